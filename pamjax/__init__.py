@@ -1,0 +1,53 @@
+"""pamjax: differentiable simulation and identification of pneumatic artificial muscle systems in JAX."""
+
+from ._errors import PamjaxInputError as PamjaxInputError, PamjaxSolveError as PamjaxSolveError
+from ._friction import (
+    AbstractFriction as AbstractFriction,
+    BristleFriction as BristleFriction,
+    CoulombViscousFriction as CoulombViscousFriction,
+)
+from ._gas import (
+    AbstractRestriction as AbstractRestriction,
+    Air as Air,
+    EllipseRestriction as EllipseRestriction,
+    ISO6358Restriction as ISO6358Restriction,
+    NozzleRestriction as NozzleRestriction,
+    SeriesRestriction as SeriesRestriction,
+)
+from ._inputs import (
+    AbstractSignal as AbstractSignal,
+    Constant as Constant,
+    Sampled as Sampled,
+    Sine as Sine,
+    Step as Step,
+    Triangle as Triangle,
+)
+from ._muscle import (
+    AbstractForceLaw as AbstractForceLaw,
+    AbstractVolume as AbstractVolume,
+    ChouHannafordForce as ChouHannafordForce,
+    CubicVolume as CubicVolume,
+    EndStops as EndStops,
+    LinearVolume as LinearVolume,
+    Muscle as Muscle,
+    PolynomialForce as PolynomialForce,
+    TonduLopezForce as TonduLopezForce,
+)
+from ._simulate import Trajectory as Trajectory, simulate as simulate
+from ._system import (
+    AbstractSystem as AbstractSystem,
+    MuscleState as MuscleState,
+    MuscleSystem as MuscleSystem,
+    TankState as TankState,
+    TankSystem as TankSystem,
+)
+from ._valve import (
+    AbstractValve as AbstractValve,
+    AveragedValve as AveragedValve,
+    OnOffValve as OnOffValve,
+    cycle_averaged_flow as cycle_averaged_flow,
+    fit_averaged_valve as fit_averaged_valve,
+)
+from . import presets as presets
+
+__version__ = "0.1.0"

@@ -1,0 +1,78 @@
+"""Input validation shared by all components.
+
+Checks on concrete values raise `PamjaxInputError` (a `ValueError`) naming the offending argument, at construction
+time, before any solve. Inside `jit`/`vmap`/`grad` values are tracers and cannot be inspected in Python; there the
+entry points (`simulate`, `fit`, `sweep`) validate concrete inputs before tracing.
+"""
+
+import numpy as np
+from jax.core import Tracer
+
+
+class PamjaxInputError(ValueError):
+    """A bad input, named in the message (argument, expected, got)."""
+
+
+class PamjaxSolveError(RuntimeError):
+    """The ODE solve failed (too many steps, non-finite state, ...); the message names the cause."""
+
+
+def _concrete(x):
+    """The value as a NumPy array, or None when it is traced (no concrete value to check)."""
+    if isinstance(x, Tracer):
+        return None
+    try:
+        return np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        return None
+
+
+def _fail(name, expected, value):
+    raise PamjaxInputError(f"{name} must be {expected}, got {np.array2string(np.asarray(value), threshold=6)}")
+
+
+def check_finite(x, name):
+    v = _concrete(x)
+    if v is not None and not np.all(np.isfinite(v)):
+        _fail(name, "finite (no NaN or inf)", v)
+
+
+def check_positive(x, name):
+    v = _concrete(x)
+    if v is not None and not np.all(v > 0):
+        _fail(name, "> 0 and finite", v)
+    check_finite(x, name)
+
+
+def check_nonnegative(x, name):
+    v = _concrete(x)
+    if v is not None and not np.all(v >= 0):
+        _fail(name, ">= 0 and finite", v)
+    check_finite(x, name)
+
+
+def check_in_open_interval(x, lo, hi, name):
+    v = _concrete(x)
+    if v is not None and not np.all((v > lo) & (v < hi)):
+        _fail(name, f"in the open interval ({lo}, {hi})", v)
+
+
+def check_in_closed_interval(x, lo, hi, name):
+    v = _concrete(x)
+    if v is not None and not np.all((v >= lo) & (v <= hi)):
+        _fail(name, f"in [{lo}, {hi}]", v)
+
+
+def check_time_grid(ts, name="ts"):
+    """A 1-D, finite, strictly increasing time grid with at least one point."""
+    v = _concrete(ts)
+    if v is None:
+        return
+    if v.ndim != 1 or v.size < 1:
+        raise PamjaxInputError(f"{name} must be a 1-D array of times [s] with at least one entry, got shape {v.shape}")
+    check_finite(v, name)
+    if v.size > 1 and not np.all(np.diff(v) > 0):
+        bad = int(np.argmin(np.diff(v) > 0))
+        raise PamjaxInputError(
+            f"{name} must be strictly increasing; {name}[{bad + 1}] = {v[bad + 1]} does not exceed {name}[{bad}] = {v[bad]}"
+        )

@@ -1,0 +1,268 @@
+"""`simulate`: one jitted, differentiable diffrax solve of a system driven by a command signal."""
+
+import diffrax as dfx
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.tree_util as jtu
+import numpy as np
+
+from ._errors import PamjaxInputError, PamjaxSolveError, check_time_grid
+from ._inputs import AbstractSignal
+from ._system import AbstractSystem
+from ._valve import OnOffValve
+
+_RESULT_NAMES = {0: "successful"}
+
+
+class Trajectory(eqx.Module):
+    """The result of `simulate`: channels at the requested times.
+
+    - `t` [s]; `state`: the state pytree at each time (absolute pressures); `command`: the command used.
+    - `pressure` [Pa abs], `mass_flow` [kg/s into the chamber]; for muscle systems also `position` [m],
+      `velocity` [m/s], `force` [N] (muscle), `friction_force` [N], `volume` [m³] (None for a tank).
+    - `num_steps`, `num_accepted_steps`, `num_rejected_steps`: solver statistics.
+    - `result`: diffrax result code (0 = success); `succeeded`: bool array.
+    """
+
+    t: jax.Array
+    state: object
+    command: jax.Array
+    pressure: jax.Array
+    mass_flow: jax.Array
+    position: jax.Array | None
+    velocity: jax.Array | None
+    force: jax.Array | None
+    friction_force: jax.Array | None
+    volume: jax.Array | None
+    num_steps: jax.Array
+    num_accepted_steps: jax.Array
+    num_rejected_steps: jax.Array
+    result: jax.Array
+
+    @property
+    def succeeded(self):
+        return self.result == 0
+
+    def channel(self, name):
+        """A channel by name ('pressure', 'position', ...); a clear error for one this system does not have."""
+        value = getattr(self, name, None) if name in _CHANNELS else None
+        if value is None:
+            raise PamjaxInputError(f"unknown or absent channel {name!r}; this trajectory has {self.channels()}")
+        return value
+
+    def channels(self):
+        return [c for c in _CHANNELS if getattr(self, c) is not None]
+
+
+_CHANNELS = ("pressure", "mass_flow", "position", "velocity", "force", "friction_force", "volume", "command")
+
+
+def _is_traced(tree):
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in jtu.tree_leaves(tree))
+
+
+def _scale(tree, scale, inverse=False):
+    return jtu.tree_map(lambda a, s: a / s if inverse else a * s, tree, scale)
+
+
+def solve(
+    system: AbstractSystem,
+    signal: AbstractSignal,
+    ts,
+    y0,
+    t0,
+    *,
+    solver=None,
+    rtol=1e-6,
+    atol=1e-6,
+    max_steps=200_000,
+    dt0=None,
+    adjoint=None,
+    jump_ts=None,
+    throw=False,
+) -> Trajectory:
+    """The unchecked, traceable core of `simulate` (vmap- and grad-safe; no Python-side validation).
+
+    `atol` applies to the scaled state (pressure in units of 1e5 Pa, position in 1e-2 m, ...: `state_scale`).
+    """
+    ts = jnp.asarray(ts, dtype=float)
+    scale = system.state_scale()
+    valve = system.valve
+    y0 = system.initial_state() if y0 is None else y0
+
+    def command_at(t):
+        return signal(valve.command_time(t))
+
+    def field(t, z, args):
+        y = _scale(z, scale)
+        dy = system.vector_field(t, y, command_at(t))
+        return _scale(dy, scale, inverse=True)
+
+    solver = dfx.Tsit5() if solver is None else solver
+    controller = dfx.PIDController(rtol=rtol, atol=atol)
+    if jump_ts is not None:
+        controller = dfx.ClipStepSizeController(controller, jump_ts=jump_ts)
+    if isinstance(adjoint, str):
+        adjoint = {"forward": dfx.ForwardMode(), "reverse": dfx.RecursiveCheckpointAdjoint()}[adjoint]
+    adjoint = dfx.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
+    sol = dfx.diffeqsolve(
+        dfx.ODETerm(field),
+        solver,
+        t0=t0,
+        t1=ts[-1],
+        dt0=dt0,
+        y0=_scale(y0, scale, inverse=True),
+        saveat=dfx.SaveAt(ts=ts),
+        stepsize_controller=controller,
+        max_steps=max_steps,
+        adjoint=adjoint,
+        throw=throw,
+    )
+    states = _scale(sol.ys, scale)
+    commands = jax.vmap(command_at)(ts)
+    outs = jax.vmap(system.outputs)(ts, states, commands)
+    failed = sol.result != dfx.RESULTS.successful
+    # A failed solve never returns plausible-looking numbers: its channels are NaN.
+    outs = jtu.tree_map(lambda a: jnp.where(failed, jnp.nan, a), outs)
+    stats = sol.stats
+    return Trajectory(
+        t=ts,
+        state=states,
+        command=commands,
+        pressure=outs["pressure"],
+        mass_flow=outs["mass_flow"],
+        position=outs.get("position"),
+        velocity=outs.get("velocity"),
+        force=outs.get("force"),
+        friction_force=outs.get("friction_force"),
+        volume=outs.get("volume"),
+        num_steps=stats["num_steps"],
+        num_accepted_steps=stats["num_accepted_steps"],
+        num_rejected_steps=stats["num_rejected_steps"],
+        result=jnp.asarray(sol.result._value if hasattr(sol.result, "_value") else sol.result),
+    )
+
+
+_solve_jit = eqx.filter_jit(solve)
+
+
+def exact_edge_times(valve: OnOffValve, signal: AbstractSignal, t0, t1):
+    """The switching times of an exact-edge PWM valve over [t0, t1] (concrete values), for `jump_ts`."""
+    period = 1.0 / float(valve.pwm_frequency)
+    n = int(np.ceil((t1 - t0) / period)) + 2
+    first = np.floor(t0 / period) * period
+    starts = first + period * np.arange(n)
+    commands = np.asarray(jax.vmap(signal)(jnp.asarray(starts)))
+    edges = np.asarray(valve.edge_times(jnp.asarray(commands), first))
+    edges = np.unique(edges[(edges > t0) & (edges < t1)])
+    return jnp.asarray(edges)
+
+
+def validate(system, signal, ts, y0=None, t0=None):
+    """Concrete checks of everything `simulate` is given, before any solve. Raises `PamjaxInputError`."""
+    if not isinstance(system, AbstractSystem):
+        raise PamjaxInputError(f"system must be a pamjax system (TankSystem, MuscleSystem, ...), got {type(system)}")
+    if not isinstance(signal, AbstractSignal):
+        raise PamjaxInputError(f"signal must be a pamjax signal (Constant, Triangle, ...), got {type(signal)}")
+    check_time_grid(ts, "ts")
+    ts_np = np.asarray(ts, dtype=float)
+    if t0 is not None and not float(t0) <= ts_np[0]:
+        raise PamjaxInputError(f"t0 ({t0}) must not exceed ts[0] ({ts_np[0]})")
+    if t0 is None and ts_np.size < 2:
+        raise PamjaxInputError("ts needs at least two times when t0 is not given (the solve starts at ts[0])")
+    lo, hi = signal.bounds()
+    clo, chi = system.valve.command_range
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        raise PamjaxInputError(f"signal must be finite, its bounds are ({lo}, {hi})")
+    if lo < clo - 1e-12 or hi > chi + 1e-12:
+        raise PamjaxInputError(
+            f"signal (the valve command, e.g. duty ratio) must stay within [{clo}, {chi}], its range is [{lo}, {hi}]"
+        )
+    if y0 is not None:
+        leaves = jtu.tree_leaves(y0)
+        for leaf in leaves:
+            if not isinstance(leaf, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(leaf))):
+                raise PamjaxInputError("y0 must be finite (no NaN or inf)")
+        pressure = getattr(y0, "pressure", None)
+        if pressure is not None and not isinstance(pressure, jax.core.Tracer) and not np.all(np.asarray(pressure) > 0):
+            raise PamjaxInputError(f"y0.pressure must be an ABSOLUTE pressure > 0 [Pa], got {pressure}")
+
+
+def simulate(
+    system: AbstractSystem,
+    signal: AbstractSignal,
+    ts,
+    *,
+    y0=None,
+    t0=None,
+    solver=None,
+    rtol: float = 1e-6,
+    atol: float = 1e-6,
+    max_steps: int = 200_000,
+    dt0=None,
+    adjoint=None,
+    throw: bool = True,
+) -> Trajectory:
+    """Simulate `system` driven by `signal` and return its channels at the times `ts`.
+
+    The whole solve is one jitted `diffrax.diffeqsolve` in float64, differentiable in forward mode
+    (`adjoint="forward"`, for Jacobians as in least squares) and reverse mode (the default, for scalar losses).
+
+    **Arguments:**
+
+    - `system`: a `TankSystem`, `MuscleSystem`, ... (its components carry every physical parameter).
+    - `signal`: the command, e.g. `Constant(0.5)` or `Triangle(0.05, 0.95, 0.08)` (PWM duty ratio in [0, 1]).
+    - `ts`: strictly increasing output times [s]. The solve starts at `t0` (default `ts[0]`).
+    - `y0`: initial state (default `system.initial_state()`: atmospheric pressure, payload at rest in equilibrium).
+    - `solver`: a diffrax solver (default `Tsit5()`); `rtol`, `atol`: tolerances of the PID step-size controller,
+      `atol` in scaled state units (pressure per 1e5 Pa, position per 1e-2 m, velocity per 1e-2 m/s).
+    - `max_steps`: the solve fails beyond this many steps; `dt0`: initial step (default: automatic).
+    - `adjoint`: "reverse" (default), "forward", or any diffrax adjoint.
+    - `throw`: raise `PamjaxSolveError` on a failed solve (default). With `throw=False` a failed solve returns a
+      trajectory whose `result` is non-zero and whose channels are NaN, never plausible-looking numbers.
+
+    **Returns:** a `Trajectory` (`t`, `pressure` [Pa abs], `position` [m], `velocity` [m/s], `force` [N],
+    `mass_flow` [kg/s], `command`, solver statistics, `result`).
+
+    **Raises:** `PamjaxInputError` (naming the argument) for bad input, before any solve; `PamjaxSolveError` when
+    the solve fails and `throw=True`.
+
+    An `OnOffValve(mode="exact")` has its switching times handed to the solver (step-size clipping at jump times).
+    """
+    validate(system, signal, ts, y0, t0)
+    ts = jnp.asarray(ts, dtype=float)
+    t0 = ts[0] if t0 is None else jnp.asarray(t0, dtype=float)
+    jump_ts = None
+    if isinstance(system.valve, OnOffValve) and system.valve.mode == "exact":
+        if _is_traced((system.valve, signal, t0, ts)):
+            raise PamjaxInputError(
+                "OnOffValve(mode='exact') needs concrete valve timing and signal (its edge times are computed before "
+                "the solve); use mode='smooth' inside jit/grad/vmap"
+            )
+        jump_ts = exact_edge_times(system.valve, signal, float(t0), float(ts[-1]))
+    traced = _is_traced((system, signal, ts, y0, t0))
+    traj = _solve_jit(
+        system,
+        signal,
+        ts,
+        y0,
+        t0,
+        solver=solver,
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
+        dt0=dt0,
+        adjoint=adjoint,
+        jump_ts=jump_ts,
+        throw=throw and traced,
+    )
+    if throw and not traced and int(traj.result) != 0:
+        raise PamjaxSolveError(
+            f"the ODE solve failed ({dfx.RESULTS[int(traj.result)] if hasattr(dfx.RESULTS, '__getitem__') else ''}"
+            f" result code {int(traj.result)}) after {int(traj.num_steps)} steps (max_steps={max_steps}). "
+            "Common causes: max_steps too small for the horizon (PWM valves need ~20 steps per period), "
+            "parameters far outside the physical range, or too tight tolerances. Pass throw=False to get the "
+            "partial result with status instead."
+        )
+    return traj

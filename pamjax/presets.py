@@ -1,0 +1,204 @@
+"""Presets: paper 000's Festo MAS-10-300 + MHE2 plant and paper 001's DMSP-40-400 muscle, every number sourced.
+
+Paper 000 gives no numbers for a0…a4, k0…k2, m1…m9, v0, v1 or C_f. They are derived here (the derivation is
+re-run by `tests/test_presets.py` and `fits/derive_presets.py`):
+
+1. **Force map shape (a0…a4, k0, k1, k2).** The real measured force map of the Festo DMSP-20-300 (Martens & Boblan,
+   Actuators 2017, CC BY 4.0; bundled in `pamjax/data/`) is affine in pressure at each length, exactly eq. 7's
+   structure. Per length, a straight line in pressure gives the force at p_max = 0.6 MPa gauge and the slope
+   ∂F/∂p. A quartic in contraction ratio ε through the five 6-bar forces plus F = 0 at the datasheet's 25 % maximum
+   contraction gives F_max(ε); a line through the slopes gives (k0 − k1 x)/k2. Same family, same 300 mm nominal
+   length, same 25 % stroke: the MAS-10-300's curves are this shape scaled to its datasheet force of 630 N at 6 bar
+   and 0 % contraction. k2 = 1e5 Pa is fixed by convention (only k0/k2 and k1/k2 are identifiable).
+2. **Volume (v0, v1).** v0 = π/4 · D² · L0 for the datasheet's 10 mm inner diameter and 300 mm length (a cylinder, as
+   paper 000 computes it). v1 is the least-squares slope over the stroke of the volume that virtual work (eq. 4,
+   F = p dV/dx) assigns to the force map at p_max: V(x) − v0 = ∫₀ˣ F_max/p_max dx.
+3. **Averaged valve (m1…m9).** Eq. 13 fitted by least squares to the cycle-averaged flow of the exact-edge switching
+   valve (Table 1 paths, 2 ms delays, 50 Hz) on a 41 × 41 grid of duty 0…1 and chamber pressure p_atm…p_s
+   (`pamjax.fit_averaged_valve`). Fit quality: max error 13.2 %, RMSE 2.1 % of the flow range (paper 000, fitted to
+   its measurements: 4.13 % and 1.16 %); the biquadratic cannot follow the 10 %/90 % dead-band steps.
+4. **Viscous friction C_f = 250 N s/m.** Paper 000 shows C_f only as a plot (Fig. 6). 250 N s/m is ≈ 0.4 of the
+   critical damping 2·sqrt(k M) of the 9.6 kg payload on the muscle's mid-stroke stiffness (≈ 1e4 N/m), the
+   order of magnitude of Fig. 6's muscle friction; it is a fit parameter.
+5. **Stroke limits.** x_max = 0.075 m (25 % of 300 mm, datasheet); x_min = −0.02 m (stretch; paper 000 Fig. 3 shows
+   negative displacements but no number, so −20 mm is assumed).
+
+The hybrid reference bench in `shared/data` (`meta.json`) was generated with independently chosen values
+(a0 = 629.7, k0 = 105 N, k1 = 1400 N/m, v0 = 2.6e-5 m³, v1 = 1.9e-4 m², C_f = 250 N s/m); differences to the values
+here are what a fit to that data must close.
+"""
+
+import jax.numpy as jnp
+
+from ._friction import BristleFriction, CoulombViscousFriction
+from ._gas import Air, EllipseRestriction, ISO6358Restriction
+from ._muscle import CubicVolume, LinearVolume, Muscle, PolynomialForce
+from ._system import MuscleSystem, TankSystem
+from ._valve import AveragedValve, OnOffValve
+
+# --- paper 000, Table 1 ---------------------------------------------------------------------------------------
+VALVE_AREA = 3.14e-6  # m², Table 1 ("valve diameter", an area)
+INFLATE_DISCHARGE_COEFFICIENT = 0.36  # C_v(1→2), Table 1
+EXHAUST_DISCHARGE_COEFFICIENT = 0.39  # C_v(2→3), Table 1
+INFLATE_CRITICAL_RATIO = 0.28  # b_v(1→2), Table 1
+EXHAUST_CRITICAL_RATIO = 0.49  # b_v(2→3), Table 1
+SUPPLY_PRESSURE = 6.5e5  # Pa abs, paper 000 "System Setup" (0.65 MPa abs.)
+PWM_FREQUENCY = 50.0  # Hz, paper 000
+SWITCH_DELAY = 2e-3  # s, paper 000 (MHE2 switching time ≈ 2 ms)
+PAYLOAD_MASS = 9.6  # kg, paper 000
+TANK_VOLUME = 5e-5  # m³, constant-volume test tank (paper 000 gives none; the hybrid bench uses 5e-5)
+
+# --- MAS-10-300, derived (see module docstring) -------------------------------------------------------------------
+MAS10_MAX_FORCE_COEFFICIENTS = (
+    630.0,  # a0 [N]: datasheet 630 N at 6 bar, 0 % contraction
+    -2.13454122e04,  # a1 [N/m]  } DMSP-20-300 force-map shape (Martens & Boblan 2017),
+    5.41182050e05,  # a2 [N/m²] } scaled to 630 N and the 300 mm length
+    -8.18503719e06,  # a3 [N/m³]
+    4.35960743e07,  # a4 [N/m⁴]
+)
+MAS10_K0 = 102.844885  # N, slope of F in p at x = 0 times k2 (DMSP-20 map, scaled)
+MAS10_K1 = 1127.520188  # N/m, decrease of that slope per metre of contraction (DMSP-20 map, scaled)
+MAS10_K2 = 1e5  # Pa, fixed by convention (k0, k1, k2 are not separately identifiable)
+MAS10_MAX_PRESSURE = 6e5  # Pa gauge, p_max (paper 000)
+MAS10_V0 = 2.3561945e-05  # m³, π/4 · (10 mm)² · 300 mm (datasheet geometry)
+MAS10_V1 = 4.1558930e-04  # m², virtual-work volume slope of the force map (see docstring)
+MAS10_MIN_POSITION = -0.02  # m, assumed stretch limit (see docstring)
+MAS10_MAX_POSITION = 0.075  # m, 25 % of 300 mm (datasheet maximum contraction)
+COULOMB_FORCE = 16.0  # N, paper 000: half of the 32 N hysteresis loop width
+VISCOUS_COEFFICIENT = 250.0  # N s/m, see docstring item 4
+
+# m1…m9 of eq. 13 (SI: kg/s, gauge pressure in Pa), row-wise m[i, j] for u^i p^j; see docstring item 3.
+MAS10_AVERAGED_VALVE = (
+    (-3.248406457251e-04, -5.389705112092e-09, 1.731119286309e-15),
+    (2.719016584137e-03, 8.384112406989e-09, -1.315013358854e-14),
+    (7.716013087130e-05, 2.379239664579e-10, -3.731739021328e-16),
+)
+
+# --- DMSP-40-400 (paper 001), derived the same way ------------------------------------------------------------
+DMSP40_NOMINAL_LENGTH = 0.4  # m, paper 001 / datasheet
+DMSP40_MAX_FORCE_COEFFICIENTS = (
+    6000.0,  # a0 [N]: datasheet 6000 N at 6 bar, 0 % contraction (paper 001)
+    -1.52467230e05,  # a1..a4: DMSP-20-300 map shape scaled to 6000 N and 400 mm
+    2.89918955e06,
+    -3.28863101e07,
+    1.31372099e08,
+)
+DMSP40_K0 = 979.475097  # N (DMSP-20 map slope, scaled)
+DMSP40_K1 = 8053.715626  # N/m
+DMSP40_VOLUME_CUBIC = (  # (d, c, b, a) of paper 001 eq. 4 in ε = x/L0 [m³]; virtual work of the force map, d = cylinder
+    5.0265482e-04,  # π/4 · (40 mm)² · 400 mm
+    3.48212e-03,
+    -8.86154e-03,
+    5.61662e-03,
+)
+DMSP40_LOAD_FORCE = 893.0  # N, paper 001 (91.3 kg subject)
+PAPER001_SUPPLY_PRESSURE = 7e5  # Pa abs, paper 001
+
+
+def mas10_valve(mode="smooth", **kwargs):
+    """Festo MHE2 3/2 on/off valve with paper 000's Table 1 paths, 0.65 MPa abs supply, 50 Hz, 2 ms delays."""
+    return OnOffValve(
+        inflate=EllipseRestriction(INFLATE_DISCHARGE_COEFFICIENT, INFLATE_CRITICAL_RATIO, VALVE_AREA),
+        exhaust=EllipseRestriction(EXHAUST_DISCHARGE_COEFFICIENT, EXHAUST_CRITICAL_RATIO, VALVE_AREA),
+        supply_pressure=SUPPLY_PRESSURE,
+        pwm_frequency=PWM_FREQUENCY,
+        switch_on_delay=SWITCH_DELAY,
+        switch_off_delay=SWITCH_DELAY,
+        mode=mode,
+        **kwargs,
+    )
+
+
+def mas10_averaged_valve():
+    """Eq. 13 averaged valve with the derived m1…m9 (module docstring, item 3)."""
+    return AveragedValve(jnp.asarray(MAS10_AVERAGED_VALVE))
+
+
+def mas10_muscle():
+    """Festo MAS-10-300 with eq. 7 force and eq. 14 linear volume (derived values, module docstring)."""
+    return Muscle(
+        force_law=PolynomialForce(
+            max_force_coefficients=jnp.asarray(MAS10_MAX_FORCE_COEFFICIENTS),
+            k0=MAS10_K0,
+            k1=MAS10_K1,
+            k2=MAS10_K2,
+            max_pressure=MAS10_MAX_PRESSURE,
+        ),
+        volume_law=LinearVolume(MAS10_V0, MAS10_V1),
+        min_position=MAS10_MIN_POSITION,
+        max_position=MAS10_MAX_POSITION,
+    )
+
+
+def _valve(valve):
+    if valve in ("pwm", "smooth"):
+        return mas10_valve("smooth")
+    if valve == "exact":
+        return mas10_valve("exact")
+    if valve == "averaged":
+        return mas10_averaged_valve()
+    if isinstance(valve, str):
+        raise ValueError(f"valve must be 'pwm' (smooth edges), 'exact' or 'averaged', or a valve object; got {valve!r}")
+    return valve
+
+
+def mas10_system(valve="pwm", friction="coulomb", payload_mass=PAYLOAD_MASS):
+    """Paper 000's plant: MAS-10-300 lifting `payload_mass` (9.6 kg) through the MHE2 valve.
+
+    **Arguments:** `valve`: "pwm" (smoothed switching), "exact" (exact-edge reference), "averaged" (eq. 13) or a
+    valve; `friction`: "coulomb" (eq. 8-9, smooth sign), "bristle" (Dahl-type, holds still) or a friction model.
+    """
+    if friction == "coulomb":
+        friction = CoulombViscousFriction(COULOMB_FORCE, VISCOUS_COEFFICIENT)
+    elif friction == "bristle":
+        friction = BristleFriction(coulomb_force=COULOMB_FORCE, viscous_coefficient=VISCOUS_COEFFICIENT)
+    elif isinstance(friction, str):
+        raise ValueError(f"friction must be 'coulomb', 'bristle' or a friction model; got {friction!r}")
+    return MuscleSystem(valve=_valve(valve), muscle=mas10_muscle(), payload_mass=payload_mass, friction=friction)
+
+
+def mas10_tank_system(valve="pwm", volume=TANK_VOLUME):
+    """Paper 000's valve tests: the MHE2 valve feeding a constant volume (5e-5 m³ by default)."""
+    return TankSystem(valve=_valve(valve), volume=volume)
+
+
+def dmsp40_muscle():
+    """Festo DMSP-40-400 (paper 001): eq. 7 force scaled from the DMSP-20 map, paper 001 eq. 4 cubic volume."""
+    return Muscle(
+        force_law=PolynomialForce(
+            max_force_coefficients=jnp.asarray(DMSP40_MAX_FORCE_COEFFICIENTS), k0=DMSP40_K0, k1=DMSP40_K1, k2=1e5
+        ),
+        volume_law=CubicVolume(jnp.asarray(DMSP40_VOLUME_CUBIC), DMSP40_NOMINAL_LENGTH),
+        min_position=-0.02,  # m, assumed as for the MAS-10
+        max_position=0.25 * DMSP40_NOMINAL_LENGTH,  # m, 25 % maximum contraction (paper 001)
+    )
+
+
+# Paper 001 Tables 1-2 (C in m³/(s bar) → divide by 1e5 for SI).
+PAPER001_CHARGING_TABLE = dict(
+    upstream_pressure_bar=(1.946, 2.954, 3.964, 4.983, 5.991, 6.943),
+    critical_ratio=(0.6624, 0.5972, 0.5674, 0.5541, 0.5308, 0.5328),
+    sonic_conductance_m3_per_s_bar=(1.6668e-04, 2.1299e-04, 6.4101e-04, 7.8871e-04, 7.7140e-04, 7.0564e-04),
+)
+PAPER001_DISCHARGING_TABLE = dict(
+    tank_pressure_bar=(1.8964, 2.7350, 3.9706, 4.9714, 5.9744, 6.8439),
+    critical_ratio=(0.7464, 0.6709, 0.6177, 0.5940, 0.5782, 0.5683),
+    sonic_conductance_m3_per_s_bar=(0.0002, 0.0003, 0.0007, 0.0008, 0.0009, 0.0007),
+)
+
+
+def paper001_restriction(sonic_conductance_m3_per_s_bar=7.0564e-04, critical_ratio=0.5328):
+    """An ISO 6358 restriction with paper 001's units converted (default: Table 1 at 6.943 bar)."""
+    return ISO6358Restriction(sonic_conductance=sonic_conductance_m3_per_s_bar / 1e5, critical_ratio=critical_ratio)
+
+
+__all__ = [
+    "Air",
+    "mas10_valve",
+    "mas10_averaged_valve",
+    "mas10_muscle",
+    "mas10_system",
+    "mas10_tank_system",
+    "dmsp40_muscle",
+    "paper001_restriction",
+]
