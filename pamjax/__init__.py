@@ -51,3 +51,10 @@ from ._valve import (
 from . import presets as presets
 
 __version__ = "0.1.0"
+
+# --- discrete-time model (paper 000 eq. 17-21) ---
+from ._discrete import (  # noqa: E402
+    DiscreteTrajectory as DiscreteTrajectory,
+    discrete_step as discrete_step,
+    simulate_discrete as simulate_discrete,
+)
