@@ -100,7 +100,8 @@ def solve(
         return _scale(dy, scale, inverse=True)
 
     solver = dfx.Tsit5() if solver is None else solver
-    controller = dfx.PIDController(rtol=rtol, atol=atol)
+    # dtmax: a switching valve's windows must not be stepped over (see OnOffValve.max_step).
+    controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=valve.max_step())
     if jump_ts is not None:
         controller = dfx.ClipStepSizeController(controller, jump_ts=jump_ts)
     if isinstance(adjoint, str):

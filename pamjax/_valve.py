@@ -30,6 +30,10 @@ class AbstractValve(eqx.Module):
     def command_time(self, t):
         return t
 
+    def max_step(self):
+        """Largest step [s] an adaptive solver may take without stepping over the valve's switching (None: any)."""
+        return None
+
 
 @jax.custom_jvp
 def _no_gradient_through_exact_edges(x):
@@ -96,6 +100,12 @@ class OnOffValve(AbstractValve):
     @property
     def period(self):
         return 1.0 / self.pwm_frequency
+
+    def max_step(self):
+        """A tenth of the PWM period (2 ms at 50 Hz), at most the shortest open or closed window the 2 ms switching
+        delays allow: an adaptive solver with larger steps can step over a whole window and silently miss it
+        (seen: 25 % duty into a tank, 40 kPa off)."""
+        return self.period / 10.0
 
     def command_time(self, t):
         if self.mode == "exact":
