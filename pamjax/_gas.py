@@ -54,7 +54,9 @@ def _orient(p1, p2):
     p_down = jnp.where(forward, p2, p1)
     # Pressures outside the physical range (the solver may try them) are clipped for the ratio only.
     p_up_safe = jnp.maximum(p_up, 1.0)
-    ratio = jnp.clip(safe_divide(p_down, p_up_safe), 0.0, 1.0)
+    ratio = safe_divide(p_down, p_up_safe)
+    # where, not clip: jnp.clip's gradient is halved at the bound, and ratio = 1 exactly at equal pressures.
+    ratio = jnp.where(ratio > 1.0, 1.0, jnp.where(ratio < 0.0, 0.0, ratio))
     direction = jnp.where(forward, 1.0, -1.0)
     return jnp.maximum(p_up, 0.0), ratio, direction
 

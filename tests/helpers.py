@@ -1,0 +1,207 @@
+"""Shared test helpers: tree comparison, finite differences, and independent NumPy transcriptions of the papers'
+equations (the oracles). Nothing here imports pamjax physics: the oracles are written from the papers."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.tree_util as jtu
+import numpy as np
+from jax.flatten_util import ravel_pytree
+
+P_ATM = 101325.0  # Pa abs, ISO 2533 (pamjax.Air default)
+R_AIR = 287.0  # J/(kg K), paper 000 Table 1
+T_AIR = 293.0  # K, paper 000 Table 1
+KAPPA = 1.4  # paper 000
+LAMINAR_RATIO = 0.999  # ISO 6358-1:2013 laminar limit used by pamjax
+RHO0, T0 = 1.185, 293.15  # ISO 8778 reference density [kg/m³] and temperature [K]
+
+
+def tree_allclose(a, b, rtol=1e-8, atol=1e-10):
+    la, lb = jtu.tree_leaves(a), jtu.tree_leaves(b)
+    return len(la) == len(lb) and all(np.allclose(np.asarray(x), np.asarray(y), rtol=rtol, atol=atol) for x, y in zip(la, lb))
+
+
+def central_difference(f, x, rel_step=1e-5, abs_step=1e-8):
+    """Central finite-difference gradient of scalar `f` at the flat NumPy vector `x` (step relative per entry)."""
+    x = np.asarray(x, dtype=float)
+    g = np.zeros_like(x)
+    for i in range(x.size):
+        h = rel_step * abs(x[i]) if x[i] != 0 else abs_step
+        xp, xm = x.copy(), x.copy()
+        xp[i] += h
+        xm[i] -= h
+        g[i] = (float(f(xp)) - float(f(xm))) / (2 * h)
+    return g
+
+
+def flat_parameters(module):
+    """(flat float vector of every inexact-array leaf, function rebuilding the module from such a vector)."""
+    params, static = eqx.partition(module, eqx.is_inexact_array)
+    flat, unravel = ravel_pytree(params)
+
+    def rebuild(v):
+        return eqx.combine(unravel(jnp.asarray(v)), static)
+
+    return np.asarray(flat), rebuild
+
+
+def parameter_names(module):
+    params, _ = eqx.partition(module, eqx.is_inexact_array)
+    names = []
+    for path, leaf in jtu.tree_leaves_with_path(params):
+        name = jtu.keystr(path)
+        size = int(np.size(leaf))
+        names += [name] if size == 1 else [f"{name}[{i}]" for i in range(size)]
+    return names
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# Oracles: paper 000 eq. 10, 11; paper 001 eq. 13-14 (ISO 6358 ratio form); with the ISO 6358-1 laminar blend above
+# r = 0.999 (a straight line from the law's value at 0.999 to zero flow at r = 1).
+# --------------------------------------------------------------------------------------------------------------------
+
+
+def np_ellipse_fraction(r, b, r_lam=LAMINAR_RATIO):
+    """Paper 000 eq. 11 normalised: 1 for r ≤ b, sqrt(1 − ((r − b)/(1 − b))²) above; laminar line above r_lam."""
+    r = np.asarray(r, dtype=float)
+
+    def ell(q):
+        return np.sqrt(np.maximum(1.0 - ((q - b) / (1.0 - b)) ** 2, 0.0))
+
+    out = np.where(r <= b, 1.0, ell(np.clip(r, b, 1.0)))
+    return np.where(r > r_lam, ell(r_lam) * (1.0 - r) / (1.0 - r_lam), out)
+
+
+def _oriented(p1, p2):
+    p1, p2 = float(p1), float(p2)
+    if p1 >= p2:
+        return p1, p2 / p1, 1.0
+    return p2, p1 / p2, -1.0
+
+
+def np_ellipse_flow(p1, p2, cv, b, area, R=R_AIR, T=T_AIR):
+    """Paper 000 eq. 11 [kg/s] from port 1 to port 2 (absolute pressures), reversed when p2 > p1."""
+    p_up, r, sign = _oriented(p1, p2)
+    return sign * cv * area * p_up / np.sqrt(R * T) * float(np_ellipse_fraction(r, b))
+
+
+def np_iso6358_flow(p1, p2, conductance, b, T=T_AIR):
+    """Paper 001 eq. 13-14 (ratio form): ṁ = ρ0 C p_up sqrt(T0/T) · sqrt(1 − ((r − b)/(1 − b))²) [kg/s]."""
+    p_up, r, sign = _oriented(p1, p2)
+    return sign * RHO0 * conductance * p_up * np.sqrt(T0 / T) * float(np_ellipse_fraction(r, b))
+
+
+def np_nozzle_cm(r, kappa=KAPPA, R=R_AIR, r_lam=LAMINAR_RATIO):
+    """Paper 000 eq. 10's C_m(r) (laminar line above r_lam)."""
+    r_cr = (2.0 / (kappa + 1.0)) ** (kappa / (kappa - 1.0))
+
+    def sub(q):
+        return np.sqrt(2 * kappa / (R * (kappa - 1)) * (q ** (2 / kappa) - q ** ((kappa + 1) / kappa)))
+
+    if r <= r_cr:
+        return np.sqrt(kappa / R * (2.0 / (kappa + 1.0)) ** ((kappa + 1.0) / (kappa - 1.0)))
+    if r > r_lam:
+        return sub(r_lam) * (1.0 - r) / (1.0 - r_lam)
+    return sub(r)
+
+
+def np_nozzle_flow(p1, p2, cq, area, kappa=KAPPA, R=R_AIR, T=T_AIR):
+    """Paper 000 eq. 10: ṁ = A p_up C_q C_m / sqrt(T_up) [kg/s]."""
+    p_up, r, sign = _oriented(p1, p2)
+    return sign * area * p_up * cq * np_nozzle_cm(r, kappa, R) / np.sqrt(T)
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# Oracles: muscle (paper 000 eq. 5, 6, 7, 14; paper 001 eq. 4), friction (eq. 8-9), valve opening, vector field.
+# --------------------------------------------------------------------------------------------------------------------
+
+
+def np_eq7_force(x, p_gauge, a, k0, k1, k2, p_max=6e5):
+    """Paper 000 eq. 7: F = a0 + a1 x + … + a4 x⁴ − (p_max − p)(k0 − k1 x)/k2 (gauge pressure)."""
+    fmax = sum(ai * x**i for i, ai in enumerate(a))
+    return fmax - (p_max - p_gauge) * (k0 - k1 * x) / k2
+
+
+def np_chou_hannaford(x, p_gauge, b, n, L0):
+    """Paper 000 eq. 1-2, 5: F = (π D0²/4) p (3 cos²θ − 1), cosθ = L/b, D0 = b/(nπ), L = L0 − x."""
+    cos_t = (L0 - x) / b
+    d0 = b / (n * np.pi)
+    return np.pi * d0**2 / 4 * p_gauge * (3 * cos_t**2 - 1)
+
+
+def np_tondu_lopez(x, p_gauge, r0, theta0, L0, k=1.0):
+    """Paper 000 eq. 6: F = π r0² p [a(1 − kε)² − b], a = 3/tan²θ0, b = 1/sin²θ0, ε = x/L0."""
+    eps = x / L0
+    return np.pi * r0**2 * p_gauge * (3 / np.tan(theta0) ** 2 * (1 - k * eps) ** 2 - 1 / np.sin(theta0) ** 2)
+
+
+def softplus(x, w):
+    return w * np.logaddexp(x / w, 0.0)
+
+
+def logistic(x, w):
+    return 0.5 * (1.0 + np.tanh(0.5 * x / w))
+
+
+def np_friction(v, fc, cf, w):
+    """Paper 000 eq. 8-9 with sign → tanh(v/w): F = F_c tanh(v/w) + C_f v."""
+    return fc * np.tanh(v / w) + cf * v
+
+
+def np_end_stops(x, v, x_min, x_max, k=1e6, c=6e3, w=1e-4):
+    over, under = x - x_max, x_min - x
+    return -k * softplus(over, w) + k * softplus(under, w) - c * v * (logistic(over, w) + logistic(under, w))
+
+
+def np_pwm_opening(t, u, f=50.0, t_on=2e-3, t_off=2e-3, width=None):
+    """Valve opening of a PWM on/off valve with switching delays (paper 000 valve section).
+
+    Exact (width None): the valve is open during [t_on, uT + t_off) of each period (wrapping into the next period),
+    never if uT ≤ t_on (the on-pulse is too short to open it), always if (1 − u)T ≤ t_off (too short to close it).
+    Smooth: every step replaced by a logistic of time width `width`.
+    """
+    T = 1.0 / f
+    phase = t - np.floor(t / T) * T
+    if width is None:
+        if u * T <= t_on:
+            return 0.0
+        if (1 - u) * T <= t_off:
+            return 1.0
+        start, end = t_on, u * T + t_off
+        return float((start <= phase < end) or (phase < end - T))
+    s = lambda z: logistic(z, width)  # noqa: E731
+    window = sum(s(phase - t_on - k * T) * s(u * T + t_off + k * T - phase) for k in (-1, 0, 1))
+    opens, closes = s(u * T - t_on), s((1 - u) * T - t_off)
+    return opens * (closes * min(max(window, 0.0), 1.0) + (1 - closes))
+
+
+class NumpyPlant:
+    """A NumPy transcription of paper 000's plant (eq. 7, 8-9, 11, 14, 15, 16) with pamjax's smoothing choices
+    (softplus slack 1 N, tanh sign, logistic PWM edges, softplus end stops), for scipy.integrate.solve_ivp."""
+
+    def __init__(self, *, a, k0, k1, k2, v0, v1, x_min, x_max, mass=9.6, fc=16.0, cf=250.0, vw=1e-3, n=1.4,
+                 ps=6.5e5, valve="pwm", m=None, edge=1e-4, slack=1.0, volume=None):
+        self.__dict__.update(locals())
+        del self.__dict__["self"]
+
+    def mass_flow(self, t, u, p):
+        if self.valve == "averaged":
+            pg = p - P_ATM
+            return sum(self.m[i][j] * u**i * pg**j for i in range(3) for j in range(3))
+        o = np_pwm_opening(t, u, width=self.edge)
+        inflow = np_ellipse_flow(self.ps, p, 0.36, 0.28, 3.14e-6)  # Table 1 path 1→2
+        outflow = np_ellipse_flow(p, P_ATM, 0.39, 0.49, 3.14e-6)  # Table 1 path 2→3
+        return o * inflow - (1 - o) * outflow
+
+    def tank_rhs(self, t, y, u_of_t):
+        return [self.n * R_AIR * T_AIR * self.mass_flow(t, u_of_t(t), y[0]) / self.volume]
+
+    def rhs(self, t, y, u_of_t):
+        p, x, v = y
+        mdot = self.mass_flow(t, u_of_t(t), p)
+        vol = self.v0 + self.v1 * x  # eq. 14
+        dp = self.n * (R_AIR * T_AIR * mdot - p * self.v1 * v) / vol  # eq. 15
+        f_static = np_eq7_force(x, p - P_ATM, self.a, self.k0, self.k1, self.k2)
+        f_muscle = softplus(f_static, self.slack)
+        dv = (f_muscle - np_friction(v, self.fc, self.cf, self.vw) + np_end_stops(x, v, self.x_min, self.x_max)) / self.mass - 9.81
+        return [dp, v, dv]  # eq. 16

@@ -1,0 +1,145 @@
+"""Gas flow laws against independent NumPy transcriptions of paper 000 eq. 10-11 and paper 001 eq. 13-14."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import P_ATM, np_ellipse_flow, np_iso6358_flow, np_nozzle_flow
+from scipy.optimize import brentq
+
+import pamjax
+from pamjax import _gas
+
+AIR = pamjax.Air()
+INFLATE = pamjax.EllipseRestriction(0.36, 0.28, 3.14e-6)  # paper 000 Table 1, path 1→2
+EXHAUST = pamjax.EllipseRestriction(0.39, 0.49, 3.14e-6)  # paper 000 Table 1, path 2→3
+ISO = pamjax.ISO6358Restriction(7.0564e-4 / 1e5, 0.5328)  # paper 001 Table 1 at 6.943 bar
+NOZZLE = pamjax.NozzleRestriction(0.8, 3.14e-6)
+
+P_UP = 6.5e5
+RATIOS = np.concatenate([np.linspace(0.0, 1.0, 201), [0.28, 0.49, 0.5328, 0.5283, 0.9985, 0.9995, 0.99999]])
+
+
+def _flow(restriction, p1, p2):
+    return float(restriction.mass_flow(jnp.asarray(p1), jnp.asarray(p2), AIR))
+
+
+@pytest.mark.parametrize(
+    "restriction, oracle",
+    [
+        (INFLATE, lambda p1, p2: np_ellipse_flow(p1, p2, 0.36, 0.28, 3.14e-6)),
+        (EXHAUST, lambda p1, p2: np_ellipse_flow(p1, p2, 0.39, 0.49, 3.14e-6)),
+        (ISO, lambda p1, p2: np_iso6358_flow(p1, p2, 7.0564e-9, 0.5328)),
+        (NOZZLE, lambda p1, p2: np_nozzle_flow(p1, p2, 0.8, 3.14e-6)),
+    ],
+    ids=["ellipse-inflate", "ellipse-exhaust", "iso6358", "nozzle"],
+)
+def test_flow_law_matches_numpy_oracle_both_directions(restriction, oracle):
+    # Both directions and both orientations of the ports; relative 1e-12 (same formula, float64).
+    for r in RATIOS:
+        for p1, p2 in ((P_UP, r * P_UP), (r * P_UP, P_UP)):
+            np.testing.assert_allclose(_flow(restriction, p1, p2), oracle(p1, p2), rtol=1e-12, atol=1e-18)
+
+
+def test_table1_choked_value_by_hand():
+    # Paper 000 eq. 11 choked branch: C_v A p_up / sqrt(R T) with Table 1: 0.36 · 3.14e-6 · 6.5e5 / sqrt(287 · 293).
+    expected = 0.36 * 3.14e-6 * 6.5e5 / np.sqrt(287.0 * 293.0)
+    assert abs(_flow(INFLATE, 6.5e5, 1e5) - expected) < 1e-15
+    assert 2.5e-3 < expected < 2.6e-3  # ≈ 2.54 g/s
+
+
+@pytest.mark.parametrize("restriction, b", [(INFLATE, 0.28), (EXHAUST, 0.49), (ISO, 0.5328)])
+def test_choked_flow_ignores_downstream_pressure(restriction, b):
+    flows = [_flow(restriction, P_UP, r * P_UP) for r in np.linspace(0.0, b, 7)]
+    np.testing.assert_allclose(flows, flows[0], rtol=1e-14)
+    assert _flow(restriction, P_UP, (b + 0.05) * P_UP) < flows[0] * (1 - 1e-4)  # and it does depend above b
+
+
+def test_nozzle_choked_below_critical_ratio():
+    r_cr = (2 / 2.4) ** 3.5  # 0.528 for κ = 1.4
+    flows = [_flow(NOZZLE, P_UP, r * P_UP) for r in np.linspace(0.0, r_cr, 5)]
+    np.testing.assert_allclose(flows, flows[0], rtol=1e-12)
+
+
+@pytest.mark.parametrize("restriction", [INFLATE, EXHAUST, ISO, NOZZLE])
+def test_reverse_flow_antisymmetric_and_zero_at_equal_pressure(restriction):
+    for p1, p2 in ((5e5, 2e5), (3e5, 2.99e5), (4e5, 4e5 * (1 - 1e-5))):
+        assert _flow(restriction, p1, p2) > 0
+        assert _flow(restriction, p2, p1) == pytest.approx(-_flow(restriction, p1, p2), rel=1e-14)
+    assert _flow(restriction, 3e5, 3e5) == 0.0
+
+
+@pytest.mark.parametrize("restriction", [INFLATE, EXHAUST, ISO, NOZZLE])
+def test_finite_slope_and_gradient_at_equal_pressures(restriction):
+    p = jnp.asarray(3e5)
+    params, static = _gas.eqx.partition(restriction, _gas.eqx.is_inexact_array)
+
+    def f(p1, p2, params):
+        return _gas.eqx.combine(params, static).mass_flow(p1, p2, AIR)
+
+    grads = jax.grad(f, argnums=(0, 1, 2))(p, p, params)
+    leaves = jax.tree_util.tree_leaves(grads)
+    assert all(np.all(np.isfinite(g)) for g in leaves)
+    d1, d2 = float(grads[0]), float(grads[1])
+    assert d1 > 0 and d2 < 0 and d1 == pytest.approx(-d2, rel=1e-6)
+    # The slope equals the laminar branch's slope from the oracle: ṁ(p, p(1 − δ)) / (p δ) for small δ.
+    delta = 1e-6
+    fd = _flow(restriction, 3e5, 3e5 * (1 - delta)) / (3e5 * delta)
+    assert d1 == pytest.approx(fd, rel=1e-4)
+    assert np.isfinite(d1) and d1 < 1e-6  # finite (an unblended ellipse law would be infinite here)
+
+
+def test_gradients_match_finite_differences_across_regimes():
+    for r in (0.1, 0.4, 0.8, 0.995, 0.9995):
+        for restriction in (INFLATE, ISO, NOZZLE):
+            g = jax.grad(lambda p2: restriction.mass_flow(jnp.asarray(P_UP), p2, AIR))(jnp.asarray(r * P_UP))
+            h = 1e-3
+            fd = (_flow(restriction, P_UP, r * P_UP + h) - _flow(restriction, P_UP, r * P_UP - h)) / (2 * h)
+            assert float(g) == pytest.approx(fd, rel=1e-5, abs=1e-16)
+
+
+# --- two restrictions in series: brute-force intermediate pressure -----------------------------------------------
+SILENCER = pamjax.ISO6358Restriction(3.0e-9, 0.3)  # comparable to the exhaust port: both throttle
+SERIES = pamjax.SeriesRestriction(EXHAUST, SILENCER)
+
+
+def _brute_series(p1, p2, cv=0.39, b=0.49, c=3.0e-9, b2=0.3):
+    def residual(pm):
+        return np_ellipse_flow(p1, pm, cv, b, 3.14e-6) - np_iso6358_flow(pm, p2, c, b2)
+
+    pm = brentq(residual, min(p1, p2), max(p1, p2), xtol=1e-10, rtol=1e-15)
+    return np_ellipse_flow(p1, pm, cv, b, 3.14e-6), pm
+
+
+@pytest.mark.parametrize("p1, p2", [(6e5, P_ATM), (2e5, P_ATM), (1.2e5, P_ATM), (P_ATM, 3e5)])
+def test_series_restriction_equals_brute_force(p1, p2):
+    flow, pm = _brute_series(p1, p2)
+    assert float(SERIES.intermediate_pressure(jnp.asarray(p1), jnp.asarray(p2), AIR)) == pytest.approx(pm, rel=1e-9)
+    assert _flow(SERIES, p1, p2) == pytest.approx(flow, rel=1e-9)
+    # In series the flow is below each restriction alone.
+    assert abs(_flow(SERIES, p1, p2)) < min(abs(_flow(EXHAUST, p1, p2)), abs(_flow(SILENCER, p1, p2)))
+
+
+def test_series_restriction_gradients_match_finite_differences_of_brute_force():
+    p1, p2 = 3e5, P_ATM
+
+    def f(cv, b, c, b2, p1):
+        s = pamjax.SeriesRestriction(pamjax.EllipseRestriction(cv, b, 3.14e-6), pamjax.ISO6358Restriction(c, b2))
+        return s.mass_flow(p1, jnp.asarray(p2), AIR)
+
+    x = [0.39, 0.49, 3.0e-9, 0.3, p1]
+    grads = jax.grad(f, argnums=tuple(range(5)))(*map(jnp.asarray, x))
+    for i, g in enumerate(grads):
+        h = 1e-6 * x[i]
+        xp, xm = list(x), list(x)
+        xp[i] += h
+        xm[i] -= h
+        fd = (_brute_series(xp[4], p2, *xp[:4])[0] - _brute_series(xm[4], p2, *xm[:4])[0]) / (2 * h)
+        assert float(g) == pytest.approx(fd, rel=1e-5), i
+    assert np.all(np.isfinite(jax.grad(f, argnums=4)(*map(jnp.asarray, x[:4] + [P_ATM]))))  # equal pressures
+
+
+def test_series_equivalent_is_slower_than_the_valve_alone():
+    cva, b = _gas.series_equivalent(SERIES, AIR)
+    assert 0 < float(cva) < 0.39 * 3.14e-6 / np.sqrt(287 * 293)
+    assert 0.0 < float(b) < 1.0

@@ -1,0 +1,58 @@
+"""Smooth primitives: converge to their sharp counterparts as width → 0; finite values and gradients everywhere."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from pamjax import _smooth as sm
+
+X = np.concatenate([np.linspace(-3.0, 3.0, 601), [0.0, 1e-300, -1e-300]])
+
+
+@pytest.mark.parametrize(
+    "fn, sharp",
+    [
+        (sm.smooth_sign, np.sign),
+        (sm.smooth_step, lambda x: (x > 0).astype(float)),
+        (sm.smooth_relu, lambda x: np.maximum(x, 0.0)),
+        (sm.smooth_abs, np.abs),
+    ],
+)
+def test_smooth_to_sharp_as_width_shrinks(fn, sharp):
+    # Error away from the kink (|x| > 0.1) falls monotonically to ~0; near it the bound is the width itself.
+    far = np.abs(X) > 0.1
+    errors = []
+    for width in (1e-1, 1e-2, 1e-3, 1e-4):
+        err = np.abs(np.asarray(fn(jnp.asarray(X), width)) - sharp(X))
+        errors.append(err[far].max())
+        assert err.max() <= max(width, 1.0 if fn in (sm.smooth_sign, sm.smooth_step) else width)
+    assert all(a > b for a, b in zip(errors, errors[1:]) if a > 1e-15)
+    assert errors[-1] <= 1.001e-4  # ≤ width (smooth_abs is off by ≈ width far out; the others by ~e^(-x/w))
+
+
+def test_smooth_relu_error_bound_and_max_min():
+    for w in (1.0, 0.1):
+        err = np.asarray(sm.smooth_relu(jnp.asarray(X), w)) - np.maximum(X, 0)
+        assert np.all(err >= 0) and err.max() <= w * np.log(2) + 1e-15
+    a, b = jnp.asarray(2.0), jnp.asarray(-1.0)
+    assert np.isclose(sm.smooth_max(a, b, 1e-3), 2.0) and np.isclose(sm.smooth_min(a, b, 1e-3), -1.0)
+
+
+@pytest.mark.parametrize("fn", [sm.smooth_sign, sm.smooth_step, sm.smooth_relu, sm.smooth_abs])
+def test_gradients_finite_and_match_finite_differences(fn):
+    g = jax.vmap(jax.grad(lambda x: fn(x, 0.5)))(jnp.asarray(X))
+    assert np.all(np.isfinite(g))
+    x = np.linspace(-2, 2, 9)
+    h = 1e-6
+    fd = (np.asarray(fn(jnp.asarray(x + h), 0.5)) - np.asarray(fn(jnp.asarray(x - h), 0.5))) / (2 * h)
+    np.testing.assert_allclose(jax.vmap(jax.grad(lambda x: fn(x, 0.5)))(jnp.asarray(x)), fd, rtol=1e-7, atol=1e-9)
+
+
+def test_safe_sqrt_and_divide():
+    x = jnp.asarray([-1.0, 0.0, 4.0])
+    np.testing.assert_array_equal(sm.safe_sqrt(x), [0.0, 0.0, 2.0])
+    g = jax.vmap(jax.grad(sm.safe_sqrt))(x)
+    np.testing.assert_array_equal(g, [0.0, 0.0, 0.25])
+    assert np.isfinite(sm.safe_divide(1.0, 0.0)) and np.isfinite(jax.grad(sm.safe_divide, argnums=1)(1.0, 0.0))
+    assert sm.safe_divide(6.0, 3.0) == 2.0
