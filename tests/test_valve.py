@@ -1,0 +1,110 @@
+"""On/off PWM valve (paper 000 valve section, Table 1) and averaged valve (eq. 13)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import P_ATM, np_ellipse_flow, np_pwm_opening
+
+import pamjax
+from pamjax import presets
+
+AIR = pamjax.Air()
+SMOOTH = presets.mas10_valve("smooth")
+EXACT = presets.mas10_valve("exact")
+T = 0.02  # s, 50 Hz PWM period
+PHASES = (np.arange(2000) + 0.5) / 2000 * T  # midpoint samples of one period
+
+
+def _mean_opening(valve, duty):
+    return float(jnp.mean(jax.vmap(lambda t: valve.opening(t, jnp.asarray(duty)))(jnp.asarray(PHASES))))
+
+
+@pytest.mark.parametrize("duty", [0.05, 0.12, 0.3, 0.5, 0.75, 0.88, 0.93])  # off the 10 %/90 % boundaries
+def test_opening_matches_numpy_oracle(duty):
+    ts = np.linspace(0.0, 3 * T, 601)[:-1] + 1e-7  # three periods, off the exact edges
+    exact = np.asarray(jax.vmap(lambda t: EXACT.opening(t, jnp.asarray(duty)))(jnp.asarray(ts)))
+    smooth = np.asarray(jax.vmap(lambda t: SMOOTH.opening(t, jnp.asarray(duty)))(jnp.asarray(ts)))
+    np.testing.assert_array_equal(exact, [np_pwm_opening(t, duty) for t in ts])
+    np.testing.assert_allclose(smooth, [np_pwm_opening(t, duty, width=1e-4) for t in ts], atol=1e-12)
+
+
+@pytest.mark.parametrize("valve", [SMOOTH, EXACT], ids=["smooth", "exact"])
+def test_dead_band_at_50_hz(valve):
+    # Paper 000: the 2 ms switching time leaves only duties 10-90 % effective at 50 Hz. The smooth edges (width
+    # 0.1 ms) blur the dead-band limits over ±5 widths = ±2.5 % duty; outside that the valve is shut / open to 1e-3.
+    for duty in (0.0, 0.02, 0.05, 0.07):
+        assert _mean_opening(valve, duty) < 1e-3
+    for duty in (0.93, 0.95, 0.98, 1.0):
+        assert _mean_opening(valve, duty) > 1 - 1e-3
+    if valve.mode == "exact":
+        assert _mean_opening(valve, 0.099) == 0.0 and _mean_opening(valve, 0.901) == 1.0
+
+
+@pytest.mark.parametrize("valve", [SMOOTH, EXACT], ids=["smooth", "exact"])
+def test_cycle_averaged_opening_equals_duty_in_working_range(valve):
+    # Equal on/off delays shift the open window but keep its length uT. Exact: midpoint rule error ≤ 1/2000;
+    # smooth: logistic edges are symmetric, so their error cancels to < 1e-3.
+    for duty in np.linspace(0.15, 0.85, 8):
+        assert _mean_opening(valve, duty) == pytest.approx(duty, abs=1e-3 if valve.mode == "smooth" else 5e-4)
+
+
+def test_mass_flow_and_cycle_average_against_oracle():
+    for duty, p in ((0.3, 2e5), (0.6, 4.5e5), (0.5, P_ATM)):
+        expected = np.mean(
+            [
+                np_pwm_opening(t, duty) * np_ellipse_flow(6.5e5, p, 0.36, 0.28, 3.14e-6)
+                - (1 - np_pwm_opening(t, duty)) * np_ellipse_flow(p, P_ATM, 0.39, 0.49, 3.14e-6)
+                for t in PHASES
+            ]
+        )
+        got = pamjax.cycle_averaged_flow(EXACT, jnp.asarray(duty), jnp.asarray(p), AIR, samples=2000)
+        assert float(got) == pytest.approx(expected, rel=1e-10, abs=1e-15)
+
+
+def test_averaged_valve_is_eq13_in_gauge_pressure():
+    m = np.arange(1, 10) * np.array([1e-4, 1e-9, 1e-15] * 3)
+    valve = pamjax.AveragedValve.from_m(m)
+    for u, p in ((0.0, P_ATM), (0.3, 2e5), (0.9, 6e5)):
+        pg = p - P_ATM
+        # eq. 13: m1 + m2 P + m3 P² + m4 u + m5 u P + m6 u P² + m7 u² + m8 u² P + m9 u² P²
+        expected = (m[0] + m[1] * pg + m[2] * pg**2 + m[3] * u + m[4] * u * pg + m[5] * u * pg**2
+                    + m[6] * u**2 + m[7] * u**2 * pg + m[8] * u**2 * pg**2)
+        assert float(valve.mass_flow(0.0, jnp.asarray(u), jnp.asarray(p), AIR)) == pytest.approx(expected, rel=1e-13)
+
+
+def test_exact_mode_refuses_gradient_with_respect_to_duty():
+    with pytest.raises(pamjax.PamjaxInputError, match="exact"):
+        jax.grad(lambda u: EXACT.mass_flow(0.005, u, 3e5, AIR))(jnp.asarray(0.5))
+    system = presets.mas10_tank_system("exact")
+    ts = jnp.linspace(0.0, 0.04, 3)
+    with pytest.raises(pamjax.PamjaxInputError, match="exact"):
+        jax.grad(lambda u: pamjax.simulate(system, pamjax.Constant(u), ts).pressure[-1])(jnp.asarray(0.5))
+    # The smooth mode differentiates fine with respect to the duty.
+    smooth = presets.mas10_tank_system("smooth")
+    g = jax.grad(lambda u: pamjax.simulate(smooth, pamjax.Constant(u), ts).pressure[-1])(jnp.asarray(0.5))
+    assert np.isfinite(g) and g > 0
+
+
+def test_smooth_pwm_trajectory_converges_to_exact_edges():
+    # Tank charging at 50 % duty for ~0.1 s (5 periods). The exact-edge solve is the reference (jump times handed to
+    # the solver). Compared half-way between edges (edges at 2 ms and 12 ms of each period): symmetric logistic edges
+    # then leave an O(w²) error. Tolerance: at the default w = 1e-4 s the max error must be < 100 Pa
+    # (2.5e-4 of the ~4e5 Pa reached) and it must fall at least 3× per 4× smaller width.
+    ts = jnp.concatenate([jnp.zeros(1), 0.007 + 0.01 * jnp.arange(10)])
+    kw = dict(rtol=1e-9, atol=1e-9)
+    ref = np.asarray(pamjax.simulate(presets.mas10_tank_system("exact"), pamjax.Constant(0.5), ts, **kw).pressure)
+    errors = []
+    for width in (4e-4, 1e-4, 2.5e-5):
+        system = presets.mas10_tank_system(presets.mas10_valve("smooth", edge_width=width))
+        p = np.asarray(pamjax.simulate(system, pamjax.Constant(0.5), ts, **kw).pressure)
+        errors.append(np.max(np.abs(p - ref)))
+    print("max |p_smooth - p_exact| [Pa] for w = 4e-4, 1e-4, 2.5e-5 s:", errors)
+    assert errors[0] > 3 * errors[1] > 9 * errors[2]
+    assert errors[1] < 100.0, errors
+
+
+def test_fit_averaged_valve_reports_quality():
+    fitted, report = pamjax.fit_averaged_valve(EXACT, AIR, jnp.linspace(0, 1, 11), jnp.linspace(P_ATM, 6.5e5, 11))
+    assert isinstance(fitted, pamjax.AveragedValve)
+    assert 0 < report["rmse_percent"] < report["max_error_percent"] < 30
