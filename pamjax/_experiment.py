@@ -1,0 +1,241 @@
+"""Experiments: what a fit compares. Each one turns a model (the object whose parameters are fitted, e.g. a
+`MuscleSystem`) into predictions of recorded channels, and its residuals (model − data) / scale.
+
+- `Experiment`: a dynamic test: the system built from the model (the model itself, or a `TankFromModel` for a
+  constant-volume valve test sharing the model's valve), a command signal, a `Recording`, the channels to compare and
+  their scales (noise level, in the channel's unit), and the initial state.
+- `ForceMapExperiment`: static isometric forces F(x, p) compared with `muscle.static_force` (no ODE); slack points
+  (measured 0 N) only penalise a positive model force.
+
+Experiments of different systems share parameters through the model (all valve tests use `model.valve`).
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._errors import PamjaxInputError
+from ._inputs import AbstractSignal
+from ._recording import Recording
+from ._simulate import solve, validate
+from ._system import AbstractSystem, TankSystem
+
+
+class SameSystem(eqx.Module):
+    """The model is the system of the experiment."""
+
+    def __call__(self, model):
+        return model
+
+
+class TankFromModel(eqx.Module):
+    """A constant-volume tank of `volume` [m³] fed by the model's valve (paper 000's valve tests)."""
+
+    volume: jax.Array = eqx.field(converter=jnp.asarray)  # m³
+    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.4)  # -
+
+    def __call__(self, model):
+        return TankSystem(valve=model.valve, volume=self.volume, air=model.air, polytropic_index=self.polytropic_index)
+
+
+def _default_scale(values):
+    """1 % of the channel's range (so a residual of 1 is 1 % of range), or 1 for a flat channel."""
+    span = float(np.ptp(values)) if values.size else 0.0
+    return 0.01 * span if span > 0 else 1.0
+
+
+class Experiment(eqx.Module):
+    """A dynamic experiment: simulate `build(model)` driven by `signal` and compare `channels` with `recording`.
+
+    **Arguments:**
+
+    - `recording`: a `Recording` (times [s], channels in SI, ABSOLUTE pressure).
+    - `signal`: the command (e.g. `Constant(0.25)`, `Triangle(0.05, 0.95, 0.08)`, `Sampled(...)`).
+    - `channels`: names compared (default: the recording's channels the system outputs, command excluded).
+    - `scales`: dict channel → scale in the channel's unit (the noise standard deviation, if known); default 1 % of
+      the channel's range.
+    - `build`: model → system (`SameSystem()` by default; `TankFromModel(volume)` for valve tests).
+    - `initial`: keyword arguments of `system.initial_state` (e.g. `dict(pressure=6.5e5)`); default: its default
+      (atmospheric, at rest in equilibrium). `t0`: start time [s] (default the first sample).
+    - `name`; `rtol`, `atol`, `max_steps`, `dt0`: solver settings (see `simulate`).
+    - `validation_fraction`: the last fraction of the samples kept out of the fit (paper 001: 0.4), reported as
+      validation error.
+    """
+
+    times: jax.Array
+    data: dict
+    weights: dict  # 1/scale where the sample is used, 0 where masked (NaN)
+    scales: dict = eqx.field(static=True)
+    signal: AbstractSignal
+    build: eqx.Module
+    initial: dict
+    t0: jax.Array
+    split_time: jax.Array
+    name: str = eqx.field(static=True)
+    channels: tuple = eqx.field(static=True)
+    rtol: float = eqx.field(static=True)
+    atol: float = eqx.field(static=True)
+    max_steps: int = eqx.field(static=True)
+    dt0: float | None = eqx.field(static=True)
+
+    def __init__(
+        self,
+        recording: Recording,
+        signal: AbstractSignal,
+        channels=None,
+        scales=None,
+        build=None,
+        initial=None,
+        t0=None,
+        name=None,
+        rtol=1e-6,
+        atol=1e-6,
+        max_steps=100_000,
+        dt0=None,
+        validation_fraction=0.0,
+    ):
+        if not isinstance(recording, Recording):
+            raise PamjaxInputError(f"recording must be a pamjax.Recording, got {type(recording)}")
+        if not isinstance(signal, AbstractSignal):
+            raise PamjaxInputError(f"signal must be a pamjax signal (Constant, Triangle, ...), got {type(signal)}")
+        if channels is None:
+            channels = [c for c in recording.channels if c in ("pressure", "position", "velocity", "force")]
+        channels = tuple(channels)
+        if not channels:
+            raise PamjaxInputError(f"experiment {name!r}: no channels to compare; recording has {sorted(recording.channels)}")
+        for c in channels:
+            recording[c]  # error naming the valid channels
+        scales = dict(scales or {})
+        for c in scales:
+            if c not in channels:
+                raise PamjaxInputError(f"scales names channel {c!r}, which is not compared; channels are {channels}")
+        self.scales = {c: float(scales.get(c, _default_scale(recording[c][recording.mask[c]]))) for c in channels}
+        for c, s in self.scales.items():
+            if not (np.isfinite(s) and s > 0):
+                raise PamjaxInputError(f"scales[{c!r}] must be > 0 (the channel's noise level), got {s}")
+        if not 0.0 <= float(validation_fraction) < 1.0:
+            raise PamjaxInputError(f"validation_fraction must be in [0, 1), got {validation_fraction}")
+        t = recording.t
+        self.times = jnp.asarray(t)
+        self.data = {c: jnp.asarray(np.where(recording.mask[c], recording[c], 0.0)) for c in channels}
+        self.weights = {c: jnp.asarray(recording.mask[c] / self.scales[c]) for c in channels}
+        self.signal = signal
+        self.build = SameSystem() if build is None else build
+        self.initial = {k: jnp.asarray(v, dtype=float) for k, v in (initial or {}).items()}
+        self.t0 = jnp.asarray(t[0] if t0 is None else t0, dtype=float)
+        self.split_time = jnp.asarray(t[0] + (1.0 - float(validation_fraction)) * (t[-1] - t[0]) + 1e-12, dtype=float)
+        self.name = recording.name if name is None else str(name)
+        self.channels = channels
+        self.rtol, self.atol, self.max_steps, self.dt0 = rtol, atol, int(max_steps), dt0
+
+    def check(self, model):
+        """Concrete validation (signal range, times, initial state) before any traced solve."""
+        system = self.build(model)
+        if not isinstance(system, AbstractSystem):
+            raise PamjaxInputError(f"experiment {self.name!r}: build(model) must give a pamjax system, got {type(system)}")
+        try:
+            y0 = system.initial_state(**self.initial)
+        except TypeError as err:
+            raise PamjaxInputError(f"experiment {self.name!r}: bad `initial` keys {sorted(self.initial)}: {err}") from err
+        validate(system, self.signal, self.times, y0, self.t0)
+        traj = predict(model, self)
+        for c in self.channels:
+            if c not in traj:
+                raise PamjaxInputError(f"experiment {self.name!r}: the system has no output {c!r}")
+
+    def predict(self, model):
+        """Model channels at the recording's times (traceable): dict channel → array."""
+        system = self.build(model)
+        y0 = system.initial_state(**self.initial)
+        traj = solve(
+            system,
+            self.signal,
+            self.times,
+            y0,
+            self.t0,
+            rtol=self.rtol,
+            atol=self.atol,
+            max_steps=self.max_steps,
+            dt0=self.dt0,
+            adjoint="forward",
+        )
+        return {c: getattr(traj, c) for c in traj.channels() if getattr(traj, c) is not None}
+
+    def residuals(self, model, part="identification"):
+        """(model − data) / scale for the compared channels, flattened; 0 at masked samples and at the samples of
+        the other part ("identification": t before the split, "validation": after it, "all")."""
+        pred = self.predict(model)
+        keep = {"identification": self.times <= self.split_time, "validation": self.times > self.split_time}.get(
+            part, jnp.ones_like(self.times, dtype=bool)
+        )
+        return jnp.concatenate([(pred[c] - self.data[c]) * self.weights[c] * keep for c in self.channels])
+
+
+class ForceMapExperiment(eqx.Module):
+    """Static force map: measured muscle forces [N] at positions x [m] and ABSOLUTE pressures [Pa].
+
+    Residual (F_model − F) / scale at loaded points; at slack points (measured F ≤ `slack_force`, default 0 N) only a
+    positive model force counts: max(F_model, 0) / scale ("force ≤ 0 → 0", the muscle cannot push).
+
+    **Arguments:** `positions` [m], `pressures` [Pa abs], `forces` [N], `scale` [N] (default 1 % of the force range),
+    `muscle`: model → muscle (default `model.muscle`, or the model itself if it is a `Muscle`), `name`.
+    """
+
+    positions: jax.Array
+    pressures: jax.Array
+    forces: jax.Array
+    slack: jax.Array
+    scale: float = eqx.field(static=True)
+    name: str = eqx.field(static=True)
+    channels: tuple = eqx.field(static=True, default=("force",))
+
+    def __init__(self, positions, pressures, forces, scale=None, slack_force=0.0, name="force_map"):
+        x, p, f = (np.asarray(a, dtype=float) for a in (positions, pressures, forces))
+        if not (x.shape == p.shape == f.shape and x.ndim == 1 and x.size > 0):
+            raise PamjaxInputError(
+                f"positions, pressures, forces must be 1-D of one length, got {x.shape}, {p.shape}, {f.shape}"
+            )
+        for label, a in (("positions", x), ("pressures", p), ("forces", f)):
+            if not np.all(np.isfinite(a)):
+                raise PamjaxInputError(f"{label} is NaN/inf at row {int(np.argmin(np.isfinite(a)))}")
+        if np.min(p) < 0 or np.max(p) < 5e4:
+            raise PamjaxInputError(
+                "pressures must be ABSOLUTE [Pa]; these look like gauge or bar (add 101325 Pa to gauge readings)"
+            )
+        self.positions, self.pressures, self.forces = jnp.asarray(x), jnp.asarray(p), jnp.asarray(f)
+        self.slack = jnp.asarray(f <= slack_force)
+        self.scale = float(0.01 * np.ptp(f) if scale is None else scale)
+        if not self.scale > 0:
+            raise PamjaxInputError(f"scale must be > 0 [N], got {self.scale}")
+        self.name = str(name)
+        self.channels = ("force",)
+
+    @staticmethod
+    def _muscle(model):
+        return getattr(model, "muscle", model)
+
+    def check(self, model):
+        if not hasattr(self._muscle(model), "static_force"):
+            raise PamjaxInputError(f"{self.name}: the model has no muscle (needs model.muscle or a Muscle)")
+
+    def predict(self, model):
+        muscle = self._muscle(model)
+        air = getattr(model, "air", None)
+        if air is None:
+            from ._gas import Air
+
+            air = Air()
+        f = jax.vmap(lambda x, p: muscle.static_force(x, p, air))(self.positions, self.pressures)
+        return {"force": f}
+
+    def residuals(self, model, part="identification"):
+        del part
+        f = self.predict(model)["force"]
+        return jnp.where(self.slack, jnp.maximum(f, 0.0), f - self.forces) / self.scale
+
+
+@eqx.filter_jit
+def predict(model, experiment):
+    """`experiment.predict(model)`, jitted (one compile per experiment structure, shared by check and reports)."""
+    return experiment.predict(model)

@@ -1,0 +1,274 @@
+"""Recordings: measured (or synthetic) time series, named channels with units, read from and written to CSV/NPZ.
+
+Validated on construction: a 1-D strictly increasing time, channels of the same length, no NaN (unless the user asks
+to mask them), and pressure channels in ABSOLUTE pascal (a channel that looks like bar or gauge is refused).
+Preprocessing as in paper 001: zero-phase low-pass filtering (2nd-order Butterworth, 20 Hz) and resampling. Those two
+need SciPy (`pip install scipy`, or the `pamjax[fit]` extra); it is imported only when they are called.
+"""
+
+import json
+import pathlib
+
+import numpy as np
+
+from ._errors import PamjaxInputError
+
+# Default unit per well-known channel name.
+DEFAULT_UNITS = dict(
+    pressure="Pa", position="m", velocity="m/s", force="N", mass_flow="kg/s", command="1", volume="m^3"
+)
+# Short names used by bench files (the hybrid reference bench: t, u, p, x) → pamjax channel names.
+BENCH_NAMES = dict(p="pressure", x="position", u="command", v="velocity", F="force", mdot="mass_flow")
+
+# A pressure channel whose largest value is below this is in bar, MPa or gauge, not absolute Pa.
+_MIN_ABSOLUTE_PA = 5e4  # Pa: half an atmosphere; no pneumatic muscle test runs below it
+
+
+def _is_pressure(name, unit):
+    return name.startswith("pressure") or unit.lower() in ("pa", "pa abs", "bar", "mpa", "kpa", "psi")
+
+
+def _scipy_signal():
+    try:
+        import scipy.signal
+    except ModuleNotFoundError as err:  # pragma: no cover - depends on the environment
+        raise ModuleNotFoundError(
+            "filtering and resampling recordings needs SciPy: pip install scipy (or pip install 'pamjax[fit]')"
+        ) from err
+    return scipy.signal
+
+
+class Recording:
+    """Time series of named channels, SI units, ABSOLUTE pressures.
+
+    **Arguments:**
+
+    - `t`: times [s], 1-D, strictly increasing.
+    - `channels`: dict name → 1-D array of `len(t)` (names as in `Trajectory`: pressure [Pa abs], position [m],
+      velocity, force, mass_flow, command, ...).
+    - `units`: dict name → unit string (defaults from `DEFAULT_UNITS`); a pressure in "bar"/"kPa"/"MPa" is refused.
+    - `mask_nan`: False (default) raises on NaN naming channel and row; True keeps them and marks them in `mask`.
+    - `name`: a label.
+
+    `mask[name]` is a boolean array, True where the sample is valid.
+    """
+
+    def __init__(self, t, channels, units=None, *, mask_nan=False, name=""):
+        self.name = str(name)
+        t = np.asarray(t, dtype=float)
+        if t.ndim != 1 or t.size < 2:
+            raise PamjaxInputError(f"Recording {self.name!r}: t must be 1-D with at least 2 times, got shape {t.shape}")
+        if not np.all(np.isfinite(t)):
+            row = int(np.argmin(np.isfinite(t)))
+            raise PamjaxInputError(f"Recording {self.name!r}: t must be finite; row {row} is {t[row]}")
+        if not np.all(np.diff(t) > 0):
+            row = int(np.argmin(np.diff(t) > 0)) + 1
+            raise PamjaxInputError(
+                f"Recording {self.name!r}: t must be strictly increasing; t[{row}] = {t[row]} <= t[{row - 1}] = "
+                f"{t[row - 1]}"
+            )
+        if not channels:
+            raise PamjaxInputError(f"Recording {self.name!r}: needs at least one channel besides t")
+        units = {} if units is None else dict(units)
+        self.t = t
+        self.channels = {}
+        self.units = {}
+        self.mask = {}
+        for key, values in channels.items():
+            v = np.asarray(values, dtype=float)
+            if v.shape != t.shape:
+                raise PamjaxInputError(
+                    f"Recording {self.name!r}: channel {key!r} has shape {v.shape}, expected {t.shape} (same as t)"
+                )
+            unit = units.get(key, DEFAULT_UNITS.get(key, ""))
+            valid = np.isfinite(v)
+            if not mask_nan and not np.all(valid):
+                row = int(np.argmin(valid))
+                raise PamjaxInputError(
+                    f"Recording {self.name!r}: channel {key!r} is NaN/inf at row {row} (t = {t[row]} s); "
+                    "clean the data or pass mask_nan=True to leave such samples out of fits"
+                )
+            if _is_pressure(key, unit):
+                _check_absolute_pressure(self.name, key, unit, v[valid])
+            self.channels[key] = v
+            self.units[key] = unit
+            self.mask[key] = valid
+
+    def __getitem__(self, key):
+        if key == "t":
+            return self.t
+        if key not in self.channels:
+            raise PamjaxInputError(f"Recording {self.name!r} has no channel {key!r}; it has {sorted(self.channels)}")
+        return self.channels[key]
+
+    def __len__(self):
+        return self.t.size
+
+    def __repr__(self):
+        return f"Recording({self.name!r}, {len(self)} samples, {self.t[0]}..{self.t[-1]} s, {sorted(self.channels)})"
+
+    @property
+    def sample_rate(self):
+        """Sampling rate [Hz] of a uniformly sampled recording (error otherwise)."""
+        dt = np.diff(self.t)
+        if np.ptp(dt) > 1e-6 * np.mean(dt):
+            raise PamjaxInputError(f"Recording {self.name!r} is not uniformly sampled; resample it first")
+        return 1.0 / float(np.mean(dt))
+
+    def _replace(self, t, channels):
+        return Recording(t, channels, self.units, mask_nan=True, name=self.name)
+
+    # -- preprocessing ------------------------------------------------------------------------------------------
+    def filtered(self, cutoff_hz=20.0, order=2, channels=None):
+        """Zero-phase Butterworth low-pass (`scipy.signal.butter` + `filtfilt`) of `channels` (default: all but
+        `command`); paper 001: 2nd order at 20 Hz."""
+        sig = _scipy_signal()
+        fs = self.sample_rate
+        if not 0 < cutoff_hz < fs / 2:
+            raise PamjaxInputError(f"cutoff_hz must be in (0, {fs / 2}) (Nyquist of this recording), got {cutoff_hz}")
+        b, a = sig.butter(int(order), cutoff_hz, fs=fs)
+        names = [c for c in self.channels if c != "command"] if channels is None else list(channels)
+        out = dict(self.channels)
+        for c in names:
+            self[c]  # unknown channel → error naming the valid ones
+            if not np.all(self.mask[c]):
+                raise PamjaxInputError(f"cannot filter channel {c!r}: it has masked (NaN) samples")
+            out[c] = sig.filtfilt(b, a, self[c])
+        return self._replace(self.t, out)
+
+    def resampled(self, rate_hz):
+        """Uniform resampling at `rate_hz` [Hz]: anti-alias filtering (zero-phase, 4th order at 0.4 × rate) when
+        downsampling, then linear interpolation. `command` is sampled (zero-order hold), not filtered."""
+        rate_hz = float(rate_hz)
+        if not rate_hz > 0:
+            raise PamjaxInputError(f"rate_hz must be > 0, got {rate_hz}")
+        source = self
+        uniform = np.ptp(np.diff(self.t)) <= 1e-6 * np.mean(np.diff(self.t))
+        if uniform and rate_hz < self.sample_rate:
+            source = self.filtered(0.4 * rate_hz, order=4)
+        n = int(np.floor((self.t[-1] - self.t[0]) * rate_hz + 1e-9)) + 1
+        ts = self.t[0] + np.arange(n) / rate_hz
+        out = {}
+        for c, v in source.channels.items():
+            if c == "command":
+                idx = np.clip(np.searchsorted(self.t, ts, side="right") - 1, 0, len(self) - 1)
+                out[c] = self.channels[c][idx]
+            else:
+                out[c] = np.interp(ts, self.t, v)
+        return self._replace(ts, out)
+
+    def window(self, t_start=None, t_end=None):
+        """The samples with t_start ≤ t ≤ t_end."""
+        lo = -np.inf if t_start is None else t_start
+        hi = np.inf if t_end is None else t_end
+        keep = (self.t >= lo) & (self.t <= hi)
+        return self._replace(self.t[keep], {c: v[keep] for c, v in self.channels.items()})
+
+    # -- files --------------------------------------------------------------------------------------------------
+    def to_csv(self, path, overwrite=False):
+        """Write `t [s],name [unit],...` CSV; refuses to overwrite an existing file unless `overwrite=True`."""
+        path = _writable(path, overwrite)
+        names = list(self.channels)
+        header = ",".join(["t [s]"] + [f"{c} [{self.units[c]}]" for c in names])
+        data = np.column_stack([self.t] + [self.channels[c] for c in names])
+        comment = f"# pamjax recording {self.name}; pressures absolute\n" if self.name else ""
+        with open(path, "w") as f:
+            f.write(comment + header + "\n")
+            for row in data:
+                f.write(",".join(repr(float(x)) for x in row) + "\n")
+        return path
+
+    def to_npz(self, path, overwrite=False):
+        """Write NPZ with arrays `t` and one per channel, units in `__units__` (JSON)."""
+        path = _writable(path, overwrite)
+        meta = json.dumps(dict(units=self.units, name=self.name))
+        np.savez(path, t=self.t, __units__=np.asarray(meta), **self.channels)
+        return path
+
+    @classmethod
+    def from_csv(cls, path, *, rename=None, units=None, mask_nan=False, name=None):
+        """Read a CSV written by `to_csv` (or any CSV with a header `t,...`; `name [unit]` headers give units;
+        lines starting with '#' are comments)."""
+        path = pathlib.Path(path)
+        with open(path) as f:
+            lines = [ln for ln in f if ln.strip() and not ln.lstrip().startswith("#")]
+        if not lines:
+            raise PamjaxInputError(f"{path}: no header line")
+        header = [h.strip() for h in lines[0].split(",")]
+        rows = []
+        for i, ln in enumerate(lines[1:]):
+            cells = ln.split(",")
+            if len(cells) != len(header):
+                raise PamjaxInputError(f"{path}: data row {i} has {len(cells)} columns, the header has {len(header)}")
+            rows.append([float(c) if c.strip() not in ("", "nan", "NaN") else np.nan for c in cells])
+        data = np.asarray(rows, dtype=float).reshape(-1, len(header))
+        names, file_units = [], {}
+        for h in header:
+            label, unit = (h.split("[", 1) + [""])[:2]
+            names.append(label.strip())
+            if unit:
+                file_units[label.strip()] = unit.rstrip("]").strip()
+        return cls._from_columns(path, dict(zip(names, data.T)), file_units, rename, units, mask_nan, name)
+
+    @classmethod
+    def from_npz(cls, path, *, rename=None, units=None, mask_nan=False, name=None):
+        """Read an NPZ with a `t` array and one array per channel (the hybrid bench's short names t, u, p, x are
+        renamed to command, pressure, position)."""
+        path = pathlib.Path(path)
+        with np.load(path) as z:
+            columns = {k: np.asarray(z[k]) for k in z.files if k != "__units__"}
+            meta = json.loads(str(z["__units__"])) if "__units__" in z.files else {}
+        return cls._from_columns(path, columns, meta.get("units", {}), rename, units, mask_nan, name or meta.get("name"))
+
+    @classmethod
+    def _from_columns(cls, path, columns, file_units, rename, units, mask_nan, name):
+        if "t" not in columns:
+            raise PamjaxInputError(f"{path}: needs a time column 't', has {sorted(columns)}")
+        rename = {**BENCH_NAMES, **(rename or {})}
+        t = columns.pop("t")
+        channels, u = {}, {}
+        for k, v in columns.items():
+            if v.ndim != 1:
+                continue  # extra metadata arrays
+            new = rename.get(k, k)
+            channels[new] = v
+            if k in file_units:
+                u[new] = file_units[k]
+        u.update(units or {})
+        return cls(t, channels, u, mask_nan=mask_nan, name=name or path.stem)
+
+    @classmethod
+    def load(cls, path, **kwargs):
+        """`from_csv` or `from_npz` by file extension."""
+        suffix = pathlib.Path(path).suffix.lower()
+        if suffix == ".npz":
+            return cls.from_npz(path, **kwargs)
+        if suffix in (".csv", ".txt"):
+            return cls.from_csv(path, **kwargs)
+        raise PamjaxInputError(f"recording file must be .csv or .npz, got {path}")
+
+
+def _check_absolute_pressure(rec, key, unit, values):
+    if unit.lower() not in ("pa", "pa abs"):
+        raise PamjaxInputError(
+            f"Recording {rec!r}: channel {key!r} is in {unit!r}; pamjax expects ABSOLUTE pressure in Pa "
+            "(convert: bar × 1e5, kPa × 1e3, MPa × 1e6, and add atmospheric pressure 101325 Pa to gauge readings)"
+        )
+    if values.size and np.max(values) < _MIN_ABSOLUTE_PA:
+        raise PamjaxInputError(
+            f"Recording {rec!r}: channel {key!r} peaks at {np.max(values):.4g} Pa: that looks like bar, MPa or a "
+            "GAUGE pressure; pamjax expects ABSOLUTE pressure in Pa (add 101325 Pa to gauge readings)"
+        )
+    if values.size and np.min(values) < 0:
+        raise PamjaxInputError(
+            f"Recording {rec!r}: channel {key!r} goes negative ({np.min(values):.4g} Pa): that looks like a GAUGE "
+            "pressure; pamjax expects ABSOLUTE pressure in Pa (add 101325 Pa)"
+        )
+
+
+def _writable(path, overwrite):
+    path = pathlib.Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return path
