@@ -58,3 +58,20 @@ from ._discrete import (  # noqa: E402
     discrete_step as discrete_step,
     simulate_discrete as simulate_discrete,
 )
+
+# --- fitting (issue 3): recordings, experiments, fit, synthetic data ---------------------------------------------
+from ._experiment import (  # noqa: E402
+    Experiment as Experiment,
+    ForceMapExperiment as ForceMapExperiment,
+    SameSystem as SameSystem,
+    TankFromModel as TankFromModel,
+)
+from ._fit import (  # noqa: E402
+    FitResult as FitResult,
+    ParameterSpace as ParameterSpace,
+    PamjaxIdentifiabilityWarning as PamjaxIdentifiabilityWarning,
+    fit as fit,
+    parameter_paths as parameter_paths,
+)
+from ._recording import Recording as Recording  # noqa: E402
+from ._synthetic import synthetic_recording as synthetic_recording  # noqa: E402
