@@ -1,0 +1,44 @@
+"""Input signals: constant, step, triangle (paper 000's 0.05-0.95 duty), sine, sampled (held per PWM period)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import pamjax
+
+
+def _eval(signal, ts):
+    return np.asarray(jax.vmap(signal)(jnp.asarray(ts, dtype=float)))
+
+
+def test_constant_and_step():
+    np.testing.assert_array_equal(_eval(pamjax.Constant(0.3), [0.0, 1.0, 7.5]), 0.3)
+    np.testing.assert_array_equal(_eval(pamjax.Step(0.2, 0.7, 1.0), [0.0, 0.999, 1.0, 2.0]), [0.2, 0.2, 0.7, 0.7])
+    assert pamjax.Step(0.7, 0.2, 1.0).bounds() == (0.2, 0.7)
+
+
+def test_triangle_matches_paper_shape():
+    tri = pamjax.Triangle(0.05, 0.95, 0.08)  # period 12.5 s
+    ts = np.linspace(0, 25, 1001)
+    phase = (ts * 0.08) % 1.0
+    expected = 0.05 + 0.9 * (1 - np.abs(2 * phase - 1))
+    np.testing.assert_allclose(_eval(tri, ts), expected, atol=1e-12)
+    assert _eval(tri, [0.0, 6.25, 12.5]).tolist() == pytest.approx([0.05, 0.95, 0.05])
+    assert tri.bounds() == (0.05, 0.95)
+
+
+def test_sine():
+    s = pamjax.Sine(0.5, 0.2, 2.0, 0.3)
+    ts = np.linspace(0, 1, 50)
+    np.testing.assert_allclose(_eval(s, ts), 0.5 + 0.2 * np.sin(2 * np.pi * 2 * ts + 0.3), atol=1e-14)
+    assert s.bounds() == pytest.approx((0.3, 0.7))
+
+
+def test_sampled_zero_order_hold_and_pwm_latch():
+    times, values = np.array([0.0, 0.015, 0.03]), np.array([0.2, 0.6, 0.8])
+    s = pamjax.Sampled(times, values)
+    np.testing.assert_array_equal(_eval(s, [0.0, 0.014, 0.015, 0.029, 0.04]), [0.2, 0.2, 0.6, 0.6, 0.8])
+    latched = pamjax.Sampled(times, values, period=0.02)  # value at the start of each 20 ms PWM period
+    np.testing.assert_array_equal(_eval(latched, [0.005, 0.019, 0.021, 0.035, 0.041]), [0.2, 0.2, 0.6, 0.6, 0.8])
+    assert latched.bounds() == (0.2, 0.8)

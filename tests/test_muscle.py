@@ -1,0 +1,84 @@
+"""Muscle force laws (paper 000 eq. 5, 6, 7), volumes (eq. 14, paper 001 eq. 4), slack, end stops."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import P_ATM, np_chou_hannaford, np_eq7_force, np_tondu_lopez, softplus
+
+import pamjax
+from pamjax import presets
+
+AIR = pamjax.Air()
+XS = np.linspace(-0.02, 0.075, 20)
+PS = np.array([P_ATM, 2e5, 4e5, 7.01325e5])
+
+
+def test_eq7_matches_oracle_with_gauge_pressure():
+    muscle = presets.mas10_muscle()
+    a = presets.MAS10_MAX_FORCE_COEFFICIENTS
+    for x in XS:
+        for p in PS:
+            expected = np_eq7_force(x, p - P_ATM, a, presets.MAS10_K0, presets.MAS10_K1, presets.MAS10_K2)
+            got = float(muscle.static_force(jnp.asarray(x), jnp.asarray(p), AIR))
+            assert got == pytest.approx(expected, rel=1e-12, abs=1e-9)
+            assert float(muscle.force(jnp.asarray(x), jnp.asarray(p), AIR)) == pytest.approx(softplus(expected, 1.0), rel=1e-12)
+    # At p_max (0.6 MPa gauge) eq. 7 reduces to F_max(x); at x = 0 that is the datasheet's 630 N.
+    assert float(muscle.static_force(0.0, 6e5 + P_ATM, AIR)) == pytest.approx(630.0, rel=1e-12)
+
+
+def test_chou_hannaford_eq5_and_virtual_work():
+    law = pamjax.ChouHannafordForce(strand_length=0.35, turns=3.0, nominal_length=0.3)
+    for x in XS:
+        assert float(law.static_force(x, 3e5)) == pytest.approx(np_chou_hannaford(x, 3e5, 0.35, 3.0, 0.3), rel=1e-12)
+
+    # Paper 000 eq. 4: F = −p dV/dL for the braided cylinder V(L) = b³ (cosθ − cos³θ)/(4π n²), cosθ = L/b.
+    def volume(length):
+        c = length / 0.35
+        return 0.35**3 * (c - c**3) / (4 * jnp.pi * 3.0**2)
+
+    for x in (0.0, 0.03, 0.06):
+        f_vw = -3e5 * jax.grad(volume)(jnp.asarray(0.3 - x))
+        assert float(law.static_force(x, 3e5)) == pytest.approx(float(f_vw), rel=1e-12)
+
+
+def test_tondu_lopez_eq6():
+    law = pamjax.TonduLopezForce(radius=5e-3, braid_angle=0.4, nominal_length=0.3, correction=1.25)
+    for x in XS:
+        assert float(law.static_force(x, 4e5)) == pytest.approx(np_tondu_lopez(x, 4e5, 5e-3, 0.4, 0.3, 1.25), rel=1e-12)
+    # At zero contraction (Tondu & Lopez): F = π r0² p (3 cos²θ0 − 1)/sin²θ0.
+    f0 = np.pi * 25e-6 * 4e5 * (3 * np.cos(0.4) ** 2 - 1) / np.sin(0.4) ** 2
+    assert float(law.static_force(0.0, 4e5)) == pytest.approx(f0, rel=1e-12)
+
+
+def test_volumes_and_their_slopes():
+    lin = pamjax.LinearVolume(2.4e-5, 4e-4)
+    cub = pamjax.CubicVolume(jnp.asarray(presets.DMSP40_VOLUME_CUBIC), 0.4)
+    d, c, b, a = presets.DMSP40_VOLUME_CUBIC
+    for x in (-0.01, 0.0, 0.03, 0.09):
+        assert float(lin.volume(x)) == pytest.approx(2.4e-5 + 4e-4 * x, rel=1e-14)  # eq. 14
+        e = x / 0.4
+        assert float(cub.volume(x)) == pytest.approx(a * e**3 + b * e**2 + c * e + d, rel=1e-13)  # paper 001 eq. 4
+    muscle = pamjax.Muscle(presets.mas10_muscle().force_law, cub, -0.02, 0.1)
+    h = 1e-7
+    assert float(muscle.volume_slope(0.05)) == pytest.approx(float(cub.volume(0.05 + h) - cub.volume(0.05 - h)) / (2 * h), rel=1e-6)
+
+
+def test_slack_and_stiffness():
+    muscle = presets.mas10_muscle()
+    # A muscle cannot push: at atmospheric pressure and full contraction eq. 7 is negative, the force ≈ 0 (≤ w ln 2).
+    assert float(muscle.static_force(0.07, P_ATM, AIR)) < -50
+    f = float(muscle.force(0.07, P_ATM, AIR))
+    assert 0 <= f < 1e-20
+    assert float(muscle.force(0.0, P_ATM + 6e5, AIR)) == pytest.approx(630.0, rel=1e-13)  # slack invisible at 630 N
+    h = 1e-7
+    fd = (muscle.force(0.03 + h, 4e5, AIR) - muscle.force(0.03 - h, 4e5, AIR)) / (2 * h)
+    assert float(muscle.stiffness(0.03, 4e5, AIR)) == pytest.approx(float(fd), rel=1e-6)
+
+
+def test_end_stops_inactive_inside_and_restoring_outside():
+    stops = pamjax.EndStops()
+    assert abs(float(stops.force(0.03, 0.0, -0.02, 0.075))) < 1e-30
+    assert float(stops.force(0.076, 0.0, -0.02, 0.075)) < -900  # pushes back down beyond x_max (1 mm · 1e6 N/m)
+    assert float(stops.force(-0.021, 0.0, -0.02, 0.075)) > 900
+    assert float(stops.force(0.076, 0.1, -0.02, 0.075)) < float(stops.force(0.076, 0.0, -0.02, 0.075))  # damping
