@@ -1,0 +1,85 @@
+"""Systems: vector fields against a NumPy transcription of paper 000 eq. 7, 11, 13-16; physical bounds; mass balance."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import P_ATM, R_AIR, T_AIR, NumpyPlant
+
+import pamjax
+from pamjax import presets
+
+
+def numpy_plant(valve):
+    return NumpyPlant(
+        a=presets.MAS10_MAX_FORCE_COEFFICIENTS, k0=presets.MAS10_K0, k1=presets.MAS10_K1, k2=presets.MAS10_K2,
+        v0=presets.MAS10_V0, v1=presets.MAS10_V1, x_min=presets.MAS10_MIN_POSITION, x_max=presets.MAS10_MAX_POSITION,
+        valve=valve, m=presets.MAS10_AVERAGED_VALVE, volume=presets.TANK_VOLUME,
+    )
+
+
+STATES = [(P_ATM, 0.0, 0.0), (3e5, 0.02, 0.05), (5.5e5, 0.06, -0.1), (2e5, -0.021, 0.0), (6.4e5, 0.0752, 0.01)]
+
+
+@pytest.mark.parametrize("valve", ["averaged", "pwm"])
+def test_muscle_vector_field_matches_numpy_transcription(valve):
+    system = presets.mas10_system(valve)
+    plant = numpy_plant(valve)
+    for t, u in ((0.0031, 0.5), (0.0123, 0.3), (0.019, 0.8)):
+        for p, x, v in STATES:
+            state = pamjax.MuscleState(jnp.asarray(p), jnp.asarray(x), jnp.asarray(v))
+            got = system.vector_field(jnp.asarray(t), state, jnp.asarray(u))
+            expected = plant.rhs(t, [p, x, v], lambda _: u)
+            np.testing.assert_allclose([got.pressure, got.position, got.velocity], expected, rtol=1e-10, atol=1e-10)
+
+
+def test_tank_vector_field_matches_numpy_transcription():
+    system = presets.mas10_tank_system("pwm")
+    plant = numpy_plant("pwm")
+    for t, u, p in ((0.001, 0.5, P_ATM), (0.005, 0.5, 3e5), (0.015, 0.2, 6e5)):
+        got = system.vector_field(t, pamjax.TankState(jnp.asarray(p)), jnp.asarray(u)).pressure
+        assert float(got) == pytest.approx(plant.tank_rhs(t, [p], lambda _: u)[0], rel=1e-11, abs=1e-6)
+
+
+@pytest.mark.parametrize(
+    "valve",
+    [
+        "pwm",
+        pytest.param(
+            "averaged",
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason="known model defect: the preset eq. 13 biquadratic (least-squares fit, max error 13 % of range) "
+                "does not vanish at p = p_supply, so at duty 0.95 the tank charges to ~7.0e5 Pa > 6.5e5 Pa supply",
+            ),
+        ),
+    ],
+)
+def test_tank_pressure_stays_between_atmosphere_and_supply(valve):
+    system = presets.mas10_tank_system(valve)
+    ts = jnp.linspace(0.0, 0.6, 301)
+    up = np.asarray(pamjax.simulate(system, pamjax.Constant(0.95), ts).pressure)
+    down = np.asarray(pamjax.simulate(system, pamjax.Constant(0.05), ts, y0=pamjax.TankState(jnp.asarray(6.5e5))).pressure)
+    tol = 10.0 if valve == "pwm" else 0.02 * 6.5e5  # Pa: solver tolerance; the fitted eq. 13 is a 2 % approximation
+    for p in (up, down):
+        assert np.all(p >= P_ATM - tol) and np.all(p <= 6.5e5 + tol)
+    assert up[-1] > 6e5 and down[-1] < 1.5e5  # and it does get near each end
+
+
+def test_isothermal_tank_mass_balance():
+    # n = 1: m = pV/(RT) must equal m(0) + ∫ ṁ dt. Averaged valve (smooth flow) so the trapezoid rule on 4001 points
+    # is accurate to ~1e-8 of the mass change; tolerance 1e-6 relative.
+    system = pamjax.TankSystem(presets.mas10_averaged_valve(), presets.TANK_VOLUME, polytropic_index=1.0)
+    ts = np.linspace(0.0, 0.4, 4001)
+    traj = pamjax.simulate(system, pamjax.Triangle(0.2, 0.9, 2.0), jnp.asarray(ts), rtol=1e-10, atol=1e-10)
+    mass = np.asarray(traj.pressure) * presets.TANK_VOLUME / (R_AIR * T_AIR)
+    flow = np.asarray(traj.mass_flow)
+    integral = np.concatenate([[0.0], np.cumsum(0.5 * (flow[1:] + flow[:-1]) * np.diff(ts))])
+    np.testing.assert_allclose(mass - mass[0], integral, rtol=0, atol=1e-6 * np.ptp(mass))
+    assert np.ptp(mass) > 1e-4  # the check is not vacuous: about 0.3 g moves
+
+
+def test_equilibrium_position_carries_the_payload():
+    system = presets.mas10_system("averaged")
+    x = system.equilibrium_position(jnp.asarray(4e5))
+    assert presets.MAS10_MIN_POSITION < float(x) < presets.MAS10_MAX_POSITION
+    assert float(system.muscle.force(x, 4e5, system.air)) == pytest.approx(9.6 * 9.81, rel=1e-10)
