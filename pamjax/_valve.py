@@ -153,10 +153,13 @@ class OnOffValve(AbstractValve):
         ).reshape(-1)
 
     def mass_flow(self, t, command, pressure, air: Air):
-        o = self.opening(t, command)
+        return self.mass_flow_at_opening(self.opening(t, command), pressure, air)
+
+    def mass_flow_at_opening(self, opening, pressure, air: Air):
+        """ṁ = o ṁ₁₂(p_s, p) − (1 − o) ṁ₂₃(p, p_atm) [kg/s] for a given opening o ∈ [0, 1]."""
         inflow = self.inflate.mass_flow(self.supply_pressure, pressure, air)
         outflow = self.exhaust.mass_flow(pressure, air.atmospheric_pressure, air)
-        return o * inflow - (1.0 - o) * outflow
+        return opening * inflow - (1.0 - opening) * outflow
 
 
 class AveragedValve(AbstractValve):
