@@ -152,9 +152,7 @@ def linearise(system, state, command, *, t=0.0, inputs=None, outputs=("pressure"
 
     A, B = jax.jacfwd(f, argnums=(0, 1))(x_flat, u_flat)
     C, D = jax.jacfwd(h, argnums=(0, 1))(x_flat, u_flat)
-    input_names = _names(command, "command") + tuple(
-        n for name, leaf in zip(inputs, extra) for n in _names(leaf, name)
-    )
+    input_names = _names(command, "command") + tuple(n for name, leaf in zip(inputs, extra) for n in _names(leaf, name))
     output_names = tuple(n for name in outputs for n in _names(available[name], name))
     return StateSpace(
         A=np.asarray(A),

@@ -191,7 +191,9 @@ class RegulatedMuscleSystem(AbstractSystem):
 
     def vector_field(self, t, state, command):
         volume, volume_rate = self._chamber(state)
-        d_reg = self.regulator.state_rate(state.regulator, command, volume, volume_rate, self.air, self.polytropic_index)
+        d_reg = self.regulator.state_rate(
+            state.regulator, command, volume, volume_rate, self.air, self.polytropic_index
+        )
         muscle, friction, stops = self._forces(state)
         dv = (muscle - friction + stops - self.load_force) / self.payload_mass
         return RegulatedMuscleState(
@@ -218,18 +220,24 @@ class RegulatedMuscleSystem(AbstractSystem):
 
     def stiffness(self, state):
         """Eq. 9, closed-chamber muscle stiffness −dF/dx [N/m] at `state`."""
-        return muscle_stiffness(self.muscle, state.position, state.regulator.pressure, self.air, None, self.polytropic_index)
+        return muscle_stiffness(
+            self.muscle, state.position, state.regulator.pressure, self.air, None, self.polytropic_index
+        )
 
     def stiffness_rate(self, t, state, command):
         """Eq. 10 [N/s] at `state`, with ṗ and ẋ from the vector field."""
         rate = self.vector_field(t, state, command)
-        return stiffness_rate(self.muscle, state.position, state.velocity, state.regulator.pressure, rate.regulator.pressure)
+        return stiffness_rate(
+            self.muscle, state.position, state.velocity, state.regulator.pressure, rate.regulator.pressure
+        )
 
     def eq11_flow(self, t, state, command):
         """Eq. 11: q = (V ṗ + V' ẋ p)/(n R T) [kg/s] at `state`, with ṗ and ẋ from the vector field."""
         rate = self.vector_field(t, state, command)
         volume, volume_rate = self._chamber(state)
-        return chamber_flow(volume, volume_rate, state.regulator.pressure, rate.regulator.pressure, self.air, self.polytropic_index)
+        return chamber_flow(
+            volume, volume_rate, state.regulator.pressure, rate.regulator.pressure, self.air, self.polytropic_index
+        )
 
     def state_scale(self):
         friction = self.friction.initial_state()

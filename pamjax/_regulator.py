@@ -75,7 +75,8 @@ class VoltageCalibration(eqx.Module):
 
 class SquareWave(AbstractSignal):
     """Square wave between `low` and `high` at `frequency` [Hz], duty 50 %, low at t = 0 and rising
-    5 edge widths later (paper 001's 1.5 Hz, 0-3 V reference, Fig. 7). Edges are logistic steps of time width `edge_width` [s] (1e-3: 0.15 % of a 1.5 Hz period)."""
+    5 edge widths later (paper 001's 1.5 Hz, 0-3 V reference, Fig. 7). Edges are logistic steps of time width
+    `edge_width` [s] (1e-3: 0.15 % of a 1.5 Hz period)."""
 
     low: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # V
     high: jax.Array = eqx.field(converter=jnp.asarray, default=3.0)  # V
