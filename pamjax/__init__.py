@@ -75,3 +75,23 @@ from ._fit import (  # noqa: E402
 )
 from ._recording import Recording as Recording  # noqa: E402
 from ._synthetic import synthetic_recording as synthetic_recording  # noqa: E402
+
+# --- proportional pressure regulator, linearisation, antagonistic joint (issue 5, paper 001) -----------------------
+from ._joint import AntagonisticJoint as AntagonisticJoint, JointState as JointState, VoltagePair as VoltagePair  # noqa: E402
+from ._linearise import StateSpace as StateSpace, equilibrium as equilibrium, linearise as linearise  # noqa: E402
+from ._regulated import (  # noqa: E402
+    RegulatedMuscleState as RegulatedMuscleState,
+    RegulatedMuscleSystem as RegulatedMuscleSystem,
+    RegulatorSystem as RegulatorSystem,
+    muscle_stiffness as muscle_stiffness,
+    stiffness_rate as stiffness_rate,
+)
+from ._regulator import (  # noqa: E402
+    AbstractRegulator as AbstractRegulator,
+    FeedbackRegulator as FeedbackRegulator,
+    ISO6358Regulator as ISO6358Regulator,
+    LinearRegulator as LinearRegulator,
+    SquareWave as SquareWave,
+    VoltageCalibration as VoltageCalibration,
+)
+from ._tabulated import TabulatedISO6358Restriction as TabulatedISO6358Restriction  # noqa: E402
