@@ -3,6 +3,7 @@ trip, bad input. The truth is the simulator's own parameters; the noise is seede
 
 import warnings
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -93,10 +94,11 @@ def test_experiment_bad_channel_and_failed_solve_is_finite():
         pj.Experiment(rec, pj.Constant(0.5), channels=["position"])
     exp = pj.Experiment(rec, pj.Constant(0.5), max_steps=2)  # the solve cannot finish: a failing trial step
     fn = pj._fit._stack_residuals(pj.ParameterSpace(system, ["payload_mass"]), (exp,), "identification")
-    r, _ = fn(jnp.zeros(1), (exp,))
+    r, _ = eqx.filter_jit(fn)(jnp.zeros(1), (exp,))
     assert np.all(np.isfinite(r)) and np.all(r == pj._fit.FAILED_RESIDUAL)
 
 
+@pytest.mark.slow  # ~20 s alone (compilation of the forward-mode Jacobian of the solve), more on a shared CPU
 def test_dynamic_recovery_with_validation_split():
     """Muscle + payload with the averaged valve, 2 s triangle, pressure and position noise as on the hybrid bench."""
     truth = presets.mas10_system(valve="averaged")
