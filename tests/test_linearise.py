@@ -1,0 +1,106 @@
+"""`linearise`: autodiff Jacobians → state space, transfer functions, Bode data; paper 001 eq. 6-8 reproduced."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+import pamjax
+from pamjax._linearise import equilibrium, linearise
+from pamjax._regulated import RegulatorSystem
+from pamjax._regulator import BAR, FLOW_UNIT, FeedbackRegulator, LinearRegulator
+
+TAU1, TAU2 = 0.041, 0.023  # eq. 6
+
+
+def _eq6(f):
+    s = 2j * np.pi * f
+    return 1.01 / ((1 + TAU1 * s) * (1 + TAU2 * s))
+
+
+@pytest.fixture(scope="module")
+def regulator_model():
+    system = RegulatorSystem(LinearRegulator(), volume=0.0)
+    y = system.initial_state(pressure=system.air.atmospheric_pressure + 3 * 1.01 * BAR)
+    return linearise(system, y, 3.0, inputs={"outlet_flow": lambda s: s.outlet_flow})
+
+
+def test_eq6_bandwidth_and_eq7_static_gain(regulator_model):
+    ss = regulator_model
+    # Independent reference: the -3 dB point of eq. 6's formula, solved with SciPy. A drop of exactly 3 dB gives
+    # 3.1404 Hz, the paper's 3.14 Hz; the half-power point 1/sqrt(2) (3.0103 dB) would give 3.1470 Hz.
+    f3 = brentq(lambda f: abs(_eq6(f)) - 1.01 * 10 ** (-3 / 20), 0.1, 100.0, xtol=1e-12)
+    assert f3 == pytest.approx(3.14, abs=0.001)
+    assert ss.bandwidth("pressure", "command") == pytest.approx(f3, rel=1e-8)
+    assert ss.dc_gain("pressure", "command") / BAR == pytest.approx(1.01, rel=1e-12)
+    # eq. 7 in paper units: bar per l/min (ANR)
+    assert ss.dc_gain("pressure", "outlet_flow") * FLOW_UNIT / BAR == pytest.approx(-0.922, rel=1e-12)
+    f = np.logspace(-1, 2, 30)
+    np.testing.assert_allclose(ss.frequency_response(f, 0, 0) / BAR, _eq6(f), rtol=1e-10)
+
+
+def test_transfer_function_coefficients(regulator_model):
+    num, den = regulator_model.transfer_function("pressure", "command")
+    # eq. 6: 1.01/(τ1τ2 s² + (τ1+τ2) s + 1), normalised to a monic denominator
+    scale = TAU1 * TAU2
+    np.testing.assert_allclose(den, [1.0, (TAU1 + TAU2) / scale, 1.0 / scale], rtol=1e-10)
+    np.testing.assert_allclose(num, [1.01 * BAR / scale], rtol=1e-10)
+
+
+def test_eq8_feedback_form_matches_its_formula():
+    reg = FeedbackRegulator(k1=0.7, k2=0.3)
+    system = RegulatorSystem(reg, volume=0.0)
+    y = equilibrium(system, 2.0, system.initial_state())
+    ss = linearise(system, y, 2.0, inputs={"outlet_flow": lambda s: s.outlet_flow})
+    f = np.logspace(-2, 2, 25)
+    s = 2j * np.pi * f
+    gv = 1.01 / ((1 + TAU1 * s) * (1 + TAU2 * s))
+    gq = -0.922 / ((1 + TAU1 * s) * (1 + TAU2 * s))
+    tv = 0.7 * gv * gq / (1 + gv * gq)  # eq. 8, bar/V
+    tq = 0.3 * gq / (1 + gv * gq)  # eq. 8, bar per l/min
+    np.testing.assert_allclose(ss.frequency_response(f, 0, 0) / BAR, tv, rtol=1e-9)
+    np.testing.assert_allclose(ss.frequency_response(f, 0, 1) * FLOW_UNIT / BAR, tq, rtol=1e-9)
+    # default K1, K2 reproduce eq. 5's static gains
+    d = RegulatorSystem(FeedbackRegulator(), volume=0.0)
+    ssd = linearise(d, equilibrium(d, 3.0, d.initial_state()), 3.0, inputs={"outlet_flow": lambda s: s.outlet_flow})
+    assert ssd.dc_gain(0, 0) / BAR == pytest.approx(1.01, rel=1e-9)
+    assert ssd.dc_gain(0, 1) * FLOW_UNIT / BAR == pytest.approx(-0.922, rel=1e-9)
+
+
+def test_muscle_system_jacobian_matches_finite_differences():
+    system = pamjax.presets.mas10_system(valve="averaged")
+    y = system.initial_state(pressure=3e5)
+    u = 0.6
+    ss = linearise(system, y, u, outputs=("pressure", "force"))
+    scale = system.state_scale()
+    names = ["pressure", "position", "velocity"]
+    for j, name in enumerate(names):
+        h = 1e-6 * float(getattr(scale, name))
+
+        def f(delta):
+            yy = type(y)(**{**{k: getattr(y, k) for k in names + ["friction"]}, name: getattr(y, name) + delta})
+            d = system.vector_field(0.0, yy, jnp.asarray(u))
+            return np.array([float(getattr(d, k)) for k in names])
+
+        fd = (f(h) - f(-h)) / (2 * h)
+        np.testing.assert_allclose(ss.A[:, j], fd, rtol=1e-5, atol=1e-8 * np.abs(ss.A).max())
+    h = 1e-6
+    fb = system.vector_field(0.0, y, jnp.asarray(u + h)).pressure
+    fa = system.vector_field(0.0, y, jnp.asarray(u - h)).pressure
+    assert ss.B[0, 0] == pytest.approx(float(fb - fa) / (2 * h), rel=1e-6)
+    assert ss.output_names == ("pressure", "force")
+    with pytest.raises(pamjax.PamjaxInputError, match="unknown output"):
+        linearise(system, y, u, outputs=("torque",))
+
+
+def test_python_control_cross_check(regulator_model):
+    control = pytest.importorskip("control")
+    sys = regulator_model.to_control()
+    siso = control.ss(sys.A, sys.B[:, :1], sys.C, sys.D[:, :1])
+    assert float(np.real(control.dcgain(siso))) / BAR == pytest.approx(1.01, rel=1e-9)
+    bw_hz = control.bandwidth(siso) / (2 * np.pi)
+    assert bw_hz == pytest.approx(regulator_model.bandwidth(0, 0), rel=1e-4)
+    mag, phase, omega = control.frequency_response(siso, 2 * np.pi * np.array([0.5, 3.0, 20.0]))
+    np.testing.assert_allclose(
+        np.ravel(mag), np.abs(regulator_model.frequency_response([0.5, 3.0, 20.0], 0, 0)), rtol=1e-9
+    )
