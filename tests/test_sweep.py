@@ -1,0 +1,132 @@
+"""`sweep`: equals a loop of `simulate`; per-point status; reductions; chunking; bad input.
+
+References are independent: each point is re-simulated with `simulate` (adaptive Tsit5, tight tolerances), and the
+reductions are recomputed with NumPy from whole trajectories.
+"""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import pamjax
+from pamjax import presets
+from pamjax._sweep import Final, Harmonic, Mean, sweep
+
+TS = np.linspace(0.0, 1.0, 21)
+
+
+@pytest.fixture(scope="module")
+def averaged():
+    return presets.mas10_system(valve="averaged")
+
+
+@pytest.mark.parametrize("method", ["ros2", "rk4"])
+def test_sweep_equals_loop_of_simulate(averaged, method):
+    duties = np.array([0.2, 0.5, 0.8])
+    masses = np.array([5.0, 9.6, 12.0])
+    result = sweep(averaged, pamjax.Constant(0.5), TS, {"signal.value": duties, "payload_mass": masses},
+                   method=method, channels=("pressure", "position"))
+    assert result.method == method and np.all(result.succeeded)
+    for i, (u, m) in enumerate(zip(duties, masses)):
+        ref = pamjax.simulate(presets.mas10_system(valve="averaged", payload_mass=m), pamjax.Constant(u), TS,
+                              rtol=1e-10, atol=1e-10)
+        if method == "rk4":  # at its stability limit (~1.5 ms) RK4 resolves the stick-slip transients: < 0.1 um
+            np.testing.assert_allclose(result["position"][i], ref.position, rtol=0, atol=1e-7)
+            np.testing.assert_allclose(result["pressure"][i], ref.pressure, rtol=0, atol=0.1)
+        else:  # ROS2 at 5 ms smears the transients (tens of um); once settling the error shrinks (2 um at 1 s)
+            np.testing.assert_allclose(result["position"][i, -1], ref.position[-1], rtol=0, atol=1e-5)
+            np.testing.assert_allclose(result["pressure"][i, -1], ref.pressure[-1], rtol=0, atol=10.0)
+
+
+def test_pwm_sweep_and_grid_shape():
+    system = presets.mas10_system(valve="pwm")
+    ts = np.linspace(0.0, 0.3, 7)
+    duties, supplies = np.array([0.3, 0.7]), np.array([5e5, 6.5e5, 7e5])
+    result = sweep(system, pamjax.Constant(0.5), ts,
+                   {"signal.value": duties[:, None], "valve.supply_pressure": supplies[None, :]},
+                   channels=("pressure",))
+    assert result.method == "rk4" and result["pressure"].shape == (2, 3, 7)
+    for i, j in [(0, 0), (1, 2)]:
+        valve = presets.mas10_valve()
+        sys_ij = pamjax.MuscleSystem(valve=type(valve)(**{**valve.__dict__, "supply_pressure": supplies[j]}),
+                                     muscle=system.muscle, friction=system.friction)
+        ref = pamjax.simulate(sys_ij, pamjax.Constant(duties[i]), ts, rtol=1e-10, atol=1e-10, max_steps=10**6)
+        # RK4 at 5 edge widths (0.5 ms): a few Pa (benchmarks/RESULTS.md, ## sweep)
+        np.testing.assert_allclose(result["pressure"][i, j], ref.pressure, rtol=0, atol=20.0)
+
+
+def test_status_per_point_with_injected_failure(averaged):
+    # A viscous coefficient of 1e6 N s/m gives the eigenvalue -C_f/M ~ -1e5 /s: RK4 at 1 ms overflows there.
+    # (A tiny velocity_width would not do: tanh saturates, so RK4 chatters but stays bounded.)
+    widths = np.array([250.0, 1e6, 250.0])
+    over = {"friction.viscous_coefficient": widths, "signal.value": np.array([0.3, 0.3, 0.7])}
+    result = sweep(averaged, pamjax.Constant(0.5), TS, over, method="rk4", dt=1e-3)
+    assert result.status.tolist() == [0, 1, 0]
+    assert np.all(np.isnan(result["position"][1]))
+    alone = sweep(averaged, pamjax.Constant(0.5), TS, {"friction.viscous_coefficient": widths[[0, 2]],
+                                                       "signal.value": np.array([0.3, 0.7])}, method="rk4", dt=1e-3)
+    np.testing.assert_array_equal(result["position"][[0, 2]], alone["position"])
+
+
+def test_reductions_match_numpy(averaged):
+    ts = np.linspace(0.0, 2.0, 401)
+    over = {"signal.frequency": np.array([1.0, 2.5]), "signal.amplitude": np.array([0.2, 0.3])}
+    signal = pamjax.Sine(0.5, 0.2, 1.0)
+    full = sweep(averaged, signal, ts, over, channels=("position", "command"))
+    for reduce, numpy_reduce in [
+        (Final(), lambda y, f: y[-1]),
+        (Mean(0.5), lambda y, f: y[ts >= 1.5 - 1e-12].mean()),
+        (Harmonic(2), lambda y, f: 2 * np.mean((y * np.exp(-2j * np.pi * f * ts))[ts > 2.0 - 2 / f + 1e-9])),
+    ]:
+        reduced = sweep(averaged, signal, ts, over, reduce=reduce, channels=("position", "command"))
+        for i, f in enumerate(over["signal.frequency"]):
+            for c in ("position", "command"):
+                np.testing.assert_allclose(reduced[c][i], numpy_reduce(full[c][i], f), rtol=1e-10, atol=1e-14)
+    # the command's harmonic is the sine itself: amplitude A, phase -pi/2 (sin = cos shifted)
+    harmonic = sweep(averaged, signal, ts, over, reduce=Harmonic(2), channels=("command",))["command"]
+    np.testing.assert_allclose(np.abs(harmonic), over["signal.amplitude"], rtol=1e-9)
+    np.testing.assert_allclose(np.angle(harmonic), -np.pi / 2, atol=1e-9)
+
+
+def test_chunks_equal_one_call_and_report_progress(averaged):
+    duties = np.linspace(0.1, 0.9, 5)
+    lines = []
+    chunked = sweep(averaged, pamjax.Constant(0.5), TS, {"signal.value": duties}, reduce=Final(), chunk_size=2,
+                    progress=lines.append)
+    whole = sweep(averaged, pamjax.Constant(0.5), TS, {"signal.value": duties}, reduce=Final())
+    assert len(lines) == 3 and "chunk 3/3" in lines[-1]
+    for c in whole.channels:
+        np.testing.assert_array_equal(chunked[c], whole[c])
+
+
+def test_initial_state_path_and_factory(averaged):
+    p0 = np.array([2e5, 4e5])
+    result = sweep(averaged, lambda v: pamjax.Constant(v["duty"]), TS, {"y0.pressure": p0, "duty": [0.4, 0.6]},
+                   channels=("pressure",))
+    np.testing.assert_allclose(result["pressure"][:, 0], p0)
+    ref = pamjax.simulate(averaged, pamjax.Constant(0.6), TS, y0=averaged.initial_state(pressure=4e5),
+                          rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(result["pressure"][1], ref.pressure, atol=2.0)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(over={"valve.nonexistent": [1.0]}), "valve.nonexistent"),
+        (dict(over={"payload_mass": [1.0, -2.0]}), "payload_mass"),
+        (dict(over={"signal.value": [0.5, 1.5]}), r"\[0.0, 1.0\]"),
+        (dict(over={"signal.value": [0.5, np.nan]}), "finite"),
+        (dict(over={"signal.value": [0.1, 0.2], "payload_mass": [1.0, 2.0, 3.0]}), "broadcast"),
+        (dict(over={"signal.value": [0.5]}, dt=-1.0), "dt"),
+        (dict(over={"signal.value": [0.5]}, method="euler"), "method"),
+        (dict(over={"signal.value": [0.5]}, chunk_size=0), "chunk_size"),
+        (dict(over={"signal.value": [0.5]}, channels=("altitude",)), "altitude"),
+        (dict(over={"signal.value": [0.5]}, ts=[0.0, 1.0, 0.5]), "ts"),
+        (dict(over={}), "over"),
+    ],
+)
+def test_bad_input_is_named(averaged, kwargs, match):
+    kwargs = dict(kwargs)
+    ts = kwargs.pop("ts", TS)
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        sweep(averaged, pamjax.Constant(0.5), ts, **kwargs)
