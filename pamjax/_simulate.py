@@ -342,8 +342,8 @@ def simulate(
         )
     if throw and not traced and int(traj.result) != 0:
         raise PamjaxSolveError(
-            f"the ODE solve failed ({dfx.RESULTS[int(traj.result)] if hasattr(dfx.RESULTS, '__getitem__') else ''}"
-            f" result code {int(traj.result)}) after {int(traj.num_steps)} steps (max_steps={max_steps}). "
+            # (dfx.RESULTS[int] raises ValueError in equinox's enums: report the code only)
+            f"the ODE solve failed (result code {int(traj.result)}) after {int(traj.num_steps)} steps (max_steps={max_steps}). "
             "Common causes: max_steps too small for the horizon (PWM valves need ~20 steps per period), "
             "parameters far outside the physical range, or too tight tolerances. Pass throw=False to get the "
             "partial result with status instead."

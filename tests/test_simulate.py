@@ -1,0 +1,132 @@
+"""simulate/solve: the whole ODE against scipy DOP853 on a NumPy vector field, gradients of a trajectory loss against
+central finite differences for every parameter leaf, forward = reverse mode, jit/vmap equivalence."""
+
+import diffrax as dfx
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import P_ATM, NumpyPlant, central_difference, flat_parameters, parameter_names
+from scipy.integrate import solve_ivp
+
+import pamjax
+from pamjax import presets
+from pamjax._simulate import solve
+
+
+def _plant(valve):
+    return NumpyPlant(
+        a=presets.MAS10_MAX_FORCE_COEFFICIENTS, k0=presets.MAS10_K0, k1=presets.MAS10_K1, k2=presets.MAS10_K2,
+        v0=presets.MAS10_V0, v1=presets.MAS10_V1, x_min=presets.MAS10_MIN_POSITION, x_max=presets.MAS10_MAX_POSITION,
+        valve=valve, m=presets.MAS10_AVERAGED_VALVE, volume=presets.TANK_VOLUME,
+    )
+
+
+@pytest.mark.parametrize("valve, t_end", [("averaged", 0.3), ("pwm", 0.05)])
+def test_muscle_ode_matches_scipy_dop853(valve, t_end):
+    # Both solved at rtol 1e-10. Tolerance: 1e-5 relative in pressure (≈ 3 Pa), 1e-7 m in position, 1e-5 m/s in
+    # velocity: the solutions agree to ~1e-8; the margin absorbs the PWM edges (width 0.1 ms) that both resolve.
+    system = presets.mas10_system(valve)
+    u = pamjax.Triangle(0.3, 0.8, 4.0)
+    y0 = system.initial_state(pressure=3e5)
+    ts = np.linspace(0.0, t_end, 11)
+    traj = pamjax.simulate(system, u, jnp.asarray(ts), y0=y0, rtol=1e-10, atol=1e-10)
+    plant = _plant(valve)
+    ref = solve_ivp(plant.rhs, (0.0, t_end), [3e5, float(y0.position), 0.0], method="DOP853", t_eval=ts, rtol=1e-10,
+                    atol=[1e-4, 1e-12, 1e-10], args=(lambda t: float(u(t)),))
+    assert ref.success
+    np.testing.assert_allclose(traj.pressure, ref.y[0], rtol=1e-5)
+    np.testing.assert_allclose(traj.position, ref.y[1], atol=1e-7)
+    np.testing.assert_allclose(traj.velocity, ref.y[2], atol=1e-5)
+    assert np.ptp(ref.y[1]) > 2e-4  # the payload actually moves (0.6 mm in 50 ms)
+
+
+def test_tank_ode_matches_scipy_dop853():
+    system = presets.mas10_tank_system("pwm")
+    ts = np.linspace(0.0, 0.06, 13)
+    traj = pamjax.simulate(system, pamjax.Constant(0.4), jnp.asarray(ts), rtol=1e-10, atol=1e-10)
+    ref = solve_ivp(_plant("pwm").tank_rhs, (0.0, 0.06), [P_ATM], method="DOP853", t_eval=ts, rtol=1e-10, atol=1e-4,
+                    args=(lambda t: 0.4,))
+    np.testing.assert_allclose(traj.pressure, ref.y[0], rtol=1e-6)
+
+
+# --- gradients of a trajectory loss w.r.t. every parameter leaf ------------------------------------------------
+CASES = {
+    "tank-pwm": (lambda: presets.mas10_tank_system("pwm"), pamjax.Constant(0.6), 0.03, None),
+    "tank-averaged": (lambda: presets.mas10_tank_system("averaged"), pamjax.Constant(0.6), 0.05, None),
+    "muscle-pwm": (lambda: presets.mas10_system("pwm"), pamjax.Constant(0.6), 0.03, 3e5),
+    "muscle-averaged": (lambda: presets.mas10_system("averaged"), pamjax.Triangle(0.3, 0.8, 4.0), 0.1, 3e5),
+    "muscle-bristle": (lambda: presets.mas10_system("averaged", friction="bristle"), pamjax.Constant(0.7), 0.05, 3e5),
+}
+
+
+def _loss_factory(case):
+    make, signal, t_end, p0 = CASES[case]
+    system = make()
+    ts = jnp.linspace(0.0, t_end, 6)
+    flat, rebuild = flat_parameters(system)
+
+    def loss(v, adjoint=None):
+        s = rebuild(v)
+        y0 = s.initial_state() if p0 is None else s.initial_state(pressure=p0)
+        traj = solve(s, signal, ts, y0, ts[0], rtol=1e-12, atol=1e-12, adjoint=adjoint)
+        out = jnp.sum((traj.pressure / 1e5) ** 2)
+        if traj.position is not None:
+            out = out + jnp.sum((traj.position / 1e-2) ** 2) + jnp.sum((traj.velocity / 1e-2) ** 2)
+        return out
+
+    return system, flat, loss
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_gradient_every_parameter_matches_finite_differences(case):
+    # Compared as sensitivities θ ∂L/∂θ (the change for a relative change of each parameter), so leaves of very
+    # different units share one tolerance: 2e-4 of the largest sensitivity plus 1e-4 relative. Central differences
+    # with relative step 1e-5 at solver rtol 1e-12 are accurate to ~1e-7 relative.
+    system, flat, loss = _loss_factory(case)
+    grad = np.asarray(jax.jit(jax.grad(loss))(jnp.asarray(flat)))
+    fd = central_difference(jax.jit(loss), flat)
+    names = parameter_names(system)
+    s_ad, s_fd = flat * grad, flat * fd
+    scale = np.max(np.abs(s_fd))
+    bad = [(n, a, f) for n, a, f in zip(names, s_ad, s_fd) if not abs(a - f) <= 2e-4 * scale + 1e-4 * abs(f)]
+    assert not bad, bad
+    assert np.all(np.isfinite(grad)) and scale > 0
+
+
+@pytest.mark.slow  # ~60 s on 2 cores: jacfwd through the solve over ~40 parameters, mostly compile time
+def test_forward_mode_jacobian_equals_reverse_mode_gradient():
+    _, flat, loss = _loss_factory("muscle-averaged")
+    rev = jax.grad(loss)(jnp.asarray(flat))
+    fwd = jax.jacfwd(lambda v: loss(v, adjoint="forward"))(jnp.asarray(flat))
+    np.testing.assert_allclose(fwd, rev, rtol=1e-8, atol=1e-12 * float(jnp.max(jnp.abs(rev))))
+
+
+def test_vmap_over_duties_equals_loop():
+    system = presets.mas10_system("pwm")
+    ts = jnp.linspace(0.0, 0.04, 5)
+    y0 = system.initial_state(pressure=3e5)
+    duties = jnp.asarray([0.2, 0.5, 0.8])
+
+    def run(u):
+        return solve(system, pamjax.Constant(u), ts, y0, ts[0], rtol=1e-8, atol=1e-8).position
+
+    batched = eqx.filter_jit(jax.vmap(run))(duties)
+    looped = [eqx.filter_jit(run)(u) for u in duties]
+    np.testing.assert_allclose(batched, np.stack(looped), rtol=1e-10, atol=1e-12)
+    jitted = pamjax.simulate(system, pamjax.Constant(0.5), ts, y0=y0, rtol=1e-8, atol=1e-8).position
+    np.testing.assert_allclose(jitted, looped[1], rtol=1e-12, atol=1e-14)
+
+
+def test_trajectory_channels_and_failed_solve():
+    system = presets.mas10_system("averaged")
+    ts = jnp.linspace(0.0, 0.1, 5)
+    traj = pamjax.simulate(system, pamjax.Constant(0.5), ts)
+    assert set(traj.channels()) >= {"pressure", "position", "velocity", "force", "mass_flow"}
+    assert np.all(traj.succeeded)
+    with pytest.raises(pamjax.PamjaxSolveError, match="max_steps"):
+        pamjax.simulate(system, pamjax.Constant(0.5), ts, max_steps=3)
+    partial = pamjax.simulate(system, pamjax.Constant(0.5), ts, max_steps=3, throw=False)
+    assert int(partial.result) != 0 and np.all(np.isnan(partial.pressure))
+    assert dfx  # diffrax is the solver underneath
