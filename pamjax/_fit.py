@@ -407,8 +407,8 @@ def fit(
     - `solver`: an optimistix least-squares solver (default `LevenbergMarquardt(rtol, atol)`); `max_steps`.
     - `progress`: True prints one line per iteration (cost, step size); a callable gets (step, cost, step_size,
       accepted); False is silent.
-    - `stall_steps`: stop after this many rejected trial steps in a row ('converged' if the last accepted step
-      changed the cost by less than `rtol`, else 'stalled').
+    - `stall_steps`: stop after this many rejected trial steps in a row ('converged' if Gauss-Newton predicts a
+      further decrease below 1e-4 of the cost, else 'stalled').
     - `identifiability_tol`: singular values of the column-normalised Jacobian below this × the largest mark a
       non-identifiable combination (warned about by name; its parameters get infinite standard errors).
     - `out`: a JSON path to write the result to; checked BEFORE the fit; never replaced unless `overwrite=True`.
@@ -490,21 +490,21 @@ def fit(
     steady = t_rest / max(n_steps, 1)
     compile_s = max(t_first - steady, 0.0)
     fit_s = t_rest + (t_first - compile_s)
-    accepted_costs = [h[1] for h in history if h[3]]
-    last_change = abs(accepted_costs[-2] - accepted_costs[-1]) / max(accepted_costs[-1], 1e-300) if len(
-        accepted_costs) > 1 else np.inf
+    jac = np.asarray(jac)
+    resid = np.asarray(resid)
+    # Gauss-Newton's predicted decrease ½‖P r‖² (P: projection onto the Jacobian's range), relative to the cost.
+    u_, s_, _ = np.linalg.svd(jac, full_matrices=False)
+    proj = u_[:, s_ > 1e-12 * (s_[0] if s_.size else 1.0)].T @ resid
+    predicted = 0.5 * float(proj @ proj) / max(float(cost), 1e-300)
     if bool(done):
         status = "converged" if result == optx.RESULTS.successful else optx.RESULTS[result]
     elif int(state.num_steps_since_acceptance) >= stall_steps:
-        # Trial steps keep failing to lower the cost: a minimum to rounding, if the last accepted step changed the
-        # cost by less than rtol.
-        status = "converged" if last_change < rtol else f"stalled: {stall_steps} rejected steps in a row"
+        # Trial steps keep failing to lower the cost: a minimum (to the solver's accuracy) if Gauss-Newton predicts
+        # almost no further decrease.
+        status = "converged" if predicted < 1e-4 else f"stalled: {stall_steps} rejected steps in a row"
     else:
         status = "max_steps"
     converged = status == "converged"
-
-    jac = np.asarray(jac)
-    resid = np.asarray(resid)
     values = np.asarray(space.physical(theta))
     init_values = np.asarray(space.initial_values())
     used = int(np.count_nonzero(np.any(jac != 0, axis=1) | (resid != 0)))
