@@ -1,0 +1,77 @@
+"""Bad input raises PamjaxInputError naming the argument, before any solve."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import pamjax
+from pamjax import presets
+
+E = pamjax.EllipseRestriction
+CASES = [
+    ("payload_mass", lambda: pamjax.MuscleSystem(presets.mas10_valve(), presets.mas10_muscle(), payload_mass=0.0)),
+    ("payload_mass", lambda: pamjax.MuscleSystem(presets.mas10_valve(), presets.mas10_muscle(), payload_mass=-1.0)),
+    ("area", lambda: E(0.36, 0.28, 0.0)),
+    ("area", lambda: E(0.36, 0.28, -3e-6)),
+    ("area", lambda: pamjax.NozzleRestriction(0.8, -1e-6)),
+    ("volume", lambda: pamjax.TankSystem(presets.mas10_valve(), 0.0)),
+    ("volume", lambda: pamjax.TankSystem(presets.mas10_valve(), -5e-5)),
+    ("v0", lambda: pamjax.LinearVolume(-1e-5, 1e-4)),
+    ("pwm_frequency", lambda: presets.mas10_valve(pwm_frequency=0.0)),
+    ("pwm_frequency", lambda: presets.mas10_valve(pwm_frequency=-50.0)),
+    ("frequency", lambda: pamjax.Triangle(0.05, 0.95, 0.0)),
+    ("frequency", lambda: pamjax.Sine(0.5, 0.1, -1.0)),
+    ("critical_ratio", lambda: E(0.36, 0.0, 3e-6)),
+    ("critical_ratio", lambda: E(0.36, 1.0, 3e-6)),
+    ("critical_ratio", lambda: E(0.36, 1.2, 3e-6)),
+    ("critical_ratio", lambda: pamjax.ISO6358Restriction(1e-8, -0.1)),
+    ("heat_capacity_ratio", lambda: pamjax.Air(heat_capacity_ratio=0.9)),
+    ("discharge_coefficient", lambda: E(float("nan"), 0.28, 3e-6)),
+    ("Sampled.values", lambda: pamjax.Sampled(jnp.linspace(0, 1, 5), jnp.ones(4))),
+    ("Sampled.times", lambda: pamjax.Sampled(jnp.asarray([0.0, 1.0, 1.0]), jnp.ones(3))),
+    ("supply_pressure", lambda: presets.mas10_valve(supply_pressure=-1.0)),
+    ("atmospheric_pressure", lambda: pamjax.Air(atmospheric_pressure=0.0)),
+]
+
+
+@pytest.mark.parametrize("name, build", CASES, ids=[f"{i}-{c[0]}" for i, c in enumerate(CASES)])
+def test_constructor_rejects(name, build):
+    with pytest.raises(pamjax.PamjaxInputError, match=name):
+        build()
+
+
+SYSTEM = presets.mas10_tank_system("averaged")
+TS = jnp.linspace(0.0, 0.1, 5)
+
+
+@pytest.mark.parametrize(
+    "name, kwargs",
+    [
+        ("ts", dict(ts=jnp.asarray([0.0, 0.1, np.nan]))),
+        ("ts", dict(ts=jnp.asarray([0.0, 0.2, 0.1]))),
+        ("ts", dict(ts=jnp.asarray([0.0, 0.0, 0.1]))),
+        ("signal", dict(signal=pamjax.Constant(1.2))),
+        ("signal", dict(signal=pamjax.Constant(-0.1))),
+        ("signal", dict(signal=pamjax.Triangle(0.05, 1.05, 0.1))),
+        ("y0.pressure", dict(y0=pamjax.TankState(jnp.asarray(-1e5)))),
+        ("y0", dict(y0=pamjax.TankState(jnp.asarray(np.nan)))),
+    ],
+)
+def test_simulate_rejects_before_solving(name, kwargs):
+    args = dict(ts=TS, signal=pamjax.Constant(0.5))
+    args.update(kwargs)
+    with pytest.raises(pamjax.PamjaxInputError, match=name.replace(".", r"\.")):
+        pamjax.simulate(SYSTEM, args.pop("signal"), args.pop("ts"), **args)
+
+
+def test_muscle_y0_negative_pressure_and_discrete_inputs():
+    system = presets.mas10_system("averaged")
+    y0 = pamjax.MuscleState(jnp.asarray(-2e5), jnp.asarray(0.0), jnp.asarray(0.0))
+    with pytest.raises(pamjax.PamjaxInputError, match="y0.pressure"):
+        pamjax.simulate(system, pamjax.Constant(0.5), TS, y0=y0)
+    with pytest.raises(pamjax.PamjaxInputError, match="sample_time"):
+        pamjax.simulate_discrete(system, pamjax.Constant(0.5), 0.0, 0.1)
+    with pytest.raises(pamjax.PamjaxInputError, match="t_end"):
+        pamjax.simulate_discrete(system, pamjax.Constant(0.5), 1e-3, -0.1)
+    with pytest.raises(pamjax.PamjaxInputError, match="signal"):
+        pamjax.simulate_discrete(system, pamjax.Constant(1.5), 1e-3, 0.1)
