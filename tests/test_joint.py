@@ -1,0 +1,86 @@
+"""Antagonistic joint: angle follows the pressure difference, stiffness the pressure sum (paper 001, Sect. 7)."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import pamjax
+from pamjax._joint import AntagonisticJoint, VoltagePair
+from pamjax._regulator import ISO6358Regulator
+from pamjax.presets import dmsp40_muscle
+
+P_ATM = 101325.0
+
+
+@pytest.fixture(scope="module")
+def joint():
+    m = dmsp40_muscle()
+    return AntagonisticJoint(ISO6358Regulator(), ISO6358Regulator(), m, m, foot_mass=0.0)
+
+
+@eqx.filter_jit
+def _equilibrium(joint, pf, pe):
+    angle = joint.equilibrium_angle(pf, pe)
+    return angle, joint.stiffness(angle, pf, pe)
+
+
+def _state(joint, total, difference):
+    pf, pe = P_ATM + 0.5 * (total + difference), P_ATM + 0.5 * (total - difference)
+    angle, stiffness = _equilibrium(joint, jnp.asarray(pf), jnp.asarray(pe))
+    return float(angle), float(stiffness)
+
+
+def test_angle_follows_difference_and_stiffness_follows_sum(joint):
+    sums = [3e5, 5e5, 7e5]
+    diffs = [-0.4e5, 0.0, 0.4e5, 0.8e5]
+    angle = np.array([[_state(joint, s, d)[0] for d in diffs] for s in sums])
+    stiff = np.array([[_state(joint, s, d)[1] for d in diffs] for s in sums])
+    np.testing.assert_allclose(angle[:, 1], 0.0, atol=1e-12)  # equal pressures: θ = 0 whatever the sum
+    assert np.all(np.diff(angle, axis=1) > 0)  # angle rises with the difference at every sum
+    assert np.all(np.diff(stiff, axis=0) > 0)  # stiffness rises with the sum at every difference
+    # the sum sets stiffness far more than the difference does: relative spread across sums vs across differences
+    across_sums = (stiff[-1] - stiff[0]) / stiff.mean(axis=0)
+    across_diffs = np.abs(stiff[:, -1] - stiff[:, 1]) / stiff.mean(axis=1)
+    assert across_sums.min() > 3 * across_diffs.max()
+
+
+def test_joint_stiffness_is_minus_torque_slope_with_closed_chambers(joint):
+    pf, pe = P_ATM + 3e5, P_ATM + 2e5
+    a = float(joint.equilibrium_angle(pf, pe))
+    h = 1e-6
+    xf, xe = joint.contractions(a)
+    vf, ve = float(joint.flexor.volume(xf)), float(joint.extensor.volume(xe))
+
+    def tau(angle):  # closed isothermal chambers: p V = const
+        xf2, xe2 = joint.contractions(angle)
+        return float(
+            joint.torque(angle, pf * vf / float(joint.flexor.volume(xf2)), pe * ve / float(joint.extensor.volume(xe2)))
+        )
+
+    fd = -(tau(a + h) - tau(a - h)) / (2 * h)
+    assert float(joint.stiffness(a, pf, pe)) == pytest.approx(fd, rel=1e-6)
+
+
+def test_simulated_joint_settles_at_static_equilibrium(joint):
+    y0 = joint.initial_state(P_ATM + 2e5, P_ATM + 2e5)
+    sig = VoltagePair(pamjax.Constant(3.0), pamjax.Constant(1.5))
+    traj = pamjax.simulate(joint, sig, jnp.linspace(0.0, 1.0, 11), y0=y0)
+    pf, pe = (float(p) for p in traj.pressure[-1])
+    # each regulator delivers its calibrated pressure (1.01 bar/V) ...
+    assert pf == pytest.approx(P_ATM + 3.0 * 1.01e5, abs=300)
+    assert pe == pytest.approx(P_ATM + 1.5 * 1.01e5, abs=300)
+    # ... and the joint rests where the static torque vanishes
+    assert float(traj.position[-1]) == pytest.approx(float(joint.equilibrium_angle(pf, pe)), abs=1e-3)
+    assert float(traj.position[-1]) > 0.1
+
+
+def test_pressures_for_inverts_the_static_map(joint):
+    pf, pe = joint.pressures_for(0.15, 5e5)
+    assert float(pf + pe - 2 * P_ATM) == pytest.approx(5e5, rel=1e-9)
+    assert float(joint.equilibrium_angle(pf, pe)) == pytest.approx(0.15, abs=1e-6)
+
+
+def test_joint_command_shape_is_checked(joint):
+    with pytest.raises(pamjax.PamjaxInputError, match="shape \\(2,\\)"):
+        joint.vector_field(0.0, joint.initial_state(), jnp.asarray(3.0))
