@@ -1,0 +1,141 @@
+"""`pamjax sweep CONFIG.toml`: run a steady-state map, flow surface or frequency response; write NPZ, CSV, figure.
+
+Config (see `examples/sweep_*.toml`):
+
+    kind = "steady_state"            # or "flow_surface", "frequency_response"
+    [system]
+    valve = "pwm"                    # "pwm" (smoothed switching) or "averaged" (eq. 13); paper 000's MAS-10 preset
+    payload_mass = 9.6               # kg
+    [sweep]
+    commands = { start = 0.0, stop = 1.0, num = 101 }   # duty ratios
+    horizon = 5.0                    # s; window = 1.0 s averaged at the end
+"""
+
+import csv
+import os
+import time
+import tomllib
+
+import numpy as np
+
+from . import presets
+from ._errors import PamjaxInputError
+from ._sweep_maps import flow_surface, frequency_response, steady_state_map
+
+KINDS = ("steady_state", "flow_surface", "frequency_response")
+
+
+def add_arguments(parser):
+    parser.add_argument("config", help="TOML file describing the sweep (examples/sweep_*.toml)")
+    parser.add_argument("--out", default=None, help="output folder (default results/sweep-<config name>)")
+    parser.add_argument("--no-plot", action="store_true", help="skip the figure")
+
+
+def _axis(spec, name):
+    if isinstance(spec, list):
+        return np.asarray(spec, dtype=float)
+    if isinstance(spec, dict) and {"start", "stop", "num"} <= set(spec):
+        space = np.geomspace if spec.get("log", False) else np.linspace
+        return space(float(spec["start"]), float(spec["stop"]), int(spec["num"]))
+    raise PamjaxInputError(f"[sweep].{name} must be a list or {{start, stop, num[, log]}}, got {spec!r}")
+
+
+def _write_csv(path, columns):
+    names = list(columns)
+    with open(path, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(names)
+        for row in zip(*(np.ravel(columns[n]) for n in names)):
+            writer.writerow([f"{v:.10g}" for v in row])
+
+
+def run_config(config, progress=print):
+    """Run a parsed config; returns (columns for CSV/NPZ: name -> 1-D array with units in the name, plot spec)."""
+    kind = config.get("kind")
+    if kind not in KINDS:
+        raise PamjaxInputError(f"kind must be one of {KINDS}, got {kind!r}")
+    sys_cfg, sw = config.get("system", {}), config.get("sweep", {})
+    options = {k: sw[k] for k in ("method", "dt", "chunk_size") if k in sw}
+    if kind == "flow_surface":
+        valve = presets.mas10_valve()
+        if "supply_pressure" in sys_cfg:
+            valve = presets.mas10_valve(supply_pressure=float(sys_cfg["supply_pressure"]))
+        u = _axis(sw.get("commands", {"start": 0, "stop": 1, "num": 41}), "commands")
+        p = _axis(sw.get("pressures", {"start": 101325.0, "stop": float(valve.supply_pressure), "num": 41}), "pressures")
+        air = presets.Air()
+        flow = flow_surface(valve, u, p, air)
+        uu, pp = np.meshgrid(u, p, indexing="ij")
+        return dict(duty=uu.ravel(), pressure_pa_abs=pp.ravel(), mass_flow_kg_s=flow.ravel()), ("surface", u, p, flow)
+    system = presets.mas10_system(valve=sys_cfg.get("valve", "pwm"), payload_mass=float(sys_cfg.get("payload_mass", 9.6)))
+    if kind == "steady_state":
+        u = _axis(sw.get("commands", {"start": 0, "stop": 1, "num": 101}), "commands")
+        r = steady_state_map(system, u, horizon=float(sw.get("horizon", 5.0)), window=float(sw.get("window", 1.0)),
+                             progress=progress, **options)
+        cols = dict(duty=u, pressure_pa_abs=r["pressure"], position_m=r["position"], status=r.status)
+        return cols, ("steady", u, r)
+    f = _axis(sw.get("frequencies", {"start": 0.05, "stop": 5.0, "num": 16, "log": True}), "frequencies")
+    fr = frequency_response(system, f, offset=float(sw.get("offset", 0.5)), amplitude=float(sw.get("amplitude", 0.2)),
+                            progress=progress, **options)
+    cols = dict(frequency_hz=f, position_gain_m=fr["position"]["gain"], position_phase_deg=fr["position"]["phase"],
+                pressure_gain_pa=fr["pressure"]["gain"], pressure_phase_deg=fr["pressure"]["phase"],
+                status=fr["result"].status)
+    return cols, ("bode", f, fr)
+
+
+def plot(spec, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    kind = spec[0]
+    if kind == "surface":
+        _, u, p, flow = spec
+        fig, ax = plt.subplots(figsize=(7, 5))
+        for j in range(0, len(p), max(1, len(p) // 8)):
+            ax.plot(u, flow[:, j] * 1e3, label=f"p = {(p[j] - 101325) / 1e6:.2f} MPa gauge")
+        ax.set(xlabel="duty ratio u [-]", ylabel="cycle-averaged mass flow [g/s]",
+               title="Averaged flow surface of the switching valve (chamber held at p)")
+        ax.legend(fontsize=7)
+    elif kind == "steady":
+        _, u, r = spec
+        fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 7), sharex=True)
+        a1.plot(u, (r["pressure"] - 101325) / 1e6)
+        a1.set(ylabel="pressure [MPa gauge]", title="Steady state against constant duty")
+        a2.plot(u, r["position"] * 1e3)
+        a2.set(xlabel="duty ratio u [-]", ylabel="displacement [mm]")
+        for a in (a1, a2):
+            a.axvspan(0, 0.1, color="gray", alpha=0.15)
+            a.axvspan(0.9, 1.0, color="gray", alpha=0.15)
+    else:
+        _, f, fr = spec
+        fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 7), sharex=True)
+        a1.loglog(f, fr["position"]["gain"] * 1e3)
+        a1.set(ylabel="gain [mm per unit duty]", title="Frequency response: duty → displacement")
+        a2.semilogx(f, fr["position"]["phase"])
+        a2.set(xlabel="frequency [Hz]", ylabel="phase [deg]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def run(args):
+    with open(args.config, "rb") as f:
+        config = tomllib.load(f)
+    name = os.path.splitext(os.path.basename(args.config))[0]
+    out = args.out or os.path.join("results", f"sweep-{name}")
+    os.makedirs(out, exist_ok=True)
+    start = time.perf_counter()
+    columns, spec = run_config(config)
+    print(f"pamjax sweep: {config['kind']}, {len(next(iter(columns.values())))} rows in "
+          f"{time.perf_counter() - start:.1f} s")
+    np.savez(os.path.join(out, "sweep.npz"), **columns)
+    _write_csv(os.path.join(out, "sweep.csv"), columns)
+    print(f"wrote {out}/sweep.npz and sweep.csv (columns: {', '.join(columns)})")
+    if not args.no_plot:
+        plot(spec, os.path.join(out, "sweep.png"))
+        print(f"figure: {out}/sweep.png")
+    failed = int(np.sum(columns.get("status", np.zeros(1)) != 0))
+    if failed:
+        print(f"warning: {failed} sweep points failed (status != 0; their outputs are NaN)")
+    return 0
