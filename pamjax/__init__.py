@@ -95,3 +95,12 @@ from ._regulator import (  # noqa: E402
     VoltageCalibration as VoltageCalibration,
 )
 from ._tabulated import TabulatedISO6358Restriction as TabulatedISO6358Restriction  # noqa: E402
+
+# --- issue 4: batch sweeps ---
+from ._sweep import (  # noqa: E402
+    Final as Final,
+    Harmonic as Harmonic,
+    Mean as Mean,
+    SweepResult as SweepResult,
+    sweep as sweep,
+)
