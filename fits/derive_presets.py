@@ -1,0 +1,110 @@
+"""Re-derive the MAS-10-300 / DMSP-40-400 preset numbers documented in `pamjax/presets.py` and compare.
+
+    python fits/derive_presets.py [--out results/derive_presets]
+
+Steps (presets.py docstring items 1-3): per-length affine fit F = c0 + c1 p of the DMSP-20-300 force map (non-zero
+points), the force at p_max = 0.6 MPa gauge and slope ∂F/∂p; a least-squares quartic in ε through those five 6-bar
+forces plus F = 0 at ε = 0.25, scaled to the datasheet force at ε = 0 (630 N MAS-10, 6000 N DMSP-40) and converted
+to x = ε L0; k0, k1 from a line through the slopes (same scale, k2 = 1e5 Pa). Volume by virtual work,
+V(x) − v0 = ∫₀ˣ F_max/p_max dx (cumulative trapezoid, 201 points over the stroke), v1 its least-squares slope
+(MAS-10) or a cubic in ε with d fixed to the cylinder (DMSP-40: the fitted constant term is discarded). m1…m9 by
+`pamjax.fit_averaged_valve` on the exact-edge valve (41 × 41 grid).
+"""
+
+import argparse
+import json
+import pathlib
+
+import numpy as np
+
+P = np.polynomial.polynomial
+DATA = pathlib.Path(__file__).resolve().parents[1] / "pamjax" / "data" / "DMSP-20-300_force_map_long.csv"
+MAP_L0 = 0.300  # m, DMSP-20-300 nominal length (type code)
+P_MAX = 6e5  # Pa gauge, paper 000
+MAX_CONTRACTION = 0.25  # datasheet
+
+
+def force_map_shape(path=DATA):
+    """(quartic F_max(ε) coefficients [N], line of ∂F/∂p in ε [N/Pa]) of the DMSP-20-300 map."""
+    length, _, pressure, force = np.genfromtxt(path, delimiter=",", skip_header=2).T
+    eps, fmax, slope = [], [], []
+    for ell in np.unique(length)[::-1]:
+        sel = (length == ell) & (force > 0)
+        if sel.sum() < 2:
+            continue
+        c1, c0 = np.polyfit(pressure[sel], force[sel], 1)
+        eps.append((MAP_L0 - ell) / MAP_L0)
+        fmax.append(c0 + c1 * P_MAX)
+        slope.append(c1)
+    quartic = P.polyfit(np.append(eps, MAX_CONTRACTION), np.append(fmax, 0.0), 4)
+    return quartic, P.polyfit(eps, slope, 1)
+
+
+def scaled_muscle(force_at_zero, nominal_length, path=DATA):
+    """a0…a4 [N/mⁱ], k0 [N], k1 [N/m] for a muscle of this family (k2 = 1e5 Pa)."""
+    quartic, slope_line = force_map_shape(path)
+    scale = force_at_zero / quartic[0]
+    a = quartic * scale / nominal_length ** np.arange(5)
+    k0 = slope_line[0] * 1e5 * scale
+    k1 = -slope_line[1] / nominal_length * 1e5 * scale
+    return a, k0, k1
+
+
+def virtual_work_volume(a_eps, nominal_length, n=201):
+    """(ε grid, V − v0 on it) [m³] from F_max(ε) coefficients [N] by cumulative trapezoid."""
+    eps = np.linspace(0.0, MAX_CONTRACTION, n)
+    integrand = P.polyval(eps, a_eps) / P_MAX * nominal_length  # dV/dε = L0 F/p
+    dv = np.concatenate([[0.0], np.cumsum(0.5 * (integrand[1:] + integrand[:-1]) * np.diff(eps))])
+    return eps, dv
+
+
+def derive(with_valve=True):
+    out = {}
+    a, k0, k1 = scaled_muscle(630.0, 0.3)  # MAS-10-300 datasheet: 630 N at 6 bar, 300 mm
+    eps, dv = virtual_work_volume(a * 0.3 ** np.arange(5), 0.3)
+    out["mas10"] = dict(a=a.tolist(), k0=k0, k1=k1, v0=np.pi / 4 * 0.01**2 * 0.3, v1=np.polyfit(eps * 0.3, dv, 1)[0])
+    a40, k0_40, k1_40 = scaled_muscle(6000.0, 0.4)  # DMSP-40-400: 6000 N, 400 mm (paper 001)
+    eps, dv = virtual_work_volume(a40 * 0.4 ** np.arange(5), 0.4)
+    cubic = P.polyfit(eps, dv, 3)
+    out["dmsp40"] = dict(a=a40.tolist(), k0=k0_40, k1=k1_40,
+                         volume_cubic=[np.pi / 4 * 0.04**2 * 0.4, *cubic[1:].tolist()])
+    if with_valve:
+        import jax
+
+        jax.config.update("jax_enable_x64", True)
+        import pamjax
+
+        fitted, report = pamjax.fit_averaged_valve(pamjax.presets.mas10_valve("exact"), pamjax.Air())
+        out["mas10_averaged_valve"] = np.asarray(fitted.coefficients).tolist()
+        out["averaged_valve_fit"] = report
+    return out
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="results/derive_presets")
+    args = parser.parse_args()
+    from pamjax import presets
+
+    derived = derive()
+    folder = pathlib.Path(args.out)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "derived_presets.json").write_text(json.dumps(derived, indent=2))
+    m = derived["mas10"]
+    rows = [
+        ("a0..a4", m["a"], presets.MAS10_MAX_FORCE_COEFFICIENTS),
+        ("k0", m["k0"], presets.MAS10_K0),
+        ("k1", m["k1"], presets.MAS10_K1),
+        ("v0", m["v0"], presets.MAS10_V0),
+        ("v1", m["v1"], presets.MAS10_V1),
+        ("m1..m9", derived["mas10_averaged_valve"], presets.MAS10_AVERAGED_VALVE),
+    ]
+    for name, got, preset in rows:
+        rel = np.max(np.abs(np.subtract(got, preset)) / np.maximum(np.abs(preset), 1e-300))
+        print(f"{name:8s} max relative difference to presets.py: {rel:.1e}")
+    print("averaged valve fit:", derived["averaged_valve_fit"])
+    print(f"wrote {folder / 'derived_presets.json'}")
+
+
+if __name__ == "__main__":
+    main()
