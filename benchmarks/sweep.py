@@ -6,7 +6,7 @@ Peers, all in this one run, on the SAME equations (an independent scalar transcr
 - numba: a hand-written fixed-step RK4 loop over the 1,024 duties (serial and `prange`);
 - SciPy: a loop of `solve_ivp(method="LSODA")` on the numba-compiled right-hand side, timed on a subset and
   extrapolated to 1,024 (said in the output);
-- pamjax `sweep` with the smoothed PWM valve (RK4 at 5 edge widths).
+- pamjax `sweep` with the smoothed PWM valve (RK4 at 2 edge widths).
 
 Accuracy matching: every method's final state is compared with a tight reference (DOP853, rtol = atol = 1e-12, on
 the numba transcription). RK4 cannot take a step beyond its stability limit (|λ h| < 2.78; λ ≈ 1,700 /s from the
@@ -40,7 +40,8 @@ def numba_plant(system):
     air, muscle, law, vol = system.air, system.muscle, system.muscle.force_law, system.muscle.volume_law
     coef = np.asarray(system.valve.coefficients, dtype=float)
     a = np.asarray(law.max_force_coefficients, dtype=float)
-    pa, rt, n = float(air.atmospheric_pressure), float(air.gas_constant * air.temperature), float(system.polytropic_index)
+    pa, rt = float(air.atmospheric_pressure), float(air.gas_constant * air.temperature)
+    n = float(system.polytropic_index)
     k0, k1, k2, pmax = float(law.k0), float(law.k1), float(law.k2), float(law.max_pressure)
     v0, v1 = float(vol.v0), float(vol.v1)
     xmin, xmax, sw = float(muscle.min_position), float(muscle.max_position), float(muscle.slack_width)
@@ -119,7 +120,8 @@ def main():
     import pamjax
     from pamjax import presets
 
-    print(f"jax {jax.__version__} ({jax.devices()[0].platform}, {len(jax.devices())} device), numba {numba.__version__}")
+    platform = jax.devices()[0].platform
+    print(f"jax {jax.__version__} ({platform}, {len(jax.devices())} device), numba {numba.__version__}")
     system = presets.mas10_system(valve="averaged")
     duties = np.linspace(0.0, 1.0, args.points)
     ts = np.linspace(0.0, args.horizon, int(round(args.horizon * 10)) + 1)  # outputs every 0.1 s, steps land on them
@@ -137,7 +139,8 @@ def main():
                                     atol=[1e-6, 1e-13, 1e-13], args=(duties[i],)).y[:, -1] for i in check])
 
     def errors(final):  # final: (len(check), >=2) pressure [Pa], position [m]
-        return float(np.max(np.abs(final[:, 0] - reference[:, 0]))), float(np.max(np.abs(final[:, 1] - reference[:, 1])))
+        difference = np.abs(final[:, :2] - reference[:, :2])
+        return float(np.max(difference[:, 0])), float(np.max(difference[:, 1]))
 
     rows = {}
 
@@ -173,7 +176,8 @@ def main():
     t_numba = median_time(lambda: rk4_serial(duties, p0, x0, h, steps), args.repeats)
     t_numba_par = median_time(lambda: rk4_parallel(duties, p0, x0, h, steps), args.repeats)
     rows["numba rk4 serial"] = (t_numba, compile_numba, h, *errors(out_numba[check]))
-    rows[f"numba rk4 prange ({numba.get_num_threads()} threads)"] = (t_numba_par, compile_numba, h, *errors(out_numba[check]))
+    name = f"numba rk4 prange ({numba.get_num_threads()} threads)"
+    rows[name] = (t_numba_par, compile_numba, h, *errors(out_numba[check]))
     h_big = 1.35 * h
     out_big = rk4_serial(duties, p0, x0, h_big, int(round(args.horizon / h_big)))
     rows["numba rk4 at 1.35x step"] = (float("nan"), 0.0, h_big, *errors(out_big[check]))
@@ -195,16 +199,17 @@ def main():
 
     # --- PWM valve
     pwm = presets.mas10_system(valve="pwm")
+    check_pwm = check[1:-1:2]  # interior duties: edges off the step grid
     res_pwm, compile_pwm, t_pwm = pamjax_run(pwm, "rk4")
     ref_pwm = [pamjax.simulate(pwm, pamjax.Constant(float(duties[i])), ts[[0, -1]], rtol=1e-11, atol=1e-11,
-                               max_steps=10**6) for i in check[1::2]]
-    err_pwm_p = max(abs(float(r.pressure[-1]) - res_pwm["pressure"][i]) for r, i in zip(ref_pwm, check[1::2]))
-    err_pwm_x = max(abs(float(r.position[-1]) - res_pwm["position"][i]) for r, i in zip(ref_pwm, check[1::2]))
+                               max_steps=10**6) for i in check_pwm]
+    err_pwm_p = max(abs(float(r.pressure[-1]) - res_pwm["pressure"][i]) for r, i in zip(ref_pwm, check_pwm))
+    err_pwm_x = max(abs(float(r.position[-1]) - res_pwm["position"][i]) for r, i in zip(ref_pwm, check_pwm))
     rows["pamjax rk4, PWM valve"] = (t_pwm, compile_pwm, res_pwm.dt, err_pwm_p, err_pwm_x)
 
     print(f"\n{args.points} constant duties x {args.horizon} s, MAS-10 + 9.6 kg (paper 000), final state per point; "
           f"medians of {args.repeats}; errors: max over {len(check)} duties vs DOP853 rtol 1e-12 "
-          f"(PWM: vs pamjax.simulate Tsit5 rtol 1e-11, {len(check[1::2])} duties)")
+          f"(PWM: vs pamjax.simulate Tsit5 rtol 1e-11, {len(check_pwm)} duties)")
     print(f"{'method':42s} {'run [s]':>9s} {'compile [s]':>11s} {'step [s]':>10s} {'err p [Pa]':>10s} "
           f"{'err x [m]':>10s} {'numba/this':>10s}")
     for name, (t, c, dt, ep, ex) in rows.items():

@@ -14,9 +14,9 @@ Config (see `examples/sweep_*.toml`):
 import csv
 import os
 import time
-import tomllib
 
 import numpy as np
+import tomllib
 
 from . import presets
 from ._errors import PamjaxInputError
@@ -61,12 +61,14 @@ def run_config(config, progress=print):
         if "supply_pressure" in sys_cfg:
             valve = presets.mas10_valve(supply_pressure=float(sys_cfg["supply_pressure"]))
         u = _axis(sw.get("commands", {"start": 0, "stop": 1, "num": 41}), "commands")
-        p = _axis(sw.get("pressures", {"start": 101325.0, "stop": float(valve.supply_pressure), "num": 41}), "pressures")
+        default_p = {"start": 101325.0, "stop": float(valve.supply_pressure), "num": 41}
+        p = _axis(sw.get("pressures", default_p), "pressures")
         air = presets.Air()
         flow = flow_surface(valve, u, p, air)
         uu, pp = np.meshgrid(u, p, indexing="ij")
         return dict(duty=uu.ravel(), pressure_pa_abs=pp.ravel(), mass_flow_kg_s=flow.ravel()), ("surface", u, p, flow)
-    system = presets.mas10_system(valve=sys_cfg.get("valve", "pwm"), payload_mass=float(sys_cfg.get("payload_mass", 9.6)))
+    payload_mass = float(sys_cfg.get("payload_mass", presets.PAYLOAD_MASS))
+    system = presets.mas10_system(valve=sys_cfg.get("valve", "pwm"), payload_mass=payload_mass)
     if kind == "steady_state":
         u = _axis(sw.get("commands", {"start": 0, "stop": 1, "num": 101}), "commands")
         r = steady_state_map(system, u, horizon=float(sw.get("horizon", 5.0)), window=float(sw.get("window", 1.0)),

@@ -34,9 +34,10 @@ STATUS_NAMES = {SUCCESS: "success", NON_FINITE: "non-finite state", NON_PHYSICAL
 # Default step of the ROS2 scheme [s]: on paper 000's MAS-10 plant (averaged valve, 1,024 duties x 5 s) its
 # final-state error against a tight adaptive reference is <= 0.5 um and <= 0.06 Pa (benchmarks/RESULTS.md, ## sweep).
 ROS2_DEFAULT_STEP = 5e-3  # s
-# A smoothed PWM edge needs a few steps across it: with RK4 at 5 edge widths (5e-4 s for the MHE2 preset) the final
-# state is within ~0.4 um and ~2 Pa of the tight reference (benchmarks/RESULTS.md, ## sweep).
-EDGE_WIDTHS_PER_STEP = 5.0
+# A smoothed PWM edge needs steps no longer than ~2 edge widths: with RK4 at 2e-4 s (MHE2 preset, edge width 1e-4 s)
+# the state after 2 s is within 0.2 um and 1.2 Pa of a tight reference at duties 0.105-0.88, at 5e-4 s off by up to
+# 50 um and 285 Pa (the edges fall between RK4's samples; measured, docs/sweeps.md).
+EDGE_WIDTHS_PER_STEP = 2.0
 # A periodic command needs >= 100 steps per period for 2nd-order accuracy at the 1e-4 level.
 STEPS_PER_SIGNAL_PERIOD = 100
 
@@ -331,7 +332,9 @@ def _check_bounds(system, sig, point):
     lo, hi = sig.bounds()
     if not (np.isfinite(lo) and np.isfinite(hi)) or lo < clo - 1e-12 or hi > chi + 1e-12:
         where = "" if point is None else f" at sweep point {point}"
-        raise PamjaxInputError(f"signal (the valve command) must stay within [{clo}, {chi}], its range is [{lo}, {hi}]{where}")
+        raise PamjaxInputError(
+            f"signal (the valve command) must stay within [{clo}, {chi}], its range is [{lo}, {hi}]{where}"
+        )
 
 
 def _signal_frequency(signal, values, plan):
@@ -435,10 +438,10 @@ def sweep(
     - `over`: `{path: values}`. Paths name a leaf of the system (`"payload_mass"`, `"valve.supply_pressure"`,
       `"friction.coulomb_force"`, `"muscle.force_law.k0"`), of the signal (`"signal.value"`,
       `"signal.frequency"`) or of the initial state (`"y0.pressure"` [Pa abs]: without `y0`, an argument of
-      `system.initial_state`, so the payload starts in equilibrium at that pressure; with `y0`, its leaf); with a signal factory any other
-      name is passed to the factory. Values broadcast together (NumPy rules) to the batch shape, so
-      `{"signal.value": u[:, None], "valve.supply_pressure": p[None, :]}` is a grid; a non-scalar leaf takes its own
-      shape as trailing axes.
+      `system.initial_state`, so the payload starts in equilibrium at that pressure; with `y0`, its leaf); with a
+      signal factory any other name is passed to the factory. Values broadcast together (NumPy rules) to the batch
+      shape, so `{"signal.value": u[:, None], "valve.supply_pressure": p[None, :]}` is a grid; a non-scalar leaf
+      takes its own shape as trailing axes.
     - `y0`: base initial state (default: each point's `system.initial_state()`, at rest in equilibrium).
     - `reduce`: None (whole trajectories at `ts`), `Final()`, `Mean(window)` or `Harmonic(periods, frequency)`.
     - `channels`: output channels to keep (default: all the system's outputs and "command").
@@ -448,7 +451,7 @@ def sweep(
       the fast transients, by tens of um on the MAS-10), or "adaptive" (vmapped diffrax Tsit5, a slow reference;
       `solve_options` go to it).
     - `dt`: the fixed step [s]. Default: RK4 at 2.5 / (largest |eigenvalue| of the Jacobian at the initial states)
-      (its stability limit with a 10 % margin), ROS2 at 5 ms; both capped at 5 PWM edge widths for a switching
+      (its stability limit with a 10 % margin), ROS2 at 5 ms; both capped at 2 PWM edge widths for a switching
       valve and at 1/100 of the signal's shortest period. Check a result by halving `dt`.
     - `chunk_size`: points per compiled call (memory bound; default all, at most 8192). The last chunk is padded.
     - `devices`: None (all of `jax.devices()`: the batch axis is sharded over them with a `Mesh` and
@@ -517,7 +520,8 @@ def sweep(
         batch_shape = np.broadcast_shapes(*[a.shape[: a.ndim - len(s)] for a, s in zip(arrays, leaf_shapes)])
     except ValueError:
         raise PamjaxInputError(
-            "over values must broadcast together, got shapes " + ", ".join(f"{k}: {a.shape}" for k, a in zip(keys, arrays))
+            "over values must broadcast together, got shapes "
+            + ", ".join(f"{k}: {a.shape}" for k, a in zip(keys, arrays))
         ) from None
     batch_size = int(np.prod(batch_shape))
     values = {k: np.broadcast_to(a, batch_shape + s) for k, a, s in zip(keys, arrays, leaf_shapes)}

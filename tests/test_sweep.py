@@ -4,7 +4,6 @@ References are independent: each point is re-simulated with `simulate` (adaptive
 reductions are recomputed with NumPy from whole trajectories.
 """
 
-import jax.numpy as jnp
 import numpy as np
 import pytest
 
