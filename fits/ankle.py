@@ -1,0 +1,97 @@
+"""Demo: an antagonistic pair of DMSP-40 muscles, each fed by its own VPPM regulator (ISO 6358 flow limits), drives
+an ankle joint along a gait-like trajectory (paper 001's future work) at stride frequencies in the human gait band
+(0.125-1.5 Hz). Feed-forward only: at each instant the static map gives the pressure pair that holds the reference
+angle at a fixed pressure sum (co-contraction, which sets the stiffness); the calibration (1.01 bar/V) turns them
+into reference voltages. Prints the tracking RMSE per frequency and writes a figure.
+
+    python fits/ankle.py [--out results/ankle] [--frequencies 0.125 0.5 1.5] [--sum-bar 5]
+"""
+
+import argparse
+import json
+import pathlib
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+
+import pamjax as pj  # noqa: E402
+
+P_ATM = 101325.0
+GAIN = 1.01e5  # Pa/V, eq. 6 static gain
+
+
+def gait_angle(t, f):
+    """A gait-like ankle angle [rad]: plantarflexion push-off and dorsiflexion swing (two harmonics, ±≈15°)."""
+    w = 2 * np.pi * f * t
+    return 0.18 * np.sin(w) + 0.08 * np.sin(2 * w + 1.0)
+
+
+def run(joint, f, pressure_sum, rate=200.0):
+    cycles = 1.0 if f < 0.3 else 2.0
+    t = np.arange(0.0, cycles / f, 1.0 / rate)
+    theta = gait_angle(t, f)
+    pressures = jax.jit(jax.vmap(lambda a: joint.pressures_for(a, pressure_sum)))(jnp.asarray(theta))
+    volts = [np.clip((np.asarray(p) - P_ATM) / GAIN, 0.0, 10.0) for p in pressures]
+    signal = pj.VoltagePair(
+        pj.Sampled(jnp.asarray(t), jnp.asarray(volts[0])), pj.Sampled(jnp.asarray(t), jnp.asarray(volts[1]))
+    )
+    y0 = joint.initial_state(pressures[0][0], pressures[1][0])
+    traj = pj.simulate(joint, signal, jnp.asarray(t), y0=y0, max_steps=500_000)
+    angle = np.asarray(traj.position)
+    stiffness = np.asarray(jax.vmap(joint.stiffness)(traj.position, traj.pressure[:, 0], traj.pressure[:, 1]))
+    rmse = float(np.sqrt(np.mean((angle - theta) ** 2)))
+    return dict(t=t, reference=theta, angle=angle, pressure=np.asarray(traj.pressure), stiffness=stiffness, rmse=rmse)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", default="results/ankle")
+    ap.add_argument("--frequencies", type=float, nargs="+", default=[0.125, 0.5, 1.5])
+    ap.add_argument("--sum-bar", type=float, default=5.0, help="gauge pressure sum (co-contraction) [bar]")
+    args = ap.parse_args(argv)
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    m = pj.presets.dmsp40_muscle()
+    joint = pj.AntagonisticJoint(pj.ISO6358Regulator(), pj.ISO6358Regulator(), m, m)
+    results = {}
+    for f in args.frequencies:
+        r = run(joint, f, args.sum_bar * 1e5)
+        results[f] = r
+        print(
+            f"{f:6.3f} Hz: angle RMSE {np.degrees(r['rmse']):.2f}° "
+            f"(reference ±{np.degrees(np.abs(r['reference']).max()):.1f}°), "
+            f"stiffness {r['stiffness'].min():.0f}-{r['stiffness'].max():.0f} N m/rad"
+        )
+    (out / "ankle.json").write_text(
+        json.dumps({str(f): dict(rmse_rad=r["rmse"]) for f, r in results.items()}, indent=2)
+    )
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, axes = plt.subplots(3, len(results), figsize=(4 * len(results), 7), squeeze=False, sharey="row")
+        for k, (f, r) in enumerate(results.items()):
+            axes[0, k].plot(r["t"], np.degrees(r["reference"]), "k--", label="reference")
+            axes[0, k].plot(r["t"], np.degrees(r["angle"]), label="simulated")
+            axes[0, k].set_title(f"{f} Hz, RMSE {np.degrees(r['rmse']):.2f}°")
+            axes[1, k].plot(r["t"], (r["pressure"] - P_ATM) / 1e5)
+            axes[2, k].plot(r["t"], r["stiffness"])
+            axes[2, k].set_xlabel("t [s]")
+        axes[0, 0].set_ylabel("angle [°]")
+        axes[0, 0].legend(fontsize=8)
+        axes[1, 0].set_ylabel("p flexor / extensor [bar g]")
+        axes[2, 0].set_ylabel("K_θ [N m/rad]")
+        fig.tight_layout()
+        fig.savefig(out / "ankle.png", dpi=110)
+    except ImportError:
+        pass
+    print(f"wrote {out}/ankle.json")
+
+
+if __name__ == "__main__":
+    main()
