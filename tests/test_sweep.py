@@ -129,3 +129,21 @@ def test_bad_input_is_named(averaged, kwargs, match):
     ts = kwargs.pop("ts", TS)
     with pytest.raises(pamjax.PamjaxInputError, match=match):
         sweep(averaged, pamjax.Constant(0.5), ts, **kwargs)
+
+
+def test_flow_surface_equals_cycle_average_and_cli_writes_outputs(tmp_path):
+    from pamjax._cli import main
+    from pamjax._sweep_maps import flow_surface
+
+    valve, air = presets.mas10_valve(), pamjax.Air()
+    u, p = np.array([0.05, 0.5, 0.95]), np.array([1.5e5, 4e5])
+    surface = flow_surface(valve, u, p, air)
+    for i, j in [(0, 0), (1, 1), (2, 0)]:
+        np.testing.assert_allclose(surface[i, j], pamjax.cycle_averaged_flow(valve, u[i], p[j], air, 400), rtol=1e-12)
+    assert abs(surface[0, 0]) < 1e-3 * abs(surface[1, 0] - surface[2, 0]) or surface[0, 0] < 0  # dead band: exhausts
+    config = tmp_path / "fs.toml"
+    config.write_text('kind = "flow_surface"\n[sweep]\ncommands = [0.2, 0.8]\npressures = [2e5, 5e5]\n')
+    assert main(["sweep", str(config), "--out", str(tmp_path / "out"), "--no-plot"]) == 0
+    data = np.load(tmp_path / "out" / "sweep.npz")
+    np.testing.assert_allclose(data["mass_flow_kg_s"], flow_surface(valve, [0.2, 0.8], [2e5, 5e5], air).ravel())
+    assert (tmp_path / "out" / "sweep.csv").read_text().startswith("duty,pressure_pa_abs,mass_flow_kg_s")
