@@ -135,8 +135,9 @@ class SlidingModeController(AbstractController):
 
     - `model`: a `MuscleSystem` with an `AveragedValve` (eq. 13) and `CoulombViscousFriction` (eq. 8-9).
     - `bandwidth` λ [rad/s] (12; (d/dt + λ)² ∫e = 0 on the surface; below the 50 Hz sampling's 314 rad/s).
-    - `switching_gain` K [m/s²] (2), `boundary_layer` φ [m/s] (0.02): linear gain K/φ = 100 1/s inside the layer.
-      Defaults: hand-tuned on `presets.mas10_system("pwm")` (1 rad/s test, `fits/control.py`).
+    - `switching_gain` K [m/s²] (6), `boundary_layer` φ [m/s] (0.06): linear gain K/φ = 100 1/s inside the layer.
+      K bounds the force error the loop rejects (M K ≈ 58 N at 9.6 kg: the ±20 % plant perturbations of
+      `fits/control.py`). Defaults: hand-tuned on `presets.mas10_system("pwm")` (1 rad/s test).
     - `pressure_switching_gain` η [Pa/s] (2e6), `pressure_boundary_layer` φ_p [Pa] (1e5): gain 20 1/s, below
       the 50 Hz sampling rate.
     - `integral_limit` [m s]: anti-windup clamp of |∫e| (0.1: λ²·0.1·M ≈ 60 N of force error at λ = 8).
@@ -146,8 +147,8 @@ class SlidingModeController(AbstractController):
 
     model: MuscleSystem
     bandwidth: jax.Array = eqx.field(converter=jnp.asarray, default=12.0)  # rad/s
-    switching_gain: jax.Array = eqx.field(converter=jnp.asarray, default=2.0)  # m/s²
-    boundary_layer: jax.Array = eqx.field(converter=jnp.asarray, default=0.02)  # m/s
+    switching_gain: jax.Array = eqx.field(converter=jnp.asarray, default=6.0)  # m/s²
+    boundary_layer: jax.Array = eqx.field(converter=jnp.asarray, default=0.06)  # m/s
     pressure_switching_gain: jax.Array = eqx.field(converter=jnp.asarray, default=2e6)  # Pa/s
     pressure_boundary_layer: jax.Array = eqx.field(converter=jnp.asarray, default=1e5)  # Pa
     integral_limit: jax.Array = eqx.field(converter=jnp.asarray, default=0.1)  # m s
