@@ -15,8 +15,9 @@ re-run by `tests/test_presets.py` and `fits/derive_presets.py`):
    F = p dV/dx) assigns to the force map at p_max: V(x) − v0 = ∫₀ˣ F_max/p_max dx.
 3. **Averaged valve (m1…m9).** Eq. 13 fitted by least squares to the cycle-averaged flow of the exact-edge switching
    valve (Table 1 paths, 2 ms delays, 50 Hz) on a 41 × 41 grid of duty 0…1 and chamber pressure p_atm…p_s
-   (`pamjax.fit_averaged_valve`). Fit quality: max error 13.2 %, RMSE 2.1 % of the flow range (paper 000, fitted to
-   its measurements: 4.13 % and 1.16 %); the biquadratic cannot follow the 10 %/90 % dead-band steps.
+   (`pamjax.fit_averaged_valve`), constrained to zero flow at (u = 0, p_atm) and (u = 1, p_s) so that a chamber
+   stays between atmosphere and supply. Fit quality: max error 12.8 %, RMSE 2.8 % of the flow range (paper 000,
+   fitted to its measurements: 4.13 % and 1.16 %); the biquadratic cannot follow the 10 %/90 % dead-band steps.
 4. **Viscous friction C_f = 250 N s/m.** Paper 000 shows C_f only as a plot (Fig. 6). 250 N s/m is ≈ 0.4 of the
    critical damping 2·sqrt(k M) of the 9.6 kg payload on the muscle's mid-stroke stiffness (≈ 1e4 N/m), the
    order of magnitude of Fig. 6's muscle friction; it is a fit parameter.
@@ -69,9 +70,9 @@ VISCOUS_COEFFICIENT = 250.0  # N s/m, see docstring item 4
 
 # m1…m9 of eq. 13 (SI: kg/s, gauge pressure in Pa), row-wise m[i, j] for u^i p^j; see docstring item 3.
 MAS10_AVERAGED_VALVE = (
-    (-3.248406457251e-04, -5.389705112092e-09, 1.731119286309e-15),
-    (2.719016584137e-03, 8.384112406989e-09, -1.315013358854e-14),
-    (7.716013087130e-05, 2.379239664579e-10, -3.731739021328e-16),
+    (0.000000000000e00, -7.181961484418e-09, 3.579264316813e-15),
+    (1.735650319051e-03, 1.083465634502e-08, -9.704130366914e-15),
+    (6.335335758663e-04, 2.128659784083e-09, -1.228195803324e-14),
 )
 
 # --- DMSP-40-400 (paper 001), derived the same way ------------------------------------------------------------

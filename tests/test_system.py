@@ -44,14 +44,7 @@ def test_tank_vector_field_matches_numpy_transcription():
     "valve",
     [
         "pwm",
-        pytest.param(
-            "averaged",
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="known model defect: the preset eq. 13 biquadratic (least-squares fit, max error 13 % of range) "
-                "does not vanish at p = p_supply, so at duty 0.95 the tank charges to ~7.0e5 Pa > 6.5e5 Pa supply",
-            ),
-        ),
+        "averaged",  # the preset eq. 13 fit is pinned to zero flow at (0, p_atm) and (1, p_supply)
     ],
 )
 def test_tank_pressure_stays_between_atmosphere_and_supply(valve):
