@@ -57,8 +57,12 @@ def tank_run(theta, mode, p_row, ts):
 
 
 def fit_tank(mode, p_row, c_true, b_true, rng, quick):
-    choked = 286.9 * 298.0 * 1.185 * c_true * p_row / TANK  # Pa/s, eq. 14 at the start
-    ts = jnp.linspace(0.0, 1.5 * abs(p_row - P_ATM) / choked, 60 if quick else 150)
+    rate = 286.9 * 298.0 * 1.185 * c_true / TANK  # 1/s: eq. 14 gives ṗ = ±rate · p_up while choked
+    if mode == "charge":  # linear rise at rate · p_s, then the subsonic approach
+        horizon = 1.5 * (p_row - P_ATM) / (rate * p_row)
+    else:  # exponential decay at `rate` down to p_atm / b, then the subsonic tail to p_atm
+        horizon = (np.log(p_row / P_ATM) + 2.0) / rate
+    ts = jnp.linspace(0.0, horizon, 60 if quick else 150)
     truth = jnp.array([np.log(c_true), _logit_b(b_true)])
     data = tank_run(truth, mode, p_row, ts) + NOISE_TANK * rng.standard_normal(ts.shape)
     start = jnp.array([np.log(0.7 * c_true), _logit_b(0.85 * b_true)])  # 30 % off in C, 15 % in b
@@ -80,7 +84,7 @@ def valve_response(params, ts):
         time_constants=jnp.stack([t1, t2]),
     )
     return pj.simulate(
-        pj.RegulatorSystem(reg, volume=0.0), pj.SquareWave(0.0, 3.0, 1.5), ts, rtol=1e-9, atol=1e-9
+        pj.RegulatorSystem(reg, volume=0.0), pj.SquareWave(0.0, 3.0, 1.5), ts, rtol=1e-9, atol=1e-9, adjoint="forward"
     ).pressure
 
 
@@ -93,8 +97,9 @@ def fit_valve(rng, quick):
     smoothed = filtfilt(bb, aa, measured)
     n_id = int(0.6 * ts.size)  # 60 % identification, 40 % validation (paper 001, Sect. 5)
     data_id = jnp.asarray(smoothed[:n_id])
+    ts_id = np.asarray(ts)[:n_id]  # NumPy, so it stays a constant under jit
     sol = optx.least_squares(
-        lambda th, _: (valve_response(th, ts[:n_id]) - data_id) / BAR,
+        lambda th, _: (valve_response(th, ts_id) - data_id) / BAR,
         optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10),
         jnp.array([0.8, 0.06, 0.01]),
         max_steps=100,
