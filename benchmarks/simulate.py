@@ -76,7 +76,8 @@ def numpy_field(system, signal):
     k0, k1, k2, pmax = f(law.k0), f(law.k1), f(law.k2), f(law.max_pressure)
     v0, v1 = f(vol.v0), f(vol.v1)
     xmin, xmax, slack = f(muscle.min_position), f(muscle.max_position), f(muscle.slack_width)
-    fc, cf, vw = f(system.friction.coulomb_force), f(system.friction.viscous_coefficient), f(system.friction.velocity_width)
+    friction = system.friction
+    fc, cf, vw = f(friction.coulomb_force), f(friction.viscous_coefficient), f(friction.velocity_width)
     ks, cs, ws = f(system.end_stops.stiffness), f(system.end_stops.damping), f(system.end_stops.width)
     mass, g, n = f(system.payload_mass), f(system.gravity), f(system.polytropic_index)
     lo, hi, freq = f(signal.low), f(signal.high), f(signal.frequency)
@@ -92,8 +93,9 @@ def numpy_field(system, signal):
     else:
         ps, period = f(valve.supply_pressure), 1.0 / f(valve.pwm_frequency)
         d_on, d_off, ew = f(valve.switch_on_delay), f(valve.switch_off_delay), f(valve.edge_width)
-        inf_cv, inf_b, inf_a = f(valve.inflate.discharge_coefficient), f(valve.inflate.critical_ratio), f(valve.inflate.area)
-        ex_cv, ex_b, ex_a = f(valve.exhaust.discharge_coefficient), f(valve.exhaust.critical_ratio), f(valve.exhaust.area)
+        inf, ex = valve.inflate, valve.exhaust
+        inf_cv, inf_b, inf_a = f(inf.discharge_coefficient), f(inf.critical_ratio), f(inf.area)
+        ex_cv, ex_b, ex_a = f(ex.discharge_coefficient), f(ex.critical_ratio), f(ex.area)
 
         def mass_flow(t, u, p):
             phase = t - math.floor(t / period) * period
@@ -192,7 +194,7 @@ def main():
     print(f"jax {jax.__version__}, {platform.processor() or platform.machine()}, {jax.devices()[0].platform}, "
           f"repeats={repeats}")
 
-    rows, res = [], {}
+    res = {}
     averaged = presets.mas10_system("averaged")
     pwm = presets.mas10_system("pwm")
     for name, system, kwargs in (
