@@ -71,7 +71,9 @@ def bench_plant():
         max_position=q["x_max"],
     )
     friction = pamjax.CoulombViscousFriction(q["Fc"], q["Cf"])
-    return pamjax.MuscleSystem(valve=presets.mas10_valve("smooth"), muscle=muscle, payload_mass=q["M"], friction=friction)
+    return pamjax.MuscleSystem(
+        valve=presets.mas10_valve("smooth"), muscle=muscle, payload_mass=q["M"], friction=friction
+    )
 
 
 def perturbed_plants(plant, relative=0.2):
@@ -123,7 +125,10 @@ def main():
     report = dict(paper=PAPER, window_start_s=WINDOW_START, duration_s=args.duration)
 
     # 1. The paper's PI and the sliding mode controller on the switching-valve plant; PI vs the bench's E5.
-    controllers = {"PI (paper: P=25, I=150)": PIController(), "SMC (eq. 13 equivalent control)": SlidingModeController(model)}
+    controllers = {
+        "PI (paper: P=25, I=150)": PIController(),
+        "SMC (eq. 13 equivalent control)": SlidingModeController(model),
+    }
     runs, tracking = {}, {}
     for omega in (0.5, 1.0):
         for name, controller in controllers.items():
@@ -131,8 +136,11 @@ def main():
             traj = simulate_closed_loop(ClosedLoop(plant, controller, sine(omega)), args.duration)
             tracking[f"{name} @ {omega} rad/s"] = m = metrics(traj) | dict(run_s=time.perf_counter() - t0)
             runs[(name, omega)] = traj
-            print(f"{name:34s} ω={omega}: RMSE {m['rmse_mm']:.3f} mm, peak {m['peak_mm']:.3f} mm (t ≥ 5 s); "
-                  f"full {m['full_rmse_mm']:.2f} mm  [{m['run_s']:.1f} s]", flush=True)
+            print(
+                f"{name:34s} ω={omega}: RMSE {m['rmse_mm']:.3f} mm, peak {m['peak_mm']:.3f} mm (t ≥ 5 s); "
+                f"full {m['full_rmse_mm']:.2f} mm  [{m['run_s']:.1f} s]",
+                flush=True,
+            )
     report["tracking"] = tracking
     bench = {}
     for omega in (0.5, 1.0):
@@ -146,9 +154,12 @@ def main():
             pamjax_on_bench_parameters=metrics(traj),
             position_rms_difference_mm=1e3 * float(np.sqrt(np.mean((np.asarray(traj.position)[w] - x_bench[w]) ** 2))),
         )
-        print(f"E5 ω={omega}: bench PI RMSE {bench[f'{omega} rad/s']['bench_recording']['rmse_mm']:.3f} mm, "
-              f"pamjax PI on bench parameters {bench[f'{omega} rad/s']['pamjax_on_bench_parameters']['rmse_mm']:.3f} mm, "
-              f"x difference {bench[f'{omega} rad/s']['position_rms_difference_mm']:.3f} mm rms", flush=True)
+        print(
+            f"E5 ω={omega}: bench PI RMSE {bench[f'{omega} rad/s']['bench_recording']['rmse_mm']:.3f} mm, "
+            f"pamjax PI on bench parameters {bench[f'{omega} rad/s']['pamjax_on_bench_parameters']['rmse_mm']:.3f} mm, "
+            f"x difference {bench[f'{omega} rad/s']['position_rms_difference_mm']:.3f} mm rms",
+            flush=True,
+        )
     report["bench_E5"] = bench
 
     # 3. Gradient-based tuning through the closed loop (1 rad/s, switching-valve plant), from the paper's gains.
@@ -159,21 +170,31 @@ def main():
     ):
         t0 = time.perf_counter()
         loop, history = tune_controller(
-            ClosedLoop(plant, controller, sine(1.0)), gains, args.duration, start=WINDOW_START,
-            steps=args.tune_steps, learning_rate=0.1,
-            callback=lambda k, r, g, name=name: print(f"  {name} step {k}: RMSE {1e3 * r:.4f} mm, gains {g}", flush=True),
+            ClosedLoop(plant, controller, sine(1.0)),
+            gains,
+            args.duration,
+            start=WINDOW_START,
+            steps=args.tune_steps,
+            learning_rate=0.1,
+            callback=lambda k, r, g, name=name: print(
+                f"  {name} step {k}: RMSE {1e3 * r:.4f} mm, gains {g}", flush=True
+            ),
         )
         traj = simulate_closed_loop(loop, args.duration)
         m = metrics(traj)
         tuned[name] = dict(
-            gains=dict(zip(gains, history[0][1])) | {"tuned": dict(zip(gains, (float(getattr(loop.controller, g)) for g in gains)))},
+            gains=dict(zip(gains, history[0][1]))
+            | {"tuned": dict(zip(gains, (float(getattr(loop.controller, g)) for g in gains)))},
             before_rmse_mm=1e3 * history[0][0],
             after=m,
             tune_s=time.perf_counter() - t0,
         )
         runs[(name, 1.0)] = traj
         controllers[name] = loop.controller
-        print(f"{name}: RMSE {tuned[name]['before_rmse_mm']:.3f} → {m['rmse_mm']:.3f} mm [{tuned[name]['tune_s']:.0f} s]", flush=True)
+        print(
+            f"{name}: RMSE {tuned[name]['before_rmse_mm']:.3f} → {m['rmse_mm']:.3f} mm [{tuned[name]['tune_s']:.0f} s]",
+            flush=True,
+        )
     report["tuning"] = tuned
 
     # 4. Robustness: every controller over 16 plants perturbed ±20 % (one vmapped sweep per controller).
@@ -189,6 +210,7 @@ def main():
     robust["holding_margin_N"] = np.asarray(margin).tolist()
 
     for name, controller in controllers.items():
+
         @eqx.filter_jit
         def sweep(plants, controller=controller):
             def one(p):
@@ -200,15 +222,22 @@ def main():
         rmse, peak = (1e3 * np.asarray(a) for a in sweep(plants))
         worst = int(np.nanargmax(rmse))
         robust[name] = dict(
-            rmse_mm=rmse.tolist(), peak_mm=peak.tolist(), worst_rmse_mm=float(np.nanmax(rmse)),
-            worst_peak_mm=float(np.nanmax(peak)), worst_plant=dict(zip(PERTURBED, signs[worst].tolist())),
-            median_rmse_mm=float(np.nanmedian(rmse)), sweep_s=time.perf_counter() - t0,
+            rmse_mm=rmse.tolist(),
+            peak_mm=peak.tolist(),
+            worst_rmse_mm=float(np.nanmax(rmse)),
+            worst_peak_mm=float(np.nanmax(peak)),
+            worst_plant=dict(zip(PERTURBED, signs[worst].tolist())),
+            median_rmse_mm=float(np.nanmedian(rmse)),
+            sweep_s=time.perf_counter() - t0,
             worst_feasible_rmse_mm=float(np.nanmax(rmse[feasible])) if feasible.any() else None,
         )
-        print(f"robustness {name:34s}: worst RMSE {robust[name]['worst_rmse_mm']:.3f} mm, worst peak "
-              f"{robust[name]['worst_peak_mm']:.3f} mm, median {robust[name]['median_rmse_mm']:.3f} mm, worst over "
-              f"{int(feasible.sum())} feasible plants {robust[name]['worst_feasible_rmse_mm']:.3f} mm "
-              f"[{robust[name]['sweep_s']:.1f} s]", flush=True)
+        print(
+            f"robustness {name:34s}: worst RMSE {robust[name]['worst_rmse_mm']:.3f} mm, worst peak "
+            f"{robust[name]['worst_peak_mm']:.3f} mm, median {robust[name]['median_rmse_mm']:.3f} mm, worst over "
+            f"{int(feasible.sum())} feasible plants {robust[name]['worst_feasible_rmse_mm']:.3f} mm "
+            f"[{robust[name]['sweep_s']:.1f} s]",
+            flush=True,
+        )
     report["robustness"] = robust
 
     # 6. Figure and summary.
@@ -240,8 +269,9 @@ def main():
         **{n: v["after"]["rmse_mm"] for n, v in tuned.items()},
     }
     best = min(candidates, key=candidates.get)
-    report["summary"] = dict(pi_rmse_mm=pi_rmse, best=best, best_rmse_mm=candidates[best],
-                             improvement=pi_rmse / candidates[best])
+    report["summary"] = dict(
+        pi_rmse_mm=pi_rmse, best=best, best_rmse_mm=candidates[best], improvement=pi_rmse / candidates[best]
+    )
     (out / "control.json").write_text(json.dumps(report, indent=1))
     print(f"best: {best}, {pi_rmse / candidates[best]:.1f}× lower RMSE than the paper's PI; wrote {out}")
     print(f"RESULT pi_rmse={pi_rmse:.4f} best_rmse={candidates[best]:.4f}")

@@ -104,3 +104,17 @@ from ._sweep import (  # noqa: E402
     SweepResult as SweepResult,
     sweep as sweep,
 )
+
+# --- closed-loop control (issue 6) ---------------------------------------------------------------------------------
+from ._control import (  # noqa: E402
+    AbstractController as AbstractController,
+    ClosedLoop as ClosedLoop,
+    ClosedLoopState as ClosedLoopState,
+    ClosedLoopTrajectory as ClosedLoopTrajectory,
+    PIController as PIController,
+    SlidingModeController as SlidingModeController,
+    equivalent_duty as equivalent_duty,
+    run_closed_loop as run_closed_loop,
+    simulate_closed_loop as simulate_closed_loop,
+    tune_controller as tune_controller,
+)

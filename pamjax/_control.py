@@ -11,15 +11,14 @@ respect to controller gains and plant parameters and vmaps over perturbed plants
   model (eq. 13 solved for the duty giving the mass flow that eq. 15 asks for), on a third-order sliding surface.
 """
 
-import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
-from ._friction import CoulombViscousFriction
 from ._errors import PamjaxInputError, check_finite, check_nonnegative, check_positive
+from ._friction import CoulombViscousFriction
 from ._inputs import AbstractSignal, Constant
 from ._simulate import solve
 from ._smooth import safe_sqrt, smooth_sign

@@ -76,8 +76,11 @@ def test_equivalent_duty_inverts_eq13(model):
 
 def test_reference_derivatives_of_sine():
     r = reference_derivatives(REF, 0.7)
-    np.testing.assert_allclose([float(a) for a in r], [0.03 + 0.01 * np.sin(0.7), 0.01 * np.cos(0.7),
-                                                        -0.01 * np.sin(0.7), -0.01 * np.cos(0.7)], rtol=1e-12)
+    np.testing.assert_allclose(
+        [float(a) for a in r],
+        [0.03 + 0.01 * np.sin(0.7), 0.01 * np.cos(0.7), -0.01 * np.sin(0.7), -0.01 * np.cos(0.7)],
+        rtol=1e-12,
+    )
 
 
 def test_closed_loop_equals_open_loop_replay(plant):
