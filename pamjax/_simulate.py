@@ -14,6 +14,7 @@ from ._inputs import AbstractSignal
 from ._system import AbstractSystem
 from ._valve import OnOffValve
 
+_RESULT_NONPHYSICAL = 102  # a state left the physical range (absolute pressure ≤ 0)
 _RESULT_NONFINITE = 101  # stepping="pwm": the fixed-step integration produced a non-finite state
 _RESULT_NAMES = {0: "successful", _RESULT_NONFINITE: "non-finite state in PWM-synchronous stepping"}
 _DEFAULT_SUBSTEPS = 16  # RK4 nodes per PWM period: step ≤ 1.25 ms at 50 Hz (docs/performance.md)
@@ -60,6 +61,20 @@ class Trajectory(eqx.Module):
 
 
 _CHANNELS = ("pressure", "mass_flow", "position", "velocity", "force", "friction_force", "volume", "command")
+
+
+def result_message(code):
+    """Human-readable reason for a `Trajectory.result` code."""
+    if code == 0:
+        return "successful"
+    if code == _RESULT_NONFINITE:
+        return "the state became non-finite (NaN or inf)"
+    if code == _RESULT_NONPHYSICAL:
+        return "an absolute pressure fell to or below 0 (unstable integration, or parameters far outside the physical range)"
+    messages = getattr(dfx.RESULTS, "_index_to_message", None)
+    if messages is not None and 0 <= code < len(messages):
+        return messages[code].split("\n")[0]
+    return "unknown failure"
 
 
 def _is_traced(tree):
@@ -123,7 +138,9 @@ def solve(
 
     solver = dfx.Tsit5() if solver is None else solver
     # dtmax: a switching valve's windows must not be stepped over (see OnOffValve.max_step).
-    controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=valve.max_step())
+    # dtmin without forcing: a state that turns non-finite makes every trial step fail, and the solve stops within
+    # a few dozen rejections (result "dt_min_reached") instead of grinding to max_steps and holding up a batch.
+    controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=valve.max_step(), dtmin=1e-12, force_dtmin=False)
     if jump_ts is not None:
         controller = dfx.ClipStepSizeController(controller, jump_ts=jump_ts)
     if isinstance(adjoint, str):
@@ -146,12 +163,17 @@ def solve(
     commands = jax.vmap(command_at)(ts)
     outs = jax.vmap(system.outputs)(ts, states, commands)
     result = jnp.asarray(sol.result._value if hasattr(sol.result, "_value") else sol.result)
+    finite = jnp.all(jnp.isfinite(sol.ys))
+    result = jnp.where((result == 0) & ~finite, _RESULT_NONFINITE, result)
     stats = sol.stats
     return _trajectory(ts, states, commands, outs, stats["num_steps"], stats["num_accepted_steps"],
                        stats["num_rejected_steps"], result)
 
 
 def _trajectory(ts, states, commands, outs, num_steps, num_accepted, num_rejected, result):
+    pressure = getattr(states, "pressure", None)
+    if pressure is not None:  # an absolute pressure ≤ 0 means an unstable integration, never a result
+        result = jnp.where((result == 0) & jnp.any(pressure <= 0), _RESULT_NONPHYSICAL, result)
     failed = result != 0
     # A failed solve never returns plausible-looking numbers: its channels are NaN.
     outs = jtu.tree_map(lambda a: jnp.where(failed, jnp.nan, a), outs)
@@ -342,8 +364,8 @@ def simulate(
         )
     if throw and not traced and int(traj.result) != 0:
         raise PamjaxSolveError(
-            # (dfx.RESULTS[int] raises ValueError in equinox's enums: report the code only)
-            f"the ODE solve failed (result code {int(traj.result)}) after {int(traj.num_steps)} steps (max_steps={max_steps}). "
+            f"the ODE solve failed: {result_message(int(traj.result))} (result code {int(traj.result)}, after "
+            f"{int(traj.num_steps)} steps, max_steps={max_steps}). "
             "Common causes: max_steps too small for the horizon (PWM valves need ~20 steps per period), "
             "parameters far outside the physical range, or too tight tolerances. Pass throw=False to get the "
             "partial result with status instead."
