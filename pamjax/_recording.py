@@ -33,7 +33,7 @@ def _scipy_signal():
         import scipy.signal
     except ModuleNotFoundError as err:  # pragma: no cover - depends on the environment
         raise ModuleNotFoundError(
-            "filtering and resampling recordings needs SciPy: pip install scipy (or pip install 'pamjax[fit]')"
+            "filtering and resampling recordings needs SciPy: pip install scipy (in the pamjax[test] and [bench] extras)"
         ) from err
     return scipy.signal
 
