@@ -3,7 +3,7 @@
 Validated on construction: a 1-D strictly increasing time, channels of the same length, no NaN (unless the user asks
 to mask them), and pressure channels in ABSOLUTE pascal (a channel that looks like bar or gauge is refused).
 Preprocessing as in paper 001: zero-phase low-pass filtering (2nd-order Butterworth, 20 Hz) and resampling. Those two
-need SciPy (`pip install scipy`, or the `pamjax[fit]` extra); it is imported only when they are called.
+need SciPy (`pip install scipy`; in the test and bench extras); it is imported only when they are called.
 """
 
 import json
