@@ -240,9 +240,12 @@ def validate(system, signal, ts, y0=None, t0=None):
     if not isinstance(signal, AbstractSignal):
         raise PamjaxInputError(f"signal must be a pamjax signal (Constant, Triangle, ...), got {type(signal)}")
     check_time_grid(ts, "ts")
-    ts_np = np.asarray(ts, dtype=float)
-    if t0 is not None and not float(t0) <= ts_np[0]:
-        raise PamjaxInputError(f"t0 ({t0}) must not exceed ts[0] ({ts_np[0]})")
+    if _is_traced(ts):  # inside jit: shape checks only; values were (or can only be) checked outside
+        ts_np = np.zeros(jnp.shape(ts))
+    else:
+        ts_np = np.asarray(ts, dtype=float)
+        if t0 is not None and not _is_traced(t0) and not float(t0) <= ts_np[0]:
+            raise PamjaxInputError(f"t0 ({t0}) must not exceed ts[0] ({ts_np[0]})")
     if t0 is None and ts_np.size < 2:
         raise PamjaxInputError("ts needs at least two times when t0 is not given (the solve starts at ts[0])")
     if not _is_traced(signal):  # a traced signal (e.g. grad w.r.t. the duty) has no concrete bounds to check
