@@ -31,13 +31,16 @@ VOLUME = presets.TANK_VOLUME  # m³
 
 def score(averaged, valve, air):
     """Max error and RMSE of an averaged valve vs the switching valve's cycle average, % of the flow range."""
-    uu, pp = np.meshgrid(np.linspace(0.1, 0.9, 17), np.linspace(air.atmospheric_pressure, valve.supply_pressure, 17),
-                         indexing="ij")
+    uu, pp = np.meshgrid(
+        np.linspace(0.1, 0.9, 17), np.linspace(air.atmospheric_pressure, valve.supply_pressure, 17), indexing="ij"
+    )
     ref = np.asarray(jax.vmap(lambda u, p: pj.cycle_averaged_flow(valve, u, p, air))(uu.ravel(), pp.ravel()))
     model = np.asarray(jax.vmap(lambda u, p: averaged.mass_flow(0.0, u, p, air))(uu.ravel(), pp.ravel()))
     err, span = model - ref, np.ptp(ref)
-    return dict(max_error_percent=float(100 * np.max(np.abs(err)) / span),
-                rmse_percent=float(100 * np.sqrt(np.mean(err**2)) / span))
+    return dict(
+        max_error_percent=float(100 * np.max(np.abs(err)) / span),
+        rmse_percent=float(100 * np.sqrt(np.mean(err**2)) / span),
+    )
 
 
 def paper_route(valve, air, rng):
@@ -47,8 +50,15 @@ def paper_route(valve, air, rng):
     us, ps, flows = [], [], []
     for u in np.linspace(0.15, 0.85, 8):
         for p0 in (float(air.atmospheric_pressure), float(valve.supply_pressure)):
-            rec = pj.synthetic_recording(tank, pj.Constant(u), ts, y0=tank.initial_state(p0), noise=dict(pressure=2e3),
-                                         seed=int(rng.integers(1 << 30)), channels=["pressure"])
+            rec = pj.synthetic_recording(
+                tank,
+                pj.Constant(u),
+                ts,
+                y0=tank.initial_state(p0),
+                noise=dict(pressure=2e3),
+                seed=int(rng.integers(1 << 30)),
+                channels=["pressure"],
+            )
             p = rec.filtered(20.0)["pressure"]
             dpdt = np.gradient(p, ts)
             mdot = VOLUME * dpdt / (1.4 * float(air.gas_constant * air.temperature))  # eq. 12, adiabatic
@@ -76,12 +86,19 @@ def main():
     air, valve = pj.Air(), presets.mas10_valve("smooth")
     direct, _ = pj.fit_averaged_valve(valve, air, commands=jnp.linspace(0.1, 0.9, 33))
     procedure = paper_route(valve, air, np.random.default_rng(0))
-    report = dict(paper=PAPER, cycle_average_fit=score(direct, valve, air), tank_procedure=score(procedure, valve, air),
-                  m_cycle_average_fit=np.asarray(direct.coefficients).ravel().tolist(),
-                  m_tank_procedure=np.asarray(procedure.coefficients).ravel().tolist(),
-                  note="scored on duty 0.1-0.9 (the valve's usable range) x pressure p_atm..p_s, 17 x 17 grid")
+    report = dict(
+        paper=PAPER,
+        cycle_average_fit=score(direct, valve, air),
+        tank_procedure=score(procedure, valve, air),
+        m_cycle_average_fit=np.asarray(direct.coefficients).ravel().tolist(),
+        m_tank_procedure=np.asarray(procedure.coefficients).ravel().tolist(),
+        note="scored on duty 0.1-0.9 (the valve's usable range) x pressure p_atm..p_s, 17 x 17 grid",
+    )
     for k in ("paper", "cycle_average_fit", "tank_procedure"):
-        print(f"{k:<18} max error {report[k]['max_error_percent']:6.2f} %   RMSE {report[k]['rmse_percent']:5.2f} % of range")
+        print(
+            f"{k:<18} max error {report[k]['max_error_percent']:6.2f} %   "
+            f"RMSE {report[k]['rmse_percent']:5.2f} % of range"
+        )
     out.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(report, indent=1))
     print(f"wrote {path}")

@@ -26,8 +26,10 @@ def run_experiments(progress=print):
             t = time.perf_counter()
             inflate = simulate(system, Constant(duty), tank_ts)
             deflate = simulate(system, Constant(duty), tank_ts, y0=system.initial_state(presets.SUPPLY_PRESSURE))
-            progress(f"  tank, {valve:8s} valve, duty {duty:.2f}: inflate to {float(inflate.pressure[-1]) / 1e5:.2f} bar"
-                     f", deflate to {float(deflate.pressure[-1]) / 1e5:.2f} bar abs ({time.perf_counter() - t:.1f} s)")
+            progress(
+                f"  tank, {valve:8s} valve, duty {duty:.2f}: inflate to {float(inflate.pressure[-1]) / 1e5:.2f} bar"
+                f", deflate to {float(deflate.pressure[-1]) / 1e5:.2f} bar abs ({time.perf_counter() - t:.1f} s)"
+            )
             results[f"tank_inflate_{valve}_{duty}"] = inflate
             results[f"tank_deflate_{valve}_{duty}"] = deflate
     for frequency, horizon in ((0.08, 25.0), (0.25, 8.0)):
@@ -37,8 +39,10 @@ def run_experiments(progress=print):
             t = time.perf_counter()
             traj = simulate(system, Triangle(0.05, 0.95, frequency), ts)
             x = np.asarray(traj.position) * 1e3
-            progress(f"  muscle + 9.6 kg, triangle {frequency} Hz, {valve:8s} valve: displacement {x.min():.1f} … "
-                     f"{x.max():.1f} mm, {int(traj.num_steps)} steps ({time.perf_counter() - t:.1f} s)")
+            progress(
+                f"  muscle + 9.6 kg, triangle {frequency} Hz, {valve:8s} valve: displacement {x.min():.1f} … "
+                f"{x.max():.1f} mm, {int(traj.num_steps)} steps ({time.perf_counter() - t:.1f} s)"
+            )
             results[f"triangle_{frequency}_{valve}"] = traj
     return results
 
@@ -50,25 +54,39 @@ def plot(results, path):
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 2, figsize=(12, 8))
-    for ax, kind, title in ((axes[0, 0], "inflate", "Fig. 11: inflating a 50 cm³ tank"),
-                            (axes[0, 1], "deflate", "Fig. 12: deflating a 50 cm³ tank")):
+    for ax, kind, title in (
+        (axes[0, 0], "inflate", "Fig. 11: inflating a 50 cm³ tank"),
+        (axes[0, 1], "deflate", "Fig. 12: deflating a 50 cm³ tank"),
+    ):
         for duty, color in zip((0.25, 0.5, 0.75), ("C0", "C1", "C2")):
             for valve, style in (("pwm", "-"), ("averaged", "--")):
                 tr = results[f"tank_{kind}_{valve}_{duty}"]
-                ax.plot(tr.t, (np.asarray(tr.pressure) - 101325) / 1e6, style, color=color,
-                        label=f"u = {duty:.2f}, {'switching' if valve == 'pwm' else 'averaged'}")
+                ax.plot(
+                    tr.t,
+                    (np.asarray(tr.pressure) - 101325) / 1e6,
+                    style,
+                    color=color,
+                    label=f"u = {duty:.2f}, {'switching' if valve == 'pwm' else 'averaged'}",
+                )
         ax.set(title=title, xlabel="time [s]", ylabel="pressure [MPa, gauge]")
         ax.legend(fontsize=7)
     for ax, frequency in ((axes[1, 0], 0.08), (axes[1, 1], 0.25)):
         for valve, style in (("pwm", "-"), ("averaged", "--")):
             tr = results[f"triangle_{frequency}_{valve}"]
-            ax.plot(tr.t, np.asarray(tr.position) * 1e3, style,
-                    label="switching valve" if valve == "pwm" else "averaged valve")
+            ax.plot(
+                tr.t,
+                np.asarray(tr.position) * 1e3,
+                style,
+                label="switching valve" if valve == "pwm" else "averaged valve",
+            )
         ax2 = ax.twinx()
         ax2.plot(tr.t, tr.command, ":", color="gray")
         ax2.set_ylabel("duty ratio [-]", color="gray")
-        ax.set(title=f"Fig. {13 if frequency == 0.08 else 14}: triangle duty 0.05-0.95 at {frequency} Hz, 9.6 kg",
-               xlabel="time [s]", ylabel="displacement [mm]")
+        ax.set(
+            title=f"Fig. {13 if frequency == 0.08 else 14}: triangle duty 0.05-0.95 at {frequency} Hz, 9.6 kg",
+            xlabel="time [s]",
+            ylabel="displacement [mm]",
+        )
         ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)

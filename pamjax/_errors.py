@@ -74,5 +74,6 @@ def check_time_grid(ts, name="ts"):
     if v.size > 1 and not np.all(np.diff(v) > 0):
         bad = int(np.argmin(np.diff(v) > 0))
         raise PamjaxInputError(
-            f"{name} must be strictly increasing; {name}[{bad + 1}] = {v[bad + 1]} does not exceed {name}[{bad}] = {v[bad]}"
+            f"{name} must be strictly increasing; {name}[{bad + 1}] = {v[bad + 1]} does not exceed "
+            f"{name}[{bad}] = {v[bad]}"
         )

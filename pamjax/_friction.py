@@ -11,6 +11,7 @@ import jax.numpy as jnp
 from ._errors import check_nonnegative, check_positive
 from ._smooth import smooth_abs, smooth_sign
 
+
 class AbstractFriction(eqx.Module):
     """Friction model: `initial_state()`, `state_rate(v, z)`, `force(v, z)` [N] (positive opposes positive v)."""
 
@@ -22,6 +23,7 @@ class AbstractFriction(eqx.Module):
 
     def force(self, v, z):
         raise NotImplementedError
+
 
 class CoulombViscousFriction(AbstractFriction):
     """Paper 000, eq. 8-9: F = F_c sign(v) + C_f v, with sign(v) ≈ tanh(v / `velocity_width`).
@@ -48,6 +50,7 @@ class CoulombViscousFriction(AbstractFriction):
     def force(self, v, z):
         del z
         return self.coulomb_force * smooth_sign(v, self.velocity_width) + self.viscous_coefficient * v
+
 
 class BristleFriction(AbstractFriction):
     """Dahl/LuGre-type bristle friction with viscous damping (state z = bristle deflection [m]).
@@ -83,4 +86,3 @@ class BristleFriction(AbstractFriction):
 
     def force(self, v, z):
         return self.bristle_stiffness * z + self.bristle_damping * self.state_rate(v, z) + self.viscous_coefficient * v
-

@@ -88,7 +88,9 @@ def nozzle_flow_parameter(ratio, kappa, gas_constant, laminar_ratio=DEFAULT_LAMI
 
     def subsonic(r):
         r = jnp.clip(r, 1e-12, 1.0)
-        return safe_sqrt(2.0 * kappa / (gas_constant * (kappa - 1.0)) * (r ** (2.0 / kappa) - r ** ((kappa + 1.0) / kappa)))
+        return safe_sqrt(
+            2.0 * kappa / (gas_constant * (kappa - 1.0)) * (r ** (2.0 / kappa) - r ** ((kappa + 1.0) / kappa))
+        )
 
     r_lam = jnp.maximum(laminar_ratio, r_cr + 1e-6)
     laminar = subsonic(r_lam) * (1.0 - ratio) / (1.0 - r_lam)
@@ -247,4 +249,3 @@ def series_equivalent(restriction: SeriesRestriction, air: Air, upstream_pressur
     still_choked = flows >= choked * (1 - 1e-3)
     b = jnp.max(jnp.where(still_choked, ratios, 0.0))
     return choked / upstream_pressure, b
-

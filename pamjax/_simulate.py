@@ -70,7 +70,10 @@ def result_message(code):
     if code == _RESULT_NONFINITE:
         return "the state became non-finite (NaN or inf)"
     if code == _RESULT_NONPHYSICAL:
-        return "an absolute pressure fell to or below 0 (unstable integration, or parameters far outside the physical range)"
+        return (
+            "an absolute pressure fell to or below 0 (unstable integration, or parameters far outside the physical "
+            "range)"
+        )
     messages = getattr(dfx.RESULTS, "_index_to_message", None)
     if messages is not None and 0 <= code < len(messages):
         return messages[code].split("\n")[0]
@@ -166,8 +169,9 @@ def solve(
     finite = jnp.all(jnp.isfinite(sol.ys))
     result = jnp.where((result == 0) & ~finite, _RESULT_NONFINITE, result)
     stats = sol.stats
-    return _trajectory(ts, states, commands, outs, stats["num_steps"], stats["num_accepted_steps"],
-                       stats["num_rejected_steps"], result)
+    return _trajectory(
+        ts, states, commands, outs, stats["num_steps"], stats["num_accepted_steps"], stats["num_rejected_steps"], result
+    )
 
 
 def _trajectory(ts, states, commands, outs, num_steps, num_accepted, num_rejected, result):
@@ -255,7 +259,8 @@ def validate(system, signal, ts, y0=None, t0=None):
             raise PamjaxInputError(f"signal must be finite, its bounds are ({lo}, {hi})")
         if lo < clo - 1e-12 or hi > chi + 1e-12:
             raise PamjaxInputError(
-                f"signal (the valve command, e.g. duty ratio) must stay within [{clo}, {chi}], its range is [{lo}, {hi}]"
+                f"signal (the valve command, e.g. duty ratio) must stay within [{clo}, {chi}], "
+                f"its range is [{lo}, {hi}]"
             )
     if y0 is not None:
         leaves = jtu.tree_leaves(y0)

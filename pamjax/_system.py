@@ -83,7 +83,9 @@ class TankSystem(AbstractSystem):
 
     def vector_field(self, t, state, command):
         mdot = self.valve.mass_flow(t, command, state.pressure, self.air)
-        return TankState(pressure=pressure_rate(mdot, state.pressure, self.volume, 0.0, self.polytropic_index, self.air))
+        return TankState(
+            pressure=pressure_rate(mdot, state.pressure, self.volume, 0.0, self.polytropic_index, self.air)
+        )
 
     def outputs(self, t, state, command):
         return dict(pressure=state.pressure, mass_flow=self.valve.mass_flow(t, command, state.pressure, self.air))

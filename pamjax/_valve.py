@@ -178,7 +178,8 @@ class AveragedValve(AbstractValve):
     def __check_init__(self):
         if jnp.shape(self.coefficients) != (3, 3):
             raise PamjaxInputError(
-                f"AveragedValve.coefficients must have shape (3, 3) (m1…m9 row-wise), got {jnp.shape(self.coefficients)}"
+                "AveragedValve.coefficients must have shape (3, 3) (m1…m9 row-wise), "
+                f"got {jnp.shape(self.coefficients)}"
             )
         check_finite(self.coefficients, "AveragedValve.coefficients")
 
@@ -234,13 +235,14 @@ def fit_averaged_valve(valve: OnOffValve, air: Air, commands=None, pressures=Non
     pn = pg / p_scale
     design = jnp.stack([u**i * pn**j for i in range(3) for j in range(3)], axis=1)
     if pin_endpoints:
+
         def row(u, p):
             pn = (p - air.atmospheric_pressure) / p_scale
             return jnp.stack([u**i * pn**j for i in range(3) for j in range(3)])
 
         constraints = jnp.stack([row(0.0, air.atmospheric_pressure), row(1.0, valve.supply_pressure)])
         _, _, vt = jnp.linalg.svd(constraints)
-        null = vt[constraints.shape[0]:].T  # (9, 7): coefficients satisfying both constraints exactly
+        null = vt[constraints.shape[0] :].T  # (9, 7): coefficients satisfying both constraints exactly
         z, *_ = jnp.linalg.lstsq(design @ null, flows.ravel())
         coef = null @ z
     else:

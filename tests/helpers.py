@@ -2,7 +2,6 @@
 equations (the oracles). Nothing here imports pamjax physics: the oracles are written from the papers."""
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
@@ -18,7 +17,9 @@ RHO0, T0 = 1.185, 293.15  # ISO 8778 reference density [kg/m³] and temperature 
 
 def tree_allclose(a, b, rtol=1e-8, atol=1e-10):
     la, lb = jtu.tree_leaves(a), jtu.tree_leaves(b)
-    return len(la) == len(lb) and all(np.allclose(np.asarray(x), np.asarray(y), rtol=rtol, atol=atol) for x, y in zip(la, lb))
+    return len(la) == len(lb) and all(
+        np.allclose(np.asarray(x), np.asarray(y), rtol=rtol, atol=atol) for x, y in zip(la, lb)
+    )
 
 
 def central_difference(f, x, rel_step=1e-5, abs_step=1e-8):
@@ -179,8 +180,29 @@ class NumpyPlant:
     """A NumPy transcription of paper 000's plant (eq. 7, 8-9, 11, 14, 15, 16) with pamjax's smoothing choices
     (softplus slack 1 N, tanh sign, logistic PWM edges, softplus end stops), for scipy.integrate.solve_ivp."""
 
-    def __init__(self, *, a, k0, k1, k2, v0, v1, x_min, x_max, mass=9.6, fc=16.0, cf=250.0, vw=1e-3, n=1.4,
-                 ps=6.5e5, valve="pwm", m=None, edge=1e-4, slack=1.0, volume=None):
+    def __init__(
+        self,
+        *,
+        a,
+        k0,
+        k1,
+        k2,
+        v0,
+        v1,
+        x_min,
+        x_max,
+        mass=9.6,
+        fc=16.0,
+        cf=250.0,
+        vw=1e-3,
+        n=1.4,
+        ps=6.5e5,
+        valve="pwm",
+        m=None,
+        edge=1e-4,
+        slack=1.0,
+        volume=None,
+    ):
         self.__dict__.update(locals())
         del self.__dict__["self"]
 
@@ -203,5 +225,7 @@ class NumpyPlant:
         dp = self.n * (R_AIR * T_AIR * mdot - p * self.v1 * v) / vol  # eq. 15
         f_static = np_eq7_force(x, p - P_ATM, self.a, self.k0, self.k1, self.k2)
         f_muscle = softplus(f_static, self.slack)
-        dv = (f_muscle - np_friction(v, self.fc, self.cf, self.vw) + np_end_stops(x, v, self.x_min, self.x_max)) / self.mass - 9.81
+        dv = (
+            f_muscle - np_friction(v, self.fc, self.cf, self.vw) + np_end_stops(x, v, self.x_min, self.x_max)
+        ) / self.mass - 9.81
         return [dp, v, dv]  # eq. 16

@@ -12,7 +12,9 @@ import pamjax
 def test_coulomb_viscous_matches_eq8_9():
     f = pamjax.CoulombViscousFriction(16.0, 250.0, 1e-3)
     for v in np.linspace(-0.1, 0.1, 41):
-        assert float(f.force(jnp.asarray(v), None)) == pytest.approx(np_friction(v, 16.0, 250.0, 1e-3), rel=1e-13, abs=1e-15)
+        assert float(f.force(jnp.asarray(v), None)) == pytest.approx(
+            np_friction(v, 16.0, 250.0, 1e-3), rel=1e-13, abs=1e-15
+        )
     # Far from v = 0 it is the sharp law F_c sign(v) + C_f v (paper 000 eq. 16's friction terms).
     for v in (-0.05, 0.02):
         assert float(f.force(v, None)) == pytest.approx(16 * np.sign(v) + 250 * v, rel=1e-12)

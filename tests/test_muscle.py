@@ -22,7 +22,9 @@ def test_eq7_matches_oracle_with_gauge_pressure():
             expected = np_eq7_force(x, p - P_ATM, a, presets.MAS10_K0, presets.MAS10_K1, presets.MAS10_K2)
             got = float(muscle.static_force(jnp.asarray(x), jnp.asarray(p), AIR))
             assert got == pytest.approx(expected, rel=1e-12, abs=1e-9)
-            assert float(muscle.force(jnp.asarray(x), jnp.asarray(p), AIR)) == pytest.approx(softplus(expected, 1.0), rel=1e-12)
+            assert float(muscle.force(jnp.asarray(x), jnp.asarray(p), AIR)) == pytest.approx(
+                softplus(expected, 1.0), rel=1e-12
+            )
     # At p_max (0.6 MPa gauge) eq. 7 reduces to F_max(x); at x = 0 that is the datasheet's 630 N.
     assert float(muscle.static_force(0.0, 6e5 + P_ATM, AIR)) == pytest.approx(630.0, rel=1e-12)
 
@@ -61,7 +63,9 @@ def test_volumes_and_their_slopes():
         assert float(cub.volume(x)) == pytest.approx(a * e**3 + b * e**2 + c * e + d, rel=1e-13)  # paper 001 eq. 4
     muscle = pamjax.Muscle(presets.mas10_muscle().force_law, cub, -0.02, 0.1)
     h = 1e-7
-    assert float(muscle.volume_slope(0.05)) == pytest.approx(float(cub.volume(0.05 + h) - cub.volume(0.05 - h)) / (2 * h), rel=1e-6)
+    assert float(muscle.volume_slope(0.05)) == pytest.approx(
+        float(cub.volume(0.05 + h) - cub.volume(0.05 - h)) / (2 * h), rel=1e-6
+    )
 
 
 def test_slack_and_stiffness():

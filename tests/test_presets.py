@@ -41,7 +41,8 @@ def test_dmsp40_rederived(derived):
 
 
 def test_averaged_valve_rederived(derived):
-    # m1…m9 printed with 13 significant digits; the fit quality quoted in the presets docstring (12.8 %, 2.8 %); m1 is pinned to 0.
+    # m1…m9 printed with 13 significant digits; the fit quality quoted in the presets docstring (12.8 %, 2.8 %);
+    # m1 is pinned to 0.
     np.testing.assert_allclose(derived["mas10_averaged_valve"], presets.MAS10_AVERAGED_VALVE, rtol=5e-12, atol=1e-24)
     assert derived["averaged_valve_fit"]["max_error_percent"] == pytest.approx(12.8, abs=0.05)
     assert derived["averaged_valve_fit"]["rmse_percent"] == pytest.approx(2.8, abs=0.05)

@@ -11,9 +11,17 @@ from pamjax import presets
 
 def numpy_plant(valve):
     return NumpyPlant(
-        a=presets.MAS10_MAX_FORCE_COEFFICIENTS, k0=presets.MAS10_K0, k1=presets.MAS10_K1, k2=presets.MAS10_K2,
-        v0=presets.MAS10_V0, v1=presets.MAS10_V1, x_min=presets.MAS10_MIN_POSITION, x_max=presets.MAS10_MAX_POSITION,
-        valve=valve, m=presets.MAS10_AVERAGED_VALVE, volume=presets.TANK_VOLUME,
+        a=presets.MAS10_MAX_FORCE_COEFFICIENTS,
+        k0=presets.MAS10_K0,
+        k1=presets.MAS10_K1,
+        k2=presets.MAS10_K2,
+        v0=presets.MAS10_V0,
+        v1=presets.MAS10_V1,
+        x_min=presets.MAS10_MIN_POSITION,
+        x_max=presets.MAS10_MAX_POSITION,
+        valve=valve,
+        m=presets.MAS10_AVERAGED_VALVE,
+        volume=presets.TANK_VOLUME,
     )
 
 
@@ -51,7 +59,9 @@ def test_tank_pressure_stays_between_atmosphere_and_supply(valve):
     system = presets.mas10_tank_system(valve)
     ts = jnp.linspace(0.0, 0.6, 301)
     up = np.asarray(pamjax.simulate(system, pamjax.Constant(0.95), ts).pressure)
-    down = np.asarray(pamjax.simulate(system, pamjax.Constant(0.05), ts, y0=pamjax.TankState(jnp.asarray(6.5e5))).pressure)
+    down = np.asarray(
+        pamjax.simulate(system, pamjax.Constant(0.05), ts, y0=pamjax.TankState(jnp.asarray(6.5e5))).pressure
+    )
     tol = 10.0 if valve == "pwm" else 0.02 * 6.5e5  # Pa: solver tolerance; the fitted eq. 13 is a 2 % approximation
     for p in (up, down):
         assert np.all(p >= P_ATM - tol) and np.all(p <= 6.5e5 + tol)

@@ -24,7 +24,8 @@ def test_trajectory_loss_and_gradient_are_finite():
 
 def test_smoothing_errors_at_ten_widths():
     """Stated smoothing errors (docs): at ten widths from the kink each primitive is within these bounds of its
-    sharp counterpart: sign 1e-8, step 5e-5, relu 5e-5·width; |·| ≈ sqrt(x² + w²) − w is off by at most one width everywhere."""
+    sharp counterpart: sign 1e-8, step 5e-5, relu 5e-5·width; |·| ≈ sqrt(x² + w²) − w is off by at most one width
+    everywhere."""
     w = 0.7
     x = 10 * w
     assert abs(sm.smooth_sign(x, w) - 1) < 1e-8 and abs(sm.smooth_sign(-x, w) + 1) < 1e-8

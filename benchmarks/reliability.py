@@ -1,0 +1,125 @@
+"""Reliability figures (issue 7): gradients vs finite differences, NaN-safety, failure handling, bad input,
+recovery from random starts, determinism.
+
+    python benchmarks/reliability.py            # full figures (20 gradient sets, 10,000 NaN-search inputs, ...)
+    python benchmarks/reliability.py --quick    # smoke-size
+
+Ends with `RESULT grad_pass=... worst_grad_rel=... nan_count=... bad_input_named=... recovery_rate=...
+deterministic=...`.
+"""
+
+import argparse
+import os
+import sys
+import time
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+
+import pamjax  # noqa: E402
+from pamjax._gradcheck import gradient_check  # noqa: E402
+from pamjax._simulate import solve  # noqa: E402
+from tests.reliability.bad_inputs import CORE_CASES  # noqa: E402
+from tests.reliability.helpers import NUMERICAL_SETTINGS, random_pwm_problem  # noqa: E402
+from tests.reliability.nan_safety import trajectory_counts, vector_field_counts  # noqa: E402
+
+
+def gradients(n_sets, periods):
+    ts = jnp.linspace(0.0, periods / 50.0, periods + 1)
+
+    def loss(tree, adjoint):
+        s, u = tree
+        traj = solve(s, u, ts, None, 0.0, rtol=1e-10, atol=1e-10, adjoint=adjoint, max_steps=200_000)
+        return jnp.mean((traj.position / 1e-2) ** 2) + jnp.mean((traj.pressure / 1e5) ** 2)
+
+    passed, worst, worst_modes, worst_name = 0, 0.0, 0.0, ""
+    for seed in range(n_sets):
+        t = time.perf_counter()
+        r = gradient_check(loss, random_pwm_problem(seed))
+        physical = np.array([not any(k in n for k in NUMERICAL_SETTINGS) for n in r["names"]])
+        err = r["error_fd"][physical]
+        ok = err.max() < 1e-4 and r["error_modes"].max() < 1e-6
+        passed += ok
+        if err.max() > worst:
+            worst, worst_name = float(err.max()), str(r["names"][physical][np.argmax(err)])
+        worst_modes = max(worst_modes, float(r["error_modes"].max()))
+        print(
+            f"  gradient set {seed:2d}: {physical.sum()} parameters, worst FD error {err.max():.1e} "
+            f"({r['names'][physical][np.argmax(err)]}), fwd/rev {r['error_modes'].max():.1e}, "
+            f"{'pass' if ok else 'FAIL'} ({time.perf_counter() - t:.0f} s)",
+            flush=True,
+        )
+    return passed / n_sets, worst, worst_modes, worst_name
+
+
+def bad_inputs():
+    named = 0
+    for case, (make, name) in sorted(CORE_CASES.items()):
+        try:
+            make()
+        except ValueError as err:
+            named += name in str(err)
+            continue
+        print(f"  bad input NOT rejected: {case}")
+    return named, len(CORE_CASES)
+
+
+def determinism():
+    """A vmapped batch against a Python loop over the same points, and a repeated run, bitwise."""
+    system = pamjax.presets.mas10_system("averaged")
+    ts = jnp.linspace(0.0, 1.0, 11)
+    duties = jnp.linspace(0.2, 0.8, 8)
+
+    def run(u):
+        return solve(system, pamjax.Constant(u), ts, None, 0.0).position
+
+    batched = np.asarray(jax.jit(jax.vmap(run))(duties))
+    looped = np.stack([np.asarray(jax.jit(jax.vmap(run))(duties.at[:].set(u))[0]) for u in duties])
+    again = np.asarray(jax.jit(jax.vmap(run))(duties))
+    return bool(np.array_equal(batched, looped) and np.array_equal(batched, again))
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--quick", action="store_true")
+    args = parser.parse_args()
+    print(f"pamjax reliability, jax {jax.__version__}, {os.cpu_count()} CPUs")
+    n_sets, periods, n_nan = (2, 20, 500) if args.quick else (20, 20, 2375)
+    print("gradients vs central finite differences (smooth PWM muscle system, rtol=atol=1e-10):")
+    grad_pass, worst, worst_modes, worst_name = gradients(n_sets, periods)
+    print(
+        f"  pass fraction {grad_pass:.2f}, worst FD error {worst:.1e} ({worst_name}), worst fwd/rev {worst_modes:.1e}"
+    )
+    t = time.perf_counter()
+    vf = vector_field_counts(n_nan, seed=123)
+    tr = trajectory_counts(max(16, 10_000 - vf["inputs"]) if not args.quick else 16, seed=7)
+    nan_count = vf["nonfinite"] + tr["nonfinite"]
+    print(
+        f"NaN search: {vf['inputs'] + tr['inputs']} inputs ({vf['inputs']} vector field + Jacobian, {tr['inputs']} "
+        f"trajectory + loss + gradient), {nan_count} non-finite values ({time.perf_counter() - t:.0f} s)"
+    )
+    named, total = bad_inputs()
+    print(f"bad input: {named}/{total} cases raise an error naming the field")
+    deterministic = determinism()
+    print(f"determinism (vmapped batch vs loop vs repeat, bitwise): {deterministic}")
+    recovery_rate = float("nan")
+    try:
+        from benchmarks.reliability_recovery import recovery  # provided with the fitting workflow
+
+        recovery_rate = recovery(quick=args.quick)
+    except ImportError:
+        print("recovery: not measured (no fitting workflow available)")
+    print(
+        f"RESULT grad_pass={grad_pass:.3f} worst_grad_rel={worst:.2e} nan_count={nan_count} "
+        f"bad_input_named={named} recovery_rate={recovery_rate:.3f} deterministic={deterministic}"
+    )
+
+
+if __name__ == "__main__":
+    main()
