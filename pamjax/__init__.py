@@ -104,6 +104,12 @@ from ._sweep import (  # noqa: E402
     SweepResult as SweepResult,
     sweep as sweep,
 )
+from ._sweep_maps import (  # noqa: E402
+    flow_surface as flow_surface,
+    frequency_response as frequency_response,
+    steady_state_map as steady_state_map,
+)
+from ._gradcheck import gradient_check as gradient_check  # noqa: E402
 
 # --- closed-loop control (issue 6) ---------------------------------------------------------------------------------
 from ._control import (  # noqa: E402
