@@ -124,3 +124,15 @@ from ._control import (  # noqa: E402
     simulate_closed_loop as simulate_closed_loop,
     tune_controller as tune_controller,
 )
+
+# --- antagonistic joint control (issue 6, item 5) ------------------------------------------------------------------
+from ._joint_control import (  # noqa: E402
+    AntagonisticJointController as AntagonisticJointController,
+    GaitAngle as GaitAngle,
+    JointControlLoop as JointControlLoop,
+    JointControlState as JointControlState,
+    JointControlTrajectory as JointControlTrajectory,
+    regulated_stiffness as regulated_stiffness,
+    run_joint_control as run_joint_control,
+    simulate_joint_control as simulate_joint_control,
+)
