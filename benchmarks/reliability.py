@@ -59,15 +59,35 @@ def gradients(n_sets, periods):
 
 
 def bad_inputs():
+    """Core catalogue (parameters, signals, time grids, initial states) plus the fitting workflow's (recordings,
+    configs, experiments, fit specifications); FILE_CASES must raise FileExistsError naming `overwrite`."""
+    cases = dict(CORE_CASES)
+    file_cases = {}
+    try:
+        from tests.reliability.bad_inputs_fit import FILE_CASES, FIT_CASES
+
+        cases.update({f"fit: {k}": v for k, v in FIT_CASES.items()})
+        file_cases = FILE_CASES
+    except ImportError:
+        print("  (fitting-workflow bad inputs not available)")
     named = 0
-    for case, (make, name) in sorted(CORE_CASES.items()):
+    for case, (make, name) in sorted(cases.items()):
         try:
             make()
         except ValueError as err:
             named += name in str(err)
+            if name not in str(err):
+                print(f"  bad input rejected but not named ({name!r}): {case}: {err}")
             continue
         print(f"  bad input NOT rejected: {case}")
-    return named, len(CORE_CASES)
+    for case, (make, name) in sorted(file_cases.items()):
+        try:
+            make()
+        except FileExistsError as err:
+            named += name in str(err)
+            continue
+        print(f"  existing results file NOT protected: {case}")
+    return named, len(cases) + len(file_cases)
 
 
 def determinism():
