@@ -374,6 +374,90 @@ def _identifiability(jac, labels, tol):
     return groups
 
 
+@eqx.filter_jit
+def _solver_init(solver, space, theta, exps):
+    """The solver's initial state. Module-level and given `space` as an argument, so that fits of one problem
+    structure from different start models (random restarts, resumed fits) share one compilation."""
+    fn = _stack_residuals(space, exps, "identification")
+    f_struct = jax.eval_shape(lambda t: fn(t, exps)[0], theta)
+    return solver.init(fn, theta, exps, {}, f_struct, None, frozenset())
+
+
+@eqx.filter_jit
+def _solver_step(solver, space, theta, state, exps):
+    """One optimiser iteration, its termination test, and the cost, step size, Jacobian and residuals after it."""
+    fn = _stack_residuals(space, exps, "identification")
+    theta, state, _ = solver.step(fn, theta, exps, {}, state, frozenset())
+    done, result = solver.terminate(fn, theta, exps, {}, state, frozenset())
+    info = state.f_info
+    cost = 0.5 * jnp.sum(info.residual**2)
+    step_size = getattr(state.search_state, "step_size", jnp.nan)
+    return theta, state, done, result, cost, step_size, info.jac.as_matrix(), info.residual
+
+
+_CHECKPOINT_FORMAT = 1
+
+
+def _check_checkpoint_path(checkpoint, resume, overwrite):
+    """Before any fit: `checkpoint` may only replace an existing file if asked to, or if it is the file resumed."""
+    if checkpoint is None:
+        return
+    path = pathlib.Path(checkpoint)
+    if path.suffix != ".npz":
+        raise PamjaxInputError(f"checkpoint must be an .npz path, got {str(checkpoint)!r}")
+    same = resume is not None and path.resolve() == pathlib.Path(resume).resolve()
+    if path.exists() and not (overwrite or same):
+        raise FileExistsError(f"checkpoint {path} exists; pass overwrite=True to replace it (or resume from it)")
+
+
+def _write_checkpoint(path, labels, carry, history):
+    """Save the optimiser carry (θ, the optimistix state, done, result, Jacobian, residuals: every array leaf,
+    exactly) and the history after an iteration. Written to a temporary file and renamed, so an interruption leaves
+    the previous checkpoint intact."""
+    path = pathlib.Path(path)
+    leaves = [np.asarray(x) for x in jax.tree_util.tree_leaves(eqx.filter(carry, eqx.is_array))]
+    weak = [bool(getattr(x, "weak_type", False)) for x in jax.tree_util.tree_leaves(eqx.filter(carry, eqx.is_array))]
+    arrays = {f"leaf_{i}": x for i, x in enumerate(leaves)}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez(tmp, format=_CHECKPOINT_FORMAT, labels=np.asarray(labels, dtype=str), weak=np.asarray(weak, dtype=bool),
+             history=np.asarray(history, dtype=float).reshape(-1, 4), **arrays)
+    tmp.replace(path)
+
+
+def _read_checkpoint(path, labels, template):
+    """The carry and history saved by `_write_checkpoint`; `template` (a fresh carry of this problem) gives the
+    structure, and every leaf's shape and dtype must match it."""
+    path = pathlib.Path(path)
+    if not path.exists():
+        raise PamjaxInputError(f"resume: checkpoint {path} does not exist")
+    with np.load(path) as f:
+        data = {k: f[k] for k in f.files}
+    if int(data.get("format", -1)) != _CHECKPOINT_FORMAT:
+        raise PamjaxInputError(f"resume: {path} is not a pamjax fit checkpoint (format {_CHECKPOINT_FORMAT})")
+    if list(data["labels"]) != list(labels):
+        raise PamjaxInputError(f"resume: {path} was saved for parameters {list(data['labels'])}, not {list(labels)}")
+    arrays, static = eqx.partition(template, eqx.is_array)
+    old, treedef = jax.tree_util.tree_flatten(arrays)
+    if len(old) != len(data["weak"]):
+        raise PamjaxInputError(f"resume: {path} holds a different optimiser state (another solver or problem)")
+    new = []
+    for i, (t, weak) in enumerate(zip(old, data["weak"])):
+        v = data[f"leaf_{i}"]
+        if v.shape != t.shape or v.dtype != t.dtype:
+            raise PamjaxInputError(f"resume: {path} leaf {i} has shape {v.shape} {v.dtype}, this fit needs "
+                                   f"{t.shape} {t.dtype} (another problem or solver)")
+        if isinstance(t, np.ndarray):
+            new.append(v)
+        elif weak and v.ndim == 0:
+            new.append(jnp.asarray(v.item()))  # a Python scalar keeps JAX's weak type (same trace as uninterrupted)
+        else:
+            new.append(jnp.asarray(v))
+    carry = eqx.combine(jax.tree_util.tree_unflatten(treedef, new), static)
+    history = [[int(s), float(c), float(z), bool(a)] for s, c, z, a in data["history"]]
+    return carry, history
+
+
 def fit(
     model,
     experiments,
@@ -388,6 +472,8 @@ def fit(
     stall_steps: int = 8,
     out=None,
     overwrite: bool = False,
+    checkpoint=None,
+    resume=None,
 ) -> FitResult:
     """Fit the parameters named in `free` of `model` to `experiments` by nonlinear least squares.
 
@@ -412,14 +498,21 @@ def fit(
     - `identifiability_tol`: singular values of the column-normalised Jacobian below this × the largest mark a
       non-identifiable combination (warned about by name; its parameters get infinite standard errors).
     - `out`: a JSON path to write the result to; checked BEFORE the fit; never replaced unless `overwrite=True`.
+    - `checkpoint`: an `.npz` path; after every iteration the optimiser state (θ, the optimistix solver state and
+      the last Jacobian, every array exactly), the iteration count and the history are written to it (atomically).
+      Never replaces an existing file unless `overwrite=True` or it is the `resume` file.
+    - `resume`: an `.npz` checkpoint of this same problem (model, experiments, free, solver): the fit continues from
+      it and ends bitwise where an uninterrupted fit with the same `max_steps` ends (values, cost, iterations,
+      history). Stop a long fit early with a small `max_steps` (or an interrupt) and resume with the full one.
 
     **Returns:** a `FitResult` (values, standard errors, correlation, per-channel RMSE, status, fitted `model`).
 
     **Raises:** `PamjaxInputError` for an unknown parameter (listing the valid ones) or bad experiment input, before
-    any fit; `FileExistsError` if `out` exists and `overwrite` is False.
+    any fit; `FileExistsError` if `out` (or `checkpoint`) exists and `overwrite` is False.
     """
     if out is not None and pathlib.Path(out).exists() and not overwrite:
         raise FileExistsError(f"{out} exists; pass overwrite=True to replace it")
+    _check_checkpoint_path(checkpoint, resume, overwrite)
     experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
     if not experiments:
         raise PamjaxInputError("experiments must be a non-empty list")
@@ -442,20 +535,12 @@ def fit(
     if not np.all(np.isfinite(np.asarray(theta))):
         raise PamjaxInputError(f"start values give non-finite transformed parameters: {dict(zip(labels, theta))}")
     f_struct = jax.eval_shape(lambda t: fn(t, exps)[0], theta)
-    tags = frozenset()
 
-    @eqx.filter_jit
     def init(theta, exps):
-        return solver.init(fn, theta, exps, {}, f_struct, None, tags)
+        return _solver_init(solver, space, theta, exps)
 
-    @eqx.filter_jit
     def step(theta, state, exps):
-        theta, state, _ = solver.step(fn, theta, exps, {}, state, tags)
-        done, result = solver.terminate(fn, theta, exps, {}, state, tags)
-        info = state.f_info
-        cost = 0.5 * jnp.sum(info.residual**2)
-        step_size = getattr(state.search_state, "step_size", jnp.nan)
-        return theta, state, done, result, cost, step_size, info.jac.as_matrix(), info.residual
+        return _solver_step(solver, space, theta, state, exps)
 
     report = progress if callable(progress) else None
     state = init(theta, exps)
@@ -465,7 +550,15 @@ def fit(
     initial_cost = None
     k = 0
     prev_accepted = 0
-    for k in range(1, max_steps + 2):  # step 1 only evaluates the start point
+    jac = jnp.zeros((f_struct.size, theta.size))
+    resid = jnp.zeros(f_struct.shape)
+    if resume is not None:
+        template = (theta, state, jnp.asarray(False), result, jac, resid)
+        (theta, state, done, result, jac, resid), history = _read_checkpoint(resume, labels, template)
+        initial_cost, cost = history[0][1], history[-1][1]
+        prev_accepted = int(state.num_accepted_steps)
+    finished = bool(done) or (bool(history) and int(state.num_steps_since_acceptance) >= stall_steps)
+    for k in range(len(history) + 1, 0 if finished else max_steps + 2):  # step 1 only evaluates the start point
         t = time.perf_counter()
         theta, state, done, result, cost, step_size, jac, resid = step(theta, state, exps)
         cost, step_size = float(cost), float(step_size)
@@ -479,6 +572,8 @@ def fit(
         accepted = int(state.num_accepted_steps) > prev_accepted
         prev_accepted = int(state.num_accepted_steps)
         history.append([k - 1, cost, step_size, bool(accepted)])
+        if checkpoint is not None:
+            _write_checkpoint(checkpoint, labels, (theta, state, done, result, jac, resid), history)
         if report is not None:
             report(k - 1, cost, step_size, accepted)
         elif progress:
@@ -487,6 +582,7 @@ def fit(
         if bool(done) or int(state.num_steps_since_acceptance) >= stall_steps:
             break
     n_steps = len(history) - 1
+    t_first = 0.0 if t_first is None else t_first  # a resumed fit that had already finished
     steady = t_rest / max(n_steps, 1)
     compile_s = max(t_first - steady, 0.0)
     fit_s = t_rest + (t_first - compile_s)
