@@ -210,6 +210,9 @@ def _lane_adaptive(system, signal, y0, ts, channels, reduction, solve_options):
     return obs, status
 
 
+_LANE_MULTIPLE = 8  # pad batches to a multiple of this many lanes (bitwise batch-independence, see sweep)
+
+
 @eqx.filter_jit
 def _run_chunk(system, signal, y0, values, ts, plan, config):
     method, counts, channels, reduction, solve_options = config
@@ -554,17 +557,22 @@ def sweep(
     n_dev = 1 if mesh is None else mesh.devices.size
     chunk = min(batch_size, 8192) if chunk_size is None else min(chunk_size, batch_size)
     chunk = int(math.ceil(chunk / n_dev) * n_dev)
+    # Each chunk's arrays are padded to a multiple of 8 lanes per device: XLA compiles a 1-point batch to different
+    # (scalar) code than a wider one, which changes results in the last bit. With the padding a point's result is
+    # bitwise the same whatever batch it is computed in (tests/reliability/test_determinism.py).
+    lanes = _LANE_MULTIPLE * n_dev
+    width = int(math.ceil(chunk / lanes) * lanes)
     n_chunks = int(math.ceil(batch_size / chunk))
     say = (print if progress is True else progress) if progress else None
     outs, statuses = [], []
     ts_j = jnp.asarray(ts_np)
     for c in range(n_chunks):
         start = time.perf_counter()
-        index = np.arange(c * chunk, (c + 1) * chunk)
-        index = np.where(index < batch_size, index, 0)  # pad with point 0 (valid values), dropped below
+        n_real = min(chunk, batch_size - c * chunk)
+        index = c * chunk + np.arange(width)
+        index = np.where(np.arange(width) < n_real, index, 0)  # pad with point 0 (valid values), dropped below
         vals = {k: _put(v[index], mesh) for k, v in flat.items()}
         out, status = _run_chunk(system, signal, y0, vals, ts_j, plan, config)
-        n_real = min(chunk, batch_size - c * chunk)
         outs.append(_fetch(out)[:n_real])
         statuses.append(_fetch(status)[:n_real])
         if say is not None and n_chunks > 1:
