@@ -30,31 +30,39 @@ from tests.reliability.helpers import NUMERICAL_SETTINGS, random_pwm_problem  # 
 from tests.reliability.nan_safety import trajectory_counts, vector_field_counts  # noqa: E402
 
 
-def gradients(n_sets, periods):
+def gradients(n_sets, periods, rtol=1e-12):
+    """Per seeded parameter set: every physical parameter's reverse-mode gradient against central finite differences
+    (steps 1e-4, 1e-5, 1e-6 relative; the most consistent neighbouring pair is kept) and against forward mode.
+    A parameter fails when its error exceeds 1e-4; it is counted "inconclusive" instead when the finite differences
+    themselves disagree across step sizes by more than both 1e-4 and the error (no reference to judge it by)."""
     ts = jnp.linspace(0.0, periods / 50.0, periods + 1)
 
     def loss(tree, adjoint):
         s, u = tree
-        traj = solve(s, u, ts, None, 0.0, rtol=1e-10, atol=1e-10, adjoint=adjoint, max_steps=200_000)
+        traj = solve(s, u, ts, None, 0.0, rtol=rtol, atol=rtol, adjoint=adjoint, max_steps=400_000)
         return jnp.mean((traj.position / 1e-2) ** 2) + jnp.mean((traj.pressure / 1e5) ** 2)
 
-    passed, worst, worst_modes, worst_name = 0, 0.0, 0.0, ""
+    passed, worst, worst_modes, worst_name, inconclusive = 0, 0.0, 0.0, "", []
     for seed in range(n_sets):
         t = time.perf_counter()
         r = gradient_check(loss, random_pwm_problem(seed))
         physical = np.array([not any(k in n for k in NUMERICAL_SETTINGS) for n in r["names"]])
-        err = r["error_fd"][physical]
-        ok = err.max() < 1e-4 and r["error_modes"].max() < 1e-6
+        err, cons, names = r["error_fd"][physical], r["fd_consistency"][physical], r["names"][physical]
+        unjudged = (err >= 1e-4) & (cons > 1e-4) & (err <= cons)
+        failed = (err >= 1e-4) & ~unjudged
+        inconclusive += [f"set {seed}: {n} (error {e:.1e}, FD spread {c:.1e})"
+                         for n, e, c in zip(names[unjudged], err[unjudged], cons[unjudged])]
+        ok = not failed.any() and r["error_modes"].max() < 1e-6
         passed += ok
-        if err.max() > worst:
-            worst, worst_name = float(err.max()), str(r["names"][physical][np.argmax(err)])
+        judged = np.where(unjudged, 0.0, err)
+        if judged.max() > worst:
+            worst, worst_name = float(judged.max()), str(names[np.argmax(judged)])
         worst_modes = max(worst_modes, float(r["error_modes"].max()))
-        print(
-            f"  gradient set {seed:2d}: {physical.sum()} parameters, worst FD error {err.max():.1e} "
-            f"({r['names'][physical][np.argmax(err)]}), fwd/rev {r['error_modes'].max():.1e}, "
-            f"{'pass' if ok else 'FAIL'} ({time.perf_counter() - t:.0f} s)",
-            flush=True,
-        )
+        print(f"  gradient set {seed:2d}: {physical.sum()} parameters, worst judged FD error {judged.max():.1e} "
+              f"({names[np.argmax(judged)]}), {unjudged.sum()} inconclusive, fwd/rev {r['error_modes'].max():.1e}, "
+              f"{'pass' if ok else 'FAIL'} ({time.perf_counter() - t:.0f} s)", flush=True)
+    for line in inconclusive:
+        print(f"  inconclusive: {line}")
     return passed / n_sets, worst, worst_modes, worst_name
 
 
@@ -135,7 +143,7 @@ def main():
     args = parser.parse_args()
     print(f"pamjax reliability, jax {jax.__version__}, {os.cpu_count()} CPUs")
     n_sets, periods, n_nan = (2, 20, 500) if args.quick else (20, 20, 2375)
-    print("gradients vs central finite differences (smooth PWM muscle system, rtol=atol=1e-10):")
+    print("gradients vs central finite differences (smooth PWM muscle system, 20 PWM periods, rtol=atol=1e-12):")
     grad_pass, worst, worst_modes, worst_name = gradients(n_sets, periods)
     print(
         f"  pass fraction {grad_pass:.2f}, worst FD error {worst:.1e} ({worst_name}), worst fwd/rev {worst_modes:.1e}"

@@ -144,7 +144,9 @@ class MuscleSystem(AbstractSystem):
         slope = jax.grad(lambda q: residual(frozen, q))(x)
         interior = (x > lo0 + 1e-9) & (x < hi0 - 1e-9) & (slope < 0)
         newton = x - residual(self, x) / jnp.where(interior, slope, -1.0)
-        return jnp.where(interior, newton, x)
+        # At a stroke limit the position IS that limit: return the limit itself so the derivative follows it.
+        at_limit = jnp.where(x >= 0.5 * (lo0 + hi0), self.muscle.max_position, self.muscle.min_position)
+        return jnp.where(interior, newton, at_limit)
 
     def initial_state(self, pressure=None, position=None, velocity=0.0):
         """State at rest: `pressure` [Pa abs] (atmospheric by default) and `position` [m] (by default the static
