@@ -528,7 +528,7 @@ def fit(
     for e in experiments:
         e.check(model)
     labels = space.labels
-    exps = tuple(experiments)
+    exps = tuple(e.bind(model) if hasattr(e, "bind") else e for e in experiments)  # PWM grids sized
     fn = _stack_residuals(space, exps, "identification")
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol) if solver is None else solver
     theta = space.initial_theta()
