@@ -34,7 +34,8 @@ def gradient_check(loss, tree, *, relative_steps=(1e-4, 1e-5, 1e-6), floor=1e-3)
     parameters with negligible influence are not judged on round-off.
 
     Returns a dict of NumPy arrays: `names`, `forward`, `reverse`, `finite_difference`, `fd_consistency`,
-    `error_fd` (autodiff reverse vs FD) and `error_modes` (forward vs reverse), both relative as described.
+    `error_fd` (autodiff reverse vs FD) and `error_modes` (forward vs reverse), both relative as described, and
+    `error_modes_normwise` = max|s_fwd − s_rev| / max|s_rev| (forward vs reverse relative to the gradient's size).
     """
     params, static = eqx.partition(tree, eqx.is_inexact_array)
     flat, unravel = ravel_pytree(params)
@@ -73,4 +74,5 @@ def gradient_check(loss, tree, *, relative_steps=(1e-4, 1e-5, 1e-6), floor=1e-3)
         fd_consistency=consistency,
         error_fd=np.abs(s_rev - s_fd) / denominator,
         error_modes=np.abs(s_fwd - s_rev) / denominator_modes,
+        error_modes_normwise=np.max(np.abs(s_fwd - s_rev)) / max(np.max(np.abs(s_rev)), 1e-300),
     )
