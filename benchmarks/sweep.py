@@ -4,8 +4,9 @@ Peers, all in this one run, on the SAME equations (an independent scalar transcr
 - pamjax `sweep` with the averaged valve: RK4 at its stability limit (trajectory-accurate) and ROS2 at 5 ms
   (steady-state configuration: only the settled values are asked for), reduced to the final state on the fly;
 - numba: a hand-written fixed-step RK4 loop over the 1,024 duties (serial and `prange`);
-- SciPy: a loop of `solve_ivp(method="LSODA")` on the numba-compiled right-hand side, timed on a subset and
-  extrapolated to 1,024 (said in the output);
+- SciPy: a loop of `solve_ivp(method="LSODA")` on a plain-Python right-hand side (what a SciPy user writes; the
+  `speedup_vs_scipy` peer) and on the numba-compiled one (the stronger variant, `speedup_vs_scipy_numba_rhs`), each
+  timed on a subset and extrapolated to 1,024 (said in the output);
 - pamjax `sweep` with the smoothed PWM valve (RK4 at 2 edge widths).
 
 Accuracy matching: every method's final state is compared with a tight reference (DOP853, rtol = atol = 1e-12, on
@@ -100,7 +101,28 @@ def numba_plant(system):
             out[i] = rk4_one(p0, x0, 0.0, duties[i], h, steps)
         return out
 
-    return rhs, rk4_serial, rk4_parallel
+    def rhs_python(p, x, v, u):
+        """The same right-hand side in plain Python (math module): what a SciPy user writes."""
+        pg = p - pa
+        mdot, ui = 0.0, 1.0
+        for row in coef_rows:
+            mdot += ui * (row[0] + row[1] * pg + row[2] * pg * pg)
+            ui *= u
+        volume = v0 + v1 * x
+        dp = n * (rt * mdot - p * v1 * v) / volume
+        fmax = a_py[0] + x * (a_py[1] + x * (a_py[2] + x * (a_py[3] + x * a_py[4])))
+        fstatic = fmax - (pmax - pg) * (k0 - k1 * x) / k2
+        fmuscle = sw * softplus.py_func(fstatic / sw)
+        ffric = fc * math.tanh(v / w) + cf * v
+        over, under = x - xmax, xmin - x
+        spring = -ks * ds * softplus.py_func(over / ds) + ks * ds * softplus.py_func(under / ds)
+        contact = 0.5 * (1.0 + math.tanh(0.5 * over / ds)) + 0.5 * (1.0 + math.tanh(0.5 * under / ds))
+        dv = (fmuscle - ffric + spring - cs * v * contact) / mass - g
+        return dp, v, dv
+
+    coef_rows = [[float(c) for c in row] for row in coef]
+    a_py = [float(c) for c in a]
+    return rhs, rhs_python, rk4_serial, rk4_parallel
 
 
 def main():
@@ -129,10 +151,17 @@ def main():
     p0, x0 = float(y0.pressure), float(y0.position)
     check = np.unique(np.linspace(0, args.points - 1, 8).astype(int))  # points whose error is measured
 
-    rhs, rk4_serial, rk4_parallel = numba_plant(system)
+    rhs, rhs_python, rk4_serial, rk4_parallel = numba_plant(system)
 
     def rhs_vec(t, y, u):
         return np.array(rhs(y[0], y[1], y[2], u))
+
+    def rhs_vec_python(t, y, u):
+        return np.array(rhs_python(y[0], y[1], y[2], u))
+
+    state = np.array([p0 + 2e5, x0 + 0.01, 0.02])
+    if not np.allclose(rhs_vec_python(0.0, state, 0.37), rhs_vec(0.0, state, 0.37), rtol=1e-12, atol=0.0):
+        raise SystemExit("the plain-Python right-hand side differs from the numba one")
 
     # --- tight reference (independent transcription, DOP853)
     reference = np.array([solve_ivp(rhs_vec, (0, args.horizon), [p0, x0, 0.0], method="DOP853", rtol=1e-12,
@@ -192,10 +221,25 @@ def main():
 
     start = time.perf_counter()
     scipy_loop()
-    t_scipy = (time.perf_counter() - start) * args.points / args.scipy_subset
+    t_scipy_numba = (time.perf_counter() - start) * args.points / args.scipy_subset
     out_scipy = np.array([solve_ivp(rhs_vec, (0, args.horizon), [p0, x0, 0.0], method="LSODA", rtol=1e-8,
                                     atol=[1e-2, 1e-9, 1e-9], args=(duties[i],)).y[:, -1] for i in check])
-    rows[f"scipy LSODA loop (x{args.points}/{args.scipy_subset})"] = (t_scipy, 0.0, float("nan"), *errors(out_scipy))
+    rows[f"scipy LSODA loop, numba RHS (x{args.points}/{args.scipy_subset})"] = (
+        t_scipy_numba, 0.0, float("nan"), *errors(out_scipy))
+
+    # the same loop with the plain-Python right-hand side (what a SciPy user writes), same tolerances
+    def scipy_loop_python():
+        return [solve_ivp(rhs_vec_python, (0, args.horizon), [p0, x0, 0.0], method="LSODA", rtol=1e-8,
+                          atol=[1e-2, 1e-9, 1e-9], args=(u,)).y[:, -1] for u in subset]
+
+    start = time.perf_counter()
+    scipy_loop_python()
+    t_scipy = (time.perf_counter() - start) * args.points / args.scipy_subset
+    out_scipy_py = np.array([solve_ivp(rhs_vec_python, (0, args.horizon), [p0, x0, 0.0], method="LSODA",
+                                       rtol=1e-8, atol=[1e-2, 1e-9, 1e-9], args=(duties[i],)).y[:, -1]
+                             for i in check])
+    rows[f"scipy LSODA loop, Python RHS (x{args.points}/{args.scipy_subset})"] = (
+        t_scipy, 0.0, float("nan"), *errors(out_scipy_py))
 
     # --- PWM valve
     pwm = presets.mas10_system(valve="pwm")
@@ -218,9 +262,12 @@ def main():
     print(f"pamjax rk4 vs numba rk4 (same step), max |Δx| over all points: {agree:.1e} m")
     print(f"SciPy loop time extrapolated from {args.scipy_subset} of {args.points} points")
     best = min(t_rk4, t_ros2)
+    print(f"speedup vs the SciPy loop: Python RHS {t_scipy / best:.0f}x (RK4 at matched accuracy "
+          f"{t_scipy / t_rk4:.0f}x); numba RHS {t_scipy_numba / best:.0f}x (RK4 {t_scipy_numba / t_rk4:.0f}x)")
     print(f"RESULT sweep_avg_s={t_ros2:.3f} sweep_avg_rk4_s={t_rk4:.3f} sweep_pwm_s={t_pwm:.3f} "
           f"speedup_vs_scipy={t_scipy / best:.0f} ratio_vs_numba={t_numba / best:.2f} "
-          f"ratio_vs_numba_same_scheme={t_numba / t_rk4:.2f}")
+          f"ratio_vs_numba_same_scheme={t_numba / t_rk4:.2f} speedup_vs_scipy_rk4={t_scipy / t_rk4:.0f} "
+          f"speedup_vs_scipy_numba_rhs={t_scipy_numba / best:.0f}")
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""The `pamjax` command line: `pamjax demo`, `pamjax simulate`, `pamjax fit CONFIG.toml`, `pamjax sweep CONFIG.toml`."""
+"""The `pamjax` command line: `pamjax demo`, `pamjax fit CONFIG.toml`, `pamjax sweep CONFIG.toml`."""
 
 import argparse
 import importlib

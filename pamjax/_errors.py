@@ -5,6 +5,7 @@ time, before any solve. Inside `jit`/`vmap`/`grad` values are tracers and cannot
 entry points (`simulate`, `fit`, `sweep`) validate concrete inputs before tracing.
 """
 
+import jax
 import numpy as np
 from jax.core import Tracer
 
@@ -15,6 +16,16 @@ class PamjaxInputError(ValueError):
 
 class PamjaxSolveError(RuntimeError):
     """The ODE solve failed (too many steps, non-finite state, ...); the message names the cause."""
+
+
+def require_float64(caller):
+    """pamjax's physics is float64 (pressures ~1e5 Pa next to flows ~1e-3 kg/s): refuse to run in float32."""
+    if not jax.config.jax_enable_x64:
+        raise PamjaxInputError(
+            f"{caller} needs float64: call jax.config.update('jax_enable_x64', True) at the start of your program "
+            "(before any array is made). Without it JAX computes in float32, which loses the pressure and flow "
+            "resolution the models and their gradients need."
+        )
 
 
 def _concrete(x):

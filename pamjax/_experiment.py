@@ -249,9 +249,10 @@ class ForceMapExperiment(eqx.Module):
         for label, a in (("positions", x), ("pressures", p), ("forces", f)):
             if not np.all(np.isfinite(a)):
                 raise PamjaxInputError(f"{label} is NaN/inf at row {int(np.argmin(np.isfinite(a)))}")
-        if np.min(p) < 0 or np.max(p) < 5e4:
+        if np.min(p) < 5e4:  # Pa abs: half an atmosphere; a vented muscle reads about 101325 Pa absolute
             raise PamjaxInputError(
-                "pressures must be ABSOLUTE [Pa]; these look like gauge or bar (add 101325 Pa to gauge readings)"
+                f"pressures must be ABSOLUTE [Pa]; the lowest is {np.min(p):.4g} Pa (row {int(np.argmin(p))}), below "
+                "half an atmosphere: these look like gauge or bar (add 101325 Pa to gauge readings)"
             )
         self.positions, self.pressures, self.forces = jnp.asarray(x), jnp.asarray(p), jnp.asarray(f)
         self.slack = jnp.asarray(f <= slack_force)

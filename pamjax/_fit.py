@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._errors import PamjaxInputError
+from ._errors import PamjaxInputError, require_float64
 from ._experiment import predict
 
 # Residual entries of a trial step whose simulation failed (non-finite): large and finite, so the step is rejected.
@@ -510,6 +510,7 @@ def fit(
     **Raises:** `PamjaxInputError` for an unknown parameter (listing the valid ones) or bad experiment input, before
     any fit; `FileExistsError` if `out` (or `checkpoint`) exists and `overwrite` is False.
     """
+    require_float64("pamjax.fit")
     if out is not None and pathlib.Path(out).exists() and not overwrite:
         raise FileExistsError(f"{out} exists; pass overwrite=True to replace it")
     _check_checkpoint_path(checkpoint, resume, overwrite)

@@ -40,7 +40,10 @@ class CoulombViscousFriction(AbstractFriction):
 
     coulomb_force: jax.Array = eqx.field(converter=jnp.asarray, default=16.0)  # N
     viscous_coefficient: jax.Array = eqx.field(converter=jnp.asarray, default=250.0)  # N s/m
-    velocity_width: jax.Array = eqx.field(converter=jnp.asarray, default=1e-3)  # m/s
+    # m/s: a numerical smoothing width (paper 000's eq. 8 has a sharp sign), small against the 10-30 mm/s mean
+    # speeds of its triangle runs (~60 mm per half period at 0.08-0.25 Hz); it sets the stiffness F_c/(w M) at rest
+    # (docs/performance.md), so it is not made smaller.
+    velocity_width: jax.Array = eqx.field(converter=jnp.asarray, default=1e-3)
 
     def __check_init__(self):
         check_nonnegative(self.coulomb_force, "CoulombViscousFriction.coulomb_force")

@@ -130,8 +130,7 @@ class EllipseRestriction(AbstractRestriction):
         check_positive(self.discharge_coefficient, "EllipseRestriction.discharge_coefficient")
         check_in_open_interval(self.critical_ratio, 0.0, 1.0, "EllipseRestriction.critical_ratio")
         check_positive(self.area, "EllipseRestriction.area")
-        if not (0.0 < self.laminar_ratio < 1.0):
-            raise ValueError(f"EllipseRestriction.laminar_ratio must lie in (0, 1), got {self.laminar_ratio}")
+        check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "EllipseRestriction.laminar_ratio")
 
     def mass_flow(self, p1, p2, air: Air):
         p_up, ratio, direction = _orient(p1, p2)
@@ -160,6 +159,7 @@ class ISO6358Restriction(AbstractRestriction):
     def __check_init__(self):
         check_positive(self.sonic_conductance, "ISO6358Restriction.sonic_conductance")
         check_in_open_interval(self.critical_ratio, 0.0, 1.0, "ISO6358Restriction.critical_ratio")
+        check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "ISO6358Restriction.laminar_ratio")
 
     def mass_flow(self, p1, p2, air: Air):
         p_up, ratio, direction = _orient(p1, p2)
@@ -185,6 +185,7 @@ class NozzleRestriction(AbstractRestriction):
     def __check_init__(self):
         check_positive(self.flow_coefficient, "NozzleRestriction.flow_coefficient")
         check_positive(self.area, "NozzleRestriction.area")
+        check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "NozzleRestriction.laminar_ratio")
 
     def mass_flow(self, p1, p2, air: Air):
         p_up, ratio, direction = _orient(p1, p2)

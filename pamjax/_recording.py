@@ -20,7 +20,7 @@ DEFAULT_UNITS = dict(
 # Short names used by bench files (the hybrid reference bench: t, u, p, x) → pamjax channel names.
 BENCH_NAMES = dict(p="pressure", x="position", u="command", v="velocity", F="force", mdot="mass_flow")
 
-# A pressure channel whose largest value is below this is in bar, MPa or gauge, not absolute Pa.
+# A pressure channel that peaks, or drops, below this is in bar, MPa or gauge, not absolute Pa.
 _MIN_ABSOLUTE_PA = 5e4  # Pa: half an atmosphere; no pneumatic muscle test runs below it
 
 
@@ -263,6 +263,12 @@ def _check_absolute_pressure(rec, key, unit, values):
         raise PamjaxInputError(
             f"Recording {rec!r}: channel {key!r} goes negative ({np.min(values):.4g} Pa): that looks like a GAUGE "
             "pressure; pamjax expects ABSOLUTE pressure in Pa (add 101325 Pa)"
+        )
+    if values.size and np.min(values) < _MIN_ABSOLUTE_PA:
+        raise PamjaxInputError(
+            f"Recording {rec!r}: channel {key!r} drops to {np.min(values):.4g} Pa at row {int(np.argmin(values))}, "
+            f"below half an atmosphere ({_MIN_ABSOLUTE_PA:g} Pa abs): a vented muscle or tank reads about 101325 Pa "
+            "ABSOLUTE, so this looks like a GAUGE pressure (add 101325 Pa to gauge readings)"
         )
 
 

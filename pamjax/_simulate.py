@@ -9,7 +9,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 
 from . import _synchronous as _sync
-from ._errors import PamjaxInputError, PamjaxSolveError, check_time_grid
+from ._errors import PamjaxInputError, PamjaxSolveError, check_time_grid, require_float64
 from ._inputs import AbstractSignal
 from ._system import AbstractSystem
 from ._valve import OnOffValve
@@ -239,6 +239,7 @@ def exact_edge_times(valve: OnOffValve, signal: AbstractSignal, t0, t1):
 
 def validate(system, signal, ts, y0=None, t0=None):
     """Concrete checks of everything `simulate` is given, before any solve. Raises `PamjaxInputError`."""
+    require_float64("pamjax.simulate")
     if not isinstance(system, AbstractSystem):
         raise PamjaxInputError(f"system must be a pamjax system (TankSystem, MuscleSystem, ...), got {type(system)}")
     if not isinstance(signal, AbstractSignal):

@@ -18,7 +18,7 @@ from jax.flatten_util import ravel_pytree
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from . import _fixed_step
-from ._errors import PamjaxInputError, check_time_grid
+from ._errors import PamjaxInputError, check_time_grid, require_float64
 from ._inputs import AbstractSignal
 from ._system import AbstractSystem
 from ._valve import OnOffValve
@@ -467,6 +467,7 @@ def sweep(
     **Raises:** `PamjaxInputError` naming the argument (unknown path, values that break a component's constraint,
     a command outside the valve's range, bad `ts`/`dt`/`chunk_size`), before any solve.
     """
+    require_float64("pamjax.sweep")
     if not isinstance(system, AbstractSystem):
         raise PamjaxInputError(f"system must be a pamjax system (MuscleSystem, TankSystem, ...), got {type(system)}")
     factory = not isinstance(signal, AbstractSignal)

@@ -31,6 +31,7 @@ here are what a fit to that data must close.
 
 import jax.numpy as jnp
 
+from ._errors import PamjaxInputError
 from ._friction import BristleFriction, CoulombViscousFriction
 from ._gas import Air, EllipseRestriction, ISO6358Restriction
 from ._muscle import CubicVolume, LinearVolume, Muscle, PolynomialForce
@@ -141,7 +142,7 @@ def _valve(valve):
     if valve == "averaged":
         return mas10_averaged_valve()
     if isinstance(valve, str):
-        raise ValueError(f"valve must be 'pwm' (smooth edges), 'exact' or 'averaged', or a valve object; got {valve!r}")
+        raise PamjaxInputError(f"valve must be 'pwm' (smooth edges), 'exact' or 'averaged', or a valve object; got {valve!r}")
     return valve
 
 
@@ -156,7 +157,7 @@ def mas10_system(valve="pwm", friction="coulomb", payload_mass=PAYLOAD_MASS):
     elif friction == "bristle":
         friction = BristleFriction(coulomb_force=COULOMB_FORCE, viscous_coefficient=VISCOUS_COEFFICIENT)
     elif isinstance(friction, str):
-        raise ValueError(f"friction must be 'coulomb', 'bristle' or a friction model; got {friction!r}")
+        raise PamjaxInputError(f"friction must be 'coulomb', 'bristle' or a friction model; got {friction!r}")
     return MuscleSystem(valve=_valve(valve), muscle=mas10_muscle(), payload_mass=payload_mass, friction=friction)
 
 

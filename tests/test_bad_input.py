@@ -75,3 +75,20 @@ def test_muscle_y0_negative_pressure_and_discrete_inputs():
         pamjax.simulate_discrete(system, pamjax.Constant(0.5), 1e-3, -0.1)
     with pytest.raises(pamjax.PamjaxInputError, match="signal"):
         pamjax.simulate_discrete(system, pamjax.Constant(1.5), 1e-3, 0.1)
+
+
+def test_float32_mode_is_refused_with_instructions():
+    """Without jax_enable_x64 every entry point refuses to run (no silent float32 physics)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import pamjax, numpy as np\n"
+        "from pamjax import presets\n"
+        "try:\n"
+        "    pamjax.simulate(presets.mas10_system('averaged'), pamjax.Constant(0.5), np.linspace(0, 0.1, 3))\n"
+        "except pamjax.PamjaxInputError as e:\n"
+        "    print('REFUSED', e)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert "REFUSED" in out.stdout and "jax_enable_x64" in out.stdout, out.stdout + out.stderr

@@ -49,11 +49,24 @@ def test_nan_names_channel_and_row_unless_masked():
 @pytest.mark.parametrize(
     "values, units, match",
     [(np.full(5, 6.0), None, "looks like bar"), (np.linspace(-1e4, 5e5, 5), None, "GAUGE"),
+     (np.linspace(0.0, 5.5e5, 5), None, "GAUGE"),  # gauge in Pa: a vented start reads 0, not 101325
      (np.full(5, 6.0), {"pressure": "bar"}, "ABSOLUTE pressure in Pa")],
 )
 def test_pressure_must_be_absolute_pa(values, units, match):
     with pytest.raises(PamjaxInputError, match=match):
         Recording(np.arange(5.0), dict(pressure=values), units)
+
+
+def test_absolute_pressures_from_atmosphere_up_are_accepted():
+    rec = Recording(np.arange(5.0), dict(pressure=np.linspace(101325.0, 6.5e5, 5)))
+    assert np.isclose(rec["pressure"][0], 101325.0)
+
+
+def test_force_map_gauge_pressures_are_refused():
+    from pamjax import ForceMapExperiment
+
+    with pytest.raises(PamjaxInputError, match="gauge"):
+        ForceMapExperiment(np.zeros(3), np.array([0.0, 3e5, 6e5]), np.array([0.0, 100.0, 200.0]))
 
 
 def test_bench_file_names_are_mapped():

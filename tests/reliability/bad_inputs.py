@@ -75,4 +75,7 @@ CORE_CASES = {
     "NaN in y0": (_sim(y0=pamjax.MuscleState(jnp.asarray(1e5), jnp.asarray(np.nan), jnp.asarray(0.0))), "y0"),
     "not a system": (lambda: pamjax.simulate("MAS-10", pamjax.Constant(0.5), jnp.linspace(0, 1, 3)), "system"),
     "unknown preset valve": (lambda: presets.mas10_system(valve="proportional"), "valve"),
+    "unknown preset friction": (lambda: presets.mas10_system(friction="stiction"), "friction"),
+    "laminar ratio of 1 (ISO 6358)": (lambda: pamjax.ISO6358Restriction(4e-9, 0.3, laminar_ratio=1.0), "laminar_ratio"),
+    "laminar ratio of 1 (nozzle)": (lambda: pamjax.NozzleRestriction(0.8, laminar_ratio=1.0), "laminar_ratio"),
 }
