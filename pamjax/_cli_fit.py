@@ -1,6 +1,8 @@
 """`pamjax fit CONFIG.toml`: fit parameters to recordings as a TOML config describes; write the result JSON and a
 figure of data vs model with residuals. See `docs/fitting.md` for the config format and `examples/fit_example.toml`."""
 
+import dataclasses
+import inspect
 import pathlib
 import tomllib
 
@@ -11,9 +13,12 @@ from ._errors import PamjaxInputError
 _TOP_KEYS = {"model", "fit", "experiment"}
 _MODEL_KEYS = {"preset", "options", "set"}
 _FIT_KEYS = {"free", "max_steps", "rtol", "atol", "out", "validation_fraction"}
+_FREE_KEYS = {"path", "transform", "bounds"}  # a free entry given as a table (pamjax.ParameterSpace)
 _EXPERIMENT_KEYS = {"name", "file", "signal", "channels", "scales", "tank_volume", "initial", "rate", "filter_hz",
                     "t_end", "max_steps", "rename"}
-_SIGNALS = {"Constant", "Triangle", "Sine", "Step", "recorded"}
+_SIGNALS = ("Constant", "Triangle", "Sine", "Step", "recorded")
+_RECORDED_KEYS = {"kind", "period"}  # signal = { kind = "recorded", period = 0.02 }: the command channel, latched
+_PRESETS = ("mas10_system", "mas10_tank_system")
 
 
 def add_arguments(parser):
@@ -24,38 +29,103 @@ def add_arguments(parser):
     parser.add_argument("--no-plot", action="store_true", help="skip the figure")
 
 
-def _check_keys(table, valid, where):
+def check_keys(table, valid, where):
+    """`table` must be a TOML table whose keys are all in `valid`; else a `PamjaxInputError` naming `where`, the
+    unknown keys and the valid ones."""
+    if not isinstance(table, dict):
+        raise PamjaxInputError(f"{where} must be a table (keys {sorted(valid)}), got {table!r}")
     unknown = set(table) - set(valid)
     if unknown:
         raise PamjaxInputError(f"{where}: unknown key(s) {sorted(unknown)}; valid keys are {sorted(valid)}")
 
 
-def load_config(path):
-    """Parse and validate a fit config; returns (model, experiments, free, fit options)."""
-    import pamjax as pj
-
+def read_toml(path):
+    """Parse a TOML config; a missing file or a syntax error is a `PamjaxInputError` naming the file."""
     path = pathlib.Path(path)
     if not path.exists():
         raise PamjaxInputError(f"config file {path} does not exist")
-    cfg = tomllib.loads(path.read_text())
-    _check_keys(cfg, _TOP_KEYS, str(path))
+    try:
+        return tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise PamjaxInputError(f"config file {path} is not valid TOML: {err}") from err
+
+
+def _signal_keys(spec, where):
+    """The valid keys of a signal table: `kind` plus the fields of the named pamjax signal class."""
+    import pamjax as pj
+
+    if spec == "recorded":
+        return None
+    if not isinstance(spec, dict) or spec.get("kind") not in _SIGNALS:
+        raise PamjaxInputError(f"{where} signal must be 'recorded' or a table with kind in {list(_SIGNALS)}, "
+                               f"got {spec!r}")
+    if spec["kind"] == "recorded":
+        return _RECORDED_KEYS
+    return {"kind"} | {f.name for f in dataclasses.fields(getattr(pj, spec["kind"]))}
+
+
+def _initial_keys(system):
+    """Keyword arguments of `system.initial_state` (e.g. pressure, position, velocity)."""
+    return set(inspect.signature(system.initial_state).parameters)
+
+
+def validate_config(cfg, where="config"):
+    """Check every table and key of a parsed fit config against the valid ones (no data loaded, nothing solved)."""
+    check_keys(cfg, _TOP_KEYS, where)
     model_cfg, fit_cfg = cfg.get("model", {}), cfg.get("fit", {})
-    _check_keys(model_cfg, _MODEL_KEYS, "[model]")
-    _check_keys(fit_cfg, _FIT_KEYS, "[fit]")
+    check_keys(model_cfg, _MODEL_KEYS, "[model]")
+    check_keys(fit_cfg, _FIT_KEYS, "[fit]")
     preset = model_cfg.get("preset", "mas10_system")
-    builders = {k: getattr(pj.presets, k) for k in ("mas10_system", "mas10_tank_system")}
-    if preset not in builders:
-        raise PamjaxInputError(f"[model] preset must be one of {sorted(builders)}, got {preset!r}")
-    model = builders[preset](**model_cfg.get("options", {}))
-    overrides = model_cfg.get("set", {})
-    if overrides:
-        space = pj.ParameterSpace(model, list(overrides))
-        model = space.with_values(np.concatenate([np.ravel(v) for v in overrides.values()]))
+    if preset not in _PRESETS:
+        raise PamjaxInputError(f"[model] preset must be one of {list(_PRESETS)}, got {preset!r}")
+    import pamjax as pj
+
+    check_keys(model_cfg.get("options", {}), inspect.signature(getattr(pj.presets, preset)).parameters,
+               f"[model] options (keyword arguments of presets.{preset})")
+    if not isinstance(model_cfg.get("set", {}), dict):
+        raise PamjaxInputError(f"[model] set must be a table of parameter path = value, got {model_cfg['set']!r}")
     if "free" not in fit_cfg:
         raise PamjaxInputError("[fit] needs 'free': the list of parameter paths to fit")
-    experiments = [_experiment(e, k, path.parent, fit_cfg) for k, e in enumerate(cfg.get("experiment", []))]
+    if isinstance(fit_cfg["free"], str) or not isinstance(fit_cfg["free"], list) or not fit_cfg["free"]:
+        raise PamjaxInputError(f"[fit] free must be a non-empty list of parameter paths, got {fit_cfg['free']!r}")
+    for entry in fit_cfg["free"]:
+        if not isinstance(entry, str):
+            check_keys(entry, _FREE_KEYS, "[fit] free entry")
+    experiments = cfg.get("experiment", [])
+    if not isinstance(experiments, list):
+        raise PamjaxInputError("experiments are an array of tables: write [[experiment]] (double brackets)")
     if not experiments:
         raise PamjaxInputError("the config needs at least one [[experiment]]")
+    for k, e in enumerate(experiments):
+        here = f"[[experiment]] #{k + 1}"
+        check_keys(e, _EXPERIMENT_KEYS, here)
+        if "file" not in e:
+            raise PamjaxInputError(f"{here} needs 'file' (a CSV or NPZ recording, relative to the config)")
+        valid = _signal_keys(e.get("signal", "recorded"), here)
+        if valid is not None:
+            check_keys(e["signal"], valid, f"{here} signal (kind = {e['signal']['kind']!r})")
+        for key in ("scales", "initial", "rename"):
+            if key in e and not isinstance(e[key], dict):
+                raise PamjaxInputError(f"{here} {key} must be a table, got {e[key]!r}")
+
+
+def load_config(path):
+    """Parse and validate a fit config; returns (model, experiments, free, fit options, out). Every key is checked
+    before any data is read; parameter paths, channels and initial-state keys before anything is solved."""
+    import pamjax as pj
+
+    path = pathlib.Path(path)
+    cfg = read_toml(path)
+    validate_config(cfg, str(path))
+    model_cfg, fit_cfg = cfg.get("model", {}), cfg["fit"]
+    preset = model_cfg.get("preset", "mas10_system")
+    model = getattr(pj.presets, preset)(**model_cfg.get("options", {}))
+    overrides = model_cfg.get("set", {})
+    if overrides:
+        space = pj.ParameterSpace(model, list(overrides))  # unknown path → error listing the model's parameters
+        model = space.with_values(np.concatenate([np.ravel(v) for v in overrides.values()]))
+    pj.ParameterSpace(model, fit_cfg["free"])  # the same check for the free list, before any solve
+    experiments = [_experiment(e, k, path.parent, fit_cfg, model) for k, e in enumerate(cfg["experiment"])]
     options = {k: fit_cfg[k] for k in ("max_steps", "rtol", "atol") if k in fit_cfg}
     return model, experiments, fit_cfg["free"], options, fit_cfg.get("out")
 
@@ -63,11 +133,9 @@ def load_config(path):
 def _signal(spec, rec, where):
     import pamjax as pj
 
-    if spec == "recorded" or (isinstance(spec, dict) and spec.get("kind") == "recorded"):
+    if spec == "recorded" or spec["kind"] == "recorded":
         period = spec.get("period") if isinstance(spec, dict) else None
         return pj.Sampled(rec.t, rec["command"], period=period)
-    if not isinstance(spec, dict) or spec.get("kind") not in _SIGNALS:
-        raise PamjaxInputError(f"{where} signal must be 'recorded' or a table with kind in {sorted(_SIGNALS)}, got {spec!r}")
     kwargs = {k: v for k, v in spec.items() if k != "kind"}
     try:
         return getattr(pj, spec["kind"])(**kwargs)
@@ -75,13 +143,15 @@ def _signal(spec, rec, where):
         raise PamjaxInputError(f"{where} signal: {err}") from err
 
 
-def _experiment(e, k, root, fit_cfg):
+def _experiment(e, k, root, fit_cfg, model):
     import pamjax as pj
 
     where = f"[[experiment]] #{k + 1}"
-    _check_keys(e, _EXPERIMENT_KEYS, where)
-    if "file" not in e:
-        raise PamjaxInputError(f"{where} needs 'file' (a CSV or NPZ recording, relative to the config)")
+    build = pj.TankFromModel(e["tank_volume"]) if "tank_volume" in e else None
+    system = build(model) if build is not None else model
+    if "initial" in e:
+        check_keys(e["initial"], _initial_keys(system), f"{where} initial (keyword arguments of "
+                                                        f"{type(system).__name__}.initial_state)")
     rec = pj.Recording.load(root / e["file"], rename=e.get("rename"))
     if "t_end" in e:
         rec = rec.window(None, float(e["t_end"]))
@@ -89,7 +159,6 @@ def _experiment(e, k, root, fit_cfg):
         rec = rec.filtered(float(e["filter_hz"]))
     if "rate" in e:
         rec = rec.resampled(float(e["rate"]))
-    build = pj.TankFromModel(e["tank_volume"]) if "tank_volume" in e else None
     return pj.Experiment(
         rec, _signal(e.get("signal", "recorded"), rec, where), channels=e.get("channels"), scales=e.get("scales"),
         build=build, initial=e.get("initial"), name=e.get("name", rec.name), max_steps=e.get("max_steps", 200_000),
@@ -131,11 +200,13 @@ def run(args):
     model, experiments, free, options, out_cfg = load_config(args.config)
     out = pathlib.Path(args.out or out_cfg or f"results/{pathlib.Path(args.config).stem}")
     result_path = out / "fit.json"
-    if result_path.exists() and not args.overwrite:
-        raise SystemExit(f"{result_path} exists; pass --overwrite to replace it")
+    for existing in (result_path, out / "fit.png"):
+        if existing.exists() and not args.overwrite:
+            raise SystemExit(f"{existing} exists; pass --overwrite to replace it")
     print(f"fitting {len(free)} parameter entries to {len(experiments)} experiments "
           f"({', '.join(e.name for e in experiments)})", flush=True)
-    res = pj.fit(model, experiments, free, progress=not args.quiet, out=result_path, overwrite=args.overwrite, **options)
+    res = pj.fit(model, experiments, free, progress=not args.quiet, out=result_path, overwrite=args.overwrite,
+                 **options)
     print(f"status {res.status}: {res.iterations} iterations, cost {res.initial_cost:.6g} → {res.cost:.6g} "
           f"({res.fit_s:.1f} s after {res.compile_s:.1f} s compilation)")
     print(res.table())

@@ -1,0 +1,103 @@
+"""The sweep recipes users map an actuator with (`pamjax._sweep_maps`): the steady-state map shows paper 000's
+10-90 % dead band and equals a direct `simulate`; the frequency response equals a least-squares sinusoid fit to a
+direct `simulate` and falls with frequency. Short horizons; the oracle is independent of `sweep` (adaptive diffrax
+solve, NumPy least squares on its own time grid)."""
+
+import numpy as np
+import pytest
+
+import pamjax
+from pamjax import presets
+from pamjax._sweep_maps import frequency_response, steady_state_map
+
+HORIZON, WINDOW = 2.0, 0.4  # s: 100 PWM periods, the last 20 averaged (a whole number of 50 Hz periods)
+
+
+@pytest.fixture(scope="module")
+def pwm_map():
+    system = presets.mas10_system(valve="pwm")  # MHE2: 50 Hz, 2 ms switching delays, smoothed edges
+    duties = np.array([0.0, 0.05, 0.08, 0.15, 0.3, 0.5, 0.7, 0.85, 0.92, 0.95, 1.0])
+    result = steady_state_map(system, duties, horizon=HORIZON, window=WINDOW, progress=False)
+    return system, duties, result
+
+
+def test_steady_state_map_shows_the_dead_band(pwm_map):
+    _, duties, r = pwm_map
+    assert np.all(r.status == 0)
+    p, x = r["pressure"], r["position"]
+    p_span, x_span = np.ptp(p), np.ptp(x)
+    assert p_span > 4e5 and x_span > 0.05  # the map spans the muscle's working range (0.55 MPa, 62 mm measured)
+    low, high = duties < 0.1, duties > 0.9
+    # A 2 ms delay is 10 % of a 20 ms period: below it the valve never opens (chamber exhausted to atmosphere),
+    # above 90 % it never closes (chamber at supply). Flat to 0.1 % of the range (549 Pa, 62 µm); measured: 15 Pa,
+    # 0.7 µm off at 0.08 and 22 Pa, 13 µm at 0.92 (the smoothed 0.1 ms edges leak a little).
+    np.testing.assert_allclose(p[low], 101325.0, atol=1e-3 * p_span)
+    np.testing.assert_allclose(p[high], float(presets.SUPPLY_PRESSURE), atol=1e-3 * p_span)
+    np.testing.assert_allclose(x[low], x[0], atol=1e-3 * x_span)
+    np.testing.assert_allclose(x[high], x[-1], atol=1e-3 * x_span)
+    # between the band edges both rise with duty, every step by more than 1 % of the range
+    inner = slice(np.flatnonzero(low)[-1], np.flatnonzero(high)[0] + 1)
+    assert np.all(np.diff(p[inner]) > 0.01 * p_span), p[inner]
+    assert np.all(np.diff(x[inner]) > 0.01 * x_span), x[inner]
+
+
+@pytest.mark.parametrize("duty", [0.3, 0.7])
+def test_steady_state_map_equals_direct_simulation(pwm_map, duty):
+    system, duties, r = pwm_map
+    k = int(np.flatnonzero(duties == duty)[0])
+    ts = np.linspace(0.0, HORIZON, 2001)  # 1 ms: 20 samples per PWM period, the map's default
+    traj = pamjax.simulate(system, pamjax.Constant(duty), ts)
+    last = ts >= HORIZON - WINDOW - 1e-12
+    # sweep: fixed RK4 at 0.2 ms; simulate: adaptive Tsit5, rtol 1e-6. Measured agreement 3-5 Pa, < 1 µm; bounds
+    # 10x that (a wrong window, sample grid or duty gives kPa and mm).
+    assert abs(r["pressure"][k] - np.mean(np.asarray(traj.channel("pressure"))[last])) < 50.0
+    assert abs(r["position"][k] - np.mean(np.asarray(traj.channel("position"))[last])) < 1e-5
+
+
+def _sine_fit(t, y, frequency):
+    """Least squares y ≈ c + a sin(ωt) + b cos(ωt) = c + R sin(ωt + φ): returns R, φ [deg]."""
+    w = 2 * np.pi * frequency
+    design = np.stack([np.ones_like(t), np.sin(w * t), np.cos(w * t)], axis=1)
+    (_, a, b), *_ = np.linalg.lstsq(design, y, rcond=None)
+    return np.hypot(a, b), np.degrees(np.arctan2(b, a))
+
+
+def test_frequency_response_equals_sinusoid_fit_and_falls_with_frequency():
+    system = presets.mas10_system(valve="averaged")
+    frequencies = np.array([0.5, 1.5, 4.0])  # Hz
+    offset, amplitude, settle, periods = 0.5, 0.2, 3, 2
+    fr = frequency_response(system, frequencies, offset=offset, amplitude=amplitude, settle_periods=settle,
+                            periods=periods, progress=False)
+    assert np.all(fr["result"].status == 0)
+    # the sweep's common grid is 160 Hz, on which 2 periods of 1.5 Hz are 213.3 samples: a plain Fourier sum leaks
+    # 0.5 % there; 0.5 Hz fits whole. The oracle: 300 Hz (whole windows for both), simulate, NumPy least squares.
+    horizon = (settle + periods) / frequencies.min()
+    ts = np.linspace(0.0, horizon, int(round(horizon * 300)) + 1)
+    for k, f in enumerate(frequencies[:2]):
+        traj = pamjax.simulate(system, pamjax.Sine(offset, amplitude, f), ts)
+        last = ts > horizon - periods / f + 1e-9
+        for channel in ("position", "pressure"):
+            amp, phase = _sine_fit(ts[last], np.asarray(traj.channel(channel))[last], f)
+            # measured agreement: 5e-7 relative in gain, 3e-5 deg in phase (RK4 vs adaptive); bounds 1e-4 and 0.01 deg
+            np.testing.assert_allclose(fr[channel]["gain"][k], amp / amplitude, rtol=1e-4)
+            dphi = (fr[channel]["phase"][k] - phase + 180.0) % 360.0 - 180.0
+            assert abs(dphi) < 0.01, (f, channel, fr[channel]["phase"][k], phase)
+    for channel in ("position", "pressure"):  # a low-pass plant: gain and phase fall with frequency
+        assert np.all(np.diff(fr[channel]["gain"]) < 0), fr[channel]["gain"]
+        assert np.all(np.diff(fr[channel]["phase"]) < 0), fr[channel]["phase"]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        (dict(amplitude=0.0), "amplitude"),
+        (dict(periods=1.5), "periods"),
+        (dict(samples_per_period=2), "samples_per_period"),
+        (dict(frequencies=[[0.5, 1.0]]), "frequencies"),
+        (dict(frequencies=[0.5, -1.0]), "frequencies"),
+    ],
+)
+def test_frequency_response_bad_input_is_named(kwargs, match):
+    kwargs = {"frequencies": [0.5, 1.0], **kwargs}
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        frequency_response(presets.mas10_system(valve="averaged"), kwargs.pop("frequencies"), **kwargs)
