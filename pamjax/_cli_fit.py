@@ -166,6 +166,9 @@ def _experiment(e, k, root, fit_cfg, model):
     )
 
 
+_UNITS = {"pressure": "[Pa abs]", "position": "[m]", "velocity": "[m/s]", "force": "[N]", "mass_flow": "[kg/s]"}
+
+
 def plot(path, model, experiments):
     """Data vs model per experiment and channel, residuals below."""
     import matplotlib
@@ -183,12 +186,15 @@ def plot(path, model, experiments):
         t = np.asarray(e.times)
         axes[0, j].plot(t, data, ".", ms=2, label="data")
         axes[0, j].plot(t, pred, "k-", lw=0.8, label="model")
-        axes[0, j].set(title=f"{e.name}: {c}")
+        unit = _UNITS.get(c, "")
+        axes[0, j].set(title=f"{e.name}: {c}", ylabel=f"{c} {unit}".strip())
         if hasattr(e, "split_time") and float(e.split_time) < t[-1]:
             for ax in axes[:, j]:
                 ax.axvline(float(e.split_time), color="C3", lw=0.8, ls="--")
         axes[1, j].plot(t, pred - data, lw=0.8)
-        axes[1, j].set(xlabel="t [s]", ylabel=f"model − data ({c})")
+        axes[1, j].set(xlabel="t [s]", ylabel=f"model − data {unit}".strip())
+    if any(hasattr(e, "split_time") and float(e.split_time) < np.asarray(e.times)[-1] for e, _ in cols):
+        axes[0, 0].plot([], [], color="C3", lw=0.8, ls="--", label="identification | validation")
     axes[0, 0].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
