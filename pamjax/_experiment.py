@@ -126,7 +126,9 @@ class Experiment(eqx.Module):
             channels = [c for c in recording.channels if c in ("pressure", "position", "velocity", "force")]
         channels = tuple(channels)
         if not channels:
-            raise PamjaxInputError(f"experiment {name!r}: no channels to compare; recording has {sorted(recording.channels)}")
+            raise PamjaxInputError(
+                f"experiment {name!r}: no channels to compare; recording has {sorted(recording.channels)}"
+            )
         for c in channels:
             recording[c]  # error naming the valid channels
         scales = dict(scales or {})
@@ -183,11 +185,15 @@ class Experiment(eqx.Module):
         """Concrete validation (signal range, times, initial state) before any traced solve."""
         system = self.build(model)
         if not isinstance(system, AbstractSystem):
-            raise PamjaxInputError(f"experiment {self.name!r}: build(model) must give a pamjax system, got {type(system)}")
+            raise PamjaxInputError(
+                f"experiment {self.name!r}: build(model) must give a pamjax system, got {type(system)}"
+            )
         try:
             y0 = system.initial_state(**self.initial)
         except TypeError as err:
-            raise PamjaxInputError(f"experiment {self.name!r}: bad `initial` keys {sorted(self.initial)}: {err}") from err
+            raise PamjaxInputError(
+                f"experiment {self.name!r}: bad `initial` keys {sorted(self.initial)}: {err}"
+            ) from err
         validate(system, self.signal, self.times, y0, self.t0)
         traj = predict(model, self)
         for c in self.channels:

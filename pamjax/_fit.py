@@ -202,7 +202,9 @@ def _make_group(model, entry, valid):
     scale = np.where(flat != 0, np.abs(flat), _zero_start_scale(full, index, value.shape))
     if user_scale is not None:
         if transform != "linear":
-            raise PamjaxInputError(f"free parameter {path!r}: 'scale' applies to the linear transform, not {transform!r}")
+            raise PamjaxInputError(
+                f"free parameter {path!r}: 'scale' applies to the linear transform, not {transform!r}"
+            )
         user = np.broadcast_to(np.asarray(user_scale, dtype=float), value.shape).reshape(-1)
         if not np.all(np.isfinite(user) & (user > 0)):
             raise PamjaxInputError(f"free parameter {path!r}: scale must be finite and > 0, got {user_scale!r}")
@@ -394,7 +396,8 @@ def _channel_errors(model, experiments):
                 if np.any(sel):
                     rmse, mx = float(np.sqrt(np.mean(err[sel] ** 2))), float(np.max(np.abs(err[sel])))
                     stats.update({f"{prefix}rmse": rmse, f"{prefix}max_error": mx,
-                                  f"{prefix}rmse_percent": 100 * rmse / span, f"{prefix}max_error_percent": 100 * mx / span})
+                                  f"{prefix}rmse_percent": 100 * rmse / span,
+                                  f"{prefix}max_error_percent": 100 * mx / span})
             out[e.name][c] = stats
     return out
 
@@ -526,7 +529,8 @@ def fit(
 
     - `model`: the object whose parameters are fitted (e.g. a `MuscleSystem`; valve tests use its valve).
     - `experiments`: a list of `Experiment` / `ForceMapExperiment`.
-    - `free`: parameter paths, e.g. `["valve.inflate.discharge_coefficient", "muscle.force_law.max_force_coefficients"]`,
+    - `free`: parameter paths, e.g.
+      `["valve.inflate.discharge_coefficient", "muscle.force_law.max_force_coefficients"]`,
       or dicts `{"path": ..., "transform": "log"|"linear"|"logistic"|"nodes", "bounds": (lo, hi)}`.
     - `solver`: an optimistix least-squares solver (default `LevenbergMarquardt(rtol, atol)`); `max_steps`.
     - `progress`: True prints one line per iteration (cost, step size); a callable gets (step, cost, step_size,
@@ -616,7 +620,8 @@ def fit(
         if report is not None:
             report(k - 1, cost, step_size, accepted)
         elif progress:
-            print(f"  iter {k - 1:4d}  cost {cost:.6e}  step size {step_size:.3e}  {'accepted' if accepted else 'rejected'}",
+            verdict = "accepted" if accepted else "rejected"
+            print(f"  iter {k - 1:4d}  cost {cost:.6e}  step size {step_size:.3e}  {verdict}",
                   flush=True)
         if bool(done) or int(state.num_steps_since_acceptance) >= stall_steps:
             break

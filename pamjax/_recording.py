@@ -33,7 +33,8 @@ def _scipy_signal():
         import scipy.signal
     except ModuleNotFoundError as err:  # pragma: no cover - depends on the environment
         raise ModuleNotFoundError(
-            "filtering and resampling recordings needs SciPy: pip install scipy (in the pamjax[test] and [bench] extras)"
+            "filtering and resampling recordings needs SciPy: pip install scipy "
+            "(in the pamjax[test] and [bench] extras)"
         ) from err
     return scipy.signal
 
@@ -218,7 +219,9 @@ class Recording:
         with np.load(path) as z:
             columns = {k: np.asarray(z[k]) for k in z.files if k != "__units__"}
             meta = json.loads(str(z["__units__"])) if "__units__" in z.files else {}
-        return cls._from_columns(path, columns, meta.get("units", {}), rename, units, mask_nan, name or meta.get("name"))
+        return cls._from_columns(
+            path, columns, meta.get("units", {}), rename, units, mask_nan, name or meta.get("name")
+        )
 
     @classmethod
     def _from_columns(cls, path, columns, file_units, rename, units, mask_nan, name):

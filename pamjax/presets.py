@@ -142,7 +142,9 @@ def _valve(valve):
     if valve == "averaged":
         return mas10_averaged_valve()
     if isinstance(valve, str):
-        raise PamjaxInputError(f"valve must be 'pwm' (smooth edges), 'exact' or 'averaged', or a valve object; got {valve!r}")
+        raise PamjaxInputError(
+            f"valve must be 'pwm' (smooth edges), 'exact' or 'averaged', or a valve object; got {valve!r}"
+        )
     return valve
 
 
