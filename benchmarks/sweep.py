@@ -14,7 +14,7 @@ the numba transcription). RK4 cannot take a step beyond its stability limit (|λ
 smooth friction sign), so at any accuracy target at or above its error there, numba's fastest run IS the RK4 run at
 that limit; the run at 1.35x that step shows what happens past it. pamjax RK4 and numba RK4 use the identical step.
 
-Usage: python benchmarks/sweep.py [--points 1024] [--horizon 5] [--scipy-subset 16] [--repeats 3]
+Usage: python benchmarks/sweep.py [--points 1024] [--horizon 5] [--scipy-subset 16] [--repeats 3] [--host-devices 2]
 Ends with: RESULT sweep_avg_s=... sweep_pwm_s=... speedup_vs_scipy=... ratio_vs_numba=...
 """
 
@@ -131,7 +131,15 @@ def main():
     parser.add_argument("--horizon", type=float, default=5.0)
     parser.add_argument("--scipy-subset", type=int, default=16)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--host-devices", type=int, default=1,
+                        help="split the CPU into this many XLA devices; pamjax.sweep shards its batch over them "
+                             "(2 on a 2-core machine uses both cores, as numba's prange does)")
     args = parser.parse_args()
+    if args.host_devices > 1:  # must be set before JAX starts
+        import os
+
+        os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") +
+                                   f" --xla_force_host_platform_device_count={args.host_devices}").strip()
 
     import jax
 
@@ -267,7 +275,7 @@ def main():
     print(f"RESULT sweep_avg_s={t_ros2:.3f} sweep_avg_rk4_s={t_rk4:.3f} sweep_pwm_s={t_pwm:.3f} "
           f"speedup_vs_scipy={t_scipy / best:.0f} ratio_vs_numba={t_numba / best:.2f} "
           f"ratio_vs_numba_same_scheme={t_numba / t_rk4:.2f} speedup_vs_scipy_rk4={t_scipy / t_rk4:.0f} "
-          f"speedup_vs_scipy_numba_rhs={t_scipy_numba / best:.0f}")
+          f"speedup_vs_scipy_numba_rhs={t_scipy_numba / best:.0f} devices={len(jax.devices())}")
 
 
 if __name__ == "__main__":
