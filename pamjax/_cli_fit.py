@@ -192,7 +192,7 @@ def plot(path, model, experiments):
             for ax in axes[:, j]:
                 ax.axvline(float(e.split_time), color="C3", lw=0.8, ls="--")
         axes[1, j].plot(t, pred - data, lw=0.8)
-        axes[1, j].set(xlabel="t [s]", ylabel=f"model − data {unit}".strip())
+        axes[1, j].set(xlabel="t [s]", ylabel=f"model − data {unit.replace(' abs', '')}".strip())
     if any(hasattr(e, "split_time") and float(e.split_time) < np.asarray(e.times)[-1] for e, _ in cols):
         axes[0, 0].plot([], [], color="C3", lw=0.8, ls="--", label="identification | validation")
     axes[0, 0].legend(fontsize=7)
