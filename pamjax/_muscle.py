@@ -180,8 +180,17 @@ class Muscle(eqx.Module):
         check_finite(self.max_position, "Muscle.max_position")
         check_positive(self.slack_width, "Muscle.slack_width")
         lo, hi = self.min_position, self.max_position
-        if not isinstance(lo, jax.core.Tracer) and not isinstance(hi, jax.core.Tracer) and not bool(hi > lo):
-            raise PamjaxInputError(f"Muscle.max_position ({hi}) must exceed Muscle.min_position ({lo})")
+        if not isinstance(lo, jax.core.Tracer) and not isinstance(hi, jax.core.Tracer):
+            if not bool(hi > lo):
+                raise PamjaxInputError(f"Muscle.max_position ({hi}) must exceed Muscle.min_position ({lo})")
+            # eq. 15 divides by V(x): the volume must stay positive over the whole stroke, not only V(0) = v0.
+            v = self.volume_law.volume(jnp.linspace(lo, hi, 33))
+            if not isinstance(v, jax.core.Tracer) and not bool(jnp.all(v > 0)):
+                raise PamjaxInputError(
+                    f"Muscle.volume_law gives a volume <= 0 inside the stroke [min_position, max_position] = "
+                    f"[{float(lo):.4g}, {float(hi):.4g}] m (smallest {float(jnp.min(v)):.3g} m³); check its "
+                    "coefficients (v0, v1, ...) and the stroke limits"
+                )
 
     def static_force(self, x, pressure, air):
         """Eq. 7 (or the chosen law) at absolute `pressure` [Pa], before the slack: may be negative."""

@@ -76,6 +76,10 @@ CORE_CASES = {
     "not a system": (lambda: pamjax.simulate("MAS-10", pamjax.Constant(0.5), jnp.linspace(0, 1, 3)), "system"),
     "unknown preset valve": (lambda: presets.mas10_system(valve="proportional"), "valve"),
     "unknown preset friction": (lambda: presets.mas10_system(friction="stiction"), "friction"),
+    "volume negative at full stretch": (
+        lambda: pamjax.Muscle(presets.mas10_muscle().force_law, pamjax.LinearVolume(2e-6, 4e-4), -0.02, 0.075),
+        "volume_law",
+    ),
     "laminar ratio of 1 (ISO 6358)": (lambda: pamjax.ISO6358Restriction(4e-9, 0.3, laminar_ratio=1.0), "laminar_ratio"),
     "laminar ratio of 1 (nozzle)": (lambda: pamjax.NozzleRestriction(0.8, laminar_ratio=1.0), "laminar_ratio"),
 }
