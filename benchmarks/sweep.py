@@ -7,7 +7,9 @@ Peers, all in this one run, on the SAME equations (an independent scalar transcr
 - SciPy: a loop of `solve_ivp(method="LSODA")` on a plain-Python right-hand side (what a SciPy user writes; the
   `speedup_vs_scipy` peer) and on the numba-compiled one (the stronger variant, `speedup_vs_scipy_numba_rhs`), each
   timed on a subset and extrapolated to 1,024 (said in the output);
-- pamjax `sweep` with the smoothed PWM valve (RK4 at 2 edge widths).
+- pamjax `sweep` with the smoothed PWM valve (RK4 at 2 edge widths);
+- pamjax `sweep(method="ros2a")`: ROS2 under error control at 1e-3 (a quick map: looser than the others, its
+  errors are printed beside it; not used for the headline ratios).
 
 Accuracy matching: every method's final state is compared with a tight reference (DOP853, rtol = atol = 1e-12, on
 the numba transcription). RK4 cannot take a step beyond its stability limit (|λ h| < 2.78; λ ≈ 1,700 /s from the
@@ -203,6 +205,10 @@ def main():
     res_ros2, compile_ros2, t_ros2 = pamjax_run(system, "ros2")
     final_ros2 = np.stack([res_ros2["pressure"], res_ros2["position"]], axis=1)
     rows["pamjax ros2 (steady state)"] = (t_ros2, compile_ros2, res_ros2.dt, *errors(final_ros2[check]))
+    res_ros2a, compile_ros2a, t_ros2a = pamjax_run(system, "ros2a")
+    final_ros2a = np.stack([res_ros2a["pressure"], res_ros2a["position"]], axis=1)
+    rows["pamjax ros2a (quick map, error control 1e-3)"] = (t_ros2a, compile_ros2a, float("nan"),
+                                                            *errors(final_ros2a[check]))
 
     # --- numba RK4, same equations, same step
     start = time.perf_counter()
@@ -275,7 +281,8 @@ def main():
     print(f"RESULT sweep_avg_s={t_ros2:.3f} sweep_avg_rk4_s={t_rk4:.3f} sweep_pwm_s={t_pwm:.3f} "
           f"speedup_vs_scipy={t_scipy / best:.0f} ratio_vs_numba={t_numba / best:.2f} "
           f"ratio_vs_numba_same_scheme={t_numba / t_rk4:.2f} speedup_vs_scipy_rk4={t_scipy / t_rk4:.0f} "
-          f"speedup_vs_scipy_numba_rhs={t_scipy_numba / best:.0f} devices={len(jax.devices())}")
+          f"speedup_vs_scipy_numba_rhs={t_scipy_numba / best:.0f} devices={len(jax.devices())} "
+          f"sweep_avg_ros2a_s={t_ros2a:.3f} speedup_vs_scipy_ros2a={t_scipy / t_ros2a:.0f}")
 
 
 if __name__ == "__main__":
