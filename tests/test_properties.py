@@ -84,3 +84,42 @@ def test_short_trajectory_gradient_finite(p, pressure, x, u):
     y0 = pamjax.MuscleState(jnp.asarray(pressure), jnp.asarray(x), jnp.asarray(0.0))
     grads = _trajectory_gradient(system, y0, jnp.asarray(u))
     assert all(np.all(np.isfinite(g)) for g in jax.tree_util.tree_leaves(grads))
+
+
+def _variant_system(variant):
+    valve, kind = variant.split("-")
+    if kind == "tank":
+        return presets.mas10_tank_system(valve=valve)
+    return presets.mas10_system(valve=valve, friction=kind)
+
+
+@eqx.filter_jit
+def _generic_field_and_jacobian(system, t, state, u):
+    from jax.flatten_util import ravel_pytree
+
+    flat, unravel = ravel_pytree(state)
+
+    def field(z):
+        return ravel_pytree(system.vector_field(t, unravel(z), u))[0]
+
+    return field(flat), jax.jacfwd(field)(flat)
+
+
+@SETTINGS
+@given(st.sampled_from(["averaged-coulomb", "pwm-bristle", "averaged-bristle", "pwm-tank", "averaged-tank"]),
+       pressures, positions, velocities, st.one_of(st.just(0.0), st.floats(-2.0, 2.0)), st.floats(0.0, 0.04),
+       st.sampled_from([0.0, 1.0, 0.37]))
+def test_other_systems_vector_field_and_jacobian_finite(variant, pressure, x, v, z, t, u):
+    """The averaged valve (eq. 13), the bristle friction state and the constant-volume tank: finite at every state,
+    friction states beyond ±1 (the solver may try them) and duty exactly 0 and 1 included."""
+    system = _variant_system(variant)
+    state = system.initial_state()
+    pressure = presets.SUPPLY_PRESSURE if pressure == "supply" else pressure
+    state = eqx.tree_at(lambda s: s.pressure, state, jnp.asarray(pressure))
+    if hasattr(state, "position"):
+        state = eqx.tree_at(lambda s: s.position, state, jnp.asarray(x))
+        state = eqx.tree_at(lambda s: s.velocity, state, jnp.asarray(v))
+    if getattr(state, "friction", None) is not None and jnp.ndim(state.friction) == 0:
+        state = eqx.tree_at(lambda s: s.friction, state, jnp.asarray(z))
+    f, jac = _generic_field_and_jacobian(system, jnp.asarray(t), state, jnp.asarray(u))
+    assert np.all(np.isfinite(f)) and np.all(np.isfinite(jac))
