@@ -226,34 +226,24 @@ def main():
     rows["numba rk4 at 1.35x step"] = (float("nan"), 0.0, h_big, *errors(out_big[check]))
     agree = float(np.max(np.abs(out_numba[:, 1] - res_rk4["position"])))
 
-    # --- SciPy loop, timed on a subset and extrapolated
+    # --- SciPy loops (LSODA, same tolerances), timed on a subset and extrapolated: on the numba right-hand side and on
+    # the plain-Python one (what a SciPy user writes)
     subset = duties[np.linspace(0, args.points - 1, args.scipy_subset).astype(int)]
 
-    def scipy_loop():
-        return [solve_ivp(rhs_vec, (0, args.horizon), [p0, x0, 0.0], method="LSODA", rtol=1e-8,
-                          atol=[1e-2, 1e-9, 1e-9], args=(u,)).y[:, -1] for u in subset]
+    def scipy_finals(field, us):
+        return np.array([solve_ivp(field, (0, args.horizon), [p0, x0, 0.0], method="LSODA", rtol=1e-8,
+                                   atol=[1e-2, 1e-9, 1e-9], args=(u,)).y[:, -1] for u in us])
 
-    start = time.perf_counter()
-    scipy_loop()
-    t_scipy_numba = (time.perf_counter() - start) * args.points / args.scipy_subset
-    out_scipy = np.array([solve_ivp(rhs_vec, (0, args.horizon), [p0, x0, 0.0], method="LSODA", rtol=1e-8,
-                                    atol=[1e-2, 1e-9, 1e-9], args=(duties[i],)).y[:, -1] for i in check])
-    rows[f"scipy LSODA loop, numba RHS (x{args.points}/{args.scipy_subset})"] = (
-        t_scipy_numba, 0.0, float("nan"), *errors(out_scipy))
+    def scipy_row(field, label):
+        start = time.perf_counter()
+        scipy_finals(field, subset)
+        elapsed = (time.perf_counter() - start) * args.points / args.scipy_subset
+        rows[f"scipy LSODA loop, {label} (x{args.points}/{args.scipy_subset})"] = (
+            elapsed, 0.0, float("nan"), *errors(scipy_finals(field, duties[check])))
+        return elapsed
 
-    # the same loop with the plain-Python right-hand side (what a SciPy user writes), same tolerances
-    def scipy_loop_python():
-        return [solve_ivp(rhs_vec_python, (0, args.horizon), [p0, x0, 0.0], method="LSODA", rtol=1e-8,
-                          atol=[1e-2, 1e-9, 1e-9], args=(u,)).y[:, -1] for u in subset]
-
-    start = time.perf_counter()
-    scipy_loop_python()
-    t_scipy = (time.perf_counter() - start) * args.points / args.scipy_subset
-    out_scipy_py = np.array([solve_ivp(rhs_vec_python, (0, args.horizon), [p0, x0, 0.0], method="LSODA",
-                                       rtol=1e-8, atol=[1e-2, 1e-9, 1e-9], args=(duties[i],)).y[:, -1]
-                             for i in check])
-    rows[f"scipy LSODA loop, Python RHS (x{args.points}/{args.scipy_subset})"] = (
-        t_scipy, 0.0, float("nan"), *errors(out_scipy_py))
+    t_scipy_numba = scipy_row(rhs_vec, "numba RHS")
+    t_scipy = scipy_row(rhs_vec_python, "Python RHS")
 
     # --- PWM valve
     pwm = presets.mas10_system(valve="pwm")

@@ -160,8 +160,7 @@ def plot(spec, path):
 
 
 def run(args):
-    config = read_toml(args.config)
-    validate_config(config)
+    config = read_toml(args.config)  # run_config validates it before anything runs
     name = os.path.splitext(os.path.basename(args.config))[0]
     out = args.out or os.path.join("results", f"sweep-{name}")
     for existing in OUTPUTS:

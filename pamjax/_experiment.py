@@ -19,7 +19,7 @@ import numpy as np
 
 from ._errors import PamjaxInputError
 from ._inputs import AbstractSignal
-from ._recording import Recording
+from ._recording import _MIN_ABSOLUTE_PA, Recording
 from ._simulate import solve, validate
 from ._synchronous import num_periods as _num_periods
 from ._system import AbstractSystem, TankSystem
@@ -262,7 +262,7 @@ class ForceMapExperiment(eqx.Module):
         for label, a in (("positions", x), ("pressures", p), ("forces", f)):
             if not np.all(np.isfinite(a)):
                 raise PamjaxInputError(f"{label} is NaN/inf at row {int(np.argmin(np.isfinite(a)))}")
-        if np.min(p) < 5e4:  # Pa abs: half an atmosphere; a vented muscle reads about 101325 Pa absolute
+        if np.min(p) < _MIN_ABSOLUTE_PA:  # half an atmosphere; a vented muscle reads about 101325 Pa absolute
             raise PamjaxInputError(
                 f"pressures must be ABSOLUTE [Pa]; the lowest is {np.min(p):.4g} Pa (row {int(np.argmin(p))}), below "
                 "half an atmosphere: these look like gauge or bar (add 101325 Pa to gauge readings)"

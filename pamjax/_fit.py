@@ -127,29 +127,24 @@ def _labels(path, attrs, shape, index):
     return tuple(f"{path}[{','.join(map(str, i))}]" if i else path for i in idx)
 
 
-def _zero_start_scale(full, index, shape):
+# Keys of a free-parameter entry given as a dict (the `pamjax fit` config's free tables take the same).
+FREE_ENTRY_KEYS = ("path", "transform", "bounds", "scale")
+
+
+def _zero_start_scale(full, index):
     """Scale of linear parameters that start at exactly 0 (their own magnitude gives none).
 
     Entries of one column of a 2-D coefficient array share units (eq. 13: m_ij multiplies u^i p_g^j, u
     dimensionless), so a zero entry takes its column's largest magnitude; in a 1-D array, the array's largest; else 1
-    (give the free entry a 'scale' then). Without this, eq. 13's m1 = 0 was fitted in kg/s units while m2 and m3 are
-    ~1e-3: Levenberg-Marquardt's isotropic damping then rejects step after step (the fit benchmark stalled at a cost
-    2 % above SciPy's)."""
-    cols = None
+    (give the free entry a 'scale' then). Without this, eq. 13's m1 = 0 would be fitted in units of 1 kg/s beside
+    m4 and m7 of ~1e-3 kg/s: badly scaled for Levenberg-Marquardt's isotropic damping."""
     if full.ndim == 2:
-        cols = np.max(np.abs(full), axis=0)
-    if index is not None:
-        if cols is not None:
-            s = cols[index[1]]
-        else:
-            s = np.max(np.abs(full)) if full.ndim == 1 else 0.0
-        return np.full(int(np.prod(shape)) or 1, s if s > 0 else 1.0)
-    if cols is not None:
-        s = np.broadcast_to(cols, full.shape).reshape(-1)
+        s = np.broadcast_to(np.max(np.abs(full), axis=0), full.shape)
     elif full.ndim == 1:
-        s = np.full(full.size, np.max(np.abs(full)) if full.size else 0.0)
+        s = np.full(full.shape, np.max(np.abs(full), initial=0.0))
     else:
-        s = np.zeros(full.size)
+        s = np.zeros(full.shape)
+    s = np.ravel(s if index is None else s[index])
     return np.where(s > 0, s, 1.0)
 
 
@@ -163,7 +158,7 @@ def _make_group(model, entry, valid):
     user_scale = spec.pop("scale", None)
     if spec:
         raise PamjaxInputError(
-            f"free parameter {path!r}: unknown keys {sorted(spec)}; valid: path, transform, bounds, scale"
+            f"free parameter {path!r}: unknown keys {sorted(spec)}; valid: {', '.join(FREE_ENTRY_KEYS)}"
         )
     attrs, index = _parse(path)
     leaf_path = ".".join(attrs)
@@ -172,7 +167,7 @@ def _make_group(model, entry, valid):
             f"unknown parameter {path!r}; the model's parameters are:\n  " + "\n  ".join(sorted(valid))
         )
     value = np.asarray(_getter(attrs)(model), dtype=float)
-    full = value
+    full = value  # the whole leaf; `value` becomes the indexed entry
     if index is not None:
         if len(index) != value.ndim or any(not 0 <= i < n for i, n in zip(index, value.shape)):
             raise PamjaxInputError(f"index {list(index)} out of range for {leaf_path!r} of shape {value.shape}")
@@ -199,7 +194,7 @@ def _make_group(model, entry, valid):
     if transform == "logistic" and bounds is None:
         raise PamjaxInputError(f"{path!r}: a logistic transform needs bounds (lo, hi)")
     flat = value.reshape(-1)
-    scale = np.where(flat != 0, np.abs(flat), _zero_start_scale(full, index, value.shape))
+    scale = np.where(flat != 0, np.abs(flat), _zero_start_scale(full, index))
     if user_scale is not None:
         if transform != "linear":
             raise PamjaxInputError(

@@ -262,11 +262,6 @@ def _check_absolute_pressure(rec, key, unit, values):
             f"Recording {rec!r}: channel {key!r} peaks at {np.max(values):.4g} Pa: that looks like bar, MPa or a "
             "GAUGE pressure; pamjax expects ABSOLUTE pressure in Pa (add 101325 Pa to gauge readings)"
         )
-    if values.size and np.min(values) < 0:
-        raise PamjaxInputError(
-            f"Recording {rec!r}: channel {key!r} goes negative ({np.min(values):.4g} Pa): that looks like a GAUGE "
-            "pressure; pamjax expects ABSOLUTE pressure in Pa (add 101325 Pa)"
-        )
     if values.size and np.min(values) < _MIN_ABSOLUTE_PA:
         raise PamjaxInputError(
             f"Recording {rec!r}: channel {key!r} drops to {np.min(values):.4g} Pa at row {int(np.argmin(values))}, "
