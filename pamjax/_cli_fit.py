@@ -9,11 +9,11 @@ import tomllib
 import numpy as np
 
 from ._errors import PamjaxInputError
+from ._fit import FREE_ENTRY_KEYS
 
 _TOP_KEYS = {"model", "fit", "experiment"}
 _MODEL_KEYS = {"preset", "options", "set"}
 _FIT_KEYS = {"free", "max_steps", "rtol", "atol", "out", "validation_fraction"}
-_FREE_KEYS = {"path", "transform", "bounds"}  # a free entry given as a table (pamjax.ParameterSpace)
 _EXPERIMENT_KEYS = {"name", "file", "signal", "channels", "scales", "tank_volume", "initial", "rate", "filter_hz",
                     "t_end", "max_steps", "rename"}
 _SIGNALS = ("Constant", "Triangle", "Sine", "Step", "recorded")
@@ -90,7 +90,7 @@ def validate_config(cfg, where="config"):
         raise PamjaxInputError(f"[fit] free must be a non-empty list of parameter paths, got {fit_cfg['free']!r}")
     for entry in fit_cfg["free"]:
         if not isinstance(entry, str):
-            check_keys(entry, _FREE_KEYS, "[fit] free entry")
+            check_keys(entry, FREE_ENTRY_KEYS, "[fit] free entry")
     experiments = cfg.get("experiment", [])
     if not isinstance(experiments, list):
         raise PamjaxInputError("experiments are an array of tables: write [[experiment]] (double brackets)")

@@ -76,7 +76,7 @@ FIT_CASES = {
     "[fit] free table key": (_fit_config({'"friction.coulomb_force"':
                                           '{ path = "friction.coulomb_force", transfrom = "log" }'}),
                              r"free entry: unknown key\(s\) \['transfrom'\]; valid keys are \['bounds', 'path', "
-                             r"'transform'\]"),
+                             r"'scale', 'transform'\]"),
     "experiment key": (_fit_config(append="noise = 2e3\n"),
                        r"#1: unknown key\(s\) \['noise'\]; valid keys are \['channels', 'file'"),
     "experiment as a single table": (_fit_config({"[[experiment]]": "[experiment]"}), r"\[\[experiment\]\]"),
