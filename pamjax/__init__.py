@@ -75,7 +75,9 @@ from ._muscle import (
 from ._muscle import (
     TonduLopezForce as TonduLopezForce,
 )
+from ._rodas import Rodas5 as Rodas5
 from ._simulate import Trajectory as Trajectory
+from ._simulate import default_solver as default_solver
 from ._simulate import simulate as simulate
 from ._system import (
     AbstractSystem as AbstractSystem,

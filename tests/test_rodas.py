@@ -1,0 +1,158 @@
+"""Rodas5 (pamjax._rodas): the Rosenbrock solver's order, stiff stability, dense output, and the stiff plant it exists
+for, against independent references (SciPy DOP853, finite differences)."""
+
+import diffrax as dfx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import NumpyPlant
+from scipy.integrate import solve_ivp
+
+import pamjax
+from pamjax import presets
+from pamjax._rodas import small_inverse
+from pamjax._simulate import solve
+
+
+def _forced_van_der_pol(t, y, args):
+    return jnp.stack([y[1], -y[0] + 0.5 * (1.0 - y[0] ** 2) * y[1] + jnp.sin(3.0 * t)])
+
+
+@pytest.fixture(scope="module")
+def van_der_pol_reference():
+    sol = solve_ivp(lambda t, y: np.asarray(_forced_van_der_pol(t, jnp.asarray(y), None)), (0.0, 2.0), [1.0, 0.0],
+                    method="DOP853", rtol=1e-13, atol=1e-13, dense_output=True)
+    assert sol.success
+    return sol
+
+
+def test_order_five_on_a_nonautonomous_nonlinear_problem(van_der_pol_reference):
+    # Fixed steps h = 2/n: a fifth-order method's end-point error falls 32x per halving of h. The time-dependent
+    # forcing exercises the d_i h ∂f/∂t terms (a wrong d_i drops the order to 2-3). Asserted: >= 24x per halving.
+    errors = []
+    for n in (10, 20, 40, 80):
+        sol = dfx.diffeqsolve(dfx.ODETerm(_forced_van_der_pol), pamjax.Rodas5(), 0.0, 2.0, 2.0 / n,
+                              jnp.array([1.0, 0.0]), max_steps=1000)
+        errors.append(np.max(np.abs(np.asarray(sol.ys[-1]) - van_der_pol_reference.y[:, -1])))
+    ratios = np.asarray(errors[:-1]) / np.asarray(errors[1:])
+    assert np.all(ratios > 24.0), (errors, ratios)
+
+
+def test_dense_output_is_a_cubic_hermite_of_fourth_order_accuracy(van_der_pol_reference):
+    # Outputs between the steps come from the cubic Hermite through y and f at both ends: local error O(h^4), so the
+    # worst error over a fine output grid falls ~16x per halving of h (asserted: > 10x).
+    ts = np.linspace(0.0, 2.0, 201)
+    worst = []
+    for n in (20, 40, 80):
+        sol = dfx.diffeqsolve(dfx.ODETerm(_forced_van_der_pol), pamjax.Rodas5(), 0.0, 2.0, 2.0 / n,
+                              jnp.array([1.0, 0.0]), saveat=dfx.SaveAt(ts=jnp.asarray(ts)), max_steps=1000)
+        worst.append(np.max(np.abs(np.asarray(sol.ys).T - van_der_pol_reference.sol(ts))))
+    assert worst[0] / worst[1] > 10.0 and worst[1] / worst[2] > 10.0, worst
+
+
+def test_l_stable_far_beyond_the_explicit_stability_limit():
+    # y' = -λ (y - cos t), λ = 1e6: an explicit solver needs h < ~3e-6 s; the exact solution follows
+    # cos t + sin(t)/λ + O(1/λ²) after the initial layer. Rodas5 under error control crosses 1 s in < 200 steps
+    # and lands on it to 1e-9 (stiffly accurate: the layer is damped, not amplified).
+    lam = 1e6
+    sol = dfx.diffeqsolve(dfx.ODETerm(lambda t, y, args: -lam * (y - jnp.cos(t))), pamjax.Rodas5(), 0.0, 1.0, 0.1,
+                          jnp.array([0.0]), stepsize_controller=dfx.PIDController(rtol=1e-8, atol=1e-8))
+    assert int(sol.stats["num_steps"]) < 200
+    assert abs(float(sol.ys[-1, 0]) - (np.cos(1.0) + np.sin(1.0) / lam)) < 1e-9
+
+
+@pytest.mark.parametrize("n", [1, 3, 5])
+def test_small_inverse_matches_numpy_including_pivoting(n):
+    rng = np.random.default_rng(n)
+    a = rng.normal(size=(n, n))
+    if n > 1:
+        a[0, 0] = 0.0  # forces a row swap
+    np.testing.assert_allclose(np.asarray(small_inverse(jnp.asarray(a))), np.linalg.inv(a), rtol=1e-10, atol=1e-12)
+
+
+def test_stiff_plant_through_stick_matches_scipy_dop853():
+    # Paper 000's MAS-10 with the averaged valve, duty falling 0.95 -> 0.05 over 5.6 s: the payload goes down and
+    # sticks (|v| < 1 mm/s for most of the last second: the stiff phase). Both solved at rtol 1e-10; tolerances as in
+    # test_simulate: 1e-5 relative in pressure, 1e-7 m in position, 1e-5 m/s in velocity.
+    system = presets.mas10_system("averaged")
+    u = pamjax.Triangle(0.05, 0.95, 0.08)
+    ts = np.linspace(6.25, 8.0, 8)
+    y0 = system.initial_state(pressure=5.5e5)
+    traj = pamjax.simulate(system, u, jnp.asarray(ts), y0=y0, rtol=1e-10, atol=1e-10)
+    plant = NumpyPlant(
+        a=presets.MAS10_MAX_FORCE_COEFFICIENTS, k0=presets.MAS10_K0, k1=presets.MAS10_K1, k2=presets.MAS10_K2,
+        v0=presets.MAS10_V0, v1=presets.MAS10_V1, x_min=presets.MAS10_MIN_POSITION, x_max=presets.MAS10_MAX_POSITION,
+        valve="averaged", m=presets.MAS10_AVERAGED_VALVE,
+    )
+    ref = solve_ivp(plant.rhs, (6.25, 8.0), [5.5e5, float(y0.position), 0.0], method="DOP853", t_eval=ts,
+                    rtol=1e-10, atol=[1e-4, 1e-12, 1e-10], args=(lambda t: float(u(t)),))
+    assert ref.success
+    np.testing.assert_allclose(traj.pressure, ref.y[0], rtol=1e-5)
+    np.testing.assert_allclose(traj.position, ref.y[1], atol=1e-7)
+    np.testing.assert_allclose(traj.velocity, ref.y[2], atol=1e-5)
+    assert np.min(np.abs(ref.y[2][1:])) < 1e-3  # it does stick
+
+
+def test_takes_far_fewer_steps_than_tsit5_where_the_payload_sticks():
+    # Step counts are deterministic (not timings): over 6-9 s of the triangle run (slow descent, stick, lift-off)
+    # Tsit5 is held at its stability limit by the smooth Coulomb sign; Rodas5 at the same tolerance is not.
+    system = presets.mas10_system("averaged")
+    ts = jnp.linspace(0.0, 9.0, 10)
+    u = pamjax.Triangle(0.05, 0.95, 0.08)
+    tsit5 = pamjax.simulate(system, u, ts, solver=dfx.Tsit5())
+    rodas5 = pamjax.simulate(system, u, ts)  # the default for a continuous valve
+    assert isinstance(pamjax.default_solver(system), pamjax.Rodas5)
+    assert int(rodas5.num_steps) < 0.5 * int(tsit5.num_steps), (int(rodas5.num_steps), int(tsit5.num_steps))
+    np.testing.assert_allclose(rodas5.position, tsit5.position, atol=1e-7)
+
+
+def test_gradient_through_rodas5_matches_finite_differences_and_tsit5():
+    # Reverse mode through the Rosenbrock step differentiates its Jacobian (second derivatives of the physics).
+    # Four parameters that enter the stiff friction, the force map and the mass balance, as sensitivities θ ∂L/∂θ.
+    # (1) Constant duty: against central differences (relative step 1e-5, rtol 1e-12), to 2e-5 relative.
+    # (2) Triangle duty: its kinks make finite differences of an adaptive solve noisy (~1e-4), so the reference is
+    #     Tsit5's reverse-mode gradient (itself checked against finite differences in test_simulate): 1e-5 (the two
+    #     discrete solutions differ by ~1e-8 relative where steps cross the kinks; measured worst 2.2e-6).
+    system = presets.mas10_system("averaged")
+    ts = jnp.linspace(0.0, 0.3, 7)
+    names = ("payload_mass", "friction.coulomb_force", "friction.velocity_width", "muscle.force_law.k0")
+    x0 = jnp.asarray([float(_get(system, n)) for n in names])
+
+    def make_loss(signal, solver):
+        def loss(values):
+            s = system
+            for name, value in zip(names, values):
+                s = _set(s, name, value)
+            y0 = s.initial_state(pressure=3e5)
+            traj = solve(s, signal, ts, y0, ts[0], solver=solver, rtol=1e-12, atol=1e-12)
+            return jnp.sum((traj.pressure / 1e5) ** 2) + jnp.sum((traj.position / 1e-2) ** 2)
+
+        return loss
+
+    loss = make_loss(pamjax.Constant(0.6), pamjax.Rodas5())
+    grad = np.asarray(jax.jit(jax.grad(loss))(x0)) * np.asarray(x0)
+    f = jax.jit(loss)
+    fd = []
+    for i in range(len(names)):
+        step = 1e-5 * abs(float(x0[i]))
+        e = jnp.zeros_like(x0).at[i].set(step)
+        fd.append((float(f(x0 + e)) - float(f(x0 - e))) / (2 * step) * float(x0[i]))
+    np.testing.assert_allclose(grad, fd, rtol=2e-5, atol=1e-7 * np.max(np.abs(fd)))
+
+    triangle = pamjax.Triangle(0.3, 0.8, 4.0)
+    rodas = np.asarray(jax.jit(jax.grad(make_loss(triangle, pamjax.Rodas5())))(x0))
+    tsit5 = np.asarray(jax.jit(jax.grad(make_loss(triangle, dfx.Tsit5())))(x0))
+    np.testing.assert_allclose(rodas, tsit5, rtol=1e-5, atol=1e-9 * np.max(np.abs(tsit5)))
+
+
+def _get(module, dotted):
+    for part in dotted.split("."):
+        module = getattr(module, part)
+    return module
+
+
+def _set(module, dotted, value):
+    import equinox as eqx
+
+    return eqx.tree_at(lambda m: _get(m, dotted), module, value)
