@@ -20,7 +20,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-SCHEMES = ("rk4", "ros2", "ros2a")
+from ._rodas import rodas5_step, small_inverse_lanes
+
+SCHEMES = ("rk4", "ros2", "ros2a", "rodas5a")
 
 # "ros2a": ROS2 with its embedded first-order solution y + h k1 as error estimate and a step-size controller per lane
 # (tolerances on the scaled state: 1e5 Pa, 1e-2 m, 1e-2 m/s), for steady-state maps where settled lanes take long
@@ -30,7 +32,10 @@ SCHEMES = ("rk4", "ros2", "ros2a")
 # (tests/test_sweep.py): a quick map, not a reference.
 ROS2A_RTOL = 1e-3
 ROS2A_ATOL = 1e-3
-ROS2A_MAX_ITERATIONS = 20_000  # per output interval; a lane that needs more is reported as failed
+# "rodas5a": RODAS5 (order 5, L-stable, pamjax._rodas) under the same per-lane control, at SciPy-like accuracy.
+RODAS5A_RTOL = 1e-5
+RODAS5A_ATOL = 1e-5
+ADAPTIVE_MAX_STEPS_PER_INTERVAL = 20_000  # x output intervals: a lane that needs more is reported as failed
 
 # RK4's stability interval on the negative real axis is (-2.785, 0); with a 10 % margin:
 RK4_STABILITY_LIMIT = 2.5  # |λ h|
@@ -90,31 +95,17 @@ def ros2_step_error(field, t, y, h):
     return y + h * (1.5 * k1 + 0.5 * k2), 0.5 * h * (k1 + k2)
 
 
-def _advance_adaptive(field, y, h, t_start, t_end):
-    """ROS2 with error control from t_start to exactly t_end; returns (y, next step guess, reached t_end)."""
-    span = t_end - t_start
+def rodas5_step_error(field, t, y, h):
+    """One RODAS5 step (order 5, L-stable; `pamjax._rodas`) and its error estimate (order 4)."""
+    y1, error, _ = rodas5_step(field, t, y, h, inverse=small_inverse_lanes)
+    return y1, error
 
-    def cond(state):
-        t, _, h, it = state
-        return (t_end - t > 1e-12 * span) & (it < ROS2A_MAX_ITERATIONS) & (h > 1e-12 * span)
 
-    def body(state):
-        t, y, h, it = state
-        h_try = jnp.minimum(h, t_end - t)
-        y_new, error = ros2_step_error(field, t, y, h_try)
-        scale = ROS2A_ATOL + ROS2A_RTOL * jnp.maximum(jnp.abs(y), jnp.abs(y_new))
-        err = jnp.sqrt(jnp.mean((error / scale) ** 2))
-        ok = (err <= 1.0) & jnp.all(jnp.isfinite(y_new))
-        factor = jnp.where(jnp.isfinite(err), jnp.clip(0.9 * jax.lax.rsqrt(jnp.maximum(err, 1e-10)), 0.2, 5.0), 0.2)
-        factor = jnp.where(ok, factor, jnp.minimum(factor, 0.5))
-        # an accepted step shortened only to land on t_end does not shrink the next one
-        h_next = jnp.where(ok & (h_try < h), jnp.maximum(h, h_try * factor), h_try * factor)
-        t = jnp.where(ok, jnp.where(h_try == t_end - t, t_end, t + h_try), t)
-        y = jnp.where(ok, y_new, y)
-        return t, y, h_next, it + 1
-
-    t, y, h, _ = jax.lax.while_loop(cond, body, (t_start, y, h, jnp.asarray(0)))
-    return y, h, t_end - t <= 1e-12 * span
+# Error-controlled schemes: (step with error estimate, rtol, atol, order of the error estimate).
+_ADAPTIVE = dict(
+    ros2a=(ros2_step_error, ROS2A_RTOL, ROS2A_ATOL, 2),
+    rodas5a=(rodas5_step_error, RODAS5A_RTOL, RODAS5A_ATOL, 5),
+)
 
 
 _STEPS = dict(rk4=rk4_step, ros2=ros2_step)
@@ -135,8 +126,8 @@ def integrate(field, y0, grid, counts, steps, scheme, carry_init, update):
     False when the state became non-finite at any grid point. The whole loop is one `lax.scan` (vmap it over lanes).
     """
     grid = jnp.asarray(grid)
-    if scheme == "ros2a":
-        return _integrate_adaptive(field, y0, grid, steps, carry_init, update)
+    if scheme in _ADAPTIVE:
+        return _integrate_adaptive(field, y0, grid, steps, carry_init, update, scheme)
     step = _STEPS[scheme]
     uniform = bool(np.all(counts == counts[0]))
 
@@ -161,22 +152,41 @@ def integrate(field, y0, grid, counts, steps, scheme, carry_init, update):
     return carry, y, finite
 
 
-def _integrate_adaptive(field, y0, grid, steps, carry_init, update):
-    """`integrate` for "ros2a": per output interval, ROS2 steps under error control (the first guess is the interval's
-    fixed step); the step size carries over between intervals. Under `vmap` every interval runs until its slowest lane
-    lands on the grid point; settled lanes take long steps, so the lockstep costs little."""
+def _integrate_adaptive(field, y0, grid, steps, carry_init, update, scheme):
+    """`integrate` for the error-controlled schemes ("ros2a", "rodas5a"): one loop over the whole grid per lane, each
+    lane with its own step size and its own next output time (steps are shortened to land on it, and a step
+    shortened only for that does not shrink the next one). Under `vmap` the loop runs until the slowest lane ends,
+    so the cost is the largest number of steps any lane needs, not a sum of per-interval maxima."""
+    step_error, rtol, atol, order = _ADAPTIVE[scheme]
+    n_out = grid.shape[0]
+    span = grid[-1] - grid[0]
+    max_iterations = ADAPTIVE_MAX_STEPS_PER_INTERVAL * (n_out - 1)
+
+    def cond(state):
+        t, y, h, k, carry, it = state
+        return (k < n_out) & (it < max_iterations) & (h > 1e-12 * span)
+
+    def body(state):
+        t, y, h, k, carry, it = state
+        target = grid[jnp.minimum(k, n_out - 1)]
+        h_try = jnp.minimum(h, target - t)
+        y_new, error = step_error(field, t, y, h_try)
+        scale = atol + rtol * jnp.maximum(jnp.abs(y), jnp.abs(y_new))
+        err = jnp.sqrt(jnp.mean((error / scale) ** 2))
+        ok = (err <= 1.0) & jnp.all(jnp.isfinite(y_new))
+        grow = 0.9 * jnp.maximum(err, 1e-10) ** (-1.0 / order)
+        factor = jnp.where(jnp.isfinite(err), jnp.clip(grow, 0.2, 5.0), 0.2)
+        factor = jnp.where(ok, factor, jnp.minimum(factor, 0.5))
+        landed = ok & (h_try == target - t)
+        h_next = jnp.where(ok & (h_try < h), jnp.maximum(h, h_try * factor), h_try * factor)
+        t = jnp.where(ok, jnp.where(landed, target, t + h_try), t)
+        y = jnp.where(ok, y_new, y)
+        observed = update(carry, k, t, y)
+        carry = jax.tree_util.tree_map(lambda new, old: jnp.where(landed, new, old), observed, carry)
+        return t, y, h_next, k + landed.astype(k.dtype), carry, it + 1
+
     carry = update(carry_init, 0, grid[0], y0)
-    finite = jnp.all(jnp.isfinite(y0))
-
-    def body(state, xs):
-        y, h, carry, finite = state
-        k, t_start, t_end = xs
-        y, h, reached = _advance_adaptive(field, y, h, t_start, t_end)
-        finite = finite & reached & jnp.all(jnp.isfinite(y))
-        carry = update(carry, k + 1, t_end, y)
-        return (y, h, carry, finite), None
-
     h0 = jnp.asarray(steps)[0]
-    xs = (jnp.arange(grid.shape[0] - 1), grid[:-1], grid[1:])
-    (y, _, carry, finite), _ = jax.lax.scan(body, (y0, h0, carry, finite), xs)
-    return carry, y, finite
+    state = (grid[0], y0, h0, jnp.asarray(1), carry, jnp.asarray(0))
+    _, y, _, k, carry, _ = jax.lax.while_loop(cond, body, state)
+    return carry, y, (k == n_out) & jnp.all(jnp.isfinite(y))

@@ -353,8 +353,8 @@ def _signal_frequency(signal, values, plan):
 
 def _default_method_and_step(system, signal, values, plan, method, dt, stiffness):
     valve = system.valve
-    if method == "auto":
-        method = "rk4"
+    if method == "auto":  # see sweep's docstring
+        method = "rk4" if isinstance(valve, OnOffValve) else "rodas5a"
     if method == "adaptive":
         return method, float("nan")
     if dt is not None:
@@ -386,6 +386,22 @@ def _mesh(devices):
     if len(devices) < 2:
         return None
     return Mesh(np.asarray(devices), ("batch",))
+
+
+_CPU_CHUNK = 8192  # points per compiled call on CPU: wider batches run no faster there (measured, benchmarks/sweep.py)
+# On a GPU/TPU every integration step is a few kernel launches whatever the width, so the whole batch in one call is
+# fastest (100,000 points x 5 s on an H100: 0.24 s in one chunk, 1.15 s in chunks of 8,192; benchmarks/RESULTS.md);
+# the default chunk is as many points as this many bytes of outputs (and at least _CPU_CHUNK).
+_ACCELERATOR_CHUNK_BYTES = 1 << 30
+
+
+def default_chunk_size(batch_size, values_per_point, platform, n_devices=1):
+    """`sweep`'s points per compiled call when `chunk_size` is not given: 8,192 on CPU; on an accelerator as many
+    as 1 GiB of outputs per device holds (`values_per_point` float64 outputs per point, counted as at least 64)."""
+    if platform == "cpu":
+        return min(batch_size, _CPU_CHUNK)
+    fit = n_devices * _ACCELERATOR_CHUNK_BYTES // (8 * max(int(values_per_point), 64))
+    return min(batch_size, max(_CPU_CHUNK, fit))
 
 
 def _put(x, mesh):
@@ -448,17 +464,25 @@ def sweep(
     - `y0`: base initial state (default: each point's `system.initial_state()`, at rest in equilibrium).
     - `reduce`: None (whole trajectories at `ts`), `Final()`, `Mean(window)` or `Harmonic(periods, frequency)`.
     - `channels`: output channels to keep (default: all the system's outputs and "command").
-    - `method`: "rk4" (= "auto": accurate along the whole trajectory; its step is bounded by the plant's stiffest
-      eigenvalue, which for paper 000's friction is also the time scale of the stick-slip transitions), "ros2"
-      (L-stable Rosenbrock at a step 3x larger: for steady-state maps, where only settled values matter; it smears
-      the fast transients, by tens of um on the MAS-10), "ros2a" (ROS2 under per-lane error control, rtol = atol =
-      1e-3 on the scaled state, `dt` its first step: settled lanes take long steps; the fastest quick steady-state
-      map, within about 1 Pa and 10 um of RK4 on the 1,024-duty MAS-10 map, tens of um with coarse output grids),
-      or "adaptive" (vmapped diffrax Tsit5, a slow reference; `solve_options` go to it).
-    - `dt`: the fixed step [s]. Default: RK4 at 2.5 / (largest |eigenvalue| of the Jacobian at the initial states)
-      (its stability limit with a 10 % margin), ROS2 at 5 ms; both capped at 2 PWM edge widths for a switching
-      valve and at 1/100 of the signal's shortest period. Check a result by halving `dt`.
-    - `chunk_size`: points per compiled call (memory bound; default all, at most 8192). The last chunk is padded.
+    - `method`: "auto" (default: "rodas5a" for a continuous valve, "rk4" for a switching one), "rodas5a" (RODAS5,
+      an L-stable Rosenbrock method of order 5, under per-lane error control at rtol = atol = 1e-5 on the scaled
+      state, every output time landed on exactly: accurate along the whole trajectory and fastest for a stiff
+      plant, as a sticking payload makes it; on the 1,024-duty MAS-10 map within 5e-5 Pa and 4e-10 m of a tight
+      solve, `dt` its first step), "rk4" (fixed steps, accurate along the whole trajectory; its step is bounded by
+      the plant's stiffest eigenvalue, which for paper 000's friction is also the time scale of the stick-slip
+      transitions; the PWM valve's smoothed edges bound any scheme's step, and fixed steps keep the lanes in
+      lockstep), "ros2" (L-stable Rosenbrock at a fixed step 3x larger: for steady-state maps, where only settled
+      values matter; it smears the fast transients, by tens of um on the MAS-10), "ros2a" (ROS2 under per-lane
+      error control, rtol = atol = 1e-3: a quick steady-state map, within about 1 Pa and 10 um of RK4 on the MAS-10
+      map, tens of um with coarse output grids), or "adaptive" (vmapped diffrax Tsit5, a slow reference;
+      `solve_options` go to it).
+    - `dt`: the fixed step [s] (the first step for "rodas5a"/"ros2a"). Default: RK4 at 2.5 / (largest |eigenvalue|
+      of the Jacobian at the initial states) (its stability limit with a 10 % margin), the others at 5 ms; all
+      capped at 2 PWM edge widths for a switching valve and at 1/100 of the signal's shortest period. Check a
+      fixed-step result by halving `dt`.
+    - `chunk_size`: points per compiled call (memory bound). Default (`default_chunk_size`): all, at most 8,192 on
+      CPU; on a GPU/TPU as many as 1 GiB of outputs per device holds (one call is fastest there). The last chunk
+      is padded.
     - `devices`: None (all of `jax.devices()`: the batch axis is sharded over them with a `Mesh` and
       `NamedSharding`; several hosts after `jax.distributed.initialize()`), a list of devices, or a `Mesh` with a
       "batch" axis.
@@ -482,7 +506,8 @@ def sweep(
     if not isinstance(over, dict) or not over:
         raise PamjaxInputError(f"over must be a non-empty dict {{path: values}}, got {over!r}")
     if method not in ("auto", "adaptive", *_fixed_step.SCHEMES):
-        raise PamjaxInputError(f"method must be 'auto', 'rk4', 'ros2', 'ros2a' or 'adaptive', got {method!r}")
+        raise PamjaxInputError(
+            f"method must be 'auto', 'rodas5a', 'rk4', 'ros2', 'ros2a' or 'adaptive', got {method!r}")
     if dt is not None and not (np.isfinite(dt) and dt > 0):
         raise PamjaxInputError(f"dt must be a step > 0 [s], got {dt}")
     if chunk_size is not None and not (isinstance(chunk_size, int) and chunk_size > 0):
@@ -558,7 +583,16 @@ def sweep(
     # --- chunks over devices
     mesh = _mesh(devices)
     n_dev = 1 if mesh is None else mesh.devices.size
-    chunk = min(batch_size, 8192) if chunk_size is None else min(chunk_size, batch_size)
+    if chunk_size is None:
+        if mesh is not None:
+            platform = mesh.devices.flat[0].platform
+        else:
+            chosen = list(devices) if devices is not None else []
+            platform = (chosen or jax.devices())[0].platform
+        per_point = len(channels) * (1 if reduce is not None else ts_np.size) * 2  # x2: complex reductions
+        chunk = default_chunk_size(batch_size, per_point, platform, n_dev)
+    else:
+        chunk = min(chunk_size, batch_size)
     chunk = int(math.ceil(chunk / n_dev) * n_dev)
     # Each chunk's arrays are padded to a multiple of 8 lanes per device: XLA compiles a 1-point batch to different
     # (scalar) code than a wider one, which changes results in the last bit. With the padding a point's result is

@@ -11,7 +11,7 @@ from scipy.integrate import solve_ivp
 
 import pamjax
 from pamjax import presets
-from pamjax._rodas import small_inverse
+from pamjax._rodas import small_inverse, small_inverse_lanes
 from pamjax._simulate import solve
 
 
@@ -68,7 +68,11 @@ def test_small_inverse_matches_numpy_including_pivoting(n):
     a = rng.normal(size=(n, n))
     if n > 1:
         a[0, 0] = 0.0  # forces a row swap
-    np.testing.assert_allclose(np.asarray(small_inverse(jnp.asarray(a))), np.linalg.inv(a), rtol=1e-10, atol=1e-12)
+    for inverse in (small_inverse, small_inverse_lanes):
+        np.testing.assert_allclose(np.asarray(inverse(jnp.asarray(a))), np.linalg.inv(a), rtol=1e-10, atol=1e-12)
+    batch = rng.normal(size=(4, n, n))
+    np.testing.assert_allclose(np.asarray(jax.vmap(small_inverse_lanes)(jnp.asarray(batch))), np.linalg.inv(batch),
+                               rtol=1e-9, atol=1e-11)
 
 
 def test_stiff_plant_through_stick_matches_scipy_dop853():

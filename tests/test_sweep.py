@@ -113,6 +113,18 @@ def test_chunks_equal_one_call_and_report_progress(averaged):
         np.testing.assert_array_equal(chunked[c], whole[c])
 
 
+def test_default_chunk_size_per_platform():
+    from pamjax._sweep import default_chunk_size
+
+    assert default_chunk_size(100, 102, "cpu") == 100
+    assert default_chunk_size(100_000, 102, "cpu") == 8192
+    # accelerators: the whole batch while its outputs stay within 1 GiB per device
+    assert default_chunk_size(100_000, 4, "gpu") == 100_000
+    assert default_chunk_size(10**8, 4, "gpu") == 2**30 // (8 * 64)
+    assert default_chunk_size(10**8, 5000, "gpu", n_devices=2) == 2 * 2**30 // (8 * 5000)
+    assert default_chunk_size(10**8, 10**8, "tpu") == 8192  # never below the CPU chunk
+
+
 def test_initial_state_path_and_factory(averaged):
     p0 = np.array([2e5, 4e5])
     result = sweep(averaged, lambda v: pamjax.Constant(v["duty"]), TS, {"y0.pressure": p0, "duty": [0.4, 0.6]},
