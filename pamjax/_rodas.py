@@ -151,7 +151,7 @@ def rodas5_step(f, t0, z0, h, inverse=small_inverse):
         rhs = value + sum((_CC[i, j] / h) * ks[j] for j in range(i))
         if _D[i] != 0.0:
             rhs = rhs + (_D[i] * h) * f_t
-        return jnp.sum(w_inverse * rhs[None, :], axis=1)
+        return w_inverse @ rhs
 
     ks = [stage(f0, 0, [])]
     for i in range(1, 6):
