@@ -7,7 +7,7 @@ Peers, all in this one run, on the SAME equations (an independent scalar transcr
 - numba: a hand-written fixed-step RK4 loop over the 1,024 duties (serial and `prange`);
 - SciPy: a loop of `solve_ivp(method="LSODA")` on a plain-Python right-hand side (what a SciPy user writes; the
   `speedup_vs_scipy` peer) and on the numba-compiled one (the stronger variant, `speedup_vs_scipy_numba_rhs`), each
-  timed on a subset and extrapolated to 1,024 (said in the output);
+  timed on a subset (median of the repeats) and extrapolated to 1,024 (said in the output);
 - pamjax `sweep` with the smoothed PWM valve (RK4 at 2 edge widths);
 - pamjax `sweep(method="ros2a")`: ROS2 under error control at 1e-3 (a quick map: looser than the others, its
   errors are printed beside it; not used for the headline ratios).
@@ -239,10 +239,8 @@ def main():
         return np.array([solve_ivp(field, (0, args.horizon), [p0, x0, 0.0], method="LSODA", rtol=1e-8,
                                    atol=[1e-2, 1e-9, 1e-9], args=(u,)).y[:, -1] for u in us])
 
-    def scipy_row(field, label):
-        start = time.perf_counter()
-        scipy_finals(field, subset)
-        elapsed = (time.perf_counter() - start) * args.points / args.scipy_subset
+    def scipy_row(field, label):  # median of `repeats` timings of the subset, extrapolated
+        elapsed = median_time(lambda: scipy_finals(field, subset), args.repeats) * args.points / args.scipy_subset
         rows[f"scipy LSODA loop, {label} (x{args.points}/{args.scipy_subset})"] = (
             elapsed, 0.0, float("nan"), *errors(scipy_finals(field, duties[check])))
         return elapsed
