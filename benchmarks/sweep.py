@@ -267,7 +267,7 @@ def main():
         ratio = t_numba / t if np.isfinite(t) else float("nan")
         print(f"{name:42s} {t:9.3f} {c:11.2f} {dt:10.2e} {ep:10.2e} {ex:10.2e} {ratio:10.2f}")
     print(f"pamjax rk4 vs numba rk4 (same step), max |Δx| over all points: {agree:.1e} m")
-    print(f"SciPy loop time extrapolated from {args.scipy_subset} of {args.points} points")
+    print(f"SciPy loop time (median of repeats) extrapolated from {args.scipy_subset} of {args.points} points")
     scipy_err = rows[f"scipy LSODA loop, Python RHS (x{args.points}/{args.scipy_subset})"][3:]
     auto_err = rows[f"pamjax default ({res_auto.method}, error control)"][3:]
     matched = auto_err[0] <= scipy_err[0] and auto_err[1] <= scipy_err[1]
