@@ -214,7 +214,10 @@ _LANE_MULTIPLE = 8  # pad batches to a multiple of this many lanes (bitwise batc
 
 
 @eqx.filter_jit
-def _run_chunk(system, signal, y0, values, ts, plan, config):
+def _run_chunk(system, signal, y0, values, ts, plan, config, mesh=None):
+    """One compiled call over a chunk of lanes. With a `mesh` the lanes are split over its devices by `shard_map`:
+    each device runs its own lanes' loop, so an error-controlled scheme's while loop ends per device when that
+    device's slowest lane ends, with no cross-device agreement per iteration."""
     method, counts, channels, reduction, solve_options = config
     counts = np.asarray(counts)
 
@@ -225,7 +228,12 @@ def _run_chunk(system, signal, y0, values, ts, plan, config):
         steps = jnp.diff(ts) / counts
         return _lane_fixed(sys_l, sig_l, y0_l, ts, counts, steps, method, channels, reduction)
 
-    out, status = jax.vmap(lane)(values)
+    if mesh is None:
+        out, status = jax.vmap(lane)(values)
+    else:
+        batch = PartitionSpec("batch")
+        out, status = jax.shard_map(jax.vmap(lane), mesh=mesh, in_specs=batch, out_specs=(batch, batch),
+                                    check_vma=False)(values)
     failed = (status != SUCCESS).reshape(status.shape + (1,) * (out.ndim - 1))
     return jnp.where(failed, jnp.nan, out), status
 
@@ -484,8 +492,8 @@ def sweep(
       CPU; on a GPU/TPU as many as 1 GiB of outputs per device holds (one call is fastest there). The last chunk
       is padded.
     - `devices`: None (all of `jax.devices()`: the batch axis is sharded over them with a `Mesh` and
-      `NamedSharding`; several hosts after `jax.distributed.initialize()`), a list of devices, or a `Mesh` with a
-      "batch" axis.
+      `NamedSharding`, each device running its own lanes under `shard_map`; several hosts after
+      `jax.distributed.initialize()`), a list of devices, or a `Mesh` with a "batch" axis.
     - `progress`: True (print one line per chunk when there are several), False, or a callable taking a string.
 
     **Returns:** a `SweepResult` (`over`, `t`, `outputs[channel]`, `status`, `dt`, `method`).
@@ -609,7 +617,7 @@ def sweep(
         index = c * chunk + np.arange(width)
         index = np.where(np.arange(width) < n_real, index, 0)  # pad with point 0 (valid values), dropped below
         vals = {k: _put(v[index], mesh) for k, v in flat.items()}
-        out, status = _run_chunk(system, signal, y0, vals, ts_j, plan, config)
+        out, status = _run_chunk(system, signal, y0, vals, ts_j, plan, config, mesh)
         outs.append(_fetch(out)[:n_real])
         statuses.append(_fetch(status)[:n_real])
         if say is not None and n_chunks > 1:
