@@ -12,6 +12,7 @@ not use is an error listing the ones it does:
     horizon = 5.0                    # s; window = 1.0 s averaged at the end
 """
 
+import argparse
 import csv
 import os
 import time
@@ -50,6 +51,19 @@ def add_arguments(parser):
     parser.add_argument("--out", default=None, help="output folder (default results/sweep-<config name>)")
     parser.add_argument("--overwrite", action="store_true", help="replace existing sweep.npz/csv/png in --out")
     parser.add_argument("--no-plot", action="store_true", help="skip the figure")
+    parser.add_argument("--cpu-devices", type=_positive_int, default=os.cpu_count() or 1,
+                        help="on CPU, split the processor into this many XLA devices and shard the sweep over them "
+                             "(default: one per core; 1: a single device). No effect on GPU/TPU runs")
+
+
+def _positive_int(text):
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"--cpu-devices must be an integer >= 1, got {text!r}")
+    return value
 
 
 def validate_config(config):
@@ -168,8 +182,11 @@ def run(args):
             raise SystemExit(f"{os.path.join(out, existing)} exists; pass --overwrite to replace it")
     start = time.perf_counter()
     columns, spec = run_config(config)
+    import jax
+
+    devices = jax.devices()
     print(f"pamjax sweep: {config['kind']}, {len(next(iter(columns.values())))} rows in "
-          f"{time.perf_counter() - start:.1f} s")
+          f"{time.perf_counter() - start:.1f} s on {len(devices)} {devices[0].platform} device(s)")
     os.makedirs(out, exist_ok=True)
     np.savez(os.path.join(out, "sweep.npz"), **columns)
     _write_csv(os.path.join(out, "sweep.csv"), columns)

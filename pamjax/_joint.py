@@ -19,7 +19,7 @@ from ._gas import Air
 from ._inputs import AbstractSignal
 from ._muscle import EndStops, Muscle
 from ._regulated import muscle_stiffness
-from ._regulator import PAPER001_AIR, AbstractRegulator
+from ._regulator import AbstractRegulator, paper001_air
 from ._system import AbstractSystem
 
 PULLEY_RADIUS = 0.03  # m, assumed (orthosis lever; ±0.35 rad swings x by ±10 mm of the DMSP-40's 100 mm stroke)
@@ -75,8 +75,8 @@ class AntagonisticJoint(AbstractSystem):
     foot_arm: jax.Array = eqx.field(converter=jnp.asarray, default=FOOT_ARM)  # m
     damping: jax.Array = eqx.field(converter=jnp.asarray, default=JOINT_DAMPING)  # N m s/rad
     gravity: jax.Array = eqx.field(converter=jnp.asarray, default=9.81)  # m/s²
-    end_stops: EndStops = EndStops()
-    air: Air = PAPER001_AIR
+    end_stops: EndStops = eqx.field(default_factory=EndStops)
+    air: Air = eqx.field(default_factory=paper001_air)
     polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
 
     def __check_init__(self):

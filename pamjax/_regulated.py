@@ -16,7 +16,7 @@ from ._errors import check_in_open_interval, check_nonnegative, check_positive
 from ._friction import AbstractFriction, CoulombViscousFriction
 from ._gas import Air
 from ._muscle import EndStops, Muscle
-from ._regulator import PAPER001_AIR, TANK_VOLUME, AbstractRegulator, ISO6358Regulator, chamber_flow
+from ._regulator import TANK_VOLUME, AbstractRegulator, ISO6358Regulator, chamber_flow, paper001_air
 from ._system import AbstractSystem
 
 DMSP40_LOAD_FORCE = 893.0  # N, paper 001 Sect. 4 (a 91.3 kg subject)
@@ -35,7 +35,7 @@ class RegulatorSystem(AbstractSystem):
     regulator: AbstractRegulator
     volume: jax.Array = eqx.field(converter=jnp.asarray, default=TANK_VOLUME)  # m³
     outlet_flow: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # kg/s
-    air: Air = PAPER001_AIR
+    air: Air = eqx.field(default_factory=paper001_air)
     polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
 
     def __check_init__(self):
@@ -153,9 +153,10 @@ class RegulatedMuscleSystem(AbstractSystem):
     muscle: Muscle
     load_force: jax.Array = eqx.field(converter=jnp.asarray, default=DMSP40_LOAD_FORCE)  # N
     payload_mass: jax.Array = eqx.field(converter=jnp.asarray, default=DMSP40_LOAD_FORCE / 9.81)  # kg
-    friction: AbstractFriction = CoulombViscousFriction(0.0, DMSP40_VISCOUS_COEFFICIENT)
-    end_stops: EndStops = EndStops()
-    air: Air = PAPER001_AIR
+    friction: AbstractFriction = eqx.field(
+        default_factory=lambda: CoulombViscousFriction(0.0, DMSP40_VISCOUS_COEFFICIENT))
+    end_stops: EndStops = eqx.field(default_factory=EndStops)
+    air: Air = eqx.field(default_factory=paper001_air)
     polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
 
     def __check_init__(self):

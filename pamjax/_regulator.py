@@ -26,8 +26,19 @@ from ._system import pressure_rate
 from ._tabulated import check_table_axis, paper001_charging_restriction, paper001_discharging_restriction, pchip
 from ._valve import AbstractValve
 
+
 # --- paper 001 numbers ----------------------------------------------------------------------------------------
-PAPER001_AIR = Air(gas_constant=286.9, temperature=298.0)  # R = 286.9 J/(kg K), T = 298 K (paper 001, eq. 1-3 text)
+def paper001_air() -> Air:
+    """Paper 001's air: R = 286.9 J/(kg K), T = 298 K (paper 001, eq. 1-3 text)."""
+    return Air(gas_constant=286.9, temperature=298.0)
+
+
+def __getattr__(name):
+    # PAPER001_AIR is built on first use, so that importing pamjax creates no JAX arrays (JAX's device settings,
+    # e.g. `jax_num_cpu_devices`, can still be changed after `import pamjax`).
+    if name == "PAPER001_AIR":
+        return paper001_air()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 VOLTAGE_RANGE = (0.0, 10.0)  # V, VPPM reference range (paper 001, Sect. 2)
 EQ6_GAIN = 1.01  # bar/V, static gain of G_Vref (eq. 6)
 EQ6_TIME_CONSTANTS = (0.041, 0.023)  # s, poles of G_Vref and G_Qin (eq. 6, 7)
@@ -167,7 +178,7 @@ class LinearRegulator(AbstractRegulator):
     - `flow_gain`: k_q [Pa/(kg/s)]; −0.922 bar per l/min ANR = −4.67e9 (eq. 7).
     """
 
-    calibration: VoltageCalibration = VoltageCalibration()
+    calibration: VoltageCalibration = eqx.field(default_factory=VoltageCalibration)
     time_constants: jax.Array = eqx.field(converter=jnp.asarray, default=EQ6_TIME_CONSTANTS)  # s
     flow_gain: jax.Array = eqx.field(converter=jnp.asarray, default=EQ7_FLOW_GAIN)  # Pa/(kg/s)
 
@@ -287,7 +298,7 @@ class ISO6358Regulator(AbstractRegulator):
     - `opening_width` [-]: corner smoothing of o; 1e-3.
     """
 
-    calibration: VoltageCalibration = VoltageCalibration()
+    calibration: VoltageCalibration = eqx.field(default_factory=VoltageCalibration)
     time_constants: jax.Array = eqx.field(converter=jnp.asarray, default=EQ6_TIME_CONSTANTS)  # s
     charging: AbstractRestriction = eqx.field(default_factory=paper001_charging_restriction)
     discharging: AbstractRestriction = eqx.field(default_factory=paper001_discharging_restriction)
@@ -337,6 +348,8 @@ class ISO6358Regulator(AbstractRegulator):
         return ISO6358RegulatorState(pilot=s, pilot_output=s, pressure=s)
 
 
-def max_charging_flow(regulator: ISO6358Regulator, air: Air = PAPER001_AIR):
-    """The most mass flow [kg/s] the charging path can deliver: choked, fully open, ρ₀ C(p_s) p_s sqrt(T₀/T)."""
+def max_charging_flow(regulator: ISO6358Regulator, air: Air | None = None):
+    """The most mass flow [kg/s] the charging path can deliver: choked, fully open, ρ₀ C(p_s) p_s sqrt(T₀/T).
+    `air` defaults to paper 001's (`paper001_air()`)."""
+    air = paper001_air() if air is None else air
     return regulator.charging.mass_flow(regulator.supply_pressure, 0.0 * regulator.supply_pressure + 1.0, air)

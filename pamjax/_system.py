@@ -69,7 +69,7 @@ class TankSystem(AbstractSystem):
 
     valve: AbstractValve
     volume: jax.Array = eqx.field(converter=jnp.asarray)  # m³
-    air: Air = Air()
+    air: Air = eqx.field(default_factory=Air)
     polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.4)  # -
 
     def __check_init__(self):
@@ -110,9 +110,9 @@ class MuscleSystem(AbstractSystem):
     valve: AbstractValve
     muscle: Muscle
     payload_mass: jax.Array = eqx.field(converter=jnp.asarray, default=9.6)  # kg
-    friction: AbstractFriction = CoulombViscousFriction()
-    end_stops: EndStops = EndStops()
-    air: Air = Air()
+    friction: AbstractFriction = eqx.field(default_factory=CoulombViscousFriction)
+    end_stops: EndStops = eqx.field(default_factory=EndStops)
+    air: Air = eqx.field(default_factory=Air)
     gravity: jax.Array = eqx.field(converter=jnp.asarray, default=9.81)  # m/s²
     polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.4)  # -
 

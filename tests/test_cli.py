@@ -186,3 +186,35 @@ def test_sweep_end_to_end_writes_outputs_and_refuses_to_overwrite(tmp_path, monk
         main(["sweep", str(config), "--out", str(out)])
     assert (out / "sweep.npz").read_bytes() == before
     assert main(["sweep", str(config), "--out", str(out), "--overwrite", "--no-plot"]) == 0
+
+
+def test_sweep_splits_the_cpu_into_one_device_per_core_and_matches_one_device(tmp_path, monkeypatch):
+    # `pamjax sweep` sets JAX's CPU device count before JAX runs (a fresh process, as from the shell) and shards the
+    # sweep over the devices; the map equals the one-device map to 1e-12 relative (tests/test_sharding.py).
+    import subprocess
+    import sys
+
+    monkeypatch.undo()
+    config = _write(tmp_path, """
+        kind = "steady_state"
+        [system]
+        valve = "averaged"
+        [sweep]
+        commands = [0.2, 0.4, 0.6, 0.8]
+        horizon = 0.5                 # s
+        window = 0.1                  # s
+    """)
+    runs = {}
+    for n in (2, 1):
+        out = tmp_path / f"out{n}"
+        code = "import sys; from pamjax._cli import main; sys.exit(main(sys.argv[1:]))"
+        proc = subprocess.run([sys.executable, "-c", code, "sweep", str(config), "--out", str(out), "--no-plot",
+                               "--cpu-devices", str(n)], capture_output=True, text=True, timeout=600,
+                              env={**__import__("os").environ, "JAX_PLATFORMS": "cpu"})
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+        assert f"on {n} cpu device(s)" in proc.stdout, proc.stdout
+        runs[n] = np.load(out / "sweep.npz")
+    for key in ("pressure_pa_abs", "position_m"):
+        np.testing.assert_allclose(runs[2][key], runs[1][key], rtol=1e-12, atol=0)
+    with pytest.raises(SystemExit):
+        main(["sweep", str(config), "--cpu-devices", "0"])
