@@ -1,10 +1,10 @@
-"""Fixed-step integrators for batched sweeps: every lane of a `vmap` takes the same steps, so nothing waits.
+"""Integrators for batched sweeps, on a flat state vector y' = f(t, y), with outputs observed (or reduced) on the fly.
 
-Adaptive solvers vmap badly on CPU (a batched while-loop runs until its slowest lane finishes). For sweeps the step
-is fixed instead, chosen per workload from the stiffness of the plant (see `stable_step`), and the steps run inside
-one `lax.scan` over output times, with outputs observed (or reduced) on the fly.
+diffrax's adaptive loop vmaps badly (a batched while loop steps every lane with one shared step sequence until the
+slowest finishes). Two kinds of scheme instead:
 
-Two schemes, both on a flat state vector y' = f(t, y):
+Fixed steps, every lane of a `vmap` the same (one `lax.scan` over output times; the step chosen per workload from
+the plant's stiffness in `pamjax._sweep`):
 
 - `"rk4"`: classical Runge-Kutta, order 4, 4 evaluations per step. Explicit: stable for |λ h| ≲ 2.78 on the
   negative real axis, so the plant's stiffest eigenvalue bounds the step (paper 000's smooth friction sign:
@@ -12,8 +12,13 @@ Two schemes, both on a flat state vector y' = f(t, y):
 - `"ros2"`: the two-stage, L-stable Rosenbrock(-W) method ROS2 of Verwer et al. (SIAM J. Sci. Comput. 20, 1999,
   eq. 2.3 with γ = 1 + 1/√2): order 2 for any Jacobian approximation, one Jacobian (forward mode) and one small
   LU per step. Its step is bounded by accuracy only, not by the friction's stiffness.
-- `"ros2a"`: ROS2 with error control per lane (embedded first-order solution), the lanes in lockstep per output
-  interval: for steady-state maps, where settled lanes take long steps.
+
+Error control per lane (`_integrate_adaptive`: one while loop over the whole grid, each lane with its own step
+and its own next output time, landing exactly on every output time):
+
+- `"rodas5a"`: RODAS5 (order 5(4), L-stable; `pamjax._rodas`) at rtol = atol = 1e-5: trajectory-accurate, and
+  the stiff stick phases cost a handful of steps.
+- `"ros2a"`: ROS2 with its embedded first-order solution at 1e-3: a quick steady-state map.
 """
 
 import jax
@@ -24,15 +29,14 @@ from ._rodas import rodas5_step, small_inverse_lanes
 
 SCHEMES = ("rk4", "ros2", "ros2a", "rodas5a")
 
-# "ros2a": ROS2 with its embedded first-order solution y + h k1 as error estimate and a step-size controller per lane
-# (tolerances on the scaled state: 1e5 Pa, 1e-2 m, 1e-2 m/s), for steady-state maps where settled lanes take long
-# L-stable steps. Measured 2026-11-22 on the 1,024-duty x 5 s MAS-10 map (outputs every 0.1 s, 2-core CPU): 1e-3
-# is within 0.7 Pa and 6 µm of RK4 at its stability limit in 0.048 s (fixed-step ROS2: 0.124 s, 0.06 Pa / 0.5 µm);
-# 1e-4: 0.3 Pa / 2 µm in 0.16 s; 1e-6: 1.5 s. With coarser output grids the error reaches tens of µm
-# (tests/test_sweep.py): a quick map, not a reference.
+# Tolerances on the scaled state (1e5 Pa, 1e-2 m, 1e-2 m/s), measured on the 1,024-duty x 5 s MAS-10 map (outputs
+# every 0.1 s, 2-core CPU, 2026-11-22, benchmarks/sweep.py; errors against DOP853 at rtol 1e-12):
+# "ros2a" at 1e-3: 0.6 Pa and 4 µm in 0.045-0.073 s (with coarser output grids tens of µm, tests/test_sweep.py):
+# a quick map, not a reference. "rodas5a" at 1e-5: 4.8e-5 Pa and 3.5e-10 m in 0.05-0.08 s, better than SciPy's
+# LSODA at rtol 1e-8 (2.6e-4 Pa, 1.4e-9 m); 1e-4 gave 3.7e-4 Pa and 2.8e-9 m (just looser than SciPy), 1e-6 took
+# ~15 % longer.
 ROS2A_RTOL = 1e-3
 ROS2A_ATOL = 1e-3
-# "rodas5a": RODAS5 (order 5, L-stable, pamjax._rodas) under the same per-lane control, at SciPy-like accuracy.
 RODAS5A_RTOL = 1e-5
 RODAS5A_ATOL = 1e-5
 ADAPTIVE_MAX_STEPS_PER_INTERVAL = 20_000  # x output intervals: a lane that needs more is reported as failed
