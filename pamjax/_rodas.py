@@ -17,7 +17,7 @@ Sec. IV.7). For y' = f(t, y), step h, J = ∂f/∂y(t0, y0), f_t = ∂f/∂t(t0,
 
 the last three stages at t0 + h on y0 + Σ_j a_6j k_j + k_6 (+ k_7): y1 = y0 + Σ_j a_6j k_j + k_6 + k_7 + k_8, and
 k_8 is the local error estimate (the difference to the embedded order-4 solution). Dense output: cubic Hermite
-through y0, y1, f(t0, y0), f(t1, y1) (as diffrax's own Rosenbrock solvers do).
+through y0, y1, f(t0, y0), f(t1, y1) (as the Rosenbrock solvers of later diffrax releases do).
 
 The order and stability are checked numerically in tests/test_rodas.py (order 5 on a non-autonomous nonlinear
 problem; a step 10⁵ times beyond the explicit stability limit stays accurate).
