@@ -2,7 +2,6 @@
 
 import argparse
 import importlib
-import os
 import sys
 
 # subcommand → (module, function, help). Each module defines `add_arguments(parser)` and `run(args)`.
@@ -19,8 +18,10 @@ def _split_cpu_for_sweep(argv):
     subcommand modules does; so it is read from the command line here, before them."""
     if not argv or argv[0] != "sweep":
         return
+    from ._cli_sweep import DEFAULT_CPU_DEVICES  # importing pamjax runs no JAX computation
+
     early = argparse.ArgumentParser(add_help=False)
-    early.add_argument("--cpu-devices", type=int, default=os.cpu_count() or 1)
+    early.add_argument("--cpu-devices", type=int, default=DEFAULT_CPU_DEVICES)
     known, _ = early.parse_known_args(argv[1:])
     if known.cpu_devices >= 1:  # a bad value is reported by the full parser below
         import jax

@@ -44,6 +44,7 @@ _AXES = {"commands", "pressures", "frequencies"}
 _VALVES = ("pwm", "averaged")
 _AXIS_KEYS = {"start", "stop", "num", "log"}
 OUTPUTS = ("sweep.npz", "sweep.csv", "sweep.png")
+DEFAULT_CPU_DEVICES = os.cpu_count() or 1  # --cpu-devices: one XLA CPU device per core (set early by pamjax._cli)
 
 
 def add_arguments(parser):
@@ -51,7 +52,7 @@ def add_arguments(parser):
     parser.add_argument("--out", default=None, help="output folder (default results/sweep-<config name>)")
     parser.add_argument("--overwrite", action="store_true", help="replace existing sweep.npz/csv/png in --out")
     parser.add_argument("--no-plot", action="store_true", help="skip the figure")
-    parser.add_argument("--cpu-devices", type=_positive_int, default=os.cpu_count() or 1,
+    parser.add_argument("--cpu-devices", type=_positive_int, default=DEFAULT_CPU_DEVICES,
                         help="on CPU, split the processor into this many XLA devices and shard the sweep over them "
                              "(default: one per core; 1: a single device). No effect on GPU/TPU runs")
 

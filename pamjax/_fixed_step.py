@@ -55,31 +55,6 @@ def rk4_step(field, t, y, h):
     return y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
 
-def _solve_small(a, b):
-    """Solve a x = b for one small dense system by Gaussian elimination with partial pivoting, unrolled (n is
-    static and small), so that under `vmap` it is plain elementwise arithmetic across lanes."""
-    n = b.shape[0]
-    rows = [a[i] for i in range(n)]
-    rhs = [b[i] for i in range(n)]
-    for k in range(n):
-        # partial pivoting: bring the largest |a[i, k]|, i >= k, to row k
-        for i in range(k + 1, n):
-            swap = jnp.abs(rows[i][k]) > jnp.abs(rows[k][k])
-            rows[k], rows[i] = jnp.where(swap, rows[i], rows[k]), jnp.where(swap, rows[k], rows[i])
-            rhs[k], rhs[i] = jnp.where(swap, rhs[i], rhs[k]), jnp.where(swap, rhs[k], rhs[i])
-        for i in range(k + 1, n):
-            factor = rows[i][k] / rows[k][k]
-            rows[i] = rows[i] - factor * rows[k]
-            rhs[i] = rhs[i] - factor * rhs[k]
-    x = [None] * n
-    for i in reversed(range(n)):
-        s = rhs[i]
-        for j in range(i + 1, n):
-            s = s - rows[i][j] * x[j]
-        x[i] = s / rows[i][i]
-    return jnp.stack(x)
-
-
 def ros2_step(field, t, y, h):
     """One ROS2 step (Verwer et al. 1999): W = I − γ h J,  W k1 = f(t, y),  W k2 = f(t + h, y + h k1) − 2 k1,
     y₊ = y + h (3 k1 + k2) / 2, with J = ∂f/∂y at (t, y) by forward mode (the time derivative is left out, which
@@ -93,9 +68,9 @@ def ros2_step_error(field, t, y, h):
     f0, jac = jax.linearize(lambda z: field(t, z), y)
     n = y.shape[0]
     jacobian = jax.vmap(jac, out_axes=1)(jnp.eye(n, dtype=y.dtype))
-    w = jnp.eye(n, dtype=y.dtype) - _ROS2_GAMMA * h * jacobian
-    k1 = _solve_small(w, f0)
-    k2 = _solve_small(w, field(t + h, y + h * k1) - 2.0 * k1)
+    w_inverse = small_inverse_lanes(jnp.eye(n, dtype=y.dtype) - _ROS2_GAMMA * h * jacobian)  # one for both stages
+    k1 = w_inverse @ f0
+    k2 = w_inverse @ (field(t + h, y + h * k1) - 2.0 * k1)
     return y + h * (1.5 * k1 + 0.5 * k2), 0.5 * h * (k1 + k2)
 
 
