@@ -1,4 +1,10 @@
 """pamjax: differentiable simulation and identification of pneumatic artificial muscle systems in JAX."""
+# ruff: noqa: E402  (the XLA CPU setting must be applied before the submodules are imported)
+
+# First, before anything can initialise JAX's backend: XLA's CPU setting for small while loops (see _xla_cpu).
+from ._xla_cpu import apply as _apply_xla_cpu_setting
+
+_apply_xla_cpu_setting()
 
 from . import presets as presets
 from ._errors import PamjaxInputError as PamjaxInputError
@@ -279,3 +285,4 @@ from ._sweep_maps import (
 )
 from ._synthetic import synthetic_recording as synthetic_recording  # noqa: E402
 from ._tabulated import TabulatedISO6358Restriction as TabulatedISO6358Restriction  # noqa: E402
+from ._xla_cpu import xla_cpu_status as xla_cpu_status  # noqa: E402

@@ -1,0 +1,89 @@
+"""pamjax's XLA CPU loop setting (pamjax/_xla_cpu.py): how it merges into XLA_FLAGS, when it stands back, and that
+it reaches XLA (a single-trajectory solve compiles to one function on CPU)."""
+
+import os
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import pytest
+
+import pamjax
+from pamjax import _xla_cpu, presets
+from pamjax._simulate import solve
+
+ENTRY = f"{_xla_cpu.KEY}={_xla_cpu.THRESHOLD_BYTES}"
+
+
+@pytest.fixture
+def keep_status():
+    saved = dict(_xla_cpu._status)
+    yield
+    _xla_cpu._status.clear()
+    _xla_cpu._status.update(saved)
+
+
+def test_merged_flags_adds_or_extends_the_extra_options():
+    assert _xla_cpu.merged_flags("") == f"--xla_backend_extra_options={ENTRY}"
+    assert _xla_cpu.merged_flags("--xla_force_host_platform_device_count=2") == (
+        f"--xla_force_host_platform_device_count=2 --xla_backend_extra_options={ENTRY}")
+    got = _xla_cpu.merged_flags("--a=1 --xla_backend_extra_options=xla_cpu_disable_loop_unrolling --b=2")
+    assert got == f"--a=1 --xla_backend_extra_options=xla_cpu_disable_loop_unrolling,{ENTRY} --b=2"
+    assert _xla_cpu.merged_flags("--xla_backend_extra_options=") == f"--xla_backend_extra_options={ENTRY}"
+
+
+def test_apply_respects_the_user(keep_status, monkeypatch):
+    env = {"XLA_FLAGS": f"--xla_backend_extra_options={_xla_cpu.KEY}=5"}
+    status = _xla_cpu.apply(env)
+    assert status["active"] and "user" in status["reason"]
+    assert env["XLA_FLAGS"] == f"--xla_backend_extra_options={_xla_cpu.KEY}=5"  # untouched
+    env = {"XLA_FLAGS": "--foo", _xla_cpu.OPT_OUT: "0"}
+    status = _xla_cpu.apply(env)
+    assert not status["active"] and _xla_cpu.OPT_OUT in status["reason"]
+    assert env["XLA_FLAGS"] == "--foo"
+
+
+def test_apply_sets_the_flag_before_jax_starts(keep_status, monkeypatch):
+    monkeypatch.setattr(_xla_cpu, "_backends_initialised", lambda: False)
+    env = {}
+    status = _xla_cpu.apply(env)
+    assert status["active"] and env["XLA_FLAGS"] == f"--xla_backend_extra_options={ENTRY}"
+    assert pamjax.xla_cpu_status() == status
+
+
+def test_apply_after_jax_started_says_so(keep_status):
+    jnp.zeros(1).block_until_ready()  # the backend is up in this process
+    env = {}
+    if jax.default_backend() == "cpu":
+        with pytest.warns(UserWarning, match="4x slower"):
+            status = _xla_cpu.apply(env)
+    else:
+        status = _xla_cpu.apply(env)
+    assert not status["active"] and "import pamjax first" in status["reason"]
+    assert "XLA_FLAGS" not in env  # too late to matter: not written
+
+
+@pytest.mark.skipif(os.environ.get(_xla_cpu.OPT_OUT, "1") == "0", reason="the user opted out")
+@pytest.mark.skipif(jax.default_backend() != "cpu", reason="a CPU-runtime setting")
+def test_single_trajectory_solve_compiles_to_one_function():
+    """The setting reached XLA: simulate's solve loop is hoisted into a single compiled call (XLA marks it
+    `xla_cpu_small_call`). Without the setting it runs as ~150 thunks per step, ~4x slower."""
+    assert pamjax.xla_cpu_status()["active"], pamjax.xla_cpu_status()["reason"]
+    system = presets.mas10_system("averaged")
+    ts = jnp.linspace(0.0, 1.0, 101)
+    text = jax.jit(lambda s: solve(s, pamjax.Constant(0.5), ts, None, 0.0, solver=pamjax.Rodas5()).position
+                   ).lower(system).compile().as_text()
+    loops, hoisted = text.count(" while("), text.count("xla_cpu_small_call")
+    assert loops >= 1 and hoisted == loops, (loops, hoisted)  # every loop, the solver's included
+
+
+def test_late_import_warns_in_a_fresh_process():
+    code = "import jax, jax.numpy as jnp; jnp.zeros(1).block_until_ready(); import pamjax; " \
+           "print(pamjax.xla_cpu_status()['active'])"
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", _xla_cpu.OPT_OUT)}
+    env["JAX_PLATFORMS"] = "cpu"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "False"
+    assert "import pamjax first" in out.stderr
