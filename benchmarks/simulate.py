@@ -11,6 +11,10 @@ with RK45 and LSODA, in the same run. The transcription is checked against pamja
 
     python benchmarks/simulate.py            # full 25 s run (SciPy PWM runs take ~5-15 s each)
     python benchmarks/simulate.py --quick    # 2 s horizon, smoke check
+    PAMJAX_XLA_CPU_TUNING=0 python benchmarks/simulate.py   # XLA's default CPU loop execution, for comparison
+
+pamjax's XLA CPU loop setting (each solve loop compiled to one function; docs/performance.md) is reported in the
+output and as `xla_cpu_loop_setting=` in the RESULT line.
 
 Ends with `RESULT averaged_ms=... pwm_ms=... speedup_averaged_vs_scipy=... speedup_pwm_vs_scipy=... ...`.
 """
@@ -198,6 +202,9 @@ def main():
     print(f"pamjax simulate benchmark: {horizon:g} s triangle, 0.05-0.95 duty at 0.08 Hz, 9.6 kg, rtol=atol={RTOL:g}")
     print(f"jax {jax.__version__}, {platform.processor() or platform.machine()}, {jax.devices()[0].platform}, "
           f"repeats={repeats}")
+    xla = pamjax.xla_cpu_status()
+    print(f"pamjax XLA CPU loop setting (docs/performance.md): {'active' if xla['active'] else 'inactive'} "
+          f"({xla['reason']})")
 
     res = {}
     averaged = presets.mas10_system("averaged")
@@ -210,7 +217,7 @@ def main():
     ):
         c, core, whole, traj = time_pamjax(system, signal, ts, repeats, **kwargs)
         res[name] = dict(compile=c, core=core, whole=whole, traj=traj)
-        print(f"  pamjax {name:9s} compile {c:6.2f} s  run {core * 1e3:8.1f} ms (simulate() {whole * 1e3:8.1f} ms)  "
+        print(f"  pamjax {name:9s} compile {c:6.2f} s  run {core * 1e3:8.2f} ms (simulate() {whole * 1e3:8.2f} ms)  "
               f"steps {int(traj.num_steps):6d} (rejected {int(traj.num_rejected_steps)})", flush=True)
 
     scipy_pwm_step = float(pwm.valve.max_step())  # the same 2 ms cap pamjax's adaptive solve uses
@@ -240,12 +247,13 @@ def main():
     sp_sync = best("pwm") / res["pwm_sync"]["core"] if "LSODA" in res["pwm"] else float("nan")
     print(f"  speedup vs best SciPy: averaged {sp_avg:.1f}x, smooth PWM {sp_pwm:.1f}x, PWM-synchronous {sp_sync:.1f}x")
     print(
-        f"RESULT averaged_ms={res['averaged']['core'] * 1e3:.1f} pwm_ms={res['pwm']['core'] * 1e3:.1f} "
+        f"RESULT averaged_ms={res['averaged']['core'] * 1e3:.2f} pwm_ms={res['pwm']['core'] * 1e3:.1f} "
         f"speedup_averaged_vs_scipy={sp_avg:.1f} speedup_pwm_vs_scipy={sp_pwm:.1f} "
         f"pwm_sync_ms={res['pwm_sync']['core'] * 1e3:.1f} speedup_pwm_sync_vs_scipy={sp_sync:.1f} "
-        f"averaged_simulate_ms={res['averaged']['whole'] * 1e3:.1f} "
-        f"averaged_tsit5_ms={res['avg_tsit5']['core'] * 1e3:.1f} "
-        f"speedup_averaged_tsit5_vs_scipy={best('averaged') / res['avg_tsit5']['core']:.1f} horizon_s={horizon:g}"
+        f"averaged_simulate_ms={res['averaged']['whole'] * 1e3:.2f} "
+        f"averaged_tsit5_ms={res['avg_tsit5']['core'] * 1e3:.2f} "
+        f"speedup_averaged_tsit5_vs_scipy={best('averaged') / res['avg_tsit5']['core']:.1f} horizon_s={horizon:g} "
+        f"xla_cpu_loop_setting={int(xla['active'])}"
     )
 
 
