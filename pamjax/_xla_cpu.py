@@ -4,9 +4,9 @@ Why: XLA's CPU runtime executes a compiled program as a sequence of "thunks", on
 or loop. A single-trajectory ODE solve is a while loop whose body is ~150 tiny kernels on 3-4 numbers, so the
 per-kernel dispatch is most of its cost: paper 000's 25 s triangle run (averaged valve, RODAS5, ~800 steps) took
 4.9 ms as thunks and 1.1 ms as one function (benchmarks/simulate.py, RESULTS.md runs s4-s7); the 20-parameter
-joint fit 10.1-11.7 s and 2.0-2.8 s after compilation (benchmarks/fit.py). XLA already compiles a loop to one function when it touches fewer than
-`xla_cpu_small_while_loop_byte_threshold` bytes per iteration (default 1,024, XLA's
-`SmallWhileLoopHoistingPass`); pamjax raises that threshold to `THRESHOLD_BYTES`.
+joint fit 10.1-11.7 s and 2.0-2.8 s after compilation (benchmarks/fit.py). XLA already compiles a loop to one
+function when it touches fewer than `xla_cpu_small_while_loop_byte_threshold` bytes per iteration (default 1,024,
+XLA's `SmallWhileLoopHoistingPass`); pamjax raises that threshold to `THRESHOLD_BYTES`.
 
 Why not higher: a batched loop (a `sweep` over many lanes) is faster as thunks, whose kernels are vectorised over the
 lanes (1,024-lane sweep measured both ways: RODAS5 0.054 s as thunks vs 0.078 s as one function, PWM RK4 2.8 s vs
@@ -17,8 +17,8 @@ is written one slice per step), the 20-parameter fit's forward-mode Jacobians th
 XLA reads its flags once, when JAX initialises its backend (the first array or computation), so the setting only
 takes effect if pamjax is imported before that. It is added to the `XLA_FLAGS` environment variable (merged into an
 existing `--xla_backend_extra_options`), never replacing a value the user set; `PAMJAX_XLA_CPU_TUNING=0` leaves
-`XLA_FLAGS` alone. `pamjax.xla_cpu_status()` says whether it is active. Other backends ignore it: only the CPU compiler reads
-the key, and XLA hands LLVM only extra options whose names do not start with `xla_`
+`XLA_FLAGS` alone. `pamjax.xla_cpu_status()` says whether it is active. Other backends ignore it: only the CPU
+compiler reads the key, and XLA hands LLVM only extra options whose names do not start with `xla_`
 (`llvm_ir::ExtractXlaBackendExtraOptions`).
 """
 
