@@ -281,7 +281,10 @@ def default_solver(system: AbstractSystem):
     Tsit5 3,170 steps, Rodas5 812 (stick phases no longer bound the step); smoothed PWM valve Tsit5 38,901 steps
     in 127 ms, Rodas5 43,711 in 328 ms (the 0.1 ms edges bound both).
     """
-    return dfx.Tsit5() if system.valve.max_step() is not None else Rodas5()
+    return _TSIT5 if system.valve.max_step() is not None else _RODAS5
+
+
+_TSIT5, _RODAS5 = dfx.Tsit5(), Rodas5()  # stateless, immutable: built once, not per call
 
 
 def simulate(
@@ -339,7 +342,10 @@ def simulate(
     """
     validate(system, signal, ts, y0, t0)
     ts = jnp.asarray(ts, dtype=float)
-    t0 = ts[0] if t0 is None else jnp.asarray(t0, dtype=float)
+    if t0 is None:  # a concrete ts[0] is read on the host (indexing a device array costs a dispatch)
+        t0 = ts[0] if _is_traced(ts) else jnp.asarray(float(np.asarray(ts)[0]))
+    else:
+        t0 = jnp.asarray(t0, dtype=float)
     jump_ts = None
     periods = None
     if stepping == "pwm":

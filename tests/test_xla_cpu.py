@@ -87,3 +87,15 @@ def test_late_import_warns_in_a_fresh_process():
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "False"
     assert "import pamjax first" in out.stderr
+
+
+def test_importing_pamjax_does_not_start_jax():
+    """The setting (and JAX's device options, e.g. `pamjax sweep --cpu-devices`) can only apply if importing pamjax
+    leaves JAX's backend unstarted: no arrays, no computations at import."""
+    code = ("import pamjax, pamjax.presets; from jax._src import xla_bridge; "
+            "print(xla_bridge.backends_are_initialized(), pamjax.xla_cpu_status()['active'])")
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", _xla_cpu.OPT_OUT)}
+    env["JAX_PLATFORMS"] = "cpu"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["False", "True"]
