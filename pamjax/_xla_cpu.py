@@ -65,10 +65,13 @@ def merged_flags(flags: str, threshold: int = THRESHOLD_BYTES) -> str:
 def apply(environ=os.environ) -> dict:
     """Add the setting to `environ["XLA_FLAGS"]` unless the user set the key, opted out, or JAX is already running."""
     flags = environ.get("XLA_FLAGS", "")
-    if environ.get(OPT_OUT, "1").strip().lower() in ("0", "false", "no", "off"):
+    users = re.search(rf"{KEY}=(\d+)", flags)
+    if users is not None:  # the user's value is what XLA uses, whatever else is set
+        value = int(users.group(1))
+        _status.update(active=value >= THRESHOLD_BYTES, reason=(
+            f"set by the user in XLA_FLAGS: {KEY}={value} (pamjax's value: {THRESHOLD_BYTES})"))
+    elif environ.get(OPT_OUT, "1").strip().lower() in ("0", "false", "no", "off"):
         _status.update(active=False, reason=f"{OPT_OUT}={environ[OPT_OUT]}: XLA_FLAGS left as they are")
-    elif KEY in flags:
-        _status.update(active=True, reason=f"set by the user in XLA_FLAGS ({KEY} given there)")
     elif _backends_initialised():
         _status.update(active=False, reason=(
             "JAX's backend was initialised before pamjax was imported, so XLA had already read its flags: import "

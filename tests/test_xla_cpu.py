@@ -36,8 +36,12 @@ def test_merged_flags_adds_or_extends_the_extra_options():
 def test_apply_respects_the_user(keep_status, monkeypatch):
     env = {"XLA_FLAGS": f"--xla_backend_extra_options={_xla_cpu.KEY}=5"}
     status = _xla_cpu.apply(env)
-    assert status["active"] and "user" in status["reason"]
+    assert not status["active"] and "user" in status["reason"] and "=5" in status["reason"]  # below pamjax's value
     assert env["XLA_FLAGS"] == f"--xla_backend_extra_options={_xla_cpu.KEY}=5"  # untouched
+    env = {"XLA_FLAGS": f"--xla_backend_extra_options=a,{_xla_cpu.KEY}=500000", _xla_cpu.OPT_OUT: "0"}
+    status = _xla_cpu.apply(env)
+    assert status["active"] and "user" in status["reason"]  # the user's flag is in effect, opt-out or not
+    assert env["XLA_FLAGS"] == f"--xla_backend_extra_options=a,{_xla_cpu.KEY}=500000"
     env = {"XLA_FLAGS": "--foo", _xla_cpu.OPT_OUT: "0"}
     status = _xla_cpu.apply(env)
     assert not status["active"] and _xla_cpu.OPT_OUT in status["reason"]
@@ -64,7 +68,8 @@ def test_apply_after_jax_started_says_so(keep_status):
     assert "XLA_FLAGS" not in env  # too late to matter: not written
 
 
-@pytest.mark.skipif(os.environ.get(_xla_cpu.OPT_OUT, "1") == "0", reason="the user opted out")
+@pytest.mark.skipif(os.environ.get(_xla_cpu.OPT_OUT, "1") == "0" or "by the user" in _xla_cpu.xla_cpu_status()["reason"],
+                    reason="the user opted out or chose their own threshold")
 @pytest.mark.skipif(jax.default_backend() != "cpu", reason="a CPU-runtime setting")
 def test_single_trajectory_solve_compiles_to_one_function():
     """The setting reached XLA: simulate's solve loop is hoisted into a single compiled call (XLA marks it
