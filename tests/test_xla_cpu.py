@@ -68,8 +68,10 @@ def test_apply_after_jax_started_says_so(keep_status):
     assert "XLA_FLAGS" not in env  # too late to matter: not written
 
 
-@pytest.mark.skipif(os.environ.get(_xla_cpu.OPT_OUT, "1") == "0" or "by the user" in _xla_cpu.xla_cpu_status()["reason"],
-                    reason="the user opted out or chose their own threshold")
+_USER_CHOICE = os.environ.get(_xla_cpu.OPT_OUT, "1") == "0" or "by the user" in _xla_cpu.xla_cpu_status()["reason"]
+
+
+@pytest.mark.skipif(_USER_CHOICE, reason="the user opted out or chose their own threshold")
 @pytest.mark.skipif(jax.default_backend() != "cpu", reason="a CPU-runtime setting")
 def test_single_trajectory_solve_compiles_to_one_function():
     """The setting reached XLA: simulate's solve loop is hoisted into a single compiled call (XLA marks it
