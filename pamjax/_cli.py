@@ -12,29 +12,8 @@ _COMMANDS = {
 }
 
 
-def _split_cpu_for_sweep(argv):
-    """`pamjax sweep` runs on one XLA CPU device per core by default (`--cpu-devices`), so that `sweep` shards its
-    batch over every core. JAX takes the device count only before it first runs anything, which importing the
-    subcommand modules does; so it is read from the command line here, before them."""
-    if not argv or argv[0] != "sweep":
-        return
-    from ._cli_sweep import DEFAULT_CPU_DEVICES  # importing pamjax runs no JAX computation
-
-    early = argparse.ArgumentParser(add_help=False)
-    early.add_argument("--cpu-devices", type=int, default=DEFAULT_CPU_DEVICES)
-    known, _ = early.parse_known_args(argv[1:])
-    if known.cpu_devices >= 1:  # a bad value is reported by the full parser below
-        import jax
-
-        try:
-            jax.config.update("jax_num_cpu_devices", known.cpu_devices)
-        except RuntimeError:  # JAX already ran in this process (main() called from Python): its devices stay
-            pass
-
-
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
-    _split_cpu_for_sweep(argv)
     parser = argparse.ArgumentParser(prog="pamjax", description="Differentiable pneumatic artificial muscle models.")
     sub = parser.add_subparsers(dest="command", required=True)
     available = {}

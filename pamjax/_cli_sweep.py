@@ -44,7 +44,7 @@ _AXES = {"commands", "pressures", "frequencies"}
 _VALVES = ("pwm", "averaged")
 _AXIS_KEYS = {"start", "stop", "num", "log"}
 OUTPUTS = ("sweep.npz", "sweep.csv", "sweep.png")
-DEFAULT_CPU_DEVICES = os.cpu_count() or 1  # --cpu-devices: one XLA CPU device per core (set early by pamjax._cli)
+DEFAULT_CPU_DEVICES = os.cpu_count() or 1  # --cpu-devices: one XLA CPU device per core
 
 
 def add_arguments(parser):
@@ -55,6 +55,17 @@ def add_arguments(parser):
     parser.add_argument("--cpu-devices", type=_positive_int, default=DEFAULT_CPU_DEVICES,
                         help="on CPU, split the processor into this many XLA devices and shard the sweep over them "
                              "(default: one per core; 1: a single device). No effect on GPU/TPU runs")
+
+
+def _use_cpu_devices(count):
+    """Split the CPU into `count` XLA devices, so that `sweep` shards its batch over every core. JAX takes the
+    device count only before its backend starts; importing pamjax and parsing the command line start nothing."""
+    import jax
+
+    try:
+        jax.config.update("jax_num_cpu_devices", count)
+    except RuntimeError:  # JAX already ran in this process (main() called from Python): its devices stay
+        pass
 
 
 def _positive_int(text):
@@ -175,6 +186,7 @@ def plot(spec, path):
 
 
 def run(args):
+    _use_cpu_devices(args.cpu_devices)
     config = read_toml(args.config)  # run_config validates it before anything runs
     name = os.path.splitext(os.path.basename(args.config))[0]
     out = args.out or os.path.join("results", f"sweep-{name}")

@@ -39,6 +39,8 @@ def __getattr__(name):
     if name == "PAPER001_AIR":
         return paper001_air()
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 VOLTAGE_RANGE = (0.0, 10.0)  # V, VPPM reference range (paper 001, Sect. 2)
 EQ6_GAIN = 1.01  # bar/V, static gain of G_Vref (eq. 6)
 EQ6_TIME_CONSTANTS = (0.041, 0.023)  # s, poles of G_Vref and G_Qin (eq. 6, 7)

@@ -277,9 +277,9 @@ def validate(system, signal, ts, y0=None, t0=None):
 def default_solver(system: AbstractSystem):
     """`simulate`'s solver for `system`: `Rodas5()` for a continuous valve (no switching edges), else `Tsit5()`.
 
-    Measured on paper 000's 25 s triangle run at rtol = atol = 1e-6 (benchmarks/simulate.py): averaged valve
-    Tsit5 3,170 steps, Rodas5 812 (stick phases no longer bound the step); smoothed PWM valve Tsit5 38,901 steps
-    in 127 ms, Rodas5 43,711 in 328 ms (the 0.1 ms edges bound both).
+    Measured on paper 000's 25 s triangle run at rtol = atol = 1e-6 (benchmarks/simulate.py, RESULTS.md): averaged
+    valve Tsit5 3,170 steps in 2.4 ms, Rodas5 805 in 1.1 ms (stick phases no longer bound the step); smoothed PWM
+    valve Tsit5 38,908 steps in 31 ms, Rodas5 43,781 in 65 ms (the 0.1 ms edges bound both).
     """
     return _TSIT5 if system.valve.max_step() is not None else _RODAS5
 
