@@ -13,7 +13,18 @@ from ._smooth import smooth_abs, smooth_sign
 
 
 class AbstractFriction(eqx.Module):
-    """Friction model: `initial_state()`, `state_rate(v, z)`, `force(v, z)` [N] (positive opposes positive v)."""
+    """Friction model: `initial_state()`, `state_rate(v, z)`, `force(v, z)` [N] (positive opposes positive v).
+
+    A *hybrid* friction (`hybrid = True`, e.g. `KarnoppFriction`) has discrete modes (stuck / sliding) held in its
+    state `z` and switched at events; the systems that use it expose those events to the fixed-grid integrator
+    (`pamjax._grid`), which locates them inside the step. Smooth frictions have `hybrid = False`.
+    """
+
+    hybrid = False
+
+    def is_stuck(self, z):
+        """Whether the friction holds the payload still (a hybrid friction's stuck mode); False for smooth ones."""
+        return False
 
     def initial_state(self):
         return None
@@ -89,3 +100,50 @@ class BristleFriction(AbstractFriction):
 
     def force(self, v, z):
         return self.bristle_stiffness * z + self.bristle_damping * self.state_rate(v, z) + self.viscous_coefficient * v
+
+
+class KarnoppFriction(AbstractFriction):
+    """Exact stick-slip Coulomb + viscous friction (Karnopp 1985), paper 000's eq. 8-9 with a true sign.
+
+    Sliding (mode z = ±1, the direction of motion): F = F_c z + C_f v, the sign held fixed between events, so the
+    vector field stays smooth inside every step. Stuck (z = 0): the payload holds still (ẋ = 0, ẍ = 0) while the net
+    force on it stays within ±F_c; the friction force is then whatever balances it. Mode switches are events located
+    inside the step by the fixed-grid integrator (`pamjax._grid`): sliding → the velocity reaches 0, then stuck if
+    |F_net| ≤ F_c, else sliding the other way; stuck → |F_net| reaches F_c, then sliding in the direction of F_net.
+    Their times carry derivatives (implicit function theorem), so fits get the exact gradients of the sharp model.
+
+    This is the friction of the hybrid reference bench (`shared/data/*/meta.json`: "exact Karnopp stick-slip"). It
+    needs fixed-grid stepping (`simulate(..., stepping="pwm")` for a switching valve, `stepping="grid"` otherwise),
+    which `stepping="auto"` chooses; an adaptive diffrax solve cannot switch its modes and is refused.
+
+    **Arguments:**
+
+    - `coulomb_force`: F_c [N]; 16 (paper 000: half the 32 N hysteresis loop width).
+    - `viscous_coefficient`: C_f [N s/m]; 250 (see `pamjax.presets`).
+    """
+
+    coulomb_force: jax.Array = eqx.field(converter=jnp.asarray, default=16.0)  # N
+    viscous_coefficient: jax.Array = eqx.field(converter=jnp.asarray, default=250.0)  # N s/m
+
+    hybrid = True
+
+    def __check_init__(self):
+        check_nonnegative(self.coulomb_force, "KarnoppFriction.coulomb_force")
+        check_nonnegative(self.viscous_coefficient, "KarnoppFriction.viscous_coefficient")
+
+    def initial_state(self):
+        return jnp.zeros(())  # stuck: the bench's runs start at rest
+
+    def state_rate(self, v, z):
+        return jnp.zeros_like(z)  # the mode changes only at events
+
+    def is_stuck(self, z):
+        return jnp.abs(z) < 0.5
+
+    def force(self, v, z):
+        """Sliding friction [N]; in the stuck mode the system holds the payload and this is not used."""
+        return self.coulomb_force * z + self.viscous_coefficient * v
+
+    def mode_after_rest(self, net_force):
+        """Mode at zero velocity under a net driving force [N]: stuck (0) within ±F_c, else its sign (±1)."""
+        return jnp.where(jnp.abs(net_force) <= self.coulomb_force, 0.0, jnp.sign(net_force))

@@ -215,7 +215,7 @@ def _solve_pwm(system, signal, ts, y0, t0, substeps, periods, throw):
         system, signal, ts, z0, flat_scale, unravel, t0, substeps=substeps, periods=periods
     )
     commands = _sync.latched_commands(system.valve, signal, ts)
-    outs = _sync.outputs_at(system, ts, states, commands)
+    outs = _sync.outputs_at(system, signal, ts, states, commands, t0)
     if throw:
         states = eqx.error_if(states, ~finite, "PWM-synchronous stepping produced a non-finite state; raise substeps")
     result = jnp.where(finite, 0, _RESULT_NONFINITE)

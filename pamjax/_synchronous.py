@@ -24,6 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
+from . import _grid
 from ._errors import PamjaxInputError
 from ._valve import AbstractValve, OnOffValve
 
@@ -38,14 +39,46 @@ class HeldOpeningValve(AbstractValve):
         return self.valve.mass_flow_at_opening(self.opening, pressure, air)
 
 
-def sharp_opening(valve: OnOffValve, phase, command):
-    """Exact-edge opening (0 or 1) at `phase` [s] ∈ [0, T) of a period with latched duty `command` (no gradient)."""
+def sharp_opening(valve: OnOffValve, phase, command, open_before=False):
+    """Exact-edge opening (0 or 1) at `phase` [s] ∈ [0, T) of a period with latched duty `command`, the valve open
+    at the period start if `open_before` (no gradient)."""
     valve, phase, command = jax.lax.stop_gradient((valve, phase, command))
+    on_edge, off_edge = _edges(valve, command)
+    before, during, after = _region_openings(valve, command, open_before)
+    return jnp.where(phase < on_edge, before, jnp.where(phase < off_edge, during, after))
+
+
+def _edges(valve: OnOffValve, command):
+    """Phases [s] of the period's on edge and off edge, clipped to [0, T] and ordered (on ≤ off). When the on-pulse
+    is too short to open the valve, the 'on edge' is put at the off edge (nothing happens between them)."""
     period = valve.period
-    opens = command * period - valve.switch_on_delay >= 0
-    closes = (1.0 - command) * period - valve.switch_off_delay > 0
-    window = (phase >= valve.switch_on_delay) & (phase < command * period + valve.switch_off_delay)
-    return jnp.where(opens & (window | ~closes), 1.0, 0.0)
+    opens, _ = valve.switching_gates(command)
+    off_edge = jnp.clip(command * period + valve.switch_off_delay, 0.0, period)
+    on_edge = jnp.where(opens, jnp.clip(valve.switch_on_delay, 0.0, period), off_edge)
+    return on_edge, jnp.maximum(off_edge, on_edge)
+
+
+def _region_openings(valve: OnOffValve, command, open_before):
+    """Opening (0/1) before the on edge, between the edges and after the off edge of one period."""
+    opens, closes = jax.lax.stop_gradient(valve.switching_gates(command))
+    before = jnp.where(open_before, 1.0, 0.0)
+    during = jnp.where(opens, 1.0, before)
+    after = jnp.where(closes, 0.0, during)
+    return before, during, after
+
+
+def open_at_start(valve: OnOffValve, signal, start, first_start):
+    """Whether the valve is open at the start `start` of a PWM period: it stays open from the period before when that
+    period's off-pulse was too short to close it (duty above ~90 % at 50 Hz with 2 ms delays). The valve is closed
+    before `first_start` (the start of the first period simulated: the runs start with the valve off). Exact when
+    T > switch_on_delay + switch_off_delay (a period then opens or closes the valve); two periods back otherwise."""
+    period = valve.period
+    state = jnp.zeros((), dtype=bool)
+    for back in (2.0, 1.0):
+        previous = start - back * period
+        end_state = valve.open_at_period_end(signal(previous), state)
+        state = jnp.where(previous >= first_start - 0.5 * period, end_state, False)
+    return jax.lax.stop_gradient(state)
 
 
 def num_periods(valve: OnOffValve, t0, t1):
@@ -62,24 +95,21 @@ def num_periods(valve: OnOffValve, t0, t1):
     return max(int(np.ceil(t1 * frequency - first - 1e-9)), 1)
 
 
-def _period_grid(valve: OnOffValve, signal, start, substeps):
+def _period_grid(valve: OnOffValve, signal, start, substeps, open_before):
     """Node times (K + 3,) of one period starting at `start` and the opening (K + 2,) of each interval."""
     period = valve.period
     command = signal(start)
-    on_edge = jnp.clip(valve.switch_on_delay, 0.0, period)
-    off_edge = jnp.clip(command * period + valve.switch_off_delay, on_edge, period)
+    on_edge, off_edge = _edges(valve, command)
     uniform = jnp.arange(substeps + 1) * (period / substeps)
     phases = jnp.sort(jnp.concatenate([uniform, jnp.stack([on_edge, off_edge])]))
-    # Intervals between the on edge and the off edge are open. Ranks (not midpoints) decide, so that an edge that
-    # coincides with a uniform node gets the derivative of the side it moves into: the stable order puts the
-    # uniform node first, the on edge next, the off edge last.
+    # Ranks (not midpoints) decide which region an interval lies in, so that an edge that coincides with a uniform
+    # node gets the derivative of the side it moves into: the stable order puts the uniform node first, the on edge
+    # next, the off edge last.
     on_rank = jnp.sum(uniform <= on_edge)
     off_rank = jnp.sum(uniform <= off_edge) + 1
     index = jnp.arange(substeps + 2)
-    window = (index >= on_rank) & (index < off_rank)
-    gate_open = jax.lax.stop_gradient(command * period - valve.switch_on_delay >= 0)
-    gate_close = jax.lax.stop_gradient((1.0 - command) * period - valve.switch_off_delay > 0)
-    opening = jnp.where(gate_open & (window | ~gate_close), 1.0, 0.0)
+    before, during, after = _region_openings(valve, command, open_before)
+    opening = jnp.where(index < on_rank, before, jnp.where(index < off_rank, during, after))
     return start + phases, opening
 
 
@@ -103,46 +133,33 @@ def solve_pwm_synchronous(system, signal, ts, z0, flat_scale, unravel, t0, *, su
     period = valve.period
     first = jnp.floor(t0 * valve.pwm_frequency + 1e-9) * period
     starts = first + jnp.arange(periods) * period
-    nodes, openings = jax.vmap(lambda s: _period_grid(valve, signal, s, substeps))(starts)
+    carried = jax.vmap(lambda s: open_at_start(valve, signal, s, first))(starts)
+    nodes, openings = jax.vmap(lambda s, c: _period_grid(valve, signal, s, substeps, c))(starts, carried)
     # Intervals outside [t0, t1] shrink to zero length (an RK step of length 0 is the identity).
     left = jnp.clip(nodes[:, :-1], t0, t1).reshape(-1)
     right = jnp.clip(nodes[:, 1:], t0, t1).reshape(-1)
     openings = openings.reshape(-1)
 
-    def field(t, z, opening):
-        held = eqx.tree_at(lambda s: s.valve, system, HeldOpeningValve(valve, opening))
+    def field(system, t, z, opening):
+        held = eqx.tree_at(lambda s: s.valve, system, HeldOpeningValve(system.valve, opening))
         dy = held.vector_field(t, unravel(z * flat_scale), None)
         return ravel_pytree(dy)[0] / flat_scale
 
-    def rk4(z, interval):
-        ta, tb, opening = interval
-        h = tb - ta
-        k1 = field(ta, z, opening)
-        k2 = field(ta + 0.5 * h, z + 0.5 * h * k1, opening)
-        k3 = field(ta + 0.5 * h, z + 0.5 * h * k2, opening)
-        k4 = field(tb, z + h * k3, opening)
-        z_next = z + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        slope_end = field(tb, z_next, opening)  # for the Hermite dense output
-        return z_next, (z_next, k1, slope_end)
+    event = update = None
+    if system.hybrid:
 
-    _, (zs, slopes_start, slopes_end) = jax.lax.scan(rk4, z0, (left, right, openings))
-    z_starts = jnp.concatenate([z0[None], zs[:-1]])
+        def event(system, t, z, opening):
+            return system.event_function(t, unravel(z * flat_scale), None)
 
-    # Cubic Hermite interpolation at the output times, inside the last interval that starts at or before t.
-    index = jnp.clip(jnp.searchsorted(left, ts, side="right") - 1, 0, left.shape[0] - 1)
-    ta, tb = left[index], right[index]
-    h = tb - ta
-    h_safe = jnp.where(h > 0, h, 1.0)
-    s = jnp.where(h > 0, (ts - ta) / h_safe, 1.0)[:, None]
-    h = h[:, None]
-    h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
-    h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
-    z_out = h00 * z_starts[index] + h10 * h * slopes_start[index] + h01 * zs[index] + h11 * h * slopes_end[index]
+        def update(system, t, z, opening):
+            return ravel_pytree(system.event_update(t, unravel(z * flat_scale), None))[0] / flat_scale
+
+    z_out, num_steps, num_events, missed, finite = _grid.integrate(
+        system, field, event, update, z0, left, right, openings, ts
+    )
     # Output times at or before t0 take the initial state.
     z_out = jnp.where((ts <= t0)[:, None], z0[None], z_out)
     states = jax.vmap(lambda z: unravel(z * flat_scale))(z_out)
-    num_steps = jnp.sum(right > left)
-    finite = jnp.all(jnp.isfinite(zs[-1]))
     return states, num_steps, finite
 
 
@@ -151,13 +168,15 @@ def latched_commands(valve: OnOffValve, signal, ts):
     return jax.vmap(lambda t: signal(jnp.floor(t * valve.pwm_frequency + 1e-9) * valve.period))(ts)
 
 
-def outputs_at(system, ts, states, commands):
+def outputs_at(system, signal, ts, states, commands, t0):
     """`system.outputs` at times `ts` with the valve holding its exact-edge opening there (mass flow included)."""
     valve = system.valve
-    phases = ts - jnp.floor(ts * valve.pwm_frequency + 1e-9) * valve.period
+    starts = jnp.floor(ts * valve.pwm_frequency + 1e-9) * valve.period
+    first = jnp.floor(t0 * valve.pwm_frequency + 1e-9) * valve.period
 
-    def one(t, state, command, phase):
-        held = eqx.tree_at(lambda s: s.valve, system, HeldOpeningValve(valve, sharp_opening(valve, phase, command)))
+    def one(t, state, command, start):
+        opening = sharp_opening(valve, t - start, command, open_at_start(valve, signal, start, first))
+        held = eqx.tree_at(lambda s: s.valve, system, HeldOpeningValve(valve, opening))
         return held.outputs(t, state, command)
 
-    return jax.vmap(one)(ts, states, commands, phases)
+    return jax.vmap(one)(ts, states, commands, starts)

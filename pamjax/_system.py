@@ -54,6 +54,20 @@ class AbstractSystem(eqx.Module):
     def state_scale(self):
         raise NotImplementedError
 
+    @property
+    def hybrid(self):
+        """Whether the system has discrete modes switched at events (e.g. stick-slip friction)."""
+        return False
+
+    def event_function(self, t, state, command):
+        """Hybrid systems only: a scalar that stays ≥ 0 while the current mode holds and crosses below 0 where it
+        ends. The fixed-grid integrator (`pamjax._grid`) locates that crossing inside the step."""
+        raise NotImplementedError
+
+    def event_update(self, t, state, command):
+        """Hybrid systems only: the state just after the event at `state` (the new mode; velocities reset)."""
+        raise NotImplementedError
+
 
 def pressure_rate(mass_flow, pressure, volume, volume_rate, polytropic_index, air: Air):
     """Paper 000 eq. 15: ṗ = n R T ṁ / V − n p V̇ / V [Pa/s] (n = 1.4 adiabatic, 1.0 isothermal)."""
@@ -160,25 +174,71 @@ class MuscleSystem(AbstractSystem):
             friction=self.friction.initial_state(),
         )
 
+    @property
+    def hybrid(self):
+        return self.friction.hybrid
+
     def _forces(self, t, state, command):
         x, v = state.position, state.velocity
         muscle = self.muscle.force(x, state.pressure, self.air)
         friction = self.friction.force(v, state.friction)
-        stops = self.end_stops.force(x, v, self.muscle.min_position, self.muscle.max_position)
+        if self.hybrid:  # the stroke limits are inelastic stops, handled as events (event_function)
+            stops = jnp.zeros_like(x)
+        else:
+            stops = self.end_stops.force(x, v, self.muscle.min_position, self.muscle.max_position)
         return muscle, friction, stops
+
+    def _held_force(self, x, muscle):
+        """Net driving force on a payload at rest [N] (muscle − weight), with what an end stop holds removed: at the
+        upper stop only a downward force can move it, at the lower stop only an upward one (hybrid systems)."""
+        net = muscle - self.payload_mass * self.gravity
+        at_upper = x >= self.muscle.max_position - 1e-12
+        at_lower = x <= self.muscle.min_position + 1e-12
+        return jnp.where(at_upper, jnp.minimum(net, 0.0), jnp.where(at_lower, jnp.maximum(net, 0.0), net))
 
     def vector_field(self, t, state, command):
         x, v, p = state.position, state.velocity, state.pressure
         mdot = self.valve.mass_flow(t, command, p, self.air)
-        volume = self.muscle.volume(x)
-        volume_rate = self.muscle.volume_slope(x) * v
-        dp = pressure_rate(mdot, p, volume, volume_rate, self.polytropic_index, self.air)
         muscle, friction, stops = self._forces(t, state, command)
         dv = (muscle - friction + stops) / self.payload_mass - self.gravity
-        return MuscleState(pressure=dp, position=v, velocity=dv, friction=self.friction.state_rate(v, state.friction))
+        dx = v
+        stuck = self.friction.is_stuck(state.friction)
+        if self.hybrid:  # stuck: the payload holds still (its velocity is exactly 0 after the event)
+            dx = jnp.where(stuck, 0.0, v)
+            dv = jnp.where(stuck, 0.0, dv)
+        volume = self.muscle.volume(x)
+        volume_rate = self.muscle.volume_slope(x) * dx
+        dp = pressure_rate(mdot, p, volume, volume_rate, self.polytropic_index, self.air)
+        return MuscleState(pressure=dp, position=dx, velocity=dv, friction=self.friction.state_rate(v, state.friction))
+
+    def event_function(self, t, state, command):
+        """Stuck: (F_c − |F_net|)/(M g), crossing 0 when the net force breaks the payload free. Sliding in
+        direction z: min(z ẋ / 1 cm/s, distance to the stop ahead / 1 cm), crossing 0 when it comes to rest or
+        reaches a stop."""
+        x, v, z = state.position, state.velocity, state.friction
+        weight = self.payload_mass * self.gravity
+        held = self._held_force(x, self.muscle.force(x, state.pressure, self.air))
+        stuck_margin = (self.friction.coulomb_force - jnp.abs(held)) / weight
+        gap = jnp.where(z > 0, self.muscle.max_position - x, x - self.muscle.min_position)
+        sliding_margin = jnp.minimum(z * v / 1e-2, gap / 1e-2)
+        return jnp.where(self.friction.is_stuck(z), stuck_margin, sliding_margin)
+
+    def event_update(self, t, state, command):
+        """At rest (velocity 0; a stop is inelastic), on a stop if at one, then stuck or sliding by the net force."""
+        x = jnp.clip(state.position, self.muscle.min_position, self.muscle.max_position)
+        held = self._held_force(x, self.muscle.force(x, state.pressure, self.air))
+        return MuscleState(
+            pressure=state.pressure,
+            position=x,
+            velocity=jnp.zeros_like(state.velocity),
+            friction=self.friction.mode_after_rest(held),
+        )
 
     def outputs(self, t, state, command):
         muscle, friction, _ = self._forces(t, state, command)
+        if self.hybrid:  # stuck: static friction balances the net force
+            stuck = self.friction.is_stuck(state.friction)
+            friction = jnp.where(stuck, self._held_force(state.position, muscle), friction)
         return dict(
             pressure=state.pressure,
             position=state.position,
@@ -191,7 +251,7 @@ class MuscleSystem(AbstractSystem):
 
     def state_scale(self):
         friction = self.friction.initial_state()
-        friction_scale = None if friction is None else jnp.asarray(1e-4)
+        friction_scale = None if friction is None else jnp.asarray(1.0 if self.hybrid else 1e-4)
         return MuscleState(
             pressure=jnp.asarray(1e5), position=jnp.asarray(1e-2), velocity=jnp.asarray(1e-2), friction=friction_scale
         )

@@ -144,6 +144,18 @@ class OnOffValve(AbstractValve):
         closes = step_open((1.0 - command) * period - off_delay)  # the off-pulse is long enough to close it
         return opens * (closes * jnp.clip(window, 0.0, 1.0) + (1.0 - closes))
 
+    def switching_gates(self, command):
+        """(opens, closes) for a period of duty `command`: whether its on-pulse (u T) outlasts the switch-on delay
+        and its off-pulse ((1 − u) T) the switch-off delay (paper 000: only duties of 10-90 % switch at 50 Hz)."""
+        period = self.period
+        return (command * period - self.switch_on_delay >= 0, (1.0 - command) * period - self.switch_off_delay > 0)
+
+    def open_at_period_end(self, command, open_before):
+        """Whether the valve is open at the end of a period of duty `command` that it started open (`open_before`)
+        or closed: a period that closes it ends closed, one that opens and does not close it ends open."""
+        opens, closes = self.switching_gates(command)
+        return jnp.where(closes, False, jnp.where(opens, True, open_before))
+
     def edge_times(self, commands_at_period_starts, t0):
         """Switching times [s] per period for the exact mode: (opening, closing) after period start t0 + kT."""
         starts = t0 + jnp.arange(commands_at_period_starts.shape[0]) * self.period
