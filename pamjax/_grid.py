@@ -137,7 +137,7 @@ def integrate(system, field, event, update, z0, left, right, held, ts):
     h = lengths[index]
     del stops  # a segment holds from its start to the next segment's start
     s = jnp.where(h > 0, (ts - starts[index]) / jnp.where(h > 0, h, 1.0), 0.0)
-    s = jnp.clip(s, 0.0, 1.0)[:, None]
+    s = s[:, None]  # in [0, 1] by construction (no clip: its derivative is halved where s sits on a bound)
     z_out = _hermite(s, h[:, None], za[index], zb[index], fa[index], fb[index])
     z_out = jnp.where((ts <= left[0])[:, None], z0[None], z_out)
     num_steps = jnp.sum(right > left)
