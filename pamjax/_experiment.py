@@ -79,6 +79,7 @@ class Experiment(eqx.Module):
     data: dict
     weights: dict  # 1/scale where the sample is used, 0 where masked (NaN)
     scales: dict = eqx.field(static=True)
+    noise_channels: tuple = eqx.field(static=True)  # channels whose scale the user gave (their noise level)
     signal: AbstractSignal
     build: eqx.Module
     initial: dict
@@ -136,6 +137,7 @@ class Experiment(eqx.Module):
             if c not in channels:
                 raise PamjaxInputError(f"scales names channel {c!r}, which is not compared; channels are {channels}")
         self.scales = {c: float(scales.get(c, _default_scale(recording[c][recording.mask[c]]))) for c in channels}
+        self.noise_channels = tuple(c for c in channels if c in scales)
         for c, s in self.scales.items():
             if not (np.isfinite(s) and s > 0):
                 raise PamjaxInputError(f"scales[{c!r}] must be > 0 (the channel's noise level), got {s}")
