@@ -17,10 +17,7 @@ the linearised standard errors understate the uncertainty. `channel_errors` meas
 `se_inflation` exceeds `MISMATCH_THRESHOLD` (1.2: the residuals are then not noise).
 """
 
-import jax
 import numpy as np
-
-from ._experiment import predict
 
 MISMATCH_THRESHOLD = 1.2  # se_inflation above which the residuals are not noise
 _LAGS = (1, 2, 5, 10, 20)
@@ -54,28 +51,21 @@ def _residual_stats(err, noise_given):
                 autocorrelation=acf, se_inflation=float(ratio * np.sqrt((1 + rho) / (1 - rho))))
 
 
-def channel_errors(model, experiments):
+def channel_errors(experiments, residuals):
     """experiment → channel → errors (rmse, max_error, range, % of range, noise, whiteness; `validation_` for the
-    held-out part)."""
-    out = {}
+    held-out part), from the residual vector of all samples (`part="all"`, in the experiments' `layout` order)."""
+    out, k = {}, 0
     for e in experiments:
-        pred = jax.tree_util.tree_map(np.asarray, predict(model, e))
         out[e.name] = {}
-        for c in e.channels:
-            if hasattr(e, "times"):
-                used = np.asarray(e.weights[c]) > 0
-                err, data = pred[c] - np.asarray(e.data[c]), np.asarray(e.data[c])
-                ident = used & (np.asarray(e.times) <= float(e.split_time))
-                valid = used & ~ident
-                given = e.scales[c] if c in getattr(e, "noise_channels", ()) else None
-            else:
-                f = pred[c]
-                slack = np.asarray(e.slack)
-                data = np.asarray(e.forces)
-                err = np.where(slack, np.maximum(f, 0.0), f - data)
-                ident, valid = np.ones_like(slack), np.zeros_like(slack)
-                given = None
-            span = float(np.ptp(data[ident | valid])) or 1.0
+        for c, scale, data, used, ident_all in e.layout():
+            r = np.asarray(residuals[k : k + data.size])
+            k += data.size
+            err = r * scale
+            ident = used & ident_all
+            valid = used & ~ident_all
+            given = scale if c in getattr(e, "noise_channels", ()) else None
+            span = float(np.ptp(data[used])) if np.any(used) else 0.0
+            span = span or 1.0
             stats = {"range": span}
             for prefix, sel in (("", ident), ("validation_", valid)):
                 if np.any(sel):

@@ -20,8 +20,9 @@ import numpy as np
 from ._errors import PamjaxInputError
 from ._inputs import AbstractSignal
 from ._recording import _MIN_ABSOLUTE_PA, Recording
-from ._simulate import solve, validate
+from ._simulate import _flat_scaled, pwm_trajectory, solve, validate
 from ._synchronous import num_periods as _num_periods
+from ._synchronous import solve_runs
 from ._system import AbstractSystem, TankSystem
 from ._valve import OnOffValve
 
@@ -197,9 +198,10 @@ class Experiment(eqx.Module):
                 f"experiment {self.name!r}: bad `initial` keys {sorted(self.initial)}: {err}"
             ) from err
         validate(system, self.signal, self.times, y0, self.t0)
-        traj = predict(model, self)
+        # Which channels the system has: its outputs, traced (not solved, not compiled).
+        outputs = jax.eval_shape(lambda s, y: s.outputs(self.t0, y, self.signal(self.t0)), system, y0)
         for c in self.channels:
-            if c not in traj:
+            if c not in outputs and c != "command":
                 raise PamjaxInputError(f"experiment {self.name!r}: the system has no output {c!r}")
 
     def predict(self, model):
@@ -227,10 +229,28 @@ class Experiment(eqx.Module):
         )
         return {c: getattr(traj, c) for c in traj.channels() if getattr(traj, c) is not None}
 
+    def batch_key(self, model):
+        """Experiments with equal keys are integrated in one compiled loop (`predict_all`): fixed-grid stepping of
+        systems of one structure. None: solved on its own (adaptive stepping)."""
+        system = self.build(model)
+        if self._stepping(system) != "pwm":
+            return None
+        return ("pwm", self.substeps, jax.tree_util.tree_structure(system))
+
     def residuals(self, model, part="identification"):
         """(model − data) / scale for the compared channels, flattened; 0 at masked samples and at the samples of
         the other part ("identification": t before the split, "validation": after it, "all")."""
-        pred = self.predict(model)
+        return self.residuals_of(self.predict(model), part)
+
+    def layout(self):
+        """The residual vector's blocks, in order: per channel (name, scale, data, used, identification) with the
+        data and two masks over its samples (used: not masked; identification: before the validation split)."""
+        ident = np.asarray(self.times) <= float(self.split_time)
+        return [(c, self.scales[c], np.asarray(self.data[c]), np.asarray(self.weights[c]) > 0, ident)
+                for c in self.channels]
+
+    def residuals_of(self, pred, part="identification"):
+        """`residuals` from this experiment's predictions `pred` (dict channel → array at `times`)."""
         keep = {"identification": self.times <= self.split_time, "validation": self.times > self.split_time}.get(
             part, jnp.ones_like(self.times, dtype=bool)
         )
@@ -295,10 +315,56 @@ class ForceMapExperiment(eqx.Module):
         f = jax.vmap(lambda x, p: muscle.static_force(x, p, air))(self.positions, self.pressures)
         return {"force": f}
 
+    def batch_key(self, model):
+        return None
+
+    def layout(self):
+        ones = np.ones(self.forces.shape, dtype=bool)
+        return [("force", self.scale, np.asarray(self.forces), ones, ones)]
+
     def residuals(self, model, part="identification"):
+        return self.residuals_of(self.predict(model), part)
+
+    def residuals_of(self, pred, part="identification"):
         del part
-        f = self.predict(model)["force"]
+        f = pred["force"]
         return jnp.where(self.slack, jnp.maximum(f, 0.0), f - self.forces) / self.scale
+
+
+def predict_all(model, experiments):
+    """Every experiment's predictions (traceable), in order. Fixed-grid experiments whose systems share one
+    structure (e.g. six tank tests, or a muscle's triangle runs) are integrated in ONE loop (`solve_runs`), so the
+    compiled program does not grow with their number."""
+    preds = [None] * len(experiments)
+    groups = {}
+    for i, e in enumerate(experiments):
+        key = e.batch_key(model)
+        if key is None:
+            preds[i] = e.predict(model)
+        else:
+            groups.setdefault(key, []).append(i)
+    for (_, substeps, _), members in groups.items():
+        exps = [experiments[i] for i in members]
+        for i, pred in zip(members, _predict_runs(model, exps, substeps)):
+            preds[i] = pred
+    return preds
+
+
+def _predict_runs(model, exps, substeps):
+    systems = [e.build(model) for e in exps]
+    y0s = [s.initial_state(**e.initial) for s, e in zip(systems, exps)]
+    flats = [_flat_scaled(s, y0) for s, y0 in zip(systems, y0s)]
+    _, flat_scale, unravel = flats[0]
+    sizes = []
+    for s, e in zip(systems, exps):
+        sizes.append(e.num_periods if e.num_periods is not None else _num_periods(s.valve, *e.span))
+    runs = solve_runs(systems, [e.signal for e in exps], [e.times for e in exps], [f[0] for f in flats], unravel,
+                      flat_scale, [e.t0 for e in exps], stepping="pwm", substeps=substeps, sizes=sizes)
+    preds = []
+    for system, e, (states, num_steps, finite) in zip(systems, exps, runs):
+        traj = pwm_trajectory(system, e.signal, e.times, e.t0, states, num_steps, finite)
+        preds.append({c: getattr(traj, c) for c in traj.channels() if getattr(traj, c) is not None})
+    return preds
 
 
 @eqx.filter_jit

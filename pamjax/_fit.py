@@ -20,6 +20,7 @@ import numpy as np
 from . import _lm
 from ._diagnostics import channel_errors, covariance, identifiability, mismatch
 from ._errors import PamjaxInputError, require_float64
+from ._experiment import predict_all
 from ._parameters import PamjaxIdentifiabilityWarning, ParameterSpace
 
 @dataclasses.dataclass
@@ -102,14 +103,16 @@ class FitResult:
 
 
 def _residual_vector(space, theta, exps):
+    """Residuals of every sample (identification and validation parts; the host selects)."""
     model = space.model(theta)
-    return jnp.concatenate([e.residuals(model, "identification") for e in exps])
+    preds = predict_all(model, exps)
+    return jnp.concatenate([e.residuals_of(p, "all") for e, p in zip(exps, preds)])
 
 
 @eqx.filter_jit
 def _residuals(space, theta, exps):
-    """The identification residuals at θ (module level, `space` an argument: fits of one problem structure from
-    different start models share this compilation)."""
+    """The residuals at θ (module level, `space` an argument: fits of one problem structure from different start
+    models share this compilation)."""
     return _residual_vector(space, theta, exps)
 
 
@@ -126,21 +129,23 @@ def _residuals_and_jacobian(space, theta, exps):
 
 
 class _Problem:
-    """The host side of the two compiled functions: NumPy in, NumPy out; a failed solve's residuals are None."""
+    """The host side of the two compiled functions: NumPy in, NumPy out, the identification samples selected; a
+    failed solve's residuals are None."""
 
     def __init__(self, space, exps):
         self.space, self.exps = space, exps
-        self.calls = 0
+        self.mask = np.concatenate([used & ident for e in exps for _, _, _, used, ident in e.layout()])
+
+    def all_residuals(self, theta):
+        return np.asarray(_residuals(self.space, jnp.asarray(theta), self.exps))
 
     def residuals(self, theta):
-        self.calls += 1
-        r = np.asarray(_residuals(self.space, jnp.asarray(theta), self.exps))
+        r = self.all_residuals(theta)[self.mask]
         return r if np.all(np.isfinite(r)) else None
 
     def jacobian(self, theta):
-        self.calls += 1
         r, j = _residuals_and_jacobian(self.space, jnp.asarray(theta), self.exps)
-        return np.asarray(r), np.asarray(j)
+        return np.asarray(r)[self.mask], np.asarray(j)[self.mask]
 
 
 _CHECKPOINT_FORMAT = 2
@@ -305,8 +310,7 @@ def fit(
     report = _progress_printer(progress)
     t_start = time.perf_counter()
     if resume is not None:
-        num = jax.eval_shape(lambda t: _residual_vector(space, t, exps), jnp.asarray(theta)).shape[0]
-        state = _read_checkpoint(resume, labels, num)
+        state = _read_checkpoint(resume, labels, int(np.count_nonzero(problem.mask)))
         t_first = time.perf_counter()
         compile_s = 0.0
     else:
@@ -366,7 +370,7 @@ def _result(model, exps, free, space, state, identifiability_tol, compile_s, fit
         warnings.warn(msg, PamjaxIdentifiabilityWarning, stacklevel=3)
     values = np.asarray(space.physical(jnp.asarray(theta)))
     fitted = space.with_values(jnp.asarray(values))
-    errors = channel_errors(fitted, exps)
+    errors = channel_errors(exps, problem.all_residuals(theta))
     flagged, note = mismatch(errors)
     if flagged:
         msgs.append(note)

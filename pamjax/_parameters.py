@@ -222,6 +222,13 @@ def _make_group(model, entry, valid):
                   jnp.asarray(upper), None if basis is None else jnp.asarray(basis))
 
 
+def strong_types(model):
+    """`model` with every array leaf of a definite dtype (JAX marks arrays made from Python scalars "weakly typed";
+    a fitted model's leaves are strongly typed, and mixing the two recompiles every function they go through)."""
+    return jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=jnp.asarray(x).dtype) if eqx.is_array(x) else x,
+                                  model)
+
+
 class ParameterSpace(eqx.Module):
     """Maps the unconstrained, O(1)-scaled vector θ to a model with the free parameters set (everything else
     fixed). `free` entries: a path string, or a dict {path, transform ('linear'|'log'|'logistic'|'nodes'),
@@ -235,6 +242,7 @@ class ParameterSpace(eqx.Module):
         if isinstance(free, str) or not free:
             raise PamjaxInputError(f"free must be a non-empty list of parameter paths, got {free!r}")
         valid = parameter_paths(model)
+        model = strong_types(model)
         self.base = model
         self.groups = tuple(_make_group(model, e, valid) for e in free)
         labels = self.labels

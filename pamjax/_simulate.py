@@ -214,10 +214,16 @@ def _solve_pwm(system, signal, ts, y0, t0, substeps, periods, throw):
     states, num_steps, finite = _sync.solve_pwm_synchronous(
         system, signal, ts, z0, flat_scale, unravel, t0, substeps=substeps, periods=periods
     )
+    traj = pwm_trajectory(system, signal, ts, t0, states, num_steps, finite)
+    if throw:
+        traj = eqx.error_if(traj, ~finite, "PWM-synchronous stepping produced a non-finite state; raise substeps")
+    return traj
+
+
+def pwm_trajectory(system, signal, ts, t0, states, num_steps, finite):
+    """The `Trajectory` of a PWM-synchronous solve from its states at `ts`."""
     commands = _sync.latched_commands(system.valve, signal, ts)
     outs = _sync.outputs_at(system, signal, ts, states, commands, t0)
-    if throw:
-        states = eqx.error_if(states, ~finite, "PWM-synchronous stepping produced a non-finite state; raise substeps")
     result = jnp.where(finite, 0, _RESULT_NONFINITE)
     zero = jnp.zeros((), dtype=num_steps.dtype)
     return _trajectory(ts, states, commands, outs, num_steps, num_steps, zero, result)
