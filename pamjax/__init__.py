@@ -185,6 +185,7 @@ from ._fit import (
 from ._parameters import (
     PamjaxIdentifiabilityWarning as PamjaxIdentifiabilityWarning,
 )
+from ._recording import PamjaxDataWarning as PamjaxDataWarning
 from ._parameters import (
     ParameterSpace as ParameterSpace,
 )
