@@ -180,8 +180,16 @@ from ._fit import (  # noqa: E402
     FitResult as FitResult,
 )
 from ._fit import (
+    evaluate as evaluate,
+)
+from ._fit import (
     fit as fit,
 )
+from ._bench import Bench as Bench
+from ._bench import BENCH_PARAMETERS as BENCH_PARAMETERS
+from ._bench import bench_values as bench_values
+from ._bench import load_bench as load_bench
+from ._experiment import predictions as predictions
 from ._parameters import (
     PamjaxIdentifiabilityWarning as PamjaxIdentifiabilityWarning,
 )
