@@ -304,3 +304,7 @@ from ._distributed import PamjaxDistributedError as PamjaxDistributedError  # no
 from ._distributed import ProcessInfo as ProcessInfo
 from ._distributed import initialize_distributed as initialize_distributed
 from ._sweep import merge_sweep_shards as merge_sweep_shards  # noqa: E402
+from ._multistart import FleetResult as FleetResult  # noqa: E402
+from ._multistart import MultistartResult as MultistartResult
+from ._multistart import fit_fleet as fit_fleet
+from ._multistart import multistart as multistart

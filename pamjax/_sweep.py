@@ -422,12 +422,13 @@ class _Layout:
 
     The batch is cut into groups of `per_device` consecutive points; each device computes one group per call, in
     `lanes` lanes (`per_device` rounded up to a multiple of 8, padded with copies of point 0). Group g runs in call
-    g // n_dev on the mesh's device g % n_dev. XLA's CPU code for a batch depends on its width and a lane's result
-    on its place in it (the last bit, ~1e-16 relative), so a point's result is fixed by its group and place alone:
-    with `chunk_size` given, `per_device` does not depend on the device or process count, and a sweep gives the
-    same bits on one device as on many devices of many processes. Without it, the batch (up to
-    `default_chunk_size` points per call) is split evenly over the devices, so results on the same number of devices
-    agree bitwise (one process or several) and on other counts to round-off."""
+    g // n_dev on the mesh's device g % n_dev. XLA's code for a batch depends on its width, and a lane's result on
+    its place in it (in the last bit, ~1e-16 relative), so a point's result is fixed by its group and place and by
+    the program: one SPMD program per device for any mesh of 2 or more devices (however many processes hold them),
+    another, optimised without the SPMD partitioner, for a single device. So: the same mesh size gives the same
+    bits, one process or several; with `chunk_size` given, `per_device` does not depend on the device count, and
+    any 2 or more devices give the same bits (2, 3 and 4 CPU devices measured), one device agreeing to round-off.
+    Without it, the batch (up to `default_chunk_size` points per call) is split evenly over the devices."""
 
     def __init__(self, batch_size, per_device, n_dev, processes):
         self.batch_size, self.per_device, self.n_dev, self.processes = batch_size, per_device, n_dev, processes
@@ -598,11 +599,11 @@ def sweep(
       of the Jacobian at the initial states) (its stability limit with a 10 % margin), the others at 5 ms; all
       capped at 2 PWM edge widths for a switching valve and at 1/100 of the signal's shortest period. Check a
       fixed-step result by halving `dt`.
-    - `chunk_size`: points per device per compiled call (memory bound). Given, it fixes every point's arithmetic:
-      the result is then bitwise the same on any number of devices and processes. Default (`default_chunk_size`):
-      all points split evenly over the devices, at most 8,192 per call on CPU, on a GPU/TPU as many as 1 GiB of
-      outputs per device holds (one call is fastest there); bitwise the same for the same number of devices,
-      to round-off (~1e-16 relative) otherwise. The last call is padded.
+    - `chunk_size`: points per device per compiled call (memory bound). Default (`default_chunk_size`): all points
+      split evenly over the devices, at most 8,192 per call on CPU, on a GPU/TPU as many as 1 GiB of outputs per
+      device holds (one call is fastest there). The last call is padded. Results are bitwise the same for the same
+      number of devices, in one process or several; with `chunk_size` given, for any 2 or more devices; between
+      one device and several, to round-off (~1e-16 relative: XLA optimises a one-device program differently).
     - `devices`: None (all of `jax.devices()`: the batch axis is sharded over them with a `Mesh` and
       `NamedSharding`, each device running its own lanes under `shard_map`; after `pamjax.initialize_distributed()`
       (or `jax.distributed.initialize()`) the devices of every process, each process computing its devices'

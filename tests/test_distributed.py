@@ -1,0 +1,136 @@
+"""Two CPU processes on localhost, joined by `pamjax.initialize_distributed` (JAX's multi-process runtime, CPU
+collectives over gloo), compute a sweep and a multistart fit that equal the single-process results bitwise.
+
+The processes run `tests/distributed_worker.py` (each with its own single CPU device); a third runs it alone as the
+reference, at the same time, with 4 CPU devices: on 2 of them, the distributed run's mesh size, a sweep is the same
+program per device and gives the same bits; with `chunk_size` given, on all 4 too; on 1, XLA compiles the sweep
+without its SPMD partitioner, which changes the last bit of some results (round-off). Every process is started in its own session and killed by its id if the test fails
+or runs past `TIMEOUT_S`, so a stuck collective cannot hang the suite.
+"""
+
+import json
+import os
+import pathlib
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+import pamjax
+from pamjax._distributed import PamjaxDistributedError
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+WORKER = ROOT / "tests" / "distributed_worker.py"
+TIMEOUT_S = 150  # the three processes together take ~30-45 s on a shared 2-core CPU
+
+
+def _free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _run_all(commands, envs):
+    """Start every command, wait for all (at most TIMEOUT_S in all), kill what is left; (returncode, output)s."""
+    procs = [subprocess.Popen(c, env=e, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                              start_new_session=True) for c, e in zip(commands, envs)]
+    deadline = time.monotonic() + TIMEOUT_S
+    outputs = []
+    try:
+        for proc in procs:
+            try:
+                out, _ = proc.communicate(timeout=max(deadline - time.monotonic(), 1))
+            except subprocess.TimeoutExpired:
+                out = f"(killed after {TIMEOUT_S} s)"
+            outputs.append((proc.returncode, out))
+    finally:
+        for proc in procs:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)  # its own session: the worker and nothing else
+                proc.wait()
+    return outputs
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    out = tmp_path_factory.mktemp("distributed")
+    env = dict(os.environ, JAX_PLATFORMS="cpu",
+               PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    env.pop("JAX_COORDINATOR_ADDRESS", None)
+    port = str(_free_port())
+    base = [sys.executable, str(WORKER), str(out)]
+    results = _run_all([base, base + ["0", "2", port], base + ["1", "2", port]],
+                       [dict(env, JAX_NUM_CPU_DEVICES=str(n)) for n in (4, 1, 1)])
+    for name, (code, text) in zip(["single", "process 0", "process 1"], results):
+        assert code == 0, f"{name} failed ({code}):\n{text}"
+    return out, [text for _, text in results]
+
+
+def test_processes_say_what_they_joined(runs):
+    _, texts = runs
+    assert "joined as process 0 of 2" in texts[1] and "joined as process 1 of 2" in texts[2]
+    assert "2 in all" in texts[1]
+
+
+def test_sweep_on_two_processes_equals_single_process_bitwise(runs):
+    out, _ = runs
+    single, p0, p1 = (np.load(out / f"sweep-{t}.npz") for t in ("single", "0", "1"))
+    for key in ("status", "pressure", "position", "split_position"):
+        np.testing.assert_array_equal(p0[key], single[key])  # bitwise (NaN where failed, in the same places)
+        np.testing.assert_array_equal(p1[key], single[key])  # every process holds the whole result
+        if key != "split_position":
+            np.testing.assert_array_equal(p0[key], single[key + "4"])  # chunk_size given: 4 devices alike
+    assert single["status"].tolist() == [0] * 5 + [1] + [0] * 6  # the injected failure, reported per point
+    assert np.all(np.isnan(single["position"][5])) and np.all(np.isfinite(single["position"][[0, 4, 6, 11]]))
+    # one device: the same results to round-off (XLA's one-device program; tolerance ~50 ulp)
+    ok = single["status"] == 0
+    for key in ("position", "split_position"):
+        np.testing.assert_allclose(single[key + "1"][ok], single[key][ok], rtol=1e-14, atol=0)
+
+
+def test_sweep_shards_are_disjoint_and_merge_to_the_whole(runs):
+    out, _ = runs
+    single = np.load(out / "sweep-single.npz")
+    shards = [np.load(out / f"sweep-{t}.npz") for t in ("0", "1")]
+    points = [s["shard_points"] for s in shards]
+    assert len(points[0]) > 0 and len(points[1]) > 0, "each process computes a part"
+    assert sorted(np.concatenate(points).tolist()) == list(range(12))
+    for s, pts in zip(shards, points):
+        np.testing.assert_array_equal(s["shard_position"], single["position"][pts])
+        np.testing.assert_array_equal(s["shard_status"], single["status"][pts])
+
+
+def test_multistart_on_two_processes_equals_single_process(runs):
+    out, _ = runs
+    single, p0, p1 = (json.loads((out / f"multistart-{t}.json").read_text()) for t in ("single", "0", "1"))
+    assert single["processes"] == [0, 0, 0, 0]
+    assert p0["processes"] == [0, 1, 0, 1]  # start i on process i mod 2
+    for multi in (p0, p1):
+        # every field but wall times: values, cost, history, standard errors (floats exact through JSON)
+        assert multi["results"] == single["results"]
+        assert multi["errors"] == single["errors"] and multi["best_index"] == single["best_index"]
+        assert multi["best_model_k0"] == single["best_model_k0"]
+    assert single["results"][2] is None and "non-finite" in single["errors"][2]  # recorded, not fatal
+    finished = [r for r in single["results"] if r is not None]
+    assert len(finished) == 3 and all(r["converged"] for r in finished)
+
+
+def test_initialize_distributed_says_why_it_cannot_join():
+    """Checked in this (already running) process: nothing to join; incomplete or bad settings are named."""
+    info = pamjax.initialize_distributed(environ={})
+    assert not info.distributed and "single process" in str(info) and "JAX_COORDINATOR_ADDRESS" in str(info)
+    with pytest.raises(PamjaxDistributedError, match="nothing to join"):
+        pamjax.initialize_distributed(required=True, environ={})
+    with pytest.raises(pamjax.PamjaxInputError, match="num_processes, process_id not given"):
+        pamjax.initialize_distributed(environ={"JAX_COORDINATOR_ADDRESS": "10.0.0.1:1234"})
+    with pytest.raises(pamjax.PamjaxInputError, match="JAX_PROCESS_ID must be an integer"):
+        pamjax.initialize_distributed(environ={"JAX_COORDINATOR_ADDRESS": "h:1", "JAX_NUM_PROCESSES": "2",
+                                               "JAX_PROCESS_ID": "one"})
+    with pytest.raises(pamjax.PamjaxInputError, match=r"process_id .* in \[0, 1\], got 2"):
+        pamjax.initialize_distributed("h:1", 2, 2)
+    with pytest.raises(PamjaxDistributedError, match="already started its backend"):
+        pamjax.initialize_distributed("127.0.0.1:1", 2, 1)
