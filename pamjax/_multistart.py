@@ -166,8 +166,8 @@ def _start_values(space, starts, seed, spread):
                                    f"{space.labels}), got {spread!r}")
         theta0 = np.asarray(space.initial_theta())
         draws = np.random.default_rng(seed).standard_normal((int(starts) - 1, n_params))
-        thetas = np.vstack([theta0, theta0 + spread * draws])
-        return np.stack([np.asarray(space.physical(t)) for t in thetas])
+        drawn = [np.asarray(space.physical(theta0 + spread * z)) for z in draws]
+        return np.stack([np.asarray(space.initial_values()), *drawn])  # start 0: the model's values, exactly
     values = np.asarray(starts, dtype=float) if not isinstance(starts, str) else None
     if values is None or values.ndim != 2 or values.shape[1] != n_params or values.shape[0] < 1:
         raise PamjaxInputError(f"starts must be a count or an array (n_starts, {n_params}) of start values for "
