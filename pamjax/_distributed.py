@@ -186,6 +186,19 @@ def initialize_distributed(
     return process_info(source=source)
 
 
+def join_for_cli(distributed: bool) -> bool:
+    """A command's `--distributed`: join (required), print what was joined, exit with the reason if it cannot.
+    True on the process that writes the outputs (process 0, or the only one)."""
+    if not distributed:
+        return True
+    try:
+        info = initialize_distributed(required=True)
+    except (PamjaxDistributedError, PamjaxInputError) as err:
+        raise SystemExit(f"pamjax: --distributed: {err}") from None
+    print(info, flush=True)
+    return info.process_index == 0
+
+
 def gather_bytes(payload: bytes) -> list:
     """Every process's `payload`, in process order, on every process (one allgather of sizes, one of bytes)."""
     import jax

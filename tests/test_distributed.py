@@ -11,6 +11,7 @@ or runs past `TIMEOUT_S`, so a stuck collective cannot hang the suite.
 import json
 import os
 import pathlib
+import re
 import signal
 import socket
 import subprocess
@@ -32,6 +33,17 @@ def _free_port():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def _environment():
+    """This environment for the workers: CPU only, this checkout's pamjax, and no settings of an enclosing
+    distributed job (a CI runner under SLURM) or forced device count."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("SLURM_", "OMPI_", "PMI_"))
+           and k not in ("JAX_COORDINATOR_ADDRESS", "JAX_NUM_PROCESSES", "JAX_PROCESS_ID", "JAX_NUM_CPU_DEVICES")}
+    env["XLA_FLAGS"] = re.sub(r"--xla_force_host_platform_device_count=\S*", "", env.get("XLA_FLAGS", ""))
+    env["JAX_PLATFORMS"] = "cpu"
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])
+    return env
 
 
 def _run_all(commands, envs):
@@ -58,9 +70,7 @@ def _run_all(commands, envs):
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     out = tmp_path_factory.mktemp("distributed")
-    env = dict(os.environ, JAX_PLATFORMS="cpu",
-               PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
-    env.pop("JAX_COORDINATOR_ADDRESS", None)
+    env = _environment()
     port = str(_free_port())
     base = [sys.executable, str(WORKER), str(out)]
     results = _run_all([base, base + ["0", "2", port], base + ["1", "2", port]],
@@ -68,6 +78,41 @@ def runs(tmp_path_factory):
     for name, (code, text) in zip(["single", "process 0", "process 1"], results):
         assert code == 0, f"{name} failed ({code}):\n{text}"
     return out, [text for _, text in results]
+
+
+CONFIG = """kind = "steady_state"
+[system]
+valve = "averaged"
+[sweep]
+commands = { start = 0.1, stop = 0.9, num = 12 }
+horizon = 0.5
+window = 0.1
+"""
+
+
+def test_cli_sweep_distributed_equals_single_process(tmp_path):
+    """`pamjax sweep --distributed` on 2 processes (settings from the JAX_* environment) writes, from process 0,
+    the same file as one process with as many devices."""
+    config = tmp_path / "map.toml"
+    config.write_text(CONFIG)
+    env = _environment()
+    cli = [sys.executable, "-m", "pamjax._cli", "sweep", str(config), "--no-plot", "--out"]
+    port = str(_free_port())
+    joined = [dict(env, JAX_COORDINATOR_ADDRESS=f"127.0.0.1:{port}", JAX_NUM_PROCESSES="2", JAX_PROCESS_ID=str(i))
+              for i in (0, 1)]
+    results = _run_all([cli + [str(tmp_path / "single"), "--cpu-devices", "2"]]
+                       + [cli + [str(tmp_path / "multi"), "--cpu-devices", "1", "--distributed"]] * 2,
+                       [env] + joined)
+    for code, text in results:
+        assert code == 0, text
+    assert "joined as process 1 of 2" in results[2][1] and "wrote" not in results[2][1]  # process 0 writes
+    single, multi = (np.load(tmp_path / d / "sweep.npz") for d in ("single", "multi"))
+    assert sorted(single.files) == sorted(multi.files)
+    for key in single.files:
+        np.testing.assert_array_equal(multi[key], single[key])
+    nothing = subprocess.run(cli + [str(tmp_path / "x"), "--distributed"], env=env, capture_output=True, text=True,
+                             timeout=TIMEOUT_S)
+    assert nothing.returncode != 0 and "--distributed: nothing to join" in nothing.stderr
 
 
 def test_processes_say_what_they_joined(runs):
