@@ -131,6 +131,8 @@ def main():
     parser.add_argument("--horizon", type=float, default=5.0)
     parser.add_argument("--chunk-size", type=int, default=5000, help="points per device per call (0: sweep's own)")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--rounds", type=int, default=1, help="launch every configuration this many times, in turn "
+                                                               "(on a shared machine the load drifts between them)")
     parser.add_argument("--platform", choices=("cpu", "gpu"), default="cpu")
     parser.add_argument("--gpus", type=int, default=1, help="GPUs on this machine (--platform gpu)")
     parser.add_argument("--timeout", type=float, default=1800, help="seconds per configuration before its "
@@ -152,28 +154,39 @@ def main():
         configurations = [(1, 1), (2, 1)] + ([(args.gpus, 1)] if args.gpus > 2 else [])
     rows, reference = {}, None
     with tempfile.TemporaryDirectory() as tmp:
-        for processes, per in configurations:
-            out = pathlib.Path(tmp) / f"{processes}x{per}"
-            out.mkdir()
-            spawned = time.time()
-            fig = run_configuration(args, processes, per, out)
-            fig["wall_s"] = time.time() - spawned
-            result = np.load(out / "result.npz")
-            if reference is None:
-                reference = {k: result[k] for k in result.files}
-            fig["bitwise_equal"] = all(np.array_equal(result[k], reference[k], equal_nan=True) for k in reference)
-            fig["max_rel_diff"] = max(float(np.nanmax(np.abs(result[k] - reference[k]) / np.maximum(
-                np.abs(reference[k]), 1e-300))) for k in ("pressure", "position"))
-            rows[(processes, per)] = fig
-            run = float(np.median(fig["runs_s"]))
-            print(f"{processes} process(es) x {per} {fig['platform']} device(s) ({fig['device']}): run {run:.3f} s "
-                  f"(median of {args.repeats}: {', '.join(f'{t:.3f}' for t in fig['runs_s'])}), "
-                  f"{args.points / run:,.0f} points/s; start-up: joined {fig['joined_s']:.1f} s, first call "
-                  f"{fig['first_s']:.1f} s, whole launch {fig['wall_s']:.1f} s; failed {fig['failed']}; "
-                  f"bitwise equal to 1x1: {fig['bitwise_equal']} (max rel. diff {fig['max_rel_diff']:.1e})",
-                  flush=True)
+        for turn in range(args.rounds):
+            for processes, per in configurations:
+                out = pathlib.Path(tmp) / f"{processes}x{per}-{turn}"
+                out.mkdir()
+                spawned = time.time()
+                fig = run_configuration(args, processes, per, out)
+                fig["wall_s"] = time.time() - spawned
+                result = np.load(out / "result.npz")
+                if reference is None:
+                    reference = {k: result[k] for k in result.files}
+                fig["bitwise_equal"] = all(np.array_equal(result[k], reference[k], equal_nan=True)
+                                           for k in reference)
+                fig["max_rel_diff"] = max(float(np.nanmax(np.abs(result[k] - reference[k]) / np.maximum(
+                    np.abs(reference[k]), 1e-300))) for k in ("pressure", "position"))
+                run = float(np.median(fig["runs_s"]))
+                print(f"{processes} process(es) x {per} {fig['platform']} device(s) ({fig['device']}): run "
+                      f"{run:.3f} s (median of {args.repeats}: {', '.join(f'{t:.3f}' for t in fig['runs_s'])}), "
+                      f"{args.points / run:,.0f} points/s; start-up: joined {fig['joined_s']:.1f} s, first call "
+                      f"{fig['first_s']:.1f} s, whole launch {fig['wall_s']:.1f} s; failed {fig['failed']}; "
+                      f"bitwise equal to 1x1: {fig['bitwise_equal']} (max rel. diff {fig['max_rel_diff']:.1e})",
+                      flush=True)
+                if (processes, per) not in rows:
+                    rows[(processes, per)] = fig
+                else:  # pool the rounds: every timed call, start-up per launch
+                    row = rows[(processes, per)]
+                    row["runs_s"] = row["runs_s"] + fig["runs_s"]
+                    for key in ("joined_s", "first_s", "wall_s"):
+                        row.setdefault(key + "_all", [row[key]]).append(fig[key])
+                        row[key] = float(np.median(row[key + "_all"]))
+                    row["bitwise_equal"] = row["bitwise_equal"] and fig["bitwise_equal"]
     base = args.points / float(np.median(rows[(1, 1)]["runs_s"]))
-    print(f"jax {rows[(1, 1)]['jax']}, chunk {args.chunk_size or 'default'} points per device per call")
+    print(f"jax {rows[(1, 1)]['jax']}, chunk {args.chunk_size or 'default'} points per device per call; medians "
+          f"over {args.rounds} round(s) x {args.repeats} calls")
     for (processes, per), fig in rows.items():
         rate = args.points / float(np.median(fig["runs_s"]))
         units = processes * per
