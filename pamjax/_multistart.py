@@ -17,7 +17,7 @@ import warnings
 import numpy as np
 
 from ._errors import PamjaxInputError, PamjaxSolveError, require_float64
-from ._fit import FitResult, ParameterSpace, PamjaxIdentifiabilityWarning, fit
+from ._fit import FitResult, ParameterSpace, fit
 
 _NOT_PASSED = ("out", "checkpoint", "resume", "overwrite", "progress")  # per-task files/output: not for many fits
 
@@ -115,7 +115,8 @@ def _use_processes(distributed):
 
 def _run_fits(tasks, free, fit_options, spread_over_processes, progress, what):
     """Run `fit(model, experiments, free)` for each task (name, model, experiments): all here, or this process's
-    share. Returns per task (FitResult or None, error message or None, process index), the same on every process."""
+    share. Returns per task (FitResult or None, error message or None, the warnings its fit issued as (category
+    name, message), process index), the same on every process."""
     import jax
 
     from ._distributed import gather_bytes, my_tasks
@@ -127,29 +128,41 @@ def _run_fits(tasks, free, fit_options, spread_over_processes, progress, what):
     for i in mine:
         name, model, experiments = tasks[i]
         start = time.perf_counter()
-        with warnings.catch_warnings():  # identifiability is reported once, for the result that is kept
-            warnings.simplefilter("ignore", PamjaxIdentifiabilityWarning)
+        with warnings.catch_warnings(record=True) as caught:  # re-issued by the caller for the fits it reports
+            warnings.simplefilter("always")
             try:
                 res, err = fit(model, experiments, free, progress=False, **fit_options), None
             except Exception as exc:  # a failed task is recorded, the others go on
                 res, err = None, f"{type(exc).__name__}: {exc}"
-        local[i] = (res, err)
+        local[i] = (res, err, [(w.category.__name__, str(w.message)) for w in caught])
         if say is not None:
             outcome = f"failed: {err}" if res is None else f"{res.status}, cost {res.cost:.6e}, {res.iterations} iter"
             where = f" on process {me}" if spread_over_processes else ""
             say(f"{what} {name} ({i + 1}/{len(tasks)}){where}: {outcome}, {time.perf_counter() - start:.2f} s")
     if not spread_over_processes:
         return [(*local[i], me) for i in range(len(tasks))]
-    payload = {str(i): (None if r is None else r.to_dict(), e) for i, (r, e) in local.items()}
+    payload = {str(i): (None if r is None else r.to_dict(), e, w) for i, (r, e, w) in local.items()}
     outcomes = {}
     for process, blob in enumerate(gather_bytes(json.dumps(payload).encode())):
-        for i, (d, e) in json.loads(blob).items():
+        for i, (d, e, w) in json.loads(blob).items():
             model = tasks[int(i)][1]
             res = None if d is None else FitResult.from_dict(d)
             if res is not None:
                 res.model = res.apply(model)  # the same bits as the fitted model (values are exact floats)
-            outcomes[int(i)] = (res, e, process)
+            outcomes[int(i)] = (res, e, [tuple(x) for x in w], process)
     return [outcomes[i] for i in range(len(tasks))]
+
+
+def _reissue(caught, prefix=""):
+    """Issue again the warnings a fit issued (category by name: pamjax's own, else Python's, else UserWarning)."""
+    import builtins
+
+    from . import _parameters, _recording
+
+    for category, message in caught:
+        cls = next((c for c in (getattr(m, category, None) for m in (_parameters, _recording, builtins))
+                    if isinstance(c, type) and issubclass(c, Warning)), UserWarning)
+        warnings.warn(prefix + message, cls, stacklevel=3)
 
 
 def _start_values(space, starts, seed, spread):
@@ -210,14 +223,15 @@ def multistart(
       runs every start).
     - `progress`: True prints one line per finished start (from the process that ran it), a callable gets that
       line, False is silent.
-    - `**fit_options`: passed to every `fit` (`solver`, `max_steps`, `rtol`, `atol`, `stall_steps`,
-      `identifiability_tol`); not `out`, `checkpoint` or `resume` (write the best with `result.best.to_json`).
+    - `**fit_options`: passed to every `fit` (`max_steps`, tolerances, `stall_steps`, `identifiability_tol`, ...;
+      checked against `fit`'s signature); not `out`, `checkpoint` or `resume` (write the best with
+      `result.best.to_json`).
 
     **Returns:** a `MultistartResult`: `best` (a `FitResult`, lowest cost among the starts that finished),
     `best_index`, `results` and `errors` per start, `starts`, `labels`, `processes`; `table()` lists them.
 
     **Raises:** `PamjaxInputError` for bad arguments (before any fit); `PamjaxSolveError` if every start failed
-    (with each start's message). Identifiability warnings are issued once, for the best start.
+    (with each start's message). The warnings `fit` issues (identifiability) are issued once, for the best start.
     """
     require_float64("pamjax.multistart")
     _check_fit_options(fit_options)
@@ -225,13 +239,12 @@ def multistart(
     values = _start_values(space, starts, seed, spread)
     tasks = [(f"start {i}", space.with_values(v), experiments) for i, v in enumerate(values)]
     outcomes = _run_fits(tasks, free, fit_options, _use_processes(distributed), progress, "multistart:")
-    results, errors, processes = (list(x) for x in zip(*outcomes))
+    results, errors, caught, processes = (list(x) for x in zip(*outcomes))
     finished = [i for i, r in enumerate(results) if r is not None]
     if not finished:
         raise PamjaxSolveError("every start failed:\n" + "\n".join(f"  start {i}: {e}" for i, e in enumerate(errors)))
     best = min(finished, key=lambda i: (results[i].cost, i))
-    for message in results[best].warnings:
-        warnings.warn(message, PamjaxIdentifiabilityWarning, stacklevel=2)
+    _reissue(caught[best])
     return MultistartResult(best=results[best], best_index=best, results=results, errors=errors, starts=values,
                             labels=space.labels, processes=processes)
 
@@ -256,7 +269,8 @@ def fit_fleet(
     - `distributed`, `progress`, `**fit_options`: as for `multistart`.
 
     **Returns:** a `FleetResult`: per member its `FitResult` (None where it failed), its error message (None where
-    it ran) and the process that ran it; `table()` lists them. A failed member is recorded, not raised.
+    it ran) and the process that ran it; `table()` lists them. A failed member is recorded, not raised; the
+    warnings of each member's fit are issued again, prefixed with its name.
 
     **Raises:** `PamjaxInputError` for bad arguments, before any fit.
     """
@@ -276,6 +290,8 @@ def fit_fleet(
         except PamjaxInputError as err:
             raise PamjaxInputError(f"fleet member {name!r}: {err}") from None
     outcomes = _run_fits(tasks, free, fit_options, _use_processes(distributed), progress, "fleet: member")
+    for name, outcome in zip(names, outcomes):
+        _reissue(outcome[2], prefix=f"fleet member {name!r}: ")
     return FleetResult(results={n: o[0] for n, o in zip(names, outcomes)},
                        errors={n: o[1] for n, o in zip(names, outcomes)},
-                       processes={n: o[2] for n, o in zip(names, outcomes)})
+                       processes={n: o[3] for n, o in zip(names, outcomes)})

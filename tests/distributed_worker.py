@@ -10,6 +10,9 @@ Writes OUT_DIR/sweep-<p>.npz (whole result and this process's shard) and OUT_DIR
 import json
 import pathlib
 import sys
+import time
+
+started = time.perf_counter()
 
 out = pathlib.Path(sys.argv[1])
 import pamjax  # noqa: E402  (joins before JAX starts its backend)
@@ -46,13 +49,18 @@ kwargs = dict(channels=("pressure", "position"), method="rk4", dt=1e-3, progress
 arrays = {}
 for name, chosen in devices.items():
     whole = pamjax.sweep(system, pamjax.Constant(0.5), ts, over, chunk_size=4, devices=chosen, **kwargs)
-    split = pamjax.sweep(system, pamjax.Constant(0.5), ts, over, devices=chosen, **kwargs)  # default chunks
     arrays.update({f"status{name}": whole.status, f"pressure{name}": whole["pressure"],
-                   f"position{name}": whole["position"], f"split_position{name}": split["position"]})
+                   f"position{name}": whole["position"]})
+split = pamjax.sweep(system, pamjax.Constant(0.5), ts, over, devices=devices[""], **kwargs)  # default chunks
+arrays["split_position"] = split["position"]
 shard = pamjax.sweep(system, pamjax.Constant(0.5), ts, over, chunk_size=4, gather="local",
                      devices=devices[""], **kwargs)
 np.savez(out / f"sweep-{tag}.npz", shard_points=shard.points, shard_status=shard.status,
          shard_position=shard["position"], **arrays)
+if tag == "single":  # the reference of `pamjax sweep --distributed` (tests/test_distributed.py's CONFIG), 2 devices
+    ss = pamjax.steady_state_map(system, np.linspace(0.1, 0.9, 12), horizon=0.5, window=0.1,
+                                 devices=devices[""], progress=False)
+    np.savez(out / "steady_state-single.npz", pressure=ss["pressure"], position=ss["position"], status=ss.status)
 
 # --- multistart: paper 000's static force map (9 lengths x 7 pressures, 2 N noise), 7 parameters; four starts,
 # the third with a NaN value (its fit refuses it: a per-start failure, recorded).
@@ -80,4 +88,4 @@ def fields(res):
     results=[None if r is None else fields(r) for r in result.results],
     best_model_k0=float(result.best.model.force_law.k0),
 )))
-print(f"worker {tag} done", flush=True)
+print(f"worker {tag} done in {time.perf_counter() - started:.1f} s", flush=True)

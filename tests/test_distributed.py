@@ -2,7 +2,7 @@
 collectives over gloo), compute a sweep and a multistart fit that equal the single-process results bitwise.
 
 The processes run `tests/distributed_worker.py` (each with its own single CPU device); a third runs it alone as the
-reference, at the same time, with 4 CPU devices: on 2 of them, the distributed run's mesh size, a sweep is the same
+reference, at the same time (and two more run `pamjax sweep --distributed`), with 4 CPU devices: on 2 of them, the distributed run's mesh size, a sweep is the same
 program per device and gives the same bits; with `chunk_size` given, on all 4 too; on 1, XLA compiles the sweep
 without its SPMD partitioner, which changes the last bit of some results (round-off). Every process is started in its own session and killed by its id if the test fails
 or runs past `TIMEOUT_S`, so a stuck collective cannot hang the suite.
@@ -26,7 +26,7 @@ from pamjax._distributed import PamjaxDistributedError
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 WORKER = ROOT / "tests" / "distributed_worker.py"
-TIMEOUT_S = 150  # the three processes together take ~30-45 s on a shared 2-core CPU
+TIMEOUT_S = 150  # the five processes together take ~25-50 s on the shared 2-core CPU
 
 
 def _free_port():
@@ -67,19 +67,6 @@ def _run_all(commands, envs):
     return outputs
 
 
-@pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    out = tmp_path_factory.mktemp("distributed")
-    env = _environment()
-    port = str(_free_port())
-    base = [sys.executable, str(WORKER), str(out)]
-    results = _run_all([base, base + ["0", "2", port], base + ["1", "2", port]],
-                       [dict(env, JAX_NUM_CPU_DEVICES=str(n)) for n in (4, 1, 1)])
-    for name, (code, text) in zip(["single", "process 0", "process 1"], results):
-        assert code == 0, f"{name} failed ({code}):\n{text}"
-    return out, [text for _, text in results]
-
-
 CONFIG = """kind = "steady_state"
 [system]
 valve = "averaged"
@@ -90,29 +77,49 @@ window = 0.1
 """
 
 
-def test_cli_sweep_distributed_equals_single_process(tmp_path):
-    """`pamjax sweep --distributed` on 2 processes (settings from the JAX_* environment) writes, from process 0,
-    the same file as one process with as many devices."""
-    config = tmp_path / "map.toml"
-    config.write_text(CONFIG)
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """Five processes at once: the reference (4 CPU devices), the worker on 2 processes, and `pamjax sweep
+    --distributed` on 2 processes (its settings from the JAX_* environment)."""
+    out = tmp_path_factory.mktemp("distributed")
     env = _environment()
-    cli = [sys.executable, "-m", "pamjax._cli", "sweep", str(config), "--no-plot", "--out"]
-    port = str(_free_port())
-    joined = [dict(env, JAX_COORDINATOR_ADDRESS=f"127.0.0.1:{port}", JAX_NUM_PROCESSES="2", JAX_PROCESS_ID=str(i))
-              for i in (0, 1)]
-    results = _run_all([cli + [str(tmp_path / "single"), "--cpu-devices", "2"]]
-                       + [cli + [str(tmp_path / "multi"), "--cpu-devices", "1", "--distributed"]] * 2,
-                       [env] + joined)
-    for code, text in results:
-        assert code == 0, text
-    assert "joined as process 1 of 2" in results[2][1] and "wrote" not in results[2][1]  # process 0 writes
-    single, multi = (np.load(tmp_path / d / "sweep.npz") for d in ("single", "multi"))
-    assert sorted(single.files) == sorted(multi.files)
-    for key in single.files:
-        np.testing.assert_array_equal(multi[key], single[key])
-    nothing = subprocess.run(cli + [str(tmp_path / "x"), "--distributed"], env=env, capture_output=True, text=True,
-                             timeout=TIMEOUT_S)
-    assert nothing.returncode != 0 and "--distributed: nothing to join" in nothing.stderr
+    base = [sys.executable, str(WORKER), str(out)]
+    port, cli_port = str(_free_port()), str(_free_port())
+    (out / "map.toml").write_text(CONFIG)
+    cli = [sys.executable, "-m", "pamjax._cli", "sweep", str(out / "map.toml"), "--no-plot", "--out",
+           str(out / "cli"), "--cpu-devices", "1", "--distributed"]
+    joined = [dict(env, JAX_COORDINATOR_ADDRESS=f"127.0.0.1:{cli_port}", JAX_NUM_PROCESSES="2",
+                   JAX_PROCESS_ID=str(i)) for i in (0, 1)]
+    results = _run_all([base, base + ["0", "2", port], base + ["1", "2", port], cli, cli],
+                       [dict(env, JAX_NUM_CPU_DEVICES=str(n)) for n in (4, 1, 1)] + joined)
+    names = ["single", "process 0", "process 1", "cli process 0", "cli process 1"]
+    for name, (code, text) in zip(names, results):
+        assert code == 0, f"{name} failed ({code}):\n{text}"
+    return out, [text for _, text in results]
+
+
+def test_cli_sweep_distributed_equals_single_process(runs):
+    """`pamjax sweep --distributed` on 2 processes writes, from process 0, the steady-state map of one process with
+    as many devices (`pamjax.steady_state_map`, computed by the reference)."""
+    out, texts = runs
+    assert "joined as process 1 of 2" in texts[4] and "wrote" not in texts[4]  # process 0 writes
+    written = np.load(out / "cli" / "sweep.npz")
+    single = np.load(out / "steady_state-single.npz")
+    np.testing.assert_array_equal(written["duty"], np.linspace(0.1, 0.9, 12))
+    np.testing.assert_array_equal(written["pressure_pa_abs"], single["pressure"])
+    np.testing.assert_array_equal(written["position_m"], single["position"])
+    np.testing.assert_array_equal(written["status"], single["status"])
+
+
+def test_cli_sweep_distributed_says_why_it_cannot_join(monkeypatch, tmp_path):
+    from pamjax._cli import main
+
+    for name in ("JAX_COORDINATOR_ADDRESS", "JAX_NUM_PROCESSES", "JAX_PROCESS_ID", "SLURM_JOB_ID",
+                 "OMPI_MCA_orte_hnp_uri", "OMPI_COMM_WORLD_RANK"):
+        monkeypatch.delenv(name, raising=False)
+    (tmp_path / "map.toml").write_text(CONFIG)
+    with pytest.raises(SystemExit, match="--distributed: nothing to join: none of JAX_COORDINATOR_ADDRESS"):
+        main(["sweep", str(tmp_path / "map.toml"), "--no-plot", "--out", str(tmp_path / "x"), "--distributed"])
 
 
 def test_processes_say_what_they_joined(runs):
@@ -133,8 +140,7 @@ def test_sweep_on_two_processes_equals_single_process_bitwise(runs):
     assert np.all(np.isnan(single["position"][5])) and np.all(np.isfinite(single["position"][[0, 4, 6, 11]]))
     # one device: the same results to round-off (XLA's one-device program; tolerance ~50 ulp)
     ok = single["status"] == 0
-    for key in ("position", "split_position"):
-        np.testing.assert_allclose(single[key + "1"][ok], single[key][ok], rtol=1e-14, atol=0)
+    np.testing.assert_allclose(single["position1"][ok], single["position"][ok], rtol=1e-14, atol=0)
 
 
 def test_sweep_shards_are_disjoint_and_merge_to_the_whole(runs):
