@@ -14,7 +14,9 @@ all in this one run, each in fresh processes started by this script (`--worker` 
 Each process times its sweep after a barrier (`multihost_utils.sync_global_devices`): the first call (compilation
 and run) and then `--repeats` calls (median), on process 0 up to the moment it holds the whole gathered result.
 Start-up (process start to joined, then the first call) is reported apart. Efficiency = throughput /
-(processes x the 1x1 throughput). The results of every configuration are compared bitwise with 1x1's.
+(processes x the 1x1 throughput). On a shared machine the wall-clock figure moves with the others' load (two busy
+processes get two shares of a contended CPU, one gets one), so the CPU time of every process is summed as well:
+`cpu_efficiency` = 1x1's CPU time / the configuration's (1: distributing costs no extra work). The results of every configuration are compared bitwise with 1x1's.
 `--chunk-size` (points per device per call, default 5,000: 20 groups, so 1, 2, 4, 5, 10 or 20 devices get equal
 shares) fixes each point's arithmetic, so results are comparable across configurations.
 
@@ -60,17 +62,22 @@ def worker(args):
     def call():
         if jax.process_count() > 1:
             multihost_utils.sync_global_devices("sweep")  # every process starts together
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), time.process_time()
         result = pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties}, reduce=pamjax.Final(),
                               channels=("pressure", "position"), chunk_size=args.chunk_size, progress=False)
-        return result, time.perf_counter() - t
+        return result, time.perf_counter() - t, time.process_time() - cpu
 
-    result, first = call()
-    runs = [call()[1] for _ in range(args.repeats)]
+    result, first, _ = call()
+    timed = [call()[1:] for _ in range(args.repeats)]
+    runs, cpu = [t for t, _ in timed], [c for _, c in timed]
+    # CPU time of every process (all its threads), summed: the work a configuration does, whatever the load
+    cpu_all = np.asarray(multihost_utils.process_allgather(np.asarray(cpu))).reshape(-1, len(cpu)).sum(axis=0) \
+        if jax.process_count() > 1 else np.asarray(cpu)
     if jax.process_index() == 0:
         np.savez(pathlib.Path(args.out) / "result.npz", pressure=result["pressure"], position=result["position"],
                  status=result.status)
-        figures = dict(joined_s=joined, first_s=first, runs_s=runs, processes=jax.process_count(),
+        figures = dict(joined_s=joined, first_s=first, runs_s=runs, cpu_s=cpu_all.tolist(),
+                       processes=jax.process_count(),
                        devices=jax.device_count(), device=str(jax.devices()[0].device_kind),
                        platform=jax.devices()[0].platform, info=str(info),
                        failed=int(np.sum(result.status != 0)), jax=jax.__version__)
@@ -170,7 +177,8 @@ def main():
                     np.abs(reference[k]), 1e-300))) for k in ("pressure", "position"))
                 run = float(np.median(fig["runs_s"]))
                 print(f"{processes} process(es) x {per} {fig['platform']} device(s) ({fig['device']}): run "
-                      f"{run:.3f} s (median of {args.repeats}: {', '.join(f'{t:.3f}' for t in fig['runs_s'])}), "
+                      f"{run:.3f} s (median of {args.repeats}: {', '.join(f'{t:.3f}' for t in fig['runs_s'])}; "
+                      f"CPU {float(np.median(fig['cpu_s'])):.2f} s in all processes), "
                       f"{args.points / run:,.0f} points/s; start-up: joined {fig['joined_s']:.1f} s, first call "
                       f"{fig['first_s']:.1f} s, whole launch {fig['wall_s']:.1f} s; failed {fig['failed']}; "
                       f"bitwise equal to 1x1: {fig['bitwise_equal']} (max rel. diff {fig['max_rel_diff']:.1e})",
@@ -180,18 +188,21 @@ def main():
                 else:  # pool the rounds: every timed call, start-up per launch
                     row = rows[(processes, per)]
                     row["runs_s"] = row["runs_s"] + fig["runs_s"]
+                    row["cpu_s"] = row["cpu_s"] + fig["cpu_s"]
                     for key in ("joined_s", "first_s", "wall_s"):
                         row.setdefault(key + "_all", [row[key]]).append(fig[key])
                         row[key] = float(np.median(row[key + "_all"]))
                     row["bitwise_equal"] = row["bitwise_equal"] and fig["bitwise_equal"]
     base = args.points / float(np.median(rows[(1, 1)]["runs_s"]))
+    base_cpu = float(np.median(rows[(1, 1)]["cpu_s"]))
     print(f"jax {rows[(1, 1)]['jax']}, chunk {args.chunk_size or 'default'} points per device per call; medians "
           f"over {args.rounds} round(s) x {args.repeats} calls")
     for (processes, per), fig in rows.items():
         rate = args.points / float(np.median(fig["runs_s"]))
         units = processes * per
         print(f"  {processes}x{per}: {rate:12,.0f} points/s  speed-up {rate / base:5.2f}  efficiency "
-              f"{rate / (units * base):5.2f} (over {units} device(s))")
+              f"{rate / (units * base):5.2f} (over {units} device(s))  CPU work vs 1x1 "
+              f"{float(np.median(fig['cpu_s'])) / base_cpu:5.2f}")
     top = max((k for k in rows if k[1] == 1), key=lambda k: k[0])
     fig = rows[top]
     rate = args.points / float(np.median(fig["runs_s"]))
@@ -203,7 +214,9 @@ def main():
     if saved_per_point > 0:
         print(f"extra start-up of {top[0]} processes: {overhead:.1f} s; amortised beyond "
               f"~{max(overhead, 0) / saved_per_point:,.0f} points")
+    work = base_cpu / float(np.median(fig["cpu_s"]))  # 1 = no extra CPU work for distributing
     print(f"RESULT points={args.points} processes={top[0]} pts_per_s={rate:.0f} efficiency={rate / (top[0] * base):.2f} "
+          f"cpu_efficiency={work:.2f} "
           f"single_pts_per_s={base:.0f} one_process_two_devices_pts_per_s="
           f"{args.points / float(np.median(rows[(1, 2)]['runs_s'])) if (1, 2) in rows else float('nan'):.0f} "
           f"bitwise_equal={int(fig['bitwise_equal'])} platform={fig['platform']}")
