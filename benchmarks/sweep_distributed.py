@@ -16,7 +16,8 @@ and run) and then `--repeats` calls (median), on process 0 up to the moment it h
 Start-up (process start to joined, then the first call) is reported apart. Efficiency = throughput /
 (processes x the 1x1 throughput). On a shared machine the wall-clock figure moves with the others' load (two busy
 processes get two shares of a contended CPU, one gets one), so the CPU time of every process is summed as well:
-`cpu_efficiency` = 1x1's CPU time / the configuration's (1: distributing costs no extra work). The results of every configuration are compared bitwise with 1x1's.
+`cpu_efficiency` = 1x1's CPU time / the configuration's (1: distributing costs no extra work). The results of
+every configuration are compared bitwise with 1x1's.
 `--chunk-size` (points per device per call, default 5,000: 20 groups, so 1, 2, 4, 5, 10 or 20 devices get equal
 shares) fixes each point's arithmetic, so results are comparable across configurations.
 
@@ -215,7 +216,8 @@ def main():
         print(f"extra start-up of {top[0]} processes: {overhead:.1f} s; amortised beyond "
               f"~{max(overhead, 0) / saved_per_point:,.0f} points")
     work = base_cpu / float(np.median(fig["cpu_s"]))  # 1 = no extra CPU work for distributing
-    print(f"RESULT points={args.points} processes={top[0]} pts_per_s={rate:.0f} efficiency={rate / (top[0] * base):.2f} "
+    print(f"RESULT points={args.points} processes={top[0]} pts_per_s={rate:.0f} "
+          f"efficiency={rate / (top[0] * base):.2f} "
           f"cpu_efficiency={work:.2f} "
           f"single_pts_per_s={base:.0f} one_process_two_devices_pts_per_s="
           f"{args.points / float(np.median(rows[(1, 2)]['runs_s'])) if (1, 2) in rows else float('nan'):.0f} "

@@ -28,8 +28,8 @@ else:
 import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
-import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from problems import FORCE_MAP_FREE, fit_fields, force_map  # noqa: E402  (tests/problems.py, beside this file)
 
 from pamjax import presets  # noqa: E402
 
@@ -64,28 +64,17 @@ if tag == "single":  # the reference of `pamjax sweep --distributed` (tests/test
 
 # --- multistart: paper 000's static force map (9 lengths x 7 pressures, 2 N noise), 7 parameters; four starts,
 # the third with a NaN value (its fit refuses it: a per-start failure, recorded).
-muscle = presets.mas10_muscle()
-x, p = np.meshgrid(np.linspace(-0.01, 0.07, 9), 101325.0 + np.linspace(0.5e5, 6e5, 7), indexing="ij")
-x, p = x.ravel(), p.ravel()
-force = np.asarray(muscle.static_force(jnp.asarray(x), jnp.asarray(p), pamjax.Air()))
-force = force + 2.0 * np.random.default_rng(0).standard_normal(force.shape)
-experiment = pamjax.ForceMapExperiment(x, p, np.maximum(force, 0.0), scale=2.0)
-free = ["force_law.max_force_coefficients", "force_law.k0", "force_law.k1"]
+muscle, experiment = force_map()
+free = FORCE_MAP_FREE
 truth = np.asarray(pamjax.ParameterSpace(muscle, free).initial_values())
 starts = np.stack([truth * 0.7, truth * 1.3, truth, truth * 0.9])
 starts[2, 0] = np.nan
 result = pamjax.multistart(muscle, [experiment], free, starts=starts, max_steps=30, progress=False)
 
 
-def fields(res):
-    d = res.to_dict()
-    del d["fit_s"], d["compile_s"]  # wall times
-    return d
-
-
 (out / f"multistart-{tag}.json").write_text(json.dumps(dict(
     best_index=result.best_index, errors=result.errors, processes=result.processes,
-    results=[None if r is None else fields(r) for r in result.results],
+    results=[None if r is None else fit_fields(r) for r in result.results],
     best_model_k0=float(result.best.model.force_law.k0),
 )))
 print(f"worker {tag} done in {time.perf_counter() - started:.1f} s", flush=True)

@@ -1,11 +1,13 @@
 """Two CPU processes on localhost, joined by `pamjax.initialize_distributed` (JAX's multi-process runtime, CPU
-collectives over gloo), compute a sweep and a multistart fit that equal the single-process results bitwise.
+collectives over gloo), compute a sweep and a multistart fit that equal the single-process results bitwise, and
+`pamjax sweep --distributed` writes what one process writes.
 
-The processes run `tests/distributed_worker.py` (each with its own single CPU device); a third runs it alone as the
-reference, at the same time (and two more run `pamjax sweep --distributed`), with 4 CPU devices: on 2 of them, the distributed run's mesh size, a sweep is the same
-program per device and gives the same bits; with `chunk_size` given, on all 4 too; on 1, XLA compiles the sweep
-without its SPMD partitioner, which changes the last bit of some results (round-off). Every process is started in its own session and killed by its id if the test fails
-or runs past `TIMEOUT_S`, so a stuck collective cannot hang the suite.
+The processes run `tests/distributed_worker.py`, each with its own single CPU device; a third runs it alone as the
+reference, at the same time, with 4 CPU devices (and two more run `pamjax sweep --distributed`). On 2 of the
+reference's devices (the distributed run's mesh size) a sweep is the same program per device and gives the same
+bits; with `chunk_size` given, on all 4 too; on 1, XLA compiles the sweep without its SPMD partitioner, which
+changes the last bit of some results (round-off). Every process is started in its own session and killed by its
+id if the test fails or runs past `TIMEOUT_S`, so a stuck collective cannot hang the suite.
 """
 
 import json
@@ -185,3 +187,36 @@ def test_initialize_distributed_says_why_it_cannot_join():
         pamjax.initialize_distributed("h:1", 2, 2)
     with pytest.raises(PamjaxDistributedError, match="already started its backend"):
         pamjax.initialize_distributed("127.0.0.1:1", 2, 1)
+
+
+def test_local_shards_merge_to_the_whole_sweep():
+    """In one process: `gather="local"` returns every point with its index; shards split from it (as two processes
+    would hold them) merge back to the gathered result, bitwise; a missing or repeated shard is named."""
+    system = pamjax.presets.mas10_system(valve="averaged")
+    ts = np.linspace(0.0, 0.2, 5)
+    over = {"signal.value": np.linspace(0.2, 0.8, 3)[:, None], "payload_mass": np.array([5.0, 9.6])[None, :]}
+    kwargs = dict(channels=("pressure", "position"), progress=False)
+    whole = pamjax.sweep(system, pamjax.Constant(0.5), ts, over, **kwargs)
+    local = pamjax.sweep(system, pamjax.Constant(0.5), ts, over, gather="local", **kwargs)
+    assert local.points.tolist() == list(range(6)) and local.batch_shape == (3, 2)
+    assert local["position"].shape == (6, 5)
+
+    def part(keep):
+        return pamjax.SweepResult(
+            over={k: v[keep] for k, v in local.over.items()}, t=local.t, channels=local.channels,
+            outputs={c: v[keep] for c, v in local.outputs.items()}, status=local.status[keep], dt=local.dt,
+            method=local.method, points=local.points[keep], batch_shape=local.batch_shape)
+
+    shards = [part(np.array([1, 3, 5])), part(np.array([4, 0, 2]))]
+    merged = pamjax.merge_sweep_shards(shards)
+    for c in whole.channels:
+        np.testing.assert_array_equal(merged[c], whole[c])
+    np.testing.assert_array_equal(merged.status, whole.status)
+    for k in over:
+        np.testing.assert_array_equal(merged.over[k], whole.over[k])
+    with pytest.raises(pamjax.PamjaxInputError, match="shards hold 3 points"):
+        pamjax.merge_sweep_shards(shards[:1])
+    with pytest.raises(pamjax.PamjaxInputError, match="pass every process's shard once"):
+        pamjax.merge_sweep_shards([shards[0], shards[0], shards[1]])
+    with pytest.raises(pamjax.PamjaxInputError, match="from sweep"):
+        pamjax.merge_sweep_shards([whole])

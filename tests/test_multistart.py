@@ -7,33 +7,17 @@ each fit converges in < 15 iterations, all fits share one compilation."""
 
 import numpy as np
 import pytest
+from problems import FORCE_MAP_FREE, fit_fields, force_map
 
 import pamjax as pj
-from pamjax import PamjaxInputError, PamjaxSolveError, presets
+from pamjax import PamjaxInputError, PamjaxSolveError
 
-FREE = ["force_law.max_force_coefficients", "force_law.k0", "force_law.k1"]
-
-
-def _force_map(seed=0):
-    import jax.numpy as jnp
-
-    muscle = presets.mas10_muscle()
-    x, p = np.meshgrid(np.linspace(-0.01, 0.07, 9), 101325.0 + np.linspace(0.5e5, 6e5, 7), indexing="ij")
-    x, p = x.ravel(), p.ravel()
-    f = np.asarray(muscle.static_force(jnp.asarray(x), jnp.asarray(p), pj.Air()))
-    f = f + 2.0 * np.random.default_rng(seed).standard_normal(f.shape)
-    return muscle, pj.ForceMapExperiment(x, p, np.maximum(f, 0.0), scale=2.0)
-
-
-def _fields(res):
-    d = res.to_dict()
-    del d["fit_s"], d["compile_s"]
-    return d
+FREE = FORCE_MAP_FREE
 
 
 @pytest.fixture(scope="module")
 def problem():
-    muscle, exp = _force_map()
+    muscle, exp = force_map()
     space = pj.ParameterSpace(muscle, FREE)
     return muscle, exp, space
 
@@ -50,7 +34,7 @@ def test_each_start_is_the_plain_fit_and_the_best_is_the_lowest_cost(problem):
     assert result.best_index == int(np.argmin(costs)) and result.best.cost == costs.min()
     for i in (0, 3):
         alone = pj.fit(space.with_values(result.starts[i]), [exp], FREE, max_steps=30, progress=False)
-        assert _fields(alone) == _fields(result.results[i])
+        assert fit_fields(alone) == fit_fields(result.results[i])
     assert "*" in result.table().splitlines()[result.best_index + 1]
     # the drawn starts depend on the seed only
     again = pj.multistart(muscle, [exp], FREE, starts=4, seed=1, spread=0.4, max_steps=1, progress=False)
@@ -81,8 +65,8 @@ def test_identifiability_warned_once_for_the_best(problem):
 
 
 def test_fleet_fits_each_member_and_records_failures():
-    muscle, exp_a = _force_map(seed=0)
-    _, exp_b = _force_map(seed=1)
+    muscle, exp_a = force_map(seed=0)
+    _, exp_b = force_map(seed=1)
     space = pj.ParameterSpace(muscle, FREE)
     start = space.with_values(np.asarray(space.initial_values()) * 0.9)
     broken = space.with_values(np.asarray(space.initial_values()) * np.nan)
@@ -90,7 +74,8 @@ def test_fleet_fits_each_member_and_records_failures():
                          max_steps=30, progress=False)
     assert fleet.failed == ["c"] and fleet.results["c"] is None and "non-finite" in fleet.errors["c"]
     for name, exp in (("a", exp_a), ("b", exp_b)):
-        assert _fields(fleet.results[name]) == _fields(pj.fit(start, [exp], FREE, max_steps=30, progress=False))
+        alone = pj.fit(start, [exp], FREE, max_steps=30, progress=False)
+        assert fit_fields(fleet.results[name]) == fit_fields(alone)
     assert fleet.results["a"].values != fleet.results["b"].values  # different data, different fits
     assert "failed" in fleet.table()
 
@@ -114,7 +99,7 @@ def test_bad_arguments_are_named_before_any_fit(problem, kwargs, match):
 
 
 def test_fleet_bad_arguments():
-    muscle, exp = _force_map()
+    muscle, exp = force_map()
     with pytest.raises(PamjaxInputError, match="fleet must be a non-empty dict"):
         pj.fit_fleet(muscle, [exp], FREE)
     with pytest.raises(PamjaxInputError, match=r"no start model for fleet members \['b'\]"):
