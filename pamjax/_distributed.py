@@ -89,11 +89,15 @@ def _backend_started():
 def process_info(source="already initialised"):
     """This process's place in the runtime, without joining anything (starts JAX's backend)."""
     import jax
-    from jax._src import distributed
 
+    try:
+        from jax._src import distributed
+
+        coordinator = distributed.global_state.coordinator_address
+    except (ImportError, AttributeError):  # private API moved: the line then names no coordinator
+        coordinator = None
     return ProcessInfo(
-        process_index=jax.process_index(), process_count=jax.process_count(),
-        coordinator=distributed.global_state.coordinator_address, source=source,
+        process_index=jax.process_index(), process_count=jax.process_count(), coordinator=coordinator, source=source,
         local_devices=jax.local_device_count(), global_devices=jax.device_count(),
         platform=jax.devices()[0].platform,
     )

@@ -727,7 +727,7 @@ def sweep(
         if say is not None and layout.calls > 1:
             first, last = layout.points_of_call(c)
             failed = int(np.sum(pieces[-1][2] != SUCCESS))
-            mine = "" if layout.processes == 1 else f" (process 0 of {layout.processes}: its {len(pieces[-1][0])})"
+            mine = "" if layout.processes == 1 else f" (of its {len(pieces[-1][0])} points on process 0)"
             say(f"sweep: chunk {c + 1}/{layout.calls}, points {first}-{last}, "
                 f"{time.perf_counter() - start:.2f} s, {failed} failed{mine}")
     points, out, status = (np.concatenate(part) for part in zip(*pieces))
