@@ -58,7 +58,7 @@ shard = pamjax.sweep(system, pamjax.Constant(0.5), ts, over, chunk_size=4, gathe
 np.savez(out / f"sweep-{tag}.npz", shard_points=shard.points, shard_status=shard.status,
          shard_position=shard["position"], **arrays)
 if tag == "single":  # the reference of `pamjax sweep --distributed` (tests/test_distributed.py's CONFIG), 2 devices
-    ss = pamjax.steady_state_map(system, np.linspace(0.1, 0.9, 12), horizon=0.5, window=0.1,
+    ss = pamjax.steady_state_map(system, np.linspace(0.1, 0.9, 12), horizon=0.5, window=0.1, method="rk4", dt=1e-3,
                                  devices=devices[""], progress=False)
     np.savez(out / "steady_state-single.npz", pressure=ss["pressure"], position=ss["position"], status=ss.status)
 

@@ -76,6 +76,8 @@ valve = "averaged"
 commands = { start = 0.1, stop = 0.9, num = 12 }
 horizon = 0.5
 window = 0.1
+method = "rk4"
+dt = 1e-3
 """
 
 
