@@ -21,6 +21,7 @@ import numpy as np
 
 from . import presets
 from ._cli_fit import check_keys, read_toml
+from ._distributed import join_for_cli
 from ._errors import PamjaxInputError
 from ._sweep_maps import flow_surface, frequency_response, steady_state_map
 
@@ -55,6 +56,10 @@ def add_arguments(parser):
     parser.add_argument("--cpu-devices", type=_positive_int, default=DEFAULT_CPU_DEVICES,
                         help="on CPU, split the processor into this many XLA devices and shard the sweep over them "
                              "(default: one per core; 1: a single device). No effect on GPU/TPU runs")
+    parser.add_argument("--distributed", action="store_true",
+                        help="join a multi-process run (JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES, JAX_PROCESS_ID, "
+                             "or SLURM/Open MPI) and spread the sweep over every process's devices (--cpu-devices "
+                             "per process); process 0 writes the outputs (docs/distributed.md)")
 
 
 def _use_cpu_devices(count):
@@ -187,6 +192,7 @@ def plot(spec, path):
 
 def run(args):
     _use_cpu_devices(args.cpu_devices)
+    writes = join_for_cli(args.distributed)  # before JAX starts; False on processes other than 0
     config = read_toml(args.config)  # run_config validates it before anything runs
     name = os.path.splitext(os.path.basename(args.config))[0]
     out = args.out or os.path.join("results", f"sweep-{name}")
@@ -195,6 +201,8 @@ def run(args):
             raise SystemExit(f"{os.path.join(out, existing)} exists; pass --overwrite to replace it")
     start = time.perf_counter()
     columns, spec = run_config(config)
+    if not writes:
+        return 0
     import jax
 
     devices = jax.devices()
