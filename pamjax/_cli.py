@@ -27,10 +27,17 @@ def main(argv=None):
         p = sub.add_parser(name, help=help_text, description=help_text)
         module.add_arguments(p)
         available[name] = module
+    parser.add_argument("--no-cache", action="store_true",
+                        help="do not use JAX's persistent compilation cache (default: on, in the user's cache directory"
+                             "; PAMJAX_CACHE_DIR moves it, PAMJAX_COMPILATION_CACHE=0 turns it off)")
     args = parser.parse_args(argv)
     import jax
 
     jax.config.update("jax_enable_x64", True)  # float64 physics (entry point, not an import-time side effect)
+    if not args.no_cache:
+        from ._cache import enable_compilation_cache
+
+        enable_compilation_cache()
     return available[args.command].run(args) or 0
 
 

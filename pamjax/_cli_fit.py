@@ -169,19 +169,17 @@ def _experiment(e, k, root, fit_cfg, model):
 _UNITS = {"pressure": "[Pa abs]", "position": "[m]", "velocity": "[m/s]", "force": "[N]", "mass_flow": "[kg/s]"}
 
 
-def plot(path, model, experiments):
-    """Data vs model per experiment and channel, residuals below."""
+def plot(path, result, experiments):
+    """Data vs model per experiment and channel (the fit result's predictions), residuals below."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ._experiment import predict
-
     cols = [(e, c) for e in experiments for c in e.channels]
     fig, axes = plt.subplots(2, len(cols), figsize=(4 * len(cols), 6), squeeze=False, sharex="col")
     for j, (e, c) in enumerate(cols):
-        pred = np.asarray(predict(model, e)[c])
+        pred = np.asarray(result.predictions[e.name][c])
         data = np.asarray(e.data[c])
         t = np.asarray(e.times)
         axes[0, j].plot(t, data, ".", ms=2, label="data")
@@ -224,7 +222,7 @@ def run(args):
         print("WARNING:", w)
     if not args.no_plot:
         try:
-            plot(out / "fit.png", res.model, experiments)
+            plot(out / "fit.png", res, experiments)
             print(f"wrote {result_path} and {out / 'fit.png'}")
         except ModuleNotFoundError:
             print(f"wrote {result_path} (no figure: matplotlib is not installed)")

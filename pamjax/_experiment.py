@@ -42,6 +42,21 @@ class TankFromModel(eqx.Module):
         return TankSystem(valve=model.valve, volume=self.volume, air=model.air, polytropic_index=self.polytropic_index)
 
 
+class _Constant:
+    """A NumPy array held as a static (compile-time) value: hashed and compared by content."""
+
+    def __init__(self, array):
+        self.array = np.array(array, copy=True)
+        self.array.setflags(write=False)
+        self._hash = hash((self.array.shape, self.array.tobytes()))
+
+    def __hash__(self):
+        return self._hash
+
+    def __eq__(self, other):
+        return isinstance(other, _Constant) and np.array_equal(self.array, other.array)
+
+
 def _default_scale(values):
     """1 % of the channel's range (so a residual of 1 is 1 % of range), or 1 for a flat channel."""
     span = float(np.ptp(values)) if values.size else 0.0
@@ -64,8 +79,9 @@ class Experiment(eqx.Module):
     - `name`; `rtol`, `atol`, `max_steps`, `dt0`: solver settings of the adaptive solve (see `simulate`); the
       tolerances default to 1e-9 (tighter than `simulate`'s 1e-6, so that the residuals are smooth enough for
       Levenberg-Marquardt near the optimum; see the comment at the default).
-    - `stepping`: "auto" (default: "pwm" when the system's valve switches, "grid" for a hybrid system (stick-slip
-      friction) with a continuous valve, else "adaptive"), "adaptive", "pwm" or "grid". "pwm" integrates on the PWM-synchronous fixed RK4 grid (`simulate(stepping="pwm")`:
+    - `stepping`: "auto" (default: "pwm" when the system's valve switches, else "grid": fixed RK4 steps of 1 ms
+      with events located inside the step for stick-slip friction), "adaptive" (diffrax at `rtol`/`atol`: for a
+      stiff system), "pwm" or "grid". "pwm" integrates on the PWM-synchronous fixed RK4 grid (`simulate(stepping="pwm")`:
       exact edges, `substeps` nodes per period plus the edges), so the residuals are smooth, deterministic functions
       of every parameter; an adaptive solve of a switching valve changes its step pattern with the parameters, and
       the cost jumps by O(1) between neighbouring trial points (docs/fitting.md), which stalls Levenberg-Marquardt.
@@ -93,6 +109,7 @@ class Experiment(eqx.Module):
     stepping: str = eqx.field(static=True)
     substeps: int = eqx.field(static=True)
     span: tuple = eqx.field(static=True)  # (t0, t_end) [s] as floats, to size the PWM grid
+    host_times: "_Constant" = eqx.field(static=True)  # the times as a NumPy array (see `predict`)
     num_periods: int | None = eqx.field(static=True)
     lowpass_hz: float | None = eqx.field(static=True)  # the recording's low-pass cut-off, if it was filtered
 
@@ -162,14 +179,17 @@ class Experiment(eqx.Module):
         self.stepping, self.substeps = stepping, substeps
         self.lowpass_hz = recording.lowpass_hz
         self.span = (float(self.t0), float(t[-1]))
+        self.host_times = _Constant(np.asarray(t, dtype=float))
         self.num_periods = None
 
     def _stepping(self, system):
-        """The stepping of this experiment's solve: "auto" is the PWM-synchronous grid for a switching valve
-        (smooth, deterministic residuals in every parameter), the uniform grid for a hybrid system fed by a
-        continuous valve, else the adaptive solver (`simulate`'s rule otherwise)."""
-        if self.stepping == "auto" and getattr(system.valve, "switches", False):
-            return "pwm"
+        """The stepping of this experiment's solve. "auto": the PWM-synchronous grid for a switching valve, the
+        uniform grid otherwise (hybrid or smooth): fixed grids give residuals that are smooth, deterministic functions
+        of every parameter (an adaptive solve's step pattern changes with them and its cost jumps at the tolerance
+        level), compile to small loops, and keep in the persistent compilation cache. "adaptive" (diffrax, at the
+        experiment's rtol/atol) remains for stiff systems a 1 ms RK4 grid cannot hold."""
+        if self.stepping == "auto":
+            return "pwm" if getattr(system.valve, "switches", False) else "grid"
         try:
             return resolve_stepping(system, self.stepping)
         except PamjaxInputError as err:
@@ -223,12 +243,15 @@ class Experiment(eqx.Module):
             traj = solve(system, self.signal, self.times, y0, self.t0, stepping=stepping, substeps=self.substeps,
                          num_periods=self._grid_size(system, stepping))
             return {c: getattr(traj, c) for c in traj.channels() if getattr(traj, c) is not None}
+        # The output times and start as compile-time constants (the recording's own, exactly): diffrax then checks
+        # them at trace time instead of with a run-time host callback, and a program with a host callback cannot be
+        # kept in JAX's persistent compilation cache.
         traj = solve(
             system,
             self.signal,
-            self.times,
+            jnp.asarray(self.host_times.array),
             y0,
-            self.t0,
+            jnp.asarray(self.span[0]),
             rtol=self.rtol,
             atol=self.atol,
             max_steps=self.max_steps,

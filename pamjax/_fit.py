@@ -5,6 +5,7 @@ is Levenberg-Marquardt on the host (`pamjax._lm`) around two compiled functions 
 and their forward-mode Jacobian; the statistics and the mismatch diagnostics are in `pamjax._diagnostics`.
 """
 
+import contextlib
 import dataclasses
 import json
 import math
@@ -42,7 +43,8 @@ class FitResult:
     - `history`: per iteration [step, cost at the current point, damping λ, accepted].
     - `fit_s`, `compile_s`: wall time of the fit without compilation, and the compilation (each compiled
       function's first call less its median later call).
-    - `model`: the fitted model (not stored in JSON; `apply(base_model)` rebuilds it).
+    - `model`: the fitted model (not stored in JSON; `apply(base_model)` rebuilds it); `predictions`: experiment →
+      channel → the fitted model at the recording's times (NaN where a sample was masked; not stored in JSON).
     """
 
     labels: list
@@ -67,12 +69,17 @@ class FitResult:
     compile_s: float
     num_residuals: int
     model: object = dataclasses.field(default=None, repr=False, compare=False)
+    predictions: dict = dataclasses.field(default=None, repr=False, compare=False)
 
     def to_dict(self):
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "model"}
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if f.name not in ("model", "predictions")}
 
     @classmethod
     def from_dict(cls, d):
+        d = dict(d)
+        d.setdefault("message", d.get("status", ""))  # results written before these fields existed
+        d.setdefault("mismatch", False)
         return cls(**d)
 
     def to_json(self, path, overwrite=False):
@@ -139,6 +146,26 @@ def evaluate(model, experiments):
     return channel_errors(experiments, r)
 
 
+@contextlib.contextmanager
+def errors_as_nan():
+    """Trace with equinox's run-time checks returning NaN instead of raising through a host callback.
+
+    diffrax checks its save times with `eqx.error_if` inside every solve, and equinox raises such errors from a host
+    callback; JAX refuses to write a program with a host callback to its persistent compilation cache, so every fit
+    with an adaptive solve would compile again in every run. A fit treats non-finite residuals as a failed trial
+    step, so NaN is the right failure here (the times themselves were checked on the host before the fit). The one
+    place pamjax sets a private name of a dependency: equinox reads `EQX_ON_ERROR` from the environment once, at
+    import; `tests/test_fit.py` fails if the name moves."""
+    import equinox._errors as eqx_errors
+
+    old = eqx_errors.EQX_ON_ERROR
+    eqx_errors.EQX_ON_ERROR = "nan"
+    try:
+        yield
+    finally:
+        eqx_errors.EQX_ON_ERROR = old
+
+
 class _Problem:
     """The host side of the two compiled functions: NumPy in, NumPy out, the identification samples selected; a
     failed solve's residuals are None."""
@@ -150,7 +177,8 @@ class _Problem:
 
     def _timed(self, kind, fn, *args):
         t = time.perf_counter()
-        out = jax.block_until_ready(fn(*args))
+        with errors_as_nan():
+            out = jax.block_until_ready(fn(*args))
         self.seconds[kind].append(time.perf_counter() - t)
         return out
 
@@ -381,6 +409,19 @@ def fit(
     return res
 
 
+def _predictions_from(exps, residuals):
+    """experiment → channel → model values at the data's times, from the residuals of all samples (data + r scale;
+    NaN where a sample was masked)."""
+    out, k = {}, 0
+    for e in exps:
+        out[e.name] = {}
+        for c, scale, data, used, _ in e.layout():
+            r = np.asarray(residuals[k : k + data.size])
+            k += data.size
+            out[e.name][c] = np.where(used, data + r * scale, np.nan)
+    return out
+
+
 def _result(model, exps, free, space, state, identifiability_tol, out, overwrite, problem):
     labels = space.labels
     theta = state.theta
@@ -410,7 +451,8 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
         warnings.warn(msg, PamjaxIdentifiabilityWarning, stacklevel=3)
     values = np.asarray(space.physical(jnp.asarray(theta)))
     fitted = space.with_values(jnp.asarray(values))
-    errors = channel_errors(exps, problem.all_residuals(theta))
+    r_all = problem.all_residuals(theta)
+    errors = channel_errors(exps, r_all)
     flagged, note = mismatch(errors)
     if flagged:
         msgs.append(note)
@@ -438,6 +480,7 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
         compile_s=0.0,
         num_residuals=used,
         model=fitted,
+        predictions=_predictions_from(exps, r_all),
     )
     if math.isnan(res.cost):
         raise RuntimeError("fit produced a NaN cost; this is a bug in pamjax")
