@@ -20,6 +20,7 @@ import optimistix as optx
 
 from ._errors import PamjaxInputError, require_float64
 from ._experiment import predict
+from ._fingerprint import check_resume, encode, fingerprint
 
 # Residual entries of a trial step whose simulation failed (non-finite): large and finite, so the step is rejected.
 FAILED_RESIDUAL = 1e6
@@ -446,7 +447,7 @@ def _check_checkpoint_path(checkpoint, resume, overwrite):
         raise FileExistsError(f"checkpoint {path} exists; pass overwrite=True to replace it (or resume from it)")
 
 
-def _write_checkpoint(path, labels, carry, history):
+def _write_checkpoint(path, labels, carry, history, fingerprint=None):
     """Save the optimiser carry (θ, the optimistix state, done, result, Jacobian, residuals: every array leaf,
     exactly) and the history after an iteration. Written to a temporary file and renamed, so an interruption leaves
     the previous checkpoint intact."""
@@ -456,8 +457,9 @@ def _write_checkpoint(path, labels, carry, history):
     arrays = {f"leaf_{i}": x for i, x in enumerate(leaves)}
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp.npz")
+    extra = {} if fingerprint is None else {"fingerprint": encode(fingerprint)}  # see _fingerprint
     np.savez(tmp, format=_CHECKPOINT_FORMAT, labels=np.asarray(labels, dtype=str), weak=np.asarray(weak, dtype=bool),
-             history=np.asarray(history, dtype=float).reshape(-1, 4), **arrays)
+             history=np.asarray(history, dtype=float).reshape(-1, 4), **arrays, **extra)
     tmp.replace(path)
 
 
@@ -540,7 +542,9 @@ def fit(
       Never replaces an existing file unless `overwrite=True` or it is the `resume` file.
     - `resume`: an `.npz` checkpoint of this same problem (model, experiments, free, solver): the fit continues from
       it and ends bitwise where an uninterrupted fit with the same `max_steps` ends (values, cost, iterations,
-      history). Stop a long fit early with a small `max_steps` (or an interrupt) and resume with the full one.
+      history). Stop a long fit early with a small `max_steps` (or an interrupt) and resume with the full one. The
+      checkpoint carries a fingerprint of the start model, free spec, experiments, data and solver
+      (`pamjax._fingerprint`); a resume of another problem is refused, saying what differs.
 
     **Returns:** a `FitResult` (values, standard errors, correlation, per-channel RMSE, status, fitted `model`).
 
@@ -563,6 +567,9 @@ def fit(
     if not (isinstance(max_steps, int) and max_steps > 0):
         raise PamjaxInputError(f"max_steps must be a positive int, got {max_steps}")
     space = ParameterSpace(model, free)
+    problem = fingerprint(model, experiments, free, solver, rtol, atol)  # start model, free, experiments, data
+    if resume is not None:
+        check_resume(resume, problem)  # before any solve: a checkpoint of another problem is refused, naming why
     for e in experiments:
         e.check(model)
     labels = space.labels
@@ -611,7 +618,7 @@ def fit(
         prev_accepted = int(state.num_accepted_steps)
         history.append([k - 1, cost, step_size, bool(accepted)])
         if checkpoint is not None:
-            _write_checkpoint(checkpoint, labels, (theta, state, done, result, jac, resid), history)
+            _write_checkpoint(checkpoint, labels, (theta, state, done, result, jac, resid), history, problem)
         if report is not None:
             report(k - 1, cost, step_size, accepted)
         elif progress:

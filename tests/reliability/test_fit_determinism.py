@@ -1,10 +1,15 @@
 """Determinism of `fit` (issue 7, item 6): the same inputs give the same fit, bitwise; a fit stopped after k
-iterations with its state checkpointed and then resumed ends bitwise where an uninterrupted fit ends.
+iterations with its state checkpointed and then resumed ends bitwise where an uninterrupted fit ends; a resume of
+another problem (start model, free list, experiments or data) is refused, saying what differs.
 
 Problem: the synthetic MAS-10 static force map (9 lengths × 7 pressures, 2 N noise), 7 free parameters (F_max at
-five nodes, k0, k1) from 30 % low: 8 Levenberg-Marquardt iterations, three of them rejected trial steps (so the
-trust region's state matters on resume); a few seconds with compilation."""
+five nodes, k0, k1) from 30 % low; a few seconds with compilation. Nothing here depends on how many iterations the
+fit takes or on last-bit values, which differ between CPUs (on a 2-core AVX-512 machine the same fit converged in 5
+iterations instead of 8): the stop points are taken from the uninterrupted fit's own history (after the first
+iteration, and inside a run of rejected trial steps when it has one), and every bitwise comparison is between two
+runs on one machine."""
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -43,14 +48,27 @@ def reference():
 def test_same_inputs_same_fit_bitwise(reference):
     start, exp = _problem()  # rebuilt from the same seed
     again = pj.fit(start, [exp], FREE, max_steps=30, progress=False)
-    assert reference.converged and reference.iterations > 6, reference.status
+    assert reference.converged and reference.iterations >= 2, reference.status
     assert _fields(again) == _fields(reference)
     other = pj.fit(*_problem(seed=1), FREE, max_steps=30, progress=False)  # the comparison can fail
     assert _fields(other) != _fields(reference)
 
 
-@pytest.mark.parametrize("stop_after", [1, 6])  # 6: inside the run of rejected steps
-def test_interrupted_and_resumed_fit_ends_bitwise_where_uninterrupted_ends(reference, tmp_path, stop_after):
+def _stop_points(history):
+    """Iterations to stop after: the first, and one inside a run of rejected trial steps (the trust region's state
+    then matters on resume), found in this machine's uninterrupted run; entries are [step, cost, step size, accepted]."""
+    last = len(history) - 1
+    inside_rejections = [k for k in range(1, last) if not history[k][3] and not history[k + 1][3]]
+    after_rejection = [k for k in range(1, last) if not history[k][3]]
+    return {"first": 1, "rejected": (inside_rejections or after_rejection or [None])[0]}
+
+
+@pytest.mark.parametrize("where", ["first", "rejected"])
+def test_interrupted_and_resumed_fit_ends_bitwise_where_uninterrupted_ends(reference, tmp_path, where):
+    stop_after = _stop_points(reference.history)[where]
+    if stop_after is None:
+        pytest.skip(f"this machine's fit ({reference.iterations} iterations) rejected no trial step before its end")
+    assert stop_after < reference.iterations
     start, exp = _problem()
     path = tmp_path / "fit_state.npz"
     part = pj.fit(start, [exp], FREE, max_steps=stop_after, progress=False, checkpoint=path)
@@ -84,7 +102,35 @@ def test_resume_from_another_problem_is_named(tmp_path):
     start, exp = _problem()
     path = tmp_path / "state.npz"
     pj.fit(start, [exp], FREE, max_steps=1, progress=False, checkpoint=path)
-    with pytest.raises(PamjaxInputError, match="resume: .* saved for parameters"):
+    with pytest.raises(PamjaxInputError, match=r"resume: .* free parameters differ"):
         pj.fit(start, [exp], FREE[:2], max_steps=3, progress=False, resume=path)
     with pytest.raises(PamjaxInputError, match="resume: .* does not exist"):
         pj.fit(start, [exp], FREE, progress=False, resume=tmp_path / "missing.npz")
+
+
+def _refused(path, model, experiments, match):
+    with pytest.raises(PamjaxInputError, match=match) as info:
+        pj.fit(model, experiments, FREE, max_steps=3, progress=False, resume=path)
+    return str(info.value)
+
+
+def test_resume_with_the_same_shapes_but_another_model_or_data_is_refused(tmp_path):
+    # Every array has the checkpoint's shape, so only the fingerprint can tell: before it, such a resume returned
+    # the checkpoint's old result attached to the new model, as "converged".
+    start, exp = _problem()
+    path = tmp_path / "state.npz"
+    part = pj.fit(start, [exp], FREE, max_steps=2, progress=False, checkpoint=path)
+    other_model = eqx.tree_at(lambda m: m.force_law.k2, start, start.force_law.k2 * 1.01)  # not a free parameter
+    message = _refused(path, other_model, [exp], r"saved by a different fit: the start model differs in force_law\.k2")
+    assert "force_law.k0" not in message  # only what differs is named
+    other_start = eqx.tree_at(lambda m: m.force_law.k0, start, start.force_law.k0 * 1.01)  # a free start value
+    _refused(path, other_start, [exp], r"the start model differs in force_law\.k0")
+    _, other_data = _problem(seed=1)  # same shapes, other noise
+    _refused(path, start, [other_data], r"experiment 'force_map' has other data")
+    rescaled = pj.ForceMapExperiment(exp.positions, exp.pressures, exp.forces, scale=3.0)
+    _refused(path, start, [rescaled], r"experiment 'force_map' has other settings")
+    renamed = pj.ForceMapExperiment(exp.positions, exp.pressures, exp.forces, scale=2.0, name="bench")
+    _refused(path, start, [renamed], r"the experiments differ \(checkpoint: \['force_map'\], now: \['bench'\]\)")
+    # the same problem rebuilt from scratch still resumes
+    again = pj.fit(*_problem(), FREE, max_steps=3, progress=False, resume=path)
+    assert again.history[: len(part.history)] == part.history
