@@ -13,6 +13,7 @@ from ._errors import PamjaxInputError, PamjaxSolveError, check_time_grid, requir
 from ._inputs import AbstractSignal
 from ._rodas import Rodas5
 from ._system import AbstractSystem
+from ._units import check_absolute_pressure
 from ._valve import OnOffValve
 
 _RESULT_NONPHYSICAL = 102  # a state left the physical range (absolute pressure ≤ 0)
@@ -272,6 +273,8 @@ def validate(system, signal, ts, y0=None, t0=None):
         pressure = getattr(y0, "pressure", None)
         if pressure is not None and not isinstance(pressure, jax.core.Tracer) and not np.all(np.asarray(pressure) > 0):
             raise PamjaxInputError(f"y0.pressure must be an ABSOLUTE pressure > 0 [Pa], got {pressure}")
+        if pressure is not None:  # 1.01325 (bar) or 0 (gauge) is refused naming the likely unit
+            check_absolute_pressure(pressure, "y0.pressure")
 
 
 def default_solver(system: AbstractSystem):

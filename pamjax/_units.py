@@ -11,7 +11,7 @@ import re
 
 import numpy as np
 
-from ._errors import PamjaxInputError
+from ._errors import PamjaxInputError, _concrete
 
 ATMOSPHERE = 101325.0  # Pa abs, ISO 2533 standard atmosphere (also `Air.atmospheric_pressure`'s default)
 # No pneumatic muscle test runs below half an atmosphere absolute (a vented chamber reads ~101325 Pa abs).
@@ -175,8 +175,11 @@ def check_magnitude(dimension, values, where, name):
 
 def check_absolute_pressure(values, name, *, above_atmosphere=False):
     """Refuse pressures that are not ABSOLUTE pascal: below half an atmosphere (bar, MPa, psi, kPa or gauge; the
-    likely unit named), above 50 bar, or — for a supply pressure (`above_atmosphere`) — not above one atmosphere."""
-    v = np.asarray(values, dtype=float)
+    likely unit named), above 50 bar, or — for a supply pressure (`above_atmosphere`) — not above one atmosphere.
+    Traced values (inside jit/vmap/grad) are not checked."""
+    v = _concrete(values)
+    if v is None:
+        return
     v = v[np.isfinite(v)]
     if v.size == 0:
         return
