@@ -1,37 +1,116 @@
-"""The `pamjax` command line: `pamjax demo`, `pamjax fit CONFIG.toml`, `pamjax sweep CONFIG.toml`."""
+"""The `pamjax` command line: `pamjax demo`, `pamjax fit CONFIG.toml`, `pamjax simulate CONFIG.toml`,
+`pamjax sweep CONFIG.toml`.
+
+A user error (a bad config, file, unit or path) prints one message — file and line for TOML, key, value and expected
+range for values — and exits with status 2; a failed solve exits with 1; Ctrl-C (or SIGTERM) exits with 130 (143)
+after one line saying what was kept. No traceback unless `--debug` (or the environment variable `PAMJAX_DEBUG=1`)
+asks for it. `docs/cli.md` describes the commands and their files.
+"""
 
 import argparse
+import contextlib
 import importlib
+import os
+import re
+import signal
 import sys
+import threading
 
-# subcommand → (module, function, help). Each module defines `add_arguments(parser)` and `run(args)`.
+# subcommand → (module, help). Each module defines `add_arguments(parser)` and `run(args)`.
 _COMMANDS = {
-    "demo": ("pamjax._demo", "Run paper 000's valve and system experiments with the preset; print and plot them."),
-    "fit": ("pamjax._cli_fit", "Fit parameters to recordings as described by a TOML config."),
+    "demo": ("pamjax._demo", "Run paper 000's valve and system experiments with the preset; write CSV and a figure."),
+    "fit": ("pamjax._cli_fit", "Fit parameters to recordings as described by a TOML config; write the fitted model."),
+    "simulate": ("pamjax._cli_simulate", "Simulate any model with any input; write the trajectory (CSV) and a figure."),
     "sweep": ("pamjax._cli_sweep", "Run a batch sweep described by a TOML config; write NPZ/CSV and a figure."),
 }
+DEBUG_VARIABLE = "PAMJAX_DEBUG"
+EXIT_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_TERMINATED = 2, 1, 130, 143
+
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, turned into an interrupt so that the commands stop as cleanly as on Ctrl-C."""
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt():
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise _Terminated()
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _parser():
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--debug", action="store_true",
+                        help=f"show Python tracebacks (also: environment variable {DEBUG_VARIABLE}=1)")
+    parser = argparse.ArgumentParser(prog="pamjax", description="Differentiable pneumatic artificial muscle models.",
+                                     parents=[common])
+    sub = parser.add_subparsers(dest="command", required=True)
+    modules = {}
+    for name, (module_name, help_text) in _COMMANDS.items():
+        module = importlib.import_module(module_name)
+        p = sub.add_parser(name, help=help_text, description=help_text, parents=[common])
+        module.add_arguments(p)
+        modules[name] = module
+    return parser, modules
+
+
+def _say(command, text):
+    text = re.sub(rf"^pamjax {command}( --\w+)?: ", "", str(text))
+    print(f"pamjax {command}: error: {text}", file=sys.stderr, flush=True)
 
 
 def main(argv=None):
+    """Run the `pamjax` command line with `argv` (default `sys.argv[1:]`); returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    parser = argparse.ArgumentParser(prog="pamjax", description="Differentiable pneumatic artificial muscle models.")
-    sub = parser.add_subparsers(dest="command", required=True)
-    available = {}
-    for name, (module_name, help_text) in _COMMANDS.items():
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as err:
-            if err.name != module_name:
-                raise
-            continue
-        p = sub.add_parser(name, help=help_text, description=help_text)
-        module.add_arguments(p)
-        available[name] = module
+    parser, modules = _parser()
     args = parser.parse_args(argv)
+    debug = args.debug or os.environ.get(DEBUG_VARIABLE, "") not in ("", "0")
     import jax
 
     jax.config.update("jax_enable_x64", True)  # float64 physics (entry point, not an import-time side effect)
-    return available[args.command].run(args) or 0
+    from ._errors import PamjaxInputError, PamjaxSolveError
+
+    command = args.command
+    with _terminate_as_interrupt():
+        try:
+            return modules[command].run(args) or 0
+        except KeyboardInterrupt as err:
+            if debug:
+                raise
+            terminated = isinstance(err, _Terminated)
+            print(f"pamjax {command}: {'terminated' if terminated else 'interrupted'}", file=sys.stderr, flush=True)
+            return EXIT_TERMINATED if terminated else EXIT_INTERRUPTED
+        except (PamjaxInputError, FileExistsError) as err:
+            if debug:
+                raise
+            _say(command, err)
+            return EXIT_INPUT
+        except PamjaxSolveError as err:
+            if debug:
+                raise
+            _say(command, err)
+            return EXIT_FAILED
+        except OSError as err:  # a file that cannot be read or written
+            if debug:
+                raise
+            _say(command, f"{err.strerror or err}: {err.filename}" if err.filename else err)
+            return EXIT_FAILED
+        except Exception as err:  # not a user error: one line, the traceback on request
+            if debug:
+                raise
+            first = str(err).strip().splitlines()[0] if str(err).strip() else ""
+            _say(command, f"{type(err).__name__}: {first}\n(run again with --debug, or {DEBUG_VARIABLE}=1, to see "
+                          "the traceback; if your input is valid, please report it)")
+            return EXIT_FAILED
 
 
 if __name__ == "__main__":

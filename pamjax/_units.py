@@ -124,9 +124,9 @@ def to_si(name, unit, values, where):
 
 def _likely_pressure_unit(peak):
     """The unit a peak absolute pressure value most likely was written in, when it is far too small for Pa."""
-    if peak <= 1.5:
+    if peak <= 0.95:  # 0.1-0.9 MPa: paper 000's pressures in MPa
         return "MPa"
-    if peak <= 15.0:
+    if peak <= 15.0:  # 1.01325 bar is one atmosphere
         return "bar"
     if peak <= 150.0:
         return "psi"
