@@ -16,6 +16,8 @@ import signal
 import sys
 import threading
 
+from ._cli_out import EXIT_FAILED, EXIT_INPUT, PENDING, Terminated, interrupt_status, raise_pending
+
 # subcommand → (module, help). Each module defines `add_arguments(parser)` and `run(args)`.
 _COMMANDS = {
     "demo": ("pamjax._demo", "Run paper 000's valve and system experiments with the preset; write CSV and a figure."),
@@ -24,27 +26,27 @@ _COMMANDS = {
     "sweep": ("pamjax._cli_sweep", "Run a batch sweep described by a TOML config; write NPZ/CSV and a figure."),
 }
 DEBUG_VARIABLE = "PAMJAX_DEBUG"
-EXIT_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_TERMINATED = 2, 1, 130, 143
-
-
-class _Terminated(KeyboardInterrupt):
-    """SIGTERM, turned into an interrupt so that the commands stop as cleanly as on Ctrl-C."""
 
 
 @contextlib.contextmanager
-def _terminate_as_interrupt():
+def _signals_as_interrupts():
+    """Ctrl-C and SIGTERM raise an interrupt (`Terminated` for SIGTERM) and are recorded in `PENDING`, so that one
+    swallowed by a garbage-collection callback is raised again at the next safe point (`raise_pending`)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def handler(signum, frame):
-        raise _Terminated()
+        PENDING.append(signum)
+        raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
-    previous = signal.signal(signal.SIGTERM, handler)
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for s, h in previous.items():
+            signal.signal(s, h)
+        PENDING.clear()
 
 
 def _parser():
@@ -80,15 +82,17 @@ def main(argv=None):
     from ._errors import PamjaxInputError, PamjaxSolveError
 
     command = args.command
-    with _terminate_as_interrupt():
+    with _signals_as_interrupts():
         try:
-            return modules[command].run(args) or 0
+            status = modules[command].run(args) or 0
+            raise_pending()  # a signal swallowed while JAX was busy: the command finished, but say so
+            return status
         except KeyboardInterrupt as err:
             if debug:
                 raise
-            terminated = isinstance(err, _Terminated)
+            terminated = isinstance(err, Terminated)
             print(f"pamjax {command}: {'terminated' if terminated else 'interrupted'}", file=sys.stderr, flush=True)
-            return EXIT_TERMINATED if terminated else EXIT_INTERRUPTED
+            return interrupt_status(err)
         except (PamjaxInputError, FileExistsError) as err:
             if debug:
                 raise

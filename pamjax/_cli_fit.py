@@ -9,6 +9,7 @@ compiled; the output folder is created, test-written and locked before the fit s
 
 import json
 import pathlib
+import sys
 
 import numpy as np
 
@@ -21,7 +22,7 @@ from ._cli_config import (
     signal_keys,
     validate_model_table,
 )
-from ._cli_out import OutputFolder
+from ._cli_out import PENDING, OutputFolder, interrupt_status, raise_pending
 from ._errors import PamjaxInputError
 from ._fit import FREE_ENTRY_KEYS
 from ._units import check_setting
@@ -215,15 +216,18 @@ def _resume_command(args, out):
 
 
 def run(args):
-    import pamjax as pj
-
-    from ._model_io import model_json
-
     model, experiments, free, options, out_cfg = load_config(args.config)
     out = pathlib.Path(args.out or out_cfg or f"results/{pathlib.Path(args.config).stem}")
     if args.resume and args.overwrite:
         raise PamjaxInputError("pamjax fit: --resume continues the fit in --out, --overwrite starts it again: "
                                "give one of them")
+    earlier = _checkpoint_summary(out / CHECKPOINT) if (out / CHECKPOINT).is_file() else None
+    if earlier and not (args.resume or args.overwrite):  # named before the generic "exists" of the outputs
+        if (out / RESULT).exists():
+            raise PamjaxInputError(f"pamjax fit: {out / RESULT} exists; pass --overwrite to replace it (or --resume "
+                                   "to continue that fit, e.g. with a larger [fit] max_steps)")
+        raise PamjaxInputError(f"pamjax fit: {out / CHECKPOINT} holds an earlier fit (checkpointed after {earlier}); "
+                               "continue it with --resume, or start again with --overwrite")
     outputs = [RESULT, MODEL, CHECKPOINT] + ([] if args.no_plot else [FIGURE])
     # --resume replaces what the resumed run wrote (its checkpoint proves it is the same problem)
     replaceable = outputs if args.resume else []
@@ -232,45 +236,62 @@ def run(args):
         if args.resume and not checkpoint.exists():
             raise PamjaxInputError(f"pamjax fit --resume: {out} holds no checkpoint ({CHECKPOINT}); run without "
                                    "--resume to start the fit")
-        if checkpoint.exists() and not (args.resume or args.overwrite):  # reached only if outputs were absent
-            raise PamjaxInputError(f"pamjax fit: {checkpoint} holds an earlier fit; continue it with --resume, or "
-                                   "start again with --overwrite")
-        done = _checkpoint_summary(checkpoint) if args.resume else None
-        print(f"fitting {len(free)} parameter entries to {len(experiments)} experiments "
-              f"({', '.join(e.name for e in experiments)})" + (f", resuming from {done}" if done else "")
-              + f"; checkpoint {checkpoint}", flush=True)
         try:
-            res = pj.fit(model, experiments, free, progress=not args.quiet, checkpoint=checkpoint,
-                         resume=checkpoint if args.resume else None, overwrite=args.overwrite, **options)
-        except KeyboardInterrupt:
+            return _fit_and_write(args, folder, model, experiments, free, options)
+        except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM: one line on what is kept and how to go on
+            PENDING.clear()  # handled here
+            what = "terminated" if interrupt_status(err) == 143 else "interrupted"
             where = _checkpoint_summary(checkpoint)
             if where is None:
-                print(f"pamjax fit: interrupted before the first iteration finished; nothing to resume: run "
-                      f"pamjax fit {args.config} --out {out} --overwrite to start again", flush=True)
+                again = f"pamjax fit {args.config} --out {out}" + (" --overwrite" if args.overwrite else "")
+                print(f"pamjax fit: {what} before the first iteration finished; nothing to resume: run {again} to "
+                      "start again", file=sys.stderr, flush=True)
             else:
-                print(f"pamjax fit: interrupted; the checkpoint after {where} is kept in {checkpoint}. Resume with: "
-                      f"{_resume_command(args, out)}", flush=True)
-            return 130
-        print(f"status {res.status}: {res.iterations} iterations, cost {res.initial_cost:.6g} → {res.cost:.6g} "
-              f"({res.fit_s:.1f} s after {res.compile_s:.1f} s compilation)")
-        print(res.table())
-        for name, chans in res.channel_errors.items():
-            for c, e in chans.items():
-                val = f", validation {e['validation_rmse_percent']:.3f} %" if "validation_rmse_percent" in e else ""
-                print(f"  {name} {c}: RMSE {e['rmse']:.4g} ({e['rmse_percent']:.3f} % of range){val}")
-        for w in res.warnings:
-            print("WARNING:", w)
-        if res.status == "max_steps":
-            print(f"not converged within max_steps = {res.iterations}: raise [fit] max_steps and continue with "
-                  f"{_resume_command(args, out)}")
-        provenance = {"written_by": f"pamjax fit {args.config}", "status": res.status, "cost": res.cost,
-                      "free": res.labels, "result": RESULT}
-        written = [folder.write_text(RESULT, json.dumps(res.to_dict(), indent=1) + "\n"),
-                   folder.write_text(MODEL, model_json(res.model, provenance))]
-        if not args.no_plot:
-            try:
-                written.append(folder.write(FIGURE, lambda p: plot(p, res.model, experiments)))
-            except ModuleNotFoundError:
-                print("no figure: matplotlib is not installed (pip install matplotlib)")
-        print("wrote " + ", ".join(str(p) for p in written if p is not None))
-        return 1 if folder.failed else 0
+                print(f"pamjax fit: {what}; the checkpoint after {where} is kept in {checkpoint}. Resume with: "
+                      f"{_resume_command(args, out)}", file=sys.stderr, flush=True)
+            return interrupt_status(err)
+
+
+def _fit_and_write(args, folder, model, experiments, free, options):
+    import pamjax as pj
+
+    from ._model_io import model_json
+
+    checkpoint = folder / CHECKPOINT
+    done = _checkpoint_summary(checkpoint) if args.resume else None
+    print(f"fitting {len(free)} parameter entries to {len(experiments)} experiments "
+          f"({', '.join(e.name for e in experiments)})" + (f", resuming from {done}" if done else "")
+          + f"; checkpoint {checkpoint}", flush=True)
+
+    def progress(step, cost, step_size, accepted):  # fit's own line, and the point where a signal is honoured
+        if not args.quiet:
+            print(f"  iter {step:4d}  cost {cost:.6e}  step size {step_size:.3e}  "
+                  f"{'accepted' if accepted else 'rejected'}", flush=True)
+        raise_pending()
+
+    res = pj.fit(model, experiments, free, progress=progress, checkpoint=checkpoint,
+                 resume=checkpoint if args.resume else None, overwrite=args.overwrite, **options)
+    raise_pending()
+    print(f"status {res.status}: {res.iterations} iterations, cost {res.initial_cost:.6g} → {res.cost:.6g} "
+          f"({res.fit_s:.1f} s after {res.compile_s:.1f} s compilation)")
+    print(res.table())
+    for name, chans in res.channel_errors.items():
+        for c, e in chans.items():
+            val = f", validation {e['validation_rmse_percent']:.3f} %" if "validation_rmse_percent" in e else ""
+            print(f"  {name} {c}: RMSE {e['rmse']:.4g} ({e['rmse_percent']:.3f} % of range){val}")
+    for w in res.warnings:
+        print("WARNING:", w)
+    if res.status == "max_steps":
+        print(f"not converged within max_steps = {res.iterations}: raise [fit] max_steps and continue with "
+              f"{_resume_command(args, folder.path)}")
+    provenance = {"written_by": f"pamjax fit {args.config}", "status": res.status, "cost": res.cost,
+                  "free": res.labels, "result": RESULT}
+    written = [folder.write_text(RESULT, json.dumps(res.to_dict(), indent=1) + "\n"),
+               folder.write_text(MODEL, model_json(res.model, provenance))]
+    if not args.no_plot:
+        try:
+            written.append(folder.write(FIGURE, lambda p: plot(p, res.model, experiments)))
+        except ModuleNotFoundError:
+            print("no figure: matplotlib is not installed (pip install matplotlib)")
+    print("wrote " + ", ".join(str(p) for p in written if p is not None))
+    return 1 if folder.failed else 0

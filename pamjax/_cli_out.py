@@ -15,6 +15,7 @@ import datetime
 import json
 import os
 import pathlib
+import signal
 import socket
 import tempfile
 import time
@@ -22,6 +23,30 @@ import time
 from ._errors import PamjaxInputError
 
 LOCK_NAME = ".pamjax.lock"
+EXIT_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_TERMINATED = 2, 1, 130, 143  # exit statuses of the commands
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, turned into an interrupt so that a command stops as cleanly as on Ctrl-C (`pamjax._cli`)."""
+
+
+def interrupt_status(err):
+    """The exit status for an interrupt: 143 for SIGTERM, 130 for Ctrl-C (128 + the signal number)."""
+    return EXIT_TERMINATED if isinstance(err, Terminated) else EXIT_INTERRUPTED
+
+
+# Signals received by the command line (`pamjax._cli` records them). Python raises KeyboardInterrupt wherever the
+# main thread happens to be, and one that lands in a garbage-collection callback (JAX registers one) is printed as
+# "Exception ignored" and lost: `raise_pending` raises it again at the next safe point (each fit iteration).
+PENDING = []
+
+
+def raise_pending():
+    """Raise the interrupt of a signal that was received but swallowed (see `PENDING`)."""
+    if PENDING:
+        signum = PENDING.pop()
+        PENDING.clear()
+        raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
 try:  # POSIX
     import fcntl

@@ -31,6 +31,7 @@ from ._cli_config import (
 from ._cli_out import OutputFolder
 from ._csv import write_table
 from ._errors import PamjaxInputError
+from ._simulate import validate
 from ._units import check_setting
 
 _TOP_KEYS = {"model", "input", "simulate"}
@@ -180,6 +181,7 @@ def run(args):
     validate_config(cfg)
     root = pathlib.Path(args.config).parent
     system, signal, ts, kwargs, recording = prepare(cfg, root)
+    validate(system, signal, ts, kwargs.get("y0"))  # signal range, initial state: before the output folder
     out = args.out or f"results/simulate-{pathlib.Path(args.config).stem}"
     outputs = [o for o in OUTPUTS if not (args.no_plot and o.endswith(".png"))]
     with OutputFolder(out, "pamjax simulate", outputs, overwrite=args.overwrite) as folder:

@@ -201,18 +201,25 @@ def _over_name(model, path):
     return f"{path} [{unit}]" if unit else path
 
 
-def run_config(config, progress=print, root="."):
-    """Validate and run a parsed config; returns (columns for CSV/NPZ: name -> 1-D array with units in the name,
-    plot spec). Defaults: paper 000's MAS-10 preset (pwm valve, 9.6 kg payload, 0.65 MPa abs supply). With
-    `[sweep] over`, every point of the grid of its values is mapped; the columns carry the swept values. Relative
-    model files are read from `root` (the config's folder)."""
+def prepare(config, root="."):
+    """Validate a parsed config and build its model, checking every swept path against it (nothing solved)."""
     validate_config(config)
     model = _model(config, root)
     over = config.get("sweep", {}).get("over", {})
+    if over:  # every path must name a parameter of this model, with the right shape: checked on the first point
+        apply_set(model, {p: float(_axis(v, f"over.{p}")[0]) for p, v in over.items()}, "[sweep] over")
+    return model
+
+
+def run_config(config, progress=print, root=".", model=None):
+    """Validate and run a parsed config; returns (columns for CSV/NPZ: name -> 1-D array with units in the name,
+    plot spec). Defaults: paper 000's MAS-10 preset (pwm valve, 9.6 kg payload, 0.65 MPa abs supply). With
+    `[sweep] over`, every point of the grid of its values is mapped; the columns carry the swept values. Relative
+    model files are read from `root` (the config's folder); `model`: the one `prepare` built."""
+    model = prepare(config, root) if model is None else model
+    over = config.get("sweep", {}).get("over", {})
     paths = list(over)
     axes = [_axis(over[p], f"over.{p}") for p in paths]
-    if paths:  # every path must name a parameter of this model, with the right shape: checked on the first point
-        apply_set(model, {p: float(a[0]) for p, a in zip(paths, axes)}, "[sweep] over")
     native = config["kind"] == "steady_state" and paths and all(
         "[" not in p and np.ndim(_leaf(model, p)) == 0 for p in paths)
     if native:  # one vmapped sweep over over-values × commands
@@ -334,13 +341,13 @@ def _savez(path, columns):
 def run(args):
     _use_cpu_devices(args.cpu_devices)
     config = read_toml(args.config)
-    validate_config(config)  # before the output folder is touched
+    model = prepare(config, pathlib.Path(args.config).parent)  # before the output folder is touched
     name = os.path.splitext(os.path.basename(args.config))[0]
     out = args.out or os.path.join("results", f"sweep-{name}")
     outputs = [o for o in OUTPUTS if not (args.no_plot and o.endswith(".png"))]
     with OutputFolder(out, "pamjax sweep", outputs, overwrite=args.overwrite) as folder:
         start = time.perf_counter()
-        columns, spec = run_config(config, root=pathlib.Path(args.config).parent)
+        columns, spec = run_config(config, model=model)
         import jax
 
         devices = jax.devices()
