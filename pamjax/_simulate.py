@@ -12,6 +12,7 @@ from . import _synchronous as _sync
 from ._errors import PamjaxInputError, PamjaxSolveError, check_time_grid, require_float64
 from ._inputs import AbstractSignal
 from ._rodas import Rodas5
+from ._solve_hints import default_max_steps, failure_hint, pwm_stability_hint
 from ._system import AbstractSystem
 from ._units import check_absolute_pressure
 from ._valve import OnOffValve
@@ -145,7 +146,13 @@ def solve(
     # dtmax: a switching valve's windows must not be stepped over (see OnOffValve.max_step).
     # dtmin without forcing: a state that turns non-finite makes every trial step fail, and the solve stops within
     # a few dozen rejections (result "dt_min_reached") instead of grinding to max_steps and holding up a batch.
-    controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=valve.max_step(), dtmin=1e-12, force_dtmin=False)
+    # dtmin below the shortest step diffrax itself takes: a last step that lands short of t1 by more than 100 ULP
+    # (diffrax snaps closer ones to t1) is taken as a sliver, and the controller's next proposal grows from it; a
+    # fixed dtmin of 1e-12 s failed runs resting at dtmax ("minimum step size reached" at t1: duty 0 over 2.5 s).
+    # With jump times a step may be clipped to a hair before a jump, below any dtmin (an exact-edge triangle run
+    # failed so at t = 5.022 s): there the guard is left out, and the step size recovers in a few steps.
+    dtmin = None if jump_ts is not None else 50 * jnp.finfo(float).eps * jnp.maximum(jnp.abs(ts[-1]), 1.0)
+    controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=valve.max_step(), dtmin=dtmin, force_dtmin=False)
     if jump_ts is not None:
         controller = dfx.ClipStepSizeController(controller, jump_ts=jump_ts)
     if isinstance(adjoint, str):
@@ -228,15 +235,28 @@ _solve_jit = eqx.filter_jit(solve)
 
 
 def exact_edge_times(valve: OnOffValve, signal: AbstractSignal, t0, t1):
-    """The switching times of an exact-edge PWM valve over [t0, t1] (concrete values), for `jump_ts`."""
+    """The switching times of an exact-edge PWM valve over [t0, t1] (concrete values), for `jump_ts`; None if the
+    valve never switches.
+
+    Only times where the valve switches: a period whose on- or off-pulse is shorter than the switching delay (duty
+    below ~10 % or above ~90 % at 50 Hz) keeps the valve shut or open throughout, and its nominal edges are no
+    jumps. Listing them once failed constant duty 0 and 1: at duty 1 each period's closing edge and the next
+    period's opening edge differ by one rounding error (1e-17 s apart), a step below `dtmin` that the solver cannot
+    take; at duty 0 a solve resting in equilibrium stopped at one of the fictitious edges ("minimum step size")."""
     period = 1.0 / float(valve.pwm_frequency)
     n = int(np.ceil((t1 - t0) / period)) + 2
     first = np.floor(t0 / period) * period
     starts = first + period * np.arange(n)
     commands = np.asarray(jax.vmap(signal)(jnp.asarray(starts)))
-    edges = np.asarray(valve.edge_times(jnp.asarray(commands), first))
+    edges = np.asarray(valve.edge_times(jnp.asarray(commands), first)).reshape(-1, 2)
+    opens, closes = (np.asarray(g) for g in valve.switching_gates(jnp.asarray(commands)))
+    switching = opens & closes
+    changes = starts[1:][switching[1:] != switching[:-1]]  # a steady period next to a switching one
+    edges = np.concatenate([edges[switching].ravel(), changes])
     edges = np.unique(edges[(edges > t0) & (edges < t1)])
-    return jnp.asarray(edges)
+    if edges.size > 1:  # one jump for times closer than the solver's smallest step
+        edges = edges[np.concatenate([[True], np.diff(edges) > 1e-9 * period])]
+    return jnp.asarray(edges) if edges.size else None  # None: the valve never switches (no jumps)
 
 
 def validate(system, signal, ts, y0=None, t0=None):
@@ -300,7 +320,7 @@ def simulate(
     solver=None,
     rtol: float = 1e-6,
     atol: float = 1e-6,
-    max_steps: int = 200_000,
+    max_steps: int | None = None,
     dt0=None,
     adjoint=None,
     throw: bool = True,
@@ -323,7 +343,9 @@ def simulate(
       Coulomb sign; `diffrax.Tsit5()` for a switching valve, whose smoothed edges bound the step whatever the
       solver. `rtol`, `atol`: tolerances of the PID step-size controller, `atol` in scaled state units (pressure
       per 1e5 Pa, position per 1e-2 m, velocity per 1e-2 m/s).
-    - `max_steps`: the solve fails beyond this many steps; `dt0`: initial step (default: automatic).
+    - `max_steps`: the solve fails beyond this many steps; default (`_solve_hints.default_max_steps`): 200,000, or
+      more for long runs (64 per PWM period of a switching valve, 1,000 per second otherwise). `dt0`: initial step
+      (default: automatic).
     - `adjoint`: "reverse" (default), "forward", or any diffrax adjoint.
     - `throw`: raise `PamjaxSolveError` on a failed solve (default). With `throw=False` a failed solve returns a
       trajectory whose `result` is non-zero and whose channels are NaN, never plausible-looking numbers.
@@ -372,6 +394,8 @@ def simulate(
     traced = _is_traced((system, signal, ts, y0, t0))
     if solver is None and stepping == "adaptive":
         solver = default_solver(system)
+    if max_steps is None:  # a budget that grows with the horizon (a 1,000 s PWM run needs ~1.6 M steps)
+        max_steps = 200_000 if _is_traced((ts, t0)) else default_max_steps(system, float(t0), float(ts[-1]))
     traj = _solve_jit(
         system,
         signal,
@@ -390,18 +414,17 @@ def simulate(
         substeps=substeps,
         num_periods=periods,
     )
-    if throw and not traced and int(traj.result) == _RESULT_NONFINITE:
+    if throw and not traced and int(traj.result) == _RESULT_NONFINITE and stepping == "pwm":
         raise PamjaxSolveError(
             f"PWM-synchronous stepping produced a non-finite state with substeps={substeps}: the fixed RK4 step "
-            "T/substeps is beyond the stability limit of this system (stiff friction or flow near equal pressures); "
-            "increase substeps or use stepping='adaptive'. Pass throw=False to get the result with status instead."
+            f"T/substeps is beyond the stability limit of this system ({pwm_stability_hint(system, signal, t0, y0)}). "
+            "Pass throw=False to get the result with status instead."
         )
     if throw and not traced and int(traj.result) != 0:
+        message = result_message(int(traj.result)).split(" Try increasing")[0]  # the hint says what to change
+        hint = failure_hint(system, signal, ts, t0, y0, traj, max_steps, solver, message)
         raise PamjaxSolveError(
-            f"the ODE solve failed: {result_message(int(traj.result))} (result code {int(traj.result)}, after "
-            f"{int(traj.num_steps)} steps, max_steps={max_steps}). "
-            "Common causes: max_steps too small for the horizon (PWM valves need ~20 steps per period), "
-            "parameters far outside the physical range, or too tight tolerances. Pass throw=False to get the "
-            "partial result with status instead."
+            f"the ODE solve failed: {message} (result code {int(traj.result)}, max_steps={max_steps}): {hint}. "
+            "(throw=False returns the partial result with its status instead.)"
         )
     return traj
