@@ -125,7 +125,7 @@ def apply_set(model, values, where):
     (a list where one number is expected, or a list of the wrong length, is an error naming the key, the expected
     and the given shape, never spread over the next parameters), checked for units, and the result is rebuilt
     through the components' constructors, so a value they refuse is named as if typed in Python."""
-    from ._fit import _parse, parameter_paths
+    from ._parameters import _parse, parameter_paths
     from ._model_io import checked
 
     if not values:

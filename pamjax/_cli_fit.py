@@ -24,7 +24,7 @@ from ._cli_config import (
 )
 from ._cli_out import PENDING, OutputFolder, interrupt_status, raise_pending
 from ._errors import PamjaxInputError
-from ._fit import FREE_ENTRY_KEYS
+from ._parameters import FREE_ENTRY_KEYS
 from ._units import check_setting
 
 _TOP_KEYS = {"model", "fit", "experiment"}
@@ -265,7 +265,7 @@ def _fit_and_write(args, folder, model, experiments, free, options):
 
     def progress(step, cost, step_size, accepted):  # fit's own line, and the point where a signal is honoured
         if not args.quiet:
-            print(f"  iter {step:4d}  cost {cost:.6e}  step size {step_size:.3e}  "
+            print(f"  iter {step:4d}  cost {cost:.6e}  damping {step_size:.3e}  "
                   f"{'accepted' if accepted else 'rejected'}", flush=True)
         raise_pending()
 

@@ -10,7 +10,8 @@ resuming it with the full budget is what checkpoints are for):
 - `free`: the free-parameter spec (paths, transforms, bounds, scales);
 - `experiments`: per experiment (by name, in order) its data (times, recorded values, weights and masks) and its
   settings (signal, channels, scales, initial state, solver settings, ...);
-- `solver`: its class and tolerances.
+- `solver`: the optimiser (its class and settings, if it is not pamjax's own Levenberg-Marquardt). Its termination
+  settings (`ftol`, `xtol`, `gtol`) are not: like `max_steps`, they only decide when the same iterations stop.
 """
 
 import dataclasses
@@ -66,16 +67,16 @@ def _leaves_by_path(model, prefix=""):
     return out
 
 
-def _solver(solver, rtol, atol):
+def _solver(solver):
     if solver is None:
-        return {"class": "LevenbergMarquardt (default)", "rtol": repr(float(rtol)), "atol": repr(float(atol))}
+        return {"class": "pamjax Levenberg-Marquardt (pamjax._lm)"}
     items = ((f.name, getattr(solver, f.name, None)) for f in dataclasses.fields(solver)) if dataclasses.is_dataclass(
         solver) else sorted(vars(solver).items())
     settings = {k: repr(v) for k, v in items if isinstance(v, (int, float, str, bool)) or eqx.is_array(v)}
     return {"class": type(solver).__qualname__, **settings}
 
 
-def fingerprint(model, experiments, free, solver=None, rtol=None, atol=None):
+def fingerprint(model, experiments, free, solver=None):
     """The fingerprint of a fit problem (a JSON-serialisable dict; see the module docstring)."""
     experiment_prints = []
     for e in experiments:
@@ -89,7 +90,7 @@ def fingerprint(model, experiments, free, solver=None, rtol=None, atol=None):
         "model": {"class": type(model).__qualname__, "leaves": _leaves_by_path(model)},
         "free": json.loads(json.dumps(free, default=list)),
         "experiments": experiment_prints,
-        "solver": _solver(solver, rtol, atol),
+        "solver": _solver(solver),
     }
 
 

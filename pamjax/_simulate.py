@@ -12,7 +12,7 @@ from . import _synchronous as _sync
 from ._errors import PamjaxInputError, PamjaxSolveError, check_time_grid, require_float64
 from ._inputs import AbstractSignal
 from ._rodas import Rodas5
-from ._solve_hints import default_max_steps, failure_hint, pwm_stability_hint
+from ._solve_hints import default_max_steps, failure_hint, fixed_step_hint
 from ._system import AbstractSystem
 from ._units import check_absolute_pressure
 from ._valve import OnOffValve
@@ -21,6 +21,9 @@ _RESULT_NONPHYSICAL = 102  # a state left the physical range (absolute pressure 
 _RESULT_NONFINITE = 101  # stepping="pwm": the fixed-step integration produced a non-finite state
 _RESULT_NAMES = {0: "successful", _RESULT_NONFINITE: "non-finite state in PWM-synchronous stepping"}
 _DEFAULT_SUBSTEPS = 16  # RK4 nodes per PWM period: step ≤ 1.25 ms at 50 Hz (docs/performance.md)
+# s, stepping="grid": RK4 step of a hybrid system fed by a continuous valve; 1 ms puts paper 000's muscle-payload
+# mode (~7 Hz) at ωh ≈ 0.045, as the PWM grid's 1.25 ms does (docs/performance.md).
+_DEFAULT_GRID_STEP = 1e-3
 
 
 class Trajectory(eqx.Module):
@@ -118,20 +121,21 @@ def solve(
     stepping="adaptive",
     substeps=_DEFAULT_SUBSTEPS,
     num_periods=None,
+    grid_step=_DEFAULT_GRID_STEP,
 ) -> Trajectory:
     """The unchecked, traceable core of `simulate` (vmap- and grad-safe; no Python-side validation).
 
     `atol` applies to the scaled state (pressure in units of 1e5 Pa, position in 1e-2 m, ...: `state_scale`).
-    `stepping="pwm"` integrates on the PWM-synchronous grid (`pamjax._synchronous`); inside jit it needs the static
-    `num_periods` covering [t0, ts[-1]].
+    `stepping="pwm"` integrates on the PWM-synchronous grid (`pamjax._synchronous`), `stepping="grid"` on a uniform
+    grid of at most `grid_step` [s]; inside jit they need the static `num_periods` (PWM periods covering [t0,
+    ts[-1]], or grid steps).
     """
     ts = jnp.asarray(ts, dtype=float)
     valve = system.valve
     y0 = system.initial_state() if y0 is None else y0
-    if stepping not in ("adaptive", "pwm"):
-        raise PamjaxInputError(f"stepping must be 'adaptive' or 'pwm', got {stepping!r}")
-    if stepping == "pwm":
-        return _solve_pwm(system, signal, ts, y0, t0, substeps, num_periods, throw)
+    stepping = resolve_stepping(system, stepping)
+    if stepping in ("pwm", "grid"):
+        return _solve_fixed(system, signal, ts, y0, t0, stepping, substeps, num_periods, grid_step, throw)
 
     z0, flat_scale, unravel = _flat_scaled(system, y0)
 
@@ -208,24 +212,68 @@ def _trajectory(ts, states, commands, outs, num_steps, num_accepted, num_rejecte
     )
 
 
-def _solve_pwm(system, signal, ts, y0, t0, substeps, periods, throw):
-    if periods is None:
+def resolve_stepping(system, stepping):
+    """The stepping for `system`: "auto" is "adaptive" for smooth systems, and for hybrid ones (stick-slip
+    friction) the fixed grid: "pwm" with a switching valve, "grid" with a continuous one."""
+    if stepping not in ("auto", "adaptive", "pwm", "grid"):
+        raise PamjaxInputError(f"stepping must be 'auto', 'adaptive', 'pwm' or 'grid', got {stepping!r}")
+    switches = getattr(system.valve, "switches", False)
+    if stepping == "auto":
+        return ("pwm" if switches else "grid") if system.hybrid else "adaptive"
+    if stepping == "adaptive" and system.hybrid:
+        raise PamjaxInputError(
+            "this system is hybrid (stick-slip friction, e.g. KarnoppFriction): its modes switch at events, which "
+            "the fixed-grid integrator locates; use stepping='auto' (or 'pwm' for a switching valve, 'grid' "
+            "otherwise), or CoulombViscousFriction for an adaptive solve"
+        )
+    if stepping == "pwm" and not switches:
+        raise PamjaxInputError(
+            f"stepping='pwm' needs a switching valve (its PWM edges define the grid), got {type(system.valve).__name__}"
+            "; use stepping='grid' (uniform fixed steps) or 'adaptive'"
+        )
+    return stepping
+
+
+def _solve_fixed(system, signal, ts, y0, t0, stepping, substeps, size, grid_step, throw):
+    if size is None:
         if _is_traced((ts, t0)):
             raise PamjaxInputError(
-                "stepping='pwm' inside jit needs num_periods (a static int covering [t0, ts[-1]]); "
-                "pamjax.simulate computes it for you"
+                f"stepping='{stepping}' inside jit needs num_periods (a static int: PWM periods covering [t0, ts[-1]], "
+                "or grid steps); pamjax.simulate computes it for you"
             )
-        if not isinstance(system.valve, OnOffValve):
-            raise PamjaxInputError(f"stepping='pwm' needs an OnOffValve, got {type(system.valve).__name__}")
-        periods = _sync.num_periods(system.valve, t0, ts[-1])
+        size = fixed_grid_size(system, stepping, t0, ts[-1], grid_step)
     z0, flat_scale, unravel = _flat_scaled(system, y0)
-    states, num_steps, finite = _sync.solve_pwm_synchronous(
-        system, signal, ts, z0, flat_scale, unravel, t0, substeps=substeps, periods=periods
+    (states, num_steps, finite), = _sync.solve_runs(
+        [system], [signal], [ts], [z0], unravel, flat_scale, [t0], stepping=stepping, substeps=substeps, sizes=[size]
     )
+    traj = fixed_trajectory(system, signal, ts, t0, states, num_steps, finite, stepping)
+    if throw:
+        traj = eqx.error_if(traj, ~finite, "fixed-grid stepping produced a non-finite state; refine the grid")
+    return traj
+
+
+def fixed_grid_size(system, stepping, t0, t1, grid_step=None):
+    """The static size of a fixed grid over [t0, t1]: PWM periods ("pwm") or uniform steps ("grid")."""
+    if stepping == "pwm":
+        return _sync.num_periods(system.valve, t0, t1)
+    return _sync.num_grid_steps(t0, t1, _DEFAULT_GRID_STEP if grid_step is None else grid_step)
+
+
+def fixed_trajectory(system, signal, ts, t0, states, num_steps, finite, stepping):
+    """The `Trajectory` of a fixed-grid solve from its states at `ts`."""
+    if stepping == "pwm":
+        return pwm_trajectory(system, signal, ts, t0, states, num_steps, finite)
+    commands = jax.vmap(signal)(ts)
+    outs = jax.vmap(system.outputs)(ts, states, commands)
+    result = jnp.where(finite, 0, _RESULT_NONFINITE)
+    zero = jnp.zeros((), dtype=num_steps.dtype)
+    return _trajectory(ts, states, commands, outs, num_steps, num_steps, zero, result)
+
+
+def pwm_trajectory(system, signal, ts, t0, states, num_steps, finite):
+    """The `Trajectory` of a PWM-synchronous solve from its states at `ts`."""
     commands = _sync.latched_commands(system.valve, signal, ts)
     outs = _sync.outputs_at(system, signal, ts, states, commands, t0)
-    if throw:
-        states = eqx.error_if(states, ~finite, "PWM-synchronous stepping produced a non-finite state; raise substeps")
     result = jnp.where(finite, 0, _RESULT_NONFINITE)
     zero = jnp.zeros((), dtype=num_steps.dtype)
     return _trajectory(ts, states, commands, outs, num_steps, num_steps, zero, result)
@@ -324,8 +372,9 @@ def simulate(
     dt0=None,
     adjoint=None,
     throw: bool = True,
-    stepping: str = "adaptive",
+    stepping: str = "auto",
     substeps: int = _DEFAULT_SUBSTEPS,
+    grid_step: float = _DEFAULT_GRID_STEP,
 ) -> Trajectory:
     """Simulate `system` driven by `signal` and return its channels at the times `ts`.
 
@@ -349,8 +398,11 @@ def simulate(
     - `adjoint`: "reverse" (default), "forward", or any diffrax adjoint.
     - `throw`: raise `PamjaxSolveError` on a failed solve (default). With `throw=False` a failed solve returns a
       trajectory whose `result` is non-zero and whose channels are NaN, never plausible-looking numbers.
-    - `stepping`: "adaptive" (default: diffrax with the PID controller above) or "pwm" (switching `OnOffValve`
-      only): PWM-synchronous fixed RK4 steps whose grid contains every switching edge, `substeps` (default 16)
+    - `stepping`: "auto" (default): "adaptive" for smooth systems; for hybrid ones (stick-slip friction,
+      `KarnoppFriction`) "pwm" with a switching valve and "grid" with a continuous one. "adaptive": diffrax with the
+      PID controller above. "grid": fixed RK4 steps of `grid_step` [s] (default 1 ms) with the hybrid system's
+      events located inside the step (`pamjax._grid`). "pwm" (switching `OnOffValve` only):
+      PWM-synchronous fixed RK4 steps whose grid contains every switching edge, `substeps` (default 16)
       uniform nodes per PWM period plus the two edges. It integrates the exact-edge model (duty latched per period,
       sharp edges, whatever the valve's `mode`) and is differentiable with respect to everything, the duty, the PWM
       frequency and the switching delays included (the edges move the step boundaries). `solver`, `rtol`, `atol`,
@@ -373,18 +425,14 @@ def simulate(
         t0 = jnp.asarray(t0, dtype=float)
     jump_ts = None
     periods = None
-    if stepping == "pwm":
-        if not isinstance(system.valve, OnOffValve):
-            raise PamjaxInputError(
-                f"stepping='pwm' needs a switching OnOffValve (its PWM edges define the grid), got "
-                f"{type(system.valve).__name__}; use stepping='adaptive'"
-            )
+    stepping = resolve_stepping(system, stepping)
+    if stepping in ("pwm", "grid"):
         if not (isinstance(substeps, int) and substeps >= 2):
             raise PamjaxInputError(f"substeps must be an int >= 2 (RK4 nodes per PWM period), got {substeps!r}")
-        periods = _sync.num_periods(system.valve, t0, ts[-1])
-    elif stepping != "adaptive":
-        raise PamjaxInputError(f"stepping must be 'adaptive' or 'pwm', got {stepping!r}")
-    elif isinstance(system.valve, OnOffValve) and system.valve.mode == "exact":
+        if not (isinstance(grid_step, (int, float)) and np.isfinite(grid_step) and grid_step > 0):
+            raise PamjaxInputError(f"grid_step must be a positive number of seconds, got {grid_step!r}")
+        periods = fixed_grid_size(system, stepping, t0, ts[-1], grid_step)
+    elif getattr(system.valve, "mode", None) == "exact":
         if _is_traced((system.valve, signal, t0, ts)):
             raise PamjaxInputError(
                 "OnOffValve(mode='exact') needs concrete valve timing and signal (its edge times are computed before "
@@ -413,12 +461,14 @@ def simulate(
         stepping=stepping,
         substeps=substeps,
         num_periods=periods,
+        grid_step=grid_step,
     )
-    if throw and not traced and int(traj.result) == _RESULT_NONFINITE and stepping == "pwm":
+    if throw and not traced and int(traj.result) == _RESULT_NONFINITE and stepping in ("pwm", "grid"):
         raise PamjaxSolveError(
-            f"PWM-synchronous stepping produced a non-finite state with substeps={substeps}: the fixed RK4 step "
-            f"T/substeps is beyond the stability limit of this system ({pwm_stability_hint(system, signal, t0, y0)}). "
-            "Pass throw=False to get the result with status instead."
+            f"fixed-grid stepping ('{stepping}') produced a non-finite state (substeps={substeps}, grid_step="
+            f"{grid_step}): the fixed RK4 step is beyond the stability limit of this system "
+            f"({fixed_step_hint(system, signal, t0, y0, stepping)}). Pass throw=False to get the result with status "
+            "instead."
         )
     if throw and not traced and int(traj.result) != 0:
         message = result_message(int(traj.result)).split(" Try increasing")[0]  # the hint says what to change

@@ -107,15 +107,19 @@ def failure_hint(system, signal, ts, t0, y0, traj, max_steps, solver, message):
 RK4_STABILITY = 2.8  # |h λ| classical RK4 stays stable up to on λ < 0
 
 
-def pwm_stability_hint(system, signal, t0, y0):
-    """What fixes an unstable PWM-synchronous run: the substeps its fastest mode needs, or an implicit solver."""
+def fixed_step_hint(system, signal, t0, y0, stepping):
+    """What fixes an unstable fixed-grid run ("pwm": substeps per PWM period; "grid": grid_step): the step its
+    fastest mode needs, or an implicit adaptive solve when that step is impractically small."""
     y0 = system.initial_state() if y0 is None else y0
     rate, state = _fastest_mode(system, signal, float(t0), y0)
     if not np.isfinite(rate) or rate == 0:
-        return "increase substeps, or use stepping='adaptive'"
-    needed = math.ceil(rate * float(system.valve.period) / RK4_STABILITY)
-    advice = (f"substeps >= {needed:,} would be stable, too many: use stepping='adaptive' with "
-              "solver=pamjax.Rodas5() (implicit: not limited by stiffness)" if needed > 256 else
-              f"pass substeps={max(needed, 2)} or more, or use stepping='adaptive'")
-    return (f"its fastest mode (mostly the {state}) needs RK4 steps below {RK4_STABILITY / rate:.2g} s"
-            f"{_stiffness_cause(system)}; {advice}")
+        return "a smaller fixed step (more substeps, smaller grid_step), or stepping='adaptive'"
+    stable = RK4_STABILITY / rate
+    implicit = "use stepping='adaptive' with solver=pamjax.Rodas5() (implicit: not limited by stiffness)"
+    if stepping == "pwm":
+        needed = math.ceil(float(system.valve.period) / stable)
+        advice = (f"substeps >= {needed:,} would be stable, too many: {implicit}" if needed > 256
+                  else f"pass substeps={max(needed, 2)} or more, or {implicit}")
+    else:
+        advice = f"pass grid_step={stable:.2g} or less, or {implicit}"
+    return f"its fastest mode (mostly the {state}) needs RK4 steps below {stable:.2g} s{_stiffness_cause(system)}; {advice}"

@@ -24,6 +24,7 @@ class AbstractValve(eqx.Module):
     """
 
     command_range = (0.0, 1.0)
+    switches = False  # True for a valve that switches on PWM edges (its grid is the PWM-synchronous one)
 
     def mass_flow(self, t, command, pressure, air: Air):
         raise NotImplementedError
@@ -87,6 +88,8 @@ class OnOffValve(AbstractValve):
     switch_off_delay: jax.Array = eqx.field(converter=jnp.asarray, default=2e-3)  # s
     edge_width: jax.Array = eqx.field(converter=jnp.asarray, default=1e-4)  # s
     mode: str = eqx.field(static=True, default="smooth")
+
+    switches = True
 
     def __check_init__(self):
         check_positive(self.supply_pressure, "OnOffValve.supply_pressure")
