@@ -227,6 +227,8 @@ from ._joint_control import (
 from ._linearise import StateSpace as StateSpace  # noqa: E402
 from ._linearise import equilibrium as equilibrium
 from ._linearise import linearise as linearise
+from ._model_io import load_model as load_model  # noqa: E402
+from ._model_io import save_model as save_model
 from ._recording import Recording as Recording  # noqa: E402
 from ._regulated import (  # noqa: E402
     RegulatedMuscleState as RegulatedMuscleState,
@@ -290,5 +292,3 @@ from ._sweep_maps import (
 from ._synthetic import synthetic_recording as synthetic_recording  # noqa: E402
 from ._tabulated import TabulatedISO6358Restriction as TabulatedISO6358Restriction  # noqa: E402
 from ._xla_cpu import xla_cpu_status as xla_cpu_status  # noqa: E402
-from ._model_io import load_model as load_model  # noqa: E402
-from ._model_io import save_model as save_model  # noqa: E402

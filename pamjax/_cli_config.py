@@ -125,8 +125,8 @@ def apply_set(model, values, where):
     (a list where one number is expected, or a list of the wrong length, is an error naming the key, the expected
     and the given shape, never spread over the next parameters), checked for units, and the result is rebuilt
     through the components' constructors, so a value they refuse is named as if typed in Python."""
-    from ._parameters import _parse, parameter_paths
     from ._model_io import checked
+    from ._parameters import _parse, parameter_paths
 
     if not values:
         return model
@@ -135,8 +135,8 @@ def apply_set(model, values, where):
         attrs, index = _parse(key)
         leaf = ".".join(attrs)
         if leaf not in valid:
-            raise PamjaxInputError(f"{where}: unknown parameter {key!r}; the model's parameters are:\n  "
-                                   + "\n  ".join(f"{p} {list(s) if s else ''}".rstrip() for p, s in sorted(valid.items())))
+            listing = "\n  ".join(f"{p} {list(s) if s else ''}".rstrip() for p, s in sorted(valid.items()))
+            raise PamjaxInputError(f"{where}: unknown parameter {key!r}; the model's parameters are:\n  {listing}")
         shape = valid[leaf]
         if index is not None:
             if len(index) != len(shape) or any(not 0 <= i < n for i, n in zip(index, shape)):

@@ -11,7 +11,6 @@ from . import presets
 from ._inputs import Constant, Triangle
 from ._simulate import simulate
 
-
 DUTIES = (0.25, 0.5, 0.75)  # paper 000, Figs. 11-12
 TRIANGLES = ((0.08, 25.0), (0.25, 8.0))  # Hz, s: paper 000, Figs. 13-14
 VALVES = ("pwm", "averaged")

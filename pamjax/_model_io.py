@@ -130,7 +130,7 @@ def model_document(model, provenance=None, classes=()):
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "pamjax_version": __version__,
-        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "class": structure["class"],
         "parameters": parameters,
         "structure": structure,

@@ -122,4 +122,5 @@ def fixed_step_hint(system, signal, t0, y0, stepping):
                   else f"pass substeps={max(needed, 2)} or more, or {implicit}")
     else:
         advice = f"pass grid_step={stable:.2g} or less, or {implicit}"
-    return f"its fastest mode (mostly the {state}) needs RK4 steps below {stable:.2g} s{_stiffness_cause(system)}; {advice}"
+    cause = _stiffness_cause(system)
+    return f"its fastest mode (mostly the {state}) needs RK4 steps below {stable:.2g} s{cause}; {advice}"

@@ -38,8 +38,8 @@ _PRESSURE_FACTORS = {"pa": 1.0, "hpa": 1e2, "kpa": 1e3, "mpa": 1e6, "mbar": 1e2,
 _SI = {"time": "s", "length": "m", "velocity": "m/s", "force": "N", "mass_flow": "kg/s", "volume": "m^3",
        "ratio": "1", "voltage": "V", "pressure": "Pa"}
 # "bar abs", "bar(a)", "bara", "bar_abs", "kPa gauge", "kPag", "psig", "Pa", "MPa (abs.)"
-_PRESSURE = re.compile(r"^(pa|hpa|kpa|mpa|mbar|bar|psi)\s*[\s(_,-]?\s*(abs\.?|absolute|a|gauge|g|rel\.?|relative)?\s*\)?$",
-                       re.IGNORECASE)
+_PRESSURE = re.compile(
+    r"^(pa|hpa|kpa|mpa|mbar|bar|psi)\s*[\s(_,-]?\s*(abs\.?|absolute|a|gauge|g|rel\.?|relative)?\s*\)?$", re.IGNORECASE)
 
 # Channel names (after renaming) → dimension. Names not listed keep their unit as written.
 _CHANNEL_DIMENSIONS = (("pressure", "pressure"), ("position", "length"), ("displacement", "length"),
@@ -152,13 +152,13 @@ def check_magnitude(dimension, values, where, name):
             )
         if step < 1e-5:
             raise PamjaxInputError(
-                f"{where}: {name!r} is sampled every {step:g} s (median), faster than 100 kHz, which no pneumatic bench "
-                f"records; are these seconds written under a [ms] header? (write '{name} [s]')"
+                f"{where}: {name!r} is sampled every {step:g} s (median), faster than 100 kHz, which no pneumatic "
+                f"bench records; are these seconds written under a [ms] header? (write '{name} [s]')"
             )
     elif dimension == "length" and peak > 1.0:
         raise PamjaxInputError(
-            f"{where}: channel {name!r} reaches {peak:g} m; no pneumatic muscle moves a metre (the MAS-10's stroke is 75 mm): "
-            f"these look like mm (or cm): write '{name} [mm]' in the header"
+            f"{where}: channel {name!r} reaches {peak:g} m; no pneumatic muscle moves a metre (the MAS-10's stroke is "
+            f"75 mm): these look like mm (or cm): write '{name} [mm]' in the header"
         )
     elif dimension == "velocity" and peak > 20.0:
         raise PamjaxInputError(
@@ -166,8 +166,8 @@ def check_magnitude(dimension, values, where, name):
         )
     elif dimension == "mass_flow" and peak > 1.0:
         raise PamjaxInputError(
-            f"{where}: channel {name!r} reaches {peak:g} kg/s, a thousand times a valve's flow; these look like g/s: write "
-            f"'{name} [g/s]' in the header"
+            f"{where}: channel {name!r} reaches {peak:g} kg/s, a thousand times a valve's flow; these look like g/s: "
+            f"write '{name} [g/s]' in the header"
         )
     elif dimension == "pressure":
         check_absolute_pressure(v, f"{where}: channel {name!r}")

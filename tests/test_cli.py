@@ -90,7 +90,8 @@ FIT_CASES = {
     "[model] preset and file": (_fit_config({'[fit]': 'file = "model.json"\n[fit]'}),
                                 r"either file .* or preset .*, not both; remove \['options', 'preset'\]"),
     "[model] missing model file": (_fit_config({'preset = "mas10_system"\n    options = { valve = "averaged" }':
-                                                'file = "nowhere/model.json"'}), r"model file .*nowhere.* does not exist"),
+                                                'file = "nowhere/model.json"'}),
+                                   r"model file .*nowhere.* does not exist"),
     "[model] set path": (_set('"muscle.volume.v0" = 3e-5'),
                          r"unknown parameter 'muscle.volume.v0'(.|\n)*muscle.volume_law.v0"),
     # issue 15: a list here once spread over the following parameters (v1 = 7.0, C_f = 3.5e-4, ...)

@@ -65,7 +65,8 @@ def _edited(tmp_path, edit):
 
 
 @pytest.mark.parametrize("edit, match", [
-    (lambda d: d["parameters"]["payload_mass"].update(value=-1.0), r"m\.json: MuscleSystem: .*payload_mass must be > 0"),
+    (lambda d: d["parameters"]["payload_mass"].update(value=-1.0),
+     r"m\.json: MuscleSystem: .*payload_mass must be > 0"),
     (lambda d: d["parameters"]["valve.supply_pressure"].update(value=6.5),
      r"m\.json: valve \(OnOffValve\): .*supply_pressure"),
     (lambda d: d["parameters"].pop("friction.coulomb_force"), r"'friction\.coulomb_force' is missing"),

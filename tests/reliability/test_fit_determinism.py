@@ -56,7 +56,8 @@ def test_same_inputs_same_fit_bitwise(reference):
 
 def _stop_points(history):
     """Iterations to stop after: the first, and one inside a run of rejected trial steps (the trust region's state
-    then matters on resume), found in this machine's uninterrupted run; entries are [step, cost, step size, accepted]."""
+    then matters on resume), found in this machine's uninterrupted run; entries are [step, cost, damping, accepted]
+    (a step is rejected when accepted is False)."""
     last = len(history) - 1
     inside_rejections = [k for k in range(1, last) if not history[k][3] and not history[k + 1][3]]
     after_rejection = [k for k in range(1, last) if not history[k][3]]
