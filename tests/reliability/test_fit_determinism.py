@@ -4,9 +4,9 @@ another problem (start model, free list, experiments or data) is refused, saying
 
 Problem: the synthetic MAS-10 static force map (9 lengths × 7 pressures, 2 N noise), 7 free parameters (F_max at
 five nodes, k0, k1) from 30 % low; a few seconds with compilation. Nothing here depends on how many iterations the
-fit takes or on last-bit values, which differ between CPUs (on a 2-core AVX-512 machine the same fit converged in 5
-iterations instead of 8): the stop points are taken from the uninterrupted fit's own history (after the first
-iteration, and inside a run of rejected trial steps when it has one), and every bitwise comparison is between two
+fit takes or on last-bit values, which differ between CPUs (on a 2-core AVX-512 machine this fit once converged in 5
+iterations where the test demanded more than 6): the stop points are taken from the uninterrupted fit's own history
+(after the first iteration, and inside a run of rejected trial steps), and every bitwise comparison is between two
 runs on one machine."""
 
 import equinox as eqx
@@ -20,7 +20,7 @@ from pamjax import PamjaxInputError, presets
 FREE = ["force_law.max_force_coefficients", "force_law.k0", "force_law.k1"]
 
 
-def _problem(seed=0):
+def _problem(seed=0, start_factor=0.7):
     muscle = presets.mas10_muscle()
     x, p = np.meshgrid(np.linspace(-0.01, 0.07, 9), 101325.0 + np.linspace(0.5e5, 6e5, 7), indexing="ij")
     x, p = x.ravel(), p.ravel()
@@ -28,7 +28,7 @@ def _problem(seed=0):
     f = f + 2.0 * np.random.default_rng(seed).standard_normal(f.shape)
     exp = pj.ForceMapExperiment(x, p, np.maximum(f, 0.0), scale=2.0)
     space = pj.ParameterSpace(muscle, FREE)
-    start = space.with_values(np.asarray(space.initial_values()) * 0.7)
+    start = space.with_values(np.asarray(space.initial_values()) * start_factor)
     return start, exp
 
 
@@ -64,19 +64,23 @@ def _stop_points(history):
     return {"first": 1, "rejected": (inside_rejections or after_rejection or [None])[0]}
 
 
-@pytest.mark.parametrize("where", ["first", "rejected"])
-def test_interrupted_and_resumed_fit_ends_bitwise_where_uninterrupted_ends(reference, tmp_path, where):
+# Stop points: after the first iteration of the 30 %-low start, and inside the run of rejected trial steps that a
+# start at 30 % of the values makes (on this machine 7 of 18 steps rejected; the 30 %-low start rejects none).
+@pytest.mark.parametrize("where, start_factor", [("first", 0.7), ("rejected", 0.3)])
+def test_interrupted_and_resumed_fit_ends_bitwise_where_uninterrupted_ends(reference, tmp_path, where, start_factor):
+    if start_factor != 0.7:
+        reference = pj.fit(*_problem(start_factor=start_factor), FREE, max_steps=30, progress=False)
     stop_after = _stop_points(reference.history)[where]
     if stop_after is None:
         pytest.skip(f"this machine's fit ({reference.iterations} iterations) rejected no trial step before its end")
     assert stop_after < reference.iterations
-    start, exp = _problem()
+    start, exp = _problem(start_factor=start_factor)
     path = tmp_path / "fit_state.npz"
     part = pj.fit(start, [exp], FREE, max_steps=stop_after, progress=False, checkpoint=path)
     assert part.status == "max_steps" and part.iterations == stop_after and path.exists()
     assert part.history == reference.history[: stop_after + 1]
     # a fresh start model object (the checkpoint, not the model, carries the state), same problem
-    start, exp = _problem()
+    start, exp = _problem(start_factor=start_factor)
     resumed = pj.fit(start, [exp], FREE, max_steps=30, progress=False, resume=path, checkpoint=path)
     assert resumed.iterations == reference.iterations
     assert resumed.cost == reference.cost and resumed.values == reference.values
