@@ -40,12 +40,18 @@ def _signals_as_interrupts():
         PENDING.append(signum)
         raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
+    def unraisable(info):  # an interrupt swallowed in a callback: no "Exception ignored" traceback; it is pending
+        if not isinstance(info.exc_value, KeyboardInterrupt):
+            previous_hook(info)
+
     previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    previous_hook, sys.unraisablehook = sys.unraisablehook, unraisable
     try:
         yield
     finally:
         for s, h in previous.items():
             signal.signal(s, h)
+        sys.unraisablehook = previous_hook
         PENDING.clear()
 
 
