@@ -61,6 +61,22 @@ def _check_free(free):
                                        f"got {b!r}")
 
 
+def _check_free_shapes(model, free):
+    """A free table's `scale` must be one number or one per element of its parameter (matched by name and shape)."""
+    from ._parameters import _parse, parameter_paths
+
+    valid = parameter_paths(model)
+    for entry in free:
+        if isinstance(entry, str) or "scale" not in entry:
+            continue
+        attrs, index = _parse(entry["path"])
+        shape = () if index is not None else valid.get(".".join(attrs))
+        given = np.shape(entry["scale"])
+        if shape is not None and given not in ((), shape):
+            raise PamjaxInputError(f"[fit] free entry {entry['path']!r}: scale expects one number or shape {shape}, "
+                                   f"got shape {given} ({entry['scale']!r})")
+
+
 def validate_config(cfg, where="config"):
     """Check every table, key and value type of a parsed fit config (no data loaded, nothing solved)."""
     check_keys(cfg, _TOP_KEYS, where)
@@ -131,6 +147,7 @@ def load_config(path):
     validate_config(cfg, str(path))
     fit_cfg = cfg["fit"]
     model = build_model(cfg.get("model", {}), path.parent)
+    _check_free_shapes(model, fit_cfg["free"])
     pj.ParameterSpace(model, fit_cfg["free"])  # unknown path, index or transform: named, before any solve
     experiments = [_experiment(e, k, path.parent, fit_cfg, model) for k, e in enumerate(cfg["experiment"])]
     names = [e.name for e in experiments]

@@ -118,6 +118,9 @@ FIT_CASES = {
                              r"'scale', 'transform'\]"),
     "[fit] free bounds": (_fit_config({'"friction.coulomb_force"': '{ path = "friction.coulomb_force", bounds = 5 }'}),
                           r"bounds must be \[lo, hi\]"),
+    "[fit] free scale of the wrong shape": (_fit_config({'"friction.coulomb_force"':
+                                                        '{ path = "valve.coefficients", scale = [1.0, 2.0] }'}),
+                                           r"scale expects one number or shape \(3, 3\), got shape \(2,\)"),
     "[fit] max_steps float": (_fit_config({"[fit]": "[fit]\nmax_steps = 40.5"}),
                               r"\[fit\] max_steps must be a positive integer"),
     "experiment key": (_fit_config(append="noise = 2e3\n"),
@@ -264,6 +267,13 @@ def test_simulate_config_errors_name_the_key_before_any_solve(tmp_path, capsys, 
     config = _write(tmp_path, text)
     _refused(capsys, ["simulate", str(config), "--out", str(tmp_path / "out")], match)
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("path", sorted(EXAMPLES.glob("simulate_*.toml")), ids=lambda p: p.stem)
+def test_example_simulate_configs_are_valid(path):
+    from pamjax._cli_simulate import validate_config
+
+    validate_config(tomllib.loads(path.read_text()))
 
 
 # ---------------------------------------------------------------------------------------------------------------
