@@ -180,8 +180,16 @@ from ._fit import (  # noqa: E402
     FitResult as FitResult,
 )
 from ._fit import (
+    evaluate as evaluate,
+)
+from ._fit import (
     fit as fit,
 )
+from ._bench import Bench as Bench
+from ._bench import BENCH_PARAMETERS as BENCH_PARAMETERS
+from ._bench import bench_values as bench_values
+from ._bench import load_bench as load_bench
+from ._experiment import predictions as predictions
 from ._parameters import (
     PamjaxIdentifiabilityWarning as PamjaxIdentifiabilityWarning,
 )
@@ -292,3 +300,13 @@ from ._sweep_maps import (
 from ._synthetic import synthetic_recording as synthetic_recording  # noqa: E402
 from ._tabulated import TabulatedISO6358Restriction as TabulatedISO6358Restriction  # noqa: E402
 from ._xla_cpu import xla_cpu_status as xla_cpu_status  # noqa: E402
+
+# --- issue 18: multi-process runs (jax.distributed), multistart and fleet fits ----------------------------------
+from ._distributed import PamjaxDistributedError as PamjaxDistributedError  # noqa: E402
+from ._distributed import ProcessInfo as ProcessInfo
+from ._distributed import initialize_distributed as initialize_distributed
+from ._multistart import FleetResult as FleetResult  # noqa: E402
+from ._multistart import MultistartResult as MultistartResult
+from ._multistart import fit_fleet as fit_fleet
+from ._multistart import multistart as multistart
+from ._sweep import merge_sweep_shards as merge_sweep_shards  # noqa: E402

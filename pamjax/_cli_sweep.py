@@ -29,6 +29,7 @@ from . import presets
 from ._cli_config import apply_set, build_model, check_keys, read_toml, validate_model_table
 from ._cli_out import OutputFolder
 from ._csv import write_table
+from ._distributed import join_for_cli
 from ._errors import PamjaxInputError
 from ._sweep_maps import flow_surface, frequency_response, steady_state_map
 from ._units import ATMOSPHERE, check_absolute_pressure, check_setting
@@ -66,6 +67,10 @@ def add_arguments(parser):
     parser.add_argument("--cpu-devices", type=_positive_int, default=DEFAULT_CPU_DEVICES,
                         help="on CPU, split the processor into this many XLA devices and shard the sweep over them "
                              "(default: one per core; 1: a single device). No effect on GPU/TPU runs")
+    parser.add_argument("--distributed", action="store_true",
+                        help="join a multi-process run (JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES, JAX_PROCESS_ID, "
+                             "or SLURM/Open MPI) and spread the sweep over every process's devices (--cpu-devices "
+                             "per process); process 0 writes the outputs (docs/distributed.md)")
 
 
 def _use_cpu_devices(count):
@@ -340,8 +345,12 @@ def _savez(path, columns):
 
 def run(args):
     _use_cpu_devices(args.cpu_devices)
+    writes = join_for_cli(args.distributed)  # before JAX starts; False on processes other than 0
     config = read_toml(args.config)
     model = prepare(config, pathlib.Path(args.config).parent)  # before the output folder is touched
+    if not writes:  # another process of a distributed run: its share of the work, no files
+        run_config(config, model=model)
+        return 0
     name = os.path.splitext(os.path.basename(args.config))[0]
     out = args.out or os.path.join("results", f"sweep-{name}")
     outputs = [o for o in OUTPUTS if not (args.no_plot and o.endswith(".png"))]

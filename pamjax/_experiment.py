@@ -359,6 +359,26 @@ def predict_all(model, experiments):
     return preds
 
 
+@eqx.filter_jit
+def _predictions(model, exps):
+    return predict_all(model, exps)
+
+
+def predictions(model, experiments):
+    """`model`'s channels at every experiment's times (list of dicts channel → NumPy array), in one compiled
+    program (experiments of one kind share one loop, as in a fit). Checks the experiments first."""
+    from ._errors import require_float64
+    from ._parameters import strong_types
+
+    require_float64("pamjax.predictions")
+    experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
+    for e in experiments:
+        e.check(model)
+    model = strong_types(model)
+    exps = tuple(e.bind(model) if hasattr(e, "bind") else e for e in experiments)
+    return [jax.tree_util.tree_map(np.asarray, p) for p in _predictions(model, exps)]
+
+
 def _predict_runs(model, exps, stepping, substeps):
     systems = [e.build(model) for e in exps]
     y0s = [s.initial_state(**e.initial) for s, e in zip(systems, exps)]

@@ -15,7 +15,7 @@ from ._rodas import Rodas5
 from ._solve_hints import default_max_steps, failure_hint, fixed_step_hint
 from ._system import AbstractSystem
 from ._units import check_absolute_pressure
-from ._valve import OnOffValve
+from ._valve import AbstractValve, OnOffValve
 
 _RESULT_NONPHYSICAL = 102  # a state left the physical range (absolute pressure ≤ 0)
 _RESULT_NONFINITE = 101  # stepping="pwm": the fixed-step integration produced a non-finite state
@@ -139,22 +139,20 @@ def solve(
 
     z0, flat_scale, unravel = _flat_scaled(system, y0)
 
-    def command_at(t):
-        return signal(valve.command_time(t))
-
     def field(t, z, args):
-        dy = system.vector_field(t, unravel(z * flat_scale), command_at(t))
+        dy = system.vector_field(t, unravel(z * flat_scale), valve.read_command(signal, t))
         return ravel_pytree(dy)[0] / flat_scale
 
     solver = dfx.Tsit5() if solver is None else solver
     # dtmax: a switching valve's windows must not be stepped over (see OnOffValve.max_step).
     # dtmin without forcing: a state that turns non-finite makes every trial step fail, and the solve stops within
     # a few dozen rejections (result "dt_min_reached") instead of grinding to max_steps and holding up a batch.
-    # dtmin below the shortest step diffrax itself takes: a last step that lands short of t1 by more than 100 ULP
-    # (diffrax snaps closer ones to t1) is taken as a sliver, and the controller's next proposal grows from it; a
-    # fixed dtmin of 1e-12 s failed runs resting at dtmax ("minimum step size reached" at t1: duty 0 over 2.5 s).
-    # With jump times a step may be clipped to a hair before a jump, below any dtmin (an exact-edge triangle run
-    # failed so at t = 5.022 s): there the guard is left out, and the step size recovers in a few steps.
+    # With jump times (the exact valve's edges) no dtmin: a step that ends a few ulps short of an edge is followed
+    # by a step of a few ulps up to it, which the dtmin test would take for a failure (E4 of the hybrid bench failed
+    # so at every rtol above 1e-9). Without them, dtmin stays below the shortest step diffrax itself takes: a last
+    # step that lands short of t1 by more than 100 ULP (diffrax snaps closer ones to t1) is taken as a sliver, and
+    # the controller's next proposal grows from it; a fixed 1e-12 s failed runs resting at dtmax ("minimum step size
+    # reached" at t1: the exact valve at duty 0 over 2.5 s).
     dtmin = None if jump_ts is not None else 50 * jnp.finfo(float).eps * jnp.maximum(jnp.abs(ts[-1]), 1.0)
     controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=valve.max_step(), dtmin=dtmin, force_dtmin=False)
     if jump_ts is not None:
@@ -176,8 +174,8 @@ def solve(
         throw=throw,
     )
     states = jax.vmap(lambda z: unravel(z * flat_scale))(sol.ys)
-    commands = jax.vmap(command_at)(ts)
-    outs = jax.vmap(system.outputs)(ts, states, commands)
+    commands = jax.vmap(lambda t: signal(valve.command_time(t)))(ts)
+    outs = jax.vmap(lambda t, y: system.outputs(t, y, valve.read_command(signal, t)))(ts, states)
     result = jnp.asarray(sol.result._value if hasattr(sol.result, "_value") else sol.result)
     finite = jnp.all(jnp.isfinite(sol.ys))
     result = jnp.where((result == 0) & ~finite, _RESULT_NONFINITE, result)
@@ -282,29 +280,62 @@ def pwm_trajectory(system, signal, ts, t0, states, num_steps, finite):
 _solve_jit = eqx.filter_jit(solve)
 
 
-def exact_edge_times(valve: OnOffValve, signal: AbstractSignal, t0, t1):
-    """The switching times of an exact-edge PWM valve over [t0, t1] (concrete values), for `jump_ts`; None if the
-    valve never switches.
+def exact_edge_schedule(valve: OnOffValve, signal: AbstractSignal, t0, t1):
+    """The switching edges of an exact-edge PWM valve over [t0, t1] and the opening after each (concrete NumPy).
 
-    Only times where the valve switches: a period whose on- or off-pulse is shorter than the switching delay (duty
-    below ~10 % or above ~90 % at 50 Hz) keeps the valve shut or open throughout, and its nominal edges are no
-    jumps. Listing them once failed constant duty 0 and 1: at duty 1 each period's closing edge and the next
-    period's opening edge differ by one rounding error (1e-17 s apart), a step below `dtmin` that the solver cannot
-    take; at duty 0 a solve resting in equilibrium stopped at one of the fictitious edges ("minimum step size")."""
+    Per period k (start kT, duty u_k = signal(kT)): the on edge kT + t_on opens the valve if the on-pulse u_k T
+    outlasts t_on; the off edge kT + u_k T + t_off closes it if the off-pulse (1 − u_k) T outlasts t_off; otherwise
+    the valve keeps its state (above ~90 % duty it stays open into the next period). The valve is closed before
+    the first period. Returns `(edges, states)`: the sorted times [s] where the opening changes and the opening
+    (0/1) from each on."""
     period = 1.0 / float(valve.pwm_frequency)
-    n = int(np.ceil((t1 - t0) / period)) + 2
-    first = np.floor(t0 / period) * period
-    starts = first + period * np.arange(n)
-    commands = np.asarray(jax.vmap(signal)(jnp.asarray(starts)))
-    edges = np.asarray(valve.edge_times(jnp.asarray(commands), first)).reshape(-1, 2)
-    opens, closes = (np.asarray(g) for g in valve.switching_gates(jnp.asarray(commands)))
-    switching = opens & closes
-    changes = starts[1:][switching[1:] != switching[:-1]]  # a steady period next to a switching one
-    edges = np.concatenate([edges[switching].ravel(), changes])
-    edges = np.unique(edges[(edges > t0) & (edges < t1)])
-    if edges.size > 1:  # one jump for times closer than the solver's smallest step
-        edges = edges[np.concatenate([[True], np.diff(edges) > 1e-9 * period])]
-    return jnp.asarray(edges) if edges.size else None  # None: the valve never switches (no jumps)
+    on, off = float(valve.switch_on_delay), float(valve.switch_off_delay)
+    k0 = int(np.floor(t0 / period + 1e-9))
+    n = int(np.ceil((t1 - k0 * period) / period)) + 2
+    starts = (k0 + np.arange(n)) * period
+    commands = np.asarray(jax.vmap(signal)(jnp.asarray(starts)), dtype=float)
+    times, states, state = [], [], 0.0
+    for start, u in zip(starts, commands):
+        if u * period - on >= 0:
+            state = 1.0
+            times.append(start + on)
+            states.append(state)
+        if (1.0 - u) * period - off > 0:
+            state = 0.0
+            times.append(start + u * period + off)
+            states.append(state)
+    order = np.argsort(times, kind="stable")
+    times, states = np.asarray(times)[order], np.asarray(states)[order]
+    # Only the edges where the opening changes: a jump time where the field is smooth restarts the solver for
+    # nothing (and diffrax's clipping controller can stall on one that a dtmax-sized step lands on exactly).
+    change = np.diff(np.concatenate([[0.0], states])) != 0
+    return times[change], states[change]
+
+
+class ScheduledValve(AbstractValve):
+    """An `OnOffValve` whose opening follows a precomputed edge schedule (`exact_edge_schedule`): the exact mode's
+    valve inside an adaptive solve. The opening switches exactly at the schedule's times, the very numbers handed to
+    the solver as jump times, so the solver's steps end one ulp before an edge and restart after it (a switch
+    computed from the phase would land a few ulps off, and the solver would fail with "minimum step size")."""
+
+    valve: OnOffValve
+    edges: jax.Array  # s, sorted
+    states: jax.Array  # opening after each edge
+
+    switches = True
+
+    def command_time(self, t):
+        return self.valve.command_time(t)
+
+    def max_step(self):
+        return self.valve.max_step()
+
+    def opening(self, t):
+        index = jnp.searchsorted(self.edges, t, side="right") - 1
+        return jnp.where(index >= 0, self.states[jnp.clip(index, 0, self.states.shape[0] - 1)], 0.0)
+
+    def mass_flow(self, t, command, pressure, air):
+        return self.valve.mass_flow_at_opening(self.opening(t), pressure, air)
 
 
 def validate(system, signal, ts, y0=None, t0=None):
@@ -438,7 +469,11 @@ def simulate(
                 "OnOffValve(mode='exact') needs concrete valve timing and signal (its edge times are computed before "
                 "the solve); use mode='smooth' inside jit/grad/vmap"
             )
-        jump_ts = exact_edge_times(system.valve, signal, float(t0), float(ts[-1]))
+        edges, states = exact_edge_schedule(system.valve, signal, float(t0), float(ts[-1]))
+        system = eqx.tree_at(lambda s: s.valve, system,
+                             ScheduledValve(system.valve, jnp.asarray(edges), jnp.asarray(states)))
+        inside = edges[(edges > float(t0)) & (edges < float(ts[-1]))]
+        jump_ts = jnp.asarray(inside) if inside.size else None
     traced = _is_traced((system, signal, ts, y0, t0))
     if solver is None and stepping == "adaptive":
         solver = default_solver(system)

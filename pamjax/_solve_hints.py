@@ -17,13 +17,21 @@ EXPLICIT_STABILITY = 3.5  # |h λ| an explicit Runge-Kutta method (Tsit5, RK4: 2
 _MAX_STEPS_REACHED = "maximum number of solver steps"
 
 
+def _pwm_period(valve):
+    """The PWM period [s] of a switching valve (or of the one a wrapper such as the exact mode's schedule holds)."""
+    for v in (valve, getattr(valve, "valve", None)):
+        if v is not None and hasattr(v, "pwm_frequency"):
+            return 1.0 / float(v.pwm_frequency)
+    return None
+
+
 def default_max_steps(system, t0, t1):
     """The step budget of a run over [t0, t1] [s]: 200,000, or the horizon's share (64 per PWM period of a switching
     valve, 1,000 per second otherwise) rounded up to 200,000 × a power of two, so that few budgets (each a separate
     compilation) occur."""
-    valve = system.valve
+    period = _pwm_period(system.valve)
     horizon = max(float(t1) - float(t0), 0.0)
-    rate = STEPS_PER_PWM_PERIOD * float(valve.pwm_frequency) if valve.max_step() is not None else STEPS_PER_SECOND
+    rate = STEPS_PER_PWM_PERIOD / period if period is not None else STEPS_PER_SECOND
     needed = rate * horizon
     if needed <= BASE_MAX_STEPS:
         return BASE_MAX_STEPS
@@ -89,11 +97,10 @@ def failure_hint(system, signal, ts, t0, y0, traj, max_steps, solver, message):
                 "solver=pamjax.Rodas5() (implicit, L-stable: its steps are not limited by stiffness)")
     if _MAX_STEPS_REACHED in message and reached > t0:
         needed = steps * horizon / (reached - t0)
-        valve = system.valve
-        per_period = (f" ({steps * float(valve.period) / (reached - t0):.0f} per PWM period)"
-                      if valve.max_step() is not None else "")
+        period = _pwm_period(system.valve)
+        per_period = f" ({steps * period / (reached - t0):.0f} per PWM period)" if period is not None else ""
         fix = (" or stepping='pwm' (fixed RK4 steps on the PWM grid, ~18 per period, for any horizon)"
-               if hasattr(valve, "edge_times") else "")
+               if period is not None else "")
         budget = int(2 ** math.ceil(math.log2(2 * needed)))  # 2×: the rate of steps varies along a run
         return (f"{where}{per_period}: the whole run needs about {needed:,.0f}; pass max_steps={budget:,}{fix}")
     if "minimum step size" in message:
@@ -116,8 +123,9 @@ def fixed_step_hint(system, signal, t0, y0, stepping):
         return "a smaller fixed step (more substeps, smaller grid_step), or stepping='adaptive'"
     stable = RK4_STABILITY / rate
     implicit = "use stepping='adaptive' with solver=pamjax.Rodas5() (implicit: not limited by stiffness)"
-    if stepping == "pwm":
-        needed = math.ceil(float(system.valve.period) / stable)
+    period = _pwm_period(system.valve)
+    if stepping == "pwm" and period is not None:
+        needed = math.ceil(period / stable)
         advice = (f"substeps >= {needed:,} would be stable, too many: {implicit}" if needed > 256
                   else f"pass substeps={max(needed, 2)} or more, or {implicit}")
     else:

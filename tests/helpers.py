@@ -154,7 +154,7 @@ def np_end_stops(x, v, x_min, x_max, k=1e6, c=6e3, w=1e-4):
     return -k * softplus(over, w) + k * softplus(under, w) - c * v * (logistic(over, w) + logistic(under, w))
 
 
-def np_pwm_opening(t, u, f=50.0, t_on=2e-3, t_off=2e-3, width=None):
+def np_pwm_opening(t, u, f=50.0, t_on=2e-3, t_off=2e-3, width=None, u_prev=None):
     """Valve opening of a PWM on/off valve with switching delays (paper 000 valve section).
 
     Exact (width None): the valve is open during [t_on, uT + t_off) of each period (wrapping into the next period),
@@ -170,10 +170,38 @@ def np_pwm_opening(t, u, f=50.0, t_on=2e-3, t_off=2e-3, width=None):
             return 1.0
         start, end = t_on, u * T + t_off
         return float((start <= phase < end) or (phase < end - T))
+    # Smooth: the exact opening as a sum of its jumps at the edges of this period and the one before (the state
+    # between a period's edges: open if its on-pulse opens the valve, else as before; after them: closed if its
+    # off-pulse closes it), each jump a logistic step; the dead-band gates logistic too.
     s = lambda z: logistic(z, width)  # noqa: E731
-    window = sum(s(phase - t_on - k * T) * s(u * T + t_off + k * T - phase) for k in (-1, 0, 1))
+    u_prev = u if u_prev is None else u_prev
     opens, closes = s(u * T - t_on), s((1 - u) * T - t_off)
-    return opens * (closes * min(max(window, 0.0), 1.0) + (1 - closes))
+    during_prev = s(u_prev * T - t_on)
+    after_prev = (1 - s((1 - u_prev) * T - t_off)) * during_prev
+    during = opens + (1 - opens) * after_prev
+    after = (1 - closes) * during
+    return (during_prev + (after_prev - during_prev) * s(phase - (u_prev * T + t_off - T))
+            + (during - after_prev) * s(phase - t_on) + (after - during) * s(phase - (u * T + t_off)))
+
+
+def np_valve_state_machine(ts, duties, f=50.0, t_on=2e-3, t_off=2e-3, dt=1e-6):
+    """Open (1) / closed (0) at times `ts` of an on/off valve driven by PWM with duty `duties[k]` in period k,
+    simulated as a state machine on a fine clock (dt): the command is on during [kT, kT + u_k T); the valve opens
+    once the command has been on for t_on without a break and closes once it has been off for t_off. Starts closed,
+    command off before t = 0. Independent of pamjax's edge formula."""
+    T = 1.0 / f
+    clock = np.arange(0.0, max(ts) + dt, dt)
+    k = np.minimum(np.floor(clock / T + 1e-9).astype(int), len(duties) - 1)
+    command = (clock - k * T) < np.asarray(duties)[k] * T
+    state, on_for, off_for, out = 0, 0.0, t_off, np.empty(clock.size)
+    for i, c in enumerate(command):
+        on_for, off_for = (on_for + dt, 0.0) if c else (0.0, off_for + dt)
+        if c and on_for >= t_on - 1e-12:
+            state = 1
+        if not c and off_for >= t_off - 1e-12:
+            state = 0
+        out[i] = state
+    return out[np.clip(np.round(np.asarray(ts) / dt).astype(int), 0, clock.size - 1)]
 
 
 class NumpyPlant:
@@ -207,20 +235,24 @@ class NumpyPlant:
         del self.__dict__["self"]
 
     def mass_flow(self, t, u, p):
+        """`u`: the command signal (a function of time); a PWM valve latches it per 20 ms period (this period's
+        and the previous period's duty), the averaged valve reads it continuously."""
         if self.valve == "averaged":
             pg = p - P_ATM
+            u = u(t)
             return sum(self.m[i][j] * u**i * pg**j for i in range(3) for j in range(3))
-        o = np_pwm_opening(t, u, width=self.edge)
+        start = np.floor(t / 0.02 + 1e-9) * 0.02
+        o = np_pwm_opening(t, u(start), width=self.edge, u_prev=u(start - 0.02))
         inflow = np_ellipse_flow(self.ps, p, 0.36, 0.28, 3.14e-6)  # Table 1 path 1→2
         outflow = np_ellipse_flow(p, P_ATM, 0.39, 0.49, 3.14e-6)  # Table 1 path 2→3
         return o * inflow - (1 - o) * outflow
 
     def tank_rhs(self, t, y, u_of_t):
-        return [self.n * R_AIR * T_AIR * self.mass_flow(t, u_of_t(t), y[0]) / self.volume]
+        return [self.n * R_AIR * T_AIR * self.mass_flow(t, u_of_t, y[0]) / self.volume]
 
     def rhs(self, t, y, u_of_t):
         p, x, v = y
-        mdot = self.mass_flow(t, u_of_t(t), p)
+        mdot = self.mass_flow(t, u_of_t, p)
         vol = self.v0 + self.v1 * x  # eq. 14
         dp = self.n * (R_AIR * T_AIR * mdot - p * self.v1 * v) / vol  # eq. 15
         f_static = np_eq7_force(x, p - P_ATM, self.a, self.k0, self.k1, self.k2)
@@ -229,3 +261,79 @@ class NumpyPlant:
             f_muscle - np_friction(v, self.fc, self.cf, self.vw) + np_end_stops(x, v, self.x_min, self.x_max)
         ) / self.mass - 9.81
         return [dp, v, dv]  # eq. 16
+
+
+def np_stick_slip_run(plant, duties, ts, *, f=50.0, t_on=2e-3, t_off=2e-3, rtol=1e-11):
+    """An event-driven reference for exact stick-slip (Karnopp) under a PWM valve with exact edges, independent of
+    pamjax's integrator: SciPy's DOP853 integrates piece by piece between the valve's switching edges (found by
+    `np_valve_state_machine`'s rules: open after t_on of command, closed after t_off without) and the friction's
+    events located by `solve_ivp`'s root finder: sliding ends where v = 0 (stuck if |F_net| ≤ F_c, else reversing),
+    sticking ends where |F_net| = F_c. `plant`: a `NumpyPlant` (its friction `fc`, `cf`; the sign is sharp here).
+    Starts at rest in equilibrium at atmospheric pressure, stuck, valve closed. Returns (p, x) at `ts`."""
+    from scipy.integrate import solve_ivp
+    from scipy.optimize import brentq
+
+    T = 1.0 / f
+    t_end = float(ts[-1])
+    edges, state = [], 0.0  # (time, opening after it), exact state machine per period
+    for k, u in enumerate(duties):
+        start = k * T
+        if u * T - t_on >= 0:
+            edges.append((start + t_on, 1.0))
+            state = 1.0
+        if (1.0 - u) * T - t_off > 0:
+            edges.append((start + u * T + t_off, 0.0))
+            state = 0.0
+    edges = sorted(e for e in edges if e[0] < t_end)
+    weight = plant.mass * 9.81
+
+    def net_force(x, p):
+        return softplus(np_eq7_force(x, p - P_ATM, plant.a, plant.k0, plant.k1, plant.k2), plant.slack) - weight
+
+    def flow(o, p):
+        return o * np_ellipse_flow(plant.ps, p, 0.36, 0.28, 3.14e-6) - (1 - o) * np_ellipse_flow(
+            p, P_ATM, 0.39, 0.49, 3.14e-6)
+
+    def rhs(o, z):
+        def f(t, y):
+            p, x, v = y
+            vol = plant.v0 + plant.v1 * x
+            if z == 0:
+                return [plant.n * R_AIR * T_AIR * flow(o, p) / vol, 0.0, 0.0]
+            dp = plant.n * (R_AIR * T_AIR * flow(o, p) - p * plant.v1 * v) / vol
+            dv = (net_force(x, p) - plant.fc * z - plant.cf * v) / plant.mass
+            return [dp, v, dv]
+        return f
+
+    x0 = brentq(lambda x: net_force(x, P_ATM), plant.x_min, plant.x_max, xtol=1e-15)
+    y, z, t = np.array([P_ATM, x0, 0.0]), 0, 0.0
+    times, states = [t], [y.copy()]
+    bounds = [e[0] for e in edges] + [t_end]
+    openings = [0.0] + [e[1] for e in edges]
+    for t_stop, o in zip(bounds, openings):
+        while t < t_stop - 1e-15:
+            if z == 0:
+                event = lambda tt, yy: abs(net_force(yy[1], yy[0])) - plant.fc  # noqa: E731
+            else:
+                event = lambda tt, yy, z=z: z * yy[2]  # noqa: E731
+            event.terminal, event.direction = True, (1 if z == 0 else -1)
+            sol = solve_ivp(rhs(o, z), (t, t_stop), y, method="DOP853", rtol=rtol, atol=[1e-6, 1e-13, 1e-13],
+                            events=event, dense_output=True)
+            inside = (ts > t) & (ts <= sol.t[-1])
+            if np.any(inside):
+                times.extend(ts[inside])
+                states.extend(np.atleast_2d(sol.sol(ts[inside]).T))
+            t, y = sol.t[-1], sol.y[:, -1].copy()
+            if sol.status == 1:  # an event
+                if z == 0:
+                    z = 1 if net_force(y[1], y[0]) > 0 else -1
+                else:
+                    y[2] = 0.0
+                    force = net_force(y[1], y[0])
+                    z = 0 if abs(force) <= plant.fc else (1 if force > 0 else -1)
+    states = np.asarray(states)
+    order = np.argsort(times)
+    times, states = np.asarray(times)[order], states[order]
+    p = np.interp(ts, times, states[:, 0])
+    x = np.interp(ts, times, states[:, 1])
+    return p, x

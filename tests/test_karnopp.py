@@ -1,0 +1,123 @@
+"""Exact stick-slip friction (`KarnoppFriction`) on the fixed grid with events located inside the step
+(`pamjax._grid`): against an independent event-driven SciPy reference, holding still, gradients through the event
+times against finite differences, and the stepping rules."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import NumpyPlant, np_stick_slip_run
+
+import pamjax as pj
+from pamjax import PamjaxInputError, presets
+from pamjax._simulate import solve
+
+MODEL = presets.mas10_system("pwm", friction="karnopp")
+TRIANGLE = pj.Triangle(0.05, 0.95, 0.5)  # up and down in 2 s: stick at both ends, slip between
+TS = np.linspace(0.0, 2.0, 401)
+
+
+def _plant(model):
+    fl, vol = model.muscle.force_law, model.muscle.volume_law
+    return NumpyPlant(a=np.asarray(fl.max_force_coefficients), k0=float(fl.k0), k1=float(fl.k1), k2=float(fl.k2),
+                      v0=float(vol.v0), v1=float(vol.v1), x_min=float(model.muscle.min_position),
+                      x_max=float(model.muscle.max_position), fc=float(model.friction.coulomb_force),
+                      cf=float(model.friction.viscous_coefficient))
+
+
+@pytest.fixture(scope="module")
+def reference():
+    duties = [float(TRIANGLE(k * 0.02)) for k in range(101)]
+    return np_stick_slip_run(_plant(MODEL), duties, TS)
+
+
+@pytest.mark.parametrize("substeps, x_tol, p_tol", [(8, 2e-7, 30.0), (16, 2e-8, 5.0)])
+def test_matches_event_driven_reference(reference, substeps, x_tol, p_tol):
+    # SciPy DOP853 at rtol 1e-11, piecewise between valve edges and friction events (tests/helpers.py); pamjax's
+    # RK4 grid is O(h⁴): measured 3.0e-8 m / 7.1 Pa at K = 8, 2.5e-9 m / 1.2 Pa at K = 16 (2 s, max over 401 times).
+    p_ref, x_ref = reference
+    traj = pj.simulate(MODEL, TRIANGLE, TS, substeps=substeps)
+    assert np.max(np.abs(np.asarray(traj.position) - x_ref)) < x_tol
+    assert np.max(np.abs(np.asarray(traj.pressure) - p_ref)) < p_tol
+    # the run does stick and slip: it moves (tens of mm) and it holds still at the end of the down ramp
+    assert np.ptp(x_ref) > 0.03
+
+
+def test_holds_still_while_the_net_force_is_within_coulomb():
+    # Duty 5 %: the valve never opens (10 % dead band at 50 Hz), the payload rests in equilibrium, stuck: its
+    # position must not move at all (a smooth sign lets it creep).
+    traj = pj.simulate(MODEL, pj.Constant(0.05), np.linspace(0, 1.0, 51))
+    x = np.asarray(traj.position)
+    assert np.all(x == x[0]) and np.all(np.asarray(traj.velocity) == 0.0)
+    # a pressure step that changes the muscle force by less than F_c does not move it either
+    x0 = float(MODEL.initial_state().position)
+    slope = float(MODEL.muscle.force_law.pressure_slope(x0))  # N/Pa
+    dp = 0.5 * float(MODEL.friction.coulomb_force) / slope
+    y0 = eqx.tree_at(lambda s: s.pressure, MODEL.initial_state(), MODEL.air.atmospheric_pressure + dp)
+    held = pj.simulate(MODEL, pj.Constant(0.05), np.linspace(0, 0.5, 26), y0=y0)
+    assert np.all(np.asarray(held.position)[1:] == x0)
+    assert np.all(np.asarray(held.friction_force) != 0.0)  # static friction carries the difference
+
+
+def test_a_start_outside_its_mode_switches_at_once():
+    # Stuck, but the net force exceeds F_c: it slides from the first step.
+    x0 = float(MODEL.initial_state().position)
+    y0 = eqx.tree_at(lambda s: s.position, MODEL.initial_state(), x0 + 2e-3)  # weaker muscle force: it falls
+    traj = pj.simulate(MODEL, pj.Constant(0.05), np.linspace(0, 0.2, 21), y0=y0)
+    assert float(traj.position[1]) < x0 + 2e-3 - 1e-5
+
+
+def _loss(params, duty):
+    coulomb, viscous, v1, k0 = params
+    model = eqx.tree_at(lambda s: (s.friction.coulomb_force, s.friction.viscous_coefficient,
+                                   s.muscle.volume_law.v1, s.muscle.force_law.k0), MODEL, (coulomb, viscous, v1, k0))
+    ts = jnp.linspace(0.0, 1.2, 61)
+    traj = solve(model, pj.Constant(duty), ts, model.initial_state(), 0.0, stepping="pwm", substeps=8,
+                 num_periods=60)
+    return jnp.mean(traj.position) * 1e3 + jnp.mean(traj.pressure) * 1e-5
+
+
+def test_gradients_through_event_times_match_finite_differences():
+    # A duty step from rest: breakaway, slide, come to rest: every parameter moves the event times. Forward and
+    # reverse mode against central differences (steps small enough not to change the event sequence).
+    params = jnp.asarray([16.0, 250.0, 4.1558930e-04, 102.844885])
+    duty = jnp.asarray(0.35)
+    fwd = jax.jit(jax.jacfwd(_loss, argnums=(0, 1)))(params, duty)
+    rev = jax.jit(jax.grad(_loss, argnums=(0, 1)))(params, duty)
+    steps = np.asarray([1e-4, 1e-3, 1e-10, 1e-5])
+    for i, h in enumerate(steps):
+        fd = (_loss(params.at[i].add(h), duty) - _loss(params.at[i].add(-h), duty)) / (2 * h)
+        assert abs(float(fwd[0][i])) > 0
+        np.testing.assert_allclose(float(fwd[0][i]), float(fd), rtol=1e-5)
+        np.testing.assert_allclose(float(rev[0][i]), float(fwd[0][i]), rtol=1e-9)
+    fd = (_loss(params, duty + 1e-6) - _loss(params, duty - 1e-6)) / 2e-6
+    np.testing.assert_allclose(float(fwd[1]), float(fd), rtol=1e-5)
+
+
+def test_stepping_rules():
+    ts = np.linspace(0.0, 0.1, 11)
+    with pytest.raises(PamjaxInputError, match="hybrid.*stepping='auto'"):
+        pj.simulate(MODEL, pj.Constant(0.5), ts, stepping="adaptive")
+    averaged = presets.mas10_system("averaged", friction="karnopp")
+    with pytest.raises(PamjaxInputError, match="switching valve"):
+        pj.simulate(averaged, pj.Constant(0.5), ts, stepping="pwm")
+    # a continuous valve runs on the uniform grid; halving the step changes the result by O(h⁴)
+    coarse = pj.simulate(averaged, TRIANGLE, TS[:201], grid_step=2e-3)
+    fine = pj.simulate(averaged, TRIANGLE, TS[:201], grid_step=5e-4)
+    assert np.ptp(np.asarray(fine.position)) > 0.01
+    assert np.max(np.abs(np.asarray(coarse.position - fine.position))) < 1e-6
+
+
+def test_vmap_over_parameters_equals_one_by_one():
+    forces = jnp.asarray([12.0, 16.0, 22.0])
+    ts = jnp.linspace(0.0, 1.0, 26)
+
+    def run(fc):
+        model = eqx.tree_at(lambda s: s.friction.coulomb_force, MODEL, fc)
+        return solve(model, TRIANGLE, ts, model.initial_state(), 0.0, stepping="pwm", substeps=8,
+                     num_periods=50).position
+
+    batch = jax.jit(jax.vmap(run))(forces)
+    for k in range(3):
+        np.testing.assert_allclose(np.asarray(batch[k]), np.asarray(jax.jit(run)(forces[k])), rtol=0, atol=1e-12)
