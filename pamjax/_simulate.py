@@ -331,6 +331,8 @@ class ScheduledValve(AbstractValve):
         return self.valve.max_step()
 
     def opening(self, t):
+        if self.states.shape[0] == 0:  # no edge at all (e.g. duty 0 throughout): closed from start to end
+            return jnp.zeros_like(jnp.asarray(t, dtype=float))
         index = jnp.searchsorted(self.edges, t, side="right") - 1
         return jnp.where(index >= 0, self.states[jnp.clip(index, 0, self.states.shape[0] - 1)], 0.0)
 
