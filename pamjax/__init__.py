@@ -235,6 +235,8 @@ from ._joint_control import (
 from ._linearise import StateSpace as StateSpace  # noqa: E402
 from ._linearise import equilibrium as equilibrium
 from ._linearise import linearise as linearise
+from ._model_io import load_model as load_model  # noqa: E402
+from ._model_io import save_model as save_model
 from ._recording import Recording as Recording  # noqa: E402
 from ._regulated import (  # noqa: E402
     RegulatedMuscleState as RegulatedMuscleState,

@@ -23,6 +23,7 @@ from . import _lm
 from ._diagnostics import channel_errors, covariance, identifiability, mismatch
 from ._errors import PamjaxInputError, require_float64
 from ._experiment import predict_all, predictions
+from ._fingerprint import check_resume, encode, fingerprint
 from ._parameters import PamjaxIdentifiabilityWarning, ParameterSpace, strong_types
 
 @dataclasses.dataclass
@@ -227,13 +228,14 @@ def _check_checkpoint_path(checkpoint, resume, overwrite):
         raise FileExistsError(f"checkpoint {path} exists; pass overwrite=True to replace it (or resume from it)")
 
 
-def _write_checkpoint(path, labels, state):
+def _write_checkpoint(path, labels, state, fingerprint=None):
     """Save the iteration state (every array exactly) after an iteration. Written to a temporary file and renamed,
     so an interruption leaves the previous checkpoint intact."""
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, format=_CHECKPOINT_FORMAT, labels=np.asarray(labels, dtype=str), **state.arrays())
+    extra = {} if fingerprint is None else {"fingerprint": encode(fingerprint)}  # see _fingerprint
+    np.savez(tmp, format=_CHECKPOINT_FORMAT, labels=np.asarray(labels, dtype=str), **state.arrays(), **extra)
     tmp.replace(path)
 
 
@@ -346,7 +348,9 @@ def fit(
     - `checkpoint`: an `.npz` path written (atomically) after every iteration with the whole iteration state.
       Never replaces an existing file unless `overwrite=True` or it is the `resume` file.
     - `resume`: an `.npz` checkpoint of this same problem: the fit continues from it and ends bitwise where an
-      uninterrupted fit with the same `max_steps` ends (values, cost, iterations, history).
+      uninterrupted fit with the same `max_steps` ends (values, cost, iterations, history). The checkpoint carries a
+      fingerprint of the start model, free spec, experiments and data (`pamjax._fingerprint`): a resume of another
+      problem is refused before any solve, saying what differs.
 
     **Returns:** a `FitResult`: values, standard errors, correlation, `status` ('converged', 'at bound',
     'stalled', 'max_steps') with `message` saying why, per-channel errors with the noise level and residual
@@ -363,6 +367,9 @@ def fit(
         if not (isinstance(tol, (int, float)) and 0 <= tol < 1):
             raise PamjaxInputError(f"{label} must be a number in [0, 1), got {tol!r}")
     space = ParameterSpace(model, free)
+    print_ = fingerprint(model, experiments, free)  # start model, free spec, experiments and data (_fingerprint)
+    if resume is not None:
+        check_resume(resume, print_)  # before any solve: a checkpoint of another problem is refused, naming why
     for e in experiments:
         e.check(model)
     labels = space.labels
@@ -398,9 +405,9 @@ def fit(
         state = _lm.iterate(state, problem.residuals, problem.jacobian, ftol=ftol, xtol=xtol, gtol=gtol,
                             stall_steps=stall_steps, report=report)
         if checkpoint is not None:
-            _write_checkpoint(checkpoint, labels, state)
+            _write_checkpoint(checkpoint, labels, state, print_)
     if checkpoint is not None and state.step == 0:
-        _write_checkpoint(checkpoint, labels, state)
+        _write_checkpoint(checkpoint, labels, state, print_)
     res = _result(model, exps, free, space, state, identifiability_tol, out, overwrite, problem)
     res.compile_s = problem.compile_seconds()
     res.fit_s = time.perf_counter() - t_start - res.compile_s

@@ -12,7 +12,9 @@ from . import _synchronous as _sync
 from ._errors import PamjaxInputError, PamjaxSolveError, check_time_grid, require_float64
 from ._inputs import AbstractSignal
 from ._rodas import Rodas5
+from ._solve_hints import default_max_steps, failure_hint, fixed_step_hint
 from ._system import AbstractSystem
+from ._units import check_absolute_pressure
 from ._valve import AbstractValve, OnOffValve
 
 _RESULT_NONPHYSICAL = 102  # a state left the physical range (absolute pressure ≤ 0)
@@ -147,8 +149,11 @@ def solve(
     # a few dozen rejections (result "dt_min_reached") instead of grinding to max_steps and holding up a batch.
     # With jump times (the exact valve's edges) no dtmin: a step that ends a few ulps short of an edge is followed
     # by a step of a few ulps up to it, which the dtmin test would take for a failure (E4 of the hybrid bench failed
-    # so at every rtol above 1e-9).
-    dtmin = 1e-12 if jump_ts is None else None
+    # so at every rtol above 1e-9). Without them, dtmin stays below the shortest step diffrax itself takes: a last
+    # step that lands short of t1 by more than 100 ULP (diffrax snaps closer ones to t1) is taken as a sliver, and
+    # the controller's next proposal grows from it; a fixed 1e-12 s failed runs resting at dtmax ("minimum step size
+    # reached" at t1: the exact valve at duty 0 over 2.5 s).
+    dtmin = None if jump_ts is not None else 50 * jnp.finfo(float).eps * jnp.maximum(jnp.abs(ts[-1]), 1.0)
     controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=valve.max_step(), dtmin=dtmin, force_dtmin=False)
     if jump_ts is not None:
         controller = dfx.ClipStepSizeController(controller, jump_ts=jump_ts)
@@ -326,6 +331,8 @@ class ScheduledValve(AbstractValve):
         return self.valve.max_step()
 
     def opening(self, t):
+        if self.states.shape[0] == 0:  # no edge at all (e.g. duty 0 throughout): closed from start to end
+            return jnp.zeros_like(jnp.asarray(t, dtype=float))
         index = jnp.searchsorted(self.edges, t, side="right") - 1
         return jnp.where(index >= 0, self.states[jnp.clip(index, 0, self.states.shape[0] - 1)], 0.0)
 
@@ -367,6 +374,8 @@ def validate(system, signal, ts, y0=None, t0=None):
         pressure = getattr(y0, "pressure", None)
         if pressure is not None and not isinstance(pressure, jax.core.Tracer) and not np.all(np.asarray(pressure) > 0):
             raise PamjaxInputError(f"y0.pressure must be an ABSOLUTE pressure > 0 [Pa], got {pressure}")
+        if pressure is not None:  # 1.01325 (bar) or 0 (gauge) is refused naming the likely unit
+            check_absolute_pressure(pressure, "y0.pressure")
 
 
 def default_solver(system: AbstractSystem):
@@ -392,7 +401,7 @@ def simulate(
     solver=None,
     rtol: float = 1e-6,
     atol: float = 1e-6,
-    max_steps: int = 200_000,
+    max_steps: int | None = None,
     dt0=None,
     adjoint=None,
     throw: bool = True,
@@ -416,7 +425,9 @@ def simulate(
       Coulomb sign; `diffrax.Tsit5()` for a switching valve, whose smoothed edges bound the step whatever the
       solver. `rtol`, `atol`: tolerances of the PID step-size controller, `atol` in scaled state units (pressure
       per 1e5 Pa, position per 1e-2 m, velocity per 1e-2 m/s).
-    - `max_steps`: the solve fails beyond this many steps; `dt0`: initial step (default: automatic).
+    - `max_steps`: the solve fails beyond this many steps; default (`_solve_hints.default_max_steps`): 200,000, or
+      more for long runs (64 per PWM period of a switching valve, 1,000 per second otherwise). `dt0`: initial step
+      (default: automatic).
     - `adjoint`: "reverse" (default), "forward", or any diffrax adjoint.
     - `throw`: raise `PamjaxSolveError` on a failed solve (default). With `throw=False` a failed solve returns a
       trajectory whose `result` is non-zero and whose channels are NaN, never plausible-looking numbers.
@@ -468,6 +479,8 @@ def simulate(
     traced = _is_traced((system, signal, ts, y0, t0))
     if solver is None and stepping == "adaptive":
         solver = default_solver(system)
+    if max_steps is None:  # a budget that grows with the horizon (a 1,000 s PWM run needs ~1.6 M steps)
+        max_steps = 200_000 if _is_traced((ts, t0)) else default_max_steps(system, float(t0), float(ts[-1]))
     traj = _solve_jit(
         system,
         signal,
@@ -487,19 +500,18 @@ def simulate(
         num_periods=periods,
         grid_step=grid_step,
     )
-    if throw and not traced and int(traj.result) == _RESULT_NONFINITE:
+    if throw and not traced and int(traj.result) == _RESULT_NONFINITE and stepping in ("pwm", "grid"):
         raise PamjaxSolveError(
             f"fixed-grid stepping ('{stepping}') produced a non-finite state (substeps={substeps}, grid_step="
-            f"{grid_step}): the fixed RK4 step is beyond the stability limit of this system (a stiff smooth friction "
-            "sign, or flow near equal pressures); increase substeps / decrease grid_step, or use "
-            "stepping='adaptive' for a smooth system. Pass throw=False to get the result with status instead."
+            f"{grid_step}): the fixed RK4 step is beyond the stability limit of this system "
+            f"({fixed_step_hint(system, signal, t0, y0, stepping)}). Pass throw=False to get the result with status "
+            "instead."
         )
     if throw and not traced and int(traj.result) != 0:
+        message = result_message(int(traj.result)).split(" Try increasing")[0]  # the hint says what to change
+        hint = failure_hint(system, signal, ts, t0, y0, traj, max_steps, solver, message)
         raise PamjaxSolveError(
-            f"the ODE solve failed: {result_message(int(traj.result))} (result code {int(traj.result)}, after "
-            f"{int(traj.num_steps)} steps, max_steps={max_steps}). "
-            "Common causes: max_steps too small for the horizon (PWM valves need ~20 steps per period), "
-            "parameters far outside the physical range, or too tight tolerances. Pass throw=False to get the "
-            "partial result with status instead."
+            f"the ODE solve failed: {message} (result code {int(traj.result)}, max_steps={max_steps}): {hint}. "
+            "(throw=False returns the partial result with its status instead.)"
         )
     return traj
