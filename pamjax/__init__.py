@@ -187,6 +187,8 @@ from ._fit import (
 )
 from ._bench import Bench as Bench
 from ._bench import BENCH_PARAMETERS as BENCH_PARAMETERS
+from ._bench import FITTED_KINDS as FITTED_KINDS
+from ._bench import bench_rmse as bench_rmse
 from ._bench import bench_values as bench_values
 from ._bench import load_bench as load_bench
 from ._experiment import predictions as predictions

@@ -27,11 +27,12 @@ from ._errors import PamjaxInputError
 from ._parameters import FREE_ENTRY_KEYS
 from ._units import check_setting
 
-_TOP_KEYS = {"model", "fit", "experiment"}
-_FIT_KEYS = {"free", "max_steps", "rtol", "atol", "out", "validation_fraction"}
+_TOP_KEYS = {"model", "fit", "experiment", "bench"}
+_FIT_KEYS = {"free", "max_steps", "ftol", "xtol", "gtol", "out", "validation_fraction"}
+_BENCH_KEYS = {"dir", "rate", "kinds", "fitted_keys", "substeps"}
 _EXPERIMENT_KEYS = {"name", "file", "signal", "channels", "scales", "tank_volume", "initial", "rate", "filter_hz",
                     "t_end", "max_steps", "rename", "units", "unit_checks"}
-RESULT, MODEL, FIGURE, CHECKPOINT = "fit.json", "model.json", "fit.png", "checkpoint.npz"
+RESULT, MODEL, FIGURE, CHECKPOINT, BENCH = "fit.json", "model.json", "fit.png", "checkpoint.npz", "bench.json"
 
 
 def add_arguments(parser):
@@ -82,17 +83,36 @@ def validate_config(cfg, where="config"):
     check_keys(cfg, _TOP_KEYS, where)
     model_cfg, fit_cfg = cfg.get("model", {}), cfg.get("fit", {})
     validate_model_table(model_cfg)
+    for old, new in (("rtol", "ftol"), ("atol", "xtol")):
+        if isinstance(fit_cfg, dict) and old in fit_cfg:
+            raise PamjaxInputError(f"[fit] {old} is no longer a setting: the fit stops on the relative cost decrease "
+                                   f"({new} and its siblings ftol, xtol, gtol; docs/fitting.md)")
     check_keys(fit_cfg, _FIT_KEYS, "[fit]")
-    if "free" not in fit_cfg:
+    bench_cfg = cfg.get("bench")
+    if bench_cfg is not None:
+        check_keys(bench_cfg, _BENCH_KEYS, "[bench]")
+        if "dir" not in bench_cfg:
+            raise PamjaxInputError("[bench] needs 'dir': a bench directory (meta.json + <experiment>.npz), relative "
+                                   "to the config")
+        require(bench_cfg["dir"], "string", "[bench] dir", '"../data/my-bench"')
+        for key, kind, example in (("rate", "positive number", "1000.0 (Hz)"), ("substeps", "positive integer", "16"),
+                                   ("kinds", "list of strings", '["tank_charge", "muscle_triangle"]'),
+                                   ("fitted_keys", "list of strings", '["Cv12", "b12", "Fc"]')):
+            if key in bench_cfg:
+                require(bench_cfg[key], kind, f"[bench] {key}", example)
+    if "free" not in fit_cfg and bench_cfg is None:
         raise PamjaxInputError("[fit] needs 'free': the list of parameter paths to fit")
-    if isinstance(fit_cfg["free"], str) or not isinstance(fit_cfg["free"], list):
+    if "free" not in fit_cfg:
+        pass  # the bench's fitted_keys
+    elif isinstance(fit_cfg["free"], str) or not isinstance(fit_cfg["free"], list):
         raise PamjaxInputError(f"[fit] free must be a non-empty list of parameter paths, got {fit_cfg['free']!r}"
                                + (" (a single string where a list is expected: put it in brackets)"
                                   if isinstance(fit_cfg["free"], str) else ""))
-    _check_free(fit_cfg["free"])
-    for key, kind, example in (("max_steps", "positive integer", "40"), ("rtol", "positive number", "1e-6"),
-                               ("atol", "positive number", "1e-6"), ("out", "string", '"results/my_fit"'),
-                               ("validation_fraction", "number", "0.4")):
+    if "free" in fit_cfg:
+        _check_free(fit_cfg["free"])
+    for key, kind, example in (("max_steps", "positive integer", "40"), ("ftol", "positive number", "1e-10"),
+                               ("xtol", "positive number", "1e-10"), ("gtol", "positive number", "1e-10"),
+                               ("out", "string", '"results/my_fit"'), ("validation_fraction", "number", "0.4")):
         if key in fit_cfg:
             require(fit_cfg[key], kind, f"[fit] {key}", example)
     if not 0 <= fit_cfg.get("validation_fraction", 0.0) < 1:
@@ -100,8 +120,8 @@ def validate_config(cfg, where="config"):
     experiments = cfg.get("experiment", [])
     if not isinstance(experiments, list):
         raise PamjaxInputError("experiments are an array of tables: write [[experiment]] (double brackets)")
-    if not experiments:
-        raise PamjaxInputError("the config needs at least one [[experiment]]")
+    if not experiments and bench_cfg is None:
+        raise PamjaxInputError("the config needs at least one [[experiment]] (or a [bench] directory)")
     for k, e in enumerate(experiments):
         _validate_experiment(e, f"[[experiment]] #{k + 1}")
 
@@ -140,21 +160,35 @@ def _validate_experiment(e, here):
 def load_config(path):
     """Parse and validate a fit config; returns (model, experiments, free, fit options, out). Every key is checked
     before any data is read; parameter paths, shapes, channels and initial-state keys before anything is solved."""
+    return _load(path)[:5]
+
+
+def _load(path):
+    """`load_config` and the config's `Bench` (None without a [bench] table)."""
     import pamjax as pj
 
     path = pathlib.Path(path)
     cfg = read_toml(path)
     validate_config(cfg, str(path))
-    fit_cfg = cfg["fit"]
+    fit_cfg = cfg.get("fit", {})
     model = build_model(cfg.get("model", {}), path.parent)
-    _check_free_shapes(model, fit_cfg["free"])
-    pj.ParameterSpace(model, fit_cfg["free"])  # unknown path, index or transform: named, before any solve
-    experiments = [_experiment(e, k, path.parent, fit_cfg, model) for k, e in enumerate(cfg["experiment"])]
+    experiments, free = [], fit_cfg.get("free")
+    bench = None
+    if "bench" in cfg:
+        b = cfg["bench"]
+        kinds = tuple(b.get("kinds", pj.FITTED_KINDS))
+        bench = pj.load_bench(path.parent / b["dir"], model, rate=b.get("rate"), kinds=kinds,
+                              fitted_keys=b.get("fitted_keys"), substeps=b.get("substeps", 16))
+        experiments += bench.experiments
+        free = bench.free if free is None else free
+    _check_free_shapes(model, free)
+    pj.ParameterSpace(model, free)  # unknown path, index or transform: named, before any solve
+    experiments += [_experiment(e, k, path.parent, fit_cfg, model) for k, e in enumerate(cfg.get("experiment", []))]
     names = [e.name for e in experiments]
     if len(set(names)) != len(names):
         raise PamjaxInputError(f"experiment names must be unique, got {names}: give each [[experiment]] a name")
-    options = {k: fit_cfg[k] for k in ("max_steps", "rtol", "atol") if k in fit_cfg}
-    return model, experiments, fit_cfg["free"], options, fit_cfg.get("out")
+    options = {k: fit_cfg[k] for k in ("max_steps", "ftol", "xtol", "gtol") if k in fit_cfg}
+    return model, experiments, free, options, fit_cfg.get("out"), bench
 
 
 def _experiment(e, k, root, fit_cfg, model):
@@ -231,7 +265,7 @@ def _resume_command(args, out):
 
 
 def run(args):
-    model, experiments, free, options, out_cfg = load_config(args.config)
+    model, experiments, free, options, out_cfg, bench = _load(args.config)
     out = pathlib.Path(args.out or out_cfg or f"results/{pathlib.Path(args.config).stem}")
     if args.resume and args.overwrite:
         raise PamjaxInputError("pamjax fit: --resume continues the fit in --out, --overwrite starts it again: "
@@ -243,7 +277,7 @@ def run(args):
                                    "to continue that fit, e.g. with a larger [fit] max_steps)")
         raise PamjaxInputError(f"pamjax fit: {out / CHECKPOINT} holds an earlier fit (checkpointed after {earlier}); "
                                "continue it with --resume, or start again with --overwrite")
-    outputs = [RESULT, MODEL, CHECKPOINT] + ([] if args.no_plot else [FIGURE])
+    outputs = [RESULT, MODEL, CHECKPOINT] + ([] if args.no_plot else [FIGURE]) + ([BENCH] if bench else [])
     # --resume replaces what the resumed run wrote (its checkpoint proves it is the same problem)
     replaceable = outputs if args.resume else []
     with OutputFolder(out, "pamjax fit", outputs, overwrite=args.overwrite, replaceable=replaceable) as folder:
@@ -252,7 +286,7 @@ def run(args):
             raise PamjaxInputError(f"pamjax fit --resume: {out} holds no checkpoint ({CHECKPOINT}); run without "
                                    "--resume to start the fit")
         try:
-            return _fit_and_write(args, folder, model, experiments, free, options)
+            return _fit_and_write(args, folder, model, experiments, free, options, bench)
         except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM: one line on what is kept and how to go on
             PENDING.clear()  # handled here
             what = "terminated" if interrupt_status(err) == 143 else "interrupted"
@@ -267,7 +301,7 @@ def run(args):
             return interrupt_status(err)
 
 
-def _fit_and_write(args, folder, model, experiments, free, options):
+def _fit_and_write(args, folder, model, experiments, free, options, bench=None):
     import pamjax as pj
 
     from ._model_io import model_json
@@ -303,6 +337,11 @@ def _fit_and_write(args, folder, model, experiments, free, options):
                   "free": res.labels, "result": RESULT}
     written = [folder.write_text(RESULT, json.dumps(res.to_dict(), indent=1) + "\n"),
                folder.write_text(MODEL, model_json(res.model, provenance))]
+    if bench is not None:  # the bench's names: params, std_err, status, rmse of p [Pa] and x [m] per experiment
+        values, errors = pj.bench_values(res, bench.fitted_keys)
+        summary = dict(data=str(bench.directory), params=values, std_err=errors, status=res.status,
+                       message=res.message, rmse=pj.bench_rmse(res), noise=bench.noise, mismatch=res.mismatch)
+        written.append(folder.write_text(BENCH, json.dumps(summary, indent=1) + "\n"))
     if not args.no_plot:
         try:
             written.append(folder.write(FIGURE, lambda p: plot(p, res, experiments)))

@@ -79,7 +79,7 @@ def _set(entries):
 
 FIT_CASES = {
     "top-level key": (_fit_config(append="[solver]\nrtol = 1e-6\n"),
-                      r"unknown key\(s\) \['solver'\]; valid keys are \['experiment', 'fit', 'model'\]"),
+                      r"unknown key\(s\) \['solver'\]; valid keys are \['bench', 'experiment', 'fit', 'model'\]"),
     "[model] key": (_fit_config({'preset = "mas10_system"': 'preset = "mas10_system"\nvalve = "pwm"'}),
                     r"\[model\]: unknown key\(s\) \['valve'\]; valid keys are \['file', 'options', 'preset', 'set'\]"),
     "[model] options key": (_fit_config({'valve = "averaged"': 'valves = "averaged"'}),
@@ -107,7 +107,7 @@ FIT_CASES = {
     "[model] options payload in grams": (_fit_config({'valve = "averaged"': 'valve = "averaged", payload_mass = 9600'}),
                                          r"payload_mass = 9600 kg: .*looks like g"),
     "[fit] key": (_fit_config({"[fit]": "[fit]\nmaxsteps = 3"}),
-                  r"\[fit\]: unknown key\(s\) \['maxsteps'\]; valid keys are \['atol', 'free', 'max_steps'"),
+                  r"\[fit\]: unknown key\(s\) \['maxsteps'\]; valid keys are \['free', 'ftol', 'gtol', 'max_steps'"),
     "[fit] free path": (_fit_config({'"friction.coulomb_force"': '"friction.coulomb"'}),
                         r"unknown parameter 'friction.coulomb'(.|\n)*friction.coulomb_force"),
     "[fit] free as a string": (_fit_config({'free = ["friction.coulomb_force"]': 'free = "friction.coulomb_force"'}),
