@@ -188,6 +188,8 @@ from ._fit import (
 from ._bench import Bench as Bench
 from ._bench import BENCH_PARAMETERS as BENCH_PARAMETERS
 from ._bench import FITTED_KINDS as FITTED_KINDS
+from ._cache import CompileStats as CompileStats
+from ._cache import enable_compilation_cache as enable_compilation_cache
 from ._bench import bench_rmse as bench_rmse
 from ._bench import bench_values as bench_values
 from ._bench import load_bench as load_bench
