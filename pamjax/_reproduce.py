@@ -114,6 +114,31 @@ def save(fig, out, name):
     return name
 
 
+_FITS_MODULES = {}
+
+
+def fits_module(name):
+    """A script of `fits/` (e.g. "static_force"), imported by path once: the gallery reuses their procedures."""
+    if name not in _FITS_MODULES:
+        path = GALLERY.parent / f"{name}.py"
+        spec = importlib.util.spec_from_file_location(f"pamjax_fits_{name}", path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        _FITS_MODULES[name] = module
+    return _FITS_MODULES[name]
+
+
+def bench_folder(name="hybrid-reference-bench"):
+    """The hybrid reference bench recordings (`shared/data/<name>`, not in the repository), or None if absent:
+    `$PAMJAX_BENCH_DATA`, else `shared/data` beside the checkout, else /work/shared/data."""
+    candidates = [os.environ.get("PAMJAX_BENCH_DATA"), GALLERY.parents[2] / "shared" / "data" / name,
+                  GALLERY.parents[3] / "shared" / "data" / name, pathlib.Path("/work/shared/data") / name]
+    for c in candidates:
+        if c and (pathlib.Path(c) / "meta.json").exists():
+            return pathlib.Path(c)
+    return None
+
+
 def _jsonable(obj):
     if isinstance(obj, dict):
         return {str(k): _jsonable(v) for k, v in obj.items()}
