@@ -1,10 +1,10 @@
 """Paper 000, eq. 10-11, Table 1 and Fig. 7: C_v and b_v of both valve paths from ISO 6358 flow-rate curves.
 
 ISO 6358-1's test, as the paper ran it: upstream pressure held at 0.5, 0.6 and 0.7 MPa abs, the downstream throttled
-from atmosphere up towards the upstream pressure, the mass flow measured, per path (1→2 inflate, 2→3 exhaust). The points
-are synthetic: eq. 11 with Table 1's values plus 1 % of the choked flow as flow-meter noise (assumed). Eq. 11's
-C_v, b_v are fitted to both paths at once (`FlowCurveExperiment`, from 30 % off), and so is eq. 10's nozzle, the law
-the paper found "does not correspond well" (one C_q per path, its critical ratio fixed at 0.528).
+from atmosphere up towards the upstream pressure, the mass flow measured, per path (1→2 inflate, 2→3 exhaust).
+The points are synthetic: eq. 11 with Table 1's values plus 1 % of the choked flow as flow-meter noise (assumed).
+Eq. 11's C_v, b_v are fitted to both paths at once (`FlowCurveExperiment`, from 30 % off), and so is eq. 10's nozzle,
+the law the paper found "does not correspond well" (one C_q per path, its critical ratio fixed at 0.528).
 """
 
 import numpy as np
@@ -88,8 +88,9 @@ def run(out, quick=False):
             "(synthetic points; the tank route on the bench's recordings is p000_valve_tests)", fig_name),
         Row("eq. 10", "isentropic nozzle (critical ratio 0.528) fitted to the same curves",
             "\"does not correspond well\"",
-            f"RMSE {err['eq10_inflate_rmse_percent_of_choked']:.1f} % / {err['eq10_exhaust_rmse_percent_of_choked']:.1f}"
-            f" % of the choked flow (eq. 11: {err['eq11_inflate_rmse_percent_of_choked']:.1f} / "
+            f"RMSE {err['eq10_inflate_rmse_percent_of_choked']:.1f} % / "
+            f"{err['eq10_exhaust_rmse_percent_of_choked']:.1f} % of the choked flow (eq. 11: "
+            f"{err['eq11_inflate_rmse_percent_of_choked']:.1f} / "
             f"{err['eq11_exhaust_rmse_percent_of_choked']:.1f} %, the noise level)",
             "eq. 10's fixed critical ratio 0.528 misfits path 1→2 (b_v 0.28) and nearly fits 2→3 (b_v 0.49): the "
             "paper's reason for eq. 11",

@@ -70,7 +70,8 @@ def run(out, quick=False):
     loaded = fa > 0
     e8 = res8.channel_errors["loop_force_map"]["force"]
 
-    numbers = dict(eq7_rmse_N=e7["rmse"], eq7_max_error_N=e7["max_error"], eq7_max_error_percent=e7["max_error_percent"],
+    numbers = dict(eq7_rmse_N=e7["rmse"], eq7_max_error_N=e7["max_error"],
+                   eq7_max_error_percent=e7["max_error_percent"],
                    eq7_rmse_percent=e7["rmse_percent"], **band, eq7_fit=dict(zip(res7.labels, res7.values)),
                    loop_coulomb_N=fc, loop_coulomb_standard_error_N=fc_se,
                    loop_width_mean_N=float(np.mean(width[loaded])), loop_width_std_N=float(np.std(width[loaded])),

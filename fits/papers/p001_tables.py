@@ -10,7 +10,6 @@ from the pressures in bar), which jumps where it switches to eq. 2.
 
 import numpy as np
 
-import pamjax as pj
 from pamjax import presets
 from pamjax._regulator import BAR, PAPER001_AIR
 from pamjax._reproduce import Result, Row, fits_module, plt, save

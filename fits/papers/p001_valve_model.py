@@ -49,8 +49,9 @@ def bandwidth(num, den, drop_db=3.0):
 def readings_of_369():
     """Bandwidth of each reading of eq. 7 (and of eq. 6's poles) that could give Fig. 10's 3.69 Hz [Hz]."""
     poles = np.polymul([T1, 1], [T2, 1])
+    printed = (np.polymul([-0.922], [TQ, 1]), np.polymul(poles, [TQ, 1]))
     out = {
-        "eq. 7 as printed (pole-zero pair cancels)": bandwidth(np.polymul([-0.922], [TQ, 1]), np.polymul(poles, [TQ, 1])),
+        "eq. 7 as printed (pole-zero pair cancels)": bandwidth(*printed),
         "eq. 7 without its 0.927 s pole (zero kept)": bandwidth(np.polymul([-0.922], [TQ, 1]), poles),
         "eq. 7 without its 0.927 s zero (pole kept)": bandwidth([-0.922], np.polymul(poles, [TQ, 1])),
         "eq. 6's poles, −6 dB instead of −3 dB": bandwidth([1.0], poles, 6.0),
