@@ -85,9 +85,9 @@ def tank_system(c_si, b, supply):
     return pj.RegulatorSystem(reg, volume=TANK)
 
 
-def tank_run(theta, mode, p_row, ts):
+def tank_run(theta, mode, p_row, ts, solver=None):
     """Tank pressure [Pa] for θ = (log C [m³/(s Pa)], scaled logit of b), charging at supply p_row or discharging from
-    p_row (main stage fully open: pilot at 10.1 bar gauge, or at atmosphere)."""
+    p_row (main stage fully open: pilot at 10.1 bar gauge, or at atmosphere); `solver`: `simulate`'s default or any."""
     c, b = jnp.exp(theta[0]), _to_b(theta[1])  # b kept inside B_BOUNDS
     if mode == "charge":
         system, target, p0, volts = tank_system(c, b, p_row), P_ATM + 10.1 * BAR, P_ATM, 10.0
@@ -96,7 +96,7 @@ def tank_run(theta, mode, p_row, ts):
     y0 = ISO6358RegulatorState(
         pilot=jnp.asarray(target), pilot_output=jnp.asarray(target), pressure=jnp.asarray(p0, dtype=float)
     )
-    traj = pj.simulate(system, pj.Constant(volts), ts, y0=y0, adjoint="forward", rtol=1e-8, atol=1e-8)
+    traj = pj.simulate(system, pj.Constant(volts), ts, y0=y0, adjoint="forward", rtol=1e-8, atol=1e-8, solver=solver)
     return traj.pressure
 
 

@@ -10,6 +10,7 @@
 - Fig. 9: the step response of eq. 7 (pamjax's linear regulator vs SciPy on eq. 7 as printed).
 """
 
+import diffrax as dfx
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -67,8 +68,9 @@ def square_wave_mse(frequency, periods):
     0-3 V square wave at `frequency` over `periods` periods; and eq. 6's output variance [bar²]."""
     ts = jnp.linspace(0.0, periods / frequency, 200 * periods)  # one shape for every frequency: one compile
     square = pj.SquareWave(0.0, 3.0, frequency)
-    linear = pj.simulate(pj.RegulatorSystem(pj.LinearRegulator(), volume=0.0), square, ts, rtol=1e-8, atol=1e-8)
-    physical = pj.simulate(pj.RegulatorSystem(pj.ISO6358Regulator(), volume=1e-6), square, ts, rtol=1e-8, atol=1e-8)
+    kwargs = dict(rtol=1e-8, atol=1e-8, solver=dfx.Tsit5(), max_steps=1_000_000)  # compiles in 1/3 of Rodas5's time
+    linear = pj.simulate(pj.RegulatorSystem(pj.LinearRegulator(), volume=0.0), square, ts, **kwargs)
+    physical = pj.simulate(pj.RegulatorSystem(pj.ISO6358Regulator(), volume=1e-6), square, ts, **kwargs)
     a, b = np.asarray(linear.pressure) / BAR, np.asarray(physical.pressure) / BAR
     return float(np.mean((a - b) ** 2)), float(np.var(a)), np.asarray(ts), a, b
 
@@ -99,7 +101,8 @@ def run(out, quick=False):
     t_step = jnp.linspace(0.0, 3.0, 301)
     y0 = pj.equilibrium(system, u, system.initial_state())
     stepped = eqx.tree_at(lambda s: s.outlet_flow, system, jnp.asarray(FLOW_UNIT))
-    step = (np.asarray(pj.simulate(stepped, pj.Constant(u), t_step, y0=y0, rtol=1e-10, atol=1e-10).pressure)
+    step = (np.asarray(pj.simulate(stepped, pj.Constant(u), t_step, y0=y0, rtol=1e-10, atol=1e-10,
+                                   solver=dfx.Tsit5()).pressure)
             - float(y0.pressure)) / BAR
     _, scipy_step = sps.step(sps.lti(np.polymul([-0.922], [TQ, 1]),
                                      np.polymul(np.polymul([T1, 1], [T2, 1]), [TQ, 1])), T=np.asarray(t_step))
