@@ -30,6 +30,9 @@ class Component(eqx.Module):
 
     path: str = eqx.field(static=True)
 
+    def describe(self):
+        return f"the model's {self.path!r}" if self.path else "the model"
+
     def __call__(self, model):
         for name in filter(None, self.path.split(".")):
             if not hasattr(model, name):
@@ -170,8 +173,8 @@ class FrictionCurveExperiment(AbstractStaticExperiment):
     def check(self, model):
         friction = self.friction(model)
         if not isinstance(friction, AbstractFriction):
-            raise PamjaxInputError(f"{self.name}: {self.friction.path!r} of the model is {type(friction).__name__}, "
-                                   "not a friction model")
+            raise PamjaxInputError(f"{self.name}: {self.friction.describe()} is {type(friction).__name__}, not a "
+                                   "friction model")
         super().check(model)
 
     def predict(self, model):
@@ -219,8 +222,8 @@ class FlowCurveExperiment(AbstractStaticExperiment):
     def check(self, model):
         restriction = self.restriction(model)
         if not isinstance(restriction, AbstractRestriction):
-            raise PamjaxInputError(f"{self.name}: {self.restriction.path!r} of the model is "
-                                   f"{type(restriction).__name__}, not a restriction")
+            raise PamjaxInputError(f"{self.name}: {self.restriction.describe()} is {type(restriction).__name__}, "
+                                   "not a restriction")
         super().check(model)
 
     def predict(self, model):

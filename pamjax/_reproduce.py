@@ -264,7 +264,7 @@ def run(args):
                                    f"{[p.stem for p in paths]}")
         paths = [p for p in paths if p.stem in args.only]
     modules = [load(p) for p in paths]
-    cover = coverage([load(p) for p in scripts(None, args.scripts)] if not args.only and paper is None else modules)
+    cover = coverage([load(p) for p in scripts(None, args.scripts)])  # of the whole gallery, whatever is run
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     records, start = [], time.perf_counter()

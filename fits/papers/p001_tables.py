@@ -4,9 +4,9 @@ charging and discharging the 0.04 m³ tank, and the modelled flow-rate curves.
 Tables 1-2 by the appendix's procedure (`fits/regulator.py`): each row's tank run simulated with that row's C, b
 (`ISO6358Regulator`, main stage fully open), 2 mbar noise, C and b fitted back (start values read off the record as the
 paper does, then Levenberg-Marquardt). `--quick` takes the 6.943 bar charging and 3.97 bar discharging rows and stops
-after the read-off: C from the choked slope (eq. 14), b by least squares over a 0.005 grid at that C (`read_off`). Figs. 13-14: the ISO 6358
-flow per row against the tank pressure, in the standard ratio form of eq. 13 and as eq. 1 is printed (b subtracted
-from the pressures in bar), which jumps where it switches to eq. 2.
+after the read-off: C from the choked slope (eq. 14), b by least squares over a 0.005 grid at that C (`read_off`).
+Figs. 13-14: the ISO 6358 flow per row against the tank pressure, in the standard ratio form of eq. 13 and as eq. 1 is
+printed (b subtracted from the pressures in bar), which jumps where it switches to eq. 2.
 """
 
 import diffrax as dfx
@@ -67,7 +67,7 @@ def read_off(reg, mode, p_row, c_true, b_true, rng):
     t, n = np.asarray(ts), ts.size // 10
     y = data[:n] / (p_row * BAR) if mode == "charge" else -np.log(data[:n])
     c0 = float(np.polyfit(t[:n], y, 1)[0] / reg.tank_rate_constant(1.0))  # m³/(s Pa)
-    grid = np.arange(0.3, 0.9, 0.005)
+    grid = np.arange(0.3, 0.8975, 0.005)  # inside fits/regulator.py's b range (0.1, 0.9)
     runs = jax.jit(jax.vmap(lambda z: reg.tank_run(jnp.stack([jnp.log(c0), z]), mode, p_row * BAR, ts, solver=solver)))
     cost = np.sum((np.asarray(runs(jnp.asarray(reg._from_b(grid)))) - data) ** 2, axis=1)
     k = int(np.clip(np.argmin(cost), 1, grid.size - 2))

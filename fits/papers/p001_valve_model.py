@@ -87,7 +87,7 @@ def run(out, quick=False):
                                     inputs={"outlet_flow": lin.flow_input}))
     readings, needed = readings_of_369()
 
-    v = fits_module("regulator").fit_valve(np.random.default_rng(0), quick)
+    v = fits_module("regulator").fit_valve(np.random.default_rng(0), quick, solver=dfx.Tsit5())  # not stiff
     var = float(np.var(v["smoothed"][v["n_id"]:] / BAR))
     implied_mse = (1 - PAPER_NUMBERS["fit_percent"] / 100) ** 2 * var  # fit % = 100 (1 − ‖e‖/‖y − ȳ‖)
 
