@@ -20,7 +20,7 @@ NEEDS_BENCH = {"p000_valve_tests", "p000_system_tests", "p000_pwm_frequency"}  #
 def get(numbers, path):
     """`numbers[a][b]…` for the path "a/b/…" (or a tuple of keys, for keys that contain a slash)."""
     for key in (path.split("/") if isinstance(path, str) else path):
-        numbers = numbers[key]
+        numbers = numbers[int(key)] if isinstance(numbers, list) else numbers[key]
     return numbers
 
 
