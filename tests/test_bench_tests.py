@@ -97,6 +97,6 @@ def test_bad_input_is_named_before_any_fit():
     with pytest.raises(pj.PamjaxInputError, match="the model is OnOffValve, not a friction model"):
         pj.FrictionCurveExperiment([0.1, 0.2], [40.0, 66.0], friction="").check(presets.mas10_valve())
     with pytest.raises(pj.PamjaxInputError, match="has no 'nozzle'"):
-        pj.FlowCurveExperiment([5e5], [2e5], [1e-3], restriction="nozzle").check(presets.mas10_valve())
+        pj.FlowCurveExperiment([5e5], [2e5], [1e-3], scale=1e-5, restriction="nozzle").check(presets.mas10_valve())
     with pytest.raises(pj.PamjaxInputError, match="needs a 'muscle'"):
-        pj.LoopForceMapExperiment([0.0], [3e5], [1e-3], [10.0]).check(presets.mas10_valve())
+        pj.LoopForceMapExperiment([0.0], [3e5], [1e-3], [10.0], scale=1.0).check(presets.mas10_valve())

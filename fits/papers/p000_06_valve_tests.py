@@ -106,7 +106,7 @@ def run(out, quick=False):
         if quick:
             rows.append(Row("Table 1 (tank route)", "C_v, b_v fitted to the bench's E1/E2 recordings",
                             "C_v 0.36 / 0.39, b_v 0.28 / 0.49", "full mode only (about 2 min)",
-                            "see p000_flow_curves for Table 1 from flow curves", ""))
+                            "see p000_04_flow_curves for Table 1 from flow curves", ""))
         else:  # Table 1 from the tank recordings: fits/valve_tank.py's fit, 2 s per run at 100 Hz
             fit = numbers["table_1_from_tanks"] = tank_fit(tank, P, bench, 2.0, 100.0)
             rows.append(Row("Table 1 (tank route)", "C_v, b_v fitted to the bench's E1/E2 recordings (2 s, 100 Hz)",

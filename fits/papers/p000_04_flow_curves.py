@@ -85,7 +85,7 @@ def run(out, quick=False):
         Row("Table 1, eq. 11, Fig. 7", "C_v, b_v of both paths fitted to ISO 6358 flow curves at 0.5/0.6/0.7 MPa",
             "C_v 0.36 / 0.39, b_v 0.28 / 0.49 (1→2 / 2→3)", table + " (started 30 % off)",
             f"recovered within {numbers['max_relative_error_percent']:.1f} %: the procedure identifies Table 1 "
-            "(synthetic points; the tank route on the bench's recordings is p000_valve_tests)", fig_name),
+            "(synthetic points; the tank route on the bench's recordings is p000_06_valve_tests)", fig_name),
         Row("eq. 10", "isentropic nozzle (critical ratio 0.528) fitted to the same curves",
             "\"does not correspond well\"",
             f"RMSE {err['eq10_inflate_rmse_percent_of_choked']:.1f} % / "
