@@ -108,11 +108,21 @@ def _check_absolute(name, p):
         )
 
 
-def _scale(scale, values, unit):
+def _set_data(experiment, channel, values, scale, unit, name, compared=None):
+    """Inside an experiment's `__init__`: the measured `channel`, its scale [`unit`] (default 1 % of the range; the
+    noise level if known), point index as `times`, weights 1/scale where `compared` (default everywhere), no
+    validation part, and the name."""
     s = float(0.01 * np.ptp(values) if scale is None else scale)
     if not (np.isfinite(s) and s > 0):
         raise PamjaxInputError(f"scale must be > 0 [{unit}] (the measurement's noise level), got {s}")
-    return s
+    compared = np.ones(values.shape, dtype=bool) if compared is None else compared
+    experiment.scale = s
+    experiment.times = jnp.arange(values.size, dtype=float)
+    experiment.data = {channel: jnp.asarray(values)}
+    experiment.weights = {channel: jnp.asarray(np.where(compared, 1.0 / s, 0.0))}
+    experiment.split_time = float("inf")
+    experiment.name = str(name)
+    experiment.channels = (channel,)
 
 
 class AbstractStaticExperiment(eqx.Module):
@@ -161,14 +171,8 @@ class FrictionCurveExperiment(AbstractStaticExperiment):
         if np.any(v == 0):
             raise PamjaxInputError(f"velocities must be non-zero (sliding), row {int(np.argmin(v != 0))} is 0")
         self.velocities = jnp.asarray(v)
-        self.scale = _scale(scale, f, "N")
-        self.times = jnp.arange(v.size, dtype=float)
-        self.data = {"force": jnp.asarray(f)}
-        self.weights = {"force": jnp.full(v.shape, 1.0 / self.scale)}
-        self.split_time = float("inf")
         self.friction = Component(friction)
-        self.name = str(name)
-        self.channels = ("force",)
+        _set_data(self, "force", f, scale, "N", name)
 
     def check(self, model):
         friction = self.friction(model)
@@ -210,14 +214,8 @@ class FlowCurveExperiment(AbstractStaticExperiment):
         _check_absolute("upstream_pressures", p1)
         _check_absolute("downstream_pressures", p2)
         self.upstream_pressures, self.downstream_pressures = jnp.asarray(p1), jnp.asarray(p2)
-        self.scale = _scale(scale, m, "kg/s")
-        self.times = jnp.arange(m.size, dtype=float)
-        self.data = {"mass_flow": jnp.asarray(m)}
-        self.weights = {"mass_flow": jnp.full(m.shape, 1.0 / self.scale)}
-        self.split_time = float("inf")
         self.restriction = Component(restriction)
-        self.name = str(name)
-        self.channels = ("mass_flow",)
+        _set_data(self, "mass_flow", m, scale, "kg/s", name)
 
     def check(self, model):
         restriction = self.restriction(model)
@@ -267,13 +265,7 @@ class LoopForceMapExperiment(AbstractStaticExperiment):
             )
         self.positions, self.pressures, self.velocities = jnp.asarray(x), jnp.asarray(p), jnp.asarray(v)
         self.slack = jnp.asarray(f <= slack_force)
-        self.scale = _scale(scale, f, "N")
-        self.times = jnp.arange(f.size, dtype=float)
-        self.data = {"force": jnp.asarray(f)}
-        self.weights = {"force": jnp.asarray(np.where(f <= slack_force, 0.0, 1.0 / self.scale))}  # slack: see residuals
-        self.split_time = float("inf")
-        self.name = str(name)
-        self.channels = ("force",)
+        _set_data(self, "force", f, scale, "N", name, compared=f > slack_force)  # slack points: see `residuals`
 
     def check(self, model):
         for name in ("muscle", "friction"):
