@@ -30,14 +30,16 @@ class Component(eqx.Module):
 
     path: str = eqx.field(static=True)
 
-    def describe(self):
-        return f"the model's {self.path!r}" if self.path else "the model"
-
-    def __call__(self, model):
+    def __call__(self, model, kind=object, experiment="experiment"):
+        """The component of `model`; a `PamjaxInputError` naming `experiment` unless it is a `kind`."""
         for name in filter(None, self.path.split(".")):
             if not hasattr(model, name):
-                raise PamjaxInputError(f"the model ({type(model).__name__}) has no {name!r} on the path {self.path!r}")
+                raise PamjaxInputError(f"{experiment}: the model ({type(model).__name__}) has no {name!r} on the path "
+                                       f"{self.path!r}")
             model = getattr(model, name)
+        if not isinstance(model, kind):
+            where = f"the model's {self.path!r}" if self.path else "the model"
+            raise PamjaxInputError(f"{experiment}: {where} is {type(model).__name__}; a {kind.__name__} is needed")
         return model
 
 
@@ -174,15 +176,8 @@ class FrictionCurveExperiment(AbstractStaticExperiment):
         self.friction = Component(friction)
         _set_data(self, "force", f, scale, "N", name)
 
-    def check(self, model):
-        friction = self.friction(model)
-        if not isinstance(friction, AbstractFriction):
-            raise PamjaxInputError(f"{self.name}: {self.friction.describe()} is {type(friction).__name__}, not a "
-                                   "friction model")
-        super().check(model)
-
     def predict(self, model):
-        return {"force": steady_friction_force(self.friction(model), self.velocities)}
+        return {"force": steady_friction_force(self.friction(model, AbstractFriction, self.name), self.velocities)}
 
 
 class FlowCurveExperiment(AbstractStaticExperiment):
@@ -217,15 +212,8 @@ class FlowCurveExperiment(AbstractStaticExperiment):
         self.restriction = Component(restriction)
         _set_data(self, "mass_flow", m, scale, "kg/s", name)
 
-    def check(self, model):
-        restriction = self.restriction(model)
-        if not isinstance(restriction, AbstractRestriction):
-            raise PamjaxInputError(f"{self.name}: {self.restriction.describe()} is {type(restriction).__name__}, "
-                                   "not a restriction")
-        super().check(model)
-
     def predict(self, model):
-        restriction, air = self.restriction(model), _air(model)
+        restriction, air = self.restriction(model, AbstractRestriction, self.name), _air(model)
         flow = jax.vmap(lambda p1, p2: restriction.mass_flow(p1, p2, air))
         return {"mass_flow": flow(self.upstream_pressures, self.downstream_pressures)}
 

@@ -94,7 +94,7 @@ def test_bad_input_is_named_before_any_fit():
         pj.FlowCurveExperiment([5e5], [2e5], [1e-3], scale=0.0)
     with pytest.raises(pj.PamjaxInputError, match="has no 'friction'"):
         pj.FrictionCurveExperiment([0.1, 0.2], [40.0, 66.0]).check(presets.mas10_valve())
-    with pytest.raises(pj.PamjaxInputError, match="the model is OnOffValve, not a friction model"):
+    with pytest.raises(pj.PamjaxInputError, match="the model is OnOffValve; a AbstractFriction is needed"):
         pj.FrictionCurveExperiment([0.1, 0.2], [40.0, 66.0], friction="").check(presets.mas10_valve())
     with pytest.raises(pj.PamjaxInputError, match="has no 'nozzle'"):
         pj.FlowCurveExperiment([5e5], [2e5], [1e-3], scale=1e-5, restriction="nozzle").check(presets.mas10_valve())
