@@ -18,6 +18,9 @@ from ._friction import (
 from ._friction import (
     CoulombViscousFriction as CoulombViscousFriction,
 )
+from ._friction import (
+    KarnoppFriction as KarnoppFriction,
+)
 from ._gas import (
     AbstractRestriction as AbstractRestriction,
 )
@@ -206,15 +209,24 @@ from ._fit import (  # noqa: E402
     FitResult as FitResult,
 )
 from ._fit import (
-    PamjaxIdentifiabilityWarning as PamjaxIdentifiabilityWarning,
-)
-from ._fit import (
-    ParameterSpace as ParameterSpace,
+    evaluate as evaluate,
 )
 from ._fit import (
     fit as fit,
 )
-from ._fit import (
+from ._bench import Bench as Bench
+from ._bench import BENCH_PARAMETERS as BENCH_PARAMETERS
+from ._bench import bench_values as bench_values
+from ._bench import load_bench as load_bench
+from ._experiment import predictions as predictions
+from ._parameters import (
+    PamjaxIdentifiabilityWarning as PamjaxIdentifiabilityWarning,
+)
+from ._recording import PamjaxDataWarning as PamjaxDataWarning
+from ._parameters import (
+    ParameterSpace as ParameterSpace,
+)
+from ._parameters import (
     parameter_paths as parameter_paths,
 )
 from ._gradcheck import gradient_check as gradient_check  # noqa: E402

@@ -9,7 +9,7 @@ import tomllib
 import numpy as np
 
 from ._errors import PamjaxInputError
-from ._fit import FREE_ENTRY_KEYS
+from ._parameters import FREE_ENTRY_KEYS
 
 _TOP_KEYS = {"model", "fit", "experiment"}
 _MODEL_KEYS = {"preset", "options", "set"}

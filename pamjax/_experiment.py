@@ -19,11 +19,10 @@ import numpy as np
 
 from ._errors import PamjaxInputError
 from ._inputs import AbstractSignal
-from ._recording import _MIN_ABSOLUTE_PA, Recording
-from ._simulate import solve, validate
-from ._synchronous import num_periods as _num_periods
+from ._recording import _MIN_ABSOLUTE_PA, Recording, warn_filtered
+from ._simulate import _flat_scaled, fixed_grid_size, fixed_trajectory, resolve_stepping, solve, validate
+from ._synchronous import solve_runs
 from ._system import AbstractSystem, TankSystem
-from ._valve import OnOffValve
 
 
 class SameSystem(eqx.Module):
@@ -65,8 +64,8 @@ class Experiment(eqx.Module):
     - `name`; `rtol`, `atol`, `max_steps`, `dt0`: solver settings of the adaptive solve (see `simulate`); the
       tolerances default to 1e-9 (tighter than `simulate`'s 1e-6, so that the residuals are smooth enough for
       Levenberg-Marquardt near the optimum; see the comment at the default).
-    - `stepping`: "auto" (default: "pwm" when the system's valve is a switching `OnOffValve`, else "adaptive"),
-      "adaptive" or "pwm". "pwm" integrates on the PWM-synchronous fixed RK4 grid (`simulate(stepping="pwm")`:
+    - `stepping`: "auto" (default: "pwm" when the system's valve switches, "grid" for a hybrid system (stick-slip
+      friction) with a continuous valve, else "adaptive"), "adaptive", "pwm" or "grid". "pwm" integrates on the PWM-synchronous fixed RK4 grid (`simulate(stepping="pwm")`:
       exact edges, `substeps` nodes per period plus the edges), so the residuals are smooth, deterministic functions
       of every parameter; an adaptive solve of a switching valve changes its step pattern with the parameters, and
       the cost jumps by O(1) between neighbouring trial points (docs/fitting.md), which stalls Levenberg-Marquardt.
@@ -79,6 +78,7 @@ class Experiment(eqx.Module):
     data: dict
     weights: dict  # 1/scale where the sample is used, 0 where masked (NaN)
     scales: dict = eqx.field(static=True)
+    noise_channels: tuple = eqx.field(static=True)  # channels whose scale the user gave (their noise level)
     signal: AbstractSignal
     build: eqx.Module
     initial: dict
@@ -94,6 +94,7 @@ class Experiment(eqx.Module):
     substeps: int = eqx.field(static=True)
     span: tuple = eqx.field(static=True)  # (t0, t_end) [s] as floats, to size the PWM grid
     num_periods: int | None = eqx.field(static=True)
+    lowpass_hz: float | None = eqx.field(static=True)  # the recording's low-pass cut-off, if it was filtered
 
     def __init__(
         self,
@@ -136,6 +137,7 @@ class Experiment(eqx.Module):
             if c not in channels:
                 raise PamjaxInputError(f"scales names channel {c!r}, which is not compared; channels are {channels}")
         self.scales = {c: float(scales.get(c, _default_scale(recording[c][recording.mask[c]]))) for c in channels}
+        self.noise_channels = tuple(c for c in channels if c in scales)
         for c, s in self.scales.items():
             if not (np.isfinite(s) and s > 0):
                 raise PamjaxInputError(f"scales[{c!r}] must be > 0 (the channel's noise level), got {s}")
@@ -158,27 +160,35 @@ class Experiment(eqx.Module):
         if not (isinstance(substeps, int) and substeps >= 2):
             raise PamjaxInputError(f"substeps must be an int >= 2 (RK4 nodes per PWM period), got {substeps!r}")
         self.stepping, self.substeps = stepping, substeps
+        self.lowpass_hz = recording.lowpass_hz
         self.span = (float(self.t0), float(t[-1]))
         self.num_periods = None
 
     def _stepping(self, system):
-        if self.stepping == "auto":
-            return "pwm" if isinstance(system.valve, OnOffValve) else "adaptive"
-        if self.stepping == "pwm" and not isinstance(system.valve, OnOffValve):
-            raise PamjaxInputError(
-                f"experiment {self.name!r}: stepping='pwm' needs a switching OnOffValve, got "
-                f"{type(system.valve).__name__}; use stepping='adaptive' or 'auto'"
-            )
-        return self.stepping
+        """The stepping of this experiment's solve: "auto" is the PWM-synchronous grid for a switching valve
+        (smooth, deterministic residuals in every parameter), the uniform grid for a hybrid system fed by a
+        continuous valve, else the adaptive solver (`simulate`'s rule otherwise)."""
+        if self.stepping == "auto" and getattr(system.valve, "switches", False):
+            return "pwm"
+        try:
+            return resolve_stepping(system, self.stepping)
+        except PamjaxInputError as err:
+            raise PamjaxInputError(f"experiment {self.name!r}: {err}") from None
+
+    def _grid_size(self, system, stepping):
+        if self.num_periods is not None:
+            return self.num_periods
+        return fixed_grid_size(system, stepping, *self.span)  # concrete model; traced: bind(model) first
 
     def bind(self, model):
-        """This experiment with its PWM grid sized for `model` (concrete): the number of PWM periods covering the
-        recording. A no-op for adaptive stepping or when already sized."""
+        """This experiment with its fixed grid sized for `model` (concrete): the number of PWM periods (or grid
+        steps) covering the recording. A no-op for adaptive stepping or when already sized."""
         system = self.build(model)
-        if self.num_periods is not None or self._stepping(system) != "pwm":
+        stepping = self._stepping(system)
+        if self.num_periods is not None or stepping == "adaptive":
             return self
         bound = copy.copy(self)
-        object.__setattr__(bound, "num_periods", _num_periods(system.valve, *self.span))
+        object.__setattr__(bound, "num_periods", fixed_grid_size(system, stepping, *self.span))
         return bound
 
     def check(self, model):
@@ -195,21 +205,23 @@ class Experiment(eqx.Module):
                 f"experiment {self.name!r}: bad `initial` keys {sorted(self.initial)}: {err}"
             ) from err
         validate(system, self.signal, self.times, y0, self.t0)
-        traj = predict(model, self)
+        frequency = getattr(system.valve, "pwm_frequency", None)
+        if self.lowpass_hz is not None and frequency is not None and self.lowpass_hz < float(frequency):
+            warn_filtered(self.name, self.lowpass_hz, float(frequency), stacklevel=4)
+        # Which channels the system has: its outputs, traced (not solved, not compiled).
+        outputs = jax.eval_shape(lambda s, y: s.outputs(self.t0, y, self.signal(self.t0)), system, y0)
         for c in self.channels:
-            if c not in traj:
+            if c not in outputs and c != "command":
                 raise PamjaxInputError(f"experiment {self.name!r}: the system has no output {c!r}")
 
     def predict(self, model):
         """Model channels at the recording's times (traceable): dict channel → array."""
         system = self.build(model)
         y0 = system.initial_state(**self.initial)
-        if self._stepping(system) == "pwm":
-            periods = self.num_periods
-            if periods is None:  # concrete model: size the grid here; traced: bind(model) first
-                periods = _num_periods(system.valve, *self.span)
-            traj = solve(system, self.signal, self.times, y0, self.t0, stepping="pwm", substeps=self.substeps,
-                         num_periods=periods)
+        stepping = self._stepping(system)
+        if stepping != "adaptive":
+            traj = solve(system, self.signal, self.times, y0, self.t0, stepping=stepping, substeps=self.substeps,
+                         num_periods=self._grid_size(system, stepping))
             return {c: getattr(traj, c) for c in traj.channels() if getattr(traj, c) is not None}
         traj = solve(
             system,
@@ -225,10 +237,29 @@ class Experiment(eqx.Module):
         )
         return {c: getattr(traj, c) for c in traj.channels() if getattr(traj, c) is not None}
 
+    def batch_key(self, model):
+        """Experiments with equal keys are integrated in one compiled loop (`predict_all`): fixed-grid stepping of
+        systems of one structure. None: solved on its own (adaptive stepping)."""
+        system = self.build(model)
+        stepping = self._stepping(system)
+        if stepping == "adaptive":
+            return None
+        return (stepping, self.substeps, jax.tree_util.tree_structure(system))
+
     def residuals(self, model, part="identification"):
         """(model − data) / scale for the compared channels, flattened; 0 at masked samples and at the samples of
         the other part ("identification": t before the split, "validation": after it, "all")."""
-        pred = self.predict(model)
+        return self.residuals_of(self.predict(model), part)
+
+    def layout(self):
+        """The residual vector's blocks, in order: per channel (name, scale, data, used, identification) with the
+        data and two masks over its samples (used: not masked; identification: before the validation split)."""
+        ident = np.asarray(self.times) <= float(self.split_time)
+        return [(c, self.scales[c], np.asarray(self.data[c]), np.asarray(self.weights[c]) > 0, ident)
+                for c in self.channels]
+
+    def residuals_of(self, pred, part="identification"):
+        """`residuals` from this experiment's predictions `pred` (dict channel → array at `times`)."""
         keep = {"identification": self.times <= self.split_time, "validation": self.times > self.split_time}.get(
             part, jnp.ones_like(self.times, dtype=bool)
         )
@@ -293,10 +324,74 @@ class ForceMapExperiment(eqx.Module):
         f = jax.vmap(lambda x, p: muscle.static_force(x, p, air))(self.positions, self.pressures)
         return {"force": f}
 
+    def batch_key(self, model):
+        return None
+
+    def layout(self):
+        ones = np.ones(self.forces.shape, dtype=bool)
+        return [("force", self.scale, np.asarray(self.forces), ones, ones)]
+
     def residuals(self, model, part="identification"):
+        return self.residuals_of(self.predict(model), part)
+
+    def residuals_of(self, pred, part="identification"):
         del part
-        f = self.predict(model)["force"]
+        f = pred["force"]
         return jnp.where(self.slack, jnp.maximum(f, 0.0), f - self.forces) / self.scale
+
+
+def predict_all(model, experiments):
+    """Every experiment's predictions (traceable), in order. Fixed-grid experiments whose systems share one
+    structure (e.g. six tank tests, or a muscle's triangle runs) are integrated in ONE loop (`solve_runs`), so the
+    compiled program does not grow with their number."""
+    preds = [None] * len(experiments)
+    groups = {}
+    for i, e in enumerate(experiments):
+        key = e.batch_key(model)
+        if key is None:
+            preds[i] = e.predict(model)
+        else:
+            groups.setdefault(key, []).append(i)
+    for (stepping, substeps, _), members in groups.items():
+        exps = [experiments[i] for i in members]
+        for i, pred in zip(members, _predict_runs(model, exps, stepping, substeps)):
+            preds[i] = pred
+    return preds
+
+
+@eqx.filter_jit
+def _predictions(model, exps):
+    return predict_all(model, exps)
+
+
+def predictions(model, experiments):
+    """`model`'s channels at every experiment's times (list of dicts channel → NumPy array), in one compiled
+    program (experiments of one kind share one loop, as in a fit). Checks the experiments first."""
+    from ._errors import require_float64
+    from ._parameters import strong_types
+
+    require_float64("pamjax.predictions")
+    experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
+    for e in experiments:
+        e.check(model)
+    model = strong_types(model)
+    exps = tuple(e.bind(model) if hasattr(e, "bind") else e for e in experiments)
+    return [jax.tree_util.tree_map(np.asarray, p) for p in _predictions(model, exps)]
+
+
+def _predict_runs(model, exps, stepping, substeps):
+    systems = [e.build(model) for e in exps]
+    y0s = [s.initial_state(**e.initial) for s, e in zip(systems, exps)]
+    flats = [_flat_scaled(s, y0) for s, y0 in zip(systems, y0s)]
+    _, flat_scale, unravel = flats[0]
+    sizes = [e._grid_size(s, stepping) for s, e in zip(systems, exps)]
+    runs = solve_runs(systems, [e.signal for e in exps], [e.times for e in exps], [f[0] for f in flats], unravel,
+                      flat_scale, [e.t0 for e in exps], stepping=stepping, substeps=substeps, sizes=sizes)
+    preds = []
+    for system, e, (states, num_steps, finite) in zip(systems, exps, runs):
+        traj = fixed_trajectory(system, e.signal, e.times, e.t0, states, num_steps, finite, stepping)
+        preds.append({c: getattr(traj, c) for c in traj.channels() if getattr(traj, c) is not None})
+    return preds
 
 
 @eqx.filter_jit

@@ -1,14 +1,15 @@
 """`fit`: least-squares identification of named parameters of a model against experiments.
 
-Workflow only: the physics lives in the components; the residuals come from `Experiment.residuals`, the optimiser
-is optimistix (Levenberg-Marquardt by default), the Jacobian forward-mode through diffrax.
+Workflow only: the physics lives in the components; the residuals come from `Experiment.residuals`; the iteration
+is Levenberg-Marquardt on the host (`pamjax._lm`) around two compiled functions per problem structure, the residuals
+and their forward-mode Jacobian; the statistics and the mismatch diagnostics are in `pamjax._diagnostics`.
 """
 
 import dataclasses
 import json
 import math
 import pathlib
-import re
+import threading
 import time
 import warnings
 
@@ -16,275 +17,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
+from . import _lm
+from ._diagnostics import channel_errors, covariance, identifiability, mismatch
 from ._errors import PamjaxInputError, require_float64
-from ._experiment import predict
-
-# Residual entries of a trial step whose simulation failed (non-finite): large and finite, so the step is rejected.
-FAILED_RESIDUAL = 1e6
-
-# Default transform by field name: positive quantities fitted in log space, ratios in (0, 1) through a logistic;
-# everything else (signed coefficients) linearly, scaled by its starting magnitude.
-_LOG_NAMES = {
-    "discharge_coefficient", "area", "sonic_conductance", "flow_coefficient", "v0", "volume", "coulomb_force",
-    "viscous_coefficient", "payload_mass", "k0", "k2", "supply_pressure", "pwm_frequency", "switch_on_delay",
-    "switch_off_delay", "edge_width", "velocity_width", "bristle_stiffness", "bristle_damping", "max_pressure",
-    "strand_length", "turns", "nominal_length", "radius", "stiffness", "damping", "temperature", "gas_constant",
-}
-_LOGISTIC_NAMES = {"critical_ratio", "laminar_ratio"}
-
-
-class PamjaxIdentifiabilityWarning(UserWarning):
-    """Some free parameters (or combinations of them) are not determined by the data."""
-
-
-_TOKEN = re.compile(r"^([A-Za-z_]\w*)((?:\[\d+(?:,\s*\d+)*\])?)$")
-
-
-def _parse(path):
-    parts = path.split(".")
-    attrs, index = [], None
-    for i, part in enumerate(parts):
-        m = _TOKEN.match(part.strip())
-        if m is None or (m.group(2) and i != len(parts) - 1):
-            raise PamjaxInputError(f"parameter path {path!r} is malformed (expected e.g. 'valve.inflate.area' or "
-                                   "'muscle.force_law.max_force_coefficients[2]')")
-        attrs.append(m.group(1))
-        if m.group(2):
-            index = tuple(int(k) for k in m.group(2)[1:-1].split(","))
-    return attrs, index
-
-
-def parameter_paths(model, prefix=""):
-    """All array-valued parameter paths of `model` with their shapes, e.g. {'valve.inflate.area': ()}."""
-    out = {}
-    if isinstance(model, eqx.Module):
-        for f in dataclasses.fields(model):
-            if f.metadata.get("static", False):
-                continue
-            out.update(parameter_paths(getattr(model, f.name), f"{prefix}{f.name}."))
-    elif eqx.is_array(model):
-        out[prefix[:-1]] = tuple(model.shape)
-    return out
-
-
-def _getter(attrs):
-    def get(m):
-        for a in attrs:
-            m = getattr(m, a)
-        return m
-
-    return get
-
-
-class _Group(eqx.Module):
-    """One free entry: an array leaf (or some of its elements) and how it maps from the unconstrained θ."""
-
-    path: str = eqx.field(static=True)
-    attrs: tuple = eqx.field(static=True)
-    index: tuple | None = eqx.field(static=True)
-    transform: str = eqx.field(static=True)
-    labels: tuple = eqx.field(static=True)
-    scale: jax.Array  # linear: value = scale θ; log: value = scale exp(θ); nodes: F(nodes) = scale θ
-    lower: jax.Array
-    upper: jax.Array
-    basis: jax.Array | None  # nodes: coefficients = basis @ F(nodes)
-
-    @property
-    def size(self):
-        return len(self.labels)
-
-    def physical(self, theta):
-        if self.transform == "linear":
-            return self.scale * theta
-        if self.transform == "log":
-            return self.scale * jnp.exp(theta)
-        if self.transform == "logistic":
-            return self.lower + (self.upper - self.lower) * jax.nn.sigmoid(theta)
-        return self.basis @ (self.scale * theta)  # nodes
-
-    def theta(self, value):
-        value = jnp.asarray(value, dtype=float)
-        if self.transform == "linear":
-            return value / self.scale
-        if self.transform == "log":
-            return jnp.log(value / self.scale)
-        if self.transform == "logistic":
-            z = (value - self.lower) / (self.upper - self.lower)
-            return jnp.log(z) - jnp.log1p(-z)
-        return jnp.linalg.solve(self.basis, value) / self.scale
-
-
-def _labels(path, attrs, shape, index):
-    if index is not None:
-        return (path,)
-    idx = list(np.ndindex(*shape)) if shape else [()]
-    if attrs[-1] == "max_force_coefficients":
-        return tuple(f"a{i[0]}" for i in idx)
-    if attrs[-1] == "coefficients" and shape == (3, 3):
-        return tuple(f"m{3 * i[0] + i[1] + 1}" for i in idx)
-    return tuple(f"{path}[{','.join(map(str, i))}]" if i else path for i in idx)
-
-
-# Keys of a free-parameter entry given as a dict (the `pamjax fit` config's free tables take the same).
-FREE_ENTRY_KEYS = ("path", "transform", "bounds", "scale")
-
-
-def _zero_start_scale(full, index):
-    """Scale of linear parameters that start at exactly 0 (their own magnitude gives none).
-
-    Entries of one column of a 2-D coefficient array share units (eq. 13: m_ij multiplies u^i p_g^j, u
-    dimensionless), so a zero entry takes its column's largest magnitude; in a 1-D array, the array's largest; else 1
-    (give the free entry a 'scale' then). Without this, eq. 13's m1 = 0 would be fitted in units of 1 kg/s beside
-    m4 and m7 of ~1e-3 kg/s: badly scaled for Levenberg-Marquardt's isotropic damping."""
-    if full.ndim == 2:
-        s = np.broadcast_to(np.max(np.abs(full), axis=0), full.shape)
-    elif full.ndim == 1:
-        s = np.full(full.shape, np.max(np.abs(full), initial=0.0))
-    else:
-        s = np.zeros(full.shape)
-    s = np.ravel(s if index is None else s[index])
-    return np.where(s > 0, s, 1.0)
-
-
-def _make_group(model, entry, valid):
-    spec = {"path": entry} if isinstance(entry, str) else dict(entry)
-    path = spec.pop("path", None)
-    if path is None:
-        raise PamjaxInputError(f"free parameter entry {entry!r} needs a 'path'")
-    transform = spec.pop("transform", None)
-    bounds = spec.pop("bounds", None)
-    user_scale = spec.pop("scale", None)
-    if spec:
-        raise PamjaxInputError(
-            f"free parameter {path!r}: unknown keys {sorted(spec)}; valid: {', '.join(FREE_ENTRY_KEYS)}"
-        )
-    attrs, index = _parse(path)
-    leaf_path = ".".join(attrs)
-    if leaf_path not in valid:
-        raise PamjaxInputError(
-            f"unknown parameter {path!r}; the model's parameters are:\n  " + "\n  ".join(sorted(valid))
-        )
-    value = np.asarray(_getter(attrs)(model), dtype=float)
-    full = value  # the whole leaf; `value` becomes the indexed entry
-    if index is not None:
-        if len(index) != value.ndim or any(not 0 <= i < n for i, n in zip(index, value.shape)):
-            raise PamjaxInputError(f"index {list(index)} out of range for {leaf_path!r} of shape {value.shape}")
-        value = value[index]
-    leaf = attrs[-1]
-    if bounds is not None:
-        lo, hi = (float(b) for b in bounds)
-        if not (lo < hi and np.all(value > lo) and np.all(value < hi)):
-            raise PamjaxInputError(f"bounds {bounds} of {path!r} must satisfy lo < start value {value} < hi")
-        transform = transform or "logistic"
-    if transform is None:
-        if leaf == "max_force_coefficients" and index is None and value.shape == (5,):
-            transform = "nodes"
-        elif leaf in _LOGISTIC_NAMES:
-            transform, bounds = "logistic", (0.0, 1.0)
-        elif leaf in _LOG_NAMES and np.all(value > 0):
-            transform = "log"
-        else:
-            transform = "linear"
-    if transform not in ("linear", "log", "logistic", "nodes"):
-        raise PamjaxInputError(f"transform of {path!r} must be linear, log, logistic or nodes, got {transform!r}")
-    if transform == "log" and not np.all(value > 0):
-        raise PamjaxInputError(f"{path!r} starts at {value}: a log transform needs a positive start value")
-    if transform == "logistic" and bounds is None:
-        raise PamjaxInputError(f"{path!r}: a logistic transform needs bounds (lo, hi)")
-    flat = value.reshape(-1)
-    scale = np.where(flat != 0, np.abs(flat), _zero_start_scale(full, index))
-    if user_scale is not None:
-        if transform != "linear":
-            raise PamjaxInputError(
-                f"free parameter {path!r}: 'scale' applies to the linear transform, not {transform!r}"
-            )
-        user = np.broadcast_to(np.asarray(user_scale, dtype=float), value.shape).reshape(-1)
-        if not np.all(np.isfinite(user) & (user > 0)):
-            raise PamjaxInputError(f"free parameter {path!r}: scale must be finite and > 0, got {user_scale!r}")
-        scale = user
-    basis = None
-    lower = upper = np.zeros_like(flat)
-    if transform == "logistic":
-        lower, upper = np.full_like(flat, bounds[0]), np.full_like(flat, bounds[1])
-    if transform == "nodes":
-        # Well-conditioned basis for the quartic F_max: its values at 5 Chebyshev nodes over the stroke.
-        muscle = _getter(attrs[:-2])(model)
-        lo, hi = float(muscle.min_position), float(muscle.max_position)
-        nodes = 0.5 * (lo + hi) + 0.5 * (hi - lo) * np.cos(np.pi * (2 * np.arange(5) + 1) / 10)
-        vander = np.vander(nodes, 5, increasing=True)  # F(nodes) = V a
-        basis = np.linalg.inv(vander)
-        scale = np.full(5, np.max(np.abs(vander @ flat)))
-    labels = _labels(path, attrs, value.shape, index)
-    return _Group(path, tuple(attrs), index, transform, labels, jnp.asarray(scale), jnp.asarray(lower),
-                  jnp.asarray(upper), None if basis is None else jnp.asarray(basis))
-
-
-class ParameterSpace(eqx.Module):
-    """Maps the unconstrained, O(1)-scaled vector θ to a model with the free parameters set (everything else
-    fixed). `free` entries: a path string, or a dict {path, transform ('linear'|'log'|'logistic'|'nodes'),
-    bounds (lo, hi), scale (linear transform: the O(1) unit of θ; default the start magnitude, see
-    `_zero_start_scale` for parameters starting at 0)}."""
-
-    base: eqx.Module
-    groups: tuple
-
-    def __init__(self, model, free):
-        if isinstance(free, str) or not free:
-            raise PamjaxInputError(f"free must be a non-empty list of parameter paths, got {free!r}")
-        valid = parameter_paths(model)
-        self.base = model
-        self.groups = tuple(_make_group(model, e, valid) for e in free)
-        labels = self.labels
-        if len(set(labels)) != len(labels):
-            raise PamjaxInputError(f"a parameter is named twice in free: {labels}")
-
-    @property
-    def labels(self):
-        return [label for g in self.groups for label in g.labels]
-
-    @property
-    def size(self):
-        return sum(g.size for g in self.groups)
-
-    def _split(self, vec):
-        out, k = [], 0
-        for g in self.groups:
-            out.append(vec[k : k + g.size])
-            k += g.size
-        return out
-
-    def physical(self, theta):
-        """The free parameters' physical values (flat; F_max as a0…a4)."""
-        return jnp.concatenate([g.physical(t) for g, t in zip(self.groups, self._split(theta))])
-
-    def theta(self, values):
-        return jnp.concatenate([g.theta(v) for g, v in zip(self.groups, self._split(jnp.asarray(values)))])
-
-    def initial_theta(self):
-        return self.theta(self.initial_values())
-
-    def initial_values(self):
-        vals = []
-        for g in self.groups:
-            v = jnp.asarray(_getter(g.attrs)(self.base), dtype=float)
-            vals.append((v if g.index is None else v[g.index]).reshape(-1))
-        return jnp.concatenate(vals)
-
-    def with_values(self, values, model=None):
-        """`model` (default the base) with the free parameters set to physical `values`."""
-        model = self.base if model is None else model
-        for g, v in zip(self.groups, self._split(jnp.asarray(values))):
-            get = _getter(g.attrs)
-            old = jnp.asarray(get(model), dtype=float)
-            new = v.reshape(old.shape) if g.index is None else old.at[g.index].set(v[0])
-            model = eqx.tree_at(get, model, new)
-        return model
-
-    def model(self, theta):
-        return self.with_values(self.physical(theta))
-
+from ._experiment import predict_all, predictions
+from ._parameters import PamjaxIdentifiabilityWarning, ParameterSpace, strong_types
 
 @dataclasses.dataclass
 class FitResult:
@@ -292,13 +30,18 @@ class FitResult:
 
     - `labels`, `paths` (the `free` spec), `values`, `initial_values`, `standard_errors` (inf for parameters in a
       non-identifiable combination), `correlation` (matrix).
-    - `cost` ½Σr² at the end (r = (model − data)/scale), `initial_cost`, `iterations`, `accepted_steps`,
-      `status` ('converged', 'max_steps', or the solver's message), `converged`.
+    - `cost` ½Σr² at the end (r = (model − data)/scale), `initial_cost`, `iterations` (trial steps),
+      `accepted_steps`, `status` ('converged', 'at bound', 'stalled', 'max_steps'), `converged`, `message` (why it
+      stopped).
     - `channel_errors`: experiment → channel → rmse, max_error, range, rmse_percent, max_error_percent (of the
-      data's range, as paper 000 reports them), and the same with `validation_` for the held-out part.
+      data's range, as paper 000 reports them), the same with `validation_` for the held-out part, and the residual
+      diagnostics of `pamjax._diagnostics` (noise, rmse_over_noise, autocorrelation, se_inflation).
+    - `mismatch`: True when some channel's residuals are not noise (the standard errors then understate the
+      uncertainty; the note is in `warnings`).
     - `non_identifiable`: lists of labels whose combination the data do not fix; `warnings`.
-    - `history`: per iteration (step, cost at last accepted point, trial cost, step size, accepted).
-    - `fit_s`, `compile_s`: wall time after compilation, and the first step's compile estimate.
+    - `history`: per iteration [step, cost at the current point, damping λ, accepted].
+    - `fit_s`, `compile_s`: wall time of the fit without compilation, and the compilation (each compiled
+      function's first call less its median later call).
     - `model`: the fitted model (not stored in JSON; `apply(base_model)` rebuilds it).
     """
 
@@ -314,7 +57,9 @@ class FitResult:
     accepted_steps: int
     status: str
     converged: bool
+    message: str
     channel_errors: dict
+    mismatch: bool
     non_identifiable: list
     warnings: list
     history: list
@@ -358,80 +103,88 @@ class FitResult:
         return "\n".join(rows)
 
 
-def _stack_residuals(space, experiments, part):
-    def fn(theta, exps):
-        model = space.model(theta)
-        r = jnp.concatenate([e.residuals(model, part) for e in exps])
-        ok = jnp.all(jnp.isfinite(r))
-        return jnp.where(ok, r, FAILED_RESIDUAL), None
 
-    return fn
-
-
-def _channel_errors(model, experiments):
-    out = {}
-    for e in experiments:
-        pred = jax.tree_util.tree_map(np.asarray, predict(model, e))
-        out[e.name] = {}
-        for c in e.channels:
-            if hasattr(e, "times"):
-                used = np.asarray(e.weights[c]) > 0
-                err, data = pred[c] - np.asarray(e.data[c]), np.asarray(e.data[c])
-                ident = used & (np.asarray(e.times) <= float(e.split_time))
-                valid = used & ~ident
-            else:
-                f = pred[c]
-                slack = np.asarray(e.slack)
-                data = np.asarray(e.forces)
-                err = np.where(slack, np.maximum(f, 0.0), f - data)
-                ident, valid = np.ones_like(slack), np.zeros_like(slack)
-            span = float(np.ptp(data[ident | valid])) or 1.0
-            stats = {"range": span}
-            for prefix, sel in (("", ident), ("validation_", valid)):
-                if np.any(sel):
-                    rmse, mx = float(np.sqrt(np.mean(err[sel] ** 2))), float(np.max(np.abs(err[sel])))
-                    stats.update({f"{prefix}rmse": rmse, f"{prefix}max_error": mx,
-                                  f"{prefix}rmse_percent": 100 * rmse / span,
-                                  f"{prefix}max_error_percent": 100 * mx / span})
-            out[e.name][c] = stats
-    return out
-
-
-def _identifiability(jac, labels, tol):
-    """Null directions of the column-normalised Jacobian: lists of labels that the data cannot separate."""
-    norms = np.linalg.norm(jac, axis=0)
-    groups = [[labels[i]] for i in np.flatnonzero(norms == 0)]
-    live = np.flatnonzero(norms > 0)
-    if live.size:
-        _, s, vt = np.linalg.svd(jac[:, live] / norms[live], full_matrices=False)
-        for k in np.flatnonzero(s < tol * s[0]):
-            v = vt[k]
-            groups.append([labels[live[i]] for i in np.flatnonzero(np.abs(v) > 0.1 * np.max(np.abs(v)))])
-    return groups
+def _residual_vector(space, theta, exps):
+    """Residuals of every sample (identification and validation parts; the host selects)."""
+    model = space.model(theta)
+    preds = predict_all(model, exps)
+    return jnp.concatenate([e.residuals_of(p, "all") for e, p in zip(exps, preds)])
 
 
 @eqx.filter_jit
-def _solver_init(solver, space, theta, exps):
-    """The solver's initial state. Module-level and given `space` as an argument, so that fits of one problem
-    structure from different start models (random restarts, resumed fits) share one compilation."""
-    fn = _stack_residuals(space, exps, "identification")
-    f_struct = jax.eval_shape(lambda t: fn(t, exps)[0], theta)
-    return solver.init(fn, theta, exps, {}, f_struct, None, frozenset())
+def _residuals(space, theta, exps):
+    """The residuals at θ (module level, `space` an argument: fits of one problem structure from different start
+    models share this compilation)."""
+    return _residual_vector(space, theta, exps)
 
 
 @eqx.filter_jit
-def _solver_step(solver, space, theta, state, exps):
-    """One optimiser iteration, its termination test, and the cost, step size, Jacobian and residuals after it."""
-    fn = _stack_residuals(space, exps, "identification")
-    theta, state, _ = solver.step(fn, theta, exps, {}, state, frozenset())
-    done, result = solver.terminate(fn, theta, exps, {}, state, frozenset())
-    info = state.f_info
-    cost = 0.5 * jnp.sum(info.residual**2)
-    step_size = getattr(state.search_state, "step_size", jnp.nan)
-    return theta, state, done, result, cost, step_size, info.jac.as_matrix(), info.residual
+def _residuals_and_jacobian(space, theta, exps):
+    """(r, ∂r/∂θ) at θ, forward mode: one pass of the solves with a tangent per free parameter."""
+
+    def f(t):
+        r = _residual_vector(space, t, exps)
+        return r, r
+
+    jac, r = jax.jacfwd(f, has_aux=True)(theta)
+    return r, jac
 
 
-_CHECKPOINT_FORMAT = 1
+def evaluate(model, experiments):
+    """Per-channel errors of `model` against `experiments` without fitting: experiment → channel → rmse, max error,
+    % of range, noise, residual whiteness (as `FitResult.channel_errors`). One compiled program for all of them."""
+    experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
+    preds = predictions(model, experiments)
+    r = np.concatenate([np.asarray(e.residuals_of(p, "all")) for e, p in zip(experiments, preds)])
+    return channel_errors(experiments, r)
+
+
+class _Problem:
+    """The host side of the two compiled functions: NumPy in, NumPy out, the identification samples selected; a
+    failed solve's residuals are None."""
+
+    def __init__(self, space, exps):
+        self.space, self.exps = space, exps
+        self.mask = np.concatenate([used & ident for e in exps for _, _, _, used, ident in e.layout()])
+        self.seconds = {"residuals": [], "jacobian": []}  # wall time of every call, the first with compilation
+
+    def _timed(self, kind, fn, *args):
+        t = time.perf_counter()
+        out = jax.block_until_ready(fn(*args))
+        self.seconds[kind].append(time.perf_counter() - t)
+        return out
+
+    def all_residuals(self, theta):
+        return np.asarray(self._timed("residuals", _residuals, self.space, jnp.asarray(theta), self.exps))
+
+    def residuals(self, theta):
+        r = self.all_residuals(theta)[self.mask]
+        return r if np.all(np.isfinite(r)) else None
+
+    def jacobian(self, theta):
+        r, j = self._timed("jacobian", _residuals_and_jacobian, self.space, jnp.asarray(theta), self.exps)
+        return np.asarray(r)[self.mask], np.asarray(j)[self.mask]
+
+    def start(self, theta):
+        """The start point's residuals and Jacobian. The residual function (for trial steps) is compiled at the
+        same time in a second thread, on the second core when there is one; `compile_seconds` is then the wall time
+        until both are ready, less one evaluation of each."""
+        t0 = time.perf_counter()
+        warm = threading.Thread(target=self.all_residuals, args=(theta,), daemon=True)
+        warm.start()
+        out = self.jacobian(theta)
+        warm.join()
+        self.ready_s = time.perf_counter() - t0
+        return out
+
+    def compile_seconds(self):
+        """Compilation time: the wall time until both compiled functions were ready, less their steady evaluation
+        times (the medians of their later calls; the whole time when a fit ended after its first evaluation)."""
+        steady = sum(float(np.median(t[1:])) for t in self.seconds.values() if len(t) >= 2)
+        return max(getattr(self, "ready_s", 0.0) - steady, 0.0)
+
+
+_CHECKPOINT_FORMAT = 2
 
 
 def _check_checkpoint_path(checkpoint, resume, overwrite):
@@ -446,24 +199,17 @@ def _check_checkpoint_path(checkpoint, resume, overwrite):
         raise FileExistsError(f"checkpoint {path} exists; pass overwrite=True to replace it (or resume from it)")
 
 
-def _write_checkpoint(path, labels, carry, history):
-    """Save the optimiser carry (θ, the optimistix state, done, result, Jacobian, residuals: every array leaf,
-    exactly) and the history after an iteration. Written to a temporary file and renamed, so an interruption leaves
-    the previous checkpoint intact."""
+def _write_checkpoint(path, labels, state):
+    """Save the iteration state (every array exactly) after an iteration. Written to a temporary file and renamed,
+    so an interruption leaves the previous checkpoint intact."""
     path = pathlib.Path(path)
-    leaves = [np.asarray(x) for x in jax.tree_util.tree_leaves(eqx.filter(carry, eqx.is_array))]
-    weak = [bool(getattr(x, "weak_type", False)) for x in jax.tree_util.tree_leaves(eqx.filter(carry, eqx.is_array))]
-    arrays = {f"leaf_{i}": x for i, x in enumerate(leaves)}
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, format=_CHECKPOINT_FORMAT, labels=np.asarray(labels, dtype=str), weak=np.asarray(weak, dtype=bool),
-             history=np.asarray(history, dtype=float).reshape(-1, 4), **arrays)
+    np.savez(tmp, format=_CHECKPOINT_FORMAT, labels=np.asarray(labels, dtype=str), **state.arrays())
     tmp.replace(path)
 
 
-def _read_checkpoint(path, labels, template):
-    """The carry and history saved by `_write_checkpoint`; `template` (a fresh carry of this problem) gives the
-    structure, and every leaf's shape and dtype must match it."""
+def _read_checkpoint(path, labels, num_residuals):
     path = pathlib.Path(path)
     if not path.exists():
         raise PamjaxInputError(f"resume: checkpoint {path} does not exist")
@@ -473,80 +219,14 @@ def _read_checkpoint(path, labels, template):
         raise PamjaxInputError(f"resume: {path} is not a pamjax fit checkpoint (format {_CHECKPOINT_FORMAT})")
     if list(data["labels"]) != list(labels):
         raise PamjaxInputError(f"resume: {path} was saved for parameters {list(data['labels'])}, not {list(labels)}")
-    arrays, static = eqx.partition(template, eqx.is_array)
-    old, treedef = jax.tree_util.tree_flatten(arrays)
-    if len(old) != len(data["weak"]):
-        raise PamjaxInputError(f"resume: {path} holds a different optimiser state (another solver or problem)")
-    new = []
-    for i, (t, weak) in enumerate(zip(old, data["weak"])):
-        v = data[f"leaf_{i}"]
-        if v.shape != t.shape or v.dtype != t.dtype:
-            raise PamjaxInputError(f"resume: {path} leaf {i} has shape {v.shape} {v.dtype}, this fit needs "
-                                   f"{t.shape} {t.dtype} (another problem or solver)")
-        if isinstance(t, np.ndarray):
-            new.append(v)
-        elif weak and v.ndim == 0:
-            new.append(jnp.asarray(v.item()))  # a Python scalar keeps JAX's weak type (same trace as uninterrupted)
-        else:
-            new.append(jnp.asarray(v))
-    carry = eqx.combine(jax.tree_util.tree_unflatten(treedef, new), static)
-    history = [[int(s), float(c), float(z), bool(a)] for s, c, z, a in data["history"]]
-    return carry, history
+    state = _lm.LMState.from_arrays(data)
+    if state.residual.shape != (num_residuals,):
+        raise PamjaxInputError(f"resume: {path} holds {state.residual.size} residuals, this fit has {num_residuals} "
+                               "(other experiments or data)")
+    return state
 
 
-def fit(
-    model,
-    experiments,
-    free,
-    *,
-    solver=None,
-    max_steps: int = 100,
-    rtol: float = 1e-6,
-    atol: float = 1e-6,
-    progress=True,
-    identifiability_tol: float = 1e-6,
-    stall_steps: int = 8,
-    out=None,
-    overwrite: bool = False,
-    checkpoint=None,
-    resume=None,
-) -> FitResult:
-    """Fit the parameters named in `free` of `model` to `experiments` by nonlinear least squares.
-
-    Minimises ½ Σ rᵢ² over all experiments' residuals r = (model − data) / scale (identification part only), with
-    optimistix's Levenberg-Marquardt (default) and Jacobians in forward mode through the diffrax solves. Parameters
-    are fitted in an unconstrained, O(1)-scaled space: log for positive quantities (v = v₀ eᶿ), a logistic for ratios
-    and bounded ones, a scale by the starting magnitude for signed coefficients, and the quartic F_max of eq. 7 as its
-    values at five nodes over the stroke (reported as a0…a4). A trial step whose simulation fails (non-finite
-    residuals) gets large finite residuals and is rejected by the trust region.
-
-    **Arguments:**
-
-    - `model`: the object whose parameters are fitted (e.g. a `MuscleSystem`; valve tests use its valve).
-    - `experiments`: a list of `Experiment` / `ForceMapExperiment`.
-    - `free`: parameter paths, e.g.
-      `["valve.inflate.discharge_coefficient", "muscle.force_law.max_force_coefficients"]`,
-      or dicts `{"path": ..., "transform": "log"|"linear"|"logistic"|"nodes", "bounds": (lo, hi)}`.
-    - `solver`: an optimistix least-squares solver (default `LevenbergMarquardt(rtol, atol)`); `max_steps`.
-    - `progress`: True prints one line per iteration (cost, step size); a callable gets (step, cost, step_size,
-      accepted); False is silent.
-    - `stall_steps`: stop after this many rejected trial steps in a row ('converged' if Gauss-Newton predicts a
-      further decrease below 1e-4 of the cost, else 'stalled').
-    - `identifiability_tol`: singular values of the column-normalised Jacobian below this × the largest mark a
-      non-identifiable combination (warned about by name; its parameters get infinite standard errors).
-    - `out`: a JSON path to write the result to; checked BEFORE the fit; never replaced unless `overwrite=True`.
-    - `checkpoint`: an `.npz` path; after every iteration the optimiser state (θ, the optimistix solver state and
-      the last Jacobian, every array exactly), the iteration count and the history are written to it (atomically).
-      Never replaces an existing file unless `overwrite=True` or it is the `resume` file.
-    - `resume`: an `.npz` checkpoint of this same problem (model, experiments, free, solver): the fit continues from
-      it and ends bitwise where an uninterrupted fit with the same `max_steps` ends (values, cost, iterations,
-      history). Stop a long fit early with a small `max_steps` (or an interrupt) and resume with the full one.
-
-    **Returns:** a `FitResult` (values, standard errors, correlation, per-channel RMSE, status, fitted `model`).
-
-    **Raises:** `PamjaxInputError` for an unknown parameter (listing the valid ones) or bad experiment input, before
-    any fit; `FileExistsError` if `out` (or `checkpoint`) exists and `overwrite` is False.
-    """
+def _validate(experiments, max_steps, out, overwrite, checkpoint, resume):
     require_float64("pamjax.fit")
     if out is not None and pathlib.Path(out).exists() and not overwrite:
         raise FileExistsError(f"{out} exists; pass overwrite=True to replace it")
@@ -562,96 +242,160 @@ def fit(
         raise PamjaxInputError(f"experiment names must be unique, got {names}")
     if not (isinstance(max_steps, int) and max_steps > 0):
         raise PamjaxInputError(f"max_steps must be a positive int, got {max_steps}")
+    return experiments
+
+
+def _progress_printer(progress):
+    if callable(progress):
+        return progress
+    if not progress:
+        return None
+
+    def report(step, cost, damping, accepted):
+        verdict = "accepted" if accepted else "rejected"
+        print(f"  iter {step:4d}  cost {cost:.6e}  damping {damping:.3e}  {verdict}", flush=True)
+
+    return report
+
+
+def _status(state, space, theta):
+    """(status, converged, message) from the final iteration state."""
+    if not state.done:
+        return "max_steps", False, "the iteration budget (max_steps) ran out before convergence"
+    if state.reason.startswith("converged"):
+        at_bound = [label for label, hit in zip(space.labels, space.at_bound(theta)) if hit]
+        if at_bound:
+            return "at bound", False, (f"{state.reason}, with {', '.join(at_bound)} at the bound of its range: the "
+                                       "data pull it outside the physical range the fit allows")
+        return "converged", True, state.reason
+    return "stalled", False, state.reason
+
+
+def fit(
+    model,
+    experiments,
+    free,
+    *,
+    max_steps: int = 100,
+    ftol: float = 1e-10,
+    xtol: float = 1e-10,
+    gtol: float = 1e-10,
+    progress=True,
+    identifiability_tol: float = 1e-6,
+    stall_steps: int = 8,
+    out=None,
+    overwrite: bool = False,
+    checkpoint=None,
+    resume=None,
+) -> FitResult:
+    """Fit the parameters named in `free` of `model` to `experiments` by nonlinear least squares.
+
+    Minimises ½ Σ rᵢ² over all experiments' residuals r = (model − data) / scale (identification part only) by
+    Levenberg-Marquardt (`pamjax._lm`: Nielsen's damping, Moré's scaling) with Jacobians in forward mode through
+    the solves. Parameters are fitted in an unconstrained, O(1)-scaled space (`pamjax.ParameterSpace`): log for
+    physically positive quantities (volumes, areas, conductances, friction: a trial value is never ≤ 0), a logistic
+    for ratios and bounded ones, a scale by the starting magnitude for signed coefficients, and the quartic F_max of
+    eq. 7 as its values at five nodes over the stroke (reported as a0…a4). A trial step whose simulation fails
+    (non-finite residuals) is rejected, never fatal.
+
+    **Arguments:**
+
+    - `model`: the object whose parameters are fitted (e.g. a `MuscleSystem`; valve tests use its valve).
+    - `experiments`: a list of `Experiment` / `ForceMapExperiment`.
+    - `free`: parameter paths, e.g.
+      `["valve.inflate.discharge_coefficient", "muscle.force_law.max_force_coefficients"]`,
+      or dicts `{"path": ..., "transform": "log"|"linear"|"logistic"|"nodes", "bounds": (lo, hi), "scale": s}`.
+    - `max_steps`: trial steps at most. `ftol`, `xtol`, `gtol`: convergence on the relative cost decrease (actual
+      and predicted), on the scaled step, and on the gradient's cosine with the residuals (MINPACK's tests).
+    - `stall_steps`: rejected trials in a row after which a fit whose step has shrunk below `xtol` while the local
+      model still promises a decrease stops as 'stalled' (the Jacobian is then checked against the cost and the
+      result says by how much they disagree). Rejections alone never stop a fit before its first accepted step.
+    - `progress`: True prints one line per iteration (cost, damping, accepted); a callable gets
+      (step, cost, damping, accepted); False is silent.
+    - `identifiability_tol`: singular values of the column-normalised Jacobian below this × the largest mark a
+      non-identifiable combination (warned about by name; its parameters get infinite standard errors).
+    - `out`: a JSON path to write the result to; checked BEFORE the fit; never replaced unless `overwrite=True`.
+    - `checkpoint`: an `.npz` path written (atomically) after every iteration with the whole iteration state.
+      Never replaces an existing file unless `overwrite=True` or it is the `resume` file.
+    - `resume`: an `.npz` checkpoint of this same problem: the fit continues from it and ends bitwise where an
+      uninterrupted fit with the same `max_steps` ends (values, cost, iterations, history).
+
+    **Returns:** a `FitResult`: values, standard errors, correlation, `status` ('converged', 'at bound',
+    'stalled', 'max_steps') with `message` saying why, per-channel errors with the noise level and residual
+    whiteness, `mismatch` (the residuals are not noise: the standard errors understate the uncertainty), the
+    fitted `model`.
+
+    **Raises:** `PamjaxInputError` for an unknown parameter (listing the valid ones) or bad experiment input, before
+    any fit; `FileExistsError` if `out` (or `checkpoint`) exists and `overwrite` is False.
+    """
+    experiments = _validate(experiments, max_steps, out, overwrite, checkpoint, resume)
+    if not (isinstance(stall_steps, int) and stall_steps >= 1):
+        raise PamjaxInputError(f"stall_steps must be a positive int, got {stall_steps!r}")
+    for label, tol in (("ftol", ftol), ("xtol", xtol), ("gtol", gtol)):
+        if not (isinstance(tol, (int, float)) and 0 <= tol < 1):
+            raise PamjaxInputError(f"{label} must be a number in [0, 1), got {tol!r}")
     space = ParameterSpace(model, free)
     for e in experiments:
         e.check(model)
     labels = space.labels
     exps = tuple(e.bind(model) if hasattr(e, "bind") else e for e in experiments)  # PWM grids sized
-    fn = _stack_residuals(space, exps, "identification")
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol) if solver is None else solver
-    theta = space.initial_theta()
-    if not np.all(np.isfinite(np.asarray(theta))):
+    theta = np.asarray(space.initial_theta())
+    if not np.all(np.isfinite(theta)):
         raise PamjaxInputError(f"start values give non-finite transformed parameters: {dict(zip(labels, theta))}")
-    f_struct = jax.eval_shape(lambda t: fn(t, exps)[0], theta)
-
-    def init(theta, exps):
-        return _solver_init(solver, space, theta, exps)
-
-    def step(theta, state, exps):
-        return _solver_step(solver, space, theta, state, exps)
-
-    report = progress if callable(progress) else None
-    state = init(theta, exps)
-    history, t_first, t_rest = [], None, 0.0
-    done = False
-    result = optx.RESULTS.successful
-    initial_cost = None
-    k = 0
-    prev_accepted = 0
-    jac = jnp.zeros((f_struct.size, theta.size))
-    resid = jnp.zeros(f_struct.shape)
+    problem = _Problem(space, exps)
+    report = _progress_printer(progress)
+    t_start = time.perf_counter()
     if resume is not None:
-        template = (theta, state, jnp.asarray(False), result, jac, resid)
-        (theta, state, done, result, jac, resid), history = _read_checkpoint(resume, labels, template)
-        initial_cost, cost = history[0][1], history[-1][1]
-        prev_accepted = int(state.num_accepted_steps)
-    finished = bool(done) or (bool(history) and int(state.num_steps_since_acceptance) >= stall_steps)
-    for k in range(len(history) + 1, 0 if finished else max_steps + 2):  # step 1 only evaluates the start point
-        t = time.perf_counter()
-        theta, state, done, result, cost, step_size, jac, resid = step(theta, state, exps)
-        cost, step_size = float(cost), float(step_size)
-        elapsed = time.perf_counter() - t
-        if t_first is None:
-            t_first = elapsed
-        else:
-            t_rest += elapsed
-        if initial_cost is None:
-            initial_cost = cost
-        accepted = int(state.num_accepted_steps) > prev_accepted
-        prev_accepted = int(state.num_accepted_steps)
-        history.append([k - 1, cost, step_size, bool(accepted)])
-        if checkpoint is not None:
-            _write_checkpoint(checkpoint, labels, (theta, state, done, result, jac, resid), history)
-        if report is not None:
-            report(k - 1, cost, step_size, accepted)
-        elif progress:
-            verdict = "accepted" if accepted else "rejected"
-            print(f"  iter {k - 1:4d}  cost {cost:.6e}  step size {step_size:.3e}  {verdict}",
-                  flush=True)
-        if bool(done) or int(state.num_steps_since_acceptance) >= stall_steps:
-            break
-    n_steps = len(history) - 1
-    t_first = 0.0 if t_first is None else t_first  # a resumed fit that had already finished
-    steady = t_rest / max(n_steps, 1)
-    compile_s = max(t_first - steady, 0.0)
-    fit_s = t_rest + (t_first - compile_s)
-    jac = np.asarray(jac)
-    resid = np.asarray(resid)
-    # Gauss-Newton's predicted decrease ½‖P r‖² (P: projection onto the Jacobian's range), relative to the cost.
-    u_, s_, _ = np.linalg.svd(jac, full_matrices=False)
-    proj = u_[:, s_ > 1e-12 * (s_[0] if s_.size else 1.0)].T @ resid
-    predicted = 0.5 * float(proj @ proj) / max(float(cost), 1e-300)
-    if bool(done):
-        status = "converged" if result == optx.RESULTS.successful else optx.RESULTS[result]
-    elif int(state.num_steps_since_acceptance) >= stall_steps:
-        # Trial steps keep failing to lower the cost: a minimum (to the solver's accuracy) if Gauss-Newton predicts
-        # almost no further decrease.
-        status = "converged" if predicted < 1e-4 else f"stalled: {stall_steps} rejected steps in a row"
+        state = _read_checkpoint(resume, labels, int(np.count_nonzero(problem.mask)))
+        t_first = time.perf_counter()
+        compile_s = 0.0
     else:
-        status = "max_steps"
-    converged = status == "converged"
-    values = np.asarray(space.physical(theta))
-    init_values = np.asarray(space.initial_values())
+        if report is not None and not callable(progress):
+            print(f"fit: {len(labels)} parameters, {len(exps)} experiments; compiling the residuals and their "
+                  "Jacobian (first run; cached afterwards) ...", flush=True)
+        r0, j0 = problem.start(theta)
+        t_first = time.perf_counter()
+        if not np.all(np.isfinite(r0)) or not np.all(np.isfinite(j0)):
+            raise PamjaxInputError("the start model's simulation fails (non-finite residuals or Jacobian): check the "
+                                   "start values and the experiments' initial states")
+        state = _lm.start(theta, r0, j0)
+        compile_s = t_first - t_start
+        if report is not None:
+            report(0, state.cost, state.damping, True)
+            if not callable(progress):
+                print(f"  (first evaluation with compilation: {compile_s:.1f} s)", flush=True)
+        if _lm._gradient_cosine(state) <= gtol:
+            state.done, state.reason = True, "converged: gradient orthogonal to the residuals at the start (gtol)"
+    while not state.done and state.step < max_steps:
+        state = _lm.iterate(state, problem.residuals, problem.jacobian, ftol=ftol, xtol=xtol, gtol=gtol,
+                            stall_steps=stall_steps, report=report)
+        if checkpoint is not None:
+            _write_checkpoint(checkpoint, labels, state)
+    if checkpoint is not None and state.step == 0:
+        _write_checkpoint(checkpoint, labels, state)
+    res = _result(model, exps, free, space, state, identifiability_tol, out, overwrite, problem)
+    res.compile_s = problem.compile_seconds()
+    res.fit_s = time.perf_counter() - t_start - res.compile_s
+    if out is not None:
+        res.to_json(out, overwrite=overwrite)
+    return res
+
+
+def _result(model, exps, free, space, state, identifiability_tol, out, overwrite, problem):
+    labels = space.labels
+    theta = state.theta
+    status, converged, message = _status(state, space, theta)
+    if status == "stalled":
+        mismatch_j = _lm.jacobian_check(state, problem.residuals)
+        message += (f"; the Jacobian disagrees with the cost by {mismatch_j:.2g} (relative) along the steepest "
+                    "descent" if mismatch_j > 1e-3 else "; the Jacobian agrees with the cost (a minimum to the "
+                    "solver's precision, or a very flat valley)")
+    jac, resid = state.jacobian, state.residual
     used = int(np.count_nonzero(np.any(jac != 0, axis=1) | (resid != 0)))
-    dof = max(used - len(labels), 1)
-    sigma2 = 2.0 * float(cost) / dof
-    groups = _identifiability(jac, labels, identifiability_tol)
+    groups = identifiability(jac, labels, identifiability_tol)
     bad = sorted({label for g in groups for label in g})
-    u, s, vt = np.linalg.svd(jac, full_matrices=False)
-    keep = s > identifiability_tol * s[0] if s.size and s[0] > 0 else np.zeros_like(s, dtype=bool)
-    cov_theta = (vt[keep].T / s[keep] ** 2) @ vt[keep] * sigma2
-    g = np.asarray(jax.jacfwd(space.physical)(theta))
-    cov = g @ cov_theta @ g.T
+    g = np.asarray(jax.jacfwd(space.physical)(jnp.asarray(theta)))
+    cov = g @ covariance(jac, state.cost, used, identifiability_tol) @ g.T
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(se, se)
@@ -661,35 +405,40 @@ def fit(
     for grp in groups:
         msg = (f"parameter {grp[0]} has no effect on the data" if len(grp) == 1
                else "non-identifiable combination: " + ", ".join(grp) + " (only a combination of them is fixed by the "
-               "data; hold one fixed, e.g. k2 in eq. 7)")
+               "data; hold one of them fixed)")
         msgs.append(msg)
-        warnings.warn(msg, PamjaxIdentifiabilityWarning, stacklevel=2)
+        warnings.warn(msg, PamjaxIdentifiabilityWarning, stacklevel=3)
+    values = np.asarray(space.physical(jnp.asarray(theta)))
     fitted = space.with_values(jnp.asarray(values))
+    errors = channel_errors(exps, problem.all_residuals(theta))
+    flagged, note = mismatch(errors)
+    if flagged:
+        msgs.append(note)
     res = FitResult(
         labels=labels,
         paths=[e if isinstance(e, str) else {k: (list(v) if isinstance(v, tuple) else v) for k, v in e.items()}
                for e in free],
         values=[float(v) for v in values],
-        initial_values=[float(v) for v in init_values],
+        initial_values=[float(v) for v in np.asarray(space.initial_values())],
         standard_errors=[float(v) for v in se],
         correlation=[[float(c) for c in row] for row in corr],
-        cost=float(cost),
-        initial_cost=float(initial_cost),
-        iterations=n_steps,
-        accepted_steps=int(state.num_accepted_steps),
-        status=str(status),
-        converged=bool(converged),
-        channel_errors=_channel_errors(fitted, exps),
+        cost=float(state.cost),
+        initial_cost=float(state.history[0][1]),
+        iterations=int(state.step),
+        accepted_steps=int(state.accepted),
+        status=status,
+        converged=converged,
+        message=message,
+        channel_errors=errors,
+        mismatch=flagged,
         non_identifiable=groups,
         warnings=msgs,
-        history=history,
-        fit_s=float(fit_s),
-        compile_s=float(compile_s),
+        history=state.history,
+        fit_s=0.0,
+        compile_s=0.0,
         num_residuals=used,
         model=fitted,
     )
     if math.isnan(res.cost):
         raise RuntimeError("fit produced a NaN cost; this is a bug in pamjax")
-    if out is not None:
-        res.to_json(out, overwrite=overwrite)
     return res

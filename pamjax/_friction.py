@@ -144,6 +144,11 @@ class KarnoppFriction(AbstractFriction):
         """Sliding friction [N]; in the stuck mode the system holds the payload and this is not used."""
         return self.coulomb_force * z + self.viscous_coefficient * v
 
-    def mode_after_rest(self, net_force):
-        """Mode at zero velocity under a net driving force [N]: stuck (0) within ±F_c, else its sign (±1)."""
-        return jnp.where(jnp.abs(net_force) <= self.coulomb_force, 0.0, jnp.sign(net_force))
+    def mode_after_event(self, z, net_force):
+        """The mode after an event of mode `z` under a net driving force [N] at zero velocity. From stuck: the net
+        force has reached ±F_c, so the payload slides in its direction (deciding by |F| ≤ F_c again would keep it
+        stuck wherever the located event time falls a rounding error short). From sliding (it came to rest): stuck
+        within ±F_c, else sliding the other way."""
+        slide = jnp.where(net_force >= 0, 1.0, -1.0)
+        after_rest = jnp.where(jnp.abs(net_force) <= self.coulomb_force, 0.0, slide)
+        return jnp.where(self.is_stuck(z), slide, after_rest)

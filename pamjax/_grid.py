@@ -17,6 +17,7 @@ Outputs at requested times are the cubic Hermite interpolants of the segment tha
 the vector field), O(h⁴) like the steps.
 """
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 
@@ -31,41 +32,56 @@ def _hermite(s, h, za, zb, fa, fb):
     return h00 * za + h10 * h * fa + h01 * zb + h11 * h * fb
 
 
-def _first(tree):
-    return jax.tree_util.tree_map(lambda a: a[0], tree)
+def integrate(systems, field, event, update, z0s, left, right, aux, member, offsets, ts):
+    """Integrate one or several runs over their concatenated intervals; returns `(z_at_ts, num_steps, num_events,
+    missed, finite)`.
 
-
-def integrate(system, field, event, update, z0, left, right, held, ts):
-    """Integrate the flat scaled state `z0` over the intervals; returns `(z_at_ts, num_steps, num_events, missed,
-    finite)`.
-
-    - `field(system, t, z, held_i)` → dz/dt (flat scaled), `event(system, t, z, held_i)` → g (or `event` None for a
-      system without modes), `update(system, t, z, held_i)` → z after an event.
-    - `left`, `right`: (n,) interval ends (zero-length intervals are skipped exactly); `held`: a pytree with leading
-      axis n, passed per interval (the valve opening), or None.
-    - `ts`: output times inside [left[0], right[-1]]; earlier ones take `z0`.
+    - `systems`: the runs' systems stacked along a leading axis (one per run; `eqx` modules of one structure);
+      `z0s`: (runs, n) flat scaled initial states; `member`: (intervals,) the run of each interval. A run's first
+      interval starts from its initial state; runs follow each other in time (the caller shifts their clocks so
+      that the intervals and `ts` increase through all runs).
+    - `field(system, t, z, aux_j)` → dz/dt (flat scaled) with `aux_j` the interval's aux at RK4 stage time j ∈ {0:
+      start, 1: middle, 2: end} (the held valve opening, or the command at that time); `event(system, t, z)` → g
+      (None for systems without modes); `update(system, t, z)` → z after an event.
+    - `left`, `right`: (intervals,) interval ends (zero-length intervals are skipped exactly); `aux`: (intervals,
+      3).
+    - `offsets`: (runs,) the shift [s] of each run's clock; `field`, `event` and `update` see the run's own time.
+    - `ts`: output times (shifted like the intervals); a time at or before its run's start takes its initial state
+      (the caller's job, as it knows the runs' starts).
     """
     hybrid = event is not None
-    frozen = jax.lax.stop_gradient(system)
+    arrays, static = eqx.partition(systems, eqx.is_array)
 
-    def rk4(ta, tb, z, h_i):
+    def system_of(m):
+        return eqx.combine(jax.tree_util.tree_map(lambda a: a[m], arrays), static)
+
+    if hybrid:  # a start state outside its mode (e.g. stuck under a net force beyond F_c) switches at once
+        fixed = []
+        for k in range(z0s.shape[0]):
+            sys_k = system_of(k)
+            z = z0s[k]
+            fixed.append(jnp.where(event(sys_k, 0.0, z) < 0, update(sys_k, 0.0, z), z))
+        z0s = jnp.stack(fixed)
+    first = jnp.concatenate([jnp.ones((1,), bool), member[1:] != member[:-1]])
+
+    def rk4(system, ta, tb, z, a):
         h = tb - ta
-        k1 = field(system, ta, z, h_i)
-        k2 = field(system, ta + 0.5 * h, z + 0.5 * h * k1, h_i)
-        k3 = field(system, ta + 0.5 * h, z + 0.5 * h * k2, h_i)
-        k4 = field(system, tb, z + h * k3, h_i)
+        k1 = field(system, ta, z, a[0])
+        k2 = field(system, ta + 0.5 * h, z + 0.5 * h * k1, a[1])
+        k3 = field(system, ta + 0.5 * h, z + 0.5 * h * k2, a[1])
+        k4 = field(system, tb, z + h * k3, a[2])
         zb = z + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        return zb, k1, field(system, tb, zb, h_i)
+        return zb, k1, field(system, tb, zb, a[2])
 
-    def locate(seg, h_i):
+    def locate(system, seg):
         """Time and state of the first crossing g = 0 in a step whose end has g < 0."""
         ta, tb, za, zb, fa, fb = seg
         h = tb - ta
-        const = jax.lax.stop_gradient((ta, h, za, zb, fa, fb))
+        frozen = jax.lax.stop_gradient((system, ta, h, za, zb, fa, fb))
 
         def g_frozen(s):
-            ta_, h_, za_, zb_, fa_, fb_ = const
-            return event(frozen, ta_ + s * h_, _hermite(s, h_, za_, zb_, fa_, fb_), h_i)
+            sys_, ta_, h_, za_, zb_, fa_, fb_ = frozen
+            return event(sys_, ta_ + s * h_, _hermite(s, h_, za_, zb_, fa_, fb_))
 
         def bisect(_, bounds):
             lo, hi = bounds
@@ -77,7 +93,7 @@ def integrate(system, field, event, update, z0, left, right, held, ts):
         s = jax.lax.stop_gradient(0.5 * (lo + hi))
 
         def g(s):
-            return event(system, ta + s * h, _hermite(s, h, za, zb, fa, fb), h_i)
+            return event(system, ta + s * h, _hermite(s, h, za, zb, fa, fb))
 
         value, slope = jax.jvp(g, (s,), (jnp.ones_like(s),))
         slope_ok = jnp.abs(jax.lax.stop_gradient(slope)) > 0
@@ -86,60 +102,65 @@ def integrate(system, field, event, update, z0, left, right, held, ts):
         s_new = jnp.clip(s_new, 0.0, 1.0)
         return ta + s_new * h, _hermite(s_new, h, za, zb, fa, fb)
 
-    def empty(tb, zb):
-        zero = jnp.zeros_like(zb)
-        return (tb, tb, jnp.ones_like(tb), zb, zb, zero, zero)
-
     def interval(carry, xs):
         z, n_events, n_missed = carry
-        ta, tb, h_i = xs
-        zb, fa, fb = rk4(ta, tb, z, h_i)
+        ta, tb, a, m, is_first = xs
+        z = jnp.where(is_first, z0s[m], z)
+        system = system_of(m)
+        off = offsets[m]
+
+        def rk4_(ta, tb, z):  # steps in the run's own clock, stored in the shifted one
+            zb, fa, fb = rk4(system, ta - off, tb - off, z, a)
+            return zb, fa, fb
+
         if not hybrid:
-            return (zb, n_events, n_missed), ((ta, tb, tb - ta, z, zb, fa, fb),)
-        segments = []
-        seg_start, seg = ta, (ta, tb, z, zb, fa, fb)
-        for _ in range(MAX_EVENTS):
-            crossed = (tb > seg_start) & (event(system, tb, seg[3], h_i) < 0)
+            zb, fa, fb = rk4_(ta, tb, z)
+            return (zb, n_events, n_missed), (ta[None], (tb - ta)[None], z[None], zb[None], fa[None], fb[None])
 
-            def split(args):
-                seg, seg_start = args
-                tau, z_tau = locate(seg, h_i)
-                z_new = update(system, tau, z_tau, h_i)
-                zb2, fa2, fb2 = rk4(tau, tb, z_new, h_i)
-                done = (seg_start, tau, seg[1] - seg[0], seg[2], seg[3], seg[4], seg[5])
-                return done, (tau, tb, z_new, zb2, fa2, fb2), tau
+        # Up to MAX_EVENTS + 1 segments, each integrated from its start to tb in its mode and cut at an event; one
+        # loop body (one RK4, one event location) whatever MAX_EVENTS, so the compiled program stays small.
+        slots = MAX_EVENTS + 1
+        # `+ 0 * z[0]` gives every carry a derivative from the start (event times and states carry one after an
+        # event), so JAX's forward-mode and batching rules trace the loop once instead of twice (compile time).
+        dep = 0.0 * z[0]
+        blank = jnp.zeros((slots,) + z.shape) + dep
+        init = (ta + dep, z, jnp.full((slots,), tb) + dep, jnp.zeros((slots,)) + dep, blank, blank, blank, blank,
+                n_events, n_missed)
 
-            def keep(args):
-                seg, seg_start = args
-                done = (seg_start, seg[1], seg[1] - seg[0], seg[2], seg[3], seg[4], seg[5])
-                tb_, zb_ = seg[1], seg[3]
-                return done, (tb_, tb_, zb_, zb_, jnp.zeros_like(zb_), jnp.zeros_like(zb_)), tb_
+        def segment(j, c):
+            def work(c):
+                seg_start, z_s, starts, lengths, za, zb_, fa_, fb_, n_ev, n_miss = c
+                zb, fa, fb = rk4_(seg_start, tb, z_s)
+                crossed = event(system, tb - off, zb) < 0
+                resolve = crossed & (j < MAX_EVENTS)
 
-            done, seg, seg_start = jax.lax.cond(crossed, split, keep, (seg, seg_start))
-            segments.append(done)
-            n_events = n_events + crossed
-        # The last segment: from its start to tb (an empty one when the interval ended earlier).
-        last_len = seg[1] - seg[0]
-        segments.append((seg_start, seg[1], jnp.where(last_len > 0, last_len, 1.0), seg[2], seg[3], seg[4], seg[5]))
-        z_end = seg[3]
-        n_missed = n_missed + ((tb > seg_start) & (event(system, tb, z_end, h_i) < 0))
-        return (z_end, n_events, n_missed), tuple(segments)
+                def split(_):
+                    tau, z_tau = locate(system, (seg_start - off, tb - off, z_s, zb, fa, fb))
+                    return tau + off, update(system, tau, z_tau)
 
-    if hybrid:  # a start state outside its mode (e.g. stuck under a net force beyond F_c) switches at once
-        z0 = jnp.where(event(system, left[0], z0, _first(held)) < 0, update(system, left[0], z0, _first(held)), z0)
+                end, z_next = jax.lax.cond(resolve, split, lambda _: (tb, zb), None)
+                return (end, z_next, starts.at[j].set(seg_start), lengths.at[j].set(tb - seg_start),
+                        za.at[j].set(z_s), zb_.at[j].set(zb), fa_.at[j].set(fa), fb_.at[j].set(fb),
+                        n_ev + resolve, n_miss + (crossed & ~resolve))
+
+            return jax.lax.cond(c[0] < tb, work, lambda c: c, c)
+
+        _, z_end, starts, lengths, za, zb, fa, fb, n_events, n_missed = jax.lax.fori_loop(0, slots, segment, init)
+        # Unused slots: empty segments at tb holding the end state.
+        unused = (lengths == 0)[:, None]
+        za = jnp.where(unused, z_end[None], za)
+        zb = jnp.where(unused, z_end[None], zb)
+        return (z_end, n_events, n_missed), (starts, lengths, za, zb, fa, fb)
+
     zero = jnp.zeros((), dtype=jnp.int32)
-    (z_end, n_events, n_missed), segs = jax.lax.scan(interval, (z0, zero, zero), (left, right, held))
-    # Flatten (n, S) segments in time order.
-    starts, stops, lengths, za, zb, fa, fb = (
-        jnp.stack([s[k] for s in segs], axis=1).reshape((-1,) + segs[0][k].shape[1:]) for k in range(7)
-    )
+    (z_end, n_events, n_missed), segs = jax.lax.scan(interval, (z0s[0], zero, zero), (left, right, aux, member, first))
+    # Flatten the (intervals, slots) segments in time order; a segment holds from its start to the next one's.
+    starts, lengths, za, zb, fa, fb = (x.reshape((-1,) + x.shape[2:]) for x in segs)
     index = jnp.clip(jnp.searchsorted(starts, ts, side="right") - 1, 0, starts.shape[0] - 1)
     h = lengths[index]
-    del stops  # a segment holds from its start to the next segment's start
-    s = jnp.where(h > 0, (ts - starts[index]) / jnp.where(h > 0, h, 1.0), 0.0)
-    s = jnp.clip(s, 0.0, 1.0)[:, None]
+    # s in [0, 1] by construction (no clip: its derivative is halved where s sits on a bound)
+    s = jnp.where(h > 0, (ts - starts[index]) / jnp.where(h > 0, h, 1.0), 0.0)[:, None]
     z_out = _hermite(s, h[:, None], za[index], zb[index], fa[index], fb[index])
-    z_out = jnp.where((ts <= left[0])[:, None], z0[None], z_out)
     num_steps = jnp.sum(right > left)
     finite = jnp.all(jnp.isfinite(z_end))
     return z_out, num_steps, n_events, n_missed, finite

@@ -13,12 +13,15 @@ from ._errors import PamjaxInputError, PamjaxSolveError, check_time_grid, requir
 from ._inputs import AbstractSignal
 from ._rodas import Rodas5
 from ._system import AbstractSystem
-from ._valve import OnOffValve
+from ._valve import AbstractValve, OnOffValve
 
 _RESULT_NONPHYSICAL = 102  # a state left the physical range (absolute pressure ≤ 0)
 _RESULT_NONFINITE = 101  # stepping="pwm": the fixed-step integration produced a non-finite state
 _RESULT_NAMES = {0: "successful", _RESULT_NONFINITE: "non-finite state in PWM-synchronous stepping"}
 _DEFAULT_SUBSTEPS = 16  # RK4 nodes per PWM period: step ≤ 1.25 ms at 50 Hz (docs/performance.md)
+# s, stepping="grid": RK4 step of a hybrid system fed by a continuous valve; 1 ms puts paper 000's muscle-payload
+# mode (~7 Hz) at ωh ≈ 0.045, as the PWM grid's 1.25 ms does (docs/performance.md).
+_DEFAULT_GRID_STEP = 1e-3
 
 
 class Trajectory(eqx.Module):
@@ -116,35 +119,37 @@ def solve(
     stepping="adaptive",
     substeps=_DEFAULT_SUBSTEPS,
     num_periods=None,
+    grid_step=_DEFAULT_GRID_STEP,
 ) -> Trajectory:
     """The unchecked, traceable core of `simulate` (vmap- and grad-safe; no Python-side validation).
 
     `atol` applies to the scaled state (pressure in units of 1e5 Pa, position in 1e-2 m, ...: `state_scale`).
-    `stepping="pwm"` integrates on the PWM-synchronous grid (`pamjax._synchronous`); inside jit it needs the static
-    `num_periods` covering [t0, ts[-1]].
+    `stepping="pwm"` integrates on the PWM-synchronous grid (`pamjax._synchronous`), `stepping="grid"` on a uniform
+    grid of at most `grid_step` [s]; inside jit they need the static `num_periods` (PWM periods covering [t0,
+    ts[-1]], or grid steps).
     """
     ts = jnp.asarray(ts, dtype=float)
     valve = system.valve
     y0 = system.initial_state() if y0 is None else y0
-    if stepping not in ("adaptive", "pwm"):
-        raise PamjaxInputError(f"stepping must be 'adaptive' or 'pwm', got {stepping!r}")
-    if stepping == "pwm":
-        return _solve_pwm(system, signal, ts, y0, t0, substeps, num_periods, throw)
+    stepping = resolve_stepping(system, stepping)
+    if stepping in ("pwm", "grid"):
+        return _solve_fixed(system, signal, ts, y0, t0, stepping, substeps, num_periods, grid_step, throw)
 
     z0, flat_scale, unravel = _flat_scaled(system, y0)
 
-    def command_at(t):
-        return signal(valve.command_time(t))
-
     def field(t, z, args):
-        dy = system.vector_field(t, unravel(z * flat_scale), command_at(t))
+        dy = system.vector_field(t, unravel(z * flat_scale), valve.read_command(signal, t))
         return ravel_pytree(dy)[0] / flat_scale
 
     solver = dfx.Tsit5() if solver is None else solver
     # dtmax: a switching valve's windows must not be stepped over (see OnOffValve.max_step).
     # dtmin without forcing: a state that turns non-finite makes every trial step fail, and the solve stops within
     # a few dozen rejections (result "dt_min_reached") instead of grinding to max_steps and holding up a batch.
-    controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=valve.max_step(), dtmin=1e-12, force_dtmin=False)
+    # With jump times (the exact valve's edges) no dtmin: a step that ends a few ulps short of an edge is followed
+    # by a step of a few ulps up to it, which the dtmin test would take for a failure (E4 of the hybrid bench failed
+    # so at every rtol above 1e-9).
+    dtmin = 1e-12 if jump_ts is None else None
+    controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=valve.max_step(), dtmin=dtmin, force_dtmin=False)
     if jump_ts is not None:
         controller = dfx.ClipStepSizeController(controller, jump_ts=jump_ts)
     if isinstance(adjoint, str):
@@ -164,8 +169,8 @@ def solve(
         throw=throw,
     )
     states = jax.vmap(lambda z: unravel(z * flat_scale))(sol.ys)
-    commands = jax.vmap(command_at)(ts)
-    outs = jax.vmap(system.outputs)(ts, states, commands)
+    commands = jax.vmap(lambda t: signal(valve.command_time(t)))(ts)
+    outs = jax.vmap(lambda t, y: system.outputs(t, y, valve.read_command(signal, t)))(ts, states)
     result = jnp.asarray(sol.result._value if hasattr(sol.result, "_value") else sol.result)
     finite = jnp.all(jnp.isfinite(sol.ys))
     result = jnp.where((result == 0) & ~finite, _RESULT_NONFINITE, result)
@@ -200,24 +205,68 @@ def _trajectory(ts, states, commands, outs, num_steps, num_accepted, num_rejecte
     )
 
 
-def _solve_pwm(system, signal, ts, y0, t0, substeps, periods, throw):
-    if periods is None:
+def resolve_stepping(system, stepping):
+    """The stepping for `system`: "auto" is "adaptive" for smooth systems, and for hybrid ones (stick-slip
+    friction) the fixed grid: "pwm" with a switching valve, "grid" with a continuous one."""
+    if stepping not in ("auto", "adaptive", "pwm", "grid"):
+        raise PamjaxInputError(f"stepping must be 'auto', 'adaptive', 'pwm' or 'grid', got {stepping!r}")
+    switches = getattr(system.valve, "switches", False)
+    if stepping == "auto":
+        return ("pwm" if switches else "grid") if system.hybrid else "adaptive"
+    if stepping == "adaptive" and system.hybrid:
+        raise PamjaxInputError(
+            "this system is hybrid (stick-slip friction, e.g. KarnoppFriction): its modes switch at events, which "
+            "the fixed-grid integrator locates; use stepping='auto' (or 'pwm' for a switching valve, 'grid' "
+            "otherwise), or CoulombViscousFriction for an adaptive solve"
+        )
+    if stepping == "pwm" and not switches:
+        raise PamjaxInputError(
+            f"stepping='pwm' needs a switching valve (its PWM edges define the grid), got {type(system.valve).__name__}"
+            "; use stepping='grid' (uniform fixed steps) or 'adaptive'"
+        )
+    return stepping
+
+
+def _solve_fixed(system, signal, ts, y0, t0, stepping, substeps, size, grid_step, throw):
+    if size is None:
         if _is_traced((ts, t0)):
             raise PamjaxInputError(
-                "stepping='pwm' inside jit needs num_periods (a static int covering [t0, ts[-1]]); "
-                "pamjax.simulate computes it for you"
+                f"stepping='{stepping}' inside jit needs num_periods (a static int: PWM periods covering [t0, ts[-1]], "
+                "or grid steps); pamjax.simulate computes it for you"
             )
-        if not isinstance(system.valve, OnOffValve):
-            raise PamjaxInputError(f"stepping='pwm' needs an OnOffValve, got {type(system.valve).__name__}")
-        periods = _sync.num_periods(system.valve, t0, ts[-1])
+        size = fixed_grid_size(system, stepping, t0, ts[-1], grid_step)
     z0, flat_scale, unravel = _flat_scaled(system, y0)
-    states, num_steps, finite = _sync.solve_pwm_synchronous(
-        system, signal, ts, z0, flat_scale, unravel, t0, substeps=substeps, periods=periods
+    (states, num_steps, finite), = _sync.solve_runs(
+        [system], [signal], [ts], [z0], unravel, flat_scale, [t0], stepping=stepping, substeps=substeps, sizes=[size]
     )
+    traj = fixed_trajectory(system, signal, ts, t0, states, num_steps, finite, stepping)
+    if throw:
+        traj = eqx.error_if(traj, ~finite, "fixed-grid stepping produced a non-finite state; refine the grid")
+    return traj
+
+
+def fixed_grid_size(system, stepping, t0, t1, grid_step=None):
+    """The static size of a fixed grid over [t0, t1]: PWM periods ("pwm") or uniform steps ("grid")."""
+    if stepping == "pwm":
+        return _sync.num_periods(system.valve, t0, t1)
+    return _sync.num_grid_steps(t0, t1, _DEFAULT_GRID_STEP if grid_step is None else grid_step)
+
+
+def fixed_trajectory(system, signal, ts, t0, states, num_steps, finite, stepping):
+    """The `Trajectory` of a fixed-grid solve from its states at `ts`."""
+    if stepping == "pwm":
+        return pwm_trajectory(system, signal, ts, t0, states, num_steps, finite)
+    commands = jax.vmap(signal)(ts)
+    outs = jax.vmap(system.outputs)(ts, states, commands)
+    result = jnp.where(finite, 0, _RESULT_NONFINITE)
+    zero = jnp.zeros((), dtype=num_steps.dtype)
+    return _trajectory(ts, states, commands, outs, num_steps, num_steps, zero, result)
+
+
+def pwm_trajectory(system, signal, ts, t0, states, num_steps, finite):
+    """The `Trajectory` of a PWM-synchronous solve from its states at `ts`."""
     commands = _sync.latched_commands(system.valve, signal, ts)
     outs = _sync.outputs_at(system, signal, ts, states, commands, t0)
-    if throw:
-        states = eqx.error_if(states, ~finite, "PWM-synchronous stepping produced a non-finite state; raise substeps")
     result = jnp.where(finite, 0, _RESULT_NONFINITE)
     zero = jnp.zeros((), dtype=num_steps.dtype)
     return _trajectory(ts, states, commands, outs, num_steps, num_steps, zero, result)
@@ -226,16 +275,62 @@ def _solve_pwm(system, signal, ts, y0, t0, substeps, periods, throw):
 _solve_jit = eqx.filter_jit(solve)
 
 
-def exact_edge_times(valve: OnOffValve, signal: AbstractSignal, t0, t1):
-    """The switching times of an exact-edge PWM valve over [t0, t1] (concrete values), for `jump_ts`."""
+def exact_edge_schedule(valve: OnOffValve, signal: AbstractSignal, t0, t1):
+    """The switching edges of an exact-edge PWM valve over [t0, t1] and the opening after each (concrete NumPy).
+
+    Per period k (start kT, duty u_k = signal(kT)): the on edge kT + t_on opens the valve if the on-pulse u_k T
+    outlasts t_on; the off edge kT + u_k T + t_off closes it if the off-pulse (1 − u_k) T outlasts t_off; otherwise
+    the valve keeps its state (above ~90 % duty it stays open into the next period). The valve is closed before
+    the first period. Returns `(edges, states)`: the sorted times [s] where the opening changes and the opening
+    (0/1) from each on."""
     period = 1.0 / float(valve.pwm_frequency)
-    n = int(np.ceil((t1 - t0) / period)) + 2
-    first = np.floor(t0 / period) * period
-    starts = first + period * np.arange(n)
-    commands = np.asarray(jax.vmap(signal)(jnp.asarray(starts)))
-    edges = np.asarray(valve.edge_times(jnp.asarray(commands), first))
-    edges = np.unique(edges[(edges > t0) & (edges < t1)])
-    return jnp.asarray(edges)
+    on, off = float(valve.switch_on_delay), float(valve.switch_off_delay)
+    k0 = int(np.floor(t0 / period + 1e-9))
+    n = int(np.ceil((t1 - k0 * period) / period)) + 2
+    starts = (k0 + np.arange(n)) * period
+    commands = np.asarray(jax.vmap(signal)(jnp.asarray(starts)), dtype=float)
+    times, states, state = [], [], 0.0
+    for start, u in zip(starts, commands):
+        if u * period - on >= 0:
+            state = 1.0
+            times.append(start + on)
+            states.append(state)
+        if (1.0 - u) * period - off > 0:
+            state = 0.0
+            times.append(start + u * period + off)
+            states.append(state)
+    order = np.argsort(times, kind="stable")
+    times, states = np.asarray(times)[order], np.asarray(states)[order]
+    # Only the edges where the opening changes: a jump time where the field is smooth restarts the solver for
+    # nothing (and diffrax's clipping controller can stall on one that a dtmax-sized step lands on exactly).
+    change = np.diff(np.concatenate([[0.0], states])) != 0
+    return times[change], states[change]
+
+
+class ScheduledValve(AbstractValve):
+    """An `OnOffValve` whose opening follows a precomputed edge schedule (`exact_edge_schedule`): the exact mode's
+    valve inside an adaptive solve. The opening switches exactly at the schedule's times, the very numbers handed to
+    the solver as jump times, so the solver's steps end one ulp before an edge and restart after it (a switch
+    computed from the phase would land a few ulps off, and the solver would fail with "minimum step size")."""
+
+    valve: OnOffValve
+    edges: jax.Array  # s, sorted
+    states: jax.Array  # opening after each edge
+
+    switches = True
+
+    def command_time(self, t):
+        return self.valve.command_time(t)
+
+    def max_step(self):
+        return self.valve.max_step()
+
+    def opening(self, t):
+        index = jnp.searchsorted(self.edges, t, side="right") - 1
+        return jnp.where(index >= 0, self.states[jnp.clip(index, 0, self.states.shape[0] - 1)], 0.0)
+
+    def mass_flow(self, t, command, pressure, air):
+        return self.valve.mass_flow_at_opening(self.opening(t), pressure, air)
 
 
 def validate(system, signal, ts, y0=None, t0=None):
@@ -301,8 +396,9 @@ def simulate(
     dt0=None,
     adjoint=None,
     throw: bool = True,
-    stepping: str = "adaptive",
+    stepping: str = "auto",
     substeps: int = _DEFAULT_SUBSTEPS,
+    grid_step: float = _DEFAULT_GRID_STEP,
 ) -> Trajectory:
     """Simulate `system` driven by `signal` and return its channels at the times `ts`.
 
@@ -324,8 +420,11 @@ def simulate(
     - `adjoint`: "reverse" (default), "forward", or any diffrax adjoint.
     - `throw`: raise `PamjaxSolveError` on a failed solve (default). With `throw=False` a failed solve returns a
       trajectory whose `result` is non-zero and whose channels are NaN, never plausible-looking numbers.
-    - `stepping`: "adaptive" (default: diffrax with the PID controller above) or "pwm" (switching `OnOffValve`
-      only): PWM-synchronous fixed RK4 steps whose grid contains every switching edge, `substeps` (default 16)
+    - `stepping`: "auto" (default): "adaptive" for smooth systems; for hybrid ones (stick-slip friction,
+      `KarnoppFriction`) "pwm" with a switching valve and "grid" with a continuous one. "adaptive": diffrax with the
+      PID controller above. "grid": fixed RK4 steps of `grid_step` [s] (default 1 ms) with the hybrid system's
+      events located inside the step (`pamjax._grid`). "pwm" (switching `OnOffValve` only):
+      PWM-synchronous fixed RK4 steps whose grid contains every switching edge, `substeps` (default 16)
       uniform nodes per PWM period plus the two edges. It integrates the exact-edge model (duty latched per period,
       sharp edges, whatever the valve's `mode`) and is differentiable with respect to everything, the duty, the PWM
       frequency and the switching delays included (the edges move the step boundaries). `solver`, `rtol`, `atol`,
@@ -348,24 +447,24 @@ def simulate(
         t0 = jnp.asarray(t0, dtype=float)
     jump_ts = None
     periods = None
-    if stepping == "pwm":
-        if not isinstance(system.valve, OnOffValve):
-            raise PamjaxInputError(
-                f"stepping='pwm' needs a switching OnOffValve (its PWM edges define the grid), got "
-                f"{type(system.valve).__name__}; use stepping='adaptive'"
-            )
+    stepping = resolve_stepping(system, stepping)
+    if stepping in ("pwm", "grid"):
         if not (isinstance(substeps, int) and substeps >= 2):
             raise PamjaxInputError(f"substeps must be an int >= 2 (RK4 nodes per PWM period), got {substeps!r}")
-        periods = _sync.num_periods(system.valve, t0, ts[-1])
-    elif stepping != "adaptive":
-        raise PamjaxInputError(f"stepping must be 'adaptive' or 'pwm', got {stepping!r}")
-    elif isinstance(system.valve, OnOffValve) and system.valve.mode == "exact":
+        if not (isinstance(grid_step, (int, float)) and np.isfinite(grid_step) and grid_step > 0):
+            raise PamjaxInputError(f"grid_step must be a positive number of seconds, got {grid_step!r}")
+        periods = fixed_grid_size(system, stepping, t0, ts[-1], grid_step)
+    elif getattr(system.valve, "mode", None) == "exact":
         if _is_traced((system.valve, signal, t0, ts)):
             raise PamjaxInputError(
                 "OnOffValve(mode='exact') needs concrete valve timing and signal (its edge times are computed before "
                 "the solve); use mode='smooth' inside jit/grad/vmap"
             )
-        jump_ts = exact_edge_times(system.valve, signal, float(t0), float(ts[-1]))
+        edges, states = exact_edge_schedule(system.valve, signal, float(t0), float(ts[-1]))
+        system = eqx.tree_at(lambda s: s.valve, system,
+                             ScheduledValve(system.valve, jnp.asarray(edges), jnp.asarray(states)))
+        inside = edges[(edges > float(t0)) & (edges < float(ts[-1]))]
+        jump_ts = jnp.asarray(inside) if inside.size else None
     traced = _is_traced((system, signal, ts, y0, t0))
     if solver is None and stepping == "adaptive":
         solver = default_solver(system)
@@ -386,12 +485,14 @@ def simulate(
         stepping=stepping,
         substeps=substeps,
         num_periods=periods,
+        grid_step=grid_step,
     )
     if throw and not traced and int(traj.result) == _RESULT_NONFINITE:
         raise PamjaxSolveError(
-            f"PWM-synchronous stepping produced a non-finite state with substeps={substeps}: the fixed RK4 step "
-            "T/substeps is beyond the stability limit of this system (stiff friction or flow near equal pressures); "
-            "increase substeps or use stepping='adaptive'. Pass throw=False to get the result with status instead."
+            f"fixed-grid stepping ('{stepping}') produced a non-finite state (substeps={substeps}, grid_step="
+            f"{grid_step}): the fixed RK4 step is beyond the stability limit of this system (a stiff smooth friction "
+            "sign, or flow near equal pressures); increase substeps / decrease grid_step, or use "
+            "stepping='adaptive' for a smooth system. Pass throw=False to get the result with status instead."
         )
     if throw and not traced and int(traj.result) != 0:
         raise PamjaxSolveError(

@@ -113,6 +113,116 @@ def _period_grid(valve: OnOffValve, signal, start, substeps, open_before):
     return start + phases, opening
 
 
+def pwm_intervals(valve: OnOffValve, signal, t0, t1, substeps, periods):
+    """The PWM-synchronous grid over [t0, t1]: interval ends (n,), (n,) each, and the opening held over each
+    interval, repeated for the three RK4 stage times (n, 3). Intervals outside [t0, t1] have zero length."""
+    period = valve.period
+    first = jnp.floor(t0 * valve.pwm_frequency + 1e-9) * period
+    starts = first + jnp.arange(periods) * period
+    carried = jax.vmap(lambda s: open_at_start(valve, signal, s, first))(starts)
+    nodes, openings = jax.vmap(lambda s, c: _period_grid(valve, signal, s, substeps, c))(starts, carried)
+    left = jnp.clip(nodes[:, :-1], t0, t1).reshape(-1)
+    right = jnp.clip(nodes[:, 1:], t0, t1).reshape(-1)
+    openings = openings.reshape(-1)
+    return left, right, jnp.stack([openings] * 3, axis=-1)
+
+
+def uniform_intervals(signal, t0, t1, steps):
+    """A uniform grid of `steps` intervals over [t0, t1] and the command at each RK4 stage time (n, 3): the grid of a
+    hybrid system fed by a continuous valve (averaged, proportional)."""
+    nodes = t0 + (t1 - t0) * jnp.arange(steps + 1) / steps
+    left, right = nodes[:-1], nodes[1:]
+    stage_times = jnp.stack([left, 0.5 * (left + right), right], axis=-1)
+    return left, right, jax.vmap(jax.vmap(signal))(stage_times)
+
+
+def num_grid_steps(t0, t1, max_step):
+    """Number of uniform steps (static int) of at most `max_step` [s] over [t0, t1]; needs concrete times."""
+    try:
+        t0, t1 = float(t0), float(t1)
+    except (TypeError, jax.errors.ConcretizationTypeError) as err:
+        raise PamjaxInputError(
+            "stepping='grid' needs concrete t0 and ts to size its grid; inside jit pass num_periods (the number of "
+            "steps) to pamjax's solve() explicitly"
+        ) from err
+    return max(int(np.ceil((t1 - t0) / max_step - 1e-9)), 1)
+
+
+def solve_runs(systems, signals, ts_list, z0s, unravel, flat_scale, t0s, *, stepping, substeps, sizes):
+    """Integrate several runs of systems of one structure in ONE scan (a compiled loop shared by all of them).
+
+    Each run: `systems[k]` driven by `signals[k]` from the flat scaled state `z0s[k]` at `t0s[k]`, output at
+    `ts_list[k]`. `stepping` "pwm" (switching valves: the PWM-synchronous grid, `sizes[k]` periods of `substeps`)
+    or "grid" (continuous valves: `sizes[k]` uniform steps). Runs are laid end to end on one clock (each shifted so
+    that it starts 1 s after the previous one ends), so one loop integrates all of them and its compiled size does
+    not grow with their number.
+
+    Returns per run `(states at ts (named pytree), num_steps, finite)`.
+    """
+    lefts, rights, auxs, members, offsets, shifted_ts = [], [], [], [], [], []
+    offset = 0.0
+    for k, (system, signal, ts, t0) in enumerate(zip(systems, signals, ts_list, t0s)):
+        t1 = ts[-1]
+        if stepping == "pwm":
+            left, right, aux = pwm_intervals(system.valve, signal, t0, t1, substeps, sizes[k])
+        else:
+            left, right, aux = uniform_intervals(signal, t0, t1, sizes[k])
+        offset_k = offset - t0
+        lefts.append(left + offset_k)
+        rights.append(right + offset_k)
+        auxs.append(aux)
+        members.append(jnp.full(left.shape, k, dtype=jnp.int32))
+        offsets.append(offset_k)
+        shifted_ts.append(ts + offset_k)
+        offset = offset + (t1 - t0) + 1.0
+    stacked = _stack_systems(systems)
+
+    if stepping == "pwm":
+
+        def field(system, t, z, opening):
+            held = eqx.tree_at(lambda s: s.valve, system, HeldOpeningValve(system.valve, opening))
+            return ravel_pytree(held.vector_field(t, unravel(z * flat_scale), None))[0] / flat_scale
+    else:
+
+        def field(system, t, z, command):
+            return ravel_pytree(system.vector_field(t, unravel(z * flat_scale), command))[0] / flat_scale
+
+    event = update = None
+    if systems[0].hybrid:
+
+        def event(system, t, z):
+            return system.event_function(t, unravel(z * flat_scale), None)
+
+        def update(system, t, z):
+            return ravel_pytree(system.event_update(t, unravel(z * flat_scale), None))[0] / flat_scale
+
+    all_ts = jnp.concatenate(shifted_ts)
+    z_out, num_steps, _, _, finite = _grid.integrate(
+        stacked, field, event, update, jnp.stack(z0s), jnp.concatenate(lefts), jnp.concatenate(rights),
+        jnp.concatenate(auxs), jnp.concatenate(members), jnp.stack([jnp.asarray(o, float) for o in offsets]), all_ts,
+    )
+    out, start = [], 0
+    for k, ts in enumerate(ts_list):
+        z_k = z_out[start : start + ts.shape[0]]
+        start += ts.shape[0]
+        z_k = jnp.where((ts <= t0s[k])[:, None], z0s[k][None], z_k)  # times at or before the start: the start state
+        states = jax.vmap(lambda z: unravel(z * flat_scale))(z_k)
+        steps_k = jnp.sum(rights[k] > lefts[k])
+        out.append((states, steps_k, finite))
+    del num_steps  # the whole loop's; each run reports its own
+    return out
+
+
+def _stack_systems(systems):
+    """The systems' array leaves stacked along a new leading axis (their static structure must agree)."""
+    arrays = [eqx.filter(s, eqx.is_array) for s in systems]
+    structure = [jax.tree_util.tree_structure(a) for a in arrays]
+    if any(st != structure[0] for st in structure):
+        raise PamjaxInputError("runs solved together must have systems of one structure (same components)")
+    stacked = jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *arrays)
+    return eqx.combine(stacked, eqx.filter(systems[0], eqx.is_array, inverse=True))
+
+
 def solve_pwm_synchronous(system, signal, ts, z0, flat_scale, unravel, t0, *, substeps, periods):
     """Integrate `system` from `t0` to `ts[-1]` on the PWM-synchronous grid; states at `ts` (named pytree).
 
@@ -129,38 +239,8 @@ def solve_pwm_synchronous(system, signal, ts, z0, flat_scale, unravel, t0, *, su
         )
     if not (isinstance(substeps, int) and substeps >= 2):
         raise PamjaxInputError(f"substeps must be an int >= 2 (RK4 steps per PWM period), got {substeps!r}")
-    t1 = ts[-1]
-    period = valve.period
-    first = jnp.floor(t0 * valve.pwm_frequency + 1e-9) * period
-    starts = first + jnp.arange(periods) * period
-    carried = jax.vmap(lambda s: open_at_start(valve, signal, s, first))(starts)
-    nodes, openings = jax.vmap(lambda s, c: _period_grid(valve, signal, s, substeps, c))(starts, carried)
-    # Intervals outside [t0, t1] shrink to zero length (an RK step of length 0 is the identity).
-    left = jnp.clip(nodes[:, :-1], t0, t1).reshape(-1)
-    right = jnp.clip(nodes[:, 1:], t0, t1).reshape(-1)
-    openings = openings.reshape(-1)
-
-    def field(system, t, z, opening):
-        held = eqx.tree_at(lambda s: s.valve, system, HeldOpeningValve(system.valve, opening))
-        dy = held.vector_field(t, unravel(z * flat_scale), None)
-        return ravel_pytree(dy)[0] / flat_scale
-
-    event = update = None
-    if system.hybrid:
-
-        def event(system, t, z, opening):
-            return system.event_function(t, unravel(z * flat_scale), None)
-
-        def update(system, t, z, opening):
-            return ravel_pytree(system.event_update(t, unravel(z * flat_scale), None))[0] / flat_scale
-
-    z_out, num_steps, num_events, missed, finite = _grid.integrate(
-        system, field, event, update, z0, left, right, openings, ts
-    )
-    # Output times at or before t0 take the initial state.
-    z_out = jnp.where((ts <= t0)[:, None], z0[None], z_out)
-    states = jax.vmap(lambda z: unravel(z * flat_scale))(z_out)
-    return states, num_steps, finite
+    return solve_runs([system], [signal], [ts], [z0], unravel, flat_scale, [t0], stepping="pwm", substeps=substeps,
+                      sizes=[periods])[0]
 
 
 def latched_commands(valve: OnOffValve, signal, ts):

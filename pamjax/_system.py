@@ -231,7 +231,7 @@ class MuscleSystem(AbstractSystem):
             pressure=state.pressure,
             position=x,
             velocity=jnp.zeros_like(state.velocity),
-            friction=self.friction.mode_after_rest(held),
+            friction=self.friction.mode_after_event(state.friction, held),
         )
 
     def outputs(self, t, state, command):

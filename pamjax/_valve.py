@@ -23,12 +23,17 @@ class AbstractValve(eqx.Module):
     """
 
     command_range = (0.0, 1.0)
+    switches = False  # True for a valve that switches on PWM edges (its grid is the PWM-synchronous one)
 
     def mass_flow(self, t, command, pressure, air: Air):
         raise NotImplementedError
 
     def command_time(self, t):
         return t
+
+    def read_command(self, signal, t):
+        """The command the valve acts on at time `t` (what `mass_flow` takes): `signal(command_time(t))`."""
+        return signal(self.command_time(t))
 
     def max_step(self):
         """Largest step [s] an adaptive solver may take without stepping over the valve's switching (None: any)."""
@@ -61,10 +66,11 @@ class OnOffValve(AbstractValve):
     command pulse shorter than the delay never switches it. With the 2 ms delays at 50 Hz, duties below 10 % leave the
     valve shut and duties above 90 % leave it open (the paper's 10-90 % usable range).
 
-    `mode="smooth"` (default): edges are logistic steps of time width `edge_width` [s] (sharpness 1/`edge_width`),
-    and the dead-band gates are smooth too: differentiable in everything, the duty included.
-    `mode="exact"`: sharp edges, the duty latched at each period start, and `simulate` hands the switching times to the
-    solver (step-size clipping at jump times). A reference for checking the smooth mode: its derivatives with respect
+    The duty is latched at each period start (`read_command`), as the valve driver, the bench and the
+    PWM-synchronous grid latch it. `mode="smooth"` (default): edges are logistic steps of time width `edge_width` [s]
+    (sharpness 1/`edge_width`), and the dead-band gates are smooth too: differentiable in everything, the latched duty
+    included. `mode="exact"`: sharp edges, and `simulate` hands the switching times to the solver (step-size clipping
+    at jump times). A reference for checking the smooth mode: its derivatives with respect
     to the duty, frequency or delays are wrong, so differentiating through them raises an error.
 
     **Arguments:**
@@ -87,6 +93,8 @@ class OnOffValve(AbstractValve):
     edge_width: jax.Array = eqx.field(converter=jnp.asarray, default=1e-4)  # s
     mode: str = eqx.field(static=True, default="smooth")
 
+    switches = True
+
     def __check_init__(self):
         check_positive(self.supply_pressure, "OnOffValve.supply_pressure")
         check_positive(self.pwm_frequency, "OnOffValve.pwm_frequency")
@@ -108,19 +116,34 @@ class OnOffValve(AbstractValve):
         return self.period / 10.0
 
     def command_time(self, t):
-        if self.mode == "exact":
-            return jnp.floor(t * self.pwm_frequency + 1e-9) * self.period
-        return t
+        """The start of the PWM period containing `t`: a PWM modulator latches its duty once per period."""
+        return jnp.floor(t * self.pwm_frequency + 1e-9) * self.period
+
+    def read_command(self, signal, t):
+        """(u_k, u_{k−1}): the duty latched at the start of the period containing `t` and at the period before (its
+        valve state carries over: a period whose off-pulse is too short to close the valve leaves it open)."""
+        start = self.command_time(t)
+        return jnp.stack([signal(start), signal(start - self.period)])
 
     def opening(self, t, command):
-        """Valve opening o(t) ∈ [0, 1] for duty `command` (1 = path 1→2 open, 0 = path 2→3 open)."""
+        """Valve opening o(t) ∈ [0, 1] (1 = path 1→2 open, 0 = path 2→3 open) for the latched duty `command`: a
+        pair (u_k, u_{k−1}) of this period and the one before (`read_command`), or one duty held over both.
+
+        The opening is a sum of steps at the switching edges: o = d_p + (a_p − d_p) S(φ − e_p) + (d_k − a_p) S(φ −
+        t_on) + (a_k − d_k) S(φ − e_k), with φ the phase in this period, e = uT + t_off the off edges (e_p = u_{k−1} T
+        + t_off − T, in this period's frame), d the state between a period's edges (open if its on-pulse opens the
+        valve, else the state it started in) and a the state after them (closed if its off-pulse closes it, else
+        d). S is a logistic step of width `edge_width` (mode "smooth") or a sharp step ("exact"). Each period's
+        edges carry its own duty, so the opening is continuous across period starts, and a valve left open by a
+        period above ~90 % duty stays open into the next until it closes (the bench, the exact mode and the PWM grid
+        agree)."""
+        command = jnp.asarray(command)
+        duty, previous = (command[0], command[1]) if command.shape == (2,) else (command, command)
         period = self.period
         on_delay, off_delay = self.switch_on_delay, self.switch_off_delay
         if self.mode == "exact":
-            command = _no_gradient_through_exact_edges(command)
-            period = _no_gradient_through_exact_edges(period)
-            on_delay = _no_gradient_through_exact_edges(on_delay)
-            off_delay = _no_gradient_through_exact_edges(off_delay)
+            duty, previous, period, on_delay, off_delay = (
+                _no_gradient_through_exact_edges(x) for x in (duty, previous, period, on_delay, off_delay))
 
             def step(x):
                 return jnp.where(x >= 0, 1.0, 0.0)
@@ -133,16 +156,16 @@ class OnOffValve(AbstractValve):
                 return smooth_step(x, self.edge_width)
 
             step_open = step
-        periods = jnp.floor(t / period)
-        phase = t - periods * period  # in [0, T)
-        start = on_delay
-        end = command * period + off_delay
-        window = 0.0
-        for k in (-1.0, 0.0, 1.0):  # the windows of the previous, current and next periods
-            window = window + step(phase - start - k * period) * step_open(end + k * period - phase)
-        opens = step(command * period - on_delay)  # the on-pulse is long enough to open the valve
-        closes = step_open((1.0 - command) * period - off_delay)  # the off-pulse is long enough to close it
-        return opens * (closes * jnp.clip(window, 0.0, 1.0) + (1.0 - closes))
+        phase = t - jnp.floor(t / period + 1e-9) * period  # in [0, T)
+        opens_p, closes_p = step(previous * period - on_delay), step_open((1.0 - previous) * period - off_delay)
+        opens_k, closes_k = step(duty * period - on_delay), step_open((1.0 - duty) * period - off_delay)
+        during_p = opens_p  # (a period that does not open the valve closes it: T > t_on + t_off)
+        after_p = (1.0 - closes_p) * during_p
+        during_k = opens_k + (1.0 - opens_k) * after_p
+        after_k = (1.0 - closes_k) * during_k
+        return (during_p + (after_p - during_p) * step(phase - (previous * period + off_delay - period))
+                + (during_k - after_p) * step(phase - on_delay)
+                + (after_k - during_k) * step(phase - (duty * period + off_delay)))
 
     def switching_gates(self, command):
         """(opens, closes) for a period of duty `command`: whether its on-pulse (u T) outlasts the switch-on delay

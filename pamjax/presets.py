@@ -42,7 +42,7 @@ here are what a fit to that data must close.
 import jax.numpy as jnp
 
 from ._errors import PamjaxInputError
-from ._friction import BristleFriction, CoulombViscousFriction
+from ._friction import BristleFriction, CoulombViscousFriction, KarnoppFriction
 from ._gas import AbstractRestriction, Air, EllipseRestriction, ISO6358Restriction, PorousRestriction, SeriesRestriction
 from ._muscle import CubicVolume, LinearVolume, Muscle, PolynomialForce
 from ._system import MuscleSystem, TankSystem
@@ -185,15 +185,20 @@ def mas10_system(valve="pwm", friction="coulomb", payload_mass=PAYLOAD_MASS, sil
     """Paper 000's plant: MAS-10-300 lifting `payload_mass` (9.6 kg) through the MHE2 valve.
 
     **Arguments:** `valve`: "pwm" (smoothed switching), "exact" (exact-edge reference), "averaged" (eq. 13) or a
-    valve; `friction`: "coulomb" (eq. 8-9, smooth sign), "bristle" (Dahl-type, holds still) or a friction model;
-    `silencer`: an exhaust silencer on the switching valve (see `mas10_valve`).
+    valve; `friction`: "coulomb" (eq. 8-9, smooth sign: fast, creeps where the real payload sticks), "karnopp"
+    (eq. 8-9 with exact stick-slip, integrated on the fixed grid: the model for identification), "bristle"
+    (Dahl-type, holds still elastically) or a friction model; `silencer`: an exhaust silencer on the switching
+    valve (see `mas10_valve`).
     """
     if friction == "coulomb":
         friction = CoulombViscousFriction(COULOMB_FORCE, VISCOUS_COEFFICIENT)
+    elif friction == "karnopp":
+        friction = KarnoppFriction(COULOMB_FORCE, VISCOUS_COEFFICIENT)
     elif friction == "bristle":
         friction = BristleFriction(coulomb_force=COULOMB_FORCE, viscous_coefficient=VISCOUS_COEFFICIENT)
     elif isinstance(friction, str):
-        raise PamjaxInputError(f"friction must be 'coulomb', 'bristle' or a friction model; got {friction!r}")
+        raise PamjaxInputError(
+            f"friction must be 'coulomb', 'karnopp', 'bristle' or a friction model; got {friction!r}")
     return MuscleSystem(
         valve=_valve(valve, silencer), muscle=mas10_muscle(), payload_mass=payload_mass, friction=friction
     )

@@ -170,10 +170,37 @@ def np_pwm_opening(t, u, f=50.0, t_on=2e-3, t_off=2e-3, width=None):
             return 1.0
         start, end = t_on, u * T + t_off
         return float((start <= phase < end) or (phase < end - T))
+    # Smooth: the exact opening as a sum of its jumps at the edges of this period and the one before (the state
+    # between a period's edges: open if its on-pulse opens the valve, else as before; after them: closed if its
+    # off-pulse closes it), each jump a logistic step; the dead-band gates logistic too.
     s = lambda z: logistic(z, width)  # noqa: E731
-    window = sum(s(phase - t_on - k * T) * s(u * T + t_off + k * T - phase) for k in (-1, 0, 1))
     opens, closes = s(u * T - t_on), s((1 - u) * T - t_off)
-    return opens * (closes * min(max(window, 0.0), 1.0) + (1 - closes))
+    during_prev = opens
+    after_prev = (1 - closes) * during_prev
+    during = opens + (1 - opens) * after_prev
+    after = (1 - closes) * during
+    return (during_prev + (after_prev - during_prev) * s(phase - (u * T + t_off - T))
+            + (during - after_prev) * s(phase - t_on) + (after - during) * s(phase - (u * T + t_off)))
+
+
+def np_valve_state_machine(ts, duties, f=50.0, t_on=2e-3, t_off=2e-3, dt=1e-6):
+    """Open (1) / closed (0) at times `ts` of an on/off valve driven by PWM with duty `duties[k]` in period k,
+    simulated as a state machine on a fine clock (dt): the command is on during [kT, kT + u_k T); the valve opens
+    once the command has been on for t_on without a break and closes once it has been off for t_off. Starts closed,
+    command off before t = 0. Independent of pamjax's edge formula."""
+    T = 1.0 / f
+    clock = np.arange(0.0, max(ts) + dt, dt)
+    k = np.minimum(np.floor(clock / T + 1e-9).astype(int), len(duties) - 1)
+    command = (clock - k * T) < np.asarray(duties)[k] * T
+    state, on_for, off_for, out = 0, 0.0, t_off, np.empty(clock.size)
+    for i, c in enumerate(command):
+        on_for, off_for = (on_for + dt, 0.0) if c else (0.0, off_for + dt)
+        if c and on_for >= t_on - 1e-12:
+            state = 1
+        if not c and off_for >= t_off - 1e-12:
+            state = 0
+        out[i] = state
+    return out[np.clip(np.round(np.asarray(ts) / dt).astype(int), 0, clock.size - 1)]
 
 
 class NumpyPlant:

@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import P_ATM, np_ellipse_flow, np_pwm_opening
+from helpers import P_ATM, np_ellipse_flow, np_pwm_opening, np_valve_state_machine
 
 import pamjax
 from pamjax import presets
@@ -27,6 +27,24 @@ def test_opening_matches_numpy_oracle(duty):
     smooth = np.asarray(jax.vmap(lambda t: SMOOTH.opening(t, jnp.asarray(duty)))(jnp.asarray(ts)))
     np.testing.assert_array_equal(exact, [np_pwm_opening(t, duty) for t in ts])
     np.testing.assert_allclose(smooth, [np_pwm_opening(t, duty, width=1e-4) for t in ts], atol=1e-12)
+
+
+def test_latched_duty_and_carried_state_match_a_state_machine():
+    # Duties that cross the 90 % and 10 % dead-band limits from period to period: a period above 90 % leaves the
+    # valve open into the next (its off-pulse is shorter than the switch-off delay), one below 10 % never opens it.
+    # The exact mode's opening (duty latched per period, the previous period's duty carried) against a fine-clock
+    # state machine of the delays, away from the edges; the smooth mode within its logistic edges.
+    duties = np.array([0.3, 0.95, 0.85, 0.93, 0.97, 0.5, 0.05, 0.95, 0.08, 0.6])
+    ts = (np.arange(len(duties) * 400) + 0.5) * (T / 400)
+    truth = np_valve_state_machine(ts, duties)
+    k = np.floor(ts / T + 1e-9).astype(int)
+    pairs = np.stack([duties[k], duties[np.maximum(k - 1, 0)] * (k > 0)], axis=1)
+    exact = np.asarray(jax.vmap(EXACT.opening)(jnp.asarray(ts), jnp.asarray(pairs)))
+    smooth = np.asarray(jax.vmap(SMOOTH.opening)(jnp.asarray(ts), jnp.asarray(pairs)))
+    np.testing.assert_array_equal(exact, truth)
+    edges = np.concatenate([[kk * T + 2e-3, kk * T + u * T + 2e-3] for kk, u in enumerate(duties)])
+    far = np.min(np.abs(ts[:, None] - edges[None, :]), axis=1) > 1e-3  # 10 edge widths from any edge
+    np.testing.assert_allclose(smooth[far], truth[far], atol=1e-4)
 
 
 @pytest.mark.parametrize("valve", [SMOOTH, EXACT], ids=["smooth", "exact"])

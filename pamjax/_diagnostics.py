@@ -1,0 +1,118 @@
+"""What a fit's residuals say: per-channel errors, noise, whiteness, model mismatch, and the parameter statistics.
+
+A least-squares fit's standard errors assume the residuals are the measurement noise: independent, of the stated
+level. Where the model cannot follow the data, the residuals are larger than the noise and correlated in time, and
+the linearised standard errors understate the uncertainty. `channel_errors` measures both per channel:
+
+- the noise level: the experiment's scale where the user gave it (the noise standard deviation), else an estimate
+  from the residuals themselves, 1.4826 MAD(Δe)/√2 of their first differences (a smooth model error cancels in Δe;
+  white noise of level σ gives σ);
+- `rmse_over_noise`: the residual RMSE over that level (1 for a model that reproduces the data up to the noise);
+- `autocorrelation`: the residuals' sample autocorrelation at lags 1, 2, 5, 10 and 20 samples (±2/√N for white
+  noise);
+- `se_inflation` = rmse_over_noise · √((1 + ρ₁)/(1 − ρ₁)), ρ₁ the lag-1 autocorrelation clipped to [0, 0.99]: the
+  factor by which an AR(1) error of that size and correlation widens the true uncertainty over the linearised one.
+
+`mismatch` flags the fit ("model mismatch: standard errors understate the uncertainty") when any channel's
+`se_inflation` exceeds `MISMATCH_THRESHOLD` (1.2: the residuals are then not noise).
+"""
+
+import numpy as np
+
+MISMATCH_THRESHOLD = 1.2  # se_inflation above which the residuals are not noise
+_LAGS = (1, 2, 5, 10, 20)
+
+
+def _noise_estimate(err):
+    """1.4826 · MAD of the first differences / √2: the white-noise level of `err` (a smooth part cancels)."""
+    if err.size < 3:
+        return float("nan")
+    d = np.diff(err)
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
+
+
+def _autocorrelation(err):
+    e = err - np.mean(err)
+    denom = float(e @ e)
+    out = {}
+    for lag in _LAGS:
+        out[str(lag)] = float(e[:-lag] @ e[lag:] / denom) if e.size > lag and denom > 0 else 0.0
+    return out
+
+
+def _residual_stats(err, noise_given):
+    rmse = float(np.sqrt(np.mean(err**2)))
+    estimate = _noise_estimate(err)
+    noise = noise_given if noise_given is not None else estimate
+    ratio = rmse / noise if noise and np.isfinite(noise) and noise > 0 else float("nan")
+    acf = _autocorrelation(err)
+    rho = min(max(acf["1"], 0.0), 0.99)
+    return dict(noise=noise, noise_estimate=estimate, noise_given=noise_given is not None, rmse_over_noise=ratio,
+                autocorrelation=acf, se_inflation=float(ratio * np.sqrt((1 + rho) / (1 - rho))))
+
+
+def channel_errors(experiments, residuals):
+    """experiment → channel → errors (rmse, max_error, range, % of range, noise, whiteness; `validation_` for the
+    held-out part), from the residual vector of all samples (`part="all"`, in the experiments' `layout` order)."""
+    out, k = {}, 0
+    for e in experiments:
+        out[e.name] = {}
+        for c, scale, data, used, ident_all in e.layout():
+            r = np.asarray(residuals[k : k + data.size])
+            k += data.size
+            err = r * scale
+            ident = used & ident_all
+            valid = used & ~ident_all
+            given = scale if c in getattr(e, "noise_channels", ()) else None
+            span = float(np.ptp(data[used])) if np.any(used) else 0.0
+            span = span or 1.0
+            stats = {"range": span}
+            for prefix, sel in (("", ident), ("validation_", valid)):
+                if np.any(sel):
+                    rmse, mx = float(np.sqrt(np.mean(err[sel] ** 2))), float(np.max(np.abs(err[sel])))
+                    stats.update({f"{prefix}rmse": rmse, f"{prefix}max_error": mx,
+                                  f"{prefix}rmse_percent": 100 * rmse / span,
+                                  f"{prefix}max_error_percent": 100 * mx / span})
+            if np.any(ident):
+                stats.update(_residual_stats(err[ident], given))
+            out[e.name][c] = stats
+    return out
+
+
+def mismatch(errors):
+    """(flag, note): whether any channel's residuals are not noise, and which ones, worst first."""
+    bad = []
+    for name, chans in errors.items():
+        for c, st in chans.items():
+            factor = st.get("se_inflation", float("nan"))
+            if np.isfinite(factor) and factor > MISMATCH_THRESHOLD:
+                bad.append((factor, f"{name}/{c} (RMSE {st['rmse_over_noise']:.2f}× noise, lag-1 autocorrelation "
+                                    f"{st['autocorrelation']['1']:.2f})"))
+    if not bad:
+        return False, ""
+    bad.sort(reverse=True)
+    return True, ("model mismatch: standard errors understate the uncertainty; the residuals are not noise in "
+                  + ", ".join(b for _, b in bad))
+
+
+def identifiability(jac, labels, tol):
+    """Null directions of the column-normalised Jacobian: lists of labels that the data cannot separate."""
+    norms = np.linalg.norm(jac, axis=0)
+    groups = [[labels[i]] for i in np.flatnonzero(norms == 0)]
+    live = np.flatnonzero(norms > 0)
+    if live.size:
+        _, s, vt = np.linalg.svd(jac[:, live] / norms[live], full_matrices=False)
+        for k in np.flatnonzero(s < tol * s[0]):
+            v = vt[k]
+            groups.append([labels[live[i]] for i in np.flatnonzero(np.abs(v) > 0.1 * np.max(np.abs(v)))])
+    return groups
+
+
+def covariance(jac, cost, used, tol):
+    """Covariance of θ from the Jacobian at the optimum, σ² (JᵀJ)⁺ with σ² = 2 cost / (used − n), directions with
+    singular values below `tol` × the largest left out."""
+    dof = max(used - jac.shape[1], 1)
+    sigma2 = 2.0 * float(cost) / dof
+    _, s, vt = np.linalg.svd(jac, full_matrices=False)
+    keep = s > tol * s[0] if s.size and s[0] > 0 else np.zeros_like(s, dtype=bool)
+    return (vt[keep].T / s[keep] ** 2) @ vt[keep] * sigma2
