@@ -110,27 +110,21 @@ def _check_absolute(name, p):
         )
 
 
-def _set_data(experiment, channel, values, scale, unit, name, compared=None):
+def _set_data(experiment, channel, values, scale, unit, name):
     """Inside an experiment's `__init__`: the measured `channel`, its scale [`unit`] (default 1 % of the range; the
-    noise level if known), point index as `times`, weights 1/scale where `compared` (default everywhere), no
-    validation part, and the name."""
+    noise level if known) and the name."""
     s = float(0.01 * np.ptp(values) if scale is None else scale)
     if not (np.isfinite(s) and s > 0):
         raise PamjaxInputError(f"scale must be > 0 [{unit}] (the measurement's noise level), got {s}")
-    compared = np.ones(values.shape, dtype=bool) if compared is None else compared
     experiment.scale = s
-    experiment.times = jnp.arange(values.size, dtype=float)
     experiment.data = {channel: jnp.asarray(values)}
-    experiment.weights = {channel: jnp.asarray(np.where(compared, 1.0 / s, 0.0))}
-    experiment.split_time = float("inf")
     experiment.name = str(name)
     experiment.channels = (channel,)
 
 
 class AbstractStaticExperiment(eqx.Module):
-    """A fit experiment without a time axis: `predict(model)` gives one channel at the data points; the residual is
-    (model − data)/scale. It exposes `times` (the point index), `data`, `weights` (1/scale, 0 where a point is not
-    compared as such) and `split_time` (+inf: no validation part) as the fitter's reports expect."""
+    """A fit experiment without a time axis: `predict(model)` gives one channel at the data points, the residual is
+    (model − data)/scale, every point is compared and none is held out (the fitter's `layout`)."""
 
     def predict(self, model):
         raise NotImplementedError
@@ -141,10 +135,22 @@ class AbstractStaticExperiment(eqx.Module):
         if channel not in pred or np.shape(pred[channel]) != np.shape(self.data[channel]):
             raise PamjaxInputError(f"{self.name}: the model does not predict {channel!r} at the data points")
 
+    def batch_key(self, model):
+        return None  # no ODE: predicted on its own
+
+    def layout(self):
+        (channel,) = self.channels
+        data = np.asarray(self.data[channel])
+        every = np.ones(data.shape, dtype=bool)
+        return [(channel, self.scale, data, every, every)]
+
     def residuals(self, model, part="identification"):
+        return self.residuals_of(self.predict(model), part)
+
+    def residuals_of(self, pred, part="identification"):
         del part
         (channel,) = self.channels
-        return (self.predict(model)[channel] - self.data[channel]) * self.weights[channel]
+        return (pred[channel] - self.data[channel]) / self.scale
 
 
 class FrictionCurveExperiment(AbstractStaticExperiment):
@@ -159,10 +165,7 @@ class FrictionCurveExperiment(AbstractStaticExperiment):
     """
 
     velocities: jax.Array
-    times: jax.Array
     data: dict
-    weights: dict
-    split_time: float = eqx.field(static=True)
     scale: float = eqx.field(static=True)
     friction: Component
     name: str = eqx.field(static=True)
@@ -193,10 +196,7 @@ class FlowCurveExperiment(AbstractStaticExperiment):
 
     upstream_pressures: jax.Array
     downstream_pressures: jax.Array
-    times: jax.Array
     data: dict
-    weights: dict
-    split_time: float = eqx.field(static=True)
     scale: float = eqx.field(static=True)
     restriction: Component
     name: str = eqx.field(static=True)
@@ -235,10 +235,7 @@ class LoopForceMapExperiment(AbstractStaticExperiment):
     pressures: jax.Array
     velocities: jax.Array
     slack: jax.Array
-    times: jax.Array
     data: dict
-    weights: dict
-    split_time: float = eqx.field(static=True)
     scale: float = eqx.field(static=True)
     name: str = eqx.field(static=True)
     channels: tuple = eqx.field(static=True)
@@ -253,7 +250,7 @@ class LoopForceMapExperiment(AbstractStaticExperiment):
             )
         self.positions, self.pressures, self.velocities = jnp.asarray(x), jnp.asarray(p), jnp.asarray(v)
         self.slack = jnp.asarray(f <= slack_force)
-        _set_data(self, "force", f, scale, "N", name, compared=f > slack_force)  # slack points: see `residuals`
+        _set_data(self, "force", f, scale, "N", name)  # slack points: see `residuals_of`
 
     def check(self, model):
         for name in ("muscle", "friction"):
@@ -267,9 +264,9 @@ class LoopForceMapExperiment(AbstractStaticExperiment):
         static = jax.vmap(lambda x, p: model.muscle.static_force(x, p, air))(self.positions, self.pressures)
         return {"force": static - steady_friction_force(model.friction, self.velocities)}
 
-    def residuals(self, model, part="identification"):
+    def residuals_of(self, pred, part="identification"):
         del part
-        f = self.predict(model)["force"]
+        f = pred["force"]
         return jnp.where(self.slack, jnp.maximum(f, 0.0), f - self.data["force"]) / self.scale
 
 
