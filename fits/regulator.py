@@ -85,9 +85,9 @@ def tank_system(c_si, b, supply):
     return pj.RegulatorSystem(reg, volume=TANK)
 
 
-def tank_run(theta, mode, p_row, ts):
+def tank_run(theta, mode, p_row, ts, solver=None):
     """Tank pressure [Pa] for θ = (log C [m³/(s Pa)], scaled logit of b), charging at supply p_row or discharging from
-    p_row (main stage fully open: pilot at 10.1 bar gauge, or at atmosphere)."""
+    p_row (main stage fully open: pilot at 10.1 bar gauge, or at atmosphere); `solver`: `simulate`'s default or any."""
     c, b = jnp.exp(theta[0]), _to_b(theta[1])  # b kept inside B_BOUNDS
     if mode == "charge":
         system, target, p0, volts = tank_system(c, b, p_row), P_ATM + 10.1 * BAR, P_ATM, 10.0
@@ -96,7 +96,7 @@ def tank_run(theta, mode, p_row, ts):
     y0 = ISO6358RegulatorState(
         pilot=jnp.asarray(target), pilot_output=jnp.asarray(target), pressure=jnp.asarray(p0, dtype=float)
     )
-    traj = pj.simulate(system, pj.Constant(volts), ts, y0=y0, adjoint="forward", rtol=1e-8, atol=1e-8)
+    traj = pj.simulate(system, pj.Constant(volts), ts, y0=y0, adjoint="forward", rtol=1e-8, atol=1e-8, solver=solver)
     return traj.pressure
 
 
@@ -161,30 +161,32 @@ def fit_tank(mode, p_row, c_true, b_true, rng, quick):
     )
 
 
-def valve_response(params, ts):
-    """Closed-port outlet pressure [Pa abs] of eq. 6 with params = (gain [bar/V], τ1 [s], τ2 [s])."""
+def valve_response(params, ts, solver=None):
+    """Closed-port outlet pressure [Pa abs] of eq. 6 with params = (gain [bar/V], τ1 [s], τ2 [s]); `solver`:
+    `simulate`'s default or any."""
     gain, t1, t2 = params
     reg = pj.LinearRegulator(
         calibration=pj.VoltageCalibration(voltage=(0.0, 10.0), gauge_pressure=jnp.stack([0.0, 10.0 * gain * BAR])),
         time_constants=jnp.stack([t1, t2]),
     )
     return pj.simulate(
-        pj.RegulatorSystem(reg, volume=0.0), pj.SquareWave(0.0, 3.0, 1.5), ts, rtol=1e-9, atol=1e-9, adjoint="forward"
+        pj.RegulatorSystem(reg, volume=0.0), pj.SquareWave(0.0, 3.0, 1.5), ts, rtol=1e-9, atol=1e-9, adjoint="forward",
+        solver=solver,
     ).pressure
 
 
-def fit_valve(rng, quick):
+def fit_valve(rng, quick, solver=None):
     rate = 500.0  # Hz sampling (assumed; the NI USB-6009 samples up to 48 kS/s)
     ts = jnp.arange(0.0, 4.0 if quick else 8.0, 1.0 / rate)
     truth = jnp.array([1.01, 0.041, 0.023])  # eq. 6
-    measured = np.asarray(valve_response(truth, ts)) + NOISE_VALVE * rng.standard_normal(ts.shape)
+    measured = np.asarray(valve_response(truth, ts, solver)) + NOISE_VALVE * rng.standard_normal(ts.shape)
     bb, aa = butter(2, 20.0 / (rate / 2))  # 2nd-order Butterworth, f_c = 20 Hz (paper 001, Sect. 5)
     smoothed = filtfilt(bb, aa, measured)
     n_id = int(0.6 * ts.size)  # 60 % identification, 40 % validation (paper 001, Sect. 5)
     data_id = jnp.asarray(smoothed[:n_id])
     ts_id = np.asarray(ts)[:n_id]  # NumPy, so it stays a constant under jit
     sol = optx.least_squares(
-        lambda th, _: (valve_response(th, ts_id) - data_id) / BAR,
+        lambda th, _: (valve_response(th, ts_id, solver) - data_id) / BAR,
         optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10),
         jnp.array([0.8, 0.06, 0.01]),
         max_steps=100,
@@ -192,7 +194,7 @@ def fit_valve(rng, quick):
     )
     gain, t1, t2 = (float(v) for v in sol.value)
     t1, t2 = max(t1, t2), min(t1, t2)  # the two poles are interchangeable
-    sim = np.asarray(valve_response(jnp.array([gain, t1, t2]), ts))
+    sim = np.asarray(valve_response(jnp.array([gain, t1, t2]), ts, solver))
     val = slice(n_id, None)
     mse = float(np.mean(((sim[val] - smoothed[val]) / BAR) ** 2))
     fit_pct = 100 * (

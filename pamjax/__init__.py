@@ -37,6 +37,9 @@ from ._gas import (
     NozzleRestriction as NozzleRestriction,
 )
 from ._gas import (
+    PorousRestriction as PorousRestriction,
+)
+from ._gas import (
     SeriesRestriction as SeriesRestriction,
 )
 from ._inputs import (
@@ -62,6 +65,9 @@ from ._muscle import (
 )
 from ._muscle import (
     AbstractVolume as AbstractVolume,
+)
+from ._muscle import (
+    BraidVolume as BraidVolume,
 )
 from ._muscle import (
     ChouHannafordForce as ChouHannafordForce,
@@ -122,6 +128,29 @@ from ._valve import (
 __version__ = "0.1.0"
 
 # --- discrete-time model (paper 000 eq. 17-21) ---
+# --- issue 19: bench tests without a time axis (friction curves, flow curves, loop force maps); PID with noise ----
+from ._bench_tests import (  # noqa: E402
+    FlowCurveExperiment as FlowCurveExperiment,
+)
+from ._bench_tests import (
+    FrictionCurveExperiment as FrictionCurveExperiment,
+)
+from ._bench_tests import (
+    LoopForceMapExperiment as LoopForceMapExperiment,
+)
+from ._bench_tests import (
+    constant_velocity_point as constant_velocity_point,
+)
+from ._bench_tests import (
+    flow_curve as flow_curve,
+)
+from ._bench_tests import (
+    loop_average as loop_average,
+)
+from ._bench_tests import (
+    steady_friction_force as steady_friction_force,
+)
+
 # --- closed-loop control (issue 6) ---------------------------------------------------------------------------------
 from ._control import (  # noqa: E402
     AbstractController as AbstractController,
@@ -241,6 +270,7 @@ from ._linearise import equilibrium as equilibrium
 from ._linearise import linearise as linearise
 from ._model_io import load_model as load_model  # noqa: E402
 from ._model_io import save_model as save_model
+from ._pid import PIDController as PIDController  # noqa: E402
 from ._recording import Recording as Recording  # noqa: E402
 from ._regulated import (  # noqa: E402
     RegulatedMuscleState as RegulatedMuscleState,

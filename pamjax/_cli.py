@@ -24,6 +24,7 @@ _COMMANDS = {
     "fit": ("pamjax._cli_fit", "Fit parameters to recordings as described by a TOML config; write the fitted model."),
     "simulate": ("pamjax._cli_simulate", "Simulate any model with any input; write the trajectory (CSV) and a figure."),
     "sweep": ("pamjax._cli_sweep", "Run a batch sweep described by a TOML config; write NPZ/CSV and a figure."),
+    "reproduce": ("pamjax._reproduce", "Reproduce every experiment of papers 000 and 001 (fits/papers); index page."),
 }
 DEBUG_VARIABLE = "PAMJAX_DEBUG"
 

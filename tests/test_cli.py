@@ -84,7 +84,7 @@ FIT_CASES = {
                     r"\[model\]: unknown key\(s\) \['valve'\]; valid keys are \['file', 'options', 'preset', 'set'\]"),
     "[model] options key": (_fit_config({'valve = "averaged"': 'valves = "averaged"'}),
                             r"options .*unknown key\(s\) \['valves'\]; valid keys are \['friction', "
-                            r"'payload_mass', 'valve'\]"),
+                            r"'payload_mass', 'silencer', 'valve'\]"),
     "[model] preset": (_fit_config({'"mas10_system"': '"mas20_system"'}),
                        r"preset must be one of \['mas10_system', 'mas10_tank_system'\]"),
     "[model] preset and file": (_fit_config({'[fit]': 'file = "model.json"\n[fit]'}),
