@@ -115,7 +115,7 @@ def scipy_residuals(theta, space, exps, counter):
         for c in e.channels:
             out.append((pred[c] - np.asarray(e.data[c])) * np.asarray(e.weights[c]))
     r = np.concatenate(out)
-    return np.where(np.isfinite(r), r, pj._fit.FAILED_RESIDUAL) if not np.all(np.isfinite(r)) else r
+    return np.where(np.isfinite(r), r, pj._fit.fit.FAILED_RESIDUAL) if not np.all(np.isfinite(r)) else r
 
 
 def main():

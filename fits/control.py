@@ -27,7 +27,7 @@ import scipy.linalg
 
 import pamjax
 from pamjax import presets
-from pamjax._control import (
+from pamjax._control.closed_loop import (
     ClosedLoop,
     PIController,
     SlidingModeController,

@@ -28,7 +28,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
-from pamjax._regulator import BAR, FLOW_UNIT, check_voltage  # noqa: E402
+from pamjax._physics.regulator import BAR, FLOW_UNIT, check_voltage  # noqa: E402
 
 PAPER = dict(
     operating_point_V=3.0,  # paper 001 Sect. 5: 3 V reference, 7 bar abs supply

@@ -29,8 +29,8 @@ from scipy.integrate import quad  # noqa: E402
 from scipy.signal import butter, filtfilt  # noqa: E402
 
 import pamjax as pj  # noqa: E402
-from pamjax._gas import ISO8778_DENSITY, ISO8778_TEMPERATURE  # noqa: E402
-from pamjax._regulator import (  # noqa: E402
+from pamjax._physics.gas import ISO8778_DENSITY, ISO8778_TEMPERATURE  # noqa: E402
+from pamjax._physics.regulator import (  # noqa: E402
     BAR,
     PAPER001_AIR,
     TANK_VOLUME,

@@ -26,8 +26,8 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
-from pamjax._regulated import muscle_stiffness  # noqa: E402
-from pamjax._regulator import FLOW_UNIT  # noqa: E402
+from pamjax._physics.regulator import FLOW_UNIT  # noqa: E402
+from pamjax._systems.regulated import muscle_stiffness  # noqa: E402
 
 PAPER = dict(
     load_force_N=893.0,  # paper 001 Sect. 4 (91.3 kg subject)

@@ -100,7 +100,7 @@ def plot(path, model, experiments):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from pamjax._experiment import predict
+    from pamjax._fit.experiment import predict
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
     for e in experiments:

@@ -1,7 +1,7 @@
-"""`python -m pamjax ...`: the `pamjax` command line (`pamjax._cli`)."""
+"""`python -m pamjax ...`: the `pamjax` command line (`pamjax._cli.main`)."""
 
 import sys
 
-from ._cli import main
+from ._cli.main import main
 
 sys.exit(main())

@@ -41,12 +41,19 @@ here are what a fit to that data must close.
 
 import jax.numpy as jnp
 
-from ._errors import PamjaxInputError
-from ._friction import BristleFriction, CoulombViscousFriction, KarnoppFriction
-from ._gas import AbstractRestriction, Air, EllipseRestriction, ISO6358Restriction, PorousRestriction, SeriesRestriction
-from ._muscle import CubicVolume, LinearVolume, Muscle, PolynomialForce
-from ._system import MuscleSystem, TankSystem
-from ._valve import AveragedValve, OnOffValve
+from ._core.errors import PamjaxInputError
+from ._physics.friction import BristleFriction, CoulombViscousFriction, KarnoppFriction
+from ._physics.gas import (
+    AbstractRestriction,
+    Air,
+    EllipseRestriction,
+    ISO6358Restriction,
+    PorousRestriction,
+    SeriesRestriction,
+)
+from ._physics.muscle import CubicVolume, LinearVolume, Muscle, PolynomialForce
+from ._physics.valve import AveragedValve, OnOffValve
+from ._systems.muscle import MuscleSystem, TankSystem
 
 # --- paper 000, Table 1 ---------------------------------------------------------------------------------------
 VALVE_AREA = 3.14e-6  # m², Table 1 ("valve diameter", an area)

@@ -8,7 +8,7 @@ from helpers import P_ATM, np_ellipse_flow, np_eq7_force, np_friction
 
 import pamjax as pj
 from pamjax import presets
-from pamjax._friction import KarnoppFriction
+from pamjax._physics.friction import KarnoppFriction
 
 
 @pytest.mark.parametrize("v", [-0.2, -0.01, 0.004, 0.15])

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 import pamjax
-import pamjax._cli_out as cli_out
-import pamjax._cli_sweep as cli_sweep
-from pamjax._cli import main
-from pamjax._cli_out import OutputFolder
+import pamjax._cli.out as cli_out
+import pamjax._cli.sweep as cli_sweep
+from pamjax._cli.main import main
+from pamjax._cli.out import OutputFolder
 
 EXAMPLES = pathlib.Path(__file__).resolve().parents[1] / "examples"
 
@@ -164,7 +164,7 @@ def test_fit_config_errors_name_the_key_before_any_solve(tmp_path, capsys, no_so
 
 
 def test_example_fit_config_is_valid(no_solves):
-    from pamjax._cli_fit import validate_config
+    from pamjax._cli.fit import validate_config
 
     validate_config(tomllib.loads((EXAMPLES / "fit_example.toml").read_text()))
 
@@ -271,7 +271,7 @@ def test_simulate_config_errors_name_the_key_before_any_solve(tmp_path, capsys, 
 
 @pytest.mark.parametrize("path", sorted(EXAMPLES.glob("simulate_*.toml")), ids=lambda p: p.stem)
 def test_example_simulate_configs_are_valid(path):
-    from pamjax._cli_simulate import validate_config
+    from pamjax._cli.simulate import validate_config
 
     validate_config(tomllib.loads(path.read_text()))
 

@@ -17,7 +17,7 @@ import pytest
 
 import pamjax
 from pamjax import presets
-from pamjax._cli import main
+from pamjax._cli.main import main
 
 CONFIG = """
     [model]

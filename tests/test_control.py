@@ -13,7 +13,7 @@ import pytest
 
 import pamjax
 from pamjax import presets
-from pamjax._control import (
+from pamjax._control.closed_loop import (
     ClosedLoop,
     PIController,
     SlidingModeController,

@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 import pamjax
-from pamjax._distributed import PamjaxDistributedError
+from pamjax._core.distributed import PamjaxDistributedError
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 WORKER = ROOT / "tests" / "distributed_worker.py"
@@ -90,7 +90,7 @@ def runs(tmp_path_factory):
     base = [sys.executable, str(WORKER), str(out)]
     port, cli_port = str(_free_port()), str(_free_port())
     (out / "map.toml").write_text(CONFIG)
-    cli = [sys.executable, "-m", "pamjax._cli", "sweep", str(out / "map.toml"), "--no-plot", "--out",
+    cli = [sys.executable, "-m", "pamjax._cli.main", "sweep", str(out / "map.toml"), "--no-plot", "--out",
            str(out / "cli"), "--cpu-devices", "1", "--distributed"]
     joined = [dict(env, JAX_COORDINATOR_ADDRESS=f"127.0.0.1:{cli_port}", JAX_NUM_PROCESSES="2",
                    JAX_PROCESS_ID=str(i)) for i in (0, 1)]
@@ -116,7 +116,7 @@ def test_cli_sweep_distributed_equals_single_process(runs):
 
 
 def test_cli_sweep_distributed_says_why_it_cannot_join(monkeypatch, tmp_path):
-    from pamjax._cli import main
+    from pamjax._cli.main import main
 
     for name in ("JAX_COORDINATOR_ADDRESS", "JAX_NUM_PROCESSES", "JAX_PROCESS_ID", "SLURM_JOB_ID",
                  "OMPI_MCA_orte_hnp_uri", "OMPI_COMM_WORLD_RANK"):

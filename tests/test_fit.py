@@ -93,9 +93,9 @@ def test_experiment_bad_channel_and_failed_solve_is_finite():
     with pytest.raises(PamjaxInputError, match="no channel 'position'"):
         pj.Experiment(rec, pj.Constant(0.5), channels=["position"])
     exp = pj.Experiment(rec, pj.Constant(0.5), max_steps=2)  # the solve cannot finish: a failing trial step
-    fn = pj._fit._stack_residuals(pj.ParameterSpace(system, ["payload_mass"]), (exp,), "identification")
+    fn = pj._fit.fit._stack_residuals(pj.ParameterSpace(system, ["payload_mass"]), (exp,), "identification")
     r, _ = eqx.filter_jit(fn)(jnp.zeros(1), (exp,))
-    assert np.all(np.isfinite(r)) and np.all(r == pj._fit.FAILED_RESIDUAL)
+    assert np.all(np.isfinite(r)) and np.all(r == pj._fit.fit.FAILED_RESIDUAL)
 
 
 @pytest.mark.slow  # ~20 s alone (compilation of the forward-mode Jacobian of the solve), more on a shared CPU

@@ -61,7 +61,7 @@ def test_pwm_residuals_are_smooth_in_the_parameters():
     truth = _tank()
     exps = tuple(e.bind(truth) for e in _experiments(truth, horizon=0.2))
     space = pj.ParameterSpace(truth, FREE[:2])
-    fn = pj._fit._stack_residuals(space, exps, "identification")
+    fn = pj._fit.fit._stack_residuals(space, exps, "identification")
 
     @eqx.filter_jit
     def res(theta):

@@ -8,7 +8,7 @@ import textwrap
 import pytest
 
 from pamjax import PamjaxInputError
-from pamjax._cli_fit import load_config
+from pamjax._cli.fit import load_config
 
 
 def _write(tmp_path, text):

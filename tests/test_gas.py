@@ -8,7 +8,7 @@ from helpers import P_ATM, np_ellipse_flow, np_iso6358_flow, np_nozzle_flow
 from scipy.optimize import brentq
 
 import pamjax
-from pamjax import _gas
+from pamjax._physics import gas as _gas
 
 AIR = pamjax.Air()
 INFLATE = pamjax.EllipseRestriction(0.36, 0.28, 3.14e-6)  # paper 000 Table 1, path 1→2

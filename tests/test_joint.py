@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import pamjax
-from pamjax._joint import AntagonisticJoint, VoltagePair
-from pamjax._regulator import ISO6358Regulator
+from pamjax._physics.regulator import ISO6358Regulator
+from pamjax._systems.joint import AntagonisticJoint, VoltagePair
 from pamjax.presets import dmsp40_muscle
 
 P_ATM = 101325.0

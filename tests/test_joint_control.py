@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import pamjax as pj
-from pamjax._joint_control import (
+from pamjax._systems.joint_control import (
     AntagonisticJointController,
     GaitAngle,
     JointControlLoop,

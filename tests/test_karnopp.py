@@ -1,5 +1,5 @@
 """Exact stick-slip friction (`KarnoppFriction`) on the fixed grid with events located inside the step
-(`pamjax._grid`): against an independent event-driven SciPy reference, holding still, gradients through the event
+(`pamjax._solve.grid`): against an independent event-driven SciPy reference, holding still, gradients through the event
 times against finite differences, and the stepping rules."""
 
 import equinox as eqx
@@ -11,7 +11,7 @@ from helpers import NumpyPlant, np_stick_slip_run
 
 import pamjax as pj
 from pamjax import PamjaxInputError, presets
-from pamjax._simulate import solve
+from pamjax._solve.simulate import solve
 
 MODEL = presets.mas10_system("pwm", friction="karnopp")
 TRIANGLE = pj.Triangle(0.05, 0.95, 0.5)  # up and down in 2 s: stick at both ends, slip between

@@ -6,9 +6,9 @@ import pytest
 from scipy.optimize import brentq
 
 import pamjax
-from pamjax._linearise import equilibrium, linearise
-from pamjax._regulated import RegulatorSystem
-from pamjax._regulator import BAR, FLOW_UNIT, FeedbackRegulator, LinearRegulator
+from pamjax._physics.regulator import BAR, FLOW_UNIT, FeedbackRegulator, LinearRegulator
+from pamjax._solve.linearise import equilibrium, linearise
+from pamjax._systems.regulated import RegulatorSystem
 
 TAU1, TAU2 = 0.041, 0.023  # eq. 6
 

@@ -1,10 +1,11 @@
-"""The host-side Levenberg-Marquardt of `pamjax.fit` (`pamjax._lm`) on problems with known answers, its stopping
-reasons, and the residual diagnostics (`pamjax._diagnostics`)."""
+"""The host-side Levenberg-Marquardt of `pamjax.fit` (`pamjax._fit.lm`) on problems with known answers, its stopping
+reasons, and the residual diagnostics (`pamjax._fit.diagnostics`)."""
 
 import numpy as np
 import pytest
 
-from pamjax import _diagnostics, _lm
+from pamjax._fit import diagnostics as _diagnostics
+from pamjax._fit import lm as _lm
 
 
 def _run(residuals, jacobian, theta, max_steps=200, **kw):

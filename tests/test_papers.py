@@ -10,8 +10,8 @@ import json
 
 import pytest
 
-from pamjax import _reproduce
-from pamjax._cli import main
+from pamjax._cli import reproduce as _reproduce
+from pamjax._cli.main import main
 
 SCRIPTS = {p.stem: p for p in _reproduce.scripts()}
 # p000_10_control scores the bench's E5 runs only when they are there

@@ -14,7 +14,7 @@ import pytest
 
 import pamjax
 from pamjax import presets
-from pamjax._simulate import solve
+from pamjax._solve.simulate import solve
 
 TS = jnp.linspace(0.0, 0.5, 51)
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import pamjax as pj
-from pamjax._pid import PIDState
-from pamjax._system import MuscleState
+from pamjax._control.pid import PIDState
+from pamjax._systems.muscle import MuscleState
 
 PERIOD = 0.02  # s, 50 Hz PWM
 

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 import pamjax
 from pamjax import presets
-from pamjax._simulate import solve
+from pamjax._solve.simulate import solve
 
 SETTINGS = settings(max_examples=12, deadline=None, derandomize=True)
 

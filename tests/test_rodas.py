@@ -1,4 +1,4 @@
-"""Rodas5 (pamjax._rodas): the Rosenbrock solver's order, stiff stability, dense output, and the stiff plant it exists
+"""Rodas5 (pamjax._solve.rodas): the Rosenbrock solver's order, stiff stability, dense output, and the stiff plant it exists
 for, against independent references (SciPy DOP853, finite differences)."""
 
 import diffrax as dfx
@@ -11,8 +11,8 @@ from scipy.integrate import solve_ivp
 
 import pamjax
 from pamjax import presets
-from pamjax._rodas import small_inverse, small_inverse_lanes
-from pamjax._simulate import solve
+from pamjax._solve.rodas import small_inverse, small_inverse_lanes
+from pamjax._solve.simulate import solve
 
 
 def _forced_van_der_pol(t, y, args):

@@ -17,7 +17,7 @@ SCRIPT = textwrap.dedent(
     import jax.numpy as jnp
     import pamjax
     from pamjax import presets
-    from pamjax import _sweep
+    from pamjax._sweep import sweep as _sweep
 
     assert len(jax.devices()) == 2, jax.devices()
     system = presets.mas10_system(valve="averaged")

@@ -12,7 +12,7 @@ from scipy.integrate import solve_ivp
 
 import pamjax
 from pamjax import presets
-from pamjax._simulate import solve
+from pamjax._solve.simulate import solve
 
 
 def _plant(valve):

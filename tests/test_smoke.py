@@ -19,8 +19,8 @@ def test_tank_inflation_stays_between_atmosphere_and_supply():
 def test_pamjax_demo_runs_paper_000s_experiments_and_writes_its_figure(tmp_path, capsys):
     # `pamjax demo` (issue 2, item 11): tank inflation/deflation at 25/50/75 % duty with both valves, the triangle
     # runs at 0.08 and 0.25 Hz with 9.6 kg; every run physical, the two valve models close, a figure written.
-    from pamjax._cli import main
-    from pamjax._demo import run_experiments
+    from pamjax._cli.demo import run_experiments
+    from pamjax._cli.main import main
 
     assert main(["demo", "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from pamjax import _smooth as sm
+from pamjax._physics import smooth as sm
 
 X = np.concatenate([np.linspace(-3.0, 3.0, 601), [0.0, 1e-300, -1e-300]])
 

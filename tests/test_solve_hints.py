@@ -1,5 +1,5 @@
 """Legal inputs that once failed with a hint blaming `max_steps` (issue 15): they solve, or fail with the real cause
-and the setting that fixes it (`pamjax._solve_hints`), and following that advice works.
+and the setting that fixes it (`pamjax._solve.hints`), and following that advice works.
 
 - the exact-edge valve at duty 0 and 1 (fictitious edges: jump times one rounding error apart) and on a triangle
   (a step clipped to a hair before a jump, then below `dtmin`): solve, and agree with the PWM-synchronous grid;
@@ -15,7 +15,7 @@ import pytest
 
 import pamjax
 from pamjax import PamjaxSolveError, presets
-from pamjax._solve_hints import default_max_steps
+from pamjax._solve.hints import default_max_steps
 
 
 @pytest.mark.parametrize("signal, horizon", [(pamjax.Constant(0.0), 2.5), (pamjax.Constant(1.0), 2.5),

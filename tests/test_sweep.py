@@ -9,7 +9,7 @@ import pytest
 
 import pamjax
 from pamjax import presets
-from pamjax._sweep import Final, Harmonic, Mean, sweep
+from pamjax._sweep.sweep import Final, Harmonic, Mean, sweep
 
 TS = np.linspace(0.0, 1.0, 21)
 
@@ -114,7 +114,7 @@ def test_chunks_equal_one_call_and_report_progress(averaged):
 
 
 def test_default_chunk_size_per_platform():
-    from pamjax._sweep import default_chunk_size
+    from pamjax._sweep.sweep import default_chunk_size
 
     assert default_chunk_size(100, 102, "cpu") == 100
     assert default_chunk_size(100_000, 102, "cpu") == 8192
@@ -159,8 +159,8 @@ def test_bad_input_is_named(averaged, kwargs, match):
 
 
 def test_flow_surface_equals_cycle_average_and_cli_writes_outputs(tmp_path):
-    from pamjax._cli import main
-    from pamjax._sweep_maps import flow_surface
+    from pamjax._cli.main import main
+    from pamjax._sweep.maps import flow_surface
 
     valve, air = presets.mas10_valve(), pamjax.Air()
     u, p = np.array([0.05, 0.5, 0.95]), np.array([1.5e5, 4e5])

@@ -1,4 +1,4 @@
-"""The sweep recipes users map an actuator with (`pamjax._sweep_maps`): the steady-state map shows paper 000's
+"""The sweep recipes users map an actuator with (`pamjax._sweep.maps`): the steady-state map shows paper 000's
 10-90 % dead band and equals a direct `simulate`; the frequency response equals a least-squares sinusoid fit to a
 direct `simulate` and falls with frequency. Short horizons; the oracle is independent of `sweep` (adaptive diffrax
 solve, NumPy least squares on its own time grid)."""
@@ -8,7 +8,7 @@ import pytest
 
 import pamjax
 from pamjax import presets
-from pamjax._sweep_maps import frequency_response, steady_state_map
+from pamjax._sweep.maps import frequency_response, steady_state_map
 
 HORIZON, WINDOW = 2.0, 0.4  # s: 100 PWM periods, the last 20 averaged (a whole number of 50 Hz periods)
 

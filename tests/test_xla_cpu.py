@@ -10,8 +10,9 @@ import jax.numpy as jnp
 import pytest
 
 import pamjax
-from pamjax import _xla_cpu, presets
-from pamjax._simulate import solve
+from pamjax import presets
+from pamjax._core import xla_cpu as _xla_cpu
+from pamjax._solve.simulate import solve
 
 ENTRY = f"{_xla_cpu.KEY}={_xla_cpu.THRESHOLD_BYTES}"
 

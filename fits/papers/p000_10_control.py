@@ -13,8 +13,8 @@ import numpy as np
 
 import pamjax as pj
 from pamjax import presets
-from pamjax._control import ClosedLoop, simulate_closed_loop
-from pamjax._reproduce import Result, Row, bench_folder, plt, save
+from pamjax._cli.reproduce import Result, Row, bench_folder, plt, save
+from pamjax._control.closed_loop import ClosedLoop, simulate_closed_loop
 
 PAPER = "000"
 TITLE = "PI position control (Figs. 15-16), derivative term with measurement noise (text)"
@@ -101,6 +101,6 @@ def run(out, quick=False):
 
 
 if __name__ == "__main__":
-    from pamjax._reproduce import script_main
+    from pamjax._cli.reproduce import script_main
 
     script_main(__name__)

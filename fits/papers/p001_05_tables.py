@@ -15,8 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from pamjax import presets
-from pamjax._regulator import BAR, PAPER001_AIR
-from pamjax._reproduce import Result, Row, fits_module, plt, save
+from pamjax._cli.reproduce import Result, Row, fits_module, plt, save
+from pamjax._physics.regulator import BAR, PAPER001_AIR
 
 PAPER = "001"
 TITLE = "Sonic conductance and critical ratio from tank tests (Tables 1-2, eq. 1-2, 12-14, Figs. 13-14)"
@@ -137,6 +137,6 @@ def run(out, quick=False):
 
 
 if __name__ == "__main__":
-    from pamjax._reproduce import script_main
+    from pamjax._cli.reproduce import script_main
 
     script_main(__name__)

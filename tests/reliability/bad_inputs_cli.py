@@ -47,7 +47,7 @@ T = np.round(np.arange(51) * 0.01, 10)  # s: 0.5 s at 100 Hz
 def cli(*argv):
     """Run `pamjax argv` in this process: (exit status, stdout + stderr). An exception escaping `main` is what a
     user sees as a traceback: status None."""
-    from pamjax._cli import main
+    from pamjax._cli.main import main
 
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
@@ -196,7 +196,7 @@ def _signal(folder, signum, code):
 
 def _fallback(folder):
     """Writing fit.json fails at the end (disk full): the result goes to a named fallback file."""
-    from pamjax import _cli_out
+    from pamjax._cli import out as _cli_out
 
     folder = pathlib.Path(folder)
     real = _cli_out.os.replace
@@ -219,7 +219,7 @@ def _fallback(folder):
 
 
 def _locked(folder):
-    from pamjax._cli_out import OutputFolder
+    from pamjax._cli.out import OutputFolder
 
     with OutputFolder(pathlib.Path(folder) / "out", "pamjax fit", ["fit.json"]):
         return fit_run(folder)
@@ -317,7 +317,7 @@ def _resume_forgotten(folder):
 
 
 def _read_only(folder):
-    from pamjax import _cli_out
+    from pamjax._cli import out as _cli_out
 
     def refuse(fd):
         raise OSError(errno.EROFS, "Read-only file system")

@@ -14,7 +14,7 @@ import numpy as np
 
 import pamjax
 from pamjax import presets
-from pamjax._cli_fit import load_config
+from pamjax._cli.fit import load_config
 
 T = np.linspace(0.0, 1.0, 5)
 P = np.full(5, 3e5)  # Pa, absolute

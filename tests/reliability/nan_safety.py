@@ -11,8 +11,8 @@ import numpy as np
 
 import pamjax
 from pamjax import presets
-from pamjax._simulate import solve
-from pamjax._system import MuscleState, TankState
+from pamjax._solve.simulate import solve
+from pamjax._systems.muscle import MuscleState, TankState
 
 
 def _random_states(rng, n):

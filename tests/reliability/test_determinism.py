@@ -13,7 +13,7 @@ import numpy as np
 
 import pamjax
 from pamjax import presets
-from pamjax._simulate import solve
+from pamjax._solve.simulate import solve
 
 TS = np.linspace(0.0, 0.5, 11)
 

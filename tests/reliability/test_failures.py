@@ -9,7 +9,7 @@ import pytest
 
 import pamjax
 from pamjax import presets
-from pamjax._simulate import result_message, solve
+from pamjax._solve.simulate import result_message, solve
 
 TS = jnp.linspace(0.0, 0.2, 11)
 

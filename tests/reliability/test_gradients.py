@@ -1,7 +1,7 @@
 """Gradients through the whole smooth-PWM muscle simulation against central finite differences.
 
 One seeded parameter set here (CI); `benchmarks/reliability.py` runs 20 and reports the pass fraction.
-Tolerance: 1e-4 relative on scaled sensitivities θ ∂L/∂θ (see `pamjax._gradcheck.gradient_check`) at solver
+Tolerance: 1e-4 relative on scaled sensitivities θ ∂L/∂θ (see `pamjax._solve.gradcheck.gradient_check`) at solver
 rtol = atol = 1e-10, for every physical parameter including the duty and the switching delays; forward and reverse
 mode agree within 1e-6. Numerical smoothing widths (edge_width, velocity_width, slack_width, end-stop width) are
 settings, not physical parameters: their finite differences are dominated by the adaptive step pattern.
@@ -11,8 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from pamjax._gradcheck import gradient_check
-from pamjax._simulate import solve
+from pamjax._solve.gradcheck import gradient_check
+from pamjax._solve.simulate import solve
 
 from .helpers import NUMERICAL_SETTINGS, random_pwm_problem
 

@@ -5,8 +5,8 @@ CI runs ~1,000 inputs; `benchmarks/reliability.py` runs 10,000."""
 import jax.numpy as jnp
 import numpy as np
 
-from pamjax import _smooth as sm
-from pamjax._gas import ellipse_flow_fraction
+from pamjax._physics import smooth as sm
+from pamjax._physics.gas import ellipse_flow_fraction
 
 from .nan_safety import trajectory_counts, vector_field_counts
 

@@ -1,0 +1,1 @@
+"""The `pamjax` command line: demo, fit, simulate, sweep, reproduce."""

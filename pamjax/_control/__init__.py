@@ -1,0 +1,1 @@
+"""Control: sampled-data controllers and closed loops, PID, antagonistic joint control runs."""

@@ -1,0 +1,434 @@
+"""Experiments: what a fit compares. Each one turns a model (the object whose parameters are fitted, e.g. a
+`MuscleSystem`) into predictions of recorded channels, and its residuals (model − data) / scale.
+
+- `Experiment`: a dynamic test: the system built from the model (the model itself, or a `TankFromModel` for a
+  constant-volume valve test sharing the model's valve), a command signal, a `Recording`, the channels to compare and
+  their scales (noise level, in the channel's unit), and the initial state.
+- `ForceMapExperiment`: static isometric forces F(x, p) compared with `muscle.static_force` (no ODE); slack points
+  (measured 0 N) only penalise a positive model force.
+
+Experiments of different systems share parameters through the model (all valve tests use `model.valve`).
+"""
+
+import copy
+import hashlib
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._core.errors import PamjaxInputError
+from .._physics.signals import AbstractSignal
+from .._solve.simulate import _flat_scaled, fixed_grid_size, fixed_trajectory, resolve_stepping, solve, validate
+from .._solve.synchronous import solve_runs
+from .._systems.muscle import AbstractSystem, TankSystem
+from .recording import _MIN_ABSOLUTE_PA, Recording, warn_filtered
+
+
+class SameSystem(eqx.Module):
+    """The model is the system of the experiment."""
+
+    def __call__(self, model):
+        return model
+
+
+class TankFromModel(eqx.Module):
+    """A constant-volume tank of `volume` [m³] fed by the model's valve (paper 000's valve tests)."""
+
+    volume: jax.Array = eqx.field(converter=jnp.asarray)  # m³
+    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.4)  # -
+
+    def __call__(self, model):
+        return TankSystem(valve=model.valve, volume=self.volume, air=model.air, polytropic_index=self.polytropic_index)
+
+
+class _Constant:
+    """A NumPy array held as a static (compile-time) value: hashed and compared by content."""
+
+    def __init__(self, array):
+        self.array = np.array(array, copy=True)
+        self.array.setflags(write=False)
+        self._hash = hash((self.array.shape, self.array.tobytes()))
+
+    def __hash__(self):
+        return self._hash
+
+    def __eq__(self, other):
+        return isinstance(other, _Constant) and np.array_equal(self.array, other.array)
+
+    def __repr__(self):  # process-independent (fingerprints of resumed fits compare it)
+        digest = hashlib.sha256(np.ascontiguousarray(self.array).tobytes()).hexdigest()[:16]
+        return f"_Constant(shape={self.array.shape}, sha256={digest})"
+
+
+def _default_scale(values):
+    """1 % of the channel's range (so a residual of 1 is 1 % of range), or 1 for a flat channel."""
+    span = float(np.ptp(values)) if values.size else 0.0
+    return 0.01 * span if span > 0 else 1.0
+
+
+class Experiment(eqx.Module):
+    """A dynamic experiment: simulate `build(model)` driven by `signal` and compare `channels` with `recording`.
+
+    **Arguments:**
+
+    - `recording`: a `Recording` (times [s], channels in SI, ABSOLUTE pressure).
+    - `signal`: the command (e.g. `Constant(0.25)`, `Triangle(0.05, 0.95, 0.08)`, `Sampled(...)`).
+    - `channels`: names compared (default: the recording's channels the system outputs, command excluded).
+    - `scales`: dict channel → scale in the channel's unit (the noise standard deviation, if known); default 1 % of
+      the channel's range.
+    - `build`: model → system (`SameSystem()` by default; `TankFromModel(volume)` for valve tests).
+    - `initial`: keyword arguments of `system.initial_state` (e.g. `dict(pressure=6.5e5)`); default: its default
+      (atmospheric, at rest in equilibrium). `t0`: start time [s] (default the first sample).
+    - `name`; `rtol`, `atol`, `max_steps`, `dt0`: solver settings of the adaptive solve (see `simulate`); the
+      tolerances default to 1e-9 (tighter than `simulate`'s 1e-6, so that the residuals are smooth enough for
+      Levenberg-Marquardt near the optimum; see the comment at the default).
+    - `stepping`: "auto" (default: "pwm" when the system's valve switches, else "grid": fixed RK4 steps of 1 ms
+      with events located inside the step for stick-slip friction), "adaptive" (diffrax at `rtol`/`atol`: for a
+      stiff system), "pwm" or "grid". "pwm" integrates on the PWM-synchronous fixed RK4 grid (`simulate(stepping="pwm")`:
+      exact edges, `substeps` nodes per period plus the edges), so the residuals are smooth, deterministic functions
+      of every parameter; an adaptive solve of a switching valve changes its step pattern with the parameters, and
+      the cost jumps by O(1) between neighbouring trial points (docs/fitting.md), which stalls Levenberg-Marquardt.
+      The grid is sized from the valve's PWM frequency in the model the experiment is first used with.
+    - `validation_fraction`: the last fraction of the samples kept out of the fit (paper 001: 0.4), reported as
+      validation error.
+    """
+
+    times: jax.Array
+    data: dict
+    weights: dict  # 1/scale where the sample is used, 0 where masked (NaN)
+    scales: dict = eqx.field(static=True)
+    noise_channels: tuple = eqx.field(static=True)  # channels whose scale the user gave (their noise level)
+    signal: AbstractSignal
+    build: eqx.Module
+    initial: dict
+    t0: jax.Array
+    split_time: jax.Array
+    name: str = eqx.field(static=True)
+    channels: tuple = eqx.field(static=True)
+    rtol: float = eqx.field(static=True)
+    atol: float = eqx.field(static=True)
+    max_steps: int = eqx.field(static=True)
+    dt0: float | None = eqx.field(static=True)
+    stepping: str = eqx.field(static=True)
+    substeps: int = eqx.field(static=True)
+    span: tuple = eqx.field(static=True)  # (t0, t_end) [s] as floats, to size the PWM grid
+    host_times: "_Constant" = eqx.field(static=True)  # the times as a NumPy array (see `predict`)
+    num_periods: int | None = eqx.field(static=True)
+    lowpass_hz: float | None = eqx.field(static=True)  # the recording's low-pass cut-off, if it was filtered
+
+    def __init__(
+        self,
+        recording: Recording,
+        signal: AbstractSignal,
+        channels=None,
+        scales=None,
+        build=None,
+        initial=None,
+        t0=None,
+        name=None,
+        # 1e-9, not simulate's 1e-6: an adaptive solve's cost jumps at the tolerance level wherever its step pattern
+        # changes with the parameters; in the ill-conditioned valleys of a joint fit (force law, friction and volume
+        # trade off) that noise outweighs the decrease Levenberg-Marquardt can still make, and the fit stalls. The
+        # averaged-valve benchmark fit (benchmarks/fit.py) stalls at 1e-6 and 1e-8 with F_c 35 % off (cost 1137 and
+        # 1148) and converges at 1e-9 (cost 1110, every parameter within 1.6 standard errors of the truth).
+        rtol=1e-9,
+        atol=1e-9,
+        max_steps=100_000,
+        dt0=None,
+        validation_fraction=0.0,
+        stepping="auto",
+        substeps=16,
+    ):
+        if not isinstance(recording, Recording):
+            raise PamjaxInputError(f"recording must be a pamjax.Recording, got {type(recording)}")
+        if not isinstance(signal, AbstractSignal):
+            raise PamjaxInputError(f"signal must be a pamjax signal (Constant, Triangle, ...), got {type(signal)}")
+        if channels is None:
+            channels = [c for c in recording.channels if c in ("pressure", "position", "velocity", "force")]
+        channels = tuple(channels)
+        if not channels:
+            raise PamjaxInputError(
+                f"experiment {name!r}: no channels to compare; recording has {sorted(recording.channels)}"
+            )
+        for c in channels:
+            recording[c]  # error naming the valid channels
+        scales = dict(scales or {})
+        for c in scales:
+            if c not in channels:
+                raise PamjaxInputError(f"scales names channel {c!r}, which is not compared; channels are {channels}")
+        self.scales = {c: float(scales.get(c, _default_scale(recording[c][recording.mask[c]]))) for c in channels}
+        self.noise_channels = tuple(c for c in channels if c in scales)
+        for c, s in self.scales.items():
+            if not (np.isfinite(s) and s > 0):
+                raise PamjaxInputError(f"scales[{c!r}] must be > 0 (the channel's noise level), got {s}")
+        if not 0.0 <= float(validation_fraction) < 1.0:
+            raise PamjaxInputError(f"validation_fraction must be in [0, 1), got {validation_fraction}")
+        t = recording.t
+        self.times = jnp.asarray(t)
+        self.data = {c: jnp.asarray(np.where(recording.mask[c], recording[c], 0.0)) for c in channels}
+        self.weights = {c: jnp.asarray(recording.mask[c] / self.scales[c]) for c in channels}
+        self.signal = signal
+        self.build = SameSystem() if build is None else build
+        self.initial = {k: jnp.asarray(v, dtype=float) for k, v in (initial or {}).items()}
+        self.t0 = jnp.asarray(t[0] if t0 is None else t0, dtype=float)
+        self.split_time = jnp.asarray(t[0] + (1.0 - float(validation_fraction)) * (t[-1] - t[0]) + 1e-12, dtype=float)
+        self.name = recording.name if name is None else str(name)
+        self.channels = channels
+        self.rtol, self.atol, self.max_steps, self.dt0 = rtol, atol, int(max_steps), dt0
+        if stepping not in ("auto", "adaptive", "pwm"):
+            raise PamjaxInputError(f"stepping must be 'auto', 'adaptive' or 'pwm', got {stepping!r}")
+        if not (isinstance(substeps, int) and substeps >= 2):
+            raise PamjaxInputError(f"substeps must be an int >= 2 (RK4 nodes per PWM period), got {substeps!r}")
+        self.stepping, self.substeps = stepping, substeps
+        self.lowpass_hz = recording.lowpass_hz
+        self.span = (float(self.t0), float(t[-1]))
+        self.host_times = _Constant(np.asarray(t, dtype=float))
+        self.num_periods = None
+
+    def _stepping(self, system):
+        """The stepping of this experiment's solve. "auto": the PWM-synchronous grid for a switching valve, the
+        uniform grid otherwise (hybrid or smooth): fixed grids give residuals that are smooth, deterministic functions
+        of every parameter (an adaptive solve's step pattern changes with them and its cost jumps at the tolerance
+        level), compile to small loops, and keep in the persistent compilation cache. "adaptive" (diffrax, at the
+        experiment's rtol/atol) remains for stiff systems a 1 ms RK4 grid cannot hold."""
+        if self.stepping == "auto":
+            return "pwm" if getattr(system.valve, "switches", False) else "grid"
+        try:
+            return resolve_stepping(system, self.stepping)
+        except PamjaxInputError as err:
+            raise PamjaxInputError(f"experiment {self.name!r}: {err}") from None
+
+    def _grid_size(self, system, stepping):
+        if self.num_periods is not None:
+            return self.num_periods
+        return fixed_grid_size(system, stepping, *self.span)  # concrete model; traced: bind(model) first
+
+    def bind(self, model):
+        """This experiment with its fixed grid sized for `model` (concrete): the number of PWM periods (or grid
+        steps) covering the recording. A no-op for adaptive stepping or when already sized."""
+        system = self.build(model)
+        stepping = self._stepping(system)
+        if self.num_periods is not None or stepping == "adaptive":
+            return self
+        bound = copy.copy(self)
+        object.__setattr__(bound, "num_periods", fixed_grid_size(system, stepping, *self.span))
+        return bound
+
+    def check(self, model):
+        """Concrete validation (signal range, times, initial state) before any traced solve."""
+        system = self.build(model)
+        if not isinstance(system, AbstractSystem):
+            raise PamjaxInputError(
+                f"experiment {self.name!r}: build(model) must give a pamjax system, got {type(system)}"
+            )
+        try:
+            y0 = system.initial_state(**self.initial)
+        except TypeError as err:
+            raise PamjaxInputError(
+                f"experiment {self.name!r}: bad `initial` keys {sorted(self.initial)}: {err}"
+            ) from err
+        validate(system, self.signal, self.times, y0, self.t0)
+        frequency = getattr(system.valve, "pwm_frequency", None)
+        if self.lowpass_hz is not None and frequency is not None and self.lowpass_hz < float(frequency):
+            warn_filtered(self.name, self.lowpass_hz, float(frequency), stacklevel=4)
+        # Which channels the system has: its outputs, traced (not solved, not compiled).
+        outputs = jax.eval_shape(lambda s, y: s.outputs(self.t0, y, self.signal(self.t0)), system, y0)
+        for c in self.channels:
+            if c not in outputs and c != "command":
+                raise PamjaxInputError(f"experiment {self.name!r}: the system has no output {c!r}")
+
+    def predict(self, model):
+        """Model channels at the recording's times (traceable): dict channel → array."""
+        system = self.build(model)
+        y0 = system.initial_state(**self.initial)
+        stepping = self._stepping(system)
+        if stepping != "adaptive":
+            traj = solve(system, self.signal, self.times, y0, self.t0, stepping=stepping, substeps=self.substeps,
+                         num_periods=self._grid_size(system, stepping))
+            return {c: getattr(traj, c) for c in traj.channels() if getattr(traj, c) is not None}
+        # The output times and start as compile-time constants (the recording's own, exactly): diffrax then checks
+        # them at trace time instead of with a run-time host callback, and a program with a host callback cannot be
+        # kept in JAX's persistent compilation cache.
+        traj = solve(
+            system,
+            self.signal,
+            jnp.asarray(self.host_times.array),
+            y0,
+            jnp.asarray(self.span[0]),
+            rtol=self.rtol,
+            atol=self.atol,
+            max_steps=self.max_steps,
+            dt0=self.dt0,
+            adjoint="forward",
+        )
+        return {c: getattr(traj, c) for c in traj.channels() if getattr(traj, c) is not None}
+
+    def batch_key(self, model):
+        """Experiments with equal keys are integrated in one compiled loop (`predict_all`): fixed-grid stepping of
+        systems of one structure. None: solved on its own (adaptive stepping)."""
+        system = self.build(model)
+        stepping = self._stepping(system)
+        if stepping == "adaptive":
+            return None
+        return (stepping, self.substeps, jax.tree_util.tree_structure(system))
+
+    def residuals(self, model, part="identification"):
+        """(model − data) / scale for the compared channels, flattened; 0 at masked samples and at the samples of
+        the other part ("identification": t before the split, "validation": after it, "all")."""
+        return self.residuals_of(self.predict(model), part)
+
+    def layout(self):
+        """The residual vector's blocks, in order: per channel (name, scale, data, used, identification) with the
+        data and two masks over its samples (used: not masked; identification: before the validation split)."""
+        ident = np.asarray(self.times) <= float(self.split_time)
+        return [(c, self.scales[c], np.asarray(self.data[c]), np.asarray(self.weights[c]) > 0, ident)
+                for c in self.channels]
+
+    def residuals_of(self, pred, part="identification"):
+        """`residuals` from this experiment's predictions `pred` (dict channel → array at `times`)."""
+        keep = {"identification": self.times <= self.split_time, "validation": self.times > self.split_time}.get(
+            part, jnp.ones_like(self.times, dtype=bool)
+        )
+        return jnp.concatenate([(pred[c] - self.data[c]) * self.weights[c] * keep for c in self.channels])
+
+
+class ForceMapExperiment(eqx.Module):
+    """Static force map: measured muscle forces [N] at positions x [m] and ABSOLUTE pressures [Pa].
+
+    Residual (F_model − F) / scale at loaded points; at slack points (measured F ≤ `slack_force`, default 0 N) only a
+    positive model force counts: max(F_model, 0) / scale ("force ≤ 0 → 0", the muscle cannot push).
+
+    **Arguments:** `positions` [m], `pressures` [Pa abs], `forces` [N], `scale` [N] (default 1 % of the force range),
+    `muscle`: model → muscle (default `model.muscle`, or the model itself if it is a `Muscle`), `name`.
+    """
+
+    positions: jax.Array
+    pressures: jax.Array
+    forces: jax.Array
+    slack: jax.Array
+    scale: float = eqx.field(static=True)
+    name: str = eqx.field(static=True)
+    channels: tuple = eqx.field(static=True, default=("force",))
+
+    def __init__(self, positions, pressures, forces, scale=None, slack_force=0.0, name="force_map"):
+        x, p, f = (np.asarray(a, dtype=float) for a in (positions, pressures, forces))
+        if not (x.shape == p.shape == f.shape and x.ndim == 1 and x.size > 0):
+            raise PamjaxInputError(
+                f"positions, pressures, forces must be 1-D of one length, got {x.shape}, {p.shape}, {f.shape}"
+            )
+        for label, a in (("positions", x), ("pressures", p), ("forces", f)):
+            if not np.all(np.isfinite(a)):
+                raise PamjaxInputError(f"{label} is NaN/inf at row {int(np.argmin(np.isfinite(a)))}")
+        if np.min(p) < _MIN_ABSOLUTE_PA:  # half an atmosphere; a vented muscle reads about 101325 Pa absolute
+            raise PamjaxInputError(
+                f"pressures must be ABSOLUTE [Pa]; the lowest is {np.min(p):.4g} Pa (row {int(np.argmin(p))}), below "
+                "half an atmosphere: these look like gauge or bar (add 101325 Pa to gauge readings)"
+            )
+        self.positions, self.pressures, self.forces = jnp.asarray(x), jnp.asarray(p), jnp.asarray(f)
+        self.slack = jnp.asarray(f <= slack_force)
+        self.scale = float(0.01 * np.ptp(f) if scale is None else scale)
+        if not self.scale > 0:
+            raise PamjaxInputError(f"scale must be > 0 [N], got {self.scale}")
+        self.name = str(name)
+        self.channels = ("force",)
+
+    @staticmethod
+    def _muscle(model):
+        return getattr(model, "muscle", model)
+
+    def check(self, model):
+        if not hasattr(self._muscle(model), "static_force"):
+            raise PamjaxInputError(f"{self.name}: the model has no muscle (needs model.muscle or a Muscle)")
+
+    def predict(self, model):
+        muscle = self._muscle(model)
+        air = getattr(model, "air", None)
+        if air is None:
+            from .._physics.gas import Air
+
+            air = Air()
+        f = jax.vmap(lambda x, p: muscle.static_force(x, p, air))(self.positions, self.pressures)
+        return {"force": f}
+
+    def batch_key(self, model):
+        return None
+
+    def layout(self):
+        ones = np.ones(self.forces.shape, dtype=bool)
+        return [("force", self.scale, np.asarray(self.forces), ones, ones)]
+
+    def residuals(self, model, part="identification"):
+        return self.residuals_of(self.predict(model), part)
+
+    def residuals_of(self, pred, part="identification"):
+        del part
+        f = pred["force"]
+        return jnp.where(self.slack, jnp.maximum(f, 0.0), f - self.forces) / self.scale
+
+
+def predict_all(model, experiments):
+    """Every experiment's predictions (traceable), in order. Fixed-grid experiments whose systems share one
+    structure (e.g. six tank tests, or a muscle's triangle runs) are integrated in ONE loop (`solve_runs`), so the
+    compiled program does not grow with their number."""
+    preds = [None] * len(experiments)
+    groups = {}
+    for i, e in enumerate(experiments):
+        key = e.batch_key(model)
+        if key is None:
+            preds[i] = e.predict(model)
+        else:
+            groups.setdefault(key, []).append(i)
+    for (stepping, substeps, _), members in groups.items():
+        exps = [experiments[i] for i in members]
+        for i, pred in zip(members, _predict_runs(model, exps, stepping, substeps)):
+            preds[i] = pred
+    return preds
+
+
+@eqx.filter_jit
+def _predictions(model, exps):
+    return predict_all(model, exps)
+
+
+def predictions(model, experiments):
+    """`model`'s channels at every experiment's times (list of dicts channel → NumPy array), in one compiled
+    program (experiments of one kind share one loop, as in a fit). Checks the experiments first."""
+    from .._core.errors import require_float64
+    from .parameters import strong_types
+
+    require_float64("pamjax.predictions")
+    experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
+    for e in experiments:
+        e.check(model)
+    model = strong_types(model)
+    exps = tuple(e.bind(model) if hasattr(e, "bind") else e for e in experiments)
+    return [jax.tree_util.tree_map(np.asarray, p) for p in _predictions(model, exps)]
+
+
+def _predict_runs(model, exps, stepping, substeps):
+    systems = [e.build(model) for e in exps]
+    y0s = [s.initial_state(**e.initial) for s, e in zip(systems, exps)]
+    flats = [_flat_scaled(s, y0) for s, y0 in zip(systems, y0s)]
+    _, flat_scale, unravel = flats[0]
+    sizes = [e._grid_size(s, stepping) for s, e in zip(systems, exps)]
+    runs = solve_runs(systems, [e.signal for e in exps], [e.times for e in exps], [f[0] for f in flats], unravel,
+                      flat_scale, [e.t0 for e in exps], stepping=stepping, substeps=substeps, sizes=sizes)
+    preds = []
+    for system, e, (states, num_steps, finite) in zip(systems, exps, runs):
+        traj = fixed_trajectory(system, e.signal, e.times, e.t0, states, num_steps, finite, stepping)
+        preds.append({c: getattr(traj, c) for c in traj.channels() if getattr(traj, c) is not None})
+    return preds
+
+
+@eqx.filter_jit
+def _predict(model, experiment):
+    return experiment.predict(model)
+
+
+def predict(model, experiment):
+    """`experiment.predict(model)`, jitted (one compile per experiment structure, shared by check and reports)."""
+    if hasattr(experiment, "bind"):
+        experiment = experiment.bind(model)
+    return _predict(model, experiment)

@@ -1,0 +1,495 @@
+"""`fit`: least-squares identification of named parameters of a model against experiments.
+
+Workflow only: the physics lives in the components; the residuals come from `Experiment.residuals`; the iteration
+is Levenberg-Marquardt on the host (`pamjax._fit.lm`) around two compiled functions per problem structure, the residuals
+and their forward-mode Jacobian; the statistics and the mismatch diagnostics are in `pamjax._fit.diagnostics`.
+"""
+
+import contextlib
+import dataclasses
+import json
+import math
+import pathlib
+import threading
+import time
+import warnings
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._core.errors import PamjaxInputError, require_float64
+from . import lm as _lm
+from .diagnostics import channel_errors, covariance, identifiability, mismatch
+from .experiment import predict_all, predictions
+from .fingerprint import check_resume, encode, fingerprint
+from .parameters import PamjaxIdentifiabilityWarning, ParameterSpace, strong_types
+
+
+@dataclasses.dataclass
+class FitResult:
+    """The outcome of `fit`. Physical values in SI units (F_max as a0…a4 [N/mⁱ], eq. 13 as m1…m9).
+
+    - `labels`, `paths` (the `free` spec), `values`, `initial_values`, `standard_errors` (inf for parameters in a
+      non-identifiable combination), `correlation` (matrix).
+    - `cost` ½Σr² at the end (r = (model − data)/scale), `initial_cost`, `iterations` (trial steps),
+      `accepted_steps`, `status` ('converged', 'at bound', 'stalled', 'max_steps'), `converged`, `message` (why it
+      stopped).
+    - `channel_errors`: experiment → channel → rmse, max_error, range, rmse_percent, max_error_percent (of the
+      data's range, as paper 000 reports them), the same with `validation_` for the held-out part, and the residual
+      diagnostics of `pamjax._fit.diagnostics` (noise, rmse_over_noise, autocorrelation, se_inflation).
+    - `mismatch`: True when some channel's residuals are not noise (the standard errors then understate the
+      uncertainty; the note is in `warnings`).
+    - `non_identifiable`: lists of labels whose combination the data do not fix; `warnings`.
+    - `history`: per iteration [step, cost at the current point, damping λ, accepted].
+    - `fit_s`, `compile_s`: wall time of the fit without compilation, and the compilation (each compiled
+      function's first call less its median later call).
+    - `model`: the fitted model (not stored in JSON; `apply(base_model)` rebuilds it); `predictions`: experiment →
+      channel → the fitted model at the recording's times (NaN where a sample was masked; not stored in JSON).
+    """
+
+    labels: list
+    paths: list
+    values: list
+    initial_values: list
+    standard_errors: list
+    correlation: list
+    cost: float
+    initial_cost: float
+    iterations: int
+    accepted_steps: int
+    status: str
+    converged: bool
+    message: str
+    channel_errors: dict
+    mismatch: bool
+    non_identifiable: list
+    warnings: list
+    history: list
+    fit_s: float
+    compile_s: float
+    num_residuals: int
+    model: object = dataclasses.field(default=None, repr=False, compare=False)
+    predictions: dict = dataclasses.field(default=None, repr=False, compare=False)
+
+    def to_dict(self):
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if f.name not in ("model", "predictions")}
+
+    @classmethod
+    def from_dict(cls, d):
+        d = dict(d)
+        d.setdefault("message", d.get("status", ""))  # results written before these fields existed
+        d.setdefault("mismatch", False)
+        return cls(**d)
+
+    def to_json(self, path, overwrite=False):
+        """Write the result (floats exact via repr); refuses to replace an existing file unless `overwrite`."""
+        path = pathlib.Path(path)
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(self.to_dict(), indent=1))
+        return path
+
+    @classmethod
+    def from_json(cls, path):
+        return cls.from_dict(json.loads(pathlib.Path(path).read_text()))
+
+    def apply(self, model):
+        """`model` with the fitted values set (the free spec in `paths`)."""
+        return ParameterSpace(model, self.paths).with_values(jnp.asarray(self.values))
+
+    def table(self, truth=None):
+        """Text table: label, (true), initial, fitted ± standard error."""
+        head = f"{'parameter':<44}" + (f"{'true':>14}" if truth is not None else "") + f"{'initial':>14}{'fitted':>14}"
+        rows = [head + f"{'± std err':>12}"]
+        for i, label in enumerate(self.labels):
+            t = "" if truth is None else f"{truth.get(label, float('nan')):>14.6g}"
+            rows.append(f"{label:<44}{t}{self.initial_values[i]:>14.6g}{self.values[i]:>14.6g}"
+                        f"{self.standard_errors[i]:>12.3g}")
+        return "\n".join(rows)
+
+
+
+def _residual_vector(space, theta, exps):
+    """Residuals of every sample (identification and validation parts; the host selects)."""
+    model = space.model(theta)
+    preds = predict_all(model, exps)
+    return jnp.concatenate([e.residuals_of(p, "all") for e, p in zip(exps, preds)])
+
+
+@eqx.filter_jit
+def _residuals(space, theta, exps):
+    """The residuals at θ (module level, `space` an argument: fits of one problem structure from different start
+    models share this compilation)."""
+    return _residual_vector(space, theta, exps)
+
+
+@eqx.filter_jit
+def _residuals_and_jacobian(space, theta, exps):
+    """(r, ∂r/∂θ) at θ, forward mode: one pass of the solves with a tangent per free parameter."""
+
+    def f(t):
+        r = _residual_vector(space, t, exps)
+        return r, r
+
+    jac, r = jax.jacfwd(f, has_aux=True)(theta)
+    return r, jac
+
+
+def evaluate(model, experiments):
+    """Per-channel errors of `model` against `experiments` without fitting: experiment → channel → rmse, max error,
+    % of range, noise, residual whiteness (as `FitResult.channel_errors`). One compiled program for all of them."""
+    experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
+    preds = predictions(model, experiments)
+    r = np.concatenate([np.asarray(e.residuals_of(p, "all")) for e, p in zip(experiments, preds)])
+    return channel_errors(experiments, r)
+
+
+@contextlib.contextmanager
+def errors_as_nan():
+    """Trace with equinox's run-time checks returning NaN instead of raising through a host callback.
+
+    diffrax checks its save times with `eqx.error_if` inside every solve, and equinox raises such errors from a host
+    callback; JAX refuses to write a program with a host callback to its persistent compilation cache, so every fit
+    with an adaptive solve would compile again in every run. A fit treats non-finite residuals as a failed trial
+    step, so NaN is the right failure here (the times themselves were checked on the host before the fit). The one
+    place pamjax sets a private name of a dependency: equinox reads `EQX_ON_ERROR` from the environment once, at
+    import; `tests/test_fit.py` fails if the name moves."""
+    import equinox._errors as eqx_errors
+
+    old = eqx_errors.EQX_ON_ERROR
+    eqx_errors.EQX_ON_ERROR = "nan"
+    try:
+        yield
+    finally:
+        eqx_errors.EQX_ON_ERROR = old
+
+
+class _Problem:
+    """The host side of the two compiled functions: NumPy in, NumPy out, the identification samples selected; a
+    failed solve's residuals are None."""
+
+    def __init__(self, space, exps):
+        self.space, self.exps = space, exps
+        self.mask = np.concatenate([used & ident for e in exps for _, _, _, used, ident in e.layout()])
+        self.seconds = {"residuals": [], "jacobian": []}  # wall time of every call, the first with compilation
+
+    def _timed(self, kind, fn, *args):
+        t = time.perf_counter()
+        with errors_as_nan():
+            out = jax.block_until_ready(fn(*args))
+        self.seconds[kind].append(time.perf_counter() - t)
+        return out
+
+    def all_residuals(self, theta):
+        return np.asarray(self._timed("residuals", _residuals, self.space, jnp.asarray(theta), self.exps))
+
+    def residuals(self, theta):
+        r = self.all_residuals(theta)[self.mask]
+        return r if np.all(np.isfinite(r)) else None
+
+    def jacobian(self, theta):
+        r, j = self._timed("jacobian", _residuals_and_jacobian, self.space, jnp.asarray(theta), self.exps)
+        return np.asarray(r)[self.mask], np.asarray(j)[self.mask]
+
+    def start(self, theta):
+        """The start point's residuals and Jacobian. The residual function (for trial steps) is compiled at the
+        same time in a second thread, on the second core when there is one; `compile_seconds` is then the wall time
+        until both are ready, less one evaluation of each."""
+        t0 = time.perf_counter()
+        warm = threading.Thread(target=self.all_residuals, args=(theta,), daemon=True)
+        warm.start()
+        out = self.jacobian(theta)
+        warm.join()
+        self.ready_s = time.perf_counter() - t0
+        return out
+
+    def compile_seconds(self):
+        """Compilation time: the wall time until both compiled functions were ready, less their steady evaluation
+        times (the medians of their later calls; the whole time when a fit ended after its first evaluation)."""
+        steady = sum(float(np.median(t[1:])) for t in self.seconds.values() if len(t) >= 2)
+        return max(getattr(self, "ready_s", 0.0) - steady, 0.0)
+
+
+_CHECKPOINT_FORMAT = 2
+
+
+def _check_checkpoint_path(checkpoint, resume, overwrite):
+    """Before any fit: `checkpoint` may only replace an existing file if asked to, or if it is the file resumed."""
+    if checkpoint is None:
+        return
+    path = pathlib.Path(checkpoint)
+    if path.suffix != ".npz":
+        raise PamjaxInputError(f"checkpoint must be an .npz path, got {str(checkpoint)!r}")
+    same = resume is not None and path.resolve() == pathlib.Path(resume).resolve()
+    if path.exists() and not (overwrite or same):
+        raise FileExistsError(f"checkpoint {path} exists; pass overwrite=True to replace it (or resume from it)")
+
+
+def _write_checkpoint(path, labels, state, fingerprint=None):
+    """Save the iteration state (every array exactly) after an iteration. Written to a temporary file and renamed,
+    so an interruption leaves the previous checkpoint intact."""
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp.npz")
+    extra = {} if fingerprint is None else {"fingerprint": encode(fingerprint)}  # see _fingerprint
+    np.savez(tmp, format=_CHECKPOINT_FORMAT, labels=np.asarray(labels, dtype=str), **state.arrays(), **extra)
+    tmp.replace(path)
+
+
+def _read_checkpoint(path, labels, num_residuals):
+    path = pathlib.Path(path)
+    if not path.exists():
+        raise PamjaxInputError(f"resume: checkpoint {path} does not exist")
+    with np.load(path) as f:
+        data = {k: f[k] for k in f.files}
+    if int(data.get("format", -1)) != _CHECKPOINT_FORMAT:
+        raise PamjaxInputError(f"resume: {path} is not a pamjax fit checkpoint (format {_CHECKPOINT_FORMAT})")
+    if list(data["labels"]) != list(labels):
+        raise PamjaxInputError(f"resume: {path} was saved for parameters {list(data['labels'])}, not {list(labels)}")
+    state = _lm.LMState.from_arrays(data)
+    if state.residual.shape != (num_residuals,):
+        raise PamjaxInputError(f"resume: {path} holds {state.residual.size} residuals, this fit has {num_residuals} "
+                               "(other experiments or data)")
+    return state
+
+
+def _validate(experiments, max_steps, out, overwrite, checkpoint, resume):
+    require_float64("pamjax.fit")
+    if out is not None and pathlib.Path(out).exists() and not overwrite:
+        raise FileExistsError(f"{out} exists; pass overwrite=True to replace it")
+    _check_checkpoint_path(checkpoint, resume, overwrite)
+    experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
+    if not experiments:
+        raise PamjaxInputError("experiments must be a non-empty list")
+    for e in experiments:
+        if not hasattr(e, "residuals"):
+            raise PamjaxInputError(f"experiments must be Experiment/ForceMapExperiment objects, got {type(e)}")
+    names = [e.name for e in experiments]
+    if len(set(names)) != len(names):
+        raise PamjaxInputError(f"experiment names must be unique, got {names}")
+    if not (isinstance(max_steps, int) and max_steps > 0):
+        raise PamjaxInputError(f"max_steps must be a positive int, got {max_steps}")
+    return experiments
+
+
+def _progress_printer(progress):
+    if callable(progress):
+        return progress
+    if not progress:
+        return None
+
+    def report(step, cost, damping, accepted):
+        verdict = "accepted" if accepted else "rejected"
+        print(f"  iter {step:4d}  cost {cost:.6e}  damping {damping:.3e}  {verdict}", flush=True)
+
+    return report
+
+
+def _status(state, space, theta):
+    """(status, converged, message) from the final iteration state."""
+    if not state.done:
+        return "max_steps", False, "the iteration budget (max_steps) ran out before convergence"
+    if state.reason.startswith("converged"):
+        at_bound = [label for label, hit in zip(space.labels, space.at_bound(theta)) if hit]
+        if at_bound:
+            return "at bound", False, (f"{state.reason}, with {', '.join(at_bound)} at the bound of its range: the "
+                                       "data pull it outside the physical range the fit allows")
+        return "converged", True, state.reason
+    return "stalled", False, state.reason
+
+
+def fit(
+    model,
+    experiments,
+    free,
+    *,
+    max_steps: int = 100,
+    ftol: float = 1e-10,
+    xtol: float = 1e-10,
+    gtol: float = 1e-10,
+    progress=True,
+    identifiability_tol: float = 1e-6,
+    stall_steps: int = 8,
+    out=None,
+    overwrite: bool = False,
+    checkpoint=None,
+    resume=None,
+) -> FitResult:
+    """Fit the parameters named in `free` of `model` to `experiments` by nonlinear least squares.
+
+    Minimises ½ Σ rᵢ² over all experiments' residuals r = (model − data) / scale (identification part only) by
+    Levenberg-Marquardt (`pamjax._fit.lm`: Nielsen's damping, Moré's scaling) with Jacobians in forward mode through
+    the solves. Parameters are fitted in an unconstrained, O(1)-scaled space (`pamjax.ParameterSpace`): log for
+    physically positive quantities (volumes, areas, conductances, friction: a trial value is never ≤ 0), a logistic
+    for ratios and bounded ones, a scale by the starting magnitude for signed coefficients, and the quartic F_max of
+    eq. 7 as its values at five nodes over the stroke (reported as a0…a4). A trial step whose simulation fails
+    (non-finite residuals) is rejected, never fatal.
+
+    **Arguments:**
+
+    - `model`: the object whose parameters are fitted (e.g. a `MuscleSystem`; valve tests use its valve).
+    - `experiments`: a list of `Experiment` / `ForceMapExperiment`.
+    - `free`: parameter paths, e.g.
+      `["valve.inflate.discharge_coefficient", "muscle.force_law.max_force_coefficients"]`,
+      or dicts `{"path": ..., "transform": "log"|"linear"|"logistic"|"nodes", "bounds": (lo, hi), "scale": s}`.
+    - `max_steps`: trial steps at most. `ftol`, `xtol`, `gtol`: convergence on the relative cost decrease (actual
+      and predicted), on the scaled step, and on the gradient's cosine with the residuals (MINPACK's tests).
+    - `stall_steps`: rejected trials in a row after which a fit whose step has shrunk below `xtol` while the local
+      model still promises a decrease stops as 'stalled' (the Jacobian is then checked against the cost and the
+      result says by how much they disagree). Rejections alone never stop a fit before its first accepted step.
+    - `progress`: True prints one line per iteration (cost, damping, accepted); a callable gets
+      (step, cost, damping, accepted); False is silent.
+    - `identifiability_tol`: singular values of the column-normalised Jacobian below this × the largest mark a
+      non-identifiable combination (warned about by name; its parameters get infinite standard errors).
+    - `out`: a JSON path to write the result to; checked BEFORE the fit; never replaced unless `overwrite=True`.
+    - `checkpoint`: an `.npz` path written (atomically) after every iteration with the whole iteration state.
+      Never replaces an existing file unless `overwrite=True` or it is the `resume` file.
+    - `resume`: an `.npz` checkpoint of this same problem: the fit continues from it and ends bitwise where an
+      uninterrupted fit with the same `max_steps` ends (values, cost, iterations, history). The checkpoint carries a
+      fingerprint of the start model, free spec, experiments and data (`pamjax._fit.fingerprint`): a resume of another
+      problem is refused before any solve, saying what differs.
+
+    **Returns:** a `FitResult`: values, standard errors, correlation, `status` ('converged', 'at bound',
+    'stalled', 'max_steps') with `message` saying why, per-channel errors with the noise level and residual
+    whiteness, `mismatch` (the residuals are not noise: the standard errors understate the uncertainty), the
+    fitted `model`.
+
+    **Raises:** `PamjaxInputError` for an unknown parameter (listing the valid ones) or bad experiment input, before
+    any fit; `FileExistsError` if `out` (or `checkpoint`) exists and `overwrite` is False.
+    """
+    experiments = _validate(experiments, max_steps, out, overwrite, checkpoint, resume)
+    if not (isinstance(stall_steps, int) and stall_steps >= 1):
+        raise PamjaxInputError(f"stall_steps must be a positive int, got {stall_steps!r}")
+    for label, tol in (("ftol", ftol), ("xtol", xtol), ("gtol", gtol)):
+        if not (isinstance(tol, (int, float)) and 0 <= tol < 1):
+            raise PamjaxInputError(f"{label} must be a number in [0, 1), got {tol!r}")
+    space = ParameterSpace(model, free)
+    print_ = fingerprint(model, experiments, free)  # start model, free spec, experiments and data (_fingerprint)
+    if resume is not None:
+        check_resume(resume, print_)  # before any solve: a checkpoint of another problem is refused, naming why
+    for e in experiments:
+        e.check(model)
+    labels = space.labels
+    exps = tuple(e.bind(model) if hasattr(e, "bind") else e for e in experiments)  # PWM grids sized
+    theta = np.asarray(space.initial_theta())
+    if not np.all(np.isfinite(theta)):
+        raise PamjaxInputError(f"start values give non-finite transformed parameters: {dict(zip(labels, theta))}")
+    problem = _Problem(space, exps)
+    report = _progress_printer(progress)
+    t_start = time.perf_counter()
+    if resume is not None:
+        state = _read_checkpoint(resume, labels, int(np.count_nonzero(problem.mask)))
+        t_first = time.perf_counter()
+        compile_s = 0.0
+    else:
+        if report is not None and not callable(progress):
+            print(f"fit: {len(labels)} parameters, {len(exps)} experiments; compiling the residuals and their "
+                  "Jacobian (first run; cached afterwards) ...", flush=True)
+        r0, j0 = problem.start(theta)
+        t_first = time.perf_counter()
+        if not np.all(np.isfinite(r0)) or not np.all(np.isfinite(j0)):
+            raise PamjaxInputError("the start model's simulation fails (non-finite residuals or Jacobian): check the "
+                                   "start values and the experiments' initial states")
+        state = _lm.start(theta, r0, j0)
+        compile_s = t_first - t_start
+        if report is not None:
+            report(0, state.cost, state.damping, True)
+            if not callable(progress):
+                print(f"  (first evaluation with compilation: {compile_s:.1f} s)", flush=True)
+        if _lm._gradient_cosine(state) <= gtol:
+            state.done, state.reason = True, "converged: gradient orthogonal to the residuals at the start (gtol)"
+    while not state.done and state.step < max_steps:
+        state = _lm.iterate(state, problem.residuals, problem.jacobian, ftol=ftol, xtol=xtol, gtol=gtol,
+                            stall_steps=stall_steps, report=report)
+        if checkpoint is not None:
+            _write_checkpoint(checkpoint, labels, state, print_)
+    if checkpoint is not None and state.step == 0:
+        _write_checkpoint(checkpoint, labels, state, print_)
+    res = _result(model, exps, free, space, state, identifiability_tol, out, overwrite, problem)
+    res.compile_s = problem.compile_seconds()
+    res.fit_s = time.perf_counter() - t_start - res.compile_s
+    if out is not None:
+        res.to_json(out, overwrite=overwrite)
+    return res
+
+
+def _predictions_from(exps, residuals):
+    """experiment → channel → model values at the data's times, from the residuals of all samples (data + r scale;
+    NaN where a sample was masked)."""
+    out, k = {}, 0
+    for e in exps:
+        out[e.name] = {}
+        for c, scale, data, used, _ in e.layout():
+            r = np.asarray(residuals[k : k + data.size])
+            k += data.size
+            out[e.name][c] = np.where(used, data + r * scale, np.nan)
+    return out
+
+
+def _result(model, exps, free, space, state, identifiability_tol, out, overwrite, problem):
+    labels = space.labels
+    theta = state.theta
+    status, converged, message = _status(state, space, theta)
+    if status == "stalled":
+        mismatch_j = _lm.jacobian_check(state, problem.residuals)
+        message += (f"; the Jacobian disagrees with the cost by {mismatch_j:.2g} (relative) along the steepest "
+                    "descent" if mismatch_j > 1e-3 else "; the Jacobian agrees with the cost (a minimum to the "
+                    "solver's precision, or a very flat valley)")
+    jac, resid = state.jacobian, state.residual
+    used = int(np.count_nonzero(np.any(jac != 0, axis=1) | (resid != 0)))
+    groups = identifiability(jac, labels, identifiability_tol)
+    bad = sorted({label for g in groups for label in g})
+    g = np.asarray(jax.jacfwd(space.physical)(jnp.asarray(theta)))
+    cov = g @ covariance(jac, state.cost, used, identifiability_tol) @ g.T
+    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(se, se)
+    corr = np.where(np.isfinite(corr), corr, 0.0)
+    se = np.where(np.isin(labels, bad), np.inf, se)
+    msgs = []
+    for grp in groups:
+        msg = (f"parameter {grp[0]} has no effect on the data" if len(grp) == 1
+               else "non-identifiable combination: " + ", ".join(grp) + " (only a combination of them is fixed by the "
+               "data; hold one of them fixed)")
+        msgs.append(msg)
+        warnings.warn(msg, PamjaxIdentifiabilityWarning, stacklevel=3)
+    values = np.asarray(space.physical(jnp.asarray(theta)))
+    fitted = space.with_values(jnp.asarray(values))
+    r_all = problem.all_residuals(theta)
+    errors = channel_errors(exps, r_all)
+    flagged, note = mismatch(errors)
+    if flagged:
+        msgs.append(note)
+    res = FitResult(
+        labels=labels,
+        paths=[e if isinstance(e, str) else {k: (list(v) if isinstance(v, tuple) else v) for k, v in e.items()}
+               for e in free],
+        values=[float(v) for v in values],
+        initial_values=[float(v) for v in np.asarray(space.initial_values())],
+        standard_errors=[float(v) for v in se],
+        correlation=[[float(c) for c in row] for row in corr],
+        cost=float(state.cost),
+        initial_cost=float(state.history[0][1]),
+        iterations=int(state.step),
+        accepted_steps=int(state.accepted),
+        status=status,
+        converged=converged,
+        message=message,
+        channel_errors=errors,
+        mismatch=flagged,
+        non_identifiable=groups,
+        warnings=msgs,
+        history=state.history,
+        fit_s=0.0,
+        compile_s=0.0,
+        num_residuals=used,
+        model=fitted,
+        predictions=_predictions_from(exps, r_all),
+    )
+    if math.isnan(res.cost):
+        raise RuntimeError("fit produced a NaN cost; this is a bug in pamjax")
+    return res

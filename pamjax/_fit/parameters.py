@@ -1,0 +1,299 @@
+"""Free parameters of a fit: paths into a model, and the map from an unconstrained, O(1)-scaled vector θ to them.
+
+Positive quantities are fitted in log space (v = v₀ eᶿ: a trial value is never ≤ 0), ratios in (0, 1) and bounded
+parameters through a logistic, signed coefficients linearly scaled by their start magnitude, and the quartic F_max of
+paper 000 eq. 7 as its values at five Chebyshev nodes over the stroke (reported as a0…a4).
+"""
+
+import dataclasses
+import re
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._core.errors import PamjaxInputError
+
+# Default transform by field name: positive quantities fitted in log space, ratios in (0, 1) through a logistic;
+# everything else (signed coefficients) linearly, scaled by its starting magnitude.
+_LOG_NAMES = {
+    "discharge_coefficient", "area", "sonic_conductance", "flow_coefficient", "v0", "volume", "coulomb_force",
+    "viscous_coefficient", "payload_mass", "v1", "k0", "k2", "supply_pressure", "pwm_frequency", "switch_on_delay",
+    "switch_off_delay", "edge_width", "velocity_width", "bristle_stiffness", "bristle_damping", "max_pressure",
+    "strand_length", "turns", "nominal_length", "radius", "stiffness", "damping", "temperature", "gas_constant",
+}
+_LOGISTIC_NAMES = {"critical_ratio", "laminar_ratio"}
+
+
+class PamjaxIdentifiabilityWarning(UserWarning):
+    """Some free parameters (or combinations of them) are not determined by the data."""
+
+
+_TOKEN = re.compile(r"^([A-Za-z_]\w*)((?:\[\d+(?:,\s*\d+)*\])?)$")
+
+
+def _parse(path):
+    parts = path.split(".")
+    attrs, index = [], None
+    for i, part in enumerate(parts):
+        m = _TOKEN.match(part.strip())
+        if m is None or (m.group(2) and i != len(parts) - 1):
+            raise PamjaxInputError(f"parameter path {path!r} is malformed (expected e.g. 'valve.inflate.area' or "
+                                   "'muscle.force_law.max_force_coefficients[2]')")
+        attrs.append(m.group(1))
+        if m.group(2):
+            index = tuple(int(k) for k in m.group(2)[1:-1].split(","))
+    return attrs, index
+
+
+def parameter_paths(model, prefix=""):
+    """All array-valued parameter paths of `model` with their shapes, e.g. {'valve.inflate.area': ()}."""
+    out = {}
+    if isinstance(model, eqx.Module):
+        for f in dataclasses.fields(model):
+            if f.metadata.get("static", False):
+                continue
+            out.update(parameter_paths(getattr(model, f.name), f"{prefix}{f.name}."))
+    elif eqx.is_array(model):
+        out[prefix[:-1]] = tuple(model.shape)
+    return out
+
+
+def _getter(attrs):
+    def get(m):
+        for a in attrs:
+            m = getattr(m, a)
+        return m
+
+    return get
+
+
+class _Group(eqx.Module):
+    """One free entry: an array leaf (or some of its elements) and how it maps from the unconstrained θ."""
+
+    path: str = eqx.field(static=True)
+    attrs: tuple = eqx.field(static=True)
+    index: tuple | None = eqx.field(static=True)
+    transform: str = eqx.field(static=True)
+    labels: tuple = eqx.field(static=True)
+    scale: jax.Array  # linear: value = scale θ; log: value = scale exp(θ); nodes: F(nodes) = scale θ
+    lower: jax.Array
+    upper: jax.Array
+    basis: jax.Array | None  # nodes: coefficients = basis @ F(nodes)
+
+    @property
+    def size(self):
+        return len(self.labels)
+
+    def physical(self, theta):
+        if self.transform == "linear":
+            return self.scale * theta
+        if self.transform == "log":
+            return self.scale * jnp.exp(theta)
+        if self.transform == "logistic":
+            return self.lower + (self.upper - self.lower) * jax.nn.sigmoid(theta)
+        return self.basis @ (self.scale * theta)  # nodes
+
+    def at_bound(self, theta):
+        """Per entry: whether θ sits at a bound of its range (logistic within ~3e-7 of an end; log below 1e-6 of the
+        start magnitude, i.e. pushed towards 0)."""
+        theta = np.asarray(theta, dtype=float)
+        if self.transform == "logistic":
+            return np.abs(theta) > 15.0
+        if self.transform == "log":
+            return theta < np.log(1e-6)
+        return np.zeros(theta.shape, dtype=bool)
+
+    def theta(self, value):
+        value = jnp.asarray(value, dtype=float)
+        if self.transform == "linear":
+            return value / self.scale
+        if self.transform == "log":
+            return jnp.log(value / self.scale)
+        if self.transform == "logistic":
+            z = (value - self.lower) / (self.upper - self.lower)
+            return jnp.log(z) - jnp.log1p(-z)
+        return jnp.linalg.solve(self.basis, value) / self.scale
+
+
+def _labels(path, attrs, shape, index):
+    if index is not None:
+        return (path,)
+    idx = list(np.ndindex(*shape)) if shape else [()]
+    if attrs[-1] == "max_force_coefficients":
+        return tuple(f"a{i[0]}" for i in idx)
+    if attrs[-1] == "coefficients" and shape == (3, 3):
+        return tuple(f"m{3 * i[0] + i[1] + 1}" for i in idx)
+    return tuple(f"{path}[{','.join(map(str, i))}]" if i else path for i in idx)
+
+
+# Keys of a free-parameter entry given as a dict (the `pamjax fit` config's free tables take the same).
+FREE_ENTRY_KEYS = ("path", "transform", "bounds", "scale")
+
+
+def _zero_start_scale(full, index):
+    """Scale of linear parameters that start at exactly 0 (their own magnitude gives none).
+
+    Entries of one column of a 2-D coefficient array share units (eq. 13: m_ij multiplies u^i p_g^j, u
+    dimensionless), so a zero entry takes its column's largest magnitude; in a 1-D array, the array's largest; else 1
+    (give the free entry a 'scale' then). Without this, eq. 13's m1 = 0 would be fitted in units of 1 kg/s beside
+    m4 and m7 of ~1e-3 kg/s: badly scaled for Levenberg-Marquardt's isotropic damping."""
+    if full.ndim == 2:
+        s = np.broadcast_to(np.max(np.abs(full), axis=0), full.shape)
+    elif full.ndim == 1:
+        s = np.full(full.shape, np.max(np.abs(full), initial=0.0))
+    else:
+        s = np.zeros(full.shape)
+    s = np.ravel(s if index is None else s[index])
+    return np.where(s > 0, s, 1.0)
+
+
+def _make_group(model, entry, valid):
+    spec = {"path": entry} if isinstance(entry, str) else dict(entry)
+    path = spec.pop("path", None)
+    if path is None:
+        raise PamjaxInputError(f"free parameter entry {entry!r} needs a 'path'")
+    transform = spec.pop("transform", None)
+    bounds = spec.pop("bounds", None)
+    user_scale = spec.pop("scale", None)
+    if spec:
+        raise PamjaxInputError(
+            f"free parameter {path!r}: unknown keys {sorted(spec)}; valid: {', '.join(FREE_ENTRY_KEYS)}"
+        )
+    attrs, index = _parse(path)
+    leaf_path = ".".join(attrs)
+    if leaf_path not in valid:
+        raise PamjaxInputError(
+            f"unknown parameter {path!r}; the model's parameters are:\n  " + "\n  ".join(sorted(valid))
+        )
+    value = np.asarray(_getter(attrs)(model), dtype=float)
+    full = value  # the whole leaf; `value` becomes the indexed entry
+    if index is not None:
+        if len(index) != value.ndim or any(not 0 <= i < n for i, n in zip(index, value.shape)):
+            raise PamjaxInputError(f"index {list(index)} out of range for {leaf_path!r} of shape {value.shape}")
+        value = value[index]
+    leaf = attrs[-1]
+    if bounds is not None:
+        lo, hi = (float(b) for b in bounds)
+        if not (lo < hi and np.all(value > lo) and np.all(value < hi)):
+            raise PamjaxInputError(f"bounds {bounds} of {path!r} must satisfy lo < start value {value} < hi")
+        transform = transform or "logistic"
+    if transform is None:
+        if leaf == "max_force_coefficients" and index is None and value.shape == (5,):
+            transform = "nodes"
+        elif leaf in _LOGISTIC_NAMES:
+            transform, bounds = "logistic", (0.0, 1.0)
+        elif leaf in _LOG_NAMES and np.all(value > 0):
+            transform = "log"
+        else:
+            transform = "linear"
+    if transform not in ("linear", "log", "logistic", "nodes"):
+        raise PamjaxInputError(f"transform of {path!r} must be linear, log, logistic or nodes, got {transform!r}")
+    if transform == "log" and not np.all(value > 0):
+        raise PamjaxInputError(f"{path!r} starts at {value}: a log transform needs a positive start value")
+    if transform == "logistic" and bounds is None:
+        raise PamjaxInputError(f"{path!r}: a logistic transform needs bounds (lo, hi)")
+    flat = value.reshape(-1)
+    scale = np.where(flat != 0, np.abs(flat), _zero_start_scale(full, index))
+    if user_scale is not None:
+        if transform != "linear":
+            raise PamjaxInputError(
+                f"free parameter {path!r}: 'scale' applies to the linear transform, not {transform!r}"
+            )
+        user = np.broadcast_to(np.asarray(user_scale, dtype=float), value.shape).reshape(-1)
+        if not np.all(np.isfinite(user) & (user > 0)):
+            raise PamjaxInputError(f"free parameter {path!r}: scale must be finite and > 0, got {user_scale!r}")
+        scale = user
+    basis = None
+    lower = upper = np.zeros_like(flat)
+    if transform == "logistic":
+        lower, upper = np.full_like(flat, bounds[0]), np.full_like(flat, bounds[1])
+    if transform == "nodes":
+        # Well-conditioned basis for the quartic F_max: its values at 5 Chebyshev nodes over the stroke.
+        muscle = _getter(attrs[:-2])(model)
+        lo, hi = float(muscle.min_position), float(muscle.max_position)
+        nodes = 0.5 * (lo + hi) + 0.5 * (hi - lo) * np.cos(np.pi * (2 * np.arange(5) + 1) / 10)
+        vander = np.vander(nodes, 5, increasing=True)  # F(nodes) = V a
+        basis = np.linalg.inv(vander)
+        scale = np.full(5, np.max(np.abs(vander @ flat)))
+    labels = _labels(path, attrs, value.shape, index)
+    return _Group(path, tuple(attrs), index, transform, labels, jnp.asarray(scale), jnp.asarray(lower),
+                  jnp.asarray(upper), None if basis is None else jnp.asarray(basis))
+
+
+def strong_types(model):
+    """`model` with every array leaf of a definite dtype (JAX marks arrays made from Python scalars "weakly typed";
+    a fitted model's leaves are strongly typed, and mixing the two recompiles every function they go through)."""
+    return jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=jnp.asarray(x).dtype) if eqx.is_array(x) else x,
+                                  model)
+
+
+class ParameterSpace(eqx.Module):
+    """Maps the unconstrained, O(1)-scaled vector θ to a model with the free parameters set (everything else
+    fixed). `free` entries: a path string, or a dict {path, transform ('linear'|'log'|'logistic'|'nodes'),
+    bounds (lo, hi), scale (linear transform: the O(1) unit of θ; default the start magnitude, see
+    `_zero_start_scale` for parameters starting at 0)}."""
+
+    base: eqx.Module
+    groups: tuple
+
+    def __init__(self, model, free):
+        if isinstance(free, str) or not free:
+            raise PamjaxInputError(f"free must be a non-empty list of parameter paths, got {free!r}")
+        valid = parameter_paths(model)
+        model = strong_types(model)
+        self.base = model
+        self.groups = tuple(_make_group(model, e, valid) for e in free)
+        labels = self.labels
+        if len(set(labels)) != len(labels):
+            raise PamjaxInputError(f"a parameter is named twice in free: {labels}")
+
+    @property
+    def labels(self):
+        return [label for g in self.groups for label in g.labels]
+
+    @property
+    def size(self):
+        return sum(g.size for g in self.groups)
+
+    def _split(self, vec):
+        out, k = [], 0
+        for g in self.groups:
+            out.append(vec[k : k + g.size])
+            k += g.size
+        return out
+
+    def physical(self, theta):
+        """The free parameters' physical values (flat; F_max as a0…a4)."""
+        return jnp.concatenate([g.physical(t) for g, t in zip(self.groups, self._split(theta))])
+
+    def at_bound(self, theta):
+        """Per label: whether the parameter sits at a bound of its range (see `_Group.at_bound`)."""
+        return np.concatenate([g.at_bound(t) for g, t in zip(self.groups, self._split(np.asarray(theta)))])
+
+    def theta(self, values):
+        return jnp.concatenate([g.theta(v) for g, v in zip(self.groups, self._split(jnp.asarray(values)))])
+
+    def initial_theta(self):
+        return self.theta(self.initial_values())
+
+    def initial_values(self):
+        vals = []
+        for g in self.groups:
+            v = jnp.asarray(_getter(g.attrs)(self.base), dtype=float)
+            vals.append((v if g.index is None else v[g.index]).reshape(-1))
+        return jnp.concatenate(vals)
+
+    def with_values(self, values, model=None):
+        """`model` (default the base) with the free parameters set to physical `values`."""
+        model = self.base if model is None else model
+        for g, v in zip(self.groups, self._split(jnp.asarray(values))):
+            get = _getter(g.attrs)
+            old = jnp.asarray(get(model), dtype=float)
+            new = v.reshape(old.shape) if g.index is None else old.at[g.index].set(v[0])
+            model = eqx.tree_at(get, model, new)
+        return model
+
+    def model(self, theta):
+        return self.with_values(self.physical(theta))

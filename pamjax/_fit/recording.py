@@ -1,0 +1,302 @@
+"""Recordings: measured (or synthetic) time series, named channels with units, read from and written to CSV/NPZ.
+
+Validated on construction: a 1-D strictly increasing time, channels of the same length, no NaN (unless the user asks
+to mask them), and pressure channels in ABSOLUTE pascal (a channel that looks like bar or gauge is refused).
+Preprocessing as in paper 001: zero-phase low-pass filtering (2nd-order Butterworth, 20 Hz) and resampling. Those two
+need SciPy (`pip install scipy`; in the test and bench extras); it is imported only when they are called.
+"""
+
+import json
+import pathlib
+
+import numpy as np
+
+from .._core.csvio import read_table, write_table
+from .._core.errors import PamjaxInputError
+from .._core.units import MIN_ABSOLUTE_PA as _MIN_ABSOLUTE_PA  # noqa: F401 (used by _experiment)
+from .._core.units import channel_dimension, check_magnitude, to_si
+
+# Default unit per well-known channel name.
+DEFAULT_UNITS = dict(
+    pressure="Pa", position="m", velocity="m/s", force="N", mass_flow="kg/s", command="1", volume="m^3"
+)
+# Short names used by bench files (the hybrid reference bench: t, u, p, x) → pamjax channel names.
+BENCH_NAMES = dict(p="pressure", x="position", u="command", v="velocity", F="force", mdot="mass_flow")
+
+
+def _scipy_signal():
+    try:
+        import scipy.signal
+    except ModuleNotFoundError as err:  # pragma: no cover - depends on the environment
+        raise ModuleNotFoundError(
+            "filtering and resampling recordings needs SciPy: pip install scipy "
+            "(in the pamjax[test] and [bench] extras)"
+        ) from err
+    return scipy.signal
+
+
+class Recording:
+    """Time series of named channels, SI units, ABSOLUTE pressures.
+
+    **Arguments:**
+
+    - `t`: times [s], 1-D, strictly increasing.
+    - `channels`: dict name → 1-D array of `len(t)` (names as in `Trajectory`: pressure [Pa abs], position [m],
+      velocity, force, mass_flow, command, ...).
+    - `units`: dict name → unit string of the values given (defaults from `DEFAULT_UNITS`; `"t"` for the times).
+      Other units are converted to SI (`"mm"`, `"ms"`, `"bar abs"`, `"kPa gauge"`, `"%"`, ...; `pamjax._core.units`);
+      a unit that does not fit the channel, and a pressure unit other than Pa that does not say absolute or gauge,
+      are refused.
+    - `mask_nan`: False (default) raises on NaN naming channel and row; True keeps them and marks them in `mask`.
+    - `name`: a label. `source`: where the data came from (a file), named in error messages.
+    - `unit_checks`: True (default) refuses values whose magnitude betrays another unit (positions beyond 1 m:
+      millimetres; samples 1 s or more apart: milliseconds; pressures below half an atmosphere: bar, gauge, ...),
+      naming the likely unit. False skips these magnitude checks (never the unit conversions).
+
+    `mask[name]` is a boolean array, True where the sample is valid. `units` holds the SI unit of each channel.
+    """
+
+    def __init__(self, t, channels, units=None, *, mask_nan=False, name="", source=None, unit_checks=True):
+        self.name = str(name)
+        units = {} if units is None else dict(units)
+        where = str(source) if source is not None else f"Recording {self.name!r}"
+        t, _ = to_si("t", units.pop("t", "s"), np.asarray(t, dtype=float), where)
+        if t.ndim != 1 or t.size < 2:
+            raise PamjaxInputError(f"Recording {self.name!r}: t must be 1-D with at least 2 times, got shape {t.shape}")
+        if not np.all(np.isfinite(t)):
+            row = int(np.argmin(np.isfinite(t)))
+            raise PamjaxInputError(f"Recording {self.name!r}: t must be finite; row {row} is {t[row]}")
+        if not np.all(np.diff(t) > 0):
+            row = int(np.argmin(np.diff(t) > 0)) + 1
+            raise PamjaxInputError(
+                f"Recording {self.name!r}: t must be strictly increasing; t[{row}] = {t[row]} <= t[{row - 1}] = "
+                f"{t[row - 1]}"
+            )
+        if not channels:
+            raise PamjaxInputError(f"Recording {self.name!r}: needs at least one channel besides t")
+        unknown = set(units) - set(channels)
+        if unknown:
+            raise PamjaxInputError(f"{where}: units name {sorted(unknown)}, not channels of the recording "
+                                   f"{sorted(channels)}")
+        if unit_checks:
+            check_magnitude("time", t, where, "t")
+        self.unit_checks = bool(unit_checks)
+        self.t = t
+        self.channels = {}
+        self.units = {}
+        self.mask = {}
+        for key, values in channels.items():
+            v = np.asarray(values, dtype=float)
+            if v.shape != t.shape:
+                raise PamjaxInputError(
+                    f"Recording {self.name!r}: channel {key!r} has shape {v.shape}, expected {t.shape} (same as t)"
+                )
+            v, unit = to_si(key, units.get(key, DEFAULT_UNITS.get(key, "")), v, where)
+            valid = np.isfinite(v)
+            if not mask_nan and not np.all(valid):
+                row = int(np.argmin(valid))
+                raise PamjaxInputError(
+                    f"Recording {self.name!r}: channel {key!r} is NaN/inf at row {row} (t = {t[row]} s); "
+                    "clean the data or pass mask_nan=True to leave such samples out of fits"
+                )
+            dimension = "pressure" if unit == "Pa" else channel_dimension(key)
+            if dimension == "pressure" or unit_checks:
+                check_magnitude(dimension, v[valid], where, key)
+            self.channels[key] = v
+            self.units[key] = unit
+            self.mask[key] = valid
+        self.lowpass_hz = None  # the lowest low-pass cut-off [Hz] applied by `filtered`, if any
+
+    def __getitem__(self, key):
+        if key == "t":
+            return self.t
+        if key not in self.channels:
+            raise PamjaxInputError(f"Recording {self.name!r} has no channel {key!r}; it has {sorted(self.channels)}")
+        return self.channels[key]
+
+    def __len__(self):
+        return self.t.size
+
+    def __repr__(self):
+        return f"Recording({self.name!r}, {len(self)} samples, {self.t[0]}..{self.t[-1]} s, {sorted(self.channels)})"
+
+    @property
+    def sample_rate(self):
+        """Sampling rate [Hz] of a uniformly sampled recording (error otherwise)."""
+        dt = np.diff(self.t)
+        if np.ptp(dt) > 1e-6 * np.mean(dt):
+            raise PamjaxInputError(f"Recording {self.name!r} is not uniformly sampled; resample it first")
+        return 1.0 / float(np.mean(dt))
+
+    def _replace(self, t, channels, filtered_at=None):
+        out = Recording(t, channels, self.units, mask_nan=True, name=self.name, unit_checks=self.unit_checks)
+        out.lowpass_hz = self.lowpass_hz if filtered_at is None else min(filtered_at, self.lowpass_hz or np.inf)
+        return out
+
+    # -- preprocessing ------------------------------------------------------------------------------------------
+    def filtered(self, cutoff_hz=20.0, order=2, channels=None, pwm_frequency=None):
+        """Zero-phase Butterworth low-pass (`scipy.signal.butter` + `filtfilt`) of `channels` (default: all but
+        `command`); paper 001: 2nd order at 20 Hz (its valve is a proportional regulator).
+
+        A switching valve's recordings carry a pressure ripple at the PWM frequency that a switching model predicts:
+        a cut-off below it removes what the model computes, and a fit then biases the valve (a tank charge at
+        50 Hz PWM: 10.8 kPa RMS against the true parameters filtered, 2.0 kPa raw). Pass `pwm_frequency` [Hz] to be
+        warned here; an `Experiment` with a switching valve warns in any case (`lowpass_hz` records the cut-off).
+        Fit switching-valve recordings raw, or decimated (`resampled`)."""
+        sig = _scipy_signal()
+        fs = self.sample_rate
+        if not 0 < cutoff_hz < fs / 2:
+            raise PamjaxInputError(f"cutoff_hz must be in (0, {fs / 2}) (Nyquist of this recording), got {cutoff_hz}")
+        if pwm_frequency is not None and cutoff_hz < float(pwm_frequency):
+            warn_filtered(self.name, cutoff_hz, float(pwm_frequency), stacklevel=3)
+        b, a = sig.butter(int(order), cutoff_hz, fs=fs)
+        names = [c for c in self.channels if c != "command"] if channels is None else list(channels)
+        out = dict(self.channels)
+        for c in names:
+            self[c]  # unknown channel → error naming the valid ones
+            if not np.all(self.mask[c]):
+                raise PamjaxInputError(f"cannot filter channel {c!r}: it has masked (NaN) samples")
+            out[c] = sig.filtfilt(b, a, self[c])
+        return self._replace(self.t, out, filtered_at=float(cutoff_hz))
+
+    def resampled(self, rate_hz):
+        """The recording at about `rate_hz` [Hz], by DECIMATION: the recorded samples nearest to a uniform grid of
+        that rate, kept with their own times and values (no filter, no interpolation), so every value is one that
+        was measured, at the instant it was measured, and a model sampled at those instants is compared like with
+        like. When `rate_hz` divides the recording's rate the result is uniform (every k-th sample).
+
+        (A low-pass before decimating, as for audio, removes the 50 Hz pressure ripple of a PWM valve that the
+        switching model predicts, and biases a fit of its valve by ~11 %; see `filtered`.) Upsampling is refused:
+        it would invent samples."""
+        rate_hz = float(rate_hz)
+        if not (np.isfinite(rate_hz) and rate_hz > 0):
+            raise PamjaxInputError(f"rate_hz must be > 0, got {rate_hz}")
+        dt = np.diff(self.t)
+        if rate_hz > 1.0 / float(np.min(dt)) * (1 + 1e-9):
+            raise PamjaxInputError(
+                f"Recording {self.name!r}: rate_hz = {rate_hz:g} Hz exceeds the recording's own rate "
+                f"({1.0 / float(np.mean(dt)):g} Hz); resampling only decimates (it never invents samples)"
+            )
+        n = int(np.floor((self.t[-1] - self.t[0]) * rate_hz + 1e-9)) + 1
+        grid = self.t[0] + np.arange(n) / rate_hz
+        right = np.clip(np.searchsorted(self.t, grid), 1, len(self) - 1)
+        nearest = np.where(np.abs(self.t[right - 1] - grid) <= np.abs(self.t[right] - grid), right - 1, right)
+        idx = np.unique(nearest)
+        return self._replace(self.t[idx], {c: v[idx] for c, v in self.channels.items()})
+
+    def window(self, t_start=None, t_end=None):
+        """The samples with t_start ≤ t ≤ t_end."""
+        lo = -np.inf if t_start is None else t_start
+        hi = np.inf if t_end is None else t_end
+        keep = (self.t >= lo) & (self.t <= hi)
+        if np.count_nonzero(keep) < 2:
+            raise PamjaxInputError(
+                f"Recording {self.name!r}: window({t_start}, {t_end}) keeps {np.count_nonzero(keep)} samples; the "
+                f"recording spans {self.t[0]}..{self.t[-1]} s"
+            )
+        return self._replace(self.t[keep], {c: v[keep] for c, v in self.channels.items()})
+
+    # -- files --------------------------------------------------------------------------------------------------
+    def to_csv(self, path, overwrite=False):
+        """Write a `t [s],name [unit],...` CSV (pressures as `[Pa abs]`, floats exact); refuses to overwrite an
+        existing file unless `overwrite=True`."""
+        path = _writable(path, overwrite)
+        units = {"t": "s", **{c: "Pa abs" if u == "Pa" else u for c, u in self.units.items()}}
+        comment = f"pamjax recording {self.name}; pressures absolute" if self.name else None
+        return write_table(path, {"t": self.t, **self.channels}, units, comment)
+
+    def to_npz(self, path, overwrite=False):
+        """Write NPZ with arrays `t` and one per channel, units in `__units__` (JSON)."""
+        path = _writable(path, overwrite)
+        meta = json.dumps(dict(units=self.units, name=self.name))
+        np.savez(path, t=self.t, __units__=np.asarray(meta), **self.channels)
+        return path
+
+    @classmethod
+    def from_csv(cls, path, *, rename=None, units=None, mask_nan=False, name=None, unit_checks=True):
+        """Read a CSV with a header row naming the columns, a time column `t` (or `time`) and one column per
+        channel; `name [unit]` or `name (unit)` headers give units, converted to SI (`pamjax._core.csvio`, `_units`).
+        Commas, semicolons or tabs; quoted headers; a UTF-8 byte-order mark; lines starting with '#' are comments.
+        `units` (dict name → unit) overrides the header's."""
+        columns = read_table(path)
+        return cls._from_columns(pathlib.Path(path), [(n, v) for n, _, v in columns],
+                                 {n: u for n, u, _ in columns if u is not None}, rename, units, mask_nan, name,
+                                 unit_checks)
+
+    @classmethod
+    def from_npz(cls, path, *, rename=None, units=None, mask_nan=False, name=None, unit_checks=True):
+        """Read an NPZ with a `t` array and one array per channel (the hybrid bench's short names t, u, p, x are
+        renamed to command, pressure, position)."""
+        path = pathlib.Path(path)
+        if not path.is_file():
+            raise PamjaxInputError(f"recording file {path} does not exist")
+        with np.load(path, allow_pickle=False) as z:
+            columns = [(k, np.asarray(z[k])) for k in z.files if k != "__units__"]
+            meta = json.loads(str(z["__units__"])) if "__units__" in z.files else {}
+        columns = [(k, v) for k, v in columns if v.ndim == 1]  # other arrays are metadata
+        return cls._from_columns(
+            path, columns, meta.get("units", {}), rename, units, mask_nan, name or meta.get("name"), unit_checks
+        )
+
+    @classmethod
+    def _from_columns(cls, path, columns, file_units, rename, units, mask_nan, name, unit_checks):
+        """`columns`: list of (name in the file, 1-D array). Bench short names (t, u, p, x, ...) and `rename` map
+        file names to channel names; two columns that end up with one name are refused."""
+        if rename is not None and not isinstance(rename, dict):
+            raise PamjaxInputError(f"rename must be a dict {{name in the file: channel name}}, got {rename!r}")
+        names = [n for n, _ in columns]
+        rename = {**BENCH_NAMES, **(rename or {})}
+        if "t" not in [rename.get(n, n) for n in names]:
+            time = next((n for n in names if n.lower() == "time" and n not in rename), None)
+            if time is None:
+                raise PamjaxInputError(f"{path}: needs a time column 't' (or 'time'), has {names}")
+            rename[time] = "t"
+        unknown = set(rename) - set(BENCH_NAMES) - set(names)
+        if unknown:
+            raise PamjaxInputError(f"{path}: rename names {sorted(unknown)}, which are not columns of the file "
+                                   f"(columns: {names})")
+        data, u, source = {}, {}, {}
+        for k, v in columns:
+            new = rename.get(k, k)
+            if new in data:
+                raise PamjaxInputError(f"{path}: columns {source[new]!r} and {k!r} both become channel {new!r}; "
+                                       "rename one (rename={...})")
+            data[new], source[new] = v, k
+            if k in file_units:
+                u[new] = file_units[k]
+        u.update(units or {})
+        t = data.pop("t")
+        return cls(t, data, u, mask_nan=mask_nan, name=name or path.stem, source=path, unit_checks=unit_checks)
+
+    @classmethod
+    def load(cls, path, **kwargs):
+        """`from_csv` or `from_npz` by file extension."""
+        suffix = pathlib.Path(path).suffix.lower()
+        if suffix == ".npz":
+            return cls.from_npz(path, **kwargs)
+        if suffix in (".csv", ".txt"):
+            return cls.from_csv(path, **kwargs)
+        raise PamjaxInputError(f"recording file must be .csv or .npz, got {path}")
+
+
+class PamjaxDataWarning(UserWarning):
+    """Preprocessing that biases a fit (e.g. a low-pass below the PWM frequency of a switching valve)."""
+
+
+def warn_filtered(name, cutoff_hz, pwm_frequency, stacklevel=2):
+    import warnings
+
+    warnings.warn(
+        f"recording {name!r} was low-pass filtered at {cutoff_hz:g} Hz, below the {pwm_frequency:g} Hz PWM frequency "
+        "of the switching valve it is compared with: the filter removes the pressure ripple the switching model "
+        "predicts, and the fit will be biased (a tank charge at 50 Hz: 10.8 kPa RMS against the true parameters). "
+        "Fit the raw or decimated recording (Recording.resampled), or use the averaged valve (eq. 13).",
+        PamjaxDataWarning, stacklevel=stacklevel)
+
+
+def _writable(path, overwrite):
+    path = pathlib.Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return path

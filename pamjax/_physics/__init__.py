@@ -1,0 +1,1 @@
+"""Physics components: smooth primitives, gas and restrictions, valves, the regulator, muscles, friction, signals."""

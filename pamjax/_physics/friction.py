@@ -1,0 +1,154 @@
+"""Friction of the muscle-payload motion: paper 000's Coulomb + viscous model (eq. 8-9) and a bristle model.
+
+`force(v, z)` is the friction force [N] opposing the velocity `v` [m/s]; `z` is the friction's own state (None for
+memoryless models) with rate `state_rate(v, z)`.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._core.errors import check_nonnegative, check_positive
+from .smooth import smooth_abs, smooth_sign
+
+
+class AbstractFriction(eqx.Module):
+    """Friction model: `initial_state()`, `state_rate(v, z)`, `force(v, z)` [N] (positive opposes positive v).
+
+    A *hybrid* friction (`hybrid = True`, e.g. `KarnoppFriction`) has discrete modes (stuck / sliding) held in its
+    state `z` and switched at events; the systems that use it expose those events to the fixed-grid integrator
+    (`pamjax._solve.grid`), which locates them inside the step. Smooth frictions have `hybrid = False`.
+    """
+
+    hybrid = False
+
+    def is_stuck(self, z):
+        """Whether the friction holds the payload still (a hybrid friction's stuck mode); False for smooth ones."""
+        return False
+
+    def initial_state(self):
+        return None
+
+    def state_rate(self, v, z):
+        return None
+
+    def force(self, v, z):
+        raise NotImplementedError
+
+
+class CoulombViscousFriction(AbstractFriction):
+    """Paper 000, eq. 8-9: F = F_c sign(v) + C_f v, with sign(v) ≈ tanh(v / `velocity_width`).
+
+    A smooth sign cannot hold a load still: under a net force ΔF < F_c the payload creeps at
+    v ≈ w·atanh(ΔF/F_c). Use `BristleFriction` where sticking matters.
+
+    **Arguments:**
+
+    - `coulomb_force`: F_c [N]; 16 (paper 000: half the 32 N hysteresis loop width).
+    - `viscous_coefficient`: C_f [N s/m]; see `pamjax.presets` for the derivation of the default.
+    - `velocity_width`: w [m/s]; 1e-3.
+    """
+
+    coulomb_force: jax.Array = eqx.field(converter=jnp.asarray, default=16.0)  # N
+    viscous_coefficient: jax.Array = eqx.field(converter=jnp.asarray, default=250.0)  # N s/m
+    # m/s: a numerical smoothing width (paper 000's eq. 8 has a sharp sign), small against the 10-30 mm/s mean
+    # speeds of its triangle runs (~60 mm per half period at 0.08-0.25 Hz); it sets the stiffness F_c/(w M) at rest
+    # (docs/performance.md), so it is not made smaller.
+    velocity_width: jax.Array = eqx.field(converter=jnp.asarray, default=1e-3)
+
+    def __check_init__(self):
+        check_nonnegative(self.coulomb_force, "CoulombViscousFriction.coulomb_force")
+        check_nonnegative(self.viscous_coefficient, "CoulombViscousFriction.viscous_coefficient")
+        check_positive(self.velocity_width, "CoulombViscousFriction.velocity_width")
+
+    def force(self, v, z):
+        del z
+        return self.coulomb_force * smooth_sign(v, self.velocity_width) + self.viscous_coefficient * v
+
+
+class BristleFriction(AbstractFriction):
+    """Dahl/LuGre-type bristle friction with viscous damping (state z = bristle deflection [m]).
+
+    ż = v − σ0 |v| z / F_c,  F = σ0 z + σ1 ż + C_f v.
+
+    Under a net force below F_c the bristles deflect elastically (z ≤ F_c/σ0) and hold the payload still, where a
+    smooth sign lets it creep (paper 000 names its simple hysteresis model the main error on the way down).
+
+    **Arguments:** `coulomb_force` F_c [N] (16), `bristle_stiffness` σ0 [N/m] (1e5: 0.16 mm pre-sliding at F_c),
+    `bristle_damping` σ1 [N s/m] (2·sqrt(σ0·9.6 kg) ≈ 2000 would be critical; 500), `viscous_coefficient`
+    C_f [N s/m] (250), `velocity_width` [m/s] smoothing |v| (1e-5).
+    """
+
+    coulomb_force: jax.Array = eqx.field(converter=jnp.asarray, default=16.0)  # N
+    bristle_stiffness: jax.Array = eqx.field(converter=jnp.asarray, default=1e5)  # N/m
+    bristle_damping: jax.Array = eqx.field(converter=jnp.asarray, default=500.0)  # N s/m
+    viscous_coefficient: jax.Array = eqx.field(converter=jnp.asarray, default=250.0)  # N s/m
+    velocity_width: jax.Array = eqx.field(converter=jnp.asarray, default=1e-5)  # m/s
+
+    def __check_init__(self):
+        check_positive(self.coulomb_force, "BristleFriction.coulomb_force")
+        check_positive(self.bristle_stiffness, "BristleFriction.bristle_stiffness")
+        check_nonnegative(self.bristle_damping, "BristleFriction.bristle_damping")
+        check_nonnegative(self.viscous_coefficient, "BristleFriction.viscous_coefficient")
+        check_positive(self.velocity_width, "BristleFriction.velocity_width")
+
+    def initial_state(self):
+        return jnp.zeros(())
+
+    def state_rate(self, v, z):
+        return v - self.bristle_stiffness * smooth_abs(v, self.velocity_width) * z / self.coulomb_force
+
+    def force(self, v, z):
+        return self.bristle_stiffness * z + self.bristle_damping * self.state_rate(v, z) + self.viscous_coefficient * v
+
+
+class KarnoppFriction(AbstractFriction):
+    """Exact stick-slip Coulomb + viscous friction (Karnopp 1985), paper 000's eq. 8-9 with a true sign.
+
+    Sliding (mode z = ±1, the direction of motion): F = F_c z + C_f v, the sign held fixed between events, so the
+    vector field stays smooth inside every step. Stuck (z = 0): the payload holds still (ẋ = 0, ẍ = 0) while the net
+    force on it stays within ±F_c; the friction force is then whatever balances it. Mode switches are events located
+    inside the step by the fixed-grid integrator (`pamjax._solve.grid`): sliding → the velocity reaches 0, then stuck if
+    |F_net| ≤ F_c, else sliding the other way; stuck → |F_net| reaches F_c, then sliding in the direction of F_net.
+    Their times carry derivatives (implicit function theorem), so fits get the exact gradients of the sharp model.
+
+    This is the friction of the hybrid reference bench (`shared/data/*/meta.json`: "exact Karnopp stick-slip"). It
+    needs fixed-grid stepping (`simulate(..., stepping="pwm")` for a switching valve, `stepping="grid"` otherwise),
+    which `stepping="auto"` chooses; an adaptive diffrax solve cannot switch its modes and is refused.
+
+    **Arguments:**
+
+    - `coulomb_force`: F_c [N]; 16 (paper 000: half the 32 N hysteresis loop width).
+    - `viscous_coefficient`: C_f [N s/m]; 250 (see `pamjax.presets`).
+    """
+
+    coulomb_force: jax.Array = eqx.field(converter=jnp.asarray, default=16.0)  # N
+    viscous_coefficient: jax.Array = eqx.field(converter=jnp.asarray, default=250.0)  # N s/m
+
+    hybrid = True
+
+    def __check_init__(self):
+        check_nonnegative(self.coulomb_force, "KarnoppFriction.coulomb_force")
+        check_nonnegative(self.viscous_coefficient, "KarnoppFriction.viscous_coefficient")
+
+    def initial_state(self):
+        return jnp.zeros(())  # stuck: the bench's runs start at rest
+
+    def state_rate(self, v, z):
+        return jnp.zeros_like(z)  # the mode changes only at events
+
+    def is_stuck(self, z):
+        return jnp.abs(z) < 0.5
+
+    def force(self, v, z):
+        """Sliding friction [N]; in the stuck mode the system holds the payload and this is not used."""
+        return self.coulomb_force * z + self.viscous_coefficient * v
+
+    def mode_after_event(self, z, net_force):
+        """The mode after an event of mode `z` under a net driving force [N] at zero velocity. From stuck: the net
+        force has reached ±F_c, so the payload slides in its direction (deciding by |F| ≤ F_c again would keep it
+        stuck wherever the located event time falls a rounding error short). From sliding (it came to rest): stuck
+        within ±F_c, else sliding the other way."""
+        slide = jnp.where(net_force >= 0, 1.0, -1.0)
+        after_rest = jnp.where(jnp.abs(net_force) <= self.coulomb_force, 0.0, slide)
+        return jnp.where(self.is_stuck(z), slide, after_rest)

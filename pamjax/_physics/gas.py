@@ -1,0 +1,272 @@
+"""Gas properties and compressible flow laws through pneumatic restrictions.
+
+All pressures are ABSOLUTE [Pa]. Every law here is written for one restriction between port 1 (pressure `p1`) and
+port 2 (pressure `p2`); it returns the mass flow 1 → 2 in kg/s, negative when the flow reverses (p2 > p1). As the
+pressure ratio tends to 1 each law switches to a linear ("laminar") branch, as ISO 6358-1:2013 does for
+p_down/p_up > 0.999, so the slope at equal pressures is finite and the flow and its gradient are finite for every
+input, equal pressures included.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._core.errors import check_in_open_interval, check_positive
+from .smooth import safe_divide, safe_sqrt
+
+# Reference conditions of ISO 8778 (ANR): 100 kPa, 20 °C, density 1.185 kg/m³. ISO 6358 sonic conductances C
+# are expressed at these conditions (paper 001, eq. 1-2).
+ISO8778_DENSITY = 1.185  # kg/m³
+ISO8778_TEMPERATURE = 293.15  # K
+
+# ISO 6358-1:2013, clause 3: flow is treated as laminar (linear in Δp) for p_down/p_up above 0.999.
+DEFAULT_LAMINAR_RATIO = 0.999
+
+
+class Air(eqx.Module):
+    """Ideal-gas properties of the working air.
+
+    **Arguments:**
+
+    - `gas_constant`: specific gas constant R [J/(kg K)]; 287 (paper 000, Table 1).
+    - `temperature`: air temperature T [K]; 293 (paper 000, Table 1).
+    - `heat_capacity_ratio`: κ [-]; 1.4 (paper 000, eq. 10 text).
+    - `atmospheric_pressure`: p_atm [Pa abs]; 101325 (ISO 2533 standard atmosphere). The gauge reference of the
+      force laws and the exhaust pressure of the valves.
+    """
+
+    gas_constant: jax.Array = eqx.field(converter=jnp.asarray, default=287.0)  # J/(kg K)
+    temperature: jax.Array = eqx.field(converter=jnp.asarray, default=293.0)  # K
+    heat_capacity_ratio: jax.Array = eqx.field(converter=jnp.asarray, default=1.4)  # -
+    atmospheric_pressure: jax.Array = eqx.field(converter=jnp.asarray, default=101325.0)  # Pa abs
+
+    def __check_init__(self):
+        check_positive(self.gas_constant, "Air.gas_constant")
+        check_positive(self.temperature, "Air.temperature")
+        check_in_open_interval(self.heat_capacity_ratio, 1.0, 2.0, "Air.heat_capacity_ratio")
+        check_positive(self.atmospheric_pressure, "Air.atmospheric_pressure")
+
+
+def _orient(p1, p2):
+    """Upstream/downstream split: returns (p_up, ratio p_down/p_up in (0, 1], direction ±1)."""
+    forward = p1 >= p2
+    p_up = jnp.where(forward, p1, p2)
+    p_down = jnp.where(forward, p2, p1)
+    # Pressures outside the physical range (the solver may try them) are clipped for the ratio only.
+    p_up_safe = jnp.maximum(p_up, 1.0)
+    ratio = safe_divide(p_down, p_up_safe)
+    # where, not clip: jnp.clip's gradient is halved at the bound, and ratio = 1 exactly at equal pressures.
+    ratio = jnp.where(ratio > 1.0, 1.0, jnp.where(ratio < 0.0, 0.0, ratio))
+    direction = jnp.where(forward, 1.0, -1.0)
+    return jnp.maximum(p_up, 0.0), ratio, direction
+
+
+def ellipse_flow_fraction(ratio, critical_ratio, laminar_ratio=DEFAULT_LAMINAR_RATIO):
+    """Normalised flow φ(r) of the quarter-ellipse law (paper 000 eq. 11; ISO 6358 with exponent ½).
+
+    φ = 1 for r ≤ b (choked), φ = sqrt(1 - ((r - b)/(1 - b))²) for b < r ≤ r_lam, and a straight line from
+    φ(r_lam) to 0 at r = 1 (laminar branch, finite slope).
+
+    **Arguments:** `ratio` r = p_down/p_up in [0, 1]; `critical_ratio` b in (0, 1); `laminar_ratio` r_lam in (b, 1).
+    """
+    b = critical_ratio
+    r_lam = jnp.maximum(laminar_ratio, b + 1e-6)
+
+    def ellipse(r):
+        z = jnp.clip((r - b) / (1.0 - b), 0.0, 1.0)
+        return safe_sqrt(1.0 - z * z)
+
+    phi_lam = ellipse(r_lam)
+    laminar = phi_lam * (1.0 - ratio) / (1.0 - r_lam)
+    return jnp.where(ratio > r_lam, laminar, jnp.where(ratio <= b, 1.0, ellipse(ratio)))
+
+
+def nozzle_flow_parameter(ratio, kappa, gas_constant, laminar_ratio=DEFAULT_LAMINAR_RATIO):
+    """C_m(r) of the isentropic nozzle (paper 000 eq. 10) [sqrt(K)/ ... = s·sqrt(K)/m], laminar above r_lam."""
+    r_cr = (2.0 / (kappa + 1.0)) ** (kappa / (kappa - 1.0))
+    choked = jnp.sqrt(kappa / gas_constant * (2.0 / (kappa + 1.0)) ** ((kappa + 1.0) / (kappa - 1.0)))
+
+    def subsonic(r):
+        r = jnp.clip(r, 1e-12, 1.0)
+        return safe_sqrt(
+            2.0 * kappa / (gas_constant * (kappa - 1.0)) * (r ** (2.0 / kappa) - r ** ((kappa + 1.0) / kappa))
+        )
+
+    r_lam = jnp.maximum(laminar_ratio, r_cr + 1e-6)
+    laminar = subsonic(r_lam) * (1.0 - ratio) / (1.0 - r_lam)
+    return jnp.where(ratio > r_lam, laminar, jnp.where(ratio <= r_cr, choked, subsonic(ratio)))
+
+
+class AbstractRestriction(eqx.Module):
+    """A pneumatic restriction (valve path, orifice, silencer) between two ports.
+
+    `mass_flow(p1, p2, air)` returns the mass flow from port 1 to port 2 [kg/s] for absolute port pressures
+    `p1`, `p2` [Pa]; negative when p2 > p1. It is finite, with finite gradients, for all finite inputs.
+    """
+
+    def mass_flow(self, p1, p2, air: Air):
+        raise NotImplementedError
+
+
+class EllipseRestriction(AbstractRestriction):
+    """Sonic/quarter-ellipse flow law of paper 000, eq. 11 (refs. [7, 27]).
+
+    ṁ = C_v A p_up / sqrt(R T) · φ(p_down/p_up; b_v), with φ from `ellipse_flow_fraction`.
+
+    **Arguments:**
+
+    - `discharge_coefficient`: C_v [-] (Table 1: 0.36 inflate 1→2, 0.39 exhaust 2→3).
+    - `critical_ratio`: b_v [-] in (0, 1) (Table 1: 0.28 inflate, 0.49 exhaust).
+    - `area`: effective orifice area A [m²] (Table 1: 3.14e-6).
+    - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
+    """
+
+    discharge_coefficient: jax.Array = eqx.field(converter=jnp.asarray)  # -
+    critical_ratio: jax.Array = eqx.field(converter=jnp.asarray)  # -
+    area: jax.Array = eqx.field(converter=jnp.asarray, default=3.14e-6)  # m²
+    laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
+
+    def __check_init__(self):
+        check_positive(self.discharge_coefficient, "EllipseRestriction.discharge_coefficient")
+        check_in_open_interval(self.critical_ratio, 0.0, 1.0, "EllipseRestriction.critical_ratio")
+        check_positive(self.area, "EllipseRestriction.area")
+        check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "EllipseRestriction.laminar_ratio")
+
+    def mass_flow(self, p1, p2, air: Air):
+        p_up, ratio, direction = _orient(p1, p2)
+        phi = ellipse_flow_fraction(ratio, self.critical_ratio, self.laminar_ratio)
+        sonic = self.discharge_coefficient * self.area * p_up / jnp.sqrt(air.gas_constant * air.temperature)
+        return direction * sonic * phi
+
+
+class ISO6358Restriction(AbstractRestriction):
+    """ISO 6358 flow law with sonic conductance C and critical pressure ratio b (paper 001, eq. 1-2, 13-14).
+
+    ṁ = ρ₀ C p_up sqrt(T₀/T) · φ(p_down/p_up; b), ρ₀ = 1.185 kg/m³ and T₀ = 293.15 K (ISO 8778).
+    Paper 001's eq. 1 as printed subtracts b from the pressures; the standard ratio form of its eq. 13 is used.
+
+    **Arguments:**
+
+    - `sonic_conductance`: C [m³/(s Pa)] (paper 001 tabulates it in m³/(s bar): divide by 1e5).
+    - `critical_ratio`: b [-] in (0, 1).
+    - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
+    """
+
+    sonic_conductance: jax.Array = eqx.field(converter=jnp.asarray)  # m³/(s Pa)
+    critical_ratio: jax.Array = eqx.field(converter=jnp.asarray)  # -
+    laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
+
+    def __check_init__(self):
+        check_positive(self.sonic_conductance, "ISO6358Restriction.sonic_conductance")
+        check_in_open_interval(self.critical_ratio, 0.0, 1.0, "ISO6358Restriction.critical_ratio")
+        check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "ISO6358Restriction.laminar_ratio")
+
+    def mass_flow(self, p1, p2, air: Air):
+        p_up, ratio, direction = _orient(p1, p2)
+        phi = ellipse_flow_fraction(ratio, self.critical_ratio, self.laminar_ratio)
+        sonic = ISO8778_DENSITY * self.sonic_conductance * p_up * jnp.sqrt(ISO8778_TEMPERATURE / air.temperature)
+        return direction * sonic * phi
+
+
+class NozzleRestriction(AbstractRestriction):
+    """Isentropic convergent nozzle, paper 000 eq. 10: ṁ = A p_up C_q C_m(r) / sqrt(T_up).
+
+    **Arguments:**
+
+    - `flow_coefficient`: C_q [-].
+    - `area`: A [m²].
+    - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
+    """
+
+    flow_coefficient: jax.Array = eqx.field(converter=jnp.asarray)  # -
+    area: jax.Array = eqx.field(converter=jnp.asarray, default=3.14e-6)  # m²
+    laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
+
+    def __check_init__(self):
+        check_positive(self.flow_coefficient, "NozzleRestriction.flow_coefficient")
+        check_positive(self.area, "NozzleRestriction.area")
+        check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "NozzleRestriction.laminar_ratio")
+
+    def mass_flow(self, p1, p2, air: Air):
+        p_up, ratio, direction = _orient(p1, p2)
+        cm = nozzle_flow_parameter(ratio, air.heat_capacity_ratio, air.gas_constant, self.laminar_ratio)
+        return direction * self.area * p_up * self.flow_coefficient * cm / jnp.sqrt(air.temperature)
+
+
+class PorousRestriction(AbstractRestriction):
+    """A porous element (a sintered exhaust silencer) in isothermal compressible Darcy flow: ṁ = K (p1² − p2²).
+
+    Darcy's law q = κ S Δp / (μ H) for gas at the mean density p̄/(R T) integrates to ṁ = κ S (p1² − p2²)/(2 μ H R T),
+    so K lumps permeability κ, area S, thickness H and viscosity μ. Laminar throughout: linear in Δp near equal
+    pressures (finite slope, no switch), quadratic in pressure level, which is why a silencer barely throttles a
+    high-pressure exhaust and slows the last part of a discharge (paper 000, Fig. 12 text).
+
+    **Arguments:** `permeance` K [kg/(s Pa²)] (see `pamjax.presets.MAS10_SILENCER_PERMEANCE` for a derived value).
+    """
+
+    permeance: jax.Array = eqx.field(converter=jnp.asarray)  # kg/(s Pa²)
+
+    def __check_init__(self):
+        check_positive(self.permeance, "PorousRestriction.permeance")
+
+    def mass_flow(self, p1, p2, air: Air):
+        return self.permeance * (p1 - p2) * (p1 + p2)
+
+
+class SeriesRestriction(AbstractRestriction):
+    """Two restrictions in series (e.g. the valve's exhaust port and a silencer), combined into one.
+
+    The intermediate pressure p_m solves ṁ_first(p1, p_m) = ṁ_second(p_m, p2) (the numerical method of
+    ISO 6358-3:2014). It is bracketed between p1 and p2 and found by bisection; a final Newton step carries the
+    implicit-function derivative, so gradients with respect to both restrictions' parameters are exact.
+
+    **Arguments:** `first` (port 1 side) and `second` (port 2 side): any `AbstractRestriction`.
+    """
+
+    first: AbstractRestriction
+    second: AbstractRestriction
+    iterations: int = eqx.field(static=True, default=60)
+
+    def intermediate_pressure(self, p1, p2, air: Air):
+        """Pressure between the two restrictions [Pa abs]."""
+
+        def residual(pm):
+            return self.first.mass_flow(p1, pm, air) - self.second.mass_flow(pm, p2, air)
+
+        lo0 = jax.lax.stop_gradient(jnp.minimum(p1, p2))
+        hi0 = jax.lax.stop_gradient(jnp.maximum(p1, p2))
+        frozen = jax.lax.stop_gradient(self)
+
+        def frozen_residual(pm):
+            return frozen.first.mass_flow(p1, pm, air) - frozen.second.mass_flow(pm, p2, air)
+
+        def body(_, bounds):
+            lo, hi = bounds
+            mid = 0.5 * (lo + hi)
+            # residual is decreasing in pm: positive means the root lies above mid.
+            above = jax.lax.stop_gradient(frozen_residual(mid)) > 0
+            return jnp.where(above, mid, lo), jnp.where(above, hi, mid)
+
+        lo, hi = jax.lax.fori_loop(0, self.iterations, body, (lo0, hi0))
+        pm = jax.lax.stop_gradient(0.5 * (lo + hi))
+        slope = jax.grad(frozen_residual)(pm)
+        slope = jnp.where(slope < 0, slope, -1e-30)
+        return pm - safe_divide(residual(pm), jax.lax.stop_gradient(slope))
+
+    def mass_flow(self, p1, p2, air: Air):
+        pm = self.intermediate_pressure(p1, p2, air)
+        return self.first.mass_flow(p1, pm, air)
+
+
+def series_equivalent(restriction: SeriesRestriction, air: Air, upstream_pressure=6e5):
+    """Equivalent (C_v·A, b) of a series combination, read off its flow curve at `upstream_pressure` [Pa abs].
+
+    Returns `(sonic_mass_flow_per_pressure, critical_ratio)`: ṁ_choked / p_up [kg/(s Pa)] and the largest ratio at
+    which the flow is still within 0.1 % of its choked value.
+    """
+    ratios = jnp.linspace(0.0, 0.999, 2000)
+    flows = jax.vmap(lambda r: restriction.mass_flow(upstream_pressure, r * upstream_pressure, air))(ratios)
+    choked = flows[0]
+    still_choked = flows >= choked * (1 - 1e-3)
+    b = jnp.max(jnp.where(still_choked, ratios, 0.0))
+    return choked / upstream_pressure, b

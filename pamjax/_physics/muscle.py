@@ -1,0 +1,282 @@
+"""Pneumatic artificial muscles: static force laws, chamber volume and physical stroke limits.
+
+Convention: `x` is the muscle's displacement [m], positive = shortening (payload up), 0 at nominal length.
+Force laws take the GAUGE pressure p_g = p − p_atm [Pa] (paper 000 eq. 7: p_max = 0.6 MPa is gauge); the
+`Muscle` wrapper takes the absolute chamber pressure and does the conversion.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._core.errors import PamjaxInputError, check_finite, check_in_open_interval, check_positive
+from .smooth import smooth_relu, smooth_step
+
+
+class AbstractForceLaw(eqx.Module):
+    """Static contractile force F(x, p_g) [N] of a muscle at displacement `x` [m] and GAUGE pressure `p_g` [Pa].
+    It may be negative (the law extrapolated past slack); `Muscle.force` applies the slack."""
+
+    def static_force(self, x, gauge_pressure):
+        raise NotImplementedError
+
+
+class PolynomialForce(AbstractForceLaw):
+    """Paper 000, eq. 7: F = F_max(x) − (p_max − p_g)(k0 − k1 x)/k2, F_max(x) = a0 + a1 x + … + a4 x⁴.
+
+    Only k0/k2 and k1/k2 are identifiable (a fit must hold one of k0, k1, k2 fixed).
+
+    **Arguments:**
+
+    - `max_force_coefficients`: (a0, …, a4) [N, N/m, N/m², N/m³, N/m⁴]: the force at `max_pressure`.
+    - `max_pressure`: p_max, GAUGE [Pa]; 0.6 MPa (paper 000).
+    - `k0` [N], `k1` [N/m], `k2` [Pa].
+    """
+
+    max_force_coefficients: jax.Array = eqx.field(converter=jnp.asarray)  # N/m^i
+    k0: jax.Array = eqx.field(converter=jnp.asarray)  # N
+    k1: jax.Array = eqx.field(converter=jnp.asarray)  # N/m
+    k2: jax.Array = eqx.field(converter=jnp.asarray)  # Pa
+    max_pressure: jax.Array = eqx.field(converter=jnp.asarray, default=6e5)  # Pa gauge
+
+    def __check_init__(self):
+        if jnp.shape(self.max_force_coefficients) != (5,):
+            raise PamjaxInputError(
+                "PolynomialForce.max_force_coefficients must hold a0…a4 (shape (5,)), got shape "
+                f"{jnp.shape(self.max_force_coefficients)}"
+            )
+        check_finite(self.max_force_coefficients, "PolynomialForce.max_force_coefficients")
+        check_finite(self.k0, "PolynomialForce.k0")
+        check_finite(self.k1, "PolynomialForce.k1")
+        check_positive(self.k2, "PolynomialForce.k2")
+        check_positive(self.max_pressure, "PolynomialForce.max_pressure")
+
+    def max_force(self, x):
+        """F_max(x) [N], the force at p_max."""
+        return jnp.polyval(self.max_force_coefficients[::-1], x)
+
+    def pressure_slope(self, x):
+        """∂F/∂p_g = (k0 − k1 x)/k2 [N/Pa]."""
+        return (self.k0 - self.k1 * x) / self.k2
+
+    def static_force(self, x, gauge_pressure):
+        return self.max_force(x) - (self.max_pressure - gauge_pressure) * self.pressure_slope(x)
+
+
+class ChouHannafordForce(AbstractForceLaw):
+    """Paper 000, eq. 5 (Chou & Hannaford): F = (π D0²/4) p_g (3 cos²θ − 1), with cos θ = L/b_s, L = L0 − x and
+    D0 = b_s/(n_s π) (eq. 1-2).
+
+    **Arguments:** `strand_length` b_s [m], `turns` n_s [-], `nominal_length` L0 [m].
+    """
+
+    strand_length: jax.Array = eqx.field(converter=jnp.asarray)  # m
+    turns: jax.Array = eqx.field(converter=jnp.asarray)  # -
+    nominal_length: jax.Array = eqx.field(converter=jnp.asarray)  # m
+
+    def __check_init__(self):
+        check_positive(self.strand_length, "ChouHannafordForce.strand_length")
+        check_positive(self.turns, "ChouHannafordForce.turns")
+        check_positive(self.nominal_length, "ChouHannafordForce.nominal_length")
+
+    def static_force(self, x, gauge_pressure):
+        cos_theta = (self.nominal_length - x) / self.strand_length
+        d0 = self.strand_length / (self.turns * jnp.pi)
+        return jnp.pi * d0**2 / 4.0 * gauge_pressure * (3.0 * cos_theta**2 - 1.0)
+
+
+class TonduLopezForce(AbstractForceLaw):
+    """Paper 000, eq. 6 (Tondu & Lopez): F = π r0² p_g [a(1 − k ε)² − b], a = 3/tan²θ0, b = 1/sin²θ0,
+    ε = x/L0. `correction` k = 1 is eq. 6 as printed; k > 1 is Tondu & Lopez's correction for the real muscle's
+    smaller stroke (paper 000 ref. [21]).
+
+    **Arguments:** `radius` r0 [m], `braid_angle` θ0 [rad], `nominal_length` L0 [m], `correction` k [-].
+    """
+
+    radius: jax.Array = eqx.field(converter=jnp.asarray)  # m
+    braid_angle: jax.Array = eqx.field(converter=jnp.asarray)  # rad
+    nominal_length: jax.Array = eqx.field(converter=jnp.asarray)  # m
+    correction: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
+
+    def __check_init__(self):
+        check_positive(self.radius, "TonduLopezForce.radius")
+        check_positive(self.nominal_length, "TonduLopezForce.nominal_length")
+        check_positive(self.correction, "TonduLopezForce.correction")
+        v = self.braid_angle
+        if not isinstance(v, jax.core.Tracer) and not bool(jnp.all((v > 0) & (v < jnp.pi / 2))):
+            raise PamjaxInputError(f"TonduLopezForce.braid_angle must lie in (0, π/2) rad, got {v}")
+
+    def static_force(self, x, gauge_pressure):
+        a = 3.0 / jnp.tan(self.braid_angle) ** 2
+        b = 1.0 / jnp.sin(self.braid_angle) ** 2
+        eps = x / self.nominal_length
+        return jnp.pi * self.radius**2 * gauge_pressure * (a * (1.0 - self.correction * eps) ** 2 - b)
+
+
+class AbstractVolume(eqx.Module):
+    """Chamber volume V(x) [m³] of a muscle at displacement `x` [m]."""
+
+    def volume(self, x):
+        raise NotImplementedError
+
+
+class LinearVolume(AbstractVolume):
+    """Paper 000, eq. 14: V = v0 + v1 x. **Arguments:** `v0` [m³], `v1` [m²]."""
+
+    v0: jax.Array = eqx.field(converter=jnp.asarray)  # m³
+    v1: jax.Array = eqx.field(converter=jnp.asarray)  # m²
+
+    def __check_init__(self):
+        check_positive(self.v0, "LinearVolume.v0")
+        check_finite(self.v1, "LinearVolume.v1")
+
+    def volume(self, x):
+        return self.v0 + self.v1 * x
+
+
+class CubicVolume(AbstractVolume):
+    """Paper 001, eq. 4: V = a ε³ + b ε² + c ε + d with contraction ratio ε = x / L0.
+
+    **Arguments:** `coefficients` (d, c, b, a) [m³], lowest order first; `nominal_length` L0 [m].
+    """
+
+    coefficients: jax.Array = eqx.field(converter=jnp.asarray)  # m³
+    nominal_length: jax.Array = eqx.field(converter=jnp.asarray)  # m
+
+    def __check_init__(self):
+        if jnp.shape(self.coefficients) != (4,):
+            raise PamjaxInputError(
+                f"CubicVolume.coefficients must hold (d, c, b, a), shape (4,), got {jnp.shape(self.coefficients)}"
+            )
+        check_finite(self.coefficients, "CubicVolume.coefficients")
+        check_positive(self.coefficients[0], "CubicVolume.coefficients[0] (volume at nominal length)")
+        check_positive(self.nominal_length, "CubicVolume.nominal_length")
+
+    def volume(self, x):
+        return jnp.polyval(self.coefficients[::-1], x / self.nominal_length)
+
+
+class BraidVolume(AbstractVolume):
+    """Paper 000, eq. 3: the volume of an ideal cylindrical braid, V = b_s³/(4π n_s²) cos θ sin²θ, with
+    cos θ = L/b_s (eq. 1) and L = L0 − x; that is V = L (b_s² − L²)/(4π n_s²).
+
+    The volume of `ChouHannafordForce` (eq. 5): p_g dV/dx = −p_g dV/dL is its force (eq. 4, virtual work).
+
+    **Arguments:** `strand_length` b_s [m] (> L0 + max stretch: cos θ < 1), `turns` n_s [-], `nominal_length` L0 [m].
+    `BraidVolume.from_datasheet(L0, D0, max_contraction)` derives b_s, n_s from a datasheet.
+    """
+
+    strand_length: jax.Array = eqx.field(converter=jnp.asarray)  # m
+    turns: jax.Array = eqx.field(converter=jnp.asarray)  # -
+    nominal_length: jax.Array = eqx.field(converter=jnp.asarray)  # m
+
+    def __check_init__(self):
+        check_positive(self.strand_length, "BraidVolume.strand_length")
+        check_positive(self.turns, "BraidVolume.turns")
+        check_positive(self.nominal_length, "BraidVolume.nominal_length")
+        b, length = self.strand_length, self.nominal_length
+        if not isinstance(b, jax.core.Tracer) and not isinstance(length, jax.core.Tracer) and not bool(b > length):
+            raise PamjaxInputError(
+                f"BraidVolume.strand_length ({b}) must exceed nominal_length ({length}): eq. 1, L = b_s cos θ"
+            )
+
+    @classmethod
+    def from_datasheet(cls, nominal_length, diameter, max_contraction):
+        """The braid of a muscle of `nominal_length` L0 [m] and inner `diameter` D0 [m] at L0 whose eq. 5 force
+        vanishes at `max_contraction` ε_max [-] (cos²θ = 1/3 there): b_s = √3 (1 − ε_max) L0 (eq. 1),
+        n_s = b_s sin θ0 / (π D0) (eq. 2), cos θ0 = L0/b_s. For the MAS-10-300 (0.3 m, 10 mm, 25 %, datasheet):
+        b_s = 0.390 m, θ0 = 39.7°, n_s = 7.9."""
+        check_positive(nominal_length, "BraidVolume.from_datasheet nominal_length")
+        check_positive(diameter, "BraidVolume.from_datasheet diameter")
+        limit = 1.0 - 1.0 / 3.0**0.5  # b_s > L0
+        check_in_open_interval(max_contraction, 0.0, limit, "BraidVolume.from_datasheet max_contraction")
+        b = 3.0**0.5 * (1.0 - max_contraction) * nominal_length
+        sin_theta = (1.0 - (nominal_length / b) ** 2) ** 0.5
+        return cls(b, b * sin_theta / (jnp.pi * diameter), nominal_length)
+
+    def volume(self, x):
+        length = self.nominal_length - x
+        return length * (self.strand_length**2 - length**2) / (4.0 * jnp.pi * self.turns**2)
+
+
+class Muscle(eqx.Module):
+    """A pneumatic muscle: force law + volume + stroke limits.
+
+    `force(x, p, air)` = smooth_relu(F_static(x, p − p_atm), `slack_width`): a muscle pulls but cannot push.
+
+    **Arguments:**
+
+    - `force_law`: an `AbstractForceLaw`; `volume_law`: an `AbstractVolume`.
+    - `min_position`, `max_position`: physical limits of x [m] (most stretched, most contracted), where the end
+      stops act.
+    - `slack_width`: [N]; smoothing of the slack (error ≤ width·ln 2 at the slack point); 1 N.
+    """
+
+    force_law: AbstractForceLaw
+    volume_law: AbstractVolume
+    min_position: jax.Array = eqx.field(converter=jnp.asarray)  # m
+    max_position: jax.Array = eqx.field(converter=jnp.asarray)  # m
+    slack_width: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # N
+
+    def __check_init__(self):
+        check_finite(self.min_position, "Muscle.min_position")
+        check_finite(self.max_position, "Muscle.max_position")
+        check_positive(self.slack_width, "Muscle.slack_width")
+        lo, hi = self.min_position, self.max_position
+        if not isinstance(lo, jax.core.Tracer) and not isinstance(hi, jax.core.Tracer):
+            if not bool(hi > lo):
+                raise PamjaxInputError(f"Muscle.max_position ({hi}) must exceed Muscle.min_position ({lo})")
+            # eq. 15 divides by V(x): the volume must stay positive over the whole stroke, not only V(0) = v0.
+            v = self.volume_law.volume(jnp.linspace(lo, hi, 33))
+            if not isinstance(v, jax.core.Tracer) and not bool(jnp.all(v > 0)):
+                raise PamjaxInputError(
+                    f"Muscle.volume_law gives a volume <= 0 inside the stroke [min_position, max_position] = "
+                    f"[{float(lo):.4g}, {float(hi):.4g}] m (smallest {float(jnp.min(v)):.3g} m³); check its "
+                    "coefficients (v0, v1, ...) and the stroke limits"
+                )
+
+    def static_force(self, x, pressure, air):
+        """Eq. 7 (or the chosen law) at absolute `pressure` [Pa], before the slack: may be negative."""
+        return self.force_law.static_force(x, pressure - air.atmospheric_pressure)
+
+    def force(self, x, pressure, air):
+        """Contractile force [N] ≥ 0 at displacement `x` [m] and ABSOLUTE pressure [Pa]."""
+        return smooth_relu(self.static_force(x, pressure, air), self.slack_width)
+
+    def volume(self, x):
+        """Chamber volume [m³]."""
+        return self.volume_law.volume(x)
+
+    def volume_slope(self, x):
+        """dV/dx [m²], by autodiff."""
+        return jax.grad(self.volume_law.volume)(jnp.asarray(x, dtype=float))
+
+    def stiffness(self, x, pressure, air):
+        """∂F/∂x at constant pressure [N/m] (paper 001 eq. 9's isobaric term), by autodiff."""
+        return jax.grad(self.force, argnums=0)(jnp.asarray(x, dtype=float), pressure, air)
+
+
+class EndStops(eqx.Module):
+    """Stiff, damped contact at the stroke limits [x_min, x_max] of a muscle, smooth at contact.
+
+    F = −k·relu_δ(x − x_max) + k·relu_δ(x_min − x) − c v (s_δ(x − x_max) + s_δ(x_min − x)).
+
+    **Arguments:** `stiffness` k [N/m] (1e6: 0.6 mm penetration under the MAS-10's 630 N), `damping` c [N s/m]
+    (6e3 ≈ critical for 9.6 kg on k), `width` δ [m] (1e-4).
+    """
+
+    stiffness: jax.Array = eqx.field(converter=jnp.asarray, default=1e6)  # N/m
+    damping: jax.Array = eqx.field(converter=jnp.asarray, default=6e3)  # N s/m
+    width: jax.Array = eqx.field(converter=jnp.asarray, default=1e-4)  # m
+
+    def __check_init__(self):
+        check_positive(self.stiffness, "EndStops.stiffness")
+        check_positive(self.damping, "EndStops.damping")
+        check_positive(self.width, "EndStops.width")
+
+    def force(self, x, v, x_min, x_max):
+        over = x - x_max
+        under = x_min - x
+        spring = -self.stiffness * smooth_relu(over, self.width) + self.stiffness * smooth_relu(under, self.width)
+        contact = smooth_step(over, self.width) + smooth_step(under, self.width)
+        return spring - self.damping * v * contact

@@ -1,0 +1,359 @@
+"""Paper 001's Festo VPPM proportional pressure regulator (0-10 V reference → outlet pressure).
+
+Three regulators, one interface (`AbstractRegulator`); each carries its own part of the state pytree, whose
+`pressure` is the ABSOLUTE outlet pressure [Pa] (the outlet is the chamber: paper 001 assumes very short tubes):
+
+- `LinearRegulator`: eq. 5 superposition of eq. 6 (reference voltage) and eq. 7 (flow disturbance).
+- `FeedbackRegulator`: eq. 8's feedback form with the paper's unnamed gains K1, K2.
+- `ISO6358Regulator`: a physical version. Eq. 6 drives an internal pilot pressure; the main stage opens its charging
+  (supply → outlet) or discharging (outlet → exhaust) path in proportion to the pilot-outlet error, and the outlet
+  flow through each path is limited by the ISO 6358 law with tabulated C(p), b(p) (Tables 1-2), so a large volume
+  fills no faster than the valve allows.
+
+Units of eq. 5-8 as printed: V_ref in V, P_out in bar (gauge), Q_in in l/min. Paper 001 reports its flows in l/min
+(Sect. 6.1) without saying at which conditions; ISO 8778 reference conditions (ANR) are assumed here.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._core.errors import PamjaxInputError, check_finite, check_in_closed_interval, check_positive
+from .._core.units import check_absolute_pressure
+from .._systems.muscle import pressure_rate
+from .gas import ISO8778_DENSITY, AbstractRestriction, Air
+from .signals import AbstractSignal
+from .smooth import smooth_relu, smooth_step
+from .tabulated import check_table_axis, paper001_charging_restriction, paper001_discharging_restriction, pchip
+from .valve import AbstractValve
+
+
+# --- paper 001 numbers ----------------------------------------------------------------------------------------
+def paper001_air() -> Air:
+    """Paper 001's air: R = 286.9 J/(kg K), T = 298 K (paper 001, eq. 1-3 text)."""
+    return Air(gas_constant=286.9, temperature=298.0)
+
+
+def __getattr__(name):
+    # PAPER001_AIR is built on first use, so that importing pamjax creates no JAX arrays (JAX's device settings,
+    # e.g. `jax_num_cpu_devices`, can still be changed after `import pamjax`).
+    if name == "PAPER001_AIR":
+        return paper001_air()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+VOLTAGE_RANGE = (0.0, 10.0)  # V, VPPM reference range (paper 001, Sect. 2)
+EQ6_GAIN = 1.01  # bar/V, static gain of G_Vref (eq. 6)
+EQ6_TIME_CONSTANTS = (0.041, 0.023)  # s, poles of G_Vref and G_Qin (eq. 6, 7)
+EQ7_GAIN = -0.922  # bar per l/min, static gain of G_Qin (eq. 7; unit l/min ANR assumed, see module docstring)
+EQ7_CANCELLED_TIME_CONSTANT = 0.927  # s, the pole-zero pair eq. 7 cancels (kept out of the state: unobservable)
+LITRE_PER_MINUTE = 1e-3 / 60.0  # m³/s
+BAR = 1e5  # Pa
+FLOW_UNIT = ISO8778_DENSITY * LITRE_PER_MINUTE  # kg/s per l/min ANR
+EQ7_FLOW_GAIN = EQ7_GAIN * BAR / FLOW_UNIT  # Pa per kg/s (≈ -4.67e9)
+SUPPLY_PRESSURE = 7e5  # Pa abs (paper 001, Sect. 3)
+VPPM_HYSTERESIS = 5e3  # Pa, 50 mbar maximal pressure hysteresis (paper 001, Sect. 2): main-stage full-opening error
+TANK_VOLUME = 0.04  # m³, paper 001's charge/discharge tank (Sect. 3, appendix)
+
+
+def check_voltage(voltage, name="reference voltage"):
+    """Reference voltage within the VPPM's 0-10 V (paper 001, Sect. 2), else `PamjaxInputError`."""
+    check_finite(voltage, name)
+    check_in_closed_interval(voltage, *VOLTAGE_RANGE, f"{name} [V]")
+
+
+class VoltageCalibration(eqx.Module):
+    """Static calibration (paper 001, Fig. 3): reference voltage [V] → set GAUGE pressure [Pa], a monotone PCHIP
+    through the table. Default: the straight line of eq. 6's static gain, 1.01 bar/V over 0-10 V.
+
+    **Arguments:** `voltage` [V] strictly increasing within 0-10 V; `gauge_pressure` [Pa] strictly increasing.
+    """
+
+    voltage: jax.Array = eqx.field(converter=jnp.asarray, default=(0.0, 10.0))  # V
+    gauge_pressure: jax.Array = eqx.field(converter=jnp.asarray, default=(0.0, 10.0 * EQ6_GAIN * BAR))  # Pa
+
+    def __check_init__(self):
+        check_table_axis(self.voltage, "VoltageCalibration.voltage")
+        check_voltage(self.voltage, "VoltageCalibration.voltage")
+        check_table_axis(self.gauge_pressure, "VoltageCalibration.gauge_pressure")
+        if jnp.shape(self.voltage) != jnp.shape(self.gauge_pressure):
+            raise PamjaxInputError(
+                f"VoltageCalibration.gauge_pressure must have the shape of .voltage {jnp.shape(self.voltage)}, got "
+                f"{jnp.shape(self.gauge_pressure)}"
+            )
+
+    def __call__(self, voltage):
+        """Set gauge pressure [Pa] at `voltage` [V]."""
+        return pchip(self.voltage, self.gauge_pressure, voltage)
+
+
+class SquareWave(AbstractSignal):
+    """Square wave between `low` and `high` at `frequency` [Hz], duty 50 %, low at t = 0 and rising
+    5 edge widths later (paper 001's 1.5 Hz, 0-3 V reference, Fig. 7). Edges are logistic steps of time width
+    `edge_width` [s] (1e-3: 0.15 % of a 1.5 Hz period)."""
+
+    low: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # V
+    high: jax.Array = eqx.field(converter=jnp.asarray, default=3.0)  # V
+    frequency: jax.Array = eqx.field(converter=jnp.asarray, default=1.5)  # Hz
+    edge_width: jax.Array = eqx.field(converter=jnp.asarray, default=1e-3)  # s
+
+    def __check_init__(self):
+        check_finite(self.low, "SquareWave.low")
+        check_finite(self.high, "SquareWave.high")
+        check_positive(self.frequency, "SquareWave.frequency")
+        check_positive(self.edge_width, "SquareWave.edge_width")
+
+    def __call__(self, t):
+        period = 1.0 / self.frequency
+        phase = t - period * jnp.floor(t / period)  # [0, T)
+        delay = 5.0 * self.edge_width  # edge centres at delay (rising) and T/2 + delay (falling): starts low
+        level = (
+            smooth_step(phase - delay, self.edge_width)
+            - smooth_step(phase - 0.5 * period - delay, self.edge_width)
+            + smooth_step(phase - period - delay, self.edge_width)
+        )
+        return self.low + (self.high - self.low) * jnp.clip(level, 0.0, 1.0)
+
+    def bounds(self):
+        lo, hi = float(self.low), float(self.high)
+        return min(lo, hi), max(lo, hi)
+
+
+class RegulatorState(eqx.Module):
+    """Regulator state: `pilot` [Pa abs] the first stage of eq. 6's two poles, `pressure` the outlet [Pa abs]."""
+
+    pilot: jax.Array
+    pressure: jax.Array
+
+
+class FeedbackRegulatorState(eqx.Module):
+    """Eq. 8 realisation: `voltage_stage`, `voltage_output` (G_Vref's two poles), `flow_stage` (G_Qin's first pole),
+    all in Pa; `pressure` the outlet [Pa abs]."""
+
+    voltage_stage: jax.Array
+    voltage_output: jax.Array
+    flow_stage: jax.Array
+    pressure: jax.Array
+
+
+class AbstractRegulator(AbstractValve):
+    """A pressure regulator feeding a chamber of volume V(t); its state holds the outlet pressure [Pa abs].
+
+    - `initial_state(pressure)`: the state at rest with the outlet at `pressure` [Pa abs] and no flow.
+    - `state_rate(state, voltage, volume, volume_rate, air, polytropic_index, outlet_flow)`: the state's derivative
+      for reference `voltage` [V], chamber `volume` [m³] and `volume_rate` [m³/s] (n = 1: isothermal, paper 001),
+      and `outlet_flow` [kg/s] drawn from the outlet besides the chamber (eq. 5's Q_in at a closed port).
+    - `delivered_flow(...)` (same arguments): mass flow leaving the regulator [kg/s] (eq. 3 for the chamber).
+    - `command_range`: reference voltages 0-10 V.
+    """
+
+    command_range = VOLTAGE_RANGE
+
+    def initial_state(self, pressure):
+        raise NotImplementedError
+
+    def state_rate(self, state, voltage, volume, volume_rate, air, polytropic_index=1.0, outlet_flow=0.0):
+        raise NotImplementedError
+
+    def delivered_flow(self, state, voltage, volume, volume_rate, air, polytropic_index=1.0, outlet_flow=0.0):
+        raise NotImplementedError
+
+    def state_scale(self):
+        raise NotImplementedError
+
+
+def chamber_flow(volume, volume_rate, pressure, pressure_rate, air, polytropic_index=1.0):
+    """Paper 001 eq. 3 / eq. 11: q = (V ṗ + p V̇) / (n R T) [kg/s] into a chamber (n = κ = 1: isothermal)."""
+    return (volume * pressure_rate + pressure * volume_rate) / (polytropic_index * air.gas_constant * air.temperature)
+
+
+class LinearRegulator(AbstractRegulator):
+    """Eq. 5: P_out = G_Vref V_ref + G_Qin Q_in, with (eq. 6, eq. 7 after its pole-zero cancellation)
+
+    G_Vref = cal(V) / ((1 + τ₁ s)(1 + τ₂ s)),  G_Qin = k_q / ((1 + τ₁ s)(1 + τ₂ s)).
+
+    Q_in is the flow the outlet delivers: into the chamber by eq. 3, plus any `outlet_flow`.
+
+    **Arguments:**
+
+    - `calibration`: `VoltageCalibration` (1.01 bar/V, eq. 6's static gain).
+    - `time_constants`: (τ₁, τ₂) [s]; (0.041, 0.023) (eq. 6).
+    - `flow_gain`: k_q [Pa/(kg/s)]; −0.922 bar per l/min ANR = −4.67e9 (eq. 7).
+    """
+
+    calibration: VoltageCalibration = eqx.field(default_factory=VoltageCalibration)
+    time_constants: jax.Array = eqx.field(converter=jnp.asarray, default=EQ6_TIME_CONSTANTS)  # s
+    flow_gain: jax.Array = eqx.field(converter=jnp.asarray, default=EQ7_FLOW_GAIN)  # Pa/(kg/s)
+
+    def __check_init__(self):
+        if jnp.shape(self.time_constants) != (2,):
+            raise PamjaxInputError(f"time_constants must be (τ1, τ2) [s], got shape {jnp.shape(self.time_constants)}")
+        check_positive(self.time_constants, f"{type(self).__name__}.time_constants")
+        check_finite(self.flow_gain, f"{type(self).__name__}.flow_gain")
+
+    def initial_state(self, pressure):
+        p = jnp.asarray(pressure, dtype=float)
+        return RegulatorState(pilot=p, pressure=p)
+
+    def _rates(self, state, voltage, volume, volume_rate, air, n, outlet_flow):
+        tau1, tau2 = self.time_constants[0], self.time_constants[1]
+        dp = (state.pilot - state.pressure) / tau2
+        q = chamber_flow(volume, volume_rate, state.pressure, dp, air, n) + outlet_flow
+        target = air.atmospheric_pressure + self.calibration(voltage) + self.flow_gain * q
+        return RegulatorState(pilot=(target - state.pilot) / tau1, pressure=dp), q
+
+    def state_rate(self, state, voltage, volume, volume_rate, air, polytropic_index=1.0, outlet_flow=0.0):
+        return self._rates(state, voltage, volume, volume_rate, air, polytropic_index, outlet_flow)[0]
+
+    def delivered_flow(self, state, voltage, volume, volume_rate, air, polytropic_index=1.0, outlet_flow=0.0):
+        return self._rates(state, voltage, volume, volume_rate, air, polytropic_index, outlet_flow)[1]
+
+    def state_scale(self):
+        return RegulatorState(pilot=jnp.asarray(BAR), pressure=jnp.asarray(BAR))
+
+
+def _eq8_default_gains(voltage_gain=EQ6_GAIN, flow_gain=EQ7_GAIN):
+    """(K1, K2) that give eq. 8 the static gains of eq. 5 (1.01 bar/V, −0.922 bar per l/min); the paper gives none."""
+    loop = voltage_gain * flow_gain
+    return voltage_gain * (1.0 + loop) / loop, 1.0 + loop
+
+
+class FeedbackRegulator(AbstractRegulator):
+    """Eq. 8: P_out = K1 G_V G_Q / (1 + G_V G_Q) V_ref + K2 G_Q / (1 + G_V G_Q) Q_in, in paper units (V, bar gauge,
+    l/min ANR), with G_V = g_v/((1+τ₁s)(1+τ₂s)) (eq. 6) and G_Q = g_q/((1+τ₁s)(1+τ₂s)) (eq. 7).
+
+    Realised as the loop v = G_V (K1 V_ref − P_out), P_out = G_Q (v + K2 Q_in): four states.
+
+    **Arguments:** `voltage_gain` g_v [bar/V] (1.01, eq. 6); `flow_gain` g_q [bar/(l/min)] (−0.922, eq. 7);
+    `time_constants` (0.041, 0.023) s; `k1` [-], `k2` [-] (paper: unnamed; defaults −0.0746 and 0.0688 make eq. 8's
+    static gains equal eq. 5's).
+    """
+
+    voltage_gain: jax.Array = eqx.field(converter=jnp.asarray, default=EQ6_GAIN)  # bar/V
+    flow_gain: jax.Array = eqx.field(converter=jnp.asarray, default=EQ7_GAIN)  # bar/(l/min)
+    time_constants: jax.Array = eqx.field(converter=jnp.asarray, default=EQ6_TIME_CONSTANTS)  # s
+    k1: jax.Array = eqx.field(converter=jnp.asarray, default=_eq8_default_gains()[0])  # -
+    k2: jax.Array = eqx.field(converter=jnp.asarray, default=_eq8_default_gains()[1])  # -
+
+    def __check_init__(self):
+        if jnp.shape(self.time_constants) != (2,):
+            raise PamjaxInputError(f"time_constants must be (τ1, τ2) [s], got shape {jnp.shape(self.time_constants)}")
+        check_positive(self.time_constants, "FeedbackRegulator.time_constants")
+        for name in ("voltage_gain", "flow_gain", "k1", "k2"):
+            check_finite(getattr(self, name), f"FeedbackRegulator.{name}")
+
+    def initial_state(self, pressure):
+        p = jnp.asarray(pressure, dtype=float)
+        return FeedbackRegulatorState(voltage_stage=0.0 * p, voltage_output=0.0 * p, flow_stage=0.0 * p, pressure=p)
+
+    def _rates(self, state, voltage, volume, volume_rate, air, n, outlet_flow):
+        tau1, tau2 = self.time_constants[0], self.time_constants[1]
+        dp = (state.flow_stage + air.atmospheric_pressure - state.pressure) / tau2
+        q = chamber_flow(volume, volume_rate, state.pressure, dp, air, n) + outlet_flow
+        gauge_bar = (state.pressure - air.atmospheric_pressure) / BAR
+        error = self.k1 * voltage - gauge_bar  # paper units (V and bar mixed, as eq. 8 is printed)
+        d_vs = (BAR * self.voltage_gain * error - state.voltage_stage) / tau1
+        d_vo = (state.voltage_stage - state.voltage_output) / tau2
+        u = state.voltage_output / BAR + self.k2 * q / FLOW_UNIT  # G_Q's input, paper units
+        d_fs = (BAR * self.flow_gain * u - state.flow_stage) / tau1
+        return FeedbackRegulatorState(voltage_stage=d_vs, voltage_output=d_vo, flow_stage=d_fs, pressure=dp), q
+
+    def state_rate(self, state, voltage, volume, volume_rate, air, polytropic_index=1.0, outlet_flow=0.0):
+        return self._rates(state, voltage, volume, volume_rate, air, polytropic_index, outlet_flow)[0]
+
+    def delivered_flow(self, state, voltage, volume, volume_rate, air, polytropic_index=1.0, outlet_flow=0.0):
+        return self._rates(state, voltage, volume, volume_rate, air, polytropic_index, outlet_flow)[1]
+
+    def state_scale(self):
+        s = jnp.asarray(BAR)
+        return FeedbackRegulatorState(voltage_stage=s, voltage_output=s, flow_stage=s, pressure=s)
+
+
+class ISO6358RegulatorState(eqx.Module):
+    """`pilot`, `pilot_output`: eq. 6's two stages [Pa abs]; `pressure`: the outlet/chamber [Pa abs]."""
+
+    pilot: jax.Array
+    pilot_output: jax.Array
+    pressure: jax.Array
+
+
+def smooth_opening(x, width):
+    """≈ clip(x, 0, 1) with smooth corners of width `width` [-] (softplus difference)."""
+    return smooth_relu(x, width) - smooth_relu(x - 1.0, width)
+
+
+class ISO6358Regulator(AbstractRegulator):
+    """Physical VPPM: eq. 6 sets a pilot pressure; the main stage's flow is limited by ISO 6358 (eq. 1-2, 13-14).
+
+    p_pilot = p_atm + cal(V) / ((1 + τ₁ s)(1 + τ₂ s));  e = p_pilot − p;
+    ṁ = o(e/Δ) ṁ_charge(p_s → p) − o(−e/Δ) ṁ_discharge(p → p_atm);  ṗ = n (R T ṁ − p V̇) / V  (eq. 12).
+
+    o is a smooth clip to [0, 1]. At a closed port (small V) the outlet follows the pilot, i.e. eq. 6; a large
+    chamber is filled at most at the charging path's choked flow ρ₀ C(p_s) p_s.
+
+    **Arguments:**
+
+    - `calibration` (1.01 bar/V, eq. 6); `time_constants` (0.041, 0.023) s (eq. 6).
+    - `charging`, `discharging`: restrictions supply → outlet and outlet → exhaust (paper 001 Tables 1 and 2 as
+      `TabulatedISO6358Restriction`).
+    - `supply_pressure` p_s [Pa abs]; 7e5 (paper 001, Sect. 3).
+    - `full_opening_error` Δ [Pa]; 5e3 (the VPPM's 50 mbar hysteresis, paper 001 Sect. 2).
+    - `opening_width` [-]: corner smoothing of o; 1e-3.
+    """
+
+    calibration: VoltageCalibration = eqx.field(default_factory=VoltageCalibration)
+    time_constants: jax.Array = eqx.field(converter=jnp.asarray, default=EQ6_TIME_CONSTANTS)  # s
+    charging: AbstractRestriction = eqx.field(default_factory=paper001_charging_restriction)
+    discharging: AbstractRestriction = eqx.field(default_factory=paper001_discharging_restriction)
+    supply_pressure: jax.Array = eqx.field(converter=jnp.asarray, default=SUPPLY_PRESSURE)  # Pa abs
+    full_opening_error: jax.Array = eqx.field(converter=jnp.asarray, default=VPPM_HYSTERESIS)  # Pa
+    opening_width: jax.Array = eqx.field(converter=jnp.asarray, default=1e-3)  # -
+
+    def __check_init__(self):
+        if jnp.shape(self.time_constants) != (2,):
+            raise PamjaxInputError(f"time_constants must be (τ1, τ2) [s], got shape {jnp.shape(self.time_constants)}")
+        check_positive(self.time_constants, "ISO6358Regulator.time_constants")
+        check_positive(self.supply_pressure, "ISO6358Regulator.supply_pressure")
+        check_absolute_pressure(self.supply_pressure, "ISO6358Regulator.supply_pressure", above_atmosphere=True)
+        check_positive(self.full_opening_error, "ISO6358Regulator.full_opening_error")
+        check_positive(self.opening_width, "ISO6358Regulator.opening_width")
+
+    def initial_state(self, pressure):
+        p = jnp.asarray(pressure, dtype=float)
+        return ISO6358RegulatorState(pilot=p, pilot_output=p, pressure=p)
+
+    def pilot_rate(self, state, voltage, air):
+        """Eq. 6 (unit static gain on the calibration) for the pilot pair; returns d(pilot)/dt [Pa/s]."""
+        target = air.atmospheric_pressure + self.calibration(voltage)
+        return (target - state.pilot) / self.time_constants[0]
+
+    def outlet_mass_flow(self, pilot_output, pressure, air):
+        """Net mass flow out of the regulator into the outlet [kg/s] for main-stage set pressure `pilot_output`."""
+        e = (pilot_output - pressure) / self.full_opening_error
+        charge = smooth_opening(e, self.opening_width) * self.charging.mass_flow(self.supply_pressure, pressure, air)
+        vent = smooth_opening(-e, self.opening_width) * self.discharging.mass_flow(
+            pressure, air.atmospheric_pressure, air
+        )
+        return charge - vent
+
+    def state_rate(self, state, voltage, volume, volume_rate, air, polytropic_index=1.0, outlet_flow=0.0):
+        mdot = self.outlet_mass_flow(state.pilot_output, state.pressure, air) - outlet_flow
+        return ISO6358RegulatorState(
+            pilot=self.pilot_rate(state, voltage, air),
+            pilot_output=(state.pilot - state.pilot_output) / self.time_constants[1],
+            pressure=pressure_rate(mdot, state.pressure, volume, volume_rate, polytropic_index, air),
+        )
+
+    def delivered_flow(self, state, voltage, volume, volume_rate, air, polytropic_index=1.0, outlet_flow=0.0):
+        return self.outlet_mass_flow(state.pilot_output, state.pressure, air)
+
+    def state_scale(self):
+        s = jnp.asarray(BAR)
+        return ISO6358RegulatorState(pilot=s, pilot_output=s, pressure=s)
+
+
+def max_charging_flow(regulator: ISO6358Regulator, air: Air | None = None):
+    """The most mass flow [kg/s] the charging path can deliver: choked, fully open, ρ₀ C(p_s) p_s sqrt(T₀/T).
+    `air` defaults to paper 001's (`paper001_air()`)."""
+    air = paper001_air() if air is None else air
+    return regulator.charging.mass_flow(regulator.supply_pressure, 0.0 * regulator.supply_pressure + 1.0, air)

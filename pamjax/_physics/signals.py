@@ -1,0 +1,138 @@
+"""Input signals: the command (PWM duty ratio, reference voltage, ...) as a function of time.
+
+Each signal is an `eqx.Module` called as `signal(t)` and reports `bounds()`, its concrete (min, max), so that a
+command outside a valve's range is rejected before any solve.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._core.errors import PamjaxInputError, check_finite, check_positive, check_time_grid
+
+
+class AbstractSignal(eqx.Module):
+    """A command signal u(t). `__call__(t)` returns the command at time `t` [s]; `bounds()` its (min, max)."""
+
+    def __call__(self, t):
+        raise NotImplementedError
+
+    def bounds(self):
+        raise NotImplementedError
+
+
+class Constant(AbstractSignal):
+    """u(t) = `value`."""
+
+    value: jax.Array = eqx.field(converter=jnp.asarray)
+
+    def __check_init__(self):
+        check_finite(self.value, "Constant.value")
+
+    def __call__(self, t):
+        return self.value + 0.0 * t
+
+    def bounds(self):
+        v = np.asarray(self.value, dtype=float)
+        return float(v.min()), float(v.max())
+
+
+class Step(AbstractSignal):
+    """u(t) = `before` for t < `time`, `after` from `time` [s] on."""
+
+    before: jax.Array = eqx.field(converter=jnp.asarray)
+    after: jax.Array = eqx.field(converter=jnp.asarray)
+    time: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # s
+
+    def __check_init__(self):
+        check_finite(self.before, "Step.before")
+        check_finite(self.after, "Step.after")
+        check_finite(self.time, "Step.time")
+
+    def __call__(self, t):
+        return jnp.where(t < self.time, self.before, self.after)
+
+    def bounds(self):
+        b, a = float(self.before), float(self.after)
+        return min(a, b), max(a, b)
+
+
+class Triangle(AbstractSignal):
+    """Triangle wave between `low` and `high` at `frequency` [Hz], starting at `low` and rising (paper 000's system
+    tests: duty 0.05-0.95 at 0.08 and 0.25 Hz)."""
+
+    low: jax.Array = eqx.field(converter=jnp.asarray, default=0.05)
+    high: jax.Array = eqx.field(converter=jnp.asarray, default=0.95)
+    frequency: jax.Array = eqx.field(converter=jnp.asarray, default=0.08)  # Hz
+
+    def __check_init__(self):
+        check_finite(self.low, "Triangle.low")
+        check_finite(self.high, "Triangle.high")
+        check_positive(self.frequency, "Triangle.frequency")
+
+    def __call__(self, t):
+        phase = t * self.frequency - jnp.floor(t * self.frequency)  # in [0, 1)
+        shape = 1.0 - jnp.abs(2.0 * phase - 1.0)  # 0 → 1 → 0
+        return self.low + (self.high - self.low) * shape
+
+    def bounds(self):
+        lo, hi = float(self.low), float(self.high)
+        return min(lo, hi), max(lo, hi)
+
+
+class Sine(AbstractSignal):
+    """u(t) = `offset` + `amplitude` sin(2π `frequency` t + `phase`)."""
+
+    offset: jax.Array = eqx.field(converter=jnp.asarray)
+    amplitude: jax.Array = eqx.field(converter=jnp.asarray)
+    frequency: jax.Array = eqx.field(converter=jnp.asarray)  # Hz
+    phase: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # rad
+
+    def __check_init__(self):
+        check_finite(self.offset, "Sine.offset")
+        check_finite(self.amplitude, "Sine.amplitude")
+        check_positive(self.frequency, "Sine.frequency")
+        check_finite(self.phase, "Sine.phase")
+
+    def __call__(self, t):
+        return self.offset + self.amplitude * jnp.sin(2 * jnp.pi * self.frequency * t + self.phase)
+
+    def bounds(self):
+        o, a = float(self.offset), abs(float(self.amplitude))
+        return o - a, o + a
+
+
+class Sampled(AbstractSignal):
+    """A signal sampled from measured data, held constant between samples (zero-order hold).
+
+    With `period` (e.g. the PWM period 1/f_PWM) the value used at time t is the sample in force at the start of the
+    period containing t, as a PWM modulator latches its duty once per period.
+
+    **Arguments:** `times` [s] strictly increasing; `values` of the same length; `period` [s] or None.
+    """
+
+    times: jax.Array = eqx.field(converter=jnp.asarray)
+    values: jax.Array = eqx.field(converter=jnp.asarray)
+    period: float | None = eqx.field(static=True, default=None)
+
+    def __check_init__(self):
+        check_time_grid(self.times, "Sampled.times")
+        check_finite(self.values, "Sampled.values")
+        if jnp.shape(self.times) != jnp.shape(self.values):
+            raise PamjaxInputError(
+                f"Sampled.values must have the same shape as Sampled.times, got {jnp.shape(self.values)} "
+                f"and {jnp.shape(self.times)}"
+            )
+        if self.period is not None and not self.period > 0:
+            raise PamjaxInputError(f"Sampled.period must be > 0 [s], got {self.period}")
+
+    def __call__(self, t):
+        if self.period is not None:
+            t = jnp.floor(t / self.period + 1e-9) * self.period
+        index = jnp.clip(jnp.searchsorted(self.times, t, side="right") - 1, 0, self.times.shape[0] - 1)
+        return self.values[index]
+
+    def bounds(self):
+        v = np.asarray(self.values, dtype=float)
+        return float(v.min()), float(v.max())

@@ -1,0 +1,160 @@
+"""ISO 6358 flow whose sonic conductance C and critical ratio b depend on the upstream pressure (paper 001, Tables 1-2).
+
+C(p_up) and b(p_up) are monotone-safe piecewise-cubic Hermite interpolants (PCHIP, Fritsch-Carlson slopes with
+SciPy's `PchipInterpolator` rules): C¹ in the pressure, and on each table interval the curve never leaves the range
+of its two end values, so an interpolated C stays > 0 and b stays in (0, 1) whenever the table's entries do. Beyond
+the first and last table pressure the end values are held (no extrapolation).
+All pressures are ABSOLUTE [Pa].
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._core.errors import PamjaxInputError, _concrete, check_finite, check_in_open_interval, check_positive
+from .gas import (
+    DEFAULT_LAMINAR_RATIO,
+    ISO8778_DENSITY,
+    ISO8778_TEMPERATURE,
+    AbstractRestriction,
+    Air,
+    _orient,
+    ellipse_flow_fraction,
+)
+from .smooth import safe_divide
+
+
+def check_table_axis(x, name):
+    """A 1-D, finite, strictly increasing table axis with at least two entries; `PamjaxInputError` otherwise."""
+    v = _concrete(x)
+    if v is None:
+        return
+    if v.ndim != 1 or v.size < 2:
+        raise PamjaxInputError(f"{name} must be a 1-D table axis with at least 2 entries, got shape {v.shape}")
+    check_finite(v, name)
+    if not np.all(np.diff(v) > 0):
+        bad = int(np.argmin(np.diff(v) > 0))
+        raise PamjaxInputError(
+            f"{name} must be strictly increasing (a monotonic table); {name}[{bad + 1}] = {v[bad + 1]} does not "
+            f"exceed {name}[{bad}] = {v[bad]}"
+        )
+
+
+def _pchip_slopes(x, y):
+    """Knot slopes of the monotone PCHIP interpolant (SciPy `PchipInterpolator._find_derivatives`, in JAX)."""
+    h = jnp.diff(x)
+    m = jnp.diff(y) / h
+    if x.shape[0] == 2:
+        return jnp.stack([m[0], m[0]])
+    m0, m1 = m[:-1], m[1:]
+    h0, h1 = h[:-1], h[1:]
+    w1 = 2.0 * h1 + h0
+    w2 = h1 + 2.0 * h0
+    flat = (jnp.sign(m0) != jnp.sign(m1)) | (m0 == 0) | (m1 == 0)
+    safe_m0 = jnp.where(flat, 1.0, m0)
+    safe_m1 = jnp.where(flat, 1.0, m1)
+    inner = jnp.where(flat, 0.0, (w1 + w2) / (w1 / safe_m0 + w2 / safe_m1))
+
+    def edge(h0, h1, m0, m1):
+        d = ((2.0 * h0 + h1) * m0 - h0 * m1) / (h0 + h1)
+        d = jnp.where(jnp.sign(d) != jnp.sign(m0), 0.0, d)
+        return jnp.where((jnp.sign(m0) != jnp.sign(m1)) & (jnp.abs(d) > 3.0 * jnp.abs(m0)), 3.0 * m0, d)
+
+    first = edge(h[0], h[1], m[0], m[1])
+    last = edge(h[-1], h[-2], m[-1], m[-2])
+    return jnp.concatenate([first[None], inner, last[None]])
+
+
+def pchip(x, y, xq):
+    """Monotone PCHIP interpolant through (`x`, `y`) evaluated at `xq`; end values held outside [x₀, x_n]."""
+    x = jnp.asarray(x, dtype=float)
+    y = jnp.asarray(y, dtype=float)
+    d = _pchip_slopes(x, y)
+    xq = jnp.clip(xq, x[0], x[-1])
+    i = jnp.clip(jnp.searchsorted(x, xq, side="right") - 1, 0, x.shape[0] - 2)
+    h = x[i + 1] - x[i]
+    s = (xq - x[i]) / h
+    h00 = (1.0 + 2.0 * s) * (1.0 - s) ** 2
+    h10 = s * (1.0 - s) ** 2
+    h01 = s * s * (3.0 - 2.0 * s)
+    h11 = s * s * (s - 1.0)
+    return h00 * y[i] + h10 * h * d[i] + h01 * y[i + 1] + h11 * h * d[i + 1]
+
+
+class TabulatedISO6358Restriction(AbstractRestriction):
+    """ISO 6358 flow (paper 001 eq. 13-14, standard ratio form) with C and b tabulated against upstream pressure.
+
+    ṁ = ρ₀ C(p_up) p_up sqrt(T₀/T) φ(p_down/p_up; b(p_up)), ρ₀ = 1.185 kg/m³, T₀ = 293.15 K (ISO 8778); φ the
+    quarter-ellipse with a laminar branch above 0.999 (ISO 6358-1:2013). For a regulator, charging tables are indexed
+    by the supply (upstream) pressure (paper 001 Table 1), discharging tables by the outlet/tank pressure, which is
+    the upstream pressure of the exhaust flow (Table 2).
+
+    **Arguments:**
+
+    - `pressure`: table axis p_up [Pa abs], strictly increasing.
+    - `sonic_conductance`: C at each table pressure [m³/(s Pa)] (paper 001 gives m³/(s bar): divide by 1e5), > 0.
+    - `critical_ratio`: b at each table pressure [-], in (0, 1).
+    - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
+    """
+
+    pressure: jax.Array = eqx.field(converter=jnp.asarray)  # Pa abs
+    sonic_conductance: jax.Array = eqx.field(converter=jnp.asarray)  # m³/(s Pa)
+    critical_ratio: jax.Array = eqx.field(converter=jnp.asarray)  # -
+    laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
+
+    def __check_init__(self):
+        name = type(self).__name__
+        check_table_axis(self.pressure, f"{name}.pressure")
+        check_positive(self.pressure, f"{name}.pressure")
+        for field in ("sonic_conductance", "critical_ratio"):
+            if jnp.shape(getattr(self, field)) != jnp.shape(self.pressure):
+                raise PamjaxInputError(
+                    f"{name}.{field} must have the shape of {name}.pressure {jnp.shape(self.pressure)}, "
+                    f"got {jnp.shape(getattr(self, field))}"
+                )
+        check_positive(self.sonic_conductance, f"{name}.sonic_conductance (C)")
+        check_in_open_interval(self.critical_ratio, 0.0, 1.0, f"{name}.critical_ratio (b)")
+
+    def conductance(self, upstream_pressure):
+        """C(p_up) [m³/(s Pa)] at the upstream pressure [Pa abs]."""
+        return pchip(self.pressure, self.sonic_conductance, upstream_pressure)
+
+    def ratio(self, upstream_pressure):
+        """b(p_up) [-] at the upstream pressure [Pa abs]."""
+        return pchip(self.pressure, self.critical_ratio, upstream_pressure)
+
+    def mass_flow(self, p1, p2, air: Air):
+        p_up, ratio, direction = _orient(p1, p2)
+        phi = ellipse_flow_fraction(ratio, self.ratio(p_up), self.laminar_ratio)
+        sonic = ISO8778_DENSITY * self.conductance(p_up) * p_up * jnp.sqrt(ISO8778_TEMPERATURE / air.temperature)
+        return direction * sonic * phi
+
+
+def volumetric_flow_anr(mass_flow):
+    """Mass flow [kg/s] → volumetric flow at ISO 8778 reference conditions (ANR) [m³/s]."""
+    return safe_divide(mass_flow, ISO8778_DENSITY)
+
+
+def paper001_charging_restriction():
+    """Supply → outlet path of the VPPM regulator, C and b of paper 001 Table 1 (tank charging) against upstream
+    (supply) pressure; bar → Pa and m³/(s bar) → m³/(s Pa)."""
+    from ..presets import PAPER001_CHARGING_TABLE as t
+
+    return TabulatedISO6358Restriction(
+        pressure=np.asarray(t["upstream_pressure_bar"]) * 1e5,
+        sonic_conductance=np.asarray(t["sonic_conductance_m3_per_s_bar"]) / 1e5,
+        critical_ratio=np.asarray(t["critical_ratio"]),
+    )
+
+
+def paper001_discharging_restriction():
+    """Outlet → exhaust path of the VPPM regulator, C and b of paper 001 Table 2 (tank discharging) against the tank
+    (upstream) pressure; bar → Pa and m³/(s bar) → m³/(s Pa)."""
+    from ..presets import PAPER001_DISCHARGING_TABLE as t
+
+    return TabulatedISO6358Restriction(
+        pressure=np.asarray(t["tank_pressure_bar"]) * 1e5,
+        sonic_conductance=np.asarray(t["sonic_conductance_m3_per_s_bar"]) / 1e5,
+        critical_ratio=np.asarray(t["critical_ratio"]),
+    )

@@ -1,0 +1,171 @@
+"""Integrators for batched sweeps, on a flat state vector y' = f(t, y), with outputs observed (or reduced) on the fly.
+
+diffrax's adaptive loop vmaps badly (a batched while loop steps every lane with one shared step sequence until the
+slowest finishes). Two kinds of scheme instead:
+
+Fixed steps, every lane of a `vmap` the same (one `lax.scan` over output times; the step chosen per workload from
+the plant's stiffness in `pamjax._sweep.sweep`):
+
+- `"rk4"`: classical Runge-Kutta, order 4, 4 evaluations per step. Explicit: stable for |λ h| ≲ 2.78 on the
+  negative real axis, so the plant's stiffest eigenvalue bounds the step (paper 000's smooth friction sign:
+  λ ≈ F_c / (w M) ≈ 1,700 /s → h ≤ 1.6 ms).
+- `"ros2"`: the two-stage, L-stable Rosenbrock(-W) method ROS2 of Verwer et al. (SIAM J. Sci. Comput. 20, 1999,
+  eq. 2.3 with γ = 1 + 1/√2): order 2 for any Jacobian approximation, one Jacobian (forward mode) and one small
+  LU per step. Its step is bounded by accuracy only, not by the friction's stiffness.
+
+Error control per lane (`_integrate_adaptive`: one while loop over the whole grid, each lane with its own step
+and its own next output time, landing exactly on every output time):
+
+- `"rodas5a"`: RODAS5 (order 5(4), L-stable; `pamjax._solve.rodas`) at rtol = atol = 1e-5: trajectory-accurate, and
+  the stiff stick phases cost a handful of steps.
+- `"ros2a"`: ROS2 with its embedded first-order solution at 1e-3: a quick steady-state map.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .rodas import rodas5_step, small_inverse_lanes
+
+SCHEMES = ("rk4", "ros2", "ros2a", "rodas5a")
+
+# Tolerances on the scaled state (1e5 Pa, 1e-2 m, 1e-2 m/s), measured on the 1,024-duty x 5 s MAS-10 map (outputs
+# every 0.1 s, 2-core CPU, 2026-11-22, benchmarks/sweep.py; errors against DOP853 at rtol 1e-12):
+# "ros2a" at 1e-3: 0.6 Pa and 4 µm in 0.045-0.073 s (with coarser output grids tens of µm, tests/test_sweep.py):
+# a quick map, not a reference. "rodas5a" at 1e-5: 4.8e-5 Pa and 3.5e-10 m in 0.05-0.08 s, better than SciPy's
+# LSODA at rtol 1e-8 (2.6e-4 Pa, 1.4e-9 m); 1e-4 gave 3.7e-4 Pa and 2.8e-9 m (just looser than SciPy), 1e-6 took
+# ~15 % longer.
+ROS2A_RTOL = 1e-3
+ROS2A_ATOL = 1e-3
+RODAS5A_RTOL = 1e-5
+RODAS5A_ATOL = 1e-5
+ADAPTIVE_MAX_STEPS_PER_INTERVAL = 20_000  # x output intervals: a lane that needs more is reported as failed
+
+# RK4's stability interval on the negative real axis is (-2.785, 0); with a 10 % margin:
+RK4_STABILITY_LIMIT = 2.5  # |λ h|
+_ROS2_GAMMA = 1.0 + 1.0 / np.sqrt(2.0)  # Verwer et al. 1999, L-stable choice
+
+
+def rk4_step(field, t, y, h):
+    """One classical RK4 step of y' = field(t, y) from t to t + h."""
+    k1 = field(t, y)
+    k2 = field(t + 0.5 * h, y + 0.5 * h * k1)
+    k3 = field(t + 0.5 * h, y + 0.5 * h * k2)
+    k4 = field(t + h, y + h * k3)
+    return y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+def ros2_step(field, t, y, h):
+    """One ROS2 step (Verwer et al. 1999): W = I − γ h J,  W k1 = f(t, y),  W k2 = f(t + h, y + h k1) − 2 k1,
+    y₊ = y + h (3 k1 + k2) / 2, with J = ∂f/∂y at (t, y) by forward mode (the time derivative is left out, which
+    a W-method allows at order 2)."""
+    return ros2_step_error(field, t, y, h)[0]  # the unused error estimate is dead code to XLA
+
+
+def ros2_step_error(field, t, y, h):
+    """`ros2_step` and its error estimate y₊ − (y + h k1) = h (k1 + k2) / 2 (the embedded linearly implicit Euler
+    solution, order 1), as in Verwer et al. 1999."""
+    f0, jac = jax.linearize(lambda z: field(t, z), y)
+    n = y.shape[0]
+    jacobian = jax.vmap(jac, out_axes=1)(jnp.eye(n, dtype=y.dtype))
+    w_inverse = small_inverse_lanes(jnp.eye(n, dtype=y.dtype) - _ROS2_GAMMA * h * jacobian)  # one for both stages
+    k1 = w_inverse @ f0
+    k2 = w_inverse @ (field(t + h, y + h * k1) - 2.0 * k1)
+    return y + h * (1.5 * k1 + 0.5 * k2), 0.5 * h * (k1 + k2)
+
+
+def rodas5_step_error(field, t, y, h):
+    """One RODAS5 step (order 5, L-stable; `pamjax._solve.rodas`) and its error estimate (order 4)."""
+    y1, error, _ = rodas5_step(field, t, y, h, inverse=small_inverse_lanes)
+    return y1, error
+
+
+# Error-controlled schemes: (step with error estimate, rtol, atol, order of the error estimate).
+_ADAPTIVE = dict(
+    ros2a=(ros2_step_error, ROS2A_RTOL, ROS2A_ATOL, 2),
+    rodas5a=(rodas5_step_error, RODAS5A_RTOL, RODAS5A_ATOL, 5),
+)
+
+
+_STEPS = dict(rk4=rk4_step, ros2=ros2_step)
+
+
+def step_counts(grid, dt):
+    """Steps per interval of the concrete time grid so that no step exceeds `dt`: (counts, step sizes)."""
+    widths = np.diff(np.asarray(grid, dtype=float))
+    counts = np.maximum(1, np.ceil(widths / dt * (1.0 - 1e-12))).astype(np.int64)
+    return counts, widths / counts
+
+
+def integrate(field, y0, grid, counts, steps, scheme, carry_init, update):
+    """Integrate y' = field(t, y) over the concrete time `grid`, `counts[k]` steps of `steps[k]` in interval k.
+
+    At every grid point (the first included) `update(carry, k, t, y)` folds the state into a running carry
+    (observations, reductions); `carry_init` is its initial value. Returns `(carry, y_final, finite)`, `finite`
+    False when the state became non-finite at any grid point. The whole loop is one `lax.scan` (vmap it over lanes).
+    """
+    grid = jnp.asarray(grid)
+    if scheme in _ADAPTIVE:
+        return _integrate_adaptive(field, y0, grid, steps, carry_init, update, scheme)
+    step = _STEPS[scheme]
+    uniform = bool(np.all(counts == counts[0]))
+
+    def advance(y, t_start, h, n):
+        if uniform:
+            return jax.lax.fori_loop(0, int(counts[0]), lambda i, z: step(field, t_start + i * h, z, h), y)
+        return jax.lax.fori_loop(0, n, lambda i, z: step(field, t_start + i * h, z, h), y)
+
+    carry = update(carry_init, 0, grid[0], y0)
+    finite = jnp.all(jnp.isfinite(y0))
+
+    def body(state, xs):
+        y, carry, finite = state
+        k, t_start, t_end, h, n = xs
+        y = advance(y, t_start, h, n)
+        finite = finite & jnp.all(jnp.isfinite(y))
+        carry = update(carry, k + 1, t_end, y)
+        return (y, carry, finite), None
+
+    xs = (jnp.arange(len(counts)), grid[:-1], grid[1:], jnp.asarray(steps), jnp.asarray(counts))
+    (y, carry, finite), _ = jax.lax.scan(body, (y0, carry, finite), xs)
+    return carry, y, finite
+
+
+def _integrate_adaptive(field, y0, grid, steps, carry_init, update, scheme):
+    """`integrate` for the error-controlled schemes ("ros2a", "rodas5a"): one loop over the whole grid per lane, each
+    lane with its own step size and its own next output time (steps are shortened to land on it, and a step
+    shortened only for that does not shrink the next one). Under `vmap` the loop runs until the slowest lane ends,
+    so the cost is the largest number of steps any lane needs, not a sum of per-interval maxima."""
+    step_error, rtol, atol, order = _ADAPTIVE[scheme]
+    n_out = grid.shape[0]
+    span = grid[-1] - grid[0]
+    max_iterations = ADAPTIVE_MAX_STEPS_PER_INTERVAL * (n_out - 1)
+
+    def cond(state):
+        t, y, h, k, carry, it = state
+        return (k < n_out) & (it < max_iterations) & (h > 1e-12 * span)
+
+    def body(state):
+        t, y, h, k, carry, it = state
+        target = grid[jnp.minimum(k, n_out - 1)]
+        h_try = jnp.minimum(h, target - t)
+        y_new, error = step_error(field, t, y, h_try)
+        scale = atol + rtol * jnp.maximum(jnp.abs(y), jnp.abs(y_new))
+        err = jnp.sqrt(jnp.mean((error / scale) ** 2))
+        ok = (err <= 1.0) & jnp.all(jnp.isfinite(y_new))
+        grow = 0.9 * jnp.maximum(err, 1e-10) ** (-1.0 / order)
+        factor = jnp.where(jnp.isfinite(err), jnp.clip(grow, 0.2, 5.0), 0.2)
+        factor = jnp.where(ok, factor, jnp.minimum(factor, 0.5))
+        landed = ok & (h_try == target - t)
+        h_next = jnp.where(ok & (h_try < h), jnp.maximum(h, h_try * factor), h_try * factor)
+        t = jnp.where(ok, jnp.where(landed, target, t + h_try), t)
+        y = jnp.where(ok, y_new, y)
+        observed = update(carry, k, t, y)
+        carry = jax.tree_util.tree_map(lambda new, old: jnp.where(landed, new, old), observed, carry)
+        return t, y, h_next, k + landed.astype(k.dtype), carry, it + 1
+
+    carry = update(carry_init, 0, grid[0], y0)
+    h0 = jnp.asarray(steps)[0]
+    state = (grid[0], y0, h0, jnp.asarray(1), carry, jnp.asarray(0))
+    _, y, _, k, carry, _ = jax.lax.while_loop(cond, body, state)
+    return carry, y, (k == n_out) & jnp.all(jnp.isfinite(y))

@@ -1,0 +1,180 @@
+"""Linearisation of any pamjax system about an operating point, by autodiff: state space, transfer functions, Bode.
+
+ẋ = f(t, x, u),  y = h(t, x, u)  →  δẋ = A δx + B δu,  δy = C δx + D δu,  with A = ∂f/∂x, B = ∂f/∂u, C = ∂h/∂x,
+D = ∂h/∂u (`jax.jacfwd` through the system's `vector_field` and `outputs`). The inputs are the command plus, on
+request, any array leaves of the system (e.g. `RegulatorSystem.outlet_flow`, eq. 5's Q_in). States are flattened in
+pytree order (names in `state_names`), in SI units.
+"""
+
+import equinox as eqx
+import jax
+import jax.flatten_util as jfu
+import jax.numpy as jnp
+import jax.tree_util as jtu
+import numpy as np
+import optimistix as optx
+
+from .._core.errors import PamjaxInputError
+
+
+class StateSpace(eqx.Module):
+    """A linear(ised) model: `A` (n×n), `B` (n×m), `C` (p×n), `D` (p×m) as NumPy arrays, with names."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    state_names: tuple = eqx.field(static=True)
+    input_names: tuple = eqx.field(static=True)
+    output_names: tuple = eqx.field(static=True)
+
+    def _index(self, names, name, kind):
+        if isinstance(name, int):
+            return name
+        if name not in names:
+            raise PamjaxInputError(f"unknown {kind} {name!r}; this model has {list(names)}")
+        return names.index(name)
+
+    def frequency_response(self, frequency, output=0, input=0):
+        """G(j 2π f) = C (j2πf I − A)⁻¹ B + D for `frequency` [Hz] (array), one output/input pair (names or indices)."""
+        i = self._index(self.output_names, output, "output")
+        j = self._index(self.input_names, input, "input")
+        f = np.atleast_1d(np.asarray(frequency, dtype=float))
+        n = self.A.shape[0]
+        out = np.empty(f.shape, dtype=complex)
+        for k, fk in enumerate(f):
+            x = np.linalg.solve(2j * np.pi * fk * np.eye(n) - self.A, self.B[:, j])
+            out[k] = self.C[i] @ x + self.D[i, j]
+        return out
+
+    def dc_gain(self, output=0, input=0):
+        """Static gain G(0) = D − C A⁻¹ B."""
+        return float(np.real(self.frequency_response(0.0, output, input)[0]))
+
+    def bode(self, frequency, output=0, input=0):
+        """(magnitude [dB], phase [deg]) at `frequency` [Hz]."""
+        g = self.frequency_response(frequency, output, input)
+        return 20 * np.log10(np.abs(g)), np.degrees(np.unwrap(np.angle(g)))
+
+    def bandwidth(self, output=0, input=0, drop_db=3.0, fmax=1e4):
+        """Lowest frequency [Hz] where |G| falls `drop_db` below |G(0)| (the −3 dB bandwidth), by bisection."""
+        ref = 20 * np.log10(abs(self.dc_gain(output, input)))
+
+        def below(f):
+            return 20 * np.log10(abs(self.frequency_response(f, output, input)[0])) < ref - drop_db
+
+        grid = np.logspace(-4, np.log10(fmax), 400)
+        hit = [f for f in grid if below(f)]
+        if not hit:
+            raise PamjaxInputError(f"|G| stays within {drop_db} dB of its static gain up to {fmax} Hz")
+        hi = hit[0]
+        lo = grid[max(np.searchsorted(grid, hi) - 1, 0)]
+        for _ in range(80):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if below(mid) else (mid, hi)
+        return 0.5 * (lo + hi)
+
+    def poles(self):
+        """Eigenvalues of A [1/s]."""
+        return np.linalg.eigvals(self.A)
+
+    def transfer_function(self, output=0, input=0):
+        """(numerator, denominator) polynomial coefficients in s, highest power first, of one channel:
+        den = det(sI − A), num = det(sI − A + B_j C_i) − det(sI − A) + D_ij det(sI − A)."""
+        i = self._index(self.output_names, output, "output")
+        j = self._index(self.input_names, input, "input")
+        den = np.poly(self.A)
+        bc = np.outer(self.B[:, j], self.C[i])
+        num = np.real(np.poly(self.A - bc) - den + self.D[i, j] * den)
+        num[np.abs(num) <= 1e-9 * np.max(np.abs(num), initial=0.0)] = 0.0  # cancellation round-off
+        num = np.trim_zeros(num, "f")
+        return (num if num.size else np.zeros(1)), np.real(den)
+
+    def to_control(self):
+        """A `control.StateSpace` (python-control, optional dependency `pamjax[control]`)."""
+        try:
+            import control
+        except ImportError as e:  # pragma: no cover
+            raise ImportError("python-control is needed: pip install 'pamjax[control]'") from e
+        return control.ss(self.A, self.B, self.C, self.D)
+
+
+def _names(tree, prefix):
+    paths = jtu.tree_flatten_with_path(tree)[0]
+    out = []
+    for path, leaf in paths:
+        name = prefix + "".join(jtu.keystr((k,)) for k in path)
+        size = int(np.prod(getattr(leaf, "shape", np.shape(leaf))))
+        out.extend([name] if size == 1 else [f"{name}[{i}]" for i in range(size)])
+    return tuple(out)
+
+
+def linearise(system, state, command, *, t=0.0, inputs=None, outputs=("pressure",)):
+    """Linearise `system` about (`state`, `command`) at time `t`: a `StateSpace`.
+
+    **Arguments:**
+
+    - `system`: any pamjax system (`vector_field(t, y, u)` and `outputs(t, y, u)`); `state`: its state pytree;
+      `command`: the command (scalar or array).
+    - `inputs`: extra inputs, a dict name → function selecting an array leaf of the system (e.g.
+      `{"outlet_flow": lambda s: s.outlet_flow}`); they follow the command (named "command") in B and D.
+    - `outputs`: names of `system.outputs` channels (default ("pressure",)).
+
+    The operating point need not be an equilibrium (then A, B describe the local flow); transfer functions and
+    Bode data are meaningful about an equilibrium (`equilibrium` finds one).
+    """
+    inputs = {} if inputs is None else dict(inputs)
+    command = jnp.asarray(command, dtype=float)
+    extra = [jnp.asarray(where(system), dtype=float) for where in inputs.values()]
+    u0 = (command, *extra)
+    x_flat, unravel_x = jfu.ravel_pytree(state)
+    u_flat, unravel_u = jfu.ravel_pytree(u0)
+    available = jax.eval_shape(lambda: system.outputs(t, state, command))  # names and shapes only
+    for name in outputs:
+        if name not in available or available[name] is None:
+            raise PamjaxInputError(f"unknown output {name!r}; this system has {sorted(available)}")
+
+    def with_inputs(u):
+        cmd, *leaves = unravel_u(u)
+        s = system
+        for where, leaf in zip(inputs.values(), leaves):
+            s = eqx.tree_at(where, s, leaf)
+        return s, cmd
+
+    def f(x, u):
+        s, cmd = with_inputs(u)
+        return jfu.ravel_pytree(s.vector_field(t, unravel_x(x), cmd))[0]
+
+    def h(x, u):
+        s, cmd = with_inputs(u)
+        out = s.outputs(t, unravel_x(x), cmd)
+        return jnp.concatenate([jnp.ravel(out[name]) for name in outputs])
+
+    # compiled once rather than traced op by op: for a muscle system this is several times faster
+    A, B = jax.jit(jax.jacfwd(f, argnums=(0, 1)))(x_flat, u_flat)
+    C, D = jax.jit(jax.jacfwd(h, argnums=(0, 1)))(x_flat, u_flat)
+    input_names = _names(command, "command") + tuple(n for name, leaf in zip(inputs, extra) for n in _names(leaf, name))
+    output_names = tuple(n for name in outputs for n in _names(available[name], name))
+    return StateSpace(
+        A=np.asarray(A),
+        B=np.asarray(B),
+        C=np.asarray(C),
+        D=np.asarray(D),
+        state_names=_names(state, "state"),
+        input_names=input_names,
+        output_names=output_names,
+    )
+
+
+def equilibrium(system, command, guess, *, t=0.0, rtol=1e-10, atol=1e-10, max_steps=200):
+    """A state where `system.vector_field(t, ·, command)` vanishes, by Newton's method from `guess` (optimistix),
+    solved in the system's scaled units (`state_scale`). Raises if it does not converge."""
+    scale = system.state_scale()
+    z0 = jtu.tree_map(lambda a, s: a / s, guess, scale)
+
+    def residual(z, _):
+        y = jtu.tree_map(lambda a, s: a * s, z, scale)
+        return jtu.tree_map(lambda d, s: d / s, system.vector_field(t, y, jnp.asarray(command, dtype=float)), scale)
+
+    sol = optx.root_find(residual, optx.Newton(rtol=rtol, atol=atol), z0, max_steps=max_steps, throw=True)
+    return jtu.tree_map(lambda a, s: a * s, sol.value, scale)

@@ -1,0 +1,262 @@
+"""PWM-synchronous stepping: fixed RK4 substeps that land exactly on every switching edge of an on/off valve.
+
+A switching valve's vector field jumps at each PWM edge. An adaptive solver either smooths the edges (many small
+steps per edge, and at loose tolerances it can step over whole windows) or is handed the edge times as jump times
+(then the edges carry no derivative). Here the time grid of each PWM period is built from the edge times themselves:
+
+    nodes_k = sort({kT + jT/K, j = 0…K} ∪ {kT + t_on, kT + t_off(u_k)}),
+    t_on = switch_on_delay,  t_off = u_k T + switch_off_delay,  u_k = signal(kT)  (duty latched per period)
+
+and each of the K + 2 intervals is one classical RK4 step with the valve opening held (1 between the edges, 0
+outside; the 10 %/90 % dead bands of `OnOffValve` included). The opening is piecewise constant, so the vector field
+is smooth inside every step, and because the node times are differentiable functions of the duty, frequency and
+switching delays, d(trajectory)/d(duty) carries the edge-motion term (f_on − f_off) dt_edge/du exactly as the sharp
+model implies. Outputs at the requested times are cubic Hermite interpolants between nodes (end slopes from the
+vector field), O(h⁴) like the RK4 steps.
+
+This integrates the EXACT-edge model (`OnOffValve(mode="exact")`'s physics) whatever the valve's `mode`; the smooth
+model converges to it as `edge_width → 0`. Accuracy and the choice of K: `docs/performance.md`.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
+
+from .._core.errors import PamjaxInputError
+from .._physics.valve import AbstractValve, OnOffValve
+from . import grid as _grid
+
+
+class HeldOpeningValve(AbstractValve):
+    """An `OnOffValve` whose opening is held at `opening` ∈ [0, 1] (one step of the PWM-synchronous scheme)."""
+
+    valve: OnOffValve
+    opening: jax.Array
+
+    def mass_flow(self, t, command, pressure, air):
+        return self.valve.mass_flow_at_opening(self.opening, pressure, air)
+
+
+def sharp_opening(valve: OnOffValve, phase, command, open_before=False):
+    """Exact-edge opening (0 or 1) at `phase` [s] ∈ [0, T) of a period with latched duty `command`, the valve open
+    at the period start if `open_before` (no gradient)."""
+    valve, phase, command = jax.lax.stop_gradient((valve, phase, command))
+    on_edge, off_edge = _edges(valve, command)
+    before, during, after = _region_openings(valve, command, open_before)
+    return jnp.where(phase < on_edge, before, jnp.where(phase < off_edge, during, after))
+
+
+def _edges(valve: OnOffValve, command):
+    """Phases [s] of the period's on edge and off edge, clipped to [0, T] and ordered (on ≤ off). When the on-pulse
+    is too short to open the valve, the 'on edge' is put at the off edge (nothing happens between them)."""
+    period = valve.period
+    opens, _ = valve.switching_gates(command)
+    off_edge = jnp.clip(command * period + valve.switch_off_delay, 0.0, period)
+    on_edge = jnp.where(opens, jnp.clip(valve.switch_on_delay, 0.0, period), off_edge)
+    return on_edge, jnp.maximum(off_edge, on_edge)
+
+
+def _region_openings(valve: OnOffValve, command, open_before):
+    """Opening (0/1) before the on edge, between the edges and after the off edge of one period."""
+    opens, closes = jax.lax.stop_gradient(valve.switching_gates(command))
+    before = jnp.where(open_before, 1.0, 0.0)
+    during = jnp.where(opens, 1.0, before)
+    after = jnp.where(closes, 0.0, during)
+    return before, during, after
+
+
+def open_at_start(valve: OnOffValve, signal, start, first_start):
+    """Whether the valve is open at the start `start` of a PWM period: it stays open from the period before when that
+    period's off-pulse was too short to close it (duty above ~90 % at 50 Hz with 2 ms delays). The valve is closed
+    before `first_start` (the start of the first period simulated: the runs start with the valve off). Exact when
+    T > switch_on_delay + switch_off_delay (a period then opens or closes the valve); two periods back otherwise."""
+    period = valve.period
+    state = jnp.zeros((), dtype=bool)
+    for back in (2.0, 1.0):
+        previous = start - back * period
+        end_state = valve.open_at_period_end(signal(previous), state)
+        state = jnp.where(previous >= first_start - 0.5 * period, end_state, False)
+    return jax.lax.stop_gradient(state)
+
+
+def num_periods(valve: OnOffValve, t0, t1):
+    """Number of PWM periods (static int) that cover [t0, t1]; needs concrete times and frequency."""
+    try:
+        frequency = float(valve.pwm_frequency)
+        t0, t1 = float(t0), float(t1)
+    except (TypeError, jax.errors.ConcretizationTypeError) as err:
+        raise PamjaxInputError(
+            "stepping='pwm' needs concrete t0, ts and pwm_frequency to size its grid; inside jit pass "
+            "num_periods to pamjax's solve() explicitly"
+        ) from err
+    first = np.floor(t0 * frequency + 1e-9)
+    return max(int(np.ceil(t1 * frequency - first - 1e-9)), 1)
+
+
+def _period_grid(valve: OnOffValve, signal, start, substeps, open_before):
+    """Node times (K + 3,) of one period starting at `start` and the opening (K + 2,) of each interval."""
+    period = valve.period
+    command = signal(start)
+    on_edge, off_edge = _edges(valve, command)
+    uniform = jnp.arange(substeps + 1) * (period / substeps)
+    phases = jnp.sort(jnp.concatenate([uniform, jnp.stack([on_edge, off_edge])]))
+    # Ranks (not midpoints) decide which region an interval lies in, so that an edge that coincides with a uniform
+    # node gets the derivative of the side it moves into: the stable order puts the uniform node first, the on edge
+    # next, the off edge last.
+    on_rank = jnp.sum(uniform <= on_edge)
+    off_rank = jnp.sum(uniform <= off_edge) + 1
+    index = jnp.arange(substeps + 2)
+    before, during, after = _region_openings(valve, command, open_before)
+    opening = jnp.where(index < on_rank, before, jnp.where(index < off_rank, during, after))
+    return start + phases, opening
+
+
+def pwm_intervals(valve: OnOffValve, signal, t0, t1, substeps, periods):
+    """The PWM-synchronous grid over [t0, t1]: interval ends (n,), (n,) each, and the opening held over each
+    interval, repeated for the three RK4 stage times (n, 3). Intervals outside [t0, t1] have zero length."""
+    period = valve.period
+    first = jnp.floor(t0 * valve.pwm_frequency + 1e-9) * period
+    starts = first + jnp.arange(periods) * period
+    carried = jax.vmap(lambda s: open_at_start(valve, signal, s, first))(starts)
+    nodes, openings = jax.vmap(lambda s, c: _period_grid(valve, signal, s, substeps, c))(starts, carried)
+    left = jnp.clip(nodes[:, :-1], t0, t1).reshape(-1)
+    right = jnp.clip(nodes[:, 1:], t0, t1).reshape(-1)
+    openings = openings.reshape(-1)
+    return left, right, jnp.stack([openings] * 3, axis=-1)
+
+
+def uniform_intervals(signal, t0, t1, steps):
+    """A uniform grid of `steps` intervals over [t0, t1] and the command at each RK4 stage time (n, 3): the grid of a
+    hybrid system fed by a continuous valve (averaged, proportional)."""
+    nodes = t0 + (t1 - t0) * jnp.arange(steps + 1) / steps
+    left, right = nodes[:-1], nodes[1:]
+    stage_times = jnp.stack([left, 0.5 * (left + right), right], axis=-1)
+    return left, right, jax.vmap(jax.vmap(signal))(stage_times)
+
+
+def num_grid_steps(t0, t1, max_step):
+    """Number of uniform steps (static int) of at most `max_step` [s] over [t0, t1]; needs concrete times."""
+    try:
+        t0, t1 = float(t0), float(t1)
+    except (TypeError, jax.errors.ConcretizationTypeError) as err:
+        raise PamjaxInputError(
+            "stepping='grid' needs concrete t0 and ts to size its grid; inside jit pass num_periods (the number of "
+            "steps) to pamjax's solve() explicitly"
+        ) from err
+    return max(int(np.ceil((t1 - t0) / max_step - 1e-9)), 1)
+
+
+def solve_runs(systems, signals, ts_list, z0s, unravel, flat_scale, t0s, *, stepping, substeps, sizes):
+    """Integrate several runs of systems of one structure in ONE scan (a compiled loop shared by all of them).
+
+    Each run: `systems[k]` driven by `signals[k]` from the flat scaled state `z0s[k]` at `t0s[k]`, output at
+    `ts_list[k]`. `stepping` "pwm" (switching valves: the PWM-synchronous grid, `sizes[k]` periods of `substeps`)
+    or "grid" (continuous valves: `sizes[k]` uniform steps). Runs are laid end to end on one clock (each shifted so
+    that it starts 1 s after the previous one ends), so one loop integrates all of them and its compiled size does
+    not grow with their number.
+
+    Returns per run `(states at ts (named pytree), num_steps, finite)`.
+    """
+    lefts, rights, auxs, members, offsets, shifted_ts = [], [], [], [], [], []
+    offset = 0.0
+    for k, (system, signal, ts, t0) in enumerate(zip(systems, signals, ts_list, t0s)):
+        t1 = ts[-1]
+        if stepping == "pwm":
+            left, right, aux = pwm_intervals(system.valve, signal, t0, t1, substeps, sizes[k])
+        else:
+            left, right, aux = uniform_intervals(signal, t0, t1, sizes[k])
+        offset_k = offset - t0
+        lefts.append(left + offset_k)
+        rights.append(right + offset_k)
+        auxs.append(aux)
+        members.append(jnp.full(left.shape, k, dtype=jnp.int32))
+        offsets.append(offset_k)
+        shifted_ts.append(ts + offset_k)
+        offset = offset + (t1 - t0) + 1.0
+    stacked = _stack_systems(systems)
+
+    if stepping == "pwm":
+
+        def field(system, t, z, opening):
+            held = eqx.tree_at(lambda s: s.valve, system, HeldOpeningValve(system.valve, opening))
+            return ravel_pytree(held.vector_field(t, unravel(z * flat_scale), None))[0] / flat_scale
+    else:
+
+        def field(system, t, z, command):
+            return ravel_pytree(system.vector_field(t, unravel(z * flat_scale), command))[0] / flat_scale
+
+    event = update = None
+    if systems[0].hybrid:
+
+        def event(system, t, z):
+            return system.event_function(t, unravel(z * flat_scale), None)
+
+        def update(system, t, z):
+            return ravel_pytree(system.event_update(t, unravel(z * flat_scale), None))[0] / flat_scale
+
+    all_ts = jnp.concatenate(shifted_ts)
+    z_out, num_steps, _, _, finite = _grid.integrate(
+        stacked, field, event, update, jnp.stack(z0s), jnp.concatenate(lefts), jnp.concatenate(rights),
+        jnp.concatenate(auxs), jnp.concatenate(members), jnp.stack([jnp.asarray(o, float) for o in offsets]), all_ts,
+    )
+    out, start = [], 0
+    for k, ts in enumerate(ts_list):
+        z_k = z_out[start : start + ts.shape[0]]
+        start += ts.shape[0]
+        z_k = jnp.where((ts <= t0s[k])[:, None], z0s[k][None], z_k)  # times at or before the start: the start state
+        states = jax.vmap(lambda z: unravel(z * flat_scale))(z_k)
+        steps_k = jnp.sum(rights[k] > lefts[k])
+        out.append((states, steps_k, finite))
+    del num_steps  # the whole loop's; each run reports its own
+    return out
+
+
+def _stack_systems(systems):
+    """The systems' array leaves stacked along a new leading axis (their static structure must agree)."""
+    arrays = [eqx.filter(s, eqx.is_array) for s in systems]
+    structure = [jax.tree_util.tree_structure(a) for a in arrays]
+    if any(st != structure[0] for st in structure):
+        raise PamjaxInputError("runs solved together must have systems of one structure (same components)")
+    stacked = jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *arrays)
+    return eqx.combine(stacked, eqx.filter(systems[0], eqx.is_array, inverse=True))
+
+
+def solve_pwm_synchronous(system, signal, ts, z0, flat_scale, unravel, t0, *, substeps, periods):
+    """Integrate `system` from `t0` to `ts[-1]` on the PWM-synchronous grid; states at `ts` (named pytree).
+
+    `z0` is the flat scaled initial state: the state is `unravel(z * flat_scale)`.
+
+    Returns `(states, num_steps, finite)`. `substeps` K: uniform nodes per period (step ≤ T/K); `periods`: static
+    number of PWM periods covering [t0, ts[-1]].
+    """
+    valve = system.valve
+    if not isinstance(valve, OnOffValve):
+        raise PamjaxInputError(
+            f"stepping='pwm' needs a switching OnOffValve (its PWM edges define the grid), got {type(valve).__name__}; "
+            "use the default adaptive stepping for other valves"
+        )
+    if not (isinstance(substeps, int) and substeps >= 2):
+        raise PamjaxInputError(f"substeps must be an int >= 2 (RK4 steps per PWM period), got {substeps!r}")
+    return solve_runs([system], [signal], [ts], [z0], unravel, flat_scale, [t0], stepping="pwm", substeps=substeps,
+                      sizes=[periods])[0]
+
+
+def latched_commands(valve: OnOffValve, signal, ts):
+    """The duty in force at each time: the signal read at the start of the PWM period containing t."""
+    return jax.vmap(lambda t: signal(jnp.floor(t * valve.pwm_frequency + 1e-9) * valve.period))(ts)
+
+
+def outputs_at(system, signal, ts, states, commands, t0):
+    """`system.outputs` at times `ts` with the valve holding its exact-edge opening there (mass flow included)."""
+    valve = system.valve
+    starts = jnp.floor(ts * valve.pwm_frequency + 1e-9) * valve.period
+    first = jnp.floor(t0 * valve.pwm_frequency + 1e-9) * valve.period
+
+    def one(t, state, command, start):
+        opening = sharp_opening(valve, t - start, command, open_at_start(valve, signal, start, first))
+        held = eqx.tree_at(lambda s: s.valve, system, HeldOpeningValve(valve, opening))
+        return held.outputs(t, state, command)
+
+    return jax.vmap(one)(ts, states, commands, starts)

@@ -1,0 +1,220 @@
+"""An antagonistic pair of muscles, each fed by its own regulator, on a revolute (ankle) joint (paper 001, Sect. 7).
+
+Kinematics (pulley of radius r): the flexor shortens by x_f = x₀ + r θ, the extensor by x_e = x₀ − r θ, θ the
+joint angle [rad] (positive = dorsiflexion). Dynamics:
+
+I θ̈ = r (F_f(x_f, p_f) − F_e(x_e, p_e)) − m g l cos θ − c θ̇,
+
+each pressure from its regulator with V = V(x), V̇ = V'(x) ẋ. With equal muscles the angle is set by the pressure
+difference (θ = 0 at p_f = p_e without load) and the joint stiffness K_θ = r² (K_f + K_e) (eq. 9 per muscle) grows
+with the pressure sum, as paper 001 proposes. The command is the pair of reference voltages (V_f, V_e) [V].
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._core.errors import PamjaxInputError, check_nonnegative, check_positive
+from .._physics.gas import Air
+from .._physics.muscle import EndStops, Muscle
+from .._physics.regulator import AbstractRegulator, paper001_air
+from .._physics.signals import AbstractSignal
+from .muscle import AbstractSystem
+from .regulated import muscle_stiffness
+
+PULLEY_RADIUS = 0.03  # m, assumed (orthosis lever; ±0.35 rad swings x by ±10 mm of the DMSP-40's 100 mm stroke)
+PRE_CONTRACTION = 0.01  # m, assumed: 2.5 % contraction at θ = 0, where the DMSP-40 preset pulls from ≈ 0.7 bar gauge
+JOINT_INERTIA = 0.05  # kg m², assumed: foot (≈ 1.3 kg) plus orthosis shell about the ankle
+FOOT_MASS = 1.3  # kg, ≈ 1.45 % of paper 001's 91.3 kg subject (Winter's segment tables)
+FOOT_ARM = 0.06  # m, ankle to foot centre of mass (assumed)
+JOINT_DAMPING = 2.0  # N m s/rad, assumed
+
+
+class JointState(eqx.Module):
+    """`flexor`, `extensor`: the regulators' states (their `pressure` [Pa abs]); `angle` θ [rad];
+    `angular_velocity` [rad/s]."""
+
+    flexor: eqx.Module
+    extensor: eqx.Module
+    angle: jax.Array
+    angular_velocity: jax.Array
+
+
+class VoltagePair(AbstractSignal):
+    """The joint's command: (flexor, extensor) reference voltages [V] from two signals."""
+
+    flexor: AbstractSignal
+    extensor: AbstractSignal
+
+    def __call__(self, t):
+        return jnp.stack([jnp.asarray(self.flexor(t), dtype=float), jnp.asarray(self.extensor(t), dtype=float)])
+
+    def bounds(self):
+        (a, b), (c, d) = self.flexor.bounds(), self.extensor.bounds()
+        return min(a, c), max(b, d)
+
+
+class AntagonisticJoint(AbstractSystem):
+    """Two muscles on a pulley, each fed by its own regulator (`valve` is the flexor's regulator, whose 0-10 V range
+    both commands obey).
+
+    **Arguments:** `flexor_regulator`, `extensor_regulator`; `flexor`, `extensor`: `Muscle`s; `pulley_radius` r [m]
+    (0.03); `pre_contraction` x₀ [m] (0.01); `inertia` I [kg m²] (0.05); `foot_mass` m [kg] (1.3) and `foot_arm` l
+    [m] (0.06) of the gravity load; `damping` c [N m s/rad] (2); `gravity` [m/s²] (9.81); `end_stops`; `air`
+    (paper 001); `polytropic_index` (1, isothermal). Assumed values are marked in the module.
+    """
+
+    flexor_regulator: AbstractRegulator
+    extensor_regulator: AbstractRegulator
+    flexor: Muscle
+    extensor: Muscle
+    pulley_radius: jax.Array = eqx.field(converter=jnp.asarray, default=PULLEY_RADIUS)  # m
+    pre_contraction: jax.Array = eqx.field(converter=jnp.asarray, default=PRE_CONTRACTION)  # m
+    inertia: jax.Array = eqx.field(converter=jnp.asarray, default=JOINT_INERTIA)  # kg m²
+    foot_mass: jax.Array = eqx.field(converter=jnp.asarray, default=FOOT_MASS)  # kg
+    foot_arm: jax.Array = eqx.field(converter=jnp.asarray, default=FOOT_ARM)  # m
+    damping: jax.Array = eqx.field(converter=jnp.asarray, default=JOINT_DAMPING)  # N m s/rad
+    gravity: jax.Array = eqx.field(converter=jnp.asarray, default=9.81)  # m/s²
+    end_stops: EndStops = eqx.field(default_factory=EndStops)
+    air: Air = eqx.field(default_factory=paper001_air)
+    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
+
+    def __check_init__(self):
+        check_positive(self.pulley_radius, "AntagonisticJoint.pulley_radius")
+        check_positive(self.inertia, "AntagonisticJoint.inertia")
+        check_nonnegative(self.foot_mass, "AntagonisticJoint.foot_mass")
+        check_nonnegative(self.damping, "AntagonisticJoint.damping")
+
+    @property
+    def valve(self):
+        return self.flexor_regulator
+
+    def contractions(self, angle):
+        """(x_f, x_e) [m] at joint angle [rad]."""
+        return self.pre_contraction + self.pulley_radius * angle, self.pre_contraction - self.pulley_radius * angle
+
+    def muscle_forces(self, angle, velocity, flexor_pressure, extensor_pressure):
+        """(F_f, F_e) [N] including the end stops, at absolute pressures [Pa]."""
+        xf, xe = self.contractions(angle)
+        vf, ve = self.pulley_radius * velocity, -self.pulley_radius * velocity
+        ff = self.flexor.force(xf, flexor_pressure, self.air) + self.end_stops.force(
+            xf, vf, self.flexor.min_position, self.flexor.max_position
+        )
+        fe = self.extensor.force(xe, extensor_pressure, self.air) + self.end_stops.force(
+            xe, ve, self.extensor.min_position, self.extensor.max_position
+        )
+        return ff, fe
+
+    def torque(self, angle, flexor_pressure, extensor_pressure, velocity=0.0):
+        """Net joint torque [N m] (muscles, gravity, damping)."""
+        ff, fe = self.muscle_forces(angle, velocity, flexor_pressure, extensor_pressure)
+        load = self.foot_mass * self.gravity * self.foot_arm * jnp.cos(angle)
+        return self.pulley_radius * (ff - fe) - load - self.damping * velocity
+
+    def stiffness(self, angle, flexor_pressure, extensor_pressure):
+        """Joint stiffness K_θ = −dτ/dθ = r² (K_f + K_e) − m g l sin θ [N m/rad]; K_f, K_e: eq. 9, closed."""
+        xf, xe = self.contractions(angle)
+        kf = muscle_stiffness(self.flexor, xf, flexor_pressure, self.air, None, self.polytropic_index)
+        ke = muscle_stiffness(self.extensor, xe, extensor_pressure, self.air, None, self.polytropic_index)
+        gravity = -self.foot_mass * self.gravity * self.foot_arm * jnp.sin(angle)
+        return self.pulley_radius**2 * (kf + ke) + gravity
+
+    def equilibrium_angle(self, flexor_pressure, extensor_pressure, max_angle=0.6):
+        """Angle [rad] where the static torque vanishes, in [−max_angle, max_angle]: bisection + a Newton step."""
+
+        def tau(joint, a):
+            return joint.torque(a, flexor_pressure, extensor_pressure)  # decreasing in a
+
+        frozen = jax.lax.stop_gradient(self)
+
+        def body(_, bounds):
+            lo, hi = bounds
+            mid = 0.5 * (lo + hi)
+            above = jax.lax.stop_gradient(tau(frozen, mid)) > 0
+            return jnp.where(above, mid, lo), jnp.where(above, hi, mid)
+
+        lo, hi = jax.lax.fori_loop(0, 60, body, (jnp.asarray(-max_angle), jnp.asarray(max_angle)))
+        a = 0.5 * (lo + hi)
+        slope = jax.grad(lambda q: tau(frozen, q))(a)
+        return a - tau(self, a) / jnp.where(slope < 0, slope, -1.0)
+
+    def pressures_for(self, angle, pressure_sum):
+        """(p_f, p_e) [Pa abs] holding `angle` [rad] statically with GAUGE pressure sum `pressure_sum` [Pa]
+        (feed-forward: the difference sets the angle, the sum the stiffness). Bisection on the difference."""
+        p_atm = self.air.atmospheric_pressure
+
+        def tau(delta):
+            return self.torque(angle, p_atm + 0.5 * (pressure_sum + delta), p_atm + 0.5 * (pressure_sum - delta))
+
+        def body(_, bounds):
+            lo, hi = bounds
+            mid = 0.5 * (lo + hi)
+            low = tau(mid) < 0  # torque increases with the difference
+            return jnp.where(low, mid, lo), jnp.where(low, hi, mid)
+
+        lo, hi = jax.lax.fori_loop(0, 80, body, (-pressure_sum, pressure_sum))
+        delta = 0.5 * (lo + hi)
+        return p_atm + 0.5 * (pressure_sum + delta), p_atm + 0.5 * (pressure_sum - delta)
+
+    def initial_state(self, flexor_pressure=None, extensor_pressure=None, angle=None):
+        """At rest with the given absolute pressures (atmospheric by default) at their static equilibrium angle."""
+        pf = jnp.asarray(self.air.atmospheric_pressure if flexor_pressure is None else flexor_pressure, dtype=float)
+        pe = jnp.asarray(self.air.atmospheric_pressure if extensor_pressure is None else extensor_pressure, dtype=float)
+        a = self.equilibrium_angle(pf, pe) if angle is None else jnp.asarray(angle, dtype=float)
+        return JointState(
+            flexor=self.flexor_regulator.initial_state(pf),
+            extensor=self.extensor_regulator.initial_state(pe),
+            angle=a,
+            angular_velocity=jnp.zeros(()),
+        )
+
+    def _chambers(self, state):
+        xf, xe = self.contractions(state.angle)
+        rv = self.pulley_radius * state.angular_velocity
+        return (
+            (self.flexor.volume(xf), self.flexor.volume_slope(xf) * rv),
+            (self.extensor.volume(xe), -self.extensor.volume_slope(xe) * rv),
+        )
+
+    def _check_command(self, command):
+        if jnp.shape(command) != (2,):
+            raise PamjaxInputError(
+                f"AntagonisticJoint's command must be (flexor, extensor) voltages, shape (2,), got {jnp.shape(command)}"
+            )
+
+    def vector_field(self, t, state, command):
+        self._check_command(command)
+        (vf, dvf), (ve, dve) = self._chambers(state)
+        n = self.polytropic_index
+        d_f = self.flexor_regulator.state_rate(state.flexor, command[0], vf, dvf, self.air, n)
+        d_e = self.extensor_regulator.state_rate(state.extensor, command[1], ve, dve, self.air, n)
+        tau = self.torque(state.angle, state.flexor.pressure, state.extensor.pressure, state.angular_velocity)
+        return JointState(flexor=d_f, extensor=d_e, angle=state.angular_velocity, angular_velocity=tau / self.inertia)
+
+    def outputs(self, t, state, command):
+        self._check_command(command)
+        (vf, dvf), (ve, dve) = self._chambers(state)
+        n = self.polytropic_index
+        pf, pe = state.flexor.pressure, state.extensor.pressure
+        ff, fe = self.muscle_forces(state.angle, state.angular_velocity, pf, pe)
+        return dict(
+            pressure=jnp.stack([pf, pe]),
+            mass_flow=jnp.stack(
+                [
+                    self.flexor_regulator.delivered_flow(state.flexor, command[0], vf, dvf, self.air, n),
+                    self.extensor_regulator.delivered_flow(state.extensor, command[1], ve, dve, self.air, n),
+                ]
+            ),
+            position=state.angle,
+            velocity=state.angular_velocity,
+            force=jnp.stack([ff, fe]),
+            volume=jnp.stack([vf, ve]),
+        )
+
+    def state_scale(self):
+        return JointState(
+            flexor=self.flexor_regulator.state_scale(),
+            extensor=self.extensor_regulator.state_scale(),
+            angle=jnp.asarray(0.1),
+            angular_velocity=jnp.asarray(0.1),
+        )

@@ -1,0 +1,421 @@
+"""Antagonistic joint control: the angle through the pressure difference, the stiffness through the pressure sum.
+
+Paper 001 (Sect. 7, future work): "the ankle joint position will depend on the difference of both valve output
+pressures, whereas the joint stiffness of the sum". With Δ = p_f − p_e and Σ = (p_f − p_atm) + (p_e − p_atm) (gauge),
+`AntagonisticJointController` runs two channels on the measured angle θ and pressures:
+
+- feed-forward through the static inverse: Δ*(θ_r, Σ_r) holds θ_r at sum Σ_r (`hold_difference`, the Newton
+  form of `AntagonisticJoint.pressures_for`); in stiffness mode Σ_r(θ_r, K_r) gives the stiffness K_r at θ_r
+  (`sum_for_stiffness`); plus a lead T_lead d/dt on both, for the regulators' lag (eq. 6);
+- angle PI on e_θ = θ_r − θ added to Δ; pressure-sum PI on e_Σ = Σ_r − Σ added to Σ;
+- p_f,e = p_atm + (Σ ± Δ)/2 → reference voltages through the inverse calibration, saturated to 0-10 V (and to
+  the voltage of the supply pressure), back-calculation anti-windup on both integrators.
+
+Joint stiffness here is the regulated one, K_θ = −∂τ/∂θ at held pressures (`regulated_stiffness`): the VPPMs
+hold their set pressures against slow deflections. It is smaller than `AntagonisticJoint.stiffness` (closed chambers,
+eq. 9), which describes deflections faster than the regulators.
+
+`JointControlLoop` is the continuous-time closed loop as a pamjax system (controller integrators in the state), so
+`simulate_joint_control` is one diffrax solve: differentiable with respect to gains and joint parameters.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._core.errors import PamjaxInputError, check_nonnegative, check_positive
+from .._physics.regulator import EQ6_TIME_CONSTANTS, VOLTAGE_RANGE, ISO6358Regulator
+from .._physics.signals import AbstractSignal, Constant
+from .._physics.tabulated import pchip
+from .._solve.simulate import solve
+from .joint import AntagonisticJoint, JointState
+from .muscle import AbstractSystem
+
+NEWTON_ITERATIONS = 6  # torque is affine in Δ and the stiffness nearly affine in Σ (DMSP-40): 2 suffice; 6 for slack
+
+# Default gains, designed on two DMSP-40s, ISO6358Regulators, default joint (reasoning per line):
+# ∂τ/∂Δ = 2.70e-4 N m/Pa and K_θ ≈ 115-180 N m/rad, so the static angle gain is ≈ 1.9e-6 rad/Pa.
+# Hand-tuned on the 0.5 Hz `GaitAngle` at K_θ = 140-165 N m/rad (grid K_P 0-3e6, K_I 0-2e7, docs/joint_control.md).
+ANGLE_PROPORTIONAL_GAIN = 1.0e6  # Pa/rad: static loop gain ≈ 1.9; 1.5e6-2e6 already oscillates (regulator lag)
+ANGLE_INTEGRAL_GAIN = 1.0e7  # Pa/(rad s): integral corner K_I/K_P = 10 rad/s, ≈ 3 × the gait's 2nd harmonic
+SUM_PROPORTIONAL_GAIN = 0.0  # -: off. When one regulator's exhaust is flow-limited, sum feedback drives the
+# other muscle the wrong way and corrupts the difference (angle RMSE 0.033 → 0.044 rad at K_θ = 140, measured)
+SUM_INTEGRAL_GAIN = 2.0  # 1/s: slow removal of static sum (hence stiffness) errors, time constant 0.5 s
+LEAD_TIME = EQ6_TIME_CONSTANTS[0] + EQ6_TIME_CONSTANTS[1]  # s, 0.064: first-order inverse of eq. 6's two poles
+TRACKING_TIME = 0.1  # s, back-calculation time constant: Åström-Hägglund's T_t ≈ T_i (= K_P/K_I = 0.1 s)
+
+
+# --- static inverse -------------------------------------------------------------------------------------------------
+def regulated_stiffness(joint: AntagonisticJoint, angle, flexor_pressure, extensor_pressure):
+    """K_θ = −∂τ/∂θ [N m/rad] at held absolute pressures [Pa] (regulated muscles), by autodiff of the torque."""
+    return -jax.grad(lambda a: joint.torque(a, flexor_pressure, extensor_pressure))(jnp.asarray(angle, dtype=float))
+
+
+def _pressures(joint, pressure_sum, difference):
+    p_atm = joint.air.atmospheric_pressure
+    return p_atm + 0.5 * (pressure_sum + difference), p_atm + 0.5 * (pressure_sum - difference)
+
+
+def hold_difference(joint: AntagonisticJoint, angle, pressure_sum):
+    """Δ = p_f − p_e [Pa] whose static torque vanishes at `angle` [rad] with gauge sum `pressure_sum` [Pa]: Newton
+    from Δ = 0 (torque is affine in Δ away from slack and end stops). Same root as `AntagonisticJoint.pressures_for`
+    (bisection); only the last step is differentiated, which gives the implicit-function derivatives."""
+
+    def tau(d, a, s):
+        return joint.torque(a, *_pressures(joint, s, d))
+
+    def newton(d, a, s):
+        value, slope = jax.value_and_grad(tau)(d, a, s)
+        return d - value / slope
+
+    frozen = jax.lax.stop_gradient((angle, pressure_sum))
+    d = jnp.zeros_like(jnp.asarray(pressure_sum, dtype=float))
+    d = jax.lax.fori_loop(0, NEWTON_ITERATIONS - 1, lambda _, d: newton(d, *frozen), d)
+    return newton(jax.lax.stop_gradient(d), angle, pressure_sum)
+
+
+def hold_pressures(joint: AntagonisticJoint, angle, pressure_sum):
+    """(p_f, p_e) [Pa abs] that hold `angle` [rad] statically at gauge sum `pressure_sum` [Pa]."""
+    return _pressures(joint, pressure_sum, hold_difference(joint, angle, pressure_sum))
+
+
+def held_stiffness(joint: AntagonisticJoint, angle, pressure_sum):
+    """Regulated stiffness [N m/rad] at `angle` [rad] held with gauge sum `pressure_sum` [Pa]."""
+    return regulated_stiffness(joint, angle, *hold_pressures(joint, angle, pressure_sum))
+
+
+def sum_for_stiffness(joint: AntagonisticJoint, angle, stiffness, initial_sum=4e5):
+    """Gauge pressure sum Σ [Pa] giving regulated stiffness `stiffness` [N m/rad] at `angle` [rad] held statically:
+    Newton on Σ from `initial_sum` [Pa] (K is nearly affine in Σ), last step differentiated."""
+
+    def newton(s, a, k):
+        value, slope = jax.value_and_grad(lambda q: held_stiffness(joint, a, q))(s)
+        return s - (value - k) / slope
+
+    frozen = jax.lax.stop_gradient((angle, stiffness))
+    s = jnp.asarray(initial_sum, dtype=float) + 0.0 * frozen[1]
+    s = jax.lax.fori_loop(0, NEWTON_ITERATIONS - 1, lambda _, s: newton(s, *frozen), s)
+    return newton(jax.lax.stop_gradient(s), angle, stiffness)
+
+
+def max_gauge_pressure(joint: AntagonisticJoint):
+    """Highest gauge pressure [Pa] both regulators can hold: their 10 V calibration, and the supply pressure for
+    ISO 6358 regulators (a regulator cannot raise its outlet above its supply)."""
+    limits = []
+    for reg in (joint.flexor_regulator, joint.extensor_regulator):
+        calibration = getattr(reg, "calibration", None)
+        if calibration is None:
+            raise PamjaxInputError(
+                "AntagonisticJointController needs regulators with a VoltageCalibration (LinearRegulator or "
+                f"ISO6358Regulator) to turn pressures into voltages, got {type(reg).__name__}"
+            )
+        limits.append(calibration(VOLTAGE_RANGE[1]))
+        if isinstance(reg, ISO6358Regulator):
+            limits.append(reg.supply_pressure - joint.air.atmospheric_pressure)
+    return jnp.min(jnp.stack(limits))
+
+
+def _voltage(regulator, gauge_pressure):
+    """Inverse calibration: the voltage [V] setting `gauge_pressure` [Pa] (PCHIP with the axes swapped: exact for
+    the linear default, monotone for any table)."""
+    cal = regulator.calibration
+    return pchip(cal.gauge_pressure, cal.voltage, gauge_pressure)
+
+
+# --- controller -----------------------------------------------------------------------------------------------------
+class AntagonisticJointController(eqx.Module):
+    """Angle and stiffness (or pressure sum) control of an `AntagonisticJoint` (see the module docstring).
+
+    Δ = Δ* + T_lead Δ̇* + K_Pθ e_θ + I_θ,   Σ = Σ_r + T_lead Σ̇_r + K_PΣ e_Σ + I_Σ,
+    İ_θ = K_Iθ e_θ + (Δ_sat − Δ)/T_t,      İ_Σ = K_IΣ e_Σ + (Σ_sat − Σ)/T_t  (back-calculation anti-windup),
+
+    Δ_sat, Σ_sat: the pressures the saturated voltages ask for.
+
+    **Arguments:** `angle_proportional_gain` K_Pθ [Pa/rad] (1e6), `angle_integral_gain` K_Iθ [Pa/(rad s)] (1e7),
+    `sum_proportional_gain` K_PΣ [-] (0), `sum_integral_gain` K_IΣ [1/s] (2), `lead_time` T_lead [s] (0.064,
+    eq. 6's τ₁ + τ₂), `tracking_time` T_t [s] (0.1); reasons beside the module constants.
+    """
+
+    angle_proportional_gain: jax.Array = eqx.field(converter=jnp.asarray, default=ANGLE_PROPORTIONAL_GAIN)  # Pa/rad
+    angle_integral_gain: jax.Array = eqx.field(converter=jnp.asarray, default=ANGLE_INTEGRAL_GAIN)  # Pa/(rad s)
+    sum_proportional_gain: jax.Array = eqx.field(converter=jnp.asarray, default=SUM_PROPORTIONAL_GAIN)  # -
+    sum_integral_gain: jax.Array = eqx.field(converter=jnp.asarray, default=SUM_INTEGRAL_GAIN)  # 1/s
+    lead_time: jax.Array = eqx.field(converter=jnp.asarray, default=LEAD_TIME)  # s
+    tracking_time: jax.Array = eqx.field(converter=jnp.asarray, default=TRACKING_TIME)  # s
+
+    def __check_init__(self):
+        for name in (
+            "angle_proportional_gain",
+            "angle_integral_gain",
+            "sum_proportional_gain",
+            "sum_integral_gain",
+            "lead_time",
+        ):
+            check_nonnegative(getattr(self, name), f"AntagonisticJointController.{name}")
+        check_positive(self.tracking_time, "AntagonisticJointController.tracking_time")
+
+    def command(self, joint, targets, target_rates, angle, pressures, integrals):
+        """Reference voltages (V_f, V_e) [V] and the integrators' rates [Pa/s] from the targets (θ_r [rad], Σ_r
+        [Pa gauge]) and their rates, the measured angle [rad], pressures (p_f, p_e) [Pa abs] and the integrators
+        (I_θ, I_Σ) [Pa]."""
+        (theta_r, sum_r), (dtheta_r, dsum_r) = targets, target_rates
+        p_atm = joint.air.atmospheric_pressure
+        diff_ff, ddiff_ff = jax.jvp(lambda a, s: hold_difference(joint, a, s), (theta_r, sum_r), (dtheta_r, dsum_r))
+        e_angle = theta_r - angle
+        e_sum = sum_r - (pressures[0] + pressures[1] - 2.0 * p_atm)
+        diff = diff_ff + self.lead_time * ddiff_ff + self.angle_proportional_gain * e_angle + integrals[0]
+        total = sum_r + self.lead_time * dsum_r + self.sum_proportional_gain * e_sum + integrals[1]
+        regs = (joint.flexor_regulator, joint.extensor_regulator)
+        gauge = (0.5 * (total + diff), 0.5 * (total - diff))
+        v_max = jnp.minimum(VOLTAGE_RANGE[1], jnp.stack([_voltage(r, max_gauge_pressure(joint)) for r in regs]))
+        raw = jnp.stack([_voltage(r, g) for r, g in zip(regs, gauge)])
+        # Controller output saturation (not physics): the exact clip is what the controller does.
+        volts = jnp.clip(raw, VOLTAGE_RANGE[0], v_max)
+        realised = [r.calibration(v) for r, v in zip(regs, volts)]
+        rates = jnp.stack(
+            [
+                self.angle_integral_gain * e_angle + ((realised[0] - realised[1]) - diff) / self.tracking_time,
+                self.sum_integral_gain * e_sum + ((realised[0] + realised[1]) - total) / self.tracking_time,
+            ]
+        )
+        return volts, rates
+
+
+# --- references -----------------------------------------------------------------------------------------------------
+class GaitAngle(AbstractSignal):
+    """Gait-like ankle angle [rad]: `offset` + a₁ sin(2π f t) + a₂ sin(4π f t + 1) (push-off and swing, the shape of
+    `fits/ankle.py`), a₁ = 0.18 rad, a₂ = 0.08 rad (≈ ±15°, the ankle's sagittal range in walking, Winter)."""
+
+    frequency: jax.Array = eqx.field(converter=jnp.asarray, default=0.5)  # Hz
+    offset: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # rad
+    first: jax.Array = eqx.field(converter=jnp.asarray, default=0.18)  # rad
+    second: jax.Array = eqx.field(converter=jnp.asarray, default=0.08)  # rad
+
+    def __check_init__(self):
+        check_positive(self.frequency, "GaitAngle.frequency")
+
+    def __call__(self, t):
+        w = 2 * jnp.pi * self.frequency * t
+        return self.offset + self.first * jnp.sin(w) + self.second * jnp.sin(2 * w + 1.0)
+
+    def bounds(self):
+        t = np.linspace(0.0, 1.0 / float(self.frequency), 2001)
+        v = np.asarray(jax.vmap(self)(jnp.asarray(t)))
+        return float(v.min()), float(v.max())
+
+
+# --- closed loop ----------------------------------------------------------------------------------------------------
+class JointControlState(eqx.Module):
+    """`plant`: the joint's `JointState` (absolute pressures); `integrals`: (I_θ, I_Σ) [Pa]."""
+
+    plant: JointState
+    integrals: jax.Array
+
+
+class JointControlLoop(AbstractSystem):
+    """An `AntagonisticJoint` under `AntagonisticJointController`, following `angle_reference` [rad] and
+    `target`: a stiffness [N m/rad] (`target_kind="stiffness"`) or a gauge pressure sum [Pa] (`"pressure_sum"`).
+    A pamjax system whose command is ignored (the references live in the loop)."""
+
+    joint: AntagonisticJoint
+    controller: AntagonisticJointController
+    angle_reference: AbstractSignal
+    target: AbstractSignal
+    target_kind: str = eqx.field(static=True, default="stiffness")
+
+    def __check_init__(self):
+        if not isinstance(self.joint, AntagonisticJoint):
+            raise PamjaxInputError(f"JointControlLoop.joint must be an AntagonisticJoint, got {type(self.joint)}")
+        if not isinstance(self.controller, AntagonisticJointController):
+            raise PamjaxInputError(
+                f"JointControlLoop.controller must be an AntagonisticJointController, got {type(self.controller)}"
+            )
+        for name in ("angle_reference", "target"):
+            if not isinstance(getattr(self, name), AbstractSignal):
+                raise PamjaxInputError(
+                    f"JointControlLoop.{name} must be a pamjax signal, got {type(getattr(self, name))}"
+                )
+        if self.target_kind not in ("stiffness", "pressure_sum"):
+            raise PamjaxInputError(f"target_kind must be 'stiffness' or 'pressure_sum', got {self.target_kind!r}")
+        max_gauge_pressure(self.joint)  # regulators must have a calibration
+
+    @property
+    def valve(self):
+        return self.joint.valve
+
+    @property
+    def air(self):
+        return self.joint.air
+
+    def targets(self, t):
+        """(θ_r [rad], Σ_r [Pa gauge]) at `t` [s]."""
+        theta = self.angle_reference(t)
+        target = self.target(t)
+        if self.target_kind == "pressure_sum":
+            return theta, target
+        return theta, sum_for_stiffness(self.joint, theta, target)
+
+    def _command(self, t, state):
+        t = jnp.asarray(t, dtype=float)
+        targets, rates = jax.jvp(self.targets, (t,), (jnp.ones_like(t),))
+        plant = state.plant
+        pressures = (plant.flexor.pressure, plant.extensor.pressure)
+        return self.controller.command(self.joint, targets, rates, plant.angle, pressures, state.integrals)
+
+    def initial_state(self, t0=0.0):
+        """At rest holding the references at `t0` [s] statically, integrators reset."""
+        theta, total = self.targets(jnp.asarray(t0, dtype=float))
+        pf, pe = hold_pressures(self.joint, theta, total)
+        return JointControlState(plant=self.joint.initial_state(pf, pe, angle=theta), integrals=jnp.zeros(2))
+
+    def vector_field(self, t, state, command):
+        volts, rates = self._command(t, state)
+        return JointControlState(plant=self.joint.vector_field(t, state.plant, volts), integrals=rates)
+
+    def outputs(self, t, state, command):
+        volts, _ = self._command(t, state)
+        out = self.joint.outputs(t, state.plant, volts)
+        out["voltage"] = volts
+        return out
+
+    def state_scale(self):
+        return JointControlState(plant=self.joint.state_scale(), integrals=jnp.full(2, 1e5))
+
+
+class JointControlTrajectory(eqx.Module):
+    """Result of `simulate_joint_control` at times `t` [s]: `angle`, `angle_reference` [rad]; `stiffness` (regulated,
+    at the measured angle and pressures), `stiffness_reference` [N m/rad] (in pressure-sum mode: the stiffness the
+    sum gives at θ_r); `pressure_sum`, `pressure_sum_reference` [Pa gauge]; `pressure` (p_f, p_e) [Pa abs];
+    `voltage` (V_f, V_e) [V]; `result` 0 on success."""
+
+    t: jax.Array
+    angle: jax.Array
+    angle_reference: jax.Array
+    stiffness: jax.Array
+    stiffness_reference: jax.Array
+    pressure_sum: jax.Array
+    pressure_sum_reference: jax.Array
+    pressure: jax.Array
+    voltage: jax.Array
+    result: jax.Array
+
+    def rmse(self, start=0.0):
+        """(angle RMSE [rad], stiffness RMSE [N m/rad]) over t ≥ `start` [s]."""
+        w = (self.t >= start).astype(float)
+        n = jnp.sum(w)
+        return (
+            jnp.sqrt(jnp.sum(w * (self.angle - self.angle_reference) ** 2) / n),
+            jnp.sqrt(jnp.sum(w * (self.stiffness - self.stiffness_reference) ** 2) / n),
+        )
+
+
+def run_joint_control(loop: JointControlLoop, ts, y0=None, rtol=1e-7, atol=1e-7, max_steps=100_000):
+    """The unchecked, traceable core of `simulate_joint_control` (for use inside grad / vmap)."""
+    ts = jnp.asarray(ts, dtype=float)
+    y0 = loop.initial_state(ts[0]) if y0 is None else y0
+    traj = solve(loop, Constant(0.0), ts, y0, ts[0], rtol=rtol, atol=atol, max_steps=max_steps)
+    joint, p_atm = loop.joint, loop.air.atmospheric_pressure
+    pressure, angle = traj.pressure, traj.position
+    theta_r, sum_r = jax.vmap(loop.targets)(ts)
+    stiffness = jax.vmap(lambda a, p: regulated_stiffness(joint, a, p[0], p[1]))(angle, pressure)
+    if loop.target_kind == "stiffness":
+        stiffness_r = jax.vmap(loop.target)(ts)
+    else:
+        stiffness_r = jax.vmap(lambda a, s: held_stiffness(joint, a, s))(theta_r, sum_r)
+    volts = jax.vmap(lambda t, s: loop._command(t, s)[0])(ts, traj.state)
+    return JointControlTrajectory(
+        t=ts,
+        angle=angle,
+        angle_reference=theta_r,
+        stiffness=stiffness,
+        stiffness_reference=stiffness_r + 0.0 * ts,
+        pressure_sum=pressure[:, 0] + pressure[:, 1] - 2 * p_atm,
+        pressure_sum_reference=sum_r + 0.0 * ts,
+        pressure=pressure,
+        voltage=volts,
+        result=traj.result,
+    )
+
+
+_run_jit = eqx.filter_jit(run_joint_control)
+
+
+def joint_angle_range(joint: AntagonisticJoint):
+    """(θ_min, θ_max) [rad] where both muscles stay inside their strokes: x₀ ± r θ ∈ [x_min, x_max]."""
+    r, x0 = float(joint.pulley_radius), float(joint.pre_contraction)
+    f_lo, f_hi = float(joint.flexor.min_position), float(joint.flexor.max_position)
+    e_lo, e_hi = float(joint.extensor.min_position), float(joint.extensor.max_position)
+    return max((f_lo - x0) / r, (x0 - e_hi) / r), min((f_hi - x0) / r, (x0 - e_lo) / r)
+
+
+@eqx.filter_jit
+def _static_targets(loop, grid):
+    """θ_r, the held pressures and the static residual (|torque| [N m], and |K − K_r| [N m/rad] for a stiffness
+    target) on `grid` [s]."""
+    joint = loop.joint
+    theta, total = jax.vmap(loop.targets)(grid)
+    pf, pe = jax.vmap(lambda a, s: hold_pressures(joint, a, s))(theta, total)
+    residual = jnp.abs(jax.vmap(joint.torque)(theta, pf, pe))
+    if loop.target_kind == "stiffness":
+        achieved = jax.vmap(lambda a, s: held_stiffness(joint, a, s))(theta, total)
+        residual = jnp.maximum(residual, jnp.abs(achieved - jax.vmap(loop.target)(grid)))
+    return theta, pf, pe, residual
+
+
+def check_joint_control(loop: JointControlLoop, ts, samples=401):
+    """Concrete feasibility checks before any solve (`PamjaxInputError` naming the argument): the angle reference
+    inside the joint's range; at `samples` times over `ts`, the target held statically with both gauge pressures in
+    [0, `max_gauge_pressure`] (a stiffness outside what the pressure sum can give, or a sum too small for the angle,
+    fails here)."""
+    ts = np.asarray(ts, dtype=float)
+    if ts.ndim != 1 or ts.size < 2 or not np.all(np.isfinite(ts)) or not np.all(np.diff(ts) > 0):
+        raise PamjaxInputError(f"ts must be a finite, strictly increasing 1-D time grid [s] of ≥ 2 times, got {ts}")
+    lo, hi = loop.angle_reference.bounds()
+    a_lo, a_hi = joint_angle_range(loop.joint)
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo >= a_lo and hi <= a_hi):
+        raise PamjaxInputError(
+            f"angle_reference must stay inside the joint's range [{a_lo:.3f}, {a_hi:.3f}] rad (both muscles within "
+            f"their strokes), but spans [{lo}, {hi}] rad"
+        )
+    grid = jnp.asarray(np.linspace(ts[0], ts[-1], samples))
+    joint = loop.joint
+    theta, pf, pe, residual = (np.asarray(a) for a in _static_targets(loop, grid))
+    p_atm, p_max = float(joint.air.atmospheric_pressure), float(max_gauge_pressure(joint))
+    gauge = np.stack([pf, pe]) - p_atm
+    name = "stiffness target" if loop.target_kind == "stiffness" else "pressure-sum target"
+    bad = ~np.isfinite(gauge).all(0) | (gauge.min(0) < 0) | (gauge.max(0) > p_max) | ~(residual < 1e-6)
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        raise PamjaxInputError(
+            f"{name} is infeasible at t = {float(grid[k]):.3f} s (θ_r = {float(theta[k]):.3f} rad): holding it needs "
+            f"gauge pressures ({gauge[0, k]:.4g}, {gauge[1, k]:.4g}) Pa outside [0, {p_max:.4g}] Pa (supply / 10 V)"
+        )
+
+
+def simulate_joint_control(
+    loop: JointControlLoop,
+    ts,
+    *,
+    y0: JointControlState | None = None,
+    rtol: float = 1e-7,
+    atol: float = 1e-7,
+    max_steps: int = 100_000,
+) -> JointControlTrajectory:
+    """Simulate angle and stiffness (or pressure-sum) control of an antagonistic joint over the times `ts` [s].
+
+    One continuous-time diffrax solve of joint, regulators and controller integrators (the controller reads θ and
+    the pressures continuously). Differentiable with respect to gains and joint parameters (use `run_joint_control`
+    inside `jax.grad` / `eqx.filter_vmap`).
+
+    **Arguments:** `loop` a `JointControlLoop`; `ts` save times [s] (the solve starts at ts[0]); `y0` initial
+    `JointControlState` (default: at rest holding the references at ts[0]); `rtol`, `atol` on the scaled state
+    (pressures in bar, angle in 0.1 rad); `max_steps`.
+
+    **Raises:** `PamjaxInputError` for an angle reference outside the joint's range or an infeasible stiffness or
+    pressure-sum target (see `check_joint_control`), before any solve.
+    """
+    if not isinstance(loop, JointControlLoop):
+        raise PamjaxInputError(f"loop must be a JointControlLoop, got {type(loop).__name__}")
+    check_joint_control(loop, ts)
+    return _run_jit(loop, jnp.asarray(ts, dtype=float), y0, rtol, atol, max_steps)

@@ -1,0 +1,257 @@
+"""Systems: components composed into one ODE vector field whose state is a named pytree.
+
+- `TankSystem`: a constant-volume tank fed by a valve (paper 000's valve tests, paper 001's appendix).
+- `MuscleSystem`: one muscle lifting a payload, fed by a valve (paper 000's system tests).
+
+`vector_field(t, state, command)` returns the state's time derivative; `outputs(t, state, command)` the measurable
+channels (pressure [Pa abs], position [m], velocity [m/s], force [N], mass_flow [kg/s]). States hold ABSOLUTE
+pressures. `state_scale()` gives a typical magnitude per state, used by `simulate` to integrate in scaled units so
+that one tolerance fits states of different units.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._core.errors import check_in_open_interval, check_positive
+from .._physics.friction import AbstractFriction, CoulombViscousFriction
+from .._physics.gas import Air
+from .._physics.muscle import EndStops, Muscle
+from .._physics.valve import AbstractValve
+
+
+class TankState(eqx.Module):
+    """State of a constant-volume tank: `pressure` [Pa abs]."""
+
+    pressure: jax.Array
+
+
+class MuscleState(eqx.Module):
+    """State of a muscle lifting a payload: `pressure` [Pa abs], `position` x [m] (positive = contraction, payload
+    up), `velocity` ẋ [m/s], `friction` the friction model's own state (None for memoryless friction)."""
+
+    pressure: jax.Array
+    position: jax.Array
+    velocity: jax.Array
+    friction: jax.Array | None = None
+
+
+class AbstractSystem(eqx.Module):
+    """An ODE vector field over a named state pytree, driven by a command signal through a valve."""
+
+    valve: eqx.AbstractVar[AbstractValve]
+    air: eqx.AbstractVar[Air]
+
+    def initial_state(self, **kwargs):
+        raise NotImplementedError
+
+    def vector_field(self, t, state, command):
+        raise NotImplementedError
+
+    def outputs(self, t, state, command):
+        raise NotImplementedError
+
+    def state_scale(self):
+        raise NotImplementedError
+
+    @property
+    def hybrid(self):
+        """Whether the system has discrete modes switched at events (e.g. stick-slip friction)."""
+        return False
+
+    def event_function(self, t, state, command):
+        """Hybrid systems only: a scalar that stays ≥ 0 while the current mode holds and crosses below 0 where it
+        ends. The fixed-grid integrator (`pamjax._solve.grid`) locates that crossing inside the step."""
+        raise NotImplementedError
+
+    def event_update(self, t, state, command):
+        """Hybrid systems only: the state just after the event at `state` (the new mode; velocities reset)."""
+        raise NotImplementedError
+
+
+def pressure_rate(mass_flow, pressure, volume, volume_rate, polytropic_index, air: Air):
+    """Paper 000 eq. 15: ṗ = n R T ṁ / V − n p V̇ / V [Pa/s] (n = 1.4 adiabatic, 1.0 isothermal)."""
+    return polytropic_index * (air.gas_constant * air.temperature * mass_flow - pressure * volume_rate) / volume
+
+
+class TankSystem(AbstractSystem):
+    """A constant-volume tank fed by a valve: ṗ = n R T ṁ(t, u, p) / V (paper 000 eq. 12 with V̇ = 0).
+
+    **Arguments:** `valve`; `volume` V [m³]; `air` (`Air()`); `polytropic_index` n [-] (1.4 adiabatic, paper 000;
+    1.0 isothermal).
+    """
+
+    valve: AbstractValve
+    volume: jax.Array = eqx.field(converter=jnp.asarray)  # m³
+    air: Air = eqx.field(default_factory=Air)
+    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.4)  # -
+
+    def __check_init__(self):
+        check_positive(self.volume, "TankSystem.volume")
+        check_in_open_interval(self.polytropic_index, 0.99, 1.41, "TankSystem.polytropic_index")
+
+    def initial_state(self, pressure=None):
+        """Tank at `pressure` [Pa abs]; atmospheric by default."""
+        p = self.air.atmospheric_pressure if pressure is None else jnp.asarray(pressure, dtype=float)
+        return TankState(pressure=jnp.asarray(p, dtype=float))
+
+    def vector_field(self, t, state, command):
+        mdot = self.valve.mass_flow(t, command, state.pressure, self.air)
+        return TankState(
+            pressure=pressure_rate(mdot, state.pressure, self.volume, 0.0, self.polytropic_index, self.air)
+        )
+
+    def outputs(self, t, state, command):
+        return dict(pressure=state.pressure, mass_flow=self.valve.mass_flow(t, command, state.pressure, self.air))
+
+    def state_scale(self):
+        return TankState(pressure=jnp.asarray(1e5))
+
+
+class MuscleSystem(AbstractSystem):
+    """Paper 000's plant: a muscle lifting a payload against gravity, fed by a valve.
+
+    ṗ = n/V(x) (R T ṁ(t, u, p) − p V'(x) ẋ)                      (eq. 15)
+    M ẍ = F_muscle(x, p) − F_friction(ẋ, z) − M g + F_stops(x, ẋ)   (eq. 16, eq. 8-9)
+
+    **Arguments:**
+
+    - `valve`, `muscle`, `friction` (`CoulombViscousFriction()` by default), `end_stops` (`EndStops()`).
+    - `payload_mass` M [kg] (9.6, paper 000); `gravity` g [m/s²] (9.81).
+    - `air`, `polytropic_index` n (1.4 adiabatic, paper 000 eq. 15).
+    """
+
+    valve: AbstractValve
+    muscle: Muscle
+    payload_mass: jax.Array = eqx.field(converter=jnp.asarray, default=9.6)  # kg
+    friction: AbstractFriction = eqx.field(default_factory=CoulombViscousFriction)
+    end_stops: EndStops = eqx.field(default_factory=EndStops)
+    air: Air = eqx.field(default_factory=Air)
+    gravity: jax.Array = eqx.field(converter=jnp.asarray, default=9.81)  # m/s²
+    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.4)  # -
+
+    def __check_init__(self):
+        check_positive(self.payload_mass, "MuscleSystem.payload_mass")
+        check_positive(self.gravity, "MuscleSystem.gravity")
+        check_in_open_interval(self.polytropic_index, 0.99, 1.41, "MuscleSystem.polytropic_index")
+
+    def equilibrium_position(self, pressure):
+        """Position [m] where the muscle force at `pressure` [Pa abs] carries the payload's weight (friction-free),
+        clipped to the stroke limits. Bisection plus one Newton step, so its derivative is the implicit one."""
+        weight = self.payload_mass * self.gravity
+        frozen = jax.lax.stop_gradient(self)
+
+        def residual(model, x):
+            return model.muscle.force(x, pressure, model.air) - weight  # decreasing in x
+
+        lo0 = jax.lax.stop_gradient(self.muscle.min_position)
+        hi0 = jax.lax.stop_gradient(self.muscle.max_position)
+
+        def body(_, bounds):
+            lo, hi = bounds
+            mid = 0.5 * (lo + hi)
+            above = jax.lax.stop_gradient(residual(frozen, mid)) > 0
+            return jnp.where(above, mid, lo), jnp.where(above, hi, mid)
+
+        lo, hi = jax.lax.fori_loop(0, 60, body, (lo0, hi0))
+        x = 0.5 * (lo + hi)
+        slope = jax.grad(lambda q: residual(frozen, q))(x)
+        interior = (x > lo0 + 1e-9) & (x < hi0 - 1e-9) & (slope < 0)
+        newton = x - residual(self, x) / jnp.where(interior, slope, -1.0)
+        # At a stroke limit the position IS that limit: return the limit itself so the derivative follows it.
+        at_limit = jnp.where(x >= 0.5 * (lo0 + hi0), self.muscle.max_position, self.muscle.min_position)
+        return jnp.where(interior, newton, at_limit)
+
+    def initial_state(self, pressure=None, position=None, velocity=0.0):
+        """State at rest: `pressure` [Pa abs] (atmospheric by default) and `position` [m] (by default the static
+        equilibrium with the payload at that pressure)."""
+        p = self.air.atmospheric_pressure if pressure is None else jnp.asarray(pressure, dtype=float)
+        x = self.equilibrium_position(p) if position is None else jnp.asarray(position, dtype=float)
+        return MuscleState(
+            pressure=jnp.asarray(p, dtype=float),
+            position=jnp.asarray(x, dtype=float),
+            velocity=jnp.asarray(velocity, dtype=float),
+            friction=self.friction.initial_state(),
+        )
+
+    @property
+    def hybrid(self):
+        return self.friction.hybrid
+
+    def _forces(self, t, state, command):
+        x, v = state.position, state.velocity
+        muscle = self.muscle.force(x, state.pressure, self.air)
+        friction = self.friction.force(v, state.friction)
+        if self.hybrid:  # the stroke limits are inelastic stops, handled as events (event_function)
+            stops = jnp.zeros_like(x)
+        else:
+            stops = self.end_stops.force(x, v, self.muscle.min_position, self.muscle.max_position)
+        return muscle, friction, stops
+
+    def _held_force(self, x, muscle):
+        """Net driving force on a payload at rest [N] (muscle − weight), with what an end stop holds removed: at the
+        upper stop only a downward force can move it, at the lower stop only an upward one (hybrid systems)."""
+        net = muscle - self.payload_mass * self.gravity
+        at_upper = x >= self.muscle.max_position - 1e-12
+        at_lower = x <= self.muscle.min_position + 1e-12
+        return jnp.where(at_upper, jnp.minimum(net, 0.0), jnp.where(at_lower, jnp.maximum(net, 0.0), net))
+
+    def vector_field(self, t, state, command):
+        x, v, p = state.position, state.velocity, state.pressure
+        mdot = self.valve.mass_flow(t, command, p, self.air)
+        muscle, friction, stops = self._forces(t, state, command)
+        dv = (muscle - friction + stops) / self.payload_mass - self.gravity
+        dx = v
+        stuck = self.friction.is_stuck(state.friction)
+        if self.hybrid:  # stuck: the payload holds still (its velocity is exactly 0 after the event)
+            dx = jnp.where(stuck, 0.0, v)
+            dv = jnp.where(stuck, 0.0, dv)
+        volume = self.muscle.volume(x)
+        volume_rate = self.muscle.volume_slope(x) * dx
+        dp = pressure_rate(mdot, p, volume, volume_rate, self.polytropic_index, self.air)
+        return MuscleState(pressure=dp, position=dx, velocity=dv, friction=self.friction.state_rate(v, state.friction))
+
+    def event_function(self, t, state, command):
+        """Stuck: (F_c − |F_net|)/(M g), crossing 0 when the net force breaks the payload free. Sliding in
+        direction z: min(z ẋ / 1 cm/s, distance to the stop ahead / 1 cm), crossing 0 when it comes to rest or
+        reaches a stop."""
+        x, v, z = state.position, state.velocity, state.friction
+        weight = self.payload_mass * self.gravity
+        held = self._held_force(x, self.muscle.force(x, state.pressure, self.air))
+        stuck_margin = (self.friction.coulomb_force - jnp.abs(held)) / weight
+        gap = jnp.where(z > 0, self.muscle.max_position - x, x - self.muscle.min_position)
+        sliding_margin = jnp.minimum(z * v / 1e-2, gap / 1e-2)
+        return jnp.where(self.friction.is_stuck(z), stuck_margin, sliding_margin)
+
+    def event_update(self, t, state, command):
+        """At rest (velocity 0; a stop is inelastic), on a stop if at one, then stuck or sliding by the net force."""
+        x = jnp.clip(state.position, self.muscle.min_position, self.muscle.max_position)
+        held = self._held_force(x, self.muscle.force(x, state.pressure, self.air))
+        return MuscleState(
+            pressure=state.pressure,
+            position=x,
+            velocity=jnp.zeros_like(state.velocity),
+            friction=self.friction.mode_after_event(state.friction, held),
+        )
+
+    def outputs(self, t, state, command):
+        muscle, friction, _ = self._forces(t, state, command)
+        if self.hybrid:  # stuck: static friction balances the net force
+            stuck = self.friction.is_stuck(state.friction)
+            friction = jnp.where(stuck, self._held_force(state.position, muscle), friction)
+        return dict(
+            pressure=state.pressure,
+            position=state.position,
+            velocity=state.velocity,
+            force=muscle,
+            friction_force=friction,
+            mass_flow=self.valve.mass_flow(t, command, state.pressure, self.air),
+            volume=self.muscle.volume(state.position),
+        )
+
+    def state_scale(self):
+        friction = self.friction.initial_state()
+        friction_scale = None if friction is None else jnp.asarray(1.0 if self.hybrid else 1e-4)
+        return MuscleState(
+            pressure=jnp.asarray(1e5), position=jnp.asarray(1e-2), velocity=jnp.asarray(1e-2), friction=friction_scale
+        )

@@ -1,0 +1,250 @@
+"""Systems fed by a proportional pressure regulator (paper 001), and the muscle-side relations of its eq. 9-11.
+
+- `RegulatorSystem`: a regulator feeding a constant volume (the 0.04 m³ tank of the appendix, or the closed outlet
+  port of eq. 6's identification), with an extra outlet mass flow `outlet_flow` (eq. 5's Q_in input).
+- `RegulatedMuscleSystem`: a regulator feeding a muscle that lifts a hanging load (paper 001: DMSP-40-400, 893 N).
+
+The command is the reference voltage [V] in 0-10 V. States hold ABSOLUTE pressures (the regulator's state carries
+the outlet pressure). Both serve `simulate`, fitting and `linearise` alike.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._core.errors import check_in_open_interval, check_nonnegative, check_positive
+from .._physics.friction import AbstractFriction, CoulombViscousFriction
+from .._physics.gas import Air
+from .._physics.muscle import EndStops, Muscle
+from .._physics.regulator import TANK_VOLUME, AbstractRegulator, ISO6358Regulator, chamber_flow, paper001_air
+from .muscle import AbstractSystem
+
+DMSP40_LOAD_FORCE = 893.0  # N, paper 001 Sect. 4 (a 91.3 kg subject)
+DMSP40_VISCOUS_COEFFICIENT = 3000.0  # N s/m, assumed: paper 001 gives no friction; ≈ 0.2 of critical damping
+#                                      2 sqrt(k M) for the 91 kg load on the DMSP-40's ≈ 1e5 N/m at 3 bar
+
+
+class RegulatorSystem(AbstractSystem):
+    """A regulator feeding a constant volume V with an extra outlet mass flow Q (kg/s): ṗ from the regulator.
+
+    **Arguments:** `regulator`; `volume` V [m³] (0.04, paper 001's tank; 0 for an ideal closed port with a linear
+    regulator); `outlet_flow` [kg/s] (0; a parameter so `linearise` can take it as eq. 5's second input);
+    `air` (paper 001: R = 286.9, T = 298 K); `polytropic_index` n (1: isothermal, paper 001 eq. 3, 12).
+    """
+
+    regulator: AbstractRegulator
+    volume: jax.Array = eqx.field(converter=jnp.asarray, default=TANK_VOLUME)  # m³
+    outlet_flow: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # kg/s
+    air: Air = eqx.field(default_factory=paper001_air)
+    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
+
+    def __check_init__(self):
+        if isinstance(self.regulator, ISO6358Regulator):
+            check_positive(self.volume, "RegulatorSystem.volume (an ISO6358Regulator needs a chamber)")
+        else:
+            check_nonnegative(self.volume, "RegulatorSystem.volume")
+        check_in_open_interval(self.polytropic_index, 0.99, 1.41, "RegulatorSystem.polytropic_index")
+
+    @property
+    def valve(self):
+        return self.regulator
+
+    def initial_state(self, pressure=None):
+        """Outlet at rest at `pressure` [Pa abs]; atmospheric by default."""
+        p = self.air.atmospheric_pressure if pressure is None else pressure
+        return self.regulator.initial_state(jnp.asarray(p, dtype=float))
+
+    def _args(self):
+        return self.volume, 0.0, self.air, self.polytropic_index, self.outlet_flow
+
+    def vector_field(self, t, state, command):
+        return self.regulator.state_rate(state, command, *self._args())
+
+    def outputs(self, t, state, command):
+        return dict(
+            pressure=state.pressure,
+            mass_flow=self.regulator.delivered_flow(state, command, *self._args()),
+            volume=self.volume + 0.0 * state.pressure,
+        )
+
+    def state_scale(self):
+        return self.regulator.state_scale()
+
+
+class RegulatedMuscleState(eqx.Module):
+    """`regulator`: the regulator's state (its `pressure` is the muscle's, Pa abs); `position` x [m] (shortening);
+    `velocity` [m/s]; `friction`: the friction model's state (None if memoryless)."""
+
+    regulator: eqx.Module
+    position: jax.Array
+    velocity: jax.Array
+    friction: jax.Array | None = None
+
+
+def load_equilibrium(muscle: Muscle, load_force, pressure, air: Air):
+    """Shortening x [m] at which the muscle's force at `pressure` [Pa abs] equals `load_force` [N], clipped to the
+    stroke. Bisection, then one Newton step that carries the implicit derivative."""
+
+    def residual(m, x):
+        return m.force(x, pressure, air) - load_force  # decreasing in x
+
+    frozen = jax.lax.stop_gradient(muscle)
+    lo0 = jax.lax.stop_gradient(muscle.min_position)
+    hi0 = jax.lax.stop_gradient(muscle.max_position)
+
+    def body(_, bounds):
+        lo, hi = bounds
+        mid = 0.5 * (lo + hi)
+        above = jax.lax.stop_gradient(residual(frozen, mid)) > 0
+        return jnp.where(above, mid, lo), jnp.where(above, hi, mid)
+
+    lo, hi = jax.lax.fori_loop(0, 60, body, (lo0, hi0))
+    x = 0.5 * (lo + hi)
+    slope = jax.grad(lambda q: residual(frozen, q))(x)
+    interior = (x > lo0 + 1e-9) & (x < hi0 - 1e-9) & (slope < 0)
+    return jnp.where(interior, x - residual(muscle, x) / jnp.where(interior, slope, -1.0), x)
+
+
+def volume_derivatives(muscle: Muscle, x):
+    """(V, dV/dx, d²V/dx²) [m³, m², m] at shortening `x` [m], by autodiff of the volume law (paper 001 eq. 4)."""
+    x = jnp.asarray(x, dtype=float)
+    dv = jax.grad(muscle.volume)
+    return muscle.volume(x), dv(x), jax.grad(dv)(x)
+
+
+def muscle_stiffness(muscle: Muscle, x, pressure, air: Air, pressure_slope=None, polytropic_index=1.0):
+    """Paper 001 eq. 9 by autodiff: K = −dF/dx = −(∂F/∂x + ∂F/∂p · dp/dx) [N/m], x the shortening [m].
+
+    `pressure_slope` dp/dx [Pa/m] along the motion; default the closed chamber, dp/dV = −n p/V (eq. 9's first
+    term), so dp/dx = −n p V'/V. For the virtual-work force F = p_g V'(x) this is eq. 9 exactly:
+    K = −(V')² dp/dV − V'' p_g. The isobaric stiffness (eq. 9's second term) is `pressure_slope=0`.
+    """
+    x = jnp.asarray(x, dtype=float)
+    pressure = jnp.asarray(pressure, dtype=float)
+    if pressure_slope is None:
+        v, dv, _ = volume_derivatives(muscle, x)
+        pressure_slope = -polytropic_index * pressure * dv / v
+    dfdx, dfdp = jax.grad(muscle.force, argnums=(0, 1))(x, pressure, air)
+    return -(dfdx + dfdp * pressure_slope)
+
+
+def stiffness_rate(muscle: Muscle, x, velocity, pressure, pressure_rate):
+    """Paper 001 eq. 10 (second line), in x = shortening [m]: V'(x) ṗ + V''(x) ẋ p [N/s], V', V'' by autodiff.
+
+    Eq. 10 as printed is the time derivative of the virtual-work force p V'(x), i.e. K ẋ; paper 001 calls it the
+    stiffness rate of change. With paper 001's x = (L − L0)/L0 its value is L0 times this one (same sign).
+    """
+    _, dv, d2v = volume_derivatives(muscle, x)
+    return dv * pressure_rate + d2v * velocity * pressure
+
+
+class RegulatedMuscleSystem(AbstractSystem):
+    """Paper 001's PPRV-PAM set-up: a regulator feeding a muscle that lifts a hanging load.
+
+    ṗ and the delivered flow from the regulator with V = V(x), V̇ = V'(x) ẋ (eq. 3, 4);
+    M ẍ = F_muscle(x, p) − F_friction(ẋ) + F_stops(x, ẋ) − F_load.
+
+    **Arguments:** `regulator` (`ISO6358Regulator()`); `muscle` (DMSP-40-400, `presets.dmsp40_muscle()`);
+    `load_force` [N] (893, paper 001); `payload_mass` [kg] (893 N / 9.81 m/s²: a hanging weight); `friction`
+    (viscous 3000 N s/m, assumed); `end_stops`; `air` (paper 001); `polytropic_index` (1: isothermal, paper 001).
+    """
+
+    regulator: AbstractRegulator
+    muscle: Muscle
+    load_force: jax.Array = eqx.field(converter=jnp.asarray, default=DMSP40_LOAD_FORCE)  # N
+    payload_mass: jax.Array = eqx.field(converter=jnp.asarray, default=DMSP40_LOAD_FORCE / 9.81)  # kg
+    friction: AbstractFriction = eqx.field(
+        default_factory=lambda: CoulombViscousFriction(0.0, DMSP40_VISCOUS_COEFFICIENT))
+    end_stops: EndStops = eqx.field(default_factory=EndStops)
+    air: Air = eqx.field(default_factory=paper001_air)
+    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
+
+    def __check_init__(self):
+        check_nonnegative(self.load_force, "RegulatedMuscleSystem.load_force")
+        check_positive(self.payload_mass, "RegulatedMuscleSystem.payload_mass")
+        check_in_open_interval(self.polytropic_index, 0.99, 1.41, "RegulatedMuscleSystem.polytropic_index")
+
+    @property
+    def valve(self):
+        return self.regulator
+
+    def initial_state(self, pressure=None, position=None, velocity=0.0):
+        """At rest: `pressure` [Pa abs] (atmospheric by default), `position` [m] (default: the load equilibrium)."""
+        p = jnp.asarray(self.air.atmospheric_pressure if pressure is None else pressure, dtype=float)
+        x = load_equilibrium(self.muscle, self.load_force, p, self.air) if position is None else position
+        return RegulatedMuscleState(
+            regulator=self.regulator.initial_state(p),
+            position=jnp.asarray(x, dtype=float),
+            velocity=jnp.asarray(velocity, dtype=float),
+            friction=self.friction.initial_state(),
+        )
+
+    def _chamber(self, state):
+        volume = self.muscle.volume(state.position)
+        return volume, self.muscle.volume_slope(state.position) * state.velocity
+
+    def _forces(self, state):
+        x, v, p = state.position, state.velocity, state.regulator.pressure
+        muscle = self.muscle.force(x, p, self.air)
+        friction = self.friction.force(v, state.friction)
+        stops = self.end_stops.force(x, v, self.muscle.min_position, self.muscle.max_position)
+        return muscle, friction, stops
+
+    def vector_field(self, t, state, command):
+        volume, volume_rate = self._chamber(state)
+        d_reg = self.regulator.state_rate(
+            state.regulator, command, volume, volume_rate, self.air, self.polytropic_index
+        )
+        muscle, friction, stops = self._forces(state)
+        dv = (muscle - friction + stops - self.load_force) / self.payload_mass
+        return RegulatedMuscleState(
+            regulator=d_reg,
+            position=state.velocity,
+            velocity=dv,
+            friction=self.friction.state_rate(state.velocity, state.friction),
+        )
+
+    def outputs(self, t, state, command):
+        volume, volume_rate = self._chamber(state)
+        muscle, friction, _ = self._forces(state)
+        return dict(
+            pressure=state.regulator.pressure,
+            position=state.position,
+            velocity=state.velocity,
+            force=muscle,
+            friction_force=friction,
+            mass_flow=self.regulator.delivered_flow(
+                state.regulator, command, volume, volume_rate, self.air, self.polytropic_index
+            ),
+            volume=volume,
+        )
+
+    def stiffness(self, state):
+        """Eq. 9, closed-chamber muscle stiffness −dF/dx [N/m] at `state`."""
+        return muscle_stiffness(
+            self.muscle, state.position, state.regulator.pressure, self.air, None, self.polytropic_index
+        )
+
+    def stiffness_rate(self, t, state, command):
+        """Eq. 10 [N/s] at `state`, with ṗ and ẋ from the vector field."""
+        rate = self.vector_field(t, state, command)
+        return stiffness_rate(
+            self.muscle, state.position, state.velocity, state.regulator.pressure, rate.regulator.pressure
+        )
+
+    def eq11_flow(self, t, state, command):
+        """Eq. 11: q = (V ṗ + V' ẋ p)/(n R T) [kg/s] at `state`, with ṗ and ẋ from the vector field."""
+        rate = self.vector_field(t, state, command)
+        volume, volume_rate = self._chamber(state)
+        return chamber_flow(
+            volume, volume_rate, state.regulator.pressure, rate.regulator.pressure, self.air, self.polytropic_index
+        )
+
+    def state_scale(self):
+        friction = self.friction.initial_state()
+        return RegulatedMuscleState(
+            regulator=self.regulator.state_scale(),
+            position=jnp.asarray(1e-2),
+            velocity=jnp.asarray(1e-2),
+            friction=None if friction is None else jnp.asarray(1e-4),
+        )
