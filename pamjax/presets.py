@@ -42,6 +42,7 @@ here are what a fit to that data must close.
 import jax.numpy as jnp
 
 from ._core.errors import PamjaxInputError
+from ._papers import datasheets, paper000, paper001
 from ._physics.friction import BristleFriction, CoulombViscousFriction, KarnoppFriction
 from ._physics.gas import (
     AbstractRestriction,
@@ -52,68 +53,57 @@ from ._physics.gas import (
     SeriesRestriction,
 )
 from ._physics.muscle import CubicVolume, LinearVolume, Muscle, PolynomialForce
+from ._physics.regulator import paper001_air
 from ._physics.valve import AveragedValve, OnOffValve
-from ._systems.muscle import MuscleSystem, TankSystem
+from ._systems.muscle import MuscleSystem
+from ._systems.tank import TankSystem
 
-# --- paper 000, Table 1 ---------------------------------------------------------------------------------------
-VALVE_AREA = 3.14e-6  # m², Table 1 ("valve diameter", an area)
-INFLATE_DISCHARGE_COEFFICIENT = 0.36  # C_v(1→2), Table 1
-EXHAUST_DISCHARGE_COEFFICIENT = 0.39  # C_v(2→3), Table 1
-INFLATE_CRITICAL_RATIO = 0.28  # b_v(1→2), Table 1
-EXHAUST_CRITICAL_RATIO = 0.49  # b_v(2→3), Table 1
-SUPPLY_PRESSURE = 6.5e5  # Pa abs, paper 000 "System Setup" (0.65 MPa abs.)
-PWM_FREQUENCY = 50.0  # Hz, paper 000
-SWITCH_DELAY = 2e-3  # s, paper 000 (MHE2 switching time ≈ 2 ms)
-PAYLOAD_MASS = 9.6  # kg, paper 000
-TANK_VOLUME = 5e-5  # m³, constant-volume test tank (paper 000 gives none; the hybrid bench uses 5e-5)
-MAS10_SILENCER_PERMEANCE = 1.9557e-14  # kg/(s Pa²), exhaust silencer: 98 % of the choked exhaust flow at 0.65 MPa
-#                                        passes (paper 000's "almost negligible" at high pressure; docstring item 5)
+# The numbers, each with its source beside it in `pamjax._papers` (written once there; named here as before).
+# --- paper 000, Table 1 and set-up ----------------------------------------------------------------------------
+VALVE_AREA = paper000.VALVE_AREA  # m²
+INFLATE_DISCHARGE_COEFFICIENT = paper000.INFLATE_DISCHARGE_COEFFICIENT  # C_v(1→2)
+EXHAUST_DISCHARGE_COEFFICIENT = paper000.EXHAUST_DISCHARGE_COEFFICIENT  # C_v(2→3)
+INFLATE_CRITICAL_RATIO = paper000.INFLATE_CRITICAL_RATIO  # b_v(1→2)
+EXHAUST_CRITICAL_RATIO = paper000.EXHAUST_CRITICAL_RATIO  # b_v(2→3)
+SUPPLY_PRESSURE = paper000.SUPPLY_PRESSURE  # Pa abs
+PWM_FREQUENCY = paper000.PWM_FREQUENCY  # Hz
+SWITCH_DELAY = paper000.SWITCH_DELAY  # s
+PAYLOAD_MASS = paper000.PAYLOAD_MASS  # kg
+COULOMB_FORCE = paper000.COULOMB_FORCE  # N
+TANK_VOLUME = datasheets.HYBRID_BENCH_TANK_VOLUME  # m³, paper 000's valve-test tank (the hybrid bench's)
 
-# --- MAS-10-300, derived (see module docstring) -------------------------------------------------------------------
-MAS10_MAX_FORCE_COEFFICIENTS = (
-    630.0,  # a0 [N]: datasheet 630 N at 6 bar, 0 % contraction
-    -2.13454122e04,  # a1 [N/m]  } DMSP-20-300 force-map shape (Martens & Boblan 2017),
-    5.41182050e05,  # a2 [N/m²] } scaled to 630 N and the 300 mm length
-    -8.18503719e06,  # a3 [N/m³]
-    4.35960743e07,  # a4 [N/m⁴]
-)
-MAS10_K0 = 102.844885  # N, slope of F in p at x = 0 times k2 (DMSP-20 map, scaled)
-MAS10_K1 = 1127.520188  # N/m, decrease of that slope per metre of contraction (DMSP-20 map, scaled)
-MAS10_K2 = 1e5  # Pa, fixed by convention (k0, k1, k2 are not separately identifiable)
-MAS10_MAX_PRESSURE = 6e5  # Pa gauge, p_max (paper 000)
-MAS10_V0 = 2.3561945e-05  # m³, π/4 · (10 mm)² · 300 mm (datasheet geometry)
-MAS10_V1 = 4.1558930e-04  # m², virtual-work volume slope of the force map (see docstring)
-MAS10_MIN_POSITION = -0.02  # m, assumed stretch limit (see docstring)
-MAS10_MAX_POSITION = 0.075  # m, 25 % of 300 mm (datasheet maximum contraction)
-COULOMB_FORCE = 16.0  # N, paper 000: half of the 32 N hysteresis loop width
-VISCOUS_COEFFICIENT = 250.0  # N s/m, see docstring item 4
-
-# m1…m9 of eq. 13 (SI: kg/s, gauge pressure in Pa), row-wise m[i, j] for u^i p^j; see docstring item 3.
-MAS10_AVERAGED_VALVE = (
-    (0.000000000000e00, -7.181961484418e-09, 3.579264316813e-15),
-    (1.735650319051e-03, 1.083465634502e-08, -9.704130366914e-15),
-    (6.335335758663e-04, 2.128659784083e-09, -1.228195803324e-14),
-)
+# --- MAS-10-300, derived (see the module docstring) ----------------------------------------------------------------
+MAS10_MAX_FORCE_COEFFICIENTS = datasheets.MAS10_MAX_FORCE_COEFFICIENTS  # a0…a4 [N/mⁱ]
+MAS10_K0 = datasheets.MAS10_K0  # N
+MAS10_K1 = datasheets.MAS10_K1  # N/m
+MAS10_K2 = datasheets.MAS10_K2  # Pa
+MAS10_MAX_PRESSURE = paper000.MAX_PRESSURE  # Pa gauge
+MAS10_V0 = datasheets.MAS10_V0  # m³
+MAS10_V1 = datasheets.MAS10_V1  # m²
+MAS10_MIN_POSITION = datasheets.MAS10_MIN_POSITION  # m
+MAS10_MAX_POSITION = datasheets.MAS10_MAX_POSITION  # m
+VISCOUS_COEFFICIENT = datasheets.MAS10_VISCOUS_COEFFICIENT  # N s/m
+MAS10_AVERAGED_VALVE = datasheets.MAS10_AVERAGED_VALVE  # m1…m9 row-wise [kg/(s Paʲ)]
+MAS10_SILENCER_PERMEANCE = datasheets.MAS10_SILENCER_PERMEANCE  # kg/(s Pa²)
 
 # --- DMSP-40-400 (paper 001), derived the same way ------------------------------------------------------------
-DMSP40_NOMINAL_LENGTH = 0.4  # m, paper 001 / datasheet
-DMSP40_MAX_FORCE_COEFFICIENTS = (
-    6000.0,  # a0 [N]: datasheet 6000 N at 6 bar, 0 % contraction (paper 001)
-    -1.52467230e05,  # a1..a4: DMSP-20-300 map shape scaled to 6000 N and 400 mm
-    2.89918955e06,
-    -3.28863101e07,
-    1.31372099e08,
-)
-DMSP40_K0 = 979.475097  # N (DMSP-20 map slope, scaled)
-DMSP40_K1 = 8053.715626  # N/m
-DMSP40_VOLUME_CUBIC = (  # (d, c, b, a) of paper 001 eq. 4 in ε = x/L0 [m³]; virtual work of the force map, d = cylinder
-    5.0265482e-04,  # π/4 · (40 mm)² · 400 mm
-    3.48212e-03,
-    -8.86154e-03,
-    5.61662e-03,
-)
-DMSP40_LOAD_FORCE = 893.0  # N, paper 001 (91.3 kg subject)
-PAPER001_SUPPLY_PRESSURE = 7e5  # Pa abs, paper 001
+DMSP40_NOMINAL_LENGTH = paper001.DMSP40_NOMINAL_LENGTH  # m
+DMSP40_MAX_FORCE_COEFFICIENTS = datasheets.DMSP40_MAX_FORCE_COEFFICIENTS  # a0…a4 [N/mⁱ]
+DMSP40_K0 = datasheets.DMSP40_K0  # N
+DMSP40_K1 = datasheets.DMSP40_K1  # N/m
+DMSP40_VOLUME_CUBIC = datasheets.DMSP40_VOLUME_CUBIC  # (d, c, b, a) [m³]
+DMSP40_LOAD_FORCE = paper001.LOAD_FORCE  # N
+
+# --- paper 001: the VPPM regulator -------------------------------------------------------------------------------
+PAPER001_SUPPLY_PRESSURE = paper001.SUPPLY_PRESSURE  # Pa abs
+PAPER001_TANK_VOLUME = paper001.TANK_VOLUME  # m³
+VPPM_HYSTERESIS = paper001.HYSTERESIS  # Pa
+EQ6_GAIN = paper001.EQ6_GAIN  # bar/V
+EQ6_TIME_CONSTANTS = paper001.EQ6_TIME_CONSTANTS  # s
+EQ7_GAIN = paper001.EQ7_GAIN  # bar per l/min ANR
+# Paper 001 Tables 1-2 (C in m³/(s bar) → divide by 1e5 for SI).
+PAPER001_CHARGING_TABLE = paper001.CHARGING_TABLE
+PAPER001_DISCHARGING_TABLE = paper001.DISCHARGING_TABLE
 
 
 def mas10_silencer():
@@ -221,28 +211,17 @@ def dmsp40_muscle():
     """Festo DMSP-40-400 (paper 001): eq. 7 force scaled from the DMSP-20 map, paper 001 eq. 4 cubic volume."""
     return Muscle(
         force_law=PolynomialForce(
-            max_force_coefficients=jnp.asarray(DMSP40_MAX_FORCE_COEFFICIENTS), k0=DMSP40_K0, k1=DMSP40_K1, k2=1e5
+            max_force_coefficients=jnp.asarray(DMSP40_MAX_FORCE_COEFFICIENTS), k0=DMSP40_K0, k1=DMSP40_K1,
+            k2=datasheets.DMSP40_K2,
         ),
         volume_law=CubicVolume(jnp.asarray(DMSP40_VOLUME_CUBIC), DMSP40_NOMINAL_LENGTH),
-        min_position=-0.02,  # m, assumed as for the MAS-10
-        max_position=0.25 * DMSP40_NOMINAL_LENGTH,  # m, 25 % maximum contraction (paper 001)
+        min_position=datasheets.DMSP40_MIN_POSITION,  # m, assumed as for the MAS-10
+        max_position=paper001.DMSP40_MAX_CONTRACTION * DMSP40_NOMINAL_LENGTH,  # m, 25 % maximum contraction
     )
 
 
-# Paper 001 Tables 1-2 (C in m³/(s bar) → divide by 1e5 for SI).
-PAPER001_CHARGING_TABLE = dict(
-    upstream_pressure_bar=(1.946, 2.954, 3.964, 4.983, 5.991, 6.943),
-    critical_ratio=(0.6624, 0.5972, 0.5674, 0.5541, 0.5308, 0.5328),
-    sonic_conductance_m3_per_s_bar=(1.6668e-04, 2.1299e-04, 6.4101e-04, 7.8871e-04, 7.7140e-04, 7.0564e-04),
-)
-PAPER001_DISCHARGING_TABLE = dict(
-    tank_pressure_bar=(1.8964, 2.7350, 3.9706, 4.9714, 5.9744, 6.8439),
-    critical_ratio=(0.7464, 0.6709, 0.6177, 0.5940, 0.5782, 0.5683),
-    sonic_conductance_m3_per_s_bar=(0.0002, 0.0003, 0.0007, 0.0008, 0.0009, 0.0007),
-)
-
-
-def paper001_restriction(sonic_conductance_m3_per_s_bar=7.0564e-04, critical_ratio=0.5328):
+def paper001_restriction(sonic_conductance_m3_per_s_bar=paper001.CHARGING_TABLE["sonic_conductance_m3_per_s_bar"][-1],
+                         critical_ratio=paper001.CHARGING_TABLE["critical_ratio"][-1]):
     """An ISO 6358 restriction with paper 001's units converted (default: Table 1 at 6.943 bar)."""
     return ISO6358Restriction(sonic_conductance=sonic_conductance_m3_per_s_bar / 1e5, critical_ratio=critical_ratio)
 
@@ -257,4 +236,5 @@ __all__ = [
     "mas10_tank_system",
     "dmsp40_muscle",
     "paper001_restriction",
+    "paper001_air",
 ]

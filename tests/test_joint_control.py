@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 
 import pamjax as pj
+from pamjax._control.joint import simulate_joint_control
 from pamjax._systems.joint_control import (
     AntagonisticJointController,
     GaitAngle,
     JointControlLoop,
     held_stiffness,
     hold_pressures,
-    simulate_joint_control,
     sum_for_stiffness,
 )
 

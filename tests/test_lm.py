@@ -4,8 +4,7 @@ reasons, and the residual diagnostics (`pamjax._fit.diagnostics`)."""
 import numpy as np
 import pytest
 
-from pamjax._fit import diagnostics as _diagnostics
-from pamjax._fit import lm as _lm
+from pamjax._fit import diagnostics as _diagnostics, lm as _lm
 
 
 def _run(residuals, jacobian, theta, max_steps=200, **kw):

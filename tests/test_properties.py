@@ -7,8 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from helpers import P_ATM
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 
 import pamjax
 from pamjax import presets

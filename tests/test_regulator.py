@@ -11,9 +11,9 @@ from pamjax._physics.regulator import (
     PAPER001_AIR,
     ISO6358Regulator,
     LinearRegulator,
-    SquareWave,
     VoltageCalibration,
 )
+from pamjax._physics.signals import SquareWave
 from pamjax._physics.tabulated import TabulatedISO6358Restriction, paper001_charging_restriction, pchip
 from pamjax._systems.regulated import RegulatedMuscleSystem, RegulatorSystem, muscle_stiffness, stiffness_rate
 from pamjax.presets import PAPER001_CHARGING_TABLE, PAPER001_DISCHARGING_TABLE, dmsp40_muscle

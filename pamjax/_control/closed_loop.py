@@ -18,6 +18,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from .._core.errors import PamjaxInputError, check_finite, check_nonnegative, check_positive
+from .._papers import datasheets, paper000
 from .._physics.friction import CoulombViscousFriction
 from .._physics.signals import AbstractSignal, Constant
 from .._physics.smooth import safe_sqrt, smooth_sign
@@ -74,9 +75,9 @@ class PIController(AbstractController):
     `bias` u0 [-] (0.5, hybrid bench `meta.json`), `duty_min`, `duty_max` [-] (0, 1).
     """
 
-    proportional_gain: jax.Array = eqx.field(converter=jnp.asarray, default=25.0)  # 1/m
-    integral_gain: jax.Array = eqx.field(converter=jnp.asarray, default=150.0)  # 1/(m s)
-    bias: jax.Array = eqx.field(converter=jnp.asarray, default=0.5)  # -
+    proportional_gain: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.PI_PROPORTIONAL_GAIN)  # 1/m
+    integral_gain: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.PI_INTEGRAL_GAIN)  # 1/(m s)
+    bias: jax.Array = eqx.field(converter=jnp.asarray, default=datasheets.PI_BIAS)  # -
     duty_min: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # -
     duty_max: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
 

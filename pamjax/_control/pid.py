@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 
 from .._core.errors import check_finite, check_nonnegative, check_positive
+from .._papers import datasheets, paper000
 from .closed_loop import AbstractController, _check_duty_limits
 
 
@@ -33,14 +34,14 @@ class PIDController(AbstractController):
     paper 000's "0.1 ms sampling time"), `seed` (static int).
     """
 
-    proportional_gain: jax.Array = eqx.field(converter=jnp.asarray, default=25.0)  # 1/m
-    integral_gain: jax.Array = eqx.field(converter=jnp.asarray, default=150.0)  # 1/(m s)
+    proportional_gain: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.PI_PROPORTIONAL_GAIN)  # 1/m
+    integral_gain: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.PI_INTEGRAL_GAIN)  # 1/(m s)
     derivative_gain: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # s/m
-    bias: jax.Array = eqx.field(converter=jnp.asarray, default=0.5)  # -
+    bias: jax.Array = eqx.field(converter=jnp.asarray, default=datasheets.PI_BIAS)  # -
     duty_min: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # -
     duty_max: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
     measurement_noise: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # m
-    sample_time: jax.Array = eqx.field(converter=jnp.asarray, default=1e-4)  # s, paper 000 (dSpace, 0.1 ms)
+    sample_time: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.SAMPLE_TIME)  # s
     seed: int = eqx.field(static=True, default=0)
 
     def __check_init__(self):

@@ -21,6 +21,13 @@ MAX_ABSOLUTE_PA = 5e6  # Pa
 # Sampling-interval checks need a run, not a handful of points (a 5-point test recording may be 1 s apart).
 MIN_SAMPLES_FOR_RATE = 50
 PSI = 6894.757293168  # Pa per psi (NIST SP 811)
+BAR = 1e5  # Pa per bar
+LITRE_PER_MINUTE = 1e-3 / 60.0  # m³/s per l/min
+# Reference conditions of ISO 8778 (ANR, "normal" litres): 100 kPa, 20 °C, density 1.185 kg/m³. ISO 6358 sonic
+# conductances are expressed at these conditions (paper 001, eq. 1-2), and paper 001's l/min are read as ANR.
+ISO8778_DENSITY = 1.185  # kg/m³
+ISO8778_TEMPERATURE = 293.15  # K
+FLOW_UNIT = ISO8778_DENSITY * LITRE_PER_MINUTE  # kg/s per l/min ANR
 
 # dimension → {spelling: SI factor}; SI value = factor × value (+ one atmosphere for gauge pressures).
 _FACTORS = {
@@ -34,7 +41,7 @@ _FACTORS = {
     "ratio": {"1": 1.0, "-": 1.0, "": 1.0, "%": 0.01},
     "voltage": {"V": 1.0, "mV": 1e-3},
 }
-_PRESSURE_FACTORS = {"pa": 1.0, "hpa": 1e2, "kpa": 1e3, "mpa": 1e6, "mbar": 1e2, "bar": 1e5, "psi": PSI}
+_PRESSURE_FACTORS = {"pa": 1.0, "hpa": 1e2, "kpa": 1e3, "mpa": 1e6, "mbar": 1e2, "bar": BAR, "psi": PSI}
 _SI = {"time": "s", "length": "m", "velocity": "m/s", "force": "N", "mass_flow": "kg/s", "volume": "m^3",
        "ratio": "1", "voltage": "V", "pressure": "Pa"}
 # "bar abs", "bar(a)", "bara", "bar_abs", "kPa gauge", "kPag", "psig", "Pa", "MPa (abs.)"

@@ -22,7 +22,8 @@ from .._core.errors import PamjaxInputError
 from .._physics.signals import AbstractSignal
 from .._solve.simulate import _flat_scaled, fixed_grid_size, fixed_trajectory, resolve_stepping, solve, validate
 from .._solve.synchronous import solve_runs
-from .._systems.muscle import AbstractSystem, TankSystem
+from .._systems.base import AbstractSystem
+from .._systems.tank import TankSystem
 from .recording import _MIN_ABSOLUTE_PA, Recording, warn_filtered
 
 

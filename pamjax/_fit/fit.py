@@ -24,7 +24,7 @@ from . import lm as _lm
 from .diagnostics import channel_errors, covariance, identifiability, mismatch
 from .experiment import predict_all, predictions
 from .fingerprint import check_resume, encode, fingerprint
-from .parameters import PamjaxIdentifiabilityWarning, ParameterSpace, strong_types
+from .parameters import PamjaxIdentifiabilityWarning, ParameterSpace
 
 
 @dataclasses.dataclass

@@ -30,6 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.errors import PamjaxInputError, require_float64
+from .._core.metadata import version
 
 FORMAT = "pamjax-model"
 FORMAT_VERSION = 1
@@ -39,9 +40,8 @@ _UNIT_FALLBACK = {"velocity_width": "m/s"}
 
 
 def _registry(extra=()):
-    """name → class for every equinox Module defined in pamjax (and `extra`)."""
-    import pamjax  # noqa: F401  (imports every public module)
-
+    """name → class for every equinox Module defined in pamjax (and `extra`): those of every pamjax module imported,
+    which is all of them, as importing any part of pamjax runs `pamjax/__init__.py` first."""
     classes = {}
     for module_name, module in list(sys.modules.items()):
         if module is None or not (module_name == "pamjax" or module_name.startswith("pamjax.")):
@@ -122,14 +122,12 @@ def model_document(model, provenance=None, classes=()):
     """The JSON document of `model` (a dict; see the module docstring)."""
     if not isinstance(model, eqx.Module):
         raise PamjaxInputError(f"model must be a pamjax model (an equinox Module), got {type(model).__name__}")
-    from .. import __version__
-
     parameters = {}
     structure = _encode(model, "", parameters, _registry(classes))
     return {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
-        "pamjax_version": __version__,
+        "pamjax_version": version(),
         "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "class": structure["class"],
         "parameters": parameters,

@@ -157,8 +157,7 @@ def _reissue(caught, prefix=""):
     """Issue again the warnings a fit issued (category by name: pamjax's own, else Python's, else UserWarning)."""
     import builtins
 
-    from . import parameters as _parameters
-    from . import recording as _recording
+    from . import parameters as _parameters, recording as _recording
 
     for category, message in caught:
         cls = next((c for c in (getattr(m, category, None) for m in (_parameters, _recording, builtins))

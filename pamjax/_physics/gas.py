@@ -12,12 +12,10 @@ import jax
 import jax.numpy as jnp
 
 from .._core.errors import check_in_open_interval, check_positive
+from .._core.fitting import positive, ratio
+from .._core.units import ATMOSPHERE, ISO8778_DENSITY, ISO8778_TEMPERATURE
+from .._papers import paper000
 from .smooth import safe_divide, safe_sqrt
-
-# Reference conditions of ISO 8778 (ANR): 100 kPa, 20 °C, density 1.185 kg/m³. ISO 6358 sonic conductances C
-# are expressed at these conditions (paper 001, eq. 1-2).
-ISO8778_DENSITY = 1.185  # kg/m³
-ISO8778_TEMPERATURE = 293.15  # K
 
 # ISO 6358-1:2013, clause 3: flow is treated as laminar (linear in Δp) for p_down/p_up above 0.999.
 DEFAULT_LAMINAR_RATIO = 0.999
@@ -35,10 +33,10 @@ class Air(eqx.Module):
       force laws and the exhaust pressure of the valves.
     """
 
-    gas_constant: jax.Array = eqx.field(converter=jnp.asarray, default=287.0)  # J/(kg K)
-    temperature: jax.Array = eqx.field(converter=jnp.asarray, default=293.0)  # K
-    heat_capacity_ratio: jax.Array = eqx.field(converter=jnp.asarray, default=1.4)  # -
-    atmospheric_pressure: jax.Array = eqx.field(converter=jnp.asarray, default=101325.0)  # Pa abs
+    gas_constant: jax.Array = positive(paper000.GAS_CONSTANT)  # J/(kg K)
+    temperature: jax.Array = positive(paper000.TEMPERATURE)  # K
+    heat_capacity_ratio: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.HEAT_CAPACITY_RATIO)  # -
+    atmospheric_pressure: jax.Array = eqx.field(converter=jnp.asarray, default=ATMOSPHERE)  # Pa abs
 
     def __check_init__(self):
         check_positive(self.gas_constant, "Air.gas_constant")
@@ -121,9 +119,9 @@ class EllipseRestriction(AbstractRestriction):
     - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
     """
 
-    discharge_coefficient: jax.Array = eqx.field(converter=jnp.asarray)  # -
-    critical_ratio: jax.Array = eqx.field(converter=jnp.asarray)  # -
-    area: jax.Array = eqx.field(converter=jnp.asarray, default=3.14e-6)  # m²
+    discharge_coefficient: jax.Array = positive()  # -
+    critical_ratio: jax.Array = ratio()  # -
+    area: jax.Array = positive(paper000.VALVE_AREA)  # m²
     laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
 
     def __check_init__(self):
@@ -152,8 +150,8 @@ class ISO6358Restriction(AbstractRestriction):
     - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
     """
 
-    sonic_conductance: jax.Array = eqx.field(converter=jnp.asarray)  # m³/(s Pa)
-    critical_ratio: jax.Array = eqx.field(converter=jnp.asarray)  # -
+    sonic_conductance: jax.Array = positive()  # m³/(s Pa)
+    critical_ratio: jax.Array = ratio()  # -
     laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
 
     def __check_init__(self):
@@ -178,8 +176,8 @@ class NozzleRestriction(AbstractRestriction):
     - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
     """
 
-    flow_coefficient: jax.Array = eqx.field(converter=jnp.asarray)  # -
-    area: jax.Array = eqx.field(converter=jnp.asarray, default=3.14e-6)  # m²
+    flow_coefficient: jax.Array = positive()  # -
+    area: jax.Array = positive(paper000.VALVE_AREA)  # m²
     laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
 
     def __check_init__(self):

@@ -10,6 +10,8 @@ import jax
 import jax.numpy as jnp
 
 from .._core.errors import PamjaxInputError, check_finite, check_in_open_interval, check_positive
+from .._core.fitting import positive
+from .._papers import paper000
 from .smooth import smooth_relu, smooth_step
 
 
@@ -34,10 +36,10 @@ class PolynomialForce(AbstractForceLaw):
     """
 
     max_force_coefficients: jax.Array = eqx.field(converter=jnp.asarray)  # N/m^i
-    k0: jax.Array = eqx.field(converter=jnp.asarray)  # N
+    k0: jax.Array = positive()  # N
     k1: jax.Array = eqx.field(converter=jnp.asarray)  # N/m
-    k2: jax.Array = eqx.field(converter=jnp.asarray)  # Pa
-    max_pressure: jax.Array = eqx.field(converter=jnp.asarray, default=6e5)  # Pa gauge
+    k2: jax.Array = positive()  # Pa
+    max_pressure: jax.Array = positive(paper000.MAX_PRESSURE)  # Pa gauge
 
     def __check_init__(self):
         if jnp.shape(self.max_force_coefficients) != (5,):
@@ -70,9 +72,9 @@ class ChouHannafordForce(AbstractForceLaw):
     **Arguments:** `strand_length` b_s [m], `turns` n_s [-], `nominal_length` L0 [m].
     """
 
-    strand_length: jax.Array = eqx.field(converter=jnp.asarray)  # m
-    turns: jax.Array = eqx.field(converter=jnp.asarray)  # -
-    nominal_length: jax.Array = eqx.field(converter=jnp.asarray)  # m
+    strand_length: jax.Array = positive()  # m
+    turns: jax.Array = positive()  # -
+    nominal_length: jax.Array = positive()  # m
 
     def __check_init__(self):
         check_positive(self.strand_length, "ChouHannafordForce.strand_length")
@@ -93,9 +95,9 @@ class TonduLopezForce(AbstractForceLaw):
     **Arguments:** `radius` r0 [m], `braid_angle` θ0 [rad], `nominal_length` L0 [m], `correction` k [-].
     """
 
-    radius: jax.Array = eqx.field(converter=jnp.asarray)  # m
+    radius: jax.Array = positive()  # m
     braid_angle: jax.Array = eqx.field(converter=jnp.asarray)  # rad
-    nominal_length: jax.Array = eqx.field(converter=jnp.asarray)  # m
+    nominal_length: jax.Array = positive()  # m
     correction: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
 
     def __check_init__(self):
@@ -123,8 +125,8 @@ class AbstractVolume(eqx.Module):
 class LinearVolume(AbstractVolume):
     """Paper 000, eq. 14: V = v0 + v1 x. **Arguments:** `v0` [m³], `v1` [m²]."""
 
-    v0: jax.Array = eqx.field(converter=jnp.asarray)  # m³
-    v1: jax.Array = eqx.field(converter=jnp.asarray)  # m²
+    v0: jax.Array = positive()  # m³
+    v1: jax.Array = positive()  # m²
 
     def __check_init__(self):
         check_positive(self.v0, "LinearVolume.v0")
@@ -141,7 +143,7 @@ class CubicVolume(AbstractVolume):
     """
 
     coefficients: jax.Array = eqx.field(converter=jnp.asarray)  # m³
-    nominal_length: jax.Array = eqx.field(converter=jnp.asarray)  # m
+    nominal_length: jax.Array = positive()  # m
 
     def __check_init__(self):
         if jnp.shape(self.coefficients) != (4,):
@@ -166,9 +168,9 @@ class BraidVolume(AbstractVolume):
     `BraidVolume.from_datasheet(L0, D0, max_contraction)` derives b_s, n_s from a datasheet.
     """
 
-    strand_length: jax.Array = eqx.field(converter=jnp.asarray)  # m
-    turns: jax.Array = eqx.field(converter=jnp.asarray)  # -
-    nominal_length: jax.Array = eqx.field(converter=jnp.asarray)  # m
+    strand_length: jax.Array = positive()  # m
+    turns: jax.Array = positive()  # -
+    nominal_length: jax.Array = positive()  # m
 
     def __check_init__(self):
         check_positive(self.strand_length, "BraidVolume.strand_length")
@@ -265,8 +267,8 @@ class EndStops(eqx.Module):
     (6e3 ≈ critical for 9.6 kg on k), `width` δ [m] (1e-4).
     """
 
-    stiffness: jax.Array = eqx.field(converter=jnp.asarray, default=1e6)  # N/m
-    damping: jax.Array = eqx.field(converter=jnp.asarray, default=6e3)  # N s/m
+    stiffness: jax.Array = positive(1e6)  # N/m
+    damping: jax.Array = positive(6e3)  # N s/m
     width: jax.Array = eqx.field(converter=jnp.asarray, default=1e-4)  # m
 
     def __check_init__(self):

@@ -19,19 +19,20 @@ import jax
 import jax.numpy as jnp
 
 from .._core.errors import PamjaxInputError, check_finite, check_in_closed_interval, check_positive
-from .._core.units import check_absolute_pressure
-from .._systems.muscle import pressure_rate
-from .gas import ISO8778_DENSITY, AbstractRestriction, Air
-from .signals import AbstractSignal
-from .smooth import smooth_relu, smooth_step
+from .._core.fitting import positive
+from .._core.units import BAR, FLOW_UNIT, check_absolute_pressure
+from .._papers import paper001
+from .chamber import chamber_flow, pressure_rate
+from .gas import AbstractRestriction, Air
+from .smooth import smooth_relu
 from .tabulated import check_table_axis, paper001_charging_restriction, paper001_discharging_restriction, pchip
 from .valve import AbstractValve
 
 
-# --- paper 001 numbers ----------------------------------------------------------------------------------------
+# --- paper 001 numbers (`pamjax._papers.paper001`) in the units the code uses --------------------------------------
 def paper001_air() -> Air:
     """Paper 001's air: R = 286.9 J/(kg K), T = 298 K (paper 001, eq. 1-3 text)."""
-    return Air(gas_constant=286.9, temperature=298.0)
+    return Air(gas_constant=paper001.GAS_CONSTANT, temperature=paper001.TEMPERATURE)
 
 
 def __getattr__(name):
@@ -42,18 +43,10 @@ def __getattr__(name):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-VOLTAGE_RANGE = (0.0, 10.0)  # V, VPPM reference range (paper 001, Sect. 2)
-EQ6_GAIN = 1.01  # bar/V, static gain of G_Vref (eq. 6)
-EQ6_TIME_CONSTANTS = (0.041, 0.023)  # s, poles of G_Vref and G_Qin (eq. 6, 7)
-EQ7_GAIN = -0.922  # bar per l/min, static gain of G_Qin (eq. 7; unit l/min ANR assumed, see module docstring)
-EQ7_CANCELLED_TIME_CONSTANT = 0.927  # s, the pole-zero pair eq. 7 cancels (kept out of the state: unobservable)
-LITRE_PER_MINUTE = 1e-3 / 60.0  # m³/s
-BAR = 1e5  # Pa
-FLOW_UNIT = ISO8778_DENSITY * LITRE_PER_MINUTE  # kg/s per l/min ANR
-EQ7_FLOW_GAIN = EQ7_GAIN * BAR / FLOW_UNIT  # Pa per kg/s (≈ -4.67e9)
-SUPPLY_PRESSURE = 7e5  # Pa abs (paper 001, Sect. 3)
-VPPM_HYSTERESIS = 5e3  # Pa, 50 mbar maximal pressure hysteresis (paper 001, Sect. 2): main-stage full-opening error
-TANK_VOLUME = 0.04  # m³, paper 001's charge/discharge tank (Sect. 3, appendix)
+VOLTAGE_RANGE = paper001.VOLTAGE_RANGE  # V
+EQ6_TIME_CONSTANTS = paper001.EQ6_TIME_CONSTANTS  # s
+EQ7_FLOW_GAIN = paper001.EQ7_GAIN * BAR / FLOW_UNIT  # Pa per kg/s (≈ -4.67e9): eq. 7's gain in SI
+TANK_VOLUME = paper001.TANK_VOLUME  # m³
 
 
 def check_voltage(voltage, name="reference voltage"):
@@ -69,8 +62,9 @@ class VoltageCalibration(eqx.Module):
     **Arguments:** `voltage` [V] strictly increasing within 0-10 V; `gauge_pressure` [Pa] strictly increasing.
     """
 
-    voltage: jax.Array = eqx.field(converter=jnp.asarray, default=(0.0, 10.0))  # V
-    gauge_pressure: jax.Array = eqx.field(converter=jnp.asarray, default=(0.0, 10.0 * EQ6_GAIN * BAR))  # Pa
+    voltage: jax.Array = eqx.field(converter=jnp.asarray, default=VOLTAGE_RANGE)  # V
+    gauge_pressure: jax.Array = eqx.field(  # Pa
+        converter=jnp.asarray, default=(0.0, VOLTAGE_RANGE[1] * paper001.EQ6_GAIN * BAR))
 
     def __check_init__(self):
         check_table_axis(self.voltage, "VoltageCalibration.voltage")
@@ -85,38 +79,6 @@ class VoltageCalibration(eqx.Module):
     def __call__(self, voltage):
         """Set gauge pressure [Pa] at `voltage` [V]."""
         return pchip(self.voltage, self.gauge_pressure, voltage)
-
-
-class SquareWave(AbstractSignal):
-    """Square wave between `low` and `high` at `frequency` [Hz], duty 50 %, low at t = 0 and rising
-    5 edge widths later (paper 001's 1.5 Hz, 0-3 V reference, Fig. 7). Edges are logistic steps of time width
-    `edge_width` [s] (1e-3: 0.15 % of a 1.5 Hz period)."""
-
-    low: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # V
-    high: jax.Array = eqx.field(converter=jnp.asarray, default=3.0)  # V
-    frequency: jax.Array = eqx.field(converter=jnp.asarray, default=1.5)  # Hz
-    edge_width: jax.Array = eqx.field(converter=jnp.asarray, default=1e-3)  # s
-
-    def __check_init__(self):
-        check_finite(self.low, "SquareWave.low")
-        check_finite(self.high, "SquareWave.high")
-        check_positive(self.frequency, "SquareWave.frequency")
-        check_positive(self.edge_width, "SquareWave.edge_width")
-
-    def __call__(self, t):
-        period = 1.0 / self.frequency
-        phase = t - period * jnp.floor(t / period)  # [0, T)
-        delay = 5.0 * self.edge_width  # edge centres at delay (rising) and T/2 + delay (falling): starts low
-        level = (
-            smooth_step(phase - delay, self.edge_width)
-            - smooth_step(phase - 0.5 * period - delay, self.edge_width)
-            + smooth_step(phase - period - delay, self.edge_width)
-        )
-        return self.low + (self.high - self.low) * jnp.clip(level, 0.0, 1.0)
-
-    def bounds(self):
-        lo, hi = float(self.low), float(self.high)
-        return min(lo, hi), max(lo, hi)
 
 
 class RegulatorState(eqx.Module):
@@ -160,11 +122,6 @@ class AbstractRegulator(AbstractValve):
 
     def state_scale(self):
         raise NotImplementedError
-
-
-def chamber_flow(volume, volume_rate, pressure, pressure_rate, air, polytropic_index=1.0):
-    """Paper 001 eq. 3 / eq. 11: q = (V ṗ + p V̇) / (n R T) [kg/s] into a chamber (n = κ = 1: isothermal)."""
-    return (volume * pressure_rate + pressure * volume_rate) / (polytropic_index * air.gas_constant * air.temperature)
 
 
 class LinearRegulator(AbstractRegulator):
@@ -212,7 +169,7 @@ class LinearRegulator(AbstractRegulator):
         return RegulatorState(pilot=jnp.asarray(BAR), pressure=jnp.asarray(BAR))
 
 
-def _eq8_default_gains(voltage_gain=EQ6_GAIN, flow_gain=EQ7_GAIN):
+def _eq8_default_gains(voltage_gain=paper001.EQ6_GAIN, flow_gain=paper001.EQ7_GAIN):
     """(K1, K2) that give eq. 8 the static gains of eq. 5 (1.01 bar/V, −0.922 bar per l/min); the paper gives none."""
     loop = voltage_gain * flow_gain
     return voltage_gain * (1.0 + loop) / loop, 1.0 + loop
@@ -229,8 +186,8 @@ class FeedbackRegulator(AbstractRegulator):
     static gains equal eq. 5's).
     """
 
-    voltage_gain: jax.Array = eqx.field(converter=jnp.asarray, default=EQ6_GAIN)  # bar/V
-    flow_gain: jax.Array = eqx.field(converter=jnp.asarray, default=EQ7_GAIN)  # bar/(l/min)
+    voltage_gain: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.EQ6_GAIN)  # bar/V
+    flow_gain: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.EQ7_GAIN)  # bar/(l/min)
     time_constants: jax.Array = eqx.field(converter=jnp.asarray, default=EQ6_TIME_CONSTANTS)  # s
     k1: jax.Array = eqx.field(converter=jnp.asarray, default=_eq8_default_gains()[0])  # -
     k2: jax.Array = eqx.field(converter=jnp.asarray, default=_eq8_default_gains()[1])  # -
@@ -305,8 +262,8 @@ class ISO6358Regulator(AbstractRegulator):
     time_constants: jax.Array = eqx.field(converter=jnp.asarray, default=EQ6_TIME_CONSTANTS)  # s
     charging: AbstractRestriction = eqx.field(default_factory=paper001_charging_restriction)
     discharging: AbstractRestriction = eqx.field(default_factory=paper001_discharging_restriction)
-    supply_pressure: jax.Array = eqx.field(converter=jnp.asarray, default=SUPPLY_PRESSURE)  # Pa abs
-    full_opening_error: jax.Array = eqx.field(converter=jnp.asarray, default=VPPM_HYSTERESIS)  # Pa
+    supply_pressure: jax.Array = positive(paper001.SUPPLY_PRESSURE)  # Pa abs
+    full_opening_error: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.HYSTERESIS)  # Pa
     opening_width: jax.Array = eqx.field(converter=jnp.asarray, default=1e-3)  # -
 
     def __check_init__(self):

@@ -10,6 +10,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.errors import PamjaxInputError, check_finite, check_positive, check_time_grid
+from .._core.fitting import positive
+from .._papers import paper001
+from .smooth import smooth_step
 
 
 class AbstractSignal(eqx.Module):
@@ -136,3 +139,35 @@ class Sampled(AbstractSignal):
     def bounds(self):
         v = np.asarray(self.values, dtype=float)
         return float(v.min()), float(v.max())
+
+
+class SquareWave(AbstractSignal):
+    """Square wave between `low` and `high` at `frequency` [Hz], duty 50 %, low at t = 0 and rising
+    5 edge widths later (paper 001's 1.5 Hz, 0-3 V reference, Fig. 7). Edges are logistic steps of time width
+    `edge_width` [s] (1e-3: 0.15 % of a 1.5 Hz period)."""
+
+    low: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # V
+    high: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.SQUARE_WAVE_HIGH)  # V
+    frequency: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.SQUARE_WAVE_FREQUENCY)  # Hz
+    edge_width: jax.Array = positive(1e-3)  # s
+
+    def __check_init__(self):
+        check_finite(self.low, "SquareWave.low")
+        check_finite(self.high, "SquareWave.high")
+        check_positive(self.frequency, "SquareWave.frequency")
+        check_positive(self.edge_width, "SquareWave.edge_width")
+
+    def __call__(self, t):
+        period = 1.0 / self.frequency
+        phase = t - period * jnp.floor(t / period)  # [0, T)
+        delay = 5.0 * self.edge_width  # edge centres at delay (rising) and T/2 + delay (falling): starts low
+        level = (
+            smooth_step(phase - delay, self.edge_width)
+            - smooth_step(phase - 0.5 * period - delay, self.edge_width)
+            + smooth_step(phase - period - delay, self.edge_width)
+        )
+        return self.low + (self.high - self.low) * jnp.clip(level, 0.0, 1.0)
+
+    def bounds(self):
+        lo, hi = float(self.low), float(self.high)
+        return min(lo, hi), max(lo, hi)

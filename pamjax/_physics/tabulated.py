@@ -13,6 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.errors import PamjaxInputError, _concrete, check_finite, check_in_open_interval, check_positive
+from .._core.fitting import positive, ratio
+from .._papers import paper001
 from .gas import (
     DEFAULT_LAMINAR_RATIO,
     ISO8778_DENSITY,
@@ -99,8 +101,8 @@ class TabulatedISO6358Restriction(AbstractRestriction):
     """
 
     pressure: jax.Array = eqx.field(converter=jnp.asarray)  # Pa abs
-    sonic_conductance: jax.Array = eqx.field(converter=jnp.asarray)  # m³/(s Pa)
-    critical_ratio: jax.Array = eqx.field(converter=jnp.asarray)  # -
+    sonic_conductance: jax.Array = positive()  # m³/(s Pa)
+    critical_ratio: jax.Array = ratio()  # -
     laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
 
     def __check_init__(self):
@@ -139,8 +141,7 @@ def volumetric_flow_anr(mass_flow):
 def paper001_charging_restriction():
     """Supply → outlet path of the VPPM regulator, C and b of paper 001 Table 1 (tank charging) against upstream
     (supply) pressure; bar → Pa and m³/(s bar) → m³/(s Pa)."""
-    from ..presets import PAPER001_CHARGING_TABLE as t
-
+    t = paper001.CHARGING_TABLE
     return TabulatedISO6358Restriction(
         pressure=np.asarray(t["upstream_pressure_bar"]) * 1e5,
         sonic_conductance=np.asarray(t["sonic_conductance_m3_per_s_bar"]) / 1e5,
@@ -151,8 +152,7 @@ def paper001_charging_restriction():
 def paper001_discharging_restriction():
     """Outlet → exhaust path of the VPPM regulator, C and b of paper 001 Table 2 (tank discharging) against the tank
     (upstream) pressure; bar → Pa and m³/(s bar) → m³/(s Pa)."""
-    from ..presets import PAPER001_DISCHARGING_TABLE as t
-
+    t = paper001.DISCHARGING_TABLE
     return TabulatedISO6358Restriction(
         pressure=np.asarray(t["tank_pressure_bar"]) * 1e5,
         sonic_conductance=np.asarray(t["sonic_conductance_m3_per_s_bar"]) / 1e5,

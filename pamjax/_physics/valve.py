@@ -9,8 +9,10 @@ import jax
 import jax.numpy as jnp
 
 from .._core.errors import PamjaxInputError, check_finite, check_nonnegative, check_positive
+from .._core.fitting import positive
 from .._core.units import check_absolute_pressure
-from .gas import AbstractRestriction, Air, EllipseRestriction
+from .._papers import paper000
+from .gas import AbstractRestriction, Air
 from .smooth import smooth_step
 
 
@@ -87,11 +89,11 @@ class OnOffValve(AbstractValve):
 
     inflate: AbstractRestriction
     exhaust: AbstractRestriction
-    supply_pressure: jax.Array = eqx.field(converter=jnp.asarray, default=6.5e5)  # Pa abs
-    pwm_frequency: jax.Array = eqx.field(converter=jnp.asarray, default=50.0)  # Hz
-    switch_on_delay: jax.Array = eqx.field(converter=jnp.asarray, default=2e-3)  # s
-    switch_off_delay: jax.Array = eqx.field(converter=jnp.asarray, default=2e-3)  # s
-    edge_width: jax.Array = eqx.field(converter=jnp.asarray, default=1e-4)  # s
+    supply_pressure: jax.Array = positive(paper000.SUPPLY_PRESSURE)  # Pa abs
+    pwm_frequency: jax.Array = positive(paper000.PWM_FREQUENCY)  # Hz
+    switch_on_delay: jax.Array = positive(paper000.SWITCH_DELAY)  # s
+    switch_off_delay: jax.Array = positive(paper000.SWITCH_DELAY)  # s
+    edge_width: jax.Array = positive(1e-4)  # s
     mode: str = eqx.field(static=True, default="smooth")
 
     switches = True
@@ -234,15 +236,6 @@ class AveragedValve(AbstractValve):
         u_powers = jnp.stack([jnp.ones_like(command), command, command * command])
         p_powers = jnp.stack([jnp.ones_like(p_gauge), p_gauge, p_gauge * p_gauge])
         return u_powers @ self.coefficients @ p_powers
-
-
-def default_onoff_valve(**kwargs):
-    """Paper 000's MHE2 valve with the Table 1 paths (A = 3.14e-6 m²)."""
-    return OnOffValve(
-        inflate=EllipseRestriction(discharge_coefficient=0.36, critical_ratio=0.28, area=3.14e-6),
-        exhaust=EllipseRestriction(discharge_coefficient=0.39, critical_ratio=0.49, area=3.14e-6),
-        **kwargs,
-    )
 
 
 def cycle_averaged_flow(valve: OnOffValve, command, pressure, air: Air, samples: int = 4000):

@@ -21,7 +21,8 @@ import numpy as np
 
 from .._core.errors import PamjaxInputError, check_positive
 from .._physics.signals import AbstractSignal
-from .._systems.muscle import AbstractSystem, MuscleState
+from .._systems.base import AbstractSystem
+from .._systems.muscle import MuscleState
 from .simulate import validate
 
 

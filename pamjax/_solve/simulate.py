@@ -12,7 +12,7 @@ from .._core.errors import PamjaxInputError, PamjaxSolveError, check_time_grid, 
 from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
 from .._physics.valve import AbstractValve, OnOffValve
-from .._systems.muscle import AbstractSystem
+from .._systems.base import AbstractSystem
 from . import synchronous as _sync
 from .hints import default_max_steps, failure_hint, fixed_step_hint
 from .rodas import Rodas5

@@ -21,7 +21,7 @@ from .._core.errors import PamjaxInputError, check_time_grid, require_float64
 from .._physics.signals import AbstractSignal
 from .._physics.valve import OnOffValve
 from .._solve import fixed_step as _fixed_step
-from .._systems.muscle import AbstractSystem
+from .._systems.base import AbstractSystem
 
 # Status codes per sweep point.
 SUCCESS = 0  # finished with a finite, physical state

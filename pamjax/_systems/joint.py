@@ -15,11 +15,13 @@ import jax
 import jax.numpy as jnp
 
 from .._core.errors import PamjaxInputError, check_nonnegative, check_positive
+from .._core.fitting import positive
+from .._papers import paper000, paper001
 from .._physics.gas import Air
 from .._physics.muscle import EndStops, Muscle
 from .._physics.regulator import AbstractRegulator, paper001_air
 from .._physics.signals import AbstractSignal
-from .muscle import AbstractSystem
+from .base import AbstractSystem
 from .regulated import muscle_stiffness
 
 PULLEY_RADIUS = 0.03  # m, assumed (orthosis lever; ±0.35 rad swings x by ±10 mm of the DMSP-40's 100 mm stroke)
@@ -73,11 +75,11 @@ class AntagonisticJoint(AbstractSystem):
     inertia: jax.Array = eqx.field(converter=jnp.asarray, default=JOINT_INERTIA)  # kg m²
     foot_mass: jax.Array = eqx.field(converter=jnp.asarray, default=FOOT_MASS)  # kg
     foot_arm: jax.Array = eqx.field(converter=jnp.asarray, default=FOOT_ARM)  # m
-    damping: jax.Array = eqx.field(converter=jnp.asarray, default=JOINT_DAMPING)  # N m s/rad
-    gravity: jax.Array = eqx.field(converter=jnp.asarray, default=9.81)  # m/s²
+    damping: jax.Array = positive(JOINT_DAMPING)  # N m s/rad
+    gravity: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.GRAVITY)  # m/s²
     end_stops: EndStops = eqx.field(default_factory=EndStops)
     air: Air = eqx.field(default_factory=paper001_air)
-    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
+    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.POLYTROPIC_INDEX)  # -
 
     def __check_init__(self):
         check_positive(self.pulley_radius, "AntagonisticJoint.pulley_radius")

@@ -1,12 +1,7 @@
-"""Systems: components composed into one ODE vector field whose state is a named pytree.
+"""Paper 000's plant: one muscle lifting a payload, fed by a valve (its system tests).
 
-- `TankSystem`: a constant-volume tank fed by a valve (paper 000's valve tests, paper 001's appendix).
-- `MuscleSystem`: one muscle lifting a payload, fed by a valve (paper 000's system tests).
-
-`vector_field(t, state, command)` returns the state's time derivative; `outputs(t, state, command)` the measurable
-channels (pressure [Pa abs], position [m], velocity [m/s], force [N], mass_flow [kg/s]). States hold ABSOLUTE
-pressures. `state_scale()` gives a typical magnitude per state, used by `simulate` to integrate in scaled units so
-that one tolerance fits states of different units.
+Outputs: pressure [Pa abs], position [m], velocity [m/s], force [N] (muscle), friction_force [N], mass_flow [kg/s],
+volume [m³].
 """
 
 import equinox as eqx
@@ -14,16 +9,14 @@ import jax
 import jax.numpy as jnp
 
 from .._core.errors import check_in_open_interval, check_positive
+from .._core.fitting import positive
+from .._papers import paper000
+from .._physics.chamber import pressure_rate
 from .._physics.friction import AbstractFriction, CoulombViscousFriction
 from .._physics.gas import Air
 from .._physics.muscle import EndStops, Muscle
 from .._physics.valve import AbstractValve
-
-
-class TankState(eqx.Module):
-    """State of a constant-volume tank: `pressure` [Pa abs]."""
-
-    pressure: jax.Array
+from .base import AbstractSystem
 
 
 class MuscleState(eqx.Module):
@@ -34,78 +27,6 @@ class MuscleState(eqx.Module):
     position: jax.Array
     velocity: jax.Array
     friction: jax.Array | None = None
-
-
-class AbstractSystem(eqx.Module):
-    """An ODE vector field over a named state pytree, driven by a command signal through a valve."""
-
-    valve: eqx.AbstractVar[AbstractValve]
-    air: eqx.AbstractVar[Air]
-
-    def initial_state(self, **kwargs):
-        raise NotImplementedError
-
-    def vector_field(self, t, state, command):
-        raise NotImplementedError
-
-    def outputs(self, t, state, command):
-        raise NotImplementedError
-
-    def state_scale(self):
-        raise NotImplementedError
-
-    @property
-    def hybrid(self):
-        """Whether the system has discrete modes switched at events (e.g. stick-slip friction)."""
-        return False
-
-    def event_function(self, t, state, command):
-        """Hybrid systems only: a scalar that stays ≥ 0 while the current mode holds and crosses below 0 where it
-        ends. The fixed-grid integrator (`pamjax._solve.grid`) locates that crossing inside the step."""
-        raise NotImplementedError
-
-    def event_update(self, t, state, command):
-        """Hybrid systems only: the state just after the event at `state` (the new mode; velocities reset)."""
-        raise NotImplementedError
-
-
-def pressure_rate(mass_flow, pressure, volume, volume_rate, polytropic_index, air: Air):
-    """Paper 000 eq. 15: ṗ = n R T ṁ / V − n p V̇ / V [Pa/s] (n = 1.4 adiabatic, 1.0 isothermal)."""
-    return polytropic_index * (air.gas_constant * air.temperature * mass_flow - pressure * volume_rate) / volume
-
-
-class TankSystem(AbstractSystem):
-    """A constant-volume tank fed by a valve: ṗ = n R T ṁ(t, u, p) / V (paper 000 eq. 12 with V̇ = 0).
-
-    **Arguments:** `valve`; `volume` V [m³]; `air` (`Air()`); `polytropic_index` n [-] (1.4 adiabatic, paper 000;
-    1.0 isothermal).
-    """
-
-    valve: AbstractValve
-    volume: jax.Array = eqx.field(converter=jnp.asarray)  # m³
-    air: Air = eqx.field(default_factory=Air)
-    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.4)  # -
-
-    def __check_init__(self):
-        check_positive(self.volume, "TankSystem.volume")
-        check_in_open_interval(self.polytropic_index, 0.99, 1.41, "TankSystem.polytropic_index")
-
-    def initial_state(self, pressure=None):
-        """Tank at `pressure` [Pa abs]; atmospheric by default."""
-        p = self.air.atmospheric_pressure if pressure is None else jnp.asarray(pressure, dtype=float)
-        return TankState(pressure=jnp.asarray(p, dtype=float))
-
-    def vector_field(self, t, state, command):
-        mdot = self.valve.mass_flow(t, command, state.pressure, self.air)
-        return TankState(
-            pressure=pressure_rate(mdot, state.pressure, self.volume, 0.0, self.polytropic_index, self.air)
-        )
-
-    def outputs(self, t, state, command):
-        return dict(pressure=state.pressure, mass_flow=self.valve.mass_flow(t, command, state.pressure, self.air))
-
-    def state_scale(self):
-        return TankState(pressure=jnp.asarray(1e5))
 
 
 class MuscleSystem(AbstractSystem):
@@ -123,12 +44,12 @@ class MuscleSystem(AbstractSystem):
 
     valve: AbstractValve
     muscle: Muscle
-    payload_mass: jax.Array = eqx.field(converter=jnp.asarray, default=9.6)  # kg
+    payload_mass: jax.Array = positive(paper000.PAYLOAD_MASS)  # kg
     friction: AbstractFriction = eqx.field(default_factory=CoulombViscousFriction)
     end_stops: EndStops = eqx.field(default_factory=EndStops)
     air: Air = eqx.field(default_factory=Air)
-    gravity: jax.Array = eqx.field(converter=jnp.asarray, default=9.81)  # m/s²
-    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.4)  # -
+    gravity: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.GRAVITY)  # m/s²
+    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.POLYTROPIC_INDEX)  # -
 
     def __check_init__(self):
         check_positive(self.payload_mass, "MuscleSystem.payload_mass")

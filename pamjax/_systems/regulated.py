@@ -13,15 +13,14 @@ import jax
 import jax.numpy as jnp
 
 from .._core.errors import check_in_open_interval, check_nonnegative, check_positive
+from .._core.fitting import positive
+from .._papers import datasheets, paper000, paper001
+from .._physics.chamber import chamber_flow
 from .._physics.friction import AbstractFriction, CoulombViscousFriction
 from .._physics.gas import Air
 from .._physics.muscle import EndStops, Muscle
-from .._physics.regulator import TANK_VOLUME, AbstractRegulator, ISO6358Regulator, chamber_flow, paper001_air
-from .muscle import AbstractSystem
-
-DMSP40_LOAD_FORCE = 893.0  # N, paper 001 Sect. 4 (a 91.3 kg subject)
-DMSP40_VISCOUS_COEFFICIENT = 3000.0  # N s/m, assumed: paper 001 gives no friction; ≈ 0.2 of critical damping
-#                                      2 sqrt(k M) for the 91 kg load on the DMSP-40's ≈ 1e5 N/m at 3 bar
+from .._physics.regulator import AbstractRegulator, ISO6358Regulator, paper001_air
+from .base import AbstractSystem
 
 
 class RegulatorSystem(AbstractSystem):
@@ -33,10 +32,10 @@ class RegulatorSystem(AbstractSystem):
     """
 
     regulator: AbstractRegulator
-    volume: jax.Array = eqx.field(converter=jnp.asarray, default=TANK_VOLUME)  # m³
+    volume: jax.Array = positive(paper001.TANK_VOLUME)  # m³
     outlet_flow: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # kg/s
     air: Air = eqx.field(default_factory=paper001_air)
-    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
+    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.POLYTROPIC_INDEX)  # -
 
     def __check_init__(self):
         if isinstance(self.regulator, ISO6358Regulator):
@@ -151,13 +150,13 @@ class RegulatedMuscleSystem(AbstractSystem):
 
     regulator: AbstractRegulator
     muscle: Muscle
-    load_force: jax.Array = eqx.field(converter=jnp.asarray, default=DMSP40_LOAD_FORCE)  # N
-    payload_mass: jax.Array = eqx.field(converter=jnp.asarray, default=DMSP40_LOAD_FORCE / 9.81)  # kg
+    load_force: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.LOAD_FORCE)  # N
+    payload_mass: jax.Array = positive(paper001.LOAD_FORCE / paper000.GRAVITY)  # kg
     friction: AbstractFriction = eqx.field(
-        default_factory=lambda: CoulombViscousFriction(0.0, DMSP40_VISCOUS_COEFFICIENT))
+        default_factory=lambda: CoulombViscousFriction(0.0, datasheets.DMSP40_VISCOUS_COEFFICIENT))
     end_stops: EndStops = eqx.field(default_factory=EndStops)
     air: Air = eqx.field(default_factory=paper001_air)
-    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
+    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.POLYTROPIC_INDEX)  # -
 
     def __check_init__(self):
         check_nonnegative(self.load_force, "RegulatedMuscleSystem.load_force")

@@ -12,7 +12,8 @@ import numpy as np
 import pamjax
 from pamjax import presets
 from pamjax._solve.simulate import solve
-from pamjax._systems.muscle import MuscleState, TankState
+from pamjax._systems.muscle import MuscleState
+from pamjax._systems.tank import TankState
 
 
 def _random_states(rng, n):

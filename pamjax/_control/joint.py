@@ -1,0 +1,151 @@
+"""Antagonistic joint control runs: `simulate_joint_control` solves a `JointControlLoop` (angle through the pressure
+difference, stiffness through the pressure sum; `pamjax._systems.joint_control`) and reports angle, stiffness and
+pressure sum against their references."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._core.errors import PamjaxInputError
+from .._physics.signals import Constant
+from .._solve.simulate import solve
+from .._systems.joint_control import (
+    JointControlLoop,
+    JointControlState,
+    held_stiffness,
+    hold_pressures,
+    joint_angle_range,
+    max_gauge_pressure,
+    regulated_stiffness,
+)
+
+
+class JointControlTrajectory(eqx.Module):
+    """Result of `simulate_joint_control` at times `t` [s]: `angle`, `angle_reference` [rad]; `stiffness` (regulated,
+    at the measured angle and pressures), `stiffness_reference` [N m/rad] (in pressure-sum mode: the stiffness the
+    sum gives at θ_r); `pressure_sum`, `pressure_sum_reference` [Pa gauge]; `pressure` (p_f, p_e) [Pa abs];
+    `voltage` (V_f, V_e) [V]; `result` 0 on success."""
+
+    t: jax.Array
+    angle: jax.Array
+    angle_reference: jax.Array
+    stiffness: jax.Array
+    stiffness_reference: jax.Array
+    pressure_sum: jax.Array
+    pressure_sum_reference: jax.Array
+    pressure: jax.Array
+    voltage: jax.Array
+    result: jax.Array
+
+    def rmse(self, start=0.0):
+        """(angle RMSE [rad], stiffness RMSE [N m/rad]) over t ≥ `start` [s]."""
+        w = (self.t >= start).astype(float)
+        n = jnp.sum(w)
+        return (
+            jnp.sqrt(jnp.sum(w * (self.angle - self.angle_reference) ** 2) / n),
+            jnp.sqrt(jnp.sum(w * (self.stiffness - self.stiffness_reference) ** 2) / n),
+        )
+
+
+def run_joint_control(loop: JointControlLoop, ts, y0=None, rtol=1e-7, atol=1e-7, max_steps=100_000):
+    """The unchecked, traceable core of `simulate_joint_control` (for use inside grad / vmap)."""
+    ts = jnp.asarray(ts, dtype=float)
+    y0 = loop.initial_state(ts[0]) if y0 is None else y0
+    traj = solve(loop, Constant(0.0), ts, y0, ts[0], rtol=rtol, atol=atol, max_steps=max_steps)
+    joint, p_atm = loop.joint, loop.air.atmospheric_pressure
+    pressure, angle = traj.pressure, traj.position
+    theta_r, sum_r = jax.vmap(loop.targets)(ts)
+    stiffness = jax.vmap(lambda a, p: regulated_stiffness(joint, a, p[0], p[1]))(angle, pressure)
+    if loop.target_kind == "stiffness":
+        stiffness_r = jax.vmap(loop.target)(ts)
+    else:
+        stiffness_r = jax.vmap(lambda a, s: held_stiffness(joint, a, s))(theta_r, sum_r)
+    volts = jax.vmap(lambda t, s: loop._command(t, s)[0])(ts, traj.state)
+    return JointControlTrajectory(
+        t=ts,
+        angle=angle,
+        angle_reference=theta_r,
+        stiffness=stiffness,
+        stiffness_reference=stiffness_r + 0.0 * ts,
+        pressure_sum=pressure[:, 0] + pressure[:, 1] - 2 * p_atm,
+        pressure_sum_reference=sum_r + 0.0 * ts,
+        pressure=pressure,
+        voltage=volts,
+        result=traj.result,
+    )
+
+
+_run_jit = eqx.filter_jit(run_joint_control)
+
+
+@eqx.filter_jit
+def _static_targets(loop, grid):
+    """θ_r, the held pressures and the static residual (|torque| [N m], and |K − K_r| [N m/rad] for a stiffness
+    target) on `grid` [s]."""
+    joint = loop.joint
+    theta, total = jax.vmap(loop.targets)(grid)
+    pf, pe = jax.vmap(lambda a, s: hold_pressures(joint, a, s))(theta, total)
+    residual = jnp.abs(jax.vmap(joint.torque)(theta, pf, pe))
+    if loop.target_kind == "stiffness":
+        achieved = jax.vmap(lambda a, s: held_stiffness(joint, a, s))(theta, total)
+        residual = jnp.maximum(residual, jnp.abs(achieved - jax.vmap(loop.target)(grid)))
+    return theta, pf, pe, residual
+
+
+def check_joint_control(loop: JointControlLoop, ts, samples=401):
+    """Concrete feasibility checks before any solve (`PamjaxInputError` naming the argument): the angle reference
+    inside the joint's range; at `samples` times over `ts`, the target held statically with both gauge pressures in
+    [0, `max_gauge_pressure`] (a stiffness outside what the pressure sum can give, or a sum too small for the angle,
+    fails here)."""
+    ts = np.asarray(ts, dtype=float)
+    if ts.ndim != 1 or ts.size < 2 or not np.all(np.isfinite(ts)) or not np.all(np.diff(ts) > 0):
+        raise PamjaxInputError(f"ts must be a finite, strictly increasing 1-D time grid [s] of ≥ 2 times, got {ts}")
+    lo, hi = loop.angle_reference.bounds()
+    a_lo, a_hi = joint_angle_range(loop.joint)
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo >= a_lo and hi <= a_hi):
+        raise PamjaxInputError(
+            f"angle_reference must stay inside the joint's range [{a_lo:.3f}, {a_hi:.3f}] rad (both muscles within "
+            f"their strokes), but spans [{lo}, {hi}] rad"
+        )
+    grid = jnp.asarray(np.linspace(ts[0], ts[-1], samples))
+    joint = loop.joint
+    theta, pf, pe, residual = (np.asarray(a) for a in _static_targets(loop, grid))
+    p_atm, p_max = float(joint.air.atmospheric_pressure), float(max_gauge_pressure(joint))
+    gauge = np.stack([pf, pe]) - p_atm
+    name = "stiffness target" if loop.target_kind == "stiffness" else "pressure-sum target"
+    bad = ~np.isfinite(gauge).all(0) | (gauge.min(0) < 0) | (gauge.max(0) > p_max) | ~(residual < 1e-6)
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        raise PamjaxInputError(
+            f"{name} is infeasible at t = {float(grid[k]):.3f} s (θ_r = {float(theta[k]):.3f} rad): holding it needs "
+            f"gauge pressures ({gauge[0, k]:.4g}, {gauge[1, k]:.4g}) Pa outside [0, {p_max:.4g}] Pa (supply / 10 V)"
+        )
+
+
+def simulate_joint_control(
+    loop: JointControlLoop,
+    ts,
+    *,
+    y0: JointControlState | None = None,
+    rtol: float = 1e-7,
+    atol: float = 1e-7,
+    max_steps: int = 100_000,
+) -> JointControlTrajectory:
+    """Simulate angle and stiffness (or pressure-sum) control of an antagonistic joint over the times `ts` [s].
+
+    One continuous-time diffrax solve of joint, regulators and controller integrators (the controller reads θ and
+    the pressures continuously). Differentiable with respect to gains and joint parameters (use `run_joint_control`
+    inside `jax.grad` / `eqx.filter_vmap`).
+
+    **Arguments:** `loop` a `JointControlLoop`; `ts` save times [s] (the solve starts at ts[0]); `y0` initial
+    `JointControlState` (default: at rest holding the references at ts[0]); `rtol`, `atol` on the scaled state
+    (pressures in bar, angle in 0.1 rad); `max_steps`.
+
+    **Raises:** `PamjaxInputError` for an angle reference outside the joint's range or an infeasible stiffness or
+    pressure-sum target (see `check_joint_control`), before any solve.
+    """
+    if not isinstance(loop, JointControlLoop):
+        raise PamjaxInputError(f"loop must be a JointControlLoop, got {type(loop).__name__}")
+    check_joint_control(loop, ts)
+    return _run_jit(loop, jnp.asarray(ts, dtype=float), y0, rtol, atol, max_steps)

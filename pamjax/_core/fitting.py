@@ -1,0 +1,49 @@
+"""How a component's parameter is fitted, declared where the parameter is: field metadata.
+
+A component says, field by field, how `pamjax.fit` moves the parameter in its unconstrained space and how it reports
+it; the fitter (`pamjax._fit.parameters`) reads these keys and knows no component:
+
+    coulomb_force: jax.Array = positive(16.0)  # N
+    critical_ratio: jax.Array = ratio()  # -
+    max_force_coefficients: jax.Array = eqx.field(converter=jnp.asarray, metadata=polynomial("a{i}", "stroke"))
+
+- `transform`: "log" (a physically positive quantity, fitted as v₀ eᶿ so that a trial value is never ≤ 0; a start
+  value ≤ 0 falls back to "linear"), "logistic" with `bounds` (lo, hi) (a bounded quantity such as a ratio in
+  (0, 1)), "nodes" (a polynomial's coefficients, fitted as its values at Chebyshev nodes over `domain`), or
+  "linear" (the default: scaled by the start magnitude).
+- `domain` ("nodes" only): the name of an attribute (lo, hi) of an enclosing component that bounds the polynomial's
+  argument (a `Muscle`'s `stroke` for the force law's F_max(x)).
+- `label`: how the entries of an array are reported, a format with `{i}` the flat index and `{n}` = i + 1 ("a{i}"
+  gives a0…a4, "m{n}" m1…m9); a scalar, or an array without a label, is reported by its path.
+
+A `free` entry of `fit` may override the transform and bounds (`{"path": ..., "transform": ..., "bounds": ...}`).
+"""
+
+import dataclasses
+
+import equinox as eqx
+import jax.numpy as jnp
+
+TRANSFORMS = ("linear", "log", "logistic", "nodes")
+
+
+def positive(default=dataclasses.MISSING, **kwargs):
+    """An array parameter that is physically positive (an area, a mass, a friction force): fitted in log space."""
+    return eqx.field(converter=jnp.asarray, default=default, metadata=dict(transform="log"), **kwargs)
+
+
+def ratio(default=dataclasses.MISSING, **kwargs):
+    """An array parameter in the open interval (0, 1) (a critical pressure ratio): fitted through a logistic."""
+    return eqx.field(converter=jnp.asarray, default=default,
+                     metadata=dict(transform="logistic", bounds=(0.0, 1.0)), **kwargs)
+
+
+def polynomial(label, domain):
+    """Metadata of a polynomial's coefficients: fitted as its values at Chebyshev nodes over `domain` (an attribute
+    (lo, hi) of an enclosing component), reported with `label` (e.g. "a{i}")."""
+    return dict(transform="nodes", label=label, domain=domain)
+
+
+def labelled(label):
+    """Metadata of an array whose entries are reported with `label` (e.g. "m{n}" for m1…m9), fitted linearly."""
+    return dict(label=label)

@@ -1,0 +1,53 @@
+"""A constant-volume tank fed by a valve (paper 000's valve tests, paper 001's appendix)."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._core.errors import check_in_open_interval, check_positive
+from .._core.fitting import positive
+from .._papers import paper000
+from .._physics.chamber import pressure_rate
+from .._physics.gas import Air
+from .._physics.valve import AbstractValve
+from .base import AbstractSystem
+
+
+class TankState(eqx.Module):
+    """State of a constant-volume tank: `pressure` [Pa abs]."""
+
+    pressure: jax.Array
+
+
+class TankSystem(AbstractSystem):
+    """A constant-volume tank fed by a valve: ṗ = n R T ṁ(t, u, p) / V (paper 000 eq. 12 with V̇ = 0).
+
+    **Arguments:** `valve`; `volume` V [m³]; `air` (`Air()`); `polytropic_index` n [-] (1.4 adiabatic, paper 000;
+    1.0 isothermal).
+    """
+
+    valve: AbstractValve
+    volume: jax.Array = positive()  # m³
+    air: Air = eqx.field(default_factory=Air)
+    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.POLYTROPIC_INDEX)  # -
+
+    def __check_init__(self):
+        check_positive(self.volume, "TankSystem.volume")
+        check_in_open_interval(self.polytropic_index, 0.99, 1.41, "TankSystem.polytropic_index")
+
+    def initial_state(self, pressure=None):
+        """Tank at `pressure` [Pa abs]; atmospheric by default."""
+        p = self.air.atmospheric_pressure if pressure is None else jnp.asarray(pressure, dtype=float)
+        return TankState(pressure=jnp.asarray(p, dtype=float))
+
+    def vector_field(self, t, state, command):
+        mdot = self.valve.mass_flow(t, command, state.pressure, self.air)
+        return TankState(
+            pressure=pressure_rate(mdot, state.pressure, self.volume, 0.0, self.polytropic_index, self.air)
+        )
+
+    def outputs(self, t, state, command):
+        return dict(pressure=state.pressure, mass_flow=self.valve.mass_flow(t, command, state.pressure, self.air))
+
+    def state_scale(self):
+        return TankState(pressure=jnp.asarray(1e5))

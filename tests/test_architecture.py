@@ -1,0 +1,124 @@
+"""The package's structure, checked (docs/architecture.md): one direction of imports between the layers
+(import-linter's layers contract in pyproject.toml), workflows that ask contracts instead of concrete classes, abstract
+methods that are abstract, modules and functions of a readable size, and fits/ and benchmarks/ on public names only."""
+
+import ast
+import pathlib
+import re
+import subprocess
+import sys
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "pamjax"
+LAYERS = ("_core", "_papers", "_physics", "_systems", "_solve", "_fit", "_sweep", "_control", "_cli")
+MAX_MODULE_LINES = 500
+MAX_FUNCTION_LINES = 80  # code lines, the docstring not counted
+LONG_REASON = re.compile(r"#\s*Long:\s*\S")  # the comment that gives a longer function its reason
+
+
+def _modules():
+    return sorted(p for p in PACKAGE.rglob("*.py"))
+
+
+def _layer(path):
+    parts = path.relative_to(PACKAGE).parts
+    return parts[0] if len(parts) > 1 else None
+
+
+def test_import_linter_layers_contract_is_kept():
+    """`lint-imports` with the contract of pyproject.toml: a module importing a layer above its own, or a sibling
+    workflow importing another (fit, sweep, control), fails here with the offending import chain."""
+    pytest.importorskip("importlinter")
+    code = ("import sys; from importlinter.cli import lint_imports; "
+            "sys.exit(lint_imports(config_filename='pyproject.toml', no_cache=True, no_logo=True))")
+    run = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stdout + run.stderr
+
+
+def test_papers_import_nothing():
+    for path in (PACKAGE / "_papers").rglob("*.py"):
+        tree = ast.parse(path.read_text())
+        imports = [n for n in ast.walk(tree) if isinstance(n, (ast.Import, ast.ImportFrom))]
+        assert not imports, f"{path.name} imports something; pamjax._papers holds numbers only"
+
+
+@pytest.mark.xfail(reason='issue 16 in progress', strict=True)
+def test_no_not_implemented_error():
+    """Abstract methods are `abc.abstractmethod`s (an incomplete component cannot be instantiated), not stubs."""
+    offenders = [str(p.relative_to(ROOT)) for p in _modules() if "NotImplementedError" in p.read_text()]
+    assert not offenders, offenders
+
+
+def _concrete_component_classes():
+    """name → layer of every concrete (non-Abstract) class defined in the physics and systems layers."""
+    out = {}
+    for path in _modules():
+        if _layer(path) not in ("_physics", "_systems"):
+            continue
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.ClassDef) and not node.name.startswith("Abstract"):
+                out[node.name] = _layer(path)
+    return out
+
+
+@pytest.mark.xfail(reason='issue 16 in progress', strict=True)
+def test_workflows_ask_contracts_not_concrete_classes():
+    """No `isinstance(x, SomeConcreteComponent)` outside the component's own layer: a workflow that needs to know
+    whether a valve switches asks `valve.switches`, not `isinstance(valve, OnOffValve)`."""
+    concrete = _concrete_component_classes()
+    offenders = []
+    for path in _modules():
+        layer = _layer(path)
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not (isinstance(node, ast.Call) and getattr(node.func, "id", None) == "isinstance" and len(node.args) == 2):
+                continue
+            kinds = node.args[1].elts if isinstance(node.args[1], ast.Tuple) else [node.args[1]]
+            for kind in kinds:
+                name = getattr(kind, "id", None) or getattr(kind, "attr", None)
+                if name in concrete and concrete[name] != layer:
+                    offenders.append(f"{path.relative_to(ROOT)}:{node.lineno} isinstance(..., {name})")
+    assert not offenders, offenders
+
+
+@pytest.mark.xfail(reason='issue 16 in progress', strict=True)
+def test_modules_are_readable_in_one_sitting():
+    sizes = {str(p.relative_to(ROOT)): len(p.read_text().splitlines()) for p in _modules()}
+    assert not {k: v for k, v in sizes.items() if v > MAX_MODULE_LINES}
+
+
+def _long_functions(path):
+    source = path.read_text()
+    lines = source.splitlines()
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        length = node.end_lineno - node.lineno + 1
+        first = node.body[0]
+        if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant) and isinstance(first.value.value, str):
+            length -= first.end_lineno - first.lineno + 1
+        start = min([d.lineno for d in node.decorator_list] + [node.lineno])
+        reason = start >= 2 and LONG_REASON.search(lines[start - 2])
+        if length > MAX_FUNCTION_LINES and not reason:
+            yield f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({length} lines)"
+
+
+@pytest.mark.xfail(reason='issue 16 in progress', strict=True)
+def test_functions_fit_on_a_screen_or_say_why():
+    """A function over 80 code lines carries a `# Long: <reason>` comment on the line above its definition."""
+    offenders = [f for p in _modules() for f in _long_functions(p)]
+    assert not offenders, offenders
+
+
+@pytest.mark.parametrize("folder", [pytest.param("fits", marks=pytest.mark.xfail(strict=True)), pytest.param("benchmarks", marks=pytest.mark.xfail(strict=True)), "examples"])
+def test_scripts_use_public_names_only(folder):
+    """fits/, benchmarks/ and examples/ are written as a user would write them: `pamjax.X`, `pamjax.presets`,
+    `pamjax.units`, `pamjax.gallery`, never a private module."""
+    private = re.compile(r"\bpamjax\._|\bpj\._|from pamjax import _|from pamjax\._")
+    offenders = []
+    for path in (ROOT / folder).rglob("*.py"):
+        for k, line in enumerate(path.read_text().splitlines(), 1):
+            if private.search(line.split("#")[0]):
+                offenders.append(f"{path.relative_to(ROOT)}:{k}: {line.strip()}")
+    assert not offenders, offenders
