@@ -23,6 +23,7 @@ from ._inputs import AbstractSignal
 from ._recording import _MIN_ABSOLUTE_PA, Recording, warn_filtered
 from ._simulate import _flat_scaled, fixed_grid_size, fixed_trajectory, resolve_stepping, solve, validate
 from ._synchronous import solve_runs
+from ._units import check_absolute_pressure
 from ._system import AbstractSystem, TankSystem
 
 
@@ -177,8 +178,8 @@ class Experiment(eqx.Module):
         self.name = recording.name if name is None else str(name)
         self.channels = channels
         self.rtol, self.atol, self.max_steps, self.dt0 = rtol, atol, int(max_steps), dt0
-        if stepping not in ("auto", "adaptive", "pwm"):
-            raise PamjaxInputError(f"stepping must be 'auto', 'adaptive' or 'pwm', got {stepping!r}")
+        if stepping not in ("auto", "adaptive", "pwm", "grid"):
+            raise PamjaxInputError(f"stepping must be 'auto', 'adaptive', 'pwm' or 'grid', got {stepping!r}")
         if not (isinstance(substeps, int) and substeps >= 2):
             raise PamjaxInputError(f"substeps must be an int >= 2 (RK4 nodes per PWM period), got {substeps!r}")
         self.stepping, self.substeps = stepping, substeps
@@ -223,13 +224,22 @@ class Experiment(eqx.Module):
             raise PamjaxInputError(
                 f"experiment {self.name!r}: build(model) must give a pamjax system, got {type(system)}"
             )
-        try:
-            y0 = system.initial_state(**self.initial)
+        try:  # traced, not run: the start state is computed inside the compiled solve
+            y0 = jax.eval_shape(lambda s: s.initial_state(**self.initial), system)
         except TypeError as err:
             raise PamjaxInputError(
                 f"experiment {self.name!r}: bad `initial` keys {sorted(self.initial)}: {err}"
             ) from err
-        validate(system, self.signal, self.times, y0, self.t0)
+        validate(system, self.signal, self.times, None, self.t0)
+        self._stepping(system)  # a stepping this system cannot take is named here
+        for key, value in self.initial.items():
+            if not np.all(np.isfinite(np.asarray(value))):
+                raise PamjaxInputError(f"experiment {self.name!r}: initial {key} must be finite, got {value}")
+            if key == "pressure":
+                if not np.all(np.asarray(value) > 0):
+                    raise PamjaxInputError(f"experiment {self.name!r}: initial pressure must be an ABSOLUTE "
+                                           f"pressure > 0 [Pa], got {value}")
+                check_absolute_pressure(value, f"experiment {self.name!r}: initial pressure")
         frequency = getattr(system.valve, "pwm_frequency", None)
         if self.lowpass_hz is not None and frequency is not None and self.lowpass_hz < float(frequency):
             warn_filtered(self.name, self.lowpass_hz, float(frequency), stacklevel=4)

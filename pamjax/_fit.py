@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _lm
+from ._cache import program_cache
 from ._diagnostics import channel_errors, covariance, identifiability, mismatch
 from ._errors import PamjaxInputError, require_float64
 from ._experiment import predict_all, predictions
@@ -167,6 +168,12 @@ def errors_as_nan():
         eqx_errors.EQX_ON_ERROR = old
 
 
+@eqx.filter_jit
+def _physical_and_jacobian(space, theta):
+    """The physical values at θ and d(values)/dθ, compiled (run eagerly, each operation compiles on its own)."""
+    return space.physical(theta), jax.jacfwd(space.physical)(theta)
+
+
 class _Problem:
     """The host side of the two compiled functions: NumPy in, NumPy out, the identification samples selected; a
     failed solve's residuals are None."""
@@ -183,15 +190,30 @@ class _Problem:
         self.seconds[kind].append(time.perf_counter() - t)
         return out
 
+    def _call(self, kind, fn, theta):
+        """A compiled function of (space, θ, experiments); with the CLI's persistent cache on, traced once per
+        problem structure for all runs (`ProgramCache`)."""
+        programs = program_cache()
+        args = (self.space, jnp.asarray(theta), self.exps)
+        if programs is None:
+            return self._timed(kind, fn, *args)
+        return self._timed(kind, programs.call, f"fit_{kind}", fn.__wrapped__, args)
+
+    def cached(self, theta):
+        """Whether both programs of this problem are already traced on disk (a second run: nothing to compile)."""
+        programs = program_cache()
+        args = (self.space, jnp.asarray(theta), self.exps)
+        return programs is not None and all(programs.has(f"fit_{kind}", args) for kind in ("residuals", "jacobian"))
+
     def all_residuals(self, theta):
-        return np.asarray(self._timed("residuals", _residuals, self.space, jnp.asarray(theta), self.exps))
+        return np.asarray(self._call("residuals", _residuals, theta))
 
     def residuals(self, theta):
         r = self.all_residuals(theta)[self.mask]
         return r if np.all(np.isfinite(r)) else None
 
     def jacobian(self, theta):
-        r, j = self._timed("jacobian", _residuals_and_jacobian, self.space, jnp.asarray(theta), self.exps)
+        r, j = self._call("jacobian", _residuals_and_jacobian, theta)
         return np.asarray(r)[self.mask], np.asarray(j)[self.mask]
 
     def start(self, theta):
@@ -385,9 +407,11 @@ def fit(
         t_first = time.perf_counter()
         compile_s = 0.0
     else:
-        if report is not None and not callable(progress):
+        announce = progress is not False and not problem.cached(theta)
+        if announce:
+            cache = "cached afterwards" if program_cache() is not None else "pamjax.enable_compilation_cache() keeps it"
             print(f"fit: {len(labels)} parameters, {len(exps)} experiments; compiling the residuals and their "
-                  "Jacobian (first run; cached afterwards) ...", flush=True)
+                  f"Jacobian (first run; {cache}) ...", flush=True)
         r0, j0 = problem.start(theta)
         t_first = time.perf_counter()
         if not np.all(np.isfinite(r0)) or not np.all(np.isfinite(j0)):
@@ -395,10 +419,10 @@ def fit(
                                    "start values and the experiments' initial states")
         state = _lm.start(theta, r0, j0)
         compile_s = t_first - t_start
+        if announce:
+            print(f"fit: compiled in {problem.compile_seconds():.1f} s", flush=True)
         if report is not None:
             report(0, state.cost, state.damping, True)
-            if not callable(progress):
-                print(f"  (first evaluation with compilation: {compile_s:.1f} s)", flush=True)
         if _lm._gradient_cosine(state) <= gtol:
             state.done, state.reason = True, "converged: gradient orthogonal to the residuals at the start (gtol)"
     while not state.done and state.step < max_steps:
@@ -442,7 +466,7 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
     used = int(np.count_nonzero(np.any(jac != 0, axis=1) | (resid != 0)))
     groups = identifiability(jac, labels, identifiability_tol)
     bad = sorted({label for g in groups for label in g})
-    g = np.asarray(jax.jacfwd(space.physical)(jnp.asarray(theta)))
+    values, g = (np.asarray(a) for a in _physical_and_jacobian(space, jnp.asarray(theta)))
     cov = g @ covariance(jac, state.cost, used, identifiability_tol) @ g.T
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -456,7 +480,6 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
                "data; hold one of them fixed)")
         msgs.append(msg)
         warnings.warn(msg, PamjaxIdentifiabilityWarning, stacklevel=3)
-    values = np.asarray(space.physical(jnp.asarray(theta)))
     fitted = space.with_values(jnp.asarray(values))
     r_all = problem.all_residuals(theta)
     errors = channel_errors(exps, r_all)
