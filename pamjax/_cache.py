@@ -187,7 +187,11 @@ class ProgramCache:
                 def flat(*xs):
                     return fn(*eqx.combine(jax.tree_util.tree_unflatten(treedef, xs), static))
 
-                exported = jax.export.export(jax.jit(flat))(*leaves)
+                try:
+                    exported = jax.export.export(jax.jit(flat))(*leaves)
+                except NotImplementedError:  # e.g. a host callback in the program: not exportable, jit it as usual
+                    caller = self.memory[key] = jax.jit(flat)
+                    return caller(*leaves)
                 self._save(path, exported)
             caller = self.memory[key] = jax.jit(exported.call)  # traced once per process (a thin wrapper)
         return caller(*leaves)

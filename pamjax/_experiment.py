@@ -85,9 +85,9 @@ class Experiment(eqx.Module):
     - `name`; `rtol`, `atol`, `max_steps`, `dt0`: solver settings of the adaptive solve (see `simulate`); the
       tolerances default to 1e-9 (tighter than `simulate`'s 1e-6, so that the residuals are smooth enough for
       Levenberg-Marquardt near the optimum; see the comment at the default).
-    - `stepping`: "auto" (default: "pwm" when the system's valve switches, else "grid": fixed RK4 steps of 1 ms
-      with events located inside the step for stick-slip friction), "adaptive" (diffrax at `rtol`/`atol`: for a
-      stiff system), "pwm" or "grid". "pwm" integrates on the PWM-synchronous fixed RK4 grid (`simulate(stepping="pwm")`:
+    - `stepping`: "auto" (default: "pwm" when the system's valve switches; "grid", fixed RK4 steps of 1 ms with
+      events located inside the step, for stick-slip friction with a continuous valve; else "adaptive", diffrax at
+      `rtol`/`atol`), or one of "adaptive", "pwm", "grid". "pwm" integrates on the PWM-synchronous fixed RK4 grid (`simulate(stepping="pwm")`:
       exact edges, `substeps` nodes per period plus the edges), so the residuals are smooth, deterministic functions
       of every parameter; an adaptive solve of a switching valve changes its step pattern with the parameters, and
       the cost jumps by O(1) between neighbouring trial points (docs/fitting.md), which stalls Levenberg-Marquardt.
@@ -189,13 +189,14 @@ class Experiment(eqx.Module):
         self.num_periods = None
 
     def _stepping(self, system):
-        """The stepping of this experiment's solve. "auto": the PWM-synchronous grid for a switching valve, the
-        uniform grid otherwise (hybrid or smooth): fixed grids give residuals that are smooth, deterministic functions
-        of every parameter (an adaptive solve's step pattern changes with them and its cost jumps at the tolerance
-        level), compile to small loops, and keep in the persistent compilation cache. "adaptive" (diffrax, at the
-        experiment's rtol/atol) remains for stiff systems a 1 ms RK4 grid cannot hold."""
-        if self.stepping == "auto":
-            return "pwm" if getattr(system.valve, "switches", False) else "grid"
+        """The stepping of this experiment's solve. "auto": the PWM-synchronous grid for a switching valve (smooth,
+        deterministic residuals in every parameter, where an adaptive solve's step pattern changes with them and its
+        cost jumps at the tolerance level), the uniform grid for a hybrid system (stick-slip friction) fed by a
+        continuous valve, and the adaptive solver otherwise: a smooth system can be stiff (a smooth Coulomb sign
+        under a large F_c) beyond what a fixed 1 ms RK4 step holds. "grid" asks for the uniform grid anyway (small
+        programs, smooth residuals: a tank test with the averaged valve)."""
+        if self.stepping == "auto" and getattr(system.valve, "switches", False):
+            return "pwm"
         try:
             return resolve_stepping(system, self.stepping)
         except PamjaxInputError as err:
