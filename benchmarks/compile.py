@@ -18,7 +18,8 @@ Each row also reports what was compiled (`pamjax.CompileStats`: programs traced,
 the same session for the before/after; the issue's other before figures (bench fit 291 s, joint fit 109 s) were
 taken by its author on this machine type. Ends with
 
-    RESULT main_job_cold_s=... main_job_warm_s=... bench_fit_compile_s=... joint_fit_compile_s=... simulate_compile_s=...
+    RESULT main_job_cold_s=... main_job_warm_s=... bench_fit_compile_s=... joint_fit_compile_s=...
+           simulate_compile_s=...
 """
 
 import argparse

@@ -129,6 +129,12 @@ __version__ = "0.1.0"
 
 # --- discrete-time model (paper 000 eq. 17-21) ---
 # --- issue 19: bench tests without a time axis (friction curves, flow curves, loop force maps); PID with noise ----
+from ._bench import BENCH_PARAMETERS as BENCH_PARAMETERS
+from ._bench import FITTED_KINDS as FITTED_KINDS
+from ._bench import Bench as Bench
+from ._bench import bench_rmse as bench_rmse
+from ._bench import bench_values as bench_values
+from ._bench import load_bench as load_bench
 from ._bench_tests import (  # noqa: E402
     FlowCurveExperiment as FlowCurveExperiment,
 )
@@ -150,6 +156,8 @@ from ._bench_tests import (
 from ._bench_tests import (
     steady_friction_force as steady_friction_force,
 )
+from ._cache import CompileStats as CompileStats
+from ._cache import enable_compilation_cache as enable_compilation_cache
 
 # --- closed-loop control (issue 6) ---------------------------------------------------------------------------------
 from ._control import (  # noqa: E402
@@ -192,6 +200,11 @@ from ._discrete import (
     simulate_discrete as simulate_discrete,
 )
 
+# --- issue 18: multi-process runs (jax.distributed), multistart and fleet fits ----------------------------------
+from ._distributed import PamjaxDistributedError as PamjaxDistributedError  # noqa: E402
+from ._distributed import ProcessInfo as ProcessInfo
+from ._distributed import initialize_distributed as initialize_distributed
+
 # --- fitting (issue 3): recordings, experiments, fit, synthetic data ---------------------------------------------
 from ._experiment import (  # noqa: E402
     Experiment as Experiment,
@@ -205,6 +218,7 @@ from ._experiment import (
 from ._experiment import (
     TankFromModel as TankFromModel,
 )
+from ._experiment import predictions as predictions
 from ._fit import (  # noqa: E402
     FitResult as FitResult,
 )
@@ -213,25 +227,6 @@ from ._fit import (
 )
 from ._fit import (
     fit as fit,
-)
-from ._bench import Bench as Bench
-from ._bench import BENCH_PARAMETERS as BENCH_PARAMETERS
-from ._bench import FITTED_KINDS as FITTED_KINDS
-from ._cache import CompileStats as CompileStats
-from ._cache import enable_compilation_cache as enable_compilation_cache
-from ._bench import bench_rmse as bench_rmse
-from ._bench import bench_values as bench_values
-from ._bench import load_bench as load_bench
-from ._experiment import predictions as predictions
-from ._parameters import (
-    PamjaxIdentifiabilityWarning as PamjaxIdentifiabilityWarning,
-)
-from ._recording import PamjaxDataWarning as PamjaxDataWarning
-from ._parameters import (
-    ParameterSpace as ParameterSpace,
-)
-from ._parameters import (
-    parameter_paths as parameter_paths,
 )
 from ._gradcheck import gradient_check as gradient_check  # noqa: E402
 
@@ -270,7 +265,21 @@ from ._linearise import equilibrium as equilibrium
 from ._linearise import linearise as linearise
 from ._model_io import load_model as load_model  # noqa: E402
 from ._model_io import save_model as save_model
+from ._multistart import FleetResult as FleetResult  # noqa: E402
+from ._multistart import MultistartResult as MultistartResult
+from ._multistart import fit_fleet as fit_fleet
+from ._multistart import multistart as multistart
+from ._parameters import (
+    PamjaxIdentifiabilityWarning as PamjaxIdentifiabilityWarning,
+)
+from ._parameters import (
+    ParameterSpace as ParameterSpace,
+)
+from ._parameters import (
+    parameter_paths as parameter_paths,
+)
 from ._pid import PIDController as PIDController  # noqa: E402
+from ._recording import PamjaxDataWarning as PamjaxDataWarning
 from ._recording import Recording as Recording  # noqa: E402
 from ._regulated import (  # noqa: E402
     RegulatedMuscleState as RegulatedMuscleState,
@@ -319,6 +328,7 @@ from ._sweep import (
 from ._sweep import (
     SweepResult as SweepResult,
 )
+from ._sweep import merge_sweep_shards as merge_sweep_shards  # noqa: E402
 from ._sweep import (
     sweep as sweep,
 )
@@ -334,13 +344,3 @@ from ._sweep_maps import (
 from ._synthetic import synthetic_recording as synthetic_recording  # noqa: E402
 from ._tabulated import TabulatedISO6358Restriction as TabulatedISO6358Restriction  # noqa: E402
 from ._xla_cpu import xla_cpu_status as xla_cpu_status  # noqa: E402
-
-# --- issue 18: multi-process runs (jax.distributed), multistart and fleet fits ----------------------------------
-from ._distributed import PamjaxDistributedError as PamjaxDistributedError  # noqa: E402
-from ._distributed import ProcessInfo as ProcessInfo
-from ._distributed import initialize_distributed as initialize_distributed
-from ._multistart import FleetResult as FleetResult  # noqa: E402
-from ._multistart import MultistartResult as MultistartResult
-from ._multistart import fit_fleet as fit_fleet
-from ._multistart import multistart as multistart
-from ._sweep import merge_sweep_shards as merge_sweep_shards  # noqa: E402

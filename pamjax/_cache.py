@@ -7,7 +7,8 @@ command line turns that on by default; a Python program that imports pamjax deci
 `enable_compilation_cache()`).
 
 Where: `$PAMJAX_CACHE_DIR` if set, else the user's cache directory (`$XDG_CACHE_HOME` or `~/.cache` on Linux,
-`~/Library/Caches` on macOS, `%LOCALAPPDATA%` on Windows) under `pamjax/jax-compilation`. Off: `PAMJAX_COMPILATION_CACHE=0`
+`~/Library/Caches` on macOS, `%LOCALAPPDATA%` on Windows) under `pamjax/jax-compilation`.
+Off: `PAMJAX_COMPILATION_CACHE=0`
 (or the CLI's `--no-cache`). Stale entries are harmless (a new key misses and compiles); the directory can be
 deleted at any time. `PAMJAX_CACHE_MIN_COMPILE_SECONDS` (default 0.1) sets the shortest compilation kept.
 """

@@ -19,7 +19,7 @@ import numpy as np
 
 from ._errors import PamjaxInputError, check_finite, check_nonnegative, check_positive
 from ._friction import CoulombViscousFriction
-from ._inputs import AbstractSignal, Constant, Step
+from ._inputs import AbstractSignal, Step
 from ._simulate import solve
 from ._smooth import safe_sqrt, smooth_sign
 from ._system import MuscleState, MuscleSystem

@@ -23,8 +23,8 @@ from ._inputs import AbstractSignal
 from ._recording import _MIN_ABSOLUTE_PA, Recording, warn_filtered
 from ._simulate import _flat_scaled, fixed_grid_size, fixed_trajectory, resolve_stepping, solve, validate
 from ._synchronous import solve_runs
-from ._units import check_absolute_pressure
 from ._system import AbstractSystem, TankSystem
+from ._units import check_absolute_pressure
 
 
 class SameSystem(eqx.Module):
@@ -87,8 +87,8 @@ class Experiment(eqx.Module):
       Levenberg-Marquardt near the optimum; see the comment at the default).
     - `stepping`: "auto" (default: "pwm" when the system's valve switches; "grid", fixed RK4 steps of 1 ms with
       events located inside the step, for stick-slip friction with a continuous valve; else "adaptive", diffrax at
-      `rtol`/`atol`), or one of "adaptive", "pwm", "grid". "pwm" integrates on the PWM-synchronous fixed RK4 grid (`simulate(stepping="pwm")`:
-      exact edges, `substeps` nodes per period plus the edges), so the residuals are smooth, deterministic functions
+      `rtol`/`atol`), or one of "adaptive", "pwm", "grid". "pwm" integrates on the PWM-synchronous fixed RK4 grid
+      (`simulate(stepping="pwm")`: exact edges, `substeps` nodes per period plus the edges), so the residuals are smooth, deterministic functions
       of every parameter; an adaptive solve of a switching valve changes its step pattern with the parameters, and
       the cost jumps by O(1) between neighbouring trial points (docs/fitting.md), which stalls Levenberg-Marquardt.
       The grid is sized from the valve's PWM frequency in the model the experiment is first used with.
@@ -115,7 +115,7 @@ class Experiment(eqx.Module):
     stepping: str = eqx.field(static=True)
     substeps: int = eqx.field(static=True)
     span: tuple = eqx.field(static=True)  # (t0, t_end) [s] as floats, to size the PWM grid
-    host_times: "_Constant" = eqx.field(static=True)  # the times as a NumPy array (see `predict`)
+    host_times: "_Constant" = eqx.field(static=True)  # the times as a NumPy array (`predict`)
     num_periods: int | None = eqx.field(static=True)
     lowpass_hz: float | None = eqx.field(static=True)  # the recording's low-pass cut-off, if it was filtered
 

@@ -25,7 +25,8 @@ from ._diagnostics import channel_errors, covariance, identifiability, mismatch
 from ._errors import PamjaxInputError, require_float64
 from ._experiment import predict_all, predictions
 from ._fingerprint import check_resume, encode, fingerprint
-from ._parameters import PamjaxIdentifiabilityWarning, ParameterSpace, strong_types
+from ._parameters import PamjaxIdentifiabilityWarning, ParameterSpace
+
 
 @dataclasses.dataclass
 class FitResult:
@@ -404,8 +405,6 @@ def fit(
     t_start = time.perf_counter()
     if resume is not None:
         state = _read_checkpoint(resume, labels, int(np.count_nonzero(problem.mask)))
-        t_first = time.perf_counter()
-        compile_s = 0.0
     else:
         announce = progress is not False and not problem.cached(theta)
         if announce:
@@ -413,12 +412,10 @@ def fit(
             print(f"fit: {len(labels)} parameters, {len(exps)} experiments; compiling the residuals and their "
                   f"Jacobian (first run; {cache}) ...", flush=True)
         r0, j0 = problem.start(theta)
-        t_first = time.perf_counter()
         if not np.all(np.isfinite(r0)) or not np.all(np.isfinite(j0)):
             raise PamjaxInputError("the start model's simulation fails (non-finite residuals or Jacobian): check the "
                                    "start values and the experiments' initial states")
         state = _lm.start(theta, r0, j0)
-        compile_s = t_first - t_start
         if announce:
             print(f"fit: compiled in {problem.compile_seconds():.1f} s", flush=True)
         if report is not None:
