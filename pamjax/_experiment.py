@@ -88,10 +88,11 @@ class Experiment(eqx.Module):
     - `stepping`: "auto" (default: "pwm" when the system's valve switches; "grid", fixed RK4 steps of 1 ms with
       events located inside the step, for stick-slip friction with a continuous valve; else "adaptive", diffrax at
       `rtol`/`atol`), or one of "adaptive", "pwm", "grid". "pwm" integrates on the PWM-synchronous fixed RK4 grid
-      (`simulate(stepping="pwm")`: exact edges, `substeps` nodes per period plus the edges), so the residuals are smooth, deterministic functions
-      of every parameter; an adaptive solve of a switching valve changes its step pattern with the parameters, and
-      the cost jumps by O(1) between neighbouring trial points (docs/fitting.md), which stalls Levenberg-Marquardt.
-      The grid is sized from the valve's PWM frequency in the model the experiment is first used with.
+      (`simulate(stepping="pwm")`: exact edges, `substeps` nodes per period plus the edges), so the residuals are
+      smooth, deterministic functions of every parameter; an adaptive solve of a switching valve changes its step
+      pattern with the parameters, and the cost jumps by O(1) between neighbouring trial points (docs/fitting.md),
+      which stalls Levenberg-Marquardt. The grid is sized from the valve's PWM frequency in the model the
+      experiment is first used with.
     - `validation_fraction`: the last fraction of the samples kept out of the fit (paper 001: 0.4), reported as
       validation error.
     """
