@@ -23,7 +23,6 @@ import time
 import jax
 
 jax.config.update("jax_enable_x64", True)
-import equinox as eqx  # noqa: E402
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402

@@ -31,7 +31,7 @@ _TOP_KEYS = {"model", "fit", "experiment", "bench"}
 _FIT_KEYS = {"free", "max_steps", "ftol", "xtol", "gtol", "out", "validation_fraction"}
 _BENCH_KEYS = {"dir", "rate", "kinds", "fitted_keys", "substeps"}
 _EXPERIMENT_KEYS = {"name", "file", "signal", "channels", "scales", "tank_volume", "initial", "rate", "filter_hz",
-                    "t_end", "max_steps", "rename", "units", "unit_checks"}
+                    "t_end", "max_steps", "rename", "units", "unit_checks", "stepping"}
 RESULT, MODEL, FIGURE, CHECKPOINT, BENCH = "fit.json", "model.json", "fit.png", "checkpoint.npz", "bench.json"
 
 
@@ -139,6 +139,8 @@ def _validate_experiment(e, here):
             raise PamjaxInputError(f"{here} {key} must be a table, got {e[key]!r}")
     if "channels" in e:
         require(e["channels"], "list of strings", f"{here} channels", '["pressure", "position"]')
+    if "stepping" in e and e["stepping"] not in ("auto", "adaptive", "pwm", "grid"):
+        raise PamjaxInputError(f"{here} stepping must be 'auto', 'adaptive', 'pwm' or 'grid', got {e['stepping']!r}")
     for key, kind, example in (("name", "string", '"triangle"'), ("tank_volume", "positive number", "5e-5 (m³)"),
                                ("rate", "positive number", "100.0 (Hz)"), ("filter_hz", "positive number", "20.0"),
                                ("t_end", "positive number", "8.0 (s)"), ("max_steps", "positive integer", "200000"),
@@ -213,7 +215,7 @@ def _experiment(e, k, root, fit_cfg, model):
     return pj.Experiment(
         rec, make_signal(e.get("signal", "recorded"), where, rec), channels=e.get("channels"), scales=e.get("scales"),
         build=build, initial=e.get("initial"), name=e.get("name", rec.name), max_steps=e.get("max_steps", 200_000),
-        validation_fraction=fit_cfg.get("validation_fraction", 0.0),
+        validation_fraction=fit_cfg.get("validation_fraction", 0.0), stepping=e.get("stepping", "auto"),
     )
 
 

@@ -7,9 +7,10 @@ command line turns that on by default; a Python program that imports pamjax deci
 `enable_compilation_cache()`).
 
 Where: `$PAMJAX_CACHE_DIR` if set, else the user's cache directory (`$XDG_CACHE_HOME` or `~/.cache` on Linux,
-`~/Library/Caches` on macOS, `%LOCALAPPDATA%` on Windows) under `pamjax/jax-compilation`. Off: `PAMJAX_COMPILATION_CACHE=0`
+`~/Library/Caches` on macOS, `%LOCALAPPDATA%` on Windows) under `pamjax/jax-compilation`.
+Off: `PAMJAX_COMPILATION_CACHE=0`
 (or the CLI's `--no-cache`). Stale entries are harmless (a new key misses and compiles); the directory can be
-deleted at any time.
+deleted at any time. `PAMJAX_CACHE_MIN_COMPILE_SECONDS` (default 0.1) sets the shortest compilation kept.
 """
 
 import os
@@ -19,8 +20,8 @@ import sys
 OPT_OUT = "PAMJAX_COMPILATION_CACHE"
 DIR_ENV = "PAMJAX_CACHE_DIR"
 # s: programs that compiled faster than this are not written (reading a tiny entry costs about as much as compiling
-# it; every pamjax solve, fit or sweep program takes longer than this to compile).
-MIN_COMPILE_SECONDS = 0.5
+# it). Low enough to keep the helpers a workflow compiles beside its solve (start states, statistics: 0.1-0.5 s).
+MIN_COMPILE_SECONDS = 0.1
 
 
 def default_cache_dir() -> pathlib.Path:
@@ -59,7 +60,8 @@ def enable_compilation_cache(path=None):
               f"directory or {OPT_OUT}=0", file=sys.stderr)
         return None
     jax.config.update("jax_compilation_cache_dir", str(path))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", MIN_COMPILE_SECONDS)
+    minimum = float(os.environ.get("PAMJAX_CACHE_MIN_COMPILE_SECONDS", MIN_COMPILE_SECONDS))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", minimum)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     return path
 
@@ -118,3 +120,116 @@ class CompileStats:
     def __exit__(self, *exc):
         self._active = False
         return False
+
+
+class ProgramCache:
+    """Traced programs kept on disk beside the compiled ones, so that a second run skips tracing too.
+
+    JAX's persistent cache keeps XLA's compiled code, keyed by the lowered program: a second run still traces and
+    lowers its Python functions to find that key (a fit's forward-mode Jacobian through the stick-slip grid: seconds).
+    `call(name, fn, args)` looks for `fn` already traced for arguments of this structure (`jax.export`, serialized
+    StableHLO); if found it calls that, compiling through the persistent cache; if not it traces, exports, saves and
+    calls. The key is a SHA-256 of the arguments' structure (classes, static fields, array shapes and dtypes, never
+    array values), the function's name, and the pamjax, jax and jaxlib versions and XLA flags: another structure or
+    version traces anew. Active only where the persistent compilation cache is on (the CLI); otherwise `call` is
+    `fn(*args)`. `fn` must be a pure function of its array arguments (as every jitted pamjax function is)."""
+
+    def __init__(self, directory):
+        self.directory = pathlib.Path(directory) / "programs"
+        self.memory = {}  # key → jitted caller of the exported program
+        self.keys = {}  # (name, argument ids, leaf shapes) → (key, the arguments)
+
+    @staticmethod
+    def key(name, args):
+        import hashlib
+        import importlib.metadata
+
+        import equinox as eqx
+        import jax
+
+        from .describe import describe
+
+        dynamic, static = eqx.partition(args, eqx.is_array)
+        shapes = jax.tree_util.tree_map(lambda a: (tuple(a.shape), str(a.dtype)), dynamic)
+        versions = []
+        for package in ("pamjax", "jax", "jaxlib"):
+            try:
+                versions.append(importlib.metadata.version(package))
+            except importlib.metadata.PackageNotFoundError:  # a source checkout without metadata
+                versions.append("?")
+        text = repr((name, describe(static), repr(shapes), jax.tree_util.tree_structure(dynamic).num_leaves,
+                     versions, os.environ.get("XLA_FLAGS", ""), bool(jax.config.jax_enable_x64)))
+        return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+    def has(self, name, args):
+        """Whether `name` is already traced for arguments of this structure (on disk or in this process)."""
+        key = self.key(name, args)
+        return key in self.memory or (self.directory / f"{name}-{key}.bin").exists()
+
+    def call(self, name, fn, args):
+        import equinox as eqx
+        import jax
+
+        dynamic, static = eqx.partition(args, eqx.is_array)
+        leaves, treedef = jax.tree_util.tree_flatten(dynamic)
+        # The key digests the whole static structure (~0.1 s): once per set of argument objects in this process.
+        # `ids` keeps the objects alive, so that no other object can later reuse one of their ids.
+        ids = (name, tuple(id(a) for a in args), tuple((x.shape, str(x.dtype)) for x in leaves))
+        known = self.keys.get(ids)
+        if known is None:
+            known = self.keys[ids] = (self.key(name, args), args)
+        key = known[0]
+        caller = self.memory.get(key)
+        if caller is None:
+            path = self.directory / f"{name}-{key}.bin"
+            exported = self._load(path)
+            if exported is None:
+
+                def flat(*xs):
+                    return fn(*eqx.combine(jax.tree_util.tree_unflatten(treedef, xs), static))
+
+                try:
+                    exported = jax.export.export(jax.jit(flat))(*leaves)
+                except NotImplementedError:  # e.g. a host callback in the program: not exportable, jit it as usual
+                    caller = self.memory[key] = jax.jit(flat)
+                    return caller(*leaves)
+                self._save(path, exported)
+            caller = self.memory[key] = jax.jit(exported.call)  # traced once per process (a thin wrapper)
+        return caller(*leaves)
+
+    @staticmethod
+    def _load(path):
+        import jax
+
+        if not path.exists():
+            return None
+        try:
+            return jax.export.deserialize(bytearray(path.read_bytes()))
+        except Exception:  # an unreadable or stale entry: trace anew (and replace it)
+            return None
+
+    @staticmethod
+    def _save(path, exported):
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
+            tmp.write_bytes(exported.serialize())
+            tmp.replace(path)
+        except (OSError, ImportError):
+            pass  # a read-only cache, or no serializer: the program is still used in this process
+
+
+_PROGRAMS = {"cache": None}
+
+
+def program_cache():
+    """The `ProgramCache` of the persistent compilation cache's directory, or None when that cache is off."""
+    import jax
+
+    directory = jax.config.jax_compilation_cache_dir
+    if not directory:
+        return None
+    cache = _PROGRAMS["cache"]
+    if cache is None or cache.directory.parent != pathlib.Path(directory):
+        cache = _PROGRAMS["cache"] = ProgramCache(directory)
+    return cache

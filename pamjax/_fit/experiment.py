@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.errors import PamjaxInputError
+from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
 from .._solve.simulate import _flat_scaled, fixed_grid_size, fixed_trajectory, resolve_stepping, solve, validate
 from .._solve.synchronous import solve_runs
@@ -85,13 +86,14 @@ class Experiment(eqx.Module):
     - `name`; `rtol`, `atol`, `max_steps`, `dt0`: solver settings of the adaptive solve (see `simulate`); the
       tolerances default to 1e-9 (tighter than `simulate`'s 1e-6, so that the residuals are smooth enough for
       Levenberg-Marquardt near the optimum; see the comment at the default).
-    - `stepping`: "auto" (default: "pwm" when the system's valve switches, else "grid": fixed RK4 steps of 1 ms
-      with events located inside the step for stick-slip friction), "adaptive" (diffrax at `rtol`/`atol`: for a
-      stiff system), "pwm" or "grid". "pwm" integrates on the PWM-synchronous fixed RK4 grid (`simulate(stepping="pwm")`:
-      exact edges, `substeps` nodes per period plus the edges), so the residuals are smooth, deterministic functions
-      of every parameter; an adaptive solve of a switching valve changes its step pattern with the parameters, and
-      the cost jumps by O(1) between neighbouring trial points (docs/fitting.md), which stalls Levenberg-Marquardt.
-      The grid is sized from the valve's PWM frequency in the model the experiment is first used with.
+    - `stepping`: "auto" (default: "pwm" when the system's valve switches; "grid", fixed RK4 steps of 1 ms with
+      events located inside the step, for stick-slip friction with a continuous valve; else "adaptive", diffrax at
+      `rtol`/`atol`), or one of "adaptive", "pwm", "grid". "pwm" integrates on the PWM-synchronous fixed RK4 grid
+      (`simulate(stepping="pwm")`: exact edges, `substeps` nodes per period plus the edges), so the residuals are
+      smooth, deterministic functions of every parameter; an adaptive solve of a switching valve changes its step
+      pattern with the parameters, and the cost jumps by O(1) between neighbouring trial points (docs/fitting.md),
+      which stalls Levenberg-Marquardt. The grid is sized from the valve's PWM frequency in the model the
+      experiment is first used with.
     - `validation_fraction`: the last fraction of the samples kept out of the fit (paper 001: 0.4), reported as
       validation error.
     """
@@ -115,7 +117,7 @@ class Experiment(eqx.Module):
     stepping: str = eqx.field(static=True)
     substeps: int = eqx.field(static=True)
     span: tuple = eqx.field(static=True)  # (t0, t_end) [s] as floats, to size the PWM grid
-    host_times: "_Constant" = eqx.field(static=True)  # the times as a NumPy array (see `predict`)
+    host_times: "_Constant" = eqx.field(static=True)  # the times as a NumPy array (`predict`)
     num_periods: int | None = eqx.field(static=True)
     lowpass_hz: float | None = eqx.field(static=True)  # the recording's low-pass cut-off, if it was filtered
 
@@ -178,8 +180,8 @@ class Experiment(eqx.Module):
         self.name = recording.name if name is None else str(name)
         self.channels = channels
         self.rtol, self.atol, self.max_steps, self.dt0 = rtol, atol, int(max_steps), dt0
-        if stepping not in ("auto", "adaptive", "pwm"):
-            raise PamjaxInputError(f"stepping must be 'auto', 'adaptive' or 'pwm', got {stepping!r}")
+        if stepping not in ("auto", "adaptive", "pwm", "grid"):
+            raise PamjaxInputError(f"stepping must be 'auto', 'adaptive', 'pwm' or 'grid', got {stepping!r}")
         if not (isinstance(substeps, int) and substeps >= 2):
             raise PamjaxInputError(f"substeps must be an int >= 2 (RK4 nodes per PWM period), got {substeps!r}")
         self.stepping, self.substeps = stepping, substeps
@@ -189,13 +191,14 @@ class Experiment(eqx.Module):
         self.num_periods = None
 
     def _stepping(self, system):
-        """The stepping of this experiment's solve. "auto": the PWM-synchronous grid for a switching valve, the
-        uniform grid otherwise (hybrid or smooth): fixed grids give residuals that are smooth, deterministic functions
-        of every parameter (an adaptive solve's step pattern changes with them and its cost jumps at the tolerance
-        level), compile to small loops, and keep in the persistent compilation cache. "adaptive" (diffrax, at the
-        experiment's rtol/atol) remains for stiff systems a 1 ms RK4 grid cannot hold."""
-        if self.stepping == "auto":
-            return "pwm" if getattr(system.valve, "switches", False) else "grid"
+        """The stepping of this experiment's solve. "auto": the PWM-synchronous grid for a switching valve (smooth,
+        deterministic residuals in every parameter, where an adaptive solve's step pattern changes with them and its
+        cost jumps at the tolerance level), the uniform grid for a hybrid system (stick-slip friction) fed by a
+        continuous valve, and the adaptive solver otherwise: a smooth system can be stiff (a smooth Coulomb sign
+        under a large F_c) beyond what a fixed 1 ms RK4 step holds. "grid" asks for the uniform grid anyway (small
+        programs, smooth residuals: a tank test with the averaged valve)."""
+        if self.stepping == "auto" and getattr(system.valve, "switches", False):
+            return "pwm"
         try:
             return resolve_stepping(system, self.stepping)
         except PamjaxInputError as err:
@@ -224,13 +227,22 @@ class Experiment(eqx.Module):
             raise PamjaxInputError(
                 f"experiment {self.name!r}: build(model) must give a pamjax system, got {type(system)}"
             )
-        try:
-            y0 = system.initial_state(**self.initial)
+        try:  # traced, not run: the start state is computed inside the compiled solve
+            y0 = jax.eval_shape(lambda s: s.initial_state(**self.initial), system)
         except TypeError as err:
             raise PamjaxInputError(
                 f"experiment {self.name!r}: bad `initial` keys {sorted(self.initial)}: {err}"
             ) from err
-        validate(system, self.signal, self.times, y0, self.t0)
+        validate(system, self.signal, self.times, None, self.t0)
+        self._stepping(system)  # a stepping this system cannot take is named here
+        for key, value in self.initial.items():
+            if not np.all(np.isfinite(np.asarray(value))):
+                raise PamjaxInputError(f"experiment {self.name!r}: initial {key} must be finite, got {value}")
+            if key == "pressure":
+                if not np.all(np.asarray(value) > 0):
+                    raise PamjaxInputError(f"experiment {self.name!r}: initial pressure must be an ABSOLUTE "
+                                           f"pressure > 0 [Pa], got {value}")
+                check_absolute_pressure(value, f"experiment {self.name!r}: initial pressure")
         frequency = getattr(system.valve, "pwm_frequency", None)
         if self.lowpass_hz is not None and frequency is not None and self.lowpass_hz < float(frequency):
             warn_filtered(self.name, self.lowpass_hz, float(frequency), stacklevel=4)

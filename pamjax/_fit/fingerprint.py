@@ -15,7 +15,6 @@ resuming it with the full budget is what checkpoints are for):
 """
 
 import dataclasses
-import hashlib
 import json
 import pathlib
 import warnings
@@ -23,34 +22,11 @@ import warnings
 import equinox as eqx
 import numpy as np
 
+from .._core.describe import describe as _describe, digest as _digest
 from .._core.errors import PamjaxInputError
 
 _DATA_FIELDS = {"times", "data", "weights", "positions", "pressures", "forces", "slack"}
 _VERSION = 1
-
-
-def _digest(*parts):
-    h = hashlib.sha256()
-    for part in parts:
-        h.update(part if isinstance(part, bytes) else repr(part).encode())
-    return h.hexdigest()[:16]
-
-
-def _describe(obj):
-    """A canonical, process-independent description of a pytree: arrays by digest, modules by class and fields."""
-    if eqx.is_array(obj) or isinstance(obj, np.ndarray):
-        a = np.asarray(obj)
-        return ("array", a.shape, str(a.dtype), _digest(np.ascontiguousarray(a).tobytes()))
-    if isinstance(obj, eqx.Module) or dataclasses.is_dataclass(obj):
-        return (type(obj).__qualname__, tuple((f.name, _describe(getattr(obj, f.name, None)))
-                                              for f in dataclasses.fields(obj)))
-    if isinstance(obj, dict):
-        return ("dict", tuple((str(k), _describe(v)) for k, v in sorted(obj.items(), key=lambda kv: str(kv[0]))))
-    if isinstance(obj, (list, tuple)):
-        return (type(obj).__name__, tuple(_describe(v) for v in obj))
-    if callable(obj):
-        return ("callable", getattr(obj, "__qualname__", type(obj).__qualname__))
-    return ("value", repr(obj))
 
 
 def _leaves_by_path(model, prefix=""):

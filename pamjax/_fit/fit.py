@@ -1,8 +1,8 @@
 """`fit`: least-squares identification of named parameters of a model against experiments.
 
 Workflow only: the physics lives in the components; the residuals come from `Experiment.residuals`; the iteration
-is Levenberg-Marquardt on the host (`pamjax._fit.lm`) around two compiled functions per problem structure, the residuals
-and their forward-mode Jacobian; the statistics and the mismatch diagnostics are in `pamjax._fit.diagnostics`.
+is Levenberg-Marquardt on the host (`pamjax._fit.fit.lm`) around two compiled functions per problem structure, the residuals
+and their forward-mode Jacobian; the statistics and the mismatch diagnostics are in `pamjax._fit.fit.diagnostics`.
 """
 
 import contextlib
@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.cache import program_cache
 from .._core.errors import PamjaxInputError, require_float64
 from . import lm as _lm
 from .diagnostics import channel_errors, covariance, identifiability, mismatch
@@ -38,7 +39,7 @@ class FitResult:
       stopped).
     - `channel_errors`: experiment → channel → rmse, max_error, range, rmse_percent, max_error_percent (of the
       data's range, as paper 000 reports them), the same with `validation_` for the held-out part, and the residual
-      diagnostics of `pamjax._fit.diagnostics` (noise, rmse_over_noise, autocorrelation, se_inflation).
+      diagnostics of `pamjax._fit.fit.diagnostics` (noise, rmse_over_noise, autocorrelation, se_inflation).
     - `mismatch`: True when some channel's residuals are not noise (the standard errors then understate the
       uncertainty; the note is in `warnings`).
     - `non_identifiable`: lists of labels whose combination the data do not fix; `warnings`.
@@ -168,6 +169,12 @@ def errors_as_nan():
         eqx_errors.EQX_ON_ERROR = old
 
 
+@eqx.filter_jit
+def _physical_and_jacobian(space, theta):
+    """The physical values at θ and d(values)/dθ, compiled (run eagerly, each operation compiles on its own)."""
+    return space.physical(theta), jax.jacfwd(space.physical)(theta)
+
+
 class _Problem:
     """The host side of the two compiled functions: NumPy in, NumPy out, the identification samples selected; a
     failed solve's residuals are None."""
@@ -184,15 +191,30 @@ class _Problem:
         self.seconds[kind].append(time.perf_counter() - t)
         return out
 
+    def _call(self, kind, fn, theta):
+        """A compiled function of (space, θ, experiments); with the CLI's persistent cache on, traced once per
+        problem structure for all runs (`ProgramCache`)."""
+        programs = program_cache()
+        args = (self.space, jnp.asarray(theta), self.exps)
+        if programs is None:
+            return self._timed(kind, fn, *args)
+        return self._timed(kind, programs.call, f"fit_{kind}", fn.__wrapped__, args)
+
+    def cached(self, theta):
+        """Whether both programs of this problem are already traced on disk (a second run: nothing to compile)."""
+        programs = program_cache()
+        args = (self.space, jnp.asarray(theta), self.exps)
+        return programs is not None and all(programs.has(f"fit_{kind}", args) for kind in ("residuals", "jacobian"))
+
     def all_residuals(self, theta):
-        return np.asarray(self._timed("residuals", _residuals, self.space, jnp.asarray(theta), self.exps))
+        return np.asarray(self._call("residuals", _residuals, theta))
 
     def residuals(self, theta):
         r = self.all_residuals(theta)[self.mask]
         return r if np.all(np.isfinite(r)) else None
 
     def jacobian(self, theta):
-        r, j = self._timed("jacobian", _residuals_and_jacobian, self.space, jnp.asarray(theta), self.exps)
+        r, j = self._call("jacobian", _residuals_and_jacobian, theta)
         return np.asarray(r)[self.mask], np.asarray(j)[self.mask]
 
     def start(self, theta):
@@ -322,7 +344,7 @@ def fit(
     """Fit the parameters named in `free` of `model` to `experiments` by nonlinear least squares.
 
     Minimises ½ Σ rᵢ² over all experiments' residuals r = (model − data) / scale (identification part only) by
-    Levenberg-Marquardt (`pamjax._fit.lm`: Nielsen's damping, Moré's scaling) with Jacobians in forward mode through
+    Levenberg-Marquardt (`pamjax._fit.fit.lm`: Nielsen's damping, Moré's scaling) with Jacobians in forward mode through
     the solves. Parameters are fitted in an unconstrained, O(1)-scaled space (`pamjax.ParameterSpace`): log for
     physically positive quantities (volumes, areas, conductances, friction: a trial value is never ≤ 0), a logistic
     for ratios and bounded ones, a scale by the starting magnitude for signed coefficients, and the quartic F_max of
@@ -350,7 +372,7 @@ def fit(
       Never replaces an existing file unless `overwrite=True` or it is the `resume` file.
     - `resume`: an `.npz` checkpoint of this same problem: the fit continues from it and ends bitwise where an
       uninterrupted fit with the same `max_steps` ends (values, cost, iterations, history). The checkpoint carries a
-      fingerprint of the start model, free spec, experiments and data (`pamjax._fit.fingerprint`): a resume of another
+      fingerprint of the start model, free spec, experiments and data (`pamjax._fit.fit.fingerprint`): a resume of another
       problem is refused before any solve, saying what differs.
 
     **Returns:** a `FitResult`: values, standard errors, correlation, `status` ('converged', 'at bound',
@@ -383,23 +405,21 @@ def fit(
     t_start = time.perf_counter()
     if resume is not None:
         state = _read_checkpoint(resume, labels, int(np.count_nonzero(problem.mask)))
-        t_first = time.perf_counter()
-        compile_s = 0.0
     else:
-        if report is not None and not callable(progress):
+        announce = progress is not False and not problem.cached(theta)
+        if announce:
+            cache = "cached afterwards" if program_cache() is not None else "pamjax.enable_compilation_cache() keeps it"
             print(f"fit: {len(labels)} parameters, {len(exps)} experiments; compiling the residuals and their "
-                  "Jacobian (first run; cached afterwards) ...", flush=True)
+                  f"Jacobian (first run; {cache}) ...", flush=True)
         r0, j0 = problem.start(theta)
-        t_first = time.perf_counter()
         if not np.all(np.isfinite(r0)) or not np.all(np.isfinite(j0)):
             raise PamjaxInputError("the start model's simulation fails (non-finite residuals or Jacobian): check the "
                                    "start values and the experiments' initial states")
         state = _lm.start(theta, r0, j0)
-        compile_s = t_first - t_start
+        if announce:
+            print(f"fit: compiled in {problem.compile_seconds():.1f} s", flush=True)
         if report is not None:
             report(0, state.cost, state.damping, True)
-            if not callable(progress):
-                print(f"  (first evaluation with compilation: {compile_s:.1f} s)", flush=True)
         if _lm._gradient_cosine(state) <= gtol:
             state.done, state.reason = True, "converged: gradient orthogonal to the residuals at the start (gtol)"
     while not state.done and state.step < max_steps:
@@ -443,7 +463,7 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
     used = int(np.count_nonzero(np.any(jac != 0, axis=1) | (resid != 0)))
     groups = identifiability(jac, labels, identifiability_tol)
     bad = sorted({label for g in groups for label in g})
-    g = np.asarray(jax.jacfwd(space.physical)(jnp.asarray(theta)))
+    values, g = (np.asarray(a) for a in _physical_and_jacobian(space, jnp.asarray(theta)))
     cov = g @ covariance(jac, state.cost, used, identifiability_tol) @ g.T
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -457,7 +477,6 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
                "data; hold one of them fixed)")
         msgs.append(msg)
         warnings.warn(msg, PamjaxIdentifiabilityWarning, stacklevel=3)
-    values = np.asarray(space.physical(jnp.asarray(theta)))
     fitted = space.with_values(jnp.asarray(values))
     r_all = problem.all_residuals(theta)
     errors = channel_errors(exps, r_all)

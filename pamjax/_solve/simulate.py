@@ -122,13 +122,15 @@ def solve(
     substeps=_DEFAULT_SUBSTEPS,
     num_periods=None,
     grid_step=_DEFAULT_GRID_STEP,
+    starts_off=True,
 ) -> Trajectory:
     """The unchecked, traceable core of `simulate` (vmap- and grad-safe; no Python-side validation).
 
     `atol` applies to the scaled state (pressure in units of 1e5 Pa, position in 1e-2 m, ...: `state_scale`).
     `stepping="pwm"` integrates on the PWM-synchronous grid (`pamjax._solve.synchronous`), `stepping="grid"` on a uniform
     grid of at most `grid_step` [s]; inside jit they need the static `num_periods` (PWM periods covering [t0,
-    ts[-1]], or grid steps).
+    ts[-1]], or grid steps). `starts_off`: a switching valve's previous PWM period is off at `t0` (a run from rest);
+    False reads the signal's own value there (a closed loop continuing period by period).
     """
     ts = jnp.asarray(ts, dtype=float)
     valve = system.valve
@@ -138,6 +140,9 @@ def solve(
         return _solve_fixed(system, signal, ts, y0, t0, stepping, substeps, num_periods, grid_step, throw)
 
     z0, flat_scale, unravel = _flat_scaled(system, y0)
+
+    if valve.switches and starts_off:  # the valve is off before the run (as the PWM grid and the exact schedule)
+        signal = StartsOff(signal, valve.command_time(t0))
 
     def field(t, z, args):
         dy = system.vector_field(t, unravel(z * flat_scale), valve.read_command(signal, t))
@@ -183,6 +188,20 @@ def solve(
     return _trajectory(
         ts, states, commands, outs, stats["num_steps"], stats["num_accepted_steps"], stats["num_rejected_steps"], result
     )
+
+
+class StartsOff(AbstractSignal):
+    """`signal` from `start` [s] on, 0 (valve off) before: the duty a switching valve's previous PWM period has at
+    the start of a run."""
+
+    signal: AbstractSignal
+    start: jax.Array
+
+    def __call__(self, t):
+        return jnp.where(t < self.start - 1e-12, jnp.zeros_like(self.signal(t)), self.signal(t))
+
+    def bounds(self):
+        return self.signal.bounds()
 
 
 def _trajectory(ts, states, commands, outs, num_steps, num_accepted, num_rejected, result):

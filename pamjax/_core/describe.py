@@ -1,0 +1,33 @@
+"""Canonical, process-independent descriptions of pytrees and their digests: the keys of fit fingerprints
+(`pamjax._fit.fingerprint`) and of the traced-program cache (`pamjax._core.cache`)."""
+
+import dataclasses
+import hashlib
+
+import equinox as eqx
+import numpy as np
+
+
+def digest(*parts):
+    """A 16-hex-digit SHA-256 digest of `parts` (bytes as they are, anything else by its repr)."""
+    h = hashlib.sha256()
+    for part in parts:
+        h.update(part if isinstance(part, bytes) else repr(part).encode())
+    return h.hexdigest()[:16]
+
+
+def describe(obj):
+    """A canonical, process-independent description of a pytree: arrays by digest, modules by class and fields."""
+    if eqx.is_array(obj) or isinstance(obj, np.ndarray):
+        a = np.asarray(obj)
+        return ("array", a.shape, str(a.dtype), digest(np.ascontiguousarray(a).tobytes()))
+    if isinstance(obj, eqx.Module) or dataclasses.is_dataclass(obj):
+        return (type(obj).__qualname__, tuple((f.name, describe(getattr(obj, f.name, None)))
+                                              for f in dataclasses.fields(obj)))
+    if isinstance(obj, dict):
+        return ("dict", tuple((str(k), describe(v)) for k, v in sorted(obj.items(), key=lambda kv: str(kv[0]))))
+    if isinstance(obj, (list, tuple)):
+        return (type(obj).__name__, tuple(describe(v) for v in obj))
+    if callable(obj):
+        return ("callable", getattr(obj, "__qualname__", type(obj).__qualname__))
+    return ("value", repr(obj))
