@@ -40,8 +40,8 @@ def run(joint, f, pressure_sum, rate=200.0, solver=None):
     )
     y0 = joint.initial_state(pressures[0][0], pressures[1][0])
     traj = pj.simulate(joint, signal, jnp.asarray(t), y0=y0, max_steps=500_000, solver=solver)
-    angle = np.asarray(traj.position)
-    stiffness = np.asarray(jax.vmap(joint.stiffness)(traj.position, traj.pressure[:, 0], traj.pressure[:, 1]))
+    angle = np.asarray(traj.angle)
+    stiffness = np.asarray(jax.vmap(joint.stiffness)(traj.angle, traj.pressure[:, 0], traj.pressure[:, 1]))
     rmse = float(np.sqrt(np.mean((angle - theta) ** 2)))
     return dict(t=t, reference=theta, angle=angle, pressure=np.asarray(traj.pressure), stiffness=stiffness, rmse=rmse)
 

@@ -66,13 +66,17 @@ from ._physics.signals import (
     Triangle as Triangle,
 )
 from ._physics.tabulated import TabulatedISO6358Restriction as TabulatedISO6358Restriction
-from ._physics.valve import (
-    AbstractValve as AbstractValve,
+from ._physics.valves.averaged import (
     AveragedValve as AveragedValve,
-    OnOffValve as OnOffValve,
     cycle_averaged_flow as cycle_averaged_flow,
     fit_averaged_valve as fit_averaged_valve,
 )
+from ._physics.valves.base import (
+    AbstractControlElement as AbstractControlElement,
+    AbstractSwitchingValve as AbstractSwitchingValve,
+    AbstractValve as AbstractValve,
+)
+from ._physics.valves.onoff import OnOffValve as OnOffValve
 
 # isort: split
 # --- systems: the vector fields over named states ------------------------------------------------------------------
@@ -123,6 +127,7 @@ from ._fit.bench import (
 )
 from ._fit.bench_tests import (
     FlowCurveExperiment as FlowCurveExperiment,
+    ForceMapExperiment as ForceMapExperiment,
     FrictionCurveExperiment as FrictionCurveExperiment,
     LoopForceMapExperiment as LoopForceMapExperiment,
     constant_velocity_point as constant_velocity_point,
@@ -131,11 +136,10 @@ from ._fit.bench_tests import (
     steady_friction_force as steady_friction_force,
 )
 from ._fit.experiment import (
+    AbstractExperiment as AbstractExperiment,
     Experiment as Experiment,
-    ForceMapExperiment as ForceMapExperiment,
     SameSystem as SameSystem,
     TankFromModel as TankFromModel,
-    predictions as predictions,
 )
 from ._fit.fit import FitResult as FitResult, evaluate as evaluate, fit as fit
 from ._fit.model_io import load_model as load_model, save_model as save_model
@@ -146,6 +150,7 @@ from ._fit.multistart import (
     multistart as multistart,
 )
 from ._fit.parameters import ParameterSpace as ParameterSpace, parameter_paths as parameter_paths
+from ._fit.predictions import predictions as predictions
 from ._fit.recording import Recording as Recording
 from ._fit.synthetic import synthetic_recording as synthetic_recording
 
@@ -156,28 +161,29 @@ from ._sweep.maps import (
     frequency_response as frequency_response,
     steady_state_map as steady_state_map,
 )
-from ._sweep.sweep import (
+from ._sweep.reductions import (
+    AbstractReduction as AbstractReduction,
     Final as Final,
     Harmonic as Harmonic,
     Mean as Mean,
-    SweepResult as SweepResult,
-    merge_sweep_shards as merge_sweep_shards,
-    sweep as sweep,
 )
+from ._sweep.result import SweepResult as SweepResult, merge_sweep_shards as merge_sweep_shards
+from ._sweep.sweep import sweep as sweep
 
 # isort: split
 # --- control: sampled-data controllers, closed loops, joint control ------------------------------------------------
 from ._control.closed_loop import (
-    AbstractController as AbstractController,
     ClosedLoop as ClosedLoop,
     ClosedLoopState as ClosedLoopState,
     ClosedLoopTrajectory as ClosedLoopTrajectory,
+    run_closed_loop as run_closed_loop,
+    simulate_closed_loop as simulate_closed_loop,
+)
+from ._control.controllers import (
+    AbstractController as AbstractController,
     PIController as PIController,
     SlidingModeController as SlidingModeController,
     equivalent_duty as equivalent_duty,
-    run_closed_loop as run_closed_loop,
-    simulate_closed_loop as simulate_closed_loop,
-    tune_controller as tune_controller,
 )
 from ._control.joint import (
     JointControlTrajectory as JointControlTrajectory,
@@ -185,6 +191,7 @@ from ._control.joint import (
     simulate_joint_control as simulate_joint_control,
 )
 from ._control.pid import PIDController as PIDController
+from ._control.tuning import tune_controller as tune_controller
 
 # isort: split
 # --- runtime: processes, compilation cache, XLA CPU setting --------------------------------------------------------

@@ -54,7 +54,8 @@ from ._physics.gas import (
 )
 from ._physics.muscle import CubicVolume, LinearVolume, Muscle, PolynomialForce
 from ._physics.regulator import paper001_air
-from ._physics.valve import AveragedValve, OnOffValve
+from ._physics.valves.averaged import AveragedValve
+from ._physics.valves.onoff import OnOffValve
 from ._systems.muscle import MuscleSystem
 from ._systems.tank import TankSystem
 

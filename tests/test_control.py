@@ -13,16 +13,9 @@ import pytest
 
 import pamjax
 from pamjax import presets
-from pamjax._control.closed_loop import (
-    ClosedLoop,
-    PIController,
-    SlidingModeController,
-    equivalent_duty,
-    reference_derivatives,
-    run_closed_loop,
-    simulate_closed_loop,
-    tracking_rmse,
-)
+from pamjax._control.closed_loop import ClosedLoop, run_closed_loop, simulate_closed_loop
+from pamjax._control.controllers import PIController, SlidingModeController, equivalent_duty, reference_derivatives
+from pamjax._control.tuning import tracking_rmse
 
 REF = pamjax.Sine(0.03, 0.01, 1.0 / (2 * np.pi))  # paper 000: 0.03 + 0.01 sin(t) m
 

@@ -71,8 +71,8 @@ def test_simulated_joint_settles_at_static_equilibrium(joint):
     assert pf == pytest.approx(P_ATM + 3.0 * 1.01e5, abs=300)
     assert pe == pytest.approx(P_ATM + 1.5 * 1.01e5, abs=300)
     # ... and the joint rests where the static torque vanishes
-    assert float(traj.position[-1]) == pytest.approx(float(joint.equilibrium_angle(pf, pe)), abs=1e-3)
-    assert float(traj.position[-1]) > 0.1
+    assert float(traj.angle[-1]) == pytest.approx(float(joint.equilibrium_angle(pf, pe)), abs=1e-3)
+    assert float(traj.angle[-1]) > 0.1
 
 
 def test_pressures_for_inverts_the_static_map(joint):

@@ -17,7 +17,7 @@ SCRIPT = textwrap.dedent(
     import jax.numpy as jnp
     import pamjax
     from pamjax import presets
-    from pamjax._sweep import sweep as _sweep
+    from pamjax._sweep import sharding
 
     assert len(jax.devices()) == 2, jax.devices()
     system = presets.mas10_system(valve="averaged")
@@ -31,8 +31,8 @@ SCRIPT = textwrap.dedent(
     assert np.all(sharded.succeeded)
 
     # the compiled call really runs on both devices: its inputs and outputs are split over the batch axis
-    mesh = _sweep._mesh(None)
-    values = _sweep._put(np.array([0.2, 0.4, 0.6, 0.8]), mesh)
+    mesh = sharding.mesh_of(None)
+    values = sharding.put(np.array([0.2, 0.4, 0.6, 0.8]), mesh)
     assert len(values.sharding.device_set) == 2
     assert [s.data.shape for s in values.addressable_shards] == [(2,), (2,)]
     print("SHARDING OK")

@@ -9,7 +9,8 @@ import pytest
 
 import pamjax
 from pamjax import presets
-from pamjax._sweep.sweep import Final, Harmonic, Mean, sweep
+from pamjax._sweep.reductions import Final, Harmonic, Mean
+from pamjax._sweep.sweep import sweep
 
 TS = np.linspace(0.0, 1.0, 21)
 
@@ -114,7 +115,7 @@ def test_chunks_equal_one_call_and_report_progress(averaged):
 
 
 def test_default_chunk_size_per_platform():
-    from pamjax._sweep.sweep import default_chunk_size
+    from pamjax._sweep.sharding import default_chunk_size
 
     assert default_chunk_size(100, 102, "cpu") == 100
     assert default_chunk_size(100_000, 102, "cpu") == 8192

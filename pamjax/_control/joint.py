@@ -54,7 +54,7 @@ def run_joint_control(loop: JointControlLoop, ts, y0=None, rtol=1e-7, atol=1e-7,
     y0 = loop.initial_state(ts[0]) if y0 is None else y0
     traj = solve(loop, Constant(0.0), ts, y0, ts[0], rtol=rtol, atol=atol, max_steps=max_steps)
     joint, p_atm = loop.joint, loop.air.atmospheric_pressure
-    pressure, angle = traj.pressure, traj.position
+    pressure, angle = traj.pressure, traj.angle
     theta_r, sum_r = jax.vmap(loop.targets)(ts)
     stiffness = jax.vmap(lambda a, p: regulated_stiffness(joint, a, p[0], p[1]))(angle, pressure)
     if loop.target_kind == "stiffness":

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 
 from .._core.errors import check_finite, check_nonnegative, check_positive
 from .._papers import datasheets, paper000
-from .closed_loop import AbstractController, _check_duty_limits
+from .controllers import AbstractController, _check_duty_limits
 
 
 class PIDState(eqx.Module):

@@ -13,6 +13,7 @@ import os
 import numpy as np
 
 from .errors import PamjaxInputError
+from .private import jax_backends_initialized, jax_coordinator_address
 
 # Environment variables read when an argument is not given (JAX itself reads JAX_COORDINATOR_ADDRESS and
 # JAX_LOCAL_DEVICE_IDS; the process count and id are pamjax's, named alike).
@@ -78,24 +79,14 @@ def _detected_cluster(environ):
 
 
 def _backend_started():
-    try:
-        from jax._src import xla_bridge
-
-        return bool(xla_bridge.backends_are_initialized())
-    except Exception:  # private API moved: let jax.distributed.initialize say it
-        return False
+    return jax_backends_initialized()  # False if the private name moved: then jax.distributed.initialize says it
 
 
 def process_info(source="already initialised"):
     """This process's place in the runtime, without joining anything (starts JAX's backend)."""
     import jax
 
-    try:
-        from jax._src import distributed
-
-        coordinator = distributed.global_state.coordinator_address
-    except (ImportError, AttributeError):  # private API moved: the line then names no coordinator
-        coordinator = None
+    coordinator = jax_coordinator_address()  # None if the private name moved: the line then names no coordinator
     return ProcessInfo(
         process_index=jax.process_index(), process_count=jax.process_count(), coordinator=coordinator, source=source,
         local_devices=jax.local_device_count(), global_devices=jax.device_count(),

@@ -26,6 +26,8 @@ import os
 import re
 import warnings
 
+from .private import jax_backends_initialized
+
 KEY = "xla_cpu_small_while_loop_byte_threshold"
 THRESHOLD_BYTES = 100_000
 OPT_OUT = "PAMJAX_XLA_CPU_TUNING"
@@ -34,12 +36,7 @@ _status = {"active": False, "reason": "not applied yet"}
 
 
 def _backends_initialised() -> bool:
-    try:
-        from jax._src import xla_bridge
-
-        return bool(xla_bridge.backends_are_initialized())
-    except Exception:  # private API moved: assume not initialised (the setting may then silently not apply)
-        return False
+    return jax_backends_initialized()  # False if the private name moved (the setting may then silently not apply)
 
 
 def _on_cpu() -> bool:

@@ -7,11 +7,15 @@ and each comes with the reduction that turns a raw bench record into its data po
 - `FlowCurveExperiment` (paper 000, eq. 10-11, Table 1, Fig. 7; paper 001, eq. 1-2): mass flow through one valve path
   against upstream and downstream pressure, as ISO 6358-1 measures it (upstream held, downstream throttled);
   `flow_curve` gives a restriction's curve.
+- `ForceMapExperiment`: static isometric forces F(x, p) compared with `muscle.static_force`; slack points (measured
+  0 N) only penalise a positive model force.
 - `LoopForceMapExperiment` (paper 000, Figs. 3 and 5, eq. 8-9): direction-dependent static forces, F = F_static(x, p)
   − F_friction(ẋ); `loop_average` gives the averaged map (Fig. 4) and the loop widths (paper: 32 N).
 
 All pressures are ABSOLUTE [Pa]; x is the muscle's shortening [m] and ẋ its rate (positive = contracting).
 """
+
+import abc
 
 import equinox as eqx
 import jax
@@ -19,9 +23,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.errors import PamjaxInputError
+from .._core.units import MIN_ABSOLUTE_PA
 from .._physics.friction import AbstractFriction
 from .._physics.gas import AbstractRestriction, Air
-from .recording import _MIN_ABSOLUTE_PA
+from .experiment import AbstractExperiment
 
 
 class Component(eqx.Module):
@@ -103,7 +108,7 @@ def _columns(names, arrays):
 
 
 def _check_absolute(name, p):
-    if np.min(p) < _MIN_ABSOLUTE_PA:
+    if np.min(p) < MIN_ABSOLUTE_PA:
         raise PamjaxInputError(
             f"{name} must be ABSOLUTE [Pa]; the lowest is {np.min(p):.4g} Pa (row {int(np.argmin(p))}), below half an "
             "atmosphere: these look like gauge or bar (add 101325 Pa to gauge readings)"
@@ -122,12 +127,77 @@ def _set_data(experiment, channel, values, scale, unit, name):
     experiment.channels = (channel,)
 
 
-class AbstractStaticExperiment(eqx.Module):
+class ForceMapExperiment(AbstractExperiment):
+    """Static force map: measured muscle forces [N] at positions x [m] and ABSOLUTE pressures [Pa].
+
+    Residual (F_model − F) / scale at loaded points; at slack points (measured F ≤ `slack_force`, default 0 N) only a
+    positive model force counts: max(F_model, 0) / scale ("force ≤ 0 → 0", the muscle cannot push).
+
+    **Arguments:** `positions` [m], `pressures` [Pa abs], `forces` [N], `scale` [N] (default 1 % of the force range),
+    `muscle`: model → muscle (default `model.muscle`, or the model itself if it is a `Muscle`), `name`.
+    """
+
+    positions: jax.Array
+    pressures: jax.Array
+    forces: jax.Array
+    slack: jax.Array
+    scale: float = eqx.field(static=True)
+    name: str = eqx.field(static=True)
+    channels: tuple = eqx.field(static=True, default=("force",))
+
+    def __init__(self, positions, pressures, forces, scale=None, slack_force=0.0, name="force_map"):
+        x, p, f = (np.asarray(a, dtype=float) for a in (positions, pressures, forces))
+        if not (x.shape == p.shape == f.shape and x.ndim == 1 and x.size > 0):
+            raise PamjaxInputError(
+                f"positions, pressures, forces must be 1-D of one length, got {x.shape}, {p.shape}, {f.shape}"
+            )
+        for label, a in (("positions", x), ("pressures", p), ("forces", f)):
+            if not np.all(np.isfinite(a)):
+                raise PamjaxInputError(f"{label} is NaN/inf at row {int(np.argmin(np.isfinite(a)))}")
+        if np.min(p) < MIN_ABSOLUTE_PA:  # half an atmosphere; a vented muscle reads about 101325 Pa absolute
+            raise PamjaxInputError(
+                f"pressures must be ABSOLUTE [Pa]; the lowest is {np.min(p):.4g} Pa (row {int(np.argmin(p))}), below "
+                "half an atmosphere: these look like gauge or bar (add 101325 Pa to gauge readings)"
+            )
+        self.positions, self.pressures, self.forces = jnp.asarray(x), jnp.asarray(p), jnp.asarray(f)
+        self.slack = jnp.asarray(f <= slack_force)
+        self.scale = float(0.01 * np.ptp(f) if scale is None else scale)
+        if not self.scale > 0:
+            raise PamjaxInputError(f"scale must be > 0 [N], got {self.scale}")
+        self.name = str(name)
+        self.channels = ("force",)
+
+    @staticmethod
+    def _muscle(model):
+        return getattr(model, "muscle", model)
+
+    def check(self, model):
+        if not hasattr(self._muscle(model), "static_force"):
+            raise PamjaxInputError(f"{self.name}: the model has no muscle (needs model.muscle or a Muscle)")
+
+    def predict(self, model):
+        muscle = self._muscle(model)
+        air = _air(model)
+        f = jax.vmap(lambda x, p: muscle.static_force(x, p, air))(self.positions, self.pressures)
+        return {"force": f}
+
+    def layout(self):
+        ones = np.ones(self.forces.shape, dtype=bool)
+        return [("force", self.scale, np.asarray(self.forces), ones, ones)]
+
+    def residuals_of(self, pred, part="identification"):
+        del part
+        f = pred["force"]
+        return jnp.where(self.slack, jnp.maximum(f, 0.0), f - self.forces) / self.scale
+
+
+class AbstractStaticExperiment(AbstractExperiment):
     """A fit experiment without a time axis: `predict(model)` gives one channel at the data points, the residual is
     (model − data)/scale, every point is compared and none is held out (the fitter's `layout`)."""
 
+    @abc.abstractmethod
     def predict(self, model):
-        raise NotImplementedError
+        """{channel: the model's values at the data points} (traceable)."""
 
     def check(self, model):
         pred = self.predict(model)
@@ -135,17 +205,11 @@ class AbstractStaticExperiment(eqx.Module):
         if channel not in pred or np.shape(pred[channel]) != np.shape(self.data[channel]):
             raise PamjaxInputError(f"{self.name}: the model does not predict {channel!r} at the data points")
 
-    def batch_key(self, model):
-        return None  # no ODE: predicted on its own
-
     def layout(self):
         (channel,) = self.channels
         data = np.asarray(self.data[channel])
         every = np.ones(data.shape, dtype=bool)
         return [(channel, self.scale, data, every, every)]
-
-    def residuals(self, model, part="identification"):
-        return self.residuals_of(self.predict(model), part)
 
     def residuals_of(self, pred, part="identification"):
         del part

@@ -4,12 +4,13 @@
 - `Experiment`: a dynamic test: the system built from the model (the model itself, or a `TankFromModel` for a
   constant-volume valve test sharing the model's valve), a command signal, a `Recording`, the channels to compare and
   their scales (noise level, in the channel's unit), and the initial state.
-- `ForceMapExperiment`: static isometric forces F(x, p) compared with `muscle.static_force` (no ODE); slack points
-  (measured 0 N) only penalise a positive model force.
+- The static experiments (no time axis) of `pamjax._fit.bench_tests`: force maps, friction and flow curves.
 
-Experiments of different systems share parameters through the model (all valve tests use `model.valve`).
+Every experiment keeps the contract of `AbstractExperiment`, the one thing `fit` knows of them. Experiments of
+different systems share parameters through the model (all valve tests use `model.valve`).
 """
 
+import abc
 import copy
 import hashlib
 
@@ -21,11 +22,55 @@ import numpy as np
 from .._core.errors import PamjaxInputError
 from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
-from .._solve.simulate import _flat_scaled, fixed_grid_size, fixed_trajectory, resolve_stepping, solve, validate
-from .._solve.synchronous import solve_runs
+from .._solve.simulate import fixed_grid_size, resolve_stepping, solve, validate
 from .._systems.base import AbstractSystem
 from .._systems.tank import TankSystem
-from .recording import _MIN_ABSOLUTE_PA, Recording, warn_filtered
+from .recording import Recording, warn_filtered
+
+
+class AbstractExperiment(eqx.Module):
+    """What a fit compares: an experiment turns a model (the object whose parameters are fitted) into predictions
+    of measured channels and their residuals (model − data) / scale. `fit`, `evaluate` and `predictions` know
+    experiments only through this contract.
+
+    - `name`: unique among a fit's experiments; `channels`: the compared channels, in residual order.
+    - `check(model)`, `predict(model)`, `layout()`, `residuals_of(pred, part)` (abstract, below).
+    - `bind(model)`: the experiment ready for tracing with `model` (e.g. its fixed grid sized); itself by default.
+    - `batch_key(model)`: experiments with equal keys are integrated in one compiled loop (`predict_all`); None (the
+      default): predicted on its own.
+    - `residuals(model, part)`: `residuals_of(predict(model), part)`.
+    """
+
+    name: eqx.AbstractVar[str]
+    channels: eqx.AbstractVar[tuple]
+
+    @abc.abstractmethod
+    def check(self, model):
+        """Concrete validation against `model` before any traced solve: a `PamjaxInputError` naming the experiment
+        for anything it cannot compare (a channel the model lacks, a command outside its range, ...)."""
+
+    @abc.abstractmethod
+    def predict(self, model):
+        """{channel: the model's values at the data points} (traceable)."""
+
+    @abc.abstractmethod
+    def layout(self):
+        """The residual vector's blocks, in order: per channel (name, scale, data, used, identification), the data
+        and two boolean masks over its samples (used: not masked; identification: not held out for validation)."""
+
+    @abc.abstractmethod
+    def residuals_of(self, pred, part="identification"):
+        """(pred − data) / scale, flat, in `layout` order, 0 where a sample is masked or belongs to the other part
+        ("identification", "validation", "all")."""
+
+    def bind(self, model):
+        return self
+
+    def batch_key(self, model):
+        return None
+
+    def residuals(self, model, part="identification"):
+        return self.residuals_of(self.predict(model), part)
 
 
 class SameSystem(eqx.Module):
@@ -70,7 +115,7 @@ def _default_scale(values):
     return 0.01 * span if span > 0 else 1.0
 
 
-class Experiment(eqx.Module):
+class Experiment(AbstractExperiment):
     """A dynamic experiment: simulate `build(model)` driven by `signal` and compare `channels` with `recording`.
 
     **Arguments:**
@@ -197,7 +242,7 @@ class Experiment(eqx.Module):
         continuous valve, and the adaptive solver otherwise: a smooth system can be stiff (a smooth Coulomb sign
         under a large F_c) beyond what a fixed 1 ms RK4 step holds. "grid" asks for the uniform grid anyway (small
         programs, smooth residuals: a tank test with the averaged valve)."""
-        if self.stepping == "auto" and getattr(system.valve, "switches", False):
+        if self.stepping == "auto" and system.valve.switches:
             return "pwm"
         try:
             return resolve_stepping(system, self.stepping)
@@ -243,9 +288,9 @@ class Experiment(eqx.Module):
                     raise PamjaxInputError(f"experiment {self.name!r}: initial pressure must be an ABSOLUTE "
                                            f"pressure > 0 [Pa], got {value}")
                 check_absolute_pressure(value, f"experiment {self.name!r}: initial pressure")
-        frequency = getattr(system.valve, "pwm_frequency", None)
-        if self.lowpass_hz is not None and frequency is not None and self.lowpass_hz < float(frequency):
-            warn_filtered(self.name, self.lowpass_hz, float(frequency), stacklevel=4)
+        period = system.valve.period
+        if self.lowpass_hz is not None and period is not None and self.lowpass_hz < 1.0 / float(period):
+            warn_filtered(self.name, self.lowpass_hz, 1.0 / float(period), stacklevel=4)
         # Which channels the system has: its outputs, traced (not solved, not compiled).
         outputs = jax.eval_shape(lambda s, y: s.outputs(self.t0, y, self.signal(self.t0)), system, y0)
         for c in self.channels:
@@ -260,7 +305,7 @@ class Experiment(eqx.Module):
         if stepping != "adaptive":
             traj = solve(system, self.signal, self.times, y0, self.t0, stepping=stepping, substeps=self.substeps,
                          num_periods=self._grid_size(system, stepping))
-            return {c: getattr(traj, c) for c in traj.channels() if getattr(traj, c) is not None}
+            return {c: traj.channel(c) for c in traj.channels()}
         # The output times and start as compile-time constants (the recording's own, exactly): diffrax then checks
         # them at trace time instead of with a run-time host callback, and a program with a host callback cannot be
         # kept in JAX's persistent compilation cache.
@@ -276,7 +321,7 @@ class Experiment(eqx.Module):
             dt0=self.dt0,
             adjoint="forward",
         )
-        return {c: getattr(traj, c) for c in traj.channels() if getattr(traj, c) is not None}
+        return {c: traj.channel(c) for c in traj.channels()}
 
     def batch_key(self, model):
         """Experiments with equal keys are integrated in one compiled loop (`predict_all`): fixed-grid stepping of
@@ -305,143 +350,3 @@ class Experiment(eqx.Module):
             part, jnp.ones_like(self.times, dtype=bool)
         )
         return jnp.concatenate([(pred[c] - self.data[c]) * self.weights[c] * keep for c in self.channels])
-
-
-class ForceMapExperiment(eqx.Module):
-    """Static force map: measured muscle forces [N] at positions x [m] and ABSOLUTE pressures [Pa].
-
-    Residual (F_model − F) / scale at loaded points; at slack points (measured F ≤ `slack_force`, default 0 N) only a
-    positive model force counts: max(F_model, 0) / scale ("force ≤ 0 → 0", the muscle cannot push).
-
-    **Arguments:** `positions` [m], `pressures` [Pa abs], `forces` [N], `scale` [N] (default 1 % of the force range),
-    `muscle`: model → muscle (default `model.muscle`, or the model itself if it is a `Muscle`), `name`.
-    """
-
-    positions: jax.Array
-    pressures: jax.Array
-    forces: jax.Array
-    slack: jax.Array
-    scale: float = eqx.field(static=True)
-    name: str = eqx.field(static=True)
-    channels: tuple = eqx.field(static=True, default=("force",))
-
-    def __init__(self, positions, pressures, forces, scale=None, slack_force=0.0, name="force_map"):
-        x, p, f = (np.asarray(a, dtype=float) for a in (positions, pressures, forces))
-        if not (x.shape == p.shape == f.shape and x.ndim == 1 and x.size > 0):
-            raise PamjaxInputError(
-                f"positions, pressures, forces must be 1-D of one length, got {x.shape}, {p.shape}, {f.shape}"
-            )
-        for label, a in (("positions", x), ("pressures", p), ("forces", f)):
-            if not np.all(np.isfinite(a)):
-                raise PamjaxInputError(f"{label} is NaN/inf at row {int(np.argmin(np.isfinite(a)))}")
-        if np.min(p) < _MIN_ABSOLUTE_PA:  # half an atmosphere; a vented muscle reads about 101325 Pa absolute
-            raise PamjaxInputError(
-                f"pressures must be ABSOLUTE [Pa]; the lowest is {np.min(p):.4g} Pa (row {int(np.argmin(p))}), below "
-                "half an atmosphere: these look like gauge or bar (add 101325 Pa to gauge readings)"
-            )
-        self.positions, self.pressures, self.forces = jnp.asarray(x), jnp.asarray(p), jnp.asarray(f)
-        self.slack = jnp.asarray(f <= slack_force)
-        self.scale = float(0.01 * np.ptp(f) if scale is None else scale)
-        if not self.scale > 0:
-            raise PamjaxInputError(f"scale must be > 0 [N], got {self.scale}")
-        self.name = str(name)
-        self.channels = ("force",)
-
-    @staticmethod
-    def _muscle(model):
-        return getattr(model, "muscle", model)
-
-    def check(self, model):
-        if not hasattr(self._muscle(model), "static_force"):
-            raise PamjaxInputError(f"{self.name}: the model has no muscle (needs model.muscle or a Muscle)")
-
-    def predict(self, model):
-        muscle = self._muscle(model)
-        air = getattr(model, "air", None)
-        if air is None:
-            from .._physics.gas import Air
-
-            air = Air()
-        f = jax.vmap(lambda x, p: muscle.static_force(x, p, air))(self.positions, self.pressures)
-        return {"force": f}
-
-    def batch_key(self, model):
-        return None
-
-    def layout(self):
-        ones = np.ones(self.forces.shape, dtype=bool)
-        return [("force", self.scale, np.asarray(self.forces), ones, ones)]
-
-    def residuals(self, model, part="identification"):
-        return self.residuals_of(self.predict(model), part)
-
-    def residuals_of(self, pred, part="identification"):
-        del part
-        f = pred["force"]
-        return jnp.where(self.slack, jnp.maximum(f, 0.0), f - self.forces) / self.scale
-
-
-def predict_all(model, experiments):
-    """Every experiment's predictions (traceable), in order. Fixed-grid experiments whose systems share one
-    structure (e.g. six tank tests, or a muscle's triangle runs) are integrated in ONE loop (`solve_runs`), so the
-    compiled program does not grow with their number."""
-    preds = [None] * len(experiments)
-    groups = {}
-    for i, e in enumerate(experiments):
-        key = e.batch_key(model)
-        if key is None:
-            preds[i] = e.predict(model)
-        else:
-            groups.setdefault(key, []).append(i)
-    for (stepping, substeps, _), members in groups.items():
-        exps = [experiments[i] for i in members]
-        for i, pred in zip(members, _predict_runs(model, exps, stepping, substeps)):
-            preds[i] = pred
-    return preds
-
-
-@eqx.filter_jit
-def _predictions(model, exps):
-    return predict_all(model, exps)
-
-
-def predictions(model, experiments):
-    """`model`'s channels at every experiment's times (list of dicts channel → NumPy array), in one compiled
-    program (experiments of one kind share one loop, as in a fit). Checks the experiments first."""
-    from .._core.errors import require_float64
-    from .parameters import strong_types
-
-    require_float64("pamjax.predictions")
-    experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
-    for e in experiments:
-        e.check(model)
-    model = strong_types(model)
-    exps = tuple(e.bind(model) if hasattr(e, "bind") else e for e in experiments)
-    return [jax.tree_util.tree_map(np.asarray, p) for p in _predictions(model, exps)]
-
-
-def _predict_runs(model, exps, stepping, substeps):
-    systems = [e.build(model) for e in exps]
-    y0s = [s.initial_state(**e.initial) for s, e in zip(systems, exps)]
-    flats = [_flat_scaled(s, y0) for s, y0 in zip(systems, y0s)]
-    _, flat_scale, unravel = flats[0]
-    sizes = [e._grid_size(s, stepping) for s, e in zip(systems, exps)]
-    runs = solve_runs(systems, [e.signal for e in exps], [e.times for e in exps], [f[0] for f in flats], unravel,
-                      flat_scale, [e.t0 for e in exps], stepping=stepping, substeps=substeps, sizes=sizes)
-    preds = []
-    for system, e, (states, num_steps, finite) in zip(systems, exps, runs):
-        traj = fixed_trajectory(system, e.signal, e.times, e.t0, states, num_steps, finite, stepping)
-        preds.append({c: getattr(traj, c) for c in traj.channels() if getattr(traj, c) is not None})
-    return preds
-
-
-@eqx.filter_jit
-def _predict(model, experiment):
-    return experiment.predict(model)
-
-
-def predict(model, experiment):
-    """`experiment.predict(model)`, jitted (one compile per experiment structure, shared by check and reports)."""
-    if hasattr(experiment, "bind"):
-        experiment = experiment.bind(model)
-    return _predict(model, experiment)

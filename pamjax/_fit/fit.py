@@ -1,11 +1,10 @@
 """`fit`: least-squares identification of named parameters of a model against experiments.
 
 Workflow only: the physics lives in the components; the residuals come from `Experiment.residuals`; the iteration
-is Levenberg-Marquardt on the host (`pamjax._fit.fit.lm`) around two compiled functions per problem structure, the residuals
-and their forward-mode Jacobian; the statistics and the mismatch diagnostics are in `pamjax._fit.fit.diagnostics`.
+is Levenberg-Marquardt on the host (`pamjax._fit.lm`) around two compiled functions per problem structure, the residuals
+and their forward-mode Jacobian; the statistics and the mismatch diagnostics are in `pamjax._fit.diagnostics`.
 """
 
-import contextlib
 import dataclasses
 import json
 import math
@@ -21,11 +20,13 @@ import numpy as np
 
 from .._core.cache import program_cache
 from .._core.errors import PamjaxInputError, require_float64
+from .._core.private import equinox_errors_as_nan
 from . import lm as _lm
 from .diagnostics import channel_errors, covariance, identifiability, mismatch
-from .experiment import predict_all, predictions
+from .experiment import AbstractExperiment
 from .fingerprint import check_resume, encode, fingerprint
 from .parameters import PamjaxIdentifiabilityWarning, ParameterSpace
+from .predictions import predict_all, predictions
 
 
 @dataclasses.dataclass
@@ -39,7 +40,7 @@ class FitResult:
       stopped).
     - `channel_errors`: experiment → channel → rmse, max_error, range, rmse_percent, max_error_percent (of the
       data's range, as paper 000 reports them), the same with `validation_` for the held-out part, and the residual
-      diagnostics of `pamjax._fit.fit.diagnostics` (noise, rmse_over_noise, autocorrelation, se_inflation).
+      diagnostics of `pamjax._fit.diagnostics` (noise, rmse_over_noise, autocorrelation, se_inflation).
     - `mismatch`: True when some channel's residuals are not noise (the standard errors then understate the
       uncertainty; the note is in `warnings`).
     - `non_identifiable`: lists of labels whose combination the data do not fix; `warnings`.
@@ -149,26 +150,6 @@ def evaluate(model, experiments):
     return channel_errors(experiments, r)
 
 
-@contextlib.contextmanager
-def errors_as_nan():
-    """Trace with equinox's run-time checks returning NaN instead of raising through a host callback.
-
-    diffrax checks its save times with `eqx.error_if` inside every solve, and equinox raises such errors from a host
-    callback; JAX refuses to write a program with a host callback to its persistent compilation cache, so every fit
-    with an adaptive solve would compile again in every run. A fit treats non-finite residuals as a failed trial
-    step, so NaN is the right failure here (the times themselves were checked on the host before the fit). The one
-    place pamjax sets a private name of a dependency: equinox reads `EQX_ON_ERROR` from the environment once, at
-    import; `tests/test_fit.py` fails if the name moves."""
-    import equinox._errors as eqx_errors
-
-    old = eqx_errors.EQX_ON_ERROR
-    eqx_errors.EQX_ON_ERROR = "nan"
-    try:
-        yield
-    finally:
-        eqx_errors.EQX_ON_ERROR = old
-
-
 @eqx.filter_jit
 def _physical_and_jacobian(space, theta):
     """The physical values at θ and d(values)/dθ, compiled (run eagerly, each operation compiles on its own)."""
@@ -186,7 +167,7 @@ class _Problem:
 
     def _timed(self, kind, fn, *args):
         t = time.perf_counter()
-        with errors_as_nan():
+        with equinox_errors_as_nan():
             out = jax.block_until_ready(fn(*args))
         self.seconds[kind].append(time.perf_counter() - t)
         return out
@@ -288,8 +269,9 @@ def _validate(experiments, max_steps, out, overwrite, checkpoint, resume):
     if not experiments:
         raise PamjaxInputError("experiments must be a non-empty list")
     for e in experiments:
-        if not hasattr(e, "residuals"):
-            raise PamjaxInputError(f"experiments must be Experiment/ForceMapExperiment objects, got {type(e)}")
+        if not isinstance(e, AbstractExperiment):
+            raise PamjaxInputError(f"experiments must be pamjax experiments (Experiment, ForceMapExperiment, ...), "
+                                   f"got {type(e)}")
     names = [e.name for e in experiments]
     if len(set(names)) != len(names):
         raise PamjaxInputError(f"experiment names must be unique, got {names}")
@@ -344,7 +326,7 @@ def fit(
     """Fit the parameters named in `free` of `model` to `experiments` by nonlinear least squares.
 
     Minimises ½ Σ rᵢ² over all experiments' residuals r = (model − data) / scale (identification part only) by
-    Levenberg-Marquardt (`pamjax._fit.fit.lm`: Nielsen's damping, Moré's scaling) with Jacobians in forward mode through
+    Levenberg-Marquardt (`pamjax._fit.lm`: Nielsen's damping, Moré's scaling) with Jacobians in forward mode through
     the solves. Parameters are fitted in an unconstrained, O(1)-scaled space (`pamjax.ParameterSpace`): log for
     physically positive quantities (volumes, areas, conductances, friction: a trial value is never ≤ 0), a logistic
     for ratios and bounded ones, a scale by the starting magnitude for signed coefficients, and the quartic F_max of
@@ -372,7 +354,7 @@ def fit(
       Never replaces an existing file unless `overwrite=True` or it is the `resume` file.
     - `resume`: an `.npz` checkpoint of this same problem: the fit continues from it and ends bitwise where an
       uninterrupted fit with the same `max_steps` ends (values, cost, iterations, history). The checkpoint carries a
-      fingerprint of the start model, free spec, experiments and data (`pamjax._fit.fit.fingerprint`): a resume of another
+      fingerprint of the start model, free spec, experiments and data (`pamjax._fit.fingerprint`): a resume of another
       problem is refused before any solve, saying what differs.
 
     **Returns:** a `FitResult`: values, standard errors, correlation, `status` ('converged', 'at bound',
@@ -396,7 +378,7 @@ def fit(
     for e in experiments:
         e.check(model)
     labels = space.labels
-    exps = tuple(e.bind(model) if hasattr(e, "bind") else e for e in experiments)  # PWM grids sized
+    exps = tuple(e.bind(model) for e in experiments)  # PWM grids sized
     theta = np.asarray(space.initial_theta())
     if not np.all(np.isfinite(theta)):
         raise PamjaxInputError(f"start values give non-finite transformed parameters: {dict(zip(labels, theta))}")

@@ -1,8 +1,10 @@
 """Free parameters of a fit: paths into a model, and the map from an unconstrained, O(1)-scaled vector θ to them.
 
-Positive quantities are fitted in log space (v = v₀ eᶿ: a trial value is never ≤ 0), ratios in (0, 1) and bounded
-parameters through a logistic, signed coefficients linearly scaled by their start magnitude, and the quartic F_max of
-paper 000 eq. 7 as its values at five Chebyshev nodes over the stroke (reported as a0…a4).
+How each parameter is transformed and reported is declared by its component, in the field's metadata
+(`pamjax._core.fitting`): positive quantities in log space (v = v₀ eᶿ: a trial value is never ≤ 0), bounded ones
+(ratios in (0, 1)) through a logistic, a polynomial's coefficients as its values at Chebyshev nodes over the domain
+an enclosing component names, labelled as the component says; anything else linearly, scaled by its start
+magnitude. This module knows no component.
 """
 
 import dataclasses
@@ -14,16 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.errors import PamjaxInputError
-
-# Default transform by field name: positive quantities fitted in log space, ratios in (0, 1) through a logistic;
-# everything else (signed coefficients) linearly, scaled by its starting magnitude.
-_LOG_NAMES = {
-    "discharge_coefficient", "area", "sonic_conductance", "flow_coefficient", "v0", "volume", "coulomb_force",
-    "viscous_coefficient", "payload_mass", "v1", "k0", "k2", "supply_pressure", "pwm_frequency", "switch_on_delay",
-    "switch_off_delay", "edge_width", "velocity_width", "bristle_stiffness", "bristle_damping", "max_pressure",
-    "strand_length", "turns", "nominal_length", "radius", "stiffness", "damping", "temperature", "gas_constant",
-}
-_LOGISTIC_NAMES = {"critical_ratio", "laminar_ratio"}
+from .._core.fitting import TRANSFORMS
 
 
 class PamjaxIdentifiabilityWarning(UserWarning):
@@ -117,14 +110,14 @@ class _Group(eqx.Module):
         return jnp.linalg.solve(self.basis, value) / self.scale
 
 
-def _labels(path, attrs, shape, index):
+def _labels(path, shape, index, label):
+    """The reported names of a free entry: its path for an indexed entry or a scalar, the field's `label` format
+    per entry ({i}: flat index, {n}: i + 1), else path[i, j]."""
     if index is not None:
         return (path,)
     idx = list(np.ndindex(*shape)) if shape else [()]
-    if attrs[-1] == "max_force_coefficients":
-        return tuple(f"a{i[0]}" for i in idx)
-    if attrs[-1] == "coefficients" and shape == (3, 3):
-        return tuple(f"m{3 * i[0] + i[1] + 1}" for i in idx)
+    if label is not None:
+        return tuple(label.format(i=k, n=k + 1) for k in range(len(idx)))
     return tuple(f"{path}[{','.join(map(str, i))}]" if i else path for i in idx)
 
 
@@ -135,10 +128,10 @@ FREE_ENTRY_KEYS = ("path", "transform", "bounds", "scale")
 def _zero_start_scale(full, index):
     """Scale of linear parameters that start at exactly 0 (their own magnitude gives none).
 
-    Entries of one column of a 2-D coefficient array share units (eq. 13: m_ij multiplies u^i p_g^j, u
-    dimensionless), so a zero entry takes its column's largest magnitude; in a 1-D array, the array's largest; else 1
-    (give the free entry a 'scale' then). Without this, eq. 13's m1 = 0 would be fitted in units of 1 kg/s beside
-    m4 and m7 of ~1e-3 kg/s: badly scaled for Levenberg-Marquardt's isotropic damping."""
+    Entries of one column of a 2-D coefficient array are taken to share units (as paper 000's eq. 13 m_ij, which
+    multiplies u^i p_g^j with u dimensionless), so a zero entry takes its column's largest magnitude; in a 1-D array,
+    the array's largest; else 1 (give the free entry a 'scale' then). Without this, eq. 13's m1 = 0 would be fitted
+    in units of 1 kg/s beside m4 and m7 of ~1e-3 kg/s: badly scaled for Levenberg-Marquardt's isotropic damping."""
     if full.ndim == 2:
         s = np.broadcast_to(np.max(np.abs(full), axis=0), full.shape)
     elif full.ndim == 1:
@@ -149,51 +142,91 @@ def _zero_start_scale(full, index):
     return np.where(s > 0, s, 1.0)
 
 
-def _make_group(model, entry, valid):
+def _field_metadata(model, attrs):
+    """The metadata of the dataclass field a path ends in (how its component says it is fitted), or {}."""
+    owner = _getter(attrs[:-1])(model)
+    fields = dataclasses.fields(owner) if dataclasses.is_dataclass(owner) else ()
+    return next((dict(f.metadata) for f in fields if f.name == attrs[-1]), {})
+
+
+def _entry(entry):
+    """(path, transform, bounds, scale) of a free entry: a path string, or a dict with those keys."""
     spec = {"path": entry} if isinstance(entry, str) else dict(entry)
     path = spec.pop("path", None)
     if path is None:
         raise PamjaxInputError(f"free parameter entry {entry!r} needs a 'path'")
-    transform = spec.pop("transform", None)
-    bounds = spec.pop("bounds", None)
-    user_scale = spec.pop("scale", None)
+    transform, bounds, user_scale = spec.pop("transform", None), spec.pop("bounds", None), spec.pop("scale", None)
     if spec:
         raise PamjaxInputError(
             f"free parameter {path!r}: unknown keys {sorted(spec)}; valid: {', '.join(FREE_ENTRY_KEYS)}"
         )
-    attrs, index = _parse(path)
+    return path, transform, bounds, user_scale
+
+
+def _start_value(model, path, attrs, index, valid):
+    """(the free entry's start value, the whole leaf) as NumPy arrays; a `PamjaxInputError` for an unknown path or
+    an index out of range."""
     leaf_path = ".".join(attrs)
     if leaf_path not in valid:
         raise PamjaxInputError(
             f"unknown parameter {path!r}; the model's parameters are:\n  " + "\n  ".join(sorted(valid))
         )
-    value = np.asarray(_getter(attrs)(model), dtype=float)
-    full = value  # the whole leaf; `value` becomes the indexed entry
-    if index is not None:
-        if len(index) != value.ndim or any(not 0 <= i < n for i, n in zip(index, value.shape)):
-            raise PamjaxInputError(f"index {list(index)} out of range for {leaf_path!r} of shape {value.shape}")
-        value = value[index]
-    leaf = attrs[-1]
+    full = np.asarray(_getter(attrs)(model), dtype=float)
+    if index is None:
+        return full, full
+    if len(index) != full.ndim or any(not 0 <= i < n for i, n in zip(index, full.shape)):
+        raise PamjaxInputError(f"index {list(index)} out of range for {leaf_path!r} of shape {full.shape}")
+    return full[index], full
+
+
+def _transform(path, value, index, transform, bounds, meta):
+    """The checked (transform, bounds) of a free entry: the user's, else its field's declaration (a "log" one only
+    for a positive start value, a "nodes" one only for the whole array), else "linear"."""
     if bounds is not None:
         lo, hi = (float(b) for b in bounds)
         if not (lo < hi and np.all(value > lo) and np.all(value < hi)):
             raise PamjaxInputError(f"bounds {bounds} of {path!r} must satisfy lo < start value {value} < hi")
         transform = transform or "logistic"
     if transform is None:
-        if leaf == "max_force_coefficients" and index is None and value.shape == (5,):
-            transform = "nodes"
-        elif leaf in _LOGISTIC_NAMES:
-            transform, bounds = "logistic", (0.0, 1.0)
-        elif leaf in _LOG_NAMES and np.all(value > 0):
-            transform = "log"
-        else:
-            transform = "linear"
-    if transform not in ("linear", "log", "logistic", "nodes"):
+        transform, bounds = meta.get("transform", "linear"), meta.get("bounds")
+        if (transform == "log" and not np.all(value > 0)) or (transform == "nodes" and index is not None):
+            transform, bounds = "linear", None
+    if transform not in TRANSFORMS:
         raise PamjaxInputError(f"transform of {path!r} must be linear, log, logistic or nodes, got {transform!r}")
     if transform == "log" and not np.all(value > 0):
         raise PamjaxInputError(f"{path!r} starts at {value}: a log transform needs a positive start value")
     if transform == "logistic" and bounds is None:
         raise PamjaxInputError(f"{path!r}: a logistic transform needs bounds (lo, hi)")
+    return transform, bounds
+
+
+def _domain(model, attrs, name, path):
+    """The interval (lo, hi) an enclosing component of the path's leaf names `name` (a muscle's `stroke`)."""
+    for k in range(len(attrs) - 1, -1, -1):
+        owner = _getter(attrs[:k])(model)
+        if name is not None and hasattr(owner, name):
+            lo, hi = getattr(owner, name)
+            return float(lo), float(hi)
+    raise PamjaxInputError(f"{path!r}: a 'nodes' transform needs an enclosing component with a {name!r} range; "
+                           "give another transform")
+
+
+def _nodes_basis(model, attrs, path, flat, domain):
+    """(basis, scale) of a polynomial fitted by its values at len(flat) Chebyshev nodes over `domain`: coefficients =
+    basis @ values (well conditioned where the monomials are not)."""
+    lo, hi = _domain(model, attrs, domain, path)
+    n = flat.size
+    nodes = 0.5 * (lo + hi) + 0.5 * (hi - lo) * np.cos(np.pi * (2 * np.arange(n) + 1) / (2 * n))
+    vander = np.vander(nodes, n, increasing=True)  # F(nodes) = V a
+    return np.linalg.inv(vander), np.full(n, np.max(np.abs(vander @ flat)))
+
+
+def _make_group(model, entry, valid):
+    path, transform, bounds, user_scale = _entry(entry)
+    attrs, index = _parse(path)
+    value, full = _start_value(model, path, attrs, index, valid)
+    meta = _field_metadata(model, attrs)
+    transform, bounds = _transform(path, value, index, transform, bounds, meta)
     flat = value.reshape(-1)
     scale = np.where(flat != 0, np.abs(flat), _zero_start_scale(full, index))
     if user_scale is not None:
@@ -210,14 +243,8 @@ def _make_group(model, entry, valid):
     if transform == "logistic":
         lower, upper = np.full_like(flat, bounds[0]), np.full_like(flat, bounds[1])
     if transform == "nodes":
-        # Well-conditioned basis for the quartic F_max: its values at 5 Chebyshev nodes over the stroke.
-        muscle = _getter(attrs[:-2])(model)
-        lo, hi = float(muscle.min_position), float(muscle.max_position)
-        nodes = 0.5 * (lo + hi) + 0.5 * (hi - lo) * np.cos(np.pi * (2 * np.arange(5) + 1) / 10)
-        vander = np.vander(nodes, 5, increasing=True)  # F(nodes) = V a
-        basis = np.linalg.inv(vander)
-        scale = np.full(5, np.max(np.abs(vander @ flat)))
-    labels = _labels(path, attrs, value.shape, index)
+        basis, scale = _nodes_basis(model, attrs, path, flat, meta.get("domain"))
+    labels = _labels(path, value.shape, index, meta.get("label"))
     return _Group(path, tuple(attrs), index, transform, labels, jnp.asarray(scale), jnp.asarray(lower),
                   jnp.asarray(upper), None if basis is None else jnp.asarray(basis))
 

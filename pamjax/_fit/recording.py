@@ -13,12 +13,7 @@ import numpy as np
 
 from .._core.csvio import read_table, write_table
 from .._core.errors import PamjaxInputError
-from .._core.units import (
-    MIN_ABSOLUTE_PA as _MIN_ABSOLUTE_PA,  # noqa: F401 (used by _experiment)
-    channel_dimension,
-    check_magnitude,
-    to_si,
-)
+from .._core.units import channel_dimension, check_magnitude, to_si
 
 # Default unit per well-known channel name.
 DEFAULT_UNITS = dict(

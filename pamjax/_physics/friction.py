@@ -4,6 +4,8 @@
 memoryless models) with rate `state_rate(v, z)`.
 """
 
+import abc
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -34,8 +36,10 @@ class AbstractFriction(eqx.Module):
     def state_rate(self, v, z):
         return None
 
+    @abc.abstractmethod
     def force(self, v, z):
-        raise NotImplementedError
+        """The friction force [N] at velocity `v` [m/s] and friction state `z`, positive opposing positive `v`. A hybrid
+        friction gives its sliding force here (the system holds a stuck payload itself)."""
 
 
 class CoulombViscousFriction(AbstractFriction):

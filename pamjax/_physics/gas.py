@@ -7,6 +7,8 @@ p_down/p_up > 0.999, so the slope at equal pressures is finite and the flow and 
 input, equal pressures included.
 """
 
+import abc
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -98,12 +100,13 @@ def nozzle_flow_parameter(ratio, kappa, gas_constant, laminar_ratio=DEFAULT_LAMI
 class AbstractRestriction(eqx.Module):
     """A pneumatic restriction (valve path, orifice, silencer) between two ports.
 
-    `mass_flow(p1, p2, air)` returns the mass flow from port 1 to port 2 [kg/s] for absolute port pressures
-    `p1`, `p2` [Pa]; negative when p2 > p1. It is finite, with finite gradients, for all finite inputs.
+    A restriction is defined by its flow law `mass_flow`; nothing else is asked of it.
     """
 
+    @abc.abstractmethod
     def mass_flow(self, p1, p2, air: Air):
-        raise NotImplementedError
+        """The mass flow from port 1 to port 2 [kg/s] for ABSOLUTE port pressures `p1`, `p2` [Pa]; negative when
+        p2 > p1. Finite, with finite gradients, for all finite inputs (equal pressures included)."""
 
 
 class EllipseRestriction(AbstractRestriction):

@@ -5,12 +5,14 @@ Force laws take the GAUGE pressure p_g = p − p_atm [Pa] (paper 000 eq. 7: p_ma
 `Muscle` wrapper takes the absolute chamber pressure and does the conversion.
 """
 
+import abc
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from .._core.errors import PamjaxInputError, check_finite, check_in_open_interval, check_positive
-from .._core.fitting import positive
+from .._core.fitting import polynomial, positive
 from .._papers import paper000
 from .smooth import smooth_relu, smooth_step
 
@@ -19,8 +21,10 @@ class AbstractForceLaw(eqx.Module):
     """Static contractile force F(x, p_g) [N] of a muscle at displacement `x` [m] and GAUGE pressure `p_g` [Pa].
     It may be negative (the law extrapolated past slack); `Muscle.force` applies the slack."""
 
+    @abc.abstractmethod
     def static_force(self, x, gauge_pressure):
-        raise NotImplementedError
+        """The contractile force [N] at displacement `x` [m] (positive = shortening) and GAUGE pressure [Pa], before
+        the slack (it may be negative); smooth in both arguments."""
 
 
 class PolynomialForce(AbstractForceLaw):
@@ -35,7 +39,8 @@ class PolynomialForce(AbstractForceLaw):
     - `k0` [N], `k1` [N/m], `k2` [Pa].
     """
 
-    max_force_coefficients: jax.Array = eqx.field(converter=jnp.asarray)  # N/m^i
+    # fitted as F_max at Chebyshev nodes over the muscle's stroke (well conditioned), reported as a0…a4:
+    max_force_coefficients: jax.Array = eqx.field(converter=jnp.asarray, metadata=polynomial("a{i}", "stroke"))  # N/m^i
     k0: jax.Array = positive()  # N
     k1: jax.Array = eqx.field(converter=jnp.asarray)  # N/m
     k2: jax.Array = positive()  # Pa
@@ -118,8 +123,10 @@ class TonduLopezForce(AbstractForceLaw):
 class AbstractVolume(eqx.Module):
     """Chamber volume V(x) [m³] of a muscle at displacement `x` [m]."""
 
+    @abc.abstractmethod
     def volume(self, x):
-        raise NotImplementedError
+        """The chamber volume [m³] at displacement `x` [m]: positive over the stroke, smooth (its slope dV/dx is taken
+        by autodiff, paper 000 eq. 15)."""
 
 
 class LinearVolume(AbstractVolume):
@@ -236,6 +243,11 @@ class Muscle(eqx.Module):
                     f"[{float(lo):.4g}, {float(hi):.4g}] m (smallest {float(jnp.min(v)):.3g} m³); check its "
                     "coefficients (v0, v1, ...) and the stroke limits"
                 )
+
+    @property
+    def stroke(self):
+        """(min_position, max_position) [m]: the range of x (where a fit places the force law's nodes)."""
+        return self.min_position, self.max_position
 
     def static_force(self, x, pressure, air):
         """Eq. 7 (or the chosen law) at absolute `pressure` [Pa], before the slack: may be negative."""

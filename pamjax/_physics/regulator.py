@@ -14,6 +14,8 @@ Units of eq. 5-8 as printed: V_ref in V, P_out in bar (gauge), Q_in in l/min. Pa
 (Sect. 6.1) without saying at which conditions; ISO 8778 reference conditions (ANR) are assumed here.
 """
 
+import abc
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -26,7 +28,7 @@ from .chamber import chamber_flow, pressure_rate
 from .gas import AbstractRestriction, Air
 from .smooth import smooth_relu
 from .tabulated import check_table_axis, paper001_charging_restriction, paper001_discharging_restriction, pchip
-from .valve import AbstractValve
+from .valves.base import AbstractControlElement
 
 
 # --- paper 001 numbers (`pamjax._papers.paper001`) in the units the code uses --------------------------------------
@@ -98,30 +100,40 @@ class FeedbackRegulatorState(eqx.Module):
     pressure: jax.Array
 
 
-class AbstractRegulator(AbstractValve):
-    """A pressure regulator feeding a chamber of volume V(t); its state holds the outlet pressure [Pa abs].
+class AbstractRegulator(AbstractControlElement):
+    """A pressure regulator feeding a chamber of volume V(t); its state holds the outlet pressure [Pa abs]. The
+    command is the reference voltage, within `command_range` = 0-10 V (paper 001, Sect. 2); the regulator is
+    continuous (`switches` False).
 
-    - `initial_state(pressure)`: the state at rest with the outlet at `pressure` [Pa abs] and no flow.
-    - `state_rate(state, voltage, volume, volume_rate, air, polytropic_index, outlet_flow)`: the state's derivative
-      for reference `voltage` [V], chamber `volume` [m³] and `volume_rate` [m³/s] (n = 1: isothermal, paper 001),
-      and `outlet_flow` [kg/s] drawn from the outlet besides the chamber (eq. 5's Q_in at a closed port).
-    - `delivered_flow(...)` (same arguments): mass flow leaving the regulator [kg/s] (eq. 3 for the chamber).
-    - `command_range`: reference voltages 0-10 V.
+    - `needs_volume`: whether the outlet must be a chamber of volume > 0 (a regulator that integrates the chamber's
+      pressure, eq. 12); False where an ideal closed port (V = 0) is allowed.
+    - `max_gauge_pressure(air)`: the highest GAUGE outlet pressure [Pa] it can be set to (its calibration at 10 V,
+      and its supply), or None for a regulator without a voltage calibration.
     """
 
     command_range = VOLTAGE_RANGE
+    needs_volume = False
 
+    @abc.abstractmethod
     def initial_state(self, pressure):
-        raise NotImplementedError
+        """The state at rest with the outlet at `pressure` [Pa abs] and no flow."""
 
+    @abc.abstractmethod
     def state_rate(self, state, voltage, volume, volume_rate, air, polytropic_index=1.0, outlet_flow=0.0):
-        raise NotImplementedError
+        """The state's time derivative for reference `voltage` [V], chamber `volume` [m³] and `volume_rate` [m³/s]
+        (`polytropic_index` n = 1: isothermal, paper 001), and `outlet_flow` [kg/s] drawn from the outlet besides the
+        chamber (eq. 5's Q_in at a closed port)."""
 
+    @abc.abstractmethod
     def delivered_flow(self, state, voltage, volume, volume_rate, air, polytropic_index=1.0, outlet_flow=0.0):
-        raise NotImplementedError
+        """The mass flow leaving the regulator [kg/s] (eq. 3 for the chamber); arguments as `state_rate`."""
 
+    @abc.abstractmethod
     def state_scale(self):
-        raise NotImplementedError
+        """A typical magnitude per state (a pytree like the state), for integrating in scaled units."""
+
+    def max_gauge_pressure(self, air):
+        return None
 
 
 class LinearRegulator(AbstractRegulator):
@@ -168,6 +180,9 @@ class LinearRegulator(AbstractRegulator):
     def state_scale(self):
         return RegulatorState(pilot=jnp.asarray(BAR), pressure=jnp.asarray(BAR))
 
+    def max_gauge_pressure(self, air):
+        return self.calibration(VOLTAGE_RANGE[1])
+
 
 def _eq8_default_gains(voltage_gain=paper001.EQ6_GAIN, flow_gain=paper001.EQ7_GAIN):
     """(K1, K2) that give eq. 8 the static gains of eq. 5 (1.01 bar/V, −0.922 bar per l/min); the paper gives none."""
@@ -190,7 +205,7 @@ class FeedbackRegulator(AbstractRegulator):
     flow_gain: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.EQ7_GAIN)  # bar/(l/min)
     time_constants: jax.Array = eqx.field(converter=jnp.asarray, default=EQ6_TIME_CONSTANTS)  # s
     k1: jax.Array = eqx.field(converter=jnp.asarray, default=_eq8_default_gains()[0])  # -
-    k2: jax.Array = eqx.field(converter=jnp.asarray, default=_eq8_default_gains()[1])  # -
+    k2: jax.Array = positive(_eq8_default_gains()[1])  # -
 
     def __check_init__(self):
         if jnp.shape(self.time_constants) != (2,):
@@ -266,6 +281,8 @@ class ISO6358Regulator(AbstractRegulator):
     full_opening_error: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.HYSTERESIS)  # Pa
     opening_width: jax.Array = eqx.field(converter=jnp.asarray, default=1e-3)  # -
 
+    needs_volume = True  # eq. 12 divides by the chamber's volume
+
     def __check_init__(self):
         if jnp.shape(self.time_constants) != (2,):
             raise PamjaxInputError(f"time_constants must be (τ1, τ2) [s], got shape {jnp.shape(self.time_constants)}")
@@ -307,6 +324,10 @@ class ISO6358Regulator(AbstractRegulator):
     def state_scale(self):
         s = jnp.asarray(BAR)
         return ISO6358RegulatorState(pilot=s, pilot_output=s, pressure=s)
+
+    def max_gauge_pressure(self, air):
+        """Its calibration at 10 V, and below its supply (a regulator cannot raise its outlet above its supply)."""
+        return jnp.minimum(self.calibration(VOLTAGE_RANGE[1]), self.supply_pressure - air.atmospheric_pressure)
 
 
 def max_charging_flow(regulator: ISO6358Regulator, air: Air | None = None):

@@ -4,6 +4,8 @@ Each signal is an `eqx.Module` called as `signal(t)` and reports `bounds()`, its
 command outside a valve's range is rejected before any solve.
 """
 
+import abc
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -18,11 +20,14 @@ from .smooth import smooth_step
 class AbstractSignal(eqx.Module):
     """A command signal u(t). `__call__(t)` returns the command at time `t` [s]; `bounds()` its (min, max)."""
 
+    @abc.abstractmethod
     def __call__(self, t):
-        raise NotImplementedError
+        """The command at time `t` [s] (traceable; `t` may be an array of times under `vmap`)."""
 
+    @abc.abstractmethod
     def bounds(self):
-        raise NotImplementedError
+        """The concrete (min, max) of the command over all times, as floats: checked against the valve's
+        `command_range` before any solve."""
 
 
 class Constant(AbstractSignal):

@@ -22,7 +22,6 @@ import numpy as np
 from .._core.errors import PamjaxInputError, check_positive
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractSystem
-from .._systems.muscle import MuscleState
 from .simulate import validate
 
 
@@ -46,18 +45,9 @@ class DiscreteTrajectory(eqx.Module):
 
 
 def discrete_step(system: AbstractSystem, t, state, command, sample_time):
-    """One step of eq. 18-21 from `state` at time `t` [s] with `command` held over [t, t + T_s]."""
-    rate = system.vector_field(t, state, command)
-    if isinstance(state, MuscleState):
-        velocity = state.velocity + sample_time * rate.velocity  # eq. 20
-        friction = None if state.friction is None else state.friction + sample_time * rate.friction
-        return MuscleState(
-            pressure=state.pressure + sample_time * rate.pressure,  # eq. 18
-            position=state.position + sample_time * velocity,  # eq. 19
-            velocity=velocity,
-            friction=friction,
-        )
-    return jax.tree_util.tree_map(lambda y, dy: y + sample_time * dy, state, rate)  # eq. 18 (tank)
+    """One step of eq. 18-21 from `state` at time `t` [s] with `command` held over [t, t + T_s]: the system's own
+    discrete-time model (`system.discrete_step`: eq. 18-20 for a muscle, eq. 18 for a tank)."""
+    return system.discrete_step(t, state, command, sample_time)
 
 
 @eqx.filter_jit
@@ -78,8 +68,8 @@ def _run(system, signal, y0, t0, sample_time, num_steps: int):
     commands = jax.vmap(command_at)(ts)
     outs = jax.vmap(system.outputs)(ts, states, commands)
     acceleration = None
-    if isinstance(y0, MuscleState):
-        acceleration = jnp.concatenate([jnp.zeros(1), jnp.diff(states.velocity) / sample_time])  # eq. 21
+    if "velocity" in outs:  # eq. 21
+        acceleration = jnp.concatenate([jnp.zeros(1), jnp.diff(outs["velocity"]) / sample_time])
     return DiscreteTrajectory(
         t=ts,
         state=states,

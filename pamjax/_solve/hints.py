@@ -8,7 +8,8 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.flatten_util import ravel_pytree
+
+from .scaled import scaled
 
 BASE_MAX_STEPS = 200_000  # the budget of runs up to ~60 s with a 50 Hz PWM valve (Tsit5 takes ~31 steps per period)
 STEPS_PER_PWM_PERIOD = 64  # budget per period of a switching valve: 2× the ~31 Tsit5 takes on paper 000's runs
@@ -18,11 +19,8 @@ _MAX_STEPS_REACHED = "maximum number of solver steps"
 
 
 def _pwm_period(valve):
-    """The PWM period [s] of a switching valve (or of the one a wrapper such as the exact mode's schedule holds)."""
-    for v in (valve, getattr(valve, "valve", None)):
-        if v is not None and hasattr(v, "pwm_frequency"):
-            return 1.0 / float(v.pwm_frequency)
-    return None
+    """The PWM period [s] of a switching valve, None for a continuous one."""
+    return None if valve.period is None else float(valve.period)
 
 
 def default_max_steps(system, t0, t1):
@@ -41,16 +39,9 @@ def default_max_steps(system, t0, t1):
 def _fastest_mode(system, signal, t0, y0):
     """(largest |Re λ| [1/s] of the Jacobian of the scaled vector field at the initial state, name of the state it
     mostly moves)."""
-    scale = jax.tree_util.tree_map(lambda s, a: jnp.broadcast_to(jnp.asarray(s, float), jnp.shape(a)),
-                                   system.state_scale(), y0)
-    flat_scale, _ = ravel_pytree(scale)
-    z0, unravel = ravel_pytree(jax.tree_util.tree_map(lambda a, s: jnp.asarray(a, float) / s, y0, scale))
+    z0, scaled_state = scaled(system, y0)
     command = signal(system.valve.command_time(jnp.asarray(t0)))
-
-    def field(z):
-        return ravel_pytree(system.vector_field(jnp.asarray(t0), unravel(z * flat_scale), command))[0] / flat_scale
-
-    jac = np.asarray(jax.jacfwd(field)(z0))
+    jac = np.asarray(jax.jacfwd(lambda z: scaled_state.field(system, jnp.asarray(t0), z, command))(z0))
     if not np.all(np.isfinite(jac)):
         return float("nan"), "?"
     values, vectors = np.linalg.eig(jac)

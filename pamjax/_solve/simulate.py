@@ -6,101 +6,27 @@ import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
-from jax.flatten_util import ravel_pytree
 
 from .._core.errors import PamjaxInputError, PamjaxSolveError, check_time_grid, require_float64
+from .._core.private import diffrax_result_code
 from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
-from .._physics.valve import AbstractValve, OnOffValve
 from .._systems.base import AbstractSystem
 from . import synchronous as _sync
+from .edges import ScheduledValve, StartsOff
 from .hints import default_max_steps, failure_hint, fixed_step_hint
 from .rodas import Rodas5
+from .scaled import scaled
+from .trajectory import RESULT_NONFINITE, Trajectory, result_message, trajectory
 
-_RESULT_NONPHYSICAL = 102  # a state left the physical range (absolute pressure ≤ 0)
-_RESULT_NONFINITE = 101  # stepping="pwm": the fixed-step integration produced a non-finite state
-_RESULT_NAMES = {0: "successful", _RESULT_NONFINITE: "non-finite state in PWM-synchronous stepping"}
 _DEFAULT_SUBSTEPS = 16  # RK4 nodes per PWM period: step ≤ 1.25 ms at 50 Hz (docs/performance.md)
 # s, stepping="grid": RK4 step of a hybrid system fed by a continuous valve; 1 ms puts paper 000's muscle-payload
 # mode (~7 Hz) at ωh ≈ 0.045, as the PWM grid's 1.25 ms does (docs/performance.md).
 _DEFAULT_GRID_STEP = 1e-3
 
 
-class Trajectory(eqx.Module):
-    """The result of `simulate`: channels at the requested times.
-
-    - `t` [s]; `state`: the state pytree at each time (absolute pressures); `command`: the command used.
-    - `pressure` [Pa abs], `mass_flow` [kg/s into the chamber]; for muscle systems also `position` [m],
-      `velocity` [m/s], `force` [N] (muscle), `friction_force` [N], `volume` [m³] (None for a tank).
-    - `num_steps`, `num_accepted_steps`, `num_rejected_steps`: solver statistics.
-    - `result`: diffrax result code (0 = success); `succeeded`: bool array.
-    """
-
-    t: jax.Array
-    state: object
-    command: jax.Array
-    pressure: jax.Array
-    mass_flow: jax.Array
-    position: jax.Array | None
-    velocity: jax.Array | None
-    force: jax.Array | None
-    friction_force: jax.Array | None
-    volume: jax.Array | None
-    num_steps: jax.Array
-    num_accepted_steps: jax.Array
-    num_rejected_steps: jax.Array
-    result: jax.Array
-
-    @property
-    def succeeded(self):
-        return self.result == 0
-
-    def channel(self, name):
-        """A channel by name ('pressure', 'position', ...); a clear error for one this system does not have."""
-        value = getattr(self, name, None) if name in _CHANNELS else None
-        if value is None:
-            raise PamjaxInputError(f"unknown or absent channel {name!r}; this trajectory has {self.channels()}")
-        return value
-
-    def channels(self):
-        return [c for c in _CHANNELS if getattr(self, c) is not None]
-
-
-_CHANNELS = ("pressure", "mass_flow", "position", "velocity", "force", "friction_force", "volume", "command")
-
-
-def result_message(code):
-    """Human-readable reason for a `Trajectory.result` code."""
-    if code == 0:
-        return "successful"
-    if code == _RESULT_NONFINITE:
-        return "the state became non-finite (NaN or inf)"
-    if code == _RESULT_NONPHYSICAL:
-        return (
-            "an absolute pressure fell to or below 0 (unstable integration, or parameters far outside the physical "
-            "range)"
-        )
-    messages = getattr(dfx.RESULTS, "_index_to_message", None)
-    if messages is not None and 0 <= code < len(messages):
-        return messages[code].split("\n")[0]
-    return "unknown failure"
-
-
 def _is_traced(tree):
     return any(isinstance(leaf, jax.core.Tracer) for leaf in jtu.tree_leaves(tree))
-
-
-def _flat_scaled(system, y0):
-    """The scaled initial state as one flat vector, the flat scale and the map back to the named pytree.
-
-    Integrating one (n,) array instead of a pytree of scalars cuts the solver's per-step overhead by about a
-    third (benchmarks/simulate.py); the physics still sees the named state.
-    """
-    y0 = jtu.tree_map(lambda a: jnp.asarray(a, dtype=float), y0)
-    scale = jtu.tree_map(lambda s, a: jnp.broadcast_to(jnp.asarray(s, float), jnp.shape(a)), system.state_scale(), y0)
-    flat_scale, _ = ravel_pytree(scale)
-    z0, unravel = ravel_pytree(jtu.tree_map(lambda a, s: a / s, y0, scale))
-    return z0, flat_scale, unravel
 
 
 def solve(
@@ -127,44 +53,53 @@ def solve(
     """The unchecked, traceable core of `simulate` (vmap- and grad-safe; no Python-side validation).
 
     `atol` applies to the scaled state (pressure in units of 1e5 Pa, position in 1e-2 m, ...: `state_scale`).
-    `stepping="pwm"` integrates on the PWM-synchronous grid (`pamjax._solve.synchronous`), `stepping="grid"` on a uniform
-    grid of at most `grid_step` [s]; inside jit they need the static `num_periods` (PWM periods covering [t0,
+    `stepping="pwm"` integrates on the PWM-synchronous grid (`pamjax._solve.synchronous`), `stepping="grid"` on a
+    uniform grid of at most `grid_step` [s]; inside jit they need the static `num_periods` (PWM periods covering [t0,
     ts[-1]], or grid steps). `starts_off`: a switching valve's previous PWM period is off at `t0` (a run from rest);
     False reads the signal's own value there (a closed loop continuing period by period).
     """
     ts = jnp.asarray(ts, dtype=float)
-    valve = system.valve
     y0 = system.initial_state() if y0 is None else y0
     stepping = resolve_stepping(system, stepping)
     if stepping in ("pwm", "grid"):
         return _solve_fixed(system, signal, ts, y0, t0, stepping, substeps, num_periods, grid_step, throw)
-
-    z0, flat_scale, unravel = _flat_scaled(system, y0)
-
-    if valve.switches and starts_off:  # the valve is off before the run (as the PWM grid and the exact schedule)
-        signal = StartsOff(signal, valve.command_time(t0))
-
-    def field(t, z, args):
-        dy = system.vector_field(t, unravel(z * flat_scale), valve.read_command(signal, t))
-        return ravel_pytree(dy)[0] / flat_scale
-
-    solver = dfx.Tsit5() if solver is None else solver
-    # dtmax: a switching valve's windows must not be stepped over (see OnOffValve.max_step).
-    # dtmin without forcing: a state that turns non-finite makes every trial step fail, and the solve stops within
-    # a few dozen rejections (result "dt_min_reached") instead of grinding to max_steps and holding up a batch.
-    # With jump times (the exact valve's edges) no dtmin: a step that ends a few ulps short of an edge is followed
-    # by a step of a few ulps up to it, which the dtmin test would take for a failure (E4 of the hybrid bench failed
-    # so at every rtol above 1e-9). Without them, dtmin stays below the shortest step diffrax itself takes: a last
-    # step that lands short of t1 by more than 100 ULP (diffrax snaps closer ones to t1) is taken as a sliver, and
-    # the controller's next proposal grows from it; a fixed 1e-12 s failed runs resting at dtmax ("minimum step size
-    # reached" at t1: the exact valve at duty 0 over 2.5 s).
-    dtmin = None if jump_ts is not None else 50 * jnp.finfo(float).eps * jnp.maximum(jnp.abs(ts[-1]), 1.0)
-    controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=valve.max_step(), dtmin=dtmin, force_dtmin=False)
-    if jump_ts is not None:
-        controller = dfx.ClipStepSizeController(controller, jump_ts=jump_ts)
+    if system.valve.switches and starts_off:  # the valve is off before the run (as the PWM grid and the schedule)
+        signal = StartsOff(signal, system.valve.command_time(t0))
+    controller = _controller(system, ts, rtol, atol, jump_ts)
     if isinstance(adjoint, str):
         adjoint = {"forward": dfx.ForwardMode(), "reverse": dfx.RecursiveCheckpointAdjoint()}[adjoint]
     adjoint = dfx.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
+    return _solve_adaptive(system, signal, ts, y0, t0, dfx.Tsit5() if solver is None else solver, controller,
+                           max_steps, dt0, adjoint, throw)
+
+
+def _controller(system, ts, rtol, atol, jump_ts):
+    """The PID step-size controller of an adaptive solve.
+
+    dtmax: a switching valve's windows must not be stepped over (its `max_step`). dtmin without forcing: a state that
+    turns non-finite makes every trial step fail, and the solve stops within a few dozen rejections (result
+    "dt_min_reached") instead of grinding to max_steps and holding up a batch. With jump times (the exact valve's
+    edges) no dtmin: a step that ends a few ulps short of an edge is followed by a step of a few ulps up to it, which
+    the dtmin test would take for a failure (E4 of the hybrid bench failed so at every rtol above 1e-9). Without them,
+    dtmin stays below the shortest step diffrax itself takes: a last step that lands short of t1 by more than 100 ULP
+    (diffrax snaps closer ones to t1) is taken as a sliver, and the controller's next proposal grows from it; a fixed
+    1e-12 s failed runs resting at dtmax ("minimum step size reached" at t1: the exact valve at duty 0 over 2.5 s)."""
+    dtmin = None if jump_ts is not None else 50 * jnp.finfo(float).eps * jnp.maximum(jnp.abs(ts[-1]), 1.0)
+    controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=system.valve.max_step(), dtmin=dtmin,
+                                   force_dtmin=False)
+    if jump_ts is not None:
+        controller = dfx.ClipStepSizeController(controller, jump_ts=jump_ts)
+    return controller
+
+
+def _solve_adaptive(system, signal, ts, y0, t0, solver, controller, max_steps, dt0, adjoint, throw):
+    """One `diffrax.diffeqsolve` of the flat scaled state (`pamjax._solve.scaled`), saved at `ts`."""
+    valve = system.valve
+    z0, scaled_state = scaled(system, y0)
+
+    def field(t, z, args):
+        return scaled_state.field(system, t, z, valve.read_command(signal, t))
+
     sol = dfx.diffeqsolve(
         dfx.ODETerm(field),
         solver,
@@ -178,54 +113,15 @@ def solve(
         adjoint=adjoint,
         throw=throw,
     )
-    states = jax.vmap(lambda z: unravel(z * flat_scale))(sol.ys)
+    states = jax.vmap(scaled_state.state)(sol.ys)
     commands = jax.vmap(lambda t: signal(valve.command_time(t)))(ts)
     outs = jax.vmap(lambda t, y: system.outputs(t, y, valve.read_command(signal, t)))(ts, states)
-    result = jnp.asarray(sol.result._value if hasattr(sol.result, "_value") else sol.result)
+    result = jnp.asarray(diffrax_result_code(sol.result))
     finite = jnp.all(jnp.isfinite(sol.ys))
-    result = jnp.where((result == 0) & ~finite, _RESULT_NONFINITE, result)
+    result = jnp.where((result == 0) & ~finite, RESULT_NONFINITE, result)
     stats = sol.stats
-    return _trajectory(
+    return trajectory(
         ts, states, commands, outs, stats["num_steps"], stats["num_accepted_steps"], stats["num_rejected_steps"], result
-    )
-
-
-class StartsOff(AbstractSignal):
-    """`signal` from `start` [s] on, 0 (valve off) before: the duty a switching valve's previous PWM period has at
-    the start of a run."""
-
-    signal: AbstractSignal
-    start: jax.Array
-
-    def __call__(self, t):
-        return jnp.where(t < self.start - 1e-12, jnp.zeros_like(self.signal(t)), self.signal(t))
-
-    def bounds(self):
-        return self.signal.bounds()
-
-
-def _trajectory(ts, states, commands, outs, num_steps, num_accepted, num_rejected, result):
-    pressure = getattr(states, "pressure", None)
-    if pressure is not None:  # an absolute pressure ≤ 0 means an unstable integration, never a result
-        result = jnp.where((result == 0) & jnp.any(pressure <= 0), _RESULT_NONPHYSICAL, result)
-    failed = result != 0
-    # A failed solve never returns plausible-looking numbers: its channels are NaN.
-    outs = jtu.tree_map(lambda a: jnp.where(failed, jnp.nan, a), outs)
-    return Trajectory(
-        t=ts,
-        state=states,
-        command=commands,
-        pressure=outs["pressure"],
-        mass_flow=outs["mass_flow"],
-        position=outs.get("position"),
-        velocity=outs.get("velocity"),
-        force=outs.get("force"),
-        friction_force=outs.get("friction_force"),
-        volume=outs.get("volume"),
-        num_steps=num_steps,
-        num_accepted_steps=num_accepted,
-        num_rejected_steps=num_rejected,
-        result=result,
     )
 
 
@@ -234,7 +130,7 @@ def resolve_stepping(system, stepping):
     friction) the fixed grid: "pwm" with a switching valve, "grid" with a continuous one."""
     if stepping not in ("auto", "adaptive", "pwm", "grid"):
         raise PamjaxInputError(f"stepping must be 'auto', 'adaptive', 'pwm' or 'grid', got {stepping!r}")
-    switches = getattr(system.valve, "switches", False)
+    switches = system.valve.switches
     if stepping == "auto":
         return ("pwm" if switches else "grid") if system.hybrid else "adaptive"
     if stepping == "adaptive" and system.hybrid:
@@ -259,9 +155,9 @@ def _solve_fixed(system, signal, ts, y0, t0, stepping, substeps, size, grid_step
                 "or grid steps); pamjax.simulate computes it for you"
             )
         size = fixed_grid_size(system, stepping, t0, ts[-1], grid_step)
-    z0, flat_scale, unravel = _flat_scaled(system, y0)
+    z0, scaled_state = scaled(system, y0)
     (states, num_steps, finite), = _sync.solve_runs(
-        [system], [signal], [ts], [z0], unravel, flat_scale, [t0], stepping=stepping, substeps=substeps, sizes=[size]
+        [system], [signal], [ts], [z0], scaled_state, [t0], stepping=stepping, substeps=substeps, sizes=[size]
     )
     traj = fixed_trajectory(system, signal, ts, t0, states, num_steps, finite, stepping)
     if throw:
@@ -282,81 +178,21 @@ def fixed_trajectory(system, signal, ts, t0, states, num_steps, finite, stepping
         return pwm_trajectory(system, signal, ts, t0, states, num_steps, finite)
     commands = jax.vmap(signal)(ts)
     outs = jax.vmap(system.outputs)(ts, states, commands)
-    result = jnp.where(finite, 0, _RESULT_NONFINITE)
+    result = jnp.where(finite, 0, RESULT_NONFINITE)
     zero = jnp.zeros((), dtype=num_steps.dtype)
-    return _trajectory(ts, states, commands, outs, num_steps, num_steps, zero, result)
+    return trajectory(ts, states, commands, outs, num_steps, num_steps, zero, result)
 
 
 def pwm_trajectory(system, signal, ts, t0, states, num_steps, finite):
     """The `Trajectory` of a PWM-synchronous solve from its states at `ts`."""
     commands = _sync.latched_commands(system.valve, signal, ts)
     outs = _sync.outputs_at(system, signal, ts, states, commands, t0)
-    result = jnp.where(finite, 0, _RESULT_NONFINITE)
+    result = jnp.where(finite, 0, RESULT_NONFINITE)
     zero = jnp.zeros((), dtype=num_steps.dtype)
-    return _trajectory(ts, states, commands, outs, num_steps, num_steps, zero, result)
+    return trajectory(ts, states, commands, outs, num_steps, num_steps, zero, result)
 
 
 _solve_jit = eqx.filter_jit(solve)
-
-
-def exact_edge_schedule(valve: OnOffValve, signal: AbstractSignal, t0, t1):
-    """The switching edges of an exact-edge PWM valve over [t0, t1] and the opening after each (concrete NumPy).
-
-    Per period k (start kT, duty u_k = signal(kT)): the on edge kT + t_on opens the valve if the on-pulse u_k T
-    outlasts t_on; the off edge kT + u_k T + t_off closes it if the off-pulse (1 − u_k) T outlasts t_off; otherwise
-    the valve keeps its state (above ~90 % duty it stays open into the next period). The valve is closed before
-    the first period. Returns `(edges, states)`: the sorted times [s] where the opening changes and the opening
-    (0/1) from each on."""
-    period = 1.0 / float(valve.pwm_frequency)
-    on, off = float(valve.switch_on_delay), float(valve.switch_off_delay)
-    k0 = int(np.floor(t0 / period + 1e-9))
-    n = int(np.ceil((t1 - k0 * period) / period)) + 2
-    starts = (k0 + np.arange(n)) * period
-    commands = np.asarray(jax.vmap(signal)(jnp.asarray(starts)), dtype=float)
-    times, states, state = [], [], 0.0
-    for start, u in zip(starts, commands):
-        if u * period - on >= 0:
-            state = 1.0
-            times.append(start + on)
-            states.append(state)
-        if (1.0 - u) * period - off > 0:
-            state = 0.0
-            times.append(start + u * period + off)
-            states.append(state)
-    order = np.argsort(times, kind="stable")
-    times, states = np.asarray(times)[order], np.asarray(states)[order]
-    # Only the edges where the opening changes: a jump time where the field is smooth restarts the solver for
-    # nothing (and diffrax's clipping controller can stall on one that a dtmax-sized step lands on exactly).
-    change = np.diff(np.concatenate([[0.0], states])) != 0
-    return times[change], states[change]
-
-
-class ScheduledValve(AbstractValve):
-    """An `OnOffValve` whose opening follows a precomputed edge schedule (`exact_edge_schedule`): the exact mode's
-    valve inside an adaptive solve. The opening switches exactly at the schedule's times, the very numbers handed to
-    the solver as jump times, so the solver's steps end one ulp before an edge and restart after it (a switch
-    computed from the phase would land a few ulps off, and the solver would fail with "minimum step size")."""
-
-    valve: OnOffValve
-    edges: jax.Array  # s, sorted
-    states: jax.Array  # opening after each edge
-
-    switches = True
-
-    def command_time(self, t):
-        return self.valve.command_time(t)
-
-    def max_step(self):
-        return self.valve.max_step()
-
-    def opening(self, t):
-        if self.states.shape[0] == 0:  # no edge at all (e.g. duty 0 throughout): closed from start to end
-            return jnp.zeros_like(jnp.asarray(t, dtype=float))
-        index = jnp.searchsorted(self.edges, t, side="right") - 1
-        return jnp.where(index >= 0, self.states[jnp.clip(index, 0, self.states.shape[0] - 1)], 0.0)
-
-    def mass_flow(self, t, command, pressure, air):
-        return self.valve.mass_flow_at_opening(self.opening(t), pressure, air)
 
 
 def validate(system, signal, ts, y0=None, t0=None):
@@ -377,7 +213,7 @@ def validate(system, signal, ts, y0=None, t0=None):
         raise PamjaxInputError("ts needs at least two times when t0 is not given (the solve starts at ts[0])")
     if not _is_traced(signal):  # a traced signal (e.g. grad w.r.t. the duty) has no concrete bounds to check
         lo, hi = signal.bounds()
-        clo, chi = system.valve.command_range
+        clo, chi = system.command_range
         if not (np.isfinite(lo) and np.isfinite(hi)):
             raise PamjaxInputError(f"signal must be finite, its bounds are ({lo}, {hi})")
         if lo < clo - 1e-12 or hi > chi + 1e-12:
@@ -475,62 +311,62 @@ def simulate(
         t0 = ts[0] if _is_traced(ts) else jnp.asarray(float(np.asarray(ts)[0]))
     else:
         t0 = jnp.asarray(t0, dtype=float)
-    jump_ts = None
-    periods = None
+    jump_ts = periods = None
     stepping = resolve_stepping(system, stepping)
     if stepping in ("pwm", "grid"):
-        if not (isinstance(substeps, int) and substeps >= 2):
-            raise PamjaxInputError(f"substeps must be an int >= 2 (RK4 nodes per PWM period), got {substeps!r}")
-        if not (isinstance(grid_step, (int, float)) and np.isfinite(grid_step) and grid_step > 0):
-            raise PamjaxInputError(f"grid_step must be a positive number of seconds, got {grid_step!r}")
-        periods = fixed_grid_size(system, stepping, t0, ts[-1], grid_step)
-    elif getattr(system.valve, "mode", None) == "exact":
-        if _is_traced((system.valve, signal, t0, ts)):
-            raise PamjaxInputError(
-                "OnOffValve(mode='exact') needs concrete valve timing and signal (its edge times are computed before "
-                "the solve); use mode='smooth' inside jit/grad/vmap"
-            )
-        edges, states = exact_edge_schedule(system.valve, signal, float(t0), float(ts[-1]))
-        system = eqx.tree_at(lambda s: s.valve, system,
-                             ScheduledValve(system.valve, jnp.asarray(edges), jnp.asarray(states)))
-        inside = edges[(edges > float(t0)) & (edges < float(ts[-1]))]
-        jump_ts = jnp.asarray(inside) if inside.size else None
+        periods = _fixed_grid_periods(system, stepping, substeps, grid_step, t0, ts)
+    elif system.valve.exact_edges:
+        system, jump_ts = _scheduled(system, signal, t0, ts)
     traced = _is_traced((system, signal, ts, y0, t0))
     if solver is None and stepping == "adaptive":
         solver = default_solver(system)
     if max_steps is None:  # a budget that grows with the horizon (a 1,000 s PWM run needs ~1.6 M steps)
         max_steps = 200_000 if _is_traced((ts, t0)) else default_max_steps(system, float(t0), float(ts[-1]))
-    traj = _solve_jit(
-        system,
-        signal,
-        ts,
-        y0,
-        t0,
-        solver=solver,
-        rtol=rtol,
-        atol=atol,
-        max_steps=max_steps,
-        dt0=dt0,
-        adjoint=adjoint,
-        jump_ts=jump_ts,
-        throw=throw and traced,
-        stepping=stepping,
-        substeps=substeps,
-        num_periods=periods,
-        grid_step=grid_step,
-    )
-    if throw and not traced and int(traj.result) == _RESULT_NONFINITE and stepping in ("pwm", "grid"):
+    traj = _solve_jit(system, signal, ts, y0, t0, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps, dt0=dt0,
+                      adjoint=adjoint, jump_ts=jump_ts, throw=throw and traced, stepping=stepping, substeps=substeps,
+                      num_periods=periods, grid_step=grid_step)
+    if throw and not traced:
+        _raise_on_failure(traj, system, signal, ts, t0, y0, stepping, substeps, grid_step, max_steps, solver)
+    return traj
+
+
+def _fixed_grid_periods(system, stepping, substeps, grid_step, t0, ts):
+    """The checked settings of a fixed-grid solve and its static size (PWM periods or grid steps)."""
+    if not (isinstance(substeps, int) and substeps >= 2):
+        raise PamjaxInputError(f"substeps must be an int >= 2 (RK4 nodes per PWM period), got {substeps!r}")
+    if not (isinstance(grid_step, (int, float)) and np.isfinite(grid_step) and grid_step > 0):
+        raise PamjaxInputError(f"grid_step must be a positive number of seconds, got {grid_step!r}")
+    return fixed_grid_size(system, stepping, t0, ts[-1], grid_step)
+
+
+def _scheduled(system, signal, t0, ts):
+    """An exact-edge valve's switching times computed before the solve: the system with a `ScheduledValve` and the
+    jump times inside (t0, ts[-1]) handed to the step-size controller (None if there are none)."""
+    if _is_traced((system.valve, signal, t0, ts)):
+        raise PamjaxInputError(
+            "OnOffValve(mode='exact') needs concrete valve timing and signal (its edge times are computed before "
+            "the solve); use mode='smooth' inside jit/grad/vmap"
+        )
+    edges, states = system.valve.edge_schedule(signal, float(t0), float(ts[-1]))
+    system = eqx.tree_at(lambda s: s.valve, system,
+                         ScheduledValve(system.valve, jnp.asarray(edges), jnp.asarray(states)))
+    inside = edges[(edges > float(t0)) & (edges < float(ts[-1]))]
+    return system, (jnp.asarray(inside) if inside.size else None)
+
+
+def _raise_on_failure(traj, system, signal, ts, t0, y0, stepping, substeps, grid_step, max_steps, solver):
+    """`PamjaxSolveError` for a failed solve, saying why and what fixes it (`pamjax._solve.hints`)."""
+    if int(traj.result) == RESULT_NONFINITE and stepping in ("pwm", "grid"):
         raise PamjaxSolveError(
             f"fixed-grid stepping ('{stepping}') produced a non-finite state (substeps={substeps}, grid_step="
             f"{grid_step}): the fixed RK4 step is beyond the stability limit of this system "
             f"({fixed_step_hint(system, signal, t0, y0, stepping)}). Pass throw=False to get the result with status "
             "instead."
         )
-    if throw and not traced and int(traj.result) != 0:
+    if int(traj.result) != 0:
         message = result_message(int(traj.result)).split(" Try increasing")[0]  # the hint says what to change
         hint = failure_hint(system, signal, ts, t0, y0, traj, max_steps, solver, message)
         raise PamjaxSolveError(
             f"the ODE solve failed: {message} (result code {int(traj.result)}, max_steps={max_steps}): {hint}. "
             "(throw=False returns the partial result with its status instead.)"
         )
-    return traj

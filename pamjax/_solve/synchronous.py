@@ -22,43 +22,32 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.flatten_util import ravel_pytree
 
 from .._core.errors import PamjaxInputError
-from .._physics.valve import AbstractValve, OnOffValve
+from .._physics.valves.base import AbstractSwitchingValve, AbstractValve
 from . import grid as _grid
 
 
 class HeldOpeningValve(AbstractValve):
-    """An `OnOffValve` whose opening is held at `opening` ∈ [0, 1] (one step of the PWM-synchronous scheme)."""
+    """A switching valve whose opening is held at `opening` ∈ [0, 1] (one step of the PWM-synchronous scheme)."""
 
-    valve: OnOffValve
+    valve: AbstractSwitchingValve
     opening: jax.Array
 
     def mass_flow(self, t, command, pressure, air):
         return self.valve.mass_flow_at_opening(self.opening, pressure, air)
 
 
-def sharp_opening(valve: OnOffValve, phase, command, open_before=False):
+def sharp_opening(valve: AbstractSwitchingValve, phase, command, open_before=False):
     """Exact-edge opening (0 or 1) at `phase` [s] ∈ [0, T) of a period with latched duty `command`, the valve open
     at the period start if `open_before` (no gradient)."""
     valve, phase, command = jax.lax.stop_gradient((valve, phase, command))
-    on_edge, off_edge = _edges(valve, command)
+    on_edge, off_edge = valve.edge_phases(command)
     before, during, after = _region_openings(valve, command, open_before)
     return jnp.where(phase < on_edge, before, jnp.where(phase < off_edge, during, after))
 
 
-def _edges(valve: OnOffValve, command):
-    """Phases [s] of the period's on edge and off edge, clipped to [0, T] and ordered (on ≤ off). When the on-pulse
-    is too short to open the valve, the 'on edge' is put at the off edge (nothing happens between them)."""
-    period = valve.period
-    opens, _ = valve.switching_gates(command)
-    off_edge = jnp.clip(command * period + valve.switch_off_delay, 0.0, period)
-    on_edge = jnp.where(opens, jnp.clip(valve.switch_on_delay, 0.0, period), off_edge)
-    return on_edge, jnp.maximum(off_edge, on_edge)
-
-
-def _region_openings(valve: OnOffValve, command, open_before):
+def _region_openings(valve: AbstractSwitchingValve, command, open_before):
     """Opening (0/1) before the on edge, between the edges and after the off edge of one period."""
     opens, closes = jax.lax.stop_gradient(valve.switching_gates(command))
     before = jnp.where(open_before, 1.0, 0.0)
@@ -67,7 +56,7 @@ def _region_openings(valve: OnOffValve, command, open_before):
     return before, during, after
 
 
-def open_at_start(valve: OnOffValve, signal, start, first_start):
+def open_at_start(valve: AbstractSwitchingValve, signal, start, first_start):
     """Whether the valve is open at the start `start` of a PWM period: it stays open from the period before when that
     period's off-pulse was too short to close it (duty above ~90 % at 50 Hz with 2 ms delays). The valve is closed
     before `first_start` (the start of the first period simulated: the runs start with the valve off). Exact when
@@ -81,7 +70,7 @@ def open_at_start(valve: OnOffValve, signal, start, first_start):
     return jax.lax.stop_gradient(state)
 
 
-def num_periods(valve: OnOffValve, t0, t1):
+def num_periods(valve: AbstractSwitchingValve, t0, t1):
     """Number of PWM periods (static int) that cover [t0, t1]; needs concrete times and frequency."""
     try:
         frequency = float(valve.pwm_frequency)
@@ -95,11 +84,11 @@ def num_periods(valve: OnOffValve, t0, t1):
     return max(int(np.ceil(t1 * frequency - first - 1e-9)), 1)
 
 
-def _period_grid(valve: OnOffValve, signal, start, substeps, open_before):
+def _period_grid(valve: AbstractSwitchingValve, signal, start, substeps, open_before):
     """Node times (K + 3,) of one period starting at `start` and the opening (K + 2,) of each interval."""
     period = valve.period
     command = signal(start)
-    on_edge, off_edge = _edges(valve, command)
+    on_edge, off_edge = valve.edge_phases(command)
     uniform = jnp.arange(substeps + 1) * (period / substeps)
     phases = jnp.sort(jnp.concatenate([uniform, jnp.stack([on_edge, off_edge])]))
     # Ranks (not midpoints) decide which region an interval lies in, so that an edge that coincides with a uniform
@@ -113,7 +102,7 @@ def _period_grid(valve: OnOffValve, signal, start, substeps, open_before):
     return start + phases, opening
 
 
-def pwm_intervals(valve: OnOffValve, signal, t0, t1, substeps, periods):
+def pwm_intervals(valve: AbstractSwitchingValve, signal, t0, t1, substeps, periods):
     """The PWM-synchronous grid over [t0, t1]: interval ends (n,), (n,) each, and the opening held over each
     interval, repeated for the three RK4 stage times (n, 3). Intervals outside [t0, t1] have zero length."""
     period = valve.period
@@ -148,10 +137,11 @@ def num_grid_steps(t0, t1, max_step):
     return max(int(np.ceil((t1 - t0) / max_step - 1e-9)), 1)
 
 
-def solve_runs(systems, signals, ts_list, z0s, unravel, flat_scale, t0s, *, stepping, substeps, sizes):
+def solve_runs(systems, signals, ts_list, z0s, scaled, t0s, *, stepping, substeps, sizes):
     """Integrate several runs of systems of one structure in ONE scan (a compiled loop shared by all of them).
 
-    Each run: `systems[k]` driven by `signals[k]` from the flat scaled state `z0s[k]` at `t0s[k]`, output at
+    Each run: `systems[k]` driven by `signals[k]` from the flat scaled state `z0s[k]` (`scaled`: the map to the
+    named state, `pamjax._solve.scaled`) at `t0s[k]`, output at
     `ts_list[k]`. `stepping` "pwm" (switching valves: the PWM-synchronous grid, `sizes[k]` periods of `substeps`)
     or "grid" (continuous valves: `sizes[k]` uniform steps). Runs are laid end to end on one clock (each shifted so
     that it starts 1 s after the previous one ends), so one loop integrates all of them and its compiled size does
@@ -181,20 +171,20 @@ def solve_runs(systems, signals, ts_list, z0s, unravel, flat_scale, t0s, *, step
 
         def field(system, t, z, opening):
             held = eqx.tree_at(lambda s: s.valve, system, HeldOpeningValve(system.valve, opening))
-            return ravel_pytree(held.vector_field(t, unravel(z * flat_scale), None))[0] / flat_scale
+            return scaled.field(held, t, z, None)
     else:
 
         def field(system, t, z, command):
-            return ravel_pytree(system.vector_field(t, unravel(z * flat_scale), command))[0] / flat_scale
+            return scaled.field(system, t, z, command)
 
     event = update = None
     if systems[0].hybrid:
 
         def event(system, t, z):
-            return system.event_function(t, unravel(z * flat_scale), None)
+            return system.event_function(t, scaled.state(z), None)
 
         def update(system, t, z):
-            return ravel_pytree(system.event_update(t, unravel(z * flat_scale), None))[0] / flat_scale
+            return scaled.vector(system.event_update(t, scaled.state(z), None))
 
     all_ts = jnp.concatenate(shifted_ts)
     z_out, num_steps, _, _, finite = _grid.integrate(
@@ -206,7 +196,7 @@ def solve_runs(systems, signals, ts_list, z0s, unravel, flat_scale, t0s, *, step
         z_k = z_out[start : start + ts.shape[0]]
         start += ts.shape[0]
         z_k = jnp.where((ts <= t0s[k])[:, None], z0s[k][None], z_k)  # times at or before the start: the start state
-        states = jax.vmap(lambda z: unravel(z * flat_scale))(z_k)
+        states = jax.vmap(scaled.state)(z_k)
         steps_k = jnp.sum(rights[k] > lefts[k])
         out.append((states, steps_k, finite))
     del num_steps  # the whole loop's; each run reports its own
@@ -223,27 +213,7 @@ def _stack_systems(systems):
     return eqx.combine(stacked, eqx.filter(systems[0], eqx.is_array, inverse=True))
 
 
-def solve_pwm_synchronous(system, signal, ts, z0, flat_scale, unravel, t0, *, substeps, periods):
-    """Integrate `system` from `t0` to `ts[-1]` on the PWM-synchronous grid; states at `ts` (named pytree).
-
-    `z0` is the flat scaled initial state: the state is `unravel(z * flat_scale)`.
-
-    Returns `(states, num_steps, finite)`. `substeps` K: uniform nodes per period (step ≤ T/K); `periods`: static
-    number of PWM periods covering [t0, ts[-1]].
-    """
-    valve = system.valve
-    if not isinstance(valve, OnOffValve):
-        raise PamjaxInputError(
-            f"stepping='pwm' needs a switching OnOffValve (its PWM edges define the grid), got {type(valve).__name__}; "
-            "use the default adaptive stepping for other valves"
-        )
-    if not (isinstance(substeps, int) and substeps >= 2):
-        raise PamjaxInputError(f"substeps must be an int >= 2 (RK4 steps per PWM period), got {substeps!r}")
-    return solve_runs([system], [signal], [ts], [z0], unravel, flat_scale, [t0], stepping="pwm", substeps=substeps,
-                      sizes=[periods])[0]
-
-
-def latched_commands(valve: OnOffValve, signal, ts):
+def latched_commands(valve: AbstractSwitchingValve, signal, ts):
     """The duty in force at each time: the signal read at the start of the PWM period containing t."""
     return jax.vmap(lambda t: signal(jnp.floor(t * valve.pwm_frequency + 1e-9) * valve.period))(ts)
 

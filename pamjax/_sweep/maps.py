@@ -8,8 +8,10 @@ import numpy as np
 
 from .._core.errors import PamjaxInputError, check_positive
 from .._physics.signals import Constant, Sine
-from .._physics.valve import OnOffValve, cycle_averaged_flow
-from .sweep import AbstractReduction, Mean, sweep
+from .._physics.valves.averaged import cycle_averaged_flow
+from .._physics.valves.base import AbstractSwitchingValve
+from .reductions import AbstractReduction, Mean
+from .sweep import sweep
 
 # Output samples per PWM period for the steady-state mean: the mean over 20 equally spaced phases is within 60 Pa
 # (0.01 % of the range) of the mean over 40 on the MAS-10 (duties 0.12-0.88, measured); sampling at 100 Hz, two
@@ -26,7 +28,7 @@ def steady_state_map(system, commands, *, horizon=5.0, window=1.0, sample_interv
 
     **Arguments:** `commands` 1-D; `horizon` [s] (default 5 s: on the MAS-10 with 9.6 kg the position still creeps
     by ~2 mm between 2 s and 5 s at duty 0.5); `window` [s] (default 1 s = 50 PWM periods); `sample_interval` [s]
-    of the output times averaged (default: 1/20 of the PWM period for an `OnOffValve`, else 0.01 s); `over`:
+    of the output times averaged (default: 1/20 of the PWM period for a switching valve, else 0.01 s); `over`:
     further swept paths, broadcast against `commands[:, None]`-style shapes by the caller; `sweep_kwargs` go to
     `sweep`. **Returns:** a `SweepResult` with `over["signal.value"]`.
     """
@@ -38,7 +40,7 @@ def steady_state_map(system, commands, *, horizon=5.0, window=1.0, sample_interv
         raise PamjaxInputError(f"window must lie in (0, horizon = {horizon}] s, got {window}")
     if sample_interval is None:
         valve = getattr(system, "valve", None)
-        sample_interval = (float(valve.period) / SAMPLES_PER_PWM_PERIOD if isinstance(valve, OnOffValve)
+        sample_interval = (float(valve.period) / SAMPLES_PER_PWM_PERIOD if valve is not None and valve.switches
                            else SMOOTH_SAMPLE_INTERVAL)
     check_positive(sample_interval, "sample_interval")
     ts = np.linspace(0.0, horizon, int(round(horizon / sample_interval)) + 1)
@@ -46,7 +48,7 @@ def steady_state_map(system, commands, *, horizon=5.0, window=1.0, sample_interv
                  **sweep_kwargs)
 
 
-def flow_surface(valve: OnOffValve, commands, pressures, air, samples: int = 400):
+def flow_surface(valve: AbstractSwitchingValve, commands, pressures, air, samples: int = 400):
     """Cycle-averaged mass flow ṁ_eq(u, p) [kg/s] into a chamber HELD at `pressures` [Pa abs] for duty `commands`:
     the surface paper 000's eq. 13 is fitted to. Shape (len(commands), len(pressures)); one vmapped call.
     `samples` phases per period (midpoint rule; with the smoothed edges 400 agree with 4000 to 2e-16 of the

@@ -1,33 +1,59 @@
 """The system contract: an ODE vector field over a named state pytree, driven by a command through a valve.
 
 `vector_field(t, state, command)` returns the state's time derivative; `outputs(t, state, command)` the measurable
-channels; `state_scale()` a typical magnitude per state, used by the solvers to integrate in scaled units so that one
-tolerance fits states of different units. States hold ABSOLUTE pressures.
+channels named in `output_names`; `state_scale()` a typical magnitude per state, used by the solvers to integrate in
+scaled units so that one tolerance fits states of different units. States hold ABSOLUTE pressures.
 """
 
+import abc
+
 import equinox as eqx
+import jax
+import jax.numpy as jnp
 
 from .._physics.gas import Air
-from .._physics.valve import AbstractValve
+from .._physics.valves.base import AbstractControlElement
 
 
 class AbstractSystem(eqx.Module):
-    """An ODE vector field over a named state pytree, driven by a command signal through a valve."""
+    """An ODE vector field over a named state pytree, driven by a command signal through `valve`.
 
-    valve: eqx.AbstractVar[AbstractValve]
+    What the workflows ask of a system (`simulate`, `sweep`, `fit`, `linearise`, the controllers):
+
+    - `valve`: the element its command drives (a valve, or a regulator for paper 001's systems): its command range,
+      whether it switches, its period, edges and max step (`AbstractControlElement`).
+    - `command_range`: the valid commands (the valve's).
+    - `output_names`: the channels `outputs` returns, in order (a class attribute).
+    - `state_scale()`, `initial_state(...)`, `vector_field(...)`, `outputs(...)` (abstract, below).
+    - `hybrid`: whether it has discrete modes switched at events (stick-slip friction); a hybrid system also defines
+      `event_function` and `event_update`, which the fixed-grid integrator (`pamjax._solve.grid`) uses.
+    - `discrete_step(...)`: one step of its discrete-time model (explicit Euler unless the system says otherwise).
+    """
+
+    valve: eqx.AbstractVar[AbstractControlElement]
     air: eqx.AbstractVar[Air]
+    output_names = ()
 
+    @property
+    def command_range(self):
+        """The closed interval of valid commands (its valve's)."""
+        return self.valve.command_range
+
+    @abc.abstractmethod
     def initial_state(self, **kwargs):
-        raise NotImplementedError
+        """The state at rest (absolute pressures; keyword arguments such as `pressure` [Pa abs] set its conditions)."""
 
+    @abc.abstractmethod
     def vector_field(self, t, state, command):
-        raise NotImplementedError
+        """The state's time derivative at time `t` [s] for the command the valve acts on (`valve.read_command`)."""
 
+    @abc.abstractmethod
     def outputs(self, t, state, command):
-        raise NotImplementedError
+        """{name: value} of the measurable channels `output_names` (SI, pressures absolute)."""
 
+    @abc.abstractmethod
     def state_scale(self):
-        raise NotImplementedError
+        """A typical magnitude of each state (a pytree like the state): the solvers integrate state / scale."""
 
     @property
     def hybrid(self):
@@ -35,10 +61,16 @@ class AbstractSystem(eqx.Module):
         return False
 
     def event_function(self, t, state, command):
-        """Hybrid systems only: a scalar that stays ≥ 0 while the current mode holds and crosses below 0 where it
-        ends. The fixed-grid integrator (`pamjax._solve.grid`) locates that crossing inside the step."""
-        raise NotImplementedError
+        """Hybrid systems: a scalar that stays ≥ 0 while the current mode holds and crosses below 0 where it ends
+        (the fixed-grid integrator locates that crossing inside the step). A system without modes never ends one."""
+        return jnp.ones(())
 
     def event_update(self, t, state, command):
-        """Hybrid systems only: the state just after the event at `state` (the new mode; velocities reset)."""
-        raise NotImplementedError
+        """Hybrid systems: the state just after the event at `state` (the new mode; velocities reset)."""
+        return state
+
+    def discrete_step(self, t, state, command, sample_time):
+        """One explicit Euler step of `sample_time` [s] from `state` at `t` [s] with `command` held (paper 000 eq. 18
+        for every state); systems whose discrete-time model differs override it."""
+        rate = self.vector_field(t, state, command)
+        return jax.tree_util.tree_map(lambda y, dy: y + sample_time * dy, state, rate)

@@ -81,6 +81,8 @@ class AntagonisticJoint(AbstractSystem):
     air: Air = eqx.field(default_factory=paper001_air)
     polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.POLYTROPIC_INDEX)  # -
 
+    output_names = ("pressure", "mass_flow", "angle", "angular_velocity", "force", "volume")
+
     def __check_init__(self):
         check_positive(self.pulley_radius, "AntagonisticJoint.pulley_radius")
         check_positive(self.inertia, "AntagonisticJoint.inertia")
@@ -207,8 +209,8 @@ class AntagonisticJoint(AbstractSystem):
                     self.extensor_regulator.delivered_flow(state.extensor, command[1], ve, dve, self.air, n),
                 ]
             ),
-            position=state.angle,
-            velocity=state.angular_velocity,
+            angle=state.angle,
+            angular_velocity=state.angular_velocity,
             force=jnp.stack([ff, fe]),
             volume=jnp.stack([vf, ve]),
         )

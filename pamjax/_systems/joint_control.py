@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.errors import PamjaxInputError, check_nonnegative, check_positive
-from .._physics.regulator import EQ6_TIME_CONSTANTS, VOLTAGE_RANGE, ISO6358Regulator
+from .._physics.regulator import EQ6_TIME_CONSTANTS, VOLTAGE_RANGE
 from .._physics.signals import AbstractSignal
 from .._physics.tabulated import pchip
 from .base import AbstractSystem
@@ -100,19 +100,17 @@ def sum_for_stiffness(joint: AntagonisticJoint, angle, stiffness, initial_sum=4e
 
 
 def max_gauge_pressure(joint: AntagonisticJoint):
-    """Highest gauge pressure [Pa] both regulators can hold: their 10 V calibration, and the supply pressure for
-    ISO 6358 regulators (a regulator cannot raise its outlet above its supply)."""
+    """Highest gauge pressure [Pa] both regulators can hold (each one's `max_gauge_pressure`: its 10 V calibration,
+    and its supply where that limits it)."""
     limits = []
     for reg in (joint.flexor_regulator, joint.extensor_regulator):
-        calibration = getattr(reg, "calibration", None)
-        if calibration is None:
+        limit = reg.max_gauge_pressure(joint.air)
+        if limit is None:
             raise PamjaxInputError(
                 "AntagonisticJointController needs regulators with a VoltageCalibration (LinearRegulator or "
                 f"ISO6358Regulator) to turn pressures into voltages, got {type(reg).__name__}"
             )
-        limits.append(calibration(VOLTAGE_RANGE[1]))
-        if isinstance(reg, ISO6358Regulator):
-            limits.append(reg.supply_pressure - joint.air.atmospheric_pressure)
+        limits.append(limit)
     return jnp.min(jnp.stack(limits))
 
 
@@ -223,6 +221,8 @@ class JointControlLoop(AbstractSystem):
     angle_reference: AbstractSignal
     target: AbstractSignal
     target_kind: str = eqx.field(static=True, default="stiffness")
+
+    output_names = (*AntagonisticJoint.output_names, "voltage")
 
     def __check_init__(self):
         if not isinstance(self.joint, AntagonisticJoint):

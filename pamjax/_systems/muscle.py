@@ -15,7 +15,7 @@ from .._physics.chamber import pressure_rate
 from .._physics.friction import AbstractFriction, CoulombViscousFriction
 from .._physics.gas import Air
 from .._physics.muscle import EndStops, Muscle
-from .._physics.valve import AbstractValve
+from .._physics.valves.base import AbstractValve
 from .base import AbstractSystem
 
 
@@ -50,6 +50,8 @@ class MuscleSystem(AbstractSystem):
     air: Air = eqx.field(default_factory=Air)
     gravity: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.GRAVITY)  # m/s²
     polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.POLYTROPIC_INDEX)  # -
+
+    output_names = ("pressure", "position", "velocity", "force", "friction_force", "mass_flow", "volume")
 
     def __check_init__(self):
         check_positive(self.payload_mass, "MuscleSystem.payload_mass")
@@ -168,6 +170,19 @@ class MuscleSystem(AbstractSystem):
             friction_force=friction,
             mass_flow=self.valve.mass_flow(t, command, state.pressure, self.air),
             volume=self.muscle.volume(state.position),
+        )
+
+    def discrete_step(self, t, state, command, sample_time):
+        """Paper 000 eq. 18-20: p and ẋ by explicit Euler, x with the NEW velocity (semi-implicit Euler, eq. 19); a
+        friction state of its own by explicit Euler."""
+        rate = self.vector_field(t, state, command)
+        velocity = state.velocity + sample_time * rate.velocity  # eq. 20
+        friction = None if state.friction is None else state.friction + sample_time * rate.friction
+        return MuscleState(
+            pressure=state.pressure + sample_time * rate.pressure,  # eq. 18
+            position=state.position + sample_time * velocity,  # eq. 19
+            velocity=velocity,
+            friction=friction,
         )
 
     def state_scale(self):

@@ -19,7 +19,7 @@ from .._physics.chamber import chamber_flow
 from .._physics.friction import AbstractFriction, CoulombViscousFriction
 from .._physics.gas import Air
 from .._physics.muscle import EndStops, Muscle
-from .._physics.regulator import AbstractRegulator, ISO6358Regulator, paper001_air
+from .._physics.regulator import AbstractRegulator, paper001_air
 from .base import AbstractSystem
 
 
@@ -37,9 +37,11 @@ class RegulatorSystem(AbstractSystem):
     air: Air = eqx.field(default_factory=paper001_air)
     polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.POLYTROPIC_INDEX)  # -
 
+    output_names = ("pressure", "mass_flow", "volume")
+
     def __check_init__(self):
-        if isinstance(self.regulator, ISO6358Regulator):
-            check_positive(self.volume, "RegulatorSystem.volume (an ISO6358Regulator needs a chamber)")
+        if self.regulator.needs_volume:
+            check_positive(self.volume, f"RegulatorSystem.volume (an {type(self.regulator).__name__} needs a chamber)")
         else:
             check_nonnegative(self.volume, "RegulatorSystem.volume")
         check_in_open_interval(self.polytropic_index, 0.99, 1.41, "RegulatorSystem.polytropic_index")
@@ -157,6 +159,8 @@ class RegulatedMuscleSystem(AbstractSystem):
     end_stops: EndStops = eqx.field(default_factory=EndStops)
     air: Air = eqx.field(default_factory=paper001_air)
     polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.POLYTROPIC_INDEX)  # -
+
+    output_names = ("pressure", "position", "velocity", "force", "friction_force", "mass_flow", "volume")
 
     def __check_init__(self):
         check_nonnegative(self.load_force, "RegulatedMuscleSystem.load_force")

@@ -9,7 +9,7 @@ from .._core.fitting import positive
 from .._papers import paper000
 from .._physics.chamber import pressure_rate
 from .._physics.gas import Air
-from .._physics.valve import AbstractValve
+from .._physics.valves.base import AbstractValve
 from .base import AbstractSystem
 
 
@@ -30,6 +30,8 @@ class TankSystem(AbstractSystem):
     volume: jax.Array = positive()  # m³
     air: Air = eqx.field(default_factory=Air)
     polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.POLYTROPIC_INDEX)  # -
+
+    output_names = ("pressure", "mass_flow")
 
     def __check_init__(self):
         check_positive(self.volume, "TankSystem.volume")

@@ -1,46 +1,17 @@
-"""Valves feeding a chamber: paper 000's 3/2 on/off solenoid valve under PWM, and its averaged model (eq. 13).
-
-Convention: `mass_flow(t, command, pressure, air)` is the mass flow INTO the chamber [kg/s] for chamber pressure
-`pressure` [Pa abs]; negative while the chamber exhausts.
-"""
+"""Paper 000's 3/2 on/off solenoid valve (Festo MHE2) under PWM: a switching valve (`AbstractSwitchingValve`)."""
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from .._core.errors import PamjaxInputError, check_finite, check_nonnegative, check_positive
-from .._core.fitting import positive
-from .._core.units import check_absolute_pressure
-from .._papers import paper000
-from .gas import AbstractRestriction, Air
-from .smooth import smooth_step
-
-
-class AbstractValve(eqx.Module):
-    """A valve between supply, chamber and exhaust.
-
-    - `mass_flow(t, command, pressure, air)`: flow into the chamber [kg/s] at time `t` [s] for the command
-      (duty ratio in [0, 1] for paper 000's valves) and the chamber's absolute pressure [Pa].
-    - `command_range`: the closed interval of valid commands.
-    - `command_time(t)`: the time at which the command is read (the PWM period start for an exact-edge valve).
-    """
-
-    command_range = (0.0, 1.0)
-    switches = False  # True for a valve that switches on PWM edges (its grid is the PWM-synchronous one)
-
-    def mass_flow(self, t, command, pressure, air: Air):
-        raise NotImplementedError
-
-    def command_time(self, t):
-        return t
-
-    def read_command(self, signal, t):
-        """The command the valve acts on at time `t` (what `mass_flow` takes): `signal(command_time(t))`."""
-        return signal(self.command_time(t))
-
-    def max_step(self):
-        """Largest step [s] an adaptive solver may take without stepping over the valve's switching (None: any)."""
-        return None
+from ..._core.errors import PamjaxInputError, check_finite, check_nonnegative, check_positive
+from ..._core.fitting import positive
+from ..._core.units import check_absolute_pressure
+from ..._papers import paper000
+from ..gas import AbstractRestriction, Air
+from ..smooth import smooth_step
+from .base import AbstractSwitchingValve
 
 
 @jax.custom_jvp
@@ -58,7 +29,7 @@ def _exact_edge_jvp(primals, tangents):
     )
 
 
-class OnOffValve(AbstractValve):
+class OnOffValve(AbstractSwitchingValve):
     """Paper 000's 3/2 high-speed on/off valve (Festo MHE2) driven by PWM.
 
     Path 1→2 (supply → chamber) is open while the valve is on, path 2→3 (chamber → exhaust) while it is off:
@@ -96,8 +67,6 @@ class OnOffValve(AbstractValve):
     edge_width: jax.Array = positive(1e-4)  # s
     mode: str = eqx.field(static=True, default="smooth")
 
-    switches = True
-
     def __check_init__(self):
         check_positive(self.supply_pressure, "OnOffValve.supply_pressure")
         check_absolute_pressure(self.supply_pressure, "OnOffValve.supply_pressure", above_atmosphere=True)
@@ -110,8 +79,12 @@ class OnOffValve(AbstractValve):
         check_finite(self.switch_on_delay + self.switch_off_delay, "OnOffValve switch delays")
 
     @property
-    def period(self):
-        return 1.0 / self.pwm_frequency
+    def exact_edges(self):
+        return self.mode == "exact"
+
+    def switching_time_scale(self):
+        """The edge width [s] of the smoothed edges (the time scale a fixed step must resolve)."""
+        return self.edge_width
 
     def max_step(self):
         """A tenth of the PWM period (2 ms at 50 Hz), at most the shortest open or closed window the 2 ms switching
@@ -177,11 +150,45 @@ class OnOffValve(AbstractValve):
         period = self.period
         return (command * period - self.switch_on_delay >= 0, (1.0 - command) * period - self.switch_off_delay > 0)
 
-    def open_at_period_end(self, command, open_before):
-        """Whether the valve is open at the end of a period of duty `command` that it started open (`open_before`)
-        or closed: a period that closes it ends closed, one that opens and does not close it ends open."""
-        opens, closes = self.switching_gates(command)
-        return jnp.where(closes, False, jnp.where(opens, True, open_before))
+    def edge_phases(self, command):
+        """Phases [s] of the period's on edge (t_on after its start) and off edge (u T + t_off), clipped to [0, T] and
+        ordered; when the on-pulse is too short to open the valve, the 'on edge' is put at the off edge."""
+        period = self.period
+        opens, _ = self.switching_gates(command)
+        off_edge = jnp.clip(command * period + self.switch_off_delay, 0.0, period)
+        on_edge = jnp.where(opens, jnp.clip(self.switch_on_delay, 0.0, period), off_edge)
+        return on_edge, jnp.maximum(off_edge, on_edge)
+
+    def edge_schedule(self, signal, t0, t1):
+        """The switching edges over [t0, t1] and the opening after each (concrete NumPy), for the exact mode.
+
+        Per period k (start kT, duty u_k = signal(kT)): the on edge kT + t_on opens the valve if the on-pulse u_k T
+        outlasts t_on; the off edge kT + u_k T + t_off closes it if the off-pulse (1 − u_k) T outlasts t_off;
+        otherwise the valve keeps its state (above ~90 % duty it stays open into the next period). The valve is
+        closed before the first period. Returns `(edges, openings)`: the sorted times [s] where the opening changes
+        and the opening (0/1) from each on."""
+        period = 1.0 / float(self.pwm_frequency)
+        on, off = float(self.switch_on_delay), float(self.switch_off_delay)
+        k0 = int(np.floor(t0 / period + 1e-9))
+        n = int(np.ceil((t1 - k0 * period) / period)) + 2
+        starts = (k0 + np.arange(n)) * period
+        commands = np.asarray(jax.vmap(signal)(jnp.asarray(starts)), dtype=float)
+        times, states, state = [], [], 0.0
+        for start, u in zip(starts, commands):
+            if u * period - on >= 0:
+                state = 1.0
+                times.append(start + on)
+                states.append(state)
+            if (1.0 - u) * period - off > 0:
+                state = 0.0
+                times.append(start + u * period + off)
+                states.append(state)
+        order = np.argsort(times, kind="stable")
+        times, states = np.asarray(times)[order], np.asarray(states)[order]
+        # Only the edges where the opening changes: a jump time where the field is smooth restarts the solver for
+        # nothing (and diffrax's clipping controller can stall on one that a dtmax-sized step lands on exactly).
+        change = np.diff(np.concatenate([[0.0], states])) != 0
+        return times[change], states[change]
 
     def edge_times(self, commands_at_period_starts, t0):
         """Switching times [s] per period for the exact mode: (opening, closing) after period start t0 + kT."""
@@ -201,92 +208,3 @@ class OnOffValve(AbstractValve):
         return opening * inflow - (1.0 - opening) * outflow
 
 
-class AveragedValve(AbstractValve):
-    """Paper 000's averaged ("analytic") valve, eq. 13: the PWM cycle-averaged mass flow as a 2nd-order
-    bi-polynomial in the duty ratio u and the chamber pressure.
-
-    ṁ_eq(u, p) = Σᵢⱼ m[i, j] uⁱ pᵍʲ, i, j ∈ {0, 1, 2}, with p_g = p − p_atm the GAUGE chamber pressure [Pa]
-    (paper 000's Fig. 8 plots relative pressure). The paper's m1…m9 are `coefficients` flattened row-wise:
-    m1 = m[0,0], m2 = m[0,1], m3 = m[0,2], m4 = m[1,0], …, m9 = m[2,2]. SI units: m[i, j] in kg/(s Paʲ).
-
-    **Arguments:** `coefficients` (3, 3) array (see `pamjax.presets` for the derived defaults).
-    """
-
-    coefficients: jax.Array = eqx.field(converter=jnp.asarray)  # kg/(s Pa^j)
-
-    def __check_init__(self):
-        if jnp.shape(self.coefficients) != (3, 3):
-            raise PamjaxInputError(
-                "AveragedValve.coefficients must have shape (3, 3) (m1…m9 row-wise), "
-                f"got {jnp.shape(self.coefficients)}"
-            )
-        check_finite(self.coefficients, "AveragedValve.coefficients")
-
-    @classmethod
-    def from_m(cls, m):
-        """Build from the paper's flat m1…m9 (SI units, gauge pressure in Pa)."""
-        m = jnp.asarray(m)
-        if m.shape != (9,):
-            raise PamjaxInputError(f"AveragedValve.from_m needs 9 coefficients m1…m9, got shape {m.shape}")
-        return cls(m.reshape(3, 3))
-
-    def mass_flow(self, t, command, pressure, air: Air):
-        del t
-        p_gauge = pressure - air.atmospheric_pressure
-        u_powers = jnp.stack([jnp.ones_like(command), command, command * command])
-        p_powers = jnp.stack([jnp.ones_like(p_gauge), p_gauge, p_gauge * p_gauge])
-        return u_powers @ self.coefficients @ p_powers
-
-
-def cycle_averaged_flow(valve: OnOffValve, command, pressure, air: Air, samples: int = 4000):
-    """PWM-period average of an on/off valve's flow into a chamber held at `pressure` [Pa abs], for duty `command`
-    [kg/s] (paper 000's "equivalent mass flow"; midpoint rule over `samples` phases of one period)."""
-    phases = (jnp.arange(samples) + 0.5) / samples * valve.period
-    flows = jax.vmap(lambda t: valve.mass_flow(t, command, pressure, air))(phases)
-    return jnp.mean(flows)
-
-
-def fit_averaged_valve(valve: OnOffValve, air: Air, commands=None, pressures=None, pin_endpoints=True):
-    """Least-squares fit of eq. 13's m1…m9 to the cycle-averaged flow of an on/off valve over a (duty, pressure)
-    grid (duty 0…1, pressure p_atm…p_supply by default). Returns `(AveragedValve, report)`, the report holding the
-    max error and RMSE in kg/s and in % of the flow range (paper 000: 4.13 % and 1.16 %).
-
-    With `pin_endpoints` (default) the fit is constrained to zero flow where the physical valve has none: duty 0 at
-    atmospheric pressure and duty 1 at supply pressure. Without it the unconstrained biquadratic charges a tank
-    above the supply pressure at high duty (and below atmosphere at low duty)."""
-    commands = jnp.linspace(0.0, 1.0, 41) if commands is None else jnp.asarray(commands)
-    if pressures is None:
-        pressures = jnp.linspace(air.atmospheric_pressure, valve.supply_pressure, 41)
-    uu, pp = jnp.meshgrid(commands, pressures, indexing="ij")
-    flows = jax.vmap(jax.vmap(lambda u, p: cycle_averaged_flow(valve, u, p, air)))(uu, pp)
-    pg = (pp - air.atmospheric_pressure).ravel()
-    u = uu.ravel()
-    p_scale = jnp.max(jnp.abs(pg))  # conditioning: fit in p / p_scale, then convert to SI
-    pn = pg / p_scale
-    design = jnp.stack([u**i * pn**j for i in range(3) for j in range(3)], axis=1)
-    if pin_endpoints:
-
-        def row(u, p):
-            pn = (p - air.atmospheric_pressure) / p_scale
-            return jnp.stack([u**i * pn**j for i in range(3) for j in range(3)])
-
-        constraints = jnp.stack([row(0.0, air.atmospheric_pressure), row(1.0, valve.supply_pressure)])
-        _, _, vt = jnp.linalg.svd(constraints)
-        null = vt[constraints.shape[0] :].T  # (9, 7): coefficients satisfying both constraints exactly
-        z, *_ = jnp.linalg.lstsq(design @ null, flows.ravel())
-        coef = null @ z
-    else:
-        coef, *_ = jnp.linalg.lstsq(design, flows.ravel())
-    coef = coef.reshape(3, 3) / p_scale ** jnp.arange(3)[None, :]
-    fitted = AveragedValve(coef)
-    model = jax.vmap(lambda u, p: fitted.mass_flow(0.0, u, p, air))(u, pp.ravel())
-    err = model - flows.ravel()
-    span = jnp.max(flows) - jnp.min(flows)
-    report = dict(
-        max_error=float(jnp.max(jnp.abs(err))),
-        rmse=float(jnp.sqrt(jnp.mean(err**2))),
-        max_error_percent=float(100 * jnp.max(jnp.abs(err)) / span),
-        rmse_percent=float(100 * jnp.sqrt(jnp.mean(err**2)) / span),
-        flow_range=float(span),
-    )
-    return fitted, report

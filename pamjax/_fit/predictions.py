@@ -1,0 +1,72 @@
+"""Predictions of a model for a list of experiments, in one compiled program: fixed-grid experiments of one system
+structure share one integration loop (`pamjax._solve.synchronous.solve_runs`)."""
+
+import equinox as eqx
+import jax
+import numpy as np
+
+from .._core.errors import require_float64
+from .._solve.scaled import scaled
+from .._solve.simulate import fixed_trajectory
+from .._solve.synchronous import solve_runs
+from .parameters import strong_types
+
+
+def predict_all(model, experiments):
+    """Every experiment's predictions (traceable), in order. Fixed-grid experiments whose systems share one
+    structure (e.g. six tank tests, or a muscle's triangle runs) are integrated in ONE loop (`solve_runs`), so the
+    compiled program does not grow with their number."""
+    preds = [None] * len(experiments)
+    groups = {}
+    for i, e in enumerate(experiments):
+        key = e.batch_key(model)
+        if key is None:
+            preds[i] = e.predict(model)
+        else:
+            groups.setdefault(key, []).append(i)
+    for (stepping, substeps, _), members in groups.items():
+        exps = [experiments[i] for i in members]
+        for i, pred in zip(members, _predict_runs(model, exps, stepping, substeps)):
+            preds[i] = pred
+    return preds
+
+
+@eqx.filter_jit
+def _predictions(model, exps):
+    return predict_all(model, exps)
+
+
+def predictions(model, experiments):
+    """`model`'s channels at every experiment's times (list of dicts channel → NumPy array), in one compiled
+    program (experiments of one kind share one loop, as in a fit). Checks the experiments first."""
+    require_float64("pamjax.predictions")
+    experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
+    for e in experiments:
+        e.check(model)
+    model = strong_types(model)
+    exps = tuple(e.bind(model) for e in experiments)
+    return [jax.tree_util.tree_map(np.asarray, p) for p in _predictions(model, exps)]
+
+
+def _predict_runs(model, exps, stepping, substeps):
+    systems = [e.build(model) for e in exps]
+    y0s = [s.initial_state(**e.initial) for s, e in zip(systems, exps)]
+    flats = [scaled(s, y0) for s, y0 in zip(systems, y0s)]
+    sizes = [e._grid_size(s, stepping) for s, e in zip(systems, exps)]
+    runs = solve_runs(systems, [e.signal for e in exps], [e.times for e in exps], [f[0] for f in flats], flats[0][1],
+                      [e.t0 for e in exps], stepping=stepping, substeps=substeps, sizes=sizes)
+    preds = []
+    for system, e, (states, num_steps, finite) in zip(systems, exps, runs):
+        traj = fixed_trajectory(system, e.signal, e.times, e.t0, states, num_steps, finite, stepping)
+        preds.append({c: traj.channel(c) for c in traj.channels()})
+    return preds
+
+
+@eqx.filter_jit
+def _predict(model, experiment):
+    return experiment.predict(model)
+
+
+def predict(model, experiment):
+    """`experiment.predict(model)`, jitted (one compile per experiment structure, shared by check and reports)."""
+    return _predict(model, experiment.bind(model))

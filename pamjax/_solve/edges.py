@@ -1,0 +1,64 @@
+"""How an adaptive solve sees a switching valve's edges: a run that starts with the valve off (`StartsOff`), and the
+exact-edge reference whose switching times are handed to the solver as jump times (`ScheduledValve`)."""
+
+import jax
+import jax.numpy as jnp
+
+from .._physics.signals import AbstractSignal
+from .._physics.valves.base import AbstractSwitchingValve
+
+
+class StartsOff(AbstractSignal):
+    """`signal` from `start` [s] on, 0 (valve off) before: the duty a switching valve's previous PWM period has at
+    the start of a run."""
+
+    signal: AbstractSignal
+    start: jax.Array
+
+    def __call__(self, t):
+        return jnp.where(t < self.start - 1e-12, jnp.zeros_like(self.signal(t)), self.signal(t))
+
+    def bounds(self):
+        return self.signal.bounds()
+
+
+class ScheduledValve(AbstractSwitchingValve):
+    """A switching valve whose opening follows a precomputed edge schedule (its `edge_schedule`): the exact mode's
+    valve inside an adaptive solve. The opening switches exactly at the schedule's times, the very numbers handed to
+    the solver as jump times, so the solver's steps end one ulp before an edge and restart after it (a switch
+    computed from the phase would land a few ulps off, and the solver would fail with "minimum step size")."""
+
+    valve: AbstractSwitchingValve
+    edges: jax.Array  # s, sorted
+    states: jax.Array  # opening after each edge
+
+    @property
+    def pwm_frequency(self):
+        return self.valve.pwm_frequency
+
+    def command_time(self, t):
+        return self.valve.command_time(t)
+
+    def max_step(self):
+        return self.valve.max_step()
+
+    def switching_gates(self, command):
+        return self.valve.switching_gates(command)
+
+    def edge_phases(self, command):
+        return self.valve.edge_phases(command)
+
+    def edge_schedule(self, signal, t0, t1):
+        return self.valve.edge_schedule(signal, t0, t1)
+
+    def opening(self, t):
+        if self.states.shape[0] == 0:  # no edge at all (e.g. duty 0 throughout): closed from start to end
+            return jnp.zeros_like(jnp.asarray(t, dtype=float))
+        index = jnp.searchsorted(self.edges, t, side="right") - 1
+        return jnp.where(index >= 0, self.states[jnp.clip(index, 0, self.states.shape[0] - 1)], 0.0)
+
+    def mass_flow_at_opening(self, opening, pressure, air):
+        return self.valve.mass_flow_at_opening(opening, pressure, air)
+
+    def mass_flow(self, t, command, pressure, air):
+        return self.valve.mass_flow_at_opening(self.opening(t), pressure, air)

@@ -1,0 +1,202 @@
+"""A sweep's plan: which path each swept key names (system, signal, initial state or a signal factory), the lane
+built from one point's values, and the checks of every point's values against the components' own constraints,
+before any solve."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.tree_util as jtu
+import numpy as np
+
+from .._core.errors import PamjaxInputError
+from .._physics.signals import AbstractSignal
+
+
+def get(obj, parts):
+    for p in parts:
+        obj = getattr(obj, p)
+    return obj
+
+
+def _split(key):
+    parts = key.split(".")
+    if parts[0] in ("signal", "y0"):
+        return parts[0], parts[1:]
+    return "system", parts
+
+
+class Plan(eqx.Module):
+    """Static description of a sweep: which key goes where, and each swept leaf's own shape."""
+
+    keys: tuple = eqx.field(static=True)
+    targets: tuple = eqx.field(static=True)  # ("system" | "signal" | "y0" | "factory", parts)
+    leaf_shapes: tuple = eqx.field(static=True)
+
+
+def make_signal(signal, plan, values):
+    """The lane's signal: the base signal with its swept leaves replaced, or the factory's signal."""
+    if not isinstance(signal, AbstractSignal):
+        return signal(dict(values))
+    for key, (where, parts) in zip(plan.keys, plan.targets):
+        if where == "signal":
+            signal = eqx.tree_at(lambda s, parts=parts: get(s, parts), signal, values[key])
+    return signal
+
+
+def lane_system(system, plan, values):
+    """The lane's system: the base system with its swept leaves replaced by `values` (a dict key -> array)."""
+    for key, (where, parts) in zip(plan.keys, plan.targets):
+        if where == "system":
+            system = eqx.tree_at(lambda s, parts=parts: get(s, parts), system, values[key])
+    return system
+
+
+def make_lane(system, signal, y0, plan, values):
+    """The lane's (system, signal, y0) for one set of swept `values` (a dict key -> array)."""
+    system = lane_system(system, plan, values)
+    signal = make_signal(signal, plan, values)
+    y0_keys = [(key, parts) for key, (where, parts) in zip(plan.keys, plan.targets) if where == "y0"]
+    if y0 is None:  # "y0.pressure" etc. are arguments of `initial_state` (position then in equilibrium with them)
+        return system, signal, system.initial_state(**{parts[0]: values[key] for key, parts in y0_keys})
+    for key, parts in y0_keys:
+        y0 = eqx.tree_at(lambda s, parts=parts: get(s, parts), y0, values[key])
+    return system, signal, y0
+
+
+def _check_module(module, name):
+    """Re-run the `__check_init__` of every class of `module` (equinox skips them under `tree_at`)."""
+    for cls in type(module).__mro__:
+        check = cls.__dict__.get("__check_init__")
+        if check is not None:
+            try:
+                check(module)
+            except PamjaxInputError as err:
+                raise PamjaxInputError(f"over[{name!r}]: {err}") from None
+
+
+def validate_values(system, signal, y0, plan, values, batch_size):
+    """Checks of the swept values against each component's own constraints, batched where the checks allow it
+    (they are elementwise `np.all`); per point otherwise."""
+    flat = {k: v.reshape((batch_size,) + shape) for (k, v), shape in zip(values.items(), plan.leaf_shapes)}
+    for key, v in flat.items():
+        if not np.all(np.isfinite(v)):
+            bad = int(np.argmin(np.all(np.isfinite(v.reshape(batch_size, -1)), axis=1)))
+            raise PamjaxInputError(f"over[{key!r}] must be finite, point {bad} is {v[bad]}")
+
+    def check_lanes(vals, n):
+        for key, (where, parts) in zip(plan.keys, plan.targets):
+            if where != "system":
+                continue
+            lane_system = eqx.tree_at(lambda s, parts=parts: get(s, parts), system, jnp.asarray(vals[key]))
+            for i in range(len(parts)):
+                sub = get(lane_system, parts[:i])
+                if isinstance(sub, eqx.Module):
+                    _check_module(sub, key)
+
+    try:
+        check_lanes(flat, batch_size)
+        batched_ok = True
+    except PamjaxInputError:
+        raise
+    except Exception:  # a check that cannot take an array (e.g. `bool(hi > lo)`): check point by point
+        batched_ok = False
+    if not batched_ok:
+        for i in range(batch_size):
+            check_lanes({k: v[i] for k, v in flat.items()}, 1)
+    # The command must stay in the valve's range at every point: all points at once where the signal's `bounds()`
+    # takes arrays (Constant), point by point otherwise.
+    signal_keys = [k for k, (w, _) in zip(plan.keys, plan.targets) if w in ("signal", "factory")]
+    if not signal_keys and isinstance(signal, AbstractSignal):
+        check_bounds(system, signal, None)
+        return
+    try:
+        if not isinstance(signal, AbstractSignal):
+            raise TypeError
+        check_bounds(system, make_signal(signal, plan, {k: jnp.asarray(v) for k, v in flat.items()}), None)
+    except PamjaxInputError:
+        pass  # find and name the offending point below
+    except Exception:
+        pass
+    else:
+        return
+    for i in range(batch_size):
+        check_bounds(system, make_signal(signal, plan, {k: jnp.asarray(v[i]) for k, v in flat.items()}),
+                      {k: np.asarray(v[i]).tolist() for k, v in flat.items()} | {"index": i})
+
+
+def check_bounds(system, sig, point):
+    if not isinstance(sig, AbstractSignal):
+        raise PamjaxInputError(f"the signal factory must return a pamjax signal, got {type(sig)}")
+    clo, chi = system.command_range
+    lo, hi = sig.bounds()
+    if not (np.isfinite(lo) and np.isfinite(hi)) or lo < clo - 1e-12 or hi > chi + 1e-12:
+        where = "" if point is None else f" at sweep point {point}"
+        raise PamjaxInputError(
+            f"signal (the valve command) must stay within [{clo}, {chi}], its range is [{lo}, {hi}]{where}"
+        )
+
+
+_STRUCTURES = {}
+
+
+def structure(system, y0):
+    """(initial-state shapes, output channel names) of a system: its state traced once per system structure (not
+    solved), its channels its `output_names` and "command"."""
+    if y0 is not None:
+        return y0, [*system.output_names, "command"]
+    key = jtu.tree_structure(system)
+    if key not in _STRUCTURES:
+        _STRUCTURES[key] = jax.eval_shape(system.initial_state)
+    return _STRUCTURES[key], [*system.output_names, "command"]
+
+
+def make_plan(system, signal, base_state, over):
+    """The `Plan` of `over` ({path: values}), the values broadcast to the batch shape (plus each leaf's own shape),
+    and the batch shape. Paths name a leaf of the system, the signal ("signal.…") or the initial state ("y0.…"); with
+    a signal factory, any other name goes to the factory."""
+    factory = not isinstance(signal, AbstractSignal)
+    keys, targets, leaf_shapes, arrays = [], [], [], []
+    for key, value in over.items():
+        where, parts, leaf = _resolve(system, signal, base_state, factory, key)
+        shape = () if leaf is None else tuple(np.shape(leaf))
+        try:
+            v = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            raise PamjaxInputError(f"over[{key!r}] must be numbers, got {value!r}") from None
+        if v.ndim < len(shape) or v.shape[v.ndim - len(shape):] != shape:
+            raise PamjaxInputError(f"over[{key!r}] must end in the leaf's shape {shape}, got shape {v.shape}")
+        keys.append(key)
+        targets.append((where, tuple(parts)))
+        leaf_shapes.append(shape)
+        arrays.append(v)
+    try:
+        batch_shape = np.broadcast_shapes(*[a.shape[: a.ndim - len(s)] for a, s in zip(arrays, leaf_shapes)])
+    except ValueError:
+        raise PamjaxInputError(
+            "over values must broadcast together, got shapes "
+            + ", ".join(f"{k}: {a.shape}" for k, a in zip(keys, arrays))
+        ) from None
+    values = {k: np.broadcast_to(a, batch_shape + s) for k, a, s in zip(keys, arrays, leaf_shapes)}
+    return Plan(tuple(keys), tuple(targets), tuple(leaf_shapes)), values, batch_shape
+
+
+def _resolve(system, signal, base_state, factory, key):
+    """(where, parts, leaf) of one swept key; the leaf is None for a factory's key."""
+    if not isinstance(key, str) or not key:
+        raise PamjaxInputError(f"over keys must be path strings like 'valve.supply_pressure', got {key!r}")
+    where, parts = _split(key)
+    root = {"system": system, "signal": signal, "y0": base_state}[where]
+    try:
+        leaf = get(root, parts) if not (where == "signal" and factory) else None
+    except AttributeError:
+        leaf = None
+        if not factory:
+            raise PamjaxInputError(
+                f"over[{key!r}]: the {where} ({type(root).__name__}) has no leaf {'.'.join(parts)!r}"
+            ) from None
+        where, parts = "factory", [key]
+    if where == "signal" and factory:
+        where = "factory"
+    if where != "factory" and not isinstance(leaf, (jax.Array, np.ndarray, float, int, jax.ShapeDtypeStruct)):
+        raise PamjaxInputError(f"over[{key!r}] must name an array parameter, it names a {type(leaf).__name__}")
+    return where, parts, leaf

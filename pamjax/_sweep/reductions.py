@@ -1,0 +1,64 @@
+"""Reductions of a sweep's outputs over the output times, evaluated on the fly: each is a weighted sum Σ_k w_k y(t_k)
+with per-lane weights (`Final`, `Mean`, `Harmonic`)."""
+
+import abc
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from .plan import get
+
+
+class AbstractReduction(eqx.Module):
+    """A reduction of each output channel over the output times, evaluated on the fly: Σ_k w_k y(t_k)."""
+
+    @abc.abstractmethod
+    def weights(self, ts, system, signal):
+        """Weights over the output times `ts` [s] for one lane (real or complex, shape `ts.shape`); the lane's
+        `system` and `signal` may set them (e.g. a swept frequency)."""
+
+
+class Final(AbstractReduction):
+    """The value at the last output time."""
+
+    def weights(self, ts, system, signal):
+        return jnp.zeros_like(ts).at[-1].set(1.0)
+
+
+class Mean(AbstractReduction):
+    """Mean over the output times in the last `window` [s] (e.g. the last N PWM periods: N / f_PWM)."""
+
+    window: float = eqx.field(static=True)
+
+    def weights(self, ts, system, signal):
+        inside = ts >= ts[-1] - self.window * (1 + 1e-12)
+        return inside / jnp.sum(inside)
+
+
+class Harmonic(AbstractReduction):
+    """Complex Fourier coefficient at the lane's frequency f over its last `periods` periods:
+    Y = (2/n) Σ y(t_k) exp(−i 2π f t_k), so y ≈ mean + Re(Y exp(i 2π f t)); |Y| is the amplitude, arg Y the phase.
+
+    **Arguments:** `periods` (integer number of periods in the window); `frequency`: a path read from the lane
+    (default "signal.frequency") or a number [Hz]. Needs output times that sample the window evenly.
+    """
+
+    periods: int = eqx.field(static=True, default=3)
+    frequency: object = eqx.field(static=True, default="signal.frequency")
+
+    def weights(self, ts, system, signal):
+        f = _lane_value(self.frequency, system, signal)
+        inside = ts >= ts[-1] - self.periods / f * (1 + 1e-9)
+        # the window [t_end - P/f, t_end] sampled with both ends would count one point twice: drop the first
+        first = jnp.argmax(inside)
+        inside = inside.at[first].set(False)
+        return inside * (2.0 / jnp.sum(inside)) * jnp.exp(-2j * jnp.pi * f * ts)
+
+
+def _lane_value(path_or_number, system, signal):
+    if isinstance(path_or_number, str):
+        head, *rest = path_or_number.split(".")
+        root = signal if head == "signal" else system
+        parts = rest if head == "signal" else [head, *rest]
+        return get(root, parts)
+    return jnp.asarray(path_or_number, dtype=float)
