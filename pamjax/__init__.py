@@ -228,6 +228,7 @@ from ._fit import (
 from ._fit import (
     fit as fit,
 )
+from ._lm import levenberg_marquardt as levenberg_marquardt
 from ._gradcheck import gradient_check as gradient_check  # noqa: E402
 
 # --- proportional pressure regulator, linearisation, antagonistic joint (issue 5, paper 001) -----------------------
