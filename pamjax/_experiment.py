@@ -22,7 +22,7 @@ from ._errors import PamjaxInputError
 from ._inputs import AbstractSignal
 from ._recording import _MIN_ABSOLUTE_PA, Recording, warn_filtered
 from ._simulate import _flat_scaled, fixed_grid_size, fixed_trajectory, resolve_stepping, solve, validate
-from ._synchronous import solve_runs
+from ._synchronous import num_periods, solve_runs
 from ._system import AbstractSystem, TankSystem
 from ._units import check_absolute_pressure
 
@@ -274,8 +274,19 @@ class Experiment(eqx.Module):
             max_steps=self.max_steps,
             dt0=self.dt0,
             adjoint="forward",
+            num_periods=self._edge_periods(system),
         )
         return {c: getattr(traj, c) for c in traj.channels() if getattr(traj, c) is not None}
+
+    def _edge_periods(self, system):
+        """PWM periods of the recording for a smoothed switching valve (its edges get step boundaries), else None."""
+        valve = system.valve
+        if getattr(valve, "mode", None) != "smooth" or not valve.switches:
+            return None
+        try:
+            return num_periods(valve, self.span[0], self.span[1])
+        except PamjaxInputError:  # a traced PWM frequency (fitted): no edge steps
+            return None
 
     def batch_key(self, model):
         """Experiments with equal keys are integrated in one compiled loop (`predict_all`): fixed-grid stepping of
