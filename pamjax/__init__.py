@@ -142,6 +142,7 @@ from ._fit.experiment import (
     TankFromModel as TankFromModel,
 )
 from ._fit.fit import FitResult as FitResult, evaluate as evaluate, fit as fit
+from ._fit.lm import levenberg_marquardt as levenberg_marquardt
 from ._fit.model_io import load_model as load_model, save_model as save_model
 from ._fit.multistart import (
     FleetResult as FleetResult,

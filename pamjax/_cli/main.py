@@ -93,12 +93,16 @@ def main(argv=None):
         from .._core.cache import enable_compilation_cache
 
         enable_compilation_cache()
+    from .._core.cache import announce_compilation
     from .._core.errors import PamjaxInputError, PamjaxSolveError
 
     command = args.command
     with _signals_as_interrupts():
         try:
-            status = modules[command].run(args) or 0
+            # fit says itself when it compiles (its programs are known); the others are announced from outside
+            announce = contextlib.nullcontext() if command == "fit" else announce_compilation(f"pamjax {command}")
+            with announce:
+                status = modules[command].run(args) or 0
             raise_pending()  # a signal swallowed while JAX was busy: the command finished, but say so
             return status
         except KeyboardInterrupt as err:

@@ -233,3 +233,38 @@ def program_cache():
     if cache is None or cache.directory.parent != pathlib.Path(directory):
         cache = _PROGRAMS["cache"] = ProgramCache(directory)
     return cache
+
+
+class announce_compilation:  # noqa: N801 - used as a context manager, like contextlib's
+    """Say when a piece of work is compiling (a context manager for the CLI's commands): if it is still busy after
+    `after` seconds and JAX has compiled or is tracing something, one line "LABEL: compiling … (first run; cached
+    afterwards)"; at the end, when compilation took more than `after` seconds, "LABEL: compiled in N s"."""
+
+    def __init__(self, label, after=2.0, stream=None):
+        self.label, self.after = label, after
+        self.stream = stream if stream is not None else sys.stdout
+        self.stats = CompileStats()
+        self._said = False
+
+    def _say_compiling(self):
+        cached = "cached afterwards" if not cache_disabled() else "not cached: PAMJAX_COMPILATION_CACHE=0"
+        print(f"{self.label}: compiling … (first run; {cached})", file=self.stream, flush=True)
+        self._said = True
+
+    def __enter__(self):
+        import threading
+
+        self.stats.__enter__()
+        self._timer = threading.Timer(self.after, self._say_compiling)
+        self._timer.daemon = True
+        self._timer.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._timer.cancel()
+        self.stats.__exit__(*exc)
+        seconds = sum(self.stats.seconds.values())
+        if exc[0] is None and (self._said or seconds > self.after):
+            print(f"{self.label}: compiled in {seconds:.1f} s ({self.stats.summary()})", file=self.stream,
+                  flush=True)
+        return False

@@ -23,6 +23,7 @@ from .._core.errors import PamjaxInputError
 from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
 from .._solve.simulate import fixed_grid_size, resolve_stepping, solve, validate
+from .._solve.synchronous import num_periods
 from .._systems.base import AbstractSystem
 from .._systems.tank import TankSystem
 from .recording import Recording, warn_filtered
@@ -320,8 +321,19 @@ class Experiment(AbstractExperiment):
             max_steps=self.max_steps,
             dt0=self.dt0,
             adjoint="forward",
+            num_periods=self._edge_periods(system),
         )
         return {c: traj.channel(c) for c in traj.channels()}
+
+    def _edge_periods(self, system):
+        """PWM periods of the recording for a smoothed switching valve (its edges get step boundaries), else None."""
+        valve = system.valve
+        if not valve.smooth_edges:
+            return None
+        try:
+            return num_periods(valve, self.span[0], self.span[1])
+        except PamjaxInputError:  # a traced PWM frequency (fitted): no edge steps
+            return None
 
     def batch_key(self, model):
         """Experiments with equal keys are integrated in one compiled loop (`predict_all`): fixed-grid stepping of

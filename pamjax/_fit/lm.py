@@ -188,3 +188,24 @@ def jacobian_check(state, residuals, directions=3):
         fd = (up - down) / (2.0 * eps)
         worst = max(worst, float(np.linalg.norm(fd - predicted)) / size)
     return worst
+
+
+def levenberg_marquardt(residuals, jacobian, theta0, *, max_steps=100, ftol=1e-10, xtol=1e-10, gtol=1e-10,
+                        stall_steps=8, geodesic=True):
+    """Least squares min ½‖r(θ)‖² by the iteration `pamjax.fit` uses, for a problem of your own.
+
+    **Arguments:** `residuals(θ)` → r (NumPy, or None / non-finite where the model fails: that trial is rejected);
+    `jacobian(θ)` → (r, ∂r/∂θ) (e.g. a jitted `jax.jacfwd` with the residuals as aux); `theta0` the start; the
+    stopping settings as in `pamjax.fit`.
+
+    **Returns:** the final `LMState`: `theta`, `cost`, `residual`, `jacobian`, `done` and `reason` ("converged: …",
+    "stalled", or "" after `max_steps`), `history`.
+    """
+    r0, j0 = jacobian(np.asarray(theta0, dtype=float))
+    state = start(np.asarray(theta0, dtype=float), np.asarray(r0), np.asarray(j0))
+    if _gradient_cosine(state) <= gtol:
+        state.done, state.reason = True, "converged: gradient orthogonal to the residuals at the start (gtol)"
+    while not state.done and state.step < max_steps:
+        state = iterate(state, residuals, jacobian, ftol=ftol, xtol=xtol, gtol=gtol, stall_steps=stall_steps,
+                        geodesic=geodesic)
+    return state

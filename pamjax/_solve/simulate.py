@@ -55,7 +55,9 @@ def solve(
     `atol` applies to the scaled state (pressure in units of 1e5 Pa, position in 1e-2 m, ...: `state_scale`).
     `stepping="pwm"` integrates on the PWM-synchronous grid (`pamjax._solve.synchronous`), `stepping="grid"` on a
     uniform grid of at most `grid_step` [s]; inside jit they need the static `num_periods` (PWM periods covering [t0,
-    ts[-1]], or grid steps). `starts_off`: a switching valve's previous PWM period is off at `t0` (a run from rest);
+    ts[-1]], or grid steps). With adaptive stepping and a valve with smoothed switching edges, `num_periods` (if
+    given) puts step boundaries either side of every edge (the valve's `edge_steps`; `simulate` always does).
+    `starts_off`: a switching valve's previous PWM period is off at `t0` (a run from rest);
     False reads the signal's own value there (a closed loop continuing period by period).
     """
     ts = jnp.asarray(ts, dtype=float)
@@ -65,7 +67,8 @@ def solve(
         return _solve_fixed(system, signal, ts, y0, t0, stepping, substeps, num_periods, grid_step, throw)
     if system.valve.switches and starts_off:  # the valve is off before the run (as the PWM grid and the schedule)
         signal = StartsOff(signal, system.valve.command_time(t0))
-    controller = _controller(system, ts, rtol, atol, jump_ts)
+    step_ts = None if num_periods is None else system.valve.edge_steps(signal, t0, num_periods)
+    controller = _controller(system, ts, rtol, atol, jump_ts, step_ts)
     if isinstance(adjoint, str):
         adjoint = {"forward": dfx.ForwardMode(), "reverse": dfx.RecursiveCheckpointAdjoint()}[adjoint]
     adjoint = dfx.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
@@ -73,7 +76,7 @@ def solve(
                            max_steps, dt0, adjoint, throw)
 
 
-def _controller(system, ts, rtol, atol, jump_ts):
+def _controller(system, ts, rtol, atol, jump_ts, step_ts=None):
     """The PID step-size controller of an adaptive solve.
 
     dtmax: a switching valve's windows must not be stepped over (its `max_step`). dtmin without forcing: a state that
@@ -87,8 +90,8 @@ def _controller(system, ts, rtol, atol, jump_ts):
     dtmin = None if jump_ts is not None else 50 * jnp.finfo(float).eps * jnp.maximum(jnp.abs(ts[-1]), 1.0)
     controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=system.valve.max_step(), dtmin=dtmin,
                                    force_dtmin=False)
-    if jump_ts is not None:
-        controller = dfx.ClipStepSizeController(controller, jump_ts=jump_ts)
+    if jump_ts is not None or step_ts is not None:  # step_ts: either side of a smoothed edge (the valve's edge_steps)
+        controller = dfx.ClipStepSizeController(controller, step_ts=step_ts, jump_ts=jump_ts)
     return controller
 
 
@@ -317,6 +320,8 @@ def simulate(
         periods = _fixed_grid_periods(system, stepping, substeps, grid_step, t0, ts)
     elif system.valve.exact_edges:
         system, jump_ts = _scheduled(system, signal, t0, ts)
+    elif system.valve.smooth_edges and not _is_traced((ts, t0, system.valve.period)):
+        periods = _sync.num_periods(system.valve, t0, ts[-1])  # step boundaries around every smoothed edge
     traced = _is_traced((system, signal, ts, y0, t0))
     if solver is None and stepping == "adaptive":
         solver = default_solver(system)

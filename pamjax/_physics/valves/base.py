@@ -29,6 +29,8 @@ class AbstractControlElement(eqx.Module):
       (None: no edges).
     - `exact_edges`: whether the solver must be handed its switching times (an exact-edge reference, which carries
       no derivative with respect to the edge times).
+    - `smooth_edges`: whether its switching edges are smoothed steps that an adaptive solver must not straddle
+      (then `edge_steps` gives the step boundaries either side of them).
     - `averaged`: whether its flow is a smooth cycle average that `command_for_flow` inverts (paper 000 eq. 13).
     - `command_time(t)`, `read_command(signal, t)`: when the command is read, and what the element acts on at `t`.
     """
@@ -36,6 +38,7 @@ class AbstractControlElement(eqx.Module):
     command_range = (0.0, 1.0)
     switches = False
     exact_edges = False
+    smooth_edges = False
     averaged = False
 
     @property
@@ -46,6 +49,12 @@ class AbstractControlElement(eqx.Module):
         return None
 
     def switching_time_scale(self):
+        return None
+
+    def edge_steps(self, signal, t0, num_periods):
+        """Step boundaries [s] (traceable, sorted) either side of every smoothed switching edge of the `num_periods`
+        PWM periods from `t0` (and the period before, whose off edge can fall after `t0`), for an adaptive solver's
+        step-size controller; None where the element has no smoothed edges (`smooth_edges` False)."""
         return None
 
     def command_time(self, t):
