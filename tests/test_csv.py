@@ -1,5 +1,5 @@
-"""The CSV reader (`pamjax._core.csvio`, behind `Recording.load`) and units (`pamjax._core.units`): whatever spreadsheet or bench
-software wrote the file, the recording read is the same, or the reader refuses by file, line and column; header
+"""The CSV reader (`pamjax._core.csvio`, behind `Recording.load`) and units (`pamjax._core.units`): whatever spreadsheet
+or bench software wrote the file, the recording read is the same, or the reader refuses by file, line and column; header
 units are converted to SI or refused, never ignored; values whose magnitude says another unit are refused with the
 likely unit named."""
 

@@ -1,5 +1,5 @@
-"""Rodas5 (pamjax._solve.rodas): the Rosenbrock solver's order, stiff stability, dense output, and the stiff plant it exists
-for, against independent references (SciPy DOP853, finite differences)."""
+"""Rodas5 (pamjax._solve.rodas): the Rosenbrock solver's order, stiff stability, dense output, and the stiff plant it
+exists for, against independent references (SciPy DOP853, finite differences)."""
 
 import diffrax as dfx
 import jax

@@ -20,11 +20,13 @@ from .out import EXIT_FAILED, EXIT_INPUT, PENDING, Terminated, interrupt_status,
 
 # subcommand → (module, help). Each module defines `add_arguments(parser)` and `run(args)`.
 _COMMANDS = {
-    "demo": ("pamjax._cli.demo", "Run paper 000's valve and system experiments with the preset; write CSV and a figure."),
+    "demo": ("pamjax._cli.demo",
+             "Run paper 000's valve and system experiments with the preset; write CSV and a figure."),
     "fit": ("pamjax._cli.fit", "Fit parameters to recordings as described by a TOML config; write the fitted model."),
     "simulate": ("pamjax._cli.simulate", "Simulate any model with any input; write the trajectory (CSV) and a figure."),
     "sweep": ("pamjax._cli.sweep", "Run a batch sweep described by a TOML config; write NPZ/CSV and a figure."),
-    "reproduce": ("pamjax._cli.reproduce", "Reproduce every experiment of papers 000 and 001 (fits/papers); index page."),
+    "reproduce": ("pamjax._cli.reproduce",
+                  "Reproduce every experiment of papers 000 and 001 (fits/papers); index page."),
 }
 DEBUG_VARIABLE = "PAMJAX_DEBUG"
 

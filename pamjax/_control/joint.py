@@ -13,6 +13,7 @@ from .._solve.simulate import solve
 from .._systems.joint_control import (
     JointControlLoop,
     JointControlState,
+    check_joint_control_loop,
     held_stiffness,
     hold_pressures,
     joint_angle_range,
@@ -145,7 +146,6 @@ def simulate_joint_control(
     **Raises:** `PamjaxInputError` for an angle reference outside the joint's range or an infeasible stiffness or
     pressure-sum target (see `check_joint_control`), before any solve.
     """
-    if not isinstance(loop, JointControlLoop):
-        raise PamjaxInputError(f"loop must be a JointControlLoop, got {type(loop).__name__}")
+    check_joint_control_loop(loop)
     check_joint_control(loop, ts)
     return _run_jit(loop, jnp.asarray(ts, dtype=float), y0, rtol, atol, max_steps)

@@ -83,7 +83,8 @@ def apply(environ=os.environ) -> dict:
 
 
 def xla_cpu_status() -> dict:
-    """Whether pamjax's XLA CPU loop setting is in effect: `{"active": bool, "reason": str}` (see `pamjax._core.xla_cpu`).
+    """Whether pamjax's XLA CPU loop setting is in effect: `{"active": bool, "reason": str}` (see
+    `pamjax._core.xla_cpu`).
 
     Without it, single-trajectory solves and fits on CPU run about 4x slower (same results)."""
     return dict(_status)

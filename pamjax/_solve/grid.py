@@ -1,9 +1,9 @@
 """Fixed-grid RK4 integration with events located inside the step: the solver of hybrid systems.
 
-The grid is given as intervals [left_i, right_i] (the PWM-synchronous grid of `pamjax._solve.synchronous` for a switching
-valve, a uniform grid otherwise), each with the valve opening held over it (or None). Each interval is one classical
-RK4 step. A hybrid system (`system.hybrid`, e.g. a muscle with `KarnoppFriction`) also gives an event function g
-that stays ≥ 0 while its current mode holds; when g < 0 at the end of a step, the crossing τ is located on the
+The grid is given as intervals [left_i, right_i] (the PWM-synchronous grid of `pamjax._solve.synchronous` for a
+switching valve, a uniform grid otherwise), each with the valve opening held over it (or None). Each interval is one
+classical RK4 step. A hybrid system (`system.hybrid`, e.g. a muscle with `KarnoppFriction`) also gives an event function
+g that stays ≥ 0 while its current mode holds; when g < 0 at the end of a step, the crossing τ is located on the
 step's cubic Hermite interpolant (bisection, then one Newton step that carries the derivatives: dτ/dθ = −g_θ/g_τ,
 the implicit function theorem), the state at τ is passed through `system.event_update` (the new mode), and the rest
 of the interval is integrated from τ in the new mode. Up to `MAX_EVENTS` events per interval are resolved (the
@@ -39,6 +39,51 @@ def _hermite(s, h, za, zb, fa, fb):
     return h00 * za + h10 * h * fa + h01 * zb + h11 * h * fb
 
 
+def _rk4(field, system, ta, tb, z, a):
+    """Classical RK4 from ta to tb, and the slopes at both ends (for the Hermite dense output). The five field
+    evaluations (four stages and the end slope) run as one loop over a Butcher tableau, so the compiled program
+    holds the vector field once, not five times (a forward-mode Jacobian multiplies whatever is there)."""
+    h = tb - ta
+    tableau, nodes, which = jnp.asarray(_RK4_A), jnp.asarray(_RK4_C), jnp.asarray(_RK4_AUX)
+
+    def stage(i, slopes):
+        zi = z + h * (tableau[i] @ slopes)
+        return slopes.at[i].set(field(system, ta + nodes[i] * h, zi, a[which[i]]))
+
+    slopes = jax.lax.fori_loop(0, 5, stage, jnp.zeros((5,) + z.shape, dtype=z.dtype))
+    zb = z + h * (tableau[4] @ slopes)
+    return zb, slopes[0], slopes[4]
+
+def _locate(event, system, seg):
+    """Time and state of the first crossing g = 0 in a step whose end has g < 0."""
+    ta, tb, za, zb, fa, fb = seg
+    h = tb - ta
+    frozen = jax.lax.stop_gradient((system, ta, h, za, zb, fa, fb))
+
+    def g_frozen(s):
+        sys_, ta_, h_, za_, zb_, fa_, fb_ = frozen
+        return event(sys_, ta_ + s * h_, _hermite(s, h_, za_, zb_, fa_, fb_))
+
+    def bisect(_, bounds):
+        lo, hi = bounds
+        mid = 0.5 * (lo + hi)
+        below = g_frozen(mid) < 0
+        return jnp.where(below, lo, mid), jnp.where(below, mid, hi)
+
+    lo, hi = jax.lax.fori_loop(0, _BISECTIONS, bisect, (jnp.zeros(()), jnp.ones(())))
+    s = jax.lax.stop_gradient(0.5 * (lo + hi))
+
+    def g(s):
+        return event(system, ta + s * h, _hermite(s, h, za, zb, fa, fb))
+
+    value, slope = jax.jvp(g, (s,), (jnp.ones_like(s),))
+    slope_ok = jnp.abs(jax.lax.stop_gradient(slope)) > 0
+    # One Newton step from the bracketed root: its value moves by ~2^-40, its derivative is −g_θ/g_s.
+    s_new = s - jnp.where(slope_ok, value / jnp.where(slope_ok, slope, 1.0), 0.0)
+    s_new = jnp.clip(s_new, 0.0, 1.0)
+    return ta + s_new * h, _hermite(s_new, h, za, zb, fa, fb)
+
+
 def integrate(systems, field, event, update, z0s, left, right, aux, member, offsets, ts):
     """Integrate one or several runs over their concatenated intervals; returns `(z_at_ts, num_steps, num_events,
     missed, finite)`.
@@ -71,50 +116,6 @@ def integrate(systems, field, event, update, z0s, left, right, aux, member, offs
         z0s = jnp.stack(fixed)
     first = jnp.concatenate([jnp.ones((1,), bool), member[1:] != member[:-1]])
 
-    def rk4(system, ta, tb, z, a):
-        """Classical RK4 from ta to tb, and the slopes at both ends (for the Hermite dense output). The five field
-        evaluations (four stages and the end slope) run as one loop over a Butcher tableau, so the compiled program
-        holds the vector field once, not five times (a forward-mode Jacobian multiplies whatever is there)."""
-        h = tb - ta
-        tableau, nodes, which = jnp.asarray(_RK4_A), jnp.asarray(_RK4_C), jnp.asarray(_RK4_AUX)
-
-        def stage(i, slopes):
-            zi = z + h * (tableau[i] @ slopes)
-            return slopes.at[i].set(field(system, ta + nodes[i] * h, zi, a[which[i]]))
-
-        slopes = jax.lax.fori_loop(0, 5, stage, jnp.zeros((5,) + z.shape, dtype=z.dtype))
-        zb = z + h * (tableau[4] @ slopes)
-        return zb, slopes[0], slopes[4]
-
-    def locate(system, seg):
-        """Time and state of the first crossing g = 0 in a step whose end has g < 0."""
-        ta, tb, za, zb, fa, fb = seg
-        h = tb - ta
-        frozen = jax.lax.stop_gradient((system, ta, h, za, zb, fa, fb))
-
-        def g_frozen(s):
-            sys_, ta_, h_, za_, zb_, fa_, fb_ = frozen
-            return event(sys_, ta_ + s * h_, _hermite(s, h_, za_, zb_, fa_, fb_))
-
-        def bisect(_, bounds):
-            lo, hi = bounds
-            mid = 0.5 * (lo + hi)
-            below = g_frozen(mid) < 0
-            return jnp.where(below, lo, mid), jnp.where(below, mid, hi)
-
-        lo, hi = jax.lax.fori_loop(0, _BISECTIONS, bisect, (jnp.zeros(()), jnp.ones(())))
-        s = jax.lax.stop_gradient(0.5 * (lo + hi))
-
-        def g(s):
-            return event(system, ta + s * h, _hermite(s, h, za, zb, fa, fb))
-
-        value, slope = jax.jvp(g, (s,), (jnp.ones_like(s),))
-        slope_ok = jnp.abs(jax.lax.stop_gradient(slope)) > 0
-        # One Newton step from the bracketed root: its value moves by ~2^-40, its derivative is −g_θ/g_s.
-        s_new = s - jnp.where(slope_ok, value / jnp.where(slope_ok, slope, 1.0), 0.0)
-        s_new = jnp.clip(s_new, 0.0, 1.0)
-        return ta + s_new * h, _hermite(s_new, h, za, zb, fa, fb)
-
     def interval(carry, xs):
         z, n_events, n_missed = carry
         ta, tb, a, m, is_first = xs
@@ -123,7 +124,7 @@ def integrate(systems, field, event, update, z0s, left, right, aux, member, offs
         off = offsets[m]
 
         def rk4_(ta, tb, z):  # steps in the run's own clock, stored in the shifted one
-            zb, fa, fb = rk4(system, ta - off, tb - off, z, a)
+            zb, fa, fb = _rk4(field, system, ta - off, tb - off, z, a)
             return zb, fa, fb
 
         if not hybrid:
@@ -148,7 +149,7 @@ def integrate(systems, field, event, update, z0s, left, right, aux, member, offs
                 resolve = crossed & (j < MAX_EVENTS)
 
                 def split(_):
-                    tau, z_tau = locate(system, (seg_start - off, tb - off, z_s, zb, fa, fb))
+                    tau, z_tau = _locate(event, system, (seg_start - off, tb - off, z_s, zb, fa, fb))
                     return tau + off, update(system, tau, z_tau)
 
                 end, z_next = jax.lax.cond(resolve, split, lambda _: (tb, zb), None)

@@ -7,7 +7,8 @@ Integrating one (n,) array instead of a pytree of scalars cuts the solver's per-
 named state.
 """
 
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp

@@ -289,3 +289,11 @@ def joint_angle_range(joint: AntagonisticJoint):
     f_lo, f_hi = float(joint.flexor.min_position), float(joint.flexor.max_position)
     e_lo, e_hi = float(joint.extensor.min_position), float(joint.extensor.max_position)
     return max((f_lo - x0) / r, (x0 - e_hi) / r), min((f_hi - x0) / r, (x0 - e_lo) / r)
+
+
+def check_joint_control_loop(loop, name="loop"):
+    """A `PamjaxInputError` naming the argument unless `loop` is a `JointControlLoop` (the type check of the
+    joint-control workflows, kept beside the class)."""
+    if not isinstance(loop, JointControlLoop):
+        raise PamjaxInputError(f"{name} must be a JointControlLoop, got {type(loop).__name__}")
+    return loop
