@@ -25,6 +25,8 @@ import numpy as np  # noqa: E402
 import pamjax as pj  # noqa: E402
 from pamjax import presets  # noqa: E402
 
+FAILED_RESIDUAL = 1e6  # a failed SciPy solve's residual (pamjax's own fit rejects such a trial instead)
+
 FREE = ["valve.coefficients", "muscle.force_law.max_force_coefficients", "muscle.force_law.k0", "muscle.force_law.k1",
         "muscle.volume_law.v0", "muscle.volume_law.v1", "friction.coulomb_force", "friction.viscous_coefficient"]
 NOISE = dict(pressure=2e3, position=1e-4)
@@ -115,7 +117,7 @@ def scipy_residuals(theta, space, exps, counter):
         for c in e.channels:
             out.append((pred[c] - np.asarray(e.data[c])) * np.asarray(e.weights[c]))
     r = np.concatenate(out)
-    return np.where(np.isfinite(r), r, pj._fit.fit.FAILED_RESIDUAL) if not np.all(np.isfinite(r)) else r
+    return np.where(np.isfinite(r), r, FAILED_RESIDUAL) if not np.all(np.isfinite(r)) else r
 
 
 def main():

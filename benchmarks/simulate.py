@@ -29,14 +29,15 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import diffrax as dfx  # noqa: E402
+import equinox as eqx  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
 import pamjax  # noqa: E402
 from pamjax import presets  # noqa: E402
-from pamjax._solve.simulate import _solve_jit  # noqa: E402
 
+_solve_jit = eqx.filter_jit(pamjax.solve)  # the traceable core of simulate, without its Python-side checks
 RTOL = ATOL = 1e-6  # pamjax's defaults; atol on the scaled state (1e5 Pa, 1e-2 m, 1e-2 m/s)
 
 
@@ -53,7 +54,7 @@ def _step(x, w):  # smooth_step
 
 
 def _ellipse_flow(p1, p2, cv, b, area, gas_constant, temperature, r_lam=0.999):
-    """Paper 000 eq. 11 with the ISO 6358 laminar branch (pamjax._physics.gas.EllipseRestriction)."""
+    """Paper 000 eq. 11 with the ISO 6358 laminar branch (pamjax.EllipseRestriction)."""
     forward = p1 >= p2
     p_up, p_down = (p1, p2) if forward else (p2, p1)
     ratio = min(max(p_down / max(p_up, 1.0), 0.0), 1.0)
@@ -172,7 +173,7 @@ def time_pamjax(system, signal, ts, repeats, **kwargs):
     if kwargs.get("stepping", "adaptive") == "adaptive":
         kwargs.setdefault("solver", pamjax.default_solver(system))  # what simulate() picks
     if kwargs.get("stepping") == "pwm":
-        kwargs["num_periods"] = pamjax._solve.synchronous.num_periods(system.valve, float(ts[0]), float(ts[-1]))
+        kwargs["num_periods"] = pamjax.num_periods(system.valve, float(ts[0]), float(ts[-1]))
     start = time.perf_counter()
     traj = jax.block_until_ready(_solve_jit(*args, **kwargs))
     compile_s = time.perf_counter() - start

@@ -26,11 +26,11 @@ import numpy as np
 import scipy.linalg
 
 import pamjax
-from pamjax import presets
-from pamjax._control.closed_loop import (
+from pamjax import (
     ClosedLoop,
     PIController,
     SlidingModeController,
+    presets,
     run_closed_loop,
     simulate_closed_loop,
     tune_controller,

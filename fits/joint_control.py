@@ -16,7 +16,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
-from pamjax._systems.joint_control import (  # noqa: E402
+from pamjax import (  # noqa: E402
     AntagonisticJointController,
     GaitAngle,
     JointControlLoop,

@@ -28,7 +28,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
-from pamjax._physics.regulator import BAR, FLOW_UNIT, check_voltage  # noqa: E402
+from pamjax.units import BAR, FLOW_UNIT  # noqa: E402
 
 PAPER = dict(
     operating_point_V=3.0,  # paper 001 Sect. 5: 3 V reference, 7 bar abs supply
@@ -140,7 +140,9 @@ def main(argv=None):
         raise SystemExit(f"{path} exists; pass --overwrite")
     start = time.perf_counter()
     u = args.voltage
-    check_voltage(u, "--voltage")
+    lo, hi = pj.presets.VPPM_VOLTAGE_RANGE
+    if not lo <= u <= hi:
+        raise SystemExit(f"--voltage must be within the VPPM's {lo:g}-{hi:g} V, got {u}")
     inputs = {"outlet_flow": flow_input}
 
     linear = pj.RegulatorSystem(pj.LinearRegulator(), volume=0.0)  # closed port (eq. 6 identification set-up)

@@ -28,16 +28,12 @@ from scipy.integrate import quad  # noqa: E402
 from scipy.signal import butter, filtfilt  # noqa: E402
 
 import pamjax as pj  # noqa: E402
-from pamjax._physics.gas import ISO8778_DENSITY, ISO8778_TEMPERATURE  # noqa: E402
-from pamjax._physics.regulator import (  # noqa: E402
-    BAR,
-    PAPER001_AIR,
-    TANK_VOLUME,
-    VPPM_HYSTERESIS,
-    ISO6358RegulatorState,
-)
+from pamjax import presets  # noqa: E402
+from pamjax.units import BAR, ISO8778_DENSITY, ISO8778_TEMPERATURE  # noqa: E402
 
-TANK = TANK_VOLUME  # m³, 0.04 (paper 001 appendix)
+PAPER001_AIR = presets.paper001_air()  # R = 286.9 J/(kg K), T = 298 K
+VPPM_HYSTERESIS = presets.VPPM_HYSTERESIS  # Pa
+TANK = presets.PAPER001_TANK_VOLUME  # m³, 0.04 (paper 001 appendix)
 NOISE_TANK = 200.0  # Pa (2 mbar), assumed transducer noise
 NOISE_VALVE = 0.05 * BAR  # Pa, assumed
 P_ATM = float(PAPER001_AIR.atmospheric_pressure)  # Pa abs
@@ -92,7 +88,7 @@ def tank_run(theta, mode, p_row, ts, solver=None):
         system, target, p0, volts = tank_system(c, b, p_row), P_ATM + 10.1 * BAR, P_ATM, 10.0
     else:
         system, target, p0, volts = tank_system(c, b, 7e5), P_ATM, p_row, 0.0
-    y0 = ISO6358RegulatorState(
+    y0 = pj.ISO6358RegulatorState(
         pilot=jnp.asarray(target), pilot_output=jnp.asarray(target), pressure=jnp.asarray(p0, dtype=float)
     )
     traj = pj.simulate(system, pj.Constant(volts), ts, y0=y0, adjoint="forward", rtol=1e-8, atol=1e-8, solver=solver)

@@ -8,6 +8,7 @@ Writes `fit_eq7.json`, `fit_eq6.json` and `static_force.png` to `--out` (default
 """
 
 import argparse
+import importlib.resources
 import pathlib
 
 import jax
@@ -18,7 +19,7 @@ import numpy as np  # noqa: E402
 import pamjax as pj  # noqa: E402
 from pamjax import presets  # noqa: E402
 
-DATA = pathlib.Path(pj.__file__).parent / "data" / "DMSP-20-300_force_map_long.csv"
+DATA = pathlib.Path(str(importlib.resources.files("pamjax") / "data" / "DMSP-20-300_force_map_long.csv"))
 L0 = 0.300  # m, nominal length (type code DMSP-20-300)
 AUTHORS_MAX_ERROR_PERCENT = 2.35  # Martens & Boblan 2017: their model's maximum error on this muscle
 

@@ -26,8 +26,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
-from pamjax._physics.regulator import FLOW_UNIT  # noqa: E402
-from pamjax._systems.regulated import muscle_stiffness  # noqa: E402
+from pamjax.units import FLOW_UNIT  # noqa: E402
 
 PAPER = dict(
     load_force_N=893.0,  # paper 001 Sect. 4 (91.3 kg subject)
@@ -48,7 +47,7 @@ def run(duration, solver=None):
     xdot, pdot = rates.position, rates.regulator.pressure
 
     def stiffness(x, p):
-        return muscle_stiffness(system.muscle, x, p, system.air, None, system.polytropic_index)
+        return pj.muscle_stiffness(system.muscle, x, p, system.air, None, system.polytropic_index)
 
     dk_dt = jax.vmap(lambda *a: jax.jvp(stiffness, a[:2], a[2:])[1])(x, p, xdot, pdot)  # d/dt of eq. 9 along the run
     return dict(

@@ -53,6 +53,7 @@ from ._physics.regulator import (
     AbstractRegulator as AbstractRegulator,
     FeedbackRegulator as FeedbackRegulator,
     ISO6358Regulator as ISO6358Regulator,
+    ISO6358RegulatorState as ISO6358RegulatorState,
     LinearRegulator as LinearRegulator,
     VoltageCalibration as VoltageCalibration,
 )
@@ -113,7 +114,13 @@ from ._solve.discrete import (
 from ._solve.gradcheck import gradient_check as gradient_check
 from ._solve.linearise import StateSpace as StateSpace, equilibrium as equilibrium, linearise as linearise
 from ._solve.rodas import Rodas5 as Rodas5
-from ._solve.simulate import Trajectory as Trajectory, default_solver as default_solver, simulate as simulate
+from ._solve.simulate import (
+    Trajectory as Trajectory,
+    default_solver as default_solver,
+    simulate as simulate,
+    solve as solve,
+)
+from ._solve.synchronous import num_periods as num_periods
 
 # isort: split
 # --- fitting: recordings, experiments, parameters, fit, bench directories, model files ------------------------------
@@ -201,5 +208,5 @@ from ._core.distributed import ProcessInfo as ProcessInfo, initialize_distribute
 from ._core.xla_cpu import xla_cpu_status as xla_cpu_status
 
 # isort: split
-# --- the papers' plants, every number sourced ----------------------------------------------------------------------
-from . import presets as presets
+# --- the papers' plants, every number sourced; unit constants --------------------------------------------------------
+from . import presets as presets, units as units

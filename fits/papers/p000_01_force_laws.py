@@ -14,7 +14,7 @@ import numpy as np
 
 import pamjax as pj
 from pamjax import presets
-from pamjax._cli.reproduce import Result, Row, fits_module, plt, save
+from pamjax.gallery import Result, Row, fits_module, plt, save
 
 PAPER = "000"
 TITLE = "McKibben geometry and force laws (eq. 1-7), muscle volume (eq. 14, Fig. 10)"
@@ -130,6 +130,6 @@ def run(out, quick=False):
 
 
 if __name__ == "__main__":
-    from pamjax._cli.reproduce import script_main
+    from pamjax.gallery import script_main
 
     script_main(__name__)

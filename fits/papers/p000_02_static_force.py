@@ -13,7 +13,7 @@ import numpy as np
 
 import pamjax as pj
 from pamjax import presets
-from pamjax._cli.reproduce import Result, Row, fits_module, plt, save
+from pamjax.gallery import Result, Row, fits_module, plt, save
 
 PAPER = "000"
 TITLE = "Static force map with hysteresis (eq. 7-8, Figs. 3-5)"
@@ -126,6 +126,6 @@ def run(out, quick=False):
 
 
 if __name__ == "__main__":
-    from pamjax._cli.reproduce import script_main
+    from pamjax.gallery import script_main
 
     script_main(__name__)

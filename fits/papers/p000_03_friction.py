@@ -13,7 +13,7 @@ import numpy as np
 
 import pamjax as pj
 from pamjax import presets
-from pamjax._cli.reproduce import Result, Row, plt, save
+from pamjax.gallery import Result, Row, plt, save
 
 PAPER = "000"
 TITLE = "Friction against velocity from constant-velocity runs (eq. 9, Fig. 6)"
@@ -85,6 +85,6 @@ def run(out, quick=False):
 
 
 if __name__ == "__main__":
-    from pamjax._cli.reproduce import script_main
+    from pamjax.gallery import script_main
 
     script_main(__name__)

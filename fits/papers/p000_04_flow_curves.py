@@ -11,7 +11,7 @@ import numpy as np
 
 import pamjax as pj
 from pamjax import presets
-from pamjax._cli.reproduce import Result, Row, plt, save
+from pamjax.gallery import Result, Row, plt, save
 
 PAPER = "000"
 TITLE = "Valve flow-rate curves per path, C_v and b_v (eq. 10-11, Table 1, Fig. 7)"
@@ -100,6 +100,6 @@ def run(out, quick=False):
 
 
 if __name__ == "__main__":
-    from pamjax._cli.reproduce import script_main
+    from pamjax.gallery import script_main
 
     script_main(__name__)

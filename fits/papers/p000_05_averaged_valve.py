@@ -6,7 +6,7 @@ mass flow by eq. 12 (Fig. 8's estimates), the surface fitted (Fig. 9). Both scor
 the valve's usable 10-90 % duty, in % of the flow range, beside the paper's fit to its measurements.
 """
 
-from pamjax._cli.reproduce import Result, Row, fits_module
+from pamjax.gallery import Result, Row, fits_module
 
 PAPER = "000"
 TITLE = "Averaged valve, eq. 13 bi-polynomial (eq. 12-13, Figs. 8-9)"
@@ -35,6 +35,6 @@ def run(out, quick=False):
 
 
 if __name__ == "__main__":
-    from pamjax._cli.reproduce import script_main
+    from pamjax.gallery import script_main
 
     script_main(__name__)

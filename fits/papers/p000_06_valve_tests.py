@@ -14,7 +14,7 @@ import numpy as np
 
 import pamjax as pj
 from pamjax import presets
-from pamjax._cli.reproduce import Result, Row, bench_folder, fits_module, plt, save
+from pamjax.gallery import Result, Row, bench_folder, fits_module, plt, save
 
 PAPER = "000"
 TITLE = "Valve tests on a constant volume (Figs. 11-12), silencer, 10-90 % duty, Table 1 from tank tests"
@@ -137,6 +137,6 @@ def tank_fit(bench, rate):
 
 
 if __name__ == "__main__":
-    from pamjax._cli.reproduce import script_main
+    from pamjax.gallery import script_main
 
     script_main(__name__)

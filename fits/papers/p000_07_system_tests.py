@@ -17,9 +17,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import pamjax as pj
-from pamjax import presets
-from pamjax._cli.reproduce import Result, Row, bench_folder, fits_module, plt, save
-from pamjax._physics.friction import KarnoppFriction
+from pamjax import KarnoppFriction, presets
+from pamjax.gallery import Result, Row, bench_folder, fits_module, plt, save
 
 PAPER = "000"
 TITLE = "Muscle and 9.6 kg under triangle duty, models vs bench (eq. 15-16, Figs. 13-14)"
@@ -93,6 +92,6 @@ def run(out, quick=False):
 
 
 if __name__ == "__main__":
-    from pamjax._cli.reproduce import script_main
+    from pamjax.gallery import script_main
 
     script_main(__name__)

@@ -15,8 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import pamjax as pj
-from pamjax._cli.reproduce import Result, Row, fits_module, plt, save
-from pamjax._physics.friction import KarnoppFriction
+from pamjax import KarnoppFriction
+from pamjax.gallery import Result, Row, fits_module, plt, save
 
 PAPER = "000"
 TITLE = "PWM frequency: pressure ripple, chattering at 25 Hz, resolution at 100 Hz (text)"
@@ -92,6 +92,6 @@ def run(out, quick=False):
 
 
 if __name__ == "__main__":
-    from pamjax._cli.reproduce import script_main
+    from pamjax.gallery import script_main
 
     script_main(__name__)

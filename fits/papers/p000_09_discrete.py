@@ -11,7 +11,7 @@ import numpy as np
 
 import pamjax as pj
 from pamjax import presets
-from pamjax._cli.reproduce import Result, Row, plt, save
+from pamjax.gallery import Result, Row, plt, save
 
 PAPER = "000"
 TITLE = "Discrete-time state-space model (eq. 17-21)"
@@ -57,6 +57,6 @@ def run(out, quick=False):
 
 
 if __name__ == "__main__":
-    from pamjax._cli.reproduce import script_main
+    from pamjax.gallery import script_main
 
     script_main(__name__)

@@ -12,9 +12,8 @@ potentiometer noise sampled every 0.1 ms (the paper's dSpace rate) the different
 import numpy as np
 
 import pamjax as pj
-from pamjax import presets
-from pamjax._cli.reproduce import Result, Row, bench_folder, plt, save
-from pamjax._control.closed_loop import ClosedLoop, simulate_closed_loop
+from pamjax import ClosedLoop, presets, simulate_closed_loop
+from pamjax.gallery import Result, Row, bench_folder, plt, save
 
 PAPER = "000"
 TITLE = "PI position control (Figs. 15-16), derivative term with measurement noise (text)"
@@ -101,6 +100,6 @@ def run(out, quick=False):
 
 
 if __name__ == "__main__":
-    from pamjax._cli.reproduce import script_main
+    from pamjax.gallery import script_main
 
     script_main(__name__)

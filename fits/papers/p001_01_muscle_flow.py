@@ -19,8 +19,9 @@ import numpy as np
 from scipy import signal as sps
 
 import pamjax as pj
-from pamjax._cli.reproduce import Result, Row, plt, save
-from pamjax._physics.regulator import BAR, EQ6_TIME_CONSTANTS, EQ7_GAIN, FLOW_UNIT
+from pamjax.gallery import Result, Row, plt, save
+from pamjax.presets import EQ6_TIME_CONSTANTS, EQ7_GAIN
+from pamjax.units import BAR, FLOW_UNIT
 
 PAPER = "001"
 TITLE = "Valve flow into the muscle: eq. 3 terms, inlet vs outlet, global vs voltage-only model (Figs. 5, 6, 11)"
@@ -143,6 +144,6 @@ def run(out, quick=False):
 
 
 if __name__ == "__main__":
-    from pamjax._cli.reproduce import script_main
+    from pamjax.gallery import script_main
 
     script_main(__name__)

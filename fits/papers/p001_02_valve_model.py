@@ -18,8 +18,8 @@ from scipy import signal as sps
 from scipy.optimize import brentq
 
 import pamjax as pj
-from pamjax._cli.reproduce import Result, Row, fits_module, plt, save
-from pamjax._physics.regulator import BAR, FLOW_UNIT
+from pamjax.gallery import Result, Row, fits_module, plt, save
+from pamjax.units import BAR, FLOW_UNIT
 
 PAPER = "001"
 TITLE = "Linear valve model: bandwidths, 3.69 Hz, eq. 8, G_Vref identification, Figs. 7-10"
@@ -182,6 +182,6 @@ def run(out, quick=False):
 
 
 if __name__ == "__main__":
-    from pamjax._cli.reproduce import script_main
+    from pamjax.gallery import script_main
 
     script_main(__name__)

@@ -8,7 +8,7 @@ the paper's claimed "equivalence" of eq. 10 and eq. 11 measured as a correlation
 
 import diffrax as dfx
 
-from pamjax._cli.reproduce import Result, Row, fits_module
+from pamjax.gallery import Result, Row, fits_module
 
 PAPER = "001"
 TITLE = "Muscle stiffness and its rate vs valve flow (eq. 9-11, Fig. 12)"
@@ -39,6 +39,6 @@ def run(out, quick=False):
 
 
 if __name__ == "__main__":
-    from pamjax._cli.reproduce import script_main
+    from pamjax.gallery import script_main
 
     script_main(__name__)

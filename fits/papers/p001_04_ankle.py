@@ -9,7 +9,7 @@ import diffrax as dfx
 import numpy as np
 
 import pamjax as pj
-from pamjax._cli.reproduce import Result, Row, fits_module, plt, save
+from pamjax.gallery import Result, Row, fits_module, plt, save
 
 PAPER = "001"
 TITLE = "Future work: antagonistic pair on an ankle joint (Sect. 7)"
@@ -44,6 +44,6 @@ def run(out, quick=False):
 
 
 if __name__ == "__main__":
-    from pamjax._cli.reproduce import script_main
+    from pamjax.gallery import script_main
 
     script_main(__name__)

@@ -15,8 +15,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from pamjax import presets
-from pamjax._cli.reproduce import Result, Row, fits_module, plt, save
-from pamjax._physics.regulator import BAR, PAPER001_AIR
+from pamjax.gallery import Result, Row, fits_module, plt, save
+from pamjax.units import BAR
+
+PAPER001_AIR = presets.paper001_air()  # R = 286.9 J/(kg K), T = 298 K
 
 PAPER = "001"
 TITLE = "Sonic conductance and critical ratio from tank tests (Tables 1-2, eq. 1-2, 12-14, Figs. 13-14)"
@@ -137,6 +139,6 @@ def run(out, quick=False):
 
 
 if __name__ == "__main__":
-    from pamjax._cli.reproduce import script_main
+    from pamjax.gallery import script_main
 
     script_main(__name__)
