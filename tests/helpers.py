@@ -335,3 +335,13 @@ def np_stick_slip_run(plant, duties, ts, *, f=50.0, t_on=2e-3, t_off=2e-3, rtol=
     p = np.interp(ts, times, states[:, 0])
     x = np.interp(ts, times, states[:, 1])
     return p, x
+
+
+def checkout_env():
+    """The environment for a script run in a subprocess (`python fits/x.py`): the checkout's pamjax first on the
+    path, so the script runs against the code under test, not another installed copy."""
+    import os
+    import pathlib
+
+    root = str(pathlib.Path(__file__).resolve().parents[1])
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([root, os.environ.get("PYTHONPATH", "")])}

@@ -6,12 +6,14 @@ import math
 import subprocess
 import sys
 
+from helpers import checkout_env
+
 SCRIPT = "fits/averaged_valve.py"
 
 
 def _run(out, *extra):
     return subprocess.run([sys.executable, SCRIPT, "--out", str(out), "--quick", *extra], capture_output=True,
-                          text=True)
+                          text=True, env=checkout_env())
 
 
 def test_quick_run_reports_both_routes_and_refuses_to_overwrite(tmp_path):

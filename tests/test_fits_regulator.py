@@ -10,6 +10,7 @@ import sys
 
 import numpy as np
 import pytest
+from helpers import checkout_env
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("fits_regulator", ROOT / "fits" / "regulator.py")
@@ -23,6 +24,7 @@ def _run(script, out, *extra):
         capture_output=True,
         text=True,
         cwd=ROOT,
+        env=checkout_env(),
     )
 
 

@@ -6,6 +6,7 @@ import sys
 import textwrap
 
 import pytest
+from helpers import checkout_env
 
 from pamjax import PamjaxInputError
 from pamjax._cli.fit import load_config
@@ -41,10 +42,10 @@ def test_example_config_loads():
 
 def test_static_force_script_matches_authors_max_error(tmp_path):
     out = subprocess.run([sys.executable, "fits/static_force.py", "--out", str(tmp_path)], capture_output=True,
-                         text=True, check=True).stdout
+                         text=True, check=True, env=checkout_env()).stdout
     line = next(ln for ln in out.splitlines() if ln.startswith("eq. 7"))
     max_percent = float(line.split("max error")[1].split("(")[1].split("%")[0])
     assert max_percent < 2.35, line
     again = subprocess.run([sys.executable, "fits/static_force.py", "--out", str(tmp_path)], capture_output=True,
-                           text=True)
+                           text=True, env=checkout_env())
     assert again.returncode != 0 and "exists" in again.stderr

@@ -108,9 +108,10 @@ def test_vmap_over_duties_equals_loop():
     ts = jnp.linspace(0.0, 0.04, 5)
     y0 = system.initial_state(pressure=3e5)
     duties = jnp.asarray([0.2, 0.5, 0.8])
+    periods = pamjax.num_periods(system.valve, 0.0, 0.04)  # step boundaries around the smoothed edges, as simulate
 
     def run(u):
-        return solve(system, pamjax.Constant(u), ts, y0, ts[0], rtol=1e-8, atol=1e-8).position
+        return solve(system, pamjax.Constant(u), ts, y0, ts[0], rtol=1e-8, atol=1e-8, num_periods=periods).position
 
     batched = eqx.filter_jit(jax.vmap(run))(duties)
     looped = [eqx.filter_jit(run)(u) for u in duties]
