@@ -298,3 +298,10 @@ from ._sweep_maps import (
 from ._synthetic import synthetic_recording as synthetic_recording  # noqa: E402
 from ._tabulated import TabulatedISO6358Restriction as TabulatedISO6358Restriction  # noqa: E402
 from ._xla_cpu import xla_cpu_status as xla_cpu_status  # noqa: E402
+
+# --- identifiability (issue 17): profile likelihoods and experiment design ---------------------------------------
+from ._design import DesignResult as DesignResult  # noqa: E402
+from ._design import design as design
+from ._profile import Profile as Profile  # noqa: E402
+from ._profile import ProfileResult as ProfileResult
+from ._profile import profile as profile

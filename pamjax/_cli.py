@@ -9,6 +9,7 @@ _COMMANDS = {
     "demo": ("pamjax._demo", "Run paper 000's valve and system experiments with the preset; print and plot them."),
     "fit": ("pamjax._cli_fit", "Fit parameters to recordings as described by a TOML config."),
     "sweep": ("pamjax._cli_sweep", "Run a batch sweep described by a TOML config; write NPZ/CSV and a figure."),
+    "design": ("pamjax._cli_design", "Design a PWM duty experiment by gradient; write the signal as CSV and a figure."),
 }
 
 

@@ -27,6 +27,8 @@ def add_arguments(parser):
     parser.add_argument("--overwrite", action="store_true", help="replace an existing results file")
     parser.add_argument("--quiet", action="store_true", help="no per-iteration progress")
     parser.add_argument("--no-plot", action="store_true", help="skip the figure")
+    parser.add_argument("--profile", action="store_true", help="also profile every fitted parameter: write "
+                        "profile.json and profile.png (pamjax.profile, docs/identifiability.md)")
 
 
 def check_keys(table, valid, where):
@@ -206,7 +208,8 @@ def run(args):
     model, experiments, free, options, out_cfg = load_config(args.config)
     out = pathlib.Path(args.out or out_cfg or f"results/{pathlib.Path(args.config).stem}")
     result_path = out / "fit.json"
-    for existing in (result_path, out / "fit.png"):
+    profile_files = (out / "profile.json", out / "profile.png") if args.profile else ()
+    for existing in (result_path, out / "fit.png") + profile_files:
         if existing.exists() and not args.overwrite:
             raise SystemExit(f"{existing} exists; pass --overwrite to replace it")
     print(f"fitting {len(free)} parameter entries to {len(experiments)} experiments "
@@ -228,4 +231,6 @@ def run(args):
             print(f"wrote {result_path} and {out / 'fit.png'}")
         except ModuleNotFoundError:
             print(f"wrote {result_path} (no figure: matplotlib is not installed)")
+    if args.profile:  # issue 17: pamjax._profile
+        pj.profile(res, progress=not args.quiet).write(out, overwrite=args.overwrite, report=True)
     return 0

@@ -42,7 +42,8 @@ class FitResult:
     - `history`: per iteration [step, cost at the current point, damping λ, accepted].
     - `fit_s`, `compile_s`: wall time of the fit without compilation, and the compilation (each compiled
       function's first call less its median later call).
-    - `model`: the fitted model (not stored in JSON; `apply(base_model)` rebuilds it).
+    - `model`: the fitted model (not stored in JSON; `apply(base_model)` rebuilds it); `experiments`: the
+      experiments as fitted (not stored in JSON; `pamjax.profile` re-optimises against them).
     """
 
     labels: list
@@ -67,9 +68,11 @@ class FitResult:
     compile_s: float
     num_residuals: int
     model: object = dataclasses.field(default=None, repr=False, compare=False)
+    experiments: object = dataclasses.field(default=None, repr=False, compare=False)  # as fitted (pamjax.profile)
 
     def to_dict(self):
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "model"}
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in ("model",
+                                                                                                  "experiments")}
 
     @classmethod
     def from_dict(cls, d):
@@ -438,6 +441,7 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
         compile_s=0.0,
         num_residuals=used,
         model=fitted,
+        experiments=exps,
     )
     if math.isnan(res.cost):
         raise RuntimeError("fit produced a NaN cost; this is a bug in pamjax")
