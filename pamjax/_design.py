@@ -10,7 +10,6 @@ import dataclasses
 import inspect
 import json
 import math
-import pathlib
 import threading
 import time
 
@@ -24,7 +23,7 @@ from ._experiment import Experiment
 from ._fit import _residuals_and_jacobian
 from ._inputs import AbstractSignal, Sampled, Triangle
 from ._parameters import ParameterSpace, strong_types
-from ._recording import Recording
+from ._recording import Recording, _writable
 
 # Defaults and their sources.
 DUTY_BAND = (0.1, 0.9)  # paper 000: with the MHE2's ~2 ms switching time, only duty 10-90 % has an effect at 50 Hz
@@ -125,14 +124,6 @@ class DesignResult:
         from ._design_plot import plot_design
 
         return plot_design(self, path)
-
-
-def _writable(path, overwrite):
-    path = pathlib.Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    return path
 
 
 def information(space, theta, experiments):

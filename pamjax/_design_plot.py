@@ -43,7 +43,8 @@ def plot_design(result, path):
         axes[3].bar(k + (j - (len(series) - 1) / 2) * width, 100 * rel, width, color=color,
                     label={"prior": "prior experiments alone"}.get(name, name))
     axes[3].set_yscale("log")
-    axes[3].set_xticks(k, [lbl.split(".")[-1] for lbl in result.labels], rotation=45, ha="right", fontsize=8)
+    short = [".".join(lbl.split(".")[-2:]) if lbl.count(".") > 1 else lbl for lbl in result.labels]
+    axes[3].set_xticks(k, short, rotation=45, ha="right", fontsize=8)
     axes[3].set(ylabel="predicted standard error [% of value]")
     axes[3].legend(fontsize=8)
     fig.tight_layout()

@@ -38,6 +38,7 @@ from . import _lm
 from ._errors import PamjaxInputError, require_float64
 from ._fit import _residuals, _residuals_and_jacobian
 from ._parameters import ParameterSpace
+from ._recording import _writable
 
 FLAT = 1e-3  # Δχ²: a profile within this of its minimum over its whole span on both sides is flat (structural)
 BISECTIONS = 3  # re-fits bisecting the step across the threshold (the interval's end to ~1/8 of a step, then
@@ -90,10 +91,8 @@ class ProfileResult:
         return dataclasses.asdict(self)
 
     def to_json(self, path, overwrite=False):
-        path = pathlib.Path(path)
-        if path.exists() and not overwrite:
-            raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
-        path.parent.mkdir(parents=True, exist_ok=True)
+        """Write the result; refuses to replace an existing file unless `overwrite`."""
+        path = _writable(path, overwrite)
         path.write_text(json.dumps(self.to_dict(), indent=1))
         return path
 
