@@ -1,11 +1,13 @@
 """Reliability figures (issue 7): gradients vs finite differences, NaN-safety, failure handling, bad input,
 recovery from random starts, determinism.
 
-    python benchmarks/reliability.py            # full figures (20 gradient sets, 10,000 NaN-search inputs, ...)
-    python benchmarks/reliability.py --quick    # smoke-size
+    python benchmarks/reliability.py                    # full figures (20 gradient sets, 10,000 NaN inputs, ...)
+    python benchmarks/reliability.py --quick            # smoke-size
+    python benchmarks/reliability.py --only bad_inputs  # the bad-input catalogues alone (a few minutes)
 
 Ends with `RESULT grad_pass=... worst_grad_rel=... nan_count=... bad_input_named=... recovery_rate=...
-deterministic=...`.
+deterministic=... workflow_cases=... silent_wrong=... lost_work=... tracebacks=...` (the last four from the file and
+command-line catalogue, `tests/reliability/bad_inputs_cli.py`: every case a correct result or a named error).
 """
 
 import argparse
@@ -141,11 +143,34 @@ def determinism():
     return bool(loop_equal and repeat_equal and same_fit and resume_equal)
 
 
+def workflow_catalogue():
+    """The file and command-line catalogue (issue 15): configs, CSV, units, paths, concurrency, interrupts, resume
+    mismatches, solves, the fitted model carried onward; each case a correct result or a named error."""
+    from tests.reliability.bad_inputs_cli import CASES, summary
+
+    t = time.perf_counter()
+    counts = summary(report=lambda line: print(line, flush=True))
+    classes = sorted({c for c, *_ in CASES.values()})
+    print(f"  {counts['ok']}/{counts['total']} cases a correct result or a named error ({', '.join(classes)}); "
+          f"silent wrong {counts['silent_wrong']}, lost work {counts['lost_work']}, tracebacks {counts['traceback']}, "
+          f"unnamed {counts['unnamed']} ({time.perf_counter() - t:.0f} s)")
+    return counts
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--only", choices=["bad_inputs"], help="run only this part")
     args = parser.parse_args()
     print(f"pamjax reliability, jax {jax.__version__}, {os.cpu_count()} CPUs")
+    if args.only == "bad_inputs":
+        named, total = bad_inputs()
+        print(f"bad input: {named}/{total} cases raise an error naming the field")
+        print("file and command-line workflow (bad_inputs_cli.py):")
+        w = workflow_catalogue()
+        print(f"RESULT bad_input_named={named} workflow_cases={w['total']} silent_wrong={w['silent_wrong']} "
+              f"lost_work={w['lost_work']} tracebacks={w['traceback']}")
+        return
     n_sets, periods, n_nan = (2, 20, 500) if args.quick else (20, 20, 2375)
     print("gradients vs central finite differences (smooth PWM muscle system, 20 PWM periods, rtol=atol=1e-12):")
     grad_pass, worst, worst_modes, worst_name = gradients(n_sets, periods)
@@ -162,6 +187,8 @@ def main():
     )
     named, total = bad_inputs()
     print(f"bad input: {named}/{total} cases raise an error naming the field")
+    print("file and command-line workflow (bad_inputs_cli.py):")
+    w = workflow_catalogue()
     deterministic = determinism()
     print(f"determinism (bitwise): {deterministic}")
     recovery_rate = float("nan")
@@ -173,7 +200,9 @@ def main():
         print("recovery: not measured (no fitting workflow available)")
     print(
         f"RESULT grad_pass={grad_pass:.3f} worst_grad_rel={worst:.2e} nan_count={nan_count} "
-        f"bad_input_named={named} recovery_rate={recovery_rate:.3f} deterministic={deterministic}"
+        f"bad_input_named={named} recovery_rate={recovery_rate:.3f} deterministic={deterministic} "
+        f"workflow_cases={w['total']} silent_wrong={w['silent_wrong']} lost_work={w['lost_work']} "
+        f"tracebacks={w['traceback']}"
     )
 
 

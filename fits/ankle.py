@@ -29,7 +29,7 @@ def gait_angle(t, f):
     return 0.18 * np.sin(w) + 0.08 * np.sin(2 * w + 1.0)
 
 
-def run(joint, f, pressure_sum, rate=200.0):
+def run(joint, f, pressure_sum, rate=200.0, solver=None):
     cycles = 1.0 if f < 0.3 else 2.0
     t = np.arange(0.0, cycles / f, 1.0 / rate)
     theta = gait_angle(t, f)
@@ -39,7 +39,7 @@ def run(joint, f, pressure_sum, rate=200.0):
         pj.Sampled(jnp.asarray(t), jnp.asarray(volts[0])), pj.Sampled(jnp.asarray(t), jnp.asarray(volts[1]))
     )
     y0 = joint.initial_state(pressures[0][0], pressures[1][0])
-    traj = pj.simulate(joint, signal, jnp.asarray(t), y0=y0, max_steps=500_000)
+    traj = pj.simulate(joint, signal, jnp.asarray(t), y0=y0, max_steps=500_000, solver=solver)
     angle = np.asarray(traj.position)
     stiffness = np.asarray(jax.vmap(joint.stiffness)(traj.position, traj.pressure[:, 0], traj.pressure[:, 1]))
     rmse = float(np.sqrt(np.mean((angle - theta) ** 2)))

@@ -142,6 +142,30 @@ def plot(path, u, p, ref, direct, procedure, samples, report, valve, air):
     plt.close(fig)
 
 
+def compute(quick=False):
+    """Both routes scored on the cycle-averaged flow: (report, arguments of `plot` after its path)."""
+    air, valve = pj.Air(), presets.mas10_valve("smooth")
+    n_u, n_p = (17, 17) if quick else (33, 41)
+    direct, _ = pj.fit_averaged_valve(valve, air, commands=jnp.linspace(*USABLE_DUTY, n_u),
+                                      pressures=jnp.linspace(air.atmospheric_pressure, valve.supply_pressure, n_p))
+    duties = np.linspace(0.15, 0.85, 4 if quick else 8)
+    procedure, samples = paper_route(valve, air, np.random.default_rng(0), duties, 1.0 if quick else 1.5)
+    u, p, ref = reference_grid(valve, air)
+    flow_direct, flow_procedure = surface(direct, u, p, air), surface(procedure, u, p, air)
+    report = dict(
+        paper=PAPER,
+        cycle_average_fit=score(flow_direct, ref),
+        tank_procedure=score(flow_procedure, ref),
+        flow_range_kg_s=float(np.ptp(ref)),
+        m_cycle_average_fit=np.asarray(direct.coefficients).ravel().tolist(),
+        m_tank_procedure=np.asarray(procedure.coefficients).ravel().tolist(),
+        quick=quick,
+        note=f"scored on duty {USABLE_DUTY[0]}-{USABLE_DUTY[1]} (the valve's usable range) x pressure p_atm..p_s, "
+             f"{SCORE_GRID} x {SCORE_GRID} grid; m1..m9 in SI (kg/s, Pa gauge), row-major over (u power, p power)",
+    )
+    return report, (u, p, ref, flow_direct, flow_procedure, samples, report, valve, air)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="results/averaged_valve")
@@ -153,25 +177,7 @@ def main():
     for path in (json_path, png_path):
         if path.exists() and not args.overwrite:
             raise SystemExit(f"{path} exists; pass --overwrite to replace it")
-    air, valve = pj.Air(), presets.mas10_valve("smooth")
-    n_u, n_p = (17, 17) if args.quick else (33, 41)
-    direct, _ = pj.fit_averaged_valve(valve, air, commands=jnp.linspace(*USABLE_DUTY, n_u),
-                                      pressures=jnp.linspace(air.atmospheric_pressure, valve.supply_pressure, n_p))
-    duties = np.linspace(0.15, 0.85, 4 if args.quick else 8)
-    procedure, samples = paper_route(valve, air, np.random.default_rng(0), duties, 1.0 if args.quick else 1.5)
-    u, p, ref = reference_grid(valve, air)
-    flow_direct, flow_procedure = surface(direct, u, p, air), surface(procedure, u, p, air)
-    report = dict(
-        paper=PAPER,
-        cycle_average_fit=score(flow_direct, ref),
-        tank_procedure=score(flow_procedure, ref),
-        flow_range_kg_s=float(np.ptp(ref)),
-        m_cycle_average_fit=np.asarray(direct.coefficients).ravel().tolist(),
-        m_tank_procedure=np.asarray(procedure.coefficients).ravel().tolist(),
-        quick=args.quick,
-        note=f"scored on duty {USABLE_DUTY[0]}-{USABLE_DUTY[1]} (the valve's usable range) x pressure p_atm..p_s, "
-             f"{SCORE_GRID} x {SCORE_GRID} grid; m1..m9 in SI (kg/s, Pa gauge), row-major over (u power, p power)",
-    )
+    report, plot_args = compute(args.quick)
     for k in ("paper", "cycle_average_fit", "tank_procedure"):
         print(
             f"{k:<18} max error {report[k]['max_error_percent']:6.2f} %   "
@@ -179,7 +185,7 @@ def main():
         )
     out.mkdir(parents=True, exist_ok=True)
     json_path.write_text(json.dumps(report, indent=1))
-    plot(png_path, u, p, ref, flow_direct, flow_procedure, samples, report, valve, air)
+    plot(png_path, *plot_args)
     print(f"wrote {json_path} and {png_path}")
 
 

@@ -40,6 +40,8 @@ def parse_args(argv=None):
     ap.add_argument("--max-steps", type=int, default=100, help="Levenberg-Marquardt trial steps at most")
     ap.add_argument("--overwrite", action="store_true", help="replace existing results in --out")
     ap.add_argument("--quiet", action="store_true", help="no per-iteration progress")
+    ap.add_argument("--multistart", type=int, default=1,
+                    help="fit from this many starts (the presets and draws around them) and keep the best")
     return ap.parse_args(argv)
 
 
@@ -80,7 +82,13 @@ def main(argv=None):
     print(f"bench {data}: {len(bench.experiments)} experiments ({', '.join(e.name for e in bench.experiments)}); "
           f"left out: {bench.skipped or 'none'}; noise {bench.noise}")
     t0 = time.perf_counter()
-    res = pj.fit(model, bench.experiments, bench.free, max_steps=args.max_steps, progress=not args.quiet)
+    if args.multistart > 1:
+        runs = pj.multistart(model, bench.experiments, bench.free, starts=args.multistart, max_steps=args.max_steps,
+                             progress=not args.quiet)
+        print(runs.table())
+        res = runs.best
+    else:
+        res = pj.fit(model, bench.experiments, bench.free, max_steps=args.max_steps, progress=not args.quiet)
     wall = time.perf_counter() - t0
     values, errors = pj.bench_values(res, bench.fitted_keys)
     full = bench if args.rate is None else pj.load_bench(data, model, rate=None)

@@ -24,7 +24,6 @@ import jax
 jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-import optimistix as optx  # noqa: E402
 from scipy.integrate import quad  # noqa: E402
 from scipy.signal import butter, filtfilt  # noqa: E402
 
@@ -85,9 +84,9 @@ def tank_system(c_si, b, supply):
     return pj.RegulatorSystem(reg, volume=TANK)
 
 
-def tank_run(theta, mode, p_row, ts):
+def tank_run(theta, mode, p_row, ts, solver=None):
     """Tank pressure [Pa] for θ = (log C [m³/(s Pa)], scaled logit of b), charging at supply p_row or discharging from
-    p_row (main stage fully open: pilot at 10.1 bar gauge, or at atmosphere)."""
+    p_row (main stage fully open: pilot at 10.1 bar gauge, or at atmosphere); `solver`: `simulate`'s default or any."""
     c, b = jnp.exp(theta[0]), _to_b(theta[1])  # b kept inside B_BOUNDS
     if mode == "charge":
         system, target, p0, volts = tank_system(c, b, p_row), P_ATM + 10.1 * BAR, P_ATM, 10.0
@@ -96,7 +95,7 @@ def tank_run(theta, mode, p_row, ts):
     y0 = ISO6358RegulatorState(
         pilot=jnp.asarray(target), pilot_output=jnp.asarray(target), pressure=jnp.asarray(p0, dtype=float)
     )
-    traj = pj.simulate(system, pj.Constant(volts), ts, y0=y0, adjoint="forward", rtol=1e-8, atol=1e-8)
+    traj = pj.simulate(system, pj.Constant(volts), ts, y0=y0, adjoint="forward", rtol=1e-8, atol=1e-8, solver=solver)
     return traj.pressure
 
 
@@ -108,6 +107,7 @@ def _residuals(mode, theta, args):
 RESIDUALS = {mode: functools.partial(_residuals, mode) for mode in ("charge", "discharge")}  # one compile per mode
 _COST = {mode: jax.jit(lambda theta, args, f=f: jnp.sum(f(theta, args) ** 2)) for mode, f in RESIDUALS.items()}
 _JACOBIAN = {mode: jax.jit(jax.jacfwd(f)) for mode, f in RESIDUALS.items()}
+_RESIDUALS_JIT = {mode: jax.jit(f) for mode, f in RESIDUALS.items()}
 
 
 def start_values(mode, p_row, ts, data):
@@ -134,65 +134,68 @@ def fit_tank(mode, p_row, c_true, b_true, rng, quick):
     data = tank_run(truth, mode, p_row, ts) + NOISE_TANK * rng.standard_normal(ts.shape)
     c0, b0 = start_values(mode, p_row, ts, data)
     args = (jnp.asarray(p_row, dtype=float), ts, data)
-    sol = optx.least_squares(
-        RESIDUALS[mode],
-        optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8),
-        jnp.array([np.log(c0), _from_b(b0)]),
-        args=args,
-        max_steps=100,
-        throw=False,
-    )
+
+    def residuals(theta):
+        r = np.asarray(_RESIDUALS_JIT[mode](jnp.asarray(theta), args))
+        return r if np.all(np.isfinite(r)) else None
+
+    def jacobian(theta):
+        return np.asarray(_RESIDUALS_JIT[mode](jnp.asarray(theta), args)), np.asarray(
+            _JACOBIAN[mode](jnp.asarray(theta), args))
+
+    sol = pj.levenberg_marquardt(residuals, jacobian, np.array([np.log(c0), _from_b(b0)]), max_steps=100,
+                                 ftol=1e-12, xtol=1e-10)
     # 1σ from the Gauss-Newton covariance (JᵀJ)⁻¹ (residuals are already in noise units), mapped to C and b
-    jac = np.asarray(_JACOBIAN[mode](sol.value, args))
+    jac = sol.jacobian
     cov = np.linalg.inv(jac.T @ jac)
-    b_fit = float(_to_b(sol.value[1]))
+    b_fit = float(_to_b(sol.theta[1]))
     db_dz = (b_fit - B_BOUNDS[0]) * (B_BOUNDS[1] - b_fit) / (B_BOUNDS[1] - B_BOUNDS[0])
     return dict(
         C_start=c0,
         b_start=b0,
-        C_fit=float(jnp.exp(sol.value[0])),
+        C_fit=float(np.exp(sol.theta[0])),
         b_fit=b_fit,
         C_sigma_percent=100 * float(np.sqrt(cov[0, 0])),
         b_sigma=float(db_dz * np.sqrt(cov[1, 1])),
         horizon_s=float(ts[-1]),
         samples=int(ts.size),
-        steps=int(sol.stats["num_steps"]),
-        converged=bool(sol.result == optx.RESULTS.successful),
+        steps=int(sol.step),
+        converged=bool(sol.reason.startswith("converged")),
     )
 
 
-def valve_response(params, ts):
-    """Closed-port outlet pressure [Pa abs] of eq. 6 with params = (gain [bar/V], τ1 [s], τ2 [s])."""
+def valve_response(params, ts, solver=None):
+    """Closed-port outlet pressure [Pa abs] of eq. 6 with params = (gain [bar/V], τ1 [s], τ2 [s]); `solver`:
+    `simulate`'s default or any."""
     gain, t1, t2 = params
     reg = pj.LinearRegulator(
         calibration=pj.VoltageCalibration(voltage=(0.0, 10.0), gauge_pressure=jnp.stack([0.0, 10.0 * gain * BAR])),
         time_constants=jnp.stack([t1, t2]),
     )
     return pj.simulate(
-        pj.RegulatorSystem(reg, volume=0.0), pj.SquareWave(0.0, 3.0, 1.5), ts, rtol=1e-9, atol=1e-9, adjoint="forward"
+        pj.RegulatorSystem(reg, volume=0.0), pj.SquareWave(0.0, 3.0, 1.5), ts, rtol=1e-9, atol=1e-9, adjoint="forward",
+        solver=solver,
     ).pressure
 
 
-def fit_valve(rng, quick):
+def fit_valve(rng, quick, solver=None):
     rate = 500.0  # Hz sampling (assumed; the NI USB-6009 samples up to 48 kS/s)
     ts = jnp.arange(0.0, 4.0 if quick else 8.0, 1.0 / rate)
     truth = jnp.array([1.01, 0.041, 0.023])  # eq. 6
-    measured = np.asarray(valve_response(truth, ts)) + NOISE_VALVE * rng.standard_normal(ts.shape)
+    measured = np.asarray(valve_response(truth, ts, solver)) + NOISE_VALVE * rng.standard_normal(ts.shape)
     bb, aa = butter(2, 20.0 / (rate / 2))  # 2nd-order Butterworth, f_c = 20 Hz (paper 001, Sect. 5)
     smoothed = filtfilt(bb, aa, measured)
     n_id = int(0.6 * ts.size)  # 60 % identification, 40 % validation (paper 001, Sect. 5)
     data_id = jnp.asarray(smoothed[:n_id])
     ts_id = np.asarray(ts)[:n_id]  # NumPy, so it stays a constant under jit
-    sol = optx.least_squares(
-        lambda th, _: (valve_response(th, ts_id) - data_id) / BAR,
-        optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10),
-        jnp.array([0.8, 0.06, 0.01]),
-        max_steps=100,
-        throw=False,
-    )
-    gain, t1, t2 = (float(v) for v in sol.value)
+    res = jax.jit(lambda th: (valve_response(th, ts_id, solver) - data_id) / BAR)
+    jac = jax.jit(jax.jacfwd(lambda th: (valve_response(th, ts_id, solver) - data_id) / BAR))
+    sol = pj.levenberg_marquardt(lambda th: np.asarray(res(jnp.asarray(th))),
+                                 lambda th: (np.asarray(res(jnp.asarray(th))), np.asarray(jac(jnp.asarray(th)))),
+                                 np.array([0.8, 0.06, 0.01]), max_steps=100, ftol=1e-12, xtol=1e-12)
+    gain, t1, t2 = (float(v) for v in sol.theta)
     t1, t2 = max(t1, t2), min(t1, t2)  # the two poles are interchangeable
-    sim = np.asarray(valve_response(jnp.array([gain, t1, t2]), ts))
+    sim = np.asarray(valve_response(jnp.array([gain, t1, t2]), ts, solver))
     val = slice(n_id, None)
     mse = float(np.mean(((sim[val] - smoothed[val]) / BAR) ** 2))
     fit_pct = 100 * (
@@ -215,7 +218,7 @@ def fit_valve(rng, quick):
         validation_mse_bar2=mse,
         validation_fit_percent=fit_pct,
         bandwidth_Hz=ss.bandwidth(),
-        steps=int(sol.stats["num_steps"]),
+        steps=int(sol.step),
         ts=np.asarray(ts),
         measured=measured,
         smoothed=smoothed,

@@ -34,6 +34,15 @@ def start_muscle(force_law):
     return pj.Muscle(force_law=force_law, volume_law=pj.LinearVolume(1e-4, 1e-3), min_position=0.0, max_position=0.08)
 
 
+def eq7_start():
+    """Eq. 7 start model for the DMSP-20-300 (the MAS-10 preset's shape scaled to its 1460 N at 6 bar) and its free
+    parameters (k2 fixed: only k0/k2 and k1/k2 are identifiable)."""
+    scale = 1460.1 / presets.MAS10_MAX_FORCE_COEFFICIENTS[0]
+    model = start_muscle(pj.PolynomialForce(np.asarray(presets.MAS10_MAX_FORCE_COEFFICIENTS) * scale,
+                                            presets.MAS10_K0 * scale, presets.MAS10_K1 * scale, 1e5))
+    return model, ["force_law.max_force_coefficients", "force_law.k0", "force_law.k1"]
+
+
 def report(name, res):
     e = res.channel_errors["force_map"]["force"]
     print(f"{name}: RMSE {e['rmse']:.2f} N ({e['rmse_percent']:.2f} % of range), max error {e['max_error']:.2f} N "
@@ -77,10 +86,7 @@ def main():
     x, p, f = load_map()
     experiment = pj.ForceMapExperiment(x, p, f, scale=1.0)  # residuals in N
 
-    scale = 1460.1 / presets.MAS10_MAX_FORCE_COEFFICIENTS[0]
-    eq7 = start_muscle(pj.PolynomialForce(np.asarray(presets.MAS10_MAX_FORCE_COEFFICIENTS) * scale,
-                                          presets.MAS10_K0 * scale, presets.MAS10_K1 * scale, 1e5))
-    free7 = ["force_law.max_force_coefficients", "force_law.k0", "force_law.k1"]  # k2 fixed (eq. 7 trap)
+    eq7, free7 = eq7_start()
     res7 = pj.fit(eq7, [experiment], free7, out=out / "fit_eq7.json", overwrite=args.overwrite)
     report("eq. 7 (quartic F_max, linear pressure slope)", res7)
 

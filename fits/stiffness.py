@@ -38,11 +38,11 @@ PAPER = dict(
 RATE = 400.0  # Hz, saving rate: 0.15 % of the 1.5 Hz period (assumed, ≥ 2× the 20 Hz filter band of Sect. 5)
 
 
-def run(duration):
+def run(duration, solver=None):
     system = pj.RegulatedMuscleSystem(pj.ISO6358Regulator(), pj.presets.dmsp40_muscle())  # 893 N load by default
     signal = pj.SquareWave(0.0, PAPER["reference_high_V"], PAPER["reference_frequency_Hz"])
     ts = jnp.arange(0.0, duration + 0.5 / RATE, 1.0 / RATE)
-    traj = pj.simulate(system, signal, ts, rtol=1e-8, atol=1e-8)
+    traj = pj.simulate(system, signal, ts, rtol=1e-8, atol=1e-8, solver=solver)
     rates = jax.vmap(system.vector_field)(traj.t, traj.state, traj.command)
     x, p = traj.position, traj.pressure
     xdot, pdot = rates.position, rates.regulator.pressure

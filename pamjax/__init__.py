@@ -37,6 +37,9 @@ from ._gas import (
     NozzleRestriction as NozzleRestriction,
 )
 from ._gas import (
+    PorousRestriction as PorousRestriction,
+)
+from ._gas import (
     SeriesRestriction as SeriesRestriction,
 )
 from ._inputs import (
@@ -62,6 +65,9 @@ from ._muscle import (
 )
 from ._muscle import (
     AbstractVolume as AbstractVolume,
+)
+from ._muscle import (
+    BraidVolume as BraidVolume,
 )
 from ._muscle import (
     ChouHannafordForce as ChouHannafordForce,
@@ -122,6 +128,37 @@ from ._valve import (
 __version__ = "0.1.0"
 
 # --- discrete-time model (paper 000 eq. 17-21) ---
+# --- issue 19: bench tests without a time axis (friction curves, flow curves, loop force maps); PID with noise ----
+from ._bench import BENCH_PARAMETERS as BENCH_PARAMETERS
+from ._bench import FITTED_KINDS as FITTED_KINDS
+from ._bench import Bench as Bench
+from ._bench import bench_rmse as bench_rmse
+from ._bench import bench_values as bench_values
+from ._bench import load_bench as load_bench
+from ._bench_tests import (  # noqa: E402
+    FlowCurveExperiment as FlowCurveExperiment,
+)
+from ._bench_tests import (
+    FrictionCurveExperiment as FrictionCurveExperiment,
+)
+from ._bench_tests import (
+    LoopForceMapExperiment as LoopForceMapExperiment,
+)
+from ._bench_tests import (
+    constant_velocity_point as constant_velocity_point,
+)
+from ._bench_tests import (
+    flow_curve as flow_curve,
+)
+from ._bench_tests import (
+    loop_average as loop_average,
+)
+from ._bench_tests import (
+    steady_friction_force as steady_friction_force,
+)
+from ._cache import CompileStats as CompileStats
+from ._cache import enable_compilation_cache as enable_compilation_cache
+
 # --- closed-loop control (issue 6) ---------------------------------------------------------------------------------
 from ._control import (  # noqa: E402
     AbstractController as AbstractController,
@@ -153,6 +190,8 @@ from ._control import (
 from ._control import (
     tune_controller as tune_controller,
 )
+from ._design import DesignResult as DesignResult  # noqa: E402
+from ._design import design as design
 from ._discrete import (  # noqa: E402
     DiscreteTrajectory as DiscreteTrajectory,
 )
@@ -162,6 +201,11 @@ from ._discrete import (
 from ._discrete import (
     simulate_discrete as simulate_discrete,
 )
+
+# --- issue 18: multi-process runs (jax.distributed), multistart and fleet fits ----------------------------------
+from ._distributed import PamjaxDistributedError as PamjaxDistributedError  # noqa: E402
+from ._distributed import ProcessInfo as ProcessInfo
+from ._distributed import initialize_distributed as initialize_distributed
 
 # --- fitting (issue 3): recordings, experiments, fit, synthetic data ---------------------------------------------
 from ._experiment import (  # noqa: E402
@@ -176,6 +220,7 @@ from ._experiment import (
 from ._experiment import (
     TankFromModel as TankFromModel,
 )
+from ._experiment import predictions as predictions
 from ._fit import (  # noqa: E402
     FitResult as FitResult,
 )
@@ -184,21 +229,6 @@ from ._fit import (
 )
 from ._fit import (
     fit as fit,
-)
-from ._bench import Bench as Bench
-from ._bench import BENCH_PARAMETERS as BENCH_PARAMETERS
-from ._bench import bench_values as bench_values
-from ._bench import load_bench as load_bench
-from ._experiment import predictions as predictions
-from ._parameters import (
-    PamjaxIdentifiabilityWarning as PamjaxIdentifiabilityWarning,
-)
-from ._recording import PamjaxDataWarning as PamjaxDataWarning
-from ._parameters import (
-    ParameterSpace as ParameterSpace,
-)
-from ._parameters import (
-    parameter_paths as parameter_paths,
 )
 from ._gradcheck import gradient_check as gradient_check  # noqa: E402
 
@@ -235,6 +265,27 @@ from ._joint_control import (
 from ._linearise import StateSpace as StateSpace  # noqa: E402
 from ._linearise import equilibrium as equilibrium
 from ._linearise import linearise as linearise
+from ._lm import levenberg_marquardt as levenberg_marquardt
+from ._model_io import load_model as load_model  # noqa: E402
+from ._model_io import save_model as save_model
+from ._multistart import FleetResult as FleetResult  # noqa: E402
+from ._multistart import MultistartResult as MultistartResult
+from ._multistart import fit_fleet as fit_fleet
+from ._multistart import multistart as multistart
+from ._parameters import (
+    PamjaxIdentifiabilityWarning as PamjaxIdentifiabilityWarning,
+)
+from ._parameters import (
+    ParameterSpace as ParameterSpace,
+)
+from ._parameters import (
+    parameter_paths as parameter_paths,
+)
+from ._pid import PIDController as PIDController  # noqa: E402
+from ._profile import Profile as Profile  # noqa: E402
+from ._profile import ProfileResult as ProfileResult
+from ._profile import profile as profile
+from ._recording import PamjaxDataWarning as PamjaxDataWarning
 from ._recording import Recording as Recording  # noqa: E402
 from ._regulated import (  # noqa: E402
     RegulatedMuscleState as RegulatedMuscleState,
@@ -283,6 +334,7 @@ from ._sweep import (
 from ._sweep import (
     SweepResult as SweepResult,
 )
+from ._sweep import merge_sweep_shards as merge_sweep_shards  # noqa: E402
 from ._sweep import (
     sweep as sweep,
 )
@@ -298,10 +350,3 @@ from ._sweep_maps import (
 from ._synthetic import synthetic_recording as synthetic_recording  # noqa: E402
 from ._tabulated import TabulatedISO6358Restriction as TabulatedISO6358Restriction  # noqa: E402
 from ._xla_cpu import xla_cpu_status as xla_cpu_status  # noqa: E402
-
-# --- identifiability (issue 17): profile likelihoods and experiment design ---------------------------------------
-from ._design import DesignResult as DesignResult  # noqa: E402
-from ._design import design as design
-from ._profile import Profile as Profile  # noqa: E402
-from ._profile import ProfileResult as ProfileResult
-from ._profile import profile as profile

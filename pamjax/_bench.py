@@ -173,7 +173,7 @@ def bench_values(result, keys):
     return values, errors
 
 
-def channel_rmse(result):
+def bench_rmse(result):
     """{experiment: {"p": Pa, "x": m}}: the residual RMSE of every fitted experiment, by the bench's channel names."""
     out = {}
     for name, chans in result.channel_errors.items():

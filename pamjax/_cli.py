@@ -1,38 +1,139 @@
-"""The `pamjax` command line: `pamjax demo`, `pamjax fit CONFIG.toml`, `pamjax sweep CONFIG.toml`."""
+"""The `pamjax` command line: `pamjax demo`, `pamjax fit CONFIG.toml`, `pamjax simulate CONFIG.toml`,
+`pamjax sweep CONFIG.toml`.
+
+A user error (a bad config, file, unit or path) prints one message — file and line for TOML, key, value and expected
+range for values — and exits with status 2; a failed solve exits with 1; Ctrl-C (or SIGTERM) exits with 130 (143)
+after one line saying what was kept. No traceback unless `--debug` (or the environment variable `PAMJAX_DEBUG=1`)
+asks for it. `docs/cli.md` describes the commands and their files.
+"""
 
 import argparse
+import contextlib
 import importlib
+import os
+import re
+import signal
 import sys
+import threading
 
-# subcommand → (module, function, help). Each module defines `add_arguments(parser)` and `run(args)`.
+from ._cli_out import EXIT_FAILED, EXIT_INPUT, PENDING, Terminated, interrupt_status, raise_pending
+
+# subcommand → (module, help). Each module defines `add_arguments(parser)` and `run(args)`.
 _COMMANDS = {
-    "demo": ("pamjax._demo", "Run paper 000's valve and system experiments with the preset; print and plot them."),
-    "fit": ("pamjax._cli_fit", "Fit parameters to recordings as described by a TOML config."),
+    "demo": ("pamjax._demo", "Run paper 000's valve and system experiments with the preset; write CSV and a figure."),
+    "fit": ("pamjax._cli_fit", "Fit parameters to recordings as described by a TOML config; write the fitted model."),
+    "simulate": ("pamjax._cli_simulate", "Simulate any model with any input; write the trajectory (CSV) and a figure."),
     "sweep": ("pamjax._cli_sweep", "Run a batch sweep described by a TOML config; write NPZ/CSV and a figure."),
     "design": ("pamjax._cli_design", "Design a PWM duty experiment by gradient; write the signal as CSV and a figure."),
+    "reproduce": ("pamjax._reproduce", "Reproduce every experiment of papers 000 and 001 (fits/papers); index page."),
 }
+DEBUG_VARIABLE = "PAMJAX_DEBUG"
+
+
+@contextlib.contextmanager
+def _signals_as_interrupts():
+    """Ctrl-C and SIGTERM raise an interrupt (`Terminated` for SIGTERM) and are recorded in `PENDING`, so that one
+    swallowed by a garbage-collection callback is raised again at the next safe point (`raise_pending`)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        PENDING.append(signum)
+        raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+    def unraisable(info):  # an interrupt swallowed in a callback: no "Exception ignored" traceback; it is pending
+        if not isinstance(info.exc_value, KeyboardInterrupt):
+            previous_hook(info)
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    previous_hook, sys.unraisablehook = sys.unraisablehook, unraisable
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+        sys.unraisablehook = previous_hook
+        PENDING.clear()
+
+
+def _parser():
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--debug", action="store_true",
+                        help=f"show Python tracebacks (also: environment variable {DEBUG_VARIABLE}=1)")
+    common.add_argument("--no-cache", action="store_true",
+                        help="do not use JAX's persistent compilation cache (default: on, in the user's cache "
+                             "directory; PAMJAX_CACHE_DIR moves it, PAMJAX_COMPILATION_CACHE=0 turns it off)")
+    parser = argparse.ArgumentParser(prog="pamjax", description="Differentiable pneumatic artificial muscle models.",
+                                     parents=[common])
+    sub = parser.add_subparsers(dest="command", required=True)
+    modules = {}
+    for name, (module_name, help_text) in _COMMANDS.items():
+        module = importlib.import_module(module_name)
+        p = sub.add_parser(name, help=help_text, description=help_text, parents=[common])
+        module.add_arguments(p)
+        modules[name] = module
+    return parser, modules
+
+
+def _say(command, text):
+    text = re.sub(rf"^pamjax {command}( --\w+)?: ", "", str(text))
+    print(f"pamjax {command}: error: {text}", file=sys.stderr, flush=True)
 
 
 def main(argv=None):
+    """Run the `pamjax` command line with `argv` (default `sys.argv[1:]`); returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    parser = argparse.ArgumentParser(prog="pamjax", description="Differentiable pneumatic artificial muscle models.")
-    sub = parser.add_subparsers(dest="command", required=True)
-    available = {}
-    for name, (module_name, help_text) in _COMMANDS.items():
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as err:
-            if err.name != module_name:
-                raise
-            continue
-        p = sub.add_parser(name, help=help_text, description=help_text)
-        module.add_arguments(p)
-        available[name] = module
+    parser, modules = _parser()
     args = parser.parse_args(argv)
+    debug = args.debug or os.environ.get(DEBUG_VARIABLE, "") not in ("", "0")
     import jax
 
     jax.config.update("jax_enable_x64", True)  # float64 physics (entry point, not an import-time side effect)
-    return available[args.command].run(args) or 0
+    if not args.no_cache:  # a second run of a workflow loads its compiled programs instead of compiling (_cache)
+        from ._cache import enable_compilation_cache
+
+        enable_compilation_cache()
+    from ._cache import announce_compilation
+    from ._errors import PamjaxInputError, PamjaxSolveError
+
+    command = args.command
+    with _signals_as_interrupts():
+        try:
+            # fit says itself when it compiles (its programs are known); the others are announced from outside
+            announce = contextlib.nullcontext() if command == "fit" else announce_compilation(f"pamjax {command}")
+            with announce:
+                status = modules[command].run(args) or 0
+            raise_pending()  # a signal swallowed while JAX was busy: the command finished, but say so
+            return status
+        except KeyboardInterrupt as err:
+            if debug:
+                raise
+            terminated = isinstance(err, Terminated)
+            print(f"pamjax {command}: {'terminated' if terminated else 'interrupted'}", file=sys.stderr, flush=True)
+            return interrupt_status(err)
+        except (PamjaxInputError, FileExistsError) as err:
+            if debug:
+                raise
+            _say(command, err)
+            return EXIT_INPUT
+        except PamjaxSolveError as err:
+            if debug:
+                raise
+            _say(command, err)
+            return EXIT_FAILED
+        except OSError as err:  # a file that cannot be read or written
+            if debug:
+                raise
+            _say(command, f"{err.strerror or err}: {err.filename}" if err.filename else err)
+            return EXIT_FAILED
+        except Exception as err:  # not a user error: one line, the traceback on request
+            if debug:
+                raise
+            first = str(err).strip().splitlines()[0] if str(err).strip() else ""
+            _say(command, f"{type(err).__name__}: {first}\n(run again with --debug, or {DEBUG_VARIABLE}=1, to see "
+                          "the traceback; if your input is valid, please report it)")
+            return EXIT_FAILED
 
 
 if __name__ == "__main__":

@@ -2,17 +2,17 @@
 signal as CSV (`t [s]`, `duty [-]`, one row per PWM period, the predicted standard errors in comment lines), the
 result as JSON and a figure. Config format: docs/identifiability.md and `examples/design_example.toml`."""
 
-import inspect
 import pathlib
 
 import numpy as np
 
-from ._cli_fit import check_keys, load_config, read_toml
+from ._cli_config import build_model, check_keys, read_toml, validate_model_table
+from ._cli_fit import load_config
+from ._cli_out import OutputFolder
 from ._errors import PamjaxInputError
 
 _TOP_KEYS = {"model", "design"}
-_MODEL_KEYS = {"preset", "options", "set"}
-_PRESETS = ("mas10_system", "mas10_tank_system")
+OUTPUTS = ("design.csv", "design.json", "design.png")
 # [design] keys: `free`, `duration`, `noise` (required), `prior` / `baseline` (fit configs whose experiments are the
 # information in hand / the experiment to beat), `initial` (a constant duty, or the CSV of an earlier design to
 # start from), `out`, and the keyword arguments of `pamjax.design` below.
@@ -30,28 +30,6 @@ def add_arguments(parser):
     parser.add_argument("--no-plot", action="store_true", help="skip the figure")
 
 
-def _model(table):
-    """The model of a [model] table (preset, options, set), as `pamjax fit` configs build it."""
-    import pamjax as pj
-
-    check_keys(table, _MODEL_KEYS, "[model]")
-    preset = table.get("preset", "mas10_system")
-    if preset not in _PRESETS:
-        raise PamjaxInputError(f"[model] preset must be one of {list(_PRESETS)}, got {preset!r}")
-    factory = getattr(pj.presets, preset)
-    options = table.get("options", {})
-    check_keys(options, inspect.signature(factory).parameters, f"[model] options (keyword arguments of "
-                                                               f"presets.{preset})")
-    model = factory(**options)
-    overrides = table.get("set", {})
-    if not isinstance(overrides, dict):
-        raise PamjaxInputError(f"[model] set must be a table of parameter path = value, got {overrides!r}")
-    if overrides:
-        space = pj.ParameterSpace(model, list(overrides))
-        model = space.with_values(np.concatenate([np.ravel(v) for v in overrides.values()]))
-    return model
-
-
 def load(path):
     """Parse and check a design config; returns (model, free, duration, keyword arguments of `design`, out).
     Every key is checked, and the prior and baseline configs loaded, before anything is solved."""
@@ -65,7 +43,8 @@ def load(path):
     for key in ("free", "duration", "noise"):
         if key not in table:
             raise PamjaxInputError(f"[design] needs '{key}'")
-    model = _model(cfg.get("model", {}))
+    validate_model_table(cfg.get("model", {}))
+    model = build_model(cfg.get("model", {}), path.parent)
     kwargs = {k: table[k] for k in _DESIGN_ARGS if k in table}
     for key in ("prior", "baseline"):
         if key in table:
@@ -94,23 +73,20 @@ def run(args):
 
     model, free, duration, kwargs, out_cfg = load(args.config)
     out = pathlib.Path(args.out or out_cfg or f"results/{pathlib.Path(args.config).stem}")
-    targets = [out / "design.csv", out / "design.json"] + ([] if args.no_plot else [out / "design.png"])
-    for existing in targets:
-        if existing.exists() and not args.overwrite:
-            raise SystemExit(f"{existing} exists; pass --overwrite to replace it")
-    res = pj.design(model, free, duration, progress=not args.quiet, **kwargs)
-    print(f"{res.message}; {res.criterion} criterion {res.objective[0]:.4f} → {res.objective[1]:.4f} "
-          f"({res.design_s:.1f} s, of which {res.compile_s:.1f} s to the first iteration)")
-    print(res.table())
-    if not res.constraints["feasible"]:
-        print("WARNING: the design violates a constraint:", res.constraints)
-    res.to_csv(targets[0], overwrite=args.overwrite)
-    res.to_json(targets[1], overwrite=args.overwrite)
-    if not args.no_plot:
-        try:
-            res.plot(targets[2])
-        except ModuleNotFoundError:
-            targets.pop()
-            print("no figure: matplotlib is not installed")
-    print("wrote " + ", ".join(map(str, targets)))
-    return 0
+    outputs = [o for o in OUTPUTS if not (args.no_plot and o.endswith(".png"))]
+    with OutputFolder(out, "pamjax design", outputs, overwrite=args.overwrite) as folder:
+        res = pj.design(model, free, duration, progress=not args.quiet, **kwargs)
+        print(f"{res.message}; {res.criterion} criterion {res.objective[0]:.4f} → {res.objective[1]:.4f} "
+              f"({res.design_s:.1f} s, of which {res.compile_s:.1f} s to the first iteration)")
+        print(res.table())
+        if not res.constraints["feasible"]:
+            print("WARNING: the design violates a constraint:", res.constraints)
+        written = [folder.write("design.csv", lambda p: res.to_csv(p, overwrite=True)),
+                   folder.write("design.json", lambda p: res.to_json(p, overwrite=True))]
+        if not args.no_plot:
+            try:
+                written.append(folder.write("design.png", res.plot))
+            except ModuleNotFoundError:
+                print("no figure: matplotlib is not installed (pip install matplotlib)")
+        print("wrote " + ", ".join(str(p) for p in written if p is not None))
+        return 1 if folder.failed else 0

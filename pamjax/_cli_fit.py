@@ -1,160 +1,214 @@
-"""`pamjax fit CONFIG.toml`: fit parameters to recordings as a TOML config describes; write the result JSON and a
-figure of data vs model with residuals. See `docs/fitting.md` for the config format and `examples/fit_example.toml`."""
+"""`pamjax fit CONFIG.toml`: fit parameters to recordings as a TOML config describes; write the result (`fit.json`),
+the complete fitted model (`model.json`, `pamjax.load_model`) and a figure of data vs model with residuals; keep a
+checkpoint after every iteration (`checkpoint.npz`) that `--resume` continues bitwise. See `docs/fitting.md` for the
+config and `docs/cli.md` for the files; `examples/fit_example.toml`.
 
-import dataclasses
-import inspect
+Every key, type, parameter path, shape and unit of the config is checked before any data are read or anything is
+compiled; the output folder is created, test-written and locked before the fit starts.
+"""
+
+import json
 import pathlib
-import tomllib
+import sys
 
 import numpy as np
 
+from ._cli_config import (
+    build_model,
+    check_keys,
+    make_signal,
+    read_toml,
+    require,
+    signal_keys,
+    validate_model_table,
+)
+from ._cli_out import PENDING, OutputFolder, interrupt_status, raise_pending
 from ._errors import PamjaxInputError
 from ._parameters import FREE_ENTRY_KEYS
+from ._units import check_setting
 
-_TOP_KEYS = {"model", "fit", "experiment"}
-_MODEL_KEYS = {"preset", "options", "set"}
-_FIT_KEYS = {"free", "max_steps", "rtol", "atol", "out", "validation_fraction"}
+_TOP_KEYS = {"model", "fit", "experiment", "bench"}
+_FIT_KEYS = {"free", "max_steps", "ftol", "xtol", "gtol", "out", "validation_fraction"}
+_BENCH_KEYS = {"dir", "rate", "kinds", "fitted_keys", "substeps"}
 _EXPERIMENT_KEYS = {"name", "file", "signal", "channels", "scales", "tank_volume", "initial", "rate", "filter_hz",
-                    "t_end", "max_steps", "rename"}
-_SIGNALS = ("Constant", "Triangle", "Sine", "Step", "recorded")
-_RECORDED_KEYS = {"kind", "period"}  # signal = { kind = "recorded", period = 0.02 }: the command channel, latched
-_PRESETS = ("mas10_system", "mas10_tank_system")
+                    "t_end", "max_steps", "rename", "units", "unit_checks", "stepping"}
+RESULT, MODEL, FIGURE, CHECKPOINT, BENCH = "fit.json", "model.json", "fit.png", "checkpoint.npz", "bench.json"
+PROFILE, PROFILE_FIGURE = "profile.json", "profile.png"
 
 
 def add_arguments(parser):
     parser.add_argument("config", help="TOML file: [model], [fit], [[experiment]] tables (docs/fitting.md)")
     parser.add_argument("--out", default=None, help="output folder (default: [fit] out, else results/<config name>)")
-    parser.add_argument("--overwrite", action="store_true", help="replace an existing results file")
+    parser.add_argument("--overwrite", action="store_true", help="replace earlier results and checkpoint in --out")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue the fit checkpointed in --out (after Ctrl-C, a crash or a max_steps stop)")
     parser.add_argument("--quiet", action="store_true", help="no per-iteration progress")
     parser.add_argument("--no-plot", action="store_true", help="skip the figure")
     parser.add_argument("--profile", action="store_true", help="also profile every fitted parameter: write "
                         "profile.json and profile.png (pamjax.profile, docs/identifiability.md)")
 
 
-def check_keys(table, valid, where):
-    """`table` must be a TOML table whose keys are all in `valid`; else a `PamjaxInputError` naming `where`, the
-    unknown keys and the valid ones."""
-    if not isinstance(table, dict):
-        raise PamjaxInputError(f"{where} must be a table (keys {sorted(valid)}), got {table!r}")
-    unknown = set(table) - set(valid)
-    if unknown:
-        raise PamjaxInputError(f"{where}: unknown key(s) {sorted(unknown)}; valid keys are {sorted(valid)}")
+def _check_free(free):
+    if not free:
+        raise PamjaxInputError("[fit] free must be a non-empty list of parameter paths, e.g. "
+                               '["friction.coulomb_force"]')
+    for entry in free:
+        if isinstance(entry, str):
+            continue
+        check_keys(entry, FREE_ENTRY_KEYS, "[fit] free entry")
+        if "path" not in entry:
+            raise PamjaxInputError(f"[fit] free entry {entry!r} needs a path")
+        if "bounds" in entry:
+            b = entry["bounds"]
+            if not (isinstance(b, list) and len(b) == 2 and all(isinstance(x, (int, float)) for x in b)):
+                raise PamjaxInputError(f"[fit] free entry {entry['path']!r}: bounds must be [lo, hi] (two numbers), "
+                                       f"got {b!r}")
 
 
-def read_toml(path):
-    """Parse a TOML config; a missing file or a syntax error is a `PamjaxInputError` naming the file."""
-    path = pathlib.Path(path)
-    if not path.exists():
-        raise PamjaxInputError(f"config file {path} does not exist")
-    try:
-        return tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as err:
-        raise PamjaxInputError(f"config file {path} is not valid TOML: {err}") from err
+def _check_free_shapes(model, free):
+    """A free table's `scale` must be one number or one per element of its parameter (matched by name and shape)."""
+    from ._parameters import _parse, parameter_paths
 
-
-def _signal_keys(spec, where):
-    """The valid keys of a signal table: `kind` plus the fields of the named pamjax signal class."""
-    import pamjax as pj
-
-    if spec == "recorded":
-        return None
-    if not isinstance(spec, dict) or spec.get("kind") not in _SIGNALS:
-        raise PamjaxInputError(f"{where} signal must be 'recorded' or a table with kind in {list(_SIGNALS)}, "
-                               f"got {spec!r}")
-    if spec["kind"] == "recorded":
-        return _RECORDED_KEYS
-    return {"kind"} | {f.name for f in dataclasses.fields(getattr(pj, spec["kind"]))}
-
-
-def _initial_keys(system):
-    """Keyword arguments of `system.initial_state` (e.g. pressure, position, velocity)."""
-    return set(inspect.signature(system.initial_state).parameters)
+    valid = parameter_paths(model)
+    for entry in free:
+        if isinstance(entry, str) or "scale" not in entry:
+            continue
+        attrs, index = _parse(entry["path"])
+        shape = () if index is not None else valid.get(".".join(attrs))
+        given = np.shape(entry["scale"])
+        if shape is not None and given not in ((), shape):
+            raise PamjaxInputError(f"[fit] free entry {entry['path']!r}: scale expects one number or shape {shape}, "
+                                   f"got shape {given} ({entry['scale']!r})")
 
 
 def validate_config(cfg, where="config"):
-    """Check every table and key of a parsed fit config against the valid ones (no data loaded, nothing solved)."""
+    """Check every table, key and value type of a parsed fit config (no data loaded, nothing solved)."""
     check_keys(cfg, _TOP_KEYS, where)
     model_cfg, fit_cfg = cfg.get("model", {}), cfg.get("fit", {})
-    check_keys(model_cfg, _MODEL_KEYS, "[model]")
+    validate_model_table(model_cfg)
+    for old, new in (("rtol", "ftol"), ("atol", "xtol")):
+        if isinstance(fit_cfg, dict) and old in fit_cfg:
+            raise PamjaxInputError(f"[fit] {old} is no longer a setting: the fit stops on the relative cost decrease "
+                                   f"({new} and its siblings ftol, xtol, gtol; docs/fitting.md)")
     check_keys(fit_cfg, _FIT_KEYS, "[fit]")
-    preset = model_cfg.get("preset", "mas10_system")
-    if preset not in _PRESETS:
-        raise PamjaxInputError(f"[model] preset must be one of {list(_PRESETS)}, got {preset!r}")
-    import pamjax as pj
-
-    check_keys(model_cfg.get("options", {}), inspect.signature(getattr(pj.presets, preset)).parameters,
-               f"[model] options (keyword arguments of presets.{preset})")
-    if not isinstance(model_cfg.get("set", {}), dict):
-        raise PamjaxInputError(f"[model] set must be a table of parameter path = value, got {model_cfg['set']!r}")
-    if "free" not in fit_cfg:
+    bench_cfg = cfg.get("bench")
+    if bench_cfg is not None:
+        check_keys(bench_cfg, _BENCH_KEYS, "[bench]")
+        if "dir" not in bench_cfg:
+            raise PamjaxInputError("[bench] needs 'dir': a bench directory (meta.json + <experiment>.npz), relative "
+                                   "to the config")
+        require(bench_cfg["dir"], "string", "[bench] dir", '"../data/my-bench"')
+        for key, kind, example in (("rate", "positive number", "1000.0 (Hz)"), ("substeps", "positive integer", "16"),
+                                   ("kinds", "list of strings", '["tank_charge", "muscle_triangle"]'),
+                                   ("fitted_keys", "list of strings", '["Cv12", "b12", "Fc"]')):
+            if key in bench_cfg:
+                require(bench_cfg[key], kind, f"[bench] {key}", example)
+    if "free" not in fit_cfg and bench_cfg is None:
         raise PamjaxInputError("[fit] needs 'free': the list of parameter paths to fit")
-    if isinstance(fit_cfg["free"], str) or not isinstance(fit_cfg["free"], list) or not fit_cfg["free"]:
-        raise PamjaxInputError(f"[fit] free must be a non-empty list of parameter paths, got {fit_cfg['free']!r}")
-    for entry in fit_cfg["free"]:
-        if not isinstance(entry, str):
-            check_keys(entry, FREE_ENTRY_KEYS, "[fit] free entry")
+    if "free" not in fit_cfg:
+        pass  # the bench's fitted_keys
+    elif isinstance(fit_cfg["free"], str) or not isinstance(fit_cfg["free"], list):
+        raise PamjaxInputError(f"[fit] free must be a non-empty list of parameter paths, got {fit_cfg['free']!r}"
+                               + (" (a single string where a list is expected: put it in brackets)"
+                                  if isinstance(fit_cfg["free"], str) else ""))
+    if "free" in fit_cfg:
+        _check_free(fit_cfg["free"])
+    for key, kind, example in (("max_steps", "positive integer", "40"), ("ftol", "positive number", "1e-10"),
+                               ("xtol", "positive number", "1e-10"), ("gtol", "positive number", "1e-10"),
+                               ("out", "string", '"results/my_fit"'), ("validation_fraction", "number", "0.4")):
+        if key in fit_cfg:
+            require(fit_cfg[key], kind, f"[fit] {key}", example)
+    if not 0 <= fit_cfg.get("validation_fraction", 0.0) < 1:
+        raise PamjaxInputError(f"[fit] validation_fraction must be in [0, 1), got {fit_cfg['validation_fraction']}")
     experiments = cfg.get("experiment", [])
     if not isinstance(experiments, list):
         raise PamjaxInputError("experiments are an array of tables: write [[experiment]] (double brackets)")
-    if not experiments:
-        raise PamjaxInputError("the config needs at least one [[experiment]]")
+    if not experiments and bench_cfg is None:
+        raise PamjaxInputError("the config needs at least one [[experiment]] (or a [bench] directory)")
     for k, e in enumerate(experiments):
-        here = f"[[experiment]] #{k + 1}"
-        check_keys(e, _EXPERIMENT_KEYS, here)
-        if "file" not in e:
-            raise PamjaxInputError(f"{here} needs 'file' (a CSV or NPZ recording, relative to the config)")
-        valid = _signal_keys(e.get("signal", "recorded"), here)
-        if valid is not None:
-            check_keys(e["signal"], valid, f"{here} signal (kind = {e['signal']['kind']!r})")
-        for key in ("scales", "initial", "rename"):
-            if key in e and not isinstance(e[key], dict):
-                raise PamjaxInputError(f"{here} {key} must be a table, got {e[key]!r}")
+        _validate_experiment(e, f"[[experiment]] #{k + 1}")
+
+
+def _validate_experiment(e, here):
+    check_keys(e, _EXPERIMENT_KEYS, here)
+    if "file" not in e:
+        raise PamjaxInputError(f"{here} needs 'file' (a CSV or NPZ recording, relative to the config)")
+    require(e["file"], "string", f"{here} file", '"triangle_025.csv"')
+    valid = signal_keys(e.get("signal", "recorded"), here)
+    if valid is not None:
+        check_keys(e["signal"], valid, f"{here} signal (kind = {e['signal']['kind']!r})")
+    for key in ("scales", "initial", "rename", "units"):
+        if key in e and not isinstance(e[key], dict):
+            raise PamjaxInputError(f"{here} {key} must be a table, got {e[key]!r}")
+    if "channels" in e:
+        require(e["channels"], "list of strings", f"{here} channels", '["pressure", "position"]')
+    if "stepping" in e and e["stepping"] not in ("auto", "adaptive", "pwm", "grid"):
+        raise PamjaxInputError(f"{here} stepping must be 'auto', 'adaptive', 'pwm' or 'grid', got {e['stepping']!r}")
+    for key, kind, example in (("name", "string", '"triangle"'), ("tank_volume", "positive number", "5e-5 (m³)"),
+                               ("rate", "positive number", "100.0 (Hz)"), ("filter_hz", "positive number", "20.0"),
+                               ("t_end", "positive number", "8.0 (s)"), ("max_steps", "positive integer", "200000"),
+                               ("unit_checks", "boolean", "false")):
+        if key in e:
+            require(e[key], kind, f"{here} {key}", example)
+    for c, s in e.get("scales", {}).items():
+        require(s, "positive number", f"{here} scales.{c}", "2e3 (the channel's noise level, in its SI unit)")
+    for key, value in e.get("initial", {}).items():
+        require(value, "number", f"{here} initial.{key}", "101325.0")
+        check_setting(key, value, f"{here} initial")
+    if "tank_volume" in e:
+        check_setting("tank_volume", e["tank_volume"], here)
+    for table in ("rename", "units"):
+        for k, v in e.get(table, {}).items():
+            require(v, "string", f"{here} {table}.{k}", '"pressure"' if table == "rename" else '"bar abs"')
 
 
 def load_config(path):
     """Parse and validate a fit config; returns (model, experiments, free, fit options, out). Every key is checked
-    before any data is read; parameter paths, channels and initial-state keys before anything is solved."""
+    before any data is read; parameter paths, shapes, channels and initial-state keys before anything is solved."""
+    return _load(path)[:5]
+
+
+def _load(path):
+    """`load_config` and the config's `Bench` (None without a [bench] table)."""
     import pamjax as pj
 
     path = pathlib.Path(path)
     cfg = read_toml(path)
     validate_config(cfg, str(path))
-    model_cfg, fit_cfg = cfg.get("model", {}), cfg["fit"]
-    preset = model_cfg.get("preset", "mas10_system")
-    model = getattr(pj.presets, preset)(**model_cfg.get("options", {}))
-    overrides = model_cfg.get("set", {})
-    if overrides:
-        space = pj.ParameterSpace(model, list(overrides))  # unknown path → error listing the model's parameters
-        model = space.with_values(np.concatenate([np.ravel(v) for v in overrides.values()]))
-    pj.ParameterSpace(model, fit_cfg["free"])  # the same check for the free list, before any solve
-    experiments = [_experiment(e, k, path.parent, fit_cfg, model) for k, e in enumerate(cfg["experiment"])]
-    options = {k: fit_cfg[k] for k in ("max_steps", "rtol", "atol") if k in fit_cfg}
-    return model, experiments, fit_cfg["free"], options, fit_cfg.get("out")
-
-
-def _signal(spec, rec, where):
-    import pamjax as pj
-
-    if spec == "recorded" or spec["kind"] == "recorded":
-        period = spec.get("period") if isinstance(spec, dict) else None
-        return pj.Sampled(rec.t, rec["command"], period=period)
-    kwargs = {k: v for k, v in spec.items() if k != "kind"}
-    try:
-        return getattr(pj, spec["kind"])(**kwargs)
-    except TypeError as err:
-        raise PamjaxInputError(f"{where} signal: {err}") from err
+    fit_cfg = cfg.get("fit", {})
+    model = build_model(cfg.get("model", {}), path.parent)
+    experiments, free = [], fit_cfg.get("free")
+    bench = None
+    if "bench" in cfg:
+        b = cfg["bench"]
+        kinds = tuple(b.get("kinds", pj.FITTED_KINDS))
+        bench = pj.load_bench(path.parent / b["dir"], model, rate=b.get("rate"), kinds=kinds,
+                              fitted_keys=b.get("fitted_keys"), substeps=b.get("substeps", 16))
+        experiments += bench.experiments
+        free = bench.free if free is None else free
+    _check_free_shapes(model, free)
+    pj.ParameterSpace(model, free)  # unknown path, index or transform: named, before any solve
+    experiments += [_experiment(e, k, path.parent, fit_cfg, model) for k, e in enumerate(cfg.get("experiment", []))]
+    names = [e.name for e in experiments]
+    if len(set(names)) != len(names):
+        raise PamjaxInputError(f"experiment names must be unique, got {names}: give each [[experiment]] a name")
+    options = {k: fit_cfg[k] for k in ("max_steps", "ftol", "xtol", "gtol") if k in fit_cfg}
+    return model, experiments, free, options, fit_cfg.get("out"), bench
 
 
 def _experiment(e, k, root, fit_cfg, model):
+    import inspect
+
     import pamjax as pj
 
     where = f"[[experiment]] #{k + 1}"
     build = pj.TankFromModel(e["tank_volume"]) if "tank_volume" in e else None
     system = build(model) if build is not None else model
     if "initial" in e:
-        check_keys(e["initial"], _initial_keys(system), f"{where} initial (keyword arguments of "
-                                                        f"{type(system).__name__}.initial_state)")
-    rec = pj.Recording.load(root / e["file"], rename=e.get("rename"))
+        check_keys(e["initial"], set(inspect.signature(system.initial_state).parameters),
+                   f"{where} initial (keyword arguments of {type(system).__name__}.initial_state)")
+    rec = pj.Recording.load(root / e["file"], rename=e.get("rename"), units=e.get("units"),
+                            unit_checks=e.get("unit_checks", True))
     if "t_end" in e:
         rec = rec.window(None, float(e["t_end"]))
     if "filter_hz" in e:
@@ -162,28 +216,26 @@ def _experiment(e, k, root, fit_cfg, model):
     if "rate" in e:
         rec = rec.resampled(float(e["rate"]))
     return pj.Experiment(
-        rec, _signal(e.get("signal", "recorded"), rec, where), channels=e.get("channels"), scales=e.get("scales"),
+        rec, make_signal(e.get("signal", "recorded"), where, rec), channels=e.get("channels"), scales=e.get("scales"),
         build=build, initial=e.get("initial"), name=e.get("name", rec.name), max_steps=e.get("max_steps", 200_000),
-        validation_fraction=fit_cfg.get("validation_fraction", 0.0),
+        validation_fraction=fit_cfg.get("validation_fraction", 0.0), stepping=e.get("stepping", "auto"),
     )
 
 
 _UNITS = {"pressure": "[Pa abs]", "position": "[m]", "velocity": "[m/s]", "force": "[N]", "mass_flow": "[kg/s]"}
 
 
-def plot(path, model, experiments):
-    """Data vs model per experiment and channel, residuals below."""
+def plot(path, result, experiments):
+    """Data vs model per experiment and channel (the fit result's predictions), residuals below."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ._experiment import predict
-
     cols = [(e, c) for e in experiments for c in e.channels]
     fig, axes = plt.subplots(2, len(cols), figsize=(4 * len(cols), 6), squeeze=False, sharex="col")
     for j, (e, c) in enumerate(cols):
-        pred = np.asarray(predict(model, e)[c])
+        pred = np.asarray(result.predictions[e.name][c])
         data = np.asarray(e.data[c])
         t = np.asarray(e.times)
         axes[0, j].plot(t, data, ".", ms=2, label="data")
@@ -199,23 +251,83 @@ def plot(path, model, experiments):
         axes[0, 0].plot([], [], color="C3", lw=0.8, ls="--", label="identification | validation")
     axes[0, 0].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, format="png")
+    plt.close(fig)
+
+
+def _checkpoint_summary(path):
+    """'iteration k (cost c)' of a checkpoint, or None if there is none."""
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            history = f["history"]
+        return f"iteration {int(history[-1][0])} (cost {history[-1][1]:.6g})"
+    except (OSError, KeyError, ValueError, IndexError):
+        return None
+
+
+def _resume_command(args, out):
+    return f"pamjax fit {args.config} --out {out} --resume"
 
 
 def run(args):
+    model, experiments, free, options, out_cfg, bench = _load(args.config)
+    out = pathlib.Path(args.out or out_cfg or f"results/{pathlib.Path(args.config).stem}")
+    if args.resume and args.overwrite:
+        raise PamjaxInputError("pamjax fit: --resume continues the fit in --out, --overwrite starts it again: "
+                               "give one of them")
+    earlier = _checkpoint_summary(out / CHECKPOINT) if (out / CHECKPOINT).is_file() else None
+    if earlier and not (args.resume or args.overwrite):  # named before the generic "exists" of the outputs
+        if (out / RESULT).exists():
+            raise PamjaxInputError(f"pamjax fit: {out / RESULT} exists; pass --overwrite to replace it (or --resume "
+                                   "to continue that fit, e.g. with a larger [fit] max_steps)")
+        raise PamjaxInputError(f"pamjax fit: {out / CHECKPOINT} holds an earlier fit (checkpointed after {earlier}); "
+                               "continue it with --resume, or start again with --overwrite")
+    outputs = [RESULT, MODEL, CHECKPOINT] + ([] if args.no_plot else [FIGURE]) + ([BENCH] if bench else [])
+    if args.profile:
+        outputs += [PROFILE] + ([] if args.no_plot else [PROFILE_FIGURE])
+    # --resume replaces what the resumed run wrote (its checkpoint proves it is the same problem)
+    replaceable = outputs if args.resume else []
+    with OutputFolder(out, "pamjax fit", outputs, overwrite=args.overwrite, replaceable=replaceable) as folder:
+        checkpoint = folder / CHECKPOINT
+        if args.resume and not checkpoint.exists():
+            raise PamjaxInputError(f"pamjax fit --resume: {out} holds no checkpoint ({CHECKPOINT}); run without "
+                                   "--resume to start the fit")
+        try:
+            return _fit_and_write(args, folder, model, experiments, free, options, bench)
+        except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM: one line on what is kept and how to go on
+            PENDING.clear()  # handled here
+            what = "terminated" if interrupt_status(err) == 143 else "interrupted"
+            where = _checkpoint_summary(checkpoint)
+            if where is None:
+                again = f"pamjax fit {args.config} --out {out}" + (" --overwrite" if args.overwrite else "")
+                print(f"pamjax fit: {what} before the first iteration finished; nothing to resume: run {again} to "
+                      "start again", file=sys.stderr, flush=True)
+            else:
+                print(f"pamjax fit: {what}; the checkpoint after {where} is kept in {checkpoint}. Resume with: "
+                      f"{_resume_command(args, out)}", file=sys.stderr, flush=True)
+            return interrupt_status(err)
+
+
+def _fit_and_write(args, folder, model, experiments, free, options, bench=None):
     import pamjax as pj
 
-    model, experiments, free, options, out_cfg = load_config(args.config)
-    out = pathlib.Path(args.out or out_cfg or f"results/{pathlib.Path(args.config).stem}")
-    result_path = out / "fit.json"
-    profile_files = (out / "profile.json", out / "profile.png") if args.profile else ()
-    for existing in (result_path, out / "fit.png") + profile_files:
-        if existing.exists() and not args.overwrite:
-            raise SystemExit(f"{existing} exists; pass --overwrite to replace it")
+    from ._model_io import model_json
+
+    checkpoint = folder / CHECKPOINT
+    done = _checkpoint_summary(checkpoint) if args.resume else None
     print(f"fitting {len(free)} parameter entries to {len(experiments)} experiments "
-          f"({', '.join(e.name for e in experiments)})", flush=True)
-    res = pj.fit(model, experiments, free, progress=not args.quiet, out=result_path, overwrite=args.overwrite,
-                 **options)
+          f"({', '.join(e.name for e in experiments)})" + (f", resuming from {done}" if done else "")
+          + f"; checkpoint {checkpoint}", flush=True)
+
+    def progress(step, cost, step_size, accepted):  # fit's own line, and the point where a signal is honoured
+        if not args.quiet:
+            print(f"  iter {step:4d}  cost {cost:.6e}  damping {step_size:.3e}  "
+                  f"{'accepted' if accepted else 'rejected'}", flush=True)
+        raise_pending()
+
+    res = pj.fit(model, experiments, free, progress=progress, checkpoint=checkpoint,
+                 resume=checkpoint if args.resume else None, overwrite=args.overwrite, **options)
+    raise_pending()
     print(f"status {res.status}: {res.iterations} iterations, cost {res.initial_cost:.6g} → {res.cost:.6g} "
           f"({res.fit_s:.1f} s after {res.compile_s:.1f} s compilation)")
     print(res.table())
@@ -225,12 +337,39 @@ def run(args):
             print(f"  {name} {c}: RMSE {e['rmse']:.4g} ({e['rmse_percent']:.3f} % of range){val}")
     for w in res.warnings:
         print("WARNING:", w)
+    if res.status == "max_steps":
+        print(f"not converged within max_steps = {res.iterations}: raise [fit] max_steps and continue with "
+              f"{_resume_command(args, folder.path)}")
+    provenance = {"written_by": f"pamjax fit {args.config}", "status": res.status, "cost": res.cost,
+                  "free": res.labels, "result": RESULT}
+    written = [folder.write_text(RESULT, json.dumps(res.to_dict(), indent=1) + "\n"),
+               folder.write_text(MODEL, model_json(res.model, provenance))]
+    if bench is not None:  # the bench's names: params, std_err, status, rmse of p [Pa] and x [m] per experiment
+        values, errors = pj.bench_values(res, bench.fitted_keys)
+        summary = dict(data=str(bench.directory), params=values, std_err=errors, status=res.status,
+                       message=res.message, rmse=pj.bench_rmse(res), noise=bench.noise, mismatch=res.mismatch)
+        written.append(folder.write_text(BENCH, json.dumps(summary, indent=1) + "\n"))
     if not args.no_plot:
         try:
-            plot(out / "fit.png", res.model, experiments)
-            print(f"wrote {result_path} and {out / 'fit.png'}")
+            written.append(folder.write(FIGURE, lambda p: plot(p, res, experiments)))
         except ModuleNotFoundError:
-            print(f"wrote {result_path} (no figure: matplotlib is not installed)")
-    if args.profile:  # issue 17: pamjax._profile
-        pj.profile(res, progress=not args.quiet).write(out, overwrite=args.overwrite, report=True)
-    return 0
+            print("no figure: matplotlib is not installed (pip install matplotlib)")
+    print("wrote " + ", ".join(str(p) for p in written if p is not None))
+    if args.profile:  # pamjax.profile along every fitted parameter, re-using the fit's compiled programs
+        written = _profile_and_write(args, folder, res)
+    return 1 if folder.failed else 0
+
+
+def _profile_and_write(args, folder, res):
+    import pamjax as pj
+
+    prof = pj.profile(res, progress=not args.quiet)
+    print(f"profiles ({prof.profile_s:.1f} s):\n{prof.table()}")
+    written = [folder.write_text(PROFILE, json.dumps(prof.to_dict(), indent=1) + "\n")]
+    if not args.no_plot:
+        try:
+            written.append(folder.write(PROFILE_FIGURE, prof.plot))
+        except ModuleNotFoundError:
+            print("no profile figure: matplotlib is not installed (pip install matplotlib)")
+    print("wrote " + ", ".join(str(p) for p in written if p is not None))
+    return written

@@ -1,31 +1,41 @@
-"""`pamjax sweep CONFIG.toml`: run a steady-state map, flow surface or frequency response; write NPZ, CSV, figure.
+"""`pamjax sweep CONFIG.toml`: run a steady-state map, flow surface or frequency response of any model; write NPZ,
+CSV, figure.
 
-Config (see `examples/sweep_*.toml`); every key is checked before anything runs, and a key the chosen `kind` does
-not use is an error listing the ones it does:
+Config (see `examples/sweep_*.toml` and `docs/sweeps.md`); every key, value type and unit is checked before anything
+runs, and a key the chosen `kind` does not use is an error listing the ones it does:
 
     kind = "steady_state"            # or "flow_surface", "frequency_response"
     [system]                         # paper 000's MAS-10 preset (flow_surface: its MHE2 valve alone)
     valve = "pwm"                    # "pwm" (smoothed switching) or "averaged" (eq. 13)
     payload_mass = 9.6               # kg
+    # or, instead of [system], any model: a preset with options and set values, or a model file
+    # [model]
+    # file = "results/fit_example/model.json"
     [sweep]
     commands = { start = 0.0, stop = 1.0, num = 101 }   # duty ratios (or a list)
     horizon = 5.0                    # s; window = 1.0 s averaged at the end
+    over = { "payload_mass" = [5.0, 9.6, 15.0] }        # any parameter path(s): a grid with the commands
 """
 
 import argparse
-import csv
+import itertools
 import os
+import pathlib
 import time
 
 import numpy as np
 
 from . import presets
-from ._cli_fit import check_keys, read_toml
+from ._cli_config import apply_set, build_model, check_keys, read_toml, validate_model_table
+from ._cli_out import OutputFolder
+from ._csv import write_table
+from ._distributed import join_for_cli
 from ._errors import PamjaxInputError
 from ._sweep_maps import flow_surface, frequency_response, steady_state_map
+from ._units import ATMOSPHERE, check_absolute_pressure, check_setting
 
 KINDS = ("steady_state", "flow_surface", "frequency_response")
-_TOP_KEYS = {"kind", "system", "sweep"}
+_TOP_KEYS = {"kind", "system", "model", "sweep"}
 _SOLVER_KEYS = {"method", "dt", "chunk_size"}  # passed to pamjax.sweep
 # [system] and [sweep] keys each kind uses (defaults in run_config, each with its source)
 _SYSTEM_KEYS = {
@@ -34,11 +44,13 @@ _SYSTEM_KEYS = {
     "frequency_response": {"valve", "payload_mass"},
 }
 _SWEEP_KEYS = {
-    "flow_surface": {"commands", "pressures"},
-    "steady_state": {"commands", "horizon", "window", "sample_interval"} | _SOLVER_KEYS,
+    "flow_surface": {"commands", "pressures", "over"},
+    "steady_state": {"commands", "horizon", "window", "sample_interval", "over"} | _SOLVER_KEYS,
     "frequency_response": {"frequencies", "offset", "amplitude", "settle_periods", "periods",
-                           "samples_per_period"} | _SOLVER_KEYS,
+                           "samples_per_period", "over"} | _SOLVER_KEYS,
 }
+_NUMBERS = ("horizon", "window", "sample_interval", "dt", "offset", "amplitude")  # s, s, s, s, 1, 1
+_INTEGERS = ("chunk_size", "settle_periods", "periods", "samples_per_period")
 _AXES = {"commands", "pressures", "frequencies"}
 # sweeps step on a fixed grid: the smoothed-edge switching valve or eq. 13; the exact-edge valve needs `simulate`
 _VALVES = ("pwm", "averaged")
@@ -55,6 +67,10 @@ def add_arguments(parser):
     parser.add_argument("--cpu-devices", type=_positive_int, default=DEFAULT_CPU_DEVICES,
                         help="on CPU, split the processor into this many XLA devices and shard the sweep over them "
                              "(default: one per core; 1: a single device). No effect on GPU/TPU runs")
+    parser.add_argument("--distributed", action="store_true",
+                        help="join a multi-process run (JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES, JAX_PROCESS_ID, "
+                             "or SLURM/Open MPI) and spread the sweep over every process's devices (--cpu-devices "
+                             "per process); process 0 writes the outputs (docs/distributed.md)")
 
 
 def _use_cpu_devices(count):
@@ -79,71 +95,189 @@ def _positive_int(text):
 
 
 def validate_config(config):
-    """Check every table and key of a parsed sweep config for its `kind` (nothing is built or solved)."""
+    """Check every table, key and value of a parsed sweep config for its `kind` (nothing is built or solved)."""
     check_keys(config, _TOP_KEYS, "sweep config")
     kind = config.get("kind")
     if kind not in KINDS:
         raise PamjaxInputError(f"kind must be one of {list(KINDS)}, got {kind!r}")
-    check_keys(config.get("system", {}), _SYSTEM_KEYS[kind], f"[system] (kind = {kind!r})")
+    if "model" in config and "system" in config:
+        raise PamjaxInputError("give either [system] (paper 000's preset) or [model] (any model), not both")
+    if "model" in config:
+        validate_model_table(config["model"])
+    sys_cfg = config.get("system", {})
+    check_keys(sys_cfg, _SYSTEM_KEYS[kind], f"[system] (kind = {kind!r})")
+    for key in ("payload_mass", "supply_pressure"):
+        if key in sys_cfg:
+            check_setting(key, _number(sys_cfg[key], f"[system] {key}"), "[system]")
     sw = config.get("sweep", {})
     check_keys(sw, _SWEEP_KEYS[kind], f"[sweep] (kind = {kind!r})")
     for name in _AXES & set(sw):
         _axis(sw[name], name)
-    valve = config.get("system", {}).get("valve", "pwm")
+    for key in set(_NUMBERS) & set(sw):
+        _number(sw[key], f"[sweep] {key}")
+    for key in set(_INTEGERS) & set(sw):
+        if not (isinstance(sw[key], int) and not isinstance(sw[key], bool) and sw[key] > 0):
+            raise PamjaxInputError(f"[sweep] {key} must be a positive integer, got {sw[key]!r}")
+    if "method" in sw and not isinstance(sw["method"], str):
+        raise PamjaxInputError(f"[sweep] method must be a string, e.g. \"rk4\", got {sw['method']!r}")
+    over = sw.get("over", {})
+    if not isinstance(over, dict):
+        raise PamjaxInputError(f"[sweep] over must be a table of parameter path = values, got {over!r}")
+    for path, spec in over.items():
+        check_setting(path, _axis(spec, f"over.{path}"), "[sweep] over")
+    valve = sys_cfg.get("valve", "pwm")
     if kind != "flow_surface" and valve not in _VALVES:
         raise PamjaxInputError(f"[system] valve must be one of {list(_VALVES)}, got {valve!r}")
 
 
+def _number(value, where):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise PamjaxInputError(f"{where} must be a number, got {value!r}")
+    return float(value)
+
+
 def _axis(spec, name):
-    if isinstance(spec, list) and spec and all(isinstance(v, int | float) for v in spec):
-        return np.asarray(spec, dtype=float)
-    if isinstance(spec, dict) and {"start", "stop", "num"} <= set(spec):
+    if isinstance(spec, list) and spec and all(isinstance(v, int | float) and not isinstance(v, bool) for v in spec):
+        values = np.asarray(spec, dtype=float)
+    elif isinstance(spec, dict) and {"start", "stop", "num"} <= set(spec):
         check_keys(spec, _AXIS_KEYS, f"[sweep] {name}")
-        space = np.geomspace if spec.get("log", False) else np.linspace
-        return space(float(spec["start"]), float(spec["stop"]), int(spec["num"]))
-    raise PamjaxInputError(f"[sweep] {name} must be a non-empty list of numbers or a table "
-                           f"{{start, stop, num[, log]}}, got {spec!r}")
+        start, stop = _number(spec["start"], f"[sweep] {name} start"), _number(spec["stop"], f"[sweep] {name} stop")
+        if not (isinstance(spec["num"], int) and not isinstance(spec["num"], bool) and spec["num"] >= 1):
+            raise PamjaxInputError(f"[sweep] {name} num must be a positive integer, got {spec['num']!r}")
+        log = spec.get("log", False)
+        if not isinstance(log, bool):
+            raise PamjaxInputError(f"[sweep] {name} log must be true or false, got {log!r}")
+        if log and not (start > 0 and stop > 0):
+            raise PamjaxInputError(f"[sweep] {name}: a log axis needs start and stop > 0, got {start}, {stop}")
+        values = (np.geomspace if log else np.linspace)(start, stop, spec["num"])
+    else:
+        raise PamjaxInputError(f"[sweep] {name} must be a non-empty list of numbers or a table "
+                               f"{{start, stop, num[, log]}}, got {spec!r}"
+                               + (" (a single string where a list is expected)" if isinstance(spec, str) else ""))
+    if name == "commands" and not np.all((values >= 0) & (values <= 1)):
+        hint = " (these look like percent: divide by 100)" if np.all((values >= 0) & (values <= 100)) else ""
+        raise PamjaxInputError(f"[sweep] commands are duty ratios in [0, 1], got {values.min():g} … "
+                               f"{values.max():g}{hint}")
+    if name == "pressures":
+        check_absolute_pressure(values, "[sweep] pressures")
+    if name == "frequencies" and not np.all(values > 0):
+        raise PamjaxInputError(f"[sweep] frequencies must be > 0 [Hz], got {values.min():g}")
+    return values
 
 
-def _write_csv(path, columns):
-    names = list(columns)
-    with open(path, "w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(names)
-        for row in zip(*(np.ravel(columns[n]) for n in names)):
-            writer.writerow([f"{v:.10g}" for v in row])
-
-
-def run_config(config, progress=print):
-    """Validate and run a parsed config; returns (columns for CSV/NPZ: name -> 1-D array with units in the name,
-    plot spec). Defaults: paper 000's MAS-10 preset (pwm valve, 9.6 kg payload, 0.65 MPa abs supply)."""
-    validate_config(config)
+def _model(config, root):
+    """The swept model: [model] (any preset or model file), else [system] (paper 000's preset)."""
     kind = config["kind"]
-    sys_cfg, sw = config.get("system", {}), config.get("sweep", {})
-    options = {k: sw[k] for k in _SOLVER_KEYS if k in sw}
+    if "model" in config:
+        model = build_model(config["model"], root)
+        valve = getattr(model, "valve", None)
+        if getattr(valve, "mode", None) == "exact":
+            raise PamjaxInputError("[model]: sweeps step on a fixed grid, which the exact-edge valve (mode = "
+                                   "\"exact\") does not suit; use pamjax simulate for it, or a smoothed valve")
+        if kind == "flow_surface" and not hasattr(valve, "pwm_frequency"):
+            raise PamjaxInputError(f"kind = 'flow_surface' maps a switching valve; this model's valve is a "
+                                   f"{type(valve).__name__}")
+        if kind != "flow_surface" and not hasattr(model, "initial_state"):
+            raise PamjaxInputError(f"kind = {kind!r} needs a system (a MuscleSystem, TankSystem, ...), got a "
+                                   f"{type(model).__name__}")
+        return model
+    sys_cfg = config.get("system", {})
     if kind == "flow_surface":
         valve = presets.mas10_valve(supply_pressure=float(sys_cfg.get("supply_pressure", presets.SUPPLY_PRESSURE)))
+        return presets.mas10_tank_system(valve=valve)
+    return presets.mas10_system(valve=sys_cfg.get("valve", "pwm"),
+                                payload_mass=float(sys_cfg.get("payload_mass", presets.PAYLOAD_MASS)))
+
+
+def _leaf(model, path):
+    obj = model
+    for part in path.split("[")[0].split("."):
+        obj = getattr(obj, part, None)
+    return obj
+
+
+def _over_name(model, path):
+    """`path [unit]` for a swept parameter (the unit its component's field comment gives)."""
+    from ._model_io import _units_of
+
+    parts = path.split("[")[0].split(".")
+    owner = _leaf(model, ".".join(parts[:-1])) if len(parts) > 1 else model
+    unit = _units_of(type(owner)).get(parts[-1], "") if owner is not None else ""
+    return f"{path} [{unit}]" if unit else path
+
+
+def prepare(config, root="."):
+    """Validate a parsed config and build its model, checking every swept path against it (nothing solved)."""
+    validate_config(config)
+    model = _model(config, root)
+    over = config.get("sweep", {}).get("over", {})
+    if over:  # every path must name a parameter of this model, with the right shape: checked on the first point
+        apply_set(model, {p: float(_axis(v, f"over.{p}")[0]) for p, v in over.items()}, "[sweep] over")
+    return model
+
+
+def run_config(config, progress=print, root=".", model=None):
+    """Validate and run a parsed config; returns (columns for CSV/NPZ: name -> 1-D array with units in the name,
+    plot spec). Defaults: paper 000's MAS-10 preset (pwm valve, 9.6 kg payload, 0.65 MPa abs supply). With
+    `[sweep] over`, every point of the grid of its values is mapped; the columns carry the swept values. Relative
+    model files are read from `root` (the config's folder); `model`: the one `prepare` built."""
+    model = prepare(config, root) if model is None else model
+    over = config.get("sweep", {}).get("over", {})
+    paths = list(over)
+    axes = [_axis(over[p], f"over.{p}") for p in paths]
+    native = config["kind"] == "steady_state" and paths and all(
+        "[" not in p and np.ndim(_leaf(model, p)) == 0 for p in paths)
+    if native:  # one vmapped sweep over over-values × commands
+        return _run_one(config, model, progress, dict(zip(paths, axes)))
+    columns, spec = {}, None
+    for point in itertools.product(*axes):  # one map per grid point (one compilation: only values change)
+        point_model = apply_set(model, dict(zip(paths, point)), "[sweep] over") if paths else model
+        cols, spec = _run_one(config, point_model, progress, None)
+        n = len(next(iter(cols.values())))
+        for p, v in zip(paths, point):
+            columns.setdefault(_over_name(model, p), []).append(np.full(n, v))
+        for name, values in cols.items():
+            columns.setdefault(name, []).append(np.asarray(values))
+    columns = {k: np.concatenate(v) for k, v in columns.items()}
+    return columns, (spec if not paths else ("table", columns, [_over_name(model, p) for p in paths]))
+
+
+def _run_one(config, model, progress, native_over):
+    """One map of `model`; `native_over` (path → axis values) is swept inside one steady-state sweep."""
+    kind = config["kind"]
+    sw = config.get("sweep", {})
+    options = {k: sw[k] for k in _SOLVER_KEYS if k in sw}
+    if kind == "flow_surface":
+        valve = model.valve
         u = _axis(sw.get("commands", {"start": 0, "stop": 1, "num": 41}), "commands")
-        default_p = {"start": 101325.0, "stop": float(valve.supply_pressure), "num": 41}  # p_atm (ISO 2533) … p_s
+        default_p = {"start": ATMOSPHERE, "stop": float(valve.supply_pressure), "num": 41}  # p_atm (ISO 2533) … p_s
         p = _axis(sw.get("pressures", default_p), "pressures")
-        air = presets.Air()
-        flow = flow_surface(valve, u, p, air)
+        flow = flow_surface(valve, u, p, model.air)
         uu, pp = np.meshgrid(u, p, indexing="ij")
         return dict(duty=uu.ravel(), pressure_pa_abs=pp.ravel(), mass_flow_kg_s=flow.ravel()), ("surface", u, p, flow)
-    system = presets.mas10_system(valve=sys_cfg.get("valve", "pwm"),
-                                  payload_mass=float(sys_cfg.get("payload_mass", presets.PAYLOAD_MASS)))
     if kind == "steady_state":
         u = _axis(sw.get("commands", {"start": 0, "stop": 1, "num": 101}), "commands")
         kwargs = {k: float(sw[k]) for k in ("horizon", "window", "sample_interval") if k in sw}
-        r = steady_state_map(system, u, progress=progress, **kwargs, **options)  # defaults: _sweep_maps
-        cols = dict(duty=u, pressure_pa_abs=r["pressure"], position_m=r["position"], status=r.status)
-        return cols, ("steady", u, r)
+        grid = {}  # axis k for the k-th swept path, the last axis for the commands
+        for k, (path, values) in enumerate((native_over or {}).items()):
+            grid[path] = np.asarray(values, dtype=float).reshape((-1,) + (1,) * (len(native_over) - k))
+        r = steady_state_map(model, u, progress=progress, over=grid or None, **kwargs, **options)
+        shape = np.broadcast_shapes(u.shape, *(v.shape for v in grid.values()))
+        cols = {_over_name(model, p): np.broadcast_to(v, shape).ravel() for p, v in grid.items()}
+        cols.update(duty=np.broadcast_to(u, shape).ravel(), pressure_pa_abs=np.ravel(r["pressure"]))
+        if "position" in r.channels:
+            cols["position_m"] = np.ravel(r["position"])
+        cols["status"] = np.ravel(r.status)
+        return cols, (("steady", u, r) if not grid else ("table", cols, list(cols)[: len(grid)]))
     f = _axis(sw.get("frequencies", {"start": 0.05, "stop": 5.0, "num": 16, "log": True}), "frequencies")
     kwargs = {k: float(sw[k]) for k in ("offset", "amplitude") if k in sw}
     kwargs.update({k: int(sw[k]) for k in ("settle_periods", "periods", "samples_per_period") if k in sw})
-    fr = frequency_response(system, f, progress=progress, **kwargs, **options)  # defaults: _sweep_maps
-    cols = dict(frequency_hz=f, position_gain_m=fr["position"]["gain"], position_phase_deg=fr["position"]["phase"],
-                pressure_gain_pa=fr["pressure"]["gain"], pressure_phase_deg=fr["pressure"]["phase"],
+    channels = ("position", "pressure") if hasattr(model, "muscle") else ("pressure",)
+    fr = frequency_response(model, f, progress=progress, channels=channels, **kwargs, **options)
+    cols = dict(frequency_hz=f)
+    if "position" in channels:
+        cols.update(position_gain_m=fr["position"]["gain"], position_phase_deg=fr["position"]["phase"])
+    cols.update(pressure_gain_pa=fr["pressure"]["gain"], pressure_phase_deg=fr["pressure"]["phase"],
                 status=fr["result"].status)
     return cols, ("bode", f, fr)
 
@@ -159,55 +293,85 @@ def plot(spec, path):
         _, u, p, flow = spec
         fig, ax = plt.subplots(figsize=(7, 5))
         for j in range(0, len(p), max(1, len(p) // 8)):
-            ax.plot(u, flow[:, j] * 1e3, label=f"p = {(p[j] - 101325) / 1e6:.2f} MPa gauge")
+            ax.plot(u, flow[:, j] * 1e3, label=f"p = {(p[j] - ATMOSPHERE) / 1e6:.2f} MPa gauge")
         ax.set(xlabel="duty ratio u [-]", ylabel="cycle-averaged mass flow [g/s]",
                title="Averaged flow surface of the switching valve (chamber held at p)")
         ax.legend(fontsize=7)
     elif kind == "steady":
         _, u, r = spec
-        fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 7), sharex=True)
-        a1.plot(u, (r["pressure"] - 101325) / 1e6)
-        a1.set(ylabel="pressure [MPa gauge]", title="Steady state against constant duty")
-        a2.plot(u, r["position"] * 1e3)
-        a2.set(xlabel="duty ratio u [-]", ylabel="displacement [mm]")
-        for a in (a1, a2):
+        rows = 2 if "position" in r.channels else 1
+        fig, axes = plt.subplots(rows, 1, figsize=(7, 3.5 * rows), sharex=True, squeeze=False)
+        axes[0, 0].plot(u, (r["pressure"] - ATMOSPHERE) / 1e6)
+        axes[0, 0].set(ylabel="pressure [MPa gauge]", title="Steady state against constant duty")
+        if rows == 2:
+            axes[1, 0].plot(u, r["position"] * 1e3)
+            axes[1, 0].set(ylabel="displacement [mm]")
+        axes[-1, 0].set(xlabel="duty ratio u [-]")
+        for a in axes[:, 0]:
             a.axvspan(0, 0.1, color="gray", alpha=0.15)
             a.axvspan(0.9, 1.0, color="gray", alpha=0.15)
-    else:
+    elif kind == "bode":
         _, f, fr = spec
+        channel = "position" if "position" in fr else "pressure"
+        scale, unit = (1e3, "mm") if channel == "position" else (1e-5, "bar")
         fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 7), sharex=True)
-        a1.loglog(f, fr["position"]["gain"] * 1e3)
-        a1.set(ylabel="gain [mm per unit duty]", title="Frequency response: duty → displacement")
-        a2.semilogx(f, fr["position"]["phase"])
+        a1.loglog(f, fr[channel]["gain"] * scale)
+        a1.set(ylabel=f"gain [{unit} per unit duty]", title=f"Frequency response: duty → {channel}")
+        a2.semilogx(f, fr[channel]["phase"])
         a2.set(xlabel="frequency [Hz]", ylabel="phase [deg]")
+    else:  # a grid over parameters: one line per swept point against the map's own axis
+        _, cols, swept = spec
+        x_name = next(c for c in cols if c not in swept)
+        y_names = [c for c in cols if c not in swept and c != x_name and c != "status"][:2]
+        fig, axes = plt.subplots(len(y_names), 1, figsize=(7, 3.5 * len(y_names)), sharex=True, squeeze=False)
+        keys = list(zip(*(cols[c] for c in swept)))
+        for point in dict.fromkeys(keys):
+            sel = np.array([k == point for k in keys])
+            label = ", ".join(f"{c} = {v:g}" for c, v in zip(swept, point))
+            for ax, y in zip(axes[:, 0], y_names):
+                ax.plot(cols[x_name][sel], cols[y][sel], label=label)
+                ax.set(ylabel=y)
+        axes[-1, 0].set(xlabel=x_name)
+        axes[0, 0].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=120, format="png")
     plt.close(fig)
+
+
+def _savez(path, columns):
+    with open(path, "wb") as f:
+        np.savez(f, **columns)
 
 
 def run(args):
     _use_cpu_devices(args.cpu_devices)
-    config = read_toml(args.config)  # run_config validates it before anything runs
+    writes = join_for_cli(args.distributed)  # before JAX starts; False on processes other than 0
+    config = read_toml(args.config)
+    model = prepare(config, pathlib.Path(args.config).parent)  # before the output folder is touched
+    if not writes:  # another process of a distributed run: its share of the work, no files
+        run_config(config, model=model)
+        return 0
     name = os.path.splitext(os.path.basename(args.config))[0]
     out = args.out or os.path.join("results", f"sweep-{name}")
-    for existing in OUTPUTS:
-        if os.path.exists(os.path.join(out, existing)) and not args.overwrite:
-            raise SystemExit(f"{os.path.join(out, existing)} exists; pass --overwrite to replace it")
-    start = time.perf_counter()
-    columns, spec = run_config(config)
-    import jax
+    outputs = [o for o in OUTPUTS if not (args.no_plot and o.endswith(".png"))]
+    with OutputFolder(out, "pamjax sweep", outputs, overwrite=args.overwrite) as folder:
+        start = time.perf_counter()
+        columns, spec = run_config(config, model=model)
+        import jax
 
-    devices = jax.devices()
-    print(f"pamjax sweep: {config['kind']}, {len(next(iter(columns.values())))} rows in "
-          f"{time.perf_counter() - start:.1f} s on {len(devices)} {devices[0].platform} device(s)")
-    os.makedirs(out, exist_ok=True)
-    np.savez(os.path.join(out, "sweep.npz"), **columns)
-    _write_csv(os.path.join(out, "sweep.csv"), columns)
-    print(f"wrote {out}/sweep.npz and sweep.csv (columns: {', '.join(columns)})")
-    if not args.no_plot:
-        plot(spec, os.path.join(out, "sweep.png"))
-        print(f"figure: {out}/sweep.png")
-    failed = int(np.sum(columns.get("status", np.zeros(1)) != 0))
-    if failed:
-        print(f"warning: {failed} sweep points failed (status != 0; their outputs are NaN)")
-    return 0
+        devices = jax.devices()
+        print(f"pamjax sweep: {config['kind']}, {len(next(iter(columns.values())))} rows in "
+              f"{time.perf_counter() - start:.1f} s on {len(devices)} {devices[0].platform} device(s)")
+        folder.write("sweep.npz", lambda p: _savez(p, columns))
+        folder.write("sweep.csv", lambda p: write_table(p, columns, {}))
+        print(f"wrote {out}/sweep.npz and sweep.csv (columns: {', '.join(columns)})")
+        if not args.no_plot:
+            try:
+                folder.write("sweep.png", lambda p: plot(spec, p))
+                print(f"figure: {out}/sweep.png")
+            except ModuleNotFoundError:
+                print("no figure: matplotlib is not installed (pip install matplotlib)")
+        failed = int(np.sum(columns.get("status", np.zeros(1)) != 0))
+        if failed:
+            print(f"warning: {failed} sweep points failed (status != 0; their outputs are NaN)")
+        return 1 if folder.failed else 0

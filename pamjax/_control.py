@@ -19,7 +19,7 @@ import numpy as np
 
 from ._errors import PamjaxInputError, check_finite, check_nonnegative, check_positive
 from ._friction import CoulombViscousFriction
-from ._inputs import AbstractSignal, Constant
+from ._inputs import AbstractSignal, Step
 from ._simulate import solve
 from ._smooth import safe_sqrt, smooth_sign
 from ._system import MuscleState, MuscleSystem
@@ -243,11 +243,13 @@ class SlidingModeController(AbstractController):
 
 # --- closed loop ----------------------------------------------------------------------------------------------------
 class ClosedLoopState(eqx.Module):
-    """State of the closed loop at a period start: `plant` (a `MuscleState`, absolute pressure) and `controller`
-    (the controller's own state, e.g. the PI integrator [m s])."""
+    """State of the closed loop at a period start: `plant` (a `MuscleState`, absolute pressure), `controller`
+    (the controller's own state, e.g. the PI integrator [m s]) and `duty`, the duty of the period before (a PWM
+    valve's state carries across periods: after a period above ~90 % it is still open)."""
 
     plant: MuscleState
     controller: object
+    duty: jax.Array = eqx.field(default_factory=lambda: jnp.zeros(()))
 
 
 class ClosedLoop(eqx.Module):
@@ -290,7 +292,7 @@ class ClosedLoop(eqx.Module):
     def initial_state(self, plant_state=None):
         """Plant at rest in equilibrium at atmospheric pressure, valve off (the bench's E5 start), controller reset."""
         plant_state = self.plant.initial_state() if plant_state is None else plant_state
-        return ClosedLoopState(plant=plant_state, controller=self.controller.initial_state())
+        return ClosedLoopState(plant=plant_state, controller=self.controller.initial_state(), duty=jnp.zeros(()))
 
     def step(self, t, state, sample_offsets, *, rtol, atol, max_steps):
         """One PWM period from `t`: the controller picks the duty, the plant runs with it held. Returns the next state
@@ -298,19 +300,22 @@ class ClosedLoop(eqx.Module):
         reference = reference_derivatives(self.reference, t)
         duty, controller_state = self.controller.update(t, reference, state.plant, state.controller, self.period)
         times = t + sample_offsets
+        # this period's duty from t, the last period's before it: the valve latches both (OnOffValve.read_command)
         traj = solve(
             self.plant,
-            Constant(duty),
+            Step(state.duty, duty, t),
             times,
             state.plant,
             t,
             rtol=rtol,
             atol=atol,
             max_steps=max_steps,
+            starts_off=False,
+            num_periods=1,  # a smoothed valve's edges get step boundaries of their own
         )
         plant_state = jtu.tree_map(lambda a: a[-1], traj.state)
         samples = dict(position=traj.position, pressure=traj.pressure, velocity=traj.velocity, result=traj.result)
-        return ClosedLoopState(plant=plant_state, controller=controller_state), duty, samples
+        return ClosedLoopState(plant=plant_state, controller=controller_state, duty=duty), duty, samples
 
 
 class ClosedLoopTrajectory(eqx.Module):

@@ -1,4 +1,5 @@
-"""`pamjax demo`: paper 000's experiments with the MAS-10 preset (valve tests, Figs. 11-12; system tests, 13-14)."""
+"""`pamjax demo`: paper 000's experiments with the MAS-10 preset (valve tests, Figs. 11-12; system tests, 13-14);
+writes each trajectory as CSV (units in the header, readable by `pamjax.Recording.load`) and a figure."""
 
 import os
 import time
@@ -10,18 +11,30 @@ from . import presets
 from ._inputs import Constant, Triangle
 from ._simulate import simulate
 
+DUTIES = (0.25, 0.5, 0.75)  # paper 000, Figs. 11-12
+TRIANGLES = ((0.08, 25.0), (0.25, 8.0))  # Hz, s: paper 000, Figs. 13-14
+VALVES = ("pwm", "averaged")
+FIGURE = "paper000_experiments.png"
+
 
 def add_arguments(parser):
-    parser.add_argument("--out", default="pamjax-demo", help="output folder for the figure and summary (created)")
+    parser.add_argument("--out", default="pamjax-demo", help="output folder for the CSV files and the figure")
+    parser.add_argument("--overwrite", action="store_true", help="replace the files of an earlier demo in --out")
     parser.add_argument("--no-plot", action="store_true", help="skip the figure (no matplotlib needed)")
+
+
+def experiment_names():
+    """The names of the demo's runs (each written as `<name>.csv`)."""
+    tanks = [f"tank_{kind}_{valve}_{duty}" for valve in VALVES for duty in DUTIES for kind in ("inflate", "deflate")]
+    return tanks + [f"triangle_{f}_{valve}" for f, _ in TRIANGLES for valve in VALVES]
 
 
 def run_experiments(progress=print):
     """Run the demo's experiments; returns a dict name → (Trajectory, description)."""
     results = {}
     tank_ts = jnp.linspace(0.0, 2.0, 401)
-    for valve in ("pwm", "averaged"):
-        for duty in (0.25, 0.5, 0.75):
+    for valve in VALVES:
+        for duty in DUTIES:
             system = presets.mas10_tank_system(valve=valve)
             t = time.perf_counter()
             inflate = simulate(system, Constant(duty), tank_ts)
@@ -32,9 +45,9 @@ def run_experiments(progress=print):
             )
             results[f"tank_inflate_{valve}_{duty}"] = inflate
             results[f"tank_deflate_{valve}_{duty}"] = deflate
-    for frequency, horizon in ((0.08, 25.0), (0.25, 8.0)):
+    for frequency, horizon in TRIANGLES:
         ts = jnp.linspace(0.0, horizon, int(horizon * 100) + 1)
-        for valve in ("pwm", "averaged"):
+        for valve in VALVES:
             system = presets.mas10_system(valve=valve)
             t = time.perf_counter()
             traj = simulate(system, Triangle(0.05, 0.95, frequency), ts)
@@ -89,16 +102,29 @@ def plot(results, path):
         )
         ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=120, format="png")
     plt.close(fig)
 
 
 def run(args):
-    os.makedirs(args.out, exist_ok=True)
-    print("pamjax demo: paper 000 (Festo MAS-10-300, MHE2 valve at 50 Hz, 0.65 MPa abs supply), preset parameters")
-    results = run_experiments()
-    if not args.no_plot:
-        path = os.path.join(args.out, "paper000_experiments.png")
-        plot(results, path)
-        print(f"figure: {path}")
-    return 0
+    from ._cli_out import OutputFolder
+    from ._cli_simulate import columns_of
+    from ._csv import write_table
+
+    outputs = [f"{name}.csv" for name in experiment_names()] + ([] if args.no_plot else [FIGURE])
+    with OutputFolder(args.out, "pamjax demo", outputs, overwrite=args.overwrite) as folder:
+        print("pamjax demo: paper 000 (Festo MAS-10-300, MHE2 valve at 50 Hz, 0.65 MPa abs supply), preset "
+              "parameters")
+        results = run_experiments()
+        for name, traj in results.items():
+            cols, units = columns_of(traj)
+            comment = f"pamjax demo: {name} (paper 000 preset); pressures absolute"
+            folder.write(f"{name}.csv", lambda p, cols=cols, units=units, c=comment: write_table(p, cols, units, c))
+        print(f"wrote {len(results)} trajectories to {args.out}/<run>.csv (t [s], command, pressure [Pa abs], ...)")
+        if not args.no_plot:
+            try:
+                folder.write(FIGURE, lambda p: plot(results, p))
+                print(f"figure: {os.path.join(args.out, FIGURE)}")
+            except ModuleNotFoundError:
+                print("no figure: matplotlib is not installed (pip install matplotlib)")
+        return 1 if folder.failed else 0

@@ -11,6 +11,7 @@ Experiments of different systems share parameters through the model (all valve t
 """
 
 import copy
+import hashlib
 
 import equinox as eqx
 import jax
@@ -21,8 +22,9 @@ from ._errors import PamjaxInputError
 from ._inputs import AbstractSignal
 from ._recording import _MIN_ABSOLUTE_PA, Recording, warn_filtered
 from ._simulate import _flat_scaled, fixed_grid_size, fixed_trajectory, resolve_stepping, solve, validate
-from ._synchronous import solve_runs
+from ._synchronous import num_periods, solve_runs
 from ._system import AbstractSystem, TankSystem
+from ._units import check_absolute_pressure
 
 
 class SameSystem(eqx.Module):
@@ -40,6 +42,25 @@ class TankFromModel(eqx.Module):
 
     def __call__(self, model):
         return TankSystem(valve=model.valve, volume=self.volume, air=model.air, polytropic_index=self.polytropic_index)
+
+
+class _Constant:
+    """A NumPy array held as a static (compile-time) value: hashed and compared by content."""
+
+    def __init__(self, array):
+        self.array = np.array(array, copy=True)
+        self.array.setflags(write=False)
+        self._hash = hash((self.array.shape, self.array.tobytes()))
+
+    def __hash__(self):
+        return self._hash
+
+    def __eq__(self, other):
+        return isinstance(other, _Constant) and np.array_equal(self.array, other.array)
+
+    def __repr__(self):  # process-independent (fingerprints of resumed fits compare it)
+        digest = hashlib.sha256(np.ascontiguousarray(self.array).tobytes()).hexdigest()[:16]
+        return f"_Constant(shape={self.array.shape}, sha256={digest})"
 
 
 def _default_scale(values):
@@ -64,12 +85,14 @@ class Experiment(eqx.Module):
     - `name`; `rtol`, `atol`, `max_steps`, `dt0`: solver settings of the adaptive solve (see `simulate`); the
       tolerances default to 1e-9 (tighter than `simulate`'s 1e-6, so that the residuals are smooth enough for
       Levenberg-Marquardt near the optimum; see the comment at the default).
-    - `stepping`: "auto" (default: "pwm" when the system's valve switches, "grid" for a hybrid system (stick-slip
-      friction) with a continuous valve, else "adaptive"), "adaptive", "pwm" or "grid". "pwm" integrates on the PWM-synchronous fixed RK4 grid (`simulate(stepping="pwm")`:
-      exact edges, `substeps` nodes per period plus the edges), so the residuals are smooth, deterministic functions
-      of every parameter; an adaptive solve of a switching valve changes its step pattern with the parameters, and
-      the cost jumps by O(1) between neighbouring trial points (docs/fitting.md), which stalls Levenberg-Marquardt.
-      The grid is sized from the valve's PWM frequency in the model the experiment is first used with.
+    - `stepping`: "auto" (default: "pwm" when the system's valve switches; "grid", fixed RK4 steps of 1 ms with
+      events located inside the step, for stick-slip friction with a continuous valve; else "adaptive", diffrax at
+      `rtol`/`atol`), or one of "adaptive", "pwm", "grid". "pwm" integrates on the PWM-synchronous fixed RK4 grid
+      (`simulate(stepping="pwm")`: exact edges, `substeps` nodes per period plus the edges), so the residuals are
+      smooth, deterministic functions of every parameter; an adaptive solve of a switching valve changes its step
+      pattern with the parameters, and the cost jumps by O(1) between neighbouring trial points (docs/fitting.md),
+      which stalls Levenberg-Marquardt. The grid is sized from the valve's PWM frequency in the model the
+      experiment is first used with.
     - `validation_fraction`: the last fraction of the samples kept out of the fit (paper 001: 0.4), reported as
       validation error.
     """
@@ -93,6 +116,7 @@ class Experiment(eqx.Module):
     stepping: str = eqx.field(static=True)
     substeps: int = eqx.field(static=True)
     span: tuple = eqx.field(static=True)  # (t0, t_end) [s] as floats, to size the PWM grid
+    host_times: "_Constant" = eqx.field(static=True)  # the times as a NumPy array (`predict`)
     num_periods: int | None = eqx.field(static=True)
     lowpass_hz: float | None = eqx.field(static=True)  # the recording's low-pass cut-off, if it was filtered
 
@@ -155,19 +179,23 @@ class Experiment(eqx.Module):
         self.name = recording.name if name is None else str(name)
         self.channels = channels
         self.rtol, self.atol, self.max_steps, self.dt0 = rtol, atol, int(max_steps), dt0
-        if stepping not in ("auto", "adaptive", "pwm"):
-            raise PamjaxInputError(f"stepping must be 'auto', 'adaptive' or 'pwm', got {stepping!r}")
+        if stepping not in ("auto", "adaptive", "pwm", "grid"):
+            raise PamjaxInputError(f"stepping must be 'auto', 'adaptive', 'pwm' or 'grid', got {stepping!r}")
         if not (isinstance(substeps, int) and substeps >= 2):
             raise PamjaxInputError(f"substeps must be an int >= 2 (RK4 nodes per PWM period), got {substeps!r}")
         self.stepping, self.substeps = stepping, substeps
         self.lowpass_hz = recording.lowpass_hz
         self.span = (float(self.t0), float(t[-1]))
+        self.host_times = _Constant(np.asarray(t, dtype=float))
         self.num_periods = None
 
     def _stepping(self, system):
-        """The stepping of this experiment's solve: "auto" is the PWM-synchronous grid for a switching valve
-        (smooth, deterministic residuals in every parameter), the uniform grid for a hybrid system fed by a
-        continuous valve, else the adaptive solver (`simulate`'s rule otherwise)."""
+        """The stepping of this experiment's solve. "auto": the PWM-synchronous grid for a switching valve (smooth,
+        deterministic residuals in every parameter, where an adaptive solve's step pattern changes with them and its
+        cost jumps at the tolerance level), the uniform grid for a hybrid system (stick-slip friction) fed by a
+        continuous valve, and the adaptive solver otherwise: a smooth system can be stiff (a smooth Coulomb sign
+        under a large F_c) beyond what a fixed 1 ms RK4 step holds. "grid" asks for the uniform grid anyway (small
+        programs, smooth residuals: a tank test with the averaged valve)."""
         if self.stepping == "auto" and getattr(system.valve, "switches", False):
             return "pwm"
         try:
@@ -198,13 +226,22 @@ class Experiment(eqx.Module):
             raise PamjaxInputError(
                 f"experiment {self.name!r}: build(model) must give a pamjax system, got {type(system)}"
             )
-        try:
-            y0 = system.initial_state(**self.initial)
+        try:  # traced, not run: the start state is computed inside the compiled solve
+            y0 = jax.eval_shape(lambda s: s.initial_state(**self.initial), system)
         except TypeError as err:
             raise PamjaxInputError(
                 f"experiment {self.name!r}: bad `initial` keys {sorted(self.initial)}: {err}"
             ) from err
-        validate(system, self.signal, self.times, y0, self.t0)
+        validate(system, self.signal, self.times, None, self.t0)
+        self._stepping(system)  # a stepping this system cannot take is named here
+        for key, value in self.initial.items():
+            if not np.all(np.isfinite(np.asarray(value))):
+                raise PamjaxInputError(f"experiment {self.name!r}: initial {key} must be finite, got {value}")
+            if key == "pressure":
+                if not np.all(np.asarray(value) > 0):
+                    raise PamjaxInputError(f"experiment {self.name!r}: initial pressure must be an ABSOLUTE "
+                                           f"pressure > 0 [Pa], got {value}")
+                check_absolute_pressure(value, f"experiment {self.name!r}: initial pressure")
         frequency = getattr(system.valve, "pwm_frequency", None)
         if self.lowpass_hz is not None and frequency is not None and self.lowpass_hz < float(frequency):
             warn_filtered(self.name, self.lowpass_hz, float(frequency), stacklevel=4)
@@ -223,19 +260,33 @@ class Experiment(eqx.Module):
             traj = solve(system, self.signal, self.times, y0, self.t0, stepping=stepping, substeps=self.substeps,
                          num_periods=self._grid_size(system, stepping))
             return {c: getattr(traj, c) for c in traj.channels() if getattr(traj, c) is not None}
+        # The output times and start as compile-time constants (the recording's own, exactly): diffrax then checks
+        # them at trace time instead of with a run-time host callback, and a program with a host callback cannot be
+        # kept in JAX's persistent compilation cache.
         traj = solve(
             system,
             self.signal,
-            self.times,
+            jnp.asarray(self.host_times.array),
             y0,
-            self.t0,
+            jnp.asarray(self.span[0]),
             rtol=self.rtol,
             atol=self.atol,
             max_steps=self.max_steps,
             dt0=self.dt0,
             adjoint="forward",
+            num_periods=self._edge_periods(system),
         )
         return {c: getattr(traj, c) for c in traj.channels() if getattr(traj, c) is not None}
+
+    def _edge_periods(self, system):
+        """PWM periods of the recording for a smoothed switching valve (its edges get step boundaries), else None."""
+        valve = system.valve
+        if getattr(valve, "mode", None) != "smooth" or not valve.switches:
+            return None
+        try:
+            return num_periods(valve, self.span[0], self.span[1])
+        except PamjaxInputError:  # a traced PWM frequency (fitted): no edge steps
+            return None
 
     def batch_key(self, model):
         """Experiments with equal keys are integrated in one compiled loop (`predict_all`): fixed-grid stepping of

@@ -5,6 +5,7 @@ is Levenberg-Marquardt on the host (`pamjax._lm`) around two compiled functions 
 and their forward-mode Jacobian; the statistics and the mismatch diagnostics are in `pamjax._diagnostics`.
 """
 
+import contextlib
 import dataclasses
 import json
 import math
@@ -19,10 +20,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _lm
+from ._cache import program_cache
 from ._diagnostics import channel_errors, covariance, identifiability, mismatch
 from ._errors import PamjaxInputError, require_float64
 from ._experiment import predict_all, predictions
-from ._parameters import PamjaxIdentifiabilityWarning, ParameterSpace, strong_types
+from ._fingerprint import check_resume, encode, fingerprint
+from ._parameters import PamjaxIdentifiabilityWarning, ParameterSpace
+
 
 @dataclasses.dataclass
 class FitResult:
@@ -42,8 +46,9 @@ class FitResult:
     - `history`: per iteration [step, cost at the current point, damping λ, accepted].
     - `fit_s`, `compile_s`: wall time of the fit without compilation, and the compilation (each compiled
       function's first call less its median later call).
-    - `model`: the fitted model (not stored in JSON; `apply(base_model)` rebuilds it); `experiments`: the
-      experiments as fitted (not stored in JSON; `pamjax.profile` re-optimises against them).
+    - `model`: the fitted model (not stored in JSON; `apply(base_model)` rebuilds it); `predictions`: experiment →
+      channel → the fitted model at the recording's times (NaN where a sample was masked; not stored in JSON);
+      `experiments`: the experiments as fitted (not stored in JSON; `pamjax.profile` re-optimises against them).
     """
 
     labels: list
@@ -68,14 +73,18 @@ class FitResult:
     compile_s: float
     num_residuals: int
     model: object = dataclasses.field(default=None, repr=False, compare=False)
+    predictions: dict = dataclasses.field(default=None, repr=False, compare=False)
     experiments: object = dataclasses.field(default=None, repr=False, compare=False)  # as fitted (pamjax.profile)
 
     def to_dict(self):
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in ("model",
-                                                                                                  "experiments")}
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if f.name not in ("model", "predictions", "experiments")}
 
     @classmethod
     def from_dict(cls, d):
+        d = dict(d)
+        d.setdefault("message", d.get("status", ""))  # results written before these fields existed
+        d.setdefault("mismatch", False)
         return cls(**d)
 
     def to_json(self, path, overwrite=False):
@@ -142,6 +151,32 @@ def evaluate(model, experiments):
     return channel_errors(experiments, r)
 
 
+@contextlib.contextmanager
+def errors_as_nan():
+    """Trace with equinox's run-time checks returning NaN instead of raising through a host callback.
+
+    diffrax checks its save times with `eqx.error_if` inside every solve, and equinox raises such errors from a host
+    callback; JAX refuses to write a program with a host callback to its persistent compilation cache, so every fit
+    with an adaptive solve would compile again in every run. A fit treats non-finite residuals as a failed trial
+    step, so NaN is the right failure here (the times themselves were checked on the host before the fit). The one
+    place pamjax sets a private name of a dependency: equinox reads `EQX_ON_ERROR` from the environment once, at
+    import; `tests/test_fit.py` fails if the name moves."""
+    import equinox._errors as eqx_errors
+
+    old = eqx_errors.EQX_ON_ERROR
+    eqx_errors.EQX_ON_ERROR = "nan"
+    try:
+        yield
+    finally:
+        eqx_errors.EQX_ON_ERROR = old
+
+
+@eqx.filter_jit
+def _physical_and_jacobian(space, theta):
+    """The physical values at θ and d(values)/dθ, compiled (run eagerly, each operation compiles on its own)."""
+    return space.physical(theta), jax.jacfwd(space.physical)(theta)
+
+
 class _Problem:
     """The host side of the two compiled functions: NumPy in, NumPy out, the identification samples selected; a
     failed solve's residuals are None."""
@@ -153,19 +188,35 @@ class _Problem:
 
     def _timed(self, kind, fn, *args):
         t = time.perf_counter()
-        out = jax.block_until_ready(fn(*args))
+        with errors_as_nan():
+            out = jax.block_until_ready(fn(*args))
         self.seconds[kind].append(time.perf_counter() - t)
         return out
 
+    def _call(self, kind, fn, theta):
+        """A compiled function of (space, θ, experiments); with the CLI's persistent cache on, traced once per
+        problem structure for all runs (`ProgramCache`)."""
+        programs = program_cache()
+        args = (self.space, jnp.asarray(theta), self.exps)
+        if programs is None:
+            return self._timed(kind, fn, *args)
+        return self._timed(kind, programs.call, f"fit_{kind}", fn.__wrapped__, args)
+
+    def cached(self, theta):
+        """Whether both programs of this problem are already traced on disk (a second run: nothing to compile)."""
+        programs = program_cache()
+        args = (self.space, jnp.asarray(theta), self.exps)
+        return programs is not None and all(programs.has(f"fit_{kind}", args) for kind in ("residuals", "jacobian"))
+
     def all_residuals(self, theta):
-        return np.asarray(self._timed("residuals", _residuals, self.space, jnp.asarray(theta), self.exps))
+        return np.asarray(self._call("residuals", _residuals, theta))
 
     def residuals(self, theta):
         r = self.all_residuals(theta)[self.mask]
         return r if np.all(np.isfinite(r)) else None
 
     def jacobian(self, theta):
-        r, j = self._timed("jacobian", _residuals_and_jacobian, self.space, jnp.asarray(theta), self.exps)
+        r, j = self._call("jacobian", _residuals_and_jacobian, theta)
         return np.asarray(r)[self.mask], np.asarray(j)[self.mask]
 
     def start(self, theta):
@@ -202,13 +253,14 @@ def _check_checkpoint_path(checkpoint, resume, overwrite):
         raise FileExistsError(f"checkpoint {path} exists; pass overwrite=True to replace it (or resume from it)")
 
 
-def _write_checkpoint(path, labels, state):
+def _write_checkpoint(path, labels, state, fingerprint=None):
     """Save the iteration state (every array exactly) after an iteration. Written to a temporary file and renamed,
     so an interruption leaves the previous checkpoint intact."""
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, format=_CHECKPOINT_FORMAT, labels=np.asarray(labels, dtype=str), **state.arrays())
+    extra = {} if fingerprint is None else {"fingerprint": encode(fingerprint)}  # see _fingerprint
+    np.savez(tmp, format=_CHECKPOINT_FORMAT, labels=np.asarray(labels, dtype=str), **state.arrays(), **extra)
     tmp.replace(path)
 
 
@@ -321,7 +373,9 @@ def fit(
     - `checkpoint`: an `.npz` path written (atomically) after every iteration with the whole iteration state.
       Never replaces an existing file unless `overwrite=True` or it is the `resume` file.
     - `resume`: an `.npz` checkpoint of this same problem: the fit continues from it and ends bitwise where an
-      uninterrupted fit with the same `max_steps` ends (values, cost, iterations, history).
+      uninterrupted fit with the same `max_steps` ends (values, cost, iterations, history). The checkpoint carries a
+      fingerprint of the start model, free spec, experiments and data (`pamjax._fingerprint`): a resume of another
+      problem is refused before any solve, saying what differs.
 
     **Returns:** a `FitResult`: values, standard errors, correlation, `status` ('converged', 'at bound',
     'stalled', 'max_steps') with `message` saying why, per-channel errors with the noise level and residual
@@ -338,6 +392,9 @@ def fit(
         if not (isinstance(tol, (int, float)) and 0 <= tol < 1):
             raise PamjaxInputError(f"{label} must be a number in [0, 1), got {tol!r}")
     space = ParameterSpace(model, free)
+    print_ = fingerprint(model, experiments, free)  # start model, free spec, experiments and data (_fingerprint)
+    if resume is not None:
+        check_resume(resume, print_)  # before any solve: a checkpoint of another problem is refused, naming why
     for e in experiments:
         e.check(model)
     labels = space.labels
@@ -350,38 +407,49 @@ def fit(
     t_start = time.perf_counter()
     if resume is not None:
         state = _read_checkpoint(resume, labels, int(np.count_nonzero(problem.mask)))
-        t_first = time.perf_counter()
-        compile_s = 0.0
     else:
-        if report is not None and not callable(progress):
+        announce = progress is not False and not problem.cached(theta)
+        if announce:
+            cache = "cached afterwards" if program_cache() is not None else "pamjax.enable_compilation_cache() keeps it"
             print(f"fit: {len(labels)} parameters, {len(exps)} experiments; compiling the residuals and their "
-                  "Jacobian (first run; cached afterwards) ...", flush=True)
+                  f"Jacobian (first run; {cache}) ...", flush=True)
         r0, j0 = problem.start(theta)
-        t_first = time.perf_counter()
         if not np.all(np.isfinite(r0)) or not np.all(np.isfinite(j0)):
             raise PamjaxInputError("the start model's simulation fails (non-finite residuals or Jacobian): check the "
                                    "start values and the experiments' initial states")
         state = _lm.start(theta, r0, j0)
-        compile_s = t_first - t_start
+        if announce:
+            print(f"fit: compiled in {problem.compile_seconds():.1f} s", flush=True)
         if report is not None:
             report(0, state.cost, state.damping, True)
-            if not callable(progress):
-                print(f"  (first evaluation with compilation: {compile_s:.1f} s)", flush=True)
         if _lm._gradient_cosine(state) <= gtol:
             state.done, state.reason = True, "converged: gradient orthogonal to the residuals at the start (gtol)"
     while not state.done and state.step < max_steps:
         state = _lm.iterate(state, problem.residuals, problem.jacobian, ftol=ftol, xtol=xtol, gtol=gtol,
                             stall_steps=stall_steps, report=report)
         if checkpoint is not None:
-            _write_checkpoint(checkpoint, labels, state)
+            _write_checkpoint(checkpoint, labels, state, print_)
     if checkpoint is not None and state.step == 0:
-        _write_checkpoint(checkpoint, labels, state)
+        _write_checkpoint(checkpoint, labels, state, print_)
     res = _result(model, exps, free, space, state, identifiability_tol, out, overwrite, problem)
     res.compile_s = problem.compile_seconds()
     res.fit_s = time.perf_counter() - t_start - res.compile_s
     if out is not None:
         res.to_json(out, overwrite=overwrite)
     return res
+
+
+def _predictions_from(exps, residuals):
+    """experiment → channel → model values at the data's times, from the residuals of all samples (data + r scale;
+    NaN where a sample was masked)."""
+    out, k = {}, 0
+    for e in exps:
+        out[e.name] = {}
+        for c, scale, data, used, _ in e.layout():
+            r = np.asarray(residuals[k : k + data.size])
+            k += data.size
+            out[e.name][c] = np.where(used, data + r * scale, np.nan)
+    return out
 
 
 def _result(model, exps, free, space, state, identifiability_tol, out, overwrite, problem):
@@ -397,7 +465,7 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
     used = int(np.count_nonzero(np.any(jac != 0, axis=1) | (resid != 0)))
     groups = identifiability(jac, labels, identifiability_tol)
     bad = sorted({label for g in groups for label in g})
-    g = np.asarray(jax.jacfwd(space.physical)(jnp.asarray(theta)))
+    values, g = (np.asarray(a) for a in _physical_and_jacobian(space, jnp.asarray(theta)))
     cov = g @ covariance(jac, state.cost, used, identifiability_tol) @ g.T
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -411,9 +479,9 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
                "data; hold one of them fixed)")
         msgs.append(msg)
         warnings.warn(msg, PamjaxIdentifiabilityWarning, stacklevel=3)
-    values = np.asarray(space.physical(jnp.asarray(theta)))
     fitted = space.with_values(jnp.asarray(values))
-    errors = channel_errors(exps, problem.all_residuals(theta))
+    r_all = problem.all_residuals(theta)
+    errors = channel_errors(exps, r_all)
     flagged, note = mismatch(errors)
     if flagged:
         msgs.append(note)
@@ -441,6 +509,7 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
         compile_s=0.0,
         num_residuals=used,
         model=fitted,
+        predictions=_predictions_from(exps, r_all),
         experiments=exps,
     )
     if math.isnan(res.cost):

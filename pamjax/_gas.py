@@ -193,6 +193,26 @@ class NozzleRestriction(AbstractRestriction):
         return direction * self.area * p_up * self.flow_coefficient * cm / jnp.sqrt(air.temperature)
 
 
+class PorousRestriction(AbstractRestriction):
+    """A porous element (a sintered exhaust silencer) in isothermal compressible Darcy flow: ṁ = K (p1² − p2²).
+
+    Darcy's law q = κ S Δp / (μ H) for gas at the mean density p̄/(R T) integrates to ṁ = κ S (p1² − p2²)/(2 μ H R T),
+    so K lumps permeability κ, area S, thickness H and viscosity μ. Laminar throughout: linear in Δp near equal
+    pressures (finite slope, no switch), quadratic in pressure level, which is why a silencer barely throttles a
+    high-pressure exhaust and slows the last part of a discharge (paper 000, Fig. 12 text).
+
+    **Arguments:** `permeance` K [kg/(s Pa²)] (see `pamjax.presets.MAS10_SILENCER_PERMEANCE` for a derived value).
+    """
+
+    permeance: jax.Array = eqx.field(converter=jnp.asarray)  # kg/(s Pa²)
+
+    def __check_init__(self):
+        check_positive(self.permeance, "PorousRestriction.permeance")
+
+    def mass_flow(self, p1, p2, air: Air):
+        return self.permeance * (p1 - p2) * (p1 + p2)
+
+
 class SeriesRestriction(AbstractRestriction):
     """Two restrictions in series (e.g. the valve's exhaust port and a silencer), combined into one.
 

@@ -20,8 +20,15 @@ the vector field), O(h⁴) like the steps.
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 MAX_EVENTS = 2  # events resolved per interval; further ones in the same interval are counted as missed
+# The classical RK4 tableau, with a fifth row: the step's end (the b weights), where the end slope is evaluated.
+# (NumPy: importing pamjax creates no JAX array, docs/performance.md.)
+_RK4_A = np.array([[0, 0, 0, 0, 0], [0.5, 0, 0, 0, 0], [0, 0.5, 0, 0, 0], [0, 0, 1, 0, 0],
+                   [1 / 6, 1 / 3, 1 / 3, 1 / 6, 0]], dtype=float)
+_RK4_C = np.array([0.0, 0.5, 0.5, 1.0, 1.0])
+_RK4_AUX = np.array([0, 1, 1, 2, 2])  # which of the interval's (start, middle, end) aux values
 _BISECTIONS = 40  # halvings of the step to bracket an event (2^-40 of a ~1 ms step), before the Newton step
 
 
@@ -65,13 +72,19 @@ def integrate(systems, field, event, update, z0s, left, right, aux, member, offs
     first = jnp.concatenate([jnp.ones((1,), bool), member[1:] != member[:-1]])
 
     def rk4(system, ta, tb, z, a):
+        """Classical RK4 from ta to tb, and the slopes at both ends (for the Hermite dense output). The five field
+        evaluations (four stages and the end slope) run as one loop over a Butcher tableau, so the compiled program
+        holds the vector field once, not five times (a forward-mode Jacobian multiplies whatever is there)."""
         h = tb - ta
-        k1 = field(system, ta, z, a[0])
-        k2 = field(system, ta + 0.5 * h, z + 0.5 * h * k1, a[1])
-        k3 = field(system, ta + 0.5 * h, z + 0.5 * h * k2, a[1])
-        k4 = field(system, tb, z + h * k3, a[2])
-        zb = z + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        return zb, k1, field(system, tb, zb, a[2])
+        tableau, nodes, which = jnp.asarray(_RK4_A), jnp.asarray(_RK4_C), jnp.asarray(_RK4_AUX)
+
+        def stage(i, slopes):
+            zi = z + h * (tableau[i] @ slopes)
+            return slopes.at[i].set(field(system, ta + nodes[i] * h, zi, a[which[i]]))
+
+        slopes = jax.lax.fori_loop(0, 5, stage, jnp.zeros((5,) + z.shape, dtype=z.dtype))
+        zb = z + h * (tableau[4] @ slopes)
+        return zb, slopes[0], slopes[4]
 
     def locate(system, seg):
         """Time and state of the first crossing g = 0 in a step whose end has g < 0."""

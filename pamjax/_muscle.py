@@ -9,7 +9,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._errors import PamjaxInputError, check_finite, check_positive
+from ._errors import PamjaxInputError, check_finite, check_in_open_interval, check_positive
 from ._smooth import smooth_relu, smooth_step
 
 
@@ -154,6 +154,49 @@ class CubicVolume(AbstractVolume):
 
     def volume(self, x):
         return jnp.polyval(self.coefficients[::-1], x / self.nominal_length)
+
+
+class BraidVolume(AbstractVolume):
+    """Paper 000, eq. 3: the volume of an ideal cylindrical braid, V = b_s³/(4π n_s²) cos θ sin²θ, with
+    cos θ = L/b_s (eq. 1) and L = L0 − x; that is V = L (b_s² − L²)/(4π n_s²).
+
+    The volume of `ChouHannafordForce` (eq. 5): p_g dV/dx = −p_g dV/dL is its force (eq. 4, virtual work).
+
+    **Arguments:** `strand_length` b_s [m] (> L0 + max stretch: cos θ < 1), `turns` n_s [-], `nominal_length` L0 [m].
+    `BraidVolume.from_datasheet(L0, D0, max_contraction)` derives b_s, n_s from a datasheet.
+    """
+
+    strand_length: jax.Array = eqx.field(converter=jnp.asarray)  # m
+    turns: jax.Array = eqx.field(converter=jnp.asarray)  # -
+    nominal_length: jax.Array = eqx.field(converter=jnp.asarray)  # m
+
+    def __check_init__(self):
+        check_positive(self.strand_length, "BraidVolume.strand_length")
+        check_positive(self.turns, "BraidVolume.turns")
+        check_positive(self.nominal_length, "BraidVolume.nominal_length")
+        b, length = self.strand_length, self.nominal_length
+        if not isinstance(b, jax.core.Tracer) and not isinstance(length, jax.core.Tracer) and not bool(b > length):
+            raise PamjaxInputError(
+                f"BraidVolume.strand_length ({b}) must exceed nominal_length ({length}): eq. 1, L = b_s cos θ"
+            )
+
+    @classmethod
+    def from_datasheet(cls, nominal_length, diameter, max_contraction):
+        """The braid of a muscle of `nominal_length` L0 [m] and inner `diameter` D0 [m] at L0 whose eq. 5 force
+        vanishes at `max_contraction` ε_max [-] (cos²θ = 1/3 there): b_s = √3 (1 − ε_max) L0 (eq. 1),
+        n_s = b_s sin θ0 / (π D0) (eq. 2), cos θ0 = L0/b_s. For the MAS-10-300 (0.3 m, 10 mm, 25 %, datasheet):
+        b_s = 0.390 m, θ0 = 39.7°, n_s = 7.9."""
+        check_positive(nominal_length, "BraidVolume.from_datasheet nominal_length")
+        check_positive(diameter, "BraidVolume.from_datasheet diameter")
+        limit = 1.0 - 1.0 / 3.0**0.5  # b_s > L0
+        check_in_open_interval(max_contraction, 0.0, limit, "BraidVolume.from_datasheet max_contraction")
+        b = 3.0**0.5 * (1.0 - max_contraction) * nominal_length
+        sin_theta = (1.0 - (nominal_length / b) ** 2) ** 0.5
+        return cls(b, b * sin_theta / (jnp.pi * diameter), nominal_length)
+
+    def volume(self, x):
+        length = self.nominal_length - x
+        return length * (self.strand_length**2 - length**2) / (4.0 * jnp.pi * self.turns**2)
 
 
 class Muscle(eqx.Module):

@@ -36,7 +36,7 @@ import numpy as np
 
 from . import _lm
 from ._errors import PamjaxInputError, require_float64
-from ._fit import _residuals, _residuals_and_jacobian
+from ._fit import _Problem
 from ._parameters import ParameterSpace
 from ._recording import _writable
 
@@ -237,24 +237,24 @@ class _Branch:
 
 
 class _Evaluator:
-    """The fit's compiled residuals and Jacobian on the host, identification samples only (as the fit has them)."""
+    """The fit's host problem (`pamjax._fit._Problem`: its compiled residual and Jacobian programs, through the
+    CLI's program cache when it is on; identification samples only) with the cost and residual variance at the
+    fit."""
 
     def __init__(self, space, exps, theta):
+        self.problem = _Problem(space, exps)
         self.space, self.exps = space, exps
-        self.mask = np.concatenate([used & ident for e in exps for _, _, _, used, ident in e.layout()])
-        r, j = self.jacobian(theta)
+        r, j = self.problem.start(theta)
         self.cost = 0.5 * float(r @ r)
         self.jac = j
         dof = max(int(np.count_nonzero(np.any(j != 0, axis=1) | (r != 0))) - j.shape[1], 1)
         self.sigma2 = 2.0 * self.cost / dof
 
     def residuals(self, theta):
-        r = np.asarray(_residuals(self.space, jnp.asarray(theta), self.exps))[self.mask]
-        return r if np.all(np.isfinite(r)) else None
+        return self.problem.residuals(theta)
 
     def jacobian(self, theta):
-        r, j = _residuals_and_jacobian(self.space, jnp.asarray(theta), self.exps)
-        return np.asarray(r)[self.mask], np.asarray(j)[self.mask]
+        return self.problem.jacobian(theta)
 
 
 def _direction(space, theta, index):

@@ -11,7 +11,10 @@ import pathlib
 
 import numpy as np
 
+from ._csv import read_table, write_table
 from ._errors import PamjaxInputError
+from ._units import MIN_ABSOLUTE_PA as _MIN_ABSOLUTE_PA  # noqa: F401 (used by _experiment)
+from ._units import channel_dimension, check_magnitude, to_si
 
 # Default unit per well-known channel name.
 DEFAULT_UNITS = dict(
@@ -19,13 +22,6 @@ DEFAULT_UNITS = dict(
 )
 # Short names used by bench files (the hybrid reference bench: t, u, p, x) → pamjax channel names.
 BENCH_NAMES = dict(p="pressure", x="position", u="command", v="velocity", F="force", mdot="mass_flow")
-
-# A pressure channel that peaks, or drops, below this is in bar, MPa or gauge, not absolute Pa.
-_MIN_ABSOLUTE_PA = 5e4  # Pa: half an atmosphere; no pneumatic muscle test runs below it
-
-
-def _is_pressure(name, unit):
-    return name.startswith("pressure") or unit.lower() in ("pa", "pa abs", "bar", "mpa", "kpa", "psi")
 
 
 def _scipy_signal():
@@ -47,16 +43,24 @@ class Recording:
     - `t`: times [s], 1-D, strictly increasing.
     - `channels`: dict name → 1-D array of `len(t)` (names as in `Trajectory`: pressure [Pa abs], position [m],
       velocity, force, mass_flow, command, ...).
-    - `units`: dict name → unit string (defaults from `DEFAULT_UNITS`); a pressure in "bar"/"kPa"/"MPa" is refused.
+    - `units`: dict name → unit string of the values given (defaults from `DEFAULT_UNITS`; `"t"` for the times).
+      Other units are converted to SI (`"mm"`, `"ms"`, `"bar abs"`, `"kPa gauge"`, `"%"`, ...; `pamjax._units`);
+      a unit that does not fit the channel, and a pressure unit other than Pa that does not say absolute or gauge,
+      are refused.
     - `mask_nan`: False (default) raises on NaN naming channel and row; True keeps them and marks them in `mask`.
-    - `name`: a label.
+    - `name`: a label. `source`: where the data came from (a file), named in error messages.
+    - `unit_checks`: True (default) refuses values whose magnitude betrays another unit (positions beyond 1 m:
+      millimetres; samples 1 s or more apart: milliseconds; pressures below half an atmosphere: bar, gauge, ...),
+      naming the likely unit. False skips these magnitude checks (never the unit conversions).
 
-    `mask[name]` is a boolean array, True where the sample is valid.
+    `mask[name]` is a boolean array, True where the sample is valid. `units` holds the SI unit of each channel.
     """
 
-    def __init__(self, t, channels, units=None, *, mask_nan=False, name=""):
+    def __init__(self, t, channels, units=None, *, mask_nan=False, name="", source=None, unit_checks=True):
         self.name = str(name)
-        t = np.asarray(t, dtype=float)
+        units = {} if units is None else dict(units)
+        where = str(source) if source is not None else f"Recording {self.name!r}"
+        t, _ = to_si("t", units.pop("t", "s"), np.asarray(t, dtype=float), where)
         if t.ndim != 1 or t.size < 2:
             raise PamjaxInputError(f"Recording {self.name!r}: t must be 1-D with at least 2 times, got shape {t.shape}")
         if not np.all(np.isfinite(t)):
@@ -70,7 +74,13 @@ class Recording:
             )
         if not channels:
             raise PamjaxInputError(f"Recording {self.name!r}: needs at least one channel besides t")
-        units = {} if units is None else dict(units)
+        unknown = set(units) - set(channels)
+        if unknown:
+            raise PamjaxInputError(f"{where}: units name {sorted(unknown)}, not channels of the recording "
+                                   f"{sorted(channels)}")
+        if unit_checks:
+            check_magnitude("time", t, where, "t")
+        self.unit_checks = bool(unit_checks)
         self.t = t
         self.channels = {}
         self.units = {}
@@ -81,7 +91,7 @@ class Recording:
                 raise PamjaxInputError(
                     f"Recording {self.name!r}: channel {key!r} has shape {v.shape}, expected {t.shape} (same as t)"
                 )
-            unit = units.get(key, DEFAULT_UNITS.get(key, ""))
+            v, unit = to_si(key, units.get(key, DEFAULT_UNITS.get(key, "")), v, where)
             valid = np.isfinite(v)
             if not mask_nan and not np.all(valid):
                 row = int(np.argmin(valid))
@@ -89,8 +99,9 @@ class Recording:
                     f"Recording {self.name!r}: channel {key!r} is NaN/inf at row {row} (t = {t[row]} s); "
                     "clean the data or pass mask_nan=True to leave such samples out of fits"
                 )
-            if _is_pressure(key, unit):
-                _check_absolute_pressure(self.name, key, unit, v[valid])
+            dimension = "pressure" if unit == "Pa" else channel_dimension(key)
+            if dimension == "pressure" or unit_checks:
+                check_magnitude(dimension, v[valid], where, key)
             self.channels[key] = v
             self.units[key] = unit
             self.mask[key] = valid
@@ -118,7 +129,7 @@ class Recording:
         return 1.0 / float(np.mean(dt))
 
     def _replace(self, t, channels, filtered_at=None):
-        out = Recording(t, channels, self.units, mask_nan=True, name=self.name)
+        out = Recording(t, channels, self.units, mask_nan=True, name=self.name, unit_checks=self.unit_checks)
         out.lowpass_hz = self.lowpass_hz if filtered_at is None else min(filtered_at, self.lowpass_hz or np.inf)
         return out
 
@@ -187,17 +198,12 @@ class Recording:
 
     # -- files --------------------------------------------------------------------------------------------------
     def to_csv(self, path, overwrite=False):
-        """Write `t [s],name [unit],...` CSV; refuses to overwrite an existing file unless `overwrite=True`."""
+        """Write a `t [s],name [unit],...` CSV (pressures as `[Pa abs]`, floats exact); refuses to overwrite an
+        existing file unless `overwrite=True`."""
         path = _writable(path, overwrite)
-        names = list(self.channels)
-        header = ",".join(["t [s]"] + [f"{c} [{self.units[c]}]" for c in names])
-        data = np.column_stack([self.t] + [self.channels[c] for c in names])
-        comment = f"# pamjax recording {self.name}; pressures absolute\n" if self.name else ""
-        with open(path, "w") as f:
-            f.write(comment + header + "\n")
-            for row in data:
-                f.write(",".join(repr(float(x)) for x in row) + "\n")
-        return path
+        units = {"t": "s", **{c: "Pa abs" if u == "Pa" else u for c, u in self.units.items()}}
+        comment = f"pamjax recording {self.name}; pressures absolute" if self.name else None
+        return write_table(path, {"t": self.t, **self.channels}, units, comment)
 
     def to_npz(self, path, overwrite=False):
         """Write NPZ with arrays `t` and one per channel, units in `__units__` (JSON)."""
@@ -207,58 +213,60 @@ class Recording:
         return path
 
     @classmethod
-    def from_csv(cls, path, *, rename=None, units=None, mask_nan=False, name=None):
-        """Read a CSV written by `to_csv` (or any CSV with a header `t,...`; `name [unit]` headers give units;
-        lines starting with '#' are comments)."""
-        path = pathlib.Path(path)
-        with open(path) as f:
-            lines = [ln for ln in f if ln.strip() and not ln.lstrip().startswith("#")]
-        if not lines:
-            raise PamjaxInputError(f"{path}: no header line")
-        header = [h.strip() for h in lines[0].split(",")]
-        rows = []
-        for i, ln in enumerate(lines[1:]):
-            cells = ln.split(",")
-            if len(cells) != len(header):
-                raise PamjaxInputError(f"{path}: data row {i} has {len(cells)} columns, the header has {len(header)}")
-            rows.append([float(c) if c.strip() not in ("", "nan", "NaN") else np.nan for c in cells])
-        data = np.asarray(rows, dtype=float).reshape(-1, len(header))
-        names, file_units = [], {}
-        for h in header:
-            label, unit = (h.split("[", 1) + [""])[:2]
-            names.append(label.strip())
-            if unit:
-                file_units[label.strip()] = unit.rstrip("]").strip()
-        return cls._from_columns(path, dict(zip(names, data.T)), file_units, rename, units, mask_nan, name)
+    def from_csv(cls, path, *, rename=None, units=None, mask_nan=False, name=None, unit_checks=True):
+        """Read a CSV with a header row naming the columns, a time column `t` (or `time`) and one column per
+        channel; `name [unit]` or `name (unit)` headers give units, converted to SI (`pamjax._csv`, `_units`).
+        Commas, semicolons or tabs; quoted headers; a UTF-8 byte-order mark; lines starting with '#' are comments.
+        `units` (dict name → unit) overrides the header's."""
+        columns = read_table(path)
+        return cls._from_columns(pathlib.Path(path), [(n, v) for n, _, v in columns],
+                                 {n: u for n, u, _ in columns if u is not None}, rename, units, mask_nan, name,
+                                 unit_checks)
 
     @classmethod
-    def from_npz(cls, path, *, rename=None, units=None, mask_nan=False, name=None):
+    def from_npz(cls, path, *, rename=None, units=None, mask_nan=False, name=None, unit_checks=True):
         """Read an NPZ with a `t` array and one array per channel (the hybrid bench's short names t, u, p, x are
         renamed to command, pressure, position)."""
         path = pathlib.Path(path)
-        with np.load(path) as z:
-            columns = {k: np.asarray(z[k]) for k in z.files if k != "__units__"}
+        if not path.is_file():
+            raise PamjaxInputError(f"recording file {path} does not exist")
+        with np.load(path, allow_pickle=False) as z:
+            columns = [(k, np.asarray(z[k])) for k in z.files if k != "__units__"]
             meta = json.loads(str(z["__units__"])) if "__units__" in z.files else {}
+        columns = [(k, v) for k, v in columns if v.ndim == 1]  # other arrays are metadata
         return cls._from_columns(
-            path, columns, meta.get("units", {}), rename, units, mask_nan, name or meta.get("name")
+            path, columns, meta.get("units", {}), rename, units, mask_nan, name or meta.get("name"), unit_checks
         )
 
     @classmethod
-    def _from_columns(cls, path, columns, file_units, rename, units, mask_nan, name):
-        if "t" not in columns:
-            raise PamjaxInputError(f"{path}: needs a time column 't', has {sorted(columns)}")
+    def _from_columns(cls, path, columns, file_units, rename, units, mask_nan, name, unit_checks):
+        """`columns`: list of (name in the file, 1-D array). Bench short names (t, u, p, x, ...) and `rename` map
+        file names to channel names; two columns that end up with one name are refused."""
+        if rename is not None and not isinstance(rename, dict):
+            raise PamjaxInputError(f"rename must be a dict {{name in the file: channel name}}, got {rename!r}")
+        names = [n for n, _ in columns]
         rename = {**BENCH_NAMES, **(rename or {})}
-        t = columns.pop("t")
-        channels, u = {}, {}
-        for k, v in columns.items():
-            if v.ndim != 1:
-                continue  # extra metadata arrays
+        if "t" not in [rename.get(n, n) for n in names]:
+            time = next((n for n in names if n.lower() == "time" and n not in rename), None)
+            if time is None:
+                raise PamjaxInputError(f"{path}: needs a time column 't' (or 'time'), has {names}")
+            rename[time] = "t"
+        unknown = set(rename) - set(BENCH_NAMES) - set(names)
+        if unknown:
+            raise PamjaxInputError(f"{path}: rename names {sorted(unknown)}, which are not columns of the file "
+                                   f"(columns: {names})")
+        data, u, source = {}, {}, {}
+        for k, v in columns:
             new = rename.get(k, k)
-            channels[new] = v
+            if new in data:
+                raise PamjaxInputError(f"{path}: columns {source[new]!r} and {k!r} both become channel {new!r}; "
+                                       "rename one (rename={...})")
+            data[new], source[new] = v, k
             if k in file_units:
                 u[new] = file_units[k]
         u.update(units or {})
-        return cls(t, channels, u, mask_nan=mask_nan, name=name or path.stem)
+        t = data.pop("t")
+        return cls(t, data, u, mask_nan=mask_nan, name=name or path.stem, source=path, unit_checks=unit_checks)
 
     @classmethod
     def load(cls, path, **kwargs):
@@ -284,25 +292,6 @@ def warn_filtered(name, cutoff_hz, pwm_frequency, stacklevel=2):
         "predicts, and the fit will be biased (a tank charge at 50 Hz: 10.8 kPa RMS against the true parameters). "
         "Fit the raw or decimated recording (Recording.resampled), or use the averaged valve (eq. 13).",
         PamjaxDataWarning, stacklevel=stacklevel)
-
-
-def _check_absolute_pressure(rec, key, unit, values):
-    if unit.lower() not in ("pa", "pa abs"):
-        raise PamjaxInputError(
-            f"Recording {rec!r}: channel {key!r} is in {unit!r}; pamjax expects ABSOLUTE pressure in Pa "
-            "(convert: bar × 1e5, kPa × 1e3, MPa × 1e6, and add atmospheric pressure 101325 Pa to gauge readings)"
-        )
-    if values.size and np.max(values) < _MIN_ABSOLUTE_PA:
-        raise PamjaxInputError(
-            f"Recording {rec!r}: channel {key!r} peaks at {np.max(values):.4g} Pa: that looks like bar, MPa or a "
-            "GAUGE pressure; pamjax expects ABSOLUTE pressure in Pa (add 101325 Pa to gauge readings)"
-        )
-    if values.size and np.min(values) < _MIN_ABSOLUTE_PA:
-        raise PamjaxInputError(
-            f"Recording {rec!r}: channel {key!r} drops to {np.min(values):.4g} Pa at row {int(np.argmin(values))}, "
-            f"below half an atmosphere ({_MIN_ABSOLUTE_PA:g} Pa abs): a vented muscle or tank reads about 101325 Pa "
-            "ABSOLUTE, so this looks like a GAUGE pressure (add 101325 Pa to gauge readings)"
-        )
 
 
 def _writable(path, overwrite):

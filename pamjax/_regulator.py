@@ -24,6 +24,7 @@ from ._inputs import AbstractSignal
 from ._smooth import smooth_relu, smooth_step
 from ._system import pressure_rate
 from ._tabulated import check_table_axis, paper001_charging_restriction, paper001_discharging_restriction, pchip
+from ._units import check_absolute_pressure
 from ._valve import AbstractValve
 
 
@@ -313,6 +314,7 @@ class ISO6358Regulator(AbstractRegulator):
             raise PamjaxInputError(f"time_constants must be (τ1, τ2) [s], got shape {jnp.shape(self.time_constants)}")
         check_positive(self.time_constants, "ISO6358Regulator.time_constants")
         check_positive(self.supply_pressure, "ISO6358Regulator.supply_pressure")
+        check_absolute_pressure(self.supply_pressure, "ISO6358Regulator.supply_pressure", above_atmosphere=True)
         check_positive(self.full_opening_error, "ISO6358Regulator.full_opening_error")
         check_positive(self.opening_width, "ISO6358Regulator.opening_width")
 

@@ -251,6 +251,9 @@ class SweepResult(eqx.Module):
       (complex for `Harmonic`). Pressures absolute [Pa], positions [m], flows [kg/s], as `simulate`.
     - `status`: int per point (0 success; 1 non-finite state; 2 non-physical state; 3 adaptive solver failed);
       failed points hold NaN outputs. `dt`, `method`: the step [s] and scheme used.
+    - `points`: None for a whole result; for one process's shard (`sweep(..., gather="local")`) the flat indices
+      (C order over `batch_shape`) of the points it holds, which then lie along one flat axis in `over`, `outputs`
+      and `status`. `merge_sweep_shards` joins the shards of every process into the whole result.
     """
 
     over: dict
@@ -260,6 +263,8 @@ class SweepResult(eqx.Module):
     status: np.ndarray
     dt: float = eqx.field(static=True)
     method: str = eqx.field(static=True)
+    points: np.ndarray | None = None
+    batch_shape: tuple | None = eqx.field(static=True, default=None)
 
     @property
     def succeeded(self):
@@ -412,6 +417,117 @@ def default_chunk_size(batch_size, values_per_point, platform, n_devices=1):
     return min(batch_size, max(_CPU_CHUNK, fit))
 
 
+class _Layout:
+    """Which points each compiled call computes, on which device.
+
+    The batch is cut into groups of `per_device` consecutive points; each device computes one group per call, in
+    `lanes` lanes (`per_device` rounded up to a multiple of 8, padded with copies of point 0). Group g runs in call
+    g // n_dev on the mesh's device g % n_dev. XLA's code for a batch depends on its width, and a lane's result on
+    its place in it (in the last bit, ~1e-16 relative), so a point's result is fixed by its group and place and by
+    the program: one SPMD program per device for any mesh of 2 or more devices (however many processes hold them),
+    another, optimised without the SPMD partitioner, for a single device. So: the same mesh size gives the same
+    bits, one process or several; with `chunk_size` given, `per_device` does not depend on the device count, and
+    any 2 or more devices give the same bits (2, 3 and 4 CPU devices measured), one device agreeing to round-off.
+    Without it, the batch (up to `default_chunk_size` points per call) is split evenly over the devices."""
+
+    def __init__(self, batch_size, per_device, n_dev, processes):
+        self.batch_size, self.per_device, self.n_dev, self.processes = batch_size, per_device, n_dev, processes
+        self.lanes = int(math.ceil(per_device / _LANE_MULTIPLE) * _LANE_MULTIPLE)
+        groups = int(math.ceil(batch_size / per_device))
+        self.calls = int(math.ceil(groups / n_dev))
+
+    @classmethod
+    def plan(cls, batch_size, chunk_size, mesh, devices, values_per_point):
+        n_dev = 1 if mesh is None else mesh.devices.size
+        processes = 1 if mesh is None else len({d.process_index for d in mesh.devices.flat})
+        if chunk_size is not None:
+            return cls(batch_size, min(chunk_size, batch_size), n_dev, processes)
+        if mesh is not None:
+            platform = mesh.devices.flat[0].platform
+        else:
+            platform = ((list(devices) if devices is not None else []) or jax.devices())[0].platform
+        total = default_chunk_size(batch_size, values_per_point, platform, n_dev)
+        return cls(batch_size, int(math.ceil(total / n_dev)), n_dev, processes)
+
+    def lanes_of_call(self, c):
+        """(point index per lane, whether the lane holds a real point) of call `c`, device-major."""
+        group = c * self.n_dev + np.arange(self.n_dev)[:, None]
+        place = np.arange(self.lanes)[None, :]
+        point = group * self.per_device + place
+        valid = (place < self.per_device) & (point < self.batch_size)
+        return np.where(valid, point, 0).reshape(-1), valid.reshape(-1)
+
+    def points_of_call(self, c):
+        first = c * self.n_dev * self.per_device
+        return first, min(first + self.n_dev * self.per_device, self.batch_size) - 1
+
+
+def _local_part(out, status, index, valid):
+    """(points, outputs, status) of the real lanes of one call that this process's devices computed."""
+    if isinstance(out, jax.Array) and len(out.sharding.device_set) > 1:
+        rows = [(shard.index[0], shard) for shard in out.addressable_shards]
+        status_of = {s.device: s for s in status.addressable_shards}
+        parts = []
+        for lanes, shard in sorted(rows, key=lambda r: r[0].start or 0):
+            keep = valid[lanes]
+            parts.append((index[lanes][keep], np.asarray(shard.data)[keep],
+                          np.asarray(status_of[shard.device].data)[keep]))
+        return tuple(np.concatenate(p) for p in zip(*parts))
+    return index[valid], np.asarray(out)[valid], np.asarray(status)[valid]
+
+
+def _gather_processes(points, out, status):
+    """Every process's (points, outputs, status), on every process (`process_allgather` of their bytes)."""
+    import io
+
+    from ._distributed import gather_bytes
+
+    buffer = io.BytesIO()
+    np.savez(buffer, points=points, out=out, status=status)
+    parts = []
+    for payload in gather_bytes(buffer.getvalue()):
+        with np.load(io.BytesIO(payload)) as f:
+            parts.append((f["points"], f["out"], f["status"]))
+    return tuple(np.concatenate(p) for p in zip(*parts))
+
+
+def _in_point_order(points, out, status, batch_size):
+    """Outputs and status placed by point index (each point computed exactly once)."""
+    order = np.argsort(points, kind="stable")
+    if not np.array_equal(points[order], np.arange(batch_size)):
+        raise RuntimeError(f"sweep: the devices returned points {np.unique(points).size} of {batch_size} "
+                           "(or some twice); this is a bug in pamjax")
+    return out[order], status[order]
+
+
+def merge_sweep_shards(shards) -> SweepResult:
+    """The whole `SweepResult` from the shards that `sweep(..., gather="local")` returned on every process (for
+    instance saved by each process and loaded on one machine); every point must be in exactly one shard."""
+    shards = list(shards)
+    if not shards or any(not isinstance(s, SweepResult) or s.points is None for s in shards):
+        raise PamjaxInputError("shards must be a non-empty list of SweepResults from sweep(..., gather='local')")
+    first = shards[0]
+    for s in shards[1:]:
+        if (s.batch_shape, s.channels, s.method) != (first.batch_shape, first.channels, first.method) or not \
+                np.array_equal(s.t, first.t):
+            raise PamjaxInputError("shards must come from one sweep (same batch shape, channels, times, method)")
+    batch_shape = tuple(first.batch_shape)
+    size = int(np.prod(batch_shape))
+    points = np.concatenate([s.points for s in shards])
+    out = np.stack([np.concatenate([s.outputs[c] for s in shards]) for c in first.channels], axis=-1)
+    try:
+        out, status = _in_point_order(points, out, np.concatenate([s.status for s in shards]), size)
+    except RuntimeError:
+        raise PamjaxInputError(f"shards hold {points.size} points ({np.unique(points).size} distinct), the sweep "
+                               f"has {size}: pass every process's shard once") from None
+    order = np.argsort(points, kind="stable")
+    over = {k: np.concatenate([s.over[k] for s in shards])[order] for k in first.over}
+    over = {k: v.reshape(batch_shape + v.shape[1:]) for k, v in over.items()}
+    outputs = {c: out[..., i].reshape(batch_shape + out.shape[1:-1]) for i, c in enumerate(first.channels)}
+    return SweepResult(over=over, t=first.t, channels=first.channels, outputs=outputs,
+                       status=status.reshape(batch_shape), dt=first.dt, method=first.method)
+
+
 def _put(x, mesh):
     """A host array as a global array sharded over the mesh's batch axis (works single- and multi-host: every
     process holds the full host array and contributes its devices' slices)."""
@@ -421,12 +537,6 @@ def _put(x, mesh):
     return jax.make_array_from_callback(x.shape, sharding, lambda index: x[index])
 
 
-def _fetch(x):
-    if jax.process_count() > 1:
-        from jax.experimental import multihost_utils
-
-        return np.asarray(multihost_utils.process_allgather(x, tiled=True))
-    return np.asarray(x)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -447,6 +557,7 @@ def sweep(
     devices=None,
     progress=True,
     solve_options: dict | None = None,
+    gather: str = "all",
 ) -> SweepResult:
     """Simulate `system` at every point of a batch of inputs and parameter values, as one compiled vmapped call.
 
@@ -488,15 +599,23 @@ def sweep(
       of the Jacobian at the initial states) (its stability limit with a 10 % margin), the others at 5 ms; all
       capped at 2 PWM edge widths for a switching valve and at 1/100 of the signal's shortest period. Check a
       fixed-step result by halving `dt`.
-    - `chunk_size`: points per compiled call (memory bound). Default (`default_chunk_size`): all, at most 8,192 on
-      CPU; on a GPU/TPU as many as 1 GiB of outputs per device holds (one call is fastest there). The last chunk
-      is padded.
+    - `chunk_size`: points per device per compiled call (memory bound). Default (`default_chunk_size`): all points
+      split evenly over the devices, at most 8,192 per call on CPU, on a GPU/TPU as many as 1 GiB of outputs per
+      device holds (one call is fastest there). The last call is padded. Results are bitwise the same for the same
+      number of devices, in one process or several; with `chunk_size` given, for any 2 or more devices; between
+      one device and several, to round-off (~1e-16 relative: XLA optimises a one-device program differently).
     - `devices`: None (all of `jax.devices()`: the batch axis is sharded over them with a `Mesh` and
-      `NamedSharding`, each device running its own lanes under `shard_map`; several hosts after
-      `jax.distributed.initialize()`), a list of devices, or a `Mesh` with a "batch" axis.
-    - `progress`: True (print one line per chunk when there are several), False, or a callable taking a string.
+      `NamedSharding`, each device running its own lanes under `shard_map`; after `pamjax.initialize_distributed()`
+      (or `jax.distributed.initialize()`) the devices of every process, each process computing its devices'
+      points), a list of devices, or a `Mesh` with a "batch" axis.
+    - `progress`: True (print one line per chunk when there are several; process 0 only), False, or a callable
+      taking a string.
+    - `gather`: "all" (default: every process returns the whole result, gathered once at the end) or "local" (each
+      process returns the points it computed, flat, with their indices in `points`: for batches larger than one
+      host's memory; `merge_sweep_shards` joins them).
 
-    **Returns:** a `SweepResult` (`over`, `t`, `outputs[channel]`, `status`, `dt`, `method`).
+    **Returns:** a `SweepResult` (`over`, `t`, `outputs[channel]`, `status`, `dt`, `method`; `points` with
+    `gather="local"`).
 
     **Raises:** `PamjaxInputError` naming the argument (unknown path, values that break a component's constraint,
     a command outside the valve's range, bad `ts`/`dt`/`chunk_size`), before any solve.
@@ -520,6 +639,8 @@ def sweep(
         raise PamjaxInputError(f"dt must be a step > 0 [s], got {dt}")
     if chunk_size is not None and not (isinstance(chunk_size, int) and chunk_size > 0):
         raise PamjaxInputError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    if gather not in ("all", "local"):
+        raise PamjaxInputError(f"gather must be 'all' or 'local', got {gather!r}")
     if reduce is not None and not isinstance(reduce, AbstractReduction):
         raise PamjaxInputError(f"reduce must be None, Final(), Mean(window) or Harmonic(...), got {reduce!r}")
     base_state, available = _structure(system, y0)  # shapes only: no solve yet
@@ -588,44 +709,37 @@ def sweep(
     config = (method, tuple(int(c) for c in counts), channels, reduce,
               tuple(sorted((solve_options or {}).items())))
 
-    # --- chunks over devices
+    # --- chunks over devices (and processes)
     mesh = _mesh(devices)
-    n_dev = 1 if mesh is None else mesh.devices.size
-    if chunk_size is None:
-        if mesh is not None:
-            platform = mesh.devices.flat[0].platform
-        else:
-            chosen = list(devices) if devices is not None else []
-            platform = (chosen or jax.devices())[0].platform
-        per_point = len(channels) * (1 if reduce is not None else ts_np.size) * 2  # x2: complex reductions
-        chunk = default_chunk_size(batch_size, per_point, platform, n_dev)
-    else:
-        chunk = min(chunk_size, batch_size)
-    chunk = int(math.ceil(chunk / n_dev) * n_dev)
-    # Each chunk's arrays are padded to a multiple of 8 lanes per device: XLA compiles a 1-point batch to different
-    # (scalar) code than a wider one, which changes results in the last bit. With the padding a point's result is
-    # bitwise the same whatever batch it is computed in (tests/reliability/test_determinism.py).
-    lanes = _LANE_MULTIPLE * n_dev
-    width = int(math.ceil(chunk / lanes) * lanes)
-    n_chunks = int(math.ceil(batch_size / chunk))
+    layout = _Layout.plan(batch_size, chunk_size, mesh, devices, len(channels) * (1 if reduce is not None else
+                                                                                 ts_np.size) * 2)  # x2: complex
     say = (print if progress is True else progress) if progress else None
-    outs, statuses = [], []
+    if say is not None and jax.process_index() != 0:
+        say = None  # one report per sweep, from process 0
+    pieces = []
     ts_j = jnp.asarray(ts_np)
-    for c in range(n_chunks):
+    for c in range(layout.calls):
         start = time.perf_counter()
-        n_real = min(chunk, batch_size - c * chunk)
-        index = c * chunk + np.arange(width)
-        index = np.where(np.arange(width) < n_real, index, 0)  # pad with point 0 (valid values), dropped below
+        index, valid = layout.lanes_of_call(c)
         vals = {k: _put(v[index], mesh) for k, v in flat.items()}
         out, status = _run_chunk(system, signal, y0, vals, ts_j, plan, config, mesh)
-        outs.append(_fetch(out)[:n_real])
-        statuses.append(_fetch(status)[:n_real])
-        if say is not None and n_chunks > 1:
-            failed = int(np.sum(statuses[-1] != SUCCESS))
-            say(f"sweep: chunk {c + 1}/{n_chunks}, points {c * chunk}-{c * chunk + n_real - 1}, "
-                f"{time.perf_counter() - start:.2f} s, {failed} failed")
-    out = np.concatenate(outs)
-    status = np.concatenate(statuses).reshape(batch_shape)
+        pieces.append(_local_part(out, status, index, valid))
+        if say is not None and layout.calls > 1:
+            first, last = layout.points_of_call(c)
+            failed = int(np.sum(pieces[-1][2] != SUCCESS))
+            mine = "" if layout.processes == 1 else f" (of its {len(pieces[-1][0])} points on process 0)"
+            say(f"sweep: chunk {c + 1}/{layout.calls}, points {first}-{last}, "
+                f"{time.perf_counter() - start:.2f} s, {failed} failed{mine}")
+    points, out, status = (np.concatenate(part) for part in zip(*pieces))
+    if gather == "local":
+        local = {k: v[points] for k, v in flat.items()}
+        outputs = {ch: out[..., i] for i, ch in enumerate(channels)}  # (n,) or (n, T) per channel
+        return SweepResult(over=local, t=ts_np, channels=channels, outputs=outputs, status=status, dt=dt,
+                           method=method, points=points, batch_shape=batch_shape)
+    if layout.processes > 1:
+        points, out, status = _gather_processes(points, out, status)
+    out, status = _in_point_order(points, out, status, batch_size)
+    status = status.reshape(batch_shape)
     if reduce is None:  # (B, T, C) -> channel: batch_shape + (T,)
         outputs = {ch: out[:, :, i].reshape(batch_shape + (ts_np.size,)) for i, ch in enumerate(channels)}
     else:

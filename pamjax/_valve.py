@@ -11,6 +11,7 @@ import jax.numpy as jnp
 from ._errors import PamjaxInputError, check_finite, check_nonnegative, check_positive
 from ._gas import AbstractRestriction, Air, EllipseRestriction
 from ._smooth import smooth_step
+from ._units import check_absolute_pressure
 
 
 class AbstractValve(eqx.Module):
@@ -97,6 +98,7 @@ class OnOffValve(AbstractValve):
 
     def __check_init__(self):
         check_positive(self.supply_pressure, "OnOffValve.supply_pressure")
+        check_absolute_pressure(self.supply_pressure, "OnOffValve.supply_pressure", above_atmosphere=True)
         check_positive(self.pwm_frequency, "OnOffValve.pwm_frequency")
         check_nonnegative(self.switch_on_delay, "OnOffValve.switch_on_delay")
         check_nonnegative(self.switch_off_delay, "OnOffValve.switch_off_delay")

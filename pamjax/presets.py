@@ -21,7 +21,17 @@ re-run by `tests/test_presets.py` and `fits/derive_presets.py`):
 4. **Viscous friction C_f = 250 N s/m.** Paper 000 shows C_f only as a plot (Fig. 6). 250 N s/m is ≈ 0.4 of the
    critical damping 2·sqrt(k M) of the 9.6 kg payload on the muscle's mid-stroke stiffness (≈ 1e4 N/m), the
    order of magnitude of Fig. 6's muscle friction; it is a fit parameter.
-5. **Stroke limits.** x_max = 0.075 m (25 % of 300 mm, datasheet); x_min = −0.02 m (stretch; paper 000 Fig. 3 shows
+5. **Exhaust silencer (optional, `silencer=True`).** Paper 000 ran its valve tests with a silencer on port 3 and
+   names it as the cause of Fig. 12's deflation offset, but gives neither its type nor data: "the effects of the
+   silencer at higher upstream pressure levels are almost negligible", and "as the pressure drop across the valve
+   decreases the silencer slows down the flow". A sintered silencer is a porous element (`PorousRestriction`,
+   isothermal Darcy flow ṁ = K (p1² − p2²)) in series with the exhaust port (`SeriesRestriction`). K is the one
+   number those two sentences fix once "almost negligible" is read as 2 %: with the silencer the exhaust path passes
+   98 % of its unsilenced (choked) flow from the 0.65 MPa supply to atmosphere. Then the port's outlet sits at
+   0.384 MPa and K = 1.9557e-14 kg/(s Pa²); at 0.2 MPa the silenced flow is 54 % of the unsilenced one, at 0.12 MPa
+   21 %. An assumption to be replaced by a fit to one's own deflation tests
+   (free parameter `valve.exhaust.second.permeance`).
+6. **Stroke limits.** x_max = 0.075 m (25 % of 300 mm, datasheet); x_min = −0.02 m (stretch; paper 000 Fig. 3 shows
    negative displacements but no number, so −20 mm is assumed).
 
 The hybrid reference bench in `shared/data` (`meta.json`) was generated with independently chosen values
@@ -33,7 +43,7 @@ import jax.numpy as jnp
 
 from ._errors import PamjaxInputError
 from ._friction import BristleFriction, CoulombViscousFriction, KarnoppFriction
-from ._gas import Air, EllipseRestriction, ISO6358Restriction
+from ._gas import AbstractRestriction, Air, EllipseRestriction, ISO6358Restriction, PorousRestriction, SeriesRestriction
 from ._muscle import CubicVolume, LinearVolume, Muscle, PolynomialForce
 from ._system import MuscleSystem, TankSystem
 from ._valve import AveragedValve, OnOffValve
@@ -49,6 +59,8 @@ PWM_FREQUENCY = 50.0  # Hz, paper 000
 SWITCH_DELAY = 2e-3  # s, paper 000 (MHE2 switching time ≈ 2 ms)
 PAYLOAD_MASS = 9.6  # kg, paper 000
 TANK_VOLUME = 5e-5  # m³, constant-volume test tank (paper 000 gives none; the hybrid bench uses 5e-5)
+MAS10_SILENCER_PERMEANCE = 1.9557e-14  # kg/(s Pa²), exhaust silencer: 98 % of the choked exhaust flow at 0.65 MPa
+#                                        passes (paper 000's "almost negligible" at high pressure; docstring item 5)
 
 # --- MAS-10-300, derived (see module docstring) -------------------------------------------------------------------
 MAS10_MAX_FORCE_COEFFICIENTS = (
@@ -97,12 +109,28 @@ DMSP40_LOAD_FORCE = 893.0  # N, paper 001 (91.3 kg subject)
 PAPER001_SUPPLY_PRESSURE = 7e5  # Pa abs, paper 001
 
 
-def mas10_valve(mode="smooth", **kwargs):
+def mas10_silencer():
+    """The exhaust silencer of paper 000's valve tests: a porous element with the derived permeance (docstring
+    item 5; an assumption, paper 000 gives no silencer data)."""
+    return PorousRestriction(MAS10_SILENCER_PERMEANCE)
+
+
+def mas10_valve(mode="smooth", silencer=False, **kwargs):
     """Festo MHE2 3/2 on/off valve with paper 000's Table 1 paths, 0.65 MPa abs supply, 50 Hz, 2 ms delays.
-    Keyword arguments override any `OnOffValve` field."""
+
+    `silencer`: False (default, as Table 1 was identified), True (port 3 → `mas10_silencer()`, docstring item 5) or
+    any restriction placed in series after the exhaust port. Keyword arguments override any `OnOffValve` field."""
+    exhaust = EllipseRestriction(EXHAUST_DISCHARGE_COEFFICIENT, EXHAUST_CRITICAL_RATIO, VALVE_AREA)
+    if silencer is True:
+        silencer = mas10_silencer()
+    if silencer is not False and silencer is not None:
+        if not isinstance(silencer, AbstractRestriction):
+            raise PamjaxInputError(f"silencer must be True, False or a restriction (e.g. PorousRestriction), got "
+                                   f"{silencer!r}")
+        exhaust = SeriesRestriction(exhaust, silencer)
     fields = dict(
         inflate=EllipseRestriction(INFLATE_DISCHARGE_COEFFICIENT, INFLATE_CRITICAL_RATIO, VALVE_AREA),
-        exhaust=EllipseRestriction(EXHAUST_DISCHARGE_COEFFICIENT, EXHAUST_CRITICAL_RATIO, VALVE_AREA),
+        exhaust=exhaust,
         supply_pressure=SUPPLY_PRESSURE,
         pwm_frequency=PWM_FREQUENCY,
         switch_on_delay=SWITCH_DELAY,
@@ -134,11 +162,16 @@ def mas10_muscle():
     )
 
 
-def _valve(valve):
+def _valve(valve, silencer=False):
     if valve in ("pwm", "smooth"):
-        return mas10_valve("smooth")
+        return mas10_valve("smooth", silencer=silencer)
     if valve == "exact":
-        return mas10_valve("exact")
+        return mas10_valve("exact", silencer=silencer)
+    if silencer is not False and silencer is not None:
+        raise PamjaxInputError(
+            f"silencer applies to the switching valve (valve='pwm' or 'exact'), got valve={valve!r}: the averaged "
+            "valve's m1…m9 were derived without one; build the silenced switching valve and pamjax.fit_averaged_valve"
+        )
     if valve == "averaged":
         return mas10_averaged_valve()
     if isinstance(valve, str):
@@ -148,13 +181,14 @@ def _valve(valve):
     return valve
 
 
-def mas10_system(valve="pwm", friction="coulomb", payload_mass=PAYLOAD_MASS):
+def mas10_system(valve="pwm", friction="coulomb", payload_mass=PAYLOAD_MASS, silencer=False):
     """Paper 000's plant: MAS-10-300 lifting `payload_mass` (9.6 kg) through the MHE2 valve.
 
     **Arguments:** `valve`: "pwm" (smoothed switching), "exact" (exact-edge reference), "averaged" (eq. 13) or a
     valve; `friction`: "coulomb" (eq. 8-9, smooth sign: fast, creeps where the real payload sticks), "karnopp"
     (eq. 8-9 with exact stick-slip, integrated on the fixed grid: the model for identification), "bristle"
-    (Dahl-type, holds still elastically) or a friction model.
+    (Dahl-type, holds still elastically) or a friction model; `silencer`: an exhaust silencer on the switching
+    valve (see `mas10_valve`).
     """
     if friction == "coulomb":
         friction = CoulombViscousFriction(COULOMB_FORCE, VISCOUS_COEFFICIENT)
@@ -165,12 +199,15 @@ def mas10_system(valve="pwm", friction="coulomb", payload_mass=PAYLOAD_MASS):
     elif isinstance(friction, str):
         raise PamjaxInputError(
             f"friction must be 'coulomb', 'karnopp', 'bristle' or a friction model; got {friction!r}")
-    return MuscleSystem(valve=_valve(valve), muscle=mas10_muscle(), payload_mass=payload_mass, friction=friction)
+    return MuscleSystem(
+        valve=_valve(valve, silencer), muscle=mas10_muscle(), payload_mass=payload_mass, friction=friction
+    )
 
 
-def mas10_tank_system(valve="pwm", volume=TANK_VOLUME):
-    """Paper 000's valve tests: the MHE2 valve feeding a constant volume (5e-5 m³ by default)."""
-    return TankSystem(valve=_valve(valve), volume=volume)
+def mas10_tank_system(valve="pwm", volume=TANK_VOLUME, silencer=False):
+    """Paper 000's valve tests: the MHE2 valve feeding a constant volume (5e-5 m³ by default); `silencer` as for
+    `mas10_valve` (paper 000 ran these tests with one, Fig. 12)."""
+    return TankSystem(valve=_valve(valve, silencer), volume=volume)
 
 
 def dmsp40_muscle():
@@ -206,6 +243,7 @@ def paper001_restriction(sonic_conductance_m3_per_s_bar=7.0564e-04, critical_rat
 __all__ = [
     "Air",
     "mas10_valve",
+    "mas10_silencer",
     "mas10_averaged_valve",
     "mas10_muscle",
     "mas10_system",

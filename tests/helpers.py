@@ -275,15 +275,13 @@ def np_stick_slip_run(plant, duties, ts, *, f=50.0, t_on=2e-3, t_off=2e-3, rtol=
 
     T = 1.0 / f
     t_end = float(ts[-1])
-    edges, state = [], 0.0  # (time, opening after it), exact state machine per period
+    edges = []  # (time, opening after it), the exact state machine per period
     for k, u in enumerate(duties):
         start = k * T
         if u * T - t_on >= 0:
             edges.append((start + t_on, 1.0))
-            state = 1.0
         if (1.0 - u) * T - t_off > 0:
             edges.append((start + u * T + t_off, 0.0))
-            state = 0.0
     edges = sorted(e for e in edges if e[0] < t_end)
     weight = plant.mass * 9.81
 

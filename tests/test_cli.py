@@ -1,8 +1,12 @@
-"""The command line: `pamjax fit CONFIG.toml` and `pamjax sweep CONFIG.toml` check every table and key of their
-config before anything is solved (an unknown key names itself and lists the valid ones), never replace results
-without `--overwrite`, and `pamjax sweep` writes NPZ, CSV and a figure."""
+"""The command line refuses bad input before any work: every table, key, value type, parameter path, shape and unit of
+a config (`pamjax fit`, `pamjax sweep`, `pamjax simulate`) and every output folder that cannot take the results
+(a file, under a file, not writable, in use by another pamjax, holding earlier results). Each refusal is one
+message naming what is wrong and how to fix it, exit status 2, no traceback, nothing created; `--debug` (or
+`PAMJAX_DEBUG=1`) shows the traceback. End-to-end runs: `test_cli_workflow.py`."""
 
+import errno
 import pathlib
+import re
 import textwrap
 import tomllib
 
@@ -10,20 +14,23 @@ import numpy as np
 import pytest
 
 import pamjax
+import pamjax._cli_out as cli_out
 import pamjax._cli_sweep as cli_sweep
 from pamjax._cli import main
+from pamjax._cli_out import OutputFolder
 
 EXAMPLES = pathlib.Path(__file__).resolve().parents[1] / "examples"
 
 
-@pytest.fixture(autouse=True)
+@pytest.fixture
 def no_solves(monkeypatch):
-    """Any fit or sweep reached is a test failure: the config errors below must come first."""
+    """Any fit, simulation or sweep reached is a test failure: the errors below must come first."""
 
     def refuse(*args, **kwargs):
-        raise AssertionError("a solve was started before the config was rejected")
+        raise AssertionError("a solve was started before the input was rejected")
 
-    monkeypatch.setattr(pamjax, "fit", refuse)
+    for name in ("fit", "simulate"):
+        monkeypatch.setattr(pamjax, name, refuse)
     for name in ("steady_state_map", "frequency_response", "flow_surface"):
         monkeypatch.setattr(cli_sweep, name, refuse)
 
@@ -32,6 +39,15 @@ def _write(tmp_path, text, name="cfg.toml"):
     path = tmp_path / name
     path.write_text(textwrap.dedent(text))
     return path
+
+
+def _refused(capsys, argv, match, code=2):
+    """`pamjax argv` exits with `code`, one message matching `match` on stderr, and no traceback."""
+    assert main(argv) == code
+    out, err = capsys.readouterr()
+    assert "Traceback" not in out + err
+    assert re.search(match, err), err
+    return err
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -57,29 +73,70 @@ def _fit_config(replace=None, append=""):
     return text + textwrap.dedent(append)
 
 
+def _set(entries):
+    return _fit_config({"[fit]": f"set = {{ {entries} }}\n[fit]"})
+
+
 FIT_CASES = {
     "top-level key": (_fit_config(append="[solver]\nrtol = 1e-6\n"),
-                      r"unknown key\(s\) \['solver'\]; valid keys are \['experiment', 'fit', 'model'\]"),
+                      r"unknown key\(s\) \['solver'\]; valid keys are \['bench', 'experiment', 'fit', 'model'\]"),
     "[model] key": (_fit_config({'preset = "mas10_system"': 'preset = "mas10_system"\nvalve = "pwm"'}),
-                    r"\[model\]: unknown key\(s\) \['valve'\]; valid keys are \['options', 'preset', 'set'\]"),
+                    r"\[model\]: unknown key\(s\) \['valve'\]; valid keys are \['file', 'options', 'preset', 'set'\]"),
     "[model] options key": (_fit_config({'valve = "averaged"': 'valves = "averaged"'}),
                             r"options .*unknown key\(s\) \['valves'\]; valid keys are \['friction', "
-                            r"'payload_mass', 'valve'\]"),
+                            r"'payload_mass', 'silencer', 'valve'\]"),
     "[model] preset": (_fit_config({'"mas10_system"': '"mas20_system"'}),
                        r"preset must be one of \['mas10_system', 'mas10_tank_system'\]"),
-    "[model] set path": (_fit_config({'[fit]': 'set = { "muscle.volume.v0" = 3e-5 }\n[fit]'}),
+    "[model] preset and file": (_fit_config({'[fit]': 'file = "model.json"\n[fit]'}),
+                                r"either file .* or preset .*, not both; remove \['options', 'preset'\]"),
+    "[model] missing model file": (_fit_config({'preset = "mas10_system"\n    options = { valve = "averaged" }':
+                                                'file = "nowhere/model.json"'}),
+                                   r"model file .*nowhere.* does not exist"),
+    "[model] set path": (_set('"muscle.volume.v0" = 3e-5'),
                          r"unknown parameter 'muscle.volume.v0'(.|\n)*muscle.volume_law.v0"),
+    # issue 15: a list here once spread over the following parameters (v1 = 7.0, C_f = 3.5e-4, ...)
+    "[model] set list for a scalar": (_set('"muscle.volume_law.v0" = [3e-5, 7.0], "muscle.volume_law.v1" = 3.5e-4'),
+                                      r"'muscle.volume_law.v0' expects one number, got shape \(2,\)"),
+    "[model] set short list": (_set('"muscle.force_law.max_force_coefficients" = [630.0, 1.0]'),
+                               r"'muscle.force_law.max_force_coefficients' expects shape \(5,\), got shape \(2,\)"),
+    "[model] set string": (_set('"payload_mass" = "heavy"'), r"'payload_mass' must be a number .*got 'heavy'"),
+    "[model] set index out of range": (_set('"valve.coefficients[3,0]" = 1.0'), r"index \[3, 0\] .* out of range"),
+    "[model] set refused by the component": (_set('"payload_mass" = -1.0'), r"payload_mass must be > 0"),
+    "[model] set supply in bar": (_set('"valve.coefficients[1,0]" = 1e-3, "air.atmospheric_pressure" = 1.01325'),
+                                  r"air.atmospheric_pressure is 1.01325 Pa at most: that looks like bar"),
+    "[model] options payload in grams": (_fit_config({'valve = "averaged"': 'valve = "averaged", payload_mass = 9600'}),
+                                         r"payload_mass = 9600 kg: .*looks like g"),
     "[fit] key": (_fit_config({"[fit]": "[fit]\nmaxsteps = 3"}),
-                  r"\[fit\]: unknown key\(s\) \['maxsteps'\]; valid keys are \['atol', 'free', 'max_steps'"),
+                  r"\[fit\]: unknown key\(s\) \['maxsteps'\]; valid keys are \['free', 'ftol', 'gtol', 'max_steps'"),
     "[fit] free path": (_fit_config({'"friction.coulomb_force"': '"friction.coulomb"'}),
                         r"unknown parameter 'friction.coulomb'(.|\n)*friction.coulomb_force"),
+    "[fit] free as a string": (_fit_config({'free = ["friction.coulomb_force"]': 'free = "friction.coulomb_force"'}),
+                               r"free must be a non-empty list .*put it in brackets"),
     "[fit] free table key": (_fit_config({'"friction.coulomb_force"':
                                           '{ path = "friction.coulomb_force", transfrom = "log" }'}),
                              r"free entry: unknown key\(s\) \['transfrom'\]; valid keys are \['bounds', 'path', "
                              r"'scale', 'transform'\]"),
+    "[fit] free bounds": (_fit_config({'"friction.coulomb_force"': '{ path = "friction.coulomb_force", bounds = 5 }'}),
+                          r"bounds must be \[lo, hi\]"),
+    "[fit] free scale of the wrong shape": (_fit_config({'"friction.coulomb_force"':
+                                                        '{ path = "valve.coefficients", scale = [1.0, 2.0] }'}),
+                                           r"scale expects one number or shape \(3, 3\), got shape \(2,\)"),
+    "[fit] max_steps float": (_fit_config({"[fit]": "[fit]\nmax_steps = 40.5"}),
+                              r"\[fit\] max_steps must be a positive integer"),
     "experiment key": (_fit_config(append="noise = 2e3\n"),
                        r"#1: unknown key\(s\) \['noise'\]; valid keys are \['channels', 'file'"),
     "experiment as a single table": (_fit_config({"[[experiment]]": "[experiment]"}), r"\[\[experiment\]\]"),
+    "experiment channels as a string": (_fit_config(append='channels = "pressure"\n'),
+                                        r"channels must be a list of strings.*got 'pressure' \(a single string"),
+    "experiment scale as a string": (_fit_config(append='scales = { pressure = "2 kPa" }\n'),
+                                     r"scales.pressure must be a positive number"),
+    "experiment initial pressure in bar": (_fit_config(append="initial = { pressure = 1.01325 }\n"),
+                                           r"initial pressure is 1.01325 Pa at most: that looks like bar"),
+    "experiment initial gauge pressure": (_fit_config(append="initial = { pressure = 0.0 }\n"), r"GAUGE"),
+    "experiment initial position in mm": (_fit_config(append="initial = { position = 12.0 }\n"),
+                                          r"initial position = 12 m: .*looks like mm"),
+    "experiment tank volume in cm3": (_fit_config(append="tank_volume = 50.0\n"),
+                                      r"tank_volume = 50 m³: .*looks like cm³ or litres"),
     "signal key": (_fit_config({"frequency = 0.25": "freq = 0.25"}),
                    r"signal \(kind = 'Triangle'\): unknown key\(s\) \['freq'\]; valid keys are \['frequency', "
                    r"'high', 'kind', 'low'\]"),
@@ -93,26 +150,23 @@ FIT_CASES = {
                     r"'pressure', 'velocity'\]"),
     "tank initial key": (_fit_config(append="tank_volume = 5e-5\ninitial = { position = 0.0 }\n"),
                          r"initial .*TankSystem.*unknown key\(s\) \['position'\]; valid keys are \['pressure'\]"),
-    "TOML syntax": ("[fit\nfree = 1\n", "not valid TOML"),
+    "TOML syntax": ("[fit\nfree = 1\n", r"cfg.toml, line 1, column 5: not valid TOML: Expected '\]'(.|\n)*\[fit"),
+    "missing recording": (_fit_config(), r"recording file .*missing.csv does not exist"),
 }
 
 
 @pytest.mark.parametrize("case", sorted(FIT_CASES))
-def test_fit_config_errors_name_the_key_before_any_solve(tmp_path, case):
+def test_fit_config_errors_name_the_key_before_any_solve(tmp_path, capsys, no_solves, case):
     text, match = FIT_CASES[case]
     config = _write(tmp_path, text)
-    with pytest.raises(pamjax.PamjaxInputError, match=match):
-        main(["fit", str(config), "--out", str(tmp_path / "out"), "--quiet"])
+    _refused(capsys, ["fit", str(config), "--out", str(tmp_path / "out"), "--quiet"], match)
     assert not (tmp_path / "out").exists()
 
 
-def test_fit_refuses_to_replace_results_before_fitting(tmp_path):
-    out = tmp_path / "out"
-    out.mkdir()
-    (out / "fit.json").write_text("{}")
-    with pytest.raises(SystemExit, match="fit.json exists; pass --overwrite"):
-        main(["fit", str(EXAMPLES / "fit_example.toml"), "--out", str(out), "--quiet"])
-    assert (out / "fit.json").read_text() == "{}"
+def test_example_fit_config_is_valid(no_solves):
+    from pamjax._cli_fit import validate_config
+
+    validate_config(tomllib.loads((EXAMPLES / "fit_example.toml").read_text()))
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -120,14 +174,15 @@ def test_fit_refuses_to_replace_results_before_fitting(tmp_path):
 
 SWEEP_CASES = {
     "top-level key": ('kind = "flow_surface"\n[plot]\ndpi = 100\n',
-                      r"unknown key\(s\) \['plot'\]; valid keys are \['kind', 'sweep', 'system'\]"),
+                      r"unknown key\(s\) \['plot'\]; valid keys are \['kind', 'model', 'sweep', 'system'\]"),
     "kind": ('kind = "bode"\n', r"kind must be one of \['steady_state', 'flow_surface', 'frequency_response'\]"),
     # flow_surface maps the valve alone: a muscle-system key would be silently ignored
     "flow_surface [system] valve": ('kind = "flow_surface"\n[system]\nvalve = "averaged"\n',
                                     r"\[system\] \(kind = 'flow_surface'\): unknown key\(s\) \['valve'\]; valid keys "
                                     r"are \['supply_pressure'\]"),
     "flow_surface [sweep] method": ('kind = "flow_surface"\n[sweep]\nmethod = "rk4"\n',
-                                    r"unknown key\(s\) \['method'\]; valid keys are \['commands', 'pressures'\]"),
+                                    r"unknown key\(s\) \['method'\]; valid keys are \['commands', 'over', "
+                                    r"'pressures'\]"),
     "steady_state [system] supply_pressure": ('kind = "steady_state"\n[system]\nsupply_pressure = 7e5\n',
                                               r"unknown key\(s\) \['supply_pressure'\]; valid keys are "
                                               r"\['payload_mass', 'valve'\]"),
@@ -143,15 +198,33 @@ SWEEP_CASES = {
     "valve": ('kind = "steady_state"\n[system]\nvalve = "exact"\n',
               r"\[system\] valve must be one of \['pwm', 'averaged'\], got 'exact'"),
     "system not a table": ('kind = "steady_state"\nsystem = "pwm"\n', r"\[system\].* must be a table"),
+    "commands in percent": ('kind = "steady_state"\n[sweep]\ncommands = [20, 50, 80]\n',
+                            r"duty ratios in \[0, 1\], got 20 … 80 \(these look like percent"),
+    "pressures in bar": ('kind = "flow_surface"\n[sweep]\npressures = [1.0, 3.0, 6.5]\n',
+                         r"\[sweep\] pressures is 6.5 Pa at most: that looks like bar"),
+    "supply pressure in MPa": ('kind = "flow_surface"\n[system]\nsupply_pressure = 0.65\n',
+                               r"supply_pressure is 0.65 Pa at most: that looks like MPa"),
+    "supply pressure below atmospheric": ('kind = "flow_surface"\n[system]\nsupply_pressure = 9e4\n',
+                                          r"supply_pressure must exceed atmospheric pressure"),
+    "payload in grams": ('kind = "steady_state"\n[system]\npayload_mass = 9600.0\n', r"looks like g"),
+    "over unknown path": ('kind = "steady_state"\n[sweep]\nover = { "payload" = [1.0, 2.0] }\n',
+                          r"unknown parameter 'payload'(.|\n)*payload_mass"),
+    "over string": ('kind = "steady_state"\n[sweep]\nover = { "payload_mass" = "5, 10" }\n',
+                    r"over.payload_mass must be a non-empty list .*a single string"),
+    "over in grams": ('kind = "steady_state"\n[sweep]\nover = { "payload_mass" = [5000.0, 9600.0] }\n',
+                      r"payload_mass = 9600 kg"),
+    "model and system": ('kind = "steady_state"\n[system]\nvalve = "pwm"\n[model]\npreset = "mas10_system"\n',
+                         r"either \[system\] .* or \[model\]"),
+    "exact valve from [model]": ('kind = "steady_state"\n[model]\noptions = { valve = "exact" }\n',
+                                 r"exact-edge valve .* use pamjax simulate"),
 }
 
 
 @pytest.mark.parametrize("case", sorted(SWEEP_CASES))
-def test_sweep_config_errors_name_the_key_before_any_solve(tmp_path, case):
+def test_sweep_config_errors_name_the_key_before_any_solve(tmp_path, capsys, no_solves, case):
     text, match = SWEEP_CASES[case]
     config = _write(tmp_path, text)
-    with pytest.raises(pamjax.PamjaxInputError, match=match):
-        main(["sweep", str(config), "--out", str(tmp_path / "out")])
+    _refused(capsys, ["sweep", str(config), "--out", str(tmp_path / "out"), "--cpu-devices", "1"], match)
     assert not (tmp_path / "out").exists()
 
 
@@ -160,8 +233,146 @@ def test_example_sweep_configs_are_valid(path):
     cli_sweep.validate_config(tomllib.loads(path.read_text()))
 
 
-def test_sweep_end_to_end_writes_outputs_and_refuses_to_overwrite(tmp_path, monkeypatch):
-    monkeypatch.undo()  # this one solves
+# ---------------------------------------------------------------------------------------------------------------
+# pamjax simulate
+
+_SIM_OK = """
+    [model]
+    preset = "mas10_system"
+    [input]
+    signal = { kind = "Constant", value = 0.5 }
+    [simulate]
+    t_end = 1.0
+"""
+
+SIMULATE_CASES = {
+    "top-level key": (_SIM_OK + "[output]\n", r"unknown key\(s\) \['output'\]; valid keys are \['input', 'model'"),
+    "no input": (_SIM_OK.replace('signal = { kind = "Constant", value = 0.5 }', ""), r"\[input\] needs a signal"),
+    "no t_end": (_SIM_OK.replace("t_end = 1.0", ""), r"needs t_end"),
+    "t_end as text": (_SIM_OK.replace("t_end = 1.0", 't_end = "1 s"'), r"t_end must be a positive number"),
+    "duty in percent": (_SIM_OK.replace("value = 0.5", "value = 50.0"), r"signal .* within \[0(.0)?, 1(.0)?\]"),
+    "unknown solver": (_SIM_OK + 'solver = "RK45"\n', r"solver must be one of \['Tsit5', 'Rodas5'"),
+    "initial pressure in bar": (_SIM_OK + "initial = { pressure = 6.5 }\n", r"looks like bar"),
+    "initial key": (_SIM_OK + "initial = { pressur = 2e5 }\n", r"unknown key\(s\) \['pressur'\]"),
+    "too many rows": (_SIM_OK.replace("t_end = 1.0", "t_end = 25000.0\ndt = 0.001"),
+                      r"would write 25,000,001 rows .* check t_end is in seconds"),
+    "recorded without a file": (_SIM_OK.replace('{ kind = "Constant", value = 0.5 }', '"recorded"'),
+                                r"'recorded' needs file"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(SIMULATE_CASES))
+def test_simulate_config_errors_name_the_key_before_any_solve(tmp_path, capsys, no_solves, case):
+    text, match = SIMULATE_CASES[case]
+    config = _write(tmp_path, text)
+    _refused(capsys, ["simulate", str(config), "--out", str(tmp_path / "out")], match)
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("path", sorted(EXAMPLES.glob("simulate_*.toml")), ids=lambda p: p.stem)
+def test_example_simulate_configs_are_valid(path):
+    from pamjax._cli_simulate import validate_config
+
+    validate_config(tomllib.loads(path.read_text()))
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# output folders: checked before any work
+
+
+@pytest.fixture
+def sweep_config(tmp_path):
+    return _write(tmp_path, 'kind = "steady_state"\n[system]\nvalve = "averaged"\n[sweep]\ncommands = [0.5]\n')
+
+
+def test_out_naming_a_file_or_lying_under_one_is_refused(tmp_path, capsys, no_solves, sweep_config):
+    (tmp_path / "afile").write_text("mine")
+    _refused(capsys, ["sweep", str(sweep_config), "--out", str(tmp_path / "afile")],
+             r"--out .*afile is a file, not a folder; choose another folder with --out")
+    _refused(capsys, ["sweep", str(sweep_config), "--out", str(tmp_path / "afile" / "x")],
+             r"cannot create the output folder .*afile is a file; choose another folder with --out")
+    assert (tmp_path / "afile").read_text() == "mine"
+
+
+def test_an_unwritable_out_is_refused_before_any_work(tmp_path, capsys, no_solves, sweep_config, monkeypatch):
+    def read_only(fd):
+        raise OSError(errno.EROFS, "Read-only file system")
+
+    monkeypatch.setattr(cli_out.os, "fsync", read_only)
+    _refused(capsys, ["sweep", str(sweep_config), "--out", str(tmp_path / "out")],
+             r"cannot write to the output folder .*out \(Read-only file system\); choose another folder with --out")
+    assert not any(p.name.startswith(".pamjax") for p in (tmp_path / "out").iterdir())
+
+
+def test_a_folder_in_use_by_another_pamjax_is_refused(tmp_path, capsys, no_solves, sweep_config):
+    with OutputFolder(tmp_path / "out", "pamjax fit", ["fit.json"]):
+        _refused(capsys, ["sweep", str(sweep_config), "--out", str(tmp_path / "out")],
+                 r"out is in use by another pamjax \(pamjax fit, pid \d+ on .*\); wait for it to finish, or choose "
+                 r"another folder with --out")
+    assert not (tmp_path / "out" / cli_out.LOCK_NAME).exists()  # released at the end
+    with OutputFolder(tmp_path / "out", "pamjax fit", ["fit.json"]):  # and can be taken again
+        pass
+
+
+def test_existing_results_are_refused_with_the_flag_that_replaces_them(tmp_path, capsys, no_solves, sweep_config):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "sweep.csv").write_text("earlier")
+    _refused(capsys, ["sweep", str(sweep_config), "--out", str(out)],
+             r"sweep.csv exists; pass --overwrite to replace it, or choose another folder with --out")
+    assert (out / "sweep.csv").read_text() == "earlier"
+
+
+def test_results_that_cannot_be_written_at_the_end_go_to_a_named_fallback(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    real = cli_out.os.replace
+
+    def failing(src, dst):
+        if pathlib.Path(dst).name == "fit.json":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(src, dst)
+
+    monkeypatch.setattr(cli_out.os, "replace", failing)
+    with OutputFolder(tmp_path / "out", "pamjax fit", ["fit.json"]) as folder:
+        folder.write_text("fit.json", '{"values": [1.0]}')
+        folder.write_text("model.json", "{}")
+    rescued = list(tmp_path.glob("pamjax-rescued-fit-*-fit.json"))
+    assert len(rescued) == 1 and rescued[0].read_text() == '{"values": [1.0]}'
+    assert folder.failed and folder.failed[0][0] == "fit.json"
+    assert (tmp_path / "out" / "model.json").exists() and not (tmp_path / "out" / "fit.json").exists()
+    assert f"saved it as {rescued[0]}" in capsys.readouterr().out
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# tracebacks on request
+
+
+def test_debug_flag_and_environment_variable_show_the_traceback(tmp_path, capsys, no_solves, monkeypatch):
+    config = _write(tmp_path, "[fit\n")
+    with pytest.raises(pamjax.PamjaxInputError, match="not valid TOML"):
+        main(["fit", str(config), "--debug"])
+    monkeypatch.setenv("PAMJAX_DEBUG", "1")
+    with pytest.raises(pamjax.PamjaxInputError, match="not valid TOML"):
+        main(["fit", str(config)])
+    monkeypatch.setenv("PAMJAX_DEBUG", "0")
+    assert main(["fit", str(config)]) == 2
+
+
+def test_an_internal_error_is_one_line_pointing_at_debug(tmp_path, capsys, monkeypatch, sweep_config):
+    def broken(*args, **kwargs):
+        raise ZeroDivisionError("float division by zero")
+
+    monkeypatch.setattr(cli_sweep, "steady_state_map", broken)
+    err = _refused(capsys, ["sweep", str(sweep_config), "--out", str(tmp_path / "out"), "--cpu-devices", "1"],
+                   r"error: ZeroDivisionError: float division by zero\n\(run again with --debug", code=1)
+    assert err.count("\n") == 2
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# sweep end to end (small)
+
+
+def test_sweep_end_to_end_writes_outputs_and_refuses_to_overwrite(tmp_path, capsys):
     config = _write(tmp_path, """
         kind = "steady_state"
         [system]
@@ -173,7 +384,7 @@ def test_sweep_end_to_end_writes_outputs_and_refuses_to_overwrite(tmp_path, monk
         window = 0.2                  # s
     """)
     out = tmp_path / "out"
-    assert main(["sweep", str(config), "--out", str(out)]) == 0
+    assert main(["sweep", str(config), "--out", str(out), "--cpu-devices", "1"]) == 0
     data = np.load(out / "sweep.npz")
     np.testing.assert_array_equal(data["duty"], [0.2, 0.5, 0.8])
     assert np.all(data["status"] == 0)
@@ -182,19 +393,18 @@ def test_sweep_end_to_end_writes_outputs_and_refuses_to_overwrite(tmp_path, monk
     assert len((out / "sweep.csv").read_text().splitlines()) == 4
     assert (out / "sweep.png").stat().st_size > 10_000
     before = (out / "sweep.npz").read_bytes()
-    with pytest.raises(SystemExit, match="exists; pass --overwrite"):
-        main(["sweep", str(config), "--out", str(out)])
+    _refused(capsys, ["sweep", str(config), "--out", str(out)], "exists; pass --overwrite")
     assert (out / "sweep.npz").read_bytes() == before
     assert main(["sweep", str(config), "--out", str(out), "--overwrite", "--no-plot"]) == 0
 
 
-def test_sweep_splits_the_cpu_into_one_device_per_core_and_matches_one_device(tmp_path, monkeypatch):
+def test_sweep_splits_the_cpu_into_one_device_per_core_and_matches_one_device(tmp_path, capsys):
     # `pamjax sweep` sets JAX's CPU device count before JAX runs (a fresh process, as from the shell) and shards the
     # sweep over the devices; the map equals the one-device map to 1e-12 relative (tests/test_sharding.py).
+    import os
     import subprocess
     import sys
 
-    monkeypatch.undo()
     config = _write(tmp_path, """
         kind = "steady_state"
         [system]
@@ -207,10 +417,9 @@ def test_sweep_splits_the_cpu_into_one_device_per_core_and_matches_one_device(tm
     runs = {}
     for n in (2, 1):
         out = tmp_path / f"out{n}"
-        code = "import sys; from pamjax._cli import main; sys.exit(main(sys.argv[1:]))"
-        proc = subprocess.run([sys.executable, "-c", code, "sweep", str(config), "--out", str(out), "--no-plot",
+        proc = subprocess.run([sys.executable, "-m", "pamjax", "sweep", str(config), "--out", str(out), "--no-plot",
                                "--cpu-devices", str(n)], capture_output=True, text=True, timeout=600,
-                              env={**__import__("os").environ, "JAX_PLATFORMS": "cpu"})
+                              env={**os.environ, "JAX_PLATFORMS": "cpu"})
         assert proc.returncode == 0, proc.stdout + proc.stderr
         assert f"on {n} cpu device(s)" in proc.stdout, proc.stdout
         runs[n] = np.load(out / "sweep.npz")

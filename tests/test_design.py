@@ -130,7 +130,7 @@ def test_design_needs_a_pwm_period():
                   channels=("pressure",))
 
 
-def test_cli_design_writes_csv_json_figure_and_refuses_to_overwrite(tmp_path):
+def test_cli_design_writes_csv_json_figure_and_refuses_to_overwrite(tmp_path, capsys):
     cfg = tmp_path / "design.toml"
     cfg.write_text(textwrap.dedent(f"""
         [model]
@@ -153,9 +153,11 @@ def test_cli_design_writes_csv_json_figure_and_refuses_to_overwrite(tmp_path):
     rec = pj.Recording.load(out / "design.csv")
     assert rec.t.size == 20 and "duty" in rec.channels
     assert (out / "design.png").stat().st_size > 10_000
-    with pytest.raises(SystemExit, match="exists; pass --overwrite"):
-        main(["design", str(cfg), "--out", str(out), "--quiet"])
+    capsys.readouterr()
+    assert main(["design", str(cfg), "--out", str(out), "--quiet"]) == 2  # a user error: one line, status 2
+    assert "design.csv exists; pass --overwrite" in capsys.readouterr().err
     bad = tmp_path / "bad.toml"
     bad.write_text(cfg.read_text().replace("knots = 4", "knot = 4"))
-    with pytest.raises(PamjaxInputError, match=r"\[design\]: unknown key\(s\) \['knot'\]"):
-        main(["design", str(bad), "--out", str(tmp_path / "o2"), "--quiet"])
+    assert main(["design", str(bad), "--out", str(tmp_path / "o2"), "--quiet"]) == 2
+    assert "[design]: unknown key(s) ['knot']" in capsys.readouterr().err
+    assert not (tmp_path / "o2").exists()  # refused before the output folder was made

@@ -3,7 +3,6 @@ trip, bad input. The truth is the simulator's own parameters; the noise is seede
 
 import warnings
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -92,10 +91,14 @@ def test_experiment_bad_channel_and_failed_solve_is_finite():
     rec = pj.Recording(np.linspace(0, 0.5, 11), dict(pressure=np.full(11, 2e5)))
     with pytest.raises(PamjaxInputError, match="no channel 'position'"):
         pj.Experiment(rec, pj.Constant(0.5), channels=["position"])
-    exp = pj.Experiment(rec, pj.Constant(0.5), max_steps=2)  # the solve cannot finish: a failing trial step
-    fn = pj._fit._stack_residuals(pj.ParameterSpace(system, ["payload_mass"]), (exp,), "identification")
-    r, _ = eqx.filter_jit(fn)(jnp.zeros(1), (exp,))
-    assert np.all(np.isfinite(r)) and np.all(r == pj._fit.FAILED_RESIDUAL)
+    # the adaptive solve cannot finish in 2 steps: its residuals are NaN, a trial step there is rejected (None), and
+    # a fit that starts there stops with a named error instead of returning NaN
+    exp = pj.Experiment(rec, pj.Constant(0.5), max_steps=2, stepping="adaptive").bind(system)
+    space = pj.ParameterSpace(system, ["payload_mass"])
+    problem = pj._fit._Problem(space, (exp,))
+    assert problem.residuals(np.zeros(1)) is None
+    with pytest.raises(PamjaxInputError, match="start model's simulation fails"):
+        pj.fit(system, [exp], ["payload_mass"], progress=False)
 
 
 @pytest.mark.slow  # ~20 s alone (compilation of the forward-mode Jacobian of the solve), more on a shared CPU

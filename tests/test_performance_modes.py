@@ -99,7 +99,7 @@ def test_gradient_wrt_physical_parameter_matches_finite_differences():
 
 
 def test_bad_input_is_rejected_before_solving():
-    with pytest.raises(pamjax.PamjaxInputError, match="OnOffValve"):
+    with pytest.raises(pamjax.PamjaxInputError, match="stepping='pwm' needs a switching valve.*AveragedValve"):
         pamjax.simulate(presets.mas10_system("averaged"), pamjax.Constant(0.5), TS, stepping="pwm")
     with pytest.raises(pamjax.PamjaxInputError, match="substeps"):
         pamjax.simulate(presets.mas10_system("pwm"), pamjax.Constant(0.5), TS, stepping="pwm", substeps=1)

@@ -131,8 +131,9 @@ def test_fit_cli_profile_writes_json_and_figure(tmp_path):
         channels = ["pressure"]
         scales = { pressure = 2e3 }
     """))
-    assert main(["fit", str(cfg), "--out", str(tmp_path / "out"), "--quiet", "--no-plot", "--profile"]) == 0
+    assert main(["fit", str(cfg), "--out", str(tmp_path / "out"), "--quiet", "--profile"]) == 0
     data = json.loads((tmp_path / "out" / "profile.json").read_text())
     assert [p["label"] for p in data["profiles"]] == ["valve.coefficients[1,0]", "valve.coefficients[1,1]"]
     assert all(p["verdict"] == "identifiable" for p in data["profiles"])
     assert (tmp_path / "out" / "profile.png").stat().st_size > 10_000
+    assert (tmp_path / "out" / "fit.png").is_file()

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+import pamjax
 from pamjax import PamjaxInputError, Recording
 
 
@@ -89,10 +90,34 @@ def test_filter_is_zero_phase_and_removes_noise():
     assert np.sqrt(np.mean((out["pressure"][inner] - clean[inner]) ** 2)) < 600.0
 
 
-def test_resample_to_lower_rate():
-    pytest.importorskip("scipy")
-    rec = _rec(1001)
+def test_resample_decimates_recorded_samples():
+    # Decimation keeps recorded samples at their own instants: no filter, no interpolation (a low-pass removes the
+    # 50 Hz PWM ripple a switching model predicts and biased valve fits by ~11 %).
+    rec = _rec(1001)  # 100 Hz
     low = rec.resampled(20.0)
     assert low.t[1] - low.t[0] == pytest.approx(0.05)
-    # a ramp passes a zero-phase low-pass unchanged away from the edges (filtfilt padding leaves ~1e-5 there)
-    np.testing.assert_allclose(low["position"][5:-5], 0.01 * low.t[5:-5], atol=1e-6)
+    idx = np.searchsorted(rec.t, low.t)
+    np.testing.assert_array_equal(low.t, rec.t[idx])
+    for c in rec.channels:
+        np.testing.assert_array_equal(low[c], rec[c][idx])
+    # a rate that does not divide the recording's: the nearest recorded samples, still measured values
+    odd = rec.resampled(30.0)
+    assert np.all(np.isin(odd.t, rec.t)) and np.max(np.abs(np.diff(odd.t) - 1 / 30.0)) <= 0.01 + 1e-12
+    with pytest.raises(PamjaxInputError, match="exceeds the recording's own rate"):
+        rec.resampled(200.0)
+
+
+def test_filter_below_the_pwm_frequency_warns():
+    pytest.importorskip("scipy")
+    rec = _rec(1001)
+    with pytest.warns(pamjax.PamjaxDataWarning, match="below the 50 Hz PWM frequency"):
+        rec.filtered(20.0, pwm_frequency=50.0)
+    out = rec.filtered(20.0)
+    assert out.lowpass_hz == 20.0 and out.resampled(100.0).lowpass_hz == 20.0
+    # an experiment with a switching valve warns about such a recording when it is checked
+    system = pamjax.presets.mas10_tank_system("pwm")
+    tank = Recording(rec.t, dict(pressure=np.full(rec.t.size, 101325.0)))
+    with pytest.warns(pamjax.PamjaxDataWarning, match="low-pass filtered at 20 Hz"):
+        pamjax.Experiment(tank.filtered(20.0), pamjax.Constant(0.5)).check(system)
+
+

@@ -27,6 +27,10 @@ def test_pamjax_demo_runs_paper_000s_experiments_and_writes_its_figure(tmp_path,
     assert printed.count("tank,") == 6 and printed.count("muscle + 9.6 kg") == 4
     assert (tmp_path / "paper000_experiments.png").stat().st_size > 50_000
     results = run_experiments(progress=lambda line: None)  # compiled already: seconds
+    for name, traj in results.items():  # each run written as CSV with units in the header, exact
+        rec = pamjax.Recording.load(tmp_path / f"{name}.csv")
+        np.testing.assert_array_equal(rec["pressure"], np.asarray(traj.pressure))
+        assert rec.units["pressure"] == "Pa" and ("position" not in rec.channels or rec.units["position"] == "m")
     for duty in (0.25, 0.5, 0.75):
         for valve in ("pwm", "averaged"):
             inflate, deflate = results[f"tank_inflate_{valve}_{duty}"], results[f"tank_deflate_{valve}_{duty}"]

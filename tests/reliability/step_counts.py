@@ -1,4 +1,5 @@
-"""The benchmark experiments whose solver step counts are recorded in `step_counts.json` (machine-independent)."""
+"""The benchmark experiments whose solver step counts are recorded in `step_counts.json` (a bound with a margin is
+tested: counts can differ by a few steps between CPUs)."""
 
 import jax.numpy as jnp
 

@@ -1,6 +1,8 @@
-"""Regression guard: solver step counts of the benchmark experiments (machine-independent, unlike times) must not
-grow by more than 10 % over the recorded `step_counts.json`. Re-record deliberately with
-`python -m tests.reliability.step_counts --write` after a change that is meant to alter them."""
+"""Regression guard: solver step counts of the benchmark experiments must not grow by more than 10 % (+ 5) over the
+recorded `step_counts.json`. Counts are not times, but neither are they exactly machine-independent: another CPU's
+last-bit differences can move an adaptive step pattern by a few steps (issue 15), so the test asserts a bound with
+that margin, never the recorded number. Re-record deliberately with `python -m tests.reliability.step_counts
+--write` after a change that is meant to alter them."""
 
 import json
 import pathlib

@@ -1,0 +1,135 @@
+"""Paper 000, eq. 1-7 and 14 (Figs. 2, 10): the geometric McKibben laws against the MAS-10-300 datasheet and the
+preset's eq. 7 / eq. 14.
+
+The braid of eq. 1-3 is fixed two ways from the datasheet (10 mm inner diameter at 300 mm, 630 N at 6 bar, 25 %
+maximum contraction): (A) diameter and stroke (eq. 5's force vanishes at 25 %), (B) diameter and force. Eq. 4 (virtual
+work) is checked by autodiff of `BraidVolume` against `ChouHannafordForce`; eq. 6 (Tondu-Lopez) takes braid (B) with
+its correction k set so that the force vanishes at 25 %. Volumes: eq. 3 for both braids, eq. 14 (the preset's
+v0 + v1 x) and the volume virtual work assigns to the preset's eq. 7 (`fits/derive_presets.py`).
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import pamjax as pj
+from pamjax import presets
+from pamjax._reproduce import Result, Row, fits_module, plt, save
+
+PAPER = "000"
+TITLE = "McKibben geometry and force laws (eq. 1-7), muscle volume (eq. 14, Fig. 10)"
+COVERS = ("eq. 1", "eq. 2", "eq. 3", "eq. 4", "eq. 5", "eq. 6", "eq. 14", "Fig. 2", "Fig. 10")
+
+L0, D, F_RATED, STROKE = 0.3, 0.01, 630.0, 0.25  # m, m, N at 6 bar gauge, - (Festo MAS-10-300 datasheet)
+P_MAX = 6e5  # Pa gauge (paper 000)
+AIR = pj.Air()
+
+
+def braid_for_force(nominal_length, diameter, force, gauge_pressure):
+    """(b_s, n_s) of the braid with inner `diameter` at `nominal_length` whose eq. 5 force at x = 0 is `force`:
+    F = π D0²/4 p (3 cos²θ0 − 1) with D0 = D/sin θ0 gives (3 cos²θ0 − 1)/sin²θ0 = 4F/(π D² p) =: q, so
+    sin²θ0 = 2/(q + 3)."""
+    q = 4 * force / (np.pi * diameter**2 * gauge_pressure)
+    sin_theta = np.sqrt(2.0 / (q + 3.0))
+    b = nominal_length / np.sqrt(1 - sin_theta**2)
+    return b, b * sin_theta / (np.pi * diameter)
+
+
+def run(out, quick=False):
+    del quick  # no simulation: the same in both modes
+    x = np.linspace(0.0, STROKE * L0, 61)
+    p = AIR.atmospheric_pressure + P_MAX
+    braid_a = pj.BraidVolume.from_datasheet(L0, D, STROKE)
+    b_b, n_b = braid_for_force(L0, D, F_RATED, P_MAX)
+    braid_b = pj.BraidVolume(b_b, n_b, L0)
+    eq5 = {k: pj.ChouHannafordForce(v.strand_length, v.turns, L0) for k, v in (("A", braid_a), ("B", braid_b))}
+
+    # eq. 4: F = p_g dV/dx (x = L0 − L), by autodiff of eq. 3, against eq. 5
+    virtual = {k: np.asarray(jax.vmap(jax.grad(v.volume))(jnp.asarray(x))) * P_MAX
+               for k, v in (("A", braid_a), ("B", braid_b))}
+    forces5 = {k: np.asarray(jax.vmap(lambda q, f=f: f.static_force(q, P_MAX))(jnp.asarray(x))) for k, f in eq5.items()}
+    eq4_error = max(np.max(np.abs(virtual[k] - forces5[k])) / np.max(np.abs(forces5[k])) for k in eq5)
+    stroke_b = 1 - float(braid_b.strand_length) / np.sqrt(3) / L0  # where cos²θ = 1/3
+
+    # eq. 6 on braid (B): a(1 − kε)² = b at ε = 0.25 sets k
+    theta0 = float(np.arccos(L0 / float(braid_b.strand_length)))
+    a, b = 3 / np.tan(theta0) ** 2, 1 / np.sin(theta0) ** 2
+    k = (1 - np.sqrt(b / a)) / STROKE
+    eq6 = pj.TonduLopezForce(D / 2, theta0, L0, k)
+    forces6 = np.asarray(jax.vmap(lambda q: eq6.static_force(q, P_MAX))(jnp.asarray(x)))
+    muscle = presets.mas10_muscle()
+    forces7 = np.asarray(jax.vmap(lambda q: muscle.static_force(q, p, AIR))(jnp.asarray(x)))
+
+    # volumes: eq. 3 (A, B), eq. 14 preset, virtual work of the preset's eq. 7
+    vol = {k: np.asarray(jax.vmap(v.volume)(jnp.asarray(x))) for k, v in (("A", braid_a), ("B", braid_b))}
+    vol14 = np.asarray(jax.vmap(muscle.volume)(jnp.asarray(x)))
+    derive = fits_module("derive_presets")
+    eps, dv = derive.virtual_work_volume(np.asarray(presets.MAS10_MAX_FORCE_COEFFICIENTS) * L0 ** np.arange(5), L0)
+    linearity = {}
+    for key, v in (("A", vol["A"]), ("B", vol["B"])):
+        fit = np.polyval(np.polyfit(x, v, 1), x)
+        linearity[key] = dict(max_deviation_from_line_percent=float(100 * np.max(np.abs(v - fit)) / np.ptp(v)),
+                              mean_slope_m2=float((v[-1] - v[0]) / (x[-1] - x[0])))
+
+    numbers = dict(
+        braid_A=dict(strand_length_m=float(braid_a.strand_length), turns=float(braid_a.turns),
+                     braid_angle_deg=float(np.degrees(np.arccos(L0 / float(braid_a.strand_length)))),
+                     force_at_0_N=float(forces5["A"][0]), volume_at_0_m3=float(vol["A"][0])),
+        braid_B=dict(strand_length_m=float(b_b), turns=float(n_b), braid_angle_deg=float(np.degrees(theta0)),
+                     force_at_0_N=float(forces5["B"][0]), zero_force_contraction=float(stroke_b)),
+        eq4_max_relative_difference=float(eq4_error),
+        eq6_correction_k=float(k), eq6_force_at_0_N=float(forces6[0]),
+        eq6_vs_eq7_max_difference_N=float(np.max(np.abs(forces6 - forces7))),
+        eq7_force_at_0_N=float(forces7[0]), cylinder_volume_m3=float(np.pi / 4 * D**2 * L0),
+        eq14=dict(v0_m3=presets.MAS10_V0, v1_m2=presets.MAS10_V1), eq3_linearity=linearity,
+        virtual_work_volume_gain_m3=float(dv[-1]),
+    )
+
+    pyplot = plt()
+    fig, (ax0, ax1) = pyplot.subplots(1, 2, figsize=(11, 4.2))
+    ax0.plot(x * 1e3, forces7, "k-", lw=2, label="eq. 7, preset (DMSP-20 map shape, 630 N)")
+    ax0.plot(x * 1e3, forces5["A"], "C0-", label=f"eq. 5, braid A (10 mm, 25 % stroke): {forces5['A'][0]:.0f} N")
+    ax0.plot(x * 1e3, forces5["B"], "C1-", label=f"eq. 5, braid B (10 mm, 630 N): stroke {100 * stroke_b:.0f} %")
+    ax0.plot(x * 1e3, virtual["B"], "C1:", lw=3, label="eq. 4: p dV/dx of eq. 3 (braid B)")
+    ax0.plot(x * 1e3, forces6, "C2--", label=f"eq. 6, braid B, k = {k:.2f}")
+    ax0.axhline(0, color="0.6", lw=0.6)
+    ax0.set(xlabel="contraction x [mm]", ylabel="force at 6 bar gauge [N]", title="MAS-10-300: eq. 4-7")
+    ax0.legend(fontsize=7)
+    ax1.plot(x * 1e3, vol14 * 1e6, "k-", lw=2, label="eq. 14, preset v0 + v1 x")
+    ax1.plot(eps * L0 * 1e3, (presets.MAS10_V0 + dv) * 1e6, "k:", label="virtual work of eq. 7 (preset's v1)")
+    ax1.plot(x * 1e3, vol["A"] * 1e6, "C0-", label="eq. 3, braid A")
+    ax1.plot(x * 1e3, vol["B"] * 1e6, "C1-", label="eq. 3, braid B")
+    ax1.set(xlabel="contraction x [mm]", ylabel="volume [cm³]", title="Fig. 10: volume against displacement")
+    ax1.legend(fontsize=7)
+    fig_name = save(fig, out, "force_laws.png")
+
+    rows = [
+        Row("eq. 1-3, Fig. 2", "braid of the MAS-10-300 from its datasheet (10 mm, 300 mm, 25 % stroke)",
+            "geometry only, no numbers",
+            f"b_s {numbers['braid_A']['strand_length_m']:.3f} m, n_s {numbers['braid_A']['turns']:.2f}, "
+            f"θ0 {numbers['braid_A']['braid_angle_deg']:.1f}°, V(0) = π D² L0/4 exactly",
+            "eq. 1-3 close on the datasheet: `BraidVolume.from_datasheet`", fig_name),
+        Row("eq. 4", "virtual work: F = −p dV/dL of eq. 3 equals eq. 5", "eq. 5 derived from eq. 3-4",
+            f"max relative difference {eq4_error:.1e} (autodiff of BraidVolume vs ChouHannafordForce)",
+            "identity holds to round-off", fig_name),
+        Row("eq. 5", "Chou-Hannaford force at x = 0, 6 bar", "Festo muscles: ideal models too inaccurate (text)",
+            f"braid A {forces5['A'][0]:.0f} N vs datasheet 630 N; braid B (630 N) would contract "
+            f"{100 * stroke_b:.0f} % (datasheet 25 %)",
+            "the ideal cylinder cannot hold both force and stroke of the Festo muscle: the paper's point", fig_name),
+        Row("eq. 6", "Tondu-Lopez with its correction k (braid B, zero force at 25 %)", "no numbers",
+            f"k = {k:.2f}; differs from the preset's eq. 7 by up to {numbers['eq6_vs_eq7_max_difference_N']:.0f} N "
+            "over the stroke at 6 bar",
+            "one correction fits force and stroke but not the curve shape: hence eq. 7's quartic", fig_name),
+        Row("eq. 14, Fig. 10", "muscle volume against displacement", "\"nearly linear\"",
+            f"eq. 3 braid B deviates {linearity['B']['max_deviation_from_line_percent']:.1f} % of its range from "
+            f"a line (braid A {linearity['A']['max_deviation_from_line_percent']:.1f} %); preset v1 "
+            f"{presets.MAS10_V1:.3g} m² vs braid B mean slope {linearity['B']['mean_slope_m2']:.3g} m²",
+            "the cylinder geometry is close to linear over the 25 % stroke, as the paper found", fig_name),
+    ]
+    return Result(rows, numbers, paper=dict(rated_force_N=F_RATED, stroke=STROKE, diameter_m=D, length_m=L0))
+
+
+if __name__ == "__main__":
+    from pamjax._reproduce import script_main
+
+    script_main(__name__)

@@ -1,0 +1,287 @@
+"""Bench tests that are not time series: constant-velocity friction runs, ISO 6358 flow-curve tests and force maps
+with their hysteresis loop. Each is an experiment `pamjax.fit` takes beside `Experiment` and `ForceMapExperiment`,
+and each comes with the reduction that turns a raw bench record into its data points.
+
+- `FrictionCurveExperiment` (paper 000, Fig. 6, eq. 9): friction force against constant sliding velocity; the model's
+  friction at steady sliding (`steady_friction_force`). `constant_velocity_point` reduces one run to (v, F).
+- `FlowCurveExperiment` (paper 000, eq. 10-11, Table 1, Fig. 7; paper 001, eq. 1-2): mass flow through one valve path
+  against upstream and downstream pressure, as ISO 6358-1 measures it (upstream held, downstream throttled);
+  `flow_curve` gives a restriction's curve.
+- `LoopForceMapExperiment` (paper 000, Figs. 3 and 5, eq. 8-9): direction-dependent static forces, F = F_static(x, p)
+  − F_friction(ẋ); `loop_average` gives the averaged map (Fig. 4) and the loop widths (paper: 32 N).
+
+All pressures are ABSOLUTE [Pa]; x is the muscle's shortening [m] and ẋ its rate (positive = contracting).
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._errors import PamjaxInputError
+from ._friction import AbstractFriction
+from ._gas import AbstractRestriction, Air
+from ._recording import _MIN_ABSOLUTE_PA
+
+
+class Component(eqx.Module):
+    """The part of a model an experiment looks at, by attribute path: `Component("valve.inflate")`,
+    `Component("friction")`; `Component("")` is the model itself."""
+
+    path: str = eqx.field(static=True)
+
+    def __call__(self, model, kind=object, experiment="experiment"):
+        """The component of `model`; a `PamjaxInputError` naming `experiment` unless it is a `kind`."""
+        for name in filter(None, self.path.split(".")):
+            if not hasattr(model, name):
+                raise PamjaxInputError(f"{experiment}: the model ({type(model).__name__}) has no {name!r} on the path "
+                                       f"{self.path!r}")
+            model = getattr(model, name)
+        if not isinstance(model, kind):
+            where = f"the model's {self.path!r}" if self.path else "the model"
+            raise PamjaxInputError(f"{experiment}: {where} is {type(model).__name__}; a {kind.__name__} is needed")
+        return model
+
+
+def _air(model):
+    air = getattr(model, "air", None)
+    return Air() if air is None else air
+
+
+def steady_friction_force(friction: AbstractFriction, velocity):
+    """Friction force [N] at steady sliding with constant `velocity` [m/s] ≠ 0 (paper 000 eq. 9: F_c sign(v) + C_f v).
+
+    Memoryless frictions are evaluated directly; a hybrid (stick-slip) friction in its sliding mode sign(v); a friction
+    with its own state (bristles) at the state where that state is at rest (Newton on `state_rate(v, z) = 0`)."""
+    velocity = jnp.asarray(velocity, dtype=float)
+    z = friction.initial_state()
+    if z is None:
+        return friction.force(velocity, None)
+    if friction.hybrid:
+        return friction.force(velocity, jnp.sign(velocity))
+    z = jnp.zeros_like(velocity) + z
+    for _ in range(4):  # state_rate is affine in z for the bristle model: the first step is exact
+        rate, slope = jax.jvp(lambda q: friction.state_rate(velocity, q), (z,), (jnp.ones_like(z),))
+        z = z - rate / slope
+    return friction.force(velocity, z)
+
+
+def constant_velocity_point(t, position, force):
+    """One constant-velocity friction run reduced to (velocity [m/s], mean force [N], its standard error [N]).
+
+    The velocity is the least-squares slope of `position` [m] over `t` [s]; the force is the mean of `force` [N] (the
+    cylinder's chamber-pressure difference times area, or the load cell; paper 000, Fig. 6 procedure). Pass only the
+    part of the run at constant velocity."""
+    t, x, f = (np.asarray(a, dtype=float) for a in (t, position, force))
+    if not (t.ndim == x.ndim == f.ndim == 1 and t.size == x.size == f.size and t.size >= 3):
+        raise PamjaxInputError(
+            f"t, position, force must be 1-D of one length >= 3, got {t.shape}, {x.shape}, {f.shape}"
+        )
+    for name, a in (("t", t), ("position", x), ("force", f)):
+        if not np.all(np.isfinite(a)):
+            raise PamjaxInputError(f"{name} must be finite, NaN/inf at row {int(np.argmin(np.isfinite(a)))}")
+    velocity = float(np.polyfit(t, x, 1)[0])
+    return velocity, float(np.mean(f)), float(np.std(f, ddof=1) / np.sqrt(f.size))
+
+
+def flow_curve(restriction: AbstractRestriction, upstream_pressure, ratios, air: Air):
+    """Mass flow [kg/s] through `restriction` from `upstream_pressure` [Pa abs] to `ratios` × that pressure: the
+    ISO 6358-1 flow curve (upstream held, downstream throttled)."""
+    p1 = jnp.asarray(upstream_pressure, dtype=float)
+    return jax.vmap(lambda r: restriction.mass_flow(p1, r * p1, air))(jnp.asarray(ratios, dtype=float))
+
+
+def _columns(names, arrays):
+    arrays = [np.asarray(a, dtype=float) for a in arrays]
+    shapes = [a.shape for a in arrays]
+    if not (all(s == shapes[0] for s in shapes) and arrays[0].ndim == 1 and arrays[0].size > 0):
+        raise PamjaxInputError(f"{', '.join(names)} must be 1-D arrays of one length, got shapes {shapes}")
+    for name, a in zip(names, arrays):
+        if not np.all(np.isfinite(a)):
+            raise PamjaxInputError(f"{name} is NaN/inf at row {int(np.argmin(np.isfinite(a)))}")
+    return arrays
+
+
+def _check_absolute(name, p):
+    if np.min(p) < _MIN_ABSOLUTE_PA:
+        raise PamjaxInputError(
+            f"{name} must be ABSOLUTE [Pa]; the lowest is {np.min(p):.4g} Pa (row {int(np.argmin(p))}), below half an "
+            "atmosphere: these look like gauge or bar (add 101325 Pa to gauge readings)"
+        )
+
+
+def _set_data(experiment, channel, values, scale, unit, name):
+    """Inside an experiment's `__init__`: the measured `channel`, its scale [`unit`] (default 1 % of the range; the
+    noise level if known) and the name."""
+    s = float(0.01 * np.ptp(values) if scale is None else scale)
+    if not (np.isfinite(s) and s > 0):
+        raise PamjaxInputError(f"scale must be > 0 [{unit}] (the measurement's noise level), got {s}")
+    experiment.scale = s
+    experiment.data = {channel: jnp.asarray(values)}
+    experiment.name = str(name)
+    experiment.channels = (channel,)
+
+
+class AbstractStaticExperiment(eqx.Module):
+    """A fit experiment without a time axis: `predict(model)` gives one channel at the data points, the residual is
+    (model − data)/scale, every point is compared and none is held out (the fitter's `layout`)."""
+
+    def predict(self, model):
+        raise NotImplementedError
+
+    def check(self, model):
+        pred = self.predict(model)
+        (channel,) = self.channels
+        if channel not in pred or np.shape(pred[channel]) != np.shape(self.data[channel]):
+            raise PamjaxInputError(f"{self.name}: the model does not predict {channel!r} at the data points")
+
+    def batch_key(self, model):
+        return None  # no ODE: predicted on its own
+
+    def layout(self):
+        (channel,) = self.channels
+        data = np.asarray(self.data[channel])
+        every = np.ones(data.shape, dtype=bool)
+        return [(channel, self.scale, data, every, every)]
+
+    def residuals(self, model, part="identification"):
+        return self.residuals_of(self.predict(model), part)
+
+    def residuals_of(self, pred, part="identification"):
+        del part
+        (channel,) = self.channels
+        return (pred[channel] - self.data[channel]) / self.scale
+
+
+class FrictionCurveExperiment(AbstractStaticExperiment):
+    """Friction force measured at constant sliding velocities (paper 000, Fig. 6: a cylinder driven at constant
+    velocities, the friction from its chamber pressures; muscle + cylinder from the load cell).
+
+    Residual: (`steady_friction_force(friction, v)` − F) / scale.
+
+    **Arguments:** `velocities` [m/s] (≠ 0; sign = direction), `forces` [N] (the friction force, positive opposing
+    positive velocity), `scale` [N] (noise level; default 1 % of the force range), `friction`: the component path
+    (default "friction"; "" when the model is the friction itself), `name`.
+    """
+
+    velocities: jax.Array
+    data: dict
+    scale: float = eqx.field(static=True)
+    friction: Component
+    name: str = eqx.field(static=True)
+    channels: tuple = eqx.field(static=True)
+
+    def __init__(self, velocities, forces, scale=None, friction="friction", name="friction_curve"):
+        v, f = _columns(("velocities", "forces"), (velocities, forces))
+        if np.any(v == 0):
+            raise PamjaxInputError(f"velocities must be non-zero (sliding), row {int(np.argmin(v != 0))} is 0")
+        self.velocities = jnp.asarray(v)
+        self.friction = Component(friction)
+        _set_data(self, "force", f, scale, "N", name)
+
+    def predict(self, model):
+        return {"force": steady_friction_force(self.friction(model, AbstractFriction, self.name), self.velocities)}
+
+
+class FlowCurveExperiment(AbstractStaticExperiment):
+    """Mass flow through one valve path measured at pairs of upstream/downstream pressures: ISO 6358-1's test (paper
+    000: three upstream pressures 0.5/0.6/0.7 MPa per path, C_v and b_v of eq. 11 fitted, Table 1, Fig. 7).
+
+    Residual: (restriction.mass_flow(p_up, p_down) − ṁ) / scale.
+
+    **Arguments:** `upstream_pressures`, `downstream_pressures` [Pa abs], `mass_flows` [kg/s], `scale` [kg/s]
+    (default 1 % of the flow range), `restriction`: the component path (e.g. "valve.inflate", "valve.exhaust";
+    "" when the model is the restriction), `name`.
+    """
+
+    upstream_pressures: jax.Array
+    downstream_pressures: jax.Array
+    data: dict
+    scale: float = eqx.field(static=True)
+    restriction: Component
+    name: str = eqx.field(static=True)
+    channels: tuple = eqx.field(static=True)
+
+    def __init__(self, upstream_pressures, downstream_pressures, mass_flows, scale=None, restriction="valve.inflate",
+                 name="flow_curve"):
+        p1, p2, m = _columns(("upstream_pressures", "downstream_pressures", "mass_flows"),
+                             (upstream_pressures, downstream_pressures, mass_flows))
+        _check_absolute("upstream_pressures", p1)
+        _check_absolute("downstream_pressures", p2)
+        self.upstream_pressures, self.downstream_pressures = jnp.asarray(p1), jnp.asarray(p2)
+        self.restriction = Component(restriction)
+        _set_data(self, "mass_flow", m, scale, "kg/s", name)
+
+    def predict(self, model):
+        restriction, air = self.restriction(model, AbstractRestriction, self.name), _air(model)
+        flow = jax.vmap(lambda p1, p2: restriction.mass_flow(p1, p2, air))
+        return {"mass_flow": flow(self.upstream_pressures, self.downstream_pressures)}
+
+
+class LoopForceMapExperiment(AbstractStaticExperiment):
+    """A force map with its hysteresis loop (paper 000, Figs. 3 and 5): the muscle moved slowly in and out at fixed
+    pressures, the force read with the direction of motion. Model (eq. 8-9): F = F_static(x, p) − F_f(ẋ), F_f the
+    friction at steady sliding (F_c sign(ẋ) + C_f ẋ): lower while contracting, higher while stretched.
+
+    Slack points (measured F ≤ `slack_force`, 0 N by default) only penalise a positive model force, as in
+    `ForceMapExperiment`.
+
+    **Arguments:** `positions` x [m] (shortening), `pressures` [Pa abs], `velocities` ẋ [m/s] (≠ 0; sign =
+    direction), `forces` [N], `scale` [N] (default 1 % of the force range), `slack_force` [N], `name`. The model is a
+    muscle system (`muscle`, `friction`, `air`).
+    """
+
+    positions: jax.Array
+    pressures: jax.Array
+    velocities: jax.Array
+    slack: jax.Array
+    data: dict
+    scale: float = eqx.field(static=True)
+    name: str = eqx.field(static=True)
+    channels: tuple = eqx.field(static=True)
+
+    def __init__(self, positions, pressures, velocities, forces, scale=None, slack_force=0.0, name="loop_force_map"):
+        x, p, v, f = _columns(("positions", "pressures", "velocities", "forces"),
+                              (positions, pressures, velocities, forces))
+        _check_absolute("pressures", p)
+        if np.any(v == 0):
+            raise PamjaxInputError(
+                f"velocities must be non-zero (the direction of motion), row {int(np.argmin(v != 0))} is 0"
+            )
+        self.positions, self.pressures, self.velocities = jnp.asarray(x), jnp.asarray(p), jnp.asarray(v)
+        self.slack = jnp.asarray(f <= slack_force)
+        _set_data(self, "force", f, scale, "N", name)  # slack points: see `residuals_of`
+
+    def check(self, model):
+        for name in ("muscle", "friction"):
+            if not hasattr(model, name):
+                raise PamjaxInputError(f"{self.name}: the model needs a {name!r} (a muscle system), got "
+                                       f"{type(model).__name__}")
+        super().check(model)
+
+    def predict(self, model):
+        air = _air(model)
+        static = jax.vmap(lambda x, p: model.muscle.static_force(x, p, air))(self.positions, self.pressures)
+        return {"force": static - steady_friction_force(model.friction, self.velocities)}
+
+    def residuals_of(self, pred, part="identification"):
+        del part
+        f = pred["force"]
+        return jnp.where(self.slack, jnp.maximum(f, 0.0), f - self.data["force"]) / self.scale
+
+
+def loop_average(positions, pressures, velocities, forces, decimals=9):
+    """Average the two branches of a hysteresis loop (paper 000, Fig. 4) and measure its width (paper: 32 N).
+
+    Points with equal (x, p) measured in both directions (sign of ẋ) are paired. Returns (x [m], p [Pa], mean force
+    [N], width [N] = F(stretching) − F(contracting)) for each pair, sorted by pressure then position."""
+    x, p, v, f = _columns(("positions", "pressures", "velocities", "forces"),
+                          (positions, pressures, velocities, forces))
+    keys = {}
+    for xi, pi, vi, fi in zip(np.round(x, decimals), np.round(p, 3), np.sign(v), f):
+        keys.setdefault((pi, xi), {}).setdefault(vi, []).append(fi)
+    rows = [(xi, pi, 0.5 * (np.mean(d[1.0]) + np.mean(d[-1.0])), np.mean(d[-1.0]) - np.mean(d[1.0]))
+            for (pi, xi), d in sorted(keys.items()) if 1.0 in d and -1.0 in d]
+    if not rows:
+        raise PamjaxInputError("no (position, pressure) point was measured in both directions")
+    return tuple(np.array(c) for c in zip(*rows))

@@ -1,0 +1,270 @@
+"""JAX's persistent compilation cache for pamjax's command line: a second run of a workflow starts at once.
+
+Compilation is most of a first run's time (a joint fit's residual and Jacobian programs, a sweep's batched loop:
+seconds to tens of seconds; docs/performance.md). JAX can keep compiled programs on disk, keyed by the program, the
+compiler options (the `XLA_FLAGS` included) and the JAX/XLA versions, and reuse them in the next process. The `pamjax`
+command line turns that on by default; a Python program that imports pamjax decides for itself (call
+`enable_compilation_cache()`).
+
+Where: `$PAMJAX_CACHE_DIR` if set, else the user's cache directory (`$XDG_CACHE_HOME` or `~/.cache` on Linux,
+`~/Library/Caches` on macOS, `%LOCALAPPDATA%` on Windows) under `pamjax/jax-compilation`.
+Off: `PAMJAX_COMPILATION_CACHE=0`
+(or the CLI's `--no-cache`). Stale entries are harmless (a new key misses and compiles); the directory can be
+deleted at any time. `PAMJAX_CACHE_MIN_COMPILE_SECONDS` (default 0.1) sets the shortest compilation kept.
+"""
+
+import os
+import pathlib
+import sys
+
+OPT_OUT = "PAMJAX_COMPILATION_CACHE"
+DIR_ENV = "PAMJAX_CACHE_DIR"
+# s: programs that compiled faster than this are not written (reading a tiny entry costs about as much as compiling
+# it). Low enough to keep the helpers a workflow compiles beside its solve (start states, statistics: 0.1-0.5 s).
+MIN_COMPILE_SECONDS = 0.1
+
+
+def default_cache_dir() -> pathlib.Path:
+    """The directory the CLI caches compiled programs in (see the module docstring)."""
+    if os.environ.get(DIR_ENV):
+        return pathlib.Path(os.environ[DIR_ENV]).expanduser()
+    if sys.platform == "darwin":
+        base = pathlib.Path.home() / "Library" / "Caches"
+    elif sys.platform.startswith("win"):
+        base = pathlib.Path(os.environ.get("LOCALAPPDATA", pathlib.Path.home() / "AppData" / "Local"))
+    else:
+        base = pathlib.Path(os.environ.get("XDG_CACHE_HOME") or pathlib.Path.home() / ".cache")
+    return base / "pamjax" / "jax-compilation"
+
+
+def cache_disabled() -> bool:
+    return os.environ.get(OPT_OUT, "1").strip().lower() in ("0", "false", "no", "off")
+
+
+def enable_compilation_cache(path=None):
+    """Turn on JAX's persistent compilation cache in `path` (default `default_cache_dir()`). Returns the directory,
+    or None when `PAMJAX_COMPILATION_CACHE=0` turns it off or the directory cannot be created (the run then just
+    compiles, and says why)."""
+    if cache_disabled():
+        return None
+    import jax
+
+    path = pathlib.Path(path) if path is not None else default_cache_dir()
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / ".pamjax-write-test"
+        probe.write_text("ok")
+        probe.unlink()
+    except OSError as err:
+        print(f"pamjax: compilation cache off: cannot write {path} ({err.strerror}); set {DIR_ENV} to a writable "
+              f"directory or {OPT_OUT}=0", file=sys.stderr)
+        return None
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    minimum = float(os.environ.get("PAMJAX_CACHE_MIN_COMPILE_SECONDS", MIN_COMPILE_SECONDS))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", minimum)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    return path
+
+
+_PHASES = {  # jax.monitoring duration events → phase
+    "/jax/core/compile/jaxpr_trace_duration": "trace",
+    "/jax/core/compile/jaxpr_to_mlir_module_duration": "lower",
+    "/jax/core/compile/backend_compile_duration": "compile",
+}
+
+
+class CompileStats:
+    """What JAX compiles while active (a context manager): per phase ("trace": Python to jaxpr, "lower": jaxpr to
+    StableHLO, "compile": XLA, or a persistent-cache read) the number of programs and the seconds, and of the
+    persistent cache's `requests` its `hits` (`misses` = programs compiled anew). From `jax.monitoring`'s events;
+    listeners cannot be removed, so an inactive one ignores events."""
+
+    def __init__(self):
+        self.count = dict.fromkeys(_PHASES.values(), 0)
+        self.seconds = dict.fromkeys(_PHASES.values(), 0.0)
+        self.requests = 0
+        self.hits = 0
+        self._active = False
+
+    def _event(self, event, **kwargs):
+        if not self._active:
+            return
+        if event == "/jax/compilation_cache/compile_requests_use_cache":
+            self.requests += 1
+        elif event == "/jax/compilation_cache/cache_hits":
+            self.hits += 1
+
+    def _duration(self, event, seconds, **kwargs):
+        phase = _PHASES.get(event)
+        if self._active and phase is not None:
+            self.count[phase] += 1
+            self.seconds[phase] += float(seconds)
+
+    @property
+    def misses(self):
+        return self.requests - self.hits
+
+    def summary(self):
+        return (f"traced {self.count['trace']} in {self.seconds['trace']:.1f} s, lowered {self.count['lower']} in "
+                f"{self.seconds['lower']:.1f} s, compiled {self.count['compile']} in {self.seconds['compile']:.1f} s"
+                + (f" ({self.hits} of {self.requests} from the persistent cache)" if self.requests else ""))
+
+    def __enter__(self):
+        import jax
+
+        jax.monitoring.register_event_listener(self._event)
+        jax.monitoring.register_event_duration_secs_listener(self._duration)
+        self._active = True
+        return self
+
+    def __exit__(self, *exc):
+        self._active = False
+        return False
+
+
+class ProgramCache:
+    """Traced programs kept on disk beside the compiled ones, so that a second run skips tracing too.
+
+    JAX's persistent cache keeps XLA's compiled code, keyed by the lowered program: a second run still traces and
+    lowers its Python functions to find that key (a fit's forward-mode Jacobian through the stick-slip grid: seconds).
+    `call(name, fn, args)` looks for `fn` already traced for arguments of this structure (`jax.export`, serialized
+    StableHLO); if found it calls that, compiling through the persistent cache; if not it traces, exports, saves and
+    calls. The key is a SHA-256 of the arguments' structure (classes, static fields, array shapes and dtypes, never
+    array values), the function's name, and the pamjax, jax and jaxlib versions and XLA flags: another structure or
+    version traces anew. Active only where the persistent compilation cache is on (the CLI); otherwise `call` is
+    `fn(*args)`. `fn` must be a pure function of its array arguments (as every jitted pamjax function is)."""
+
+    def __init__(self, directory):
+        self.directory = pathlib.Path(directory) / "programs"
+        self.memory = {}  # key → jitted caller of the exported program
+        self.keys = {}  # (name, argument ids, leaf shapes) → (key, the arguments)
+
+    @staticmethod
+    def key(name, args):
+        import hashlib
+        import importlib.metadata
+
+        import equinox as eqx
+        import jax
+
+        from ._fingerprint import _describe
+
+        dynamic, static = eqx.partition(args, eqx.is_array)
+        shapes = jax.tree_util.tree_map(lambda a: (tuple(a.shape), str(a.dtype)), dynamic)
+        versions = []
+        for package in ("pamjax", "jax", "jaxlib"):
+            try:
+                versions.append(importlib.metadata.version(package))
+            except importlib.metadata.PackageNotFoundError:  # a source checkout without metadata
+                versions.append("?")
+        text = repr((name, _describe(static), repr(shapes), jax.tree_util.tree_structure(dynamic).num_leaves,
+                     versions, os.environ.get("XLA_FLAGS", ""), bool(jax.config.jax_enable_x64)))
+        return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+    def has(self, name, args):
+        """Whether `name` is already traced for arguments of this structure (on disk or in this process)."""
+        key = self.key(name, args)
+        return key in self.memory or (self.directory / f"{name}-{key}.bin").exists()
+
+    def call(self, name, fn, args):
+        import equinox as eqx
+        import jax
+
+        dynamic, static = eqx.partition(args, eqx.is_array)
+        leaves, treedef = jax.tree_util.tree_flatten(dynamic)
+        # The key digests the whole static structure (~0.1 s): once per set of argument objects in this process.
+        # `ids` keeps the objects alive, so that no other object can later reuse one of their ids.
+        ids = (name, tuple(id(a) for a in args), tuple((x.shape, str(x.dtype)) for x in leaves))
+        known = self.keys.get(ids)
+        if known is None:
+            known = self.keys[ids] = (self.key(name, args), args)
+        key = known[0]
+        caller = self.memory.get(key)
+        if caller is None:
+            path = self.directory / f"{name}-{key}.bin"
+            exported = self._load(path)
+            if exported is None:
+
+                def flat(*xs):
+                    return fn(*eqx.combine(jax.tree_util.tree_unflatten(treedef, xs), static))
+
+                try:
+                    exported = jax.export.export(jax.jit(flat))(*leaves)
+                except NotImplementedError:  # e.g. a host callback in the program: not exportable, jit it as usual
+                    caller = self.memory[key] = jax.jit(flat)
+                    return caller(*leaves)
+                self._save(path, exported)
+            caller = self.memory[key] = jax.jit(exported.call)  # traced once per process (a thin wrapper)
+        return caller(*leaves)
+
+    @staticmethod
+    def _load(path):
+        import jax
+
+        if not path.exists():
+            return None
+        try:
+            return jax.export.deserialize(bytearray(path.read_bytes()))
+        except Exception:  # an unreadable or stale entry: trace anew (and replace it)
+            return None
+
+    @staticmethod
+    def _save(path, exported):
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
+            tmp.write_bytes(exported.serialize())
+            tmp.replace(path)
+        except (OSError, ImportError):
+            pass  # a read-only cache, or no serializer: the program is still used in this process
+
+
+_PROGRAMS = {"cache": None}
+
+
+def program_cache():
+    """The `ProgramCache` of the persistent compilation cache's directory, or None when that cache is off."""
+    import jax
+
+    directory = jax.config.jax_compilation_cache_dir
+    if not directory:
+        return None
+    cache = _PROGRAMS["cache"]
+    if cache is None or cache.directory.parent != pathlib.Path(directory):
+        cache = _PROGRAMS["cache"] = ProgramCache(directory)
+    return cache
+
+
+class announce_compilation:  # noqa: N801 - used as a context manager, like contextlib's
+    """Say when a piece of work is compiling (a context manager for the CLI's commands): if it is still busy after
+    `after` seconds and JAX has compiled or is tracing something, one line "LABEL: compiling … (first run; cached
+    afterwards)"; at the end, when compilation took more than `after` seconds, "LABEL: compiled in N s"."""
+
+    def __init__(self, label, after=2.0, stream=None):
+        self.label, self.after = label, after
+        self.stream = stream if stream is not None else sys.stdout
+        self.stats = CompileStats()
+        self._said = False
+
+    def _say_compiling(self):
+        cached = "cached afterwards" if not cache_disabled() else "not cached: PAMJAX_COMPILATION_CACHE=0"
+        print(f"{self.label}: compiling … (first run; {cached})", file=self.stream, flush=True)
+        self._said = True
+
+    def __enter__(self):
+        import threading
+
+        self.stats.__enter__()
+        self._timer = threading.Timer(self.after, self._say_compiling)
+        self._timer.daemon = True
+        self._timer.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._timer.cancel()
+        self.stats.__exit__(*exc)
+        seconds = sum(self.stats.seconds.values())
+        if exc[0] is None and (self._said or seconds > self.after):
+            print(f"{self.label}: compiled in {seconds:.1f} s ({self.stats.summary()})", file=self.stream,
+                  flush=True)
+        return False

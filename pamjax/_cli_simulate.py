@@ -1,0 +1,202 @@
+"""`pamjax simulate CONFIG.toml`: simulate any model (a preset, or a model file such as the `model.json` that
+`pamjax fit` writes) driven by any input (a signal, or the command channel of a recording); write the trajectory as
+CSV with units in the header (readable by `pamjax.Recording.load`) and a figure. `docs/cli.md`.
+
+    [model]
+    file = "results/fit_example/model.json"   # or preset = "mas10_system", options = {...}, set = {...}
+    [input]
+    signal = { kind = "Triangle", low = 0.05, high = 0.95, frequency = 0.25 }
+    # file = "bench.csv"                       # a recording: its command drives the model (signal = "recorded"),
+    #                                          # its other channels are drawn beside the simulation
+    [simulate]
+    t_end = 8.0                                # s (default: the recording's end)
+    dt = 0.01                                  # s between output rows (default 0.01 s, or the recording's times)
+    initial = { pressure = 101325.0 }          # keyword arguments of the system's initial_state
+"""
+
+import inspect
+import pathlib
+
+import numpy as np
+
+from ._cli_config import (
+    build_model,
+    check_keys,
+    make_signal,
+    read_toml,
+    require,
+    signal_keys,
+    validate_model_table,
+)
+from ._cli_out import OutputFolder
+from ._csv import write_table
+from ._errors import PamjaxInputError
+from ._simulate import validate
+from ._units import check_setting
+
+_TOP_KEYS = {"model", "input", "simulate"}
+_INPUT_KEYS = {"signal", "file", "rename", "units", "unit_checks"}
+_SIMULATE_KEYS = {"t_end", "t0", "dt", "initial", "tank_volume", "stepping", "substeps", "solver", "rtol", "atol",
+                  "max_steps"}
+_SOLVERS = ("Tsit5", "Rodas5", "Dopri5", "Dopri8")
+OUTPUTS = ("trajectory.csv", "trajectory.png")
+DEFAULT_DT = 0.01  # s: 100 rows per second, the rate of paper 000's figures
+MAX_ROWS = 2_000_000  # a larger CSV (hundreds of MB) is more likely a unit slip (t_end in ms) than a wish
+_UNITS = {"t": "s", "command": "1", "pressure": "Pa abs", "position": "m", "velocity": "m/s", "force": "N",
+          "friction_force": "N", "mass_flow": "kg/s", "volume": "m^3"}
+
+
+def add_arguments(parser):
+    parser.add_argument("config", help="TOML file: [model], [input], [simulate] tables (docs/cli.md)")
+    parser.add_argument("--out", default=None, help="output folder (default results/simulate-<config name>)")
+    parser.add_argument("--overwrite", action="store_true", help="replace trajectory.csv/png in --out")
+    parser.add_argument("--no-plot", action="store_true", help="skip the figure")
+
+
+def validate_config(cfg):
+    """Check every table, key and value type (nothing built, nothing read)."""
+    check_keys(cfg, _TOP_KEYS, "simulate config")
+    validate_model_table(cfg.get("model", {}))
+    inp, sim = cfg.get("input", {}), cfg.get("simulate", {})
+    check_keys(inp, _INPUT_KEYS, "[input]")
+    check_keys(sim, _SIMULATE_KEYS, "[simulate]")
+    if "signal" not in inp and "file" not in inp:
+        raise PamjaxInputError("[input] needs a signal (e.g. signal = { kind = \"Constant\", value = 0.5 }) or a "
+                               "file (a recording whose command channel drives the model)")
+    if "file" in inp:
+        require(inp["file"], "string", "[input] file", '"bench.csv"')
+    signal = inp.get("signal", "recorded")
+    valid = signal_keys(signal, "[input]")
+    if valid is not None:
+        check_keys(signal, valid, f"[input] signal (kind = {signal['kind']!r})")
+    if (signal == "recorded" or (isinstance(signal, dict) and signal.get("kind") == "recorded")) and "file" not in inp:
+        raise PamjaxInputError("[input] signal 'recorded' needs file = a recording with a command channel")
+    for key in ("rename", "units"):
+        if key in inp:
+            require(inp[key], "table", f"[input] {key}", "{ p = \"pressure\" }")
+    for key, kind, example in (("t_end", "positive number", "8.0 (s)"), ("dt", "positive number", "0.01 (s)"),
+                               ("t0", "number", "0.0 (s)"), ("tank_volume", "positive number", "5e-5 (m³)"),
+                               ("substeps", "positive integer", "16"), ("rtol", "positive number", "1e-6"),
+                               ("atol", "positive number", "1e-6"), ("max_steps", "positive integer", "200000"),
+                               ("stepping", "string", '"pwm"'), ("solver", "string", '"Rodas5"'),
+                               ("initial", "table", "{ pressure = 101325.0 }")):
+        if key in sim:
+            require(sim[key], kind, f"[simulate] {key}", example)
+    if sim.get("solver", "Tsit5") not in _SOLVERS:
+        raise PamjaxInputError(f"[simulate] solver must be one of {list(_SOLVERS)}, got {sim['solver']!r}")
+    if sim.get("stepping", "adaptive") not in ("adaptive", "pwm"):
+        raise PamjaxInputError(f"[simulate] stepping must be 'adaptive' or 'pwm', got {sim['stepping']!r}")
+    for key, value in sim.get("initial", {}).items():
+        require(value, "number", f"[simulate] initial.{key}", "101325.0")
+        check_setting(key, value, "[simulate] initial")
+    if "tank_volume" in sim:
+        check_setting("tank_volume", sim["tank_volume"], "[simulate]")
+    if "file" not in inp and "t_end" not in sim:
+        raise PamjaxInputError("[simulate] needs t_end (s) when no recording gives the times")
+
+
+def prepare(cfg, root):
+    """(system, signal, ts, simulate keyword arguments, recording or None) from a validated config."""
+    import jax.numpy as jnp
+
+    import pamjax as pj
+
+    inp, sim = cfg.get("input", {}), cfg.get("simulate", {})
+    model = build_model(cfg.get("model", {}), root)
+    system = pj.TankFromModel(sim["tank_volume"])(model) if "tank_volume" in sim else model
+    if not isinstance(system, pj.AbstractSystem):
+        raise PamjaxInputError(f"[model] must describe a system (MuscleSystem, TankSystem, ...) to simulate, got a "
+                               f"{type(system).__name__} (a {type(system).__name__} alone has no dynamics)")
+    recording = None
+    if "file" in inp:
+        recording = pj.Recording.load(pathlib.Path(root) / inp["file"], rename=inp.get("rename"),
+                                      units=inp.get("units"), unit_checks=inp.get("unit_checks", True))
+    signal = make_signal(inp.get("signal", "recorded"), "[input]", recording)
+    t0 = float(sim.get("t0", recording.t[0] if recording is not None else 0.0))
+    t_end = float(sim.get("t_end", recording.t[-1] if recording is not None else 0.0))
+    if not t_end > t0:
+        raise PamjaxInputError(f"[simulate] t_end ({t_end} s) must exceed t0 ({t0} s)")
+    if recording is not None and "dt" not in sim:
+        ts = recording.t[(recording.t >= t0) & (recording.t <= t_end)]
+    else:
+        dt = float(sim.get("dt", DEFAULT_DT))
+        rows = int(np.floor((t_end - t0) / dt + 1e-9)) + 1
+        if rows > MAX_ROWS:
+            raise PamjaxInputError(f"[simulate] t_end = {t_end} s at dt = {dt} s would write {rows:,} rows (more than "
+                                   f"{MAX_ROWS:,}); raise dt, or check t_end is in seconds")
+        if rows < 2:
+            raise PamjaxInputError(f"[simulate] dt = {dt} s leaves fewer than two output times in [{t0}, {t_end}] s")
+        ts = t0 + dt * np.arange(rows)
+    keys = set(inspect.signature(system.initial_state).parameters)
+    check_keys(sim.get("initial", {}), keys,
+               f"[simulate] initial (keyword arguments of {type(system).__name__}.initial_state)")
+    kwargs = {k: sim[k] for k in ("stepping", "substeps", "rtol", "atol", "max_steps") if k in sim}
+    if "solver" in sim:
+        import diffrax as dfx
+
+        kwargs["solver"] = pj.Rodas5() if sim["solver"] == "Rodas5" else getattr(dfx, sim["solver"])()
+    if sim.get("initial"):
+        kwargs["y0"] = system.initial_state(**sim["initial"])
+    return system, signal, jnp.asarray(ts), kwargs, recording
+
+
+def columns_of(traj):
+    """The trajectory's channels as CSV columns (name → array) and their units."""
+    cols = {"t": np.asarray(traj.t)}
+    for c in ("command", *[c for c in traj.channels() if c != "command"]):
+        cols[c] = np.asarray(traj.channel(c))
+    return cols, {c: _UNITS.get(c, "") for c in cols}
+
+
+def plot(path, traj, recording=None, title=""):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = [("pressure", 1e-6, "pressure [MPa abs]")]
+    if traj.position is not None:
+        panels += [("position", 1e3, "position [mm]"), ("force", 1.0, "muscle force [N]")]
+    panels.append(("command", 1.0, "command"))
+    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 2.3 * len(panels)), sharex=True, squeeze=False)
+    t = np.asarray(traj.t)
+    for ax, (c, scale, label) in zip(axes[:, 0], panels):
+        if recording is not None and c in recording.channels and c != "command":
+            ax.plot(recording.t, recording[c] * scale, ".", ms=2, color="0.6", label="recording")
+        ax.plot(t, np.asarray(traj.channel(c)) * scale, lw=0.9, label="simulation")
+        ax.set(ylabel=label)
+    axes[0, 0].set_title(title)
+    axes[-1, 0].set(xlabel="t [s]")
+    if recording is not None:
+        axes[0, 0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, format="png")
+    plt.close(fig)
+
+
+def run(args):
+    import pamjax as pj
+
+    cfg = read_toml(args.config)
+    validate_config(cfg)
+    root = pathlib.Path(args.config).parent
+    system, signal, ts, kwargs, recording = prepare(cfg, root)
+    validate(system, signal, ts, kwargs.get("y0"))  # signal range, initial state: before the output folder
+    out = args.out or f"results/simulate-{pathlib.Path(args.config).stem}"
+    outputs = [o for o in OUTPUTS if not (args.no_plot and o.endswith(".png"))]
+    with OutputFolder(out, "pamjax simulate", outputs, overwrite=args.overwrite) as folder:
+        traj = pj.simulate(system, signal, ts, **kwargs)
+        cols, units = columns_of(traj)
+        summary = ", ".join(f"{c} {np.min(v):.6g} … {np.max(v):.6g} {units[c]}" for c, v in cols.items()
+                            if c in ("pressure", "position"))
+        print(f"pamjax simulate: {type(system).__name__}, {len(ts)} output times over "
+              f"{float(ts[-1] - ts[0]):g} s, {int(traj.num_steps)} solver steps; {summary}")
+        comment = f"pamjax simulate {args.config}: {type(system).__name__}; pressures absolute"
+        written = [folder.write("trajectory.csv", lambda p: write_table(p, cols, units, comment))]
+        if not args.no_plot:
+            try:
+                written.append(folder.write("trajectory.png", lambda p: plot(p, traj, recording, str(args.config))))
+            except ModuleNotFoundError:
+                print("no figure: matplotlib is not installed (pip install matplotlib)")
+        print("wrote " + ", ".join(str(p) for p in written if p is not None))
+        return 1 if folder.failed else 0

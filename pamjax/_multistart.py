@@ -1,0 +1,297 @@
+"""`multistart` (many starts of one fit) and `fit_fleet` (one fit per set of experiments): many `fit`s, spread over
+the processes of a multi-process run, every outcome gathered on every process.
+
+Workflow only: each task is one call of `pamjax.fit`; fits of one problem structure share one compilation (`fit`'s
+solver step takes the parameter space as an argument). With `jax.distributed` initialised, task i runs on process
+i mod P, on that process's own default device; the outcomes (the `FitResult` fields, floats exact) are gathered
+with `process_allgather`, so every process returns the same result.
+"""
+
+import dataclasses
+import inspect
+import json
+import pathlib
+import time
+import warnings
+
+import numpy as np
+
+from ._errors import PamjaxInputError, PamjaxSolveError, require_float64
+from ._fit import FitResult, ParameterSpace, fit
+
+_NOT_PASSED = ("out", "checkpoint", "resume", "overwrite", "progress")  # per-task files/output: not for many fits
+
+
+@dataclasses.dataclass
+class MultistartResult:
+    """The outcome of `multistart`.
+
+    - `best`: the `FitResult` of lowest final cost among the starts that finished (any status; see its `status`),
+      `best_index` its start.
+    - `results`: a `FitResult` per start (None where the start failed), `errors`: None or the failure's message
+      per start ("PamjaxInputError: ..."), `starts`: the start values (n_starts × parameters, physical units, in
+      the order of `labels`), `processes`: the process that ran each start.
+    """
+
+    best: FitResult
+    best_index: int
+    results: list
+    errors: list
+    starts: np.ndarray
+    labels: list
+    processes: list
+
+    @property
+    def costs(self):
+        """Final cost per start (inf where it failed)."""
+        return np.array([np.inf if r is None else r.cost for r in self.results])
+
+    def table(self):
+        """Text table: one row per start (cost, status, iterations, process), the best marked."""
+        rows = [f"{'start':>5} {'cost':>14} {'iter':>5} {'proc':>4}  status"]
+        for i, (r, e, p) in enumerate(zip(self.results, self.errors, self.processes)):
+            mark = " *" if i == self.best_index else ""
+            if r is None:
+                rows.append(f"{i:>5} {'failed':>14} {'':>5} {p:>4}  {e}")
+            else:
+                rows.append(f"{i:>5} {r.cost:>14.6e} {r.iterations:>5} {p:>4}  {r.status}{mark}")
+        return "\n".join(rows)
+
+    def to_json(self, path, overwrite=False):
+        """Write every start's result and error (floats exact); refuses to replace a file unless `overwrite`."""
+        path = pathlib.Path(path)
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+        data = dict(best_index=self.best_index, labels=self.labels, starts=self.starts.tolist(),
+                    processes=self.processes, errors=self.errors,
+                    results=[None if r is None else r.to_dict() for r in self.results])
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(data, indent=1))
+        return path
+
+
+@dataclasses.dataclass
+class FleetResult:
+    """The outcome of `fit_fleet`: per member name, its `FitResult` (`results`, None where the fit failed), the
+    failure's message (`errors`, None where it ran) and the process that ran it (`processes`)."""
+
+    results: dict
+    errors: dict
+    processes: dict
+
+    @property
+    def failed(self):
+        return [name for name, e in self.errors.items() if e is not None]
+
+    def table(self):
+        rows = [f"{'member':<24} {'cost':>14} {'iter':>5} {'proc':>4}  status"]
+        for name, r in self.results.items():
+            if r is None:
+                rows.append(f"{name:<24} {'failed':>14} {'':>5} {self.processes[name]:>4}  {self.errors[name]}")
+            else:
+                rows.append(f"{name:<24} {r.cost:>14.6e} {r.iterations:>5} {self.processes[name]:>4}  {r.status}")
+        return "\n".join(rows)
+
+
+def _check_fit_options(fit_options):
+    known = set(inspect.signature(fit).parameters) - {"model", "experiments", "free"}
+    for key in fit_options:
+        if key in _NOT_PASSED:
+            raise PamjaxInputError(f"{key!r} is not passed to the individual fits (write the chosen result with "
+                                   "its to_json; progress is per task here)")
+        if key not in known:
+            raise PamjaxInputError(f"unknown fit option {key!r}; valid: {sorted(known - set(_NOT_PASSED))}")
+
+
+def _use_processes(distributed):
+    import jax
+
+    if distributed is None:
+        return jax.process_count() > 1
+    if not isinstance(distributed, bool):
+        raise PamjaxInputError(f"distributed must be None, True or False, got {distributed!r}")
+    return distributed and jax.process_count() > 1
+
+
+def _run_fits(tasks, free, fit_options, spread_over_processes, progress, what):
+    """Run `fit(model, experiments, free)` for each task (name, model, experiments): all here, or this process's
+    share. Returns per task (FitResult or None, error message or None, the warnings its fit issued as (category
+    name, message), process index), the same on every process."""
+    import jax
+
+    from ._distributed import gather_bytes, my_tasks
+
+    me = jax.process_index()
+    mine = my_tasks(len(tasks)) if spread_over_processes else range(len(tasks))
+    say = (print if progress is True else progress) if progress else None
+    local = {}
+    for i in mine:
+        name, model, experiments = tasks[i]
+        start = time.perf_counter()
+        with warnings.catch_warnings(record=True) as caught:  # re-issued by the caller for the fits it reports
+            warnings.simplefilter("always")
+            try:
+                res, err = fit(model, experiments, free, progress=False, **fit_options), None
+            except Exception as exc:  # a failed task is recorded, the others go on
+                res, err = None, f"{type(exc).__name__}: {exc}"
+        local[i] = (res, err, [(w.category.__name__, str(w.message)) for w in caught])
+        if say is not None:
+            outcome = f"failed: {err}" if res is None else f"{res.status}, cost {res.cost:.6e}, {res.iterations} iter"
+            where = f" on process {me}" if spread_over_processes else ""
+            say(f"{what} {name} ({i + 1}/{len(tasks)}){where}: {outcome}, {time.perf_counter() - start:.2f} s")
+    if not spread_over_processes:
+        return [(*local[i], me) for i in range(len(tasks))]
+    payload = {str(i): (None if r is None else r.to_dict(), e, w) for i, (r, e, w) in local.items()}
+    outcomes = {}
+    for process, blob in enumerate(gather_bytes(json.dumps(payload).encode())):
+        for i, (d, e, w) in json.loads(blob).items():
+            model = tasks[int(i)][1]
+            res = None if d is None else FitResult.from_dict(d)
+            if res is not None:
+                res.model = res.apply(model)  # the same bits as the fitted model (values are exact floats)
+            outcomes[int(i)] = (res, e, [tuple(x) for x in w], process)
+    return [outcomes[i] for i in range(len(tasks))]
+
+
+def _reissue(caught, prefix=""):
+    """Issue again the warnings a fit issued (category by name: pamjax's own, else Python's, else UserWarning)."""
+    import builtins
+
+    from . import _parameters, _recording
+
+    for category, message in caught:
+        cls = next((c for c in (getattr(m, category, None) for m in (_parameters, _recording, builtins))
+                    if isinstance(c, type) and issubclass(c, Warning)), UserWarning)
+        warnings.warn(prefix + message, cls, stacklevel=3)
+
+
+def _start_values(space, starts, seed, spread):
+    """(n_starts, n_params) physical start values: the model's own, then draws around it in the fit's
+    unconstrained space (θ = θ₀ + spread · N(0, 1)), or the rows given."""
+    n_params = space.size
+    if isinstance(starts, int | np.integer) and not isinstance(starts, bool):
+        if starts < 1:
+            raise PamjaxInputError(f"starts must be >= 1 (or an array of start values), got {starts}")
+        spread = np.broadcast_to(np.asarray(spread, dtype=float), (n_params,)) if np.ndim(spread) <= 1 and \
+            np.size(spread) in (1, n_params) else None
+        if spread is None or not np.all(np.isfinite(spread) & (spread >= 0)):
+            raise PamjaxInputError(f"spread must be a number >= 0 or one per parameter ({n_params}: "
+                                   f"{space.labels}), got {spread!r}")
+        theta0 = np.asarray(space.initial_theta())
+        draws = np.random.default_rng(seed).standard_normal((int(starts) - 1, n_params))
+        drawn = [np.asarray(space.physical(theta0 + spread * z)) for z in draws]
+        return np.stack([np.asarray(space.initial_values()), *drawn])  # start 0: the model's values, exactly
+    values = np.asarray(starts, dtype=float) if not isinstance(starts, str) else None
+    if values is None or values.ndim != 2 or values.shape[1] != n_params or values.shape[0] < 1:
+        raise PamjaxInputError(f"starts must be a count or an array (n_starts, {n_params}) of start values for "
+                               f"{space.labels}, got {np.shape(starts) if values is not None else starts!r}")
+    return values
+
+
+def multistart(
+    model,
+    experiments,
+    free,
+    *,
+    starts=8,
+    seed: int = 0,
+    spread=0.5,
+    distributed: bool | None = None,
+    progress=True,
+    **fit_options,
+) -> MultistartResult:
+    """Fit the parameters named in `free` from many starts, and keep the best: a guard against local minima.
+
+    Each start is one `pamjax.fit` of `model` with the free parameters set to the start's values, all else equal;
+    the starts share one compilation. Start 0 is the model's own values; the others are drawn around them in the
+    fit's unconstrained space, θ = θ₀ + `spread` · N(0, 1): for a positive parameter (log transform) a factor
+    e^(spread·z), for a bounded one a shift of its logit, for a signed one a shift of `spread` times its start
+    magnitude. A start that fails (bad start values, a solve that breaks, a NaN cost) is recorded with its
+    message and the others go on. With `jax.distributed` initialised (`pamjax.initialize_distributed`), the starts
+    are spread over the processes (start i on process i mod P), each process fitting its own on its own device,
+    and every result is gathered on every process: the same result as in one process, bitwise.
+
+    **Arguments:**
+
+    - `model`, `experiments`, `free`: as for `pamjax.fit`.
+    - `starts`: the number of starts (default 8), or an array (n_starts, n_params) of physical start values in
+      the order of `ParameterSpace(model, free).labels` (e.g. a Latin hypercube of your own).
+    - `seed`: the NumPy seed of the drawn starts (the same starts on every process and every run).
+    - `spread`: standard deviation of the draws in the unconstrained space (default 0.5: a factor ~1.65 for
+      positive parameters), a number or one per parameter.
+    - `distributed`: None (default: spread over the processes when there are several), or False (every process
+      runs every start).
+    - `progress`: True prints one line per finished start (from the process that ran it), a callable gets that
+      line, False is silent.
+    - `**fit_options`: passed to every `fit` (`max_steps`, tolerances, `stall_steps`, `identifiability_tol`, ...;
+      checked against `fit`'s signature); not `out`, `checkpoint` or `resume` (write the best with
+      `result.best.to_json`).
+
+    **Returns:** a `MultistartResult`: `best` (a `FitResult`, lowest cost among the starts that finished),
+    `best_index`, `results` and `errors` per start, `starts`, `labels`, `processes`; `table()` lists them.
+
+    **Raises:** `PamjaxInputError` for bad arguments (before any fit); `PamjaxSolveError` if every start failed
+    (with each start's message). The warnings `fit` issues (identifiability) are issued once, for the best start.
+    """
+    require_float64("pamjax.multistart")
+    _check_fit_options(fit_options)
+    space = ParameterSpace(model, free)  # names bad parameters before anything runs
+    values = _start_values(space, starts, seed, spread)
+    tasks = [(f"start {i}", space.with_values(v), experiments) for i, v in enumerate(values)]
+    outcomes = _run_fits(tasks, free, fit_options, _use_processes(distributed), progress, "multistart:")
+    results, errors, caught, processes = (list(x) for x in zip(*outcomes))
+    finished = [i for i, r in enumerate(results) if r is not None]
+    if not finished:
+        raise PamjaxSolveError("every start failed:\n" + "\n".join(f"  start {i}: {e}" for i, e in enumerate(errors)))
+    best = min(finished, key=lambda i: (results[i].cost, i))
+    _reissue(caught[best])
+    return MultistartResult(best=results[best], best_index=best, results=results, errors=errors, starts=values,
+                            labels=space.labels, processes=processes)
+
+
+def fit_fleet(
+    model,
+    fleet: dict,
+    free,
+    *,
+    distributed: bool | None = None,
+    progress=True,
+    **fit_options,
+) -> FleetResult:
+    """Fit the same parameters to each member of a fleet (one muscle, valve or bench per set of experiments),
+    one `pamjax.fit` per member, spread over the processes of a multi-process run like `multistart`.
+
+    **Arguments:**
+
+    - `model`: the start model of every member, or a dict {member name: its start model}.
+    - `fleet`: {member name: its experiments (a list, or one `Experiment`)}.
+    - `free`: as for `pamjax.fit` (the same for every member).
+    - `distributed`, `progress`, `**fit_options`: as for `multistart`.
+
+    **Returns:** a `FleetResult`: per member its `FitResult` (None where it failed), its error message (None where
+    it ran) and the process that ran it; `table()` lists them. A failed member is recorded, not raised; the
+    warnings of each member's fit are issued again, prefixed with its name.
+
+    **Raises:** `PamjaxInputError` for bad arguments, before any fit.
+    """
+    require_float64("pamjax.fit_fleet")
+    _check_fit_options(fit_options)
+    if not isinstance(fleet, dict) or not fleet:
+        raise PamjaxInputError(f"fleet must be a non-empty dict {{member name: experiments}}, got {type(fleet)}")
+    if isinstance(model, dict):
+        missing = sorted(set(fleet) - set(model))
+        if missing:
+            raise PamjaxInputError(f"model has no start model for fleet members {missing}")
+    names = list(fleet)
+    tasks = [(str(n), model[n] if isinstance(model, dict) else model, fleet[n]) for n in names]
+    for name, member_model, _ in tasks:
+        try:
+            ParameterSpace(member_model, free)
+        except PamjaxInputError as err:
+            raise PamjaxInputError(f"fleet member {name!r}: {err}") from None
+    outcomes = _run_fits(tasks, free, fit_options, _use_processes(distributed), progress, "fleet: member")
+    for name, outcome in zip(names, outcomes):
+        _reissue(outcome[2], prefix=f"fleet member {name!r}: ")
+    return FleetResult(results={n: o[0] for n, o in zip(names, outcomes)},
+                       errors={n: o[1] for n, o in zip(names, outcomes)},
+                       processes={n: o[3] for n, o in zip(names, outcomes)})

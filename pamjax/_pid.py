@@ -1,0 +1,72 @@
+"""A sampled-data PID position controller whose position measurement may carry sensor noise (paper 000, "PI-Control":
+"a reasonable performance was gained with a derivative gain in the controller during the simulations, but due to the
+measurement noise it could not be used in the real system")."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ._control import AbstractController, _check_duty_limits
+from ._errors import check_finite, check_nonnegative, check_positive
+
+
+class PIDState(eqx.Module):
+    """`integral` ∫e dt [m s]."""
+
+    integral: jax.Array
+
+
+class PIDController(AbstractController):
+    """Discrete PID on a position sensor sampled every T_s with Gaussian noise n ~ N(0, σ²), seeded.
+
+    The controller differentiates its last two samples, (y(t) − y(t − T_s))/T_s; at the PWM period start t_k, where
+    the duty is set, that is ẋ(t_k) + (n_k − n'_k)/T_s to O(T_s ẍ) (two independent noise draws): noise enters the
+    derivative amplified by √2/T_s. With y_k = x_k + n_k:
+
+    e_k = r_k − y_k,  ė_k = ṙ_k − ẋ_k − (n_k − n'_k)/T_s,  u_k = clip(u0 + K_P e_k + K_I I_{k+1} + K_D ė_k, ...),
+    I_{k+1} = I_k + T e_k, held while the unclipped duty is saturated and e_k drives it further (as `PIController`).
+    The derivative acts on the measurement (no reference kick; ṙ from the smooth reference).
+
+    **Arguments:** `proportional_gain` K_P [1/m] (25, paper 000), `integral_gain` K_I [1/(m s)] (150, paper 000),
+    `derivative_gain` K_D [s/m] (0: the paper's PI), `bias` u0 [-] (0.5, as `PIController`), `duty_min`, `duty_max`
+    [-] (0, 1), `measurement_noise` σ [m] (0; the hybrid bench's potentiometer: 1e-4), `sample_time` T_s [s] (1e-4:
+    paper 000's "0.1 ms sampling time"), `seed` (static int).
+    """
+
+    proportional_gain: jax.Array = eqx.field(converter=jnp.asarray, default=25.0)  # 1/m
+    integral_gain: jax.Array = eqx.field(converter=jnp.asarray, default=150.0)  # 1/(m s)
+    derivative_gain: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # s/m
+    bias: jax.Array = eqx.field(converter=jnp.asarray, default=0.5)  # -
+    duty_min: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # -
+    duty_max: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
+    measurement_noise: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # m
+    sample_time: jax.Array = eqx.field(converter=jnp.asarray, default=1e-4)  # s, paper 000 (dSpace, 0.1 ms)
+    seed: int = eqx.field(static=True, default=0)
+
+    def __check_init__(self):
+        for name in ("proportional_gain", "integral_gain", "derivative_gain", "measurement_noise"):
+            check_nonnegative(getattr(self, name), f"PIDController.{name}")
+        check_positive(self.sample_time, "PIDController.sample_time")
+        check_finite(self.bias, "PIDController.bias")
+        _check_duty_limits(self.duty_min, self.duty_max, "PIDController")
+
+    def initial_state(self):
+        return PIDState(integral=jnp.zeros(()))
+
+    def noise(self, t, period):
+        """The sensor noise (n_k, n'_k) [m] of the two samples the controller uses at the period starting at `t` [s]."""
+        k = jnp.round(t / period).astype(jnp.int32)
+        draws = jax.random.normal(jax.random.fold_in(jax.random.key(self.seed), k), (2,), dtype=jnp.float64)
+        return self.measurement_noise * draws[0], self.measurement_noise * draws[1]
+
+    def update(self, t, reference, plant_state, state, period):
+        noise, earlier_noise = self.noise(t, period)
+        error = reference[0] - (plant_state.position + noise)
+        error_rate = reference[1] - plant_state.velocity - (noise - earlier_noise) / self.sample_time
+        fixed = self.bias + self.proportional_gain * error + self.derivative_gain * error_rate
+        integral = state.integral + period * error
+        raw = fixed + self.integral_gain * integral
+        winding_up = ((raw > self.duty_max) & (error > 0)) | ((raw < self.duty_min) & (error < 0))
+        integral = jnp.where(winding_up, state.integral, integral)
+        duty = jnp.clip(fixed + self.integral_gain * integral, self.duty_min, self.duty_max)  # digital saturation
+        return duty, PIDState(integral=integral)

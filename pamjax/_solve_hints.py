@@ -1,0 +1,134 @@
+"""Why a legal simulation failed, and the setting that fixes it: the step budget `simulate` gives a run by default
+(it grows with the horizon), and the diagnosis behind its `PamjaxSolveError` messages — a horizon longer than the
+step budget, or a stiff system (its fastest mode far quicker than an explicit solver's stable step) — naming the
+parameter that makes it so where the system says. Workflow only: the physics is asked, never restated."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
+
+BASE_MAX_STEPS = 200_000  # the budget of runs up to ~60 s with a 50 Hz PWM valve (Tsit5 takes ~31 steps per period)
+STEPS_PER_PWM_PERIOD = 64  # budget per period of a switching valve: 2× the ~31 Tsit5 takes on paper 000's runs
+STEPS_PER_SECOND = 1000  # budget per second of a continuous valve (Rodas5 ~32/s, Tsit5 ~130/s on paper 000's runs)
+EXPLICIT_STABILITY = 3.5  # |h λ| an explicit Runge-Kutta method (Tsit5, RK4: 2.8) stays stable up to on λ < 0
+_MAX_STEPS_REACHED = "maximum number of solver steps"
+
+
+def _pwm_period(valve):
+    """The PWM period [s] of a switching valve (or of the one a wrapper such as the exact mode's schedule holds)."""
+    for v in (valve, getattr(valve, "valve", None)):
+        if v is not None and hasattr(v, "pwm_frequency"):
+            return 1.0 / float(v.pwm_frequency)
+    return None
+
+
+def default_max_steps(system, t0, t1):
+    """The step budget of a run over [t0, t1] [s]: 200,000, or the horizon's share (64 per PWM period of a switching
+    valve, 1,000 per second otherwise) rounded up to 200,000 × a power of two, so that few budgets (each a separate
+    compilation) occur."""
+    period = _pwm_period(system.valve)
+    horizon = max(float(t1) - float(t0), 0.0)
+    rate = STEPS_PER_PWM_PERIOD / period if period is not None else STEPS_PER_SECOND
+    needed = rate * horizon
+    if needed <= BASE_MAX_STEPS:
+        return BASE_MAX_STEPS
+    return BASE_MAX_STEPS * 2 ** math.ceil(math.log2(needed / BASE_MAX_STEPS))
+
+
+def _fastest_mode(system, signal, t0, y0):
+    """(largest |Re λ| [1/s] of the Jacobian of the scaled vector field at the initial state, name of the state it
+    mostly moves)."""
+    scale = jax.tree_util.tree_map(lambda s, a: jnp.broadcast_to(jnp.asarray(s, float), jnp.shape(a)),
+                                   system.state_scale(), y0)
+    flat_scale, _ = ravel_pytree(scale)
+    z0, unravel = ravel_pytree(jax.tree_util.tree_map(lambda a, s: jnp.asarray(a, float) / s, y0, scale))
+    command = signal(system.valve.command_time(jnp.asarray(t0)))
+
+    def field(z):
+        return ravel_pytree(system.vector_field(jnp.asarray(t0), unravel(z * flat_scale), command))[0] / flat_scale
+
+    jac = np.asarray(jax.jacfwd(field)(z0))
+    if not np.all(np.isfinite(jac)):
+        return float("nan"), "?"
+    values, vectors = np.linalg.eig(jac)
+    k = int(np.argmax(np.abs(values.real)))
+    names = [jax.tree_util.keystr(path).strip(".") for path, _ in jax.tree_util.tree_flatten_with_path(y0)[0]]
+    state = names[int(np.argmax(np.abs(vectors[:, k])))] if len(names) == len(z0) else "?"
+    return float(abs(values[k].real)), state
+
+
+def _stiffness_cause(system):
+    """A phrase naming the parameters behind a stiff payload, for systems that carry them."""
+    mass = getattr(system, "payload_mass", None)
+    friction = getattr(system, "friction", None)
+    force, width = getattr(friction, "coulomb_force", None), getattr(friction, "velocity_width", None)
+    if mass is None or force is None or width is None:
+        return ""
+    rate = float(force) / (float(width) * float(mass))
+    return (f"; here the payload's motion: Coulomb friction F_c = {float(force):g} N smoothed over velocity_width = "
+            f"{float(width):g} m/s acts on payload_mass = {float(mass):g} kg, a rate F_c/(w·M) = {rate:.3g} 1/s (a "
+            "heavier payload or a wider velocity_width makes it milder)")
+
+
+def failure_hint(system, signal, ts, t0, y0, traj, max_steps, solver, message):
+    """A sentence on why the solve behind `traj` failed and what fixes it (see the module docstring)."""
+    ts = np.asarray(ts, dtype=float)
+    t0, t1 = float(t0), float(ts[-1])
+    horizon = t1 - t0
+    states = np.stack([np.ravel(np.asarray(x)) for x in jax.tree_util.tree_leaves(traj.state)], axis=-1)
+    finite = np.all(np.isfinite(states.reshape(len(ts), -1)), axis=1)
+    reached = float(ts[np.flatnonzero(finite)[-1]]) if finite.any() else t0
+    steps = int(traj.num_steps)
+    y0 = system.initial_state() if y0 is None else y0
+    rate, state = _fastest_mode(system, signal, t0, y0)
+    explicit = type(solver).__name__ not in ("Rodas5", "Kvaerno5", "Kvaerno4", "Kvaerno3", "ImplicitEuler")
+    where = f"it reached t = {reached:.4g} s of {t1:.4g} s after {steps:,} steps"
+    # Stiff: the explicit solver's stable step is far below the step the run needs anyway (a switching valve's cap,
+    # or 1/1000 of the horizon), so stiffness, not the horizon, uses up the steps.
+    usual_step = system.valve.max_step() or horizon / 1000.0
+    if explicit and np.isfinite(rate) and EXPLICIT_STABILITY / rate < 0.1 * usual_step:
+        needed = rate * horizon / EXPLICIT_STABILITY
+        return (f"{where}. The system is stiff: its fastest mode (mostly the {state}) decays in {1 / rate:.2g} s, so "
+                f"the explicit solver {type(solver).__name__} needs steps below ~{EXPLICIT_STABILITY / rate:.2g} s, "
+                f"about {needed:,.0f} for this {horizon:g} s run{_stiffness_cause(system)}. Pass "
+                "solver=pamjax.Rodas5() (implicit, L-stable: its steps are not limited by stiffness)")
+    if _MAX_STEPS_REACHED in message and reached > t0:
+        needed = steps * horizon / (reached - t0)
+        period = _pwm_period(system.valve)
+        per_period = f" ({steps * period / (reached - t0):.0f} per PWM period)" if period is not None else ""
+        fix = (" or stepping='pwm' (fixed RK4 steps on the PWM grid, ~18 per period, for any horizon)"
+               if period is not None else "")
+        budget = int(2 ** math.ceil(math.log2(2 * needed)))  # 2×: the rate of steps varies along a run
+        return (f"{where}{per_period}: the whole run needs about {needed:,.0f}; pass max_steps={budget:,}{fix}")
+    if "minimum step size" in message:
+        return (f"{where}, where the step size fell below the solver's minimum: the state or its rate became "
+                "non-finite or discontinuous there (parameters far outside the physical range?); simulate with "
+                "throw=False and look at the trajectory up to that time")
+    return (f"{where}. Common causes: parameters far outside the physical range, or too tight tolerances; pass "
+            "throw=False to get the partial result with status instead")
+
+
+RK4_STABILITY = 2.8  # |h λ| classical RK4 stays stable up to on λ < 0
+
+
+def fixed_step_hint(system, signal, t0, y0, stepping):
+    """What fixes an unstable fixed-grid run ("pwm": substeps per PWM period; "grid": grid_step): the step its
+    fastest mode needs, or an implicit adaptive solve when that step is impractically small."""
+    y0 = system.initial_state() if y0 is None else y0
+    rate, state = _fastest_mode(system, signal, float(t0), y0)
+    if not np.isfinite(rate) or rate == 0:
+        return "a smaller fixed step (more substeps, smaller grid_step), or stepping='adaptive'"
+    stable = RK4_STABILITY / rate
+    implicit = "use stepping='adaptive' with solver=pamjax.Rodas5() (implicit: not limited by stiffness)"
+    period = _pwm_period(system.valve)
+    if stepping == "pwm" and period is not None:
+        needed = math.ceil(period / stable)
+        advice = (f"substeps >= {needed:,} would be stable, too many: {implicit}" if needed > 256
+                  else f"pass substeps={max(needed, 2)} or more, or {implicit}")
+    else:
+        advice = f"pass grid_step={stable:.2g} or less, or {implicit}"
+    cause = _stiffness_cause(system)
+    return f"its fastest mode (mostly the {state}) needs RK4 steps below {stable:.2g} s{cause}; {advice}"

@@ -1,0 +1,248 @@
+"""Units: the unit suffixes pamjax reads (CSV headers `position [mm]`, `Recording(units=...)`), their SI factors, and
+the plausibility checks that catch a number written in another unit (millimetres under `[m]`, bar under `[Pa]`,
+milliseconds under `[s]`) wherever numbers come in: recordings, configs, sweeps, initial states.
+
+Every unit is either converted to SI or refused by name, never ignored. Pressures in pamjax are ABSOLUTE pascal; a
+pressure unit other than `Pa` must say whether it is absolute or gauge (`bar abs`, `barg`, `kPa gauge`, `psia`):
+bench software writes both, and a guess would be wrong by one atmosphere.
+"""
+
+import re
+
+import numpy as np
+
+from ._errors import PamjaxInputError, _concrete
+
+ATMOSPHERE = 101325.0  # Pa abs, ISO 2533 standard atmosphere (also `Air.atmospheric_pressure`'s default)
+# No pneumatic muscle test runs below half an atmosphere absolute (a vented chamber reads ~101325 Pa abs).
+MIN_ABSOLUTE_PA = 5e4  # Pa
+# Nor above 50 bar: industrial pneumatics stops at ~16 bar; paper 000 supplies 0.65 MPa, paper 001 0.7 MPa abs.
+MAX_ABSOLUTE_PA = 5e6  # Pa
+# Sampling-interval checks need a run, not a handful of points (a 5-point test recording may be 1 s apart).
+MIN_SAMPLES_FOR_RATE = 50
+PSI = 6894.757293168  # Pa per psi (NIST SP 811)
+
+# dimension → {spelling: SI factor}; SI value = factor × value (+ one atmosphere for gauge pressures).
+_FACTORS = {
+    "time": {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "min": 60.0},
+    "length": {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "μm": 1e-6, "in": 0.0254},
+    "velocity": {"m/s": 1.0, "cm/s": 1e-2, "mm/s": 1e-3},
+    "force": {"N": 1.0, "kN": 1e3, "mN": 1e-3},
+    "mass_flow": {"kg/s": 1.0, "g/s": 1e-3, "kg/h": 1.0 / 3600.0},
+    "volume": {"m^3": 1.0, "m3": 1.0, "m³": 1.0, "l": 1e-3, "L": 1e-3, "cm^3": 1e-6, "cm3": 1e-6, "cm³": 1e-6,
+               "ml": 1e-6, "mL": 1e-6},
+    "ratio": {"1": 1.0, "-": 1.0, "": 1.0, "%": 0.01},
+    "voltage": {"V": 1.0, "mV": 1e-3},
+}
+_PRESSURE_FACTORS = {"pa": 1.0, "hpa": 1e2, "kpa": 1e3, "mpa": 1e6, "mbar": 1e2, "bar": 1e5, "psi": PSI}
+_SI = {"time": "s", "length": "m", "velocity": "m/s", "force": "N", "mass_flow": "kg/s", "volume": "m^3",
+       "ratio": "1", "voltage": "V", "pressure": "Pa"}
+# "bar abs", "bar(a)", "bara", "bar_abs", "kPa gauge", "kPag", "psig", "Pa", "MPa (abs.)"
+_PRESSURE = re.compile(
+    r"^(pa|hpa|kpa|mpa|mbar|bar|psi)\s*[\s(_,-]?\s*(abs\.?|absolute|a|gauge|g|rel\.?|relative)?\s*\)?$", re.IGNORECASE)
+
+# Channel names (after renaming) → dimension. Names not listed keep their unit as written.
+_CHANNEL_DIMENSIONS = (("pressure", "pressure"), ("position", "length"), ("displacement", "length"),
+                       ("velocity", "velocity"), ("friction_force", "force"), ("force", "force"),
+                       ("mass_flow", "mass_flow"), ("volume", "volume"), ("command", "command"))
+
+
+def channel_dimension(name):
+    """The physical dimension of a channel by its name ('pressure', 'pressure_tank' → "pressure"), or None."""
+    if name == "t":
+        return "time"
+    for prefix, dimension in _CHANNEL_DIMENSIONS:
+        if name == prefix or name.startswith(prefix + "_"):
+            return dimension
+    return None
+
+
+def parse_pressure_unit(unit):
+    """(SI factor, offset [Pa]) for a pressure unit, or None if `unit` is not one; an unqualified pressure unit other
+    than Pa (absolute or gauge?) raises."""
+    m = _PRESSURE.match(unit.strip())
+    if m is None:
+        return None
+    base, qualifier = m.group(1).lower(), (m.group(2) or "").lower().rstrip(".")
+    factor = _PRESSURE_FACTORS[base]
+    if qualifier in ("g", "gauge", "rel", "relative"):
+        return factor, ATMOSPHERE
+    if qualifier in ("a", "abs", "absolute") or base == "pa":  # Pa alone is absolute: pamjax's own convention
+        return factor, 0.0
+    return None
+
+
+def _dimension_of_unit(unit):
+    if unit.strip() and parse_pressure_unit(unit) is not None:
+        return "pressure"
+    for dimension, table in _FACTORS.items():
+        if unit in table and unit:
+            return dimension
+    return None
+
+
+def to_si(name, unit, values, where):
+    """`values` of channel `name` written in `unit`, converted to SI: (values, SI unit). A unit that does not fit the
+    channel, that pamjax does not know for a known channel, or a pressure unit that does not say absolute or gauge,
+    raises a `PamjaxInputError` naming `where`, the channel and the unit."""
+    unit = "" if unit is None else str(unit).strip()
+    dimension = channel_dimension(name)
+    if dimension == "command":  # a duty ratio [1] or a regulator's reference voltage [V]
+        dimension = "voltage" if unit in _FACTORS["voltage"] else "ratio"
+    values = np.asarray(values, dtype=float)
+    if dimension is None:  # a channel pamjax does not model: converted if its unit is known, else kept as written
+        dimension = _dimension_of_unit(unit)
+        if dimension is None or unit == "":
+            return values, unit
+    if dimension == "pressure":
+        base = re.match(r"^\s*(pa|hpa|kpa|mpa|mbar|bar|psi)\b", unit, re.IGNORECASE)
+        parsed = parse_pressure_unit(unit) if unit else (1.0, 0.0)
+        if parsed is None and base is not None:
+            raise PamjaxInputError(
+                f"{where}: channel {name!r} is in {unit!r}: say whether that is ABSOLUTE or GAUGE pressure, e.g. "
+                f"'{name} [{base.group(1)} abs]' or '{name} [{base.group(1)} gauge]' in the CSV header (or "
+                f"units={{{name!r}: '{base.group(1)} abs'}}); pamjax converts it to ABSOLUTE pressure in Pa"
+            )
+        if parsed is None:
+            raise PamjaxInputError(
+                f"{where}: channel {name!r} has unit {unit!r}, not a pressure unit pamjax knows; use Pa (absolute), "
+                "or kPa, MPa, bar, mbar, psi with 'abs' or 'gauge' (pamjax expects ABSOLUTE pressure in Pa)"
+            )
+        factor, offset = parsed
+        return values * factor + offset, "Pa"
+    table = _FACTORS[dimension]
+    if unit not in table:
+        other = _dimension_of_unit(unit)
+        what = f"a {other} unit" if other else "a unit pamjax does not know"
+        raise PamjaxInputError(
+            f"{where}: channel {name!r} has unit {unit!r} ({what}); a {dimension} channel takes one of "
+            f"{[u for u in table if u]} (converted to {_SI[dimension]})"
+        )
+    factor = table[unit]
+    return (values * factor if factor != 1.0 else values), _SI[dimension]
+
+
+def _likely_pressure_unit(peak):
+    """The unit a peak absolute pressure value most likely was written in, when it is far too small for Pa."""
+    if peak <= 0.95:  # 0.1-0.9 MPa: paper 000's pressures in MPa
+        return "MPa"
+    if peak <= 15.0:  # 1.01325 bar is one atmosphere
+        return "bar"
+    if peak <= 150.0:
+        return "psi"
+    if peak <= 1500.0:
+        return "kPa"
+    return "hPa or mbar"
+
+
+def check_magnitude(dimension, values, where, name):
+    """Refuse values whose magnitude says another unit (the likely one named). `values` are SI, finite ones only."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return
+    peak = float(np.max(np.abs(v)))
+    if dimension == "time" and v.size >= MIN_SAMPLES_FOR_RATE:
+        step = float(np.median(np.diff(v)))
+        if step >= 1.0:
+            likely = "ms" if step < 1000.0 else "µs"
+            raise PamjaxInputError(
+                f"{where}: {name!r} is sampled every {step:g} s (median): far too slow to record a muscle driven at "
+                f"50 Hz; these look like {likely}: write '{name} [{likely}]' in the header"
+            )
+        if step < 1e-5:
+            raise PamjaxInputError(
+                f"{where}: {name!r} is sampled every {step:g} s (median), faster than 100 kHz, which no pneumatic "
+                f"bench records; are these seconds written under a [ms] header? (write '{name} [s]')"
+            )
+    elif dimension == "length" and peak > 1.0:
+        raise PamjaxInputError(
+            f"{where}: channel {name!r} reaches {peak:g} m; no pneumatic muscle moves a metre (the MAS-10's stroke is "
+            f"75 mm): these look like mm (or cm): write '{name} [mm]' in the header"
+        )
+    elif dimension == "velocity" and peak > 20.0:
+        raise PamjaxInputError(
+            f"{where}: channel {name!r} reaches {peak:g} m/s; these look like mm/s: write '{name} [mm/s]' in the header"
+        )
+    elif dimension == "mass_flow" and peak > 1.0:
+        raise PamjaxInputError(
+            f"{where}: channel {name!r} reaches {peak:g} kg/s, a thousand times a valve's flow; these look like g/s: "
+            f"write '{name} [g/s]' in the header"
+        )
+    elif dimension == "pressure":
+        check_absolute_pressure(v, f"{where}: channel {name!r}")
+
+
+def check_absolute_pressure(values, name, *, above_atmosphere=False):
+    """Refuse pressures that are not ABSOLUTE pascal: below half an atmosphere (bar, MPa, psi, kPa or gauge; the
+    likely unit named), above 50 bar, or — for a supply pressure (`above_atmosphere`) — not above one atmosphere.
+    Traced values (inside jit/vmap/grad) are not checked."""
+    v = _concrete(values)
+    if v is None:
+        return
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return
+    low, high = float(np.min(v)), float(np.max(v))
+    if high < MIN_ABSOLUTE_PA:
+        raise PamjaxInputError(
+            f"{name} is {high:.6g} Pa at most: that looks like {_likely_pressure_unit(high)} (or a GAUGE pressure); "
+            f"pamjax expects ABSOLUTE pressure in Pa (e.g. 0.65 MPa abs = 6.5e5; add {ATMOSPHERE:g} Pa to gauge "
+            "readings)"
+        )
+    if low < MIN_ABSOLUTE_PA:
+        raise PamjaxInputError(
+            f"{name} drops to {low:.6g} Pa, below half an atmosphere ({MIN_ABSOLUTE_PA:g} Pa abs): a vented muscle or "
+            f"tank reads about {ATMOSPHERE:g} Pa ABSOLUTE, so this looks like a GAUGE pressure (add {ATMOSPHERE:g} "
+            "Pa)"
+        )
+    if high > MAX_ABSOLUTE_PA:
+        raise PamjaxInputError(
+            f"{name} reaches {high:.6g} Pa = {high / 1e5:.4g} bar; pneumatic muscles run below ~10 bar: check the "
+            "unit (pamjax expects ABSOLUTE pressure in Pa)"
+        )
+    if above_atmosphere and low <= ATMOSPHERE:
+        raise PamjaxInputError(
+            f"{name} must exceed atmospheric pressure ({ATMOSPHERE:g} Pa abs) to inflate anything, got {low:.6g} Pa; "
+            f"a gauge supply pressure needs {ATMOSPHERE:g} Pa added (0.55 MPa gauge = 6.513e5 Pa abs)"
+        )
+
+
+# Parameters and settings checked by magnitude where users type them (configs, sweeps): last path component → check.
+_PLAUSIBLE = {
+    "payload_mass": ("kg", 1e3, "g"),  # no pneumatic muscle lifts a tonne (DMSP-40: 6000 N)
+    "mass": ("kg", 1e3, "g"),
+    "min_position": ("m", 1.0, "mm"),
+    "max_position": ("m", 1.0, "mm"),
+    "position": ("m", 1.0, "mm"),
+    "switch_on_delay": ("s", 0.1, "ms"),
+    "switch_off_delay": ("s", 0.1, "ms"),
+    "edge_width": ("s", 0.1, "ms"),
+    "volume": ("m³", 0.1, "cm³ or litres"),
+    "tank_volume": ("m³", 0.1, "cm³ or litres"),
+    "v0": ("m³", 0.1, "cm³"),
+}
+_ABSOLUTE_PRESSURES = {"pressure", "pressures", "atmospheric_pressure"}
+
+
+def check_setting(path, values, where):
+    """Plausibility of a value a user typed for parameter `path` (e.g. 'valve.supply_pressure', 'payload_mass',
+    'y0.pressure'): refused with the likely unit named when its magnitude says another unit."""
+    leaf = str(path).split(".")[-1].split("[")[0]
+    v = np.asarray(values, dtype=float)
+    label = f"{where} {path}"
+    if leaf == "supply_pressure":
+        check_absolute_pressure(v, label, above_atmosphere=True)
+    elif leaf in _ABSOLUTE_PRESSURES:
+        check_absolute_pressure(v, label)
+    elif leaf == "max_pressure" and v.size and np.nanmax(np.abs(v)) < 1e3:
+        raise PamjaxInputError(
+            f"{label} = {np.nanmax(np.abs(v)):g} Pa: that looks like {_likely_pressure_unit(np.nanmax(np.abs(v)))}; "
+            "p_max of eq. 7 is a GAUGE pressure in Pa (paper 000: 6e5)"
+        )
+    elif leaf in _PLAUSIBLE and v.size:
+        unit, limit, likely = _PLAUSIBLE[leaf]
+        peak = float(np.nanmax(np.abs(v)))
+        if peak > limit:
+            raise PamjaxInputError(f"{label} = {peak:g} {unit}: more than {limit:g} {unit}; that looks like {likely} "
+                                   f"(pamjax takes SI units: {unit})")

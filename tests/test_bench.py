@@ -1,0 +1,92 @@
+"""Bench directories (`pamjax.load_bench`) and `fits/joint.py --data DIR`: a small synthetic bench in the shared
+layout (meta.json + npz), made by pamjax's exact stick-slip model from known parameters, fitted from the presets."""
+
+import importlib.util
+import json
+import pathlib
+
+import numpy as np
+import pytest
+
+import pamjax as pj
+from pamjax import PamjaxInputError, presets
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+FACTORS = {"Cv12": 1.08, "b12": 0.93, "Cv23": 0.94, "b23": 1.05, "v1": 0.8, "Fc": 1.15, "Cf": 0.9}
+KEYS = list(FACTORS)
+NOISE = {"p_std_Pa": 2000.0, "x_std_m": 1e-4}
+
+
+def _truth():
+    model = presets.mas10_system(valve="pwm", friction="karnopp")
+    space = pj.ParameterSpace(model, [pj.BENCH_PARAMETERS[k][0] for k in KEYS])
+    values = np.asarray(space.initial_values()) * np.array([FACTORS[k] for k in KEYS])
+    return space.with_values(values), dict(zip(KEYS, values.tolist()))
+
+
+@pytest.fixture(scope="module")
+def bench(tmp_path_factory):
+    """E1 (tank charge, duty 0.5), E2 (discharge, 0.25), E3 (triangle 0.5 Hz): short runs at 500 Hz, seeded."""
+    folder = tmp_path_factory.mktemp("bench")
+    truth, params = _truth()
+    experiments = {
+        "E1": dict(kind="tank_charge", V_tank=5e-5, u=0.5, t_end=0.4, p0="p_atm"),
+        "E2": dict(kind="tank_discharge", V_tank=5e-5, u=0.25, t_end=0.4, p0="p_s"),
+        "E3": dict(kind="muscle_triangle", f_tri=0.5, lo=0.05, hi=0.95, t_end=2.0),
+        "E5": dict(kind="muscle_PI", kp=25.0),  # listed, not fitted
+    }
+    rng = np.random.default_rng(3)
+    for name, e in list(experiments.items())[:3]:
+        ts = np.arange(0.0, e["t_end"] + 1e-9, 2e-3)
+        if e["kind"].startswith("tank"):
+            system = pj.TankFromModel(5e-5)(truth)
+            signal = pj.Constant(e["u"])
+            y0 = system.initial_state(101325.0 if e["p0"] == "p_atm" else 6.5e5)
+        else:
+            system, signal, y0 = truth, pj.Triangle(e["lo"], e["hi"], e["f_tri"]), None
+        traj = pj.simulate(system, signal, ts, y0=y0, substeps=32)
+        p = np.asarray(traj.pressure) + NOISE["p_std_Pa"] * rng.standard_normal(ts.size)
+        x = np.zeros_like(ts) if traj.position is None else np.asarray(traj.position) + NOISE[
+            "x_std_m"] * rng.standard_normal(ts.size)
+        u = np.asarray(traj.command)
+        np.savez(folder / f"{name}.npz", t=ts, u=u, p=p, x=x)
+    meta = dict(params=params, fitted_keys=KEYS, experiments=experiments, noise=NOISE)
+    (folder / "meta.json").write_text(json.dumps(meta))
+    return folder, params
+
+
+def test_load_bench(bench):
+    folder, _ = bench
+    model = presets.mas10_system(valve="pwm", friction="karnopp")
+    b = pj.load_bench(folder, model)
+    assert [e.name for e in b.experiments] == ["E1", "E2", "E3"] and "E5" in b.skipped
+    assert b.noise == {"pressure": 2000.0, "position": 1e-4}
+    assert b.experiments[1].initial["pressure"] == pytest.approx(6.5e5)  # p_s from the model's valve
+    assert b.experiments[2].channels == ("pressure", "position")
+    half = pj.load_bench(folder, model, rate=250.0)
+    assert len(half.experiments[0].times) == (len(b.experiments[0].times) + 1) // 2
+    with pytest.raises(PamjaxInputError, match="not bench parameters.*valid"):
+        pj.load_bench(folder, model, fitted_keys=["Cv12", "nonsense"])
+    with pytest.raises(PamjaxInputError, match="no meta.json"):
+        pj.load_bench(ROOT, model)
+
+
+def test_joint_script_fits_a_bench_directory_from_the_presets(bench, tmp_path):
+    folder, params = bench
+    spec = importlib.util.spec_from_file_location("joint", ROOT / "fits" / "joint.py")
+    joint = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(joint)
+    out = tmp_path / "out"
+    joint.main(["--data", str(folder), "--out", str(out), "--quiet", "--max-steps", "60"])
+    result = json.loads((out / "joint.json").read_text())
+    assert (out / "joint.png").exists()
+    assert result["status"] == "converged", result["message"]
+    assert set(result["params"]) == set(KEYS) and set(result["std_err"]) == set(KEYS)
+    for k in KEYS:  # recovered within 4 standard errors of the truth
+        assert abs(result["params"][k] - params[k]) < 4 * result["std_err"][k], (k, result["params"][k], params[k])
+    assert set(result["rmse"]) == {"E1", "E2", "E3"} and set(result["rmse"]["E3"]) == {"p", "x"}
+    for name, chans in result["rmse_over_noise"].items():
+        assert all(0.9 < r < 1.1 for r in chans.values()), (name, chans)
+    assert not result["mismatch"]
+    with pytest.raises(SystemExit, match="--overwrite"):
+        joint.main(["--data", str(folder), "--out", str(out), "--quiet"])

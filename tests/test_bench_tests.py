@@ -1,0 +1,102 @@
+"""Bench tests without a time axis (`pamjax/_bench_tests.py`): their predictions against NumPy transcriptions of paper
+000's eq. 8-9 and 11, parameter recovery through `pamjax.fit` from oracle-made data, the reductions of raw runs, and
+bad input named before any fit."""
+
+import numpy as np
+import pytest
+from helpers import P_ATM, np_ellipse_flow, np_eq7_force, np_friction
+
+import pamjax as pj
+from pamjax import presets
+from pamjax._friction import KarnoppFriction
+
+
+@pytest.mark.parametrize("v", [-0.2, -0.01, 0.004, 0.15])
+def test_steady_friction_force(v):
+    """Eq. 9 at steady sliding: smooth sign (tanh), exact sign (Karnopp), and the bristle model's steady state
+    z = F_c v/(σ0 |v|_w) with |v|_w = sqrt(v² + w²) − w, where its force is F_c v/|v|_w + C_f v."""
+    smooth = pj.CoulombViscousFriction(16.0, 250.0)
+    assert float(pj.steady_friction_force(smooth, v)) == pytest.approx(np_friction(v, 16.0, 250.0, 1e-3), rel=1e-12)
+    assert float(pj.steady_friction_force(KarnoppFriction(16.0, 250.0), v)) == pytest.approx(
+        16.0 * np.sign(v) + 250.0 * v, rel=1e-12)
+    w = 1e-5
+    bristle = pj.BristleFriction(16.0, velocity_width=w)
+    expected = 16.0 * v / (np.sqrt(v * v + w * w) - w) + 250.0 * v
+    assert float(pj.steady_friction_force(bristle, v)) == pytest.approx(expected, rel=1e-10)
+
+
+def test_constant_velocity_point_reduces_a_run():
+    t = np.linspace(0.0, 0.1, 101)
+    v, f, se = pj.constant_velocity_point(t, 0.01 + 0.05 * t, np.full(t.size, 28.5))
+    assert v == pytest.approx(0.05, rel=1e-12) and f == pytest.approx(28.5) and se == 0.0
+    with pytest.raises(pj.PamjaxInputError, match="force must be finite"):
+        pj.constant_velocity_point(t, t, np.where(t > 0.05, np.nan, 1.0))
+
+
+def test_friction_curve_fit_recovers_eq9():
+    """Points from eq. 9 (NumPy) with 0.5 N noise; F_c and C_f recovered within 3 standard errors."""
+    rng = np.random.default_rng(1)
+    v = np.concatenate([-np.geomspace(0.01, 0.2, 6), np.geomspace(0.01, 0.2, 6)])
+    f = np_friction(v, 16.0, 250.0, 1e-3) + 0.5 * rng.standard_normal(v.size)
+    exp = pj.FrictionCurveExperiment(v, f, scale=0.5, friction="")
+    res = pj.fit(pj.CoulombViscousFriction(10.0, 100.0), [exp], ["coulomb_force", "viscous_coefficient"],
+                 progress=False)
+    z = (np.asarray(res.values) - [16.0, 250.0]) / np.asarray(res.standard_errors)
+    assert np.all(np.abs(z) < 3), (res.values, res.standard_errors)
+    assert res.channel_errors["friction_curve"]["force"]["rmse"] < 1.0  # the fitter's report works without a time axis
+
+
+def test_flow_curve_prediction_and_fit():
+    """Eq. 11 through a valve path against the NumPy oracle; C_v, b_v of path 1→2 recovered from oracle points."""
+    valve = presets.mas10_valve("exact")
+    p_up = np.repeat([5e5, 6e5, 7e5], 10)
+    p_down = np.concatenate([np.linspace(P_ATM, 0.98 * p, 10) for p in (5e5, 6e5, 7e5)])
+    flow = np.array([np_ellipse_flow(a, b, 0.36, 0.28, 3.14e-6) for a, b in zip(p_up, p_down)])
+    exp = pj.FlowCurveExperiment(p_up, p_down, flow, scale=1e-5, restriction="inflate")
+    np.testing.assert_allclose(np.asarray(exp.predict(valve)["mass_flow"]), flow, rtol=1e-12)
+    space = pj.ParameterSpace(valve, ["inflate.discharge_coefficient", "inflate.critical_ratio"])
+    start = space.with_values([0.45, 0.2])
+    res = pj.fit(start, [exp], ["inflate.discharge_coefficient", "inflate.critical_ratio"], progress=False)
+    np.testing.assert_allclose(res.values, [0.36, 0.28], rtol=1e-6)  # noise-free: exact recovery
+    assert np.allclose(pj.flow_curve(valve.inflate, 6e5, [0.1, 0.2], pj.Air()), valve.inflate.mass_flow(6e5, 0.0,
+                                                                                                          pj.Air()))
+
+
+def test_loop_force_map_prediction_slack_and_average():
+    """Eq. 8-9: F = F_static − F_c sign(ẋ) − C_f ẋ (eq. 7 from NumPy); slack points only penalise a pulling model;
+    `loop_average` gives the mean curve and the width 2 F_c + 2 C_f |ẋ|."""
+    system = presets.mas10_system("pwm", friction=KarnoppFriction(16.0, 250.0))
+    x = np.array([0.0, 0.02, 0.04, 0.0, 0.02, 0.04])
+    p = np.full(6, P_ATM + 4e5)
+    v = np.array([5e-3] * 3 + [-5e-3] * 3)
+    law = system.muscle.force_law
+    static = np_eq7_force(x, 4e5, np.asarray(law.max_force_coefficients), float(law.k0), float(law.k1),
+                          float(law.k2))
+    expected = static - (16.0 * np.sign(v) + 250.0 * v)
+    exp = pj.LoopForceMapExperiment(x, p, v, expected, scale=1.0)
+    np.testing.assert_allclose(np.asarray(exp.predict(system)["force"]), expected, rtol=1e-12)
+    assert np.max(np.abs(np.asarray(exp.residuals(system)))) < 1e-9
+    slack = pj.LoopForceMapExperiment(x, p, v, np.where(x > 0.03, 0.0, expected), scale=1.0)
+    assert float(slack.residuals(system)[2]) == pytest.approx(max(expected[2], 0.0))  # 0 N measured: one-sided
+    xa, pa, mean, width = pj.loop_average(x, p, v, expected)
+    np.testing.assert_allclose(width, 2 * (16.0 + 250.0 * 5e-3), rtol=1e-12)
+    np.testing.assert_allclose(mean, static[:3], rtol=1e-12)
+
+
+def test_bad_input_is_named_before_any_fit():
+    with pytest.raises(pj.PamjaxInputError, match="velocities must be non-zero"):
+        pj.FrictionCurveExperiment([0.0, 0.1], [1.0, 2.0])
+    with pytest.raises(pj.PamjaxInputError, match="one length"):
+        pj.FrictionCurveExperiment([0.1, 0.2], [1.0])
+    with pytest.raises(pj.PamjaxInputError, match="upstream_pressures must be ABSOLUTE"):
+        pj.FlowCurveExperiment([5.0, 6.0], [1.0, 1.0], [1e-3, 1e-3])  # bar, not Pa
+    with pytest.raises(pj.PamjaxInputError, match="scale must be > 0"):
+        pj.FlowCurveExperiment([5e5], [2e5], [1e-3], scale=0.0)
+    with pytest.raises(pj.PamjaxInputError, match="has no 'friction'"):
+        pj.FrictionCurveExperiment([0.1, 0.2], [40.0, 66.0]).check(presets.mas10_valve())
+    with pytest.raises(pj.PamjaxInputError, match="the model is OnOffValve; a AbstractFriction is needed"):
+        pj.FrictionCurveExperiment([0.1, 0.2], [40.0, 66.0], friction="").check(presets.mas10_valve())
+    with pytest.raises(pj.PamjaxInputError, match="has no 'nozzle'"):
+        pj.FlowCurveExperiment([5e5], [2e5], [1e-3], scale=1e-5, restriction="nozzle").check(presets.mas10_valve())
+    with pytest.raises(pj.PamjaxInputError, match="needs a 'muscle'"):
+        pj.LoopForceMapExperiment([0.0], [3e5], [1e-3], [10.0], scale=1.0).check(presets.mas10_valve())

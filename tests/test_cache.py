@@ -1,0 +1,96 @@
+"""The CLI's persistent caches: a second run of a workflow compiles nothing new and traces nothing it traced before;
+the cache can be moved and turned off."""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+import pamjax
+
+SCRIPT = textwrap.dedent("""
+    import json, sys
+    import pamjax
+    from pamjax._cli import main
+    with pamjax.CompileStats() as stats:
+        status = main(sys.argv[1:])
+    print(json.dumps(dict(status=status, requests=stats.requests, hits=stats.hits, traced=stats.count["trace"])))
+""")
+
+
+def _config(folder):
+    t = np.arange(0.0, 0.3 + 1e-9, 0.01)
+    truth = pamjax.TankFromModel(5e-5)(pamjax.presets.mas10_system("pwm"))
+    rec = pamjax.synthetic_recording(truth, pamjax.Constant(0.5), t, noise=dict(pressure=2e3), channels=["pressure"],
+                                     y0=truth.initial_state(101325.0), seed=1)
+    rec.to_csv(folder / "tank.csv")
+    (folder / "fit.toml").write_text(textwrap.dedent("""
+        [model]
+        preset = "mas10_system"
+        set = { "valve.inflate.discharge_coefficient" = 0.40 }
+        [fit]
+        free = ["valve.inflate.discharge_coefficient"]
+        max_steps = 10
+        [[experiment]]
+        name = "tank"
+        file = "tank.csv"
+        tank_volume = 5e-5
+        signal = { kind = "Constant", value = 0.5 }
+        channels = ["pressure"]
+        scales = { pressure = 2e3 }
+        initial = { pressure = 101325.0 }
+    """))
+    return folder / "fit.toml"
+
+
+def _run(config, out, cache, **env):
+    env = dict(os.environ, PAMJAX_CACHE_DIR=str(cache), PAMJAX_CACHE_MIN_COMPILE_SECONDS="0", **env)
+    proc = subprocess.run([sys.executable, "-c", SCRIPT, "fit", str(config), "--out", str(out), "--quiet",
+                           "--no-plot"], env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return proc.stdout, json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def test_second_run_compiles_nothing_new(tmp_path):
+    config, cache = _config(tmp_path), tmp_path / "cache"
+    text, first = _run(config, tmp_path / "a", cache)
+    assert first["status"] == 0 and first["requests"] > 0 and first["hits"] < first["requests"]
+    assert "compiling the residuals and their Jacobian (first run; cached afterwards)" in text
+    text, second = _run(config, tmp_path / "b", cache)
+    assert second["status"] == 0
+    assert second["requests"] > 0 and second["hits"] == second["requests"], second  # every program from the cache
+    assert second["traced"] < first["traced"]  # the fit's programs are not traced again
+    assert "compiling" not in text
+    programs = sorted(p.name.split("-")[0] for p in (cache / "programs").iterdir())
+    assert programs == ["fit_jacobian", "fit_residuals"]
+    a = json.loads((tmp_path / "a" / "fit.json").read_text())
+    b = json.loads((tmp_path / "b" / "fit.json").read_text())
+    assert a["values"] == b["values"] and a["cost"] == b["cost"]  # the same fit, bitwise
+
+
+@pytest.mark.parametrize("how", ["env", "flag"])
+def test_cache_can_be_turned_off(tmp_path, how):
+    config, cache = _config(tmp_path), tmp_path / "cache"
+    env = {"PAMJAX_COMPILATION_CACHE": "0"} if how == "env" else {}
+    extra = [] if how == "env" else ["--no-cache"]
+    proc = subprocess.run([sys.executable, "-m", "pamjax", "fit", str(config), "--out", str(tmp_path / "a"),
+                           "--quiet", "--no-plot", *extra],
+                          env=dict(os.environ, PAMJAX_CACHE_DIR=str(cache), **env), capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert not cache.exists() or not any(cache.iterdir())
+
+
+def test_default_cache_directory_follows_the_platform_convention(monkeypatch, tmp_path):
+    from pamjax._cache import default_cache_dir
+
+    monkeypatch.delenv("PAMJAX_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    if sys.platform.startswith("linux"):
+        assert default_cache_dir() == tmp_path / "pamjax" / "jax-compilation"
+    monkeypatch.setenv("PAMJAX_CACHE_DIR", str(tmp_path / "elsewhere"))
+    assert default_cache_dir() == tmp_path / "elsewhere"
