@@ -111,7 +111,7 @@ def main(argv=None):
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs, {platform.processor() or platform.platform()}; "
-          f"load average at start {os.getloadavg()[0]:.2f}; jax {jax.__version__}", flush=True)
+          f"load average at start {os.getloadavg()[0]:.2f}; jax {jax.__version__}; pamjax {pj.__file__}", flush=True)
     model = pj.presets.mas10_system(valve="pwm", friction="karnopp")
     bench = pj.load_bench(args.bench, model, kinds=("tank_charge", "tank_discharge"))
     truth = truth_model(model, bench)
@@ -148,6 +148,12 @@ def main(argv=None):
             seconds[arm].append(wall)
             print(f"seed {seed:2d} {arm:<9} {fit.status:<10} {fit.iterations:3d} iterations {wall:6.1f} s "
                   f"(compile {fit.compile_s:.1f} s)", flush=True)
+        if seed >= 1:  # the spreads so far (a long run can be read before it ends)
+            ratio = np.std(fitted["triangle"], axis=0, ddof=1) / np.std(fitted["designed"], axis=0, ddof=1)
+            ok = sum(s == "converged" for arm in status.values() for s in arm)
+            print(f"after {seed + 1} seeds: SD ratio geomean {np.exp(np.mean(np.log(ratio))):.2f}, worst "
+                  f"{np.min(ratio):.2f}; converged {ok}/{2 * (seed + 1)}; load average {os.getloadavg()[0]:.2f}",
+                  flush=True)
 
     # 3. spreads
     values = {arm: np.asarray(v) for arm, v in fitted.items()}
