@@ -6,6 +6,7 @@ The system is paper 000's valve feeding the 5e-5 m³ test tank (pressure only, a
 """
 
 import math
+import pathlib
 import textwrap
 
 import jax.numpy as jnp
@@ -161,3 +162,13 @@ def test_cli_design_writes_csv_json_figure_and_refuses_to_overwrite(tmp_path, ca
     assert main(["design", str(bad), "--out", str(tmp_path / "o2"), "--quiet"]) == 2
     assert "[design]: unknown key(s) ['knot']" in capsys.readouterr().err
     assert not (tmp_path / "o2").exists()  # refused before the output folder was made
+
+
+def test_design_example_config_loads():
+    # every key of examples/design_example.toml is checked and its model built (nothing solved)
+    from pamjax._cli_design import load
+
+    model, free, duration, kwargs, out = load(pathlib.Path(__file__).resolve().parents[1] / "examples"
+                                              / "design_example.toml")
+    assert duration == 10.0 and len(free) == 5 and out == "results/design_example"
+    assert kwargs["duty_band"] == (0.1, 0.9) and kwargs["criterion"] == "D"
