@@ -9,6 +9,7 @@ import math
 import pathlib
 import textwrap
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -172,3 +173,25 @@ def test_design_example_config_loads():
                                               / "design_example.toml")
     assert duration == 10.0 and len(free) == 5 and out == "results/design_example"
     assert kwargs["duty_band"] == (0.1, 0.9) and kwargs["criterion"] == "D"
+
+
+def test_pressure_limit_is_penalised_and_kept():
+    # The penalty: zero below the limit; above it, PENALTY·dt·Σ(excess/1 kPa)² and the worst excess reported.
+    c, prob = _problem("envelope")
+    free_value, free_aux = obj.value(c, prob)
+    top = float(np.max(free_aux["pressure"]))
+    for limit in (top + 1e3, top - 5e3):
+        limited = eqx.tree_at(lambda p: p.max_pressure, prob, jnp.asarray(limit), is_leaf=lambda x: x is None)
+        value, aux = obj.value(c, limited)
+        excess = np.maximum(np.asarray(aux["pressure"]) - limit, 0.0)
+        assert float(aux["worst_pressure"]) == pytest.approx(float(np.max(excess)), abs=1e-9)
+        dt = float(limited.experiment.times[1] - limited.experiment.times[0])
+        expected = obj.PENALTY * dt * np.sum((excess / obj.PRESSURE_UNIT) ** 2)
+        assert float(value) - float(free_value) == pytest.approx(expected, rel=1e-9, abs=1e-12)
+        assert (expected > 0) == (limit < top)
+    # A design that starts within the limit stays within it (pressure predicted at the design samples).
+    start = pj.design(_tank(), FREE, 0.4, noise=NOISE, steps=0, progress=False, **TANK)
+    limit = start.constraints["pressure_range"][1] + 2e3
+    res = pj.design(_tank(), FREE, 0.4, noise=NOISE, steps=4, progress=False, max_pressure=limit, **TANK)
+    assert res.constraints["feasible"] and res.constraints["pressure_range"][1] <= limit
+    assert res.objective[1] < res.objective[0]
