@@ -1,4 +1,4 @@
-"""Joint-fit benchmark: pamjax (optimistix Levenberg-Marquardt, forward-mode Jacobians through diffrax, jitted)
+"""Joint-fit benchmark: pamjax (its Levenberg-Marquardt, forward-mode Jacobians through diffrax, jitted)
 against SciPy (`scipy.optimize.least_squares`, trust-region reflective, 2-point finite-difference Jacobian, each
 residual from `scipy.integrate.solve_ivp` RK45 on an independent NumPy transcription of the same vector field), on
 the same synthetic data, model, parameterisation (pamjax's unconstrained θ) and start.

@@ -57,6 +57,16 @@ _CC[7, :7] = [42.57076742291101, -13.80770672017997, 93.98938432427124, 18.77919
               -6.685968952921985, -5.810979938412932]
 
 
+# The tableau as square (8, 8) stage tables for the stage loop: row i gives stage i's argument (A) and right-hand
+# side (C / h) from the earlier stages; stage 7 (the embedded solution) and 8 (y1) add k_6 and k_7 with weight 1.
+_A_STAGE = np.zeros((8, 8))
+_A_STAGE[1:6, :5] = _A[1:6, :5]
+_A_STAGE[6, :5], _A_STAGE[6, 5] = _A[5, :5], 1.0
+_A_STAGE[7, :5], _A_STAGE[7, 5], _A_STAGE[7, 6] = _A[5, :5], 1.0, 1.0
+_CC_STAGE = np.zeros((8, 8))
+_CC_STAGE[:, :7] = _CC
+
+
 def small_inverse(a):
     """Inverse of a small dense matrix by Gauss-Jordan elimination with partial pivoting, unrolled over its size.
 
@@ -147,17 +157,18 @@ def rodas5_step(f, t0, z0, h, inverse=small_inverse):
     f_t, jac_z = jac[:, 0], jac[:, 1:]
     w_inverse = inverse(jnp.eye(z0.shape[0], dtype=z0.dtype) / (h * _GAMMA) - jac_z)
 
-    def stage(value, i, ks):  # k_i from f at the stage's argument and the earlier stages
-        rhs = value + sum((_CC[i, j] / h) * ks[j] for j in range(i))
-        if _D[i] != 0.0:
-            rhs = rhs + (_D[i] * h) * f_t
-        return w_inverse @ rhs
+    # Stages 2-8 as a loop over the tableau (the field traced once for all seven, not seven times): stage i's
+    # argument is z0 + Σ_j A_ij k_j at t0 + c_i h, and k_i = W⁻¹ (f(·) + Σ_j (C_ij / h) k_j + d_i h f_t).
+    n = z0.shape[0]
+    k0 = w_inverse @ (f0 + (_D[0] * h) * f_t)
+    ks = jnp.zeros((8, n), z0.dtype).at[0].set(k0)
 
-    ks = [stage(f0, 0, [])]
-    for i in range(1, 6):
-        ks.append(stage(f(t0 + _C[i] * h, z0 + sum(_A[i, j] * ks[j] for j in range(i))), i, ks))
-    z = z0 + sum(_A[5, j] * ks[j] for j in range(5)) + ks[5]
-    ks.append(stage(f(t0 + h, z), 6, ks))
-    z = z + ks[6]  # the embedded order-4 solution
-    ks.append(stage(f(t0 + h, z), 7, ks))
+    def stage(i, ks):
+        z = z0 + jnp.asarray(_A_STAGE, z0.dtype)[i] @ ks
+        rhs = f(t0 + jnp.asarray(_C, z0.dtype)[i] * h, z) + (jnp.asarray(_CC_STAGE, z0.dtype)[i] / h) @ ks
+        rhs = rhs + (jnp.asarray(_D, z0.dtype)[i] * h) * f_t
+        return ks.at[i].set(w_inverse @ rhs)
+
+    ks = jax.lax.fori_loop(1, 8, stage, ks)
+    z = z0 + jnp.asarray(_A_STAGE, z0.dtype)[7] @ ks  # the embedded order-4 solution, the last stage's argument
     return z + ks[7], ks[7], f0

@@ -131,8 +131,8 @@ def solve(
     grid of at most `grid_step` [s]; inside jit they need the static `num_periods` (PWM periods covering [t0,
     ts[-1]], or grid steps). With adaptive stepping and a smoothed switching valve, `num_periods` (if given) puts
     step boundaries either side of every switching edge (`smooth_edge_steps`; `simulate` always does).
-    `starts_off`: a switching valve's previous PWM period is off at `t0` (a run from rest); False reads the signal's
-    own value there (a closed loop continuing period by period).
+    `starts_off`: a switching valve's previous PWM period is off at `t0` (a run from rest); False reads the
+    signal's own value there (a closed loop continuing period by period).
     """
     ts = jnp.asarray(ts, dtype=float)
     valve = system.valve

@@ -74,7 +74,7 @@ def trajectory_counts(n, seed=0):
 
     def loss(system, u, p0, v0):
         y0 = system.initial_state(pressure=p0, velocity=v0)
-        traj = solve(system, pamjax.Constant(u), ts, y0, 0.0, rtol=1e-6, atol=1e-6)
+        traj = solve(system, pamjax.Constant(u), ts, y0, 0.0, rtol=1e-6, atol=1e-6, max_steps=4096)  # 5 periods
         return jnp.mean(traj.position**2) + jnp.mean((traj.pressure / 1e5) ** 2), traj
 
     def one(u, p0, v0):
