@@ -142,6 +142,7 @@ from ._fit.bench_tests import (
     loop_average as loop_average,
     steady_friction_force as steady_friction_force,
 )
+from ._fit.design import DesignResult as DesignResult, design as design
 from ._fit.experiment import (
     AbstractExperiment as AbstractExperiment,
     Experiment as Experiment,
@@ -159,6 +160,7 @@ from ._fit.multistart import (
 )
 from ._fit.parameters import ParameterSpace as ParameterSpace, parameter_paths as parameter_paths
 from ._fit.predictions import predictions as predictions
+from ._fit.profile import Profile as Profile, ProfileResult as ProfileResult, profile as profile
 from ._fit.recording import Recording as Recording
 from ._fit.synthetic import synthetic_recording as synthetic_recording
 

@@ -33,6 +33,7 @@ _BENCH_KEYS = {"dir", "rate", "kinds", "fitted_keys", "substeps"}
 _EXPERIMENT_KEYS = {"name", "file", "signal", "channels", "scales", "tank_volume", "initial", "rate", "filter_hz",
                     "t_end", "max_steps", "rename", "units", "unit_checks", "stepping"}
 RESULT, MODEL, FIGURE, CHECKPOINT, BENCH = "fit.json", "model.json", "fit.png", "checkpoint.npz", "bench.json"
+PROFILE, PROFILE_FIGURE = "profile.json", "profile.png"
 
 
 def add_arguments(parser):
@@ -43,6 +44,8 @@ def add_arguments(parser):
                         help="continue the fit checkpointed in --out (after Ctrl-C, a crash or a max_steps stop)")
     parser.add_argument("--quiet", action="store_true", help="no per-iteration progress")
     parser.add_argument("--no-plot", action="store_true", help="skip the figure")
+    parser.add_argument("--profile", action="store_true", help="also profile every fitted parameter: write "
+                        "profile.json and profile.png (pamjax.profile, docs/identifiability.md)")
 
 
 def _check_free(free):
@@ -280,6 +283,8 @@ def run(args):
         raise PamjaxInputError(f"pamjax fit: {out / CHECKPOINT} holds an earlier fit (checkpointed after {earlier}); "
                                "continue it with --resume, or start again with --overwrite")
     outputs = [RESULT, MODEL, CHECKPOINT] + ([] if args.no_plot else [FIGURE]) + ([BENCH] if bench else [])
+    if args.profile:
+        outputs += [PROFILE] + ([] if args.no_plot else [PROFILE_FIGURE])
     # --resume replaces what the resumed run wrote (its checkpoint proves it is the same problem)
     replaceable = outputs if args.resume else []
     with OutputFolder(out, "pamjax fit", outputs, overwrite=args.overwrite, replaceable=replaceable) as folder:
@@ -350,4 +355,21 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None):
         except ModuleNotFoundError:
             print("no figure: matplotlib is not installed (pip install matplotlib)")
     print("wrote " + ", ".join(str(p) for p in written if p is not None))
+    if args.profile:  # pamjax.profile along every fitted parameter, re-using the fit's compiled programs
+        written = _profile_and_write(args, folder, res)
     return 1 if folder.failed else 0
+
+
+def _profile_and_write(args, folder, res):
+    import pamjax as pj
+
+    prof = pj.profile(res, progress=not args.quiet)
+    print(f"profiles ({prof.profile_s:.1f} s):\n{prof.table()}")
+    written = [folder.write_text(PROFILE, json.dumps(prof.to_dict(), indent=1) + "\n")]
+    if not args.no_plot:
+        try:
+            written.append(folder.write(PROFILE_FIGURE, prof.plot))
+        except ModuleNotFoundError:
+            print("no profile figure: matplotlib is not installed (pip install matplotlib)")
+    print("wrote " + ", ".join(str(p) for p in written if p is not None))
+    return written

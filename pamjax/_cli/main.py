@@ -25,6 +25,8 @@ _COMMANDS = {
     "fit": ("pamjax._cli.fit", "Fit parameters to recordings as described by a TOML config; write the fitted model."),
     "simulate": ("pamjax._cli.simulate", "Simulate any model with any input; write the trajectory (CSV) and a figure."),
     "sweep": ("pamjax._cli.sweep", "Run a batch sweep described by a TOML config; write NPZ/CSV and a figure."),
+    "design": ("pamjax._cli.design",
+               "Design a PWM duty experiment by gradient; write the signal as CSV and a figure."),
     "reproduce": ("pamjax._cli.reproduce",
                   "Reproduce every experiment of papers 000 and 001 (fits/papers); index page."),
 }

@@ -48,7 +48,8 @@ class FitResult:
     - `fit_s`, `compile_s`: wall time of the fit without compilation, and the compilation (each compiled
       function's first call less its median later call).
     - `model`: the fitted model (not stored in JSON; `apply(base_model)` rebuilds it); `predictions`: experiment →
-      channel → the fitted model at the recording's times (NaN where a sample was masked; not stored in JSON).
+      channel → the fitted model at the recording's times (NaN where a sample was masked; not stored in JSON);
+      `experiments`: the experiments as fitted (not stored in JSON; `pamjax.profile` re-optimises against them).
     """
 
     labels: list
@@ -74,10 +75,11 @@ class FitResult:
     num_residuals: int
     model: object = dataclasses.field(default=None, repr=False, compare=False)
     predictions: dict = dataclasses.field(default=None, repr=False, compare=False)
+    experiments: object = dataclasses.field(default=None, repr=False, compare=False)  # as fitted (pamjax.profile)
 
     def to_dict(self):
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
-                if f.name not in ("model", "predictions")}
+                if f.name not in ("model", "predictions", "experiments")}
 
     @classmethod
     def from_dict(cls, d):
@@ -490,6 +492,7 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
         num_residuals=used,
         model=fitted,
         predictions=_predictions_from(exps, r_all),
+        experiments=exps,
     )
     if math.isnan(res.cost):
         raise RuntimeError("fit produced a NaN cost; this is a bug in pamjax")

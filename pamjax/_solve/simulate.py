@@ -13,7 +13,7 @@ from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractSystem
 from . import synchronous as _sync
-from .edges import ScheduledValve, StartsOff
+from .edges import EdgeClipController, ScheduledValve, StartsOff
 from .hints import default_max_steps, failure_hint, fixed_step_hint
 from .rodas import Rodas5
 from .scaled import scaled
@@ -56,7 +56,8 @@ def solve(
     `stepping="pwm"` integrates on the PWM-synchronous grid (`pamjax._solve.synchronous`), `stepping="grid"` on a
     uniform grid of at most `grid_step` [s]; inside jit they need the static `num_periods` (PWM periods covering [t0,
     ts[-1]], or grid steps). With adaptive stepping and a valve with smoothed switching edges, `num_periods` (if
-    given) puts step boundaries either side of every edge (the valve's `edge_steps`; `simulate` always does).
+    given) puts step boundaries either side of every edge (`EdgeClipController`, asking the valve's `next_edge_step`;
+    `simulate` always does).
     `starts_off`: a switching valve's previous PWM period is off at `t0` (a run from rest);
     False reads the signal's own value there (a closed loop continuing period by period).
     """
@@ -67,8 +68,8 @@ def solve(
         return _solve_fixed(system, signal, ts, y0, t0, stepping, substeps, num_periods, grid_step, throw)
     if system.valve.switches and starts_off:  # the valve is off before the run (as the PWM grid and the schedule)
         signal = StartsOff(signal, system.valve.command_time(t0))
-    step_ts = None if num_periods is None else system.valve.edge_steps(signal, t0, num_periods)
-    controller = _controller(system, ts, rtol, atol, jump_ts, step_ts)
+    edge_clip = system.valve.smooth_edges and num_periods is not None
+    controller = _controller(system, signal, ts, rtol, atol, jump_ts, edge_clip)
     if isinstance(adjoint, str):
         adjoint = {"forward": dfx.ForwardMode(), "reverse": dfx.RecursiveCheckpointAdjoint()}[adjoint]
     adjoint = dfx.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
@@ -76,7 +77,7 @@ def solve(
                            max_steps, dt0, adjoint, throw)
 
 
-def _controller(system, ts, rtol, atol, jump_ts, step_ts=None):
+def _controller(system, signal, ts, rtol, atol, jump_ts, edge_clip):
     """The PID step-size controller of an adaptive solve.
 
     dtmax: a switching valve's windows must not be stepped over (its `max_step`). dtmin without forcing: a state that
@@ -90,8 +91,10 @@ def _controller(system, ts, rtol, atol, jump_ts, step_ts=None):
     dtmin = None if jump_ts is not None else 50 * jnp.finfo(float).eps * jnp.maximum(jnp.abs(ts[-1]), 1.0)
     controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=system.valve.max_step(), dtmin=dtmin,
                                    force_dtmin=False)
-    if jump_ts is not None or step_ts is not None:  # step_ts: either side of a smoothed edge (the valve's edge_steps)
-        controller = dfx.ClipStepSizeController(controller, step_ts=step_ts, jump_ts=jump_ts)
+    if edge_clip:  # steps end either side of every smoothed switching edge (the valve's next_edge_step)
+        controller = EdgeClipController(controller, system.valve, signal)
+    if jump_ts is not None:
+        controller = dfx.ClipStepSizeController(controller, jump_ts=jump_ts)
     return controller
 
 

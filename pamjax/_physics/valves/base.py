@@ -30,7 +30,7 @@ class AbstractControlElement(eqx.Module):
     - `exact_edges`: whether the solver must be handed its switching times (an exact-edge reference, which carries
       no derivative with respect to the edge times).
     - `smooth_edges`: whether its switching edges are smoothed steps that an adaptive solver must not straddle
-      (then `edge_steps` gives the step boundaries either side of them).
+      (then `next_edge_step(signal, t)` gives the next step boundary beside one).
     - `averaged`: whether its flow is a smooth cycle average that `command_for_flow` inverts (paper 000 eq. 13).
     - `command_time(t)`, `read_command(signal, t)`: when the command is read, and what the element acts on at `t`.
     """
@@ -51,11 +51,10 @@ class AbstractControlElement(eqx.Module):
     def switching_time_scale(self):
         return None
 
-    def edge_steps(self, signal, t0, num_periods):
-        """Step boundaries [s] (traceable, sorted) either side of every smoothed switching edge of the `num_periods`
-        PWM periods from `t0` (and the period before, whose off edge can fall after `t0`), for an adaptive solver's
-        step-size controller; None where the element has no smoothed edges (`smooth_edges` False)."""
-        return None
+    def next_edge_step(self, signal, t):
+        """The first step boundary [s] after `t` (traceable) beside a smoothed switching edge, for an adaptive
+        solver's step-size controller (`pamjax._solve.edges.EdgeClipController`); only asked where `smooth_edges`."""
+        raise TypeError(f"{type(self).__name__} has no smoothed switching edges (smooth_edges is False)")
 
     def command_time(self, t):
         return t

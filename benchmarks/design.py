@@ -1,0 +1,194 @@
+"""Designing pays: a 33 s experiment designed by `pamjax.design` against paper 000's triangle pair (E3 + E4).
+
+    python benchmarks/design.py [--seeds 20] [--steps 20] [--out results/benchmark_design]
+
+Plant (the identification issue's): `presets.mas10_system(valve="pwm", friction="karnopp")`, the switching valve on
+the PWM-synchronous grid with exact stick-slip friction; the 15 bench parameters of
+`shared/data/hybrid-reference-bench/meta.json` (`fitted_keys`) are free. The truth is that bench's `params` (set in
+the preset model); every fit and the design start from the presets (datasheet values), as an experimenter would.
+
+1. Design (timed, compilation included: a fresh process, JAX's persistent cache off): a 33 s duty signal (the
+   duration of E3 + E4), D-optimal over the 15 parameters at the presets, with the bench's six tank tests (E1, E2:
+   constant-volume charge and discharge at duty 0.25/0.5/0.75, 2 s each) as information in hand (a muscle run alone
+   cannot separate the valve's flow scale from the muscle's volume: C_v12, C_v23, v0, v1 scaled together leave
+   every muscle run unchanged) and the triangle pair as the baseline it must match on every parameter.
+2. For each of `--seeds` noise seeds: recordings of the truth at 1 kHz with the bench's noise (2 kPa, 0.1 mm) of
+   the tank tests (the same noise in both arms), of the triangle pair (E3 Triangle(0.05, 0.95, 0.08) 25 s, E4
+   Triangle(0.05, 0.95, 0.25) 8 s) and of the designed run; `pamjax.fit` of tanks + triangle pair and of tanks +
+   designed run, from the presets.
+3. Per parameter: the empirical standard deviation of the fitted values over the seeds in each arm, and
+   ratio = SD(triangle pair) / SD(designed) (the issue's figure), beside the ratio the design predicted.
+
+Ends with
+    RESULT design_s=... se_ratio_geomean=... se_ratio_worst=... fits_converged=.../40
+and writes OUT/design_benchmark.json, OUT/design.csv (the signal) and OUT/design.png.
+"""
+
+import argparse
+import inspect
+import json
+import os
+import pathlib
+import platform
+import sys
+import time
+
+os.environ.setdefault("JAX_ENABLE_COMPILATION_CACHE", "false")
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)
+import numpy as np  # noqa: E402
+
+import pamjax as pj  # noqa: E402
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+# the shared data beside the checkout (a worktree sits one level deeper); --bench overrides
+BENCH = next((p / "shared" / "data" / "hybrid-reference-bench" for p in (ROOT.parent, ROOT.parent.parent)
+              if (p / "shared" / "data" / "hybrid-reference-bench").is_dir()), ROOT.parent / "shared")
+NOISE = {"pressure": 2e3, "position": 1e-4}  # Pa, m: the bench's meta.json `noise`
+RATE = 1000.0  # Hz, the bench's sampling
+TRIANGLES = [("E3", pj.Triangle(0.05, 0.95, 0.08), 25.0), ("E4", pj.Triangle(0.05, 0.95, 0.25), 8.0)]  # paper 000
+DURATION = 33.0  # s: E3 + E4
+
+
+def truth_model(model, bench):
+    """The preset model with the bench's true values of the fitted parameters."""
+    space = pj.ParameterSpace(model, bench.free)
+    by_label = {label: key for key, (_, label) in pj.BENCH_PARAMETERS.items()}
+    return space.with_values(np.asarray([bench.meta["params"][by_label[lbl]] for lbl in space.labels]))
+
+
+class Arm:
+    """Noise-free recordings of some experiments (simulated once from the truth) and their noisy copies per seed."""
+
+    def __init__(self, truth, specs):
+        self.specs, self.clean = specs, []
+        for name, signal, duration, build, initial, channels in specs:
+            t = np.arange(0.0, duration + 0.5 / RATE, 1.0 / RATE)
+            system = truth if build is None else build(truth)
+            rec = pj.synthetic_recording(system, signal, t, channels=list(channels), name=name,
+                                         y0=system.initial_state(**initial))
+            self.clean.append(rec)
+
+    def experiments(self, rng):
+        out = []
+        for (name, signal, _, build, initial, channels), rec in zip(self.specs, self.clean):
+            data = {c: rec[c] + NOISE[c] * rng.standard_normal(rec.t.shape) for c in channels}
+            noisy = pj.Recording(rec.t, data, name=name)
+            out.append(pj.Experiment(noisy, signal, channels=list(channels), scales={c: NOISE[c] for c in channels},
+                                     build=build, initial=initial, name=name))
+        return out
+
+
+def tank_specs(bench):
+    specs = []
+    for e in bench.experiments:  # the bench's tank tests: their signals, volumes and initial pressures
+        specs.append((e.name, e.signal, float(e.times[-1]), e.build, dict(e.initial), ("pressure",)))
+    return specs
+
+
+def muscle_specs(runs):
+    return [(name, signal, duration, None, {}, ("pressure", "position")) for name, signal, duration in runs]
+
+
+def fit_arm(model, free, experiments):
+    t0 = time.perf_counter()
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pj.PamjaxIdentifiabilityWarning)
+        res = pj.fit(model, experiments, free, max_steps=100, progress=False)
+    return res, time.perf_counter() - t0
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--steps", type=int, default=20, help="design iterations")
+    ap.add_argument("--out", default="results/benchmark_design")
+    ap.add_argument("--bench", default=str(BENCH), help="the bench directory whose tank tests, noise, fitted keys "
+                                                        "and true parameters are used")
+    args = ap.parse_args(argv)
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs, {platform.processor() or platform.platform()}; "
+          f"load average at start {os.getloadavg()[0]:.2f}; jax {jax.__version__}; "
+          f"pamjax {pathlib.Path(inspect.getfile(pj)).parent}", flush=True)
+    model = pj.presets.mas10_system(valve="pwm", friction="karnopp")
+    bench = pj.load_bench(args.bench, model, kinds=("tank_charge", "tank_discharge"))
+    truth = truth_model(model, bench)
+    tanks = Arm(truth, tank_specs(bench))
+    triangles = Arm(truth, muscle_specs(TRIANGLES))
+    rng0 = np.random.default_rng(0)
+
+    # 1. the design, from the presets
+    t0 = time.perf_counter()
+    res = pj.design(model, bench.free, DURATION, noise=NOISE, rate=RATE, prior=tanks.experiments(rng0),
+                    baseline=triangles.experiments(rng0), steps=args.steps)
+    design_s = time.perf_counter() - t0
+    print(f"design: {design_s:.1f} s ({res.compile_s:.1f} s to the first iteration), {res.message}; "
+          f"criterion {res.objective[0]:.3f} → {res.objective[1]:.3f}; constraints {res.constraints}", flush=True)
+    print(res.table(), flush=True)
+    res.to_csv(out / "design.csv", overwrite=True)
+    res.to_json(out / "design.json", overwrite=True)
+    res.plot(out / "design.png")
+    designed = Arm(truth, muscle_specs([("designed", res.signal(), DURATION)]))
+
+    # 2. noisy recordings and fits
+    labels = None
+    fitted = {"triangle": [], "designed": []}
+    status = {"triangle": [], "designed": []}
+    seconds = {"triangle": [], "designed": []}
+    for seed in range(args.seeds):
+        tank_exps = tanks.experiments(np.random.default_rng([seed, 0]))  # common to both arms
+        for arm, runs, stream in (("triangle", triangles, 1), ("designed", designed, 2)):
+            exps = tank_exps + runs.experiments(np.random.default_rng([seed, stream]))
+            fit, wall = fit_arm(model, bench.free, exps)
+            labels = fit.labels
+            fitted[arm].append(fit.values)
+            status[arm].append(fit.status)
+            seconds[arm].append(wall)
+            print(f"seed {seed:2d} {arm:<9} {fit.status:<10} {fit.iterations:3d} iterations {wall:6.1f} s "
+                  f"(compile {fit.compile_s:.1f} s)", flush=True)
+        if seed >= 1:  # the spreads so far (a long run can be read before it ends)
+            ratio = np.std(fitted["triangle"], axis=0, ddof=1) / np.std(fitted["designed"], axis=0, ddof=1)
+            ok = sum(s == "converged" for arm in status.values() for s in arm)
+            print(f"after {seed + 1} seeds: SD ratio geomean {np.exp(np.mean(np.log(ratio))):.2f}, worst "
+                  f"{np.min(ratio):.2f}; converged {ok}/{2 * (seed + 1)}; load average {os.getloadavg()[0]:.2f}",
+                  flush=True)
+
+    # 3. spreads
+    values = {arm: np.asarray(v) for arm, v in fitted.items()}
+    sd = {arm: np.std(v, axis=0, ddof=1) for arm, v in values.items()}
+    ratio = sd["triangle"] / sd["designed"]
+    predicted = np.asarray(res.standard_errors["baseline"]) / np.asarray(res.standard_errors["design"])
+    true_values = np.asarray(pj.ParameterSpace(truth, bench.free).initial_values())
+    by_label = {label: key for key, (_, label) in pj.BENCH_PARAMETERS.items()}
+    print(f"\n{'key':<6}{'true':>13}{'SD triangle':>13}{'SD designed':>13}{'ratio':>8}{'predicted':>10}"
+          f"{'bias tri [SD]':>14}{'bias des [SD]':>14}")
+    for i, label in enumerate(labels):
+        bias = [(np.mean(values[a][:, i]) - true_values[i]) / sd[a][i] for a in ("triangle", "designed")]
+        print(f"{by_label[label]:<6}{true_values[i]:>13.6g}{sd['triangle'][i]:>13.4g}{sd['designed'][i]:>13.4g}"
+              f"{ratio[i]:>8.2f}{predicted[i]:>10.2f}{bias[0]:>14.2f}{bias[1]:>14.2f}")
+    converged = sum(s == "converged" for arm in status.values() for s in arm)
+    total = sum(len(arm) for arm in status.values())
+    geomean = float(np.exp(np.mean(np.log(ratio))))
+    worst = float(np.min(ratio))
+    fit_med = {arm: float(np.median(s)) for arm, s in seconds.items()}
+    summary = dict(design_s=design_s, design_compile_s=res.compile_s, design_iterations=res.iterations,
+                   labels=labels, keys=[by_label[lbl] for lbl in labels], truth=true_values.tolist(),
+                   sd={a: v.tolist() for a, v in sd.items()}, ratio=ratio.tolist(), predicted_ratio=predicted.tolist(),
+                   values={a: v.tolist() for a, v in values.items()}, status=status, fit_s=seconds,
+                   fit_median_s=fit_med, seeds=args.seeds, load_average_end=os.getloadavg()[0],
+                   machine=f"{platform.machine()} {os.cpu_count()} CPUs", argv=sys.argv[1:])
+    (out / "design_benchmark.json").write_text(json.dumps(summary, indent=1))
+    print(f"\nfits: median {fit_med['triangle']:.1f} s (triangle pair), {fit_med['designed']:.1f} s (designed); "
+          f"load average at end {os.getloadavg()[0]:.2f}")
+    print(f"targets: geometric-mean SD ratio ≥ 3 ({geomean:.2f}), none below 1 (worst {worst:.2f}), "
+          f"{total}/{total} converged ({converged}), design ≤ 300 s ({design_s:.0f} s)")
+    print(f"RESULT design_s={design_s:.1f} se_ratio_geomean={geomean:.2f} se_ratio_worst={worst:.2f} "
+          f"fits_converged={converged}/{total}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,473 @@
+"""`design`: a PWM duty signal chosen by gradient to maximise what a recording will tell about named parameters.
+
+Workflow only: the objective (Fisher information through the solve, criteria, constraint penalties) is in
+`pamjax._design_objective`; the Jacobians of experiments already in hand come from the fit's compiled residual
+function (`pamjax._fit`); the iteration is a BFGS on the host with a backtracking line search on the objective's
+value (one forward-mode Jacobian per trial) and a gradient only at accepted points.
+"""
+
+import dataclasses
+import inspect
+import json
+import math
+import threading
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._core.errors import PamjaxInputError, require_float64
+from .._physics.signals import AbstractSignal, Sampled, Triangle
+from . import design_objective as obj
+from .experiment import Experiment
+from .fit import _residuals_and_jacobian
+from .parameters import ParameterSpace, strong_types
+from .recording import Recording, _writable
+
+# Defaults and their sources.
+DUTY_BAND = (0.1, 0.9)  # paper 000: with the MHE2's ~2 ms switching time, only duty 10-90 % has an effect at 50 Hz
+STROKE_MARGIN = 0.005  # m; assumed (paper 000 gives no clearance): ≈ 5 % of the MAS-10's 95 mm stroke
+START_LEVEL = Triangle(0.05, 0.95, 0.08)  # paper 000's E3 duty: the start of the envelope's level
+START_AMPLITUDE = 0.25  # of the band; assumed: the carrier swings the duty by ±20 % of 0.8 around the level
+CARRIER_HOLD = 10  # PWM periods (0.2 s at 50 Hz): the hold of the most informative of the multilevel signals
+# compared in docs/identifiability.md (0.1, 0.2, 0.5 and 1 s holds)
+DESIGN_RATE = 250.0  # Hz: the objective's samples; the information matrix agrees within 0.2 % with 1 kHz (docs)
+DESIGN_SUBSTEPS = 4  # RK4 nodes per PWM period in the objective: within 0.2 % of the fit's 16 (docs)
+FIT_SUBSTEPS = inspect.signature(Experiment.__init__).parameters["substeps"].default  # what a fit integrates with
+
+
+@dataclasses.dataclass
+class DesignResult:
+    """The outcome of `design`.
+
+    - `times` [s] (start of each PWM period), `duty` [-] (one value per period), `period` [s]; `signal()` gives the
+      `Sampled` signal, `to_csv` writes it (`t [s]`, `duty [-]`).
+    - `labels`, `values` (the design point), `subset` (the labels the criterion is on), `criterion` ("D" or "A").
+    - `standard_errors`: predicted (Cramér-Rao) standard errors in physical units per label, for "design" (prior
+      experiments + the designed one), "prior" (prior experiments alone; inf where they do not determine it) and
+      "baseline" (prior + baseline experiments) when a baseline was given.
+    - `objective`: [start, end] values of the criterion; `history`: per iteration [iteration, objective, criterion,
+      step length, accepted].
+    - `constraints`: the predicted stroke and pressure extremes, the largest duty step, the limits, `feasible`.
+    - `design_s`: wall time of the whole design; `compile_s`: of its start (compiling the objective and its
+      gradient, overlapped with the prior and baseline experiments' Jacobians), before the first iteration.
+    - `prediction`: the predicted run at the objective's samples (t, position, pressure; not in JSON).
+    """
+
+    times: list
+    duty: list
+    period: float
+    labels: list
+    values: list
+    subset: list
+    criterion: str
+    standard_errors: dict
+    objective: list
+    history: list
+    constraints: dict
+    parametrisation: str
+    iterations: int
+    message: str
+    design_s: float
+    compile_s: float
+    prediction: dict = dataclasses.field(default=None, repr=False, compare=False)
+
+    def signal(self):
+        """The designed duty as `pamjax.Sampled(times, duty, period=period)`."""
+        return Sampled(jnp.asarray(self.times), jnp.asarray(self.duty), period=self.period)
+
+    def to_dict(self):
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "prediction"}
+
+    def to_json(self, path, overwrite=False):
+        path = _writable(path, overwrite)
+        path.write_text(json.dumps(self.to_dict(), indent=1))
+        return path
+
+    def to_csv(self, path, overwrite=False):
+        """`t [s],duty [-]`, one row per PWM period, the predicted standard errors in '#' comment lines above
+        (`pamjax.Recording.load(path)` reads it; `Sampled(rec.t, rec["duty"], period=...)` replays it)."""
+        path = _writable(path, overwrite)
+        lines = [f"# pamjax design: {self.criterion}-optimal over {', '.join(self.subset)}; PWM period "
+                 f"{self.period} s; duty latched per period",
+                 "# predicted standard errors (Cramér-Rao, SI units): label, design"
+                 + (", baseline" if "baseline" in self.standard_errors else "") + ", prior experiments alone"]
+        for i, label in enumerate(self.labels):
+            cols = [self.standard_errors["design"][i]]
+            if "baseline" in self.standard_errors:
+                cols.append(self.standard_errors["baseline"][i])
+            cols.append(self.standard_errors["prior"][i])
+            lines.append(f"#   {label}, " + ", ".join(f"{c:.6g}" for c in cols))
+        lines.append("t [s],duty [-]")
+        lines += [f"{t!r},{d!r}" for t, d in zip(map(float, self.times), map(float, self.duty))]
+        path.write_text("\n".join(lines) + "\n")
+        return path
+
+    def table(self):
+        """Text table: label, value, predicted standard error (design, baseline, prior alone) and their ratio."""
+        base = self.standard_errors.get("baseline")
+        head = f"{'parameter':<40}{'value':>13}{'se design':>12}" + (f"{'se baseline':>13}{'ratio':>8}" if base
+                                                                       else "") + f"{'se prior':>12}"
+        rows = [head]
+        for i, label in enumerate(self.labels):
+            se = self.standard_errors["design"][i]
+            row = f"{label:<40}{self.values[i]:>13.6g}{se:>12.3g}"
+            if base:
+                row += f"{base[i]:>13.3g}{base[i] / se:>8.2f}"
+            rows.append(row + f"{self.standard_errors['prior'][i]:>12.3g}")
+        return "\n".join(rows)
+
+    def plot(self, path):
+        """Figure: the duty, the predicted position and pressure with their limits, and the predicted relative
+        standard errors (design, baseline, prior alone)."""
+        from .design_plot import plot_design
+
+        return plot_design(self, path)
+
+
+def information(space, theta, experiments):
+    """Fisher information about θ of `experiments` (identification samples, as the fit uses them): JᵀJ of the
+    scaled residuals at θ (the fit's compiled Jacobian, shared with fits of the same problem structure)."""
+    exps = tuple(e.bind(space.model(theta)) if hasattr(e, "bind") else e for e in experiments)
+    mask = np.concatenate([used & ident for e in exps for _, _, _, used, ident in e.layout()])
+    _, jac = _residuals_and_jacobian(space, jnp.asarray(theta), exps)
+    jac = np.asarray(jac)[mask]
+    return jac.T @ jac
+
+
+def _validate(model, free, duration, noise, channels, band, criterion, subset, parametrisation, knots, steps, rate,
+              stroke_margin, max_pressure, max_duty_step, period):
+    require_float64("pamjax.design")
+    if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
+        raise PamjaxInputError(f"duration must be a positive number of seconds, got {duration!r}")
+    valve = getattr(model, "valve", None)
+    frequency = getattr(valve, "pwm_frequency", None)
+    if period is None and frequency is None:
+        raise PamjaxInputError("period: the model's valve has no pwm_frequency; give the PWM period [s] explicitly")
+    period = float(1.0 / float(frequency)) if period is None else float(period)
+    if not period > 0:
+        raise PamjaxInputError(f"period must be > 0 [s], got {period}")
+    channels = tuple(channels)
+    if not channels:
+        raise PamjaxInputError("channels must name at least one recorded channel, e.g. ('pressure', 'position')")
+    if not isinstance(noise, dict) or not set(channels) <= set(noise):
+        raise PamjaxInputError(f"noise must give the noise standard deviation of every channel {list(channels)} "
+                               f"(e.g. {{'pressure': 2e3, 'position': 1e-4}} [Pa, m]), got {noise!r}")
+    for c in channels:
+        if not (math.isfinite(float(noise[c])) and float(noise[c]) > 0):
+            raise PamjaxInputError(f"noise[{c!r}] must be > 0 (the channel's standard deviation), got {noise[c]!r}")
+    lo, hi = (float(b) for b in band)
+    if not 0.0 <= lo < hi <= 1.0:
+        raise PamjaxInputError(f"duty_band must be (lo, hi) with 0 <= lo < hi <= 1, got {band!r}")
+    if criterion not in ("D", "A"):
+        raise PamjaxInputError(f"criterion must be 'D' or 'A', got {criterion!r}")
+    if parametrisation not in ("envelope", "periods"):
+        raise PamjaxInputError(f"parametrisation must be 'envelope' or 'periods', got {parametrisation!r}")
+    if not (isinstance(knots, int) and knots >= 4):
+        raise PamjaxInputError(f"knots must be an int >= 4 (cubic B-spline coefficients), got {knots!r}")
+    if not (isinstance(steps, int) and steps >= 0):
+        raise PamjaxInputError(f"steps must be a non-negative int, got {steps!r}")
+    if not (math.isfinite(rate) and rate > 0):
+        raise PamjaxInputError(f"rate must be the recording's sample rate [Hz] > 0, got {rate!r}")
+    if not stroke_margin >= 0:
+        raise PamjaxInputError(f"stroke_margin must be >= 0 [m], got {stroke_margin!r}")
+    if max_pressure is not None and not max_pressure > 0:
+        raise PamjaxInputError(f"max_pressure must be an absolute pressure > 0 [Pa], got {max_pressure!r}")
+    if max_duty_step is not None and not 0 < max_duty_step <= 1:
+        raise PamjaxInputError(f"max_duty_step must be in (0, 1] (duty change per PWM period), got {max_duty_step!r}")
+    space = ParameterSpace(model, free)
+    subset = list(space.labels) if subset is None else list(subset)
+    unknown = [s for s in subset if s not in space.labels]
+    if unknown or not subset:
+        raise PamjaxInputError(f"subset {unknown or subset!r} must name free parameters; they are {space.labels}")
+    return space, subset, period, channels
+
+
+def _template(model, duration, period, rate, channels, noise, start, substeps, duty):
+    """The designed experiment (a Sampled duty, a blank recording at `rate`) bound to `model`."""
+    times = np.arange(0.0, duration + 0.5 / rate, 1.0 / rate)
+    blank = {c: np.full(times.shape, 101325.0 if c.startswith("pressure") else 0.0) for c in channels}
+    rec = Recording(times, blank, name="design")
+    starts = np.arange(len(duty)) * period
+    signal = Sampled(jnp.asarray(starts), jnp.asarray(duty, dtype=float), period=period)
+    exp = Experiment(rec, signal, channels=list(channels), scales={c: float(noise[c]) for c in channels},
+                     initial=start, name="design", substeps=substeps)
+    exp.check(model)
+    return exp.bind(model)
+
+
+def _start_coefficients(parametrisation, times, duration, knots, carrier, band, initial):
+    """The start: z = level + START_AMPLITUDE ξ, the level from `initial` (a signal or per-period duties; default
+    paper 000's E3 triangle), in the units of the soft clip (0 and 1 the band's ends; beyond them saturated)."""
+    lo, hi = band
+    if initial is None:
+        level = (np.asarray(jax.vmap(START_LEVEL)(jnp.asarray(times))) - lo) / (hi - lo)
+    else:
+        duty = (np.asarray(jax.vmap(initial)(jnp.asarray(times))) if isinstance(initial, AbstractSignal)
+                else np.asarray(initial, dtype=float))
+        if duty.shape != times.shape:
+            raise PamjaxInputError(f"initial must be a signal or one duty per PWM period ({times.size}), got shape "
+                                   f"{duty.shape}")
+        level = obj.unclip01((np.clip(duty, lo, hi) - lo) / (hi - lo))
+    if parametrisation == "periods":
+        return level + (START_AMPLITUDE * carrier if initial is None else 0.0), None
+    b = obj.bspline_basis(times, 0.0, duration, knots)
+    c_level = np.linalg.lstsq(b, level, rcond=None)[0]
+    amplitude = np.full(knots, START_AMPLITUDE if initial is None else 0.0)
+    return np.concatenate([c_level, amplitude]), obj.envelope_basis(times, duration, knots, carrier)
+
+
+def _floor(prior_info, base_info, margin):
+    """Variances of θ the design must reach: those of a run carrying `margin`² times the baseline run's information
+    about each parameter beyond the prior's, 1/v = 1/v_prior + margin² (1/v_baseline − 1/v_prior) (`margin` = 1:
+    the baseline's variances; where the prior alone fixes a parameter as well as the baseline does, its own)."""
+    v_base = variances(base_info)
+    prior_precision = 1.0 / variances(prior_info)  # 0 where the prior leaves a parameter free
+    gain = np.maximum(1.0 / v_base - prior_precision, 0.0)
+    return 1.0 / (prior_precision + margin**2 * gain)
+
+
+def _violation(aux):
+    """The largest constraint violation in its penalty's units (mm, kPa, duty %)."""
+    return max(float(aux["worst_stroke"]) / obj.STROKE_UNIT, float(aux["worst_pressure"]) / obj.PRESSURE_UNIT,
+               float(aux["worst_step"]) / obj.STEP_UNIT)
+
+
+def _optimise(c, problem, gradient, steps, report):
+    """BFGS on the host: a backtracking line search on the value (cheap), a gradient at each accepted point; a
+    trial may not leave the feasible set (or, from an infeasible start, increase the worst violation). The cost
+    jumps where a stick-slip phase appears or vanishes, so a failed line search restarts from steepest descent;
+    two failures in a row end the search."""
+    v, aux = obj.value(jnp.asarray(c), problem)
+    v = float(v)
+    g = np.asarray(gradient(jnp.asarray(c), problem))
+    eye = np.eye(c.size)
+    h0 = 0.5 / max(float(np.max(np.abs(g))), 1e-12)  # first step moves z by at most 0.5 (the band is z ∈ [0, 1])
+    inverse = eye * h0
+    history = [[0, v, float(aux["criterion"]), 0.0, True]]
+    failures, message = 0, f"{steps} iterations"
+    for it in range(1, steps + 1):
+        direction = -inverse @ g
+        slope = float(g @ direction)
+        if not slope < 0:
+            inverse, direction = eye * h0, -h0 * g
+            slope = float(g @ direction)
+        step, accepted = 1.0, False
+        for _ in range(8):
+            trial = c + step * direction
+            v_trial, aux_trial = obj.value(jnp.asarray(trial), problem)
+            v_trial = float(v_trial)
+            feasible = _violation(aux_trial) <= max(_violation(aux), 0.0) + 1e-9
+            if math.isfinite(v_trial) and v_trial <= v + 1e-4 * step * slope and feasible:
+                accepted = True
+                break
+            step *= 0.3
+        history.append([it, v_trial if accepted else v, float((aux_trial if accepted else aux)["criterion"]), step,
+                         accepted])
+        if report is not None:
+            report(it, history[-1][1], history[-1][2], step, accepted)
+        if not accepted:
+            failures += 1
+            inverse = eye * h0 * 0.1
+            if failures >= 2:
+                message = f"stopped after {it} iterations: no descent along the gradient (a kink of the cost)"
+                break
+            continue
+        failures = 0
+        g_new = np.asarray(gradient(jnp.asarray(trial), problem))
+        s, y = trial - c, g_new - g
+        if s @ y > 1e-12 * np.linalg.norm(s) * np.linalg.norm(y):
+            rho = 1.0 / (s @ y)
+            left = eye - rho * np.outer(s, y)
+            inverse = left @ inverse @ left.T + rho * np.outer(s, s)
+        decrease = v - v_trial
+        c, g, v, aux = trial, g_new, v_trial, aux_trial
+        if decrease < 1e-6 * max(abs(v), 1.0) and step == 1.0:
+            message = f"converged after {it} iterations (objective decrease below 1e-6)"
+            break
+    return c, aux, history, message
+
+
+def variances(info, transform=None):
+    """Diagonal of G F⁺ Gᵀ (G = `transform`, default the identity): the Cramér-Rao variances, inf for every entry
+    that moves along a direction F does not fix (an eigenvalue below 1e-9 of the largest)."""
+    g = np.eye(info.shape[0]) if transform is None else np.asarray(transform)
+    w, v = np.linalg.eigh(0.5 * (info + info.T))
+    good = w > 1e-9 * max(float(w.max()), 1e-300)
+    var = np.clip(np.diag(g @ ((v[:, good] / w[good]) @ v[:, good].T) @ g.T), 0.0, None)
+    null = g @ v[:, ~good]
+    loose = (np.abs(null).max(axis=1) > 1e-9 * np.abs(g).max(axis=1)) if null.size else np.zeros(var.shape, bool)
+    return np.where(loose, np.inf, var)
+
+
+def _physical_errors(space, theta, info):
+    """Predicted standard errors in physical units (inf along directions the information does not fix)."""
+    g = np.asarray(jax.jacfwd(space.physical)(jnp.asarray(theta)))
+    return [float(math.sqrt(v)) for v in variances(info, g)]
+
+
+# Long: the entry point reads top-down (checks, parametrisation, optimisation loop, result); to be split by concern
+def design(
+    model,
+    free,
+    duration: float,
+    *,
+    noise: dict,
+    channels=("pressure", "position"),
+    start=None,
+    rate: float = 1000.0,
+    prior=(),
+    baseline=None,
+    baseline_margin: float = 1.0,
+    criterion: str = "D",
+    subset=None,
+    duty_band=DUTY_BAND,
+    stroke_margin: float = STROKE_MARGIN,
+    max_pressure=None,
+    max_duty_step=None,
+    parametrisation: str = "envelope",
+    knots: int = 12,
+    steps: int = 20,
+    initial=None,
+    seed: int = 0,
+    period=None,
+    design_rate: float = DESIGN_RATE,
+    substeps: int = DESIGN_SUBSTEPS,
+    verify: bool = True,
+    progress=True,
+) -> DesignResult:
+    """Choose a PWM duty signal (one value per PWM period) that maximises the information a recording of
+    `duration` seconds gives about the parameters `free` of `model`, under a bench's constraints.
+
+    Maximises the Fisher information F = F_prior + Σ JᵀJ (J: the noise-scaled outputs' forward-mode Jacobian with
+    respect to the fit's scaled parameters, through the solve) in the D sense (minimise log det F⁻¹ on `subset`) or
+    the A sense (log tr F⁻¹), by BFGS with gradients through the solve, the PWM edges and the stick-slip events
+    (`pamjax._design_objective`). The design is local: it is optimal near the parameter values of `model` (the best
+    guess before the experiment), from the start signal.
+
+    **Arguments:**
+
+    - `model`: the system at the design point (e.g. `presets.mas10_system(valve="pwm", friction="karnopp")`); its
+      valve's PWM frequency sets the period (or give `period` [s]).
+    - `free`: the parameters of interest, as `fit` takes them.
+    - `duration`: of the designed run [s], from `start` (keyword arguments of `model.initial_state`; default at rest
+      at atmospheric pressure).
+    - `noise`: channel → noise standard deviation of the bench [channel unit], e.g. `{"pressure": 2e3, "position":
+      1e-4}`; `channels`: those recorded; `rate`: the recording's sample rate [Hz].
+    - `prior`: experiments already in hand (or run anyway, e.g. constant-volume tank tests): their information is
+      added (a muscle run alone cannot separate the valve's flow scale from the muscle's volume).
+    - `baseline`: experiments the design must match or beat on every parameter of `subset` (predicted standard
+      errors); with `baseline_margin` m > 1 the designed run must carry m² times the baseline run's information on
+      each of them beyond what `prior` gives (`_floor`); a penalty enforces it.
+    - `criterion`: "D" (default) or "A"; `subset`: labels the criterion is on (default all).
+    - `duty_band`: (lo, hi) duty the valve acts on (0.1, 0.9: paper 000); `stroke_margin` [m] kept from the end
+      stops (`muscle.min_position`, `max_position`); `max_pressure` [Pa abs] (default none: a valve cannot exceed
+      its supply); `max_duty_step`: largest duty change from one period to the next (default none).
+    - `parametrisation`: "envelope" (default: a level and an amplitude, `knots` cubic B-spline coefficients each,
+      modulating a seeded multilevel carrier; gradient in forward mode, 2·knots tangents) or "periods" (one free value
+      per period; gradient in reverse mode: exact but ~50× a Jacobian per step on a 2-core CPU for 33 s).
+    - `steps`: BFGS iterations at most; `initial`: start signal (a pamjax signal or one duty per period; default paper
+      000's E3 triangle with the carrier on top); `seed`: the carrier's.
+    - `design_rate` [Hz], `substeps`: resolution of the objective (docs/identifiability.md: within 0.2 % of the
+      fit's); `verify`: recompute the final standard errors at the fit's resolution (16 substeps, `rate`).
+    - `progress`: True prints one line per iteration; a callable gets (iteration, objective, criterion, step,
+      accepted); False is silent.
+
+    **Returns:** a `DesignResult` (`signal()`, `to_csv`, `to_json`, `plot`, `table`).
+    """
+    t_start = time.perf_counter()
+    space, subset, period, channels = _validate(
+        model, free, duration, noise, channels, duty_band, criterion, subset, parametrisation, knots, steps,
+        float(rate), stroke_margin, max_pressure, max_duty_step, period)
+    model = strong_types(model)
+    space = ParameterSpace(model, free)
+    theta = np.asarray(space.initial_theta())
+    lo, hi = (float(b) for b in duty_band)
+    count = int(math.ceil(duration / period - 1e-9))
+    times = np.arange(count) * period
+    carrier = obj.multilevel_carrier(count, CARRIER_HOLD, seed)
+    c0, basis = _start_coefficients(parametrisation, times, float(duration), knots, carrier, (lo, hi), initial)
+    start = dict(start or {})
+    exp = _template(model, float(duration), period, float(design_rate), channels, noise, start, substeps,
+                    lo + (hi - lo) * np.asarray(obj.clip01(jnp.asarray(c0 if basis is None else basis @ c0))))
+    muscle = getattr(model, "muscle", None)
+    stroke = None
+    if muscle is not None and "position" in channels:
+        stroke = jnp.asarray([float(muscle.min_position) + stroke_margin, float(muscle.max_position) - stroke_margin])
+    n = len(space.labels)
+    index = tuple(space.labels.index(s) for s in subset)
+
+    def problem(prior_info, floor):
+        return obj.DesignProblem(
+            space=space, theta=jnp.asarray(theta), experiment=exp, basis=None if basis is None else jnp.asarray(basis),
+            prior=jnp.asarray(prior_info), weight=jnp.asarray(float(rate) / float(design_rate)),
+            band=jnp.asarray([lo, hi]), stroke=stroke,
+            max_pressure=None if max_pressure is None else jnp.asarray(float(max_pressure)),
+            max_step=None if max_duty_step is None else jnp.asarray(float(max_duty_step)),
+            floor=None if floor is None else jnp.asarray(floor), subset=index, criterion=criterion)
+
+    gradient = obj.reverse_gradient if parametrisation == "periods" else obj.forward_gradient
+    report = _printer(progress)
+    if report is not None and not callable(progress):
+        print(f"design: {count} PWM periods, {len(c0)} coefficients ({parametrisation}), {criterion}-optimal over "
+              f"{len(subset)} of {n} parameters; compiling the objective and its gradient ...", flush=True)
+    # Compile the gradient (the long pole) in a second thread while the prior and baseline information are computed.
+    placeholder = problem(np.eye(n), None if baseline is None else np.ones(n))
+    warm = threading.Thread(target=lambda: jax.block_until_ready(gradient(jnp.asarray(c0), placeholder)), daemon=True)
+    t_compile = time.perf_counter()
+    warm.start()
+    prior_info = information(space, theta, prior) if len(prior) else np.zeros((n, n))
+    floor, base_info = None, None
+    if baseline is not None:
+        base_info = prior_info + information(space, theta, baseline)
+        floor = np.full(n, np.inf)
+        floor[list(index)] = _floor(prior_info, base_info, float(baseline_margin))[list(index)]
+    prob = problem(prior_info, floor)
+    start_value, start_aux = obj.value(jnp.asarray(c0), prob)
+    warm.join()
+    if not np.isfinite(float(start_value)):
+        loose = [lbl for lbl, v in zip(space.labels, variances(np.asarray(start_aux["information"]))) if np.isinf(v)]
+        raise PamjaxInputError(f"initial: the start signal (with the prior experiments) does not determine {loose}, "
+                               "so the criterion is undefined there; start from another signal (`initial`) or add "
+                               "prior experiments that fix them")
+    compile_s = time.perf_counter() - t_compile
+    c, aux, history, message = _optimise(np.asarray(c0, dtype=float), prob, gradient, steps, report)
+    duty = np.asarray(aux["duty"])
+    info = np.asarray(aux["information"])
+    if verify:  # at the fit's resolution (the Experiment's default substeps, the recording's rate)
+        full = _template(model, float(duration), period, float(rate), channels, noise, start, FIT_SUBSTEPS, duty)
+        info = prior_info + information(space, theta, [full])
+    errors = {"design": _physical_errors(space, theta, info), "prior": _physical_errors(space, theta, prior_info)}
+    if base_info is not None:
+        errors["baseline"] = _physical_errors(space, theta, base_info)
+    position, pressure = aux.get("position"), aux.get("pressure")
+    constraints = dict(
+        duty_band=[lo, hi], duty_range=[float(duty.min()), float(duty.max())],
+        largest_duty_step=float(np.max(np.abs(np.diff(duty)))) if duty.size > 1 else 0.0,
+        max_duty_step=max_duty_step, stroke_limits=None if stroke is None else [float(s) for s in stroke],
+        position_range=None if position is None else [float(np.min(position)), float(np.max(position))],
+        max_pressure=max_pressure, pressure_range=None if pressure is None else [float(np.min(pressure)),
+                                                                                 float(np.max(pressure))],
+        feasible=_violation(aux) <= 1e-9)
+    return DesignResult(
+        times=[float(t) for t in times], duty=[float(d) for d in duty], period=period, labels=list(space.labels),
+        values=[float(v) for v in np.asarray(space.initial_values())], subset=subset, criterion=criterion,
+        standard_errors=errors, objective=[history[0][2], float(aux["criterion"])], history=history,
+        constraints=constraints, parametrisation=parametrisation, iterations=len(history) - 1, message=message,
+        design_s=time.perf_counter() - t_start, compile_s=compile_s,
+        prediction=dict(t=np.asarray(exp.times), position=None if position is None else np.asarray(position),
+                        pressure=None if pressure is None else np.asarray(pressure)))
+
+
+def _printer(progress):
+    if callable(progress):
+        return progress
+    if not progress:
+        return None
+
+    def report(it, objective, criterion, step, accepted):
+        print(f"  iter {it:3d}  objective {objective:.6f}  criterion {criterion:.6f}  step {step:.3g}  "
+              f"{'accepted' if accepted else 'no descent'}", flush=True)
+
+    return report

@@ -1,0 +1,53 @@
+"""The figure of a `DesignResult`: the designed duty, the predicted run against its limits, and the predicted
+standard errors against the baseline's and the prior experiments' alone."""
+
+import numpy as np
+
+
+def plot_design(result, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pred = result.prediction or {}
+    cons = result.constraints
+    fig, axes = plt.subplots(4, 1, figsize=(11, 11), gridspec_kw=dict(height_ratios=[1, 1, 1, 1.3]))
+    axes[0].step(result.times, result.duty, where="post", lw=0.7)
+    for b in cons["duty_band"]:
+        axes[0].axhline(b, color="C3", lw=0.8, ls="--")
+    axes[0].set(ylabel="duty [-]", title=f"{result.criterion}-optimal PWM duty ({result.parametrisation}), "
+                                         f"one value per {1e3 * result.period:g} ms period")
+    if pred.get("position") is not None:
+        axes[1].plot(pred["t"], 1e3 * np.asarray(pred["position"]), lw=0.7)
+        for b in cons["stroke_limits"] or []:
+            axes[1].axhline(1e3 * b, color="C3", lw=0.8, ls="--")
+        axes[1].set(ylabel="position [mm]", title="predicted at the design point (dashed: end stops less margin)")
+    else:
+        axes[1].axis("off")
+    if pred.get("pressure") is not None:
+        axes[2].plot(pred["t"], np.asarray(pred["pressure"]) / 1e5, lw=0.5)
+        if cons.get("max_pressure") is not None:
+            axes[2].axhline(cons["max_pressure"] / 1e5, color="C3", lw=0.8, ls="--")
+        axes[2].set(xlabel="t [s]", ylabel="pressure [bar abs]")
+    else:
+        axes[2].axis("off")
+    values = np.abs(np.asarray(result.values))
+    k = np.arange(len(result.labels))
+    series = [("design", "C0")] + ([("baseline", "C1")] if "baseline" in result.standard_errors else [])
+    series.append(("prior", "C7"))
+    width = 0.8 / len(series)
+    for j, (name, color) in enumerate(series):
+        rel = np.asarray(result.standard_errors[name], dtype=float) / np.where(values > 0, values, 1.0)
+        rel = np.where(np.isfinite(rel), rel, np.nan)
+        axes[3].bar(k + (j - (len(series) - 1) / 2) * width, 100 * rel, width, color=color,
+                    label={"prior": "prior experiments alone"}.get(name, name))
+    axes[3].set_yscale("log")
+    short = [".".join(lbl.split(".")[-2:]) if lbl.count(".") > 1 else lbl for lbl in result.labels]
+    axes[3].set_xticks(k, short, rotation=45, ha="right", fontsize=8)
+    axes[3].set(ylabel="predicted standard error [% of value]")
+    axes[3].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

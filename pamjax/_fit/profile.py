@@ -1,0 +1,405 @@
+"""`profile`: profile likelihoods of fitted parameters, their likelihood-ratio intervals and what they say.
+
+The profile of a parameter ψ is the best cost with ψ held at each value and every other free parameter re-fitted:
+
+    PL(v) = min_{θ : ψ(θ) = v} ½ Σ r(θ)²,      Δχ²(v) = 2 (PL(v) − PL(ψ̂)) / σ²,
+
+σ² = 2 cost / (samples − parameters) as in the fit's standard errors (1 when the scales are the noise and the model
+fits). {v : Δχ²(v) ≤ χ²₁(level)} (3.84 at 95 %) is the likelihood-ratio interval; for a model linear in its
+parameters it is the linearised ψ̂ ± 1.96 se, elsewhere it follows the likelihood where the linearisation does not
+(Raue et al. 2009, "Structural and practical identifiability analysis of partially observed dynamical models by
+exploiting the profile likelihood", Bioinformatics 25(15)). Verdicts:
+
+- identifiable: Δχ² crosses the threshold on both sides;
+- practically non-identifiable (lower / upper / both sides): the profile rises but stays below the threshold out to
+  the search span (the data bound ψ on that side only weakly, or not before a physical limit);
+- structurally non-identifiable: the profile is flat (Δχ² < `FLAT` over the whole span on both sides): other
+  parameters compensate exactly (e.g. k0, k1, k2 of paper 000 eq. 7, which enter only as k0/k2 and k1/k2).
+
+Each point is re-fitted by the fit's Levenberg-Marquardt (`pamjax._lm`) in the coordinates orthogonal to ψ's, warm
+started from the previous point plus the linearised change of the others along ψ; the residuals and Jacobians are
+the fit's compiled functions (`pamjax._fit`: no new compilation for a problem already fitted). The branches
+(parameter × side) are independent and run in a pool of threads, which XLA executes on separate cores.
+"""
+
+import concurrent.futures
+import dataclasses
+import json
+import math
+import pathlib
+import statistics
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._core.errors import PamjaxInputError, require_float64
+from . import lm as _lm
+from .fit import _Problem
+from .parameters import ParameterSpace
+from .recording import _writable
+
+FLAT = 1e-3  # Δχ²: a profile within this of its minimum over its whole span on both sides is flat (structural)
+BISECTIONS = 3  # re-fits bisecting the step across the threshold (the interval's end to ~1/8 of a step, then
+# interpolated)
+REFINES = 6  # shorter retakes of a step that jumps across the threshold (locates a steep crossing to ~4⁻⁶ of it)
+
+
+def chi2_quantile_1dof(level):
+    """χ²₁ quantile: (Φ⁻¹((1 + level)/2))² (3.841 at 0.95)."""
+    return statistics.NormalDist().inv_cdf(0.5 * (1.0 + level)) ** 2
+
+
+@dataclasses.dataclass
+class Profile:
+    """One parameter's profile: `values` (physical, ascending), `delta` (Δχ² at each), `others` (the re-fitted
+    values of the other parameters, by label), `converged` (per point), the likelihood-ratio `interval` (±inf on a
+    side not crossed), the `linearised` interval ψ̂ ± z se, and the `verdict`."""
+
+    label: str
+    value: float
+    values: list
+    delta: list
+    others: dict
+    converged: list
+    interval: list
+    linearised: list
+    verdict: str
+
+
+@dataclasses.dataclass
+class ProfileResult:
+    """The outcome of `profile`: `profiles` (one `Profile` per parameter, by `labels`), `level`, `threshold`
+    (Δχ²), `sigma2` (the residual variance the Δχ² is measured in), `cost` at the fit, `profile_s` (wall time)."""
+
+    profiles: list
+    labels: list
+    level: float
+    threshold: float
+    sigma2: float
+    cost: float
+    profile_s: float
+
+    def __getitem__(self, label):
+        for p in self.profiles:
+            if p.label == label:
+                return p
+        raise KeyError(f"no profile of {label!r}; profiled: {self.labels}")
+
+    def to_dict(self):
+        return dataclasses.asdict(self)
+
+    def to_json(self, path, overwrite=False):
+        """Write the result; refuses to replace an existing file unless `overwrite`."""
+        path = _writable(path, overwrite)
+        path.write_text(json.dumps(self.to_dict(), indent=1))
+        return path
+
+    def table(self):
+        """Text table: label, fitted value, likelihood-ratio interval, linearised interval, verdict."""
+        rows = [f"{'parameter':<40}{'fitted':>13}{'LR lower':>13}{'LR upper':>13}{'lin. lower':>13}"
+                f"{'lin. upper':>13}  verdict"]
+        for p in self.profiles:
+            rows.append(f"{p.label:<40}{p.value:>13.6g}{p.interval[0]:>13.6g}{p.interval[1]:>13.6g}"
+                        f"{p.linearised[0]:>13.6g}{p.linearised[1]:>13.6g}  {p.verdict}")
+        return "\n".join(rows)
+
+    def plot(self, path):
+        """Figure: every profile (Δχ² against the value) with the threshold, the fitted value and the linearised
+        interval's quadratic Δχ² = ((v − ψ̂)/se)²."""
+        from .profile_plot import plot_profiles
+
+        return plot_profiles(self, path)
+
+    def write(self, out, overwrite=False, report=False):
+        """`out/profile.json` and `out/profile.png` (the figure skipped without matplotlib); returns the paths.
+        `report` prints the table and what was written (`pamjax fit --profile`)."""
+        out = pathlib.Path(out)
+        figure = out / "profile.png"
+        if figure.exists() and not overwrite:
+            raise FileExistsError(f"{figure} exists; pass overwrite=True to replace it")
+        paths = [self.to_json(out / "profile.json", overwrite=overwrite)]
+        try:
+            paths.append(self.plot(figure))
+        except ModuleNotFoundError:
+            pass
+        if report:
+            print(f"profiles ({self.profile_s:.1f} s):\n{self.table()}\nwrote {', '.join(map(str, paths))}")
+        return paths
+
+
+class _Branch:
+    """One side of one parameter's profile: θ = τ u + N φ with ψ a monotone function of τ alone; walks τ away from
+    the fit, re-fitting φ at each point."""
+
+    def __init__(self, evaluator, index, u, side, theta, jac, se_tau, settings):
+        self.evaluator, self.index, self.u, self.side = evaluator, index, u, side
+        basis = np.linalg.svd(np.eye(u.size) - np.outer(u, u))[0][:, : u.size - 1]
+        self.null = basis  # orthonormal, ⟂ u
+        self.tau0 = float(u @ theta)
+        self.phi = basis.T @ theta
+        self.jac = jac  # full Jacobian at the current point
+        self.settings = settings
+        span = settings["span"]
+        finite = math.isfinite(se_tau) and se_tau > 0
+        self.step = min(settings["first_step"] * se_tau, 0.25 * span) if finite else 0.05 * span
+        self.points = []  # (tau, delta, theta, converged)
+
+    def theta(self, tau, phi):
+        return tau * self.u + self.null @ phi
+
+    def refit(self, tau, phi):
+        """Re-fit φ with τ held: Levenberg-Marquardt from `phi`."""
+        ev, s = self.evaluator, self.settings
+
+        def residuals(p):
+            return ev.residuals(self.theta(tau, p))
+
+        def jacobian(p):
+            r, j = ev.jacobian(self.theta(tau, p))
+            self.jac = j
+            return r, j @ self.null
+
+        r0 = residuals(phi)
+        if r0 is None:
+            return None
+        r0, j0 = jacobian(phi)
+        state = _lm.start(phi, r0, j0)
+        while not state.done and state.step < s["max_steps"]:
+            state = _lm.iterate(state, residuals, jacobian, ftol=s["ftol"], xtol=s["xtol"], gtol=s["gtol"],
+                                stall_steps=8)
+        self.jac = ev.jacobian(self.theta(tau, state.theta))[1]
+        return state
+
+    def walk(self):
+        """Step away from the fit until Δχ² passes the threshold by `overshoot`, the span or a bound is reached,
+        or `max_points` points are taken. A step that jumps across the threshold by more than the threshold itself
+        is retaken a quarter as long (at most `REFINES` times), so that the crossing is located where the profile
+        is steep or has a kink (a physical limit)."""
+        s, ev = self.settings, self.evaluator
+        tau, phi, last_delta, refines = self.tau0, self.phi, 0.0, 0
+        while len(self.points) < s["max_points"]:
+            step = self.side * self.step
+            if abs(tau + step - self.tau0) > s["span"]:
+                step = self.side * max(s["span"] - abs(tau - self.tau0), 0.0)
+                if abs(step) < 1e-12:
+                    break
+            # Predictor: the others' linearised change along τ, −(J_φᵀJ_φ)⁺ J_φᵀ J_τ.
+            j_phi, j_tau = self.jac @ self.null, self.jac @ self.u
+            slope = -np.linalg.lstsq(j_phi, j_tau, rcond=None)[0]
+            state = self.refit(tau + step, phi + slope * step)
+            delta = math.inf if state is None else 2.0 * (state.cost - ev.cost) / ev.sigma2
+            if delta > s["threshold"] and delta - last_delta > s["threshold"] and refines < REFINES:
+                refines += 1  # jumped across: retake a shorter step from the last point
+                self.step *= 0.25
+                self.jac = ev.jacobian(self.theta(tau, phi))[1]
+                continue
+            if state is None:  # the solve fails here: the physical range ends
+                break
+            tau, phi = tau + step, state.theta
+            theta = self.theta(tau, phi)
+            self.points.append((tau, delta, theta, state.reason.startswith("converged")))
+            if delta > s["threshold"] * s["overshoot"] or ev.space.at_bound(theta).any():
+                break
+            growth = delta - last_delta
+            if growth < s["threshold"] / 8:
+                self.step *= 2.0
+            elif growth > s["threshold"] / 2:
+                self.step *= 0.5
+            last_delta = delta
+        self._refine()
+        return self
+
+    def _refine(self):
+        """Bisect the last step across the threshold `BISECTIONS` times (re-fits warm-started from the point
+        below), so that interpolating √Δχ² places the interval's end to a small fraction of a step even where the
+        profile is far from quadratic."""
+        s, ev = self.settings, self.evaluator
+        below = [(t, d, th) for t, d, th, _ in self.points if d < s["threshold"]]
+        above = [(t, d, th) for t, d, th, _ in self.points if d >= s["threshold"]]
+        if not above:
+            return
+        lo = max(below, key=lambda p: abs(p[0] - self.tau0), default=(self.tau0, 0.0, self.tau0 * self.u +
+                                                                       self.null @ self.phi))
+        hi = min(above, key=lambda p: abs(p[0] - self.tau0))
+        for _ in range(BISECTIONS):
+            tau = 0.5 * (lo[0] + hi[0])
+            self.jac = ev.jacobian(lo[2])[1]
+            state = self.refit(tau, self.null.T @ lo[2])
+            if state is None:
+                break
+            theta = self.theta(tau, state.theta)
+            point = (tau, 2.0 * (state.cost - ev.cost) / ev.sigma2, theta)
+            self.points.append(point + (state.reason.startswith("converged"),))
+            lo, hi = (point, hi) if point[1] < s["threshold"] else (lo, point)
+        self.points.sort(key=lambda p: abs(p[0] - self.tau0))
+
+
+class _Evaluator:
+    """The fit's host problem (`pamjax._fit._Problem`: its compiled residual and Jacobian programs, through the
+    CLI's program cache when it is on; identification samples only) with the cost and residual variance at the
+    fit."""
+
+    def __init__(self, space, exps, theta):
+        self.problem = _Problem(space, exps)
+        self.space, self.exps = space, exps
+        r, j = self.problem.start(theta)
+        self.cost = 0.5 * float(r @ r)
+        self.jac = j
+        dof = max(int(np.count_nonzero(np.any(j != 0, axis=1) | (r != 0))) - j.shape[1], 1)
+        self.sigma2 = 2.0 * self.cost / dof
+
+    def residuals(self, theta):
+        return self.problem.residuals(theta)
+
+    def jacobian(self, theta):
+        return self.problem.jacobian(theta)
+
+
+def _direction(space, theta, index):
+    """Unit vector u in θ along which the physical value of parameter `index` moves, the others held: for a
+    per-entry transform its own coordinate; for the F_max nodes (a0…a4 linear in the five node values) the row of
+    the linear map."""
+    grad = np.asarray(jax.grad(lambda t: space.physical(t)[index])(jnp.asarray(theta)))
+    if np.count_nonzero(grad) == 1:
+        u = (grad != 0).astype(float)
+    else:
+        u = grad / np.linalg.norm(grad)
+    return u
+
+
+def _crossing(points, threshold, tau0):
+    """τ where Δχ² crosses `threshold` on this side, or None: linear interpolation of √Δχ² (exact for a quadratic
+    profile, whose √Δχ² = |τ − τ̂|/se is linear)."""
+    last_tau, last_root = tau0, 0.0
+    for tau, delta, _, _ in points:
+        root = math.sqrt(max(delta, 0.0))
+        if delta >= threshold:
+            w = (math.sqrt(threshold) - last_root) / (root - last_root) if root > last_root else 1.0
+            return last_tau + w * (tau - last_tau)
+        last_tau, last_root = tau, root
+    return None
+
+
+def _physical_at(space, theta, index, u, tau):
+    t = np.asarray(theta) + (tau - float(u @ theta)) * u
+    return float(space.physical(jnp.asarray(t))[index])
+
+
+def _verdict(lower, upper, branches):
+    deltas = [d for b in branches for _, d, _, _ in b.points]
+    if deltas and max(deltas) < FLAT and all(len(b.points) > 0 for b in branches):
+        return "structurally non-identifiable"
+    if lower is not None and upper is not None:
+        return "identifiable"
+    sides = [name for name, hit in (("lower", lower), ("upper", upper)) if hit is None]
+    return "practically non-identifiable (" + (" and ".join(sides) if len(sides) == 1 else "both") + " side" + \
+        ("s" if len(sides) == 2 else "") + ")"
+
+
+def _validate(result, names, experiments, level, max_points, span, workers):
+    require_float64("pamjax.profile")
+    if not hasattr(result, "labels") or not hasattr(result, "paths"):
+        raise PamjaxInputError(f"result must be a pamjax.FitResult, got {type(result)}")
+    experiments = getattr(result, "experiments", None) if experiments is None else experiments
+    if experiments is None:
+        raise PamjaxInputError("experiments: this FitResult does not carry its experiments (it was read from JSON); "
+                               "pass the experiments it was fitted to")
+    if getattr(result, "model", None) is None:
+        raise PamjaxInputError("result has no fitted model (read from JSON): profile the FitResult `fit` returned")
+    names = list(result.labels) if names is None else ([names] if isinstance(names, str) else list(names))
+    unknown = [n for n in names if n not in result.labels]
+    if unknown or not names:
+        raise PamjaxInputError(f"names {unknown or names!r} must be fitted parameters; they are {result.labels}")
+    if not 0.0 < level < 1.0:
+        raise PamjaxInputError(f"level must be in (0, 1), got {level!r}")
+    if not (isinstance(max_points, int) and max_points >= 2):
+        raise PamjaxInputError(f"max_points must be an int >= 2, got {max_points!r}")
+    if not span > 0:
+        raise PamjaxInputError(f"span must be > 0 (in the fit's scaled coordinates), got {span!r}")
+    if not (isinstance(workers, int) and workers >= 1):
+        raise PamjaxInputError(f"workers must be an int >= 1, got {workers!r}")
+    return names, experiments
+
+
+def profile(
+    result,
+    names=None,
+    *,
+    experiments=None,
+    level: float = 0.95,
+    max_points: int = 12,
+    span: float = 4.0,
+    max_steps: int = 30,
+    workers: int = 2,
+    progress=True,
+) -> ProfileResult:
+    """Profile likelihoods of the parameters `names` (labels of `result`; default all) of a fit.
+
+    For each, the other free parameters are re-fitted with it held at values stepping away from the fit on both
+    sides, until Δχ² passes the `level` threshold (3.84 at 95 %) by half again, `max_points` points are taken, a
+    bound is reached, or the step has gone `span` from the fit in the fit's scaled coordinates (4: a factor e⁴ ≈ 55
+    for a positive parameter fitted in log space). Steps start at 0.6 linearised standard errors and adapt to the
+    profile's rise.
+
+    **Arguments:**
+
+    - `result`: the `FitResult` of `pamjax.fit` (it carries the fitted model and its experiments).
+    - `names`: labels to profile (e.g. `["friction.coulomb_force", "a2"]`); default every fitted parameter.
+    - `experiments`: the experiments fitted (default: those the result carries).
+    - `level`: of the likelihood-ratio interval; `max_points` per side; `span`; `max_steps`: Levenberg-Marquardt
+      steps per point.
+    - `workers`: threads running the branches (parameter × side) side by side; 1 runs them in turn.
+    - `progress`: True prints one line per finished parameter; False is silent.
+
+    **Returns:** a `ProfileResult` (`table()`, `plot(path)`, `to_json(path)`, `write(folder)`).
+    """
+    names, experiments = _validate(result, names, experiments, level, max_points, span, workers)
+    t_start = time.perf_counter()
+    space = ParameterSpace(result.model, result.paths)
+    theta = np.asarray(space.initial_theta())
+    exps = tuple(e.bind(result.model) if hasattr(e, "bind") else e for e in experiments)
+    ev = _Evaluator(space, exps, theta)
+    threshold = chi2_quantile_1dof(level)
+    settings = dict(threshold=threshold, overshoot=1.5, max_points=max_points, span=float(span), first_step=0.6,
+                    max_steps=max_steps, ftol=1e-10, xtol=1e-10, gtol=1e-10)
+    cov = ev.sigma2 * np.linalg.pinv(ev.jac.T @ ev.jac)
+    labels = list(space.labels)
+    jobs = []
+    for name in names:
+        i = labels.index(name)
+        u = _direction(space, theta, i)
+        loose = any(name in group for group in result.non_identifiable)  # linearised error infinite
+        se_tau = math.inf if loose else math.sqrt(max(float(u @ cov @ u), 0.0))
+        jobs += [(name, _Branch(ev, i, u, side, theta, ev.jac, se_tau, settings)) for side in (-1, 1)]
+    with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
+        done = list(pool.map(lambda job: job[1].walk(), jobs))
+    z = math.sqrt(threshold)
+    profiles = []
+    for name in names:
+        i = labels.index(name)
+        lower_b, upper_b = [b for (n, _), b in zip(jobs, done) if n == name]
+        u = lower_b.u
+        value = float(result.values[i])
+        crossings = [_crossing(b.points, threshold, b.tau0) for b in (lower_b, upper_b)]
+        ends = [None if c is None else _physical_at(space, theta, i, u, c) for c in crossings]
+        points = sorted([(float(space.physical(jnp.asarray(th))[i]), d, th, ok)
+                         for b in (lower_b, upper_b) for _, d, th, ok in b.points]
+                        + [(value, 0.0, theta, True)], key=lambda p: p[0])
+        others = {lbl: [float(space.physical(jnp.asarray(th))[k]) for _, _, th, _ in points]
+                  for k, lbl in enumerate(labels) if k != i}
+        se = float(result.standard_errors[i])
+        lo_hi = sorted([e if e is not None else -math.inf * side for e, side in zip(ends, (1, -1))])
+        # a decreasing transform (none today) would swap the sides; sorting keeps [lower, upper]
+        profiles.append(Profile(
+            label=name, value=value, values=[p[0] for p in points], delta=[float(p[1]) for p in points],
+            others=others, converged=[bool(p[3]) for p in points], interval=[float(v) for v in lo_hi],
+            linearised=[value - z * se, value + z * se], verdict=_verdict(*ends, (lower_b, upper_b))))
+        if progress:
+            p = profiles[-1]
+            print(f"  {name}: {p.verdict}; {level:.0%} LR interval [{p.interval[0]:.6g}, {p.interval[1]:.6g}] "
+                  f"(linearised [{p.linearised[0]:.6g}, {p.linearised[1]:.6g}])", flush=True)
+    return ProfileResult(profiles=profiles, labels=names, level=level, threshold=threshold, sigma2=ev.sigma2,
+                         cost=ev.cost, profile_s=time.perf_counter() - t_start)
+

@@ -1,0 +1,197 @@
+"""design: the objective's gradient (forward mode over the envelope, reverse mode per period) against central finite
+differences and each other; a design raises the information over its start and keeps its constraints; the CSV
+replays as the same signal; `pamjax design CONFIG.toml` writes it; bad input is named before any solve.
+
+The system is paper 000's valve feeding the 5e-5 m³ test tank (pressure only, a few PWM periods): small programs.
+"""
+
+import math
+import pathlib
+import textwrap
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import pamjax as pj
+from pamjax import PamjaxInputError, presets
+from pamjax._cli.main import main
+from pamjax._fit import design_objective as obj
+
+FREE = ["valve.inflate.discharge_coefficient", "valve.inflate.critical_ratio", "valve.exhaust.discharge_coefficient"]
+NOISE = {"pressure": 2e3}
+TANK = dict(channels=("pressure",), start={"pressure": 101325.0}, rate=500.0, design_rate=250.0, knots=4,
+            max_duty_step=0.3, initial=pj.Constant(0.6))  # from 0.6: the tank passes the inflow's critical ratio
+
+
+def _tank():
+    return presets.mas10_tank_system(valve="pwm")
+
+
+def test_bspline_basis_is_a_partition_of_unity_and_soft_clip_inverts():
+    t = np.linspace(0.0, 3.0, 301)
+    b = obj.bspline_basis(t, 0.0, 3.0, 7)
+    assert b.shape == (301, 7) and np.all(b >= 0)
+    np.testing.assert_allclose(b.sum(axis=1), 1.0, atol=1e-12)
+    assert b[0, 0] == pytest.approx(1.0) and b[-1, -1] == pytest.approx(1.0)  # clamped ends
+    z = np.linspace(-0.5, 1.5, 41)
+    d = np.asarray(obj.clip01(jnp.asarray(z)))
+    assert np.all((d > 0) & (d < 1)) and np.all(np.diff(d) > 0)
+    # within width·log 2 of the sharp clip, as smooth_relu promises
+    assert np.max(np.abs(d - np.clip(z, 0, 1))) <= obj.CLIP_WIDTH * math.log(2) + 1e-12
+    inner = d[(z > 0.05) & (z < 0.95)]
+    np.testing.assert_allclose(np.asarray(obj.clip01(jnp.asarray(obj.unclip01(inner)))), inner, atol=1e-12)
+
+
+def _problem(parametrisation):
+    """The compiled objective's problem for the 0.4 s tank run (20 PWM periods) as `design` builds it (the same
+    structure as the CLI test's, so that they share one compilation)."""
+    from pamjax._fit.design import _start_coefficients, _template
+
+    model = pj.ParameterSpace(_tank(), FREE).base
+    space = pj.ParameterSpace(model, FREE)
+    times = np.arange(20) * 0.02
+    carrier = obj.multilevel_carrier(20, 10, 0)
+    c0, basis = _start_coefficients(parametrisation, times, 0.4, 4, carrier, (0.1, 0.9), None)
+    exp = _template(model, 0.4, 0.02, 250.0, ("pressure",), NOISE, {"pressure": 101325.0}, 4, np.full(20, 0.5))
+    prob = obj.DesignProblem(space=space, theta=space.initial_theta(), experiment=exp,
+                             basis=None if basis is None else jnp.asarray(basis), prior=jnp.zeros((3, 3)),
+                             weight=jnp.asarray(2.0), band=jnp.asarray([0.1, 0.9]), stroke=None, max_pressure=None,
+                             max_step=jnp.asarray(0.3), floor=None, subset=(0, 1, 2), criterion="D")
+    return jnp.asarray(c0) + 0.5, prob  # level lifted off the band's bottom: every parameter is fixed there
+
+
+def test_forward_gradient_matches_central_differences():
+    # The objective is piecewise smooth in the duty (edges move continuously inside a period); away from the band
+    # ends and the 10 %/90 % dead bands a central difference of step 1e-5 agrees to its truncation error.
+    c, prob = _problem("envelope")
+    g = np.asarray(obj.forward_gradient(c, prob))
+    h = 1e-5
+    for k in range(c.size):
+        e = jnp.zeros(c.size).at[k].set(h)
+        fd = (float(obj.value(c + e, prob)[0]) - float(obj.value(c - e, prob)[0])) / (2 * h)
+        assert g[k] == pytest.approx(fd, rel=1e-4, abs=1e-6 * np.max(np.abs(g)))
+
+
+def test_reverse_gradient_per_period_equals_forward_mode():
+    c, prob = _problem("periods")
+    rev = np.asarray(obj.reverse_gradient(c, prob))
+    fwd = np.asarray(obj.forward_gradient(c, prob))
+    assert np.any(rev != 0)
+    np.testing.assert_allclose(rev, fwd, rtol=1e-8, atol=1e-10 * np.max(np.abs(fwd)))
+
+
+def test_design_raises_the_information_keeps_its_constraints_and_replays_from_csv(tmp_path):
+    # Baseline: a constant-duty run of the same length; the design must match it on every parameter.
+    base_rec = pj.synthetic_recording(_tank(), pj.Constant(0.3), np.arange(0.0, 0.4, 2e-3), name="base")
+    base = pj.Experiment(base_rec, pj.Constant(0.3), channels=["pressure"], scales=NOISE,
+                         initial={"pressure": 101325.0})
+    res = pj.design(_tank(), FREE, 0.4, noise=NOISE, steps=6, baseline=[base], progress=False, **TANK)
+    assert res.objective[1] < res.objective[0]  # D criterion: log det F⁻¹ went down
+    assert len(res.duty) == 20 and all(0.1 <= d <= 0.9 for d in res.duty)
+    assert res.constraints["feasible"] and res.constraints["largest_duty_step"] <= 0.3 + 1e-9
+    ratio = np.asarray(res.standard_errors["baseline"]) / np.asarray(res.standard_errors["design"])
+    assert np.all(ratio > 0.97), ratio  # the floor's penalty leaves a slack of ~1 %
+    assert all(math.isinf(s) for s in res.standard_errors["prior"])  # no prior experiments: nothing known
+    # the start (steps=0) is the constant 0.6 of TANK: the design beats it
+    start = pj.design(_tank(), FREE, 0.4, noise=NOISE, steps=0, baseline=[base], progress=False, **TANK)
+    assert start.objective[1] == pytest.approx(res.objective[0], rel=1e-9)
+    path = res.to_csv(tmp_path / "design.csv")
+    rec = pj.Recording.load(path)
+    np.testing.assert_array_equal(rec["duty"], res.duty)
+    replay = pj.Sampled(rec.t, rec["duty"], period=0.02)
+    t = np.arange(0.0, 0.4, 0.005)
+    np.testing.assert_array_equal(np.asarray(replay(jnp.asarray(t))), np.asarray(res.signal()(jnp.asarray(t))))
+    with pytest.raises(FileExistsError):
+        res.to_csv(path)
+
+
+def test_a_start_that_leaves_a_parameter_free_is_named():
+    with pytest.raises(PamjaxInputError, match=r"does not determine \['valve.inflate.critical_ratio'\]"):
+        pj.design(_tank(), FREE, 0.4, noise=NOISE, steps=1, progress=False,
+                  **{**TANK, "initial": pj.Constant(0.12)})
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(noise={"position": 1e-4}), r"noise must give the noise standard deviation of every channel"),
+    (dict(noise=NOISE, duty_band=(0.9, 0.1)), r"duty_band must be \(lo, hi\)"),
+    (dict(noise=NOISE, subset=["k0"]), r"subset \['k0'\] must name free parameters"),
+    (dict(noise=NOISE, criterion="E"), r"criterion must be 'D' or 'A'"),
+    (dict(noise=NOISE, parametrisation="fourier"), r"parametrisation must be 'envelope' or 'periods'"),
+])
+def test_bad_input_is_named_before_any_solve(kwargs, match, monkeypatch):
+    monkeypatch.setattr(obj, "value", lambda *a: pytest.fail("solved before rejecting the input"))
+    with pytest.raises(PamjaxInputError, match=match):
+        pj.design(_tank(), FREE, 0.4, **{**TANK, **kwargs})
+
+
+def test_design_needs_a_pwm_period():
+    with pytest.raises(PamjaxInputError, match="period: the model's valve has no pwm_frequency"):
+        pj.design(presets.mas10_tank_system(valve="averaged"), ["valve.coefficients[1,0]"], 0.4, noise=NOISE,
+                  channels=("pressure",))
+
+
+def test_cli_design_writes_csv_json_figure_and_refuses_to_overwrite(tmp_path, capsys):
+    cfg = tmp_path / "design.toml"
+    cfg.write_text(textwrap.dedent(f"""
+        [model]
+        preset = "mas10_tank_system"
+        options = {{ valve = "pwm" }}
+        [design]
+        free = {FREE!r}
+        duration = 0.4
+        noise = {{ pressure = 2e3 }}
+        channels = ["pressure"]
+        start = {{ pressure = 101325.0 }}
+        rate = 500.0
+        knots = 4
+        max_duty_step = 0.3
+        initial = 0.6
+        steps = 2
+    """).replace("'", '"'))
+    out = tmp_path / "out"
+    assert main(["design", str(cfg), "--out", str(out), "--quiet"]) == 0
+    rec = pj.Recording.load(out / "design.csv")
+    assert rec.t.size == 20 and "duty" in rec.channels
+    assert (out / "design.png").stat().st_size > 10_000
+    capsys.readouterr()
+    assert main(["design", str(cfg), "--out", str(out), "--quiet"]) == 2  # a user error: one line, status 2
+    assert "design.csv exists; pass --overwrite" in capsys.readouterr().err
+    bad = tmp_path / "bad.toml"
+    bad.write_text(cfg.read_text().replace("knots = 4", "knot = 4"))
+    assert main(["design", str(bad), "--out", str(tmp_path / "o2"), "--quiet"]) == 2
+    assert "[design]: unknown key(s) ['knot']" in capsys.readouterr().err
+    assert not (tmp_path / "o2").exists()  # refused before the output folder was made
+
+
+def test_design_example_config_loads():
+    # every key of examples/design_example.toml is checked and its model built (nothing solved)
+    from pamjax._cli.design import load
+
+    model, free, duration, kwargs, out = load(pathlib.Path(__file__).resolve().parents[1] / "examples"
+                                              / "design_example.toml")
+    assert duration == 10.0 and len(free) == 5 and out == "results/design_example"
+    assert kwargs["duty_band"] == (0.1, 0.9) and kwargs["criterion"] == "D"
+
+
+def test_pressure_limit_is_penalised_and_kept():
+    # The penalty: zero below the limit; above it, PENALTY·dt·Σ(excess/1 kPa)² and the worst excess reported.
+    c, prob = _problem("envelope")
+    free_value, free_aux = obj.value(c, prob)
+    top = float(np.max(free_aux["pressure"]))
+    for limit in (top + 1e3, top - 5e3):
+        limited = eqx.tree_at(lambda p: p.max_pressure, prob, jnp.asarray(limit), is_leaf=lambda x: x is None)
+        value, aux = obj.value(c, limited)
+        excess = np.maximum(np.asarray(aux["pressure"]) - limit, 0.0)
+        assert float(aux["worst_pressure"]) == pytest.approx(float(np.max(excess)), abs=1e-9)
+        dt = float(limited.experiment.times[1] - limited.experiment.times[0])
+        expected = obj.PENALTY * dt * np.sum((excess / obj.PRESSURE_UNIT) ** 2)
+        assert float(value) - float(free_value) == pytest.approx(expected, rel=1e-9, abs=1e-12)
+        assert (expected > 0) == (limit < top)
+    # A design that starts within the limit stays within it (pressure predicted at the design samples).
+    start = pj.design(_tank(), FREE, 0.4, noise=NOISE, steps=0, progress=False, **TANK)
+    limit = start.constraints["pressure_range"][1] + 2e3
+    res = pj.design(_tank(), FREE, 0.4, noise=NOISE, steps=4, progress=False, max_pressure=limit, **TANK)
+    assert res.constraints["feasible"] and res.constraints["pressure_range"][1] <= limit
+    assert res.objective[1] < res.objective[0]

@@ -1,0 +1,139 @@
+"""profile: likelihood-ratio intervals equal the linearised ones for a model linear in its parameters; a nonlinear
+two-parameter profile agrees with a brute-force grid of an independent NumPy transcription; eq. 7's k0, k1, k2 come
+out structurally non-identifiable; `pamjax fit --profile` writes the profile and its figure; bad input is named."""
+
+import json
+import math
+import textwrap
+import warnings
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import pamjax as pj
+from pamjax import PamjaxInputError, presets
+from pamjax._cli.main import main
+
+
+def _force_map(noise, pressures_bar, positions, seed=0):
+    """Synthetic isometric map of the MAS-10 preset with Gaussian noise [N]."""
+    muscle = presets.mas10_muscle()
+    x, p = np.meshgrid(positions, 101325.0 + 1e5 * np.asarray(pressures_bar), indexing="ij")
+    x, p = x.ravel(), p.ravel()
+    f = np.asarray(muscle.static_force(jnp.asarray(x), jnp.asarray(p), pj.Air()))
+    f = f + noise * np.random.default_rng(seed).standard_normal(f.shape)
+    return muscle, x, p, f, pj.ForceMapExperiment(x, p, f, scale=noise)
+
+
+def _fit(model, exps, free):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pj.PamjaxIdentifiabilityWarning)
+        return pj.fit(model, exps, free, progress=False)
+
+
+def test_linear_model_profile_intervals_equal_the_linearised_ones():
+    # Eq. 7 is linear in a0…a4, k0, k1 (k2 held): the profile is exactly quadratic, its interval ψ̂ ± 1.96 se.
+    muscle, *_, exp = _force_map(2.0, np.linspace(0.5, 6.0, 7), np.linspace(-0.01, 0.07, 9))
+    res = _fit(muscle, [exp], ["force_law.max_force_coefficients", "force_law.k0", "force_law.k1"])
+    prof = pj.profile(res, ["a2", "force_law.k0", "force_law.k1"], progress=False)
+    assert prof.threshold == pytest.approx(3.841459, abs=1e-5)
+    for p in prof.profiles:
+        assert p.verdict == "identifiable"
+        width = p.linearised[1] - p.linearised[0]
+        # crossing located by interpolating √Δχ² (exact for a quadratic) between re-fitted points: 1e-4 of the width
+        np.testing.assert_allclose(p.interval, p.linearised, atol=1e-4 * width)
+        assert all(p.converged)
+        i = p.values.index(p.value)
+        assert p.delta[i] == 0.0 and min(p.delta) > -1e-6  # the fit is the profile's minimum
+
+
+def test_two_parameter_profile_matches_a_brute_force_grid():
+    # k0 and k2 free (k1 held): F = F_max(x) − (p_max − p_g)(k0 − k1 x)/k2 is nonlinear in k2. The noise is large
+    # so that the interval is wide and the profile visibly not quadratic. Oracle: the same equation in NumPy,
+    # minimised over a fine grid of w = 1/k2 (w → 0: k2 → ∞, where this profile levels off) for each k0.
+    muscle, x, p, f, exp = _force_map(60.0, [3.0, 4.0, 5.0, 6.0], np.linspace(-0.01, 0.03, 6), seed=3)
+    assert np.all(f > 0)  # no slack points: every residual is (F_model − F)/scale
+    res = _fit(muscle, [exp], ["force_law.k0", "force_law.k2"])
+    prof = pj.profile(res, ["force_law.k0"], progress=False)
+    law = muscle.force_law
+    fmax = np.polyval(np.asarray(law.max_force_coefficients)[::-1], x)
+    gauge_gap = float(law.max_pressure) - (p - 101325.0)
+    k1 = float(law.k1)
+
+    def cost(k0, w):
+        model = fmax[:, None] - gauge_gap[:, None] * (k0 - k1 * x[:, None]) * w[None, :]
+        return 0.5 * np.sum(((model - f[:, None]) / 60.0) ** 2, axis=0)
+
+    w_hat = 1.0 / res.values[1]
+    grid = np.linspace(0.0, 10.0 * w_hat, 200_001)[1:]
+    cost_min = cost(res.values[0], np.asarray([w_hat]))[0]
+    sigma2 = 2.0 * cost_min / (x.size - 2)
+    assert prof.sigma2 == pytest.approx(sigma2, rel=1e-9)
+    pr = prof.profiles[0]
+    assert pr.verdict == "identifiable"
+    brute = np.asarray([2.0 * (cost(k0, grid).min() - cost_min) / sigma2 for k0 in pr.values])
+    # a grid step of 5e-5 ŵ costs at most ~1e-6 in Δχ² at the profile's curvature; the profile's re-fits converge
+    np.testing.assert_allclose(pr.delta, brute, atol=2e-3)
+    # the profile is not quadratic here (else this test would not check more than the linear one)
+    se = (pr.linearised[1] - pr.linearised[0]) / (2 * math.sqrt(prof.threshold))
+    quad = ((np.asarray(pr.values) - pr.value) / se) ** 2
+    assert np.max(np.abs(quad - np.asarray(pr.delta))) > 0.05
+    # the interval ends: where the brute-force profile crosses the threshold (bisection on k0)
+    for end, side in zip(pr.interval, (-1, 1)):
+        lo, hi = pr.value, pr.value + side * 20 * se
+        for _ in range(50):
+            mid = 0.5 * (lo + hi)
+            below = 2.0 * (cost(mid, grid).min() - cost_min) / sigma2 < prof.threshold
+            lo, hi = (mid, hi) if below else (lo, mid)
+        assert end == pytest.approx(0.5 * (lo + hi), abs=0.01 * se)
+
+
+def test_k0_k1_k2_together_are_structurally_non_identifiable():
+    muscle, *_, exp = _force_map(2.0, np.linspace(0.5, 6.0, 7), np.linspace(-0.01, 0.07, 9))
+    res = _fit(muscle, [exp], ["force_law.k0", "force_law.k1", "force_law.k2"])
+    prof = pj.profile(res, ["force_law.k0", "force_law.k2"], progress=False)
+    for p in prof.profiles:
+        assert p.verdict == "structurally non-identifiable", p.label
+        assert p.interval == [-math.inf, math.inf]
+        assert max(p.values) / min(p.values) > 10  # walked far (the span) on both sides, flat all the way
+        assert max(abs(d) for d in p.delta) < 1e-3
+
+
+def test_bad_input_is_named_before_any_solve():
+    muscle, *_, exp = _force_map(2.0, np.linspace(0.5, 6.0, 7), np.linspace(-0.01, 0.07, 9))
+    res = _fit(muscle, [exp], ["force_law.k0", "force_law.k1"])
+    with pytest.raises(PamjaxInputError, match=r"names \['k0'\] must be fitted parameters"):
+        pj.profile(res, ["k0"])
+    with pytest.raises(PamjaxInputError, match="level must be in"):
+        pj.profile(res, level=95)
+    loaded = pj.FitResult.from_dict(json.loads(json.dumps(res.to_dict())))
+    with pytest.raises(PamjaxInputError, match="experiments: this FitResult does not carry"):
+        pj.profile(loaded)
+
+
+def test_fit_cli_profile_writes_json_and_figure(tmp_path):
+    # A 0.6 s constant-volume charge through the averaged valve, eq. 13 terms u and u·p free.
+    system = presets.mas10_tank_system(valve="averaged")
+    ts = np.arange(0.0, 0.6, 2e-3)
+    rec = pj.synthetic_recording(system, pj.Constant(0.5), ts, noise={"pressure": 2e3}, seed=1, name="charge")
+    rec.to_csv(tmp_path / "charge.csv")
+    cfg = tmp_path / "tank.toml"
+    cfg.write_text(textwrap.dedent("""
+        [model]
+        preset = "mas10_tank_system"
+        options = { valve = "averaged" }
+        [fit]
+        free = ["valve.coefficients[1,0]", "valve.coefficients[1,1]"]
+        [[experiment]]
+        file = "charge.csv"
+        signal = { kind = "Constant", value = 0.5 }
+        channels = ["pressure"]
+        scales = { pressure = 2e3 }
+    """))
+    assert main(["fit", str(cfg), "--out", str(tmp_path / "out"), "--quiet", "--profile"]) == 0
+    data = json.loads((tmp_path / "out" / "profile.json").read_text())
+    assert [p["label"] for p in data["profiles"]] == ["valve.coefficients[1,0]", "valve.coefficients[1,1]"]
+    assert all(p["verdict"] == "identifiable" for p in data["profiles"])
+    assert (tmp_path / "out" / "profile.png").stat().st_size > 10_000
+    assert (tmp_path / "out" / "fit.png").is_file()
