@@ -28,7 +28,8 @@ from .recording import Recording, _writable
 # Defaults and their sources.
 DUTY_BAND = (0.1, 0.9)  # paper 000: with the MHE2's ~2 ms switching time, only duty 10-90 % has an effect at 50 Hz
 STROKE_MARGIN = 0.005  # m; assumed (paper 000 gives no clearance): ≈ 5 % of the MAS-10's 95 mm stroke
-START_LEVEL = Triangle(0.05, 0.95, 0.08)  # paper 000's E3 duty: the start of the envelope's level
+START_LEVEL = (0.05, 0.95, 0.08)  # paper 000's E3 duty (Triangle low, high, Hz): the start of the envelope's level
+# (built when used: a component made at import would start JAX's backend, fixing its devices before the user can)
 START_AMPLITUDE = 0.25  # of the band; assumed: the carrier swings the duty by ±20 % of 0.8 around the level
 CARRIER_HOLD = 10  # PWM periods (0.2 s at 50 Hz): the hold of the most informative of the multilevel signals
 # compared in docs/identifiability.md (0.1, 0.2, 0.5 and 1 s holds)
@@ -202,7 +203,7 @@ def _start_coefficients(parametrisation, times, duration, knots, carrier, band, 
     paper 000's E3 triangle), in the units of the soft clip (0 and 1 the band's ends; beyond them saturated)."""
     lo, hi = band
     if initial is None:
-        level = (np.asarray(jax.vmap(START_LEVEL)(jnp.asarray(times))) - lo) / (hi - lo)
+        level = (np.asarray(jax.vmap(Triangle(*START_LEVEL))(jnp.asarray(times))) - lo) / (hi - lo)
     else:
         duty = (np.asarray(jax.vmap(initial)(jnp.asarray(times))) if isinstance(initial, AbstractSignal)
                 else np.asarray(initial, dtype=float))

@@ -86,6 +86,12 @@ class OnOffValve(AbstractSwitchingValve):
     def smooth_edges(self):
         return self.mode == "smooth"
 
+    def switching_time_scale(self):
+        """The time scale [s] of a switching edge, which bounds a fixed step (`sweep`'s RK4 at 2 edge widths):
+        `edge_width`. The exact mode's sharp edges have none of their own; a fixed step across one is as coarse as
+        across a smoothed one, so the same width is used."""
+        return self.edge_width
+
     def next_edge_step(self, signal, t):
         """The first boundary after `t` among the edges ± 3 `edge_width` of the periods before, containing and after
         `t` (on edge: period start + t_on; off edge: + u T + t_off), in constant time per step.
