@@ -294,3 +294,26 @@ class EndStops(eqx.Module):
         spring = -self.stiffness * smooth_relu(over, self.width) + self.stiffness * smooth_relu(under, self.width)
         contact = smooth_step(over, self.width) + smooth_step(under, self.width)
         return spring - self.damping * v * contact
+
+
+def stroke_root(residual, live, lo, hi):
+    """The root in [lo, hi] of `residual(model, x)`, decreasing in the shortening x [m]: 60 bisection steps on the
+    gradient-stopped `live` model, then one Newton step on `live` itself, so the root carries the implicit
+    derivative. Returns `(x, interior, newton, (lo, hi))`: the bisection point, whether it lies strictly inside the
+    stroke with a negative slope (else the root is at a limit), the Newton-corrected root and the (stopped) limits.
+    Shared by the payload and load equilibria of the muscle systems."""
+    frozen = jax.lax.stop_gradient(live)
+    lo0, hi0 = jax.lax.stop_gradient(lo), jax.lax.stop_gradient(hi)
+
+    def body(_, bounds):
+        a, b = bounds
+        mid = 0.5 * (a + b)
+        above = jax.lax.stop_gradient(residual(frozen, mid)) > 0
+        return jnp.where(above, mid, a), jnp.where(above, b, mid)
+
+    a, b = jax.lax.fori_loop(0, 60, body, (lo0, hi0))
+    x = 0.5 * (a + b)
+    slope = jax.grad(lambda q: residual(frozen, q))(x)
+    interior = (x > lo0 + 1e-9) & (x < hi0 - 1e-9) & (slope < 0)
+    newton = x - residual(live, x) / jnp.where(interior, slope, -1.0)
+    return x, interior, newton, (lo0, hi0)

@@ -14,7 +14,7 @@ from .._papers import paper000
 from .._physics.chamber import pressure_rate
 from .._physics.friction import AbstractFriction, CoulombViscousFriction
 from .._physics.gas import Air
-from .._physics.muscle import EndStops, Muscle
+from .._physics.muscle import EndStops, Muscle, stroke_root
 from .._physics.valves.base import AbstractValve
 from .base import AbstractSystem
 
@@ -62,25 +62,12 @@ class MuscleSystem(AbstractSystem):
         """Position [m] where the muscle force at `pressure` [Pa abs] carries the payload's weight (friction-free),
         clipped to the stroke limits. Bisection plus one Newton step, so its derivative is the implicit one."""
         weight = self.payload_mass * self.gravity
-        frozen = jax.lax.stop_gradient(self)
 
         def residual(model, x):
             return model.muscle.force(x, pressure, model.air) - weight  # decreasing in x
 
-        lo0 = jax.lax.stop_gradient(self.muscle.min_position)
-        hi0 = jax.lax.stop_gradient(self.muscle.max_position)
-
-        def body(_, bounds):
-            lo, hi = bounds
-            mid = 0.5 * (lo + hi)
-            above = jax.lax.stop_gradient(residual(frozen, mid)) > 0
-            return jnp.where(above, mid, lo), jnp.where(above, hi, mid)
-
-        lo, hi = jax.lax.fori_loop(0, 60, body, (lo0, hi0))
-        x = 0.5 * (lo + hi)
-        slope = jax.grad(lambda q: residual(frozen, q))(x)
-        interior = (x > lo0 + 1e-9) & (x < hi0 - 1e-9) & (slope < 0)
-        newton = x - residual(self, x) / jnp.where(interior, slope, -1.0)
+        x, interior, newton, (lo0, hi0) = stroke_root(residual, self, self.muscle.min_position,
+                                                      self.muscle.max_position)
         # At a stroke limit the position IS that limit: return the limit itself so the derivative follows it.
         at_limit = jnp.where(x >= 0.5 * (lo0 + hi0), self.muscle.max_position, self.muscle.min_position)
         return jnp.where(interior, newton, at_limit)

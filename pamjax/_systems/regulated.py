@@ -18,7 +18,7 @@ from .._papers import datasheets, paper000, paper001
 from .._physics.chamber import chamber_flow
 from .._physics.friction import AbstractFriction, CoulombViscousFriction
 from .._physics.gas import Air
-from .._physics.muscle import EndStops, Muscle
+from .._physics.muscle import EndStops, Muscle, stroke_root
 from .._physics.regulator import AbstractRegulator, paper001_air
 from .base import AbstractSystem
 
@@ -89,21 +89,8 @@ def load_equilibrium(muscle: Muscle, load_force, pressure, air: Air):
     def residual(m, x):
         return m.force(x, pressure, air) - load_force  # decreasing in x
 
-    frozen = jax.lax.stop_gradient(muscle)
-    lo0 = jax.lax.stop_gradient(muscle.min_position)
-    hi0 = jax.lax.stop_gradient(muscle.max_position)
-
-    def body(_, bounds):
-        lo, hi = bounds
-        mid = 0.5 * (lo + hi)
-        above = jax.lax.stop_gradient(residual(frozen, mid)) > 0
-        return jnp.where(above, mid, lo), jnp.where(above, hi, mid)
-
-    lo, hi = jax.lax.fori_loop(0, 60, body, (lo0, hi0))
-    x = 0.5 * (lo + hi)
-    slope = jax.grad(lambda q: residual(frozen, q))(x)
-    interior = (x > lo0 + 1e-9) & (x < hi0 - 1e-9) & (slope < 0)
-    return jnp.where(interior, x - residual(muscle, x) / jnp.where(interior, slope, -1.0), x)
+    x, interior, newton, _ = stroke_root(residual, muscle, muscle.min_position, muscle.max_position)
+    return jnp.where(interior, newton, x)
 
 
 def volume_derivatives(muscle: Muscle, x):
