@@ -141,20 +141,19 @@ def volumetric_flow_anr(mass_flow):
 def paper001_charging_restriction():
     """Supply → outlet path of the VPPM regulator, C and b of paper 001 Table 1 (tank charging) against upstream
     (supply) pressure; bar → Pa and m³/(s bar) → m³/(s Pa)."""
-    t = paper001.CHARGING_TABLE
-    return TabulatedISO6358Restriction(
-        pressure=np.asarray(t["upstream_pressure_bar"]) * 1e5,
-        sonic_conductance=np.asarray(t["sonic_conductance_m3_per_s_bar"]) / 1e5,
-        critical_ratio=np.asarray(t["critical_ratio"]),
-    )
+    return _table_restriction(paper001.CHARGING_TABLE, "upstream_pressure_bar")
 
 
 def paper001_discharging_restriction():
     """Outlet → exhaust path of the VPPM regulator, C and b of paper 001 Table 2 (tank discharging) against the tank
     (upstream) pressure; bar → Pa and m³/(s bar) → m³/(s Pa)."""
-    t = paper001.DISCHARGING_TABLE
+    return _table_restriction(paper001.DISCHARGING_TABLE, "tank_pressure_bar")
+
+
+def _table_restriction(table, pressure_key):
+    """A `TabulatedISO6358Restriction` from one of paper 001's C/b tables, its pressure column `pressure_key` [bar]."""
     return TabulatedISO6358Restriction(
-        pressure=np.asarray(t["tank_pressure_bar"]) * 1e5,
-        sonic_conductance=np.asarray(t["sonic_conductance_m3_per_s_bar"]) / 1e5,
-        critical_ratio=np.asarray(t["critical_ratio"]),
+        pressure=np.asarray(table[pressure_key]) * 1e5,
+        sonic_conductance=np.asarray(table["sonic_conductance_m3_per_s_bar"]) / 1e5,
+        critical_ratio=np.asarray(table["critical_ratio"]),
     )
