@@ -80,10 +80,37 @@ def test_a_wrong_jacobian_stalls_and_the_check_says_so():
     def jacobian(t):
         return residuals(t), -np.diag([1.0, 2.0])
 
-    state = _run(residuals, jacobian, np.array([0.0, 0.0]), max_steps=200)
+    state = _run(residuals, jacobian, np.array([0.0, 0.0]), max_steps=1000)
     assert state.done and state.reason == "stalled", state.reason
-    assert state.accepted == 0
+    assert state.accepted == 0 and state.restarts == _lm.PROBE_RESTARTS  # probes found lower points; no step did
     assert _lm.jacobian_check(state, residuals) > 0.5
+
+
+def test_a_minimum_where_the_cost_is_not_smooth_is_converged_not_stalled():
+    # A noise-scaled problem (200 residuals, cost ≈ 100) whose cost jumps up where θ₀ crosses k, half a standard
+    # error short of the smooth optimum (as a stick-slip phase appearing makes a bench cost jump). The Jacobian is
+    # the smooth one, so it keeps promising a decrease beyond k that every step there refuses: the damped steps end
+    # at the jump, with θ₁ (started 2 standard errors off) not yet at its optimum. The probe finds the lower point
+    # along θ₁ and the iteration goes on from there; the next probe finds none: converged, not stalled.
+    rng = np.random.default_rng(3)
+    a = np.linalg.qr(rng.normal(size=(200, 2)))[0] * [8.0, 3.0]  # orthogonal columns: θ₁ is free of the jump
+    e = rng.normal(size=200)
+    smooth = np.linalg.lstsq(a, -e, rcond=None)[0]  # the minimum of ½‖a θ + e‖²
+    se0 = np.sqrt(np.linalg.inv(a.T @ a)[0, 0])
+    k = smooth[0] - 0.5 * se0
+    rest = a @ smooth + e  # orthogonal to a's columns: beyond k the cost is higher by a constant (1.05² − 1)·½‖rest‖²
+
+    def residuals(t):
+        return a @ t + e + (0.05 * rest if t[0] > k else 0.0)
+
+    def jacobian(t):
+        return residuals(t), a
+
+    state = _run(residuals, jacobian, np.array([smooth[0] - 3 * se0, smooth[1] + 2 / 3.0]), max_steps=300)
+    assert state.done and state.reason == _lm.PROBED_MINIMUM, state.reason
+    assert k - 0.01 * se0 < state.theta[0] <= k and state.restarts >= 1
+    np.testing.assert_allclose(state.theta[1], smooth[1], atol=1e-3 / 3.0)
+    assert _lm.probe(state, residuals)[0] <= 1e-6 * state.cost
 
 
 def test_state_round_trips_through_arrays():
