@@ -94,3 +94,32 @@ def test_default_cache_directory_follows_the_platform_convention(monkeypatch, tm
         assert default_cache_dir() == tmp_path / "pamjax" / "jax-compilation"
     monkeypatch.setenv("PAMJAX_CACHE_DIR", str(tmp_path / "elsewhere"))
     assert default_cache_dir() == tmp_path / "elsewhere"
+
+
+def test_program_key_follows_what_is_traced_not_the_traced_values():
+    """The traced-program cache's key changes with a static field, a shape or a dtype (another program), not with
+    the values of the arrays the program takes as arguments, and is the same for the same (or an equal) model."""
+    import dataclasses
+
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    from pamjax._core.cache import ProgramCache
+
+    jax.config.update("jax_enable_x64", True)
+    key = ProgramCache.key
+    model = pamjax.presets.mas10_system("pwm")
+    theta = jnp.zeros(3)
+    reference = key("fit_residuals", (model, theta))
+    assert key("fit_residuals", (model, theta)) == reference  # the same model twice
+    assert key("fit_residuals", (pamjax.presets.mas10_system("pwm"), jnp.ones(3))) == reference  # equal; other θ
+    moved = eqx.tree_at(lambda s: s.friction.coulomb_force, model, model.friction.coulomb_force * 2)
+    assert key("fit_residuals", (moved, theta)) == reference  # a traced parameter's value is an argument
+    exact = eqx.tree_at(lambda s: s.valve, model, dataclasses.replace(model.valve, mode="exact"))
+    assert exact.valve.mode != model.valve.mode
+    assert key("fit_residuals", (exact, theta)) != reference  # a static field: another program
+    assert key("fit_residuals", (model, jnp.zeros(4))) != reference  # another shape
+    assert key("fit_residuals", (model, jnp.zeros(3, jnp.float32))) != reference  # another dtype
+    assert key("fit_jacobian", (model, theta)) != reference  # another function
+    assert key("fit_residuals", (model, theta, 2.0)) != key("fit_residuals", (model, theta, 3.0))  # a baked constant

@@ -141,24 +141,19 @@ class ProgramCache:
 
     @staticmethod
     def key(name, args):
+        """The SHA-256 (32 hex digits) of what the program traced from `args` depends on: the pytree structure,
+        every static field and non-array value (tracing bakes them in), the arrays' shapes and dtypes (never their
+        values: they are the program's arguments), `name`, the versions, the XLA flags and the x64 setting. A
+        canonical description (`describe(args, values=False)`), not a `repr`: equinox's pretty-printer cost ~50 ms
+        per call."""
         import hashlib
-        import importlib.metadata
 
-        import equinox as eqx
         import jax
 
         from .describe import describe
 
-        dynamic, static = eqx.partition(args, eqx.is_array)
-        shapes = jax.tree_util.tree_map(lambda a: (tuple(a.shape), str(a.dtype)), dynamic)
-        versions = []
-        for package in ("pamjax", "jax", "jaxlib"):
-            try:
-                versions.append(importlib.metadata.version(package))
-            except importlib.metadata.PackageNotFoundError:  # a source checkout without metadata
-                versions.append("?")
-        text = repr((name, describe(static), repr(shapes), jax.tree_util.tree_structure(dynamic).num_leaves,
-                     versions, os.environ.get("XLA_FLAGS", ""), bool(jax.config.jax_enable_x64)))
+        text = repr((name, describe(args, values=False), _versions(), os.environ.get("XLA_FLAGS", ""),
+                     bool(jax.config.jax_enable_x64)))
         return hashlib.sha256(text.encode()).hexdigest()[:32]
 
     def has(self, name, args):
@@ -172,9 +167,11 @@ class ProgramCache:
 
         dynamic, static = eqx.partition(args, eqx.is_array)
         leaves, treedef = jax.tree_util.tree_flatten(dynamic)
-        # The key digests the whole static structure (~0.1 s): once per set of argument objects in this process.
-        # `ids` keeps the objects alive, so that no other object can later reuse one of their ids.
-        ids = (name, tuple(id(a) for a in args), tuple((x.shape, str(x.dtype)) for x in leaves))
+        # The key describes the whole structure (a few ms): once per set of non-array argument objects (a fit's
+        # parameter space and experiments; θ is a new array at every call) in this process. `known` keeps the
+        # objects alive, so that no other object can later reuse one of their ids.
+        ids = (name, tuple(id(a) for a in args if not eqx.is_array(a)),
+               tuple((x.shape, str(x.dtype), bool(getattr(x, "weak_type", False))) for x in leaves))
         known = self.keys.get(ids)
         if known is None:
             known = self.keys[ids] = (self.key(name, args), args)
@@ -217,6 +214,21 @@ class ProgramCache:
             tmp.replace(path)
         except (OSError, ImportError):
             pass  # a read-only cache, or no serializer: the program is still used in this process
+
+
+def _versions():
+    """The pamjax, jax and jaxlib versions (read once per process: ~5 ms each from the package metadata)."""
+    if "versions" not in _PROGRAMS:
+        import importlib.metadata
+
+        versions = []
+        for package in ("pamjax", "jax", "jaxlib"):
+            try:
+                versions.append(importlib.metadata.version(package))
+            except importlib.metadata.PackageNotFoundError:  # a source checkout without metadata
+                versions.append("?")
+        _PROGRAMS["versions"] = tuple(versions)
+    return _PROGRAMS["versions"]
 
 
 _PROGRAMS = {"cache": None}
