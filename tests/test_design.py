@@ -195,3 +195,15 @@ def test_pressure_limit_is_penalised_and_kept():
     res = pj.design(_tank(), FREE, 0.4, noise=NOISE, steps=4, progress=False, max_pressure=limit, **TANK)
     assert res.constraints["feasible"] and res.constraints["pressure_range"][1] <= limit
     assert res.objective[1] < res.objective[0]
+
+
+def test_stroke_limits_are_the_stops_less_the_margin_or_the_rest_position():
+    from pamjax._fit.design import stroke_limits
+
+    muscle = presets.mas10_system(valve="pwm")
+    rest = float(muscle.initial_state().position)  # the payload's equilibrium at atmospheric pressure
+    lo, hi = float(muscle.muscle.min_position), float(muscle.muscle.max_position)
+    assert stroke_limits(muscle, None, 0.005) == pytest.approx((lo + 0.005, hi - 0.005))
+    margin = rest - lo + 0.002  # the payload rests 2 mm inside the margin: the design may go as far as the rest
+    assert stroke_limits(muscle, None, margin) == pytest.approx((rest, hi - margin))
+    assert stroke_limits(_tank(), None, 0.005) is None

@@ -308,6 +308,18 @@ def _physical_errors(space, theta, info):
     return [float(math.sqrt(v)) for v in variances(info, g)]
 
 
+def stroke_limits(model, start, margin):
+    """(lo, hi) positions [m] a design may reach: the muscle's stops less `margin`, or as far as the start position
+    itself where that lies nearer a stop (a payload hanging at rest within the margin: the run may return there and
+    no duty can avoid it). None for a model without a muscle."""
+    muscle = getattr(model, "muscle", None)
+    if muscle is None:
+        return None
+    lo, hi = float(muscle.min_position) + margin, float(muscle.max_position) - margin
+    x0 = float(getattr(model.initial_state(**dict(start or {})), "position", np.nan))
+    return (min(lo, x0), max(hi, x0)) if math.isfinite(x0) else (lo, hi)
+
+
 # Long: the entry point reads top-down (checks, parametrisation, optimisation loop, result); to be split by concern
 def design(
     model,
@@ -392,10 +404,8 @@ def design(
     start = dict(start or {})
     exp = _template(model, float(duration), period, float(design_rate), channels, noise, start, substeps,
                     lo + (hi - lo) * np.asarray(obj.clip01(jnp.asarray(c0 if basis is None else basis @ c0))))
-    muscle = getattr(model, "muscle", None)
-    stroke = None
-    if muscle is not None and "position" in channels:
-        stroke = jnp.asarray([float(muscle.min_position) + stroke_margin, float(muscle.max_position) - stroke_margin])
+    limits = stroke_limits(model, start, stroke_margin) if "position" in channels else None
+    stroke = None if limits is None else jnp.asarray(limits)
     n = len(space.labels)
     index = tuple(space.labels.index(s) for s in subset)
 
