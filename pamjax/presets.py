@@ -41,6 +41,7 @@ here are what a fit to that data must close.
 
 import jax.numpy as jnp
 
+from ._core.arrays import device_array
 from ._core.errors import PamjaxInputError
 from ._papers import datasheets, paper000, paper001
 from ._physics.friction import BristleFriction, CoulombViscousFriction, KarnoppFriction
@@ -142,14 +143,14 @@ def mas10_valve(mode="smooth", silencer=False, **kwargs):
 
 def mas10_averaged_valve():
     """Eq. 13 averaged valve with the derived m1…m9 (module docstring, item 3)."""
-    return AveragedValve(jnp.asarray(MAS10_AVERAGED_VALVE))
+    return AveragedValve(device_array(MAS10_AVERAGED_VALVE))
 
 
 def mas10_muscle():
     """Festo MAS-10-300 with eq. 7 force and eq. 14 linear volume (derived values, module docstring)."""
     return Muscle(
         force_law=PolynomialForce(
-            max_force_coefficients=jnp.asarray(MAS10_MAX_FORCE_COEFFICIENTS),
+            max_force_coefficients=device_array(MAS10_MAX_FORCE_COEFFICIENTS),
             k0=MAS10_K0,
             k1=MAS10_K1,
             k2=MAS10_K2,

@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError
 from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
@@ -215,14 +216,15 @@ class Experiment(AbstractExperiment):
         if not 0.0 <= float(validation_fraction) < 1.0:
             raise PamjaxInputError(f"validation_fraction must be in [0, 1), got {validation_fraction}")
         t = recording.t
-        self.times = jnp.asarray(t)
-        self.data = {c: jnp.asarray(np.where(recording.mask[c], recording[c], 0.0)) for c in channels}
-        self.weights = {c: jnp.asarray(recording.mask[c] / self.scales[c]) for c in channels}
+        self.times = device_array(t)  # (jnp.asarray compiles a small program per shape)
+        self.data = {c: device_array(np.where(recording.mask[c], recording[c], 0.0)) for c in channels}
+        self.weights = {c: device_array(recording.mask[c] / self.scales[c]) for c in channels}
         self.signal = signal
         self.build = SameSystem() if build is None else build
-        self.initial = {k: jnp.asarray(v, dtype=float) for k, v in (initial or {}).items()}
-        self.t0 = jnp.asarray(t[0] if t0 is None else t0, dtype=float)
-        self.split_time = jnp.asarray(t[0] + (1.0 - float(validation_fraction)) * (t[-1] - t[0]) + 1e-12, dtype=float)
+        self.initial = {k: device_array(v, dtype=float) for k, v in (initial or {}).items()}
+        self.t0 = device_array(t[0] if t0 is None else t0, dtype=float)
+        self.split_time = device_array(t[0] + (1.0 - float(validation_fraction)) * (t[-1] - t[0]) + 1e-12,
+                                       dtype=float)
         self.name = recording.name if name is None else str(name)
         self.channels = channels
         self.rtol, self.atol, self.max_steps, self.dt0 = rtol, atol, int(max_steps), dt0

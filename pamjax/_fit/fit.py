@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.arrays import device_array
 from .._core.cache import program_cache
 from .._core.errors import PamjaxInputError, require_float64
 from .._core.private import equinox_errors_as_nan
@@ -103,7 +104,7 @@ class FitResult:
 
     def apply(self, model):
         """`model` with the fitted values set (the free spec in `paths`)."""
-        return ParameterSpace(model, self.paths).with_values(jnp.asarray(self.values))
+        return ParameterSpace(model, self.paths).with_values(np.asarray(self.values, dtype=float))
 
     def table(self, truth=None):
         """Text table: label, (true), initial, fitted ± standard error."""
@@ -178,7 +179,7 @@ class _Problem:
         """A compiled function of (space, θ, experiments); with the CLI's persistent cache on, traced once per
         problem structure for all runs (`ProgramCache`)."""
         programs = program_cache()
-        args = (self.space, jnp.asarray(theta), self.exps)
+        args = (self.space, device_array(theta), self.exps)
         if programs is None:
             return self._timed(kind, fn, *args)
         return self._timed(kind, programs.call, f"fit_{kind}", fn.__wrapped__, args)
@@ -186,7 +187,7 @@ class _Problem:
     def cached(self, theta):
         """Whether both programs of this problem are already traced on disk (a second run: nothing to compile)."""
         programs = program_cache()
-        args = (self.space, jnp.asarray(theta), self.exps)
+        args = (self.space, device_array(theta), self.exps)
         return programs is not None and all(programs.has(f"fit_{kind}", args) for kind in ("residuals", "jacobian"))
 
     def all_residuals(self, theta):
@@ -447,7 +448,7 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
     used = int(np.count_nonzero(np.any(jac != 0, axis=1) | (resid != 0)))
     groups = identifiability(jac, labels, identifiability_tol)
     bad = sorted({label for g in groups for label in g})
-    values, g = (np.asarray(a) for a in _physical_and_jacobian(space, jnp.asarray(theta)))
+    values, g = (np.asarray(a) for a in _physical_and_jacobian(space, device_array(theta)))
     cov = g @ covariance(jac, state.cost, used, identifiability_tol) @ g.T
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -461,7 +462,7 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
                "data; hold one of them fixed)")
         msgs.append(msg)
         warnings.warn(msg, PamjaxIdentifiabilityWarning, stacklevel=3)
-    fitted = space.with_values(jnp.asarray(values))
+    fitted = space.with_values(np.asarray(values))
     r_all = problem.all_residuals(theta)
     errors = channel_errors(exps, r_all)
     flagged, note = mismatch(errors)

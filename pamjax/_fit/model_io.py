@@ -29,6 +29,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError, require_float64
 from .._core.metadata import version
 
@@ -47,7 +48,9 @@ def _registry(extra=()):
         if module is None or not (module_name == "pamjax" or module_name.startswith("pamjax.")):
             continue
         for obj in vars(module).values():
-            if isinstance(obj, type) and issubclass(obj, eqx.Module) and obj.__module__.startswith("pamjax"):
+            # the MRO, not issubclass: ABCMeta's subclass check walks every Module subclass in the process for each
+            # class that is not one (0.1 s per registry)
+            if isinstance(obj, type) and obj.__module__.startswith("pamjax") and eqx.Module in obj.__mro__:
                 classes[obj.__name__] = obj
     for cls in extra:
         classes[_class_name(cls)] = cls
@@ -192,7 +195,7 @@ class _Decoder:
             value = value.reshape(entry["shape"])
         if value.ndim == 0 and dtype == "float64":
             return jnp.asarray(value.item())  # a scalar as `jnp.asarray(9.6)` makes it (the components' converter)
-        return jnp.asarray(value)
+        return device_array(value)
 
     def decode(self, node, path):
         if not isinstance(node, dict) or len(node) == 0:

@@ -10,6 +10,7 @@ import abc
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._core.errors import PamjaxInputError, check_finite, check_in_open_interval, check_positive
 from .._core.fitting import polynomial, positive
@@ -233,15 +234,18 @@ class Muscle(eqx.Module):
         check_positive(self.slack_width, "Muscle.slack_width")
         lo, hi = self.min_position, self.max_position
         if not isinstance(lo, jax.core.Tracer) and not isinstance(hi, jax.core.Tracer):
+            lo, hi = np.asarray(lo), np.asarray(hi)  # concrete: checked in NumPy (eager JAX compiles each operation)
             if not bool(hi > lo):
                 raise PamjaxInputError(f"Muscle.max_position ({hi}) must exceed Muscle.min_position ({lo})")
             # eq. 15 divides by V(x): the volume must stay positive over the whole stroke, not only V(0) = v0.
-            v = self.volume_law.volume(jnp.linspace(lo, hi, 33))
-            if not isinstance(v, jax.core.Tracer) and not bool(jnp.all(v > 0)):
+            concrete = not any(isinstance(a, jax.core.Tracer) for a in jax.tree_util.tree_leaves(self.volume_law))
+            law = jax.tree_util.tree_map(np.asarray, self.volume_law) if concrete else self.volume_law
+            v = law.volume(np.linspace(lo, hi, 33))
+            if not isinstance(v, jax.core.Tracer) and not bool(np.all(np.asarray(v) > 0)):
                 raise PamjaxInputError(
                     f"Muscle.volume_law gives a volume <= 0 inside the stroke [min_position, max_position] = "
-                    f"[{float(lo):.4g}, {float(hi):.4g}] m (smallest {float(jnp.min(v)):.3g} m³); check its "
-                    "coefficients (v0, v1, ...) and the stroke limits"
+                    f"[{float(lo):.4g}, {float(hi):.4g}] m (smallest {float(np.min(np.asarray(v))):.3g} m³); check "
+                    "its coefficients (v0, v1, ...) and the stroke limits"
                 )
 
     @property

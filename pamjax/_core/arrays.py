@@ -1,0 +1,24 @@
+"""Host values to JAX arrays without compiling anything.
+
+JAX (0.10) compiles a small program for `jnp.asarray` of a NumPy array or a Python number, once per shape and dtype
+(`jit(stage)`, `jit(convert_element_type)`: 5-30 ms each on a slow CPU); a fit's set-up makes dozens of such arrays
+(the recordings, the parameter space, the decoded model), tenths of a second of a warm `pamjax fit`.
+`jax.device_put` of the same NumPy array compiles nothing and gives the same array.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+def device_array(x, dtype=None):
+    """`jnp.asarray(x, dtype)` for a concrete host value (a NumPy array, a list, a number with `dtype`): the same
+    values, dtype and (strong) type, made without compiling; copied, never sharing `x`'s memory. A Python number
+    without `dtype` (weakly typed in JAX), a JAX array or tracer, and float64 without JAX's x64 mode go through
+    `jnp.asarray` as they are."""
+    if isinstance(x, (jax.Array, jax.core.Tracer)) or (dtype is None and isinstance(x, (bool, int, float, complex))):
+        return jnp.asarray(x, dtype=dtype)
+    a = np.asarray(x, dtype=dtype)
+    if a.dtype.itemsize == 8 and a.dtype.kind in "fiuc" and not jax.config.jax_enable_x64:
+        return jnp.asarray(x, dtype=dtype)  # JAX narrows 64-bit values without x64: keep its rule
+    return jax.device_put(a, may_alias=False)
