@@ -67,9 +67,17 @@ def test_second_run_compiles_nothing_new(tmp_path):
     assert "compiling" not in text
     programs = sorted(p.name.split("-")[0] for p in (cache / "programs").iterdir())
     assert programs == ["fit_jacobian", "fit_residuals"]
+    executables = sorted((cache / "executables").iterdir())  # the compiled programs, loaded without lowering
+    assert [p.name.split("-")[0] for p in executables] == ["fit_jacobian", "fit_residuals"]
     a = json.loads((tmp_path / "a" / "fit.json").read_text())
     b = json.loads((tmp_path / "b" / "fit.json").read_text())
     assert a["values"] == b["values"] and a["cost"] == b["cost"]  # the same fit, bitwise
+    for p in executables:  # an unreadable executable: the exported program is compiled (from JAX's cache) instead
+        p.write_bytes(b"not an executable")
+    text, third = _run(config, tmp_path / "c", cache)
+    assert third["status"] == 0 and third["hits"] == third["requests"] and "compiling" not in text
+    c = json.loads((tmp_path / "c" / "fit.json").read_text())
+    assert c["values"] == a["values"] and c["cost"] == a["cost"]
 
 
 @pytest.mark.parametrize("how", ["env", "flag"])

@@ -16,6 +16,7 @@ deleted at any time. `PAMJAX_CACHE_MIN_COMPILE_SECONDS` (default 0.1) sets the s
 import os
 import pathlib
 import sys
+import threading
 
 OPT_OUT = "PAMJAX_COMPILATION_CACHE"
 DIR_ENV = "PAMJAX_CACHE_DIR"
@@ -132,12 +133,18 @@ class ProgramCache:
     calls. The key is a SHA-256 of the arguments' structure (classes, static fields, array shapes and dtypes, never
     array values), the function's name, and the pamjax, jax and jaxlib versions and XLA flags: another structure or
     version traces anew. Active only where the persistent compilation cache is on (the CLI); otherwise `call` is
-    `fn(*args)`. `fn` must be a pure function of its array arguments (as every jitted pamjax function is)."""
+    `fn(*args)`. `fn` must be a pure function of its array arguments (as every jitted pamjax function is).
+
+    Loading an exported program still lowers it (StableHLO → XLA, ~0.3 s for a fit's Jacobian) before the persistent
+    cache can find its compiled code; so the compiled executable itself is kept too (`executables/`, JAX's
+    `serialize_executable`, keyed as the program plus this machine: platform, its version, devices, CPU), and a
+    later run loads it directly. Any failure there falls back to the exported program."""
 
     def __init__(self, directory):
         self.directory = pathlib.Path(directory) / "programs"
+        self.executables = pathlib.Path(directory) / "executables"
         self.memory = {}  # key → jitted caller of the exported program
-        self.keys = {}  # (name, argument ids, leaf shapes) → (key, the arguments)
+        self.keys = {}  # (name, argument ids or array shapes) → (key, the arguments, their flattening)
 
     @staticmethod
     def key(name, args):
@@ -165,34 +172,51 @@ class ProgramCache:
         import equinox as eqx
         import jax
 
-        dynamic, static = eqx.partition(args, eqx.is_array)
-        leaves, treedef = jax.tree_util.tree_flatten(dynamic)
-        # The key describes the whole structure (a few ms): once per set of non-array argument objects (a fit's
-        # parameter space and experiments; θ is a new array at every call) in this process. `known` keeps the
-        # objects alive, so that no other object can later reuse one of their ids.
-        ids = (name, tuple(id(a) for a in args if not eqx.is_array(a)),
-               tuple((x.shape, str(x.dtype), bool(getattr(x, "weak_type", False))) for x in leaves))
-        known = self.keys.get(ids)
-        if known is None:
-            known = self.keys[ids] = (self.key(name, args), args)
-        key = known[0]
+        # Per set of non-array argument objects (a fit's parameter space and experiments; θ is a new array at every
+        # call) and the array arguments' shapes: the key (describing the whole structure: a few ms) and the
+        # flattened arguments, computed once in this process. The entry keeps the objects alive, so that no other
+        # object can later reuse one of their ids (they are immutable pytrees).
+        ids = (name, tuple(("array", a.shape, str(a.dtype), bool(getattr(a, "weak_type", False))) if eqx.is_array(a)
+                           else id(a) for a in args))
+        entry = self.keys.get(ids)
+        if entry is None:
+            dynamic, static = eqx.partition(args, eqx.is_array)
+            treedef = jax.tree_util.tree_structure(dynamic)
+            parts = [None if eqx.is_array(a) else jax.tree_util.tree_leaves(d) for a, d in zip(args, dynamic)]
+            entry = self.keys[ids] = (self.key(name, args), args, treedef, static, parts)
+        key, _, treedef, static, parts = entry
+        leaves = [x for a, part in zip(args, parts) for x in ((a,) if part is None else part)]
         caller = self.memory.get(key)
         if caller is None:
-            path = self.directory / f"{name}-{key}.bin"
-            exported = self._load(path)
-            if exported is None:
 
-                def flat(*xs):
-                    return fn(*eqx.combine(jax.tree_util.tree_unflatten(treedef, xs), static))
+            def flat(*xs):
+                return fn(*eqx.combine(jax.tree_util.tree_unflatten(treedef, xs), static))
 
-                try:
-                    exported = jax.export.export(jax.jit(flat))(*leaves)
-                except NotImplementedError:  # e.g. a host callback in the program: not exportable, jit it as usual
-                    caller = self.memory[key] = jax.jit(flat)
-                    return caller(*leaves)
-                self._save(path, exported)
-            caller = self.memory[key] = jax.jit(exported.call)  # traced once per process (a thin wrapper)
+            caller = self.memory[key] = self._caller(name, key, flat, leaves)
         return caller(*leaves)
+
+    def _caller(self, name, key, flat, leaves):
+        """The compiled program: this machine's executable if kept, else the exported program (traced and exported
+        now if not kept either) compiled through the persistent cache, its executable then kept."""
+        import jax
+
+        executable = self.executables / f"{name}-{key}-{_machine()}.exe"
+        compiled = self._load_executable(executable)
+        if compiled is not None:
+            return compiled
+        path = self.directory / f"{name}-{key}.bin"
+        exported = self._load(path)
+        if exported is None:
+            try:
+                exported = jax.export.export(jax.jit(flat))(*leaves)
+            except NotImplementedError:  # e.g. a host callback in the program: not exportable, jit it as usual
+                return jax.jit(flat)
+            self._save(path, exported.serialize())
+        hits = _persistent_hits()
+        compiled = jax.jit(exported.call).lower(*leaves).compile()
+        if _persistent_hits() == hits:  # compiled here: an executable read from JAX's cache does not serialize whole
+            self._save_executable(executable, compiled)
+        return compiled
 
     @staticmethod
     def _load(path):
@@ -206,14 +230,41 @@ class ProgramCache:
             return None
 
     @staticmethod
-    def _save(path, exported):
+    def _save(path, data):
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
-            tmp.write_bytes(exported.serialize())
+            tmp = path.with_name(path.name + f".{os.getpid()}.{threading.get_ident()}.tmp")
+            tmp.write_bytes(data)
             tmp.replace(path)
-        except (OSError, ImportError):
-            pass  # a read-only cache, or no serializer: the program is still used in this process
+        except OSError:
+            pass  # a read-only cache: the program is still used in this process
+
+    @staticmethod
+    def _load_executable(path):
+        if not path.exists():
+            return None
+        try:
+            import pickle
+            import zlib
+
+            from jax.experimental.serialize_executable import deserialize_and_load
+
+            payload, in_tree, out_tree = pickle.loads(zlib.decompress(path.read_bytes()))
+            return deserialize_and_load(payload, in_tree, out_tree)
+        except Exception:  # unreadable, stale or not loadable here: compile from the exported program (and replace)
+            return None
+
+    def _save_executable(self, path, compiled):
+        try:
+            import pickle
+            import zlib
+
+            from jax.experimental.serialize_executable import serialize
+
+            data = zlib.compress(pickle.dumps(serialize(compiled), protocol=pickle.HIGHEST_PROTOCOL), 1)
+        except Exception:  # an executable this backend cannot serialize: the exported program is kept
+            return
+        self._save(path, data)
 
 
 def _versions():
@@ -229,6 +280,44 @@ def _versions():
                 versions.append("?")
         _PROGRAMS["versions"] = tuple(versions)
     return _PROGRAMS["versions"]
+
+
+_HITS = {}  # thread → JAX persistent-cache hits seen in it
+
+
+def _persistent_hits():
+    """How many programs this thread has read from JAX's persistent cache (a listener counts them)."""
+    if "listener" not in _PROGRAMS:
+        import jax
+
+        def listener(event, **kwargs):
+            if event == "/jax/compilation_cache/cache_hits":
+                _HITS[threading.get_ident()] = _HITS.get(threading.get_ident(), 0) + 1
+
+        jax.monitoring.register_event_listener(listener)
+        _PROGRAMS["listener"] = listener
+    return _HITS.get(threading.get_ident(), 0)
+
+
+def _machine():
+    """A digest of what a compiled executable is specific to: the platform and its version, the devices, and on
+    Linux the CPU's model and instruction-set flags (XLA compiles for the host CPU)."""
+    if "machine" not in _PROGRAMS:
+        import hashlib
+        import platform
+
+        import jax
+
+        devices = jax.devices()
+        parts = [platform.machine(), devices[0].platform, getattr(devices[0].client, "platform_version", "?"),
+                 [d.device_kind for d in devices]]
+        try:
+            with open("/proc/cpuinfo") as f:
+                parts += [line.strip() for line in f if line.startswith(("model name", "flags"))][:2]
+        except OSError:
+            pass
+        _PROGRAMS["machine"] = hashlib.sha256(repr(parts).encode()).hexdigest()[:12]
+    return _PROGRAMS["machine"]
 
 
 _PROGRAMS = {"cache": None}
@@ -264,8 +353,6 @@ class announce_compilation:  # noqa: N801 - used as a context manager, like cont
         self._said = True
 
     def __enter__(self):
-        import threading
-
         self.stats.__enter__()
         self._timer = threading.Timer(self.after, self._say_compiling)
         self._timer.daemon = True
