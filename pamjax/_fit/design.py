@@ -6,9 +6,7 @@ function (`pamjax._fit`); the iteration is a BFGS on the host with a backtrackin
 value (one forward-mode Jacobian per trial) and a gradient only at accepted points.
 """
 
-import dataclasses
 import inspect
-import json
 import math
 import threading
 import time
@@ -20,10 +18,11 @@ import numpy as np
 from .._core.errors import PamjaxInputError, require_float64
 from .._physics.signals import AbstractSignal, Sampled, Triangle
 from . import design_objective as obj
+from .design_result import DesignResult
 from .experiment import Experiment
 from .fit import _residuals_and_jacobian
 from .parameters import ParameterSpace, strong_types
-from .recording import Recording, _writable
+from .recording import Recording
 
 # Defaults and their sources.
 DUTY_BAND = (0.1, 0.9)  # paper 000: with the MHE2's ~2 ms switching time, only duty 10-90 % has an effect at 50 Hz
@@ -36,95 +35,6 @@ CARRIER_HOLD = 10  # PWM periods (0.2 s at 50 Hz): the hold of the most informat
 DESIGN_RATE = 250.0  # Hz: the objective's samples; the information matrix agrees within 0.2 % with 1 kHz (docs)
 DESIGN_SUBSTEPS = 4  # RK4 nodes per PWM period in the objective: within 0.2 % of the fit's 16 (docs)
 FIT_SUBSTEPS = inspect.signature(Experiment.__init__).parameters["substeps"].default  # what a fit integrates with
-
-
-@dataclasses.dataclass
-class DesignResult:
-    """The outcome of `design`.
-
-    - `times` [s] (start of each PWM period), `duty` [-] (one value per period), `period` [s]; `signal()` gives the
-      `Sampled` signal, `to_csv` writes it (`t [s]`, `duty [-]`).
-    - `labels`, `values` (the design point), `subset` (the labels the criterion is on), `criterion` ("D" or "A").
-    - `standard_errors`: predicted (Cramér-Rao) standard errors in physical units per label, for "design" (prior
-      experiments + the designed one), "prior" (prior experiments alone; inf where they do not determine it) and
-      "baseline" (prior + baseline experiments) when a baseline was given.
-    - `objective`: [start, end] values of the criterion; `history`: per iteration [iteration, objective, criterion,
-      step length, accepted].
-    - `constraints`: the predicted stroke and pressure extremes, the largest duty step, the limits, `feasible`.
-    - `design_s`: wall time of the whole design; `compile_s`: of its start (compiling the objective and its
-      gradient, overlapped with the prior and baseline experiments' Jacobians), before the first iteration.
-    - `prediction`: the predicted run at the objective's samples (t, position, pressure; not in JSON).
-    """
-
-    times: list
-    duty: list
-    period: float
-    labels: list
-    values: list
-    subset: list
-    criterion: str
-    standard_errors: dict
-    objective: list
-    history: list
-    constraints: dict
-    parametrisation: str
-    iterations: int
-    message: str
-    design_s: float
-    compile_s: float
-    prediction: dict = dataclasses.field(default=None, repr=False, compare=False)
-
-    def signal(self):
-        """The designed duty as `pamjax.Sampled(times, duty, period=period)`."""
-        return Sampled(jnp.asarray(self.times), jnp.asarray(self.duty), period=self.period)
-
-    def to_dict(self):
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "prediction"}
-
-    def to_json(self, path, overwrite=False):
-        path = _writable(path, overwrite)
-        path.write_text(json.dumps(self.to_dict(), indent=1))
-        return path
-
-    def to_csv(self, path, overwrite=False):
-        """`t [s],duty [-]`, one row per PWM period, the predicted standard errors in '#' comment lines above
-        (`pamjax.Recording.load(path)` reads it; `Sampled(rec.t, rec["duty"], period=...)` replays it)."""
-        path = _writable(path, overwrite)
-        lines = [f"# pamjax design: {self.criterion}-optimal over {', '.join(self.subset)}; PWM period "
-                 f"{self.period} s; duty latched per period",
-                 "# predicted standard errors (Cramér-Rao, SI units): label, design"
-                 + (", baseline" if "baseline" in self.standard_errors else "") + ", prior experiments alone"]
-        for i, label in enumerate(self.labels):
-            cols = [self.standard_errors["design"][i]]
-            if "baseline" in self.standard_errors:
-                cols.append(self.standard_errors["baseline"][i])
-            cols.append(self.standard_errors["prior"][i])
-            lines.append(f"#   {label}, " + ", ".join(f"{c:.6g}" for c in cols))
-        lines.append("t [s],duty [-]")
-        lines += [f"{t!r},{d!r}" for t, d in zip(map(float, self.times), map(float, self.duty))]
-        path.write_text("\n".join(lines) + "\n")
-        return path
-
-    def table(self):
-        """Text table: label, value, predicted standard error (design, baseline, prior alone) and their ratio."""
-        base = self.standard_errors.get("baseline")
-        head = f"{'parameter':<40}{'value':>13}{'se design':>12}" + (f"{'se baseline':>13}{'ratio':>8}" if base
-                                                                       else "") + f"{'se prior':>12}"
-        rows = [head]
-        for i, label in enumerate(self.labels):
-            se = self.standard_errors["design"][i]
-            row = f"{label:<40}{self.values[i]:>13.6g}{se:>12.3g}"
-            if base:
-                row += f"{base[i]:>13.3g}{base[i] / se:>8.2f}"
-            rows.append(row + f"{self.standard_errors['prior'][i]:>12.3g}")
-        return "\n".join(rows)
-
-    def plot(self, path):
-        """Figure: the duty, the predicted position and pressure with their limits, and the predicted relative
-        standard errors (design, baseline, prior alone)."""
-        from .design_plot import plot_design
-
-        return plot_design(self, path)
 
 
 def information(space, theta, experiments):
@@ -320,7 +230,52 @@ def stroke_limits(model, start, margin):
     return (min(lo, x0), max(hi, x0)) if math.isfinite(x0) else (lo, hi)
 
 
-# Long: the entry point reads top-down (checks, parametrisation, optimisation loop, result); to be split by concern
+def _in_hand(space, theta, prior, baseline, index, margin):
+    """(prior information, prior + baseline information or None, the variance floor on `index` or None)."""
+    n = len(space.labels)
+    prior_info = information(space, theta, prior) if len(prior) else np.zeros((n, n))
+    if baseline is None:
+        return prior_info, None, None
+    base_info = prior_info + information(space, theta, baseline)
+    floor = np.full(n, np.inf)
+    floor[list(index)] = _floor(prior_info, base_info, margin)[list(index)]
+    return prior_info, base_info, floor
+
+
+def _constraints(aux, band, max_duty_step, stroke, max_pressure):
+    """The `constraints` report of a design: limits, the predicted extremes, and whether all hold."""
+    duty, position, pressure = np.asarray(aux["duty"]), aux.get("position"), aux.get("pressure")
+    return dict(
+        duty_band=list(band), duty_range=[float(duty.min()), float(duty.max())],
+        largest_duty_step=float(np.max(np.abs(np.diff(duty)))) if duty.size > 1 else 0.0,
+        max_duty_step=max_duty_step, stroke_limits=None if stroke is None else [float(s) for s in stroke],
+        position_range=None if position is None else [float(np.min(position)), float(np.max(position))],
+        max_pressure=max_pressure,
+        pressure_range=None if pressure is None else [float(np.min(pressure)), float(np.max(pressure))],
+        feasible=_violation(aux) <= 1e-9)
+
+
+def _prepare(problem, gradient, c0, space, theta, prior, baseline, index, margin):
+    """The design problem with the information in hand, compiling the gradient (the long pole) in a second thread
+    meanwhile; checks that the start determines every parameter. Returns (problem, prior information, prior +
+    baseline information or None, seconds to the first iteration)."""
+    n = len(space.labels)
+    placeholder = problem(np.eye(n), None if baseline is None else np.ones(n))
+    warm = threading.Thread(target=lambda: jax.block_until_ready(gradient(jnp.asarray(c0), placeholder)), daemon=True)
+    t_compile = time.perf_counter()
+    warm.start()
+    prior_info, base_info, floor = _in_hand(space, theta, prior, baseline, index, margin)
+    prob = problem(prior_info, floor)
+    start_value, start_aux = obj.value(jnp.asarray(c0), prob)
+    warm.join()
+    if not np.isfinite(float(start_value)):
+        loose = [lbl for lbl, v in zip(space.labels, variances(np.asarray(start_aux["information"]))) if np.isinf(v)]
+        raise PamjaxInputError(f"initial: the start signal (with the prior experiments) does not determine {loose}, "
+                               "so the criterion is undefined there; start from another signal (`initial`) or add "
+                               "prior experiments that fix them")
+    return prob, prior_info, base_info, time.perf_counter() - t_compile
+
+
 def design(
     model,
     free,
@@ -399,83 +354,55 @@ def design(
     lo, hi = (float(b) for b in duty_band)
     count = int(math.ceil(duration / period - 1e-9))
     times = np.arange(count) * period
-    carrier = obj.multilevel_carrier(count, CARRIER_HOLD, seed)
-    c0, basis = _start_coefficients(parametrisation, times, float(duration), knots, carrier, (lo, hi), initial)
+    c0, basis = _start_coefficients(parametrisation, times, float(duration), knots,
+                                    obj.multilevel_carrier(count, CARRIER_HOLD, seed), (lo, hi), initial)
     start = dict(start or {})
     exp = _template(model, float(duration), period, float(design_rate), channels, noise, start, substeps,
                     lo + (hi - lo) * np.asarray(obj.clip01(jnp.asarray(c0 if basis is None else basis @ c0))))
     limits = stroke_limits(model, start, stroke_margin) if "position" in channels else None
-    stroke = None if limits is None else jnp.asarray(limits)
-    n = len(space.labels)
-    index = tuple(space.labels.index(s) for s in subset)
+    n, index = len(space.labels), tuple(space.labels.index(s) for s in subset)
 
     def problem(prior_info, floor):
         return obj.DesignProblem(
             space=space, theta=jnp.asarray(theta), experiment=exp, basis=None if basis is None else jnp.asarray(basis),
             prior=jnp.asarray(prior_info), weight=jnp.asarray(float(rate) / float(design_rate)),
-            band=jnp.asarray([lo, hi]), stroke=stroke,
+            band=jnp.asarray([lo, hi]), stroke=None if limits is None else jnp.asarray(limits),
             max_pressure=None if max_pressure is None else jnp.asarray(float(max_pressure)),
             max_step=None if max_duty_step is None else jnp.asarray(float(max_duty_step)),
             floor=None if floor is None else jnp.asarray(floor), subset=index, criterion=criterion)
 
     gradient = obj.reverse_gradient if parametrisation == "periods" else obj.forward_gradient
-    report = _printer(progress)
-    if report is not None and not callable(progress):
-        print(f"design: {count} PWM periods, {len(c0)} coefficients ({parametrisation}), {criterion}-optimal over "
-              f"{len(subset)} of {n} parameters; compiling the objective and its gradient ...", flush=True)
-    # Compile the gradient (the long pole) in a second thread while the prior and baseline information are computed.
-    placeholder = problem(np.eye(n), None if baseline is None else np.ones(n))
-    warm = threading.Thread(target=lambda: jax.block_until_ready(gradient(jnp.asarray(c0), placeholder)), daemon=True)
-    t_compile = time.perf_counter()
-    warm.start()
-    prior_info = information(space, theta, prior) if len(prior) else np.zeros((n, n))
-    floor, base_info = None, None
-    if baseline is not None:
-        base_info = prior_info + information(space, theta, baseline)
-        floor = np.full(n, np.inf)
-        floor[list(index)] = _floor(prior_info, base_info, float(baseline_margin))[list(index)]
-    prob = problem(prior_info, floor)
-    start_value, start_aux = obj.value(jnp.asarray(c0), prob)
-    warm.join()
-    if not np.isfinite(float(start_value)):
-        loose = [lbl for lbl, v in zip(space.labels, variances(np.asarray(start_aux["information"]))) if np.isinf(v)]
-        raise PamjaxInputError(f"initial: the start signal (with the prior experiments) does not determine {loose}, "
-                               "so the criterion is undefined there; start from another signal (`initial`) or add "
-                               "prior experiments that fix them")
-    compile_s = time.perf_counter() - t_compile
+    report = _printer(progress, f"design: {count} PWM periods, {len(c0)} coefficients ({parametrisation}), "
+                                f"{criterion}-optimal over {len(subset)} of {n} parameters; compiling the objective "
+                                "and its gradient ...")
+    prob, prior_info, base_info, compile_s = _prepare(problem, gradient, c0, space, theta, prior, baseline, index,
+                                                      float(baseline_margin))
     c, aux, history, message = _optimise(np.asarray(c0, dtype=float), prob, gradient, steps, report)
-    duty = np.asarray(aux["duty"])
-    info = np.asarray(aux["information"])
+    duty, info = np.asarray(aux["duty"]), np.asarray(aux["information"])
     if verify:  # at the fit's resolution (the Experiment's default substeps, the recording's rate)
         full = _template(model, float(duration), period, float(rate), channels, noise, start, FIT_SUBSTEPS, duty)
         info = prior_info + information(space, theta, [full])
-    errors = {"design": _physical_errors(space, theta, info), "prior": _physical_errors(space, theta, prior_info)}
-    if base_info is not None:
-        errors["baseline"] = _physical_errors(space, theta, base_info)
+    errors = {key: _physical_errors(space, theta, i) for key, i in
+              (("design", info), ("prior", prior_info), ("baseline", base_info)) if i is not None}
     position, pressure = aux.get("position"), aux.get("pressure")
-    constraints = dict(
-        duty_band=[lo, hi], duty_range=[float(duty.min()), float(duty.max())],
-        largest_duty_step=float(np.max(np.abs(np.diff(duty)))) if duty.size > 1 else 0.0,
-        max_duty_step=max_duty_step, stroke_limits=None if stroke is None else [float(s) for s in stroke],
-        position_range=None if position is None else [float(np.min(position)), float(np.max(position))],
-        max_pressure=max_pressure, pressure_range=None if pressure is None else [float(np.min(pressure)),
-                                                                                 float(np.max(pressure))],
-        feasible=_violation(aux) <= 1e-9)
     return DesignResult(
         times=[float(t) for t in times], duty=[float(d) for d in duty], period=period, labels=list(space.labels),
         values=[float(v) for v in np.asarray(space.initial_values())], subset=subset, criterion=criterion,
         standard_errors=errors, objective=[history[0][2], float(aux["criterion"])], history=history,
-        constraints=constraints, parametrisation=parametrisation, iterations=len(history) - 1, message=message,
+        constraints=_constraints(aux, (lo, hi), max_duty_step, limits, max_pressure), parametrisation=parametrisation,
+        iterations=len(history) - 1, message=message,
         design_s=time.perf_counter() - t_start, compile_s=compile_s,
         prediction=dict(t=np.asarray(exp.times), position=None if position is None else np.asarray(position),
                         pressure=None if pressure is None else np.asarray(pressure)))
 
 
-def _printer(progress):
+def _printer(progress, announce):
+    """The per-iteration report `progress` asks for; True prints `announce` first."""
     if callable(progress):
         return progress
     if not progress:
         return None
+    print(announce, flush=True)
 
     def report(it, objective, criterion, step, accepted):
         print(f"  iter {it:3d}  objective {objective:.6f}  criterion {criterion:.6f}  step {step:.3g}  "
