@@ -168,7 +168,10 @@ class ProgramCache:
         key = self.key(name, args)
         return key in self.memory or (self.directory / f"{name}-{key}.bin").exists()
 
-    def call(self, name, fn, args):
+    def call(self, name, fn, args, ready=None):
+        """`fn(*args)`, compiled once per argument structure (see the class docstring). `ready`, if given, is called
+        once the Python side of a first call is done (traced, exported, lowered), before XLA compiles or loads the
+        program: the moment another thread's Python work no longer competes with this one."""
         import equinox as eqx
         import jax
 
@@ -192,28 +195,35 @@ class ProgramCache:
             def flat(*xs):
                 return fn(*eqx.combine(jax.tree_util.tree_unflatten(treedef, xs), static))
 
-            caller = self.memory[key] = self._caller(name, key, flat, leaves)
+            caller = self.memory[key] = self._caller(name, key, flat, leaves, ready or (lambda: None))
+        elif ready is not None:
+            ready()
         return caller(*leaves)
 
-    def _caller(self, name, key, flat, leaves):
+    def _caller(self, name, key, flat, leaves, ready):
         """The compiled program: this machine's executable if kept, else the exported program (traced and exported
         now if not kept either) compiled through the persistent cache, its executable then kept."""
         import jax
 
         executable = self.executables / f"{name}-{key}-{_machine()}.exe"
-        compiled = self._load_executable(executable)
-        if compiled is not None:
-            return compiled
+        if executable.exists():
+            ready()
+            compiled = self._load_executable(executable)
+            if compiled is not None:
+                return compiled
         path = self.directory / f"{name}-{key}.bin"
         exported = self._load(path)
         if exported is None:
             try:
                 exported = jax.export.export(jax.jit(flat))(*leaves)
             except NotImplementedError:  # e.g. a host callback in the program: not exportable, jit it as usual
+                ready()
                 return jax.jit(flat)
             self._save(path, exported.serialize())
         hits = _persistent_hits()
-        compiled = jax.jit(exported.call).lower(*leaves).compile()
+        lowered = jax.jit(exported.call).lower(*leaves)
+        ready()
+        compiled = lowered.compile()
         if _persistent_hits() == hits:  # compiled here: an executable read from JAX's cache does not serialize whole
             self._save_executable(executable, compiled)
         return compiled

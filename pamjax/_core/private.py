@@ -5,6 +5,7 @@ that breaks one is caught by the test suite, not by a user. Everything else in p
 """
 
 import contextlib
+import threading
 
 
 @contextlib.contextmanager
@@ -18,12 +19,23 @@ def equinox_errors_as_nan():
     switch afterwards is its private module-level name `equinox._errors.EQX_ON_ERROR`."""
     import equinox._errors as eqx_errors
 
-    old = eqx_errors.EQX_ON_ERROR
-    eqx_errors.EQX_ON_ERROR = "nan"
+    # Counted: a fit's two programs are traced in two threads whose uses overlap; the setting is restored when the
+    # last one ends (a plain save/restore per use could leave "nan" set, or restore "raise" under a tracing thread).
+    with _ERRORS_AS_NAN["lock"]:
+        if _ERRORS_AS_NAN["depth"] == 0:
+            _ERRORS_AS_NAN["old"] = eqx_errors.EQX_ON_ERROR
+            eqx_errors.EQX_ON_ERROR = "nan"
+        _ERRORS_AS_NAN["depth"] += 1
     try:
         yield
     finally:
-        eqx_errors.EQX_ON_ERROR = old
+        with _ERRORS_AS_NAN["lock"]:
+            _ERRORS_AS_NAN["depth"] -= 1
+            if _ERRORS_AS_NAN["depth"] == 0:
+                eqx_errors.EQX_ON_ERROR = _ERRORS_AS_NAN["old"]
+
+
+_ERRORS_AS_NAN = {"lock": threading.Lock(), "depth": 0, "old": None}
 
 
 def jax_backends_initialized() -> bool:

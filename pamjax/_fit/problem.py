@@ -1,0 +1,121 @@
+"""A fit's two compiled functions and their host side: the residuals at θ and (r, ∂r/∂θ) in forward mode, compiled
+once per problem structure (`ProgramCache` when the CLI's persistent cache is on), called with NumPy in and out
+(`_Problem`); `fit`, `profile` and `design` use them."""
+
+import threading
+import time
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._core.arrays import device_array
+from .._core.cache import program_cache
+from .._core.private import equinox_errors_as_nan
+from .predictions import predict_all
+
+
+def _residual_vector(space, theta, exps):
+    """Residuals of every sample (identification and validation parts; the host selects)."""
+    model = space.model(theta)
+    preds = predict_all(model, exps)
+    return jnp.concatenate([e.residuals_of(p, "all") for e, p in zip(exps, preds)])
+
+
+@eqx.filter_jit
+def _residuals(space, theta, exps):
+    """The residuals at θ (module level, `space` an argument: fits of one problem structure from different start
+    models share this compilation)."""
+    return _residual_vector(space, theta, exps)
+
+
+@eqx.filter_jit
+def _residuals_and_jacobian(space, theta, exps):
+    """(r, ∂r/∂θ) at θ, forward mode: one pass of the solves with a tangent per free parameter."""
+
+    def f(t):
+        r = _residual_vector(space, t, exps)
+        return r, r
+
+    jac, r = jax.jacfwd(f, has_aux=True)(theta)
+    return r, jac
+
+
+@eqx.filter_jit
+def _physical_and_jacobian(space, theta):
+    """The physical values at θ and d(values)/dθ, compiled (run eagerly, each operation compiles on its own)."""
+    return space.physical(theta), jax.jacfwd(space.physical)(theta)
+
+
+class _Problem:
+    """The host side of the two compiled functions: NumPy in, NumPy out, the identification samples selected; a
+    failed solve's residuals are None."""
+
+    def __init__(self, space, exps):
+        self.space, self.exps = space, exps
+        self.mask = np.concatenate([used & ident for e in exps for _, _, _, used, ident in e.layout()])
+        self.seconds = {"residuals": [], "jacobian": []}  # wall time of every call, the first with compilation
+
+    def _timed(self, kind, fn, *args):
+        t = time.perf_counter()
+        with equinox_errors_as_nan():
+            out = jax.block_until_ready(fn(*args))
+        self.seconds[kind].append(time.perf_counter() - t)
+        return out
+
+    def _call(self, kind, fn, theta, ready=None):
+        """A compiled function of (space, θ, experiments); with the CLI's persistent cache on, traced once per
+        problem structure for all runs (`ProgramCache`; `ready` as its `call`'s, else called at once)."""
+        programs = program_cache()
+        args = (self.space, device_array(theta), self.exps)
+        if programs is None:
+            if ready is not None:
+                ready()
+            return self._timed(kind, fn, *args)
+        return self._timed(kind, programs.call, f"fit_{kind}", fn.__wrapped__, args, ready)
+
+    def cached(self, theta):
+        """Whether both programs of this problem are already traced on disk (a second run: nothing to compile)."""
+        programs = program_cache()
+        args = (self.space, device_array(theta), self.exps)
+        return programs is not None and all(programs.has(f"fit_{kind}", args) for kind in ("residuals", "jacobian"))
+
+    def all_residuals(self, theta):
+        return np.asarray(self._call("residuals", _residuals, theta))
+
+    def residuals(self, theta):
+        r = self.all_residuals(theta)[self.mask]
+        return r if np.all(np.isfinite(r)) else None
+
+    def jacobian(self, theta, ready=None):
+        r, j = self._call("jacobian", _residuals_and_jacobian, theta, ready)
+        return np.asarray(r)[self.mask], np.asarray(j)[self.mask]
+
+    def _side(self, theta):
+        self.all_residuals(theta)
+        _physical_and_jacobian(self.space, device_array(theta))  # compiled now for the statistics at the end
+
+    def start(self, theta):
+        """The start point's residuals and Jacobian. The residual function (for trial steps) is compiled at the
+        same time in a second thread, on the second core when there is one, started once the Jacobian's Python
+        work (tracing) is done, so as not to slow it; `compile_seconds` is then the wall time until both are ready,
+        less one evaluation of each."""
+        t0 = time.perf_counter()
+        side = threading.Thread(target=self._side, args=(theta,), daemon=True)
+
+        def ready():
+            if side.ident is None:
+                side.start()
+
+        out = self.jacobian(theta, ready)  # an error or Ctrl-C here leaves the (daemon) side thread unwaited for
+        ready()
+        side.join()
+        self.ready_s = time.perf_counter() - t0
+        return out
+
+    def compile_seconds(self):
+        """Compilation time: the wall time until both compiled functions were ready, less their steady evaluation
+        times (the medians of their later calls; the whole time when a fit ended after its first evaluation)."""
+        steady = sum(float(np.median(t[1:])) for t in self.seconds.values() if len(t) >= 2)
+        return max(getattr(self, "ready_s", 0.0) - steady, 0.0)
