@@ -226,33 +226,19 @@ _UNITS = {"pressure": "[Pa abs]", "position": "[m]", "velocity": "[m/s]", "force
 
 
 def plot(path, result, experiments):
-    """Data vs model per experiment and channel (the fit result's predictions), residuals below."""
-    import matplotlib
+    """Data vs model per experiment and channel (the fit result's predictions), residuals below
+    (`pamjax/_cli/fit_figure.py`; drawn in the process `run` started, if any)."""
+    from . import figures, fit_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    cols = [(e, c) for e in experiments for c in e.channels]
-    fig, axes = plt.subplots(2, len(cols), figsize=(4 * len(cols), 6), squeeze=False, sharex="col")
-    for j, (e, c) in enumerate(cols):
-        pred = np.asarray(result.predictions[e.name][c])
-        data = np.asarray(e.data[c])
+    columns = []
+    for e in experiments:
         t = np.asarray(e.times)
-        axes[0, j].plot(t, data, ".", ms=2, label="data")
-        axes[0, j].plot(t, pred, "k-", lw=0.8, label="model")
-        unit = _UNITS.get(c, "")
-        axes[0, j].set(title=f"{e.name}: {c}", ylabel=f"{c} {unit}".strip())
-        if hasattr(e, "split_time") and float(e.split_time) < t[-1]:
-            for ax in axes[:, j]:
-                ax.axvline(float(e.split_time), color="C3", lw=0.8, ls="--")
-        axes[1, j].plot(t, pred - data, lw=0.8)
-        axes[1, j].set(xlabel="t [s]", ylabel=f"model − data {unit.replace(' abs', '')}".strip())
-    if any(hasattr(e, "split_time") and float(e.split_time) < np.asarray(e.times)[-1] for e, _ in cols):
-        axes[0, 0].plot([], [], color="C3", lw=0.8, ls="--", label="identification | validation")
-    axes[0, 0].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110, format="png")
-    plt.close(fig)
+        split = float(e.split_time) if hasattr(e, "split_time") and float(e.split_time) < t[-1] else None
+        for c in e.channels:
+            columns.append(dict(title=f"{e.name}: {c}", channel=c, unit=_UNITS.get(c, ""), t=t,
+                                data=np.asarray(e.data[c]), model=np.asarray(result.predictions[e.name][c]),
+                                split=split))
+    figures.draw(fit_figure, path, columns)
 
 
 def _checkpoint_summary(path):
@@ -270,6 +256,10 @@ def _resume_command(args, out):
 
 
 def run(args):
+    if not args.no_plot:  # matplotlib imported and warmed up in a process of its own while the fit runs
+        from . import figures, fit_figure
+
+        figures.start(fit_figure)
     model, experiments, free, options, out_cfg, bench = _load(args.config)
     out = pathlib.Path(args.out or out_cfg or f"results/{pathlib.Path(args.config).stem}")
     if args.resume and args.overwrite:

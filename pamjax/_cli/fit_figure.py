@@ -1,0 +1,78 @@
+"""`pamjax fit`'s figure (data vs model per experiment and channel, residuals below), drawn by `draw(path, columns)`.
+
+Also a script: `pamjax._cli.figures` runs this file in a Python process of its own when a fit starts, so that
+importing matplotlib and its first drawing (fonts, ticks, the PNG writer: ~1 s of Python) happen on another core
+while the fit runs; the script then waits for one pickled request on stdin (`{"path": ..., "columns": [...]}`), draws
+it and answers one line on stdout: "ok", or the error's type and message. It imports neither pamjax nor JAX (as a
+script it is not part of the package), only NumPy and matplotlib.
+
+`columns`: one dict per compared channel, with `title`, `channel`, `unit`, `t`, `data`, `model` (arrays over the
+samples) and `split` (the identification | validation boundary [s], or None).
+"""
+
+import io
+import os
+import pickle
+import sys
+
+import numpy as np
+
+
+def _figure(**kwargs):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure  # no pyplot: no global figure registry, the same drawing
+
+    return Figure(**kwargs)
+
+
+def draw(path, columns):
+    """Write the figure of `columns` (see the module docstring) to `path` as PNG."""
+    fig = _figure(figsize=(4 * len(columns), 6))
+    axes = fig.subplots(2, len(columns), squeeze=False, sharex="col")
+    for j, col in enumerate(columns):
+        t, data, model = (np.asarray(col[k]) for k in ("t", "data", "model"))
+        unit = col["unit"]
+        axes[0, j].plot(t, data, ".", ms=2, label="data")
+        axes[0, j].plot(t, model, "k-", lw=0.8, label="model")
+        axes[0, j].set(title=col["title"], ylabel=f"{col['channel']} {unit}".strip())
+        if col["split"] is not None:
+            for ax in axes[:, j]:
+                ax.axvline(col["split"], color="C3", lw=0.8, ls="--")
+        axes[1, j].plot(t, model - data, lw=0.8)
+        axes[1, j].set(xlabel="t [s]", ylabel=f"model − data {unit.replace(' abs', '')}".strip())
+    if any(col["split"] is not None for col in columns):
+        axes[0, 0].plot([], [], color="C3", lw=0.8, ls="--", label="identification | validation")
+    axes[0, 0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, format="png")
+
+
+def _warm_up():
+    """Import matplotlib and draw a small figure of the same kind into memory (fonts, ticks, PNG writer loaded)."""
+    t = np.linspace(0.0, 1.0, 5)
+    draw(io.BytesIO(), [dict(title="warm-up", channel="pressure", unit="[Pa abs]", t=t, data=t, model=t, split=0.5)])
+
+
+def _serve():
+    try:
+        _warm_up()
+    except Exception:  # noqa: BLE001 - reported when a figure is asked for (e.g. no matplotlib)
+        pass
+    try:
+        request = pickle.load(sys.stdin.buffer)
+    except (EOFError, pickle.UnpicklingError, KeyboardInterrupt):  # the command ended without a figure
+        return
+    try:
+        draw(request["path"], request["columns"])
+        answer = "ok"
+    except Exception as err:  # noqa: BLE001 - sent back to the command, which reports it as its own
+        answer = f"{type(err).__name__}\t{err}".replace("\n", " ")
+    sys.stdout.write(answer + "\n")
+    sys.stdout.flush()
+    os._exit(0)  # the figure is written: no interpreter teardown for the command to wait for
+
+
+if __name__ == "__main__":
+    _serve()
