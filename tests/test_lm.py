@@ -113,6 +113,31 @@ def test_a_minimum_where_the_cost_is_not_smooth_is_converged_not_stalled():
     assert _lm.probe(state, residuals)[0] <= 1e-6 * state.cost
 
 
+def test_a_fit_crawling_at_a_minimum_is_probed_and_converged():
+    # Tiny steps accepted between rejections never make `stall_steps` rejections in a row (two bench fits from the
+    # presets ran to max_steps so, gaining 1e-9 of the cost per step). Where CRAWL_STEPS iterations together gained
+    # less than POTENTIAL_TOL of the cost, the probe decides: here, at the minimum of a quadratic, converged.
+    rng = np.random.default_rng(4)
+    a, e = rng.normal(size=(50, 2)), rng.normal(size=50)
+
+    def residuals(t):
+        return a @ t + e
+
+    def jacobian(t):
+        return residuals(t), a
+
+    best = np.linalg.lstsq(a, -e, rcond=None)[0]
+    state = _lm.start(best, *jacobian(best))
+    assert not _lm._crawling(state)
+    state.history = [[k, state.cost * (1 + 1e-9 * (20 - k)), state.damping, k % 2 == 0] for k in range(20)]
+    state.accepted, state.step = 10, 19
+    assert _lm._crawling(state)
+    state = _lm.iterate(state, residuals, jacobian, ftol=0.0, xtol=0.0, gtol=0.0, stall_steps=8)
+    assert state.done and state.reason == _lm.PROBED_MINIMUM, state.reason
+    state.history[-1 - _lm.CRAWL_STEPS][1] = state.cost * 1.01  # a real gain over the window: not crawling
+    assert not _lm._crawling(state)
+
+
 def test_state_round_trips_through_arrays():
     residuals, jacobian = _rosenbrock()
     state = _run(residuals, jacobian, np.array([-1.2, 1.0]), max_steps=5)

@@ -22,7 +22,9 @@ Stopping (the `reason` says which):
   step already below `xtol`: the local model and the cost disagree (the Jacobian check then says by how much) —
   unless probing the cost one parameter at a time (`probe`) finds no decrease either: then the point is a minimum
   of a cost that is not smooth there (stick-slip events move with θ) and the fit is "converged"; where a probe
-  finds a lower point, the iteration goes on from it (`PROBE_RESTARTS` times at most);
+  finds a lower point, the iteration goes on from it (`PROBE_RESTARTS` times at most). The same probe runs where
+  `CRAWL_STEPS` iterations together gained less than `POTENTIAL_TOL` of the cost (tiny steps accepted between
+  rejections, so the rejections in a row never come);
 - "max_steps": the iteration budget ran out.
 No rule stops the fit before its first accepted step except `max_steps`: rejections only raise the damping.
 """
@@ -127,6 +129,7 @@ def _step(state, residuals, geodesic):
 # step over the cost's jumps at stick-slip events (~1e-7 of the cost on the bench problems).
 PROBE_STEPS = (0.1, 0.01)
 PROBE_RESTARTS = 3  # moves to a lower probe point before a fit is called stalled
+CRAWL_STEPS = 16  # iterations over which a fit that gains less than POTENTIAL_TOL of its cost is probed
 PROBED_MINIMUM = ("converged: no parameter moved by ±0.1 or ±0.01 of its conditional standard error lowers the cost "
                   "by more than 1e-6 of it (a minimum where the cost is not smooth, e.g. where a stick-slip phase "
                   "begins or ends; the damped steps had stopped)")
@@ -211,23 +214,41 @@ def iterate(state, residuals, jacobian, *, ftol, xtol, gtol, stall_steps, geodes
             # The local model promises no decrease worth having: the point is a minimum to the solver's precision.
             state.done, state.reason = True, "converged: no predicted decrease above ftol"
         elif state.rejected_in_row >= stall_steps and scaled_norm <= xtol * (theta_norm + xtol):
-            # Before calling it stalled: the Jacobian may describe the cost badly only because the cost is not
-            # smooth here (a stick-slip phase begins or ends as θ moves), at a minimum all the same. Probe the cost.
-            gain, point = probe(state, residuals)
-            if gain <= POTENTIAL_TOL * state.cost:
-                state.done, state.reason = True, PROBED_MINIMUM
-            elif state.restarts >= PROBE_RESTARTS:
-                state.done, state.reason = True, "stalled"
-            else:  # a lower point the damped steps missed: go on from there with the start's damping
-                r_new, j_new = jacobian(point)
-                fresh = start(point, np.asarray(r_new), np.asarray(j_new))
-                state = dataclasses.replace(
-                    state, theta=point, residual=fresh.residual, jacobian=fresh.jacobian, cost=fresh.cost,
-                    damping=fresh.damping, growth=2.0, scale=np.maximum(state.scale, fresh.scale),
-                    rejected_in_row=0, restarts=state.restarts + 1)
-                state.history.append([state.step, state.cost, state.damping, True])
+            state = _stalled_or_minimum(state, residuals, jacobian)
+    if not state.done and state.accepted > 0 and _crawling(state):
+        state = _stalled_or_minimum(state, residuals, jacobian)
     if report is not None:
         report(state.step, state.cost, state.damping, state.history[-1][3])
+    return state
+
+
+def _crawling(state):
+    """True where the last `CRAWL_STEPS` iterations together lowered the cost by less than `POTENTIAL_TOL` of it:
+    steps accepted for gains of ~1e-9 of the cost, between rejections, as at a minimum where the cost is not
+    smooth (the stall rule, which wants rejections in a row, never fires there)."""
+    if len(state.history) <= CRAWL_STEPS:
+        return False
+    return state.history[-1 - CRAWL_STEPS][1] - state.cost <= POTENTIAL_TOL * state.cost
+
+
+def _stalled_or_minimum(state, residuals, jacobian):
+    """Where the damped steps have stopped gaining: the Jacobian may describe the cost badly only because the cost
+    is not smooth here (a stick-slip phase begins or ends as θ moves), at a minimum all the same. Probe the cost:
+    no lower point → converged; a lower point → go on from it with the start's damping (`PROBE_RESTARTS` times at
+    most); then "stalled"."""
+    gain, point = probe(state, residuals)
+    if gain <= POTENTIAL_TOL * state.cost:
+        state.done, state.reason = True, PROBED_MINIMUM
+        return state
+    if state.restarts >= PROBE_RESTARTS:
+        state.done, state.reason = True, "stalled"
+        return state
+    r_new, j_new = jacobian(point)
+    fresh = start(point, np.asarray(r_new), np.asarray(j_new))
+    state = dataclasses.replace(
+        state, theta=point, residual=fresh.residual, jacobian=fresh.jacobian, cost=fresh.cost, damping=fresh.damping,
+        growth=2.0, scale=np.maximum(state.scale, fresh.scale), rejected_in_row=0, restarts=state.restarts + 1)
+    state.history.append([state.step, state.cost, state.damping, True])
     return state
 
 
