@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
+from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError, PamjaxSolveError, check_time_grid, require_float64
 from .._core.private import diffrax_result_code
 from .._core.units import check_absolute_pressure
@@ -357,9 +358,9 @@ def _scheduled(system, signal, t0, ts):
         )
     edges, states = system.valve.edge_schedule(signal, float(t0), float(ts[-1]))
     system = eqx.tree_at(lambda s: s.valve, system,
-                         ScheduledValve(system.valve, jnp.asarray(edges), jnp.asarray(states)))
+                         ScheduledValve(system.valve, device_array(edges), device_array(states)))
     inside = edges[(edges > float(t0)) & (edges < float(ts[-1]))]
-    return system, (jnp.asarray(inside) if inside.size else None)
+    return system, (device_array(inside) if inside.size else None)
 
 
 def _raise_on_failure(traj, system, signal, ts, t0, y0, stepping, substeps, grid_step, max_steps, solver):
