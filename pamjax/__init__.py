@@ -113,7 +113,6 @@ from ._solve.discrete import (
 )
 from ._solve.gradcheck import gradient_check as gradient_check
 from ._solve.linearise import StateSpace as StateSpace, equilibrium as equilibrium, linearise as linearise
-from ._solve.rodas import Rodas5 as Rodas5
 from ._solve.simulate import (
     Trajectory as Trajectory,
     default_solver as default_solver,
@@ -212,3 +211,17 @@ from ._core.xla_cpu import xla_cpu_status as xla_cpu_status
 # isort: split
 # --- the papers' plants, every number sourced; unit constants --------------------------------------------------------
 from . import presets as presets, units as units
+
+
+def __getattr__(name):
+    """`pamjax.Rodas5`, imported on first use: its module imports diffrax (~0.4 s), which a fit on the fixed grids
+    loaded from the cache never needs."""
+    if name == "Rodas5":
+        from ._solve.rodas_solver import Rodas5
+
+        return Rodas5
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted({*globals(), "Rodas5"})

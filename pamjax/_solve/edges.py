@@ -1,13 +1,11 @@
 """How an adaptive solve sees a switching valve's edges: a run that starts with the valve off (`StartsOff`), and the
 exact-edge reference whose switching times are handed to the solver as jump times (`ScheduledValve`)."""
 
-import diffrax as dfx
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from .._physics.signals import AbstractSignal
-from .._physics.valves.base import AbstractControlElement, AbstractSwitchingValve
+from .._physics.valves.base import AbstractSwitchingValve
 
 
 class StartsOff(AbstractSignal):
@@ -64,40 +62,3 @@ class ScheduledValve(AbstractSwitchingValve):
 
     def mass_flow(self, t, command, pressure, air):
         return self.valve.mass_flow_at_opening(self.opening(t), pressure, air)
-
-
-class EdgeClipController(dfx.AbstractAdaptiveStepSizeController):
-    """A step-size controller (wrapping `controller`) whose steps end either side of every smoothed switching edge
-    of `valve` (its `next_edge_step`): the next boundary is computed from the PWM period and the duty latched at its
-    start, in constant time per step (diffrax's `ClipStepSizeController` with an array of all boundaries compares
-    each step against the whole array: 3x the run time of a 25 s PWM run)."""
-
-    controller: dfx.AbstractAdaptiveStepSizeController
-    valve: AbstractControlElement
-    signal: AbstractSignal
-
-    @property
-    def atol(self):
-        return self.controller.atol
-
-    @property
-    def rtol(self):
-        return self.controller.rtol
-
-    @property
-    def norm(self):
-        return self.controller.norm
-
-    def wrap(self, direction):
-        return eqx.tree_at(lambda c: c.controller, self, self.controller.wrap(direction))
-
-    def init(self, terms, t0, t1, y0, dt0, args, func, error_order):
-        t1, state = self.controller.init(terms, t0, t1, y0, dt0, args, func, error_order)
-        return jnp.minimum(t1, self.valve.next_edge_step(self.signal, t0)), state
-
-    def adapt_step_size(self, t0, t1, y0, y1_candidate, args, y_error, error_order, controller_state):
-        keep, next_t0, next_t1, made_jump, state, result = self.controller.adapt_step_size(
-            t0, t1, y0, y1_candidate, args, y_error, error_order, controller_state
-        )
-        next_t1 = jnp.minimum(next_t1, self.valve.next_edge_step(self.signal, next_t0))
-        return keep, next_t0, next_t1, made_jump, state, result

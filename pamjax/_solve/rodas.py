@@ -1,4 +1,5 @@
-"""RODAS5: an L-stable, stiffly accurate Rosenbrock method of order 5(4), as a diffrax solver.
+"""RODAS5: an L-stable, stiffly accurate Rosenbrock method of order 5(4): its step (`rodas5_step`), and as a diffrax
+solver `Rodas5` (`pamjax/_solve/rodas_solver.py`, apart so that what steps without diffrax imports no diffrax).
 
 Why pamjax needs it: the smooth Coulomb sign makes paper 000's plant stiff whenever the payload sticks
 (λ ≈ F_c / (w M) ≈ 1,700 /s), and an explicit solver (Tsit5) then steps at its stability limit, not at the accuracy
@@ -27,13 +28,9 @@ densely). Differentiable in forward and reverse mode (reverse mode differentiate
 derivatives of the vector field).
 """
 
-from typing import ClassVar
-
-import diffrax as dfx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.flatten_util import ravel_pytree
 
 _GAMMA = 0.19
 _C = np.array([0.0, 0.38, 0.3878509998321533, 0.4839718937873840, 0.4570477008819580, 1.0, 1.0, 1.0])
@@ -105,44 +102,6 @@ def small_inverse_lanes(a):
             if i != k:
                 rows[i] = rows[i] - rows[i][k] * rows[k]
     return jnp.stack(rows)[:, n:]
-
-
-class Rodas5(dfx.AbstractAdaptiveSolver):
-    """L-stable, stiffly accurate Rosenbrock method of order 5 with an embedded order-4 error estimate (RODAS5).
-
-    For stiff plants (a sticking payload under the smooth Coulomb sign): steps are bounded by the tolerance, where
-    Tsit5 is held at its stability limit. Per step: one forward-mode Jacobian (with ∂f/∂t), one small matrix
-    inverse and nine right-hand-side evaluations. Not for the switching valve's smoothed edges (Tsit5 is faster
-    there). Source: Di Marzo (1993) in Hairer & Wanner, *Solving ODEs II* (1996), Sec. IV.7.
-    """
-
-    term_structure: ClassVar = dfx.AbstractTerm
-    interpolation_cls: ClassVar = dfx.ThirdOrderHermitePolynomialInterpolation
-
-    def order(self, terms):
-        return 5
-
-    def error_order(self, terms):
-        return 5  # k_8 = y1 - (embedded order-4 solution): O(h^5)
-
-    def init(self, terms, t0, t1, y0, args):
-        return None
-
-    def func(self, terms, t0, y0, args):
-        return terms.vf(t0, y0, args)
-
-    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
-        del solver_state, made_jump
-        z0, unravel = ravel_pytree(y0)
-
-        def f(t, z):
-            return ravel_pytree(terms.vf(t, unravel(z), args))[0]
-
-        h = t1 - t0
-        z1, error, f0 = rodas5_step(f, t0, z0, h)
-        y1 = unravel(z1)
-        dense_info = dict(y0=y0, y1=y1, k0=unravel(h * f0), k1=unravel(h * f(t1, z1)))
-        return y1, unravel(error), dense_info, None, dfx.RESULTS.successful
 
 
 def rodas5_step(f, t0, z0, h, inverse=small_inverse):

@@ -1,6 +1,5 @@
 """`simulate`: one jitted, differentiable diffrax solve of a system driven by a command signal."""
 
-import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -14,9 +13,8 @@ from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractSystem
 from . import synchronous as _sync
-from .edges import EdgeClipController, ScheduledValve, StartsOff
+from .edges import ScheduledValve, StartsOff
 from .hints import default_max_steps, failure_hint, fixed_step_hint
-from .rodas import Rodas5
 from .scaled import scaled
 from .trajectory import RESULT_NONFINITE, Trajectory, result_message, trajectory
 
@@ -71,6 +69,8 @@ def solve(
         signal = StartsOff(signal, system.valve.command_time(t0))
     edge_clip = system.valve.smooth_edges and num_periods is not None
     controller = _controller(system, signal, ts, rtol, atol, jump_ts, edge_clip)
+    import diffrax as dfx  # here, not at the top: importing diffrax costs ~0.4 s that fixed-grid work never needs
+
     if isinstance(adjoint, str):
         adjoint = {"forward": dfx.ForwardMode(), "reverse": dfx.RecursiveCheckpointAdjoint()}[adjoint]
     adjoint = dfx.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
@@ -89,6 +89,10 @@ def _controller(system, signal, ts, rtol, atol, jump_ts, edge_clip):
     dtmin stays below the shortest step diffrax itself takes: a last step that lands short of t1 by more than 100 ULP
     (diffrax snaps closer ones to t1) is taken as a sliver, and the controller's next proposal grows from it; a fixed
     1e-12 s failed runs resting at dtmax ("minimum step size reached" at t1: the exact valve at duty 0 over 2.5 s)."""
+    import diffrax as dfx
+
+    from .edge_clip import EdgeClipController
+
     dtmin = None if jump_ts is not None else 50 * jnp.finfo(float).eps * jnp.maximum(jnp.abs(ts[-1]), 1.0)
     controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=system.valve.max_step(), dtmin=dtmin,
                                    force_dtmin=False)
@@ -101,6 +105,8 @@ def _controller(system, signal, ts, rtol, atol, jump_ts, edge_clip):
 
 def _solve_adaptive(system, signal, ts, y0, t0, solver, controller, max_steps, dt0, adjoint, throw):
     """One `diffrax.diffeqsolve` of the flat scaled state (`pamjax._solve.scaled`), saved at `ts`."""
+    import diffrax as dfx
+
     valve = system.valve
     z0, scaled_state = scaled(system, y0)
 
@@ -247,10 +253,16 @@ def default_solver(system: AbstractSystem):
     valve Tsit5 3,170 steps in 2.4 ms, Rodas5 805 in 1.1 ms (stick phases no longer bound the step); smoothed PWM
     valve Tsit5 38,908 steps in 31 ms, Rodas5 43,781 in 65 ms (the 0.1 ms edges bound both).
     """
-    return _TSIT5 if system.valve.max_step() is not None else _RODAS5
+    if not _SOLVERS:  # stateless, immutable: built once, not per call (and diffrax imported then, not before)
+        import diffrax as dfx
+
+        from .rodas_solver import Rodas5
+
+        _SOLVERS.update(tsit5=dfx.Tsit5(), rodas5=Rodas5())
+    return _SOLVERS["tsit5"] if system.valve.max_step() is not None else _SOLVERS["rodas5"]
 
 
-_TSIT5, _RODAS5 = dfx.Tsit5(), Rodas5()  # stateless, immutable: built once, not per call
+_SOLVERS = {}
 
 
 def simulate(

@@ -53,7 +53,8 @@ class AbstractControlElement(eqx.Module):
 
     def next_edge_step(self, signal, t):
         """The first step boundary [s] after `t` (traceable) beside a smoothed switching edge, for an adaptive
-        solver's step-size controller (`pamjax._solve.edges.EdgeClipController`); only asked where `smooth_edges`."""
+        solver's step-size controller (`pamjax._solve.edge_clip.EdgeClipController`); only asked where
+        `smooth_edges`."""
         raise TypeError(f"{type(self).__name__} has no smoothed switching edges (smooth_edges is False)")
 
     def command_time(self, t):
