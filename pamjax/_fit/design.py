@@ -311,8 +311,10 @@ def design(
     Maximises the Fisher information F = F_prior + Σ JᵀJ (J: the noise-scaled outputs' forward-mode Jacobian with
     respect to the fit's scaled parameters, through the solve) in the D sense (minimise log det F⁻¹ on `subset`) or
     the A sense (log tr F⁻¹), by BFGS with gradients through the solve, the PWM edges and the stick-slip events
-    (`pamjax._design_objective`). The design is local: it is optimal near the parameter values of `model` (the best
-    guess before the experiment), from the start signal.
+    (`pamjax._design_objective`). The design is local: it is optimal near the parameter values of `model`, from the
+    start signal. Design at your best estimate — the fit of a short pilot run, not the datasheet: at the MAS-10
+    presets the payload rests 11 mm higher than on the bench plant, and a design there predicted gains on the force
+    law's a3, a4 that the plant did not give (docs/identifiability.md).
 
     **Arguments:**
 
