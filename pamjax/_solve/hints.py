@@ -20,7 +20,8 @@ _MAX_STEPS_REACHED = "maximum number of solver steps"
 
 def _pwm_period(valve):
     """The PWM period [s] of a switching valve, None for a continuous one."""
-    return None if valve.period is None else float(valve.period)
+    # 1/f on the host: the valve's `period` of a concrete frequency would compile a one-operation program
+    return 1.0 / float(valve.pwm_frequency) if valve.switches else None
 
 
 def default_max_steps(system, t0, t1):

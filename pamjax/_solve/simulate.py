@@ -259,7 +259,7 @@ def default_solver(system: AbstractSystem):
         from .rodas_solver import Rodas5
 
         _SOLVERS.update(tsit5=dfx.Tsit5(), rodas5=Rodas5())
-    return _SOLVERS["tsit5"] if system.valve.max_step() is not None else _SOLVERS["rodas5"]
+    return _SOLVERS["tsit5"] if system.valve.switches else _SOLVERS["rodas5"]  # (max_step() would run 1/f eagerly)
 
 
 _SOLVERS = {}
@@ -326,23 +326,27 @@ def simulate(
     """
     validate(system, signal, ts, y0, t0)
     ts = jnp.asarray(ts, dtype=float)
-    if t0 is None:  # a concrete ts[0] is read on the host (indexing a device array costs a dispatch)
+    # concrete ts[0] and ts[-1] are read on the host (indexing a device array compiles a one-operation program)
+    t_end = ts[-1] if _is_traced(ts) else float(np.asarray(ts)[-1])
+    if t0 is None:
         t0 = ts[0] if _is_traced(ts) else jnp.asarray(float(np.asarray(ts)[0]))
     else:
         t0 = jnp.asarray(t0, dtype=float)
     jump_ts = periods = None
     stepping = resolve_stepping(system, stepping)
     if stepping in ("pwm", "grid"):
-        periods = _fixed_grid_periods(system, stepping, substeps, grid_step, t0, ts)
+        periods = _fixed_grid_periods(system, stepping, substeps, grid_step, t0, t_end)
     elif system.valve.exact_edges:
-        system, jump_ts = _scheduled(system, signal, t0, ts)
-    elif system.valve.smooth_edges and not _is_traced((ts, t0, system.valve.period)):
-        periods = _sync.num_periods(system.valve, t0, ts[-1])  # step boundaries around every smoothed edge
+        system, jump_ts = _scheduled(system, signal, t0, t_end)
+    elif system.valve.smooth_edges and not _is_traced((ts, t0, system.valve.pwm_frequency)):
+        # step boundaries around every smoothed edge (the frequency, not the valve's `period`: 1/f run eagerly
+        # would compile a one-operation program)
+        periods = _sync.num_periods(system.valve, t0, t_end)
     traced = _is_traced((system, signal, ts, y0, t0))
     if solver is None and stepping == "adaptive":
         solver = default_solver(system)
     if max_steps is None:  # a budget that grows with the horizon (a 1,000 s PWM run needs ~1.6 M steps)
-        max_steps = 200_000 if _is_traced((ts, t0)) else default_max_steps(system, float(t0), float(ts[-1]))
+        max_steps = 200_000 if _is_traced((ts, t0)) else default_max_steps(system, float(t0), t_end)
     traj = _solve_jit(system, signal, ts, y0, t0, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps, dt0=dt0,
                       adjoint=adjoint, jump_ts=jump_ts, throw=throw and traced, stepping=stepping, substeps=substeps,
                       num_periods=periods, grid_step=grid_step)
@@ -351,27 +355,27 @@ def simulate(
     return traj
 
 
-def _fixed_grid_periods(system, stepping, substeps, grid_step, t0, ts):
+def _fixed_grid_periods(system, stepping, substeps, grid_step, t0, t_end):
     """The checked settings of a fixed-grid solve and its static size (PWM periods or grid steps)."""
     if not (isinstance(substeps, int) and substeps >= 2):
         raise PamjaxInputError(f"substeps must be an int >= 2 (RK4 nodes per PWM period), got {substeps!r}")
     if not (isinstance(grid_step, (int, float)) and np.isfinite(grid_step) and grid_step > 0):
         raise PamjaxInputError(f"grid_step must be a positive number of seconds, got {grid_step!r}")
-    return fixed_grid_size(system, stepping, t0, ts[-1], grid_step)
+    return fixed_grid_size(system, stepping, t0, t_end, grid_step)
 
 
-def _scheduled(system, signal, t0, ts):
+def _scheduled(system, signal, t0, t_end):
     """An exact-edge valve's switching times computed before the solve: the system with a `ScheduledValve` and the
     jump times inside (t0, ts[-1]) handed to the step-size controller (None if there are none)."""
-    if _is_traced((system.valve, signal, t0, ts)):
+    if _is_traced((system.valve, signal, t0, t_end)):
         raise PamjaxInputError(
             "OnOffValve(mode='exact') needs concrete valve timing and signal (its edge times are computed before "
             "the solve); use mode='smooth' inside jit/grad/vmap"
         )
-    edges, states = system.valve.edge_schedule(signal, float(t0), float(ts[-1]))
+    edges, states = system.valve.edge_schedule(signal, float(t0), float(t_end))
     system = eqx.tree_at(lambda s: s.valve, system,
                          ScheduledValve(system.valve, device_array(edges), device_array(states)))
-    inside = edges[(edges > float(t0)) & (edges < float(ts[-1]))]
+    inside = edges[(edges > float(t0)) & (edges < float(t_end))]
     return system, (device_array(inside) if inside.size else None)
 
 

@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._core.arrays import device_array
-from ..._core.errors import PamjaxInputError, check_finite, check_nonnegative, check_positive
+from ..._core.errors import PamjaxInputError, check_nonnegative, check_positive
 from ..._core.fitting import positive
 from ..._core.units import check_absolute_pressure
 from ..._papers import paper000
@@ -84,7 +84,6 @@ class OnOffValve(AbstractSwitchingValve):
         check_positive(self.edge_width, "OnOffValve.edge_width")
         if self.mode not in ("smooth", "exact"):
             raise PamjaxInputError(f"OnOffValve.mode must be 'smooth' or 'exact', got {self.mode!r}")
-        check_finite(self.switch_on_delay + self.switch_off_delay, "OnOffValve switch delays")
 
     @property
     def exact_edges(self):
