@@ -40,6 +40,8 @@ def parse_args(argv=None):
     ap.add_argument("--max-steps", type=int, default=100, help="Levenberg-Marquardt trial steps at most")
     ap.add_argument("--overwrite", action="store_true", help="replace existing results in --out")
     ap.add_argument("--quiet", action="store_true", help="no per-iteration progress")
+    ap.add_argument("--joint-only", action="store_true",
+                    help="fit all parameters jointly from the presets at once (no staged start: pamjax.staged_start)")
     ap.add_argument("--multistart", type=int, default=1,
                     help="fit from this many starts (the presets and draws around them) and keep the best")
     return ap.parse_args(argv)
@@ -82,13 +84,20 @@ def main(argv=None):
     print(f"bench {data}: {len(bench.experiments)} experiments ({', '.join(e.name for e in bench.experiments)}); "
           f"left out: {bench.skipped or 'none'}; noise {bench.noise}")
     t0 = time.perf_counter()
+    stages = []  # the staged start's fits (fit and compilation times count in the totals)
     if args.multistart > 1:
         runs = pj.multistart(model, bench.experiments, bench.free, starts=args.multistart, max_steps=args.max_steps,
                              progress=not args.quiet)
         print(runs.table())
         res = runs.best
     else:
-        res = pj.fit(model, bench.experiments, bench.free, max_steps=args.max_steps, progress=not args.quiet)
+        start = model
+        if not args.joint_only:  # valve on the tank tests, then muscle and friction on the runs, then all jointly
+            staged = pj.staged_start(model, bench.experiments, bench.free, max_steps=args.max_steps,
+                                     progress=not args.quiet)
+            start, stages = staged.model, staged.stages
+            print("\n".join(staged.summary()))
+        res = pj.fit(start, bench.experiments, bench.free, max_steps=args.max_steps, progress=not args.quiet)
     wall = time.perf_counter() - t0
     values, errors = pj.bench_values(res, bench.fitted_keys)
     full = bench if args.rate is None else pj.load_bench(data, model, rate=None)
@@ -101,8 +110,13 @@ def main(argv=None):
         data=str(data), rate=args.rate, params=values, std_err=errors, status=res.status, converged=res.converged,
         message=res.message, rmse=rmse, rmse_over_noise=over_noise, noise=full.noise, mismatch=res.mismatch,
         warnings=res.warnings, iterations=res.iterations, cost=res.cost, initial_cost=res.initial_cost,
-        fit_s=res.fit_s, compile_s=res.compile_s, wall_s=wall, held={"k2": float(model.muscle.force_law.k2)},
+        fit_s=res.fit_s + sum(r.fit_s for *_, r in stages),
+        compile_s=res.compile_s + sum(r.compile_s for *_, r in stages), wall_s=wall,
+        held={"k2": float(model.muscle.force_law.k2)},
         skipped=bench.skipped, start={k: v for k, v in zip(res.labels, res.initial_values)},
+        presets=dict(zip(res.labels, np.asarray(pj.ParameterSpace(model, bench.free).initial_values()).tolist())),
+        stages=[dict(stage=name, free=paths, experiments=exps, status=r.status, iterations=r.iterations, cost=r.cost,
+                     fit_s=r.fit_s, compile_s=r.compile_s) for name, paths, exps, r in stages],
     )
     truth = bench.meta.get("params")
     if truth:

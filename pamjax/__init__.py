@@ -161,6 +161,7 @@ from ._fit.parameters import ParameterSpace as ParameterSpace, parameter_paths a
 from ._fit.predictions import predictions as predictions
 from ._fit.profile import Profile as Profile, ProfileResult as ProfileResult, profile as profile
 from ._fit.recording import Recording as Recording
+from ._fit.staged import StagedStart as StagedStart, staged_start as staged_start
 from ._fit.synthetic import synthetic_recording as synthetic_recording
 
 # isort: split

@@ -88,5 +88,27 @@ def test_joint_script_fits_a_bench_directory_from_the_presets(bench, tmp_path):
     for name, chans in result["rmse_over_noise"].items():
         assert all(0.9 < r < 1.1 for r in chans.values()), (name, chans)
     assert not result["mismatch"]
+    # the staged start (pamjax.staged_start): the valve on the tank tests alone, then the rest on the muscle run
+    stages = {st["stage"]: st for st in result["stages"]}
+    assert set(stages) == {"1", "2"}
+    assert stages["1"]["experiments"] == ["E1", "E2"] and all(p.startswith("valve.") for p in stages["1"]["free"])
+    assert len(stages["1"]["free"]) == 4 and stages["2"]["experiments"] == ["E3"]
+    assert sorted(stages["2"]["free"]) == sorted(pj.BENCH_PARAMETERS[k][0] for k in ("v1", "Fc", "Cf"))
+    assert stages["1"]["status"] == "converged"  # four valve parameters on two tank tests: well posed
     with pytest.raises(SystemExit, match="--overwrite"):
         joint.main(["--data", str(folder), "--out", str(out), "--quiet"])
+
+
+def test_staged_start_needs_experiments_that_see_part_of_the_model(bench):
+    # Stages come from the experiments' structure: where every experiment's system has every free parameter (here
+    # the muscle run alone), or an entry cannot be placed, there is nothing to stage and the model comes back as is.
+    folder, _ = bench
+    model = presets.mas10_system(valve="pwm", friction="karnopp")
+    b = pj.load_bench(folder, model)
+    run = [e for e in b.experiments if e.name == "E3"]
+    staged = pj.staged_start(model, run, b.free)
+    assert staged.stages == [] and staged.model is model and staged.summary() == []
+    tanks = [e for e in b.experiments if e.name != "E3"]  # tank tests only see the valve: nothing left for stage 2
+    valve = [p for p in b.free if p.startswith("valve.")]
+    assert pj.staged_start(model, tanks, valve).stages == []
+    assert pj.staged_start(model, b.experiments, [("not", "a", "path")]).stages == []

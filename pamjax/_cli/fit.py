@@ -7,6 +7,7 @@ Every key, type, parameter path, shape and unit of the config is checked before 
 compiled; the output folder is created, test-written and locked before the fit starts.
 """
 
+import dataclasses
 import json
 import pathlib
 import sys
@@ -29,7 +30,7 @@ from .out import PENDING, OutputFolder, interrupt_status, raise_pending
 
 _TOP_KEYS = {"model", "fit", "experiment", "bench"}
 _FIT_KEYS = {"free", "max_steps", "ftol", "xtol", "gtol", "out", "validation_fraction"}
-_BENCH_KEYS = {"dir", "rate", "kinds", "fitted_keys", "substeps"}
+_BENCH_KEYS = {"dir", "rate", "kinds", "fitted_keys", "substeps", "staged"}
 _EXPERIMENT_KEYS = {"name", "file", "signal", "channels", "scales", "tank_volume", "initial", "rate", "filter_hz",
                     "t_end", "max_steps", "rename", "units", "unit_checks", "stepping"}
 RESULT, MODEL, FIGURE, CHECKPOINT, BENCH = "fit.json", "model.json", "fit.png", "checkpoint.npz", "bench.json"
@@ -100,7 +101,8 @@ def validate_config(cfg, where="config"):
         require(bench_cfg["dir"], "string", "[bench] dir", '"../data/my-bench"')
         for key, kind, example in (("rate", "positive number", "1000.0 (Hz)"), ("substeps", "positive integer", "16"),
                                    ("kinds", "list of strings", '["tank_charge", "muscle_triangle"]'),
-                                   ("fitted_keys", "list of strings", '["Cv12", "b12", "Fc"]')):
+                                   ("fitted_keys", "list of strings", '["Cv12", "b12", "Fc"]'),
+                                   ("staged", "boolean", "false")):
             if key in bench_cfg:
                 require(bench_cfg[key], kind, f"[bench] {key}", example)
     if "free" not in fit_cfg and bench_cfg is None:
@@ -184,6 +186,7 @@ def _load(path):
         kinds = tuple(b.get("kinds", pj.FITTED_KINDS))
         bench = pj.load_bench(path.parent / b["dir"], model, rate=b.get("rate"), kinds=kinds,
                               fitted_keys=b.get("fitted_keys"), substeps=b.get("substeps", 16))
+        bench = dataclasses.replace(bench, staged=b.get("staged", True))  # pamjax.staged_start first (default)
         experiments += bench.experiments
         free = bench.free if free is None else free
     _check_free_shapes(model, free)
@@ -315,6 +318,13 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None):
                   f"{'accepted' if accepted else 'rejected'}", flush=True)
         raise_pending()
 
+    if bench is not None and bench.staged:  # valve on the tank tests, muscle on the runs, then the joint fit
+        # (deterministic: a --resume computes the same start again, which its checkpoint's fingerprint checks)
+        staged = pj.staged_start(model, experiments, free, max_steps=options.get("max_steps", 100),
+                                 progress=progress)
+        model = staged.model
+        for line in staged.summary():
+            print(line, flush=True)
     res = pj.fit(model, experiments, free, progress=progress, checkpoint=checkpoint,
                  resume=checkpoint if args.resume else None, overwrite=args.overwrite, **options)
     raise_pending()
