@@ -112,3 +112,28 @@ def test_staged_start_needs_experiments_that_see_part_of_the_model(bench):
     valve = [p for p in b.free if p.startswith("valve.")]
     assert pj.staged_start(model, tanks, valve).stages == []
     assert pj.staged_start(model, b.experiments, [("not", "a", "path")]).stages == []
+
+
+def test_pamjax_fit_with_a_bench_table_starts_stage_by_stage(bench, tmp_path, capsys):
+    # `pamjax fit CONFIG` with [bench]: the same staged start and joint fit as fits/joint.py (the same compiled
+    # programs, reused in this process), bench.json in the bench's names; `staged = false` is accepted, a non-boolean
+    # refused naming the key.
+    from pamjax._cli.main import main
+
+    folder, params = bench
+    cfg = tmp_path / "bench.toml"
+    def body(staged):
+        return ('[model]\npreset = "mas10_system"\noptions = { valve = "pwm", friction = "karnopp" }\n'
+                f'[bench]\ndir = "{folder}"\n{staged}[fit]\nmax_steps = 60\n')
+
+    cfg.write_text(body(""))
+    assert main(["fit", str(cfg), "--out", str(tmp_path / "out"), "--quiet", "--no-plot"]) == 0
+    out = capsys.readouterr().out
+    assert "stage 1: 4 parameters on E1, E2" in out and "stage 2: 3 parameters on E3" in out
+    result = json.loads((tmp_path / "out" / "bench.json").read_text())
+    assert result["status"] == "converged" and set(result["params"]) == set(KEYS)
+    for k in KEYS:
+        assert abs(result["params"][k] - params[k]) < 4 * result["std_err"][k], k
+    cfg.write_text(body("staged = 1\n"))
+    assert main(["fit", str(cfg), "--out", str(tmp_path / "bad"), "--quiet", "--no-plot"]) == 2
+    assert "[bench] staged" in capsys.readouterr().err
