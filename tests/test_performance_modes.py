@@ -68,18 +68,24 @@ def _loss(duty, on_delay, frequency, *, substeps=16):
     return jnp.mean(traj.position) * 1e3 + jnp.mean(traj.pressure) * 1e-5
 
 
+# compiled once for both duties and the finite differences (an eager solve re-traces at every call)
+_loss_jit = jax.jit(_loss)
+_grad_jit = jax.jit(jax.grad(_loss, argnums=(0, 1, 2)))
+_jacfwd_jit = jax.jit(jax.jacfwd(_loss, argnums=(0, 1, 2)))
+
+
 @pytest.mark.parametrize("duty", [0.3, 0.72])
 def test_gradients_through_edge_times_match_finite_differences(duty):
     # The edges move the step boundaries, so d/d(duty), d/d(switch delay), d/d(frequency) are the sharp model's
     # derivatives. Central differences with steps small enough not to move an edge across a node; agreement 1e-6.
     args = (duty, 2e-3, 50.0)
-    rev = jax.jit(jax.grad(_loss, argnums=(0, 1, 2)))(*args)
-    fwd = jax.jit(jax.jacfwd(_loss, argnums=(0, 1, 2)))(*args)
+    rev = _grad_jit(*args)
+    fwd = _jacfwd_jit(*args)
     for i, h in enumerate((1e-6, 1e-8, 1e-5)):
         up, down = list(args), list(args)
         up[i] += h
         down[i] -= h
-        fd = (_loss(*up) - _loss(*down)) / (2 * h)
+        fd = (_loss_jit(*up) - _loss_jit(*down)) / (2 * h)
         assert np.isfinite(float(rev[i])) and abs(float(rev[i])) > 0
         np.testing.assert_allclose(float(rev[i]), float(fd), rtol=1e-6)
         np.testing.assert_allclose(float(fwd[i]), float(rev[i]), rtol=1e-10)
