@@ -22,6 +22,7 @@ The plants' directories are written under `--out` (not part of the repository). 
 """
 
 import argparse
+import importlib.metadata
 import json
 import os
 import pathlib
@@ -78,7 +79,8 @@ def write_plant(directory, meta, params, truth, bench, substeps, seed):
         np.savez(directory / f"{e.name}.npz", **columns)
     out = dict(meta, params=params)
     out["experiments"] = {k: v for k, v in meta["experiments"].items() if k in {e.name for e in bench.experiments}}
-    out["generated_by"] = (f"benchmarks/unseen_plants.py: pamjax {pj.__version__}, PWM-synchronous grid with "
+    version = importlib.metadata.version("pamjax")
+    out["generated_by"] = (f"benchmarks/unseen_plants.py: pamjax {version}, PWM-synchronous grid with "
                            f"{substeps} RK4 nodes per period, exact stick-slip; noise seed {seed}")
     (directory / "meta.json").write_text(json.dumps(out, indent=1) + "\n")
 
