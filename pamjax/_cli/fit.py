@@ -7,7 +7,6 @@ Every key, type, parameter path, shape and unit of the config is checked before 
 compiled; the output folder is created, test-written and locked before the fit starts.
 """
 
-import dataclasses
 import json
 import pathlib
 import sys
@@ -186,7 +185,6 @@ def _load(path):
         kinds = tuple(b.get("kinds", pj.FITTED_KINDS))
         bench = pj.load_bench(path.parent / b["dir"], model, rate=b.get("rate"), kinds=kinds,
                               fitted_keys=b.get("fitted_keys"), substeps=b.get("substeps", 16))
-        bench = dataclasses.replace(bench, staged=b.get("staged", True))  # pamjax.staged_start first (default)
         experiments += bench.experiments
         free = bench.free if free is None else free
     _check_free_shapes(model, free)
@@ -196,7 +194,8 @@ def _load(path):
     if len(set(names)) != len(names):
         raise PamjaxInputError(f"experiment names must be unique, got {names}: give each [[experiment]] a name")
     options = {k: fit_cfg[k] for k in ("max_steps", "ftol", "xtol", "gtol") if k in fit_cfg}
-    return model, experiments, free, options, fit_cfg.get("out"), bench
+    staged = bench is not None and cfg["bench"].get("staged", True)  # pamjax.staged_start first (the default)
+    return model, experiments, free, options, fit_cfg.get("out"), bench, staged
 
 
 def _experiment(e, k, root, fit_cfg, model):
@@ -263,7 +262,7 @@ def run(args):
         from . import figures, fit_figure
 
         figures.start(fit_figure)
-    model, experiments, free, options, out_cfg, bench = _load(args.config)
+    model, experiments, free, options, out_cfg, bench, staged = _load(args.config)
     out = pathlib.Path(args.out or out_cfg or f"results/{pathlib.Path(args.config).stem}")
     if args.resume and args.overwrite:
         raise PamjaxInputError("pamjax fit: --resume continues the fit in --out, --overwrite starts it again: "
@@ -286,7 +285,7 @@ def run(args):
             raise PamjaxInputError(f"pamjax fit --resume: {out} holds no checkpoint ({CHECKPOINT}); run without "
                                    "--resume to start the fit")
         try:
-            return _fit_and_write(args, folder, model, experiments, free, options, bench)
+            return _fit_and_write(args, folder, model, experiments, free, options, bench, staged)
         except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM: one line on what is kept and how to go on
             PENDING.clear()  # handled here
             what = "terminated" if interrupt_status(err) == 143 else "interrupted"
@@ -301,7 +300,7 @@ def run(args):
             return interrupt_status(err)
 
 
-def _fit_and_write(args, folder, model, experiments, free, options, bench=None):
+def _fit_and_write(args, folder, model, experiments, free, options, bench=None, staged=False):
     import pamjax as pj
 
     from .._fit.model_io import model_json
@@ -318,7 +317,7 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None):
                   f"{'accepted' if accepted else 'rejected'}", flush=True)
         raise_pending()
 
-    if bench is not None and bench.staged:  # valve on the tank tests, muscle on the runs, then the joint fit
+    if staged:  # valve on the tank tests, muscle on the runs, then the joint fit
         # (deterministic: a --resume computes the same start again, which its checkpoint's fingerprint checks)
         staged = pj.staged_start(model, experiments, free, max_steps=options.get("max_steps", 100),
                                  progress=progress)

@@ -45,8 +45,7 @@ _CHANNEL = {"pressure": "p", "position": "x"}
 class Bench:
     """A loaded bench directory: `experiments` (for `pamjax.fit`), `free` (the parameter paths of `fitted_keys`),
     `fitted_keys`, `noise` (channel → standard deviation used as the residual scale), `skipped` (experiment →
-    reason), `meta` (the parsed meta.json), `directory`, `rate` (None: as recorded), `staged` (whether `pamjax
-    fit`'s [bench] fits start stage by stage, `pamjax.staged_start`; default True)."""
+    reason), `meta` (the parsed meta.json), `directory`, `rate` (None: as recorded)."""
 
     experiments: list
     free: list
@@ -56,7 +55,6 @@ class Bench:
     meta: dict
     directory: pathlib.Path
     rate: float | None
-    staged: bool = True
 
 
 def _read_meta(directory):

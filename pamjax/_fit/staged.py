@@ -33,8 +33,8 @@ class StagedStart:
 
     def summary(self):
         """One line per stage: what was fitted on what, and how the fit ended."""
-        return [f"stage {name}: {len(res.labels)} parameters on {', '.join(exps)}: {res.status}, {res.iterations} trial "
-                f"steps, cost {res.initial_cost:.4g} → {res.cost:.4g}" for name, paths, exps, res in self.stages]
+        return [f"stage {name}: {len(res.labels)} parameters on {', '.join(exps)}: {res.status}, {res.iterations} "
+                f"trial steps, cost {res.initial_cost:.4g} → {res.cost:.4g}" for name, _, exps, res in self.stages]
 
 
 def _path(entry):

@@ -327,9 +327,10 @@ def simulate(
     validate(system, signal, ts, y0, t0)
     ts = jnp.asarray(ts, dtype=float)
     # concrete ts[0] and ts[-1] are read on the host (indexing a device array compiles a one-operation program)
-    t_end = ts[-1] if _is_traced(ts) else float(np.asarray(ts)[-1])
+    host = None if _is_traced(ts) else np.asarray(ts)
+    t_end = ts[-1] if host is None else float(host[-1])
     if t0 is None:
-        t0 = ts[0] if _is_traced(ts) else jnp.asarray(float(np.asarray(ts)[0]))
+        t0 = ts[0] if host is None else jnp.asarray(float(host[0]))
     else:
         t0 = jnp.asarray(t0, dtype=float)
     jump_ts = periods = None
