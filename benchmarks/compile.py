@@ -186,7 +186,10 @@ def main():
               f"fit {[round(s['fit_s'], 1) for _, s in joints]} s, process {[round(w, 1) for w, _ in joints]} s")
         stages = [[round(st["compile_s"], 1) for st in s.get("stages", [])] for _, s in joints]
         if any(stages):  # the staged start's own problems (pamjax.staged_start), included in the compile figure
-            print(f"  of which the staged start's stages 1 and 2: {stages} s; the joint problem the rest")
+            pre = [s.get("joint_precompile") or {} for _, s in joints]
+            print(f"  of which the staged start's stages 1 and 2: {stages} s; the joint problem compiled beside them "
+                  f"in {[round(p.get('wall_s', 0.0), 1) for p in pre]} s, waited for after them "
+                  f"{[round(p.get('waited_s', 0.0), 1) for p in pre]} s; the joint fit's own the rest")
     print(f"load average at the end {os.getloadavg()[0]:.1f}")
     print(f"RESULT main_job_cold_s={median(cold):.1f} main_job_warm_s={median(warm):.1f} "
           f"bench_fit_compile_s={bench_compile:.1f} joint_fit_compile_s={joint_compile:.1f} "

@@ -84,7 +84,7 @@ def main(argv=None):
     print(f"bench {data}: {len(bench.experiments)} experiments ({', '.join(e.name for e in bench.experiments)}); "
           f"left out: {bench.skipped or 'none'}; noise {bench.noise}")
     t0 = time.perf_counter()
-    stages = []  # the staged start's fits (fit and compilation times count in the totals)
+    stages, staged = [], None  # the staged start's fits (fit and compilation times count in the totals)
     if args.multistart > 1:
         runs = pj.multistart(model, bench.experiments, bench.free, starts=args.multistart, max_steps=args.max_steps,
                              progress=not args.quiet)
@@ -111,12 +111,13 @@ def main(argv=None):
         message=res.message, rmse=rmse, rmse_over_noise=over_noise, noise=full.noise, mismatch=res.mismatch,
         warnings=res.warnings, iterations=res.iterations, cost=res.cost, initial_cost=res.initial_cost,
         fit_s=res.fit_s + sum(r.fit_s for *_, r in stages),
-        compile_s=res.compile_s + sum(r.compile_s for *_, r in stages), wall_s=wall,
+        compile_s=res.compile_s + (staged.compile_s if staged is not None else 0.0), wall_s=wall,
         held={"k2": float(model.muscle.force_law.k2)},
         skipped=bench.skipped, start={k: v for k, v in zip(res.labels, res.initial_values)},
         presets=dict(zip(res.labels, np.asarray(pj.ParameterSpace(model, bench.free).initial_values()).tolist())),
         stages=[dict(stage=name, free=paths, experiments=exps, status=r.status, iterations=r.iterations, cost=r.cost,
                      fit_s=r.fit_s, compile_s=r.compile_s) for name, paths, exps, r in stages],
+        joint_precompile=None if staged is None else dict(wall_s=staged.precompile_s, waited_s=staged.waited_s),
     )
     truth = bench.meta.get("params")
     if truth:

@@ -114,6 +114,28 @@ def test_staged_start_needs_experiments_that_see_part_of_the_model(bench):
     assert pj.staged_start(model, b.experiments, [("not", "a", "path")]).stages == []
 
 
+def test_staged_start_compiles_the_joint_problem_beside_its_stages(bench):
+    # The joint problem's programs are compiled in a second thread while the stages fit: the joint fit after
+    # `staged_start` then compiles nothing, and the start is bitwise the one of a staged start without that thread.
+    # (C_f held: a problem structure no other test of this module compiles, so the programs are new here.)
+    folder, _ = bench
+    model = presets.mas10_system(valve="pwm", friction="karnopp")
+    b = pj.load_bench(folder, model)
+    free = [p for p in b.free if p != pj.BENCH_PARAMETERS["Cf"][0]]
+    staged = pj.staged_start(model, b.experiments, free, max_steps=60, progress=False)
+    assert staged.precompile_s > 0.0 and 0.0 <= staged.waited_s <= staged.precompile_s
+    assert staged.compile_s >= sum(res.compile_s for *_, res in staged.stages)
+    assert any("beside the stages" in line for line in staged.summary())
+    with pj.CompileStats() as stats:
+        res = pj.fit(staged.model, b.experiments, free, max_steps=60, progress=False)
+    assert res.status == "converged", res.message
+    assert stats.count["compile"] == 0, stats.summary()
+    plain = pj.staged_start(model, b.experiments, free, max_steps=60, progress=False, precompile_joint=False)
+    assert plain.precompile_s == 0.0 and plain.waited_s == 0.0
+    np.testing.assert_array_equal(pj.ParameterSpace(plain.model, free).initial_values(),
+                                  pj.ParameterSpace(staged.model, free).initial_values())
+
+
 def test_pamjax_fit_with_a_bench_table_starts_stage_by_stage(bench, tmp_path, capsys):
     # `pamjax fit CONFIG` with [bench]: the same staged start and joint fit as fits/joint.py (the same compiled
     # programs, reused in this process), bench.json in the bench's names; `staged = false` is accepted, a non-boolean

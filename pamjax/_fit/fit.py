@@ -191,6 +191,31 @@ def _validate(experiments, max_steps, out, overwrite, checkpoint, resume):
     return experiments
 
 
+def _setup(model, experiments, space):
+    """The bound experiments (PWM grids sized), the start θ and the compiled-function host of a fit (`_Problem`)."""
+    exps = tuple(e.bind(model) for e in experiments)
+    theta = np.asarray(space.initial_theta())
+    if not np.all(np.isfinite(theta)):
+        raise PamjaxInputError(f"start values give non-finite transformed parameters: "
+                               f"{dict(zip(space.labels, theta))}")
+    return exps, theta, _Problem(space, exps)
+
+
+def precompile(model, experiments, free):
+    """Compile (or load from the CLI's cache) the programs `fit(model', experiments, free)` will use, for any
+    `model'` of `model`'s structure: the residuals, their Jacobian and the statistics' transform, each evaluated
+    once at `model`'s values. Returns the wall time [s]. `staged_start` runs this in a second thread while its
+    stages fit, so that the joint fit after them starts at once."""
+    t0 = time.perf_counter()
+    experiments = _validate(experiments, 1, None, False, None, None)
+    space = ParameterSpace(model, free)
+    for e in experiments:
+        e.check(model)
+    _, theta, problem = _setup(model, experiments, space)
+    problem.start(theta)
+    return time.perf_counter() - t0
+
+
 def _progress_printer(progress):
     if callable(progress):
         return progress
@@ -289,11 +314,7 @@ def fit(
     for e in experiments:
         e.check(model)
     labels = space.labels
-    exps = tuple(e.bind(model) for e in experiments)  # PWM grids sized
-    theta = np.asarray(space.initial_theta())
-    if not np.all(np.isfinite(theta)):
-        raise PamjaxInputError(f"start values give non-finite transformed parameters: {dict(zip(labels, theta))}")
-    problem = _Problem(space, exps)
+    exps, theta, problem = _setup(model, experiments, space)
     report = _progress_printer(progress)
     t_start = time.perf_counter()
     if resume is not None:

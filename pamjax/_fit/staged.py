@@ -15,26 +15,45 @@ together. `staged_start` does that, deciding the stages from the structure of th
    the final values, standard errors and status are those of the joint problem.
 
 Where the experiments give no such split (every experiment sees every free parameter), nothing is done.
+
+Three problems compile instead of one. The joint problem's programs (the largest: every experiment, a tangent per
+free parameter) do not depend on the start values, so they are compiled in a second thread while the stages fit
+(`precompile`: XLA compiles outside Python's lock, on the second core where there is one); what the stages leave of
+that compilation is waited for at the end and reported as `waited_s`.
 """
 
 import dataclasses
+import threading
+import time
 
-from .fit import fit
+from .fit import fit, precompile
 from .parameters import parameter_paths
 
 
 @dataclasses.dataclass
 class StagedStart:
     """`model`: the start model of the joint fit; `stages`: (name, free paths, experiment names, FitResult) per
-    stage fitted."""
+    stage fitted; `waited_s`: wall time spent after the stages waiting for the joint problem's compilation (started
+    in a second thread with the stages); `precompile_s`: that compilation's own wall time (0 when not done)."""
 
     model: object
     stages: list
+    waited_s: float = 0.0
+    precompile_s: float = 0.0
+
+    @property
+    def compile_s(self):
+        """Compilation on the critical path: the stages' own, and the wait for the joint problem's."""
+        return sum(res.compile_s for *_, res in self.stages) + self.waited_s
 
     def summary(self):
         """One line per stage: what was fitted on what, and how the fit ended."""
-        return [f"stage {name}: {len(res.labels)} parameters on {', '.join(exps)}: {res.status}, {res.iterations} "
-                f"trial steps, cost {res.initial_cost:.4g} → {res.cost:.4g}" for name, _, exps, res in self.stages]
+        lines = [f"stage {name}: {len(res.labels)} parameters on {', '.join(exps)}: {res.status}, {res.iterations} "
+                 f"trial steps, cost {res.initial_cost:.4g} → {res.cost:.4g}" for name, _, exps, res in self.stages]
+        if self.precompile_s:
+            lines.append(f"joint problem compiled beside the stages in {self.precompile_s:.1f} s "
+                         f"({self.waited_s:.1f} s waited for after them)")
+        return lines
 
 
 def _path(entry):
@@ -53,10 +72,33 @@ def _seen(experiment, model, entries):
     return [e for e in entries if _path(e) in paths]
 
 
-def staged_start(model, experiments, free, *, max_steps=100, progress=None):
+class _Background:
+    """`precompile` in a daemon thread; its errors are kept, not raised (the joint fit then compiles itself and
+    raises them where they belong)."""
+
+    def __init__(self, model, experiments, free):
+        self.seconds, self.error = 0.0, None
+        self.thread = threading.Thread(target=self._run, args=(model, experiments, free), daemon=True)
+        self.thread.start()
+
+    def _run(self, model, experiments, free):
+        try:
+            self.seconds = precompile(model, experiments, free)
+        except Exception as err:  # noqa: BLE001 - reported by the joint fit itself
+            self.error = err
+
+    def join(self):
+        t0 = time.perf_counter()
+        self.thread.join()
+        return time.perf_counter() - t0
+
+
+def staged_start(model, experiments, free, *, max_steps=100, progress=None, precompile_joint=True):
     """The start of a joint fit of `free` to `experiments`, stage by stage (see the module docstring).
 
-    **Arguments:** as `pamjax.fit`'s; `max_steps` bounds each stage, `progress` is passed to each stage's fit.
+    **Arguments:** as `pamjax.fit`'s; `max_steps` bounds each stage, `progress` is passed to each stage's fit;
+    `precompile_joint`: compile the joint problem's programs in a second thread while the stages run (default; False
+    compiles nothing beyond the stages).
 
     **Returns:** a `StagedStart` (`.model` to start the joint fit from; `.stages` with each stage's `FitResult`).
     """
@@ -69,6 +111,15 @@ def staged_start(model, experiments, free, *, max_steps=100, progress=None):
     if not partial or not first or len(first) == len(free):
         return StagedStart(model, [])
     stages = []
+    background = _Background(model, experiments, free) if precompile_joint else None
+    # (an error or Ctrl-C in a stage leaves the daemon thread unwaited for: no wait for a compilation nobody needs)
+    model = _stages(model, experiments, free, first, partial, stages, max_steps, progress)
+    waited = background.join() if background is not None else 0.0
+    return StagedStart(model, stages, waited_s=waited,
+                       precompile_s=background.seconds if background is not None else 0.0)
+
+
+def _stages(model, experiments, free, first, partial, stages, max_steps, progress):
     exps = [experiments[i] for i in partial]
     res = fit(model, exps, first, max_steps=max_steps, progress=progress)
     stages.append(("1", [_path(e) for e in first], [e.name for e in exps], res))
@@ -79,4 +130,4 @@ def staged_start(model, experiments, free, *, max_steps=100, progress=None):
         res = fit(model, full, rest, max_steps=max_steps, progress=progress)
         stages.append(("2", [_path(e) for e in rest], [e.name for e in full], res))
         model = res.apply(model)
-    return StagedStart(model, stages)
+    return model
