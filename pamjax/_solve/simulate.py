@@ -110,8 +110,12 @@ def _solve_adaptive(system, signal, ts, y0, t0, solver, controller, max_steps, d
     valve = system.valve
     z0, scaled_state = scaled(system, y0)
 
-    def field(t, z, args):
+    @jax.jit
+    def vector_field(t, z):
         return scaled_state.field(system, t, z, valve.read_command(signal, t))
+
+    def field(t, z, args):
+        return vector_field(t, z)
 
     sol = dfx.diffeqsolve(
         dfx.ODETerm(field),
