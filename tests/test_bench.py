@@ -115,8 +115,9 @@ def test_staged_start_needs_experiments_that_see_part_of_the_model(bench):
 
 
 def test_staged_start_compiles_the_joint_problem_beside_its_stages(bench):
-    # The joint problem's programs are compiled in a second thread while the stages fit: the joint fit after
-    # `staged_start` then compiles nothing, and the start is bitwise the one of a staged start without that thread.
+    # Stage 2's and the joint problem's programs are compiled in a second thread while stage 1 fits: the joint fit
+    # after `staged_start` then compiles nothing, and the start is bitwise the one of a staged start without that
+    # thread.
     # (C_f held: a problem structure no other test of this module compiles, so the programs are new here.)
     folder, _ = bench
     model = presets.mas10_system(valve="pwm", friction="karnopp")
@@ -125,12 +126,12 @@ def test_staged_start_compiles_the_joint_problem_beside_its_stages(bench):
     staged = pj.staged_start(model, b.experiments, free, max_steps=60, progress=False)
     assert staged.precompile_s > 0.0 and 0.0 <= staged.waited_s <= staged.precompile_s
     assert staged.compile_s >= sum(res.compile_s for *_, res in staged.stages)
-    assert any("beside the stages" in line for line in staged.summary())
+    assert any("second thread" in line for line in staged.summary())
     with pj.CompileStats() as stats:
         res = pj.fit(staged.model, b.experiments, free, max_steps=60, progress=False)
     assert res.status == "converged", res.message
     assert stats.count["compile"] == 0, stats.summary()
-    plain = pj.staged_start(model, b.experiments, free, max_steps=60, progress=False, precompile_joint=False)
+    plain = pj.staged_start(model, b.experiments, free, max_steps=60, progress=False, background_compile=False)
     assert plain.precompile_s == 0.0 and plain.waited_s == 0.0
     np.testing.assert_array_equal(pj.ParameterSpace(plain.model, free).initial_values(),
                                   pj.ParameterSpace(staged.model, free).initial_values())

@@ -16,10 +16,12 @@ together. `staged_start` does that, deciding the stages from the structure of th
 
 Where the experiments give no such split (every experiment sees every free parameter), nothing is done.
 
-Three problems compile instead of one. The joint problem's programs (the largest: every experiment, a tangent per
-free parameter) do not depend on the start values, so they are compiled in a second thread while the stages fit
-(`precompile`: XLA compiles outside Python's lock, on the second core where there is one); what the stages leave of
-that compilation is waited for at the end and reported as `waited_s`.
+Three problems compile instead of one. The programs of stage 2 and of the joint problem (the largest: every
+experiment, a tangent per free parameter) do not depend on the values stage 1 finds, so they are compiled in a
+second thread from the start (`precompile`: XLA compiles outside Python's lock, on the second core where there is
+one) while stage 1 compiles and fits, then stage 2 fits; a stage that would start before its programs are ready
+waits for them rather than compiling them a second time, and the joint fit after `staged_start` compiles nothing.
+The waits are reported as `waited_s` (compilation on the critical path, beside each stage's own `compile_s`).
 """
 
 import dataclasses
@@ -33,8 +35,8 @@ from .parameters import parameter_paths
 @dataclasses.dataclass
 class StagedStart:
     """`model`: the start model of the joint fit; `stages`: (name, free paths, experiment names, FitResult) per
-    stage fitted; `waited_s`: wall time spent after the stages waiting for the joint problem's compilation (started
-    in a second thread with the stages); `precompile_s`: that compilation's own wall time (0 when not done)."""
+    stage fitted; `waited_s`: wall time the stages and the end spent waiting for the programs compiled in the second
+    thread (stage 2's, the joint problem's); `precompile_s`: that thread's wall time (0 when not used)."""
 
     model: object
     stages: list
@@ -43,7 +45,7 @@ class StagedStart:
 
     @property
     def compile_s(self):
-        """Compilation on the critical path: the stages' own, and the wait for the joint problem's."""
+        """Compilation on the critical path: the stages' own, and the waits for the second thread's."""
         return sum(res.compile_s for *_, res in self.stages) + self.waited_s
 
     def summary(self):
@@ -51,8 +53,8 @@ class StagedStart:
         lines = [f"stage {name}: {len(res.labels)} parameters on {', '.join(exps)}: {res.status}, {res.iterations} "
                  f"trial steps, cost {res.initial_cost:.4g} → {res.cost:.4g}" for name, _, exps, res in self.stages]
         if self.precompile_s:
-            lines.append(f"joint problem compiled beside the stages in {self.precompile_s:.1f} s "
-                         f"({self.waited_s:.1f} s waited for after them)")
+            lines.append(f"stage 2's and the joint problem's programs compiled beside stage 1 in a second thread "
+                         f"({self.precompile_s:.1f} s; {self.waited_s:.1f} s waited for)")
         return lines
 
 
@@ -73,32 +75,39 @@ def _seen(experiment, model, entries):
 
 
 class _Background:
-    """`precompile` in a daemon thread; its errors are kept, not raised (the joint fit then compiles itself and
-    raises them where they belong)."""
+    """`precompile` of several problems, in order, in one daemon thread; `wait(i)` blocks until problem i is
+    compiled and returns the seconds waited. Errors are kept, not raised (the fit of that problem then compiles it
+    itself and raises them where they belong)."""
 
-    def __init__(self, model, experiments, free):
+    def __init__(self, problems):
         self.seconds, self.error = 0.0, None
-        self.thread = threading.Thread(target=self._run, args=(model, experiments, free), daemon=True)
+        self.done = [threading.Event() for _ in problems]
+        self.thread = threading.Thread(target=self._run, args=(problems,), daemon=True)
         self.thread.start()
 
-    def _run(self, model, experiments, free):
+    def _run(self, problems):
         try:
-            self.seconds = precompile(model, experiments, free)
-        except Exception as err:  # noqa: BLE001 - reported by the joint fit itself
+            for (model, experiments, free), done in zip(problems, self.done):
+                self.seconds += precompile(model, experiments, free)
+                done.set()
+        except Exception as err:  # noqa: BLE001 - reported by the fit itself
             self.error = err
+        finally:
+            for done in self.done:
+                done.set()
 
-    def join(self):
+    def wait(self, i):
         t0 = time.perf_counter()
-        self.thread.join()
+        self.done[i].wait()
         return time.perf_counter() - t0
 
 
-def staged_start(model, experiments, free, *, max_steps=100, progress=None, precompile_joint=True):
+def staged_start(model, experiments, free, *, max_steps=100, progress=None, background_compile=True):
     """The start of a joint fit of `free` to `experiments`, stage by stage (see the module docstring).
 
     **Arguments:** as `pamjax.fit`'s; `max_steps` bounds each stage, `progress` is passed to each stage's fit;
-    `precompile_joint`: compile the joint problem's programs in a second thread while the stages run (default; False
-    compiles nothing beyond the stages).
+    `background_compile`: compile stage 2's and the joint problem's programs in a second thread from the start
+    (default); False compiles each stage's programs when it starts and leaves the joint problem's to the joint fit.
 
     **Returns:** a `StagedStart` (`.model` to start the joint fit from; `.stages` with each stage's `FitResult`).
     """
@@ -111,23 +120,23 @@ def staged_start(model, experiments, free, *, max_steps=100, progress=None, prec
     if not partial or not first or len(first) == len(free):
         return StagedStart(model, [])
     stages = []
-    background = _Background(model, experiments, free) if precompile_joint else None
-    # (an error or Ctrl-C in a stage leaves the daemon thread unwaited for: no wait for a compilation nobody needs)
-    model = _stages(model, experiments, free, first, partial, stages, max_steps, progress)
-    waited = background.join() if background is not None else 0.0
-    return StagedStart(model, stages, waited_s=waited,
-                       precompile_s=background.seconds if background is not None else 0.0)
-
-
-def _stages(model, experiments, free, first, partial, stages, max_steps, progress):
-    exps = [experiments[i] for i in partial]
-    res = fit(model, exps, first, max_steps=max_steps, progress=progress)
-    stages.append(("1", [_path(e) for e in first], [e.name for e in exps], res))
-    model = res.apply(model)
+    exps1 = [experiments[i] for i in partial]
     rest = [e for e in free if e not in first]
     full = [experiments[i] for i in range(len(experiments)) if i not in partial]
+    # Stage 2's programs, then the joint problem's, compile in a second thread while stage 1 fits (their structure
+    # does not depend on the values stage 1 finds); each fit waits for its programs rather than compiling them twice.
+    background = _Background(([(model, full, rest)] if full else []) + [(model, experiments, free)]) \
+        if background_compile else None
+    # (an error or Ctrl-C in a stage leaves the daemon thread unwaited for: no wait for a compilation nobody needs)
+    waited = 0.0
+    res = fit(model, exps1, first, max_steps=max_steps, progress=progress)
+    stages.append(("1", [_path(e) for e in first], [e.name for e in exps1], res))
+    model = res.apply(model)
     if full:
+        waited += background.wait(0) if background is not None else 0.0
         res = fit(model, full, rest, max_steps=max_steps, progress=progress)
         stages.append(("2", [_path(e) for e in rest], [e.name for e in full], res))
         model = res.apply(model)
-    return model
+    waited += background.wait(-1) if background is not None else 0.0
+    return StagedStart(model, stages, waited_s=waited,
+                       precompile_s=background.seconds if background is not None else 0.0)
