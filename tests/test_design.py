@@ -186,6 +186,7 @@ def test_a_start_that_leaves_a_parameter_free_is_named():
     (dict(noise={**NOISE, "position": 1e-4}, build=pj.TankFromModel(5e-5), channels=("pressure", "position")),
      r"channels \['position'\]: the designed system \(TankSystem, from build\) has no such output"),
     (dict(noise=NOISE, start={"position": 0.0}), r"start: bad keys \['position'\]"),
+    (dict(noise=NOISE, start=101325.0), r"start must be a dict of keyword arguments"),
 ])
 def test_bad_input_is_named_before_any_solve(kwargs, match, monkeypatch):
     monkeypatch.setattr(obj, "value", lambda *a: pytest.fail("solved before rejecting the input"))

@@ -83,9 +83,11 @@ def _validate(model, free, duration, noise, channels, band, criterion, subset, p
     require_float64("pamjax.design")
     if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
         raise PamjaxInputError(f"duration must be a positive number of seconds, got {duration!r}")
+    start = {} if start is None else start
     if not isinstance(start, dict):
         raise PamjaxInputError(f"start must be a dict of keyword arguments of the system's initial_state (e.g. "
                                f"{{'pressure': 101325.0}}), got {start!r}")
+    start = dict(start)
     channels = tuple(channels)
     system = built_system(model, build, start, channels)
     valve = getattr(system, "valve", None)
@@ -127,7 +129,7 @@ def _validate(model, free, duration, noise, channels, band, criterion, subset, p
     unknown = [s for s in subset if s not in space.labels]
     if unknown or not subset:
         raise PamjaxInputError(f"subset {unknown or subset!r} must name free parameters; they are {space.labels}")
-    return space, subset, period, channels, system
+    return space, subset, period, channels, system, start
 
 
 def _template(model, duration, period, rate, channels, noise, start, substeps, duty, build=None):
@@ -390,11 +392,9 @@ def design(
     **Returns:** a `DesignResult` (`signal()`, `to_csv`, `to_json`, `plot`, `table`).
     """
     t_start = time.perf_counter()
-    start = {} if start is None else start
-    space, subset, period, channels, system = _validate(
+    space, subset, period, channels, system, start = _validate(
         model, free, duration, noise, channels, duty_band, criterion, subset, parametrisation, knots, steps,
         float(rate), stroke_margin, max_pressure, max_duty_step, period, build, start)
-    start = dict(start)
     model = strong_types(model)
     space = ParameterSpace(model, free)
     theta = np.asarray(space.initial_theta())
@@ -437,8 +437,7 @@ def design(
         values=[float(v) for v in np.asarray(space.initial_values())], subset=subset, criterion=criterion,
         standard_errors=errors, objective=[history[0][2], float(aux["criterion"])], history=history,
         constraints=_constraints(aux, (lo, hi), max_duty_step, limits, max_pressure), parametrisation=parametrisation,
-        iterations=len(history) - 1, message=message,
-        design_s=time.perf_counter() - t_start, compile_s=compile_s,
+        iterations=len(history) - 1, message=message, design_s=time.perf_counter() - t_start, compile_s=compile_s,
         prediction=dict(t=np.asarray(exp.times), position=None if position is None else np.asarray(position),
                         pressure=None if pressure is None else np.asarray(pressure)))
 
