@@ -25,9 +25,10 @@ whatever the muscle run. `--tanks designed` (the default) lets the designed arm 
    off; `design_s`).
    a. Tank protocol (`--tanks designed`): `pamjax.design(..., build=<the bench's tank>, channels=("pressure",),
       start=atmospheric)`, one run of the bench's tank time (12 s) on the same tank, D-optimal over the four valve
-      parameters a tank test determines (C_v12, b12, C_v23, b23), at the presets (nothing recorded yet), with the
-      bench's tank tests as the baseline to beat by `--tank-margin` on each, on the tank run's own information (without
-      a known volume the muscle runs cannot fix the flow scales; they sharpen them once a tank test has).
+      parameters a tank test determines (C_v12, b12, C_v23, b23), at the presets (nothing recorded yet; their four
+      valve values are the bench plant's own, so this local design sits at the truth), with the bench's tank tests
+      as the baseline to beat by `--tank-margin` on each, on the tank run's own information (without a known volume
+      the muscle runs cannot fix the flow scales; they sharpen them once a tank test has).
    b. Sequential, as on a bench (`--pilot E4`, the default): the first 8 s of the muscle time are paper 000's E4
       triangle run, recorded and fitted with the arm's tank tests from the presets; the other 25 s are designed
       D-optimal over the 15 parameters at those fitted values, with the arm's tank tests and the pilot as information
