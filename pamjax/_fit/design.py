@@ -17,6 +17,7 @@ import numpy as np
 
 from .._core.errors import PamjaxInputError, require_float64
 from .._physics.signals import AbstractSignal, Sampled, Triangle
+from .._systems.base import AbstractSystem
 from . import design_objective as obj
 from .design_result import DesignResult
 from .experiment import Experiment
@@ -47,19 +48,55 @@ def information(space, theta, experiments):
     return jac.T @ jac
 
 
+def built_system(model, build, start, channels):
+    """`build(model)` (the model itself when `build` is None), checked before any solve: a pamjax system whose
+    initial state takes `start` and whose outputs include every channel of `channels`."""
+    if build is None:
+        system = model
+    elif not callable(build):
+        raise PamjaxInputError(f"build must be a callable model → system (e.g. pamjax.TankFromModel(5e-5), as "
+                               f"pamjax.Experiment takes it), got {build!r}")
+    else:
+        try:
+            system = build(model)
+        except Exception as err:  # a user's callable: any failure is bad input, named
+            raise PamjaxInputError(f"build(model) failed: {type(err).__name__}: {err}") from err
+    if not isinstance(system, AbstractSystem):
+        raise PamjaxInputError(f"build(model) must give a pamjax system (e.g. pamjax.TankFromModel(5e-5) gives a "
+                               f"TankSystem), got {type(system).__name__}")
+    try:  # traced, not solved
+        y0 = jax.eval_shape(lambda s: s.initial_state(**start), system)
+    except TypeError as err:
+        raise PamjaxInputError(f"start: bad keys {sorted(start)} for {type(system).__name__}.initial_state: "
+                               f"{err}") from err
+    outputs = jax.eval_shape(lambda s, y: s.outputs(0.0, y, 0.5), system, y0)
+    missing = [c for c in channels if c not in outputs]
+    if missing:
+        raise PamjaxInputError(f"channels {missing}: the designed system ({type(system).__name__}"
+                               f"{'' if build is None else ', from build'}) has no such output; it has "
+                               f"{sorted(outputs)}")
+    return system
+
+
 def _validate(model, free, duration, noise, channels, band, criterion, subset, parametrisation, knots, steps, rate,
-              stroke_margin, max_pressure, max_duty_step, period):
+              stroke_margin, max_pressure, max_duty_step, period, build, start):
     require_float64("pamjax.design")
     if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
         raise PamjaxInputError(f"duration must be a positive number of seconds, got {duration!r}")
-    valve = getattr(model, "valve", None)
+    start = {} if start is None else start
+    if not isinstance(start, dict):
+        raise PamjaxInputError(f"start must be a dict of keyword arguments of the system's initial_state (e.g. "
+                               f"{{'pressure': 101325.0}}), got {start!r}")
+    start = dict(start)
+    channels = tuple(channels)
+    system = built_system(model, build, start, channels)
+    valve = getattr(system, "valve", None)
     frequency = getattr(valve, "pwm_frequency", None)
     if period is None and frequency is None:
         raise PamjaxInputError("period: the model's valve has no pwm_frequency; give the PWM period [s] explicitly")
     period = float(1.0 / float(frequency)) if period is None else float(period)
     if not period > 0:
         raise PamjaxInputError(f"period must be > 0 [s], got {period}")
-    channels = tuple(channels)
     if not channels:
         raise PamjaxInputError("channels must name at least one recorded channel, e.g. ('pressure', 'position')")
     if not isinstance(noise, dict) or not set(channels) <= set(noise):
@@ -92,18 +129,19 @@ def _validate(model, free, duration, noise, channels, band, criterion, subset, p
     unknown = [s for s in subset if s not in space.labels]
     if unknown or not subset:
         raise PamjaxInputError(f"subset {unknown or subset!r} must name free parameters; they are {space.labels}")
-    return space, subset, period, channels
+    return space, subset, period, channels, system, start
 
 
-def _template(model, duration, period, rate, channels, noise, start, substeps, duty):
-    """The designed experiment (a Sampled duty, a blank recording at `rate`) bound to `model`."""
+def _template(model, duration, period, rate, channels, noise, start, substeps, duty, build=None):
+    """The designed experiment (a Sampled duty, a blank recording at `rate`; the system `build(model)`) bound to
+    `model`."""
     times = np.arange(0.0, duration + 0.5 / rate, 1.0 / rate)
     blank = {c: np.full(times.shape, 101325.0 if c.startswith("pressure") else 0.0) for c in channels}
     rec = Recording(times, blank, name="design")
     starts = np.arange(len(duty)) * period
     signal = Sampled(jnp.asarray(starts), jnp.asarray(duty, dtype=float), period=period)
     exp = Experiment(rec, signal, channels=list(channels), scales={c: float(noise[c]) for c in channels},
-                     initial=start, name="design", substeps=substeps)
+                     build=build, initial=start, name="design", substeps=substeps)
     exp.check(model)
     return exp.bind(model)
 
@@ -284,6 +322,7 @@ def design(
     noise: dict,
     channels=("pressure", "position"),
     start=None,
+    build=None,
     rate: float = 1000.0,
     prior=(),
     baseline=None,
@@ -321,8 +360,14 @@ def design(
     - `model`: the system at the design point (e.g. `presets.mas10_system(valve="pwm", friction="karnopp")`); its
       valve's PWM frequency sets the period (or give `period` [s]).
     - `free`: the parameters of interest, as `fit` takes them.
-    - `duration`: of the designed run [s], from `start` (keyword arguments of `model.initial_state`; default at rest
-      at atmospheric pressure).
+    - `duration`: of the designed run [s], from `start` (keyword arguments of the system's `initial_state`; default
+      at rest at atmospheric pressure).
+    - `build`: model → the system the designed signal drives, as `Experiment(build=...)` takes it (default: `model`
+      itself). E.g. `pamjax.TankFromModel(5e-5)` with `channels=("pressure",)` and `start={"pressure": 101325.0}`
+      designs a constant-volume tank test of `model`'s valve: the test that separates the valve's flow scales from
+      the muscle's volume, which no muscle run can (docs/identifiability.md). `free` are still `model`'s paths (name
+      only those the built system depends on, e.g. the valve's); the stroke limit applies only to a system with a
+      muscle and a `position` channel.
     - `noise`: channel → noise standard deviation of the bench [channel unit], e.g. `{"pressure": 2e3, "position":
       1e-4}`; `channels`: those recorded; `rate`: the recording's sample rate [Hz].
     - `prior`: experiments already in hand (or run anyway, e.g. constant-volume tank tests): their information is
@@ -347,9 +392,9 @@ def design(
     **Returns:** a `DesignResult` (`signal()`, `to_csv`, `to_json`, `plot`, `table`).
     """
     t_start = time.perf_counter()
-    space, subset, period, channels = _validate(
+    space, subset, period, channels, system, start = _validate(
         model, free, duration, noise, channels, duty_band, criterion, subset, parametrisation, knots, steps,
-        float(rate), stroke_margin, max_pressure, max_duty_step, period)
+        float(rate), stroke_margin, max_pressure, max_duty_step, period, build, start)
     model = strong_types(model)
     space = ParameterSpace(model, free)
     theta = np.asarray(space.initial_theta())
@@ -358,10 +403,9 @@ def design(
     times = np.arange(count) * period
     c0, basis = _start_coefficients(parametrisation, times, float(duration), knots,
                                     obj.multilevel_carrier(count, CARRIER_HOLD, seed), (lo, hi), initial)
-    start = dict(start or {})
     exp = _template(model, float(duration), period, float(design_rate), channels, noise, start, substeps,
-                    lo + (hi - lo) * np.asarray(obj.clip01(jnp.asarray(c0 if basis is None else basis @ c0))))
-    limits = stroke_limits(model, start, stroke_margin) if "position" in channels else None
+                    lo + (hi - lo) * np.asarray(obj.clip01(jnp.asarray(c0 if basis is None else basis @ c0))), build)
+    limits = stroke_limits(system, start, stroke_margin) if "position" in channels else None
     n, index = len(space.labels), tuple(space.labels.index(s) for s in subset)
 
     def problem(prior_info, floor):
@@ -382,7 +426,8 @@ def design(
     c, aux, history, message = _optimise(np.asarray(c0, dtype=float), prob, gradient, steps, report)
     duty, info = np.asarray(aux["duty"]), np.asarray(aux["information"])
     if verify:  # at the fit's resolution (the Experiment's default substeps, the recording's rate)
-        full = _template(model, float(duration), period, float(rate), channels, noise, start, FIT_SUBSTEPS, duty)
+        full = _template(model, float(duration), period, float(rate), channels, noise, start, FIT_SUBSTEPS, duty,
+                         build)
         info = prior_info + information(space, theta, [full])
     errors = {key: _physical_errors(space, theta, i) for key, i in
               (("design", info), ("prior", prior_info), ("baseline", base_info)) if i is not None}
@@ -392,8 +437,7 @@ def design(
         values=[float(v) for v in np.asarray(space.initial_values())], subset=subset, criterion=criterion,
         standard_errors=errors, objective=[history[0][2], float(aux["criterion"])], history=history,
         constraints=_constraints(aux, (lo, hi), max_duty_step, limits, max_pressure), parametrisation=parametrisation,
-        iterations=len(history) - 1, message=message,
-        design_s=time.perf_counter() - t_start, compile_s=compile_s,
+        iterations=len(history) - 1, message=message, design_s=time.perf_counter() - t_start, compile_s=compile_s,
         prediction=dict(t=np.asarray(exp.times), position=None if position is None else np.asarray(position),
                         pressure=None if pressure is None else np.asarray(pressure)))
 

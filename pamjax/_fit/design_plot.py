@@ -12,24 +12,26 @@ def plot_design(result, path):
 
     pred = result.prediction or {}
     cons = result.constraints
-    fig, axes = plt.subplots(4, 1, figsize=(11, 11), gridspec_kw=dict(height_ratios=[1, 1, 1, 1.3]))
+    stroke = pred.get("position") is not None  # no position panel for a system without one (a tank test)
+    ratios = [1, 1, 1, 1.3] if stroke else [1, 1, 1.3]
+    fig, panels = plt.subplots(len(ratios), 1, figsize=(11, 2.5 * sum(ratios)), gridspec_kw=dict(height_ratios=ratios))
+    axes = list(panels) if stroke else [panels[0], None, *panels[1:]]
     axes[0].step(result.times, result.duty, where="post", lw=0.7)
     for b in cons["duty_band"]:
         axes[0].axhline(b, color="C3", lw=0.8, ls="--")
     axes[0].set(ylabel="duty [-]", title=f"{result.criterion}-optimal PWM duty ({result.parametrisation}), "
                                          f"one value per {1e3 * result.period:g} ms period")
-    if pred.get("position") is not None:
+    if stroke:
         axes[1].plot(pred["t"], 1e3 * np.asarray(pred["position"]), lw=0.7)
         for b in cons["stroke_limits"] or []:
             axes[1].axhline(1e3 * b, color="C3", lw=0.8, ls="--")
         axes[1].set(ylabel="position [mm]", title="predicted at the design point (dashed: end stops less margin)")
-    else:
-        axes[1].axis("off")
     if pred.get("pressure") is not None:
         axes[2].plot(pred["t"], np.asarray(pred["pressure"]) / 1e5, lw=0.5)
         if cons.get("max_pressure") is not None:
             axes[2].axhline(cons["max_pressure"] / 1e5, color="C3", lw=0.8, ls="--")
-        axes[2].set(xlabel="t [s]", ylabel="pressure [bar abs]")
+        axes[2].set(xlabel="t [s]", ylabel="pressure [bar abs]",
+                    title=None if stroke else "predicted at the design point")
     else:
         axes[2].axis("off")
     values = np.abs(np.asarray(result.values))
