@@ -241,6 +241,27 @@ def test_design_example_config_loads():
                                               / "design_example.toml")
     assert duration == 10.0 and len(free) == 5 and out == "results/design_example"
     assert kwargs["duty_band"] == (0.1, 0.9) and kwargs["criterion"] == "D"
+    assert "build" not in kwargs
+
+
+def test_design_config_tank_volume_designs_a_tank_test(tmp_path):
+    # `tank_volume` in [design]: the signal drives a constant-volume tank test of the model's valve (build=), as a fit
+    # experiment's tank_volume; a bad volume is refused naming the key, before anything is built or solved.
+    from pamjax._cli.design import load
+
+    body = ('[model]\npreset = "mas10_system"\noptions = { valve = "pwm" }\n[design]\n'
+            'free = ["valve.inflate.discharge_coefficient"]\nduration = 2.0\nnoise = { pressure = 2e3 }\n'
+            'channels = ["pressure"]\nstart = { pressure = 101325.0 }\ntank_volume = %s\n')
+    cfg = tmp_path / "tank.toml"
+    cfg.write_text(body % "5e-5")
+    model, _, _, kwargs, _ = load(cfg)
+    system = kwargs["build"](model)
+    assert isinstance(system, pj.TankSystem) and float(system.volume) == pytest.approx(5e-5)
+    assert system.valve is model.valve
+    for bad in ("-5e-5", '"big"'):
+        cfg.write_text(body % bad)
+        with pytest.raises(PamjaxInputError, match=r"\[design\] tank_volume"):
+            load(cfg)
 
 
 def test_pressure_limit_is_penalised_and_kept():

@@ -7,7 +7,8 @@ import pathlib
 import numpy as np
 
 from .._core.errors import PamjaxInputError
-from .config import build_model, check_keys, read_toml, validate_model_table
+from .._core.units import check_setting
+from .config import build_model, check_keys, read_toml, require, validate_model_table
 from .fit import load_config
 from .out import OutputFolder
 
@@ -15,10 +16,11 @@ _TOP_KEYS = {"model", "design"}
 OUTPUTS = ("design.csv", "design.json", "design.png")
 # [design] keys: `free`, `duration`, `noise` (required), `prior` / `baseline` (fit configs whose experiments are the
 # information in hand / the experiment to beat), `initial` (a constant duty, or the CSV of an earlier design to
-# start from), `out`, and the keyword arguments of `pamjax.design` below.
+# start from), `tank_volume` (design a constant-volume tank test of the model's valve: build=TankFromModel, as a fit
+# experiment's `tank_volume`), `out`, and the keyword arguments of `pamjax.design` below.
 _DESIGN_ARGS = ("channels", "start", "rate", "criterion", "subset", "duty_band", "stroke_margin", "max_pressure",
                 "max_duty_step", "parametrisation", "knots", "steps", "seed", "baseline_margin")
-_DESIGN_KEYS = {"free", "duration", "noise", "prior", "baseline", "initial", "out", *_DESIGN_ARGS}
+_DESIGN_KEYS = {"free", "duration", "noise", "prior", "baseline", "initial", "tank_volume", "out", *_DESIGN_ARGS}
 
 
 def add_arguments(parser):
@@ -54,6 +56,12 @@ def load(path):
         kwargs["initial"] = _initial(table["initial"], path.parent)
     if "duty_band" in kwargs:
         kwargs["duty_band"] = tuple(kwargs["duty_band"])
+    if "tank_volume" in table:  # a tank test of the model's valve, as a fit experiment's tank_volume
+        import pamjax as pj
+
+        require(table["tank_volume"], "positive number", "[design] tank_volume", "5e-5 (m³)")
+        check_setting("tank_volume", table["tank_volume"], "[design]")
+        kwargs["build"] = pj.TankFromModel(float(table["tank_volume"]))
     return model, table["free"], float(table["duration"]), dict(noise=table["noise"], **kwargs), table.get("out")
 
 
