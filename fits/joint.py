@@ -84,7 +84,7 @@ def main(argv=None):
     print(f"bench {data}: {len(bench.experiments)} experiments ({', '.join(e.name for e in bench.experiments)}); "
           f"left out: {bench.skipped or 'none'}; noise {bench.noise}")
     t0 = time.perf_counter()
-    stages, staged = [], None  # the staged start's fits (fit and compilation times count in the totals)
+    staged = None  # the staged start (its stages' fit and compilation times count in the totals)
     if args.multistart > 1:
         runs = pj.multistart(model, bench.experiments, bench.free, starts=args.multistart, max_steps=args.max_steps,
                              progress=not args.quiet)
@@ -95,10 +95,11 @@ def main(argv=None):
         if not args.joint_only:  # valve on the tank tests, then muscle and friction on the runs, then all jointly
             staged = pj.staged_start(model, bench.experiments, bench.free, max_steps=args.max_steps,
                                      progress=not args.quiet)
-            start, stages = staged.model, staged.stages
+            start = staged.model
             print("\n".join(staged.summary()))
         res = pj.fit(start, bench.experiments, bench.free, max_steps=args.max_steps, progress=not args.quiet)
     wall = time.perf_counter() - t0
+    stages = staged.stages if staged is not None else []
     values, errors = pj.bench_values(res, bench.fitted_keys)
     full = bench if args.rate is None else pj.load_bench(data, model, rate=None)
     channel_errors = res.channel_errors if args.rate is None else pj.evaluate(res.model, full.experiments)

@@ -192,7 +192,10 @@ def _validate(experiments, max_steps, out, overwrite, checkpoint, resume):
 
 
 def _setup(model, experiments, space):
-    """The bound experiments (PWM grids sized), the start θ and the compiled-function host of a fit (`_Problem`)."""
+    """The experiments checked against `model` and bound to it (PWM grids sized), the start θ and the
+    compiled-function host of a fit (`_Problem`)."""
+    for e in experiments:
+        e.check(model)
     exps = tuple(e.bind(model) for e in experiments)
     theta = np.asarray(space.initial_theta())
     if not np.all(np.isfinite(theta)):
@@ -208,10 +211,7 @@ def precompile(model, experiments, free):
     stages fit, so that the joint fit after them starts at once."""
     t0 = time.perf_counter()
     experiments = _validate(experiments, 1, None, False, None, None)
-    space = ParameterSpace(model, free)
-    for e in experiments:
-        e.check(model)
-    _, theta, problem = _setup(model, experiments, space)
+    _, theta, problem = _setup(model, experiments, ParameterSpace(model, free))
     problem.start(theta)
     return time.perf_counter() - t0
 
@@ -311,8 +311,6 @@ def fit(
     print_ = fingerprint(model, experiments, free)  # start model, free spec, experiments and data (_fingerprint)
     if resume is not None:
         check_resume(resume, print_)  # before any solve: a checkpoint of another problem is refused, naming why
-    for e in experiments:
-        e.check(model)
     labels = space.labels
     exps, theta, problem = _setup(model, experiments, space)
     report = _progress_printer(progress)

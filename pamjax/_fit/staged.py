@@ -76,11 +76,11 @@ def _seen(experiment, model, entries):
 
 class _Background:
     """`precompile` of several problems, in order, in one daemon thread; `wait(i)` blocks until problem i is
-    compiled and returns the seconds waited. Errors are kept, not raised (the fit of that problem then compiles it
-    itself and raises them where they belong)."""
+    compiled and returns the seconds waited. An error ends the thread without being raised here: the fit of that
+    problem then compiles it itself and raises it where it belongs."""
 
     def __init__(self, problems):
-        self.seconds, self.error = 0.0, None
+        self.seconds = 0.0
         self.done = [threading.Event() for _ in problems]
         self.thread = threading.Thread(target=self._run, args=(problems,), daemon=True)
         self.thread.start()
@@ -90,8 +90,8 @@ class _Background:
             for (model, experiments, free), done in zip(problems, self.done):
                 self.seconds += precompile(model, experiments, free)
                 done.set()
-        except Exception as err:  # noqa: BLE001 - reported by the fit itself
-            self.error = err
+        except Exception:  # noqa: BLE001, S110 - raised again by the fit that compiles the problem itself
+            pass
         finally:
             for done in self.done:
                 done.set()
