@@ -45,8 +45,19 @@ def draw(path, columns):
     if any(col["split"] is not None for col in columns):
         axes[0, 0].plot([], [], color="C3", lw=0.8, ls="--", label="identification | validation")
     axes[0, 0].legend(fontsize=7)
-    fig.tight_layout()
+    _margins(fig, len(columns))
     fig.savefig(path, dpi=110, format="png")
+
+
+def _margins(fig, n):
+    """Fixed margins in inches, room for six-digit tick labels (pressures in Pa), an axis label and a title: the
+    layout `tight_layout` would find for these axes, without its extra drawing pass (a third of the figure's time)."""
+    width, height = fig.get_size_inches()
+    left, right, top, bottom, gap_x, gap_y = 0.95, 0.15, 0.35, 0.55, 1.05, 0.2  # inches
+    axis_w = (width - left - right - (n - 1) * gap_x) / n
+    axis_h = (height - top - bottom - gap_y) / 2
+    fig.subplots_adjust(left=left / width, right=1 - right / width, top=1 - top / height, bottom=bottom / height,
+                        wspace=gap_x / axis_w, hspace=gap_y / axis_h)
 
 
 def _warm_up():
