@@ -18,3 +18,29 @@ if os.environ.get("PAMJAX_TEST_CACHE", "1") != "0":
     jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
     jax.config.update("jax_persistent_cache_min_compile_time_secs",
                       float(os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"]))
+
+
+# The suite's longest modules first (their serial seconds in a full run, heaviest first: `pytest --durations=0`,
+# summed per module). xdist's `--dist loadscope --no-loadscope-reorder` hands whole modules to the workers in
+# collection order (by default it would order them by their number of tests, a poor guess of their time); started
+# last, a module of several minutes would run alone on one core at the end while the other core idles. Only the
+# order changes: every test still runs, the tests of a module in their own order. Modules not listed follow in their
+# usual (alphabetical) order.
+HEAVY_FIRST = [
+    "test_papers.py", "test_design.py", "test_simulate.py", "test_unbiased_data.py", "test_karnopp.py",
+    "test_rodas.py", "test_performance_modes.py", "test_solve_hints.py", "test_fits_regulator.py", "test_bench.py",
+    "test_joint_control.py", "test_control.py", "reliability/test_nan_safety.py", "test_sweep.py",
+    "reliability/test_gradients.py", "test_distributed.py", "test_fit.py", "test_joint.py", "test_valve.py",
+    "test_cache.py", "test_regulator.py", "test_sweep_maps.py",
+]
+
+
+def pytest_collection_modifyitems(session, config, items):
+    here = os.path.dirname(os.path.abspath(__file__))
+    rank = {name: i for i, name in enumerate(HEAVY_FIRST)}
+
+    def module_rank(item):
+        path = os.path.relpath(str(item.path), here).replace(os.sep, "/")
+        return rank.get(path, len(HEAVY_FIRST))
+
+    items.sort(key=module_rank)  # stable: the rest keep their order, a module's tests theirs
