@@ -115,10 +115,10 @@ def start(reg, mode, p_row, c_true, b_true, rng):
                 C_table=c_true, b_table=b_true)
 
 
-def read_off(grid, cost, row):
-    """b by least squares over the 0.005 grid at the read-off C (`grid_costs`): a parabola through the three lowest.
-    Returns a `fits/regulator.fit_tables`-like row."""
-    c0, c_true, b_true = row["c0"], row["C_table"], row["b_table"]
+def read_off(grid, row):
+    """b by least squares over the 0.005 grid at the read-off C (the row's `cost` from `grid_costs`): a parabola
+    through the three lowest. Returns a `fits/regulator.fit_tables`-like row."""
+    c0, c_true, b_true, cost = row["c0"], row["C_table"], row["b_table"], row["cost"]
     k = int(np.clip(np.argmin(cost), 1, grid.size - 2))
     a, b_, c_ = cost[k - 1: k + 2]
     b0 = float(grid[k] + 0.0025 * (a - c_) / (a - 2 * b_ + c_))  # parabola through the three lowest
@@ -137,8 +137,9 @@ def quick_tables(reg, rng):
                              table["critical_ratio"][i], rng) for i in QUICK_ROWS[key]]
     rows = [r for key in starts for r in starts[key]]
     grid, costs = grid_costs(reg, rows)
-    cost = dict(zip(map(id, rows), costs))
-    return {key: [read_off(grid, cost[id(r)], r) for r in starts[key]] for key in starts}
+    for r, cost in zip(rows, costs):
+        r["cost"] = cost
+    return {key: [read_off(grid, r) for r in starts[key]] for key in starts}
 
 
 def run(out, quick=False):
