@@ -8,6 +8,7 @@ its correction k set so that the force vanishes at 25 %. Volumes: eq. 3 for both
 v0 + v1 x) and the volume virtual work assigns to the preset's eq. 7 (`fits/derive_presets.py`).
 """
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -35,6 +36,32 @@ def braid_for_force(nominal_length, diameter, force, gauge_pressure):
     return b, b * sin_theta / (np.pi * diameter)
 
 
+# The curves over x, jitted: one program per law (the braids, shared by (A) and (B)), where the eager vmaps compiled
+# every operation of every law as a program of its own.
+@eqx.filter_jit
+def volume_slopes(volume_law, x):
+    """dV/dx [m²] of `volume_law` at each x (eq. 4's virtual work per unit gauge pressure)."""
+    return jax.vmap(jax.grad(volume_law.volume))(x)
+
+
+@eqx.filter_jit
+def gauge_forces(force_law, x):
+    """Force [N] of a geometric law (eq. 5, eq. 6) at gauge pressure P_MAX at each x."""
+    return jax.vmap(lambda q: force_law.static_force(q, P_MAX))(x)
+
+
+@eqx.filter_jit
+def muscle_forces(muscle, x, p, air):
+    """The muscle's static force [N] at absolute pressure p at each x (eq. 7)."""
+    return jax.vmap(lambda q: muscle.static_force(q, p, air))(x)
+
+
+@eqx.filter_jit
+def volumes(volume_law, x):
+    """Volume [m³] of `volume_law` (a braid or a muscle) at each x."""
+    return jax.vmap(volume_law.volume)(x)
+
+
 def run(out, quick=False):
     del quick  # no simulation: the same in both modes
     x = np.linspace(0.0, STROKE * L0, 61)
@@ -45,9 +72,8 @@ def run(out, quick=False):
     eq5 = {k: pj.ChouHannafordForce(v.strand_length, v.turns, L0) for k, v in (("A", braid_a), ("B", braid_b))}
 
     # eq. 4: F = p_g dV/dx (x = L0 − L), by autodiff of eq. 3, against eq. 5
-    virtual = {k: np.asarray(jax.vmap(jax.grad(v.volume))(jnp.asarray(x))) * P_MAX
-               for k, v in (("A", braid_a), ("B", braid_b))}
-    forces5 = {k: np.asarray(jax.vmap(lambda q, f=f: f.static_force(q, P_MAX))(jnp.asarray(x))) for k, f in eq5.items()}
+    virtual = {k: np.asarray(volume_slopes(v, jnp.asarray(x))) * P_MAX for k, v in (("A", braid_a), ("B", braid_b))}
+    forces5 = {k: np.asarray(gauge_forces(f, jnp.asarray(x))) for k, f in eq5.items()}
     eq4_error = max(np.max(np.abs(virtual[k] - forces5[k])) / np.max(np.abs(forces5[k])) for k in eq5)
     stroke_b = 1 - float(braid_b.strand_length) / np.sqrt(3) / L0  # where cos²θ = 1/3
 
@@ -56,13 +82,13 @@ def run(out, quick=False):
     a, b = 3 / np.tan(theta0) ** 2, 1 / np.sin(theta0) ** 2
     k = (1 - np.sqrt(b / a)) / STROKE
     eq6 = pj.TonduLopezForce(D / 2, theta0, L0, k)
-    forces6 = np.asarray(jax.vmap(lambda q: eq6.static_force(q, P_MAX))(jnp.asarray(x)))
+    forces6 = np.asarray(gauge_forces(eq6, jnp.asarray(x)))
     muscle = presets.mas10_muscle()
-    forces7 = np.asarray(jax.vmap(lambda q: muscle.static_force(q, p, AIR))(jnp.asarray(x)))
+    forces7 = np.asarray(muscle_forces(muscle, jnp.asarray(x), p, AIR))
 
     # volumes: eq. 3 (A, B), eq. 14 preset, virtual work of the preset's eq. 7
-    vol = {k: np.asarray(jax.vmap(v.volume)(jnp.asarray(x))) for k, v in (("A", braid_a), ("B", braid_b))}
-    vol14 = np.asarray(jax.vmap(muscle.volume)(jnp.asarray(x)))
+    vol = {k: np.asarray(volumes(v, jnp.asarray(x))) for k, v in (("A", braid_a), ("B", braid_b))}
+    vol14 = np.asarray(volumes(muscle, jnp.asarray(x)))
     derive = fits_module("derive_presets")
     eps, dv = derive.virtual_work_volume(np.asarray(presets.MAS10_MAX_FORCE_COEFFICIENTS) * L0 ** np.arange(5), L0)
     linearity = {}

@@ -8,7 +8,9 @@ C_f = 250 N s/m at |ẋ| = 5 mm/s), with 2 N load-cell noise (assumed). `LoopFor
 and F_c together) and `loop_average` gives Fig. 4's averaged curves and the loop width (paper: 32 N).
 """
 
+import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 import pamjax as pj
@@ -23,6 +25,13 @@ COULOMB = 16.0  # N, paper 000: half the 32 N loop width
 LOOP_SPEED = 5e-3  # m/s, quasi-static cycling (assumed; the paper gives no speed)
 LOAD_CELL_NOISE = 2.0  # N (assumed)
 P_ATM = 101325.0
+
+
+@eqx.filter_jit
+def static_forces(muscle, x, p, air):
+    """The muscle's static force [N] at each (x, p): one jitted program per number of points (the eager vmap compiled
+    each operation of the force law as a program of its own)."""
+    return jax.vmap(lambda a, b: muscle.static_force(a, b, air))(x, p)
 
 
 def loop_data(x, p, f, rng):
@@ -47,7 +56,7 @@ def run(out, quick=False):
 
     # eq. 7 on the real isometric map
     res7 = pj.fit(muscle, [pj.ForceMapExperiment(x, p, f, scale=1.0)], free, progress=False)
-    model_f = np.asarray(jax.vmap(lambda a, b: res7.model.static_force(a, b, pj.Air()))(x, p))
+    model_f = np.asarray(static_forces(res7.model, jnp.asarray(x), jnp.asarray(p), pj.Air()))
     err = np.where(f > 0, model_f - f, np.maximum(model_f, 0))
     low = (p - P_ATM < 2e5) & (f > 0)
     e7 = res7.channel_errors["force_map"]["force"]
@@ -89,7 +98,7 @@ def run(out, quick=False):
         sel = pa == pi
         axes[1].plot(xa[sel] * 1e3, fa[sel], "o", color=c, ms=4, label=f"{(pi - P_ATM) / 1e5:.2f} bar")
         xx = np.linspace(0, x.max(), 50)
-        model_xx = jax.vmap(lambda q, pi=pi: res7.model.static_force(q, pi, air))(xx)
+        model_xx = static_forces(res7.model, jnp.asarray(xx), jnp.asarray(np.full(xx.shape, pi)), air)
         axes[1].plot(xx * 1e3, np.maximum(model_xx, 0.0), "-", color=c)  # slack: no push
         pred = np.asarray(loop.predict(res8.model)["force"])
         for sign in (1.0, -1.0):

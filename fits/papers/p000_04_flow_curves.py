@@ -7,6 +7,8 @@ Eq. 11's C_v, b_v are fitted to both paths at once (`FlowCurveExperiment`, from 
 the law the paper found "does not correspond well" (one C_q per path, its critical ratio fixed at 0.528).
 """
 
+import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 
 import pamjax as pj
@@ -24,6 +26,18 @@ NOISE = 0.01  # flow-meter noise, fraction of the choked flow (assumed)
 AIR = pj.Air()
 
 
+@eqx.filter_jit
+def flow_curve(restriction, upstream_pressure, ratios, air):
+    """`pamjax.flow_curve` jitted: one program per restriction type and number of ratios. Run eagerly, each of its
+    vmapped operations compiled a program of its own, anew for each curve (~140 in all)."""
+    return pj.flow_curve(restriction, upstream_pressure, ratios, air)
+
+
+def curve(restriction, p_up, ratios):
+    """`flow_curve` of `restriction` at `p_up` [Pa abs] (an array argument, not a constant of the program)."""
+    return np.asarray(flow_curve(restriction, jnp.asarray(p_up, dtype=float), jnp.asarray(ratios, dtype=float), AIR))
+
+
 def flow_points(valve, n, rng):
     """ISO 6358 test points (p_up, p_down, ṁ + noise) per path of `valve`: `n` downstream pressures from atmosphere
     to 0.98 p_up."""
@@ -33,7 +47,7 @@ def flow_points(valve, n, rng):
         rows = []
         for p_up in UPSTREAM:
             ratios = np.linspace(float(AIR.atmospheric_pressure) / p_up, 0.98, n)
-            flow = np.asarray(pj.flow_curve(restriction, p_up, ratios, AIR))
+            flow = curve(restriction, p_up, ratios)
             flow = flow + NOISE * flow[0] * rng.standard_normal(flow.shape)
             rows.append(np.stack([np.full(ratios.shape, p_up), ratios * p_up, flow]))
         data[path] = np.concatenate(rows, axis=1)
@@ -70,8 +84,8 @@ def run(out, quick=False):
         for k, pu in enumerate(UPSTREAM):
             sel = p_up == pu
             ax.plot(p_down[sel] / pu, flow[sel] * 1e3, "o", color=f"C{k}", ms=4, label=f"{pu / 1e6:.1f} MPa points")
-            ax.plot(rr, np.asarray(pj.flow_curve(getattr(res11.model, path), pu, rr, AIR)) * 1e3, "-", color=f"C{k}")
-            ax.plot(rr, np.asarray(pj.flow_curve(getattr(res10.model, path), pu, rr, AIR)) * 1e3, ":", color=f"C{k}")
+            ax.plot(rr, curve(getattr(res11.model, path), pu, rr) * 1e3, "-", color=f"C{k}")
+            ax.plot(rr, curve(getattr(res10.model, path), pu, rr) * 1e3, ":", color=f"C{k}")
         name = "1→2 (inflate)" if path == "inflate" else "2→3 (exhaust)"
         ax.set(title=f"Fig. 7, path {name}: eq. 11 (solid), eq. 10 (dotted)", xlabel="p_down / p_up [-]")
     axes[0].set_ylabel("mass flow [g/s]")

@@ -35,8 +35,9 @@ def usable_duty_range(valve, air, pressure=3e5, tol=1e-9):
             mid = 0.5 * (lo + hi)
             lo, hi = (mid, hi) if abs(float(flow_at(mid)) - end) <= tol * abs(ends[1] - ends[0]) else (lo, mid)
         edges.append(0.5 * (lo + hi))
-    u = jnp.linspace(0.0, 1.0, 201)
-    return edges[0], edges[1], np.asarray(u), np.asarray(jax.vmap(flow_at)(u))
+    u = np.asarray(jnp.linspace(0.0, 1.0, 201))
+    # the curve by the bisection's compiled program, point by point (a vmapped one would be a second compilation)
+    return edges[0], edges[1], u, np.array([float(flow_at(float(v))) for v in u])
 
 
 def simulate_tank(system, duty, p0, ts, **kwargs):

@@ -13,6 +13,7 @@ DMSP-40-400 preset (eq. 4 cubic volume) under a 1.5 Hz square wave, 0-3 V and 0-
 """
 
 import diffrax as dfx
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -36,16 +37,23 @@ def run_muscle(volts, duration):
     ts = jnp.arange(0.0, duration + 0.5 / RATE, 1.0 / RATE)
     traj = pj.simulate(system, pj.SquareWave(0.0, volts, FREQUENCY), ts, rtol=1e-8, atol=1e-8,
                        solver=dfx.Tsit5())  # not stiff: as many steps as Rodas5, a fifth of its compile time
+    return {k: np.asarray(v) for k, v in flow_terms(system, traj).items()}
+
+
+@eqx.filter_jit
+def flow_terms(system, traj):
+    """eq. 3's pressure and volume terms along `traj`, and the channels the figures use. Jitted (one program for both
+    voltages): run eagerly, each vmapped operation compiled a program of its own (~100 of them)."""
     rates = jax.vmap(system.vector_field)(traj.t, traj.state, traj.command)
     rt = system.air.gas_constant * system.air.temperature * system.polytropic_index
     volume = jax.vmap(system.muscle.volume)(traj.position)
     slope = jax.vmap(system.muscle.volume_slope)(traj.position)
     pressure_term = volume * rates.regulator.pressure / rt
     volume_term = slope * rates.position * traj.pressure / rt
-    return {k: np.asarray(v) for k, v in dict(
+    return dict(
         t=traj.t, command=traj.command, pressure=traj.pressure, delivered=traj.mass_flow, pressure_term=pressure_term,
         volume_term=volume_term, supply=jnp.full_like(traj.pressure, system.regulator.supply_pressure),
-        position=traj.position, rt=rt).items()}
+        position=traj.position, rt=rt)
 
 
 def global_model(r, volts):

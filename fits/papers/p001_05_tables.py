@@ -9,11 +9,14 @@ Figs. 13-14: the ISO 6358 flow per row against the tank pressure, in the standar
 printed (b subtracted from the pressures in bar), which jumps where it switches to eq. 2.
 """
 
+import functools
+
 import diffrax as dfx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+import pamjax as pj
 from pamjax import presets
 from pamjax.gallery import Result, Row, fits_module, plt, save
 from pamjax.units import BAR
@@ -57,36 +60,86 @@ def curves(table, pcol, mode, n=200):
     return out
 
 
-def read_off(reg, mode, p_row, c_true, b_true, rng):
-    """One row's tank run (150 samples, 2 mbar noise) read off: C [m³/(s bar)] from the choked slope over the first
-    tenth (eq. 14: ṗ = k p_in charging, d ln p/dt = −k discharging), b by least squares over a 0.005 grid at that C
-    (one vmapped batch of tank runs, Tsit5). Returns a `fits/regulator.fit_tables`-like row."""
+def mode_values(reg, mode, p_row):
+    """`fits/regulator.tank_run`'s constants of a `mode` at row pressure `p_row` [Pa]: (supply, pilot target, start
+    pressure [Pa], voltage [V]), as arrays, so that charging and discharging runs are one program."""
+    if mode == "charge":
+        values = (p_row, reg.P_ATM + 10.1 * BAR, reg.P_ATM, 10.0)
+    else:
+        values = (7e5, reg.P_ATM, p_row, 0.0)
+    return tuple(jnp.asarray(v, dtype=float) for v in values)
+
+
+def tank_pressure(reg, theta, values, ts):
+    """`fits/regulator.tank_run(theta, mode, p_row, ts, solver=Tsit5())` with the mode's constants (`mode_values`)
+    as arguments: the same system, start state, command and solve."""
+    supply, target, p0, volts = values
+    system = reg.tank_system(jnp.exp(theta[0]), reg._to_b(theta[1]), supply)
+    y0 = pj.ISO6358RegulatorState(pilot=target, pilot_output=target, pressure=p0)
+    return pj.simulate(system, pj.Constant(volts), ts, y0=y0, adjoint="forward", rtol=1e-8, atol=1e-8,
+                       solver=dfx.Tsit5()).pressure
+
+
+def grid_costs(reg, rows):
+    """Per read-off row (`start`: ts, data, C, mode values), the squared misfit of the tank run at each b of the
+    0.005 grid at that row's C: ONE vmapped batch of every row's runs (rows × b values, Tsit5), so that the quick
+    run compiles one program instead of one per row (whose pressure and mode were constants of its program)."""
+    grid = np.arange(0.3, 0.8975, 0.005)  # inside fits/regulator.py's b range (0.1, 0.9)
+    runs = np.asarray(_grid_runs(reg, jnp.log(jnp.asarray([r["c0"] for r in rows])),  # stacked in NumPy: no programs
+                                 tuple(jnp.asarray(np.stack(v)) for v in zip(*(r["values"] for r in rows))),
+                                 jnp.asarray(np.stack([r["ts"] for r in rows])), jnp.asarray(reg._from_b(grid))))
+    return grid, [np.sum((run - r["data"]) ** 2, axis=1) for run, r in zip(runs, rows)]
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _grid_runs(reg, log_c0, values, ts, zs):
+    """Tank pressures (rows, b values, samples) of `tank_pressure` at θ = (log C of the row, z) for each z."""
+
+    def one_row(log_c, vals, times):
+        return jax.vmap(lambda z: tank_pressure(reg, jnp.stack([log_c, z]), vals, times))(zs)
+
+    return jax.vmap(one_row)(log_c0, values, ts)
+
+
+def start(reg, mode, p_row, c_true, b_true, rng):
+    """One row's tank run (150 samples, 2 mbar noise) and C [m³/(s Pa)] read off the choked slope over its first
+    tenth (eq. 14: ṗ = k p_in charging, d ln p/dt = −k discharging)."""
     ts = jnp.linspace(0.0, reg.tank_horizon(mode, p_row * BAR, c_true / BAR, b_true), 150)
     truth = jnp.array([np.log(c_true / BAR), reg._from_b(b_true)])
-    solver = dfx.Tsit5()
-    data = np.asarray(reg.tank_run(truth, mode, p_row * BAR, ts, solver=solver))
+    data = np.asarray(reg.tank_run(truth, mode, p_row * BAR, ts, solver=dfx.Tsit5()))
     data = data + NOISE * rng.standard_normal(data.shape)
     t, n = np.asarray(ts), ts.size // 10
     y = data[:n] / (p_row * BAR) if mode == "charge" else -np.log(data[:n])
     c0 = float(np.polyfit(t[:n], y, 1)[0] / reg.tank_rate_constant(1.0))  # m³/(s Pa)
-    grid = np.arange(0.3, 0.8975, 0.005)  # inside fits/regulator.py's b range (0.1, 0.9)
-    runs = jax.jit(jax.vmap(lambda z: reg.tank_run(jnp.stack([jnp.log(c0), z]), mode, p_row * BAR, ts, solver=solver)))
-    cost = np.sum((np.asarray(runs(jnp.asarray(reg._from_b(grid)))) - data) ** 2, axis=1)
+    return dict(ts=ts, data=data, c0=c0, values=mode_values(reg, mode, p_row * BAR), pressure_bar=p_row,
+                C_table=c_true, b_table=b_true)
+
+
+def read_off(grid, row):
+    """b by least squares over the 0.005 grid at the read-off C (the row's `cost` from `grid_costs`): a parabola
+    through the three lowest. Returns a `fits/regulator.fit_tables`-like row."""
+    c0, c_true, b_true, cost = row["c0"], row["C_table"], row["b_table"], row["cost"]
     k = int(np.clip(np.argmin(cost), 1, grid.size - 2))
     a, b_, c_ = cost[k - 1: k + 2]
     b0 = float(grid[k] + 0.0025 * (a - c_) / (a - 2 * b_ + c_))  # parabola through the three lowest
-    return dict(pressure_bar=p_row, C_table=c_true, b_table=b_true, C_fit=c0 * BAR, b_fit=b0,
+    return dict(pressure_bar=row["pressure_bar"], C_table=c_true, b_table=b_true, C_fit=c0 * BAR, b_fit=b0,
                 C_error_percent=100 * (c0 * BAR / c_true - 1), b_error=b0 - b_true)
 
 
 def quick_tables(reg, rng):
-    report = {}
+    """The quick rows read off the record: every row's run and C first (in the order of the noise draws), then b
+    for all rows in one batch (`grid_costs`)."""
+    starts = {}
     for key, mode, table, pcol in (("charging", "charge", presets.PAPER001_CHARGING_TABLE, "upstream_pressure_bar"),
                                    ("discharging", "discharge", presets.PAPER001_DISCHARGING_TABLE,
                                     "tank_pressure_bar")):
-        report[key] = [read_off(reg, mode, table[pcol][i], table["sonic_conductance_m3_per_s_bar"][i],
-                                table["critical_ratio"][i], rng) for i in QUICK_ROWS[key]]
-    return report
+        starts[key] = [start(reg, mode, table[pcol][i], table["sonic_conductance_m3_per_s_bar"][i],
+                             table["critical_ratio"][i], rng) for i in QUICK_ROWS[key]]
+    rows = [r for key in starts for r in starts[key]]
+    grid, costs = grid_costs(reg, rows)
+    for r, cost in zip(rows, costs):
+        r["cost"] = cost
+    return {key: [read_off(grid, r) for r in starts[key]] for key in starts}
 
 
 def run(out, quick=False):
