@@ -1,7 +1,7 @@
 """Antagonistic joint control (issue 6 item 5): angle through the pressure difference, stiffness through the sum.
 
 All closed-loop runs share one loop structure (stiffness target as a `Step`, `GaitAngle` reference, 401 times over
-4 s), so the file compiles the loop once (≈ 25 s on 2 idle CPU cores).
+4 s), so the file compiles the loop once (its most expensive compilation).
 """
 
 import equinox as eqx
