@@ -46,11 +46,12 @@ def test_pi_matches_numpy_transcription():
     rng = np.random.default_rng(0)
     errors = np.concatenate([rng.normal(0, 0.01, 50), np.full(30, 0.05), np.full(30, -0.05)])  # incl. saturation
     pi = PIController()
+    update = eqx.filter_jit(pi.update)  # one program for the 110 updates (eagerly, each operation compiles its own)
     state, duties = pi.initial_state(), []
     plant_state = presets.mas10_system("pwm").initial_state()
     for e in errors:
         ps = eqx.tree_at(lambda s: s.position, plant_state, jnp.asarray(0.03 - e))
-        duty, state = pi.update(0.0, (jnp.asarray(0.03),), ps, state, 0.02)
+        duty, state = update(0.0, (jnp.asarray(0.03),), ps, state, 0.02)
         duties.append(float(duty))
     np.testing.assert_allclose(duties, numpy_pi(errors, 25.0, 150.0, 0.5, 0.02), rtol=0, atol=1e-12)
     assert min(duties) == 0.0 and max(duties) == 1.0  # both saturations visited
@@ -79,7 +80,10 @@ def test_reference_derivatives_of_sine():
 def test_closed_loop_equals_open_loop_replay(plant):
     """The plant inside the loop is the plant `simulate` integrates: replaying the chosen duties open loop (at tight
     tolerance) gives the same positions. Tolerance 0.05 mm: the loop integrates at rtol = atol = 1e-6 (scaled)."""
-    traj = simulate_closed_loop(ClosedLoop(plant, PIController(), REF), 1.0)
+    # 1.5 s from the loop's own rest state, passed explicitly: the same run structure (PI, 75 periods, y0 given) as the
+    # PI run of test_sliding_mode_beats_pi_on_switching_plant, so the module compiles that closed loop once
+    loop = ClosedLoop(plant, PIController(), REF)
+    traj = simulate_closed_loop(loop, 1.5, y0=loop.initial_state())
     signal = pamjax.Sampled(np.asarray(traj.period_start), np.asarray(traj.duty), period=0.02)
     ts = np.concatenate([[0.0], np.asarray(traj.t)])
     replay = pamjax.simulate(plant, signal, ts, rtol=1e-8, atol=1e-8, max_steps=100_000)
@@ -122,11 +126,13 @@ def test_vmap_over_plants_matches_loop(plant):
     plants = eqx.filter_vmap(lambda m: eqx.tree_at(lambda p: p.payload_mass, plant, m))(masses)
     y0 = plant.initial_state(pressure=4.3e5)
 
+    # jitted: eagerly, every call re-traces the loop's scan and compiles it anew (and each operation around it)
+    @eqx.filter_jit
     def rmse(p):
         loop = ClosedLoop(p, PIController(), REF)
         return run_closed_loop(loop, 10, y0=loop.initial_state(y0)).tracking_error(0.0)[0]
 
-    batched = eqx.filter_vmap(rmse)(plants)
+    batched = eqx.filter_jit(eqx.filter_vmap(rmse))(plants)
     single = [rmse(eqx.tree_at(lambda p: p.payload_mass, plant, m)) for m in masses]
     np.testing.assert_allclose(batched, single, rtol=1e-6)
 

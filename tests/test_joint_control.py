@@ -1,9 +1,10 @@
 """Antagonistic joint control (issue 6 item 5): angle through the pressure difference, stiffness through the sum.
 
 All closed-loop runs share one loop structure (stiffness target as a `Step`, `GaitAngle` reference, 401 times over
-4 s), so the file compiles the loop once (≈ 35 s on 2 CPU cores).
+4 s), so the file compiles the loop once (its most expensive compilation).
 """
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -30,9 +31,24 @@ def joint():
     return pj.AntagonisticJoint(pj.ISO6358Regulator(), pj.ISO6358Regulator(), m, m)
 
 
+@eqx.filter_jit
+def _measured_stiffness(joint, angle, pressure):
+    return jax.vmap(lambda a, p: -jax.grad(lambda q: joint.torque(q, p[0], p[1]))(a))(angle, pressure)
+
+
 def measured_stiffness(joint, angle, pressure):
-    """Independent of the controller: −∂τ/∂θ of the joint torque at the measured angle and pressures (autodiff)."""
-    return np.asarray(jax.vmap(lambda a, p: -jax.grad(lambda q: joint.torque(q, p[0], p[1]))(a))(angle, pressure))
+    """Independent of the controller: −∂τ/∂θ of the joint torque at the measured angle and pressures (autodiff;
+    compiled once: eagerly, each of vmap's primitives compiles a program of its own)."""
+    return np.asarray(_measured_stiffness(joint, angle, pressure))
+
+
+# The static inverses and the bisection they are checked against run fori_loops: called eagerly, each call re-traces
+# its loop body and compiles it anew. Jitted once here, with the angles, sums and stiffnesses as array arguments (not
+# Python floats, which `filter_jit` would bake in as constants), each compiles once for all the cases.
+_hold_pressures = eqx.filter_jit(hold_pressures)
+_pressures_for = eqx.filter_jit(lambda joint, angle, total: joint.pressures_for(angle, total))
+_sum_for_stiffness = eqx.filter_jit(sum_for_stiffness)
+_held_stiffness = eqx.filter_jit(held_stiffness)
 
 
 @pytest.fixture(scope="module")
@@ -55,12 +71,13 @@ def step_run(joint):
 def test_static_inverse_matches_bisection(joint):
     # hold_pressures (Newton) against AntagonisticJoint.pressures_for (80-step bisection): same root to 1 Pa.
     for angle, total in ((0.2, 5e5), (-0.3, 3e5), (0.0, 8e5)):
-        got = hold_pressures(joint, angle, total)
-        ref = joint.pressures_for(angle, total)
+        angle, total = jnp.asarray(angle), jnp.asarray(total)
+        got = _hold_pressures(joint, angle, total)
+        ref = _pressures_for(joint, angle, total)
         np.testing.assert_allclose(np.asarray(got), np.asarray(ref), atol=1.0)
     # sum_for_stiffness: the stiffness at the returned sum, by central differences of the torque (h = 1e-5 rad).
-    total = sum_for_stiffness(joint, 0.1, 150.0)
-    pf, pe = joint.pressures_for(0.1, total)
+    total = _sum_for_stiffness(joint, jnp.asarray(0.1), jnp.asarray(150.0))
+    pf, pe = _pressures_for(joint, jnp.asarray(0.1), total)
     h = 1e-5
     fd = -(joint.torque(0.1 + h, pf, pe) - joint.torque(0.1 - h, pf, pe)) / (2 * h)
     np.testing.assert_allclose(float(fd), 150.0, rtol=1e-6)
@@ -107,7 +124,7 @@ def test_stiffness_change_leaves_angle(joint, step_run):
 
 
 def test_held_stiffness_grows_with_sum(joint):
-    ks = [float(held_stiffness(joint, 0.1, s)) for s in (2e5, 5e5, 8e5)]
+    ks = [float(_held_stiffness(joint, jnp.asarray(0.1), jnp.asarray(s))) for s in (2e5, 5e5, 8e5)]
     assert ks[0] < ks[1] < ks[2]
 
 

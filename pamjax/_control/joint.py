@@ -62,7 +62,9 @@ def run_joint_control(loop: JointControlLoop, ts, y0=None, rtol=1e-7, atol=1e-7,
         stiffness_r = jax.vmap(loop.target)(ts)
     else:
         stiffness_r = jax.vmap(lambda a, s: held_stiffness(joint, a, s))(theta_r, sum_r)
-    volts = jax.vmap(lambda t, s: loop._command(t, s)[0])(ts, traj.state)
+    # the loop's outputs already hold the command voltages at `ts` (`JointControlLoop.outputs`): recomputing them here
+    # would trace and compile a second copy of the controller (its Newton solves) for the same numbers
+    volts = traj.voltage
     return JointControlTrajectory(
         t=ts,
         angle=angle,
