@@ -29,6 +29,12 @@ def _tank():
     return presets.mas10_tank_system(valve="pwm")
 
 
+@eqx.filter_jit
+def _at(signal, t):
+    """`signal` at times `t`, one compiled program (eagerly, each of its operations would compile on its own)."""
+    return signal(t)
+
+
 def test_bspline_basis_is_a_partition_of_unity_and_soft_clip_inverts():
     t = np.linspace(0.0, 3.0, 301)
     b = obj.bspline_basis(t, 0.0, 3.0, 7)
@@ -45,8 +51,9 @@ def test_bspline_basis_is_a_partition_of_unity_and_soft_clip_inverts():
 
 
 def _problem(parametrisation):
-    """The compiled objective's problem for the 0.4 s tank run (20 PWM periods) as `design` builds it (the same
-    structure as the CLI test's, so that they share one compilation)."""
+    """The compiled objective's problem for the 0.4 s tank run (20 PWM periods) as `design` builds it: no pressure
+    limit and no variance floor are infinite ones, as in `design`, so that this problem, the CLI test's and every
+    design of this module on the tank share one compilation of the objective and of its gradient."""
     from pamjax._fit.design import _start_coefficients, _template
 
     model = pj.ParameterSpace(_tank(), FREE).base
@@ -57,8 +64,9 @@ def _problem(parametrisation):
     exp = _template(model, 0.4, 0.02, 250.0, ("pressure",), NOISE, {"pressure": 101325.0}, 4, np.full(20, 0.5))
     prob = obj.DesignProblem(space=space, theta=space.initial_theta(), experiment=exp,
                              basis=None if basis is None else jnp.asarray(basis), prior=jnp.zeros((3, 3)),
-                             weight=jnp.asarray(2.0), band=jnp.asarray([0.1, 0.9]), stroke=None, max_pressure=None,
-                             max_step=jnp.asarray(0.3), floor=None, subset=(0, 1, 2), criterion="D")
+                             weight=jnp.asarray(2.0), band=jnp.asarray([0.1, 0.9]), stroke=None,
+                             max_pressure=jnp.asarray(np.inf), max_step=jnp.asarray(0.3),
+                             floor=jnp.asarray(np.full(3, np.inf)), subset=(0, 1, 2), criterion="D")
     return jnp.asarray(c0) + 0.5, prob  # level lifted off the band's bottom: every parameter is fixed there
 
 
@@ -67,10 +75,12 @@ def test_forward_gradient_matches_central_differences():
     # ends and the 10 %/90 % dead bands a central difference of step 1e-5 agrees to its truncation error.
     c, prob = _problem("envelope")
     g = np.asarray(obj.forward_gradient(c, prob))
-    h = 1e-5
+    h, host = 1e-5, np.asarray(c)
     for k in range(c.size):
-        e = jnp.zeros(c.size).at[k].set(h)
-        fd = (float(obj.value(c + e, prob)[0]) - float(obj.value(c - e, prob)[0])) / (2 * h)
+        e = np.zeros(c.size)
+        e[k] = h  # the steps on the host: eager JAX would compile each small operation on its own
+        up, down = (float(obj.value(jnp.asarray(host + sign * e), prob)[0]) for sign in (1.0, -1.0))
+        fd = (up - down) / (2 * h)
         assert g[k] == pytest.approx(fd, rel=1e-4, abs=1e-6 * np.max(np.abs(g)))
 
 
@@ -101,8 +111,8 @@ def test_design_raises_the_information_keeps_its_constraints_and_replays_from_cs
     rec = pj.Recording.load(path)
     np.testing.assert_array_equal(rec["duty"], res.duty)
     replay = pj.Sampled(rec.t, rec["duty"], period=0.02)
-    t = np.arange(0.0, 0.4, 0.005)
-    np.testing.assert_array_equal(np.asarray(replay(jnp.asarray(t))), np.asarray(res.signal()(jnp.asarray(t))))
+    t = jnp.asarray(np.arange(0.0, 0.4, 0.005))
+    np.testing.assert_array_equal(np.asarray(_at(replay, t)), np.asarray(_at(res.signal(), t)))
     with pytest.raises(FileExistsError):
         res.to_csv(path)
 
@@ -156,7 +166,9 @@ def test_a_designed_tank_tests_information_matches_the_fits_standard_errors(tank
     t = np.arange(0.0, 0.4 + 1e-6, 2e-3)
 
     def experiment(pressure):
-        rec = pj.Recording(t, {"pressure": pressure}, name="designed")
+        # named as design's own verification experiment of the same run: the name is a static field of the compiled
+        # residuals, so the fit's Jacobian can be the one compiled there
+        rec = pj.Recording(t, {"pressure": pressure}, name="design")
         return pj.Experiment(rec, res.signal(), channels=["pressure"], scales=NOISE, build=pj.TankFromModel(5e-5),
                              initial={"pressure": 101325.0})
 
@@ -270,7 +282,7 @@ def test_pressure_limit_is_penalised_and_kept():
     free_value, free_aux = obj.value(c, prob)
     top = float(np.max(free_aux["pressure"]))
     for limit in (top + 1e3, top - 5e3):
-        limited = eqx.tree_at(lambda p: p.max_pressure, prob, jnp.asarray(limit), is_leaf=lambda x: x is None)
+        limited = eqx.tree_at(lambda p: p.max_pressure, prob, jnp.asarray(limit))
         value, aux = obj.value(c, limited)
         excess = np.maximum(np.asarray(aux["pressure"]) - limit, 0.0)
         assert float(aux["worst_pressure"]) == pytest.approx(float(np.max(excess)), abs=1e-9)

@@ -11,17 +11,19 @@ import math
 import threading
 import time
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError, require_float64
 from .._physics.signals import AbstractSignal, Sampled, Triangle
 from .._systems.base import AbstractSystem
 from . import design_objective as obj
 from .design_result import DesignResult
 from .experiment import Experiment
-from .fit import _residuals_and_jacobian
+from .fit import _physical_and_jacobian, _residuals_and_jacobian
 from .parameters import ParameterSpace, strong_types
 from .recording import Recording
 
@@ -41,9 +43,10 @@ FIT_SUBSTEPS = inspect.signature(Experiment.__init__).parameters["substeps"].def
 def information(space, theta, experiments):
     """Fisher information about θ of `experiments` (identification samples, as the fit uses them): JᵀJ of the
     scaled residuals at θ (the fit's compiled Jacobian, shared with fits of the same problem structure)."""
-    exps = tuple(e.bind(space.model(theta)) if hasattr(e, "bind") else e for e in experiments)
+    model = space.with_values(_physical_and_jacobian(space, device_array(theta))[0])  # compiled, not op by op
+    exps = tuple(e.bind(model) if hasattr(e, "bind") else e for e in experiments)
     mask = np.concatenate([used & ident for e in exps for _, _, _, used, ident in e.layout()])
-    _, jac = _residuals_and_jacobian(space, jnp.asarray(theta), exps)
+    _, jac = _residuals_and_jacobian(space, device_array(theta), exps)
     jac = np.asarray(jac)[mask]
     return jac.T @ jac
 
@@ -139,11 +142,17 @@ def _template(model, duration, period, rate, channels, noise, start, substeps, d
     blank = {c: np.full(times.shape, 101325.0 if c.startswith("pressure") else 0.0) for c in channels}
     rec = Recording(times, blank, name="design")
     starts = np.arange(len(duty)) * period
-    signal = Sampled(jnp.asarray(starts), jnp.asarray(duty, dtype=float), period=period)
+    signal = Sampled(device_array(starts), device_array(duty, dtype=float), period=period)
     exp = Experiment(rec, signal, channels=list(channels), scales={c: float(noise[c]) for c in channels},
                      build=build, initial=start, name="design", substeps=substeps)
     exp.check(model)
     return exp.bind(model)
+
+
+@eqx.filter_jit
+def _sampled(signal, times):
+    """`signal` at `times`, compiled as one program (run eagerly, each operation compiles on its own)."""
+    return jax.vmap(signal)(times)
 
 
 def _start_coefficients(parametrisation, times, duration, knots, carrier, band, initial):
@@ -151,9 +160,9 @@ def _start_coefficients(parametrisation, times, duration, knots, carrier, band, 
     paper 000's E3 triangle), in the units of the soft clip (0 and 1 the band's ends; beyond them saturated)."""
     lo, hi = band
     if initial is None:
-        level = (np.asarray(jax.vmap(Triangle(*START_LEVEL))(jnp.asarray(times))) - lo) / (hi - lo)
+        level = (np.asarray(_sampled(Triangle(*START_LEVEL), device_array(times))) - lo) / (hi - lo)
     else:
-        duty = (np.asarray(jax.vmap(initial)(jnp.asarray(times))) if isinstance(initial, AbstractSignal)
+        duty = (np.asarray(_sampled(initial, device_array(times))) if isinstance(initial, AbstractSignal)
                 else np.asarray(initial, dtype=float))
         if duty.shape != times.shape:
             raise PamjaxInputError(f"initial must be a signal or one duty per PWM period ({times.size}), got shape "
@@ -252,7 +261,7 @@ def variances(info, transform=None):
 
 def _physical_errors(space, theta, info):
     """Predicted standard errors in physical units (inf along directions the information does not fix)."""
-    g = np.asarray(jax.jacfwd(space.physical)(jnp.asarray(theta)))
+    g = np.asarray(_physical_and_jacobian(space, device_array(theta))[1])  # the fit's compiled Jacobian
     return [float(math.sqrt(v)) for v in variances(info, g)]
 
 
@@ -282,7 +291,9 @@ def _in_hand(space, theta, prior, baseline, index, margin):
 
 def _constraints(aux, band, max_duty_step, stroke, max_pressure):
     """The `constraints` report of a design: limits, the predicted extremes, and whether all hold."""
-    duty, position, pressure = np.asarray(aux["duty"]), aux.get("position"), aux.get("pressure")
+    # on the host: NumPy reductions of a JAX array would each compile a program
+    duty, position, pressure = (None if a is None else np.asarray(a) for a in
+                                (aux["duty"], aux.get("position"), aux.get("pressure")))
     return dict(
         duty_band=list(band), duty_range=[float(duty.min()), float(duty.max())],
         largest_duty_step=float(np.max(np.abs(np.diff(duty)))) if duty.size > 1 else 0.0,
@@ -403,19 +414,24 @@ def design(
     times = np.arange(count) * period
     c0, basis = _start_coefficients(parametrisation, times, float(duration), knots,
                                     obj.multilevel_carrier(count, CARRIER_HOLD, seed), (lo, hi), initial)
+    z0 = device_array(c0 if basis is None else basis @ c0)
     exp = _template(model, float(duration), period, float(design_rate), channels, noise, start, substeps,
-                    lo + (hi - lo) * np.asarray(obj.clip01(jnp.asarray(c0 if basis is None else basis @ c0))), build)
+                    lo + (hi - lo) * np.asarray(obj.clip01_and_slope(z0)[0]), build)
     limits = stroke_limits(system, start, stroke_margin) if "position" in channels else None
     n, index = len(space.labels), tuple(space.labels.index(s) for s in subset)
 
     def problem(prior_info, floor):
+        # An absent limit or floor is an infinite one (its penalty and worst violation are exactly 0), not None: the
+        # problem's structure, and so the compiled objective and gradient, is then the same whichever limits and
+        # baseline a design of this system, parametrisation and duration has (one compilation for all of them).
         return obj.DesignProblem(
-            space=space, theta=jnp.asarray(theta), experiment=exp, basis=None if basis is None else jnp.asarray(basis),
-            prior=jnp.asarray(prior_info), weight=jnp.asarray(float(rate) / float(design_rate)),
+            space=space, theta=device_array(theta), experiment=exp,
+            basis=None if basis is None else device_array(basis), prior=device_array(prior_info),
+            weight=jnp.asarray(float(rate) / float(design_rate)),
             band=jnp.asarray([lo, hi]), stroke=None if limits is None else jnp.asarray(limits),
-            max_pressure=None if max_pressure is None else jnp.asarray(float(max_pressure)),
-            max_step=None if max_duty_step is None else jnp.asarray(float(max_duty_step)),
-            floor=None if floor is None else jnp.asarray(floor), subset=index, criterion=criterion)
+            max_pressure=jnp.asarray(np.inf if max_pressure is None else float(max_pressure)),
+            max_step=jnp.asarray(np.inf if max_duty_step is None else float(max_duty_step)),
+            floor=device_array(np.full(n, np.inf) if floor is None else floor), subset=index, criterion=criterion)
 
     gradient = obj.reverse_gradient if parametrisation == "periods" else obj.forward_gradient
     report = _printer(progress, f"design: {count} PWM periods, {len(c0)} coefficients ({parametrisation}), "

@@ -29,6 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.arrays import device_array
 from .._physics.smooth import smooth_relu
 from .predictions import predict_all
 
@@ -46,14 +47,20 @@ def clip01(z):
     return smooth_relu(z, CLIP_WIDTH) - smooth_relu(z - 1.0, CLIP_WIDTH)
 
 
+@jax.jit
+def clip01_and_slope(z):
+    """`clip01(z)` and its derivative, elementwise, compiled as one program (run eagerly, each of their operations
+    compiles on its own: a dozen programs per shape)."""
+    return clip01(z), jax.vmap(jax.grad(clip01))(z)
+
+
 def unclip01(d):
     """The inverse of `clip01` for d in (0, 1) (a few Newton steps from the sharp clip)."""
     d = np.clip(np.asarray(d, dtype=float), 1e-6, 1.0 - 1e-6)
     z = d.copy()
     for _ in range(50):
-        f = np.asarray(clip01(jnp.asarray(z))) - d
-        slope = np.asarray(jax.vmap(jax.grad(clip01))(jnp.asarray(z)))
-        z = z - f / np.maximum(slope, 1e-12)
+        value, slope = (np.asarray(a) for a in clip01_and_slope(device_array(z)))
+        z = z - (value - d) / np.maximum(slope, 1e-12)
     return z
 
 
