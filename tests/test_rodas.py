@@ -83,15 +83,23 @@ def test_small_inverse_matches_numpy_including_pivoting(n):
                                rtol=1e-9, atol=1e-11)
 
 
+def _rodas5_triangle_run(system, u, ts, y0, tol):
+    """`simulate` with the default solver (Rodas5 for the averaged valve) at rtol = atol = `tol`. The two tests below
+    run the same compiled solve: same signal type, ten output times, an explicit start, the tolerances as arrays
+    (Python floats would be constants of the program, one compilation per tolerance)."""
+    return pamjax.simulate(system, u, jnp.asarray(ts), y0=y0, rtol=jnp.asarray(tol), atol=jnp.asarray(tol))
+
+
 def test_stiff_plant_through_stick_matches_scipy_dop853():
     # Paper 000's MAS-10 with the averaged valve, duty falling 0.95 -> 0.05 over 5.6 s: the payload goes down and
     # sticks (|v| < 1 mm/s for most of the last second: the stiff phase). Both solved at rtol 1e-10; tolerances as in
     # test_simulate: 1e-5 relative in pressure, 1e-7 m in position, 1e-5 m/s in velocity.
     system = presets.mas10_system("averaged")
     u = pamjax.Triangle(0.05, 0.95, 0.08)
-    ts = np.linspace(6.25, 8.0, 8)
+    # every quarter second, plus 6.375 and 7.875 s: ten times, as the next test's run (one compiled solve)
+    ts = np.sort(np.concatenate([np.linspace(6.25, 8.0, 8), [6.375, 7.875]]))
     y0 = system.initial_state(pressure=5.5e5)
-    traj = pamjax.simulate(system, u, jnp.asarray(ts), y0=y0, rtol=1e-10, atol=1e-10)
+    traj = _rodas5_triangle_run(system, u, ts, y0, 1e-10)
     plant = NumpyPlant(
         a=presets.MAS10_MAX_FORCE_COEFFICIENTS, k0=presets.MAS10_K0, k1=presets.MAS10_K1, k2=presets.MAS10_K2,
         v0=presets.MAS10_V0, v1=presets.MAS10_V1, x_min=presets.MAS10_MIN_POSITION, x_max=presets.MAS10_MAX_POSITION,
@@ -113,7 +121,8 @@ def test_takes_far_fewer_steps_than_tsit5_where_the_payload_sticks():
     ts = jnp.linspace(0.0, 9.0, 10)
     u = pamjax.Triangle(0.05, 0.95, 0.08)
     tsit5 = pamjax.simulate(system, u, ts, solver=dfx.Tsit5())
-    rodas5 = pamjax.simulate(system, u, ts)  # the default for a continuous valve
+    # the default solver for a continuous valve, at simulate's default tolerance (1e-6) and start
+    rodas5 = _rodas5_triangle_run(system, u, ts, system.initial_state(), 1e-6)
     assert isinstance(pamjax.default_solver(system), pamjax.Rodas5)
     assert int(rodas5.num_steps) < 0.5 * int(tsit5.num_steps), (int(rodas5.num_steps), int(tsit5.num_steps))
     np.testing.assert_allclose(rodas5.position, tsit5.position, atol=1e-7)
