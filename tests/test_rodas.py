@@ -157,11 +157,10 @@ def test_gradient_through_rodas5_matches_finite_differences_and_tsit5():
     constant = pamjax.Triangle(0.6, 0.6, 4.0)
     grad = np.asarray(rodas5(x0, constant)[1]) * np.asarray(x0)
     fd = []
-    for i in range(len(names)):  # the perturbed values in NumPy (eager array updates compile programs of their own)
+    for i in range(len(names)):
         step = 1e-5 * abs(float(x0[i]))
-        e = np.zeros(len(names))
-        e[i] = step
-        up, down = rodas5(np.asarray(x0) + e, constant)[0], rodas5(np.asarray(x0) - e, constant)[0]
+        e = jnp.zeros_like(x0).at[i].set(step)
+        up, down = rodas5(x0 + e, constant)[0], rodas5(x0 - e, constant)[0]
         fd.append((float(up) - float(down)) / (2 * step) * float(x0[i]))
     np.testing.assert_allclose(grad, fd, rtol=2e-5, atol=1e-7 * np.max(np.abs(fd)))
 
