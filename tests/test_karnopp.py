@@ -44,27 +44,38 @@ def test_matches_event_driven_reference(reference, substeps, x_tol, p_tol):
     assert np.ptp(x_ref) > 0.03
 
 
+# The tests that start at duty 5 % share one compiled solve: one horizon and output grid (the longest, 1 s, sampled
+# every 10 ms) and an explicit initial state whose leaves are float64 arrays like `initial_state()`'s (a Python float
+# or a weakly typed leaf would be a different program).
+HOLD_TS = np.linspace(0.0, 1.0, 101)
+
+
+def _from_rest(y0):
+    y0 = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf, dtype=float), y0)
+    return pj.simulate(MODEL, pj.Constant(0.05), HOLD_TS, y0=y0)
+
+
 def test_holds_still_while_the_net_force_is_within_coulomb():
     # Duty 5 %: the valve never opens (10 % dead band at 50 Hz), the payload rests in equilibrium, stuck: its
     # position must not move at all (a smooth sign lets it creep).
-    traj = pj.simulate(MODEL, pj.Constant(0.05), np.linspace(0, 1.0, 51))
+    traj = _from_rest(MODEL.initial_state())  # simulate's default start, given explicitly
     x = np.asarray(traj.position)
     assert np.all(x == x[0]) and np.all(np.asarray(traj.velocity) == 0.0)
-    # a pressure step that changes the muscle force by less than F_c does not move it either
+    # a pressure step that changes the muscle force by less than F_c does not move it either (for the whole second)
     x0 = float(MODEL.initial_state().position)
     slope = float(MODEL.muscle.force_law.pressure_slope(x0))  # N/Pa
     dp = 0.5 * float(MODEL.friction.coulomb_force) / slope
     y0 = eqx.tree_at(lambda s: s.pressure, MODEL.initial_state(), MODEL.air.atmospheric_pressure + dp)
-    held = pj.simulate(MODEL, pj.Constant(0.05), np.linspace(0, 0.5, 26), y0=y0)
+    held = _from_rest(y0)
     assert np.all(np.asarray(held.position)[1:] == x0)
     assert np.all(np.asarray(held.friction_force) != 0.0)  # static friction carries the difference
 
 
 def test_a_start_outside_its_mode_switches_at_once():
-    # Stuck, but the net force exceeds F_c: it slides from the first step.
+    # Stuck, but the net force exceeds F_c: it slides from the first step (position[1]: t = 10 ms).
     x0 = float(MODEL.initial_state().position)
     y0 = eqx.tree_at(lambda s: s.position, MODEL.initial_state(), x0 + 2e-3)  # weaker muscle force: it falls
-    traj = pj.simulate(MODEL, pj.Constant(0.05), np.linspace(0, 0.2, 21), y0=y0)
+    traj = _from_rest(y0)
     assert float(traj.position[1]) < x0 + 2e-3 - 1e-5
 
 
@@ -81,19 +92,29 @@ def _loss(params, duty):
 def test_gradients_through_event_times_match_finite_differences():
     # A duty step from rest: breakaway, slide, come to rest: every parameter moves the event times. Forward and
     # reverse mode against central differences (steps small enough not to change the event sequence).
-    params = jnp.asarray([16.0, 250.0, 4.1558930e-04, 102.844885])
-    duty = jnp.asarray(0.35)
+    params = np.asarray([16.0, 250.0, 4.1558930e-04, 102.844885])
+    duty = 0.35
     fwd = jax.jit(jax.jacfwd(_loss, argnums=(0, 1)))(params, duty)
-    rev = jax.jit(jax.grad(_loss, argnums=(0, 1)))(params, duty)
-    loss = jax.jit(_loss)  # one compilation for the ten evaluations (an eager solve re-traces at every call)
+    # One compiled value-and-gradient gives the reverse-mode gradient and the ten loss values of the differences (no
+    # separate loss compilation; an eager solve re-traces at every call). The differences' arguments are NumPy
+    # arrays and Python floats like the first call's, so no call compiles anew.
+    value_and_grad = jax.jit(jax.value_and_grad(_loss, argnums=(0, 1)))
+    rev = value_and_grad(params, duty)[1]
+
+    def loss(p, d):
+        return float(value_and_grad(p, d)[0])
+
     steps = np.asarray([1e-4, 1e-3, 1e-10, 1e-5])
     for i, h in enumerate(steps):
-        fd = (loss(params.at[i].add(h), duty) - loss(params.at[i].add(-h), duty)) / (2 * h)
+        up, down = params.copy(), params.copy()
+        up[i] += h
+        down[i] -= h
+        fd = (loss(up, duty) - loss(down, duty)) / (2 * h)
         assert abs(float(fwd[0][i])) > 0
-        np.testing.assert_allclose(float(fwd[0][i]), float(fd), rtol=1e-5)
+        np.testing.assert_allclose(float(fwd[0][i]), fd, rtol=1e-5)
         np.testing.assert_allclose(float(rev[0][i]), float(fwd[0][i]), rtol=1e-9)
     fd = (loss(params, duty + 1e-6) - loss(params, duty - 1e-6)) / 2e-6
-    np.testing.assert_allclose(float(fwd[1]), float(fd), rtol=1e-5)
+    np.testing.assert_allclose(float(fwd[1]), fd, rtol=1e-5)
 
 
 def test_stepping_rules():

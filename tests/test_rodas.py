@@ -30,9 +30,10 @@ def van_der_pol_reference():
 def test_order_five_on_a_nonautonomous_nonlinear_problem(van_der_pol_reference):
     # Fixed steps h = 2/n: a fifth-order method's end-point error falls 32x per halving of h. The time-dependent
     # forcing exercises the d_i h ∂f/∂t terms (a wrong d_i drops the order to 2-3). Asserted: >= 24x per halving.
+    # dt0 an array: diffeqsolve (itself jitted) takes a Python float as a compile-time constant, one program per h
     errors = []
     for n in (10, 20, 40, 80):
-        sol = dfx.diffeqsolve(dfx.ODETerm(_forced_van_der_pol), pamjax.Rodas5(), 0.0, 2.0, 2.0 / n,
+        sol = dfx.diffeqsolve(dfx.ODETerm(_forced_van_der_pol), pamjax.Rodas5(), 0.0, 2.0, jnp.asarray(2.0 / n),
                               jnp.array([1.0, 0.0]), max_steps=1000)
         errors.append(np.max(np.abs(np.asarray(sol.ys[-1]) - van_der_pol_reference.y[:, -1])))
     ratios = np.asarray(errors[:-1]) / np.asarray(errors[1:])
@@ -44,8 +45,8 @@ def test_dense_output_is_a_cubic_hermite_of_fourth_order_accuracy(van_der_pol_re
     # worst error over a fine output grid falls ~16x per halving of h (asserted: > 10x).
     ts = np.linspace(0.0, 2.0, 201)
     worst = []
-    for n in (20, 40, 80):
-        sol = dfx.diffeqsolve(dfx.ODETerm(_forced_van_der_pol), pamjax.Rodas5(), 0.0, 2.0, 2.0 / n,
+    for n in (20, 40, 80):  # dt0 an array: one compiled solve for the three step sizes
+        sol = dfx.diffeqsolve(dfx.ODETerm(_forced_van_der_pol), pamjax.Rodas5(), 0.0, 2.0, jnp.asarray(2.0 / n),
                               jnp.array([1.0, 0.0]), saveat=dfx.SaveAt(ts=jnp.asarray(ts)), max_steps=1000)
         worst.append(np.max(np.abs(np.asarray(sol.ys).T - van_der_pol_reference.sol(ts))))
     assert worst[0] / worst[1] > 10.0 and worst[1] / worst[2] > 10.0, worst
@@ -62,17 +63,31 @@ def test_l_stable_far_beyond_the_explicit_stability_limit():
     assert abs(float(sol.ys[-1, 0]) - (np.cos(1.0) + np.sin(1.0) / lam)) < 1e-9
 
 
+# `small_inverse` jitted (as the solver runs it): eagerly, its gather-based elimination compiles dozens of one-operation
+# programs per size (~2-3 s); jitted, one program per size (0.2-1.1 s). The lanes variant stays eager: its eager
+# operations compile faster than the jitted unrolled elimination at n = 5 (~1 s eager against ~3 s jitted, ~4 s for
+# its vmap).
+_INVERSES = (jax.jit(small_inverse), small_inverse_lanes)
+
+
 @pytest.mark.parametrize("n", [1, 3, 5])
 def test_small_inverse_matches_numpy_including_pivoting(n):
     rng = np.random.default_rng(n)
     a = rng.normal(size=(n, n))
     if n > 1:
         a[0, 0] = 0.0  # forces a row swap
-    for inverse in (small_inverse, small_inverse_lanes):
+    for inverse in _INVERSES:
         np.testing.assert_allclose(np.asarray(inverse(jnp.asarray(a))), np.linalg.inv(a), rtol=1e-10, atol=1e-12)
     batch = rng.normal(size=(4, n, n))
     np.testing.assert_allclose(np.asarray(jax.vmap(small_inverse_lanes)(jnp.asarray(batch))), np.linalg.inv(batch),
                                rtol=1e-9, atol=1e-11)
+
+
+def _rodas5_triangle_run(system, u, ts, y0, tol):
+    """`simulate` with the default solver (Rodas5 for the averaged valve) at rtol = atol = `tol`. The two tests below
+    run the same compiled solve: same signal type, ten output times, an explicit start, the tolerances as arrays
+    (Python floats would be constants of the program, one compilation per tolerance)."""
+    return pamjax.simulate(system, u, jnp.asarray(ts), y0=y0, rtol=jnp.asarray(tol), atol=jnp.asarray(tol))
 
 
 def test_stiff_plant_through_stick_matches_scipy_dop853():
@@ -81,16 +96,17 @@ def test_stiff_plant_through_stick_matches_scipy_dop853():
     # test_simulate: 1e-5 relative in pressure, 1e-7 m in position, 1e-5 m/s in velocity.
     system = presets.mas10_system("averaged")
     u = pamjax.Triangle(0.05, 0.95, 0.08)
-    ts = np.linspace(6.25, 8.0, 8)
+    # every quarter second, plus 6.375 and 7.875 s: ten times, as the next test's run (one compiled solve)
+    ts = np.sort(np.concatenate([np.linspace(6.25, 8.0, 8), [6.375, 7.875]]))
     y0 = system.initial_state(pressure=5.5e5)
-    traj = pamjax.simulate(system, u, jnp.asarray(ts), y0=y0, rtol=1e-10, atol=1e-10)
+    traj = _rodas5_triangle_run(system, u, ts, y0, 1e-10)
     plant = NumpyPlant(
         a=presets.MAS10_MAX_FORCE_COEFFICIENTS, k0=presets.MAS10_K0, k1=presets.MAS10_K1, k2=presets.MAS10_K2,
         v0=presets.MAS10_V0, v1=presets.MAS10_V1, x_min=presets.MAS10_MIN_POSITION, x_max=presets.MAS10_MAX_POSITION,
         valve="averaged", m=presets.MAS10_AVERAGED_VALVE,
     )
     ref = solve_ivp(plant.rhs, (6.25, 8.0), [5.5e5, float(y0.position), 0.0], method="DOP853", t_eval=ts,
-                    rtol=1e-10, atol=[1e-4, 1e-12, 1e-10], args=(lambda t: float(u(t)),))
+                    rtol=1e-10, atol=[1e-4, 1e-12, 1e-10], args=(_host_signal(u),))
     assert ref.success
     np.testing.assert_allclose(traj.pressure, ref.y[0], rtol=1e-5)
     np.testing.assert_allclose(traj.position, ref.y[1], atol=1e-7)
@@ -105,7 +121,8 @@ def test_takes_far_fewer_steps_than_tsit5_where_the_payload_sticks():
     ts = jnp.linspace(0.0, 9.0, 10)
     u = pamjax.Triangle(0.05, 0.95, 0.08)
     tsit5 = pamjax.simulate(system, u, ts, solver=dfx.Tsit5())
-    rodas5 = pamjax.simulate(system, u, ts)  # the default for a continuous valve
+    # the default solver for a continuous valve, at simulate's default tolerance (1e-6) and start
+    rodas5 = _rodas5_triangle_run(system, u, ts, system.initial_state(), 1e-6)
     assert isinstance(pamjax.default_solver(system), pamjax.Rodas5)
     assert int(rodas5.num_steps) < 0.5 * int(tsit5.num_steps), (int(rodas5.num_steps), int(tsit5.num_steps))
     np.testing.assert_allclose(rodas5.position, tsit5.position, atol=1e-7)
@@ -151,6 +168,13 @@ def test_gradient_through_rodas5_matches_finite_differences_and_tsit5():
     rodas = np.asarray(rodas5(x0, triangle)[1])
     tsit5 = np.asarray(jax.jit(jax.grad(make_loss(dfx.Tsit5())))(x0, triangle))
     np.testing.assert_allclose(rodas, tsit5, rtol=1e-5, atol=1e-9 * np.max(np.abs(tsit5)))
+
+
+def _host_signal(u):
+    """The command `u` (a pamjax signal) as a float function of a float time for SciPy's right-hand side, jitted once:
+    called eagerly, each of the reference's thousands of evaluations runs the signal's operations one by one."""
+    jitted = jax.jit(lambda t: u(t))
+    return lambda t: float(jitted(t))
 
 
 def _get(module, dotted):

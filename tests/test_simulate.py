@@ -1,6 +1,8 @@
 """simulate/solve: the whole ODE against scipy DOP853 on a NumPy vector field, gradients of a trajectory loss against
 central finite differences for every parameter leaf, forward = reverse mode, jit/vmap equivalence."""
 
+import functools
+
 import diffrax as dfx
 import equinox as eqx
 import jax
@@ -13,6 +15,13 @@ from scipy.integrate import solve_ivp
 import pamjax
 from pamjax import presets
 from pamjax._solve.simulate import solve
+
+
+def _host_signal(u):
+    """The command `u` (a pamjax signal) as a float function of a float time for SciPy's right-hand side, jitted once:
+    called eagerly, each of the reference's thousands of evaluations runs the signal's operations one by one."""
+    jitted = jax.jit(lambda t: u(t))
+    return lambda t: float(jitted(t))
 
 
 def _plant(valve):
@@ -34,7 +43,7 @@ def test_muscle_ode_matches_scipy_dop853(valve, t_end):
     traj = pamjax.simulate(system, u, jnp.asarray(ts), y0=y0, rtol=1e-10, atol=1e-10)
     plant = _plant(valve)
     ref = solve_ivp(plant.rhs, (0.0, t_end), [3e5, float(y0.position), 0.0], method="DOP853", t_eval=ts, rtol=1e-10,
-                    atol=[1e-4, 1e-12, 1e-10], args=(lambda t: float(u(t)),))
+                    atol=[1e-4, 1e-12, 1e-10], args=(_host_signal(u),))
     assert ref.success
     np.testing.assert_allclose(traj.pressure, ref.y[0], rtol=1e-5)
     np.testing.assert_allclose(traj.position, ref.y[1], atol=1e-7)
@@ -79,14 +88,22 @@ def _loss_factory(case):
     return system, flat, loss
 
 
+@functools.cache
+def _value_and_grad(case):
+    """(system, flat parameters, loss, jitted value-and-gradient of the loss) of a case, built and compiled once per
+    module: the finite-difference test and the forward-mode test share the reverse-mode gradient of "muscle-averaged"
+    (one compilation instead of two)."""
+    system, flat, loss = _loss_factory(case)
+    return system, flat, loss, jax.jit(jax.value_and_grad(loss))
+
+
 @pytest.mark.parametrize("case", list(CASES))
 def test_gradient_every_parameter_matches_finite_differences(case):
     # Compared as sensitivities θ ∂L/∂θ (the change for a relative change of each parameter), so leaves of very
     # different units share one tolerance: 2e-4 of the largest sensitivity plus 1e-4 relative. Central differences
     # with relative step 1e-5 at solver rtol 1e-12 are accurate to ~1e-7 relative.
-    system, flat, loss = _loss_factory(case)
     # one compiled value-and-gradient serves the gradient and the differences' values (no separate loss compile)
-    value_and_grad = jax.jit(jax.value_and_grad(loss))
+    system, flat, _, value_and_grad = _value_and_grad(case)
     grad = np.asarray(value_and_grad(jnp.asarray(flat))[1])
     fd = central_difference(lambda v: value_and_grad(v)[0], flat)
     names = parameter_names(system)
@@ -99,9 +116,10 @@ def test_gradient_every_parameter_matches_finite_differences(case):
 
 @pytest.mark.slow  # ~60 s on 2 cores: jacfwd through the solve over ~40 parameters, mostly compile time
 def test_forward_mode_jacobian_equals_reverse_mode_gradient():
-    _, flat, loss = _loss_factory("muscle-averaged")
-    # jitted: eager transforms of the solve trace and compile it piecewise (~1.7x slower)
-    rev = jax.jit(jax.grad(loss))(jnp.asarray(flat))
+    # jitted: eager transforms of the solve trace and compile it piecewise (~1.7x slower); the reverse-mode gradient
+    # is the finite-difference test's compiled value-and-gradient of the same loss
+    _, flat, loss, value_and_grad = _value_and_grad("muscle-averaged")
+    rev = value_and_grad(jnp.asarray(flat))[1]
     fwd = jax.jit(jax.jacfwd(lambda v: loss(v, adjoint="forward")))(jnp.asarray(flat))
     np.testing.assert_allclose(fwd, rev, rtol=1e-8, atol=1e-12 * float(jnp.max(jnp.abs(rev))))
 
