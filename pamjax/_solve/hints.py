@@ -5,6 +5,7 @@ parameter that makes it so where the system says. Workflow only: the physics is 
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -37,18 +38,28 @@ def default_max_steps(system, t0, t1):
     return BASE_MAX_STEPS * 2 ** math.ceil(math.log2(needed / BASE_MAX_STEPS))
 
 
-def _fastest_mode(system, signal, t0, y0):
-    """(largest |Re λ| [1/s] of the Jacobian of the scaled vector field at the initial state, name of the state it
-    mostly moves)."""
+@eqx.filter_jit
+def _start_jacobian(system, signal, t0, y0):
+    """(Jacobian of the scaled vector field at the start state, the start state: `y0`, or the system's own when None),
+    compiled as one program: run eagerly, the initial state and the Jacobian compile ~90 one-operation programs
+    (~7 s on a slow CPU) on every failed solve."""
+    y0 = system.initial_state() if y0 is None else y0
     z0, scaled_state = scaled(system, y0)
-    command = signal(system.valve.command_time(jnp.asarray(t0)))
-    jac = np.asarray(jax.jacfwd(lambda z: scaled_state.field(system, jnp.asarray(t0), z, command))(z0))
+    command = signal(system.valve.command_time(t0))
+    return jax.jacfwd(lambda z: scaled_state.field(system, t0, z, command))(z0), y0
+
+
+def _fastest_mode(system, signal, t0, y0):
+    """(largest |Re λ| [1/s] of the Jacobian of the scaled vector field at the initial state (`y0`, or the system's
+    own when None), name of the state it mostly moves)."""
+    jac, y0 = _start_jacobian(system, signal, jnp.asarray(float(t0)), y0)
+    jac = np.asarray(jac)
     if not np.all(np.isfinite(jac)):
         return float("nan"), "?"
     values, vectors = np.linalg.eig(jac)
     k = int(np.argmax(np.abs(values.real)))
     names = [jax.tree_util.keystr(path).strip(".") for path, _ in jax.tree_util.tree_flatten_with_path(y0)[0]]
-    state = names[int(np.argmax(np.abs(vectors[:, k])))] if len(names) == len(z0) else "?"
+    state = names[int(np.argmax(np.abs(vectors[:, k])))] if len(names) == jac.shape[0] else "?"
     return float(abs(values[k].real)), state
 
 
@@ -74,7 +85,6 @@ def failure_hint(system, signal, ts, t0, y0, traj, max_steps, solver, message):
     finite = np.all(np.isfinite(states.reshape(len(ts), -1)), axis=1)
     reached = float(ts[np.flatnonzero(finite)[-1]]) if finite.any() else t0
     steps = int(traj.num_steps)
-    y0 = system.initial_state() if y0 is None else y0
     rate, state = _fastest_mode(system, signal, t0, y0)
     explicit = type(solver).__name__ not in ("Rodas5", "Kvaerno5", "Kvaerno4", "Kvaerno3", "ImplicitEuler")
     where = f"it reached t = {reached:.4g} s of {t1:.4g} s after {steps:,} steps"
@@ -109,7 +119,6 @@ RK4_STABILITY = 2.8  # |h λ| classical RK4 stays stable up to on λ < 0
 def fixed_step_hint(system, signal, t0, y0, stepping):
     """What fixes an unstable fixed-grid run ("pwm": substeps per PWM period; "grid": grid_step): the step its
     fastest mode needs, or an implicit adaptive solve when that step is impractically small."""
-    y0 = system.initial_state() if y0 is None else y0
     rate, state = _fastest_mode(system, signal, float(t0), y0)
     if not np.isfinite(rate) or rate == 0:
         return "a smaller fixed step (more substeps, smaller grid_step), or stepping='adaptive'"
