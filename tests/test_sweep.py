@@ -4,6 +4,8 @@ References are independent: each point is re-simulated with `simulate` (adaptive
 reductions are recomputed with NumPy from whole trajectories.
 """
 
+import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -13,6 +15,23 @@ from pamjax._sweep.reductions import Final, Harmonic, Mean
 from pamjax._sweep.sweep import sweep
 
 TS = np.linspace(0.0, 1.0, 21)
+
+
+@eqx.filter_jit
+def _initial_state(system, pressure):
+    """`system.initial_state(pressure=...)` as one program (system and pressure its arguments): eagerly, its
+    equilibrium solve compiles some forty one-operation programs."""
+    return system.initial_state(pressure=pressure)
+
+
+def _reference(system, duty, ts, pressure=None):
+    """The independent reference: `simulate` (adaptive, rtol = atol = 1e-10) from `system.initial_state(pressure)`
+    (atmospheric by default, as `simulate`'s own default y0), passed explicitly and on output grids of TS's length
+    so that this module's references on the averaged MAS-10 share one compiled solve."""
+    p0 = system.air.atmospheric_pressure if pressure is None else pressure
+    y0 = _initial_state(system, jnp.asarray(p0, dtype=float))
+    # np.float64: the duty strongly typed whether given as a Python or a NumPy number (one argument type)
+    return pamjax.simulate(system, pamjax.Constant(np.float64(duty)), ts, y0=y0, rtol=1e-10, atol=1e-10)
 
 
 @pytest.fixture(scope="module")
@@ -28,8 +47,9 @@ def test_sweep_equals_loop_of_simulate(averaged, method):
                    method=method, channels=("pressure", "position"))
     assert result.method == method and np.all(result.succeeded)
     for i, (u, m) in enumerate(zip(duties, masses)):
-        ref = pamjax.simulate(presets.mas10_system(valve="averaged", payload_mass=m), pamjax.Constant(u), TS,
-                              rtol=1e-10, atol=1e-10)
+        # float(m): a Python number, weakly typed in the system as the preset's default mass is (a NumPy scalar
+        # would be strongly typed, a different argument type, and the reference solve would compile again)
+        ref = _reference(presets.mas10_system(valve="averaged", payload_mass=float(m)), u, TS)
         if method == "rk4":  # at its stability limit (~1.5 ms) RK4 resolves the stick-slip transients: < 0.1 um
             np.testing.assert_allclose(result["position"][i], ref.position, rtol=0, atol=1e-7)
             np.testing.assert_allclose(result["pressure"][i], ref.pressure, rtol=0, atol=0.1)
@@ -47,8 +67,9 @@ def test_error_controlled_ros2_settles_on_the_steady_state(averaged):
     result = sweep(averaged, pamjax.Constant(0.5), ts, {"signal.value": duties}, method="ros2a",
                    channels=("pressure", "position"), reduce=Final())
     assert result.method == "ros2a" and np.all(result.succeeded)
+    ts_ref = np.linspace(0.0, 5.0, TS.size)  # the reference's final state at 5 s does not depend on its output grid
     for i, u in enumerate(duties):
-        ref = pamjax.simulate(averaged, pamjax.Constant(u), ts, rtol=1e-10, atol=1e-10)
+        ref = _reference(averaged, u, ts_ref)
         assert abs(result["pressure"][i] - float(ref.pressure[-1])) < 50.0
         assert abs(result["position"][i] - float(ref.position[-1])) < 5e-5
 
@@ -78,9 +99,11 @@ def test_status_per_point_with_injected_failure(averaged):
     result = sweep(averaged, pamjax.Constant(0.5), TS, over, method="rk4", dt=1e-3)
     assert result.status.tolist() == [0, 1, 0]
     assert np.all(np.isnan(result["position"][1]))
-    alone = sweep(averaged, pamjax.Constant(0.5), TS, {"friction.viscous_coefficient": widths[[0, 2]],
-                                                       "signal.value": np.array([0.3, 0.7])}, method="rk4", dt=1e-3)
-    np.testing.assert_array_equal(result["position"][[0, 2]], alone["position"])
+    # the same points with the failing one made healthy: the same batch shape, so the same compiled program
+    alone = sweep(averaged, pamjax.Constant(0.5), TS, {**over, "friction.viscous_coefficient": widths[[0, 0, 2]]},
+                  method="rk4", dt=1e-3)
+    assert alone.status.tolist() == [0, 0, 0]
+    np.testing.assert_array_equal(result["position"][[0, 2]], alone["position"][[0, 2]])
 
 
 def test_reductions_match_numpy(averaged):
@@ -97,8 +120,10 @@ def test_reductions_match_numpy(averaged):
         for i, f in enumerate(over["signal.frequency"]):
             for c in ("position", "command"):
                 np.testing.assert_allclose(reduced[c][i], numpy_reduce(full[c][i], f), rtol=1e-10, atol=1e-14)
-    # the command's harmonic is the sine itself: amplitude A, phase -pi/2 (sin = cos shifted)
-    harmonic = sweep(averaged, signal, ts, over, reduce=Harmonic(2), channels=("command",), method="rk4")["command"]
+    # the command's harmonic is the sine itself: amplitude A, phase -pi/2 (sin = cos shifted); read from the loop's
+    # last sweep, Harmonic(2)'s (a sweep of the command channel alone would compile the same program again)
+    assert isinstance(reduce, Harmonic)
+    harmonic = reduced["command"]
     np.testing.assert_allclose(np.abs(harmonic), over["signal.amplitude"], rtol=1e-9)
     np.testing.assert_allclose(np.angle(harmonic), -np.pi / 2, atol=1e-9)
 
@@ -131,8 +156,7 @@ def test_initial_state_path_and_factory(averaged):
     result = sweep(averaged, lambda v: pamjax.Constant(v["duty"]), TS, {"y0.pressure": p0, "duty": [0.4, 0.6]},
                    channels=("pressure",))
     np.testing.assert_allclose(result["pressure"][:, 0], p0)
-    ref = pamjax.simulate(averaged, pamjax.Constant(0.6), TS, y0=averaged.initial_state(pressure=4e5),
-                          rtol=1e-10, atol=1e-10)
+    ref = _reference(averaged, 0.6, TS, pressure=4e5)
     np.testing.assert_allclose(result["pressure"][1], ref.pressure, atol=2.0)
 
 
@@ -166,8 +190,10 @@ def test_flow_surface_equals_cycle_average_and_cli_writes_outputs(tmp_path):
     valve, air = presets.mas10_valve(), pamjax.Air()
     u, p = np.array([0.05, 0.5, 0.95]), np.array([1.5e5, 4e5])
     surface = flow_surface(valve, u, p, air)
+    # the scalar cycle average, jitted once (eagerly each of its operations compiles a program of its own)
+    cycle_average = eqx.filter_jit(pamjax.cycle_averaged_flow)
     for i, j in [(0, 0), (1, 1), (2, 0)]:
-        np.testing.assert_allclose(surface[i, j], pamjax.cycle_averaged_flow(valve, u[i], p[j], air, 400), rtol=1e-12)
+        np.testing.assert_allclose(surface[i, j], cycle_average(valve, u[i], p[j], air, 400), rtol=1e-12)
     assert abs(surface[0, 0]) < 1e-3 * abs(surface[1, 0] - surface[2, 0]) or surface[0, 0] < 0  # dead band: exhausts
     config = tmp_path / "fs.toml"
     config.write_text('kind = "flow_surface"\n[sweep]\ncommands = [0.2, 0.8]\npressures = [2e5, 5e5]\n')

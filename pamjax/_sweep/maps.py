@@ -53,17 +53,24 @@ def flow_surface(valve: AbstractSwitchingValve, commands, pressures, air, sample
     the surface paper 000's eq. 13 is fitted to. Shape (len(commands), len(pressures)); one vmapped call.
     `samples` phases per period (midpoint rule; with the smoothed edges 400 agree with 4000 to 2e-16 of the
     range on the MHE2 preset, measured)."""
-    commands = jnp.asarray(commands, dtype=float)
-    pressures = jnp.asarray(pressures, dtype=float)
+    commands = np.asarray(commands, dtype=float)  # checked on the host: no eager device operations
+    pressures = np.asarray(pressures, dtype=float)
     if commands.ndim != 1 or pressures.ndim != 1:
         raise PamjaxInputError(f"commands and pressures must be 1-D, got {commands.shape} and {pressures.shape}")
     check_positive(pressures, "pressures (absolute) [Pa]")
     lo, hi = valve.command_range
-    if not bool(jnp.all((commands >= lo) & (commands <= hi))):
+    if not bool(np.all((commands >= np.asarray(lo)) & (commands <= np.asarray(hi)))):
         raise PamjaxInputError(f"commands must lie in [{lo}, {hi}]")
-    flow = jax.jit(jax.vmap(jax.vmap(lambda u, p: cycle_averaged_flow(valve, u, p, air, samples), (None, 0)),
-                            (0, None)))
-    return np.asarray(flow(commands, pressures))
+    return np.asarray(_flow_surface(valve, commands, pressures, air, samples))
+
+
+@eqx.filter_jit
+def _flow_surface(valve, commands, pressures, air, samples):
+    """The (commands × pressures) surface as one program, jitted once here with the valve, air, commands and
+    pressures as its arguments (`samples`, an int, static): a lambda jitted per call compiled anew on every call,
+    its valve and air baked in as constants."""
+    per_pressure = jax.vmap(lambda u, p: cycle_averaged_flow(valve, u, p, air, samples), (None, 0))
+    return jax.vmap(per_pressure, (0, None))(commands, pressures)
 
 
 class _FourierIntegral(AbstractReduction):
