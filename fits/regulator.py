@@ -186,24 +186,30 @@ def valve_response(params, ts, solver=None):
     ).pressure
 
 
+# eq. 6's closed-port response and its forward-mode Jacobian, compiled once per sample count (and solver): the
+# parameters, times and data are arguments (a `jax.jit(lambda ...)` closing over them compiles on every call).
+_VALVE_RESPONSE = eqx.filter_jit(valve_response)
+_VALVE_JACOBIAN = eqx.filter_jit(jax.jacfwd(valve_response))
+
+
 def fit_valve(rng, quick, solver=None):
     rate = 500.0  # Hz sampling (assumed; the NI USB-6009 samples up to 48 kS/s)
-    ts = jnp.arange(0.0, 4.0 if quick else 8.0, 1.0 / rate)
-    truth = jnp.array([1.01, 0.041, 0.023])  # eq. 6
-    measured = np.asarray(valve_response(truth, ts, solver)) + NOISE_VALVE * rng.standard_normal(ts.shape)
+    ts = np.arange(0.0, 4.0 if quick else 8.0, 1.0 / rate)
+    truth = np.array([1.01, 0.041, 0.023])  # eq. 6
+    measured = np.asarray(_VALVE_RESPONSE(truth, ts, solver)) + NOISE_VALVE * rng.standard_normal(ts.shape)
     bb, aa = butter(2, 20.0 / (rate / 2))  # 2nd-order Butterworth, f_c = 20 Hz (paper 001, Sect. 5)
     smoothed = filtfilt(bb, aa, measured)
     n_id = int(0.6 * ts.size)  # 60 % identification, 40 % validation (paper 001, Sect. 5)
-    data_id = jnp.asarray(smoothed[:n_id])
-    ts_id = np.asarray(ts)[:n_id]  # NumPy, so it stays a constant under jit
-    res = jax.jit(lambda th: (valve_response(th, ts_id, solver) - data_id) / BAR)
-    jac = jax.jit(jax.jacfwd(lambda th: (valve_response(th, ts_id, solver) - data_id) / BAR))
-    sol = pj.levenberg_marquardt(lambda th: np.asarray(res(jnp.asarray(th))),
-                                 lambda th: (np.asarray(res(jnp.asarray(th))), np.asarray(jac(jnp.asarray(th)))),
+    data_id, ts_id = smoothed[:n_id], ts[:n_id]
+
+    def res(th):
+        return (np.asarray(_VALVE_RESPONSE(th, ts_id, solver)) - data_id) / BAR
+
+    sol = pj.levenberg_marquardt(res, lambda th: (res(th), np.asarray(_VALVE_JACOBIAN(th, ts_id, solver)) / BAR),
                                  np.array([0.8, 0.06, 0.01]), max_steps=100, ftol=1e-12, xtol=1e-12)
     gain, t1, t2 = (float(v) for v in sol.theta)
     t1, t2 = max(t1, t2), min(t1, t2)  # the two poles are interchangeable
-    sim = np.asarray(valve_response(jnp.array([gain, t1, t2]), ts, solver))
+    sim = np.asarray(_VALVE_RESPONSE(np.array([gain, t1, t2]), ts, solver))
     val = slice(n_id, None)
     mse = float(np.mean(((sim[val] - smoothed[val]) / BAR) ** 2))
     fit_pct = 100 * (
@@ -227,7 +233,7 @@ def fit_valve(rng, quick, solver=None):
         validation_fit_percent=fit_pct,
         bandwidth_Hz=ss.bandwidth(),
         steps=int(sol.step),
-        ts=np.asarray(ts),
+        ts=ts,
         measured=measured,
         smoothed=smoothed,
         simulated=sim,
