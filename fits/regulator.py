@@ -187,7 +187,8 @@ def valve_response(params, ts, solver=None):
 
 
 # eq. 6's closed-port response and its forward-mode Jacobian, compiled once per sample count (and solver): the
-# parameters, times and data are arguments (a `jax.jit(lambda ...)` closing over them compiles on every call).
+# parameters and times are arguments and the residuals NumPy on the output (a `jax.jit(lambda ...)` closing over the
+# data compiles on every call, and the truth's and the fit's responses share one program).
 _VALVE_RESPONSE = eqx.filter_jit(valve_response)
 _VALVE_JACOBIAN = eqx.filter_jit(jax.jacfwd(valve_response))
 
