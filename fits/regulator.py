@@ -15,10 +15,10 @@
 """
 
 import argparse
-import functools
 import json
 import pathlib
 
+import equinox as eqx
 import jax
 
 jax.config.update("jax_enable_x64", True)
@@ -80,30 +80,42 @@ def tank_system(c_si, b, supply):
     return pj.RegulatorSystem(reg, volume=TANK)
 
 
+def mode_values(mode, p_row):
+    """The constants of a tank run (supply [Pa], pilot target [Pa], start pressure [Pa], voltage [V]): charging at
+    supply `p_row` from atmosphere with the pilot at 10.1 bar gauge, or discharging from `p_row` with the pilot at
+    atmosphere. As values (arguments of the compiled programs), so both modes and every row share one program."""
+    if mode == "charge":
+        values = (p_row, P_ATM + 10.1 * BAR, P_ATM, 10.0)
+    else:
+        values = (7e5, P_ATM, p_row, 0.0)
+    return np.asarray(values, dtype=float)
+
+
 def tank_run(theta, mode, p_row, ts, solver=None):
     """Tank pressure [Pa] for θ = (log C [m³/(s Pa)], scaled logit of b), charging at supply p_row or discharging from
     p_row (main stage fully open: pilot at 10.1 bar gauge, or at atmosphere); `solver`: `simulate`'s default or any."""
+    return _tank_pressure(jnp.asarray(theta, dtype=float), mode_values(mode, p_row), jnp.asarray(ts), solver)
+
+
+@eqx.filter_jit
+def _tank_pressure(theta, values, ts, solver=None):
+    """`tank_run` with the mode's constants as values: one program per sample count (and solver)."""
     c, b = jnp.exp(theta[0]), _to_b(theta[1])  # b kept inside B_BOUNDS
-    if mode == "charge":
-        system, target, p0, volts = tank_system(c, b, p_row), P_ATM + 10.1 * BAR, P_ATM, 10.0
-    else:
-        system, target, p0, volts = tank_system(c, b, 7e5), P_ATM, p_row, 0.0
-    y0 = pj.ISO6358RegulatorState(
-        pilot=jnp.asarray(target), pilot_output=jnp.asarray(target), pressure=jnp.asarray(p0, dtype=float)
-    )
-    traj = pj.simulate(system, pj.Constant(volts), ts, y0=y0, adjoint="forward", rtol=1e-8, atol=1e-8, solver=solver)
+    supply, target, p0, volts = values
+    y0 = pj.ISO6358RegulatorState(pilot=target, pilot_output=target, pressure=p0)
+    traj = pj.simulate(tank_system(c, b, supply), pj.Constant(volts), ts, y0=y0, adjoint="forward", rtol=1e-8,
+                       atol=1e-8, solver=solver)
     return traj.pressure
 
 
-def _residuals(mode, theta, args):
-    p_row, ts, data = args
-    return (tank_run(theta, mode, p_row, ts) - data) / NOISE_TANK
+# d(tank pressure)/dθ by forward mode: with `_tank_pressure` the fit's only two programs (residuals and the cost of
+# `start_values`' scan are NumPy on its output), shared by both modes and every row of a sample count.
+_TANK_JACOBIAN = eqx.filter_jit(jax.jacfwd(_tank_pressure))
 
 
-RESIDUALS = {mode: functools.partial(_residuals, mode) for mode in ("charge", "discharge")}  # one compile per mode
-_COST = {mode: jax.jit(lambda theta, args, f=f: jnp.sum(f(theta, args) ** 2)) for mode, f in RESIDUALS.items()}
-_JACOBIAN = {mode: jax.jit(jax.jacfwd(f)) for mode, f in RESIDUALS.items()}
-_RESIDUALS_JIT = {mode: jax.jit(f) for mode, f in RESIDUALS.items()}
+def _residuals(theta, values, ts, data):
+    """Residuals of a tank run in noise units (NumPy, from the compiled `_tank_pressure`)."""
+    return (np.asarray(_tank_pressure(jnp.asarray(theta, dtype=float), values, ts)) - data) / NOISE_TANK
 
 
 def start_values(mode, p_row, ts, data):
@@ -117,34 +129,34 @@ def start_values(mode, p_row, ts, data):
     y = p[:n] / p_row if mode == "charge" else -np.log(p[:n])
     c0 = float(np.polyfit(t[:n], y, 1)[0] / tank_rate_constant(1.0))
     grid = np.arange(B_BOUNDS[0] + 0.02, B_BOUNDS[1] - 0.01, 0.02)
-    args = (jnp.asarray(p_row, dtype=float), ts, data)
-    cost = [float(_COST[mode](jnp.array([np.log(c0), _from_b(b)]), args)) for b in grid]
+    values, data = mode_values(mode, p_row), np.asarray(data)
+    cost = [float(np.sum(_residuals(np.array([np.log(c0), _from_b(b)]), values, ts, data) ** 2)) for b in grid]
     return c0, float(grid[int(np.argmin(cost))])
 
 
 def fit_tank(mode, p_row, c_true, b_true, rng, quick):
     """Simulate one noisy tank run with (C, b) = (`c_true` [m³/(s Pa)], `b_true`) and fit them back: start values
     from the record (`start_values`), then Levenberg-Marquardt through `simulate` (forward-mode derivatives)."""
-    ts = jnp.linspace(0.0, tank_horizon(mode, p_row, c_true, b_true), 60 if quick else 150)
-    truth = jnp.array([np.log(c_true), _from_b(b_true)])
-    data = tank_run(truth, mode, p_row, ts) + NOISE_TANK * rng.standard_normal(ts.shape)
+    ts = jnp.asarray(np.linspace(0.0, tank_horizon(mode, p_row, c_true, b_true), 60 if quick else 150))
+    truth = np.array([np.log(c_true), _from_b(b_true)])
+    data = np.asarray(tank_run(truth, mode, p_row, ts)) + NOISE_TANK * rng.standard_normal(ts.shape)
     c0, b0 = start_values(mode, p_row, ts, data)
-    args = (jnp.asarray(p_row, dtype=float), ts, data)
+    values = mode_values(mode, p_row)
 
     def residuals(theta):
-        r = np.asarray(_RESIDUALS_JIT[mode](jnp.asarray(theta), args))
+        r = _residuals(theta, values, ts, data)
         return r if np.all(np.isfinite(r)) else None
 
     def jacobian(theta):
-        return np.asarray(_RESIDUALS_JIT[mode](jnp.asarray(theta), args)), np.asarray(
-            _JACOBIAN[mode](jnp.asarray(theta), args))
+        return _residuals(theta, values, ts, data), np.asarray(
+            _TANK_JACOBIAN(jnp.asarray(theta, dtype=float), values, ts)) / NOISE_TANK
 
     sol = pj.levenberg_marquardt(residuals, jacobian, np.array([np.log(c0), _from_b(b0)]), max_steps=100,
                                  ftol=1e-12, xtol=1e-10)
     # 1σ from the Gauss-Newton covariance (JᵀJ)⁻¹ (residuals are already in noise units), mapped to C and b
     jac = sol.jacobian
     cov = np.linalg.inv(jac.T @ jac)
-    b_fit = float(_to_b(sol.theta[1]))
+    b_fit = float(B_BOUNDS[0] + (B_BOUNDS[1] - B_BOUNDS[0]) / (1.0 + np.exp(-sol.theta[1])))  # _to_b, in NumPy
     db_dz = (b_fit - B_BOUNDS[0]) * (B_BOUNDS[1] - b_fit) / (B_BOUNDS[1] - B_BOUNDS[0])
     return dict(
         C_start=c0,
@@ -174,24 +186,31 @@ def valve_response(params, ts, solver=None):
     ).pressure
 
 
+# eq. 6's closed-port response and its forward-mode Jacobian, compiled once per sample count (and solver): the
+# parameters and times are arguments and the residuals NumPy on the output (a `jax.jit(lambda ...)` closing over the
+# data compiles on every call, and the truth's and the fit's responses share one program).
+_VALVE_RESPONSE = eqx.filter_jit(valve_response)
+_VALVE_JACOBIAN = eqx.filter_jit(jax.jacfwd(valve_response))
+
+
 def fit_valve(rng, quick, solver=None):
     rate = 500.0  # Hz sampling (assumed; the NI USB-6009 samples up to 48 kS/s)
-    ts = jnp.arange(0.0, 4.0 if quick else 8.0, 1.0 / rate)
-    truth = jnp.array([1.01, 0.041, 0.023])  # eq. 6
-    measured = np.asarray(valve_response(truth, ts, solver)) + NOISE_VALVE * rng.standard_normal(ts.shape)
+    ts = np.arange(0.0, 4.0 if quick else 8.0, 1.0 / rate)
+    truth = np.array([1.01, 0.041, 0.023])  # eq. 6
+    measured = np.asarray(_VALVE_RESPONSE(truth, ts, solver)) + NOISE_VALVE * rng.standard_normal(ts.shape)
     bb, aa = butter(2, 20.0 / (rate / 2))  # 2nd-order Butterworth, f_c = 20 Hz (paper 001, Sect. 5)
     smoothed = filtfilt(bb, aa, measured)
     n_id = int(0.6 * ts.size)  # 60 % identification, 40 % validation (paper 001, Sect. 5)
-    data_id = jnp.asarray(smoothed[:n_id])
-    ts_id = np.asarray(ts)[:n_id]  # NumPy, so it stays a constant under jit
-    res = jax.jit(lambda th: (valve_response(th, ts_id, solver) - data_id) / BAR)
-    jac = jax.jit(jax.jacfwd(lambda th: (valve_response(th, ts_id, solver) - data_id) / BAR))
-    sol = pj.levenberg_marquardt(lambda th: np.asarray(res(jnp.asarray(th))),
-                                 lambda th: (np.asarray(res(jnp.asarray(th))), np.asarray(jac(jnp.asarray(th)))),
+    data_id, ts_id = smoothed[:n_id], ts[:n_id]
+
+    def res(th):
+        return (np.asarray(_VALVE_RESPONSE(th, ts_id, solver)) - data_id) / BAR
+
+    sol = pj.levenberg_marquardt(res, lambda th: (res(th), np.asarray(_VALVE_JACOBIAN(th, ts_id, solver)) / BAR),
                                  np.array([0.8, 0.06, 0.01]), max_steps=100, ftol=1e-12, xtol=1e-12)
     gain, t1, t2 = (float(v) for v in sol.theta)
     t1, t2 = max(t1, t2), min(t1, t2)  # the two poles are interchangeable
-    sim = np.asarray(valve_response(jnp.array([gain, t1, t2]), ts, solver))
+    sim = np.asarray(_VALVE_RESPONSE(np.array([gain, t1, t2]), ts, solver))
     val = slice(n_id, None)
     mse = float(np.mean(((sim[val] - smoothed[val]) / BAR) ** 2))
     fit_pct = 100 * (
@@ -215,7 +234,7 @@ def fit_valve(rng, quick, solver=None):
         validation_fit_percent=fit_pct,
         bandwidth_Hz=ss.bandwidth(),
         steps=int(sol.step),
-        ts=np.asarray(ts),
+        ts=ts,
         measured=measured,
         smoothed=smoothed,
         simulated=sim,

@@ -11,6 +11,7 @@ import argparse
 import importlib.resources
 import pathlib
 
+import equinox as eqx
 import jax
 
 jax.config.update("jax_enable_x64", True)
@@ -51,6 +52,13 @@ def report(name, res):
     print(res.table())
 
 
+@eqx.filter_jit
+def _forces(muscle, x, pressures, air):
+    """The model's force [N] at contraction `x` for each pressure: one program per model and sample count (eagerly,
+    each operation of the force law compiles on its own; `x` as a closed-over constant, once per length)."""
+    return jax.vmap(lambda q: muscle.force(x, q, air))(pressures)
+
+
 def plot(path, x, p, f, models):
     import matplotlib
 
@@ -65,9 +73,9 @@ def plot(path, x, p, f, models):
         color = f"C{k}"
         ax[0].plot((p[sel] - 101325.0) / 1e5, f[sel], "o", color=color, ms=4, label=f"L = {L0 - xi:.3f} m")
         for (label, muscle), style in zip(models.items(), ("-", "--")):
-            fm = np.asarray(jax.vmap(lambda q: muscle.force(xi, q, air))(pp))
+            fm = np.asarray(_forces(muscle, xi, pp, air))
             ax[0].plot((pp - 101325.0) / 1e5, fm, style, color=color, lw=1, label=label if k == 0 else None)
-            fs = np.asarray(jax.vmap(lambda q: muscle.force(xi, q, air))(p[sel]))
+            fs = np.asarray(_forces(muscle, xi, p[sel], air))
             if style == "-":
                 ax[1].plot((p[sel] - 101325.0) / 1e5, fs - f[sel], "o-", color=color, ms=3)
     ax[0].set(xlabel="gauge pressure [bar]", ylabel="force [N]", title="DMSP-20-300: measured (dots) vs model")
