@@ -1,7 +1,7 @@
 """Eq. 13's averaged valve (m1…m9) by two routes, compared on the switching valve's cycle-averaged flow:
 
 1. fitted directly to the switching valve's cycle-averaged flow over a (duty, pressure) grid
-   (`pamjax.fit_averaged_valve`'s least squares, `fit_cycle_average`);
+   (`pamjax.fit_averaged_valve`);
 2. paper 000's own procedure: noisy constant-volume tank recordings of the switching valve (charge from atmosphere
    and discharge from supply at duties 0.15…0.85, 1 kHz, 2 kPa noise), pressure filtered (zero-phase Butterworth,
    20 Hz), differentiated, turned into mass flow with eq. 12 (ṁ = V ṗ / (κ R T)), and the surface fitted.
@@ -41,50 +41,16 @@ USABLE_DUTY = (0.1, 0.9)  # the valve's usable range: 2 ms switching delay at 50
 SCORE_GRID = 17  # points per axis of the scoring grid (duty × pressure)
 
 
-@eqx.filter_jit
-def _cycle_average(valve, air, u, p):
-    """The switching valve's cycle-averaged flow [kg/s] on the grid u × p (`pamjax.cycle_averaged_flow`, its default
-    4000 phases; what `pamjax.flow_surface` computes): one program per grid shape, the valve an argument. The fit
-    grid, the scoring grid and the figure's curves all use it (`flow_surface` builds and compiles its program anew
-    on every call; eagerly, each operation of the flow law compiles on its own)."""
-    return jax.vmap(jax.vmap(lambda d, q: pj.cycle_averaged_flow(valve, d, q, air), (None, 0)), (0, None))(u, p)
-
-
-def cycle_average(valve, air, u, p):
-    return np.asarray(_cycle_average(valve, air, jnp.asarray(u, dtype=float), jnp.asarray(p, dtype=float)))
-
-
 def reference_grid(valve, air):
     """Scoring grid (duty in the usable range × pressure p_atm…p_s) and the switching valve's cycle-averaged flow."""
     u = np.linspace(*USABLE_DUTY, SCORE_GRID)
     p = np.linspace(float(air.atmospheric_pressure), float(valve.supply_pressure), SCORE_GRID)
-    return u, p, cycle_average(valve, air, u, p)
-
-
-def fit_cycle_average(valve, air, u, p):
-    """Route 1: `pamjax.fit_averaged_valve`'s least squares (eq. 13 with zero flow pinned at duty 0 / atmosphere and
-    duty 1 / supply) of the cycle-averaged flow on the grid u × p, the flow from `cycle_average` (one compiled
-    program, shared with the scoring grid) and the small least-squares problem in NumPy on the host. Called eagerly,
-    `fit_averaged_valve` compiles each operation of the valve's flow law as a program of its own (~110 in the quick
-    run); the coefficients agree to round-off."""
-    flows = cycle_average(valve, air, u, p)
-    p_atm, p_s = float(air.atmospheric_pressure), float(valve.supply_pressure)
-    uu, pp = np.meshgrid(u, p, indexing="ij")
-    pg = (pp - p_atm).ravel()
-    scale = np.max(np.abs(pg))  # conditioning: fit in p / scale, then convert to SI
-
-    def design(u, pn):
-        return np.stack([u**i * pn**j for i in range(3) for j in range(3)], axis=-1)
-
-    constraints = design(np.array([0.0, 1.0]), np.array([0.0, (p_s - p_atm) / scale]))
-    null = np.linalg.svd(constraints)[2][constraints.shape[0]:].T  # (9, 7): coefficients meeting both exactly
-    z, *_ = np.linalg.lstsq(design(uu.ravel(), pg / scale) @ null, flows.ravel(), rcond=None)
-    return pj.AveragedValve(jnp.asarray((null @ z).reshape(3, 3) / scale ** np.arange(3)[None, :]))
+    return u, p, pj.flow_surface(valve, u, p, air, samples=4000)  # cycle_averaged_flow's default resolution
 
 
 @eqx.filter_jit
 def _surface(averaged, air, uu, pp):
-    """eq. 13's flow at each (u, p) pair: one program per grid shape (eager, each operation compiles)."""
+    """eq. 13's flow at each (u, p) pair: one program per grid shape (eagerly, each operation compiles its own)."""
     return jax.vmap(lambda u, p: averaged.mass_flow(0.0, u, p, air))(uu, pp)
 
 
@@ -157,7 +123,8 @@ def plot(path, u, p, ref, direct, procedure, samples, report, valve, air):
     ax = axes[0, 1]
     su, sp, sf = samples
     duties, grid = np.unique(su), np.linspace(p_atm, p[-1], 41)
-    curves = cycle_average(valve, air, duties, grid)
+    curves = jax.jit(jax.vmap(jax.vmap(lambda d, q: pj.cycle_averaged_flow(valve, d, q, air), (None, 0)),
+                              (0, None)))(duties, grid)
     for k, d in enumerate(duties):
         m = su == d
         ax.plot((sp[m] - p_atm) / 1e5, sf[m] * 1e3, ".", ms=1, color=f"C{k}", label=f"u = {d:.2f}")
@@ -185,8 +152,8 @@ def compute(quick=False):
     """Both routes scored on the cycle-averaged flow: (report, arguments of `plot` after its path)."""
     air, valve = pj.Air(), presets.mas10_valve("smooth")
     n_u, n_p = (17, 17) if quick else (33, 41)
-    direct = fit_cycle_average(valve, air, np.linspace(*USABLE_DUTY, n_u),
-                               np.linspace(float(air.atmospheric_pressure), float(valve.supply_pressure), n_p))
+    direct, _ = pj.fit_averaged_valve(valve, air, commands=jnp.linspace(*USABLE_DUTY, n_u),
+                                      pressures=jnp.linspace(air.atmospheric_pressure, valve.supply_pressure, n_p))
     duties = np.linspace(0.15, 0.85, 4 if quick else 8)
     procedure, samples = paper_route(valve, air, np.random.default_rng(0), duties, 1.0 if quick else 1.5)
     u, p, ref = reference_grid(valve, air)

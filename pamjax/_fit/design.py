@@ -6,6 +6,7 @@ function (`pamjax._fit`); the iteration is a BFGS on the host with a backtrackin
 value (one forward-mode Jacobian per trial) and a gradient only at accepted points.
 """
 
+import functools
 import inspect
 import math
 import threading
@@ -325,6 +326,22 @@ def _prepare(problem, gradient, c0, space, theta, prior, baseline, index, margin
     return prob, prior_info, base_info, time.perf_counter() - t_compile
 
 
+def _problem(space, theta, exp, basis, weight, band, limits, max_pressure, max_duty_step, index, criterion,
+             prior_info, floor):
+    """The design's `DesignProblem` with a prior information and a variance floor. An absent limit or floor is an
+    infinite one (its penalty and worst violation are exactly 0), not None: the problem's structure, and so the
+    compiled objective and gradient, is then the same whichever limits and baseline a design of this system,
+    parametrisation and duration has (one compilation for all of them)."""
+    return obj.DesignProblem(
+        space=space, theta=device_array(theta), experiment=exp,
+        basis=None if basis is None else device_array(basis), prior=device_array(prior_info),
+        weight=jnp.asarray(weight), band=jnp.asarray(band), stroke=None if limits is None else jnp.asarray(limits),
+        max_pressure=jnp.asarray(np.inf if max_pressure is None else float(max_pressure)),
+        max_step=jnp.asarray(np.inf if max_duty_step is None else float(max_duty_step)),
+        floor=device_array(np.full(len(space.labels), np.inf) if floor is None else floor), subset=index,
+        criterion=criterion)
+
+
 def design(
     model,
     free,
@@ -420,18 +437,8 @@ def design(
     limits = stroke_limits(system, start, stroke_margin) if "position" in channels else None
     n, index = len(space.labels), tuple(space.labels.index(s) for s in subset)
 
-    def problem(prior_info, floor):
-        # An absent limit or floor is an infinite one (its penalty and worst violation are exactly 0), not None: the
-        # problem's structure, and so the compiled objective and gradient, is then the same whichever limits and
-        # baseline a design of this system, parametrisation and duration has (one compilation for all of them).
-        return obj.DesignProblem(
-            space=space, theta=device_array(theta), experiment=exp,
-            basis=None if basis is None else device_array(basis), prior=device_array(prior_info),
-            weight=jnp.asarray(float(rate) / float(design_rate)),
-            band=jnp.asarray([lo, hi]), stroke=None if limits is None else jnp.asarray(limits),
-            max_pressure=jnp.asarray(np.inf if max_pressure is None else float(max_pressure)),
-            max_step=jnp.asarray(np.inf if max_duty_step is None else float(max_duty_step)),
-            floor=device_array(np.full(n, np.inf) if floor is None else floor), subset=index, criterion=criterion)
+    problem = functools.partial(_problem, space, theta, exp, basis, float(rate) / float(design_rate), (lo, hi),
+                                limits, max_pressure, max_duty_step, index, criterion)
 
     gradient = obj.reverse_gradient if parametrisation == "periods" else obj.forward_gradient
     report = _printer(progress, f"design: {count} PWM periods, {len(c0)} coefficients ({parametrisation}), "
