@@ -108,9 +108,13 @@ def _tank_pressure(theta, values, ts, solver=None):
     return traj.pressure
 
 
-# d(tank pressure)/dθ by forward mode: with `_tank_pressure` the fit's only two programs (residuals and the cost of
-# `start_values`' scan are NumPy on its output), shared by both modes and every row of a sample count.
-_TANK_JACOBIAN = eqx.filter_jit(jax.jacfwd(_tank_pressure))
+@eqx.filter_jit
+def _tank_pressure_and_jacobian(theta, values, ts):
+    """(tank pressure, d(tank pressure)/dθ) by forward mode, one solve: with `_tank_pressure` the fit's only two
+    programs (residuals and the cost of `start_values`' scan are NumPy on their output), shared by both modes and
+    every row of a sample count."""
+    jac, pressure = jax.jacfwd(lambda th: (_tank_pressure(th, values, ts),) * 2, has_aux=True)(theta)
+    return pressure, jac
 
 
 def _residuals(theta, values, ts, data):
@@ -148,15 +152,15 @@ def fit_tank(mode, p_row, c_true, b_true, rng, quick):
         return r if np.all(np.isfinite(r)) else None
 
     def jacobian(theta):
-        return _residuals(theta, values, ts, data), np.asarray(
-            _TANK_JACOBIAN(jnp.asarray(theta, dtype=float), values, ts)) / NOISE_TANK
+        pressure, jac = _tank_pressure_and_jacobian(jnp.asarray(theta, dtype=float), values, ts)
+        return (np.asarray(pressure) - data) / NOISE_TANK, np.asarray(jac) / NOISE_TANK
 
     sol = pj.levenberg_marquardt(residuals, jacobian, np.array([np.log(c0), _from_b(b0)]), max_steps=100,
                                  ftol=1e-12, xtol=1e-10)
     # 1σ from the Gauss-Newton covariance (JᵀJ)⁻¹ (residuals are already in noise units), mapped to C and b
     jac = sol.jacobian
     cov = np.linalg.inv(jac.T @ jac)
-    b_fit = float(B_BOUNDS[0] + (B_BOUNDS[1] - B_BOUNDS[0]) / (1.0 + np.exp(-sol.theta[1])))  # _to_b, in NumPy
+    b_fit = float(_to_b(sol.theta[1]))
     db_dz = (b_fit - B_BOUNDS[0]) * (B_BOUNDS[1] - b_fit) / (B_BOUNDS[1] - B_BOUNDS[0])
     return dict(
         C_start=c0,

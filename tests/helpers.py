@@ -2,6 +2,7 @@
 equations (the oracles). Nothing here imports pamjax physics: the oracles are written from the papers."""
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
@@ -345,3 +346,10 @@ def checkout_env():
 
     root = str(pathlib.Path(__file__).resolve().parents[1])
     return {**os.environ, "PYTHONPATH": os.pathsep.join([root, os.environ.get("PYTHONPATH", "")])}
+
+
+def host_signal(u):
+    """The command `u` (a pamjax signal) as a float function of a float time for SciPy's right-hand side, jitted once:
+    called eagerly, each of the reference's thousands of evaluations runs the signal's operations one by one."""
+    jitted = jax.jit(lambda t: u(t))
+    return lambda t: float(jitted(t))

@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import NumpyPlant
+from helpers import NumpyPlant, host_signal
 from scipy.integrate import solve_ivp
 
 import pamjax
@@ -106,7 +106,7 @@ def test_stiff_plant_through_stick_matches_scipy_dop853():
         valve="averaged", m=presets.MAS10_AVERAGED_VALVE,
     )
     ref = solve_ivp(plant.rhs, (6.25, 8.0), [5.5e5, float(y0.position), 0.0], method="DOP853", t_eval=ts,
-                    rtol=1e-10, atol=[1e-4, 1e-12, 1e-10], args=(_host_signal(u),))
+                    rtol=1e-10, atol=[1e-4, 1e-12, 1e-10], args=(host_signal(u),))
     assert ref.success
     np.testing.assert_allclose(traj.pressure, ref.y[0], rtol=1e-5)
     np.testing.assert_allclose(traj.position, ref.y[1], atol=1e-7)
@@ -168,13 +168,6 @@ def test_gradient_through_rodas5_matches_finite_differences_and_tsit5():
     rodas = np.asarray(rodas5(x0, triangle)[1])
     tsit5 = np.asarray(jax.jit(jax.grad(make_loss(dfx.Tsit5())))(x0, triangle))
     np.testing.assert_allclose(rodas, tsit5, rtol=1e-5, atol=1e-9 * np.max(np.abs(tsit5)))
-
-
-def _host_signal(u):
-    """The command `u` (a pamjax signal) as a float function of a float time for SciPy's right-hand side, jitted once:
-    called eagerly, each of the reference's thousands of evaluations runs the signal's operations one by one."""
-    jitted = jax.jit(lambda t: u(t))
-    return lambda t: float(jitted(t))
 
 
 def _get(module, dotted):

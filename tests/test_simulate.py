@@ -9,19 +9,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import P_ATM, NumpyPlant, central_difference, flat_parameters, parameter_names
+from helpers import P_ATM, NumpyPlant, central_difference, flat_parameters, host_signal, parameter_names
 from scipy.integrate import solve_ivp
 
 import pamjax
 from pamjax import presets
 from pamjax._solve.simulate import solve
-
-
-def _host_signal(u):
-    """The command `u` (a pamjax signal) as a float function of a float time for SciPy's right-hand side, jitted once:
-    called eagerly, each of the reference's thousands of evaluations runs the signal's operations one by one."""
-    jitted = jax.jit(lambda t: u(t))
-    return lambda t: float(jitted(t))
 
 
 def _plant(valve):
@@ -43,7 +36,7 @@ def test_muscle_ode_matches_scipy_dop853(valve, t_end):
     traj = pamjax.simulate(system, u, jnp.asarray(ts), y0=y0, rtol=1e-10, atol=1e-10)
     plant = _plant(valve)
     ref = solve_ivp(plant.rhs, (0.0, t_end), [3e5, float(y0.position), 0.0], method="DOP853", t_eval=ts, rtol=1e-10,
-                    atol=[1e-4, 1e-12, 1e-10], args=(_host_signal(u),))
+                    atol=[1e-4, 1e-12, 1e-10], args=(host_signal(u),))
     assert ref.success
     np.testing.assert_allclose(traj.pressure, ref.y[0], rtol=1e-5)
     np.testing.assert_allclose(traj.position, ref.y[1], atol=1e-7)
