@@ -145,3 +145,26 @@ def test_trajectory_channels_and_failed_solve():
     partial = pamjax.simulate(system, pamjax.Constant(0.5), ts, max_steps=3, throw=False)
     assert int(partial.result) != 0 and np.all(np.isnan(partial.pressure))
     assert dfx  # diffrax is the solver underneath
+
+
+def test_another_horizon_tolerance_or_first_step_does_not_compile_again():
+    # Issue 14: what changes between runs of one system is an argument of the compiled solve, not a constant in it:
+    # the horizon (its PWM period count, the smoothed-edge valve's step clipping), rtol, atol, dt0 (a given dt0 is
+    # another program than the automatic first step, once). Bad values are refused naming the argument.
+    system = presets.mas10_tank_system()  # smoothed PWM edges, adaptive Tsit5 with the edge clipping
+
+    def run(t_end=0.2, rtol=1e-6, atol=1e-6, dt0=None):
+        ts = np.linspace(0.0, t_end, 11)
+        return pamjax.simulate(system, pamjax.Constant(0.5), ts, rtol=rtol, atol=atol, dt0=dt0).pressure
+
+    first, first_dt0 = run(), run(dt0=1e-4)
+    with pamjax.CompileStats() as stats:
+        longer, tighter, other_dt0 = run(t_end=0.3), run(rtol=1e-8, atol=1e-7), run(dt0=3e-4)
+    assert stats.count["compile"] == 0 and stats.count["trace"] == 0, stats.summary()
+    assert np.all(np.isfinite(np.stack([first, first_dt0, longer, tighter, other_dt0])))
+    for same_run in (tighter, first_dt0, other_dt0):  # other tolerances or first steps: the same solution
+        np.testing.assert_allclose(same_run, first, rtol=1e-4)
+    assert longer[-1] > first[-1]  # the tank fills further over the longer horizon
+    for name, bad in (("rtol", 0.0), ("atol", -1e-6), ("dt0", float("nan")), ("rtol", "1e-6")):
+        with pytest.raises(pamjax.PamjaxInputError, match=f"{name} must be a finite number > 0"):
+            pamjax.simulate(system, pamjax.Constant(0.5), np.linspace(0.0, 0.2, 11), **{name: bad})

@@ -329,6 +329,10 @@ def simulate(
     An `OnOffValve(mode="exact")` has its switching times handed to the solver (step-size clipping at jump times).
     """
     validate(system, signal, ts, y0, t0)
+    # Tolerances and the first step as arrays: arguments of the compiled solve, not constants baked into it (another
+    # rtol does not compile again).
+    rtol, atol = _positive(rtol, "rtol"), _positive(atol, "atol")
+    dt0 = None if dt0 is None else _positive(dt0, "dt0")
     ts = jnp.asarray(ts, dtype=float)
     # concrete ts[0] and ts[-1] are read on the host (indexing a device array compiles a one-operation program)
     host = None if _is_traced(ts) else np.asarray(ts)
@@ -345,8 +349,10 @@ def simulate(
         system, jump_ts = _scheduled(system, signal, t0, t_end)
     elif system.valve.smooth_edges and not _is_traced((ts, t0, system.valve.pwm_frequency)):
         # step boundaries around every smoothed edge (the frequency, not the valve's `period`: 1/f run eagerly
-        # would compile a one-operation program)
-        periods = _sync.num_periods(system.valve, t0, t_end)
+        # would compile a one-operation program). An adaptive solve only asks whether num_periods is given, and it
+        # is a static argument: one value for every horizon, so that another horizon does not compile again.
+        _sync.num_periods(system.valve, t0, t_end)  # checks the horizon's PWM period count
+        periods = _EDGE_CLIP
     traced = _is_traced((system, signal, ts, y0, t0))
     if solver is None and stepping == "adaptive":
         solver = default_solver(system)
@@ -358,6 +364,19 @@ def simulate(
     if throw and not traced:
         _raise_on_failure(traj, system, signal, ts, t0, y0, stepping, substeps, grid_step, max_steps, solver)
     return traj
+
+
+_EDGE_CLIP = 1  # `num_periods` of an adaptive solve with smoothed edges: edge clipping on (its value is not used)
+
+
+def _positive(value, name):
+    """A tolerance or step [s] checked finite and > 0 (when concrete), as a float64 array."""
+    if not _is_traced(value):
+        v = np.asarray(value, dtype=float) if isinstance(value, (int, float, np.ndarray, jax.Array)) else None
+        if v is None or v.ndim != 0 or not np.isfinite(v) or v <= 0:
+            raise PamjaxInputError(f"{name} must be a finite number > 0, got {value!r}")
+        return device_array(v)
+    return value
 
 
 def _fixed_grid_periods(system, stepping, substeps, grid_step, t0, t_end):
