@@ -165,6 +165,6 @@ def test_another_horizon_tolerance_or_first_step_does_not_compile_again():
     for same_run in (tighter, first_dt0, other_dt0):  # other tolerances or first steps: the same solution
         np.testing.assert_allclose(same_run, first, rtol=1e-4)
     assert longer[-1] > first[-1]  # the tank fills further over the longer horizon
-    for name, bad in (("rtol", 0.0), ("atol", -1e-6), ("dt0", float("nan")), ("rtol", "1e-6")):
+    for name, bad in (("rtol", 0.0), ("atol", -1e-6), ("dt0", float("nan")), ("rtol", "1e-6"), ("atol", True)):
         with pytest.raises(pamjax.PamjaxInputError, match=f"{name} must be a finite number > 0"):
             pamjax.simulate(system, pamjax.Constant(0.5), np.linspace(0.0, 0.2, 11), **{name: bad})

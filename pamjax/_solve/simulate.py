@@ -302,7 +302,9 @@ def simulate(
       for a continuous valve (averaged, regulator), whose plant is stiff while the payload sticks under the smooth
       Coulomb sign; `diffrax.Tsit5()` for a switching valve, whose smoothed edges bound the step whatever the
       solver. `rtol`, `atol`: tolerances of the PID step-size controller, `atol` in scaled state units (pressure
-      per 1e5 Pa, position per 1e-2 m, velocity per 1e-2 m/s).
+      per 1e5 Pa, position per 1e-2 m, velocity per 1e-2 m/s); finite and > 0. They, `dt0` and an adaptive
+      solve's horizon are arguments of its compiled program: another value does not compile again (a fixed grid's
+      number of steps is its program's shape).
     - `max_steps`: the solve fails beyond this many steps; default (`_solve_hints.default_max_steps`): 200,000, or
       more for long runs (64 per PWM period of a switching valve, 1,000 per second otherwise). `dt0`: initial step
       (default: automatic).
@@ -351,7 +353,6 @@ def simulate(
         # step boundaries around every smoothed edge (the frequency, not the valve's `period`: 1/f run eagerly
         # would compile a one-operation program). An adaptive solve only asks whether num_periods is given, and it
         # is a static argument: one value for every horizon, so that another horizon does not compile again.
-        _sync.num_periods(system.valve, t0, t_end)  # checks the horizon's PWM period count
         periods = _EDGE_CLIP
     traced = _is_traced((system, signal, ts, y0, t0))
     if solver is None and stepping == "adaptive":
@@ -372,7 +373,8 @@ _EDGE_CLIP = 1  # `num_periods` of an adaptive solve with smoothed edges: edge c
 def _positive(value, name):
     """A tolerance or step [s] checked finite and > 0 (when concrete), as a float64 array."""
     if not _is_traced(value):
-        v = np.asarray(value, dtype=float) if isinstance(value, (int, float, np.ndarray, jax.Array)) else None
+        number = isinstance(value, (int, float, np.ndarray, jax.Array)) and not isinstance(value, bool)
+        v = np.asarray(value, dtype=float) if number else None
         if v is None or v.ndim != 0 or not np.isfinite(v) or v <= 0:
             raise PamjaxInputError(f"{name} must be a finite number > 0, got {value!r}")
         return device_array(v)

@@ -68,6 +68,9 @@ CORE_CASES = {
     "NaN in ts": (_sim(ts=jnp.array([0.0, np.nan, 0.2])), "ts"),
     "2-D ts": (_sim(ts=jnp.zeros((2, 2))), "ts"),
     "t0 after ts[0]": (_sim(t0=0.5), "t0"),
+    "zero rtol": (_sim(rtol=0.0), "rtol"),
+    "negative atol": (_sim(atol=-1e-6), "atol"),
+    "NaN first step": (_sim(dt0=np.nan), "dt0"),
     "negative absolute pressure in y0": (
         _sim(y0=pamjax.MuscleState(jnp.asarray(-1e5), jnp.asarray(0.0), jnp.asarray(0.0))),
         "y0.pressure",
