@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..._core.arrays import device_array
 from ..._core.errors import PamjaxInputError, check_finite
 from ..._core.fitting import labelled
 from ..gas import Air
@@ -80,12 +81,14 @@ def fit_averaged_valve(valve: AbstractSwitchingValve, air: Air, commands=None, p
     With `pin_endpoints` (default) the fit is constrained to zero flow where the physical valve has none: duty 0 at
     atmospheric pressure and duty 1 at supply pressure. Without it the unconstrained biquadratic charges a tank
     above the supply pressure at high duty (and below atmosphere at low duty)."""
-    commands = jnp.linspace(0.0, 1.0, 41) if commands is None else jnp.asarray(commands)
+    # a user's grid (NumPy or a list) and the fitted coefficients are put on the device without compiling
+    # (`device_array`; `jnp.asarray` of a NumPy array compiles a small program per shape)
+    commands = jnp.linspace(0.0, 1.0, 41) if commands is None else device_array(commands)
     if pressures is None:
         pressures = jnp.linspace(air.atmospheric_pressure, valve.supply_pressure, 41)
     coef, max_error, rmse, span = (np.asarray(x) for x in
-                                   _fit_coefficients(valve, air, commands, jnp.asarray(pressures), pin_endpoints))
-    fitted = AveragedValve(jnp.asarray(coef))
+                                   _fit_coefficients(valve, air, commands, device_array(pressures), pin_endpoints))
+    fitted = AveragedValve(device_array(coef))
     report = dict(
         max_error=float(max_error),
         rmse=float(rmse),
