@@ -18,7 +18,8 @@ SCRIPT = textwrap.dedent("""
     from pamjax._cli.main import main
     with pamjax.CompileStats() as stats:
         status = main(sys.argv[1:])
-    print(json.dumps(dict(status=status, requests=stats.requests, hits=stats.hits, traced=stats.count["trace"])))
+    print(json.dumps(dict(status=status, requests=stats.requests, hits=stats.hits, traced=stats.count["trace"],
+                          compiled=stats.count["compile"])))
 """)
 
 
@@ -78,6 +79,77 @@ def test_second_run_compiles_nothing_new(tmp_path):
     assert third["status"] == 0 and third["hits"] == third["requests"] and "compiling" not in text
     c = json.loads((tmp_path / "c" / "fit.json").read_text())
     assert c["values"] == a["values"] and c["cost"] == a["cost"]
+
+
+SIMULATE = """
+[model]
+preset = "mas10_system"
+options = { valve = "pwm" }
+[input]
+signal = { kind = "Triangle", low = 0.05, high = 0.95, frequency = 1.0 }
+[simulate]
+t_end = 0.5
+dt = 0.01
+"""
+SWEEP = """
+kind = "steady_state"
+[system]
+valve = "pwm"
+[sweep]
+commands = { start = 0.2, stop = 0.8, num = 3 }
+horizon = 0.3
+window = 0.1
+"""
+
+
+@pytest.mark.parametrize("command, config, output", [("simulate", SIMULATE, "trajectory.csv"),
+                                                     ("sweep", SWEEP, "sweep.csv")])
+def test_second_simulate_or_sweep_compiles_nothing_new(tmp_path, command, config, output):
+    """A `simulate` solve holds diffrax's run-time checks; traced as host callbacks they kept its program out of JAX's
+    persistent cache, so every `pamjax simulate` or `pamjax demo` compiled it again (the simulate case fails on that
+    code). The second run reads every program from the cache, says nothing about compiling, and writes the same
+    numbers; a sweep (lanes with status codes, no callbacks) likewise."""
+    (tmp_path / "run.toml").write_text(config)
+    cache = tmp_path / "cache"
+    env = dict(os.environ, PAMJAX_CACHE_DIR=str(cache), PAMJAX_CACHE_MIN_COMPILE_SECONDS="0")
+    runs = []
+    for out in ("a", "b"):
+        proc = subprocess.run([sys.executable, "-c", SCRIPT, command, str(tmp_path / "run.toml"), "--out",
+                               str(tmp_path / out), "--no-plot"], env=env, capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        runs.append((proc.stdout, json.loads(proc.stdout.strip().splitlines()[-1])))
+    (_, first), (text, second) = runs
+    assert first["status"] == 0 and first["requests"] > 0 and first["hits"] < first["requests"]
+    assert second["status"] == 0
+    # every program from the cache (a program JAX will not cache is compiled without asking it: counted apart)
+    assert second["requests"] > 0 and second["hits"] == second["requests"] == second["compiled"], second
+    assert "compiling" not in text
+    assert (tmp_path / "a" / output).read_bytes() == (tmp_path / "b" / output).read_bytes()
+
+
+def test_announcement_comes_with_compilation_only(monkeypatch):
+    """`announce_compilation` (every command but fit): "compiling …" once JAX compiles and the work is still busy
+    after `after` seconds, then the time it took; nothing for busy work that compiles nothing."""
+    import io
+    import time
+
+    import jax
+    import jax.numpy as jnp
+
+    from pamjax._core import cache as _cache
+
+    monkeypatch.setattr(_cache.announce_compilation, "_cache_is_empty", classmethod(lambda cls: True))
+    quiet = io.StringIO()
+    with _cache.announce_compilation("idle", after=0.05, stream=quiet):
+        time.sleep(0.4)  # busy, no JAX
+    assert quiet.getvalue() == ""
+    said = io.StringIO()
+    with _cache.announce_compilation("work", after=0.05, stream=said):
+        offset = time.time()  # a function JAX has not seen: traced and compiled here
+        jax.block_until_ready(jax.jit(lambda x: jnp.sin(x) * offset + jnp.cumsum(x))(jnp.arange(5.0)))
+        time.sleep(0.4)
+    lines = said.getvalue().splitlines()
+    assert len(lines) == 2 and lines[0].startswith("work: compiling … (") and lines[1].startswith("work: compiled in")
 
 
 @pytest.mark.parametrize("how", ["env", "flag"])

@@ -77,15 +77,18 @@ _PHASES = {  # jax.monitoring duration events → phase
 class CompileStats:
     """What JAX compiles while active (a context manager): per phase ("trace": Python to jaxpr, "lower": jaxpr to
     StableHLO, "compile": XLA, or a persistent-cache read) the number of programs and the seconds, and of the
-    persistent cache's `requests` its `hits` (`misses` = programs compiled anew). From `jax.monitoring`'s events;
-    listeners cannot be removed, so an inactive one ignores events."""
+    persistent cache's `requests` its `hits` (`misses` = programs compiled anew); `longest_anew_s`: the longest
+    compilation that was not a persistent-cache read. From `jax.monitoring`'s events; listeners cannot be removed,
+    so an inactive one ignores events."""
 
     def __init__(self):
         self.count = dict.fromkeys(_PHASES.values(), 0)
         self.seconds = dict.fromkeys(_PHASES.values(), 0.0)
         self.requests = 0
         self.hits = 0
+        self.longest_anew_s = 0.0
         self._active = False
+        self._hit = threading.local()  # a cache hit is recorded inside its program's compile event, in its thread
 
     def _event(self, event, **kwargs):
         if not self._active:
@@ -94,12 +97,18 @@ class CompileStats:
             self.requests += 1
         elif event == "/jax/compilation_cache/cache_hits":
             self.hits += 1
+            self._hit.pending = True
 
     def _duration(self, event, seconds, **kwargs):
         phase = _PHASES.get(event)
         if self._active and phase is not None:
             self.count[phase] += 1
             self.seconds[phase] += float(seconds)
+            if phase == "compile":
+                if getattr(self._hit, "pending", False):
+                    self._hit.pending = False
+                else:
+                    self.longest_anew_s = max(self.longest_anew_s, float(seconds))
 
     @property
     def misses(self):
@@ -347,9 +356,15 @@ def program_cache():
 
 
 class announce_compilation:  # noqa: N801 - used as a context manager, like contextlib's
-    """Say when a piece of work is compiling (a context manager for the CLI's commands): if it is still busy after
-    `after` seconds and JAX has compiled or is tracing something, one line "LABEL: compiling … (first run; cached
-    afterwards)"; at the end, when compilation took more than `after` seconds, "LABEL: compiled in N s"."""
+    """Say when a piece of work is compiling (a context manager for the CLI's commands): once it has been busy for
+    `after` seconds, one line "LABEL: compiling … (first run; cached afterwards)" as soon as JAX is compiling: with
+    the persistent cache empty (or off), as soon as JAX has done any work; with programs in it, once a program that
+    the cache would keep (≥ `MIN_COMPILE_SECONDS`) was compiled anew instead of read. Never for a run whose programs
+    all come from the cache, nor for work that does not involve JAX. At the end, when tracing, lowering and
+    compilation took more than `after` seconds (or were announced), "LABEL: compiled in N s" with what was traced,
+    lowered, compiled and read from the cache."""
+
+    POLL_S = 0.25  # how often the condition is checked once `after` has passed
 
     def __init__(self, label, after=2.0, stream=None):
         self.label, self.after = label, after
@@ -357,20 +372,51 @@ class announce_compilation:  # noqa: N801 - used as a context manager, like cont
         self.stats = CompileStats()
         self._said = False
 
-    def _say_compiling(self):
-        cached = "cached afterwards" if not cache_disabled() else "not cached: PAMJAX_COMPILATION_CACHE=0"
-        print(f"{self.label}: compiling … (first run; {cached})", file=self.stream, flush=True)
-        self._said = True
+    @staticmethod
+    def _cache_directory():
+        """JAX's persistent cache directory, None when it is off (`PAMJAX_COMPILATION_CACHE=0`, `--no-cache`)."""
+        import jax
+
+        directory = jax.config.jax_compilation_cache_dir
+        return None if cache_disabled() or not directory else pathlib.Path(directory)
+
+    @classmethod
+    def _cache_is_empty(cls):
+        """Whether JAX's persistent cache is off or holds no program yet (its directory has no file of its own)."""
+        directory = cls._cache_directory()
+        try:
+            return directory is None or not any(p.is_file() for p in directory.iterdir())
+        except OSError:
+            return True
+
+    def compiling(self):
+        """Whether JAX is compiling anew (rather than reading its persistent cache, or not working at all)."""
+        if self._first_run:
+            return any(self.stats.count.values())
+        return self.stats.longest_anew_s >= MIN_COMPILE_SECONDS
+
+    def _watch(self):
+        if self._done.wait(self.after):
+            return
+        while not self._done.is_set():
+            if self.compiling():
+                why = "first run; cached afterwards" if self._cache_directory() is not None else "the cache is off"
+                print(f"{self.label}: compiling … ({why})", file=self.stream, flush=True)
+                self._said = True
+                return
+            self._done.wait(self.POLL_S)
 
     def __enter__(self):
+        self._first_run = self._cache_is_empty()
         self.stats.__enter__()
-        self._timer = threading.Timer(self.after, self._say_compiling)
-        self._timer.daemon = True
-        self._timer.start()
+        self._done = threading.Event()
+        self._watcher = threading.Thread(target=self._watch, daemon=True)
+        self._watcher.start()
         return self
 
     def __exit__(self, *exc):
-        self._timer.cancel()
+        self._done.set()
+        self._watcher.join()
         self.stats.__exit__(*exc)
         seconds = sum(self.stats.seconds.values())
         if exc[0] is None and (self._said or seconds > self.after):

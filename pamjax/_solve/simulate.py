@@ -1,5 +1,7 @@
 """`simulate`: one jitted, differentiable diffrax solve of a system driven by a command signal."""
 
+import contextlib
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -8,7 +10,7 @@ import numpy as np
 
 from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError, PamjaxSolveError, check_time_grid, require_float64
-from .._core.private import diffrax_result_code
+from .._core.private import diffrax_result_code, equinox_errors_as_nan
 from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractSystem
@@ -359,9 +361,13 @@ def simulate(
         solver = default_solver(system)
     if max_steps is None:  # a budget that grows with the horizon (a 1,000 s PWM run needs ~1.6 M steps)
         max_steps = 200_000 if _is_traced((ts, t0)) else default_max_steps(system, float(t0), t_end)
-    traj = _solve_jit(system, signal, ts, y0, t0, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps, dt0=dt0,
-                      adjoint=adjoint, jump_ts=jump_ts, throw=throw and traced, stepping=stepping, substeps=substeps,
-                      num_periods=periods, grid_step=grid_step)
+    # A concrete call checks the result on the host (below), so its program is traced with equinox's run-time
+    # checks (diffrax's, on the save times) as NaN rather than as host callbacks: JAX does not keep a program with a
+    # host callback in its persistent cache, and a second run would compile the solve again.
+    with contextlib.nullcontext() if traced else equinox_errors_as_nan():
+        traj = _solve_jit(system, signal, ts, y0, t0, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps,
+                          dt0=dt0, adjoint=adjoint, jump_ts=jump_ts, throw=throw and traced, stepping=stepping,
+                          substeps=substeps, num_periods=periods, grid_step=grid_step)
     if throw and not traced:
         _raise_on_failure(traj, system, signal, ts, t0, y0, stepping, substeps, grid_step, max_steps, solver)
     return traj
