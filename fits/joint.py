@@ -1,6 +1,6 @@
 """Joint identification of paper 000's MAS-10 plant from a bench directory, starting from the datasheet presets.
 
-    python fits/joint.py --data DIR [--out DIR] [--rate HZ] [--max-steps N] [--overwrite]
+    python fits/joint.py --data DIR [--out DIR] [--rate HZ] [--max-steps N] [--overwrite] [--no-cache]
 
 DIR holds one `.npz` recording per experiment and a `meta.json` describing them (the layout of
 `shared/data/hybrid-reference-bench/`; default: that directory). The model is `pamjax.presets.mas10_system` with
@@ -14,6 +14,9 @@ Writes `OUT/joint.json`: `params` and `std_err` by the bench's names (SI units),
 (every experiment's 1 kHz residual RMSE of `p` [Pa] and `x` [m]), the noise levels, the residual diagnostics and,
 when the bench lists its true parameters, `score` (relative errors, F_max over the recorded stroke); and
 `OUT/joint.png`, data against model with residuals. A second run refuses to replace them without `--overwrite`.
+The compiled programs stay in the `pamjax` command's cache directory (`PAMJAX_CACHE_DIR`; off with `--no-cache` or
+`PAMJAX_COMPILATION_CACHE=0`), so a second run, on these recordings or another plant's of the same layout, loads
+them instead of compiling (same experiments and lengths: the same programs).
 """
 
 import argparse
@@ -44,6 +47,9 @@ def parse_args(argv=None):
                     help="fit all parameters jointly from the presets at once (no staged start: pamjax.staged_start)")
     ap.add_argument("--multistart", type=int, default=1,
                     help="fit from this many starts (the presets and draws around them) and keep the best")
+    ap.add_argument("--no-cache", action="store_true",
+                    help="compile everything anew, keep nothing (default: the persistent compilation cache, as the "
+                         "pamjax command's: a second run loads the compiled programs; PAMJAX_COMPILATION_CACHE=0 too)")
     return ap.parse_args(argv)
 
 
@@ -78,6 +84,8 @@ def main(argv=None):
     if existing and not args.overwrite:
         sys.exit(f"joint.py: {', '.join(existing)} exist; pass --overwrite to replace them (or another --out)")
     out.mkdir(parents=True, exist_ok=True)
+    if not args.no_cache:  # a second run (another start, more steps, the next plant) compiles nothing again
+        pj.enable_compilation_cache()
 
     model = pj.presets.mas10_system(valve="pwm", friction="karnopp")  # datasheet / paper values
     bench = pj.load_bench(data, model, rate=args.rate)

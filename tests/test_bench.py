@@ -77,7 +77,9 @@ def test_joint_script_fits_a_bench_directory_from_the_presets(bench, tmp_path):
     joint = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(joint)
     out = tmp_path / "out"
-    joint.main(["--data", str(folder), "--out", str(out), "--quiet", "--max-steps", "60"])
+    # --no-cache: the script would turn the persistent cache on in PAMJAX_CACHE_DIR (the session's, when the tests
+    # have one: tests/conftest.py, whose cache this run still uses), else in the user's cache directory
+    joint.main(["--data", str(folder), "--out", str(out), "--quiet", "--max-steps", "60", "--no-cache"])
     result = json.loads((out / "joint.json").read_text())
     assert (out / "joint.png").exists()
     assert result["status"] == "converged", result["message"]
