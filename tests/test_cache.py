@@ -150,6 +150,14 @@ def test_announcement_comes_with_compilation_only(monkeypatch):
         time.sleep(0.4)
     lines = said.getvalue().splitlines()
     assert len(lines) == 2 and lines[0].startswith("work: compiling … (") and lines[1].startswith("work: compiled in")
+    # with programs in the cache and nothing compiled anew (traced, then read): no "compiling", the time it took
+    monkeypatch.setattr(_cache.announce_compilation, "_cache_is_empty", classmethod(lambda cls: False))
+    served = io.StringIO()
+    with _cache.announce_compilation("warm", after=0.05, stream=served) as announce:
+        announce.stats.count["trace"] += 1  # as the listeners record a trace and a cache read
+        announce.stats.seconds["trace"] += 0.5
+        time.sleep(0.4)
+    assert served.getvalue().startswith("warm: traced its programs and read them from the cache in 0.5 s")
 
 
 @pytest.mark.parametrize("how", ["env", "flag"])

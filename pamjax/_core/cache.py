@@ -361,8 +361,9 @@ class announce_compilation:  # noqa: N801 - used as a context manager, like cont
     the persistent cache empty (or off), as soon as JAX has done any work; with programs in it, once a program that
     the cache would keep (≥ `MIN_COMPILE_SECONDS`) was compiled anew instead of read. Never for a run whose programs
     all come from the cache, nor for work that does not involve JAX. At the end, when tracing, lowering and
-    compilation took more than `after` seconds (or were announced), "LABEL: compiled in N s" with what was traced,
-    lowered, compiled and read from the cache."""
+    compilation took more than `after` seconds (or were announced), "LABEL: compiled in N s" (or, when every
+    program came from the cache, "LABEL: traced its programs and read them from the cache in N s") with what
+    was traced, lowered, compiled and read from the cache."""
 
     POLL_S = 0.25  # how often the condition is checked once `after` has passed
 
@@ -420,6 +421,7 @@ class announce_compilation:  # noqa: N801 - used as a context manager, like cont
         self.stats.__exit__(*exc)
         seconds = sum(self.stats.seconds.values())
         if exc[0] is None and (self._said or seconds > self.after):
-            print(f"{self.label}: compiled in {seconds:.1f} s ({self.stats.summary()})", file=self.stream,
-                  flush=True)
+            done = ("compiled in" if self._said or self._first_run or self.compiling()
+                    else "traced its programs and read them from the cache in")
+            print(f"{self.label}: {done} {seconds:.1f} s ({self.stats.summary()})", file=self.stream, flush=True)
         return False
