@@ -138,7 +138,7 @@ def test_announcement_comes_with_compilation_only(monkeypatch):
 
     from pamjax._core import cache as _cache
 
-    monkeypatch.setattr(_cache.announce_compilation, "_cache_is_empty", classmethod(lambda cls: True))
+    monkeypatch.setattr(_cache.announce_compilation, "_cache_is_empty", staticmethod(lambda directory: True))
     quiet = io.StringIO()
     with _cache.announce_compilation("idle", after=0.05, stream=quiet):
         time.sleep(0.4)  # busy, no JAX
@@ -151,7 +151,7 @@ def test_announcement_comes_with_compilation_only(monkeypatch):
     lines = said.getvalue().splitlines()
     assert len(lines) == 2 and lines[0].startswith("work: compiling … (") and lines[1].startswith("work: compiled in")
     # with programs in the cache and nothing compiled anew (traced, then read): no "compiling", the time it took
-    monkeypatch.setattr(_cache.announce_compilation, "_cache_is_empty", classmethod(lambda cls: False))
+    monkeypatch.setattr(_cache.announce_compilation, "_cache_is_empty", staticmethod(lambda directory: False))
     served = io.StringIO()
     with _cache.announce_compilation("warm", after=0.05, stream=served) as announce:
         announce.stats.count["trace"] += 1  # as the listeners record a trace and a cache read

@@ -381,10 +381,9 @@ class announce_compilation:  # noqa: N801 - used as a context manager, like cont
         directory = jax.config.jax_compilation_cache_dir
         return None if cache_disabled() or not directory else pathlib.Path(directory)
 
-    @classmethod
-    def _cache_is_empty(cls):
-        """Whether JAX's persistent cache is off or holds no program yet (its directory has no file of its own)."""
-        directory = cls._cache_directory()
+    @staticmethod
+    def _cache_is_empty(directory):
+        """Whether the persistent cache is off (`directory` None) or holds no program yet (no file of its own)."""
         try:
             return directory is None or not any(p.is_file() for p in directory.iterdir())
         except OSError:
@@ -401,14 +400,15 @@ class announce_compilation:  # noqa: N801 - used as a context manager, like cont
             return
         while not self._done.is_set():
             if self.compiling():
-                why = "first run; cached afterwards" if self._cache_directory() is not None else "the cache is off"
+                why = "first run; cached afterwards" if self._directory is not None else "the cache is off"
                 print(f"{self.label}: compiling … ({why})", file=self.stream, flush=True)
                 self._said = True
                 return
             self._done.wait(self.POLL_S)
 
     def __enter__(self):
-        self._first_run = self._cache_is_empty()
+        self._directory = self._cache_directory()
+        self._first_run = self._cache_is_empty(self._directory)
         self.stats.__enter__()
         self._done = threading.Event()
         self._watcher = threading.Thread(target=self._watch, daemon=True)
