@@ -76,9 +76,14 @@ def _locate(event, system, seg):
     def g(s):
         return event(system, ta + s * h, _hermite(s, h, za, zb, fa, fb))
 
-    value, slope = jax.jvp(g, (s,), (jnp.ones_like(s),))
-    slope_ok = jnp.abs(jax.lax.stop_gradient(slope)) > 0
-    # One Newton step from the bracketed root: its value moves by ~2^-40, its derivative is −g_θ/g_s.
+    # One Newton step from the bracketed root: its value moves by ~2^-40, its derivative is −g_θ/g_s (the implicit
+    # function theorem). Only g's value carries derivatives; its slope g_s comes from the frozen interpolant (the
+    # term it drops, g ∂g_s/∂θ / g_s², vanishes with g at the root: |g| ≤ 2^-41 |g_s| after the bisection), so a
+    # forward-mode Jacobian carries first derivatives here, not the second derivatives of the event function and the
+    # interpolant (13 % of the example fit's Jacobian program, ~0.7 CPU-s of its compilation; docs/performance.md).
+    value = g(s)
+    _, slope = jax.jvp(g_frozen, (s,), (jnp.ones_like(s),))
+    slope_ok = jnp.abs(slope) > 0
     s_new = s - jnp.where(slope_ok, value / jnp.where(slope_ok, slope, 1.0), 0.0)
     s_new = jnp.clip(s_new, 0.0, 1.0)
     return ta + s_new * h, _hermite(s_new, h, za, zb, fa, fb)
