@@ -113,12 +113,12 @@ def integrate(systems, field, event, update, z0s, left, right, aux, member, offs
         return eqx.combine(jax.tree_util.tree_map(lambda a: a[m], arrays), static)
 
     if hybrid:  # a start state outside its mode (e.g. stuck under a net force beyond F_c) switches at once
-        fixed = []
-        for k in range(z0s.shape[0]):
-            sys_k = system_of(k)
-            z = z0s[k]
-            fixed.append(jnp.where(event(sys_k, 0.0, z) < 0, update(sys_k, 0.0, z), z))
-        z0s = jnp.stack(fixed)
+
+        def switched(run_arrays, z):  # one run's; mapped over the runs (one trace, not one per run)
+            sys_k = eqx.combine(run_arrays, static)
+            return jnp.where(event(sys_k, 0.0, z) < 0, update(sys_k, 0.0, z), z)
+
+        z0s = jax.vmap(switched)(arrays, z0s)
     first = jnp.concatenate([jnp.ones((1,), bool), member[1:] != member[:-1]])
 
     def interval(carry, xs):
