@@ -92,17 +92,14 @@ class _Problem:
         r, j = self._call("jacobian", _residuals_and_jacobian, theta, ready)
         return np.asarray(r)[self.mask], np.asarray(j)[self.mask]
 
-    def _side(self, theta):
-        self.all_residuals(theta)
-        _physical_and_jacobian(self.space, device_array(theta))  # compiled now for the statistics at the end
-
     def start(self, theta):
         """The start point's residuals and Jacobian. The residual function (for trial steps) is compiled at the
         same time in a second thread, on the second core when there is one, started once the Jacobian's Python
         work (tracing) is done, so as not to slow it; `compile_seconds` is then the wall time until both are ready,
-        less one evaluation of each."""
+        less one evaluation of each. The statistics' parameter transform (a small program) is compiled here once
+        the Jacobian is, while the residual function may still be compiling."""
         t0 = time.perf_counter()
-        side = threading.Thread(target=self._side, args=(theta,), daemon=True)
+        side = threading.Thread(target=self.all_residuals, args=(theta,), daemon=True)
 
         def ready():
             if side.ident is None:
@@ -110,6 +107,7 @@ class _Problem:
 
         out = self.jacobian(theta, ready)  # an error or Ctrl-C here leaves the (daemon) side thread unwaited for
         ready()
+        _physical_and_jacobian(self.space, device_array(theta))  # compiled now for the statistics at the end
         side.join()
         self.ready_s = time.perf_counter() - t0
         return out
