@@ -34,8 +34,9 @@ _BISECTIONS = 40  # halvings of the step to bracket an event (2^-40 of a ~1 ms s
 
 def _hermite(s, h, za, zb, fa, fb):
     """Cubic Hermite interpolant at s ∈ [0, 1] of a step of length h from (za, fa) to (zb, fb), in Horner form:
-    za + s (h fa + s (3d − h(2fa + fb) + s (h(fa + fb) − 2d))), d = zb − za (the basis-function form costs half as
-    many operations again, and a forward-mode Jacobian carries each of them per parameter)."""
+    za + s (h fa + s (3d − h(2fa + fb) + s (h(fa + fb) − 2d))), d = zb − za: the same polynomial as the basis-function
+    form h00 za + h10 h fa + h01 zb + h11 h fb in two thirds of its operations, each of which a forward-mode Jacobian
+    repeats per parameter. Exactly za at s = 0; zb at s = 1 up to rounding."""
     d, ha, hb = zb - za, h * fa, h * fb
     return za + s * (ha + s * ((3 * d - 2 * ha - hb) + s * (ha + hb - 2 * d)))
 
