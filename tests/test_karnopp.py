@@ -1,6 +1,6 @@
 """Exact stick-slip friction (`KarnoppFriction`) on the fixed grid with events located inside the step
 (`pamjax._solve.grid`): against an independent event-driven SciPy reference, holding still, gradients through the event
-times against finite differences, and the stepping rules."""
+times against finite differences, the stepping rules, and the steps' Hermite interpolant."""
 
 import equinox as eqx
 import jax
@@ -143,3 +143,23 @@ def test_vmap_over_parameters_equals_one_by_one():
     batch = jax.jit(jax.vmap(run))(forces)
     for k in range(3):
         np.testing.assert_allclose(np.asarray(batch[k]), np.asarray(jax.jit(run)(forces[k])), rtol=0, atol=1e-12)
+
+
+def test_step_interpolant_is_the_cubic_hermite():
+    # The grid's dense output and event location use the cubic Hermite of each step (Horner form): against the
+    # textbook basis-function form in NumPy, and its end values and end slopes (dz/ds = h f).
+    from pamjax._solve.grid import _hermite
+
+    rng = np.random.default_rng(7)
+    za, zb, fa, fb = rng.normal(size=(4, 3))
+    h = 1e-3
+    s = np.linspace(0.0, 1.0, 11)[:, None]
+    basis = ((2 * s**3 - 3 * s**2 + 1) * za + (s**3 - 2 * s**2 + s) * h * fa + (-2 * s**3 + 3 * s**2) * zb
+             + (s**3 - s**2) * h * fb)
+    interp = jax.jit(_hermite)
+    np.testing.assert_allclose(np.asarray(interp(s, h, za, zb, fa, fb)), basis, rtol=1e-13, atol=1e-15)
+    assert np.array_equal(np.asarray(interp(0.0, h, za, zb, fa, fb)), za)
+    np.testing.assert_allclose(np.asarray(interp(1.0, h, za, zb, fa, fb)), zb, rtol=1e-14, atol=1e-15)
+    for end, slope in ((0.0, fa), (1.0, fb)):
+        _, ds = jax.jvp(lambda q: _hermite(q, h, za, zb, fa, fb), (jnp.asarray(end),), (jnp.ones(()),))
+        np.testing.assert_allclose(np.asarray(ds), h * slope, rtol=1e-12, atol=1e-15)
