@@ -163,3 +163,25 @@ def test_step_interpolant_is_the_cubic_hermite():
     for end, slope in ((0.0, fa), (1.0, fb)):
         _, ds = jax.jvp(lambda q: _hermite(q, h, za, zb, fa, fb), (jnp.asarray(end),), (jnp.ones(()),))
         np.testing.assert_allclose(np.asarray(ds), h * slope, rtol=1e-12, atol=1e-15)
+
+
+def test_runs_in_one_loop_switch_their_start_modes_each_on_its_own():
+    # A fit integrates experiments of one structure as runs of one loop; a start outside its mode is switched per
+    # run before it (mapped over the runs). Two runs, stuck at the preset's rest and stuck 2 mm below it (the net
+    # force exceeds F_c: it slides at once), each equal to its own single-run solve.
+    from pamjax._solve import synchronous
+    from pamjax._solve.scaled import scaled
+    from pamjax._solve.simulate import _DEFAULT_SUBSTEPS, fixed_grid_size
+
+    x0 = float(MODEL.initial_state().position)
+    starts = [MODEL.initial_state(), eqx.tree_at(lambda s: s.position, MODEL.initial_state(), x0 + 2e-3)]
+    starts = [jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf, dtype=float), y0) for y0 in starts]
+    flats = [scaled(MODEL, y0) for y0 in starts]
+    size = fixed_grid_size(MODEL, "pwm", 0.0, float(HOLD_TS[-1]))
+    runs = synchronous.solve_runs([MODEL, MODEL], [pj.Constant(0.05)] * 2, [HOLD_TS] * 2, [f[0] for f in flats],
+                                  flats[0][1], [0.0, 0.0], stepping="pwm", substeps=_DEFAULT_SUBSTEPS,
+                                  sizes=[size, size])
+    held, slid = (np.asarray(states.position) for states, _, _ in runs)
+    np.testing.assert_allclose(held, np.asarray(_from_rest(starts[0]).position), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(slid, np.asarray(_from_rest(starts[1]).position), rtol=0, atol=1e-12)
+    assert np.ptp(held) < 1e-9 and slid[1] < x0 + 2e-3 - 1e-5  # one holds still, the other slides from the start
