@@ -368,6 +368,30 @@ def test_an_internal_error_is_one_line_pointing_at_debug(tmp_path, capsys, monke
     assert err.count("\n") == 2
 
 
+def test_the_garbage_collector_is_set_for_the_commands_own_process_only(tmp_path, capsys, no_solves, monkeypatch):
+    # `pamjax ...` as a program freezes what its imports made and collects young objects less often (tracing makes
+    # millions of short-lived objects); `main(argv)` called from a user's program leaves their collector alone.
+    import pamjax._cli.main as cli_main
+
+    calls = []
+
+    class Recorder:
+        def freeze(self):
+            calls.append("freeze")
+
+        def set_threshold(self, *thresholds):
+            calls.append(thresholds)
+
+    monkeypatch.setattr(cli_main, "gc", Recorder())
+    config = _write(tmp_path, "[fit\n")
+    assert main(["fit", str(config)]) == 2
+    assert calls == []
+    monkeypatch.setattr(cli_main.sys, "argv", ["pamjax", "fit", str(config)])
+    monkeypatch.setattr(cli_main, "_end_process", lambda status: calls.append(("status", status)))
+    main()
+    assert calls == ["freeze", (50_000, 20, 100), ("status", 2)]
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # sweep end to end (small)
 
