@@ -1,5 +1,6 @@
 """Gas flow laws against independent NumPy transcriptions of paper 000 eq. 10-11 and paper 001 eq. 13-14."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -20,8 +21,19 @@ P_UP = 6.5e5
 RATIOS = np.concatenate([np.linspace(0.0, 1.0, 201), [0.28, 0.49, 0.5328, 0.5283, 0.9985, 0.9995, 0.99999]])
 
 
+# The flow laws, their slope in p2 and the series' inner pressure jitted once per restriction type, the pressures as
+# array arguments: called eagerly, every operation of every evaluation would compile a program of its own.
+@eqx.filter_jit
+def _mass_flow(restriction, p1, p2):
+    return restriction.mass_flow(p1, p2, AIR)
+
+
+_flow_slope_p2 = eqx.filter_jit(jax.grad(lambda p2, restriction, p1: restriction.mass_flow(p1, p2, AIR)))
+_intermediate_pressure = eqx.filter_jit(lambda restriction, p1, p2: restriction.intermediate_pressure(p1, p2, AIR))
+
+
 def _flow(restriction, p1, p2):
-    return float(restriction.mass_flow(jnp.asarray(p1), jnp.asarray(p2), AIR))
+    return float(_mass_flow(restriction, np.asarray(p1, dtype=float), np.asarray(p2, dtype=float)))
 
 
 @pytest.mark.parametrize(
@@ -77,7 +89,7 @@ def test_finite_slope_and_gradient_at_equal_pressures(restriction):
     def f(p1, p2, params):
         return _gas.eqx.combine(params, static).mass_flow(p1, p2, AIR)
 
-    grads = jax.grad(f, argnums=(0, 1, 2))(p, p, params)
+    grads = jax.jit(jax.grad(f, argnums=(0, 1, 2)))(p, p, params)  # one program (eagerly: one per operation)
     leaves = jax.tree_util.tree_leaves(grads)
     assert all(np.all(np.isfinite(g)) for g in leaves)
     d1, d2 = float(grads[0]), float(grads[1])
@@ -92,7 +104,7 @@ def test_finite_slope_and_gradient_at_equal_pressures(restriction):
 def test_gradients_match_finite_differences_across_regimes():
     for r in (0.1, 0.4, 0.8, 0.995, 0.9995):
         for restriction in (INFLATE, ISO, NOZZLE):
-            g = jax.grad(lambda p2: restriction.mass_flow(jnp.asarray(P_UP), p2, AIR))(jnp.asarray(r * P_UP))
+            g = _flow_slope_p2(np.asarray(r * P_UP), restriction, np.asarray(P_UP))
             h = 1e-3
             fd = (_flow(restriction, P_UP, r * P_UP + h) - _flow(restriction, P_UP, r * P_UP - h)) / (2 * h)
             assert float(g) == pytest.approx(fd, rel=1e-5, abs=1e-16)
@@ -114,7 +126,7 @@ def _brute_series(p1, p2, cv=0.39, b=0.49, c=3.0e-9, b2=0.3):
 @pytest.mark.parametrize("p1, p2", [(6e5, P_ATM), (2e5, P_ATM), (1.2e5, P_ATM), (P_ATM, 3e5)])
 def test_series_restriction_equals_brute_force(p1, p2):
     flow, pm = _brute_series(p1, p2)
-    assert float(SERIES.intermediate_pressure(jnp.asarray(p1), jnp.asarray(p2), AIR)) == pytest.approx(pm, rel=1e-9)
+    assert float(_intermediate_pressure(SERIES, jnp.asarray(p1), jnp.asarray(p2))) == pytest.approx(pm, rel=1e-9)
     assert _flow(SERIES, p1, p2) == pytest.approx(flow, rel=1e-9)
     # In series the flow is below each restriction alone.
     assert abs(_flow(SERIES, p1, p2)) < min(abs(_flow(EXHAUST, p1, p2)), abs(_flow(SILENCER, p1, p2)))
@@ -128,7 +140,8 @@ def test_series_restriction_gradients_match_finite_differences_of_brute_force():
         return s.mass_flow(p1, jnp.asarray(p2), AIR)
 
     x = [0.39, 0.49, 3.0e-9, 0.3, p1]
-    grads = jax.grad(f, argnums=tuple(range(5)))(*map(jnp.asarray, x))
+    gradient = jax.jit(jax.grad(f, argnums=tuple(range(5))))  # one program for both points (eagerly: one per operation)
+    grads = gradient(*map(jnp.asarray, x))
     for i, g in enumerate(grads):
         h = 1e-6 * x[i]
         xp, xm = list(x), list(x)
@@ -136,10 +149,10 @@ def test_series_restriction_gradients_match_finite_differences_of_brute_force():
         xm[i] -= h
         fd = (_brute_series(xp[4], p2, *xp[:4])[0] - _brute_series(xm[4], p2, *xm[:4])[0]) / (2 * h)
         assert float(g) == pytest.approx(fd, rel=1e-5), i
-    assert np.all(np.isfinite(jax.grad(f, argnums=4)(*map(jnp.asarray, x[:4] + [P_ATM]))))  # equal pressures
+    assert np.all(np.isfinite(gradient(*map(jnp.asarray, x[:4] + [P_ATM]))[4]))  # equal pressures
 
 
 def test_series_equivalent_is_slower_than_the_valve_alone():
-    cva, b = _gas.series_equivalent(SERIES, AIR)
+    cva, b = eqx.filter_jit(_gas.series_equivalent)(SERIES, AIR)  # one program (eagerly: one per operation)
     assert 0 < float(cva) < 0.39 * 3.14e-6 / np.sqrt(287 * 293)
     assert 0.0 < float(b) < 1.0

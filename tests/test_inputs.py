@@ -1,15 +1,18 @@
 """Input signals: constant, step, triangle (paper 000's 0.05-0.95 duty), sine, sampled (held per PWM period)."""
 
+import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import pamjax
 
+# One program per signal type and number of times (eagerly, each of the signal's operations compiles its own).
+_values = eqx.filter_jit(lambda signal, ts: jax.vmap(signal)(ts))
+
 
 def _eval(signal, ts):
-    return np.asarray(jax.vmap(signal)(jnp.asarray(ts, dtype=float)))
+    return np.asarray(_values(signal, np.asarray(ts, dtype=float)))
 
 
 def test_constant_and_step():

@@ -1,6 +1,7 @@
 """`PIDController`: with no derivative gain and no noise it is `PIController`; its derivative term is K_D (ṙ − ẋ)
 noise-free; its noise is seeded, per period, of the stated size and enters the derivative amplified by 1/T_s."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -13,6 +14,16 @@ from pamjax._systems.muscle import MuscleState
 PERIOD = 0.02  # s, 50 Hz PWM
 
 
+# A controller's update and its noise draws jitted once per controller type (eagerly, each of their operations would
+# compile a program of its own), the time as an array argument.
+@eqx.filter_jit
+def _update(controller, t, reference, plant, state):
+    return controller.update(t, reference, plant, state, PERIOD)
+
+
+_noise = eqx.filter_jit(lambda controller, ts: jax.vmap(lambda t: jnp.stack(controller.noise(t, PERIOD)))(ts))
+
+
 def plant_state(x, v):
     return MuscleState(pressure=jnp.asarray(3e5), position=jnp.asarray(x), velocity=jnp.asarray(v))
 
@@ -22,9 +33,9 @@ def test_without_derivative_and_noise_it_is_the_pi(x, integral):
     """Same duty and integrator as `PIController` in the linear range and in both saturations (anti-windup)."""
     reference = (jnp.asarray(0.03), jnp.asarray(0.01), jnp.asarray(0.0), jnp.asarray(0.0))
     pid = pj.PIDController()
-    duty, state = pid.update(1.0, reference, plant_state(x, 0.004), PIDState(integral=jnp.asarray(integral)), PERIOD)
-    duty_pi, integral_pi = pj.PIController().update(1.0, reference, plant_state(x, 0.004), jnp.asarray(integral),
-                                                    PERIOD)
+    t = np.asarray(1.0)
+    duty, state = _update(pid, t, reference, plant_state(x, 0.004), PIDState(integral=jnp.asarray(integral)))
+    duty_pi, integral_pi = _update(pj.PIController(), t, reference, plant_state(x, 0.004), jnp.asarray(integral))
     assert float(duty) == pytest.approx(float(duty_pi), abs=1e-15)
     assert float(state.integral) == pytest.approx(float(integral_pi), abs=1e-15)
 
@@ -34,21 +45,21 @@ def test_derivative_term_acts_on_the_velocity_error():
     base = pj.PIDController(proportional_gain=0.0, integral_gain=0.0, bias=0.5)
     pid = pj.PIDController(proportional_gain=0.0, integral_gain=0.0, bias=0.5, derivative_gain=4.0)
     state = pid.initial_state()
-    d0, _ = base.update(0.0, reference, plant_state(0.03, 0.004), state, PERIOD)
-    d1, _ = pid.update(0.0, reference, plant_state(0.03, 0.004), state, PERIOD)
-    assert float(d1 - d0) == pytest.approx(4.0 * (0.01 - 0.004), rel=1e-12)
+    d0, _ = _update(base, np.asarray(0.0), reference, plant_state(0.03, 0.004), state)
+    d1, _ = _update(pid, np.asarray(0.0), reference, plant_state(0.03, 0.004), state)
+    assert float(d1) - float(d0) == pytest.approx(4.0 * (0.01 - 0.004), rel=1e-12)
 
 
 def test_noise_is_seeded_per_period_and_of_the_stated_size():
     pid = pj.PIDController(measurement_noise=1e-4, seed=3)
-    times = PERIOD * jnp.arange(4000)
-    draws = np.asarray(jax.vmap(lambda t: jnp.stack(pid.noise(t, PERIOD)))(times))
+    times = PERIOD * np.arange(4000)
+    draws = np.asarray(_noise(pid, times))
     assert np.std(draws) == pytest.approx(1e-4, rel=0.05)  # 8000 draws: 1.6 % standard error of the std
     assert abs(np.corrcoef(draws[:, 0], draws[:, 1])[0, 1]) < 0.05  # the two samples are independent
-    again = np.asarray(jax.vmap(lambda t: jnp.stack(pid.noise(t, PERIOD)))(times))
+    again = np.asarray(_noise(pid, times))
     np.testing.assert_array_equal(draws, again)
     other = pj.PIDController(measurement_noise=1e-4, seed=4)
-    assert not np.allclose(draws[:10], np.asarray(jax.vmap(lambda t: jnp.stack(other.noise(t, PERIOD)))(times[:10])))
+    assert not np.allclose(draws[:10], np.asarray(_noise(other, times[:10])))
 
 
 def test_noise_enters_the_derivative_amplified_by_the_sample_time():
@@ -56,9 +67,9 @@ def test_noise_enters_the_derivative_amplified_by_the_sample_time():
     # 1e-7 m of noise keeps the duty inside [0, 1]: the derivative noise is (n − n')/T_s ≈ 1e-3 m/s
     pid = pj.PIDController(proportional_gain=0.0, integral_gain=0.0, bias=0.5, derivative_gain=1.0,
                            measurement_noise=1e-7)
-    n, n_earlier = pid.noise(0.0, PERIOD)
-    duty, _ = pid.update(0.0, reference, plant_state(0.03, 0.0), pid.initial_state(), PERIOD)
-    assert float(duty) == pytest.approx(0.5 - float(n - n_earlier) / 1e-4, rel=1e-12)
+    n, n_earlier = np.asarray(_noise(pid, np.zeros(1)))[0]  # at t = 0
+    duty, _ = _update(pid, np.asarray(0.0), reference, plant_state(0.03, 0.0), pid.initial_state())
+    assert float(duty) == pytest.approx(0.5 - (float(n) - float(n_earlier)) / 1e-4, rel=1e-12)
 
 
 def test_bad_input_is_named():

@@ -1,7 +1,7 @@
 """Paper 001: tabulated ISO 6358 flow (Tables 1-2), the VPPM regulator models and the muscle-side eq. 9-11."""
 
+import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy.interpolate import PchipInterpolator
@@ -20,6 +20,17 @@ from pamjax.presets import PAPER001_CHARGING_TABLE, PAPER001_DISCHARGING_TABLE, 
 
 P_ATM = 101325.0
 
+# The library functions the tests evaluate point by point, jitted once each (per shape), the numbers as array
+# arguments: called eagerly, every operation of every evaluation would compile a program of its own.
+_pchip = jax.jit(pchip)
+_pchip_many = jax.jit(jax.vmap(pchip, in_axes=(None, None, 0)))
+_mass_flow = eqx.filter_jit(lambda restriction, p1, p2: restriction.mass_flow(p1, p2, PAPER001_AIR))
+_volume = eqx.filter_jit(lambda muscle, x: muscle.volume(x))
+_volume_slope = eqx.filter_jit(lambda muscle, x: muscle.volume_slope(x))
+_force = eqx.filter_jit(lambda muscle, x, p: muscle.force(x, p, PAPER001_AIR))
+_muscle_stiffness = eqx.filter_jit(muscle_stiffness)
+_stiffness_rate = eqx.filter_jit(stiffness_rate)
+
 
 @pytest.mark.parametrize("table", [PAPER001_CHARGING_TABLE, PAPER001_DISCHARGING_TABLE])
 @pytest.mark.parametrize("column", ["critical_ratio", "sonic_conductance_m3_per_s_bar"])
@@ -27,15 +38,15 @@ def test_pchip_matches_scipy_and_stays_within_each_interval(table, column):
     x = np.asarray(table.get("upstream_pressure_bar", table.get("tank_pressure_bar")))
     y = np.asarray(table[column])
     xq = np.linspace(x[0], x[-1], 301)
-    ours = np.asarray(jax.vmap(lambda q: pchip(x, y, q))(xq))
+    ours = np.asarray(_pchip_many(x, y, xq))
     # Independent reference: SciPy's PCHIP. Same algorithm, float64: agreement to round-off.
     np.testing.assert_allclose(ours, PchipInterpolator(x, y)(xq), rtol=1e-12, atol=1e-15 * np.abs(y).max())
     i = np.clip(np.searchsorted(x, xq, side="right") - 1, 0, len(x) - 2)
     lo, hi = np.minimum(y[i], y[i + 1]), np.maximum(y[i], y[i + 1])
     assert np.all(ours >= lo - 1e-15) and np.all(ours <= hi + 1e-15)  # monotone-safe: no overshoot
     # end values held outside the table
-    assert float(pchip(x, y, x[0] - 1.0)) == pytest.approx(y[0])
-    assert float(pchip(x, y, x[-1] + 1.0)) == pytest.approx(y[-1])
+    assert float(_pchip(x, y, np.asarray(x[0] - 1.0))) == pytest.approx(y[0])
+    assert float(_pchip(x, y, np.asarray(x[-1] + 1.0))) == pytest.approx(y[-1])
 
 
 def _eq13_reference(c_si, b, p_in, p_out, temperature):
@@ -51,7 +62,7 @@ def test_tabulated_flow_at_table_rows_matches_eq13():
     for p_bar, b, c in zip(t["upstream_pressure_bar"], t["critical_ratio"], t["sonic_conductance_m3_per_s_bar"]):
         p_in = p_bar * 1e5
         for ratio in (0.2, b + 0.5 * (1 - b), 0.95):
-            ours = float(restriction.mass_flow(p_in, ratio * p_in, PAPER001_AIR))
+            ours = float(_mass_flow(restriction, np.asarray(p_in), np.asarray(ratio * p_in)))
             ref = _eq13_reference(c / 1e5, b, p_in, ratio * p_in, 298.0)
             assert ours == pytest.approx(ref, rel=1e-12)
 
@@ -67,12 +78,12 @@ def test_bad_tables_and_voltages_are_named():
     with pytest.raises(pamjax.PamjaxInputError, match="VoltageCalibration.voltage"):
         VoltageCalibration(voltage=(0.0, 12.0), gauge_pressure=(0.0, 1e6))
     with pytest.raises(pamjax.PamjaxInputError, match=r"\[0.0, 10.0\]"):
-        pamjax.simulate(RegulatorSystem(LinearRegulator(), volume=0.0), SquareWave(0.0, 12.0), jnp.linspace(0, 0.1, 3))
+        pamjax.simulate(RegulatorSystem(LinearRegulator(), volume=0.0), SquareWave(0.0, 12.0), np.linspace(0, 0.1, 3))
 
 
 def test_linear_regulator_step_matches_eq6_analytically():
     system = RegulatorSystem(LinearRegulator(), volume=0.0)  # closed port: Q_in = 0
-    ts = jnp.linspace(0.0, 0.4, 81)
+    ts = np.linspace(0.0, 0.4, 81)
     traj = pamjax.simulate(system, pamjax.Constant(3.0), ts, rtol=1e-10, atol=1e-10)
     t1, t2 = 0.041, 0.023
     t = np.asarray(ts)
@@ -82,7 +93,7 @@ def test_linear_regulator_step_matches_eq6_analytically():
 
 
 def test_physical_regulator_follows_eq6_at_closed_port_and_is_flow_limited_on_a_tank():
-    ts = jnp.linspace(0.0, 0.3, 31)
+    ts = np.linspace(0.0, 0.3, 31)
     closed = pamjax.simulate(RegulatorSystem(ISO6358Regulator(), volume=1e-6), pamjax.Constant(3.0), ts)
     linear = pamjax.simulate(RegulatorSystem(LinearRegulator(), volume=0.0), pamjax.Constant(3.0), ts)
     # A 1 cm³ outlet fills in ~1 ms at choked flow: the outlet tracks eq. 6 within 0.03 bar.
@@ -93,14 +104,14 @@ def test_physical_regulator_follows_eq6_at_closed_port_and_is_flow_limited_on_a_
     assert np.max(np.asarray(tank.mass_flow)) <= limit * (1 + 1e-9)
     assert np.max(np.asarray(tank.mass_flow)) >= 0.99 * limit  # it does saturate
     # pressure rise bounded by R T ṁ_max / V: far slower than eq. 6 (0.3 s after the step, well below 4 bar)
-    assert float(tank.pressure[-1]) <= P_ATM + 286.9 * 298.0 * limit * 0.3 / 0.04 + 1.0
-    assert float(tank.pressure[-1]) < P_ATM + 0.5e5
+    assert float(np.asarray(tank.pressure)[-1]) <= P_ATM + 286.9 * 298.0 * limit * 0.3 / 0.04 + 1.0
+    assert float(np.asarray(tank.pressure)[-1]) < P_ATM + 0.5e5
 
 
 @pytest.fixture(scope="module")
 def muscle_run():
     system = RegulatedMuscleSystem(ISO6358Regulator(), dmsp40_muscle())
-    ts = jnp.linspace(0.0, 1.0, 401)
+    ts = np.linspace(0.0, 1.0, 401)
     traj = pamjax.simulate(system, SquareWave(0.0, 3.0, 1.5), ts, rtol=1e-8, atol=1e-8)
     return system, traj
 
@@ -108,7 +119,8 @@ def muscle_run():
 def test_eq11_flow_equals_delivered_flow_along_a_run(muscle_run):
     """Mass conservation: eq. 11 from (p, ṗ, x, ẋ) equals the ISO 6358 flow the regulator delivers."""
     system, traj = muscle_run
-    eq11 = jax.vmap(system.eq11_flow)(traj.t, traj.state, traj.command)
+    eq11 = eqx.filter_jit(lambda system, traj: jax.vmap(system.eq11_flow)(traj.t, traj.state, traj.command))(
+        system, traj)  # one program (eagerly: one per operation)
     np.testing.assert_allclose(np.asarray(eq11), np.asarray(traj.mass_flow), rtol=1e-9, atol=1e-12)
 
 
@@ -116,9 +128,17 @@ def test_eq10_is_the_rate_of_p_dVdx_and_tracks_eq11(muscle_run):
     """Fig. 12: eq. 10 along the run equals d/dt (p V'(x)) (central differences of the saved trajectory), and it
     rises and falls with the valve flow of eq. 11 (strong positive correlation)."""
     system, traj = muscle_run
-    eq10 = np.asarray(jax.vmap(system.stiffness_rate)(traj.t, traj.state, traj.command))
-    slope = jax.vmap(system.muscle.volume_slope)(traj.position)
-    pv = np.asarray(traj.pressure * slope)
+
+    @eqx.filter_jit  # one program for the four quantities along the run (eagerly: one per operation)
+    def along_the_run(system, traj):
+        return (jax.vmap(system.stiffness_rate)(traj.t, traj.state, traj.command),
+                jax.vmap(system.muscle.volume_slope)(traj.position),
+                jax.vmap(system.vector_field)(traj.t, traj.state, traj.command),
+                jax.vmap(system.muscle.volume)(traj.position))
+
+    eq10, slope, rates, volume = along_the_run(system, traj)
+    eq10 = np.asarray(eq10)
+    pv = np.asarray(traj.pressure) * np.asarray(slope)
     t = np.asarray(traj.t)
     fd = (pv[2:] - pv[:-2]) / (t[2:] - t[:-2])
     mid = eq10[1:-1]
@@ -131,8 +151,6 @@ def test_eq10_is_the_rate_of_p_dVdx_and_tracks_eq11(muscle_run):
     # opposite signs (V'' < 0 for the DMSP-40 cubic): the paper's "equivalence" is a resemblance, measured here as a
     # correlation of 0.59 for the full terms (0.95 for the ṗ terms alone). A sign error in either would make it < 0.
     assert np.corrcoef(eq10, q)[0, 1] > 0.5
-    rates = jax.vmap(system.vector_field)(traj.t, traj.state, traj.command)
-    volume = jax.vmap(system.muscle.volume)(traj.position)
     pdot = np.asarray(rates.regulator.pressure)
     assert np.corrcoef(np.asarray(slope) * pdot, np.asarray(volume) * pdot)[0, 1] > 0.9
 
@@ -140,19 +158,21 @@ def test_eq10_is_the_rate_of_p_dVdx_and_tracks_eq11(muscle_run):
 def test_eq9_stiffness_matches_closed_chamber_finite_difference():
     muscle = dmsp40_muscle()
     for x, p in [(0.01, 3e5), (0.03, 5e5), (0.05, 6e5)]:
-        v0 = float(muscle.volume(x))
+        v0 = float(_volume(muscle, np.asarray(x)))
         h = 1e-6
 
         def force(xx):
-            pp = p * v0 / float(muscle.volume(xx))  # closed isothermal chamber: p V = const
-            return float(muscle.force(xx, pp, PAPER001_AIR))
+            pp = p * v0 / float(_volume(muscle, np.asarray(xx)))  # closed isothermal chamber: p V = const
+            return float(_force(muscle, np.asarray(xx), np.asarray(pp)))
 
         fd = -(force(x + h) - force(x - h)) / (2 * h)
-        ours = float(muscle_stiffness(muscle, x, p, PAPER001_AIR))
+        ours = float(_muscle_stiffness(muscle, np.asarray(x), np.asarray(p), PAPER001_AIR))
         assert ours == pytest.approx(fd, rel=1e-6)
         # isobaric term only (eq. 9's second term)
-        iso = -(float(muscle.force(x + h, p, PAPER001_AIR)) - float(muscle.force(x - h, p, PAPER001_AIR))) / (2 * h)
-        assert float(muscle_stiffness(muscle, x, p, PAPER001_AIR, pressure_slope=0.0)) == pytest.approx(iso, rel=1e-6)
+        iso = -(float(_force(muscle, np.asarray(x + h), np.asarray(p)))
+                - float(_force(muscle, np.asarray(x - h), np.asarray(p)))) / (2 * h)
+        isobaric = _muscle_stiffness(muscle, np.asarray(x), np.asarray(p), PAPER001_AIR, pressure_slope=0.0)
+        assert float(isobaric) == pytest.approx(iso, rel=1e-6)
 
 
 def test_stiffness_rate_formula():
@@ -162,7 +182,7 @@ def test_stiffness_rate_formula():
 
     # d/dt (p V'(x)) with x(t) = x + v t, p(t) = p + pdot t, by central differences in t
     def pv(s):
-        return (p + pdot * s) * float(muscle.volume_slope(x + v * s))
+        return (p + pdot * s) * float(_volume_slope(muscle, np.asarray(x + v * s)))
 
     fd = (pv(h) - pv(-h)) / (2 * h)
-    assert float(stiffness_rate(muscle, x, v, p, pdot)) == pytest.approx(fd, rel=1e-6)
+    assert float(_stiffness_rate(muscle, *map(np.asarray, (x, v, p, pdot)))) == pytest.approx(fd, rel=1e-6)

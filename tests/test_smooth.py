@@ -1,13 +1,18 @@
 """Smooth primitives: converge to their sharp counterparts as width → 0; finite values and gradients everywhere."""
 
+import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from pamjax._physics import smooth as sm
 
 X = np.concatenate([np.linspace(-3.0, 3.0, 601), [0.0, 1e-300, -1e-300]])
+
+# A primitive and its pointwise gradient jitted once per primitive and shape, the widths as array arguments: called
+# eagerly, every operation would compile a program of its own.
+_call = eqx.filter_jit(lambda fn, *args: fn(*args))
+_gradient = eqx.filter_jit(lambda fn, x, width: jax.vmap(jax.grad(lambda x: fn(x, width)))(x))
 
 
 @pytest.mark.parametrize(
@@ -24,7 +29,7 @@ def test_smooth_to_sharp_as_width_shrinks(fn, sharp):
     far = np.abs(X) > 0.1
     errors = []
     for width in (1e-1, 1e-2, 1e-3, 1e-4):
-        err = np.abs(np.asarray(fn(jnp.asarray(X), width)) - sharp(X))
+        err = np.abs(np.asarray(_call(fn, X, np.asarray(width))) - sharp(X))
         errors.append(err[far].max())
         assert err.max() <= max(width, 1.0 if fn in (sm.smooth_sign, sm.smooth_step) else width)
     assert all(a > b for a, b in zip(errors, errors[1:]) if a > 1e-15)
@@ -33,26 +38,29 @@ def test_smooth_to_sharp_as_width_shrinks(fn, sharp):
 
 def test_smooth_relu_error_bound_and_max_min():
     for w in (1.0, 0.1):
-        err = np.asarray(sm.smooth_relu(jnp.asarray(X), w)) - np.maximum(X, 0)
+        err = np.asarray(_call(sm.smooth_relu, X, np.asarray(w))) - np.maximum(X, 0)
         assert np.all(err >= 0) and err.max() <= w * np.log(2) + 1e-15
-    a, b = jnp.asarray(2.0), jnp.asarray(-1.0)
-    assert np.isclose(sm.smooth_max(a, b, 1e-3), 2.0) and np.isclose(sm.smooth_min(a, b, 1e-3), -1.0)
+    a, b, w = np.asarray(2.0), np.asarray(-1.0), np.asarray(1e-3)
+    assert np.isclose(_call(sm.smooth_max, a, b, w), 2.0) and np.isclose(_call(sm.smooth_min, a, b, w), -1.0)
 
 
 @pytest.mark.parametrize("fn", [sm.smooth_sign, sm.smooth_step, sm.smooth_relu, sm.smooth_abs])
 def test_gradients_finite_and_match_finite_differences(fn):
-    g = jax.vmap(jax.grad(lambda x: fn(x, 0.5)))(jnp.asarray(X))
+    width = np.asarray(0.5)
+    g = _gradient(fn, X, width)
     assert np.all(np.isfinite(g))
     x = np.linspace(-2, 2, 9)
     h = 1e-6
-    fd = (np.asarray(fn(jnp.asarray(x + h), 0.5)) - np.asarray(fn(jnp.asarray(x - h), 0.5))) / (2 * h)
-    np.testing.assert_allclose(jax.vmap(jax.grad(lambda x: fn(x, 0.5)))(jnp.asarray(x)), fd, rtol=1e-7, atol=1e-9)
+    fd = (np.asarray(_call(fn, x + h, width)) - np.asarray(_call(fn, x - h, width))) / (2 * h)
+    np.testing.assert_allclose(_gradient(fn, x, width), fd, rtol=1e-7, atol=1e-9)
 
 
 def test_safe_sqrt_and_divide():
-    x = jnp.asarray([-1.0, 0.0, 4.0])
-    np.testing.assert_array_equal(sm.safe_sqrt(x), [0.0, 0.0, 2.0])
-    g = jax.vmap(jax.grad(sm.safe_sqrt))(x)
+    x = np.asarray([-1.0, 0.0, 4.0])
+    np.testing.assert_array_equal(_call(sm.safe_sqrt, x), [0.0, 0.0, 2.0])
+    g = jax.jit(jax.vmap(jax.grad(sm.safe_sqrt)))(x)  # one program (eagerly: one per operation)
     np.testing.assert_array_equal(g, [0.0, 0.0, 0.25])
-    assert np.isfinite(sm.safe_divide(1.0, 0.0)) and np.isfinite(jax.grad(sm.safe_divide, argnums=1)(1.0, 0.0))
-    assert sm.safe_divide(6.0, 3.0) == 2.0
+    one, zero = np.asarray(1.0), np.asarray(0.0)
+    assert (np.isfinite(_call(sm.safe_divide, one, zero))
+            and np.isfinite(jax.jit(jax.grad(sm.safe_divide, argnums=1))(one, zero)))
+    assert float(_call(sm.safe_divide, np.asarray(6.0), np.asarray(3.0))) == 2.0
