@@ -353,3 +353,11 @@ def host_signal(u):
     called eagerly, each of the reference's thousands of evaluations runs the signal's operations one by one."""
     jitted = jax.jit(lambda t: u(t))
     return lambda t: float(jitted(t))
+
+
+@eqx.filter_jit
+def initial_state(system, **conditions):
+    """`system.initial_state(**conditions)` as one compiled program: called eagerly, its static equilibrium (a
+    bisection) compiles each of its dozens of operations as a program of its own, and its loop anew at every call.
+    Give the conditions as arrays (`np.asarray(4.3e5)`): a Python float would be a constant of the program."""
+    return system.initial_state(**conditions)

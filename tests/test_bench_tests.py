@@ -2,6 +2,7 @@
 000's eq. 8-9 and 11, parameter recovery through `pamjax.fit` from oracle-made data, the reductions of raw runs, and
 bad input named before any fit."""
 
+import equinox as eqx
 import numpy as np
 import pytest
 from helpers import P_ATM, np_ellipse_flow, np_eq7_force, np_friction
@@ -10,19 +11,28 @@ import pamjax as pj
 from pamjax import presets
 from pamjax._physics.friction import KarnoppFriction
 
+# The laws under test jitted, one program each (eagerly, each of their operations compiles a program of its own); the
+# velocities and pressures go in as arrays, not Python floats, which `filter_jit` would bake in as constants.
+_steady_friction_force = eqx.filter_jit(pj.steady_friction_force)
+_flow_curve = eqx.filter_jit(pj.flow_curve)
+_mass_flow = eqx.filter_jit(lambda restriction, p_up, p_down, air: restriction.mass_flow(p_up, p_down, air))
+_predict = eqx.filter_jit(lambda experiment, model: experiment.predict(model))
+_residuals = eqx.filter_jit(lambda experiment, model: experiment.residuals(model))
+
 
 @pytest.mark.parametrize("v", [-0.2, -0.01, 0.004, 0.15])
 def test_steady_friction_force(v):
     """Eq. 9 at steady sliding: smooth sign (tanh), exact sign (Karnopp), and the bristle model's steady state
     z = F_c v/(σ0 |v|_w) with |v|_w = sqrt(v² + w²) − w, where its force is F_c v/|v|_w + C_f v."""
     smooth = pj.CoulombViscousFriction(16.0, 250.0)
-    assert float(pj.steady_friction_force(smooth, v)) == pytest.approx(np_friction(v, 16.0, 250.0, 1e-3), rel=1e-12)
-    assert float(pj.steady_friction_force(KarnoppFriction(16.0, 250.0), v)) == pytest.approx(
+    assert float(_steady_friction_force(smooth, np.asarray(v))) == pytest.approx(np_friction(v, 16.0, 250.0, 1e-3),
+                                                                                 rel=1e-12)
+    assert float(_steady_friction_force(KarnoppFriction(16.0, 250.0), np.asarray(v))) == pytest.approx(
         16.0 * np.sign(v) + 250.0 * v, rel=1e-12)
     w = 1e-5
     bristle = pj.BristleFriction(16.0, velocity_width=w)
     expected = 16.0 * v / (np.sqrt(v * v + w * w) - w) + 250.0 * v
-    assert float(pj.steady_friction_force(bristle, v)) == pytest.approx(expected, rel=1e-10)
+    assert float(_steady_friction_force(bristle, np.asarray(v))) == pytest.approx(expected, rel=1e-10)
 
 
 def test_constant_velocity_point_reduces_a_run():
@@ -53,13 +63,13 @@ def test_flow_curve_prediction_and_fit():
     p_down = np.concatenate([np.linspace(P_ATM, 0.98 * p, 10) for p in (5e5, 6e5, 7e5)])
     flow = np.array([np_ellipse_flow(a, b, 0.36, 0.28, 3.14e-6) for a, b in zip(p_up, p_down)])
     exp = pj.FlowCurveExperiment(p_up, p_down, flow, scale=1e-5, restriction="inflate")
-    np.testing.assert_allclose(np.asarray(exp.predict(valve)["mass_flow"]), flow, rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(_predict(exp, valve)["mass_flow"]), flow, rtol=1e-12)
     space = pj.ParameterSpace(valve, ["inflate.discharge_coefficient", "inflate.critical_ratio"])
     start = space.with_values([0.45, 0.2])
     res = pj.fit(start, [exp], ["inflate.discharge_coefficient", "inflate.critical_ratio"], progress=False)
     np.testing.assert_allclose(res.values, [0.36, 0.28], rtol=1e-6)  # noise-free: exact recovery
-    assert np.allclose(pj.flow_curve(valve.inflate, 6e5, [0.1, 0.2], pj.Air()), valve.inflate.mass_flow(6e5, 0.0,
-                                                                                                          pj.Air()))
+    assert np.allclose(_flow_curve(valve.inflate, np.asarray(6e5), np.asarray([0.1, 0.2]), pj.Air()),
+                       _mass_flow(valve.inflate, np.asarray(6e5), np.asarray(0.0), pj.Air()))
 
 
 def test_loop_force_map_prediction_slack_and_average():
@@ -74,10 +84,11 @@ def test_loop_force_map_prediction_slack_and_average():
                           float(law.k2))
     expected = static - (16.0 * np.sign(v) + 250.0 * v)
     exp = pj.LoopForceMapExperiment(x, p, v, expected, scale=1.0)
-    np.testing.assert_allclose(np.asarray(exp.predict(system)["force"]), expected, rtol=1e-12)
-    assert np.max(np.abs(np.asarray(exp.residuals(system)))) < 1e-9
+    np.testing.assert_allclose(np.asarray(_predict(exp, system)["force"]), expected, rtol=1e-12)
+    assert np.max(np.abs(np.asarray(_residuals(exp, system)))) < 1e-9
     slack = pj.LoopForceMapExperiment(x, p, v, np.where(x > 0.03, 0.0, expected), scale=1.0)
-    assert float(slack.residuals(system)[2]) == pytest.approx(max(expected[2], 0.0))  # 0 N measured: one-sided
+    # 0 N measured: one-sided
+    assert float(np.asarray(_residuals(slack, system))[2]) == pytest.approx(max(expected[2], 0.0))
     xa, pa, mean, width = pj.loop_average(x, p, v, expected)
     np.testing.assert_allclose(width, 2 * (16.0 + 250.0 * 5e-3), rtol=1e-12)
     np.testing.assert_allclose(mean, static[:3], rtol=1e-12)

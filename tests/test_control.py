@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import initial_state
 
 import pamjax
 from pamjax import presets
@@ -18,6 +19,13 @@ from pamjax._control.controllers import PIController, SlidingModeController, equ
 from pamjax._control.tuning import tracking_rmse
 
 REF = pamjax.Sine(0.03, 0.01, 1.0 / (2 * np.pi))  # paper 000: 0.03 + 0.01 sin(t) m
+
+# Called eagerly, each operation of these compiles a program of its own: jitted once, the times, duties and pressures
+# as array arguments (a Python float would be a constant of the program).
+_mass_flow = eqx.filter_jit(lambda valve, u, p, air: valve.mass_flow(0.0, u, p, air))
+_equivalent_duty = eqx.filter_jit(equivalent_duty)
+_reference_derivatives = eqx.filter_jit(reference_derivatives)
+_tracking_error = eqx.filter_jit(lambda traj, start: traj.tracking_error(start))
 
 
 @pytest.fixture(scope="module")
@@ -48,9 +56,9 @@ def test_pi_matches_numpy_transcription():
     pi = PIController()
     update = eqx.filter_jit(pi.update)  # one program for the 110 updates (eagerly, each operation compiles its own)
     state, duties = pi.initial_state(), []
-    plant_state = presets.mas10_system("pwm").initial_state()
+    plant_state = initial_state(presets.mas10_system("pwm"))
     for e in errors:
-        ps = eqx.tree_at(lambda s: s.position, plant_state, jnp.asarray(0.03 - e))
+        ps = eqx.tree_at(lambda s: s.position, plant_state, np.asarray(0.03 - e))
         duty, state = update(0.0, (jnp.asarray(0.03),), ps, state, 0.02)
         duties.append(float(duty))
     np.testing.assert_allclose(duties, numpy_pi(errors, 25.0, 150.0, 0.5, 0.02), rtol=0, atol=1e-12)
@@ -61,15 +69,15 @@ def test_equivalent_duty_inverts_eq13(model):
     valve, air = model.valve, model.air
     for p in (1.2e5, 3e5, 5e5):
         for u in (0.05, 0.3, 0.7, 0.95):
-            flow = valve.mass_flow(0.0, jnp.asarray(u), jnp.asarray(p), air)
-            assert abs(float(equivalent_duty(valve, flow, jnp.asarray(p), air)) - u) < 1e-9
+            flow = _mass_flow(valve, np.asarray(u), np.asarray(p), air)
+            assert abs(float(_equivalent_duty(valve, flow, np.asarray(p), air)) - u) < 1e-9
         # Out of reach: saturates, never NaN.
-        assert float(equivalent_duty(valve, jnp.asarray(1.0), jnp.asarray(p), air)) == 1.0
-        assert float(equivalent_duty(valve, jnp.asarray(-1.0), jnp.asarray(p), air)) == 0.0
+        assert float(_equivalent_duty(valve, np.asarray(1.0), np.asarray(p), air)) == 1.0
+        assert float(_equivalent_duty(valve, np.asarray(-1.0), np.asarray(p), air)) == 0.0
 
 
 def test_reference_derivatives_of_sine():
-    r = reference_derivatives(REF, 0.7)
+    r = _reference_derivatives(REF, np.asarray(0.7))
     np.testing.assert_allclose(
         [float(a) for a in r],
         [0.03 + 0.01 * np.sin(0.7), 0.01 * np.cos(0.7), -0.01 * np.sin(0.7), -0.01 * np.cos(0.7)],
@@ -83,23 +91,23 @@ def test_closed_loop_equals_open_loop_replay(plant):
     # 1.5 s from the loop's own rest state, passed explicitly: the same run structure (PI, 75 periods, y0 given) as the
     # PI run of test_sliding_mode_beats_pi_on_switching_plant, so the module compiles that closed loop once
     loop = ClosedLoop(plant, PIController(), REF)
-    traj = simulate_closed_loop(loop, 1.5, y0=loop.initial_state())
+    traj = simulate_closed_loop(loop, 1.5, y0=initial_state(loop))
     signal = pamjax.Sampled(np.asarray(traj.period_start), np.asarray(traj.duty), period=0.02)
     ts = np.concatenate([[0.0], np.asarray(traj.t)])
     replay = pamjax.simulate(plant, signal, ts, rtol=1e-8, atol=1e-8, max_steps=100_000)
     assert int(traj.result) == 0
-    np.testing.assert_allclose(replay.position[1:], traj.position, atol=5e-5)
+    np.testing.assert_allclose(np.asarray(replay.position)[1:], traj.position, atol=5e-5)
 
 
 def test_sliding_mode_beats_pi_on_switching_plant(plant, model):
     """Started on the reference (pressure for x = 0.03 m), the SMC tracks the 1 rad/s sine with a smaller RMSE
     than the paper's PI over 1.5 s; both succeed. A broken equivalent control (sign or eq. 13 inverse) fails this."""
-    y0 = plant.initial_state(pressure=4.3e5)
+    y0 = initial_state(plant, pressure=np.asarray(4.3e5))
     errs = {}
     for name, ctl in (("pi", PIController()), ("smc", SlidingModeController(model))):
         loop = ClosedLoop(plant, ctl, REF)
         traj = simulate_closed_loop(loop, 1.5, y0=loop.initial_state(y0))
-        errs[name] = float(traj.tracking_error(0.5)[0])
+        errs[name] = float(_tracking_error(traj, np.asarray(0.5))[0])
         assert int(traj.result) == 0
     assert errs["smc"] < 0.5 * errs["pi"], errs
 
@@ -107,7 +115,7 @@ def test_sliding_mode_beats_pi_on_switching_plant(plant, model):
 def test_gain_gradient_matches_finite_difference(plant):
     """d RMSE / d K_P through the whole sampled-data loop vs a central difference (rel. 2 %: the adaptive solver's
     step choices make the loss piecewise smooth at the 1e-6 tolerance level)."""
-    y0 = plant.initial_state(pressure=4.3e5)
+    y0 = initial_state(plant, pressure=np.asarray(4.3e5))
 
     def loss(kp):
         loop = ClosedLoop(plant, PIController(proportional_gain=kp), REF)
@@ -122,9 +130,9 @@ def test_gain_gradient_matches_finite_difference(plant):
 
 
 def test_vmap_over_plants_matches_loop(plant):
-    masses = jnp.asarray([8.0, 11.0])
-    plants = eqx.filter_vmap(lambda m: eqx.tree_at(lambda p: p.payload_mass, plant, m))(masses)
-    y0 = plant.initial_state(pressure=4.3e5)
+    masses = np.asarray([8.0, 11.0])
+    plants = eqx.filter_jit(eqx.filter_vmap(lambda m: eqx.tree_at(lambda p: p.payload_mass, plant, m)))(masses)
+    y0 = initial_state(plant, pressure=np.asarray(4.3e5))
 
     # jitted: eagerly, every call re-traces the loop's scan and compiles it anew (and each operation around it)
     @eqx.filter_jit

@@ -10,6 +10,7 @@ import pathlib
 import textwrap
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ import pytest
 import pamjax as pj
 from pamjax import PamjaxInputError, presets
 from pamjax._cli.main import main
+from pamjax._core.arrays import device_array
 from pamjax._fit import design_objective as obj
 
 FREE = ["valve.inflate.discharge_coefficient", "valve.inflate.critical_ratio", "valve.exhaust.discharge_coefficient"]
@@ -35,6 +37,9 @@ def _at(signal, t):
     return signal(t)
 
 
+_clip01 = jax.jit(obj.clip01)  # one program per shape (eagerly, each of its operations compiles its own)
+
+
 def test_bspline_basis_is_a_partition_of_unity_and_soft_clip_inverts():
     t = np.linspace(0.0, 3.0, 301)
     b = obj.bspline_basis(t, 0.0, 3.0, 7)
@@ -42,12 +47,12 @@ def test_bspline_basis_is_a_partition_of_unity_and_soft_clip_inverts():
     np.testing.assert_allclose(b.sum(axis=1), 1.0, atol=1e-12)
     assert b[0, 0] == pytest.approx(1.0) and b[-1, -1] == pytest.approx(1.0)  # clamped ends
     z = np.linspace(-0.5, 1.5, 41)
-    d = np.asarray(obj.clip01(jnp.asarray(z)))
+    d = np.asarray(_clip01(z))
     assert np.all((d > 0) & (d < 1)) and np.all(np.diff(d) > 0)
     # within width·log 2 of the sharp clip, as smooth_relu promises
     assert np.max(np.abs(d - np.clip(z, 0, 1))) <= obj.CLIP_WIDTH * math.log(2) + 1e-12
     inner = d[(z > 0.05) & (z < 0.95)]
-    np.testing.assert_allclose(np.asarray(obj.clip01(jnp.asarray(obj.unclip01(inner)))), inner, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(_clip01(obj.unclip01(inner))), inner, atol=1e-12)
 
 
 def _problem(parametrisation):
@@ -62,12 +67,15 @@ def _problem(parametrisation):
     carrier = obj.multilevel_carrier(20, 10, 0)
     c0, basis = _start_coefficients(parametrisation, times, 0.4, 4, carrier, (0.1, 0.9), None)
     exp = _template(model, 0.4, 0.02, 250.0, ("pressure",), NOISE, {"pressure": 101325.0}, 4, np.full(20, 0.5))
+    # the arrays made from NumPy with `device_array` (jnp.asarray compiles a program per shape; the scalars stay
+    # jnp.asarray's weakly typed ones, as `design` makes them)
     prob = obj.DesignProblem(space=space, theta=space.initial_theta(), experiment=exp,
-                             basis=None if basis is None else jnp.asarray(basis), prior=jnp.zeros((3, 3)),
-                             weight=jnp.asarray(2.0), band=jnp.asarray([0.1, 0.9]), stroke=None,
+                             basis=None if basis is None else device_array(basis), prior=device_array(np.zeros((3, 3))),
+                             weight=jnp.asarray(2.0), band=device_array([0.1, 0.9]), stroke=None,
                              max_pressure=jnp.asarray(np.inf), max_step=jnp.asarray(0.3),
-                             floor=jnp.asarray(np.full(3, np.inf)), subset=(0, 1, 2), criterion="D")
-    return jnp.asarray(c0) + 0.5, prob  # level lifted off the band's bottom: every parameter is fixed there
+                             floor=device_array(np.full(3, np.inf)), subset=(0, 1, 2), criterion="D")
+    c = device_array(np.asarray(c0) + 0.5)  # level lifted off the band's bottom: every parameter is fixed there
+    return c, prob
 
 
 def test_forward_gradient_matches_central_differences():
@@ -111,7 +119,7 @@ def test_design_raises_the_information_keeps_its_constraints_and_replays_from_cs
     rec = pj.Recording.load(path)
     np.testing.assert_array_equal(rec["duty"], res.duty)
     replay = pj.Sampled(rec.t, rec["duty"], period=0.02)
-    t = jnp.asarray(np.arange(0.0, 0.4, 0.005))
+    t = np.arange(0.0, 0.4, 0.005)
     np.testing.assert_array_equal(np.asarray(_at(replay, t)), np.asarray(_at(res.signal(), t)))
     with pytest.raises(FileExistsError):
         res.to_csv(path)
@@ -280,13 +288,14 @@ def test_pressure_limit_is_penalised_and_kept():
     # The penalty: zero below the limit; above it, PENALTY·dt·Σ(excess/1 kPa)² and the worst excess reported.
     c, prob = _problem("envelope")
     free_value, free_aux = obj.value(c, prob)
-    top = float(np.max(free_aux["pressure"]))
+    top = float(np.max(np.asarray(free_aux["pressure"])))
     for limit in (top + 1e3, top - 5e3):
         limited = eqx.tree_at(lambda p: p.max_pressure, prob, jnp.asarray(limit))
         value, aux = obj.value(c, limited)
         excess = np.maximum(np.asarray(aux["pressure"]) - limit, 0.0)
         assert float(aux["worst_pressure"]) == pytest.approx(float(np.max(excess)), abs=1e-9)
-        dt = float(limited.experiment.times[1] - limited.experiment.times[0])
+        times = np.asarray(limited.experiment.times)
+        dt = float(times[1] - times[0])
         expected = obj.PENALTY * dt * np.sum((excess / obj.PRESSURE_UNIT) ** 2)
         assert float(value) - float(free_value) == pytest.approx(expected, rel=1e-9, abs=1e-12)
         assert (expected > 0) == (limit < top)

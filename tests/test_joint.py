@@ -4,6 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import initial_state
 
 import pamjax
 from pamjax._physics.regulator import ISO6358Regulator
@@ -37,6 +38,18 @@ def _equilibrium_angle(joint, pf, pe):
     return float(_equilibrium(joint, jnp.asarray(float(pf)), jnp.asarray(float(pe)))[0])
 
 
+# The chambers' volumes, the torque and the static inverse jitted likewise (eagerly, each of their operations compiles a
+# program of its own), the angles and pressures as array arguments (Python floats would be constants of the program).
+@eqx.filter_jit
+def _volumes(joint, angle):
+    xf, xe = joint.contractions(angle)
+    return joint.flexor.volume(xf), joint.extensor.volume(xe)
+
+
+_torque = eqx.filter_jit(lambda joint, angle, pf, pe: joint.torque(angle, pf, pe))
+_pressures_for = eqx.filter_jit(lambda joint, angle, total: joint.pressures_for(angle, total))
+
+
 def test_angle_follows_difference_and_stiffness_follows_sum(joint):
     sums = [3e5, 5e5, 7e5]
     diffs = [-0.4e5, 0.0, 0.4e5, 0.8e5]
@@ -53,40 +66,39 @@ def test_angle_follows_difference_and_stiffness_follows_sum(joint):
 
 def test_joint_stiffness_is_minus_torque_slope_with_closed_chambers(joint):
     pf, pe = P_ATM + 3e5, P_ATM + 2e5
-    a = _equilibrium_angle(joint, pf, pe)
+    # the equilibrium angle and joint.stiffness at that angle, both from the jitted `_equilibrium`
+    a, stiffness = (float(v) for v in _equilibrium(joint, jnp.asarray(pf), jnp.asarray(pe)))
     h = 1e-6
-    xf, xe = joint.contractions(a)
-    vf, ve = float(joint.flexor.volume(xf)), float(joint.extensor.volume(xe))
+    vf, ve = (float(v) for v in _volumes(joint, np.asarray(a)))
 
     def tau(angle):  # closed isothermal chambers: p V = const
-        xf2, xe2 = joint.contractions(angle)
-        return float(
-            joint.torque(angle, pf * vf / float(joint.flexor.volume(xf2)), pe * ve / float(joint.extensor.volume(xe2)))
-        )
+        vf2, ve2 = (float(v) for v in _volumes(joint, np.asarray(angle)))
+        return float(_torque(joint, np.asarray(angle), np.asarray(pf * vf / vf2), np.asarray(pe * ve / ve2)))
 
     fd = -(tau(a + h) - tau(a - h)) / (2 * h)
-    assert float(joint.stiffness(a, pf, pe)) == pytest.approx(fd, rel=1e-6)
+    assert stiffness == pytest.approx(fd, rel=1e-6)
 
 
 def test_simulated_joint_settles_at_static_equilibrium(joint):
-    y0 = joint.initial_state(P_ATM + 2e5, P_ATM + 2e5)
+    y0 = initial_state(joint, flexor_pressure=np.asarray(P_ATM + 2e5), extensor_pressure=np.asarray(P_ATM + 2e5))
     sig = VoltagePair(pamjax.Constant(3.0), pamjax.Constant(1.5))
     traj = pamjax.simulate(joint, sig, jnp.linspace(0.0, 1.0, 11), y0=y0)
-    pf, pe = (float(p) for p in traj.pressure[-1])
+    pf, pe = (float(p) for p in np.asarray(traj.pressure)[-1])
     # each regulator delivers its calibrated pressure (1.01 bar/V) ...
     assert pf == pytest.approx(P_ATM + 3.0 * 1.01e5, abs=300)
     assert pe == pytest.approx(P_ATM + 1.5 * 1.01e5, abs=300)
     # ... and the joint rests where the static torque vanishes
-    assert float(traj.angle[-1]) == pytest.approx(_equilibrium_angle(joint, pf, pe), abs=1e-3)
-    assert float(traj.angle[-1]) > 0.1
+    angle = np.asarray(traj.angle)
+    assert float(angle[-1]) == pytest.approx(_equilibrium_angle(joint, pf, pe), abs=1e-3)
+    assert float(angle[-1]) > 0.1
 
 
 def test_pressures_for_inverts_the_static_map(joint):
-    pf, pe = joint.pressures_for(0.15, 5e5)
+    pf, pe = (float(p) for p in _pressures_for(joint, np.asarray(0.15), np.asarray(5e5)))
     assert float(pf + pe - 2 * P_ATM) == pytest.approx(5e5, rel=1e-9)
     assert _equilibrium_angle(joint, pf, pe) == pytest.approx(0.15, abs=1e-6)
 
 
 def test_joint_command_shape_is_checked(joint):
     with pytest.raises(pamjax.PamjaxInputError, match="shape \\(2,\\)"):
-        joint.vector_field(0.0, joint.initial_state(), jnp.asarray(3.0))
+        joint.vector_field(0.0, initial_state(joint), jnp.asarray(3.0))

@@ -49,6 +49,9 @@ _hold_pressures = eqx.filter_jit(hold_pressures)
 _pressures_for = eqx.filter_jit(lambda joint, angle, total: joint.pressures_for(angle, total))
 _sum_for_stiffness = eqx.filter_jit(sum_for_stiffness)
 _held_stiffness = eqx.filter_jit(held_stiffness)
+# The torque and the runs' RMSE jitted likewise (eagerly, each of their operations compiles on its own).
+_torque = eqx.filter_jit(lambda joint, angle, pf, pe: joint.torque(angle, pf, pe))
+_rmse = eqx.filter_jit(lambda run, start: run.rmse(start=start))
 
 
 @pytest.fixture(scope="module")
@@ -79,15 +82,16 @@ def test_static_inverse_matches_bisection(joint):
     total = _sum_for_stiffness(joint, jnp.asarray(0.1), jnp.asarray(150.0))
     pf, pe = _pressures_for(joint, jnp.asarray(0.1), total)
     h = 1e-5
-    fd = -(joint.torque(0.1 + h, pf, pe) - joint.torque(0.1 - h, pf, pe)) / (2 * h)
+    up, down = (float(_torque(joint, np.asarray(angle), pf, pe)) for angle in (0.1 + h, 0.1 - h))
+    fd = -(up - down) / (2 * h)
     np.testing.assert_allclose(float(fd), 150.0, rtol=1e-6)
 
 
 def test_angle_tracks_gait_at_constant_stiffness(gait_runs):
     closed, open_loop = gait_runs
     assert int(closed.result) == 0 and int(open_loop.result) == 0
-    rmse, stiffness_rmse = (float(x) for x in closed.rmse(start=2.0))
-    open_rmse = float(open_loop.rmse(start=2.0)[0])
+    rmse, stiffness_rmse = (float(x) for x in _rmse(closed, np.asarray(2.0)))
+    open_rmse = float(_rmse(open_loop, np.asarray(2.0))[0])
     # Measured: 3.47e-3 rad closed loop (reference ±0.25 rad), 1.38e-2 rad feed-forward alone. Bound 5e-3 rad leaves
     # 45 % for platform/solver differences; the feedback must at least halve the feed-forward error.
     assert rmse < 5e-3
@@ -115,8 +119,10 @@ def test_stiffness_change_leaves_angle(joint, step_run):
     # that) and the angle returns to its reference.
     angle = np.asarray(step_run.angle)
     t = np.asarray(step_run.t)
-    delta_sum = float(step_run.pressure_sum_reference[-1] - step_run.pressure_sum_reference[0])
-    one_muscle = jax.grad(lambda d: joint.torque(0.1, 3e5 + d, 3e5))(0.0) * delta_sum / 155.0
+    sum_reference = np.asarray(step_run.pressure_sum_reference)
+    delta_sum = float(sum_reference[-1] - sum_reference[0])
+    # jitted: one program (eagerly, each operation of the torque and of its derivative compiles its own)
+    one_muscle = float(jax.jit(jax.grad(lambda d: joint.torque(0.1, 3e5 + d, 3e5)))(0.0)) * delta_sum / 155.0
     assert delta_sum > 2e5
     peak = np.abs(angle - 0.1).max()
     assert peak < 0.05 and peak < 0.12 * float(one_muscle)

@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import NumpyPlant, np_stick_slip_run
+from helpers import NumpyPlant, host_signal, initial_state, np_stick_slip_run
 
 import pamjax as pj
 from pamjax import PamjaxInputError, presets
@@ -28,7 +28,8 @@ def _plant(model):
 
 @pytest.fixture(scope="module")
 def reference():
-    duties = [float(TRIANGLE(k * 0.02)) for k in range(101)]
+    duty = host_signal(TRIANGLE)
+    duties = [duty(k * 0.02) for k in range(101)]
     return np_stick_slip_run(_plant(MODEL), duties, TS)
 
 
@@ -46,26 +47,27 @@ def test_matches_event_driven_reference(reference, substeps, x_tol, p_tol):
 
 # The tests that start at duty 5 % share one compiled solve: one horizon and output grid (the longest, 1 s, sampled
 # every 10 ms) and an explicit initial state whose leaves are float64 arrays like `initial_state()`'s (a Python float
-# or a weakly typed leaf would be a different program).
+# or a weakly typed leaf would be a different program), made with NumPy (jnp.asarray of a Python float compiles).
 HOLD_TS = np.linspace(0.0, 1.0, 101)
 
 
 def _from_rest(y0):
-    y0 = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf, dtype=float), y0)
+    y0 = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf, dtype=float), y0)
     return pj.simulate(MODEL, pj.Constant(0.05), HOLD_TS, y0=y0)
 
 
 def test_holds_still_while_the_net_force_is_within_coulomb():
     # Duty 5 %: the valve never opens (10 % dead band at 50 Hz), the payload rests in equilibrium, stuck: its
     # position must not move at all (a smooth sign lets it creep).
-    traj = _from_rest(MODEL.initial_state())  # simulate's default start, given explicitly
+    traj = _from_rest(initial_state(MODEL))  # simulate's default start, given explicitly
     x = np.asarray(traj.position)
     assert np.all(x == x[0]) and np.all(np.asarray(traj.velocity) == 0.0)
     # a pressure step that changes the muscle force by less than F_c does not move it either (for the whole second)
-    x0 = float(MODEL.initial_state().position)
-    slope = float(MODEL.muscle.force_law.pressure_slope(x0))  # N/Pa
+    x0 = float(initial_state(MODEL).position)
+    # jitted: eagerly, each operation of the force law compiles a program of its own
+    slope = float(eqx.filter_jit(MODEL.muscle.force_law.pressure_slope)(np.asarray(x0)))  # N/Pa
     dp = 0.5 * float(MODEL.friction.coulomb_force) / slope
-    y0 = eqx.tree_at(lambda s: s.pressure, MODEL.initial_state(), MODEL.air.atmospheric_pressure + dp)
+    y0 = eqx.tree_at(lambda s: s.pressure, initial_state(MODEL), float(MODEL.air.atmospheric_pressure) + dp)
     held = _from_rest(y0)
     assert np.all(np.asarray(held.position)[1:] == x0)
     assert np.all(np.asarray(held.friction_force) != 0.0)  # static friction carries the difference
@@ -73,10 +75,10 @@ def test_holds_still_while_the_net_force_is_within_coulomb():
 
 def test_a_start_outside_its_mode_switches_at_once():
     # Stuck, but the net force exceeds F_c: it slides from the first step (position[1]: t = 10 ms).
-    x0 = float(MODEL.initial_state().position)
-    y0 = eqx.tree_at(lambda s: s.position, MODEL.initial_state(), x0 + 2e-3)  # weaker muscle force: it falls
+    x0 = float(initial_state(MODEL).position)
+    y0 = eqx.tree_at(lambda s: s.position, initial_state(MODEL), x0 + 2e-3)  # weaker muscle force: it falls
     traj = _from_rest(y0)
-    assert float(traj.position[1]) < x0 + 2e-3 - 1e-5
+    assert float(np.asarray(traj.position)[1]) < x0 + 2e-3 - 1e-5
 
 
 def _loss(params, duty):
@@ -94,12 +96,12 @@ def test_gradients_through_event_times_match_finite_differences():
     # reverse mode against central differences (steps small enough not to change the event sequence).
     params = np.asarray([16.0, 250.0, 4.1558930e-04, 102.844885])
     duty = 0.35
-    fwd = jax.jit(jax.jacfwd(_loss, argnums=(0, 1)))(params, duty)
+    fwd = [np.asarray(g) for g in jax.jit(jax.jacfwd(_loss, argnums=(0, 1)))(params, duty)]
     # One compiled value-and-gradient gives the reverse-mode gradient and the ten loss values of the differences (no
     # separate loss compilation; an eager solve re-traces at every call). The differences' arguments are NumPy
     # arrays and Python floats like the first call's, so no call compiles anew.
     value_and_grad = jax.jit(jax.value_and_grad(_loss, argnums=(0, 1)))
-    rev = value_and_grad(params, duty)[1]
+    rev = [np.asarray(g) for g in value_and_grad(params, duty)[1]]
 
     def loss(p, d):
         return float(value_and_grad(p, d)[0])
@@ -128,12 +130,12 @@ def test_stepping_rules():
     coarse = pj.simulate(averaged, TRIANGLE, TS[:201], grid_step=2e-3)
     fine = pj.simulate(averaged, TRIANGLE, TS[:201], grid_step=5e-4)
     assert np.ptp(np.asarray(fine.position)) > 0.01
-    assert np.max(np.abs(np.asarray(coarse.position - fine.position))) < 1e-6
+    assert np.max(np.abs(np.asarray(coarse.position) - np.asarray(fine.position))) < 1e-6
 
 
 def test_vmap_over_parameters_equals_one_by_one():
-    forces = jnp.asarray([12.0, 16.0, 22.0])
-    ts = jnp.linspace(0.0, 1.0, 26)
+    forces = np.asarray([12.0, 16.0, 22.0])
+    ts = np.linspace(0.0, 1.0, 26)
 
     def run(fc):
         model = eqx.tree_at(lambda s: s.friction.coulomb_force, MODEL, fc)
@@ -142,7 +144,7 @@ def test_vmap_over_parameters_equals_one_by_one():
 
     batch = jax.jit(jax.vmap(run))(forces)
     for k in range(3):
-        np.testing.assert_allclose(np.asarray(batch[k]), np.asarray(jax.jit(run)(forces[k])), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(np.asarray(batch)[k], np.asarray(jax.jit(run)(forces[k])), rtol=0, atol=1e-12)
 
 
 def test_step_interpolant_is_the_cubic_hermite():
@@ -160,8 +162,10 @@ def test_step_interpolant_is_the_cubic_hermite():
     np.testing.assert_allclose(np.asarray(interp(s, h, za, zb, fa, fb)), basis, rtol=1e-13, atol=1e-15)
     assert np.array_equal(np.asarray(interp(0.0, h, za, zb, fa, fb)), za)
     np.testing.assert_allclose(np.asarray(interp(1.0, h, za, zb, fa, fb)), zb, rtol=1e-14, atol=1e-15)
+    # the end slopes by forward mode, jitted: one program for both ends (eagerly, one per operation)
+    tangent = jax.jit(lambda q: jax.jvp(lambda r: _hermite(r, h, za, zb, fa, fb), (q,), (jnp.ones(()),)))
     for end, slope in ((0.0, fa), (1.0, fb)):
-        _, ds = jax.jvp(lambda q: _hermite(q, h, za, zb, fa, fb), (jnp.asarray(end),), (jnp.ones(()),))
+        _, ds = tangent(jnp.asarray(end))
         np.testing.assert_allclose(np.asarray(ds), h * slope, rtol=1e-12, atol=1e-15)
 
 
@@ -173,14 +177,20 @@ def test_runs_in_one_loop_switch_their_start_modes_each_on_its_own():
     from pamjax._solve.scaled import scaled
     from pamjax._solve.simulate import _DEFAULT_SUBSTEPS, fixed_grid_size
 
-    x0 = float(MODEL.initial_state().position)
-    starts = [MODEL.initial_state(), eqx.tree_at(lambda s: s.position, MODEL.initial_state(), x0 + 2e-3)]
-    starts = [jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf, dtype=float), y0) for y0 in starts]
-    flats = [scaled(MODEL, y0) for y0 in starts]
+    x0 = float(initial_state(MODEL).position)
+    starts = [initial_state(MODEL), eqx.tree_at(lambda s: s.position, initial_state(MODEL), x0 + 2e-3)]
+    starts = [jax.tree_util.tree_map(lambda leaf: np.asarray(leaf, dtype=float), y0) for y0 in starts]
     size = fixed_grid_size(MODEL, "pwm", 0.0, float(HOLD_TS[-1]))
-    runs = synchronous.solve_runs([MODEL, MODEL], [pj.Constant(0.05)] * 2, [HOLD_TS] * 2, [f[0] for f in flats],
-                                  flats[0][1], [0.0, 0.0], stepping="pwm", substeps=_DEFAULT_SUBSTEPS,
-                                  sizes=[size, size])
+
+    # jitted: eagerly, the set-up around the loop (grids, stacking, outputs) compiles ~140 one-operation programs
+    @eqx.filter_jit
+    def solve_runs(starts):
+        flats = [scaled(MODEL, y0) for y0 in starts]
+        return synchronous.solve_runs([MODEL, MODEL], [pj.Constant(0.05)] * 2, [HOLD_TS] * 2, [f[0] for f in flats],
+                                      flats[0][1], [0.0, 0.0], stepping="pwm", substeps=_DEFAULT_SUBSTEPS,
+                                      sizes=[size, size])
+
+    runs = solve_runs(starts)
     held, slid = (np.asarray(states.position) for states, _, _ in runs)
     np.testing.assert_allclose(held, np.asarray(_from_rest(starts[0]).position), rtol=0, atol=1e-12)
     np.testing.assert_allclose(slid, np.asarray(_from_rest(starts[1]).position), rtol=0, atol=1e-12)

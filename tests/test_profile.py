@@ -7,7 +7,7 @@ import math
 import textwrap
 import warnings
 
-import jax.numpy as jnp
+import equinox as eqx
 import numpy as np
 import pytest
 
@@ -15,13 +15,16 @@ import pamjax as pj
 from pamjax import PamjaxInputError, presets
 from pamjax._cli.main import main
 
+# the muscle's force law jitted: eagerly, each of its operations compiles a program of its own
+_static_force = eqx.filter_jit(lambda muscle, x, p, air: muscle.static_force(x, p, air))
+
 
 def _force_map(noise, pressures_bar, positions, seed=0):
     """Synthetic isometric map of the MAS-10 preset with Gaussian noise [N]."""
     muscle = presets.mas10_muscle()
     x, p = np.meshgrid(positions, 101325.0 + 1e5 * np.asarray(pressures_bar), indexing="ij")
     x, p = x.ravel(), p.ravel()
-    f = np.asarray(muscle.static_force(jnp.asarray(x), jnp.asarray(p), pj.Air()))
+    f = np.asarray(_static_force(muscle, x, p, pj.Air()))
     f = f + noise * np.random.default_rng(seed).standard_normal(f.shape)
     return muscle, x, p, f, pj.ForceMapExperiment(x, p, f, scale=noise)
 
