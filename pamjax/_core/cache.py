@@ -146,7 +146,8 @@ class ProgramCache:
 
     Loading an exported program still lowers it (StableHLO → XLA, ~0.3 s for a fit's Jacobian) before the persistent
     cache can find its compiled code; so the compiled executable itself is kept too (`executables/`, JAX's
-    `serialize_executable`, keyed as the program plus this machine: platform, its version, devices, CPU), and a
+    `serialize_executable`, keyed as the program plus this machine: platform, its version, devices, the process's own
+    devices, CPU), and a
     later run loads it directly. Any failure there falls back to the exported program."""
 
     def __init__(self, directory):
@@ -319,8 +320,11 @@ def _persistent_hits():
 
 
 def _machine():
-    """A digest of what a compiled executable is specific to: the platform and its version, the devices, and on
-    Linux the CPU's model and instruction-set flags (XLA compiles for the host CPU)."""
+    """A digest of what a compiled executable is specific to: the platform and its version, the devices, the
+    process's own devices (an executable runs on the device it was compiled for: in a multi-process run, process 1
+    loading process 0's executable failed with "Expected args to execute_sharded_on_local_devices to have 1 shards,
+    got: [0, …]" — tests/test_distributed.py, whichever process compiled first), and on Linux the CPU's model and
+    instruction-set flags (XLA compiles for the host CPU)."""
     if "machine" not in _PROGRAMS:
         import hashlib
         import platform
@@ -329,7 +333,7 @@ def _machine():
 
         devices = jax.devices()
         parts = [platform.machine(), devices[0].platform, getattr(devices[0].client, "platform_version", "?"),
-                 [d.device_kind for d in devices]]
+                 [d.device_kind for d in devices], jax.process_index(), [d.id for d in jax.local_devices()]]
         try:
             with open("/proc/cpuinfo") as f:
                 parts += [line.strip() for line in f if line.startswith(("model name", "flags"))][:2]
