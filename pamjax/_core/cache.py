@@ -147,8 +147,7 @@ class ProgramCache:
     Loading an exported program still lowers it (StableHLO → XLA, ~0.3 s for a fit's Jacobian) before the persistent
     cache can find its compiled code; so the compiled executable itself is kept too (`executables/`, JAX's
     `serialize_executable`, keyed as the program plus this machine: platform, its version, devices, the process's own
-    devices, CPU), and a
-    later run loads it directly. Any failure there falls back to the exported program."""
+    devices, CPU), and a later run loads it directly. Any failure there falls back to the exported program."""
 
     def __init__(self, directory):
         self.directory = pathlib.Path(directory) / "programs"
