@@ -16,7 +16,8 @@ when the bench lists its true parameters, `score` (relative errors, F_max over t
 `OUT/joint.png`, data against model with residuals. A second run refuses to replace them without `--overwrite`.
 The compiled programs stay in the `pamjax` command's cache directory (`PAMJAX_CACHE_DIR`; off with `--no-cache` or
 `PAMJAX_COMPILATION_CACHE=0`), so a second run, on these recordings or another plant's of the same layout, loads
-them instead of compiling (same experiments and lengths: the same programs).
+them instead of compiling (same experiments and lengths: the same programs). Like the `pamjax` command's fit, it
+compiles with XLA's classic CPU emitters (`pamjax.prefer_fast_compilation`; `PAMJAX_FAST_COMPILE=0` turns it off).
 """
 
 import argparse
@@ -86,6 +87,7 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     if not args.no_cache:  # a second run (another start, more steps, the next plant) compiles nothing again
         pj.enable_compilation_cache()
+    pj.prefer_fast_compilation()  # fits of single trajectories: XLA's classic CPU emitters compile them faster
 
     model = pj.presets.mas10_system(valve="pwm", friction="karnopp")  # datasheet / paper values
     bench = pj.load_bench(data, model, rate=args.rate)

@@ -207,7 +207,7 @@ from ._control.tuning import tune_controller as tune_controller
 # --- runtime: processes, compilation cache, XLA CPU setting --------------------------------------------------------
 from ._core.cache import CompileStats as CompileStats, enable_compilation_cache as enable_compilation_cache
 from ._core.distributed import ProcessInfo as ProcessInfo, initialize_distributed as initialize_distributed
-from ._core.xla_cpu import xla_cpu_status as xla_cpu_status
+from ._core.xla_cpu import prefer_fast_compilation as prefer_fast_compilation, xla_cpu_status as xla_cpu_status
 
 # isort: split
 # --- the papers' plants, every number sourced; unit constants --------------------------------------------------------

@@ -368,10 +368,11 @@ def test_an_internal_error_is_one_line_pointing_at_debug(tmp_path, capsys, monke
     assert err.count("\n") == 2
 
 
-def test_the_garbage_collector_is_set_for_the_commands_own_process_only(tmp_path, capsys, no_solves, monkeypatch):
+def test_the_process_is_set_up_for_the_commands_own_process_only(tmp_path, capsys, no_solves, monkeypatch):
     # `pamjax ...` as a program freezes what its imports made and collects young objects less often (tracing makes
     # millions of short-lived objects); `main(argv)` called from a user's program leaves their collector alone.
     import pamjax._cli.main as cli_main
+    import pamjax._core.xla_cpu as xla_cpu
 
     calls = []
 
@@ -383,13 +384,20 @@ def test_the_garbage_collector_is_set_for_the_commands_own_process_only(tmp_path
             calls.append(thresholds)
 
     monkeypatch.setattr(cli_main, "gc", Recorder())
+    # and XLA's classic CPU emitters (faster compilation) for every command but sweep (pamjax._core.xla_cpu)
+    monkeypatch.setattr(xla_cpu, "prefer_fast_compilation", lambda: calls.append("fast compilation"))
     config = _write(tmp_path, "[fit\n")
     assert main(["fit", str(config)]) == 2
     assert calls == []
-    monkeypatch.setattr(cli_main.sys, "argv", ["pamjax", "fit", str(config)])
     monkeypatch.setattr(cli_main, "_end_process", lambda status: calls.append(("status", status)))
+    monkeypatch.setattr(cli_main.sys, "argv", ["pamjax", "fit", str(config)])
     main()
-    assert calls == ["freeze", (50_000, 20, 100), ("status", 2)]
+    assert calls == ["freeze", (50_000, 20, 100), "fast compilation", ("status", 2)]
+    calls.clear()
+    sweep = _write(tmp_path, "[sweep\n", name="sweep.toml")
+    monkeypatch.setattr(cli_main.sys, "argv", ["pamjax", "sweep", str(sweep)])
+    main()
+    assert calls == ["freeze", (50_000, 20, 100), ("status", 2)]  # batched lanes: XLA's default emitters
 
 
 # ---------------------------------------------------------------------------------------------------------------

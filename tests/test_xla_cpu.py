@@ -7,6 +7,7 @@ import sys
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import pytest
 
 import pamjax
@@ -67,6 +68,63 @@ def test_apply_after_jax_started_says_so(keep_status):
         status = _xla_cpu.apply(env)
     assert not status["active"] and "import pamjax first" in status["reason"]
     assert "XLA_FLAGS" not in env  # too late to matter: not written
+
+
+def test_fast_compilation_is_set_only_where_xla_knows_the_flag(keep_status, monkeypatch):
+    # XLA aborts the process on a flag it does not know, so the classic emitters are asked for only on a jaxlib known
+    # to have the flag, before JAX starts, and never against the user's own choice or opt-out.
+    flag = f"--{_xla_cpu.EMITTER_FLAG}=false"
+    monkeypatch.setattr(_xla_cpu, "_backends_initialised", lambda: False)
+    monkeypatch.setattr(_xla_cpu, "_jaxlib_version", lambda: _xla_cpu.FAST_COMPILE_JAXLIB[0])
+    env = {"XLA_FLAGS": "--a=1"}
+    status = _xla_cpu.prefer_fast_compilation(env)
+    assert status["fast_compile"] and "set by pamjax" in status["fast_compile_reason"]
+    assert env["XLA_FLAGS"] == f"--a=1 {flag}"
+    assert pamjax.xla_cpu_status() == status
+    assert _xla_cpu.prefer_fast_compilation(env) == status and env["XLA_FLAGS"] == f"--a=1 {flag}"  # asked twice
+    for users in ("true", "false"):  # the user's value stands, whichever it is
+        env = {"XLA_FLAGS": f"--{_xla_cpu.EMITTER_FLAG}={users}"}
+        status = _xla_cpu.prefer_fast_compilation(env)
+        assert status["fast_compile"] == (users == "false") and "user" in status["fast_compile_reason"]
+        assert env["XLA_FLAGS"] == f"--{_xla_cpu.EMITTER_FLAG}={users}"
+    for name in (_xla_cpu.FAST_COMPILE, _xla_cpu.OPT_OUT):
+        env = {name: "0"}
+        status = _xla_cpu.prefer_fast_compilation(env)
+        assert not status["fast_compile"] and f"{name}=0" in status["fast_compile_reason"] and "XLA_FLAGS" not in env
+    newer = (_xla_cpu.FAST_COMPILE_JAXLIB[1][0], _xla_cpu.FAST_COMPILE_JAXLIB[1][1] + 1)
+    for version in (newer, (0, 4), None):
+        monkeypatch.setattr(_xla_cpu, "_jaxlib_version", lambda v=version: v)
+        env = {}
+        status = _xla_cpu.prefer_fast_compilation(env)
+        assert not status["fast_compile"] and "not one known" in status["fast_compile_reason"] and not env
+    monkeypatch.setattr(_xla_cpu, "_jaxlib_version", lambda: _xla_cpu.FAST_COMPILE_JAXLIB[1])
+    monkeypatch.setattr(_xla_cpu, "_backends_initialised", lambda: True)
+    env = {}
+    status = _xla_cpu.prefer_fast_compilation(env)
+    assert not status["fast_compile"] and "already running" in status["fast_compile_reason"] and not env
+
+
+def test_import_asks_for_fast_compilation_when_the_environment_does(keep_status, monkeypatch):
+    monkeypatch.setattr(_xla_cpu, "_backends_initialised", lambda: False)
+    monkeypatch.setattr(_xla_cpu, "_jaxlib_version", lambda: _xla_cpu.FAST_COMPILE_JAXLIB[0])
+    for value, wanted in (("1", True), ("0", False), ("", False)):
+        env = {_xla_cpu.FAST_COMPILE: value}
+        status = _xla_cpu.apply(env)
+        assert status["active"] and status["fast_compile"] is wanted
+        assert (f"--{_xla_cpu.EMITTER_FLAG}=false" in env["XLA_FLAGS"]) is wanted
+
+
+def test_this_jaxlib_knows_the_flag_when_the_suite_asks_for_it():
+    # The suite asks for fast compilation (tests/conftest.py): on a jaxlib of the checked range it is in effect here,
+    # which also shows that XLA accepted the flag (it would have aborted the process otherwise).
+    status = pamjax.xla_cpu_status()
+    version = _xla_cpu._jaxlib_version()
+    known = version is not None and _xla_cpu.FAST_COMPILE_JAXLIB[0] <= version <= _xla_cpu.FAST_COMPILE_JAXLIB[1]
+    if os.environ.get(_xla_cpu.FAST_COMPILE) != "1" or not known or "user" in status["fast_compile_reason"]:
+        pytest.skip(f"not asked for, or not this jaxlib: {status['fast_compile_reason']}")
+    assert status["fast_compile"], status
+    assert f"--{_xla_cpu.EMITTER_FLAG}=false" in os.environ["XLA_FLAGS"]
+    assert float(jnp.tanh(jnp.asarray(0.5))) == pytest.approx(np.tanh(0.5), rel=1e-15)  # XLA runs with it
 
 
 _USER_CHOICE = os.environ.get(_xla_cpu.OPT_OUT, "1") == "0" or "by the user" in _xla_cpu.xla_cpu_status()["reason"]

@@ -126,8 +126,12 @@ def _end_process(status):
 def _main(argv, program=False):
     parser, modules = _parser()
     args = parser.parse_args(argv)
-    if program:
+    if program:  # the command's own process (not a program that calls main(argv)): set it up for the work
         _collect_less()
+        if args.command != "sweep":  # single trajectories: XLA's classic CPU emitters compile them faster (xla_cpu)
+            from .._core.xla_cpu import prefer_fast_compilation
+
+            prefer_fast_compilation()
     debug = args.debug or os.environ.get(DEBUG_VARIABLE, "") not in ("", "0")
     import jax
 
