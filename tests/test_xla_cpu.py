@@ -165,3 +165,60 @@ def test_importing_pamjax_does_not_start_jax():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["False", "True"]
+
+
+def test_single_trajectory_options_stand_back_where_the_process_setting_does(keep_status, monkeypatch):
+    # The per-program classic emitters (`pamjax.simulate` called outside any transformation) follow the same rules as
+    # the process-wide flag: not against the user's own choice or opt-out, not on an unchecked jaxlib, CPU only, and
+    # not at all when the whole process already compiles that way.
+    wanted = {_xla_cpu.EMITTER_FLAG: False}
+    monkeypatch.setattr(_xla_cpu, "_jaxlib_version", lambda: _xla_cpu.FAST_COMPILE_JAXLIB[0])
+    monkeypatch.setattr(_xla_cpu, "_on_cpu", lambda: True)
+    _xla_cpu._status["fast_compile"] = False
+    assert _xla_cpu.single_trajectory_options({}) == wanted
+    assert _xla_cpu.single_trajectory_options({_xla_cpu.FAST_COMPILE: "1", "XLA_FLAGS": "--a=1"}) == wanted
+    for env in ({_xla_cpu.FAST_COMPILE: "0"}, {_xla_cpu.OPT_OUT: "0"},
+                {"XLA_FLAGS": f"--{_xla_cpu.EMITTER_FLAG}=true"}, {"XLA_FLAGS": f"--{_xla_cpu.EMITTER_FLAG}=false"}):
+        assert _xla_cpu.single_trajectory_options(env) is None, env
+    newer = (_xla_cpu.FAST_COMPILE_JAXLIB[1][0], _xla_cpu.FAST_COMPILE_JAXLIB[1][1] + 1)
+    for version in (newer, (0, 4), None):
+        monkeypatch.setattr(_xla_cpu, "_jaxlib_version", lambda v=version: v)
+        assert _xla_cpu.single_trajectory_options({}) is None, version
+    monkeypatch.setattr(_xla_cpu, "_jaxlib_version", lambda: _xla_cpu.FAST_COMPILE_JAXLIB[1])
+    monkeypatch.setattr(_xla_cpu, "_on_cpu", lambda: False)
+    assert _xla_cpu.single_trajectory_options({}) is None
+    monkeypatch.setattr(_xla_cpu, "_on_cpu", lambda: True)
+    _xla_cpu._status["fast_compile"] = True
+    assert _xla_cpu.single_trajectory_options({}) is None
+
+
+def test_top_level_simulate_compiles_with_the_options_and_transformed_simulate_without(keep_status, monkeypatch):
+    from pamjax._solve import simulate as simulate_module
+
+    system = presets.mas10_system("averaged")
+    signal = pamjax.Triangle(0.05, 0.95, 0.25)
+    ts = jnp.linspace(0.0, 2.0, 101)
+    monkeypatch.setenv(_xla_cpu.FAST_COMPILE, "0")
+    plain = pamjax.simulate(system, signal, ts)
+    # As in a process without the process-wide flag (`import pamjax` alone): XLA_FLAGS is read once, at JAX's start,
+    # so changing it now only changes what single_trajectory_options sees.
+    monkeypatch.delenv(_xla_cpu.FAST_COMPILE)
+    flags = os.environ.get("XLA_FLAGS", "").replace(f"--{_xla_cpu.EMITTER_FLAG}=false", "")
+    monkeypatch.setenv("XLA_FLAGS", flags)
+    _xla_cpu._status["fast_compile"] = False
+    options = _xla_cpu.single_trajectory_options()
+    if options is None:
+        pytest.skip("not a CPU backend, or not a jaxlib known to have the option")
+    key = tuple(sorted(options.items()))
+    simulate_module._SOLVE_FAST.pop(key, None)
+    fast = pamjax.simulate(system, signal, ts)
+    assert key in simulate_module._SOLVE_FAST  # compiled by the program with the options
+    np.testing.assert_allclose(np.asarray(fast.position), np.asarray(plain.position), rtol=1e-9, atol=1e-13)
+    np.testing.assert_allclose(np.asarray(fast.pressure), np.asarray(plain.pressure), rtol=1e-9)
+    # Inside jit, vmap or grad (JAX refuses compiler options on a nested jit), even with every argument concrete:
+    # the plain program, the same numbers.
+    end = float(plain.position[-1])
+    inside_jit = jax.jit(lambda y: pamjax.simulate(system, signal, ts).position[-1] + y)(0.0)
+    inside_vmap = jax.vmap(lambda y: pamjax.simulate(system, signal, ts).position[-1] + y)(jnp.zeros(2))
+    assert float(inside_jit) == pytest.approx(end, rel=1e-9)
+    np.testing.assert_allclose(np.asarray(inside_vmap), end, rtol=1e-9)

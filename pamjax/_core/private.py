@@ -49,6 +49,18 @@ def jax_backends_initialized() -> bool:
         return False
 
 
+def jax_at_top_level() -> bool:
+    """Whether no JAX transformation (jit, vmap, grad, ...) is tracing right now: only then may a `jax.jit` carry its
+    own `compiler_options` (JAX refuses them on a nested jit). False when the private name has moved (the caller then
+    takes the plain program)."""
+    try:
+        from jax._src import core
+
+        return bool(core.trace_state_clean())
+    except Exception:
+        return False
+
+
 def jax_coordinator_address():
     """The coordinator address `jax.distributed.initialize` connected to, or None (JAX keeps it in a private global
     state only; None too when that name has moved)."""

@@ -10,8 +10,9 @@ import numpy as np
 
 from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError, PamjaxSolveError, check_time_grid, require_float64
-from .._core.private import diffrax_result_code, equinox_errors_as_nan
+from .._core.private import diffrax_result_code, equinox_errors_as_nan, jax_at_top_level
 from .._core.units import check_absolute_pressure
+from .._core.xla_cpu import single_trajectory_options
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractSystem
 from . import synchronous as _sync
@@ -212,6 +213,22 @@ def pwm_trajectory(system, signal, ts, t0, states, num_steps, finite):
 
 
 _solve_jit = eqx.filter_jit(solve)
+_SOLVE_FAST = {}  # compiler options (as a sorted tuple) → `solve` jitted with them
+
+
+def _solve_program():
+    """The jitted `solve` for this call: called outside any transformation, with the single-trajectory compiler
+    options (`pamjax._core.xla_cpu.single_trajectory_options`: a 25-35 % shorter compilation at the same run time);
+    under jit, vmap or grad the plain program, whose compilation the enclosing transformation decides (JAX takes
+    compiler options on a top-level jit only, and a vmapped solve runs faster with XLA's default emitters)."""
+    options = single_trajectory_options() if jax_at_top_level() else None
+    if options is None:
+        return _solve_jit
+    key = tuple(sorted(options.items()))
+    program = _SOLVE_FAST.get(key)
+    if program is None:
+        program = _SOLVE_FAST[key] = eqx.filter_jit(solve, compiler_options=options)
+    return program
 
 
 def validate(system, signal, ts, y0=None, t0=None):
@@ -365,7 +382,7 @@ def simulate(
     # checks (diffrax's, on the save times) as NaN rather than as host callbacks: JAX does not keep a program with a
     # host callback in its persistent cache, and a second run would compile the solve again.
     with contextlib.nullcontext() if traced else equinox_errors_as_nan():
-        traj = _solve_jit(system, signal, ts, y0, t0, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps,
+        traj = _solve_program()(system, signal, ts, y0, t0, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps,
                           dt0=dt0, adjoint=adjoint, jump_ts=jump_ts, throw=throw and traced, stepping=stepping,
                           substeps=substeps, num_periods=periods, grid_step=grid_step)
     if throw and not traced:
