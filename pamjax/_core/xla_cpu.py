@@ -131,6 +131,16 @@ def _users_emitter_flag(environ):
     return None if users is None else users.group(1)
 
 
+def _opted_out(environ):
+    """The variable that turns the classic emitters off (`PAMJAX_FAST_COMPILE=0` or `PAMJAX_XLA_CPU_TUNING=0`), or
+    None."""
+    return next((name for name in (FAST_COMPILE, OPT_OUT) if _off(environ.get(name, "1"))), None)
+
+
+def _known_jaxlib(version) -> bool:
+    return version is not None and FAST_COMPILE_JAXLIB[0] <= version <= FAST_COMPILE_JAXLIB[1]
+
+
 @functools.cache
 def _jaxlib_version():
     from importlib.metadata import PackageNotFoundError, version
@@ -157,13 +167,12 @@ def prefer_fast_compilation(environ=os.environ) -> dict:
     if users is not None:
         _status.update(fast_compile=_off(users), fast_compile_reason=(
             f"set by the user in XLA_FLAGS: --{EMITTER_FLAG}={users}"))
-    elif _off(environ.get(FAST_COMPILE, "1")) or _off(environ.get(OPT_OUT, "1")):
-        which = FAST_COMPILE if _off(environ.get(FAST_COMPILE, "1")) else OPT_OUT
+    elif (which := _opted_out(environ)) is not None:
         _status.update(fast_compile=False, fast_compile_reason=f"{which}={environ[which]}: XLA's default emitters")
     elif _backends_initialised():
         _status.update(fast_compile=False, fast_compile_reason=(
             "JAX's backend was already running (XLA had read its flags): set it before JAX starts"))
-    elif version is None or not FAST_COMPILE_JAXLIB[0] <= version <= FAST_COMPILE_JAXLIB[1]:
+    elif not _known_jaxlib(version):
         _status.update(fast_compile=False, fast_compile_reason=(
             f"jaxlib {'not found' if version is None else '.'.join(map(str, version))} is not one known to have "
             f"--{EMITTER_FLAG} (checked: {'.'.join(map(str, FAST_COMPILE_JAXLIB[0]))} to "
@@ -183,12 +192,8 @@ def single_trajectory_options(environ=os.environ):
     process already compiles everything that way (`prefer_fast_compilation`), the user chose the emitters in
     XLA_FLAGS or opted out (`PAMJAX_FAST_COMPILE=0`, `PAMJAX_XLA_CPU_TUNING=0`), this jaxlib is not one known to have
     the option (`FAST_COMPILE_JAXLIB`; XLA refuses an unknown one), or the backend is not the CPU."""
-    if _status["fast_compile"] or _users_emitter_flag(environ) is not None:
-        return None
-    if _off(environ.get(FAST_COMPILE, "1")) or _off(environ.get(OPT_OUT, "1")):
-        return None
-    version = _jaxlib_version()
-    if version is None or not FAST_COMPILE_JAXLIB[0] <= version <= FAST_COMPILE_JAXLIB[1] or not _on_cpu():
+    if (_status["fast_compile"] or _users_emitter_flag(environ) is not None or _opted_out(environ) is not None
+            or not _known_jaxlib(_jaxlib_version()) or not _on_cpu()):
         return None
     return {EMITTER_FLAG: False}
 

@@ -382,9 +382,10 @@ def simulate(
     # checks (diffrax's, on the save times) as NaN rather than as host callbacks: JAX does not keep a program with a
     # host callback in its persistent cache, and a second run would compile the solve again.
     with contextlib.nullcontext() if traced else equinox_errors_as_nan():
-        traj = _solve_program()(system, signal, ts, y0, t0, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps,
-                          dt0=dt0, adjoint=adjoint, jump_ts=jump_ts, throw=throw and traced, stepping=stepping,
-                          substeps=substeps, num_periods=periods, grid_step=grid_step)
+        program = _solve_program()
+        traj = program(system, signal, ts, y0, t0, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps,
+                       dt0=dt0, adjoint=adjoint, jump_ts=jump_ts, throw=throw and traced, stepping=stepping,
+                       substeps=substeps, num_periods=periods, grid_step=grid_step)
     if throw and not traced:
         _raise_on_failure(traj, system, signal, ts, t0, y0, stepping, substeps, grid_step, max_steps, solver)
     return traj
