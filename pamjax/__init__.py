@@ -161,6 +161,13 @@ from ._fit.parameters import ParameterSpace as ParameterSpace, parameter_paths a
 from ._fit.predictions import predictions as predictions
 from ._fit.profile import Profile as Profile, ProfileResult as ProfileResult, profile as profile
 from ._fit.recording import Recording as Recording
+from ._fit.rig import (
+    Rig as Rig,
+    RunConditions as RunConditions,
+    Sensors as Sensors,
+    StartState as StartState,
+    nuisance_report as nuisance_report,
+)
 from ._fit.staged import StagedStart as StagedStart, staged_start as staged_start
 from ._fit.synthetic import synthetic_recording as synthetic_recording
 

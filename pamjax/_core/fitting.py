@@ -10,7 +10,7 @@ it; the fitter (`pamjax._fit.parameters`) reads these keys and knows no componen
 - `transform`: "log" (a physically positive quantity, fitted as v₀ eᶿ so that a trial value is never ≤ 0; a start
   value ≤ 0 falls back to "linear"), "logistic" with `bounds` (lo, hi) (a bounded quantity such as a ratio in
   (0, 1)), "nodes" (a polynomial's coefficients, fitted as its values at Chebyshev nodes over `domain`), or
-  "linear" (the default: scaled by the start magnitude).
+  "linear" (the default: scaled by the start magnitude, or by `scale` where the field declares one: `signed`).
 - `domain` ("nodes" only): the name of an attribute (lo, hi) of an enclosing component that bounds the polynomial's
   argument (a `Muscle`'s `stroke` for the force law's F_max(x)).
 - `label`: how the entries of an array are reported, a format with `{i}` the flat index and `{n}` = i + 1 ("a{i}"
@@ -27,15 +27,32 @@ import jax.numpy as jnp
 TRANSFORMS = ("linear", "log", "logistic", "nodes")
 
 
+def optional_array(x):
+    """Field converter of an optional array parameter: None stays None (not set), anything else an array."""
+    return None if x is None else jnp.asarray(x)
+
+
+def _converter(default):
+    return optional_array if default is None else jnp.asarray
+
+
 def positive(default=dataclasses.MISSING, **kwargs):
-    """An array parameter that is physically positive (an area, a mass, a friction force): fitted in log space."""
-    return eqx.field(converter=jnp.asarray, default=default, metadata=dict(transform="log"), **kwargs)
+    """An array parameter that is physically positive (an area, a mass, a friction force): fitted in log space.
+    A default of None makes it optional (unset until given)."""
+    return eqx.field(converter=_converter(default), default=default, metadata=dict(transform="log"), **kwargs)
 
 
 def ratio(default=dataclasses.MISSING, **kwargs):
     """An array parameter in the open interval (0, 1) (a critical pressure ratio): fitted through a logistic."""
     return eqx.field(converter=jnp.asarray, default=default,
                      metadata=dict(transform="logistic", bounds=(0.0, 1.0)), **kwargs)
+
+
+def signed(default=dataclasses.MISSING, *, scale, **kwargs):
+    """A signed array parameter (an offset, a delay) fitted linearly in units of `scale` (its natural size: a
+    start value of 0 gives no magnitude of its own)."""
+    return eqx.field(converter=_converter(default), default=default,
+                     metadata=dict(transform="linear", scale=float(scale)), **kwargs)
 
 
 def polynomial(label, domain):

@@ -29,7 +29,7 @@ import threading
 import time
 
 from .fit import fit, precompile
-from .parameters import parameter_paths
+from .parameters import _parse, join_path
 
 
 @dataclasses.dataclass
@@ -59,19 +59,27 @@ class StagedStart:
 
 
 def _path(entry):
-    """The parameter path of a `free` entry (a path string, or a dict with `path`), without an index."""
+    """The parameter path of a `free` entry (a path string, or a dict with `path`), without an array index."""
     path = entry if isinstance(entry, str) else entry.get("path") if isinstance(entry, dict) else None
-    return None if path is None else path.split("[")[0]
+    if path is None:
+        return None
+    steps, _ = _parse(path)
+    return join_path(steps)
 
 
 def _seen(experiment, model, entries):
-    """The entries of `free` whose parameter exists in the experiment's system (all of them where the experiment
-    does not say how its system is built from the model)."""
-    build = getattr(experiment, "build", None)
-    if build is None:
+    """The entries of `free` whose parameter this experiment's predictions depend on (`AbstractExperiment.sees`; all
+    of them where the experiment does not say)."""
+    paths = experiment.sees(model)
+    if paths is None:
         return list(entries)
-    paths = parameter_paths(build(model))
     return [e for e in entries if _path(e) in paths]
+
+
+def _is_plant(entry):
+    from .rig import is_nuisance
+
+    return not is_nuisance(_path(entry))
 
 
 class _Background:
@@ -115,9 +123,12 @@ def staged_start(model, experiments, free, *, max_steps=100, progress=None, back
     if any(_path(e) is None for e in free):  # an entry this cannot place: no stages, the joint fit as given
         return StagedStart(model, [])
     seen = [_seen(e, model, free) for e in experiments]
-    partial = [i for i, s in enumerate(seen) if len(s) < len(free)]
+    # Stage 1's experiments see part of the plant (a tank test: the valve, no muscle); a rig's nuisances (each run's
+    # own conditions, the sensors) do not decide the stages: every experiment sees only its own run's.
+    plant = [e for e in free if _is_plant(e)]
+    partial = [i for i, s in enumerate(seen) if len([e for e in s if _is_plant(e)]) < len(plant)]
     first = [e for e in free if any(e in seen[i] for i in partial)]
-    if not partial or not first or len(first) == len(free):
+    if not partial or not first or len(first) == len(free) or all(not _is_plant(e) for e in first):
         return StagedStart(model, [])
     stages = []
     exps1 = [experiments[i] for i in partial]

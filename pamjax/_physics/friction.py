@@ -30,7 +30,8 @@ class AbstractFriction(eqx.Module):
         """Whether the friction holds the payload still (a hybrid friction's stuck mode); False for smooth ones."""
         return False
 
-    def initial_state(self):
+    def initial_state(self, velocity=0.0):
+        """The friction's own state at the start of a run moving at `velocity` [m/s] (None: memoryless)."""
         return None
 
     def state_rate(self, v, z):
@@ -98,8 +99,8 @@ class BristleFriction(AbstractFriction):
         check_nonnegative(self.viscous_coefficient, "BristleFriction.viscous_coefficient")
         check_positive(self.velocity_width, "BristleFriction.velocity_width")
 
-    def initial_state(self):
-        return jnp.zeros(())
+    def initial_state(self, velocity=0.0):
+        return jnp.zeros(())  # undeflected bristles
 
     def state_rate(self, v, z):
         return v - self.bristle_stiffness * smooth_abs(v, self.velocity_width) * z / self.coulomb_force
@@ -137,8 +138,10 @@ class KarnoppFriction(AbstractFriction):
         check_nonnegative(self.coulomb_force, "KarnoppFriction.coulomb_force")
         check_nonnegative(self.viscous_coefficient, "KarnoppFriction.viscous_coefficient")
 
-    def initial_state(self):
-        return jnp.zeros(())  # stuck: the bench's runs start at rest
+    def initial_state(self, velocity=0.0):
+        """Stuck at rest (the bench's runs start so); a run that starts moving (a recording started mid-run) slides in
+        the direction of its velocity."""
+        return jnp.sign(jnp.asarray(velocity, dtype=float))
 
     def state_rate(self, v, z):
         return jnp.zeros_like(z)  # the mode changes only at events

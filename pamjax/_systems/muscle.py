@@ -81,7 +81,7 @@ class MuscleSystem(AbstractSystem):
             pressure=jnp.asarray(p, dtype=float),
             position=jnp.asarray(x, dtype=float),
             velocity=jnp.asarray(velocity, dtype=float),
-            friction=self.friction.initial_state(),
+            friction=self.friction.initial_state(velocity),
         )
 
     @property

@@ -166,7 +166,7 @@ class RegulatedMuscleSystem(AbstractSystem):
             regulator=self.regulator.initial_state(p),
             position=jnp.asarray(x, dtype=float),
             velocity=jnp.asarray(velocity, dtype=float),
-            friction=self.friction.initial_state(),
+            friction=self.friction.initial_state(velocity),
         )
 
     def _chamber(self, state):

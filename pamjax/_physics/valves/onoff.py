@@ -85,6 +85,12 @@ class OnOffValve(AbstractSwitchingValve):
         if self.mode not in ("smooth", "exact"):
             raise PamjaxInputError(f"OnOffValve.mode must be 'smooth' or 'exact', got {self.mode!r}")
 
+    def supply(self):
+        return self.supply_pressure
+
+    def with_supply_pressure(self, pressure):
+        return eqx.tree_at(lambda v: v.supply_pressure, self, jnp.asarray(pressure, dtype=float))
+
     @property
     def exact_edges(self):
         return self.mode == "exact"
