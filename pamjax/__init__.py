@@ -124,12 +124,15 @@ from ._solve.synchronous import num_periods as num_periods
 # isort: split
 # --- fitting: recordings, experiments, parameters, fit, bench directories, model files ------------------------------
 from ._fit.bench import (
+    BENCH_NUISANCES as BENCH_NUISANCES,
     BENCH_PARAMETERS as BENCH_PARAMETERS,
     FITTED_KINDS as FITTED_KINDS,
     Bench as Bench,
+    bench_nuisance as bench_nuisance,
     bench_rmse as bench_rmse,
     bench_values as bench_values,
     load_bench as load_bench,
+    nuisance_table as nuisance_table,
 )
 from ._fit.bench_tests import (
     FlowCurveExperiment as FlowCurveExperiment,

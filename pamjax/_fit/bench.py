@@ -40,7 +40,7 @@ from .bench_files import (
     run_command,
 )
 from .experiment import Experiment, TankFromModel
-from .rig import DEFAULT_GROUP, Rig, RunConditions, Sensors, StartState
+from .rig import DEFAULT_GROUP, Rig, RunConditions, Sensors, StartState, nuisance_report
 
 # bench name → (pamjax parameter path, label of the value in a FitResult)
 BENCH_PARAMETERS = {
@@ -62,8 +62,8 @@ BENCH_PARAMETERS = {
 # plant (F_max's quartic a0…a4, eq. 7's k0 − k1 x and eq. 14's v0 + v1 x are polynomials in x of degrees it keeps),
 # so no recording determines it unless the payload reaches a stop of known position; it is held at its calibration
 # (`position_offset=`, default 0) and the plant is identified in the sensor's frame.
-NUISANCES = ("pressure_offset", "pressure_gain", "position_offset", "delay", "supply_pressure", "start")
-DEFAULT_NUISANCES = ("pressure_offset", "pressure_gain", "delay", "supply_pressure", "start")
+BENCH_NUISANCES = ("pressure_offset", "pressure_gain", "position_offset", "delay", "supply_pressure", "start")
+DEFAULT_BENCH_NUISANCES = ("pressure_offset", "pressure_gain", "delay", "supply_pressure", "start")
 _CHANNEL = {"pressure": "p", "position": "x"}
 
 
@@ -105,14 +105,14 @@ def _free_paths(keys):
 
 def _nuisance_names(nuisance):
     if nuisance is True:
-        return set(DEFAULT_NUISANCES)
+        return set(DEFAULT_BENCH_NUISANCES)
     if not nuisance:
         return set()
     names = {nuisance} if isinstance(nuisance, str) else set(nuisance)
-    unknown = names - set(NUISANCES)
+    unknown = names - set(BENCH_NUISANCES)
     if unknown:
         raise PamjaxInputError(f"nuisance names {sorted(unknown)} are not nuisances pamjax fits; valid: "
-                               f"{list(NUISANCES)} (or True for {list(DEFAULT_NUISANCES)})")
+                               f"{list(BENCH_NUISANCES)} (or True for {list(DEFAULT_BENCH_NUISANCES)})")
     return names
 
 
@@ -163,8 +163,9 @@ def load_bench(directory, model, *, rate=None, kinds=FITTED_KINDS, fitted_keys=N
     - `nuisance`: False (default: ideal sensors, nominal supply, every run at rest unless meta.json gives its start),
       True (free the nuisances of a real rig that its recordings determine: the pressure sensor's offset and gain
       and the acquisition delay, shared by all runs; each run's supply pressure; the start state of runs whose
-      `init` is "unknown…"), or a list of names from `NUISANCES` ("position_offset" too: only where a run reaches a
-      stop of known position, see `DEFAULT_NUISANCES`). The fit's model is then `bench.model`, a `pamjax.Rig`.
+      `init` is "unknown…"), or a list of names from `BENCH_NUISANCES` ("position_offset" too: only where a run
+      reaches a stop of known position, see `DEFAULT_BENCH_NUISANCES`). The fit's model is then `bench.model`, a
+      `pamjax.Rig`.
     - `position_offset`: the position sensor's offset [m] as calibrated (what it reads at x = 0; default 0), held
       unless "position_offset" is freed.
     - `atmosphere`: the ambient pressure [Pa abs] that gauge readings (`barg`, `kPa gauge`) are referred to;
@@ -206,7 +207,8 @@ def load_bench(directory, model, *, rate=None, kinds=FITTED_KINDS, fitted_keys=N
         start_unknown = str(e.get("init", "")).strip().lower().startswith("unknown")
         if start_unknown:
             unknown.append(name)
-        signal = run_command(name, kind, e, rec, period, f"{where}/meta.json", notes, start_unknown)
+        signal = run_command(name, kind, e, rec, period, f"{where}/meta.json: experiment {name!r}", notes,
+                             start_unknown)
         if rate is not None:
             rec = rec.resampled(rate)
         recordings.append(rec)
@@ -317,6 +319,55 @@ def bench_values(result, keys):
         if i is not None:
             values[k], errors[k] = float(result.values[i]), float(result.standard_errors[i])
     return values, errors
+
+
+def bench_nuisance(result, bench):
+    """A fit's nuisances in the bench's terms (SI units): `delay_s`, `pressure_offset_Pa` (added to the gauge
+    pressure), `pressure_gain` (multiplies it), `position_offset_m`, `supply_pressure_Pa` (run → value), `start` (run
+    → pressure_Pa, position_m, velocity_m_s), each fitted one's standard error under `std_err` (same keys), and
+    `held` (those not fitted, with their value and why)."""
+    report = nuisance_report(result)
+    sensors = report["sensors"].get(DEFAULT_GROUP, {})
+    base = bench.model.sensors[DEFAULT_GROUP] if isinstance(bench.model, Rig) else Sensors()
+    out, se, held = {}, {}, {}
+    for field, key in (("delay", "delay_s"), ("pressure_offset", "pressure_offset_Pa"),
+                       ("pressure_gain", "pressure_gain"), ("position_offset", "position_offset_m")):
+        if field in sensors:
+            out[key], se[key] = sensors[field]
+        else:
+            out[key] = float(getattr(base, field))
+            held[key] = ("not identifiable from a rig's runs (a shift of the position origin is absorbed exactly by "
+                         "F_max, k0 and v0); held at the calibration given" if field == "position_offset" else
+                         "not fitted (nuisance not freed)")
+    supply, supply_se, start, start_se = {}, {}, {}, {}
+    units = {"pressure": "pressure_Pa", "position": "position_m", "velocity": "velocity_m_s"}
+    for run, fields in report["runs"].items():
+        for name, (value, err) in fields.items():
+            if name == "supply_pressure":
+                supply[run], supply_se[run] = value, err
+            elif name.startswith("start."):
+                key = units[name.split(".", 1)[1]]
+                start.setdefault(run, {})[key] = value
+                start_se.setdefault(run, {})[key] = err
+    out.update(supply_pressure_Pa=supply, start=start)
+    se.update(supply_pressure_Pa=supply_se, start=start_se)
+    out["std_err"], out["held"] = se, held
+    return out
+
+
+def nuisance_table(nuisance):
+    """Text table of `bench_nuisance`'s report: each nuisance, its value ± standard error (or 'held')."""
+    se, rows = nuisance["std_err"], []
+    for key in ("delay_s", "pressure_offset_Pa", "pressure_gain", "position_offset_m"):
+        v = nuisance[key]
+        rows.append(f"  {key:<22}{v:>14.6g}  " + (f"± {se[key]:.3g}" if key in se else "held: "
+                                                   + nuisance["held"].get(key, "")))
+    for run, v in nuisance["supply_pressure_Pa"].items():
+        rows.append(f"  {'supply_pressure_Pa':<22}{v:>14.6g}  ± {se['supply_pressure_Pa'][run]:.3g}  ({run})")
+    for run, fields in nuisance["start"].items():
+        for key, v in fields.items():
+            rows.append(f"  {'start ' + key:<22}{v:>14.6g}  ± {se['start'][run][key]:.3g}  ({run})")
+    return "\n".join(rows)
 
 
 def bench_rmse(result):

@@ -150,7 +150,7 @@ def run_command(name, kind, e, rec, valve_period, where, notes, unknown_start):
         u = rec["command"]
         if np.nanmin(u) < -1e-9 or np.nanmax(u) > 1 + 1e-9:
             hint = " (it looks like percent: write the header 'duty [%]')" if np.nanmax(u) <= 100 else ""
-            raise PamjaxInputError(f"{where}: the recorded duty of {name!r} must lie in [0, 1], its range is "
+            raise PamjaxInputError(f"{where}: the recorded duty must lie in [0, 1], its range is "
                                    f"[{np.nanmin(u):g}, {np.nanmax(u):g}]{hint}")
     if kind in TANK_KINDS:
         duty = number(e, "u", where, 0.0, 1.0)
@@ -158,11 +158,11 @@ def run_command(name, kind, e, rec, valve_period, where, notes, unknown_start):
             off = float(np.max(np.abs(rec["command"] - duty)))
             if off > _DUTY_TOLERANCE:
                 raise PamjaxInputError(
-                    f"{where}: meta.json gives {name!r} duty u = {duty:g}, but its recording's duty is "
+                    f"{where}: meta.json gives duty u = {duty:g}, but its recording's duty is "
                     f"{np.min(rec['command']):g}..{np.max(rec['command']):g}: one of them is wrong (the recording "
                     "is what the rig commanded)")
         if not recorded and duty is None:
-            raise PamjaxInputError(f"{where}: {name!r} has neither a recorded duty column nor meta.json's 'u'")
+            raise PamjaxInputError(f"{where}: it has neither a recorded duty column nor meta.json's 'u'")
         if not recorded:
             return Constant(duty)
     else:
@@ -172,17 +172,17 @@ def run_command(name, kind, e, rec, valve_period, where, notes, unknown_start):
             missing = [k for k in ("lo", "hi", "f_tri") if k not in e]
             if missing:
                 raise PamjaxInputError(
-                    f"{where}: {name!r} gives a triangle duty without {missing} (a triangle needs lo, hi and f_tri "
+                    f"{where}: it gives a triangle duty without {missing} (a triangle needs lo, hi and f_tri "
                     "[Hz]; a run with a recorded duty column needs none of them: kind 'muscle_run')")
             lo, hi = number(e, "lo", where, 0.0, 1.0), number(e, "hi", where, 0.0, 1.0)
             f = number(e, "f_tri", where, 0.0, None, "Hz")
             if not (lo < hi and f > 0):
-                raise PamjaxInputError(f"{where}: {name!r} needs lo < hi and f_tri > 0, got lo={lo}, hi={hi}, "
+                raise PamjaxInputError(f"{where}: it needs lo < hi and f_tri > 0, got lo={lo}, hi={hi}, "
                                        f"f_tri={f}")
             triangle = Triangle(lo, hi, f)
         if not recorded and triangle is None:
             raise PamjaxInputError(
-                f"{where}: {name!r} has no recorded duty column (u / duty) and meta.json gives no triangle (lo, hi, "
+                f"{where}: it has no recorded duty column (u / duty) and meta.json gives no triangle (lo, hi, "
                 "f_tri): pamjax cannot know what drove the run; record the commanded duty")
         if not recorded:
             return triangle
@@ -194,12 +194,12 @@ def run_command(name, kind, e, rec, valve_period, where, notes, unknown_start):
                 phase = _triangle_phase(triangle, t, u, valve_period)
                 if phase is None:
                     raise PamjaxInputError(
-                        f"{where}: {name!r}'s recorded duty is not meta.json's triangle (lo={e['lo']}, hi={e['hi']}, "
+                        f"{where}: its recorded duty is not meta.json's triangle (lo={e['lo']}, hi={e['hi']}, "
                         f"f_tri={e['f_tri']}) at any phase: one of them is wrong (the recording is what the rig "
                         "commanded)")
                 if not unknown_start:
                     raise PamjaxInputError(
-                        f"{where}: {name!r}'s recorded duty is meta.json's triangle {phase:.3f} s in: the run was "
+                        f"{where}: its recorded duty is meta.json's triangle {phase:.3f} s in: the run was "
                         "logged from the middle, so its start is not at rest; mark it with \"init\": \"unknown\" "
                         "(its start state is then fitted with --nuisance)")
                 notes.append(f"{name}: logged {phase:.3f} s into its triangle (recorded duty); driven by the recorded "
