@@ -93,6 +93,10 @@ def nuisance_hints(model, experiments, predictions, labels):
         plant, _, _ = split(model, e.name, e.sensor_group)
         system = e.system_for(model)
         atmosphere = float(plant.air.atmospheric_pressure)
+        start_p = _start_pressure(e, system, model, atmosphere)
+        moving = _moving_start(e, predictions[e.name], start_p) if "position" in e.channels else ""
+        if moving and not e.start_at_supply:
+            starts.append((e.name, moving))
         t = np.asarray(e.times)
         for c in e.channels:
             data, pred = np.asarray(e.data[c]), np.asarray(predictions[e.name][c])
@@ -100,13 +104,12 @@ def nuisance_hints(model, experiments, predictions, labels):
             if np.count_nonzero(used) < 10:
                 continue
             r, sigma = (data - pred)[used], e.scales[c]
-            slope = np.gradient(pred, t)[used]
-            num += float(r @ -slope) / sigma**2
-            den += float(slope @ slope) / sigma**2
+            if not moving:  # a run that does not start where the model does says nothing about a lag
+                slope = np.gradient(pred, t)[used]
+                num += float(r @ -slope) / sigma**2
+                den += float(slope @ slope) / sigma**2
             if c == "pressure":
-                start_p = _start_pressure(e, system, model, atmosphere)
-                at_atmosphere = abs(start_p - atmosphere) < 1.0
-                first = _first_opening(e, system.valve) if at_atmosphere else None
+                first = _first_opening(e, system.valve) if abs(start_p - atmosphere) < 1.0 else None
                 if first is not None:
                     rest = used & (t < first)
                     if np.count_nonzero(rest) >= 3:
@@ -122,10 +125,6 @@ def nuisance_hints(model, experiments, predictions, labels):
                     tail = used & (t >= t[0] + 0.8 * (t[-1] - t[0]))
                     steady.append((e.name, float(np.mean(data[tail] - pred[tail])),
                                    sigma / np.sqrt(max(np.count_nonzero(tail), 1))))
-        if "position" in e.channels and not e.start_at_supply:
-            finding = _moving_start(e, predictions[e.name], _start_pressure(e, system, model, atmosphere))
-            if finding:
-                starts.append((e.name, finding))
     if den > 0 and "delay" not in freed:
         d, se = num / den, 1.0 / np.sqrt(den)
         if abs(d) > max(_SIGNIFICANT * se, _MIN_DELAY):
