@@ -243,3 +243,24 @@ def test_joint_script_answers_a_bad_folder_in_one_line_and_leaves_nothing(rig, t
     assert exit_.value.code == 2 and not out.exists()
     err = capsys.readouterr().err
     assert err.startswith("joint.py: error:") and "u = 50" in err and "Traceback" not in err
+
+
+def test_pamjax_fit_with_bench_nuisance_writes_the_plant_and_the_rig_apart(rig, tmp_path, capsys):
+    from pamjax._cli.main import main
+
+    cfg = tmp_path / "rig.toml"
+    body = ('[model]\npreset = "mas10_system"\noptions = { valve = "pwm", friction = "karnopp" }\n'
+            f'[bench]\ndir = "{rig}"\nnuisance = NUISANCE\n[fit]\nmax_steps = 100\n')
+    cfg.write_text(body.replace("NUISANCE", "true"))
+    assert main(["fit", str(cfg), "--out", str(tmp_path / "out"), "--quiet", "--no-plot"]) == 0
+    out = capsys.readouterr().out
+    assert "nuisances (the rig's, reported apart from the plant)" in out and "delay_s" in out
+    bench = json.loads((tmp_path / "out" / "bench.json").read_text())
+    assert bench["status"] == "converged" and set(bench["nuisance"]["supply_pressure_Pa"]) == set(TRUTH["supply"])
+    assert abs(bench["nuisance"]["delay_s"] - TRUTH["delay_s"]) < 4 * bench["nuisance"]["std_err"]["delay_s"]
+    plant = pj.load_model(tmp_path / "out" / "model.json")  # the plant alone: simulate it, fit it again
+    assert isinstance(plant, pj.MuscleSystem)
+    assert abs(float(plant.friction.coulomb_force) - 14.0) < 4 * bench["std_err"]["Fc"]
+    cfg.write_text(body.replace("NUISANCE", '"all"'))
+    assert main(["fit", str(cfg), "--out", str(tmp_path / "bad"), "--quiet", "--no-plot"]) == 2
+    assert "[bench] nuisance" in capsys.readouterr().err

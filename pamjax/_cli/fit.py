@@ -29,7 +29,8 @@ from .out import PENDING, OutputFolder, interrupt_status, raise_pending
 
 _TOP_KEYS = {"model", "fit", "experiment", "bench"}
 _FIT_KEYS = {"free", "max_steps", "ftol", "xtol", "gtol", "out", "validation_fraction"}
-_BENCH_KEYS = {"dir", "rate", "kinds", "fitted_keys", "substeps", "staged"}
+_BENCH_KEYS = {"dir", "rate", "kinds", "fitted_keys", "substeps", "staged", "nuisance", "position_offset",
+               "atmosphere"}
 _EXPERIMENT_KEYS = {"name", "file", "signal", "channels", "scales", "tank_volume", "initial", "rate", "filter_hz",
                     "t_end", "max_steps", "rename", "units", "unit_checks", "stepping"}
 RESULT, MODEL, FIGURE, CHECKPOINT, BENCH = "fit.json", "model.json", "fit.png", "checkpoint.npz", "bench.json"
@@ -67,14 +68,14 @@ def _check_free(free):
 
 def _check_free_shapes(model, free):
     """A free table's `scale` must be one number or one per element of its parameter (matched by name and shape)."""
-    from .._fit.parameters import _parse, parameter_paths
+    from .._fit.parameters import _parse, join_path, parameter_paths
 
     valid = parameter_paths(model)
     for entry in free:
         if isinstance(entry, str) or "scale" not in entry:
             continue
         attrs, index = _parse(entry["path"])
-        shape = () if index is not None else valid.get(".".join(attrs))
+        shape = () if index is not None else valid.get(join_path(attrs))
         given = np.shape(entry["scale"])
         if shape is not None and given not in ((), shape):
             raise PamjaxInputError(f"[fit] free entry {entry['path']!r}: scale expects one number or shape {shape}, "
@@ -101,9 +102,13 @@ def validate_config(cfg, where="config"):
         for key, kind, example in (("rate", "positive number", "1000.0 (Hz)"), ("substeps", "positive integer", "16"),
                                    ("kinds", "list of strings", '["tank_charge", "muscle_triangle"]'),
                                    ("fitted_keys", "list of strings", '["Cv12", "b12", "Fc"]'),
-                                   ("staged", "boolean", "false")):
+                                   ("staged", "boolean", "false"), ("position_offset", "number", "0.0 (m)"),
+                                   ("atmosphere", "positive number", "101325.0 (Pa abs)")):
             if key in bench_cfg:
                 require(bench_cfg[key], kind, f"[bench] {key}", example)
+        if "nuisance" in bench_cfg and not isinstance(bench_cfg["nuisance"], bool):
+            require(bench_cfg["nuisance"], "list of strings", "[bench] nuisance",
+                    'true, or ["delay", "pressure_offset", "supply_pressure"]')
     if "free" not in fit_cfg and bench_cfg is None:
         raise PamjaxInputError("[fit] needs 'free': the list of parameter paths to fit")
     if "free" not in fit_cfg:
@@ -184,8 +189,11 @@ def _load(path):
         b = cfg["bench"]
         kinds = tuple(b.get("kinds", pj.FITTED_KINDS))
         bench = pj.load_bench(path.parent / b["dir"], model, rate=b.get("rate"), kinds=kinds,
-                              fitted_keys=b.get("fitted_keys"), substeps=b.get("substeps", 16))
+                              fitted_keys=b.get("fitted_keys"), substeps=b.get("substeps", 16),
+                              nuisance=b.get("nuisance", False), position_offset=b.get("position_offset", 0.0),
+                              atmosphere=b.get("atmosphere"))
         experiments += bench.experiments
+        model = bench.model  # the plant, or a pamjax.Rig holding it with the rig's nuisances
         free = bench.free if free is None else free
     _check_free_shapes(model, free)
     pj.ParameterSpace(model, free)  # unknown path, index or transform: named, before any solve
@@ -341,12 +349,17 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None, 
               f"{_resume_command(args, folder.path)}")
     provenance = {"written_by": f"pamjax fit {args.config}", "status": res.status, "cost": res.cost,
                   "free": res.labels, "result": RESULT}
+    plant = res.model.plant if isinstance(res.model, pj.Rig) else res.model  # the rig's nuisances: in bench.json
     written = [folder.write_text(RESULT, json.dumps(res.to_dict(), indent=1) + "\n"),
-               folder.write_text(MODEL, model_json(res.model, provenance))]
+               folder.write_text(MODEL, model_json(plant, provenance))]
     if bench is not None:  # the bench's names: params, std_err, status, rmse of p [Pa] and x [m] per experiment
         values, errors = pj.bench_values(res, bench.fitted_keys)
         summary = dict(data=str(bench.directory), params=values, std_err=errors, status=res.status,
-                       message=res.message, rmse=pj.bench_rmse(res), noise=bench.noise, mismatch=res.mismatch)
+                       message=res.message, rmse=pj.bench_rmse(res), noise=bench.noise, mismatch=res.mismatch,
+                       diagnosis=res.diagnosis, notes=bench.notes)
+        if bench.nuisance:
+            summary["nuisance"] = pj.bench_nuisance(res, bench)
+            print("nuisances (the rig's, reported apart from the plant):\n" + pj.nuisance_table(summary["nuisance"]))
         written.append(folder.write_text(BENCH, json.dumps(summary, indent=1) + "\n"))
     if not args.no_plot:
         try:
