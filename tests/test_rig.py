@@ -264,3 +264,32 @@ def test_pamjax_fit_with_bench_nuisance_writes_the_plant_and_the_rig_apart(rig, 
     cfg.write_text(body.replace("NUISANCE", '"all"'))
     assert main(["fit", str(cfg), "--out", str(tmp_path / "bad"), "--quiet", "--no-plot"]) == 2
     assert "[bench] nuisance" in capsys.readouterr().err
+
+
+def test_a_config_declares_the_rig_of_its_experiments(rig, tmp_path, capsys):
+    # [rig]: the sensors' start values and which nuisances to fit; each [[experiment]] its supply pressure (and a
+    # start table for a run logged mid-way). Here the delay and the offset are fitted with the valve's C_v 1→2.
+    from pamjax._cli.main import main
+
+    tanks = "".join(
+        f'[[experiment]]\nname = "{n}"\nfile = "{rig / (n + ".csv")}"\nsignal = "recorded"\ntank_volume = 5e-5\n'
+        f'initial = {{ pressure = {p0} }}\nchannels = ["pressure"]\nscales = {{ pressure = 2000.0 }}\n'
+        f'supply_pressure = {TRUTH["supply"][n]}\n' for n, p0 in (("T1", ATM), ("T2", TRUTH["supply"]["T2"])))
+    cfg = tmp_path / "rig.toml"
+    head = ('[model]\npreset = "mas10_system"\noptions = { valve = "pwm", friction = "karnopp" }\n'
+            '[fit]\nfree = ["valve.inflate.discharge_coefficient"]\nmax_steps = 60\n')
+    cfg.write_text(head + f'[rig]\nsensors = {{ pressure_gain = {TRUTH["pressure_gain"]} }}\n'
+                          'free = ["delay", "pressure_offset"]\n' + tanks)
+    assert main(["fit", str(cfg), "--out", str(tmp_path / "out"), "--quiet", "--no-plot"]) == 0
+    assert "sensors[rig].delay" in capsys.readouterr().out
+    res = pj.FitResult.from_json(tmp_path / "out" / "fit.json")
+    got = dict(zip(res.labels, zip(res.values, res.standard_errors)))
+    assert res.status == "converged", res.message
+    for label, true in (("sensors[rig].delay", TRUTH["delay_s"]), ("sensors[rig].pressure_offset",
+                                                                  TRUTH["pressure_offset_Pa"])):
+        assert abs(got[label][0] - true) < 4 * got[label][1], (label, got[label], true)
+    assert abs(got["plant.valve.inflate.discharge_coefficient"][0] - 0.40) < 4 * got[
+        "plant.valve.inflate.discharge_coefficient"][1]
+    cfg.write_text(head + '[rig]\nfree = ["gain"]\n' + tanks)
+    assert main(["fit", str(cfg), "--out", str(tmp_path / "bad"), "--quiet", "--no-plot"]) == 2
+    assert "[rig] free names ['gain']" in capsys.readouterr().err

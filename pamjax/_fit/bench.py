@@ -133,15 +133,21 @@ def _rest_samples(rec, signal, valve, period):
     return rec.t < first
 
 
+# s: a run logged mid-way starts its solve this long before its first sample, so that the model can be read there
+# even when the sensors lag (delays of a few ms); one PWM period of paper 000's valve keeps the grid on its periods.
+START_LEAD = 0.02
+
+
 def _start_estimate(rec, offset, window=0.02):
-    """A run logged mid-way: its start (pressure, position, velocity) from the first `window` seconds of data (the
-    median pressure less the rest offset, a straight line through the position)."""
+    """A run logged mid-way: its start (pressure, position, velocity) `START_LEAD` before its first sample, from the
+    first `window` seconds of data (the median pressure less the rest offset, a straight line through the
+    position)."""
     keep = rec.t <= rec.t[0] + window
     p = float(np.median(rec["pressure"][keep])) - offset
     out = {"pressure": p}
     if "position" in rec.channels and np.ptp(rec["position"]) > 0:
         slope, intercept = np.polyfit(rec.t[keep] - rec.t[0], rec["position"][keep], 1)
-        out.update(position=float(intercept), velocity=float(slope))
+        out.update(position=float(intercept - slope * START_LEAD), velocity=float(slope))
     return out
 
 
@@ -236,8 +242,9 @@ def load_bench(directory, model, *, rate=None, kinds=FITTED_KINDS, fitted_keys=N
             missing = [c for c in channels if c not in noise]
             if missing:
                 raise PamjaxInputError(f"{where}/meta.json: no noise level for {missing} (give 'noise')")
+            lead = START_LEAD if name in unknown and "start" in names else 0.0  # solved from before the log
             experiments.append(Experiment(rec, signal, channels=channels, scales={c: noise[c] for c in channels},
-                                          name=name, substeps=substeps))
+                                          name=name, substeps=substeps, t0=rec.t[0] - lead))
     if not experiments:
         raise PamjaxInputError(f"{where}: no experiment of the kinds {list(kinds)}")
     bench = Bench(experiments, free, keys, noise, skipped, meta, directory, rate, model=model, notes=notes,
