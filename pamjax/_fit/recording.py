@@ -305,7 +305,7 @@ def _mat_columns(path):
     try:
         import scipy.io
     except ModuleNotFoundError as err:  # pragma: no cover - depends on the environment
-        raise ModuleNotFoundError("reading .mat recordings needs SciPy: pip install scipy") from err
+        raise ModuleNotFoundError('reading .mat recordings needs SciPy: pip install "pamjax[mat]"') from err
     try:
         raw = scipy.io.loadmat(str(path), squeeze_me=True)
     except NotImplementedError:  # MATLAB v7.3: an HDF5 file
