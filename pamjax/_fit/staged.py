@@ -90,12 +90,15 @@ class _Background:
     def __init__(self, problems):
         self.seconds = 0.0
         self.done = [threading.Event() for _ in problems]
+        self.cancelled = threading.Event()
         self.thread = threading.Thread(target=self._run, args=(problems,), daemon=True)
         self.thread.start()
 
     def _run(self, problems):
         try:
             for (model, experiments, free), done in zip(problems, self.done):
+                if self.cancelled.is_set():
+                    break
                 self.seconds += precompile(model, experiments, free)
                 done.set()
         except Exception:  # noqa: BLE001, S110 - raised again by the fit that compiles the problem itself
@@ -108,6 +111,12 @@ class _Background:
         t0 = time.perf_counter()
         self.done[i].wait()
         return time.perf_counter() - t0
+
+    def stop(self):
+        """After an error or Ctrl-C in a stage: compile nothing more, and wait for the compilation under way (XLA
+        compiling in a thread while the interpreter shuts down crashes the process: exit 139 or 134)."""
+        self.cancelled.set()
+        self.thread.join()
 
 
 def staged_start(model, experiments, free, *, max_steps=100, progress=None, background_compile=True):
@@ -138,16 +147,20 @@ def staged_start(model, experiments, free, *, max_steps=100, progress=None, back
     # does not depend on the values stage 1 finds); each fit waits for its programs rather than compiling them twice.
     background = _Background(([(model, full, rest)] if full else []) + [(model, experiments, free)]) \
         if background_compile else None
-    # (an error or Ctrl-C in a stage leaves the daemon thread unwaited for: no wait for a compilation nobody needs)
     waited = 0.0
-    res = fit(model, exps1, first, max_steps=max_steps, progress=progress)
-    stages.append(("1", [_path(e) for e in first], [e.name for e in exps1], res))
-    model = res.apply(model)
-    if full:
-        waited += background.wait(0) if background is not None else 0.0
-        res = fit(model, full, rest, max_steps=max_steps, progress=progress)
-        stages.append(("2", [_path(e) for e in rest], [e.name for e in full], res))
+    try:
+        res = fit(model, exps1, first, max_steps=max_steps, progress=progress)
+        stages.append(("1", [_path(e) for e in first], [e.name for e in exps1], res))
         model = res.apply(model)
-    waited += background.wait(-1) if background is not None else 0.0
+        if full:
+            waited += background.wait(0) if background is not None else 0.0
+            res = fit(model, full, rest, max_steps=max_steps, progress=progress)
+            stages.append(("2", [_path(e) for e in rest], [e.name for e in full], res))
+            model = res.apply(model)
+        waited += background.wait(-1) if background is not None else 0.0
+    except BaseException:  # an error or Ctrl-C in a stage: the second thread ends before the error leaves here
+        if background is not None:
+            background.stop()
+        raise
     return StagedStart(model, stages, waited_s=waited,
                        precompile_s=background.seconds if background is not None else 0.0)
