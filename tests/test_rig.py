@@ -293,3 +293,31 @@ def test_a_config_declares_the_rig_of_its_experiments(rig, tmp_path, capsys):
     cfg.write_text(head + '[rig]\nfree = ["gain"]\n' + tanks)
     assert main(["fit", str(cfg), "--out", str(tmp_path / "bad"), "--quiet", "--no-plot"]) == 2
     assert "[rig] free names ['gain']" in capsys.readouterr().err
+
+
+def test_a_failing_stage_waits_for_the_background_compilation(rig, monkeypatch):
+    # The second thread compiling the joint problem must not outlive an error of stage 1: XLA compiling in a thread
+    # while the interpreter shuts down killed fits/joint.py (exit 139/134) after a data error.
+    import threading
+    import time
+
+    from pamjax._fit import staged as staged_module
+
+    started, threads = threading.Event(), []
+
+    def slow_precompile(model, experiments, free):
+        threads.append(threading.current_thread())
+        started.set()
+        time.sleep(0.5)
+        return 0.5
+
+    def failing_fit(*args, **kwargs):
+        started.wait()
+        raise PamjaxInputError("stage 1 failed")
+
+    monkeypatch.setattr(staged_module, "precompile", slow_precompile)
+    monkeypatch.setattr(staged_module, "fit", failing_fit)
+    bench = pj.load_bench(rig, _plant(), nuisance=True)
+    with pytest.raises(PamjaxInputError, match="stage 1 failed"):
+        pj.staged_start(bench.model, bench.experiments, bench.free)
+    assert threads and not threads[0].is_alive()
