@@ -58,10 +58,10 @@ BENCH_PARAMETERS = {
     "Cf": ("friction.viscous_coefficient", "friction.viscous_coefficient"),
 }
 # The nuisances `load_bench(..., nuisance=...)` can free (docs/fitting.md, "Identifying your own rig"), and those
-# `nuisance=True` frees. Not the position sensor's offset: a shift of the position origin is absorbed EXACTLY by the
-# plant (F_max's quartic a0…a4, eq. 7's k0 − k1 x and eq. 14's v0 + v1 x are polynomials in x of degrees it keeps),
-# so no recording determines it unless the payload reaches a stop of known position; it is held at its calibration
-# (`position_offset=`, default 0) and the plant is identified in the sensor's frame.
+# `nuisance=True` frees. The position sensor's offset only where a muscle run rests on a stroke limit: elsewhere a
+# shift of the position origin is absorbed EXACTLY by the plant (F_max's quartic a0…a4, eq. 7's k0 − k1 x and eq. 14's
+# v0 + v1 x are polynomials in x of degrees it keeps), so no recording determines it; it is then held at its
+# calibration (`position_offset=`, default 0) and the plant is identified in the sensor's frame.
 BENCH_NUISANCES = ("pressure_offset", "pressure_gain", "position_offset", "delay", "supply_pressure", "start")
 DEFAULT_BENCH_NUISANCES = ("pressure_offset", "pressure_gain", "delay", "supply_pressure", "start")
 _CHANNEL = {"pressure": "p", "position": "x"}
@@ -279,6 +279,15 @@ def _with_nuisance(bench, specs, names, p_atm, position_offset):
     rest = np.concatenate(rest) if rest else np.zeros(0)
     offset = float(np.median(rest)) if rest.size >= 3 else 0.0
     sensors = Sensors(pressure_offset=offset if "pressure_offset" in names else 0.0, position_offset=position_offset)
+    stops = [name for name, kind, _, rec, _ in specs
+             if kind in MUSCLE_KINDS and _rests_on_stop(rec, plant, bench.noise)]
+    if stops and "position_offset" in names:
+        bench.notes.append(f"{', '.join(stops)}: the payload rests on a stroke limit of known position: the position "
+                           "sensor's offset is fitted")
+    elif stops and names == set(DEFAULT_BENCH_NUISANCES):  # nuisance=True: free it where the data determine it
+        names = names | {"position_offset"}
+        bench.notes.append(f"{', '.join(stops)}: the payload rests on a stroke limit of known position, which fixes "
+                           "the position sensor's offset: fitted")
     free = []
     group = f"sensors[{DEFAULT_GROUP}]"
     for field, needs in (("pressure_offset", "pressure"), ("pressure_gain", "pressure"),
@@ -305,6 +314,26 @@ def _with_nuisance(bench, specs, names, p_atm, position_offset):
     bench.model = Rig(plant, sensors={DEFAULT_GROUP: sensors}, runs=runs)
     bench.free = [f"plant.{p}" for p in bench.free] + free
     bench.nuisance = free
+
+
+# A muscle run rests on a stroke limit where its recorded position stays this close to the plant's limit for at
+# least STOP_SECONDS: the stop's position is a plant parameter, so the offset of the position sensor shows there
+# (elsewhere a shift of the origin is absorbed by the force and volume laws: BENCH_NUISANCES' note).
+STOP_NEAR, STOP_SECONDS = 1e-3, 0.2  # m, s
+
+
+def _rests_on_stop(rec, plant, noise):
+    """Whether a muscle run's recorded position rests on a stroke limit (the plant's `min_position` /
+    `max_position`): flat (within 3 noise standard deviations + 0.05 mm) within `STOP_NEAR` of it for
+    `STOP_SECONDS`."""
+    if "position" not in rec.channels or "position" not in noise:
+        return False
+    x, dt = rec["position"], float(np.median(np.diff(rec.t)))
+    for stop in (float(plant.muscle.min_position), float(plant.muscle.max_position)):
+        near = np.abs(x - stop) < STOP_NEAR
+        if np.count_nonzero(near) * dt >= STOP_SECONDS and np.std(x[near]) < 3 * noise["position"] + 5e-5:
+            return True
+    return False
 
 
 def _has_supply(valve):
