@@ -129,7 +129,7 @@ class ExtendedKalmanFilter(eqx.Module):
       5e-3 m, velocity 1e-2 m/s).
     - `substeps` (static int, 1): Euler steps of the model per sample. Paper 000's averaged model runs at 1 kHz in
       one; a switching-valve model (`presets.mas10_system("pwm")`, smoothed edges of 0.1 ms) needs ≥ 10, and then
-      predicts the PWM ripple: its pressure error halves (docs/control.md).
+      predicts the PWM ripple (with pressure process noise 3e4 Pa/√s its pressure error halves, docs/control.md).
     """
 
     model: AbstractSystem
