@@ -205,6 +205,11 @@ from ._control.controllers import (
     SlidingModeController as SlidingModeController,
     equivalent_duty as equivalent_duty,
 )
+from ._control.estimator import (
+    ExtendedKalmanFilter as ExtendedKalmanFilter,
+    KalmanState as KalmanState,
+    Sensors as Sensors,
+)
 from ._control.joint import (
     JointControlTrajectory as JointControlTrajectory,
     run_joint_control as run_joint_control,

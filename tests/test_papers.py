@@ -59,6 +59,9 @@ KEY_NUMBERS = {
     "p000_10_control": [(("PI (paper: P = 25, I = 150) @ 1.0 rad/s", "rmse_mm"), 0.356, 0.03),
                      (("PID, P = 100, D = 4 s/m @ 1.0 rad/s", "rmse_mm"), 0.289, 0.03),  # derivative helps…
                      (("PID, P = 100, D = 4 s/m, 0.1 mm noise @ 1.0 rad/s", "rmse_mm"), 12.7, 3.0)],  # …until noise
+    "p000_11_estimator_control": [(("PI, bench noise @ 1.0 rad/s", "rmse_mm"), 0.377, 0.03),  # identified plant
+                               (("SMC + EKF, bench noise @ 1.0 rad/s", "rmse_mm"), 0.106, 0.02),  # 3.6× below
+                               (("SMC + EKF, bench noise @ 1.0 rad/s", "estimation_error", "position_um"), 26.7, 5.0)],
     "p001_05_tables": [("max_C_error_percent", 0.47, 0.2), ("max_b_error", 0.026, 0.01),
                     ("eq1_printed_max_jump_fraction", 0.134, 0.002),
                     ("charging_choked_flow_l_per_min_anr/5", 294.0, 1.0)],
