@@ -208,7 +208,7 @@ from ._control.controllers import (
 from ._control.estimator import (
     ExtendedKalmanFilter as ExtendedKalmanFilter,
     KalmanState as KalmanState,
-    Sensors as Sensors,
+    LoopSensors as LoopSensors,
 )
 from ._control.joint import (
     JointControlTrajectory as JointControlTrajectory,

@@ -188,7 +188,7 @@ def test_sliding_mode_with_estimator_tracks_with_the_bench_noise():
     # the sensors are seeded: the same loop gives the same run, another seed another (similar) one
     again = pj.simulate_closed_loop(smc, 1.5, y0=smc.initial_state(y0, estimate=start))
     np.testing.assert_array_equal(np.asarray(again.duty), np.asarray(traj.duty))
-    other = eqx.tree_at(lambda lp: lp.sensors, smc, pj.Sensors(seed=1))
+    other = eqx.tree_at(lambda lp: lp.sensors, smc, pj.LoopSensors(seed=1))
     traj_other = pj.simulate_closed_loop(other, 1.5, y0=other.initial_state(y0, estimate=start))
     assert not np.array_equal(np.asarray(traj_other.duty), np.asarray(traj.duty))
     assert abs(float(traj_other.tracking_error(0.5)[0]) - rmse) < 0.5 * rmse
@@ -212,14 +212,14 @@ def test_bad_estimator_and_sensor_input_raises():
     with pytest.raises(pj.PamjaxInputError, match="process_noise"):
         pj.ExtendedKalmanFilter(MODEL, process_noise=dict(pressure=-1.0))
     with pytest.raises(pj.PamjaxInputError, match="channel"):
-        pj.Sensors(channels=("pressure",), noise=(2e3, 1e-4))
+        pj.LoopSensors(channels=("pressure",), noise=(2e3, 1e-4))
     with pytest.raises(pj.PamjaxInputError, match="states of the plant"):
         pj.ClosedLoop(PLANT, pj.PIController(), ref, estimator=pj.ExtendedKalmanFilter(MODEL),
-                      sensors=pj.Sensors(channels=("force",), noise=(1.0,)))
+                      sensors=pj.LoopSensors(channels=("force",), noise=(1.0,)))
     with pytest.raises(pj.PamjaxInputError, match="estimator"):
-        pj.ClosedLoop(PLANT, pj.PIController(), ref, sensors=pj.Sensors())
+        pj.ClosedLoop(PLANT, pj.PIController(), ref, sensors=pj.LoopSensors())
     with pytest.raises(pj.PamjaxInputError, match="measurement_noise"):
         pj.ClosedLoop(PLANT, pj.PIController(), ref, estimator=pj.ExtendedKalmanFilter(MODEL),
-                      sensors=pj.Sensors(noise=(0.0, 0.0)))
+                      sensors=pj.LoopSensors(noise=(0.0, 0.0)))
     with pytest.raises(pj.PamjaxInputError, match="samples_per_period"):
-        pj.Sensors(samples_per_period=0)
+        pj.LoopSensors(samples_per_period=0)

@@ -38,7 +38,7 @@ PAPER_NUMBERS = dict(pi_rmse_percent_min=10.0, pi_error_mm={0.5: 1.5, 1.0: 2.2},
 ERROR_TOLERANCE_MM = 0.35
 PLANT = presets.mas10_system("pwm", friction="karnopp")
 MODEL = presets.mas10_system("averaged")  # the SMC's and the filter's model (paper 000: eq. 13 valve)
-NOISE = pj.Sensors()  # 2 kPa, 0.1 mm at 1 kHz: the hybrid bench's sensors
+NOISE = pj.LoopSensors()  # 2 kPa, 0.1 mm at 1 kHz: the hybrid bench's sensors
 
 CONTROLLERS = {  # name → (controller, estimator)
     "PI, bench noise": (pj.PIDController(measurement_noise=1e-4), None),

@@ -19,7 +19,7 @@ from .._solve.simulate import solve
 from .._solve.trajectory import RESULT_NONFINITE
 from .._systems.base import AbstractSystem
 from .controllers import AbstractController, reference_derivatives
-from .estimator import ExtendedKalmanFilter, Sensors, check_channels
+from .estimator import ExtendedKalmanFilter, LoopSensors, check_channels
 from .fixed_grid import period_on_grid
 
 _DEFAULT_SUBSTEPS = 16  # RK4 nodes per period on the fixed grids: ≤ 1.25 ms at 50 Hz, as `simulate`'s PWM grid
@@ -81,7 +81,7 @@ class ClosedLoop(eqx.Module):
     The controller runs once per PWM period T = 1/f of the plant's valve (1/50 s for paper 000's MHE2); an
     `AveragedValve` plant uses `period` [s] (default 0.02 s). Without an estimator the controller reads the plant's
     true state at each period start; with one (`estimator`, e.g. `ExtendedKalmanFilter`) it reads the estimate, which
-    the estimator forms from the `sensors`' noisy readings (default `Sensors()`: pressure and position at 1 kHz with
+    the estimator forms from the `sensors`' noisy readings (default `LoopSensors()`: pressure and position at 1 kHz with
     the bench's 2 kPa and 0.1 mm noise).
 
     `stepping`: how each period's plant is solved. "auto" (default): "adaptive" (diffrax, `rtol`/`atol` of
@@ -98,7 +98,7 @@ class ClosedLoop(eqx.Module):
     reference: AbstractSignal
     period: jax.Array  # s
     estimator: ExtendedKalmanFilter | None
-    sensors: Sensors | None
+    sensors: LoopSensors | None
     stepping: str = eqx.field(static=True)
     substeps: int = eqx.field(static=True)
 
@@ -112,7 +112,7 @@ class ClosedLoop(eqx.Module):
             period = plant.valve.period if plant.valve.switches else 1.0 / paper000.PWM_FREQUENCY
         self.period = jnp.asarray(period, dtype=float)
         self.estimator = estimator
-        self.sensors = Sensors() if (sensors is None and estimator is not None) else sensors
+        self.sensors = LoopSensors() if (sensors is None and estimator is not None) else sensors
         self.stepping = _resolve_stepping(plant, stepping)
         self.substeps = substeps
 
@@ -142,8 +142,8 @@ class ClosedLoop(eqx.Module):
                 f"{type(self.estimator).__name__}"
             )
         if self.sensors is not None:
-            if not isinstance(self.sensors, Sensors):
-                raise PamjaxInputError(f"ClosedLoop.sensors must be Sensors, got {type(self.sensors).__name__}")
+            if not isinstance(self.sensors, LoopSensors):
+                raise PamjaxInputError(f"ClosedLoop.sensors must be LoopSensors, got {type(self.sensors).__name__}")
             if self.estimator is None:
                 raise PamjaxInputError(
                     "ClosedLoop.sensors need an estimator between them and the controller (e.g. "
@@ -157,7 +157,7 @@ class ClosedLoop(eqx.Module):
                     and not np.all(np.asarray(noise) > 0)):
                 raise PamjaxInputError(
                     "ExtendedKalmanFilter.measurement_noise must be given (> 0) where the sensors are noise-free "
-                    f"(Sensors.noise {noise})"
+                    f"(LoopSensors.noise {noise})"
                 )
 
     def initial_state(self, plant_state=None, estimate=None):

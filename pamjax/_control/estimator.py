@@ -37,7 +37,7 @@ def _state_fields(state):
     return tuple(k for k, v in vars(state).items() if v is not None)
 
 
-class Sensors(eqx.Module):
+class LoopSensors(eqx.Module):
     """The loop's sensors: the plant states `channels` sampled `samples_per_period` times per control period, at
     t_k + jT/N (j = 1 … N), each with independent Gaussian noise of standard deviation `noise` (per channel, in the
     channel's unit), seeded (`seed`, drawn per period: a run is reproducible and differentiable).
@@ -57,13 +57,14 @@ class Sensors(eqx.Module):
         if not (isinstance(channels, tuple) and channels and all(isinstance(c, str) for c in channels)
                 and len(set(channels)) == len(channels)):
             raise PamjaxInputError(
-                f"Sensors.channels must be a non-empty tuple of distinct state names, got {channels!r}")
+                f"LoopSensors.channels must be a non-empty tuple of distinct state names, got {channels!r}")
         if jnp.shape(self.noise) != (len(channels),):
-            raise PamjaxInputError(f"Sensors.noise must have one standard deviation per channel {channels}, got "
+            raise PamjaxInputError(f"LoopSensors.noise must have one standard deviation per channel {channels}, got "
                                    f"shape {jnp.shape(self.noise)}")
-        check_nonnegative(self.noise, "Sensors.noise")
+        check_nonnegative(self.noise, "LoopSensors.noise")
         if not (isinstance(self.samples_per_period, int) and self.samples_per_period >= 1):
-            raise PamjaxInputError(f"Sensors.samples_per_period must be an int >= 1, got {self.samples_per_period!r}")
+            raise PamjaxInputError(
+                f"LoopSensors.samples_per_period must be an int >= 1, got {self.samples_per_period!r}")
 
     def offsets(self, period):
         """Sample times after the period start [s]: jT/N, j = 1 … N (the last at the period's end)."""
@@ -124,7 +125,8 @@ class ExtendedKalmanFilter(eqx.Module):
       acceleration error of 0.6 m/s²: 6 N on 9.6 kg, where the smooth sign misplaces stick-slip). Chosen on a grid
       (pressure 3e4-4e5, position 1e-5-1e-3, velocity 0.005-0.5) as the smallest estimation error of the SMC's loop
       on `presets.mas10_system("pwm", friction="karnopp")` with the bench's noise (docs/control.md).
-    - `measurement_noise`: σ_R per sensor channel, in the channel's unit; None (default): the loop's `Sensors.noise`.
+    - `measurement_noise`: σ_R per sensor channel, in the channel's unit; None (default): the loop's
+      `LoopSensors.noise`.
     - `initial_std`: {state: σ} of the initial belief about the model's state at rest (pressure 1e4 Pa, position
       5e-3 m, velocity 1e-2 m/s).
     - `substeps` (static int, 1): Euler steps of the model per sample. Paper 000's averaged model runs at 1 kHz in
@@ -284,4 +286,4 @@ def check_channels(system, channels, what):
     fields = _state_fields(jax.eval_shape(system.initial_state))
     missing = [c for c in channels if c not in fields]
     if missing:
-        raise PamjaxInputError(f"Sensors.channels {missing} are not states of the {what} (its states: {fields})")
+        raise PamjaxInputError(f"LoopSensors.channels {missing} are not states of the {what} (its states: {fields})")
