@@ -1,12 +1,17 @@
-"""The paper gallery's toolkit (`fits/papers/`, run by `pamjax reproduce`): what a reproduction script returns
-(`Result` of `Row`s), how it writes figures (`plt`, `save`), the `fits/` procedures it reuses (`fits_module`), the
-bench recordings (`bench_folder`), and running one script on its own (`script_main`)."""
+"""The paper gallery (`pamjax reproduce`): one script per figure, table or experiment of papers 000 and 001
+(`pamjax.gallery.scripts`), the catalogue of every item of both papers with its status computed from the numbers
+(`pamjax.gallery.catalogue`), the procedures of `fits/` the scripts reuse (`pamjax.gallery.procedures`), the index
+page and `docs/papers.md` written from them (`pamjax.gallery.report`, `pamjax.gallery.docs`).
 
-from ._cli.reproduce import (
+The toolkit a script uses: `Result` (and `Row`), `plt`, `save`, `bench_folder` / `bench_params` (the hybrid bench's
+recordings, shipped in `pamjax/data/hybrid-reference-bench`), and `script_main` (run one script on its own).
+"""
+
+from .toolkit import (
     Result as Result,
     Row as Row,
     bench_folder as bench_folder,
-    fits_module as fits_module,
+    bench_params as bench_params,
     plt as plt,
     save as save,
     script_main as script_main,
