@@ -23,10 +23,18 @@ import jax
 jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
-from pamjax.gallery.procedures.regulator import (  # noqa: E402  (the procedures; this file is their command line)
+from pamjax.gallery.procedures.regulator import (  # noqa: E402, F401  (the procedures; this file is their command line)
+    B_BOUNDS,
+    NOISE_TANK,
     P_ATM,
+    TANK,
     fit_tables,
+    fit_tank,
     fit_valve,
+    start_values,
+    tank_horizon,
+    tank_rate_constant,
+    tank_run,
 )
 from pamjax.units import BAR  # noqa: E402
 
