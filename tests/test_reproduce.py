@@ -162,3 +162,25 @@ def test_a_folder_in_use_by_another_run_is_refused(gallery, tmp_path, monkeypatc
     finally:
         os.close(fd)
     assert pathlib.Path(out).is_dir()
+
+
+def test_a_script_whose_items_have_no_catalogue_entry_is_reported(gallery, tmp_path, monkeypatch, capsys):
+    """A new script lists the paper items it computes (COVERS); until the catalogue has entries computed by it, the
+    run says so and exits 1 (its results are written all the same)."""
+    path = gallery / "p000_01_first.py"
+    path.write_text(path.read_text().replace("COVERS = ()", 'COVERS = ("text: creep near the maximum displacement",)'))
+    assert _run(gallery, tmp_path / "p", monkeypatch=monkeypatch) == 1
+    err = capsys.readouterr().err
+    assert ("catalogue: p000_01_first covers 'text: creep near the maximum displacement' but no catalogue entry is "
+            "computed by it") in err
+    assert (tmp_path / "p" / "index.md").exists()
+
+
+def test_fits_module_gives_the_package_procedures():
+    from pamjax.gallery import fits_module
+    from pamjax.gallery.procedures import bench, regulator
+
+    assert fits_module("control") is bench and fits_module("regulator") is regulator
+    assert callable(fits_module("control").bench_plant)
+    with pytest.raises(Exception, match="no procedures in the package"):
+        fits_module("joint")

@@ -201,7 +201,8 @@ def _recover_stale(out):
 def run(args):
     chosen = _selection(args)
     _check_dependencies()
-    problems = catalogue.coverage_problems()
+    modules = {name: toolkit.load(source) for name, source in chosen.items()}
+    problems = catalogue.coverage_problems({n: tuple(getattr(m, "COVERS", ())) for n, m in modules.items()})
     out = pathlib.Path(args.out)
     earlier = _earlier_run(out)
     _check_keep(out, earlier, args)
@@ -212,8 +213,7 @@ def run(args):
         state = _new_run(args, chosen)
         start = time.perf_counter()
         try:
-            for name, source in chosen.items():
-                module = toolkit.load(source)
+            for name, module in modules.items():
                 print(f"[{time.perf_counter() - start:6.1f} s] {name}: {module.TITLE}", flush=True)
                 record = toolkit.run_script(module, staging, args.quick)
                 state["scripts"][name] = record

@@ -12,6 +12,7 @@ from .toolkit import (
     Row as Row,
     bench_folder as bench_folder,
     bench_params as bench_params,
+    fits_module as fits_module,
     plt as plt,
     save as save,
     script_main as script_main,

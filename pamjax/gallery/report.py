@@ -76,10 +76,6 @@ def index_page(run):
         "(`pamjax.gallery.catalogue`): reproduced / differs (pamjax's number against the paper's, with the stated "
         "tolerance), procedure check (truth in, truth out; never a reproduction), not implemented, no numbers. Each "
         "script's figures and `<script>.json` (its numbers) are in its folder; `run.json` holds them all.", ""]
-    merged = {r.get("quick") for r in scripts.values()}
-    if len(merged) > 1:
-        lines += ["Note: this index merges quick and full-mode runs (`--merge`); each script's mode is in its JSON.",
-                  ""]
     lines += paper_tables(vs, figures_under="")
     lines += ["## Scripts", "", "| script | paper | title | mode | finished | seconds |", "|---|---|---|---|---|---|"]
     for name, r in sorted(scripts.items()):

@@ -156,6 +156,22 @@ def run_script(module, out, quick):
     return record
 
 
+# fits/ script → the package module that now holds what the gallery used from it (`fits_module`)
+_PROCEDURES = {"static_force": "force_map", "derive_presets": "force_map", "averaged_valve": "averaged_valve",
+               "control": "bench", "valve_tank": "bench", "linearise": "linearised", "regulator": "regulator",
+               "stiffness": "stiffness", "ankle": "ankle"}
+
+
+def fits_module(name):
+    """For scripts written against the earlier toolkit, which imported `fits/<name>.py` by path: the package module of
+    `pamjax.gallery.procedures` that now holds what the gallery used from it (`fits_module("control").bench_plant`).
+    New scripts import `pamjax.gallery.procedures.<module>` directly."""
+    if name not in _PROCEDURES:
+        raise PamjaxInputError(f"fits/{name}.py has no procedures in the package (pamjax.gallery.procedures has "
+                               f"{sorted(set(_PROCEDURES.values()))}); move what the script needs there")
+    return importlib.import_module(f"pamjax.gallery.procedures.{_PROCEDURES[name]}")
+
+
 def script_main(module_name):
     """`python -m pamjax.gallery.scripts.<script> [--quick] [--out DIR]`: run one gallery script on its own (float64
     on; the script is imported afresh after that, so that its module-level values are float64 too)."""
