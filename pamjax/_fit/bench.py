@@ -1,5 +1,5 @@
 """Bench directories in the hybrid-reference layout: one `.npz` recording per experiment and a `meta.json` that
-describes them (`shared/data/hybrid-reference-bench/README.md`).
+describes them (`pamjax/data/hybrid-reference-bench/README.md`: the copy shipped with pamjax).
 
 `meta.json` holds `experiments` (name → kind and conditions: `tank_charge` / `tank_discharge` with `V_tank`, `u`,
 `p0`; `muscle_triangle` with `lo`, `hi`, `f_tri`; `muscle_PI` closed-loop runs), `noise` (`p_std_Pa`, `x_std_m`),
@@ -64,7 +64,7 @@ def _read_meta(directory):
     path = directory / "meta.json"
     if not path.exists():
         raise PamjaxInputError(f"bench directory {directory} has no meta.json (the hybrid-reference layout: "
-                               "shared/data/hybrid-reference-bench/README.md)")
+                               "pamjax/data/hybrid-reference-bench/README.md)")
     try:
         meta = json.loads(path.read_text())
     except json.JSONDecodeError as err:

@@ -118,9 +118,10 @@ class KarnoppFriction(AbstractFriction):
     |F_net| ≤ F_c, else sliding the other way; stuck → |F_net| reaches F_c, then sliding in the direction of F_net.
     Their times carry derivatives (implicit function theorem), so fits get the exact gradients of the sharp model.
 
-    This is the friction of the hybrid reference bench (`shared/data/*/meta.json`: "exact Karnopp stick-slip"). It
-    needs fixed-grid stepping (`simulate(..., stepping="pwm")` for a switching valve, `stepping="grid"` otherwise),
-    which `stepping="auto"` chooses; an adaptive diffrax solve cannot switch its modes and is refused.
+    This is the friction of the hybrid reference bench (`pamjax/data/hybrid-reference-bench/meta.json`: "exact Karnopp
+    stick-slip"). It needs fixed-grid stepping (`simulate(..., stepping="pwm")` for a switching valve,
+    `stepping="grid"` otherwise), which `stepping="auto"` chooses; an adaptive diffrax solve cannot switch its modes and
+    is refused.
 
     **Arguments:**
 
