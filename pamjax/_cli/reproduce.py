@@ -35,7 +35,8 @@ INDEX, RUN = "index.md", "run.json"
 def add_arguments(parser):
     parser.add_argument("paper", nargs="?", choices=sorted(toolkit.PAPERS.values()), help="one paper only (default: "
                         "both)")
-    parser.add_argument("--quick", action="store_true", help="shorter runs and fewer points (about a minute)")
+    parser.add_argument("--quick", action="store_true", help="shorter runs and fewer points (what the tests and "
+                        "docs/papers.md run)")
     parser.add_argument("--out", default="results/papers", help="output folder (index.md, run.json, one folder per "
                         "script)")
     parser.add_argument("--only", nargs="+", default=None, help="run only these scripts (names, e.g. "
