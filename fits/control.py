@@ -41,10 +41,10 @@ from pamjax import (
     simulate_closed_loop,
     tune_controller,
 )
+from pamjax.gallery import bench_folder
+from pamjax.gallery.procedures.bench import bench_plant
 
-BENCH = pathlib.Path(__file__).resolve().parents[2] / "shared" / "data" / "hybrid-reference-bench"
-if not BENCH.exists():
-    BENCH = pathlib.Path("/work/shared/data/hybrid-reference-bench")
+BENCH = bench_folder()  # the hybrid bench's recordings, shipped in pamjax/data (or $PAMJAX_BENCH_DATA)
 WINDOW_START = 5.0  # s, tracking window start (after the initial rise)
 PAPER = "paper 000: RMSE > 10 % (of the 10 mm amplitude, i.e. > 1 mm), 1.5-2.2 mm steady error"
 
@@ -69,24 +69,6 @@ PLANTS = {
     "smooth": lambda: presets.mas10_system("pwm"),
     "identified": lambda: presets.mas10_system("pwm", friction="karnopp"),
 }
-
-
-def bench_plant(friction="coulomb"):
-    """Paper 000's plant with the bench's true parameters (meta.json `params`) and the PWM valve; `friction`
-    "coulomb" (smooth sign) or "karnopp" (exact stick-slip, as the bench)."""
-    q = json.loads((BENCH / "meta.json").read_text())["params"]
-    muscle = pamjax.Muscle(
-        force_law=pamjax.PolynomialForce(
-            jnp.asarray([q[f"a{i}"] for i in range(5)]), q["k0"], q["k1"], q["k2"], q["p_max"]
-        ),
-        volume_law=pamjax.LinearVolume(q["v0"], q["v1"]),
-        min_position=q["x_min"],
-        max_position=q["x_max"],
-    )
-    friction = (pamjax.KarnoppFriction if friction == "karnopp" else pamjax.CoulombViscousFriction)(q["Fc"], q["Cf"])
-    return pamjax.MuscleSystem(
-        valve=presets.mas10_valve("smooth"), muscle=muscle, payload_mass=q["M"], friction=friction
-    )
 
 
 def perturbed_plants(plant, relative=0.2):

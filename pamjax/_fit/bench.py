@@ -1,5 +1,6 @@
 """Bench directories: one recording per experiment and a `meta.json` that describes them (the hybrid-reference layout,
-`shared/data/hybrid-reference-bench/README.md`; a real rig's CSV files, `shared/data/bench-realistic/README.md`).
+`pamjax/data/hybrid-reference-bench/README.md`, the copy shipped with pamjax; a real rig's CSV files,
+`shared/data/bench-realistic/README.md`).
 
 `meta.json` holds `experiments` (name → kind and conditions: `tank_charge` / `tank_discharge` with `V_tank`, `u`,
 `p0`; `muscle_triangle` with `lo`, `hi`, `f_tri`; `muscle_run` (any recorded duty, e.g. a designed experiment);

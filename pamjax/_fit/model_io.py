@@ -18,11 +18,9 @@ hand-edited value is checked as if typed in Python.
 import dataclasses
 import datetime
 import functools
-import inspect
 import json
 import math
 import pathlib
-import re
 import sys
 
 import equinox as eqx
@@ -31,12 +29,12 @@ import numpy as np
 
 from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError, require_float64
+from .._core.fitting import field_units
 from .._core.metadata import version
 
 FORMAT = "pamjax-model"
 FORMAT_VERSION = 1
-_FIELD_COMMENT = re.compile(r"^\s+(\w+)\s*:[^#]*#\s*(.+?)\s*$")
-# Units of fields whose declaration carries no unit comment (the docstring gives it).
+# Units of fields declared without one in their metadata (the docstring gives it).
 _UNIT_FALLBACK = {"velocity_width": "m/s"}
 
 
@@ -63,20 +61,9 @@ def _class_name(cls):
 
 @functools.cache
 def _units_of(cls):
-    """field → unit, from the trailing comments of the class body (`supply_pressure: ... = ...  # Pa abs`)."""
-    units = {}
-    for klass in reversed(cls.__mro__):
-        if not (isinstance(klass, type) and issubclass(klass, eqx.Module)) or klass is eqx.Module:
-            continue
-        try:
-            source = inspect.getsource(klass)
-        except (OSError, TypeError):
-            continue
-        for line in source.splitlines():
-            m = _FIELD_COMMENT.match(line)
-            if m:
-                units[m.group(1)] = re.split(r",\s|;\s|\s\(", m.group(2))[0]
-    return units
+    """field → unit of a component class, from its fields' metadata (`positive(16.0, unit="N")`,
+    `parameter(..., unit=...)`, ... of `pamjax._core.fitting`): declared with the field, never read from source."""
+    return field_units(cls) if dataclasses.is_dataclass(cls) else {}
 
 
 def _to_json_value(a):

@@ -56,12 +56,12 @@ class CoulombViscousFriction(AbstractFriction):
     - `velocity_width`: w [m/s]; 1e-3.
     """
 
-    coulomb_force: jax.Array = positive(paper000.COULOMB_FORCE)  # N
-    viscous_coefficient: jax.Array = positive(datasheets.MAS10_VISCOUS_COEFFICIENT)  # N s/m
+    coulomb_force: jax.Array = positive(paper000.COULOMB_FORCE, unit="N")
+    viscous_coefficient: jax.Array = positive(datasheets.MAS10_VISCOUS_COEFFICIENT, unit="N s/m")
     # m/s: a numerical smoothing width (paper 000's eq. 8 has a sharp sign), small against the 10-30 mm/s mean
     # speeds of its triangle runs (~60 mm per half period at 0.08-0.25 Hz); it sets the stiffness F_c/(w M) at rest
     # (docs/performance.md), so it is not made smaller.
-    velocity_width: jax.Array = positive(1e-3)
+    velocity_width: jax.Array = positive(1e-3, unit="m/s")
 
     def __check_init__(self):
         check_nonnegative(self.coulomb_force, "CoulombViscousFriction.coulomb_force")
@@ -86,11 +86,11 @@ class BristleFriction(AbstractFriction):
     C_f [N s/m] (250), `velocity_width` [m/s] smoothing |v| (1e-5).
     """
 
-    coulomb_force: jax.Array = positive(paper000.COULOMB_FORCE)  # N
-    bristle_stiffness: jax.Array = positive(1e5)  # N/m
-    bristle_damping: jax.Array = positive(500.0)  # N s/m
-    viscous_coefficient: jax.Array = positive(datasheets.MAS10_VISCOUS_COEFFICIENT)  # N s/m
-    velocity_width: jax.Array = positive(1e-5)  # m/s
+    coulomb_force: jax.Array = positive(paper000.COULOMB_FORCE, unit="N")
+    bristle_stiffness: jax.Array = positive(1e5, unit="N/m")
+    bristle_damping: jax.Array = positive(500.0, unit="N s/m")
+    viscous_coefficient: jax.Array = positive(datasheets.MAS10_VISCOUS_COEFFICIENT, unit="N s/m")
+    velocity_width: jax.Array = positive(1e-5, unit="m/s")
 
     def __check_init__(self):
         check_positive(self.coulomb_force, "BristleFriction.coulomb_force")
@@ -119,9 +119,10 @@ class KarnoppFriction(AbstractFriction):
     |F_net| ≤ F_c, else sliding the other way; stuck → |F_net| reaches F_c, then sliding in the direction of F_net.
     Their times carry derivatives (implicit function theorem), so fits get the exact gradients of the sharp model.
 
-    This is the friction of the hybrid reference bench (`shared/data/*/meta.json`: "exact Karnopp stick-slip"). It
-    needs fixed-grid stepping (`simulate(..., stepping="pwm")` for a switching valve, `stepping="grid"` otherwise),
-    which `stepping="auto"` chooses; an adaptive diffrax solve cannot switch its modes and is refused.
+    This is the friction of the hybrid reference bench (`pamjax/data/hybrid-reference-bench/meta.json`: "exact Karnopp
+    stick-slip"). It needs fixed-grid stepping (`simulate(..., stepping="pwm")` for a switching valve,
+    `stepping="grid"` otherwise), which `stepping="auto"` chooses; an adaptive diffrax solve cannot switch its modes and
+    is refused.
 
     **Arguments:**
 
@@ -129,8 +130,8 @@ class KarnoppFriction(AbstractFriction):
     - `viscous_coefficient`: C_f [N s/m]; 250 (see `pamjax.presets`).
     """
 
-    coulomb_force: jax.Array = positive(paper000.COULOMB_FORCE)  # N
-    viscous_coefficient: jax.Array = positive(datasheets.MAS10_VISCOUS_COEFFICIENT)  # N s/m
+    coulomb_force: jax.Array = positive(paper000.COULOMB_FORCE, unit="N")
+    viscous_coefficient: jax.Array = positive(datasheets.MAS10_VISCOUS_COEFFICIENT, unit="N s/m")
 
     hybrid = True
 

@@ -78,9 +78,7 @@ def run(out, quick=False):
                 "curves only (F_c = 16 N from the loop; C_f 'experimentally approximated')",
                 f"F_c {muscle[0]:.1f} ± {muscle_se[0]:.1f} N, C_f {muscle[1]:.0f} ± {muscle_se[1]:.0f} N s/m "
                 f"(truth 16 N, 250 N s/m; {numbers['runs']} runs each)",
-                "the procedure recovers the muscle's friction within "
-                f"{np.max(np.abs(z)):.1f} standard errors; synthetic runs, the paper's data are not published",
-                fig_name)]
+                figure=fig_name)]
     return Result(rows, numbers, paper=dict(coulomb_N=16.0))
 
 

@@ -5,7 +5,9 @@ The braid of eq. 1-3 is fixed two ways from the datasheet (10 mm inner diameter 
 maximum contraction): (A) diameter and stroke (eq. 5's force vanishes at 25 %), (B) diameter and force. Eq. 4 (virtual
 work) is checked by autodiff of `BraidVolume` against `ChouHannafordForce`; eq. 6 (Tondu-Lopez) takes braid (B) with
 its correction k set so that the force vanishes at 25 %. Volumes: eq. 3 for both braids, eq. 14 (the preset's
-v0 + v1 x) and the volume virtual work assigns to the preset's eq. 7 (`fits/derive_presets.py`).
+v0 + v1 x) and the volume virtual work assigns to the preset's eq. 7 (`fits/derive_presets.py`). Eq. 1-3 and eq. 6
+are checked against NumPy transcriptions of the printed equations, and the preset's eq. 7 gives the stroke at which
+its 6-bar force vanishes (the datasheet's 25 %, paper 000's "typically 20 % to 25 %").
 """
 
 import equinox as eqx
@@ -15,11 +17,13 @@ import numpy as np
 
 import pamjax as pj
 from pamjax import presets
-from pamjax.gallery import Result, Row, fits_module, plt, save
+from pamjax.gallery import Result, Row, plt, save
+from pamjax.gallery.procedures.force_map import virtual_work_volume
 
 PAPER = "000"
 TITLE = "McKibben geometry and force laws (eq. 1-7), muscle volume (eq. 14, Fig. 10)"
-COVERS = ("eq. 1", "eq. 2", "eq. 3", "eq. 4", "eq. 5", "eq. 6", "eq. 14", "Fig. 2", "Fig. 10")
+COVERS = ("eq. 1", "eq. 2", "eq. 3", "eq. 4", "eq. 5", "eq. 6", "eq. 14", "Fig. 2", "Fig. 10",
+          "text: maximum contraction without load 20-25 %")
 
 L0, D, F_RATED, STROKE = 0.3, 0.01, 630.0, 0.25  # m, m, N at 6 bar gauge, - (Festo MAS-10-300 datasheet)
 P_MAX = 6e5  # Pa gauge (paper 000)
@@ -62,6 +66,54 @@ def volumes(volume_law, x):
     return jax.vmap(volume_law.volume)(x)
 
 
+def transcriptions(x, braids, vol, eq6):
+    """Max relative differences between pamjax's laws and NumPy transcriptions of the printed eq. 1-3 (volume over
+    the stroke, both braids; D0 from eq. 2 at x = 0 for braid A) and eq. 6 (braid B with its correction k)."""
+    out = {}
+    worst = 0.0
+    for key, braid in zip(("A", "B"), braids):
+        b, n = float(braid.strand_length), float(braid.turns)
+        theta = np.arccos((L0 - x) / b)  # eq. 1: L = b_s cos θ
+        v3 = b**3 / (4 * np.pi * n**2) * np.cos(theta) * np.sin(theta) ** 2  # eq. 3
+        worst = max(worst, float(np.max(np.abs(vol[key] - v3)) / np.max(np.abs(v3))))
+        if key == "A":
+            out["eq2_diameter_at_0_mm"] = 1e3 * b * np.sin(theta[0]) / (n * np.pi)  # eq. 2
+    out["eq3_vs_transcription_max_relative"] = worst
+    theta0, k, forces6 = eq6
+    a, b_ = 3 / np.tan(theta0) ** 2, 1 / np.sin(theta0) ** 2
+    f6 = np.pi * (D / 2) ** 2 * P_MAX * (a * (1 - k * x / L0) ** 2 - b_)  # eq. 6 with Tondu's k
+    out["eq6_vs_transcription_max_relative"] = float(np.max(np.abs(forces6 - f6)) / np.max(np.abs(f6)))
+    return out
+
+
+def zero_force_contraction(coefficients):
+    """The smallest positive x [m] where F_max(x) = a0 + … + a4 x⁴ (eq. 7 at p_max) vanishes."""
+    roots = np.roots(np.asarray(coefficients, dtype=float)[::-1])
+    real = roots[(np.abs(roots.imag) < 1e-9) & (roots.real > 0)].real
+    return float(real.min())
+
+
+def draw(out, dv, eps, forces5, forces6, forces7, k, stroke_b, virtual, vol, vol14, x):
+    """The figure (written into `out`); returns its file name."""
+    pyplot = plt()
+    fig, (ax0, ax1) = pyplot.subplots(1, 2, figsize=(11, 4.2))
+    ax0.plot(x * 1e3, forces7, "k-", lw=2, label="eq. 7, preset (DMSP-20 map shape, 630 N)")
+    ax0.plot(x * 1e3, forces5["A"], "C0-", label=f"eq. 5, braid A (10 mm, 25 % stroke): {forces5['A'][0]:.0f} N")
+    ax0.plot(x * 1e3, forces5["B"], "C1-", label=f"eq. 5, braid B (10 mm, 630 N): stroke {100 * stroke_b:.0f} %")
+    ax0.plot(x * 1e3, virtual["B"], "C1:", lw=3, label="eq. 4: p dV/dx of eq. 3 (braid B)")
+    ax0.plot(x * 1e3, forces6, "C2--", label=f"eq. 6, braid B, k = {k:.2f}")
+    ax0.axhline(0, color="0.6", lw=0.6)
+    ax0.set(xlabel="contraction x [mm]", ylabel="force at 6 bar gauge [N]", title="MAS-10-300: eq. 4-7")
+    ax0.legend(fontsize=7)
+    ax1.plot(x * 1e3, vol14 * 1e6, "k-", lw=2, label="eq. 14, preset v0 + v1 x")
+    ax1.plot(eps * L0 * 1e3, (presets.MAS10_V0 + dv) * 1e6, "k:", label="virtual work of eq. 7 (preset's v1)")
+    ax1.plot(x * 1e3, vol["A"] * 1e6, "C0-", label="eq. 3, braid A")
+    ax1.plot(x * 1e3, vol["B"] * 1e6, "C1-", label="eq. 3, braid B")
+    ax1.set(xlabel="contraction x [mm]", ylabel="volume [cm³]", title="Fig. 10: volume against displacement")
+    ax1.legend(fontsize=7)
+    return save(fig, out, "force_laws.png")
+
+
 def run(out, quick=False):
     del quick  # no simulation: the same in both modes
     x = np.linspace(0.0, STROKE * L0, 61)
@@ -89,15 +141,20 @@ def run(out, quick=False):
     # volumes: eq. 3 (A, B), eq. 14 preset, virtual work of the preset's eq. 7
     vol = {k: np.asarray(volumes(v, jnp.asarray(x))) for k, v in (("A", braid_a), ("B", braid_b))}
     vol14 = np.asarray(volumes(muscle, jnp.asarray(x)))
-    derive = fits_module("derive_presets")
-    eps, dv = derive.virtual_work_volume(np.asarray(presets.MAS10_MAX_FORCE_COEFFICIENTS) * L0 ** np.arange(5), L0)
+    eps, dv = virtual_work_volume(np.asarray(presets.MAS10_MAX_FORCE_COEFFICIENTS) * L0 ** np.arange(5), L0)
     linearity = {}
-    for key, v in (("A", vol["A"]), ("B", vol["B"])):
-        fit = np.polyval(np.polyfit(x, v, 1), x)
+    for key, xs, v in (("A", x, vol["A"]), ("B", x, vol["B"]), ("virtual_work", eps * L0, dv)):
+        fit = np.polyval(np.polyfit(xs, v, 1), xs)
         linearity[key] = dict(max_deviation_from_line_percent=float(100 * np.max(np.abs(v - fit)) / np.ptp(v)),
-                              mean_slope_m2=float((v[-1] - v[0]) / (x[-1] - x[0])))
+                              mean_slope_m2=float((v[-1] - v[0]) / (xs[-1] - xs[0])))
+
+    transcribed = transcriptions(x, (braid_a, braid_b), vol, (theta0, k, forces6))
 
     numbers = dict(
+        **transcribed,
+        eq5=dict(force_error_braid_A=float(1 - forces5["A"][0] / F_RATED),
+                 stroke_error_braid_B=float(stroke_b / STROKE - 1)),
+        eq7_zero_force_contraction=zero_force_contraction(presets.MAS10_MAX_FORCE_COEFFICIENTS) / L0,
         braid_A=dict(strand_length_m=float(braid_a.strand_length), turns=float(braid_a.turns),
                      braid_angle_deg=float(np.degrees(np.arccos(L0 / float(braid_a.strand_length)))),
                      force_at_0_N=float(forces5["A"][0]), volume_at_0_m3=float(vol["A"][0])),
@@ -111,46 +168,30 @@ def run(out, quick=False):
         virtual_work_volume_gain_m3=float(dv[-1]),
     )
 
-    pyplot = plt()
-    fig, (ax0, ax1) = pyplot.subplots(1, 2, figsize=(11, 4.2))
-    ax0.plot(x * 1e3, forces7, "k-", lw=2, label="eq. 7, preset (DMSP-20 map shape, 630 N)")
-    ax0.plot(x * 1e3, forces5["A"], "C0-", label=f"eq. 5, braid A (10 mm, 25 % stroke): {forces5['A'][0]:.0f} N")
-    ax0.plot(x * 1e3, forces5["B"], "C1-", label=f"eq. 5, braid B (10 mm, 630 N): stroke {100 * stroke_b:.0f} %")
-    ax0.plot(x * 1e3, virtual["B"], "C1:", lw=3, label="eq. 4: p dV/dx of eq. 3 (braid B)")
-    ax0.plot(x * 1e3, forces6, "C2--", label=f"eq. 6, braid B, k = {k:.2f}")
-    ax0.axhline(0, color="0.6", lw=0.6)
-    ax0.set(xlabel="contraction x [mm]", ylabel="force at 6 bar gauge [N]", title="MAS-10-300: eq. 4-7")
-    ax0.legend(fontsize=7)
-    ax1.plot(x * 1e3, vol14 * 1e6, "k-", lw=2, label="eq. 14, preset v0 + v1 x")
-    ax1.plot(eps * L0 * 1e3, (presets.MAS10_V0 + dv) * 1e6, "k:", label="virtual work of eq. 7 (preset's v1)")
-    ax1.plot(x * 1e3, vol["A"] * 1e6, "C0-", label="eq. 3, braid A")
-    ax1.plot(x * 1e3, vol["B"] * 1e6, "C1-", label="eq. 3, braid B")
-    ax1.set(xlabel="contraction x [mm]", ylabel="volume [cm³]", title="Fig. 10: volume against displacement")
-    ax1.legend(fontsize=7)
-    fig_name = save(fig, out, "force_laws.png")
+    fig_name = draw(out, dv, eps, forces5, forces6, forces7, k, stroke_b, virtual, vol, vol14, x)
 
     rows = [
         Row("eq. 1-3, Fig. 2", "braid of the MAS-10-300 from its datasheet (10 mm, 300 mm, 25 % stroke)",
             "geometry only, no numbers",
             f"b_s {numbers['braid_A']['strand_length_m']:.3f} m, n_s {numbers['braid_A']['turns']:.2f}, "
             f"θ0 {numbers['braid_A']['braid_angle_deg']:.1f}°, V(0) = π D² L0/4 exactly",
-            "eq. 1-3 close on the datasheet: `BraidVolume.from_datasheet`", fig_name),
+            figure=fig_name),
         Row("eq. 4", "virtual work: F = −p dV/dL of eq. 3 equals eq. 5", "eq. 5 derived from eq. 3-4",
             f"max relative difference {eq4_error:.1e} (autodiff of BraidVolume vs ChouHannafordForce)",
-            "identity holds to round-off", fig_name),
+            figure=fig_name),
         Row("eq. 5", "Chou-Hannaford force at x = 0, 6 bar", "Festo muscles: ideal models too inaccurate (text)",
             f"braid A {forces5['A'][0]:.0f} N vs datasheet 630 N; braid B (630 N) would contract "
             f"{100 * stroke_b:.0f} % (datasheet 25 %)",
-            "the ideal cylinder cannot hold both force and stroke of the Festo muscle: the paper's point", fig_name),
+            figure=fig_name),
         Row("eq. 6", "Tondu-Lopez with its correction k (braid B, zero force at 25 %)", "no numbers",
             f"k = {k:.2f}; differs from the preset's eq. 7 by up to {numbers['eq6_vs_eq7_max_difference_N']:.0f} N "
             "over the stroke at 6 bar",
-            "one correction fits force and stroke but not the curve shape: hence eq. 7's quartic", fig_name),
+            figure=fig_name),
         Row("eq. 14, Fig. 10", "muscle volume against displacement", "\"nearly linear\"",
             f"eq. 3 braid B deviates {linearity['B']['max_deviation_from_line_percent']:.1f} % of its range from "
             f"a line (braid A {linearity['A']['max_deviation_from_line_percent']:.1f} %); preset v1 "
             f"{presets.MAS10_V1:.3g} m² vs braid B mean slope {linearity['B']['mean_slope_m2']:.3g} m²",
-            "the cylinder geometry is close to linear over the 25 % stroke, as the paper found", fig_name),
+            figure=fig_name),
     ]
     return Result(rows, numbers, paper=dict(rated_force_N=F_RATED, stroke=STROKE, diameter_m=D, length_m=L0))
 
