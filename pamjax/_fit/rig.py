@@ -42,10 +42,10 @@ class Sensors(eqx.Module):
     Defaults are ideal sensors (offsets 0, gain 1, no delay). Fitted linearly in units of their natural size
     (`signed`: 1 kPa, 0.1 mm, 1 ms — the scale of a bench's noise and sampling interval), the gain in log space."""
 
-    pressure_offset: jax.Array = signed(0.0, scale=1e3)  # Pa (added to the gauge pressure)
-    pressure_gain: jax.Array = positive(1.0)  # - (multiplies the gauge pressure)
-    position_offset: jax.Array = signed(0.0, scale=1e-4)  # m
-    delay: jax.Array = signed(0.0, scale=1e-3)  # s (the samples lag the command)
+    pressure_offset: jax.Array = signed(0.0, scale=1e3, unit="Pa")  # added to the gauge pressure
+    pressure_gain: jax.Array = positive(1.0, unit="-")  # multiplies the gauge pressure
+    position_offset: jax.Array = signed(0.0, scale=1e-4, unit="m")
+    delay: jax.Array = signed(0.0, scale=1e-3, unit="s")  # the samples lag the command
 
     def observe(self, channel, values, atmosphere):
         """The measured `channel` from the model's `values` (the delay is applied where the model is read)."""
@@ -69,9 +69,9 @@ class StartState(eqx.Module):
     `position` [m], `velocity` [m/s]; None keeps the system's default (at rest, in equilibrium). `mode`: "auto" (stick-
     slip friction sliding in the direction of the velocity, stuck where it is 0) or "stuck" (the velocity is 0)."""
 
-    pressure: jax.Array | None = positive(None)  # Pa abs
-    position: jax.Array | None = signed(None, scale=1e-3)  # m
-    velocity: jax.Array | None = signed(None, scale=1e-2)  # m/s
+    pressure: jax.Array | None = positive(None, unit="Pa abs")
+    position: jax.Array | None = signed(None, scale=1e-3, unit="m")
+    velocity: jax.Array | None = signed(None, scale=1e-2, unit="m/s")
     mode: str = eqx.field(static=True, default="auto")
 
     def __check_init__(self):
@@ -93,7 +93,7 @@ class RunConditions(eqx.Module):
     """One run's conditions: `supply_pressure` [Pa abs] (None: the plant's own), `start` (a `StartState`; None: the
     experiment's own start, at rest by default)."""
 
-    supply_pressure: jax.Array | None = positive(None)  # Pa abs
+    supply_pressure: jax.Array | None = positive(None, unit="Pa abs")
     start: StartState | None = None
 
 
