@@ -340,7 +340,8 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None, 
         print(f"not converged within max_steps = {res.iterations}: raise [fit] max_steps and continue with "
               f"{_resume_command(args, folder.path)}")
     provenance = {"written_by": f"pamjax fit {args.config}", "status": res.status, "cost": res.cost,
-                  "free": res.labels, "result": RESULT}
+                  "free": res.labels, "result": RESULT,
+                  "covariance": pj.FitUncertainty.of(res).document()}  # what --band propagates (docs/cli.md)
     written = [folder.write_text(RESULT, json.dumps(res.to_dict(), indent=1) + "\n"),
                folder.write_text(MODEL, model_json(res.model, provenance))]
     if bench is not None:  # the bench's names: params, std_err, status, rmse of p [Pa] and x [m] per experiment
