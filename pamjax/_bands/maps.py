@@ -129,14 +129,17 @@ def steady_state_band(result, commands, *, model=None, level=0.95, method="linea
 
 
 def frequency_response_band(result, frequencies, *, model=None, level=0.95, method="linear", samples=200, seed=0,
-                            channels=("position", "pressure"), **response_kwargs) -> PredictionBand:
+                            channels=None, **response_kwargs) -> PredictionBand:
     """A confidence band on `pamjax.frequency_response(model, frequencies, ...)` of a fitted model: per channel
     `"<channel>_gain"` (|Y|/|U|) and `"<channel>_phase"` [deg], from the fit's covariance (phases differenced
-    modulo 360°). The parameter points are one more batch axis of one sweep (module docstring); arguments as for
-    `steady_state_band`, `response_kwargs` to `frequency_response` (`offset`, `amplitude`, `periods`, ...)."""
+    modulo 360°). `channels`: default position and pressure, those the system has. The parameter points are one more
+    batch axis of one sweep (module docstring); arguments as for `steady_state_band`, `response_kwargs` to
+    `frequency_response` (`offset`, `amplitude`, `periods`, ...)."""
     z_of(level)
     check_method(method, samples)
     prop = propagation(result, model)
+    if channels is None:
+        channels = tuple(c for c in ("position", "pressure") if c in prop.space.base.output_names)
     points = parameter_points(prop, method, samples, seed)
     kwargs = dict(response_kwargs)
     if "scheme" in kwargs:

@@ -65,10 +65,11 @@ def _touches(key, entry):
     return a == b and (ia is None or ib is None or ia == ib)
 
 
-def fitted_source(config, root, command, changed=()):
+def fitted_source(config, root, command, model, changed=()):
     """The model file whose covariance the band propagates, and its `FitUncertainty`; a `PamjaxInputError` naming
-    what to change when the config's model is not a fitted model file, or `changed` (the `set` and `over` paths)
-    touches a fitted parameter."""
+    what to change when the config's model is not a fitted model file, `changed` (the `set` and `over` paths)
+    touches a fitted parameter, the fit left a combination undetermined, or `model` (built from the config) does not
+    hold the fitted values."""
     model_cfg = config.get("model")
     if model_cfg is None or "file" not in model_cfg:
         what = ("[system] (paper 000's preset)" if model_cfg is None else
@@ -87,6 +88,11 @@ def fitted_source(config, root, command, changed=()):
                 raise PamjaxInputError(f"{command} --band: {where} changes {key!r}, a parameter the fit determined "
                                        f"({hit}); the band is of the fitted values: remove it from {where}, or run "
                                        "without --band")
+    try:
+        with _quiet():
+            propagation(uncertainty, model, check_values=True)  # identifiable, and the file's values are the fit's
+    except PamjaxInputError as err:
+        raise PamjaxInputError(f"{command} --band: {err}") from None
     return path, uncertainty
 
 
@@ -132,7 +138,9 @@ def check_simulate(args, cfg, root, system, kwargs):
     """Before the output folder: the fitted model file and its covariance; a solve the band can trace."""
     if not args.band:
         return None
-    source = fitted_source(cfg, root, "pamjax simulate")
+    from .config import build_model
+
+    source = fitted_source(cfg, root, "pamjax simulate", build_model(cfg.get("model", {}), root))
     from .._solve.simulate import resolve_stepping
 
     if system.valve.exact_edges and resolve_stepping(system, kwargs.get("stepping", "auto")) == "adaptive":
@@ -154,7 +162,6 @@ def add_to_simulation(args, cfg, root, source, signal, ts, kwargs, traj, recordi
     predict = _Trajectory(signal, ts, kwargs, sim.get("tank_volume"), sim.get("initial"), channels)
     path, uncertainty = source
     with _quiet():
-        propagation(uncertainty, model, check_values=True)  # the model file's values are the fit's
         band = prediction_band(uncertainty, predict, model=model, **_options(args))
     for c in channels:
         cols[f"{c}_lower"], cols[f"{c}_upper"] = band.lower[c], band.upper[c]
@@ -171,13 +178,16 @@ SWEEP_COLUMNS = {"pressure": "pressure_pa_abs", "position": "position_m", "posit
                  "pressure_phase": "pressure_phase_deg", "mass_flow": "mass_flow_kg_s"}
 
 
-def check_sweep(args, config, root):
+def check_sweep(args, config, root, model):
     """Before the output folder: the fitted model file and its covariance, `set` and `over` not on a fitted
     parameter."""
     if not args.band:
         return None
+    if getattr(args, "distributed", False):
+        raise PamjaxInputError("pamjax sweep --band runs its band's sweeps in one process: drop --distributed (the "
+                               "band of a map is a few sweeps of the map's size)")
     over = config.get("sweep", {}).get("over", {})
-    return fitted_source(config, root, "pamjax sweep", changed=(("[sweep] over", over),))
+    return fitted_source(config, root, "pamjax sweep", model, changed=(("[sweep] over", over),))
 
 
 def _one_map(config, model, uncertainty, options, axis):
@@ -220,7 +230,6 @@ def add_to_sweep(args, config, model, source, spec, columns, axis, apply_set):
     options = _options(args)
     extra, maps = {}, []
     with _quiet():
-        propagation(uncertainty, model, check_values=True)  # the model file's values are the fit's
         for point in grid:
             point_model = apply_set(model, dict(zip(paths, point)), "[sweep] over") if paths else model
             band = _one_map(config, point_model, uncertainty, options, axis)

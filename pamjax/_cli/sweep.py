@@ -350,7 +350,7 @@ def run(args):
     writes = join_for_cli(args.distributed)  # before JAX starts; False on processes other than 0
     config = read_toml(args.config)
     model = prepare(config, pathlib.Path(args.config).parent)  # before the output folder is touched
-    band_source = bands.check_sweep(args, config, pathlib.Path(args.config).parent)  # --band: a fitted model file
+    band_source = bands.check_sweep(args, config, pathlib.Path(args.config).parent, model)  # --band: a fitted model
     if not writes:  # another process of a distributed run: its share of the work, no files
         run_config(config, model=model)
         return 0
