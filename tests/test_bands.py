@@ -209,6 +209,40 @@ def test_flow_surface_band_against_central_differences():
                                rtol=1e-12)
 
 
+@pytest.mark.slow  # ~30 s: compiles the PWM grid's solve with tangents and vmapped
+def test_band_of_a_switching_valve_and_stick_slip_on_the_pwm_grid():
+    """The bench's model (switching valve on the PWM-synchronous grid, exact stick-slip): the grid's size needs the
+    PWM frequency concrete, which a band must not trace (only the free parameters are). σ from the forward-mode
+    Jacobian equals the delta method with central differences in the physical values (1e-4)."""
+    model = presets.mas10_system(valve="pwm", friction="karnopp")
+    paths = ["friction.coulomb_force", "valve.inflate.discharge_coefficient"]
+    values = np.array([float(model.friction.coulomb_force), float(model.valve.inflate.discharge_coefficient)])
+    se, corr = 0.02 * values, np.array([[1.0, 0.3], [0.3, 1.0]])
+    uncertainty = pj.FitUncertainty.from_document(
+        dict(labels=paths, paths=paths, values=values.tolist(), standard_errors=se.tolist(),
+             correlation=corr.tolist()), "a stated covariance")
+    ts = np.linspace(0.0, 0.6, 31)
+
+    def position(m):
+        return pj.simulate(m, pj.Triangle(0.1, 0.9, 1.0), ts, throw=False).channel("position")
+
+    band = pj.prediction_band(uncertainty, position, model=model, check_linearity=False)
+    space = pj.ParameterSpace(model, paths)
+    grads = []
+    for i in range(2):
+        h = 1e-5 * values[i]
+        up, down = values.copy(), values.copy()
+        up[i] += h
+        down[i] -= h
+        grads.append((np.asarray(position(space.with_values(up))) - np.asarray(position(space.with_values(down))))
+                     / (2 * h))
+    grads = np.stack(grads, axis=-1)
+    reference = np.sqrt(np.einsum("ti,ij,tj->t", grads, corr * np.outer(se, se), grads))
+    moving = reference > 1e-3 * reference.max()
+    assert np.count_nonzero(moving) > 20
+    np.testing.assert_allclose(band.std[moving], reference[moving], rtol=1e-4)
+
+
 def test_a_rig_fit_gives_the_plants_band_with_its_nuisances_marginalised(refits):
     """A rig's fit (the plant's labels `plant.…` and a sensor delay correlated with them): the band is the plant's,
     from the plant block of the covariance (the marginal), the delay named as marginalised; equal to the plain

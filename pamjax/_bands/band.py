@@ -23,7 +23,6 @@ import dataclasses
 import statistics
 import warnings
 
-import equinox as eqx
 import jax
 import numpy as np
 
@@ -142,7 +141,9 @@ class PredictionBand:
         return "\n".join(lines + [f"note: {n}" for n in self.notes])
 
 
-@eqx.filter_jit
+# Not jitted here: under an outer jit every leaf of the model would be traced, the fixed values too (a PWM frequency,
+# which a fixed grid's size needs concrete); transformed at the top level, only the free parameters are, and the
+# solves inside `predict` compile their own programs once per structure (`pamjax.simulate`'s jitted solve).
 def _value_and_jacobian(predict, space, theta):
     def f(t):
         y = predict(space.model(t))
@@ -152,7 +153,6 @@ def _value_and_jacobian(predict, space, theta):
     return y, jac
 
 
-@eqx.filter_jit
 def _evaluate(predict, space, thetas):
     return jax.vmap(lambda t: predict(space.model(t)))(thetas)
 

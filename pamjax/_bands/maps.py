@@ -155,9 +155,9 @@ def frequency_response_band(result, frequencies, *, model=None, level=0.95, meth
                      f"one sweep, {fr['result'].method}", periods)
 
 
-def _surface(model, commands, pressures, samples):
-    valve = model.valve
-    per_pressure = jax.vmap(lambda u, p: cycle_averaged_flow(valve, u, p, model.air, samples), (None, 0))
+@eqx.filter_jit
+def _surface(valve, air, commands, pressures, samples):
+    per_pressure = jax.vmap(lambda u, p: cycle_averaged_flow(valve, u, p, air, samples), (None, 0))
     return jax.vmap(per_pressure, (0, None))(commands, pressures)
 
 
@@ -169,7 +169,7 @@ class _Surface(eqx.Module):
     samples: int = eqx.field(static=True)
 
     def __call__(self, model):
-        return {"mass_flow": _surface(model, self.commands, self.pressures, self.samples)}
+        return {"mass_flow": _surface(model.valve, model.air, self.commands, self.pressures, self.samples)}
 
 
 def flow_surface_band(result, commands, pressures, *, model=None, level=0.95, method="linear", samples=200, seed=0,
