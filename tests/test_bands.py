@@ -278,6 +278,11 @@ def test_refusals_are_named(refits, tmp_path):
     pj.save_model(tmp_path / "model.json", res.model)  # a model file that no fit wrote
     with pytest.raises(PamjaxInputError, match="this model was not fitted"):
         pj.prediction_band(tmp_path / "model.json", predict)
+    stick_slip = presets.mas10_system(valve="averaged", friction="karnopp")
+    friction = pj.FitUncertainty.from_document(dict(labels=["friction.coulomb_force"], paths=["friction.coulomb_force"],
+                                                    values=[16.0], standard_errors=[0.5], correlation=[[1.0]]), "x")
+    with pytest.raises(PamjaxInputError, match="this model is hybrid"):
+        pj.steady_state_band(friction, [0.5], model=stick_slip)
     loaded = pj.FitResult.from_json(res.to_json(tmp_path / "fit.json"))
     with pytest.raises(PamjaxInputError, match="pass model="):
         pj.prediction_band(loaded, predict)

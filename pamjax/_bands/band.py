@@ -12,7 +12,7 @@ Two methods, and the band says which made it:
 - `"samples"`: θₖ ~ N(θ̂, Σθ) drawn in the unconstrained space (so positive parameters stay positive and ratios in
   their range), each simulated (vmapped, in batches), the band the (1 − level)/2 and (1 + level)/2 quantiles of the
   predictions. Not symmetric about ŷ where the prediction is nonlinear; its Monte-Carlo error is that of a quantile
-  of `samples` draws (with 200 draws the 2.5 % quantile of a normal scatters by about 0.16 σ).
+  of `samples` draws (with 200 draws the 2.5 % quantile of a normal scatters by √(p(1 − p)/N)/φ(z) ≈ 0.19 σ).
 
 Both take the covariance as the fit computed it (σ² (JᵀJ)⁺ with σ² from the residuals: `docs/fitting.md`), so they
 answer "how much do the predictions vary with the parameters the data allow": a confidence band of the model's
@@ -184,9 +184,13 @@ def _finite_rows(tree, rows):
 def _nonlinearity_warning(index, notes):
     worst = max(jax.tree_util.tree_leaves(index), default=0.0)
     if worst > NONLINEARITY_WARNING:
-        note = (f"the prediction is nonlinear in the parameters over their uncertainty (index {worst:.2g} > "
-                f"{NONLINEARITY_WARNING}): the linear band's edges are off by about {3.8 * worst:.1f} σ; use "
-                "method='samples'")
+        where = ""
+        if isinstance(index, dict):
+            where = " in " + ", ".join(f"{k} ({v:.2g})" for k, v in sorted(index.items(), key=lambda kv: -kv[1])
+                                       if v > NONLINEARITY_WARNING)
+        note = (f"the prediction is nonlinear in the parameters over their uncertainty{where}: index "
+                f"{worst:.2g} > {NONLINEARITY_WARNING}, the linear band's edges off by about {3.8 * worst:.1f} σ "
+                "(or the solver's error is not small against the band); use method='samples'")
         notes.append(note)
         warnings.warn(note, PamjaxBandWarning, stacklevel=3)
 

@@ -60,6 +60,14 @@ def swept_values(prop, thetas, extra_axes=1):
     return out
 
 
+def _sweepable(prop, what):
+    """A map's band needs a map the sweep engine computes: its fixed-step lanes locate no stick-slip events."""
+    if getattr(prop.space.base, "hybrid", False):
+        raise PamjaxInputError(f"{what}: this model is hybrid (stick-slip friction, e.g. KarnoppFriction), and sweeps "
+                               "step without locating its mode switches; band a pamjax.simulate prediction with "
+                               "pamjax.prediction_band instead, or map a model with CoulombViscousFriction")
+
+
 def parameter_points(prop, method, samples, seed):
     """The parameter points a map's band sweeps: θ̂ first, then θ̂ ± sₖ (linear) or the draws (samples)."""
     if method == "linear":
@@ -118,6 +126,7 @@ def steady_state_band(result, commands, *, model=None, level=0.95, method="linea
     z_of(level)
     check_method(method, samples)
     prop = propagation(result, model)
+    _sweepable(prop, "steady_state_band")
     points = parameter_points(prop, method, samples, seed)
     kwargs = dict(map_kwargs)
     if "scheme" in kwargs:
@@ -138,6 +147,7 @@ def frequency_response_band(result, frequencies, *, model=None, level=0.95, meth
     z_of(level)
     check_method(method, samples)
     prop = propagation(result, model)
+    _sweepable(prop, "frequency_response_band")
     if channels is None:
         channels = tuple(c for c in ("position", "pressure") if c in prop.space.base.output_names)
     points = parameter_points(prop, method, samples, seed)

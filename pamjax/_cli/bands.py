@@ -22,7 +22,7 @@ from .._core.errors import PamjaxInputError
 from .._fit.parameters import _parse
 
 DEFAULT_LEVEL = 0.95  # the two-sided 95 % band (z = 1.96), the usual default for confidence bands
-DEFAULT_SAMPLES = 200  # draws: the 2.5 % quantile then scatters by ~0.16 σ (docs/fitting.md)
+DEFAULT_SAMPLES = 200  # draws: the 2.5 % quantile then scatters by ~0.19 σ (docs/fitting.md)
 
 
 def _level(text):
@@ -186,6 +186,10 @@ def check_sweep(args, config, root, model):
     if getattr(args, "distributed", False):
         raise PamjaxInputError("pamjax sweep --band runs its band's sweeps in one process: drop --distributed (the "
                                "band of a map is a few sweeps of the map's size)")
+    if config["kind"] != "flow_surface" and getattr(model, "hybrid", False):
+        raise PamjaxInputError("pamjax sweep --band: this model is hybrid (stick-slip friction, e.g. KarnoppFriction), "
+                               "and sweeps step without locating its mode switches; band a run with pamjax simulate "
+                               "--band instead")
     over = config.get("sweep", {}).get("over", {})
     return fitted_source(config, root, "pamjax sweep", model, changed=(("[sweep] over", over),))
 
