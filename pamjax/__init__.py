@@ -191,6 +191,20 @@ from ._sweep.result import SweepResult as SweepResult, merge_sweep_shards as mer
 from ._sweep.sweep import sweep as sweep
 
 # isort: split
+# --- bands on predictions: a fit's covariance carried to trajectories, maps and frequency responses ----------------
+from ._bands.band import PredictionBand as PredictionBand, prediction_band as prediction_band
+from ._bands.maps import (
+    flow_surface_band as flow_surface_band,
+    frequency_response_band as frequency_response_band,
+    steady_state_band as steady_state_band,
+)
+from ._bands.uncertainty import (
+    FitUncertainty as FitUncertainty,
+    PamjaxBandWarning as PamjaxBandWarning,
+    read_uncertainty as read_uncertainty,
+)
+
+# isort: split
 # --- control: sampled-data controllers, closed loops, joint control ------------------------------------------------
 from ._control.closed_loop import (
     ClosedLoop as ClosedLoop,

@@ -427,7 +427,8 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None, 
         print(f"not converged within max_steps = {res.iterations}: raise [fit] max_steps and continue with "
               f"{_resume_command(args, folder.path)}")
     provenance = {"written_by": f"pamjax fit {args.config}", "status": res.status, "cost": res.cost,
-                  "free": res.labels, "result": RESULT}
+                  "free": res.labels, "result": RESULT,
+                  "covariance": pj.FitUncertainty.of(res).document()}  # what --band propagates (docs/cli.md)
     plant = res.model.plant if isinstance(res.model, pj.Rig) else res.model  # the rig's nuisances: in bench.json
     written = [folder.write_text(RESULT, json.dumps(res.to_dict(), indent=1) + "\n"),
                folder.write_text(MODEL, model_json(plant, provenance))]
