@@ -311,4 +311,8 @@ ENTRIES = [
                 "(not the SVSF) with 2 kPa / 0.1 mm readings at 1 kHz, on the identified plant",
           reason="the paper gives no numbers to compare; pamjax's estimator is an extended Kalman filter, the SVSF "
                  "itself is not implemented", figure="estimator_control.png"),
+    Entry("000", "text: sliding mode control with the SVSF state estimator", "the smooth variable structure filter "
+          "(SVSF) itself", NOT_IMPLEMENTED,
+          reason="the SVSF state estimator of the paper's ref. [29]; pamjax estimates the states with an extended "
+                 "Kalman filter on eq. 18-21 instead (ExtendedKalmanFilter, docs/control.md)"),
 ]
