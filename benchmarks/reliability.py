@@ -169,7 +169,8 @@ def register_case_modules(cases):
 
     folder = pathlib.Path(__file__).resolve().parents[1] / "tests" / "reliability"
     for path in sorted(folder.glob("*_cases.py")):
-        cases.update(importlib.import_module(f"tests.reliability.{path.stem}").CASES)
+        if not path.name.startswith("test_"):  # test_*_cases.py are the pytest modules that run them
+            cases.update(importlib.import_module(f"tests.reliability.{path.stem}").CASES)
 
 
 def main():
