@@ -174,9 +174,22 @@ def plot(path, traj, recording=None, title=""):
     plt.close(fig)
 
 
+def _not_a_model_file(path):
+    """`pamjax simulate model.json`: a model file where the config belongs is named, with the config it needs."""
+    path = pathlib.Path(path)
+    if path.suffix.lower() != ".json" or not path.is_file():
+        return
+    raise PamjaxInputError(
+        f"{path} is a JSON file; pamjax simulate reads a TOML config that names the model file, the input and the "
+        f"horizon, e.g. a file sim.toml beside it holding\n  [model]\n  file = \"{path.name}\"\n  [input]\n  signal "
+        "= { kind = \"Triangle\", low = 0.05, high = 0.95, frequency = 0.25 }\n  [simulate]\n  t_end = 8.0\nand "
+        "then: pamjax simulate sim.toml (docs/cli.md)")
+
+
 def run(args):
     import pamjax as pj
 
+    _not_a_model_file(args.config)
     cfg = read_toml(args.config)
     validate_config(cfg)
     root = pathlib.Path(args.config).parent
