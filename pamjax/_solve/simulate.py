@@ -19,7 +19,7 @@ from . import synchronous as _sync
 from .edges import ScheduledValve, StartsOff
 from .hints import default_max_steps, failure_hint, fixed_step_hint
 from .scaled import scaled
-from .trajectory import RESULT_NONFINITE, Trajectory, result_message, trajectory
+from .trajectory import RESULT_NONFINITE, RESULT_NONPHYSICAL, Trajectory, result_message, trajectory
 
 _DEFAULT_SUBSTEPS = 16  # RK4 nodes per PWM period: step ≤ 1.25 ms at 50 Hz (docs/performance.md)
 # s, stepping="grid": RK4 step of a hybrid system fed by a continuous valve; 1 ms puts paper 000's muscle-payload
@@ -431,12 +431,14 @@ def _scheduled(system, signal, t0, t_end):
 
 def _raise_on_failure(traj, system, signal, ts, t0, y0, stepping, substeps, grid_step, max_steps, solver):
     """`PamjaxSolveError` for a failed solve, saying why and what fixes it (`pamjax._solve.hints`)."""
-    if int(traj.result) == RESULT_NONFINITE and stepping in ("pwm", "grid"):
+    if int(traj.result) in (RESULT_NONFINITE, RESULT_NONPHYSICAL) and stepping in ("pwm", "grid"):
+        step = float(grid_step) if stepping == "grid" else 1.0 / (float(system.valve.pwm_frequency) * substeps)
+        hint = fixed_step_hint(system, signal, t0, y0, stepping, step)
+        setting = f"substeps={substeps}" if stepping == "pwm" else f"grid_step={grid_step}"
+        what = "a non-finite state" if int(traj.result) == RESULT_NONFINITE else "an absolute pressure at or below 0"
         raise PamjaxSolveError(
-            f"fixed-grid stepping ('{stepping}') produced a non-finite state (substeps={substeps}, grid_step="
-            f"{grid_step}): the fixed RK4 step is beyond the stability limit of this system "
-            f"({fixed_step_hint(system, signal, t0, y0, stepping)}). Pass throw=False to get the result with status "
-            "instead."
+            f"fixed-grid stepping ('{stepping}', {setting}) produced {what}: {hint}. Pass throw=False to get the "
+            "result with status instead."
         )
     if int(traj.result) != 0:
         message = result_message(int(traj.result)).split(" Try increasing")[0]  # the hint says what to change
