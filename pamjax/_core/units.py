@@ -235,6 +235,13 @@ _ABSOLUTE_PRESSURES = {"pressure", "pressures", "atmospheric_pressure"}
 MIN_TEMPERATURE_K = 200.0
 
 
+def checks_setting(path):
+    """Whether `check_setting` checks parameter `path` (by its last component) at all."""
+    leaf = str(path).split(".")[-1].split("[")[0]
+    return leaf in _PLAUSIBLE or leaf in _ABSOLUTE_PRESSURES or leaf in ("supply_pressure", "max_pressure",
+                                                                          "temperature")
+
+
 def check_setting(path, values, where):
     """Plausibility of a value a user typed for parameter `path` (e.g. 'valve.supply_pressure', 'payload_mass',
     'y0.pressure'): refused with the likely unit named when its magnitude says another unit."""

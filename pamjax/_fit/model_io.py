@@ -33,7 +33,7 @@ from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError, require_float64
 from .._core.metadata import version
 from .._core.units import check_setting, parameter_to_si
-from .._solve.shapes import batched_parameters, describe_batched
+from .._solve.checks import batched_parameters, describe_batched
 
 FORMAT = "pamjax-model"
 FORMAT_VERSION = 1

@@ -16,6 +16,7 @@ from .._core.xla_cpu import single_trajectory_options
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractSystem
 from . import synchronous as _sync
+from .checks import batched_parameters, check_parameters, describe_batched, runtime_checks
 from .edges import ScheduledValve, StartsOff
 from .hints import default_max_steps, failure_hint, fixed_step_hint
 from .scaled import scaled
@@ -253,10 +254,13 @@ def validate(system, signal, ts, y0=None, t0=None):
         if not (np.isfinite(lo) and np.isfinite(hi)):
             raise PamjaxInputError(f"signal must be finite, its bounds are ({lo}, {hi})")
         if lo < clo - 1e-12 or hi > chi + 1e-12:
+            percent = (clo == 0 and chi == 1 and lo >= 0 and 1 < hi <= 100)  # a duty of 50 meant as 50 %
             raise PamjaxInputError(
                 f"signal (the valve command, e.g. duty ratio) must stay within [{clo}, {chi}], "
-                f"its range is [{lo}, {hi}]"
+                f"its range is [{lo}, {hi}]" + (f"; that looks like percent: a duty ratio of {hi / 100:g} is "
+                                                f"written {hi / 100:g}, not {hi:g}" if percent else "")
             )
+    check_parameters(system)  # a system changed with eqx.tree_at skipped its components' checks
     if y0 is not None:
         leaves = jtu.tree_leaves(y0)
         for leaf in leaves:
@@ -350,6 +354,8 @@ def simulate(
     An `OnOffValve(mode="exact")` has its switching times handed to the solver (step-size clipping at jump times).
     """
     validate(system, signal, ts, y0, t0)
+    if _is_traced((system, signal)):  # inside jit/vmap/grad: the same checks, as run-time errors naming the value
+        system, signal = runtime_checks(system, signal, ts, system.command_range)
     # Tolerances and the first step as arrays: arguments of the compiled solve, not constants baked into it (another
     # rtol does not compile again).
     rtol, atol = _positive(rtol, "rtol"), _positive(atol, "atol")
@@ -383,12 +389,25 @@ def simulate(
     # host callback in its persistent cache, and a second run would compile the solve again.
     with contextlib.nullcontext() if traced else equinox_errors_as_nan():
         program = _solve_program()
-        traj = program(system, signal, ts, y0, t0, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps,
-                       dt0=dt0, adjoint=adjoint, jump_ts=jump_ts, throw=throw and traced, stepping=stepping,
-                       substeps=substeps, num_periods=periods, grid_step=grid_step)
+        try:
+            traj = program(system, signal, ts, y0, t0, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps,
+                           dt0=dt0, adjoint=adjoint, jump_ts=jump_ts, throw=throw and traced, stepping=stepping,
+                           substeps=substeps, num_periods=periods, grid_step=grid_step)
+        except (TypeError, ValueError):  # a parameter with an axis too many fails in tracing: name it
+            found = _batched(system)
+            if found:
+                raise PamjaxInputError(describe_batched(found)) from None
+            raise
     if throw and not traced:
         _raise_on_failure(traj, system, signal, ts, t0, y0, stepping, substeps, grid_step, max_steps, solver)
     return traj
+
+
+def _batched(system):
+    try:
+        return batched_parameters(system)
+    except Exception:  # noqa: BLE001 - the diagnosis of a failure must not replace it
+        return []
 
 
 _EDGE_CLIP = 1  # `num_periods` of an adaptive solve with smoothed edges: edge clipping on (its value is not used)
