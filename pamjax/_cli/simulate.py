@@ -148,6 +148,27 @@ def columns_of(traj):
     return cols, {c: _UNITS.get(c, "") for c in cols}
 
 
+PLOT_POINTS = 100_000  # a figure's width holds ~1,000 pixels: more points than this are drawn as their envelope
+
+
+def _envelope(t, y):
+    """(t, y) to draw: as given up to `PLOT_POINTS`, else the minimum and maximum of each of `PLOT_POINTS / 2`
+    bins (a 19,000 s run's 1.9 M rows look the same, and are drawn in a fraction of the time and memory)."""
+    t, y = np.asarray(t), np.asarray(y)
+    if t.size <= PLOT_POINTS:
+        return t, y
+    bins = PLOT_POINTS // 2
+    n = t.size // bins * bins
+    tb, yb = t[:n].reshape(bins, -1), y[:n].reshape(bins, -1)
+    lo, hi = np.nanargmin(np.where(np.isnan(yb), np.inf, yb), axis=1), np.nanargmax(np.where(np.isnan(yb), -np.inf,
+                                                                                                 yb), axis=1)
+    rows = np.arange(bins)
+    first, second = np.minimum(lo, hi), np.maximum(lo, hi)  # in time order within the bin
+    ts = np.stack([tb[rows, first], tb[rows, second]], axis=1).ravel()
+    ys = np.stack([yb[rows, first], yb[rows, second]], axis=1).ravel()
+    return np.concatenate([ts, t[n:]]), np.concatenate([ys, y[n:]])
+
+
 def plot(path, traj, recording=None, title=""):
     import matplotlib
 
@@ -162,8 +183,8 @@ def plot(path, traj, recording=None, title=""):
     t = np.asarray(traj.t)
     for ax, (c, scale, label) in zip(axes[:, 0], panels):
         if recording is not None and c in recording.channels and c != "command":
-            ax.plot(recording.t, recording[c] * scale, ".", ms=2, color="0.6", label="recording")
-        ax.plot(t, np.asarray(traj.channel(c)) * scale, lw=0.9, label="simulation")
+            ax.plot(*_envelope(recording.t, recording[c] * scale), ".", ms=2, color="0.6", label="recording")
+        ax.plot(*_envelope(t, np.asarray(traj.channel(c)) * scale), lw=0.9, label="simulation")
         ax.set(ylabel=label)
     axes[0, 0].set_title(title)
     axes[-1, 0].set(xlabel="t [s]")

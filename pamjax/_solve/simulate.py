@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
+from jax.flatten_util import ravel_pytree
 
 from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError, PamjaxSolveError, check_time_grid, require_float64
@@ -15,7 +16,7 @@ from .._core.units import check_absolute_pressure
 from .._core.xla_cpu import single_trajectory_options
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractSystem
-from . import synchronous as _sync
+from . import chunks as _chunks, synchronous as _sync
 from .checks import batched_parameters, check_parameters, describe_batched, runtime_checks
 from .edges import ScheduledValve, StartsOff
 from .hints import default_max_steps, failure_hint, fixed_step_hint
@@ -387,12 +388,23 @@ def simulate(
     # A concrete call checks the result on the host (below), so its program is traced with equinox's run-time
     # checks (diffrax's, on the save times) as NaN rather than as host callbacks: JAX does not keep a program with a
     # host callback in its persistent cache, and a second run would compile the solve again.
+    pieces = None
+    if stepping in ("pwm", "grid") and not traced:  # a long fixed-grid run in pieces: bounded memory (_chunks)
+        state_size = ravel_pytree(system.state_scale())[0].size  # the state's shape: constants, nothing solved
+        pieces = _chunks.plan(system, signal, host, float(t0), stepping, substeps, grid_step, periods, state_size)
     with contextlib.nullcontext() if traced else equinox_errors_as_nan():
         program = _solve_program()
-        try:
-            traj = program(system, signal, ts, y0, t0, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps,
+
+        def solve_on(ts_, y0_, t0_, periods_, grid_step_):
+            return program(system, signal, ts_, y0_, t0_, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps,
                            dt0=dt0, adjoint=adjoint, jump_ts=jump_ts, throw=throw and traced, stepping=stepping,
-                           substeps=substeps, num_periods=periods, grid_step=grid_step)
+                           substeps=substeps, num_periods=periods_, grid_step=grid_step_)
+
+        try:
+            if pieces is None:
+                traj = solve_on(ts, y0, t0, periods, grid_step)
+            else:
+                traj = _solve_pieces(solve_on, system, stepping, host, y0, t0, pieces)
         except (TypeError, ValueError):  # a parameter with an axis too many fails in tracing: name it
             found = _batched(system)
             if found:
@@ -401,6 +413,30 @@ def simulate(
     if throw and not traced:
         _raise_on_failure(traj, system, signal, ts, t0, y0, stepping, substeps, grid_step, max_steps, solver)
     return traj
+
+
+def _solve_pieces(solve_on, system, stepping, host, y0, t0, pieces):
+    """A fixed-grid run solved piece by piece (`pamjax._solve.chunks`), each from the state its predecessor reached
+    at the piece's first row (the start state given to the first too: one compiled program for every piece)."""
+    if y0 is None:
+        y0 = _initial_state(system)
+    done, previous = [], None
+    for first, last, step in pieces:
+        if previous is not None:
+            y0 = jtu.tree_map(lambda a: a[first - previous[0]], previous[2].state)
+        t_start = t0 if first == 0 else jnp.asarray(float(host[first]))
+        size = fixed_grid_size(system, stepping, float(t_start), float(host[last]), step)
+        traj = solve_on(jnp.asarray(host[first:last + 1]), y0, t_start, size, step)
+        previous = (first, last, traj)
+        done.append(previous)
+        if int(traj.result) != 0:
+            break
+    return _chunks.join(done, host)
+
+
+@eqx.filter_jit
+def _initial_state(system):
+    return system.initial_state()
 
 
 def _batched(system):
