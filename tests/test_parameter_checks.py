@@ -57,7 +57,7 @@ def test_a_bad_parameter_inside_jit_is_named_at_run_time(system):
 
 def test_a_bad_parameter_inside_vmap_is_named(system):
     run = jax.vmap(lambda m: pamjax.simulate(_with_mass(system, m), pamjax.Constant(0.5), TS).position[-1])
-    with pytest.raises(Exception, match=r"MuscleSystem\.payload_mass must be > 0 and finite"):
+    with pytest.raises(PamjaxInputError, match=r"MuscleSystem\.payload_mass must be > 0 and finite"):
         run(jnp.asarray([9.6, -1.0]))
     good = np.asarray(run(jnp.asarray([9.6, 5.0])))
     eager = [float(pamjax.simulate(_with_mass(system, jnp.asarray(m)), pamjax.Constant(0.5), TS).position[-1])
@@ -68,8 +68,8 @@ def test_a_bad_parameter_inside_vmap_is_named(system):
 def test_a_duty_out_of_range_inside_vmap_is_refused(system):
     # was: a position returned for duty 1.5, no error, no NaN
     run = jax.vmap(lambda d: pamjax.simulate(system, pamjax.Constant(d), TS).position[-1])
-    with pytest.raises(Exception, match=r"signal \(the valve command, e\.g\. duty ratio\) must stay within \[0\.0, "
-                                        r"1\.0\]"):
+    with pytest.raises(PamjaxInputError, match=r"signal \(the valve command, e\.g\. duty ratio\) must stay within "
+                                               r"\[0\.0, 1\.0\]"):
         run(jnp.asarray([0.3, 1.5]))
     good = np.asarray(run(jnp.asarray([0.3, 0.6])))
     eager = [float(pamjax.simulate(system, pamjax.Constant(d), TS).position[-1]) for d in (0.3, 0.6)]

@@ -90,6 +90,12 @@ def test_negative_inflow_is_named_instead_of_a_step_the_run_already_takes():
     assert "takes air OUT of the chamber" in text and "negative inflow" in text and "valve.coefficients" in text
     assert "grid_step=0.0" not in text.replace("grid_step=0.001)", "")  # no smaller step is offered
     assert bool(pamjax.simulate(system, pamjax.Triangle(0.05, 0.95, 0.25), ts).succeeded)  # the sign put back
+    # over 0.5 s the same model "succeeded" at 6,600 Pa abs: a chamber emptied below half an atmosphere fails too
+    short = jnp.linspace(0.0, 0.5, 51)
+    with pytest.raises(PamjaxSolveError, match="below half an atmosphere: the valve takes air OUT"):
+        pamjax.simulate(flipped, pamjax.Triangle(0.05, 0.95, 0.25), short)
+    traj = pamjax.simulate(flipped, pamjax.Triangle(0.05, 0.95, 0.25), short, throw=False)
+    assert int(traj.result) != 0 and np.all(np.isnan(np.asarray(traj.pressure)))
 
 
 def test_a_suggested_fixed_step_works_when_applied():

@@ -141,9 +141,11 @@ def prepare(cfg, root):
 
 
 def columns_of(traj):
-    """The trajectory's channels as CSV columns (name → array) and their units."""
+    """The trajectory's channels as CSV columns (name → array) and their units, in the order of `_UNITS` (docs/cli.md:
+    t, command, pressure, position, velocity, force, friction_force, mass_flow, volume), then any others."""
     cols = {"t": np.asarray(traj.t)}
-    for c in ("command", *[c for c in traj.channels() if c != "command"]):
+    channels = traj.channels()
+    for c in [c for c in _UNITS if c in channels] + [c for c in channels if c not in _UNITS]:
         cols[c] = np.asarray(traj.channel(c))
     return cols, {c: _UNITS.get(c, "") for c in cols}
 

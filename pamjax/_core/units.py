@@ -247,6 +247,7 @@ def check_setting(path, values, where):
     'y0.pressure'): refused with the likely unit named when its magnitude says another unit."""
     leaf = str(path).split(".")[-1].split("[")[0]
     v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]  # NaN and inf are the components' own checks to name ("must be finite")
     label = f"{where} {path}"
     if leaf == "supply_pressure":
         check_absolute_pressure(v, label, above_atmosphere=True)

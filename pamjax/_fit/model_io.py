@@ -33,6 +33,7 @@ from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError, require_float64
 from .._core.metadata import version
 from .._core.units import check_setting, parameter_to_si
+from .._physics.signals import AbstractSignal
 from .._solve.checks import batched_parameters, describe_batched
 
 FORMAT = "pamjax-model"
@@ -154,6 +155,9 @@ def model_document(model, provenance=None, classes=()):
     """The JSON document of `model` (a dict; see the module docstring)."""
     if not isinstance(model, eqx.Module):
         raise PamjaxInputError(f"model must be a pamjax model (an equinox Module), got {type(model).__name__}")
+    if isinstance(model, AbstractSignal):
+        raise PamjaxInputError(f"model must be a pamjax model (a system or a component), got the signal "
+                               f"{type(model).__name__}: a signal is an input, given to simulate beside the model")
     parameters = {}
     structure = _encode(model, "", parameters, _registry(classes))
     return {

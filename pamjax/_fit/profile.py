@@ -395,7 +395,15 @@ def profile(
     if progress:
         print(f"  profiling {len(names)} parameter(s): {len(jobs)} branches on {workers} thread(s) ...", flush=True)
     with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
-        done = list(pool.map(lambda job: job[1].walk(), jobs))
+        futures = [pool.submit(job[1].walk) for job in jobs]
+        if progress:  # a line as each parameter's two branches finish (a profile takes seconds to minutes)
+            left = {name: 2 for name in names}
+            for future in concurrent.futures.as_completed(futures):
+                name = jobs[futures.index(future)][0]
+                left[name] -= 1
+                if left[name] == 0:
+                    print(f"  profiled {name} ({sum(v == 0 for v in left.values())} of {len(names)})", flush=True)
+        done = [f.result() for f in futures]
     lowest = min(((d, name, b) for (name, _), b in zip(jobs, done) for _, d, _, _ in b.points),
                  key=lambda x: x[0], default=(0.0, None, None))
     warnings = []

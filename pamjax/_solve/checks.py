@@ -88,8 +88,8 @@ def runtime_checks(system, signal, ts, command_range):
         lo, hi = command_range
         u = jax.vmap(signal)(jnp.asarray(ts, dtype=float))
         failed = jnp.any((u < lo - 1e-12) | (u > hi + 1e-12) | ~jnp.isfinite(u))
-        message = (f"signal (the valve command, e.g. duty ratio) must stay within [{lo}, {hi}] (checked at the output "
-                   "times at run time: the signal is traced by jit/vmap/grad)")
+        message = (f"signal (the valve command, e.g. duty ratio) must stay within [{lo}, {hi}] (checked at run time, "
+                   "at the output times: the signal is traced by jit/vmap/grad)")
         signal = jax.tree_util.tree_map(
             lambda x: eqx.error_if(x, failed, message) if isinstance(x, jax.core.Tracer) else x, signal)
     return system, signal
