@@ -223,3 +223,19 @@ def test_save_refuses_what_load_would_refuse(tmp_path):
     with pytest.raises(PamjaxInputError, match=r"payload_mass = 9600 kg.*looks like g"):
         pamjax.save_model(tmp_path / "m.json", grams)
     assert not (tmp_path / "m.json").exists()
+
+
+def test_a_signal_is_not_saved_as_a_model(tmp_path):
+    with pytest.raises(PamjaxInputError, match=r"got the signal Triangle: a signal is an input"):
+        pamjax.save_model(tmp_path / "s.json", pamjax.Triangle(0.05, 0.95, 0.25))
+
+
+def test_simulate_writes_the_columns_in_the_documented_order():
+    # docs/cli.md: t, command, pressure, position, velocity, force, friction_force, mass_flow, volume
+    from pamjax._cli.simulate import columns_of
+
+    traj = pamjax.simulate(presets.mas10_system("averaged"), pamjax.Constant(0.5), jnp.linspace(0.0, 0.05, 3))
+    cols, units = columns_of(traj)
+    assert list(cols) == ["t", "command", "pressure", "position", "velocity", "force", "friction_force", "mass_flow",
+                          "volume"]
+    assert units["pressure"] == "Pa abs"
