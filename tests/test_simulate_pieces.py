@@ -41,7 +41,7 @@ def test_pieces_join_into_the_run_one_solve_gives(valve, small_pieces, monkeypat
     ts = np.arange(0, 1201) * 0.01  # 12 s: ~12,000 grid steps (1 ms) or ~10,800 PWM intervals: 4 or more pieces
     signal = pamjax.Triangle(0.05, 0.95, 0.25)
     plan = chunks.plan(system, signal, ts, 0.0, "grid" if valve == "averaged" else "pwm", 16, 1e-3,
-                       12000 if valve == "averaged" else 600, 4)
+                       12000 if valve == "averaged" else 600)
     assert plan is not None and len(plan) >= 4
     assert len({last - first for first, last, _ in plan}) == 1  # one length: one compiled program for all
     if valve == "pwm":

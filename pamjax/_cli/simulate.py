@@ -41,6 +41,7 @@ _SIMULATE_KEYS = {"t_end", "t0", "dt", "initial", "tank_volume", "stepping", "su
 _SOLVERS = ("Tsit5", "Rodas5", "Dopri5", "Dopri8")
 OUTPUTS = ("trajectory.csv", "trajectory.png")
 DEFAULT_DT = 0.01  # s: 100 rows per second, the rate of paper 000's figures
+LONG_ROWS = 100_000  # a run with more output rows than this is announced before it starts (it takes a while)
 MAX_ROWS = 2_000_000  # a larger CSV (hundreds of MB) is more likely a unit slip (t_end in ms) than a wish
 _UNITS = {"t": "s", "command": "1", "pressure": "Pa abs", "position": "m", "velocity": "m/s", "force": "N",
           "friction_force": "N", "mass_flow": "kg/s", "volume": "m^3"}
@@ -221,6 +222,8 @@ def run(args):
     out = args.out or f"results/simulate-{pathlib.Path(args.config).stem}"
     outputs = [o for o in OUTPUTS if not (args.no_plot and o.endswith(".png"))]
     with OutputFolder(out, "pamjax simulate", outputs, overwrite=args.overwrite) as folder:
+        if len(ts) > LONG_ROWS:  # a run of minutes: say so before it starts
+            print(f"pamjax simulate: solving {float(ts[-1] - ts[0]):g} s ({len(ts):,} output times) ...", flush=True)
         traj = pj.simulate(system, signal, ts, **kwargs)
         cols, units = columns_of(traj)
         summary = ", ".join(f"{c} {np.min(v):.6g} … {np.max(v):.6g} {units[c]}" for c, v in cols.items()

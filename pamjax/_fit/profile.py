@@ -310,6 +310,38 @@ def _verdict(lower, upper, branches):
         ("s" if len(sides) == 2 else "") + ")"
 
 
+def _walk_all(jobs, names, workers, progress):
+    """Walk every branch in a pool of `workers` threads; with `progress`, a line as each parameter's two branches
+    finish (a profile takes seconds to minutes)."""
+    if progress:
+        print(f"  profiling {len(names)} parameter(s): {len(jobs)} branches on {workers} thread(s) ...", flush=True)
+    with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
+        futures = [pool.submit(job[1].walk) for job in jobs]
+        if progress:
+            left = {name: 2 for name in names}
+            for future in concurrent.futures.as_completed(futures):
+                name = jobs[futures.index(future)][0]
+                left[name] -= 1
+                if left[name] == 0:
+                    print(f"  profiled {name} ({sum(v == 0 for v in left.values())} of {len(names)})", flush=True)
+        return [f.result() for f in futures]
+
+
+def _not_a_minimum(jobs, done, space, labels, values):
+    """[a warning] when some re-fitted point lies below the fit's cost by more than `NOT_A_MINIMUM`, naming it."""
+    delta, name, branch = min(((d, n, b) for (n, _), b in zip(jobs, done) for _, d, _, _ in b.points),
+                              key=lambda x: x[0], default=(0.0, None, None))
+    if not delta < NOT_A_MINIMUM:
+        return []
+    theta = min(branch.points, key=lambda p: p[1])[2]
+    k = labels.index(name)
+    at = float(space.physical(jnp.asarray(theta))[k])
+    return [f"the fit is not at a minimum: with {name} = {at:.6g} (fitted {values[k]:.6g}) and the others re-fitted "
+            f"the cost is lower by Δχ² = {-delta:.3g}; the profiles are taken around a point that is not the best "
+            "fit, so their intervals and verdicts say nothing: fit again (e.g. from that point, or with tighter "
+            "ftol/xtol/gtol) and profile the new result"]
+
+
 def _validate(result, names, experiments, level, max_points, span, workers):
     require_float64("pamjax.profile")
     if not hasattr(result, "labels") or not hasattr(result, "paths"):
@@ -392,30 +424,8 @@ def profile(
         loose = any(name in group for group in result.non_identifiable)  # linearised error infinite
         se_tau = math.inf if loose else math.sqrt(max(float(u @ cov @ u), 0.0))
         jobs += [(name, _Branch(ev, i, u, side, theta, ev.jac, se_tau, settings)) for side in (-1, 1)]
-    if progress:
-        print(f"  profiling {len(names)} parameter(s): {len(jobs)} branches on {workers} thread(s) ...", flush=True)
-    with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
-        futures = [pool.submit(job[1].walk) for job in jobs]
-        if progress:  # a line as each parameter's two branches finish (a profile takes seconds to minutes)
-            left = {name: 2 for name in names}
-            for future in concurrent.futures.as_completed(futures):
-                name = jobs[futures.index(future)][0]
-                left[name] -= 1
-                if left[name] == 0:
-                    print(f"  profiled {name} ({sum(v == 0 for v in left.values())} of {len(names)})", flush=True)
-        done = [f.result() for f in futures]
-    lowest = min(((d, name, b) for (name, _), b in zip(jobs, done) for _, d, _, _ in b.points),
-                 key=lambda x: x[0], default=(0.0, None, None))
-    warnings = []
-    if lowest[0] < NOT_A_MINIMUM:
-        delta, name, branch = lowest
-        tau, _, th, _ = min(branch.points, key=lambda p: p[1])
-        k = labels.index(name)
-        at = float(space.physical(jnp.asarray(th))[k])
-        warnings.append(f"the fit is not at a minimum: with {name} = {at:.6g} (fitted {result.values[k]:.6g}) and the "
-                        f"others re-fitted the cost is lower by Δχ² = {-delta:.3g}; the profiles are taken around a "
-                        "point that is not the best fit, so their intervals and verdicts say nothing: fit again (e.g. "
-                        "from that point, or with tighter ftol/xtol/gtol) and profile the new result")
+    done = _walk_all(jobs, names, workers, progress)
+    warnings = _not_a_minimum(jobs, done, space, labels, result.values)
     z = math.sqrt(threshold)
     profiles = []
     for name in names:

@@ -18,6 +18,7 @@ or run): the rate has the state's shape, or it does not, and then the parameter 
 is the one. Batches of models are what `jax.vmap` and `pamjax.sweep` are for.
 """
 
+import contextlib
 import dataclasses
 
 import equinox as eqx
@@ -25,9 +26,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._core.errors import traced_checks
-from .._core.units import check_setting, checks_setting
+from .._core.errors import PamjaxInputError, traced_checks
+from .._core.units import MIN_ABSOLUTE_PA, check_setting, checks_setting
 from .._systems.base import AbstractSystem
+from .hints import negative_inflow
+from .trajectory import RESULT_NONPHYSICAL
 
 
 def _components(obj, path=""):
@@ -78,7 +81,30 @@ def check_parameters(system, where="system"):
 def runtime_checks(system, signal, ts, command_range):
     """`(system, signal)` with the checks that meet traced values attached as run-time errors (`equinox.error_if`
     on those values): the components' own checks, and the command within `command_range` at the times `ts` (when
-    the signal is traced). Unchanged when nothing is traced."""
+    the signal is traced). Unchanged when nothing is traced. Under `jax.vmap` alone the checks run at once: a
+    failed one is raised as a `PamjaxInputError` here."""
+    try:
+        return _runtime_checks(system, signal, ts, command_range)
+    except Exception as err:
+        named = [line.strip() for line in str(err).splitlines() if "(checked at run time" in line]
+        if not named:
+            raise
+        raise PamjaxInputError(named[0].split("EquinoxRuntimeError: ")[-1]) from None
+
+
+@contextlib.contextmanager
+def naming_batched(system):
+    """A parameter with an axis too many fails while the solve is traced (JAX's carry-type `TypeError`): named."""
+    try:
+        yield
+    except (TypeError, ValueError):
+        found = batched_parameters(system, quiet=True)
+        if found:
+            raise PamjaxInputError(describe_batched(found)) from None
+        raise
+
+
+def _runtime_checks(system, signal, ts, command_range):
     with traced_checks() as found:
         for _, component in _components(system):
             _own_checks(component)
@@ -121,11 +147,16 @@ def _fine(system, command):
     return [np.shape(x) for x in jax.tree_util.tree_leaves(scale)] == [x.shape for x in jax.tree_util.tree_leaves(rate)]
 
 
-def batched_parameters(system):
+def batched_parameters(system, quiet=False):
     """[(path, shape, the shape it fits with)] of the array parameters of `system` with axes too many (several
     values where the system takes one): with each one's first entry alone (along one leading axis, or more) the
     vector field keeps the state's shape. Empty for a system whose vector field keeps it (the usual case: one shape
     inference), and for anything that is not a system."""
+    if quiet:  # the diagnosis of a failure: it must not replace the failure it explains
+        try:
+            return batched_parameters(system)
+        except Exception:  # noqa: BLE001
+            return []
     if not isinstance(system, AbstractSystem):
         return []
     lo, hi = (float(np.min(b)) for b in system.command_range)
@@ -164,3 +195,19 @@ def describe_batched(found):
     return ("; ".join(one(*f) for f in found) + ": it would make the state hold several values too, and the solve "
             "fail; give the value the model takes (a batch of models is simulated with jax.vmap over simulate, or "
             "pamjax.sweep)")
+
+
+def vacuum(traj, system, signal, t0, y0):
+    """A solve that succeeded with the chamber drawn below half an atmosphere, by a valve that empties a chamber at
+    atmospheric pressure (negative inflow: a flow coefficient's sign flipped), is a failure: RESULT_NONPHYSICAL, NaN
+    outputs. (A run over 2 s of such a model turned non-finite; over 0.5 s it "succeeded" at 6,600 Pa abs.) The
+    diagnosis runs only when the pressure is that low."""
+    pressure = traj.outputs.get("pressure") if isinstance(traj.outputs, dict) else None
+    if pressure is None or int(traj.result) != 0:
+        return traj
+    low = np.asarray(pressure)
+    if not (low.size and np.nanmin(low) < MIN_ABSOLUTE_PA) or negative_inflow(system, signal, t0, y0) is None:
+        return traj
+    outputs = jax.tree_util.tree_map(lambda a: jnp.full_like(a, jnp.nan), traj.outputs)
+    return eqx.tree_at(lambda tr: (tr.outputs, tr.result), traj,
+                       (outputs, jnp.asarray(RESULT_NONPHYSICAL, dtype=jnp.asarray(traj.result).dtype)))

@@ -19,9 +19,11 @@ change.
 import math
 import os
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.flatten_util import ravel_pytree
 
 from .._core.errors import PamjaxInputError
 from . import synchronous as _sync
@@ -44,7 +46,7 @@ def _steps(stepping, size, substeps):
     return size * (substeps + 2) if stepping == "pwm" else size
 
 
-def plan(system, signal, ts, t0, stepping, substeps, grid_step, size, state_size):
+def plan(system, signal, ts, t0, stepping, substeps, grid_step, size):
     """The pieces of a fixed-grid run over the output times `ts` (host array) from `t0`: a list of (first row, last
     row, grid_step of the piece), or None to solve it whole (see the module docstring). `size`: the whole run's
     static size (periods or steps). Every piece spans the same number of rows from a cut point, so that the pieces
@@ -53,6 +55,7 @@ def plan(system, signal, ts, t0, stepping, substeps, grid_step, size, state_size
     steps = _steps(stepping, size, substeps)
     if steps <= PIECE_STEPS or ts.size < 4:
         return None
+    state_size = ravel_pytree(system.state_scale())[0].size  # the state's shape: constants, nothing solved
     valid, step = _cut_points(system, signal, ts, t0, stepping, grid_step, size)
     end = ts.size - 1
     cuts = np.flatnonzero(valid[1:-1]) + 1
@@ -164,3 +167,34 @@ def join(pieces, ts):
                       num_accepted_steps=count(steps[1], template.num_accepted_steps),
                       num_rejected_steps=count(steps[2], template.num_rejected_steps),
                       result=count(result, template.result))
+
+
+def solve_pieces(solve_on, system, stepping, host, y0, t0, pieces):
+    """A fixed-grid run solved piece by piece (`pamjax._solve.chunks`), each from the state its predecessor reached
+    at the piece's first row (the start state given to the first too: one compiled program for every piece)."""
+    if y0 is None:
+        y0 = _initial_state(system)
+    done, previous = [], None
+    for first, last, step in pieces:
+        if previous is not None:
+            y0 = jax.tree_util.tree_map(lambda a: a[first - previous[0]], previous[2].state)
+        t_start = t0 if first == 0 else jnp.asarray(float(host[first]))
+        size = _size(system, stepping, float(t_start), float(host[last]), step)
+        traj = solve_on(jnp.asarray(host[first:last + 1]), y0, t_start, size, step)
+        previous = (first, last, traj)
+        done.append(previous)
+        if int(traj.result) != 0:
+            break
+    return join(done, host)
+
+
+@eqx.filter_jit
+def _initial_state(system):
+    return system.initial_state()
+
+
+def _size(system, stepping, t0, t1, grid_step):
+    """The static size of a piece's grid: PWM periods ("pwm") or uniform steps ("grid")."""
+    if stepping == "pwm":
+        return _sync.num_periods(system.valve, t0, t1)
+    return _sync.num_grid_steps(t0, t1, grid_step)

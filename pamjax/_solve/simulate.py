@@ -7,17 +7,16 @@ import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
-from jax.flatten_util import ravel_pytree
 
 from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError, PamjaxSolveError, check_time_grid, require_float64
 from .._core.private import diffrax_result_code, equinox_errors_as_nan, jax_at_top_level
-from .._core.units import MIN_ABSOLUTE_PA, check_absolute_pressure
+from .._core.units import check_absolute_pressure
 from .._core.xla_cpu import single_trajectory_options
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractSystem
 from . import chunks as _chunks, synchronous as _sync
-from .checks import batched_parameters, check_parameters, describe_batched, runtime_checks
+from .checks import check_parameters, naming_batched, runtime_checks, vacuum
 from .edges import ScheduledValve, StartsOff
 from .hints import default_max_steps, failure_hint, fixed_step_hint, negative_inflow
 from .scaled import scaled
@@ -356,13 +355,7 @@ def simulate(
     """
     validate(system, signal, ts, y0, t0)
     if _is_traced((system, signal)):  # inside jit/vmap/grad: the same checks, as run-time errors naming the value
-        try:
-            system, signal = runtime_checks(system, signal, ts, system.command_range)
-        except Exception as err:  # under vmap alone they run at once: the named error, as a PamjaxInputError
-            named = [line.strip() for line in str(err).splitlines() if "(checked at run time" in line]
-            if not named:
-                raise
-            raise PamjaxInputError(named[0].split("EquinoxRuntimeError: ")[-1]) from None
+        system, signal = runtime_checks(system, signal, ts, system.command_range)
     # Tolerances and the first step as arrays: arguments of the compiled solve, not constants baked into it (another
     # rtol does not compile again).
     rtol, atol = _positive(rtol, "rtol"), _positive(atol, "atol")
@@ -394,11 +387,10 @@ def simulate(
     # A concrete call checks the result on the host (below), so its program is traced with equinox's run-time
     # checks (diffrax's, on the save times) as NaN rather than as host callbacks: JAX does not keep a program with a
     # host callback in its persistent cache, and a second run would compile the solve again.
-    pieces = None
-    if stepping in ("pwm", "grid") and not traced:  # a long fixed-grid run in pieces: bounded memory (_chunks)
-        state_size = ravel_pytree(system.state_scale())[0].size  # the state's shape: constants, nothing solved
-        pieces = _chunks.plan(system, signal, host, float(t0), stepping, substeps, grid_step, periods, state_size)
-    with contextlib.nullcontext() if traced else equinox_errors_as_nan():
+    # a long fixed-grid run in pieces: bounded memory (_chunks)
+    pieces = None if traced or stepping == "adaptive" else _chunks.plan(system, signal, host, float(t0), stepping,
+                                                                         substeps, grid_step, periods)
+    with contextlib.nullcontext() if traced else equinox_errors_as_nan(), naming_batched(system):
         program = _solve_program()
 
         def solve_on(ts_, y0_, t0_, periods_, grid_step_):
@@ -406,68 +398,13 @@ def simulate(
                            dt0=dt0, adjoint=adjoint, jump_ts=jump_ts, throw=throw and traced, stepping=stepping,
                            substeps=substeps, num_periods=periods_, grid_step=grid_step_)
 
-        try:
-            if pieces is None:
-                traj = solve_on(ts, y0, t0, periods, grid_step)
-            else:
-                traj = _solve_pieces(solve_on, system, stepping, host, y0, t0, pieces)
-        except (TypeError, ValueError):  # a parameter with an axis too many fails in tracing: name it
-            found = _batched(system)
-            if found:
-                raise PamjaxInputError(describe_batched(found)) from None
-            raise
+        traj = (solve_on(ts, y0, t0, periods, grid_step) if pieces is None
+                else _chunks.solve_pieces(solve_on, system, stepping, host, y0, t0, pieces))
     if not traced:
-        traj = _vacuum(traj, system, signal, t0, y0)
-    if throw and not traced:
-        _raise_on_failure(traj, system, signal, ts, t0, y0, stepping, substeps, grid_step, max_steps, solver)
+        traj = vacuum(traj, system, signal, t0, y0)
+        if throw:
+            _raise_on_failure(traj, system, signal, ts, t0, y0, stepping, substeps, grid_step, max_steps, solver)
     return traj
-
-
-def _vacuum(traj, system, signal, t0, y0):
-    """A solve that succeeded with the chamber drawn below half an atmosphere, by a valve that empties a chamber at
-    atmospheric pressure (negative inflow: a flow coefficient's sign flipped), is a failure: RESULT_NONPHYSICAL, NaN
-    outputs. (A run over 2 s of such a model turned non-finite; over 0.5 s it "succeeded" at 6,600 Pa abs.) The
-    diagnosis runs only when the pressure is that low."""
-    pressure = traj.outputs.get("pressure") if isinstance(traj.outputs, dict) else None
-    if pressure is None or int(traj.result) != 0:
-        return traj
-    low = np.asarray(pressure)
-    if not (low.size and np.nanmin(low) < MIN_ABSOLUTE_PA) or negative_inflow(system, signal, t0, y0) is None:
-        return traj
-    outputs = jtu.tree_map(lambda a: jnp.full_like(a, jnp.nan), traj.outputs)
-    return eqx.tree_at(lambda tr: (tr.outputs, tr.result), traj,
-                       (outputs, jnp.asarray(RESULT_NONPHYSICAL, dtype=jnp.asarray(traj.result).dtype)))
-
-
-def _solve_pieces(solve_on, system, stepping, host, y0, t0, pieces):
-    """A fixed-grid run solved piece by piece (`pamjax._solve.chunks`), each from the state its predecessor reached
-    at the piece's first row (the start state given to the first too: one compiled program for every piece)."""
-    if y0 is None:
-        y0 = _initial_state(system)
-    done, previous = [], None
-    for first, last, step in pieces:
-        if previous is not None:
-            y0 = jtu.tree_map(lambda a: a[first - previous[0]], previous[2].state)
-        t_start = t0 if first == 0 else jnp.asarray(float(host[first]))
-        size = fixed_grid_size(system, stepping, float(t_start), float(host[last]), step)
-        traj = solve_on(jnp.asarray(host[first:last + 1]), y0, t_start, size, step)
-        previous = (first, last, traj)
-        done.append(previous)
-        if int(traj.result) != 0:
-            break
-    return _chunks.join(done, host)
-
-
-@eqx.filter_jit
-def _initial_state(system):
-    return system.initial_state()
-
-
-def _batched(system):
-    try:
-        return batched_parameters(system)
-    except Exception:  # noqa: BLE001 - the diagnosis of a failure must not replace it
-        return []
 
 
 _EDGE_CLIP = 1  # `num_periods` of an adaptive solve with smoothed edges: edge clipping on (its value is not used)
