@@ -72,5 +72,8 @@ def test_a_run_that_cannot_be_cut_and_would_not_fit_is_refused_with_its_estimate
     with pytest.raises(PamjaxInputError, match=r"needs about [\d.]+ GB of memory to solve in one piece, more than the "
                                                r"0\.0 GB available.*give output times on its grid"):
         pamjax.simulate(system, pamjax.Constant(0.5), jnp.asarray(ts))
+    # the advice works: the same run with output times on its grid is cut into pieces, in the same 1 MB
+    on_grid = np.arange(0, 1201) * 0.01
+    assert bool(pamjax.simulate(system, pamjax.Constant(0.5), jnp.asarray(on_grid)).succeeded)
     monkeypatch.setattr(small_pieces, "_available_memory", lambda: 64 * 2**30)  # it fits: solved whole
     assert bool(pamjax.simulate(system, pamjax.Constant(0.5), jnp.asarray(ts)).succeeded)
