@@ -64,8 +64,8 @@ def write_plant(directory, meta, params, truth, bench, substeps, seed):
     rng = np.random.default_rng(seed)
     for e in bench.experiments:
         t = np.asarray(e.times, dtype=float)
-        system = truth if e.build is None else e.build(truth)
-        y0 = system.initial_state(**dict(e.initial))
+        system = e.system_for(truth)
+        y0 = e.start_for(system, truth)
         traj = pj.simulate(system, e.signal, t, y0=y0, stepping="pwm", substeps=substeps)
         if int(traj.result) != 0:
             raise SystemExit(f"{directory.name}/{e.name}: the truth's solve failed (result {int(traj.result)})")

@@ -1,16 +1,20 @@
-"""Closed-loop position control of paper 000's plant (issue 6): the paper's PI, sliding mode control with the averaged
-model's equivalent control, gradient-tuned gains, and a ±20 % robustness sweep.
+"""Closed-loop position control of paper 000's plant (issues 6 and 32): the paper's PI, sliding mode control with the
+averaged model's equivalent control, gradient-tuned gains, a ±20 % robustness sweep, and on the identified plant the
+SMC fed by an extended Kalman filter from the bench's noisy sensors.
 
-    python fits/control.py [--out results/control] [--tune-steps 20] [--duration 20]
+    python fits/control.py [--out results/control] [--tune-steps 20] [--duration 20] [--plant smooth|identified|both]
 
-Plant: `presets.mas10_system("pwm")` (MAS-10-300 + 9.6 kg, MHE2 valve with smoothed PWM edges), from rest at
-atmospheric pressure. Reference 0.03 + 0.01 sin(ω t) m, ω = 0.5 and 1 rad/s, 20 s (paper 000 Figs. 15-16; the hybrid
-bench's E5 runs). Tracking figures: RMSE and peak |r − x| over t ≥ 5 s (after the initial rise from the rest position,
-which the valve's flow capacity limits for every controller; full-horizon figures are reported too).
+Plants (MAS-10-300 + 9.6 kg, MHE2 valve, from rest at atmospheric pressure):
+- "smooth": `presets.mas10_system("pwm")`: smoothed PWM edges and the smooth Coulomb sign, solved adaptively per period;
+- "identified": `presets.mas10_system("pwm", friction="karnopp")`, the model class identification produces: exact
+  PWM edges and exact stick-slip, solved per period on the PWM-synchronous grid with events located inside the step.
+Reference 0.03 + 0.01 sin(ω t) m, ω = 0.5 and 1 rad/s, 20 s (paper 000 Figs. 15-16; the hybrid bench's E5 runs).
+Tracking figures: RMSE and peak |r − x| over t ≥ 5 s (after the initial rise from the rest position, which the valve's
+flow capacity limits for every controller; full-horizon figures are reported too).
 
-Also: the PI on a plant built from the bench's true parameters (`meta.json`) against the bench's E5 recordings.
-Writes `control.json`, `control.png` (reference vs response per controller) under `--out`; ends with
-`RESULT pi_rmse=... best_rmse=...` (mm, 1 rad/s, t ≥ 5 s).
+Also: the PI on a plant built from the bench's true parameters (`meta.json`, with the plant's friction) against the
+bench's E5 recordings. Writes `control.json`, `control_<plant>.png` (reference vs response per controller) under
+`--out`; ends with `RESULT <plant> pi_rmse=... best_rmse=...` (mm, 1 rad/s, t ≥ 5 s) per plant.
 """
 
 import argparse
@@ -28,17 +32,19 @@ import scipy.linalg
 import pamjax
 from pamjax import (
     ClosedLoop,
+    ExtendedKalmanFilter,
     PIController,
+    PIDController,
     SlidingModeController,
     presets,
     run_closed_loop,
     simulate_closed_loop,
     tune_controller,
 )
+from pamjax.gallery import bench_folder
+from pamjax.gallery.procedures.bench import bench_plant
 
-BENCH = pathlib.Path(__file__).resolve().parents[2] / "shared" / "data" / "hybrid-reference-bench"
-if not BENCH.exists():
-    BENCH = pathlib.Path("/work/shared/data/hybrid-reference-bench")
+BENCH = bench_folder()  # the hybrid bench's recordings, shipped in pamjax/data (or $PAMJAX_BENCH_DATA)
 WINDOW_START = 5.0  # s, tracking window start (after the initial rise)
 PAPER = "paper 000: RMSE > 10 % (of the 10 mm amplitude, i.e. > 1 mm), 1.5-2.2 mm steady error"
 
@@ -59,21 +65,10 @@ def sine(omega):
     return pamjax.Sine(0.03, 0.01, omega / (2 * np.pi))
 
 
-def bench_plant():
-    """Paper 000's plant with the bench's true parameters (meta.json `params`) and the smoothed PWM valve."""
-    q = json.loads((BENCH / "meta.json").read_text())["params"]
-    muscle = pamjax.Muscle(
-        force_law=pamjax.PolynomialForce(
-            jnp.asarray([q[f"a{i}"] for i in range(5)]), q["k0"], q["k1"], q["k2"], q["p_max"]
-        ),
-        volume_law=pamjax.LinearVolume(q["v0"], q["v1"]),
-        min_position=q["x_min"],
-        max_position=q["x_max"],
-    )
-    friction = pamjax.CoulombViscousFriction(q["Fc"], q["Cf"])
-    return pamjax.MuscleSystem(
-        valve=presets.mas10_valve("smooth"), muscle=muscle, payload_mass=q["M"], friction=friction
-    )
+PLANTS = {
+    "smooth": lambda: presets.mas10_system("pwm"),
+    "identified": lambda: presets.mas10_system("pwm", friction="karnopp"),
+}
 
 
 def perturbed_plants(plant, relative=0.2):
@@ -111,60 +106,72 @@ def bench_errors(recording):
     )
 
 
-def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="results/control")
-    parser.add_argument("--duration", type=float, default=20.0)
-    parser.add_argument("--tune-steps", type=int, default=20)
-    args = parser.parse_args()
-    jax.config.update("jax_enable_x64", True)
-    out = pathlib.Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    plant = presets.mas10_system("pwm")
+def run_plant(name, plant, args, out):
+    """Every study on one plant; returns its part of the report."""
     model = presets.mas10_system("averaged")  # the sliding mode controller's model (eq. 13 valve)
-    report = dict(paper=PAPER, window_start_s=WINDOW_START, duration_s=args.duration)
+    report = {}
 
-    # 1. The paper's PI and the sliding mode controller on the switching-valve plant; PI vs the bench's E5.
+    # 1. The paper's PI and the sliding mode controller; on the identified plant also with the bench's sensor noise
+    # (PI: the 0.1 mm potentiometer; SMC: an extended Kalman filter on eq. 18-21 from 2 kPa / 0.1 mm at 1 kHz).
     controllers = {
-        "PI (paper: P=25, I=150)": PIController(),
-        "SMC (eq. 13 equivalent control)": SlidingModeController(model),
+        "PI (paper: P=25, I=150)": (PIController(), None),
+        "SMC (eq. 13 equivalent control)": (SlidingModeController(model), None),
     }
+    if name == "identified":
+        controllers |= {
+            "PI, 0.1 mm position noise": (PIDController(measurement_noise=1e-4), None),
+            "SMC + EKF, bench noise": (SlidingModeController(model), ExtendedKalmanFilter(model)),
+        }
     runs, tracking = {}, {}
     for omega in (0.5, 1.0):
-        for name, controller in controllers.items():
+        for label, (controller, estimator) in controllers.items():
             t0 = time.perf_counter()
-            traj = simulate_closed_loop(ClosedLoop(plant, controller, sine(omega)), args.duration)
-            tracking[f"{name} @ {omega} rad/s"] = m = metrics(traj) | dict(run_s=time.perf_counter() - t0)
-            runs[(name, omega)] = traj
+            traj = simulate_closed_loop(ClosedLoop(plant, controller, sine(omega), estimator=estimator), args.duration)
+            tracking[f"{label} @ {omega} rad/s"] = m = metrics(traj) | dict(run_s=time.perf_counter() - t0)
+            if estimator is not None:
+                est = traj.estimation_error(WINDOW_START)
+                m["estimation_error"] = dict(pressure_Pa=float(est["pressure"]),
+                                             position_um=1e6 * float(est["position"]),
+                                             velocity_mm_s=1e3 * float(est["velocity"]))
+            runs[(label, omega)] = traj
             print(
-                f"{name:34s} ω={omega}: RMSE {m['rmse_mm']:.3f} mm, peak {m['peak_mm']:.3f} mm (t ≥ 5 s); "
-                f"full {m['full_rmse_mm']:.2f} mm  [{m['run_s']:.1f} s]",
+                f"[{name}] {label:34s} ω={omega}: RMSE {m['rmse_mm']:.3f} mm, peak {m['peak_mm']:.3f} mm (t ≥ 5 s); "
+                f"full {m['full_rmse_mm']:.2f} mm  [{m['run_s']:.1f} s]"
+                + (f"; estimation error {m['estimation_error']}" if estimator is not None else ""),
                 flush=True,
             )
     report["tracking"] = tracking
     bench = {}
-    for omega in (0.5, 1.0):
-        recording = np.load(BENCH / f"E5_w{omega:.1f}.npz")
-        traj = simulate_closed_loop(ClosedLoop(bench_plant(), PIController(), sine(omega)), args.duration)
-        t = np.asarray(traj.t)
-        x_bench = np.interp(t, recording["t"], recording["x"])
-        w = t >= WINDOW_START
-        bench[f"{omega} rad/s"] = dict(
-            bench_recording=bench_errors(recording),
-            pamjax_on_bench_parameters=metrics(traj),
-            position_rms_difference_mm=1e3 * float(np.sqrt(np.mean((np.asarray(traj.position)[w] - x_bench[w]) ** 2))),
-        )
-        print(
-            f"E5 ω={omega}: bench PI RMSE {bench[f'{omega} rad/s']['bench_recording']['rmse_mm']:.3f} mm, "
-            f"pamjax PI on bench parameters {bench[f'{omega} rad/s']['pamjax_on_bench_parameters']['rmse_mm']:.3f} mm, "
-            f"x difference {bench[f'{omega} rad/s']['position_rms_difference_mm']:.3f} mm rms",
-            flush=True,
-        )
+    if BENCH.exists():
+        for omega in (0.5, 1.0):
+            recording = np.load(BENCH / f"E5_w{omega:.1f}.npz")
+            friction = "karnopp" if name == "identified" else "coulomb"
+            traj = simulate_closed_loop(ClosedLoop(bench_plant(friction), PIController(), sine(omega)), args.duration)
+            t = np.asarray(traj.t)
+            x_bench = np.interp(t, recording["t"], recording["x"])
+            w = t >= WINDOW_START
+            difference = np.asarray(traj.position)[w] - x_bench[w]
+            duty_bench = recording["u"][::20][: traj.duty.shape[0]]
+            after = np.asarray(traj.period_start) >= WINDOW_START
+            bench[f"{omega} rad/s"] = dict(
+                bench_recording=bench_errors(recording),
+                pamjax_on_bench_parameters=metrics(traj),
+                position_rms_difference_mm=1e3 * float(np.sqrt(np.mean(difference**2))),
+                duty_rms_difference=float(np.sqrt(np.mean((np.asarray(traj.duty) - duty_bench)[after] ** 2))),
+            )
+            b = bench[f"{omega} rad/s"]
+            print(
+                f"[{name}] E5 ω={omega}: bench PI RMSE {b['bench_recording']['rmse_mm']:.3f} mm, pamjax PI on bench "
+                f"parameters {b['pamjax_on_bench_parameters']['rmse_mm']:.3f} mm, x difference "
+                f"{b['position_rms_difference_mm']:.3f} mm rms, duty difference {b['duty_rms_difference']:.2e} rms "
+                "(t ≥ 5 s)",
+                flush=True,
+            )
     report["bench_E5"] = bench
 
-    # 3. Gradient-based tuning through the closed loop (1 rad/s, switching-valve plant), from the paper's gains.
+    # 3. Gradient-based tuning through the closed loop (1 rad/s), from the paper's gains.
     tuned = {}
-    for name, controller, gains in (
+    for label, controller, gains in (
         ("PI tuned", PIController(), ("proportional_gain", "integral_gain")),
         ("SMC tuned", SlidingModeController(model), ("bandwidth", "switching_gain", "boundary_layer")),
     ):
@@ -176,28 +183,29 @@ def main():
             start=WINDOW_START,
             steps=args.tune_steps,
             learning_rate=0.1,
-            callback=lambda k, r, g, name=name: print(
-                f"  {name} step {k}: RMSE {1e3 * r:.4f} mm, gains {g}", flush=True
+            callback=lambda k, r, g, label=label: print(
+                f"  [{name}] {label} step {k}: RMSE {1e3 * r:.4f} mm, gains {g}", flush=True
             ),
         )
         traj = simulate_closed_loop(loop, args.duration)
         m = metrics(traj)
-        tuned[name] = dict(
+        tuned[label] = dict(
             gains=dict(zip(gains, history[0][1]))
             | {"tuned": dict(zip(gains, (float(getattr(loop.controller, g)) for g in gains)))},
             before_rmse_mm=1e3 * history[0][0],
             after=m,
             tune_s=time.perf_counter() - t0,
         )
-        runs[(name, 1.0)] = traj
-        controllers[name] = loop.controller
+        runs[(label, 1.0)] = traj
+        controllers[label] = (loop.controller, None)
         print(
-            f"{name}: RMSE {tuned[name]['before_rmse_mm']:.3f} → {m['rmse_mm']:.3f} mm [{tuned[name]['tune_s']:.0f} s]",
+            f"[{name}] {label}: RMSE {tuned[label]['before_rmse_mm']:.3f} → {m['rmse_mm']:.3f} mm "
+            f"[{tuned[label]['tune_s']:.0f} s]",
             flush=True,
         )
     report["tuning"] = tuned
 
-    # 4. Robustness: every controller over 16 plants perturbed ±20 % (one vmapped sweep per controller).
+    # 4. Robustness: every controller (true state) over 16 plants perturbed ±20 % (one vmapped sweep per controller).
     plants, signs = perturbed_plants(plant)
     num_periods = int(np.ceil(args.duration * 50 - 1e-9))
     robust = dict(factors=list(PERTURBED), design=signs.tolist())
@@ -209,7 +217,9 @@ def main():
     feasible = np.asarray(margin) > 0
     robust["holding_margin_N"] = np.asarray(margin).tolist()
 
-    for name, controller in controllers.items():
+    for label, (controller, estimator) in controllers.items():
+        if estimator is not None or isinstance(controller, PIDController):
+            continue  # the sweep compares the controllers on the true state
 
         @eqx.filter_jit
         def sweep(plants, controller=controller):
@@ -221,7 +231,7 @@ def main():
         t0 = time.perf_counter()
         rmse, peak = (1e3 * np.asarray(a) for a in sweep(plants))
         worst = int(np.nanargmax(rmse))
-        robust[name] = dict(
+        robust[label] = dict(
             rmse_mm=rmse.tolist(),
             peak_mm=peak.tolist(),
             worst_rmse_mm=float(np.nanmax(rmse)),
@@ -232,10 +242,10 @@ def main():
             worst_feasible_rmse_mm=float(np.nanmax(rmse[feasible])) if feasible.any() else None,
         )
         print(
-            f"robustness {name:34s}: worst RMSE {robust[name]['worst_rmse_mm']:.3f} mm, worst peak "
-            f"{robust[name]['worst_peak_mm']:.3f} mm, median {robust[name]['median_rmse_mm']:.3f} mm, worst over "
-            f"{int(feasible.sum())} feasible plants {robust[name]['worst_feasible_rmse_mm']:.3f} mm "
-            f"[{robust[name]['sweep_s']:.1f} s]",
+            f"[{name}] robustness {label:34s}: worst RMSE {robust[label]['worst_rmse_mm']:.3f} mm, worst peak "
+            f"{robust[label]['worst_peak_mm']:.3f} mm, median {robust[label]['median_rmse_mm']:.3f} mm, worst over "
+            f"{int(feasible.sum())} feasible plants {robust[label]['worst_feasible_rmse_mm']:.3f} mm "
+            f"[{robust[label]['sweep_s']:.1f} s]",
             flush=True,
         )
     report["robustness"] = robust
@@ -248,20 +258,20 @@ def main():
 
     names = [n for (n, w) in runs if w == 1.0]
     fig, axes = plt.subplots(len(names) + 1, 1, figsize=(10, 2.4 * (len(names) + 1)), sharex=True)
-    for ax, name in zip(axes, names):
-        traj = runs[(name, 1.0)]
+    for ax, label in zip(axes, names):
+        traj = runs[(label, 1.0)]
         ax.plot(traj.t, 1e3 * np.asarray(traj.reference), "k--", lw=1, label="reference")
-        ax.plot(traj.t, 1e3 * np.asarray(traj.position), lw=1, label=name)
+        ax.plot(traj.t, 1e3 * np.asarray(traj.position), lw=1, label=label)
         ax.set_ylabel("x [mm]")
         ax.legend(loc="lower right", fontsize=8)
-        axes[-1].plot(traj.t, 1e3 * np.asarray(traj.reference - traj.position), lw=1, label=name)
+        axes[-1].plot(traj.t, 1e3 * np.asarray(traj.reference - traj.position), lw=1, label=label)
     axes[-1].set_ylim(-2.5, 2.5)
     axes[-1].set_ylabel("r − x [mm]")
     axes[-1].set_xlabel("t [s]")
     axes[-1].legend(fontsize=8)
-    axes[0].set_title("1 rad/s, switching-valve plant (presets.mas10_system('pwm'))")
+    axes[0].set_title(f"1 rad/s, {name} plant")
     fig.tight_layout()
-    fig.savefig(out / "control.png", dpi=110)
+    fig.savefig(out / f"control_{name}.png", dpi=110)
 
     pi_rmse = tracking["PI (paper: P=25, I=150) @ 1.0 rad/s"]["rmse_mm"]
     candidates = {
@@ -272,9 +282,29 @@ def main():
     report["summary"] = dict(
         pi_rmse_mm=pi_rmse, best=best, best_rmse_mm=candidates[best], improvement=pi_rmse / candidates[best]
     )
+    print(f"[{name}] best: {best}, {pi_rmse / candidates[best]:.1f}× lower RMSE than the paper's PI")
+    return report
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="results/control")
+    parser.add_argument("--duration", type=float, default=20.0)
+    parser.add_argument("--tune-steps", type=int, default=20)
+    parser.add_argument("--plant", choices=("smooth", "identified", "both"), default="both")
+    args = parser.parse_args()
+    jax.config.update("jax_enable_x64", True)
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    report = dict(paper=PAPER, window_start_s=WINDOW_START, duration_s=args.duration)
+    names = list(PLANTS) if args.plant == "both" else [args.plant]
+    for name in names:
+        report[name] = run_plant(name, PLANTS[name](), args, out)
     (out / "control.json").write_text(json.dumps(report, indent=1))
-    print(f"best: {best}, {pi_rmse / candidates[best]:.1f}× lower RMSE than the paper's PI; wrote {out}")
-    print(f"RESULT pi_rmse={pi_rmse:.4f} best_rmse={candidates[best]:.4f}")
+    print(f"wrote {out}")
+    for name in names:
+        summary = report[name]["summary"]
+        print(f"RESULT {name} pi_rmse={summary['pi_rmse_mm']:.4f} best_rmse={summary['best_rmse_mm']:.4f}")
 
 
 if __name__ == "__main__":

@@ -17,45 +17,11 @@ import pathlib
 
 import numpy as np
 
-P = np.polynomial.polynomial
-DATA = pathlib.Path(__file__).resolve().parents[1] / "pamjax" / "data" / "DMSP-20-300_force_map_long.csv"
-MAP_L0 = 0.300  # m, DMSP-20-300 nominal length (type code)
-P_MAX = 6e5  # Pa gauge, paper 000
-MAX_CONTRACTION = 0.25  # datasheet
-
-
-def force_map_shape(path=DATA):
-    """(quartic F_max(ε) coefficients [N], line of ∂F/∂p in ε [N/Pa]) of the DMSP-20-300 map."""
-    length, _, pressure, force = np.genfromtxt(path, delimiter=",", skip_header=2).T
-    eps, fmax, slope = [], [], []
-    for ell in np.unique(length)[::-1]:
-        sel = (length == ell) & (force > 0)
-        if sel.sum() < 2:
-            continue
-        c1, c0 = np.polyfit(pressure[sel], force[sel], 1)
-        eps.append((MAP_L0 - ell) / MAP_L0)
-        fmax.append(c0 + c1 * P_MAX)
-        slope.append(c1)
-    quartic = P.polyfit(np.append(eps, MAX_CONTRACTION), np.append(fmax, 0.0), 4)
-    return quartic, P.polyfit(eps, slope, 1)
-
-
-def scaled_muscle(force_at_zero, nominal_length, path=DATA):
-    """a0…a4 [N/mⁱ], k0 [N], k1 [N/m] for a muscle of this family (k2 = 1e5 Pa)."""
-    quartic, slope_line = force_map_shape(path)
-    scale = force_at_zero / quartic[0]
-    a = quartic * scale / nominal_length ** np.arange(5)
-    k0 = slope_line[0] * 1e5 * scale
-    k1 = -slope_line[1] / nominal_length * 1e5 * scale
-    return a, k0, k1
-
-
-def virtual_work_volume(a_eps, nominal_length, n=201):
-    """(ε grid, V − v0 on it) [m³] from F_max(ε) coefficients [N] by cumulative trapezoid."""
-    eps = np.linspace(0.0, MAX_CONTRACTION, n)
-    integrand = P.polyval(eps, a_eps) / P_MAX * nominal_length  # dV/dε = L0 F/p
-    dv = np.concatenate([[0.0], np.cumsum(0.5 * (integrand[1:] + integrand[:-1]) * np.diff(eps))])
-    return eps, dv
+from pamjax.gallery.procedures.force_map import (  # noqa: E402  (the derivation's steps)
+    P,
+    scaled_muscle,
+    virtual_work_volume,
+)
 
 
 def derive(with_valve=True):

@@ -26,8 +26,9 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
+from pamjax.gallery import bench_folder  # noqa: E402
 
-DEFAULT_DATA = pathlib.Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "hybrid-reference-bench"
+DEFAULT_DATA = bench_folder()  # the hybrid bench recordings shipped with pamjax (pamjax/data/)
 
 
 def true_system(P, friction, mode="smooth"):

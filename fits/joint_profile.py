@@ -19,10 +19,9 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 import pamjax as pj  # noqa: E402
+from pamjax.gallery import bench_folder  # noqa: E402
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
-DEFAULT_DATA = next((p / "shared" / "data" / "hybrid-reference-bench" for p in (ROOT.parent, ROOT.parent.parent)
-                     if (p / "shared" / "data" / "hybrid-reference-bench").is_dir()), ROOT.parent / "shared")
+DEFAULT_DATA = bench_folder()  # the hybrid bench recordings shipped with pamjax (pamjax/data/)
 
 
 def main(argv=None):

@@ -8,7 +8,6 @@ Writes `fit_eq7.json`, `fit_eq6.json` and `static_force.png` to `--out` (default
 """
 
 import argparse
-import importlib.resources
 import pathlib
 
 import equinox as eqx
@@ -18,31 +17,13 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
-from pamjax import presets  # noqa: E402
-
-DATA = pathlib.Path(str(importlib.resources.files("pamjax") / "data" / "DMSP-20-300_force_map_long.csv"))
-L0 = 0.300  # m, nominal length (type code DMSP-20-300)
-AUTHORS_MAX_ERROR_PERCENT = 2.35  # Martens & Boblan 2017: their model's maximum error on this muscle
-
-
-def load_map():
-    rows = np.loadtxt(DATA, delimiter=",", comments="#", skiprows=2)
-    length, pressure_gauge, force = rows[:, 0], rows[:, 2], rows[:, 3]
-    return L0 - length, pressure_gauge + 101325.0, force  # x [m] (contraction), p [Pa abs], F [N]
-
-
-def start_muscle(force_law):
-    """DMSP-20-300 start: the MAS-10 preset's shape (itself derived from this map) scaled to 1460 N at 6 bar."""
-    return pj.Muscle(force_law=force_law, volume_law=pj.LinearVolume(1e-4, 1e-3), min_position=0.0, max_position=0.08)
-
-
-def eq7_start():
-    """Eq. 7 start model for the DMSP-20-300 (the MAS-10 preset's shape scaled to its 1460 N at 6 bar) and its free
-    parameters (k2 fixed: only k0/k2 and k1/k2 are identifiable)."""
-    scale = 1460.1 / presets.MAS10_MAX_FORCE_COEFFICIENTS[0]
-    model = start_muscle(pj.PolynomialForce(np.asarray(presets.MAS10_MAX_FORCE_COEFFICIENTS) * scale,
-                                            presets.MAS10_K0 * scale, presets.MAS10_K1 * scale, 1e5))
-    return model, ["force_law.max_force_coefficients", "force_law.k0", "force_law.k1"]
+from pamjax.gallery.procedures.force_map import (  # noqa: E402
+    AUTHORS_MAX_ERROR_PERCENT,
+    L0,
+    eq7_start,
+    load_map,
+    start_muscle,
+)
 
 
 def report(name, res):

@@ -3,7 +3,7 @@ a 5e-5 m³ tank charged from atmosphere (path 1→2, inflate) and discharged fro
 exhaust) at PWM duty 0.25, 0.50 and 0.75 (50 Hz, 2 ms switching delays), pressure compared over 2 s.
 
     python fits/valve_tank.py --data synthetic   # pamjax's own simulation of Table 1's values, 2 kPa noise, seeded
-    python fits/valve_tank.py --data bench       # E1_u*/E2_u* of ../shared/data/hybrid-reference-bench
+    python fits/valve_tank.py --data bench       # E1_u*/E2_u* of the hybrid bench (pamjax/data)
 
 The valve is the switching valve with exact edges, integrated on the PWM-synchronous grid (`stepping="pwm"`; residuals
 smooth in C_v, b_v). Start: C_v 30 % high, b_v 30 % low. Writes `fit.json`, `summary.json` and `valve_tank.png`
@@ -21,23 +21,15 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
+from pamjax.gallery import bench_folder  # noqa: E402
+from pamjax.gallery.procedures.bench import tank_model  # noqa: E402
 
-BENCH = pathlib.Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "hybrid-reference-bench"
 TABLE_1 = {"valve.inflate.discharge_coefficient": 0.36, "valve.inflate.critical_ratio": 0.28,
            "valve.exhaust.discharge_coefficient": 0.39, "valve.exhaust.critical_ratio": 0.49}  # paper 000, Table 1
 FREE = list(TABLE_1)
 NOISE = 2e3  # Pa: the bench's pressure noise (meta.json "noise")
 DUTIES = (0.25, 0.50, 0.75)
 
-
-def tank_model(P, cv12, b12, cv23, b23):
-    """The bench's tank (5e-5 m³, adiabatic) fed by the on/off valve with the given C_v, b_v (meta.json names)."""
-    valve = pj.OnOffValve(
-        inflate=pj.EllipseRestriction(cv12, b12, P["A"]), exhaust=pj.EllipseRestriction(cv23, b23, P["A"]),
-        supply_pressure=P["p_s"], pwm_frequency=P["f_pwm"], switch_on_delay=P["t_on"], switch_off_delay=P["t_off"],
-    )
-    return pj.TankSystem(valve=valve, volume=5e-5, air=pj.Air(P["R"], P["T"], P["kappa"], P["p_atm"]),
-                         polytropic_index=P["kappa"])
 
 
 def main():
@@ -50,7 +42,7 @@ def main():
     ap.add_argument("--overwrite", action="store_true")
     args = ap.parse_args()
     out = pathlib.Path(args.out or f"results/valve_tank_{args.data}")
-    bench = BENCH if BENCH.exists() else pathlib.Path("/work/shared/data/hybrid-reference-bench")
+    bench = bench_folder()
     P = json.loads((bench / "meta.json").read_text())["params"]
     truth = tank_model(P, *TABLE_1.values())
     horizon = 0.5 if args.quick else 2.0

@@ -124,12 +124,15 @@ from ._solve.synchronous import num_periods as num_periods
 # isort: split
 # --- fitting: recordings, experiments, parameters, fit, bench directories, model files ------------------------------
 from ._fit.bench import (
+    BENCH_NUISANCES as BENCH_NUISANCES,
     BENCH_PARAMETERS as BENCH_PARAMETERS,
     FITTED_KINDS as FITTED_KINDS,
     Bench as Bench,
+    bench_nuisance as bench_nuisance,
     bench_rmse as bench_rmse,
     bench_values as bench_values,
     load_bench as load_bench,
+    nuisance_table as nuisance_table,
 )
 from ._fit.bench_tests import (
     FlowCurveExperiment as FlowCurveExperiment,
@@ -161,6 +164,13 @@ from ._fit.parameters import ParameterSpace as ParameterSpace, parameter_paths a
 from ._fit.predictions import predictions as predictions
 from ._fit.profile import Profile as Profile, ProfileResult as ProfileResult, profile as profile
 from ._fit.recording import Recording as Recording
+from ._fit.rig import (
+    Rig as Rig,
+    RunConditions as RunConditions,
+    Sensors as Sensors,
+    StartState as StartState,
+    nuisance_report as nuisance_report,
+)
 from ._fit.staged import StagedStart as StagedStart, staged_start as staged_start
 from ._fit.synthetic import synthetic_recording as synthetic_recording
 
@@ -181,6 +191,20 @@ from ._sweep.result import SweepResult as SweepResult, merge_sweep_shards as mer
 from ._sweep.sweep import sweep as sweep
 
 # isort: split
+# --- bands on predictions: a fit's covariance carried to trajectories, maps and frequency responses ----------------
+from ._bands.band import PredictionBand as PredictionBand, prediction_band as prediction_band
+from ._bands.maps import (
+    flow_surface_band as flow_surface_band,
+    frequency_response_band as frequency_response_band,
+    steady_state_band as steady_state_band,
+)
+from ._bands.uncertainty import (
+    FitUncertainty as FitUncertainty,
+    PamjaxBandWarning as PamjaxBandWarning,
+    read_uncertainty as read_uncertainty,
+)
+
+# isort: split
 # --- control: sampled-data controllers, closed loops, joint control ------------------------------------------------
 from ._control.closed_loop import (
     ClosedLoop as ClosedLoop,
@@ -194,6 +218,11 @@ from ._control.controllers import (
     PIController as PIController,
     SlidingModeController as SlidingModeController,
     equivalent_duty as equivalent_duty,
+)
+from ._control.estimator import (
+    ExtendedKalmanFilter as ExtendedKalmanFilter,
+    KalmanState as KalmanState,
+    LoopSensors as LoopSensors,
 )
 from ._control.joint import (
     JointControlTrajectory as JointControlTrajectory,

@@ -34,9 +34,9 @@ re-run by `tests/test_presets.py` and `fits/derive_presets.py`):
 6. **Stroke limits.** x_max = 0.075 m (25 % of 300 mm, datasheet); x_min = −0.02 m (stretch; paper 000 Fig. 3 shows
    negative displacements but no number, so −20 mm is assumed).
 
-The hybrid reference bench in `shared/data` (`meta.json`) was generated with independently chosen values
-(a0 = 629.7, k0 = 105 N, k1 = 1400 N/m, v0 = 2.6e-5 m³, v1 = 1.9e-4 m², C_f = 250 N s/m); differences to the values
-here are what a fit to that data must close.
+The hybrid reference bench (`pamjax/data/hybrid-reference-bench/meta.json`) was generated with independently chosen
+values (a0 = 629.7, k0 = 105 N, k1 = 1400 N/m, v0 = 2.6e-5 m³, v1 = 1.9e-4 m², C_f = 250 N s/m); differences to the
+values here are what a fit to that data must close.
 """
 
 import jax.numpy as jnp

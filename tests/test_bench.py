@@ -61,7 +61,8 @@ def test_load_bench(bench):
     b = pj.load_bench(folder, model)
     assert [e.name for e in b.experiments] == ["E1", "E2", "E3"] and "E5" in b.skipped
     assert b.noise == {"pressure": 2000.0, "position": 1e-4}
-    assert b.experiments[1].initial["pressure"] == pytest.approx(6.5e5)  # p_s from the model's valve
+    e2 = b.experiments[1]  # p_s: the run's supply pressure, here the model valve's
+    assert e2.start_at_supply and float(e2.start_for(e2.system_for(model), model).pressure) == pytest.approx(6.5e5)
     assert b.experiments[2].channels == ("pressure", "position")
     half = pj.load_bench(folder, model, rate=250.0)
     assert len(half.experiments[0].times) == (len(b.experiments[0].times) + 1) // 2

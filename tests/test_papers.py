@@ -1,116 +1,193 @@
-"""The paper gallery (`fits/papers/`, `pamjax reproduce`): every equation, table, figure and stated result of both
-papers is reproduced by a script or listed with the reason it cannot be; every script runs in quick mode and its key
-numbers stay where they are (tolerances: a few times the run-to-run spread of the seeded noise, or the physics'
-own margin, stated per number); the command writes its index page.
-
-The scripts that need the hybrid bench recordings (shared/data, not in the repository) are skipped without them.
+"""The paper gallery (`pamjax.gallery`, `pamjax reproduce`): every item of both papers is in the catalogue with a
+status computed from the numbers; a status cannot contradict its numbers (the verdict is the numbers' comparison with
+the paper's, and the tests below make it fail when it should); the audit's comparisons of a model with itself are
+procedure checks, not reproductions; `docs/papers.md` is what its numbers (`docs/papers.json`) give; and a fresh quick
+run of each script gives the statuses the page shows (so the page is current with the code). Nothing pins pamjax's own
+outputs: a number may move as long as its verdict stays.
 """
 
+import dataclasses
 import json
+import math
+import pathlib
 
 import pytest
 
-from pamjax._cli import reproduce as _reproduce
 from pamjax._cli.main import main
+from pamjax.gallery import catalogue, docs, report, toolkit
+from pamjax.gallery.catalogue import (
+    COMPARE,
+    DIFFERS,
+    MISSING_NUMBER,
+    NOT_IMPLEMENTED,
+    NOT_RUN,
+    PROCEDURE,
+    PROCEDURE_CHECK,
+    REPRODUCED,
+    AtLeast,
+    AtMost,
+    Between,
+    Check,
+    Entry,
+    Near,
+)
 
-SCRIPTS = {p.stem: p for p in _reproduce.scripts()}
-# p000_10_control scores the bench's E5 runs only when they are there
-NEEDS_BENCH = {"p000_06_valve_tests", "p000_07_system_tests", "p000_08_pwm_frequency"}
-
-
-def get(numbers, path):
-    """`numbers[a][b]…` for the path "a/b/…" (or a tuple of keys, for keys that contain a slash)."""
-    for key in (path.split("/") if isinstance(path, str) else path):
-        numbers = numbers[int(key)] if isinstance(numbers, list) else numbers[key]
-    return numbers
-
-
-# script → [(path in Result.numbers, expected, absolute tolerance)] for `--quick` (seeded: deterministic up to
-# floating-point and solver differences across platforms)
-KEY_NUMBERS = {
-    "p000_01_force_laws": [("eq4_max_relative_difference", 0.0, 1e-12),  # eq. 4 → eq. 5: an identity
-                        ("braid_A/force_at_0_N", 90.0, 0.5),  # eq. 5 on the datasheet braid: far below 630 N
-                        ("braid_B/zero_force_contraction", 0.384, 0.002),  # eq. 5 at 630 N: 38 % stroke, not 25 %
-                        ("eq3_linearity/B/max_deviation_from_line_percent", 9.4, 0.3)],
-    "p000_02_static_force": [("eq7_max_error_percent", 0.65, 0.1),  # real map; the authors' model: < 2.35 %
-                          ("loop_coulomb_N", 16.0, 1.5),  # 3 standard errors
-                          ("loop_width_mean_N", 34.5, 1.0)],  # 2 F_c + 2 C_f |ẋ|
-    "p000_03_friction": [("muscle/coulomb_N", 16.0, 0.75), ("muscle/viscous_Ns_per_m", 250.0, 9.0)],  # 3 std errors
-    "p000_04_flow_curves": [("fitted/inflate.discharge_coefficient", 0.36, 0.004),
-                         ("fitted/inflate.critical_ratio", 0.28, 0.025),
-                         ("fitted/exhaust.discharge_coefficient", 0.39, 0.003),
-                         ("fitted/exhaust.critical_ratio", 0.49, 0.018),
-                         ("eq10_inflate_rmse_percent_of_choked", 4.6, 0.5)],  # eq. 10 misfits path 1→2
-    "p000_06_valve_tests": [("usable_duty/0", 0.10, 1e-6), ("usable_duty/1", 0.90, 1e-6),  # 2 ms at 50 Hz
-                         ("max_rmse_kPa/switching", 2.0, 0.3),  # the bench's 2 kPa noise
-                         ("max_rmse_kPa/averaged", 16.0, 2.0),
-                         ("silencer_final_offset_deflation_kPa/0.25", 72.0, 5.0),
-                         ("table_1_from_tanks/C_v(1→2)/fitted", 0.36, 0.004),  # Table 1 by the tank route
-                         ("table_1_from_tanks/b_v(2→3)/fitted", 0.49, 0.04)],
-    "p000_05_averaged_valve": [("cycle_average_fit/max_error_percent", 10.3, 0.5),  # paper: 4.13 %
-                            ("cycle_average_fit/rmse_percent", 2.57, 0.2)],  # paper: 1.16 %
-    "p000_07_system_tests": [("E4/switching/rmse_mm", 0.10, 0.02),  # the bench's 0.1 mm noise
-                          ("E4/averaged/rmse_percent", 2.8, 0.4),  # paper: 3-5 %
-                          ("E4/averaged/max_percent", 8.9, 1.0)],  # paper: ≈ 10 %
-    "p000_08_pwm_frequency": [("50Hz/pressure_ripple_kPa/0", 50.0, 5.0),  # paper: ≈ 15 kPa amplitude
-                           ("100Hz/usable_duty_steps", 60.0, 1e-9), ("25Hz/position_ripple_mm/0", 0.68, 0.1)],
-    "p000_09_discrete": [("0.1ms/max_position_difference_mm", 0.0020, 0.0003),
-                      ("0.5ms/max_position_difference_mm", 0.0101, 0.0015)],  # first order in T_s
-    "p000_10_control": [(("PI (paper: P = 25, I = 150) @ 1.0 rad/s", "rmse_mm"), 0.356, 0.03),
-                     (("PID, P = 100, D = 4 s/m @ 1.0 rad/s", "rmse_mm"), 0.289, 0.03),  # derivative helps…
-                     (("PID, P = 100, D = 4 s/m, 0.1 mm noise @ 1.0 rad/s", "rmse_mm"), 12.7, 3.0)],  # …until noise
-    "p001_05_tables": [("max_C_error_percent", 0.47, 0.2), ("max_b_error", 0.026, 0.01),
-                    ("eq1_printed_max_jump_fraction", 0.134, 0.002),
-                    ("charging_choked_flow_l_per_min_anr/5", 294.0, 1.0)],
-    "p001_02_valve_model": [("eq5_7/bandwidth_Hz", 3.1404, 1e-3), ("eq5_7/flow_bandwidth_Hz", 3.1404, 1e-3),
-                         ("eq5_7/flow_gain_bar_per_l_min", -0.922, 1e-6),
-                         ("needed_for_3_69_Hz/both_time_constants_scaled_by", 0.851, 0.002),
-                         ("g_vref_fit/validation_fit_percent", 98.9, 0.5), ("fig9/final_bar", -0.922, 1e-3)],
-    "p001_01_muscle_flow": [("3V/peak_inflow_l_per_min_anr", 294.0, 2.0), ("3V/volume_term_share/rms", 0.346, 0.02),
-                         ("3V/eq3_vs_delivered_max_relative", 0.0, 1e-9), ("fig11/mse_bar2/voltage_only", 2.30, 0.1),
-                         ("fig11/fitted_flow_gain_bar_per_l_min", -0.0045, 0.0005)],
-    "p001_03_stiffness": [("eq11_vs_delivered_max_relative", 0.0, 1e-9), ("correlation_eq10_eq11", 0.58, 0.05),
-                       ("stiffness_eq9_range_N_per_m/1", 1.72e5, 4e3)],
-    "p001_04_ankle": [("1.5Hz/rmse_deg", 6.9, 0.5)],
-}
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+SCRIPTS = toolkit.script_names()
 FAST = {"p000_01_force_laws", "p000_03_friction", "p000_09_discrete", "p000_10_control"}  # each ~10 s on 2 cores
 
 
-def test_every_item_of_both_papers_is_covered():
-    cover = _reproduce.coverage([_reproduce.load(p) for p in SCRIPTS.values()])
-    missing = [(paper, item) for paper, items in cover.items() for item, (status, _) in items.items()
-               if status == "missing"]
-    assert not missing
-    for paper, reasons in _reproduce.NOT_REPRODUCED.items():
-        assert set(reasons) <= set(_reproduce.CATALOGUE[paper])
-        assert all(cover[paper][item][0] == "not reproduced" for item in reasons)
-    assert set(KEY_NUMBERS) == set(SCRIPTS), "every gallery script has its key numbers tested"
+def _documented():
+    return json.loads((DOCS / "papers.json").read_text())
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=() if n in FAST else pytest.mark.slow)
-                                  for n in sorted(KEY_NUMBERS)])  # gallery order: later scripts reuse compilations
-def test_script_runs_quick_and_keeps_its_key_numbers(name, tmp_path):
-    if name in NEEDS_BENCH and _reproduce.bench_folder() is None:
-        pytest.skip("hybrid bench recordings not on this machine")
-    module = _reproduce.load(SCRIPTS[name])
-    result, _ = _reproduce.run_script(module, tmp_path, quick=True)
-    assert result.rows and all(r.paper and r.pamjax and r.reading for r in result.rows)
-    record = json.loads((tmp_path / name / f"{name}.json").read_text())
-    assert record["rows"] and record["covers"] == list(module.COVERS)
-    for row in result.rows:
-        assert not row.figure or (tmp_path / name / row.figure).exists()
-    for path, expected, tol in KEY_NUMBERS[name]:
-        value = get(record["numbers"], path)
-        assert abs(value - expected) <= tol, f"{name}: {path} = {value}, expected {expected} ± {tol}"
+def _key(v):
+    """What a verdict says: its status and which of its checks hold."""
+    return v.status, tuple(sorted(v.holds.items()))
 
 
-def test_reproduce_command_writes_the_index(tmp_path, capsys):
+# --- the catalogue ------------------------------------------------------------------------------------------------
+
+def test_every_item_of_both_papers_has_an_entry_and_every_script_its_entries():
+    covers = {name: tuple(getattr(toolkit.load(name), "COVERS", ())) for name in SCRIPTS}
+    assert catalogue.coverage_problems(covers) == []
+    for e in catalogue.entries():
+        assert e.kind in catalogue.KINDS
+        if e.kind in (COMPARE, PROCEDURE):
+            assert e.script in SCRIPTS, f"{e.item}: no script {e.script}"
+
+
+def test_the_coverage_check_fails_on_a_missing_item_or_a_script_without_entries(monkeypatch):
+    items = {**catalogue.ITEMS, "000": [*catalogue.ITEMS["000"], "text: an item nobody catalogued"]}
+    monkeypatch.setattr(catalogue, "ITEMS", items)
+    assert any("an item nobody catalogued" in p for p in catalogue.coverage_problems())
+    monkeypatch.undo()
+    problems = catalogue.coverage_problems({"p000_99_new": ("Fig. 7",)})
+    assert problems == ["p000_99_new covers 'Fig. 7' but no catalogue entry is computed by it"]
+
+
+def _entry(kind, target=None, **kwargs):
+    return Entry("000", "Fig. 7", "a number", kind, "p000_04_flow_curves", "0.36",
+                 (Check("C_v", "fitted/c", target),) if target is not None else (), **kwargs)
+
+
+def test_a_status_follows_its_numbers():
+    near = Near(0.36, abs=0.01, why="one hundredth")
+    inside, outside = {"fitted": {"c": 0.365}}, {"fitted": {"c": 0.40}}
+    assert catalogue.verdict(_entry(COMPARE, near), inside).status == REPRODUCED
+    v = catalogue.verdict(_entry(COMPARE, near, reason="the valve is another"), outside)
+    assert v.status == DIFFERS and "0.4 vs 0.36 ± 0.01" in v.reading and "Why: the valve is another" in v.reading
+    assert "+0.04" in v.reading  # the difference, both numbers
+    assert catalogue.verdict(_entry(COMPARE, near), outside).reading.endswith("The reason is not known.")
+    for numbers in (inside, outside):  # truth in, truth out: never a reproduction, whether or not it came out
+        v = catalogue.verdict(_entry(PROCEDURE, near), numbers)
+        assert v.status == PROCEDURE_CHECK and "reproduced" not in v.reading
+    assert "truth recovered" in catalogue.verdict(_entry(PROCEDURE, near), inside).reading
+    assert "truth NOT recovered" in catalogue.verdict(_entry(PROCEDURE, near), outside).reading
+    for bad in ({"fitted": {}}, {"fitted": {"c": float("nan")}}, {"fitted": {"c": "0.36"}}, {"fitted": {"c": True}}):
+        assert catalogue.verdict(_entry(COMPARE, near), bad).status == MISSING_NUMBER
+    assert catalogue.verdict(_entry(COMPARE, near), None).status == NOT_RUN
+    v = catalogue.verdict(_entry(NOT_IMPLEMENTED, reason="a creep model"), None)
+    assert v.status == NOT_IMPLEMENTED and "a creep model" in v.reading
+
+
+@pytest.mark.parametrize("target, inside, outside", [
+    (Near(10.0, rel=0.2), 11.9, 12.1), (Between(3.0, 5.0), 3.0, 2.99), (AtLeast(2.0), 2.0, 1.99),
+    (AtMost(1e-12), 0.0, 2e-12), (Near(-0.922, rel=1e-4), -0.92205, -0.9212),
+])
+def test_targets_hold_inside_and_fail_outside(target, inside, outside):
+    assert target.holds(inside) and not target.holds(outside)
+    assert target.describe() and isinstance(target.difference(outside), str) and target.difference(outside)
+
+
+def test_the_audits_comparisons_of_a_model_with_itself_are_procedure_checks():
+    """Paper 001 eq. 3 and eq. 11 are identities of pamjax's chamber; paper 000's Figs. 3, 5, 6, Table 1 and paper
+    001's Tables 1-2 put the truth in and get it back; Figs. 11-14's references are the bench (pamjax's own
+    equations). Paper 001 Fig. 11 re-fits no gain, and no entry compares eq. 6 with a regulator whose pilot is eq. 6."""
+    by_item = {}
+    for e in catalogue.entries():
+        by_item.setdefault((e.paper, e.item), []).append(e)
+    for key in [("001", "eq. 3"), ("001", "eq. 11"), ("000", "Fig. 3"), ("000", "Fig. 5"), ("000", "Fig. 6"),
+                ("000", "Table 1"), ("001", "Table 1"), ("001", "Table 2"), ("000", "Fig. 11"), ("000", "Fig. 12")]:
+        assert all(e.kind == PROCEDURE for e in by_item[key]), key
+    for e in catalogue.entries():
+        if e.kind == COMPARE:
+            text = " ".join([e.what, e.basis] + [str(c.path) for c in e.checks]).lower()
+            assert "fitted_gain" not in text and "square_wave_mse" not in text and "identity" not in text, e.item
+    fig11 = by_item[("001", "Fig. 11")][0]
+    assert [c.path for c in fig11.checks] == ["fig11/mse_bar2/voltage_only", "fig11/mse_bar2/global_printed_gain"]
+
+
+def test_not_implemented_items_name_what_is_missing():
+    missing = {e.item: e.reason for e in catalogue.entries() if e.kind == NOT_IMPLEMENTED}
+    for item, word in [("text: sliding mode control with the SVSF state estimator", "SVSF"),
+                       ("text: creep near the maximum displacement", "creep"),
+                       ("text: VPPM pressure hysteresis 50 mbar", "hysteresis"),
+                       ("text: VPPM accuracy 2 %", "accuracy"),
+                       ("text: VPPM operating modes fast / universal / precise", "modes"),
+                       ("text: future work, C and b against the diaphragm aperture", "aperture"),
+                       ("text: future work, activation and contraction dynamics", "activation"),
+                       ("text: largest errors on the way down (no transition between loop branches)", "branch"),
+                       ("Fig. 6", "internal volume")]:
+        assert word in missing[item], item
+
+
+# --- docs/papers.md ------------------------------------------------------------------------------------------------
+
+def test_docs_papers_md_is_generated_from_its_numbers():
+    ok, expected = docs.current(DOCS)
+    assert ok, "docs/papers.md is not what docs/papers.json gives: python -m pamjax.gallery.docs --run"
+    run = _documented()
+    assert run["quick"] and set(run["scripts"]) == set(SCRIPTS), "docs/papers.json: a complete quick run"
+    for v in report.verdicts(run):  # every status shown is the one its numbers give, and none is broken
+        assert v.status in catalogue.STATUSES, (v.entry.item, v.status, v.reading)
+        assert f"**{v.status}**" in expected
+
+
+def test_docs_check_command_fails_on_a_stale_page(tmp_path):
+    (tmp_path / "papers.json").write_text((DOCS / "papers.json").read_text())
+    (tmp_path / "papers.md").write_text((DOCS / "papers.md").read_text().replace("**differs**", "**reproduced**", 1))
+    assert docs.main(["--check", "--docs", str(tmp_path)]) == 1
+    (tmp_path / "papers.md").write_text((DOCS / "papers.md").read_text())
+    assert docs.main(["--check", "--docs", str(tmp_path)]) == 0
+
+
+# --- the scripts ---------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=() if n in FAST else pytest.mark.slow) for n in SCRIPTS])
+def test_script_runs_quick_and_gives_the_statuses_the_docs_show(name, tmp_path):
+    record = toolkit.run_script(toolkit.load(name), tmp_path, quick=True)
+    assert json.loads((tmp_path / name / f"{name}.json").read_text())["numbers"] == json.loads(
+        json.dumps(record["numbers"]))
+    mine = catalogue.verdicts_of({name: record}, scripts=[name])
+    documented = catalogue.verdicts_of(_documented()["scripts"], scripts=[name])
+    assert mine, f"{name} computes no catalogue entry"
+    for v, d in zip(mine, documented):
+        assert v.status != MISSING_NUMBER, v.reading
+        assert all(math.isfinite(x) for x in v.values.values())
+        assert _key(v) == _key(d), (f"{name}, {v.entry.item}: now {v.status} {v.holds}, docs/papers.md says {d.status} "
+                                    f"{d.holds}; regenerate it (python -m pamjax.gallery.docs --run) if the change is "
+                                    "meant")
+        if v.entry.figure:
+            assert (tmp_path / name / v.entry.figure).stat().st_size > 10_000, v.entry.figure
+
+
+def test_reproduce_command_writes_the_index_and_run(tmp_path, capsys):
     assert main(["reproduce", "paper000", "--quick", "--only", "p000_01_force_laws", "--out", str(tmp_path)]) == 0
     index = (tmp_path / "index.md").read_text()
-    assert "| eq. 4 |" in index and "[force_laws.png](p000_01_force_laws/force_laws.png)" in index
-    assert "| Fig. 1 | not reproduced | hardware only" in index  # coverage of the whole gallery, whatever ran
-    assert (tmp_path / "p000_01_force_laws" / "p000_01_force_laws.json").exists()
-    capsys.readouterr()
-    assert main(["reproduce", "--only", "p999_nothing", "--out", str(tmp_path)]) == 2  # a user error: one line
+    assert "| eq. 4 |" in index and "**reproduced**" in index and "**not run**" in index
+    assert "[force_laws.png](p000_01_force_laws/force_laws.png)" in index
+    run = json.loads((tmp_path / "run.json").read_text())
+    assert run["state"] == "complete" and list(run["scripts"]) == ["p000_01_force_laws"]
+    out = capsys.readouterr().out
+    assert "eq. 4: reproduced" in out
+    assert main(["reproduce", "--only", "p999_nothing", "--out", str(tmp_path / "x")]) == 2  # a user error: one line
     err = capsys.readouterr().err
     assert "unknown script(s) ['p999_nothing']" in err and "Traceback" not in err
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_verdict_is_a_dataclass_of_its_entry():
+    v = catalogue.verdict(_entry(COMPARE, Near(1.0, abs=0.1)), {"fitted": {"c": 1.0}})
+    assert dataclasses.asdict(v)["entry"]["item"] == "Fig. 7" and v.values == {"C_v": 1.0} and v.holds == {"C_v": True}

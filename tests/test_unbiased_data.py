@@ -2,20 +2,20 @@
 
 A switching valve's recordings carry the PWM ripple the model predicts; decimating them keeps it (the model is sampled
 at the recorded instants), a low-pass would remove it. With the TRUE parameters every run must score its noise at every
-supported rate: on pamjax's own noisy recordings (always), and on the shared bench's exact-switching recordings when
-the workspace has them (`../shared/data/hybrid-reference-bench`)."""
+supported rate: on pamjax's own noisy recordings, and on the hybrid bench's exact-switching recordings (shipped in
+`pamjax/data/hybrid-reference-bench`)."""
 
 import json
-import pathlib
 
 import numpy as np
 import pytest
 
 import pamjax as pj
 from pamjax import presets
+from pamjax.gallery import bench_folder
 
 RATES = (1000.0, 500.0, 200.0, 100.0, 50.0)  # divisors of 1 kHz down to the PWM frequency
-BENCH = pathlib.Path(__file__).resolve().parents[2] / "shared" / "data" / "hybrid-reference-bench"
+BENCH = bench_folder()  # the hybrid bench recordings shipped with pamjax (pamjax/data/)
 
 
 def _at(traj, times):

@@ -126,14 +126,14 @@ def apply_set(model, values, where):
     and the given shape, never spread over the next parameters), checked for units, and the result is rebuilt
     through the components' constructors, so a value they refuse is named as if typed in Python."""
     from .._fit.model_io import checked
-    from .._fit.parameters import _parse, parameter_paths
+    from .._fit.parameters import _parse, join_path, parameter_paths
 
     if not values:
         return model
     valid = parameter_paths(model)
     for key, value in values.items():
         attrs, index = _parse(key)
-        leaf = ".".join(attrs)
+        leaf = join_path(attrs)
         if leaf not in valid:
             listing = "\n  ".join(f"{p} {list(s) if s else ''}".rstrip() for p, s in sorted(valid.items()))
             raise PamjaxInputError(f"{where}: unknown parameter {key!r}; the model's parameters are:\n  {listing}")

@@ -28,10 +28,15 @@ from .config import (
 )
 from .out import PENDING, OutputFolder, interrupt_status, raise_pending
 
-_TOP_KEYS = {"model", "fit", "experiment", "bench"}
+_TOP_KEYS = {"model", "fit", "experiment", "bench", "rig"}
+_RIG_KEYS = {"sensors", "free"}
+_SENSOR_FIELDS = ("pressure_offset", "pressure_gain", "position_offset", "delay")
+_RIG_FREE = _SENSOR_FIELDS + ("supply_pressure", "start")
 _FIT_KEYS = {"free", "max_steps", "ftol", "xtol", "gtol", "out", "validation_fraction"}
-_BENCH_KEYS = {"dir", "rate", "kinds", "fitted_keys", "substeps", "staged"}
+_BENCH_KEYS = {"dir", "rate", "kinds", "fitted_keys", "substeps", "staged", "nuisance", "position_offset",
+               "atmosphere"}
 _EXPERIMENT_KEYS = {"name", "file", "signal", "channels", "scales", "tank_volume", "initial", "rate", "filter_hz",
+                    "sensors", "supply_pressure", "start",
                     "t_end", "max_steps", "rename", "units", "unit_checks", "stepping"}
 RESULT, MODEL, FIGURE, CHECKPOINT, BENCH = "fit.json", "model.json", "fit.png", "checkpoint.npz", "bench.json"
 PROFILE, PROFILE_FIGURE = "profile.json", "profile.png"
@@ -68,14 +73,14 @@ def _check_free(free):
 
 def _check_free_shapes(model, free):
     """A free table's `scale` must be one number or one per element of its parameter (matched by name and shape)."""
-    from .._fit.parameters import _parse, parameter_paths
+    from .._fit.parameters import _parse, join_path, parameter_paths
 
     valid = parameter_paths(model)
     for entry in free:
         if isinstance(entry, str) or "scale" not in entry:
             continue
         attrs, index = _parse(entry["path"])
-        shape = () if index is not None else valid.get(".".join(attrs))
+        shape = () if index is not None else valid.get(join_path(attrs))
         given = np.shape(entry["scale"])
         if shape is not None and given not in ((), shape):
             raise PamjaxInputError(f"[fit] free entry {entry['path']!r}: scale expects one number or shape {shape}, "
@@ -102,9 +107,16 @@ def validate_config(cfg, where="config"):
         for key, kind, example in (("rate", "positive number", "1000.0 (Hz)"), ("substeps", "positive integer", "16"),
                                    ("kinds", "list of strings", '["tank_charge", "muscle_triangle"]'),
                                    ("fitted_keys", "list of strings", '["Cv12", "b12", "Fc"]'),
-                                   ("staged", "boolean", "false")):
+                                   ("staged", "boolean", "false"), ("position_offset", "number", "0.0 (m)"),
+                                   ("atmosphere", "positive number", "101325.0 (Pa abs)")):
             if key in bench_cfg:
                 require(bench_cfg[key], kind, f"[bench] {key}", example)
+        if "nuisance" in bench_cfg and not isinstance(bench_cfg["nuisance"], bool):
+            require(bench_cfg["nuisance"], "list of strings", "[bench] nuisance",
+                    'true, or ["delay", "pressure_offset", "supply_pressure"]')
+    rig_cfg = cfg.get("rig")
+    if rig_cfg is not None:
+        _validate_rig(rig_cfg, bench_cfg)
     if "free" not in fit_cfg and bench_cfg is None:
         raise PamjaxInputError("[fit] needs 'free': the list of parameter paths to fit")
     if "free" not in fit_cfg:
@@ -131,6 +143,28 @@ def validate_config(cfg, where="config"):
         _validate_experiment(e, f"[[experiment]] #{k + 1}")
 
 
+def _validate_rig(rig_cfg, bench_cfg):
+    if not isinstance(rig_cfg, dict):
+        raise PamjaxInputError(f"[rig] must be a table, got {rig_cfg!r}")
+    check_keys(rig_cfg, _RIG_KEYS, "[rig]")
+    if bench_cfg is not None:
+        raise PamjaxInputError("[rig] describes the nuisances of [[experiment]] tables; a [bench] directory takes "
+                               "them as [bench] nuisance = true (or a list)")
+    sensors = rig_cfg.get("sensors", {})
+    if not isinstance(sensors, dict):
+        raise PamjaxInputError(f"[rig] sensors must be a table of start values, got {sensors!r}")
+    groups = sensors if all(isinstance(v, dict) for v in sensors.values()) and sensors else {"rig": sensors}
+    for group, values in groups.items():
+        check_keys(values, set(_SENSOR_FIELDS), f"[rig] sensors{'' if group == 'rig' else '.' + group}")
+        for key, value in values.items():
+            require(value, "number", f"[rig] sensors.{key}", "0.0")
+    if "free" in rig_cfg:
+        require(rig_cfg["free"], "list of strings", "[rig] free", '["pressure_offset", "delay", "supply_pressure"]')
+        unknown = sorted(set(rig_cfg["free"]) - set(_RIG_FREE))
+        if unknown:
+            raise PamjaxInputError(f"[rig] free names {unknown}, not nuisances pamjax fits; valid: {list(_RIG_FREE)}")
+
+
 def _validate_experiment(e, here):
     check_keys(e, _EXPERIMENT_KEYS, here)
     if "file" not in e:
@@ -154,6 +188,18 @@ def _validate_experiment(e, here):
             require(e[key], kind, f"{here} {key}", example)
     for c, s in e.get("scales", {}).items():
         require(s, "positive number", f"{here} scales.{c}", "2e3 (the channel's noise level, in its SI unit)")
+    if "sensors" in e:
+        require(e["sensors"], "string", f"{here} sensors", '"rig" (a [rig] sensors group)')
+    if "supply_pressure" in e:
+        require(e["supply_pressure"], "positive number", f"{here} supply_pressure", "6.5e5 (Pa abs)")
+        check_setting("supply_pressure", e["supply_pressure"], here)
+    if "start" in e:
+        if not isinstance(e["start"], dict):
+            raise PamjaxInputError(f"{here} start must be a table {{pressure = ..., position = ..., velocity = ...}} "
+                                   f"(a run logged mid-way), got {e['start']!r}")
+        check_keys(e["start"], {"pressure", "position", "velocity"}, f"{here} start")
+        for key, value in e["start"].items():
+            require(value, "number", f"{here} start.{key}", "4e5")
     for key, value in e.get("initial", {}).items():
         require(value, "number", f"{here} initial.{key}", "101325.0")
         check_setting(key, value, f"{here} initial")
@@ -185,8 +231,11 @@ def _load(path):
         b = cfg["bench"]
         kinds = tuple(b.get("kinds", pj.FITTED_KINDS))
         bench = pj.load_bench(path.parent / b["dir"], model, rate=b.get("rate"), kinds=kinds,
-                              fitted_keys=b.get("fitted_keys"), substeps=b.get("substeps", 16))
+                              fitted_keys=b.get("fitted_keys"), substeps=b.get("substeps", 16),
+                              nuisance=b.get("nuisance", False), position_offset=b.get("position_offset", 0.0),
+                              atmosphere=b.get("atmosphere"))
         experiments += bench.experiments
+        model = bench.model  # the plant, or a pamjax.Rig holding it with the rig's nuisances
         free = bench.free if free is None else free
     _check_free_shapes(model, free)
     pj.ParameterSpace(model, free)  # unknown path, index or transform: named, before any solve
@@ -194,9 +243,46 @@ def _load(path):
     names = [e.name for e in experiments]
     if len(set(names)) != len(names):
         raise PamjaxInputError(f"experiment names must be unique, got {names}: give each [[experiment]] a name")
+    if "rig" in cfg:
+        model, free = _rig(cfg["rig"], cfg.get("experiment", []), model, experiments, free)
     options = {k: fit_cfg[k] for k in ("max_steps", "ftol", "xtol", "gtol") if k in fit_cfg}
     staged = bench is not None and cfg["bench"].get("staged", True)  # pamjax.staged_start first (the default)
     return model, experiments, free, options, fit_cfg.get("out"), bench, staged
+
+
+def _rig(rig_cfg, tables, model, experiments, free):
+    """The model as a `pamjax.Rig` with the [rig] table's sensors and each [[experiment]]'s run conditions, and
+    `free` with the plant's paths under `plant.` and the nuisances [rig] free names."""
+    import pamjax as pj
+
+    sensors = rig_cfg.get("sensors", {})
+    groups = sensors if sensors and all(isinstance(v, dict) for v in sensors.values()) else {"rig": sensors}
+    used = {e.sensor_group for e in experiments}
+    groups = {g: pj.Sensors(**{k: float(v) for k, v in groups.get(g, {}).items()}) for g in used | set(groups)}
+    wanted = set(rig_cfg.get("free", []))
+    runs, nuisance = {}, []
+    for table, e in zip(tables, experiments):
+        supply = table.get("supply_pressure")
+        if "supply_pressure" in wanted and supply is None:
+            try:
+                supply = float(e.system_for(model).valve.supply())
+            except PamjaxInputError:
+                supply = None  # a valve without a supply pressure (averaged): nothing to fit
+        start = pj.StartState(**{k: float(v) for k, v in table["start"].items()}) if "start" in table else None
+        if supply is not None or start is not None:
+            runs[e.name] = pj.RunConditions(supply_pressure=supply, start=start)
+        if "supply_pressure" in wanted and supply is not None:
+            nuisance.append(f"runs[{e.name}].supply_pressure")
+        if "start" in wanted and start is not None:
+            nuisance += [f"runs[{e.name}].start.{k}" for k in table["start"]]
+    for g in sorted(groups):
+        channels = {c for e in experiments if e.sensor_group == g for c in e.channels}
+        for field in _SENSOR_FIELDS:
+            acts = field == "delay" or any(field in pj.Sensors.channel_parameters(c) for c in channels)
+            if field in wanted and acts:
+                nuisance.append(f"sensors[{g}].{field}")
+    plant_free = [f"plant.{p}" if isinstance(p, str) else {**p, "path": f"plant.{p['path']}"} for p in free]
+    return pj.Rig(model, sensors=groups, runs=runs), plant_free + nuisance
 
 
 def _experiment(e, k, root, fit_cfg, model):
@@ -222,6 +308,7 @@ def _experiment(e, k, root, fit_cfg, model):
         rec, make_signal(e.get("signal", "recorded"), where, rec), channels=e.get("channels"), scales=e.get("scales"),
         build=build, initial=e.get("initial"), name=e.get("name", rec.name), max_steps=e.get("max_steps", 200_000),
         validation_fraction=fit_cfg.get("validation_fraction", 0.0), stepping=e.get("stepping", "auto"),
+        sensors=e.get("sensors", "rig"),
     )
 
 
@@ -346,14 +433,25 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None, 
         print(f"not converged within max_steps = {res.iterations}: raise [fit] max_steps and continue with "
               f"{_resume_command(args, folder.path)}")
     provenance = {"written_by": f"pamjax fit {args.config}", "status": res.status, "cost": res.cost,
-                  "free": res.labels, "result": RESULT}
+                  "free": res.labels, "result": RESULT,
+                  "covariance": pj.FitUncertainty.of(res).document()}  # what --band propagates (docs/cli.md)
+    plant = res.model.plant if isinstance(res.model, pj.Rig) else res.model  # the rig's nuisances: in bench.json
     written = [folder.write_text(RESULT, json.dumps(res.to_dict(), indent=1) + "\n"),
-               folder.write_text(MODEL, model_json(res.model, provenance))]
+               folder.write_text(MODEL, model_json(plant, provenance))]
     if bench is not None:  # the bench's names: params, std_err, status, rmse of p [Pa] and x [m] per experiment
         values, errors = pj.bench_values(res, bench.fitted_keys)
         summary = dict(data=str(bench.directory), params=values, std_err=errors, status=res.status,
-                       message=res.message, rmse=pj.bench_rmse(res), noise=bench.noise, mismatch=res.mismatch)
+                       message=res.message, rmse=pj.bench_rmse(res), noise=bench.noise, mismatch=res.mismatch,
+                       diagnosis=res.diagnosis, notes=bench.notes)
+        if bench.nuisance:
+            summary["nuisance"] = pj.bench_nuisance(res, bench)
+            print("nuisances (the rig's, reported apart from the plant):\n" + pj.nuisance_table(summary["nuisance"]))
         written.append(folder.write_text(BENCH, json.dumps(summary, indent=1) + "\n"))
+    if isinstance(res.model, pj.Rig) and (bench is None or not bench.nuisance):  # a [rig] table's nuisances
+        report = pj.nuisance_report(res)
+        lines = [f"  {kind}[{name}].{field}: {v:.6g} ± {se:.3g}" for kind in ("sensors", "runs")
+                 for name, fields in report[kind].items() for field, (v, se) in fields.items()]
+        print("nuisances (the rig's, reported apart from the plant; also in fit.json):\n" + "\n".join(lines))
     if not args.no_plot:
         try:
             written.append(folder.write(FIGURE, lambda p: plot(p, res, experiments)))

@@ -29,7 +29,7 @@ _COMMANDS = {
     "design": ("pamjax._cli.design",
                "Design a PWM duty experiment by gradient; write the signal as CSV and a figure."),
     "reproduce": ("pamjax._cli.reproduce",
-                  "Reproduce every experiment of papers 000 and 001 (fits/papers); index page."),
+                  "Reproduce every item of papers 000 and 001 (pamjax.gallery); index page."),
 }
 DEBUG_VARIABLE = "PAMJAX_DEBUG"
 

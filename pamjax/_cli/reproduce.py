@@ -1,305 +1,234 @@
-"""`pamjax reproduce [paper000|paper001] [--quick]`: run the gallery of paper reproductions and write its index page.
+"""`pamjax reproduce [paper000|paper001] [--quick] [--only NAME ...] [--out DIR] [--overwrite | --merge]`: run the
+paper gallery (`pamjax.gallery`) and write its index page.
 
-The gallery is `fits/papers/` of a source checkout: one script per figure, table or experiment of paper 000 (PWM on/off
-valve, MAS-10) and paper 001 (VPPM regulator, DMSP-40). Each script has
+The gallery ships with the package: one script per figure, table or experiment of paper 000 (PWM on/off valve,
+MAS-10) and paper 001 (VPPM regulator, DMSP-40), `pamjax.gallery.scripts` (`--scripts DIR` runs a folder of one's
+own instead). They run in one process (compiled functions are shared). Each writes its figures and
+`<script>.json` into `DIR/<script>/`; `DIR/run.json` holds every script's numbers and `DIR/index.md` the catalogue of
+both papers (`pamjax.gallery.catalogue`): every item with pamjax's number beside the paper's and a status computed
+from the numbers.
 
-- `PAPER` ("000" or "001"), `TITLE`, `COVERS` (the equations, tables, figures and text results it reproduces, named as
-  in `CATALOGUE`), and
-- `run(out, quick)`, which writes its figure(s) to the folder `out` and returns a `Result` (rows for the index, the
-  numbers, the paper's numbers).
-
-`pamjax reproduce` runs them in one process (compiled functions are shared), writes `<out>/<script>/<script>.json`
-beside each figure, and `<out>/index.md`: every row (item, paper, pamjax, reading of the difference, figure) and the
-coverage of both papers, where every item of `CATALOGUE` is either reproduced by a script or listed in
-`NOT_REPRODUCED` with the reason. Each script also runs alone: `python fits/papers/<script>.py [--quick] [--out DIR]`.
+Earlier results are kept or refused, never silently replaced: into a folder holding an earlier run the command runs
+only with `--overwrite` (the earlier run is replaced as a whole: its script folders that this run does not write are
+removed) or `--merge` (this run's scripts replace theirs, the others' numbers are kept, and the index lists them
+all; both runs must be of the same mode). The scripts write into a staging folder that replaces the earlier results
+only when every script has finished: an interrupt (or a failing script) leaves the earlier run as it was, and what
+finished in `DIR/interrupted-<time>/`, with an index marked INTERRUPTED (or FAILED).
 """
 
-import dataclasses
-import importlib.util
 import json
 import os
 import pathlib
 import platform
+import shutil
 import sys
 import time
 
 from .._core.errors import PamjaxInputError
+from ..gallery import catalogue, report, toolkit
+from .out import OutputFolder
 
-GALLERY = pathlib.Path(__file__).resolve().parents[2] / "fits" / "papers"
-PAPERS = {"000": "paper000", "001": "paper001"}
-
-
-def _items(prefix, numbers):
-    return [f"{prefix} {n}" for n in numbers]
-
-
-# Every equation, table and figure of both papers, and the results their text states without a figure.
-CATALOGUE = {
-    "000": [
-        *_items("eq.", range(1, 22)),
-        "Table 1",
-        *_items("Fig.", range(1, 17)),
-        "text: switching time 2 ms, usable duty 10-90 %",
-        "text: pressure ripple ≈ 15 kPa",
-        "text: 25 Hz PWM chatters, 100 Hz is coarse",
-        "text: derivative term works in simulation, fails with measurement noise",
-        "text: exhaust silencer explains Fig. 12's offset",
-    ],
-    "001": [
-        *_items("eq.", range(1, 15)),
-        "Table 1",
-        "Table 2",
-        *_items("Fig.", range(1, 15)),
-        "text: G_Vref identified with 94.64 % fit (60/40 split, Butterworth 20 Hz)",
-        "text: bandwidths 3.12 Hz (P_out/V_ref) and 3.69 Hz (P_out/Q_in)",
-        "text: peak valve inflow 2.79 / 4.34 l/min at 3 / 5 V",
-        "text: future work, antagonistic pair on an ankle joint",
-    ],
-}
-
-# Items no script can reproduce, with the reason.
-NOT_REPRODUCED = {
-    "000": {
-        "Fig. 1": "hardware only: a photograph/schematic of the bench (regulator, MHE2 valve, muscle, sensors)",
-    },
-    "001": {
-        "Fig. 1": "hardware only: block diagram of the VPPM's internal control loop (no numbers)",
-        "Fig. 2": "hardware only: schematic of the test bench",
-        "Fig. 3": "no data: the static calibration curve is printed without values; pamjax uses eq. 6's 1.01 bar/V "
-                  "(`VoltageCalibration`), which the figure's straight line agrees with",
-        "Fig. 4": "no numbers: the superposition block diagram of eq. 5, which `LinearRegulator` implements",
-    },
-}
-
-
-@dataclasses.dataclass
-class Row:
-    """One line of the index: `item` (e.g. "Table 1"), `what`, `paper` (its number as printed), `pamjax` (pamjax's
-    number), `reading` (one line on the difference), `figure` (file name in the script's folder, or "")."""
-
-    item: str
-    what: str
-    paper: str
-    pamjax: str
-    reading: str
-    figure: str = ""
-
-
-@dataclasses.dataclass
-class Result:
-    """What a gallery script returns: `rows` for the index, `numbers` (pamjax's, JSON-able), `paper` (the paper's)."""
-
-    rows: list
-    numbers: dict
-    paper: dict = dataclasses.field(default_factory=dict)
-
-
-def plt():
-    """matplotlib.pyplot with the Agg backend (the gallery writes files only)."""
-    try:
-        import matplotlib
-    except ImportError as err:  # pragma: no cover
-        raise ImportError("the paper gallery draws figures: pip install 'pamjax[plot]'") from err
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as pyplot
-
-    return pyplot
-
-
-def save(fig, out, name):
-    """Write `fig` as `out/name` (PNG, 110 dpi), close it and return `name`."""
-    fig.tight_layout()
-    fig.savefig(pathlib.Path(out) / name, dpi=110)
-    plt().close(fig)
-    return name
-
-
-_FITS_MODULES = {}
-
-
-def fits_module(name):
-    """A script of `fits/` (e.g. "static_force"), imported by path once: the gallery reuses their procedures."""
-    if name not in _FITS_MODULES:
-        path = GALLERY.parent / f"{name}.py"
-        spec = importlib.util.spec_from_file_location(f"pamjax_fits_{name}", path)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        _FITS_MODULES[name] = module
-    return _FITS_MODULES[name]
-
-
-def bench_folder(name="hybrid-reference-bench"):
-    """The hybrid reference bench recordings (`shared/data/<name>`, not in the repository), or None if absent:
-    `$PAMJAX_BENCH_DATA`, else `shared/data` beside the checkout, else /work/shared/data."""
-    candidates = [os.environ.get("PAMJAX_BENCH_DATA"), GALLERY.parents[2] / "shared" / "data" / name,
-                  GALLERY.parents[3] / "shared" / "data" / name, pathlib.Path("/work/shared/data") / name]
-    for c in candidates:
-        if c and (pathlib.Path(c) / "meta.json").exists():
-            return pathlib.Path(c)
-    return None
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if hasattr(obj, "tolist"):
-        return obj.tolist()
-    return obj
-
-
-def scripts(paper=None, folder=GALLERY):
-    """The gallery scripts (paths), sorted, optionally of one paper ("000" or "001")."""
-    folder = pathlib.Path(folder)
-    if not folder.is_dir():
-        raise PamjaxInputError(
-            f"the paper gallery {folder} is not there: `pamjax reproduce` runs the scripts of a source checkout "
-            "(fits/papers/); pass --scripts DIR"
-        )
-    prefix = "p" if paper is None else f"p{paper}_"
-    return sorted(p for p in folder.glob("p0*.py") if p.name.startswith(prefix))
-
-
-def load(path):
-    """Import a gallery script from its path."""
-    path = pathlib.Path(path)
-    spec = importlib.util.spec_from_file_location(f"pamjax_gallery_{path.stem}", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    for name in ("PAPER", "TITLE", "COVERS", "run"):
-        if not hasattr(module, name):
-            raise PamjaxInputError(f"gallery script {path} lacks {name}")
-    return module
-
-
-def run_script(module, out, quick):
-    """Run one gallery script into `out/<name>/`; returns (result, seconds) and writes `<name>.json` there."""
-    name = pathlib.Path(module.__file__).stem
-    folder = pathlib.Path(out) / name
-    folder.mkdir(parents=True, exist_ok=True)
-    start = time.perf_counter()
-    result = module.run(folder, quick)
-    seconds = time.perf_counter() - start
-    record = dict(script=name, paper=module.PAPER, title=module.TITLE, covers=list(module.COVERS), quick=quick,
-                  seconds=seconds, rows=[dataclasses.asdict(r) for r in result.rows], numbers=result.numbers,
-                  paper_numbers=result.paper)
-    (folder / f"{name}.json").write_text(json.dumps(_jsonable(record), indent=1, ensure_ascii=False))
-    return result, seconds
-
-
-def coverage(modules):
-    """item → where it is reproduced (script names) or why not, per paper; raises if an item is neither."""
-    out = {}
-    for paper, items in CATALOGUE.items():
-        covered = {}
-        for m in modules:
-            if m.PAPER == paper:
-                for item in m.COVERS:
-                    if item not in items:
-                        raise PamjaxInputError(f"{m.__name__} covers {item!r}, which is not in CATALOGUE[{paper!r}]")
-                    covered.setdefault(item, []).append(pathlib.Path(m.__file__).stem)
-        out[paper] = {}
-        for item in items:
-            if item in covered:
-                out[paper][item] = ("reproduced", ", ".join(covered[item]))
-            elif item in NOT_REPRODUCED.get(paper, {}):
-                out[paper][item] = ("not reproduced", NOT_REPRODUCED[paper][item])
-            else:
-                out[paper][item] = ("missing", "")
-    return out
-
-
-def _cell(text):
-    return str(text).replace("|", "\\|").replace("\n", " ")
-
-
-def index_page(records, cover, quick, total_seconds):
-    """The Markdown index: one table per paper (rows of every script) and the coverage lists."""
-    lines = [
-        "# pamjax against papers 000 and 001: the gallery",
-        "",
-        f"Generated by `pamjax reproduce{' --quick' if quick else ''}` on {time.strftime('%Y-%m-%d %H:%M')} "
-        f"({platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}): {len(records)} "
-        f"scripts in {total_seconds:.0f} s. Each figure and `<script>.json` (pamjax's numbers beside the paper's) is "
-        "in the script's folder. Paper 000: Festo MAS-10 + MHE2 PWM valve; paper 001: Festo VPPM regulator + DMSP-40.",
-        "",
-    ]
-    titles = {"000": "Paper 000 (PWM on/off valve, MAS-10-300, 9.6 kg)", "001": "Paper 001 (VPPM regulator, DMSP-40)"}
-    for paper in ("000", "001"):
-        mine = [r for r in records if r["paper"] == paper]
-        if not mine:
-            continue
-        lines += [f"## {titles[paper]}", "", "| item | what | paper | pamjax | reading | figure |",
-                  "|---|---|---|---|---|---|"]
-        for rec in mine:
-            for row in rec["rows"]:
-                fig = f"[{row['figure']}]({rec['script']}/{row['figure']})" if row["figure"] else ""
-                lines.append("| " + " | ".join(_cell(row[k]) for k in ("item", "what", "paper", "pamjax", "reading"))
-                             + f" | {fig} |")
-        lines += ["", f"### Coverage of paper {paper}", "", "| item | status | where / why |", "|---|---|---|"]
-        for item, (status, where) in cover[paper].items():
-            lines.append(f"| {item} | {status} | {_cell(where)} |")
-        lines += ["", "| script | title | seconds |", "|---|---|---|"]
-        lines += [f"| `{r['script']}` | {_cell(r['title'])} | {r['seconds']:.1f} |" for r in mine]
-        lines.append("")
-    return "\n".join(lines)
+STAGING = ".reproduce-partial"
+INDEX, RUN = "index.md", "run.json"
 
 
 def add_arguments(parser):
-    parser.add_argument("paper", nargs="?", choices=sorted(PAPERS.values()), help="one paper only (default: both)")
-    parser.add_argument("--quick", action="store_true", help="shorter runs and fewer points (a few minutes in all)")
-    parser.add_argument("--out", default="results/papers", help="output folder (index.md, one folder per script)")
-    parser.add_argument("--only", nargs="+", default=None, help="run only these scripts (names without .py)")
-    parser.add_argument("--scripts", default=str(GALLERY), help="the gallery folder (default: fits/papers)")
+    parser.add_argument("paper", nargs="?", choices=sorted(toolkit.PAPERS.values()), help="one paper only (default: "
+                        "both)")
+    parser.add_argument("--quick", action="store_true", help="shorter runs and fewer points (what the tests and "
+                        "docs/papers.md run)")
+    parser.add_argument("--out", default="results/papers", help="output folder (index.md, run.json, one folder per "
+                        "script)")
+    parser.add_argument("--only", nargs="+", default=None, help="run only these scripts (names, e.g. "
+                        "p000_04_flow_curves)")
+    parser.add_argument("--scripts", default=None, help="a folder of gallery scripts of one's own (default: the "
+                        "package's, pamjax.gallery.scripts)")
+    keep = parser.add_mutually_exclusive_group()
+    keep.add_argument("--overwrite", action="store_true", help="replace an earlier run in --out")
+    keep.add_argument("--merge", action="store_true", help="add this run's scripts to the earlier run in --out "
+                      "(same mode), replacing theirs; the index lists both")
+
+
+def _selection(args):
+    """The scripts to run: (names, loader argument per name)."""
+    if args.scripts:
+        found = {p.stem: p for p in toolkit.folder_scripts(args.scripts)}
+    else:
+        found = {n: n for n in toolkit.script_names()}
+    paper = {v: k for k, v in toolkit.PAPERS.items()}.get(args.paper)
+    chosen = {n: s for n, s in found.items() if paper is None or n.startswith(f"p{paper}_")}
+    if args.only:
+        only = [n[:-3] if n.endswith(".py") else n for n in args.only]
+        elsewhere = [n for n in only if n in found and n not in chosen]
+        if elsewhere:
+            raise PamjaxInputError(f"--only: {', '.join(elsewhere)} belong(s) to "
+                                   f"{toolkit.PAPERS[elsewhere[0][1:4]]}, not {args.paper}")
+        unknown = sorted(set(only) - set(found))
+        if unknown:
+            raise PamjaxInputError(f"--only: unknown script(s) {unknown}; the gallery has {sorted(found)}")
+        chosen = {n: chosen[n] for n in sorted(set(only))}
+    if not chosen:
+        raise PamjaxInputError(f"no gallery script to run (paper {args.paper}, --scripts {args.scripts})")
+    return chosen
+
+
+def _check_dependencies():
+    missing = []
+    for module in ("matplotlib", "scipy"):
+        try:
+            __import__(module)
+        except ImportError:
+            missing.append(module)
+    if missing:
+        raise PamjaxInputError(f"the paper gallery needs {' and '.join(missing)}: pip install 'pamjax[gallery]'")
+
+
+def _earlier_run(out):
+    """The earlier run in `out`: its run.json (a dict), {} for results without one (an index of an older pamjax,
+    or gallery folders), None when there is none."""
+    path = out / RUN
+    if path.is_file():
+        try:
+            return json.loads(path.read_text())
+        except (OSError, ValueError) as err:
+            raise PamjaxInputError(f"{path} cannot be read ({err}); move it away or choose another folder with --out")
+    if (out / INDEX).exists() or any((out / n).is_dir() for n in toolkit.script_names()):
+        return {}
+    return None
+
+
+def _describe(run):
+    if not run:
+        return "results of an earlier run"
+    n = len(run.get("scripts", {}))
+    return (f"an earlier run ({n} script{'s' * (n != 1)}, {'quick' if run.get('quick') else 'full mode'}, "
+            f"{run.get('state', '?')}, {run.get('finished') or run.get('started', '?')})")
+
+
+def _check_keep(out, earlier, args):
+    """Refuse to replace an earlier run unless asked (`--overwrite`, `--merge`), before any work."""
+    if earlier is None:
+        if args.merge:
+            raise PamjaxInputError(f"--merge: {out} holds no earlier run to merge into; drop --merge")
+        return
+    if not (args.overwrite or args.merge):
+        raise PamjaxInputError(f"{out} holds {_describe(earlier)}; pass --overwrite to replace it, --merge to add "
+                               "this run's scripts to it, or choose another folder with --out")
+    if args.merge:
+        if not earlier.get("scripts"):
+            raise PamjaxInputError(f"--merge: {out} holds {_describe(earlier)} without its numbers (no run.json); "
+                                   "pass --overwrite, or choose another folder with --out")
+        if bool(earlier.get("quick")) != bool(args.quick):
+            mode = "quick" if earlier.get("quick") else "full mode"
+            raise PamjaxInputError(f"--merge: the earlier run in {out} is {mode}, this one is "
+                                   f"{'quick' if args.quick else 'full mode'}; one index does not mix modes: match "
+                                   "the mode, pass --overwrite, or choose another folder with --out")
+
+
+def _new_run(args, planned):
+    from .._core.metadata import version
+
+    return dict(format=report.FORMAT, version=1, state="running", quick=bool(args.quick), planned=list(planned),
+                started=time.strftime("%Y-%m-%d %H:%M:%S"), finished=None, pamjax_version=version(),
+                machine=f"{platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}",
+                scripts={})
+
+
+def _write_json(path, data):
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(json.dumps(toolkit.jsonable(data), indent=1, ensure_ascii=False))
+    os.replace(tmp, path)
+
+
+def _commit(folder, staging, run, earlier, args):
+    """Move the staged script folders into place and write run.json and index.md (the merged run with --merge)."""
+    out, written = folder.path, list(run["scripts"])
+    if args.merge:
+        run = dict(earlier, scripts={**earlier.get("scripts", {}), **run["scripts"]}, state="complete",
+                   finished=run["finished"], merged=[*earlier.get("merged", []), run["started"]])
+    elif earlier is not None:  # --overwrite: the earlier run goes as a whole
+        for name in set(earlier.get("scripts", {})) | set(toolkit.script_names()):
+            if name not in run["scripts"] and (out / name).is_dir() and (out / name / f"{name}.json").exists():
+                shutil.rmtree(out / name)
+    for name in written:
+        if (out / name).exists():
+            shutil.rmtree(out / name)
+        os.replace(staging / name, out / name)
+    shutil.rmtree(staging, ignore_errors=True)
+    folder.write_text(RUN, json.dumps(toolkit.jsonable(run), indent=1, ensure_ascii=False))
+    folder.write_text(INDEX, report.index_page(run))
+    return run
+
+
+def _keep_partial(out, staging, run, err):
+    """After an interrupt or a failing script: what finished goes to `out/interrupted-<time>/` (or `failed-`), with
+    its run.json and an index saying so; the earlier run in `out` is untouched. Returns the message."""
+    state = "interrupted" if isinstance(err, KeyboardInterrupt) else "failed"
+    done = len(run["scripts"])
+    if not done:
+        shutil.rmtree(staging, ignore_errors=True)
+        return f"{state} before any script finished; {out} is as it was"
+    run = dict(run, state=state)
+    target = stamp = out / f"{state}-{time.strftime('%Y%m%d-%H%M%S')}"
+    for k in range(2, 1000):
+        if not target.exists():
+            break
+        target = stamp.with_name(f"{stamp.name}-{k}")
+    for name in list(run["planned"]):
+        if name not in run["scripts"]:
+            shutil.rmtree(staging / name, ignore_errors=True)  # a script cut short: its folder is incomplete
+    os.replace(staging, target)
+    _write_json(target / RUN, run)
+    (target / INDEX).write_text(report.index_page(run))
+    return (f"{state} after {done} of {len(run['planned'])} scripts: the results in {out} are as they were; the "
+            f"{done} finished are in {target} (index.md there, marked {state.upper()})")
+
+
+def _recover_stale(out):
+    """A staging folder left by a run that was killed outright (no chance to say so) becomes
+    `out/interrupted-<time>/` like any interrupted run's. Called with the folder's lock held: no other run owns it."""
+    for stale in sorted(out.glob(f"{STAGING}-*")):
+        try:
+            run = json.loads((stale / RUN).read_text())
+        except (OSError, ValueError):
+            run = None
+        if not run or not run.get("scripts"):
+            shutil.rmtree(stale, ignore_errors=True)
+            continue
+        message = _keep_partial(out, stale, run, KeyboardInterrupt())
+        print(f"pamjax reproduce: found the staging folder of a run that was killed: {message}", file=sys.stderr)
 
 
 def run(args):
-    paper = {v: k for k, v in PAPERS.items()}.get(args.paper)
-    paths = scripts(paper, args.scripts)
-    if args.only:
-        unknown = set(args.only) - {p.stem for p in paths}
-        if unknown:
-            raise PamjaxInputError(f"--only: unknown script(s) {sorted(unknown)}; the gallery has "
-                                   f"{[p.stem for p in paths]}")
-        paths = [p for p in paths if p.stem in args.only]
-    modules = [load(p) for p in paths]
-    cover = coverage([load(p) for p in scripts(None, args.scripts)])  # of the whole gallery, whatever is run
+    chosen = _selection(args)
+    _check_dependencies()
+    modules = {name: toolkit.load(source) for name, source in chosen.items()}
+    problems = catalogue.coverage_problems({n: tuple(getattr(m, "COVERS", ())) for n, m in modules.items()})
     out = pathlib.Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    records, start = [], time.perf_counter()
-    for m in modules:
-        name = pathlib.Path(m.__file__).stem
-        print(f"[{time.perf_counter() - start:6.1f} s] {name}: {m.TITLE}", flush=True)
-        result, seconds = run_script(m, out, args.quick)
-        for r in result.rows:
-            print(f"    {r.item}: paper {r.paper} | pamjax {r.pamjax}", flush=True)
-        records.append(dict(script=name, paper=m.PAPER, title=m.TITLE, seconds=seconds,
-                            rows=[dataclasses.asdict(r) for r in result.rows]))
+    earlier = _earlier_run(out)
+    _check_keep(out, earlier, args)
+    with OutputFolder(out, "pamjax reproduce", [], overwrite=True) as folder:
+        _recover_stale(out)
+        staging = out / f"{STAGING}-{os.getpid()}"
+        staging.mkdir()
+        state = _new_run(args, chosen)
+        start = time.perf_counter()
+        try:
+            for name, module in modules.items():
+                print(f"[{time.perf_counter() - start:6.1f} s] {name}: {module.TITLE}", flush=True)
+                record = toolkit.run_script(module, staging, args.quick)
+                state["scripts"][name] = record
+                _write_json(staging / RUN, state)  # what finished so far, should the run stop here
+                for v in catalogue.verdicts_of({name: record}, scripts=[name]):
+                    print(f"    {v.entry.item}: {v.status} | pamjax {v.pamjax}", flush=True)
+        except BaseException as err:
+            print(f"pamjax reproduce: {_keep_partial(out, staging, state, err)}", file=sys.stderr, flush=True)
+            raise
+        state.update(state="complete", finished=time.strftime("%Y-%m-%d %H:%M:%S"))
+        merged = _commit(folder, staging, state, earlier, args)
     total = time.perf_counter() - start
-    index = out / "index.md"
-    index.write_text(index_page(records, cover, args.quick, total))
-    missing = [(p, i) for p, items in cover.items() for i, (s, _) in items.items() if s == "missing"]
-    print(f"wrote {index} ({len(records)} scripts, {total:.0f} s)")
-    if missing:
-        print(f"not covered: {missing}", file=sys.stderr)
-        return 1
-    return 0
-
-
-def script_main(module_name):
-    """`python fits/papers/<script>.py [--quick] [--out DIR]`: run one gallery script on its own."""
-    import argparse
-
-    import jax
-
-    jax.config.update("jax_enable_x64", True)
-    module = sys.modules[module_name]
-    parser = argparse.ArgumentParser(description=f"paper {module.PAPER}: {module.TITLE}")
-    parser.add_argument("--quick", action="store_true", help="shorter runs and fewer points")
-    parser.add_argument("--out", default="results/papers", help="parent folder; the script writes OUT/<script>/")
-    args = parser.parse_args()
-    result, seconds = run_script(module, args.out, args.quick)
-    for r in result.rows:
-        print(f"{r.item}: {r.what}\n    paper {r.paper} | pamjax {r.pamjax}\n    {r.reading}")
-    print(f"wrote {pathlib.Path(args.out) / pathlib.Path(module.__file__).stem} ({seconds:.1f} s)")
+    broken = [v for v in report.verdicts(merged) if v.status == catalogue.MISSING_NUMBER]
+    print(f"wrote {out / INDEX} ({len(state['scripts'])} scripts, {total:.0f} s)")
+    for line in problems + [f"{v.entry.item} ({v.entry.script}): {v.reading}" for v in broken]:
+        print(f"pamjax reproduce: catalogue: {line}", file=sys.stderr)
+    return 1 if problems or broken else 0

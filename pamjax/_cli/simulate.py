@@ -23,6 +23,7 @@ from .._core.csvio import write_table
 from .._core.errors import PamjaxInputError
 from .._core.units import check_setting
 from .._solve.simulate import validate
+from . import bands
 from .config import (
     build_model,
     check_keys,
@@ -52,6 +53,7 @@ def add_arguments(parser):
     parser.add_argument("--out", default=None, help="output folder (default results/simulate-<config name>)")
     parser.add_argument("--overwrite", action="store_true", help="replace trajectory.csv/png in --out")
     parser.add_argument("--no-plot", action="store_true", help="skip the figure")
+    bands.add_arguments(parser)  # --band, --band-method, --band-level, --band-samples, --band-seed
 
 
 def validate_config(cfg):
@@ -219,6 +221,7 @@ def run(args):
     root = pathlib.Path(args.config).parent
     system, signal, ts, kwargs, recording = prepare(cfg, root)
     validate(system, signal, ts, kwargs.get("y0"))  # signal range, initial state: before the output folder
+    band_source = bands.check_simulate(args, cfg, root, system, kwargs)  # --band: a fitted model file, before work
     out = args.out or f"results/simulate-{pathlib.Path(args.config).stem}"
     outputs = [o for o in OUTPUTS if not (args.no_plot and o.endswith(".png"))]
     with OutputFolder(out, "pamjax simulate", outputs, overwrite=args.overwrite) as folder:
@@ -231,10 +234,14 @@ def run(args):
         print(f"pamjax simulate: {type(system).__name__}, {len(ts)} output times over "
               f"{float(ts[-1] - ts[0]):g} s, {int(traj.num_steps)} solver steps; {summary}")
         comment = f"pamjax simulate {args.config}: {type(system).__name__}; pressures absolute"
+        figure = lambda p: plot(p, traj, recording, str(args.config))  # noqa: E731
+        if band_source is not None:  # --band: <channel>_lower / _upper columns, the band drawn in the figure
+            comment, figure = bands.add_to_simulation(args, cfg, root, band_source, signal, ts, kwargs, traj,
+                                                      recording, cols, units, comment)
         written = [folder.write("trajectory.csv", lambda p: write_table(p, cols, units, comment))]
         if not args.no_plot:
             try:
-                written.append(folder.write("trajectory.png", lambda p: plot(p, traj, recording, str(args.config))))
+                written.append(folder.write("trajectory.png", figure))
             except ModuleNotFoundError:
                 print("no figure: matplotlib is not installed (pip install matplotlib)")
         print("wrote " + ", ".join(str(p) for p in written if p is not None))

@@ -31,6 +31,7 @@ from .._core.distributed import join_for_cli
 from .._core.errors import PamjaxInputError
 from .._core.units import ATMOSPHERE, check_absolute_pressure, check_setting
 from .._sweep.maps import flow_surface, frequency_response, steady_state_map
+from . import bands
 from .config import apply_set, build_model, check_keys, read_toml, validate_model_table
 from .out import OutputFolder
 
@@ -71,6 +72,7 @@ def add_arguments(parser):
                         help="join a multi-process run (JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES, JAX_PROCESS_ID, "
                              "or SLURM/Open MPI) and spread the sweep over every process's devices (--cpu-devices "
                              "per process); process 0 writes the outputs (docs/distributed.md)")
+    bands.add_arguments(parser)  # --band, --band-method, --band-level, --band-samples, --band-seed
 
 
 def _use_cpu_devices(count):
@@ -348,6 +350,7 @@ def run(args):
     writes = join_for_cli(args.distributed)  # before JAX starts; False on processes other than 0
     config = read_toml(args.config)
     model = prepare(config, pathlib.Path(args.config).parent)  # before the output folder is touched
+    band_source = bands.check_sweep(args, config, pathlib.Path(args.config).parent, model)  # --band: a fitted model
     if not writes:  # another process of a distributed run: its share of the work, no files
         run_config(config, model=model)
         return 0
@@ -362,12 +365,17 @@ def run(args):
         devices = jax.devices()
         print(f"pamjax sweep: {config['kind']}, {len(next(iter(columns.values())))} rows in "
               f"{time.perf_counter() - start:.1f} s on {len(devices)} {devices[0].platform} device(s)")
+        comment, figure = None, lambda p: plot(spec, p)  # noqa: E731
+        if band_source is not None:  # --band: <column>_lower / _upper columns, the band drawn in the figure
+            sw = config.get("sweep", {})
+            comment, figure = bands.add_to_sweep(args, config, model, band_source, spec, columns,
+                                                 lambda name, default: _axis(sw.get(name, default), name), apply_set)
         folder.write("sweep.npz", lambda p: _savez(p, columns))
-        folder.write("sweep.csv", lambda p: write_table(p, columns, {}))
+        folder.write("sweep.csv", lambda p: write_table(p, columns, {}, comment))
         print(f"wrote {out}/sweep.npz and sweep.csv (columns: {', '.join(columns)})")
         if not args.no_plot:
             try:
-                folder.write("sweep.png", lambda p: plot(spec, p))
+                folder.write("sweep.png", figure)
                 print(f"figure: {out}/sweep.png")
             except ModuleNotFoundError:
                 print("no figure: matplotlib is not installed (pip install matplotlib)")

@@ -1,6 +1,10 @@
-"""The sampled-data closed loop: plant, controller and position reference, run as a `lax.scan` over PWM periods,
-one diffrax solve of the plant per period, so the whole loop is differentiable with respect to controller gains and
-plant parameters and vmaps over perturbed plants."""
+"""The sampled-data closed loop: plant, controller and position reference (and optionally noisy sensors and a state
+estimator), run as a `lax.scan` over PWM periods with one solve of the plant per period, so the whole loop is
+differentiable with respect to controller gains and plant parameters and vmaps over perturbed plants.
+
+Per period the plant is solved adaptively (diffrax; a smooth plant: smoothed valve edges, smooth friction) or on the
+fixed grid with events located inside the step (`pamjax._control.fixed_grid`: exact PWM edges, exact stick-slip),
+which the loop chooses from the plant (`stepping="auto"`)."""
 
 import equinox as eqx
 import jax
@@ -12,48 +16,107 @@ from .._core.errors import PamjaxInputError, check_positive
 from .._papers import paper000
 from .._physics.signals import AbstractSignal, Step
 from .._solve.simulate import solve
+from .._solve.trajectory import RESULT_NONFINITE
 from .._systems.base import AbstractSystem
 from .controllers import AbstractController, reference_derivatives
+from .estimator import ExtendedKalmanFilter, LoopSensors, check_channels
+from .fixed_grid import period_on_grid
+
+_DEFAULT_SUBSTEPS = 16  # RK4 nodes per period on the fixed grids: ≤ 1.25 ms at 50 Hz, as `simulate`'s PWM grid
 
 
 class ClosedLoopState(eqx.Module):
     """State of the closed loop at a period start: `plant` (the plant's state, absolute pressure), `controller`
-    (the controller's own state, e.g. the PI integrator [m s]) and `duty`, the duty of the period before (a PWM
-    valve's state carries across periods: after a period above ~90 % it is still open)."""
+    (the controller's own state, e.g. the PI integrator [m s]), `duty`, the duty of the period before, `valve_open`
+    whether a switching valve is open at the period start (its state carries across periods: after a period above
+    ~90 % it is still open), and `estimator` the state estimator's belief (a `KalmanState`; None without one)."""
 
     plant: eqx.Module
     controller: object
     duty: jax.Array = eqx.field(default_factory=lambda: jnp.zeros(()))
+    valve_open: jax.Array = eqx.field(default_factory=lambda: jnp.zeros((), dtype=bool))
+    estimator: object = None
+
+
+def _check_plant(plant):
+    if not (isinstance(plant, AbstractSystem) and hasattr(plant, "muscle") and plant.command_range == (0.0, 1.0)
+            and {"position", "velocity", "pressure"} <= set(plant.output_names)):
+        raise PamjaxInputError(
+            "ClosedLoop.plant must be a muscle driven by a duty ratio through a valve (position, velocity and "
+            f"pressure outputs, e.g. MuscleSystem), got {type(plant).__name__}"
+        )
+
+
+def _resolve_stepping(plant, stepping):
+    """"auto": the fixed grid where an adaptive solve cannot go (exact edges or a hybrid plant), "pwm" for a switching
+    valve and "grid" for a continuous one; else "adaptive" (diffrax per period, the smoothed plant)."""
+    if stepping not in ("auto", "adaptive", "pwm", "grid"):
+        raise PamjaxInputError(f"ClosedLoop.stepping must be 'auto', 'adaptive', 'pwm' or 'grid', got {stepping!r}")
+    valve = plant.valve
+    exact = plant.hybrid or valve.exact_edges
+    if stepping == "auto":
+        return ("pwm" if valve.switches else "grid") if exact else "adaptive"
+    if stepping == "adaptive" and exact:
+        raise PamjaxInputError(
+            "ClosedLoop(stepping='adaptive') needs a smooth plant: smoothed valve edges (OnOffValve(mode='smooth'), "
+            "presets.mas10_system('pwm')) and smooth friction; exact edges and stick-slip (KarnoppFriction) run on "
+            "the fixed grid: stepping='auto' or 'pwm'"
+        )
+    if stepping == "pwm" and not valve.switches:
+        raise PamjaxInputError(
+            f"ClosedLoop(stepping='pwm') needs a switching valve, got {type(valve).__name__}; use 'grid' or 'auto'"
+        )
+    if stepping == "grid" and valve.switches:
+        raise PamjaxInputError(
+            "ClosedLoop(stepping='grid') is for continuous valves; a switching valve's fixed grid is 'pwm' (its edges "
+            "are nodes of the grid)"
+        )
+    return stepping
 
 
 class ClosedLoop(eqx.Module):
-    """A muscle plant under sampled-data position control: plant, controller and position reference [m].
+    """A muscle plant under sampled-data position control: plant, controller and position reference [m], and
+    optionally noisy sensors with a state estimator between the plant and the controller.
 
     The controller runs once per PWM period T = 1/f of the plant's valve (1/50 s for paper 000's MHE2); an
-    `AveragedValve` plant uses `period` [s] (default 0.02 s).
+    `AveragedValve` plant uses `period` [s] (default 0.02 s). Without an estimator the controller reads the plant's
+    true state at each period start; with one (`estimator`, e.g. `ExtendedKalmanFilter`) it reads the estimate, which
+    the estimator forms from the `sensors`' noisy readings (default `LoopSensors()`: pressure and position at 1 kHz with
+    the bench's 2 kPa and 0.1 mm noise).
+
+    `stepping`: how each period's plant is solved. "auto" (default): "adaptive" (diffrax, `rtol`/`atol` of
+    `simulate_closed_loop`) for a smooth plant (smoothed valve edges, smooth friction); the fixed grid with events
+    located inside the step for a plant an adaptive solve cannot take: "pwm" for a switching valve (exact edges,
+    whatever the valve's `mode`: the PWM-synchronous grid, `substeps` uniform RK4 nodes per period plus the two
+    edges) and "grid" for a continuous one (`substeps` uniform RK4 steps), both with exact stick-slip
+    (`KarnoppFriction`). So `presets.mas10_system(valve="pwm", friction="karnopp")`, the plant identification
+    produces, runs with exact edges and stick-slip. "pwm" also runs a smoothed-valve plant with exact edges.
     """
 
     plant: AbstractSystem
     controller: AbstractController
     reference: AbstractSignal
     period: jax.Array  # s
+    estimator: ExtendedKalmanFilter | None
+    sensors: LoopSensors | None
+    stepping: str = eqx.field(static=True)
+    substeps: int = eqx.field(static=True)
 
-    def __init__(self, plant, controller, reference, period=None):
+    def __init__(self, plant, controller, reference, period=None, *, estimator=None, sensors=None, stepping="auto",
+                 substeps=_DEFAULT_SUBSTEPS):
+        _check_plant(plant)
         self.plant = plant
         self.controller = controller
         self.reference = reference
         if period is None:
             period = plant.valve.period if plant.valve.switches else 1.0 / paper000.PWM_FREQUENCY
         self.period = jnp.asarray(period, dtype=float)
+        self.estimator = estimator
+        self.sensors = LoopSensors() if (sensors is None and estimator is not None) else sensors
+        self.stepping = _resolve_stepping(plant, stepping)
+        self.substeps = substeps
 
     def __check_init__(self):
-        plant = self.plant
-        if not (isinstance(plant, AbstractSystem) and hasattr(plant, "muscle") and plant.command_range == (0.0, 1.0)
-                and {"position", "velocity", "pressure"} <= set(plant.output_names)):
-            raise PamjaxInputError(
-                "ClosedLoop.plant must be a muscle driven by a duty ratio through a valve (position, velocity and "
-                f"pressure outputs, e.g. MuscleSystem), got {type(plant).__name__}"
-            )
         if not isinstance(self.controller, AbstractController):
             raise PamjaxInputError(
                 f"ClosedLoop.controller must be a pamjax controller, got {type(self.controller).__name__}"
@@ -62,45 +125,110 @@ class ClosedLoop(eqx.Module):
             raise PamjaxInputError(
                 f"ClosedLoop.reference must be a pamjax signal (e.g. Sine), got {type(self.reference).__name__}"
             )
-        if self.plant.valve.exact_edges:
-            raise PamjaxInputError(
-                "ClosedLoop needs a differentiable plant: use OnOffValve(mode='smooth') (presets.mas10_system('pwm'))"
-            )
         check_positive(self.period, "ClosedLoop.period")
+        if not (isinstance(self.substeps, int) and self.substeps >= 2):
+            raise PamjaxInputError(f"ClosedLoop.substeps must be an int >= 2 (RK4 nodes per period), got "
+                                   f"{self.substeps!r}")
+        if self.stepping == "pwm":
+            period, valve_period = _concrete(self.period), _concrete(self.plant.valve.period)
+            if period is not None and valve_period is not None and not np.isclose(period, valve_period, rtol=1e-12):
+                raise PamjaxInputError(
+                    f"ClosedLoop.period ({period} s) must be the valve's PWM period ({valve_period} s) on the PWM "
+                    "grid: a PWM controller sets one duty per period"
+                )
+        if self.estimator is not None and not isinstance(self.estimator, ExtendedKalmanFilter):
+            raise PamjaxInputError(
+                f"ClosedLoop.estimator must be a pamjax estimator (ExtendedKalmanFilter), got "
+                f"{type(self.estimator).__name__}"
+            )
+        if self.sensors is not None:
+            if not isinstance(self.sensors, LoopSensors):
+                raise PamjaxInputError(f"ClosedLoop.sensors must be LoopSensors, got {type(self.sensors).__name__}")
+            if self.estimator is None:
+                raise PamjaxInputError(
+                    "ClosedLoop.sensors need an estimator between them and the controller (e.g. "
+                    "ExtendedKalmanFilter(model)); a controller with a noisy sensor of its own is PIDController("
+                    "measurement_noise=...)"
+                )
+            check_channels(self.plant, self.sensors.channels, "plant")
+            check_channels(self.estimator.model, self.sensors.channels, "estimator's model")
+            noise = self.sensors.noise
+            if (self.estimator.measurement_noise is None and not isinstance(noise, jax.core.Tracer)
+                    and not np.all(np.asarray(noise) > 0)):
+                raise PamjaxInputError(
+                    "ExtendedKalmanFilter.measurement_noise must be given (> 0) where the sensors are noise-free "
+                    f"(LoopSensors.noise {noise})"
+                )
 
-    def initial_state(self, plant_state=None):
-        """Plant at rest in equilibrium at atmospheric pressure, valve off (the bench's E5 start), controller reset."""
+    def initial_state(self, plant_state=None, estimate=None):
+        """Plant at rest in equilibrium at atmospheric pressure, valve off (the bench's E5 start), controller reset;
+        an estimator starts from `estimate` (a model state; default its model at rest) with its `initial_std`."""
         plant_state = self.plant.initial_state() if plant_state is None else plant_state
-        return ClosedLoopState(plant=plant_state, controller=self.controller.initial_state(), duty=jnp.zeros(()))
+        belief = None if self.estimator is None else self.estimator.initial_state(estimate)
+        return ClosedLoopState(plant=plant_state, controller=self.controller.initial_state(), duty=jnp.zeros(()),
+                               valve_open=jnp.zeros((), dtype=bool), estimator=belief)
 
     def step(self, t, state, sample_offsets, *, rtol, atol, max_steps):
-        """One PWM period from `t`: the controller picks the duty, the plant runs with it held. Returns the next state
-        and the plant's position and pressure at `t + sample_offsets` and the duty."""
+        """One PWM period from `t`: the controller picks the duty from the plant's state (or its estimate), the plant
+        runs with it held, the estimator takes the period's readings. Returns the next state, the duty and the
+        samples: the plant's position, pressure and velocity at `t + sample_offsets` (the last offset is the period's
+        end), what the controller read and the plant's true state at `t`."""
         reference = reference_derivatives(self.reference, t)
-        duty, controller_state = self.controller.update(t, reference, state.plant, state.controller, self.period)
-        times = t + sample_offsets
-        # this period's duty from t, the last period's before it: a switching valve latches both (`read_command`)
-        traj = solve(
-            self.plant,
-            Step(state.duty, duty, t),
-            times,
-            state.plant,
-            t,
-            rtol=rtol,
-            atol=atol,
-            max_steps=max_steps,
-            starts_off=False,
-            num_periods=1,  # a smoothed valve's edges get step boundaries of their own
-        )
-        plant_state = jtu.tree_map(lambda a: a[-1], traj.state)
-        samples = dict(position=traj.position, pressure=traj.pressure, velocity=traj.velocity, result=traj.result)
-        return ClosedLoopState(plant=plant_state, controller=controller_state, duty=duty), duty, samples
+        observed = state.plant if self.estimator is None else self.estimator.estimate(state.estimator)
+        duty, controller_state = self.controller.update(t, reference, observed, state.controller, self.period)
+        sensor_offsets = jnp.zeros((0,)) if self.sensors is None else self.sensors.offsets(self.period)
+        offsets = jnp.concatenate([sample_offsets, sensor_offsets])
+        n = sample_offsets.shape[0]
+        valve = self.plant.valve
+        if self.stepping == "adaptive":
+            order = jnp.argsort(offsets)  # diffrax saves at non-decreasing times
+            # this period's duty from t, the last period's before it: a switching valve latches both (`read_command`)
+            traj = solve(
+                self.plant,
+                Step(state.duty, duty, t),
+                t + offsets[order],
+                state.plant,
+                t,
+                rtol=rtol,
+                atol=atol,
+                max_steps=max_steps,
+                starts_off=False,
+                num_periods=1,  # a smoothed valve's edges get step boundaries of their own
+            )
+            states = jtu.tree_map(lambda a: a[jnp.argsort(order)], traj.state)
+            result = traj.result
+        else:
+            states, finite = period_on_grid(self.plant, duty, state.valve_open, state.plant, t, self.period,
+                                            t + offsets, stepping=self.stepping, substeps=self.substeps)
+            result = jnp.where(finite, 0, RESULT_NONFINITE)
+        samples = jtu.tree_map(lambda a: a[:n], states)
+        plant_state = jtu.tree_map(lambda a: a[n - 1], states)  # the period's end
+        valve_open = valve.open_at_period_end(duty, state.valve_open) if valve.switches else state.valve_open
+        belief = state.estimator
+        if self.estimator is not None:
+            k = jnp.round(t / self.period).astype(jnp.int32)
+            readings = self.sensors.read(jtu.tree_map(lambda a: a[n:], states), k)
+            belief = self.estimator.run_period(belief, t, duty, state.duty, self.period, readings, self.sensors)
+        out = dict(position=samples.position, pressure=samples.pressure, velocity=samples.velocity, result=result,
+                   observed=observed, start=state.plant)
+        next_state = ClosedLoopState(plant=plant_state, controller=controller_state, duty=duty, valve_open=valve_open,
+                                     estimator=belief)
+        return next_state, duty, out
+
+
+def _concrete(x):
+    try:
+        return float(x)
+    except (TypeError, jax.errors.ConcretizationTypeError):
+        return None
 
 
 class ClosedLoopTrajectory(eqx.Module):
     """Result of `simulate_closed_loop`: `t` [s], `position` [m], `reference` [m], `pressure` [Pa abs], `velocity`
     [m/s] at the sample times; `period_start` [s] and `duty` [-] per PWM period; `final` the last `ClosedLoopState`;
-    `result` 0 where every period's solve succeeded."""
+    `result` 0 where every period's solve succeeded. Per period also `observed`, the plant state the controller read
+    at the period start (the true state, or the estimator's estimate), and `period_start_state`, the plant's true
+    state there (named states with a leading axis of periods)."""
 
     t: jax.Array
     position: jax.Array
@@ -111,6 +239,16 @@ class ClosedLoopTrajectory(eqx.Module):
     duty: jax.Array
     final: ClosedLoopState
     result: jax.Array
+    observed: eqx.Module | None = None
+    period_start_state: eqx.Module | None = None
+
+    def estimation_error(self, start=0.0):
+        """RMS of (what the controller read − the true state) at the period starts t ≥ `start` [s], per state:
+        {"pressure" [Pa], "position" [m], "velocity" [m/s]} (zeros without an estimator; traceable)."""
+        weight = (self.period_start >= start).astype(float)
+        return {name: jnp.sqrt(jnp.sum(weight * (getattr(self.observed, name) - getattr(self.period_start_state, name))
+                                       ** 2) / jnp.sum(weight))
+                for name in ("pressure", "position", "velocity")}
 
     def tracking_error(self, start=0.0):
         """(RMSE, peak |e|) [m] of e = r − x over samples with t ≥ `start` [s] (traceable)."""
@@ -135,7 +273,7 @@ def _run(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps):
 
     final, (starts, duties, samples) = jax.lax.scan(body, state, starts)
     t = (starts[:, None] + offsets[None, :]).reshape(-1)
-    flat = {k: v.reshape(-1) for k, v in samples.items() if k != "result"}
+    flat = {k: samples[k].reshape(-1) for k in ("position", "pressure", "velocity")}
     return ClosedLoopTrajectory(
         t=t,
         position=flat["position"],
@@ -146,6 +284,8 @@ def _run(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps):
         duty=duties,
         final=final,
         result=jnp.max(jnp.abs(samples["result"])),
+        observed=samples["observed"],
+        period_start_state=samples["start"],
     )
 
 
@@ -169,14 +309,16 @@ def simulate_closed_loop(
 ) -> ClosedLoopTrajectory:
     """Simulate a sampled-data closed loop for `duration` [s] (rounded up to whole PWM periods).
 
-    Each PWM period the controller reads the plant state and the reference at the period start and sets the duty,
-    which the plant holds for the period (one diffrax solve of the plant per period, `lax.scan` over periods).
-    Differentiable with respect to controller gains and plant parameters (use `run_closed_loop` inside `jax.grad` /
-    `eqx.filter_vmap`).
+    Each PWM period the controller reads the plant state (or the estimator's estimate of it) and the reference at
+    the period start and sets the duty, which the plant holds for the period (one solve of the plant per period,
+    `lax.scan` over periods: diffrax for a smooth plant, the fixed grid with exact edges and stick-slip events for the
+    identified plant, `ClosedLoop.stepping`). Differentiable with respect to controller gains and plant parameters
+    (use `run_closed_loop` inside `jax.grad` / `eqx.filter_vmap`).
 
     **Arguments:** `loop` a `ClosedLoop`; `duration` [s]; `samples_per_period` output samples per period (10: 2 ms
     at 50 Hz, the position ripple resolved); `y0` initial `ClosedLoopState` (default: plant at rest in equilibrium
-    at atmospheric pressure, valve off); `rtol`, `atol` as for `simulate` (scaled states); `max_steps` per period.
+    at atmospheric pressure, valve off); `rtol`, `atol` as for `simulate` (scaled states) and `max_steps` per period,
+    for adaptive stepping (the fixed grid's size is `ClosedLoop.substeps`).
 
     **Raises:** `PamjaxInputError` for a reference outside the muscle's stroke or a bad duration, before any solve.
     """

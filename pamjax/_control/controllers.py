@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.errors import PamjaxInputError, check_finite, check_nonnegative, check_positive
+from .._core.fitting import parameter
 from .._papers import datasheets, paper000
 from .._physics.signals import AbstractSignal
 from .._physics.smooth import smooth_sign
@@ -74,11 +75,11 @@ class PIController(AbstractController):
     `bias` u0 [-] (0.5, hybrid bench `meta.json`), `duty_min`, `duty_max` [-] (0, 1).
     """
 
-    proportional_gain: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.PI_PROPORTIONAL_GAIN)  # 1/m
-    integral_gain: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.PI_INTEGRAL_GAIN)  # 1/(m s)
-    bias: jax.Array = eqx.field(converter=jnp.asarray, default=datasheets.PI_BIAS)  # -
-    duty_min: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # -
-    duty_max: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
+    proportional_gain: jax.Array = parameter(paper000.PI_PROPORTIONAL_GAIN, unit="1/m")
+    integral_gain: jax.Array = parameter(paper000.PI_INTEGRAL_GAIN, unit="1/(m s)")
+    bias: jax.Array = parameter(datasheets.PI_BIAS, unit="-")
+    duty_min: jax.Array = parameter(0.0, unit="-")
+    duty_max: jax.Array = parameter(1.0, unit="-")
 
     def __check_init__(self):
         check_nonnegative(self.proportional_gain, "PIController.proportional_gain")
@@ -139,15 +140,15 @@ class SlidingModeController(AbstractController):
     """
 
     model: AbstractSystem
-    bandwidth: jax.Array = eqx.field(converter=jnp.asarray, default=12.0)  # rad/s
-    switching_gain: jax.Array = eqx.field(converter=jnp.asarray, default=6.0)  # m/s²
-    boundary_layer: jax.Array = eqx.field(converter=jnp.asarray, default=0.06)  # m/s
-    pressure_switching_gain: jax.Array = eqx.field(converter=jnp.asarray, default=2e6)  # Pa/s
-    pressure_boundary_layer: jax.Array = eqx.field(converter=jnp.asarray, default=1e5)  # Pa
-    integral_limit: jax.Array = eqx.field(converter=jnp.asarray, default=0.1)  # m s
-    friction_velocity_width: jax.Array = eqx.field(converter=jnp.asarray, default=5e-3)  # m/s
-    duty_min: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # -
-    duty_max: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
+    bandwidth: jax.Array = parameter(12.0, unit="rad/s")
+    switching_gain: jax.Array = parameter(6.0, unit="m/s²")
+    boundary_layer: jax.Array = parameter(0.06, unit="m/s")
+    pressure_switching_gain: jax.Array = parameter(2e6, unit="Pa/s")
+    pressure_boundary_layer: jax.Array = parameter(1e5, unit="Pa")
+    integral_limit: jax.Array = parameter(0.1, unit="m s")
+    friction_velocity_width: jax.Array = parameter(5e-3, unit="m/s")
+    duty_min: jax.Array = parameter(0.0, unit="-")
+    duty_max: jax.Array = parameter(1.0, unit="-")
 
     def __check_init__(self):
         model = self.model

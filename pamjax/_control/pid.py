@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 
 from .._core.errors import check_finite, check_nonnegative, check_positive
+from .._core.fitting import parameter
 from .._papers import datasheets, paper000
 from .controllers import AbstractController, _check_duty_limits
 
@@ -34,14 +35,14 @@ class PIDController(AbstractController):
     paper 000's "0.1 ms sampling time"), `seed` (static int).
     """
 
-    proportional_gain: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.PI_PROPORTIONAL_GAIN)  # 1/m
-    integral_gain: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.PI_INTEGRAL_GAIN)  # 1/(m s)
-    derivative_gain: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # s/m
-    bias: jax.Array = eqx.field(converter=jnp.asarray, default=datasheets.PI_BIAS)  # -
-    duty_min: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # -
-    duty_max: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
-    measurement_noise: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # m
-    sample_time: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.SAMPLE_TIME)  # s
+    proportional_gain: jax.Array = parameter(paper000.PI_PROPORTIONAL_GAIN, unit="1/m")
+    integral_gain: jax.Array = parameter(paper000.PI_INTEGRAL_GAIN, unit="1/(m s)")
+    derivative_gain: jax.Array = parameter(0.0, unit="s/m")
+    bias: jax.Array = parameter(datasheets.PI_BIAS, unit="-")
+    duty_min: jax.Array = parameter(0.0, unit="-")
+    duty_max: jax.Array = parameter(1.0, unit="-")
+    measurement_noise: jax.Array = parameter(0.0, unit="m")
+    sample_time: jax.Array = parameter(paper000.SAMPLE_TIME, unit="s")
     seed: int = eqx.field(static=True, default=0)
 
     def __check_init__(self):

@@ -3,18 +3,22 @@
 A component says, field by field, how `pamjax.fit` moves the parameter in its unconstrained space and how it reports
 it; the fitter (`pamjax._fit.parameters`) reads these keys and knows no component:
 
-    coulomb_force: jax.Array = positive(16.0)  # N
-    critical_ratio: jax.Array = ratio()  # -
-    max_force_coefficients: jax.Array = eqx.field(converter=jnp.asarray, metadata=polynomial("a{i}", "stroke"))
+    coulomb_force: jax.Array = positive(16.0, unit="N")
+    critical_ratio: jax.Array = ratio(unit="-")
+    max_force_coefficients: jax.Array = eqx.field(converter=jnp.asarray, metadata=polynomial("a{i}", "stroke", "N/m^i"))
+    heat_capacity_ratio: jax.Array = parameter(1.4, unit="-")
 
 - `transform`: "log" (a physically positive quantity, fitted as v₀ eᶿ so that a trial value is never ≤ 0; a start
   value ≤ 0 falls back to "linear"), "logistic" with `bounds` (lo, hi) (a bounded quantity such as a ratio in
   (0, 1)), "nodes" (a polynomial's coefficients, fitted as its values at Chebyshev nodes over `domain`), or
-  "linear" (the default: scaled by the start magnitude).
+  "linear" (the default: scaled by the start magnitude, or by `scale` where the field declares one: `signed`).
 - `domain` ("nodes" only): the name of an attribute (lo, hi) of an enclosing component that bounds the polynomial's
   argument (a `Muscle`'s `stroke` for the force law's F_max(x)).
 - `label`: how the entries of an array are reported, a format with `{i}` the flat index and `{n}` = i + 1 ("a{i}"
   gives a0…a4, "m{n}" m1…m9); a scalar, or an array without a label, is reported by its path.
+
+- `unit`: the parameter's unit as model files write it (`pamjax.save_model`; "-" for a pure number). Every helper
+  takes it (`positive(16.0, unit="N")`); `parameter(default, unit=...)` declares a parameter fitted linearly.
 
 A `free` entry of `fit` may override the transform and bounds (`{"path": ..., "transform": ..., "bounds": ...}`).
 """
@@ -27,23 +31,56 @@ import jax.numpy as jnp
 TRANSFORMS = ("linear", "log", "logistic", "nodes")
 
 
-def positive(default=dataclasses.MISSING, **kwargs):
-    """An array parameter that is physically positive (an area, a mass, a friction force): fitted in log space."""
-    return eqx.field(converter=jnp.asarray, default=default, metadata=dict(transform="log"), **kwargs)
+def optional_array(x):
+    """Field converter of an optional array parameter: None stays None (not set), anything else an array."""
+    return None if x is None else jnp.asarray(x)
 
 
-def ratio(default=dataclasses.MISSING, **kwargs):
+def _converter(default):
+    return optional_array if default is None else jnp.asarray
+
+
+def _with_unit(metadata, unit):
+    return metadata if unit is None else {**metadata, "unit": unit}
+
+
+def parameter(default=dataclasses.MISSING, *, unit=None, **kwargs):
+    """An array parameter fitted linearly (scaled by its start magnitude), in `unit`."""
+    return eqx.field(converter=jnp.asarray, default=default, metadata=_with_unit({}, unit), **kwargs)
+
+
+def positive(default=dataclasses.MISSING, *, unit=None, **kwargs):
+    """An array parameter that is physically positive (an area, a mass, a friction force): fitted in log space, in
+    `unit`. A default of None makes it optional (unset until given)."""
+    return eqx.field(converter=_converter(default), default=default, metadata=_with_unit(dict(transform="log"), unit),
+                     **kwargs)
+
+
+def ratio(default=dataclasses.MISSING, *, unit="-", **kwargs):
     """An array parameter in the open interval (0, 1) (a critical pressure ratio): fitted through a logistic."""
     return eqx.field(converter=jnp.asarray, default=default,
-                     metadata=dict(transform="logistic", bounds=(0.0, 1.0)), **kwargs)
+                     metadata=_with_unit(dict(transform="logistic", bounds=(0.0, 1.0)), unit), **kwargs)
 
 
-def polynomial(label, domain):
+def signed(default=dataclasses.MISSING, *, scale, unit=None, **kwargs):
+    """A signed array parameter (an offset, a delay) fitted linearly in units of `scale` (its natural size: a
+    start value of 0 gives no magnitude of its own), in `unit`."""
+    return eqx.field(converter=_converter(default), default=default,
+                     metadata=_with_unit(dict(transform="linear", scale=float(scale)), unit), **kwargs)
+
+
+def polynomial(label, domain, unit=None):
     """Metadata of a polynomial's coefficients: fitted as its values at Chebyshev nodes over `domain` (an attribute
-    (lo, hi) of an enclosing component), reported with `label` (e.g. "a{i}")."""
-    return dict(transform="nodes", label=label, domain=domain)
+    (lo, hi) of an enclosing component), reported with `label` (e.g. "a{i}"), in `unit`."""
+    return _with_unit(dict(transform="nodes", label=label, domain=domain), unit)
 
 
-def labelled(label):
+def labelled(label, unit=None):
     """Metadata of an array whose entries are reported with `label` (e.g. "m{n}" for m1…m9), fitted linearly."""
-    return dict(label=label)
+    return _with_unit(dict(label=label), unit)
+
+
+def field_units(cls):
+    """field name → unit of the equinox Module class `cls` (its own fields and those it inherits), from the fields'
+    metadata; fields without a unit are left out."""
+    return {f.name: f.metadata["unit"] for f in dataclasses.fields(cls) if "unit" in f.metadata}

@@ -88,10 +88,11 @@ def _dimension_of_unit(unit):
     return None
 
 
-def to_si(name, unit, values, where):
+def to_si(name, unit, values, where, atmosphere=None):
     """`values` of channel `name` written in `unit`, converted to SI: (values, SI unit). A unit that does not fit the
     channel, that pamjax does not know for a known channel, or a pressure unit that does not say absolute or gauge,
-    raises a `PamjaxInputError` naming `where`, the channel and the unit."""
+    raises a `PamjaxInputError` naming `where`, the channel and the unit. Gauge pressures become absolute by adding
+    `atmosphere` [Pa] (default: the ISO 2533 standard atmosphere, `ATMOSPHERE`)."""
     unit = "" if unit is None else str(unit).strip()
     dimension = channel_dimension(name)
     if dimension == "command":  # a duty ratio [1] or a regulator's reference voltage [V]
@@ -116,6 +117,8 @@ def to_si(name, unit, values, where):
                 "or kPa, MPa, bar, mbar, psi with 'abs' or 'gauge' (pamjax expects ABSOLUTE pressure in Pa)"
             )
         factor, offset = parsed
+        if offset and atmosphere is not None:
+            offset = float(atmosphere)
         return values * factor + offset, "Pa"
     table = _FACTORS[dimension]
     if unit not in table:

@@ -1,26 +1,47 @@
-"""Bench directories in the hybrid-reference layout: one `.npz` recording per experiment and a `meta.json` that
-describes them (`shared/data/hybrid-reference-bench/README.md`).
+"""Bench directories: one recording per experiment and a `meta.json` that describes them (the hybrid-reference layout,
+`pamjax/data/hybrid-reference-bench/README.md`, the copy shipped with pamjax; a real rig's CSV files,
+`shared/data/bench-realistic/README.md`).
 
 `meta.json` holds `experiments` (name → kind and conditions: `tank_charge` / `tank_discharge` with `V_tank`, `u`,
-`p0`; `muscle_triangle` with `lo`, `hi`, `f_tri`; `muscle_PI` closed-loop runs), `noise` (`p_std_Pa`, `x_std_m`),
-`fitted_keys` (the parameters to identify, named as below) and, for simulated benches, the true `params` (never read
-here: a fit starts from the model it is given, e.g. the presets). Recordings hold `t` [s], `u` (the duty latched per
-PWM period), `p` [Pa abs], `x` [m].
+`p0`; `muscle_triangle` with `lo`, `hi`, `f_tri`; `muscle_run` (any recorded duty, e.g. a designed experiment);
+`muscle_PI` closed-loop runs; `init` "unknown…" for a run logged from the middle), `noise` (`p_std_Pa`,
+`x_std_m`), `fitted_keys` (the parameters to identify, named as below) and, optionally, `units` (channel → unit, for
+files that carry none: NPZ and MAT) and `atmosphere_Pa` (the ambient pressure gauge readings are referred to; default
+101325 Pa). Simulated benches also list their true `params` and `nuisance`: never read here (a fit starts from the
+model it is given, e.g. the presets).
 
-`load_bench` turns such a directory into `Experiment`s for `pamjax.fit`; `BENCH_PARAMETERS` maps the bench's
-parameter names to pamjax parameter paths; `bench_values` reads a fit result back in the bench's names.
+Recordings: `<name>.npz`, `<name>.csv` or `<name>.mat`, one per experiment, with time, the duty the rig commanded
+(`u` / `duty` / `command`, held per PWM period), pressure and position (short names `t, u, p, x` or full ones; CSV
+headers give units, `pressure [barg]`, `position [mm]`; gauge pressures become absolute with the stated
+atmosphere). The command that drives a run is the one the rig logged: meta.json's duty or triangle, where given, is
+checked against it (a contradiction is an error naming both), and only a recording without a command column is
+driven from meta.json.
+
+`load_bench` turns such a directory into `Experiment`s for `pamjax.fit`, optionally with the rig's nuisances free
+(`nuisance=True`: `pamjax.Rig`); `BENCH_PARAMETERS` maps the bench's parameter names to pamjax parameter paths;
+`bench_values` reads a fit result back in the bench's names.
 """
 
 import dataclasses
-import json
 import pathlib
 
 import numpy as np
 
 from .._core.errors import PamjaxInputError
-from .._physics.signals import Constant, Triangle
+from .bench_files import (
+    FITTED_KINDS,
+    MUSCLE_KINDS,
+    TANK_KINDS,
+    load_recording,
+    noise_levels,
+    number,
+    period_starts,
+    read_meta,
+    recording_file,
+    run_command,
+)
 from .experiment import Experiment, TankFromModel
-from .recording import Recording
+from .rig import DEFAULT_GROUP, Rig, RunConditions, Sensors, StartState, nuisance_report
 
 # bench name → (pamjax parameter path, label of the value in a FitResult)
 BENCH_PARAMETERS = {
@@ -37,15 +58,24 @@ BENCH_PARAMETERS = {
     "Fc": ("friction.coulomb_force", "friction.coulomb_force"),
     "Cf": ("friction.viscous_coefficient", "friction.viscous_coefficient"),
 }
-FITTED_KINDS = ("tank_charge", "tank_discharge", "muscle_triangle")
+# The nuisances `load_bench(..., nuisance=...)` can free (docs/fitting.md, "Identifying your own rig"), and those
+# `nuisance=True` frees. The position sensor's offset only where a muscle run rests on a stroke limit: elsewhere a
+# shift of the position origin is absorbed EXACTLY by the plant (F_max's quartic a0…a4, eq. 7's k0 − k1 x and eq. 14's
+# v0 + v1 x are polynomials in x of degrees it keeps), so no recording determines it; it is then held at its
+# calibration (`position_offset=`, default 0) and the plant is identified in the sensor's frame.
+BENCH_NUISANCES = ("pressure_offset", "pressure_gain", "position_offset", "delay", "supply_pressure", "start")
+DEFAULT_BENCH_NUISANCES = ("pressure_offset", "pressure_gain", "delay", "supply_pressure", "start")
 _CHANNEL = {"pressure": "p", "position": "x"}
 
 
 @dataclasses.dataclass
 class Bench:
-    """A loaded bench directory: `experiments` (for `pamjax.fit`), `free` (the parameter paths of `fitted_keys`),
-    `fitted_keys`, `noise` (channel → standard deviation used as the residual scale), `skipped` (experiment →
-    reason), `meta` (the parsed meta.json), `directory`, `rate` (None: as recorded)."""
+    """A loaded bench directory: `experiments` (for `pamjax.fit`), `free` (the parameter paths to fit: the plant's
+    from `fitted_keys`, prefixed `plant.` when nuisances are free, then the nuisances'), `fitted_keys`, `noise`
+    (channel → standard deviation used as the residual scale), `skipped` (experiment → reason), `meta` (the parsed
+    meta.json), `directory`, `rate` (None: as recorded); `model` (the start model of the fit: the plant, or a
+    `pamjax.Rig` holding it with the nuisances' start values), `nuisance` (the nuisance paths in `free`), `notes`
+    (what the loader found: commands checked, runs logged mid-way, start values estimated)."""
 
     experiments: list
     free: list
@@ -55,23 +85,10 @@ class Bench:
     meta: dict
     directory: pathlib.Path
     rate: float | None
-
-
-def _read_meta(directory):
-    directory = pathlib.Path(directory)
-    if not directory.is_dir():
-        raise PamjaxInputError(f"bench directory {directory} does not exist or is not a directory")
-    path = directory / "meta.json"
-    if not path.exists():
-        raise PamjaxInputError(f"bench directory {directory} has no meta.json (the hybrid-reference layout: "
-                               "shared/data/hybrid-reference-bench/README.md)")
-    try:
-        meta = json.loads(path.read_text())
-    except json.JSONDecodeError as err:
-        raise PamjaxInputError(f"{path} is not valid JSON: {err}") from err
-    if not isinstance(meta.get("experiments"), dict) or not meta["experiments"]:
-        raise PamjaxInputError(f"{path} needs an 'experiments' table (name → kind and conditions)")
-    return directory, meta
+    model: object = None
+    nuisance: list = dataclasses.field(default_factory=list)
+    notes: list = dataclasses.field(default_factory=list)
+    unknown_starts: list = dataclasses.field(default_factory=list)
 
 
 def _free_paths(keys):
@@ -87,90 +104,307 @@ def _free_paths(keys):
     return paths
 
 
-def _noise_levels(meta, recordings):
-    """Noise standard deviations: meta.json's `noise` where given, else estimated from the recordings (1.4826 MAD
-    of first differences / √2, the white part of the signal)."""
-    given = meta.get("noise", {})
-    out = {}
-    if "p_std_Pa" in given:
-        out["pressure"] = float(given["p_std_Pa"])
-    if "x_std_m" in given:
-        out["position"] = float(given["x_std_m"])
-    for c in ("pressure", "position"):
-        if c not in out:
-            diffs = [np.diff(r[c]) for r in recordings if c in r.channels and np.ptp(r[c]) > 0]
-            if diffs:
-                d = np.concatenate(diffs)
-                out[c] = float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
+def _nuisance_names(nuisance):
+    if nuisance is True:
+        return set(DEFAULT_BENCH_NUISANCES)
+    if not nuisance:
+        return set()
+    names = {nuisance} if isinstance(nuisance, str) else set(nuisance)
+    unknown = names - set(BENCH_NUISANCES)
+    if unknown:
+        raise PamjaxInputError(f"nuisance names {sorted(unknown)} are not nuisances pamjax fits; valid: "
+                               f"{list(BENCH_NUISANCES)} (or True for {list(DEFAULT_BENCH_NUISANCES)})")
+    return names
+
+
+def _rest_samples(rec, signal, valve, period):
+    """Samples of a run that starts at rest at atmospheric pressure before the first PWM period whose duty opens its
+    valve (`switching_gates`): the pressure there is the atmosphere, as the sensor reads it."""
+    if period is None:
+        return np.zeros(rec.t.shape, bool)
+    idx = period_starts(rec.t, period)
+    if "command" in rec.channels:
+        duty = rec["command"][idx]
+    else:
+        import jax
+
+        duty = np.asarray(jax.vmap(signal)(np.floor(rec.t[idx] / period + 1e-9) * period))
+    opens = np.asarray(valve.switching_gates(duty)[0])
+    first = rec.t[idx[np.argmax(opens)]] if np.any(opens) else rec.t[-1]
+    return rec.t < first
+
+
+# s: a run logged mid-way starts its solve this long before its first sample, so that the model can be read there
+# even when the sensors lag (delays of a few ms); one PWM period of paper 000's valve keeps the grid on its periods.
+START_LEAD = 0.02
+
+
+def _start_estimate(rec, offset, window=0.02):
+    """A run logged mid-way: its start (pressure, position, velocity) `START_LEAD` before its first sample, from the
+    first `window` seconds of data (the median pressure less the rest offset, a straight line through the
+    position)."""
+    keep = rec.t <= rec.t[0] + window
+    p = float(np.median(rec["pressure"][keep])) - offset
+    out = {"pressure": p}
+    if "position" in rec.channels and np.ptp(rec["position"]) > 0:
+        slope, intercept = np.polyfit(rec.t[keep] - rec.t[0], rec["position"][keep], 1)
+        out.update(position=float(intercept - slope * START_LEAD), velocity=float(slope))
     return out
 
 
-def load_bench(directory, model, *, rate=None, kinds=FITTED_KINDS, fitted_keys=None, substeps=16):
-    """Experiments of a bench directory for `pamjax.fit(model, bench.experiments, bench.free)`.
+def load_bench(directory, model, *, rate=None, kinds=FITTED_KINDS, fitted_keys=None, substeps=16, nuisance=False,
+               atmosphere=None, position_offset=0.0):
+    """Experiments of a bench directory for `pamjax.fit(bench.model, bench.experiments, bench.free)`.
 
     **Arguments:**
 
-    - `directory`: a folder with `meta.json` and one `<name>.npz` per experiment.
-    - `model`: the system to be fitted (e.g. `pamjax.presets.mas10_system(valve="pwm", friction="karnopp")`); its
+    - `directory`: a folder with `meta.json` and one recording per experiment (`<name>.npz`, `.csv` or `.mat`).
+    - `model`: the plant to be fitted (e.g. `pamjax.presets.mas10_system(valve="pwm", friction="karnopp")`); its
       atmospheric and supply pressures set the tank tests' initial pressures (`p0` "p_atm" / "p_s").
     - `rate`: decimate the recordings to this rate [Hz] (`Recording.resampled`: recorded samples, no filter);
       None keeps them as recorded.
-    - `kinds`: the experiment kinds to fit (default: tank charge/discharge and the muscle's triangle runs; the
-      closed-loop `muscle_PI` runs are left out: pamjax's PWM grid reads a planned duty, not a controller's).
+    - `kinds`: the experiment kinds to fit (default: tank charge/discharge and the muscle runs; the closed-loop
+      `muscle_PI` runs are left out: pamjax's PWM grid reads a planned duty, not a controller's).
     - `fitted_keys`: bench parameter names to free (default: meta.json's `fitted_keys`).
     - `substeps`: RK4 nodes per PWM period of the fixed grid.
+    - `nuisance`: False (default: ideal sensors, nominal supply, every run at rest unless meta.json gives its start),
+      True (free the nuisances of a real rig that its recordings determine: the pressure sensor's offset and gain
+      and the acquisition delay, shared by all runs; each run's supply pressure; the start state of runs whose
+      `init` is "unknown…"), or a list of names from `BENCH_NUISANCES` ("position_offset" too: only where a run
+      reaches a stop of known position, see `DEFAULT_BENCH_NUISANCES`). The fit's model is then `bench.model`, a
+      `pamjax.Rig`.
+    - `position_offset`: the position sensor's offset [m] as calibrated (what it reads at x = 0; default 0), held
+      unless "position_offset" is freed.
+    - `atmosphere`: the ambient pressure [Pa abs] that gauge readings (`barg`, `kPa gauge`) are referred to;
+      default meta.json's `atmosphere_Pa`, else the model's atmospheric pressure.
 
-    **Returns:** a `Bench`.
+    **Returns:** a `Bench`. **Raises:** `PamjaxInputError` naming the experiment, file and key for every mistake in
+    the directory (missing or duplicated recordings, unreadable meta.json, units, NaN, time order, a duty outside
+    [0, 1], meta.json contradicting a recording), before anything is fitted.
     """
-    directory, meta = _read_meta(directory)
+    directory, meta = read_meta(directory)
+    where = f"bench {directory}"
     keys = list(meta.get("fitted_keys", [])) if fitted_keys is None else list(fitted_keys)
     if not keys:
-        raise PamjaxInputError("no parameters to fit: meta.json has no fitted_keys and none were given")
+        raise PamjaxInputError(f"{where}: no parameters to fit: meta.json has no fitted_keys and none were given")
     free = _free_paths(keys)
+    names = _nuisance_names(nuisance)
+    unknown_kinds = [k for k in kinds if k not in FITTED_KINDS]
+    if unknown_kinds:
+        raise PamjaxInputError(f"kinds {unknown_kinds} are not experiment kinds pamjax fits; valid: "
+                               f"{list(FITTED_KINDS)}")
     p_atm = float(model.air.atmospheric_pressure)
-    p_supply = float(getattr(model.valve, "supply_pressure", np.nan))
-    specs, skipped, recordings = [], {}, []
+    if atmosphere is None:
+        atmosphere = number(meta, "atmosphere_Pa", f"{where}/meta.json", 5e4, 1.2e5, "Pa abs") or p_atm
+    valve = model.valve
+    period = None if valve.period is None else float(valve.period)
+    specs, skipped, recordings, notes, unknown = [], {}, [], [], []
     for name, e in meta["experiments"].items():
         kind = e.get("kind")
         if kind not in kinds:
             skipped[name] = f"kind {kind!r} not fitted (kinds={list(kinds)})"
             continue
-        path = directory / f"{name}.npz"
-        if not path.exists():
-            raise PamjaxInputError(f"bench {directory}: experiment {name!r} has no recording {path.name}")
-        rec = Recording.load(path, name=name)
+        rec = load_recording(recording_file(directory, name), name, meta, atmosphere)
+        if kind in MUSCLE_KINDS and "pressure" not in rec.channels and "position" not in rec.channels:
+            raise PamjaxInputError(f"{where}: {name!r} records neither pressure nor position (columns: "
+                                   f"{sorted(rec.channels)})")
+        if kind in TANK_KINDS and "pressure" not in rec.channels:
+            raise PamjaxInputError(f"{where}: tank test {name!r} has no pressure column (columns: "
+                                   f"{sorted(rec.channels)})")
+        start_unknown = str(e.get("init", "")).strip().lower().startswith("unknown")
+        if start_unknown:
+            unknown.append(name)
+        signal = run_command(name, kind, e, rec, period, f"{where}/meta.json: experiment {name!r}", notes,
+                             start_unknown)
         if rate is not None:
             rec = rec.resampled(rate)
         recordings.append(rec)
-        specs.append((name, kind, e, rec))
-    noise = _noise_levels(meta, recordings)
+        specs.append((name, kind, e, rec, signal))
+    noise = noise_levels(meta, recordings, f"{where}/meta.json")
     experiments = []
-    for name, kind, e, rec in specs:
-        if kind in ("tank_charge", "tank_discharge"):
-            p0 = {"p_atm": p_atm, "p_s": p_supply}.get(e.get("p0"), e.get("p0"))
+    for name, kind, e, rec, signal in specs:
+        if kind in TANK_KINDS:
+            volume = number(e, "V_tank", f"{where}/meta.json: {name}", 0.0, None, "m^3")
+            if volume is None or volume <= 0:
+                raise PamjaxInputError(f"{where}/meta.json: tank test {name!r} needs V_tank, its volume > 0 [m^3]")
+            p0 = e.get("p0", "p_atm" if kind == "tank_charge" else "p_s")
+            if p0 == "p_s":
+                p0 = "supply"  # the run's own supply pressure (its nuisance, when fitted)
+            elif p0 == "p_atm":
+                p0 = p_atm
+            elif not isinstance(p0, (int, float)):
+                raise PamjaxInputError(f"{where}/meta.json: {name!r} p0 must be 'p_atm', 'p_s' or a pressure [Pa abs], "
+                                       f"got {p0!r}")
             experiments.append(Experiment(
-                rec, Constant(float(e["u"])), channels=["pressure"], scales={"pressure": noise["pressure"]},
-                build=TankFromModel(float(e["V_tank"])), initial={"pressure": float(p0)}, name=name,
-                substeps=substeps))
-        else:  # muscle_triangle: from rest at equilibrium, valve off, stuck (the model's default initial state)
-            experiments.append(Experiment(
-                rec, Triangle(float(e["lo"]), float(e["hi"]), float(e["f_tri"])), channels=["pressure", "position"],
-                scales={c: noise[c] for c in ("pressure", "position")}, name=name, substeps=substeps))
+                rec, signal, channels=["pressure"], scales={"pressure": noise["pressure"]},
+                build=TankFromModel(volume), initial={"pressure": p0}, name=name, substeps=substeps))
+        else:  # from rest at equilibrium, valve off, stuck (the model's default initial state) unless unknown
+            channels = [c for c in ("pressure", "position") if c in rec.channels and np.ptp(rec[c]) > 0]
+            missing = [c for c in channels if c not in noise]
+            if missing:
+                raise PamjaxInputError(f"{where}/meta.json: no noise level for {missing} (give 'noise')")
+            lead = START_LEAD if name in unknown and "start" in names else 0.0  # solved from before the log
+            experiments.append(Experiment(rec, signal, channels=channels, scales={c: noise[c] for c in channels},
+                                          name=name, substeps=substeps, t0=rec.t[0] - lead))
     if not experiments:
-        raise PamjaxInputError(f"bench {directory}: no experiment of the kinds {list(kinds)}")
-    return Bench(experiments, free, keys, noise, skipped, meta, directory, rate)
+        raise PamjaxInputError(f"{where}: no experiment of the kinds {list(kinds)}")
+    bench = Bench(experiments, free, keys, noise, skipped, meta, directory, rate, model=model, notes=notes,
+                  unknown_starts=unknown)
+    if unknown and "start" not in names:
+        notes.append(f"{', '.join(unknown)}: start state unknown (meta.json init); fitted as if at rest unless the "
+                     "start is freed (nuisance=True / --nuisance)")
+    if not (isinstance(position_offset, (int, float)) and np.isfinite(position_offset) and
+            abs(position_offset) < 0.1):
+        raise PamjaxInputError(f"position_offset must be the position sensor's calibrated offset in m (|x| < 0.1 m), "
+                               f"got {position_offset!r}")
+    if names or position_offset:
+        _with_nuisance(bench, specs, names, p_atm, float(position_offset))
+    return bench
+
+
+def _with_nuisance(bench, specs, names, p_atm, position_offset):
+    """`bench` with its model a `Rig` (start values from the data: no solve, nothing of the truth) and the nuisance
+    paths appended to `free`."""
+    plant = bench.model
+    valve = plant.valve
+    period = None if valve.period is None else float(valve.period)
+    compared = {c for e in bench.experiments for c in e.channels}
+    # Pressure offset: where a run starts at rest at atmospheric pressure, the samples before its valve first opens.
+    rest = []
+    for (name, kind, e, rec, signal), exp in zip(specs, bench.experiments):
+        starts_atm = (kind == "tank_charge" and not exp.start_at_supply and
+                      abs(float(exp.initial.get("pressure", p_atm)) - p_atm) < 1.0) or \
+                     (kind in MUSCLE_KINDS and name not in bench.unknown_starts)
+        if starts_atm and "pressure" in rec.channels:
+            rest.append(rec["pressure"][_rest_samples(rec, signal, valve, period)] - p_atm)
+    rest = np.concatenate(rest) if rest else np.zeros(0)
+    offset = float(np.median(rest)) if rest.size >= 3 else 0.0
+    sensors = Sensors(pressure_offset=offset if "pressure_offset" in names else 0.0, position_offset=position_offset)
+    stops = [name for name, kind, _, rec, _ in specs
+             if kind in MUSCLE_KINDS and _rests_on_stop(rec, plant, bench.noise)]
+    if stops and "position_offset" in names:
+        bench.notes.append(f"{', '.join(stops)}: the payload rests on a stroke limit of known position: the position "
+                           "sensor's offset is fitted")
+    elif stops and names == set(DEFAULT_BENCH_NUISANCES):  # nuisance=True: free it where the data determine it
+        names = names | {"position_offset"}
+        bench.notes.append(f"{', '.join(stops)}: the payload rests on a stroke limit of known position, which fixes "
+                           "the position sensor's offset: fitted")
+    free = []
+    group = f"sensors[{DEFAULT_GROUP}]"
+    for field, needs in (("pressure_offset", "pressure"), ("pressure_gain", "pressure"),
+                         ("position_offset", "position"), ("delay", None)):
+        if field in names and (needs is None or needs in compared):
+            free.append(f"{group}.{field}")
+    runs = {}
+    has_supply = _has_supply(valve)
+    for (name, kind, e, rec, _), exp in zip(specs, bench.experiments):
+        supply = start = None
+        if "supply_pressure" in names and has_supply:
+            supply = float(valve.supply())
+            if exp.start_at_supply and "pressure" in rec.channels:  # a discharge from supply: its first samples
+                supply = float(np.median(rec["pressure"][:5])) - offset
+            free.append(f"runs[{name}].supply_pressure")
+        if "start" in names and name in bench.unknown_starts:
+            estimate = _start_estimate(rec, offset)
+            start = StartState(**estimate)
+            free += [f"runs[{name}].start.{k}" for k in estimate]
+            bench.notes.append(f"{name}: start state fitted (meta.json init unknown), from "
+                               + ", ".join(f"{k} {v:.4g}" for k, v in estimate.items()) + " (first 20 ms of data)")
+        if supply is not None or start is not None:
+            runs[name] = RunConditions(supply_pressure=supply, start=start)
+    bench.model = Rig(plant, sensors={DEFAULT_GROUP: sensors}, runs=runs)
+    bench.free = [f"plant.{p}" for p in bench.free] + free
+    bench.nuisance = free
+
+
+# A muscle run rests on a stroke limit where its recorded position stays this close to the plant's limit for at
+# least STOP_SECONDS: the stop's position is a plant parameter, so the offset of the position sensor shows there
+# (elsewhere a shift of the origin is absorbed by the force and volume laws: BENCH_NUISANCES' note).
+STOP_NEAR, STOP_SECONDS = 1e-3, 0.2  # m, s
+
+
+def _rests_on_stop(rec, plant, noise):
+    """Whether a muscle run's recorded position rests on a stroke limit (the plant's `min_position` /
+    `max_position`): flat (within 3 noise standard deviations + 0.05 mm) within `STOP_NEAR` of it for
+    `STOP_SECONDS`."""
+    if "position" not in rec.channels or "position" not in noise:
+        return False
+    x, dt = rec["position"], float(np.median(np.diff(rec.t)))
+    for stop in (float(plant.muscle.min_position), float(plant.muscle.max_position)):
+        near = np.abs(x - stop) < STOP_NEAR
+        if np.count_nonzero(near) * dt >= STOP_SECONDS and np.std(x[near]) < 3 * noise["position"] + 5e-5:
+            return True
+    return False
+
+
+def _has_supply(valve):
+    try:
+        valve.supply()
+    except PamjaxInputError:
+        return False
+    return True
 
 
 def bench_values(result, keys):
-    """A fit result's values and standard errors by bench name: ({key: value}, {key: std err}) [SI units]."""
+    """A fit result's values and standard errors by bench name: ({key: value}, {key: std err}) [SI units]. The
+    plant's labels are matched with or without a `Rig`'s `plant.` prefix."""
     label_index = {label: i for i, label in enumerate(result.labels)}
     values, errors = {}, {}
     for k in keys:
         label = BENCH_PARAMETERS[k][1]
-        if label in label_index:
-            i = label_index[label]
+        i = label_index.get(label, label_index.get(f"plant.{label}"))
+        if i is not None:
             values[k], errors[k] = float(result.values[i]), float(result.standard_errors[i])
     return values, errors
+
+
+def bench_nuisance(result, bench):
+    """A fit's nuisances in the bench's terms (SI units): `delay_s`, `pressure_offset_Pa` (added to the gauge
+    pressure), `pressure_gain` (multiplies it), `position_offset_m`, `supply_pressure_Pa` (run → value), `start` (run
+    → pressure_Pa, position_m, velocity_m_s), each fitted one's standard error under `std_err` (same keys), and
+    `held` (those not fitted, with their value and why)."""
+    report = nuisance_report(result)
+    sensors = report["sensors"].get(DEFAULT_GROUP, {})
+    base = bench.model.sensors[DEFAULT_GROUP] if isinstance(bench.model, Rig) else Sensors()
+    out, se, held = {}, {}, {}
+    for field, key in (("delay", "delay_s"), ("pressure_offset", "pressure_offset_Pa"),
+                       ("pressure_gain", "pressure_gain"), ("position_offset", "position_offset_m")):
+        if field in sensors:
+            out[key], se[key] = sensors[field]
+        else:
+            out[key] = float(getattr(base, field))
+            held[key] = ("not identifiable from a rig's runs (a shift of the position origin is absorbed exactly by "
+                         "F_max, k0 and v0); held at the calibration given" if field == "position_offset" else
+                         "not fitted (nuisance not freed)")
+    supply, supply_se, start, start_se = {}, {}, {}, {}
+    units = {"pressure": "pressure_Pa", "position": "position_m", "velocity": "velocity_m_s"}
+    for run, fields in report["runs"].items():
+        for name, (value, err) in fields.items():
+            if name == "supply_pressure":
+                supply[run], supply_se[run] = value, err
+            elif name.startswith("start."):
+                key = units[name.split(".", 1)[1]]
+                start.setdefault(run, {})[key] = value
+                start_se.setdefault(run, {})[key] = err
+    out.update(supply_pressure_Pa=supply, start=start)
+    se.update(supply_pressure_Pa=supply_se, start=start_se)
+    out["std_err"], out["held"] = se, held
+    return out
+
+
+def nuisance_table(nuisance):
+    """Text table of `bench_nuisance`'s report: each nuisance, its value ± standard error (or 'held')."""
+    se, rows = nuisance["std_err"], []
+    for key in ("delay_s", "pressure_offset_Pa", "pressure_gain", "position_offset_m"):
+        v = nuisance[key]
+        rows.append(f"  {key:<22}{v:>14.6g}  " + (f"± {se[key]:.3g}" if key in se else "held: "
+                                                   + nuisance["held"].get(key, "")))
+    for run, v in nuisance["supply_pressure_Pa"].items():
+        rows.append(f"  {'supply_pressure_Pa':<22}{v:>14.6g}  ± {se['supply_pressure_Pa'][run]:.3g}  ({run})")
+    for run, fields in nuisance["start"].items():
+        for key, v in fields.items():
+            rows.append(f"  {'start ' + key:<22}{v:>14.6g}  ± {se['start'][run][key]:.3g}  ({run})")
+    return "\n".join(rows)
 
 
 def bench_rmse(result):

@@ -28,6 +28,7 @@ from .._solve.synchronous import num_periods
 from .._systems.base import AbstractSystem
 from .._systems.tank import TankSystem
 from .recording import Recording, warn_filtered
+from .rig import DEFAULT_GROUP, split
 
 
 class AbstractExperiment(eqx.Module):
@@ -38,6 +39,7 @@ class AbstractExperiment(eqx.Module):
     - `name`: unique among a fit's experiments; `channels`: the compared channels, in residual order.
     - `check(model)`, `predict(model)`, `layout()`, `residuals_of(pred, part)` (abstract, below).
     - `bind(model)`: the experiment ready for tracing with `model` (e.g. its fixed grid sized); itself by default.
+    - `sees(model)`: the parameter paths its predictions depend on (None, the default: all).
     - `batch_key(model)`: experiments with equal keys are integrated in one compiled loop (`predict_all`); None (the
       default): predicted on its own.
     - `residuals(model, part)`: `residuals_of(predict(model), part)`.
@@ -69,6 +71,12 @@ class AbstractExperiment(eqx.Module):
         return self
 
     def batch_key(self, model):
+        return None
+
+    def sees(self, model):
+        """The parameter paths of `model` (as `pamjax.parameter_paths` names them) that this experiment's predictions
+        depend on, from the model's structure; None (the default): all of them. `staged_start` chooses its stages
+        from this."""
         return None
 
     def residuals(self, model, part="identification"):
@@ -143,6 +151,9 @@ class Experiment(AbstractExperiment):
       experiment is first used with.
     - `validation_fraction`: the last fraction of the samples kept out of the fit (paper 001: 0.4), reported as
       validation error.
+    - `sensors`: the sensor group whose `pamjax.Sensors` read this experiment when it is predicted from a
+      `pamjax.Rig` (default "rig": one set of sensors for the whole rig); its run conditions are the rig's
+      `runs[name]`. `initial={"pressure": "supply"}` starts a tank at its run's supply pressure.
     """
 
     times: jax.Array
@@ -167,6 +178,8 @@ class Experiment(AbstractExperiment):
     host_times: "_Constant" = eqx.field(static=True)  # the times as a NumPy array (`predict`)
     num_periods: int | None = eqx.field(static=True)
     lowpass_hz: float | None = eqx.field(static=True)  # the recording's low-pass cut-off, if it was filtered
+    sensor_group: str = eqx.field(static=True)  # which `Sensors` of a `Rig` read this experiment
+    start_at_supply: bool = eqx.field(static=True)  # initial pressure = the run's supply pressure
 
     def __init__(
         self,
@@ -190,6 +203,7 @@ class Experiment(AbstractExperiment):
         validation_fraction=0.0,
         stepping="auto",
         substeps=16,
+        sensors=DEFAULT_GROUP,
     ):
         if not isinstance(recording, Recording):
             raise PamjaxInputError(f"recording must be a pamjax.Recording, got {type(recording)}")
@@ -221,7 +235,17 @@ class Experiment(AbstractExperiment):
         self.weights = {c: device_array(recording.mask[c] / self.scales[c]) for c in channels}
         self.signal = signal
         self.build = SameSystem() if build is None else build
-        self.initial = {k: device_array(v, dtype=float) for k, v in (initial or {}).items()}
+        initial = dict(initial or {})
+        self.start_at_supply = isinstance(initial.get("pressure"), str)
+        if self.start_at_supply:
+            if initial["pressure"] != "supply":
+                raise PamjaxInputError(f"experiment {name!r}: initial pressure must be a number [Pa abs] or "
+                                       f"'supply', got {initial['pressure']!r}")
+            del initial["pressure"]
+        self.initial = {k: device_array(v, dtype=float) for k, v in initial.items()}
+        if not isinstance(sensors, str) or not sensors:
+            raise PamjaxInputError(f"experiment {name!r}: sensors must be a sensor group name (str), got {sensors!r}")
+        self.sensor_group = sensors
         self.t0 = device_array(t[0] if t0 is None else t0, dtype=float)
         self.split_time = device_array(t[0] + (1.0 - float(validation_fraction)) * (t[-1] - t[0]) + 1e-12,
                                        dtype=float)
@@ -237,6 +261,59 @@ class Experiment(AbstractExperiment):
         self.span = (float(self.t0), float(t[-1]))
         self.host_times = _Constant(np.asarray(t, dtype=float))
         self.num_periods = None
+
+    # -- the plant under this run's conditions, read through its sensors (a `Rig`; a plain plant: ideal) ---------
+    def system_for(self, model):
+        """The system this experiment simulates: `build` of the plant, fed at the run's supply pressure."""
+        plant, _, run = split(model, self.name, self.sensor_group)
+        system = self.build(plant)
+        if run is not None and run.supply_pressure is not None:
+            system = system.with_supply_pressure(run.supply_pressure)
+        return system
+
+    def start_for(self, system, model):
+        """The start state: the experiment's `initial` (at the supply pressure if it says so), with the run's
+        `StartState` where the rig gives one."""
+        _, _, run = split(model, self.name, self.sensor_group)
+        initial = dict(self.initial)
+        if self.start_at_supply:
+            initial["pressure"] = system.valve.supply()
+        if run is not None and run.start is not None:
+            initial.update(run.start.keywords())
+        return system.initial_state(**initial)
+
+    def sample_times(self, model):
+        """Where the model is read: the recording's times less the sensors' delay, within the run."""
+        _, sensors, _ = split(model, self.name, self.sensor_group)
+        if sensors is None:
+            return self.times
+        return jnp.clip(self.times - sensors.delay, self.t0, self.times[-1])
+
+    def observe(self, model, channels):
+        """The measured channels from the model's (the sensors' offsets and gain; see `pamjax.Sensors`)."""
+        plant, sensors, _ = split(model, self.name, self.sensor_group)
+        if sensors is None:
+            return channels
+        atmosphere = plant.air.atmospheric_pressure
+        return {c: sensors.observe(c, v, atmosphere) for c, v in channels.items()}
+
+    def sees(self, model):
+        """The model's parameter paths this experiment depends on: those of the system `build` makes of the plant
+        (prefixed `plant.` in a `Rig`), its sensor group's fields that act on its channels, and its own run's
+        conditions."""
+        from .parameters import parameter_paths
+
+        plant, sensors, run = split(model, self.name, self.sensor_group)
+        system = parameter_paths(self.build(plant))
+        if plant is model:
+            return set(system)
+        paths = {f"plant.{p}" for p in system}
+        if sensors is not None:
+            fields = {"delay"} | {f for c in self.channels for f in sensors.channel_parameters(c)}
+            paths |= {f"sensors[{self.sensor_group}].{f}" for f in fields}
+        if run is not None:
+            paths |= {f"runs[{self.name}].{p}" for p in parameter_paths(run)}
+        return paths
 
     def _stepping(self, system):
         """The stepping of this experiment's solve. "auto": the PWM-synchronous grid for a switching valve (smooth,
@@ -260,7 +337,7 @@ class Experiment(AbstractExperiment):
     def bind(self, model):
         """This experiment with its fixed grid sized for `model` (concrete): the number of PWM periods (or grid
         steps) covering the recording. A no-op for adaptive stepping or when already sized."""
-        system = self.build(model)
+        system = self.system_for(model)
         stepping = self._stepping(system)
         if self.num_periods is not None or stepping == "adaptive":
             return self
@@ -270,13 +347,15 @@ class Experiment(AbstractExperiment):
 
     def check(self, model):
         """Concrete validation (signal range, times, initial state) before any traced solve."""
-        system = self.build(model)
+        plant, _, _ = split(model, self.name, self.sensor_group)
+        system = self.build(plant)
         if not isinstance(system, AbstractSystem):
             raise PamjaxInputError(
                 f"experiment {self.name!r}: build(model) must give a pamjax system, got {type(system)}"
             )
+        system = self.system_for(model)
         try:  # traced, not run: the start state is computed inside the compiled solve
-            y0 = jax.eval_shape(lambda s: s.initial_state(**self.initial), system)
+            y0 = jax.eval_shape(lambda s: self.start_for(s, model), system)
         except TypeError as err:
             raise PamjaxInputError(
                 f"experiment {self.name!r}: bad `initial` keys {sorted(self.initial)}: {err}"
@@ -302,20 +381,21 @@ class Experiment(AbstractExperiment):
 
     def predict(self, model):
         """Model channels at the recording's times (traceable): dict channel → array."""
-        system = self.build(model)
-        y0 = system.initial_state(**self.initial)
+        system = self.system_for(model)
+        y0 = self.start_for(system, model)
         stepping = self._stepping(system)
+        times = self.sample_times(model)
         if stepping != "adaptive":
-            traj = solve(system, self.signal, self.times, y0, self.t0, stepping=stepping, substeps=self.substeps,
+            traj = solve(system, self.signal, times, y0, self.t0, stepping=stepping, substeps=self.substeps,
                          num_periods=self._grid_size(system, stepping))
-            return {c: traj.channel(c) for c in traj.channels()}
+            return self.observe(model, {c: traj.channel(c) for c in traj.channels()})
         # The output times and start as compile-time constants (the recording's own, exactly): diffrax then checks
         # them at trace time instead of with a run-time host callback, and a program with a host callback cannot be
         # kept in JAX's persistent compilation cache.
         traj = solve(
             system,
             self.signal,
-            jnp.asarray(self.host_times.array),
+            jnp.asarray(self.host_times.array) if times is self.times else times,
             y0,
             jnp.asarray(self.span[0]),
             rtol=self.rtol,
@@ -325,7 +405,7 @@ class Experiment(AbstractExperiment):
             adjoint="forward",
             num_periods=self._edge_periods(system),
         )
-        return {c: traj.channel(c) for c in traj.channels()}
+        return self.observe(model, {c: traj.channel(c) for c in traj.channels()})
 
     def _edge_periods(self, system):
         """PWM periods of the recording for a smoothed switching valve (its edges get step boundaries), else None."""
@@ -340,7 +420,7 @@ class Experiment(AbstractExperiment):
     def batch_key(self, model):
         """Experiments with equal keys are integrated in one compiled loop (`predict_all`): fixed-grid stepping of
         systems of one structure. None: solved on its own (adaptive stepping)."""
-        system = self.build(model)
+        system = self.system_for(model)
         stepping = self._stepping(system)
         if stepping == "adaptive":
             return None

@@ -29,6 +29,7 @@ from .problem import (  # noqa: F401 - _residuals_and_jacobian: design's, and th
     _residuals,
     _residuals_and_jacobian,
 )
+from .rig_hints import nuisance_hints
 
 
 @dataclasses.dataclass
@@ -46,6 +47,9 @@ class FitResult:
     - `mismatch`: True when some channel's residuals are not noise (the standard errors then understate the
       uncertainty; the note is in `warnings`).
     - `non_identifiable`: lists of labels whose combination the data do not fix; `warnings`.
+    - `diagnosis`: where `mismatch` is flagged, what the residuals point to among a real rig's nuisances (an offset
+      at rest, an acquisition lag, a start not at rest, per-run supply pressures; `pamjax._fit.rig_hints`), each with
+      the option that frees it.
     - `history`: per iteration [step, cost at the current point, damping λ, accepted].
     - `fit_s`, `compile_s`: wall time of the fit without compilation, and the compilation (each compiled
       function's first call less its median later call).
@@ -75,6 +79,7 @@ class FitResult:
     fit_s: float
     compile_s: float
     num_residuals: int
+    diagnosis: list = dataclasses.field(default_factory=list)  # what a mismatch's residuals point to (rig_hints)
     model: object = dataclasses.field(default=None, repr=False, compare=False)
     predictions: dict = dataclasses.field(default=None, repr=False, compare=False)
     experiments: object = dataclasses.field(default=None, repr=False, compare=False)  # as fitted (pamjax.profile)
@@ -399,8 +404,10 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
     r_all = problem.all_residuals(theta)
     errors = channel_errors(exps, r_all)
     flagged, note = mismatch(errors)
+    predicted = _predictions_from(exps, r_all)
+    diagnosis = nuisance_hints(fitted, exps, predicted, labels) if flagged else []
     if flagged:
-        msgs.append(note)
+        msgs.append(note + ("; the residuals point to " + "; ".join(diagnosis) if diagnosis else ""))
     res = FitResult(
         labels=labels,
         paths=[e if isinstance(e, str) else {k: (list(v) if isinstance(v, tuple) else v) for k, v in e.items()}
@@ -424,8 +431,9 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
         fit_s=0.0,
         compile_s=0.0,
         num_residuals=used,
+        diagnosis=diagnosis,
         model=fitted,
-        predictions=_predictions_from(exps, r_all),
+        predictions=predicted,
         experiments=exps,
     )
     if math.isnan(res.cost):

@@ -18,7 +18,6 @@ hand-edited value is checked as if typed in Python.
 import dataclasses
 import datetime
 import functools
-import inspect
 import json
 import math
 import pathlib
@@ -31,6 +30,7 @@ import numpy as np
 
 from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError, require_float64
+from .._core.fitting import field_units
 from .._core.metadata import version
 from .._core.units import check_setting, parameter_to_si
 from .._physics.signals import AbstractSignal
@@ -38,11 +38,10 @@ from .._solve.checks import batched_parameters, describe_batched
 
 FORMAT = "pamjax-model"
 FORMAT_VERSION = 1
-_FIELD_COMMENT = re.compile(r"^\s+(\w+)\s*:[^#]*#\s*(.+?)\s*$")
 # A stored dtype other than float64 must hold the value written to float32's precision at least (2⁻²⁴ relative): a
 # float32 model round-trips exactly, while "int8" (9.6 kg → 9 kg) or float16 (101325 Pa → inf) are refused.
 _DTYPE_RTOL = 2.0**-24
-# Units of fields whose declaration carries no unit comment (the docstring gives it).
+# Units of fields declared without one in their metadata (the docstring gives it).
 _UNIT_FALLBACK = {"velocity_width": "m/s"}
 
 
@@ -69,44 +68,9 @@ def _class_name(cls):
 
 @functools.cache
 def _units_of(cls):
-    """field → unit, from the trailing comments of the class body (`supply_pressure: ... = ...  # Pa abs`)."""
-    units = {}
-    for klass in reversed(cls.__mro__):
-        if not (isinstance(klass, type) and issubclass(klass, eqx.Module)) or klass is eqx.Module:
-            continue
-        for line in _class_lines(klass):
-            m = _FIELD_COMMENT.match(line)
-            if m:
-                units[m.group(1)] = re.split(r",\s|;\s|\s\(", m.group(2))[0]
-    return units
-
-
-def _class_lines(klass):
-    """The source lines of a class body: read from its module's file (`linecache`) from its `class` line to the next
-    top-level statement, which costs a fraction of `inspect.getsource`'s parse of the whole module (~10 ms a class,
-    paid by every model file read); `inspect.getsource` for a class not defined at a module's top level."""
-    import linecache
-
-    try:
-        filename = inspect.getsourcefile(klass)
-    except TypeError:
-        filename = None
-    lines = linecache.getlines(filename) if filename else []
-    if "." in klass.__qualname__ or not lines:
-        try:
-            return inspect.getsource(klass).splitlines()
-        except (OSError, TypeError):
-            return []
-    header = re.compile(rf"^class {re.escape(klass.__name__)}\b")
-    for k, line in enumerate(lines):
-        if header.match(line):
-            body = []
-            for line in lines[k + 1:]:
-                if line.strip() and not line[0].isspace() and not line.startswith("#"):
-                    break
-                body.append(line.rstrip("\n"))
-            return body
-    return []
+    """field → unit of a component class, from its fields' metadata (`positive(16.0, unit="N")`,
+    `parameter(..., unit=...)`, ... of `pamjax._core.fitting`): declared with the field, never read from source."""
+    return field_units(cls) if dataclasses.is_dataclass(cls) else {}
 
 
 def _to_json_value(a):

@@ -24,31 +24,78 @@ class PamjaxIdentifiabilityWarning(UserWarning):
     """Some free parameters (or combinations of them) are not determined by the data."""
 
 
-_TOKEN = re.compile(r"^([A-Za-z_]\w*)((?:\[\d+(?:,\s*\d+)*\])?)$")
+class Key(str):
+    """A step of a parameter path into a dict (an experiment's run conditions: `runs[E1_u0.25].supply_pressure`)."""
+
+    __slots__ = ()
+
+
+_SEGMENT = re.compile(r"\s*([A-Za-z_]\w*)\s*((?:\[[^\]]*\]\s*)*)")
+_BRACKET = re.compile(r"\[([^\]]*)\]")
+_INDEX = re.compile(r"^\s*\d+(?:\s*,\s*\d+)*\s*$")
 
 
 def _parse(path):
-    parts = path.split(".")
-    attrs, index = [], None
-    for i, part in enumerate(parts):
-        m = _TOKEN.match(part.strip())
-        if m is None or (m.group(2) and i != len(parts) - 1):
-            raise PamjaxInputError(f"parameter path {path!r} is malformed (expected e.g. 'valve.inflate.area' or "
-                                   "'muscle.force_law.max_force_coefficients[2]')")
-        attrs.append(m.group(1))
-        if m.group(2):
-            index = tuple(int(k) for k in m.group(2)[1:-1].split(","))
-    return attrs, index
+    """(steps, index) of a parameter path: steps are attribute names (str) and dict keys (`Key`, written
+    `name[key]`, the key optionally quoted, which it must be when it looks like a number); `index` is a final array
+    index such as `[2]` or `[1,0]` (None when the path names the whole leaf)."""
+    malformed = PamjaxInputError(f"parameter path {path!r} is malformed (expected e.g. 'valve.inflate.area', "
+                                 "'muscle.force_law.max_force_coefficients[2]' or 'runs[E4].supply_pressure')")
+    if not isinstance(path, str):
+        raise PamjaxInputError(f"a parameter path must be a string, got {path!r}")
+    steps, index, pos = [], None, 0
+    while True:
+        m = _SEGMENT.match(path, pos)
+        if m is None or index is not None:
+            raise malformed
+        steps.append(m.group(1))
+        brackets = _BRACKET.findall(m.group(2))
+        for j, inner in enumerate(brackets):
+            if _INDEX.match(inner):  # an array index: the path's last element
+                if j != len(brackets) - 1:
+                    raise malformed
+                index = tuple(int(k) for k in inner.split(","))
+            else:
+                key = inner.strip()
+                if len(key) >= 2 and key[0] == key[-1] and key[0] in "'\"":
+                    key = key[1:-1]
+                if not key:
+                    raise malformed
+                steps.append(Key(key))
+        pos = m.end()
+        if pos == len(path):
+            return steps, index
+        if path[pos] != ".":
+            raise malformed
+        pos += 1
+        if index is not None:
+            raise malformed
+
+
+def _key_text(key):
+    return f"['{key}']" if _INDEX.match(key) else f"[{key}]"
+
+
+def join_path(steps):
+    """The path string of parse steps (the inverse of `_parse` without an index)."""
+    out = ""
+    for s in steps:
+        out += _key_text(s) if isinstance(s, Key) else (f".{s}" if out else s)
+    return out
 
 
 def parameter_paths(model, prefix=""):
-    """All array-valued parameter paths of `model` with their shapes, e.g. {'valve.inflate.area': ()}."""
+    """All array-valued parameter paths of `model` with their shapes, e.g. {'valve.inflate.area': ()}; dict fields
+    (a `Rig`'s run conditions) give `name[key].…` paths."""
     out = {}
     if isinstance(model, eqx.Module):
         for f in dataclasses.fields(model):
             if f.metadata.get("static", False):
                 continue
             out.update(parameter_paths(getattr(model, f.name), f"{prefix}{f.name}."))
+    elif isinstance(model, dict):
+        for key, value in model.items():
+            out.update(parameter_paths(value, f"{prefix[:-1]}{_key_text(str(key))}."))
     elif eqx.is_array(model):
         out[prefix[:-1]] = tuple(model.shape)
     return out
@@ -57,7 +104,7 @@ def parameter_paths(model, prefix=""):
 def _getter(attrs):
     def get(m):
         for a in attrs:
-            m = getattr(m, a)
+            m = m[a] if isinstance(a, Key) else getattr(m, a)
         return m
 
     return get
@@ -165,6 +212,8 @@ def _zero_start_scale(full, index):
 def _field_metadata(model, attrs):
     """The metadata of the dataclass field a path ends in (how its component says it is fitted), or {}."""
     owner = _getter(attrs[:-1])(model)
+    if isinstance(attrs[-1], Key):
+        return {}
     fields = dataclasses.fields(owner) if dataclasses.is_dataclass(owner) else ()
     return next((dict(f.metadata) for f in fields if f.name == attrs[-1]), {})
 
@@ -186,7 +235,7 @@ def _entry(entry):
 def _start_value(model, path, attrs, index, valid):
     """(the free entry's start value, the whole leaf) as NumPy arrays; a `PamjaxInputError` for an unknown path or
     an index out of range."""
-    leaf_path = ".".join(attrs)
+    leaf_path = join_path(attrs)
     if leaf_path not in valid:
         raise PamjaxInputError(
             f"unknown parameter {path!r}; the model's parameters are:\n  " + "\n  ".join(sorted(valid))
@@ -224,7 +273,7 @@ def _domain(model, attrs, name, path):
     """The interval (lo, hi) an enclosing component of the path's leaf names `name` (a muscle's `stroke`)."""
     for k in range(len(attrs) - 1, -1, -1):
         owner = _getter(attrs[:k])(model)
-        if name is not None and hasattr(owner, name):
+        if name is not None and isinstance(owner, eqx.Module) and hasattr(owner, name):
             lo, hi = getattr(owner, name)
             return float(lo), float(hi)
     raise PamjaxInputError(f"{path!r}: a 'nodes' transform needs an enclosing component with a {name!r} range; "
@@ -249,6 +298,8 @@ def _make_group(model, entry, valid):
     transform, bounds = _transform(path, value, index, transform, bounds, meta)
     flat = value.reshape(-1)
     scale = np.where(flat != 0, np.abs(flat), _zero_start_scale(full, index))
+    if transform == "linear" and meta.get("scale") is not None:  # a signed quantity with a natural unit (an offset)
+        scale = np.full(flat.shape, float(meta["scale"]))
     if user_scale is not None:
         if transform != "linear":
             raise PamjaxInputError(

@@ -49,16 +49,17 @@ def predictions(model, experiments):
 
 
 def _predict_runs(model, exps, stepping, substeps):
-    systems = [e.build(model) for e in exps]
-    y0s = [s.initial_state(**e.initial) for s, e in zip(systems, exps)]
+    systems = [e.system_for(model) for e in exps]
+    y0s = [e.start_for(s, model) for s, e in zip(systems, exps)]
+    times = [e.sample_times(model) for e in exps]
     flats = [scaled(s, y0) for s, y0 in zip(systems, y0s)]
     sizes = [e._grid_size(s, stepping) for s, e in zip(systems, exps)]
-    runs = solve_runs(systems, [e.signal for e in exps], [e.times for e in exps], [f[0] for f in flats], flats[0][1],
+    runs = solve_runs(systems, [e.signal for e in exps], times, [f[0] for f in flats], flats[0][1],
                       [e.t0 for e in exps], stepping=stepping, substeps=substeps, sizes=sizes)
     preds = []
-    for system, e, (states, num_steps, finite) in zip(systems, exps, runs):
-        traj = fixed_trajectory(system, e.signal, e.times, e.t0, states, num_steps, finite, stepping)
-        preds.append({c: traj.channel(c) for c in traj.channels()})
+    for system, e, ts, (states, num_steps, finite) in zip(systems, exps, times, runs):
+        traj = fixed_trajectory(system, e.signal, ts, e.t0, states, num_steps, finite, stepping)
+        preds.append(e.observe(model, {c: traj.channel(c) for c in traj.channels()}))
     return preds
 
 

@@ -20,7 +20,8 @@ DEFAULT_UNITS = dict(
     pressure="Pa", position="m", velocity="m/s", force="N", mass_flow="kg/s", command="1", volume="m^3"
 )
 # Short names used by bench files (the hybrid reference bench: t, u, p, x) → pamjax channel names.
-BENCH_NAMES = dict(p="pressure", x="position", u="command", v="velocity", F="force", mdot="mass_flow")
+BENCH_NAMES = dict(p="pressure", x="position", u="command", v="velocity", F="force", mdot="mass_flow",
+                   duty="command")
 
 
 def _scipy_signal():
@@ -51,12 +52,18 @@ class Recording:
     - `unit_checks`: True (default) refuses values whose magnitude betrays another unit (positions beyond 1 m:
       millimetres; samples 1 s or more apart: milliseconds; pressures below half an atmosphere: bar, gauge, ...),
       naming the likely unit. False skips these magnitude checks (never the unit conversions).
+    - `atmosphere`: the ambient pressure [Pa abs] that gauge units (`barg`, `kPa gauge`, `psig`) are referred to;
+      default the ISO 2533 standard atmosphere, 101325 Pa.
 
     `mask[name]` is a boolean array, True where the sample is valid. `units` holds the SI unit of each channel.
     """
 
-    def __init__(self, t, channels, units=None, *, mask_nan=False, name="", source=None, unit_checks=True):
+    def __init__(self, t, channels, units=None, *, mask_nan=False, name="", source=None, unit_checks=True,
+                 atmosphere=None):
         self.name = str(name)
+        if atmosphere is not None and not (np.isfinite(atmosphere) and 5e4 <= float(atmosphere) <= 1.2e5):
+            raise PamjaxInputError(f"Recording {self.name!r}: atmosphere must be the ambient pressure in Pa abs "
+                                   f"(50-120 kPa), got {atmosphere!r}")
         units = {} if units is None else dict(units)
         where = str(source) if source is not None else f"Recording {self.name!r}"
         t, _ = to_si("t", units.pop("t", "s"), np.asarray(t, dtype=float), where)
@@ -90,7 +97,7 @@ class Recording:
                 raise PamjaxInputError(
                     f"Recording {self.name!r}: channel {key!r} has shape {v.shape}, expected {t.shape} (same as t)"
                 )
-            v, unit = to_si(key, units.get(key, DEFAULT_UNITS.get(key, "")), v, where)
+            v, unit = to_si(key, units.get(key, DEFAULT_UNITS.get(key, "")), v, where, atmosphere)
             valid = np.isfinite(v)
             if not mask_nan and not np.all(valid):
                 row = int(np.argmin(valid))
@@ -212,7 +219,7 @@ class Recording:
         return path
 
     @classmethod
-    def from_csv(cls, path, *, rename=None, units=None, mask_nan=False, name=None, unit_checks=True):
+    def from_csv(cls, path, *, rename=None, units=None, mask_nan=False, name=None, unit_checks=True, atmosphere=None):
         """Read a CSV with a header row naming the columns, a time column `t` (or `time`) and one column per
         channel; `name [unit]` or `name (unit)` headers give units, converted to SI (`pamjax._core.csvio`, `_units`).
         Commas, semicolons or tabs; quoted headers; a UTF-8 byte-order mark; lines starting with '#' are comments.
@@ -220,10 +227,10 @@ class Recording:
         columns = read_table(path)
         return cls._from_columns(pathlib.Path(path), [(n, v) for n, _, v in columns],
                                  {n: u for n, u, _ in columns if u is not None}, rename, units, mask_nan, name,
-                                 unit_checks)
+                                 unit_checks, atmosphere)
 
     @classmethod
-    def from_npz(cls, path, *, rename=None, units=None, mask_nan=False, name=None, unit_checks=True):
+    def from_npz(cls, path, *, rename=None, units=None, mask_nan=False, name=None, unit_checks=True, atmosphere=None):
         """Read an NPZ with a `t` array and one array per channel (the hybrid bench's short names t, u, p, x are
         renamed to command, pressure, position)."""
         path = pathlib.Path(path)
@@ -234,11 +241,23 @@ class Recording:
             meta = json.loads(str(z["__units__"])) if "__units__" in z.files else {}
         columns = [(k, v) for k, v in columns if v.ndim == 1]  # other arrays are metadata
         return cls._from_columns(
-            path, columns, meta.get("units", {}), rename, units, mask_nan, name or meta.get("name"), unit_checks
+            path, columns, meta.get("units", {}), rename, units, mask_nan, name or meta.get("name"), unit_checks,
+            atmosphere
         )
 
     @classmethod
-    def _from_columns(cls, path, columns, file_units, rename, units, mask_nan, name, unit_checks):
+    def from_mat(cls, path, *, rename=None, units=None, mask_nan=False, name=None, unit_checks=True, atmosphere=None):
+        """Read a MATLAB `.mat` file (Simulink / dSPACE logs): every 1-D numeric variable is a column (a time
+        variable `t` or `time`, channels by name or the bench short names t, u, p, x); MATLAB files carry no units,
+        so `units` (dict name → unit) says what is not SI (e.g. {"p": "barg", "x": "mm"}). v5-v7.2 files through
+        `scipy.io.loadmat`, v7.3 (HDF5) through h5py (`pip install "pamjax[mat]"`)."""
+        path = pathlib.Path(path)
+        if not path.is_file():
+            raise PamjaxInputError(f"recording file {path} does not exist")
+        return cls._from_columns(path, _mat_columns(path), {}, rename, units, mask_nan, name, unit_checks, atmosphere)
+
+    @classmethod
+    def _from_columns(cls, path, columns, file_units, rename, units, mask_nan, name, unit_checks, atmosphere=None):
         """`columns`: list of (name in the file, 1-D array). Bench short names (t, u, p, x, ...) and `rename` map
         file names to channel names; two columns that end up with one name are refused."""
         if rename is not None and not isinstance(rename, dict):
@@ -265,7 +284,8 @@ class Recording:
                 u[new] = file_units[k]
         u.update(units or {})
         t = data.pop("t")
-        return cls(t, data, u, mask_nan=mask_nan, name=name or path.stem, source=path, unit_checks=unit_checks)
+        return cls(t, data, u, mask_nan=mask_nan, name=name or path.stem, source=path, unit_checks=unit_checks,
+                   atmosphere=atmosphere)
 
     @classmethod
     def load(cls, path, **kwargs):
@@ -275,7 +295,39 @@ class Recording:
             return cls.from_npz(path, **kwargs)
         if suffix in (".csv", ".txt"):
             return cls.from_csv(path, **kwargs)
-        raise PamjaxInputError(f"recording file must be .csv or .npz, got {path}")
+        if suffix == ".mat":
+            return cls.from_mat(path, **kwargs)
+        raise PamjaxInputError(f"recording file must be .csv, .npz or .mat, got {path}")
+
+
+def _mat_columns(path):
+    """[(name, 1-D float array)] of a .mat file's 1-D numeric variables (row or column vectors)."""
+    try:
+        import scipy.io
+    except ModuleNotFoundError as err:  # pragma: no cover - depends on the environment
+        raise ModuleNotFoundError('reading .mat recordings needs SciPy: pip install "pamjax[mat]"') from err
+    try:
+        raw = scipy.io.loadmat(str(path), squeeze_me=True)
+    except NotImplementedError:  # MATLAB v7.3: an HDF5 file
+        try:
+            import h5py
+        except ModuleNotFoundError as err:
+            raise PamjaxInputError(f"{path} is a MATLAB v7.3 (HDF5) file: reading it needs h5py "
+                                   '(pip install "pamjax[mat]"), or save it with -v7 in MATLAB') from err
+        with h5py.File(path, "r") as f:
+            raw = {k: np.asarray(f[k]) for k in f.keys() if isinstance(f[k], h5py.Dataset)}
+    except ValueError as err:
+        raise PamjaxInputError(f"{path} is not a MATLAB .mat file scipy can read: {err}") from err
+    columns = []
+    for k, v in raw.items():
+        if k.startswith("__"):
+            continue
+        a = np.asarray(v)
+        if a.dtype.kind in "fiu" and a.ndim in (1, 2) and (a.ndim == 1 or 1 in a.shape) and a.size > 1:
+            columns.append((k, a.reshape(-1).astype(float)))
+    if not columns:
+        raise PamjaxInputError(f"{path} holds no 1-D numeric variable (expected t and one vector per channel)")
+    return columns
 
 
 class PamjaxDataWarning(UserWarning):

@@ -29,7 +29,7 @@ import threading
 import time
 
 from .fit import fit, precompile
-from .parameters import parameter_paths
+from .parameters import _parse, join_path
 
 
 @dataclasses.dataclass
@@ -59,19 +59,27 @@ class StagedStart:
 
 
 def _path(entry):
-    """The parameter path of a `free` entry (a path string, or a dict with `path`), without an index."""
+    """The parameter path of a `free` entry (a path string, or a dict with `path`), without an array index."""
     path = entry if isinstance(entry, str) else entry.get("path") if isinstance(entry, dict) else None
-    return None if path is None else path.split("[")[0]
+    if path is None:
+        return None
+    steps, _ = _parse(path)
+    return join_path(steps)
 
 
 def _seen(experiment, model, entries):
-    """The entries of `free` whose parameter exists in the experiment's system (all of them where the experiment
-    does not say how its system is built from the model)."""
-    build = getattr(experiment, "build", None)
-    if build is None:
+    """The entries of `free` whose parameter this experiment's predictions depend on (`AbstractExperiment.sees`; all
+    of them where the experiment does not say)."""
+    paths = experiment.sees(model)
+    if paths is None:
         return list(entries)
-    paths = parameter_paths(build(model))
     return [e for e in entries if _path(e) in paths]
+
+
+def _is_plant(entry):
+    from .rig import is_nuisance
+
+    return not is_nuisance(_path(entry))
 
 
 class _Background:
@@ -82,12 +90,15 @@ class _Background:
     def __init__(self, problems):
         self.seconds = 0.0
         self.done = [threading.Event() for _ in problems]
+        self.cancelled = threading.Event()
         self.thread = threading.Thread(target=self._run, args=(problems,), daemon=True)
         self.thread.start()
 
     def _run(self, problems):
         try:
             for (model, experiments, free), done in zip(problems, self.done):
+                if self.cancelled.is_set():
+                    break
                 self.seconds += precompile(model, experiments, free)
                 done.set()
         except Exception:  # noqa: BLE001, S110 - raised again by the fit that compiles the problem itself
@@ -100,6 +111,12 @@ class _Background:
         t0 = time.perf_counter()
         self.done[i].wait()
         return time.perf_counter() - t0
+
+    def stop(self):
+        """After an error or Ctrl-C in a stage: compile nothing more, and wait for the compilation under way (XLA
+        compiling in a thread while the interpreter shuts down crashes the process: exit 139 or 134)."""
+        self.cancelled.set()
+        self.thread.join()
 
 
 def staged_start(model, experiments, free, *, max_steps=100, progress=None, background_compile=True):
@@ -115,9 +132,12 @@ def staged_start(model, experiments, free, *, max_steps=100, progress=None, back
     if any(_path(e) is None for e in free):  # an entry this cannot place: no stages, the joint fit as given
         return StagedStart(model, [])
     seen = [_seen(e, model, free) for e in experiments]
-    partial = [i for i, s in enumerate(seen) if len(s) < len(free)]
+    # Stage 1's experiments see part of the plant (a tank test: the valve, no muscle); a rig's nuisances (each run's
+    # own conditions, the sensors) do not decide the stages: every experiment sees only its own run's.
+    plant = [e for e in free if _is_plant(e)]
+    partial = [i for i, s in enumerate(seen) if len([e for e in s if _is_plant(e)]) < len(plant)]
     first = [e for e in free if any(e in seen[i] for i in partial)]
-    if not partial or not first or len(first) == len(free):
+    if not partial or not first or len(first) == len(free) or all(not _is_plant(e) for e in first):
         return StagedStart(model, [])
     stages = []
     exps1 = [experiments[i] for i in partial]
@@ -127,16 +147,20 @@ def staged_start(model, experiments, free, *, max_steps=100, progress=None, back
     # does not depend on the values stage 1 finds); each fit waits for its programs rather than compiling them twice.
     background = _Background(([(model, full, rest)] if full else []) + [(model, experiments, free)]) \
         if background_compile else None
-    # (an error or Ctrl-C in a stage leaves the daemon thread unwaited for: no wait for a compilation nobody needs)
     waited = 0.0
-    res = fit(model, exps1, first, max_steps=max_steps, progress=progress)
-    stages.append(("1", [_path(e) for e in first], [e.name for e in exps1], res))
-    model = res.apply(model)
-    if full:
-        waited += background.wait(0) if background is not None else 0.0
-        res = fit(model, full, rest, max_steps=max_steps, progress=progress)
-        stages.append(("2", [_path(e) for e in rest], [e.name for e in full], res))
+    try:
+        res = fit(model, exps1, first, max_steps=max_steps, progress=progress)
+        stages.append(("1", [_path(e) for e in first], [e.name for e in exps1], res))
         model = res.apply(model)
-    waited += background.wait(-1) if background is not None else 0.0
+        if full:
+            waited += background.wait(0) if background is not None else 0.0
+            res = fit(model, full, rest, max_steps=max_steps, progress=progress)
+            stages.append(("2", [_path(e) for e in rest], [e.name for e in full], res))
+            model = res.apply(model)
+        waited += background.wait(-1) if background is not None else 0.0
+    except BaseException:  # an error or Ctrl-C in a stage: the second thread ends before the error leaves here
+        if background is not None:
+            background.stop()
+        raise
     return StagedStart(model, stages, waited_s=waited,
                        precompile_s=background.seconds if background is not None else 0.0)

@@ -30,7 +30,8 @@ class AbstractFriction(eqx.Module):
         """Whether the friction holds the payload still (a hybrid friction's stuck mode); False for smooth ones."""
         return False
 
-    def initial_state(self):
+    def initial_state(self, velocity=0.0):
+        """The friction's own state at the start of a run moving at `velocity` [m/s] (None: memoryless)."""
         return None
 
     def state_rate(self, v, z):
@@ -55,12 +56,12 @@ class CoulombViscousFriction(AbstractFriction):
     - `velocity_width`: w [m/s]; 1e-3.
     """
 
-    coulomb_force: jax.Array = positive(paper000.COULOMB_FORCE)  # N
-    viscous_coefficient: jax.Array = positive(datasheets.MAS10_VISCOUS_COEFFICIENT)  # N s/m
+    coulomb_force: jax.Array = positive(paper000.COULOMB_FORCE, unit="N")
+    viscous_coefficient: jax.Array = positive(datasheets.MAS10_VISCOUS_COEFFICIENT, unit="N s/m")
     # m/s: a numerical smoothing width (paper 000's eq. 8 has a sharp sign), small against the 10-30 mm/s mean
     # speeds of its triangle runs (~60 mm per half period at 0.08-0.25 Hz); it sets the stiffness F_c/(w M) at rest
     # (docs/performance.md), so it is not made smaller.
-    velocity_width: jax.Array = positive(1e-3)
+    velocity_width: jax.Array = positive(1e-3, unit="m/s")
 
     def __check_init__(self):
         check_nonnegative(self.coulomb_force, "CoulombViscousFriction.coulomb_force")
@@ -85,11 +86,11 @@ class BristleFriction(AbstractFriction):
     C_f [N s/m] (250), `velocity_width` [m/s] smoothing |v| (1e-5).
     """
 
-    coulomb_force: jax.Array = positive(paper000.COULOMB_FORCE)  # N
-    bristle_stiffness: jax.Array = positive(1e5)  # N/m
-    bristle_damping: jax.Array = positive(500.0)  # N s/m
-    viscous_coefficient: jax.Array = positive(datasheets.MAS10_VISCOUS_COEFFICIENT)  # N s/m
-    velocity_width: jax.Array = positive(1e-5)  # m/s
+    coulomb_force: jax.Array = positive(paper000.COULOMB_FORCE, unit="N")
+    bristle_stiffness: jax.Array = positive(1e5, unit="N/m")
+    bristle_damping: jax.Array = positive(500.0, unit="N s/m")
+    viscous_coefficient: jax.Array = positive(datasheets.MAS10_VISCOUS_COEFFICIENT, unit="N s/m")
+    velocity_width: jax.Array = positive(1e-5, unit="m/s")
 
     def __check_init__(self):
         check_positive(self.coulomb_force, "BristleFriction.coulomb_force")
@@ -98,8 +99,8 @@ class BristleFriction(AbstractFriction):
         check_nonnegative(self.viscous_coefficient, "BristleFriction.viscous_coefficient")
         check_positive(self.velocity_width, "BristleFriction.velocity_width")
 
-    def initial_state(self):
-        return jnp.zeros(())
+    def initial_state(self, velocity=0.0):
+        return jnp.zeros(())  # undeflected bristles
 
     def state_rate(self, v, z):
         return v - self.bristle_stiffness * smooth_abs(v, self.velocity_width) * z / self.coulomb_force
@@ -118,9 +119,10 @@ class KarnoppFriction(AbstractFriction):
     |F_net| ≤ F_c, else sliding the other way; stuck → |F_net| reaches F_c, then sliding in the direction of F_net.
     Their times carry derivatives (implicit function theorem), so fits get the exact gradients of the sharp model.
 
-    This is the friction of the hybrid reference bench (`shared/data/*/meta.json`: "exact Karnopp stick-slip"). It
-    needs fixed-grid stepping (`simulate(..., stepping="pwm")` for a switching valve, `stepping="grid"` otherwise),
-    which `stepping="auto"` chooses; an adaptive diffrax solve cannot switch its modes and is refused.
+    This is the friction of the hybrid reference bench (`pamjax/data/hybrid-reference-bench/meta.json`: "exact Karnopp
+    stick-slip"). It needs fixed-grid stepping (`simulate(..., stepping="pwm")` for a switching valve,
+    `stepping="grid"` otherwise), which `stepping="auto"` chooses; an adaptive diffrax solve cannot switch its modes and
+    is refused.
 
     **Arguments:**
 
@@ -128,8 +130,8 @@ class KarnoppFriction(AbstractFriction):
     - `viscous_coefficient`: C_f [N s/m]; 250 (see `pamjax.presets`).
     """
 
-    coulomb_force: jax.Array = positive(paper000.COULOMB_FORCE)  # N
-    viscous_coefficient: jax.Array = positive(datasheets.MAS10_VISCOUS_COEFFICIENT)  # N s/m
+    coulomb_force: jax.Array = positive(paper000.COULOMB_FORCE, unit="N")
+    viscous_coefficient: jax.Array = positive(datasheets.MAS10_VISCOUS_COEFFICIENT, unit="N s/m")
 
     hybrid = True
 
@@ -137,8 +139,10 @@ class KarnoppFriction(AbstractFriction):
         check_nonnegative(self.coulomb_force, "KarnoppFriction.coulomb_force")
         check_nonnegative(self.viscous_coefficient, "KarnoppFriction.viscous_coefficient")
 
-    def initial_state(self):
-        return jnp.zeros(())  # stuck: the bench's runs start at rest
+    def initial_state(self, velocity=0.0):
+        """Stuck at rest (the bench's runs start so); a run that starts moving (a recording started mid-run) slides in
+        the direction of its velocity."""
+        return jnp.sign(jnp.asarray(velocity, dtype=float))
 
     def state_rate(self, v, z):
         return jnp.zeros_like(z)  # the mode changes only at events

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.errors import PamjaxInputError, check_finite, check_in_open_interval, check_positive
-from .._core.fitting import polynomial, positive
+from .._core.fitting import parameter, polynomial, positive
 from .._papers import paper000
 from .smooth import smooth_relu, smooth_step
 
@@ -41,11 +41,12 @@ class PolynomialForce(AbstractForceLaw):
     """
 
     # fitted as F_max at Chebyshev nodes over the muscle's stroke (well conditioned), reported as a0…a4:
-    max_force_coefficients: jax.Array = eqx.field(converter=jnp.asarray, metadata=polynomial("a{i}", "stroke"))  # N/m^i
-    k0: jax.Array = positive()  # N
-    k1: jax.Array = eqx.field(converter=jnp.asarray)  # N/m
-    k2: jax.Array = positive()  # Pa
-    max_pressure: jax.Array = positive(paper000.MAX_PRESSURE)  # Pa gauge
+    max_force_coefficients: jax.Array = eqx.field(converter=jnp.asarray,
+                                                  metadata=polynomial("a{i}", "stroke", unit="N/m^i"))
+    k0: jax.Array = positive(unit="N")
+    k1: jax.Array = parameter(unit="N/m")
+    k2: jax.Array = positive(unit="Pa")
+    max_pressure: jax.Array = positive(paper000.MAX_PRESSURE, unit="Pa gauge")
 
     def __check_init__(self):
         if jnp.shape(self.max_force_coefficients) != (5,):
@@ -78,9 +79,9 @@ class ChouHannafordForce(AbstractForceLaw):
     **Arguments:** `strand_length` b_s [m], `turns` n_s [-], `nominal_length` L0 [m].
     """
 
-    strand_length: jax.Array = positive()  # m
-    turns: jax.Array = positive()  # -
-    nominal_length: jax.Array = positive()  # m
+    strand_length: jax.Array = positive(unit="m")
+    turns: jax.Array = positive(unit="-")
+    nominal_length: jax.Array = positive(unit="m")
 
     def __check_init__(self):
         check_positive(self.strand_length, "ChouHannafordForce.strand_length")
@@ -101,10 +102,10 @@ class TonduLopezForce(AbstractForceLaw):
     **Arguments:** `radius` r0 [m], `braid_angle` θ0 [rad], `nominal_length` L0 [m], `correction` k [-].
     """
 
-    radius: jax.Array = positive()  # m
-    braid_angle: jax.Array = eqx.field(converter=jnp.asarray)  # rad
-    nominal_length: jax.Array = positive()  # m
-    correction: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # -
+    radius: jax.Array = positive(unit="m")
+    braid_angle: jax.Array = parameter(unit="rad")
+    nominal_length: jax.Array = positive(unit="m")
+    correction: jax.Array = parameter(1.0, unit="-")
 
     def __check_init__(self):
         check_positive(self.radius, "TonduLopezForce.radius")
@@ -133,8 +134,8 @@ class AbstractVolume(eqx.Module):
 class LinearVolume(AbstractVolume):
     """Paper 000, eq. 14: V = v0 + v1 x. **Arguments:** `v0` [m³], `v1` [m²]."""
 
-    v0: jax.Array = positive()  # m³
-    v1: jax.Array = positive()  # m²
+    v0: jax.Array = positive(unit="m³")
+    v1: jax.Array = positive(unit="m²")
 
     def __check_init__(self):
         check_positive(self.v0, "LinearVolume.v0")
@@ -150,8 +151,8 @@ class CubicVolume(AbstractVolume):
     **Arguments:** `coefficients` (d, c, b, a) [m³], lowest order first; `nominal_length` L0 [m].
     """
 
-    coefficients: jax.Array = eqx.field(converter=jnp.asarray)  # m³
-    nominal_length: jax.Array = positive()  # m
+    coefficients: jax.Array = parameter(unit="m³")
+    nominal_length: jax.Array = positive(unit="m")
 
     def __check_init__(self):
         if jnp.shape(self.coefficients) != (4,):
@@ -176,9 +177,9 @@ class BraidVolume(AbstractVolume):
     `BraidVolume.from_datasheet(L0, D0, max_contraction)` derives b_s, n_s from a datasheet.
     """
 
-    strand_length: jax.Array = positive()  # m
-    turns: jax.Array = positive()  # -
-    nominal_length: jax.Array = positive()  # m
+    strand_length: jax.Array = positive(unit="m")
+    turns: jax.Array = positive(unit="-")
+    nominal_length: jax.Array = positive(unit="m")
 
     def __check_init__(self):
         check_positive(self.strand_length, "BraidVolume.strand_length")
@@ -224,9 +225,9 @@ class Muscle(eqx.Module):
 
     force_law: AbstractForceLaw
     volume_law: AbstractVolume
-    min_position: jax.Array = eqx.field(converter=jnp.asarray)  # m
-    max_position: jax.Array = eqx.field(converter=jnp.asarray)  # m
-    slack_width: jax.Array = eqx.field(converter=jnp.asarray, default=1.0)  # N
+    min_position: jax.Array = parameter(unit="m")
+    max_position: jax.Array = parameter(unit="m")
+    slack_width: jax.Array = parameter(1.0, unit="N")
 
     def __check_init__(self):
         check_finite(self.min_position, "Muscle.min_position")
@@ -283,9 +284,9 @@ class EndStops(eqx.Module):
     (6e3 ≈ critical for 9.6 kg on k), `width` δ [m] (1e-4).
     """
 
-    stiffness: jax.Array = positive(1e6)  # N/m
-    damping: jax.Array = positive(6e3)  # N s/m
-    width: jax.Array = eqx.field(converter=jnp.asarray, default=1e-4)  # m
+    stiffness: jax.Array = positive(1e6, unit="N/m")
+    damping: jax.Array = positive(6e3, unit="N s/m")
+    width: jax.Array = parameter(1e-4, unit="m")
 
     def __check_init__(self):
         check_positive(self.stiffness, "EndStops.stiffness")

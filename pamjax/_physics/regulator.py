@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 
 from .._core.errors import PamjaxInputError, check_finite, check_in_closed_interval, check_positive
-from .._core.fitting import positive
+from .._core.fitting import parameter, positive
 from .._core.units import BAR, FLOW_UNIT, check_absolute_pressure
 from .._papers import paper001
 from .chamber import chamber_flow, pressure_rate
@@ -64,9 +64,8 @@ class VoltageCalibration(eqx.Module):
     **Arguments:** `voltage` [V] strictly increasing within 0-10 V; `gauge_pressure` [Pa] strictly increasing.
     """
 
-    voltage: jax.Array = eqx.field(converter=jnp.asarray, default=VOLTAGE_RANGE)  # V
-    gauge_pressure: jax.Array = eqx.field(  # Pa
-        converter=jnp.asarray, default=(0.0, VOLTAGE_RANGE[1] * paper001.EQ6_GAIN * BAR))
+    voltage: jax.Array = parameter(VOLTAGE_RANGE, unit="V")
+    gauge_pressure: jax.Array = parameter((0.0, VOLTAGE_RANGE[1] * paper001.EQ6_GAIN * BAR), unit="Pa")
 
     def __check_init__(self):
         check_table_axis(self.voltage, "VoltageCalibration.voltage")
@@ -151,8 +150,8 @@ class LinearRegulator(AbstractRegulator):
     """
 
     calibration: VoltageCalibration = eqx.field(default_factory=VoltageCalibration)
-    time_constants: jax.Array = eqx.field(converter=jnp.asarray, default=EQ6_TIME_CONSTANTS)  # s
-    flow_gain: jax.Array = eqx.field(converter=jnp.asarray, default=EQ7_FLOW_GAIN)  # Pa/(kg/s)
+    time_constants: jax.Array = parameter(EQ6_TIME_CONSTANTS, unit="s")
+    flow_gain: jax.Array = parameter(EQ7_FLOW_GAIN, unit="Pa/(kg/s)")
 
     def __check_init__(self):
         if jnp.shape(self.time_constants) != (2,):
@@ -201,11 +200,11 @@ class FeedbackRegulator(AbstractRegulator):
     static gains equal eq. 5's).
     """
 
-    voltage_gain: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.EQ6_GAIN)  # bar/V
-    flow_gain: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.EQ7_GAIN)  # bar/(l/min)
-    time_constants: jax.Array = eqx.field(converter=jnp.asarray, default=EQ6_TIME_CONSTANTS)  # s
-    k1: jax.Array = eqx.field(converter=jnp.asarray, default=_eq8_default_gains()[0])  # -
-    k2: jax.Array = positive(_eq8_default_gains()[1])  # -
+    voltage_gain: jax.Array = parameter(paper001.EQ6_GAIN, unit="bar/V")
+    flow_gain: jax.Array = parameter(paper001.EQ7_GAIN, unit="bar/(l/min)")
+    time_constants: jax.Array = parameter(EQ6_TIME_CONSTANTS, unit="s")
+    k1: jax.Array = parameter(_eq8_default_gains()[0], unit="-")
+    k2: jax.Array = positive(_eq8_default_gains()[1], unit="-")
 
     def __check_init__(self):
         if jnp.shape(self.time_constants) != (2,):
@@ -274,12 +273,12 @@ class ISO6358Regulator(AbstractRegulator):
     """
 
     calibration: VoltageCalibration = eqx.field(default_factory=VoltageCalibration)
-    time_constants: jax.Array = eqx.field(converter=jnp.asarray, default=EQ6_TIME_CONSTANTS)  # s
+    time_constants: jax.Array = parameter(EQ6_TIME_CONSTANTS, unit="s")
     charging: AbstractRestriction = eqx.field(default_factory=paper001_charging_restriction)
     discharging: AbstractRestriction = eqx.field(default_factory=paper001_discharging_restriction)
-    supply_pressure: jax.Array = positive(paper001.SUPPLY_PRESSURE)  # Pa abs
-    full_opening_error: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.HYSTERESIS)  # Pa
-    opening_width: jax.Array = eqx.field(converter=jnp.asarray, default=1e-3)  # -
+    supply_pressure: jax.Array = positive(paper001.SUPPLY_PRESSURE, unit="Pa abs")
+    full_opening_error: jax.Array = parameter(paper001.HYSTERESIS, unit="Pa")
+    opening_width: jax.Array = parameter(1e-3, unit="-")
 
     needs_volume = True  # eq. 12 divides by the chamber's volume
 

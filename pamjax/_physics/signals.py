@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.errors import PamjaxInputError, check_finite, check_positive, check_time_grid
-from .._core.fitting import positive
+from .._core.fitting import parameter, positive
 from .._papers import paper001
 from .smooth import smooth_step
 
@@ -51,7 +51,7 @@ class Step(AbstractSignal):
 
     before: jax.Array = eqx.field(converter=jnp.asarray)
     after: jax.Array = eqx.field(converter=jnp.asarray)
-    time: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # s
+    time: jax.Array = parameter(0.0, unit="s")
 
     def __check_init__(self):
         check_finite(self.before, "Step.before")
@@ -72,7 +72,7 @@ class Triangle(AbstractSignal):
 
     low: jax.Array = eqx.field(converter=jnp.asarray, default=0.05)
     high: jax.Array = eqx.field(converter=jnp.asarray, default=0.95)
-    frequency: jax.Array = eqx.field(converter=jnp.asarray, default=0.08)  # Hz
+    frequency: jax.Array = parameter(0.08, unit="Hz")
 
     def __check_init__(self):
         check_finite(self.low, "Triangle.low")
@@ -94,8 +94,8 @@ class Sine(AbstractSignal):
 
     offset: jax.Array = eqx.field(converter=jnp.asarray)
     amplitude: jax.Array = eqx.field(converter=jnp.asarray)
-    frequency: jax.Array = eqx.field(converter=jnp.asarray)  # Hz
-    phase: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # rad
+    frequency: jax.Array = parameter(unit="Hz")
+    phase: jax.Array = parameter(0.0, unit="rad")
 
     def __check_init__(self):
         check_finite(self.offset, "Sine.offset")
@@ -151,10 +151,10 @@ class SquareWave(AbstractSignal):
     5 edge widths later (paper 001's 1.5 Hz, 0-3 V reference, Fig. 7). Edges are logistic steps of time width
     `edge_width` [s] (1e-3: 0.15 % of a 1.5 Hz period)."""
 
-    low: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # V
-    high: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.SQUARE_WAVE_HIGH)  # V
-    frequency: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.SQUARE_WAVE_FREQUENCY)  # Hz
-    edge_width: jax.Array = positive(1e-3)  # s
+    low: jax.Array = parameter(0.0, unit="V")
+    high: jax.Array = parameter(paper001.SQUARE_WAVE_HIGH, unit="V")
+    frequency: jax.Array = parameter(paper001.SQUARE_WAVE_FREQUENCY, unit="Hz")
+    edge_width: jax.Array = positive(1e-3, unit="s")
 
     def __check_init__(self):
         check_finite(self.low, "SquareWave.low")

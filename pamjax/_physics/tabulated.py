@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.errors import PamjaxInputError, _concrete, check_finite, check_in_open_interval, check_positive
-from .._core.fitting import positive, ratio
+from .._core.fitting import parameter, positive, ratio
 from .._papers import paper001
 from .gas import (
     DEFAULT_LAMINAR_RATIO,
@@ -100,9 +100,9 @@ class TabulatedISO6358Restriction(AbstractRestriction):
     - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
     """
 
-    pressure: jax.Array = eqx.field(converter=jnp.asarray)  # Pa abs
-    sonic_conductance: jax.Array = positive()  # m³/(s Pa)
-    critical_ratio: jax.Array = ratio()  # -
+    pressure: jax.Array = parameter(unit="Pa abs")
+    sonic_conductance: jax.Array = positive(unit="m³/(s Pa)")
+    critical_ratio: jax.Array = ratio(unit="-")
     laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
 
     def __check_init__(self):

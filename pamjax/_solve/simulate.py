@@ -360,20 +360,24 @@ def simulate(
     # rtol does not compile again).
     rtol, atol = _positive(rtol, "rtol"), _positive(atol, "atol")
     dt0 = None if dt0 is None else _positive(dt0, "dt0")
+    # concrete ts[0] and ts[-1] are read on the host (indexing a device array compiles a one-operation program),
+    # before jnp.asarray: under an enclosing jit or vmap (a band's draws) that makes even concrete times tracers
+    host = None if _is_traced(ts) else np.asarray(ts, dtype=float)
     ts = jnp.asarray(ts, dtype=float)
-    # concrete ts[0] and ts[-1] are read on the host (indexing a device array compiles a one-operation program)
-    host = None if _is_traced(ts) else np.asarray(ts)
     t_end = ts[-1] if host is None else float(host[-1])
     if t0 is None:
-        t0 = ts[0] if host is None else jnp.asarray(float(host[0]))
+        start = None if host is None else float(host[0])
+        t0 = ts[0] if host is None else jnp.asarray(start)
     else:
+        start = None if _is_traced(t0) else float(np.asarray(t0))
         t0 = jnp.asarray(t0, dtype=float)
+    start = t0 if start is None else start  # the start as the fixed grid's size and the edge schedule read it
     jump_ts = periods = None
     stepping = resolve_stepping(system, stepping)
     if stepping in ("pwm", "grid"):
-        periods = _fixed_grid_periods(system, stepping, substeps, grid_step, t0, t_end)
+        periods = _fixed_grid_periods(system, stepping, substeps, grid_step, start, t_end)
     elif system.valve.exact_edges:
-        system, jump_ts = _scheduled(system, signal, t0, t_end)
+        system, jump_ts = _scheduled(system, signal, start, t_end)
     elif system.valve.smooth_edges and not _is_traced((ts, t0, system.valve.pwm_frequency)):
         # step boundaries around every smoothed edge (the frequency, not the valve's `period`: 1/f run eagerly
         # would compile a one-operation program). An adaptive solve only asks whether num_periods is given, and it

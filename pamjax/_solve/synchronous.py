@@ -116,6 +116,14 @@ def pwm_intervals(valve: AbstractSwitchingValve, signal, t0, t1, substeps, perio
     return left, right, jnp.stack([openings] * 3, axis=-1)
 
 
+def period_intervals(valve: AbstractSwitchingValve, duty, start, substeps, open_before):
+    """The PWM-synchronous grid of ONE period starting at `start` [s] with the latched `duty`, the valve open at its
+    start if `open_before` (a period-by-period closed loop carries it): interval ends (K + 2,) each and the opening
+    held over each interval, repeated for the three RK4 stage times (K + 2, 3)."""
+    nodes, openings = _period_grid(valve, lambda s: duty, start, substeps, open_before)
+    return nodes[:-1], nodes[1:], jnp.stack([openings] * 3, axis=-1)
+
+
 def uniform_intervals(signal, t0, t1, steps):
     """A uniform grid of `steps` intervals over [t0, t1] and the command at each RK4 stage time (n, 3): the grid of a
     hybrid system fed by a continuous valve (averaged, proportional)."""

@@ -99,7 +99,7 @@ class _FourierIntegral(AbstractReduction):
 
 
 def frequency_response(system, frequencies, *, offset=0.5, amplitude=0.2, settle_periods=3, periods=3,
-                       samples_per_period=40, channels=("position", "pressure"), **sweep_kwargs):
+                       samples_per_period=40, channels=("position", "pressure"), over=None, **sweep_kwargs):
     """Gain and phase of outputs against a sinusoidal command u = offset + amplitude sin(2π f t), at each of
     `frequencies` [Hz], from the Fourier coefficient over exactly the last `periods` periods after
     `settle_periods`.
@@ -107,9 +107,10 @@ def frequency_response(system, frequencies, *, offset=0.5, amplitude=0.2, settle
     All frequencies run in one sweep on a common time grid (as long as the lowest frequency needs, sampled with
     `samples_per_period` samples of the highest). Defaults: mid-range duty 0.5 ± 0.2, inside the valve's 10-90 %
     usable band; 3 settling periods (on the MAS-10 with the averaged valve the harmonic at 0.5 Hz is the same to
-    8 digits after 3 and 8 periods, measured). **Returns:** dict with `frequency`, and per channel `gain` (|Y|/|U|,
-    channel units per unit command) and `phase` [deg] (arg Y − arg U, unwrapped along increasing frequency), plus
-    the `SweepResult`.
+    8 digits after 3 and 8 periods, measured). `over`: further swept paths (as `steady_state_map`'s), broadcast
+    against the frequencies, which are the last axis (e.g. values of shape (k, 1) map k models at every frequency).
+    **Returns:** dict with `frequency`, and per channel `gain` (|Y|/|U|, channel units per unit command) and `phase`
+    [deg] (arg Y − arg U, unwrapped along increasing frequency), plus the `SweepResult`.
     """
     frequencies = np.asarray(frequencies, dtype=float)
     if frequencies.ndim != 1 or frequencies.size == 0:
@@ -127,14 +128,14 @@ def frequency_response(system, frequencies, *, offset=0.5, amplitude=0.2, settle
     horizon = (settle_periods + periods) / frequencies.min()
     n = int(np.ceil(horizon * frequencies.max() * samples_per_period))
     ts = np.linspace(0.0, horizon, n + 1)
-    result = sweep(system, Sine(offset, amplitude, 1.0), ts, {"signal.frequency": frequencies},
+    result = sweep(system, Sine(offset, amplitude, 1.0), ts, {"signal.frequency": frequencies, **(over or {})},
                    reduce=_FourierIntegral(int(periods)), channels=(*channels, "command"), **sweep_kwargs)
     u = result["command"]
     order = np.argsort(frequencies)
     out = dict(frequency=frequencies, result=result)
     for c in channels:
         ratio = result[c] / u
-        phase = np.empty(frequencies.shape)
-        phase[order] = np.degrees(np.unwrap(np.angle(ratio[order])))
+        phase = np.empty(ratio.shape)
+        phase[..., order] = np.degrees(np.unwrap(np.angle(ratio[..., order]), axis=-1))
         out[c] = dict(gain=np.abs(ratio), phase=phase)
     return out

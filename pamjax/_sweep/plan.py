@@ -83,9 +83,9 @@ def validate_values(system, signal, y0, plan, values, batch_size):
             bad = int(np.argmin(np.all(np.isfinite(v.reshape(batch_size, -1)), axis=1)))
             raise PamjaxInputError(f"over[{key!r}] must be finite, point {bad} is {v[bad]}")
 
-    def check_lanes(vals, n):
-        for key, (where, parts) in zip(plan.keys, plan.targets):
-            if where != "system":
+    def check_lanes(vals, n, leaves="scalar"):
+        for key, (where, parts), shape in zip(plan.keys, plan.targets, plan.leaf_shapes):
+            if where != "system" or (bool(shape) if leaves == "scalar" else key != leaves):
                 continue
             lane_system = eqx.tree_at(lambda s, parts=parts: get(s, parts), system, jnp.asarray(vals[key]))
             for i in range(len(parts)):
@@ -93,6 +93,12 @@ def validate_values(system, signal, y0, plan, values, batch_size):
                 if isinstance(sub, eqx.Module):
                     _check_module(sub, key)
 
+    # A non-scalar leaf (a valve's coefficient matrix) is checked one distinct value at a time: its component checks
+    # its shape, which a batch of values fails.
+    for key, shape in zip(plan.keys, plan.leaf_shapes):
+        if shape:
+            for value in np.unique(flat[key].reshape(batch_size, -1), axis=0):
+                check_lanes({key: value.reshape(shape)}, 1, leaves=key)
     try:
         check_lanes(flat, batch_size)
         batched_ok = True

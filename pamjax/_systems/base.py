@@ -27,6 +27,7 @@ class AbstractSystem(eqx.Module):
     - `state_scale()`, `initial_state(...)`, `vector_field(...)`, `outputs(...)` (abstract, below).
     - `hybrid`: whether it has discrete modes switched at events (stick-slip friction); a hybrid system also defines
       `event_function` and `event_update`, which the fixed-grid integrator (`pamjax._solve.grid`) uses.
+    - `with_supply_pressure(p)`: the system with its valve fed at another supply pressure (a rig's runs).
     - `discrete_step(...)`: one step of its discrete-time model (explicit Euler unless the system says otherwise).
     """
 
@@ -68,6 +69,10 @@ class AbstractSystem(eqx.Module):
     def event_update(self, t, state, command):
         """Hybrid systems: the state just after the event at `state` (the new mode; velocities reset)."""
         return state
+
+    def with_supply_pressure(self, pressure):
+        """This system with its valve fed at `pressure` [Pa abs] (`AbstractControlElement.with_supply_pressure`)."""
+        return eqx.tree_at(lambda s: s.valve, self, self.valve.with_supply_pressure(pressure))
 
     def discrete_step(self, t, state, command, sample_time):
         """One explicit Euler step of `sample_time` [s] from `state` at `t` [s] with `command` held (paper 000 eq. 18

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 
 from .._core.errors import PamjaxInputError, check_nonnegative, check_positive
-from .._core.fitting import positive
+from .._core.fitting import parameter, positive
 from .._papers import paper000, paper001
 from .._physics.gas import Air
 from .._physics.muscle import EndStops, Muscle
@@ -70,16 +70,16 @@ class AntagonisticJoint(AbstractSystem):
     extensor_regulator: AbstractRegulator
     flexor: Muscle
     extensor: Muscle
-    pulley_radius: jax.Array = eqx.field(converter=jnp.asarray, default=PULLEY_RADIUS)  # m
-    pre_contraction: jax.Array = eqx.field(converter=jnp.asarray, default=PRE_CONTRACTION)  # m
-    inertia: jax.Array = eqx.field(converter=jnp.asarray, default=JOINT_INERTIA)  # kg m²
-    foot_mass: jax.Array = eqx.field(converter=jnp.asarray, default=FOOT_MASS)  # kg
-    foot_arm: jax.Array = eqx.field(converter=jnp.asarray, default=FOOT_ARM)  # m
-    damping: jax.Array = positive(JOINT_DAMPING)  # N m s/rad
-    gravity: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.GRAVITY)  # m/s²
+    pulley_radius: jax.Array = parameter(PULLEY_RADIUS, unit="m")
+    pre_contraction: jax.Array = parameter(PRE_CONTRACTION, unit="m")
+    inertia: jax.Array = parameter(JOINT_INERTIA, unit="kg m²")
+    foot_mass: jax.Array = parameter(FOOT_MASS, unit="kg")
+    foot_arm: jax.Array = parameter(FOOT_ARM, unit="m")
+    damping: jax.Array = positive(JOINT_DAMPING, unit="N m s/rad")
+    gravity: jax.Array = parameter(paper000.GRAVITY, unit="m/s²")
     end_stops: EndStops = eqx.field(default_factory=EndStops)
     air: Air = eqx.field(default_factory=paper001_air)
-    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.POLYTROPIC_INDEX)  # -
+    polytropic_index: jax.Array = parameter(paper001.POLYTROPIC_INDEX, unit="-")
 
     output_names = ("pressure", "mass_flow", "angle", "angular_velocity", "force", "volume")
 

@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.errors import PamjaxInputError, check_nonnegative, check_positive
+from .._core.fitting import parameter
 from .._physics.regulator import EQ6_TIME_CONSTANTS, VOLTAGE_RANGE
 from .._physics.signals import AbstractSignal
 from .._physics.tabulated import pchip
@@ -135,12 +136,12 @@ class AntagonisticJointController(eqx.Module):
     eq. 6's τ₁ + τ₂), `tracking_time` T_t [s] (0.1); reasons beside the module constants.
     """
 
-    angle_proportional_gain: jax.Array = eqx.field(converter=jnp.asarray, default=ANGLE_PROPORTIONAL_GAIN)  # Pa/rad
-    angle_integral_gain: jax.Array = eqx.field(converter=jnp.asarray, default=ANGLE_INTEGRAL_GAIN)  # Pa/(rad s)
-    sum_proportional_gain: jax.Array = eqx.field(converter=jnp.asarray, default=SUM_PROPORTIONAL_GAIN)  # -
-    sum_integral_gain: jax.Array = eqx.field(converter=jnp.asarray, default=SUM_INTEGRAL_GAIN)  # 1/s
-    lead_time: jax.Array = eqx.field(converter=jnp.asarray, default=LEAD_TIME)  # s
-    tracking_time: jax.Array = eqx.field(converter=jnp.asarray, default=TRACKING_TIME)  # s
+    angle_proportional_gain: jax.Array = parameter(ANGLE_PROPORTIONAL_GAIN, unit="Pa/rad")
+    angle_integral_gain: jax.Array = parameter(ANGLE_INTEGRAL_GAIN, unit="Pa/(rad s)")
+    sum_proportional_gain: jax.Array = parameter(SUM_PROPORTIONAL_GAIN, unit="-")
+    sum_integral_gain: jax.Array = parameter(SUM_INTEGRAL_GAIN, unit="1/s")
+    lead_time: jax.Array = parameter(LEAD_TIME, unit="s")
+    tracking_time: jax.Array = parameter(TRACKING_TIME, unit="s")
 
     def __check_init__(self):
         for name in (
@@ -185,10 +186,10 @@ class GaitAngle(AbstractSignal):
     """Gait-like ankle angle [rad]: `offset` + a₁ sin(2π f t) + a₂ sin(4π f t + 1) (push-off and swing, the shape of
     `fits/ankle.py`), a₁ = 0.18 rad, a₂ = 0.08 rad (≈ ±15°, the ankle's sagittal range in walking, Winter)."""
 
-    frequency: jax.Array = eqx.field(converter=jnp.asarray, default=0.5)  # Hz
-    offset: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # rad
-    first: jax.Array = eqx.field(converter=jnp.asarray, default=0.18)  # rad
-    second: jax.Array = eqx.field(converter=jnp.asarray, default=0.08)  # rad
+    frequency: jax.Array = parameter(0.5, unit="Hz")
+    offset: jax.Array = parameter(0.0, unit="rad")
+    first: jax.Array = parameter(0.18, unit="rad")
+    second: jax.Array = parameter(0.08, unit="rad")
 
     def __check_init__(self):
         check_positive(self.frequency, "GaitAngle.frequency")

@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 
 from .._core.errors import check_in_open_interval, check_positive
-from .._core.fitting import positive
+from .._core.fitting import parameter, positive
 from .._papers import paper000
 from .._physics.chamber import pressure_rate
 from .._physics.friction import AbstractFriction, CoulombViscousFriction
@@ -44,12 +44,12 @@ class MuscleSystem(AbstractSystem):
 
     valve: AbstractValve
     muscle: Muscle
-    payload_mass: jax.Array = positive(paper000.PAYLOAD_MASS)  # kg
+    payload_mass: jax.Array = positive(paper000.PAYLOAD_MASS, unit="kg")
     friction: AbstractFriction = eqx.field(default_factory=CoulombViscousFriction)
     end_stops: EndStops = eqx.field(default_factory=EndStops)
     air: Air = eqx.field(default_factory=Air)
-    gravity: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.GRAVITY)  # m/s²
-    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.POLYTROPIC_INDEX)  # -
+    gravity: jax.Array = parameter(paper000.GRAVITY, unit="m/s²")
+    polytropic_index: jax.Array = parameter(paper000.POLYTROPIC_INDEX, unit="-")
 
     output_names = ("pressure", "position", "velocity", "force", "friction_force", "mass_flow", "volume")
 
@@ -81,7 +81,7 @@ class MuscleSystem(AbstractSystem):
             pressure=jnp.asarray(p, dtype=float),
             position=jnp.asarray(x, dtype=float),
             velocity=jnp.asarray(velocity, dtype=float),
-            friction=self.friction.initial_state(),
+            friction=self.friction.initial_state(velocity),
         )
 
     @property

@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 
 from .._core.errors import check_in_open_interval, check_nonnegative, check_positive
-from .._core.fitting import positive
+from .._core.fitting import parameter, positive
 from .._papers import datasheets, paper000, paper001
 from .._physics.chamber import chamber_flow
 from .._physics.friction import AbstractFriction, CoulombViscousFriction
@@ -32,10 +32,10 @@ class RegulatorSystem(AbstractSystem):
     """
 
     regulator: AbstractRegulator
-    volume: jax.Array = positive(paper001.TANK_VOLUME)  # m³
-    outlet_flow: jax.Array = eqx.field(converter=jnp.asarray, default=0.0)  # kg/s
+    volume: jax.Array = positive(paper001.TANK_VOLUME, unit="m³")
+    outlet_flow: jax.Array = parameter(0.0, unit="kg/s")
     air: Air = eqx.field(default_factory=paper001_air)
-    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.POLYTROPIC_INDEX)  # -
+    polytropic_index: jax.Array = parameter(paper001.POLYTROPIC_INDEX, unit="-")
 
     output_names = ("pressure", "mass_flow", "volume")
 
@@ -139,13 +139,13 @@ class RegulatedMuscleSystem(AbstractSystem):
 
     regulator: AbstractRegulator
     muscle: Muscle
-    load_force: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.LOAD_FORCE)  # N
-    payload_mass: jax.Array = positive(paper001.LOAD_FORCE / paper000.GRAVITY)  # kg
+    load_force: jax.Array = parameter(paper001.LOAD_FORCE, unit="N")
+    payload_mass: jax.Array = positive(paper001.LOAD_FORCE / paper000.GRAVITY, unit="kg")
     friction: AbstractFriction = eqx.field(
         default_factory=lambda: CoulombViscousFriction(0.0, datasheets.DMSP40_VISCOUS_COEFFICIENT))
     end_stops: EndStops = eqx.field(default_factory=EndStops)
     air: Air = eqx.field(default_factory=paper001_air)
-    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=paper001.POLYTROPIC_INDEX)  # -
+    polytropic_index: jax.Array = parameter(paper001.POLYTROPIC_INDEX, unit="-")
 
     output_names = ("pressure", "position", "velocity", "force", "friction_force", "mass_flow", "volume")
 
@@ -166,7 +166,7 @@ class RegulatedMuscleSystem(AbstractSystem):
             regulator=self.regulator.initial_state(p),
             position=jnp.asarray(x, dtype=float),
             velocity=jnp.asarray(velocity, dtype=float),
-            friction=self.friction.initial_state(),
+            friction=self.friction.initial_state(velocity),
         )
 
     def _chamber(self, state):

@@ -5,7 +5,7 @@ import jax
 import jax.numpy as jnp
 
 from .._core.errors import check_in_open_interval, check_positive
-from .._core.fitting import positive
+from .._core.fitting import parameter, positive
 from .._papers import paper000
 from .._physics.chamber import pressure_rate
 from .._physics.gas import Air
@@ -27,9 +27,9 @@ class TankSystem(AbstractSystem):
     """
 
     valve: AbstractValve
-    volume: jax.Array = positive()  # m³
+    volume: jax.Array = positive(unit="m³")
     air: Air = eqx.field(default_factory=Air)
-    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=paper000.POLYTROPIC_INDEX)  # -
+    polytropic_index: jax.Array = parameter(paper000.POLYTROPIC_INDEX, unit="-")
 
     output_names = ("pressure", "mass_flow")
 

@@ -24,7 +24,7 @@ class AveragedValve(AbstractValve):
     **Arguments:** `coefficients` (3, 3) array (see `pamjax.presets` for the derived defaults).
     """
 
-    coefficients: jax.Array = eqx.field(converter=jnp.asarray, metadata=labelled("m{n}"))  # kg/(s Pa^j)
+    coefficients: jax.Array = eqx.field(converter=jnp.asarray, metadata=labelled("m{n}", unit="kg/(s Pa^j)"))
 
     def __check_init__(self):
         if jnp.shape(self.coefficients) != (3, 3):

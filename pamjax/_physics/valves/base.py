@@ -10,6 +10,7 @@ import abc
 import equinox as eqx
 import jax
 
+from ..._core.errors import PamjaxInputError
 from ..gas import Air
 
 
@@ -33,6 +34,8 @@ class AbstractControlElement(eqx.Module):
       (then `next_edge_step(signal, t)` gives the next step boundary beside one).
     - `averaged`: whether its flow is a smooth cycle average that `command_for_flow` inverts (paper 000 eq. 13).
     - `command_time(t)`, `read_command(signal, t)`: when the command is read, and what the element acts on at `t`.
+    - `supply()`, `with_supply_pressure(p)`: the supply pressure it is fed at, and the element fed at another one (a
+      rig's run conditions).
     """
 
     command_range = (0.0, 1.0)
@@ -59,6 +62,17 @@ class AbstractControlElement(eqx.Module):
 
     def command_time(self, t):
         return t
+
+    def supply(self):
+        """The supply pressure [Pa abs] the element is fed at (a tank test that starts "at supply" starts there)."""
+        raise PamjaxInputError(f"{type(self).__name__} has no supply pressure of its own")
+
+    def with_supply_pressure(self, pressure):
+        """This element fed at the supply pressure `pressure` [Pa abs] (a rig whose supply differs from run to run).
+        An element whose flow does not depend on a supply pressure of its own (paper 000's averaged valve, eq. 13, has
+        the supply folded into its coefficients) refuses."""
+        raise PamjaxInputError(f"{type(self).__name__} has no supply pressure that a run could change (its flow law "
+                               "does not take one); fit the supply pressure with a valve that does (OnOffValve)")
 
     def read_command(self, signal, t):
         """The command the element acts on at time `t`: `signal(command_time(t))`."""

@@ -68,11 +68,11 @@ class OnOffValve(AbstractSwitchingValve):
 
     inflate: AbstractRestriction
     exhaust: AbstractRestriction
-    supply_pressure: jax.Array = positive(paper000.SUPPLY_PRESSURE)  # Pa abs
-    pwm_frequency: jax.Array = positive(paper000.PWM_FREQUENCY)  # Hz
-    switch_on_delay: jax.Array = positive(paper000.SWITCH_DELAY)  # s
-    switch_off_delay: jax.Array = positive(paper000.SWITCH_DELAY)  # s
-    edge_width: jax.Array = positive(1e-4)  # s
+    supply_pressure: jax.Array = positive(paper000.SUPPLY_PRESSURE, unit="Pa abs")
+    pwm_frequency: jax.Array = positive(paper000.PWM_FREQUENCY, unit="Hz")
+    switch_on_delay: jax.Array = positive(paper000.SWITCH_DELAY, unit="s")
+    switch_off_delay: jax.Array = positive(paper000.SWITCH_DELAY, unit="s")
+    edge_width: jax.Array = positive(1e-4, unit="s")
     mode: str = eqx.field(static=True, default="smooth")
 
     def __check_init__(self):
@@ -84,6 +84,12 @@ class OnOffValve(AbstractSwitchingValve):
         check_positive(self.edge_width, "OnOffValve.edge_width")
         if self.mode not in ("smooth", "exact"):
             raise PamjaxInputError(f"OnOffValve.mode must be 'smooth' or 'exact', got {self.mode!r}")
+
+    def supply(self):
+        return self.supply_pressure
+
+    def with_supply_pressure(self, pressure):
+        return eqx.tree_at(lambda v: v.supply_pressure, self, jnp.asarray(pressure, dtype=float))
 
     @property
     def exact_edges(self):

@@ -1,0 +1,195 @@
+"""Bands on the maps users draw of a fitted model: the steady state against duty, the frequency response (gain and
+phase), the valve's averaged flow surface.
+
+The steady-state map and the frequency response run on `pamjax.sweep`'s batch engine (per-lane error control, many
+lanes per compiled call), which is not traced end to end; their bands put the parameter points into the sweep as
+one more batch axis, so every point of the band is one more lane of ONE sweep:
+
+- "linear": the 2n + 1 points θ̂, θ̂ ± sₖ (the covariance's principal axes at 1 σ; `band.sigma_points`), and
+  σ² = Σₖ ((y(θ̂+sₖ) − y(θ̂−sₖ))/2)²: the delta method with central differences at ±1 σ instead of a traced
+  Jacobian (exact for a prediction linear in θ, like the forward-mode one; its step is the uncertainty itself, far
+  above the solver's tolerance), with the curvature index from the same points;
+- "samples": θ̂ and the draws, quantiles as `prediction_band`'s.
+
+The flow surface is a traced function of the valve, so its band is `prediction_band`'s (forward-mode Jacobian).
+"""
+
+import equinox as eqx
+import jax
+import numpy as np
+
+from .._core.arrays import device_array
+from .._core.errors import PamjaxInputError, PamjaxSolveError
+from .._fit.parameters import Key, _getter, join_path
+from .._physics.valves.averaged import cycle_averaged_flow
+from .._sweep.maps import frequency_response, steady_state_map
+from .band import (
+    PredictionBand,
+    _nonlinearity_warning,
+    check_method,
+    draws,
+    linear_from_points,
+    prediction_band,
+    quantile_band,
+    sigma_points,
+    z_of,
+)
+from .uncertainty import propagation
+
+PHASE_PERIOD = 360.0  # deg: phase differences between parameter points are taken modulo a turn
+
+
+@eqx.filter_jit
+def _leaves(space, thetas, attrs):
+    return jax.vmap(lambda t: tuple(_getter(a)(space.model(t)) for a in attrs))(thetas)
+
+
+def swept_values(prop, thetas, extra_axes=1):
+    """`over` for a sweep of the models at `thetas` (P, n): {leaf path: values of shape (P, 1, ..., leaf shape)},
+    with `extra_axes` unit axes for the map's own axes to broadcast against."""
+    attrs = tuple(dict.fromkeys(g.attrs for g in prop.space.groups))
+    for a in attrs:
+        if any(isinstance(s, Key) for s in a):
+            raise PamjaxInputError(f"{join_path(a)}: a band on a map propagates the model's own parameters, not a "
+                                   "rig's run conditions")
+    values = _leaves(prop.space, device_array(np.asarray(thetas, dtype=float)), attrs)
+    out = {}
+    for a, v in zip(attrs, values):
+        v = np.asarray(v)
+        out[join_path(a)] = v.reshape(v.shape[:1] + (1,) * extra_axes + v.shape[1:])
+    return out
+
+
+def _sweepable(prop, what):
+    """A map's band needs a map the sweep engine computes: its fixed-step lanes locate no stick-slip events."""
+    if getattr(prop.space.base, "hybrid", False):
+        raise PamjaxInputError(f"{what}: this model is hybrid (stick-slip friction, e.g. KarnoppFriction), and sweeps "
+                               "step without locating its mode switches; band a pamjax.simulate prediction with "
+                               "pamjax.prediction_band instead, or map a model with CoulombViscousFriction")
+
+
+def parameter_points(prop, method, samples, seed):
+    """The parameter points a map's band sweeps: θ̂ first, then θ̂ ± sₖ (linear) or the draws (samples)."""
+    if method == "linear":
+        return sigma_points(prop.theta, prop.covariance)
+    return np.concatenate([prop.theta[None], draws(prop.theta, prop.covariance, samples, seed)])
+
+
+def band_of_points(outputs, method, level, n, periods=None):
+    """A `PredictionBand`'s arrays from each output's values at the parameter points (a dict name → (P, ...), θ̂
+    first): (prediction, lower, upper, std, nonlinearity or None, failed points)."""
+    z = z_of(level)
+    pred, lower, upper, std, index = {}, {}, {}, {}, {}
+    rows = next(iter(outputs.values())).shape[0]
+    ok = np.ones(rows, dtype=bool)
+    for y in outputs.values():
+        ok &= np.all(np.isfinite(y.reshape(rows, -1)), axis=1)
+    for name, y in outputs.items():
+        pred[name] = y[0]
+        if method == "linear":
+            period = (periods or {}).get(name)
+            std[name], index[name] = linear_from_points(y[0], y[1 : n + 1], y[n + 1 :], period)
+            lower[name], upper[name] = y[0] - z * std[name], y[0] + z * std[name]
+        else:
+            lower[name], upper[name], std[name] = quantile_band(y[1:][ok[1:]], level)
+    return pred, lower, upper, std, (index if method == "linear" else None), int(np.count_nonzero(~ok[1:]))
+
+
+def _map_band(prop, outputs, method, level, samples, seed, how, periods=None):
+    n = prop.theta.size
+    notes = list(prop.notes)
+    if not all(np.any(np.isfinite(y[0])) for y in outputs.values()):
+        raise PamjaxSolveError("the map of the fitted model failed at every point: see the sweep's status")
+    pred, lower, upper, std, index, failed = band_of_points(outputs, method, level, n, periods)
+    if index is not None:
+        _nonlinearity_warning(index, notes)
+    if failed:
+        notes.append(f"{failed} of {2 * n if method == 'linear' else samples} parameter points failed at some map "
+                     "point (NaN there" + (")" if method == "linear" else "; left out of the quantiles)"))
+    count = 2 * n + 1 if method == "linear" else samples + 1
+    if method == "linear":
+        how = f"delta method, central differences at ±1 σ along the {n} principal axes of the covariance ({how})"
+    else:
+        how = (f"{samples} draws of the parameters from N(θ̂, Σθ) in the fit's unconstrained space (seed {seed}), "
+               f"band = their quantiles ({how})")
+    return PredictionBand(prediction=pred, lower=lower, upper=upper, std=std, level=float(level), method=method,
+                          how=how, parameters=list(prop.labels), marginalised=list(prop.marginalised), draws=count,
+                          failed=failed, nonlinearity=index, notes=notes)
+
+
+def steady_state_band(result, commands, *, model=None, level=0.95, method="linear", samples=200, seed=0,
+                      **map_kwargs) -> PredictionBand:
+    """A confidence band on `pamjax.steady_state_map(model, commands, ...)` of a fitted model: every output channel
+    (pressure, position, ...) against the command, from the fit's covariance. The parameter points are one more
+    batch axis of one sweep (module docstring). `result`, `model`, `level`, `method`, `samples`, `seed` as for
+    `prediction_band`; `map_kwargs` go to `steady_state_map` (`horizon`, `window`, `method` → `scheme`, ...)."""
+    z_of(level)
+    check_method(method, samples)
+    prop = propagation(result, model)
+    _sweepable(prop, "steady_state_band")
+    points = parameter_points(prop, method, samples, seed)
+    kwargs = dict(map_kwargs)
+    if "scheme" in kwargs:
+        kwargs["method"] = kwargs.pop("scheme")
+    r = steady_state_map(prop.space.base, commands, over=swept_values(prop, points), **kwargs)
+    outputs = {c: np.asarray(r[c]) for c in r.channels if c != "command"}
+    return _map_band(prop, outputs, method, level, samples, seed, f"{len(points)} x {np.size(commands)} lanes of "
+                     f"one sweep, {r.method}")
+
+
+def frequency_response_band(result, frequencies, *, model=None, level=0.95, method="linear", samples=200, seed=0,
+                            channels=None, **response_kwargs) -> PredictionBand:
+    """A confidence band on `pamjax.frequency_response(model, frequencies, ...)` of a fitted model: per channel
+    `"<channel>_gain"` (|Y|/|U|) and `"<channel>_phase"` [deg], from the fit's covariance (phases differenced
+    modulo 360°). `channels`: default position and pressure, those the system has. The parameter points are one more
+    batch axis of one sweep (module docstring); arguments as for `steady_state_band`, `response_kwargs` to
+    `frequency_response` (`offset`, `amplitude`, `periods`, ...)."""
+    z_of(level)
+    check_method(method, samples)
+    prop = propagation(result, model)
+    _sweepable(prop, "frequency_response_band")
+    if channels is None:
+        channels = tuple(c for c in ("position", "pressure") if c in prop.space.base.output_names)
+    points = parameter_points(prop, method, samples, seed)
+    kwargs = dict(response_kwargs)
+    if "scheme" in kwargs:
+        kwargs["method"] = kwargs.pop("scheme")
+    fr = frequency_response(prop.space.base, frequencies, channels=tuple(channels), over=swept_values(prop, points),
+                            **kwargs)
+    outputs, periods = {}, {}
+    for c in channels:
+        outputs[f"{c}_gain"] = np.asarray(fr[c]["gain"])
+        outputs[f"{c}_phase"] = np.asarray(fr[c]["phase"])
+        periods[f"{c}_phase"] = PHASE_PERIOD
+    return _map_band(prop, outputs, method, level, samples, seed, f"{len(points)} x {np.size(frequencies)} lanes of "
+                     f"one sweep, {fr['result'].method}", periods)
+
+
+@eqx.filter_jit
+def _surface(valve, air, commands, pressures, samples):
+    per_pressure = jax.vmap(lambda u, p: cycle_averaged_flow(valve, u, p, air, samples), (None, 0))
+    return jax.vmap(per_pressure, (0, None))(commands, pressures)
+
+
+class _Surface(eqx.Module):
+    """The flow surface as a traced prediction of a model (its valve and air), for `prediction_band`."""
+
+    commands: jax.Array
+    pressures: jax.Array
+    samples: int = eqx.field(static=True)
+
+    def __call__(self, model):
+        return {"mass_flow": _surface(model.valve, model.air, self.commands, self.pressures, self.samples)}
+
+
+def flow_surface_band(result, commands, pressures, *, model=None, level=0.95, method="linear", samples=200, seed=0,
+                      phases=400) -> PredictionBand:
+    """A confidence band on `pamjax.flow_surface(model.valve, commands, pressures, model.air)` of a fitted model
+    (a switching valve's cycle-averaged mass flow [kg/s], shape (commands, pressures)): `prediction_band` of the
+    traced surface (forward-mode Jacobian, or draws), `phases` per PWM period as `flow_surface`'s `samples`."""
+    commands = np.asarray(commands, dtype=float)
+    pressures = np.asarray(pressures, dtype=float)
+    if commands.ndim != 1 or pressures.ndim != 1:
+        raise PamjaxInputError(f"commands and pressures must be 1-D, got {commands.shape} and {pressures.shape}")
+    predict = _Surface(device_array(commands), device_array(pressures), int(phases))
+    return prediction_band(result, predict, model=model, level=level, method=method, samples=samples, seed=seed)

@@ -1,0 +1,289 @@
+"""State estimation in the closed loop: the bench's noisy sensors and an extended Kalman filter on paper 000's
+discrete-time model (eq. 17-21), which feeds a state-feedback controller (the sliding mode controller needs the
+velocity, which no sensor measures; paper 000 estimates it with an SVSF filter, ref. [29]).
+
+The filter steps the model's own discrete-time model (`discrete_step`: eq. 18 pressure, eq. 20 velocity, eq. 19
+position from the new velocity; eq. 21's acceleration is the velocity's difference quotient and adds no state):
+
+    z_{k+1} = f(t_k, z_k, u_k) + w_k,   w_k ~ N(0, Q T_s)     (Q: white noise on each state's rate, per √s)
+    y_k     = h(z_k) + v_k,             v_k ~ N(0, R)         (R: the sensors' noise, diagonal)
+
+with the extended Kalman filter's first-order propagation (Jacobians by forward-mode autodiff) and the Joseph form of
+the covariance update. It runs in the solvers' scaled coordinates (`system.state_scale()`) with each measurement
+divided by its noise, so that pressures [Pa] and positions [m] meet in one well-conditioned matrix; on a linear model
+it is the textbook Kalman filter (tests/test_control_estimator.py). Everything is JAX: the loop is differentiable
+through the filter (gains, noise settings, plant and model parameters).
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.tree_util as jtu
+
+from .._core.errors import PamjaxInputError, check_nonnegative, check_positive
+from .._physics.signals import Step
+from .._solve.scaled import scaled
+from .._systems.base import AbstractSystem
+
+# The hybrid reference bench's sensors (`shared/data/hybrid-reference-bench/meta.json`, "noise": p_std_Pa 2000,
+# x_std_m 1e-4; "sampling_hz": 1000): the pressure sensor (Festo SDE1) and the potentiometer of paper 000's Fig. 1.
+BENCH_PRESSURE_NOISE = 2e3  # Pa
+BENCH_POSITION_NOISE = 1e-4  # m
+BENCH_SAMPLES_PER_PERIOD = 20  # 1 kHz at 50 Hz PWM
+
+
+def _state_fields(state):
+    """Names of the non-None fields of a named state (e.g. pressure, position, velocity of a `MuscleState`)."""
+    return tuple(k for k, v in vars(state).items() if v is not None)
+
+
+class LoopSensors(eqx.Module):
+    """The loop's sensors: the plant states `channels` sampled `samples_per_period` times per control period, at
+    t_k + jT/N (j = 1 … N), each with independent Gaussian noise of standard deviation `noise` (per channel, in the
+    channel's unit), seeded (`seed`, drawn per period: a run is reproducible and differentiable).
+
+    **Arguments:** `channels` (static; state fields, default ("pressure", "position")); `noise` (2e3 Pa, 1e-4 m: the
+    hybrid bench's `meta.json`); `samples_per_period` N (static int, 20: the bench's 1 kHz at 50 Hz); `seed` (an int).
+    """
+
+    channels: tuple = eqx.field(static=True, default=("pressure", "position"))
+    noise: jax.Array = eqx.field(converter=jnp.asarray, default=(BENCH_PRESSURE_NOISE, BENCH_POSITION_NOISE))
+    samples_per_period: int = eqx.field(static=True, default=BENCH_SAMPLES_PER_PERIOD)
+    seed: jax.Array = eqx.field(converter=lambda s: jnp.asarray(s, dtype=jnp.int32), default=0)  # an array: a new
+    # seed runs the same compiled loop (and seeds vmap)
+
+    def __check_init__(self):
+        channels = self.channels
+        if not (isinstance(channels, tuple) and channels and all(isinstance(c, str) for c in channels)
+                and len(set(channels)) == len(channels)):
+            raise PamjaxInputError(
+                f"LoopSensors.channels must be a non-empty tuple of distinct state names, got {channels!r}")
+        if jnp.shape(self.noise) != (len(channels),):
+            raise PamjaxInputError(f"LoopSensors.noise must have one standard deviation per channel {channels}, got "
+                                   f"shape {jnp.shape(self.noise)}")
+        check_nonnegative(self.noise, "LoopSensors.noise")
+        if not (isinstance(self.samples_per_period, int) and self.samples_per_period >= 1):
+            raise PamjaxInputError(
+                f"LoopSensors.samples_per_period must be an int >= 1, got {self.samples_per_period!r}")
+
+    def offsets(self, period):
+        """Sample times after the period start [s]: jT/N, j = 1 … N (the last at the period's end)."""
+        n = self.samples_per_period
+        return period * jnp.arange(1, n + 1) / n
+
+    def read(self, states, period_index):
+        """Noisy readings (N, channels) of the true `states` (a named state with a leading axis of N samples) in the
+        period `period_index`."""
+        values = jnp.stack([getattr(states, c) for c in self.channels], axis=-1)
+        key = jax.random.fold_in(jax.random.key(self.seed), period_index)
+        return values + self.noise * jax.random.normal(key, values.shape, dtype=values.dtype)
+
+
+class KalmanState(eqx.Module):
+    """The filter's belief: `mean` (n,) and `covariance` (n, n) of the model's state in scaled units (state /
+    `system.state_scale()`, flattened in the state's field order); `ExtendedKalmanFilter.estimate` and `.covariance`
+    give them in SI units."""
+
+    mean: jax.Array
+    covariance: jax.Array
+
+
+def _arrays(values):
+    """A {state: value} dict with float arrays as values (differentiable leaves, not constants of the program)."""
+    return {k: jnp.asarray(v, dtype=float) for k, v in values.items()} if isinstance(values, dict) else values
+
+
+def _named(template, values, name):
+    """A state-shaped pytree from a {field: value} dict (missing fields 0), e.g. process noise per state."""
+    fields = _state_fields(template)
+    unknown = set(values) - set(fields)
+    if unknown:
+        raise PamjaxInputError(f"{name}: unknown state(s) {sorted(unknown)}; the model's states are {fields}")
+    out = template
+    for k in fields:
+        value = jnp.broadcast_to(jnp.asarray(values.get(k, 0.0), float), jnp.shape(getattr(template, k)))
+        out = eqx.tree_at(lambda s, k=k: getattr(s, k), out, value)
+    return out
+
+
+class ExtendedKalmanFilter(eqx.Module):
+    """Extended Kalman filter on a system's discrete-time model (paper 000 eq. 18-21, `discrete_step`).
+
+    Each sensor sample: predict z ← f(z), P ← F P Fᵀ + Q T_s (F = ∂f/∂z by forward-mode autodiff), then update with
+    the readings y (noise σ_R): S = H P Hᵀ + R, K = P Hᵀ S⁻¹, z ← z + K (y − h(z)), P ← (I − K H) P (I − K H)ᵀ + K R Kᵀ.
+
+    **Arguments:**
+
+    - `model`: the filter's model, a smooth system (not hybrid: Euler steps cannot switch a stick-slip mode), e.g.
+      paper 000's choice `presets.mas10_system("averaged")` (eq. 13 valve) or the identified plant's parameters with
+      `CoulombViscousFriction` (eq. 20's sign smoothed). Its discrete step at the sample time T_s = T / N must be
+      stable: with the smooth sign that needs T_s below ≈ 2 w M / F_c (1.2 ms at w = 1 mm/s, 9.6 kg, 16 N).
+    - `process_noise`: {state: q} the white noise on each state's rate [state unit per √s] that covers the model's
+      errors (Q = q² T_s per sample). Default, for paper 000's plant under the averaged model: pressure 1.5e5 Pa/√s
+      (4.7 kPa per 1 ms sample: the averaged valve does not know the switching valve's ±7 kPa ripple, so the filter
+      follows the pressure readings), position 1e-4 m/√s, velocity 0.02 m/s/√s (0.63 mm/s per sample, an
+      acceleration error of 0.6 m/s²: 6 N on 9.6 kg, where the smooth sign misplaces stick-slip). Chosen on a grid
+      (pressure 3e4-4e5, position 1e-5-1e-3, velocity 0.005-0.5) as the smallest estimation error of the SMC's loop
+      on `presets.mas10_system("pwm", friction="karnopp")` with the bench's noise (docs/control.md).
+    - `measurement_noise`: σ_R per sensor channel, in the channel's unit; None (default): the loop's
+      `LoopSensors.noise`.
+    - `initial_std`: {state: σ} of the initial belief about the model's state at rest (pressure 1e4 Pa, position
+      5e-3 m, velocity 1e-2 m/s).
+    - `substeps` (static int, 1): Euler steps of the model per sample. Paper 000's averaged model runs at 1 kHz in
+      one; a switching-valve model (`presets.mas10_system("pwm")`, smoothed edges of 0.1 ms) needs ≥ 10, and then
+      predicts the PWM ripple (with pressure process noise 3e4 Pa/√s its pressure error halves, docs/control.md).
+    """
+
+    model: AbstractSystem
+    process_noise: dict = eqx.field(converter=_arrays,
+                                    default_factory=lambda: dict(pressure=1.5e5, position=1e-4, velocity=0.02))
+    measurement_noise: jax.Array | None = eqx.field(converter=lambda v: v if v is None else jnp.asarray(v, float),
+                                                    default=None)
+    initial_std: dict = eqx.field(converter=_arrays,
+                                  default_factory=lambda: dict(pressure=1e4, position=5e-3, velocity=1e-2))
+    substeps: int = eqx.field(static=True, default=1)
+
+    def __check_init__(self):
+        model = self.model
+        if not isinstance(model, AbstractSystem):
+            raise PamjaxInputError(f"ExtendedKalmanFilter.model must be a pamjax system, got {type(model).__name__}")
+        if model.hybrid:
+            raise PamjaxInputError(
+                "ExtendedKalmanFilter.model must be smooth, not hybrid: its discrete-time model (eq. 18-21) steps by "
+                "Euler and cannot switch a stick-slip mode; give the filter CoulombViscousFriction (eq. 20's sign "
+                "smoothed), e.g. presets.mas10_system('averaged')"
+            )
+        template = jax.eval_shape(model.initial_state)
+        for name in ("process_noise", "initial_std"):
+            values = getattr(self, name)
+            if not isinstance(values, dict):
+                raise PamjaxInputError(f"ExtendedKalmanFilter.{name} must be a dict {{state: value}}, got {values!r}")
+            unknown = set(values) - set(_state_fields(template))
+            if unknown:
+                raise PamjaxInputError(
+                    f"ExtendedKalmanFilter.{name}: unknown state(s) {sorted(unknown)}; the model's states are "
+                    f"{_state_fields(template)}"
+                )
+            for k, v in values.items():
+                check_nonnegative(v, f"ExtendedKalmanFilter.{name}[{k!r}]")
+        if self.measurement_noise is not None:
+            check_positive(self.measurement_noise, "ExtendedKalmanFilter.measurement_noise")
+
+    # --- the state map -------------------------------------------------------------------------------------------
+    def _template(self):
+        shapes = jax.eval_shape(self.model.initial_state)
+        return jtu.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+
+    def _scaled(self):
+        return scaled(self.model, self._template())[1]
+
+    def estimate(self, state: KalmanState):
+        """The estimated model state (named, SI units, absolute pressure)."""
+        return self._scaled().state(state.mean)
+
+    def covariance(self, state: KalmanState):
+        """The covariance (n, n) in SI units, in the flat order of the state's fields."""
+        scale = self._scaled().scale
+        return state.covariance * scale[:, None] * scale[None, :]
+
+    def std(self, state: KalmanState):
+        """The estimate's standard deviations as a named state (SI units)."""
+        sc = self._scaled()
+        return sc.unravel(jnp.sqrt(jnp.diag(state.covariance)) * sc.scale)
+
+    def initial_state(self, mean=None):
+        """The belief at the start: `mean` (a model state; default the model at rest, `model.initial_state()`) with
+        the standard deviations `initial_std`."""
+        mean = self.model.initial_state() if mean is None else mean
+        z0, sc = scaled(self.model, mean)
+        std = sc.vector(_named(self._template(), self.initial_std, "initial_std"))
+        return KalmanState(mean=z0, covariance=jnp.diag(std**2))
+
+    # --- the two steps -------------------------------------------------------------------------------------------
+    def predict(self, state: KalmanState, t, command, sample_time):
+        """Propagate the belief over one sample time T_s [s] from `t` with `command` (what the model's valve acts
+        on, `valve.read_command`) held: the model's `discrete_step`, linearised."""
+        sc = self._scaled()
+
+        h = sample_time / self.substeps
+
+        def transition(z):
+            y = sc.state(z)
+            for i in range(self.substeps):
+                y = self.model.discrete_step(t + i * h, y, command, h)
+            return sc.vector(y)
+
+        mean, jac = transition(state.mean), jax.jacfwd(transition)(state.mean)
+        q = sc.vector(_named(self._template(), self.process_noise, "process_noise"))
+        covariance = jac @ state.covariance @ jac.T + jnp.diag(q**2 * sample_time)
+        return KalmanState(mean=mean, covariance=0.5 * (covariance + covariance.T))
+
+    def update(self, state: KalmanState, readings, channels, noise):
+        """Correct the belief with `readings` (m,) of the state fields `channels`, whose noise the filter takes as
+        `measurement_noise` (or `noise`, the sensors' own, where that is None). Returns (belief, normalised
+        innovation (y − h(z))/σ_R)."""
+        sc = self._scaled()
+        sigma = jnp.asarray(noise if self.measurement_noise is None else self.measurement_noise, dtype=float)
+
+        def measure(z):
+            named = sc.state(z)
+            return jnp.stack([getattr(named, c) for c in channels]) / sigma
+
+        predicted, h = measure(state.mean), jax.jacfwd(measure)(state.mean)
+        p = state.covariance
+        s = h @ p @ h.T + jnp.eye(len(channels))
+        gain = jnp.linalg.solve(s, h @ p).T  # P Hᵀ S⁻¹ (S, P symmetric)
+        innovation = readings / sigma - predicted
+        mean = state.mean + gain @ innovation
+        joseph = jnp.eye(p.shape[0]) - gain @ h
+        covariance = joseph @ p @ joseph.T + gain @ gain.T
+        return KalmanState(mean=mean, covariance=0.5 * (covariance + covariance.T)), innovation
+
+    # --- the loop's period and an offline run ----------------------------------------------------------------------
+    def run_period(self, state: KalmanState, start, duty, previous_duty, period, readings, sensors):
+        """One control period from `start` [s] with `duty` (the period before: `previous_duty`): predict and update
+        at each of the sensors' N samples t_k + jT/N. `readings` (N, channels)."""
+        signal = Step(previous_duty, duty, start)
+        sample_time = period / sensors.samples_per_period
+
+        def body(belief, xs):
+            j, y = xs
+            t = start + j * sample_time
+            belief = self.predict(belief, t, self.model.valve.read_command(signal, t), sample_time)
+            belief, _ = self.update(belief, y, sensors.channels, sensors.noise)
+            return belief, None
+
+        state, _ = jax.lax.scan(body, state, (jnp.arange(readings.shape[0], dtype=float), readings))
+        return state
+
+    def filter(self, signal, readings, sample_time, channels, noise=None, *, t0=0.0, initial=None):
+        """Filter a recording offline: `readings` (N, channels) of the state fields `channels` at t0 + k T_s (k = 1
+        … N), the model driven by the command `signal` (read as its valve reads it). `noise` σ per channel (default:
+        `measurement_noise`). Returns (estimates: a named state with a leading axis of N, their standard deviations
+        alike, the final `KalmanState`)."""
+        if noise is None and self.measurement_noise is None:
+            raise PamjaxInputError("ExtendedKalmanFilter.filter needs `noise` (σ per channel) or measurement_noise")
+        noise = self.measurement_noise if noise is None else noise
+        belief = self.initial_state() if initial is None else initial
+        readings = jnp.asarray(readings, dtype=float)
+        if readings.ndim != 2 or readings.shape[1] != len(channels):
+            raise PamjaxInputError(
+                f"readings must be (N, {len(channels)}) for channels {channels}, got {readings.shape}")
+
+        def body(b, xs):
+            k, y = xs
+            t = t0 + k * sample_time
+            b = self.predict(b, t, self.model.valve.read_command(signal, t), sample_time)
+            b, _ = self.update(b, y, channels, noise)
+            return b, (self.estimate(b), self.std(b))
+
+        final, (means, stds) = jax.lax.scan(body, belief, (jnp.arange(readings.shape[0], dtype=float), readings))
+        return means, stds, final
+
+
+def check_channels(system, channels, what):
+    """Every sensor channel must be a state field of `system` (the plant, or the filter's model)."""
+    fields = _state_fields(jax.eval_shape(system.initial_state))
+    missing = [c for c in channels if c not in fields]
+    if missing:
+        raise PamjaxInputError(f"LoopSensors.channels {missing} are not states of the {what} (its states: {fields})")

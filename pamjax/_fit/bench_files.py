@@ -1,0 +1,211 @@
+"""Reading a bench directory: meta.json (checked key by key), one recording per experiment (NPZ, CSV with units in its
+header, MATLAB .mat), and the command that drove each run (the recorded duty, checked against meta.json's). Every
+mistake is a `PamjaxInputError` naming the experiment, the file and the key, with what to write instead.
+`pamjax._fit.bench` builds the experiments from what this reads."""
+
+import json
+import pathlib
+
+import numpy as np
+
+from .._core.errors import PamjaxInputError
+from .._physics.signals import Constant, Sampled, Triangle
+from .recording import BENCH_NAMES, Recording
+
+TANK_KINDS = ("tank_charge", "tank_discharge")
+MUSCLE_KINDS = ("muscle_triangle", "muscle_run")
+FITTED_KINDS = TANK_KINDS + MUSCLE_KINDS
+RECORDING_SUFFIXES = (".npz", ".csv", ".mat")
+# A recorded duty agrees with meta.json's when every PWM period's value is within this of it: a logger writes the
+# duty with 6 decimals (shared/data/bench-realistic), far below any duty step that changes a valve's behaviour.
+_DUTY_TOLERANCE = 1e-3
+
+
+_META_TEMPLATE = ('{"experiments": {"E1": {"kind": "tank_charge", "V_tank": 5e-5, "u": 0.5, "p0": "p_atm"}, '
+                  '"E3": {"kind": "muscle_run"}}, "noise": {"p_std_Pa": 2000, "x_std_m": 1e-4}, '
+                  '"fitted_keys": ["Cv12", "b12", "Cv23", "b23", "v0", "v1", "Fc", "Cf"]}')
+
+
+def read_meta(directory):
+    directory = pathlib.Path(directory)
+    if not directory.is_dir():
+        raise PamjaxInputError(f"bench directory {directory} does not exist or is not a directory")
+    path = directory / "meta.json"
+    if not path.exists():
+        files = sorted(p.name for p in directory.iterdir() if p.suffix.lower() in RECORDING_SUFFIXES)
+        found = f" It holds {len(files)} recording(s) ({', '.join(files[:4])}{', ...' if len(files) > 4 else ''})" \
+            if files else " It holds no recording (.npz, .csv or .mat) either."
+        raise PamjaxInputError(
+            f"bench directory {directory} has no meta.json describing its experiments.{found} Write one beside them, "
+            f"e.g. {_META_TEMPLATE} (each experiment named as its file; the layout: docs/fitting.md, 'Identifying "
+            "your own rig')")
+    try:
+        meta = json.loads(path.read_text())
+    except json.JSONDecodeError as err:
+        raise PamjaxInputError(f"{path} is not valid JSON: {err}") from None
+    if not isinstance(meta, dict) or not isinstance(meta.get("experiments"), dict) or not meta["experiments"]:
+        raise PamjaxInputError(f"{path} needs an 'experiments' table (name → kind and conditions), e.g. "
+                               f"{_META_TEMPLATE}")
+    for name, e in meta["experiments"].items():
+        if not isinstance(e, dict) or "kind" not in e:
+            raise PamjaxInputError(f"{path}: experiment {name!r} must be a table with a 'kind' (one of "
+                                   f"{list(FITTED_KINDS) + ['muscle_PI']}), got {e!r}")
+    return directory, meta
+
+
+def noise_levels(meta, recordings, where):
+    """Noise standard deviations: meta.json's `noise` where given, else estimated from the recordings (1.4826 MAD
+    of first differences / √2, the white part of the signal)."""
+    given = meta.get("noise", {})
+    if not isinstance(given, dict):
+        raise PamjaxInputError(f"{where}: 'noise' must be a table {{'p_std_Pa': ..., 'x_std_m': ...}}, got {given!r}")
+    out = {}
+    for key, channel, unit in (("p_std_Pa", "pressure", "Pa"), ("x_std_m", "position", "m")):
+        if key in given:
+            value = given[key]
+            if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
+                raise PamjaxInputError(f"{where}: noise {key} must be the sensor's noise standard deviation, a "
+                                       f"number > 0 [{unit}], got {value!r} (leave it out to estimate it from the "
+                                       "recordings)")
+            out[channel] = float(value)
+    for c in ("pressure", "position"):
+        if c not in out:
+            diffs = [np.diff(r[c]) for r in recordings if c in r.channels and np.ptp(r[c]) > 0]
+            if diffs:
+                d = np.concatenate(diffs)
+                out[c] = float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
+    return out
+
+
+def recording_file(directory, name):
+    found = [directory / f"{name}{s}" for s in RECORDING_SUFFIXES if (directory / f"{name}{s}").exists()]
+    if not found:
+        others = sorted(p.name for p in directory.iterdir() if p.suffix.lower() in RECORDING_SUFFIXES)
+        raise PamjaxInputError(
+            f"bench {directory}: experiment {name!r} of meta.json has no recording {name}.npz, {name}.csv or "
+            f"{name}.mat" + (f" (the folder holds {', '.join(others[:6])}{', ...' if len(others) > 6 else ''})"
+                             if others else " (the folder holds no recording)"))
+    if len(found) > 1:
+        raise PamjaxInputError(f"bench {directory}: experiment {name!r} has {len(found)} recordings "
+                               f"({', '.join(p.name for p in found)}); keep one")
+    return found[0]
+
+
+def load_recording(path, name, meta, atmosphere):
+    units = meta.get("units")
+    if units is not None and not isinstance(units, dict):
+        raise PamjaxInputError(f"meta.json 'units' must be a table channel → unit (e.g. {{\"p\": \"barg\"}}), got "
+                               f"{units!r}")
+    kwargs = dict(name=name, atmosphere=atmosphere, mask_nan=False)
+    if units and path.suffix.lower() != ".csv":  # CSV headers carry their own units
+        kwargs["units"] = _renamed_units(units)
+    return Recording.load(path, **kwargs)
+
+
+def _renamed_units(units):
+    return {BENCH_NAMES.get(k, k) if k not in ("t", "time") else "t": str(v) for k, v in units.items()}
+
+
+def number(e, key, where, lo=None, hi=None, unit=""):
+    if key not in e:
+        return None
+    v = e[key]
+    if not (isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)):
+        raise PamjaxInputError(f"{where}: {key} must be a number{f' [{unit}]' if unit else ''}, got {v!r}")
+    if (lo is not None and v < lo) or (hi is not None and v > hi):
+        hint = " (a duty ratio: 0.5, not 50 %)" if key in ("u", "lo", "hi") and v > 1 else ""
+        raise PamjaxInputError(f"{where}: {key} = {v!r} is outside [{lo}, {hi}]{hint}")
+    return float(v)
+
+
+def period_starts(t, period):
+    """Indices of the first sample in each PWM period the recording covers."""
+    k = np.floor(t / period + 1e-9).astype(np.int64)
+    idx = np.concatenate([[0], np.nonzero(np.diff(k))[0] + 1])
+    return idx[idx < t.size - 1] if idx.size > 1 else idx  # a last row alone in its period is the logger's end
+
+
+def _triangle_phase(signal, t, u, period):
+    """The time φ [s] into `signal` (a Triangle) at which the recording starts, if the recorded duty `u` is that
+    triangle delayed by φ (a run logged from the middle): searched on a 1 ms grid over one triangle period and
+    refined at the PWM period's resolution; None if no φ fits within the duty tolerance."""
+    idx = period_starts(t, period)
+    ts, us = t[idx], u[idx]
+    cycle = 1.0 / float(signal.frequency)
+    best = None
+    for phi in np.arange(0.0, cycle, 1e-3):
+        ref = np.asarray(Triangle(signal.low, signal.high, signal.frequency)(np.floor((ts + phi) / period + 1e-9)
+                                                                              * period))
+        err = float(np.max(np.abs(ref - us)))
+        if best is None or err < best[1]:
+            best = (phi, err)
+    return best[0] if best[1] <= _DUTY_TOLERANCE else None
+
+
+def run_command(name, kind, e, rec, valve_period, where, notes, unknown_start):
+    """The signal that drives the run: the recorded duty (checked against meta.json's where both exist), else
+    meta.json's."""
+    recorded = "command" in rec.channels
+    if recorded:
+        u = rec["command"]
+        if np.nanmin(u) < -1e-9 or np.nanmax(u) > 1 + 1e-9:
+            hint = " (it looks like percent: write the header 'duty [%]')" if np.nanmax(u) <= 100 else ""
+            raise PamjaxInputError(f"{where}: the recorded duty must lie in [0, 1], its range is "
+                                   f"[{np.nanmin(u):g}, {np.nanmax(u):g}]{hint}")
+    if kind in TANK_KINDS:
+        duty = number(e, "u", where, 0.0, 1.0)
+        if recorded and duty is not None:
+            off = float(np.max(np.abs(rec["command"] - duty)))
+            if off > _DUTY_TOLERANCE:
+                raise PamjaxInputError(
+                    f"{where}: meta.json gives duty u = {duty:g}, but its recording's duty is "
+                    f"{np.min(rec['command']):g}..{np.max(rec['command']):g}: one of them is wrong (the recording "
+                    "is what the rig commanded)")
+        if not recorded and duty is None:
+            raise PamjaxInputError(f"{where}: it has neither a recorded duty column nor meta.json's 'u'")
+        if not recorded:
+            return Constant(duty)
+    else:
+        keys = [k for k in ("lo", "hi", "f_tri") if k in e]
+        triangle = None
+        if keys:
+            missing = [k for k in ("lo", "hi", "f_tri") if k not in e]
+            if missing:
+                raise PamjaxInputError(
+                    f"{where}: it gives a triangle duty without {missing} (a triangle needs lo, hi and f_tri "
+                    "[Hz]; a run with a recorded duty column needs none of them: kind 'muscle_run')")
+            lo, hi = number(e, "lo", where, 0.0, 1.0), number(e, "hi", where, 0.0, 1.0)
+            f = number(e, "f_tri", where, 0.0, None, "Hz")
+            if not (lo < hi and f > 0):
+                raise PamjaxInputError(f"{where}: it needs lo < hi and f_tri > 0, got lo={lo}, hi={hi}, "
+                                       f"f_tri={f}")
+            triangle = Triangle(lo, hi, f)
+        if not recorded and triangle is None:
+            raise PamjaxInputError(
+                f"{where}: it has no recorded duty column (u / duty) and meta.json gives no triangle (lo, hi, "
+                "f_tri): pamjax cannot know what drove the run; record the commanded duty")
+        if not recorded:
+            return triangle
+        if triangle is not None:
+            t, u = rec.t, rec["command"]
+            idx = period_starts(t, valve_period)
+            ref = np.asarray(triangle(np.floor(t[idx] / valve_period + 1e-9) * valve_period))
+            if float(np.max(np.abs(ref - u[idx]))) > _DUTY_TOLERANCE:
+                phase = _triangle_phase(triangle, t, u, valve_period)
+                if phase is None:
+                    raise PamjaxInputError(
+                        f"{where}: its recorded duty is not meta.json's triangle (lo={e['lo']}, hi={e['hi']}, "
+                        f"f_tri={e['f_tri']}) at any phase: one of them is wrong (the recording is what the rig "
+                        "commanded)")
+                if not unknown_start:
+                    raise PamjaxInputError(
+                        f"{where}: its recorded duty is meta.json's triangle {phase:.3f} s in: the run was "
+                        "logged from the middle, so its start is not at rest; mark it with \"init\": \"unknown\" "
+                        "(its start state is then fitted with --nuisance)")
+                notes.append(f"{name}: logged {phase:.3f} s into its triangle (recorded duty); driven by the recorded "
+                             "duty")
+            else:
+                notes.append(f"{name}: recorded duty = meta.json's triangle (checked); driven by the recorded duty")
+    return Sampled(rec.t, rec["command"], period=valve_period)
+
+

@@ -1,0 +1,151 @@
+"""A rig: the plant seen through its sensors and driven under the conditions of each run.
+
+A recording is not the plant's state: a real rig's pressure sensor has an offset and a gain error, its position sensor
+an offset, its acquisition lags the command by a fraction of a millisecond to a few milliseconds, the supply pressure
+drifts from run to run, and a run logged from the middle starts in an unknown state. These are parameters of the
+experiments, not of the plant (design.md, "What a rig adds"; as PEtab's observables separate measurement offsets and
+scalings from the model, and as SDO estimates initial states beside the parameters):
+
+- `Sensors`: pressure offset [Pa] (added to the gauge pressure) and gain [-] (multiplies it), position offset [m],
+  acquisition delay [s] (every channel's samples are `delay` late: fractional, differentiable — the model is read
+  at t − delay on its own continuous interpolant, not shifted by whole samples). One `Sensors` per group of
+  experiments that share the same sensors (default group "rig": one set for the whole rig).
+- `RunConditions`: one run's supply pressure [Pa abs] and its start state (`StartState`: pressure, position,
+  velocity; for stick-slip friction the mode follows the velocity — stuck at 0, sliding in its direction
+  otherwise — or is declared "stuck").
+- `Rig(plant, sensors, runs)`: the object `pamjax.fit` fits when nuisances are free. Its parameter paths are the
+  plant's under `plant.` (`plant.valve.inflate.discharge_coefficient`), `sensors[rig].delay`,
+  `runs[E4].supply_pressure`, `runs[E4].start.position`. An `Experiment` asked for its predictions of a `Rig`
+  simulates the plant under its run's conditions and reads it through its group's sensors; given a plain plant, it
+  assumes ideal sensors, the plant's nominal supply and its own start state, exactly as before.
+
+Which nuisances to free, and why, is in docs/fitting.md ("Identifying your own rig").
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._core.errors import PamjaxInputError
+from .._core.fitting import positive, signed
+
+DEFAULT_GROUP = "rig"
+NUISANCE_ROOTS = ("sensors", "runs")
+
+
+class Sensors(eqx.Module):
+    """What a rig's sensors add to the plant's true channels (model → measured):
+
+    pressure [Pa abs] = p_atm + `pressure_gain` (p − p_atm) + `pressure_offset`; position [m] = x + `position_offset`;
+    every channel read `delay` [s] late: measured(t) = model(t − delay).
+
+    Defaults are ideal sensors (offsets 0, gain 1, no delay). Fitted linearly in units of their natural size
+    (`signed`: 1 kPa, 0.1 mm, 1 ms — the scale of a bench's noise and sampling interval), the gain in log space."""
+
+    pressure_offset: jax.Array = signed(0.0, scale=1e3, unit="Pa")  # added to the gauge pressure
+    pressure_gain: jax.Array = positive(1.0, unit="-")  # multiplies the gauge pressure
+    position_offset: jax.Array = signed(0.0, scale=1e-4, unit="m")
+    delay: jax.Array = signed(0.0, scale=1e-3, unit="s")  # the samples lag the command
+
+    def observe(self, channel, values, atmosphere):
+        """The measured `channel` from the model's `values` (the delay is applied where the model is read)."""
+        if channel == "pressure":
+            return atmosphere + self.pressure_gain * (values - atmosphere) + self.pressure_offset
+        if channel == "position":
+            return values + self.position_offset
+        return values
+
+    @staticmethod
+    def channel_parameters(channel):
+        """The fields that act on `channel` (besides the delay, which acts on all)."""
+        return {"pressure": ("pressure_offset", "pressure_gain"), "position": ("position_offset",)}.get(channel, ())
+
+
+START_MODES = ("auto", "stuck")
+
+
+class StartState(eqx.Module):
+    """A run's start state where it is not "at rest" (a recording started mid-run): `pressure` [Pa abs],
+    `position` [m], `velocity` [m/s]; None keeps the system's default (at rest, in equilibrium). `mode`: "auto" (stick-
+    slip friction sliding in the direction of the velocity, stuck where it is 0) or "stuck" (the velocity is 0)."""
+
+    pressure: jax.Array | None = positive(None, unit="Pa abs")
+    position: jax.Array | None = signed(None, scale=1e-3, unit="m")
+    velocity: jax.Array | None = signed(None, scale=1e-2, unit="m/s")
+    mode: str = eqx.field(static=True, default="auto")
+
+    def __check_init__(self):
+        if self.mode not in START_MODES:
+            raise PamjaxInputError(f"StartState.mode must be one of {START_MODES}, got {self.mode!r}")
+        if self.mode == "stuck" and self.velocity is not None:
+            raise PamjaxInputError("StartState: a start declared 'stuck' has no velocity (it is 0)")
+
+    def keywords(self):
+        """The `initial_state` keyword arguments this start sets."""
+        out = {k: v for k, v in (("pressure", self.pressure), ("position", self.position),
+                                 ("velocity", self.velocity)) if v is not None}
+        if self.mode == "stuck":
+            out["velocity"] = jnp.zeros(())
+        return out
+
+
+class RunConditions(eqx.Module):
+    """One run's conditions: `supply_pressure` [Pa abs] (None: the plant's own), `start` (a `StartState`; None: the
+    experiment's own start, at rest by default)."""
+
+    supply_pressure: jax.Array | None = positive(None, unit="Pa abs")
+    start: StartState | None = None
+
+
+class Rig(eqx.Module):
+    """A plant with the nuisances of the rig it was recorded on (module docstring): `plant` (a system), `sensors`
+    (group name → `Sensors`), `runs` (experiment name → `RunConditions`)."""
+
+    plant: eqx.Module
+    sensors: dict
+    runs: dict
+
+    def __init__(self, plant, sensors=None, runs=None):
+        if isinstance(plant, Rig):
+            raise PamjaxInputError("Rig(plant=...): the plant is a Rig already")
+        sensors = {DEFAULT_GROUP: Sensors()} if sensors is None else sensors
+        if isinstance(sensors, Sensors):
+            sensors = {DEFAULT_GROUP: sensors}
+        for name, s in dict(sensors).items():
+            if not isinstance(s, Sensors):
+                raise PamjaxInputError(f"Rig sensors[{name!r}] must be a pamjax.Sensors, got {type(s).__name__}")
+        for name, r in dict(runs or {}).items():
+            if not isinstance(r, RunConditions):
+                raise PamjaxInputError(f"Rig runs[{name!r}] must be a pamjax.RunConditions, got {type(r).__name__}")
+        self.plant = plant
+        self.sensors = {str(k): v for k, v in dict(sensors).items()}
+        self.runs = {str(k): v for k, v in dict(runs or {}).items()}
+
+
+def split(model, name, group):
+    """(plant, sensors or None, run conditions or None) of experiment `name` in sensor group `group`: a `Rig`'s, or
+    the plain plant with ideal sensors and its own conditions."""
+    if isinstance(model, Rig):
+        return model.plant, model.sensors.get(group), model.runs.get(name)
+    return model, None, None
+
+
+def is_nuisance(path):
+    """Whether a parameter path (or label) names a rig's nuisance rather than the plant."""
+    head = str(path).split(".")[0].split("[")[0]
+    return head in NUISANCE_ROOTS
+
+
+def nuisance_report(result):
+    """A fit result's nuisances apart from the plant: {"sensors": {group: {field: (value, std err)}},
+    "runs": {run: {"supply_pressure" | "start.position" | ...: (value, std err)}}}."""
+    from .parameters import Key, _parse
+
+    out = {"sensors": {}, "runs": {}}
+    for label, value, se in zip(result.labels, result.values, result.standard_errors):
+        if not is_nuisance(label):
+            continue
+        steps, _ = _parse(label)
+        root, key, rest = steps[0], steps[1], [s for s in steps[2:] if not isinstance(s, Key)]
+        out[root].setdefault(str(key), {})[".".join(rest)] = (float(value), float(se))
+    return out

@@ -1,0 +1,157 @@
+"""What a mismatched fit's residuals point to on a real rig: the nuisances a fit without them leaves in its residuals.
+
+A fit of the ideal plant to a rig's recordings ends with residuals that are not noise (`diagnostics.mismatch`), but
+"model mismatch" alone sends the user after the model. The residuals of such a fit carry the signature of each
+everyday nuisance, measured here from the data, the fitted predictions and the commands, without another solve:
+
+- **an offset at rest**: where a run starts at rest at atmospheric pressure, before its valve first opens, the model
+  IS the atmosphere; the data's mean there is the pressure sensor's offset;
+- **a lag between command and response**: data(t) = model(t − d) ≈ model(t) − d ṁ(t), so the residual regressed on
+  −ṁ gives the acquisition delay d (pooled over every run and channel, each weighted by its noise);
+- **a start that is not at rest**: a run declared at rest whose first 20 ms move, or sit far from the model's rest
+  state (a recording started mid-run);
+- **a supply pressure the tank runs contradict**: a discharge starts at its supply, so its first samples give that
+  run's supply; tank runs whose steady pressures sit on opposite sides of the model cannot share one supply.
+
+Each finding is reported only where it is significant (its estimate several standard errors from 0) and large
+enough to matter (beside the bench figures of issue 29: 0.1 ms, 300 Pa, 1 kPa), with the option that frees it.
+"""
+
+import numpy as np
+
+from .experiment import Experiment
+from .rig import is_nuisance
+
+FREE_IT = ("free it: fits/joint.py --nuisance, [bench] nuisance = true in a pamjax fit config, or "
+           "load_bench(..., nuisance=True) / pamjax.Rig in Python")
+_SIGNIFICANT = 5.0  # standard errors
+_MIN_DELAY = 1e-4  # s
+_MIN_OFFSET = 300.0  # Pa
+_MIN_SUPPLY = 1e3  # Pa
+_START_WINDOW = 0.02  # s
+
+
+def _first_opening(e, valve):
+    """The time of the first PWM period whose duty opens the valve (None for a valve without a period)."""
+    period = valve.period
+    if period is None:
+        return None
+    period = float(period)
+    starts = np.arange(np.floor(float(e.times[0]) / period), np.floor(float(e.times[-1]) / period) + 1) * period
+    import jax
+
+    duty = np.asarray(jax.vmap(e.signal)(starts))
+    opens = np.asarray(valve.switching_gates(duty)[0])
+    return float(starts[np.argmax(opens)]) if np.any(opens) else float(e.times[-1])
+
+
+def _start_pressure(e, system, model, atmosphere):
+    """The start pressure [Pa abs] of an experiment's run, without building its start state (no solve)."""
+    from .rig import split
+
+    _, _, run = split(model, e.name, e.sensor_group)
+    if run is not None and run.start is not None and run.start.pressure is not None:
+        return float(run.start.pressure)
+    if e.start_at_supply:
+        return float(system.valve.supply())
+    return float(e.initial["pressure"]) if "pressure" in e.initial else atmosphere
+
+
+def _moving_start(e, pred, start_pressure):
+    """How a run declared at rest visibly does not start so (its first 20 ms move, or its pressure is far from
+    the model's start), as a phrase; "" when it may well start at rest."""
+    t = np.asarray(e.times)
+    head = t <= t[0] + _START_WINDOW
+    if np.count_nonzero(head) < 5:
+        return ""
+    found = []
+    x, sigma_x = np.asarray(e.data["position"])[head], e.scales["position"]
+    tt = t[head] - t[0]
+    speed = np.polyfit(tt, x, 1)[0]
+    se = sigma_x / np.sqrt(np.sum((tt - tt.mean()) ** 2))
+    if abs(speed) > max(_SIGNIFICANT * se, 5e-3):
+        found.append(f"moves at {speed * 1e3:+.1f} mm/s in its first {_START_WINDOW * 1e3:.0f} ms (± {se * 1e3:.1f})")
+    if "pressure" in e.channels:
+        p, sigma_p = float(np.mean(np.asarray(e.data["pressure"])[head])), e.scales["pressure"]
+        if abs(p - start_pressure) > max(10 * sigma_p, 2e4):
+            found.append(f"starts at {p / 1e3:.0f} kPa abs where the model starts at {start_pressure / 1e3:.0f}")
+    return " and ".join(found)
+
+
+def nuisance_hints(model, experiments, predictions, labels):
+    """Findings (sentences) of what the residuals of a fit point to among a rig's nuisances that `labels` (the
+    fitted parameters) do not already free; [] when none is significant."""
+    from .rig import split
+
+    freed = {str(label).split("].", 1)[-1].split(".")[-1] for label in labels if is_nuisance(label)}
+    exps = [e for e in experiments if isinstance(e, Experiment) and e.name in predictions]
+    hints = []
+    num = den = 0.0
+    rest_sum, rest_n, rest_sigma = 0.0, 0, None
+    starts, supplies, steady = [], [], []
+    for e in exps:
+        plant, _, _ = split(model, e.name, e.sensor_group)
+        system = e.system_for(model)
+        atmosphere = float(plant.air.atmospheric_pressure)
+        start_p = _start_pressure(e, system, model, atmosphere)
+        moving = _moving_start(e, predictions[e.name], start_p) if "position" in e.channels else ""
+        if moving and not e.start_at_supply:
+            starts.append((e.name, moving))
+        t = np.asarray(e.times)
+        for c in e.channels:
+            data, pred = np.asarray(e.data[c]), np.asarray(predictions[e.name][c])
+            used = (np.asarray(e.weights[c]) > 0) & np.isfinite(pred)
+            if np.count_nonzero(used) < 10:
+                continue
+            r, sigma = (data - pred)[used], e.scales[c]
+            if not moving:  # a run that does not start where the model does says nothing about a lag
+                slope = np.gradient(pred, t)[used]
+                num += float(r @ -slope) / sigma**2
+                den += float(slope @ slope) / sigma**2
+            if c == "pressure":
+                first = _first_opening(e, system.valve) if abs(start_p - atmosphere) < 1.0 else None
+                if first is not None:
+                    rest = used & (t < first)
+                    if np.count_nonzero(rest) >= 3:
+                        rest_sum += float(np.sum(data[rest] - atmosphere))
+                        rest_n += int(np.count_nonzero(rest))
+                        rest_sigma = sigma
+                if e.start_at_supply:
+                    head = used & (t <= t[0] + 0.005)
+                    if np.count_nonzero(head) >= 3:
+                        supplies.append((e.name, float(np.mean(data[head] - pred[head])), sigma /
+                                         np.sqrt(np.count_nonzero(head)), start_p))
+                if "position" not in e.channels:  # a tank run's steady end
+                    tail = used & (t >= t[0] + 0.8 * (t[-1] - t[0]))
+                    steady.append((e.name, float(np.mean(data[tail] - pred[tail])),
+                                   sigma / np.sqrt(max(np.count_nonzero(tail), 1))))
+    if den > 0 and "delay" not in freed:
+        d, se = num / den, 1.0 / np.sqrt(den)
+        if abs(d) > max(_SIGNIFICANT * se, _MIN_DELAY):
+            hints.append(f"a lag between command and response: the data {'lag' if d > 0 else 'lead'} the model by "
+                         f"{abs(d) * 1e3:.2f} ms (± {se * 1e3:.2g} ms; residuals regressed on the model's slope): an "
+                         f"acquisition delay; {FREE_IT} (delay)")
+    if rest_n and "pressure_offset" not in freed:
+        offset, se = rest_sum / rest_n, rest_sigma / np.sqrt(rest_n)
+        if abs(offset) > max(_SIGNIFICANT * se, _MIN_OFFSET):
+            hints.append(f"an offset at rest: before the valve first opens, where the model is at atmospheric "
+                         f"pressure, the pressure reads {offset:+.0f} Pa (± {se:.0f} Pa over {rest_n} samples): a "
+                         f"pressure sensor offset; {FREE_IT} (pressure_offset, pressure_gain)")
+    if "start" not in freed:
+        for name, finding in starts:
+            hints.append(f"a start that is not at rest: {name} {finding} (a recording started mid-run?): give it "
+                         f"\"init\": \"unknown\" in meta.json and {FREE_IT} (start)")
+    if "supply_pressure" not in freed:
+        off = [(n, d, se, p0) for n, d, se, p0 in supplies if abs(d) > max(_SIGNIFICANT * se, _MIN_SUPPLY)]
+        if off:
+            runs = ", ".join(f"{n} about {(p0 + d) / 1e3:.1f} kPa abs ({d / 1e3:+.1f} kPa)" for n, d, _, p0 in off)
+            hints.append(f"a supply pressure the tank runs contradict: discharges start at their supply pressure, and "
+                         f"these start away from the model's ({off[0][3] / 1e3:.1f} kPa abs): {runs}; {FREE_IT} "
+                         "(supply_pressure, per run)")
+        signs = {np.sign(d) for _, d, se in steady if abs(d) > max(_SIGNIFICANT * se, _MIN_SUPPLY)}
+        if len(signs) > 1 and not off:
+            spread = ", ".join(f"{n} {d / 1e3:+.1f}" for n, d, _ in steady)
+            hints.append(f"a supply pressure the tank runs contradict: their steady pressures sit on both sides of the "
+                         f"model (data − model over their last 20 %, kPa: {spread}), which one supply pressure cannot "
+                         f"give; {FREE_IT} (supply_pressure, per run)")
+    return hints

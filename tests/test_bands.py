@@ -1,0 +1,403 @@
+"""Bands on predictions (`pamjax.prediction_band`, the map bands, `--band`), checked against what they claim:
+
+- the linear band's standard deviation against the spread of REFITS over noise seeds (40 synthetic recordings of
+  one tank → 40 fits → the scatter of their predictions of another run), and its coverage of the truth;
+- the delta method against an independent one (central differences in the PHYSICAL parameters with the covariance
+  rebuilt from the fit's standard errors and correlations), so the unconstrained-space algebra is checked;
+- the steady-state map's band against a NumPy oracle: a tank with eq. 13's valve settles where the flow is zero, the
+  root of a quadratic in the gauge pressure;
+- the flow surface's band against central differences of `pamjax.flow_surface`;
+- samples against linear where the problem is linear at the scale of its uncertainty; a rig's nuisances
+  marginalised; every refusal named.
+
+The problem: paper 000's averaged (eq. 13) valve charging its 5e-5 m³ tank along a 1 Hz triangle, 2 kPa noise,
+three free parameters (m4, m5 and the volume); each fit < 0.1 s after the first.
+"""
+
+import json
+import textwrap
+import warnings
+
+import numpy as np
+import pytest
+
+import pamjax as pj
+from pamjax import presets
+from pamjax._cli.main import main
+from pamjax._core.errors import PamjaxInputError
+
+FREE = ["valve.coefficients[1,0]", "valve.coefficients[1,1]", "volume"]
+NOISE = 2e3  # Pa, the hybrid bench's pressure noise
+SIGNAL = pj.Triangle(0.1, 0.9, 1.0)
+T_FIT = np.linspace(0.0, 2.0, 101)
+# The prediction banded: another run than the one fitted (a 0.7 Hz sine), on the fixed RK4 grid (1 ms): smooth in
+# every parameter, so the ±1 σ points see the model's curvature and not an adaptive solver's step pattern.
+PREDICT_SIGNAL = pj.Sine(0.5, 0.3, 0.7)
+T_PREDICT = np.linspace(0.0, 3.0, 31)
+REFITS = 40
+
+
+def predict(model):
+    return pj.simulate(model, PREDICT_SIGNAL, T_PREDICT, stepping="grid", throw=False).channel("pressure")
+
+
+def _fit(truth, seed):
+    rec = pj.synthetic_recording(truth, SIGNAL, T_FIT, noise=dict(pressure=NOISE), seed=seed, name="tank")
+    exp = pj.Experiment(rec, SIGNAL, channels=["pressure"], scales=dict(pressure=NOISE))
+    return pj.fit(truth, [exp], FREE, progress=False)
+
+
+@pytest.fixture(scope="module")
+def truth():
+    return presets.mas10_tank_system("averaged")
+
+
+@pytest.fixture(scope="module")
+def refits(truth):
+    """40 fits of 40 noise seeds, each with its linear band of `predict`. (A few seeds' residuals pass the mismatch
+    threshold by chance, 101 samples being few for a lag-1 autocorrelation: their bands' warning is expected.)"""
+    fits, bands = [], []
+    for seed in range(REFITS):
+        res = _fit(truth, seed)
+        assert res.converged, res.message
+        fits.append(res)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", pj.PamjaxBandWarning)
+            bands.append(pj.prediction_band(res, predict, check_linearity=False))
+    return fits, bands
+
+
+def test_linear_band_matches_the_spread_of_refits_and_covers_the_truth(truth, refits):
+    """The band's σ against the empirical σ of 40 refits' predictions: an empirical σ of N draws scatters by
+    1/√(2(N−1)) = 11 % relative, so every time's ratio must lie within ±3 of that (0.66…1.34) and their median within
+    ±2 (0.77…1.23); the truth must be inside the 95 % band in at least 85 % of fits × times (3 binomial σ of 40
+    effectively independent fits below 0.95). A band off by the σ² estimate, the transform's Jacobian or a factor z
+    fails this."""
+    _, bands = refits
+    predictions = np.array([b.prediction for b in bands])
+    stds = np.array([b.std for b in bands])
+    later = T_PREDICT > 0.15  # the start (atmosphere at t = 0) is known exactly: no spread to compare
+    ratio = predictions.std(axis=0, ddof=1)[later] / stds.mean(axis=0)[later]
+    assert np.all((ratio > 0.66) & (ratio < 1.34)), ratio
+    assert 0.77 < np.median(ratio) < 1.23, ratio
+    y_true = np.asarray(predict(truth))
+    inside = (y_true >= np.array([b.lower for b in bands])) & (y_true <= np.array([b.upper for b in bands]))
+    assert inside[:, later].mean() > 0.85, inside[:, later].mean()
+    assert bands[0].method == "linear" and "forward-mode Jacobian" in bands[0].how
+    assert bands[0].parameters == [*FREE[:2], "volume"] and bands[0].marginalised == []
+
+
+def test_delta_method_equals_central_differences_in_the_physical_parameters(refits):
+    """σ² = diag(J Σ Jᵀ) with J by central differences of the prediction in the PHYSICAL values (steps of 1e-4 of
+    each value) and Σ = diag(SE) R diag(SE) from the result's stored numbers: the band's forward-mode Jacobian in the
+    unconstrained space must give the same σ (to 1e-4: the differences' truncation and round-off)."""
+    fits, bands = refits
+    res, band = fits[0], bands[0]
+    space = pj.ParameterSpace(res.model, FREE)
+    values = np.asarray(res.values)
+    columns = []
+    for i in range(values.size):
+        h = 1e-4 * abs(values[i])
+        up, down = values.copy(), values.copy()
+        up[i] += h
+        down[i] -= h
+        columns.append((np.asarray(predict(space.with_values(up))) - np.asarray(predict(space.with_values(down))))
+                       / (2 * h))
+    jac = np.stack(columns, axis=-1)
+    se = np.asarray(res.standard_errors)
+    cov = np.asarray(res.correlation) * np.outer(se, se)
+    reference = np.sqrt(np.einsum("ti,ij,tj->t", jac, cov, jac))
+    later = T_PREDICT > 0.15
+    np.testing.assert_allclose(band.std[later], reference[later], rtol=1e-4)
+    np.testing.assert_allclose(band.upper - band.prediction, 1.959964 * band.std, rtol=1e-6)
+
+
+def test_samples_agree_with_linear_and_the_linearity_index_is_small(refits):
+    """Where the uncertainty is small (0.4 % in m4), the prediction is linear over it: the nonlinearity index is
+    far below 0.1, and 200 draws give the linear σ within 15 % (a σ of 200 draws scatters by 5 %)."""
+    fits, _ = refits
+    linear = pj.prediction_band(fits[1], predict)
+    assert linear.nonlinearity < 0.02, linear.nonlinearity
+    samples = pj.prediction_band(fits[1], predict, method="samples", samples=200, seed=1)
+    later = T_PREDICT > 0.15
+    ratio = samples.std[later] / linear.std[later]
+    assert np.all((ratio > 0.85) & (ratio < 1.15)), ratio
+    assert samples.method == "samples" and "200 draws" in samples.how and samples.failed == 0
+    assert np.all(samples.lower <= samples.upper)
+    assert samples.nonlinearity is None
+
+
+def _settled_pressure(coefficients, u, p_atm):
+    """NumPy oracle: the tank pressure [Pa abs] where eq. 13's flow Σ m_ij uⁱ p_gʲ is zero, in (0, 6 bar) gauge."""
+    c = np.array([1.0, u, u * u]) @ coefficients  # c0, c1, c2 of the gauge pressure
+    roots = np.roots([c[2], c[1], c[0]])
+    real = roots[np.isreal(roots)].real
+    return p_atm + real[(real > 0) & (real < 6e5)][0]
+
+
+def test_steady_state_band_against_the_settled_pressure_oracle(refits):
+    """The steady-state map's band (±1 σ points as one more sweep axis) against the delta method on the NumPy
+    oracle's root (its Jacobian by central differences in m4, m5; the volume does not move a settled tank): σ
+    within 2 %, the band's centre within 20 Pa of the root (the map averages a settled 0.5 s window)."""
+    fits, _ = refits
+    res = fits[0]
+    duties = np.array([0.3, 0.5, 0.7])
+    band = pj.steady_state_band(res, duties, horizon=2.0, window=0.5, progress=False)
+    assert "central differences at ±1 σ" in band.how
+    m = np.asarray(res.model.valve.coefficients)
+    p_atm = float(res.model.air.atmospheric_pressure)
+    se = np.asarray(res.standard_errors)[:2]
+    cov = np.asarray(res.correlation)[:2, :2] * np.outer(se, se)
+    for k, u in enumerate(duties):
+        grad = []
+        for index in ((1, 0), (1, 1)):
+            h = 1e-5 * abs(m[index])
+            up, down = m.copy(), m.copy()
+            up[index] += h
+            down[index] -= h
+            grad.append((_settled_pressure(up, u, p_atm) - _settled_pressure(down, u, p_atm)) / (2 * h))
+        grad = np.array(grad)
+        assert abs(band.prediction["pressure"][k] - _settled_pressure(m, u, p_atm)) < 20.0
+        assert band.std["pressure"][k] == pytest.approx(np.sqrt(grad @ cov @ grad), rel=0.02)
+
+
+@pytest.mark.slow  # ~15 s: two frequency-response sweeps of 14 and 202 lanes (compiled once each)
+def test_frequency_response_band_linear_and_samples_agree(refits):
+    """Gain and phase of the tank pressure at 0.5 and 2 Hz: the ±1 σ linear band and 200 draws agree within 20 %
+    (Monte-Carlo scatter 5 %, and the lanes' error control 1e-5); phases differenced modulo 360°."""
+    res = refits[0][2]
+    f = np.array([0.5, 2.0])
+    kwargs = dict(channels=("pressure",), settle_periods=2, periods=2, samples_per_period=40, progress=False)
+    linear = pj.frequency_response_band(res, f, **kwargs)
+    samples = pj.frequency_response_band(res, f, method="samples", samples=200, **kwargs)
+    for name in ("pressure_gain", "pressure_phase"):
+        assert np.all(linear.std[name] > 0)
+        np.testing.assert_allclose(samples.std[name], linear.std[name], rtol=0.2)
+    assert linear.prediction["pressure_phase"][1] < linear.prediction["pressure_phase"][0] < 0  # a lag, growing
+    direct = pj.frequency_response(res.model, f, channels=("pressure",), settle_periods=2, periods=2,
+                                   samples_per_period=40, progress=False)
+    np.testing.assert_allclose(linear.prediction["pressure_gain"], direct["pressure"]["gain"], rtol=1e-4)
+
+
+def test_flow_surface_band_against_central_differences():
+    """A switching valve's cycle-averaged flow surface with a stated covariance of two inflate-path parameters
+    (2 % and 3 %, correlation 0.4; a `FitUncertainty` from its JSON document, as a model file carries it): σ from
+    the forward-mode Jacobian equals the delta method with central differences of `pamjax.flow_surface` (1e-5)."""
+    model = presets.mas10_tank_system("pwm")
+    paths = ["valve.inflate.discharge_coefficient", "valve.inflate.critical_ratio"]
+    values = np.array([float(model.valve.inflate.discharge_coefficient), float(model.valve.inflate.critical_ratio)])
+    se = values * np.array([0.02, 0.03])
+    document = dict(labels=paths, paths=paths, values=values.tolist(), standard_errors=se.tolist(),
+                    correlation=[[1.0, 0.4], [0.4, 1.0]], status="converged", mismatch=False)
+    uncertainty = pj.FitUncertainty.from_document(json.loads(json.dumps(document)), "a stated covariance")
+    u, p = np.array([0.3, 0.6]), np.array([2e5, 4e5])
+    band = pj.flow_surface_band(uncertainty, u, p, model=model)
+    space = pj.ParameterSpace(model, paths)
+    grads = []
+    for i in range(2):
+        h = 1e-6 * values[i]
+        up, down = values.copy(), values.copy()
+        up[i] += h
+        down[i] -= h
+        flow = [pj.flow_surface(space.with_values(v).valve, u, p, model.air) for v in (up, down)]
+        grads.append((flow[0] - flow[1]) / (2 * h))
+    grads = np.stack(grads, axis=-1)
+    cov = np.array([[1.0, 0.4], [0.4, 1.0]]) * np.outer(se, se)
+    reference = np.sqrt(np.einsum("...i,ij,...j->...", grads, cov, grads))
+    np.testing.assert_allclose(band.std["mass_flow"], reference, rtol=1e-5)
+    np.testing.assert_allclose(band.prediction["mass_flow"], pj.flow_surface(model.valve, u, p, model.air),
+                               rtol=1e-12)
+
+
+@pytest.mark.slow  # ~30 s: compiles the PWM grid's solve with tangents and vmapped
+def test_band_of_a_switching_valve_and_stick_slip_on_the_pwm_grid():
+    """The bench's model (switching valve on the PWM-synchronous grid, exact stick-slip): the grid's size needs the
+    PWM frequency concrete, which a band must not trace (only the free parameters are). σ from the forward-mode
+    Jacobian equals the delta method with central differences in the physical values (1e-4)."""
+    model = presets.mas10_system(valve="pwm", friction="karnopp")
+    paths = ["friction.coulomb_force", "valve.inflate.discharge_coefficient"]
+    values = np.array([float(model.friction.coulomb_force), float(model.valve.inflate.discharge_coefficient)])
+    se, corr = 0.02 * values, np.array([[1.0, 0.3], [0.3, 1.0]])
+    uncertainty = pj.FitUncertainty.from_document(
+        dict(labels=paths, paths=paths, values=values.tolist(), standard_errors=se.tolist(),
+             correlation=corr.tolist()), "a stated covariance")
+    ts = np.linspace(0.0, 0.6, 31)
+
+    def position(m):
+        return pj.simulate(m, pj.Triangle(0.1, 0.9, 1.0), ts, throw=False).channel("position")
+
+    band = pj.prediction_band(uncertainty, position, model=model, check_linearity=False)
+    space = pj.ParameterSpace(model, paths)
+    grads = []
+    for i in range(2):
+        h = 1e-5 * values[i]
+        up, down = values.copy(), values.copy()
+        up[i] += h
+        down[i] -= h
+        grads.append((np.asarray(position(space.with_values(up))) - np.asarray(position(space.with_values(down))))
+                     / (2 * h))
+    grads = np.stack(grads, axis=-1)
+    reference = np.sqrt(np.einsum("ti,ij,tj->t", grads, corr * np.outer(se, se), grads))
+    moving = reference > 1e-3 * reference.max()
+    assert np.count_nonzero(moving) > 20
+    np.testing.assert_allclose(band.std[moving], reference[moving], rtol=1e-4)
+
+
+def test_a_rig_fit_gives_the_plants_band_with_its_nuisances_marginalised(refits):
+    """A rig's fit (the plant's labels `plant.…` and a sensor delay correlated with them): the band is the plant's,
+    from the plant block of the covariance (the marginal), the delay named as marginalised; equal to the plain
+    fit's band with that block."""
+    res, band = refits[0][0], refits[1][0]
+    se = np.asarray(res.standard_errors)
+    corr = np.eye(4)
+    corr[:3, :3] = np.asarray(res.correlation)
+    corr[3, :3] = corr[:3, 3] = [0.5, -0.3, 0.2]
+    labels = [f"plant.{p}" for p in FREE] + ["sensors[rig].delay"]
+    document = dict(labels=labels, paths=labels, values=[*res.values, 1e-3], correlation=corr.tolist(),
+                    standard_errors=[*se, 2e-4], status="converged", mismatch=False)
+    rig = pj.Rig(res.model)
+    plant_band = pj.prediction_band(pj.FitUncertainty.from_document(document, "a rig"), predict, model=rig,
+                                    check_linearity=False)
+    assert plant_band.marginalised == ["sensors[rig].delay"]
+    assert plant_band.parameters == FREE
+    assert any("nuisances (sensors[rig].delay) marginalised" in n for n in plant_band.notes)
+    np.testing.assert_allclose(plant_band.std, band.std, rtol=1e-10)
+
+
+def test_refusals_are_named(refits, tmp_path):
+    res = refits[0][0]
+    with pytest.raises(PamjaxInputError, match="level must be a confidence level"):
+        pj.prediction_band(res, predict, level=95)
+    with pytest.raises(PamjaxInputError, match="method must be one of"):
+        pj.prediction_band(res, predict, method="bootstrap")
+    with pytest.raises(PamjaxInputError, match="samples must be an integer >= 20"):
+        pj.prediction_band(res, predict, method="samples", samples=5)
+    unidentified = res.to_dict() | {"standard_errors": [float("inf"), *res.standard_errors[1:]]}
+    with pytest.raises(PamjaxInputError, match=r"does not determine valve.coefficients\[1,0\]"):
+        pj.prediction_band(pj.FitUncertainty.from_document(unidentified, "x"), predict, model=res.model)
+    pj.save_model(tmp_path / "model.json", res.model)  # a model file that no fit wrote
+    with pytest.raises(PamjaxInputError, match="this model was not fitted"):
+        pj.prediction_band(tmp_path / "model.json", predict)
+    stick_slip = presets.mas10_system(valve="averaged", friction="karnopp")
+    friction = pj.FitUncertainty.from_document(dict(labels=["friction.coulomb_force"], paths=["friction.coulomb_force"],
+                                                    values=[16.0], standard_errors=[0.5], correlation=[[1.0]]), "x")
+    with pytest.raises(PamjaxInputError, match="this model is hybrid"):
+        pj.steady_state_band(friction, [0.5], model=stick_slip)
+    loaded = pj.FitResult.from_json(res.to_json(tmp_path / "fit.json"))
+    with pytest.raises(PamjaxInputError, match="pass model="):
+        pj.prediction_band(loaded, predict)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", pj.PamjaxBandWarning)
+        mismatched = res.to_dict() | {"mismatch": True}
+        with pytest.raises(pj.PamjaxBandWarning, match="understates the uncertainty"):
+            pj.prediction_band(pj.FitUncertainty.from_document(mismatched, "x"), predict, model=res.model)
+
+
+# -- the command line -------------------------------------------------------------------------------------------
+FIT_CONFIG = """
+    [model]
+    preset = "mas10_tank_system"
+    options = { valve = "averaged" }
+    [fit]
+    free = ["valve.coefficients[1,0]", "valve.coefficients[1,1]", "volume"]
+    max_steps = 30
+    [[experiment]]
+    name = "tank"
+    file = "tank.csv"
+    signal = { kind = "Triangle", low = 0.1, high = 0.9, frequency = 1.0 }
+    channels = ["pressure"]
+    scales = { pressure = 2e3 }
+"""
+SIMULATE_CONFIG = """
+    [model]
+    file = "fit/model.json"{extra}
+    [input]
+    signal = {{ kind = "Sine", offset = 0.5, amplitude = 0.3, frequency = 0.7 }}
+    [simulate]
+    t_end = 3.0
+    dt = 0.1
+    rtol = 1e-8
+    atol = 1e-8
+"""
+
+
+@pytest.fixture(scope="module")
+def fitted(truth, tmp_path_factory):
+    """`pamjax fit` of the tank (model.json carries the covariance)."""
+    root = tmp_path_factory.mktemp("bands")
+    pj.synthetic_recording(truth, SIGNAL, T_FIT, noise=dict(pressure=NOISE), seed=0, name="tank").to_csv(
+        root / "tank.csv")
+    (root / "fit.toml").write_text(textwrap.dedent(FIT_CONFIG))
+    assert main(["fit", str(root / "fit.toml"), "--out", str(root / "fit"), "--quiet", "--no-plot"]) == 0
+    (root / "sim.toml").write_text(textwrap.dedent(SIMULATE_CONFIG.format(extra="")))
+    return root
+
+
+@pytest.mark.slow  # ~25 s: compiles the CLI's solve, its band and the Python API's band of it
+def test_cli_simulate_band_columns_figure_and_unchanged_without(fitted, refits):
+    root = fitted
+    document = json.loads((root / "fit" / "model.json").read_text())
+    assert document["provenance"]["covariance"]["labels"] == FREE
+    assert main(["simulate", str(root / "sim.toml"), "--out", str(root / "plain")]) == 0
+    assert main(["simulate", str(root / "sim.toml"), "--out", str(root / "band"), "--band"]) == 0
+    plain = pj.Recording.load(root / "plain" / "trajectory.csv")
+    band = pj.Recording.load(root / "band" / "trajectory.csv")
+    assert "pressure_lower" not in plain.channels
+    assert set(band.channels) == set(plain.channels) | {f"{c}_{e}" for c in ("pressure", "mass_flow")
+                                                       for e in ("lower", "upper")}
+    np.testing.assert_array_equal(band["pressure"], plain["pressure"])
+    assert np.all(band["pressure_lower"] <= band["pressure"]) and np.all(band["pressure"] <= band["pressure_upper"])
+    text = (root / "band" / "trajectory.csv").read_text()
+    assert "# 95 % confidence band (linear): delta method" in text and "model.json" in text
+    assert (root / "band" / "trajectory.png").stat().st_size > 10_000
+    # the same band as the Python API's of the same fit (fit.json's values), to the CSV's exact floats
+    python = pj.prediction_band(root / "fit" / "fit.json", lambda m: pj.simulate(
+        m, PREDICT_SIGNAL, band.t, rtol=1e-8, atol=1e-8, adjoint="forward", throw=False).channel("pressure"),
+        model=pj.load_model(root / "fit" / "model.json"), check_linearity=False)
+    np.testing.assert_allclose(band["pressure_upper"], python.upper, rtol=1e-12)
+
+
+def test_cli_band_refusals_and_an_older_model_file(fitted, capsys):
+    root = fitted
+    preset = root / "preset.toml"
+    preset.write_text(textwrap.dedent(SIMULATE_CONFIG.format(extra="").replace('file = "fit/model.json"',
+                                                                               'preset = "mas10_tank_system"')))
+    assert main(["simulate", str(preset), "--out", str(root / "x"), "--band"]) == 2
+    assert "is not a fitted model; --band needs [model] file" in capsys.readouterr().err
+    changed = root / "changed.toml"
+    changed.write_text(textwrap.dedent(SIMULATE_CONFIG.format(extra='\n    set = { "volume" = 6e-5 }')))
+    assert main(["simulate", str(changed), "--out", str(root / "y"), "--band"]) == 2
+    assert "changes 'volume', a parameter the fit determined" in capsys.readouterr().err
+    assert not (root / "x").exists() and not (root / "y").exists()  # refused before the output folder
+    # a model.json written before the covariance entry: the fit.json its provenance names, beside it
+    old = json.loads((root / "fit" / "model.json").read_text())
+    del old["provenance"]["covariance"]
+    (root / "old").mkdir()
+    (root / "old" / "model.json").write_text(json.dumps(old))
+    (root / "old" / "fit.json").write_text((root / "fit" / "fit.json").read_text())
+    (root / "old.toml").write_text(textwrap.dedent(SIMULATE_CONFIG.format(extra="")).replace("fit/model", "old/model"))
+    assert main(["simulate", str(root / "old.toml"), "--out", str(root / "z"), "--band", "--no-plot"]) == 0
+    assert "covariance of" in capsys.readouterr().out
+    (root / "old" / "fit.json").unlink()
+    assert main(["simulate", str(root / "old.toml"), "--out", str(root / "w"), "--band"]) == 2
+    assert "this model was not fitted" in capsys.readouterr().err
+
+
+def test_cli_sweep_steady_state_band(fitted):
+    root = fitted
+    (root / "ss.toml").write_text(textwrap.dedent("""
+        kind = "steady_state"
+        [model]
+        file = "fit/model.json"
+        [sweep]
+        commands = [0.3, 0.5, 0.7]
+        horizon = 2.0
+        window = 0.5
+    """))
+    assert main(["sweep", str(root / "ss.toml"), "--out", str(root / "ss"), "--band", "--cpu-devices", "1"]) == 0
+    with np.load(root / "ss" / "sweep.npz") as f:
+        columns = {k: f[k] for k in f.files}
+    assert list(columns)[-2:] == ["pressure_pa_abs_lower", "pressure_pa_abs_upper"]
+    assert np.all(columns["pressure_pa_abs_lower"] < columns["pressure_pa_abs"])
+    assert np.all(columns["pressure_pa_abs"] < columns["pressure_pa_abs_upper"])
+    assert (root / "ss" / "sweep.png").stat().st_size > 10_000

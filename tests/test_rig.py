@@ -1,0 +1,323 @@
+"""A real rig's nuisances (`pamjax.Rig`, `Sensors`, `RunConditions`, `StartState`), bench folders as a rig logs them
+(CSV in barg and mm, MAT), and what a fit without the nuisances says about them.
+
+The sensor model is checked against its NumPy transcription on the plant simulated at t − delay; the run conditions
+against `simulate` of the plant with that supply and start; the identification on a small rig written as CSV files
+(supply drift, offset, gain, a fractional delay, a run logged mid-way), fitted from the presets."""
+
+import json
+
+import jax
+import numpy as np
+import pytest
+
+import pamjax as pj
+from pamjax import PamjaxInputError, presets
+
+ATM = 101325.0
+NOISE = {"p_std_Pa": 2000.0, "x_std_m": 1e-4}
+TRUTH = dict(delay_s=1.7e-3, pressure_offset_Pa=1500.0, pressure_gain=1.008,
+             supply={"T1": 6.3e5, "T2": 6.62e5, "M0": 6.45e5, "M1": 6.4e5})
+PREROLL = 0.6  # s: M1 is logged from 0.6 s into its triangle
+
+
+def _plant():
+    return presets.mas10_system(valve="pwm", friction="karnopp")
+
+
+def _read_at(system, signal, t_read, y0, substeps=32):
+    """The plant's channels at times `t_read` (before 0: the start state), by `simulate`."""
+    after = t_read > 0
+    traj = pj.simulate(system, signal, np.concatenate([[0.0], t_read[after]]), y0=y0, stepping="pwm",
+                       substeps=substeps)
+    return {c: np.asarray(traj.channel(c))[np.cumsum(after)] for c in ("pressure", "position")
+            if c in traj.channels()}
+
+
+def test_sensors_delay_and_supply_match_their_numpy_transcription():
+    plant = _plant()
+    rec = pj.Recording(np.arange(0.0, 0.3001, 1e-3), {"pressure": np.full(301, ATM)})
+    exp = pj.Experiment(rec, pj.Constant(0.5), build=pj.TankFromModel(5e-5), initial={"pressure": ATM}, name="T")
+    sensors = pj.Sensors(pressure_offset=1500.0, pressure_gain=1.01, delay=1.7e-3)
+    rig = pj.Rig(plant, sensors=sensors, runs={"T": pj.RunConditions(supply_pressure=6.3e5)})
+    (pred,) = pj.predictions(rig, [exp])
+    system = pj.TankFromModel(5e-5)(plant).with_supply_pressure(6.3e5)
+    true = _read_at(system, pj.Constant(0.5), rec.t - 1.7e-3, system.initial_state(ATM), substeps=16)["pressure"]
+    expected = ATM + 1.01 * (true - ATM) + 1500.0
+    np.testing.assert_allclose(pred["pressure"], expected, atol=5.0)  # Pa; the fit's 16-node grid vs simulate's
+    (plain,) = pj.predictions(plant, [exp])  # a plain plant: ideal sensors, nominal supply (0.65 MPa)
+    assert np.max(np.abs(plain["pressure"] - pred["pressure"])) > 1e4
+
+
+def test_a_start_state_and_its_sliding_mode_match_simulate():
+    plant = _plant()
+    t = np.arange(0.0, 0.5001, 1e-3)
+    rec = pj.Recording(t, {"pressure": np.full(t.size, 4e5), "position": np.zeros(t.size)})
+    signal = pj.Triangle(0.05, 0.95, 0.5)
+    exp = pj.Experiment(rec, signal, name="M")
+    start = pj.StartState(pressure=4.2e5, position=0.02, velocity=0.015)
+    (pred,) = pj.predictions(pj.Rig(plant, runs={"M": pj.RunConditions(start=start)}), [exp])
+    y0 = plant.initial_state(pressure=4.2e5, position=0.02, velocity=0.015)
+    assert float(y0.friction) == 1.0  # moving up: Karnopp friction sliding up, not stuck
+    ref = pj.simulate(plant, signal, t, y0=y0, stepping="pwm")
+    np.testing.assert_allclose(pred["position"], np.asarray(ref.position), atol=1e-9)
+    np.testing.assert_allclose(pred["pressure"], np.asarray(ref.pressure), atol=1e-3)
+    with pytest.raises(PamjaxInputError, match="stuck"):
+        pj.StartState(velocity=0.1, mode="stuck")
+
+
+def test_parameter_paths_name_runs_and_sensors():
+    rig = pj.Rig(_plant(), runs={"E1_u0.25": pj.RunConditions(supply_pressure=6.4e5),
+                                 "7": pj.RunConditions(supply_pressure=6.5e5)})
+    paths = pj.parameter_paths(rig)
+    assert "runs[E1_u0.25].supply_pressure" in paths and "runs['7'].supply_pressure" in paths
+    assert "sensors[rig].delay" in paths and "plant.friction.coulomb_force" in paths
+    space = pj.ParameterSpace(rig, ["runs[E1_u0.25].supply_pressure", "sensors[rig].pressure_offset",
+                                    "plant.muscle.force_law.max_force_coefficients[2]"])
+    moved = space.with_values(np.asarray([6.2e5, 900.0, 1.0]))
+    assert float(moved.runs["E1_u0.25"].supply_pressure) == 6.2e5
+    assert float(moved.sensors["rig"].pressure_offset) == 900.0
+    for bad in ("runs[].supply_pressure", "runs[E1].x[1].y", "sensors[rig]..delay"):
+        with pytest.raises(PamjaxInputError, match="malformed"):
+            pj.ParameterSpace(rig, [bad])
+    with pytest.raises(PamjaxInputError, match="unknown parameter"):
+        pj.ParameterSpace(rig, ["runs[E9].supply_pressure"])
+
+
+def _write_rig(folder, fmt="csv"):
+    """A small rig: a tank charge T1 and a discharge T2 (0.5 s), a triangle run M0 from rest (1.2 s) and one, M1,
+    logged from PREROLL s (2 s), with the nuisances of TRUTH, written as a logger writes them (time [s], duty [-],
+    pressure [barg], position [mm])."""
+    plant = _plant()
+    truth = pj.ParameterSpace(plant, ["valve.inflate.discharge_coefficient", "friction.coulomb_force"]).with_values(
+        np.asarray([0.40, 14.0]))
+    rng = np.random.default_rng(7)
+    period = 0.02
+    runs = {"T1": ("tank_charge", pj.Constant(0.5), 0.5), "T2": ("tank_discharge", pj.Constant(0.3), 0.5),
+            "M0": ("muscle_triangle", pj.Triangle(0.05, 0.95, 0.4), 1.2),
+            "M1": ("muscle_triangle", pj.Triangle(0.05, 0.95, 0.5), 2.0)}
+    experiments = {}
+    for name, (kind, signal, t_end) in runs.items():
+        t = np.arange(0.0, t_end + 5e-4, 1e-3)
+        supply = TRUTH["supply"][name]
+        preroll = PREROLL if name == "M1" else 0.0
+        if kind.startswith("tank"):
+            system = pj.TankFromModel(5e-5)(truth).with_supply_pressure(supply)
+            y0 = system.initial_state(ATM if kind == "tank_charge" else supply)
+            experiments[name] = dict(kind=kind, V_tank=5e-5, u=float(signal.value), p0="p_atm" if kind ==
+                                     "tank_charge" else "p_s")
+        else:
+            system, y0 = truth.with_supply_pressure(supply), None
+            experiments[name] = dict(kind=kind, lo=0.05, hi=0.95, f_tri=float(signal.frequency))
+            if preroll:
+                experiments[name]["init"] = "unknown: logged mid-way"
+        clean = _read_at(system, signal, t + preroll - TRUTH["delay_s"], y0)
+        duty = np.asarray(jax.vmap(signal)(np.floor((t + preroll) / period + 1e-9) * period))
+        p = TRUTH["pressure_gain"] * (clean["pressure"] - ATM) + TRUTH["pressure_offset_Pa"] + NOISE[
+            "p_std_Pa"] * rng.standard_normal(t.size)
+        x = clean["position"] + NOISE["x_std_m"] * rng.standard_normal(t.size) if "position" in clean else 0 * t
+        if fmt == "csv":
+            np.savetxt(folder / f"{name}.csv", np.column_stack([t, duty, p / 1e5, x * 1e3]), delimiter=",",
+                       header="time [s],duty [-],pressure [barg],position [mm]", comments="", fmt="%.6f")
+        else:
+            import scipy.io
+
+            scipy.io.savemat(folder / f"{name}.mat", {"t": t, "u": duty, "p": p / 1e5, "x": x * 1e3})
+    meta = dict(experiments=experiments, noise=NOISE, fitted_keys=["Cv12", "Fc"])
+    if fmt == "mat":
+        meta["units"] = {"p": "barg", "x": "mm"}
+    (folder / "meta.json").write_text(json.dumps(meta))
+    return folder
+
+
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory):
+    return _write_rig(tmp_path_factory.mktemp("rig"))
+
+
+def test_a_rig_is_identified_with_its_nuisances_and_a_plain_fit_names_them(rig):
+    plant = _plant()
+    bench = pj.load_bench(rig, plant, nuisance=True)
+    assert any("logged 0.600 s into its triangle" in n for n in bench.notes), bench.notes
+    assert set(bench.nuisance) >= {"sensors[rig].delay", "sensors[rig].pressure_gain", "runs[T2].supply_pressure",
+                                   "runs[M1].start.velocity"}
+    staged = pj.staged_start(bench.model, bench.experiments, bench.free, progress=False)
+    res = pj.fit(staged.model, bench.experiments, bench.free, progress=False)
+    assert res.status == "converged", res.message
+    values = dict(zip(res.labels, res.values))
+    se = dict(zip(res.labels, res.standard_errors))
+    expect = {"plant.valve.inflate.discharge_coefficient": 0.40, "plant.friction.coulomb_force": 14.0,
+              "sensors[rig].delay": TRUTH["delay_s"], "sensors[rig].pressure_offset": TRUTH["pressure_offset_Pa"],
+              "sensors[rig].pressure_gain": TRUTH["pressure_gain"],
+              **{f"runs[{n}].supply_pressure": p for n, p in TRUTH["supply"].items()}}
+    for label, true in expect.items():
+        assert abs(values[label] - true) < 4 * se[label] + 1e-9 * abs(true), (label, values[label], true, se[label])
+    for name, chans in res.channel_errors.items():
+        assert all(st["rmse_over_noise"] < 1.15 for st in chans.values()), (name, chans)
+    report = pj.bench_nuisance(res, bench)
+    assert set(report["supply_pressure_Pa"]) == {"T1", "T2", "M0", "M1"} and set(report["start"]) == {"M1"}
+    assert report["held"]["position_offset_m"].startswith("not identifiable")
+    # the same data fitted as an ideal bench: the fit says what the residuals point to
+    plain = pj.load_bench(rig, plant)
+    res0 = pj.fit(plant, plain.experiments, plain.free, progress=False, max_steps=30)
+    assert res0.mismatch
+    text = " | ".join(res0.diagnosis)
+    for finding in ("the data lag the model", "an offset at rest", "a start that is not at rest",
+                    "a supply pressure the tank runs contradict"):
+        assert finding in text, text
+    assert "--nuisance" in text
+
+
+def test_a_rig_logged_to_matlab_files_loads_as_its_csv_twin(tmp_path, rig):
+    mat = _write_rig(tmp_path, fmt="mat")
+    a, b = pj.load_bench(rig, _plant()), pj.load_bench(mat, _plant())
+    for ea, eb in zip(a.experiments, b.experiments):
+        assert ea.channels == eb.channels
+        for c in ea.channels:
+            np.testing.assert_allclose(np.asarray(ea.data[c]), np.asarray(eb.data[c]), atol=0.06 if c == "pressure"
+                                       else 1e-8)
+
+
+def _damaged(src, tmp_path, edit):
+    import shutil
+
+    folder = tmp_path / "bench"
+    shutil.copytree(src, folder)
+    edit(folder)
+    return folder
+
+
+def _meta_edit(change):
+    def edit(folder):
+        meta = json.loads((folder / "meta.json").read_text())
+        change(meta)
+        (folder / "meta.json").write_text(json.dumps(meta))
+    return edit
+
+
+def _csv_edit(name, change):
+    def edit(folder):
+        path = folder / f"{name}.csv"
+        head, *rows = path.read_text().splitlines()
+        path.write_text("\n".join(change(head, rows)) + "\n")
+    return edit
+
+
+DAMAGE = {
+    "no recording": (lambda f: (f / "T2.csv").unlink(), "'T2' of meta.json has no recording T2.npz, T2.csv or T2.mat"),
+    "two recordings": (lambda f: (f / "T2.npz").write_bytes(b""), "'T2' has 2 recordings"),
+    "no meta": (lambda f: (f / "meta.json").unlink(), "has no meta.json.*holds 4 recording"),
+    "bad json": (lambda f: (f / "meta.json").write_text("{"), "not valid JSON"),
+    "duty in percent": (_meta_edit(lambda m: m["experiments"]["T1"].update(u=50)), "T1.*u = 50.*not 50 %"),
+    "duty contradicts": (_meta_edit(lambda m: m["experiments"]["T1"].update(u=0.75)), "u = 0.75, but its recording"),
+    "half a triangle": (_meta_edit(lambda m: m["experiments"]["M1"].pop("lo")), r"without \['lo'\].*muscle_run"),
+    "wrong triangle": (_meta_edit(lambda m: m["experiments"]["M1"].update(f_tri=0.3)),
+                       "not meta.json's triangle.*at any phase"),
+    "mid-way at rest": (_meta_edit(lambda m: m["experiments"]["M1"].pop("init")), "logged from the middle.*unknown"),
+    "zero noise": (_meta_edit(lambda m: m["noise"].update(p_std_Pa=0)), "p_std_Pa must be.*> 0"),
+    "unqualified bar": (_csv_edit("T1", lambda h, r: [h.replace("barg", "bar"), *r]), "ABSOLUTE or GAUGE"),
+    "NaN": (_csv_edit("T1", lambda h, r: [h, *r[:5], "0.005,0.5,nan,0", *r[6:]]), "NaN/inf at row 5"),
+    "unsorted": (_csv_edit("T1", lambda h, r: [h, r[1], r[0], *r[2:]]), "strictly increasing"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(DAMAGE))
+def test_every_mistake_in_a_bench_folder_is_named_before_any_fit(case, rig, tmp_path):
+    edit, message = DAMAGE[case]
+    folder = _damaged(rig, tmp_path, edit)
+    with pytest.raises(PamjaxInputError, match=message):
+        pj.load_bench(folder, _plant(), nuisance=True)
+
+
+def test_joint_script_answers_a_bad_folder_in_one_line_and_leaves_nothing(rig, tmp_path, capsys):
+    import importlib.util
+    import pathlib
+
+    spec = importlib.util.spec_from_file_location("joint", pathlib.Path(__file__).parents[1] / "fits" / "joint.py")
+    joint = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(joint)
+    folder = _damaged(rig, tmp_path, DAMAGE["duty in percent"][0])
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as exit_:
+        joint.main(["--data", str(folder), "--out", str(out), "--nuisance", "--no-cache"])
+    assert exit_.value.code == 2 and not out.exists()
+    err = capsys.readouterr().err
+    assert err.startswith("joint.py: error:") and "u = 50" in err and "Traceback" not in err
+
+
+def test_pamjax_fit_with_bench_nuisance_writes_the_plant_and_the_rig_apart(rig, tmp_path, capsys):
+    from pamjax._cli.main import main
+
+    cfg = tmp_path / "rig.toml"
+    body = ('[model]\npreset = "mas10_system"\noptions = { valve = "pwm", friction = "karnopp" }\n'
+            f'[bench]\ndir = "{rig}"\nnuisance = NUISANCE\n[fit]\nmax_steps = 100\n')
+    cfg.write_text(body.replace("NUISANCE", "true"))
+    assert main(["fit", str(cfg), "--out", str(tmp_path / "out"), "--quiet", "--no-plot"]) == 0
+    out = capsys.readouterr().out
+    assert "nuisances (the rig's, reported apart from the plant)" in out and "delay_s" in out
+    bench = json.loads((tmp_path / "out" / "bench.json").read_text())
+    assert bench["status"] == "converged" and set(bench["nuisance"]["supply_pressure_Pa"]) == set(TRUTH["supply"])
+    assert abs(bench["nuisance"]["delay_s"] - TRUTH["delay_s"]) < 4 * bench["nuisance"]["std_err"]["delay_s"]
+    plant = pj.load_model(tmp_path / "out" / "model.json")  # the plant alone: simulate it, fit it again
+    assert isinstance(plant, pj.MuscleSystem)
+    assert abs(float(plant.friction.coulomb_force) - 14.0) < 4 * bench["std_err"]["Fc"]
+    cfg.write_text(body.replace("NUISANCE", '"all"'))
+    assert main(["fit", str(cfg), "--out", str(tmp_path / "bad"), "--quiet", "--no-plot"]) == 2
+    assert "[bench] nuisance" in capsys.readouterr().err
+
+
+def test_a_config_declares_the_rig_of_its_experiments(rig, tmp_path, capsys):
+    # [rig]: the sensors' start values and which nuisances to fit; each [[experiment]] its supply pressure (and a
+    # start table for a run logged mid-way). Here the delay and the offset are fitted with the valve's C_v 1→2.
+    from pamjax._cli.main import main
+
+    tanks = "".join(
+        f'[[experiment]]\nname = "{n}"\nfile = "{rig / (n + ".csv")}"\nsignal = "recorded"\ntank_volume = 5e-5\n'
+        f'initial = {{ pressure = {p0} }}\nchannels = ["pressure"]\nscales = {{ pressure = 2000.0 }}\n'
+        f'supply_pressure = {TRUTH["supply"][n]}\n' for n, p0 in (("T1", ATM), ("T2", TRUTH["supply"]["T2"])))
+    cfg = tmp_path / "rig.toml"
+    head = ('[model]\npreset = "mas10_system"\noptions = { valve = "pwm", friction = "karnopp" }\n'
+            '[fit]\nfree = ["valve.inflate.discharge_coefficient"]\nmax_steps = 60\n')
+    cfg.write_text(head + f'[rig]\nsensors = {{ pressure_gain = {TRUTH["pressure_gain"]} }}\n'
+                          'free = ["delay", "pressure_offset"]\n' + tanks)
+    assert main(["fit", str(cfg), "--out", str(tmp_path / "out"), "--quiet", "--no-plot"]) == 0
+    assert "sensors[rig].delay" in capsys.readouterr().out
+    res = pj.FitResult.from_json(tmp_path / "out" / "fit.json")
+    got = dict(zip(res.labels, zip(res.values, res.standard_errors)))
+    assert res.status == "converged", res.message
+    for label, true in (("sensors[rig].delay", TRUTH["delay_s"]), ("sensors[rig].pressure_offset",
+                                                                  TRUTH["pressure_offset_Pa"])):
+        assert abs(got[label][0] - true) < 4 * got[label][1], (label, got[label], true)
+    assert abs(got["plant.valve.inflate.discharge_coefficient"][0] - 0.40) < 4 * got[
+        "plant.valve.inflate.discharge_coefficient"][1]
+    cfg.write_text(head + '[rig]\nfree = ["gain"]\n' + tanks)
+    assert main(["fit", str(cfg), "--out", str(tmp_path / "bad"), "--quiet", "--no-plot"]) == 2
+    assert "[rig] free names ['gain']" in capsys.readouterr().err
+
+
+def test_a_failing_stage_waits_for_the_background_compilation(rig, monkeypatch):
+    # The second thread compiling the joint problem must not outlive an error of stage 1: XLA compiling in a thread
+    # while the interpreter shuts down killed fits/joint.py (exit 139/134) after a data error.
+    import threading
+    import time
+
+    from pamjax._fit import staged as staged_module
+
+    started, threads = threading.Event(), []
+
+    def slow_precompile(model, experiments, free):
+        threads.append(threading.current_thread())
+        started.set()
+        time.sleep(0.5)
+        return 0.5
+
+    def failing_fit(*args, **kwargs):
+        started.wait()
+        raise PamjaxInputError("stage 1 failed")
+
+    monkeypatch.setattr(staged_module, "precompile", slow_precompile)
+    monkeypatch.setattr(staged_module, "fit", failing_fit)
+    bench = pj.load_bench(rig, _plant(), nuisance=True)
+    with pytest.raises(PamjaxInputError, match="stage 1 failed"):
+        pj.staged_start(bench.model, bench.experiments, bench.free)
+    assert threads and not threads[0].is_alive()
