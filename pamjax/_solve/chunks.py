@@ -11,6 +11,9 @@ rounding; a test compares them). The cut points are:
 - `"pwm"`: PWM period starts at which the valve is closed in the whole run (the grid assumes a closed valve before
   its first period; `pamjax._solve.synchronous.open_at_start`).
 
+All pieces span one number of rows (one compiled program); where that needs it, the last piece starts earlier and
+overlaps its predecessor, whose rows are kept (the overlap's steps count twice in `num_steps`).
+
 A run with no such output times (times off the grid, a valve held open for ever) is solved whole, unless its
 estimated memory exceeds what the machine has available: then `plan` refuses it, with the estimate and what to
 change.
