@@ -6,8 +6,13 @@ import json
 
 import jax.numpy as jnp
 
+from .._core.errors import PamjaxInputError
 from .._physics.signals import Sampled
 from .recording import _writable
+
+
+class PamjaxDesignWarning(UserWarning):
+    """A design that ends outside its limits (`DesignResult.constraints["violations"]` says which)."""
 
 
 @dataclasses.dataclass
@@ -22,10 +27,15 @@ class DesignResult:
       "baseline" (prior + baseline experiments) when a baseline was given.
     - `objective`: [start, end] values of the criterion; `history`: per iteration [iteration, objective, criterion,
       step length, accepted].
-    - `constraints`: the predicted stroke and pressure extremes, the largest duty step, the limits, `feasible`.
+    - `constraints`: the limits and what the design keeps of them: the duty band, the valve's switching thresholds,
+      `duty_margin` and the duties they leave (`duty_limits`), the closest any period comes to a threshold
+      (`threshold_distance`), the largest duty step; the predicted stroke, pressure and eq. 7 force extremes at the
+      objective's samples and (`verified`) at the fit's resolution, against `stroke_limits`, `max_pressure`,
+      `min_force`; `feasible` (every limit holds) and `violations` (one line per limit that does not).
     - `design_s`: wall time of the whole design; `compile_s`: of its start (compiling the objective and its
       gradient, overlapped with the prior and baseline experiments' Jacobians), before the first iteration.
-    - `prediction`: the predicted run at the objective's samples (t, position, pressure; not in JSON).
+    - `duration` [s]: of the run (the last period may end before its full length).
+    - `prediction`: the predicted run at the objective's samples (t, position, pressure, eq. 7 force; not in JSON).
     """
 
     times: list
@@ -44,6 +54,7 @@ class DesignResult:
     message: str
     design_s: float
     compile_s: float
+    duration: float = None
     prediction: dict = dataclasses.field(default=None, repr=False, compare=False)
 
     def signal(self):
@@ -58,9 +69,21 @@ class DesignResult:
         path.write_text(json.dumps(self.to_dict(), indent=1))
         return path
 
-    def to_csv(self, path, overwrite=False):
-        """`t [s],duty [-]`, one row per PWM period, the predicted standard errors in '#' comment lines above
-        (`pamjax.Recording.load(path)` reads it; `Sampled(rec.t, rec["duty"], period=...)` replays it)."""
+    @property
+    def feasible(self):
+        """Whether the design keeps every limit (`constraints["violations"]` lists those it does not)."""
+        return bool(self.constraints.get("feasible", True))
+
+    def to_csv(self, path, overwrite=False, infeasible_ok=False):
+        """`t [s],duty [-]`: one row per PWM period (its start and duty) and a last row at the run's end (the last
+        duty again), so that a replay runs to the end; the predicted standard errors in '#' comment lines above
+        (`pamjax.Recording.load(path)` reads the duty as channel "command", the bench's name for it;
+        `Sampled(rec.t, rec["command"], period=...)` replays it; `pamjax.load_bench` fits its recording as a
+        "muscle_run"). A design
+        that violates its limits is refused (a bench must not play it) unless `infeasible_ok`."""
+        if not self.feasible and not infeasible_ok:
+            raise PamjaxInputError("this design violates its limits (" + "; ".join(self.constraints["violations"])
+                                   + "): a bench must not play it; pass infeasible_ok=True to write it anyway")
         path = _writable(path, overwrite)
         lines = [f"# pamjax design: {self.criterion}-optimal over {', '.join(self.subset)}; PWM period "
                  f"{self.period} s; duty latched per period",
@@ -74,6 +97,9 @@ class DesignResult:
             lines.append(f"#   {label}, " + ", ".join(f"{c:.6g}" for c in cols))
         lines.append("t [s],duty [-]")
         lines += [f"{t!r},{d!r}" for t, d in zip(map(float, self.times), map(float, self.duty))]
+        end = self.times[-1] + self.period if self.duration is None else self.duration
+        if float(end) > float(self.times[-1]):
+            lines.append(f"{float(end)!r},{float(self.duty[-1])!r}")
         path.write_text("\n".join(lines) + "\n")
         return path
 
