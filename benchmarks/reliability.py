@@ -7,7 +7,8 @@ recovery from random starts, determinism.
 
 Ends with `RESULT grad_pass=... worst_grad_rel=... nan_count=... bad_input_named=... recovery_rate=...
 deterministic=... workflow_cases=... silent_wrong=... lost_work=... tracebacks=...` (the last four from the file and
-command-line catalogue, `tests/reliability/bad_inputs_cli.py`: every case a correct result or a named error).
+command-line catalogue, `tests/reliability/bad_inputs_cli.py`, and every `tests/reliability/*_cases.py` catalogue
+beside it: every case a correct result or a named error).
 """
 
 import argparse
@@ -144,12 +145,22 @@ def determinism():
 
 def workflow_catalogue():
     """The file and command-line catalogue (issue 15): configs, CSV, units, paths, concurrency, interrupts, resume
-    mismatches, solves, the fitted model carried onward; each case a correct result or a named error."""
+    mismatches, solves, the fitted model carried onward; each case a correct result or a named error. With it, every
+    further catalogue `tests/reliability/*_cases.py` (a module with `CASES` and `summary`, e.g. `design_cases.py`)."""
+    import importlib
+    import pathlib
+
     from tests.reliability.bad_inputs_cli import CASES, summary
 
     t = time.perf_counter()
     counts = summary(report=lambda line: print(line, flush=True))
     classes = sorted({c for c, *_ in CASES.values()})
+    here = pathlib.Path(__file__).resolve().parents[1] / "tests" / "reliability"
+    for path in sorted(p for p in here.glob("*_cases.py") if not p.name.startswith("test_")):
+        module = importlib.import_module(f"tests.reliability.{path.stem}")
+        more = module.summary(report=lambda line: print(line, flush=True))
+        counts = {k: counts.get(k, 0) + more.get(k, 0) for k in set(counts) | set(more)}
+        classes += sorted({c for c, *_ in module.CASES.values()})
     print(f"  {counts['ok']}/{counts['total']} cases a correct result or a named error ({', '.join(classes)}); "
           f"silent wrong {counts['silent_wrong']}, lost work {counts['lost_work']}, tracebacks {counts['traceback']}, "
           f"unnamed {counts['unnamed']} ({time.perf_counter() - t:.0f} s)")

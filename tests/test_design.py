@@ -59,7 +59,7 @@ def _problem(parametrisation):
     """The compiled objective's problem for the 0.4 s tank run (20 PWM periods) as `design` builds it: no pressure
     limit and no variance floor are infinite ones, as in `design`, so that this problem, the CLI test's and every
     design of this module on the tank share one compilation of the objective and of its gradient."""
-    from pamjax._fit.design import _start_coefficients, _template
+    from pamjax._fit.design_setup import _start_coefficients, _template
 
     model = pj.ParameterSpace(_tank(), FREE).base
     space = pj.ParameterSpace(model, FREE)
@@ -71,7 +71,7 @@ def _problem(parametrisation):
     # jnp.asarray's weakly typed ones, as `design` makes them)
     prob = obj.DesignProblem(space=space, theta=space.initial_theta(), experiment=exp,
                              basis=None if basis is None else device_array(basis), prior=device_array(np.zeros((3, 3))),
-                             weight=jnp.asarray(2.0), band=device_array([0.1, 0.9]), stroke=None,
+                             weight=jnp.asarray(2.0), band=device_array([0.1, 0.9]), windows=None, stroke=None,
                              max_pressure=jnp.asarray(np.inf), max_step=jnp.asarray(0.3), min_force=None,
                              floor=device_array(np.full(3, np.inf)), subset=(0, 1, 2), criterion="D")
     c = device_array(np.asarray(c0) + 0.5)  # level lifted off the band's bottom: every parameter is fixed there
@@ -263,8 +263,9 @@ def test_design_example_config_loads():
 
     model, free, duration, kwargs, out = load(pathlib.Path(__file__).resolve().parents[1] / "examples"
                                               / "design_example.toml")
-    assert duration == 10.0 and len(free) == 5 and out == "results/design_example"
+    assert duration == 33.0 and len(free) == 5 and out == "results/design_example"
     assert kwargs["duty_band"] == (0.1, 0.9) and kwargs["criterion"] == "D"
+    assert kwargs["duty_margin"] == "auto" and kwargs["min_force"] == 20.0
     assert "build" not in kwargs
 
 
@@ -312,7 +313,7 @@ def test_pressure_limit_is_penalised_and_kept():
 
 
 def test_stroke_limits_are_the_stops_less_the_margin_or_the_rest_position():
-    from pamjax._fit.design import stroke_limits
+    from pamjax._fit.design_setup import stroke_limits
 
     muscle = presets.mas10_system(valve="pwm")
     rest = float(muscle.initial_state().position)  # the payload's equilibrium at atmospheric pressure
@@ -329,7 +330,7 @@ def test_stroke_limits_are_the_stops_less_the_margin_or_the_rest_position():
 def test_switching_thresholds_come_from_the_valve_contract():
     # Paper 000's valve at 50 Hz with 2 ms switching: a period's on-pulse opens it from u T = t_on (0.1), its
     # off-pulse closes it until (1 − u) T = t_off (0.9); slower switching moves both; an averaged valve has none.
-    from pamjax._fit.design import switching_thresholds
+    from pamjax._fit.design_setup import switching_thresholds
 
     assert switching_thresholds(presets.mas10_valve()) == pytest.approx((0.1, 0.9), abs=1e-11)
     slow = presets.mas10_valve(switch_on_delay=3e-3, switch_off_delay=2.5e-3)
@@ -338,13 +339,20 @@ def test_switching_thresholds_come_from_the_valve_contract():
 
 
 def test_duty_limits_keep_the_margin_from_every_threshold():
-    from pamjax._fit.design import duty_limits
+    from pamjax._fit.design_setup import _skip, duty_limits
 
-    assert duty_limits((0.1, 0.9), (0.1, 0.9), 0.025) == pytest.approx((0.125, 0.875))
-    assert duty_limits((0.3, 0.6), (0.1, 0.9), 0.025) == (0.3, 0.6)  # far from both: as given
-    assert duty_limits((0.0, 1.0), (0.1, 0.9), 0.0) == (0.0, 1.0)  # duty_margin = 0: no limit
-    with pytest.raises(PamjaxInputError, match=r"contains 0\.1, one of the valve's switching thresholds"):
-        duty_limits((0.0, 1.0), (0.1, 0.9), 0.025)
+    lo, hi, windows = duty_limits((0.1, 0.9), (0.1, 0.9), 0.025)  # ends at the thresholds: they move in
+    assert (lo, hi) == pytest.approx((0.125, 0.875)) and windows == ()
+    lo, hi, windows = duty_limits((0.09, 0.95), (0.1, 0.9), 0.025)
+    assert (lo, hi) == pytest.approx((0.125, 0.95)) and np.allclose(windows, [(0.875, 0.925)])
+    assert duty_limits((0.3, 0.6), (0.1, 0.9), 0.025) == (0.3, 0.6, ())  # far from both: as given
+    assert duty_limits((0.0, 1.0), (0.1, 0.9), 0.0) == (0.0, 1.0, ())  # duty_margin = 0: no limit
+    lo, hi, windows = duty_limits((0.0, 1.0), (0.1, 0.9), 0.025)  # thresholds inside: windows no duty may enter
+    assert (lo, hi) == (0.0, 1.0) and np.allclose(windows, [(0.075, 0.125), (0.875, 0.925)])
+    duty = np.array([0.0, 0.08, 0.0999, 0.1001, 0.124, 0.5, 0.9, 0.93, 1.0])
+    np.testing.assert_allclose(_skip(duty, windows), [0.0, 0.075, 0.075, 0.125, 0.125, 0.5, 0.925, 0.93, 1.0])
+    skipped = np.asarray(jax.jit(obj.skip_windows)(device_array(duty), device_array(np.asarray(windows))))
+    np.testing.assert_array_equal(skipped, _skip(duty, windows))  # the objective's (traced) and the host's agree
     with pytest.raises(PamjaxInputError, match=r"no duty is left"):
         duty_limits((0.09, 0.11), (0.1, 0.9), 0.025)
 
@@ -360,7 +368,7 @@ def _muscle():
 @pytest.mark.parametrize("model, kwargs, match", [
     (_tank, dict(duration=0.01), r"duration 0\.01 s is shorter than one PWM period \(0\.02 s\)"),
     (_tank, dict(max_pressure=5.0), r"max_pressure 5\.0 Pa abs is not above the run's start pressure"),
-    (_tank, dict(duty_band=(0.0, 1.0)), r"duty_band \(0, 1\) contains 0\.1"),
+    (_tank, dict(duty_band=(0.09, 0.11)), r"duty_band \(0\.09, 0\.11\) lies within duty_margin 0\.025 of the valve's"),
     (_tank, dict(duty_margin=0.6), r"duty_margin must be 'auto'"),
     (_tank, dict(initial=pj.Constant(1.5)), r"initial: the start duty must lie in \[0, 1\]"),
     (_tank, dict(period=-0.02), r"period must be the PWM period"),
@@ -413,7 +421,8 @@ def test_a_muscle_design_keeps_the_force_margin_and_reports_eq7_independently(mu
     # the stated tolerance at the fit's resolution; every duty 0.025 from the thresholds.
     from helpers import np_eq7_force
 
-    from pamjax._fit.design import MIN_FORCE, VERIFY_TOLERANCE
+    from pamjax._fit.design_result import VERIFY_TOLERANCE
+    from pamjax._fit.design_setup import MIN_FORCE
 
     res = muscle_design
     c = res.constraints
@@ -431,7 +440,8 @@ def test_a_muscle_design_keeps_the_force_margin_and_reports_eq7_independently(mu
 def test_the_force_penalty_acts_from_the_buffer_and_the_limit_from_min_force():
     # objective(min_force) − objective(no limit) = PENALTY·dt·Σ(max(min_force + FORCE_BUFFER − F, 0))² at the
     # objective's samples, and the worst violation is measured from min_force itself
-    from pamjax._fit.design import _problem, _setup
+    from pamjax._fit.design import _problem
+    from pamjax._fit.design_setup import _setup
 
     setup = _setup(_muscle(), MUSCLE_FREE, 1.0, noise=MUSCLE_NOISE, channels=("pressure", "position"), start={},
                    build=None, rate=500.0, criterion="D", subset=None, duty_band=(0.1, 0.9), stroke_margin=0.005,
@@ -442,8 +452,8 @@ def test_the_force_penalty_acts_from_the_buffer_and_the_limit_from_min_force():
     theta = np.asarray(space.initial_theta())
 
     def problem(min_force):
-        return _problem(space, theta, setup["experiment"], setup["basis"], 2.0, setup["band"], setup["limits"], None,
-                        None, True, min_force, (0, 1), "D", np.zeros((2, 2)), None)
+        return _problem(space, theta, setup["experiment"], setup["basis"], 2.0, setup["band"], setup["windows"],
+                        setup["limits"], None, None, True, min_force, (0, 1), "D", np.zeros((2, 2)), None)
 
     c = device_array(setup["c0"])
     free_value, aux = obj.value(c, problem(None))

@@ -114,6 +114,7 @@ class DesignProblem(eqx.Module):
     prior: jax.Array  # (n, n) information already in hand
     weight: jax.Array  # f_rec / f_design
     band: jax.Array  # (lo, hi) duty
+    windows: jax.Array | None  # (k, 2): duty windows (θ − m, θ + m) around switching thresholds inside the band
     stroke: jax.Array | None  # (lo, hi) allowed positions [m], margin included; None: no position channel/limit
     max_pressure: jax.Array | None  # Pa abs
     max_step: jax.Array | None  # per PWM period
@@ -124,7 +125,18 @@ class DesignProblem(eqx.Module):
 
     def duty(self, c):
         z = c if self.basis is None else self.basis @ c
-        return self.band[0] + (self.band[1] - self.band[0]) * clip01(z)
+        u = self.band[0] + (self.band[1] - self.band[0]) * clip01(z)
+        return u if self.windows is None else skip_windows(u, self.windows)
+
+
+def skip_windows(u, windows):
+    """Each duty inside a window (lo, hi) moved to the window's nearer end: no period sits within the margin of a
+    switching threshold. The valve's flow already jumps where a duty crosses the threshold (a period opens it or not);
+    this moves the jump to the window's middle and widens it to the window, and the duty's derivative is 0 inside."""
+    for i in range(windows.shape[0]):
+        lo, hi = windows[i, 0], windows[i, 1]
+        u = jnp.where((u > lo) & (u < hi), jnp.where(u < 0.5 * (lo + hi), lo, hi), u)
+    return u
 
 
 def _criterion(cov, subset, criterion):
