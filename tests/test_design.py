@@ -511,3 +511,34 @@ def test_cli_design_takes_period_and_fails_an_infeasible_design(tmp_path, capsys
     captured = capsys.readouterr()
     assert "FAILED" in captured.err and "max_pressure: predicted up to" in captured.err
     assert not (tmp_path / "c" / "design.csv").exists() and (tmp_path / "c" / "design.json").exists()
+
+
+def test_a_designed_run_is_a_bench_experiment(muscle_design, tmp_path):
+    # A designed run recorded on a rig (the recording's own duty column, no triangle parameters) is a bench
+    # experiment: kind "muscle_run", or "muscle_triangle" without lo/hi/f_tri. `load_bench` drives it by the recorded
+    # duty (each period's designed duty), from rest, and its prediction at the plant that made it is the recording.
+    import json
+
+    model = _muscle()
+    res = muscle_design
+    t = np.round(np.arange(0.0, 1.0 + 1e-9, 2e-3), 9)
+    rec = pj.synthetic_recording(model, res.signal(), t, channels=["pressure", "position", "command"], name="run",
+                                 stepping="pwm", substeps=16)
+    for name in ("D1", "D2"):
+        rec.to_csv(tmp_path / f"{name}.csv")
+    meta = {"experiments": {"D1": {"kind": "muscle_run"}, "D2": {"kind": "muscle_triangle"}},
+            "noise": {"p_std_Pa": 2e3, "x_std_m": 1e-4}, "fitted_keys": ["Fc", "k0"]}
+    (tmp_path / "meta.json").write_text(json.dumps(meta))
+    bench = pj.load_bench(tmp_path, model)
+    assert [e.name for e in bench.experiments] == ["D1", "D2"] and not bench.skipped
+    starts = np.arange(len(res.duty)) * res.period
+    for e in bench.experiments:
+        np.testing.assert_array_equal(np.asarray(_at(e.signal, starts)), res.duty)
+    for e, pred in zip(bench.experiments, pj.predictions(model, bench.experiments)):
+        assert np.max(np.abs(pred["pressure"] - rec["pressure"])) < 1.0  # Pa, of 2 kPa noise
+        assert np.max(np.abs(pred["position"] - rec["position"])) < 1e-7  # m, of 0.1 mm noise
+    # without its duty column a run cannot be driven: named
+    rec_no_duty = pj.Recording(rec.t, {"pressure": rec["pressure"], "position": rec["position"]}, name="run")
+    rec_no_duty.to_csv(tmp_path / "D1.csv", overwrite=True)
+    with pytest.raises(PamjaxInputError, match=r"'D1' has no recorded duty column"):
+        pj.load_bench(tmp_path, model)
