@@ -311,6 +311,7 @@ def np_stick_slip_run(plant, duties, ts, *, f=50.0, t_on=2e-3, t_off=2e-3, rtol=
     openings = [0.0] + [e[1] for e in edges]
     for t_stop, o in zip(bounds, openings):
         while t < t_stop - 1e-15:
+            t_from = t
             if z == 0:
                 event = lambda tt, yy: abs(net_force(yy[1], yy[0])) - plant.fc  # noqa: E731
             else:
@@ -329,7 +330,11 @@ def np_stick_slip_run(plant, duties, ts, *, f=50.0, t_on=2e-3, t_off=2e-3, rtol=
                 else:
                     y[2] = 0.0
                     force = net_force(y[1], y[0])
-                    z = 0 if abs(force) <= plant.fc else (1 if force > 0 else -1)
+                    slide = 0 if abs(force) <= plant.fc else (1 if force > 0 else -1)
+                    # A slide that ends where it began, to slide on the same way, would do so forever: the net force
+                    # sits at F_c to rounding and falls inside the band at once (the first step reverses the
+                    # velocity), so the payload sticks there.
+                    z = 0 if (slide == z and t - t_from <= 1e-12) else slide
     states = np.asarray(states)
     order = np.argsort(times)
     times, states = np.asarray(times)[order], states[order]
