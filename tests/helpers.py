@@ -331,10 +331,15 @@ def np_stick_slip_run(plant, duties, ts, *, f=50.0, t_on=2e-3, t_off=2e-3, rtol=
                     y[2] = 0.0
                     force = net_force(y[1], y[0])
                     slide = 0 if abs(force) <= plant.fc else (1 if force > 0 else -1)
-                    # A slide that ends where it began, to slide on the same way, would do so forever: the net force
-                    # sits at F_c to rounding and falls inside the band at once (the first step reverses the
-                    # velocity), so the payload sticks there.
-                    z = 0 if (slide == z and t - t_from <= 1e-12) else slide
+                    if slide == z and t - t_from <= 1e-12:
+                        # A slide that starts at v = 0 "ends" where it began when the velocity's sign changes within
+                        # the solver's first step (the event function is exactly 0 at the start, and the root finder
+                        # returns the start): it would do so forever. Step it 1 ns without the event, then go on.
+                        step = min(1e-9, t_stop - t)
+                        y = solve_ivp(rhs(o, z), (t, t + step), y, method="DOP853", rtol=rtol,
+                                      atol=[1e-6, 1e-13, 1e-13]).y[:, -1].copy()
+                        t += step
+                    z = slide
     states = np.asarray(states)
     order = np.argsort(times)
     times, states = np.asarray(times)[order], states[order]
