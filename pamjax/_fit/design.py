@@ -2,9 +2,10 @@
 
 Workflow only: the objective (Fisher information through the solve, criteria, constraint penalties) is in
 `design_objective`, everything before the first solve (checks, the valve's thresholds, limits, the start, defaults)
-in `design_setup`, the result and its constraints report in `design_result`; the Jacobians of experiments already in hand come from the fit's compiled residual
-function (`pamjax._fit`); the iteration is a BFGS on the host with a backtracking line search on the objective's
-value (one forward-mode Jacobian per trial) and a gradient only at accepted points.
+in `design_setup`, the result and its constraints report in `design_result`; the Jacobians of experiments already
+in hand come from the fit's compiled residual function (`pamjax._fit`); the iteration is a BFGS on the host with a
+backtracking line search on the objective's value (one forward-mode Jacobian per trial) and a gradient only at
+accepted points.
 """
 
 import functools

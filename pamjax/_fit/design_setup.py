@@ -381,6 +381,5 @@ def _setup(model, free, duration, *, noise, channels, start, build, rate, criter
                     _skip(band[0] + (band[1] - band[0]) * np.asarray(obj.clip01_and_slope(z0)[0]), windows), build)
     return dict(model=model, space=space, subset=subset, period=period, channels=channels, system=system, start=start,
                 thresholds=thresholds, duty_margin=margin, duty_band=[float(b) for b in duty_band], band=band,
-                windows=windows,
-                force_law=force_law, min_force=min_force, limits=limits, max_pressure=max_pressure,
+                windows=windows, force_law=force_law, min_force=min_force, limits=limits, max_pressure=max_pressure,
                 max_duty_step=max_duty_step, count=count, times=times, c0=c0, basis=basis, experiment=exp)
