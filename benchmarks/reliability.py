@@ -148,7 +148,8 @@ def determinism():
 
 def workflow_catalogue():
     """The file and command-line catalogue (issue 15): configs, CSV, units, paths, concurrency, interrupts, resume
-    mismatches, solves, the fitted model carried onward; each case a correct result or a named error."""
+    mismatches, solves, the fitted model carried onward; each case a correct result or a named error. With it, every
+    further catalogue `tests/reliability/*_cases.py` (`register_case_modules`: sweeps, bench folders, designs)."""
     from tests.reliability.bad_inputs_cli import CASES, summary
 
     register_case_modules(CASES)

@@ -145,6 +145,7 @@ from ._fit.bench_tests import (
     steady_friction_force as steady_friction_force,
 )
 from ._fit.design import DesignResult as DesignResult, design as design
+from ._fit.design_result import PamjaxDesignWarning as PamjaxDesignWarning
 from ._fit.experiment import (
     AbstractExperiment as AbstractExperiment,
     Experiment as Experiment,

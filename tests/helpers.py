@@ -311,6 +311,7 @@ def np_stick_slip_run(plant, duties, ts, *, f=50.0, t_on=2e-3, t_off=2e-3, rtol=
     openings = [0.0] + [e[1] for e in edges]
     for t_stop, o in zip(bounds, openings):
         while t < t_stop - 1e-15:
+            t_from = t
             if z == 0:
                 event = lambda tt, yy: abs(net_force(yy[1], yy[0])) - plant.fc  # noqa: E731
             else:
@@ -329,7 +330,16 @@ def np_stick_slip_run(plant, duties, ts, *, f=50.0, t_on=2e-3, t_off=2e-3, rtol=
                 else:
                     y[2] = 0.0
                     force = net_force(y[1], y[0])
-                    z = 0 if abs(force) <= plant.fc else (1 if force > 0 else -1)
+                    slide = 0 if abs(force) <= plant.fc else (1 if force > 0 else -1)
+                    if slide == z and t - t_from <= 1e-12:
+                        # A slide that starts at v = 0 "ends" where it began when the velocity's sign changes within
+                        # the solver's first step (the event function is exactly 0 at the start, and the root finder
+                        # returns the start): it would do so forever. Step it 1 ns without the event, then go on.
+                        step = min(1e-9, t_stop - t)
+                        y = solve_ivp(rhs(o, z), (t, t + step), y, method="DOP853", rtol=rtol,
+                                      atol=[1e-6, 1e-13, 1e-13]).y[:, -1].copy()
+                        t += step
+                    z = slide
     states = np.asarray(states)
     order = np.argsort(times)
     times, states = np.asarray(times)[order], states[order]

@@ -59,7 +59,7 @@ def _problem(parametrisation):
     """The compiled objective's problem for the 0.4 s tank run (20 PWM periods) as `design` builds it: no pressure
     limit and no variance floor are infinite ones, as in `design`, so that this problem, the CLI test's and every
     design of this module on the tank share one compilation of the objective and of its gradient."""
-    from pamjax._fit.design import _start_coefficients, _template
+    from pamjax._fit.design_setup import _start_coefficients, _template
 
     model = pj.ParameterSpace(_tank(), FREE).base
     space = pj.ParameterSpace(model, FREE)
@@ -71,8 +71,8 @@ def _problem(parametrisation):
     # jnp.asarray's weakly typed ones, as `design` makes them)
     prob = obj.DesignProblem(space=space, theta=space.initial_theta(), experiment=exp,
                              basis=None if basis is None else device_array(basis), prior=device_array(np.zeros((3, 3))),
-                             weight=jnp.asarray(2.0), band=device_array([0.1, 0.9]), stroke=None,
-                             max_pressure=jnp.asarray(np.inf), max_step=jnp.asarray(0.3),
+                             weight=jnp.asarray(2.0), band=device_array([0.1, 0.9]), windows=None, stroke=None,
+                             max_pressure=jnp.asarray(np.inf), max_step=jnp.asarray(0.3), min_force=None,
                              floor=device_array(np.full(3, np.inf)), subset=(0, 1, 2), criterion="D")
     c = device_array(np.asarray(c0) + 0.5)  # level lifted off the band's bottom: every parameter is fixed there
     return c, prob
@@ -107,7 +107,8 @@ def test_design_raises_the_information_keeps_its_constraints_and_replays_from_cs
                          initial={"pressure": 101325.0})
     res = pj.design(_tank(), FREE, 0.4, noise=NOISE, steps=6, baseline=[base], progress=False, **TANK)
     assert res.objective[1] < res.objective[0]  # D criterion: log det F⁻¹ went down
-    assert len(res.duty) == 20 and all(0.1 <= d <= 0.9 for d in res.duty)
+    assert len(res.duty) == 20 and all(0.125 <= d <= 0.875 for d in res.duty)  # 0.025 from the 10 %/90 % thresholds
+    assert res.constraints["threshold_distance"] >= 0.025 - 1e-12
     assert res.constraints["feasible"] and res.constraints["largest_duty_step"] <= 0.3 + 1e-9
     ratio = np.asarray(res.standard_errors["baseline"]) / np.asarray(res.standard_errors["design"])
     assert np.all(ratio > 0.97), ratio  # the floor's penalty leaves a slack of ~1 %
@@ -117,8 +118,11 @@ def test_design_raises_the_information_keeps_its_constraints_and_replays_from_cs
     assert start.objective[1] == pytest.approx(res.objective[0], rel=1e-9)
     path = res.to_csv(tmp_path / "design.csv")
     rec = pj.Recording.load(path)
-    np.testing.assert_array_equal(rec["duty"], res.duty)
-    replay = pj.Sampled(rec.t, rec["duty"], period=0.02)
+    # one row per period and a last one at the run's end (the last duty again: a replay runs to the end); the duty
+    # column is read as the bench's "command"
+    np.testing.assert_array_equal(rec["command"], [*res.duty, res.duty[-1]])
+    np.testing.assert_allclose(rec.t, [*res.times, 0.4], rtol=0, atol=1e-12)
+    replay = pj.Sampled(rec.t, rec["command"], period=0.02)
     t = np.arange(0.0, 0.4, 0.005)
     np.testing.assert_array_equal(np.asarray(_at(replay, t)), np.asarray(_at(res.signal(), t)))
     with pytest.raises(FileExistsError):
@@ -241,7 +245,7 @@ def test_cli_design_writes_csv_json_figure_and_refuses_to_overwrite(tmp_path, ca
     out = tmp_path / "out"
     assert main(["design", str(cfg), "--out", str(out), "--quiet"]) == 0
     rec = pj.Recording.load(out / "design.csv")
-    assert rec.t.size == 20 and "duty" in rec.channels
+    assert rec.t.size == 21 and rec.t[-1] == pytest.approx(0.4) and "command" in rec.channels
     assert (out / "design.png").stat().st_size > 10_000
     capsys.readouterr()
     assert main(["design", str(cfg), "--out", str(out), "--quiet"]) == 2  # a user error: one line, status 2
@@ -259,8 +263,9 @@ def test_design_example_config_loads():
 
     model, free, duration, kwargs, out = load(pathlib.Path(__file__).resolve().parents[1] / "examples"
                                               / "design_example.toml")
-    assert duration == 10.0 and len(free) == 5 and out == "results/design_example"
+    assert duration == 33.0 and len(free) == 5 and out == "results/design_example"
     assert kwargs["duty_band"] == (0.1, 0.9) and kwargs["criterion"] == "D"
+    assert kwargs["duty_margin"] == "auto" and kwargs["min_force"] == 20.0
     assert "build" not in kwargs
 
 
@@ -308,7 +313,7 @@ def test_pressure_limit_is_penalised_and_kept():
 
 
 def test_stroke_limits_are_the_stops_less_the_margin_or_the_rest_position():
-    from pamjax._fit.design import stroke_limits
+    from pamjax._fit.design_setup import stroke_limits
 
     muscle = presets.mas10_system(valve="pwm")
     rest = float(muscle.initial_state().position)  # the payload's equilibrium at atmospheric pressure
@@ -317,3 +322,223 @@ def test_stroke_limits_are_the_stops_less_the_margin_or_the_rest_position():
     margin = rest - lo + 0.002  # the payload rests 2 mm inside the margin: the design may go as far as the rest
     assert stroke_limits(muscle, None, margin) == pytest.approx((rest, hi - margin))
     assert stroke_limits(_tank(), None, 0.005) is None
+
+
+# --- designs a real rig can trust (issue 29 item 7): the valve's thresholds, the muscle in tension, named limits ---
+
+
+def test_switching_thresholds_come_from_the_valve_contract():
+    # Paper 000's valve at 50 Hz with 2 ms switching: a period's on-pulse opens it from u T = t_on (0.1), its
+    # off-pulse closes it until (1 − u) T = t_off (0.9); slower switching moves both; an averaged valve has none.
+    from pamjax._fit.design_setup import switching_thresholds
+
+    assert switching_thresholds(presets.mas10_valve()) == pytest.approx((0.1, 0.9), abs=1e-11)
+    slow = presets.mas10_valve(switch_on_delay=3e-3, switch_off_delay=2.5e-3)
+    assert switching_thresholds(slow) == pytest.approx((0.15, 0.875), abs=1e-11)
+    assert switching_thresholds(presets.mas10_averaged_valve()) == ()
+
+
+def test_duty_limits_keep_the_margin_from_every_threshold():
+    from pamjax._fit.design_setup import _skip, duty_limits
+
+    lo, hi, windows = duty_limits((0.1, 0.9), (0.1, 0.9), 0.025)  # ends at the thresholds: they move in
+    assert (lo, hi) == pytest.approx((0.125, 0.875)) and windows == ()
+    lo, hi, windows = duty_limits((0.09, 0.95), (0.1, 0.9), 0.025)
+    assert (lo, hi) == pytest.approx((0.125, 0.95)) and np.allclose(windows, [(0.875, 0.925)])
+    assert duty_limits((0.3, 0.6), (0.1, 0.9), 0.025) == (0.3, 0.6, ())  # far from both: as given
+    assert duty_limits((0.0, 1.0), (0.1, 0.9), 0.0) == (0.0, 1.0, ())  # duty_margin = 0: no limit
+    lo, hi, windows = duty_limits((0.0, 1.0), (0.1, 0.9), 0.025)  # thresholds inside: windows no duty may enter
+    assert (lo, hi) == (0.0, 1.0) and np.allclose(windows, [(0.075, 0.125), (0.875, 0.925)])
+    duty = np.array([0.0, 0.08, 0.0999, 0.1001, 0.124, 0.5, 0.9, 0.93, 1.0])
+    np.testing.assert_allclose(_skip(duty, windows), [0.0, 0.075, 0.075, 0.125, 0.125, 0.5, 0.925, 0.93, 1.0])
+    skipped = np.asarray(jax.jit(obj.skip_windows)(device_array(duty), device_array(np.asarray(windows))))
+    np.testing.assert_array_equal(skipped, _skip(duty, windows))  # the objective's (traced) and the host's agree
+    with pytest.raises(PamjaxInputError, match=r"no duty is left"):
+        duty_limits((0.09, 0.11), (0.1, 0.9), 0.025)
+
+
+MUSCLE_NOISE = {"pressure": 2e3, "position": 1e-4}
+MUSCLE_FREE = ["friction.coulomb_force", "muscle.force_law.k0"]
+
+
+def _muscle():
+    return presets.mas10_system(valve="pwm")
+
+
+@pytest.mark.parametrize("model, kwargs, match", [
+    (_tank, dict(duration=0.01), r"duration 0\.01 s is shorter than one PWM period \(0\.02 s\)"),
+    (_tank, dict(max_pressure=5.0), r"max_pressure 5\.0 Pa abs is not above the run's start pressure"),
+    (_tank, dict(duty_band=(0.09, 0.11)), r"duty_band \(0\.09, 0\.11\) lies within duty_margin 0\.025 of the valve's"),
+    (_tank, dict(duty_margin=0.6), r"duty_margin must be 'auto'"),
+    (_tank, dict(initial=pj.Constant(1.5)), r"initial: the start duty must lie in \[0, 1\]"),
+    (_tank, dict(period=-0.02), r"period must be the PWM period"),
+    (_tank, dict(noise={"pressure": 2e5}), r"noise\['pressure'\] = 200000\.0 Pa is 0\.36 of the valve's whole range"),
+    (_muscle, dict(stroke_margin=5.0), r"stroke_margin 5\.0 m leaves no stroke"),
+    (_muscle, dict(min_force=200.0), r"min_force 200 N: eq\. 7 gives 94\.2 N at the run's start"),
+    (_muscle, dict(noise={"pressure": 2e3, "position": 0.1}), r"noise\['position'\] = 0\.1 m is 1\.1 of the"),
+    (_muscle, dict(build=pj.TankFromModel(5e-5), channels=("pressure",), start={"pressure": 101325.0}),
+     r"free: \['friction\.coulomb_force', 'muscle\.force_law\.k0'\] do not enter the designed system \(TankSystem"),
+])
+def test_limits_no_run_can_keep_are_named_before_any_solve(model, kwargs, match, monkeypatch):
+    # the battery's cases (issue 33): a limit in the wrong unit, a run shorter than a period, a band across the valve's
+    # threshold, a tank test asked about the muscle: each a PamjaxInputError naming the argument, before any solve
+    from pamjax._fit.design import check_design
+
+    monkeypatch.setattr(obj, "value", lambda *a: pytest.fail("solved before rejecting the input"))
+    base = (dict(noise=NOISE, **TANK) if model is _tank else
+            dict(noise=MUSCLE_NOISE, knots=4, rate=500.0))
+    free = FREE if model is _tank else MUSCLE_FREE
+    args = {**base, **kwargs}
+    duration = args.pop("duration", 0.4)
+    with pytest.raises(PamjaxInputError, match=match):
+        pj.design(model(), free, duration, progress=False, **args)
+    with pytest.raises(PamjaxInputError, match=match):  # the CLI's check before it makes the output folder
+        check_design(model(), free, duration, **args)
+
+
+def test_an_averaged_valve_designs_with_the_period_given():
+    # the fix the error names works: period=0.02 for a model whose valve has no PWM frequency; no switching
+    # thresholds, so no duty margin
+    res = pj.design(presets.mas10_tank_system(valve="averaged"), ["valve.coefficients[1,0]"], 0.2, noise=NOISE,
+                    channels=("pressure",), start={"pressure": 101325.0}, rate=500.0, knots=4, steps=1, period=0.02,
+                    initial=pj.Constant(0.6), progress=False)
+    assert res.period == 0.02 and len(res.duty) == 10 and res.feasible
+    assert res.constraints["switching_thresholds"] == [] and res.constraints["duty_margin"] == 0.0
+
+
+@pytest.fixture(scope="module")
+def muscle_design():
+    """A 1 s design of the MAS-10's friction and k0 with its default limits (duty 0.025 from the valve's thresholds,
+    eq. 7's force >= 20 N), from a constant 0.55 (the muscle lifts and holds: in tension)."""
+    res = pj.design(_muscle(), MUSCLE_FREE, 1.0, noise=MUSCLE_NOISE, rate=500.0, knots=4, steps=3,
+                    initial=pj.Constant(0.55), progress=False)
+    return res
+
+
+def test_a_muscle_design_keeps_the_force_margin_and_reports_eq7_independently(muscle_design):
+    # The reported force is eq. 7 of the predicted run: against a NumPy transcription of the paper's eq. 7
+    # (tests/helpers.np_eq7_force) at the same samples; it stays >= min_force at the objective's samples and within
+    # the stated tolerance at the fit's resolution; every duty 0.025 from the thresholds.
+    from helpers import np_eq7_force
+
+    from pamjax._fit.design_result import VERIFY_TOLERANCE
+    from pamjax._fit.design_setup import MIN_FORCE
+
+    res = muscle_design
+    c = res.constraints
+    assert res.feasible and c["violations"] == [] and c["min_force"] == MIN_FORCE
+    fl = _muscle().muscle.force_law
+    pred = res.prediction
+    numpy = np_eq7_force(pred["position"], pred["pressure"] - 101325.0, np.asarray(fl.max_force_coefficients),
+                         float(fl.k0), float(fl.k1), float(fl.k2))
+    np.testing.assert_allclose(pred["force"], numpy, rtol=1e-12, atol=1e-9)
+    assert c["force_range"][0] >= MIN_FORCE and c["force_range"][0] == pytest.approx(float(numpy.min()))
+    assert c["verified"]["force_range"][0] >= MIN_FORCE - VERIFY_TOLERANCE["force"]
+    assert c["threshold_distance"] >= 0.025 - 1e-12 and c["duty_limits"] == pytest.approx([0.125, 0.875])
+
+
+def test_the_force_penalty_acts_from_the_buffer_and_the_limit_from_min_force():
+    # objective(min_force) − objective(no limit) = PENALTY·dt·Σ(max(min_force + FORCE_BUFFER − F, 0))² at the
+    # objective's samples, and the worst violation is measured from min_force itself
+    from pamjax._fit.design import _problem
+    from pamjax._fit.design_setup import _setup
+
+    setup = _setup(_muscle(), MUSCLE_FREE, 1.0, noise=MUSCLE_NOISE, channels=("pressure", "position"), start={},
+                   build=None, rate=500.0, criterion="D", subset=None, duty_band=(0.1, 0.9), stroke_margin=0.005,
+                   max_pressure=None, max_duty_step=None, parametrisation="envelope", knots=4, steps=3,
+                   initial=pj.Constant(0.55), seed=0, period=None, design_rate=250.0, substeps=4, duty_margin="auto",
+                   min_force=None)
+    space = setup["space"]
+    theta = np.asarray(space.initial_theta())
+
+    def problem(min_force):
+        return _problem(space, theta, setup["experiment"], setup["basis"], 2.0, setup["band"], setup["windows"],
+                        setup["limits"], None, None, True, min_force, (0, 1), "D", np.zeros((2, 2)), None)
+
+    c = device_array(setup["c0"])
+    free_value, aux = obj.value(c, problem(None))
+    force = np.asarray(aux["force"])
+    dt = float(np.diff(np.asarray(setup["experiment"].times))[0])
+    for limit in (float(force.min()) + 2.0, float(force.min()) - 2.0):
+        value, aux_l = obj.value(c, problem(limit))
+        near = np.maximum(limit + obj.FORCE_BUFFER - force, 0.0)
+        assert float(value) - float(free_value) == pytest.approx(obj.PENALTY * dt * np.sum(near**2), rel=1e-9)
+        assert float(aux_l["worst_force"]) == pytest.approx(max(limit - force.min(), 0.0), abs=1e-12)
+
+
+def test_an_infeasible_design_fails_clearly_and_is_not_written(tmp_path):
+    # a limit the start breaks and a search too short to repair it: the result says which limit and by how much,
+    # warns, and to_csv refuses it (a bench must not play it) unless told otherwise
+    with pytest.warns(pj.PamjaxDesignWarning, match=r"max_pressure: predicted up to"):
+        res = pj.design(_tank(), FREE, 0.4, noise=NOISE, steps=1, progress=False,
+                        **{**TANK, "max_pressure": 1.2e5})
+    assert not res.feasible and res.constraints["violations"][0].startswith("max_pressure")
+    with pytest.raises(PamjaxInputError, match=r"violates its limits \(max_pressure"):
+        res.to_csv(tmp_path / "design.csv")
+    assert not (tmp_path / "design.csv").exists()
+    res.to_csv(tmp_path / "design.csv", infeasible_ok=True)
+
+
+def test_cli_design_takes_period_and_fails_an_infeasible_design(tmp_path, capsys):
+    body = textwrap.dedent("""
+        [model]
+        preset = "mas10_tank_system"
+        options = {{ valve = "{valve}" }}
+        [design]
+        free = ["{free}"]
+        duration = 0.2
+        noise = {{ pressure = 2e3 }}
+        channels = ["pressure"]
+        start = {{ pressure = 101325.0 }}
+        rate = 500.0
+        knots = 4
+        initial = 0.6
+        steps = 1
+        {extra}
+    """)
+    cfg = tmp_path / "d.toml"
+    averaged = dict(valve="averaged", free="valve.coefficients[1,0]")
+    cfg.write_text(body.format(**averaged, extra=""))
+    assert main(["design", str(cfg), "--out", str(tmp_path / "a"), "--quiet", "--no-plot"]) == 2
+    err = capsys.readouterr().err
+    assert "period = 0.02" in err and not (tmp_path / "a").exists()  # refused before the folder was made
+    cfg.write_text(body.format(**averaged, extra="period = 0.02"))  # the fix the message names
+    assert main(["design", str(cfg), "--out", str(tmp_path / "b"), "--quiet", "--no-plot"]) == 0
+    assert pj.Recording.load(tmp_path / "b" / "design.csv").t[-1] == pytest.approx(0.2)
+    capsys.readouterr()
+    cfg.write_text(body.format(valve="pwm", free="valve.inflate.discharge_coefficient", extra="max_pressure = 1.2e5"))
+    assert main(["design", str(cfg), "--out", str(tmp_path / "c"), "--quiet", "--no-plot"]) == 1
+    captured = capsys.readouterr()
+    assert "FAILED" in captured.err and "max_pressure: predicted up to" in captured.err
+    assert not (tmp_path / "c" / "design.csv").exists() and (tmp_path / "c" / "design.json").exists()
+
+
+def test_a_designed_run_is_a_bench_experiment(muscle_design, tmp_path):
+    # A designed run recorded on a rig (the recording's own duty column, no triangle parameters) is a bench
+    # experiment: kind "muscle_run", or "muscle_triangle" without lo/hi/f_tri. `load_bench` drives it by the recorded
+    # duty (each period's designed duty), from rest, and its prediction at the plant that made it is the recording.
+    import json
+
+    model = _muscle()
+    res = muscle_design
+    t = np.round(np.arange(0.0, 1.0 + 1e-9, 2e-3), 9)
+    rec = pj.synthetic_recording(model, res.signal(), t, channels=["pressure", "position", "command"], name="run",
+                                 stepping="pwm", substeps=16)
+    for name in ("D1", "D2"):
+        rec.to_csv(tmp_path / f"{name}.csv")
+    meta = {"experiments": {"D1": {"kind": "muscle_run"}, "D2": {"kind": "muscle_triangle"}},
+            "noise": {"p_std_Pa": 2e3, "x_std_m": 1e-4}, "fitted_keys": ["Fc", "k0"]}
+    (tmp_path / "meta.json").write_text(json.dumps(meta))
+    bench = pj.load_bench(tmp_path, model)
+    assert [e.name for e in bench.experiments] == ["D1", "D2"] and not bench.skipped
+    starts = np.arange(len(res.duty)) * res.period
+    for e in bench.experiments:
+        np.testing.assert_array_equal(np.asarray(_at(e.signal, starts)), res.duty)
+    for e, pred in zip(bench.experiments, pj.predictions(model, bench.experiments)):
+        assert np.max(np.abs(pred["pressure"] - rec["pressure"])) < 1.0  # Pa, of 2 kPa noise
+        assert np.max(np.abs(pred["position"] - rec["position"])) < 1e-7  # m, of 0.1 mm noise
+    # without its duty column a run cannot be driven: named
+    rec_no_duty = pj.Recording(rec.t, {"pressure": rec["pressure"], "position": rec["position"]}, name="run")
+    rec_no_duty.to_csv(tmp_path / "D1.csv", overwrite=True)
+    with pytest.raises(PamjaxInputError, match=r"'D1' has no recorded duty column"):
+        pj.load_bench(tmp_path, model)

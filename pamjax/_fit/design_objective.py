@@ -21,7 +21,9 @@ where the run dwells, m, and how hard it is excited there, s).
 
 Constraints enter as quadratic penalties on their violation (the optimiser also refuses steps that leave a feasible
 point): the stroke within the end stops less a margin, the pressure below a limit, |u_k − u_{k−1}| below a rate
-limit, and, when a baseline is given, each named parameter's variance below the baseline experiment's.
+limit, the muscle's static force (eq. 7, before the slack) above a margin (penalised from `FORCE_BUFFER` above
+it), and, when a baseline is given, each named parameter's variance below the baseline experiment's. (The duty's
+distance from the valve's switching thresholds is kept exactly, by the band `lo`, `hi` of the clip.)
 """
 
 import equinox as eqx
@@ -37,6 +39,10 @@ CLIP_WIDTH = 0.02  # width of the soft clip of z to [0, 1] (2 % of the duty band
 STROKE_UNIT = 1e-3  # m: a stroke violation is penalised in mm
 PRESSURE_UNIT = 1e3  # Pa: a pressure violation in kPa
 STEP_UNIT = 0.01  # duty: a rate-limit violation in duty percent
+FORCE_UNIT = 1.0  # N: a violation of the muscle's force margin in newtons
+FORCE_BUFFER = 5.0  # N: the force penalty acts from min_force + 5 N, the limit itself from min_force: the search sees
+# the limit's gradient before it reaches it (a step may not cross it, so without one it crawls along it), and the
+# PWM ripple between the objective's samples (≈ 4 N on the MAS-10 example: `design.VERIFY_TOLERANCE`) stays above it
 PENALTY = 100.0  # weight of a squared violation of one unit per second of run (stroke, pressure) or per period
 FLOOR_PENALTY = 1000.0  # weight of a squared excess of a log variance over the baseline's (~0.5 % slack)
 
@@ -108,16 +114,29 @@ class DesignProblem(eqx.Module):
     prior: jax.Array  # (n, n) information already in hand
     weight: jax.Array  # f_rec / f_design
     band: jax.Array  # (lo, hi) duty
+    windows: jax.Array | None  # (k, 2): duty windows (θ − m, θ + m) around switching thresholds inside the band
     stroke: jax.Array | None  # (lo, hi) allowed positions [m], margin included; None: no position channel/limit
     max_pressure: jax.Array | None  # Pa abs
     max_step: jax.Array | None  # per PWM period
+    min_force: jax.Array | None  # N, eq. 7's force kept above it (−inf: no limit); None: the system has no muscle
     floor: jax.Array | None  # (n,) baseline variances of θ (inf where not constrained)
     subset: tuple = eqx.field(static=True)
     criterion: str = eqx.field(static=True)
 
     def duty(self, c):
         z = c if self.basis is None else self.basis @ c
-        return self.band[0] + (self.band[1] - self.band[0]) * clip01(z)
+        u = self.band[0] + (self.band[1] - self.band[0]) * clip01(z)
+        return u if self.windows is None else skip_windows(u, self.windows)
+
+
+def skip_windows(u, windows):
+    """Each duty inside a window (lo, hi) moved to the window's nearer end: no period sits within the margin of a
+    switching threshold. The valve's flow already jumps where a duty crosses the threshold (a period opens it or not);
+    this moves the jump to the window's middle and widens it to the window, and the duty's derivative is 0 inside."""
+    for i in range(windows.shape[0]):
+        lo, hi = windows[i, 0], windows[i, 1]
+        u = jnp.where((u > lo) & (u < hi), jnp.where(u < 0.5 * (lo + hi), lo, hi), u)
+    return u
 
 
 def _criterion(cov, subset, criterion):
@@ -129,8 +148,8 @@ def _criterion(cov, subset, criterion):
 
 def evaluate(c, problem: DesignProblem):
     """(objective, aux): the criterion plus the penalties at coefficients `c`; aux holds the criterion, the
-    penalties, the largest violations (stroke [m], pressure [Pa], duty step), the duty, and the predicted position
-    and pressure at the design samples."""
+    penalties, the largest violations (stroke [m], pressure [Pa], duty step, force [N]), the duty, and the predicted
+    position, pressure and eq. 7 force at the design samples."""
     duty = problem.duty(c)
     exp = eqx.tree_at(lambda e: e.signal.values, problem.experiment, duty)
 
@@ -144,8 +163,9 @@ def evaluate(c, problem: DesignProblem):
     crit = _criterion(cov, problem.subset, problem.criterion)
     dt = exp.times[1] - exp.times[0]
     zero = jnp.zeros(())
-    pen_stroke = pen_pressure = pen_step = pen_floor = zero
-    worst_stroke = worst_pressure = worst_step = zero
+    pen_stroke = pen_pressure = pen_step = pen_floor = pen_force = zero
+    worst_stroke = worst_pressure = worst_step = worst_force = zero
+    force = None
     if problem.stroke is not None:
         x = pred["position"]
         over = jnp.maximum(x - problem.stroke[1], 0.0) + jnp.maximum(problem.stroke[0] - x, 0.0)
@@ -159,13 +179,20 @@ def evaluate(c, problem: DesignProblem):
         over = jnp.maximum(jnp.abs(jnp.diff(duty)) - problem.max_step, 0.0)
         pen_step = PENALTY * jnp.sum((over / STEP_UNIT) ** 2)
         worst_step = jnp.max(over)
+    if problem.min_force is not None:
+        system = exp.system_for(problem.space.model(problem.theta))
+        force = system.muscle.static_force(pred["position"], pred["pressure"], system.air)
+        near = jnp.maximum(problem.min_force + FORCE_BUFFER - force, 0.0)
+        pen_force = PENALTY * dt * jnp.sum((near / FORCE_UNIT) ** 2)
+        worst_force = jnp.max(jnp.maximum(problem.min_force - force, 0.0))
     if problem.floor is not None:
         excess = jnp.where(jnp.isfinite(problem.floor), jnp.log(jnp.diag(cov)) - jnp.log(problem.floor), 0.0)
         pen_floor = FLOOR_PENALTY * jnp.sum(jnp.maximum(excess, 0.0) ** 2)
-    total = crit + pen_stroke + pen_pressure + pen_step + pen_floor
-    aux = dict(criterion=crit, penalty=pen_stroke + pen_pressure + pen_step + pen_floor, floor_penalty=pen_floor,
-               worst_stroke=worst_stroke, worst_pressure=worst_pressure, worst_step=worst_step, duty=duty,
-               position=pred.get("position"), pressure=pred.get("pressure"), information=info)
+    total = crit + pen_stroke + pen_pressure + pen_step + pen_force + pen_floor
+    aux = dict(criterion=crit, penalty=pen_stroke + pen_pressure + pen_step + pen_force + pen_floor,
+               floor_penalty=pen_floor, worst_stroke=worst_stroke, worst_pressure=worst_pressure, worst_step=worst_step,
+               worst_force=worst_force, duty=duty, position=pred.get("position"), pressure=pred.get("pressure"),
+               force=force, information=info)
     return total, aux
 
 

@@ -17,15 +17,24 @@ def plot_design(result, path):
     fig, panels = plt.subplots(len(ratios), 1, figsize=(11, 2.5 * sum(ratios)), gridspec_kw=dict(height_ratios=ratios))
     axes = list(panels) if stroke else [panels[0], None, *panels[1:]]
     axes[0].step(result.times, result.duty, where="post", lw=0.7)
-    for b in cons["duty_band"]:
+    for b in cons.get("duty_limits", cons["duty_band"]):
         axes[0].axhline(b, color="C3", lw=0.8, ls="--")
+    for b in cons.get("switching_thresholds") or []:
+        axes[0].axhline(b, color="0.4", lw=0.8, ls=":")
     axes[0].set(ylabel="duty [-]", title=f"{result.criterion}-optimal PWM duty ({result.parametrisation}), "
-                                         f"one value per {1e3 * result.period:g} ms period")
+                                         f"one value per {1e3 * result.period:g} ms period (dashed: the duties "
+                                         "allowed; dotted: the valve's switching thresholds)")
     if stroke:
         axes[1].plot(pred["t"], 1e3 * np.asarray(pred["position"]), lw=0.7)
         for b in cons["stroke_limits"] or []:
             axes[1].axhline(1e3 * b, color="C3", lw=0.8, ls="--")
         axes[1].set(ylabel="position [mm]", title="predicted at the design point (dashed: end stops less margin)")
+        if pred.get("force") is not None:
+            twin = axes[1].twinx()
+            twin.plot(pred["t"], np.asarray(pred["force"]), lw=0.5, color="C2")
+            if cons.get("min_force") is not None:
+                twin.axhline(cons["min_force"], color="C2", lw=0.8, ls="--")
+            twin.set_ylabel("eq. 7 force [N] (green; dashed: min_force)", color="C2")
     if pred.get("pressure") is not None:
         axes[2].plot(pred["t"], np.asarray(pred["pressure"]) / 1e5, lw=0.5)
         if cons.get("max_pressure") is not None:

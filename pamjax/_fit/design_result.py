@@ -5,9 +5,103 @@ import dataclasses
 import json
 
 import jax.numpy as jnp
+import numpy as np
 
+from .._core.errors import PamjaxInputError
 from .._physics.signals import Sampled
+from .design_objective import FORCE_UNIT, PRESSURE_UNIT, STEP_UNIT, STROKE_UNIT
 from .recording import _writable
+
+
+class PamjaxDesignWarning(UserWarning):
+    """A design that ends outside its limits (`DesignResult.constraints["violations"]` says which)."""
+
+
+# How far the run at the fit's resolution (1 kHz, 16 substeps) may pass a limit that the objective (250 Hz, 4 substeps)
+# keeps: the objective samples a 20 ms PWM period 5 times, so the PWM ripple's peaks between its samples go unseen
+# (measured: 2.1 kPa on the 5e-5 m³ tank, tests/test_design.py; the force follows the pressure at ~1 N per kPa)
+VERIFY_TOLERANCE = dict(stroke=1e-4, pressure=5e3, force=5.0)  # m, Pa, N
+
+
+def _violation(aux):
+    """The largest constraint violation in its penalty's units (mm, kPa, duty %, N)."""
+    return max(float(aux["worst_stroke"]) / STROKE_UNIT, float(aux["worst_pressure"]) / PRESSURE_UNIT,
+               float(aux["worst_step"]) / STEP_UNIT, float(aux["worst_force"]) / FORCE_UNIT)
+
+
+def _range(a):
+    return None if a is None else [float(np.min(a)), float(np.max(a))]
+
+
+def _worst(values, lo, hi):
+    """The largest excursion of `values` below `lo` or above `hi` (0 when within; None when not predicted)."""
+    if values is None:
+        return None
+    values = np.asarray(values, dtype=float)
+    return float(max(np.max(lo - values, initial=0.0), np.max(values - hi, initial=0.0), 0.0))
+
+
+def _constraints(aux, setup, verified=None):
+    """The `constraints` report of a design: the limits, the predicted extremes at the objective's samples and, when
+    verified, at the fit's resolution, and whether every limit holds (within `VERIFY_TOLERANCE` at the fit's
+    resolution, the objective's own resolution limit)."""
+    # on the host: NumPy reductions of a JAX array would each compile a program
+    duty, position, pressure, force = (None if aux.get(k) is None else np.asarray(aux[k])
+                                       for k in ("duty", "position", "pressure", "force"))
+    thresholds = setup["thresholds"]
+    out = dict(
+        duty_band=list(setup["duty_band"]), switching_thresholds=list(thresholds), duty_margin=setup["duty_margin"],
+        duty_limits=list(setup["band"]), duty_windows=[list(w) for w in setup["windows"]], duty_range=_range(duty),
+        threshold_distance=(float(np.min(np.abs(duty[:, None] - np.asarray(thresholds)[None, :])))
+                            if thresholds else None),
+        largest_duty_step=float(np.max(np.abs(np.diff(duty)))) if duty.size > 1 else 0.0,
+        max_duty_step=setup["max_duty_step"],
+        stroke_limits=None if setup["limits"] is None else [float(s) for s in setup["limits"]],
+        position_range=_range(position), max_pressure=setup["max_pressure"], pressure_range=_range(pressure),
+        min_force=setup["min_force"], force_range=_range(force), feasible=_violation(aux) <= 1e-9)
+    if verified is not None:
+        lo_x, hi_x = setup["limits"] if setup["limits"] is not None else (-np.inf, np.inf)
+        p_max = np.inf if setup["max_pressure"] is None else setup["max_pressure"]
+        f_min = -np.inf if setup["min_force"] is None else setup["min_force"]
+        excess = dict(stroke=_worst(verified.get("position"), lo_x, hi_x),
+                      pressure=_worst(verified.get("pressure"), -np.inf, p_max),
+                      force=_worst(verified.get("force"), f_min, np.inf))
+        out["verified"] = dict(
+            position_range=_range(verified.get("position")), pressure_range=_range(verified.get("pressure")),
+            force_range=_range(verified.get("force")), excess=excess,
+            tolerance=dict(VERIFY_TOLERANCE),
+            feasible=all(v is None or v <= VERIFY_TOLERANCE[k] for k, v in excess.items()))
+        out["feasible"] = out["feasible"] and out["verified"]["feasible"]
+    out["violations"] = _violations(out)
+    return out
+
+
+def _violations(report):
+    """One line per violated limit, with what to change (empty when every limit holds)."""
+    lines = []
+    v = report.get("verified") or {}
+    excess = v.get("excess", {})
+    tol = v.get("tolerance", {})
+
+    def over(kind, at_samples):
+        return at_samples or (excess.get(kind) is not None and excess[kind] > tol.get(kind, 0.0))
+
+    x, lim = report["position_range"], report["stroke_limits"]
+    if lim is not None and over("stroke", x is not None and (x[0] < lim[0] - 1e-12 or x[1] > lim[1] + 1e-12)):
+        xr = v.get("position_range") or x
+        lines.append(f"stroke_margin: predicted {1e3 * xr[0]:.2f} … {1e3 * xr[1]:.2f} mm, limits {1e3 * lim[0]:.2f} "
+                     f"… {1e3 * lim[1]:.2f} mm (the end stops less stroke_margin)")
+    p, p_max = report["pressure_range"], report["max_pressure"]
+    if p_max is not None and over("pressure", p is not None and p[1] > p_max + 1e-9):
+        pr = v.get("pressure_range") or p
+        lines.append(f"max_pressure: predicted up to {pr[1] / 1e5:.3f} bar abs, limit {p_max / 1e5:.3f} bar abs")
+    f, f_min = report["force_range"], report["min_force"]
+    if f_min is not None and over("force", f is not None and f[0] < f_min - 1e-9):
+        fr = v.get("force_range") or f
+        lines.append(f"min_force: eq. 7's force down to {fr[0]:.1f} N, limit {f_min:g} N (the muscle near slack)")
+    if report["max_duty_step"] is not None and report["largest_duty_step"] > report["max_duty_step"] + 1e-9:
+        lines.append(f"max_duty_step: a step of {report['largest_duty_step']:.3f}, limit {report['max_duty_step']:g}")
+    return lines
 
 
 @dataclasses.dataclass
@@ -22,10 +116,15 @@ class DesignResult:
       "baseline" (prior + baseline experiments) when a baseline was given.
     - `objective`: [start, end] values of the criterion; `history`: per iteration [iteration, objective, criterion,
       step length, accepted].
-    - `constraints`: the predicted stroke and pressure extremes, the largest duty step, the limits, `feasible`.
+    - `constraints`: the limits and what the design keeps of them: the duty band, the valve's switching thresholds,
+      `duty_margin` and the duties they leave (`duty_limits`), the closest any period comes to a threshold
+      (`threshold_distance`), the largest duty step; the predicted stroke, pressure and eq. 7 force extremes at the
+      objective's samples and (`verified`) at the fit's resolution, against `stroke_limits`, `max_pressure`,
+      `min_force`; `feasible` (every limit holds) and `violations` (one line per limit that does not).
     - `design_s`: wall time of the whole design; `compile_s`: of its start (compiling the objective and its
       gradient, overlapped with the prior and baseline experiments' Jacobians), before the first iteration.
-    - `prediction`: the predicted run at the objective's samples (t, position, pressure; not in JSON).
+    - `duration` [s]: of the run (the last period may end before its full length).
+    - `prediction`: the predicted run at the objective's samples (t, position, pressure, eq. 7 force; not in JSON).
     """
 
     times: list
@@ -44,6 +143,7 @@ class DesignResult:
     message: str
     design_s: float
     compile_s: float
+    duration: float = None
     prediction: dict = dataclasses.field(default=None, repr=False, compare=False)
 
     def signal(self):
@@ -58,9 +158,21 @@ class DesignResult:
         path.write_text(json.dumps(self.to_dict(), indent=1))
         return path
 
-    def to_csv(self, path, overwrite=False):
-        """`t [s],duty [-]`, one row per PWM period, the predicted standard errors in '#' comment lines above
-        (`pamjax.Recording.load(path)` reads it; `Sampled(rec.t, rec["duty"], period=...)` replays it)."""
+    @property
+    def feasible(self):
+        """Whether the design keeps every limit (`constraints["violations"]` lists those it does not)."""
+        return bool(self.constraints.get("feasible", True))
+
+    def to_csv(self, path, overwrite=False, infeasible_ok=False):
+        """`t [s],duty [-]`: one row per PWM period (its start and duty) and a last row at the run's end (the last
+        duty again), so that a replay runs to the end; the predicted standard errors in '#' comment lines above
+        (`pamjax.Recording.load(path)` reads the duty as channel "command", the bench's name for it;
+        `Sampled(rec.t, rec["command"], period=...)` replays it; `pamjax.load_bench` fits its recording as a
+        "muscle_run"). A design
+        that violates its limits is refused (a bench must not play it) unless `infeasible_ok`."""
+        if not self.feasible and not infeasible_ok:
+            raise PamjaxInputError("this design violates its limits (" + "; ".join(self.constraints["violations"])
+                                   + "): a bench must not play it; pass infeasible_ok=True to write it anyway")
         path = _writable(path, overwrite)
         lines = [f"# pamjax design: {self.criterion}-optimal over {', '.join(self.subset)}; PWM period "
                  f"{self.period} s; duty latched per period",
@@ -74,6 +186,9 @@ class DesignResult:
             lines.append(f"#   {label}, " + ", ".join(f"{c:.6g}" for c in cols))
         lines.append("t [s],duty [-]")
         lines += [f"{t!r},{d!r}" for t, d in zip(map(float, self.times), map(float, self.duty))]
+        end = self.times[-1] + self.period if self.duration is None else self.duration
+        if float(end) > float(self.times[-1]):
+            lines.append(f"{float(end)!r},{float(self.duty[-1])!r}")
         path.write_text("\n".join(lines) + "\n")
         return path
 

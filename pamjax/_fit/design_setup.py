@@ -1,0 +1,385 @@
+"""`design`'s set-up: everything before the first solve. The arguments checked, the valve's switching thresholds
+(from its contract, `switching_gates`) and the duties they leave, the limits checked against the run's start state
+(a limit no run from there can keep is refused, naming it), the start signal's coefficients and the designed
+experiment. Defaults and their sources are here."""
+
+import inspect
+import math
+
+import equinox as eqx
+import jax
+import numpy as np
+
+from .._core.arrays import device_array
+from .._core.errors import PamjaxInputError, require_float64
+from .._physics.signals import AbstractSignal, Sampled, Triangle
+from .._systems.base import AbstractSystem
+from . import design_objective as obj
+from .experiment import Experiment
+from .parameters import ParameterSpace, strong_types
+from .recording import Recording
+
+# Defaults and their sources.
+DUTY_BAND = (0.1, 0.9)  # paper 000: with the MHE2's ~2 ms switching time, only duty 10-90 % has an effect at 50 Hz
+STROKE_MARGIN = 0.005  # m; assumed (paper 000 gives no clearance): ≈ 5 % of the MAS-10's 95 mm stroke
+DUTY_MARGIN_FRACTION = 0.25  # of a switching threshold's distance from the end of [0, 1] (t_on·f below, t_off·f above):
+# paper 000 gives the MHE2's switching time only as "approximately 2 ms", ±0.5 ms in its rounding (±25 %); a duty within
+# that of a threshold (0.1 ± 0.025 and 0.9 ± 0.025 at 50 Hz) may or may not switch a real valve in its period
+MIN_FORCE = 20.0  # N; eq. 7 is backed by data only above it: the measured DMSP-20-300 force map it was derived from
+# (Martens & Boblan 2017, Appendix A1; `presets`) is affine in pressure within 2 N down to its smallest non-zero
+# force, 21 N, and has no point between slack and 21 N. No braid model is checked below that, nor is the slack itself
+START_LEVEL = (0.05, 0.95, 0.08)  # paper 000's E3 duty (Triangle low, high, Hz): the start of the envelope's level
+# (built when used: a component made at import would start JAX's backend, fixing its devices before the user can)
+START_AMPLITUDE = 0.25  # of the band; assumed: the carrier swings the duty by ±20 % of 0.8 around the level
+CARRIER_HOLD = 10  # PWM periods (0.2 s at 50 Hz): the hold of the most informative of the multilevel signals
+# compared in docs/identifiability.md (0.1, 0.2, 0.5 and 1 s holds)
+DESIGN_RATE = 250.0  # Hz: the objective's samples; the information matrix agrees within 0.2 % with 1 kHz (docs)
+DESIGN_SUBSTEPS = 4  # RK4 nodes per PWM period in the objective: within 0.2 % of the fit's 16 (docs)
+FIT_SUBSTEPS = inspect.signature(Experiment.__init__).parameters["substeps"].default  # what a fit integrates with
+
+
+def built_system(model, build, start, channels):
+    """`build(model)` (the model itself when `build` is None), checked before any solve: a pamjax system whose
+    initial state takes `start` and whose outputs include every channel of `channels`."""
+    if build is None:
+        system = model
+    elif not callable(build):
+        raise PamjaxInputError(f"build must be a callable model → system (e.g. pamjax.TankFromModel(5e-5), as "
+                               f"pamjax.Experiment takes it), got {build!r}")
+    else:
+        try:
+            system = build(model)
+        except Exception as err:  # a user's callable: any failure is bad input, named
+            raise PamjaxInputError(f"build(model) failed: {type(err).__name__}: {err}") from err
+    if not isinstance(system, AbstractSystem):
+        raise PamjaxInputError(f"build(model) must give a pamjax system (e.g. pamjax.TankFromModel(5e-5) gives a "
+                               f"TankSystem), got {type(system).__name__}")
+    try:  # traced, not solved
+        y0 = jax.eval_shape(lambda s: s.initial_state(**start), system)
+    except TypeError as err:
+        raise PamjaxInputError(f"start: bad keys {sorted(start)} for {type(system).__name__}.initial_state: "
+                               f"{err}") from err
+    outputs = jax.eval_shape(lambda s, y: s.outputs(0.0, y, 0.5), system, y0)
+    missing = [c for c in channels if c not in outputs]
+    if missing:
+        raise PamjaxInputError(f"channels {missing}: the designed system ({type(system).__name__}"
+                               f"{'' if build is None else ', from build'}) has no such output; it has "
+                               f"{sorted(outputs)}")
+    return system
+
+
+def _validate(model, free, duration, noise, channels, band, criterion, subset, parametrisation, knots, steps, rate,
+              stroke_margin, max_pressure, max_duty_step, period, build, start, duty_margin, min_force):
+    require_float64("pamjax.design")
+    if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
+        raise PamjaxInputError(f"duration must be a positive number of seconds, got {duration!r}")
+    start = {} if start is None else start
+    if not isinstance(start, dict):
+        raise PamjaxInputError(f"start must be a dict of keyword arguments of the system's initial_state (e.g. "
+                               f"{{'pressure': 101325.0}}), got {start!r}")
+    start = dict(start)
+    channels = tuple(channels)
+    system = built_system(model, build, start, channels)
+    valve = getattr(system, "valve", None)
+    frequency = getattr(valve, "pwm_frequency", None)
+    if period is None and frequency is None:
+        raise PamjaxInputError("period: the model's valve has no pwm_frequency; give the PWM period [s] the bench's "
+                               "PWM driver latches the duty with: period=0.02 in pamjax.design, `period = 0.02` in "
+                               "the [design] table of a config")
+    if period is not None and not (isinstance(period, (int, float)) and not isinstance(period, bool)
+                                   and math.isfinite(period) and period > 0):
+        raise PamjaxInputError(f"period must be the PWM period, a number > 0 [s] (e.g. 0.02 at 50 Hz), got {period!r}")
+    period = float(1.0 / float(frequency)) if period is None else float(period)
+    if duration < period * (1.0 - 1e-9):
+        raise PamjaxInputError(f"duration {duration!r} s is shorter than one PWM period ({period:g} s): a design sets "
+                               f"one duty per period, so it needs at least one (duration >= {period:g} s; designs that "
+                               "tell much last seconds: docs/identifiability.md)")
+    if not channels:
+        raise PamjaxInputError("channels must name at least one recorded channel, e.g. ('pressure', 'position')")
+    if not isinstance(noise, dict) or not set(channels) <= set(noise):
+        raise PamjaxInputError(f"noise must give the noise standard deviation of every channel {list(channels)} "
+                               f"(e.g. {{'pressure': 2e3, 'position': 1e-4}} [Pa, m]), got {noise!r}")
+    for c in channels:
+        if not (math.isfinite(float(noise[c])) and float(noise[c]) > 0):
+            raise PamjaxInputError(f"noise[{c!r}] must be > 0 (the channel's standard deviation), got {noise[c]!r}")
+    _check_noise_scale(system, noise, channels)
+    lo, hi = (float(b) for b in band)
+    if not 0.0 <= lo < hi <= 1.0:
+        raise PamjaxInputError(f"duty_band must be (lo, hi) with 0 <= lo < hi <= 1, got {band!r}")
+    if criterion not in ("D", "A"):
+        raise PamjaxInputError(f"criterion must be 'D' or 'A', got {criterion!r}")
+    if parametrisation not in ("envelope", "periods"):
+        raise PamjaxInputError(f"parametrisation must be 'envelope' or 'periods', got {parametrisation!r}")
+    if not (isinstance(knots, int) and knots >= 4):
+        raise PamjaxInputError(f"knots must be an int >= 4 (cubic B-spline coefficients), got {knots!r}")
+    if not (isinstance(steps, int) and steps >= 0):
+        raise PamjaxInputError(f"steps must be a non-negative int, got {steps!r}")
+    if not (math.isfinite(rate) and rate > 0):
+        raise PamjaxInputError(f"rate must be the recording's sample rate [Hz] > 0, got {rate!r}")
+    if not stroke_margin >= 0:
+        raise PamjaxInputError(f"stroke_margin must be >= 0 [m], got {stroke_margin!r}")
+    if max_pressure is not None and not max_pressure > 0:
+        raise PamjaxInputError(f"max_pressure must be an absolute pressure > 0 [Pa], got {max_pressure!r}")
+    if not (duty_margin == "auto" or (isinstance(duty_margin, (int, float)) and not isinstance(duty_margin, bool)
+                                      and 0 <= duty_margin < 0.5)):
+        raise PamjaxInputError(f"duty_margin must be 'auto' (a quarter of the valve's switching time, in duty) or a "
+                               f"duty in [0, 0.5) kept from the valve's switching thresholds (0: none), got "
+                               f"{duty_margin!r}")
+    if not (min_force is None or min_force is False or (isinstance(min_force, (int, float)) and
+                                                        not isinstance(min_force, bool) and math.isfinite(min_force))):
+        raise PamjaxInputError(f"min_force must be the force [N] eq. 7 must keep along the run (default "
+                               f"{MIN_FORCE:g}), or None / false for no limit, got {min_force!r}")
+    if max_duty_step is not None and not 0 < max_duty_step <= 1:
+        raise PamjaxInputError(f"max_duty_step must be in (0, 1] (duty change per PWM period), got {max_duty_step!r}")
+    space = ParameterSpace(model, free)
+    subset = list(space.labels) if subset is None else list(subset)
+    unknown = [s for s in subset if s not in space.labels]
+    if unknown or not subset:
+        raise PamjaxInputError(f"subset {unknown or subset!r} must name free parameters; they are {space.labels}")
+    if build is not None:
+        _check_seen(model, space, build, system)
+    return space, subset, period, channels, system, start
+
+
+def _check_noise_scale(system, noise, channels):
+    """A noise level no sensor of this system can have: a position noise of a tenth of the whole stroke or more, a
+    pressure noise of a tenth of the supply's range or more (a unit slip: 0.1 meant in mm)."""
+    muscle = getattr(system, "muscle", None)
+    if "position" in channels and muscle is not None:
+        stroke = float(muscle.max_position) - float(muscle.min_position)
+        if float(noise["position"]) >= 0.1 * stroke:
+            raise PamjaxInputError(f"noise['position'] = {noise['position']!r} m is "
+                                   f"{float(noise['position']) / stroke:.2g} of the muscle's whole stroke "
+                                   f"({1e3 * stroke:.0f} mm): the noise is a standard deviation in metres (0.1 mm = "
+                                   "1e-4)")
+    valve = getattr(system, "valve", None)
+    try:
+        span = float(valve.supply()) - float(system.air.atmospheric_pressure)
+    except (AttributeError, PamjaxInputError):
+        span = None
+    if "pressure" in channels and span is not None and float(noise["pressure"]) >= 0.1 * span:
+        raise PamjaxInputError(f"noise['pressure'] = {noise['pressure']!r} Pa is {float(noise['pressure']) / span:.2g} "
+                               f"of the valve's whole range (supply − atmosphere, {span / 1e5:.2f} bar): the noise "
+                               "is a standard deviation in Pa (2 kPa = 2e3)")
+
+
+def _check_seen(model, space, build, system):
+    """Free parameters that the system `build` makes of `model` does not depend on (a tank test of the valve never
+    sees the muscle): refused, naming them (perturbed one at a time, rebuilt, compared; no solve)."""
+    import jax.tree_util as jtu
+
+    from .parameters import _getter
+
+    leaves = [np.asarray(x) for x in jtu.tree_leaves(eqx.filter(system, eqx.is_array))]
+    unseen = []
+    for g in space.groups:
+        get = _getter(g.attrs)
+        old = np.asarray(get(model), dtype=float)
+        try:
+            other = build(eqx.tree_at(get, model, device_array(old * 1.25 + 1e-3)))
+        except Exception:  # noqa: BLE001 - a build that refuses the perturbed value depends on it
+            continue
+        new = [np.asarray(x) for x in jtu.tree_leaves(eqx.filter(other, eqx.is_array))]
+        if len(new) == len(leaves) and all(a.shape == b.shape and np.array_equal(a, b) for a, b in zip(leaves, new)):
+            unseen += list(g.labels)
+    if unseen:
+        raise PamjaxInputError(f"free: {unseen} do not enter the designed system ({type(system).__name__}, from "
+                               "build): no run of it can determine them; remove them from free (design the muscle run "
+                               "separately, with this test's fit as its prior)")
+
+
+@eqx.filter_jit
+def _gates(valve, duty):
+    return valve.switching_gates(duty)
+
+
+def switching_thresholds(valve):
+    """The duties in [0, 1] where a switching valve's gates change (`switching_gates`, the valve contract): below the
+    first a period's on-pulse is too short to open it, above the last its off-pulse too short to close it (paper
+    000's 10 % and 90 % at 50 Hz with 2 ms switching). Located on nested grids to 1e-12; () for a valve that does not
+    switch (an averaged valve)."""
+    if not getattr(valve, "switches", False):
+        return ()
+    found = []
+    for gate in (0, 1):
+        lo, hi = 0.0, 1.0
+        grid = np.linspace(lo, hi, 4097)
+        values = np.asarray(_gates(valve, device_array(grid))[gate])
+        for i in np.nonzero(values[1:] != values[:-1])[0]:
+            a, b = grid[i], grid[i + 1]
+            while b - a > 1e-12:
+                fine = np.linspace(a, b, 4097)
+                v = np.asarray(_gates(valve, device_array(fine))[gate])
+                j = int(np.nonzero(v[1:] != v[:-1])[0][0])
+                a, b = fine[j], fine[j + 1]
+            found.append(0.5 * (a + b))
+    return tuple(sorted(found))
+
+
+def duty_limits(band, thresholds, margin):
+    """The duties a design may use: (lo, hi, windows): the band less `margin` at either end where a switching
+    threshold lies within `margin` of it, and the windows (θ − m, θ + m) of the thresholds inside it, which no period's
+    duty may enter (`design_objective.skip_windows`). A band the margins leave empty is refused."""
+    lo, hi = band
+    if not margin or not thresholds:
+        return lo, hi, ()
+    for th in thresholds:  # a threshold within the margin of an end: that end moves inside
+        if th - margin <= lo < th + margin:
+            lo = th + margin
+        if th - margin < hi <= th + margin:
+            hi = th - margin
+    windows = tuple((th - margin, th + margin) for th in thresholds if lo < th - margin and th + margin < hi)
+    if not hi > lo:
+        raise PamjaxInputError(
+            f"duty_band ({band[0]:g}, {band[1]:g}) lies within duty_margin {margin:g} of the valve's switching "
+            f"thresholds {', '.join(f'{t:.6g}' for t in thresholds)} (a period's duty below {thresholds[0]:.6g} does "
+            f"not open it, above {thresholds[-1]:.6g} does not close it): no duty is left; use a wider band, e.g. "
+            f"({thresholds[0] + margin:.6g}, {thresholds[-1] - margin:.6g}), or a smaller duty_margin")
+    return lo, hi, windows
+
+
+def _skip(duty, windows):
+    """`design_objective.skip_windows` on the host."""
+    duty = np.asarray(duty, dtype=float).copy()
+    for lo, hi in windows:
+        inside = (duty > lo) & (duty < hi)
+        duty[inside] = np.where(duty[inside] < 0.5 * (lo + hi), lo, hi)
+    return duty
+
+
+@eqx.filter_jit
+def _static_force(system, position, pressure):
+    """Eq. 7 (the muscle's force law before the slack) along a run, compiled as one program."""
+    return system.muscle.static_force(position, pressure, system.air)
+
+
+def _has_force_law(system):
+    return hasattr(getattr(system, "muscle", None), "static_force")
+
+
+def stroke_limits(model, start, margin):
+    """(lo, hi) positions [m] a design may reach: the muscle's stops less `margin`, or as far as the start position
+    itself where that lies nearer a stop (a payload hanging at rest within the margin: the run may return there and
+    no duty can avoid it). None for a model without a muscle."""
+    muscle = getattr(model, "muscle", None)
+    if muscle is None:
+        return None
+    lo, hi = float(muscle.min_position) + margin, float(muscle.max_position) - margin
+    x0 = float(np.asarray(getattr(_start_state(model, dict(start or {})), "position", np.nan)))
+    return (min(lo, x0), max(hi, x0)) if math.isfinite(x0) else (lo, hi)
+
+
+@eqx.filter_jit
+def _initial_state(system, start):
+    return system.initial_state(**start)
+
+
+def _start_state(system, start):
+    """`system.initial_state(**start)`, compiled as one program (eagerly, its static equilibrium compiles each of
+    its operations on its own)."""
+    return _initial_state(system, {k: device_array(np.asarray(v, dtype=float)) for k, v in start.items()})
+
+
+def _template(model, duration, period, rate, channels, noise, start, substeps, duty, build=None):
+    """The designed experiment (a Sampled duty, a blank recording at `rate`; the system `build(model)`) bound to
+    `model`."""
+    times = np.arange(0.0, duration + 0.5 / rate, 1.0 / rate)
+    blank = {c: np.full(times.shape, 101325.0 if c.startswith("pressure") else 0.0) for c in channels}
+    rec = Recording(times, blank, name="design")
+    starts = np.arange(len(duty)) * period
+    signal = Sampled(device_array(starts), device_array(duty, dtype=float), period=period)
+    exp = Experiment(rec, signal, channels=list(channels), scales={c: float(noise[c]) for c in channels},
+                     build=build, initial=start, name="design", substeps=substeps)
+    exp.check(model)
+    return exp.bind(model)
+
+
+@eqx.filter_jit
+def _sampled(signal, times):
+    """`signal` at `times`, compiled as one program (run eagerly, each operation compiles on its own)."""
+    return jax.vmap(signal)(times)
+
+
+def _start_coefficients(parametrisation, times, duration, knots, carrier, band, initial, amplitude=START_AMPLITUDE):
+    """The start: z = level + `amplitude` ξ, the level from `initial` (a signal or per-period duties; default paper
+    000's E3 triangle; no carrier on a given one), in the units of the soft clip (0 and 1 the band's ends; beyond
+    them saturated)."""
+    lo, hi = band
+    if initial is None:
+        level = (np.asarray(_sampled(Triangle(*START_LEVEL), device_array(times))) - lo) / (hi - lo)
+    else:
+        duty = (np.asarray(_sampled(initial, device_array(times))) if isinstance(initial, AbstractSignal)
+                else np.asarray(initial, dtype=float))
+        if duty.shape != times.shape:
+            raise PamjaxInputError(f"initial must be a signal or one duty per PWM period ({times.size}), got shape "
+                                   f"{duty.shape}")
+        if not np.all(np.isfinite(duty)) or np.min(duty) < 0.0 or np.max(duty) > 1.0:
+            raise PamjaxInputError(f"initial: the start duty must lie in [0, 1] (a duty ratio: 0.5, not 50 %), its "
+                                   f"range is [{np.min(duty):g}, {np.max(duty):g}]")
+        level = obj.unclip01((np.clip(duty, lo, hi) - lo) / (hi - lo))
+    if parametrisation == "periods":
+        return level + (amplitude * carrier if initial is None else 0.0), None
+    b = obj.bspline_basis(times, 0.0, duration, knots)
+    c_level = np.linalg.lstsq(b, level, rcond=None)[0]
+    return (np.concatenate([c_level, np.full(knots, amplitude if initial is None else 0.0)]),
+            obj.envelope_basis(times, duration, knots, carrier))
+
+
+_SETUP_ARGS = ("noise", "channels", "start", "build", "rate", "criterion", "subset", "duty_band", "stroke_margin",
+               "max_pressure", "max_duty_step", "parametrisation", "knots", "steps", "initial", "seed", "period",
+               "design_rate", "substeps", "duty_margin", "min_force")
+
+
+def _setup(model, free, duration, *, noise, channels, start, build, rate, criterion, subset, duty_band, stroke_margin,
+           max_pressure, max_duty_step, parametrisation, knots, steps, initial, seed, period, design_rate, substeps,
+           duty_margin, min_force):
+    """Everything before the first solve, as a dict: the checked arguments, the valve's switching thresholds and the
+    duties they leave, the limits (each checked against the run's start state), the start coefficients and the
+    designed experiment."""
+    space, subset, period, channels, system, start = _validate(
+        model, free, duration, noise, channels, duty_band, criterion, subset, parametrisation, knots, steps,
+        float(rate), stroke_margin, max_pressure, max_duty_step, period, build, start, duty_margin, min_force)
+    model = strong_types(model)
+    space = ParameterSpace(model, free)
+    thresholds = switching_thresholds(getattr(system, "valve", None))
+    margin = (DUTY_MARGIN_FRACTION * min(min(t, 1.0 - t) for t in thresholds) if thresholds else 0.0) \
+        if duty_margin == "auto" else float(duty_margin)
+    *band, windows = duty_limits(tuple(float(b) for b in duty_band), thresholds, margin)
+    band = tuple(band)
+    force_law = _has_force_law(system)
+    min_force = None if (min_force is None or min_force is False or not force_law) else float(min_force)
+    y0 = _start_state(system, start)
+    limits = None
+    if "position" in channels and getattr(system, "muscle", None) is not None:
+        lo, hi = float(system.muscle.min_position), float(system.muscle.max_position)
+        if lo + stroke_margin >= hi - stroke_margin:
+            raise PamjaxInputError(
+                f"stroke_margin {stroke_margin!r} m leaves no stroke: the end stops are {1e3 * lo:g} and {1e3 * hi:g} "
+                f"mm ({1e3 * (hi - lo):.0f} mm apart) and the margin is kept from each; it is in metres (5 mm = "
+                f"0.005, the default {STROKE_MARGIN:g})")
+        limits = stroke_limits(system, start, stroke_margin)
+    p0 = float(np.asarray(getattr(y0, "pressure", np.nan)))
+    if max_pressure is not None and math.isfinite(p0) and max_pressure <= p0:
+        raise PamjaxInputError(
+            f"max_pressure {max_pressure!r} Pa abs is not above the run's start pressure ({p0:.0f} Pa abs): no run "
+            f"from there keeps it. It is an ABSOLUTE pressure in Pa: 5 bar abs = 5e5, 5 bar gauge = "
+            f"{5e5 + float(system.air.atmospheric_pressure):.6g}")
+    if min_force is not None:
+        f0 = float(np.asarray(_static_force(system, device_array(np.asarray(y0.position, dtype=float)),
+                                            device_array(np.asarray(y0.pressure, dtype=float)))))
+        if f0 < min_force:
+            raise PamjaxInputError(
+                f"min_force {min_force:g} N: eq. 7 gives {f0:.1f} N at the run's start, so no run from there keeps "
+                f"the muscle's force above it; give min_force below {f0:.1f} N (default {MIN_FORCE:g}), or None / "
+                "false for no limit")
+    count = int(math.ceil(duration / period - 1e-9))
+    times = np.arange(count) * period
+    c0, basis = _start_coefficients(parametrisation, times, float(duration), knots,
+                                    obj.multilevel_carrier(count, CARRIER_HOLD, seed), band, initial)
+    z0 = device_array(c0 if basis is None else basis @ c0)
+    exp = _template(model, float(duration), period, float(design_rate), channels, noise, start, substeps,
+                    _skip(band[0] + (band[1] - band[0]) * np.asarray(obj.clip01_and_slope(z0)[0]), windows), build)
+    return dict(model=model, space=space, subset=subset, period=period, channels=channels, system=system, start=start,
+                thresholds=thresholds, duty_margin=margin, duty_band=[float(b) for b in duty_band], band=band,
+                windows=windows, force_law=force_law, min_force=min_force, limits=limits, max_pressure=max_pressure,
+                max_duty_step=max_duty_step, count=count, times=times, c0=c0, basis=basis, experiment=exp)
