@@ -85,7 +85,7 @@ FIT_CASES = {
     "recording pressure unit kPa": (lambda: pamjax.Recording(T, dict(pressure=P), units=dict(pressure="kPa")),
                                     "ABSOLUTE pressure in Pa"),
     "recording no channels": (lambda: pamjax.Recording(T, {}), "channel"),
-    "recording file type": (lambda: pamjax.Recording.load("bench.xlsx"), ".csv or .npz"),
+    "recording file type": (lambda: pamjax.Recording.load("bench.xlsx"), ".csv, .npz or .mat"),
     "recording CSV ragged row": (_in_tmp(lambda d: _write_csv(d, "t [s],pressure [Pa]\n0,3e5\n0.1,3e5,7\n")),
                                  "data row 1"),
     "recording CSV without time": (_in_tmp(lambda d: _write_csv(d, "pressure [Pa]\n3e5\n3e5\n")), "'t'"),
