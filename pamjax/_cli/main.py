@@ -154,7 +154,8 @@ def _main(argv, program=False):
             from .._core.devices import for_command
 
             # single trajectories on the CPU, sweeps on an accelerator if any (pamjax/_core/devices.py); said first
-            placed, where = for_command("batched" if command in _BATCHED else "single", args.device)
+            placed, where = for_command("batched" if command in _BATCHED else "single", args.device,
+                                        check=not getattr(args, "distributed", False))  # joins before JAX starts
             print(f"pamjax {command}: {where}", flush=True)
             # fit says itself when it compiles (its programs are known); the others are announced from outside
             announce = contextlib.nullcontext() if command == "fit" else announce_compilation(f"pamjax {command}")

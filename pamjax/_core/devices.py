@@ -144,12 +144,13 @@ def unavailable_message(device, err):
     return f"--device {device}: JAX cannot start a {str(device).upper()} here ({first})"
 
 
-def for_command(work: str, device: str | None = "auto", environ=None):
+def for_command(work: str, device: str | None = "auto", environ=None, check=True):
     """Set up the `pamjax` command's devices before JAX starts, and return `(context, line)`: a context to run the
     command in (placing its computations) and the line that says where it runs. A `JAX_PLATFORMS` the user set in
     the environment wins over `"auto"` (it is said); `--device` wins over it. When JAX is already running (the
     command called as `main(argv)` from a program), its platforms stay and the choice is made among its devices
-    with `jax.default_device`. An asked-for platform that cannot start is a `PamjaxInputError`."""
+    with `jax.default_device`. An asked-for platform that cannot start is a `PamjaxInputError` (`check=False`: not
+    tried here, for a process that must join a multi-process run before JAX starts; JAX then says so itself)."""
     import contextlib
     import os
 
@@ -170,7 +171,7 @@ def for_command(work: str, device: str | None = "auto", environ=None):
     before = jax.config.jax_platforms
     if platforms is not None:
         jax.config.update("jax_platforms", platforms)
-    if requested in ("gpu", "tpu"):  # say it now, not as an internal error at the first computation
+    if check and requested in ("gpu", "tpu"):  # say it now, not as an internal error at the first computation
         try:
             jax.devices(requested)
         except RuntimeError as err:
