@@ -18,6 +18,9 @@ smooth friction sign), so at any accuracy target at or above its error there, nu
 that limit; the run at 1.35x that step shows what happens past it. pamjax RK4 and numba RK4 use the identical step.
 
 Usage: python benchmarks/sweep.py [--points 1024] [--horizon 5] [--scipy-subset 16] [--repeats 3] [--host-devices 2]
+                                 [--pwm-points N] [--quick]
+(`--quick`, for benchmarks/check.py: the SciPy loop timed on 4 points, the PWM sweep on 128; the headline averaged
+sweep as in a full run.)
 Ends with: RESULT sweep_avg_s=... sweep_pwm_s=... speedup_vs_scipy=... ratio_vs_numba=...
 """
 
@@ -134,10 +137,17 @@ def main():
     parser.add_argument("--horizon", type=float, default=5.0)
     parser.add_argument("--scipy-subset", type=int, default=16)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--pwm-points", type=int, default=None, help="points of the PWM-valve sweep (default --points)")
+    parser.add_argument("--quick", action="store_true", help="SciPy timed on 4 points, the PWM sweep on 128")
+    parser.add_argument("--default-only", action="store_true",
+                        help="time pamjax's default method alone (no peers, no reference): RESULT sweep_avg_s")
     parser.add_argument("--host-devices", type=int, default=1,
                         help="split the CPU into this many XLA devices; pamjax.sweep shards its batch over them "
                              "(2 on a 2-core machine uses both cores, as numba's prange does)")
     args = parser.parse_args()
+    if args.quick:
+        args.scipy_subset = min(args.scipy_subset, 4)
+        args.pwm_points = args.pwm_points or 128
     if args.host_devices > 1:  # must be set before JAX starts
         import os
 
@@ -158,6 +168,18 @@ def main():
     system = presets.mas10_system(valve="averaged")
     duties = np.linspace(0.0, 1.0, args.points)
     ts = np.linspace(0.0, args.horizon, int(round(args.horizon * 10)) + 1)  # outputs every 0.1 s, steps land on them
+    if args.default_only:  # benchmarks/check.py's two-device check: the headline figure alone
+        def call():
+            return pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties}, reduce=pamjax.Final(),
+                                channels=("pressure", "position"), progress=False)
+
+        start = time.perf_counter()
+        result = call()
+        first = time.perf_counter() - start
+        run = median_time(call, args.repeats)
+        print(f"pamjax default ({result.method}): first call {first:.2f} s, run {run:.3f} s (median of {args.repeats})")
+        print(f"RESULT sweep_avg_s={run:.3f} devices={len(jax.devices())}")
+        return
     y0 = system.initial_state()
     p0, x0 = float(y0.pressure), float(y0.position)
     check = np.unique(np.linspace(0, args.points - 1, 8).astype(int))  # points whose error is measured
@@ -185,7 +207,7 @@ def main():
     rows = {}
 
     # --- pamjax
-    def pamjax_run(system, method, dt=None):
+    def pamjax_run(system, method, dt=None, duties=duties):
         def call():
             return pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties}, reduce=pamjax.Final(),
                                 channels=("pressure", "position"), method=method, dt=dt, progress=False)
@@ -250,13 +272,15 @@ def main():
 
     # --- PWM valve
     pwm = presets.mas10_system(valve="pwm")
-    check_pwm = check[1:-1:2]  # interior duties: edges off the step grid
-    res_pwm, compile_pwm, t_pwm = pamjax_run(pwm, "rk4")
-    ref_pwm = [pamjax.simulate(pwm, pamjax.Constant(float(duties[i])), ts[[0, -1]], rtol=1e-11, atol=1e-11,
+    pwm_points = args.pwm_points or args.points
+    duties_pwm = np.linspace(0.0, 1.0, pwm_points)
+    check_pwm = np.unique(np.linspace(0, pwm_points - 1, 8).astype(int))[1:-1:2]  # interior duties, edges off the grid
+    res_pwm, compile_pwm, t_pwm = pamjax_run(pwm, "rk4", duties=duties_pwm)
+    ref_pwm = [pamjax.simulate(pwm, pamjax.Constant(float(duties_pwm[i])), ts[[0, -1]], rtol=1e-11, atol=1e-11,
                                max_steps=10**6) for i in check_pwm]
     err_pwm_p = max(abs(float(r.pressure[-1]) - res_pwm["pressure"][i]) for r, i in zip(ref_pwm, check_pwm))
     err_pwm_x = max(abs(float(r.position[-1]) - res_pwm["position"][i]) for r, i in zip(ref_pwm, check_pwm))
-    rows["pamjax rk4, PWM valve"] = (t_pwm, compile_pwm, res_pwm.dt, err_pwm_p, err_pwm_x)
+    rows[f"pamjax rk4, PWM valve ({pwm_points} points)"] = (t_pwm, compile_pwm, res_pwm.dt, err_pwm_p, err_pwm_x)
 
     print(f"\n{args.points} constant duties x {args.horizon} s, MAS-10 + 9.6 kg (paper 000), final state per point; "
           f"medians of {args.repeats}; errors: max over {len(check)} duties vs DOP853 rtol 1e-12 "
@@ -280,7 +304,7 @@ def main():
           f"sweep_avg_ros2_s={t_ros2:.3f} ratio_vs_numba_same_scheme={t_numba / t_rk4:.2f} "
           f"speedup_vs_scipy_rk4={t_scipy / t_rk4:.0f} speedup_vs_scipy_numba_rhs={t_scipy_numba / t_auto:.0f} "
           f"devices={len(jax.devices())} sweep_avg_ros2a_s={t_ros2a:.3f} "
-          f"speedup_vs_scipy_ros2a={t_scipy / t_ros2a:.0f}")
+          f"speedup_vs_scipy_ros2a={t_scipy / t_ros2a:.0f} pwm_points={pwm_points}")
 
 
 if __name__ == "__main__":
