@@ -16,7 +16,9 @@ Noise bands: `--record --runs N` runs every check N times and stores, per figure
 the largest deviation of a run from the median (at least `MIN_BAND`, at most `MAX_BAND` for times and ratios; an
 absolute band for counts and percentages), so a band is what identical code moved by on that machine. RESULTS.md
 (`## check`) mirrors the reference with its conditions. The shared development machine is noisy (±40 % between
-runs minutes apart under load): a flagged figure is a reason to measure A/B, not a verdict.
+runs minutes apart under load, several times slower at a load average of 15): the `*_cpu_*` figures (the process's
+CPU time of single-threaded runs) are what other work on the machine inflates least, and a load far above the
+reference's is said. A flagged figure is a reason to measure A/B, not a verdict.
 """
 
 import argparse
@@ -50,12 +52,14 @@ def _figure(better, kind="relative", floor=None):
 CHECKS = {
     "simulate": (["benchmarks/simulate.py", "--quick"], {
         "averaged_ms": _figure(LOWER), "pwm_ms": _figure(LOWER), "pwm_sync_ms": _figure(LOWER),
+        "averaged_cpu_ms": _figure(LOWER), "pwm_cpu_ms": _figure(LOWER), "pwm_sync_cpu_ms": _figure(LOWER),
         "speedup_averaged_vs_scipy": _figure(HIGHER), "speedup_pwm_vs_scipy": _figure(HIGHER)}, 300),
     "sweep": (["benchmarks/sweep.py", "--quick"], {
         "sweep_avg_s": _figure(LOWER), "speedup_vs_scipy": _figure(HIGHER), "ratio_vs_numba": _figure(HIGHER),
-        "sweep_avg_rk4_s": _figure(LOWER), "sweep_avg_ros2_s": _figure(LOWER), "sweep_pwm_s": _figure(LOWER)}, 400),
+        "sweep_avg_rk4_s": _figure(LOWER), "sweep_avg_ros2_s": _figure(LOWER), "sweep_pwm_s": _figure(LOWER),
+        "sweep_avg_cpu_s": _figure(LOWER), "sweep_pwm_cpu_s": _figure(LOWER)}, 400),
     "sweep_2dev": (["benchmarks/sweep.py", "--default-only", "--repeats", "5", "--host-devices", "2"], {
-        "sweep_avg_s": _figure(LOWER)}, 300),
+        "sweep_avg_s": _figure(LOWER), "sweep_avg_cpu_s": _figure(LOWER)}, 300),
     "sweep_throughput": (["benchmarks/sweep_throughput.py", "--points", "8192", "--methods", "rodas5a,ros2",
                           "--repeats", "2", "--check", "1"], {
         "avg_rodas5a_pts_per_s": _figure(HIGHER), "avg_ros2_pts_per_s": _figure(HIGHER)}, 400),

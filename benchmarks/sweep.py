@@ -32,12 +32,20 @@ import numpy as np
 
 
 def median_time(fn, repeats):
-    times = []
+    return median_times(fn, repeats)[0]
+
+
+def median_times(fn, repeats):
+    """Medians of the wall time and of the process's CPU time of `fn()` over `repeats` calls. On one XLA device a
+    sweep runs on one thread, so its CPU time is what the call takes on a free core, whatever else the machine
+    runs (benchmarks/check.py compares it)."""
+    walls, cpus = [], []
     for _ in range(repeats):
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         fn()
-        times.append(time.perf_counter() - start)
-    return float(np.median(times))
+        walls.append(time.perf_counter() - start)
+        cpus.append(time.process_time() - cpu)
+    return float(np.median(walls)), float(np.median(cpus))
 
 
 def numba_plant(system):
@@ -176,9 +184,10 @@ def main():
         start = time.perf_counter()
         result = call()
         first = time.perf_counter() - start
-        run = median_time(call, args.repeats)
-        print(f"pamjax default ({result.method}): first call {first:.2f} s, run {run:.3f} s (median of {args.repeats})")
-        print(f"RESULT sweep_avg_s={run:.3f} devices={len(jax.devices())}")
+        run, cpu = median_times(call, args.repeats)
+        print(f"pamjax default ({result.method}): first call {first:.2f} s, run {run:.3f} s, CPU {cpu:.3f} s "
+              f"(medians of {args.repeats})")
+        print(f"RESULT sweep_avg_s={run:.3f} sweep_avg_cpu_s={cpu:.3f} devices={len(jax.devices())}")
         return
     y0 = system.initial_state()
     p0, x0 = float(y0.pressure), float(y0.position)
@@ -207,6 +216,8 @@ def main():
     rows = {}
 
     # --- pamjax
+    cpu_times = {}
+
     def pamjax_run(system, method, dt=None, duties=duties):
         def call():
             return pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties}, reduce=pamjax.Final(),
@@ -215,7 +226,7 @@ def main():
         start = time.perf_counter()
         result = call()
         first = time.perf_counter() - start
-        run = median_time(call, args.repeats)
+        run, cpu_times[method if system.valve.switches is False else "pwm"] = median_times(call, args.repeats)
         return result, first - run, run
 
     res_rk4, compile_rk4, t_rk4 = pamjax_run(system, "rk4")
@@ -304,7 +315,8 @@ def main():
           f"sweep_avg_ros2_s={t_ros2:.3f} ratio_vs_numba_same_scheme={t_numba / t_rk4:.2f} "
           f"speedup_vs_scipy_rk4={t_scipy / t_rk4:.0f} speedup_vs_scipy_numba_rhs={t_scipy_numba / t_auto:.0f} "
           f"devices={len(jax.devices())} sweep_avg_ros2a_s={t_ros2a:.3f} "
-          f"speedup_vs_scipy_ros2a={t_scipy / t_ros2a:.0f} pwm_points={pwm_points}")
+          f"speedup_vs_scipy_ros2a={t_scipy / t_ros2a:.0f} pwm_points={pwm_points} "
+          f"sweep_avg_cpu_s={cpu_times['auto']:.3f} sweep_pwm_cpu_s={cpu_times['pwm']:.3f}")
 
 
 if __name__ == "__main__":
