@@ -13,8 +13,9 @@ noise band is printed, as better or worse; any worse one makes the exit status 1
     RESULT regressions=N checked=M
 
 Noise bands: `--record --runs N` runs every check N times and stores, per figure, the median and a band of twice
-the largest deviation of a run from the median (at least `MIN_BAND`, at most `MAX_BAND` for times and ratios; an
-absolute band for counts and percentages), so a band is what identical code moved by on that machine. RESULTS.md
+the largest deviation of a run from the median (at least `MIN_BAND`, `CPU_BAND` for CPU times, at most `MAX_BAND`
+for times and ratios; an absolute band for counts and percentages), so a band is what identical code moved by on
+that machine. RESULTS.md
 (`## check`) mirrors the reference with its conditions. The shared development machine is noisy (±40 % between
 runs minutes apart under load, several times slower at a load average of 15): the `*_cpu_*` figures (the process's
 CPU time of single-threaded runs) are what other work on the machine inflates least, and a load far above the
@@ -38,28 +39,36 @@ import time
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 REFERENCE = ROOT / "benchmarks" / "reference.json"
 BENCH = ROOT / ".." / "shared" / "data" / "hybrid-reference-bench"
-MIN_BAND, MAX_BAND = 0.15, 0.60  # relative bands of times and ratios (see the docstring)
+MIN_BAND, MAX_BAND = 0.25, 0.60  # relative bands of times and ratios (see the docstring)
+CPU_BAND = 0.15  # the smallest band of a CPU-time figure, which other work on the machine moves less
 LOWER, HIGHER = "lower", "higher"
 
 
-def _figure(better, kind="relative", floor=None):
+def _figure(better, kind="relative", floor=None, loaded=None):
     """How a figure is compared: which way is better; its band relative (times, ratios) or absolute (counts,
-    percentages: `floor` is the smallest band)."""
-    return dict(better=better, kind=kind, floor=floor)
+    percentages); `floor`: the smallest band (default `MIN_BAND` for relative ones); `loaded`: whether it is judged
+    on a loaded machine (default: not for wall times and ratios of wall times, which other work inflates unevenly)."""
+    return dict(better=better, kind=kind, floor=MIN_BAND if floor is None and kind == "relative" else floor,
+                loaded=kind == "absolute" if loaded is None else loaded)
+
+
+def _cpu(better=LOWER):
+    """A CPU-time figure: relative, with the smaller floor `CPU_BAND`, judged whatever the load."""
+    return _figure(better, floor=CPU_BAND, loaded=True)
 
 
 # name -> (script and quick arguments (OUT: a temporary folder), {RESULT key: comparison}, timeout [s])
 CHECKS = {
     "simulate": (["benchmarks/simulate.py", "--quick"], {
         "averaged_ms": _figure(LOWER), "pwm_ms": _figure(LOWER), "pwm_sync_ms": _figure(LOWER),
-        "averaged_cpu_ms": _figure(LOWER), "pwm_cpu_ms": _figure(LOWER), "pwm_sync_cpu_ms": _figure(LOWER),
+        "averaged_cpu_ms": _cpu(), "pwm_cpu_ms": _cpu(), "pwm_sync_cpu_ms": _cpu(),
         "speedup_averaged_vs_scipy": _figure(HIGHER), "speedup_pwm_vs_scipy": _figure(HIGHER)}, 300),
     "sweep": (["benchmarks/sweep.py", "--quick"], {
         "sweep_avg_s": _figure(LOWER), "speedup_vs_scipy": _figure(HIGHER), "ratio_vs_numba": _figure(HIGHER),
         "sweep_avg_rk4_s": _figure(LOWER), "sweep_avg_ros2_s": _figure(LOWER), "sweep_pwm_s": _figure(LOWER),
-        "sweep_avg_cpu_s": _figure(LOWER), "sweep_pwm_cpu_s": _figure(LOWER)}, 400),
+        "sweep_avg_cpu_s": _cpu(), "sweep_pwm_cpu_s": _cpu()}, 400),
     "sweep_2dev": (["benchmarks/sweep.py", "--default-only", "--repeats", "5", "--host-devices", "2"], {
-        "sweep_avg_s": _figure(LOWER), "sweep_avg_cpu_s": _figure(LOWER)}, 300),
+        "sweep_avg_s": _figure(LOWER), "sweep_avg_cpu_s": _cpu()}, 300),
     "sweep_throughput": (["benchmarks/sweep_throughput.py", "--points", "8192", "--methods", "rodas5a,ros2",
                           "--repeats", "2", "--check", "1"], {
         "avg_rodas5a_pts_per_s": _figure(HIGHER), "avg_ros2_pts_per_s": _figure(HIGHER)}, 400),
@@ -126,7 +135,7 @@ def _children_cpu():
 def run_check(name, pythonpath, out):
     args, wanted, timeout = CHECKS[name]
     args = [a.replace("OUT", str(out)) for a in args]
-    env = dict(os.environ, PYTHONPATH=str(pythonpath), PAMJAX_COMPILATION_CACHE="0")
+    env = dict(os.environ, PYTHONPATH=str(pythonpath))  # caches as each benchmark sets them (compile.py's warm run)
     env.pop("PYTHONDONTWRITEBYTECODE", None)
     start, cpu = time.perf_counter(), _children_cpu()
     try:
@@ -148,7 +157,7 @@ def band_of(spec, runs):
     if spec["kind"] == "absolute":
         return max(spec["floor"], 2.0 * max(abs(r - middle) for r in runs))
     spread = max(abs(r / middle - 1.0) for r in runs) if middle else 0.0
-    return min(MAX_BAND, max(MIN_BAND, 2.0 * spread))
+    return min(MAX_BAND, max(spec["floor"], 2.0 * spread))
 
 
 def compare(spec, value, ref):
@@ -180,6 +189,9 @@ def main():
     ap.add_argument("--reference", default=str(REFERENCE))
     ap.add_argument("--record", action="store_true", help="store this machine class's figures as the reference")
     ap.add_argument("--runs", type=int, default=1, help="runs of every check (with --record: the noise bands)")
+    ap.add_argument("--max-load", type=float, default=1.5 * (os.cpu_count() or 1),
+                    help="above this load average (at the start or the end), wall times and their ratios are shown "
+                         "but not judged; CPU times, counts and errors are (default 1.5 x cores)")
     args = ap.parse_args()
     names = list(CHECKS) if args.only is None else [n.strip() for n in args.only.split(",") if n.strip()]
     unknown = [n for n in names if n not in CHECKS]
@@ -190,7 +202,8 @@ def main():
         else {"machines": {}}
     mine = reference["machines"].get(cls)
     code = git_commit(args.pythonpath)
-    print(f"machine class: {cls}; code: {args.pythonpath} at {code}; load average {os.getloadavg()[0]:.1f}")
+    load_start = os.getloadavg()[0]
+    print(f"machine class: {cls}; code: {args.pythonpath} at {code}; load average {load_start:.1f}")
     if mine is None and not args.record:
         print(f"no reference figures for this machine class in {args.reference} (classes: "
               f"{', '.join(reference['machines']) or 'none'}): nothing to compare; --record stores some")
@@ -211,23 +224,27 @@ def main():
                     runs.setdefault(f"{name}.{key}", []).append(value)
 
     regressions = checked = 0
-    load = os.getloadavg()[0]
-    if mine is not None and load > mine.get("load_average", 0.0) + (os.cpu_count() or 1):
-        print(f"note: load average {load:.1f} now against {mine.get('load_average')} when the reference was "
-              f"measured: wall times are inflated by other work on the machine; re-run when it is quieter")
+    load = max(load_start, os.getloadavg()[0])
+    loaded = load > args.max_load
+    if mine is not None and loaded:
+        print(f"note: load average {load:.1f} (> {args.max_load:g}): other work inflates wall times unevenly, so "
+              f"wall times and their ratios are shown, not judged; re-run on a quieter machine to judge them")
     if mine is not None:
         for full, values in runs.items():
             name, key = full.split(".", 1)
             ref = mine["figures"].get(full)
             if ref is None:
                 continue
-            checked += 1
+            spec = CHECKS[name][1][key]
             value = statistics.median(values)
-            moved, worse, words = compare(CHECKS[name][1][key], value, ref)
+            moved, worse, words = compare(spec, value, ref)
+            judged = spec["loaded"] or not loaded
+            checked += judged
             if moved:
-                regressions += worse
-                print(f"{'WORSE' if worse else 'better'}: {full} = {value:g} against {ref['value']:g} "
-                      f"({mine['commit']}, {mine['date']}): {words}")
+                regressions += worse and judged
+                verdict = ("WORSE" if worse else "better") if judged else "(not judged, loaded) moved"
+                print(f"{verdict}: {full} = {value:g} against {ref['value']:g} ({ref.get('commit', mine['commit'])}, "
+                      f"{ref.get('date', mine['date'])}, load {ref.get('load_average', '?')}): {words}")
     regressions += len(failures)  # a benchmark that no longer runs is a regression too
     if args.record:
         if failures:
@@ -236,10 +253,10 @@ def main():
         for full, values in runs.items():
             name, key = full.split(".", 1)
             spec = CHECKS[name][1][key]
-            band = band_of(spec, values) if len(values) > 1 else (spec["floor"] if spec["kind"] == "absolute"
-                                                                   else MIN_BAND)
+            band = band_of(spec, values) if len(values) > 1 else spec["floor"]
             figures[full] = dict(value=statistics.median(values), band=band, better=spec["better"],
-                                 kind=spec["kind"], runs=values)
+                                 kind=spec["kind"], runs=values, commit=code, date=datetime.date.today().isoformat(),
+                                 load_average=round(max(load_start, os.getloadavg()[0]), 1))
         old = (mine or {}).get("figures", {})
         reference["machines"][cls] = dict(commit=code, date=datetime.date.today().isoformat(), runs=args.runs,
                                           load_average=round(os.getloadavg()[0], 1),
