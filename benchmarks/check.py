@@ -88,7 +88,7 @@ CHECKS = {
         "fit_s": _figure(LOWER)}, 900),
     "design": (["benchmarks/design.py", "--seeds", "2", "--steps", "2", "--pilot", "none", "--tanks", "shared", "--out",
                 "OUT/design"], {
-        "design_s": _figure(LOWER), "se_ratio_geomean": _figure(LOWER, "absolute", 0.1)}, 900),
+        "design_s": _figure(LOWER), "se_ratio_geomean": _figure(HIGHER, "absolute", 1.0)}, 900),
     "reliability": (["benchmarks/reliability.py", "--quick"], {
         "grad_pass": _figure(HIGHER, "absolute", 0.0), "nan_count": _figure(LOWER, "absolute", 0.0),
         "silent_wrong": _figure(LOWER, "absolute", 0.0), "recovery_rate": _figure(HIGHER, "absolute", 0.2)}, 900),
