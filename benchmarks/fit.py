@@ -10,7 +10,7 @@ discharge at duty 0.5 (2 s); `--rate` Hz samples (default 50), noise 2 kPa / 0.1
 speedup = SciPy's time to reach pamjax's final cost (or, if it stops short, its time to stop: then `scipy_reached=0`)
 ÷ pamjax's fit time after compilation. Ends with one `RESULT` line.
 
-    python benchmarks/fit.py [--rate 50] [--scipy-budget-s 600]
+    python benchmarks/fit.py [--rate 50] [--scipy-budget-s 600] [--skip-scipy]
 """
 
 import argparse
@@ -125,6 +125,7 @@ def main():
     ap.add_argument("--rate", type=float, default=50.0)
     ap.add_argument("--scipy-budget-s", type=float, default=600.0, help="wall-time cap for SciPy")
     ap.add_argument("--off", type=float, default=0.10, help="relative start offset")
+    ap.add_argument("--skip-scipy", action="store_true", help="pamjax's fit only (benchmarks/check.py's quick run)")
     args = ap.parse_args()
 
     truth = presets.mas10_system(valve="averaged")
@@ -150,6 +151,12 @@ def main():
           f"({res.labels[int(z.argmax())]})")
     for i in np.flatnonzero(~nonzero):
         print(f"  {res.labels[i]}: true 0, fitted {res.values[i]:.3g} ± {res.standard_errors[i]:.3g}")
+
+    if args.skip_scipy:
+        print(f"RESULT fit_s={res.fit_s:.3f} compile_s={res.compile_s:.3f} cost={res.cost:.6g} "
+              f"max_rel_error={rel.max():.3g} max_z={z.max():.2f} total_s={res.fit_s + res.compile_s:.3f} "
+              f"iterations={res.iterations} n_params={true_values.size} n_experiments={len(exps)}")
+        return
 
     from scipy.optimize import least_squares
 

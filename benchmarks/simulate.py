@@ -16,7 +16,9 @@ with RK45 and LSODA, in the same run. The transcription is checked against pamja
 pamjax's XLA CPU loop setting (each solve loop compiled to one function; docs/performance.md) is reported in the
 output and as `xla_cpu_loop_setting=` in the RESULT line.
 
-Ends with `RESULT averaged_ms=... pwm_ms=... speedup_averaged_vs_scipy=... speedup_pwm_vs_scipy=... ...`.
+Ends with `RESULT averaged_ms=... pwm_ms=... speedup_averaged_vs_scipy=... speedup_pwm_vs_scipy=... ...`; the
+`*_cpu_ms` figures are the process's CPU time of the same calls (one thread: what they take on a free core, whatever
+else the machine runs; benchmarks/check.py compares them).
 """
 
 import argparse
@@ -177,17 +179,18 @@ def time_pamjax(system, signal, ts, repeats, **kwargs):
     start = time.perf_counter()
     traj = jax.block_until_ready(_solve_jit(*args, **kwargs))
     compile_s = time.perf_counter() - start
-    core, whole = [], []
+    core, core_cpu, whole = [], [], []
     sim_kwargs = {k: v for k, v in kwargs.items() if k != "num_periods"}
     jax.block_until_ready(pamjax.simulate(system, signal, ts, **sim_kwargs))  # warm the simulate() path too
     for _ in range(repeats):
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         traj = jax.block_until_ready(_solve_jit(*args, **kwargs))
         core.append(time.perf_counter() - start)
+        core_cpu.append(time.process_time() - cpu)
         start = time.perf_counter()
         jax.block_until_ready(pamjax.simulate(system, signal, ts, **sim_kwargs))
         whole.append(time.perf_counter() - start)
-    return compile_s, np.median(core), np.median(whole), traj
+    return compile_s, np.median(core), np.median(whole), traj, np.median(core_cpu)
 
 
 def main():
@@ -216,8 +219,8 @@ def main():
         ("pwm", pwm, {}),  # default solver: Tsit5
         ("pwm_sync", pwm, dict(stepping="pwm")),
     ):
-        c, core, whole, traj = time_pamjax(system, signal, ts, repeats, **kwargs)
-        res[name] = dict(compile=c, core=core, whole=whole, traj=traj)
+        c, core, whole, traj, core_cpu = time_pamjax(system, signal, ts, repeats, **kwargs)
+        res[name] = dict(compile=c, core=core, whole=whole, traj=traj, cpu=core_cpu)
         print(f"  pamjax {name:9s} compile {c:6.2f} s  run {core * 1e3:8.2f} ms (simulate() {whole * 1e3:8.2f} ms)  "
               f"steps {int(traj.num_steps):6d} (rejected {int(traj.num_rejected_steps)})", flush=True)
 
@@ -254,7 +257,8 @@ def main():
         f"averaged_simulate_ms={res['averaged']['whole'] * 1e3:.2f} "
         f"averaged_tsit5_ms={res['avg_tsit5']['core'] * 1e3:.2f} "
         f"speedup_averaged_tsit5_vs_scipy={best('averaged') / res['avg_tsit5']['core']:.1f} horizon_s={horizon:g} "
-        f"xla_cpu_loop_setting={int(xla['active'])}"
+        f"xla_cpu_loop_setting={int(xla['active'])} averaged_cpu_ms={res['averaged']['cpu'] * 1e3:.2f} "
+        f"pwm_cpu_ms={res['pwm']['cpu'] * 1e3:.1f} pwm_sync_cpu_ms={res['pwm_sync']['cpu'] * 1e3:.1f}"
     )
 
 

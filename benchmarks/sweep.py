@@ -18,6 +18,9 @@ smooth friction sign), so at any accuracy target at or above its error there, nu
 that limit; the run at 1.35x that step shows what happens past it. pamjax RK4 and numba RK4 use the identical step.
 
 Usage: python benchmarks/sweep.py [--points 1024] [--horizon 5] [--scipy-subset 16] [--repeats 3] [--host-devices 2]
+                                 [--pwm-points N] [--quick]
+(`--quick`, for benchmarks/check.py: the SciPy loop timed on 4 points, the PWM sweep on 128; the headline averaged
+sweep as in a full run.)
 Ends with: RESULT sweep_avg_s=... sweep_pwm_s=... speedup_vs_scipy=... ratio_vs_numba=...
 """
 
@@ -29,12 +32,20 @@ import numpy as np
 
 
 def median_time(fn, repeats):
-    times = []
+    return median_times(fn, repeats)[0]
+
+
+def median_times(fn, repeats):
+    """Medians of the wall time and of the process's CPU time of `fn()` over `repeats` calls. On one XLA device a
+    sweep runs on one thread, so its CPU time is what the call takes on a free core, whatever else the machine
+    runs (benchmarks/check.py compares it)."""
+    walls, cpus = [], []
     for _ in range(repeats):
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         fn()
-        times.append(time.perf_counter() - start)
-    return float(np.median(times))
+        walls.append(time.perf_counter() - start)
+        cpus.append(time.process_time() - cpu)
+    return float(np.median(walls)), float(np.median(cpus))
 
 
 def numba_plant(system):
@@ -134,10 +145,17 @@ def main():
     parser.add_argument("--horizon", type=float, default=5.0)
     parser.add_argument("--scipy-subset", type=int, default=16)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--pwm-points", type=int, default=None, help="points of the PWM-valve sweep (default --points)")
+    parser.add_argument("--quick", action="store_true", help="SciPy timed on 4 points, the PWM sweep on 128")
+    parser.add_argument("--default-only", action="store_true",
+                        help="time pamjax's default method alone (no peers, no reference): RESULT sweep_avg_s")
     parser.add_argument("--host-devices", type=int, default=1,
                         help="split the CPU into this many XLA devices; pamjax.sweep shards its batch over them "
                              "(2 on a 2-core machine uses both cores, as numba's prange does)")
     args = parser.parse_args()
+    if args.quick:
+        args.scipy_subset = min(args.scipy_subset, 4)
+        args.pwm_points = args.pwm_points or 128
     if args.host_devices > 1:  # must be set before JAX starts
         import os
 
@@ -158,6 +176,19 @@ def main():
     system = presets.mas10_system(valve="averaged")
     duties = np.linspace(0.0, 1.0, args.points)
     ts = np.linspace(0.0, args.horizon, int(round(args.horizon * 10)) + 1)  # outputs every 0.1 s, steps land on them
+    if args.default_only:  # benchmarks/check.py's two-device check: the headline figure alone
+        def call():
+            return pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties}, reduce=pamjax.Final(),
+                                channels=("pressure", "position"), progress=False)
+
+        start = time.perf_counter()
+        result = call()
+        first = time.perf_counter() - start
+        run, cpu = median_times(call, args.repeats)
+        print(f"pamjax default ({result.method}): first call {first:.2f} s, run {run:.3f} s, CPU {cpu:.3f} s "
+              f"(medians of {args.repeats})")
+        print(f"RESULT sweep_avg_s={run:.3f} sweep_avg_cpu_s={cpu:.3f} devices={len(jax.devices())}")
+        return
     y0 = system.initial_state()
     p0, x0 = float(y0.pressure), float(y0.position)
     check = np.unique(np.linspace(0, args.points - 1, 8).astype(int))  # points whose error is measured
@@ -185,7 +216,9 @@ def main():
     rows = {}
 
     # --- pamjax
-    def pamjax_run(system, method, dt=None):
+    cpu_times = {}
+
+    def pamjax_run(system, method, dt=None, duties=duties):
         def call():
             return pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties}, reduce=pamjax.Final(),
                                 channels=("pressure", "position"), method=method, dt=dt, progress=False)
@@ -193,7 +226,7 @@ def main():
         start = time.perf_counter()
         result = call()
         first = time.perf_counter() - start
-        run = median_time(call, args.repeats)
+        run, cpu_times[method if system.valve.switches is False else "pwm"] = median_times(call, args.repeats)
         return result, first - run, run
 
     res_rk4, compile_rk4, t_rk4 = pamjax_run(system, "rk4")
@@ -250,13 +283,15 @@ def main():
 
     # --- PWM valve
     pwm = presets.mas10_system(valve="pwm")
-    check_pwm = check[1:-1:2]  # interior duties: edges off the step grid
-    res_pwm, compile_pwm, t_pwm = pamjax_run(pwm, "rk4")
-    ref_pwm = [pamjax.simulate(pwm, pamjax.Constant(float(duties[i])), ts[[0, -1]], rtol=1e-11, atol=1e-11,
+    pwm_points = args.pwm_points or args.points
+    duties_pwm = np.linspace(0.0, 1.0, pwm_points)
+    check_pwm = np.unique(np.linspace(0, pwm_points - 1, 8).astype(int))[1:-1:2]  # interior duties, edges off the grid
+    res_pwm, compile_pwm, t_pwm = pamjax_run(pwm, "rk4", duties=duties_pwm)
+    ref_pwm = [pamjax.simulate(pwm, pamjax.Constant(float(duties_pwm[i])), ts[[0, -1]], rtol=1e-11, atol=1e-11,
                                max_steps=10**6) for i in check_pwm]
     err_pwm_p = max(abs(float(r.pressure[-1]) - res_pwm["pressure"][i]) for r, i in zip(ref_pwm, check_pwm))
     err_pwm_x = max(abs(float(r.position[-1]) - res_pwm["position"][i]) for r, i in zip(ref_pwm, check_pwm))
-    rows["pamjax rk4, PWM valve"] = (t_pwm, compile_pwm, res_pwm.dt, err_pwm_p, err_pwm_x)
+    rows[f"pamjax rk4, PWM valve ({pwm_points} points)"] = (t_pwm, compile_pwm, res_pwm.dt, err_pwm_p, err_pwm_x)
 
     print(f"\n{args.points} constant duties x {args.horizon} s, MAS-10 + 9.6 kg (paper 000), final state per point; "
           f"medians of {args.repeats}; errors: max over {len(check)} duties vs DOP853 rtol 1e-12 "
@@ -280,7 +315,8 @@ def main():
           f"sweep_avg_ros2_s={t_ros2:.3f} ratio_vs_numba_same_scheme={t_numba / t_rk4:.2f} "
           f"speedup_vs_scipy_rk4={t_scipy / t_rk4:.0f} speedup_vs_scipy_numba_rhs={t_scipy_numba / t_auto:.0f} "
           f"devices={len(jax.devices())} sweep_avg_ros2a_s={t_ros2a:.3f} "
-          f"speedup_vs_scipy_ros2a={t_scipy / t_ros2a:.0f}")
+          f"speedup_vs_scipy_ros2a={t_scipy / t_ros2a:.0f} pwm_points={pwm_points} "
+          f"sweep_avg_cpu_s={cpu_times['auto']:.3f} sweep_pwm_cpu_s={cpu_times['pwm']:.3f}")
 
 
 if __name__ == "__main__":

@@ -236,6 +236,7 @@ from ._control.tuning import tune_controller as tune_controller
 # isort: split
 # --- runtime: processes, compilation cache, XLA CPU setting --------------------------------------------------------
 from ._core.cache import CompileStats as CompileStats, enable_compilation_cache as enable_compilation_cache
+from ._core.devices import DeviceChoice as DeviceChoice, select_devices as select_devices
 from ._core.distributed import ProcessInfo as ProcessInfo, initialize_distributed as initialize_distributed
 from ._core.xla_cpu import prefer_fast_compilation as prefer_fast_compilation, xla_cpu_status as xla_cpu_status
 

@@ -11,7 +11,7 @@ from scipy.integrate import solve_ivp
 
 import pamjax
 from pamjax import presets
-from pamjax._solve.rodas import small_inverse, small_inverse_lanes
+from pamjax._solve.rodas import rodas5_step, rodas5_step_unrolled, small_inverse, small_inverse_lanes
 from pamjax._solve.simulate import solve
 
 
@@ -62,6 +62,37 @@ def test_l_stable_far_beyond_the_explicit_stability_limit():
                           np.array([0.0]), stepsize_controller=dfx.PIDController(rtol=1e-8, atol=1e-8))
     assert int(sol.stats["num_steps"]) < 200
     assert abs(float(np.asarray(sol.ys)[-1, 0]) - (np.cos(1.0) + np.sin(1.0) / lam)) < 1e-9
+
+
+def _fixed_step_rodas5(step, n, lanes):
+    """End point of the forced van der Pol problem over [0, 2] in n fixed RODAS5 steps of `step`, for `lanes`
+    starting values of y[0] (one vmapped program: the form `sweep` runs)."""
+
+    def one(y0):
+        def body(i, y):
+            return step(lambda t, z: _forced_van_der_pol(t, z, None), i * (2.0 / n), y, 2.0 / n)[0]
+
+        return jax.lax.fori_loop(0, n, body, y0)
+
+    return jax.vmap(one)(lanes)
+
+
+_unrolled_ends = jax.jit(lambda lanes, n: _fixed_step_rodas5(rodas5_step_unrolled, n, lanes), static_argnums=1)
+_loop_ends = jax.jit(lambda lanes, n: _fixed_step_rodas5(
+    lambda f, t, y, h: rodas5_step(f, t, y, h, inverse=small_inverse_lanes), n, lanes), static_argnums=1)
+
+
+def test_unrolled_stages_are_the_same_step_as_the_stage_loop(van_der_pol_reference):
+    # sweep's form of the step (stages unrolled, 1/h multiplied, the Jacobian one direction at a time) against the
+    # stage loop that Rodas5 runs: the same numbers to rounding, over lanes, and fifth order (>= 24x per halving).
+    lanes = jnp.stack([jnp.array([1.0, 0.0]), jnp.array([1.0 + 1e-3, 0.0])])
+    errors = []
+    for n in (10, 20, 40):
+        unrolled, loop = np.asarray(_unrolled_ends(lanes, n)), np.asarray(_loop_ends(lanes, n))
+        np.testing.assert_allclose(unrolled, loop, rtol=1e-12, atol=1e-13)
+        errors.append(np.max(np.abs(unrolled[0] - van_der_pol_reference.y[:, -1])))
+    ratios = np.asarray(errors[:-1]) / np.asarray(errors[1:])
+    assert np.all(ratios > 24.0), (errors, ratios)
 
 
 # `small_inverse` jitted (as the solver runs it): eagerly, its gather-based elimination compiles dozens of one-operation

@@ -32,6 +32,7 @@ _COMMANDS = {
                   "Reproduce every item of papers 000 and 001 (pamjax.gallery); index page."),
 }
 DEBUG_VARIABLE = "PAMJAX_DEBUG"
+_BATCHED = {"sweep"}  # commands whose work is batched lanes (an accelerator's); the others run single trajectories
 
 
 @contextlib.contextmanager
@@ -65,6 +66,10 @@ def _parser():
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--debug", action="store_true",
                         help=f"show Python tracebacks (also: environment variable {DEBUG_VARIABLE}=1)")
+    common.add_argument("--device", default="auto", choices=("auto", "cpu", "gpu", "tpu"),
+                        help="where the work runs: auto (default: single-trajectory commands on the CPU, where "
+                             "they run fastest; sweeps on a GPU/TPU if there is one, else every CPU core), or cpu, "
+                             "gpu, tpu to choose (docs/performance.md)")
     common.add_argument("--no-cache", action="store_true",
                         help="do not use JAX's persistent compilation cache (default: on, in the user's cache "
                              "directory; PAMJAX_CACHE_DIR moves it, PAMJAX_COMPILATION_CACHE=0 turns it off)")
@@ -146,9 +151,15 @@ def _main(argv, program=False):
     command = args.command
     with _signals_as_interrupts():
         try:
+            from .._core.devices import for_command
+
+            # single trajectories on the CPU, sweeps on an accelerator if any (pamjax/_core/devices.py); said first
+            placed, where = for_command("batched" if command in _BATCHED else "single", args.device,
+                                        check=not getattr(args, "distributed", False))  # joins before JAX starts
+            print(f"pamjax {command}: {where}", flush=True)
             # fit says itself when it compiles (its programs are known); the others are announced from outside
             announce = contextlib.nullcontext() if command == "fit" else announce_compilation(f"pamjax {command}")
-            with announce:
+            with placed, announce:
                 status = modules[command].run(args) or 0
             raise_pending()  # a signal swallowed while JAX was busy: the command finished, but say so
             return status

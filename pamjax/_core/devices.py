@@ -1,0 +1,180 @@
+"""Where pamjax's work runs: single trajectories on the CPU, batched sweeps on an accelerator when there is one.
+
+Why two answers. A single-trajectory solve (`simulate`, a fit's residuals and Jacobian, an identification, a design's
+gradient) is a loop of small steps on a handful of numbers: each RODAS5 or RK4 step is ~100 tiny kernels. On the
+CPU, pamjax compiles that loop into one function (docs/performance.md, "On CPU: each solve loop runs as one compiled
+function"): ~1-2 µs per step. On a GPU every kernel is a launch of a few microseconds, and the loop's condition is
+read back by the host every iteration, so the same solve runs tens of times slower there, whatever the GPU. A
+batched sweep does the same steps for thousands of lanes at once, each kernel working on all of them: there an
+accelerator wins by two orders of magnitude (100,000 points of the MAS-10 map: 0.065 s on one H100 against ~7 s on
+this project's 2-core CPU; benchmarks/RESULTS.md, `## sweep`). At ~1,000 points the two are about even (the GPU's
+per-step launches dominate: 0.021 s on the H100 against 0.04-0.08 s on the CPU).
+
+So by default (`device="auto"`):
+
+- `work="single"`: the first CPU device. A GPU, if any, is left alone (the `pamjax` command does not even start
+  it: `jax_platforms="cpu"`, which also spares its start-up and memory reservation).
+- `work="batched"`: every device of the first accelerator platform JAX finds (GPU, TPU), else every CPU device
+  (`pamjax sweep` splits the CPU into one device per core).
+
+`device="cpu"`, `"gpu"` (CUDA or ROCm) or `"tpu"` overrides it (the command line's `--device`); a platform that is
+not there is a `PamjaxInputError` naming it and listing what is. A GPU measurement of the single-trajectory claim on
+this project's code is pending (no GPU in the session that wrote this; the sweep figures above were measured).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .errors import PamjaxInputError
+
+WORKS = ("single", "batched")
+CHOICES = ("auto", "cpu", "gpu", "tpu")
+# JAX platform names that count as each choice (jax.Device.platform; "gpu" is JAX's alias for CUDA and ROCm).
+_PLATFORMS = {"cpu": ("cpu",), "gpu": ("gpu", "cuda", "rocm"), "tpu": ("tpu",)}
+
+SINGLE_REASON = ("single-trajectory work: each solver step is ~100 tiny kernels, one compiled loop on the CPU but a "
+                 "kernel launch each on a GPU, so the CPU is faster")
+BATCHED_REASON = "batched work: each kernel runs every lane at once, so an accelerator is faster when there is one"
+
+
+def _check(work, device):
+    if work not in WORKS:
+        raise PamjaxInputError(f"work must be one of {WORKS}, got {work!r}")
+    if device is None:
+        return "auto"
+    name = str(device).strip().lower()
+    if name not in CHOICES:
+        raise PamjaxInputError(f"device must be one of {CHOICES}, got {device!r}")
+    return name
+
+
+def _kind(platform):
+    """'cpu', 'gpu' or 'tpu' for a JAX platform name (another platform is an accelerator of its own name)."""
+    return next((kind for kind, names in _PLATFORMS.items() if platform in names), platform)
+
+
+@dataclass(frozen=True)
+class DeviceChoice:
+    """The devices a piece of work runs on, and why (`statement()`: the line the command line prints)."""
+
+    devices: tuple
+    reason: str
+    requested: str  # "auto" or the override
+
+    @property
+    def platform(self):
+        return self.devices[0].platform
+
+    def statement(self):
+        where = f"{len(self.devices)} {self.platform} device{'s' if len(self.devices) > 1 else ''}"
+        how = f"--device {self.requested}" if self.requested != "auto" else self.reason
+        return f"running on {where} ({how})"
+
+    def default(self):
+        """A context in which computations without placed inputs run on the choice's first device
+        (`jax.default_device`)."""
+        import jax
+
+        return jax.default_device(self.devices[0])
+
+
+def select_devices(work: str, device: str | None = "auto", available=None) -> DeviceChoice:
+    """The devices for `work` ("single": one trajectory at a time, as `simulate`, fits, identification, design;
+    "batched": a sweep's lanes), by default the fastest kind (module docstring), or the `device` asked for
+    ("cpu", "gpu", "tpu"). `available`: the devices to choose from (default: every device of every platform JAX
+    can start, e.g. `jax.devices("cpu") + jax.devices("gpu")`).
+
+    Raises `PamjaxInputError` for an unknown `work` or `device`, or a `device` platform that is not available."""
+    requested = _check(work, device)
+    if available is None:
+        available = _all_devices()
+    by_kind = {}
+    for d in available:
+        by_kind.setdefault(_kind(d.platform), []).append(d)
+    if requested != "auto":
+        if requested not in by_kind:
+            have = ", ".join(sorted(by_kind)) or "none"
+            raise PamjaxInputError(f"device={requested!r}: JAX finds no {requested.upper()} here (available: {have})")
+        chosen = by_kind[requested]
+        return DeviceChoice(tuple(chosen if work == "batched" else chosen[:1]), f"--device {requested}", requested)
+    if work == "single":
+        if "cpu" in by_kind:
+            return DeviceChoice((by_kind["cpu"][0],), SINGLE_REASON, requested)
+        first = next(iter(by_kind.values()))  # no CPU device (a process limited to an accelerator): what there is
+        return DeviceChoice((first[0],), "no CPU device in this process", requested)
+    accelerators = [k for k in by_kind if k != "cpu"]
+    if accelerators:
+        return DeviceChoice(tuple(by_kind[accelerators[0]]), BATCHED_REASON, requested)
+    return DeviceChoice(tuple(by_kind.get("cpu", ())), "batched work: no accelerator here, every CPU device",
+                        requested)
+
+
+def _all_devices():
+    """Every device of every platform JAX can start (the CPU always; GPU and TPU where present)."""
+    import jax
+
+    devices = []
+    for platform in ("cpu", "gpu", "tpu"):
+        try:
+            devices += jax.devices(platform)
+        except RuntimeError:  # not installed or not present
+            continue
+    return devices
+
+
+def platforms_before_start(work: str, device: str | None = "auto"):
+    """The `jax_platforms` value to set before JAX starts for `work` on `device` (None: JAX's default, every
+    platform present), and the line that says where the work will run. Starts nothing: for the `pamjax` command,
+    which picks its platforms before any JAX computation (a sweep first splits the CPU into one device per core)."""
+    requested = _check(work, device)
+    if requested == "cpu":
+        return "cpu", "running on the CPU (--device cpu)"
+    if requested in ("gpu", "tpu"):  # the CPU stays available for host-side work; JAX fails clearly without one
+        return f"{requested},cpu", f"running on the {requested.upper()} (--device {requested})"
+    if work == "single":
+        return "cpu", f"running on the CPU ({SINGLE_REASON}; --device gpu to use one)"
+    return None, f"running on the GPU/TPU if JAX finds one, else every CPU core ({BATCHED_REASON}; --device cpu " \
+                 "to stay on the CPU)"
+
+
+def unavailable_message(device, err):
+    """The user's message when the platform `device` asked for cannot start (JAX's own error appended)."""
+    first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+    return f"--device {device}: JAX cannot start a {str(device).upper()} here ({first})"
+
+
+def for_command(work: str, device: str | None = "auto", environ=None, check=True):
+    """Set up the `pamjax` command's devices before JAX starts, and return `(context, line)`: a context to run the
+    command in (placing its computations) and the line that says where it runs. A `JAX_PLATFORMS` the user set in
+    the environment wins over `"auto"` (it is said); `--device` wins over it. When JAX is already running (the
+    command called as `main(argv)` from a program), its platforms stay and the choice is made among its devices
+    with `jax.default_device`. An asked-for platform that cannot start is a `PamjaxInputError` (`check=False`: not
+    tried here, for a process that must join a multi-process run before JAX starts; JAX then says so itself)."""
+    import contextlib
+    import os
+
+    import jax
+
+    from .private import jax_backends_initialized
+
+    environ = os.environ if environ is None else environ
+    requested = _check(work, device)
+    users = environ.get("JAX_PLATFORMS", "").strip()
+    if requested == "auto" and users:
+        return contextlib.nullcontext(), f"running on JAX_PLATFORMS={users} (set in the environment; --device " \
+                                         "overrides it)"
+    if jax_backends_initialized():
+        choice = select_devices(work, requested)
+        return choice.default(), choice.statement()
+    platforms, line = platforms_before_start(work, requested)
+    before = jax.config.jax_platforms
+    if platforms is not None:
+        jax.config.update("jax_platforms", platforms)
+    if check and requested in ("gpu", "tpu"):  # say it now, not as an internal error at the first computation
+        try:
+            jax.devices(requested)
+        except RuntimeError as err:
+            jax.config.update("jax_platforms", before)  # a program that called main(argv) keeps its platforms
+            raise PamjaxInputError(unavailable_message(requested, err)) from None
+    return contextlib.nullcontext(), line

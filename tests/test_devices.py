@@ -1,0 +1,109 @@
+"""Where work runs (pamjax/_core/devices.py): single trajectories on the CPU, batched sweeps on an accelerator when
+there is one, `--device` / `device=` to choose. No GPU here: the choices are checked against fake device lists and
+a JAX whose backends have not started (its configuration calls recorded), and the command line in this process."""
+
+import re
+import subprocess
+import sys
+from dataclasses import dataclass
+
+import jax
+import pytest
+
+import pamjax._core.devices as devices
+from pamjax import PamjaxInputError
+from pamjax._cli.main import main
+
+
+@dataclass(frozen=True)
+class Fake:
+    platform: str
+    id: int
+
+
+CPU0, CPU1, GPU0, GPU1, TPU0 = Fake("cpu", 0), Fake("cpu", 1), Fake("gpu", 0), Fake("gpu", 1), Fake("tpu", 0)
+
+
+def test_single_trajectories_go_to_the_cpu_and_sweeps_to_the_accelerator():
+    available = [CPU0, CPU1, GPU0, GPU1]
+    single = devices.select_devices("single", available=available)
+    assert single.devices == (CPU0,) and single.reason == devices.SINGLE_REASON
+    batched = devices.select_devices("batched", available=available)
+    assert batched.devices == (GPU0, GPU1) and batched.reason == devices.BATCHED_REASON
+    assert devices.select_devices("batched", available=[TPU0, CPU0]).devices == (TPU0,)
+    # CUDA and ROCm devices are GPUs
+    assert devices.select_devices("batched", available=[CPU0, Fake("cuda", 0)]).platform == "cuda"
+    assert devices.select_devices("single", device="gpu", available=[CPU0, Fake("rocm", 3)]).devices == (
+        Fake("rocm", 3),)
+
+
+def test_without_an_accelerator_a_sweep_uses_every_cpu_device():
+    choice = devices.select_devices("batched", available=[CPU0, CPU1])
+    assert choice.devices == (CPU0, CPU1) and "no accelerator" in choice.reason
+    assert devices.select_devices("single", available=[CPU0, CPU1]).devices == (CPU0,)
+    assert devices.select_devices("single", available=[GPU0]).devices == (GPU0,)  # a process without a CPU device
+
+
+def test_the_device_asked_for_wins_and_is_said():
+    available = [CPU0, CPU1, GPU0, GPU1]
+    assert devices.select_devices("batched", "cpu", available).devices == (CPU0, CPU1)
+    choice = devices.select_devices("single", "GPU", available)
+    assert choice.devices == (GPU0,) and choice.statement() == "running on 1 gpu device (--device gpu)"
+    assert devices.select_devices("batched", "gpu", available).statement() == "running on 2 gpu devices " \
+                                                                                 "(--device gpu)"
+
+
+@pytest.mark.parametrize("work, device, match", [
+    ("single", "tpu", r"device='tpu': JAX finds no TPU here \(available: cpu, gpu\)"),
+    ("single", "metal", r"device must be one of \('auto', 'cpu', 'gpu', 'tpu'\), got 'metal'"),
+    ("lanes", "auto", r"work must be one of \('single', 'batched'\), got 'lanes'"),
+])
+def test_an_unknown_or_absent_device_is_an_input_error_naming_it(work, device, match):
+    with pytest.raises(PamjaxInputError, match=match):
+        devices.select_devices(work, device, [CPU0, GPU0])
+
+
+def test_the_command_sets_its_platforms_before_jax_starts(monkeypatch):
+    # A fresh process's view: backends not started; what the command line sets is recorded, nothing starts.
+    updates = []
+    monkeypatch.setattr("pamjax._core.private.jax_backends_initialized", lambda: False)
+    monkeypatch.setattr(jax.config, "update", lambda name, value: updates.append((name, value)))
+
+    _, line = devices.for_command("single", "auto", environ={})
+    assert updates == [("jax_platforms", "cpu")] and line.startswith("running on the CPU (single-trajectory work")
+    updates.clear()
+    _, line = devices.for_command("batched", "auto", environ={})
+    assert updates == [] and "GPU/TPU if JAX finds one, else every CPU core" in line  # JAX's default platforms
+    _, line = devices.for_command("batched", "cpu", environ={})
+    assert updates == [("jax_platforms", "cpu")] and line == "running on the CPU (--device cpu)"
+    updates.clear()
+    _, line = devices.for_command("single", "auto", environ={"JAX_PLATFORMS": "cuda"})  # the user's setting wins
+    assert updates == [] and "JAX_PLATFORMS=cuda" in line
+
+    def no_gpu(platform=None):
+        raise RuntimeError("Unknown backend: 'gpu' requested, but no platforms that are instances of gpu are present")
+
+    monkeypatch.setattr(jax, "devices", no_gpu)
+    with pytest.raises(PamjaxInputError, match=r"--device gpu: JAX cannot start a GPU here \(Unknown backend"):
+        devices.for_command("single", "gpu", environ={})
+    assert updates[-2:] == [("jax_platforms", "gpu,cpu"), ("jax_platforms", None)]  # and put back
+
+
+def test_a_fresh_command_process_runs_single_trajectories_on_the_cpu_platform_only():
+    # The real thing in a new process: for_command before any JAX computation leaves JAX with the CPU platform.
+    code = ("import jax; import pamjax._core.devices as d; ctx, line = d.for_command('single', environ={}); "
+            "print(jax.config.jax_platforms, [x.platform for x in jax.devices()]); print(line)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.splitlines()[0] == "cpu ['cpu']"
+
+
+def test_the_command_line_says_where_it_runs_and_refuses_an_absent_device(tmp_path, capsys):
+    jax.devices()  # JAX running, as in a program that calls main(argv): the choice among its devices
+    config = tmp_path / "bad.toml"
+    config.write_text("[model]\npreset = \"no-such-preset\"\n")
+    assert main(["simulate", str(config), "--out", str(tmp_path / "out")]) == 2  # a config error, after the line
+    out, err = capsys.readouterr()
+    assert re.search(r"^pamjax simulate: running on 1 cpu device \(single-trajectory work", out, re.M), out
+    assert main(["simulate", str(config), "--device", "tpu", "--out", str(tmp_path / "out")]) == 2
+    out, err = capsys.readouterr()
+    assert "pamjax simulate: error: device='tpu': JAX finds no TPU here (available: cpu)" in err, err
