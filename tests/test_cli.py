@@ -418,7 +418,8 @@ def test_sweep_end_to_end_writes_outputs_and_refuses_to_overwrite(tmp_path, caps
     """)
     out = tmp_path / "out"
     assert main(["sweep", str(config), "--out", str(out), "--cpu-devices", "1"]) == 0
-    data = np.load(out / "sweep.npz")
+    with np.load(out / "sweep.npz") as npz:  # closed: an open file warns in whichever test runs next
+        data = dict(npz)
     np.testing.assert_array_equal(data["duty"], [0.2, 0.5, 0.8])
     assert np.all(data["status"] == 0)
     assert np.all(np.diff(data["pressure_pa_abs"]) > 0) and np.all(np.diff(data["position_m"]) > 0)
@@ -455,7 +456,8 @@ def test_sweep_splits_the_cpu_into_one_device_per_core_and_matches_one_device(tm
                               env={**os.environ, "JAX_PLATFORMS": "cpu"})
         assert proc.returncode == 0, proc.stdout + proc.stderr
         assert f"on {n} cpu device(s)" in proc.stdout, proc.stdout
-        runs[n] = np.load(out / "sweep.npz")
+        with np.load(out / "sweep.npz") as npz:
+            runs[n] = dict(npz)
     for key in ("pressure_pa_abs", "position_m"):
         np.testing.assert_allclose(runs[2][key], runs[1][key], rtol=1e-12, atol=0)
     with pytest.raises(SystemExit):
