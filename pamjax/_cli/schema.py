@@ -187,9 +187,7 @@ def check_model(table, where="[model]"):
         if both:
             raise PamjaxInputError(f"{where}: give either file (a model file) or preset (with options), not both; "
                                    f"remove {both}")
-    preset = table.get("preset", "mas10_system")
-    if preset not in PRESETS:
-        raise PamjaxInputError(f"{where} preset must be one of {list(PRESETS)}, got {preset!r}")
+    preset = table.get("preset", "mas10_system")  # one of PRESETS (checked with the table)
     options = table.get("options", {})
     check_keys(options, inspect.signature(getattr(pj.presets, preset)).parameters,
                f"{where} options (keyword arguments of presets.{preset})")
