@@ -19,7 +19,7 @@ from .._bands.band import METHODS, prediction_band, z_of
 from .._bands.maps import flow_surface_band, frequency_response_band, steady_state_band
 from .._bands.uncertainty import PamjaxBandWarning, propagation, read_uncertainty
 from .._core.errors import PamjaxInputError
-from .._fit.parameters import _parse
+from .._fit.parameters import split_path
 
 DEFAULT_LEVEL = 0.95  # the two-sided 95 % band (z = 1.96), the usual default for confidence bands
 DEFAULT_SAMPLES = 200  # draws: the 2.5 % quantile then scatters by ~0.19 σ (docs/fitting.md)
@@ -61,7 +61,7 @@ def add_arguments(parser):
 def _touches(key, entry):
     """Whether setting parameter `key` changes the fitted free entry `entry` (same leaf, overlapping elements)."""
     path = entry if isinstance(entry, str) else entry["path"]
-    (a, ia), (b, ib) = _parse(key), _parse(path)
+    (a, ia), (b, ib) = split_path(key), split_path(path)
     return a == b and (ia is None or ib is None or ia == ib)
 
 
@@ -134,41 +134,39 @@ class _Trajectory:
         return {c: traj.channel(c) for c in self.channels}
 
 
-def check_simulate(args, cfg, root, system, kwargs):
-    """Before the output folder: the fitted model file and its covariance; a solve the band can trace."""
+def check_simulate(args, run):
+    """Before the output folder: the fitted model file and its covariance (`run`: what `simulate.load` built); a
+    solve the band can trace."""
     if not args.band:
         return None
-    from .config import build_model
-
-    source = fitted_source(cfg, root, "pamjax simulate", build_model(cfg.get("model", {}), root))
+    source = fitted_source(run.cfg, run.root, "pamjax simulate", run.model)
     from .._solve.simulate import resolve_stepping
 
-    if system.valve.exact_edges and resolve_stepping(system, kwargs.get("stepping", "auto")) == "adaptive":
+    if run.system.valve.exact_edges and resolve_stepping(run.system, run.kwargs.get("stepping", "auto")) == "adaptive":
         raise PamjaxInputError("pamjax simulate --band: the exact-edge valve's solve computes its switching times "
                                "before it starts and cannot be differentiated or batched; set [simulate] stepping = "
                                "\"pwm\" (the PWM-synchronous grid integrates the exact-edge model, differentiably)")
     return source
 
 
-def add_to_simulation(args, cfg, root, source, signal, ts, kwargs, traj, recording, cols, units, comment):
-    """The band of `pamjax simulate`'s trajectory: `<channel>_lower` / `_upper` columns added to `cols` (and their
-    units to `units`); returns (the CSV comment with the band's description, the figure writer)."""
+def add_to_simulation(args, run, source, traj, cols, units, comment):
+    """The band of `pamjax simulate`'s trajectory (`run`: what `simulate.load` built): `<channel>_lower` / `_upper`
+    columns added to `cols` (and their units to `units`); returns (the CSV comment with the band's description, the
+    figure writer)."""
     from . import band_figures
-    from .config import build_model
 
-    model = build_model(cfg.get("model", {}), root)
-    sim = cfg.get("simulate", {})
+    sim = run.cfg.get("simulate", {})
     channels = [c for c in cols if c not in ("t", "command")]
-    predict = _Trajectory(signal, ts, kwargs, sim.get("tank_volume"), sim.get("initial"), channels)
+    predict = _Trajectory(run.signal, run.ts, run.kwargs, sim.get("tank_volume"), sim.get("initial"), channels)
     path, uncertainty = source
     with _quiet():
-        band = prediction_band(uncertainty, predict, model=model, **_options(args))
+        band = prediction_band(uncertainty, predict, model=run.model, **_options(args))
     for c in channels:
         cols[f"{c}_lower"], cols[f"{c}_upper"] = band.lower[c], band.upper[c]
         units[f"{c}_lower"] = units[f"{c}_upper"] = units[c]
     note = report(band, path, "pamjax simulate")
     title = f"{args.config}: {100 * band.level:g} % band ({band.method})"
-    return comment + "\n" + note, lambda p: band_figures.trajectory(p, traj, band, recording, title)
+    return comment + "\n" + note, lambda p: band_figures.trajectory(p, traj, band, run.recording, title)
 
 
 # -- sweep -----------------------------------------------------------------------------------------------------
@@ -219,13 +217,19 @@ def _one_map(config, model, uncertainty, options, axis):
     return band
 
 
-def add_to_sweep(args, config, model, source, spec, columns, axis, apply_set):
+def add_to_sweep(args, config, model, source, spec, columns):
     """The band of `pamjax sweep`'s map (every point of a `[sweep] over` grid): `<column>_lower` / `_upper` columns
-    added to `columns`; returns (the CSV comment, the figure writer). `axis(name, default)` reads a `[sweep]` axis;
-    `apply_set` sets a grid point's values."""
+    added to `columns`; returns (the CSV comment, the figure writer)."""
     import itertools
 
     from . import band_figures
+    from .config import apply_set
+    from .kinds import axis as axis_values
+
+    sw = config.get("sweep", {})
+
+    def axis(name, default):  # a [sweep] axis's values (validated with the config)
+        return axis_values(sw.get(name, default), name)
 
     path, uncertainty = source
     over = config.get("sweep", {}).get("over", {})

@@ -1,6 +1,13 @@
-"""What the `pamjax` configs share: reading TOML (file and line named on a syntax error), checking keys and value
-types, and building the model from a `[model]` table — a preset with options, or a model file, with `set` values
-matched to their parameters by name and shape and checked for units.
+"""Reading a `pamjax` config and building what the commands share. Every command's `load` runs the same straight
+path (docs/architecture.md, "How a config is read"):
+
+1. `read_toml(path)`: the file parsed (a syntax error names the file, line and column and shows the line);
+2. `schema.validate(command, cfg, where)`: the whole config against the schema, nothing built or read;
+3. `build_model(cfg["model"], root)`: a preset with options, or a model file, with `set` values matched to their
+   parameters by name and shape and checked for units;
+4. the command's own builder (experiments, the run's inputs, the sweep, the design), which checks what needs the
+   model (parameter paths, `initial` keys: `check_initial`) before any data are read (`load_recording`);
+5. the command runs.
 
     [model]
     preset = "mas10_system"                  # or file = "results/fit_example/model.json" (relative to the config)
@@ -8,7 +15,6 @@ matched to their parameters by name and shape and checked for units.
     set = { "friction.coulomb_force" = 20.0, "muscle.force_law.max_force_coefficients" = [630.0, 0, 0, 0, 0] }
 """
 
-import dataclasses
 import inspect
 import pathlib
 import re
@@ -19,21 +25,7 @@ import numpy as np
 
 from .._core.errors import PamjaxInputError
 from .._core.units import check_setting
-
-PRESETS = ("mas10_system", "mas10_tank_system")
-MODEL_KEYS = {"preset", "options", "set", "file"}
-SIGNALS = ("Constant", "Triangle", "Sine", "Step", "recorded")
-RECORDED_KEYS = {"kind", "period"}  # signal = { kind = "recorded", period = 0.02 }: the command channel, latched
-
-
-def check_keys(table, valid, where):
-    """`table` must be a TOML table whose keys are all in `valid`; else a `PamjaxInputError` naming `where`, the
-    unknown keys and the valid ones."""
-    if not isinstance(table, dict):
-        raise PamjaxInputError(f"{where} must be a table (keys {sorted(valid)}), got {table!r}")
-    unknown = set(table) - set(valid)
-    if unknown:
-        raise PamjaxInputError(f"{where}: unknown key(s) {sorted(unknown)}; valid keys are {sorted(valid)}")
+from .kinds import check_keys
 
 
 def read_toml(path):
@@ -59,59 +51,13 @@ def read_toml(path):
         raise PamjaxInputError(f"{path}, line {line}, column {column}: not valid TOML: {message}{shown}") from None
 
 
-def require(value, kind, where, example):
-    """`value` must be of `kind` ("number", "positive number", "integer", "string", "list of strings", "table",
-    "boolean"); else a `PamjaxInputError` naming `where`, the kind and an example."""
-    number = isinstance(value, (int, float)) and not isinstance(value, bool)
-    ok = {
-        "number": number,
-        "positive number": number and value > 0 and np.isfinite(value),
-        "integer": isinstance(value, int) and not isinstance(value, bool),
-        "positive integer": isinstance(value, int) and not isinstance(value, bool) and value > 0,
-        "string": isinstance(value, str),
-        "list of strings": isinstance(value, list) and bool(value) and all(isinstance(v, str) for v in value),
-        "table": isinstance(value, dict),
-        "boolean": isinstance(value, bool),
-    }[kind]
-    if not ok:
-        hint = " (a single string where a list is expected: put it in brackets)" if (
-            kind.startswith("list") and isinstance(value, str)) else ""
-        raise PamjaxInputError(f"{where} must be a {kind}, e.g. {example}; got {value!r}{hint}")
-    return value
-
-
 # -- the model --------------------------------------------------------------------------------------------------
-def validate_model_table(model_cfg, where="[model]"):
-    """Keys and types of a `[model]` table (nothing built)."""
-    import pamjax as pj
-
-    check_keys(model_cfg, MODEL_KEYS, where)
-    if "file" in model_cfg:
-        require(model_cfg["file"], "string", f"{where} file", '"results/fit_example/model.json"')
-        both = sorted({"preset", "options"} & set(model_cfg))
-        if both:
-            raise PamjaxInputError(f"{where}: give either file (a model file) or preset (with options), not both; "
-                                   f"remove {both}")
-    preset = model_cfg.get("preset", "mas10_system")
-    if preset not in PRESETS:
-        raise PamjaxInputError(f"{where} preset must be one of {list(PRESETS)}, got {preset!r}")
-    options = model_cfg.get("options", {})
-    check_keys(options, inspect.signature(getattr(pj.presets, preset)).parameters,
-               f"{where} options (keyword arguments of presets.{preset})")
-    for key, value in options.items():
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            check_setting(key, value, f"{where} options")
-    if not isinstance(model_cfg.get("set", {}), dict):
-        raise PamjaxInputError(f"{where} set must be a table of parameter path = value, got {model_cfg['set']!r}")
-
-
 def build_model(model_cfg, root, where="[model]"):
-    """The model a `[model]` table describes (`root`: the config's folder, for a relative `file`)."""
+    """The model a validated `[model]` table describes (`root`: the config's folder, for a relative `file`)."""
     import pamjax as pj
 
     from .._fit.model_io import load_model
 
-    validate_model_table(model_cfg, where)
     if "file" in model_cfg:
         model = load_model(pathlib.Path(root) / model_cfg["file"])
     else:
@@ -126,30 +72,39 @@ def apply_set(model, values, where):
     and the given shape, never spread over the next parameters), checked for units, and the result is rebuilt
     through the components' constructors, so a value they refuse is named as if typed in Python."""
     from .._fit.model_io import checked
-    from .._fit.parameters import _parse, join_path, parameter_paths
 
     if not values:
         return model
-    valid = parameter_paths(model)
     for key, value in values.items():
-        attrs, index = _parse(key)
-        leaf = join_path(attrs)
-        if leaf not in valid:
-            listing = "\n  ".join(f"{p} {list(s) if s else ''}".rstrip() for p, s in sorted(valid.items()))
-            raise PamjaxInputError(f"{where}: unknown parameter {key!r}; the model's parameters are:\n  {listing}")
-        shape = valid[leaf]
-        if index is not None:
-            if len(index) != len(shape) or any(not 0 <= i < n for i, n in zip(index, shape)):
-                raise PamjaxInputError(f"{where}: index {list(index)} of {key!r} is out of range for shape {shape}")
-            shape = ()
+        leaf, steps, index, shape = parameter_shape(model, key, where)
         new = _array(value, f"{where}: {key!r}")
         if new.shape != shape:
             expected = "one number" if shape == () else f"shape {shape}"
             raise PamjaxInputError(f"{where}: {key!r} expects {expected}, got shape {new.shape} ({value!r}); each "
                                    "entry sets one parameter (index an element as 'path[i]')")
         check_setting(leaf, new, where)
-        model = _set_leaf(model, attrs, index, new)
+        model = _set_leaf(model, steps, index, new)
     return checked(model, where)
+
+
+def parameter_shape(model, path, where):
+    """(leaf, steps, index, shape) of parameter `path` of `model`: the leaf's path and steps (`split_path`), the
+    element index (None for the whole leaf) and the shape a value for it has (() for one element); an unknown path
+    lists the model's parameters, an index out of range names the leaf's shape."""
+    from .._fit.parameters import join_path, parameter_paths, split_path
+
+    valid = parameter_paths(model)
+    steps, index = split_path(path)
+    leaf = join_path(steps)
+    if leaf not in valid:
+        listing = "\n  ".join(f"{p} {list(s) if s else ''}".rstrip() for p, s in sorted(valid.items()))
+        raise PamjaxInputError(f"{where}: unknown parameter {path!r}; the model's parameters are:\n  {listing}")
+    shape = valid[leaf]
+    if index is not None:
+        if len(index) != len(shape) or any(not 0 <= i < n for i, n in zip(index, shape)):
+            raise PamjaxInputError(f"{where}: index {list(index)} of {path!r} is out of range for shape {shape}")
+        shape = ()
+    return leaf, steps, index, shape
 
 
 def _array(value, where):
@@ -170,9 +125,11 @@ def _array(value, where):
 def _set_leaf(model, attrs, index, value):
     import jax.numpy as jnp
 
+    from .._fit.parameters import Key
+
     def get(m):
         for a in attrs:
-            m = getattr(m, a)
+            m = m[a] if isinstance(a, Key) else getattr(m, a)
         return m
 
     old = jnp.asarray(get(model))
@@ -182,39 +139,29 @@ def _set_leaf(model, attrs, index, value):
     return eqx.tree_at(get, model, new)
 
 
-# -- signals ----------------------------------------------------------------------------------------------------
-def signal_keys(spec, where):
-    """The valid keys of a signal table: `kind` plus the fields of the named pamjax signal class (None for
-    "recorded")."""
+def check_initial(system, values, where):
+    """The keys of an `initial` (or `start`) table must be arguments of `system.initial_state`."""
+    check_keys(values, set(inspect.signature(system.initial_state).parameters),
+               f"{where} (keyword arguments of {type(system).__name__}.initial_state)")
+
+
+# -- inputs -----------------------------------------------------------------------------------------------------
+def build_signal(spec, where, recording=None):
+    """The pamjax signal a validated signal table describes (`recording`'s `command` channel for "recorded")."""
     import pamjax as pj
 
-    if spec == "recorded":
-        return None
-    if not isinstance(spec, dict) or spec.get("kind") not in SIGNALS:
-        raise PamjaxInputError(f"{where} signal must be 'recorded' or a table with kind in {list(SIGNALS)}, "
-                               f"got {spec!r}")
-    if spec["kind"] == "recorded":
-        return RECORDED_KEYS
-    return {"kind"} | {f.name for f in dataclasses.fields(getattr(pj, spec["kind"]))}
-
-
-def make_signal(spec, where, recording=None):
-    """The pamjax signal a table describes (`recording`'s `command` channel for "recorded")."""
-    import pamjax as pj
-
-    valid = signal_keys(spec, where)
-    if valid is None or spec["kind"] == "recorded":
+    if spec == "recorded" or spec["kind"] == "recorded":
         if recording is None:
             raise PamjaxInputError(f"{where} signal 'recorded' needs a recording with a command channel")
         period = spec.get("period") if isinstance(spec, dict) else None
-        if period is not None:
-            require(period, "positive number", f"{where} signal period", "0.02 (s)")
         return pj.Sampled(recording.t, recording["command"], period=period)
-    check_keys(spec, valid, f"{where} signal (kind = {spec['kind']!r})")
-    kwargs = {k: v for k, v in spec.items() if k != "kind"}
-    for k, v in kwargs.items():
-        require(v, "number", f"{where} signal {k}", "0.5")
-    try:
-        return getattr(pj, spec["kind"])(**kwargs)
-    except TypeError as err:
-        raise PamjaxInputError(f"{where} signal: {err}") from err
+    return getattr(pj, spec["kind"])(**{k: v for k, v in spec.items() if k != "kind"})
+
+
+def load_recording(table, root):
+    """The recording a validated table's `file` names (relative to `root`), with its `rename`, `units` and
+    `unit_checks`."""
+    import pamjax as pj
+
+    return pj.Recording.load(pathlib.Path(root) / table["file"], rename=table.get("rename"), units=table.get("units"),
+                             unit_checks=table.get("unit_checks", True))

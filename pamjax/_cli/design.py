@@ -9,22 +9,12 @@ import warnings
 import numpy as np
 
 from .._core.errors import PamjaxInputError
-from .._core.units import check_setting
-from .config import build_model, check_keys, read_toml, require, validate_model_table
+from . import schema
+from .config import build_model, read_toml
 from .fit import load_config
 from .out import OutputFolder
 
-_TOP_KEYS = {"model", "design"}
 OUTPUTS = ("design.csv", "design.json", "design.png")
-# [design] keys: `free`, `duration`, `noise` (required), `prior` / `baseline` (fit configs whose experiments are the
-# information in hand / the experiment to beat), `initial` (a constant duty, or the CSV of an earlier design to
-# start from), `tank_volume` (design a constant-volume tank test of the model's valve: build=TankFromModel, as a fit
-# experiment's `tank_volume`), `out`, and the keyword arguments of `pamjax.design` below (`period`: the PWM period
-# [s] of a model whose valve has none, e.g. an averaged valve; `min_force = false`: no force limit).
-_DESIGN_ARGS = ("channels", "start", "rate", "criterion", "subset", "duty_band", "duty_margin", "stroke_margin",
-                "max_pressure", "max_duty_step", "min_force", "parametrisation", "knots", "steps", "seed",
-                "baseline_margin", "period")
-_DESIGN_KEYS = {"free", "duration", "noise", "prior", "baseline", "initial", "tank_volume", "out", *_DESIGN_ARGS}
 
 
 def add_arguments(parser):
@@ -37,53 +27,51 @@ def add_arguments(parser):
 
 
 def load(path):
-    """Parse and check a design config; returns (model, free, duration, keyword arguments of `design`, out).
-    Every key is checked, and the prior and baseline configs loaded, before anything is solved."""
+    """A design config read in one pass: read → validate all → build the model → build the design's inputs (the
+    prior and baseline fit configs, each read by `pamjax fit`'s `load_config`; the start signal; a tank test).
+    Returns (model, free, duration, keyword arguments of `design`, out); nothing is solved. The limits are checked
+    against the run's start by `check_design` (`run`), still before the output folder is made."""
     path = pathlib.Path(path)
     cfg = read_toml(path)
-    check_keys(cfg, _TOP_KEYS, str(path))
-    table = cfg.get("design")
-    if table is None:
-        raise PamjaxInputError(f"{path} needs a [design] table (free, duration, noise, ...)")
-    check_keys(table, _DESIGN_KEYS, "[design]")
-    for key in ("free", "duration", "noise"):
-        if key not in table:
-            raise PamjaxInputError(f"[design] needs '{key}'")
-    validate_model_table(cfg.get("model", {}))
+    schema.validate_design(cfg, str(path))
     model = build_model(cfg.get("model", {}), path.parent)
-    kwargs = {k: table[k] for k in _DESIGN_ARGS if k in table}
-    for key in ("prior", "baseline"):
+    table = cfg["design"]
+    return model, table["free"], float(table["duration"]), build_design(table, path.parent), table.get("out")
+
+
+def build_design(table, root):
+    """The keyword arguments of `pamjax.design` a validated [design] table gives."""
+    import pamjax as pj
+
+    kwargs = {k: table[k] for k in schema.DESIGN_ARGS if k in table}
+    kwargs["noise"] = table["noise"]
+    for key in ("prior", "baseline"):  # fit configs: their experiments
         if key in table:
-            _, experiments, *_ = load_config(path.parent / table[key])
+            try:
+                _, experiments, *_ = load_config(pathlib.Path(root) / table[key])
+            except PamjaxInputError as err:
+                raise PamjaxInputError(f"[design] {key} = {table[key]!r}: {err}") from err
             kwargs[key] = experiments
     if "initial" in table:
-        kwargs["initial"] = _initial(table["initial"], path.parent)
+        kwargs["initial"] = _initial(table["initial"], root)
     if "duty_band" in kwargs:
         kwargs["duty_band"] = tuple(kwargs["duty_band"])
-    if kwargs.get("min_force") is True:
-        raise PamjaxInputError("[design] min_force must be a force [N] (e.g. 20.0) or false for no limit, got true")
     if "tank_volume" in table:  # a tank test of the model's valve, as a fit experiment's tank_volume
-        import pamjax as pj
-
-        require(table["tank_volume"], "positive number", "[design] tank_volume", "5e-5 (m³)")
-        check_setting("tank_volume", table["tank_volume"], "[design]")
         kwargs["build"] = pj.TankFromModel(float(table["tank_volume"]))
-    return model, table["free"], float(table["duration"]), dict(noise=table["noise"], **kwargs), table.get("out")
+    return kwargs
 
 
 def _initial(value, root):
     """`initial = 0.6` (a constant duty) or `initial = "earlier/design.csv"` (its duty column, one per period)."""
     import pamjax as pj
 
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
+    if not isinstance(value, str):
         return pj.Constant(float(value))
-    if isinstance(value, str):  # held from each row's time: a period's duty at its start (the end row adds nothing)
-        rec = pj.Recording.load(root / value)  # its `duty` column is read as channel "command"
-        if "command" not in rec.channels:
-            raise PamjaxInputError(f"[design] initial = {value!r} has no duty column (channels: "
-                                   f"{sorted(rec.channels)}); give a design.csv of pamjax design")
-        return pj.Sampled(rec.t, np.asarray(rec["command"]))
-    raise PamjaxInputError(f"[design] initial must be a constant duty or a design CSV path, got {value!r}")
+    rec = pj.Recording.load(pathlib.Path(root) / value)  # its `duty` column is read as channel "command"
+    if "command" not in rec.channels:  # held from each row's time: a period's duty at its start
+        raise PamjaxInputError(f"[design] initial = {value!r} has no duty column (channels: "
+                               f"{sorted(rec.channels)}); give a design.csv of pamjax design")
+    return pj.Sampled(rec.t, np.asarray(rec["command"]))
 
 
 def run(args):

@@ -3,41 +3,26 @@ the complete fitted model (`model.json`, `pamjax.load_model`) and a figure of da
 checkpoint after every iteration (`checkpoint.npz`) that `--resume` continues bitwise. See `docs/fitting.md` for the
 config and `docs/cli.md` for the files; `examples/fit_example.toml`.
 
-Every key, type, parameter path, shape and unit of the config is checked before any data are read or anything is
-compiled; the output folder is created, test-written and locked before the fit starts.
+`load` reads the config in one pass (docs/architecture.md, "How a config is read"): the whole config against the
+schema (`schema.validate_fit`), then the model, then the fit's experiments (`build_fit`: a [bench] directory, the free
+parameters checked against the model, every [[experiment]] checked against it before any recording is read, then
+read; a [rig] around the plant); the output folder is created, test-written and locked before the fit starts.
 """
 
 import json
 import pathlib
 import sys
+from typing import NamedTuple
 
 import numpy as np
 
 from .._core.errors import PamjaxInputError
-from .._core.units import check_setting
-from .._fit.parameters import FREE_ENTRY_KEYS
 from .._fit.profile import PROFILED_STATUSES
-from .config import (
-    build_model,
-    check_keys,
-    make_signal,
-    read_toml,
-    require,
-    signal_keys,
-    validate_model_table,
-)
+from . import schema
+from .config import build_model, build_signal, check_initial, load_recording, parameter_shape, read_toml
+from .kinds import sensor_groups
 from .out import PENDING, OutputFolder, interrupt_status, raise_pending
 
-_TOP_KEYS = {"model", "fit", "experiment", "bench", "rig"}
-_RIG_KEYS = {"sensors", "free"}
-_SENSOR_FIELDS = ("pressure_offset", "pressure_gain", "position_offset", "delay")
-_RIG_FREE = _SENSOR_FIELDS + ("supply_pressure", "start")
-_FIT_KEYS = {"free", "max_steps", "ftol", "xtol", "gtol", "out", "validation_fraction"}
-_BENCH_KEYS = {"dir", "rate", "kinds", "fitted_keys", "substeps", "staged", "nuisance", "position_offset",
-               "atmosphere"}
-_EXPERIMENT_KEYS = {"name", "file", "signal", "channels", "scales", "tank_volume", "initial", "rate", "filter_hz",
-                    "sensors", "supply_pressure", "start",
-                    "t_end", "max_steps", "rename", "units", "unit_checks", "stepping"}
 RESULT, MODEL, FIGURE, CHECKPOINT, BENCH = "fit.json", "model.json", "fit.png", "checkpoint.npz", "bench.json"
 PROFILE, PROFILE_FIGURE = "profile.json", "profile.png"
 
@@ -54,192 +39,53 @@ def add_arguments(parser):
                         "profile.json and profile.png (pamjax.profile, docs/identifiability.md)")
 
 
-def _check_free(free):
-    if not free:
-        raise PamjaxInputError("[fit] free must be a non-empty list of parameter paths, e.g. "
-                               '["friction.coulomb_force"]')
-    for entry in free:
-        if isinstance(entry, str):
-            continue
-        check_keys(entry, FREE_ENTRY_KEYS, "[fit] free entry")
-        if "path" not in entry:
-            raise PamjaxInputError(f"[fit] free entry {entry!r} needs a path")
-        if "bounds" in entry:
-            b = entry["bounds"]
-            if not (isinstance(b, list) and len(b) == 2 and all(isinstance(x, (int, float)) for x in b)):
-                raise PamjaxInputError(f"[fit] free entry {entry['path']!r}: bounds must be [lo, hi] (two numbers), "
-                                       f"got {b!r}")
+class FitSetup(NamedTuple):
+    """What a fit config describes: the start model (a `pamjax.Rig` with a [rig] table or a bench's nuisances), the
+    experiments, the free parameters, `pamjax.fit`'s options, the output folder it names, the `Bench` (None without
+    a [bench] table) and whether to start stage by stage (`pamjax.staged_start`)."""
 
-
-def _check_free_shapes(model, free):
-    """A free table's `scale` must be one number or one per element of its parameter (matched by name and shape)."""
-    from .._fit.parameters import _parse, join_path, parameter_paths
-
-    valid = parameter_paths(model)
-    for entry in free:
-        if isinstance(entry, str) or "scale" not in entry:
-            continue
-        attrs, index = _parse(entry["path"])
-        shape = () if index is not None else valid.get(join_path(attrs))
-        given = np.shape(entry["scale"])
-        if shape is not None and given not in ((), shape):
-            raise PamjaxInputError(f"[fit] free entry {entry['path']!r}: scale expects one number or shape {shape}, "
-                                   f"got shape {given} ({entry['scale']!r})")
+    model: object
+    experiments: list
+    free: list
+    options: dict
+    out: str | None
+    bench: object = None
+    staged: bool = False
 
 
 def validate_config(cfg, where="config"):
     """Check every table, key and value type of a parsed fit config (no data loaded, nothing solved)."""
-    check_keys(cfg, _TOP_KEYS, where)
-    model_cfg, fit_cfg = cfg.get("model", {}), cfg.get("fit", {})
-    validate_model_table(model_cfg)
-    for old, new in (("rtol", "ftol"), ("atol", "xtol")):
-        if isinstance(fit_cfg, dict) and old in fit_cfg:
-            raise PamjaxInputError(f"[fit] {old} is no longer a setting: the fit stops on the relative cost decrease "
-                                   f"({new} and its siblings ftol, xtol, gtol; docs/fitting.md)")
-    check_keys(fit_cfg, _FIT_KEYS, "[fit]")
-    bench_cfg = cfg.get("bench")
-    if bench_cfg is not None:
-        check_keys(bench_cfg, _BENCH_KEYS, "[bench]")
-        if "dir" not in bench_cfg:
-            raise PamjaxInputError("[bench] needs 'dir': a bench directory (meta.json + <experiment>.npz), relative "
-                                   "to the config")
-        require(bench_cfg["dir"], "string", "[bench] dir", '"../data/my-bench"')
-        for key, kind, example in (("rate", "positive number", "1000.0 (Hz)"), ("substeps", "positive integer", "16"),
-                                   ("kinds", "list of strings", '["tank_charge", "muscle_triangle"]'),
-                                   ("fitted_keys", "list of strings", '["Cv12", "b12", "Fc"]'),
-                                   ("staged", "boolean", "false"), ("position_offset", "number", "0.0 (m)"),
-                                   ("atmosphere", "positive number", "101325.0 (Pa abs)")):
-            if key in bench_cfg:
-                require(bench_cfg[key], kind, f"[bench] {key}", example)
-        if "nuisance" in bench_cfg and not isinstance(bench_cfg["nuisance"], bool):
-            require(bench_cfg["nuisance"], "list of strings", "[bench] nuisance",
-                    'true, or ["delay", "pressure_offset", "supply_pressure"]')
-    rig_cfg = cfg.get("rig")
-    if rig_cfg is not None:
-        _validate_rig(rig_cfg, bench_cfg)
-    if "free" not in fit_cfg and bench_cfg is None:
-        raise PamjaxInputError("[fit] needs 'free': the list of parameter paths to fit")
-    if "free" not in fit_cfg:
-        pass  # the bench's fitted_keys
-    elif isinstance(fit_cfg["free"], str) or not isinstance(fit_cfg["free"], list):
-        raise PamjaxInputError(f"[fit] free must be a non-empty list of parameter paths, got {fit_cfg['free']!r}"
-                               + (" (a single string where a list is expected: put it in brackets)"
-                                  if isinstance(fit_cfg["free"], str) else ""))
-    if "free" in fit_cfg:
-        _check_free(fit_cfg["free"])
-    for key, kind, example in (("max_steps", "positive integer", "40"), ("ftol", "positive number", "1e-10"),
-                               ("xtol", "positive number", "1e-10"), ("gtol", "positive number", "1e-10"),
-                               ("out", "string", '"results/my_fit"'), ("validation_fraction", "number", "0.4")):
-        if key in fit_cfg:
-            require(fit_cfg[key], kind, f"[fit] {key}", example)
-    if not 0 <= fit_cfg.get("validation_fraction", 0.0) < 1:
-        raise PamjaxInputError(f"[fit] validation_fraction must be in [0, 1), got {fit_cfg['validation_fraction']}")
-    experiments = cfg.get("experiment", [])
-    if not isinstance(experiments, list):
-        raise PamjaxInputError("experiments are an array of tables: write [[experiment]] (double brackets)")
-    if not experiments and bench_cfg is None:
-        raise PamjaxInputError("the config needs at least one [[experiment]] (or a [bench] directory)")
-    for k, e in enumerate(experiments):
-        _validate_experiment(e, f"[[experiment]] #{k + 1}")
+    schema.validate_fit(cfg, where)
 
 
-def _validate_rig(rig_cfg, bench_cfg):
-    if not isinstance(rig_cfg, dict):
-        raise PamjaxInputError(f"[rig] must be a table, got {rig_cfg!r}")
-    check_keys(rig_cfg, _RIG_KEYS, "[rig]")
-    if bench_cfg is not None:
-        raise PamjaxInputError("[rig] describes the nuisances of [[experiment]] tables; a [bench] directory takes "
-                               "them as [bench] nuisance = true (or a list)")
-    sensors = rig_cfg.get("sensors", {})
-    if not isinstance(sensors, dict):
-        raise PamjaxInputError(f"[rig] sensors must be a table of start values, got {sensors!r}")
-    groups = sensors if all(isinstance(v, dict) for v in sensors.values()) and sensors else {"rig": sensors}
-    for group, values in groups.items():
-        check_keys(values, set(_SENSOR_FIELDS), f"[rig] sensors{'' if group == 'rig' else '.' + group}")
-        for key, value in values.items():
-            require(value, "number", f"[rig] sensors.{key}", "0.0")
-    if "free" in rig_cfg:
-        require(rig_cfg["free"], "list of strings", "[rig] free", '["pressure_offset", "delay", "supply_pressure"]')
-        unknown = sorted(set(rig_cfg["free"]) - set(_RIG_FREE))
-        if unknown:
-            raise PamjaxInputError(f"[rig] free names {unknown}, not nuisances pamjax fits; valid: {list(_RIG_FREE)}")
-
-
-def _validate_experiment(e, here):
-    check_keys(e, _EXPERIMENT_KEYS, here)
-    if "file" not in e:
-        raise PamjaxInputError(f"{here} needs 'file' (a CSV or NPZ recording, relative to the config)")
-    require(e["file"], "string", f"{here} file", '"triangle_025.csv"')
-    valid = signal_keys(e.get("signal", "recorded"), here)
-    if valid is not None:
-        check_keys(e["signal"], valid, f"{here} signal (kind = {e['signal']['kind']!r})")
-    for key in ("scales", "initial", "rename", "units"):
-        if key in e and not isinstance(e[key], dict):
-            raise PamjaxInputError(f"{here} {key} must be a table, got {e[key]!r}")
-    if "channels" in e:
-        require(e["channels"], "list of strings", f"{here} channels", '["pressure", "position"]')
-    if "stepping" in e and e["stepping"] not in ("auto", "adaptive", "pwm", "grid"):
-        raise PamjaxInputError(f"{here} stepping must be 'auto', 'adaptive', 'pwm' or 'grid', got {e['stepping']!r}")
-    for key, kind, example in (("name", "string", '"triangle"'), ("tank_volume", "positive number", "5e-5 (m³)"),
-                               ("rate", "positive number", "100.0 (Hz)"), ("filter_hz", "positive number", "20.0"),
-                               ("t_end", "positive number", "8.0 (s)"), ("max_steps", "positive integer", "200000"),
-                               ("unit_checks", "boolean", "false")):
-        if key in e:
-            require(e[key], kind, f"{here} {key}", example)
-    for c, s in e.get("scales", {}).items():
-        require(s, "positive number", f"{here} scales.{c}", "2e3 (the channel's noise level, in its SI unit)")
-    if "sensors" in e:
-        require(e["sensors"], "string", f"{here} sensors", '"rig" (a [rig] sensors group)')
-    if "supply_pressure" in e:
-        require(e["supply_pressure"], "positive number", f"{here} supply_pressure", "6.5e5 (Pa abs)")
-        check_setting("supply_pressure", e["supply_pressure"], here)
-    if "start" in e:
-        if not isinstance(e["start"], dict):
-            raise PamjaxInputError(f"{here} start must be a table {{pressure = ..., position = ..., velocity = ...}} "
-                                   f"(a run logged mid-way), got {e['start']!r}")
-        check_keys(e["start"], {"pressure", "position", "velocity"}, f"{here} start")
-        for key, value in e["start"].items():
-            require(value, "number", f"{here} start.{key}", "4e5")
-    for key, value in e.get("initial", {}).items():
-        require(value, "number", f"{here} initial.{key}", "101325.0")
-        check_setting(key, value, f"{here} initial")
-    if "tank_volume" in e:
-        check_setting("tank_volume", e["tank_volume"], here)
-    for table in ("rename", "units"):
-        for k, v in e.get(table, {}).items():
-            require(v, "string", f"{here} {table}.{k}", '"pressure"' if table == "rename" else '"bar abs"')
+def load(path):
+    """The fit a config describes, read in one pass: read → validate all → build the model → build the experiments.
+    Every key, type, parameter path, shape and unit is checked before any data are read; every recording is read
+    before anything is compiled."""
+    path = pathlib.Path(path)
+    cfg = read_toml(path)
+    schema.validate_fit(cfg, str(path))
+    model = build_model(cfg.get("model", {}), path.parent)
+    return build_fit(cfg, model, path.parent)
 
 
 def load_config(path):
-    """Parse and validate a fit config; returns (model, experiments, free, fit options, out). Every key is checked
-    before any data is read; parameter paths, shapes, channels and initial-state keys before anything is solved."""
-    return _load(path)[:5]
+    """Parse and validate a fit config; returns (model, experiments, free, fit options, out) (`load`)."""
+    return tuple(load(path))[:5]
 
 
-def _load(path):
-    """`load_config` and the config's `Bench` (None without a [bench] table)."""
-    import pamjax as pj
-
-    path = pathlib.Path(path)
-    cfg = read_toml(path)
-    validate_config(cfg, str(path))
+def build_fit(cfg, model, root):
+    """The `FitSetup` of a validated config and its model: the bench's experiments (a [bench] table), the free
+    parameters checked against the model, the [[experiment]] tables, then the [rig] around the plant."""
     fit_cfg = cfg.get("fit", {})
-    model = build_model(cfg.get("model", {}), path.parent)
-    experiments, free = [], fit_cfg.get("free")
-    bench = None
+    experiments, free, bench = [], fit_cfg.get("free"), None
     if "bench" in cfg:
-        b = cfg["bench"]
-        kinds = tuple(b.get("kinds", pj.FITTED_KINDS))
-        bench = pj.load_bench(path.parent / b["dir"], model, rate=b.get("rate"), kinds=kinds,
-                              fitted_keys=b.get("fitted_keys"), substeps=b.get("substeps", 16),
-                              nuisance=b.get("nuisance", False), position_offset=b.get("position_offset", 0.0),
-                              atmosphere=b.get("atmosphere"))
+        bench = _bench(cfg["bench"], model, root)
         experiments += bench.experiments
         model = bench.model  # the plant, or a pamjax.Rig holding it with the rig's nuisances
         free = bench.free if free is None else free
-    _check_free_shapes(model, free)
-    pj.ParameterSpace(model, free)  # unknown path, index or transform: named, before any solve
-    experiments += [_experiment(e, k, path.parent, fit_cfg, model) for k, e in enumerate(cfg.get("experiment", []))]
+    check_free(model, free)
+    experiments += build_experiments(cfg.get("experiment", []), model, root, fit_cfg.get("validation_fraction", 0.0))
     names = [e.name for e in experiments]
     if len(set(names)) != len(names):
         raise PamjaxInputError(f"experiment names must be unique, got {names}: give each [[experiment]] a name")
@@ -247,7 +93,67 @@ def _load(path):
         model, free = _rig(cfg["rig"], cfg.get("experiment", []), model, experiments, free)
     options = {k: fit_cfg[k] for k in ("max_steps", "ftol", "xtol", "gtol") if k in fit_cfg}
     staged = bench is not None and cfg["bench"].get("staged", True)  # pamjax.staged_start first (the default)
-    return model, experiments, free, options, fit_cfg.get("out"), bench, staged
+    return FitSetup(model, experiments, free, options, fit_cfg.get("out"), bench, staged)
+
+
+def _bench(table, model, root):
+    import pamjax as pj
+
+    return pj.load_bench(pathlib.Path(root) / table["dir"], model, rate=table.get("rate"),
+                         kinds=tuple(table.get("kinds", pj.FITTED_KINDS)), fitted_keys=table.get("fitted_keys"),
+                         substeps=table.get("substeps", 16), nuisance=table.get("nuisance", False),
+                         position_offset=table.get("position_offset", 0.0), atmosphere=table.get("atmosphere"))
+
+
+def check_free(model, free, where="[fit] free"):
+    """The free entries against the model, before any solve: every path, index and transform (`ParameterSpace`),
+    and a table's `scale` one number or one per element of its parameter (matched by name and shape)."""
+    import pamjax as pj
+
+    for entry in free:
+        if isinstance(entry, str) or "scale" not in entry:
+            continue
+        try:
+            *_, shape = parameter_shape(model, entry["path"], where)
+        except PamjaxInputError:
+            continue  # an unknown path: named by ParameterSpace below
+        given = np.shape(entry["scale"])
+        if given not in ((), shape):
+            raise PamjaxInputError(f"{where} entry {entry['path']!r}: scale expects one number or shape {shape}, "
+                                   f"got shape {given} ({entry['scale']!r})")
+    pj.ParameterSpace(model, free)  # unknown path, index or transform: named, before any solve
+
+
+def build_experiments(tables, model, root, validation_fraction=0.0):
+    """`pamjax.Experiment`s of validated [[experiment]] tables: each checked against `model` first (its `initial`
+    keys against the system it drives), then each recording read, windowed, filtered and resampled."""
+    import pamjax as pj
+
+    systems = []
+    for k, e in enumerate(tables):
+        build = pj.TankFromModel(e["tank_volume"]) if "tank_volume" in e else None
+        if "initial" in e:
+            check_initial(build(model) if build is not None else model, e["initial"], f"{_where(k)} initial")
+        systems.append(build)
+    experiments = []
+    for k, (e, build) in enumerate(zip(tables, systems)):
+        rec = load_recording(e, root)
+        if "t_end" in e:
+            rec = rec.window(None, float(e["t_end"]))
+        if "filter_hz" in e:
+            rec = rec.filtered(float(e["filter_hz"]))
+        if "rate" in e:
+            rec = rec.resampled(float(e["rate"]))
+        experiments.append(pj.Experiment(
+            rec, build_signal(e.get("signal", "recorded"), _where(k), rec), channels=e.get("channels"),
+            scales=e.get("scales"), build=build, initial=e.get("initial"), name=e.get("name", rec.name),
+            max_steps=e.get("max_steps", 200_000), validation_fraction=validation_fraction,
+            stepping=e.get("stepping", "auto"), sensors=e.get("sensors", "rig")))
+    return experiments
+
+
+def _where(k):
+    return f"[[experiment]] #{k + 1}"
 
 
 def _rig(rig_cfg, tables, model, experiments, free):
@@ -255,8 +161,7 @@ def _rig(rig_cfg, tables, model, experiments, free):
     `free` with the plant's paths under `plant.` and the nuisances [rig] free names."""
     import pamjax as pj
 
-    sensors = rig_cfg.get("sensors", {})
-    groups = sensors if sensors and all(isinstance(v, dict) for v in sensors.values()) else {"rig": sensors}
+    groups = sensor_groups(rig_cfg.get("sensors", {}))
     used = {e.sensor_group for e in experiments}
     groups = {g: pj.Sensors(**{k: float(v) for k, v in groups.get(g, {}).items()}) for g in used | set(groups)}
     wanted = set(rig_cfg.get("free", []))
@@ -277,39 +182,12 @@ def _rig(rig_cfg, tables, model, experiments, free):
             nuisance += [f"runs[{e.name}].start.{k}" for k in table["start"]]
     for g in sorted(groups):
         channels = {c for e in experiments if e.sensor_group == g for c in e.channels}
-        for field in _SENSOR_FIELDS:
+        for field in schema.SENSOR_FIELDS:
             acts = field == "delay" or any(field in pj.Sensors.channel_parameters(c) for c in channels)
             if field in wanted and acts:
                 nuisance.append(f"sensors[{g}].{field}")
     plant_free = [f"plant.{p}" if isinstance(p, str) else {**p, "path": f"plant.{p['path']}"} for p in free]
     return pj.Rig(model, sensors=groups, runs=runs), plant_free + nuisance
-
-
-def _experiment(e, k, root, fit_cfg, model):
-    import inspect
-
-    import pamjax as pj
-
-    where = f"[[experiment]] #{k + 1}"
-    build = pj.TankFromModel(e["tank_volume"]) if "tank_volume" in e else None
-    system = build(model) if build is not None else model
-    if "initial" in e:
-        check_keys(e["initial"], set(inspect.signature(system.initial_state).parameters),
-                   f"{where} initial (keyword arguments of {type(system).__name__}.initial_state)")
-    rec = pj.Recording.load(root / e["file"], rename=e.get("rename"), units=e.get("units"),
-                            unit_checks=e.get("unit_checks", True))
-    if "t_end" in e:
-        rec = rec.window(None, float(e["t_end"]))
-    if "filter_hz" in e:
-        rec = rec.filtered(float(e["filter_hz"]))
-    if "rate" in e:
-        rec = rec.resampled(float(e["rate"]))
-    return pj.Experiment(
-        rec, make_signal(e.get("signal", "recorded"), where, rec), channels=e.get("channels"), scales=e.get("scales"),
-        build=build, initial=e.get("initial"), name=e.get("name", rec.name), max_steps=e.get("max_steps", 200_000),
-        validation_fraction=fit_cfg.get("validation_fraction", 0.0), stepping=e.get("stepping", "auto"),
-        sensors=e.get("sensors", "rig"),
-    )
 
 
 _UNITS = {"pressure": "[Pa abs]", "position": "[m]", "velocity": "[m/s]", "force": "[N]", "mass_flow": "[kg/s]"}
@@ -350,7 +228,7 @@ def run(args):
         from . import figures, fit_figure
 
         figures.start(fit_figure)
-    model, experiments, free, options, out_cfg, bench, staged = _load(args.config)
+    model, experiments, free, options, out_cfg, bench, staged = load(args.config)
     out = pathlib.Path(args.out or out_cfg or f"results/{pathlib.Path(args.config).stem}")
     if args.resume and args.overwrite:
         raise PamjaxInputError("pamjax fit: --resume continues the fit in --out, --overwrite starts it again: "

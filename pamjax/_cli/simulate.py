@@ -14,32 +14,18 @@ CSV with units in the header (readable by `pamjax.Recording.load`) and a figure.
     initial = { pressure = 101325.0 }          # keyword arguments of the system's initial_state
 """
 
-import inspect
 import pathlib
+from typing import NamedTuple
 
 import numpy as np
 
 from .._core.csvio import write_table
 from .._core.errors import PamjaxInputError
-from .._core.units import check_setting
 from .._solve.simulate import validate
-from . import bands
-from .config import (
-    build_model,
-    check_keys,
-    make_signal,
-    read_toml,
-    require,
-    signal_keys,
-    validate_model_table,
-)
+from . import bands, schema
+from .config import build_model, build_signal, check_initial, load_recording, read_toml
 from .out import OutputFolder
 
-_TOP_KEYS = {"model", "input", "simulate"}
-_INPUT_KEYS = {"signal", "file", "rename", "units", "unit_checks"}
-_SIMULATE_KEYS = {"t_end", "t0", "dt", "initial", "tank_volume", "stepping", "substeps", "solver", "rtol", "atol",
-                  "max_steps"}
-_SOLVERS = ("Tsit5", "Rodas5", "Dopri5", "Dopri8")
 OUTPUTS = ("trajectory.csv", "trajectory.png")
 DEFAULT_DT = 0.01  # s: 100 rows per second, the rate of paper 000's figures
 LONG_ROWS = 100_000  # a run with more output rows than this is announced before it starts (it takes a while)
@@ -56,65 +42,54 @@ def add_arguments(parser):
     bands.add_arguments(parser)  # --band, --band-method, --band-level, --band-samples, --band-seed
 
 
+class Run(NamedTuple):
+    """What a simulate config describes: the config and its folder, the model, the system it simulates (the model, or
+    a tank test of its valve), the signal, the output times, `pamjax.simulate`'s keyword arguments and the recording
+    that drives it (or None)."""
+
+    cfg: dict
+    root: pathlib.Path
+    model: object
+    system: object
+    signal: object
+    ts: object
+    kwargs: dict
+    recording: object
+
+
 def validate_config(cfg):
     """Check every table, key and value type (nothing built, nothing read)."""
-    check_keys(cfg, _TOP_KEYS, "simulate config")
-    validate_model_table(cfg.get("model", {}))
-    inp, sim = cfg.get("input", {}), cfg.get("simulate", {})
-    check_keys(inp, _INPUT_KEYS, "[input]")
-    check_keys(sim, _SIMULATE_KEYS, "[simulate]")
-    if "signal" not in inp and "file" not in inp:
-        raise PamjaxInputError("[input] needs a signal (e.g. signal = { kind = \"Constant\", value = 0.5 }) or a "
-                               "file (a recording whose command channel drives the model)")
-    if "file" in inp:
-        require(inp["file"], "string", "[input] file", '"bench.csv"')
-    signal = inp.get("signal", "recorded")
-    valid = signal_keys(signal, "[input]")
-    if valid is not None:
-        check_keys(signal, valid, f"[input] signal (kind = {signal['kind']!r})")
-    if (signal == "recorded" or (isinstance(signal, dict) and signal.get("kind") == "recorded")) and "file" not in inp:
-        raise PamjaxInputError("[input] signal 'recorded' needs file = a recording with a command channel")
-    for key in ("rename", "units"):
-        if key in inp:
-            require(inp[key], "table", f"[input] {key}", "{ p = \"pressure\" }")
-    for key, kind, example in (("t_end", "positive number", "8.0 (s)"), ("dt", "positive number", "0.01 (s)"),
-                               ("t0", "number", "0.0 (s)"), ("tank_volume", "positive number", "5e-5 (m³)"),
-                               ("substeps", "positive integer", "16"), ("rtol", "positive number", "1e-6"),
-                               ("atol", "positive number", "1e-6"), ("max_steps", "positive integer", "200000"),
-                               ("stepping", "string", '"pwm"'), ("solver", "string", '"Rodas5"'),
-                               ("initial", "table", "{ pressure = 101325.0 }")):
-        if key in sim:
-            require(sim[key], kind, f"[simulate] {key}", example)
-    if sim.get("solver", "Tsit5") not in _SOLVERS:
-        raise PamjaxInputError(f"[simulate] solver must be one of {list(_SOLVERS)}, got {sim['solver']!r}")
-    if sim.get("stepping", "adaptive") not in ("adaptive", "pwm"):
-        raise PamjaxInputError(f"[simulate] stepping must be 'adaptive' or 'pwm', got {sim['stepping']!r}")
-    for key, value in sim.get("initial", {}).items():
-        require(value, "number", f"[simulate] initial.{key}", "101325.0")
-        check_setting(key, value, "[simulate] initial")
-    if "tank_volume" in sim:
-        check_setting("tank_volume", sim["tank_volume"], "[simulate]")
-    if "file" not in inp and "t_end" not in sim:
-        raise PamjaxInputError("[simulate] needs t_end (s) when no recording gives the times")
+    schema.validate_simulate(cfg)
 
 
-def prepare(cfg, root):
-    """(system, signal, ts, simulate keyword arguments, recording or None) from a validated config."""
+def load(path):
+    """The run a simulate config describes, read in one pass: read → validate all → build the model → build the
+    run (`build_run`) and check it (the signal's range, the initial state), all before the output folder."""
+    path = pathlib.Path(path)
+    _not_a_model_file(path)
+    cfg = read_toml(path)
+    schema.validate_simulate(cfg)
+    model = build_model(cfg.get("model", {}), path.parent)
+    run = build_run(cfg, model, path.parent)
+    validate(run.system, run.signal, run.ts, run.kwargs.get("y0"))  # signal range, initial state
+    return run
+
+
+def build_run(cfg, model, root):
+    """The `Run` of a validated config and its model: the system, its `initial` keys checked against it, then the
+    recording read (if any), the signal, the output times and the solver's settings."""
     import jax.numpy as jnp
 
     import pamjax as pj
 
     inp, sim = cfg.get("input", {}), cfg.get("simulate", {})
-    model = build_model(cfg.get("model", {}), root)
     system = pj.TankFromModel(sim["tank_volume"])(model) if "tank_volume" in sim else model
     if not isinstance(system, pj.AbstractSystem):
         raise PamjaxInputError(f"[model] must describe a system (MuscleSystem, TankSystem, ...) to simulate, got a "
                                f"{type(system).__name__} (a {type(system).__name__} alone has no dynamics)")
-    recording = None
-    if "file" in inp:
-        recording = pj.Recording.load(pathlib.Path(root) / inp["file"], rename=inp.get("rename"),
-                                      units=inp.get("units"), unit_checks=inp.get("unit_checks", True))
-    signal = make_signal(inp.get("signal", "recorded"), "[input]", recording)
+    check_initial(system, sim.get("initial", {}), "[simulate] initial")
+    recording = load_recording(inp, root) if "file" in inp else None
+    signal = build_signal(inp.get("signal", "recorded"), "[input]", recording)
     t0 = float(sim.get("t0", recording.t[0] if recording is not None else 0.0))
     t_end = float(sim.get("t_end", recording.t[-1] if recording is not None else 0.0))
     if not t_end > t0:
@@ -130,9 +105,6 @@ def prepare(cfg, root):
         if rows < 2:
             raise PamjaxInputError(f"[simulate] dt = {dt} s leaves fewer than two output times in [{t0}, {t_end}] s")
         ts = t0 + dt * np.arange(rows)
-    keys = set(inspect.signature(system.initial_state).parameters)
-    check_keys(sim.get("initial", {}), keys,
-               f"[simulate] initial (keyword arguments of {type(system).__name__}.initial_state)")
     kwargs = {k: sim[k] for k in ("stepping", "substeps", "rtol", "atol", "max_steps") if k in sim}
     if "solver" in sim:
         import diffrax as dfx
@@ -140,7 +112,7 @@ def prepare(cfg, root):
         kwargs["solver"] = pj.Rodas5() if sim["solver"] == "Rodas5" else getattr(dfx, sim["solver"])()
     if sim.get("initial"):
         kwargs["y0"] = system.initial_state(**sim["initial"])
-    return system, signal, jnp.asarray(ts), kwargs, recording
+    return Run(cfg, pathlib.Path(root), model, system, signal, jnp.asarray(ts), kwargs, recording)
 
 
 def columns_of(traj):
@@ -215,13 +187,9 @@ def _not_a_model_file(path):
 def run(args):
     import pamjax as pj
 
-    _not_a_model_file(args.config)
-    cfg = read_toml(args.config)
-    validate_config(cfg)
-    root = pathlib.Path(args.config).parent
-    system, signal, ts, kwargs, recording = prepare(cfg, root)
-    validate(system, signal, ts, kwargs.get("y0"))  # signal range, initial state: before the output folder
-    band_source = bands.check_simulate(args, cfg, root, system, kwargs)  # --band: a fitted model file, before work
+    r = load(args.config)
+    system, signal, ts, kwargs, recording = r.system, r.signal, r.ts, r.kwargs, r.recording
+    band_source = bands.check_simulate(args, r)  # --band: a fitted model file, before the output folder
     out = args.out or f"results/simulate-{pathlib.Path(args.config).stem}"
     outputs = [o for o in OUTPUTS if not (args.no_plot and o.endswith(".png"))]
     with OutputFolder(out, "pamjax simulate", outputs, overwrite=args.overwrite) as folder:
@@ -236,8 +204,7 @@ def run(args):
         comment = f"pamjax simulate {args.config}: {type(system).__name__}; pressures absolute"
         figure = lambda p: plot(p, traj, recording, str(args.config))  # noqa: E731
         if band_source is not None:  # --band: <channel>_lower / _upper columns, the band drawn in the figure
-            comment, figure = bands.add_to_simulation(args, cfg, root, band_source, signal, ts, kwargs, traj,
-                                                      recording, cols, units, comment)
+            comment, figure = bands.add_to_simulation(args, r, band_source, traj, cols, units, comment)
         written = [folder.write("trajectory.csv", lambda p: write_table(p, cols, units, comment))]
         if not args.no_plot:
             try:

@@ -18,6 +18,7 @@ runs, and a key the chosen `kind` does not use is an error listing the ones it d
 """
 
 import argparse
+import dataclasses
 import itertools
 import os
 import pathlib
@@ -29,33 +30,15 @@ from .. import presets
 from .._core.csvio import write_table
 from .._core.distributed import join_for_cli
 from .._core.errors import PamjaxInputError
-from .._core.units import ATMOSPHERE, check_absolute_pressure, check_setting
+from .._core.fitting import field_units
+from .._core.units import ATMOSPHERE
 from .._sweep.maps import flow_surface, frequency_response, steady_state_map
-from . import bands
-from .config import apply_set, build_model, check_keys, read_toml, validate_model_table
+from . import bands, schema
+from .config import apply_set, build_model, read_toml
+from .kinds import axis as _axis
 from .out import OutputFolder
+from .schema import SOLVER_KEYS
 
-KINDS = ("steady_state", "flow_surface", "frequency_response")
-_TOP_KEYS = {"kind", "system", "model", "sweep"}
-_SOLVER_KEYS = {"method", "dt", "chunk_size"}  # passed to pamjax.sweep
-# [system] and [sweep] keys each kind uses (defaults in run_config, each with its source)
-_SYSTEM_KEYS = {
-    "flow_surface": {"supply_pressure"},
-    "steady_state": {"valve", "payload_mass"},
-    "frequency_response": {"valve", "payload_mass"},
-}
-_SWEEP_KEYS = {
-    "flow_surface": {"commands", "pressures", "over"},
-    "steady_state": {"commands", "horizon", "window", "sample_interval", "over"} | _SOLVER_KEYS,
-    "frequency_response": {"frequencies", "offset", "amplitude", "settle_periods", "periods",
-                           "samples_per_period", "over"} | _SOLVER_KEYS,
-}
-_NUMBERS = ("horizon", "window", "sample_interval", "dt", "offset", "amplitude")  # s, s, s, s, 1, 1
-_INTEGERS = ("chunk_size", "settle_periods", "periods", "samples_per_period")
-_AXES = {"commands", "pressures", "frequencies"}
-# sweeps step on a fixed grid: the smoothed-edge switching valve or eq. 13; the exact-edge valve needs `simulate`
-_VALVES = ("pwm", "averaged")
-_AXIS_KEYS = {"start", "stop", "num", "log"}
 OUTPUTS = ("sweep.npz", "sweep.csv", "sweep.png")
 DEFAULT_CPU_DEVICES = os.cpu_count() or 1  # --cpu-devices: one XLA CPU device per core
 
@@ -98,77 +81,23 @@ def _positive_int(text):
 
 def validate_config(config):
     """Check every table, key and value of a parsed sweep config for its `kind` (nothing is built or solved)."""
-    check_keys(config, _TOP_KEYS, "sweep config")
-    kind = config.get("kind")
-    if kind not in KINDS:
-        raise PamjaxInputError(f"kind must be one of {list(KINDS)}, got {kind!r}")
-    if "model" in config and "system" in config:
-        raise PamjaxInputError("give either [system] (paper 000's preset) or [model] (any model), not both")
-    if "model" in config:
-        validate_model_table(config["model"])
-    sys_cfg = config.get("system", {})
-    check_keys(sys_cfg, _SYSTEM_KEYS[kind], f"[system] (kind = {kind!r})")
-    for key in ("payload_mass", "supply_pressure"):
-        if key in sys_cfg:
-            check_setting(key, _number(sys_cfg[key], f"[system] {key}"), "[system]")
-    sw = config.get("sweep", {})
-    check_keys(sw, _SWEEP_KEYS[kind], f"[sweep] (kind = {kind!r})")
-    for name in _AXES & set(sw):
-        _axis(sw[name], name)
-    for key in set(_NUMBERS) & set(sw):
-        _number(sw[key], f"[sweep] {key}")
-    for key in set(_INTEGERS) & set(sw):
-        if not (isinstance(sw[key], int) and not isinstance(sw[key], bool) and sw[key] > 0):
-            raise PamjaxInputError(f"[sweep] {key} must be a positive integer, got {sw[key]!r}")
-    if "method" in sw and not isinstance(sw["method"], str):
-        raise PamjaxInputError(f"[sweep] method must be a string, e.g. \"rk4\", got {sw['method']!r}")
-    over = sw.get("over", {})
-    if not isinstance(over, dict):
-        raise PamjaxInputError(f"[sweep] over must be a table of parameter path = values, got {over!r}")
-    for path, spec in over.items():
-        check_setting(path, _axis(spec, f"over.{path}"), "[sweep] over")
-    valve = sys_cfg.get("valve", "pwm")
-    if kind != "flow_surface" and valve not in _VALVES:
-        raise PamjaxInputError(f"[system] valve must be one of {list(_VALVES)}, got {valve!r}")
+    schema.validate_sweep(config)
 
 
-def _number(value, where):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise PamjaxInputError(f"{where} must be a number, got {value!r}")
-    return float(value)
+def load(path):
+    """The sweep a config describes, read in one pass: read → validate all → build the model → check every swept
+    path against it (nothing solved); returns (config, model)."""
+    path = pathlib.Path(path)
+    config = read_toml(path)
+    schema.validate_sweep(config)
+    model = build_sweep_model(config, path.parent)
+    check_over(config, model)
+    return config, model
 
 
-def _axis(spec, name):
-    if isinstance(spec, list) and spec and all(isinstance(v, int | float) and not isinstance(v, bool) for v in spec):
-        values = np.asarray(spec, dtype=float)
-    elif isinstance(spec, dict) and {"start", "stop", "num"} <= set(spec):
-        check_keys(spec, _AXIS_KEYS, f"[sweep] {name}")
-        start, stop = _number(spec["start"], f"[sweep] {name} start"), _number(spec["stop"], f"[sweep] {name} stop")
-        if not (isinstance(spec["num"], int) and not isinstance(spec["num"], bool) and spec["num"] >= 1):
-            raise PamjaxInputError(f"[sweep] {name} num must be a positive integer, got {spec['num']!r}")
-        log = spec.get("log", False)
-        if not isinstance(log, bool):
-            raise PamjaxInputError(f"[sweep] {name} log must be true or false, got {log!r}")
-        if log and not (start > 0 and stop > 0):
-            raise PamjaxInputError(f"[sweep] {name}: a log axis needs start and stop > 0, got {start}, {stop}")
-        values = (np.geomspace if log else np.linspace)(start, stop, spec["num"])
-    else:
-        raise PamjaxInputError(f"[sweep] {name} must be a non-empty list of numbers or a table "
-                               f"{{start, stop, num[, log]}}, got {spec!r}"
-                               + (" (a single string where a list is expected)" if isinstance(spec, str) else ""))
-    if name == "commands" and not np.all((values >= 0) & (values <= 1)):
-        hint = " (these look like percent: divide by 100)" if np.all((values >= 0) & (values <= 100)) else ""
-        raise PamjaxInputError(f"[sweep] commands are duty ratios in [0, 1], got {values.min():g} … "
-                               f"{values.max():g}{hint}")
-    if name == "pressures":
-        check_absolute_pressure(values, "[sweep] pressures")
-    if name == "frequencies" and not np.all(values > 0):
-        raise PamjaxInputError(f"[sweep] frequencies must be > 0 [Hz], got {values.min():g}")
-    return values
-
-
-def _model(config, root):
-    """The swept model: [model] (any preset or model file), else [system] (paper 000's preset)."""
+def build_sweep_model(config, root):
+    """The swept model of a validated config: [model] (any preset or model file), else [system] (paper 000's
+    preset)."""
     kind = config["kind"]
     if "model" in config:
         model = build_model(config["model"], root)
@@ -199,22 +128,27 @@ def _leaf(model, path):
 
 
 def _over_name(model, path):
-    """`path [unit]` for a swept parameter (the unit its component's field comment gives)."""
-    from .._fit.model_io import _units_of
-
+    """`path [unit]` for a swept parameter (the unit its component's field declares)."""
     parts = path.split("[")[0].split(".")
     owner = _leaf(model, ".".join(parts[:-1])) if len(parts) > 1 else model
-    unit = _units_of(type(owner)).get(parts[-1], "") if owner is not None else ""
+    unit = field_units(type(owner)).get(parts[-1], "") if dataclasses.is_dataclass(owner) else ""
     return f"{path} [{unit}]" if unit else path
 
 
-def prepare(config, root="."):
-    """Validate a parsed config and build its model, checking every swept path against it (nothing solved)."""
-    validate_config(config)
-    model = _model(config, root)
+def check_over(config, model):
+    """Every `[sweep] over` path must name a parameter of `model`, with the right shape and units (checked on the
+    grid's first point)."""
     over = config.get("sweep", {}).get("over", {})
-    if over:  # every path must name a parameter of this model, with the right shape: checked on the first point
+    if over:
         apply_set(model, {p: float(_axis(v, f"over.{p}")[0]) for p, v in over.items()}, "[sweep] over")
+
+
+def prepare(config, root="."):
+    """Validate a parsed config and build its model, checking every swept path against it (nothing solved): `load`
+    of a config already read."""
+    schema.validate_sweep(config)
+    model = build_sweep_model(config, root)
+    check_over(config, model)
     return model
 
 
@@ -248,7 +182,7 @@ def _run_one(config, model, progress, native_over):
     """One map of `model`; `native_over` (path → axis values) is swept inside one steady-state sweep."""
     kind = config["kind"]
     sw = config.get("sweep", {})
-    options = {k: sw[k] for k in _SOLVER_KEYS if k in sw}
+    options = {k: sw[k] for k in SOLVER_KEYS if k in sw}
     if kind == "flow_surface":
         valve = model.valve
         u = _axis(sw.get("commands", {"start": 0, "stop": 1, "num": 41}), "commands")
@@ -348,8 +282,7 @@ def _savez(path, columns):
 def run(args):
     _use_cpu_devices(args.cpu_devices)
     writes = join_for_cli(args.distributed)  # before JAX starts; False on processes other than 0
-    config = read_toml(args.config)
-    model = prepare(config, pathlib.Path(args.config).parent)  # before the output folder is touched
+    config, model = load(args.config)  # before the output folder is touched
     band_source = bands.check_sweep(args, config, pathlib.Path(args.config).parent, model)  # --band: a fitted model
     if not writes:  # another process of a distributed run: its share of the work, no files
         run_config(config, model=model)
@@ -367,9 +300,7 @@ def run(args):
               f"{time.perf_counter() - start:.1f} s on {len(devices)} {devices[0].platform} device(s)")
         comment, figure = None, lambda p: plot(spec, p)  # noqa: E731
         if band_source is not None:  # --band: <column>_lower / _upper columns, the band drawn in the figure
-            sw = config.get("sweep", {})
-            comment, figure = bands.add_to_sweep(args, config, model, band_source, spec, columns,
-                                                 lambda name, default: _axis(sw.get(name, default), name), apply_set)
+            comment, figure = bands.add_to_sweep(args, config, model, band_source, spec, columns)
         folder.write("sweep.npz", lambda p: _savez(p, columns))
         folder.write("sweep.csv", lambda p: write_table(p, columns, {}, comment))
         print(f"wrote {out}/sweep.npz and sweep.csv (columns: {', '.join(columns)})")

@@ -84,6 +84,13 @@ def join_path(steps):
     return out
 
 
+def split_path(path):
+    """(steps, index) of a parameter path such as 'valve.coefficients[1,0]' or 'runs[E4].supply_pressure': the
+    attribute names and dict keys (`Key`) it walks, and its final array index (None for the whole leaf); a
+    malformed path is a `PamjaxInputError`. `join_path(steps)` writes the leaf's path back."""
+    return _parse(path)
+
+
 def parameter_paths(model, prefix=""):
     """All array-valued parameter paths of `model` with their shapes, e.g. {'valve.inflate.area': ()}; dict fields
     (a `Rig`'s run conditions) give `name[key].…` paths."""
