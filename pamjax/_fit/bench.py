@@ -214,8 +214,7 @@ def load_bench(directory, model, *, rate=None, kinds=FITTED_KINDS, fitted_keys=N
         start_unknown = str(e.get("init", "")).strip().lower().startswith("unknown")
         if start_unknown:
             unknown.append(name)
-        signal = run_command(name, kind, e, rec, period, f"{where}/meta.json: experiment {name!r}", notes,
-                             start_unknown)
+        signal = run_command(name, kind, e, rec, period, f"{where}/meta.json", notes, start_unknown)
         if rate is not None:
             rec = rec.resampled(rate)
         recordings.append(rec)

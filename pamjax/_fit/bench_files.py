@@ -145,24 +145,26 @@ def _triangle_phase(signal, t, u, period):
 def run_command(name, kind, e, rec, valve_period, where, notes, unknown_start):
     """The signal that drives the run: the recorded duty (checked against meta.json's where both exist), else
     meta.json's."""
+    here = f"{where}: experiment {name!r}"
     recorded = "command" in rec.channels
     if recorded:
         u = rec["command"]
         if np.nanmin(u) < -1e-9 or np.nanmax(u) > 1 + 1e-9:
             hint = " (it looks like percent: write the header 'duty [%]')" if np.nanmax(u) <= 100 else ""
-            raise PamjaxInputError(f"{where}: the recorded duty must lie in [0, 1], its range is "
-                                   f"[{np.nanmin(u):g}, {np.nanmax(u):g}]{hint}")
+            raise PamjaxInputError(f"{where}: the recorded duty of experiment {name!r} must lie in [0, 1], its range "
+                                   f"is [{np.nanmin(u):g}, {np.nanmax(u):g}]{hint}")
     if kind in TANK_KINDS:
-        duty = number(e, "u", where, 0.0, 1.0)
+        duty = number(e, "u", here, 0.0, 1.0)
         if recorded and duty is not None:
             off = float(np.max(np.abs(rec["command"] - duty)))
             if off > _DUTY_TOLERANCE:
                 raise PamjaxInputError(
-                    f"{where}: meta.json gives duty u = {duty:g}, but its recording's duty is "
+                    f"{where}: meta.json gives experiment {name!r} duty u = {duty:g}, but its recording's duty is "
                     f"{np.min(rec['command']):g}..{np.max(rec['command']):g}: one of them is wrong (the recording "
                     "is what the rig commanded)")
         if not recorded and duty is None:
-            raise PamjaxInputError(f"{where}: it has neither a recorded duty column nor meta.json's 'u'")
+            raise PamjaxInputError(f"{where}: experiment {name!r} has neither a recorded duty column nor meta.json's "
+                                   "'u'")
         if not recorded:
             return Constant(duty)
     else:
@@ -172,18 +174,18 @@ def run_command(name, kind, e, rec, valve_period, where, notes, unknown_start):
             missing = [k for k in ("lo", "hi", "f_tri") if k not in e]
             if missing:
                 raise PamjaxInputError(
-                    f"{where}: it gives a triangle duty without {missing} (a triangle needs lo, hi and f_tri "
-                    "[Hz]; a run with a recorded duty column needs none of them: kind 'muscle_run')")
-            lo, hi = number(e, "lo", where, 0.0, 1.0), number(e, "hi", where, 0.0, 1.0)
-            f = number(e, "f_tri", where, 0.0, None, "Hz")
+                    f"{where}: experiment {name!r} gives a triangle duty without {missing} (a triangle needs lo, hi "
+                    "and f_tri [Hz]; a run with a recorded duty column needs none of them: kind 'muscle_run')")
+            lo, hi = number(e, "lo", here, 0.0, 1.0), number(e, "hi", here, 0.0, 1.0)
+            f = number(e, "f_tri", here, 0.0, None, "Hz")
             if not (lo < hi and f > 0):
-                raise PamjaxInputError(f"{where}: it needs lo < hi and f_tri > 0, got lo={lo}, hi={hi}, "
-                                       f"f_tri={f}")
+                raise PamjaxInputError(f"{where}: experiment {name!r} needs lo < hi and f_tri > 0, got lo={lo}, "
+                                       f"hi={hi}, f_tri={f}")
             triangle = Triangle(lo, hi, f)
         if not recorded and triangle is None:
             raise PamjaxInputError(
-                f"{where}: it has no recorded duty column (u / duty) and meta.json gives no triangle (lo, hi, "
-                "f_tri): pamjax cannot know what drove the run; record the commanded duty")
+                f"{where}: experiment {name!r} has no recorded duty column (u / duty) and meta.json gives no "
+                "triangle (lo, hi, f_tri): pamjax cannot know what drove the run; record the commanded duty")
         if not recorded:
             return triangle
         if triangle is not None:
@@ -194,14 +196,14 @@ def run_command(name, kind, e, rec, valve_period, where, notes, unknown_start):
                 phase = _triangle_phase(triangle, t, u, valve_period)
                 if phase is None:
                     raise PamjaxInputError(
-                        f"{where}: its recorded duty is not meta.json's triangle (lo={e['lo']}, hi={e['hi']}, "
-                        f"f_tri={e['f_tri']}) at any phase: one of them is wrong (the recording is what the rig "
-                        "commanded)")
+                        f"{where}: experiment {name!r}'s recorded duty is not meta.json's triangle (lo={e['lo']}, "
+                        f"hi={e['hi']}, f_tri={e['f_tri']}) at any phase: one of them is wrong (the recording is what "
+                        "the rig commanded)")
                 if not unknown_start:
                     raise PamjaxInputError(
-                        f"{where}: its recorded duty is meta.json's triangle {phase:.3f} s in: the run was "
-                        "logged from the middle, so its start is not at rest; mark it with \"init\": \"unknown\" "
-                        "(its start state is then fitted with --nuisance)")
+                        f"{where}: experiment {name!r}'s recorded duty is meta.json's triangle {phase:.3f} s in: the "
+                        "run was logged from the middle, so its start is not at rest; mark it with \"init\": "
+                        "\"unknown\" (its start state is then fitted with --nuisance)")
                 notes.append(f"{name}: logged {phase:.3f} s into its triangle (recorded duty); driven by the recorded "
                              "duty")
             else:

@@ -702,9 +702,3 @@ def summary(names=None, report=print):
             report(f"  {result}: [{CASES[name][0]}] {name}: {text.strip()[:300]}")
     counts["total"] = sum(counts.values())
     return counts
-
-
-# Catalogue modules of later surfaces, in the same format (each imports the helpers above).
-from .bench_cases import CASES as _BENCH_CASES  # noqa: E402 - bench folders: fits/joint.py, [bench], load_bench
-
-CASES.update(_BENCH_CASES)

@@ -3,7 +3,8 @@
 damaged one way at a time. Every case ends in one named error (exit status 2, no traceback, no output folder left
 behind) or, for the folder itself, a correct result.
 
-Cases in the format of `bad_inputs_cli.CASES`: name → (class, expect, run, name_in_message); registered there.
+Cases in the format of `bad_inputs_cli.CASES`: name → (class, expect, run, name_in_message); `register()` adds them
+there (`test_bench_cases.py`; `benchmarks/reliability.py` counts every `*_cases.py` in `workflow_cases`).
 """
 
 import contextlib
@@ -123,3 +124,11 @@ CASES = {f"bench joint.py {k}": ("bench", E, joint_run(edit), message) for k, (e
 _VIA_CONFIG = ("duty in percent in meta.json", "meta.json duty contradicts the recording", "triangle without lo",
                "folder of CSV without meta.json")
 CASES.update({f"bench pamjax fit {k}": ("bench", E, fit_run(DAMAGE[k][0]), DAMAGE[k][1]) for k in _VIA_CONFIG})
+
+
+def register():
+    """Add these cases to `bad_inputs_cli.CASES` (idempotent); returns their names."""
+    from . import bad_inputs_cli
+
+    bad_inputs_cli.CASES.update(CASES)
+    return sorted(CASES)
