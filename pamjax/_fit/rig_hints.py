@@ -4,8 +4,8 @@ A fit of the ideal plant to a rig's recordings ends with residuals that are not 
 "model mismatch" alone sends the user after the model. The residuals of such a fit carry the signature of each
 everyday nuisance, measured here from the data, the fitted predictions and the commands, without another solve:
 
-- **an offset at rest**: where a run starts at rest at atmospheric pressure, before its valve first opens, the model
-  IS the atmosphere; the data's mean there is the pressure sensor's offset;
+- **an offset at rest**: where a run starts at rest at atmospheric pressure, until its valve first opens (the fitted
+  model's pressure first moves), the model IS the atmosphere; the data's mean there is the pressure sensor's offset;
 - **a lag between command and response**: data(t) = model(t − d) ≈ model(t) − d ṁ(t), so the residual regressed on
   −ṁ gives the acquisition delay d (pooled over every run and channel, each weighted by its noise);
 - **a start that is not at rest**: a run declared at rest whose first 20 ms move, or sit far from the model's rest
@@ -29,20 +29,6 @@ _MIN_DELAY = 1e-4  # s
 _MIN_OFFSET = 300.0  # Pa
 _MIN_SUPPLY = 1e3  # Pa
 _START_WINDOW = 0.02  # s
-
-
-def _first_opening(e, valve):
-    """The time of the first PWM period whose duty opens the valve (None for a valve without a period)."""
-    period = valve.period
-    if period is None:
-        return None
-    period = float(period)
-    starts = np.arange(np.floor(float(e.times[0]) / period), np.floor(float(e.times[-1]) / period) + 1) * period
-    import jax
-
-    duty = np.asarray(jax.vmap(e.signal)(starts))
-    opens = np.asarray(valve.switching_gates(duty)[0])
-    return float(starts[np.argmax(opens)]) if np.any(opens) else float(e.times[-1])
 
 
 def _start_pressure(e, system, model, atmosphere):
@@ -109,9 +95,9 @@ def nuisance_hints(model, experiments, predictions, labels):
                 num += float(r @ -slope) / sigma**2
                 den += float(slope @ slope) / sigma**2
             if c == "pressure":
-                first = _first_opening(e, system.valve) if abs(start_p - atmosphere) < 1.0 else None
-                if first is not None:
-                    rest = used & (t < first)
+                if abs(start_p - atmosphere) < 1.0:  # at rest until the model's pressure first moves (the valve opens)
+                    moved = np.flatnonzero(np.abs(pred - pred[0]) > 1.0)
+                    rest = used & (np.arange(t.size) < (moved[0] if moved.size else t.size))
                     if np.count_nonzero(rest) >= 3:
                         rest_sum += float(np.sum(data[rest] - atmosphere))
                         rest_n += int(np.count_nonzero(rest))
