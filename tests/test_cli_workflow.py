@@ -172,6 +172,8 @@ def test_a_real_interrupt_during_compilation_exits_cleanly(folder, signum, code)
     proc = subprocess.Popen([sys.executable, "-m", "pamjax", "fit", str(folder / "fit.toml"), "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env={**os.environ, "JAX_PLATFORMS": "cpu"})
+    device = proc.stdout.readline()  # where the command runs (docs/cli.md, Device), before any work
+    assert device.startswith("pamjax fit: running on"), device + proc.stderr.read()
     first = proc.stdout.readline()  # printed once the folder is held, just before the fit compiles
     assert first.startswith("fitting 1 parameter entries"), first + proc.stderr.read()
     proc.send_signal(signum)
