@@ -1,4 +1,5 @@
-"""`design`: a PWM duty signal chosen by gradient to maximise what a recording will tell about named parameters.
+"""`design_experiment`: a PWM duty signal chosen by gradient to maximise what a recording will tell about named
+parameters.
 
 Workflow only: the objective (Fisher information through the solve, criteria, constraint penalties) is in
 `design_objective`, everything before the first solve (checks, the valve's thresholds, limits, the start, defaults)
@@ -205,7 +206,7 @@ def _problem(space, theta, exp, basis, weight, band, windows, limits, max_pressu
         criterion=criterion)
 
 
-def design(
+def design_experiment(
     model,
     free,
     duration: float,
@@ -319,8 +320,8 @@ def design(
                                         float(rate), noise, build)
     constraints = _constraints(aux, setup, verified)
     if not constraints["feasible"]:
-        warnings.warn("pamjax.design: the design violates its limits (a bench must not play it; to_csv refuses "
-                      "it): " + "; ".join(constraints["violations"]), PamjaxDesignWarning, stacklevel=2)
+        warnings.warn("pamjax.design_experiment: the design violates its limits (a bench must not play it; to_csv "
+                      "refuses it): " + "; ".join(constraints["violations"]), PamjaxDesignWarning, stacklevel=2)
     return _result(setup, aux, history, errors, constraints, message + note, criterion, parametrisation,
                    float(duration), t_start, compile_s)
 
@@ -392,11 +393,11 @@ def check_design(model, free, duration, **kwargs):
     """Every check `design` makes before its first solve (the arguments, the valve's thresholds and the duties they
     leave, each limit against the run's start), without designing: a `PamjaxInputError` naming the argument, or
     None. `pamjax design` runs it before it makes the output folder."""
-    known = set(inspect.signature(design).parameters) - {"model", "free", "duration"}
+    known = set(inspect.signature(design_experiment).parameters) - {"model", "free", "duration"}
     unknown = sorted(set(kwargs) - known)
     if unknown:
         raise PamjaxInputError(f"unknown design argument(s) {unknown}")
-    args = {k: v.default for k, v in inspect.signature(design).parameters.items()
+    args = {k: v.default for k, v in inspect.signature(design_experiment).parameters.items()
             if k in known and k in _SETUP_ARGS}
     args.update({k: v for k, v in kwargs.items() if k in _SETUP_ARGS})
     _setup(model, free, duration, **args)
