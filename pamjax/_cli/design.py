@@ -1,6 +1,6 @@
-"""`pamjax design CONFIG.toml`: design a PWM duty experiment (`pamjax.design`) as a TOML config describes; write the
-signal as CSV (`t [s]`, `duty [-]`, one row per PWM period, the predicted standard errors in comment lines), the
-result as JSON and a figure. Config format: docs/identifiability.md and `examples/design_example.toml`."""
+"""`pamjax design CONFIG.toml`: design a PWM duty experiment (`pamjax.design_experiment`) as a TOML config describes;
+write the signal as CSV (`t [s]`, `duty [-]`, one row per PWM period, the predicted standard errors in comment lines),
+the result as JSON and a figure. Config format: docs/identifiability.md and `examples/design_example.toml`."""
 
 import pathlib
 import sys
@@ -19,8 +19,8 @@ OUTPUTS = ("design.csv", "design.json", "design.png")
 # [design] keys: `free`, `duration`, `noise` (required), `prior` / `baseline` (fit configs whose experiments are the
 # information in hand / the experiment to beat), `initial` (a constant duty, or the CSV of an earlier design to
 # start from), `tank_volume` (design a constant-volume tank test of the model's valve: build=TankFromModel, as a fit
-# experiment's `tank_volume`), `out`, and the keyword arguments of `pamjax.design` below (`period`: the PWM period
-# [s] of a model whose valve has none, e.g. an averaged valve; `min_force = false`: no force limit).
+# experiment's `tank_volume`), `out`, and the keyword arguments of `pamjax.design_experiment` below (`period`: the PWM
+# period [s] of a model whose valve has none, e.g. an averaged valve; `min_force = false`: no force limit).
 _DESIGN_ARGS = ("channels", "start", "rate", "criterion", "subset", "duty_band", "duty_margin", "stroke_margin",
                 "max_pressure", "max_duty_step", "min_force", "parametrisation", "knots", "steps", "seed",
                 "baseline_margin", "period")
@@ -98,7 +98,7 @@ def run(args):
     with OutputFolder(out, "pamjax design", outputs, overwrite=args.overwrite) as folder:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", pj.PamjaxDesignWarning)  # reported below, as the command's outcome
-            res = pj.design(model, free, duration, progress=not args.quiet, **kwargs)
+            res = pj.design_experiment(model, free, duration, progress=not args.quiet, **kwargs)
         print(f"{res.message}; {res.criterion} criterion {res.objective[0]:.4f} → {res.objective[1]:.4f} "
               f"({res.design_s:.1f} s, of which {res.compile_s:.1f} s to the first iteration)")
         print(res.table())
