@@ -187,7 +187,7 @@ def main():
     # --- pamjax
     def pamjax_run(system, method, dt=None):
         def call():
-            return pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties}, reduce=pamjax.Final(),
+            return pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties}, reduce=pamjax.FinalValue(),
                                 channels=("pressure", "position"), method=method, dt=dt, progress=False)
 
         start = time.perf_counter()
