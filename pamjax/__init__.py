@@ -1,8 +1,7 @@
 """pamjax: differentiable simulation and identification of pneumatic artificial muscle systems in JAX.
 
 The public names, grouped by concept (`docs/architecture.md` says where each lives and why); bench directories and
-bench tests in `pamjax.bench`, runtime knobs in `pamjax.runtime`, unchecked traceable cores in `pamjax.unchecked`.
-"""
+bench tests in `pamjax.bench`, runtime knobs in `pamjax.runtime`, unchecked traceable cores in `pamjax.unchecked`."""
 # ruff: noqa: E402, I001  (the XLA CPU setting is applied before the submodules are imported; groups by concept)
 
 # First, before anything can initialise JAX's backend: XLA's CPU setting for small while loops (see _core.xla_cpu).
