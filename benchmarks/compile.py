@@ -17,9 +17,9 @@ Every figure comes from a fresh Python process (compilation is per process), sta
   of diffrax — is timed apart and printed, not charged to whichever valve comes first (before, ~0.4–0.8 s of it
   sat in the smoothed-PWM figure).
 
-Each row also reports what was compiled (`pamjax.CompileStats`: programs traced, lowered and compiled, and seconds).
-`--before REV` runs the main job of an earlier commit (its own checkout in a temporary git worktree, same venv) in
-the same session for the before/after; the issue's other before figures (bench fit 291 s, joint fit 109 s) were
+Each row also reports what was compiled (`pamjax.runtime.CompileStats`: programs traced, lowered and compiled, and
+seconds). `--before REV` runs the main job of an earlier commit (its own checkout in a temporary git worktree, same
+venv) in the same session for the before/after; the issue's other before figures (bench fit 291 s, joint fit 109 s) were
 taken by its author on this machine type. Ends with
 
     RESULT main_job_cold_s=... main_job_warm_s=... bench_fit_compile_s=... joint_fit_compile_s=...
@@ -48,9 +48,9 @@ BENCH_FIT = textwrap.dedent("""
     import jax
     jax.config.update("jax_enable_x64", True)
     import pamjax as pj
-    with pj.CompileStats() as stats:
+    with pj.runtime.CompileStats() as stats:
         model = pj.presets.mas10_system(valve="pwm", friction="karnopp")
-        bench = pj.load_bench(sys.argv[1], model, fitted_keys=["Cv12", "b12", "Cv23", "b23", "Fc", "Cf"])
+        bench = pj.bench.load_bench(sys.argv[1], model, fitted_keys=["Cv12", "b12", "Cv23", "b23", "Fc", "Cf"])
         res = pj.fit(model, bench.experiments, bench.free, progress=False)
     print(json.dumps(dict(compile_s=res.compile_s, fit_s=res.fit_s, status=res.status, iterations=res.iterations,
                           stats=dict(count=stats.count, seconds=stats.seconds))))
@@ -74,7 +74,7 @@ SIMULATE = textwrap.dedent("""
                          ("exact edges", pj.presets.mas10_system("exact")),
                          ("averaged", pj.presets.mas10_system("averaged")),
                          ("pwm grid, stick-slip", pj.presets.mas10_system("pwm", friction="karnopp"))):
-        with pj.CompileStats() as stats:
+        with pj.runtime.CompileStats() as stats:
             t0 = time.perf_counter(); jax.block_until_ready(pj.simulate(system, signal, ts).position)
             t1 = time.perf_counter(); jax.block_until_ready(pj.simulate(system, signal, ts).position)
             t2 = time.perf_counter()

@@ -1,4 +1,5 @@
-"""Designing pays: a 33 s experiment designed with `pamjax.design` against paper 000's triangle pair (E3 + E4).
+"""Designing pays: a 33 s experiment designed with `pamjax.design_experiment` against paper 000's triangle pair
+(E3 + E4).
 
     python benchmarks/design.py [--seeds 20] [--steps 40] [--pilot E4|none] [--tanks designed|shared]
                                 [--out results/benchmark_design]
@@ -23,12 +24,12 @@ whatever the muscle run. `--tanks designed` (the default) lets the designed arm 
 
 1. Design (timed from the first design to the last, compilation included: a fresh process, JAX's persistent cache
    off; `design_s`).
-   a. Tank protocol (`--tanks designed`): `pamjax.design(..., build=<the bench's tank>, channels=("pressure",),
-      start=atmospheric)`, one run of the bench's tank time (12 s) on the same tank, D-optimal over the four valve
-      parameters a tank test determines (C_v12, b12, C_v23, b23), at the presets (nothing recorded yet; their four
-      valve values are the bench plant's own, so this local design sits at the truth), with the bench's tank tests
-      as the baseline to beat by `--tank-margin` on each, on the tank run's own information (without a known volume
-      the muscle runs cannot fix the flow scales; they sharpen them once a tank test has).
+   a. Tank protocol (`--tanks designed`): `pamjax.design_experiment(..., build=<the bench's tank>,
+      channels=("pressure",), start=atmospheric)`, one run of the bench's tank time (12 s) on the same tank, D-optimal
+      over the four valve parameters a tank test determines (C_v12, b12, C_v23, b23), at the presets (nothing
+      recorded yet; their four valve values are the bench plant's own, so this local design sits at the truth), with
+      the bench's tank tests as the baseline to beat by `--tank-margin` on each, on the tank run's own information
+      (without a known volume the muscle runs cannot fix the flow scales; they sharpen them once a tank test has).
    b. Sequential, as on a bench (`--pilot E4`, the default): the first 8 s of the muscle time are paper 000's E4
       triangle run, recorded and fitted with the arm's tank tests from the presets; the other 25 s are designed
       D-optimal over the 15 parameters at those fitted values, with the arm's tank tests and the pilot as information
@@ -84,7 +85,7 @@ VALVE_KEYS = ("Cv12", "b12", "Cv23", "b23")  # the bench parameters a constant-v
 def truth_model(model, bench):
     """The preset model with the bench's true values of the fitted parameters."""
     space = pj.ParameterSpace(model, bench.free)
-    by_label = {label: key for key, (_, label) in pj.BENCH_PARAMETERS.items()}
+    by_label = {label: key for key, (_, label) in pj.bench.BENCH_PARAMETERS.items()}
     return space.with_values(np.asarray([bench.meta["params"][by_label[lbl]] for lbl in space.labels]))
 
 
@@ -139,10 +140,11 @@ def design_tanks(model, bench, tanks, args):
     build = bench.experiments[0].build
     seconds = sum(float(e.times[-1] - e.times[0]) for e in bench.experiments)
     start = {"pressure": float(model.air.atmospheric_pressure)}
-    valve = [pj.BENCH_PARAMETERS[k][0] for k in VALVE_KEYS]
-    res = pj.design(model, valve, seconds, noise={"pressure": NOISE["pressure"]}, channels=("pressure",),
-                    start=start, build=build, rate=RATE, baseline=tanks.experiments(np.random.default_rng(0)),
-                    baseline_margin=args.tank_margin, knots=args.tank_knots, steps=args.tank_steps)
+    valve = [pj.bench.BENCH_PARAMETERS[k][0] for k in VALVE_KEYS]
+    res = pj.design_experiment(model, valve, seconds, noise={"pressure": NOISE["pressure"]}, channels=("pressure",),
+                               start=start, build=build, rate=RATE,
+                               baseline=tanks.experiments(np.random.default_rng(0)), baseline_margin=args.tank_margin,
+                               knots=args.tank_knots, steps=args.tank_steps)
     return res, ("tank_design", res.signal(), seconds, build, start, ("pressure",))
 
 
@@ -183,7 +185,7 @@ def main(argv=None):
           f"load average at start {os.getloadavg()[0]:.2f}; jax {jax.__version__}; "
           f"pamjax {pathlib.Path(inspect.getfile(pj)).parent}", flush=True)
     model = pj.presets.mas10_system(valve="pwm", friction="karnopp")
-    bench = pj.load_bench(args.bench, model, kinds=("tank_charge", "tank_discharge"))
+    bench = pj.bench.load_bench(args.bench, model, kinds=("tank_charge", "tank_discharge"))
     truth = truth_model(model, bench)
     tanks = Arm(truth, tank_specs(bench))
     rng0 = np.random.default_rng(0)
@@ -210,8 +212,8 @@ def main(argv=None):
         print(f"pilot fit ({args.tanks} tank tests + E4, from the presets): {pilot_fit.status}, "
               f"{pilot_fit.iterations} iterations, {wall:.1f} s", flush=True)
     baseline = Arm(truth, muscle_specs(rest)).experiments(rng0)
-    res = pj.design(point, bench.free, duration, noise=NOISE, rate=RATE, prior=prior, baseline=baseline,
-                    baseline_margin=args.margin, steps=args.steps)
+    res = pj.design_experiment(point, bench.free, duration, noise=NOISE, rate=RATE, prior=prior, baseline=baseline,
+                               baseline_margin=args.margin, steps=args.steps)
     design_s = time.perf_counter() - t0
     print(f"design: {design_s:.1f} s ({res.compile_s:.1f} s to the first iteration), {res.message}; "
           f"criterion {res.objective[0]:.3f} → {res.objective[1]:.3f}; constraints {res.constraints}", flush=True)
@@ -226,9 +228,9 @@ def main(argv=None):
         # The triangle arm's predicted errors at the design point (its tank tests are the bench's, not those the
         # muscle design had as prior): the baseline of a design of no iterations with the triangle arm's prior; its
         # programs are the design's own (not timed: a figure of the benchmark, not of the design).
-        triangle_arm = pj.design(point, bench.free, duration, noise=NOISE, rate=RATE, baseline=baseline,
-                                 prior=tanks.experiments(rng0) + (pilots.experiments(rng0) if pilot else []),
-                                 steps=0, verify=False, progress=False)
+        triangle_arm = pj.design_experiment(point, bench.free, duration, noise=NOISE, rate=RATE, baseline=baseline,
+                                            prior=tanks.experiments(rng0) + (pilots.experiments(rng0) if pilot else []),
+                                            steps=0, verify=False, progress=False)
         predicted = np.asarray(triangle_arm.standard_errors["baseline"]) / np.asarray(res.standard_errors["design"])
     designed = Arm(truth, muscle_specs([("designed", res.signal(), duration)]))
     triangles = Arm(truth, muscle_specs(rest))
@@ -265,7 +267,7 @@ def main(argv=None):
     sd = {arm: np.std(v, axis=0, ddof=1) for arm, v in values.items()}
     ratio = sd["triangle"] / sd["designed"]
     true_values = np.asarray(pj.ParameterSpace(truth, bench.free).initial_values())
-    by_label = {label: key for key, (_, label) in pj.BENCH_PARAMETERS.items()}
+    by_label = {label: key for key, (_, label) in pj.bench.BENCH_PARAMETERS.items()}
     print(f"\n{'key':<6}{'true':>13}{'SD triangle':>13}{'SD designed':>13}{'ratio':>8}{'predicted':>10}"
           f"{'bias tri [SD]':>14}{'bias des [SD]':>14}")
     for i, label in enumerate(labels):

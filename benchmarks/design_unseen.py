@@ -26,7 +26,8 @@ The arms (each run from rest at atmospheric pressure, recorded at 1 kHz):
    integrator), noise 2 kPa and 0.1 mm (seeded per plant and arm), written as a bench folder of CSV files (`t [s],
    duty [-], pressure [Pa], position [m]`; meta.json: the designed runs as kind "muscle_run", a recorded duty and no
    triangle parameters; E3, E4 as "muscle_triangle").
-4. `pamjax.load_bench` of the folder and `pamjax.fit` of each arm's runs from the presets, the five parameters free.
+4. `pamjax.bench.load_bench` of the folder and `pamjax.fit` of each arm's runs from the presets, the five
+   parameters free.
 
 Reports per arm and parameter the worst |error| over the plants [% of the plant's value], the fit's standard error
 [%], the residual RMSE over the noise, and the plant-side conditions (periods near the plant's thresholds, the
@@ -69,8 +70,8 @@ ARMS = {"designed": ["designed"], "unconstrained": ["unconstrained"], "E3 + E4":
 
 
 def example():
-    """The example config's model, free parameters, duration and `pamjax.design` keywords (its keys are those of
-    `pamjax.design`; `min_force = false` is None)."""
+    """The example config's model, free parameters, duration and `pamjax.design_experiment` keywords (its keys are
+    those of `pamjax.design_experiment`; `min_force = false` is None)."""
     cfg = tomllib.loads(CONFIG.read_text())
     if cfg["model"].get("preset") != "mas10_system":
         raise SystemExit(f"{CONFIG}: this benchmark plays a design of the MAS-10 plant (preset mas10_system)")
@@ -98,7 +99,7 @@ def designs(out, reuse):
         t0 = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", pj.PamjaxDesignWarning)  # judged here: the unconstrained one sits at them
-            res = pj.design(model, free, duration, progress=False, **{**kwargs, **extra})
+            res = pj.design_experiment(model, free, duration, progress=False, **{**kwargs, **extra})
         seconds[name] = time.perf_counter() - t0
         c = res.constraints
         print(f"{name}: {res.message}; {seconds[name]:.1f} s; duty {c['duty_range'][0]:.4f}…{c['duty_range'][1]:.4f}, "
@@ -183,8 +184,8 @@ def fit_arm(model, bench, names):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", pj.PamjaxIdentifiabilityWarning)
         res = pj.fit(model, exps, bench.free, max_steps=100, progress=False)
-    values, errors = pj.bench_values(res, list(KEYS.values()))
-    rmse = pj.bench_rmse(res)
+    values, errors = pj.bench.bench_values(res, list(KEYS.values()))
+    rmse = pj.bench.bench_rmse(res)
     over = max(rmse[n][c] / NOISE[{"p": "pressure", "x": "position"}[c]] for n in names for c in rmse[n])
     return dict(status=res.status, values=values, se=errors, rmse_over_noise=over, seconds=time.perf_counter() - t0)
 
@@ -211,7 +212,7 @@ def main(argv=None):
         factors, truth, t_switch = draw_plant(model, seed, args.spread, args.switching_spread)
         directory = out / f"plant{seed}"
         conditions = write_bench(directory, model, truth, t_switch, runs, seed)
-        bench = pj.load_bench(directory, fit_model)
+        bench = pj.bench.load_bench(directory, fit_model)
         print(f"plant {seed}: × {', '.join(f'{k} {v:.3f}' for k, v in factors.items())}; "
               + "; ".join(f"{n}: {c['near_thresholds']}/{c['periods']} periods within 0.025 of its thresholds, "
                           f"eq. 7 force >= {c['min_force']:.1f} N" for n, c in conditions.items()), flush=True)

@@ -98,7 +98,7 @@ def data_positions(data):
     jax.config.update("jax_enable_x64", True)
     import pamjax as pj
 
-    bench = pj.load_bench(data, pj.presets.mas10_system(valve="pwm", friction="karnopp"))
+    bench = pj.bench.load_bench(data, pj.presets.mas10_system(valve="pwm", friction="karnopp"))
     xs = [np.asarray(e.data["position"]) for e in bench.experiments if "position" in e.channels]
     return np.concatenate(xs) if xs else np.zeros(0)
 

@@ -27,7 +27,8 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 import pamjax  # noqa: E402
-from pamjax import gradient_check, solve  # noqa: E402
+from pamjax import gradient_check  # noqa: E402
+from pamjax.unchecked import solve  # noqa: E402
 from tests.reliability.bad_inputs import CORE_CASES  # noqa: E402
 from tests.reliability.helpers import NUMERICAL_SETTINGS, random_pwm_problem  # noqa: E402
 from tests.reliability.nan_safety import trajectory_counts, vector_field_counts  # noqa: E402

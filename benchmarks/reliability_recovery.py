@@ -65,7 +65,7 @@ def problem(rate=50.0):
         pj.Experiment(rec, tri, scales=NOISE),
         pj.Experiment(rec_tank, charge, channels=["pressure"], scales=dict(pressure=NOISE["pressure"]), build=tank,
                       initial=dict(pressure=101325.0)),
-        pj.ForceMapExperiment(x, p, f, scale=FORCE_NOISE),
+        pj.bench.ForceMapExperiment(x, p, f, scale=FORCE_NOISE),
     ]
     return truth, experiments
 

@@ -3,8 +3,8 @@
 Plant: `presets.mas10_system` (MAS-10-300, 9.6 kg), duty triangle 0.05-0.95 at 0.08 Hz, outputs every 10 ms.
 Valves: the averaged valve (eq. 13) and the smoothed PWM valve (50 Hz, edge width 1e-4 s); pamjax additionally
 runs the PWM-synchronous stepping (`stepping="pwm"`, exact edges). pamjax uses `simulate`'s default solver
-(`pamjax.default_solver`: Rodas5 for the averaged valve, Tsit5 for the switching one); the averaged run is repeated
-with Tsit5 for comparison (`averaged_tsit5_ms`). The peer is a float-scalar NumPy/`math`
+(`pamjax.unchecked.default_solver`: Rodas5 for the averaged valve, Tsit5 for the switching one); the averaged run is
+repeated with Tsit5 for comparison (`averaged_tsit5_ms`). The peer is a float-scalar NumPy/`math`
 transcription of the same vector field (same parameters, read from the pamjax objects; same initial state; same
 scaled state and tolerances; same 2 ms step cap for the switching valve) integrated by `scipy.integrate.solve_ivp`
 with RK45 and LSODA, in the same run. The transcription is checked against pamjax's vector field before timing.
@@ -39,7 +39,7 @@ from scipy.integrate import solve_ivp  # noqa: E402
 import pamjax  # noqa: E402
 from pamjax import presets  # noqa: E402
 
-_solve_jit = eqx.filter_jit(pamjax.solve)  # the traceable core of simulate, without its Python-side checks
+_solve_jit = eqx.filter_jit(pamjax.unchecked.solve)  # the traceable core of simulate, without its Python-side checks
 RTOL = ATOL = 1e-6  # pamjax's defaults; atol on the scaled state (1e5 Pa, 1e-2 m, 1e-2 m/s)
 
 
@@ -173,9 +173,9 @@ def time_pamjax(system, signal, ts, repeats, **kwargs):
     """Compile time (first call), then the median run time of the jitted core and of the whole `simulate` call."""
     args = (system, signal, ts, None, ts[0])
     if kwargs.get("stepping", "adaptive") == "adaptive":
-        kwargs.setdefault("solver", pamjax.default_solver(system))  # what simulate() picks
+        kwargs.setdefault("solver", pamjax.unchecked.default_solver(system))  # what simulate() picks
     if kwargs.get("stepping") == "pwm":
-        kwargs["num_periods"] = pamjax.num_periods(system.valve, float(ts[0]), float(ts[-1]))
+        kwargs["num_periods"] = pamjax.unchecked.num_periods(system.valve, float(ts[0]), float(ts[-1]))
     start = time.perf_counter()
     traj = jax.block_until_ready(_solve_jit(*args, **kwargs))
     compile_s = time.perf_counter() - start
@@ -206,7 +206,7 @@ def main():
     print(f"pamjax simulate benchmark: {horizon:g} s triangle, 0.05-0.95 duty at 0.08 Hz, 9.6 kg, rtol=atol={RTOL:g}")
     print(f"jax {jax.__version__}, {platform.processor() or platform.machine()}, {jax.devices()[0].platform}, "
           f"repeats={repeats}")
-    xla = pamjax.xla_cpu_status()
+    xla = pamjax.runtime.xla_cpu_status()
     print(f"pamjax XLA CPU loop setting (docs/performance.md): {'active' if xla['active'] else 'inactive'} "
           f"({xla['reason']})")
 

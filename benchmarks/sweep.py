@@ -220,7 +220,7 @@ def main():
 
     def pamjax_run(system, method, dt=None, duties=duties):
         def call():
-            return pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties}, reduce=pamjax.Final(),
+            return pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties}, reduce=pamjax.FinalValue(),
                                 channels=("pressure", "position"), method=method, dt=dt, progress=False)
 
         start = time.perf_counter()

@@ -7,7 +7,7 @@ all in this one run, each in fresh processes started by this script (`--worker` 
 - `1x1`: one process, one device: the baseline of the efficiency;
 - `1x2` (the peer on one machine): one process with two devices (`sweep` shards over them with `shard_map`, no
   `jax.distributed`): what a single machine does without this issue's work;
-- `2x1`: two processes with one device each, joined by `pamjax.initialize_distributed` on localhost (CPU
+- `2x1`: two processes with one device each, joined by `pamjax.runtime.initialize_distributed` on localhost (CPU
   collectives over gloo); each computes its devices' points, results gathered on every process.
 - on a GPU machine (`--platform gpu`), one process per GPU (`CUDA_VISIBLE_DEVICES`), 1, 2 and every GPU.
 
@@ -47,7 +47,7 @@ def worker(args):
     start = float(args.spawned)
     import pamjax
 
-    info = pamjax.initialize_distributed(timeout=120)  # JAX_* environment set by run_configuration
+    info = pamjax.runtime.initialize_distributed(timeout=120)  # JAX_* environment set by run_configuration
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -64,7 +64,7 @@ def worker(args):
         if jax.process_count() > 1:
             multihost_utils.sync_global_devices("sweep")  # every process starts together
         t, cpu = time.perf_counter(), time.process_time()
-        result = pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties}, reduce=pamjax.Final(),
+        result = pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties}, reduce=pamjax.FinalValue(),
                               channels=("pressure", "position"), chunk_size=args.chunk_size, progress=False)
         return result, time.perf_counter() - t, time.process_time() - cpu
 

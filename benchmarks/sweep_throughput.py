@@ -58,7 +58,7 @@ def main():
         system = systems[valve]
 
         def call(system=system, method=method):
-            return pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties}, reduce=pamjax.Final(),
+            return pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties}, reduce=pamjax.FinalValue(),
                                 channels=("pressure", "position"), method=method, chunk_size=args.chunk_size,
                                 progress=False)
 

@@ -53,7 +53,7 @@ def draw_params(meta, rng):
 def truth_model(model, bench, params):
     """The preset model with `params`' values of the bench's fitted parameters."""
     space = pj.ParameterSpace(model, bench.free)
-    by_label = {label: key for key, (_, label) in pj.BENCH_PARAMETERS.items()}
+    by_label = {label: key for key, (_, label) in pj.bench.BENCH_PARAMETERS.items()}
     return space.with_values(np.asarray([params[by_label[label]] for label in space.labels]))
 
 
@@ -98,7 +98,7 @@ def main(argv=None):
     out = pathlib.Path(args.out)
     meta = json.loads((pathlib.Path(args.bench) / "meta.json").read_text())
     model = pj.presets.mas10_system(valve="pwm", friction="karnopp")
-    bench = pj.load_bench(args.bench, model)
+    bench = pj.bench.load_bench(args.bench, model)
     sets = []
     for i in range(args.plants):
         seed = args.seed + i

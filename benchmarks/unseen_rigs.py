@@ -124,7 +124,7 @@ def main(argv=None):
     truth_meta = json.loads((pathlib.Path(BENCH) / "meta.json").read_text())
     template = json.loads((REALISTIC / "meta.json").read_text())
     model = pj.presets.mas10_system(valve="pwm", friction="karnopp")
-    bench = pj.load_bench(BENCH, model)
+    bench = pj.bench.load_bench(BENCH, model)
     sets = []
     for i in range(args.rigs):
         seed = args.seed + i

@@ -37,12 +37,12 @@ from pamjax import (
     PIDController,
     SlidingModeController,
     presets,
-    run_closed_loop,
     simulate_closed_loop,
     tune_controller,
 )
 from pamjax.gallery import bench_folder
 from pamjax.gallery.procedures.bench import bench_plant
+from pamjax.unchecked import run_closed_loop
 
 BENCH = bench_folder()  # the hybrid bench's recordings, shipped in pamjax/data (or $PAMJAX_BENCH_DATA)
 WINDOW_START = 5.0  # s, tracking window start (after the initial rise)

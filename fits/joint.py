@@ -24,8 +24,8 @@ without `--overwrite`. A mistake in the data is one line naming the file and key
 left behind. The compiled programs stay in the `pamjax` command's cache directory (`PAMJAX_CACHE_DIR`; off with
 `--no-cache` or `PAMJAX_COMPILATION_CACHE=0`), so a second run, on these recordings or another plant's of the same
 layout, loads them instead of compiling (same experiments and lengths: the same programs). Like the `pamjax`
-command's fit, it compiles with XLA's classic CPU emitters (`pamjax.prefer_fast_compilation`; `PAMJAX_FAST_COMPILE=0`
-turns it off). `benchmarks/identify.py` scores the results against a simulated bench's truth.
+command's fit, it compiles with XLA's classic CPU emitters (`pamjax.runtime.prefer_fast_compilation`;
+`PAMJAX_FAST_COMPILE=0` turns it off). `benchmarks/identify.py` scores the results against a simulated bench's truth.
 """
 
 import argparse
@@ -62,7 +62,7 @@ def parse_args(argv=None):
                     help="fit the rig's nuisances with the plant: the pressure sensor's offset and gain and the "
                          "acquisition delay (shared by all runs), each run's supply pressure, and the start state of "
                          "runs whose meta.json init is 'unknown'; or a comma-separated list of "
-                         f"{', '.join(pj.BENCH_NUISANCES)}")
+                         f"{', '.join(pj.bench.BENCH_NUISANCES)}")
     ap.add_argument("--position-offset", type=float, default=0.0, metavar="M",
                     help="the position sensor's calibrated offset [m] (what it reads at x = 0); held in the fit (a "
                          "shift of the position origin is absorbed by the force and volume laws: docs/fitting.md)")
@@ -114,15 +114,15 @@ def _clean(out, created):
 
 def run(args, data, out):
     model = pj.presets.mas10_system(valve="pwm", friction="karnopp")  # datasheet / paper values
-    bench = pj.load_bench(data, model, rate=args.rate, nuisance=_nuisance_arg(args.nuisance),
-                          position_offset=args.position_offset, atmosphere=args.atmosphere)
+    bench = pj.bench.load_bench(data, model, rate=args.rate, nuisance=_nuisance_arg(args.nuisance),
+                                position_offset=args.position_offset, atmosphere=args.atmosphere)
     out.mkdir(parents=True, exist_ok=True)  # after the data are read: a mistake there leaves no folder behind
     probe = out / ".joint-write-test"
     probe.write_text("")  # the results can be written: checked before minutes of fitting
     probe.unlink()
     if not args.no_cache:  # a second run (another start, more steps, the next plant) compiles nothing again
-        pj.enable_compilation_cache()
-    pj.prefer_fast_compilation()  # fits of single trajectories: XLA's classic CPU emitters compile them faster
+        pj.runtime.enable_compilation_cache()
+    pj.runtime.prefer_fast_compilation()  # fits of single trajectories: XLA's classic CPU emitters compile them faster
     start_model = bench.model
     print(f"bench {data}: {len(bench.experiments)} experiments ({', '.join(e.name for e in bench.experiments)}); "
           f"left out: {bench.skipped or 'none'}; noise {bench.noise}")
@@ -147,11 +147,11 @@ def run(args, data, out):
         res = pj.fit(start, bench.experiments, bench.free, max_steps=args.max_steps, progress=not args.quiet)
     wall = time.perf_counter() - t0
     stages = staged.stages if staged is not None else []
-    values, errors = pj.bench_values(res, bench.fitted_keys)
-    full = bench if args.rate is None else pj.load_bench(data, model, rate=None,
-                                                          nuisance=_nuisance_arg(args.nuisance),
-                                                          position_offset=args.position_offset,
-                                                          atmosphere=args.atmosphere)
+    values, errors = pj.bench.bench_values(res, bench.fitted_keys)
+    full = bench if args.rate is None else pj.bench.load_bench(data, model, rate=None,
+                                                                nuisance=_nuisance_arg(args.nuisance),
+                                                                position_offset=args.position_offset,
+                                                                atmosphere=args.atmosphere)
     channel_errors = res.channel_errors if args.rate is None else pj.evaluate(res.model, full.experiments)
     rmse = {name: {"p" if c == "pressure" else "x": float(st["rmse"]) for c, st in chans.items()}
             for name, chans in channel_errors.items()}
@@ -171,7 +171,7 @@ def run(args, data, out):
         joint_precompile=None if staged is None else dict(wall_s=staged.precompile_s, waited_s=staged.waited_s),
     )
     if bench.nuisance or args.position_offset:
-        summary["nuisance"] = pj.bench_nuisance(res, bench)
+        summary["nuisance"] = pj.bench.bench_nuisance(res, bench)
     (out / "joint.json").write_text(json.dumps(summary, indent=1))
     report(res, values, errors, summary, over_noise)
     plot(out / "joint.png", res.model, full.experiments)
@@ -186,7 +186,7 @@ def report(res, values, errors, summary, over_noise):
         print(f"{k:<6}{v:>14.6g}{errors[k]:>12.3g}")
     if "nuisance" in summary:
         print("nuisances (the rig's, reported apart from the plant):")
-        print(pj.nuisance_table(summary["nuisance"]))
+        print(pj.bench.nuisance_table(summary["nuisance"]))
     for name, chans in over_noise.items():
         print(f"  {name:<10} " + "  ".join(f"{c} RMSE {r:.3f}× noise" for c, r in chans.items()))
     if res.mismatch:

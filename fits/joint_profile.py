@@ -4,7 +4,7 @@
 
 Fits the bench directory's tank tests and triangle runs (E1, E2, E3, E4) from the presets exactly as
 `fits/joint.py` does (switching valve on the PWM-synchronous grid, exact stick-slip friction, the 15 parameters of
-`fitted_keys`, k2 held), then profiles the named bench parameters (default all) with `pamjax.profile`. Writes
+`fitted_keys`, k2 held), then profiles the named bench parameters (default all) with `pamjax.profile_likelihood`. Writes
 `OUT/profile.json` (every profile, its likelihood-ratio interval and verdict, by pamjax label) and
 `OUT/profile.png`, and prints the table with the bench's names; docs/identifiability.md quotes it.
 """
@@ -40,15 +40,15 @@ def main(argv=None):
         sys.exit(f"joint_profile.py: {', '.join(existing)} exist; pass --overwrite to replace them (or another --out)")
 
     model = pj.presets.mas10_system(valve="pwm", friction="karnopp")
-    bench = pj.load_bench(data, model, rate=args.rate)
+    bench = pj.bench.load_bench(data, model, rate=args.rate)
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", pj.PamjaxIdentifiabilityWarning)
         res = pj.fit(model, bench.experiments, bench.free, progress=False)
     print(f"fit: {res.status}, {res.iterations} iterations, {time.perf_counter() - t0:.1f} s")
-    label = {k: pj.BENCH_PARAMETERS[k][1] for k in bench.fitted_keys}
+    label = {k: pj.bench.BENCH_PARAMETERS[k][1] for k in bench.fitted_keys}
     names = [label[k] for k in (args.names or bench.fitted_keys)]
-    prof = pj.profile(res, names, workers=args.workers)
+    prof = pj.profile_likelihood(res, names, workers=args.workers)
     print(f"profiles of {len(names)} parameters: {prof.profile_s:.1f} s (σ² = {prof.sigma2:.3g})")
     key = {v: k for k, v in label.items()}
     print(f"{'key':<6}{'fitted':>13}{'LR lower':>13}{'LR upper':>13}{'lin. lower':>13}{'lin. upper':>13}  verdict")

@@ -74,7 +74,7 @@ def main():
     out = pathlib.Path(args.out)
 
     x, p, f = load_map()
-    experiment = pj.ForceMapExperiment(x, p, f, scale=1.0)  # residuals in N
+    experiment = pj.bench.ForceMapExperiment(x, p, f, scale=1.0)  # residuals in N
 
     eq7, free7 = eq7_start()
     res7 = pj.fit(eq7, [experiment], free7, out=out / "fit_eq7.json", overwrite=args.overwrite)

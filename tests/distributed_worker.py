@@ -19,7 +19,7 @@ import pamjax  # noqa: E402  (joins before JAX starts its backend)
 
 if len(sys.argv) > 2:
     process_id, count, port = int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
-    info = pamjax.initialize_distributed(f"127.0.0.1:{port}", count, process_id, timeout=60)
+    info = pamjax.runtime.initialize_distributed(f"127.0.0.1:{port}", count, process_id, timeout=60)
     print(info, flush=True)
     tag = str(process_id)
 else:
@@ -34,7 +34,7 @@ from problems import FORCE_MAP_FREE, fit_fields, force_map  # noqa: E402  (tests
 from pamjax import presets  # noqa: E402
 
 assert jax.local_device_count() == (1 if tag != "single" else 4), jax.local_devices()
-assert pamjax.xla_cpu_status()["active"], pamjax.xla_cpu_status()
+assert pamjax.runtime.xla_cpu_status()["active"], pamjax.runtime.xla_cpu_status()
 # the reference process has 4 CPU devices: 2 of them (the distributed run's mesh size), all 4, and 1
 devices = {"": None} if tag != "single" else {"": jax.devices()[:2], "4": jax.devices(), "1": jax.devices()[:1]}
 

@@ -19,7 +19,7 @@ def force_map(seed=0, noise=2.0):
     x, p = x.ravel(), p.ravel()
     f = np.asarray(muscle.static_force(jnp.asarray(x), jnp.asarray(p), pamjax.Air()))
     f = f + noise * np.random.default_rng(seed).standard_normal(f.shape)
-    return muscle, pamjax.ForceMapExperiment(x, p, np.maximum(f, 0.0), scale=noise)
+    return muscle, pamjax.bench.ForceMapExperiment(x, p, np.maximum(f, 0.0), scale=noise)
 
 
 def fit_fields(result):

@@ -119,3 +119,61 @@ def test_scripts_use_public_names_only(folder):
             if private.search(line.split("#")[0]):
                 offenders.append(f"{path.relative_to(ROOT)}:{k}: {line.strip()}")
     assert not offenders, offenders
+
+
+MAX_INIT_LINES = 160  # issue 31: the top level holds what a user imports daily; the rest is in sub-namespaces
+
+
+def test_top_level_is_compact():
+    lines = len((PACKAGE / "__init__.py").read_text().splitlines())
+    assert lines <= MAX_INIT_LINES, f"pamjax/__init__.py has {lines} lines (at most {MAX_INIT_LINES})"
+
+
+def _moved():
+    from pamjax._core.deprecation import MOVED
+
+    return sorted(MOVED.items())
+
+
+@pytest.mark.parametrize(("old", "new"), _moved())
+def test_deprecated_names_warn_and_resolve_to_their_new_place(old, new):
+    """`pamjax.<old>` still works for one release: the same object as at its new place, with a DeprecationWarning that
+    names the new place and points at the line that asked for it."""
+    import pamjax
+
+    value = pamjax
+    for part in new.split("."):
+        value = getattr(value, part)
+    with pytest.warns(DeprecationWarning, match=rf"pamjax\.{old} is deprecated .*use pamjax\.{re.escape(new)}$") as w:
+        alias = getattr(pamjax, old)
+    assert alias is value
+    assert all(r.filename == __file__ for r in w), [r.filename for r in w]
+    assert old not in vars(pamjax) and old not in dir(pamjax)  # resolved by __getattr__ only, so it always warns
+
+
+def test_from_import_of_a_deprecated_name_warns():
+    with pytest.warns(DeprecationWarning, match="use pamjax.bench.load_bench"):
+        from pamjax import load_bench
+    import pamjax.bench
+
+    assert load_bench is pamjax.bench.load_bench
+
+
+def test_unknown_names_are_still_attribute_errors():
+    import pamjax
+
+    with pytest.raises(AttributeError, match="has no attribute 'no_such_name'"):
+        pamjax.no_such_name  # noqa: B018
+    assert not hasattr(pamjax, "no_such_name")
+
+
+def test_the_repository_uses_no_deprecated_name():
+    """The package, scripts, docs and tests use the new places (`_core/deprecation.py` lists the old names)."""
+    names = "|".join(re.escape(old) for old, _ in _moved())
+    old = re.compile(rf"(?<![\w.])(?:pamjax|pj)\.({names})\b|^from pamjax import .*\b({names})\b")
+    skip = {PACKAGE / "_core" / "deprecation.py", pathlib.Path(__file__)}
+    paths = [p for folder in ("pamjax", "fits", "benchmarks", "examples", "docs", "tests")
+             for p in (ROOT / folder).rglob("*") if p.suffix in (".py", ".md", ".toml")] + [ROOT / "README.md"]
+    offenders = [f"{p.relative_to(ROOT)}:{k}: {line.strip()}" for p in paths if p not in skip
+                 for k, line in enumerate(p.read_text().splitlines(), 1) if old.search(line)]
+    assert not offenders, offenders

@@ -1,4 +1,4 @@
-"""Bench directories (`pamjax.load_bench`) and `fits/joint.py --data DIR`: a small synthetic bench in the shared
+"""Bench directories (`pamjax.bench.load_bench`) and `fits/joint.py --data DIR`: a small synthetic bench in the shared
 layout (meta.json + npz), made by pamjax's exact stick-slip model from known parameters, fitted from the presets."""
 
 import importlib.util
@@ -19,7 +19,7 @@ NOISE = {"p_std_Pa": 2000.0, "x_std_m": 1e-4}
 
 def _truth():
     model = presets.mas10_system(valve="pwm", friction="karnopp")
-    space = pj.ParameterSpace(model, [pj.BENCH_PARAMETERS[k][0] for k in KEYS])
+    space = pj.ParameterSpace(model, [pj.bench.BENCH_PARAMETERS[k][0] for k in KEYS])
     values = np.asarray(space.initial_values()) * np.array([FACTORS[k] for k in KEYS])
     return space.with_values(values), dict(zip(KEYS, values.tolist()))
 
@@ -58,18 +58,18 @@ def bench(tmp_path_factory):
 def test_load_bench(bench):
     folder, _ = bench
     model = presets.mas10_system(valve="pwm", friction="karnopp")
-    b = pj.load_bench(folder, model)
+    b = pj.bench.load_bench(folder, model)
     assert [e.name for e in b.experiments] == ["E1", "E2", "E3"] and "E5" in b.skipped
     assert b.noise == {"pressure": 2000.0, "position": 1e-4}
     e2 = b.experiments[1]  # p_s: the run's supply pressure, here the model valve's
     assert e2.start_at_supply and float(e2.start_for(e2.system_for(model), model).pressure) == pytest.approx(6.5e5)
     assert b.experiments[2].channels == ("pressure", "position")
-    half = pj.load_bench(folder, model, rate=250.0)
+    half = pj.bench.load_bench(folder, model, rate=250.0)
     assert len(half.experiments[0].times) == (len(b.experiments[0].times) + 1) // 2
     with pytest.raises(PamjaxInputError, match="not bench parameters.*valid"):
-        pj.load_bench(folder, model, fitted_keys=["Cv12", "nonsense"])
+        pj.bench.load_bench(folder, model, fitted_keys=["Cv12", "nonsense"])
     with pytest.raises(PamjaxInputError, match="no meta.json"):
-        pj.load_bench(ROOT, model)
+        pj.bench.load_bench(ROOT, model)
 
 
 def test_joint_script_fits_a_bench_directory_from_the_presets(bench, tmp_path):
@@ -96,7 +96,7 @@ def test_joint_script_fits_a_bench_directory_from_the_presets(bench, tmp_path):
     assert set(stages) == {"1", "2"}
     assert stages["1"]["experiments"] == ["E1", "E2"] and all(p.startswith("valve.") for p in stages["1"]["free"])
     assert len(stages["1"]["free"]) == 4 and stages["2"]["experiments"] == ["E3"]
-    assert sorted(stages["2"]["free"]) == sorted(pj.BENCH_PARAMETERS[k][0] for k in ("v1", "Fc", "Cf"))
+    assert sorted(stages["2"]["free"]) == sorted(pj.bench.BENCH_PARAMETERS[k][0] for k in ("v1", "Fc", "Cf"))
     assert stages["1"]["status"] == "converged"  # four valve parameters on two tank tests: well posed
     with pytest.raises(SystemExit, match="--overwrite"):
         joint.main(["--data", str(folder), "--out", str(out), "--quiet"])
@@ -107,7 +107,7 @@ def test_staged_start_needs_experiments_that_see_part_of_the_model(bench):
     # the muscle run alone), or an entry cannot be placed, there is nothing to stage and the model comes back as is.
     folder, _ = bench
     model = presets.mas10_system(valve="pwm", friction="karnopp")
-    b = pj.load_bench(folder, model)
+    b = pj.bench.load_bench(folder, model)
     run = [e for e in b.experiments if e.name == "E3"]
     staged = pj.staged_start(model, run, b.free)
     assert staged.stages == [] and staged.model is model and staged.summary() == []
@@ -124,13 +124,13 @@ def test_staged_start_compiles_the_joint_problem_beside_its_stages(bench):
     # (C_f held: a problem structure no other test of this module compiles, so the programs are new here.)
     folder, _ = bench
     model = presets.mas10_system(valve="pwm", friction="karnopp")
-    b = pj.load_bench(folder, model)
-    free = [p for p in b.free if p != pj.BENCH_PARAMETERS["Cf"][0]]
+    b = pj.bench.load_bench(folder, model)
+    free = [p for p in b.free if p != pj.bench.BENCH_PARAMETERS["Cf"][0]]
     staged = pj.staged_start(model, b.experiments, free, max_steps=60, progress=False)
     assert staged.precompile_s > 0.0 and 0.0 <= staged.waited_s <= staged.precompile_s
     assert staged.compile_s >= sum(res.compile_s for *_, res in staged.stages)
     assert any("second thread" in line for line in staged.summary())
-    with pj.CompileStats() as stats:
+    with pj.runtime.CompileStats() as stats:
         res = pj.fit(staged.model, b.experiments, free, max_steps=60, progress=False)
     assert res.status == "converged", res.message
     assert stats.count["compile"] == 0, stats.summary()

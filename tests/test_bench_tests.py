@@ -13,8 +13,8 @@ from pamjax._physics.friction import KarnoppFriction
 
 # The laws under test jitted, one program each (eagerly, each of their operations compiles a program of its own); the
 # velocities and pressures go in as arrays, not Python floats, which `filter_jit` would bake in as constants.
-_steady_friction_force = eqx.filter_jit(pj.steady_friction_force)
-_flow_curve = eqx.filter_jit(pj.flow_curve)
+_steady_friction_force = eqx.filter_jit(pj.bench.steady_friction_force)
+_flow_curve = eqx.filter_jit(pj.bench.flow_curve)
 _mass_flow = eqx.filter_jit(lambda restriction, p_up, p_down, air: restriction.mass_flow(p_up, p_down, air))
 _predict = eqx.filter_jit(lambda experiment, model: experiment.predict(model))
 _residuals = eqx.filter_jit(lambda experiment, model: experiment.residuals(model))
@@ -37,10 +37,10 @@ def test_steady_friction_force(v):
 
 def test_constant_velocity_point_reduces_a_run():
     t = np.linspace(0.0, 0.1, 101)
-    v, f, se = pj.constant_velocity_point(t, 0.01 + 0.05 * t, np.full(t.size, 28.5))
+    v, f, se = pj.bench.constant_velocity_point(t, 0.01 + 0.05 * t, np.full(t.size, 28.5))
     assert v == pytest.approx(0.05, rel=1e-12) and f == pytest.approx(28.5) and se == 0.0
     with pytest.raises(pj.PamjaxInputError, match="force must be finite"):
-        pj.constant_velocity_point(t, t, np.where(t > 0.05, np.nan, 1.0))
+        pj.bench.constant_velocity_point(t, t, np.where(t > 0.05, np.nan, 1.0))
 
 
 def test_friction_curve_fit_recovers_eq9():
@@ -48,7 +48,7 @@ def test_friction_curve_fit_recovers_eq9():
     rng = np.random.default_rng(1)
     v = np.concatenate([-np.geomspace(0.01, 0.2, 6), np.geomspace(0.01, 0.2, 6)])
     f = np_friction(v, 16.0, 250.0, 1e-3) + 0.5 * rng.standard_normal(v.size)
-    exp = pj.FrictionCurveExperiment(v, f, scale=0.5, friction="")
+    exp = pj.bench.FrictionCurveExperiment(v, f, scale=0.5, friction="")
     res = pj.fit(pj.CoulombViscousFriction(10.0, 100.0), [exp], ["coulomb_force", "viscous_coefficient"],
                  progress=False)
     z = (np.asarray(res.values) - [16.0, 250.0]) / np.asarray(res.standard_errors)
@@ -62,7 +62,7 @@ def test_flow_curve_prediction_and_fit():
     p_up = np.repeat([5e5, 6e5, 7e5], 10)
     p_down = np.concatenate([np.linspace(P_ATM, 0.98 * p, 10) for p in (5e5, 6e5, 7e5)])
     flow = np.array([np_ellipse_flow(a, b, 0.36, 0.28, 3.14e-6) for a, b in zip(p_up, p_down)])
-    exp = pj.FlowCurveExperiment(p_up, p_down, flow, scale=1e-5, restriction="inflate")
+    exp = pj.bench.FlowCurveExperiment(p_up, p_down, flow, scale=1e-5, restriction="inflate")
     np.testing.assert_allclose(np.asarray(_predict(exp, valve)["mass_flow"]), flow, rtol=1e-12)
     space = pj.ParameterSpace(valve, ["inflate.discharge_coefficient", "inflate.critical_ratio"])
     start = space.with_values([0.45, 0.2])
@@ -83,31 +83,32 @@ def test_loop_force_map_prediction_slack_and_average():
     static = np_eq7_force(x, 4e5, np.asarray(law.max_force_coefficients), float(law.k0), float(law.k1),
                           float(law.k2))
     expected = static - (16.0 * np.sign(v) + 250.0 * v)
-    exp = pj.LoopForceMapExperiment(x, p, v, expected, scale=1.0)
+    exp = pj.bench.LoopForceMapExperiment(x, p, v, expected, scale=1.0)
     np.testing.assert_allclose(np.asarray(_predict(exp, system)["force"]), expected, rtol=1e-12)
     assert np.max(np.abs(np.asarray(_residuals(exp, system)))) < 1e-9
-    slack = pj.LoopForceMapExperiment(x, p, v, np.where(x > 0.03, 0.0, expected), scale=1.0)
+    slack = pj.bench.LoopForceMapExperiment(x, p, v, np.where(x > 0.03, 0.0, expected), scale=1.0)
     # 0 N measured: one-sided
     assert float(np.asarray(_residuals(slack, system))[2]) == pytest.approx(max(expected[2], 0.0))
-    xa, pa, mean, width = pj.loop_average(x, p, v, expected)
+    xa, pa, mean, width = pj.bench.loop_average(x, p, v, expected)
     np.testing.assert_allclose(width, 2 * (16.0 + 250.0 * 5e-3), rtol=1e-12)
     np.testing.assert_allclose(mean, static[:3], rtol=1e-12)
 
 
 def test_bad_input_is_named_before_any_fit():
     with pytest.raises(pj.PamjaxInputError, match="velocities must be non-zero"):
-        pj.FrictionCurveExperiment([0.0, 0.1], [1.0, 2.0])
+        pj.bench.FrictionCurveExperiment([0.0, 0.1], [1.0, 2.0])
     with pytest.raises(pj.PamjaxInputError, match="one length"):
-        pj.FrictionCurveExperiment([0.1, 0.2], [1.0])
+        pj.bench.FrictionCurveExperiment([0.1, 0.2], [1.0])
     with pytest.raises(pj.PamjaxInputError, match="upstream_pressures must be ABSOLUTE"):
-        pj.FlowCurveExperiment([5.0, 6.0], [1.0, 1.0], [1e-3, 1e-3])  # bar, not Pa
+        pj.bench.FlowCurveExperiment([5.0, 6.0], [1.0, 1.0], [1e-3, 1e-3])  # bar, not Pa
     with pytest.raises(pj.PamjaxInputError, match="scale must be > 0"):
-        pj.FlowCurveExperiment([5e5], [2e5], [1e-3], scale=0.0)
+        pj.bench.FlowCurveExperiment([5e5], [2e5], [1e-3], scale=0.0)
     with pytest.raises(pj.PamjaxInputError, match="has no 'friction'"):
-        pj.FrictionCurveExperiment([0.1, 0.2], [40.0, 66.0]).check(presets.mas10_valve())
+        pj.bench.FrictionCurveExperiment([0.1, 0.2], [40.0, 66.0]).check(presets.mas10_valve())
     with pytest.raises(pj.PamjaxInputError, match="the model is OnOffValve; a AbstractFriction is needed"):
-        pj.FrictionCurveExperiment([0.1, 0.2], [40.0, 66.0], friction="").check(presets.mas10_valve())
+        pj.bench.FrictionCurveExperiment([0.1, 0.2], [40.0, 66.0], friction="").check(presets.mas10_valve())
     with pytest.raises(pj.PamjaxInputError, match="has no 'nozzle'"):
-        pj.FlowCurveExperiment([5e5], [2e5], [1e-3], scale=1e-5, restriction="nozzle").check(presets.mas10_valve())
+        pj.bench.FlowCurveExperiment([5e5], [2e5], [1e-3], scale=1e-5,
+                                     restriction="nozzle").check(presets.mas10_valve())
     with pytest.raises(pj.PamjaxInputError, match="needs a 'muscle'"):
-        pj.LoopForceMapExperiment([0.0], [3e5], [1e-3], [10.0], scale=1.0).check(presets.mas10_valve())
+        pj.bench.LoopForceMapExperiment([0.0], [3e5], [1e-3], [10.0], scale=1.0).check(presets.mas10_valve())

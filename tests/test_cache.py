@@ -16,7 +16,7 @@ SCRIPT = textwrap.dedent("""
     import json, sys
     import pamjax
     from pamjax._cli.main import main
-    with pamjax.CompileStats() as stats:
+    with pamjax.runtime.CompileStats() as stats:
         status = main(sys.argv[1:])
     print(json.dumps(dict(status=status, requests=stats.requests, hits=stats.hits, traced=stats.count["trace"],
                           compiled=stats.count["compile"])))

@@ -105,7 +105,7 @@ def test_design_raises_the_information_keeps_its_constraints_and_replays_from_cs
     base_rec = pj.synthetic_recording(_tank(), pj.Constant(0.3), np.arange(0.0, 0.4, 2e-3), name="base")
     base = pj.Experiment(base_rec, pj.Constant(0.3), channels=["pressure"], scales=NOISE,
                          initial={"pressure": 101325.0})
-    res = pj.design(_tank(), FREE, 0.4, noise=NOISE, steps=6, baseline=[base], progress=False, **TANK)
+    res = pj.design_experiment(_tank(), FREE, 0.4, noise=NOISE, steps=6, baseline=[base], progress=False, **TANK)
     assert res.objective[1] < res.objective[0]  # D criterion: log det F⁻¹ went down
     assert len(res.duty) == 20 and all(0.125 <= d <= 0.875 for d in res.duty)  # 0.025 from the 10 %/90 % thresholds
     assert res.constraints["threshold_distance"] >= 0.025 - 1e-12
@@ -114,7 +114,7 @@ def test_design_raises_the_information_keeps_its_constraints_and_replays_from_cs
     assert np.all(ratio > 0.97), ratio  # the floor's penalty leaves a slack of ~1 %
     assert all(math.isinf(s) for s in res.standard_errors["prior"])  # no prior experiments: nothing known
     # the start (steps=0) is the constant 0.6 of TANK: the design beats it
-    start = pj.design(_tank(), FREE, 0.4, noise=NOISE, steps=0, baseline=[base], progress=False, **TANK)
+    start = pj.design_experiment(_tank(), FREE, 0.4, noise=NOISE, steps=0, baseline=[base], progress=False, **TANK)
     assert start.objective[1] == pytest.approx(res.objective[0], rel=1e-9)
     path = res.to_csv(tmp_path / "design.csv")
     rec = pj.Recording.load(path)
@@ -151,7 +151,7 @@ def tank_design():
     of tank tests in the same time: a charge from atmospheric and a discharge from supply at duty 0.5, 0.2 s each."""
     model = presets.mas10_system(valve="pwm")
     base = [_tank_test(model, 0.5, 101325.0), _tank_test(model, 0.5, float(model.valve.supply_pressure))]
-    res = pj.design(model, VALVE, 0.4, noise=NOISE, steps=6, baseline=base, progress=False, **TANK_BUILD)
+    res = pj.design_experiment(model, VALVE, 0.4, noise=NOISE, steps=6, baseline=base, progress=False, **TANK_BUILD)
     return model, res
 
 
@@ -194,8 +194,8 @@ def test_a_designed_tank_tests_information_matches_the_fits_standard_errors(tank
 
 def test_a_start_that_leaves_a_parameter_free_is_named():
     with pytest.raises(PamjaxInputError, match=r"does not determine \['valve.inflate.critical_ratio'\]"):
-        pj.design(_tank(), FREE, 0.4, noise=NOISE, steps=1, progress=False,
-                  **{**TANK, "initial": pj.Constant(0.12)})
+        pj.design_experiment(_tank(), FREE, 0.4, noise=NOISE, steps=1, progress=False,
+                             **{**TANK, "initial": pj.Constant(0.12)})
 
 
 @pytest.mark.parametrize("kwargs, match", [
@@ -215,13 +215,13 @@ def test_a_start_that_leaves_a_parameter_free_is_named():
 def test_bad_input_is_named_before_any_solve(kwargs, match, monkeypatch):
     monkeypatch.setattr(obj, "value", lambda *a: pytest.fail("solved before rejecting the input"))
     with pytest.raises(PamjaxInputError, match=match):
-        pj.design(_tank(), FREE, 0.4, **{**TANK, **kwargs})
+        pj.design_experiment(_tank(), FREE, 0.4, **{**TANK, **kwargs})
 
 
 def test_design_needs_a_pwm_period():
     with pytest.raises(PamjaxInputError, match="period: the model's valve has no pwm_frequency"):
-        pj.design(presets.mas10_tank_system(valve="averaged"), ["valve.coefficients[1,0]"], 0.4, noise=NOISE,
-                  channels=("pressure",))
+        pj.design_experiment(presets.mas10_tank_system(valve="averaged"), ["valve.coefficients[1,0]"], 0.4, noise=NOISE,
+                             channels=("pressure",))
 
 
 def test_cli_design_writes_csv_json_figure_and_refuses_to_overwrite(tmp_path, capsys):
@@ -305,9 +305,9 @@ def test_pressure_limit_is_penalised_and_kept():
         assert float(value) - float(free_value) == pytest.approx(expected, rel=1e-9, abs=1e-12)
         assert (expected > 0) == (limit < top)
     # A design that starts within the limit stays within it (pressure predicted at the design samples).
-    start = pj.design(_tank(), FREE, 0.4, noise=NOISE, steps=0, progress=False, **TANK)
+    start = pj.design_experiment(_tank(), FREE, 0.4, noise=NOISE, steps=0, progress=False, **TANK)
     limit = start.constraints["pressure_range"][1] + 2e3
-    res = pj.design(_tank(), FREE, 0.4, noise=NOISE, steps=4, progress=False, max_pressure=limit, **TANK)
+    res = pj.design_experiment(_tank(), FREE, 0.4, noise=NOISE, steps=4, progress=False, max_pressure=limit, **TANK)
     assert res.constraints["feasible"] and res.constraints["pressure_range"][1] <= limit
     assert res.objective[1] < res.objective[0]
 
@@ -391,7 +391,7 @@ def test_limits_no_run_can_keep_are_named_before_any_solve(model, kwargs, match,
     args = {**base, **kwargs}
     duration = args.pop("duration", 0.4)
     with pytest.raises(PamjaxInputError, match=match):
-        pj.design(model(), free, duration, progress=False, **args)
+        pj.design_experiment(model(), free, duration, progress=False, **args)
     with pytest.raises(PamjaxInputError, match=match):  # the CLI's check before it makes the output folder
         check_design(model(), free, duration, **args)
 
@@ -399,9 +399,9 @@ def test_limits_no_run_can_keep_are_named_before_any_solve(model, kwargs, match,
 def test_an_averaged_valve_designs_with_the_period_given():
     # the fix the error names works: period=0.02 for a model whose valve has no PWM frequency; no switching
     # thresholds, so no duty margin
-    res = pj.design(presets.mas10_tank_system(valve="averaged"), ["valve.coefficients[1,0]"], 0.2, noise=NOISE,
-                    channels=("pressure",), start={"pressure": 101325.0}, rate=500.0, knots=4, steps=1, period=0.02,
-                    initial=pj.Constant(0.6), progress=False)
+    res = pj.design_experiment(presets.mas10_tank_system(valve="averaged"), ["valve.coefficients[1,0]"], 0.2,
+                               noise=NOISE, channels=("pressure",), start={"pressure": 101325.0}, rate=500.0, knots=4,
+                               steps=1, period=0.02, initial=pj.Constant(0.6), progress=False)
     assert res.period == 0.02 and len(res.duty) == 10 and res.feasible
     assert res.constraints["switching_thresholds"] == [] and res.constraints["duty_margin"] == 0.0
 
@@ -410,8 +410,8 @@ def test_an_averaged_valve_designs_with_the_period_given():
 def muscle_design():
     """A 1 s design of the MAS-10's friction and k0 with its default limits (duty 0.025 from the valve's thresholds,
     eq. 7's force >= 20 N), from a constant 0.55 (the muscle lifts and holds: in tension)."""
-    res = pj.design(_muscle(), MUSCLE_FREE, 1.0, noise=MUSCLE_NOISE, rate=500.0, knots=4, steps=3,
-                    initial=pj.Constant(0.55), progress=False)
+    res = pj.design_experiment(_muscle(), MUSCLE_FREE, 1.0, noise=MUSCLE_NOISE, rate=500.0, knots=4, steps=3,
+                               initial=pj.Constant(0.55), progress=False)
     return res
 
 
@@ -470,8 +470,8 @@ def test_an_infeasible_design_fails_clearly_and_is_not_written(tmp_path):
     # a limit the start breaks and a search too short to repair it: the result says which limit and by how much,
     # warns, and to_csv refuses it (a bench must not play it) unless told otherwise
     with pytest.warns(pj.PamjaxDesignWarning, match=r"max_pressure: predicted up to"):
-        res = pj.design(_tank(), FREE, 0.4, noise=NOISE, steps=1, progress=False,
-                        **{**TANK, "max_pressure": 1.2e5})
+        res = pj.design_experiment(_tank(), FREE, 0.4, noise=NOISE, steps=1, progress=False,
+                                   **{**TANK, "max_pressure": 1.2e5})
     assert not res.feasible and res.constraints["violations"][0].startswith("max_pressure")
     with pytest.raises(PamjaxInputError, match=r"violates its limits \(max_pressure"):
         res.to_csv(tmp_path / "design.csv")
@@ -529,7 +529,7 @@ def test_a_designed_run_is_a_bench_experiment(muscle_design, tmp_path):
     meta = {"experiments": {"D1": {"kind": "muscle_run"}, "D2": {"kind": "muscle_triangle"}},
             "noise": {"p_std_Pa": 2e3, "x_std_m": 1e-4}, "fitted_keys": ["Fc", "k0"]}
     (tmp_path / "meta.json").write_text(json.dumps(meta))
-    bench = pj.load_bench(tmp_path, model)
+    bench = pj.bench.load_bench(tmp_path, model)
     assert [e.name for e in bench.experiments] == ["D1", "D2"] and not bench.skipped
     starts = np.arange(len(res.duty)) * res.period
     for e in bench.experiments:
@@ -541,4 +541,4 @@ def test_a_designed_run_is_a_bench_experiment(muscle_design, tmp_path):
     rec_no_duty = pj.Recording(rec.t, {"pressure": rec["pressure"], "position": rec["position"]}, name="run")
     rec_no_duty.to_csv(tmp_path / "D1.csv", overwrite=True)
     with pytest.raises(PamjaxInputError, match=r"'D1' has no recorded duty column"):
-        pj.load_bench(tmp_path, model)
+        pj.bench.load_bench(tmp_path, model)

@@ -1,4 +1,4 @@
-"""Two CPU processes on localhost, joined by `pamjax.initialize_distributed` (JAX's multi-process runtime, CPU
+"""Two CPU processes on localhost, joined by `pamjax.runtime.initialize_distributed` (JAX's multi-process runtime, CPU
 collectives over gloo), compute a sweep and a multistart fit that equal the single-process results bitwise, and
 `pamjax sweep --distributed` writes what one process writes.
 
@@ -176,19 +176,19 @@ def test_multistart_on_two_processes_equals_single_process(runs):
 
 def test_initialize_distributed_says_why_it_cannot_join():
     """Checked in this (already running) process: nothing to join; incomplete or bad settings are named."""
-    info = pamjax.initialize_distributed(environ={})
+    info = pamjax.runtime.initialize_distributed(environ={})
     assert not info.distributed and "single process" in str(info) and "JAX_COORDINATOR_ADDRESS" in str(info)
     with pytest.raises(PamjaxDistributedError, match="nothing to join"):
-        pamjax.initialize_distributed(required=True, environ={})
+        pamjax.runtime.initialize_distributed(required=True, environ={})
     with pytest.raises(pamjax.PamjaxInputError, match="num_processes, process_id not given"):
-        pamjax.initialize_distributed(environ={"JAX_COORDINATOR_ADDRESS": "10.0.0.1:1234"})
+        pamjax.runtime.initialize_distributed(environ={"JAX_COORDINATOR_ADDRESS": "10.0.0.1:1234"})
     with pytest.raises(pamjax.PamjaxInputError, match="JAX_PROCESS_ID must be an integer"):
-        pamjax.initialize_distributed(environ={"JAX_COORDINATOR_ADDRESS": "h:1", "JAX_NUM_PROCESSES": "2",
+        pamjax.runtime.initialize_distributed(environ={"JAX_COORDINATOR_ADDRESS": "h:1", "JAX_NUM_PROCESSES": "2",
                                                "JAX_PROCESS_ID": "one"})
     with pytest.raises(pamjax.PamjaxInputError, match=r"process_id .* in \[0, 1\], got 2"):
-        pamjax.initialize_distributed("h:1", 2, 2)
+        pamjax.runtime.initialize_distributed("h:1", 2, 2)
     with pytest.raises(PamjaxDistributedError, match="already started its backend"):
-        pamjax.initialize_distributed("127.0.0.1:1", 2, 1)
+        pamjax.runtime.initialize_distributed("127.0.0.1:1", 2, 1)
 
 
 def test_local_shards_merge_to_the_whole_sweep():

@@ -19,7 +19,7 @@ def _force_map(noise=2.0, seed=0):
     x, p = x.ravel(), p.ravel()
     f = np.asarray(muscle.static_force(jnp.asarray(x), jnp.asarray(p), air))
     f = f + noise * np.random.default_rng(seed).standard_normal(f.shape)
-    return muscle, pj.ForceMapExperiment(x, p, np.maximum(f, 0.0), scale=noise)
+    return muscle, pj.bench.ForceMapExperiment(x, p, np.maximum(f, 0.0), scale=noise)
 
 
 FORCE_FREE = ["force_law.max_force_coefficients", "force_law.k0", "force_law.k1"]
@@ -83,7 +83,7 @@ def test_unknown_parameter_lists_valid_ones():
 
 def test_force_map_rejects_gauge_pressure():
     with pytest.raises(PamjaxInputError, match="ABSOLUTE"):
-        pj.ForceMapExperiment([0.0, 0.01], [0.0, 3e4], [10.0, 5.0])
+        pj.bench.ForceMapExperiment([0.0, 0.01], [0.0, 3e4], [10.0, 5.0])
 
 
 def test_experiment_bad_channel_and_failed_solve_is_finite():

@@ -26,7 +26,7 @@ def _force_map(noise, pressures_bar, positions, seed=0):
     x, p = x.ravel(), p.ravel()
     f = np.asarray(_static_force(muscle, x, p, pj.Air()))
     f = f + noise * np.random.default_rng(seed).standard_normal(f.shape)
-    return muscle, x, p, f, pj.ForceMapExperiment(x, p, f, scale=noise)
+    return muscle, x, p, f, pj.bench.ForceMapExperiment(x, p, f, scale=noise)
 
 
 def _fit(model, exps, free):
@@ -39,7 +39,7 @@ def test_linear_model_profile_intervals_equal_the_linearised_ones():
     # Eq. 7 is linear in a0…a4, k0, k1 (k2 held): the profile is exactly quadratic, its interval ψ̂ ± 1.96 se.
     muscle, *_, exp = _force_map(2.0, np.linspace(0.5, 6.0, 7), np.linspace(-0.01, 0.07, 9))
     res = _fit(muscle, [exp], ["force_law.max_force_coefficients", "force_law.k0", "force_law.k1"])
-    prof = pj.profile(res, ["a2", "force_law.k0", "force_law.k1"], progress=False)
+    prof = pj.profile_likelihood(res, ["a2", "force_law.k0", "force_law.k1"], progress=False)
     assert prof.threshold == pytest.approx(3.841459, abs=1e-5)
     for p in prof.profiles:
         assert p.verdict == "identifiable"
@@ -58,7 +58,7 @@ def test_two_parameter_profile_matches_a_brute_force_grid():
     muscle, x, p, f, exp = _force_map(60.0, [3.0, 4.0, 5.0, 6.0], np.linspace(-0.01, 0.03, 6), seed=3)
     assert np.all(f > 0)  # no slack points: every residual is (F_model − F)/scale
     res = _fit(muscle, [exp], ["force_law.k0", "force_law.k2"])
-    prof = pj.profile(res, ["force_law.k0"], progress=False)
+    prof = pj.profile_likelihood(res, ["force_law.k0"], progress=False)
     law = muscle.force_law
     fmax = np.polyval(np.asarray(law.max_force_coefficients)[::-1], x)
     gauge_gap = float(law.max_pressure) - (p - 101325.0)
@@ -95,7 +95,7 @@ def test_two_parameter_profile_matches_a_brute_force_grid():
 def test_k0_k1_k2_together_are_structurally_non_identifiable():
     muscle, *_, exp = _force_map(2.0, np.linspace(0.5, 6.0, 7), np.linspace(-0.01, 0.07, 9))
     res = _fit(muscle, [exp], ["force_law.k0", "force_law.k1", "force_law.k2"])
-    prof = pj.profile(res, ["force_law.k0", "force_law.k2"], progress=False)
+    prof = pj.profile_likelihood(res, ["force_law.k0", "force_law.k2"], progress=False)
     for p in prof.profiles:
         assert p.verdict == "structurally non-identifiable", p.label
         assert p.interval == [-math.inf, math.inf]
@@ -107,12 +107,12 @@ def test_bad_input_is_named_before_any_solve():
     muscle, *_, exp = _force_map(2.0, np.linspace(0.5, 6.0, 7), np.linspace(-0.01, 0.07, 9))
     res = _fit(muscle, [exp], ["force_law.k0", "force_law.k1"])
     with pytest.raises(PamjaxInputError, match=r"names \['k0'\] must be fitted parameters"):
-        pj.profile(res, ["k0"])
+        pj.profile_likelihood(res, ["k0"])
     with pytest.raises(PamjaxInputError, match="level must be in"):
-        pj.profile(res, level=95)
+        pj.profile_likelihood(res, level=95)
     loaded = pj.FitResult.from_dict(json.loads(json.dumps(res.to_dict())))
     with pytest.raises(PamjaxInputError, match="experiments: this FitResult does not carry"):
-        pj.profile(loaded)
+        pj.profile_likelihood(loaded)
 
 
 def test_fit_cli_profile_writes_json_and_figure(tmp_path):
@@ -153,7 +153,7 @@ def test_a_fit_stopped_at_max_steps_is_refused_before_any_work():
         res = pj.fit(start, [exp], ["force_law.k0", "force_law.k1"], max_steps=1, progress=False)
     assert res.status == "max_steps"
     with pytest.raises(PamjaxInputError, match=r"status 'max_steps'.*not a minimum.*--resume --profile"):
-        pj.profile(res, progress=False)
+        pj.profile_likelihood(res, progress=False)
 
 
 def test_a_start_below_which_the_profile_finds_a_lower_cost_voids_every_verdict():
@@ -165,9 +165,9 @@ def test_a_start_below_which_the_profile_finds_a_lower_cost_voids_every_verdict(
     res = _fit(muscle, [exp], ["force_law.k0", "force_law.k1"])
     off = eqx.tree_at(lambda m: m.force_law.k1, res.model, res.model.force_law.k1 * 1.05)
     moved = dataclasses.replace(res, model=off, values=[res.values[0], res.values[1] * 1.05])
-    prof = pj.profile(moved, progress=False)
+    prof = pj.profile_likelihood(moved, progress=False)
     assert prof.warnings and "not at a minimum" in prof.warnings[0]
     assert all(p.verdict.startswith("not a minimum") for p in prof.profiles)
     assert "WARNING: the fit is not at a minimum" in prof.table()
-    control = pj.profile(res, progress=False)  # the fit itself: no warning, the verdicts stand
+    control = pj.profile_likelihood(res, progress=False)  # the fit itself: no warning, the verdicts stand
     assert not control.warnings and all(p.verdict == "identifiable" for p in control.profiles)

@@ -137,7 +137,7 @@ def rig(tmp_path_factory):
 
 def test_a_rig_is_identified_with_its_nuisances_and_a_plain_fit_names_them(rig):
     plant = _plant()
-    bench = pj.load_bench(rig, plant, nuisance=True)
+    bench = pj.bench.load_bench(rig, plant, nuisance=True)
     assert any("logged 0.600 s into its triangle" in n for n in bench.notes), bench.notes
     assert set(bench.nuisance) >= {"sensors[rig].delay", "sensors[rig].pressure_gain", "runs[T2].supply_pressure",
                                    "runs[M1].start.velocity"}
@@ -154,11 +154,11 @@ def test_a_rig_is_identified_with_its_nuisances_and_a_plain_fit_names_them(rig):
         assert abs(values[label] - true) < 4 * se[label] + 1e-9 * abs(true), (label, values[label], true, se[label])
     for name, chans in res.channel_errors.items():
         assert all(st["rmse_over_noise"] < 1.15 for st in chans.values()), (name, chans)
-    report = pj.bench_nuisance(res, bench)
+    report = pj.bench.bench_nuisance(res, bench)
     assert set(report["supply_pressure_Pa"]) == {"T1", "T2", "M0", "M1"} and set(report["start"]) == {"M1"}
     assert report["held"]["position_offset_m"].startswith("not identifiable")
     # the same data fitted as an ideal bench: the fit says what the residuals point to
-    plain = pj.load_bench(rig, plant)
+    plain = pj.bench.load_bench(rig, plant)
     res0 = pj.fit(plant, plain.experiments, plain.free, progress=False, max_steps=30)
     assert res0.mismatch
     text = " | ".join(res0.diagnosis)
@@ -170,7 +170,7 @@ def test_a_rig_is_identified_with_its_nuisances_and_a_plain_fit_names_them(rig):
 
 def test_a_rig_logged_to_matlab_files_loads_as_its_csv_twin(tmp_path, rig):
     mat = _write_rig(tmp_path, fmt="mat")
-    a, b = pj.load_bench(rig, _plant()), pj.load_bench(mat, _plant())
+    a, b = pj.bench.load_bench(rig, _plant()), pj.bench.load_bench(mat, _plant())
     for ea, eb in zip(a.experiments, b.experiments):
         assert ea.channels == eb.channels
         for c in ea.channels:
@@ -226,7 +226,7 @@ def test_every_mistake_in_a_bench_folder_is_named_before_any_fit(case, rig, tmp_
     edit, message = DAMAGE[case]
     folder = _damaged(rig, tmp_path, edit)
     with pytest.raises(PamjaxInputError, match=message):
-        pj.load_bench(folder, _plant(), nuisance=True)
+        pj.bench.load_bench(folder, _plant(), nuisance=True)
 
 
 def test_joint_script_answers_a_bad_folder_in_one_line_and_leaves_nothing(rig, tmp_path, capsys):
@@ -317,7 +317,7 @@ def test_a_failing_stage_waits_for_the_background_compilation(rig, monkeypatch):
 
     monkeypatch.setattr(staged_module, "precompile", slow_precompile)
     monkeypatch.setattr(staged_module, "fit", failing_fit)
-    bench = pj.load_bench(rig, _plant(), nuisance=True)
+    bench = pj.bench.load_bench(rig, _plant(), nuisance=True)
     with pytest.raises(PamjaxInputError, match="stage 1 failed"):
         pj.staged_start(bench.model, bench.experiments, bench.free)
     assert threads and not threads[0].is_alive()

@@ -158,7 +158,7 @@ def test_another_horizon_tolerance_or_first_step_does_not_compile_again():
         return pamjax.simulate(system, pamjax.Constant(0.5), ts, rtol=rtol, atol=atol, dt0=dt0).pressure
 
     first, first_dt0 = run(), run(dt0=1e-4)
-    with pamjax.CompileStats() as stats:
+    with pamjax.runtime.CompileStats() as stats:
         longer, tighter, other_dt0 = run(t_end=0.3), run(rtol=1e-8, atol=1e-7), run(dt0=3e-4)
     assert stats.count["compile"] == 0 and stats.count["trace"] == 0, stats.summary()
     assert np.all(np.isfinite(np.stack([first, first_dt0, longer, tighter, other_dt0])))

@@ -11,7 +11,7 @@ import pytest
 
 import pamjax
 from pamjax import presets
-from pamjax._sweep.reductions import Final, Harmonic, Mean
+from pamjax._sweep.reductions import FinalValue, FourierCoefficient, WindowMean
 from pamjax._sweep.sweep import sweep
 
 TS = np.linspace(0.0, 1.0, 21)
@@ -65,7 +65,7 @@ def test_error_controlled_ros2_settles_on_the_steady_state(averaged):
     duties = np.array([0.05, 0.3, 0.6, 0.95])
     ts = np.linspace(0.0, 5.0, 11)
     result = sweep(averaged, pamjax.Constant(0.5), ts, {"signal.value": duties}, method="ros2a",
-                   channels=("pressure", "position"), reduce=Final())
+                   channels=("pressure", "position"), reduce=FinalValue())
     assert result.method == "ros2a" and np.all(result.succeeded)
     ts_ref = np.linspace(0.0, 5.0, TS.size)  # the reference's final state at 5 s does not depend on its output grid
     for i, u in enumerate(duties):
@@ -112,17 +112,17 @@ def test_reductions_match_numpy(averaged):
     signal = pamjax.Sine(0.5, 0.2, 1.0)
     full = sweep(averaged, signal, ts, over, channels=("position", "command"), method="rk4")
     for reduce, numpy_reduce in [
-        (Final(), lambda y, f: y[-1]),
-        (Mean(0.5), lambda y, f: y[ts >= 1.5 - 1e-12].mean()),
-        (Harmonic(2), lambda y, f: 2 * np.mean((y * np.exp(-2j * np.pi * f * ts))[ts > 2.0 - 2 / f + 1e-9])),
+        (FinalValue(), lambda y, f: y[-1]),
+        (WindowMean(0.5), lambda y, f: y[ts >= 1.5 - 1e-12].mean()),
+        (FourierCoefficient(2), lambda y, f: 2 * np.mean((y * np.exp(-2j * np.pi * f * ts))[ts > 2.0 - 2 / f + 1e-9])),
     ]:
         reduced = sweep(averaged, signal, ts, over, reduce=reduce, channels=("position", "command"), method="rk4")
         for i, f in enumerate(over["signal.frequency"]):
             for c in ("position", "command"):
                 np.testing.assert_allclose(reduced[c][i], numpy_reduce(full[c][i], f), rtol=1e-10, atol=1e-14)
     # the command's harmonic is the sine itself: amplitude A, phase -pi/2 (sin = cos shifted); read from the loop's
-    # last sweep, Harmonic(2)'s (a sweep of the command channel alone would compile the same program again)
-    assert isinstance(reduce, Harmonic)
+    # last sweep, FourierCoefficient(2)'s (a sweep of the command channel alone would compile the same program again)
+    assert isinstance(reduce, FourierCoefficient)
     harmonic = reduced["command"]
     np.testing.assert_allclose(np.abs(harmonic), over["signal.amplitude"], rtol=1e-9)
     np.testing.assert_allclose(np.angle(harmonic), -np.pi / 2, atol=1e-9)
@@ -131,9 +131,9 @@ def test_reductions_match_numpy(averaged):
 def test_chunks_equal_one_call_and_report_progress(averaged):
     duties = np.linspace(0.1, 0.9, 5)
     lines = []
-    chunked = sweep(averaged, pamjax.Constant(0.5), TS, {"signal.value": duties}, reduce=Final(), chunk_size=2,
+    chunked = sweep(averaged, pamjax.Constant(0.5), TS, {"signal.value": duties}, reduce=FinalValue(), chunk_size=2,
                     progress=lines.append)
-    whole = sweep(averaged, pamjax.Constant(0.5), TS, {"signal.value": duties}, reduce=Final())
+    whole = sweep(averaged, pamjax.Constant(0.5), TS, {"signal.value": duties}, reduce=FinalValue())
     assert len(lines) == 3 and "chunk 3/3" in lines[-1]
     for c in whole.channels:
         np.testing.assert_array_equal(chunked[c], whole[c])

@@ -66,7 +66,7 @@ def test_every_lane_equals_its_own_simulate(valve):
 def test_reductions_of_a_hybrid_lane_equal_those_of_simulate():
     system = _karnopp("averaged")
     trajs = [pamjax.simulate(system, pamjax.Constant(float(d)), TS) for d in DUTIES]
-    for reduce in (pamjax.Final(), pamjax.Mean(0.5)):
+    for reduce in (pamjax.FinalValue(), pamjax.WindowMean(0.5)):
         r = pamjax.sweep(system, pamjax.Constant(0.5), TS, {"signal.value": DUTIES}, reduce=reduce,
                          channels=("position", "pressure", "friction_force"), progress=False)
         for k, traj in enumerate(trajs):
@@ -113,7 +113,7 @@ def test_schemes_without_events_are_refused_by_name(method):
 def test_rk4_step_of_a_hybrid_sweep_is_simulates_grid_step():
     system = _karnopp("averaged")
     r = pamjax.sweep(system, pamjax.Constant(0.5), TS, {"signal.value": DUTIES[1:2]}, method="rk4", dt=2e-3,
-                     reduce=pamjax.Final(), progress=False)
+                     reduce=pamjax.FinalValue(), progress=False)
     assert r.dt == pytest.approx(2e-3)
     traj = pamjax.simulate(system, pamjax.Constant(float(DUTIES[1])), TS, grid_step=2e-3)
     assert abs(r["position"][0] - float(traj.position[-1])) < POSITION_TOL

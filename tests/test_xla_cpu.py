@@ -55,7 +55,7 @@ def test_apply_sets_the_flag_before_jax_starts(keep_status, monkeypatch):
     env = {}
     status = _xla_cpu.apply(env)
     assert status["active"] and env["XLA_FLAGS"] == f"--xla_backend_extra_options={ENTRY}"
-    assert pamjax.xla_cpu_status() == status
+    assert pamjax.runtime.xla_cpu_status() == status
 
 
 def test_apply_after_jax_started_says_so(keep_status):
@@ -80,7 +80,7 @@ def test_fast_compilation_is_set_only_where_xla_knows_the_flag(keep_status, monk
     status = _xla_cpu.prefer_fast_compilation(env)
     assert status["fast_compile"] and "set by pamjax" in status["fast_compile_reason"]
     assert env["XLA_FLAGS"] == f"--a=1 {flag}"
-    assert pamjax.xla_cpu_status() == status
+    assert pamjax.runtime.xla_cpu_status() == status
     assert _xla_cpu.prefer_fast_compilation(env) == status and env["XLA_FLAGS"] == f"--a=1 {flag}"  # asked twice
     for users in ("true", "false"):  # the user's value stands, whichever it is
         env = {"XLA_FLAGS": f"--{_xla_cpu.EMITTER_FLAG}={users}"}
@@ -117,7 +117,7 @@ def test_import_asks_for_fast_compilation_when_the_environment_does(keep_status,
 def test_this_jaxlib_knows_the_flag_when_the_suite_asks_for_it():
     # The suite asks for fast compilation (tests/conftest.py): on a jaxlib of the checked range it is in effect here,
     # which also shows that XLA accepted the flag (it would have aborted the process otherwise).
-    status = pamjax.xla_cpu_status()
+    status = pamjax.runtime.xla_cpu_status()
     version = _xla_cpu._jaxlib_version()
     known = version is not None and _xla_cpu.FAST_COMPILE_JAXLIB[0] <= version <= _xla_cpu.FAST_COMPILE_JAXLIB[1]
     if os.environ.get(_xla_cpu.FAST_COMPILE) != "1" or not known or "user" in status["fast_compile_reason"]:
@@ -135,7 +135,7 @@ _USER_CHOICE = os.environ.get(_xla_cpu.OPT_OUT, "1") == "0" or "by the user" in 
 def test_single_trajectory_solve_compiles_to_one_function():
     """The setting reached XLA: simulate's solve loop is hoisted into a single compiled call (XLA marks it
     `xla_cpu_small_call`). Without the setting it runs as ~150 thunks per step, ~4x slower."""
-    assert pamjax.xla_cpu_status()["active"], pamjax.xla_cpu_status()["reason"]
+    assert pamjax.runtime.xla_cpu_status()["active"], pamjax.runtime.xla_cpu_status()["reason"]
     system = presets.mas10_system("averaged")
     ts = jnp.linspace(0.0, 1.0, 101)
     text = jax.jit(lambda s: solve(s, pamjax.Constant(0.5), ts, None, 0.0, solver=pamjax.Rodas5()).position
@@ -146,7 +146,7 @@ def test_single_trajectory_solve_compiles_to_one_function():
 
 def test_late_import_warns_in_a_fresh_process():
     code = "import jax, jax.numpy as jnp; jnp.zeros(1).block_until_ready(); import pamjax; " \
-           "print(pamjax.xla_cpu_status()['active'])"
+           "print(pamjax.runtime.xla_cpu_status()['active'])"
     env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", _xla_cpu.OPT_OUT)}
     env["JAX_PLATFORMS"] = "cpu"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
@@ -159,7 +159,7 @@ def test_importing_pamjax_does_not_start_jax():
     """The setting (and JAX's device options, e.g. `pamjax sweep --cpu-devices`) can only apply if importing pamjax
     leaves JAX's backend unstarted: no arrays, no computations at import."""
     code = ("import pamjax, pamjax.presets; from jax._src import xla_bridge; "
-            "print(xla_bridge.backends_are_initialized(), pamjax.xla_cpu_status()['active'])")
+            "print(xla_bridge.backends_are_initialized(), pamjax.runtime.xla_cpu_status()['active'])")
     env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", _xla_cpu.OPT_OUT)}
     env["JAX_PLATFORMS"] = "cpu"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)

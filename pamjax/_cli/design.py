@@ -1,6 +1,6 @@
-"""`pamjax design CONFIG.toml`: design a PWM duty experiment (`pamjax.design`) as a TOML config describes; write the
-signal as CSV (`t [s]`, `duty [-]`, one row per PWM period, the predicted standard errors in comment lines), the
-result as JSON and a figure. Config format: docs/identifiability.md and `examples/design_example.toml`."""
+"""`pamjax design CONFIG.toml`: design a PWM duty experiment (`pamjax.design_experiment`) as a TOML config describes;
+write the signal as CSV (`t [s]`, `duty [-]`, one row per PWM period, the predicted standard errors in comment lines),
+the result as JSON and a figure. Config format: docs/identifiability.md and `examples/design_example.toml`."""
 
 import pathlib
 import sys
@@ -86,7 +86,7 @@ def run(args):
     with OutputFolder(out, "pamjax design", outputs, overwrite=args.overwrite) as folder:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", pj.PamjaxDesignWarning)  # reported below, as the command's outcome
-            res = pj.design(model, free, duration, progress=not args.quiet, **kwargs)
+            res = pj.design_experiment(model, free, duration, progress=not args.quiet, **kwargs)
         print(f"{res.message}; {res.criterion} criterion {res.objective[0]:.4f} → {res.objective[1]:.4f} "
               f"({res.design_s:.1f} s, of which {res.compile_s:.1f} s to the first iteration)")
         print(res.table())

@@ -36,7 +36,7 @@ def add_arguments(parser):
     parser.add_argument("--quiet", action="store_true", help="no per-iteration progress")
     parser.add_argument("--no-plot", action="store_true", help="skip the figure")
     parser.add_argument("--profile", action="store_true", help="also profile every fitted parameter: write "
-                        "profile.json and profile.png (pamjax.profile, docs/identifiability.md)")
+                        "profile.json and profile.png (pamjax.profile_likelihood, docs/identifiability.md)")
 
 
 class FitSetup(NamedTuple):
@@ -99,10 +99,11 @@ def build_fit(cfg, model, root):
 def _bench(table, model, root):
     import pamjax as pj
 
-    return pj.load_bench(pathlib.Path(root) / table["dir"], model, rate=table.get("rate"),
-                         kinds=tuple(table.get("kinds", pj.FITTED_KINDS)), fitted_keys=table.get("fitted_keys"),
-                         substeps=table.get("substeps", 16), nuisance=table.get("nuisance", False),
-                         position_offset=table.get("position_offset", 0.0), atmosphere=table.get("atmosphere"))
+    return pj.bench.load_bench(
+        pathlib.Path(root) / table["dir"], model, rate=table.get("rate"),
+        kinds=tuple(table.get("kinds", pj.bench.FITTED_KINDS)), fitted_keys=table.get("fitted_keys"),
+        substeps=table.get("substeps", 16), nuisance=table.get("nuisance", False),
+        position_offset=table.get("position_offset", 0.0), atmosphere=table.get("atmosphere"))
 
 
 def check_free(model, free, where="[fit] free"):
@@ -317,13 +318,14 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None, 
     written = [folder.write_text(RESULT, json.dumps(res.to_dict(), indent=1) + "\n"),
                folder.write_text(MODEL, model_json(plant, provenance))]
     if bench is not None:  # the bench's names: params, std_err, status, rmse of p [Pa] and x [m] per experiment
-        values, errors = pj.bench_values(res, bench.fitted_keys)
+        values, errors = pj.bench.bench_values(res, bench.fitted_keys)
         summary = dict(data=str(bench.directory), params=values, std_err=errors, status=res.status,
-                       message=res.message, rmse=pj.bench_rmse(res), noise=bench.noise, mismatch=res.mismatch,
+                       message=res.message, rmse=pj.bench.bench_rmse(res), noise=bench.noise, mismatch=res.mismatch,
                        diagnosis=res.diagnosis, notes=bench.notes)
         if bench.nuisance:
-            summary["nuisance"] = pj.bench_nuisance(res, bench)
-            print("nuisances (the rig's, reported apart from the plant):\n" + pj.nuisance_table(summary["nuisance"]))
+            summary["nuisance"] = pj.bench.bench_nuisance(res, bench)
+            print("nuisances (the rig's, reported apart from the plant):\n"
+                  + pj.bench.nuisance_table(summary["nuisance"]))
         written.append(folder.write_text(BENCH, json.dumps(summary, indent=1) + "\n"))
     if isinstance(res.model, pj.Rig) and (bench is None or not bench.nuisance):  # a [rig] table's nuisances
         report = pj.nuisance_report(res)
@@ -342,7 +344,7 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None, 
               f"written ({folder / RESULT}, {folder / MODEL}); raise [fit] max_steps in {args.config} and continue "
               f"it with: {_resume_command(args, folder.path)}", file=sys.stderr, flush=True)
         return 1
-    if args.profile:  # pamjax.profile along every fitted parameter, re-using the fit's compiled programs
+    if args.profile:  # pamjax.profile_likelihood along every fitted parameter, re-using the fit's compiled programs
         if stage is not None:
             stage["profiling"] = True
         written, void = _profile_and_write(args, folder, res)
@@ -354,7 +356,7 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None, 
 def _profile_and_write(args, folder, res):
     import pamjax as pj
 
-    prof = pj.profile(res, progress=not args.quiet)
+    prof = pj.profile_likelihood(res, progress=not args.quiet)
     print(f"profiles ({prof.profile_s:.1f} s):\n{prof.table()}")
     for w in prof.warnings:
         print(f"pamjax fit: error: {w}", file=sys.stderr, flush=True)

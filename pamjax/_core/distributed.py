@@ -165,7 +165,7 @@ def initialize_distributed(
     if _backend_started():
         raise PamjaxDistributedError(
             "cannot join a multi-process run: JAX already started its backend in this process (an array or "
-            "computation was made before); call pamjax.initialize_distributed() first")
+            "computation was made before); call pamjax.runtime.initialize_distributed() first")
     if jax.config.jax_cpu_collectives_implementation is None:
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
     kwargs = dict(coordinator_address=coordinator, num_processes=count, process_id=index,

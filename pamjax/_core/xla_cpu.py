@@ -18,7 +18,7 @@ is written one slice per step), the 20-parameter fit's forward-mode Jacobians th
 XLA reads its flags once, when JAX initialises its backend (the first array or computation), so the setting only
 takes effect if pamjax is imported before that. It is added to the `XLA_FLAGS` environment variable (merged into an
 existing `--xla_backend_extra_options`), never replacing a value the user set; `PAMJAX_XLA_CPU_TUNING=0` leaves
-`XLA_FLAGS` alone. `pamjax.xla_cpu_status()` says whether it is active. Other backends ignore it: only the CPU
+`XLA_FLAGS` alone. `pamjax.runtime.xla_cpu_status()` says whether it is active. Other backends ignore it: only the CPU
 compiler reads the key, and XLA hands LLVM only extra options whose names do not start with `xla_`
 (`llvm_ir::ExtractXlaBackendExtraOptions`).
 

@@ -1,4 +1,5 @@
-"""`design`: a PWM duty signal chosen by gradient to maximise what a recording will tell about named parameters.
+"""`design_experiment`: a PWM duty signal chosen by gradient to maximise what a recording will tell about named
+parameters.
 
 Workflow only: the objective (Fisher information through the solve, criteria, constraint penalties) is in
 `design_objective`, everything before the first solve (checks, the valve's thresholds, limits, the start, defaults)
@@ -205,7 +206,7 @@ def _problem(space, theta, exp, basis, weight, band, windows, limits, max_pressu
         criterion=criterion)
 
 
-def design(
+def design_experiment(
     model,
     free,
     duration: float,
@@ -300,44 +301,63 @@ def design(
                    max_pressure=max_pressure, max_duty_step=max_duty_step, parametrisation=parametrisation,
                    knots=knots, steps=steps, initial=initial, seed=seed, period=period, design_rate=design_rate,
                    substeps=substeps, duty_margin=duty_margin, min_force=min_force)
-    model, space, subset, c0, basis, exp = (setup[k] for k in ("model", "space", "subset", "c0", "basis", "experiment"))
-    channels, start, period, count = setup["channels"], setup["start"], setup["period"], setup["count"]
+    space, subset, c0 = setup["space"], setup["subset"], setup["c0"]
     theta = np.asarray(space.initial_theta())
-    n, index = len(space.labels), tuple(space.labels.index(s) for s in subset)
-
-    problem = functools.partial(_problem, space, theta, exp, basis, float(rate) / float(design_rate), setup["band"],
-                                setup["windows"], setup["limits"], max_pressure, max_duty_step, setup["force_law"],
-                                setup["min_force"], index, criterion)
-
+    index = tuple(space.labels.index(s) for s in subset)
+    problem = _problem_of(setup, theta, index, float(rate) / float(design_rate), max_pressure, max_duty_step,
+                          criterion)
     gradient = obj.reverse_gradient if parametrisation == "periods" else obj.forward_gradient
-    report = _printer(progress, f"design: {count} PWM periods, {len(c0)} coefficients ({parametrisation}), "
-                                f"{criterion}-optimal over {len(subset)} of {n} parameters; compiling the objective "
-                                "and its gradient ...")
+    report = _printer(progress, f"design: {setup['count']} PWM periods, {len(c0)} coefficients ({parametrisation}), "
+                                f"{criterion}-optimal over {len(subset)} of {len(space.labels)} parameters; compiling "
+                                "the objective and its gradient ...")
     prob, prior_info, base_info, compile_s, start_aux = _prepare(problem, gradient, c0, space, theta, prior, baseline,
                                                                  index, float(baseline_margin))
     note = ""
     if initial is None and _violation(start_aux) > 0:  # the default start breaks a limit: a calmer carrier
         c0, note = _calmer_start(c0, prob, setup, parametrisation, float(duration), knots, seed)
     c, aux, history, message = _optimise(np.asarray(c0, dtype=float), prob, gradient, steps, report)
-    message += note
-    duty, info = np.asarray(aux["duty"]), np.asarray(aux["information"])
-    verified = None
-    if verify:  # at the fit's resolution (the Experiment's default substeps, the recording's rate)
-        run_info, verified = _verified(setup, duty, float(duration), float(rate), noise, build)
-        info = prior_info + run_info
-    errors = {key: _physical_errors(space, theta, i) for key, i in
-              (("design", info), ("prior", prior_info), ("baseline", base_info)) if i is not None}
+    errors, verified = _standard_errors(setup, aux, theta, prior_info, base_info, verify, float(duration),
+                                        float(rate), noise, build)
     constraints = _constraints(aux, setup, verified)
     if not constraints["feasible"]:
-        warnings.warn("pamjax.design: the design violates its limits (a bench must not play it; to_csv refuses "
-                      "it): " + "; ".join(constraints["violations"]), PamjaxDesignWarning, stacklevel=2)
+        warnings.warn("pamjax.design_experiment: the design violates its limits (a bench must not play it; to_csv "
+                      "refuses it): " + "; ".join(constraints["violations"]), PamjaxDesignWarning, stacklevel=2)
+    return _result(setup, aux, history, errors, constraints, message + note, criterion, parametrisation,
+                   float(duration), t_start, compile_s)
+
+
+def _problem_of(setup, theta, index, weight, max_pressure, max_duty_step, criterion):
+    """`_problem` with all but the prior information and the variance floor bound: (prior, floor) → the problem."""
+    return functools.partial(_problem, setup["space"], theta, setup["experiment"], setup["basis"], weight,
+                             setup["band"], setup["windows"], setup["limits"], max_pressure, max_duty_step,
+                             setup["force_law"], setup["min_force"], index, criterion)
+
+
+def _standard_errors(setup, aux, theta, prior_info, base_info, verify, duration, rate, noise, build):
+    """The predicted standard errors {"design", "prior", "baseline"} in physical units, and the designed run's channels
+    at the fit's resolution (None without `verify`: then the design's own information, at the design's resolution)."""
+    info, verified = np.asarray(aux["information"]), None
+    if verify:  # at the fit's resolution (the Experiment's default substeps, the recording's rate)
+        run_info, verified = _verified(setup, np.asarray(aux["duty"]), duration, rate, noise, build)
+        info = prior_info + run_info
+    errors = {key: _physical_errors(setup["space"], theta, i) for key, i in
+              (("design", info), ("prior", prior_info), ("baseline", base_info)) if i is not None}
+    return errors, verified
+
+
+def _result(setup, aux, history, errors, constraints, message, criterion, parametrisation, duration, t_start,
+            compile_s):
+    """The `DesignResult` of the search's last point `aux` (its duty, criterion and predicted channels)."""
+    space, exp = setup["space"], setup["experiment"]
     position, pressure, force = (aux.get(k) for k in ("position", "pressure", "force"))
     return DesignResult(
-        times=[float(t) for t in setup["times"]], duty=[float(d) for d in duty], period=period,
-        labels=list(space.labels), values=[float(v) for v in np.asarray(space.initial_values())], subset=subset,
-        criterion=criterion, standard_errors=errors, objective=[history[0][2], float(aux["criterion"])],
-        history=history, constraints=constraints, parametrisation=parametrisation, iterations=len(history) - 1,
-        message=message, design_s=time.perf_counter() - t_start, compile_s=compile_s, duration=float(duration),
+        times=[float(t) for t in setup["times"]], duty=[float(d) for d in np.asarray(aux["duty"])],
+        period=setup["period"], labels=list(space.labels),
+        values=[float(v) for v in np.asarray(space.initial_values())], subset=setup["subset"], criterion=criterion,
+        standard_errors=errors,
+        objective=[history[0][2], float(aux["criterion"])], history=history, constraints=constraints,
+        parametrisation=parametrisation, iterations=len(history) - 1, message=message,
+        design_s=time.perf_counter() - t_start, compile_s=compile_s, duration=duration,
         prediction=dict(t=np.asarray(exp.times), position=None if position is None else np.asarray(position),
                         pressure=None if pressure is None else np.asarray(pressure),
                         force=None if force is None else np.asarray(force)))
@@ -373,11 +393,12 @@ def check_design(model, free, duration, **kwargs):
     """Every check `design` makes before its first solve (the arguments, the valve's thresholds and the duties they
     leave, each limit against the run's start), without designing: a `PamjaxInputError` naming the argument, or
     None. `pamjax design` runs it before it makes the output folder."""
-    known = set(inspect.signature(design).parameters) - {"model", "free", "duration"}
+    known = set(inspect.signature(design_experiment).parameters) - {"model", "free", "duration"}
     unknown = sorted(set(kwargs) - known)
     if unknown:
         raise PamjaxInputError(f"unknown design argument(s) {unknown}")
-    args = {k: v.default for k, v in inspect.signature(design).parameters.items() if k in known and k in _SETUP_ARGS}
+    args = {k: v.default for k, v in inspect.signature(design_experiment).parameters.items()
+            if k in known and k in _SETUP_ARGS}
     args.update({k: v for k, v in kwargs.items() if k in _SETUP_ARGS})
     _setup(model, free, duration, **args)
 

@@ -1,5 +1,5 @@
-"""The objective of `pamjax.design`: the information a PWM duty signal gives about named parameters, and the bench's
-constraints, as one compiled function of the signal's coefficients.
+"""The objective of `pamjax.design_experiment`: the information a PWM duty signal gives about named parameters, and
+the bench's constraints, as one compiled function of the signal's coefficients.
 
 For a recording of channels y_c with Gaussian noise of standard deviation σ_c, the Fisher information about the
 fit's scaled parameters θ (`pamjax.ParameterSpace`) is

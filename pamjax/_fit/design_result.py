@@ -1,5 +1,5 @@
-"""`DesignResult`: what `pamjax.design` returns (the signal, predicted standard errors, constraints), with its CSV,
-JSON, table and figure."""
+"""`DesignResult`: what `pamjax.design_experiment` returns (the signal, predicted standard errors, constraints), with
+its CSV, JSON, table and figure."""
 
 import dataclasses
 import json
@@ -167,7 +167,7 @@ class DesignResult:
         """`t [s],duty [-]`: one row per PWM period (its start and duty) and a last row at the run's end (the last
         duty again), so that a replay runs to the end; the predicted standard errors in '#' comment lines above
         (`pamjax.Recording.load(path)` reads the duty as channel "command", the bench's name for it;
-        `Sampled(rec.t, rec["command"], period=...)` replays it; `pamjax.load_bench` fits its recording as a
+        `Sampled(rec.t, rec["command"], period=...)` replays it; `pamjax.bench.load_bench` fits its recording as a
         "muscle_run"). A design
         that violates its limits is refused (a bench must not play it) unless `infeasible_ok`."""
         if not self.feasible and not infeasible_ok:

@@ -70,7 +70,7 @@ def built_system(model, build, start, channels):
 
 def _validate(model, free, duration, noise, channels, band, criterion, subset, parametrisation, knots, steps, rate,
               stroke_margin, max_pressure, max_duty_step, period, build, start, duty_margin, min_force):
-    require_float64("pamjax.design")
+    require_float64("pamjax.design_experiment")
     if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
         raise PamjaxInputError(f"duration must be a positive number of seconds, got {duration!r}")
     start = {} if start is None else start
@@ -84,8 +84,8 @@ def _validate(model, free, duration, noise, channels, band, criterion, subset, p
     frequency = getattr(valve, "pwm_frequency", None)
     if period is None and frequency is None:
         raise PamjaxInputError("period: the model's valve has no pwm_frequency; give the PWM period [s] the bench's "
-                               "PWM driver latches the duty with: period=0.02 in pamjax.design, `period = 0.02` in "
-                               "the [design] table of a config")
+                               "PWM driver latches the duty with: period=0.02 in pamjax.design_experiment, "
+                               "`period = 0.02` in the [design] table of a config")
     if period is not None and not (isinstance(period, (int, float)) and not isinstance(period, bool)
                                    and math.isfinite(period) and period > 0):
         raise PamjaxInputError(f"period must be the PWM period, a number > 0 [s] (e.g. 0.02 at 50 Hz), got {period!r}")

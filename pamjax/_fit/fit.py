@@ -55,7 +55,8 @@ class FitResult:
       function's first call less its median later call).
     - `model`: the fitted model (not stored in JSON; `apply(base_model)` rebuilds it); `predictions`: experiment →
       channel → the fitted model at the recording's times (NaN where a sample was masked; not stored in JSON);
-      `experiments`: the experiments as fitted (not stored in JSON; `pamjax.profile` re-optimises against them).
+      `experiments`: the experiments as fitted (not stored in JSON; `pamjax.profile_likelihood` re-optimises
+      against them).
     """
 
     labels: list
@@ -82,7 +83,7 @@ class FitResult:
     diagnosis: list = dataclasses.field(default_factory=list)  # what a mismatch's residuals point to (rig_hints)
     model: object = dataclasses.field(default=None, repr=False, compare=False)
     predictions: dict = dataclasses.field(default=None, repr=False, compare=False)
-    experiments: object = dataclasses.field(default=None, repr=False, compare=False)  # as fitted (pamjax.profile)
+    experiments: object = dataclasses.field(default=None, repr=False, compare=False)  # as fitted (profiles)
 
     def to_dict(self):
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
@@ -331,7 +332,8 @@ def fit(
     else:
         announce = progress is not False and not problem.cached(theta)
         if announce:
-            cache = "cached afterwards" if program_cache() is not None else "pamjax.enable_compilation_cache() keeps it"
+            cache = ("cached afterwards" if program_cache() is not None
+                     else "pamjax.runtime.enable_compilation_cache() keeps it")
             print(f"fit: {len(labels)} parameters, {len(exps)} experiments; compiling the residuals and their "
                   f"Jacobian (first run; {cache}) ...", flush=True)
         r0, j0 = problem.start(theta)

@@ -207,8 +207,8 @@ def multistart(
     fit's unconstrained space, θ = θ₀ + `spread` · N(0, 1): for a positive parameter (log transform) a factor
     e^(spread·z), for a bounded one a shift of its logit, for a signed one a shift of `spread` times its start
     magnitude. A start that fails (bad start values, a solve that breaks, a NaN cost) is recorded with its
-    message and the others go on. With `jax.distributed` initialised (`pamjax.initialize_distributed`), the starts
-    are spread over the processes (start i on process i mod P), each process fitting its own on its own device,
+    message and the others go on. With `jax.distributed` initialised (`pamjax.runtime.initialize_distributed`), the
+    starts are spread over the processes (start i on process i mod P), each process fitting its own on its own device,
     and every result is gathered on every process: the same result as in one process, bitwise.
 
     **Arguments:**

@@ -1,4 +1,4 @@
-"""`profile`: profile likelihoods of fitted parameters, their likelihood-ratio intervals and what they say.
+"""`profile_likelihood`: profile likelihoods of fitted parameters, their likelihood-ratio intervals and what they say.
 
 The profile of a parameter ψ is the best cost with ψ held at each value and every other free parameter re-fitted:
 
@@ -61,7 +61,7 @@ def chi2_quantile_1dof(level):
 
 
 @dataclasses.dataclass
-class Profile:
+class LikelihoodProfile:
     """One parameter's profile: `values` (physical, ascending), `delta` (Δχ² at each), `others` (the re-fitted
     values of the other parameters, by label), `converged` (per point), the likelihood-ratio `interval` (±inf on a
     side not crossed), the `linearised` interval ψ̂ ± z se, and the `verdict`."""
@@ -79,9 +79,9 @@ class Profile:
 
 @dataclasses.dataclass
 class ProfileResult:
-    """The outcome of `profile`: `profiles` (one `Profile` per parameter, by `labels`), `level`, `threshold`
-    (Δχ²), `sigma2` (the residual variance the Δχ² is measured in), `cost` at the fit, `profile_s` (wall time),
-    `warnings` (e.g. that a re-fit found a lower cost than the fit's: the verdicts then say nothing)."""
+    """The outcome of `profile_likelihood`: `profiles` (one `LikelihoodProfile` per parameter, by `labels`), `level`,
+    `threshold` (Δχ²), `sigma2` (the residual variance the Δχ² is measured in), `cost` at the fit, `profile_s` (wall
+    time), `warnings` (e.g. that a re-fit found a lower cost than the fit's: the verdicts then say nothing)."""
 
     profiles: list
     labels: list
@@ -343,7 +343,7 @@ def _not_a_minimum(jobs, done, space, labels, values):
 
 
 def _validate(result, names, experiments, level, max_points, span, workers):
-    require_float64("pamjax.profile")
+    require_float64("pamjax.profile_likelihood")
     if not hasattr(result, "labels") or not hasattr(result, "paths"):
         raise PamjaxInputError(f"result must be a pamjax.FitResult, got {type(result)}")
     experiments = getattr(result, "experiments", None) if experiments is None else experiments
@@ -374,7 +374,7 @@ def _validate(result, names, experiments, level, max_points, span, workers):
     return names, experiments
 
 
-def profile(
+def profile_likelihood(
     result,
     names=None,
     *,
@@ -443,7 +443,7 @@ def profile(
         se = float(result.standard_errors[i])
         lo_hi = sorted([e if e is not None else -math.inf * side for e, side in zip(ends, (1, -1))])
         # a decreasing transform (none today) would swap the sides; sorting keeps [lower, upper]
-        profiles.append(Profile(
+        profiles.append(LikelihoodProfile(
             label=name, value=value, values=[p[0] for p in points], delta=[float(p[1]) for p in points],
             others=others, converged=[bool(p[3]) for p in points], interval=[float(v) for v in lo_hi],
             linearised=[value - z * se, value + z * se],

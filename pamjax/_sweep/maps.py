@@ -10,7 +10,7 @@ from .._core.errors import PamjaxInputError, check_positive
 from .._physics.signals import Constant, Sine
 from .._physics.valves.averaged import cycle_averaged_flow
 from .._physics.valves.base import AbstractSwitchingValve
-from .reductions import AbstractReduction, Mean
+from .reductions import AbstractReduction, WindowMean
 from .sweep import sweep
 
 # Output samples per PWM period for the steady-state mean: the mean over 20 equally spaced phases is within 60 Pa
@@ -44,7 +44,7 @@ def steady_state_map(system, commands, *, horizon=5.0, window=1.0, sample_interv
                            else SMOOTH_SAMPLE_INTERVAL)
     check_positive(sample_interval, "sample_interval")
     ts = np.linspace(0.0, horizon, int(round(horizon / sample_interval)) + 1)
-    return sweep(system, Constant(0.5), ts, {"signal.value": commands, **(over or {})}, reduce=Mean(window),
+    return sweep(system, Constant(0.5), ts, {"signal.value": commands, **(over or {})}, reduce=WindowMean(window),
                  **sweep_kwargs)
 
 
@@ -75,15 +75,15 @@ def _flow_surface(valve, commands, pressures, air, samples):
 
 class _FourierIntegral(AbstractReduction):
     """Fourier coefficient over exactly the last `periods` periods of the lane's `signal.frequency` f,
-    Y = (2/T_w) ∫ y(t) exp(−i 2π f t) dt over [t_end − T_w, t_end], T_w = periods/f (the `Harmonic` convention:
-    y ≈ mean + Re(Y exp(i 2π f t))), by the trapezoid rule with the window's start interpolated linearly.
+    Y = (2/T_w) ∫ y(t) exp(−i 2π f t) dt over [t_end − T_w, t_end], T_w = periods/f (the `FourierCoefficient`
+    convention: y ≈ mean + Re(Y exp(i 2π f t))), by the trapezoid rule with the window's start interpolated linearly.
 
-    On one common time grid for many frequencies most windows do not hold a whole number of samples; `Harmonic`'s
-    plain sum over the samples then covers a fraction of a period too few, and the plant's harmonics and mean leak
-    in (0.5 % in gain, 0.45° in phase at 1.5 Hz with 2 periods on a 160 Hz grid, measured on the MAS-10; a
-    least-squares sinusoid fit on the same samples still leaks 0.06 %). On a whole window it differs from `Harmonic`
-    only in taking half of each end sample (the same for a settled, periodic response); otherwise the error is the
-    trapezoid rule's on the fractional interval, O(h³)."""
+    On one common time grid for many frequencies most windows do not hold a whole number of samples;
+    `FourierCoefficient`'s plain sum over the samples then covers a fraction of a period too few, and the plant's
+    harmonics and mean leak in (0.5 % in gain, 0.45° in phase at 1.5 Hz with 2 periods on a 160 Hz grid, measured on
+    the MAS-10; a least-squares sinusoid fit on the same samples still leaks 0.06 %). On a whole window it differs
+    from `FourierCoefficient` only in taking half of each end sample (the same for a settled, periodic response);
+    otherwise the error is the trapezoid rule's on the fractional interval, O(h³)."""
 
     periods: int = eqx.field(static=True)
 

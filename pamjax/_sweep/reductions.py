@@ -1,5 +1,5 @@
 """Reductions of a sweep's outputs over the output times, evaluated on the fly: each is a weighted sum Σ_k w_k y(t_k)
-with per-lane weights (`Final`, `Mean`, `Harmonic`)."""
+with per-lane weights (`FinalValue`, `WindowMean`, `FourierCoefficient`)."""
 
 import abc
 
@@ -18,14 +18,14 @@ class AbstractReduction(eqx.Module):
         `system` and `signal` may set them (e.g. a swept frequency)."""
 
 
-class Final(AbstractReduction):
+class FinalValue(AbstractReduction):
     """The value at the last output time."""
 
     def weights(self, ts, system, signal):
         return jnp.zeros_like(ts).at[-1].set(1.0)
 
 
-class Mean(AbstractReduction):
+class WindowMean(AbstractReduction):
     """Mean over the output times in the last `window` [s] (e.g. the last N PWM periods: N / f_PWM)."""
 
     window: float = eqx.field(static=True)
@@ -35,7 +35,7 @@ class Mean(AbstractReduction):
         return inside / jnp.sum(inside)
 
 
-class Harmonic(AbstractReduction):
+class FourierCoefficient(AbstractReduction):
     """Complex Fourier coefficient at the lane's frequency f over its last `periods` periods:
     Y = (2/n) Σ y(t_k) exp(−i 2π f t_k), so y ≈ mean + Re(Y exp(i 2π f t)); |Y| is the amplitude, arg Y the phase.
 

@@ -20,7 +20,7 @@ class SweepResult(eqx.Module):
     - `over`: the swept values, each broadcast to the batch shape (plus the leaf's own shape).
     - `t`: output times [s]; `channels`: names of the output channels.
     - `outputs`: channel -> array of shape batch_shape + (len(t),) for trajectories, batch_shape for reductions
-      (complex for `Harmonic`). Pressures absolute [Pa], positions [m], flows [kg/s], as `simulate`.
+      (complex for `FourierCoefficient`). Pressures absolute [Pa], positions [m], flows [kg/s], as `simulate`.
     - `status`: int per point (0 success; 1 non-finite state; 2 non-physical state; 3 adaptive solver failed);
       failed points hold NaN outputs. `dt`, `method`: the step [s] and scheme used.
     - `points`: None for a whole result; for one process's shard (`sweep(..., gather="local")`) the flat indices

@@ -3,7 +3,8 @@
 A sweep point ("lane") is the base system and signal with some leaves replaced, named by path
 (`"valve.supply_pressure"`, `"payload_mass"`, `"signal.value"`, `"y0.pressure"`). Lanes integrate in lockstep with a
 fixed-step scheme (`pamjax._solve.fixed_step`), so no lane waits for another; outputs are kept whole or reduced on the
-fly (`Final`, `Mean`, `Harmonic`). A failed lane gets a status code and NaN outputs; the others are unaffected.
+fly (`FinalValue`, `WindowMean`, `FourierCoefficient`). A failed lane gets a status code and NaN outputs; the others
+are unaffected.
 
 By concern: the plan of swept paths and the checks of their values (`plan`), one lane and the compiled call over a
 chunk of lanes with the scheme and step (`lanes`), the reductions (`reductions`), the spread over devices, calls and
@@ -66,7 +67,8 @@ def sweep(
       shape, so `{"signal.value": u[:, None], "valve.supply_pressure": p[None, :]}` is a grid; a non-scalar leaf
       takes its own shape as trailing axes.
     - `y0`: base initial state (default: each point's `system.initial_state()`, at rest in equilibrium).
-    - `reduce`: None (whole trajectories at `ts`), `Final()`, `Mean(window)` or `Harmonic(periods, frequency)`.
+    - `reduce`: None (whole trajectories at `ts`), `FinalValue()`, `WindowMean(window)` or
+      `FourierCoefficient(periods, frequency)`.
     - `channels`: output channels to keep (default: all the system's outputs and "command").
     - `method`: "auto" (default: "rodas5a" for a continuous valve, "rk4" for a switching one), "rodas5a" (RODAS5,
       an L-stable Rosenbrock method of order 5, under per-lane error control at rtol = atol = 1e-5 on the scaled
@@ -93,9 +95,9 @@ def sweep(
       number of devices, in one process or several; with `chunk_size` given, for any 2 or more devices; between
       one device and several, to round-off (~1e-16 relative: XLA optimises a one-device program differently).
     - `devices`: None (all of `jax.devices()`: the batch axis is sharded over them with a `Mesh` and
-      `NamedSharding`, each device running its own lanes under `shard_map`; after `pamjax.initialize_distributed()`
-      (or `jax.distributed.initialize()`) the devices of every process, each process computing its devices'
-      points), a list of devices, or a `Mesh` with a "batch" axis.
+      `NamedSharding`, each device running its own lanes under `shard_map`; after
+      `pamjax.runtime.initialize_distributed()` (or `jax.distributed.initialize()`) the devices of every process, each
+      process computing its devices' points), a list of devices, or a `Mesh` with a "batch" axis.
     - `progress`: True (print one line per chunk when there are several; process 0 only), False, or a callable
       taking a string.
     - `gather`: "all" (default: every process returns the whole result, gathered once at the end) or "local" (each
@@ -176,7 +178,8 @@ def _check_arguments(system, signal, ts, over, method, dt, chunk_size, gather, r
     if gather not in ("all", "local"):
         raise PamjaxInputError(f"gather must be 'all' or 'local', got {gather!r}")
     if reduce is not None and not isinstance(reduce, AbstractReduction):
-        raise PamjaxInputError(f"reduce must be None, Final(), Mean(window) or Harmonic(...), got {reduce!r}")
+        raise PamjaxInputError(f"reduce must be None, FinalValue(), WindowMean(window) or FourierCoefficient(...), "
+                               f"got {reduce!r}")
 
 
 def _run_calls(system, signal, y0, flat, ts_np, plan, config, mesh, layout, progress):

@@ -72,21 +72,21 @@ import pamjax as pj
 from pamjax import presets
 
 # Constant-velocity friction runs (paper 000, Fig. 6): reduce each run, fit eq. 9
-points = [pj.constant_velocity_point(t, x, f) for t, x, f in runs]          # (v [m/s], F [N], σ [N]) per run
+points = [pj.bench.constant_velocity_point(t, x, f) for t, x, f in runs]    # (v [m/s], F [N], σ [N]) per run
 v, f, sigma = np.array(points).T
-exp = pj.FrictionCurveExperiment(v, f, scale=sigma.mean(), friction="friction")
+exp = pj.bench.FrictionCurveExperiment(v, f, scale=sigma.mean(), friction="friction")
 fit = pj.fit(presets.mas10_system("averaged"), [exp], ["friction.coulomb_force", "friction.viscous_coefficient"])
 
 # ISO 6358 flow curves (paper 000, Fig. 7; upstream held, downstream throttled): fit C_v, b_v of one valve path
-exp = pj.FlowCurveExperiment(p_up, p_down, mass_flow, scale=1e-5, restriction="valve.inflate")
+exp = pj.bench.FlowCurveExperiment(p_up, p_down, mass_flow, scale=1e-5, restriction="valve.inflate")
 free = ["valve.inflate.discharge_coefficient", "valve.inflate.critical_ratio"]
 fit = pj.fit(presets.mas10_system("pwm"), [exp], free)
-curve = pj.flow_curve(presets.mas10_valve().exhaust, 6e5, np.linspace(0.2, 1.0, 50), pj.Air())
+curve = pj.bench.flow_curve(presets.mas10_valve().exhaust, 6e5, np.linspace(0.2, 1.0, 50), pj.Air())
 
 # Force map with its hysteresis loop (paper 000, Figs. 3-5): eq. 8 = eq. 7 − F_c sign(ẋ) − C_f ẋ
-exp = pj.LoopForceMapExperiment(x, p_abs, xdot, force, scale=2.0)
+exp = pj.bench.LoopForceMapExperiment(x, p_abs, xdot, force, scale=2.0)
 fit = pj.fit(presets.mas10_system("pwm"), [exp], ["muscle.force_law.max_force_coefficients", "friction.coulomb_force"])
-x_avg, p_avg, f_avg, width = pj.loop_average(x, p_abs, xdot, force)          # Fig. 4's averages, the loop width
+x_avg, p_avg, f_avg, width = pj.bench.loop_average(x, p_abs, xdot, force)    # Fig. 4's averages, the loop width
 ```
 
 All three go into `pamjax.fit` beside time-series `Experiment`s (one joint fit), report per-channel errors, and refuse

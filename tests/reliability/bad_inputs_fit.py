@@ -23,7 +23,7 @@ P = np.full(5, 3e5)  # Pa, absolute
 def _force_map():
     x, p = np.meshgrid(np.linspace(0.0, 0.06, 3), 101325.0 + np.array([2e5, 4e5]), indexing="ij")
     f = np.asarray(presets.mas10_muscle().static_force(jnp.asarray(x.ravel()), jnp.asarray(p.ravel()), pamjax.Air()))
-    return pamjax.ForceMapExperiment(x.ravel(), p.ravel(), np.maximum(f, 0.0), scale=2.0)
+    return pamjax.bench.ForceMapExperiment(x.ravel(), p.ravel(), np.maximum(f, 0.0), scale=2.0)
 
 
 def _fit(free=("force_law.k0",), experiments=None, **kwargs):
@@ -108,9 +108,11 @@ FIT_CASES = {
     "experiment validation fraction 1": (_experiment(validation_fraction=1.0), "validation_fraction"),
     "experiment unknown channel": (_experiment(channels=["force"]), "no channel 'force'"),
     "experiment not a recording": (lambda: pamjax.Experiment({"t": T}, pamjax.Constant(0.5)), "recording"),
-    "force map gauge pressure": (lambda: pamjax.ForceMapExperiment([0.0, 0.01], [0.0, 3e4], [10.0, 5.0]), "ABSOLUTE"),
-    "force map length mismatch": (lambda: pamjax.ForceMapExperiment([0.0, 0.01], [3e5, 3e5], [10.0]), "one length"),
-    "force map NaN force": (lambda: pamjax.ForceMapExperiment([0.0, 0.01], [3e5, 3e5], [10.0, np.nan]), "forces"),
+    "force map gauge pressure": (lambda: pamjax.bench.ForceMapExperiment([0.0, 0.01], [0.0, 3e4], [10.0, 5.0]),
+                                 "ABSOLUTE"),
+    "force map length mismatch": (lambda: pamjax.bench.ForceMapExperiment([0.0, 0.01], [3e5, 3e5], [10.0]),
+                                  "one length"),
+    "force map NaN force": (lambda: pamjax.bench.ForceMapExperiment([0.0, 0.01], [3e5, 3e5], [10.0, np.nan]), "forces"),
     "synthetic negative noise": (lambda: pamjax.synthetic_recording(
         presets.mas10_tank_system("averaged"), pamjax.Constant(0.5), T, noise=dict(pressure=-1.0)), "noise"),
     # fit specifications

@@ -1,5 +1,5 @@
 """Mistakes in a bench folder (issue 33, battery section 5): `fits/joint.py --data DIR`, `pamjax fit` with a
-`[bench]` table and `pamjax.load_bench`, each on a small folder a rig might log (CSV in barg and mm, a meta.json),
+`[bench]` table and `pamjax.bench.load_bench`, each on a small folder a rig might log (CSV in barg and mm, a meta.json),
 damaged one way at a time. Every case ends in one named error (exit status 2, no traceback, no output folder left
 behind) or, for the folder itself, a correct result.
 

@@ -26,7 +26,7 @@ def _problem(seed=0, start_factor=0.7):
     x, p = x.ravel(), p.ravel()
     f = np.asarray(muscle.static_force(jnp.asarray(x), jnp.asarray(p), pj.Air()))
     f = f + 2.0 * np.random.default_rng(seed).standard_normal(f.shape)
-    exp = pj.ForceMapExperiment(x, p, np.maximum(f, 0.0), scale=2.0)
+    exp = pj.bench.ForceMapExperiment(x, p, np.maximum(f, 0.0), scale=2.0)
     space = pj.ParameterSpace(muscle, FREE)
     start = space.with_values(np.asarray(space.initial_values()) * start_factor)
     return start, exp
@@ -132,9 +132,9 @@ def test_resume_with_the_same_shapes_but_another_model_or_data_is_refused(tmp_pa
     _refused(path, other_start, [exp], r"the start model differs in force_law\.k0")
     _, other_data = _problem(seed=1)  # same shapes, other noise
     _refused(path, start, [other_data], r"experiment 'force_map' has other data")
-    rescaled = pj.ForceMapExperiment(exp.positions, exp.pressures, exp.forces, scale=3.0)
+    rescaled = pj.bench.ForceMapExperiment(exp.positions, exp.pressures, exp.forces, scale=3.0)
     _refused(path, start, [rescaled], r"experiment 'force_map' has other settings")
-    renamed = pj.ForceMapExperiment(exp.positions, exp.pressures, exp.forces, scale=2.0, name="bench")
+    renamed = pj.bench.ForceMapExperiment(exp.positions, exp.pressures, exp.forces, scale=2.0, name="bench")
     _refused(path, start, [renamed], r"the experiments differ \(checkpoint: \['force_map'\], now: \['bench'\]\)")
     # the same problem rebuilt from scratch still resumes
     again = pj.fit(*_problem(), FREE, max_steps=3, progress=False, resume=path)

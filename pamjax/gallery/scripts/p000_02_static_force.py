@@ -85,7 +85,7 @@ def run(out, quick=False):
     muscle, free = eq7_start()
 
     # eq. 7 on the real isometric map
-    res7 = pj.fit(muscle, [pj.ForceMapExperiment(x, p, f, scale=1.0)], free, progress=False)
+    res7 = pj.fit(muscle, [pj.bench.ForceMapExperiment(x, p, f, scale=1.0)], free, progress=False)
     model_f = np.asarray(static_forces(res7.model, jnp.asarray(x), jnp.asarray(p), pj.Air()))
     err = np.where(f > 0, model_f - f, np.maximum(model_f, 0))
     low = (p - P_ATM < 2e5) & (f > 0)
@@ -100,11 +100,11 @@ def run(out, quick=False):
     xl, pl, vl, fl = loop_data(x, p, f, np.random.default_rng(0))
     system = pj.MuscleSystem(valve=presets.mas10_valve(), muscle=muscle,
                              friction=pj.CoulombViscousFriction(10.0, presets.VISCOUS_COEFFICIENT))
-    loop = pj.LoopForceMapExperiment(xl, pl, vl, fl, scale=LOAD_CELL_NOISE)
+    loop = pj.bench.LoopForceMapExperiment(xl, pl, vl, fl, scale=LOAD_CELL_NOISE)
     res8 = pj.fit(system, [loop], [f"muscle.{k}" for k in free] + ["friction.coulomb_force"], progress=False)
     i = res8.labels.index("friction.coulomb_force")
     fc, fc_se = float(res8.values[i]), float(res8.standard_errors[i])
-    xa, pa, fa, width = pj.loop_average(xl, pl, vl, fl)
+    xa, pa, fa, width = pj.bench.loop_average(xl, pl, vl, fl)
     loaded = fa > 0
     e8 = res8.channel_errors["loop_force_map"]["force"]
 

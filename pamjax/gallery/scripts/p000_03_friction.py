@@ -32,13 +32,13 @@ def runs(truth, speeds, rng):
     for v in np.concatenate([-speeds[::-1], speeds]):
         force = float(truth(v)) + FORCE_NOISE * rng.standard_normal(t.size)
         position = v * t + POSITION_NOISE * rng.standard_normal(t.size)
-        points.append(pj.constant_velocity_point(t, position, force))
+        points.append(pj.bench.constant_velocity_point(t, position, force))
     return np.array(points).T
 
 
 def fit(velocities, forces, sigma, name):
     start = pj.CoulombViscousFriction(10.0, 100.0)
-    exp = pj.FrictionCurveExperiment(velocities, forces, scale=sigma, friction="", name=name)
+    exp = pj.bench.FrictionCurveExperiment(velocities, forces, scale=sigma, friction="", name=name)
     res = pj.fit(start, [exp], ["coulomb_force", "viscous_coefficient"], progress=False)
     return np.asarray(res.values), np.asarray(res.standard_errors), res
 
@@ -47,8 +47,9 @@ def run(out, quick=False):
     speeds = np.array([0.01, 0.03, 0.06, 0.1, 0.15]) if quick else np.array([0.01, 0.02, 0.04, 0.06, 0.08, 0.1, 0.15,
                                                                              0.2])
     rng = np.random.default_rng(0)
-    cylinder = runs(lambda v: pj.steady_friction_force(CYLINDER, v), speeds, rng)
-    total = runs(lambda v: pj.steady_friction_force(CYLINDER, v) + pj.steady_friction_force(MUSCLE, v), speeds, rng)
+    cylinder = runs(lambda v: pj.bench.steady_friction_force(CYLINDER, v), speeds, rng)
+    total = runs(lambda v: pj.bench.steady_friction_force(CYLINDER, v) + pj.bench.steady_friction_force(MUSCLE, v),
+                 speeds, rng)
     sigma = FORCE_NOISE / np.sqrt(DURATION * RATE)
     cyl, cyl_se, _ = fit(cylinder[0], cylinder[1], sigma, "cylinder")
     tot, tot_se, _ = fit(total[0], total[1], sigma, "cylinder_and_muscle")

@@ -29,9 +29,9 @@ AIR = pj.Air()
 
 @eqx.filter_jit
 def flow_curve(restriction, upstream_pressure, ratios, air):
-    """`pamjax.flow_curve` jitted: one program per restriction type and number of ratios. Run eagerly, each of its
+    """`pamjax.bench.flow_curve` jitted: one program per restriction type and number of ratios. Run eagerly, each of its
     vmapped operations compiled a program of its own, anew for each curve (~140 in all)."""
-    return pj.flow_curve(restriction, upstream_pressure, ratios, air)
+    return pj.bench.flow_curve(restriction, upstream_pressure, ratios, air)
 
 
 def curve(restriction, p_up, ratios):
@@ -75,7 +75,7 @@ def run(out, quick=False):
     sigma = {k: NOISE * float(np.max(v[2])) for k, v in data.items()}
 
     def experiments():
-        return [pj.FlowCurveExperiment(*data[k], scale=sigma[k], restriction=k, name=k) for k in data]
+        return [pj.bench.FlowCurveExperiment(*data[k], scale=sigma[k], restriction=k, name=k) for k in data]
 
     space = pj.ParameterSpace(truth, list(TABLE_1))
     start = space.with_values(np.asarray(space.initial_values()) * np.array([1.3, 0.7, 1.3, 0.7]))

@@ -118,15 +118,15 @@ def run(out, quick=False):
 
 
 def tank_fit(bench, rate):
-    """C_v, b_v of both paths from the bench's E1/E2 runs (`pamjax.load_bench`, tank tests only) at `rate` [Hz],
+    """C_v, b_v of both paths from the bench's E1/E2 runs (`pamjax.bench.load_bench`, tank tests only) at `rate` [Hz],
     started 30 % off Table 1 (× 1.3 / 0.7 / 1.3 / 0.7), as `fits/valve_tank.py` does."""
     model = presets.mas10_system("pwm", friction="karnopp")
     keys = ["Cv12", "b12", "Cv23", "b23"]
-    loaded = pj.load_bench(bench, model, rate=rate, kinds=("tank_charge", "tank_discharge"), fitted_keys=keys)
+    loaded = pj.bench.load_bench(bench, model, rate=rate, kinds=("tank_charge", "tank_discharge"), fitted_keys=keys)
     space = pj.ParameterSpace(model, loaded.free)
     start = space.with_values(np.asarray(space.initial_values()) * np.array([1.3, 0.7, 1.3, 0.7]))
     res = pj.fit(start, loaded.experiments, loaded.free, progress=False)
-    values, errors = pj.bench_values(res, keys)
+    values, errors = pj.bench.bench_values(res, keys)
     names = dict(Cv12="C_v(1→2)", b12="b_v(1→2)", Cv23="C_v(2→3)", b23="b_v(2→3)")
     return {names[k]: dict(fitted=values[k], se=errors[k]) for k in keys}
 

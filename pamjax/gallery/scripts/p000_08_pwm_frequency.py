@@ -38,11 +38,11 @@ def plant(frequency):
 
 @eqx.filter_jit
 def solve_pwm(system, signal, ts, t0, num_periods):
-    """`pamjax.solve` on the PWM-synchronous grid of `num_periods` periods (static): the frequency is an array leaf of
-    `system`, so the three frequencies share this one compiled program when they are given the same grid size. A
-    grid longer than [t0, ts[-1]] needs adds only zero-length intervals, which the fixed-grid integrator skips exactly
-    (`pamjax.solve`), so every frequency's trajectory is the one `simulate` sizes for it."""
-    return pj.solve(system, signal, ts, None, t0, stepping="pwm", num_periods=num_periods)
+    """`pamjax.unchecked.solve` on the PWM-synchronous grid of `num_periods` periods (static): the frequency is an array
+    leaf of `system`, so the three frequencies share this one compiled program when they are given the same grid size.
+    A grid longer than [t0, ts[-1]] needs adds only zero-length intervals, which the fixed-grid integrator skips
+    exactly (`pamjax.unchecked.solve`), so every frequency's trajectory is the one `simulate` sizes for it."""
+    return pj.unchecked.solve(system, signal, ts, None, t0, stepping="pwm", num_periods=num_periods)
 
 
 def simulate_pwm(system, signal, ts, num_periods):
@@ -70,7 +70,7 @@ def run(out, quick=False):
     numbers = {}
     plants = {f: plant(f) for f in FREQUENCIES}
     # one grid size for all frequencies (the finest's): one compiled solve instead of one per frequency
-    periods = max(pj.num_periods(p.valve, ts[0], ts[-1]) for p in plants.values())
+    periods = max(pj.unchecked.num_periods(p.valve, ts[0], ts[-1]) for p in plants.values())
     for k, f in enumerate(FREQUENCIES):
         traj = simulate_pwm(plants[f], pj.Triangle(0.05, 0.95, 0.25), ts, periods)
         p, x = np.asarray(traj.pressure), np.asarray(traj.position)
