@@ -178,7 +178,7 @@ def main():
     ts = np.linspace(0.0, args.horizon, int(round(args.horizon * 10)) + 1)  # outputs every 0.1 s, steps land on them
     if args.default_only:  # benchmarks/check.py's two-device check: the headline figure alone
         def call():
-            return pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties}, reduce=pamjax.Final(),
+            return pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties}, reduce=pamjax.FinalValue(),
                                 channels=("pressure", "position"), progress=False)
 
         start = time.perf_counter()

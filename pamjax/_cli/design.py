@@ -40,7 +40,7 @@ def load(path):
 
 
 def build_design(table, root):
-    """The keyword arguments of `pamjax.design` a validated [design] table gives."""
+    """The keyword arguments of `pamjax.design_experiment` a validated [design] table gives."""
     import pamjax as pj
 
     kwargs = {k: table[k] for k in schema.DESIGN_ARGS if k in table}

@@ -142,7 +142,8 @@ SWEEP_KEYS = {  # the [sweep] keys each kind uses
 }
 
 DESIGN_TABLES = {"model", "design"}
-DESIGN = {  # free, duration, noise, prior, baseline, initial, tank_volume, out; the rest: pamjax.design's arguments
+# free, duration, noise, prior, baseline, initial, tank_volume, out; the rest: pamjax.design_experiment's arguments
+DESIGN = {
     "free": Key("free", '["friction.coulomb_force"]', "parameter paths, as [fit] free"),
     "duration": Key("positive number", "33.0", "s"),
     "noise": Key("table of positive numbers", "{ pressure = 2e3, position = 1e-4 }",
@@ -171,8 +172,9 @@ DESIGN = {  # free, duration, noise, prior, baseline, initial, tank_volume, out;
     "baseline_margin": Key("positive number", "1.0"),
     "period": Key("positive number", "0.02", "s, the PWM period of a valve that has none"),
 }
+# the keyword arguments of pamjax.design_experiment
 DESIGN_ARGS = tuple(k for k in DESIGN if k not in ("free", "duration", "noise", "prior", "baseline", "initial",
-                                                     "tank_volume", "out"))  # keyword arguments of pamjax.design
+                                                     "tank_volume", "out"))
 
 
 # -- one validation per config -----------------------------------------------------------------------------------
@@ -273,7 +275,8 @@ def validate_sweep(cfg, where="sweep config"):
 
 def validate_design(cfg, where="config"):
     """A `pamjax design` config: [model] and [design] (`free`, `duration`, `noise` and the keyword arguments of
-    `pamjax.design`; the limits are checked against the run's start once the model is built: `check_design`)."""
+    `pamjax.design_experiment`; the limits are checked against the run's start once the model is built:
+    `check_design`)."""
     check_keys(cfg, DESIGN_TABLES, where)
     if "design" not in cfg:
         raise PamjaxInputError(f"{where} needs a [design] table (free, duration, noise, ...)")
