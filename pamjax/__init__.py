@@ -153,7 +153,6 @@ from ._fit.experiment import (
     TankFromModel as TankFromModel,
 )
 from ._fit.fit import FitResult as FitResult, evaluate as evaluate, fit as fit
-from ._fit.lm import levenberg_marquardt as levenberg_marquardt
 from ._fit.model_io import load_model as load_model, save_model as save_model
 from ._fit.multistart import (
     FleetResult as FleetResult,
@@ -247,13 +246,22 @@ from . import presets as presets, units as units
 
 def __getattr__(name):
     """`pamjax.Rodas5`, imported on first use: its module imports diffrax (~0.4 s), which a fit on the fixed grids
-    loaded from the cache never needs."""
+    loaded from the cache never needs; `pamjax.LevenbergMarquardt` (the fit's optimistix solver) and
+    `pamjax.levenberg_marquardt` likewise import optimistix and lineax (~0.3 s) when first used."""
     if name == "Rodas5":
         from ._solve.rodas_solver import Rodas5
 
         return Rodas5
+    if name == "LevenbergMarquardt":
+        from ._fit.solver import LevenbergMarquardt
+
+        return LevenbergMarquardt
+    if name == "levenberg_marquardt":
+        from ._fit.drive import levenberg_marquardt
+
+        return levenberg_marquardt
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted({*globals(), "Rodas5"})
+    return sorted({*globals(), "Rodas5", "LevenbergMarquardt", "levenberg_marquardt"})
