@@ -8,9 +8,11 @@ through `optimistix.least_squares` on the same two programs; the statistics and 
 """
 
 import dataclasses
+import importlib
 import json
 import math
 import pathlib
+import threading
 import time
 import warnings
 
@@ -181,6 +183,15 @@ def _read_checkpoint(path, labels, num_residuals, solver):
     return state_from_arrays(solver, data)
 
 
+def _check_settings(ftol, xtol, gtol, stall_steps):
+    """The default solver's settings, checked before anything is set up (as `LevenbergMarquardt` checks them)."""
+    if isinstance(stall_steps, bool) or not (isinstance(stall_steps, int) and stall_steps >= 1):
+        raise PamjaxInputError(f"stall_steps must be a positive int, got {stall_steps!r}")
+    for label, tol in (("ftol", ftol), ("xtol", xtol), ("gtol", gtol)):
+        if isinstance(tol, bool) or not (isinstance(tol, (int, float)) and 0 <= tol < 1):
+            raise PamjaxInputError(f"{label} must be a number in [0, 1), got {tol!r}")
+
+
 def _validate(experiments, max_steps, out, overwrite, checkpoint, resume):
     require_float64("pamjax.fit")
     if out is not None and pathlib.Path(out).exists() and not overwrite:
@@ -321,11 +332,16 @@ def fit(
     any fit; `FileExistsError` if `out` (or `checkpoint`) exists and `overwrite` is False.
     """
     experiments = _validate(experiments, max_steps, out, overwrite, checkpoint, resume)
-    from .drive import choose_solver, run_fit, run_optimistix, state_arrays  # imports optimistix: not at import
+    if solver is None:  # the default: its module (optimistix, lineax: ~0.1 s) is imported beside the set-up
+        _check_settings(ftol, xtol, gtol, stall_steps)
+        beside = threading.Thread(target=importlib.import_module, args=(f"{__package__}.drive",), daemon=True)
+        beside.start()
+    else:  # an optimistix object: optimistix is imported
+        from .drive import choose_solver
 
-    solver, own = choose_solver(solver, ftol, xtol, gtol, stall_steps, checkpoint, resume)
+        solver, _ = choose_solver(solver, ftol, xtol, gtol, stall_steps, checkpoint, resume)
     space = ParameterSpace(model, free)
-    print_ = fingerprint(model, experiments, free, solver if own else None)  # start model, free spec, experiments, data
+    print_ = fingerprint(model, experiments, free, solver)  # start model, free spec, experiments, data (None: default)
     if resume is not None:
         check_resume(resume, print_)  # before any solve: a checkpoint of another problem is refused, naming why
     labels = space.labels
@@ -336,6 +352,11 @@ def fit(
             f"the experiments give {used} residuals (samples × channels used for identification) for {len(labels)} "
             f"free parameters ({', '.join(labels)}): fewer data than unknowns cannot determine them; add samples or "
             "experiments, or free fewer parameters")
+    if solver is None:
+        beside.join()
+    from .drive import choose_solver, run_fit, run_optimistix, state_arrays
+
+    solver, own = choose_solver(solver, ftol, xtol, gtol, stall_steps, checkpoint, resume)
     report = _progress_printer(progress)
     t_start = time.perf_counter()
     announce = resume is None and progress is not False and not problem.cached(theta)
@@ -344,8 +365,7 @@ def fit(
         print(f"fit: {len(labels)} parameters, {len(exps)} experiments; compiling the residuals and their "
               f"Jacobian (first run; {cache}) ...", flush=True)
     if own:
-        m = int(np.count_nonzero(problem.mask))
-        start = None if resume is None else _read_checkpoint(resume, labels, m, solver)
+        start = None if resume is None else _read_checkpoint(resume, labels, used, solver)
 
         def save(y, state, history):
             _write_checkpoint(checkpoint, labels, state_arrays(y, state, history), print_)
