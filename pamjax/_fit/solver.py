@@ -48,7 +48,7 @@ from .._core.errors import PamjaxInputError
 # of the reliability benchmark stopped so at 8,800× its optimum cost).
 POTENTIAL_TOL = 1e-6
 ACCEPT_RATIO = 1e-4  # ρ above which a trial is accepted (Nielsen's alg. 3.16 accepts any ρ > 0; 1e-4 as MINPACK)
-TAU = 1e-3  # λ₀ = τ max(1, diag DJᵀJD) (Madsen, Nielsen & Tingleff 2004: τ = 1e-3 for a start believed good)
+TAU = 1e-3  # λ₀ = τ max(1, diag DJᵀJD) (Madsen, Nielsen & Tingleff 2004, sec. 3.2: 1e-3 unless x₀ is known close)
 GEODESIC_H = 0.1  # finite-difference step of r_vv along the velocity (Transtrum & Sethna 2012, sec. IV: h = 0.1)
 GEODESIC_ALPHA = 0.75  # acceleration trusted while 2‖a‖/‖v‖ ≤ α (Transtrum & Sethna 2012: α = 0.75)
 # The probes, in conditional standard errors (the move of one parameter, the others fixed, that the local model says
@@ -124,7 +124,7 @@ def _all_finite(xp, r):
     return xp.all(xp.isfinite(r))
 
 
-def _cost(xp, r):
+def _cost(r):
     return 0.5 * (r @ r)
 
 
@@ -342,7 +342,7 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
         r, jac, aux = _jacobian(fn, flat, args, host, unravel)
         factors = self.descent.factor(r, jac, xp.zeros(flat.size))
         search = self.search.start(jac / factors.scale)
-        cost = _cost(xp, r)
+        cost = _cost(r)
         done = gradient_cosine(jac, r) <= self.gtol
         first = xp.stack([xp.asarray(0.0), cost, search.damping, xp.asarray(1.0)])
         return State(
@@ -387,7 +387,7 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
         r_trial, aux_trial = _cond(host, trusted, lambda: _residual(fn, trial, args, host, unravel),
                                    lambda: (xp.full_like(r, xp.nan), state.aux))
         ok = trusted & _all_finite(xp, r_trial)
-        actual = cost - xp.where(ok, _cost(xp, r_trial), xp.inf)
+        actual = cost - xp.where(ok, _cost(r_trial), xp.inf)
         accept, search = self.search.decide(ok, actual, predicted, state.search)
         count = state.step + 1
         theta_norm = xp.linalg.norm(y * f.scale)
@@ -397,7 +397,7 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
 
         def accepted():
             r_new, j_new, aux_new = _jacobian(fn, trial, args, host, unravel)
-            cost_new = _cost(xp, r_new)
+            cost_new = _cost(r_new)
             reason = xp.where(
                 stationary & (xp.abs(actual) <= self.ftol * cost_new) & (predicted <= self.ftol * cost_new), _FTOL,
                 xp.where(stationary & small, _XTOL, xp.where(gradient_cosine(j_new, r_new) <= self.gtol, _GTOL, 0)))
@@ -441,7 +441,7 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
             r, jac, aux = _jacobian(fn, point, args, host, unravel)
             fresh = xp.linalg.norm(jac, axis=0)
             search = self.search.start(jac / xp.where(fresh > 0, fresh, 1.0))
-            cost = _cost(xp, r)
+            cost = _cost(r)
             row = xp.stack([state.last_rows[0, 0], cost, search.damping, xp.asarray(1.0)])
             return point, dataclasses.replace(
                 state, residual=r, jacobian=jac, cost=cost, factors=self.descent.factor(r, jac, state.factors.scale),
@@ -478,7 +478,7 @@ def probe(fn, y, args, jacobian, cost, *, host=True, unravel=lambda t: t):
 
     def gain_at(theta):
         r, _ = _residual(fn, theta, args, host, unravel)
-        return xp.where(_all_finite(xp, r), cost - _cost(xp, r), -xp.inf)
+        return xp.where(_all_finite(xp, r), cost - _cost(r), -xp.inf)
 
     if host:
         gains = np.array([gain_at(p) if use else -np.inf for p, use in zip(points, usable)])
