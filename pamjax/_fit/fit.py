@@ -244,6 +244,9 @@ def _progress_printer(progress):
         return None
 
     def report(step, cost, damping, accepted):
+        if math.isnan(damping):  # another optimistix solver: one line per evaluation, lower than all before or not
+            print(f"  eval {step:4d}  cost {cost:.6e}  {'lowest yet' if accepted else 'not lower'}", flush=True)
+            return
         verdict = "accepted" if accepted else "rejected"
         print(f"  iter {step:4d}  cost {cost:.6e}  damping {damping:.3e}  {verdict}", flush=True)
 
