@@ -1,4 +1,4 @@
-"""Joint-fit benchmark: pamjax (its Levenberg-Marquardt, forward-mode Jacobians through diffrax, jitted)
+"""Joint-fit benchmark: pamjax (its optimistix Levenberg-Marquardt, forward-mode Jacobians through diffrax, jitted)
 against SciPy (`scipy.optimize.least_squares`, trust-region reflective, 2-point finite-difference Jacobian, each
 residual from `scipy.integrate.solve_ivp` RK45 on an independent NumPy transcription of the same vector field), on
 the same synthetic data, model, parameterisation (pamjax's unconstrained θ) and start.
@@ -10,7 +10,12 @@ discharge at duty 0.5 (2 s); `--rate` Hz samples (default 50), noise 2 kPa / 0.1
 speedup = SciPy's time to reach pamjax's final cost (or, if it stops short, its time to stop: then `scipy_reached=0`)
 ÷ pamjax's fit time after compilation. Ends with one `RESULT` line.
 
-    python benchmarks/fit.py [--rate 50] [--scipy-budget-s 600] [--skip-scipy]
+`--solvers` fits the same problem again with other optimistix solvers, each in `pamjax.fit(solver=...)` on the same
+two compiled programs, printed beside pamjax's default (`RESULT` is the default's): `plain` (pamjax's
+`LevenbergMarquardt(geodesic=False)`), `optimistix` (`optimistix.LevenbergMarquardt(rtol=1e-8, atol=1e-8)`, run by
+`optimistix.least_squares`). `--skip-scipy`: pamjax's fits only.
+
+    python benchmarks/fit.py [--rate 50] [--scipy-budget-s 600] [--skip-scipy] [--solvers plain,optimistix]
 """
 
 import argparse
@@ -120,12 +125,24 @@ def scipy_residuals(theta, space, exps, counter):
     return np.where(np.isfinite(r), r, FAILED_RESIDUAL) if not np.all(np.isfinite(r)) else r
 
 
+def other_solver(name):
+    """The optimistix solvers `--solvers` compares with pamjax's default."""
+    if name == "plain":
+        return pj.LevenbergMarquardt(geodesic=False)
+    if name == "optimistix":
+        import optimistix as optx
+
+        return optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8)
+    raise SystemExit(f"--solvers: unknown solver {name!r} (plain, optimistix)")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rate", type=float, default=50.0)
     ap.add_argument("--scipy-budget-s", type=float, default=600.0, help="wall-time cap for SciPy")
     ap.add_argument("--off", type=float, default=0.10, help="relative start offset")
     ap.add_argument("--skip-scipy", action="store_true", help="pamjax's fit only (benchmarks/check.py's quick run)")
+    ap.add_argument("--solvers", default="", help="comma-separated: plain, optimistix (fitted beside the default)")
     args = ap.parse_args()
 
     truth = presets.mas10_system(valve="averaged")
@@ -151,7 +168,11 @@ def main():
           f"({res.labels[int(z.argmax())]})")
     for i in np.flatnonzero(~nonzero):
         print(f"  {res.labels[i]}: true 0, fitted {res.values[i]:.3g} ± {res.standard_errors[i]:.3g}")
-
+    for name in filter(None, args.solvers.split(",")):
+        other = pj.fit(start, exps, FREE, max_steps=100, progress=False, solver=other_solver(name))
+        print(f"SOLVER {name}: {other.status}, {other.iterations} iterations ({other.accepted_steps} accepted), cost "
+              f"{other.cost:.9g} ({other.cost / res.cost:.6f} x the default's); fit {other.fit_s:.2f} s after "
+              f"compile {other.compile_s:.2f} s ({other.fit_s / res.fit_s:.2f} x the default's fit time)")
     if args.skip_scipy:
         print(f"RESULT fit_s={res.fit_s:.3f} compile_s={res.compile_s:.3f} cost={res.cost:.6g} "
               f"max_rel_error={rel.max():.3g} max_z={z.max():.2f} total_s={res.fit_s + res.compile_s:.3f} "

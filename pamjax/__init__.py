@@ -84,7 +84,6 @@ from ._fit.experiment import (
     TankFromModel as TankFromModel,
 )
 from ._fit.fit import FitResult as FitResult, evaluate as evaluate, fit as fit
-from ._fit.lm import levenberg_marquardt as levenberg_marquardt
 from ._fit.model_io import load_model as load_model, save_model as save_model
 from ._fit.multistart import (
     FleetResult as FleetResult, MultistartResult as MultistartResult, fit_fleet as fit_fleet, multistart as multistart,
@@ -145,15 +144,18 @@ from ._control.tuning import tune_controller as tune_controller
 from . import bench as bench, presets as presets, runtime as runtime, unchecked as unchecked, units as units
 
 
-def __getattr__(name):
-    """`pamjax.Rodas5` on first use (its module imports diffrax, ~0.4 s, which a fit on the fixed grids never needs);
-    old names that moved or were renamed, for one release, with a `DeprecationWarning` (`_core/deprecation.py`)."""
-    if name == "Rodas5":
-        from ._solve.rodas_solver import Rodas5
+_LAZY = {"Rodas5": "._solve.rodas_solver", "LevenbergMarquardt": "._fit.solver", "levenberg_marquardt": "._fit.drive"}
 
-        return Rodas5
+
+def __getattr__(name):
+    """`_LAZY` names on first use (diffrax ~0.4 s, optimistix ~0.3 s: a cached fixed-grid fit needs neither); moved or
+    renamed names for one release, with a `DeprecationWarning` (`_core/deprecation.py`)."""
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name], __name__), name)
     return _moved(__name__, name)
 
 
 def __dir__():
-    return sorted({*globals(), "Rodas5"})
+    return sorted({*globals(), *_LAZY})

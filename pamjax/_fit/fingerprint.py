@@ -10,8 +10,9 @@ resuming it with the full budget is what checkpoints are for):
 - `free`: the free-parameter spec (paths, transforms, bounds, scales);
 - `experiments`: per experiment (by name, in order) its data (times, recorded values, weights and masks) and its
   settings (signal, channels, scales, initial state, solver settings, ...);
-- `solver`: the optimiser (its class and settings, if it is not pamjax's own Levenberg-Marquardt). Its termination
-  settings (`ftol`, `xtol`, `gtol`) are not: like `max_steps`, they only decide when the same iterations stop.
+- `solver`: the optimiser (its class and settings; of pamjax's own `LevenbergMarquardt` only whether its geodesic
+  acceleration is on). Its termination settings (`ftol`, `xtol`, `gtol`) are not: like `max_steps`, they only
+  decide when the same iterations stop.
 """
 
 import dataclasses
@@ -46,6 +47,8 @@ def _leaves_by_path(model, prefix=""):
 def _solver(solver):
     if solver is None:
         return {"class": "pamjax Levenberg-Marquardt (pamjax._fit.lm)"}
+    if callable(getattr(solver, "fingerprint", None)):  # pamjax's LevenbergMarquardt: only what changes its steps
+        return solver.fingerprint()
     items = ((f.name, getattr(solver, f.name, None)) for f in dataclasses.fields(solver)) if dataclasses.is_dataclass(
         solver) else sorted(vars(solver).items())
     settings = {k: repr(v) for k, v in items if isinstance(v, (int, float, str, bool)) or eqx.is_array(v)}

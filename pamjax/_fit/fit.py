@@ -1,14 +1,18 @@
 """`fit`: least-squares identification of named parameters of a model against experiments.
 
 Workflow only: the physics lives in the components; the residuals come from `Experiment.residuals`; the iteration
-is Levenberg-Marquardt on the host (`pamjax._fit.lm`) around two compiled functions per problem structure, the residuals
-and their forward-mode Jacobian; the statistics and the mismatch diagnostics are in `pamjax._fit.diagnostics`.
+is an optimistix least-squares solver — pamjax's `LevenbergMarquardt` (`pamjax._fit.solver`), driven from the host
+around two compiled functions per problem structure, the residuals and their forward-mode Jacobian, or any other
+through `optimistix.least_squares` on the same two programs; the statistics and the mismatch diagnostics are in
+`pamjax._fit.diagnostics`.
 """
 
 import dataclasses
+import importlib
 import json
 import math
 import pathlib
+import threading
 import time
 import warnings
 
@@ -17,7 +21,6 @@ import numpy as np
 from .._core.arrays import device_array
 from .._core.cache import program_cache
 from .._core.errors import PamjaxInputError, require_float64
-from . import lm as _lm
 from .diagnostics import channel_errors, covariance, identifiability, mismatch
 from .experiment import AbstractExperiment
 from .fingerprint import check_resume, encode, fingerprint
@@ -134,7 +137,8 @@ def evaluate(model, experiments):
     return channel_errors(experiments, r)
 
 
-_CHECKPOINT_FORMAT = 2
+_CHECKPOINT_FORMAT = 3  # 3: pamjax's optimistix solver's state (`solver.state_arrays`); 2 (the host
+_READABLE_FORMATS = (2, 3)  # Levenberg-Marquardt's, until 2026-11) resumes in it, at the same point
 
 
 def _check_checkpoint_path(checkpoint, resume, overwrite):
@@ -149,32 +153,44 @@ def _check_checkpoint_path(checkpoint, resume, overwrite):
         raise FileExistsError(f"checkpoint {path} exists; pass overwrite=True to replace it (or resume from it)")
 
 
-def _write_checkpoint(path, labels, state, fingerprint=None):
-    """Save the iteration state (every array exactly) after an iteration. Written to a temporary file and renamed,
-    so an interruption leaves the previous checkpoint intact."""
+def _write_checkpoint(path, labels, arrays, fingerprint=None):
+    """Save the iteration state (`solver.state_arrays`: θ, the solver's state, the history; every array exactly)
+    after an iteration. Written to a temporary file and renamed, so an interruption leaves the previous checkpoint
+    intact."""
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp.npz")
     extra = {} if fingerprint is None else {"fingerprint": encode(fingerprint)}  # see _fingerprint
-    np.savez(tmp, format=_CHECKPOINT_FORMAT, labels=np.asarray(labels, dtype=str), **state.arrays(), **extra)
+    np.savez(tmp, format=_CHECKPOINT_FORMAT, labels=np.asarray(labels, dtype=str), **arrays, **extra)
     tmp.replace(path)
 
 
-def _read_checkpoint(path, labels, num_residuals):
+def _read_checkpoint(path, labels, num_residuals, solver):
+    """(θ, solver state, history) from a checkpoint of this fit."""
+    from .drive import state_from_arrays
+
     path = pathlib.Path(path)
     if not path.exists():
         raise PamjaxInputError(f"resume: checkpoint {path} does not exist")
     with np.load(path) as f:
         data = {k: f[k] for k in f.files}
-    if int(data.get("format", -1)) != _CHECKPOINT_FORMAT:
+    if int(data.get("format", -1)) not in _READABLE_FORMATS:
         raise PamjaxInputError(f"resume: {path} is not a pamjax fit checkpoint (format {_CHECKPOINT_FORMAT})")
     if list(data["labels"]) != list(labels):
         raise PamjaxInputError(f"resume: {path} was saved for parameters {list(data['labels'])}, not {list(labels)}")
-    state = _lm.LMState.from_arrays(data)
-    if state.residual.shape != (num_residuals,):
-        raise PamjaxInputError(f"resume: {path} holds {state.residual.size} residuals, this fit has {num_residuals} "
-                               "(other experiments or data)")
-    return state
+    if np.shape(data["residual"]) != (num_residuals,):
+        raise PamjaxInputError(f"resume: {path} holds {np.size(data['residual'])} residuals, this fit has "
+                               f"{num_residuals} (other experiments or data)")
+    return state_from_arrays(solver, data)
+
+
+def _check_settings(ftol, xtol, gtol, stall_steps):
+    """The default solver's settings, checked before anything is set up (as `LevenbergMarquardt` checks them)."""
+    if isinstance(stall_steps, bool) or not (isinstance(stall_steps, int) and stall_steps >= 1):
+        raise PamjaxInputError(f"stall_steps must be a positive int, got {stall_steps!r}")
+    for label, tol in (("ftol", ftol), ("xtol", xtol), ("gtol", gtol)):
+        if isinstance(tol, bool) or not (isinstance(tol, (int, float)) and 0 <= tol < 1):
+            raise PamjaxInputError(f"{label} must be a number in [0, 1), got {tol!r}")
 
 
 def _validate(experiments, max_steps, out, overwrite, checkpoint, resume):
@@ -229,13 +245,16 @@ def _progress_printer(progress):
         return None
 
     def report(step, cost, damping, accepted):
+        if math.isnan(damping):  # another optimistix solver: one line per evaluation, lower than all before or not
+            print(f"  eval {step:4d}  cost {cost:.6e}  {'lowest yet' if accepted else 'not lower'}", flush=True)
+            return
         verdict = "accepted" if accepted else "rejected"
         print(f"  iter {step:4d}  cost {cost:.6e}  damping {damping:.3e}  {verdict}", flush=True)
 
     return report
 
 
-def _status(state, space, theta):
+def _status(state, space, theta):  # state: a `solver.Outcome`
     """(status, converged, message) from the final iteration state."""
     if not state.done:
         return "max_steps", False, "the iteration budget (max_steps) ran out before convergence"
@@ -264,13 +283,15 @@ def fit(
     overwrite: bool = False,
     checkpoint=None,
     resume=None,
+    solver=None,
 ) -> FitResult:
     """Fit the parameters named in `free` of `model` to `experiments` by nonlinear least squares.
 
-    Minimises ½ Σ rᵢ² over all experiments' residuals r = (model − data) / scale (identification part only) by
-    Levenberg-Marquardt (`pamjax._fit.lm`: Nielsen's damping, Moré's scaling) with Jacobians in forward mode through
-    the solves. Parameters are fitted in an unconstrained, O(1)-scaled space (`pamjax.ParameterSpace`): log for
-    physically positive quantities (volumes, areas, conductances, friction: a trial value is never ≤ 0), a logistic
+    Minimises ½ Σ rᵢ² over all experiments' residuals r = (model − data) / scale (identification part only) by an
+    optimistix least-squares solver, by default pamjax's `LevenbergMarquardt` (Nielsen's damping, Moré's scaling,
+    geodesic acceleration; `pamjax._fit.solver`), with Jacobians in forward mode through the solves. Parameters
+    are fitted in an unconstrained, O(1)-scaled space (`pamjax.ParameterSpace`): log for physically positive
+    quantities (volumes, areas, conductances, friction: a trial value is never ≤ 0), a logistic
     for ratios and bounded ones, a scale by the starting magnitude for signed coefficients, and the quartic F_max of
     eq. 7 as its values at five nodes over the stroke (reported as a0…a4). A trial step whose simulation fails
     (non-finite residuals) is rejected, never fatal.
@@ -287,6 +308,13 @@ def fit(
     - `stall_steps`: rejected trials in a row after which a fit whose step has shrunk below `xtol` while the local
       model still promises a decrease stops as 'stalled' (the Jacobian is then checked against the cost and the
       result says by how much they disagree). Rejections alone never stop a fit before its first accepted step.
+    - `solver`: None (pamjax's `LevenbergMarquardt(ftol, xtol, gtol, stall_steps)`, run from the host: no program
+      besides the residuals and their Jacobian is compiled), a `pamjax.LevenbergMarquardt` of your settings, or any
+      optimistix least-squares solver or minimiser (e.g. `optimistix.LevenbergMarquardt(rtol=1e-8, atol=1e-8)`),
+      run by `optimistix.least_squares` on a function whose value and forward-mode derivative are the same two
+      compiled programs (its loop is compiled too, with the programs as host callbacks: not kept by the persistent
+      cache); it stops by its own tests ('converged' when it reports success), and takes no `ftol`, `xtol`, `gtol`,
+      `stall_steps`, `checkpoint` or `resume`. Progress then prints one line per evaluation.
     - `progress`: True prints one line per iteration (cost, damping, accepted); a callable gets
       (step, cost, damping, accepted); False is silent.
     - `identifiability_tol`: singular values of the column-normalised Jacobian below this × the largest mark a
@@ -308,13 +336,16 @@ def fit(
     any fit; `FileExistsError` if `out` (or `checkpoint`) exists and `overwrite` is False.
     """
     experiments = _validate(experiments, max_steps, out, overwrite, checkpoint, resume)
-    if not (isinstance(stall_steps, int) and stall_steps >= 1):
-        raise PamjaxInputError(f"stall_steps must be a positive int, got {stall_steps!r}")
-    for label, tol in (("ftol", ftol), ("xtol", xtol), ("gtol", gtol)):
-        if not (isinstance(tol, (int, float)) and 0 <= tol < 1):
-            raise PamjaxInputError(f"{label} must be a number in [0, 1), got {tol!r}")
+    if solver is None:  # the default: its module (optimistix, lineax: ~0.1 s) is imported beside the set-up
+        _check_settings(ftol, xtol, gtol, stall_steps)
+        beside = threading.Thread(target=importlib.import_module, args=(f"{__package__}.drive",), daemon=True)
+        beside.start()
+    else:  # an optimistix object: optimistix is imported
+        from .drive import choose_solver
+
+        solver, _ = choose_solver(solver, ftol, xtol, gtol, stall_steps, checkpoint, resume)
     space = ParameterSpace(model, free)
-    print_ = fingerprint(model, experiments, free)  # start model, free spec, experiments and data (_fingerprint)
+    print_ = fingerprint(model, experiments, free, solver)  # start model, free spec, experiments, data (None: default)
     if resume is not None:
         check_resume(resume, print_)  # before any solve: a checkpoint of another problem is refused, naming why
     labels = space.labels
@@ -325,37 +356,31 @@ def fit(
             f"the experiments give {used} residuals (samples × channels used for identification) for {len(labels)} "
             f"free parameters ({', '.join(labels)}): fewer data than unknowns cannot determine them; add samples or "
             "experiments, or free fewer parameters")
+    if solver is None:
+        beside.join()
+    from .drive import choose_solver, run_fit, run_optimistix, state_arrays
+
+    solver, own = choose_solver(solver, ftol, xtol, gtol, stall_steps, checkpoint, resume)
     report = _progress_printer(progress)
     t_start = time.perf_counter()
-    if resume is not None:
-        state = _read_checkpoint(resume, labels, int(np.count_nonzero(problem.mask)))
+    announce = resume is None and progress is not False and not problem.cached(theta)
+    if announce:
+        cache = ("cached afterwards" if program_cache() is not None
+                 else "pamjax.runtime.enable_compilation_cache() keeps it")
+        print(f"fit: {len(labels)} parameters, {len(exps)} experiments; compiling the residuals and their "
+              f"Jacobian (first run; {cache}) ...", flush=True)
+    if own:
+        start = None if resume is None else _read_checkpoint(resume, labels, used, solver)
+
+        def save(y, state, history):
+            _write_checkpoint(checkpoint, labels, state_arrays(y, state, history), print_)
+
+        outcome = run_fit(solver, problem, theta, max_steps, report, announce, start, save if checkpoint else None)
+        extra_compile = 0.0
     else:
-        announce = progress is not False and not problem.cached(theta)
-        if announce:
-            cache = ("cached afterwards" if program_cache() is not None
-                     else "pamjax.runtime.enable_compilation_cache() keeps it")
-            print(f"fit: {len(labels)} parameters, {len(exps)} experiments; compiling the residuals and their "
-                  f"Jacobian (first run; {cache}) ...", flush=True)
-        r0, j0 = problem.start(theta)
-        if not np.all(np.isfinite(r0)) or not np.all(np.isfinite(j0)):
-            raise PamjaxInputError("the start model's simulation fails (non-finite residuals or Jacobian): check the "
-                                   "start values and the experiments' initial states")
-        state = _lm.start(theta, r0, j0)
-        if announce:
-            print(f"fit: compiled in {problem.compile_seconds():.1f} s", flush=True)
-        if report is not None:
-            report(0, state.cost, state.damping, True)
-        if _lm._gradient_cosine(state) <= gtol:
-            state.done, state.reason = True, "converged: gradient orthogonal to the residuals at the start (gtol)"
-    while not state.done and state.step < max_steps:
-        state = _lm.iterate(state, problem.residuals, problem.jacobian, ftol=ftol, xtol=xtol, gtol=gtol,
-                            stall_steps=stall_steps, report=report)
-        if checkpoint is not None:
-            _write_checkpoint(checkpoint, labels, state, print_)
-    if checkpoint is not None and state.step == 0:
-        _write_checkpoint(checkpoint, labels, state, print_)
-    res = _result(model, exps, free, space, state, identifiability_tol, out, overwrite, problem)
-    res.compile_s = problem.compile_seconds()
+        outcome, extra_compile = run_optimistix(solver, problem, theta, max_steps, report, announce)
+    res = _result(model, exps, free, space, outcome, identifiability_tol, out, overwrite, problem)
+    res.compile_s = problem.compile_seconds() + extra_compile
     res.fit_s = time.perf_counter() - t_start - res.compile_s
     if out is not None:
         res.to_json(out, overwrite=overwrite)
@@ -380,7 +405,9 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
     theta = state.theta
     status, converged, message = _status(state, space, theta)
     if status == "stalled":
-        mismatch_j = _lm.jacobian_check(state, problem.residuals)
+        from .drive import jacobian_check
+
+        mismatch_j = jacobian_check(state, problem.residuals)
         message += (f"; the Jacobian disagrees with the cost by {mismatch_j:.2g} (relative) along the steepest "
                     "descent" if mismatch_j > 1e-3 else "; the Jacobian agrees with the cost (a minimum to the "
                     "solver's precision, or a very flat valley)")

@@ -1,6 +1,8 @@
 """A fit's two compiled functions and their host side: the residuals at θ and (r, ∂r/∂θ) in forward mode, compiled
 once per problem structure (`ProgramCache` when the CLI's persistent cache is on), called with NumPy in and out
-(`_Problem`); `fit`, `profile` and `design` use them."""
+(`_Problem`); `fit`, `profile` and `design` use them. The optimiser sees them as an optimistix `fn(y, args)`: on
+the host for pamjax's own solver (`_Problem.objective`), or through host callbacks for any other
+(`_Problem.traced`)."""
 
 import threading
 import time
@@ -12,6 +14,7 @@ import numpy as np
 
 from .._core.arrays import device_array
 from .._core.cache import program_cache
+from .._core.errors import PamjaxInputError
 from .._core.private import equinox_errors_as_nan
 from .predictions import predict_all
 
@@ -117,3 +120,70 @@ class _Problem:
         times (the medians of their later calls; the whole time when a fit ended after its first evaluation)."""
         steady = sum(float(np.median(t[1:])) for t in self.seconds.values() if len(t) >= 2)
         return max(getattr(self, "ready_s", 0.0) - steady, 0.0)
+
+    def objective(self, started=False):
+        """The fit's `fn(y, args)` for pamjax's `LevenbergMarquardt` run from the host: NumPy residuals (non-finite
+        where the solve fails) and `fn.jacobian`. Its first Jacobian is `start`'s (both programs compiled side by
+        side), and a start whose simulation fails is refused there; `started`: a resumed fit's (no such start)."""
+        return _Objective(self, started)
+
+    def traced(self, evaluated=None):
+        """The fit's residuals as a JAX function `fn(y, args)` for `optimistix.least_squares` with any solver: its
+        value and its forward-mode derivative (J·t, the Jacobian from the second program) are the two compiled
+        programs, called back on the host (`jax.pure_callback`; a custom JVP rule), so that the solver's own loop
+        is the only new program. `evaluated(r)` is told every evaluation's residuals."""
+        m, n = int(np.count_nonzero(self.mask)), self.space.size
+        r_shape = jax.ShapeDtypeStruct((m,), jnp.float64)
+        j_shape = jax.ShapeDtypeStruct((m, n), jnp.float64)
+
+        def value(theta):
+            r = self.all_residuals(np.asarray(theta))[self.mask]
+            if evaluated is not None:
+                evaluated(r)
+            return r
+
+        def both(theta):
+            r, j = self.jacobian(np.asarray(theta))
+            if evaluated is not None:
+                evaluated(r)
+            return r, j
+
+        @jax.custom_jvp
+        def residuals(theta):
+            return jax.pure_callback(value, r_shape, theta)
+
+        @residuals.defjvp
+        def _(primals, tangents):
+            r, j = jax.pure_callback(both, (r_shape, j_shape), primals[0])
+            return r, j @ tangents[0]
+
+        return _Traced(residuals)
+
+
+class _Traced(eqx.Module):
+    """`fn(y, args)` → residuals, for optimistix (a module: one compilation of its loop per fit)."""
+
+    residuals: object = eqx.field(static=True)
+
+    def __call__(self, y, args):
+        return self.residuals(y)
+
+
+class _Objective:
+    """`fn` for pamjax's solver on the host (`_Problem.objective`)."""
+
+    def __init__(self, problem, started):
+        self.problem, self.started = problem, started
+
+    def __call__(self, theta, args):
+        return self.problem.all_residuals(theta)[self.problem.mask], None
+
+    def jacobian(self, theta, args):
+        if self.started:
+            return self.problem.jacobian(theta)
+        self.started = True
+        r, j = self.problem.start(theta)
+        if not np.all(np.isfinite(r)) or not np.all(np.isfinite(j)):
+            raise PamjaxInputError("the start model's simulation fails (non-finite residuals or Jacobian): check the "
+                                   "start values and the experiments' initial states")
+        return r, j

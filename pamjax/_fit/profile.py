@@ -20,7 +20,7 @@ Profiles need the fit at a minimum: a fit that stopped at `max_steps` (or stalle
 when a re-fitted point lies below the fit's cost (Δχ² < `NOT_A_MINIMUM`: the fit had not reached the minimum after
 all) every verdict reads "not a minimum: ..." and `ProfileResult.warnings` says where the lower cost is.
 
-Each point is re-fitted by the fit's Levenberg-Marquardt (`pamjax._lm`) in the coordinates orthogonal to ψ's, warm
+Each point is re-fitted by the fit's solver (`pamjax._fit.solver`) in the coordinates orthogonal to ψ's, warm
 started from the previous point plus the linearised change of the others along ψ; the residuals and Jacobians are
 the fit's compiled functions (`pamjax._fit`: no new compilation for a problem already fitted). The branches
 (parameter × side) are independent and run in a pool of threads, which XLA executes on separate cores.
@@ -39,7 +39,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.errors import PamjaxInputError, require_float64
-from . import lm as _lm
 from .fit import _Problem
 from .parameters import ParameterSpace
 from .recording import _writable
@@ -176,11 +175,10 @@ class _Branch:
         r0 = residuals(phi)
         if r0 is None:
             return None
-        r0, j0 = jacobian(phi)
-        state = _lm.start(phi, r0, j0)
-        while not state.done and state.step < s["max_steps"]:
-            state = _lm.iterate(state, residuals, jacobian, ftol=s["ftol"], xtol=s["xtol"], gtol=s["gtol"],
-                                stall_steps=8)
+        from .drive import levenberg_marquardt
+
+        state = levenberg_marquardt(residuals, jacobian, phi, max_steps=s["max_steps"], ftol=s["ftol"],
+                                    xtol=s["xtol"], gtol=s["gtol"], stall_steps=8)
         self.jac = ev.jacobian(self.theta(tau, state.theta))[1]
         return state
 
