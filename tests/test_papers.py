@@ -59,6 +59,11 @@ KEY_NUMBERS = {
     "p000_10_control": [(("PI (paper: P = 25, I = 150) @ 1.0 rad/s", "rmse_mm"), 0.356, 0.03),
                      (("PID, P = 100, D = 4 s/m @ 1.0 rad/s", "rmse_mm"), 0.289, 0.03),  # derivative helps…
                      (("PID, P = 100, D = 4 s/m, 0.1 mm noise @ 1.0 rad/s", "rmse_mm"), 12.7, 3.0)],  # …until noise
+    "p000_11_hysteresis": [("loop/bouc_wen/rmse_N", 2.0, 0.15),  # the plant's model class: at the 2 N noise
+                           ("loop/offset/rmse_N", 4.15, 0.4),  # eq. 8 misses the branch transitions
+                           ("loop/bouc_wen/values/friction.coulomb_force", 17.0, 0.4),  # 3 standard errors
+                           ("down_stroke/offset/down_over_up", 3.4, 0.5),  # the paper's "largest on the way down"
+                           ("down_stroke/bouc_wen/down_rmse_mm", 0.0, 0.02)],  # a fraction of the 0.1 mm noise
     "p001_05_tables": [("max_C_error_percent", 0.47, 0.2), ("max_b_error", 0.026, 0.01),
                     ("eq1_printed_max_jump_fraction", 0.134, 0.002),
                     ("charging_choked_flow_l_per_min_anr/5", 294.0, 1.0)],

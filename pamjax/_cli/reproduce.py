@@ -44,6 +44,7 @@ CATALOGUE = {
         "text: 25 Hz PWM chatters, 100 Hz is coarse",
         "text: derivative term works in simulation, fails with measurement noise",
         "text: exhaust silencer explains Fig. 12's offset",
+        "text: largest error on the way down (no transition between loop branches)",
     ],
     "001": [
         *_items("eq.", range(1, 15)),
