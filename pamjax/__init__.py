@@ -56,7 +56,9 @@ from ._physics.regulator import (
     ISO6358Regulator as ISO6358Regulator,
     ISO6358RegulatorState as ISO6358RegulatorState,
     LinearRegulator as LinearRegulator,
+    PressureHysteresis as PressureHysteresis,
     VoltageCalibration as VoltageCalibration,
+    vppm_regulator as vppm_regulator,
 )
 from ._physics.signals import (
     AbstractSignal as AbstractSignal,
