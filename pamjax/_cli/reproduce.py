@@ -55,6 +55,7 @@ CATALOGUE = {
         "text: bandwidths 3.12 Hz (P_out/V_ref) and 3.69 Hz (P_out/Q_in)",
         "text: peak valve inflow 2.79 / 4.34 l/min at 3 / 5 V",
         "text: future work, antagonistic pair on an ankle joint",
+        "text: VPPM specification (2 % accuracy, 50 mbar hysteresis, fast / universal / precise modes)",
     ],
 }
 
