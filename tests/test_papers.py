@@ -64,6 +64,9 @@ KEY_NUMBERS = {
                            ("loop/bouc_wen/values/friction.coulomb_force", 17.0, 0.4),  # 3 standard errors
                            ("down_stroke/offset/down_over_up", 3.4, 0.5),  # the paper's "largest on the way down"
                            ("down_stroke/bouc_wen/down_rmse_mm", 0.0, 0.02)],  # a fraction of the 0.1 mm noise
+    "p000_12_silencer": [("alone/z", 0.0, 3.0),  # K recovered within 3 standard errors (procedure check)
+                         ("fig12_offset_kPa/identified/0.25", 92.0, 5.0),  # the offset Fig. 12 shows
+                         ("flow_ratio/identified/6.50 bar", 0.945, 0.005)],  # "almost negligible" at 0.65 MPa
     "p001_05_tables": [("max_C_error_percent", 0.47, 0.2), ("max_b_error", 0.026, 0.01),
                     ("eq1_printed_max_jump_fraction", 0.134, 0.002),
                     ("charging_choked_flow_l_per_min_anr/5", 294.0, 1.0)],
