@@ -3,7 +3,7 @@
 Paper 001 quotes the data sheet [29]: pressure regulation range 0.02-10 bar, "standard accuracy 2 %", "pressure
 maximal hysteresis 50 mbar", three operating modes (fast, universal, precise; universal used), and an output pressure
 that stays constant with the flow. The data sheet itself is not available here; what pamjax builds from those words
-(`pamjax._physics.regulator`, `pamjax._papers.datasheets`):
+(`pj.vppm_regulator`, its assumed numbers marked where they are defined):
 
 - hysteresis: `PressureHysteresis` (a rounded play operator on the main stage's set pressure, 50 mbar wide), shown
   as the static loop of a closed 50 cm³ volume under a 0 → 6 → 0 V staircase: outlet minus set pressure at the end
