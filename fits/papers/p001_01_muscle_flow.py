@@ -229,9 +229,9 @@ def run(out, quick=False):
             f"virtual work the work the muscle does (p_g V' = F for a lossless muscle; the preset's cubic, taken "
             f"from the force map at 6 bar, gives p_g V'/F = {n3['virtual_work_ratio_while_charging']:.2f} while "
             f"charging); 10 % needs V' at {scale:.2f} of the preset's (p_g V'/F = "
-            f"{law['virtual_work_ratio_while_charging']:.2f}): air doing a quarter of the work the load receives, or "
-            f"a stroke per cycle a fraction of the {law['stroke_preset_mm']:.0f} mm the DMSP-40's force law gives "
-            "under 893 N", fig_name),
+            f"{law['virtual_work_ratio_while_charging']:.2f}): the air's p dV a fraction of the work F dx the "
+            f"muscle does, or a stroke per cycle a fraction of the {law['stroke_preset_mm']:.0f} mm the DMSP-40's "
+            "force law gives under 893 N", fig_name),
         Row("text: 2.79 / 4.34 l/min", "peak valve inflow at 3 V / 5 V",
             "2.79 / 4.34 l/min (ratio 1.56)", f"{n3['peak_inflow_l_per_min_anr']:.0f} / "
             f"{n5['peak_inflow_l_per_min_anr']:.0f} l/min ANR (ratio "
