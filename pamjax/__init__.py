@@ -37,6 +37,7 @@ from ._physics.gas import (
     PorousRestriction as PorousRestriction,
     SeriesRestriction as SeriesRestriction,
 )
+from ._physics.hysteresis import BoucWenFriction as BoucWenFriction
 from ._physics.muscle import (
     AbstractForceLaw as AbstractForceLaw,
     AbstractVolume as AbstractVolume,
@@ -55,7 +56,9 @@ from ._physics.regulator import (
     ISO6358Regulator as ISO6358Regulator,
     ISO6358RegulatorState as ISO6358RegulatorState,
     LinearRegulator as LinearRegulator,
+    PressureHysteresis as PressureHysteresis,
     VoltageCalibration as VoltageCalibration,
+    vppm_regulator as vppm_regulator,
 )
 from ._physics.signals import (
     AbstractSignal as AbstractSignal,
@@ -138,10 +141,12 @@ from ._fit.bench_tests import (
     FlowCurveExperiment as FlowCurveExperiment,
     ForceMapExperiment as ForceMapExperiment,
     FrictionCurveExperiment as FrictionCurveExperiment,
+    HysteresisLoopExperiment as HysteresisLoopExperiment,
     LoopForceMapExperiment as LoopForceMapExperiment,
     constant_velocity_point as constant_velocity_point,
     flow_curve as flow_curve,
     loop_average as loop_average,
+    path_friction_force as path_friction_force,
     steady_friction_force as steady_friction_force,
 )
 from ._fit.design import DesignResult as DesignResult, design as design
