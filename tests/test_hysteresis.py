@@ -200,6 +200,28 @@ def test_loop_fit_recovers_the_parameters(truth):
         "force"]["rmse"]
 
 
+def test_preset_and_start_states():
+    """`presets.mas10_system(friction="bouc_wen")` carries eq. 8-9's F_c and C_f; a system started at rest is in the
+    virgin state (between the branches), one started moving is on the branch of its velocity (F = F_c sign(v) +
+    C_f v, eq. 8-9), with finite gradients through the start."""
+    sys = presets.mas10_system("averaged", friction="bouc_wen")
+    fr = sys.friction
+    assert isinstance(fr, pj.BoucWenFriction)
+    assert float(fr.coulomb_force) == presets.COULOMB_FORCE and float(fr.viscous_coefficient) == (
+        presets.VISCOUS_COEFFICIENT)
+    assert float(sys.initial_state(pressure=P_ATM + 2e5).friction) == 0.0
+    for v in (3e-3, -3e-3):
+        z = sys.initial_state(pressure=P_ATM + 2e5, velocity=v).friction
+        assert float(fr.force(v, z)) == pytest.approx(16.0 * np.sign(v) + 250.0 * v, rel=1e-3)
+        assert abs(float(fr.state_rate(v, z))) < 1e-9  # steady on its branch
+    g = jax.grad(lambda v: fr.force(v, fr.initial_state(v)))
+    assert np.isfinite(float(g(0.0))) and np.isfinite(float(g(3e-3)))
+    traj = pj.simulate(sys, pj.Triangle(0.05, 0.95, 0.5), jnp.linspace(0.0, 2.0, 5))
+    assert np.all(np.isfinite(np.asarray(traj.position)))
+    with pytest.raises(pj.PamjaxInputError, match="bouc_wen"):
+        presets.mas10_system(friction="boucwen")
+
+
 def test_bad_input_is_named():
     with pytest.raises(pj.PamjaxInputError, match="transition_length"):
         pj.BoucWenFriction(transition_length=0.0)
