@@ -4,10 +4,12 @@ recovery from random starts, determinism.
     python benchmarks/reliability.py                    # full figures (20 gradient sets, 10,000 NaN inputs, ...)
     python benchmarks/reliability.py --quick            # smoke-size
     python benchmarks/reliability.py --only bad_inputs  # the bad-input catalogues alone (a few minutes)
+    python benchmarks/reliability.py --only gradients   # the 20 gradient sets alone (--quick: 2)
 
 Ends with `RESULT grad_pass=... worst_grad_rel=... nan_count=... bad_input_named=... recovery_rate=...
 deterministic=... workflow_cases=... silent_wrong=... lost_work=... tracebacks=...` (the last four from the file and
-command-line catalogue, `tests/reliability/bad_inputs_cli.py`: every case a correct result or a named error).
+command-line catalogue, `tests/reliability/bad_inputs_cli.py` and every `tests/reliability/*_cases.py`: every case a
+correct result or a named error).
 """
 
 import argparse
@@ -33,7 +35,9 @@ from tests.reliability.nan_safety import trajectory_counts, vector_field_counts 
 
 def gradients(n_sets, periods, rtol=1e-12):
     """Per seeded parameter set: every physical parameter's reverse-mode gradient against central finite differences
-    (steps 1e-4, 1e-5, 1e-6 relative; the most consistent neighbouring pair is kept) and against forward mode.
+    (`gradient_check`'s ladder of relative steps 1e-2 ... 1e-6; per parameter the most consistent neighbouring pair
+    is kept: the loss of an adaptive solve is smooth only down to the solver's noise, ~2e-11 of it here, which
+    steps of 1e-5 and 1e-6 alone measured instead of the gradient) and against forward mode.
     Forward and reverse mode must agree within 1e-6 relative to the gradient's largest scaled component (normwise;
     per-parameter differences of negligible components are round-off of a 20,000-step solve). A parameter fails
     when its error exceeds 1e-4; it is counted "inconclusive" instead when the finite differences
@@ -147,6 +151,7 @@ def workflow_catalogue():
     mismatches, solves, the fitted model carried onward; each case a correct result or a named error."""
     from tests.reliability.bad_inputs_cli import CASES, summary
 
+    register_case_modules(CASES)
     t = time.perf_counter()
     counts = summary(report=lambda line: print(line, flush=True))
     classes = sorted({c for c, *_ in CASES.values()})
@@ -156,10 +161,22 @@ def workflow_catalogue():
     return counts
 
 
+def register_case_modules(cases):
+    """Add the cases of every `tests/reliability/*_cases.py` (each a `CASES` table in `bad_inputs_cli`'s format, e.g.
+    `sweep_cases.py`: stick-slip sweeps and the gradient reference) to the catalogue `cases`."""
+    import importlib
+    import pathlib
+
+    folder = pathlib.Path(__file__).resolve().parents[1] / "tests" / "reliability"
+    for path in sorted(folder.glob("*_cases.py")):
+        if not path.name.startswith("test_"):  # test_*_cases.py are the pytest modules that run them
+            cases.update(importlib.import_module(f"tests.reliability.{path.stem}").CASES)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true")
-    parser.add_argument("--only", choices=["bad_inputs"], help="run only this part")
+    parser.add_argument("--only", choices=["bad_inputs", "gradients"], help="run only this part")
     args = parser.parse_args()
     print(f"pamjax reliability, jax {jax.__version__}, {os.cpu_count()} CPUs")
     if args.only == "bad_inputs":
@@ -176,6 +193,9 @@ def main():
     print(
         f"  pass fraction {grad_pass:.2f}, worst FD error {worst:.1e} ({worst_name}), worst fwd/rev {worst_modes:.1e}"
     )
+    if args.only == "gradients":
+        print(f"RESULT grad_pass={grad_pass:.3f} worst_grad_rel={worst:.2e} worst_fwd_rev={worst_modes:.2e}")
+        return
     t = time.perf_counter()
     vf = vector_field_counts(n_nan, seed=123)
     tr = trajectory_counts(max(16, 10_000 - vf["inputs"]) if not args.quick else 16, seed=7)

@@ -211,3 +211,62 @@ def test_program_key_follows_what_is_traced_not_the_traced_values():
     assert key("fit_residuals", (model, jnp.zeros(3, jnp.float32))) != reference  # another dtype
     assert key("fit_jacobian", (model, theta)) != reference  # another function
     assert key("fit_residuals", (model, theta, 2.0)) != key("fit_residuals", (model, theta, 3.0))  # a baked constant
+
+
+def test_program_key_follows_the_platform(monkeypatch):
+    """A program exported on one platform (a GPU) is not the same program on another (`JAX_PLATFORMS=cpu`): the
+    key names the platform and devices."""
+    import jax
+    import jax.numpy as jnp
+
+    from pamjax._core import cache
+
+    jax.config.update("jax_enable_x64", True)
+    args = (pamjax.presets.mas10_system("pwm"), jnp.zeros(3))
+    here = cache.ProgramCache.key("fit_residuals", args)
+    monkeypatch.setitem(cache._PROGRAMS, "platform", ("cuda", "12.8", ["NVIDIA H100 80GB HBM3"], 1))
+    assert cache.ProgramCache.key("fit_residuals", args) != here
+
+
+def _planted(tmp_path, content):
+    """A program cache whose entry for `fn` at these arguments holds `content(fn, x)` (bytes): what a run on another
+    platform, an older jax or a damaged disk left there."""
+    import jax
+    import jax.numpy as jnp
+
+    from pamjax._core.cache import ProgramCache
+
+    jax.config.update("jax_enable_x64", True)
+
+    def fn(x):
+        return jnp.sin(x) * 2.0
+
+    x = jnp.linspace(0.0, 1.0, 5)
+    programs = ProgramCache(tmp_path)
+    key = programs.key("planted", (x,))
+    path = programs.directory / f"planted-{key}.bin"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(content(fn, x))
+    return programs, fn, x, path
+
+
+@pytest.mark.parametrize("entry", ["exported for cuda", "damaged"])
+def test_a_foreign_or_damaged_program_entry_is_traced_anew(tmp_path, entry):
+    """The regression: a fit run on a GPU, then with `JAX_PLATFORMS=cpu` on the same cache, failed with "Function
+    'flat' was exported for platforms '('cuda',)' but it is used on '('cpu',)'". An entry that cannot be used here is
+    traced anew and replaced; the result is the function's own."""
+    import jax
+
+    def cuda(fn, x):
+        return bytes(jax.export.export(jax.jit(fn), platforms=("cuda",))(x).serialize())
+
+    def damaged(fn, x):
+        return b"\x00not a program" * 10
+
+    programs, fn, x, path = _planted(tmp_path, cuda if entry == "exported for cuda" else damaged)
+    before = path.read_bytes()
+    got = programs.call("planted", fn, (x,))
+    np.testing.assert_array_equal(np.asarray(got), np.asarray(fn(x)))
+    assert path.read_bytes() != before  # replaced by this platform's export
+    again = type(programs)(tmp_path).call("planted", fn, (x,))  # a new process reads the replaced entry
+    np.testing.assert_array_equal(np.asarray(again), np.asarray(fn(x)))

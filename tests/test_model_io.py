@@ -5,6 +5,7 @@ hand-edited file is refused naming the file and the entry, and a file cannot mak
 import json
 
 import equinox as eqx
+import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 import pytest
@@ -68,7 +69,7 @@ def _edited(tmp_path, edit):
     (lambda d: d["parameters"]["payload_mass"].update(value=-1.0),
      r"m\.json: MuscleSystem: .*payload_mass must be > 0"),
     (lambda d: d["parameters"]["valve.supply_pressure"].update(value=6.5),
-     r"m\.json: valve \(OnOffValve\): .*supply_pressure"),
+     r"m\.json: parameter valve\.supply_pressure .*looks like bar"),
     (lambda d: d["parameters"].pop("friction.coulomb_force"), r"'friction\.coulomb_force' is missing"),
     (lambda d: d["parameters"].update({"friction.coulomb": {"value": 1.0, "unit": "N"}}),
      r"\['friction\.coulomb'\] are not part of the model's structure"),
@@ -109,3 +110,132 @@ def test_a_fitted_model_carries_on(tmp_path):
     a = pamjax.simulate(fitted, pamjax.Constant(0.5), ts)
     b = pamjax.simulate(back, pamjax.Constant(0.5), ts)
     np.testing.assert_array_equal(a.position, b.position)
+
+
+# -- hand-edited files: units, magnitudes, dtypes, shapes, duplicated keys (issue 33) ------------------------------
+def _file(tmp_path, edit, model=None, text=None):
+    """A saved model file with `edit(parameters)` applied (or with its text passed through `text`)."""
+    model = presets.mas10_system("averaged", friction="karnopp") if model is None else model
+    path = pamjax.save_model(tmp_path / "m.json", model, overwrite=True)
+    doc = json.loads(path.read_text(encoding="utf-8"))
+    edit(doc["parameters"])
+    body = json.dumps(doc, indent=1, ensure_ascii=False)
+    path.write_text(text(body) if text else body, encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize("path, value, unit, si", [
+    ("payload_mass", 9600.0, "g", 9.6),
+    ("muscle.volume_law.v0", 23.1, "cm³", 23.1e-6),
+    ("muscle.volume_law.v0", 23.1, "cm^3", 23.1e-6),
+    ("air.atmospheric_pressure", 1.01325, "bar abs", 101325.0),
+    ("air.atmospheric_pressure", 0.0, "bar gauge", 101325.0),
+    ("air.temperature", 20.0, "°C", 293.15),
+    ("muscle.min_position", -20.0, "mm", -0.02),
+    ("muscle.force_law.max_pressure", 6.0, "bar gauge", 6e5),
+    ("muscle.force_law.max_pressure", 701325.0, "Pa abs", 6e5),
+    ("muscle.force_law.k2", 1.0, "bar", 1e5),
+])
+def test_a_value_in_another_unit_is_converted_to_si(tmp_path, path, value, unit, si):
+    # the file's unit is honoured: the loaded model holds the SI value, as if it had been written in SI
+    m = pamjax.load_model(_file(tmp_path, lambda p: p[path].update(value=value, unit=unit)))
+    leaf = m
+    for attr in path.split("."):
+        leaf = getattr(leaf, attr)
+    assert float(leaf) == pytest.approx(si, rel=1e-12, abs=1e-12)
+
+
+@pytest.mark.parametrize("path, value, unit, match", [
+    # the battery's silent cases: a number in another unit under the SI one
+    ("payload_mass", 9600.0, "kg", r"m\.json: parameter payload_mass = 9600 kg.*looks like g.*\"unit\": \"g\""),
+    ("muscle.volume_law.v0", 23.1, "m³", r"m\.json: parameter muscle\.volume_law\.v0 = 23\.1.*looks like cm³"),
+    ("air.atmospheric_pressure", 1.01325, "Pa abs",
+     r"m\.json: parameter air\.atmospheric_pressure .*looks like bar.*\"unit\": \"bar abs\""),
+    ("air.temperature", 20.0, "K", r"m\.json: parameter air\.temperature = 20 K.*looks like °C.*\"unit\": \"°C\""),
+    # units that cannot be converted, or that leave absolute/gauge open, are refused by name
+    ("payload_mass", 21.0, "lb", r"m\.json: parameter 'payload_mass': unit 'lb' is not one pamjax converts.*'g'"),
+    ("payload_mass", 9.6, "N", r"parameter 'payload_mass': unit 'N'"),
+    ("air.atmospheric_pressure", 1.01325, "bar", r"'air\.atmospheric_pressure': unit 'bar': say whether"),
+    ("muscle.force_law.max_pressure", 6e5, "Pa", r"'muscle\.force_law\.max_pressure': unit 'Pa': say whether"),
+    ("muscle.force_law.k2", 1.0, "bar abs", r"'muscle\.force_law\.k2': unit 'bar abs' says absolute or gauge"),
+])
+def test_a_value_whose_unit_is_wrong_or_unknown_is_refused_naming_parameter_and_file(tmp_path, path, value, unit,
+                                                                                      match):
+    with pytest.raises(PamjaxInputError, match=match):
+        pamjax.load_model(_file(tmp_path, lambda p: p[path].update(value=value, unit=unit)))
+
+
+def test_the_suggested_unit_loads_the_intended_model(tmp_path):
+    # "if the number is right in g, say so in its entry ("unit": "g")": doing so gives the 9.6 kg model
+    with pytest.raises(PamjaxInputError, match=r'"unit": "g"'):
+        pamjax.load_model(_file(tmp_path, lambda p: p["payload_mass"].update(value=9600.0)))
+    model = pamjax.load_model(_file(tmp_path, lambda p: p["payload_mass"].update(value=9600.0, unit="g")))
+    assert eqx.tree_equal(model, presets.mas10_system("averaged", friction="karnopp"))
+
+
+@pytest.mark.parametrize("dtype, match", [
+    ("int8", r"'payload_mass': dtype 'int8': a model parameter is a floating-point number"),
+    ("bool", r"dtype 'bool'"),
+    ("float16", None),  # 9.6 is not a float16: refused as lossy
+    ("complex128", r"dtype 'complex128'"),
+    ("quad", r"dtype 'quad' is not a dtype"),
+])
+def test_a_dtype_that_would_change_the_value_is_refused(tmp_path, dtype, match):
+    with pytest.raises(PamjaxInputError, match=match or r"dtype 'float16' cannot hold 9\.6"):
+        pamjax.load_model(_file(tmp_path, lambda p: p["payload_mass"].update(dtype=dtype)))
+
+
+def test_a_float32_model_round_trips_and_a_float32_edit_is_rounded_only(tmp_path):
+    model = eqx.tree_at(lambda s: s.payload_mass, presets.mas10_system("averaged"), np.float32(9.6))
+    back = pamjax.load_model(pamjax.save_model(tmp_path / "f32.json", model))
+    _assert_identical(model, back)
+    edited = pamjax.load_model(_file(tmp_path, lambda p: p["payload_mass"].update(dtype="float32")))
+    assert edited.payload_mass.dtype == np.float32 and float(edited.payload_mass) == pytest.approx(9.6, rel=1e-7)
+
+
+def test_a_duplicated_key_is_refused_with_its_lines(tmp_path):
+    # JSON keeps the last of two keys silently: 96 kg instead of 9.6 kg
+    path = _file(tmp_path, lambda p: None, text=lambda body: body.replace(
+        '"payload_mass": {', '"payload_mass": {"value": 96.0, "unit": "kg"},\n  "payload_mass": {', 1))
+    with pytest.raises(PamjaxInputError, match=r"m\.json: key 'payload_mass' appears twice in one table \(lines "
+                                               r"\d+, \d+\)"):
+        pamjax.load_model(path)
+
+
+@pytest.mark.parametrize("value", [[9.6, 9.6], [[9.6]]])
+def test_a_parameter_holding_several_values_is_refused_on_load_and_save(tmp_path, value):
+    # it loaded, and simulate failed with "scan body function carry input and carry output must have equal types"
+    with pytest.raises(PamjaxInputError, match=r"m\.json: parameter 'payload_mass' has shape \([\d, ]+\) where the "
+                                               "model takes one number"):
+        pamjax.load_model(_file(tmp_path, lambda p: p["payload_mass"].update(value=value)))
+    batch = eqx.tree_at(lambda s: s.payload_mass, presets.mas10_system("averaged"), jnp.asarray(value))
+    with pytest.raises(PamjaxInputError, match=r"cannot save .*b\.json: parameter 'payload_mass'"):
+        pamjax.save_model(tmp_path / "b.json", batch)
+    assert not (tmp_path / "b.json").exists()
+
+
+def test_save_refuses_what_load_would_refuse(tmp_path):
+    # a NaN friction force set with eqx.tree_at (no constructor check) was written, and the file then refused
+    bad = eqx.tree_at(lambda s: s.friction.coulomb_force, presets.mas10_system("averaged"), jnp.asarray(np.nan))
+    with pytest.raises(PamjaxInputError, match=r"cannot save .*m\.json: friction .*coulomb_force must be"):
+        pamjax.save_model(tmp_path / "m.json", bad)
+    grams = eqx.tree_at(lambda s: s.payload_mass, presets.mas10_system("averaged"), jnp.asarray(9600.0))
+    with pytest.raises(PamjaxInputError, match=r"payload_mass = 9600 kg.*looks like g"):
+        pamjax.save_model(tmp_path / "m.json", grams)
+    assert not (tmp_path / "m.json").exists()
+
+
+def test_a_signal_is_not_saved_as_a_model(tmp_path):
+    with pytest.raises(PamjaxInputError, match=r"got the signal Triangle: a signal is an input"):
+        pamjax.save_model(tmp_path / "s.json", pamjax.Triangle(0.05, 0.95, 0.25))
+
+
+def test_simulate_writes_the_columns_in_the_documented_order():
+    # docs/cli.md: t, command, pressure, position, velocity, force, friction_force, mass_flow, volume
+    from pamjax._cli.simulate import columns_of
+
+    traj = pamjax.simulate(presets.mas10_system("averaged"), pamjax.Constant(0.5), jnp.linspace(0.0, 0.05, 3))
+    cols, units = columns_of(traj)
+    assert list(cols) == ["t", "command", "pressure", "position", "velocity", "force", "friction_force", "mass_flow",
+                          "volume"]
+    assert units["pressure"] == "Pa abs"

@@ -140,3 +140,34 @@ def test_fit_cli_profile_writes_json_and_figure(tmp_path):
     assert all(p["verdict"] == "identifiable" for p in data["profiles"])
     assert (tmp_path / "out" / "profile.png").stat().st_size > 10_000
     assert (tmp_path / "out" / "fit.png").is_file()
+
+
+# -- a start that is not a minimum (issue 33) ------------------------------------------------------------------
+def test_a_fit_stopped_at_max_steps_is_refused_before_any_work():
+    # the regression: after a fit stopped at max_steps every parameter read "structurally non-identifiable",
+    # interval (-inf, inf), because every re-fit fell below the unconverged start (Δχ² < 0 all along)
+    muscle, *_, exp = _force_map(2.0, np.linspace(0.5, 6.0, 7), np.linspace(-0.01, 0.07, 9))
+    start = eqx.tree_at(lambda m: m.force_law.k0, muscle, muscle.force_law.k0 * 1.5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pj.PamjaxIdentifiabilityWarning)
+        res = pj.fit(start, [exp], ["force_law.k0", "force_law.k1"], max_steps=1, progress=False)
+    assert res.status == "max_steps"
+    with pytest.raises(PamjaxInputError, match=r"status 'max_steps'.*not a minimum.*--resume --profile"):
+        pj.profile(res, progress=False)
+
+
+def test_a_start_below_which_the_profile_finds_a_lower_cost_voids_every_verdict():
+    # a "converged" result whose model is not the best fit (here: moved off it by hand; in practice a fit stopped
+    # by a loose tolerance): the re-fits find a lower cost, and no verdict claims anything
+    import dataclasses
+
+    muscle, *_, exp = _force_map(2.0, np.linspace(0.5, 6.0, 7), np.linspace(-0.01, 0.07, 9))
+    res = _fit(muscle, [exp], ["force_law.k0", "force_law.k1"])
+    off = eqx.tree_at(lambda m: m.force_law.k1, res.model, res.model.force_law.k1 * 1.05)
+    moved = dataclasses.replace(res, model=off, values=[res.values[0], res.values[1] * 1.05])
+    prof = pj.profile(moved, progress=False)
+    assert prof.warnings and "not at a minimum" in prof.warnings[0]
+    assert all(p.verdict.startswith("not a minimum") for p in prof.profiles)
+    assert "WARNING: the fit is not at a minimum" in prof.table()
+    control = pj.profile(res, progress=False)  # the fit itself: no warning, the verdicts stand
+    assert not control.warnings and all(p.verdict == "identifiable" for p in control.profiles)

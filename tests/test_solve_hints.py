@@ -73,3 +73,55 @@ def test_a_thousand_second_pwm_run_solves_with_the_default_budget():
     traj = pamjax.simulate(presets.mas10_system("pwm"), pamjax.Constant(0.5), jnp.linspace(0.0, 1000.0, 11))
     assert bool(traj.succeeded) and int(traj.num_steps) > 200_000  # beyond the old fixed budget
     assert 0.02 < float(traj.position[-1]) < 0.07  # settled mid-stroke at duty 0.5 (m)
+
+
+# -- advice that cannot work is never given (issue 33) ----------------------------------------------------------
+def test_negative_inflow_is_named_instead_of_a_step_the_run_already_takes():
+    # a model file with a valve coefficient's sign flipped: the run failed with "pass grid_step=0.076 or less" at
+    # grid_step=0.001, which cannot help: the valve empties the chamber below zero pressure whatever the step
+    import equinox as eqx
+
+    system = presets.mas10_system("averaged", friction="karnopp")
+    flipped = eqx.tree_at(lambda s: s.valve.coefficients, system, system.valve.coefficients.at[1, 0].set(-0.0017))
+    ts = jnp.linspace(0.0, 2.0, 21)
+    with pytest.raises(PamjaxSolveError) as info:
+        pamjax.simulate(flipped, pamjax.Triangle(0.05, 0.95, 0.25), ts)
+    text = str(info.value)
+    assert "takes air OUT of the chamber" in text and "negative inflow" in text and "valve.coefficients" in text
+    assert "grid_step=0.0" not in text.replace("grid_step=0.001)", "")  # no smaller step is offered
+    assert bool(pamjax.simulate(system, pamjax.Triangle(0.05, 0.95, 0.25), ts).succeeded)  # the sign put back
+    # over 0.5 s the same model "succeeded" at 6,600 Pa abs: a chamber emptied below half an atmosphere fails too
+    short = jnp.linspace(0.0, 0.5, 51)
+    with pytest.raises(PamjaxSolveError, match="below half an atmosphere: the valve takes air OUT"):
+        pamjax.simulate(flipped, pamjax.Triangle(0.05, 0.95, 0.25), short)
+    traj = pamjax.simulate(flipped, pamjax.Triangle(0.05, 0.95, 0.25), short, throw=False)
+    assert int(traj.result) != 0 and np.all(np.isnan(np.asarray(traj.pressure)))
+
+
+def test_a_suggested_fixed_step_works_when_applied():
+    # a 1 ml tank (a pressure time constant far below the 10 ms step) on the PWM grid with 2 substeps; both remedies
+    # the message offers work
+    system = presets.mas10_tank_system("pwm", volume=1e-6)
+    ts = jnp.linspace(0.0, 0.2, 11)
+    with pytest.raises(PamjaxSolveError) as info:
+        pamjax.simulate(system, pamjax.Constant(0.5), ts, stepping="pwm", substeps=2)
+    text = str(info.value)
+    suggested = int(re.search(r"pass substeps=([\d,]+) or more", text).group(1).replace(",", ""))
+    assert suggested > 2
+    assert bool(pamjax.simulate(system, pamjax.Constant(0.5), ts, stepping="pwm", substeps=suggested).succeeded)
+    assert "stepping='adaptive' with solver=pamjax.Rodas5()" in text
+    assert bool(pamjax.simulate(system, pamjax.Constant(0.5), ts, stepping="adaptive",
+                                solver=pamjax.Rodas5()).succeeded)
+
+
+def test_a_hybrid_system_is_never_told_to_use_adaptive_stepping():
+    # stick-slip friction has no adaptive solve (refused); the grid's advice is a finer grid, and it works
+    system = presets.mas10_system("averaged", friction="karnopp", payload_mass=0.05)
+    ts = jnp.linspace(0.0, 0.2, 11)
+    with pytest.raises(PamjaxSolveError) as info:
+        pamjax.simulate(system, pamjax.Constant(0.5), ts, grid_step=0.02)
+    text = str(info.value)
+    assert "stepping='adaptive'" not in text
+    step = float(re.search(r"pass grid_step=([\d.e-]+) or less", text).group(1))
+    assert step < 0.02
+    assert bool(pamjax.simulate(system, pamjax.Constant(0.5), ts, grid_step=step).succeeded)

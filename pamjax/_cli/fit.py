@@ -16,6 +16,7 @@ import numpy as np
 from .._core.errors import PamjaxInputError
 from .._core.units import check_setting
 from .._fit.parameters import FREE_ENTRY_KEYS
+from .._fit.profile import PROFILED_STATUSES
 from .config import (
     build_model,
     check_keys,
@@ -341,7 +342,7 @@ def _checkpoint_summary(path):
 
 
 def _resume_command(args, out):
-    return f"pamjax fit {args.config} --out {out} --resume"
+    return f"pamjax fit {args.config} --out {out} --resume" + (" --profile" if args.profile else "")
 
 
 def run(args):
@@ -371,13 +372,18 @@ def run(args):
         if args.resume and not checkpoint.exists():
             raise PamjaxInputError(f"pamjax fit --resume: {out} holds no checkpoint ({CHECKPOINT}); run without "
                                    "--resume to start the fit")
+        stage = {}  # "profiling": True once the fit's results are written and the profiles are being taken
         try:
-            return _fit_and_write(args, folder, model, experiments, free, options, bench, staged)
+            return _fit_and_write(args, folder, model, experiments, free, options, bench, staged, stage)
         except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM: one line on what is kept and how to go on
             PENDING.clear()  # handled here
             what = "terminated" if interrupt_status(err) == 143 else "interrupted"
             where = _checkpoint_summary(checkpoint)
-            if where is None:
+            if stage.get("profiling"):
+                print(f"pamjax fit: {what} while profiling; the fit itself is complete and written ({out / RESULT}, "
+                      f"{out / MODEL}); no profile was written. Take the profiles with: {_resume_command(args, out)}",
+                      file=sys.stderr, flush=True)
+            elif where is None:
                 again = f"pamjax fit {args.config} --out {out}" + (" --overwrite" if args.overwrite else "")
                 print(f"pamjax fit: {what} before the first iteration finished; nothing to resume: run {again} to "
                       "start again", file=sys.stderr, flush=True)
@@ -387,7 +393,7 @@ def run(args):
             return interrupt_status(err)
 
 
-def _fit_and_write(args, folder, model, experiments, free, options, bench=None, staged=False):
+def _fit_and_write(args, folder, model, experiments, free, options, bench=None, staged=False, stage=None):
     import pamjax as pj
 
     from .._fit.model_io import model_json
@@ -452,8 +458,18 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None, 
         except ModuleNotFoundError:
             print("no figure: matplotlib is not installed (pip install matplotlib)")
     print("wrote " + ", ".join(str(p) for p in written if p is not None))
+    if args.profile and res.status not in PROFILED_STATUSES:  # not a minimum: profiles would mean nothing
+        print(f"pamjax fit: error: no profile taken: the fit stopped with status {res.status!r}, not at a minimum of "
+              "the cost, where every profile would fall below the fit and read as non-identifiable. The fit is "
+              f"written ({folder / RESULT}, {folder / MODEL}); raise [fit] max_steps in {args.config} and continue "
+              f"it with: {_resume_command(args, folder.path)}", file=sys.stderr, flush=True)
+        return 1
     if args.profile:  # pamjax.profile along every fitted parameter, re-using the fit's compiled programs
-        written = _profile_and_write(args, folder, res)
+        if stage is not None:
+            stage["profiling"] = True
+        written, void = _profile_and_write(args, folder, res)
+        if void:  # a re-fit found a lower cost: the profiles are written, each verdict void
+            return 1
     return 1 if folder.failed else 0
 
 
@@ -462,6 +478,8 @@ def _profile_and_write(args, folder, res):
 
     prof = pj.profile(res, progress=not args.quiet)
     print(f"profiles ({prof.profile_s:.1f} s):\n{prof.table()}")
+    for w in prof.warnings:
+        print(f"pamjax fit: error: {w}", file=sys.stderr, flush=True)
     written = [folder.write_text(PROFILE, json.dumps(prof.to_dict(), indent=1) + "\n")]
     if not args.no_plot:
         try:
@@ -469,4 +487,4 @@ def _profile_and_write(args, folder, res):
         except ModuleNotFoundError:
             print("no profile figure: matplotlib is not installed (pip install matplotlib)")
     print("wrote " + ", ".join(str(p) for p in written if p is not None))
-    return written
+    return written, bool(prof.warnings)

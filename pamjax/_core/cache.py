@@ -140,9 +140,12 @@ class ProgramCache:
     `call(name, fn, args)` looks for `fn` already traced for arguments of this structure (`jax.export`, serialized
     StableHLO); if found it calls that, compiling through the persistent cache; if not it traces, exports, saves and
     calls. The key is a SHA-256 of the arguments' structure (classes, static fields, array shapes and dtypes, never
-    array values), the function's name, and the pamjax, jax and jaxlib versions and XLA flags: another structure or
-    version traces anew. Active only where the persistent compilation cache is on (the CLI); otherwise `call` is
-    `fn(*args)`. `fn` must be a pure function of its array arguments (as every jitted pamjax function is).
+    array values), the function's name, the pamjax, jax and jaxlib versions, the XLA flags and the platform and
+    devices it runs on (an export is lowered for one platform: a program exported on a GPU is refused on the CPU, as
+    `JAX_PLATFORMS=cpu` makes it): another structure, version or platform traces anew. An entry that cannot be used
+    all the same (foreign, stale, damaged) is traced anew and replaced, never an error. Active only where the
+    persistent compilation cache is on (the CLI); otherwise `call` is `fn(*args)`. `fn` must be a pure function of
+    its array arguments (as every jitted pamjax function is).
 
     Loading an exported program still lowers it (StableHLO → XLA, ~0.3 s for a fit's Jacobian) before the persistent
     cache can find its compiled code; so the compiled executable itself is kept too (`executables/`, JAX's
@@ -169,7 +172,7 @@ class ProgramCache:
         from .describe import describe
 
         text = repr((name, describe(args, values=False), _versions(), os.environ.get("XLA_FLAGS", ""),
-                     bool(jax.config.jax_enable_x64)))
+                     bool(jax.config.jax_enable_x64), _platform()))
         return hashlib.sha256(text.encode()).hexdigest()[:32]
 
     def has(self, name, args):
@@ -222,6 +225,12 @@ class ProgramCache:
                 return compiled
         path = self.directory / f"{name}-{key}.bin"
         exported = self._load(path)
+        lowered = None
+        if exported is not None:
+            try:  # an entry exported for another platform, or by another jax, cannot be lowered here: trace anew
+                lowered = jax.jit(exported.call).lower(*leaves)
+            except Exception:  # noqa: BLE001 - whatever the entry's fault, the remedy is to trace again
+                exported = None
         if exported is None:
             try:
                 exported = jax.export.export(jax.jit(flat))(*leaves)
@@ -230,7 +239,8 @@ class ProgramCache:
                 return jax.jit(flat)
             self._save(path, exported.serialize())
         hits = _persistent_hits()
-        lowered = jax.jit(exported.call).lower(*leaves)
+        if lowered is None:
+            lowered = jax.jit(exported.call).lower(*leaves)
         ready()
         compiled = lowered.compile()
         if _persistent_hits() == hits:  # compiled here: an executable read from JAX's cache does not serialize whole
@@ -316,6 +326,18 @@ def _persistent_hits():
         jax.monitoring.register_event_listener(listener)
         _PROGRAMS["listener"] = listener
     return _HITS.get(threading.get_ident(), 0)
+
+
+def _platform():
+    """What an exported program is specific to: the default backend's platform ("cpu", "cuda", ...), its version,
+    and the kinds and number of its devices (read once per process)."""
+    if "platform" not in _PROGRAMS:
+        import jax
+
+        devices = jax.devices()
+        _PROGRAMS["platform"] = (jax.default_backend(), getattr(devices[0].client, "platform_version", "?"),
+                                 sorted({d.device_kind for d in devices}), len(devices))
+    return _PROGRAMS["platform"]
 
 
 def _machine():

@@ -5,6 +5,8 @@ time, before any solve. Inside `jit`/`vmap`/`grad` values are tracers and cannot
 entry points (`simulate`, `fit`, `sweep`) validate concrete inputs before tracing.
 """
 
+import contextlib
+
 import jax
 import numpy as np
 from jax.core import Tracer
@@ -38,6 +40,32 @@ def _concrete(x):
         return None
 
 
+_TRACED = []  # the open `traced_checks` collections (innermost last)
+
+
+@contextlib.contextmanager
+def traced_checks():
+    """Collect the checks that meet traced values (inside jit, vmap or grad they cannot be decided in Python): the
+    context yields a list that fills with (tracer, failed, message), `failed` a traced boolean. `simulate` attaches
+    them to the solve as run-time errors (`equinox.error_if`), so that a bad parameter inside `jax.jit`/`jax.vmap`
+    is named ("MuscleSystem.payload_mass must be > 0 and finite") instead of surfacing as a solver failure."""
+    found = []
+    _TRACED.append(found)
+    try:
+        yield found
+    finally:
+        _TRACED.pop()
+
+
+def _traced(x, failed, name, expected):
+    """Record a check on traced `x` (`failed(x)`: traced bool) when `traced_checks` is collecting."""
+    if _TRACED and isinstance(x, Tracer):
+        import jax.numpy as jnp
+
+        _TRACED[-1].append((x, jnp.any(failed(x)), f"{name} must be {expected} (checked at run time: the value is "
+                                                   "traced by jit/vmap/grad)"))
+
+
 def _fail(name, expected, value):
     raise PamjaxInputError(f"{name} must be {expected}, got {np.array2string(np.asarray(value), threshold=6)}")
 
@@ -46,12 +74,14 @@ def check_finite(x, name):
     v = _concrete(x)
     if v is not None and not np.all(np.isfinite(v)):
         _fail(name, "finite (no NaN or inf)", v)
+    _traced(x, lambda a: ~jax.numpy.isfinite(a), name, "finite (no NaN or inf)")
 
 
 def check_positive(x, name):
     v = _concrete(x)
     if v is not None and not np.all(v > 0):
         _fail(name, "> 0 and finite", v)
+    _traced(x, lambda a: ~(a > 0), name, "> 0 and finite")
     check_finite(x, name)
 
 
@@ -59,6 +89,7 @@ def check_nonnegative(x, name):
     v = _concrete(x)
     if v is not None and not np.all(v >= 0):
         _fail(name, ">= 0 and finite", v)
+    _traced(x, lambda a: ~(a >= 0), name, ">= 0 and finite")
     check_finite(x, name)
 
 
@@ -66,12 +97,14 @@ def check_in_open_interval(x, lo, hi, name):
     v = _concrete(x)
     if v is not None and not np.all((v > lo) & (v < hi)):
         _fail(name, f"in the open interval ({lo}, {hi})", v)
+    _traced(x, lambda a: ~((a > lo) & (a < hi)), name, f"in the open interval ({lo}, {hi})")
 
 
 def check_in_closed_interval(x, lo, hi, name):
     v = _concrete(x)
     if v is not None and not np.all((v >= lo) & (v <= hi)):
         _fail(name, f"in [{lo}, {hi}]", v)
+    _traced(x, lambda a: ~((a >= lo) & (a <= hi)), name, f"in [{lo}, {hi}]")
 
 
 def check_time_grid(ts, name="ts"):

@@ -233,6 +233,16 @@ _PLAUSIBLE = {
     "v0": ("m³", 0.1, "cm³"),
 }
 _ABSOLUTE_PRESSURES = {"pressure", "pressures", "atmospheric_pressure"}
+# K: the coldest air a pneumatic bench works in is far above this (-73 °C); a temperature below it was written in °C
+# (paper 000's 293 K is 20 °C).
+MIN_TEMPERATURE_K = 200.0
+
+
+def checks_setting(path):
+    """Whether `check_setting` checks parameter `path` (by its last component) at all."""
+    leaf = str(path).split(".")[-1].split("[")[0]
+    return leaf in _PLAUSIBLE or leaf in _ABSOLUTE_PRESSURES or leaf in ("supply_pressure", "max_pressure",
+                                                                          "temperature")
 
 
 def check_setting(path, values, where):
@@ -240,11 +250,17 @@ def check_setting(path, values, where):
     'y0.pressure'): refused with the likely unit named when its magnitude says another unit."""
     leaf = str(path).split(".")[-1].split("[")[0]
     v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]  # NaN and inf are the components' own checks to name ("must be finite")
     label = f"{where} {path}"
     if leaf == "supply_pressure":
         check_absolute_pressure(v, label, above_atmosphere=True)
     elif leaf in _ABSOLUTE_PRESSURES:
         check_absolute_pressure(v, label)
+    elif leaf == "temperature" and v.size and np.nanmin(v) < MIN_TEMPERATURE_K:
+        raise PamjaxInputError(
+            f"{label} = {np.nanmin(v):g} K: colder than {MIN_TEMPERATURE_K:g} K (-73 °C); that looks like °C "
+            "(pamjax takes kelvin: add 273.15)"
+        )
     elif leaf == "max_pressure" and v.size and np.nanmax(np.abs(v)) < 1e3:
         raise PamjaxInputError(
             f"{label} = {np.nanmax(np.abs(v)):g} Pa: that looks like {_likely_pressure_unit(np.nanmax(np.abs(v)))}; "
@@ -256,3 +272,90 @@ def check_setting(path, values, where):
         if peak > limit:
             raise PamjaxInputError(f"{label} = {peak:g} {unit}: more than {limit:g} {unit}; that looks like {likely} "
                                    f"(pamjax takes SI units: {unit})")
+
+
+# -- units of model parameters (model files) ----------------------------------------------------------------------
+# A parameter's unit is its component's own (the field comment: `payload_mass: ... # kg`); a model file may give a
+# value in another unit of the same quantity, converted here, or in one pamjax cannot convert, refused by name.
+_PARAMETER_FACTORS = {
+    "kg": {"g": 1e-3, "mg": 1e-6, "t": 1e3},
+    "m": _FACTORS["length"],
+    "s": _FACTORS["time"],
+    "m/s": _FACTORS["velocity"],
+    "N": _FACTORS["force"],
+    "kg/s": _FACTORS["mass_flow"],
+    "m^3": {"l": 1e-3, "L": 1e-3, "dm^3": 1e-3, "cm^3": 1e-6, "ml": 1e-6, "mL": 1e-6, "mm^3": 1e-9},
+    "m^2": {"cm^2": 1e-4, "mm^2": 1e-6},
+    "Hz": {"kHz": 1e3},
+    "rad": {"deg": np.pi / 180.0, "°": np.pi / 180.0},
+    "V": {"mV": 1e-3},
+    "N/m": {"N/mm": 1e3, "kN/m": 1e3},
+    "N s/m": {"N s/mm": 1e3},
+    "1": {"%": 1e-2},
+}
+_CELSIUS = ("°C", "degC", "C", "℃", "deg C")
+
+
+def canonical_unit(unit):
+    """A unit's spelling reduced to one form: superscripts and bare exponents as `^n` (m³, m3 → m^3), `·`/`*` as a
+    space, dimensionless `-`, `1` and the empty string as "1"."""
+    u = str(unit).strip().replace("²", "^2").replace("³", "^3").replace("·", " ").replace("*", " ")
+    u = re.sub(r"(?<=[A-Za-z])(\d)", r"^\1", u)
+    u = re.sub(r"\s+", " ", u)
+    return "1" if u in ("", "-", "1") else u
+
+
+def parameter_to_si(declared, given, values, name):
+    """`values` of parameter `name`, given in unit `given`, in the component's own unit `declared` (SI): converted,
+    or a `PamjaxInputError` naming `name`, the unit and the ones accepted. `declared` None (a parameter whose unit
+    pamjax does not know) takes only the empty unit. Pressures: a field in `Pa abs` takes any pressure unit that says
+    `abs` or `gauge` (`bar abs`, `barg`; Pa alone is absolute), one in `Pa gauge` likewise (`Pa` alone refused: say
+    which), one in plain `Pa` (a pressure scale, neither) takes an unqualified unit (`kPa`, `bar`)."""
+    values = np.asarray(values, dtype=float)
+    if given is None:
+        return values
+    if not isinstance(given, str):
+        raise PamjaxInputError(f"{name}: unit must be a string such as \"{declared or 'kg'}\", got {given!r}")
+    have, want = canonical_unit(given), None if declared is None else canonical_unit(declared)
+    if want is None:
+        if have == "1":
+            return values
+        raise PamjaxInputError(f"{name}: unit {given!r}, but pamjax does not know this parameter's unit (its "
+                               "component declares none), so it cannot convert it: give the value in the component's "
+                               "own unit and remove \"unit\"")
+    if have == want:
+        return values
+    if want in ("Pa abs", "Pa gauge", "Pa"):
+        return _pressure_parameter(want, given, values, name)
+    if want == "K" and given.strip() in _CELSIUS:
+        return values + 273.15
+    table = {canonical_unit(u): f for u, f in _PARAMETER_FACTORS.get(want, {}).items()}
+    if have in table:
+        return values * table[have]
+    accepted = [declared] + sorted(set(table) - {want}) + (["°C"] if want == "K" else [])
+    raise PamjaxInputError(f"{name}: unit {given!r} is not one pamjax converts to this parameter's unit "
+                           f"{declared!r}; write the value in one of {accepted}")
+
+
+def _pressure_parameter(want, given, values, name):
+    m = _PRESSURE.match(given.strip())
+    if m is None:
+        raise PamjaxInputError(f"{name}: unit {given!r} is not a pressure unit; this parameter is in {want!r} (Pa, "
+                               "hPa, kPa, MPa, mbar, bar or psi" + (" with 'abs' or 'gauge')" if want != "Pa" else ")"))
+    base, qualifier = m.group(1), (m.group(2) or "").lower().rstrip(".")
+    factor = _PRESSURE_FACTORS[base.lower()]
+    if want == "Pa":  # a pressure scale or a difference: neither absolute nor gauge
+        if qualifier:
+            raise PamjaxInputError(f"{name}: unit {given!r} says absolute or gauge, but this parameter (in 'Pa') is "
+                                   f"a pressure difference; write '{base}' alone")
+        return values * factor
+    gauge = qualifier in ("g", "gauge", "rel", "relative")
+    absolute = qualifier in ("a", "abs", "absolute") or (not qualifier and base.lower() == "pa" and want == "Pa abs")
+    if not (gauge or absolute):
+        kind = "an ABSOLUTE" if want == "Pa abs" else "a GAUGE"
+        raise PamjaxInputError(f"{name}: unit {given!r}: say whether that is absolute or gauge pressure ('{base} abs' "
+                               f"or '{base} gauge'); this parameter is {kind} pressure in Pa")
+    si = values * factor
+    if want == "Pa abs":
+        return si + ATMOSPHERE if gauge else si
+    return si - ATMOSPHERE if absolute else si

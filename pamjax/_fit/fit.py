@@ -318,6 +318,12 @@ def fit(
         check_resume(resume, print_)  # before any solve: a checkpoint of another problem is refused, naming why
     labels = space.labels
     exps, theta, problem = _setup(model, experiments, space)
+    used = int(np.count_nonzero(problem.mask))
+    if used < len(labels):  # fewer equations than unknowns: no fit determines them, its statistics would be noise
+        raise PamjaxInputError(
+            f"the experiments give {used} residuals (samples × channels used for identification) for {len(labels)} "
+            f"free parameters ({', '.join(labels)}): fewer data than unknowns cannot determine them; add samples or "
+            "experiments, or free fewer parameters")
     report = _progress_printer(progress)
     t_start = time.perf_counter()
     if resume is not None:

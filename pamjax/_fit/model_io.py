@@ -21,6 +21,7 @@ import functools
 import json
 import math
 import pathlib
+import re
 import sys
 
 import equinox as eqx
@@ -31,9 +32,15 @@ from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError, require_float64
 from .._core.fitting import field_units
 from .._core.metadata import version
+from .._core.units import check_setting, parameter_to_si
+from .._physics.signals import AbstractSignal
+from .._solve.checks import batched_parameters, describe_batched
 
 FORMAT = "pamjax-model"
 FORMAT_VERSION = 1
+# A stored dtype other than float64 must hold the value written to float32's precision at least (2⁻²⁴ relative): a
+# float32 model round-trips exactly, while "int8" (9.6 kg → 9 kg) or float16 (101325 Pa → inf) are refused.
+_DTYPE_RTOL = 2.0**-24
 # Units of fields declared without one in their metadata (the docstring gives it).
 _UNIT_FALLBACK = {"velocity_width": "m/s"}
 
@@ -112,6 +119,9 @@ def model_document(model, provenance=None, classes=()):
     """The JSON document of `model` (a dict; see the module docstring)."""
     if not isinstance(model, eqx.Module):
         raise PamjaxInputError(f"model must be a pamjax model (an equinox Module), got {type(model).__name__}")
+    if isinstance(model, AbstractSignal):
+        raise PamjaxInputError(f"model must be a pamjax model (a system or a component), got the signal "
+                               f"{type(model).__name__}: a signal is an input, given to simulate beside the model")
     parameters = {}
     structure = _encode(model, "", parameters, _registry(classes))
     return {
@@ -149,6 +159,9 @@ def save_model(path, model, *, overwrite=False, provenance=None, classes=()):
     path = pathlib.Path(path)
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+    document = model_document(model, provenance, classes)
+    # what load_model would refuse is not written: the same checks, run on the document itself
+    _check_document(_Decoder(f"cannot save {path}", document, _registry(classes)), document)
     text = model_json(model, provenance, classes)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp")
@@ -166,29 +179,68 @@ class _Decoder:
     def fail(self, message):
         raise PamjaxInputError(f"{self.where}: {message}")
 
-    def array(self, path):
+    def array(self, path, declared=None):
+        """The parameter `path` of the file: its value in the component's unit `declared` (the file's `unit`
+        converted, or refused by name), in a dtype that holds it, checked for a magnitude that betrays another unit
+        (`pamjax._core.units.check_setting`, as for `[model] set`)."""
         if path not in self.parameters:
             self.fail(f"parameter {path!r} is missing from 'parameters'")
         entry = self.parameters[path]
         if not isinstance(entry, dict) or "value" not in entry:
             self.fail(f"parameter {path!r} must be {{\"value\": ..., \"unit\": ...}}, got {entry!r}")
+        unknown = set(entry) - {"value", "unit", "dtype", "shape"}
+        if unknown:
+            self.fail(f"parameter {path!r} has unknown key(s) {sorted(unknown)}; an entry holds value, unit and "
+                      "(optionally) dtype and shape")
         self.used.add(path)
-        dtype = entry.get("dtype", "float64")
+        name = f"parameter {path!r}"
+        dtype = self._dtype(entry.get("dtype", "float64"), name)
+        raw = entry["value"]
+        if any(isinstance(v, bool) for v in _flat(raw)):
+            self.fail(f"{name}: {raw!r} is not a number or a list of numbers")
         try:
-            value = np.asarray(_from_json_value(entry["value"]), dtype=dtype)
+            value = np.asarray(_from_json_value(raw), dtype=np.float64)
         except (TypeError, ValueError) as err:
-            self.fail(f"parameter {path!r}: {entry['value']!r} is not a {dtype} array ({err})")
+            self.fail(f"{name}: {raw!r} is not a number or a list of numbers ({err})")
         if "shape" in entry:
-            value = value.reshape(entry["shape"])
-        if value.ndim == 0 and dtype == "float64":
+            try:
+                value = value.reshape(entry["shape"])
+            except (TypeError, ValueError) as err:
+                self.fail(f"{name}: shape {entry['shape']!r} does not fit its value ({err})")
+        unit = entry.get("unit")
+        try:
+            value = parameter_to_si(declared, None if unit in (None, "") else unit, value, name)
+            check_setting(path, value, "parameter")
+        except PamjaxInputError as err:
+            self.fail(f"{err}{_unit_hint(str(err), declared)}")
+        if dtype != np.float64:
+            stored = value.astype(dtype)
+            back = stored.astype(np.float64)
+            lossy = ~((back == value) | (np.abs(back - value) <= _DTYPE_RTOL * np.abs(value)))
+            if np.any(lossy & ~np.isnan(value)):
+                k = int(np.flatnonzero(lossy)[0])
+                self.fail(f"{name}: dtype {dtype.name!r} cannot hold {float(value.ravel()[k])!r} (it would be "
+                          f"{float(back.ravel()[k])!r}); remove \"dtype\" (float64)")
+            value = stored
+        if value.ndim == 0 and dtype == np.float64:
             return jnp.asarray(value.item())  # a scalar as `jnp.asarray(9.6)` makes it (the components' converter)
         return device_array(value)
 
-    def decode(self, node, path):
+    def _dtype(self, spec, name):
+        try:
+            dtype = np.dtype(spec)
+        except TypeError:
+            self.fail(f"{name}: dtype {spec!r} is not a dtype")
+        if dtype.kind != "f":
+            self.fail(f"{name}: dtype {spec!r}: a model parameter is a floating-point number (an integer dtype would "
+                      "cut 9.6 to 9); remove \"dtype\" (float64)")
+        return dtype
+
+    def decode(self, node, path, unit=None):
         if not isinstance(node, dict) or len(node) == 0:
             self.fail(f"structure at {path or 'the top'} must be a table, got {node!r}")
         if "array" in node:
-            return self.array(node["array"])
+            return self.array(node["array"], unit)
         if "class" in node:
             return self.module(node, path)
         if "value" in node:
@@ -213,7 +265,9 @@ class _Decoder:
         if unknown:
             self.fail(f"{name} at {path or 'the top'} has no field(s) {sorted(unknown)}; its fields are "
                       f"{sorted(fields)}")
-        values = {k: self.decode(v, f"{path}.{k}" if path else k) for k, v in given.items()}
+        units = _units_of(cls)
+        values = {k: self.decode(v, f"{path}.{k}" if path else k, units.get(k, _UNIT_FALLBACK.get(k)))
+                  for k, v in given.items()}
         where = f"{path} ({name})" if path else name
         try:  # through the constructor: converters and value checks run as in Python
             obj = cls(**{k: v for k, v in values.items() if fields[k].init})
@@ -241,6 +295,22 @@ def _same_leaves(obj, values):
     return True
 
 
+def _unit_hint(message, declared):
+    """For a magnitude refused as another unit: how to say that unit in the file (which pamjax then converts)."""
+    m = re.search(r"looks like ([^\s,;()]+)", message)
+    if m is None:
+        return ""
+    likely = m.group(1)
+    if declared in ("Pa abs", "Pa gauge"):
+        likely += " abs" if declared == "Pa abs" else " gauge"
+    return (f"; if the number is right in {m.group(1)}, say so in its entry (\"unit\": \"{likely}\") and pamjax "
+            "converts it")
+
+
+def _flat(v):
+    return [x for item in v for x in _flat(item)] if isinstance(v, list) else [v]
+
+
 def _from_json_value(v):
     if isinstance(v, list):
         return [_from_json_value(x) for x in v]
@@ -258,7 +328,12 @@ def load_model(path, *, classes=()):
     if not path.is_file():
         raise PamjaxInputError(f"model file {path} does not exist" + (" (it is a folder)" if path.is_dir() else ""))
     try:
-        document = json.loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
+        document = _parse(text)
+    except _DuplicateKey as dup:
+        raise PamjaxInputError(f"model file {path}: key {dup.key!r} appears twice in one table (lines "
+                               f"{', '.join(map(str, dup.lines))}); JSON would keep only the last one and drop the "
+                               "other silently: remove one") from None
     except json.JSONDecodeError as err:
         raise PamjaxInputError(f"model file {path}, line {err.lineno}, column {err.colno}: not valid JSON: "
                                f"{err.msg}") from None
@@ -270,13 +345,52 @@ def load_model(path, *, classes=()):
     if document.get("format_version") != FORMAT_VERSION:
         raise PamjaxInputError(f"model file {path} has format_version {document.get('format_version')!r}; this "
                                f"pamjax reads version {FORMAT_VERSION}")
-    decoder = _Decoder(f"model file {path}", document, _registry(classes))
+    return _check_document(_Decoder(f"model file {path}", document, _registry(classes)), document)
+
+
+class _DuplicateKey(Exception):
+    def __init__(self, key, lines):
+        self.key, self.lines = key, lines
+
+
+def _parse(text):
+    """`json.loads(text)`, refusing a key given twice in one object (JSON itself keeps the last silently): the pure
+    Python scanner, whose object parser is told where each object starts, so that the lines of the key's occurrences
+    in that object can be named."""
+    import json.decoder
+    import json.scanner
+
+    def parse_object(s_and_end, strict, scan_once, object_hook, object_pairs_hook, memo=None, _w=None):
+        start = s_and_end[1]
+        pairs, end = json.decoder.JSONObject(s_and_end, strict, scan_once, object_hook, list, memo)
+        keys = [k for k, _ in pairs]
+        for k in keys:
+            if keys.count(k) > 1:
+                span = s_and_end[0][start:end]
+                found = [m.start() for m in re.finditer(re.escape(json.dumps(k)) + r"\s*:", span)]
+                found += [m.start() for m in re.finditer(re.escape(json.dumps(k, ensure_ascii=False)) + r"\s*:",
+                                                          span) if m.start() not in found]
+                lines = sorted(s_and_end[0].count("\n", 0, start + pos) + 1 for pos in found)
+                raise _DuplicateKey(k, lines)
+        return dict(pairs), end
+
+    decoder = json.JSONDecoder()
+    decoder.parse_object = parse_object
+    decoder.scan_once = json.scanner.py_make_scanner(decoder)
+    return decoder.decode(text)
+
+
+def _check_document(decoder, document):
+    """The model `document` describes, rebuilt and checked by `decoder` (every parameter used, none batched)."""
     if not isinstance(decoder.parameters, dict):
         decoder.fail("'parameters' must be a table of path → {value, unit}")
     model = decoder.decode(document.get("structure"), "")
     unused = set(decoder.parameters) - decoder.used
     if unused:
         decoder.fail(f"parameter(s) {sorted(unused)} are not part of the model's structure (misspelt paths?)")
+    found = batched_parameters(model)
+    if found:
+        decoder.fail(describe_batched(found))
     return model
 
 
@@ -284,4 +398,4 @@ def checked(model, where):
     """`model` rebuilt through its components' constructors, so that their value checks run (a model changed with
     `eqx.tree_at` skips them); an error names `where`. Values and structure are unchanged."""
     document = model_document(model)
-    return _Decoder(where, document, _registry()).decode(document["structure"], "")
+    return _check_document(_Decoder(where, document, _registry()), document)

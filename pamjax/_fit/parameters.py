@@ -162,6 +162,21 @@ class _Group(eqx.Module):
         return xp.linalg.solve(xp.asarray(self.basis), value) / scale
 
 
+def _refuse_overlaps(groups, valid):
+    """Two free entries must not move one element ('valve.coefficients' and 'valve.coefficients[1,0]' both fit m4:
+    twice the same unknown, a singular problem)."""
+    owner = {}
+    for g in groups:
+        leaf = ".".join(g.attrs)
+        shape = valid.get(leaf, ())
+        for element in ([tuple(g.index)] if g.index is not None else list(np.ndindex(*shape)) or [()]):
+            if (leaf, element) in owner and owner[(leaf, element)] != g.path:
+                shown = f"{leaf}[{','.join(map(str, element))}]" if element else leaf
+                raise PamjaxInputError(f"free names {shown} twice: in {owner[(leaf, element)]!r} and in {g.path!r} "
+                                       "(a whole array frees all its elements); keep one of them")
+            owner[(leaf, element)] = g.path
+
+
 def _labels(path, shape, index, label):
     """The reported names of a free entry: its path for an indexed entry or a scalar, the field's `label` format
     per entry ({i}: flat index, {n}: i + 1), else path[i, j]."""
@@ -339,6 +354,7 @@ class ParameterSpace(eqx.Module):
         labels = self.labels
         if len(set(labels)) != len(labels):
             raise PamjaxInputError(f"a parameter is named twice in free: {labels}")
+        _refuse_overlaps(self.groups, valid)
 
     @property
     def labels(self):

@@ -16,6 +16,10 @@ exploiting the profile likelihood", Bioinformatics 25(15)). Verdicts:
 - structurally non-identifiable: the profile is flat (Δχ² < `FLAT` over the whole span on both sides): other
   parameters compensate exactly (e.g. k0, k1, k2 of paper 000 eq. 7, which enter only as k0/k2 and k1/k2).
 
+Profiles need the fit at a minimum: a fit that stopped at `max_steps` (or stalled) is refused before any work, and
+when a re-fitted point lies below the fit's cost (Δχ² < `NOT_A_MINIMUM`: the fit had not reached the minimum after
+all) every verdict reads "not a minimum: ..." and `ProfileResult.warnings` says where the lower cost is.
+
 Each point is re-fitted by the fit's Levenberg-Marquardt (`pamjax._lm`) in the coordinates orthogonal to ψ's, warm
 started from the previous point plus the linearised change of the others along ψ; the residuals and Jacobians are
 the fit's compiled functions (`pamjax._fit`: no new compilation for a problem already fitted). The branches
@@ -41,6 +45,11 @@ from .parameters import ParameterSpace
 from .recording import _writable
 
 FLAT = 1e-3  # Δχ²: a profile within this of its minimum over its whole span on both sides is flat (structural)
+# Δχ²: a re-fitted point this far BELOW the fit's cost shows that the fit is not at a minimum (a converged fit's
+# re-fits lie within ~1e-6 of it: the stopping tolerances); every verdict is then void, not "non-identifiable"
+NOT_A_MINIMUM = -0.1
+# statuses of a fit whose end point is a minimum (of the cost, or of the cost within the bounds): what profiles need
+PROFILED_STATUSES = ("converged", "at bound")
 BISECTIONS = 3  # re-fits bisecting the step across the threshold (the interval's end to ~1/8 of a step, then
 # interpolated)
 REFINES = 6  # shorter retakes of a step that jumps across the threshold (locates a steep crossing to ~4⁻⁶ of it)
@@ -71,7 +80,8 @@ class Profile:
 @dataclasses.dataclass
 class ProfileResult:
     """The outcome of `profile`: `profiles` (one `Profile` per parameter, by `labels`), `level`, `threshold`
-    (Δχ²), `sigma2` (the residual variance the Δχ² is measured in), `cost` at the fit, `profile_s` (wall time)."""
+    (Δχ²), `sigma2` (the residual variance the Δχ² is measured in), `cost` at the fit, `profile_s` (wall time),
+    `warnings` (e.g. that a re-fit found a lower cost than the fit's: the verdicts then say nothing)."""
 
     profiles: list
     labels: list
@@ -80,6 +90,7 @@ class ProfileResult:
     sigma2: float
     cost: float
     profile_s: float
+    warnings: list = dataclasses.field(default_factory=list)
 
     def __getitem__(self, label):
         for p in self.profiles:
@@ -103,6 +114,7 @@ class ProfileResult:
         for p in self.profiles:
             rows.append(f"{p.label:<40}{p.value:>13.6g}{p.interval[0]:>13.6g}{p.interval[1]:>13.6g}"
                         f"{p.linearised[0]:>13.6g}{p.linearised[1]:>13.6g}  {p.verdict}")
+        rows += [f"WARNING: {w}" for w in self.warnings]
         return "\n".join(rows)
 
     def plot(self, path):
@@ -298,6 +310,38 @@ def _verdict(lower, upper, branches):
         ("s" if len(sides) == 2 else "") + ")"
 
 
+def _walk_all(jobs, names, workers, progress):
+    """Walk every branch in a pool of `workers` threads; with `progress`, a line as each parameter's two branches
+    finish (a profile takes seconds to minutes)."""
+    if progress:
+        print(f"  profiling {len(names)} parameter(s): {len(jobs)} branches on {workers} thread(s) ...", flush=True)
+    with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
+        futures = [pool.submit(job[1].walk) for job in jobs]
+        if progress:
+            left = {name: 2 for name in names}
+            for future in concurrent.futures.as_completed(futures):
+                name = jobs[futures.index(future)][0]
+                left[name] -= 1
+                if left[name] == 0:
+                    print(f"  profiled {name} ({sum(v == 0 for v in left.values())} of {len(names)})", flush=True)
+        return [f.result() for f in futures]
+
+
+def _not_a_minimum(jobs, done, space, labels, values):
+    """[a warning] when some re-fitted point lies below the fit's cost by more than `NOT_A_MINIMUM`, naming it."""
+    delta, name, branch = min(((d, n, b) for (n, _), b in zip(jobs, done) for _, d, _, _ in b.points),
+                              key=lambda x: x[0], default=(0.0, None, None))
+    if not delta < NOT_A_MINIMUM:
+        return []
+    theta = min(branch.points, key=lambda p: p[1])[2]
+    k = labels.index(name)
+    at = float(space.physical(jnp.asarray(theta))[k])
+    return [f"the fit is not at a minimum: with {name} = {at:.6g} (fitted {values[k]:.6g}) and the others re-fitted "
+            f"the cost is lower by Δχ² = {-delta:.3g}; the profiles are taken around a point that is not the best "
+            "fit, so their intervals and verdicts say nothing: fit again (e.g. from that point, or with tighter "
+            "ftol/xtol/gtol) and profile the new result"]
+
+
 def _validate(result, names, experiments, level, max_points, span, workers):
     require_float64("pamjax.profile")
     if not hasattr(result, "labels") or not hasattr(result, "paths"):
@@ -308,6 +352,13 @@ def _validate(result, names, experiments, level, max_points, span, workers):
                                "pass the experiments it was fitted to")
     if getattr(result, "model", None) is None:
         raise PamjaxInputError("result has no fitted model (read from JSON): profile the FitResult `fit` returned")
+    status = getattr(result, "status", "converged")
+    if status not in PROFILED_STATUSES:
+        raise PamjaxInputError(
+            f"the fit stopped with status {status!r} ({getattr(result, 'message', '')}): its end point is not a "
+            "minimum of the cost, so every profile would fall below it and read as non-identifiable; continue the fit "
+            "to convergence first (pamjax.fit(..., checkpoint=..., resume=...) with a larger max_steps; on the command "
+            "line raise [fit] max_steps and run pamjax fit CONFIG --out FOLDER --resume --profile)")
     names = list(result.labels) if names is None else ([names] if isinstance(names, str) else list(names))
     unknown = [n for n in names if n not in result.labels]
     if unknown or not names:
@@ -373,8 +424,8 @@ def profile(
         loose = any(name in group for group in result.non_identifiable)  # linearised error infinite
         se_tau = math.inf if loose else math.sqrt(max(float(u @ cov @ u), 0.0))
         jobs += [(name, _Branch(ev, i, u, side, theta, ev.jac, se_tau, settings)) for side in (-1, 1)]
-    with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
-        done = list(pool.map(lambda job: job[1].walk(), jobs))
+    done = _walk_all(jobs, names, workers, progress)
+    warnings = _not_a_minimum(jobs, done, space, labels, result.values)
     z = math.sqrt(threshold)
     profiles = []
     for name in names:
@@ -395,11 +446,14 @@ def profile(
         profiles.append(Profile(
             label=name, value=value, values=[p[0] for p in points], delta=[float(p[1]) for p in points],
             others=others, converged=[bool(p[3]) for p in points], interval=[float(v) for v in lo_hi],
-            linearised=[value - z * se, value + z * se], verdict=_verdict(*ends, (lower_b, upper_b))))
+            linearised=[value - z * se, value + z * se],
+            verdict="not a minimum: see warnings" if warnings else _verdict(*ends, (lower_b, upper_b))))
         if progress:
             p = profiles[-1]
             print(f"  {name}: {p.verdict}; {level:.0%} LR interval [{p.interval[0]:.6g}, {p.interval[1]:.6g}] "
                   f"(linearised [{p.linearised[0]:.6g}, {p.linearised[1]:.6g}])", flush=True)
+    for w in warnings if progress else ():
+        print(f"  WARNING: {w}", flush=True)
     return ProfileResult(profiles=profiles, labels=names, level=level, threshold=threshold, sigma2=ev.sigma2,
-                         cost=ev.cost, profile_s=time.perf_counter() - t_start)
+                         cost=ev.cost, profile_s=time.perf_counter() - t_start, warnings=warnings)
 

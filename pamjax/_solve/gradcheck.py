@@ -22,13 +22,30 @@ def parameter_names(tree):
     return names
 
 
-def gradient_check(loss, tree, *, relative_steps=(1e-4, 1e-5, 1e-6), floor=1e-3):
+# Relative steps of the finite differences, a 1-2-5 ladder over four decades. A loss computed by an adaptive solve
+# is smooth in θ only down to the solver's noise: a change of θ changes the accepted step sequence, and the loss
+# jumps by about the solve's error (2e-11 of the loss at rtol = 1e-12 over 20 PWM periods of the MAS-10: rms 4e-10
+# off the gradient's tangent line within ±2e-6 relative of F_c, while the step count varies 6,077-6,095). A central
+# difference with step h θ then errs by noise / (h θ) plus its truncation ∝ h²: for parameters of small influence
+# (F_c, C_f, a2, b) the noise dominates below h ≈ 1e-4 (1e-3 off at 1e-5, 1e-6), while a strongly nonlinear one
+# (the PWM frequency over 20 periods) needs h ≤ 1e-5. No single step serves all, so each parameter keeps the most
+# consistent pair of neighbours on this ladder. Measured (benchmarks/reliability.py, 20 sets x 33 parameters):
+# steps (1e-4, 1e-5, 1e-6) failed 4 sets (worst 1.1e-3, F_c; 14 pairs inconclusive); this ladder passes all, worst
+# judged error 5.2e-5, one pair inconclusive (set 4's PWM frequency, 9e-4 of the largest scaled sensitivity: noise
+# reaches it before its curvature lets go). A finer ladder (adding 5e-6, 2e-6) found a coincident noisy pair there.
+RELATIVE_STEPS = (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4, 5e-5, 2e-5, 1e-5, 1e-6)
+
+
+def gradient_check(loss, tree, *, relative_steps=RELATIVE_STEPS, floor=1e-3):
     """Compare d loss / d θ from forward mode, reverse mode and central finite differences for every scalar θ in the
     inexact-array leaves of `tree`.
 
     `loss(tree, adjoint)` returns a scalar; `adjoint` is "forward" or "reverse" (pass it on to `simulate`/`solve`).
-    Finite differences use steps h·max(|θ|, 1e-12) for each h in `relative_steps`; the estimate kept per parameter
-    is the one of the most consistent pair of neighbouring steps.
+    Finite differences use steps h·max(|θ|, 1e-12) for each h in `relative_steps` (default `RELATIVE_STEPS`, a
+    ladder from 1e-2 to 1e-6); the estimate kept per parameter is the mean of the most consistent pair of
+    neighbouring steps. A wide ladder matters for losses computed by adaptive solves: the loss is smooth only down
+    to the solver's noise (its step sequence changes with θ), so small steps measure the noise (noise / step) and
+    large ones the curvature; the consistent pair lies between, at a different step for each parameter.
 
     Errors are measured on scaled sensitivities s = θ ∂L/∂θ, relative to max(|s_fd|, `floor`·max|s_fd|), so that
     parameters with negligible influence are not judged on round-off.

@@ -185,3 +185,79 @@ def integrate(systems, field, event, update, z0s, left, right, aux, member, offs
     num_steps = jnp.sum(right > left)
     finite = jnp.all(jnp.isfinite(z_end))
     return z_out, num_steps, n_events, n_missed, finite
+
+
+def _once(needed, work, default):
+    """`work()` where `needed`, else `default`: a `cond` written as a while loop of at most one iteration. Under
+    `vmap` a `cond` with a batched predicate computes both branches for every lane; this loop runs its body only when
+    some lane needs it (the others keep `default`), so a batch of lanes pays for an event location only in the
+    steps where one of them has an event. Not reverse-mode differentiable (sweeps are not differentiated)."""
+
+    def body(c):
+        return (jnp.zeros_like(c[0]), *work())
+
+    return jax.lax.while_loop(lambda c: c[0], body, (needed, *default))[1:]
+
+
+def integrate_observed(system, field, event, update, z0, left, right, aux, ts, observe, init):
+    """`integrate`'s scheme for ONE run, its outputs observed on the fly instead of stored: the lane of a sweep.
+
+    The same RK4 steps over the intervals `left`, `right` (with `aux` as in `integrate`), the same event location
+    inside the step and the same cubic Hermite outputs, so each output equals `integrate`'s to round-off; but every
+    output time `ts[k]` (concrete order, the first at the run's start `left[0]`) is passed to
+    `observe(carry, k, t, z)` as soon as its step is done, and nothing of the trajectory is kept: memory does not
+    grow with the horizon, whatever the number of lanes. A time at or before the start takes the initial state `z0`
+    itself (as `integrate`'s callers do). Control flow is batch-friendly: the segments of a step, the event location
+    and the outputs of a step are while loops that, under `vmap`, run as long as some lane needs them (see `_once`).
+
+    Returns `(carry, z_end, finite)`.
+    """
+    n_out = ts.shape[0]
+    t_start = left[0]
+    z = jnp.where(event(system, 0.0, z0) < 0, update(system, 0.0, z0), z0)  # as in `integrate`
+    slots = MAX_EVENTS + 1
+
+    def emit(carry, k, end, seg):
+        """Observe every output time before `end` (all of them with `end` = inf), on the segment `seg`."""
+        seg_start, h, za, zb, fa, fb = seg
+
+        def more(c):
+            return (c[1] < n_out) & (ts[jnp.minimum(c[1], n_out - 1)] < end)
+
+        def body(c):
+            acc, k = c
+            t = ts[k]
+            s = jnp.where(h > 0, (t - seg_start) / jnp.where(h > 0, h, 1.0), 0.0)
+            z_t = jnp.where(t <= t_start, z0, _hermite(s, h, za, zb, fa, fb))
+            return observe(acc, k, t, z_t), k + 1
+
+        return jax.lax.while_loop(more, body, (carry, k))
+
+    def interval(state, xs):
+        z, k, carry = state
+        ta, tb, a = xs
+
+        def more(c):
+            return (c[0] < tb) & (c[1] < slots)
+
+        def segment(c):
+            seg_start, j, z_s, k, carry = c
+            zb, fa, fb = _rk4(field, system, seg_start, tb, z_s, a)
+            resolve = (event(system, tb, zb) < 0) & (j < MAX_EVENTS)
+
+            def split():
+                tau, z_tau = _locate(event, system, (seg_start, tb, z_s, zb, fa, fb))
+                return tau, update(system, tau, z_tau)
+
+            end, z_next = _once(resolve, split, (tb, zb))
+            carry, k = emit(carry, k, end, (seg_start, tb - seg_start, z_s, zb, fa, fb))
+            return end, j + 1, z_next, k, carry
+
+        _, _, z, k, carry = jax.lax.while_loop(more, segment, (ta, jnp.zeros((), jnp.int32), z, k, carry))
+        return (z, k, carry), None
+
+    k0 = jnp.zeros((), jnp.int32)
+    (z_end, k, carry), _ = jax.lax.scan(interval, (z, k0, init), (left, right, aux))
+    zeros = jnp.zeros_like(z_end)
+    carry, _ = emit(carry, k, jnp.inf, (right[-1], jnp.zeros(()), z_end, z_end, zeros, zeros))  # at the end time
+    return carry, z_end, jnp.all(jnp.isfinite(z_end))

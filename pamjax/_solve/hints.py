@@ -105,6 +105,9 @@ def failure_hint(system, signal, ts, t0, y0, traj, max_steps, solver, message):
                if period is not None else "")
         budget = int(2 ** math.ceil(math.log2(2 * needed)))  # 2×: the rate of steps varies along a run
         return (f"{where}{per_period}: the whole run needs about {needed:,.0f}; pass max_steps={budget:,}{fix}")
+    inflow = negative_inflow(system, signal, t0, y0)
+    if inflow is not None:
+        return f"{where}: {inflow}"
     if "minimum step size" in message:
         return (f"{where}, where the step size fell below the solver's minimum: the state or its rate became "
                 "non-finite or discontinuous there (parameters far outside the physical range?); simulate with "
@@ -116,20 +119,75 @@ def failure_hint(system, signal, ts, t0, y0, traj, max_steps, solver, message):
 RK4_STABILITY = 2.8  # |h λ| classical RK4 stays stable up to on λ < 0
 
 
-def fixed_step_hint(system, signal, t0, y0, stepping):
+@eqx.filter_jit
+def _start_inflow(system, signal, t0, y0, command):
+    """The mass flow into the chamber [kg/s] at the start state with the valve held at `command`."""
+    y0 = system.initial_state() if y0 is None else y0
+    return system.outputs(t0, y0, command).get("mass_flow")
+
+
+def negative_inflow(system, signal, t0, y0):
+    """A sentence naming negative inflow, or None: the valve at the signal's largest command takes air OUT of a
+    chamber that starts at or below atmospheric pressure, so the pressure falls to zero and the state turns
+    non-finite whatever the solver or its step (e.g. a flow coefficient with its sign flipped in a model file)."""
+    try:
+        lo, hi = signal.bounds()
+        y = system.initial_state() if y0 is None else y0
+        pressure = getattr(y, "pressure", None)
+        if pressure is None or float(np.max(np.asarray(pressure))) > float(system.air.atmospheric_pressure) + 1.0:
+            return None  # a chamber above atmospheric empties legitimately
+        flow = _start_inflow(system, signal, jnp.asarray(float(t0)), y0, jnp.asarray(float(hi)))
+        flow = None if flow is None else float(np.min(np.asarray(flow)))
+    except Exception:  # noqa: BLE001 - a diagnosis must not raise in place of the failure it explains
+        return None
+    if flow is None or not flow < -1e-12:
+        return None
+    return (f"the valve takes air OUT of the chamber at the start (mass flow {flow:.3g} kg/s at {float(pressure):g} Pa "
+            f"abs with the command at {hi:g}, where a valve fills it): negative inflow drives the pressure below zero "
+            "whatever the solver or its step. Check the signs of the valve's flow parameters (e.g. "
+            "valve.coefficients of an AveragedValve: a coefficient with its sign flipped)")
+
+
+def fixed_step_hint(system, signal, t0, y0, stepping, step=None):
     """What fixes an unstable fixed-grid run ("pwm": substeps per PWM period; "grid": grid_step): the step its
-    fastest mode needs, or an implicit adaptive solve when that step is impractically small."""
+    fastest mode needs, or an implicit adaptive solve when that step is impractically small. When the run's step
+    `step` [s] is already below what its fastest mode needs, a smaller step cannot help: the cause is named
+    (negative inflow) or the parameters are blamed, never a step the run already takes."""
+    inflow = negative_inflow(system, signal, t0, y0)
+    if inflow is not None:
+        return inflow
     rate, state = _fastest_mode(system, signal, float(t0), y0)
-    if not np.isfinite(rate) or rate == 0:
-        return "a smaller fixed step (more substeps, smaller grid_step), or stepping='adaptive'"
+    if system.hybrid:  # a run that starts stuck also slides: the sliding mode's rates (c/M: the viscous friction)
+        y = system.initial_state() if y0 is None else y0
+        if getattr(y, "friction", None) is not None:
+            sliding = eqx.tree_at(lambda s: s.friction, y, jnp.ones_like(jnp.asarray(y.friction)))
+            rate_sliding, state_sliding = _fastest_mode(system, signal, float(t0), sliding)
+            if np.isfinite(rate_sliding) and rate_sliding > rate:
+                rate, state = rate_sliding, f"{state_sliding}, once the payload slides"
+    if not np.isfinite(rate):
+        return ("the state's rate is not finite at the start already: a step size cannot help; check the model's "
+                "parameters and the initial state (values far outside their physical range)")
+    if rate == 0:
+        return ("the state does not move at the start, so its stability limit cannot be named; check the model's "
+                "parameters (values far outside their physical range, a sign flipped)")
     stable = RK4_STABILITY / rate
-    implicit = "use stepping='adaptive' with solver=pamjax.Rodas5() (implicit: not limited by stiffness)"
+    if step is not None and step <= stable:
+        return (f"not a step-size problem: the step ({step:.2g} s) is already below the {stable:.2g} s its fastest "
+                f"mode (mostly the {state}) needs, so the state left the physical range for another reason: check "
+                "the model's parameters (values far outside their physical range, a sign flipped)")
+    # a hybrid system (stick-slip friction) has no adaptive solve: only a finer fixed grid helps it
+    implicit = None if system.hybrid else ("use stepping='adaptive' with solver=pamjax.Rodas5() (implicit: not "
+                                           "limited by stiffness)")
     period = _pwm_period(system.valve)
     if stepping == "pwm" and period is not None:
         needed = math.ceil(period / stable)
-        advice = (f"substeps >= {needed:,} would be stable, too many: {implicit}" if needed > 256
-                  else f"pass substeps={max(needed, 2)} or more, or {implicit}")
+        finer = f"pass substeps={max(needed, 2):,} or more"
+        advice = (f"substeps >= {needed:,} would be stable, too many: {implicit}" if needed > 256 and implicit
+                  else finer + (f", or {implicit}" if implicit else ""))
     else:
-        advice = f"pass grid_step={stable:.2g} or less, or {implicit}"
+        shown = float(f"{stable:.2g}")
+        shown = shown if shown <= stable else float(f"{stable * 0.95:.2g}")  # never a step above the limit
+        advice = f"pass grid_step={shown:g} or less" + (f", or {implicit}" if implicit else "")
     cause = _stiffness_cause(system)
-    return f"its fastest mode (mostly the {state}) needs RK4 steps below {stable:.2g} s{cause}; {advice}"
+    return (f"the fixed RK4 step is beyond the stability limit of this system: its fastest mode (mostly the {state}) "
+            f"needs RK4 steps below {stable:.2g} s{cause}; {advice}")

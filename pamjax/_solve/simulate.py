@@ -15,11 +15,12 @@ from .._core.units import check_absolute_pressure
 from .._core.xla_cpu import single_trajectory_options
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractSystem
-from . import synchronous as _sync
+from . import chunks as _chunks, synchronous as _sync
+from .checks import check_parameters, naming_batched, runtime_checks, vacuum
 from .edges import ScheduledValve, StartsOff
-from .hints import default_max_steps, failure_hint, fixed_step_hint
+from .hints import default_max_steps, failure_hint, fixed_step_hint, negative_inflow
 from .scaled import scaled
-from .trajectory import RESULT_NONFINITE, Trajectory, result_message, trajectory
+from .trajectory import RESULT_NONFINITE, RESULT_NONPHYSICAL, Trajectory, result_message, trajectory
 
 _DEFAULT_SUBSTEPS = 16  # RK4 nodes per PWM period: step ≤ 1.25 ms at 50 Hz (docs/performance.md)
 # s, stepping="grid": RK4 step of a hybrid system fed by a continuous valve; 1 ms puts paper 000's muscle-payload
@@ -253,10 +254,13 @@ def validate(system, signal, ts, y0=None, t0=None):
         if not (np.isfinite(lo) and np.isfinite(hi)):
             raise PamjaxInputError(f"signal must be finite, its bounds are ({lo}, {hi})")
         if lo < clo - 1e-12 or hi > chi + 1e-12:
+            percent = (clo == 0 and chi == 1 and lo >= 0 and 1 < hi <= 100)  # a duty of 50 meant as 50 %
             raise PamjaxInputError(
                 f"signal (the valve command, e.g. duty ratio) must stay within [{clo}, {chi}], "
-                f"its range is [{lo}, {hi}]"
+                f"its range is [{lo}, {hi}]" + (f"; that looks like percent: a duty ratio of {hi / 100:g} is "
+                                                f"written {hi / 100:g}, not {hi:g}" if percent else "")
             )
+    check_parameters(system)  # a system changed with eqx.tree_at skipped its components' checks
     if y0 is not None:
         leaves = jtu.tree_leaves(y0)
         for leaf in leaves:
@@ -350,6 +354,8 @@ def simulate(
     An `OnOffValve(mode="exact")` has its switching times handed to the solver (step-size clipping at jump times).
     """
     validate(system, signal, ts, y0, t0)
+    if _is_traced((system, signal)):  # inside jit/vmap/grad: the same checks, as run-time errors naming the value
+        system, signal = runtime_checks(system, signal, ts, system.command_range)
     # Tolerances and the first step as arrays: arguments of the compiled solve, not constants baked into it (another
     # rtol does not compile again).
     rtol, atol = _positive(rtol, "rtol"), _positive(atol, "atol")
@@ -385,13 +391,23 @@ def simulate(
     # A concrete call checks the result on the host (below), so its program is traced with equinox's run-time
     # checks (diffrax's, on the save times) as NaN rather than as host callbacks: JAX does not keep a program with a
     # host callback in its persistent cache, and a second run would compile the solve again.
-    with contextlib.nullcontext() if traced else equinox_errors_as_nan():
+    # a long fixed-grid run in pieces: bounded memory (_chunks)
+    pieces = None if traced or stepping == "adaptive" else _chunks.plan(system, signal, host, float(t0), stepping,
+                                                                         substeps, grid_step, periods)
+    with contextlib.nullcontext() if traced else equinox_errors_as_nan(), naming_batched(system):
         program = _solve_program()
-        traj = program(system, signal, ts, y0, t0, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps,
-                       dt0=dt0, adjoint=adjoint, jump_ts=jump_ts, throw=throw and traced, stepping=stepping,
-                       substeps=substeps, num_periods=periods, grid_step=grid_step)
-    if throw and not traced:
-        _raise_on_failure(traj, system, signal, ts, t0, y0, stepping, substeps, grid_step, max_steps, solver)
+
+        def solve_on(ts_, y0_, t0_, periods_, grid_step_):
+            return program(system, signal, ts_, y0_, t0_, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps,
+                           dt0=dt0, adjoint=adjoint, jump_ts=jump_ts, throw=throw and traced, stepping=stepping,
+                           substeps=substeps, num_periods=periods_, grid_step=grid_step_)
+
+        traj = (solve_on(ts, y0, t0, periods, grid_step) if pieces is None
+                else _chunks.solve_pieces(solve_on, system, stepping, host, y0, t0, pieces))
+    if not traced:
+        traj = vacuum(traj, system, signal, t0, y0)
+        if throw:
+            _raise_on_failure(traj, system, signal, ts, t0, y0, stepping, substeps, grid_step, max_steps, solver)
     return traj
 
 
@@ -435,12 +451,18 @@ def _scheduled(system, signal, t0, t_end):
 
 def _raise_on_failure(traj, system, signal, ts, t0, y0, stepping, substeps, grid_step, max_steps, solver):
     """`PamjaxSolveError` for a failed solve, saying why and what fixes it (`pamjax._solve.hints`)."""
-    if int(traj.result) == RESULT_NONFINITE and stepping in ("pwm", "grid"):
+    inflow = negative_inflow(system, signal, t0, y0) if int(traj.result) == RESULT_NONPHYSICAL else None
+    if inflow is not None:  # whatever the stepping: the model empties the chamber, no solver setting helps
+        raise PamjaxSolveError(f"the solve drew the chamber below half an atmosphere: {inflow}. (throw=False returns "
+                               "the result with its status instead.)")
+    if int(traj.result) in (RESULT_NONFINITE, RESULT_NONPHYSICAL) and stepping in ("pwm", "grid"):
+        step = float(grid_step) if stepping == "grid" else 1.0 / (float(system.valve.pwm_frequency) * substeps)
+        hint = fixed_step_hint(system, signal, t0, y0, stepping, step)
+        setting = f"substeps={substeps}" if stepping == "pwm" else f"grid_step={grid_step}"
+        what = "a non-finite state" if int(traj.result) == RESULT_NONFINITE else "an absolute pressure at or below 0"
         raise PamjaxSolveError(
-            f"fixed-grid stepping ('{stepping}') produced a non-finite state (substeps={substeps}, grid_step="
-            f"{grid_step}): the fixed RK4 step is beyond the stability limit of this system "
-            f"({fixed_step_hint(system, signal, t0, y0, stepping)}). Pass throw=False to get the result with status "
-            "instead."
+            f"fixed-grid stepping ('{stepping}', {setting}) produced {what}: {hint}. Pass throw=False to get the "
+            "result with status instead."
         )
     if int(traj.result) != 0:
         message = result_message(int(traj.result)).split(" Try increasing")[0]  # the hint says what to change

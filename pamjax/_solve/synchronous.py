@@ -174,26 +174,7 @@ def solve_runs(systems, signals, ts_list, z0s, scaled, t0s, *, stepping, substep
         shifted_ts.append(ts + offset_k)
         offset = offset + (t1 - t0) + 1.0
     stacked = _stack_systems(systems)
-
-    if stepping == "pwm":
-
-        def field(system, t, z, opening):
-            held = eqx.tree_at(lambda s: s.valve, system, HeldOpeningValve(system.valve, opening))
-            return scaled.field(held, t, z, None)
-    else:
-
-        def field(system, t, z, command):
-            return scaled.field(system, t, z, command)
-
-    event = update = None
-    if systems[0].hybrid:
-
-        def event(system, t, z):
-            return system.event_function(t, scaled.state(z), None)
-
-        def update(system, t, z):
-            return scaled.vector(system.event_update(t, scaled.state(z), None))
-
+    field, event, update = _grid_functions(stepping, scaled, systems[0].hybrid)
     all_ts = jnp.concatenate(shifted_ts)
     z_out, num_steps, _, _, finite = _grid.integrate(
         stacked, field, event, update, jnp.stack(z0s), jnp.concatenate(lefts), jnp.concatenate(rights),
@@ -211,6 +192,52 @@ def solve_runs(systems, signals, ts_list, z0s, scaled, t0s, *, stepping, substep
     return out
 
 
+def _grid_functions(stepping, scaled, hybrid):
+    """The fixed grid's vector field `field(system, t, z, aux)` (aux: the opening held over a PWM-synchronous
+    interval, or the command at the stage time), and a hybrid system's event function and update (None
+    otherwise), all on the flat scaled state."""
+    if stepping == "pwm":
+
+        def field(system, t, z, opening):
+            held = eqx.tree_at(lambda s: s.valve, system, HeldOpeningValve(system.valve, opening))
+            return scaled.field(held, t, z, None)
+    else:
+
+        def field(system, t, z, command):
+            return scaled.field(system, t, z, command)
+
+    if not hybrid:
+        return field, None, None
+
+    def event(system, t, z):
+        return system.event_function(t, scaled.state(z), None)
+
+    def update(system, t, z):
+        return scaled.vector(system.event_update(t, scaled.state(z), None))
+
+    return field, event, update
+
+
+def observe_run(system, signal, ts, z0, scaled, t0, *, stepping, substeps, size, observe, init):
+    """One run of a hybrid `system` on the fixed grid of `solve_runs` (same intervals, steps and events), each
+    output time passed on the fly to `observe(carry, k, t, state, command)` with the named state and the command
+    in force (the latched duty with a switching valve), nothing of the trajectory kept: a sweep's lane
+    (`pamjax._solve.grid.integrate_observed`). `ts` concrete, `ts[0]` ≥ `t0`. Returns `(carry, finite)`."""
+    t1 = ts[-1]
+    if stepping == "pwm":
+        left, right, aux = pwm_intervals(system.valve, signal, t0, t1, substeps, size)
+    else:
+        left, right, aux = uniform_intervals(signal, t0, t1, size)
+    field, event, update = _grid_functions(stepping, scaled, system.hybrid)
+
+    def seen(carry, k, t, z):
+        command = latched_command(system.valve, signal, t) if stepping == "pwm" else signal(t)
+        return observe(carry, k, t, scaled.state(z), command)
+
+    carry, _, finite = _grid.integrate_observed(system, field, event, update, z0, left, right, aux, ts, seen, init)
+    return carry, finite
+
+
 def _stack_systems(systems):
     """The systems' array leaves stacked along a new leading axis (their static structure must agree)."""
     arrays = [eqx.filter(s, eqx.is_array) for s in systems]
@@ -221,20 +248,27 @@ def _stack_systems(systems):
     return eqx.combine(stacked, eqx.filter(systems[0], eqx.is_array, inverse=True))
 
 
+def latched_command(valve: AbstractSwitchingValve, signal, t):
+    """The duty in force at time `t`: the signal read at the start of the PWM period containing t."""
+    return signal(jnp.floor(t * valve.pwm_frequency + 1e-9) * valve.period)
+
+
 def latched_commands(valve: AbstractSwitchingValve, signal, ts):
-    """The duty in force at each time: the signal read at the start of the PWM period containing t."""
-    return jax.vmap(lambda t: signal(jnp.floor(t * valve.pwm_frequency + 1e-9) * valve.period))(ts)
+    """`latched_command` at each of the times `ts`."""
+    return jax.vmap(lambda t: latched_command(valve, signal, t))(ts)
+
+
+def output_at(system, signal, t, state, command, t0):
+    """`system.outputs` at time `t` with the valve holding its exact-edge opening there (mass flow included), in a
+    run from `t0`."""
+    valve = system.valve
+    start = jnp.floor(t * valve.pwm_frequency + 1e-9) * valve.period
+    first = jnp.floor(t0 * valve.pwm_frequency + 1e-9) * valve.period
+    opening = sharp_opening(valve, t - start, command, open_at_start(valve, signal, start, first))
+    held = eqx.tree_at(lambda s: s.valve, system, HeldOpeningValve(valve, opening))
+    return held.outputs(t, state, command)
 
 
 def outputs_at(system, signal, ts, states, commands, t0):
-    """`system.outputs` at times `ts` with the valve holding its exact-edge opening there (mass flow included)."""
-    valve = system.valve
-    starts = jnp.floor(ts * valve.pwm_frequency + 1e-9) * valve.period
-    first = jnp.floor(t0 * valve.pwm_frequency + 1e-9) * valve.period
-
-    def one(t, state, command, start):
-        opening = sharp_opening(valve, t - start, command, open_at_start(valve, signal, start, first))
-        held = eqx.tree_at(lambda s: s.valve, system, HeldOpeningValve(valve, opening))
-        return held.outputs(t, state, command)
-
-    return jax.vmap(one)(ts, states, commands, starts)
+    """`output_at` at each of the times `ts`."""
+    return jax.vmap(lambda t, state, command: output_at(system, signal, t, state, command, t0))(ts, states, commands)

@@ -7,10 +7,11 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import PartitionSpec
 
+from .._core.errors import PamjaxInputError
 from .._physics.signals import AbstractSignal
-from .._solve import fixed_step as _fixed_step
+from .._solve import fixed_step as _fixed_step, synchronous as _sync
 from .._solve.scaled import scaled
-from .._solve.simulate import solve
+from .._solve.simulate import _DEFAULT_GRID_STEP, _DEFAULT_SUBSTEPS, solve
 from .plan import lane_system, make_lane
 from .result import NON_FINITE, NON_PHYSICAL, SOLVER_FAILED, SUCCESS
 
@@ -64,6 +65,39 @@ def _lane_fixed(system, signal, y0, ts, counts, steps, scheme, channels, reducti
     return acc, status
 
 
+def _lane_hybrid(system, signal, y0, ts, grid, channels, reduction):
+    """A hybrid lane (stick-slip friction): `simulate`'s fixed grid with the events located inside the step, the
+    outputs observed on the fly (`pamjax._solve.synchronous.observe_run`), so each lane equals its own `simulate`."""
+    stepping, size, substeps = grid
+    z0, scaled_state = scaled(system, y0)
+    t0 = ts[0]
+    n_out = ts.shape[0]
+    if reduction is None:
+        init = jnp.zeros((n_out, len(channels)))
+    else:
+        w = reduction.weights(ts, system, signal)
+        init = jnp.zeros((len(channels),), dtype=w.dtype)
+
+    def observe(carry, k, t, state, command):
+        acc, physical = carry
+        if stepping == "pwm":  # the valve's exact-edge opening at t, as simulate's trajectory reports it
+            outs = _sync.output_at(system, signal, t, state, command, t0)
+        else:
+            outs = system.outputs(t, state, command)
+        outs = dict(outs, command=command)
+        obs = jnp.stack([jnp.asarray(outs[c], dtype=float) for c in channels])
+        physical = physical & jnp.all(state.pressure > 0)
+        acc = acc.at[k].set(obs) if reduction is None else acc + w[k] * obs
+        return acc, physical
+
+    (acc, physical), finite = _sync.observe_run(system, signal, ts, z0, scaled_state, t0, stepping=stepping,
+                                                substeps=substeps, size=size, observe=observe,
+                                                init=(init, jnp.asarray(True)))
+    finite = finite & jnp.all(jnp.isfinite(acc))
+    status = jnp.where(finite, jnp.where(physical, SUCCESS, NON_PHYSICAL), NON_FINITE)
+    return acc, status
+
+
 def _lane_adaptive(system, signal, y0, ts, channels, reduction, solve_options):
     traj = solve(system, signal, ts, y0, ts[0], throw=False, **solve_options)
     obs = jnp.stack([jnp.asarray(traj.channel(c), dtype=float) for c in channels], axis=-1)
@@ -79,11 +113,13 @@ def run_chunk(system, signal, y0, values, ts, plan, config, mesh=None):
     """One compiled call over a chunk of lanes. With a `mesh` the lanes are split over its devices by `shard_map`:
     each device runs its own lanes' loop, so an error-controlled scheme's while loop ends per device when that
     device's slowest lane ends, with no cross-device agreement per iteration."""
-    method, counts, channels, reduction, solve_options = config
+    method, counts, channels, reduction, solve_options, grid = config
     counts = np.asarray(counts)
 
     def lane(vals):
         sys_l, sig_l, y0_l = make_lane(system, signal, y0, plan, vals)
+        if grid is not None:
+            return _lane_hybrid(sys_l, sig_l, y0_l, ts, grid, channels, reduction)
         if method == "adaptive":
             return _lane_adaptive(sys_l, sig_l, y0_l, ts, channels, reduction, dict(solve_options))
         steps = jnp.diff(ts) / counts
@@ -133,6 +169,45 @@ def method_and_step(system, signal, values, flat, plan, method, dt, stiffness):
     else:
         caps.append(ROS2_DEFAULT_STEP)
     return method, min(caps)
+
+
+def hybrid_method_and_step(system, signal, values, flat, plan, method, dt, ts):
+    """The scheme of a sweep of a hybrid system (stick-slip friction, `system.hybrid`): `simulate`'s fixed grid with
+    the mode switches located inside the RK4 step, the only scheme of pamjax that integrates such a system; the
+    error-controlled and implicit schemes would hold the payload stuck at its start (they do not see the events),
+    so they are refused. Returns `(method, dt, grid)`: method "pwm" (a switching valve: the PWM-synchronous grid,
+    `substeps` RK4 nodes per period, `simulate`'s default 16; `dt` given: period / dt of the shortest period, rounded
+    up) or "grid" (a continuous valve: uniform RK4 steps of at most `dt`, default `simulate`'s 1 ms), the step no
+    longer than 1/100 of the signal's shortest period; `grid` = (stepping, size, substeps), size the periods or
+    steps covering `ts`."""
+    if method not in ("auto", "rk4"):
+        raise PamjaxInputError(
+            f"method={method!r} cannot sweep this system: it is hybrid (stick-slip friction, e.g. KarnoppFriction), "
+            "its modes switch at events that only the fixed-grid RK4 with events located inside the step "
+            "integrates (the scheme of pamjax.simulate); use method='auto' (or 'rk4', with dt its step), or "
+            "CoulombViscousFriction (smooth) for the other schemes")
+    t0, t1 = float(ts[0]), float(ts[-1])
+    frequency = _signal_frequency(signal, values, plan)
+    signal_cap = np.inf if frequency is None else 1.0 / (STEPS_PER_SIGNAL_PERIOD * frequency)
+    if not system.valve.switches:
+        step = min(_DEFAULT_GRID_STEP if dt is None else float(dt), signal_cap)
+        size = _sync.num_grid_steps(t0, t1, step)
+        return "grid", (t1 - t0) / size, ("grid", size, _DEFAULT_SUBSTEPS)
+    pwm = np.asarray(_lane_valves(system, plan, flat, lambda v: v.pwm_frequency), dtype=float)
+    shortest = 1.0 / float(np.max(pwm))
+    substeps = _DEFAULT_SUBSTEPS if dt is None else max(2, int(np.ceil(shortest / float(dt) - 1e-9)))
+    substeps = max(substeps, int(np.ceil(shortest / signal_cap - 1e-9)))
+    first = np.floor(t0 * pwm + 1e-9)  # as `pamjax._solve.synchronous.num_periods`, for every lane's frequency
+    periods = int(np.max(np.maximum(np.ceil(t1 * pwm - first - 1e-9), 1)))
+    return "pwm", shortest / substeps, ("pwm", periods, substeps)
+
+
+def _lane_valves(system, plan, flat, read):
+    """`read(valve)` of the base system's valve, or of every lane's where the sweep replaces system leaves."""
+    if not any(where == "system" for where, _ in plan.targets):
+        return read(system.valve)
+    lanes = jax.vmap(lambda vals: read(lane_system(system, plan, vals).valve))
+    return lanes({k: jnp.asarray(v) for k, v in flat.items()})
 
 
 def _edge_time_scale(system, plan, flat):

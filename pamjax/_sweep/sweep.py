@@ -20,7 +20,7 @@ from .._core.errors import PamjaxInputError, check_time_grid, require_float64
 from .._physics.signals import AbstractSignal
 from .._solve import fixed_step as _fixed_step
 from .._systems.base import AbstractSystem
-from .lanes import jacobians, method_and_step, run_chunk
+from .lanes import hybrid_method_and_step, jacobians, method_and_step, run_chunk
 from .plan import make_plan, structure, validate_values
 from .reductions import AbstractReduction
 from .result import SUCCESS, SweepResult, in_point_order
@@ -79,7 +79,10 @@ def sweep(
       values matter; it smears the fast transients, by tens of um on the MAS-10), "ros2a" (ROS2 under per-lane
       error control, rtol = atol = 1e-3: a quick steady-state map, within about 1 Pa and 10 um of RK4 on the MAS-10
       map, tens of um with coarse output grids), or "adaptive" (vmapped diffrax Tsit5, a slow reference;
-      `solve_options` go to it).
+      `solve_options` go to it). A hybrid system (stick-slip friction, `KarnoppFriction`) is integrated as
+      `simulate` integrates it, each lane on the fixed RK4 grid with the stick/slip events located inside the step
+      (method "grid" for a continuous valve, "pwm" on the PWM-synchronous grid for a switching one): "auto" or
+      "rk4" (`dt` the grid step) only; the schemes that do not see the events are refused.
     - `dt`: the fixed step [s] (the first step for "rodas5a"/"ros2a"). Default: RK4 at 2.5 / (largest |eigenvalue|
       of the Jacobian at the initial states) (its stability limit with a 10 % margin), the others at 5 ms; all
       capped at 2 PWM edge widths for a switching valve and at 1/100 of the signal's shortest period. Check a
@@ -125,9 +128,14 @@ def sweep(
         return float(np.nanmax(np.abs(np.linalg.eigvals(np.asarray(jacobians(system, signal, y0, plan, vals,
                                                                                 float(ts_np[0])))))))
 
-    method, dt = method_and_step(system, signal, values, flat, plan, method, dt, stiffness)
-    counts = np.zeros(0, dtype=np.int64) if method == "adaptive" else _fixed_step.step_counts(ts_np, dt)[0]
-    config = (method, tuple(int(c) for c in counts), channels, reduce, tuple(sorted((solve_options or {}).items())))
+    grid = None
+    if system.hybrid:  # stick-slip friction: simulate's fixed grid with its events (lanes.hybrid_method_and_step)
+        method, dt, grid = hybrid_method_and_step(system, signal, values, flat, plan, method, dt, ts_np)
+    else:
+        method, dt = method_and_step(system, signal, values, flat, plan, method, dt, stiffness)
+    counts = np.zeros(0, dtype=np.int64) if method == "adaptive" or grid else _fixed_step.step_counts(ts_np, dt)[0]
+    config = (method, tuple(int(c) for c in counts), channels, reduce, tuple(sorted((solve_options or {}).items())),
+              grid)
     mesh = mesh_of(devices)
     layout = Layout.plan(batch_size, chunk_size, mesh, devices,
                          len(channels) * (1 if reduce is not None else ts_np.size) * 2)  # x2: complex

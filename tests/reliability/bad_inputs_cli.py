@@ -327,6 +327,176 @@ def _read_only(folder):
 
 
 # ---------------------------------------------------------------------------------------------------------------
+# issue 33: model files, profiles, advice that works, API misuse, the program cache, memory
+
+
+def _model_file(folder, edit=None, text=None, name="m.json"):
+    """The averaged-valve stick-slip preset (what `pamjax fit examples/fit_example.toml` fits) as a model file,
+    `edit(parameters)` applied by hand, or its text passed through `text`."""
+    path = pamjax.save_model(pathlib.Path(folder) / name, presets.mas10_system("averaged", friction="karnopp"),
+                             overwrite=True)
+    doc = json.loads(path.read_text(encoding="utf-8"))
+    if edit is not None:
+        edit(doc["parameters"])
+    body = json.dumps(doc, indent=1, ensure_ascii=False)
+    path.write_text(text(body) if text else body, encoding="utf-8")
+    return path
+
+
+SIM = """
+[model]
+file = "{file}"
+[input]
+signal = {{ kind = "Triangle", low = 0.05, high = 0.95, frequency = 0.25 }}
+[simulate]
+t_end = 0.5
+"""
+
+
+def _simulate_file(folder, edit=None, text=None):
+    """`pamjax simulate` of the hand-edited model file."""
+    return _simulate(folder, SIM.format(file=_model_file(folder, edit, text).name))
+
+
+def _unit_converted(folder):
+    """A model file giving payload_mass in g and v0 in cm³ simulates as the SI model does."""
+    folder = pathlib.Path(folder)
+
+    def edit(p):
+        p["payload_mass"].update(value=9600.0, unit="g")
+        p["muscle.volume_law.v0"].update(value=float(p["muscle.volume_law.v0"]["value"]) * 1e6, unit="cm³")
+
+    status, _ = _simulate_file(folder, edit)
+    got = pamjax.Recording.load(folder / "sim" / "trajectory.csv")
+    model = presets.mas10_system("averaged", friction="karnopp")
+    expected = pamjax.simulate(model, pamjax.Triangle(0.05, 0.95, 0.25), got.t)
+    return status == 0 and np.allclose(got["position"], expected.position, rtol=1e-12, atol=1e-15)
+
+
+def _model_json_as_config(folder):
+    """`pamjax simulate model.json`: refused, with a config; that config, written as told, simulates."""
+    folder = pathlib.Path(folder)
+    model = _model_file(folder)
+    status, text = cli("simulate", model, "--out", folder / "sim", "--no-plot")
+    lines = text.split("holding\n", 1)[-1].split("\nand then", 1)[0]
+    (folder / "sim.toml").write_text("\n".join(line.strip() for line in lines.splitlines()) + "\n")
+    again, _ = cli("simulate", folder / "sim.toml", "--out", folder / "sim", "--no-plot")
+    return status == 2 and again == 0 and (folder / "sim" / "trajectory.csv").is_file()
+
+
+def _profile_after_max_steps(folder):
+    """`fit --profile` of a fit stopped at max_steps: the fit written, no profile, status 1, and the command it
+    names (after raising max_steps as it says) writes the profile."""
+    folder = pathlib.Path(folder)
+    fit_config(folder)
+    config = _variant(folder, "max_steps = 20", "max_steps = 1")
+    status, text = fit_run(folder, "--profile", config=config)
+    out = folder / "out"
+    if status != 1 or (out / "profile.json").exists() or not (out / "fit.json").is_file():
+        return False
+    command = text.split("continue it with: ", 1)[-1].split()
+    if command[:2] != ["pamjax", "fit"] or "--resume" not in command or "--profile" not in command:
+        return False
+    config.write_text(config.read_text().replace("max_steps = 1", "max_steps = 20"))
+    status, _ = cli(*command[1:], "--quiet", "--no-plot")
+    profile = json.loads((out / "profile.json").read_text()) if (out / "profile.json").exists() else None
+    return status == 0 and profile is not None and all(p["verdict"] == "identifiable" for p in profile["profiles"])
+
+
+def _profile_interrupted(folder):
+    """Ctrl-C while profiling (the fit written): status 130, the fit said to be complete, and the command given
+    writes the profile."""
+    folder = pathlib.Path(folder)
+    fit_config(folder)
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    with patched(pamjax, "profile", interrupted):
+        status, text = fit_run(folder, "--profile")
+    if status != 130 or "complete and written" not in text or not (folder / "out" / "fit.json").is_file():
+        return False
+    command = text.split("Take the profiles with: ", 1)[-1].split()
+    status, _ = cli(*command[1:], "--quiet", "--no-plot")
+    return status == 0 and (folder / "out" / "profile.json").is_file()
+
+
+def _flipped_coefficient(p):
+    p["valve.coefficients"]["value"][1][0] = -abs(p["valve.coefficients"]["value"][1][0])
+
+
+def _tree_at_mass(mass):
+    import equinox as eqx
+
+    system = presets.mas10_system("averaged")
+    return eqx.tree_at(lambda s: s.payload_mass, system, jnp.asarray(mass))
+
+
+def _vmapped(masses=(9.6, 5.0), duties=(0.5, 0.5)):
+    import jax
+
+    system = presets.mas10_system("averaged")
+
+    def one(m, d):
+        import equinox as eqx
+
+        return pamjax.simulate(eqx.tree_at(lambda s: s.payload_mass, system, m), pamjax.Constant(d), T).position[-1]
+
+    return jax.vmap(one)(jnp.asarray(masses), jnp.asarray(duties))
+
+
+def _too_few_residuals():
+    model = presets.mas10_system("averaged")
+    rec = pamjax.synthetic_recording(model, pamjax.Constant(0.5), np.array([0.0, 0.05]),
+                                     noise=dict(pressure=2e3, position=1e-4), seed=0)
+    exp = pamjax.Experiment(rec, pamjax.Constant(0.5), channels=["pressure", "position"],
+                            scales=dict(pressure=2e3, position=1e-4))
+    return pamjax.fit(model, [exp], ["friction.coulomb_force", "muscle.volume_law.v0", "muscle.volume_law.v1",
+                                     "muscle.force_law.k0", "friction.viscous_coefficient"], progress=False)
+
+
+def _foreign_program_entry(folder):
+    """A program cache entry exported for a GPU ('cuda'), met on the CPU: traced anew, the right result."""
+    import jax
+
+    from pamjax._core.cache import ProgramCache
+
+    def fn(x):
+        return jnp.cos(x) + 1.0
+
+    x = jnp.linspace(0.0, 1.0, 7)
+    programs = ProgramCache(folder)
+    path = programs.directory / f"planted-{programs.key('planted', (x,))}.bin"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(bytes(jax.export.export(jax.jit(fn), platforms=("cuda",))(x).serialize()))
+    return np.array_equal(np.asarray(programs.call("planted", fn, (x,))), np.asarray(fn(x)))
+
+
+MEMORY_SCRIPT = """
+import resource, sys
+import jax
+jax.config.update("jax_enable_x64", True)
+import numpy as np, pamjax
+system = pamjax.presets.mas10_system("averaged", friction="karnopp")
+ts = np.arange(300001) * 0.01
+traj = pamjax.simulate(system, pamjax.Triangle(0.05, 0.95, 0.25), ts)
+print(int(traj.result), float(np.max(np.asarray(traj.position))),
+      resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
+"""
+
+
+def _long_simulation_memory(folder):
+    """A 3,000 s stick-slip run (3 M fixed steps, 300,001 rows) in a fresh process: solved, under 1 GB peak (one
+    solve took 1.7 GB; a 19,000 s run 9.3 GB)."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+           "JAX_PLATFORMS": "cpu"}
+    proc = subprocess.run([sys.executable, "-c", MEMORY_SCRIPT], capture_output=True, text=True, env=env,
+                          timeout=1800)
+    result, peak_position, rss = proc.stdout.split()[-3:] if proc.returncode == 0 else ("1", "nan", "inf")
+    return int(result) == 0 and 0.05 < float(peak_position) < 0.06 and float(rss) < 2**30
+
+
+# ---------------------------------------------------------------------------------------------------------------
 # the catalogue: name → (class, expect, run, name_in_message)
 
 E, R, K = "error", "result", "kept"
@@ -443,9 +613,59 @@ CASES = {
     # the fitted model carried onward
     "model fit -> model.json -> simulate": ("model", R, _model_travels, None),
     "model sweep over any parameter path": ("model", R, _sweep_any_path, None),
+    # model files go through the checks of every other input (issue 33)
+    "model file grams under kg": ("model", E, lambda d: _simulate_file(
+        d, lambda p: p["payload_mass"].update(value=9600.0)), "looks like g"),
+    "model file cm³ under m³": ("model", E, lambda d: _simulate_file(
+        d, lambda p: p["muscle.volume_law.v0"].update(value=23.1)), "looks like cm³"),
+    "model file bar under Pa abs": ("model", E, lambda d: _simulate_file(
+        d, lambda p: p["air.atmospheric_pressure"].update(value=1.01325)), "looks like bar"),
+    "model file °C under K": ("model", E, lambda d: _simulate_file(
+        d, lambda p: p["air.temperature"].update(value=20.0)), "looks like °C"),
+    "model file units g and cm³ converted": ("model", R, _unit_converted, None),
+    "model file unit pamjax cannot convert": ("model", E, lambda d: _simulate_file(
+        d, lambda p: p["payload_mass"].update(unit="lb")), "unit 'lb' is not one pamjax converts"),
+    "model file dtype int8": ("model", E, lambda d: _simulate_file(
+        d, lambda p: p["payload_mass"].update(dtype="int8")), "dtype 'int8'"),
+    "model file key given twice": ("model", E, lambda d: _simulate_file(d, text=lambda body: body.replace(
+        '"payload_mass": {', '"payload_mass": {"value": 96.0, "unit": "kg"},\n  "payload_mass": {', 1)),
+        "appears twice in one table"),
+    "model file parameter with several values": ("model", E, lambda d: _simulate_file(
+        d, lambda p: p["payload_mass"].update(value=[9.6, 9.6])), "has shape (2,) where the model takes one number"),
+    "model save of a model load refuses": ("model", E, lambda d: call(
+        pamjax.save_model, pathlib.Path(d) / "m.json", _tree_at_mass(np.nan)), "payload_mass must be > 0"),
+    "model file given to pamjax simulate": ("model", R, _model_json_as_config, None),
+    # profiles need a minimum
+    "profile after a fit stopped at max_steps": ("profile", R, _profile_after_max_steps, None),
+    "profile interrupted after the fit": ("profile", K, _profile_interrupted, None),
+    # advice that works
+    "solve sign-flipped valve coefficient in a model file": ("solve", E, lambda d: _simulate_file(
+        d, _flipped_coefficient), "negative inflow"),
+    # the Python API misused
+    "api bad parameter set with eqx.tree_at": ("api", E, lambda d: call(
+        pamjax.simulate, _tree_at_mass(-1.0), pamjax.Constant(0.5), T), "payload_mass must be > 0"),
+    "api grams set with eqx.tree_at": ("api", E, lambda d: call(
+        pamjax.simulate, _tree_at_mass(9600.0), pamjax.Constant(0.5), T), "looks like g"),
+    "api parameter with an axis too many": ("api", E, lambda d: call(
+        pamjax.simulate, _tree_at_mass([9.6, 5.0]), pamjax.Constant(0.5), T), "'payload_mass' has shape (2,)"),
+    "api bad parameter inside jax.vmap": ("api", E, lambda d: call(_vmapped, masses=(9.6, -1.0)),
+                                          "payload_mass must be > 0"),
+    "api duty out of range inside jax.vmap": ("api", E, lambda d: call(_vmapped, duties=(0.3, 1.5)),
+                                              "must stay within [0.0, 1.0]"),
+    "api duty in percent": ("api", E, lambda d: call(
+        pamjax.simulate, presets.mas10_system("averaged"), pamjax.Constant(50.0), T), "looks like percent"),
+    "api free entries that overlap": ("api", E, lambda d: call(
+        pamjax.ParameterSpace, presets.mas10_system("averaged"), ["valve.coefficients", "valve.coefficients[1,0]"]),
+        "free names valve.coefficients[1,0] twice"),
+    "api fewer residuals than free parameters": ("api", E, lambda d: call(_too_few_residuals),
+                                                 "4 residuals (samples × channels used for identification) for 5"),
+    # the program cache
+    "cache program exported for another platform": ("cache", R, _foreign_program_entry, None),
 }
 # Slow cases (a fresh process or a long solve each): in the benchmark, not in the test suite.
-SLOW = {"interrupt SIGINT while compiling", "interrupt SIGTERM while compiling", "solve 1,000 s PWM run"}
+SLOW = {"interrupt SIGINT while compiling", "interrupt SIGTERM while compiling", "solve 1,000 s PWM run",
+        "memory 3,000 s stick-slip simulation"}
+CASES["memory 3,000 s stick-slip simulation"] = ("memory", R, _long_simulation_memory, None)
 CASES["solve 1,000 s PWM run"] = ("solve", R, lambda d: _solves(presets.mas10_system("pwm"), pamjax.Constant(0.5),
                                                                 1000.0), None)
 

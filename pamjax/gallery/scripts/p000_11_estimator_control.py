@@ -84,6 +84,39 @@ def rmse_reading(pi):
     return "its RMSE stays below 10 % even with the step from rest"
 
 
+def _figure(out, runs, numbers, duration):
+    """Tracking at both frequencies, the error at 1 rad/s, and the velocity the estimator gives the SMC."""
+    pyplot = plt()
+    fig, axes = pyplot.subplots(4, 1, figsize=(10, 11))
+    for ax, omega in zip(axes[:2], (0.5, 1.0)):
+        traj = runs[("PI, bench noise", omega)]
+        ax.plot(traj.t, np.asarray(traj.reference) * 1e3, "k--", lw=1, label="reference")
+        for k, name in enumerate(("PI, bench noise", "SMC + EKF, bench noise")):
+            traj = runs[(name, omega)]
+            m = numbers[f"{name} @ {omega} rad/s"]
+            ax.plot(traj.t, np.asarray(traj.position) * 1e3, color=f"C{k}", lw=1,
+                    label=f"{name}: RMSE {m['rmse_mm']:.2f} mm, peak {m['peak_mm']:.2f} mm")
+        ax.set(title=f"Fig. {15 if omega == 0.5 else 16} setting: ω = {omega} rad/s, identified plant (exact edges, "
+               "stick-slip)", ylabel="x [mm]", ylim=(10, 50))
+        ax.legend(fontsize=7, loc="lower right")
+    for k, name in enumerate(CONTROLLERS):
+        traj = runs[(name, 1.0)]
+        axes[2].plot(traj.t, np.asarray(traj.reference - traj.position) * 1e3, color=f"C{k}", lw=0.8,
+                     label=f"{name}: RMSE {numbers[f'{name} @ 1.0 rad/s']['rmse_mm']:.3f} mm")
+    axes[2].set(ylim=(-2.5, 2.5), xlabel="t [s]", ylabel="r − x [mm]", title="1 rad/s: tracking error")
+    axes[2].legend(fontsize=7, ncol=2)
+    traj = runs[("SMC + EKF, bench noise", 1.0)]
+    window = np.asarray(traj.period_start) >= duration - 4.0
+    t_k = np.asarray(traj.period_start)[window]
+    axes[3].plot(t_k, 1e3 * np.asarray(traj.period_start_state.velocity)[window], "k-", lw=1.5, label="true ẋ")
+    axes[3].plot(t_k, 1e3 * np.asarray(traj.observed.velocity)[window], "C2.", ms=3,
+                 label="EKF estimate (what the SMC reads)")
+    axes[3].set(xlabel="t [s]", ylabel="ẋ [mm/s]", title="1 rad/s: velocity, which no sensor measures, at the "
+                "period starts")
+    axes[3].legend(fontsize=7)
+    return save(fig, out, "estimator_control.png")
+
+
 def run(out, quick=False):
     duration = 10.0 if quick else 20.0
     numbers, runs = {}, {}
@@ -124,35 +157,7 @@ def run(out, quick=False):
     ]
     numbers["comparisons"] = comparisons
 
-    pyplot = plt()
-    fig, axes = pyplot.subplots(4, 1, figsize=(10, 11))
-    for ax, omega in zip(axes[:2], (0.5, 1.0)):
-        traj = runs[("PI, bench noise", omega)]
-        ax.plot(traj.t, np.asarray(traj.reference) * 1e3, "k--", lw=1, label="reference")
-        for k, name in enumerate(("PI, bench noise", "SMC + EKF, bench noise")):
-            traj = runs[(name, omega)]
-            m = numbers[f"{name} @ {omega} rad/s"]
-            ax.plot(traj.t, np.asarray(traj.position) * 1e3, color=f"C{k}", lw=1,
-                    label=f"{name}: RMSE {m['rmse_mm']:.2f} mm, peak {m['peak_mm']:.2f} mm")
-        ax.set(title=f"Fig. {15 if omega == 0.5 else 16} setting: ω = {omega} rad/s, identified plant (exact edges, "
-               "stick-slip)", ylabel="x [mm]", ylim=(10, 50))
-        ax.legend(fontsize=7, loc="lower right")
-    for k, name in enumerate(CONTROLLERS):
-        traj = runs[(name, 1.0)]
-        axes[2].plot(traj.t, np.asarray(traj.reference - traj.position) * 1e3, color=f"C{k}", lw=0.8,
-                     label=f"{name}: RMSE {numbers[f'{name} @ 1.0 rad/s']['rmse_mm']:.3f} mm")
-    axes[2].set(ylim=(-2.5, 2.5), xlabel="t [s]", ylabel="r − x [mm]", title="1 rad/s: tracking error")
-    axes[2].legend(fontsize=7, ncol=2)
-    traj = runs[("SMC + EKF, bench noise", 1.0)]
-    window = np.asarray(traj.period_start) >= duration - 4.0
-    t_k = np.asarray(traj.period_start)[window]
-    axes[3].plot(t_k, 1e3 * np.asarray(traj.period_start_state.velocity)[window], "k-", lw=1.5, label="true ẋ")
-    axes[3].plot(t_k, 1e3 * np.asarray(traj.observed.velocity)[window], "C2.", ms=3,
-                 label="EKF estimate (what the SMC reads)")
-    axes[3].set(xlabel="t [s]", ylabel="ẋ [mm/s]", title="1 rad/s: velocity, which no sensor measures, at the "
-                "period starts")
-    axes[3].legend(fontsize=7)
-    fig_name = save(fig, out, "estimator_control.png")
+    fig_name = _figure(out, runs, numbers, duration)
 
     e = {w: smc[w]["estimation_error"] for w in (0.5, 1.0)}
     rows = [

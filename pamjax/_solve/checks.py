@@ -1,0 +1,213 @@
+"""A system's parameters checked before a solve, however the system was made (a constructor, a model file,
+`eqx.tree_at`, a transformation):
+
+- `check_parameters`: every component's own checks (`__check_init__`: `payload_mass must be > 0`), which a model
+  changed with `eqx.tree_at` skipped, and the magnitudes that betray another unit (`check_setting`: 9600 kg looks like
+  grams); on concrete values, in Python, before anything is traced;
+- `runtime_checks`: the same checks on values that are traced (inside `jax.jit`, `jax.vmap`, `jax.grad`), attached
+  to those values as run-time errors naming the parameter (`equinox.error_if`), and the command's range at the
+  output times;
+- `batched_parameters`: parameters that hold several values where a system takes one (`payload_mass = [9.6, 9.6]`
+  in a model file, or a batch built with `eqx.tree_at`).
+
+A system's state leaves hold one value each (a pressure, a position, ...). A parameter array with a leading axis too
+many broadcasts into the state's rate (the accelerations of two payloads are two), and the solve then fails deep
+inside JAX ("scan body function carry input and carry output must have equal types"). Shapes alone tell (one
+`jax.eval_shape` of the vector field at the system's `state_scale`, a state of constants: ~20 ms, nothing compiled
+or run): the rate has the state's shape, or it does not, and then the parameter whose first entry alone restores it
+is the one. Batches of models are what `jax.vmap` and `pamjax.sweep` are for.
+"""
+
+import contextlib
+import dataclasses
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._core.errors import PamjaxInputError, traced_checks
+from .._core.units import MIN_ABSOLUTE_PA, check_setting, checks_setting
+from .._systems.base import AbstractSystem
+from .hints import negative_inflow
+from .trajectory import RESULT_NONPHYSICAL
+
+
+def _components(obj, path=""):
+    """(path, component) for `obj` and every component inside it, depth first."""
+    if isinstance(obj, eqx.Module):
+        yield path, obj
+        for f in dataclasses.fields(obj):
+            yield from _components(getattr(obj, f.name), f"{path}.{f.name}" if path else f.name)
+    elif isinstance(obj, (list, tuple)):
+        for i, v in enumerate(obj):
+            yield from _components(v, f"{path}.{i}" if path else str(i))
+    elif isinstance(obj, dict):
+        for k, v in obj.items():
+            yield from _components(v, f"{path}.{k}" if path else str(k))
+
+
+def _own_checks(component):
+    """Run `component`'s `__check_init__`s (each class of its MRO that defines one, base classes first), as its
+    constructor did."""
+    for klass in reversed(type(component).__mro__):
+        check = klass.__dict__.get("__check_init__")
+        if check is not None:
+            check(component)
+
+
+_CHECKED = []  # the last systems `check_parameters` passed (kept alive, so that their ids stay theirs)
+_REMEMBERED = 8
+
+
+def check_parameters(system, where="system"):
+    """Every component's own checks and the unit-magnitude checks of every concrete parameter of `system`; a
+    `PamjaxInputError` names the parameter. Traced values are left to `runtime_checks`. The last few systems that
+    passed are remembered (immutable: the same object passes again), so that a loop simulating one system with
+    many signals pays the ~2 ms once."""
+    if any(s is system for s in _CHECKED):
+        return
+    for path, component in _components(system):
+        _own_checks(component)
+        for f in dataclasses.fields(component):
+            value = getattr(component, f.name)
+            if checks_setting(f.name) and eqx.is_array(value) and not isinstance(value, jax.core.Tracer):
+                check_setting(f"{path}.{f.name}" if path else f.name, np.asarray(value), f"{where} parameter")
+    if not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(system)):
+        _CHECKED.append(system)
+        del _CHECKED[:-_REMEMBERED]
+
+
+def runtime_checks(system, signal, ts, command_range):
+    """`(system, signal)` with the checks that meet traced values attached as run-time errors (`equinox.error_if`
+    on those values): the components' own checks, and the command within `command_range` at the times `ts` (when
+    the signal is traced). Unchanged when nothing is traced. Under `jax.vmap` alone the checks run at once: a
+    failed one is raised as a `PamjaxInputError` here."""
+    try:
+        return _runtime_checks(system, signal, ts, command_range)
+    except Exception as err:
+        named = [line.strip() for line in str(err).splitlines() if "(checked at run time" in line]
+        if not named:
+            raise
+        raise PamjaxInputError(named[0].split("EquinoxRuntimeError: ")[-1]) from None
+
+
+@contextlib.contextmanager
+def naming_batched(system):
+    """A parameter with an axis too many fails while the solve is traced (JAX's carry-type `TypeError`): named."""
+    try:
+        yield
+    except (TypeError, ValueError):
+        found = batched_parameters(system, quiet=True)
+        if found:
+            raise PamjaxInputError(describe_batched(found)) from None
+        raise
+
+
+def _runtime_checks(system, signal, ts, command_range):
+    with traced_checks() as found:
+        for _, component in _components(system):
+            _own_checks(component)
+    if found:
+        system = _attach(system, found)
+    if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(signal)):
+        lo, hi = command_range
+        u = jax.vmap(signal)(jnp.asarray(ts, dtype=float))
+        failed = jnp.any((u < lo - 1e-12) | (u > hi + 1e-12) | ~jnp.isfinite(u))
+        message = (f"signal (the valve command, e.g. duty ratio) must stay within [{lo}, {hi}] (checked at run time, "
+                   "at the output times: the signal is traced by jit/vmap/grad)")
+        signal = jax.tree_util.tree_map(
+            lambda x: eqx.error_if(x, failed, message) if isinstance(x, jax.core.Tracer) else x, signal)
+    return system, signal
+
+
+def _attach(tree, found):
+    """`tree` with each traced leaf of `found` (tracer, failed, message) carrying its run-time errors."""
+    checks = {}
+    for tracer, failed, message in found:
+        checks.setdefault(id(tracer), []).append((failed, message))
+
+    def attach(x):
+        for failed, message in checks.get(id(x), ()):
+            x = eqx.error_if(x, failed, message)
+        return x
+
+    return jax.tree_util.tree_map(attach, tree)
+
+
+def _name(path):
+    return ".".join(str(getattr(k, "name", getattr(k, "key", getattr(k, "idx", k)))) for k in path)
+
+
+def _fine(system, command):
+    """Whether `system`'s vector field keeps the shape of its state (its `state_scale`, a state of constants), by
+    shape inference only (~20 ms)."""
+    scale = system.state_scale()
+    rate = jax.eval_shape(lambda s, y: s.vector_field(jnp.zeros(()), y, command), system, scale)
+    return [np.shape(x) for x in jax.tree_util.tree_leaves(scale)] == [x.shape for x in jax.tree_util.tree_leaves(rate)]
+
+
+def batched_parameters(system, quiet=False):
+    """[(path, shape, the shape it fits with)] of the array parameters of `system` with axes too many (several
+    values where the system takes one): with each one's first entry alone (along one leading axis, or more) the
+    vector field keeps the state's shape. Empty for a system whose vector field keeps it (the usual case: one shape
+    inference), and for anything that is not a system."""
+    if quiet:  # the diagnosis of a failure: it must not replace the failure it explains
+        try:
+            return batched_parameters(system)
+        except Exception:  # noqa: BLE001
+            return []
+    if not isinstance(system, AbstractSystem):
+        return []
+    lo, hi = (float(np.min(b)) for b in system.command_range)
+    command = jnp.asarray(0.5 * (lo + hi) if np.isfinite(lo + hi) else 0.0)
+    try:
+        if _fine(system, command):
+            return []
+    except Exception:  # noqa: BLE001 - the shapes do not even combine (any error of shape inference)
+        pass
+    dynamic, static = eqx.partition(system, eqx.is_array)
+    flat, treedef = jax.tree_util.tree_flatten_with_path(dynamic)
+    leaves = [leaf for _, leaf in flat]
+    found = []
+    for k, leaf in enumerate(leaves):
+        for axes in range(1, np.ndim(leaf) + 1):  # the first entry along one, two, ... leading axes
+            if 0 in np.shape(leaf)[:axes]:
+                break
+            trial = list(leaves)
+            trial[k] = leaf[(0,) * axes]
+            try:
+                fine = _fine(eqx.combine(jax.tree_util.tree_unflatten(treedef, trial), static), command)
+            except Exception:  # noqa: BLE001 - this parameter's first entry alone does not fit either
+                continue
+            if fine:
+                found.append((_name(flat[k][0]), tuple(np.shape(leaf)), tuple(np.shape(trial[k]))))
+                break
+    return found
+
+
+def describe_batched(found):
+    """The sentence naming `batched_parameters`' findings."""
+    def one(path, shape, wanted):
+        wanted = "one number" if not wanted else f"shape {wanted}"
+        return f"parameter {path!r} has shape {shape} where the model takes {wanted}"
+
+    return ("; ".join(one(*f) for f in found) + ": it would make the state hold several values too, and the solve "
+            "fail; give the value the model takes (a batch of models is simulated with jax.vmap over simulate, or "
+            "pamjax.sweep)")
+
+
+def vacuum(traj, system, signal, t0, y0):
+    """A solve that succeeded with the chamber drawn below half an atmosphere, by a valve that empties a chamber at
+    atmospheric pressure (negative inflow: a flow coefficient's sign flipped), is a failure: RESULT_NONPHYSICAL, NaN
+    outputs. (A run over 2 s of such a model turned non-finite; over 0.5 s it "succeeded" at 6,600 Pa abs.) The
+    diagnosis runs only when the pressure is that low."""
+    pressure = traj.outputs.get("pressure") if isinstance(traj.outputs, dict) else None
+    if pressure is None or int(traj.result) != 0:
+        return traj
+    low = np.asarray(pressure)
+    if not (low.size and np.nanmin(low) < MIN_ABSOLUTE_PA) or negative_inflow(system, signal, t0, y0) is None:
+        return traj
+    outputs = jax.tree_util.tree_map(lambda a: jnp.full_like(a, jnp.nan), traj.outputs)
+    return eqx.tree_at(lambda tr: (tr.outputs, tr.result), traj,
+                       (outputs, jnp.asarray(RESULT_NONPHYSICAL, dtype=jnp.asarray(traj.result).dtype)))

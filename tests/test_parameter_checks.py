@@ -1,0 +1,85 @@
+"""A system's parameters are checked before a solve however the system was made (issue 33, battery section 7):
+changed with `eqx.tree_at` (which skips the components' constructors), or traced inside `jax.jit`/`jax.vmap`, a bad
+value is named — never a solver failure ("minimum step size reached", "INTERNAL: CpuCallback error") or a silent
+result; good values under jit, vmap and grad give what the eager call gives."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import pamjax
+from pamjax import PamjaxInputError, presets
+
+TS = np.linspace(0.0, 0.3, 7)
+
+
+@pytest.fixture(scope="module")
+def system():
+    return presets.mas10_system(valve="averaged")
+
+
+def _with_mass(system, mass):
+    return eqx.tree_at(lambda s: s.payload_mass, system, mass)
+
+
+@pytest.mark.parametrize("mass, match", [
+    (-1.0, r"MuscleSystem\.payload_mass must be > 0 and finite, got -1"),  # was: PamjaxSolveError, minimum step
+    (np.nan, r"MuscleSystem\.payload_mass must be > 0 and finite, got nan"),
+    (9600.0, r"payload_mass = 9600 kg: more than 1000 kg; that looks like g"),  # grams, as configs refuse them
+])
+def test_a_bad_parameter_set_with_tree_at_is_named_before_the_solve(system, mass, match):
+    with pytest.raises(PamjaxInputError, match=match):
+        pamjax.simulate(_with_mass(system, jnp.asarray(mass)), pamjax.Constant(0.5), TS)
+
+
+def test_a_parameter_with_an_axis_too_many_is_named(system):
+    # was: TypeError "scan body function carry input and carry output must have equal types"
+    with pytest.raises(PamjaxInputError, match=r"parameter 'payload_mass' has shape \(2,\) where the model takes one "
+                                               "number"):
+        pamjax.simulate(_with_mass(system, jnp.asarray([9.6, 5.0])), pamjax.Constant(0.5), TS)
+
+
+def test_a_duty_in_percent_is_named_as_percent(system):
+    with pytest.raises(PamjaxInputError, match=r"its range is \[50\.0, 50\.0\]; that looks like percent: a duty ratio "
+                                               r"of 0\.5 is written 0\.5"):
+        pamjax.simulate(system, pamjax.Constant(50.0), TS)
+
+
+def test_a_bad_parameter_inside_jit_is_named_at_run_time(system):
+    run = jax.jit(lambda m: pamjax.simulate(_with_mass(system, m), pamjax.Constant(0.5), TS).position[-1])
+    with pytest.raises(Exception, match=r"MuscleSystem\.payload_mass must be > 0 and finite"):
+        run(-1.0)
+    assert float(run(9.6)) == pytest.approx(float(pamjax.simulate(system, pamjax.Constant(0.5), TS).position[-1]),
+                                            rel=1e-9, abs=1e-12)
+
+
+def test_a_bad_parameter_inside_vmap_is_named(system):
+    run = jax.vmap(lambda m: pamjax.simulate(_with_mass(system, m), pamjax.Constant(0.5), TS).position[-1])
+    with pytest.raises(PamjaxInputError, match=r"MuscleSystem\.payload_mass must be > 0 and finite"):
+        run(jnp.asarray([9.6, -1.0]))
+    good = np.asarray(run(jnp.asarray([9.6, 5.0])))
+    eager = [float(pamjax.simulate(_with_mass(system, jnp.asarray(m)), pamjax.Constant(0.5), TS).position[-1])
+             for m in (9.6, 5.0)]
+    np.testing.assert_allclose(good, eager, rtol=1e-9, atol=1e-12)
+
+
+def test_a_duty_out_of_range_inside_vmap_is_refused(system):
+    # was: a position returned for duty 1.5, no error, no NaN
+    run = jax.vmap(lambda d: pamjax.simulate(system, pamjax.Constant(d), TS).position[-1])
+    with pytest.raises(PamjaxInputError, match=r"signal \(the valve command, e\.g\. duty ratio\) must stay within "
+                                               r"\[0\.0, 1\.0\]"):
+        run(jnp.asarray([0.3, 1.5]))
+    good = np.asarray(run(jnp.asarray([0.3, 0.6])))
+    eager = [float(pamjax.simulate(system, pamjax.Constant(d), TS).position[-1]) for d in (0.3, 0.6)]
+    np.testing.assert_allclose(good, eager, rtol=1e-9, atol=1e-12)
+
+
+def test_gradients_pass_through_the_checks(system):
+    def final(m):
+        return pamjax.simulate(_with_mass(system, m), pamjax.Constant(0.5), TS).position[-1]
+
+    g = float(jax.grad(final)(9.6))
+    fd = (float(final(9.6 * (1 + 1e-6))) - float(final(9.6 * (1 - 1e-6)))) / (2 * 9.6e-6)
+    assert np.isfinite(g) and g == pytest.approx(fd, rel=1e-4)
