@@ -14,7 +14,7 @@ The paper's loops and runs are not published, so both parts use one SYNTHETIC pl
   assumed), fitted with eq. 8 (`LoopForceMapExperiment`, constant offset) and with Bouc–Wen
   (`HysteresisLoopExperiment`, the loop read as a path); k0, k1 fitted with either, C_f held at the preset's
   250 N s/m (at one speed C_f |ẋ| and F_c cannot be told apart: the loop width is what is identified); profile
-  likelihoods of F_c, δ, n;
+  likelihoods of F_c, δ, n (full mode);
 - (b) Fig. 13 and the down-stroke: the plant under paper 000's triangle duty 0.05-0.95 at 0.08 Hz with the averaged
   valve (eq. 13), recorded at 100 Hz with the bench's noise (0.1 mm, 2 kPa); both friction models identified from
   the presets (`presets.mas10_system("averaged")`: Coulomb 16 N / 250 N s/m, Bouc–Wen at its defaults 16 N, 2 mm,
@@ -104,7 +104,7 @@ def part_a(quick, rng):
     bw_start = eqx.tree_at(lambda s: s.friction, start, pj.BoucWenFriction())
     bouc_wen = pj.fit(bw_start, [pj.HysteresisLoopExperiment(x, p, v, f, scale=LOAD_CELL_NOISE)],
                       static + list(FRICTION_LABELS), progress=False)
-    profiles = pj.profile(bouc_wen, list(FRICTION_LABELS), progress=False)
+    profiles = None if quick else pj.profile(bouc_wen, list(FRICTION_LABELS), progress=False)  # full mode only
     zone = after_reversal(x, v, p)
     fits = {}
     for name, res, key in (("offset", offset, "loop_force_map"), ("bouc_wen", bouc_wen, "hysteresis_loop")):
@@ -116,8 +116,9 @@ def part_a(quick, rng):
             converged=bool(res.converged), rmse_N=float(np.sqrt(np.mean(err[loaded] ** 2))),
             rmse_after_reversal_N=float(np.sqrt(np.mean(err[zone & loaded] ** 2))),
             rmse_elsewhere_N=float(np.sqrt(np.mean(err[~zone & loaded] ** 2))), prediction=pred)
-    fits["profiles"] = {pr.label: dict(verdict=pr.verdict, interval=pr.interval, linearised=pr.linearised,
-                                       values=pr.values, delta=pr.delta) for pr in profiles.profiles}
+    fits["profiles"] = {} if profiles is None else {
+        pr.label: dict(verdict=pr.verdict, interval=pr.interval, linearised=pr.linearised, values=pr.values,
+                       delta=pr.delta) for pr in profiles.profiles}
     return fits, (x, p, v, f, zone)
 
 
@@ -163,6 +164,46 @@ def part_b(quick, rng):
     return out, (ts, clean, down)
 
 
+def draw(out, a, b, loop, stroke):
+    """The figure (written into `out`): the loop at the highest pressure and its top reversal, the loop fit's
+    profiles (full mode), the down-stroke errors; returns its file name."""
+    (x, p, f), (ts, clean, down) = loop, stroke
+    pyplot = plt()
+    fig, axes = pyplot.subplots(2, 2, figsize=(13, 8.5))
+    top = p == p.max()
+    for ax, lim in ((axes[0, 0], None), (axes[0, 1], 12e-3)):
+        sel = top if lim is None else top & (np.abs(x - x[top].max()) <= lim)
+        ax.plot(x[sel] * 1e3, f[sel], ".", color="0.6", ms=3, label="synthetic loop (2 N noise)")
+        for name, c, label in (("offset", "C0", "eq. 8, constant offset"), ("bouc_wen", "C3", "Bouc–Wen")):
+            ax.plot(x[sel] * 1e3, a[name]["prediction"][sel], "-", color=c, lw=1.2,
+                    label=f"{label}: RMSE {a[name]['rmse_N']:.2f} N")
+        ax.set(xlabel="contraction x [mm]", ylabel="force [N]")
+        ax.legend(fontsize=8)
+    axes[0, 0].set_title(f"Figs. 3, 5: loop at {(p.max() - P_ATM) / 1e5:.0f} bar g")
+    axes[0, 1].set_title("the reversal at the top of the stroke")
+    for k, (label, prof) in enumerate(a["profiles"].items()):
+        values = np.asarray(prof["values"])
+        centre = a["bouc_wen"]["values"][label]
+        axes[1, 0].plot(values / centre, prof["delta"], "o-", color=f"C{k}", ms=3,
+                        label=f"{label.split('.')[1]}: {prof['verdict']}")
+    axes[1, 0].axhline(3.84, color="k", lw=0.8, ls="--")
+    axes[1, 0].set(xlabel="value / fitted value", ylabel="Δχ²", ylim=(0, 12),
+                   title="profile likelihoods of the loop fit (95 %: Δχ² = 3.84)")
+    if a["profiles"]:
+        axes[1, 0].legend(fontsize=8)
+    else:
+        axes[1, 0].text(0.5, 0.5, "profiles: full mode", ha="center", transform=axes[1, 0].transAxes)
+    ax = axes[1, 1]
+    for name, c, label in (("offset", "C0", "eq. 8 offset"), ("bouc_wen", "C3", "Bouc–Wen")):
+        ax.plot(ts, 1e3 * (b[name]["position"] - clean), "-", color=c, lw=1,
+                label=f"{label}: down {b[name]['down_rmse_mm']:.2f} mm, up {b[name]['up_rmse_mm']:.2f} mm RMSE")
+    ax.fill_between(ts, -1, 1, where=down, transform=ax.get_xaxis_transform(), color="0.9", label="way down")
+    ax.set(xlabel="t [s]", ylabel="x error vs the plant [mm]",
+           title="Fig. 13 triangle, 0.08 Hz: identified models' displacement error")
+    ax.legend(fontsize=8)
+    return save(fig, out, "hysteresis.png")
+
+
 def run(out, quick=False):
     rng = np.random.default_rng(0)
     a, (x, p, v, f, zone) = part_a(quick, rng)
@@ -203,37 +244,7 @@ def run(out, quick=False):
                                abs_z=abs(delta - TRUTH["transition_length"])
                                / a["bouc_wen"]["standard_errors"]["friction.transition_length"]))
 
-    pyplot = plt()
-    fig, axes = pyplot.subplots(2, 2, figsize=(13, 8.5))
-    top = p == p.max()
-    for ax, lim in ((axes[0, 0], None), (axes[0, 1], 12e-3)):
-        sel = top if lim is None else top & (np.abs(x - x[top].max()) <= lim)
-        ax.plot(x[sel] * 1e3, f[sel], ".", color="0.6", ms=3, label="synthetic loop (2 N noise)")
-        for name, c, label in (("offset", "C0", "eq. 8, constant offset"), ("bouc_wen", "C3", "Bouc–Wen")):
-            ax.plot(x[sel] * 1e3, a[name]["prediction"][sel], "-", color=c, lw=1.2,
-                    label=f"{label}: RMSE {a[name]['rmse_N']:.2f} N")
-        ax.set(xlabel="contraction x [mm]", ylabel="force [N]")
-        ax.legend(fontsize=8)
-    axes[0, 0].set_title(f"Figs. 3, 5: loop at {(p.max() - P_ATM) / 1e5:.0f} bar g")
-    axes[0, 1].set_title("the reversal at the top of the stroke")
-    for k, (label, prof) in enumerate(a["profiles"].items()):
-        values = np.asarray(prof["values"])
-        centre = a["bouc_wen"]["values"][label]
-        axes[1, 0].plot(values / centre, prof["delta"], "o-", color=f"C{k}", ms=3,
-                        label=f"{label.split('.')[1]}: {prof['verdict']}")
-    axes[1, 0].axhline(3.84, color="k", lw=0.8, ls="--")
-    axes[1, 0].set(xlabel="value / fitted value", ylabel="Δχ²", ylim=(0, 12),
-                   title="profile likelihoods of the loop fit (95 %: Δχ² = 3.84)")
-    axes[1, 0].legend(fontsize=8)
-    ax = axes[1, 1]
-    for name, c, label in (("offset", "C0", "eq. 8 offset"), ("bouc_wen", "C3", "Bouc–Wen")):
-        ax.plot(ts, 1e3 * (b[name]["position"] - clean), "-", color=c, lw=1,
-                label=f"{label}: down {b[name]['down_rmse_mm']:.2f} mm, up {b[name]['up_rmse_mm']:.2f} mm RMSE")
-    ax.fill_between(ts, -1, 1, where=down, transform=ax.get_xaxis_transform(), color="0.9", label="way down")
-    ax.set(xlabel="t [s]", ylabel="x error vs the plant [mm]",
-           title="Fig. 13 triangle, 0.08 Hz: identified models' displacement error")
-    ax.legend(fontsize=8)
-    fig_name = save(fig, out, "hysteresis.png")
+    fig_name = draw(out, a, b, (x, p, f), (ts, clean, down))
 
     o, w = b["offset"], b["bouc_wen"]
     rows = [
@@ -243,7 +254,8 @@ def run(out, quick=False):
             f"({a['offset']['rmse_after_reversal_N']:.2f} N in the 10 mm after a reversal); Bouc–Wen: width "
             f"{width:.2f} ± {width_se:.2f} N (plant {true_width:.1f} N), δ {1e3 * delta:.2f} mm, n "
             f"{a['bouc_wen']['values']['friction.exponent']:.2f}, RMSE {a['bouc_wen']['rmse_N']:.2f} N; profiles: "
-            + ", ".join(f"{k.split('.')[1]} {d['verdict']}" for k, d in a["profiles"].items()), figure=fig_name),
+            + (", ".join(f"{k.split('.')[1]} {d['verdict']}" for k, d in a["profiles"].items()) or "full mode"),
+            figure=fig_name),
         Row("text: largest errors on the way down", "displacement error of identified models on the way up / down, "
             "0.08 Hz triangle (Fig. 13), plant with a branch transition",
             "largest errors on the way down, from the missing transition; RMSE 3-5 %, max ≈ 10 %",

@@ -12,7 +12,7 @@ sentence (98 % of the unsilenced flow at 0.65 MPa). Here K is identified from de
   exhaust path alone, a plain tank discharge) and at Fig. 12's 0.25/0.50/0.75, 2 s at 100 Hz with the bench's
   2 kPa pressure noise;
 - K fitted alone from the preset's assumed value (Table 1's exhaust path known), then jointly with the exhaust
-  path's C_v and b_v (from Table 1), with profile likelihoods of all three;
+  path's C_v and b_v (from Table 1), with profile likelihoods of all three (full mode);
 - the identified silencer's Fig. 12 offsets (end pressure with minus without it) and its flow ratio at 0.65 and
   0.2 MPa, the two things the paper says in words.
 
@@ -76,6 +76,32 @@ def end_pressures(system, horizon):
                                  stepping="pwm").pressure[-1]) for u in DUTIES[1:]}
 
 
+def draw(out, experiments, alone, profiles):
+    """The figure (written into `out`): the runs with the silencer fitted alone, the joint fit's profiles (full
+    mode); returns its file name."""
+    k_fit, k_se = float(alone.values[0]), float(alone.standard_errors[0])
+    pyplot = plt()
+    fig, axes = pyplot.subplots(1, 2, figsize=(13, 4.5))
+    for k, e in enumerate(experiments):
+        pred = np.asarray(pj.predictions(alone.model, e)[0]["pressure"])
+        axes[0].plot(e.times, np.asarray(e.data["pressure"]) / 1e5, ".", color=f"C{k}", ms=1.5)
+        axes[0].plot(e.times, pred / 1e5, "-", color=f"C{k}", lw=1, label=f"u = {DUTIES[k]:.2f}")
+    axes[0].set(xlabel="t [s]", ylabel="tank pressure [bar abs]",
+                title=f"deflation runs (dots) and the identified silencer: K = {k_fit:.3g} ± {k_se:.1g}")
+    axes[0].legend(fontsize=8)
+    for k, p in enumerate([] if profiles is None else profiles.profiles):
+        axes[1].plot(np.asarray(p.values) / p.value, p.delta, "o-", ms=3, color=f"C{k}",
+                     label=f"{p.label.split('.')[-1]}: {p.verdict}")
+    axes[1].axhline(3.84, color="k", lw=0.8, ls="--")
+    axes[1].set(xlabel="value / fitted value", ylabel="Δχ²", ylim=(0, 12),
+                title="profiles: K with the exhaust path's C_v, b_v")
+    if profiles is None:
+        axes[1].text(0.5, 0.5, "profiles: full mode", ha="center", transform=axes[1].transAxes)
+    else:
+        axes[1].legend(fontsize=8)
+    return save(fig, out, "silencer.png")
+
+
 def run(out, quick=False):
     horizon, rate = (1.0, 50.0) if quick else (2.0, 100.0)
     truth = tank(TRUE_PERMEANCE)
@@ -84,7 +110,7 @@ def run(out, quick=False):
     free_k = [dict(path=PERMEANCE, transform="log")]
     alone = pj.fit(start, experiments, free_k, progress=False)
     joint = pj.fit(start, experiments, free_k + list(EXHAUST), progress=False)
-    profiles = pj.profile(joint, progress=False, max_points=5 if quick else 10)
+    profiles = None if quick else pj.profile(joint, progress=False, max_points=10)  # full mode only
     k_fit, k_se = float(alone.values[0]), float(alone.standard_errors[0])
     identified = eqx.tree_at(lambda s: s.valve.exhaust.second.permeance, start, jnp.asarray(k_fit))
 
@@ -102,7 +128,8 @@ def run(out, quick=False):
                    standard_errors=dict(zip(joint.labels, joint.standard_errors)),
                    correlation=np.asarray(joint.correlation).tolist(), converged=bool(joint.converged),
                    permeance_abs_z=abs(float(joint.values[0]) - TRUE_PERMEANCE) / float(joint.standard_errors[0])),
-        profiles={p.label: dict(verdict=p.verdict, interval=p.interval) for p in profiles.profiles},
+        profiles={} if profiles is None else {p.label: dict(verdict=p.verdict, interval=p.interval)
+                                              for p in profiles.profiles},
         fig12_offset_kPa={name: {f"{u:.2f}": v / 1e3 for u, v in d.items()} for name, d in offsets.items()},
         fig12_offset_identified_over_truth={f"{u:.2f}": offsets["identified"][u] / offsets["truth"][u]
                                             for u in DUTIES[1:]},
@@ -121,26 +148,9 @@ def run(out, quick=False):
                    note="paper: the simulation without the silencer drops faster, a steady-state offset; > 0 agrees"),
     ]
 
-    pyplot = plt()
-    fig, axes = pyplot.subplots(1, 2, figsize=(13, 4.5))
-    for k, e in enumerate(experiments):
-        pred = np.asarray(pj.predictions(alone.model, e)[0]["pressure"])
-        axes[0].plot(e.times, np.asarray(e.data["pressure"]) / 1e5, ".", color=f"C{k}", ms=1.5)
-        axes[0].plot(e.times, pred / 1e5, "-", color=f"C{k}", lw=1, label=f"u = {DUTIES[k]:.2f}")
-    axes[0].set(xlabel="t [s]", ylabel="tank pressure [bar abs]",
-                title=f"deflation runs (dots) and the identified silencer: K = {k_fit:.3g} ± {k_se:.1g}")
-    axes[0].legend(fontsize=8)
-    for k, (label, prof) in enumerate(numbers["profiles"].items()):
-        p = next(q for q in profiles.profiles if q.label == label)
-        axes[1].plot(np.asarray(p.values) / p.value, p.delta, "o-", ms=3, color=f"C{k}",
-                     label=f"{label.split('.')[-1]}: {prof['verdict']}")
-    axes[1].axhline(3.84, color="k", lw=0.8, ls="--")
-    axes[1].set(xlabel="value / fitted value", ylabel="Δχ²", ylim=(0, 12),
-                title="profiles: K with the exhaust path's C_v, b_v")
-    axes[1].legend(fontsize=8)
-    fig_name = save(fig, out, "silencer.png")
+    fig_name = draw(out, experiments, alone, profiles)
 
-    verdicts = ", ".join(f"{k.split('.')[-1]} {v['verdict']}" for k, v in numbers["profiles"].items())
+    verdicts = ", ".join(f"{k.split('.')[-1]} {v['verdict']}" for k, v in numbers["profiles"].items()) or "full mode"
     rows = [
         Row("text: exhaust silencer", "silencer permeance identified from deflation runs (duty 0, 0.25, 0.5, 0.75; "
             "synthetic, exact switching valve, 2 kPa noise)", "no data: 'negligible at high pressure, slows the end "

@@ -118,27 +118,25 @@ def dmsp40_checks():
                 force_at_0_6bar_N=float(a[0]), zero_force_contraction=zero / length)
 
 
-def run(out, quick=False):
-    duration = 4.0 / 3.0 if quick else 2.0  # two or three periods at 1.5 Hz
-    regulator = pj.vppm_regulator()
-    runs = {v: flows(regulator, 1.0, v, duration) for v in (3.0, 5.0)}
-    numbers = {}
-    for v, r in runs.items():
-        charging = r["delivered"] > 0.05 * r["delivered"].max()
-        numbers[f"{v:.0f}V"] = dict(
-            peak_inflow_l_per_min_anr=float(r["inlet"].max() / FLOW_UNIT),
-            peak_inflow_kg_per_s=float(r["inlet"].max()),
-            volume_term_share=volume_share(r),
-            eq3_vs_delivered_max_relative=float(np.max(np.abs(r["pressure_term"] + r["volume_term"] - r["delivered"]))
-                                                / np.max(np.abs(r["delivered"]))),
-            inlet_outlet_difference=inlet_outlet_difference(r),
-            virtual_work_ratio_while_charging=float(np.median(r["virtual_work_ratio"][charging])),
-            position_range_mm=[float(1e3 * r["position"].min()), float(1e3 * r["position"].max())],
-            pressure_range_bar_gauge=[float((r["pressure"].min() - P_ATM) / BAR),
-                                      float((r["pressure"].max() - P_ATM) / BAR)])
-    r = runs[3.0]
+def run_numbers(r):
+    """The numbers of one run: peak inflow, eq. 3's terms, inlet against outlet, virtual work, ranges."""
+    charging = r["delivered"] > 0.05 * r["delivered"].max()
+    return dict(
+        peak_inflow_l_per_min_anr=float(r["inlet"].max() / FLOW_UNIT),
+        peak_inflow_kg_per_s=float(r["inlet"].max()),
+        volume_term_share=volume_share(r),
+        eq3_vs_delivered_max_relative=float(np.max(np.abs(r["pressure_term"] + r["volume_term"] - r["delivered"]))
+                                            / np.max(np.abs(r["delivered"]))),
+        inlet_outlet_difference=inlet_outlet_difference(r),
+        virtual_work_ratio_while_charging=float(np.median(r["virtual_work_ratio"][charging])),
+        position_range_mm=[float(1e3 * r["position"].min()), float(1e3 * r["position"].max())],
+        pressure_range_bar_gauge=[float((r["pressure"].min() - P_ATM) / BAR),
+                                  float((r["pressure"].max() - P_ATM) / BAR)])
 
-    # Fig. 5: the volume law that gives the paper's 10 %, and what it costs
+
+def fig5_volume_law(regulator, duration, r):
+    """Fig. 5: the volume law that gives the paper's 10 % (the preset's slope scaled, root found), and what it costs
+    in virtual work; returns (numbers, the run with that law)."""
     def share_at(scale):
         return volume_share(flows(regulator, scale, 3.0, duration))["rms"] - PAPER_NUMBERS["volume_share"]
 
@@ -146,15 +144,18 @@ def run(out, quick=False):
     r10 = flows(regulator, scale, 3.0, duration)
     charging10 = r10["delivered"] > 0.05 * r10["delivered"].max()
     coefficients = np.asarray(muscle(scale).volume_law.coefficients)
-    numbers["fig5_volume_law"] = dict(
+    return dict(
         slope_scale=scale, coefficients_d_c_b_a_m3=coefficients.tolist(), share=volume_share(r10),
         virtual_work_ratio_while_charging=float(np.median(r10["virtual_work_ratio"][charging10])),
         stroke_mm=float(1e3 * np.ptp(r10["position"])), stroke_preset_mm=float(1e3 * np.ptp(r["position"])),
         volume_change_cm3=float(1e6 * (np.polyval(coefficients[::-1], 0.25) - coefficients[0])),
         volume_change_preset_cm3=float(1e6 * (np.polyval(np.asarray(muscle().volume_law.coefficients)[::-1], 0.25)
-                                              - coefficients[0])))
+                                              - coefficients[0]))), r10
 
-    # Fig. 11: the printed models on pamjax's run, no fit
+
+def fig11(r):
+    """Fig. 11: the printed models on pamjax's run, no fit, with Q_in in three readings of its unprinted unit;
+    returns (numbers, P_sim1, eq. 7's response per unit of Q_in, the readings' factors, the 'measured' pressure)."""
     measured = (r["pressure"] - P_ATM) / BAR
     p_v, unit = printed_models(r)
     readings = {  # key → (Q_in's unit eq. 7's −0.922 bar per "l/min" is read in (no conditions printed), factor)
@@ -172,15 +173,15 @@ def run(out, quick=False):
         else:
             eq7 = factor * unit
         mse[key] = float(np.mean((p_v + EQ7_GAIN * eq7 - measured) ** 2))
-    printed_key = "global_printed_gain"
-    numbers["fig11"] = dict(mse_bar2=mse, q_in_readings={k: v[0] for k, v in readings.items()}, refitted=False,
-                            output_variance_bar2=float(np.var(measured)))
-    numbers["peak_inflow_ratio_5V_to_3V"] = numbers["5V"]["peak_inflow_l_per_min_anr"] / numbers["3V"][
-        "peak_inflow_l_per_min_anr"]
-    numbers["dmsp40"] = dmsp40_checks()
+    numbers = dict(mse_bar2=mse, q_in_readings={k: v[0] for k, v in readings.items()}, refitted=False,
+                   output_variance_bar2=float(np.var(measured)))
+    return numbers, p_v, unit, {k: v[1] for k, v in readings.items()}, measured
 
-    n3, n5 = numbers["3V"], numbers["5V"]
-    comparisons = [
+
+def comparisons_of(numbers):
+    """Each comparison with the paper as plain data."""
+    n3, mse, scale = numbers["3V"], numbers["fig11"]["mse_bar2"], numbers["fig5_volume_law"]["slope_scale"]
+    return [
         comparison("Fig. 5", "volume term's RMS share of the outlet flow, 0-3 V", n3["volume_term_share"]["rms"],
                    paper=PAPER_NUMBERS["volume_share"], tolerance=0.03,
                    note="the preset's virtual-work volume; ±3 points is reading 'about 10 %' off a plot"),
@@ -198,11 +199,14 @@ def run(out, quick=False):
                    tolerance=MSE_TOLERANCE * PAPER_NUMBERS["mse_bar2"]["voltage_only"],
                    note="printed eq. 6, no fit; pamjax's regulator + muscle stands in for the measurement"),
         comparison("Fig. 11", "MSE of printed eq. 5 (P_sim2, Q_in in l/min ANR) vs pamjax's outlet [bar²]",
-                   mse[printed_key], paper=PAPER_NUMBERS["mse_bar2"]["global"],
+                   mse["global_printed_gain"], paper=PAPER_NUMBERS["mse_bar2"]["global"],
                    tolerance=MSE_TOLERANCE * PAPER_NUMBERS["mse_bar2"]["global"], note="printed eq. 5-7, no fit"),
     ]
-    numbers["comparisons"] = comparisons
 
+
+def draw(out, regulator, numbers, r, r10, p_v, unit, factors, measured):
+    """The figure (written into `out`); returns its file name."""
+    n3, mse, scale = numbers["3V"], numbers["fig11"]["mse_bar2"], numbers["fig5_volume_law"]["slope_scale"]
     pyplot = plt()
     fig, axes = pyplot.subplots(3, 1, figsize=(9, 10), sharex=True)
     t = r["t"]
@@ -221,20 +225,36 @@ def run(out, quick=False):
     axes[1].legend(fontsize=8)
     axes[2].plot(t, measured, "k-", lw=2, label="pamjax's outlet (stands in for P_exp)")
     axes[2].plot(t, p_v, "C0--", label=f"P_sim1, printed eq. 6: MSE {mse['voltage_only']:.3f} bar²")
-    axes[2].plot(t, p_v + EQ7_GAIN * readings["global_printed_gain_scaled_to_paper_peak"][1] * unit, "C3-",
+    axes[2].plot(t, p_v + EQ7_GAIN * factors["global_printed_gain_scaled_to_paper_peak"] * unit, "C3-",
                  label="P_sim2, printed eq. 5, Q_in scaled to 2.79 l/min: MSE "
                        f"{mse['global_printed_gain_scaled_to_paper_peak']:.3f} bar²")
     axes[2].set(xlabel="t [s]", ylabel="P_out [bar g]", ylim=(-0.5, 3.5),
-                title=f"Fig. 11: printed models, no fit (Q_in in l/min ANR: MSE {mse[printed_key]:.3g} bar²)")
+                title=f"Fig. 11: printed models, no fit (Q_in in l/min ANR: MSE {mse['global_printed_gain']:.3g} bar²)")
     axes[2].legend(fontsize=8)
-    fig_name = save(fig, out, "muscle_flow.png")
+    return save(fig, out, "muscle_flow.png")
 
+
+def run(out, quick=False):
+    duration = 4.0 / 3.0 if quick else 2.0  # two or three periods at 1.5 Hz
+    regulator = pj.vppm_regulator()
+    runs = {v: flows(regulator, 1.0, v, duration) for v in (3.0, 5.0)}
+    numbers = {f"{v:.0f}V": run_numbers(r) for v, r in runs.items()}
+    r = runs[3.0]
+    numbers["fig5_volume_law"], r10 = fig5_volume_law(regulator, duration, r)
+    numbers["fig11"], p_v, unit, factors, measured = fig11(r)
+    numbers["peak_inflow_ratio_5V_to_3V"] = numbers["5V"]["peak_inflow_l_per_min_anr"] / numbers["3V"][
+        "peak_inflow_l_per_min_anr"]
+    numbers["dmsp40"] = dmsp40_checks()
+    numbers["comparisons"] = comparisons_of(numbers)
+    fig_name = draw(out, regulator, numbers, r, r10, p_v, unit, factors, measured)
+
+    n3, n5, mse = numbers["3V"], numbers["5V"], numbers["fig11"]["mse_bar2"]
     law = numbers["fig5_volume_law"]
     rows = [
         Row("eq. 3-4, Fig. 5", "volume term's share of the valve outlet flow (RMS; peak), 0-3 V",
             "≈ 10 %", f"{100 * n3['volume_term_share']['rms']:.1f} % RMS, {100 * n3['volume_term_share']['peak']:.1f} "
             f"% of the peak; eq. 3's sum equals the delivered flow to {n3['eq3_vs_delivered_max_relative']:.0e}; "
-            f"10 % needs the volume's slope × {scale:.3f} ({law['volume_change_cm3']:.0f} instead of "
+            f"10 % needs the volume's slope × {law['slope_scale']:.3f} ({law['volume_change_cm3']:.0f} instead of "
             f"{law['volume_change_preset_cm3']:.0f} cm³ over 25 % contraction)", figure=fig_name),
         Row("text: 2.79 / 4.34 l/min", "peak valve inflow at 3 V / 5 V",
             "2.79 / 4.34 l/min (ratio 1.56)", f"{n3['peak_inflow_l_per_min_anr']:.0f} / "
@@ -247,7 +267,7 @@ def run(out, quick=False):
         Row("Fig. 11", "MSE vs pamjax's outlet pressure: printed eq. 6 alone / printed eq. 5 (Q_in in l/min ANR; at "
             "the outlet pressure; scaled to the paper's 2.79 l/min peak), no fit",
             "0.1663 (voltage-only) / 0.0499 (global)",
-            f"{mse['voltage_only']:.3f} / " + " / ".join(f"{mse[k]:.3g}" for k in readings) + " bar²",
+            f"{mse['voltage_only']:.3f} / " + " / ".join(f"{mse[k]:.3g}" for k in factors) + " bar²",
             figure=fig_name),
     ]
     return Result(rows, numbers, paper=PAPER_NUMBERS)

@@ -87,6 +87,34 @@ def step_times(quick):
     return np.asarray(ts), out, curves
 
 
+def draw(out, numbers, static, curves, steps):
+    """The figure (written into `out`): the hysteresis loop, the pressure-flow curves in the accuracy band, the
+    modes' steps; returns its file name."""
+    (grid, loop), (ts, modes, step_curves) = static, steps
+    pyplot = plt()
+    fig, axes = pyplot.subplots(1, 3, figsize=(16, 4.5))
+    for name, c in (("rising", "C0"), ("falling", "C3")):
+        axes[0].plot((grid - P_ATM) / BAR, loop[name] / 100, "-", color=c, label=f"set pressure {name}")
+    axes[0].set(xlabel="set pressure [bar g]", ylabel="outlet − set [mbar]",
+                title=f"hysteresis: loop {numbers['hysteresis']['loop_width_mbar_mean']:.1f} mbar (paper: 50)")
+    axes[0].legend(fontsize=8)
+    for k, volts in enumerate((1.0, 3.0, 5.0)):
+        for branch, style in ((1.0, "-"), (-1.0, "--")):
+            flows, p, lo, hi, set_p = curves[(volts, branch)]
+            axes[1].plot(flows * 1e3, (p - P_ATM) / BAR, style, color=f"C{k}",
+                         label=f"{volts:.0f} V" if branch > 0 else None)
+        axes[1].fill_between(flows * 1e3, (lo - P_ATM) / BAR, (hi - P_ATM) / BAR, color=f"C{k}", alpha=0.12)
+    axes[1].set(xlabel="delivered flow [g/s]", ylabel="outlet [bar g]",
+                title=f"pressure vs flow (— rising, -- falling) in the ±2 % band: worst "
+                      f"{numbers['accuracy']['worst_static_error_percent_of_full_scale']:.2f} %")
+    axes[1].legend(fontsize=8)
+    for mode, c in (("fast", "C2"), ("universal", "C0"), ("precise", "C1")):
+        axes[2].plot(ts, step_curves[mode], color=c, label=f"{mode}: t63 {1e3 * modes[mode]['t63_s']:.0f} ms")
+    axes[2].set(xlabel="t [s]", ylabel="outlet [bar g]", title="modes: closed-port step to 3 V (fast/precise assumed)")
+    axes[2].legend(fontsize=8)
+    return save(fig, out, "vppm_specs.png")
+
+
 def run(out, quick=False):
     regulator = pj.vppm_regulator()
     grid, loop = static_loop(pj.vppm_regulator(internal_volume=0.0), quick)
@@ -131,28 +159,7 @@ def run(out, quick=False):
           for m, d in modes.items()],
     ]
 
-    pyplot = plt()
-    fig, axes = pyplot.subplots(1, 3, figsize=(16, 4.5))
-    for name, c in (("rising", "C0"), ("falling", "C3")):
-        axes[0].plot((grid - P_ATM) / BAR, loop[name] / 100, "-", color=c, label=f"set pressure {name}")
-    axes[0].set(xlabel="set pressure [bar g]", ylabel="outlet − set [mbar]",
-                title=f"hysteresis: loop {numbers['hysteresis']['loop_width_mbar_mean']:.1f} mbar (paper: 50)")
-    axes[0].legend(fontsize=8)
-    for k, volts in enumerate((1.0, 3.0, 5.0)):
-        for branch, style in ((1.0, "-"), (-1.0, "--")):
-            flows, p, lo, hi, set_p = curves[(volts, branch)]
-            axes[1].plot(flows * 1e3, (p - P_ATM) / BAR, style, color=f"C{k}",
-                         label=f"{volts:.0f} V" if branch > 0 else None)
-        axes[1].fill_between(flows * 1e3, (lo - P_ATM) / BAR, (hi - P_ATM) / BAR, color=f"C{k}", alpha=0.12)
-    axes[1].set(xlabel="delivered flow [g/s]", ylabel="outlet [bar g]",
-                title=f"pressure vs flow (— rising, -- falling) in the ±2 % band: worst "
-                      f"{numbers['accuracy']['worst_static_error_percent_of_full_scale']:.2f} %")
-    axes[1].legend(fontsize=8)
-    for mode, c in (("fast", "C2"), ("universal", "C0"), ("precise", "C1")):
-        axes[2].plot(ts, step_curves[mode], color=c, label=f"{mode}: t63 {1e3 * modes[mode]['t63_s']:.0f} ms")
-    axes[2].set(xlabel="t [s]", ylabel="outlet [bar g]", title="modes: closed-port step to 3 V (fast/precise assumed)")
-    axes[2].legend(fontsize=8)
-    fig_name = save(fig, out, "vppm_specs.png")
+    fig_name = draw(out, numbers, (grid, loop), curves, (ts, modes, step_curves))
 
     h, a = numbers["hysteresis"], numbers["accuracy"]
     rows = [
