@@ -45,7 +45,6 @@ from ._core.arrays import device_array
 from ._core.errors import PamjaxInputError
 from ._papers import datasheets, paper000, paper001
 from ._physics.friction import BristleFriction, CoulombViscousFriction, KarnoppFriction
-from ._physics.hysteresis import BoucWenFriction
 from ._physics.gas import (
     AbstractRestriction,
     Air,
@@ -54,6 +53,7 @@ from ._physics.gas import (
     PorousRestriction,
     SeriesRestriction,
 )
+from ._physics.hysteresis import BoucWenFriction
 from ._physics.muscle import CubicVolume, LinearVolume, Muscle, PolynomialForce
 from ._physics.regulator import paper001_air
 from ._physics.valves.averaged import AveragedValve
