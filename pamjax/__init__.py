@@ -24,6 +24,7 @@ from ._physics.friction import (
     AbstractFriction as AbstractFriction, BristleFriction as BristleFriction,
     CoulombViscousFriction as CoulombViscousFriction, KarnoppFriction as KarnoppFriction,
 )
+from ._physics.hysteresis import BoucWenFriction as BoucWenFriction
 from ._physics.gas import (
     AbstractRestriction as AbstractRestriction, Air as Air, EllipseRestriction as EllipseRestriction,
     ISO6358Restriction as ISO6358Restriction, NozzleRestriction as NozzleRestriction,
@@ -38,7 +39,8 @@ from ._physics.muscle import (
 from ._physics.regulator import (
     AbstractRegulator as AbstractRegulator, FeedbackRegulator as FeedbackRegulator,
     ISO6358Regulator as ISO6358Regulator, ISO6358RegulatorState as ISO6358RegulatorState,
-    LinearRegulator as LinearRegulator, VoltageCalibration as VoltageCalibration,
+    LinearRegulator as LinearRegulator, PressureHysteresis as PressureHysteresis,
+    VoltageCalibration as VoltageCalibration, vppm_regulator as vppm_regulator,
 )
 from ._physics.signals import (
     AbstractSignal as AbstractSignal, Constant as Constant, Sampled as Sampled, Sine as Sine, SquareWave as SquareWave,
@@ -143,17 +145,14 @@ from ._control.tuning import tune_controller as tune_controller
 # --- the papers' plants, every number sourced; unit constants; the sub-namespaces ----------------------------------
 from . import bench as bench, presets as presets, runtime as runtime, unchecked as unchecked, units as units
 
-
+# imported on first use: diffrax (~0.4 s) and optimistix (~0.3 s), which a fit on fixed grids from the cache never needs
 _LAZY = {"Rodas5": "._solve.rodas_solver", "LevenbergMarquardt": "._fit.solver", "levenberg_marquardt": "._fit.drive"}
 
 
 def __getattr__(name):
-    """`_LAZY` names on first use (diffrax ~0.4 s, optimistix ~0.3 s: a cached fixed-grid fit needs neither); moved or
-    renamed names for one release, with a `DeprecationWarning` (`_core/deprecation.py`)."""
+    """`_LAZY` names on first use; moved or renamed names for one release, warned (`_core/deprecation.py`)."""
     if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(_LAZY[name], __name__), name)
+        return getattr(__import__(_LAZY[name][1:], globals(), level=1, fromlist=[name]), name)
     return _moved(__name__, name)
 
 

@@ -26,9 +26,11 @@ from ._fit.bench_tests import (
     FlowCurveExperiment as FlowCurveExperiment,
     ForceMapExperiment as ForceMapExperiment,
     FrictionCurveExperiment as FrictionCurveExperiment,
+    HysteresisLoopExperiment as HysteresisLoopExperiment,
     LoopForceMapExperiment as LoopForceMapExperiment,
     constant_velocity_point as constant_velocity_point,
     flow_curve as flow_curve,
     loop_average as loop_average,
+    path_friction_force as path_friction_force,
     steady_friction_force as steady_friction_force,
 )

@@ -53,6 +53,7 @@ from ._physics.gas import (
     PorousRestriction,
     SeriesRestriction,
 )
+from ._physics.hysteresis import BoucWenFriction
 from ._physics.muscle import CubicVolume, LinearVolume, Muscle, PolynomialForce
 from ._physics.regulator import paper001_air
 from ._physics.valves.averaged import AveragedValve
@@ -187,8 +188,10 @@ def mas10_system(valve="pwm", friction="coulomb", payload_mass=PAYLOAD_MASS, sil
     **Arguments:** `valve`: "pwm" (smoothed switching), "exact" (exact-edge reference), "averaged" (eq. 13) or a
     valve; `friction`: "coulomb" (eq. 8-9, smooth sign: fast, creeps where the real payload sticks), "karnopp"
     (eq. 8-9 with exact stick-slip, integrated on the fixed grid: the model for identification), "bristle"
-    (Dahl-type, holds still elastically) or a friction model; `silencer`: an exhaust silencer on the switching
-    valve (see `mas10_valve`).
+    (Dahl-type, holds still elastically), "bouc_wen" (`BoucWenFriction`: eq. 8-9's branches with a gradual transition
+    between them after a reversal; F_c and C_f as eq. 8-9's here, its transition length 2 mm and exponent 2 are
+    `BoucWenFriction`'s assumed defaults, paper 000 giving no loop shape) or a friction model; `silencer`: an exhaust
+    silencer on the switching valve (see `mas10_valve`).
     """
     if friction == "coulomb":
         friction = CoulombViscousFriction(COULOMB_FORCE, VISCOUS_COEFFICIENT)
@@ -196,9 +199,11 @@ def mas10_system(valve="pwm", friction="coulomb", payload_mass=PAYLOAD_MASS, sil
         friction = KarnoppFriction(COULOMB_FORCE, VISCOUS_COEFFICIENT)
     elif friction == "bristle":
         friction = BristleFriction(coulomb_force=COULOMB_FORCE, viscous_coefficient=VISCOUS_COEFFICIENT)
+    elif friction == "bouc_wen":
+        friction = BoucWenFriction(coulomb_force=COULOMB_FORCE, viscous_coefficient=VISCOUS_COEFFICIENT)
     elif isinstance(friction, str):
         raise PamjaxInputError(
-            f"friction must be 'coulomb', 'karnopp', 'bristle' or a friction model; got {friction!r}")
+            f"friction must be 'coulomb', 'karnopp', 'bristle', 'bouc_wen' or a friction model; got {friction!r}")
     return MuscleSystem(
         valve=_valve(valve, silencer), muscle=mas10_muscle(), payload_mass=payload_mass, friction=friction
     )

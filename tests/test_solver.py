@@ -244,8 +244,8 @@ def force_map():
     f = np.asarray(muscle.static_force(jnp.asarray(x), jnp.asarray(p), pj.Air()))
     f = f + 2.0 * np.random.default_rng(0).standard_normal(f.shape)
     space = pj.ParameterSpace(muscle, FREE)
-    return space.with_values(np.asarray(space.initial_values()) * 0.7), pj.ForceMapExperiment(x, p, np.maximum(f, 0),
-                                                                                            scale=2.0)
+    experiment = pj.bench.ForceMapExperiment(x, p, np.maximum(f, 0), scale=2.0)
+    return space.with_values(np.asarray(space.initial_values()) * 0.7), experiment
 
 
 def test_fit_with_optimistix_levenberg_marquardt_converges_to_pamjax_optimum(force_map):

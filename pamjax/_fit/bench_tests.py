@@ -11,6 +11,9 @@ and each comes with the reduction that turns a raw bench record into its data po
   0 N) only penalise a positive model force.
 - `LoopForceMapExperiment` (paper 000, Figs. 3 and 5, eq. 8-9): direction-dependent static forces, F = F_static(x, p)
   − F_friction(ẋ); `loop_average` gives the averaged map (Fig. 4) and the loop widths (paper: 32 N).
+- `HysteresisLoopExperiment` (paper 000, Figs. 3 and 5): the same loop read as a path, in the order measured, with a
+  stateful friction's state carried along it, so that a friction whose force moves between the branches after a
+  reversal (`BoucWenFriction`) is compared point by point.
 
 All pressures are ABSOLUTE [Pa]; x is the muscle's shortening [m] and ẋ its rate (positive = contracting).
 """
@@ -59,16 +62,27 @@ def steady_friction_force(friction: AbstractFriction, velocity):
     Memoryless frictions are evaluated directly; a hybrid (stick-slip) friction in its sliding mode sign(v); a friction
     with its own state (bristles) at the state where that state is at rest (Newton on `state_rate(v, z) = 0`)."""
     velocity = jnp.asarray(velocity, dtype=float)
+    return friction.force(velocity, sliding_state(friction, velocity))
+
+
+def sliding_state(friction: AbstractFriction, velocity):
+    """The friction's state at steady sliding with constant `velocity` [m/s] ≠ 0 (None for a memoryless friction):
+    the sliding mode sign(v) of a hybrid one, the friction's own `steady_state(v)` where it gives one, else Newton on
+    `state_rate(v, z) = 0` from the initial state."""
+    velocity = jnp.asarray(velocity, dtype=float)
     z = friction.initial_state()
     if z is None:
-        return friction.force(velocity, None)
+        return None
     if friction.hybrid:
-        return friction.force(velocity, jnp.sign(velocity))
+        return jnp.sign(velocity)
+    steady = friction.steady_state(velocity)
+    if steady is not None:
+        return steady
     z = jnp.zeros_like(velocity) + z
     for _ in range(4):  # state_rate is affine in z for the bristle model: the first step is exact
         rate, slope = jax.jvp(lambda q: friction.state_rate(velocity, q), (z,), (jnp.ones_like(z),))
         z = z - rate / slope
-    return friction.force(velocity, z)
+    return z
 
 
 def constant_velocity_point(t, position, force):
@@ -349,3 +363,116 @@ def loop_average(positions, pressures, velocities, forces, decimals=9):
     if not rows:
         raise PamjaxInputError("no (position, pressure) point was measured in both directions")
     return tuple(np.array(c) for c in zip(*rows))
+
+
+def path_friction_force(friction: AbstractFriction, positions, velocities, starts, substeps=4):
+    """Friction force [N] at each sample of a quasi-static path: x = `positions` [m] in the order travelled, ẋ =
+    `velocities` [m/s] (≠ 0), `starts` (bool) where a sweep begins.
+
+    A memoryless or hybrid friction is evaluated at steady sliding (as `LoopForceMapExperiment`). A friction with a
+    state of its own starts each sweep in its sliding state for the sweep's first velocity (the muscle has travelled
+    that way before the sweep), then carries the state from sample to sample: between samples k−1 and k it moves at
+    sign(x_k − x_{k−1}) · ½(|ẋ_{k−1}| + |ẋ_k|) for the time that takes, integrated by `substeps` RK4 steps. Each
+    stage's state is kept within the sliding states ±z_s of that speed, which bound the state of a friction that
+    saturates there (bristle, Bouc–Wen): where a transition is shorter than a sub-step (stiff), RK4 then lands on the
+    branch instead of overshooting it."""
+    x, v = jnp.asarray(positions, dtype=float), jnp.asarray(velocities, dtype=float)
+    if friction.initial_state() is None or friction.hybrid:
+        return steady_friction_force(friction, v)
+    dx = jnp.diff(x, prepend=x[:1])
+    speed = 0.5 * (jnp.abs(v) + jnp.abs(jnp.concatenate([v[:1], v[:-1]])))
+    step_velocity = jnp.sign(dx) * speed
+    h = jnp.abs(dx) / speed / substeps
+    at_start = jax.vmap(lambda w: sliding_state(friction, w))(v)
+
+    bound = jnp.abs(jax.vmap(lambda w: sliding_state(friction, w))(step_velocity + (dx == 0) * v))
+
+    def rk4(z, u, h, zmax):
+        clip = lambda q: jnp.clip(q, -zmax, zmax)  # noqa: E731
+        k1 = friction.state_rate(u, z)
+        k2 = friction.state_rate(u, clip(z + 0.5 * h * k1))
+        k3 = friction.state_rate(u, clip(z + 0.5 * h * k2))
+        k4 = friction.state_rate(u, clip(z + h * k3))
+        return clip(z + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4))
+
+    def sample(z, inputs):
+        u, hk, start, z_start, vk, zmax = inputs
+        for _ in range(substeps):
+            z = rk4(z, u, hk, zmax)
+        z = jnp.where(start, z_start, z)
+        return z, friction.force(vk, z)
+
+    z0 = jnp.zeros_like(at_start[0])
+    _, force = jax.lax.scan(sample, z0, (step_velocity, h, jnp.asarray(starts), at_start, v, bound))
+    return force
+
+
+class HysteresisLoopExperiment(AbstractStaticExperiment):
+    """A force–displacement hysteresis loop read as a path (paper 000, Figs. 3 and 5): the muscle moved slowly in and
+    out at fixed pressures, the force read with the direction of motion, the samples IN THE ORDER MEASURED. Model:
+    F = F_static(x, p) − F_f, the friction F_f carried along the path (`path_friction_force`), so that the force
+    after a reversal follows the friction's own transition between the branches. For a memoryless friction (eq. 8-9)
+    it predicts what `LoopForceMapExperiment` does.
+
+    Slack points (measured F ≤ `slack_force`) only penalise a positive model force, as in `ForceMapExperiment`.
+
+    **Arguments:** `positions` x [m] (shortening), `pressures` [Pa abs], `velocities` ẋ [m/s] (≠ 0; sign =
+    direction), `forces` [N], in the order travelled; `scale` [N] (default 1 % of the force range);
+    `slack_force` [N]; `starts`: bool per sample, True where a new sweep begins (default: the first sample and
+    every change of pressure); `substeps`: RK4 steps per sample interval (4); `name`. The model is a muscle system
+    (`muscle`, `friction`, `air`).
+    """
+
+    positions: jax.Array
+    pressures: jax.Array
+    velocities: jax.Array
+    starts: jax.Array
+    slack: jax.Array
+    data: dict
+    scale: float = eqx.field(static=True)
+    name: str = eqx.field(static=True)
+    channels: tuple = eqx.field(static=True)
+    substeps: int = eqx.field(static=True)
+
+    def __init__(self, positions, pressures, velocities, forces, scale=None, slack_force=0.0, starts=None, substeps=4,
+                 name="hysteresis_loop"):
+        x, p, v, f = _columns(("positions", "pressures", "velocities", "forces"),
+                              (positions, pressures, velocities, forces))
+        _check_absolute("pressures", p)
+        if np.any(v == 0):
+            raise PamjaxInputError(
+                f"velocities must be non-zero (the direction of motion), row {int(np.argmin(v != 0))} is 0"
+            )
+        if starts is None:
+            starts = np.concatenate([[True], p[1:] != p[:-1]])
+        starts = np.asarray(starts)
+        if starts.shape != x.shape or starts.dtype != bool:
+            raise PamjaxInputError(f"starts must be a bool array of the positions' shape {x.shape}, got "
+                                   f"{starts.dtype} {starts.shape}")
+        if not starts[0]:
+            raise PamjaxInputError("starts[0] must be True: the first sample begins a sweep")
+        if not (isinstance(substeps, int) and substeps >= 1):
+            raise PamjaxInputError(f"substeps must be an integer >= 1, got {substeps!r}")
+        self.positions, self.pressures, self.velocities = jnp.asarray(x), jnp.asarray(p), jnp.asarray(v)
+        self.starts = jnp.asarray(starts)
+        self.slack = jnp.asarray(f <= slack_force)
+        self.substeps = substeps
+        _set_data(self, "force", f, scale, "N", name)
+
+    def check(self, model):
+        for name in ("muscle", "friction"):
+            if not hasattr(model, name):
+                raise PamjaxInputError(f"{self.name}: the model needs a {name!r} (a muscle system), got "
+                                       f"{type(model).__name__}")
+        super().check(model)
+
+    def predict(self, model):
+        air = _air(model)
+        static = jax.vmap(lambda x, p: model.muscle.static_force(x, p, air))(self.positions, self.pressures)
+        friction = path_friction_force(model.friction, self.positions, self.velocities, self.starts, self.substeps)
+        return {"force": static - friction}
+
+    def residuals_of(self, pred, part="identification"):
+        del part
+        f = pred["force"]
+        return jnp.where(self.slack, jnp.maximum(f, 0.0), f - self.data["force"]) / self.scale

@@ -59,3 +59,17 @@ DMSP40_VOLUME_CUBIC = (  # (d, c, b, a) of paper 001 eq. 4 in ε = x/L0 [m³]; v
 DMSP40_MIN_POSITION = -0.02  # m, assumed as for the MAS-10
 DMSP40_VISCOUS_COEFFICIENT = 3000.0  # N s/m, assumed: paper 001 gives no friction; ≈ 0.2 of critical damping
 #                                      2 sqrt(k M) for the 91 kg load on the DMSP-40's ≈ 1e5 N/m at 3 bar
+
+# --- Festo VPPM-6L (paper 001's regulator): what its data sheet [29] would give, not available here -----------------
+# Paper 001 quotes from it: 0.02-10 bar, 2 % accuracy, 50 mbar maximal hysteresis, modes fast/universal/precise
+# (`paper001`). Everything below is derived or assumed, as marked.
+VPPM_INTERNAL_VOLUME = 2.06e-4  # m³, DERIVED from paper 001 Fig. 6: the regulator volume (at the outlet pressure)
+#   for which the inlet flow exceeds the outlet flow by 20 % (1 − ∫q_out/∫q_in over the charging phases) with the
+#   DMSP-40 preset under 893 N, 0-3 V at 1.5 Hz for 2 s (`pamjax/gallery/scripts/p001_01_muscle_flow.py` re-derives it,
+#   tests/test_vppm.py checks it); 41 % of the muscle's 0.50 L, far more than a G1/8 regulator body is likely to hold
+#   (no volume is given): read it as everything between the seats and the muscle, tubing included.
+VPPM_MODE_FACTORS = {  # ASSUMED: (factor on eq. 6's time constants, factor on the main stage's full-opening error)
+    "universal": (1.0, 1.0),  # the mode paper 001 used (Sect. 3): eq. 6 and the 50 mbar as identified
+    "fast": (0.5, 2.0),  # Festo's names promise a faster response at less accuracy; the factor 2 is an assumption
+    "precise": (2.0, 0.5),  # more accuracy at a slower response; the factor 2 is an assumption
+}

@@ -13,6 +13,9 @@ POLYTROPIC_INDEX = 1.0  # n = κ = 1: isothermal chambers (eq. 3, 12)
 VOLTAGE_RANGE = (0.0, 10.0)  # V, reference range (Sect. 2)
 SUPPLY_PRESSURE = 7e5  # Pa abs (Sect. 3)
 HYSTERESIS = 5e3  # Pa, the 50 mbar maximal pressure hysteresis (Sect. 2)
+ACCURACY = 0.02  # -, "standard accuracy 2 %" (Sect. 2; of the full scale assumed, as regulator data sheets state it)
+REGULATION_RANGE = (2e3, 10e5)  # Pa GAUGE, "pressure regulation range 0.02-10 bars" (Sect. 2)
+OPERATING_MODES = ("fast", "universal", "precise")  # Sect. 2; eq. 6 was identified in "universal" (Sect. 3)
 TANK_VOLUME = 0.04  # m³, the charge/discharge tank (Sect. 3, appendix)
 
 # --- identified transfer functions (Sect. 5) ---------------------------------------------------------------------
@@ -43,3 +46,10 @@ DISCHARGING_TABLE = dict(  # Table 2: tank discharging, indexed by the tank (ups
     critical_ratio=(0.7464, 0.6709, 0.6177, 0.5940, 0.5782, 0.5683),
     sonic_conductance_m3_per_s_bar=(0.0002, 0.0003, 0.0007, 0.0008, 0.0009, 0.0007),
 )
+
+# --- results the paper reports in numbers (Sect. 6), compared in the gallery ---------------------------------------
+FIG5_VOLUME_SHARE = 0.10  # -, "the contribution of dV_PAM is about 10 % of the total output flow rate" (Fig. 5)
+FIG6_INLET_OUTLET_DIFFERENCE = 0.20  # -, "a difference of around 20 % between the valve inlet and outlet flow rates"
+PEAK_INFLOW = {3.0: 2.79, 5.0: 4.34}  # l/min at 3 V and 5 V reference (Sect. 6.1)
+FIG11_MSE = dict(voltage_only=0.1663, global_model=0.0499)  # bar² (Fig. 11: P_sim1 eq. 6 alone, P_sim2 eq. 5)
+FIG7_MSE = {1.5: 0.304, 1.0: 0.3183, 0.7: 0.2270}  # bar², eq. 6 vs the closed-port runs at 1.5, 1, 0.7 Hz (Fig. 7)

@@ -37,6 +37,11 @@ class AbstractFriction(eqx.Module):
     def state_rate(self, v, z):
         return None
 
+    def steady_state(self, v):
+        """The friction state at steady sliding with constant velocity `v` ≠ 0 [m/s], where a friction knows it in
+        closed form or better than by Newton from rest (`pamjax.bench.steady_friction_force`); None: not provided."""
+        return None
+
     @abc.abstractmethod
     def force(self, v, z):
         """The friction force [N] at velocity `v` [m/s] and friction state `z`, positive opposing positive `v`. A hybrid

@@ -12,6 +12,11 @@ Three regulators, one interface (`AbstractRegulator`); each carries its own part
 
 Units of eq. 5-8 as printed: V_ref in V, P_out in bar (gauge), Q_in in l/min. Paper 001 reports its flows in l/min
 (Sect. 6.1) without saying at which conditions; ISO 8778 reference conditions (ANR) are assumed here.
+
+The VPPM as built (`vppm_regulator`): an `ISO6358Regulator` with the regulator's internal volume (paper 001 Fig. 6:
+its inlet flow differs from its outlet flow), the 50 mbar pressure hysteresis (`PressureHysteresis`), the 2 %
+accuracy band (`accuracy_band`) and the operating modes fast / universal / precise (Sect. 2). The Festo data sheet
+[29] is not available here: the numbers the paper prints are used, every other one is marked as an assumption.
 """
 
 import abc
@@ -20,12 +25,19 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._core.errors import PamjaxInputError, check_finite, check_in_closed_interval, check_positive
+from .._core.errors import (
+    PamjaxInputError,
+    check_finite,
+    check_in_closed_interval,
+    check_nonnegative,
+    check_positive,
+)
 from .._core.fitting import parameter, positive
 from .._core.units import BAR, FLOW_UNIT, check_absolute_pressure
-from .._papers import paper001
+from .._papers import datasheets, paper001
 from .chamber import chamber_flow, pressure_rate
 from .gas import AbstractRestriction, Air
+from .hysteresis import EXPONENT_BOUNDS, bouc_wen_rate, exponent_field
 from .smooth import smooth_relu
 from .tabulated import check_table_axis, paper001_charging_restriction, paper001_discharging_restriction, pchip
 from .valves.base import AbstractControlElement
@@ -130,6 +142,11 @@ class AbstractRegulator(AbstractControlElement):
     @abc.abstractmethod
     def state_scale(self):
         """A typical magnitude per state (a pytree like the state), for integrating in scaled units."""
+
+    def inlet_flow(self, state, voltage, volume, volume_rate, air, polytropic_index=1.0, outlet_flow=0.0):
+        """The mass flow into the regulator's inlet port [kg/s]; arguments as `state_rate`. A regulator without
+        separate seats or an internal volume (the linear models) has one flow: the delivered one."""
+        return self.delivered_flow(state, voltage, volume, volume_rate, air, polytropic_index, outlet_flow)
 
     def max_gauge_pressure(self, air):
         return None
@@ -241,11 +258,45 @@ class FeedbackRegulator(AbstractRegulator):
 
 
 class ISO6358RegulatorState(eqx.Module):
-    """`pilot`, `pilot_output`: eq. 6's two stages [Pa abs]; `pressure`: the outlet/chamber [Pa abs]."""
+    """`pilot`, `pilot_output`: eq. 6's two stages [Pa abs]; `pressure`: the outlet/chamber [Pa abs];
+    `hysteresis`: the branch u ∈ [−1, 1] of a `PressureHysteresis` (None without one)."""
 
     pilot: jax.Array
     pilot_output: jax.Array
     pressure: jax.Array
+    hysteresis: jax.Array | None = None
+
+
+class PressureHysteresis(eqx.Module):
+    """The regulator's pressure hysteresis (paper 001 Sect. 2: "pressure maximal hysteresis 50 mbar"): the outlet
+    settles h/2 below its set pressure after the set pressure rose and h/2 above after it fell, so the rising and
+    falling static curves are h apart. A play operator with rounded corners on the main stage's set pressure:
+
+        offset = −(h/2) u,   (h/2) u̇ = ṗ_set − ½ ṗ_set |u|ⁿ − ½ |ṗ_set| u |u|ⁿ⁻¹   (normalised Bouc–Wen, β = ½)
+
+    With the transition length h/2 (in Pa of set pressure) the outlet stays still for the first h of set-point change
+    after a reversal, the dead band of a main stage held by friction; n rounds its corners.
+
+    **Arguments:** `width` h [Pa]; 5e3 (the paper's 50 mbar maximum, taken as the loop width); `exponent` n [-];
+    2 (assumed: no loop shape is published); `rate_width` [Pa/s] smoothing |ṗ_set|; 100 (numerical, 1e-3 bar/s).
+    """
+
+    width: jax.Array = positive(paper001.HYSTERESIS, unit="Pa")
+    exponent: jax.Array = exponent_field(2.0)  # assumed (see above)
+    rate_width: jax.Array = positive(1e2, unit="Pa/s")
+
+    def __check_init__(self):
+        check_positive(self.width, "PressureHysteresis.width")
+        check_in_closed_interval(self.exponent, *EXPONENT_BOUNDS, "PressureHysteresis.exponent")
+        check_positive(self.rate_width, "PressureHysteresis.rate_width")
+
+    def rate(self, set_rate, u):
+        """u̇ [1/s] for the set pressure's rate `set_rate` [Pa/s]."""
+        return bouc_wen_rate(set_rate, u, self.exponent, 0.5, self.rate_width) / (0.5 * self.width)
+
+    def offset(self, u):
+        """The main stage's set-pressure offset [Pa] on branch u: −h/2 after a rise, +h/2 after a fall."""
+        return -0.5 * self.width * u
 
 
 def smooth_opening(x, width):
@@ -256,11 +307,14 @@ def smooth_opening(x, width):
 class ISO6358Regulator(AbstractRegulator):
     """Physical VPPM: eq. 6 sets a pilot pressure; the main stage's flow is limited by ISO 6358 (eq. 1-2, 13-14).
 
-    p_pilot = p_atm + cal(V) / ((1 + τ₁ s)(1 + τ₂ s));  e = p_pilot − p;
-    ṁ = o(e/Δ) ṁ_charge(p_s → p) − o(−e/Δ) ṁ_discharge(p → p_atm);  ṗ = n (R T ṁ − p V̇) / V  (eq. 12).
+    p_pilot = p_atm + cal(V) / ((1 + τ₁ s)(1 + τ₂ s));  e = p_pilot + offset(u) − p;
+    ṁ = o(e/Δ) ṁ_charge(p_s → p) − o(−e/Δ) ṁ_discharge(p → p_atm);  ṗ = n (R T ṁ − p V̇) / (V + V_r)  (eq. 12).
 
     o is a smooth clip to [0, 1]. At a closed port (small V) the outlet follows the pilot, i.e. eq. 6; a large
-    chamber is filled at most at the charging path's choked flow ρ₀ C(p_s) p_s.
+    chamber is filled at most at the charging path's choked flow ρ₀ C(p_s) p_s. The regulator's own volume V_r
+    (between its seats and its outlet port, at the outlet pressure) stores air: the flow it takes at its inlet
+    (`inlet_flow`, the charging seat) then differs from the flow it delivers at its outlet (`delivered_flow`,
+    ṁ − V_r ṗ/(n R T)), paper 001's Fig. 6. `offset(u)` is the `hysteresis`'s (0 without one).
 
     **Arguments:**
 
@@ -268,8 +322,12 @@ class ISO6358Regulator(AbstractRegulator):
     - `charging`, `discharging`: restrictions supply → outlet and outlet → exhaust (paper 001 Tables 1 and 2 as
       `TabulatedISO6358Restriction`).
     - `supply_pressure` p_s [Pa abs]; 7e5 (paper 001, Sect. 3).
-    - `full_opening_error` Δ [Pa]; 5e3 (the VPPM's 50 mbar hysteresis, paper 001 Sect. 2).
+    - `full_opening_error` Δ [Pa]; 5e3 (assumed, of the size of the paper's 50 mbar hysteresis: the main stage's
+      steady droop is Δ ṁ/ṁ_max, ≤ 50 mbar, inside the 2 % accuracy band; the data sheet's flow curve is not here).
     - `opening_width` [-]: corner smoothing of o; 1e-3.
+    - `internal_volume` V_r [m³]; 0 (paper 001 assumes very short tubes and gives no regulator volume;
+      `vppm_regulator()` uses the one its Fig. 6 implies).
+    - `hysteresis`: a `PressureHysteresis`, or None (default: none).
     """
 
     calibration: VoltageCalibration = eqx.field(default_factory=VoltageCalibration)
@@ -279,6 +337,8 @@ class ISO6358Regulator(AbstractRegulator):
     supply_pressure: jax.Array = positive(paper001.SUPPLY_PRESSURE, unit="Pa abs")
     full_opening_error: jax.Array = parameter(paper001.HYSTERESIS, unit="Pa")
     opening_width: jax.Array = parameter(1e-3, unit="-")
+    internal_volume: jax.Array = parameter(0.0, unit="m³")
+    hysteresis: PressureHysteresis | None = None
 
     needs_volume = True  # eq. 12 divides by the chamber's volume
 
@@ -290,39 +350,102 @@ class ISO6358Regulator(AbstractRegulator):
         check_absolute_pressure(self.supply_pressure, "ISO6358Regulator.supply_pressure", above_atmosphere=True)
         check_positive(self.full_opening_error, "ISO6358Regulator.full_opening_error")
         check_positive(self.opening_width, "ISO6358Regulator.opening_width")
+        check_nonnegative(self.internal_volume, "ISO6358Regulator.internal_volume")
 
     def initial_state(self, pressure):
+        """At rest at `pressure` [Pa abs]; a hysteresis in its virgin state (u = 0, between its branches)."""
         p = jnp.asarray(pressure, dtype=float)
-        return ISO6358RegulatorState(pilot=p, pilot_output=p, pressure=p)
+        u = None if self.hysteresis is None else jnp.zeros_like(p)
+        return ISO6358RegulatorState(pilot=p, pilot_output=p, pressure=p, hysteresis=u)
 
     def pilot_rate(self, state, voltage, air):
         """Eq. 6 (unit static gain on the calibration) for the pilot pair; returns d(pilot)/dt [Pa/s]."""
         target = air.atmospheric_pressure + self.calibration(voltage)
         return (target - state.pilot) / self.time_constants[0]
 
-    def outlet_mass_flow(self, pilot_output, pressure, air):
-        """Net mass flow out of the regulator into the outlet [kg/s] for main-stage set pressure `pilot_output`."""
-        e = (pilot_output - pressure) / self.full_opening_error
+    def seat_flows(self, set_pressure, pressure, air):
+        """(charging, venting) mass flows [kg/s] through the main stage's seats for its set pressure `set_pressure`
+        and outlet `pressure` [Pa abs]: supply → regulator, regulator → exhaust."""
+        e = (set_pressure - pressure) / self.full_opening_error
         charge = smooth_opening(e, self.opening_width) * self.charging.mass_flow(self.supply_pressure, pressure, air)
         vent = smooth_opening(-e, self.opening_width) * self.discharging.mass_flow(
             pressure, air.atmospheric_pressure, air
         )
+        return charge, vent
+
+    def outlet_mass_flow(self, pilot_output, pressure, air):
+        """Net mass flow through the seats into the regulator's outlet side [kg/s] for main-stage set pressure
+        `pilot_output` (without a hysteresis offset)."""
+        charge, vent = self.seat_flows(pilot_output, pressure, air)
         return charge - vent
 
+    def set_pressure(self, state):
+        """The main stage's set pressure [Pa abs]: eq. 6's output plus the hysteresis offset on its branch."""
+        if self.hysteresis is None:
+            return state.pilot_output
+        if state.hysteresis is None:
+            raise PamjaxInputError("this ISO6358Regulator has a hysteresis: its state needs `hysteresis` (the "
+                                   "branch u); build states with regulator.initial_state(pressure)")
+        return state.pilot_output + self.hysteresis.offset(state.hysteresis)
+
+    def _rates(self, state, voltage, volume, volume_rate, air, n, outlet_flow):
+        charge, vent = self.seat_flows(self.set_pressure(state), state.pressure, air)
+        d_output = (state.pilot - state.pilot_output) / self.time_constants[1]
+        dp = pressure_rate(charge - vent - outlet_flow, state.pressure, volume + self.internal_volume, volume_rate,
+                           n, air)
+        du = None if self.hysteresis is None else self.hysteresis.rate(d_output, state.hysteresis)
+        rates = ISO6358RegulatorState(pilot=self.pilot_rate(state, voltage, air), pilot_output=d_output, pressure=dp,
+                                      hysteresis=du)
+        stored = self.internal_volume * dp / (n * air.gas_constant * air.temperature)
+        return rates, charge, charge - vent - stored
+
     def state_rate(self, state, voltage, volume, volume_rate, air, polytropic_index=1.0, outlet_flow=0.0):
-        mdot = self.outlet_mass_flow(state.pilot_output, state.pressure, air) - outlet_flow
-        return ISO6358RegulatorState(
-            pilot=self.pilot_rate(state, voltage, air),
-            pilot_output=(state.pilot - state.pilot_output) / self.time_constants[1],
-            pressure=pressure_rate(mdot, state.pressure, volume, volume_rate, polytropic_index, air),
-        )
+        return self._rates(state, voltage, volume, volume_rate, air, polytropic_index, outlet_flow)[0]
 
     def delivered_flow(self, state, voltage, volume, volume_rate, air, polytropic_index=1.0, outlet_flow=0.0):
-        return self.outlet_mass_flow(state.pilot_output, state.pressure, air)
+        """The mass flow out of the outlet port [kg/s]: the seats' net flow less what the internal volume stores."""
+        return self._rates(state, voltage, volume, volume_rate, air, polytropic_index, outlet_flow)[2]
+
+    def inlet_flow(self, state, voltage, volume, volume_rate, air, polytropic_index=1.0, outlet_flow=0.0):
+        """The mass flow into the inlet port [kg/s]: the charging seat's (paper 001 Fig. 6's inlet flow)."""
+        return self._rates(state, voltage, volume, volume_rate, air, polytropic_index, outlet_flow)[1]
+
+    def static_outlet_pressure(self, voltage, mass_flow, air, branch=1.0):
+        """The steady outlet pressure [Pa abs] at `voltage` [V] while `mass_flow` [kg/s] leaves the outlet (> 0;
+        < 0 flows back in): the main stage's droop, plus the hysteresis offset on `branch` (+1: the set pressure last
+        rose, −1: it fell). The data sheet's pressure-against-flow curve. Bisection between atmosphere and supply
+        (the seats' net flow falls with the outlet pressure)."""
+        target = air.atmospheric_pressure + self.calibration(voltage)
+        if self.hysteresis is not None:
+            target = target + self.hysteresis.offset(jnp.asarray(branch, dtype=float))
+
+        def excess(p):
+            charge, vent = self.seat_flows(target, p, air)
+            return charge - vent - mass_flow
+
+        def halve(_, bracket):
+            lo, hi = bracket
+            mid = 0.5 * (lo + hi)
+            above = excess(mid) > 0
+            return jnp.where(above, mid, lo), jnp.where(above, hi, mid)
+
+        lo = jnp.asarray(air.atmospheric_pressure, dtype=float) + 0.0 * target
+        hi = jnp.asarray(self.supply_pressure, dtype=float) + 0.0 * target
+        lo, hi = jax.lax.fori_loop(0, 60, halve, (lo, hi))  # to ~1e-12 of the span
+        return 0.5 * (lo + hi)
+
+    def accuracy_band(self, voltage, air, accuracy=paper001.ACCURACY):
+        """(lowest, highest) outlet pressure [Pa abs] within the accuracy band at `voltage` [V]: the set pressure
+        ± `accuracy` × the full scale (the calibration at 10 V; paper 001: "standard accuracy 2 %", of the full
+        scale assumed, as a regulator's data sheet states it; 0.2 bar for the 10 bar VPPM)."""
+        set_pressure = air.atmospheric_pressure + self.calibration(voltage)
+        band = accuracy * self.calibration(VOLTAGE_RANGE[1])
+        return set_pressure - band, set_pressure + band
 
     def state_scale(self):
         s = jnp.asarray(BAR)
-        return ISO6358RegulatorState(pilot=s, pilot_output=s, pressure=s)
+        u = None if self.hysteresis is None else jnp.asarray(1.0)
+        return ISO6358RegulatorState(pilot=s, pilot_output=s, pressure=s, hysteresis=u)
 
     def max_gauge_pressure(self, air):
         """Its calibration at 10 V, and below its supply (a regulator cannot raise its outlet above its supply)."""
@@ -334,3 +457,34 @@ def max_charging_flow(regulator: ISO6358Regulator, air: Air | None = None):
     `air` defaults to paper 001's (`paper001_air()`)."""
     air = paper001_air() if air is None else air
     return regulator.charging.mass_flow(regulator.supply_pressure, 0.0 * regulator.supply_pressure + 1.0, air)
+
+
+def vppm_regulator(mode="universal", *, internal_volume=datasheets.VPPM_INTERNAL_VOLUME, hysteresis=True, **fields):
+    """Paper 001's Festo VPPM as built: an `ISO6358Regulator` with its internal volume, its pressure hysteresis and
+    an operating mode.
+
+    **Arguments:**
+
+    - `mode`: "universal" (paper 001's, Sect. 3: eq. 6's time constants and the 50 mbar full-opening error), "fast"
+      or "precise" (Sect. 2 names them; the data sheet is not available here, so their factors on the time constants
+      and on the full-opening error, `pamjax._papers.datasheets.VPPM_MODE_FACTORS`, are ASSUMED: 0.5/2 and 2/0.5).
+    - `internal_volume` V_r [m³]: 2.06e-4, derived from paper 001 Fig. 6's 20 % inlet-outlet difference
+      (`datasheets.VPPM_INTERNAL_VOLUME`); 0 for none.
+    - `hysteresis`: True (`PressureHysteresis()`: 50 mbar), False, or a `PressureHysteresis`.
+    - any other `ISO6358Regulator` field (e.g. `supply_pressure`), which overrides the mode's.
+    """
+    if mode not in datasheets.VPPM_MODE_FACTORS:
+        raise PamjaxInputError(f"mode must be one of {sorted(datasheets.VPPM_MODE_FACTORS)} (paper 001 Sect. 2), got "
+                               f"{mode!r}")
+    if hysteresis is True:
+        hysteresis = PressureHysteresis()
+    elif hysteresis is False or hysteresis is None:
+        hysteresis = None
+    elif not isinstance(hysteresis, PressureHysteresis):
+        raise PamjaxInputError(f"hysteresis must be True, False or a PressureHysteresis, got {hysteresis!r}")
+    time_factor, error_factor = datasheets.VPPM_MODE_FACTORS[mode]
+    settings = dict(time_constants=time_factor * jnp.asarray(EQ6_TIME_CONSTANTS),
+                    full_opening_error=error_factor * paper001.HYSTERESIS, internal_volume=internal_volume,
+                    hysteresis=hysteresis)
+    settings.update(fields)
+    return ISO6358Regulator(**settings)

@@ -2,6 +2,9 @@
 
 - `RegulatorSystem`: a regulator feeding a constant volume (the 0.04 m³ tank of the appendix, or the closed outlet
   port of eq. 6's identification), with an extra outlet mass flow `outlet_flow` (eq. 5's Q_in input).
+
+Both output the flow the regulator delivers at its outlet (`mass_flow`) and the flow it takes at its inlet
+(`inlet_flow`; they differ where the regulator has an internal volume, paper 001 Fig. 6).
 - `RegulatedMuscleSystem`: a regulator feeding a muscle that lifts a hanging load (paper 001: DMSP-40-400, 893 N).
 
 The command is the reference voltage [V] in 0-10 V. States hold ABSOLUTE pressures (the regulator's state carries
@@ -37,7 +40,7 @@ class RegulatorSystem(AbstractSystem):
     air: Air = eqx.field(default_factory=paper001_air)
     polytropic_index: jax.Array = parameter(paper001.POLYTROPIC_INDEX, unit="-")
 
-    output_names = ("pressure", "mass_flow", "volume")
+    output_names = ("pressure", "mass_flow", "inlet_flow", "volume")
 
     def __check_init__(self):
         if self.regulator.needs_volume:
@@ -65,6 +68,7 @@ class RegulatorSystem(AbstractSystem):
         return dict(
             pressure=state.pressure,
             mass_flow=self.regulator.delivered_flow(state, command, *self._args()),
+            inlet_flow=self.regulator.inlet_flow(state, command, *self._args()),
             volume=self.volume + 0.0 * state.pressure,
         )
 
@@ -147,7 +151,8 @@ class RegulatedMuscleSystem(AbstractSystem):
     air: Air = eqx.field(default_factory=paper001_air)
     polytropic_index: jax.Array = parameter(paper001.POLYTROPIC_INDEX, unit="-")
 
-    output_names = ("pressure", "position", "velocity", "force", "friction_force", "mass_flow", "volume")
+    output_names = ("pressure", "position", "velocity", "force", "friction_force", "mass_flow", "inlet_flow",
+                    "volume")
 
     def __check_init__(self):
         check_nonnegative(self.load_force, "RegulatedMuscleSystem.load_force")
@@ -204,6 +209,9 @@ class RegulatedMuscleSystem(AbstractSystem):
             force=muscle,
             friction_force=friction,
             mass_flow=self.regulator.delivered_flow(
+                state.regulator, command, volume, volume_rate, self.air, self.polytropic_index
+            ),
+            inlet_flow=self.regulator.inlet_flow(
                 state.regulator, command, volume, volume_rate, self.air, self.polytropic_index
             ),
             volume=volume,

@@ -20,11 +20,11 @@ and, for the first two, from the numbers a gallery script computed:
 Readings are written here from the numbers and the targets (`verdict`); nothing is pinned. A comparison of a model
 with itself is a `PROCEDURE`, never a `COMPARE`.
 
-**Adding an item or a script** (e.g. a new `pamjax/gallery/scripts/p000_11_hysteresis.py`):
+**Adding an item or a script** (e.g. a new `pamjax/gallery/scripts/p000_14_creep.py`):
 
 1. The script computes its numbers into `Result.numbers` and lists the items in `COVERS`.
 2. In `items000.py` (or `items001.py`), replace the item's `NOT_IMPLEMENTED` entry (or add one) with a `COMPARE` or
-   `PROCEDURE` entry: `Entry("000", "text: creep ...", "what is compared", COMPARE, "p000_11_hysteresis",
+   `PROCEDURE` entry: `Entry("000", "text: creep ...", "what is compared", COMPARE, "p000_14_creep",
    paper_says="...", checks=(Check("creep at x_max", "creep/mm", Near(1.0, rel=0.2, why="...")),),
    reason="why it differs, when known")`. A new item also goes into `ITEMS` below.
 3. `python -m pamjax.gallery.docs --run` regenerates `docs/papers.md` (and `docs/papers.json`, its numbers);
