@@ -79,20 +79,20 @@ from ._solve.linearise import StateSpace as StateSpace, equilibrium as equilibri
 from ._solve.simulate import Trajectory as Trajectory, simulate as simulate
 
 # --- fitting: recordings, experiments, parameters, fit, model files, designs (bench directories: pamjax.bench) ----
-from ._fit.design import DesignResult as DesignResult, design_experiment as design_experiment
-from ._fit.design_result import PamjaxDesignWarning as PamjaxDesignWarning
+from ._identifiability.design import DesignResult as DesignResult, design_experiment as design_experiment
+from ._identifiability.design_result import PamjaxDesignWarning as PamjaxDesignWarning
 from ._fit.experiment import (
     AbstractExperiment as AbstractExperiment, Experiment as Experiment, SameSystem as SameSystem,
     TankFromModel as TankFromModel,
 )
 from ._fit.fit import FitResult as FitResult, evaluate as evaluate, fit as fit
-from ._fit.model_io import load_model as load_model, save_model as save_model
+from ._files.model_file import load_model as load_model, save_model as save_model
 from ._fit.multistart import (
     FleetResult as FleetResult, MultistartResult as MultistartResult, fit_fleet as fit_fleet, multistart as multistart,
 )
 from ._fit.parameters import ParameterSpace as ParameterSpace, parameter_paths as parameter_paths
 from ._fit.predictions import predictions as predictions
-from ._fit.profile import (
+from ._identifiability.profile import (
     LikelihoodProfile as LikelihoodProfile, ProfileResult as ProfileResult, profile_likelihood as profile_likelihood,
 )
 from ._fit.recording import Recording as Recording

@@ -11,7 +11,7 @@ tests (friction curves, ISO 6358 flow curves, static and loop force maps) are ex
 `pamjax.Experiment`, each with the reduction that turns a raw bench record into its data points (docs/papers.md).
 """
 
-from ._fit.bench import (
+from ._bench.load import (
     BENCH_NUISANCES as BENCH_NUISANCES,
     BENCH_PARAMETERS as BENCH_PARAMETERS,
     FITTED_KINDS as FITTED_KINDS,
@@ -22,7 +22,7 @@ from ._fit.bench import (
     load_bench as load_bench,
     nuisance_table as nuisance_table,
 )
-from ._fit.bench_tests import (
+from ._fit.static_experiments import (
     FlowCurveExperiment as FlowCurveExperiment,
     ForceMapExperiment as ForceMapExperiment,
     FrictionCurveExperiment as FrictionCurveExperiment,

@@ -1,6 +1,6 @@
-"""Bench tests without a time axis (`pamjax/_bench_tests.py`): their predictions against NumPy transcriptions of paper
-000's eq. 8-9 and 11, parameter recovery through `pamjax.fit` from oracle-made data, the reductions of raw runs, and
-bad input named before any fit."""
+"""Bench tests without a time axis (`pamjax/_fit/static_experiments.py`): their predictions against NumPy
+transcriptions of paper 000's eq. 8-9 and 11, parameter recovery through `pamjax.fit` from oracle-made data, the
+reductions of raw runs, and bad input named before any fit."""
 
 import equinox as eqx
 import numpy as np

@@ -19,7 +19,7 @@ import pamjax as pj
 from pamjax import PamjaxInputError, presets
 from pamjax._cli.main import main
 from pamjax._core.arrays import device_array
-from pamjax._fit import design_objective as obj
+from pamjax._identifiability import design_objective as obj
 
 FREE = ["valve.inflate.discharge_coefficient", "valve.inflate.critical_ratio", "valve.exhaust.discharge_coefficient"]
 NOISE = {"pressure": 2e3}
@@ -59,14 +59,15 @@ def _problem(parametrisation):
     """The compiled objective's problem for the 0.4 s tank run (20 PWM periods) as `design` builds it: no pressure
     limit and no variance floor are infinite ones, as in `design`, so that this problem, the CLI test's and every
     design of this module on the tank share one compilation of the objective and of its gradient."""
-    from pamjax._fit.design_setup import _start_coefficients, _template
+    from pamjax._identifiability.design_setup import designed_experiment, start_coefficients
 
     model = pj.ParameterSpace(_tank(), FREE).base
     space = pj.ParameterSpace(model, FREE)
     times = np.arange(20) * 0.02
     carrier = obj.multilevel_carrier(20, 10, 0)
-    c0, basis = _start_coefficients(parametrisation, times, 0.4, 4, carrier, (0.1, 0.9), None)
-    exp = _template(model, 0.4, 0.02, 250.0, ("pressure",), NOISE, {"pressure": 101325.0}, 4, np.full(20, 0.5))
+    c0, basis = start_coefficients(parametrisation, times, 0.4, 4, carrier, (0.1, 0.9), None)
+    exp = designed_experiment(model, 0.4, 0.02, 250.0, ("pressure",), NOISE, {"pressure": 101325.0}, 4,
+                              np.full(20, 0.5))
     # the arrays made from NumPy with `device_array` (jnp.asarray compiles a program per shape; the scalars stay
     # jnp.asarray's weakly typed ones, as `design` makes them)
     prob = obj.DesignProblem(space=space, theta=space.initial_theta(), experiment=exp,
@@ -313,7 +314,7 @@ def test_pressure_limit_is_penalised_and_kept():
 
 
 def test_stroke_limits_are_the_stops_less_the_margin_or_the_rest_position():
-    from pamjax._fit.design_setup import stroke_limits
+    from pamjax._identifiability.design_setup import stroke_limits
 
     muscle = presets.mas10_system(valve="pwm")
     rest = float(muscle.initial_state().position)  # the payload's equilibrium at atmospheric pressure
@@ -330,7 +331,7 @@ def test_stroke_limits_are_the_stops_less_the_margin_or_the_rest_position():
 def test_switching_thresholds_come_from_the_valve_contract():
     # Paper 000's valve at 50 Hz with 2 ms switching: a period's on-pulse opens it from u T = t_on (0.1), its
     # off-pulse closes it until (1 − u) T = t_off (0.9); slower switching moves both; an averaged valve has none.
-    from pamjax._fit.design_setup import switching_thresholds
+    from pamjax._identifiability.design_setup import switching_thresholds
 
     assert switching_thresholds(presets.mas10_valve()) == pytest.approx((0.1, 0.9), abs=1e-11)
     slow = presets.mas10_valve(switch_on_delay=3e-3, switch_off_delay=2.5e-3)
@@ -339,7 +340,7 @@ def test_switching_thresholds_come_from_the_valve_contract():
 
 
 def test_duty_limits_keep_the_margin_from_every_threshold():
-    from pamjax._fit.design_setup import _skip, duty_limits
+    from pamjax._identifiability.design_setup import _skip, duty_limits
 
     lo, hi, windows = duty_limits((0.1, 0.9), (0.1, 0.9), 0.025)  # ends at the thresholds: they move in
     assert (lo, hi) == pytest.approx((0.125, 0.875)) and windows == ()
@@ -382,7 +383,7 @@ def _muscle():
 def test_limits_no_run_can_keep_are_named_before_any_solve(model, kwargs, match, monkeypatch):
     # the battery's cases (issue 33): a limit in the wrong unit, a run shorter than a period, a band across the valve's
     # threshold, a tank test asked about the muscle: each a PamjaxInputError naming the argument, before any solve
-    from pamjax._fit.design import check_design
+    from pamjax._identifiability.design import check_design
 
     monkeypatch.setattr(obj, "value", lambda *a: pytest.fail("solved before rejecting the input"))
     base = (dict(noise=NOISE, **TANK) if model is _tank else
@@ -421,8 +422,8 @@ def test_a_muscle_design_keeps_the_force_margin_and_reports_eq7_independently(mu
     # the stated tolerance at the fit's resolution; every duty 0.025 from the thresholds.
     from helpers import np_eq7_force
 
-    from pamjax._fit.design_result import VERIFY_TOLERANCE
-    from pamjax._fit.design_setup import MIN_FORCE
+    from pamjax._identifiability.design_result import VERIFY_TOLERANCE
+    from pamjax._identifiability.design_setup import MIN_FORCE
 
     res = muscle_design
     c = res.constraints
@@ -440,10 +441,10 @@ def test_a_muscle_design_keeps_the_force_margin_and_reports_eq7_independently(mu
 def test_the_force_penalty_acts_from_the_buffer_and_the_limit_from_min_force():
     # objective(min_force) − objective(no limit) = PENALTY·dt·Σ(max(min_force + FORCE_BUFFER − F, 0))² at the
     # objective's samples, and the worst violation is measured from min_force itself
-    from pamjax._fit.design import _problem
-    from pamjax._fit.design_setup import _setup
+    from pamjax._identifiability.design import _problem
+    from pamjax._identifiability.design_setup import set_up
 
-    setup = _setup(_muscle(), MUSCLE_FREE, 1.0, noise=MUSCLE_NOISE, channels=("pressure", "position"), start={},
+    setup = set_up(_muscle(), MUSCLE_FREE, 1.0, noise=MUSCLE_NOISE, channels=("pressure", "position"), start={},
                    build=None, rate=500.0, criterion="D", subset=None, duty_band=(0.1, 0.9), stroke_margin=0.005,
                    max_pressure=None, max_duty_step=None, parametrisation="envelope", knots=4, steps=3,
                    initial=pj.Constant(0.55), seed=0, period=None, design_rate=250.0, substeps=4, duty_margin="auto",

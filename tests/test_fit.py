@@ -95,7 +95,7 @@ def test_experiment_bad_channel_and_failed_solve_is_finite():
     # a fit that starts there stops with a named error instead of returning NaN
     exp = pj.Experiment(rec, pj.Constant(0.5), max_steps=2, stepping="adaptive").bind(system)
     space = pj.ParameterSpace(system, ["payload_mass"])
-    problem = pj._fit.fit._Problem(space, (exp,))
+    problem = pj._fit.problem.Problem(space, (exp,))
     assert problem.residuals(np.zeros(1)) is None
     with pytest.raises(PamjaxInputError, match="start model's simulation fails"):
         pj.fit(system, [exp], ["payload_mass"], progress=False)

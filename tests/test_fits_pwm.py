@@ -61,10 +61,10 @@ def test_pwm_residuals_are_smooth_in_the_parameters():
     exps = tuple(e.bind(truth) for e in _experiments(truth, horizon=0.2))
     space = pj.ParameterSpace(truth, FREE[:2])
     def res(theta):
-        return pj._fit.fit._residuals(space, theta, exps)
+        return pj._fit.problem.residuals_at(space, theta, exps)
 
     theta = space.initial_theta()
-    jac = np.asarray(pj._fit.fit._residuals_and_jacobian(space, theta, exps)[1])
+    jac = np.asarray(pj._fit.problem.residuals_and_jacobian(space, theta, exps)[1])
     h = 1e-5
     for i in range(theta.size):
         d = jnp.zeros_like(theta).at[i].set(h)

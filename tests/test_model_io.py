@@ -1,6 +1,6 @@
-"""Model files (`pamjax.save_model` / `pamjax.load_model`, `pamjax._fit.model_io`): every model pamjax builds is written
-whole (every parameter with its unit, the structure, the static settings) and read back equal, bitwise; a damaged or
-hand-edited file is refused naming the file and the entry, and a file cannot make pamjax run code."""
+"""Model files (`pamjax.save_model` / `pamjax.load_model`, `pamjax._files.model_file`): every model pamjax builds is
+written whole (every parameter with its unit, the structure, the static settings) and read back equal, bitwise; a
+damaged or hand-edited file is refused naming the file and the entry, and a file cannot make pamjax run code."""
 
 import json
 

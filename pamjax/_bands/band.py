@@ -181,7 +181,7 @@ def _finite_rows(tree, rows):
     return ok
 
 
-def _nonlinearity_warning(index, notes):
+def nonlinearity_warning(index, notes):
     worst = max(jax.tree_util.tree_leaves(index), default=0.0)
     if worst > NONLINEARITY_WARNING:
         where = ""
@@ -217,7 +217,7 @@ def _linear(predict, prop, z, check, batch, notes):
         count += 2 * n
         index = jax.tree_util.tree_map(
             lambda s, a, yy: nonlinearity_index(s, (yy[:n] + yy[n:] - 2 * a[None]) / 2.0), std, y, ys)
-        _nonlinearity_warning(index, notes)
+        nonlinearity_warning(index, notes)
     how = ("delta method, forward-mode Jacobian in the fit's unconstrained parameters"
            + (f"; linearity checked at ±1 σ along the {prop.theta.size} principal axes" if check else ""))
     return y, lower, upper, std, how, count, 0, index

@@ -20,15 +20,15 @@ import numpy as np
 
 from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError, PamjaxSolveError
-from .._fit.parameters import Key, _getter, join_path
+from .._fit.parameters import Key, getter, join_path
 from .._physics.valves.averaged import cycle_averaged_flow
 from .._sweep.maps import frequency_response, steady_state_map
 from .band import (
     PredictionBand,
-    _nonlinearity_warning,
     check_method,
     draws,
     linear_from_points,
+    nonlinearity_warning,
     prediction_band,
     quantile_band,
     sigma_points,
@@ -41,7 +41,7 @@ PHASE_PERIOD = 360.0  # deg: phase differences between parameter points are take
 
 @eqx.filter_jit
 def _leaves(space, thetas, attrs):
-    return jax.vmap(lambda t: tuple(_getter(a)(space.model(t)) for a in attrs))(thetas)
+    return jax.vmap(lambda t: tuple(getter(a)(space.model(t)) for a in attrs))(thetas)
 
 
 def swept_values(prop, thetas, extra_axes=1):
@@ -102,7 +102,7 @@ def _map_band(prop, outputs, method, level, samples, seed, how, periods=None):
         raise PamjaxSolveError("the map of the fitted model failed at every point: see the sweep's status")
     pred, lower, upper, std, index, failed = band_of_points(outputs, method, level, n, periods)
     if index is not None:
-        _nonlinearity_warning(index, notes)
+        nonlinearity_warning(index, notes)
     if failed:
         notes.append(f"{failed} of {2 * n if method == 'linear' else samples} parameter points failed at some map "
                      "point (NaN there" + (")" if method == "linear" else "; left out of the quantiles)"))

@@ -184,7 +184,7 @@ def propagation(result, model=None, *, check_values=False):
     if model is None:
         model = getattr(result, "model", None)
         if model is None and isinstance(result, (str, pathlib.Path)):
-            from .._fit.model_io import load_model
+            from .._files.model_file import load_model
 
             model = load_model(result)
         if model is None:

@@ -56,7 +56,7 @@ def build_model(model_cfg, root, where="[model]"):
     """The model a validated `[model]` table describes (`root`: the config's folder, for a relative `file`)."""
     import pamjax as pj
 
-    from .._fit.model_io import load_model
+    from .._files.model_file import load_model
 
     if "file" in model_cfg:
         model = load_model(pathlib.Path(root) / model_cfg["file"])
@@ -71,7 +71,7 @@ def apply_set(model, values, where):
     (a list where one number is expected, or a list of the wrong length, is an error naming the key, the expected
     and the given shape, never spread over the next parameters), checked for units, and the result is rebuilt
     through the components' constructors, so a value they refuse is named as if typed in Python."""
-    from .._fit.model_io import checked
+    from .._files.model_file import checked
 
     if not values:
         return model

@@ -77,7 +77,7 @@ def _initial(value, root):
 def run(args):
     import pamjax as pj
 
-    from .._fit.design import check_design
+    from .._identifiability.design import check_design
 
     model, free, duration, kwargs, out_cfg = load(args.config)
     check_design(model, free, duration, **kwargs)  # every refusal before the output folder exists

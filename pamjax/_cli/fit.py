@@ -17,7 +17,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._core.errors import PamjaxInputError
-from .._fit.profile import PROFILED_STATUSES
+from .._identifiability.profile import PROFILED_STATUSES
 from . import schema
 from .config import build_model, build_signal, check_initial, load_recording, parameter_shape, read_toml
 from .kinds import sensor_groups
@@ -275,7 +275,7 @@ def run(args):
 def _fit_and_write(args, folder, model, experiments, free, options, bench=None, staged=False, stage=None):
     import pamjax as pj
 
-    from .._fit.model_io import model_json
+    from .._files.model_file import model_json
 
     checkpoint = folder / CHECKPOINT
     done = _checkpoint_summary(checkpoint) if args.resume else None

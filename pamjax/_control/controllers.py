@@ -36,7 +36,7 @@ def reference_derivatives(reference: AbstractSignal, t, order=3):
 
 
 # --- controllers ----------------------------------------------------------------------------------------------------
-def _check_duty_limits(lo, hi, name):
+def check_duty_limits(lo, hi, name):
     for v, which in ((lo, "duty_min"), (hi, "duty_max")):
         arr = np.asarray(v, dtype=float) if not isinstance(v, jax.core.Tracer) else None
         if arr is not None and not np.all((arr >= 0) & (arr <= 1)):
@@ -85,7 +85,7 @@ class PIController(AbstractController):
         check_nonnegative(self.proportional_gain, "PIController.proportional_gain")
         check_nonnegative(self.integral_gain, "PIController.integral_gain")
         check_finite(self.bias, "PIController.bias")
-        _check_duty_limits(self.duty_min, self.duty_max, "PIController")
+        check_duty_limits(self.duty_min, self.duty_max, "PIController")
 
     def initial_state(self):
         return jnp.zeros(())  # ∫e dt [m s]
@@ -174,7 +174,7 @@ class SlidingModeController(AbstractController):
             check_positive(getattr(self, name), f"SlidingModeController.{name}")
         check_nonnegative(self.switching_gain, "SlidingModeController.switching_gain")
         check_nonnegative(self.pressure_switching_gain, "SlidingModeController.pressure_switching_gain")
-        _check_duty_limits(self.duty_min, self.duty_max, "SlidingModeController")
+        check_duty_limits(self.duty_min, self.duty_max, "SlidingModeController")
 
     def initial_state(self):
         return jnp.zeros(())  # ∫(x − r) dt [m s]

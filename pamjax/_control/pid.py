@@ -9,7 +9,7 @@ import jax.numpy as jnp
 from .._core.errors import check_finite, check_nonnegative, check_positive
 from .._core.fitting import parameter
 from .._papers import datasheets, paper000
-from .controllers import AbstractController, _check_duty_limits
+from .controllers import AbstractController, check_duty_limits
 
 
 class PIDState(eqx.Module):
@@ -50,7 +50,7 @@ class PIDController(AbstractController):
             check_nonnegative(getattr(self, name), f"PIDController.{name}")
         check_positive(self.sample_time, "PIDController.sample_time")
         check_finite(self.bias, "PIDController.bias")
-        _check_duty_limits(self.duty_min, self.duty_max, "PIDController")
+        check_duty_limits(self.duty_min, self.duty_max, "PIDController")
 
     def initial_state(self):
         return PIDState(integral=jnp.zeros(()))

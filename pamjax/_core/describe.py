@@ -1,5 +1,5 @@
 """Canonical, process-independent descriptions of pytrees and their digests: the keys of fit fingerprints
-(`pamjax._fit.fingerprint`) and of the traced-program cache (`pamjax._core.cache`)."""
+(`pamjax._files.fingerprint`) and of the traced-program cache (`pamjax._core.cache`)."""
 
 import dataclasses
 import hashlib

@@ -30,7 +30,7 @@ def require_float64(caller):
         )
 
 
-def _concrete(x):
+def concrete_values(x):
     """The value as a NumPy array, or None when it is traced (no concrete value to check)."""
     if isinstance(x, Tracer):
         return None
@@ -71,14 +71,14 @@ def _fail(name, expected, value):
 
 
 def check_finite(x, name):
-    v = _concrete(x)
+    v = concrete_values(x)
     if v is not None and not np.all(np.isfinite(v)):
         _fail(name, "finite (no NaN or inf)", v)
     _traced(x, lambda a: ~jax.numpy.isfinite(a), name, "finite (no NaN or inf)")
 
 
 def check_positive(x, name):
-    v = _concrete(x)
+    v = concrete_values(x)
     if v is not None and not np.all(v > 0):
         _fail(name, "> 0 and finite", v)
     _traced(x, lambda a: ~(a > 0), name, "> 0 and finite")
@@ -86,7 +86,7 @@ def check_positive(x, name):
 
 
 def check_nonnegative(x, name):
-    v = _concrete(x)
+    v = concrete_values(x)
     if v is not None and not np.all(v >= 0):
         _fail(name, ">= 0 and finite", v)
     _traced(x, lambda a: ~(a >= 0), name, ">= 0 and finite")
@@ -94,14 +94,14 @@ def check_nonnegative(x, name):
 
 
 def check_in_open_interval(x, lo, hi, name):
-    v = _concrete(x)
+    v = concrete_values(x)
     if v is not None and not np.all((v > lo) & (v < hi)):
         _fail(name, f"in the open interval ({lo}, {hi})", v)
     _traced(x, lambda a: ~((a > lo) & (a < hi)), name, f"in the open interval ({lo}, {hi})")
 
 
 def check_in_closed_interval(x, lo, hi, name):
-    v = _concrete(x)
+    v = concrete_values(x)
     if v is not None and not np.all((v >= lo) & (v <= hi)):
         _fail(name, f"in [{lo}, {hi}]", v)
     _traced(x, lambda a: ~((a >= lo) & (a <= hi)), name, f"in [{lo}, {hi}]")
@@ -109,7 +109,7 @@ def check_in_closed_interval(x, lo, hi, name):
 
 def check_time_grid(ts, name="ts"):
     """A 1-D, finite, strictly increasing time grid with at least one point."""
-    v = _concrete(ts)
+    v = concrete_values(ts)
     if v is None:
         return
     if v.ndim != 1 or v.size < 1:

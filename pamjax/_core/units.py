@@ -11,7 +11,7 @@ import re
 
 import numpy as np
 
-from .errors import PamjaxInputError, _concrete
+from .errors import PamjaxInputError, concrete_values
 
 ATMOSPHERE = 101325.0  # Pa abs, ISO 2533 standard atmosphere (also `Air.atmospheric_pressure`'s default)
 # No pneumatic muscle test runs below half an atmosphere absolute (a vented chamber reads ~101325 Pa abs).
@@ -187,7 +187,7 @@ def check_absolute_pressure(values, name, *, above_atmosphere=False):
     """Refuse pressures that are not ABSOLUTE pascal: below half an atmosphere (bar, MPa, psi, kPa or gauge; the
     likely unit named), above 50 bar, or — for a supply pressure (`above_atmosphere`) — not above one atmosphere.
     Traced values (inside jit/vmap/grad) are not checked."""
-    v = _concrete(values)
+    v = concrete_values(values)
     if v is None:
         return
     v = v[np.isfinite(v)]

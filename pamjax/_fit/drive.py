@@ -11,7 +11,7 @@ import optimistix as optx
 
 from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError
-from .solver import _STALLED, CRAWL_STEPS, REASONS, Damping, LevenbergMarquardt, State
+from .solver import CRAWL_STEPS, REASONS, Damping, LevenbergMarquardt, State
 
 
 @dataclasses.dataclass
@@ -93,7 +93,7 @@ def state_from_arrays(solver, a):
         step, accepted, rejected, done, *rest = counters
         restarts, rows = (rest[0] if rest else 0), len(history)
         text = str(a["reason"])
-        reason = REASONS.index(text) if text in REASONS else (_STALLED if text else 0)
+        reason = REASONS.index(text) if text in REASONS else (REASONS.index("stalled") if text else 0)
         costs = [row[1] for row in history[-(CRAWL_STEPS + 1):]]
         recent = np.asarray([np.nan] * (CRAWL_STEPS + 1 - len(costs)) + costs)
     last = np.full((2, 4), np.nan)
@@ -203,7 +203,7 @@ def choose_solver(solver, ftol, xtol, gtol, stall_steps, checkpoint, resume):
 
 def run_fit(solver, problem, theta, max_steps, report, announce, start=None, save=None):
     """`fit` with pamjax's `LevenbergMarquardt`, driven from the host (`run_on_host`) around the fit's two compiled
-    programs (`_Problem.objective`): from θ, or from `start` = (θ, state, history) of a checkpoint; `save(y, state,
+    programs (`Problem.objective`): from θ, or from `start` = (θ, state, history) of a checkpoint; `save(y, state,
     history)` after every iteration. Returns the `Outcome`."""
     fn = problem.objective(started=start is not None)
     if start is not None:
@@ -230,7 +230,7 @@ def run_fit(solver, problem, theta, max_steps, report, announce, start=None, sav
 
 
 def run_optimistix(solver, problem, theta, max_steps, report, announce):
-    """Any other optimistix solver: `optimistix.least_squares` on the fit's two programs (`_Problem.traced`).
+    """Any other optimistix solver: `optimistix.least_squares` on the fit's two programs (`Problem.traced`).
     Returns (`solver.Outcome`, the seconds its loop took to trace and compile)."""
     r0, j0 = problem.objective().jacobian(theta, None)  # compiles both programs, refuses a failing start
     if announce:

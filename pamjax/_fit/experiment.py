@@ -4,7 +4,8 @@
 - `Experiment`: a dynamic test: the system built from the model (the model itself, or a `TankFromModel` for a
   constant-volume valve test sharing the model's valve), a command signal, a `Recording`, the channels to compare and
   their scales (noise level, in the channel's unit), and the initial state.
-- The static experiments (no time axis) of `pamjax._fit.bench_tests`: force maps, friction and flow curves.
+- The static experiments (no time axis) of `pamjax._fit.static_experiments`: force maps, friction and flow
+  curves.
 
 Every experiment keeps the contract of `AbstractExperiment`, the one thing `fit` knows of them. Experiments of
 different systems share parameters through the model (all valve tests use `model.valve`).
@@ -329,7 +330,9 @@ class Experiment(AbstractExperiment):
         except PamjaxInputError as err:
             raise PamjaxInputError(f"experiment {self.name!r}: {err}") from None
 
-    def _grid_size(self, system, stepping):
+    def grid_size(self, system, stepping):
+        """The number of fixed-grid steps (PWM periods for "pwm") covering the recording: as bound (`bind`), else
+        sized for this concrete `system`."""
         if self.num_periods is not None:
             return self.num_periods
         return fixed_grid_size(system, stepping, *self.span)  # concrete model; traced: bind(model) first
@@ -387,7 +390,7 @@ class Experiment(AbstractExperiment):
         times = self.sample_times(model)
         if stepping != "adaptive":
             traj = solve(system, self.signal, times, y0, self.t0, stepping=stepping, substeps=self.substeps,
-                         num_periods=self._grid_size(system, stepping))
+                         num_periods=self.grid_size(system, stepping))
             return self.observe(model, {c: traj.channel(c) for c in traj.channels()})
         # The output times and start as compile-time constants (the recording's own, exactly): diffrax then checks
         # them at trace time instead of with a run-time host callback, and a program with a host callback cannot be

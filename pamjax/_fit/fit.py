@@ -21,17 +21,13 @@ import numpy as np
 from .._core.arrays import device_array
 from .._core.cache import program_cache
 from .._core.errors import PamjaxInputError, require_float64
+from .._files.checkpoint import check_checkpoint_path, read_checkpoint, write_checkpoint
+from .._files.fingerprint import check_resume, fingerprint
 from .diagnostics import channel_errors, covariance, identifiability, mismatch
 from .experiment import AbstractExperiment
-from .fingerprint import check_resume, encode, fingerprint
 from .parameters import PamjaxIdentifiabilityWarning, ParameterSpace
 from .predictions import predictions
-from .problem import (  # noqa: F401 - _residuals_and_jacobian: design's, and the tests'
-    _physical_and_jacobian,
-    _Problem,
-    _residuals,
-    _residuals_and_jacobian,
-)
+from .problem import Problem, physical_and_jacobian
 from .rig_hints import nuisance_hints
 
 
@@ -137,53 +133,6 @@ def evaluate(model, experiments):
     return channel_errors(experiments, r)
 
 
-_CHECKPOINT_FORMAT = 3  # 3: pamjax's optimistix solver's state (`solver.state_arrays`); 2 (the host
-_READABLE_FORMATS = (2, 3)  # Levenberg-Marquardt's, until 2026-11) resumes in it, at the same point
-
-
-def _check_checkpoint_path(checkpoint, resume, overwrite):
-    """Before any fit: `checkpoint` may only replace an existing file if asked to, or if it is the file resumed."""
-    if checkpoint is None:
-        return
-    path = pathlib.Path(checkpoint)
-    if path.suffix != ".npz":
-        raise PamjaxInputError(f"checkpoint must be an .npz path, got {str(checkpoint)!r}")
-    same = resume is not None and path.resolve() == pathlib.Path(resume).resolve()
-    if path.exists() and not (overwrite or same):
-        raise FileExistsError(f"checkpoint {path} exists; pass overwrite=True to replace it (or resume from it)")
-
-
-def _write_checkpoint(path, labels, arrays, fingerprint=None):
-    """Save the iteration state (`solver.state_arrays`: θ, the solver's state, the history; every array exactly)
-    after an iteration. Written to a temporary file and renamed, so an interruption leaves the previous checkpoint
-    intact."""
-    path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp.npz")
-    extra = {} if fingerprint is None else {"fingerprint": encode(fingerprint)}  # see _fingerprint
-    np.savez(tmp, format=_CHECKPOINT_FORMAT, labels=np.asarray(labels, dtype=str), **arrays, **extra)
-    tmp.replace(path)
-
-
-def _read_checkpoint(path, labels, num_residuals, solver):
-    """(θ, solver state, history) from a checkpoint of this fit."""
-    from .drive import state_from_arrays
-
-    path = pathlib.Path(path)
-    if not path.exists():
-        raise PamjaxInputError(f"resume: checkpoint {path} does not exist")
-    with np.load(path) as f:
-        data = {k: f[k] for k in f.files}
-    if int(data.get("format", -1)) not in _READABLE_FORMATS:
-        raise PamjaxInputError(f"resume: {path} is not a pamjax fit checkpoint (format {_CHECKPOINT_FORMAT})")
-    if list(data["labels"]) != list(labels):
-        raise PamjaxInputError(f"resume: {path} was saved for parameters {list(data['labels'])}, not {list(labels)}")
-    if np.shape(data["residual"]) != (num_residuals,):
-        raise PamjaxInputError(f"resume: {path} holds {np.size(data['residual'])} residuals, this fit has "
-                               f"{num_residuals} (other experiments or data)")
-    return state_from_arrays(solver, data)
-
-
 def _check_settings(ftol, xtol, gtol, stall_steps):
     """The default solver's settings, checked before anything is set up (as `LevenbergMarquardt` checks them)."""
     if isinstance(stall_steps, bool) or not (isinstance(stall_steps, int) and stall_steps >= 1):
@@ -197,7 +146,7 @@ def _validate(experiments, max_steps, out, overwrite, checkpoint, resume):
     require_float64("pamjax.fit")
     if out is not None and pathlib.Path(out).exists() and not overwrite:
         raise FileExistsError(f"{out} exists; pass overwrite=True to replace it")
-    _check_checkpoint_path(checkpoint, resume, overwrite)
+    check_checkpoint_path(checkpoint, resume, overwrite)
     experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
     if not experiments:
         raise PamjaxInputError("experiments must be a non-empty list")
@@ -215,7 +164,7 @@ def _validate(experiments, max_steps, out, overwrite, checkpoint, resume):
 
 def _setup(model, experiments, space):
     """The experiments checked against `model` and bound to it (PWM grids sized), the start θ and the
-    compiled-function host of a fit (`_Problem`)."""
+    compiled-function host of a fit (`Problem`)."""
     for e in experiments:
         e.check(model)
     exps = tuple(e.bind(model) for e in experiments)
@@ -223,7 +172,7 @@ def _setup(model, experiments, space):
     if not np.all(np.isfinite(theta)):
         raise PamjaxInputError(f"start values give non-finite transformed parameters: "
                                f"{dict(zip(space.labels, theta))}")
-    return exps, theta, _Problem(space, exps)
+    return exps, theta, Problem(space, exps)
 
 
 def precompile(model, experiments, free):
@@ -324,7 +273,7 @@ def fit(
       Never replaces an existing file unless `overwrite=True` or it is the `resume` file.
     - `resume`: an `.npz` checkpoint of this same problem: the fit continues from it and ends bitwise where an
       uninterrupted fit with the same `max_steps` ends (values, cost, iterations, history). The checkpoint carries a
-      fingerprint of the start model, free spec, experiments and data (`pamjax._fit.fingerprint`): a resume of another
+      fingerprint of the start model, free spec, experiments and data (`pamjax._files.fingerprint`): a resume of another
       problem is refused before any solve, saying what differs.
 
     **Returns:** a `FitResult`: values, standard errors, correlation, `status` ('converged', 'at bound',
@@ -358,7 +307,7 @@ def fit(
             "experiments, or free fewer parameters")
     if solver is None:
         beside.join()
-    from .drive import choose_solver, run_fit, run_optimistix, state_arrays
+    from .drive import choose_solver, run_fit, run_optimistix, state_arrays, state_from_arrays
 
     solver, own = choose_solver(solver, ftol, xtol, gtol, stall_steps, checkpoint, resume)
     report = _progress_printer(progress)
@@ -370,10 +319,10 @@ def fit(
         print(f"fit: {len(labels)} parameters, {len(exps)} experiments; compiling the residuals and their "
               f"Jacobian (first run; {cache}) ...", flush=True)
     if own:
-        start = None if resume is None else _read_checkpoint(resume, labels, used, solver)
+        start = None if resume is None else state_from_arrays(solver, read_checkpoint(resume, labels, used))
 
         def save(y, state, history):
-            _write_checkpoint(checkpoint, labels, state_arrays(y, state, history), print_)
+            write_checkpoint(checkpoint, labels, state_arrays(y, state, history), print_)
 
         outcome = run_fit(solver, problem, theta, max_steps, report, announce, start, save if checkpoint else None)
         extra_compile = 0.0
@@ -415,7 +364,7 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
     used = int(np.count_nonzero(np.any(jac != 0, axis=1) | (resid != 0)))
     groups = identifiability(jac, labels, identifiability_tol)
     bad = sorted({label for g in groups for label in g})
-    values, g = (np.asarray(a) for a in _physical_and_jacobian(space, device_array(theta)))
+    values, g = (np.asarray(a) for a in physical_and_jacobian(space, device_array(theta)))
     cov = g @ covariance(jac, state.cost, used, identifiability_tol) @ g.T
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):

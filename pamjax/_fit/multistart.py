@@ -17,7 +17,8 @@ import warnings
 import numpy as np
 
 from .._core.errors import PamjaxInputError, PamjaxSolveError, require_float64
-from .fit import FitResult, ParameterSpace, fit
+from .fit import FitResult, fit
+from .parameters import ParameterSpace
 
 _NOT_PASSED = ("out", "checkpoint", "resume", "overwrite", "progress")  # per-task files/output: not for many fits
 

@@ -108,7 +108,10 @@ def parameter_paths(model, prefix=""):
     return out
 
 
-def _getter(attrs):
+def getter(attrs):
+    """The function model → the value at the parse steps `attrs` (attribute names and dict `Key`s, as `split_path`
+    gives them)."""
+
     def get(m):
         for a in attrs:
             m = m[a] if isinstance(a, Key) else getattr(m, a)
@@ -218,7 +221,7 @@ def _zero_start_scale(full, index):
 
 def _field_metadata(model, attrs):
     """The metadata of the dataclass field a path ends in (how its component says it is fitted), or {}."""
-    owner = _getter(attrs[:-1])(model)
+    owner = getter(attrs[:-1])(model)
     if isinstance(attrs[-1], Key):
         return {}
     fields = dataclasses.fields(owner) if dataclasses.is_dataclass(owner) else ()
@@ -247,7 +250,7 @@ def _start_value(model, path, attrs, index, valid):
         raise PamjaxInputError(
             f"unknown parameter {path!r}; the model's parameters are:\n  " + "\n  ".join(sorted(valid))
         )
-    full = np.asarray(_getter(attrs)(model), dtype=float)
+    full = np.asarray(getter(attrs)(model), dtype=float)
     if index is None:
         return full, full
     if len(index) != full.ndim or any(not 0 <= i < n for i, n in zip(index, full.shape)):
@@ -279,7 +282,7 @@ def _transform(path, value, index, transform, bounds, meta):
 def _domain(model, attrs, name, path):
     """The interval (lo, hi) an enclosing component of the path's leaf names `name` (a muscle's `stroke`)."""
     for k in range(len(attrs) - 1, -1, -1):
-        owner = _getter(attrs[:k])(model)
+        owner = getter(attrs[:k])(model)
         if name is not None and isinstance(owner, eqx.Module) and hasattr(owner, name):
             lo, hi = getattr(owner, name)
             return float(lo), float(hi)
@@ -400,7 +403,7 @@ class ParameterSpace(eqx.Module):
     def initial_values(self):
         vals = []
         for g in self.groups:
-            v = np.asarray(_getter(g.attrs)(self.base), dtype=float)
+            v = np.asarray(getter(g.attrs)(self.base), dtype=float)
             vals.append((v if g.index is None else v[g.index]).reshape(-1))
         return device_array(np.concatenate(vals))
 
@@ -409,7 +412,7 @@ class ParameterSpace(eqx.Module):
         model = self.base if model is None else model
         traced = isinstance(values, jax.core.Tracer)
         for g, v in zip(self.groups, self._split(values if traced else np.asarray(values))):
-            get = _getter(g.attrs)
+            get = getter(g.attrs)
             if traced:
                 old = jnp.asarray(get(model), dtype=float)
                 new = v.reshape(old.shape) if g.index is None else old.at[g.index].set(v[0])

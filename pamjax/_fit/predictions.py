@@ -53,7 +53,7 @@ def _predict_runs(model, exps, stepping, substeps):
     y0s = [e.start_for(s, model) for s, e in zip(systems, exps)]
     times = [e.sample_times(model) for e in exps]
     flats = [scaled(s, y0) for s, y0 in zip(systems, y0s)]
-    sizes = [e._grid_size(s, stepping) for s, e in zip(systems, exps)]
+    sizes = [e.grid_size(s, stepping) for s, e in zip(systems, exps)]
     runs = solve_runs(systems, [e.signal for e in exps], times, [f[0] for f in flats], flats[0][1],
                       [e.t0 for e in exps], stepping=stepping, substeps=substeps, sizes=sizes)
     preds = []

@@ -1,8 +1,8 @@
 """A fit's two compiled functions and their host side: the residuals at θ and (r, ∂r/∂θ) in forward mode, compiled
 once per problem structure (`ProgramCache` when the CLI's persistent cache is on), called with NumPy in and out
-(`_Problem`); `fit`, `profile` and `design` use them. The optimiser sees them as an optimistix `fn(y, args)`: on
-the host for pamjax's own solver (`_Problem.objective`), or through host callbacks for any other
-(`_Problem.traced`)."""
+(`Problem`); `fit`, `profile` and `design` use them (the fit's public contract with the layers above). The optimiser
+sees them as an optimistix `fn(y, args)`: on the host for pamjax's own solver (`Problem.objective`), or through host
+callbacks for any other (`Problem.traced`)."""
 
 import threading
 import time
@@ -27,14 +27,14 @@ def _residual_vector(space, theta, exps):
 
 
 @eqx.filter_jit
-def _residuals(space, theta, exps):
+def residuals_at(space, theta, exps):
     """The residuals at θ (module level, `space` an argument: fits of one problem structure from different start
     models share this compilation)."""
     return _residual_vector(space, theta, exps)
 
 
 @eqx.filter_jit
-def _residuals_and_jacobian(space, theta, exps):
+def residuals_and_jacobian(space, theta, exps):
     """(r, ∂r/∂θ) at θ, forward mode: one pass of the solves with a tangent per free parameter."""
 
     def f(t):
@@ -46,12 +46,12 @@ def _residuals_and_jacobian(space, theta, exps):
 
 
 @eqx.filter_jit
-def _physical_and_jacobian(space, theta):
+def physical_and_jacobian(space, theta):
     """The physical values at θ and d(values)/dθ, compiled (run eagerly, each operation compiles on its own)."""
     return space.physical(theta), jax.jacfwd(space.physical)(theta)
 
 
-class _Problem:
+class Problem:
     """The host side of the two compiled functions: NumPy in, NumPy out, the identification samples selected; a
     failed solve's residuals are None."""
 
@@ -85,14 +85,14 @@ class _Problem:
         return programs is not None and all(programs.has(f"fit_{kind}", args) for kind in ("residuals", "jacobian"))
 
     def all_residuals(self, theta):
-        return np.asarray(self._call("residuals", _residuals, theta))
+        return np.asarray(self._call("residuals", residuals_at, theta))
 
     def residuals(self, theta):
         r = self.all_residuals(theta)[self.mask]
         return r if np.all(np.isfinite(r)) else None
 
     def jacobian(self, theta, ready=None):
-        r, j = self._call("jacobian", _residuals_and_jacobian, theta, ready)
+        r, j = self._call("jacobian", residuals_and_jacobian, theta, ready)
         return np.asarray(r)[self.mask], np.asarray(j)[self.mask]
 
     def start(self, theta):
@@ -110,7 +110,7 @@ class _Problem:
 
         out = self.jacobian(theta, ready)  # an error or Ctrl-C here leaves the (daemon) side thread unwaited for
         ready()
-        _physical_and_jacobian(self.space, device_array(theta))  # compiled now for the statistics at the end
+        physical_and_jacobian(self.space, device_array(theta))  # compiled now for the statistics at the end
         side.join()
         self.ready_s = time.perf_counter() - t0
         return out
@@ -170,7 +170,7 @@ class _Traced(eqx.Module):
 
 
 class _Objective:
-    """`fn` for pamjax's solver on the host (`_Problem.objective`)."""
+    """`fn` for pamjax's solver on the host (`Problem.objective`)."""
 
     def __init__(self, problem, started):
         self.problem, self.started = problem, started

@@ -13,6 +13,7 @@ import numpy as np
 
 from .._core.csvio import read_table, write_table
 from .._core.errors import PamjaxInputError
+from .._core.paths import writable_path
 from .._core.units import channel_dimension, check_magnitude, to_si
 
 # Default unit per well-known channel name.
@@ -206,14 +207,14 @@ class Recording:
     def to_csv(self, path, overwrite=False):
         """Write a `t [s],name [unit],...` CSV (pressures as `[Pa abs]`, floats exact); refuses to overwrite an
         existing file unless `overwrite=True`."""
-        path = _writable(path, overwrite)
+        path = writable_path(path, overwrite)
         units = {"t": "s", **{c: "Pa abs" if u == "Pa" else u for c, u in self.units.items()}}
         comment = f"pamjax recording {self.name}; pressures absolute" if self.name else None
         return write_table(path, {"t": self.t, **self.channels}, units, comment)
 
     def to_npz(self, path, overwrite=False):
         """Write NPZ with arrays `t` and one per channel, units in `__units__` (JSON)."""
-        path = _writable(path, overwrite)
+        path = writable_path(path, overwrite)
         meta = json.dumps(dict(units=self.units, name=self.name))
         np.savez(path, t=self.t, __units__=np.asarray(meta), **self.channels)
         return path
@@ -343,11 +344,3 @@ def warn_filtered(name, cutoff_hz, pwm_frequency, stacklevel=2):
         "predicts, and the fit will be biased (a tank charge at 50 Hz: 10.8 kPa RMS against the true parameters). "
         "Fit the raw or decimated recording (Recording.resampled), or use the averaged valve (eq. 13).",
         PamjaxDataWarning, stacklevel=stacklevel)
-
-
-def _writable(path, overwrite):
-    path = pathlib.Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    return path

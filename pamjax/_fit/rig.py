@@ -139,13 +139,13 @@ def is_nuisance(path):
 def nuisance_report(result):
     """A fit result's nuisances apart from the plant: {"sensors": {group: {field: (value, std err)}},
     "runs": {run: {"supply_pressure" | "start.position" | ...: (value, std err)}}}."""
-    from .parameters import Key, _parse
+    from .parameters import Key, split_path
 
     out = {"sensors": {}, "runs": {}}
     for label, value, se in zip(result.labels, result.values, result.standard_errors):
         if not is_nuisance(label):
             continue
-        steps, _ = _parse(label)
+        steps, _ = split_path(label)
         root, key, rest = steps[0], steps[1], [s for s in steps[2:] if not isinstance(s, Key)]
         out[root].setdefault(str(key), {})[".".join(rest)] = (float(value), float(se))
     return out

@@ -325,7 +325,7 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
         self.stall_steps, self.geodesic = stall_steps, geodesic
 
     def fingerprint(self):
-        """What a checkpoint records of this solver (`pamjax._fit.fingerprint`): whether the acceleration is on (the
+        """What a checkpoint records of this solver (`pamjax._files.fingerprint`): whether the acceleration is on (the
         tolerances and `stall_steps` only decide where the same iterations stop). The text is the host
         Levenberg-Marquardt's that this solver replaced, which its checkpoints carry: they resume here."""
         print_ = {"class": "pamjax Levenberg-Marquardt (pamjax._fit.lm)"}

@@ -29,7 +29,7 @@ import threading
 import time
 
 from .fit import fit, precompile
-from .parameters import _parse, join_path
+from .parameters import join_path, split_path
 
 
 @dataclasses.dataclass
@@ -63,7 +63,7 @@ def _path(entry):
     path = entry if isinstance(entry, str) else entry.get("path") if isinstance(entry, dict) else None
     if path is None:
         return None
-    steps, _ = _parse(path)
+    steps, _ = split_path(path)
     return join_path(steps)
 
 

@@ -47,7 +47,7 @@ class Air(eqx.Module):
         check_positive(self.atmospheric_pressure, "Air.atmospheric_pressure")
 
 
-def _orient(p1, p2):
+def orient(p1, p2):
     """Upstream/downstream split: returns (p_up, ratio p_down/p_up in (0, 1], direction ±1)."""
     forward = p1 >= p2
     p_up = jnp.where(forward, p1, p2)
@@ -134,7 +134,7 @@ class EllipseRestriction(AbstractRestriction):
         check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "EllipseRestriction.laminar_ratio")
 
     def mass_flow(self, p1, p2, air: Air):
-        p_up, ratio, direction = _orient(p1, p2)
+        p_up, ratio, direction = orient(p1, p2)
         phi = ellipse_flow_fraction(ratio, self.critical_ratio, self.laminar_ratio)
         sonic = self.discharge_coefficient * self.area * p_up / jnp.sqrt(air.gas_constant * air.temperature)
         return direction * sonic * phi
@@ -163,7 +163,7 @@ class ISO6358Restriction(AbstractRestriction):
         check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "ISO6358Restriction.laminar_ratio")
 
     def mass_flow(self, p1, p2, air: Air):
-        p_up, ratio, direction = _orient(p1, p2)
+        p_up, ratio, direction = orient(p1, p2)
         phi = ellipse_flow_fraction(ratio, self.critical_ratio, self.laminar_ratio)
         sonic = ISO8778_DENSITY * self.sonic_conductance * p_up * jnp.sqrt(ISO8778_TEMPERATURE / air.temperature)
         return direction * sonic * phi
@@ -189,7 +189,7 @@ class NozzleRestriction(AbstractRestriction):
         check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "NozzleRestriction.laminar_ratio")
 
     def mass_flow(self, p1, p2, air: Air):
-        p_up, ratio, direction = _orient(p1, p2)
+        p_up, ratio, direction = orient(p1, p2)
         cm = nozzle_flow_parameter(ratio, air.heat_capacity_ratio, air.gas_constant, self.laminar_ratio)
         return direction * self.area * p_up * self.flow_coefficient * cm / jnp.sqrt(air.temperature)
 

@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._core.errors import PamjaxInputError, _concrete, check_finite, check_in_open_interval, check_positive
+from .._core.errors import PamjaxInputError, check_finite, check_in_open_interval, check_positive, concrete_values
 from .._core.fitting import parameter, positive, ratio
 from .._papers import paper001
 from .gas import (
@@ -21,15 +21,15 @@ from .gas import (
     ISO8778_TEMPERATURE,
     AbstractRestriction,
     Air,
-    _orient,
     ellipse_flow_fraction,
+    orient,
 )
 from .smooth import safe_divide
 
 
 def check_table_axis(x, name):
     """A 1-D, finite, strictly increasing table axis with at least two entries; `PamjaxInputError` otherwise."""
-    v = _concrete(x)
+    v = concrete_values(x)
     if v is None:
         return
     if v.ndim != 1 or v.size < 2:
@@ -127,7 +127,7 @@ class TabulatedISO6358Restriction(AbstractRestriction):
         return pchip(self.pressure, self.critical_ratio, upstream_pressure)
 
     def mass_flow(self, p1, p2, air: Air):
-        p_up, ratio, direction = _orient(p1, p2)
+        p_up, ratio, direction = orient(p1, p2)
         phi = ellipse_flow_fraction(ratio, self.ratio(p_up), self.laminar_ratio)
         sonic = ISO8778_DENSITY * self.conductance(p_up) * p_up * jnp.sqrt(ISO8778_TEMPERATURE / air.temperature)
         return direction * sonic * phi

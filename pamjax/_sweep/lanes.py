@@ -1,6 +1,8 @@
 """One sweep lane (a point's system, signal and initial state) integrated and observed, and the compiled call over a
 chunk of lanes; the scheme and step a sweep chooses from the plant's stiffness and the valve's edges."""
 
+import inspect
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -11,7 +13,7 @@ from .._core.errors import PamjaxInputError
 from .._physics.signals import AbstractSignal
 from .._solve import fixed_step as _fixed_step, synchronous as _sync
 from .._solve.scaled import scaled
-from .._solve.simulate import _DEFAULT_GRID_STEP, _DEFAULT_SUBSTEPS, solve
+from .._solve.simulate import solve
 from .plan import lane_system, make_lane
 from .result import NON_FINITE, NON_PHYSICAL, SOLVER_FAILED, SUCCESS
 
@@ -24,6 +26,9 @@ ROS2_DEFAULT_STEP = 5e-3  # s
 EDGE_WIDTHS_PER_STEP = 2.0
 # A periodic command needs >= 100 steps per period for 2nd-order accuracy at the 1e-4 level.
 STEPS_PER_SIGNAL_PERIOD = 100
+# `solve`'s fixed-grid defaults (RK4 nodes per PWM period; the uniform grid's step [s]), read from its signature
+DEFAULT_SUBSTEPS = inspect.signature(solve).parameters["substeps"].default
+DEFAULT_GRID_STEP = inspect.signature(solve).parameters["grid_step"].default
 
 
 def _observe(system, signal, t, state, channels):
@@ -190,12 +195,12 @@ def hybrid_method_and_step(system, signal, values, flat, plan, method, dt, ts):
     frequency = _signal_frequency(signal, values, plan)
     signal_cap = np.inf if frequency is None else 1.0 / (STEPS_PER_SIGNAL_PERIOD * frequency)
     if not system.valve.switches:
-        step = min(_DEFAULT_GRID_STEP if dt is None else float(dt), signal_cap)
+        step = min(DEFAULT_GRID_STEP if dt is None else float(dt), signal_cap)
         size = _sync.num_grid_steps(t0, t1, step)
-        return "grid", (t1 - t0) / size, ("grid", size, _DEFAULT_SUBSTEPS)
+        return "grid", (t1 - t0) / size, ("grid", size, DEFAULT_SUBSTEPS)
     pwm = np.asarray(_lane_valves(system, plan, flat, lambda v: v.pwm_frequency), dtype=float)
     shortest = 1.0 / float(np.max(pwm))
-    substeps = _DEFAULT_SUBSTEPS if dt is None else max(2, int(np.ceil(shortest / float(dt) - 1e-9)))
+    substeps = DEFAULT_SUBSTEPS if dt is None else max(2, int(np.ceil(shortest / float(dt) - 1e-9)))
     substeps = max(substeps, int(np.ceil(shortest / signal_cap - 1e-9)))
     first = np.floor(t0 * pwm + 1e-9)  # as `pamjax._solve.synchronous.num_periods`, for every lane's frequency
     periods = int(np.max(np.maximum(np.ceil(t1 * pwm - first - 1e-9), 1)))

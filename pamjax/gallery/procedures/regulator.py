@@ -58,12 +58,12 @@ def tank_horizon(mode, p_row, c_si, b):
     return (np.log(p_row * b / P_ATM) + subsonic) / k
 
 
-def _to_b(z):
+def to_b(z):
     lo, hi = B_BOUNDS
     return lo + (hi - lo) * jax.nn.sigmoid(z)
 
 
-def _from_b(b):
+def from_b(b):
     lo, hi = B_BOUNDS
     return np.log((b - lo) / (hi - b))
 
@@ -94,7 +94,7 @@ def tank_run(theta, mode, p_row, ts, solver=None):
 @eqx.filter_jit
 def _tank_pressure(theta, values, ts, solver=None):
     """`tank_run` with the mode's constants as values: one program per sample count (and solver)."""
-    c, b = jnp.exp(theta[0]), _to_b(theta[1])  # b kept inside B_BOUNDS
+    c, b = jnp.exp(theta[0]), to_b(theta[1])  # b kept inside B_BOUNDS
     supply, target, p0, volts = values
     y0 = pj.ISO6358RegulatorState(pilot=target, pilot_output=target, pressure=p0)
     traj = pj.simulate(tank_system(c, b, supply), pj.Constant(volts), ts, y0=y0, adjoint="forward", rtol=1e-8,
@@ -128,7 +128,7 @@ def start_values(mode, p_row, ts, data):
     c0 = float(np.polyfit(t[:n], y, 1)[0] / tank_rate_constant(1.0))
     grid = np.arange(B_BOUNDS[0] + 0.02, B_BOUNDS[1] - 0.01, 0.02)
     values, data = mode_values(mode, p_row), np.asarray(data)
-    cost = [float(np.sum(_residuals(np.array([np.log(c0), _from_b(b)]), values, ts, data) ** 2)) for b in grid]
+    cost = [float(np.sum(_residuals(np.array([np.log(c0), from_b(b)]), values, ts, data) ** 2)) for b in grid]
     return c0, float(grid[int(np.argmin(cost))])
 
 
@@ -136,7 +136,7 @@ def fit_tank(mode, p_row, c_true, b_true, rng, quick):
     """Simulate one noisy tank run with (C, b) = (`c_true` [m³/(s Pa)], `b_true`) and fit them back: start values
     from the record (`start_values`), then Levenberg-Marquardt through `simulate` (forward-mode derivatives)."""
     ts = jnp.asarray(np.linspace(0.0, tank_horizon(mode, p_row, c_true, b_true), 60 if quick else 150))
-    truth = np.array([np.log(c_true), _from_b(b_true)])
+    truth = np.array([np.log(c_true), from_b(b_true)])
     data = np.asarray(tank_run(truth, mode, p_row, ts)) + NOISE_TANK * rng.standard_normal(ts.shape)
     c0, b0 = start_values(mode, p_row, ts, data)
     values = mode_values(mode, p_row)
@@ -149,12 +149,12 @@ def fit_tank(mode, p_row, c_true, b_true, rng, quick):
         pressure, jac = _tank_pressure_and_jacobian(jnp.asarray(theta, dtype=float), values, ts)
         return (np.asarray(pressure) - data) / NOISE_TANK, np.asarray(jac) / NOISE_TANK
 
-    sol = pj.levenberg_marquardt(residuals, jacobian, np.array([np.log(c0), _from_b(b0)]), max_steps=100,
+    sol = pj.levenberg_marquardt(residuals, jacobian, np.array([np.log(c0), from_b(b0)]), max_steps=100,
                                  ftol=1e-12, xtol=1e-10)
     # 1σ from the Gauss-Newton covariance (JᵀJ)⁻¹ (residuals are already in noise units), mapped to C and b
     jac = sol.jacobian
     cov = np.linalg.inv(jac.T @ jac)
-    b_fit = float(_to_b(sol.theta[1]))
+    b_fit = float(to_b(sol.theta[1]))
     db_dz = (b_fit - B_BOUNDS[0]) * (B_BOUNDS[1] - b_fit) / (B_BOUNDS[1] - B_BOUNDS[0])
     return dict(
         C_start=c0,

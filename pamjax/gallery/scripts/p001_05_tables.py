@@ -78,7 +78,7 @@ def tank_pressure(reg, theta, values, ts):
     """`fits/regulator.tank_run(theta, mode, p_row, ts, solver=Tsit5())` with the mode's constants (`mode_values`)
     as arguments: the same system, start state, command and solve."""
     supply, target, p0, volts = values
-    system = reg.tank_system(jnp.exp(theta[0]), reg._to_b(theta[1]), supply)
+    system = reg.tank_system(jnp.exp(theta[0]), reg.to_b(theta[1]), supply)
     y0 = pj.ISO6358RegulatorState(pilot=target, pilot_output=target, pressure=p0)
     return pj.simulate(system, pj.Constant(volts), ts, y0=y0, adjoint="forward", rtol=1e-8, atol=1e-8,
                        solver=dfx.Tsit5()).pressure
@@ -91,7 +91,7 @@ def grid_costs(reg, rows):
     grid = np.arange(0.3, 0.8975, 0.005)  # inside fits/regulator.py's b range (0.1, 0.9)
     runs = np.asarray(_grid_runs(reg, jnp.log(jnp.asarray([r["c0"] for r in rows])),  # stacked in NumPy: no programs
                                  tuple(jnp.asarray(np.stack(v)) for v in zip(*(r["values"] for r in rows))),
-                                 jnp.asarray(np.stack([r["ts"] for r in rows])), jnp.asarray(reg._from_b(grid))))
+                                 jnp.asarray(np.stack([r["ts"] for r in rows])), jnp.asarray(reg.from_b(grid))))
     return grid, [np.sum((run - r["data"]) ** 2, axis=1) for run, r in zip(runs, rows)]
 
 
@@ -109,7 +109,7 @@ def start(reg, mode, p_row, c_true, b_true, rng):
     """One row's tank run (150 samples, 2 mbar noise) and C [m³/(s Pa)] read off the choked slope over its first
     tenth (eq. 14: ṗ = k p_in charging, d ln p/dt = −k discharging)."""
     ts = jnp.linspace(0.0, reg.tank_horizon(mode, p_row * BAR, c_true / BAR, b_true), 150)
-    truth = jnp.array([np.log(c_true / BAR), reg._from_b(b_true)])
+    truth = jnp.array([np.log(c_true / BAR), reg.from_b(b_true)])
     data = np.asarray(reg.tank_run(truth, mode, p_row * BAR, ts, solver=dfx.Tsit5()))
     data = data + NOISE * rng.standard_normal(data.shape)
     t, n = np.asarray(ts), ts.size // 10

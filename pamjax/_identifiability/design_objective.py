@@ -6,7 +6,7 @@ fit's scaled parameters θ (`pamjax.ParameterSpace`) is
 
     F(u) = F_prior + (f_rec / f_design) Σ_samples J_iᵀ J_i,      J_i = ∂(y_c(t_i; θ, u) / σ_c) / ∂θ,
 
-with J one forward-mode Jacobian through the solve (the fit's own residual function, `pamjax._fit`), F_prior the
+with J one forward-mode Jacobian through the solve (the fit's own residual function, `pamjax._fit.problem`), F_prior the
 information of the experiments already in hand, f_rec the recording's sample rate and f_design the (coarser) rate
 at which the objective samples the run. Its inverse is the Cramér-Rao bound on the covariance of θ̂. The criteria,
 on a subset S of the parameters (all by default), are minimised:
@@ -32,8 +32,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.arrays import device_array
+from .._fit.predictions import predict_all
 from .._physics.smooth import smooth_relu
-from .predictions import predict_all
 
 CLIP_WIDTH = 0.02  # width of the soft clip of z to [0, 1] (2 % of the duty band): a sharp band, nonzero gradient
 STROKE_UNIT = 1e-3  # m: a stroke violation is penalised in mm

@@ -28,7 +28,9 @@ import pathlib
 import numpy as np
 
 from .._core.errors import PamjaxInputError
-from .bench_files import (
+from .._fit.experiment import Experiment, TankFromModel
+from .._fit.rig import DEFAULT_GROUP, Rig, RunConditions, Sensors, StartState, nuisance_report
+from .files import (
     FITTED_KINDS,
     MUSCLE_KINDS,
     TANK_KINDS,
@@ -40,8 +42,6 @@ from .bench_files import (
     recording_file,
     run_command,
 )
-from .experiment import Experiment, TankFromModel
-from .rig import DEFAULT_GROUP, Rig, RunConditions, Sensors, StartState, nuisance_report
 
 # bench name → (pamjax parameter path, label of the value in a FitResult)
 BENCH_PARAMETERS = {

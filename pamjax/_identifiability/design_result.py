@@ -8,9 +8,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.errors import PamjaxInputError
+from .._core.paths import writable_path
 from .._physics.signals import Sampled
 from .design_objective import FORCE_UNIT, PRESSURE_UNIT, STEP_UNIT, STROKE_UNIT
-from .recording import _writable
 
 
 class PamjaxDesignWarning(UserWarning):
@@ -23,7 +23,7 @@ class PamjaxDesignWarning(UserWarning):
 VERIFY_TOLERANCE = dict(stroke=1e-4, pressure=5e3, force=5.0)  # m, Pa, N
 
 
-def _violation(aux):
+def worst_violation(aux):
     """The largest constraint violation in its penalty's units (mm, kPa, duty %, N)."""
     return max(float(aux["worst_stroke"]) / STROKE_UNIT, float(aux["worst_pressure"]) / PRESSURE_UNIT,
                float(aux["worst_step"]) / STEP_UNIT, float(aux["worst_force"]) / FORCE_UNIT)
@@ -41,7 +41,7 @@ def _worst(values, lo, hi):
     return float(max(np.max(lo - values, initial=0.0), np.max(values - hi, initial=0.0), 0.0))
 
 
-def _constraints(aux, setup, verified=None):
+def constraints_report(aux, setup, verified=None):
     """The `constraints` report of a design: the limits, the predicted extremes at the objective's samples and, when
     verified, at the fit's resolution, and whether every limit holds (within `VERIFY_TOLERANCE` at the fit's
     resolution, the objective's own resolution limit)."""
@@ -58,7 +58,7 @@ def _constraints(aux, setup, verified=None):
         max_duty_step=setup["max_duty_step"],
         stroke_limits=None if setup["limits"] is None else [float(s) for s in setup["limits"]],
         position_range=_range(position), max_pressure=setup["max_pressure"], pressure_range=_range(pressure),
-        min_force=setup["min_force"], force_range=_range(force), feasible=_violation(aux) <= 1e-9)
+        min_force=setup["min_force"], force_range=_range(force), feasible=worst_violation(aux) <= 1e-9)
     if verified is not None:
         lo_x, hi_x = setup["limits"] if setup["limits"] is not None else (-np.inf, np.inf)
         p_max = np.inf if setup["max_pressure"] is None else setup["max_pressure"]
@@ -154,7 +154,7 @@ class DesignResult:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "prediction"}
 
     def to_json(self, path, overwrite=False):
-        path = _writable(path, overwrite)
+        path = writable_path(path, overwrite)
         path.write_text(json.dumps(self.to_dict(), indent=1))
         return path
 
@@ -173,7 +173,7 @@ class DesignResult:
         if not self.feasible and not infeasible_ok:
             raise PamjaxInputError("this design violates its limits (" + "; ".join(self.constraints["violations"])
                                    + "): a bench must not play it; pass infeasible_ok=True to write it anyway")
-        path = _writable(path, overwrite)
+        path = writable_path(path, overwrite)
         lines = [f"# pamjax design: {self.criterion}-optimal over {', '.join(self.subset)}; PWM period "
                  f"{self.period} s; duty latched per period",
                  "# predicted standard errors (Cramér-Rao, SI units): label, design"

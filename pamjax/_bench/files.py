@@ -1,7 +1,7 @@
 """Reading a bench directory: meta.json (checked key by key), one recording per experiment (NPZ, CSV with units in its
 header, MATLAB .mat), and the command that drove each run (the recorded duty, checked against meta.json's). Every
 mistake is a `PamjaxInputError` naming the experiment, the file and the key, with what to write instead.
-`pamjax._fit.bench` builds the experiments from what this reads."""
+`pamjax._bench.load` builds the experiments from what this reads."""
 
 import json
 import pathlib
@@ -9,8 +9,8 @@ import pathlib
 import numpy as np
 
 from .._core.errors import PamjaxInputError
+from .._fit.recording import BENCH_NAMES, Recording
 from .._physics.signals import Constant, Sampled, Triangle
-from .recording import BENCH_NAMES, Recording
 
 TANK_KINDS = ("tank_charge", "tank_discharge")
 MUSCLE_KINDS = ("muscle_triangle", "muscle_run")

@@ -4,8 +4,8 @@ parameters.
 Workflow only: the objective (Fisher information through the solve, criteria, constraint penalties) is in
 `design_objective`, everything before the first solve (checks, the valve's thresholds, limits, the start, defaults)
 in `design_setup`, the result and its constraints report in `design_result`; the Jacobians of experiments already
-in hand come from the fit's compiled residual function (`pamjax._fit`); the iteration is a BFGS on the host with a
-backtracking line search on the objective's value (one forward-mode Jacobian per trial) and a gradient only at
+in hand come from the fit's compiled residual function (`pamjax._fit.problem`); the iteration is a BFGS on the host
+with a backtracking line search on the objective's value (one forward-mode Jacobian per trial) and a gradient only at
 accepted points.
 """
 
@@ -22,24 +22,24 @@ import numpy as np
 
 from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError
+from .._fit.problem import physical_and_jacobian, residuals_and_jacobian
 from . import design_objective as obj
-from .design_result import DesignResult, PamjaxDesignWarning, _constraints, _violation
+from .design_result import DesignResult, PamjaxDesignWarning, constraints_report, worst_violation
 from .design_setup import (
-    _SETUP_ARGS,
     CARRIER_HOLD,
     DESIGN_RATE,
     DESIGN_SUBSTEPS,
     DUTY_BAND,
     FIT_SUBSTEPS,
     MIN_FORCE,
+    SETUP_ARGS,
     START_AMPLITUDE,
     STROKE_MARGIN,
-    _setup,
-    _start_coefficients,
-    _static_force,
-    _template,
+    designed_experiment,
+    set_up,
+    start_coefficients,
+    static_force_along,
 )
-from .fit import _physical_and_jacobian, _residuals_and_jacobian
 
 START_CALMER = (0.8, 0.6, 0.4, 0.2, 0.0)  # factors on START_AMPLITUDE tried, in turn, where the default start breaks a
 # limit (a fast exhaust from high up slackens the muscle): a search that starts within its limits stays within them
@@ -50,11 +50,11 @@ def information(space, theta, experiments, predictions=False):
     scaled residuals at θ (the fit's compiled Jacobian, shared with fits of the same problem structure). With
     `predictions`, also each experiment's predicted channels {channel: values at its samples}, read back from the
     same residuals (data + scale · residual: no further solve, no further compilation)."""
-    model = space.with_values(_physical_and_jacobian(space, device_array(theta))[0])  # compiled, not op by op
+    model = space.with_values(physical_and_jacobian(space, device_array(theta))[0])  # compiled, not op by op
     exps = tuple(e.bind(model) if hasattr(e, "bind") else e for e in experiments)
     layouts = [e.layout() for e in exps]
     mask = np.concatenate([used & ident for layout in layouts for _, _, _, used, ident in layout])
-    residuals, jac = _residuals_and_jacobian(space, device_array(theta), exps)
+    residuals, jac = residuals_and_jacobian(space, device_array(theta), exps)
     jac = np.asarray(jac)[mask]
     if not predictions:
         return jac.T @ jac
@@ -103,7 +103,7 @@ def _optimise(c, problem, gradient, steps, report):
             trial = c + step * direction
             v_trial, aux_trial = obj.value(jnp.asarray(trial), problem)
             v_trial = float(v_trial)
-            feasible = _violation(aux_trial) <= max(_violation(aux), 0.0) + 1e-9
+            feasible = worst_violation(aux_trial) <= max(worst_violation(aux), 0.0) + 1e-9
             if math.isfinite(v_trial) and v_trial <= v + 1e-4 * step * slope and feasible:
                 accepted = True
                 break
@@ -148,7 +148,7 @@ def variances(info, transform=None):
 
 def _physical_errors(space, theta, info):
     """Predicted standard errors in physical units (inf along directions the information does not fix)."""
-    g = np.asarray(_physical_and_jacobian(space, device_array(theta))[1])  # the fit's compiled Jacobian
+    g = np.asarray(physical_and_jacobian(space, device_array(theta))[1])  # the fit's compiled Jacobian
     return [float(math.sqrt(v)) for v in variances(info, g)]
 
 
@@ -244,7 +244,7 @@ def design_experiment(
     Maximises the Fisher information F = F_prior + Σ JᵀJ (J: the noise-scaled outputs' forward-mode Jacobian with
     respect to the fit's scaled parameters, through the solve) in the D sense (minimise log det F⁻¹ on `subset`) or
     the A sense (log tr F⁻¹), by BFGS with gradients through the solve, the PWM edges and the stick-slip events
-    (`pamjax._design_objective`). The design is local: it is optimal near the parameter values of `model`, from the
+    (`design_objective`). The design is local: it is optimal near the parameter values of `model`, from the
     start signal. Design at your best estimate — the fit of a short pilot run, not the datasheet: at the MAS-10
     presets the payload rests 11 mm higher than on the bench plant, and a design there predicted gains on the force
     law's a3, a4 that the plant did not give (docs/identifiability.md).
@@ -296,7 +296,7 @@ def design_experiment(
     **Returns:** a `DesignResult` (`signal()`, `to_csv`, `to_json`, `plot`, `table`).
     """
     t_start = time.perf_counter()
-    setup = _setup(model, free, duration, noise=noise, channels=channels, start=start, build=build, rate=rate,
+    setup = set_up(model, free, duration, noise=noise, channels=channels, start=start, build=build, rate=rate,
                    criterion=criterion, subset=subset, duty_band=duty_band, stroke_margin=stroke_margin,
                    max_pressure=max_pressure, max_duty_step=max_duty_step, parametrisation=parametrisation,
                    knots=knots, steps=steps, initial=initial, seed=seed, period=period, design_rate=design_rate,
@@ -313,12 +313,12 @@ def design_experiment(
     prob, prior_info, base_info, compile_s, start_aux = _prepare(problem, gradient, c0, space, theta, prior, baseline,
                                                                  index, float(baseline_margin))
     note = ""
-    if initial is None and _violation(start_aux) > 0:  # the default start breaks a limit: a calmer carrier
+    if initial is None and worst_violation(start_aux) > 0:  # the default start breaks a limit: a calmer carrier
         c0, note = _calmer_start(c0, prob, setup, parametrisation, float(duration), knots, seed)
     c, aux, history, message = _optimise(np.asarray(c0, dtype=float), prob, gradient, steps, report)
     errors, verified = _standard_errors(setup, aux, theta, prior_info, base_info, verify, float(duration),
                                         float(rate), noise, build)
-    constraints = _constraints(aux, setup, verified)
+    constraints = constraints_report(aux, setup, verified)
     if not constraints["feasible"]:
         warnings.warn("pamjax.design_experiment: the design violates its limits (a bench must not play it; to_csv "
                       "refuses it): " + "; ".join(constraints["violations"]), PamjaxDesignWarning, stacklevel=2)
@@ -367,10 +367,10 @@ def _calmer_start(c0, prob, setup, parametrisation, duration, knots, seed):
     """The default start with its carrier's amplitude lowered (`START_CALMER`) until it keeps every limit, and the
     note for the message; the start as it was if none does."""
     for factor in START_CALMER:
-        trial, _ = _start_coefficients(parametrisation, setup["times"], duration, knots,
-                                       obj.multilevel_carrier(setup["count"], CARRIER_HOLD, seed), setup["band"],
-                                       None, factor * START_AMPLITUDE)
-        if _violation(obj.value(jnp.asarray(trial), prob)[1]) <= 0:
+        trial, _ = start_coefficients(parametrisation, setup["times"], duration, knots,
+                                      obj.multilevel_carrier(setup["count"], CARRIER_HOLD, seed), setup["band"],
+                                      None, factor * START_AMPLITUDE)
+        if worst_violation(obj.value(jnp.asarray(trial), prob)[1]) <= 0:
             return trial, (f"; the default start broke a limit, so its carrier's amplitude was lowered to "
                            f"{factor * START_AMPLITUDE:g}")
     return c0, ""
@@ -379,13 +379,13 @@ def _calmer_start(c0, prob, setup, parametrisation, duration, knots, seed):
 def _verified(setup, duty, duration, rate, noise, build):
     """The designed run at the fit's resolution (the Experiment's default substeps, the recording's rate): its
     information and its predicted channels, with eq. 7's force where the system has a muscle."""
-    full = _template(setup["model"], duration, setup["period"], rate, setup["channels"], noise, setup["start"],
-                     FIT_SUBSTEPS, duty, build)
+    full = designed_experiment(setup["model"], duration, setup["period"], rate, setup["channels"], noise,
+                               setup["start"], FIT_SUBSTEPS, duty, build)
     info, (verified,) = information(setup["space"], np.asarray(setup["space"].initial_theta()), [full],
                                     predictions=True)
     if setup["force_law"] and {"position", "pressure"} <= set(verified):
-        verified["force"] = np.asarray(_static_force(setup["system"], device_array(verified["position"]),
-                                                     device_array(verified["pressure"])))
+        verified["force"] = np.asarray(static_force_along(setup["system"], device_array(verified["position"]),
+                                                          device_array(verified["pressure"])))
     return info, verified
 
 
@@ -398,9 +398,9 @@ def check_design(model, free, duration, **kwargs):
     if unknown:
         raise PamjaxInputError(f"unknown design argument(s) {unknown}")
     args = {k: v.default for k, v in inspect.signature(design_experiment).parameters.items()
-            if k in known and k in _SETUP_ARGS}
-    args.update({k: v for k, v in kwargs.items() if k in _SETUP_ARGS})
-    _setup(model, free, duration, **args)
+            if k in known and k in SETUP_ARGS}
+    args.update({k: v for k, v in kwargs.items() if k in SETUP_ARGS})
+    set_up(model, free, duration, **args)
 
 
 def _printer(progress, announce):

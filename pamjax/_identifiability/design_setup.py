@@ -12,12 +12,12 @@ import numpy as np
 
 from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError, require_float64
+from .._fit.experiment import Experiment
+from .._fit.parameters import ParameterSpace, strong_types
+from .._fit.recording import Recording
 from .._physics.signals import AbstractSignal, Sampled, Triangle
 from .._systems.base import AbstractSystem
 from . import design_objective as obj
-from .experiment import Experiment
-from .parameters import ParameterSpace, strong_types
-from .recording import Recording
 
 # Defaults and their sources.
 DUTY_BAND = (0.1, 0.9)  # paper 000: with the MHE2's ~2 ms switching time, only duty 10-90 % has an effect at 50 Hz
@@ -168,12 +168,12 @@ def _check_seen(model, space, build, system):
     sees the muscle): refused, naming them (perturbed one at a time, rebuilt, compared; no solve)."""
     import jax.tree_util as jtu
 
-    from .parameters import _getter
+    from .._fit.parameters import getter
 
     leaves = [np.asarray(x) for x in jtu.tree_leaves(eqx.filter(system, eqx.is_array))]
     unseen = []
     for g in space.groups:
-        get = _getter(g.attrs)
+        get = getter(g.attrs)
         old = np.asarray(get(model), dtype=float)
         try:
             other = build(eqx.tree_at(get, model, device_array(old * 1.25 + 1e-3)))
@@ -248,7 +248,7 @@ def _skip(duty, windows):
 
 
 @eqx.filter_jit
-def _static_force(system, position, pressure):
+def static_force_along(system, position, pressure):
     """Eq. 7 (the muscle's force law before the slack) along a run, compiled as one program."""
     return system.muscle.static_force(position, pressure, system.air)
 
@@ -280,7 +280,7 @@ def _start_state(system, start):
     return _initial_state(system, {k: device_array(np.asarray(v, dtype=float)) for k, v in start.items()})
 
 
-def _template(model, duration, period, rate, channels, noise, start, substeps, duty, build=None):
+def designed_experiment(model, duration, period, rate, channels, noise, start, substeps, duty, build=None):
     """The designed experiment (a Sampled duty, a blank recording at `rate`; the system `build(model)`) bound to
     `model`."""
     times = np.arange(0.0, duration + 0.5 / rate, 1.0 / rate)
@@ -300,7 +300,7 @@ def _sampled(signal, times):
     return jax.vmap(signal)(times)
 
 
-def _start_coefficients(parametrisation, times, duration, knots, carrier, band, initial, amplitude=START_AMPLITUDE):
+def start_coefficients(parametrisation, times, duration, knots, carrier, band, initial, amplitude=START_AMPLITUDE):
     """The start: z = level + `amplitude` ξ, the level from `initial` (a signal or per-period duties; default paper
     000's E3 triangle; no carrier on a given one), in the units of the soft clip (0 and 1 the band's ends; beyond
     them saturated)."""
@@ -325,12 +325,12 @@ def _start_coefficients(parametrisation, times, duration, knots, carrier, band, 
             obj.envelope_basis(times, duration, knots, carrier))
 
 
-_SETUP_ARGS = ("noise", "channels", "start", "build", "rate", "criterion", "subset", "duty_band", "stroke_margin",
-               "max_pressure", "max_duty_step", "parametrisation", "knots", "steps", "initial", "seed", "period",
-               "design_rate", "substeps", "duty_margin", "min_force")
+SETUP_ARGS = ("noise", "channels", "start", "build", "rate", "criterion", "subset", "duty_band", "stroke_margin",
+              "max_pressure", "max_duty_step", "parametrisation", "knots", "steps", "initial", "seed", "period",
+              "design_rate", "substeps", "duty_margin", "min_force")
 
 
-def _setup(model, free, duration, *, noise, channels, start, build, rate, criterion, subset, duty_band, stroke_margin,
+def set_up(model, free, duration, *, noise, channels, start, build, rate, criterion, subset, duty_band, stroke_margin,
            max_pressure, max_duty_step, parametrisation, knots, steps, initial, seed, period, design_rate, substeps,
            duty_margin, min_force):
     """Everything before the first solve, as a dict: the checked arguments, the valve's switching thresholds and the
@@ -365,8 +365,8 @@ def _setup(model, free, duration, *, noise, channels, start, build, rate, criter
             f"from there keeps it. It is an ABSOLUTE pressure in Pa: 5 bar abs = 5e5, 5 bar gauge = "
             f"{5e5 + float(system.air.atmospheric_pressure):.6g}")
     if min_force is not None:
-        f0 = float(np.asarray(_static_force(system, device_array(np.asarray(y0.position, dtype=float)),
-                                            device_array(np.asarray(y0.pressure, dtype=float)))))
+        f0 = float(np.asarray(static_force_along(system, device_array(np.asarray(y0.position, dtype=float)),
+                                                 device_array(np.asarray(y0.pressure, dtype=float)))))
         if f0 < min_force:
             raise PamjaxInputError(
                 f"min_force {min_force:g} N: eq. 7 gives {f0:.1f} N at the run's start, so no run from there keeps "
@@ -374,11 +374,12 @@ def _setup(model, free, duration, *, noise, channels, start, build, rate, criter
                 "false for no limit")
     count = int(math.ceil(duration / period - 1e-9))
     times = np.arange(count) * period
-    c0, basis = _start_coefficients(parametrisation, times, float(duration), knots,
-                                    obj.multilevel_carrier(count, CARRIER_HOLD, seed), band, initial)
+    c0, basis = start_coefficients(parametrisation, times, float(duration), knots,
+                                   obj.multilevel_carrier(count, CARRIER_HOLD, seed), band, initial)
     z0 = device_array(c0 if basis is None else basis @ c0)
-    exp = _template(model, float(duration), period, float(design_rate), channels, noise, start, substeps,
-                    _skip(band[0] + (band[1] - band[0]) * np.asarray(obj.clip01_and_slope(z0)[0]), windows), build)
+    duty = _skip(band[0] + (band[1] - band[0]) * np.asarray(obj.clip01_and_slope(z0)[0]), windows)
+    exp = designed_experiment(model, float(duration), period, float(design_rate), channels, noise, start, substeps,
+                              duty, build)
     return dict(model=model, space=space, subset=subset, period=period, channels=channels, system=system, start=start,
                 thresholds=thresholds, duty_margin=margin, duty_band=[float(b) for b in duty_band], band=band,
                 windows=windows, force_law=force_law, min_force=min_force, limits=limits, max_pressure=max_pressure,

@@ -22,7 +22,7 @@ all) every verdict reads "not a minimum: ..." and `ProfileResult.warnings` says 
 
 Each point is re-fitted by the fit's solver (`pamjax._fit.solver`) in the coordinates orthogonal to ψ's, warm
 started from the previous point plus the linearised change of the others along ψ; the residuals and Jacobians are
-the fit's compiled functions (`pamjax._fit`: no new compilation for a problem already fitted). The branches
+the fit's compiled functions (`pamjax._fit.problem`: no new compilation for a problem already fitted). The branches
 (parameter × side) are independent and run in a pool of threads, which XLA executes on separate cores.
 """
 
@@ -39,9 +39,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.errors import PamjaxInputError, require_float64
-from .fit import _Problem
-from .parameters import ParameterSpace
-from .recording import _writable
+from .._core.paths import writable_path
+from .._fit.parameters import ParameterSpace
+from .._fit.problem import Problem
 
 FLAT = 1e-3  # Δχ²: a profile within this of its minimum over its whole span on both sides is flat (structural)
 # Δχ²: a re-fitted point this far BELOW the fit's cost shows that the fit is not at a minimum (a converged fit's
@@ -102,7 +102,7 @@ class ProfileResult:
 
     def to_json(self, path, overwrite=False):
         """Write the result; refuses to replace an existing file unless `overwrite`."""
-        path = _writable(path, overwrite)
+        path = writable_path(path, overwrite)
         path.write_text(json.dumps(self.to_dict(), indent=1))
         return path
 
@@ -175,7 +175,7 @@ class _Branch:
         r0 = residuals(phi)
         if r0 is None:
             return None
-        from .drive import levenberg_marquardt
+        from .._fit.drive import levenberg_marquardt
 
         state = levenberg_marquardt(residuals, jacobian, phi, max_steps=s["max_steps"], ftol=s["ftol"],
                                     xtol=s["xtol"], gtol=s["gtol"], stall_steps=8)
@@ -247,12 +247,12 @@ class _Branch:
 
 
 class _Evaluator:
-    """The fit's host problem (`pamjax._fit._Problem`: its compiled residual and Jacobian programs, through the
+    """The fit's host problem (`pamjax._fit.problem.Problem`: its compiled residual and Jacobian programs, through the
     CLI's program cache when it is on; identification samples only) with the cost and residual variance at the
     fit."""
 
     def __init__(self, space, exps, theta):
-        self.problem = _Problem(space, exps)
+        self.problem = Problem(space, exps)
         self.space, self.exps = space, exps
         r, j = self.problem.start(theta)
         self.cost = 0.5 * float(r @ r)
