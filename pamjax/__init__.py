@@ -31,9 +31,9 @@ from ._physics.gas import (
     PorousRestriction as PorousRestriction, SeriesRestriction as SeriesRestriction,
 )
 from ._physics.muscle import (
-    AbstractForceLaw as AbstractForceLaw, AbstractVolume as AbstractVolume, BraidVolume as BraidVolume,
-    ChouHannafordForce as ChouHannafordForce, CubicVolume as CubicVolume, EndStops as EndStops,
-    LinearVolume as LinearVolume, Muscle as Muscle, PolynomialForce as PolynomialForce,
+    AbstractForceLaw as AbstractForceLaw, AbstractMuscle as AbstractMuscle, AbstractVolume as AbstractVolume,
+    BraidVolume as BraidVolume, ChouHannafordForce as ChouHannafordForce, CubicVolume as CubicVolume,
+    EndStops as EndStops, LinearVolume as LinearVolume, Muscle as Muscle, PolynomialForce as PolynomialForce,
     TonduLopezForce as TonduLopezForce,
 )
 from ._physics.regulator import (
@@ -58,7 +58,7 @@ from ._physics.valves.base import (
 from ._physics.valves.onoff import OnOffValve as OnOffValve
 
 # --- systems: the vector fields over named states ------------------------------------------------------------------
-from ._systems.base import AbstractSystem as AbstractSystem
+from ._systems.base import AbstractMuscleSystem as AbstractMuscleSystem, AbstractSystem as AbstractSystem
 from ._systems.joint import AntagonisticJoint as AntagonisticJoint, JointState as JointState, VoltagePair as VoltagePair
 from ._systems.joint_control import (
     AntagonisticJointController as AntagonisticJointController, GaitAngle as GaitAngle,

@@ -280,3 +280,129 @@ def test_the_private_name_rule_can_fail(tmp_path):
     # _own2 is z's own; _cache is defined nowhere in the package (another library's attribute): neither is named
     expected = ["from pamjax._a.x import _y", "x._y", "C()._grid"]
     assert sorted(f.split(" ", 1)[1] for f in found) == sorted(expected), found
+
+
+# --- contracts, not duck typing (issue 31) -------------------------------------------------------------------------
+COMPONENT_LAYERS = ("_physics", "_systems")
+EXPERIMENT_MODULES = ("pamjax/_fit/experiment.py", "pamjax/_fit/static_experiments.py")
+# (module, attribute) → why a literal hasattr/getattr there is not a component's attribute read outside its layer
+GENERIC_READS = {
+    ("pamjax/_solve/simulate.py", "pressure"): "y0's field: a system's named state (data), checked if it has one",
+    ("pamjax/_solve/trajectory.py", "pressure"): "the states' field: a named state (data), marks p ≤ 0 as failed",
+    ("pamjax/_solve/hints.py", "pressure"): "the start state's field: a named state (data), for a diagnosis",
+    ("pamjax/_solve/hints.py", "friction"): "the start state's friction mode: a named state (data), for a diagnosis",
+    ("pamjax/_identifiability/design_setup.py", "pressure"): "the start state's field: a named state (data)",
+    ("pamjax/_solve/checks.py", "name"): "a JAX pytree path key's name (GetAttrKey), not a component",
+    ("pamjax/_solve/linearise.py", "shape"): "an array leaf's shape, not a component",
+}
+
+
+def _declared_attributes(paths, root=ROOT):
+    """attribute → the places that declare it: every public field, method, property and class attribute of the
+    components (the classes of `_physics` and `_systems`, except their named states `…State`, which are data whose
+    fields are the state's names) by layer, and of the experiments by module."""
+    declared = {}
+    for path in paths:
+        rel = path.relative_to(root)
+        layer = rel.parts[1] if len(rel.parts) > 2 else None
+        place = layer if layer in COMPONENT_LAYERS else str(rel) if str(rel) in EXPERIMENT_MODULES else None
+        if place is None:
+            continue
+        for node in ast.parse(path.read_text()).body:
+            if not isinstance(node, ast.ClassDef) or node.name.endswith("State"):
+                continue
+            for item in node.body:
+                if isinstance(item, ast.AnnAssign) and isinstance(item.target, ast.Name):
+                    names = [item.target.id]
+                elif isinstance(item, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    names = [item.name]
+                elif isinstance(item, ast.Assign):
+                    names = [t.id for t in item.targets if isinstance(t, ast.Name)]
+                else:
+                    names = []
+                for name in names:
+                    if not name.startswith("_"):
+                        declared.setdefault(name, set()).add(place)
+    return declared
+
+
+def _literal_names(node, loops):
+    """The attribute names a hasattr/getattr call reads: its string literal, or the literals a `for name in
+    ("muscle", "friction")` loop around it binds to its name argument."""
+    arg = node.args[1]
+    if isinstance(arg, ast.Constant) and isinstance(arg.value, str):
+        return [arg.value]
+    if isinstance(arg, ast.Name):
+        return loops.get((arg.id, node.lineno), [])
+    return []
+
+
+def _duck_typing(paths, allowed=GENERIC_READS, root=ROOT):
+    """hasattr/getattr reads of a component's or an experiment's attribute outside the place that declares it."""
+    declared = _declared_attributes(paths, root)
+    offenders = []
+    for path in paths:
+        rel = path.relative_to(root)
+        layer = rel.parts[1] if len(rel.parts) > 2 else None
+        tree = ast.parse(path.read_text())
+        loops = {}
+        for loop in ast.walk(tree):
+            if (isinstance(loop, ast.For) and isinstance(loop.target, ast.Name)
+                    and isinstance(loop.iter, (ast.Tuple, ast.List))
+                    and all(isinstance(e, ast.Constant) and isinstance(e.value, str) for e in loop.iter.elts)):
+                for inner in ast.walk(loop):
+                    if hasattr(inner, "lineno"):
+                        loops[(loop.target.id, inner.lineno)] = [e.value for e in loop.iter.elts]
+        for node in ast.walk(tree):
+            if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                    and node.func.id in ("hasattr", "getattr") and len(node.args) >= 2):
+                continue
+            if isinstance(node.args[0], ast.Name) and node.args[0].id in ("self", "cls"):
+                continue  # an object reading its own fields
+            for name in _literal_names(node, loops):
+                places = declared.get(name, set())
+                if not places or layer in places or str(rel) in places or (str(rel), name) in allowed:
+                    continue
+                offenders.append(f"{rel}:{node.lineno} {node.func.id}({ast.unparse(node.args[0])}, {name!r}): "
+                                 f"declared by {', '.join(sorted(places))}")
+    return offenders
+
+
+def test_workflows_ask_contracts_not_attributes():
+    """No `hasattr(model, "muscle")`, `getattr(friction, "coulomb_force")` or `hasattr(e, "split_time")` outside the
+    component's layer (`_physics`, `_systems`) or the experiment's module: a workflow asks the contract
+    (`isinstance(model, AbstractMuscleSystem)`, `AbstractFriction.coulomb_force`, `AbstractExperiment.split_time`,
+    `AbstractControlElement.period` and `exact_edges`, `AbstractSignal.cycle_frequency()`, `AbstractSystem.actuators`).
+    A read that is not of a component (a named state's field, an array's shape) is listed in `GENERIC_READS` with
+    its reason."""
+    offenders = _duck_typing(_modules())
+    assert not offenders, "attributes read by name instead of through a contract:\n" + "\n".join(offenders)
+    stale = [k for k in GENERIC_READS if not (ROOT / k[0]).is_file() or f'"{k[1]}"' not in (ROOT / k[0]).read_text()]
+    assert not stale, f"GENERIC_READS entries that no longer match a read: {stale}"
+
+
+def test_the_duck_typing_rule_can_fail(tmp_path):
+    """The rule above on a small package: a component's attribute read by name in a workflow is found (as a literal,
+    and through a loop over literals); the same read inside the physics layer, one of `self`, one of an attribute no
+    component declares and an allowed one are not."""
+    files = {
+        "pamjax/_physics/friction.py": "class Friction:\n    coulomb_force: float\n\n    def smoothing_width(self):\n"
+                                       "        return getattr(self, 'coulomb_force')\n",
+        "pamjax/_systems/muscle.py": "class MuscleState:\n    pressure: float\n\n\nclass MuscleSystem:\n"
+                                     "    muscle: object\n    friction: object\n",
+        "pamjax/_control/loop.py": "def check(model, friction, y):\n    a = hasattr(model, 'muscle')\n"
+                                   "    b = getattr(friction, 'coulomb_force', None)\n"
+                                   "    c = getattr(y, 'pressure', None)\n    d = getattr(model, 'weak_type', 0)\n"
+                                   "    for name in ('muscle', 'friction'):\n        hasattr(model, name)\n"
+                                   "    return getattr(model, 'muscle', 1)\n",
+    }
+    paths = []
+    for rel, text in files.items():
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(text)
+        paths.append(tmp_path / rel)
+    found = _duck_typing(paths, allowed={("pamjax/_control/loop.py", "friction"): "test"}, root=tmp_path)
+    reads = sorted(f.split(" ", 1)[1].split(":")[0] for f in found)
+    # 'pressure' is a named state's field, 'weak_type' no component's, 'friction' in the loop allowed here
+    assert reads == sorted(["hasattr(model, 'muscle')", "getattr(friction, 'coulomb_force')",
+                            "hasattr(model, 'muscle')", "getattr(model, 'muscle')"]), found

@@ -23,6 +23,7 @@ from .._core.errors import PamjaxInputError, PamjaxSolveError
 from .._fit.parameters import Key, getter, join_path
 from .._physics.valves.averaged import cycle_averaged_flow
 from .._sweep.maps import frequency_response, steady_state_map
+from .._systems.base import AbstractSystem
 from .band import (
     PredictionBand,
     check_method,
@@ -62,7 +63,8 @@ def swept_values(prop, thetas, extra_axes=1):
 
 def _sweepable(prop, what):
     """A map's band needs a map the sweep engine computes: its fixed-step lanes locate no stick-slip events."""
-    if getattr(prop.space.base, "hybrid", False):
+    model = prop.space.base
+    if isinstance(model, AbstractSystem) and model.hybrid:
         raise PamjaxInputError(f"{what}: this model is hybrid (stick-slip friction, e.g. KarnoppFriction), and sweeps "
                                "step without locating its mode switches; band a pamjax.simulate prediction with "
                                "pamjax.prediction_band instead, or map a model with CoulombViscousFriction")

@@ -20,6 +20,7 @@ from .._bands.maps import flow_surface_band, frequency_response_band, steady_sta
 from .._bands.uncertainty import PamjaxBandWarning, propagation, read_uncertainty
 from .._core.errors import PamjaxInputError
 from .._fit.parameters import split_path
+from .._systems.base import AbstractMuscleSystem, AbstractSystem
 
 DEFAULT_LEVEL = 0.95  # the two-sided 95 % band (z = 1.96), the usual default for confidence bands
 DEFAULT_SAMPLES = 200  # draws: the 2.5 % quantile then scatters by ~0.19 σ (docs/fitting.md)
@@ -184,7 +185,7 @@ def check_sweep(args, config, root, model):
     if getattr(args, "distributed", False):
         raise PamjaxInputError("pamjax sweep --band runs its band's sweeps in one process: drop --distributed (the "
                                "band of a map is a few sweeps of the map's size)")
-    if config["kind"] != "flow_surface" and getattr(model, "hybrid", False):
+    if config["kind"] != "flow_surface" and isinstance(model, AbstractSystem) and model.hybrid:
         raise PamjaxInputError("pamjax sweep --band: this model is hybrid (stick-slip friction, e.g. KarnoppFriction), "
                                "and sweeps step without locating its mode switches; band a run with pamjax simulate "
                                "--band instead")
@@ -211,7 +212,7 @@ def _one_map(config, model, uncertainty, options, axis):
         f = axis("frequencies", {"start": 0.05, "stop": 5.0, "num": 16, "log": True})
         kwargs = {k: float(sw[k]) for k in ("offset", "amplitude") if k in sw}
         kwargs.update({k: int(sw[k]) for k in ("settle_periods", "periods", "samples_per_period") if k in sw})
-        channels = ("position", "pressure") if hasattr(model, "muscle") else ("pressure",)  # sweep.csv's columns
+        channels = ("position", "pressure") if isinstance(model, AbstractMuscleSystem) else ("pressure",)  # sweep.csv
         band = frequency_response_band(uncertainty, f, model=model, channels=channels, progress=False, **kwargs,
                                        **solver, **options)
     return band

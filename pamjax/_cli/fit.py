@@ -202,7 +202,7 @@ def plot(path, result, experiments):
     columns = []
     for e in experiments:
         t = np.asarray(e.times)
-        split = float(e.split_time) if hasattr(e, "split_time") and float(e.split_time) < t[-1] else None
+        split = float(e.split_time) if e.split_time is not None and float(e.split_time) < t[-1] else None
         for c in e.channels:
             columns.append(dict(title=f"{e.name}: {c}", channel=c, unit=_UNITS.get(c, ""), t=t,
                                 data=np.asarray(e.data[c]), model=np.asarray(result.predictions[e.name][c]),

@@ -33,6 +33,7 @@ from .._core.errors import PamjaxInputError
 from .._core.fitting import field_units
 from .._core.units import ATMOSPHERE
 from .._sweep.maps import flow_surface, frequency_response, steady_state_map
+from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from . import bands, schema
 from .config import apply_set, build_model, read_toml
 from .kinds import axis as _axis
@@ -101,14 +102,14 @@ def build_sweep_model(config, root):
     kind = config["kind"]
     if "model" in config:
         model = build_model(config["model"], root)
-        valve = getattr(model, "valve", None)
-        if getattr(valve, "mode", None) == "exact":
+        valve = model.valve if isinstance(model, AbstractSystem) else None
+        if valve is not None and valve.exact_edges:
             raise PamjaxInputError("[model]: sweeps step on a fixed grid, which the exact-edge valve (mode = "
                                    "\"exact\") does not suit; use pamjax simulate for it, or a smoothed valve")
-        if kind == "flow_surface" and not hasattr(valve, "pwm_frequency"):
+        if kind == "flow_surface" and not (valve is not None and valve.switches):
             raise PamjaxInputError(f"kind = 'flow_surface' maps a switching valve; this model's valve is a "
                                    f"{type(valve).__name__}")
-        if kind != "flow_surface" and not hasattr(model, "initial_state"):
+        if kind != "flow_surface" and not isinstance(model, AbstractSystem):
             raise PamjaxInputError(f"kind = {kind!r} needs a system (a MuscleSystem, TankSystem, ...), got a "
                                    f"{type(model).__name__}")
         return model
@@ -208,7 +209,7 @@ def _run_one(config, model, progress, native_over):
     f = _axis(sw.get("frequencies", {"start": 0.05, "stop": 5.0, "num": 16, "log": True}), "frequencies")
     kwargs = {k: float(sw[k]) for k in ("offset", "amplitude") if k in sw}
     kwargs.update({k: int(sw[k]) for k in ("settle_periods", "periods", "samples_per_period") if k in sw})
-    channels = ("position", "pressure") if hasattr(model, "muscle") else ("pressure",)
+    channels = ("position", "pressure") if isinstance(model, AbstractMuscleSystem) else ("pressure",)
     fr = frequency_response(model, f, progress=progress, channels=channels, **kwargs, **options)
     cols = dict(frequency_hz=f)
     if "position" in channels:

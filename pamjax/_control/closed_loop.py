@@ -17,7 +17,7 @@ from .._papers import paper000
 from .._physics.signals import AbstractSignal, Step
 from .._solve.simulate import solve
 from .._solve.trajectory import RESULT_NONFINITE
-from .._systems.base import AbstractSystem
+from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from .controllers import AbstractController, reference_derivatives
 from .estimator import ExtendedKalmanFilter, LoopSensors, check_channels
 from .fixed_grid import period_on_grid
@@ -39,7 +39,7 @@ class ClosedLoopState(eqx.Module):
 
 
 def _check_plant(plant):
-    if not (isinstance(plant, AbstractSystem) and hasattr(plant, "muscle") and plant.command_range == (0.0, 1.0)
+    if not (isinstance(plant, AbstractMuscleSystem) and plant.command_range == (0.0, 1.0)
             and {"position", "velocity", "pressure"} <= set(plant.output_names)):
         raise PamjaxInputError(
             "ClosedLoop.plant must be a muscle driven by a duty ratio through a valve (position, velocity and "

@@ -22,7 +22,7 @@ from .._core.fitting import parameter
 from .._papers import datasheets, paper000
 from .._physics.signals import AbstractSignal
 from .._physics.smooth import smooth_sign
-from .._systems.base import AbstractSystem
+from .._systems.base import AbstractMuscleSystem, AbstractSystem
 
 
 # --- reference ------------------------------------------------------------------------------------------------------
@@ -152,17 +152,13 @@ class SlidingModeController(AbstractController):
 
     def __check_init__(self):
         model = self.model
-        if not (isinstance(model, AbstractSystem) and hasattr(model, "muscle") and model.valve.averaged):
+        # a muscle system's friction keeps eq. 8-9's coulomb_force and viscous_coefficient (`AbstractFriction`)
+        if not (isinstance(model, AbstractMuscleSystem) and model.valve.averaged):
+            valve = model.valve if isinstance(model, AbstractSystem) else None
             raise PamjaxInputError(
                 "SlidingModeController.model must be a muscle system with an averaged valve (paper 000 eq. 13, "
                 "AveragedValve), e.g. presets.mas10_system(valve='averaged'); got "
-                f"{type(model).__name__} with {type(getattr(model, 'valve', None)).__name__}"
-            )
-        friction = getattr(model, "friction", None)
-        if not (hasattr(friction, "coulomb_force") and hasattr(friction, "viscous_coefficient")):
-            raise PamjaxInputError(
-                "SlidingModeController.model.friction must have paper 000 eq. 8-9's coulomb_force and "
-                f"viscous_coefficient (e.g. CoulombViscousFriction), got {type(friction).__name__}"
+                f"{type(model).__name__} with {type(valve).__name__}"
             )
         for name in (
             "bandwidth",

@@ -62,7 +62,7 @@ def fingerprint(model, experiments, free, solver=None):
         fields = dataclasses.fields(e) if dataclasses.is_dataclass(e) else ()
         data = {f.name: _describe(getattr(e, f.name)) for f in fields if f.name in _DATA_FIELDS}
         settings = {f.name: _describe(getattr(e, f.name)) for f in fields if f.name not in _DATA_FIELDS}
-        experiment_prints.append({"name": str(getattr(e, "name", "")), "class": type(e).__qualname__,
+        experiment_prints.append({"name": str(e.name), "class": type(e).__qualname__,
                                   "data": _digest(data), "settings": _digest(settings)})
     return {
         "version": _VERSION,

@@ -63,7 +63,7 @@ def channel_errors(experiments, residuals):
             err = r * scale
             ident = used & ident_all
             valid = used & ~ident_all
-            given = scale if c in getattr(e, "noise_channels", ()) else None
+            given = scale if c in e.noise_channels else None
             span = float(np.ptp(data[used])) if np.any(used) else 0.0
             span = span or 1.0
             stats = {"range": span}

@@ -38,6 +38,10 @@ class AbstractExperiment(eqx.Module):
     experiments only through this contract.
 
     - `name`: unique among a fit's experiments; `channels`: the compared channels, in residual order.
+    - `noise_channels`: the channels whose scale is their noise level as the user gave it (the diagnostics then
+      measure the residuals against it; elsewhere they estimate the noise from the residuals).
+    - `split_time`: the time [s] after which the samples are held out for validation (the first sample's time or
+      later; after the last: none held out); None for an experiment without a time axis.
     - `check(model)`, `predict(model)`, `layout()`, `residuals_of(pred, part)` (abstract, below).
     - `bind(model)`: the experiment ready for tracing with `model` (e.g. its fixed grid sized); itself by default.
     - `sees(model)`: the parameter paths its predictions depend on (None, the default: all).
@@ -48,6 +52,8 @@ class AbstractExperiment(eqx.Module):
 
     name: eqx.AbstractVar[str]
     channels: eqx.AbstractVar[tuple]
+    noise_channels: eqx.AbstractVar[tuple]
+    split_time: eqx.AbstractVar[jax.Array | None]
 
     @abc.abstractmethod
     def check(self, model):

@@ -29,12 +29,15 @@ from .._core.errors import PamjaxInputError
 from .._core.units import MIN_ABSOLUTE_PA
 from .._physics.friction import AbstractFriction
 from .._physics.gas import AbstractRestriction, Air
+from .._physics.muscle import AbstractMuscle
+from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from .experiment import AbstractExperiment
 
 
 class Component(eqx.Module):
     """The part of a model an experiment looks at, by attribute path: `Component("valve.inflate")`,
-    `Component("friction")`; `Component("")` is the model itself."""
+    `Component("friction")`; `Component("")` is the model itself. The path is the user's (a parameter path's
+    prefix), walked generically, and what it ends at is checked against the contract `kind` it must keep."""
 
     path: str = eqx.field(static=True)
 
@@ -52,8 +55,8 @@ class Component(eqx.Module):
 
 
 def _air(model):
-    air = getattr(model, "air", None)
-    return Air() if air is None else air
+    """The system's air; the standard air for a component on its own (a muscle, a restriction, a friction)."""
+    return model.air if isinstance(model, AbstractSystem) else Air()
 
 
 def steady_friction_force(friction: AbstractFriction, velocity):
@@ -181,12 +184,20 @@ class ForceMapExperiment(AbstractExperiment):
         self.name = str(name)
         self.channels = ("force",)
 
+    @property
+    def noise_channels(self):
+        return ()  # `scale` is not declared the noise level: the diagnostics estimate it from the residuals
+
+    @property
+    def split_time(self):
+        return None  # no time axis: every point is fitted
+
     @staticmethod
     def _muscle(model):
-        return getattr(model, "muscle", model)
+        return model.muscle if isinstance(model, AbstractMuscleSystem) else model
 
     def check(self, model):
-        if not hasattr(self._muscle(model), "static_force"):
+        if not isinstance(self._muscle(model), AbstractMuscle):
             raise PamjaxInputError(f"{self.name}: the model has no muscle (needs model.muscle or a Muscle)")
 
     def predict(self, model):
@@ -208,6 +219,14 @@ class ForceMapExperiment(AbstractExperiment):
 class AbstractStaticExperiment(AbstractExperiment):
     """A fit experiment without a time axis: `predict(model)` gives one channel at the data points, the residual is
     (model − data)/scale, every point is compared and none is held out (the fitter's `layout`)."""
+
+    @property
+    def noise_channels(self):
+        return ()  # `scale` is not declared the noise level: the diagnostics estimate it from the residuals
+
+    @property
+    def split_time(self):
+        return None  # no time axis: every point is fitted
 
     @abc.abstractmethod
     def predict(self, model):
@@ -331,10 +350,9 @@ class LoopForceMapExperiment(AbstractStaticExperiment):
         _set_data(self, "force", f, scale, "N", name)  # slack points: see `residuals_of`
 
     def check(self, model):
-        for name in ("muscle", "friction"):
-            if not hasattr(model, name):
-                raise PamjaxInputError(f"{self.name}: the model needs a {name!r} (a muscle system), got "
-                                       f"{type(model).__name__}")
+        if not isinstance(model, AbstractMuscleSystem):
+            raise PamjaxInputError(f"{self.name}: the model needs a 'muscle' and a 'friction' (a muscle system, "
+                                   f"e.g. MuscleSystem), got {type(model).__name__}")
         super().check(model)
 
     def predict(self, model):
@@ -460,10 +478,9 @@ class HysteresisLoopExperiment(AbstractStaticExperiment):
         _set_data(self, "force", f, scale, "N", name)
 
     def check(self, model):
-        for name in ("muscle", "friction"):
-            if not hasattr(model, name):
-                raise PamjaxInputError(f"{self.name}: the model needs a {name!r} (a muscle system), got "
-                                       f"{type(model).__name__}")
+        if not isinstance(model, AbstractMuscleSystem):
+            raise PamjaxInputError(f"{self.name}: the model needs a 'muscle' and a 'friction' (a muscle system, "
+                                   f"e.g. MuscleSystem), got {type(model).__name__}")
         super().check(model)
 
     def predict(self, model):

@@ -22,6 +22,7 @@ import numpy as np
 
 from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError
+from .._fit.experiment import AbstractExperiment
 from .._fit.problem import physical_and_jacobian, residuals_and_jacobian
 from . import design_objective as obj
 from .design_result import DesignResult, PamjaxDesignWarning, constraints_report, worst_violation
@@ -51,7 +52,7 @@ def information(space, theta, experiments, predictions=False):
     `predictions`, also each experiment's predicted channels {channel: values at its samples}, read back from the
     same residuals (data + scale · residual: no further solve, no further compilation)."""
     model = space.with_values(physical_and_jacobian(space, device_array(theta))[0])  # compiled, not op by op
-    exps = tuple(e.bind(model) if hasattr(e, "bind") else e for e in experiments)
+    exps = tuple(e.bind(model) for e in experiments)
     layouts = [e.layout() for e in exps]
     mask = np.concatenate([used & ident for layout in layouts for _, _, _, used, ident in layout])
     residuals, jac = residuals_and_jacobian(space, device_array(theta), exps)
@@ -67,6 +68,17 @@ def information(space, theta, experiments, predictions=False):
             k += data.size
         preds.append(pred)
     return jac.T @ jac, preds
+
+
+def _experiments(value, argument):
+    """`prior` or `baseline` as a list of pamjax experiments (None stays None), or a `PamjaxInputError` naming it."""
+    if value is None:
+        return None
+    value = list(value) if isinstance(value, (list, tuple)) else [value]
+    for e in value:
+        if not isinstance(e, AbstractExperiment):
+            raise PamjaxInputError(f"{argument} must be pamjax experiments (Experiment, ...), got {type(e).__name__}")
+    return value
 
 
 def _floor(prior_info, base_info, margin):
@@ -296,6 +308,7 @@ def design_experiment(
     **Returns:** a `DesignResult` (`signal()`, `to_csv`, `to_json`, `plot`, `table`).
     """
     t_start = time.perf_counter()
+    prior, baseline = _experiments(prior, "prior"), _experiments(baseline, "baseline")
     setup = set_up(model, free, duration, noise=noise, channels=channels, start=start, build=build, rate=rate,
                    criterion=criterion, subset=subset, duty_band=duty_band, stroke_margin=stroke_margin,
                    max_pressure=max_pressure, max_duty_step=max_duty_step, parametrisation=parametrisation,

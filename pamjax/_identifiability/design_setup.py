@@ -16,7 +16,7 @@ from .._fit.experiment import Experiment
 from .._fit.parameters import ParameterSpace, strong_types
 from .._fit.recording import Recording
 from .._physics.signals import AbstractSignal, Sampled, Triangle
-from .._systems.base import AbstractSystem
+from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from . import design_objective as obj
 
 # Defaults and their sources.
@@ -80,16 +80,15 @@ def _validate(model, free, duration, noise, channels, band, criterion, subset, p
     start = dict(start)
     channels = tuple(channels)
     system = built_system(model, build, start, channels)
-    valve = getattr(system, "valve", None)
-    frequency = getattr(valve, "pwm_frequency", None)
-    if period is None and frequency is None:
+    valve_period = system.valve.period  # a switching valve's PWM period (None for a continuous one)
+    if period is None and valve_period is None:
         raise PamjaxInputError("period: the model's valve has no pwm_frequency; give the PWM period [s] the bench's "
                                "PWM driver latches the duty with: period=0.02 in pamjax.design_experiment, "
                                "`period = 0.02` in the [design] table of a config")
     if period is not None and not (isinstance(period, (int, float)) and not isinstance(period, bool)
                                    and math.isfinite(period) and period > 0):
         raise PamjaxInputError(f"period must be the PWM period, a number > 0 [s] (e.g. 0.02 at 50 Hz), got {period!r}")
-    period = float(1.0 / float(frequency)) if period is None else float(period)
+    period = float(valve_period) if period is None else float(period)
     if duration < period * (1.0 - 1e-9):
         raise PamjaxInputError(f"duration {duration!r} s is shorter than one PWM period ({period:g} s): a design sets "
                                f"one duty per period, so it needs at least one (duration >= {period:g} s; designs that "
@@ -144,18 +143,16 @@ def _validate(model, free, duration, noise, channels, band, criterion, subset, p
 def _check_noise_scale(system, noise, channels):
     """A noise level no sensor of this system can have: a position noise of a tenth of the whole stroke or more, a
     pressure noise of a tenth of the supply's range or more (a unit slip: 0.1 meant in mm)."""
-    muscle = getattr(system, "muscle", None)
-    if "position" in channels and muscle is not None:
-        stroke = float(muscle.max_position) - float(muscle.min_position)
+    if "position" in channels and isinstance(system, AbstractMuscleSystem):
+        stroke = float(system.muscle.max_position) - float(system.muscle.min_position)
         if float(noise["position"]) >= 0.1 * stroke:
             raise PamjaxInputError(f"noise['position'] = {noise['position']!r} m is "
                                    f"{float(noise['position']) / stroke:.2g} of the muscle's whole stroke "
                                    f"({1e3 * stroke:.0f} mm): the noise is a standard deviation in metres (0.1 mm = "
                                    "1e-4)")
-    valve = getattr(system, "valve", None)
     try:
-        span = float(valve.supply()) - float(system.air.atmospheric_pressure)
-    except (AttributeError, PamjaxInputError):
+        span = float(system.valve.supply()) - float(system.air.atmospheric_pressure)
+    except PamjaxInputError:  # a valve without a supply pressure of its own (the averaged valve)
         span = None
     if "pressure" in channels and span is not None and float(noise["pressure"]) >= 0.1 * span:
         raise PamjaxInputError(f"noise['pressure'] = {noise['pressure']!r} Pa is {float(noise['pressure']) / span:.2g} "
@@ -198,7 +195,7 @@ def switching_thresholds(valve):
     first a period's on-pulse is too short to open it, above the last its off-pulse too short to close it (paper
     000's 10 % and 90 % at 50 Hz with 2 ms switching). Located on nested grids to 1e-12; () for a valve that does not
     switch (an averaged valve)."""
-    if not getattr(valve, "switches", False):
+    if not valve.switches:
         return ()
     found = []
     for gate in (0, 1):
@@ -254,17 +251,16 @@ def static_force_along(system, position, pressure):
 
 
 def _has_force_law(system):
-    return hasattr(getattr(system, "muscle", None), "static_force")
+    return isinstance(system, AbstractMuscleSystem)
 
 
 def stroke_limits(model, start, margin):
     """(lo, hi) positions [m] a design may reach: the muscle's stops less `margin`, or as far as the start position
     itself where that lies nearer a stop (a payload hanging at rest within the margin: the run may return there and
     no duty can avoid it). None for a model without a muscle."""
-    muscle = getattr(model, "muscle", None)
-    if muscle is None:
+    if not isinstance(model, AbstractMuscleSystem):
         return None
-    lo, hi = float(muscle.min_position) + margin, float(muscle.max_position) - margin
+    lo, hi = float(model.muscle.min_position) + margin, float(model.muscle.max_position) - margin
     x0 = float(np.asarray(getattr(_start_state(model, dict(start or {})), "position", np.nan)))
     return (min(lo, x0), max(hi, x0)) if math.isfinite(x0) else (lo, hi)
 
@@ -341,7 +337,7 @@ def set_up(model, free, duration, *, noise, channels, start, build, rate, criter
         float(rate), stroke_margin, max_pressure, max_duty_step, period, build, start, duty_margin, min_force)
     model = strong_types(model)
     space = ParameterSpace(model, free)
-    thresholds = switching_thresholds(getattr(system, "valve", None))
+    thresholds = switching_thresholds(system.valve)
     margin = (DUTY_MARGIN_FRACTION * min(min(t, 1.0 - t) for t in thresholds) if thresholds else 0.0) \
         if duty_margin == "auto" else float(duty_margin)
     *band, windows = duty_limits(tuple(float(b) for b in duty_band), thresholds, margin)
@@ -350,7 +346,7 @@ def set_up(model, free, duration, *, noise, channels, start, build, rate, criter
     min_force = None if (min_force is None or min_force is False or not force_law) else float(min_force)
     y0 = _start_state(system, start)
     limits = None
-    if "position" in channels and getattr(system, "muscle", None) is not None:
+    if "position" in channels and isinstance(system, AbstractMuscleSystem):
         lo, hi = float(system.muscle.min_position), float(system.muscle.max_position)
         if lo + stroke_margin >= hi - stroke_margin:
             raise PamjaxInputError(

@@ -40,6 +40,8 @@ import numpy as np
 
 from .._core.errors import PamjaxInputError, require_float64
 from .._core.paths import writable_path
+from .._fit.experiment import AbstractExperiment
+from .._fit.fit import FitResult
 from .._fit.parameters import ParameterSpace
 from .._fit.problem import Problem
 
@@ -342,18 +344,21 @@ def _not_a_minimum(jobs, done, space, labels, values):
 
 def _validate(result, names, experiments, level, max_points, span, workers):
     require_float64("pamjax.profile_likelihood")
-    if not hasattr(result, "labels") or not hasattr(result, "paths"):
+    if not isinstance(result, FitResult):
         raise PamjaxInputError(f"result must be a pamjax.FitResult, got {type(result)}")
-    experiments = getattr(result, "experiments", None) if experiments is None else experiments
+    experiments = result.experiments if experiments is None else experiments
     if experiments is None:
         raise PamjaxInputError("experiments: this FitResult does not carry its experiments (it was read from JSON); "
                                "pass the experiments it was fitted to")
-    if getattr(result, "model", None) is None:
+    experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
+    if not all(isinstance(e, AbstractExperiment) for e in experiments):
+        raise PamjaxInputError(f"experiments must be pamjax experiments, got {[type(e).__name__ for e in experiments]}")
+    if result.model is None:
         raise PamjaxInputError("result has no fitted model (read from JSON): profile the FitResult `fit` returned")
-    status = getattr(result, "status", "converged")
+    status = result.status
     if status not in PROFILED_STATUSES:
         raise PamjaxInputError(
-            f"the fit stopped with status {status!r} ({getattr(result, 'message', '')}): its end point is not a "
+            f"the fit stopped with status {status!r} ({result.message}): its end point is not a "
             "minimum of the cost, so every profile would fall below it and read as non-identifiable; continue the fit "
             "to convergence first (pamjax.fit(..., checkpoint=..., resume=...) with a larger max_steps; on the command "
             "line raise [fit] max_steps and run pamjax fit CONFIG --out FOLDER --resume --profile)")
@@ -408,7 +413,7 @@ def profile_likelihood(
     t_start = time.perf_counter()
     space = ParameterSpace(result.model, result.paths)
     theta = np.asarray(space.initial_theta())
-    exps = tuple(e.bind(result.model) if hasattr(e, "bind") else e for e in experiments)
+    exps = tuple(e.bind(result.model) for e in experiments)
     ev = _Evaluator(space, exps, theta)
     threshold = chi2_quantile_1dof(level)
     settings = dict(threshold=threshold, overshoot=1.5, max_points=max_points, span=float(span), first_step=0.6,

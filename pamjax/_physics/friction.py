@@ -22,9 +22,21 @@ class AbstractFriction(eqx.Module):
     A *hybrid* friction (`hybrid = True`, e.g. `KarnoppFriction`) has discrete modes (stuck / sliding) held in its
     state `z` and switched at events; the systems that use it expose those events to the fixed-grid integrator
     (`pamjax._solve.grid`), which locates them inside the step. Smooth frictions have `hybrid = False`.
+
+    What the workflows ask of every friction besides its force: paper 000's eq. 8-9 levels of steady sliding,
+    `coulomb_force` F_c [N] (the level at vanishing speed) and `viscous_coefficient` C_f [N s/m] (the slope at speed),
+    which a controller compensates (`SlidingModeController`), and `smoothing_width()`.
     """
 
+    coulomb_force: eqx.AbstractVar[jax.Array]
+    viscous_coefficient: eqx.AbstractVar[jax.Array]
     hybrid = False
+
+    def smoothing_width(self):
+        """The velocity [m/s] over which the friction's direction is smoothed (a smooth sign or |v| of that width:
+        `velocity_width`), whose F_c/width is a stiff rate on a light payload (a solver's hint names it); None for a
+        friction that switches direction at events instead (a hybrid one)."""
+        return None
 
     def is_stuck(self, z):
         """Whether the friction holds the payload still (a hybrid friction's stuck mode); False for smooth ones."""
@@ -73,6 +85,9 @@ class CoulombViscousFriction(AbstractFriction):
         check_nonnegative(self.viscous_coefficient, "CoulombViscousFriction.viscous_coefficient")
         check_positive(self.velocity_width, "CoulombViscousFriction.velocity_width")
 
+    def smoothing_width(self):
+        return self.velocity_width
+
     def force(self, v, z):
         del z
         return self.coulomb_force * smooth_sign(v, self.velocity_width) + self.viscous_coefficient * v
@@ -103,6 +118,9 @@ class BristleFriction(AbstractFriction):
         check_nonnegative(self.bristle_damping, "BristleFriction.bristle_damping")
         check_nonnegative(self.viscous_coefficient, "BristleFriction.viscous_coefficient")
         check_positive(self.velocity_width, "BristleFriction.velocity_width")
+
+    def smoothing_width(self):
+        return self.velocity_width
 
     def initial_state(self, velocity=0.0):
         return jnp.zeros(())  # undeflected bristles

@@ -93,6 +93,9 @@ class BoucWenFriction(AbstractFriction):
         check_nonnegative(self.viscous_coefficient, "BoucWenFriction.viscous_coefficient")
         check_positive(self.velocity_width, "BoucWenFriction.velocity_width")
 
+    def smoothing_width(self):
+        return self.velocity_width
+
     def initial_state(self, velocity=0.0):
         """At rest: the virgin state z = 0, halfway between the branches (a fit may start elsewhere: y0); a run that
         starts moving (a recording started mid-run) on the branch of its velocity (`steady_state`)."""

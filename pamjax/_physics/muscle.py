@@ -210,7 +210,33 @@ class BraidVolume(AbstractVolume):
         return length * (self.strand_length**2 - length**2) / (4.0 * jnp.pi * self.turns**2)
 
 
-class Muscle(eqx.Module):
+class AbstractMuscle(eqx.Module):
+    """What the workflows ask of a muscle (a force map, a controller, an experiment design, a bench's stops): its
+    stroke limits `min_position`, `max_position` [m] (x, positive = contraction), its `static_force` (the force law
+    before the slack, may be negative) and `force` [N] at ABSOLUTE pressure, its `volume` [m³] and `volume_slope`
+    dV/dx [m²]. `Muscle` is pamjax's."""
+
+    min_position: eqx.AbstractVar[jax.Array]
+    max_position: eqx.AbstractVar[jax.Array]
+
+    @abc.abstractmethod
+    def static_force(self, x, pressure, air):
+        """The force law [N] at displacement `x` [m] and ABSOLUTE `pressure` [Pa], before the slack (may be < 0)."""
+
+    @abc.abstractmethod
+    def force(self, x, pressure, air):
+        """The contractile force [N] ≥ 0 at displacement `x` [m] and ABSOLUTE `pressure` [Pa]."""
+
+    @abc.abstractmethod
+    def volume(self, x):
+        """The chamber volume [m³] at displacement `x` [m]."""
+
+    @abc.abstractmethod
+    def volume_slope(self, x):
+        """dV/dx [m²] at displacement `x` [m]."""
+
+
+class Muscle(AbstractMuscle):
     """A pneumatic muscle: force law + volume + stroke limits.
 
     `force(x, p, air)` = smooth_relu(F_static(x, p − p_atm), `slack_width`): a muscle pulls but cannot push.

@@ -29,6 +29,11 @@ class AbstractSignal(eqx.Module):
         """The concrete (min, max) of the command over all times, as floats: checked against the valve's
         `command_range` before any solve."""
 
+    def cycle_frequency(self):
+        """The frequency [Hz] at which a periodic signal repeats (its `frequency`; an array where swept), which a
+        fixed step must resolve (a sweep's scheme takes it); None for a signal that does not repeat."""
+        return None
+
 
 class Constant(AbstractSignal):
     """u(t) = `value`."""
@@ -79,6 +84,9 @@ class Triangle(AbstractSignal):
         check_finite(self.high, "Triangle.high")
         check_positive(self.frequency, "Triangle.frequency")
 
+    def cycle_frequency(self):
+        return self.frequency
+
     def __call__(self, t):
         phase = t * self.frequency - jnp.floor(t * self.frequency)  # in [0, 1)
         shape = 1.0 - jnp.abs(2.0 * phase - 1.0)  # 0 → 1 → 0
@@ -102,6 +110,9 @@ class Sine(AbstractSignal):
         check_finite(self.amplitude, "Sine.amplitude")
         check_positive(self.frequency, "Sine.frequency")
         check_finite(self.phase, "Sine.phase")
+
+    def cycle_frequency(self):
+        return self.frequency
 
     def __call__(self, t):
         return self.offset + self.amplitude * jnp.sin(2 * jnp.pi * self.frequency * t + self.phase)
@@ -161,6 +172,9 @@ class SquareWave(AbstractSignal):
         check_finite(self.high, "SquareWave.high")
         check_positive(self.frequency, "SquareWave.frequency")
         check_positive(self.edge_width, "SquareWave.edge_width")
+
+    def cycle_frequency(self):
+        return self.frequency
 
     def __call__(self, t):
         period = 1.0 / self.frequency

@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._systems.base import AbstractMuscleSystem
 from .scaled import scaled
 
 BASE_MAX_STEPS = 200_000  # the budget of runs up to ~60 s with a 50 Hz PWM valve (Tsit5 takes ~31 steps per period)
@@ -65,10 +66,10 @@ def _fastest_mode(system, signal, t0, y0):
 
 def _stiffness_cause(system):
     """A phrase naming the parameters behind a stiff payload, for systems that carry them."""
-    mass = getattr(system, "payload_mass", None)
-    friction = getattr(system, "friction", None)
-    force, width = getattr(friction, "coulomb_force", None), getattr(friction, "velocity_width", None)
-    if mass is None or force is None or width is None:
+    if not isinstance(system, AbstractMuscleSystem):
+        return ""
+    mass, force, width = system.payload_mass, system.friction.coulomb_force, system.friction.smoothing_width()
+    if width is None:
         return ""
     rate = float(force) / (float(width) * float(mass))
     return (f"; here the payload's motion: Coulomb friction F_c = {float(force):g} N smoothed over velocity_width = "

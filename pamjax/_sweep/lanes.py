@@ -143,8 +143,9 @@ def run_chunk(system, signal, y0, values, ts, plan, config, mesh=None):
 def _signal_frequency(signal, values, plan):
     """The highest frequency [Hz] of the (possibly swept) signal, or None."""
     freqs = []
-    if isinstance(signal, AbstractSignal) and hasattr(signal, "frequency"):
-        freqs.append(float(np.max(np.asarray(signal.frequency))))
+    frequency = signal.cycle_frequency() if isinstance(signal, AbstractSignal) else None
+    if frequency is not None:
+        freqs.append(float(np.max(np.asarray(frequency))))
     for key, (where, parts) in zip(plan.keys, plan.targets):
         if parts and parts[-1] == "frequency" and where in ("signal", "factory"):
             freqs.append(float(np.max(values[key])))

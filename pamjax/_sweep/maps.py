@@ -10,6 +10,7 @@ from .._core.errors import PamjaxInputError, check_positive
 from .._physics.signals import Constant, Sine
 from .._physics.valves.averaged import cycle_averaged_flow
 from .._physics.valves.base import AbstractSwitchingValve
+from .._systems.base import AbstractSystem
 from .reductions import AbstractReduction, WindowMean
 from .sweep import sweep
 
@@ -39,7 +40,7 @@ def steady_state_map(system, commands, *, horizon=5.0, window=1.0, sample_interv
     if not 0 < window <= horizon:
         raise PamjaxInputError(f"window must lie in (0, horizon = {horizon}] s, got {window}")
     if sample_interval is None:
-        valve = getattr(system, "valve", None)
+        valve = system.valve if isinstance(system, AbstractSystem) else None
         sample_interval = (float(valve.period) / SAMPLES_PER_PWM_PERIOD if valve is not None and valve.switches
                            else SMOOTH_SAMPLE_INTERVAL)
     check_positive(sample_interval, "sample_interval")

@@ -11,7 +11,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._physics.friction import AbstractFriction
 from .._physics.gas import Air
+from .._physics.muscle import AbstractMuscle
 from .._physics.valves.base import AbstractControlElement
 
 
@@ -21,7 +23,10 @@ class AbstractSystem(eqx.Module):
     What the workflows ask of a system (`simulate`, `sweep`, `fit`, `linearise`, the controllers):
 
     - `valve`: the element its command drives (a valve, or a regulator for paper 001's systems): its command range,
-      whether it switches, its period, edges and max step (`AbstractControlElement`).
+      whether it switches, its period, edges and max step (`AbstractControlElement`); the first of `actuators`.
+    - `actuators`: every element its command drives, by what it is (its field's name): {"valve": ...} for a valve's
+      system, {"regulator": ...} for a regulator's, {"flexor_regulator": ..., "extensor_regulator": ...} for the
+      antagonistic joint, whose command drives both.
     - `command_range`: the valid commands (the valve's).
     - `output_names`: the channels `outputs` returns, in order (a class attribute).
     - `state_scale()`, `initial_state(...)`, `vector_field(...)`, `outputs(...)` (abstract, below).
@@ -34,6 +39,12 @@ class AbstractSystem(eqx.Module):
     valve: eqx.AbstractVar[AbstractControlElement]
     air: eqx.AbstractVar[Air]
     output_names = ()
+
+    @property
+    def actuators(self):
+        """{name: element} of every control element the command drives (`valve` first), each named by the field that
+        holds it."""
+        return {"valve": self.valve}
 
     @property
     def command_range(self):
@@ -71,11 +82,30 @@ class AbstractSystem(eqx.Module):
         return state
 
     def with_supply_pressure(self, pressure):
-        """This system with its valve fed at `pressure` [Pa abs] (`AbstractControlElement.with_supply_pressure`)."""
-        return eqx.tree_at(lambda s: s.valve, self, self.valve.with_supply_pressure(pressure))
+        """This system with every one of its `actuators` fed at `pressure` [Pa abs]
+        (`AbstractControlElement.with_supply_pressure`)."""
+        elements = tuple(self.actuators.values())
+        return eqx.tree_at(lambda s: tuple(s.actuators.values()), self,
+                           tuple(e.with_supply_pressure(pressure) for e in elements))
 
     def discrete_step(self, t, state, command, sample_time):
         """One explicit Euler step of `sample_time` [s] from `state` at `t` [s] with `command` held (paper 000 eq. 18
         for every state); systems whose discrete-time model differs override it."""
         rate = self.vector_field(t, state, command)
         return jax.tree_util.tree_map(lambda y, dy: y + sample_time * dy, state, rate)
+
+
+class AbstractMuscleSystem(AbstractSystem):
+    """A system that moves one muscle against a payload (paper 000's plant, paper 001's regulated muscle): what the
+    muscle-specific workflows ask of it besides the system contract (a closed loop's stroke, the sliding-mode
+    controller's model, an experiment design's stroke and force limits, a force map, a solver's stiffness hint).
+
+    - `muscle`: its `AbstractMuscle` (stroke limits, force law, volume).
+    - `friction`: the `AbstractFriction` on its motion.
+    - `payload_mass` [kg]: the mass it moves.
+
+    Its outputs include `position`, `velocity` and `pressure`."""
+
+    muscle: eqx.AbstractVar[AbstractMuscle]
+    friction: eqx.AbstractVar[AbstractFriction]
+    payload_mass: eqx.AbstractVar[jax.Array]

@@ -93,6 +93,11 @@ class AntagonisticJoint(AbstractSystem):
     def valve(self):
         return self.flexor_regulator
 
+    @property
+    def actuators(self):
+        """Both regulators: the command is the pair of their reference voltages (V_f, V_e)."""
+        return {"flexor_regulator": self.flexor_regulator, "extensor_regulator": self.extensor_regulator}
+
     def contractions(self, angle):
         """(x_f, x_e) [m] at joint angle [rad]."""
         return self.pre_contraction + self.pulley_radius * angle, self.pre_contraction - self.pulley_radius * angle

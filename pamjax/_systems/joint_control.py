@@ -194,6 +194,9 @@ class GaitAngle(AbstractSignal):
     def __check_init__(self):
         check_positive(self.frequency, "GaitAngle.frequency")
 
+    def cycle_frequency(self):
+        return self.frequency
+
     def __call__(self, t):
         w = 2 * jnp.pi * self.frequency * t
         return self.offset + self.first * jnp.sin(w) + self.second * jnp.sin(2 * w + 1.0)
@@ -244,6 +247,10 @@ class JointControlLoop(AbstractSystem):
     @property
     def valve(self):
         return self.joint.valve
+
+    @property
+    def actuators(self):
+        return self.joint.actuators
 
     @property
     def air(self):

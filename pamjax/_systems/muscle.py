@@ -16,7 +16,7 @@ from .._physics.friction import AbstractFriction, CoulombViscousFriction
 from .._physics.gas import Air
 from .._physics.muscle import EndStops, Muscle, stroke_root
 from .._physics.valves.base import AbstractValve
-from .base import AbstractSystem
+from .base import AbstractMuscleSystem
 
 
 class MuscleState(eqx.Module):
@@ -29,7 +29,7 @@ class MuscleState(eqx.Module):
     friction: jax.Array | None = None
 
 
-class MuscleSystem(AbstractSystem):
+class MuscleSystem(AbstractMuscleSystem):
     """Paper 000's plant: a muscle lifting a payload against gravity, fed by a valve.
 
     ṗ = n/V(x) (R T ṁ(t, u, p) − p V'(x) ẋ)                      (eq. 15)

@@ -23,7 +23,7 @@ from .._physics.friction import AbstractFriction, CoulombViscousFriction
 from .._physics.gas import Air
 from .._physics.muscle import EndStops, Muscle, stroke_root
 from .._physics.regulator import AbstractRegulator, paper001_air
-from .base import AbstractSystem
+from .base import AbstractMuscleSystem, AbstractSystem
 
 
 class RegulatorSystem(AbstractSystem):
@@ -52,6 +52,10 @@ class RegulatorSystem(AbstractSystem):
     @property
     def valve(self):
         return self.regulator
+
+    @property
+    def actuators(self):
+        return {"regulator": self.regulator}
 
     def initial_state(self, pressure=None):
         """Outlet at rest at `pressure` [Pa abs]; atmospheric by default."""
@@ -130,7 +134,7 @@ def stiffness_rate(muscle: Muscle, x, velocity, pressure, pressure_rate):
     return dv * pressure_rate + d2v * velocity * pressure
 
 
-class RegulatedMuscleSystem(AbstractSystem):
+class RegulatedMuscleSystem(AbstractMuscleSystem):
     """Paper 001's PPRV-PAM set-up: a regulator feeding a muscle that lifts a hanging load.
 
     ṗ and the delivered flow from the regulator with V = V(x), V̇ = V'(x) ẋ (eq. 3, 4);
@@ -162,6 +166,10 @@ class RegulatedMuscleSystem(AbstractSystem):
     @property
     def valve(self):
         return self.regulator
+
+    @property
+    def actuators(self):
+        return {"regulator": self.regulator}
 
     def initial_state(self, pressure=None, position=None, velocity=0.0):
         """At rest: `pressure` [Pa abs] (atmospheric by default), `position` [m] (default: the load equilibrium)."""

@@ -16,7 +16,8 @@ from ..gas import Air
 
 class AbstractControlElement(eqx.Module):
     """The element a system's command drives (control engineering's final control element): a valve or a
-    proportional pressure regulator. A system exposes it as `system.valve`.
+    proportional pressure regulator. A system exposes each of its elements in `system.actuators` (named by the field
+    that holds it), the first as `system.valve`.
 
     What the workflows ask of it:
 

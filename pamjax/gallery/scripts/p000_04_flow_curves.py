@@ -39,12 +39,17 @@ def curve(restriction, p_up, ratios):
     return np.asarray(flow_curve(restriction, jnp.asarray(p_up, dtype=float), jnp.asarray(ratios, dtype=float), AIR))
 
 
+def restriction_of(valve, path):
+    """The valve's restriction on `path` ("inflate": 1→2, "exhaust": 2→3), as `FlowCurveExperiment` names it."""
+    return {"inflate": valve.inflate, "exhaust": valve.exhaust}[path]
+
+
 def flow_points(valve, n, rng):
     """ISO 6358 test points (p_up, p_down, ṁ + noise) per path of `valve`: `n` downstream pressures from atmosphere
     to 0.98 p_up."""
     data = {}
     for path in ("inflate", "exhaust"):
-        restriction = getattr(valve, path)
+        restriction = restriction_of(valve, path)
         rows = []
         for p_up in UPSTREAM:
             ratios = np.linspace(float(AIR.atmospheric_pressure) / p_up, 0.98, n)
@@ -65,7 +70,8 @@ def eq11_transcription(valve):
             ratios = np.linspace(0.0, 0.999, 201)  # the figure's curves' size: the same compiled program
             choked = cv * 3.14e-6 * p_up / np.sqrt(r * t)  # eq. 11, sonic branch, A = 3.14e-6 m² (Table 1)
             printed = choked * np.sqrt(1 - np.clip((ratios - b) / (1 - b), 0.0, None) ** 2)
-            worst = max(worst, float(np.max(np.abs(curve(getattr(valve, path), p_up, ratios) - printed)) / choked))
+            error = np.max(np.abs(curve(restriction_of(valve, path), p_up, ratios) - printed))
+            worst = max(worst, float(error) / choked)
     return worst
 
 
@@ -102,8 +108,8 @@ def run(out, quick=False):
         for k, pu in enumerate(UPSTREAM):
             sel = p_up == pu
             ax.plot(p_down[sel] / pu, flow[sel] * 1e3, "o", color=f"C{k}", ms=4, label=f"{pu / 1e6:.1f} MPa points")
-            ax.plot(rr, curve(getattr(res11.model, path), pu, rr) * 1e3, "-", color=f"C{k}")
-            ax.plot(rr, curve(getattr(res10.model, path), pu, rr) * 1e3, ":", color=f"C{k}")
+            ax.plot(rr, curve(restriction_of(res11.model, path), pu, rr) * 1e3, "-", color=f"C{k}")
+            ax.plot(rr, curve(restriction_of(res10.model, path), pu, rr) * 1e3, ":", color=f"C{k}")
         name = "1→2 (inflate)" if path == "inflate" else "2→3 (exhaust)"
         ax.set(title=f"Fig. 7, path {name}: eq. 11 (solid), eq. 10 (dotted)", xlabel="p_down / p_up [-]")
     axes[0].set_ylabel("mass flow [g/s]")
