@@ -182,7 +182,7 @@ def propagation(result, model=None, *, check_values=False):
     whose values differ from the fit's is refused instead (the CLI: a model file and the covariance it carries)."""
     unc = FitUncertainty.of(result)
     if model is None:
-        model = getattr(result, "model", None)
+        model = result.model if isinstance(result, FitResult) else None  # a FitUncertainty carries none
         if model is None and isinstance(result, (str, pathlib.Path)):
             from .._files.model_file import load_model
 
