@@ -6,7 +6,6 @@ Force laws take the GAUGE pressure p_g = p − p_atm [Pa] (paper 000 eq. 7: p_ma
 """
 
 import abc
-from typing import Self
 
 import equinox as eqx
 import jax
@@ -196,7 +195,7 @@ class BraidVolume(AbstractVolume):
 
     @classmethod
     def from_datasheet(cls, nominal_length: RealScalarLike, diameter: RealScalarLike,
-                       max_contraction: RealScalarLike) -> Self:
+                       max_contraction: RealScalarLike) -> "BraidVolume":
         """The braid of a muscle of `nominal_length` L0 [m] and inner `diameter` D0 [m] at L0 whose eq. 5 force
         vanishes at `max_contraction` ε_max [-] (cos²θ = 1/3 there): b_s = √3 (1 − ε_max) L0 (eq. 1),
         n_s = b_s sin θ0 / (π D0) (eq. 2), cos θ0 = L0/b_s. For the MAS-10-300 (0.3 m, 10 mm, 25 %, datasheet):

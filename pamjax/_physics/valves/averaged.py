@@ -1,7 +1,5 @@
 """Paper 000's averaged ("analytic") valve, eq. 13, and the cycle average of a switching valve it is fitted to."""
 
-from typing import Self
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -38,7 +36,7 @@ class AveragedValve(AbstractValve):
         check_finite(self.coefficients, "AveragedValve.coefficients")
 
     @classmethod
-    def from_m(cls, m: RealVectorLike) -> Self:
+    def from_m(cls, m: RealVectorLike) -> "AveragedValve":
         """Build from the paper's flat m1…m9 (SI units, gauge pressure in Pa)."""
         m = jnp.asarray(m)
         if m.shape != (9,):
