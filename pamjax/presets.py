@@ -39,12 +39,15 @@ values (a0 = 629.7, k0 = 105 N, k1 = 1400 N/m, v0 = 2.6e-5 m³, v1 = 1.9e-4 m²,
 values here are what a fit to that data must close.
 """
 
+from typing import Any, Literal
+
 import jax.numpy as jnp
 
 from ._core.arrays import device_array
+from ._core.custom_types import RealScalarLike
 from ._core.errors import PamjaxInputError
 from ._papers import datasheets, paper000, paper001
-from ._physics.friction import BristleFriction, CoulombViscousFriction, KarnoppFriction
+from ._physics.friction import AbstractFriction, BristleFriction, CoulombViscousFriction, KarnoppFriction
 from ._physics.gas import (
     AbstractRestriction,
     Air,
@@ -57,6 +60,7 @@ from ._physics.hysteresis import BoucWenFriction
 from ._physics.muscle import CubicVolume, LinearVolume, Muscle, PolynomialForce
 from ._physics.regulator import paper001_air
 from ._physics.valves.averaged import AveragedValve
+from ._physics.valves.base import AbstractValve
 from ._physics.valves.onoff import OnOffValve
 from ._systems.muscle import MuscleSystem
 from ._systems.tank import TankSystem
@@ -110,13 +114,14 @@ PAPER001_CHARGING_TABLE = paper001.CHARGING_TABLE
 PAPER001_DISCHARGING_TABLE = paper001.DISCHARGING_TABLE
 
 
-def mas10_silencer():
+def mas10_silencer() -> PorousRestriction:
     """The exhaust silencer of paper 000's valve tests: a porous element with the derived permeance (docstring
     item 5; an assumption, paper 000 gives no silencer data)."""
     return PorousRestriction(MAS10_SILENCER_PERMEANCE)
 
 
-def mas10_valve(mode="smooth", silencer=False, **kwargs):
+def mas10_valve(mode: Literal["smooth", "exact"] = "smooth", silencer: bool | AbstractRestriction | None = False,
+                **kwargs: Any) -> OnOffValve:
     """Festo MHE2 3/2 on/off valve with paper 000's Table 1 paths, 0.65 MPa abs supply, 50 Hz, 2 ms delays.
 
     `silencer`: False (default, as Table 1 was identified), True (port 3 → `mas10_silencer()`, docstring item 5) or
@@ -142,12 +147,12 @@ def mas10_valve(mode="smooth", silencer=False, **kwargs):
     return OnOffValve(**fields)
 
 
-def mas10_averaged_valve():
+def mas10_averaged_valve() -> AveragedValve:
     """Eq. 13 averaged valve with the derived m1…m9 (module docstring, item 3)."""
     return AveragedValve(device_array(MAS10_AVERAGED_VALVE))
 
 
-def mas10_muscle():
+def mas10_muscle() -> Muscle:
     """Festo MAS-10-300 with eq. 7 force and eq. 14 linear volume (derived values, module docstring)."""
     return Muscle(
         force_law=PolynomialForce(
@@ -161,6 +166,9 @@ def mas10_muscle():
         min_position=MAS10_MIN_POSITION,
         max_position=MAS10_MAX_POSITION,
     )
+
+
+ValveChoice = Literal["pwm", "smooth", "exact", "averaged"]  # paper 000's valve, switching or averaged
 
 
 def _valve(valve, silencer=False):
@@ -182,7 +190,10 @@ def _valve(valve, silencer=False):
     return valve
 
 
-def mas10_system(valve="pwm", friction="coulomb", payload_mass=PAYLOAD_MASS, silencer=False):
+def mas10_system(valve: ValveChoice | AbstractValve = "pwm",
+                 friction: Literal["coulomb", "karnopp", "bristle", "bouc_wen"] | AbstractFriction = "coulomb",
+                 payload_mass: RealScalarLike = PAYLOAD_MASS,
+                 silencer: bool | AbstractRestriction | None = False) -> MuscleSystem:
     """Paper 000's plant: MAS-10-300 lifting `payload_mass` (9.6 kg) through the MHE2 valve.
 
     **Arguments:** `valve`: "pwm" (smoothed switching), "exact" (exact-edge reference), "averaged" (eq. 13) or a
@@ -209,13 +220,14 @@ def mas10_system(valve="pwm", friction="coulomb", payload_mass=PAYLOAD_MASS, sil
     )
 
 
-def mas10_tank_system(valve="pwm", volume=TANK_VOLUME, silencer=False):
+def mas10_tank_system(valve: ValveChoice | AbstractValve = "pwm", volume: RealScalarLike = TANK_VOLUME,
+                      silencer: bool | AbstractRestriction | None = False) -> TankSystem:
     """Paper 000's valve tests: the MHE2 valve feeding a constant volume (5e-5 m³ by default); `silencer` as for
     `mas10_valve` (paper 000 ran these tests with one, Fig. 12)."""
     return TankSystem(valve=_valve(valve, silencer), volume=volume)
 
 
-def dmsp40_muscle():
+def dmsp40_muscle() -> Muscle:
     """Festo DMSP-40-400 (paper 001): eq. 7 force scaled from the DMSP-20 map, paper 001 eq. 4 cubic volume."""
     return Muscle(
         force_law=PolynomialForce(
@@ -228,8 +240,10 @@ def dmsp40_muscle():
     )
 
 
-def paper001_restriction(sonic_conductance_m3_per_s_bar=paper001.CHARGING_TABLE["sonic_conductance_m3_per_s_bar"][-1],
-                         critical_ratio=paper001.CHARGING_TABLE["critical_ratio"][-1]):
+def paper001_restriction(
+    sonic_conductance_m3_per_s_bar: RealScalarLike = paper001.CHARGING_TABLE["sonic_conductance_m3_per_s_bar"][-1],
+    critical_ratio: RealScalarLike = paper001.CHARGING_TABLE["critical_ratio"][-1],
+) -> ISO6358Restriction:
     """An ISO 6358 restriction with paper 001's units converted (default: Table 1 at 6.943 bar)."""
     return ISO6358Restriction(sonic_conductance=sonic_conductance_m3_per_s_bar / 1e5, critical_ratio=critical_ratio)
 

@@ -22,13 +22,19 @@ prediction, not a prediction interval of new measurements (add the noise for tha
 import dataclasses
 import statistics
 import warnings
+from collections.abc import Callable
+from typing import Any, Literal
 
+import equinox as eqx
 import jax
 import numpy as np
 
 from .._core.arrays import device_array
+from .._core.custom_types import PyTreeLike
 from .._core.errors import PamjaxInputError, PamjaxSolveError
-from .uncertainty import PamjaxBandWarning, propagation
+from .uncertainty import PamjaxBandWarning, ResultLike, propagation
+
+Method = Literal["linear", "samples"]
 
 METHODS = ("linear", "samples")
 NONLINEARITY_WARNING = 0.1  # index above which the linear band's 95 % edges are ~0.4 σ or more off (module docstring)
@@ -111,19 +117,19 @@ class PredictionBand:
     - `notes`: what the band cannot promise (model mismatch, a fit not converged, strong nonlinearity).
     """
 
-    prediction: object
-    lower: object
-    upper: object
-    std: object
+    prediction: PyTreeLike
+    lower: PyTreeLike
+    upper: PyTreeLike
+    std: PyTreeLike
     level: float
     method: str
     how: str
-    parameters: list
-    marginalised: list
+    parameters: list[str]
+    marginalised: list[str]
     draws: int
     failed: int
-    nonlinearity: object
-    notes: list
+    nonlinearity: float | dict[str, float] | None
+    notes: list[str]
 
     def describe(self):
         """A few lines saying what the band is and how it was made."""
@@ -246,8 +252,9 @@ def _samples(predict, prop, level, samples, seed, batch, notes):
     return y, lower, upper, std, how, samples + 1, failed, None
 
 
-def prediction_band(result, predict, *, model=None, level=0.95, method="linear", samples=200, seed=0, batch=64,
-                    check_linearity=True) -> PredictionBand:
+def prediction_band(result: ResultLike, predict: Callable[[Any], PyTreeLike], *, model: eqx.Module | None = None,
+                    level: float = 0.95, method: Method = "linear", samples: int = 200, seed: int = 0, batch: int = 64,
+                    check_linearity: bool = True) -> PredictionBand:
     """A confidence band on `predict(model)` from a fit's covariance.
 
     **Arguments:**

@@ -14,17 +14,22 @@ one more batch axis, so every point of the band is one more lane of ONE sweep:
 The flow surface is a traced function of the valve, so its band is `prediction_band`'s (forward-mode Jacobian).
 """
 
+from collections.abc import Sequence
+from typing import Any
+
 import equinox as eqx
 import jax
 import numpy as np
 
 from .._core.arrays import device_array
+from .._core.custom_types import RealVectorLike
 from .._core.errors import PamjaxInputError, PamjaxSolveError
 from .._fit.parameters import Key, getter, join_path
 from .._physics.valves.averaged import cycle_averaged_flow
 from .._sweep.maps import frequency_response, steady_state_map
 from .._systems.base import AbstractSystem
 from .band import (
+    Method,
     PredictionBand,
     check_method,
     draws,
@@ -35,7 +40,7 @@ from .band import (
     sigma_points,
     z_of,
 )
-from .uncertainty import propagation
+from .uncertainty import ResultLike, propagation
 
 PHASE_PERIOD = 360.0  # deg: phase differences between parameter points are taken modulo a turn
 
@@ -119,8 +124,9 @@ def _map_band(prop, outputs, method, level, samples, seed, how, periods=None):
                           failed=failed, nonlinearity=index, notes=notes)
 
 
-def steady_state_band(result, commands, *, model=None, level=0.95, method="linear", samples=200, seed=0,
-                      **map_kwargs) -> PredictionBand:
+def steady_state_band(result: ResultLike, commands: RealVectorLike, *, model: eqx.Module | None = None,
+                      level: float = 0.95, method: Method = "linear", samples: int = 200, seed: int = 0,
+                      **map_kwargs: Any) -> PredictionBand:
     """A confidence band on `pamjax.steady_state_map(model, commands, ...)` of a fitted model: every output channel
     (pressure, position, ...) against the command, from the fit's covariance. The parameter points are one more
     batch axis of one sweep (module docstring). `result`, `model`, `level`, `method`, `samples`, `seed` as for
@@ -139,8 +145,9 @@ def steady_state_band(result, commands, *, model=None, level=0.95, method="linea
                      f"one sweep, {r.method}")
 
 
-def frequency_response_band(result, frequencies, *, model=None, level=0.95, method="linear", samples=200, seed=0,
-                            channels=None, **response_kwargs) -> PredictionBand:
+def frequency_response_band(result: ResultLike, frequencies: RealVectorLike, *, model: eqx.Module | None = None,
+                            level: float = 0.95, method: Method = "linear", samples: int = 200, seed: int = 0,
+                            channels: Sequence[str] | None = None, **response_kwargs: Any) -> PredictionBand:
     """A confidence band on `pamjax.frequency_response(model, frequencies, ...)` of a fitted model: per channel
     `"<channel>_gain"` (|Y|/|U|) and `"<channel>_phase"` [deg], from the fit's covariance (phases differenced
     modulo 360°). `channels`: default position and pressure, those the system has. The parameter points are one more
@@ -184,8 +191,9 @@ class _Surface(eqx.Module):
         return {"mass_flow": _surface(model.valve, model.air, self.commands, self.pressures, self.samples)}
 
 
-def flow_surface_band(result, commands, pressures, *, model=None, level=0.95, method="linear", samples=200, seed=0,
-                      phases=400) -> PredictionBand:
+def flow_surface_band(result: ResultLike, commands: RealVectorLike, pressures: RealVectorLike, *,
+                      model: eqx.Module | None = None, level: float = 0.95, method: Method = "linear",
+                      samples: int = 200, seed: int = 0, phases: int = 400) -> PredictionBand:
     """A confidence band on `pamjax.flow_surface(model.valve, commands, pressures, model.air)` of a fitted model
     (a switching valve's cycle-averaged mass flow [kg/s], shape (commands, pressures)): `prediction_band` of the
     traced surface (forward-mode Jacobian, or draws), `phases` per PWM period as `flow_surface`'s `samples`."""

@@ -15,14 +15,17 @@ the nuisances marginalised (for a Gaussian, the marginal of a block is that bloc
 import dataclasses
 import json
 import math
+import os
 import pathlib
 import warnings
+from typing import Any
 
 import equinox as eqx
 import jax
 import numpy as np
 
 from .._core.arrays import device_array
+from .._core.custom_types import Float
 from .._core.errors import PamjaxInputError
 from .._fit.fit import FitResult
 from .._fit.parameters import ParameterSpace
@@ -66,10 +69,10 @@ class FitUncertainty:
     were not noise), `se_inflation` (the largest channel's factor, 1 for white noise at the stated level), `source`
     (where it was read)."""
 
-    labels: tuple
-    paths: tuple
-    values: np.ndarray
-    covariance: np.ndarray
+    labels: tuple[str, ...]
+    paths: tuple[str | dict[str, Any], ...]
+    values: Float[np.ndarray, " n"]
+    covariance: Float[np.ndarray, " n n"]
     status: str = "converged"
     mismatch: bool = False
     se_inflation: float = float("nan")
@@ -171,6 +174,10 @@ class Propagation:
     notes: tuple
 
 
+# What a band's `result` may be: a fit result, its uncertainty, or the path of a fit's model.json / fit.json.
+ResultLike = FitResult | FitUncertainty | str | pathlib.Path
+
+
 @eqx.filter_jit
 def _physical_jacobian(space, theta):
     return jax.jacfwd(space.physical)(theta)
@@ -230,7 +237,7 @@ def _check_values(space, block):
                                    "propagates the fit's covariance around the fitted values only")
 
 
-def read_uncertainty(path):
+def read_uncertainty(path: str | os.PathLike[str]) -> FitUncertainty:
     """The `FitUncertainty` a file carries: a `model.json` written by `pamjax fit` (its provenance's `covariance`
     entry; for model files written before it, the `fit.json` its provenance names, beside it) or a `fit.json`."""
     path = pathlib.Path(path)

@@ -6,12 +6,26 @@ Per period the plant is solved adaptively (diffrax; a smooth plant: smoothed val
 fixed grid with events located inside the step (`pamjax._control.fixed_grid`: exact PWM edges, exact stick-slip),
 which the loop chooses from the plant (`stepping="auto"`)."""
 
+from typing import Literal
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
+from .._core.custom_types import (
+    Array,
+    ArrayLike,
+    Bool,
+    Float,
+    Int,
+    PyTreeLike,
+    RealScalar,
+    RealScalarLike,
+    Series,
+    StateLike,
+)
 from .._core.errors import PamjaxInputError, check_positive
 from .._papers import paper000
 from .._physics.signals import AbstractSignal, Step
@@ -32,10 +46,10 @@ class ClosedLoopState(eqx.Module):
     ~90 % it is still open), and `estimator` the state estimator's belief (a `KalmanState`; None without one)."""
 
     plant: eqx.Module
-    controller: object
-    duty: jax.Array = eqx.field(default_factory=lambda: jnp.zeros(()))
-    valve_open: jax.Array = eqx.field(default_factory=lambda: jnp.zeros((), dtype=bool))
-    estimator: object = None
+    controller: PyTreeLike
+    duty: StateLike = eqx.field(default_factory=lambda: jnp.zeros(()))
+    valve_open: Bool[ArrayLike, "*batch"] = eqx.field(default_factory=lambda: jnp.zeros((), dtype=bool))
+    estimator: PyTreeLike = None
 
 
 def _check_plant(plant):
@@ -96,14 +110,16 @@ class ClosedLoop(eqx.Module):
     plant: AbstractSystem
     controller: AbstractController
     reference: AbstractSignal
-    period: jax.Array  # s
+    period: RealScalar  # s
     estimator: ExtendedKalmanFilter | None
     sensors: LoopSensors | None
     stepping: str = eqx.field(static=True)
     substeps: int = eqx.field(static=True)
 
-    def __init__(self, plant, controller, reference, period=None, *, estimator=None, sensors=None, stepping="auto",
-                 substeps=_DEFAULT_SUBSTEPS):
+    def __init__(self, plant: AbstractSystem, controller: AbstractController, reference: AbstractSignal,
+                 period: RealScalarLike | None = None, *, estimator: ExtendedKalmanFilter | None = None,
+                 sensors: LoopSensors | None = None, stepping: Literal["auto", "adaptive", "pwm", "grid"] = "auto",
+                 substeps: int = _DEFAULT_SUBSTEPS):
         _check_plant(plant)
         self.plant = plant
         self.controller = controller
@@ -230,15 +246,15 @@ class ClosedLoopTrajectory(eqx.Module):
     at the period start (the true state, or the estimator's estimate), and `period_start_state`, the plant's true
     state there (named states with a leading axis of periods)."""
 
-    t: jax.Array
-    position: jax.Array
-    reference: jax.Array
-    pressure: jax.Array
-    velocity: jax.Array
-    period_start: jax.Array
-    duty: jax.Array
+    t: Series
+    position: Series
+    reference: Series
+    pressure: Series
+    velocity: Series
+    period_start: Float[Array, " periods"]
+    duty: Float[Array, " periods"]
     final: ClosedLoopState
-    result: jax.Array
+    result: Int[Array, ""]
     observed: eqx.Module | None = None
     period_start_state: eqx.Module | None = None
 
@@ -289,7 +305,9 @@ def _run(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps):
     )
 
 
-def run_closed_loop(loop, num_periods, samples_per_period=10, y0=None, rtol=1e-6, atol=1e-6, max_steps=2000):
+def run_closed_loop(loop: ClosedLoop, num_periods: int, samples_per_period: int = 10, y0: ClosedLoopState | None = None,
+                    rtol: RealScalarLike = 1e-6, atol: RealScalarLike = 1e-6,
+                    max_steps: int = 2000) -> ClosedLoopTrajectory:
     """The unchecked, traceable core of `simulate_closed_loop` (for use inside grad / vmap)."""
     return _run(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps)
 
@@ -299,12 +317,12 @@ _run_jit = eqx.filter_jit(_run)
 
 def simulate_closed_loop(
     loop: ClosedLoop,
-    duration,
+    duration: RealScalarLike,
     *,
     samples_per_period: int = 10,
     y0: ClosedLoopState | None = None,
-    rtol: float = 1e-6,
-    atol: float = 1e-6,
+    rtol: RealScalarLike = 1e-6,
+    atol: RealScalarLike = 1e-6,
     max_steps: int = 2000,
 ) -> ClosedLoopTrajectory:
     """Simulate a sampled-data closed loop for `duration` [s] (rounded up to whole PWM periods).

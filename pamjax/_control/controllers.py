@@ -17,11 +17,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.custom_types import FloatScalar, RealScalar, RealScalarLike
 from .._core.errors import PamjaxInputError, check_finite, check_nonnegative, check_positive
 from .._core.fitting import parameter
 from .._papers import datasheets, paper000
+from .._physics.gas import Air
 from .._physics.signals import AbstractSignal
 from .._physics.smooth import smooth_sign
+from .._physics.valves.averaged import AveragedValve
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
 
 
@@ -75,11 +78,11 @@ class PIController(AbstractController):
     `bias` u0 [-] (0.5, hybrid bench `meta.json`), `duty_min`, `duty_max` [-] (0, 1).
     """
 
-    proportional_gain: jax.Array = parameter(paper000.PI_PROPORTIONAL_GAIN, unit="1/m")
-    integral_gain: jax.Array = parameter(paper000.PI_INTEGRAL_GAIN, unit="1/(m s)")
-    bias: jax.Array = parameter(datasheets.PI_BIAS, unit="-")
-    duty_min: jax.Array = parameter(0.0, unit="-")
-    duty_max: jax.Array = parameter(1.0, unit="-")
+    proportional_gain: RealScalar = parameter(paper000.PI_PROPORTIONAL_GAIN, unit="1/m")
+    integral_gain: RealScalar = parameter(paper000.PI_INTEGRAL_GAIN, unit="1/(m s)")
+    bias: RealScalar = parameter(datasheets.PI_BIAS, unit="-")
+    duty_min: RealScalar = parameter(0.0, unit="-")
+    duty_max: RealScalar = parameter(1.0, unit="-")
 
     def __check_init__(self):
         check_nonnegative(self.proportional_gain, "PIController.proportional_gain")
@@ -102,7 +105,8 @@ class PIController(AbstractController):
         return duty, integral
 
 
-def equivalent_duty(valve, mass_flow, pressure, air):
+def equivalent_duty(valve: AveragedValve, mass_flow: RealScalarLike, pressure: RealScalarLike,
+                    air: Air) -> FloatScalar:
     """The duty u ∈ [0, 1] whose averaged flow (paper 000 eq. 13) is `mass_flow` [kg/s] at chamber `pressure`
     [Pa abs]: `valve.command_for_flow` of an averaged valve (`AveragedValve`: the increasing root of eq. 13's
     quadratic in u, clipped to [0, 1] where ṁ is out of reach)."""
@@ -140,15 +144,15 @@ class SlidingModeController(AbstractController):
     """
 
     model: AbstractSystem
-    bandwidth: jax.Array = parameter(12.0, unit="rad/s")
-    switching_gain: jax.Array = parameter(6.0, unit="m/s²")
-    boundary_layer: jax.Array = parameter(0.06, unit="m/s")
-    pressure_switching_gain: jax.Array = parameter(2e6, unit="Pa/s")
-    pressure_boundary_layer: jax.Array = parameter(1e5, unit="Pa")
-    integral_limit: jax.Array = parameter(0.1, unit="m s")
-    friction_velocity_width: jax.Array = parameter(5e-3, unit="m/s")
-    duty_min: jax.Array = parameter(0.0, unit="-")
-    duty_max: jax.Array = parameter(1.0, unit="-")
+    bandwidth: RealScalar = parameter(12.0, unit="rad/s")
+    switching_gain: RealScalar = parameter(6.0, unit="m/s²")
+    boundary_layer: RealScalar = parameter(0.06, unit="m/s")
+    pressure_switching_gain: RealScalar = parameter(2e6, unit="Pa/s")
+    pressure_boundary_layer: RealScalar = parameter(1e5, unit="Pa")
+    integral_limit: RealScalar = parameter(0.1, unit="m s")
+    friction_velocity_width: RealScalar = parameter(5e-3, unit="m/s")
+    duty_min: RealScalar = parameter(0.0, unit="-")
+    duty_max: RealScalar = parameter(1.0, unit="-")
 
     def __check_init__(self):
         model = self.model

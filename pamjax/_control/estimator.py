@@ -20,6 +20,8 @@ import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 
+from .._core.arrays import as_array
+from .._core.custom_types import Array, ArrayLike, Float, Int, IntScalarLike, Real, RealArrayLike
 from .._core.errors import PamjaxInputError, check_nonnegative, check_positive
 from .._physics.signals import Step
 from .._solve.scaled import scaled
@@ -37,6 +39,14 @@ def _state_fields(state):
     return tuple(k for k, v in vars(state).items() if v is not None)
 
 
+def _as_seed(seed: IntScalarLike) -> Int[Array, ""]:
+    return jnp.asarray(seed, dtype=jnp.int32)
+
+
+def _as_optional_floats(values: RealArrayLike | None) -> Float[Array, "..."] | None:
+    return values if values is None else jnp.asarray(values, float)
+
+
 class LoopSensors(eqx.Module):
     """The loop's sensors: the plant states `channels` sampled `samples_per_period` times per control period, at
     t_k + jT/N (j = 1 … N), each with independent Gaussian noise of standard deviation `noise` (per channel, in the
@@ -46,10 +56,11 @@ class LoopSensors(eqx.Module):
     hybrid bench's `meta.json`); `samples_per_period` N (static int, 20: the bench's 1 kHz at 50 Hz); `seed` (an int).
     """
 
-    channels: tuple = eqx.field(static=True, default=("pressure", "position"))
-    noise: jax.Array = eqx.field(converter=jnp.asarray, default=(BENCH_PRESSURE_NOISE, BENCH_POSITION_NOISE))
+    channels: tuple[str, ...] = eqx.field(static=True, default=("pressure", "position"))
+    noise: Real[Array, " channels"] = eqx.field(converter=as_array,
+                                                default=(BENCH_PRESSURE_NOISE, BENCH_POSITION_NOISE))
     samples_per_period: int = eqx.field(static=True, default=BENCH_SAMPLES_PER_PERIOD)
-    seed: jax.Array = eqx.field(converter=lambda s: jnp.asarray(s, dtype=jnp.int32), default=0)  # an array: a new
+    seed: Int[Array, ""] = eqx.field(converter=_as_seed, default=0)  # an array: a new
     # seed runs the same compiled loop (and seeds vmap)
 
     def __check_init__(self):
@@ -84,11 +95,11 @@ class KalmanState(eqx.Module):
     `system.state_scale()`, flattened in the state's field order); `ExtendedKalmanFilter.estimate` and `.covariance`
     give them in SI units."""
 
-    mean: jax.Array
-    covariance: jax.Array
+    mean: Float[ArrayLike, " *batch n"]
+    covariance: Float[ArrayLike, " *batch n n"]
 
 
-def _arrays(values):
+def _arrays(values: dict[str, RealArrayLike]) -> dict[str, Float[Array, "..."]]:
     """A {state: value} dict with float arrays as values (differentiable leaves, not constants of the program)."""
     return {k: jnp.asarray(v, dtype=float) for k, v in values.items()} if isinstance(values, dict) else values
 
@@ -135,12 +146,11 @@ class ExtendedKalmanFilter(eqx.Module):
     """
 
     model: AbstractSystem
-    process_noise: dict = eqx.field(converter=_arrays,
-                                    default_factory=lambda: dict(pressure=1.5e5, position=1e-4, velocity=0.02))
-    measurement_noise: jax.Array | None = eqx.field(converter=lambda v: v if v is None else jnp.asarray(v, float),
-                                                    default=None)
-    initial_std: dict = eqx.field(converter=_arrays,
-                                  default_factory=lambda: dict(pressure=1e4, position=5e-3, velocity=1e-2))
+    process_noise: dict[str, Float[Array, "..."]] = eqx.field(
+        converter=_arrays, default_factory=lambda: dict(pressure=1.5e5, position=1e-4, velocity=0.02))
+    measurement_noise: Float[Array, " channels"] | None = eqx.field(converter=_as_optional_floats, default=None)
+    initial_std: dict[str, Float[Array, "..."]] = eqx.field(
+        converter=_arrays, default_factory=lambda: dict(pressure=1e4, position=5e-3, velocity=1e-2))
     substeps: int = eqx.field(static=True, default=1)
 
     def __check_init__(self):

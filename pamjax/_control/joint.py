@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.custom_types import Array, Float, Int, RealScalarLike, Series, TimesLike
 from .._core.errors import PamjaxInputError
 from .._physics.signals import Constant
 from .._solve.simulate import solve
@@ -28,16 +29,16 @@ class JointControlTrajectory(eqx.Module):
     sum gives at θ_r); `pressure_sum`, `pressure_sum_reference` [Pa gauge]; `pressure` (p_f, p_e) [Pa abs];
     `voltage` (V_f, V_e) [V]; `result` 0 on success."""
 
-    t: jax.Array
-    angle: jax.Array
-    angle_reference: jax.Array
-    stiffness: jax.Array
-    stiffness_reference: jax.Array
-    pressure_sum: jax.Array
-    pressure_sum_reference: jax.Array
-    pressure: jax.Array
-    voltage: jax.Array
-    result: jax.Array
+    t: Series
+    angle: Series
+    angle_reference: Series
+    stiffness: Series
+    stiffness_reference: Series
+    pressure_sum: Series
+    pressure_sum_reference: Series
+    pressure: Float[Array, " times 2"]
+    voltage: Float[Array, " times 2"]
+    result: Int[Array, ""]
 
     def rmse(self, start=0.0):
         """(angle RMSE [rad], stiffness RMSE [N m/rad]) over t ≥ `start` [s]."""
@@ -49,7 +50,9 @@ class JointControlTrajectory(eqx.Module):
         )
 
 
-def run_joint_control(loop: JointControlLoop, ts, y0=None, rtol=1e-7, atol=1e-7, max_steps=100_000):
+def run_joint_control(loop: JointControlLoop, ts: TimesLike, y0: JointControlState | None = None,
+                      rtol: RealScalarLike = 1e-7, atol: RealScalarLike = 1e-7,
+                      max_steps: int = 100_000) -> JointControlTrajectory:
     """The unchecked, traceable core of `simulate_joint_control` (for use inside grad / vmap)."""
     ts = jnp.asarray(ts, dtype=float)
     y0 = loop.initial_state(ts[0]) if y0 is None else y0
@@ -128,11 +131,11 @@ def check_joint_control(loop: JointControlLoop, ts, samples=401):
 
 def simulate_joint_control(
     loop: JointControlLoop,
-    ts,
+    ts: TimesLike,
     *,
     y0: JointControlState | None = None,
-    rtol: float = 1e-7,
-    atol: float = 1e-7,
+    rtol: RealScalarLike = 1e-7,
+    atol: RealScalarLike = 1e-7,
     max_steps: int = 100_000,
 ) -> JointControlTrajectory:
     """Simulate angle and stiffness (or pressure-sum) control of an antagonistic joint over the times `ts` [s].

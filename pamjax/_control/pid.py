@@ -6,6 +6,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._core.custom_types import RealScalar, StateLike
 from .._core.errors import check_finite, check_nonnegative, check_positive
 from .._core.fitting import parameter
 from .._papers import datasheets, paper000
@@ -15,7 +16,7 @@ from .controllers import AbstractController, check_duty_limits
 class PIDState(eqx.Module):
     """`integral` ∫e dt [m s]."""
 
-    integral: jax.Array
+    integral: StateLike
 
 
 class PIDController(AbstractController):
@@ -35,14 +36,14 @@ class PIDController(AbstractController):
     paper 000's "0.1 ms sampling time"), `seed` (static int).
     """
 
-    proportional_gain: jax.Array = parameter(paper000.PI_PROPORTIONAL_GAIN, unit="1/m")
-    integral_gain: jax.Array = parameter(paper000.PI_INTEGRAL_GAIN, unit="1/(m s)")
-    derivative_gain: jax.Array = parameter(0.0, unit="s/m")
-    bias: jax.Array = parameter(datasheets.PI_BIAS, unit="-")
-    duty_min: jax.Array = parameter(0.0, unit="-")
-    duty_max: jax.Array = parameter(1.0, unit="-")
-    measurement_noise: jax.Array = parameter(0.0, unit="m")
-    sample_time: jax.Array = parameter(paper000.SAMPLE_TIME, unit="s")
+    proportional_gain: RealScalar = parameter(paper000.PI_PROPORTIONAL_GAIN, unit="1/m")
+    integral_gain: RealScalar = parameter(paper000.PI_INTEGRAL_GAIN, unit="1/(m s)")
+    derivative_gain: RealScalar = parameter(0.0, unit="s/m")
+    bias: RealScalar = parameter(datasheets.PI_BIAS, unit="-")
+    duty_min: RealScalar = parameter(0.0, unit="-")
+    duty_max: RealScalar = parameter(1.0, unit="-")
+    measurement_noise: RealScalar = parameter(0.0, unit="m")
+    sample_time: RealScalar = parameter(paper000.SAMPLE_TIME, unit="s")
     seed: int = eqx.field(static=True, default=0)
 
     def __check_init__(self):

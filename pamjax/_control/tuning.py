@@ -1,12 +1,15 @@
 """Gradient-based tuning of a closed loop's controller gains (Adam on their logarithms, reverse mode through the
 whole sampled-data simulation)."""
 
+from collections.abc import Callable, Sequence
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
+from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError
 from .closed_loop import ClosedLoop, run_closed_loop
 
@@ -18,15 +21,15 @@ def tracking_rmse(loop: ClosedLoop, num_periods: int, start=0.0, **kwargs):
 
 def tune_controller(
     loop: ClosedLoop,
-    gains,
-    duration,
+    gains: Sequence[str],
+    duration: RealScalarLike,
     *,
-    start=0.0,
+    start: RealScalarLike = 0.0,
     steps: int = 30,
-    learning_rate: float = 0.05,
+    learning_rate: RealScalarLike = 0.05,
     samples_per_period: int = 5,
-    callback=None,
-):
+    callback: Callable[[int, float, tuple[float, ...]], object] | None = None,
+) -> tuple[ClosedLoop, list[tuple[float, tuple[float, ...]]]]:
     """Tune positive controller gains by gradient descent (Adam on their logarithms) on the tracking RMSE of the
     closed loop, differentiated through the whole sampled-data simulation (reverse mode).
 

@@ -9,9 +9,36 @@ JAX (0.10) compiles a small program for `jnp.asarray` of a NumPy array or a Pyth
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import DTypeLike
+
+from .custom_types import Array, RealArray, RealArrayLike, RealScalar, RealScalarLike, Table, TableLike
 
 
-def device_array(x, dtype=None):
+def as_scalar(x: RealScalarLike) -> RealScalar:
+    """`jnp.asarray` of a component's scalar parameter: the field converter that gives its constructor the type of
+    the argument (equinox annotates `__init__` with the converter's argument type)."""
+    return jnp.asarray(x)
+
+
+def as_optional_scalar(x: RealScalarLike | None) -> RealScalar | None:
+    """The converter of an optional scalar parameter: None stays None (not set), anything else a scalar array."""
+    return None if x is None else jnp.asarray(x)
+
+
+def as_array(x: RealArrayLike) -> RealArray:
+    """`jnp.asarray` of a component's array parameter (a table, coefficients, a pair of time constants): a number,
+    an array or a (nested) list or tuple of numbers."""
+    return jnp.asarray(x)
+
+
+def as_table(x: TableLike) -> Table:
+    """`jnp.asarray` of a column of a component's table (a calibration's voltages, tabulated conductances, a sampled
+    signal's times): a vector with as many entries as the component's other columns (its constructor checks that
+    they agree, through the shared dimension of `TableLike`)."""
+    return jnp.asarray(x)
+
+
+def device_array(x: RealArrayLike, dtype: DTypeLike | None = None) -> Array:
     """`jnp.asarray(x, dtype)` for a concrete host value (a NumPy array, a list, a number with `dtype`): the same
     values, dtype and (strong) type, made without compiling; copied, never sharing `x`'s memory. A Python number
     without `dtype` (weakly typed in JAX), a JAX array or tracer, and float64 without JAX's x64 mode go through

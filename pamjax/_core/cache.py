@@ -42,7 +42,7 @@ def cache_disabled() -> bool:
     return os.environ.get(OPT_OUT, "1").strip().lower() in ("0", "false", "no", "off")
 
 
-def enable_compilation_cache(path=None):
+def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> pathlib.Path | None:
     """Turn on JAX's persistent compilation cache in `path` (default `default_cache_dir()`). Returns the directory,
     or None when `PAMJAX_COMPILATION_CACHE=0` turns it off or the directory cannot be created (the run then just
     compiles, and says why)."""
@@ -81,7 +81,7 @@ class CompileStats:
     compilation that was not a persistent-cache read. From `jax.monitoring`'s events; listeners cannot be removed,
     so an inactive one ignores events."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.count = dict.fromkeys(_PHASES.values(), 0)
         self.seconds = dict.fromkeys(_PHASES.values(), 0.0)
         self.requests = 0

@@ -24,9 +24,14 @@ this project's code is pending (no GPU in the session that wrote this; the sweep
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
 
 from .errors import PamjaxInputError
+
+if TYPE_CHECKING:  # annotations only: this module is read before JAX is imported
+    import jax
 
 WORKS = ("single", "batched")
 CHOICES = ("auto", "cpu", "gpu", "tpu")
@@ -58,7 +63,7 @@ def _kind(platform):
 class DeviceChoice:
     """The devices a piece of work runs on, and why (`statement()`: the line the command line prints)."""
 
-    devices: tuple
+    devices: tuple[jax.Device, ...]
     reason: str
     requested: str  # "auto" or the override
 
@@ -79,7 +84,8 @@ class DeviceChoice:
         return jax.default_device(self.devices[0])
 
 
-def select_devices(work: str, device: str | None = "auto", available=None) -> DeviceChoice:
+def select_devices(work: Literal["single", "batched"], device: str | None = "auto",
+                   available: Sequence[jax.Device] | None = None) -> DeviceChoice:
     """The devices for `work` ("single": one trajectory at a time, as `simulate`, fits, identification, design;
     "batched": a sweep's lanes), by default the fastest kind (module docstring), or the `device` asked for
     ("cpu", "gpu", "tpu"). `available`: the devices to choose from (default: every device of every platform JAX

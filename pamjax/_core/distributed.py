@@ -9,6 +9,7 @@ joined or why it could not, and gathers Python-level results (bytes) from every 
 
 import dataclasses
 import os
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -99,10 +100,10 @@ def initialize_distributed(
     num_processes: int | None = None,
     process_id: int | None = None,
     *,
-    local_device_ids=None,
-    timeout: float | None = None,
+    local_device_ids: int | Sequence[int] | None = None,
+    timeout: float | int | None = None,
     required: bool = False,
-    environ=None,
+    environ: Mapping[str, str] | None = None,
 ) -> ProcessInfo:
     """Join JAX's multi-process runtime (`jax.distributed.initialize`), reading the usual settings, and say what
     was joined; call it first, before any JAX computation, in every process.

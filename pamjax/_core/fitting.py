@@ -3,10 +3,15 @@
 A component says, field by field, how `pamjax.fit` moves the parameter in its unconstrained space and how it reports
 it; the fitter (`pamjax._fit.parameters`) reads these keys and knows no component:
 
-    coulomb_force: jax.Array = positive(16.0, unit="N")
-    critical_ratio: jax.Array = ratio(unit="-")
-    max_force_coefficients: jax.Array = eqx.field(converter=jnp.asarray, metadata=polynomial("a{i}", "stroke", "N/m^i"))
-    heat_capacity_ratio: jax.Array = parameter(1.4, unit="-")
+    coulomb_force: RealScalar = positive(16.0, unit="N")
+    critical_ratio: RealScalar = ratio(unit="-")
+    max_force_coefficients: RealVector = eqx.field(converter=as_array, metadata=polynomial("a{i}", "stroke", "N/m^i"))
+    heat_capacity_ratio: RealScalar = parameter(1.4, unit="-")
+
+Each helper's `shape` says what the constructor takes (the converter's argument type, `_core/custom_types`):
+"scalar" (the default: a number), "table" (a column of the component's table: every such column of one component
+has the same length) or "array" (any shape: coefficients, a pair of time constants); the field's annotation gives the
+exact shape.
 
 - `transform`: "log" (a physically positive quantity, fitted as v₀ eᶿ so that a trial value is never ≤ 0; a start
   value ≤ 0 falls back to "linear"), "logistic" with `bounds` (lo, hi) (a bounded quantity such as a ratio in
@@ -26,46 +31,59 @@ A `free` entry of `fit` may override the transform and bounds (`{"path": ..., "t
 import dataclasses
 
 import equinox as eqx
-import jax.numpy as jnp
+
+from .arrays import as_array, as_optional_scalar, as_scalar, as_table
+from .custom_types import RealArray, RealArrayLike
 
 TRANSFORMS = ("linear", "log", "logistic", "nodes")
 
 
-def optional_array(x):
+def optional_array(x: RealArrayLike | None) -> RealArray | None:
     """Field converter of an optional array parameter: None stays None (not set), anything else an array."""
-    return None if x is None else jnp.asarray(x)
+    return None if x is None else as_array(x)
 
 
-def _converter(default):
-    return optional_array if default is None else jnp.asarray
+# shape → (converter, converter of an optional parameter)
+_CONVERTERS = {"scalar": (as_scalar, as_optional_scalar), "table": (as_table, None),
+               "array": (as_array, optional_array)}
+
+
+def _converter(default, shape):
+    """The field's converter for `shape` ("scalar", "table" or "array"), optional (None stays None) where the default
+    is None. The converter's argument type is the constructor's (equinox)."""
+    if shape not in _CONVERTERS:
+        raise ValueError(f"shape must be one of {sorted(_CONVERTERS)}, got {shape!r}")
+    required, optional = _CONVERTERS[shape]
+    return optional if default is None and optional is not None else required
 
 
 def _with_unit(metadata, unit):
     return metadata if unit is None else {**metadata, "unit": unit}
 
 
-def parameter(default=dataclasses.MISSING, *, unit=None, **kwargs):
-    """An array parameter fitted linearly (scaled by its start magnitude), in `unit`."""
-    return eqx.field(converter=jnp.asarray, default=default, metadata=_with_unit({}, unit), **kwargs)
+def parameter(default=dataclasses.MISSING, *, unit=None, shape="scalar", **kwargs):
+    """An array parameter fitted linearly (scaled by its start magnitude), in `unit`, of `shape` (module docstring)."""
+    return eqx.field(converter=_converter(default, shape), default=default, metadata=_with_unit({}, unit), **kwargs)
 
 
-def positive(default=dataclasses.MISSING, *, unit=None, **kwargs):
+def positive(default=dataclasses.MISSING, *, unit=None, shape="scalar", **kwargs):
     """An array parameter that is physically positive (an area, a mass, a friction force): fitted in log space, in
-    `unit`. A default of None makes it optional (unset until given)."""
-    return eqx.field(converter=_converter(default), default=default, metadata=_with_unit(dict(transform="log"), unit),
-                     **kwargs)
+    `unit`, of `shape`. A default of None makes it optional (unset until given)."""
+    return eqx.field(converter=_converter(default, shape), default=default,
+                     metadata=_with_unit(dict(transform="log"), unit), **kwargs)
 
 
-def ratio(default=dataclasses.MISSING, *, unit="-", **kwargs):
-    """An array parameter in the open interval (0, 1) (a critical pressure ratio): fitted through a logistic."""
-    return eqx.field(converter=jnp.asarray, default=default,
+def ratio(default=dataclasses.MISSING, *, unit="-", shape="scalar", **kwargs):
+    """An array parameter in the open interval (0, 1) (a critical pressure ratio): fitted through a logistic; of
+    `shape`."""
+    return eqx.field(converter=_converter(default, shape), default=default,
                      metadata=_with_unit(dict(transform="logistic", bounds=(0.0, 1.0)), unit), **kwargs)
 
 
-def signed(default=dataclasses.MISSING, *, scale, unit=None, **kwargs):
+def signed(default=dataclasses.MISSING, *, scale, unit=None, shape="scalar", **kwargs):
     """A signed array parameter (an offset, a delay) fitted linearly in units of `scale` (its natural size: a
-    start value of 0 gives no magnitude of its own), in `unit`."""
-    return eqx.field(converter=_converter(default), default=default,
+    start value of 0 gives no magnitude of its own), in `unit`, of `shape`."""
+    return eqx.field(converter=_converter(default, shape), default=default,
                      metadata=_with_unit(dict(transform="linear", scale=float(scale)), unit), **kwargs)
 
 

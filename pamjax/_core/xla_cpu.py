@@ -47,6 +47,7 @@ import functools
 import os
 import re
 import warnings
+from collections.abc import MutableMapping
 
 from .private import jax_backends_initialized
 
@@ -151,7 +152,7 @@ def _jaxlib_version():
         return None
 
 
-def prefer_fast_compilation(environ=os.environ) -> dict:
+def prefer_fast_compilation(environ: MutableMapping[str, str] = os.environ) -> dict[str, bool | str]:
     """XLA's classic CPU code generator for fused kernels (`--xla_cpu_use_fusion_emitters=false` in XLA_FLAGS):
     single-trajectory solves, gradients and fits compile 13-30 % faster and run as fast; batched sweeps run
     1.3-2.5x slower (see the module's docstring). Call before JAX starts (the `pamjax` command does, for all its
@@ -198,7 +199,7 @@ def single_trajectory_options(environ=os.environ):
     return {EMITTER_FLAG: False}
 
 
-def xla_cpu_status() -> dict:
+def xla_cpu_status() -> dict[str, bool | str]:
     """Whether pamjax's XLA CPU settings are in effect: `{"active": bool, "reason": str}` for the loop setting,
     `"fast_compile"`, `"fast_compile_reason"` for the classic code generator (`prefer_fast_compilation`; see
     `pamjax._core.xla_cpu`).

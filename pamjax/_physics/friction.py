@@ -7,9 +7,9 @@ memoryless models) with rate `state_rate(v, z)`.
 import abc
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 
+from .._core.custom_types import RealScalar
 from .._core.errors import check_nonnegative, check_positive
 from .._core.fitting import positive
 from .._papers import datasheets, paper000
@@ -28,8 +28,8 @@ class AbstractFriction(eqx.Module):
     which a controller compensates (`SlidingModeController`), and `smoothing_width()`.
     """
 
-    coulomb_force: eqx.AbstractVar[jax.Array]
-    viscous_coefficient: eqx.AbstractVar[jax.Array]
+    coulomb_force: eqx.AbstractVar[RealScalar]
+    viscous_coefficient: eqx.AbstractVar[RealScalar]
     hybrid = False
 
     def smoothing_width(self):
@@ -73,12 +73,12 @@ class CoulombViscousFriction(AbstractFriction):
     - `velocity_width`: w [m/s]; 1e-3.
     """
 
-    coulomb_force: jax.Array = positive(paper000.COULOMB_FORCE, unit="N")
-    viscous_coefficient: jax.Array = positive(datasheets.MAS10_VISCOUS_COEFFICIENT, unit="N s/m")
+    coulomb_force: RealScalar = positive(paper000.COULOMB_FORCE, unit="N")
+    viscous_coefficient: RealScalar = positive(datasheets.MAS10_VISCOUS_COEFFICIENT, unit="N s/m")
     # m/s: a numerical smoothing width (paper 000's eq. 8 has a sharp sign), small against the 10-30 mm/s mean
     # speeds of its triangle runs (~60 mm per half period at 0.08-0.25 Hz); it sets the stiffness F_c/(w M) at rest
     # (docs/performance.md), so it is not made smaller.
-    velocity_width: jax.Array = positive(1e-3, unit="m/s")
+    velocity_width: RealScalar = positive(1e-3, unit="m/s")
 
     def __check_init__(self):
         check_nonnegative(self.coulomb_force, "CoulombViscousFriction.coulomb_force")
@@ -106,11 +106,11 @@ class BristleFriction(AbstractFriction):
     C_f [N s/m] (250), `velocity_width` [m/s] smoothing |v| (1e-5).
     """
 
-    coulomb_force: jax.Array = positive(paper000.COULOMB_FORCE, unit="N")
-    bristle_stiffness: jax.Array = positive(1e5, unit="N/m")
-    bristle_damping: jax.Array = positive(500.0, unit="N s/m")
-    viscous_coefficient: jax.Array = positive(datasheets.MAS10_VISCOUS_COEFFICIENT, unit="N s/m")
-    velocity_width: jax.Array = positive(1e-5, unit="m/s")
+    coulomb_force: RealScalar = positive(paper000.COULOMB_FORCE, unit="N")
+    bristle_stiffness: RealScalar = positive(1e5, unit="N/m")
+    bristle_damping: RealScalar = positive(500.0, unit="N s/m")
+    viscous_coefficient: RealScalar = positive(datasheets.MAS10_VISCOUS_COEFFICIENT, unit="N s/m")
+    velocity_width: RealScalar = positive(1e-5, unit="m/s")
 
     def __check_init__(self):
         check_positive(self.coulomb_force, "BristleFriction.coulomb_force")
@@ -153,8 +153,8 @@ class KarnoppFriction(AbstractFriction):
     - `viscous_coefficient`: C_f [N s/m]; 250 (see `pamjax.presets`).
     """
 
-    coulomb_force: jax.Array = positive(paper000.COULOMB_FORCE, unit="N")
-    viscous_coefficient: jax.Array = positive(datasheets.MAS10_VISCOUS_COEFFICIENT, unit="N s/m")
+    coulomb_force: RealScalar = positive(paper000.COULOMB_FORCE, unit="N")
+    viscous_coefficient: RealScalar = positive(datasheets.MAS10_VISCOUS_COEFFICIENT, unit="N s/m")
 
     hybrid = True
 

@@ -13,6 +13,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._core.custom_types import RealScalar
 from .._core.errors import check_in_open_interval, check_positive
 from .._core.fitting import parameter, positive, ratio
 from .._core.units import ATMOSPHERE, ISO8778_DENSITY, ISO8778_TEMPERATURE
@@ -35,10 +36,10 @@ class Air(eqx.Module):
       force laws and the exhaust pressure of the valves.
     """
 
-    gas_constant: jax.Array = positive(paper000.GAS_CONSTANT, unit="J/(kg K)")
-    temperature: jax.Array = positive(paper000.TEMPERATURE, unit="K")
-    heat_capacity_ratio: jax.Array = parameter(paper000.HEAT_CAPACITY_RATIO, unit="-")
-    atmospheric_pressure: jax.Array = parameter(ATMOSPHERE, unit="Pa abs")
+    gas_constant: RealScalar = positive(paper000.GAS_CONSTANT, unit="J/(kg K)")
+    temperature: RealScalar = positive(paper000.TEMPERATURE, unit="K")
+    heat_capacity_ratio: RealScalar = parameter(paper000.HEAT_CAPACITY_RATIO, unit="-")
+    atmospheric_pressure: RealScalar = parameter(ATMOSPHERE, unit="Pa abs")
 
     def __check_init__(self):
         check_positive(self.gas_constant, "Air.gas_constant")
@@ -122,9 +123,9 @@ class EllipseRestriction(AbstractRestriction):
     - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
     """
 
-    discharge_coefficient: jax.Array = positive(unit="-")
-    critical_ratio: jax.Array = ratio(unit="-")
-    area: jax.Array = positive(paper000.VALVE_AREA, unit="m²")
+    discharge_coefficient: RealScalar = positive(unit="-")
+    critical_ratio: RealScalar = ratio(unit="-")
+    area: RealScalar = positive(paper000.VALVE_AREA, unit="m²")
     laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
 
     def __check_init__(self):
@@ -153,8 +154,8 @@ class ISO6358Restriction(AbstractRestriction):
     - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
     """
 
-    sonic_conductance: jax.Array = positive(unit="m³/(s Pa)")
-    critical_ratio: jax.Array = ratio(unit="-")
+    sonic_conductance: RealScalar = positive(unit="m³/(s Pa)")
+    critical_ratio: RealScalar = ratio(unit="-")
     laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
 
     def __check_init__(self):
@@ -179,8 +180,8 @@ class NozzleRestriction(AbstractRestriction):
     - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
     """
 
-    flow_coefficient: jax.Array = positive(unit="-")
-    area: jax.Array = positive(paper000.VALVE_AREA, unit="m²")
+    flow_coefficient: RealScalar = positive(unit="-")
+    area: RealScalar = positive(paper000.VALVE_AREA, unit="m²")
     laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
 
     def __check_init__(self):
@@ -205,7 +206,7 @@ class PorousRestriction(AbstractRestriction):
     **Arguments:** `permeance` K [kg/(s Pa²)] (see `pamjax.presets.MAS10_SILENCER_PERMEANCE` for a derived value).
     """
 
-    permeance: jax.Array = parameter(unit="kg/(s Pa²)")
+    permeance: RealScalar = parameter(unit="kg/(s Pa²)")
 
     def __check_init__(self):
         check_positive(self.permeance, "PorousRestriction.permeance")

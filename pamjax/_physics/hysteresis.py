@@ -19,6 +19,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._core.arrays import as_scalar
+from .._core.custom_types import RealScalar
 from .._core.errors import check_in_closed_interval, check_nonnegative, check_positive
 from .._core.fitting import positive, ratio
 from .._papers import datasheets, paper000
@@ -30,7 +32,7 @@ EXPONENT_BOUNDS = (1.0, 10.0)  # n: ≥ 1 keeps the law continuously differentia
 
 def exponent_field(default):
     """A Bouc–Wen exponent n [-]: fitted through a logistic onto `EXPONENT_BOUNDS`."""
-    return eqx.field(converter=jnp.asarray, default=default,
+    return eqx.field(converter=as_scalar, default=default,
                      metadata=dict(transform="logistic", bounds=EXPONENT_BOUNDS, unit="-"))
 
 
@@ -77,12 +79,12 @@ class BoucWenFriction(AbstractFriction):
     - `velocity_width`: [m/s] smoothing |ẋ|; 1e-5 (numerical, as `BristleFriction`'s).
     """
 
-    coulomb_force: jax.Array = positive(paper000.COULOMB_FORCE, unit="N")
-    transition_length: jax.Array = positive(2e-3, unit="m")  # assumed (see the docstring)
-    exponent: jax.Array = exponent_field(2.0)  # assumed (see the docstring)
-    shape: jax.Array = ratio(0.5, unit="-")
-    viscous_coefficient: jax.Array = positive(datasheets.MAS10_VISCOUS_COEFFICIENT, unit="N s/m")
-    velocity_width: jax.Array = positive(1e-5, unit="m/s")
+    coulomb_force: RealScalar = positive(paper000.COULOMB_FORCE, unit="N")
+    transition_length: RealScalar = positive(2e-3, unit="m")  # assumed (see the docstring)
+    exponent: RealScalar = exponent_field(2.0)  # assumed (see the docstring)
+    shape: RealScalar = ratio(0.5, unit="-")
+    viscous_coefficient: RealScalar = positive(datasheets.MAS10_VISCOUS_COEFFICIENT, unit="N s/m")
+    velocity_width: RealScalar = positive(1e-5, unit="m/s")
 
     def __check_init__(self):
         check_nonnegative(self.coulomb_force, "BoucWenFriction.coulomb_force")

@@ -12,6 +12,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.arrays import as_array
+from .._core.custom_types import Array, Real, RealScalar, RealScalarLike, RealVector
 from .._core.errors import PamjaxInputError, check_finite, check_in_open_interval, check_positive
 from .._core.fitting import parameter, polynomial, positive
 from .._papers import paper000
@@ -41,12 +43,12 @@ class PolynomialForce(AbstractForceLaw):
     """
 
     # fitted as F_max at Chebyshev nodes over the muscle's stroke (well conditioned), reported as a0…a4:
-    max_force_coefficients: jax.Array = eqx.field(converter=jnp.asarray,
+    max_force_coefficients: RealVector = eqx.field(converter=as_array,
                                                   metadata=polynomial("a{i}", "stroke", unit="N/m^i"))
-    k0: jax.Array = positive(unit="N")
-    k1: jax.Array = parameter(unit="N/m")
-    k2: jax.Array = positive(unit="Pa")
-    max_pressure: jax.Array = positive(paper000.MAX_PRESSURE, unit="Pa gauge")
+    k0: RealScalar = positive(unit="N")
+    k1: RealScalar = parameter(unit="N/m")
+    k2: RealScalar = positive(unit="Pa")
+    max_pressure: RealScalar = positive(paper000.MAX_PRESSURE, unit="Pa gauge")
 
     def __check_init__(self):
         if jnp.shape(self.max_force_coefficients) != (5,):
@@ -79,9 +81,9 @@ class ChouHannafordForce(AbstractForceLaw):
     **Arguments:** `strand_length` b_s [m], `turns` n_s [-], `nominal_length` L0 [m].
     """
 
-    strand_length: jax.Array = positive(unit="m")
-    turns: jax.Array = positive(unit="-")
-    nominal_length: jax.Array = positive(unit="m")
+    strand_length: RealScalar = positive(unit="m")
+    turns: RealScalar = positive(unit="-")
+    nominal_length: RealScalar = positive(unit="m")
 
     def __check_init__(self):
         check_positive(self.strand_length, "ChouHannafordForce.strand_length")
@@ -102,10 +104,10 @@ class TonduLopezForce(AbstractForceLaw):
     **Arguments:** `radius` r0 [m], `braid_angle` θ0 [rad], `nominal_length` L0 [m], `correction` k [-].
     """
 
-    radius: jax.Array = positive(unit="m")
-    braid_angle: jax.Array = parameter(unit="rad")
-    nominal_length: jax.Array = positive(unit="m")
-    correction: jax.Array = parameter(1.0, unit="-")
+    radius: RealScalar = positive(unit="m")
+    braid_angle: RealScalar = parameter(unit="rad")
+    nominal_length: RealScalar = positive(unit="m")
+    correction: RealScalar = parameter(1.0, unit="-")
 
     def __check_init__(self):
         check_positive(self.radius, "TonduLopezForce.radius")
@@ -134,8 +136,8 @@ class AbstractVolume(eqx.Module):
 class LinearVolume(AbstractVolume):
     """Paper 000, eq. 14: V = v0 + v1 x. **Arguments:** `v0` [m³], `v1` [m²]."""
 
-    v0: jax.Array = positive(unit="m³")
-    v1: jax.Array = positive(unit="m²")
+    v0: RealScalar = positive(unit="m³")
+    v1: RealScalar = positive(unit="m²")
 
     def __check_init__(self):
         check_positive(self.v0, "LinearVolume.v0")
@@ -151,8 +153,8 @@ class CubicVolume(AbstractVolume):
     **Arguments:** `coefficients` (d, c, b, a) [m³], lowest order first; `nominal_length` L0 [m].
     """
 
-    coefficients: jax.Array = parameter(unit="m³")
-    nominal_length: jax.Array = positive(unit="m")
+    coefficients: Real[Array, "4"] = parameter(unit="m³", shape="array")
+    nominal_length: RealScalar = positive(unit="m")
 
     def __check_init__(self):
         if jnp.shape(self.coefficients) != (4,):
@@ -177,9 +179,9 @@ class BraidVolume(AbstractVolume):
     `BraidVolume.from_datasheet(L0, D0, max_contraction)` derives b_s, n_s from a datasheet.
     """
 
-    strand_length: jax.Array = positive(unit="m")
-    turns: jax.Array = positive(unit="-")
-    nominal_length: jax.Array = positive(unit="m")
+    strand_length: RealScalar = positive(unit="m")
+    turns: RealScalar = positive(unit="-")
+    nominal_length: RealScalar = positive(unit="m")
 
     def __check_init__(self):
         check_positive(self.strand_length, "BraidVolume.strand_length")
@@ -192,7 +194,8 @@ class BraidVolume(AbstractVolume):
             )
 
     @classmethod
-    def from_datasheet(cls, nominal_length, diameter, max_contraction):
+    def from_datasheet(cls, nominal_length: RealScalarLike, diameter: RealScalarLike,
+                       max_contraction: RealScalarLike) -> "BraidVolume":
         """The braid of a muscle of `nominal_length` L0 [m] and inner `diameter` D0 [m] at L0 whose eq. 5 force
         vanishes at `max_contraction` ε_max [-] (cos²θ = 1/3 there): b_s = √3 (1 − ε_max) L0 (eq. 1),
         n_s = b_s sin θ0 / (π D0) (eq. 2), cos θ0 = L0/b_s. For the MAS-10-300 (0.3 m, 10 mm, 25 %, datasheet):
@@ -251,9 +254,9 @@ class Muscle(AbstractMuscle):
 
     force_law: AbstractForceLaw
     volume_law: AbstractVolume
-    min_position: jax.Array = parameter(unit="m")
-    max_position: jax.Array = parameter(unit="m")
-    slack_width: jax.Array = parameter(1.0, unit="N")
+    min_position: RealScalar = parameter(unit="m")
+    max_position: RealScalar = parameter(unit="m")
+    slack_width: RealScalar = parameter(1.0, unit="N")
 
     def __check_init__(self):
         check_finite(self.min_position, "Muscle.min_position")
@@ -310,9 +313,9 @@ class EndStops(eqx.Module):
     (6e3 ≈ critical for 9.6 kg on k), `width` δ [m] (1e-4).
     """
 
-    stiffness: jax.Array = positive(1e6, unit="N/m")
-    damping: jax.Array = positive(6e3, unit="N s/m")
-    width: jax.Array = parameter(1e-4, unit="m")
+    stiffness: RealScalar = positive(1e6, unit="N/m")
+    damping: RealScalar = positive(6e3, unit="N s/m")
+    width: RealScalar = parameter(1e-4, unit="m")
 
     def __check_init__(self):
         check_positive(self.stiffness, "EndStops.stiffness")

@@ -20,11 +20,13 @@ accuracy band (`accuracy_band`) and the operating modes fast / universal / preci
 """
 
 import abc
+from typing import Any, Literal
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._core.custom_types import Array, FloatScalar, Real, RealScalar, RealScalarLike, StateLike, Table
 from .._core.errors import (
     PamjaxInputError,
     check_finite,
@@ -76,8 +78,8 @@ class VoltageCalibration(eqx.Module):
     **Arguments:** `voltage` [V] strictly increasing within 0-10 V; `gauge_pressure` [Pa] strictly increasing.
     """
 
-    voltage: jax.Array = parameter(VOLTAGE_RANGE, unit="V")
-    gauge_pressure: jax.Array = parameter((0.0, VOLTAGE_RANGE[1] * paper001.EQ6_GAIN * BAR), unit="Pa")
+    voltage: Table = parameter(VOLTAGE_RANGE, unit="V", shape="table")
+    gauge_pressure: Table = parameter((0.0, VOLTAGE_RANGE[1] * paper001.EQ6_GAIN * BAR), unit="Pa", shape="table")
 
     def __check_init__(self):
         check_table_axis(self.voltage, "VoltageCalibration.voltage")
@@ -97,18 +99,18 @@ class VoltageCalibration(eqx.Module):
 class RegulatorState(eqx.Module):
     """Regulator state: `pilot` [Pa abs] the first stage of eq. 6's two poles, `pressure` the outlet [Pa abs]."""
 
-    pilot: jax.Array
-    pressure: jax.Array
+    pilot: StateLike
+    pressure: StateLike
 
 
 class FeedbackRegulatorState(eqx.Module):
     """Eq. 8 realisation: `voltage_stage`, `voltage_output` (G_Vref's two poles), `flow_stage` (G_Qin's first pole),
     all in Pa; `pressure` the outlet [Pa abs]."""
 
-    voltage_stage: jax.Array
-    voltage_output: jax.Array
-    flow_stage: jax.Array
-    pressure: jax.Array
+    voltage_stage: StateLike
+    voltage_output: StateLike
+    flow_stage: StateLike
+    pressure: StateLike
 
 
 class AbstractRegulator(AbstractControlElement):
@@ -167,8 +169,8 @@ class LinearRegulator(AbstractRegulator):
     """
 
     calibration: VoltageCalibration = eqx.field(default_factory=VoltageCalibration)
-    time_constants: jax.Array = parameter(EQ6_TIME_CONSTANTS, unit="s")
-    flow_gain: jax.Array = parameter(EQ7_FLOW_GAIN, unit="Pa/(kg/s)")
+    time_constants: Real[Array, "2"] = parameter(EQ6_TIME_CONSTANTS, unit="s", shape="array")
+    flow_gain: RealScalar = parameter(EQ7_FLOW_GAIN, unit="Pa/(kg/s)")
 
     def __check_init__(self):
         if jnp.shape(self.time_constants) != (2,):
@@ -217,11 +219,11 @@ class FeedbackRegulator(AbstractRegulator):
     static gains equal eq. 5's).
     """
 
-    voltage_gain: jax.Array = parameter(paper001.EQ6_GAIN, unit="bar/V")
-    flow_gain: jax.Array = parameter(paper001.EQ7_GAIN, unit="bar/(l/min)")
-    time_constants: jax.Array = parameter(EQ6_TIME_CONSTANTS, unit="s")
-    k1: jax.Array = parameter(_eq8_default_gains()[0], unit="-")
-    k2: jax.Array = positive(_eq8_default_gains()[1], unit="-")
+    voltage_gain: RealScalar = parameter(paper001.EQ6_GAIN, unit="bar/V")
+    flow_gain: RealScalar = parameter(paper001.EQ7_GAIN, unit="bar/(l/min)")
+    time_constants: Real[Array, "2"] = parameter(EQ6_TIME_CONSTANTS, unit="s", shape="array")
+    k1: RealScalar = parameter(_eq8_default_gains()[0], unit="-")
+    k2: RealScalar = positive(_eq8_default_gains()[1], unit="-")
 
     def __check_init__(self):
         if jnp.shape(self.time_constants) != (2,):
@@ -261,10 +263,10 @@ class ISO6358RegulatorState(eqx.Module):
     """`pilot`, `pilot_output`: eq. 6's two stages [Pa abs]; `pressure`: the outlet/chamber [Pa abs];
     `hysteresis`: the branch u ∈ [−1, 1] of a `PressureHysteresis` (None without one)."""
 
-    pilot: jax.Array
-    pilot_output: jax.Array
-    pressure: jax.Array
-    hysteresis: jax.Array | None = None
+    pilot: StateLike
+    pilot_output: StateLike
+    pressure: StateLike
+    hysteresis: StateLike | None = None
 
 
 class PressureHysteresis(eqx.Module):
@@ -281,9 +283,9 @@ class PressureHysteresis(eqx.Module):
     2 (assumed: no loop shape is published); `rate_width` [Pa/s] smoothing |ṗ_set|; 100 (numerical, 1e-3 bar/s).
     """
 
-    width: jax.Array = positive(paper001.HYSTERESIS, unit="Pa")
-    exponent: jax.Array = exponent_field(2.0)  # assumed (see above)
-    rate_width: jax.Array = positive(1e2, unit="Pa/s")
+    width: RealScalar = positive(paper001.HYSTERESIS, unit="Pa")
+    exponent: RealScalar = exponent_field(2.0)  # assumed (see above)
+    rate_width: RealScalar = positive(1e2, unit="Pa/s")
 
     def __check_init__(self):
         check_positive(self.width, "PressureHysteresis.width")
@@ -331,13 +333,13 @@ class ISO6358Regulator(AbstractRegulator):
     """
 
     calibration: VoltageCalibration = eqx.field(default_factory=VoltageCalibration)
-    time_constants: jax.Array = parameter(EQ6_TIME_CONSTANTS, unit="s")
+    time_constants: Real[Array, "2"] = parameter(EQ6_TIME_CONSTANTS, unit="s", shape="array")
     charging: AbstractRestriction = eqx.field(default_factory=paper001_charging_restriction)
     discharging: AbstractRestriction = eqx.field(default_factory=paper001_discharging_restriction)
-    supply_pressure: jax.Array = positive(paper001.SUPPLY_PRESSURE, unit="Pa abs")
-    full_opening_error: jax.Array = parameter(paper001.HYSTERESIS, unit="Pa")
-    opening_width: jax.Array = parameter(1e-3, unit="-")
-    internal_volume: jax.Array = parameter(0.0, unit="m³")
+    supply_pressure: RealScalar = positive(paper001.SUPPLY_PRESSURE, unit="Pa abs")
+    full_opening_error: RealScalar = parameter(paper001.HYSTERESIS, unit="Pa")
+    opening_width: RealScalar = parameter(1e-3, unit="-")
+    internal_volume: RealScalar = parameter(0.0, unit="m³")
     hysteresis: PressureHysteresis | None = None
 
     needs_volume = True  # eq. 12 divides by the chamber's volume
@@ -452,14 +454,16 @@ class ISO6358Regulator(AbstractRegulator):
         return jnp.minimum(self.calibration(VOLTAGE_RANGE[1]), self.supply_pressure - air.atmospheric_pressure)
 
 
-def max_charging_flow(regulator: ISO6358Regulator, air: Air | None = None):
+def max_charging_flow(regulator: ISO6358Regulator, air: Air | None = None) -> FloatScalar:
     """The most mass flow [kg/s] the charging path can deliver: choked, fully open, ρ₀ C(p_s) p_s sqrt(T₀/T).
     `air` defaults to paper 001's (`paper001_air()`)."""
     air = paper001_air() if air is None else air
     return regulator.charging.mass_flow(regulator.supply_pressure, 0.0 * regulator.supply_pressure + 1.0, air)
 
 
-def vppm_regulator(mode="universal", *, internal_volume=datasheets.VPPM_INTERNAL_VOLUME, hysteresis=True, **fields):
+def vppm_regulator(mode: Literal["universal", "fast", "precise"] = "universal", *,
+                   internal_volume: RealScalarLike = datasheets.VPPM_INTERNAL_VOLUME,
+                   hysteresis: bool | PressureHysteresis | None = True, **fields: Any) -> ISO6358Regulator:
     """Paper 001's Festo VPPM as built: an `ISO6358Regulator` with its internal volume, its pressure hysteresis and
     an operating mode.
 

@@ -7,10 +7,11 @@ command outside a valve's range is rejected before any solve.
 import abc
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.arrays import as_array, as_scalar, as_table
+from .._core.custom_types import RealArray, RealScalar, Table
 from .._core.errors import PamjaxInputError, check_finite, check_positive, check_time_grid
 from .._core.fitting import parameter, positive
 from .._papers import paper001
@@ -38,7 +39,7 @@ class AbstractSignal(eqx.Module):
 class Constant(AbstractSignal):
     """u(t) = `value`."""
 
-    value: jax.Array = eqx.field(converter=jnp.asarray)
+    value: RealArray = eqx.field(converter=as_array)
 
     def __check_init__(self):
         check_finite(self.value, "Constant.value")
@@ -54,9 +55,9 @@ class Constant(AbstractSignal):
 class Step(AbstractSignal):
     """u(t) = `before` for t < `time`, `after` from `time` [s] on."""
 
-    before: jax.Array = eqx.field(converter=jnp.asarray)
-    after: jax.Array = eqx.field(converter=jnp.asarray)
-    time: jax.Array = parameter(0.0, unit="s")
+    before: RealScalar = eqx.field(converter=as_scalar)
+    after: RealScalar = eqx.field(converter=as_scalar)
+    time: RealScalar = parameter(0.0, unit="s")
 
     def __check_init__(self):
         check_finite(self.before, "Step.before")
@@ -75,9 +76,9 @@ class Triangle(AbstractSignal):
     """Triangle wave between `low` and `high` at `frequency` [Hz], starting at `low` and rising (paper 000's system
     tests: duty 0.05-0.95 at 0.08 and 0.25 Hz)."""
 
-    low: jax.Array = eqx.field(converter=jnp.asarray, default=0.05)
-    high: jax.Array = eqx.field(converter=jnp.asarray, default=0.95)
-    frequency: jax.Array = parameter(0.08, unit="Hz")
+    low: RealScalar = eqx.field(converter=as_scalar, default=0.05)
+    high: RealScalar = eqx.field(converter=as_scalar, default=0.95)
+    frequency: RealScalar = parameter(0.08, unit="Hz")
 
     def __check_init__(self):
         check_finite(self.low, "Triangle.low")
@@ -100,10 +101,10 @@ class Triangle(AbstractSignal):
 class Sine(AbstractSignal):
     """u(t) = `offset` + `amplitude` sin(2π `frequency` t + `phase`)."""
 
-    offset: jax.Array = eqx.field(converter=jnp.asarray)
-    amplitude: jax.Array = eqx.field(converter=jnp.asarray)
-    frequency: jax.Array = parameter(unit="Hz")
-    phase: jax.Array = parameter(0.0, unit="rad")
+    offset: RealScalar = eqx.field(converter=as_scalar)
+    amplitude: RealScalar = eqx.field(converter=as_scalar)
+    frequency: RealScalar = parameter(unit="Hz")
+    phase: RealScalar = parameter(0.0, unit="rad")
 
     def __check_init__(self):
         check_finite(self.offset, "Sine.offset")
@@ -131,8 +132,8 @@ class Sampled(AbstractSignal):
     **Arguments:** `times` [s] strictly increasing; `values` of the same length; `period` [s] or None.
     """
 
-    times: jax.Array = eqx.field(converter=jnp.asarray)
-    values: jax.Array = eqx.field(converter=jnp.asarray)
+    times: Table = eqx.field(converter=as_table)
+    values: Table = eqx.field(converter=as_table)
     period: float | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
@@ -162,10 +163,10 @@ class SquareWave(AbstractSignal):
     5 edge widths later (paper 001's 1.5 Hz, 0-3 V reference, Fig. 7). Edges are logistic steps of time width
     `edge_width` [s] (1e-3: 0.15 % of a 1.5 Hz period)."""
 
-    low: jax.Array = parameter(0.0, unit="V")
-    high: jax.Array = parameter(paper001.SQUARE_WAVE_HIGH, unit="V")
-    frequency: jax.Array = parameter(paper001.SQUARE_WAVE_FREQUENCY, unit="Hz")
-    edge_width: jax.Array = positive(1e-3, unit="s")
+    low: RealScalar = parameter(0.0, unit="V")
+    high: RealScalar = parameter(paper001.SQUARE_WAVE_HIGH, unit="V")
+    frequency: RealScalar = parameter(paper001.SQUARE_WAVE_FREQUENCY, unit="Hz")
+    edge_width: RealScalar = positive(1e-3, unit="s")
 
     def __check_init__(self):
         check_finite(self.low, "SquareWave.low")

@@ -8,10 +8,10 @@ All pressures are ABSOLUTE [Pa].
 """
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.custom_types import Table
 from .._core.errors import PamjaxInputError, check_finite, check_in_open_interval, check_positive, concrete_values
 from .._core.fitting import parameter, positive, ratio
 from .._papers import paper001
@@ -100,9 +100,9 @@ class TabulatedISO6358Restriction(AbstractRestriction):
     - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
     """
 
-    pressure: jax.Array = parameter(unit="Pa abs")
-    sonic_conductance: jax.Array = positive(unit="m³/(s Pa)")
-    critical_ratio: jax.Array = ratio(unit="-")
+    pressure: Table = parameter(unit="Pa abs", shape="table")
+    sonic_conductance: Table = positive(unit="m³/(s Pa)", shape="table")
+    critical_ratio: Table = ratio(unit="-", shape="table")
     laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
 
     def __check_init__(self):

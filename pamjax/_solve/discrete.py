@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.custom_types import Array, ArrayLike, PyTreeLike, Real, RealScalarLike, Series
 from .._core.errors import PamjaxInputError, check_positive
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractSystem
@@ -33,18 +34,19 @@ class DiscreteTrajectory(eqx.Module):
     `force` [N] (muscle); None for a tank.
     """
 
-    t: jax.Array
-    state: object
-    command: jax.Array
-    pressure: jax.Array
-    mass_flow: jax.Array
-    position: jax.Array | None
-    velocity: jax.Array | None
-    acceleration: jax.Array | None
-    force: jax.Array | None
+    t: Series
+    state: PyTreeLike
+    command: Real[Array, " times *command"]
+    pressure: Series
+    mass_flow: Series
+    position: Series | None
+    velocity: Series | None
+    acceleration: Series | None
+    force: Series | None
 
 
-def discrete_step(system: AbstractSystem, t, state, command, sample_time):
+def discrete_step(system: AbstractSystem, t: RealScalarLike, state: eqx.Module, command: Real[ArrayLike, "*command"],
+                  sample_time: RealScalarLike) -> eqx.Module:
     """One step of eq. 18-21 from `state` at time `t` [s] with `command` held over [t, t + T_s]: the system's own
     discrete-time model (`system.discrete_step`: eq. 18-20 for a muscle, eq. 18 for a tank)."""
     return system.discrete_step(t, state, command, sample_time)
@@ -83,7 +85,9 @@ def _run(system, signal, y0, t0, sample_time, num_steps: int):
     )
 
 
-def simulate_discrete(system: AbstractSystem, signal: AbstractSignal, sample_time, t_end, *, y0=None, t0=0.0):
+def simulate_discrete(system: AbstractSystem, signal: AbstractSignal, sample_time: RealScalarLike,
+                      t_end: RealScalarLike, *, y0: eqx.Module | None = None,
+                      t0: RealScalarLike = 0.0) -> DiscreteTrajectory:
     """Paper 000's discrete-time model (eq. 18-21): step `system` by Euler at `sample_time` T_s [s] from `t0` to
     `t_end` [s] (⌈(t_end − t0)/T_s⌉ steps, the last sample at or just past `t_end`).
 

@@ -3,12 +3,17 @@
 Used by `tests/reliability/` and `benchmarks/reliability.py`; public so users can check their own losses.
 """
 
+from collections.abc import Callable, Sequence
+from typing import Literal
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 from jax.flatten_util import ravel_pytree
+
+from .._core.custom_types import PyTreeLike, RealScalarLike
 
 
 def parameter_names(tree):
@@ -36,7 +41,9 @@ def parameter_names(tree):
 RELATIVE_STEPS = (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4, 5e-5, 2e-5, 1e-5, 1e-6)
 
 
-def gradient_check(loss, tree, *, relative_steps=RELATIVE_STEPS, floor=1e-3):
+def gradient_check(loss: Callable[[PyTreeLike, Literal["forward", "reverse"]], RealScalarLike], tree: PyTreeLike, *,
+                   relative_steps: Sequence[float] = RELATIVE_STEPS,
+                   floor: RealScalarLike = 1e-3) -> dict[str, np.ndarray]:
     """Compare d loss / d θ from forward mode, reverse mode and central finite differences for every scalar θ in the
     inexact-array leaves of `tree`.
 

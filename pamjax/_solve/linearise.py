@@ -6,6 +6,8 @@ request, any array leaves of the system (e.g. `RegulatorSystem.outlet_flow`, eq.
 pytree order (names in `state_names`), in SI units.
 """
 
+from collections.abc import Callable, Mapping, Sequence
+
 import equinox as eqx
 import jax
 import jax.flatten_util as jfu
@@ -13,19 +15,21 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
+from .._core.custom_types import ArrayLike, Float, Real, RealArrayLike, RealScalarLike
 from .._core.errors import PamjaxInputError, PamjaxSolveError
+from .._systems.base import AbstractSystem
 
 
 class StateSpace(eqx.Module):
     """A linear(ised) model: `A` (n×n), `B` (n×m), `C` (p×n), `D` (p×m) as NumPy arrays, with names."""
 
-    A: np.ndarray
-    B: np.ndarray
-    C: np.ndarray
-    D: np.ndarray
-    state_names: tuple = eqx.field(static=True)
-    input_names: tuple = eqx.field(static=True)
-    output_names: tuple = eqx.field(static=True)
+    A: Float[np.ndarray, "n n"]
+    B: Float[np.ndarray, "n m"]
+    C: Float[np.ndarray, "p n"]
+    D: Float[np.ndarray, "p m"]
+    state_names: tuple[str, ...] = eqx.field(static=True)
+    input_names: tuple[str, ...] = eqx.field(static=True)
+    output_names: tuple[str, ...] = eqx.field(static=True)
 
     def _index(self, names, name, kind):
         if isinstance(name, int):
@@ -108,7 +112,9 @@ def _names(tree, prefix):
     return tuple(out)
 
 
-def linearise(system, state, command, *, t=0.0, inputs=None, outputs=("pressure",)):
+def linearise(system: AbstractSystem, state: eqx.Module, command: RealArrayLike, *, t: RealScalarLike = 0.0,
+              inputs: Mapping[str, Callable[[AbstractSystem], Real[ArrayLike, "..."]]] | None = None,
+              outputs: Sequence[str] = ("pressure",)) -> StateSpace:
     """Linearise `system` about (`state`, `command`) at time `t`: a `StateSpace`.
 
     **Arguments:**
@@ -165,7 +171,8 @@ def linearise(system, state, command, *, t=0.0, inputs=None, outputs=("pressure"
     )
 
 
-def equilibrium(system, command, guess, *, t=0.0, rtol=1e-10, atol=1e-10, max_steps=200):
+def equilibrium(system: AbstractSystem, command: RealArrayLike, guess: eqx.Module, *, t: RealScalarLike = 0.0,
+                rtol: RealScalarLike = 1e-10, atol: RealScalarLike = 1e-10, max_steps: int = 200) -> eqx.Module:
     """A state where `system.vector_field(t, ·, command)` vanishes, by Newton's method from `guess`, solved in the
     system's scaled units (`state_scale`): full Newton steps until a step is below `atol + rtol |z|` in every
     scaled component. Raises `PamjaxSolveError` if it does not converge within `max_steps`.

@@ -1,6 +1,7 @@
 """`simulate`: one jitted, differentiable diffrax solve of a system driven by a command signal."""
 
 import contextlib
+from typing import TYPE_CHECKING, Literal
 
 import equinox as eqx
 import jax
@@ -9,6 +10,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from .._core.arrays import device_array
+from .._core.custom_types import ArrayLike, Real, RealScalarLike, TimesLike
 from .._core.errors import PamjaxInputError, PamjaxSolveError, check_time_grid, require_float64
 from .._core.private import diffrax_result_code, equinox_errors_as_nan, jax_at_top_level
 from .._core.units import check_absolute_pressure
@@ -21,6 +23,11 @@ from .edges import ScheduledValve, StartsOff
 from .hints import default_max_steps, failure_hint, fixed_step_hint, negative_inflow
 from .scaled import scaled
 from .trajectory import RESULT_NONFINITE, RESULT_NONPHYSICAL, Trajectory, result_message, trajectory
+
+if TYPE_CHECKING:  # annotations only: importing diffrax costs ~0.4 s that fixed-grid work never needs
+    import diffrax as dfx
+
+Stepping = Literal["auto", "adaptive", "pwm", "grid"]
 
 _DEFAULT_SUBSTEPS = 16  # RK4 nodes per PWM period: step ≤ 1.25 ms at 50 Hz (docs/performance.md)
 # s, stepping="grid": RK4 step of a hybrid system fed by a continuous valve; 1 ms puts paper 000's muscle-payload
@@ -35,23 +42,23 @@ def _is_traced(tree):
 def solve(
     system: AbstractSystem,
     signal: AbstractSignal,
-    ts,
-    y0,
-    t0,
+    ts: TimesLike,
+    y0: eqx.Module | None,
+    t0: RealScalarLike,
     *,
-    solver=None,
-    rtol=1e-6,
-    atol=1e-6,
-    max_steps=200_000,
-    dt0=None,
-    adjoint=None,
-    jump_ts=None,
-    throw=False,
-    stepping="adaptive",
-    substeps=_DEFAULT_SUBSTEPS,
-    num_periods=None,
-    grid_step=_DEFAULT_GRID_STEP,
-    starts_off=True,
+    solver: "dfx.AbstractSolver | None" = None,
+    rtol: RealScalarLike = 1e-6,
+    atol: RealScalarLike = 1e-6,
+    max_steps: int = 200_000,
+    dt0: RealScalarLike | None = None,
+    adjoint: "Literal['forward', 'reverse'] | dfx.AbstractAdjoint | None" = None,
+    jump_ts: Real[ArrayLike, " jumps"] | None = None,
+    throw: bool = False,
+    stepping: Stepping = "adaptive",
+    substeps: int = _DEFAULT_SUBSTEPS,
+    num_periods: int | None = None,
+    grid_step: RealScalarLike = _DEFAULT_GRID_STEP,
+    starts_off: bool = True,
 ) -> Trajectory:
     """The unchecked, traceable core of `simulate` (vmap- and grad-safe; no Python-side validation).
 
@@ -273,7 +280,7 @@ def validate(system, signal, ts, y0=None, t0=None):
             check_absolute_pressure(pressure, "y0.pressure")
 
 
-def default_solver(system: AbstractSystem):
+def default_solver(system: AbstractSystem) -> "dfx.AbstractSolver":
     """`simulate`'s solver for `system`: `Rodas5()` for a continuous valve (no switching edges), else `Tsit5()`.
 
     Measured on paper 000's 25 s triangle run at rtol = atol = 1e-6 (benchmarks/simulate.py, RESULTS.md): averaged
@@ -295,20 +302,20 @@ _SOLVERS = {}
 def simulate(
     system: AbstractSystem,
     signal: AbstractSignal,
-    ts,
+    ts: TimesLike,
     *,
-    y0=None,
-    t0=None,
-    solver=None,
-    rtol: float = 1e-6,
-    atol: float = 1e-6,
+    y0: eqx.Module | None = None,
+    t0: RealScalarLike | None = None,
+    solver: "dfx.AbstractSolver | None" = None,
+    rtol: RealScalarLike = 1e-6,
+    atol: RealScalarLike = 1e-6,
     max_steps: int | None = None,
-    dt0=None,
-    adjoint=None,
+    dt0: RealScalarLike | None = None,
+    adjoint: "Literal['forward', 'reverse'] | dfx.AbstractAdjoint | None" = None,
     throw: bool = True,
-    stepping: str = "auto",
+    stepping: Stepping = "auto",
     substeps: int = _DEFAULT_SUBSTEPS,
-    grid_step: float = _DEFAULT_GRID_STEP,
+    grid_step: RealScalarLike = _DEFAULT_GRID_STEP,
 ) -> Trajectory:
     """Simulate `system` driven by `signal` and return its channels at the times `ts`.
 

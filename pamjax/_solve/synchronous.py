@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError
 from .._physics.valves.base import AbstractSwitchingValve, AbstractValve
 from . import grid as _grid
@@ -70,7 +71,7 @@ def open_at_start(valve: AbstractSwitchingValve, signal, start, first_start):
     return jax.lax.stop_gradient(state)
 
 
-def num_periods(valve: AbstractSwitchingValve, t0, t1):
+def num_periods(valve: AbstractSwitchingValve, t0: RealScalarLike, t1: RealScalarLike) -> int:
     """Number of PWM periods (static int) that cover [t0, t1]; needs concrete times and frequency."""
     try:
         frequency = float(valve.pwm_frequency)

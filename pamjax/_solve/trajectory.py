@@ -1,10 +1,10 @@
 """`Trajectory`: what `simulate` returns, the system's named outputs at the requested times, and its result codes."""
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 
+from .._core.custom_types import Array, Float, Int, PyTreeLike, Real, Series
 from .._core.errors import PamjaxInputError
 from .._core.private import diffrax_result_message
 
@@ -28,14 +28,14 @@ class Trajectory(eqx.Module):
     - `result`: diffrax result code, or `RESULT_NONFINITE` / `RESULT_NONPHYSICAL` (0 = success); `succeeded`.
     """
 
-    t: jax.Array
-    state: object
-    command: jax.Array
-    outputs: dict
-    num_steps: jax.Array
-    num_accepted_steps: jax.Array
-    num_rejected_steps: jax.Array
-    result: jax.Array
+    t: Series
+    state: PyTreeLike
+    command: Real[Array, " times *command"]
+    outputs: dict[str, Float[Array, " times *channel"]]
+    num_steps: Int[Array, ""]
+    num_accepted_steps: Int[Array, ""]
+    num_rejected_steps: Int[Array, ""]
+    result: Int[Array, ""]
 
     def __getattr__(self, name):
         outputs = self.__dict__.get("outputs")

@@ -1,17 +1,23 @@
 """The sweeps users map an actuator with: steady state against duty, the valve's averaged flow surface, frequency
 response. Thin recipes over `sweep` and `cycle_averaged_flow`; no physics here."""
 
+from collections.abc import Sequence
+from typing import Any
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.custom_types import Float, RealArrayLike, RealScalarLike, RealVectorLike
 from .._core.errors import PamjaxInputError, check_positive
+from .._physics.gas import Air
 from .._physics.signals import Constant, Sine
 from .._physics.valves.averaged import cycle_averaged_flow
 from .._physics.valves.base import AbstractSwitchingValve
 from .._systems.base import AbstractSystem
 from .reductions import AbstractReduction, WindowMean
+from .result import SweepResult
 from .sweep import sweep
 
 # Output samples per PWM period for the steady-state mean: the mean over 20 equally spaced phases is within 60 Pa
@@ -22,7 +28,9 @@ SAMPLES_PER_PWM_PERIOD = 20
 SMOOTH_SAMPLE_INTERVAL = 0.01  # s
 
 
-def steady_state_map(system, commands, *, horizon=5.0, window=1.0, sample_interval=None, over=None, **sweep_kwargs):
+def steady_state_map(system: AbstractSystem, commands: RealVectorLike, *, horizon: RealScalarLike = 5.0,
+                     window: RealScalarLike = 1.0, sample_interval: RealScalarLike | None = None,
+                     over: dict[str, RealArrayLike] | None = None, **sweep_kwargs: Any) -> SweepResult:
     """Settled outputs against a constant command (duty ratio): each channel averaged over the last `window` [s]
     of a `horizon` [s] run (with a PWM valve, a whole number of periods, e.g. 1 s = 50 periods at 50 Hz). With the
     switching valve the dead band shows: below ~10 % and above ~90 % duty the valve does not switch (paper 000).
@@ -49,7 +57,8 @@ def steady_state_map(system, commands, *, horizon=5.0, window=1.0, sample_interv
                  **sweep_kwargs)
 
 
-def flow_surface(valve: AbstractSwitchingValve, commands, pressures, air, samples: int = 400):
+def flow_surface(valve: AbstractSwitchingValve, commands: RealVectorLike, pressures: RealVectorLike, air: Air,
+                 samples: int = 400) -> Float[np.ndarray, "commands pressures"]:
     """Cycle-averaged mass flow ṁ_eq(u, p) [kg/s] into a chamber HELD at `pressures` [Pa abs] for duty `commands`:
     the surface paper 000's eq. 13 is fitted to. Shape (len(commands), len(pressures)); one vmapped call.
     `samples` phases per period (midpoint rule; with the smoothed edges 400 agree with 4000 to 2e-16 of the
@@ -99,8 +108,10 @@ class _FourierIntegral(AbstractReduction):
         return node * (2.0 / window) * jnp.exp(-2j * jnp.pi * signal.frequency * ts)
 
 
-def frequency_response(system, frequencies, *, offset=0.5, amplitude=0.2, settle_periods=3, periods=3,
-                       samples_per_period=40, channels=("position", "pressure"), over=None, **sweep_kwargs):
+def frequency_response(system: AbstractSystem, frequencies: RealVectorLike, *, offset: RealScalarLike = 0.5,
+                       amplitude: RealScalarLike = 0.2, settle_periods: RealScalarLike = 3, periods: RealScalarLike = 3,
+                       samples_per_period: RealScalarLike = 40, channels: Sequence[str] = ("position", "pressure"),
+                       over: dict[str, RealArrayLike] | None = None, **sweep_kwargs: Any) -> dict[str, Any]:
     """Gain and phase of outputs against a sinusoidal command u = offset + amplitude sin(2π f t), at each of
     `frequencies` [Hz], from the Fourier coefficient over exactly the last `periods` periods after
     `settle_periods`.

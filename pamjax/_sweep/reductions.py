@@ -28,7 +28,7 @@ class FinalValue(AbstractReduction):
 class WindowMean(AbstractReduction):
     """Mean over the output times in the last `window` [s] (e.g. the last N PWM periods: N / f_PWM)."""
 
-    window: float = eqx.field(static=True)
+    window: float | int = eqx.field(static=True)
 
     def weights(self, ts, system, signal):
         inside = ts >= ts[-1] - self.window * (1 + 1e-12)
@@ -44,7 +44,7 @@ class FourierCoefficient(AbstractReduction):
     """
 
     periods: int = eqx.field(static=True, default=3)
-    frequency: object = eqx.field(static=True, default="signal.frequency")
+    frequency: str | float | int = eqx.field(static=True, default="signal.frequency")
 
     def weights(self, ts, system, signal):
         f = _lane_value(self.frequency, system, signal)

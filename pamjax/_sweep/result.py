@@ -1,8 +1,11 @@
 """What a sweep returns (`SweepResult`, its status codes), and the whole result joined from every process's shard."""
 
+from collections.abc import Iterable
+
 import equinox as eqx
 import numpy as np
 
+from .._core.custom_types import Float, Int
 from .._core.errors import PamjaxInputError
 
 # Status codes per sweep point.
@@ -28,15 +31,15 @@ class SweepResult(eqx.Module):
       and `status`. `merge_sweep_shards` joins the shards of every process into the whole result.
     """
 
-    over: dict
-    t: np.ndarray
-    channels: tuple = eqx.field(static=True)
-    outputs: dict
-    status: np.ndarray
+    over: dict[str, np.ndarray]
+    t: Float[np.ndarray, " times"]
+    channels: tuple[str, ...] = eqx.field(static=True)
+    outputs: dict[str, np.ndarray]
+    status: Int[np.ndarray, "..."]
     dt: float = eqx.field(static=True)
     method: str = eqx.field(static=True)
-    points: np.ndarray | None = None
-    batch_shape: tuple | None = eqx.field(static=True, default=None)
+    points: Int[np.ndarray, " points"] | None = None
+    batch_shape: tuple[int, ...] | None = eqx.field(static=True, default=None)
 
     @property
     def succeeded(self):
@@ -57,7 +60,7 @@ def in_point_order(points, out, status, batch_size):
     return out[order], status[order]
 
 
-def merge_sweep_shards(shards) -> SweepResult:
+def merge_sweep_shards(shards: Iterable[SweepResult]) -> SweepResult:
     """The whole `SweepResult` from the shards that `sweep(..., gather="local")` returned on every process (for
     instance saved by each process and loaded on one machine); every point must be in exactly one shard."""
     shards = list(shards)

@@ -12,11 +12,15 @@ processes (`sharding`), the result (`result`); this module is the front end.
 """
 
 import time
+from collections.abc import Callable, Sequence
+from typing import Any, Literal
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.custom_types import RealArrayLike, RealScalarLike, TimesLike
 from .._core.errors import PamjaxInputError, check_time_grid, require_float64
 from .._physics.signals import AbstractSignal
 from .._solve import fixed_step as _fixed_step
@@ -30,20 +34,20 @@ from .sharding import Layout, gather_processes, local_part, mesh_of, put
 
 def sweep(
     system: AbstractSystem,
-    signal,
-    ts,
-    over: dict,
+    signal: AbstractSignal | Callable[[dict[str, Any]], AbstractSignal],
+    ts: TimesLike,
+    over: dict[str, RealArrayLike],
     *,
-    y0=None,
+    y0: eqx.Module | None = None,
     reduce: AbstractReduction | None = None,
-    channels=None,
-    method: str = "auto",
-    dt: float | None = None,
+    channels: Sequence[str] | None = None,
+    method: Literal["auto", "rodas5a", "rk4", "ros2", "ros2a", "adaptive"] = "auto",
+    dt: RealScalarLike | None = None,
     chunk_size: int | None = None,
-    devices=None,
-    progress=True,
-    solve_options: dict | None = None,
-    gather: str = "all",
+    devices: Sequence[jax.Device] | jax.sharding.Mesh | None = None,
+    progress: bool | Callable[[str], object] = True,
+    solve_options: dict[str, Any] | None = None,
+    gather: Literal["all", "local"] = "all",
 ) -> SweepResult:
     """Simulate `system` at every point of a batch of inputs and parameter values, as one compiled vmapped call.
 

@@ -14,6 +14,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._core.custom_types import RealScalar, StateLike
 from .._core.errors import PamjaxInputError, check_nonnegative, check_positive
 from .._core.fitting import parameter, positive
 from .._papers import paper000, paper001
@@ -38,8 +39,8 @@ class JointState(eqx.Module):
 
     flexor: eqx.Module
     extensor: eqx.Module
-    angle: jax.Array
-    angular_velocity: jax.Array
+    angle: StateLike
+    angular_velocity: StateLike
 
 
 class VoltagePair(AbstractSignal):
@@ -70,16 +71,16 @@ class AntagonisticJoint(AbstractSystem):
     extensor_regulator: AbstractRegulator
     flexor: Muscle
     extensor: Muscle
-    pulley_radius: jax.Array = parameter(PULLEY_RADIUS, unit="m")
-    pre_contraction: jax.Array = parameter(PRE_CONTRACTION, unit="m")
-    inertia: jax.Array = parameter(JOINT_INERTIA, unit="kg m²")
-    foot_mass: jax.Array = parameter(FOOT_MASS, unit="kg")
-    foot_arm: jax.Array = parameter(FOOT_ARM, unit="m")
-    damping: jax.Array = positive(JOINT_DAMPING, unit="N m s/rad")
-    gravity: jax.Array = parameter(paper000.GRAVITY, unit="m/s²")
+    pulley_radius: RealScalar = parameter(PULLEY_RADIUS, unit="m")
+    pre_contraction: RealScalar = parameter(PRE_CONTRACTION, unit="m")
+    inertia: RealScalar = parameter(JOINT_INERTIA, unit="kg m²")
+    foot_mass: RealScalar = parameter(FOOT_MASS, unit="kg")
+    foot_arm: RealScalar = parameter(FOOT_ARM, unit="m")
+    damping: RealScalar = positive(JOINT_DAMPING, unit="N m s/rad")
+    gravity: RealScalar = parameter(paper000.GRAVITY, unit="m/s²")
     end_stops: EndStops = eqx.field(default_factory=EndStops)
     air: Air = eqx.field(default_factory=paper001_air)
-    polytropic_index: jax.Array = parameter(paper001.POLYTROPIC_INDEX, unit="-")
+    polytropic_index: RealScalar = parameter(paper001.POLYTROPIC_INDEX, unit="-")
 
     output_names = ("pressure", "mass_flow", "angle", "angular_velocity", "force", "volume")
 

@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.custom_types import ArrayLike, FloatScalar, Real, RealScalar, RealScalarLike
 from .._core.errors import PamjaxInputError, check_nonnegative, check_positive
 from .._core.fitting import parameter
 from .._physics.regulator import EQ6_TIME_CONSTANTS, VOLTAGE_RANGE
@@ -48,7 +49,8 @@ TRACKING_TIME = 0.1  # s, back-calculation time constant: Åström-Hägglund's T
 
 
 # --- static inverse -------------------------------------------------------------------------------------------------
-def regulated_stiffness(joint: AntagonisticJoint, angle, flexor_pressure, extensor_pressure):
+def regulated_stiffness(joint: AntagonisticJoint, angle: RealScalarLike, flexor_pressure: RealScalarLike,
+                        extensor_pressure: RealScalarLike) -> FloatScalar:
     """K_θ = −∂τ/∂θ [N m/rad] at held absolute pressures [Pa] (regulated muscles), by autodiff of the torque."""
     return -jax.grad(lambda a: joint.torque(a, flexor_pressure, extensor_pressure))(jnp.asarray(angle, dtype=float))
 
@@ -136,12 +138,12 @@ class AntagonisticJointController(eqx.Module):
     eq. 6's τ₁ + τ₂), `tracking_time` T_t [s] (0.1); reasons beside the module constants.
     """
 
-    angle_proportional_gain: jax.Array = parameter(ANGLE_PROPORTIONAL_GAIN, unit="Pa/rad")
-    angle_integral_gain: jax.Array = parameter(ANGLE_INTEGRAL_GAIN, unit="Pa/(rad s)")
-    sum_proportional_gain: jax.Array = parameter(SUM_PROPORTIONAL_GAIN, unit="-")
-    sum_integral_gain: jax.Array = parameter(SUM_INTEGRAL_GAIN, unit="1/s")
-    lead_time: jax.Array = parameter(LEAD_TIME, unit="s")
-    tracking_time: jax.Array = parameter(TRACKING_TIME, unit="s")
+    angle_proportional_gain: RealScalar = parameter(ANGLE_PROPORTIONAL_GAIN, unit="Pa/rad")
+    angle_integral_gain: RealScalar = parameter(ANGLE_INTEGRAL_GAIN, unit="Pa/(rad s)")
+    sum_proportional_gain: RealScalar = parameter(SUM_PROPORTIONAL_GAIN, unit="-")
+    sum_integral_gain: RealScalar = parameter(SUM_INTEGRAL_GAIN, unit="1/s")
+    lead_time: RealScalar = parameter(LEAD_TIME, unit="s")
+    tracking_time: RealScalar = parameter(TRACKING_TIME, unit="s")
 
     def __check_init__(self):
         for name in (
@@ -186,10 +188,10 @@ class GaitAngle(AbstractSignal):
     """Gait-like ankle angle [rad]: `offset` + a₁ sin(2π f t) + a₂ sin(4π f t + 1) (push-off and swing, the shape of
     `fits/ankle.py`), a₁ = 0.18 rad, a₂ = 0.08 rad (≈ ±15°, the ankle's sagittal range in walking, Winter)."""
 
-    frequency: jax.Array = parameter(0.5, unit="Hz")
-    offset: jax.Array = parameter(0.0, unit="rad")
-    first: jax.Array = parameter(0.18, unit="rad")
-    second: jax.Array = parameter(0.08, unit="rad")
+    frequency: RealScalar = parameter(0.5, unit="Hz")
+    offset: RealScalar = parameter(0.0, unit="rad")
+    first: RealScalar = parameter(0.18, unit="rad")
+    second: RealScalar = parameter(0.08, unit="rad")
 
     def __check_init__(self):
         check_positive(self.frequency, "GaitAngle.frequency")
@@ -212,7 +214,7 @@ class JointControlState(eqx.Module):
     """`plant`: the joint's `JointState` (absolute pressures); `integrals`: (I_θ, I_Σ) [Pa]."""
 
     plant: JointState
-    integrals: jax.Array
+    integrals: Real[ArrayLike, " *batch 2"]
 
 
 class JointControlLoop(AbstractSystem):

@@ -5,9 +5,9 @@ volume [m³].
 """
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 
+from .._core.custom_types import RealScalar, StateLike
 from .._core.errors import check_in_open_interval, check_positive
 from .._core.fitting import parameter, positive
 from .._papers import paper000
@@ -23,10 +23,10 @@ class MuscleState(eqx.Module):
     """State of a muscle lifting a payload: `pressure` [Pa abs], `position` x [m] (positive = contraction, payload
     up), `velocity` ẋ [m/s], `friction` the friction model's own state (None for memoryless friction)."""
 
-    pressure: jax.Array
-    position: jax.Array
-    velocity: jax.Array
-    friction: jax.Array | None = None
+    pressure: StateLike
+    position: StateLike
+    velocity: StateLike
+    friction: StateLike | None = None
 
 
 class MuscleSystem(AbstractMuscleSystem):
@@ -44,12 +44,12 @@ class MuscleSystem(AbstractMuscleSystem):
 
     valve: AbstractValve
     muscle: Muscle
-    payload_mass: jax.Array = positive(paper000.PAYLOAD_MASS, unit="kg")
+    payload_mass: RealScalar = positive(paper000.PAYLOAD_MASS, unit="kg")
     friction: AbstractFriction = eqx.field(default_factory=CoulombViscousFriction)
     end_stops: EndStops = eqx.field(default_factory=EndStops)
     air: Air = eqx.field(default_factory=Air)
-    gravity: jax.Array = parameter(paper000.GRAVITY, unit="m/s²")
-    polytropic_index: jax.Array = parameter(paper000.POLYTROPIC_INDEX, unit="-")
+    gravity: RealScalar = parameter(paper000.GRAVITY, unit="m/s²")
+    polytropic_index: RealScalar = parameter(paper000.POLYTROPIC_INDEX, unit="-")
 
     output_names = ("pressure", "position", "velocity", "force", "friction_force", "mass_flow", "volume")
 

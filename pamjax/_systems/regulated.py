@@ -15,6 +15,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._core.custom_types import FloatScalar, RealScalar, RealScalarLike, StateLike
 from .._core.errors import check_in_open_interval, check_nonnegative, check_positive
 from .._core.fitting import parameter, positive
 from .._papers import datasheets, paper000, paper001
@@ -35,10 +36,10 @@ class RegulatorSystem(AbstractSystem):
     """
 
     regulator: AbstractRegulator
-    volume: jax.Array = positive(paper001.TANK_VOLUME, unit="m³")
-    outlet_flow: jax.Array = parameter(0.0, unit="kg/s")
+    volume: RealScalar = positive(paper001.TANK_VOLUME, unit="m³")
+    outlet_flow: RealScalar = parameter(0.0, unit="kg/s")
     air: Air = eqx.field(default_factory=paper001_air)
-    polytropic_index: jax.Array = parameter(paper001.POLYTROPIC_INDEX, unit="-")
+    polytropic_index: RealScalar = parameter(paper001.POLYTROPIC_INDEX, unit="-")
 
     output_names = ("pressure", "mass_flow", "inlet_flow", "volume")
 
@@ -85,9 +86,9 @@ class RegulatedMuscleState(eqx.Module):
     `velocity` [m/s]; `friction`: the friction model's state (None if memoryless)."""
 
     regulator: eqx.Module
-    position: jax.Array
-    velocity: jax.Array
-    friction: jax.Array | None = None
+    position: StateLike
+    velocity: StateLike
+    friction: StateLike | None = None
 
 
 def load_equilibrium(muscle: Muscle, load_force, pressure, air: Air):
@@ -108,7 +109,9 @@ def volume_derivatives(muscle: Muscle, x):
     return muscle.volume(x), dv(x), jax.grad(dv)(x)
 
 
-def muscle_stiffness(muscle: Muscle, x, pressure, air: Air, pressure_slope=None, polytropic_index=1.0):
+def muscle_stiffness(muscle: Muscle, x: RealScalarLike, pressure: RealScalarLike, air: Air,
+                     pressure_slope: RealScalarLike | None = None,
+                     polytropic_index: RealScalarLike = 1.0) -> FloatScalar:
     """Paper 001 eq. 9 by autodiff: K = −dF/dx = −(∂F/∂x + ∂F/∂p · dp/dx) [N/m], x the shortening [m].
 
     `pressure_slope` dp/dx [Pa/m] along the motion; default the closed chamber, dp/dV = −n p/V (eq. 9's first
@@ -124,7 +127,8 @@ def muscle_stiffness(muscle: Muscle, x, pressure, air: Air, pressure_slope=None,
     return -(dfdx + dfdp * pressure_slope)
 
 
-def stiffness_rate(muscle: Muscle, x, velocity, pressure, pressure_rate):
+def stiffness_rate(muscle: Muscle, x: RealScalarLike, velocity: RealScalarLike, pressure: RealScalarLike,
+                   pressure_rate: RealScalarLike) -> FloatScalar:
     """Paper 001 eq. 10 (second line), in x = shortening [m]: V'(x) ṗ + V''(x) ẋ p [N/s], V', V'' by autodiff.
 
     Eq. 10 as printed is the time derivative of the virtual-work force p V'(x), i.e. K ẋ; paper 001 calls it the
@@ -147,13 +151,13 @@ class RegulatedMuscleSystem(AbstractMuscleSystem):
 
     regulator: AbstractRegulator
     muscle: Muscle
-    load_force: jax.Array = parameter(paper001.LOAD_FORCE, unit="N")
-    payload_mass: jax.Array = positive(paper001.LOAD_FORCE / paper000.GRAVITY, unit="kg")
+    load_force: RealScalar = parameter(paper001.LOAD_FORCE, unit="N")
+    payload_mass: RealScalar = positive(paper001.LOAD_FORCE / paper000.GRAVITY, unit="kg")
     friction: AbstractFriction = eqx.field(
         default_factory=lambda: CoulombViscousFriction(0.0, datasheets.DMSP40_VISCOUS_COEFFICIENT))
     end_stops: EndStops = eqx.field(default_factory=EndStops)
     air: Air = eqx.field(default_factory=paper001_air)
-    polytropic_index: jax.Array = parameter(paper001.POLYTROPIC_INDEX, unit="-")
+    polytropic_index: RealScalar = parameter(paper001.POLYTROPIC_INDEX, unit="-")
 
     output_names = ("pressure", "position", "velocity", "force", "friction_force", "mass_flow", "inlet_flow",
                     "volume")

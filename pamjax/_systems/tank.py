@@ -1,9 +1,9 @@
 """A constant-volume tank fed by a valve (paper 000's valve tests, paper 001's appendix)."""
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 
+from .._core.custom_types import RealScalar, StateLike
 from .._core.errors import check_in_open_interval, check_positive
 from .._core.fitting import parameter, positive
 from .._papers import paper000
@@ -16,7 +16,7 @@ from .base import AbstractSystem
 class TankState(eqx.Module):
     """State of a constant-volume tank: `pressure` [Pa abs]."""
 
-    pressure: jax.Array
+    pressure: StateLike
 
 
 class TankSystem(AbstractSystem):
@@ -27,9 +27,9 @@ class TankSystem(AbstractSystem):
     """
 
     valve: AbstractValve
-    volume: jax.Array = positive(unit="m³")
+    volume: RealScalar = positive(unit="m³")
     air: Air = eqx.field(default_factory=Air)
-    polytropic_index: jax.Array = parameter(paper000.POLYTROPIC_INDEX, unit="-")
+    polytropic_index: RealScalar = parameter(paper000.POLYTROPIC_INDEX, unit="-")
 
     output_names = ("pressure", "mass_flow")
 

@@ -5,7 +5,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..._core.arrays import device_array
+from ..._core.arrays import as_array, device_array
+from ..._core.custom_types import Array, FloatScalar, Real, RealArrayLike, RealScalarLike, RealVectorLike
 from ..._core.errors import PamjaxInputError, check_finite
 from ..._core.fitting import labelled
 from ..gas import Air
@@ -24,7 +25,7 @@ class AveragedValve(AbstractValve):
     **Arguments:** `coefficients` (3, 3) array (see `pamjax.presets` for the derived defaults).
     """
 
-    coefficients: jax.Array = eqx.field(converter=jnp.asarray, metadata=labelled("m{n}", unit="kg/(s Pa^j)"))
+    coefficients: Real[Array, "3 3"] = eqx.field(converter=as_array, metadata=labelled("m{n}", unit="kg/(s Pa^j)"))
 
     def __check_init__(self):
         if jnp.shape(self.coefficients) != (3, 3):
@@ -35,7 +36,7 @@ class AveragedValve(AbstractValve):
         check_finite(self.coefficients, "AveragedValve.coefficients")
 
     @classmethod
-    def from_m(cls, m):
+    def from_m(cls, m: RealVectorLike) -> "AveragedValve":
         """Build from the paper's flat m1…m9 (SI units, gauge pressure in Pa)."""
         m = jnp.asarray(m)
         if m.shape != (9,):
@@ -67,7 +68,8 @@ class AveragedValve(AbstractValve):
         return jnp.clip(root, 0.0, 1.0)
 
 
-def cycle_averaged_flow(valve: AbstractSwitchingValve, command, pressure, air: Air, samples: int = 4000):
+def cycle_averaged_flow(valve: AbstractSwitchingValve, command: RealScalarLike, pressure: RealScalarLike, air: Air,
+                        samples: int = 4000) -> FloatScalar:
     """PWM-period average of an on/off valve's flow into a chamber held at `pressure` [Pa abs], for duty `command`
     [kg/s] (paper 000's "equivalent mass flow"; midpoint rule over `samples` phases of one period)."""
     phases = (jnp.arange(samples) + 0.5) / samples * valve.period
@@ -75,7 +77,9 @@ def cycle_averaged_flow(valve: AbstractSwitchingValve, command, pressure, air: A
     return jnp.mean(flows)
 
 
-def fit_averaged_valve(valve: AbstractSwitchingValve, air: Air, commands=None, pressures=None, pin_endpoints=True):
+def fit_averaged_valve(valve: AbstractSwitchingValve, air: Air, commands: RealArrayLike | None = None,
+                       pressures: RealArrayLike | None = None,
+                       pin_endpoints: bool = True) -> tuple[AveragedValve, dict[str, float]]:
     """Least-squares fit of eq. 13's m1…m9 to the cycle-averaged flow of an on/off valve over a (duty, pressure)
     grid (duty 0…1, pressure p_atm…p_supply by default). Returns `(AveragedValve, report)`, the report holding the
     max error and RMSE in kg/s and in % of the flow range (paper 000: 4.13 % and 1.16 %).

@@ -6,6 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._core.arrays import device_array
+from ..._core.custom_types import RealScalar
 from ..._core.errors import PamjaxInputError, check_nonnegative, check_positive
 from ..._core.fitting import positive
 from ..._core.units import check_absolute_pressure
@@ -68,11 +69,11 @@ class OnOffValve(AbstractSwitchingValve):
 
     inflate: AbstractRestriction
     exhaust: AbstractRestriction
-    supply_pressure: jax.Array = positive(paper000.SUPPLY_PRESSURE, unit="Pa abs")
-    pwm_frequency: jax.Array = positive(paper000.PWM_FREQUENCY, unit="Hz")
-    switch_on_delay: jax.Array = positive(paper000.SWITCH_DELAY, unit="s")
-    switch_off_delay: jax.Array = positive(paper000.SWITCH_DELAY, unit="s")
-    edge_width: jax.Array = positive(1e-4, unit="s")
+    supply_pressure: RealScalar = positive(paper000.SUPPLY_PRESSURE, unit="Pa abs")
+    pwm_frequency: RealScalar = positive(paper000.PWM_FREQUENCY, unit="Hz")
+    switch_on_delay: RealScalar = positive(paper000.SWITCH_DELAY, unit="s")
+    switch_off_delay: RealScalar = positive(paper000.SWITCH_DELAY, unit="s")
+    edge_width: RealScalar = positive(1e-4, unit="s")
     mode: str = eqx.field(static=True, default="smooth")
 
     def __check_init__(self):
