@@ -23,13 +23,17 @@ driven from meta.json.
 """
 
 import dataclasses
+import os
 import pathlib
+from collections.abc import Sequence
 
 import numpy as np
 
 from .._core.errors import PamjaxInputError
 from .._fit.experiment import Experiment, TankFromModel
+from .._fit.fit import FitResult
 from .._fit.rig import DEFAULT_GROUP, Rig, RunConditions, Sensors, StartState, nuisance_report
+from .._systems.base import AbstractSystem
 from .files import (
     FITTED_KINDS,
     MUSCLE_KINDS,
@@ -154,8 +158,10 @@ def _start_estimate(rec, offset, window=0.02):
     return out
 
 
-def load_bench(directory, model, *, rate=None, kinds=FITTED_KINDS, fitted_keys=None, substeps=16, nuisance=False,
-               atmosphere=None, position_offset=0.0):
+def load_bench(directory: str | os.PathLike, model: AbstractSystem | Rig, *, rate: float | None = None,
+               kinds: Sequence[str] = FITTED_KINDS, fitted_keys: Sequence[str] | None = None, substeps: int = 16,
+               nuisance: bool | Sequence[str] = False, atmosphere: float | None = None,
+               position_offset: float = 0.0) -> "Bench":
     """Experiments of a bench directory for `pamjax.fit(bench.model, bench.experiments, bench.free)`.
 
     **Arguments:**
@@ -198,8 +204,7 @@ def load_bench(directory, model, *, rate=None, kinds=FITTED_KINDS, fitted_keys=N
     p_atm = float(model.air.atmospheric_pressure)
     if atmosphere is None:
         atmosphere = number(meta, "atmosphere_Pa", f"{where}/meta.json", 5e4, 1.2e5, "Pa abs") or p_atm
-    valve = model.valve
-    period = None if valve.period is None else float(valve.period)
+    period = None if model.valve.period is None else float(model.valve.period)
     specs, skipped, recordings, notes, unknown = [], {}, [], [], []
     for name, e in meta["experiments"].items():
         kind = e.get("kind")
@@ -346,7 +351,7 @@ def _has_supply(valve):
     return True
 
 
-def bench_values(result, keys):
+def bench_values(result: FitResult, keys: Sequence[str]) -> tuple[dict[str, float], dict[str, float]]:
     """A fit result's values and standard errors by bench name: ({key: value}, {key: std err}) [SI units]. The
     plant's labels are matched with or without a `Rig`'s `plant.` prefix."""
     label_index = {label: i for i, label in enumerate(result.labels)}
@@ -359,7 +364,7 @@ def bench_values(result, keys):
     return values, errors
 
 
-def bench_nuisance(result, bench):
+def bench_nuisance(result: FitResult, bench: "Bench") -> dict:
     """A fit's nuisances in the bench's terms (SI units): `delay_s`, `pressure_offset_Pa` (added to the gauge
     pressure), `pressure_gain` (multiplies it), `position_offset_m`, `supply_pressure_Pa` (run → value), `start` (run
     → pressure_Pa, position_m, velocity_m_s), each fitted one's standard error under `std_err` (same keys), and
@@ -393,7 +398,7 @@ def bench_nuisance(result, bench):
     return out
 
 
-def nuisance_table(nuisance):
+def nuisance_table(nuisance: dict) -> str:
     """Text table of `bench_nuisance`'s report: each nuisance, its value ± standard error (or 'held')."""
     se, rows = nuisance["std_err"], []
     for key in ("delay_s", "pressure_offset_Pa", "pressure_gain", "position_offset_m"):
@@ -408,7 +413,7 @@ def nuisance_table(nuisance):
     return "\n".join(rows)
 
 
-def bench_rmse(result):
+def bench_rmse(result: FitResult) -> dict[str, dict[str, float]]:
     """{experiment: {"p": Pa, "x": m}}: the residual RMSE of every fitted experiment, by the bench's channel names."""
     out = {}
     for name, chans in result.channel_errors.items():

@@ -20,9 +20,11 @@ import datetime
 import functools
 import json
 import math
+import os
 import pathlib
 import re
 import sys
+from collections.abc import Sequence
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -152,7 +154,8 @@ def model_json(model, provenance=None, classes=()):
     return "\n".join(lines) + "\n}\n"
 
 
-def save_model(path, model, *, overwrite=False, provenance=None, classes=()):
+def save_model(path: str | os.PathLike, model: eqx.Module, *, overwrite: bool = False,
+               provenance: dict | None = None, classes: Sequence[type] = ()) -> pathlib.Path:
     """Write `model` (every parameter, its units and structure) to the JSON file `path`; `load_model(path)` reads it
     back equal, bitwise. Refuses to replace an existing file unless `overwrite=True`. `provenance`: a JSON-able dict
     stored beside (e.g. how the model was fitted). `classes`: your own component classes used in the model."""
@@ -319,7 +322,7 @@ def _from_json_value(v):
     return v
 
 
-def load_model(path, *, classes=()):
+def load_model(path: str | os.PathLike, *, classes: Sequence[type] = ()) -> eqx.Module:
     """Read a model written by `save_model` or `pamjax fit` (`model.json`): the same classes, structure and every
     parameter bitwise. Raises `PamjaxInputError` naming the file and the entry for a malformed file, an unknown class
     or a value the component refuses. `classes`: your own component classes, if the model uses any."""

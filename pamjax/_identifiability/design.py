@@ -15,6 +15,8 @@ import math
 import threading
 import time
 import warnings
+from collections.abc import Callable, Sequence
+from typing import Literal
 
 import jax
 import jax.numpy as jnp
@@ -24,6 +26,8 @@ from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError
 from .._fit.experiment import AbstractExperiment
 from .._fit.problem import physical_and_jacobian, residuals_and_jacobian
+from .._physics.signals import AbstractSignal
+from .._systems.base import AbstractSystem
 from . import design_objective as obj
 from .design_result import DesignResult, PamjaxDesignWarning, constraints_report, worst_violation
 from .design_setup import (
@@ -219,36 +223,36 @@ def _problem(space, theta, exp, basis, weight, band, windows, limits, max_pressu
 
 
 def design_experiment(
-    model,
-    free,
+    model: AbstractSystem,
+    free: str | Sequence[str],
     duration: float,
     *,
-    noise: dict,
-    channels=("pressure", "position"),
-    start=None,
-    build=None,
+    noise: dict[str, float],
+    channels: Sequence[str] = ("pressure", "position"),
+    start: dict[str, float] | None = None,
+    build: Callable[[AbstractSystem], AbstractSystem] | None = None,
     rate: float = 1000.0,
-    prior=(),
-    baseline=None,
+    prior: AbstractExperiment | Sequence[AbstractExperiment] = (),
+    baseline: AbstractExperiment | Sequence[AbstractExperiment] | None = None,
     baseline_margin: float = 1.0,
-    criterion: str = "D",
-    subset=None,
-    duty_band=DUTY_BAND,
-    duty_margin="auto",
+    criterion: Literal["D", "A"] = "D",
+    subset: Sequence[str] | None = None,
+    duty_band: tuple[float, float] = DUTY_BAND,
+    duty_margin: float | Literal["auto"] = "auto",
     stroke_margin: float = STROKE_MARGIN,
-    max_pressure=None,
-    max_duty_step=None,
-    min_force=MIN_FORCE,
-    parametrisation: str = "envelope",
+    max_pressure: float | None = None,
+    max_duty_step: float | None = None,
+    min_force: float | None = MIN_FORCE,
+    parametrisation: Literal["envelope", "periods"] = "envelope",
     knots: int = 12,
     steps: int = 20,
-    initial=None,
+    initial: AbstractSignal | Sequence[float] | None = None,
     seed: int = 0,
-    period=None,
+    period: float | None = None,
     design_rate: float = DESIGN_RATE,
     substeps: int = DESIGN_SUBSTEPS,
     verify: bool = True,
-    progress=True,
+    progress: bool | Callable[..., object] = True,
 ) -> DesignResult:
     """Choose a PWM duty signal (one value per PWM period) that maximises the information a recording of
     `duration` seconds gives about the parameters `free` of `model`, under a bench's constraints.

@@ -33,6 +33,7 @@ import math
 import pathlib
 import statistics
 import time
+from collections.abc import Callable, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -378,16 +379,16 @@ def _validate(result, names, experiments, level, max_points, span, workers):
 
 
 def profile_likelihood(
-    result,
-    names=None,
+    result: FitResult,
+    names: str | Sequence[str] | None = None,
     *,
-    experiments=None,
+    experiments: Sequence[AbstractExperiment] | None = None,
     level: float = 0.95,
     max_points: int = 12,
     span: float = 4.0,
     max_steps: int = 30,
     workers: int = 2,
-    progress=True,
+    progress: bool | Callable[..., object] = True,
 ) -> ProfileResult:
     """Profile likelihoods of the parameters `names` (labels of `result`; default all) of a fit.
 
