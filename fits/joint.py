@@ -1,6 +1,7 @@
 """Joint identification of paper 000's MAS-10 plant from a bench directory, starting from the datasheet presets.
 
     python fits/joint.py --data DIR [--out DIR] [--nuisance] [--rate HZ] [--max-steps N] [--overwrite] [--no-cache]
+                         [--device auto|cpu|gpu]
 
 DIR holds one recording per experiment (`<name>.npz`, `.csv` with units in its header such as `pressure [barg]`,
 `position [mm]`, or `.mat`) and a `meta.json` describing them (the layout of `shared/data/hybrid-reference-bench/`
@@ -69,6 +70,9 @@ def parse_args(argv=None):
     ap.add_argument("--atmosphere", type=float, default=None, metavar="PA",
                     help="ambient pressure [Pa abs] that gauge readings (barg, kPa gauge) are referred to (default: "
                          "meta.json's atmosphere_Pa, else 101325)")
+    ap.add_argument("--device", default="auto", choices=("auto", "cpu", "gpu", "tpu"),
+                    help="where the fit runs (default auto: the CPU, where a single trajectory's solve loop is one "
+                         "compiled function; on a GPU each step is a kernel launch: pamjax.runtime.for_command)")
     ap.add_argument("--no-cache", action="store_true",
                     help="compile everything anew, keep nothing (default: the persistent compilation cache, as the "
                          "pamjax command's: a second run loads the compiled programs; PAMJAX_COMPILATION_CACHE=0 too)")
@@ -95,7 +99,10 @@ def main(argv=None):
         sys.exit(f"joint.py: {', '.join(existing)} exist; pass --overwrite to replace them (or another --out)")
     created = not out.exists()
     try:
-        run(args, data, out)
+        placed, where = pj.runtime.for_command("single", args.device)  # before JAX starts; said first
+        print(f"joint.py: {where}", flush=True)
+        with placed:
+            run(args, data, out)
     except (pj.PamjaxInputError, FileExistsError, NotADirectoryError, PermissionError) as err:
         _clean(out, created)
         print(f"joint.py: error: {err}", file=sys.stderr)

@@ -19,12 +19,13 @@ So by default (`device="auto"`):
 
 `device="cpu"`, `"gpu"` (CUDA or ROCm) or `"tpu"` overrides it (the command line's `--device`); a platform that is
 not there is a `PamjaxInputError` naming it and listing what is. A GPU measurement of the single-trajectory claim on
-this project's code is pending (no GPU in the session that wrote this; the sweep figures above were measured).
+this project's code: benchmarks/RESULTS.md, `### Which device` (an H100: the fit 20.7 s on its CPU, > 140 s on the GPU).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import contextlib
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
@@ -130,14 +131,17 @@ def _all_devices():
 
 
 def platforms_before_start(work: str, device: str | None = "auto"):
-    """The `jax_platforms` value to set before JAX starts for `work` on `device` (None: JAX's default, every
-    platform present), and the line that says where the work will run. Starts nothing: for the `pamjax` command,
+    """The `jax_platforms` value to set before JAX starts for `work` on `device` (None: leave it; "": JAX's default,
+    every platform present, even where the environment's `JAX_PLATFORMS` named fewer), and the line that says where the work will run. Starts nothing: for the `pamjax` command,
     which picks its platforms before any JAX computation (a sweep first splits the CPU into one device per core)."""
     requested = _check(work, device)
     if requested == "cpu":
         return "cpu", "running on the CPU (--device cpu)"
-    if requested in ("gpu", "tpu"):  # the CPU stays available for host-side work; JAX fails clearly without one
-        return f"{requested},cpu", f"running on the {requested.upper()} (--device {requested})"
+    if requested == "gpu":  # JAX's own choice of every platform present (GPU first, the CPU kept for host work): a
+        # "gpu,cpu" list makes JAX 0.11 start CUDA *and* ROCm and fail on the one not installed (seen on an H100)
+        return "", "running on the GPU (--device gpu)"
+    if requested == "tpu":  # the CPU stays available for host-side work; JAX fails clearly without one
+        return "tpu,cpu", "running on the TPU (--device tpu)"
     if work == "single":
         return "cpu", f"running on the CPU ({SINGLE_REASON}; --device gpu to use one)"
     return None, f"running on the GPU/TPU if JAX finds one, else every CPU core ({BATCHED_REASON}; --device cpu " \
@@ -150,14 +154,15 @@ def unavailable_message(device, err):
     return f"--device {device}: JAX cannot start a {str(device).upper()} here ({first})"
 
 
-def for_command(work: str, device: str | None = "auto", environ=None, check=True):
+def for_command(work: Literal["single", "batched"], device: str | None = "auto",
+                environ: Mapping[str, str] | None = None,
+                check: bool = True) -> tuple[contextlib.AbstractContextManager, str]:
     """Set up the `pamjax` command's devices before JAX starts, and return `(context, line)`: a context to run the
     command in (placing its computations) and the line that says where it runs. A `JAX_PLATFORMS` the user set in
     the environment wins over `"auto"` (it is said); `--device` wins over it. When JAX is already running (the
     command called as `main(argv)` from a program), its platforms stay and the choice is made among its devices
     with `jax.default_device`. An asked-for platform that cannot start is a `PamjaxInputError` (`check=False`: not
     tried here, for a process that must join a multi-process run before JAX starts; JAX then says so itself)."""
-    import contextlib
     import os
 
     import jax
