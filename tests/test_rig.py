@@ -321,3 +321,26 @@ def test_a_failing_stage_waits_for_the_background_compilation(rig, monkeypatch):
     with pytest.raises(PamjaxInputError, match="stage 1 failed"):
         pj.staged_start(bench.model, bench.experiments, bench.free)
     assert threads and not threads[0].is_alive()
+
+
+@pytest.mark.parametrize("level_mm, freed", [(0.1, True), (-0.25, True), (0.7, False)])
+def test_the_position_offset_is_freed_only_where_a_run_rests_on_a_stroke_limit(tmp_path, level_mm, freed):
+    # A payload still within 0.3 mm of a stroke limit rests on it (the offset shows there: freed); one 0.7 mm from it
+    # may as well hang short of it, held by friction (an unseen rig did: freeing the offset there moved F_max by
+    # 3.9 %), so the offset stays held and a note names the level and how to free it.
+    plant = _plant()
+    stop = float(plant.muscle.min_position)
+    t = np.arange(0.0, 1.0005, 1e-3)
+    rng = np.random.default_rng(3)
+    x = stop + level_mm * 1e-3 + NOISE["x_std_m"] * rng.standard_normal(t.size)
+    p = NOISE["p_std_Pa"] * rng.standard_normal(t.size)  # gauge: the valve stays shut
+    np.savetxt(tmp_path / "M.csv", np.column_stack([t, 0 * t, p / 1e5, x * 1e3]), delimiter=",",
+               header="time [s],duty [-],pressure [barg],position [mm]", comments="", fmt="%.6f")
+    (tmp_path / "meta.json").write_text(json.dumps(dict(experiments={"M": {"kind": "muscle_run"}}, noise=NOISE,
+                                                        fitted_keys=["Fc"])))
+    bench = pj.bench.load_bench(tmp_path, plant, nuisance=True)
+    assert ("sensors[rig].position_offset" in bench.free) is freed
+    notes = " ".join(bench.notes)
+    assert ("mm from a stroke limit" in notes) is (not freed)
+    if not freed:
+        assert "+0.70 mm" in notes  # the rest level, as the sensor reads it
