@@ -35,8 +35,8 @@ if os.environ.get("PAMJAX_TEST_CACHE", "1") != "0":
 # order changes: every test still runs, the tests of a module in their own order. Modules not listed follow in their
 # usual (alphabetical) order.
 HEAVY_FIRST = [
-    "test_papers.py", "test_wheel.py", "test_design.py", "test_simulate.py", "test_unbiased_data.py", "test_karnopp.py",
-    "test_rodas.py", "test_performance_modes.py", "test_solve_hints.py", "test_fits_regulator.py", "test_bench.py",
+    "test_gallery.py", "test_gallery_wheel.py", "test_design.py", "test_simulate.py", "test_simulate_edges.py",
+    "test_grid.py", "test_rodas.py", "test_synchronous.py", "test_hints.py", "test_fits_regulator.py", "test_bench.py",
     "test_joint_control.py", "test_control.py", "reliability/test_nan_safety.py", "test_sweep.py",
     "reliability/test_gradients.py", "test_distributed.py", "test_fit.py", "test_joint.py", "test_valve.py",
     "test_cache.py", "test_regulator.py", "test_sweep_maps.py",
@@ -58,7 +58,7 @@ def pytest_collection_modifyitems(session, config, items):
 # millions of short-lived objects, so CPython's default thresholds (a young collection every 700 net allocations)
 # start a full collection every few thousand, and each full collection walks every object the worker holds: the
 # imported libraries and every compiled program and fixture kept so far. Measured with `gc.callbacks` on
-# test_simulate + test_karnopp + test_design run serially: 11.3 s of 139 s in the collector (10.0 s of it full
+# test_simulate + test_grid + test_design run serially: 11.3 s of 139 s in the collector (10.0 s of it full
 # collections). What is alive once the worker has imported and collected everything is moved out of the collector's
 # way (`gc.freeze`: never freed, never walked again), and the young generation is collected every 50,000 allocations:
 # 3.3 s. Reference counting still frees everything that is not in a cycle at once; the cycles wait a little longer.

@@ -406,3 +406,69 @@ def test_the_duck_typing_rule_can_fail(tmp_path):
     # 'pressure' is a named state's field, 'weak_type' no component's, 'friction' in the loop allowed here
     assert reads == sorted(["hasattr(model, 'muscle')", "getattr(friction, 'coulomb_force')",
                             "hasattr(model, 'muscle')", "getattr(model, 'muscle')"]), found
+
+
+# --- the module map and the tests table of docs/architecture.md (issue 31 item 8) ----------------------------------
+ARCHITECTURE_DOC = ROOT / "docs" / "architecture.md"
+# a path of the package as the doc writes it: relative to pamjax/ (`_solve/grid.py`, `gallery/scripts/p000_01_x.py`,
+# `presets.py`), or with the package's name in front (`pamjax/__init__.py`); not a part of a longer path
+_DOC_MODULE = re.compile(r"(?<![\w/.-])(?:pamjax/)?((?:_[a-z_]+|gallery|data)/[\w/.-]*?\.py|[a-z_]+\.py)(?![\w/])")
+_DOC_TEST = re.compile(r"(?<![\w/.-])tests/(test_\w+\.py)")
+
+
+def _doc_section(text, title):
+    """The text of the `## title` section of a markdown document (to the next `## ` heading)."""
+    start = text.index(f"\n## {title}\n")
+    end = text.find("\n## ", start + 1)
+    return text[start:] if end < 0 else text[start:end]
+
+
+def _module_map_problems(section, package=PACKAGE):
+    """The modules of `package` the map does not name (every .py; a private sub-package's `__init__.py` may be named
+    by its folder), and the module paths the map names that are not in the package."""
+    named = {m.group(1) for m in _DOC_MODULE.finditer(section)}
+    missing = []
+    for path in sorted(package.rglob("*.py")):
+        rel = path.relative_to(package).as_posix()
+        if rel in named:
+            continue
+        folder = rel.rsplit("/", 1)[0] if "/" in rel else ""
+        if path.name == "__init__.py" and folder.startswith("_") and f"`{folder}/`" in section:
+            continue  # a private sub-package's __init__.py holds only its docstring; the package is named
+        missing.append(rel)
+    # a bare name (`joint.py`) may be a script's (`fits/joint.py`): only a path into a layer can be stale
+    stale = sorted(rel for rel in named if "/" in rel and not (package / rel).is_file())
+    return missing, stale
+
+
+def test_every_module_is_in_the_module_map():
+    """docs/architecture.md's "Module map" names every module of pamjax/ by its path (`_solve/grid.py`), so a new,
+    moved or deleted module cannot leave the map stale silently; a path in the map that names no module fails too."""
+    missing, stale = _module_map_problems(_doc_section(ARCHITECTURE_DOC.read_text(), "Module map"))
+    assert not missing, "modules missing from docs/architecture.md's module map:\n" + "\n".join(missing)
+    assert not stale, "docs/architecture.md's module map names modules that do not exist:\n" + "\n".join(stale)
+
+
+def test_every_test_file_is_in_the_tests_table():
+    """docs/architecture.md's "Tests" table names every tests/test_*.py (which module it tests), and no other."""
+    section = _doc_section(ARCHITECTURE_DOC.read_text(), "Tests")
+    named = {m.group(1) for m in _DOC_TEST.finditer(section)}
+    files = {p.name for p in (ROOT / "tests").glob("test_*.py")}
+    assert not files - named, f"test files missing from docs/architecture.md's Tests table: {sorted(files - named)}"
+    assert not named - files, f"docs/architecture.md's Tests table names missing files: {sorted(named - files)}"
+
+
+def test_the_module_map_rule_can_fail(tmp_path):
+    """The map rule on a small package: a module the map leaves out is found, a private sub-package's __init__.py is
+    covered by its folder, a public one's is not, and a path naming no module is stale."""
+    package = tmp_path / "pamjax"
+    for rel in ("__init__.py", "presets.py", "_solve/__init__.py", "_solve/grid.py", "_control/fixed_grid.py",
+                "gallery/__init__.py", "gallery/scripts/p000_01_x.py"):
+        (package / rel).parent.mkdir(parents=True, exist_ok=True)
+        (package / rel).write_text("")
+    section = ("| `pamjax/__init__.py` | … |\n| `presets.py` | … |\n### `_solve/`\n| `_control/fixed_grid.py` | … |\n"
+               "| `gallery/scripts/p000_01_x.py` | … |\n| `_solve/gone.py` | … (see `fits/joint.py`) |\n")
+    missing, stale = _module_map_problems(section, package)
+    # `_solve/grid.py` is not named (`_control/fixed_grid.py` does not name it); `fits/joint.py` is no module path
+    assert missing == ["_solve/grid.py", "gallery/__init__.py"], missing
+    assert stale == ["_solve/gone.py"], stale

@@ -6,7 +6,7 @@ that cannot see the events are refused by name.
 The defect these guard against: sweeps stepped the hybrid plant with schemes that never switch its friction mode,
 so the payload stayed stuck at its start (−4.69 mm at every duty, 479 N of "static friction" against F_c = 16 N),
 status 0, while `simulate` moves it by tens of mm. The oracle is `simulate` itself, lane by lane (its own
-event-driven solve, checked against SciPy in tests/test_karnopp.py)."""
+event-driven solve, checked against SciPy in tests/test_grid.py)."""
 
 import csv
 

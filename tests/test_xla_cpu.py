@@ -1,5 +1,5 @@
-"""pamjax's XLA CPU loop setting (pamjax/_xla_cpu.py): how it merges into XLA_FLAGS, when it stands back, and that
-it reaches XLA (a single-trajectory solve compiles to one function on CPU)."""
+"""pamjax's XLA CPU loop setting (`pamjax/_core/xla_cpu.py`): how it merges into XLA_FLAGS, when it stands back, and
+that it reaches XLA (a single-trajectory solve compiles to one function on CPU)."""
 
 import os
 import subprocess

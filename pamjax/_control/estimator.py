@@ -11,7 +11,7 @@ position from the new velocity; eq. 21's acceleration is the velocity's differen
 with the extended Kalman filter's first-order propagation (Jacobians by forward-mode autodiff) and the Joseph form of
 the covariance update. It runs in the solvers' scaled coordinates (`system.state_scale()`) with each measurement
 divided by its noise, so that pressures [Pa] and positions [m] meet in one well-conditioned matrix; on a linear model
-it is the textbook Kalman filter (tests/test_control_estimator.py). Everything is JAX: the loop is differentiable
+it is the textbook Kalman filter (tests/test_estimator.py). Everything is JAX: the loop is differentiable
 through the filter (gains, noise settings, plant and model parameters).
 """
 

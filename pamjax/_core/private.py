@@ -1,6 +1,6 @@
 """The one place pamjax reads private internals of its dependencies, each where no public route exists.
 
-`tests/test_private_internals.py` fails when any of these names moves, so an upgrade of JAX, equinox or diffrax
+`tests/test_private.py` fails when any of these names moves, so an upgrade of JAX, equinox or diffrax
 that breaks one is caught by the test suite, not by a user. Everything else in pamjax uses public APIs only.
 """
 

@@ -66,8 +66,8 @@ DMSP40_VISCOUS_COEFFICIENT = 3000.0  # N s/m, assumed: paper 001 gives no fricti
 VPPM_INTERNAL_VOLUME = 2.06e-4  # m³, DERIVED from paper 001 Fig. 6: the regulator volume (at the outlet pressure)
 #   for which the inlet flow exceeds the outlet flow by 20 % (1 − ∫q_out/∫q_in over the charging phases) with the
 #   DMSP-40 preset under 893 N, 0-3 V at 1.5 Hz for 2 s (`pamjax/gallery/scripts/p001_01_muscle_flow.py` re-derives it,
-#   tests/test_vppm.py checks it); 41 % of the muscle's 0.50 L, far more than a G1/8 regulator body is likely to hold
-#   (no volume is given): read it as everything between the seats and the muscle, tubing included.
+#   tests/test_regulator_vppm.py checks it); 41 % of the muscle's 0.50 L, far more than a G1/8 regulator body is
+#   likely to hold (no volume is given): read it as everything between the seats and the muscle, tubing included.
 VPPM_MODE_FACTORS = {  # ASSUMED: (factor on eq. 6's time constants, factor on the main stage's full-opening error)
     "universal": (1.0, 1.0),  # the mode paper 001 used (Sect. 3): eq. 6 and the 50 mbar as identified
     "fast": (0.5, 2.0),  # Festo's names promise a faster response at less accuracy; the factor 2 is an assumption

@@ -28,7 +28,7 @@ with itself is a `PROCEDURE`, never a `COMPARE`.
    paper_says="...", checks=(Check("creep at x_max", "creep/mm", Near(1.0, rel=0.2, why="...")),),
    reason="why it differs, when known")`. A new item also goes into `ITEMS` below.
 3. `python -m pamjax.gallery.docs --run` regenerates `docs/papers.md` (and `docs/papers.json`, its numbers);
-   `tests/test_papers.py` fails until every item has an entry, every script's `COVERS` is matched by entries, and the
+   `tests/test_gallery.py` fails until every item has an entry, every script's `COVERS` is matched by entries, and the
    docs are current.
 """
 

@@ -1,6 +1,10 @@
 """The contract members the workflows ask instead of reading attributes by name (issue 31 item 3): what each component,
 system and experiment answers, that an incomplete implementation cannot be made, and that the workflows' answers are
-the ones the duck typing gave (`tests/test_architecture.py` checks that no workflow reads attributes by name)."""
+the ones the duck typing gave (`tests/test_architecture.py` checks that no workflow reads attributes by name).
+
+The contracts' abstract classes: `AbstractSystem` and `AbstractMuscleSystem` (`pamjax._systems.base`: `actuators`,
+`with_supply_pressure`), `AbstractFriction` (`pamjax._physics.friction`), `AbstractSignal.cycle_frequency`
+(`pamjax._physics.signals`), `AbstractExperiment` (`pamjax._fit.experiment`, `pamjax._fit.static_experiments`)."""
 
 import equinox as eqx
 import jax

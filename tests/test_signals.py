@@ -1,4 +1,5 @@
-"""Input signals: constant, step, triangle (paper 000's 0.05-0.95 duty), sine, sampled (held per PWM period)."""
+"""Input signals (`pamjax._physics.signals`): constant, step, triangle (paper 000's 0.05-0.95 duty), sine, sampled (held
+per PWM period)."""
 
 import equinox as eqx
 import jax

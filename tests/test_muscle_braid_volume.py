@@ -1,5 +1,5 @@
-"""`BraidVolume` (paper 000 eq. 3) against a NumPy transcription of eq. 1-3, the virtual-work identity eq. 4 → eq. 5
-by autodiff, the datasheet construction, finite-difference gradients and bad input."""
+"""`BraidVolume` (`pamjax._physics.muscle`, paper 000 eq. 3) against a NumPy transcription of eq. 1-3, the virtual-work
+identity eq. 4 → eq. 5 by autodiff, the datasheet construction, finite-difference gradients and bad input."""
 
 import equinox as eqx
 import jax

@@ -1,6 +1,6 @@
 """Property-based tests (hypothesis): over random valid parameters and states, equal pressures (chamber = supply,
 chamber = atmosphere) and zero velocity included, the vector field, its Jacobian and a short trajectory's gradient
-are always finite."""
+are always finite. The systems' vector fields (`pamjax._systems`), the gradient through `pamjax._solve.simulate`."""
 
 import equinox as eqx
 import jax

@@ -1,6 +1,6 @@
-"""The MAS-10 preset's exhaust silencer (paper 000, Fig. 12 text): `PorousRestriction` against Darcy's compressible
-law, the preset's permeance re-derived from its stated rule by an independent NumPy computation, the silencer in
-series with the exhaust port, and bad input."""
+"""The MAS-10 preset's exhaust silencer (paper 000, Fig. 12 text): `PorousRestriction` against Darcy's compressible law
+(`pamjax._physics.gas`), the preset's permeance (`presets.mas10_silencer`) re-derived from its stated rule by an
+independent NumPy computation, the silencer in series with the exhaust port, and bad input."""
 
 import equinox as eqx
 import jax

@@ -1,4 +1,5 @@
-"""Systems: vector fields against a NumPy transcription of paper 000 eq. 7, 11, 13-16; physical bounds; mass balance."""
+"""Systems (`pamjax._systems`: `tank`, `muscle`): vector fields against a NumPy transcription of paper 000 eq. 7, 11,
+13-16; physical bounds; mass balance."""
 
 import jax.numpy as jnp
 import numpy as np

@@ -1,7 +1,7 @@
-"""A system's parameters are checked before a solve however the system was made (issue 33, battery section 7):
-changed with `eqx.tree_at` (which skips the components' constructors), or traced inside `jax.jit`/`jax.vmap`, a bad
-value is named — never a solver failure ("minimum step size reached", "INTERNAL: CpuCallback error") or a silent
-result; good values under jit, vmap and grad give what the eager call gives."""
+"""A system's parameters are checked before a solve however the system was made (`pamjax._solve.checks`; issue 33,
+battery section 7): changed with `eqx.tree_at` (which skips the components' constructors), or traced inside
+`jax.jit`/`jax.vmap`, a bad value is named — never a solver failure ("minimum step size reached", "INTERNAL: CpuCallback
+error") or a silent result; good values under jit, vmap and grad give what the eager call gives."""
 
 import equinox as eqx
 import jax

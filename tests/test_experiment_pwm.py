@@ -1,6 +1,7 @@
 """Fits with the switching (PWM) valve: experiments step on the PWM-synchronous grid, so the residuals are smooth,
 deterministic functions of the parameters; a small tank fit converges and recovers the truth within 3 standard
-errors. Short horizons (0.6 s, 30 PWM periods) to keep compilation small."""
+errors. Short horizons (0.6 s, 30 PWM periods) to keep compilation small. `Experiment(stepping=...)`
+(`pamjax._fit.experiment`), its residuals and Jacobian (`pamjax._fit.problem`), the fit (`pamjax._fit.fit`)."""
 
 import jax.numpy as jnp
 import numpy as np

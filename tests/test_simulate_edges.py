@@ -3,7 +3,10 @@
 A switching valve's recordings carry the PWM ripple the model predicts; decimating them keeps it (the model is sampled
 at the recorded instants), a low-pass would remove it. With the TRUE parameters every run must score its noise at every
 supported rate: on pamjax's own noisy recordings, and on the hybrid bench's exact-switching recordings (shipped in
-`pamjax/data/hybrid-reference-bench`)."""
+`pamjax/data/hybrid-reference-bench`).
+
+`pamjax.simulate` (`pamjax._solve.simulate`) at a recording's instants (`Recording.resampled`, `pamjax._fit.recording`),
+and the switching valve's edges as an adaptive solve sees them (`pamjax._solve.edges`, `pamjax._solve.edge_clip`)."""
 
 import json
 

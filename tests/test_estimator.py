@@ -1,5 +1,5 @@
-"""The state estimator (`ExtendedKalmanFilter` on paper 000's discrete-time model, eq. 18-21) and the noisy sensors of
-the closed loop.
+"""The state estimator (`pamjax._control.estimator`: `ExtendedKalmanFilter` on paper 000's discrete-time model, eq.
+18-21) and the noisy sensors of the closed loop.
 
 Oracles: a textbook Kalman filter in NumPy (SI units, no scaling) on a linear system, which the extended filter must
 reproduce exactly; the true states of a simulated plant with exact stick-slip and exact valve edges (the filter's

@@ -1,4 +1,6 @@
-"""Bad input raises PamjaxInputError naming the argument, before any solve."""
+"""Bad input raises PamjaxInputError naming the argument, before any solve: the checks of `pamjax._core.errors`
+(`check_positive`, `check_time_grid`, `require_float64`, ...) as the components' constructors (`pamjax._physics`,
+`pamjax._systems`), `simulate` and `simulate_discrete` (`pamjax._solve`) call them."""
 
 import jax.numpy as jnp
 import numpy as np

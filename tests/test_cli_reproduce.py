@@ -1,7 +1,8 @@
-"""`pamjax reproduce` keeps or refuses, never silently replaces (issue 33): into a folder holding an earlier run it
-runs only with `--overwrite` (the earlier run replaced as a whole) or `--merge` (this run's scripts replace theirs,
-the others stay in the index); an interrupted or failing run leaves the earlier run as it was and puts what finished
-in a folder of its own whose index says so; a run killed outright is found and labelled the same way by the next.
+"""`pamjax reproduce` (`pamjax._cli.reproduce`) keeps or refuses, never silently replaces (issue 33): into a folder
+holding an earlier run it runs only with `--overwrite` (the earlier run replaced as a whole) or `--merge` (this run's
+scripts replace theirs, the others stay in the index); an interrupted or failing run leaves the earlier run as it was
+and puts what finished in a folder of its own whose index says so; a run killed outright is found and labelled the same
+way by the next.
 
 The runs use small gallery scripts of their own (`--scripts DIR`, no JAX), so they take a second each."""
 

@@ -1,5 +1,6 @@
-"""Paper 001's VPPM as built (`vppm_regulator`): the regulator's internal volume (inlet flow ≠ outlet flow, Fig. 6),
-its 50 mbar pressure hysteresis (`PressureHysteresis`), the 2 % accuracy band, the operating modes, and bad input.
+"""Paper 001's VPPM as built (`vppm_regulator`, `pamjax._physics.regulator`): the regulator's internal volume (inlet
+flow ≠ outlet flow, Fig. 6), its 50 mbar pressure hysteresis (`PressureHysteresis`), the 2 % accuracy band, the
+operating modes, and bad input.
 
 Oracles: the chamber's own mass balance written out here (paper 001 eq. 3, 12); the static curves by SciPy's brentq on
 the seats' flows; a play operator's dead band; the Fig. 6 derivation of the internal volume re-run."""

@@ -1,7 +1,8 @@
 """The repository holds what `pamjax reproduce` needs (issue 31): the wheel, installed in a fresh virtual environment
 outside the checkout, runs the whole quick gallery from its own files (scripts, procedures, bench recordings). The
 environment reuses this interpreter's installed dependencies (a `.pth` line to its site-packages: no download of JAX)
-and installs the wheel with `--no-deps`; building the wheel fetches hatchling (network)."""
+and installs the wheel with `--no-deps`; building the wheel fetches hatchling (network). What is checked: the
+wheel's contents (`pyproject.toml`'s build targets) and `pamjax.gallery` with `pamjax/data` run from them."""
 
 import os
 import pathlib

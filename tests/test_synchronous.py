@@ -1,5 +1,5 @@
-"""PWM-synchronous stepping (`simulate(..., stepping="pwm")`) against the reference adaptive solve, and its gradients
-against central finite differences.
+"""PWM-synchronous stepping (`pamjax._solve.synchronous`, `simulate(..., stepping="pwm")`) against the reference
+adaptive solve, and its gradients against central finite differences.
 
 Reference: the exact-edge valve (`mode="exact"`, the same sharp-edge model with the duty latched per period) solved by
 diffrax Tsit5 with its switching times as jump times at rtol = atol = 1e-9. Horizons are short (0.5-1 s) to keep

@@ -1,4 +1,5 @@
-"""End-to-end smoke test: the presets simulate and stay physical."""
+"""End-to-end smoke test: the presets simulate and stay physical (`pamjax.presets`, `pamjax.simulate`), and
+`pamjax demo` (`pamjax._cli.demo`) runs paper 000's experiments."""
 
 import jax.numpy as jnp
 import numpy as np
