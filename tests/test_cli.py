@@ -462,3 +462,40 @@ def test_sweep_splits_the_cpu_into_one_device_per_core_and_matches_one_device(tm
         np.testing.assert_allclose(runs[2][key], runs[1][key], rtol=1e-12, atol=0)
     with pytest.raises(SystemExit):
         main(["sweep", str(config), "--cpu-devices", "0"])
+
+
+def test_an_interrupt_inside_the_import_lock_waits_until_the_lock_is_free():
+    # A SIGINT handled while the global import lock is held (e.g. in a weakref callback of the import machinery,
+    # whose exception Python swallows) must not raise there: the lock would stay held for good and the next import of
+    # another thread would wait forever (`pamjax fit` hung on SIGINT: its beside-import of the solver's module). The
+    # handler sends the signal again once the lock is free, and the interrupt arrives then. In a fresh process: the
+    # handler is the command's own, installed in the main thread.
+    import subprocess
+    import sys
+
+    code = textwrap.dedent("""
+        import _imp, os, signal, threading, time
+        from pamjax._cli.main import _signals_as_interrupts
+        raised_inside = later = False
+        with _signals_as_interrupts():
+            _imp.acquire_lock()
+            try:
+                try:
+                    os.kill(os.getpid(), signal.SIGINT)
+                    for _ in range(10000):
+                        pass
+                except KeyboardInterrupt:
+                    raised_inside = True
+            finally:
+                _imp.release_lock()
+            side = threading.Thread(target=__import__, args=("json",))  # another thread's import goes through
+            side.start()
+            side.join(5.0)
+            try:
+                time.sleep(5.0)
+            except KeyboardInterrupt:
+                later = True
+        print(raised_inside, later, side.is_alive())
+    """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.stdout.split() == ["False", "True", "False"], out.stdout + out.stderr

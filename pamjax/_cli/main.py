@@ -7,6 +7,7 @@ after one line saying what was kept. No traceback unless `--debug` (or the envir
 asks for it. `docs/cli.md` describes the commands and their files.
 """
 
+import _imp
 import argparse
 import contextlib
 import gc
@@ -44,6 +45,12 @@ def _signals_as_interrupts():
         return
 
     def handler(signum, frame):
+        if _imp.lock_held():  # inside the import machinery's critical section (e.g. a weakref callback there, whose
+            # exception Python swallows): an interrupt raised now would leave the global import lock held for good,
+            # and the next import of another thread (a fit's beside-import, a compile thread) would wait forever.
+            # The signal is sent again in 20 ms, when the lock is free (seen: `pamjax fit` hung on SIGINT).
+            threading.Timer(0.02, os.kill, (os.getpid(), signum)).start()
+            return
         PENDING.append(signum)
         raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 

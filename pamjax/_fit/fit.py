@@ -306,7 +306,8 @@ def fit(
             f"free parameters ({', '.join(labels)}): fewer data than unknowns cannot determine them; add samples or "
             "experiments, or free fewer parameters")
     if solver is None:
-        beside.join()
+        beside.join(timeout=10.0)  # ~0.1 s; an import thread blocked on a lock another thread kept (a signal raised
+        # inside the import machinery) is left behind: this thread imports the module itself below
     from .drive import choose_solver, run_fit, run_optimistix, state_arrays, state_from_arrays
 
     solver, own = choose_solver(solver, ftol, xtol, gtol, stall_steps, checkpoint, resume)
