@@ -225,11 +225,18 @@ def _resume_command(args, out):
 
 
 def run(args):
-    if not args.no_plot:  # matplotlib imported and warmed up in a process of its own while the fit runs
-        from . import figures, fit_figure
+    try:  # starting the figure's process and reading the config (the model built): a second a Ctrl-C may fall in
+        if not args.no_plot:  # matplotlib imported and warmed up in a process of its own while the fit runs
+            from . import figures, fit_figure
 
-        figures.start(fit_figure)
-    model, experiments, free, options, out_cfg, bench, staged = load(args.config)
+            figures.start(fit_figure)
+        model, experiments, free, options, out_cfg, bench, staged = load(args.config)
+    except KeyboardInterrupt as err:
+        PENDING.clear()  # handled here
+        what = "terminated" if interrupt_status(err) == 143 else "interrupted"
+        print(f"pamjax fit: {what} while reading {args.config}, before the fit started; nothing to resume, nothing "
+              "written", file=sys.stderr, flush=True)
+        return interrupt_status(err)
     out = pathlib.Path(args.out or out_cfg or f"results/{pathlib.Path(args.config).stem}")
     if args.resume and args.overwrite:
         raise PamjaxInputError("pamjax fit: --resume continues the fit in --out, --overwrite starts it again: "

@@ -156,6 +156,7 @@ def _main(argv, program=False):
     from .._core.errors import PamjaxInputError, PamjaxSolveError
 
     command = args.command
+    started = False  # whether the command's own work began (before it, an interrupt has nothing to keep)
     with _signals_as_interrupts():
         try:
             from .._core.devices import for_command
@@ -167,6 +168,7 @@ def _main(argv, program=False):
             # fit says itself when it compiles (its programs are known); the others are announced from outside
             announce = contextlib.nullcontext() if command == "fit" else announce_compilation(f"pamjax {command}")
             with placed, announce:
+                started = True
                 status = modules[command].run(args) or 0
             raise_pending()  # a signal swallowed while JAX was busy: the command finished, but say so
             return status
@@ -174,7 +176,9 @@ def _main(argv, program=False):
             if debug:
                 raise
             terminated = isinstance(err, Terminated)
-            print(f"pamjax {command}: {'terminated' if terminated else 'interrupted'}", file=sys.stderr, flush=True)
+            note = "" if started else " before it started: nothing to resume, nothing written"
+            print(f"pamjax {command}: {'terminated' if terminated else 'interrupted'}{note}", file=sys.stderr,
+                  flush=True)
             return interrupt_status(err)
         except (PamjaxInputError, FileExistsError) as err:
             if debug:
