@@ -1,13 +1,13 @@
 """The jaxtyping annotations of pamjax's public signatures (docs/architecture.md, "Types"), checked.
 
 1. Every public function and class constructor of `pamjax`, `pamjax.bench`, `pamjax.runtime`, `pamjax.unchecked`
-   and `pamjax.presets` annotates every argument (functions their return too); `EXEMPT_MODULES` lists the modules
-   not annotated yet.
+   and `pamjax.presets` annotates every argument (functions their return too).
 2. Checked with beartype through jaxtyping's import hook, in a subprocess (the hook must be installed before pamjax
    is imported, and this process imported it already): each case below calls a public entry point either with
    valid input, which must pass (Python floats and lists where arrays are accepted, NumPy arrays, tracers under
    `jit`/`vmap`; the fields of what it builds must match their annotations too), or with one wrongly typed
-   argument, which must raise a type error naming that argument. One subprocess runs every case (~1 min).
+   argument, which must raise a type error naming that argument. One subprocess runs every case (~15 s; the fit's
+   cases fit a 0.2 s tank test's volume in a few steps).
 3. Without the hook nothing is checked and nothing is wrapped: `import pamjax` does not import beartype, and the
    public functions are pamjax's own (no typechecking wrapper on any run).
 
@@ -26,11 +26,11 @@ import typing
 import numpy as np
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-# The layers whose modules are type-checked by the hook: every one the public namespaces re-export from, but
-# `pamjax._fit` (its annotations are still to come) and the command line (`pamjax._cli`, not a Python API).
+# The layers whose modules are type-checked by the hook: every one the public namespaces re-export from; not the
+# command line (`pamjax._cli`, not a Python API) nor the gallery's scripts.
 CHECKED = ["pamjax._core", "pamjax._physics", "pamjax._systems", "pamjax._solve", "pamjax._sweep", "pamjax._control",
-           "pamjax._bands", "pamjax.presets"]
-EXEMPT_MODULES = ("pamjax._fit",)  # not annotated yet (fitting, bench tests, model files, designs)
+           "pamjax._bands", "pamjax._fit", "pamjax._files", "pamjax._bench", "pamjax._identifiability",
+           "pamjax.presets"]
 NAMESPACES = ("pamjax", "pamjax.bench", "pamjax.runtime", "pamjax.unchecked", "pamjax.presets")
 
 
@@ -60,10 +60,9 @@ def _public_callables():
 
 def test_every_public_signature_is_annotated():
     public = _public_callables()
-    checked = [(name, obj) for name, obj in public if not obj.__module__.startswith(EXEMPT_MODULES)]
-    assert len(checked) > 100, f"only {len(checked)} public names found"
+    assert len(public) > 150, f"only {len(public)} public names found"
     missing = []
-    for name, obj in checked:
+    for name, obj in public:
         signature = inspect.signature(obj)
         for p in signature.parameters.values():
             bare_any = p.annotation is typing.Any and p.kind is not p.VAR_KEYWORD
@@ -81,7 +80,7 @@ def test_import_loads_no_typechecker_and_wraps_nothing():
     code = f"""if True:
         import sys, inspect, pamjax, pamjax.bench, pamjax.runtime, pamjax.unchecked, pamjax.presets
         assert "beartype" not in sys.modules, "import pamjax imported beartype"
-        for ns in (pamjax, pamjax.runtime, pamjax.unchecked, pamjax.presets):
+        for ns in (pamjax, pamjax.bench, pamjax.runtime, pamjax.unchecked, pamjax.presets):
             for name in dir(ns):
                 f = getattr(ns, name)
                 if inspect.isfunction(f) and f.__module__.startswith("pamjax"):
@@ -282,6 +281,141 @@ def _runtime():
     return [choice, pj.runtime.CompileStats(), pj.presets.device_array([1.0, 2.0])]
 
 
+_MEMO = {}
+
+
+def _tank_problem():
+    """A tiny fit problem, built once per worker: a 0.2 s tank charge through the averaged valve (41 samples, fixed
+    RK4 grid), its volume to fit from a start 10 % off."""
+    if "tank" not in _MEMO:
+        pj = _pj()
+        tank = pj.presets.mas10_tank_system(valve="averaged")
+        rec = pj.synthetic_recording(tank, pj.Constant(0.6), np.linspace(0.0, 0.2, 41), noise={"pressure": 500.0},
+                                     seed=1, stepping="grid", grid_step=0.005)
+        exp = pj.Experiment(rec, pj.Constant(0.6), scales={"pressure": 500}, stepping="grid")
+        _MEMO["tank"] = pj.presets.mas10_tank_system(valve="averaged", volume=4.5e-5), exp
+    return _MEMO["tank"]
+
+
+@case("recordings and experiments: lists, NumPy arrays, files")
+def _recordings():
+    import tempfile
+
+    pj = _pj()
+    listed = pj.Recording([0.0, 0.01, 0.02, 0.03], {"pressure": [1.2e5, 1.3e5, 1.4e5, 1.45e5]}, name="listed")
+    t = np.arange(40) * 1e-3
+    arrays = pj.Recording(t, {"pressure": np.linspace(1.2, 1.45, 40), "command": np.full(40, 0.5)},
+                          units={"pressure": "bar abs"}, atmosphere=np.float64(101325), source="bench/E1.csv")
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = pathlib.Path(tmp)
+        from_csv = pj.Recording.from_csv(arrays.to_csv(folder / "r.csv"), name="csv", unit_checks=True)
+        loaded = pj.Recording.load(str(arrays.to_npz(folder / "r.npz")), rename={"command": "duty"})
+    shorter = arrays.filtered(20, channels=["pressure"]).resampled(500).window(0.0, np.float64(0.03))
+    assert len(from_csv) == 40 and "duty" in loaded.channels and len(shorter) == 16
+    return [
+        pj.Experiment(listed, pj.Constant(0.5), channels=["pressure"], scales={"pressure": 500},
+                      build=pj.TankFromModel(5e-5), initial={"pressure": 1.2e5}, t0=0, name="E", rtol=1e-8,
+                      atol=np.float64(1e-8), max_steps=1000, dt0=1e-4, validation_fraction=0.25, stepping="grid",
+                      substeps=8, sensors="bench"),
+        pj.Experiment(arrays, pj.Constant(np.float64(0.5)), channels=("pressure",), initial={"pressure": "supply"}),
+        pj.TankFromModel(np.float64(5e-5), polytropic_index=1),
+    ]
+
+
+@case("static bench tests and their reductions")
+def _static():
+    pj = _pj()
+    b = pj.bench
+    x, p, v, f = [0.0, 0.01, 0.01, 0.0], np.full(4, 4e5), (0.01, 0.01, -0.01, -0.01), np.array([300.0, 250, 280, 330])
+    force_map = b.ForceMapExperiment([0.0, 0.01, 0.02], np.array([3e5, 3e5, 4e5]), (100, 50, 0), scale=5,
+                                     slack_force=1, name="fm")
+    errors = pj.evaluate(pj.presets.mas10_system("averaged"), force_map)
+    assert set(errors) == {"fm"}
+    velocity, force, _ = b.constant_velocity_point([0, 0.1, 0.2], [0.0, 0.001, 0.002], np.array([10.0, 11.0, 12.0]))
+    averaged = b.loop_average(x, p, v, f, decimals=6)
+    karnopp = pj.KarnoppFriction(16, 250)
+    flows = b.flow_curve(pj.presets.mas10_valve().inflate, 5e5, [0.2, 0.5], pj.Air())
+    steady = b.steady_friction_force(karnopp, [0.01, -0.01])
+    path = b.path_friction_force(karnopp, [0.0, 0.001], np.array([0.01, 0.01]), [True, False], substeps=2)
+    assert np.shape(flows) == np.shape(steady) == np.shape(path) == (2,) and len(averaged) == 4
+    return [force_map, b.FrictionCurveExperiment([-0.01, 0.01], [-20.0, 20.0], scale=np.float64(1.0)),
+            b.FlowCurveExperiment([5e5, 5e5], np.array([2e5, 4e5]), [1e-3, 5e-4], restriction="valve.inflate"),
+            b.LoopForceMapExperiment(x, p, v, f, slack_force=0), b.HysteresisLoopExperiment(
+                x, p, v, f, starts=[True, False, False, False], substeps=2), flows, steady, path]
+
+
+@case("a rig: sensors, run conditions, start states, parameter spaces")
+def _rig():
+    pj = _pj()
+    plant = pj.presets.mas10_system("averaged")
+    sensors = pj.Sensors(pressure_offset=500, pressure_gain=np.float64(1.01), delay=1e-3)
+    start = pj.StartState(pressure=3e5, position=np.float32(0.01), mode="auto")
+    rig = pj.Rig(plant, sensors=sensors, runs={"E": pj.RunConditions(supply_pressure=6e5, start=start)})
+    both = pj.Rig(plant, sensors={"a": pj.Sensors(), "b": sensors}, runs={"E": pj.RunConditions()})
+    paths = pj.parameter_paths(rig, prefix="")
+    space = pj.ParameterSpace(rig, ["sensors[rig].delay", {"path": "runs[E].supply_pressure", "transform": "log"},
+                                    {"path": "plant.muscle.force_law.max_force_coefficients[1]", "scale": 100.0}])
+    assert "sensors[rig].delay" in paths and len(space.labels) == 3
+    return [rig, both, pj.StartState(mode="stuck"), space]
+
+
+@case("a small fit, its evaluation and predictions, many starts, a fleet, a staged start")
+def _fit():
+    import tempfile
+
+    pj = _pj()
+    start, exp = _tank_problem()
+    steps = []
+    res = pj.fit(start, [exp], ["volume"], max_steps=5, ftol=0, xtol=1e-10, gtol=np.float64(1e-10), stall_steps=4,
+                 identifiability_tol=1e-7, progress=lambda step, cost, damping, accepted: steps.append(step))
+    assert res.iterations >= 1 and steps
+    with tempfile.TemporaryDirectory() as tmp:
+        again = pj.FitResult.from_json(res.to_json(pathlib.Path(tmp) / "fit.json"))
+    fitted = res.apply(start)
+    errors, (pred,) = pj.evaluate(fitted, exp), pj.predictions(fitted, (exp,))
+    assert again.values == res.values and set(errors) == {"synthetic"} and "pressure" in pred
+    many = pj.multistart(start, (exp,), [{"path": "volume", "transform": "log"}], starts=2, spread=0.3, max_steps=3,
+                         progress=False, distributed=False)
+    fleet = pj.fit_fleet({"a": start}, {"a": exp}, ["volume"], max_steps=2, progress=False)
+    staged = pj.staged_start(start, [exp], ["volume"], max_steps=3, background_compile=False)
+    return [res, many, fleet, staged, pj.nuisance_report(res)]
+
+
+@case("pamjax's Levenberg-Marquardt on a problem of one's own")
+def _levenberg_marquardt():
+    pj = _pj()
+    target = np.array([1.0, 2.0])
+    lm = pj.LevenbergMarquardt(ftol=0, xtol=1e-12, gtol=1e-12, stall_steps=4, geodesic=False)
+    out = pj.levenberg_marquardt(lambda th: th - target, lambda th: (th - target, np.eye(2)), [0.0, 0.0],
+                                 max_steps=20, solver=lm)
+    again = pj.levenberg_marquardt(lambda th: th - target, lambda th: (th - target, np.eye(2)), np.zeros(2),
+                                   ftol=1e-12)
+    assert out.done and np.allclose(out.theta, target) and np.allclose(again.theta, target)
+    return [lm, out, again]
+
+
+@case("model files and a bench directory")
+def _files():
+    import tempfile
+
+    pj = _pj()
+    import pamjax.bench
+
+    model = pj.presets.mas10_system("averaged", "karnopp")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = pj.save_model(pathlib.Path(tmp) / "model.json", model, provenance={"by": "test_types"})
+        back = pj.load_model(str(path), classes=())
+        pj.save_model(path, back, overwrite=True)
+    assert pj.parameter_paths(back) == pj.parameter_paths(model)
+    bench = pamjax.bench.load_bench(ROOT / "pamjax" / "data" / "hybrid-reference-bench",
+                                    pj.presets.mas10_system("pwm", "karnopp"), rate=250, kinds=["tank_charge"],
+                                    nuisance=True, atmosphere=101325)
+    res, _ = pj.fit(*_tank_problem(), ["volume"], max_steps=1, progress=False), None
+    table = pamjax.bench.nuisance_table(pamjax.bench.bench_nuisance(res, bench))
+    assert isinstance(table, str) and set(pamjax.bench.bench_rmse(res)) == {"synthetic"}
+    return [back, bench]
+
+
 # wrongly typed arguments: the hook names the argument before any work (no solve, no compilation)
 def _wrong(name, argument, call):
     case(name, wrong=argument)(call)
@@ -347,6 +481,68 @@ _wrong("runtime.select_devices for an unknown kind of work", "work",
        lambda: _pj().runtime.select_devices("lanes"))
 _wrong("runtime.initialize_distributed with a string timeout", "timeout",
        lambda: _pj().runtime.initialize_distributed(timeout="300"))
+
+# the fit's entry points
+_wrong("fit with one dict entry for free", "free", lambda: _pj().fit(*_tank_problem(), {"path": "volume"}))
+_wrong("fit with a string progress", "progress", lambda: _pj().fit(*_tank_problem(), ["volume"], progress="yes"))
+_wrong("fit with a float max_steps", "max_steps", lambda: _pj().fit(*_tank_problem(), ["volume"], max_steps=10.0))
+_wrong("fit with a number for the checkpoint path", "checkpoint",
+       lambda: _pj().fit(*_tank_problem(), ["volume"], checkpoint=3))
+_wrong("evaluate with a number for the experiments", "experiments", lambda: _pj().evaluate(_tank_problem()[0], 3))
+_wrong("predictions with a string for the experiments", "experiments",
+       lambda: _pj().predictions(_tank_problem()[0], "E1"))
+_wrong("multistart with a string count", "starts",
+       lambda: _pj().multistart(*_tank_problem(), ["volume"], starts="8"))
+_wrong("fit_fleet with a list for the fleet", "fleet",
+       lambda: _pj().fit_fleet(_tank_problem()[0], [_tank_problem()[1]], ["volume"]))
+_wrong("staged_start with a string max_steps", "max_steps",
+       lambda: _pj().staged_start(_tank_problem()[0], [_tank_problem()[1]], ["volume"], max_steps="10"))
+_wrong("Experiment with a number for the signal", "signal",
+       lambda: _pj().Experiment(_pj().Recording([0.0, 0.1], {"pressure": [2e5, 3e5]}), 0.5))
+_wrong("Experiment with a list of scales", "scales",
+       lambda: _pj().Experiment(_pj().Recording([0.0, 0.1], {"pressure": [2e5, 3e5]}), _pj().Constant(0.5),
+                                scales=[500.0]))
+_wrong("Recording with a list of channels", "channels", lambda: _pj().Recording([0.0, 0.1], [[2e5, 3e5]]))
+_wrong("Recording with a channel of another length", "channels",
+       lambda: _pj().Recording(np.array([0.0, 0.1]), {"pressure": np.array([2e5, 3e5, 4e5])}))
+_wrong("Recording.from_csv with a number for the path", "path", lambda: _pj().Recording.from_csv(3))
+_wrong("ParameterSpace with a number for free", "free", lambda: _pj().ParameterSpace(_tank_problem()[0], 3))
+_wrong("parameter_paths with a number for the prefix", "prefix", lambda: _pj().parameter_paths(_pj().Air(), 1))
+_wrong("Rig with a list of sensors", "sensors",
+       lambda: _pj().Rig(_pj().presets.mas10_system("averaged"), sensors=[_pj().Sensors()]))
+_wrong("Rig with a muscle for the plant", "plant", lambda: _pj().Rig(_pj().presets.mas10_muscle()))
+_wrong("Sensors with a string delay", "delay", lambda: _pj().Sensors(delay="1 ms"))
+_wrong("StartState with an unknown mode", "mode", lambda: _pj().StartState(mode="sliding"))
+_wrong("RunConditions with a number for the start", "start", lambda: _pj().RunConditions(start=3e5))
+_wrong("synthetic_recording with a list of noise levels", "noise",
+       lambda: _pj().synthetic_recording(_pj().presets.mas10_tank_system(), _pj().Constant(0.5), [0.0, 0.1],
+                                         noise=[2e3]))
+_wrong("LevenbergMarquardt with a string for geodesic", "geodesic", lambda: _pj().LevenbergMarquardt(geodesic="no"))
+_wrong("levenberg_marquardt with a number for the residuals", "residuals",
+       lambda: _pj().levenberg_marquardt(1.0, lambda th: (th, np.eye(1)), [0.0]))
+_wrong("ForceMapExperiment with columns of different lengths", "pressures",
+       lambda: _pj().bench.ForceMapExperiment(np.array([0.0, 0.01]), np.full(3, 3e5), np.array([10.0, 20.0])))
+_wrong("HysteresisLoopExperiment with numbers for the starts", "starts",
+       lambda: _pj().bench.HysteresisLoopExperiment([0.0, 0.01], [3e5, 3e5], [0.01, 0.01], [10.0, 20.0],
+                                                    starts=np.array([1.0, 0.0])))
+_wrong("FlowCurveExperiment with a number for the restriction", "restriction",
+       lambda: _pj().bench.FlowCurveExperiment([5e5], [2e5], [1e-3], restriction=3))
+_wrong("loop_average with a float for the decimals", "decimals",
+       lambda: _pj().bench.loop_average([0.0], [3e5], [0.01], [10.0], decimals=2.5))
+_wrong("constant_velocity_point with a 2-D force", "force",
+       lambda: _pj().bench.constant_velocity_point([0.0, 0.1, 0.2], [0.0, 0.001, 0.002], np.ones((3, 2))))
+_wrong("flow_curve with a string for the air", "air",
+       lambda: _pj().bench.flow_curve(_pj().presets.mas10_silencer(), 5e5, [0.5], "air"))
+_wrong("save_model with a number for the path", "path", lambda: _pj().save_model(3, _pj().Air()))
+_wrong("load_model with a list of class names", "classes",
+       lambda: _pj().load_model("model.json", classes=["MyValve"]))
+_wrong("load_bench with a number for the directory", "directory",
+       lambda: _pj().bench.load_bench(3, _pj().presets.mas10_system("averaged")))
+_wrong("bench_rmse with a dict for the result", "result", lambda: _pj().bench.bench_rmse({"labels": []}))
+_wrong("design_experiment with a string duration", "duration",
+       lambda: _pj().design_experiment(_pj().presets.mas10_system("pwm"), ["volume.dead_volume"], "30 s",
+                                       noise={"pressure": 2e3}))
+_wrong("profile_likelihood with a dict for the result", "result", lambda: _pj().profile_likelihood({"labels": []}))
 
 
 # --- the worker (a subprocess: the hook must come before pamjax's import) -------------------------------------------

@@ -29,6 +29,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError
 from .._fit.experiment import Experiment, TankFromModel
 from .._fit.fit import FitResult
@@ -89,7 +90,7 @@ class Bench:
     meta: dict
     directory: pathlib.Path
     rate: float | None
-    model: object = None
+    model: AbstractSystem | Rig | None = None
     nuisance: list = dataclasses.field(default_factory=list)
     notes: list = dataclasses.field(default_factory=list)
     unknown_starts: list = dataclasses.field(default_factory=list)
@@ -158,10 +159,10 @@ def _start_estimate(rec, offset, window=0.02):
     return out
 
 
-def load_bench(directory: str | os.PathLike, model: AbstractSystem | Rig, *, rate: float | None = None,
+def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: RealScalarLike | None = None,
                kinds: Sequence[str] = FITTED_KINDS, fitted_keys: Sequence[str] | None = None, substeps: int = 16,
-               nuisance: bool | Sequence[str] = False, atmosphere: float | None = None,
-               position_offset: float = 0.0) -> "Bench":
+               nuisance: bool | Sequence[str] = False, atmosphere: RealScalarLike | None = None,
+               position_offset: float | int = 0.0) -> "Bench":
     """Experiments of a bench directory for `pamjax.fit(bench.model, bench.experiments, bench.free)`.
 
     **Arguments:**
@@ -254,8 +255,8 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem | Rig, *, rat
                                           name=name, substeps=substeps, t0=rec.t[0] - lead))
     if not experiments:
         raise PamjaxInputError(f"{where}: no experiment of the kinds {list(kinds)}")
-    bench = Bench(experiments, free, keys, noise, skipped, meta, directory, rate, model=model, notes=notes,
-                  unknown_starts=unknown)
+    bench = Bench(experiments, free, keys, noise, skipped, meta, directory, None if rate is None else float(rate),
+                  model=model, notes=notes, unknown_starts=unknown)
     if unknown and "start" not in names:
         notes.append(f"{', '.join(unknown)}: start state unknown (meta.json init); fitted as if at rest unless the "
                      "start is freed (nuisance=True / --nuisance)")

@@ -29,6 +29,7 @@ TimesLike = Real[ArrayLike, " times"] | Sequence[RealScalarLike]  # the output t
 # a column of a component's table (a calibration, tabulated conductances, a sampled signal): one number per entry,
 # as many entries in every column of one component
 TableLike = Real[ArrayLike, " entries"] | Sequence[RealScalarLike]
+BoolTableLike = Bool[ArrayLike, " entries"] | Sequence[bool]  # a column of flags (e.g. where a sweep starts)
 # a state variable (a pressure, a position): a number per run, or with the leading axes of a trajectory or a batch,
 # the same for every variable of one state
 StateLike = Real[ArrayLike, "*batch"]
@@ -49,7 +50,7 @@ Result = Int[Array, "..."]  # equinox/diffrax result codes, one per run or lane
 PyTreeLike = PyTree[Any]  # a pytree whose leaves pamjax does not constrain (a model, a state, solver options)
 
 __all__ = [
-    "Array", "ArrayLike", "Bool", "BoolArray", "BoolScalarLike", "Float", "FloatArray", "FloatScalar",
+    "Array", "ArrayLike", "Bool", "BoolArray", "BoolScalarLike", "BoolTableLike", "Float", "FloatArray", "FloatScalar",
     "FloatVector", "Int", "IntArray", "IntScalarLike", "PyTree", "PyTreeLike", "Real", "RealArray", "RealArrayLike",
     "RealScalar", "RealScalarLike", "RealSequence", "RealVector", "RealVectorLike", "Result", "Series", "StateLike",
     "Table", "TableLike", "TimesLike",

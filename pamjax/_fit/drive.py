@@ -5,11 +5,13 @@ checkpoint arrays, `levenberg_marquardt` for a problem of one's own), any other 
 
 import dataclasses
 import time
+from collections.abc import Callable
 
 import numpy as np
 import optimistix as optx
 
 from .._core.arrays import device_array
+from .._core.custom_types import ArrayLike, RealVectorLike
 from .._core.errors import PamjaxInputError
 from .solver import CRAWL_STEPS, REASONS, Damping, LevenbergMarquardt, State
 
@@ -151,8 +153,11 @@ class _Callables:
         return r, jac
 
 
-def levenberg_marquardt(residuals, jacobian, theta0, *, max_steps=100, ftol=1e-10, xtol=1e-10, gtol=1e-10,
-                        stall_steps=8, geodesic=True, solver=None):
+def levenberg_marquardt(residuals: Callable[[np.ndarray], ArrayLike | None],
+                        jacobian: Callable[[np.ndarray], tuple[ArrayLike, ArrayLike]], theta0: RealVectorLike, *,
+                        max_steps: int = 100, ftol: float | int = 1e-10, xtol: float | int = 1e-10,
+                        gtol: float | int = 1e-10, stall_steps: int = 8, geodesic: bool = True,
+                        solver: LevenbergMarquardt | None = None) -> Outcome:
     """Least squares min ½‖r(θ)‖² by the solver and host loop `pamjax.fit` uses, for a problem of your own.
 
     **Arguments:** `residuals(θ)` → r (NumPy, or None / non-finite where the model fails: that trial is rejected);

@@ -14,17 +14,19 @@ different systems share parameters through the model (all valve tests use `model
 import abc
 import copy
 import hashlib
+from collections.abc import Callable, Mapping, Sequence
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._core.arrays import device_array
+from .._core.arrays import as_scalar, device_array
+from .._core.custom_types import RealArrayLike, RealScalar, RealScalarLike
 from .._core.errors import PamjaxInputError
 from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
-from .._solve.simulate import fixed_grid_size, resolve_stepping, solve, validate
+from .._solve.simulate import Stepping, fixed_grid_size, resolve_stepping, solve, validate
 from .._solve.synchronous import num_periods
 from .._systems.base import AbstractSystem
 from .._systems.tank import TankSystem
@@ -90,6 +92,10 @@ class AbstractExperiment(eqx.Module):
         return self.residuals_of(self.predict(model), part)
 
 
+# What `fit`, `evaluate` and `predictions` take as their experiments: a list (or tuple) of them, or one
+Experiments = AbstractExperiment | Sequence[AbstractExperiment]
+
+
 class SameSystem(eqx.Module):
     """The model is the system of the experiment."""
 
@@ -100,8 +106,8 @@ class SameSystem(eqx.Module):
 class TankFromModel(eqx.Module):
     """A constant-volume tank of `volume` [m³] fed by the model's valve (paper 000's valve tests)."""
 
-    volume: jax.Array = eqx.field(converter=jnp.asarray)  # m³
-    polytropic_index: jax.Array = eqx.field(converter=jnp.asarray, default=1.4)  # -
+    volume: RealScalar = eqx.field(converter=as_scalar)  # m³
+    polytropic_index: RealScalar = eqx.field(converter=as_scalar, default=1.4)  # -
 
     def __call__(self, model):
         return TankSystem(valve=model.valve, volume=self.volume, air=model.air, polytropic_index=self.polytropic_index)
@@ -169,7 +175,7 @@ class Experiment(AbstractExperiment):
     scales: dict = eqx.field(static=True)
     noise_channels: tuple = eqx.field(static=True)  # channels whose scale the user gave (their noise level)
     signal: AbstractSignal
-    build: eqx.Module
+    build: Callable[[eqx.Module], AbstractSystem]
     initial: dict
     t0: jax.Array
     split_time: jax.Array
@@ -179,7 +185,7 @@ class Experiment(AbstractExperiment):
     atol: float = eqx.field(static=True)
     max_steps: int = eqx.field(static=True)
     dt0: float | None = eqx.field(static=True)
-    stepping: str = eqx.field(static=True)
+    stepping: Stepping = eqx.field(static=True)
     substeps: int = eqx.field(static=True)
     span: tuple = eqx.field(static=True)  # (t0, t_end) [s] as floats, to size the PWM grid
     host_times: "_Constant" = eqx.field(static=True)  # the times as a NumPy array (`predict`)
@@ -192,25 +198,23 @@ class Experiment(AbstractExperiment):
         self,
         recording: Recording,
         signal: AbstractSignal,
-        channels=None,
-        scales=None,
-        build=None,
-        initial=None,
-        t0=None,
-        name=None,
+        channels: Sequence[str] | None = None,
+        scales: Mapping[str, RealScalarLike] | None = None,
+        build: Callable[[eqx.Module], AbstractSystem] | None = None,
+        initial: Mapping[str, RealArrayLike | str] | None = None,
+        t0: RealScalarLike | None = None,
+        name: str | None = None,
         # 1e-9, not simulate's 1e-6: an adaptive solve's cost jumps at the tolerance level wherever its step pattern
         # changes with the parameters; in the ill-conditioned valleys of a joint fit (force law, friction and volume
         # trade off) that noise outweighs the decrease Levenberg-Marquardt can still make, and the fit stalls. The
         # averaged-valve benchmark fit (benchmarks/fit.py) stalls at 1e-6 and 1e-8 with F_c 35 % off (cost 1137 and
         # 1148) and converges at 1e-9 (cost 1110, every parameter within 1.6 standard errors of the truth).
-        rtol=1e-9,
-        atol=1e-9,
-        max_steps=100_000,
-        dt0=None,
-        validation_fraction=0.0,
-        stepping="auto",
-        substeps=16,
-        sensors=DEFAULT_GROUP,
+        rtol: RealScalarLike = 1e-9,
+        atol: RealScalarLike = 1e-9,
+        max_steps: int = 100_000,
+        dt0: RealScalarLike | None = None,
+        validation_fraction: RealScalarLike = 0.0,
+        stepping: Stepping = "auto", substeps: int = 16, sensors: str = DEFAULT_GROUP,
     ):
         if not isinstance(recording, Recording):
             raise PamjaxInputError(f"recording must be a pamjax.Recording, got {type(recording)}")
@@ -258,7 +262,8 @@ class Experiment(AbstractExperiment):
                                        dtype=float)
         self.name = recording.name if name is None else str(name)
         self.channels = channels
-        self.rtol, self.atol, self.max_steps, self.dt0 = rtol, atol, int(max_steps), dt0
+        self.rtol, self.atol, self.max_steps = float(rtol), float(atol), int(max_steps)
+        self.dt0 = None if dt0 is None else float(dt0)
         if stepping not in ("auto", "adaptive", "pwm", "grid"):
             raise PamjaxInputError(f"stepping must be 'auto', 'adaptive', 'pwm' or 'grid', got {stepping!r}")
         if not (isinstance(substeps, int) and substeps >= 2):

@@ -11,24 +11,36 @@ import dataclasses
 import importlib
 import json
 import math
+import os
 import pathlib
 import threading
 import time
 import warnings
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
 
+import equinox as eqx
 import numpy as np
 
 from .._core.arrays import device_array
 from .._core.cache import program_cache
+from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError, require_float64
 from .._files.checkpoint import check_checkpoint_path, read_checkpoint, write_checkpoint
 from .._files.fingerprint import check_resume, fingerprint
 from .diagnostics import channel_errors, covariance, identifiability, mismatch
-from .experiment import AbstractExperiment
-from .parameters import PamjaxIdentifiabilityWarning, ParameterSpace
+from .experiment import AbstractExperiment, Experiments
+from .parameters import Free, PamjaxIdentifiabilityWarning, ParameterSpace
 from .predictions import predictions
 from .problem import Problem, physical_and_jacobian
 from .rig_hints import nuisance_hints
+
+if TYPE_CHECKING:  # annotations only: importing optimistix costs ~0.3 s that a fit from the cache never needs
+    import optimistix as optx
+
+# `fit`'s progress: True prints, False is silent, a callable gets (step, cost, damping, accepted); None: as False,
+# but the first compilation is announced (`staged_start`'s stages)
+Progress = bool | Callable[[int, float, float, bool], object] | None
 
 
 @dataclasses.dataclass
@@ -80,22 +92,23 @@ class FitResult:
     compile_s: float
     num_residuals: int
     diagnosis: list = dataclasses.field(default_factory=list)  # what a mismatch's residuals point to (rig_hints)
-    model: object = dataclasses.field(default=None, repr=False, compare=False)
-    predictions: dict = dataclasses.field(default=None, repr=False, compare=False)
-    experiments: object = dataclasses.field(default=None, repr=False, compare=False)  # as fitted (profiles)
+    model: eqx.Module | None = dataclasses.field(default=None, repr=False, compare=False)
+    predictions: dict | None = dataclasses.field(default=None, repr=False, compare=False)
+    experiments: Sequence[AbstractExperiment] | None = dataclasses.field(default=None, repr=False,
+                                                                         compare=False)  # as fitted (profiles)
 
     def to_dict(self):
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
                 if f.name not in ("model", "predictions", "experiments")}
 
     @classmethod
-    def from_dict(cls, d):
+    def from_dict(cls, d: dict[str, Any]) -> "FitResult":
         d = dict(d)
         d.setdefault("message", d.get("status", ""))  # results written before these fields existed
         d.setdefault("mismatch", False)
         return cls(**d)
 
-    def to_json(self, path, overwrite=False):
+    def to_json(self, path: str | os.PathLike, overwrite: bool = False) -> pathlib.Path:
         """Write the result (floats exact via repr); refuses to replace an existing file unless `overwrite`."""
         path = pathlib.Path(path)
         if path.exists() and not overwrite:
@@ -105,14 +118,14 @@ class FitResult:
         return path
 
     @classmethod
-    def from_json(cls, path):
+    def from_json(cls, path: str | os.PathLike) -> "FitResult":
         return cls.from_dict(json.loads(pathlib.Path(path).read_text()))
 
-    def apply(self, model):
+    def apply(self, model: eqx.Module) -> eqx.Module:
         """`model` with the fitted values set (the free spec in `paths`)."""
         return ParameterSpace(model, self.paths).with_values(np.asarray(self.values, dtype=float))
 
-    def table(self, truth=None):
+    def table(self, truth: dict[str, float] | None = None) -> str:
         """Text table: label, (true), initial, fitted ± standard error."""
         head = f"{'parameter':<44}" + (f"{'true':>14}" if truth is not None else "") + f"{'initial':>14}{'fitted':>14}"
         rows = [head + f"{'± std err':>12}"]
@@ -124,7 +137,7 @@ class FitResult:
 
 
 
-def evaluate(model, experiments):
+def evaluate(model: eqx.Module, experiments: Experiments) -> dict[str, dict[str, dict[str, Any]]]:
     """Per-channel errors of `model` against `experiments` without fitting: experiment → channel → rmse, max error,
     % of range, noise, residual whiteness (as `FitResult.channel_errors`). One compiled program for all of them."""
     experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
@@ -217,22 +230,22 @@ def _status(state, space, theta):  # state: a `solver.Outcome`
 
 
 def fit(
-    model,
-    experiments,
-    free,
+    model: eqx.Module,
+    experiments: Experiments,
+    free: Free,
     *,
     max_steps: int = 100,
-    ftol: float = 1e-10,
-    xtol: float = 1e-10,
-    gtol: float = 1e-10,
-    progress=True,
-    identifiability_tol: float = 1e-6,
+    ftol: float | int = 1e-10,
+    xtol: float | int = 1e-10,
+    gtol: float | int = 1e-10,
+    progress: Progress = True,
+    identifiability_tol: RealScalarLike = 1e-6,
     stall_steps: int = 8,
-    out=None,
+    out: str | os.PathLike | None = None,
     overwrite: bool = False,
-    checkpoint=None,
-    resume=None,
-    solver=None,
+    checkpoint: str | os.PathLike | None = None,
+    resume: str | os.PathLike | None = None,
+    solver: "optx.AbstractLeastSquaresSolver | optx.AbstractMinimiser | None" = None,
 ) -> FitResult:
     """Fit the parameters named in `free` of `model` to `experiments` by nonlinear least squares.
 
@@ -265,7 +278,7 @@ def fit(
       cache); it stops by its own tests ('converged' when it reports success), and takes no `ftol`, `xtol`, `gtol`,
       `stall_steps`, `checkpoint` or `resume`. Progress then prints one line per evaluation.
     - `progress`: True prints one line per iteration (cost, damping, accepted); a callable gets
-      (step, cost, damping, accepted); False is silent.
+      (step, cost, damping, accepted); False is silent; None prints only the notice of a first compilation.
     - `identifiability_tol`: singular values of the column-normalised Jacobian below this × the largest mark a
       non-identifiable combination (warned about by name; its parameters get infinite standard errors).
     - `out`: a JSON path to write the result to; checked BEFORE the fit; never replaced unless `overwrite=True`.

@@ -10,15 +10,21 @@ with `process_allgather`, so every process returns the same result.
 import dataclasses
 import inspect
 import json
+import os
 import pathlib
 import time
 import warnings
+from collections.abc import Callable
+from typing import Any
 
+import equinox as eqx
 import numpy as np
 
+from .._core.custom_types import RealArrayLike, RealScalarLike, RealVectorLike
 from .._core.errors import PamjaxInputError, PamjaxSolveError, require_float64
+from .experiment import Experiments
 from .fit import FitResult, fit
-from .parameters import ParameterSpace
+from .parameters import Free, ParameterSpace
 
 _NOT_PASSED = ("out", "checkpoint", "resume", "overwrite", "progress")  # per-task files/output: not for many fits
 
@@ -36,11 +42,11 @@ class MultistartResult:
 
     best: FitResult
     best_index: int
-    results: list
-    errors: list
+    results: list[FitResult | None]
+    errors: list[str | None]
     starts: np.ndarray
-    labels: list
-    processes: list
+    labels: list[str]
+    processes: list[int]
 
     @property
     def costs(self):
@@ -58,7 +64,7 @@ class MultistartResult:
                 rows.append(f"{i:>5} {r.cost:>14.6e} {r.iterations:>5} {p:>4}  {r.status}{mark}")
         return "\n".join(rows)
 
-    def to_json(self, path, overwrite=False):
+    def to_json(self, path: str | os.PathLike, overwrite: bool = False) -> pathlib.Path:
         """Write every start's result and error (floats exact); refuses to replace a file unless `overwrite`."""
         path = pathlib.Path(path)
         if path.exists() and not overwrite:
@@ -76,9 +82,9 @@ class FleetResult:
     """The outcome of `fit_fleet`: per member name, its `FitResult` (`results`, None where the fit failed), the
     failure's message (`errors`, None where it ran) and the process that ran it (`processes`)."""
 
-    results: dict
-    errors: dict
-    processes: dict
+    results: dict[str, FitResult | None]
+    errors: dict[str, str | None]
+    processes: dict[str, int]
 
     @property
     def failed(self):
@@ -190,16 +196,16 @@ def _start_values(space, starts, seed, spread):
 
 
 def multistart(
-    model,
-    experiments,
-    free,
+    model: eqx.Module,
+    experiments: Experiments,
+    free: Free,
     *,
-    starts=8,
+    starts: int | RealArrayLike = 8,
     seed: int = 0,
-    spread=0.5,
+    spread: RealScalarLike | RealVectorLike = 0.5,
     distributed: bool | None = None,
-    progress=True,
-    **fit_options,
+    progress: bool | Callable[[str], object] = True,
+    **fit_options: Any,
 ) -> MultistartResult:
     """Fit the parameters named in `free` from many starts, and keep the best: a guard against local minima.
 
@@ -251,13 +257,13 @@ def multistart(
 
 
 def fit_fleet(
-    model,
-    fleet: dict,
-    free,
+    model: eqx.Module | dict[str, eqx.Module],
+    fleet: dict[str, Experiments],
+    free: Free,
     *,
     distributed: bool | None = None,
-    progress=True,
-    **fit_options,
+    progress: bool | Callable[[str], object] = True,
+    **fit_options: Any,
 ) -> FleetResult:
     """Fit the same parameters to each member of a fleet (one muscle, valve or bench per set of experiments),
     one `pamjax.fit` per member, spread over the processes of a multi-process run like `multistart`.

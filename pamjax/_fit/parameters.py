@@ -9,6 +9,8 @@ magnitude. This module knows no component.
 
 import dataclasses
 import re
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -91,20 +93,25 @@ def split_path(path):
     return _parse(path)
 
 
-def parameter_paths(model, prefix=""):
+def parameter_paths(model: eqx.Module, prefix: str = "") -> dict[str, tuple[int, ...]]:
     """All array-valued parameter paths of `model` with their shapes, e.g. {'valve.inflate.area': ()}; dict fields
-    (a `Rig`'s run conditions) give `name[key].…` paths."""
+    (a `Rig`'s run conditions) give `name[key].…` paths. `prefix` is written before every path (e.g. "plant.")."""
+    return _paths(model, prefix)
+
+
+def _paths(node, prefix):
+    """`parameter_paths` of any node of a model: a Module, a dict, an array (anything else has none)."""
     out = {}
-    if isinstance(model, eqx.Module):
-        for f in dataclasses.fields(model):
+    if isinstance(node, eqx.Module):
+        for f in dataclasses.fields(node):
             if f.metadata.get("static", False):
                 continue
-            out.update(parameter_paths(getattr(model, f.name), f"{prefix}{f.name}."))
-    elif isinstance(model, dict):
-        for key, value in model.items():
-            out.update(parameter_paths(value, f"{prefix[:-1]}{_key_text(str(key))}."))
-    elif eqx.is_array(model):
-        out[prefix[:-1]] = tuple(model.shape)
+            out.update(_paths(getattr(node, f.name), f"{prefix}{f.name}."))
+    elif isinstance(node, dict):
+        for key, value in node.items():
+            out.update(_paths(value, f"{prefix[:-1]}{_key_text(str(key))}."))
+    elif eqx.is_array(node):
+        out[prefix[:-1]] = tuple(node.shape)
     return out
 
 
@@ -200,6 +207,9 @@ def _labels(path, shape, index, label):
 
 # Keys of a free-parameter entry given as a dict (the `pamjax fit` config's free tables take the same).
 FREE_ENTRY_KEYS = ("path", "transform", "bounds", "scale")
+# The type of `free` (fit, ParameterSpace, multistart, ...): entries that are a parameter path, or a dict with the
+# keys FREE_ENTRY_KEYS ({"path": ..., "transform": "log", "bounds": (lo, hi), "scale": s}).
+Free = Sequence[str | Mapping[str, Any]]
 
 
 def _zero_start_scale(full, index):
@@ -354,7 +364,7 @@ class ParameterSpace(eqx.Module):
     base: eqx.Module
     groups: tuple
 
-    def __init__(self, model, free):
+    def __init__(self, model: eqx.Module, free: Free):
         if isinstance(free, str) or not free:
             raise PamjaxInputError(f"free must be a non-empty list of parameter paths, got {free!r}")
         valid = parameter_paths(model)

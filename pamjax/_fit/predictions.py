@@ -9,6 +9,7 @@ from .._core.errors import require_float64
 from .._solve.scaled import scaled
 from .._solve.simulate import fixed_trajectory
 from .._solve.synchronous import solve_runs
+from .experiment import Experiments
 from .parameters import strong_types
 
 
@@ -36,7 +37,7 @@ def _predictions(model, exps):
     return predict_all(model, exps)
 
 
-def predictions(model, experiments):
+def predictions(model: eqx.Module, experiments: Experiments) -> list[dict[str, np.ndarray]]:
     """`model`'s channels at every experiment's times (list of dicts channel → NumPy array), in one compiled
     program (experiments of one kind share one loop, as in a fit). Checks the experiments first."""
     require_float64("pamjax.predictions")

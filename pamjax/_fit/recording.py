@@ -7,11 +7,15 @@ need SciPy (`pip install scipy`; in the test and bench extras); it is imported o
 """
 
 import json
+import os
 import pathlib
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 from .._core.csvio import read_table, write_table
+from .._core.custom_types import RealScalarLike, TimesLike
 from .._core.errors import PamjaxInputError
 from .._core.paths import writable_path
 from .._core.units import channel_dimension, check_magnitude, to_si
@@ -59,8 +63,9 @@ class Recording:
     `mask[name]` is a boolean array, True where the sample is valid. `units` holds the SI unit of each channel.
     """
 
-    def __init__(self, t, channels, units=None, *, mask_nan=False, name="", source=None, unit_checks=True,
-                 atmosphere=None):
+    def __init__(self, t: TimesLike, channels: Mapping[str, TimesLike], units: Mapping[str, str] | None = None, *,
+                 mask_nan: bool = False, name: str = "", source: str | os.PathLike | None = None,
+                 unit_checks: bool = True, atmosphere: RealScalarLike | None = None):
         self.name = str(name)
         if atmosphere is not None and not (np.isfinite(atmosphere) and 5e4 <= float(atmosphere) <= 1.2e5):
             raise PamjaxInputError(f"Recording {self.name!r}: atmosphere must be the ambient pressure in Pa abs "
@@ -141,7 +146,8 @@ class Recording:
         return out
 
     # -- preprocessing ------------------------------------------------------------------------------------------
-    def filtered(self, cutoff_hz=20.0, order=2, channels=None, pwm_frequency=None):
+    def filtered(self, cutoff_hz: RealScalarLike = 20.0, order: int = 2, channels: Sequence[str] | None = None,
+                 pwm_frequency: RealScalarLike | None = None) -> "Recording":
         """Zero-phase Butterworth low-pass (`scipy.signal.butter` + `filtfilt`) of `channels` (default: all but
         `command`); paper 001: 2nd order at 20 Hz (its valve is a proportional regulator).
 
@@ -166,7 +172,7 @@ class Recording:
             out[c] = sig.filtfilt(b, a, self[c])
         return self._replace(self.t, out, filtered_at=float(cutoff_hz))
 
-    def resampled(self, rate_hz):
+    def resampled(self, rate_hz: RealScalarLike) -> "Recording":
         """The recording at about `rate_hz` [Hz], by DECIMATION: the recorded samples nearest to a uniform grid of
         that rate, kept with their own times and values (no filter, no interpolation), so every value is one that
         was measured, at the instant it was measured, and a model sampled at those instants is compared like with
@@ -191,7 +197,7 @@ class Recording:
         idx = np.unique(nearest)
         return self._replace(self.t[idx], {c: v[idx] for c, v in self.channels.items()})
 
-    def window(self, t_start=None, t_end=None):
+    def window(self, t_start: RealScalarLike | None = None, t_end: RealScalarLike | None = None) -> "Recording":
         """The samples with t_start ≤ t ≤ t_end."""
         lo = -np.inf if t_start is None else t_start
         hi = np.inf if t_end is None else t_end
@@ -204,7 +210,7 @@ class Recording:
         return self._replace(self.t[keep], {c: v[keep] for c, v in self.channels.items()})
 
     # -- files --------------------------------------------------------------------------------------------------
-    def to_csv(self, path, overwrite=False):
+    def to_csv(self, path: str | os.PathLike, overwrite: bool = False) -> pathlib.Path:
         """Write a `t [s],name [unit],...` CSV (pressures as `[Pa abs]`, floats exact); refuses to overwrite an
         existing file unless `overwrite=True`."""
         path = writable_path(path, overwrite)
@@ -212,7 +218,7 @@ class Recording:
         comment = f"pamjax recording {self.name}; pressures absolute" if self.name else None
         return write_table(path, {"t": self.t, **self.channels}, units, comment)
 
-    def to_npz(self, path, overwrite=False):
+    def to_npz(self, path: str | os.PathLike, overwrite: bool = False) -> pathlib.Path:
         """Write NPZ with arrays `t` and one per channel, units in `__units__` (JSON)."""
         path = writable_path(path, overwrite)
         meta = json.dumps(dict(units=self.units, name=self.name))
@@ -220,7 +226,9 @@ class Recording:
         return path
 
     @classmethod
-    def from_csv(cls, path, *, rename=None, units=None, mask_nan=False, name=None, unit_checks=True, atmosphere=None):
+    def from_csv(cls, path: str | os.PathLike, *, rename: Mapping[str, str] | None = None,
+                 units: Mapping[str, str] | None = None, mask_nan: bool = False, name: str | None = None,
+                 unit_checks: bool = True, atmosphere: RealScalarLike | None = None) -> "Recording":
         """Read a CSV with a header row naming the columns, a time column `t` (or `time`) and one column per
         channel; `name [unit]` or `name (unit)` headers give units, converted to SI (`pamjax._core.csvio`, `_units`).
         Commas, semicolons or tabs; quoted headers; a UTF-8 byte-order mark; lines starting with '#' are comments.
@@ -231,7 +239,9 @@ class Recording:
                                  unit_checks, atmosphere)
 
     @classmethod
-    def from_npz(cls, path, *, rename=None, units=None, mask_nan=False, name=None, unit_checks=True, atmosphere=None):
+    def from_npz(cls, path: str | os.PathLike, *, rename: Mapping[str, str] | None = None,
+                 units: Mapping[str, str] | None = None, mask_nan: bool = False, name: str | None = None,
+                 unit_checks: bool = True, atmosphere: RealScalarLike | None = None) -> "Recording":
         """Read an NPZ with a `t` array and one array per channel (the hybrid bench's short names t, u, p, x are
         renamed to command, pressure, position)."""
         path = pathlib.Path(path)
@@ -247,7 +257,9 @@ class Recording:
         )
 
     @classmethod
-    def from_mat(cls, path, *, rename=None, units=None, mask_nan=False, name=None, unit_checks=True, atmosphere=None):
+    def from_mat(cls, path: str | os.PathLike, *, rename: Mapping[str, str] | None = None,
+                 units: Mapping[str, str] | None = None, mask_nan: bool = False, name: str | None = None,
+                 unit_checks: bool = True, atmosphere: RealScalarLike | None = None) -> "Recording":
         """Read a MATLAB `.mat` file (Simulink / dSPACE logs): every 1-D numeric variable is a column (a time
         variable `t` or `time`, channels by name or the bench short names t, u, p, x); MATLAB files carry no units,
         so `units` (dict name → unit) says what is not SI (e.g. {"p": "barg", "x": "mm"}). v5-v7.2 files through
@@ -289,7 +301,7 @@ class Recording:
                    atmosphere=atmosphere)
 
     @classmethod
-    def load(cls, path, **kwargs):
+    def load(cls, path: str | os.PathLike, **kwargs: Any) -> "Recording":
         """`from_csv` or `from_npz` by file extension."""
         suffix = pathlib.Path(path).suffix.lower()
         if suffix == ".npz":

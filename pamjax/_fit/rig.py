@@ -22,12 +22,19 @@ scalings from the model, and as SDO estimates initial states beside the paramete
 Which nuisances to free, and why, is in docs/fitting.md ("Identifying your own rig").
 """
 
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Literal
+
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 
+from .._core.custom_types import RealScalar
 from .._core.errors import PamjaxInputError
 from .._core.fitting import positive, signed
+from .._systems.base import AbstractSystem
+
+if TYPE_CHECKING:  # annotations only: the fit imports this module
+    from .fit import FitResult
 
 DEFAULT_GROUP = "rig"
 NUISANCE_ROOTS = ("sensors", "runs")
@@ -42,10 +49,10 @@ class Sensors(eqx.Module):
     Defaults are ideal sensors (offsets 0, gain 1, no delay). Fitted linearly in units of their natural size
     (`signed`: 1 kPa, 0.1 mm, 1 ms — the scale of a bench's noise and sampling interval), the gain in log space."""
 
-    pressure_offset: jax.Array = signed(0.0, scale=1e3, unit="Pa")  # added to the gauge pressure
-    pressure_gain: jax.Array = positive(1.0, unit="-")  # multiplies the gauge pressure
-    position_offset: jax.Array = signed(0.0, scale=1e-4, unit="m")
-    delay: jax.Array = signed(0.0, scale=1e-3, unit="s")  # the samples lag the command
+    pressure_offset: RealScalar = signed(0.0, scale=1e3, unit="Pa")  # added to the gauge pressure
+    pressure_gain: RealScalar = positive(1.0, unit="-")  # multiplies the gauge pressure
+    position_offset: RealScalar = signed(0.0, scale=1e-4, unit="m")
+    delay: RealScalar = signed(0.0, scale=1e-3, unit="s")  # the samples lag the command
 
     def observe(self, channel, values, atmosphere):
         """The measured `channel` from the model's `values` (the delay is applied where the model is read)."""
@@ -69,10 +76,10 @@ class StartState(eqx.Module):
     `position` [m], `velocity` [m/s]; None keeps the system's default (at rest, in equilibrium). `mode`: "auto" (stick-
     slip friction sliding in the direction of the velocity, stuck where it is 0) or "stuck" (the velocity is 0)."""
 
-    pressure: jax.Array | None = positive(None, unit="Pa abs")
-    position: jax.Array | None = signed(None, scale=1e-3, unit="m")
-    velocity: jax.Array | None = signed(None, scale=1e-2, unit="m/s")
-    mode: str = eqx.field(static=True, default="auto")
+    pressure: RealScalar | None = positive(None, unit="Pa abs")
+    position: RealScalar | None = signed(None, scale=1e-3, unit="m")
+    velocity: RealScalar | None = signed(None, scale=1e-2, unit="m/s")
+    mode: Literal["auto", "stuck"] = eqx.field(static=True, default="auto")
 
     def __check_init__(self):
         if self.mode not in START_MODES:
@@ -93,7 +100,7 @@ class RunConditions(eqx.Module):
     """One run's conditions: `supply_pressure` [Pa abs] (None: the plant's own), `start` (a `StartState`; None: the
     experiment's own start, at rest by default)."""
 
-    supply_pressure: jax.Array | None = positive(None, unit="Pa abs")
+    supply_pressure: RealScalar | None = positive(None, unit="Pa abs")
     start: StartState | None = None
 
 
@@ -101,11 +108,12 @@ class Rig(eqx.Module):
     """A plant with the nuisances of the rig it was recorded on (module docstring): `plant` (a system), `sensors`
     (group name → `Sensors`), `runs` (experiment name → `RunConditions`)."""
 
-    plant: eqx.Module
-    sensors: dict
-    runs: dict
+    plant: AbstractSystem
+    sensors: dict[str, Sensors]
+    runs: dict[str, RunConditions]
 
-    def __init__(self, plant, sensors=None, runs=None):
+    def __init__(self, plant: AbstractSystem, sensors: Sensors | Mapping[str, Sensors] | None = None,
+                 runs: Mapping[str, RunConditions] | None = None):
         if isinstance(plant, Rig):
             raise PamjaxInputError("Rig(plant=...): the plant is a Rig already")
         sensors = {DEFAULT_GROUP: Sensors()} if sensors is None else sensors
@@ -136,7 +144,7 @@ def is_nuisance(path):
     return head in NUISANCE_ROOTS
 
 
-def nuisance_report(result):
+def nuisance_report(result: "FitResult") -> dict[str, dict[str, dict[str, tuple[float, float]]]]:
     """A fit result's nuisances apart from the plant: {"sensors": {group: {field: (value, std err)}},
     "runs": {run: {"supply_pressure" | "start.position" | ...: (value, std err)}}}."""
     from .parameters import Key, split_path

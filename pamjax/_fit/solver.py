@@ -41,6 +41,7 @@ import numpy as np
 import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
+from .._core.custom_types import ArrayLike
 from .._core.errors import PamjaxInputError
 
 # A fit counts as converged (by ftol or xtol) only where an undamped Gauss-Newton step could gain at most this
@@ -137,14 +138,15 @@ def gradient_cosine(jacobian, residual):
 
 
 # --- the descent: Moré-scaled damped Gauss-Newton with geodesic acceleration ---------------------------------------
+# The states hold NumPy values where the solver runs from the host (`pamjax.fit`), JAX arrays where it is traced.
 class Factors(eqx.Module):
     """The descent's state: Moré's scaling D (`scale`), the SVD J D⁻¹ = U S Vᵀ (`u`, `s`, `vt`) and c = Uᵀ r."""
 
-    scale: jax.Array
-    u: jax.Array
-    s: jax.Array
-    vt: jax.Array
-    c: jax.Array
+    scale: ArrayLike
+    u: ArrayLike
+    s: ArrayLike
+    vt: ArrayLike
+    c: ArrayLike
 
 
 class ScaledDampedDescent(optx.AbstractDescent):
@@ -203,8 +205,8 @@ class ScaledDampedDescent(optx.AbstractDescent):
 class Damping(eqx.Module):
     """The search's state: the damping λ and its growth factor ν."""
 
-    damping: jax.Array
-    growth: jax.Array
+    damping: ArrayLike
+    growth: ArrayLike
 
 
 class NielsenDamping(optx.AbstractSearch):
@@ -259,21 +261,21 @@ class State(eqx.Module):
     `rows` counts the history rows, `recent` holds the cost of the last `CRAWL_STEPS` + 1 of them (the crawl rule),
     `last_rows` the rows this step added (one, or two where a probe moved the fit: [step, cost, damping, accepted])."""
 
-    residual: jax.Array
-    jacobian: jax.Array
-    cost: jax.Array
-    initial_cost: jax.Array
+    residual: ArrayLike
+    jacobian: ArrayLike
+    cost: ArrayLike
+    initial_cost: ArrayLike
     factors: Factors
     search: Damping
-    step: jax.Array
-    accepted: jax.Array
-    rejected_in_row: jax.Array
-    restarts: jax.Array
-    done: jax.Array
-    reason: jax.Array
-    rows: jax.Array
-    recent: jax.Array
-    last_rows: jax.Array
+    step: ArrayLike
+    accepted: ArrayLike
+    rejected_in_row: ArrayLike
+    restarts: ArrayLike
+    done: ArrayLike
+    reason: ArrayLike
+    rows: ArrayLike
+    recent: ArrayLike
+    last_rows: ArrayLike
     aux: object
 
 
@@ -310,7 +312,8 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
     stall_steps: int = eqx.field(static=True)
     geodesic: bool = eqx.field(static=True)
 
-    def __init__(self, ftol=1e-10, xtol=1e-10, gtol=1e-10, stall_steps=8, geodesic=True):
+    def __init__(self, ftol: float | int = 1e-10, xtol: float | int = 1e-10, gtol: float | int = 1e-10,
+                 stall_steps: int = 8, geodesic: bool = True):
         for label, tol in (("ftol", ftol), ("xtol", xtol), ("gtol", gtol)):
             if isinstance(tol, bool) or not (isinstance(tol, (int, float)) and 0 <= tol < 1):
                 raise PamjaxInputError(f"{label} must be a number in [0, 1), got {tol!r}")

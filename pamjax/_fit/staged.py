@@ -27,9 +27,13 @@ The waits are reported as `waited_s` (compilation on the critical path, beside e
 import dataclasses
 import threading
 import time
+from collections.abc import Sequence
 
-from .fit import fit, precompile
-from .parameters import join_path, split_path
+import equinox as eqx
+
+from .experiment import AbstractExperiment
+from .fit import FitResult, Progress, fit, precompile
+from .parameters import Free, join_path, split_path
 
 
 @dataclasses.dataclass
@@ -38,8 +42,8 @@ class StagedStart:
     stage fitted; `waited_s`: wall time the stages and the end spent waiting for the programs compiled in the second
     thread (stage 2's, the joint problem's); `precompile_s`: that thread's wall time (0 when not used)."""
 
-    model: object
-    stages: list
+    model: eqx.Module
+    stages: list[tuple[str, list[str], list[str], FitResult]]
     waited_s: float = 0.0
     precompile_s: float = 0.0
 
@@ -119,7 +123,8 @@ class _Background:
         self.thread.join()
 
 
-def staged_start(model, experiments, free, *, max_steps=100, progress=None, background_compile=True):
+def staged_start(model: eqx.Module, experiments: Sequence[AbstractExperiment], free: Free, *, max_steps: int = 100,
+                 progress: Progress = None, background_compile: bool = True) -> StagedStart:
     """The start of a joint fit of `free` to `experiments`, stage by stage (see the module docstring).
 
     **Arguments:** as `pamjax.fit`'s; `max_steps` bounds each stage, `progress` is passed to each stage's fit;

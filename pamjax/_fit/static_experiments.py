@@ -25,6 +25,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.custom_types import (
+    BoolTableLike,
+    FloatArray,
+    FloatVector,
+    RealArrayLike,
+    RealScalarLike,
+    RealVectorLike,
+    TableLike,
+)
 from .._core.errors import PamjaxInputError
 from .._core.units import MIN_ABSOLUTE_PA
 from .._physics.friction import AbstractFriction
@@ -59,7 +68,7 @@ def _air(model):
     return model.air if isinstance(model, AbstractSystem) else Air()
 
 
-def steady_friction_force(friction: AbstractFriction, velocity):
+def steady_friction_force(friction: AbstractFriction, velocity: RealArrayLike) -> FloatArray:
     """Friction force [N] at steady sliding with constant `velocity` [m/s] ≠ 0 (paper 000 eq. 9: F_c sign(v) + C_f v).
 
     Memoryless frictions are evaluated directly; a hybrid (stick-slip) friction in its sliding mode sign(v); a friction
@@ -88,7 +97,7 @@ def sliding_state(friction: AbstractFriction, velocity):
     return z
 
 
-def constant_velocity_point(t, position, force):
+def constant_velocity_point(t: TableLike, position: TableLike, force: TableLike) -> tuple[float, float, float]:
     """One constant-velocity friction run reduced to (velocity [m/s], mean force [N], its standard error [N]).
 
     The velocity is the least-squares slope of `position` [m] over `t` [s]; the force is the mean of `force` [N] (the
@@ -106,7 +115,8 @@ def constant_velocity_point(t, position, force):
     return velocity, float(np.mean(f)), float(np.std(f, ddof=1) / np.sqrt(f.size))
 
 
-def flow_curve(restriction: AbstractRestriction, upstream_pressure, ratios, air: Air):
+def flow_curve(restriction: AbstractRestriction, upstream_pressure: RealScalarLike, ratios: RealVectorLike,
+               air: Air) -> FloatVector:
     """Mass flow [kg/s] through `restriction` from `upstream_pressure` [Pa abs] to `ratios` × that pressure: the
     ISO 6358-1 flow curve (upstream held, downstream throttled)."""
     p1 = jnp.asarray(upstream_pressure, dtype=float)
@@ -162,20 +172,10 @@ class ForceMapExperiment(AbstractExperiment):
     name: str = eqx.field(static=True)
     channels: tuple = eqx.field(static=True, default=("force",))
 
-    def __init__(self, positions, pressures, forces, scale=None, slack_force=0.0, name="force_map"):
-        x, p, f = (np.asarray(a, dtype=float) for a in (positions, pressures, forces))
-        if not (x.shape == p.shape == f.shape and x.ndim == 1 and x.size > 0):
-            raise PamjaxInputError(
-                f"positions, pressures, forces must be 1-D of one length, got {x.shape}, {p.shape}, {f.shape}"
-            )
-        for label, a in (("positions", x), ("pressures", p), ("forces", f)):
-            if not np.all(np.isfinite(a)):
-                raise PamjaxInputError(f"{label} is NaN/inf at row {int(np.argmin(np.isfinite(a)))}")
-        if np.min(p) < MIN_ABSOLUTE_PA:  # half an atmosphere; a vented muscle reads about 101325 Pa absolute
-            raise PamjaxInputError(
-                f"pressures must be ABSOLUTE [Pa]; the lowest is {np.min(p):.4g} Pa (row {int(np.argmin(p))}), below "
-                "half an atmosphere: these look like gauge or bar (add 101325 Pa to gauge readings)"
-            )
+    def __init__(self, positions: TableLike, pressures: TableLike, forces: TableLike,
+                 scale: RealScalarLike | None = None, slack_force: RealScalarLike = 0.0, name: str = "force_map"):
+        x, p, f = _columns(("positions", "pressures", "forces"), (positions, pressures, forces))
+        _check_absolute("pressures", p)  # half an atmosphere; a vented muscle reads about 101325 Pa absolute
         self.positions, self.pressures, self.forces = jnp.asarray(x), jnp.asarray(p), jnp.asarray(f)
         self.slack = jnp.asarray(f <= slack_force)
         self.scale = float(0.01 * np.ptp(f) if scale is None else scale)
@@ -268,7 +268,8 @@ class FrictionCurveExperiment(AbstractStaticExperiment):
     name: str = eqx.field(static=True)
     channels: tuple = eqx.field(static=True)
 
-    def __init__(self, velocities, forces, scale=None, friction="friction", name="friction_curve"):
+    def __init__(self, velocities: TableLike, forces: TableLike, scale: RealScalarLike | None = None,
+                 friction: str = "friction", name: str = "friction_curve"):
         v, f = _columns(("velocities", "forces"), (velocities, forces))
         if np.any(v == 0):
             raise PamjaxInputError(f"velocities must be non-zero (sliding), row {int(np.argmin(v != 0))} is 0")
@@ -299,8 +300,8 @@ class FlowCurveExperiment(AbstractStaticExperiment):
     name: str = eqx.field(static=True)
     channels: tuple = eqx.field(static=True)
 
-    def __init__(self, upstream_pressures, downstream_pressures, mass_flows, scale=None, restriction="valve.inflate",
-                 name="flow_curve"):
+    def __init__(self, upstream_pressures: TableLike, downstream_pressures: TableLike, mass_flows: TableLike,
+                 scale: RealScalarLike | None = None, restriction: str = "valve.inflate", name: str = "flow_curve"):
         p1, p2, m = _columns(("upstream_pressures", "downstream_pressures", "mass_flows"),
                              (upstream_pressures, downstream_pressures, mass_flows))
         _check_absolute("upstream_pressures", p1)
@@ -337,7 +338,8 @@ class LoopForceMapExperiment(AbstractStaticExperiment):
     name: str = eqx.field(static=True)
     channels: tuple = eqx.field(static=True)
 
-    def __init__(self, positions, pressures, velocities, forces, scale=None, slack_force=0.0, name="loop_force_map"):
+    def __init__(self, positions: TableLike, pressures: TableLike, velocities: TableLike, forces: TableLike,
+                 scale: RealScalarLike | None = None, slack_force: RealScalarLike = 0.0, name: str = "loop_force_map"):
         x, p, v, f = _columns(("positions", "pressures", "velocities", "forces"),
                               (positions, pressures, velocities, forces))
         _check_absolute("pressures", p)
@@ -366,7 +368,8 @@ class LoopForceMapExperiment(AbstractStaticExperiment):
         return jnp.where(self.slack, jnp.maximum(f, 0.0), f - self.data["force"]) / self.scale
 
 
-def loop_average(positions, pressures, velocities, forces, decimals=9):
+def loop_average(positions: TableLike, pressures: TableLike, velocities: TableLike, forces: TableLike,
+                 decimals: int = 9) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Average the two branches of a hysteresis loop (paper 000, Fig. 4) and measure its width (paper: 32 N).
 
     Points with equal (x, p) measured in both directions (sign of ẋ) are paired. Returns (x [m], p [Pa], mean force
@@ -383,7 +386,8 @@ def loop_average(positions, pressures, velocities, forces, decimals=9):
     return tuple(np.array(c) for c in zip(*rows))
 
 
-def path_friction_force(friction: AbstractFriction, positions, velocities, starts, substeps=4):
+def path_friction_force(friction: AbstractFriction, positions: TableLike, velocities: TableLike,
+                        starts: BoolTableLike, substeps: int = 4) -> FloatVector:
     """Friction force [N] at each sample of a quasi-static path: x = `positions` [m] in the order travelled, ẋ =
     `velocities` [m/s] (≠ 0), `starts` (bool) where a sweep begins.
 
@@ -452,8 +456,9 @@ class HysteresisLoopExperiment(AbstractStaticExperiment):
     channels: tuple = eqx.field(static=True)
     substeps: int = eqx.field(static=True)
 
-    def __init__(self, positions, pressures, velocities, forces, scale=None, slack_force=0.0, starts=None, substeps=4,
-                 name="hysteresis_loop"):
+    def __init__(self, positions: TableLike, pressures: TableLike, velocities: TableLike, forces: TableLike,
+                 scale: RealScalarLike | None = None, slack_force: RealScalarLike = 0.0,
+                 starts: BoolTableLike | None = None, substeps: int = 4, name: str = "hysteresis_loop"):
         x, p, v, f = _columns(("positions", "pressures", "velocities", "forces"),
                               (positions, pressures, velocities, forces))
         _check_absolute("pressures", p)

@@ -1,14 +1,23 @@
 """Synthetic recordings from any system, with seeded Gaussian noise: for tests, demos and benchmarks."""
 
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import equinox as eqx
 import numpy as np
 
+from .._core.custom_types import RealScalarLike, TimesLike
 from .._core.errors import PamjaxInputError
+from .._physics.signals import AbstractSignal
 from .._solve.simulate import simulate
+from .._systems.base import AbstractSystem
 from .recording import Recording
 
 
-def synthetic_recording(system, signal, ts, *, noise=None, seed=0, channels=None, y0=None, t0=None, name="synthetic",
-                        **solver_kwargs) -> Recording:
+def synthetic_recording(system: AbstractSystem, signal: AbstractSignal, ts: TimesLike, *,
+                        noise: Mapping[str, RealScalarLike] | None = None, seed: int = 0,
+                        channels: Sequence[str] | None = None, y0: eqx.Module | None = None,
+                        t0: RealScalarLike | None = None, name: str = "synthetic", **solver_kwargs: Any) -> Recording:
     """Simulate `system` under `signal` at times `ts` [s] and return a `Recording` with noise added.
 
     **Arguments:** `noise`: dict channel → standard deviation in the channel's unit (e.g. `{"pressure": 2e3,

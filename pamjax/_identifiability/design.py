@@ -23,8 +23,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.arrays import device_array
+from .._core.custom_types import RealScalarLike, RealVectorLike
 from .._core.errors import PamjaxInputError
-from .._fit.experiment import AbstractExperiment
+from .._fit.experiment import AbstractExperiment, Experiments
+from .._fit.parameters import Free
 from .._fit.problem import physical_and_jacobian, residuals_and_jacobian
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractSystem
@@ -224,32 +226,32 @@ def _problem(space, theta, exp, basis, weight, band, windows, limits, max_pressu
 
 def design_experiment(
     model: AbstractSystem,
-    free: str | Sequence[str],
-    duration: float,
+    free: Free,
+    duration: float | int,
     *,
-    noise: dict[str, float],
+    noise: dict[str, RealScalarLike],
     channels: Sequence[str] = ("pressure", "position"),
-    start: dict[str, float] | None = None,
+    start: dict[str, RealScalarLike] | None = None,
     build: Callable[[AbstractSystem], AbstractSystem] | None = None,
-    rate: float = 1000.0,
-    prior: AbstractExperiment | Sequence[AbstractExperiment] = (),
-    baseline: AbstractExperiment | Sequence[AbstractExperiment] | None = None,
-    baseline_margin: float = 1.0,
+    rate: RealScalarLike = 1000.0,
+    prior: Experiments = (),
+    baseline: Experiments | None = None,
+    baseline_margin: RealScalarLike = 1.0,
     criterion: Literal["D", "A"] = "D",
     subset: Sequence[str] | None = None,
-    duty_band: tuple[float, float] = DUTY_BAND,
-    duty_margin: float | Literal["auto"] = "auto",
-    stroke_margin: float = STROKE_MARGIN,
-    max_pressure: float | None = None,
-    max_duty_step: float | None = None,
-    min_force: float | None = MIN_FORCE,
+    duty_band: Sequence[RealScalarLike] = DUTY_BAND,
+    duty_margin: float | int | Literal["auto"] = "auto",
+    stroke_margin: RealScalarLike = STROKE_MARGIN,
+    max_pressure: RealScalarLike | None = None,
+    max_duty_step: RealScalarLike | None = None,
+    min_force: float | int | None = MIN_FORCE,
     parametrisation: Literal["envelope", "periods"] = "envelope",
     knots: int = 12,
     steps: int = 20,
-    initial: AbstractSignal | Sequence[float] | None = None,
+    initial: AbstractSignal | RealVectorLike | None = None,
     seed: int = 0,
-    period: float | None = None,
-    design_rate: float = DESIGN_RATE,
+    period: float | int | None = None,
+    design_rate: RealScalarLike = DESIGN_RATE,
     substeps: int = DESIGN_SUBSTEPS,
     verify: bool = True,
     progress: bool | Callable[..., object] = True,

@@ -143,8 +143,8 @@ class DesignResult:
     message: str
     design_s: float
     compile_s: float
-    duration: float = None
-    prediction: dict = dataclasses.field(default=None, repr=False, compare=False)
+    duration: float | None = None
+    prediction: dict | None = dataclasses.field(default=None, repr=False, compare=False)
 
     def signal(self):
         """The designed duty as `pamjax.Sampled(times, duty, period=period)`."""

@@ -39,9 +39,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError, require_float64
 from .._core.paths import writable_path
-from .._fit.experiment import AbstractExperiment
+from .._fit.experiment import AbstractExperiment, Experiments
 from .._fit.fit import FitResult
 from .._fit.parameters import ParameterSpace
 from .._fit.problem import Problem
@@ -382,10 +383,10 @@ def profile_likelihood(
     result: FitResult,
     names: str | Sequence[str] | None = None,
     *,
-    experiments: Sequence[AbstractExperiment] | None = None,
-    level: float = 0.95,
+    experiments: Experiments | None = None,
+    level: RealScalarLike = 0.95,
     max_points: int = 12,
-    span: float = 4.0,
+    span: RealScalarLike = 4.0,
     max_steps: int = 30,
     workers: int = 2,
     progress: bool | Callable[..., object] = True,
