@@ -132,8 +132,9 @@ def _all_devices():
 
 def platforms_before_start(work: str, device: str | None = "auto"):
     """The `jax_platforms` value to set before JAX starts for `work` on `device` (None: leave it; "": JAX's default,
-    every platform present, even where the environment's `JAX_PLATFORMS` named fewer), and the line that says where the work will run. Starts nothing: for the `pamjax` command,
-    which picks its platforms before any JAX computation (a sweep first splits the CPU into one device per core)."""
+    every platform present, even where the environment's `JAX_PLATFORMS` named fewer), and the line that says where
+    the work will run. Starts nothing: for the `pamjax` command, which picks its platforms before any JAX computation
+    (a sweep first splits the CPU into one device per core)."""
     requested = _check(work, device)
     if requested == "cpu":
         return "cpu", "running on the CPU (--device cpu)"
