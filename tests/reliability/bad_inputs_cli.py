@@ -480,8 +480,12 @@ import numpy as np, pamjax
 system = pamjax.presets.mas10_system("averaged", friction="karnopp")
 ts = np.arange(300001) * 0.01
 traj = pamjax.simulate(system, pamjax.Triangle(0.05, 0.95, 0.25), ts)
-print(int(traj.result), float(np.max(np.asarray(traj.position))),
-      resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
+try:  # this process's own peak (Linux: VmHWM of its memory map). ru_maxrss would also count the parent's resident
+    # memory at the fork (Linux keeps the pre-exec image's high-water mark): a 1.7 GB parent made the case fail
+    peak = next(int(line.split()[1]) * 1024 for line in open("/proc/self/status") if line.startswith("VmHWM:"))
+except (OSError, StopIteration):
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * (1 if sys.platform == "darwin" else 1024)
+print(int(traj.result), float(np.max(np.asarray(traj.position))), peak)
 """
 
 
