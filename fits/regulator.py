@@ -1,15 +1,7 @@
 """Paper 001 identification, on synthetic data generated from the paper's own numbers.
 
-1. C and b from constant-volume tank runs (appendix eq. 12-14): for each row of Tables 1 (charging) and 2
-   (discharging), the 0.04 m³ tank is charged from atmosphere at that row's supply pressure, or discharged from
-   that row's tank pressure, through the VPPM model (`ISO6358Regulator`, main stage fully open) with the row's C, b.
-   Each run is recorded at a constant rate until the tank is 0.1 bar from its final pressure (so the subsonic phase,
-   28-71 % of the record, is in it), 2 mbar pressure noise is added, and C and b are fitted back: start values read
-   off the record as the paper's appendix does (C from the choked slope, eq. 14; b from a scan at that C), then
-   Levenberg-Marquardt through `simulate` with b kept in (0.1, 0.9). Reported with 1σ from (JᵀJ)⁻¹.
-2. G_Vref (eq. 6) from a 1.5 Hz, 0-3 V square wave at the closed port (paper's Fig. 7 set-up): eq. 6's response plus
-   0.05 bar noise, smoothed by a 2nd-order Butterworth at 20 Hz (paper 001, Sect. 5), identified on the first 60 %
-   and validated on the last 40 %, MSE [bar²] reported.
+What it computes, how and from which of the paper's numbers: the docstring of `pamjax.gallery.procedures.regulator`,
+whose procedures this script runs (the gallery runs the same ones).
 
     python fits/regulator.py [--out results/regulator] [--quick] [--overwrite]
 """

@@ -1,13 +1,7 @@
 """Paper 001 Sect. 6.2 (Fig. 12): muscle stiffness, its rate and the valve flow along a simulated run.
 
-A DMSP-40-400 carrying 893 N is fed by the physical VPPM model (`ISO6358Regulator`, Tables 1-2 flow limits) with the
-Fig. 12 reference, a 0-3 V square wave at 1.5 Hz. Along the run, by autodiff of the model's own laws:
-
-- eq. 9: K = −dF/dx of the closed isothermal chamber [N/m] (`RegulatedMuscleSystem.stiffness`);
-- eq. 10: V'(x) ṗ + V''(x) ẋ p [N/s] (`RegulatedMuscleSystem.stiffness_rate`), checked against central differences
-  of p V'(x) along the saved run, and, for comparison, the literal time derivative of eq. 9's K (a JVP);
-- eq. 11: q = (V ṗ + V' ẋ p)/(R T) [kg/s] (`RegulatedMuscleSystem.eq11_flow`), checked against the ISO 6358 flow
-  the regulator delivers (mass conservation), and correlated with eq. 10 (the paper's "equivalence").
+What it computes, how and from which of the paper's numbers: the docstring of `pamjax.gallery.procedures.stiffness`,
+whose procedures this script runs (the gallery runs the same ones).
 
 Writes `stiffness.json` and `stiffness.png` to `--out`; refuses to overwrite existing results unless `--overwrite`.
 

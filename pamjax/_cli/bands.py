@@ -36,14 +36,19 @@ def _level(text):
     return value
 
 
-def _samples(text):
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 20:
-        raise argparse.ArgumentTypeError(f"--band-samples must be an integer >= 20, got {text!r}")
-    return value
+def int_at_least(option, minimum):
+    """An argparse `type` for `option`: an integer >= `minimum`, else an error naming the option and the value."""
+
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            value = minimum - 1
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"{option} must be an integer >= {minimum}, got {text!r}")
+        return value
+
+    return parse
 
 
 def add_arguments(parser):
@@ -54,7 +59,7 @@ def add_arguments(parser):
     group.add_argument("--band-method", choices=METHODS, default="linear",
                        help="linear (delta method; default) or samples (parameter draws, each simulated)")
     group.add_argument("--band-level", type=_level, default=DEFAULT_LEVEL, help="confidence level (default 0.95)")
-    group.add_argument("--band-samples", type=_samples, default=DEFAULT_SAMPLES,
+    group.add_argument("--band-samples", type=int_at_least("--band-samples", 20), default=DEFAULT_SAMPLES,
                        help=f"draws for --band-method samples (default {DEFAULT_SAMPLES})")
     group.add_argument("--band-seed", type=int, default=0, help="seed of the draws (default 0)")
 

@@ -17,7 +17,6 @@ runs, and a key the chosen `kind` does not use is an error listing the ones it d
     over = { "payload_mass" = [5.0, 9.6, 15.0] }        # any parameter path(s): a grid with the commands
 """
 
-import argparse
 import dataclasses
 import itertools
 import os
@@ -49,7 +48,7 @@ def add_arguments(parser):
     parser.add_argument("--out", default=None, help="output folder (default results/sweep-<config name>)")
     parser.add_argument("--overwrite", action="store_true", help="replace existing sweep.npz/csv/png in --out")
     parser.add_argument("--no-plot", action="store_true", help="skip the figure")
-    parser.add_argument("--cpu-devices", type=_positive_int, default=DEFAULT_CPU_DEVICES,
+    parser.add_argument("--cpu-devices", type=bands.int_at_least("--cpu-devices", 1), default=DEFAULT_CPU_DEVICES,
                         help="on CPU, split the processor into this many XLA devices and shard the sweep over them "
                              "(default: one per core; 1: a single device). No effect on GPU/TPU runs")
     parser.add_argument("--distributed", action="store_true",
@@ -68,16 +67,6 @@ def _use_cpu_devices(count):
         jax.config.update("jax_num_cpu_devices", count)
     except RuntimeError:  # JAX already ran in this process (main() called from Python): its devices stay
         pass
-
-
-def _positive_int(text):
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"--cpu-devices must be an integer >= 1, got {text!r}")
-    return value
 
 
 def validate_config(config):

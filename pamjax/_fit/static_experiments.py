@@ -232,7 +232,12 @@ class AbstractStaticExperiment(AbstractExperiment):
     def predict(self, model):
         """{channel: the model's values at the data points} (traceable)."""
 
+    needs_muscle_system = False  # the force maps: the model must have a muscle and a friction
+
     def check(self, model):
+        if self.needs_muscle_system and not isinstance(model, AbstractMuscleSystem):
+            raise PamjaxInputError(f"{self.name}: the model needs a 'muscle' and a 'friction' (a muscle system, e.g. "
+                                   f"MuscleSystem), got {type(model).__name__}")
         pred = self.predict(model)
         (channel,) = self.channels
         if channel not in pred or np.shape(pred[channel]) != np.shape(self.data[channel]):
@@ -351,11 +356,7 @@ class LoopForceMapExperiment(AbstractStaticExperiment):
         self.slack = jnp.asarray(f <= slack_force)
         _set_data(self, "force", f, scale, "N", name)  # slack points: see `residuals_of`
 
-    def check(self, model):
-        if not isinstance(model, AbstractMuscleSystem):
-            raise PamjaxInputError(f"{self.name}: the model needs a 'muscle' and a 'friction' (a muscle system, "
-                                   f"e.g. MuscleSystem), got {type(model).__name__}")
-        super().check(model)
+    needs_muscle_system = True
 
     def predict(self, model):
         air = _air(model)
@@ -482,11 +483,7 @@ class HysteresisLoopExperiment(AbstractStaticExperiment):
         self.substeps = substeps
         _set_data(self, "force", f, scale, "N", name)
 
-    def check(self, model):
-        if not isinstance(model, AbstractMuscleSystem):
-            raise PamjaxInputError(f"{self.name}: the model needs a 'muscle' and a 'friction' (a muscle system, "
-                                   f"e.g. MuscleSystem), got {type(model).__name__}")
-        super().check(model)
+    needs_muscle_system = True
 
     def predict(self, model):
         air = _air(model)
