@@ -210,9 +210,9 @@ def test_top_level_simulate_compiles_with_the_options_and_transformed_simulate_w
     if options is None:
         pytest.skip("not a CPU backend, or not a jaxlib known to have the option")
     key = tuple(sorted(options.items()))
-    simulate_module._SOLVE_FAST.pop(key, None)
+    simulate_module._SOLVE_TOP.pop(key, None)
     fast = pamjax.simulate(system, signal, ts)
-    assert key in simulate_module._SOLVE_FAST  # compiled by the program with the options
+    assert key in simulate_module._SOLVE_TOP  # compiled by the program with the options
     np.testing.assert_allclose(np.asarray(fast.position), np.asarray(plain.position), rtol=1e-9, atol=1e-13)
     np.testing.assert_allclose(np.asarray(fast.pressure), np.asarray(plain.pressure), rtol=1e-9)
     # Inside jit, vmap or grad (JAX refuses compiler options on a nested jit), even with every argument concrete:

@@ -1,0 +1,67 @@
+"""`filter_jit`: `equinox.filter_jit`'s semantics (arrays traced, every other leaf static) with a cheaper call.
+
+A call of `equinox.filter_jit` partitions its arguments in Python (`eqx.partition` over every module of the system,
+the signal and the solver: ~0.11 ms) and wraps the call with its run-time error reporting: about 0.1 ms per call on
+this project's 2-core CPU, a tenth of a 25 s averaged-valve solve (the same compiled program 1.07 ms through
+`jax.jit`, 1.10 ms through this, 1.19 ms through `equinox.filter_jit`, medians of 101; docs/performance.md). Here the
+arguments are flattened once by JAX's C++ pytree code, the non-array leaves (with their types) and the tree
+structure (its static fields included) key a `jax.jit` of the arrays alone, and the outputs' non-array leaves are
+kept from the trace, as `equinox.filter_jit` does.
+
+What it leaves out: equinox's run-time error messages (`eqx.error_if` fired inside the program surfaces as JAX's
+own runtime error). It is used only where the program traces those checks as NaN (`simulate`'s concrete calls,
+`pamjax._core.private.equinox_errors_as_nan`) and the result is checked on the host. A static leaf that cannot be
+hashed goes to `equinox.filter_jit`, which refuses it with its own error.
+"""
+
+import functools
+
+import equinox as eqx
+import jax
+
+_ARRAY = object()  # marks a traced leaf's place among the static ones
+
+
+def _static_key(leaf):
+    return (type(leaf), leaf)  # 1, 1.0 and True are equal and hash alike: the type keeps them apart
+
+
+def filter_jit(fn, **jit_kwargs):
+    """`fn` compiled as `equinox.filter_jit(fn, **jit_kwargs)` would compile it (arrays of the arguments traced,
+    every other leaf static; any outputs), dispatched through `jax.jit` (see the module docstring)."""
+    slow = eqx.filter_jit(fn, **jit_kwargs)
+    programs = {}  # (tree structure, static leaves) → (jitted function of the arrays, the outputs' static part)
+
+    def program(treedef, statics):
+        out_static = []
+
+        def arrays_only(arrays):
+            it = iter(arrays)
+            leaves = [next(it) if s is _ARRAY else s[1] for s in statics]
+            args, kwargs = jax.tree_util.tree_unflatten(treedef, leaves)
+            dynamic, static = eqx.partition(fn(*args, **kwargs), eqx.is_array)
+            # None: every output leaf is an array (the usual case), and the call returns JAX's output as it is
+            out_static[:] = [static if jax.tree_util.tree_leaves(static) else None]
+            return dynamic
+
+        arrays_only.__name__ = arrays_only.__qualname__ = getattr(fn, "__name__", "fn")  # the program's name
+        return jax.jit(arrays_only, **jit_kwargs), out_static
+
+    @functools.wraps(fn)
+    def call(*args, **kwargs):
+        leaves, treedef = jax.tree_util.tree_flatten((args, kwargs))
+        arrays = [x for x in leaves if eqx.is_array(x)]
+        statics = tuple(_ARRAY if eqx.is_array(x) else _static_key(x) for x in leaves)
+        key = (treedef, statics)
+        try:
+            entry = programs.get(key)
+        except TypeError:  # an unhashable static leaf
+            return slow(*args, **kwargs)
+        if entry is None:
+            entry = programs[key] = program(treedef, statics)
+        jitted, out_static = entry
+        dynamic = jitted(arrays)
+        return dynamic if out_static[0] is None else eqx.combine(dynamic, out_static[0])
+
+    call.lower = slow.lower  # the same program, for ahead-of-time use
+    return call
