@@ -35,7 +35,7 @@ if os.environ.get("PAMJAX_TEST_CACHE", "1") != "0":
 # order changes: every test still runs, the tests of a module in their own order. Modules not listed follow in their
 # usual (alphabetical) order.
 HEAVY_FIRST = [
-    "test_gallery.py", "test_gallery_wheel.py", "test_design.py", "test_simulate.py", "test_simulate_edges.py",
+    "test_gallery.py", "test_design.py", "test_simulate.py", "test_simulate_edges.py",
     "test_grid.py", "test_rodas.py", "test_synchronous.py", "test_hints.py", "test_fits_regulator.py", "test_bench.py",
     "test_joint_control.py", "test_control.py", "reliability/test_nan_safety.py", "test_sweep.py",
     "reliability/test_gradients.py", "test_distributed.py", "test_fit.py", "test_joint.py", "test_valve.py",
