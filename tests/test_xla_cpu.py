@@ -222,3 +222,47 @@ def test_top_level_simulate_compiles_with_the_options_and_transformed_simulate_w
     inside_vmap = jax.vmap(lambda y: pamjax.simulate(system, signal, ts).position[-1] + y)(jnp.zeros(2))
     assert float(inside_jit) == pytest.approx(end, rel=1e-9)
     np.testing.assert_allclose(np.asarray(inside_vmap), end, rtol=1e-9)
+
+
+def test_batched_options_ask_for_wide_vectors_only_on_an_avx512_cpu_unless_the_user_decides(monkeypatch):
+    monkeypatch.setattr(_xla_cpu, "_has_avx512", lambda: True)
+    monkeypatch.setattr(_xla_cpu, "_jaxlib_version", lambda: _xla_cpu.FAST_COMPILE_JAXLIB[1])
+    env = {"XLA_FLAGS": ""}
+    assert _xla_cpu.batched_options("cpu", env) == {_xla_cpu.VECTOR_FLAG: 512}
+    assert _xla_cpu.batched_options("gpu", env) is None and _xla_cpu.batched_options("tpu", env) is None
+    assert _xla_cpu.batched_options("cpu", {"XLA_FLAGS": f"--{_xla_cpu.VECTOR_FLAG}=256"}) is None  # the user's
+    assert _xla_cpu.batched_options("cpu", {_xla_cpu.OPT_OUT: "0"}) is None
+    monkeypatch.setattr(_xla_cpu, "_jaxlib_version", lambda: (99, 0))
+    assert _xla_cpu.batched_options("cpu", env) is None  # an unchecked jaxlib
+    monkeypatch.setattr(_xla_cpu, "_jaxlib_version", lambda: _xla_cpu.FAST_COMPILE_JAXLIB[1])
+    monkeypatch.setattr(_xla_cpu, "_has_avx512", lambda: False)
+    assert _xla_cpu.batched_options("cpu", env) is None
+
+
+def test_the_avx512_check_reads_this_cpu():
+    flags = ""
+    if os.path.exists("/proc/cpuinfo"):
+        with open("/proc/cpuinfo") as f:
+            flags = next((line for line in f if line.startswith("flags")), "")
+    assert _xla_cpu._has_avx512() == (" avx512f" in flags)
+
+
+def test_a_sweep_with_the_batched_options_equals_one_without(monkeypatch):
+    from pamjax._sweep import lanes
+
+    system = presets.mas10_system("averaged")
+    ts = np.linspace(0.0, 1.0, 11)
+    duties = np.linspace(0.05, 0.95, 24)
+
+    def run():
+        return pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties},
+                            channels=("pressure", "position"), progress=False)
+
+    monkeypatch.setattr(lanes, "batched_options", lambda platform: {_xla_cpu.VECTOR_FLAG: 512})
+    wide = run()
+    assert lanes._CHUNK_PROGRAMS  # compiled with the option
+    monkeypatch.setattr(lanes, "batched_options", lambda platform: None)
+    plain = run()
+    assert np.all(wide.status == 0) and np.all(plain.status == 0)
+    for channel in ("pressure", "position"):
+        np.testing.assert_allclose(wide[channel], plain[channel], rtol=1e-10, atol=1e-15)

@@ -25,7 +25,7 @@ from .._core.errors import PamjaxInputError, check_time_grid, require_float64
 from .._physics.signals import AbstractSignal
 from .._solve import fixed_step as _fixed_step
 from .._systems.base import AbstractSystem
-from .lanes import hybrid_method_and_step, jacobians, method_and_step, run_chunk
+from .lanes import chunk_program, hybrid_method_and_step, jacobians, method_and_step
 from .plan import make_plan, structure, validate_values
 from .reductions import AbstractReduction
 from .result import SUCCESS, SweepResult, in_point_order
@@ -198,7 +198,8 @@ def _run_calls(system, signal, y0, flat, ts_np, plan, config, mesh, layout, prog
         start = time.perf_counter()
         index, valid = layout.lanes_of_call(c)
         vals = {k: put(v[index], mesh) for k, v in flat.items()}
-        out, status = run_chunk(system, signal, y0, vals, ts_j, plan, config, mesh)
+        platform = next(iter(next(iter(vals.values())).devices())).platform  # where the lanes were put
+        out, status = chunk_program(platform)(system, signal, y0, vals, ts_j, plan, config, mesh)
         pieces.append(local_part(out, status, index, valid))
         if say is not None and layout.calls > 1:
             first, last = layout.points_of_call(c)
