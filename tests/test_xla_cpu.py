@@ -266,3 +266,29 @@ def test_a_sweep_with_the_batched_options_equals_one_without(monkeypatch):
     assert np.all(wide.status == 0) and np.all(plain.status == 0)
     for channel in ("pressure", "position"):
         np.testing.assert_allclose(wide[channel], plain[channel], rtol=1e-10, atol=1e-15)
+
+
+def test_a_fit_whose_jacobian_has_the_batched_options_equals_one_without(monkeypatch):
+    from pamjax._fit import problem
+
+    muscle = presets.mas10_muscle()
+    x, p = np.meshgrid(np.linspace(-0.01, 0.07, 5), 101325.0 + np.linspace(0.5e5, 6e5, 4), indexing="ij")
+    force = np.asarray(muscle.static_force(jnp.asarray(x.ravel()), jnp.asarray(p.ravel()), pamjax.Air()))
+    exp = pamjax.bench.ForceMapExperiment(x.ravel(), p.ravel(), np.maximum(force * 1.03, 0.0), scale=2.0)
+    free = ["force_law.k0", "force_law.k1"]
+    results, asked = {}, []
+
+    def options_of(options):
+        def ask():
+            asked.append(options)
+            return options
+
+        return ask
+
+    for label, options in (("wide", {_xla_cpu.VECTOR_FLAG: 512}), ("plain", None)):
+        monkeypatch.setattr(problem, "_jacobian_options", options_of(options))
+        results[label] = pamjax.fit(muscle, [exp], free, progress=False)
+    assert {_xla_cpu.VECTOR_FLAG: 512} in asked and None in asked  # each fit's Jacobian compiled as asked
+    assert results["wide"].converged and results["plain"].converged
+    np.testing.assert_allclose(results["wide"].values, results["plain"].values, rtol=1e-9)
+    assert results["wide"].cost == pytest.approx(results["plain"].cost, rel=1e-10)

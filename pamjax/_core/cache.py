@@ -175,18 +175,26 @@ class ProgramCache:
                      bool(jax.config.jax_enable_x64), _platform()))
         return hashlib.sha256(text.encode()).hexdigest()[:32]
 
-    def has(self, name, args):
+    @staticmethod
+    def _named(name, options):
+        """The program's name with its compile options (another executable, another file)."""
+        return name if not options else name + "".join(f"-{k}={v}" for k, v in sorted(options.items()))
+
+    def has(self, name, args, options=None):
         """Whether `name` is already traced for arguments of this structure (on disk or in this process)."""
+        name = self._named(name, options)
         key = self.key(name, args)
         return key in self.memory or (self.directory / f"{name}-{key}.bin").exists()
 
-    def call(self, name, fn, args, ready=None):
+    def call(self, name, fn, args, ready=None, options=None):
         """`fn(*args)`, compiled once per argument structure (see the class docstring). `ready`, if given, is called
         once the Python side of a first call is done (traced, exported, lowered), before XLA compiles or loads the
-        program: the moment another thread's Python work no longer competes with this one."""
+        program: the moment another thread's Python work no longer competes with this one. `options`: XLA compile
+        options of the program (part of its name: kept apart from the same program without them)."""
         import equinox as eqx
         import jax
 
+        name = self._named(name, options)
         # Per set of non-array argument objects (a fit's parameter space and experiments; θ is a new array at every
         # call) and the array arguments' shapes: the key (describing the whole structure: a few ms) and the
         # flattened arguments, computed once in this process. The entry keeps the objects alive, so that no other
@@ -207,12 +215,12 @@ class ProgramCache:
             def flat(*xs):
                 return fn(*eqx.combine(jax.tree_util.tree_unflatten(treedef, xs), static))
 
-            caller = self.memory[key] = self._caller(name, key, flat, leaves, ready or (lambda: None))
+            caller = self.memory[key] = self._caller(name, key, flat, leaves, ready or (lambda: None), options)
         elif ready is not None:
             ready()
         return caller(*leaves)
 
-    def _caller(self, name, key, flat, leaves, ready):
+    def _caller(self, name, key, flat, leaves, ready, options=None):
         """The compiled program: this machine's executable if kept, else the exported program (traced and exported
         now if not kept either) compiled through the persistent cache, its executable then kept."""
         import jax
@@ -236,13 +244,13 @@ class ProgramCache:
                 exported = jax.export.export(jax.jit(flat))(*leaves)
             except NotImplementedError:  # e.g. a host callback in the program: not exportable, jit it as usual
                 ready()
-                return jax.jit(flat)
+                return jax.jit(flat, compiler_options=options)
             self._save(path, exported.serialize())
         hits = _persistent_hits()
         if lowered is None:
             lowered = jax.jit(exported.call).lower(*leaves)
         ready()
-        compiled = lowered.compile()
+        compiled = lowered.compile(options)
         if _persistent_hits() == hits:  # compiled here: an executable read from JAX's cache does not serialize whole
             self._save_executable(executable, compiled)
         return compiled

@@ -42,8 +42,9 @@ triangle's `simulate` compiles 10-20 % faster (its XLA part 25-35 %) at the same
 (a batched program, compiled by the enclosing transformation) and the sweeps keep XLA's default. An unknown option is
 an error there, not an abort, but the same jaxlib range and opt-outs apply.
 
-**Batched programs** (`batched_options`): a `sweep`'s compiled call over its lanes asks LLVM for 512-bit vectors
-(`xla_cpu_prefer_vector_width=512`, XLA's default 256) on a CPU with AVX-512, per program; see `VECTOR_WIDTH`.
+**Batched programs** (`batched_options`): a `sweep`'s compiled call over its lanes and a fit's forward-mode Jacobian
+(a tangent per parameter) ask LLVM for 512-bit vectors (`xla_cpu_prefer_vector_width=512`, XLA's default 256) on a
+CPU with AVX-512, per program; see `VECTOR_WIDTH`.
 """
 
 import functools
