@@ -50,8 +50,14 @@ def filter_jit(fn, **jit_kwargs):
     @functools.wraps(fn)
     def call(*args, **kwargs):
         leaves, treedef = jax.tree_util.tree_flatten((args, kwargs))
-        arrays = [x for x in leaves if eqx.is_array(x)]
-        statics = tuple(_ARRAY if eqx.is_array(x) else _static_key(x) for x in leaves)
+        arrays, statics = [], []
+        for x in leaves:
+            if eqx.is_array(x):
+                arrays.append(x)
+                statics.append(_ARRAY)
+            else:
+                statics.append(_static_key(x))
+        statics = tuple(statics)
         key = (treedef, statics)
         try:
             entry = programs.get(key)

@@ -223,6 +223,17 @@ def batched_options(platform: str, environ=os.environ) -> dict[str, int] | None:
     return {VECTOR_FLAG: VECTOR_WIDTH}
 
 
+def compiled_with(programs: dict, jit, fn, options: dict | None):
+    """`jit(fn, compiler_options=options)` (`jit(fn)` for None options), made once and kept in `programs` under the
+    options as a sorted tuple (or None): the one program per set of options of `simulate`'s solve, a sweep's lanes
+    and a fit's Jacobian."""
+    key = None if options is None else tuple(sorted(options.items()))
+    program = programs.get(key)
+    if program is None:
+        program = programs[key] = jit(fn) if options is None else jit(fn, compiler_options=options)
+    return program
+
+
 @functools.cache
 def _has_avx512() -> bool:
     """Whether this CPU has AVX-512 (its foundation, avx512f), from Linux's /proc/cpuinfo; False where that cannot

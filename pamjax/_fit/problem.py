@@ -16,7 +16,7 @@ from .._core.arrays import device_array
 from .._core.cache import program_cache
 from .._core.errors import PamjaxInputError
 from .._core.private import equinox_errors_as_nan
-from .._core.xla_cpu import batched_options
+from .._core.xla_cpu import batched_options, compiled_with
 from .predictions import predict_all
 
 
@@ -62,11 +62,7 @@ def _jacobian_options():
 def _jacobian_program(options):
     if options is None:
         return residuals_and_jacobian
-    key = tuple(sorted(options.items()))
-    program = _JACOBIAN_PROGRAMS.get(key)
-    if program is None:
-        program = _JACOBIAN_PROGRAMS[key] = eqx.filter_jit(residuals_and_jacobian.__wrapped__, compiler_options=options)
-    return program
+    return compiled_with(_JACOBIAN_PROGRAMS, eqx.filter_jit, residuals_and_jacobian.__wrapped__, options)
 
 
 @eqx.filter_jit

@@ -15,7 +15,7 @@ from .._core.errors import PamjaxInputError, PamjaxSolveError, check_time_grid, 
 from .._core.fastjit import filter_jit
 from .._core.private import diffrax_result_code, equinox_errors_as_nan, jax_at_top_level
 from .._core.units import check_absolute_pressure
-from .._core.xla_cpu import single_trajectory_options
+from .._core.xla_cpu import compiled_with, single_trajectory_options
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractSystem
 from . import chunks as _chunks, synchronous as _sync
@@ -233,13 +233,7 @@ def _solve_program():
     top-level jit only, and a vmapped solve runs faster with XLA's default emitters)."""
     if not jax_at_top_level():
         return _solve_jit
-    options = single_trajectory_options()
-    key = None if options is None else tuple(sorted(options.items()))
-    program = _SOLVE_TOP.get(key)
-    if program is None:
-        program = _SOLVE_TOP[key] = filter_jit(solve) if options is None else filter_jit(solve,
-                                                                                        compiler_options=options)
-    return program
+    return compiled_with(_SOLVE_TOP, filter_jit, solve, single_trajectory_options())
 
 
 def validate(system, signal, ts, y0=None, t0=None):
