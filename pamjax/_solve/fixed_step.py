@@ -143,30 +143,37 @@ def _integrate_adaptive(field, y0, grid, steps, carry_init, update, scheme):
     max_iterations = ADAPTIVE_MAX_STEPS_PER_INTERVAL * (n_out - 1)
 
     def cond(state):
-        t, y, h, k, carry, it = state
+        t, y, h, k, carry, it, rejected = state
         return (k < n_out) & (it < max_iterations) & (h > 1e-12 * span)
 
     def body(state):
-        t, y, h, k, carry, it = state
+        t, y, h, k, carry, it, rejected = state
         target = grid[jnp.minimum(k, n_out - 1)]
-        h_try = jnp.minimum(h, target - t)
+        # a step that would end within 1e-6 of its length short of the next output time ends on it: otherwise
+        # t + h can round onto that time without landing, and the next step's length is 0 (a lane failed so)
+        remaining = target - t
+        land = h >= remaining * (1.0 - 1e-6)
+        h_try = jnp.where(land, remaining, h)
         y_new, error = step_error(field, t, y, h_try)
         scale = atol + rtol * jnp.maximum(jnp.abs(y), jnp.abs(y_new))
         err = jnp.sqrt(jnp.mean((error / scale) ** 2))
         ok = (err <= 1.0) & jnp.all(jnp.isfinite(y_new))
         grow = 0.9 * jnp.maximum(err, 1e-10) ** (-1.0 / order)
         factor = jnp.where(jnp.isfinite(err), jnp.clip(grow, 0.2, 5.0), 0.2)
-        factor = jnp.where(ok, factor, jnp.minimum(factor, 0.5))
-        landed = ok & (h_try == target - t)
+        # a rejected step shrinks the next by at least 2; the step after a rejection may not grow (Hairer & Wanner,
+        # Solving ODEs II, IV.8): at a sharp transient (a lane's payload breaking away) an accepted short step
+        # followed by a 5x longer one was rejected again, every other step (1,024-duty map: 136 -> 129 iterations)
+        factor = jnp.where(ok, jnp.where(rejected, jnp.minimum(factor, 1.0), factor), jnp.minimum(factor, 0.5))
+        landed = ok & land
         h_next = jnp.where(ok & (h_try < h), jnp.maximum(h, h_try * factor), h_try * factor)
         t = jnp.where(ok, jnp.where(landed, target, t + h_try), t)
         y = jnp.where(ok, y_new, y)
         observed = update(carry, k, t, y)
         carry = jax.tree_util.tree_map(lambda new, old: jnp.where(landed, new, old), observed, carry)
-        return t, y, h_next, k + landed.astype(k.dtype), carry, it + 1
+        return t, y, h_next, k + landed.astype(k.dtype), carry, it + 1, ~ok
 
     carry = update(carry_init, 0, grid[0], y0)
     h0 = jnp.asarray(steps)[0]
-    state = (grid[0], y0, h0, jnp.asarray(1), carry, jnp.asarray(0))
-    _, y, _, k, carry, _ = jax.lax.while_loop(cond, body, state)
+    state = (grid[0], y0, h0, jnp.asarray(1), carry, jnp.asarray(0), jnp.asarray(False))
+    _, y, _, k, carry, _, _ = jax.lax.while_loop(cond, body, state)
     return carry, y, (k == n_out) & jnp.all(jnp.isfinite(y))

@@ -90,8 +90,9 @@ def sweep(
       (method "grid" for a continuous valve, "pwm" on the PWM-synchronous grid for a switching one): "auto" or
       "rk4" (`dt` the grid step) only; the schemes that do not see the events are refused.
     - `dt`: the fixed step [s] (the first step for "rodas5a"/"ros2a"). Default: RK4 at 2.5 / (largest |eigenvalue|
-      of the Jacobian at the initial states) (its stability limit with a 10 % margin), the others at 5 ms; all
-      capped at 2 PWM edge widths for a switching valve and at 1/100 of the signal's shortest period. Check a
+      of the Jacobian at the initial states) (its stability limit with a 10 % margin), "rodas5a"'s first step 1 ms,
+      the others 5 ms; all capped at 2 PWM edge widths for a switching valve and at 1/100 of the signal's shortest
+      period. Check a
       fixed-step result by halving `dt`.
     - `chunk_size`: points per device per compiled call (memory bound). Default (`default_chunk_size`): all points
       split evenly over the devices, at most 8,192 per call on CPU, on a GPU/TPU as many as 1 GiB of outputs per
