@@ -76,8 +76,19 @@ def test_softplus_log_matches_numpy_to_a_few_ulp():
     normal = ref >= np.finfo(float).tiny  # below, XLA's CPU code may flush a subnormal result to 0
     assert np.max(np.abs(got - ref)[normal] / np.spacing(ref[normal])) <= 4.0
     assert np.all(np.abs(got - ref)[~normal] <= np.finfo(float).tiny) and np.all(got >= 0.0)
+    # the softplus traced for a sweep's lanes (`batched_lanes`: with `log1p_exp`) and as for one trajectory (with
+    # jnp.logaddexp): both against NumPy; smooth_relu's value and derivatives (its custom rule) alike both ways
     z = np.concatenate([np.linspace(-60.0, 60.0, 240_001), [0.0, 1e-300, -1e-300, 700.0, -700.0]])
-    got, ref = np.asarray(_call(sm._softplus, z)), np.logaddexp(z, 0.0)
-    assert np.max(np.abs(got - ref) / np.spacing(ref)) <= 4.0
-    special = np.asarray(_call(sm._softplus, np.asarray([np.inf, -np.inf, np.nan])))
+    with sm.batched_lanes():
+        batched = np.asarray(jax.jit(jax.vmap(sm._softplus))(z))
+        special = np.asarray(jax.jit(jax.vmap(sm._softplus))(np.asarray([np.inf, -np.inf, np.nan])))
+    for got in (batched, np.asarray(jax.jit(jax.vmap(sm._softplus))(z))):  # outside: traced with XLA's log
+        ref = np.logaddexp(z, 0.0)
+        assert np.max(np.abs(got - ref) / np.spacing(ref)) <= 4.0
     assert special[0] == np.inf and special[1] == 0.0 and np.isnan(special[2])
+    x, width = np.linspace(-3.0, 3.0, 7), np.linspace(0.5, 2.0, 7)
+    for fn in (sm.smooth_relu, jax.grad(sm.smooth_relu, argnums=(0, 1))):
+        with sm.batched_lanes():
+            vec = jax.jit(jax.vmap(fn))(x, width)
+        one = jax.jit(jax.vmap(fn))(x, width)
+        np.testing.assert_allclose(np.asarray(vec), np.asarray(one), rtol=1e-15)

@@ -6,6 +6,8 @@ Every non-smooth function the models need (sign, step, max, |·|, √ near zero,
 `docs/api/debug.md`), so they are safe inside ODE solves and least-squares fits.
 """
 
+import contextlib
+import contextvars
 import math
 
 import jax
@@ -49,9 +51,27 @@ def log1p_exp(a):
     return jnp.where(small, value + _LOG2, value)
 
 
+_LANES = contextvars.ContextVar("pamjax_batched_lanes", default=False)
+
+
+@contextlib.contextmanager
+def batched_lanes():
+    """Trace the softplus with its log by `log1p_exp` (vectorised) instead of `jnp.logaddexp`, for programs whose
+    field runs over many lanes side by side (`pamjax._sweep.lanes`). Single trajectories keep XLA's log: its scalar
+    form is cheaper than the series (the averaged 25 s `simulate` ran 3-8 % slower with the series). A trace-time
+    switch, as a `while_loop` under `vmap` traces its body unbatched: the function cannot see the lanes itself."""
+    token = _LANES.set(True)
+    try:
+        yield
+    finally:
+        _LANES.reset(token)
+
+
 def _softplus(z):
-    """`log(1 + exp(z))` = max(z, 0) + log(1 + exp(−|z|)) (NaN in, NaN out; ±inf exact)."""
-    return jnp.maximum(z, 0.0) + log1p_exp(jnp.abs(z))
+    """`log(1 + exp(z))` = max(z, 0) + log(1 + exp(−|z|)) (NaN in, NaN out; ±inf exact); see `batched_lanes`."""
+    if _LANES.get():
+        return jnp.maximum(z, 0.0) + log1p_exp(jnp.abs(z))
+    return jnp.logaddexp(z, 0.0)
 
 
 @jax.custom_jvp
@@ -60,8 +80,9 @@ def smooth_relu(x, width):
 
     Its derivatives are written out (∂/∂x = σ(x/w), ∂/∂w = log(1 + e^{x/w}) − (x/w) σ(x/w)) instead of
     differentiating `logaddexp`, whose rule costs more operations in every step of a batched sweep or a Jacobian
-    (the same values; benchmarks/sweep.py 69 → 66 ms per 1,024-lane sweep, docs/performance.md), and its log by
-    `log1p_exp` (within 4 ulp of `numpy.logaddexp(x / width, 0)`; a RODAS5 step over 1,024 lanes 15 % faster)."""
+    (the same values; benchmarks/sweep.py 69 → 66 ms per 1,024-lane sweep, docs/performance.md), and in a sweep's
+    lanes its log by `log1p_exp` (`batched_lanes`; within 4 ulp of `numpy.logaddexp(x / width, 0)`; a RODAS5 step
+    over 1,024 lanes 15 % faster)."""
     return width * _softplus(x / width)
 
 

@@ -12,6 +12,7 @@ from jax.sharding import PartitionSpec
 from .._core.errors import PamjaxInputError
 from .._core.xla_cpu import batched_options, compiled_with
 from .._physics.signals import AbstractSignal
+from .._physics.smooth import batched_lanes
 from .._solve import fixed_step as _fixed_step, synchronous as _sync
 from .._solve.scaled import scaled
 from .._solve.simulate import solve
@@ -132,7 +133,8 @@ def _run_chunk(system, signal, y0, values, ts, plan, config, mesh=None):
         if method == "adaptive":
             return _lane_adaptive(sys_l, sig_l, y0_l, ts, channels, reduction, dict(solve_options))
         steps = jnp.diff(ts) / counts
-        return _lane_fixed(sys_l, sig_l, y0_l, ts, counts, steps, method, channels, reduction)
+        with batched_lanes():  # the softplus's log vectorised (its field is traced here, in no nested jit)
+            return _lane_fixed(sys_l, sig_l, y0_l, ts, counts, steps, method, channels, reduction)
 
     if mesh is None:
         out, status = jax.vmap(lane)(values)
