@@ -1,6 +1,7 @@
 """pamjax's XLA CPU loop setting (`pamjax/_core/xla_cpu.py`): how it merges into XLA_FLAGS, when it stands back, and
 that it reaches XLA (a single-trajectory solve compiles to one function on CPU)."""
 
+import functools
 import os
 import subprocess
 import sys
@@ -266,6 +267,37 @@ def test_a_sweep_with_the_batched_options_equals_one_without(monkeypatch):
     assert np.all(wide.status == 0) and np.all(plain.status == 0)
     for channel in ("pressure", "position"):
         np.testing.assert_allclose(wide[channel], plain[channel], rtol=1e-10, atol=1e-15)
+
+
+def test_a_sweep_on_the_cpu_takes_the_vectorised_softplus_log_and_agrees_with_xla_s(monkeypatch):
+    # On a CPU the fixed-scheme lanes trace the softplus with `smooth.log1p_exp` (XLA's float64 log is not vectorised
+    # there); elsewhere with jnp.logaddexp. Both programs give the same map to round-off.
+    from pamjax._physics import smooth
+    from pamjax._sweep import lanes, sweep as sweep_module
+
+    assert lanes.chunk_program("cpu").keywords["vector_log"] is True
+    assert lanes.chunk_program("gpu").keywords["vector_log"] is False
+    system = presets.mas10_system("averaged")
+    ts = np.linspace(0.0, 1.0, 11)
+    duties = np.linspace(0.05, 0.95, 24)
+    used = []
+    series = smooth.log1p_exp
+    monkeypatch.setattr(smooth, "log1p_exp", lambda a: used.append(1) or series(a))
+
+    def run(platform):  # `sweep` calls `chunk_program(platform)` (the platform where the lanes are)
+        monkeypatch.setattr(sweep_module, "chunk_program", lambda _: functools.partial(
+            lanes.run_chunk, vector_log=lanes.chunk_program(platform).keywords["vector_log"]))
+        return pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties},
+                            channels=("pressure", "position"), progress=False)
+
+    vector = run("cpu")
+    assert used  # traced with the series
+    used.clear()
+    xla = run("gpu")
+    assert not used
+    assert np.all(vector.status == 0) and np.all(xla.status == 0)
+    for channel in ("pressure", "position"):
+        np.testing.assert_allclose(vector[channel], xla[channel], rtol=1e-10, atol=1e-15)
 
 
 def test_a_fit_whose_jacobian_has_the_batched_options_equals_one_without(monkeypatch):

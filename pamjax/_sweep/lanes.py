@@ -1,6 +1,8 @@
 """One sweep lane (a point's system, signal and initial state) integrated and observed, and the compiled call over a
 chunk of lanes; the scheme and step a sweep chooses from the plant's stiffness and the valve's edges."""
 
+import contextlib
+import functools
 import inspect
 
 import equinox as eqx
@@ -119,10 +121,12 @@ def _lane_adaptive(system, signal, y0, ts, channels, reduction, solve_options):
     return obs, status
 
 
-def _run_chunk(system, signal, y0, values, ts, plan, config, mesh=None):
+def _run_chunk(system, signal, y0, values, ts, plan, config, mesh=None, vector_log=False):
     """One compiled call over a chunk of lanes. With a `mesh` the lanes are split over its devices by `shard_map`:
     each device runs its own lanes' loop, so an error-controlled scheme's while loop ends per device when that
-    device's slowest lane ends, with no cross-device agreement per iteration."""
+    device's slowest lane ends, with no cross-device agreement per iteration. `vector_log` (static; on a CPU): the
+    fixed-scheme lanes' softplus takes its log from `smooth.log1p_exp` (`smooth.batched_lanes`), as XLA's CPU code
+    for a float64 log is not vectorised (a GPU's is native: there, not measured, XLA's own is kept)."""
     method, counts, channels, reduction, solve_options, grid = config
     counts = np.asarray(counts)
 
@@ -133,7 +137,7 @@ def _run_chunk(system, signal, y0, values, ts, plan, config, mesh=None):
         if method == "adaptive":
             return _lane_adaptive(sys_l, sig_l, y0_l, ts, channels, reduction, dict(solve_options))
         steps = jnp.diff(ts) / counts
-        with batched_lanes():  # the softplus's log vectorised (its field is traced here, in no nested jit)
+        with batched_lanes() if vector_log else contextlib.nullcontext():  # the field is traced here, no nested jit
             return _lane_fixed(sys_l, sig_l, y0_l, ts, counts, steps, method, channels, reduction)
 
     if mesh is None:
@@ -152,9 +156,11 @@ _CHUNK_PROGRAMS = {}  # compile options (a sorted tuple) → `_run_chunk` jitted
 
 def chunk_program(platform):
     """`run_chunk` as compiled for lanes on `platform`: with `pamjax._core.xla_cpu.batched_options` where they apply
-    (512-bit vectors on an AVX-512 CPU: a 1,024-lane sweep 20-30 % faster), else the plain program."""
+    (512-bit vectors on an AVX-512 CPU: a 1,024-lane sweep 20-30 % faster), else the plain program; on a CPU with
+    the softplus's vectorised log (`_run_chunk`'s `vector_log`)."""
     options = batched_options(platform)
-    return run_chunk if options is None else compiled_with(_CHUNK_PROGRAMS, eqx.filter_jit, _run_chunk, options)
+    program = run_chunk if options is None else compiled_with(_CHUNK_PROGRAMS, eqx.filter_jit, _run_chunk, options)
+    return functools.partial(program, vector_log=platform == "cpu")
 
 
 def _signal_frequency(signal, values, plan):
