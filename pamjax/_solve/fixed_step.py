@@ -32,7 +32,8 @@ SCHEMES = ("rk4", "ros2", "ros2a", "rodas5a")
 # Tolerances on the scaled state (1e5 Pa, 1e-2 m, 1e-2 m/s), measured on the 1,024-duty x 5 s MAS-10 map (outputs
 # every 0.1 s, 2-core CPU, 2026-11-22, benchmarks/sweep.py; errors against DOP853 at rtol 1e-12):
 # "ros2a" at 1e-3: 0.6 Pa and 4 µm in 0.045-0.073 s (with coarser output grids tens of µm, tests/test_sweep.py):
-# a quick map, not a reference. "rodas5a" at 1e-5: 4.8e-5 Pa and 3.5e-10 m in 0.05-0.08 s, better than SciPy's
+# a quick map, not a reference. "rodas5a" at 1e-5: 3.3e-5 Pa and 2.2e-10 m in 0.044-0.048 s (2026-11-26, session
+# 37; 4.8e-5 Pa and 3.5e-10 m in 0.05-0.08 s before its step-control changes), better than SciPy's
 # LSODA at rtol 1e-8 (2.6e-4 Pa, 1.4e-9 m); 1e-4 gave 3.7e-4 Pa and 2.8e-9 m (just looser than SciPy), 1e-6 took
 # ~15 % longer.
 ROS2A_RTOL = 1e-3
