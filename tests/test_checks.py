@@ -29,9 +29,38 @@ def _with_mass(system, mass):
     (np.nan, r"MuscleSystem\.payload_mass must be > 0 and finite, got nan"),
     (9600.0, r"payload_mass = 9600 kg: more than 1000 kg; that looks like g"),  # grams, as configs refuse them
 ])
-def test_a_bad_parameter_set_with_tree_at_is_named_before_the_solve(system, mass, match):
+@pytest.mark.parametrize("as_value", [jnp.asarray, float], ids=["array", "python float"])
+def test_a_bad_parameter_set_with_tree_at_is_named_before_the_solve(system, mass, match, as_value):
+    # a Python float set with tree_at stays a Python number (no constructor ran): checked as an array is
     with pytest.raises(PamjaxInputError, match=match):
-        pamjax.simulate(_with_mass(system, jnp.asarray(mass)), pamjax.Constant(0.5), TS)
+        pamjax.simulate(_with_mass(system, as_value(mass)), pamjax.Constant(0.5), TS)
+
+
+def test_python_floats_set_with_tree_at_are_arguments_of_one_program(system, caplog):
+    # `jax.jit` takes a Python number as a constant of the program: each value compiled a solve of its own (~1 s).
+    # simulate and sweep make them arrays first (pamjax._core.arrays.floats_as_arrays), as a constructor would.
+    from pamjax._core.arrays import floats_as_arrays
+
+    assert floats_as_arrays(system) is system  # nothing to convert: the same object
+    changed = _with_mass(system, 9.0)
+    converted = floats_as_arrays(changed)
+    assert eqx.is_array(converted.payload_mass) and float(converted.payload_mass) == 9.0
+    assert jax.tree_util.tree_structure(converted) == jax.tree_util.tree_structure(system)
+    signal = pamjax.Constant(0.5)
+    def swept(mass):
+        return pamjax.sweep(_with_mass(system, mass), signal, TS, {"signal.value": [0.5, 0.6]}, progress=False)
+
+    first, first_map = pamjax.simulate(_with_mass(system, 9.1), signal, TS), swept(9.1)  # compile, as any first call
+    with caplog.at_level("WARNING"), jax.log_compiles():
+        second, second_map = pamjax.simulate(_with_mass(system, 9.2), signal, TS), swept(9.2)
+    compiled = [r.getMessage()[:80] for r in caplog.records if r.getMessage().startswith("Compiling")
+                and ("solve" in r.getMessage() or "_run_chunk" in r.getMessage())]
+    assert not compiled, compiled  # the second value reused the first one's programs
+    assert np.all(first.position != second.position)  # and did use its own value
+    np.testing.assert_array_equal(second.position,
+                                  pamjax.simulate(_with_mass(system, jnp.asarray(9.2)), signal, TS).position)
+    assert np.all(first_map.status == 0) and np.all(second_map.status == 0)
+    np.testing.assert_allclose(second_map["position"][0], second.position, atol=1e-7)  # two solvers: to 0.1 um
 
 
 def test_a_parameter_with_an_axis_too_many_is_named(system):

@@ -20,6 +20,18 @@ def as_scalar(x: RealScalarLike) -> RealScalar:
     return jnp.asarray(x)
 
 
+def floats_as_arrays(tree):
+    """`tree` with every Python `float` leaf as the array its component's constructor makes of it (`as_scalar`); the
+    same object when it has none. A parameter set with `eqx.tree_at(lambda s: ..., system, 3.5e-3)` bypasses the
+    constructor and stays a Python number, which `jax.jit` takes as a constant of the program: every value compiled
+    a program of its own (~1.1 s each for the averaged MAS-10's `simulate`) and skipped the unit checks of
+    concrete parameters. Python ints and bools are left alone (they may size or select things)."""
+    leaves, treedef = jax.tree_util.tree_flatten(tree)
+    if not any(type(x) is float for x in leaves):
+        return tree
+    return jax.tree_util.tree_unflatten(treedef, [as_scalar(x) if type(x) is float else x for x in leaves])
+
+
 def as_optional_scalar(x: RealScalarLike | None) -> RealScalar | None:
     """The converter of an optional scalar parameter: None stays None (not set), anything else a scalar array."""
     return None if x is None else jnp.asarray(x)

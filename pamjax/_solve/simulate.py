@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
-from .._core.arrays import device_array
+from .._core.arrays import device_array, floats_as_arrays
 from .._core.custom_types import ArrayLike, Real, RealScalarLike, TimesLike
 from .._core.errors import PamjaxInputError, PamjaxSolveError, check_time_grid, require_float64
 from .._core.fastjit import filter_jit
@@ -357,6 +357,7 @@ def simulate(
 
     An `OnOffValve(mode="exact")` has its switching times handed to the solver (step-size clipping at jump times).
     """
+    system = floats_as_arrays(system)  # a value set with eqx.tree_at: an argument, not a constant of the program
     validate(system, signal, ts, y0, t0)
     traced_model = _is_traced((system, signal))
     if traced_model:  # inside jit/vmap/grad: the same checks, as run-time errors naming the value

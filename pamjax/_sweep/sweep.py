@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.arrays import floats_as_arrays
 from .._core.custom_types import RealArrayLike, RealScalarLike, TimesLike
 from .._core.errors import PamjaxInputError, check_time_grid, require_float64
 from .._physics.signals import AbstractSignal
@@ -116,6 +117,7 @@ def sweep(
     a command outside the valve's range, bad `ts`/`dt`/`chunk_size`), before any solve.
     """
     require_float64("pamjax.sweep")
+    system = floats_as_arrays(system)  # a value set with eqx.tree_at: an argument, not a constant of the program
     _check_arguments(system, signal, ts, over, method, dt, chunk_size, gather, reduce)
     ts_np = np.asarray(ts, dtype=float)
     base_state, available = structure(system, y0)  # shapes only: no solve yet
