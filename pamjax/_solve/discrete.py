@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.arrays import floats_as_arrays
 from .._core.custom_types import Array, ArrayLike, PyTreeLike, Real, RealScalarLike, Series
 from .._core.errors import PamjaxInputError, check_positive
 from .._physics.signals import AbstractSignal
@@ -103,6 +104,7 @@ def simulate_discrete(system: AbstractSystem, signal: AbstractSignal, sample_tim
     num_steps = int(np.ceil((float(t_end) - float(t0)) / float(sample_time) - 1e-9))
     if num_steps > 50_000_000:
         raise PamjaxInputError(f"sample_time {sample_time} gives {num_steps} steps up to t_end; use a larger one")
+    system = floats_as_arrays(system)  # a value set with eqx.tree_at: an argument, not a constant of the program
     validate(system, signal, np.array([float(t0), float(t0) + num_steps * float(sample_time)]), y0, None)
     y0 = system.initial_state() if y0 is None else y0
     return _run(system, signal, y0, jnp.asarray(t0, dtype=float), jnp.asarray(sample_time, dtype=float), num_steps)
