@@ -183,8 +183,26 @@ class ProgramCache:
     def has(self, name, args, options=None):
         """Whether `name` is already traced for arguments of this structure (on disk or in this process)."""
         name = self._named(name, options)
-        key = self.key(name, args)
+        key = self._entry(name, args)[0]  # the key `call` then reuses (describing the arguments: ~15 ms)
         return key in self.memory or (self.directory / f"{name}-{key}.bin").exists()
+
+    def _entry(self, name, args):
+        """(key, args, treedef, static, parts) of `args` for program `name`, computed once in this process per set of
+        non-array argument objects (a fit's parameter space and experiments; θ is a new array at every call) and
+        array shapes: the key describes the whole structure (a few ms). The entry keeps the objects alive, so that no
+        other object can later reuse one of their ids (they are immutable pytrees)."""
+        import equinox as eqx
+        import jax
+
+        ids = (name, tuple(("array", a.shape, str(a.dtype), bool(getattr(a, "weak_type", False))) if eqx.is_array(a)
+                           else id(a) for a in args))
+        entry = self.keys.get(ids)
+        if entry is None:
+            dynamic, static = eqx.partition(args, eqx.is_array)
+            treedef = jax.tree_util.tree_structure(dynamic)
+            parts = [None if eqx.is_array(a) else jax.tree_util.tree_leaves(d) for a, d in zip(args, dynamic)]
+            entry = self.keys[ids] = (self.key(name, args), args, treedef, static, parts)
+        return entry
 
     def call(self, name, fn, args, ready=None, options=None):
         """`fn(*args)`, compiled once per argument structure (see the class docstring). `ready`, if given, is called
@@ -195,19 +213,7 @@ class ProgramCache:
         import jax
 
         name = self._named(name, options)
-        # Per set of non-array argument objects (a fit's parameter space and experiments; θ is a new array at every
-        # call) and the array arguments' shapes: the key (describing the whole structure: a few ms) and the
-        # flattened arguments, computed once in this process. The entry keeps the objects alive, so that no other
-        # object can later reuse one of their ids (they are immutable pytrees).
-        ids = (name, tuple(("array", a.shape, str(a.dtype), bool(getattr(a, "weak_type", False))) if eqx.is_array(a)
-                           else id(a) for a in args))
-        entry = self.keys.get(ids)
-        if entry is None:
-            dynamic, static = eqx.partition(args, eqx.is_array)
-            treedef = jax.tree_util.tree_structure(dynamic)
-            parts = [None if eqx.is_array(a) else jax.tree_util.tree_leaves(d) for a, d in zip(args, dynamic)]
-            entry = self.keys[ids] = (self.key(name, args), args, treedef, static, parts)
-        key, _, treedef, static, parts = entry
+        key, _, treedef, static, parts = self._entry(name, args)  # the key and flattening, once per structure
         leaves = [x for a, part in zip(args, parts) for x in ((a,) if part is None else part)]
         caller = self.memory.get(key)
         if caller is None:
