@@ -278,14 +278,13 @@ def test_a_sweep_on_the_cpu_takes_the_vectorised_softplus_log_and_agrees_with_xl
     assert lanes.chunk_program("cpu").keywords["vector_log"] is True
     assert lanes.chunk_program("gpu").keywords["vector_log"] is False
     system = presets.mas10_system("averaged")
-    ts = np.linspace(0.0, 1.0, 9)  # shapes of its own: another test's program of these shapes is not reused
+    ts = np.linspace(0.0, 1.0, 9)  # shapes of its own, so both programs are traced here (no other test's reused)
     duties = np.linspace(0.05, 0.95, 19)
     used = []
     series = smooth.log1p_exp
     monkeypatch.setattr(smooth, "log1p_exp", lambda a: used.append(1) or series(a))
 
     def run(platform):  # `sweep` calls `chunk_program(platform)` (the platform where the lanes are)
-        jax.clear_caches()  # traced afresh, whatever ran before in this process
         monkeypatch.setattr(sweep_module, "chunk_program", lambda _: functools.partial(
             lanes.run_chunk, vector_log=lanes.chunk_program(platform).keywords["vector_log"]))
         return pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": duties},

@@ -93,8 +93,7 @@ def sweep(
     - `dt`: the fixed step [s] (the first step for "rodas5a"/"ros2a"). Default: RK4 at 2.5 / (largest |eigenvalue|
       of the Jacobian at the initial states) (its stability limit with a 10 % margin), "rodas5a"'s first step 1 ms,
       the others 5 ms; all capped at 2 PWM edge widths for a switching valve and at 1/100 of the signal's shortest
-      period. Check a
-      fixed-step result by halving `dt`.
+      period. Check a fixed-step result by halving `dt`.
     - `chunk_size`: points per device per compiled call (memory bound). Default (`default_chunk_size`): all points
       split evenly over the devices, at most 8,192 per call on CPU, on a GPU/TPU as many as 1 GiB of outputs per
       device holds (one call is fastest there). The last call is padded. Results are bitwise the same for the same
