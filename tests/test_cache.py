@@ -63,13 +63,15 @@ def test_second_run_compiles_nothing_new(tmp_path):
     assert "compiling the residuals and their Jacobian (first run; cached afterwards)" in text
     text, second = _run(config, tmp_path / "b", cache)
     assert second["status"] == 0
-    assert second["requests"] > 0 and second["hits"] == second["requests"], second  # every program from the cache
-    assert second["traced"] < first["traced"]  # the fit's programs are not traced again
+    # every program from the cache: its kept executables, or JAX's persistent cache; nothing compiled anew
+    assert second["hits"] == second["requests"] and second["compiled"] == second["hits"], second
+    assert second["traced"] == 0, second  # nothing traced again: the programs, nor the set-up's shape checks
     assert "compiling" not in text
     programs = sorted(p.name.split("-")[0] for p in (cache / "programs").iterdir())
-    assert programs == ["fit_jacobian", "fit_residuals"]
+    # the fit's programs (exported), and the experiment's output names (its set-up's shape inference, pickled)
+    assert programs == ["experiment_outputs", "fit_jacobian", "fit_physical", "fit_residuals"]
     executables = sorted((cache / "executables").iterdir())  # the compiled programs, loaded without lowering
-    assert [p.name.split("-")[0] for p in executables] == ["fit_jacobian", "fit_residuals"]
+    assert [p.name.split("-")[0] for p in executables] == ["fit_jacobian", "fit_physical", "fit_residuals"]
     a = json.loads((tmp_path / "a" / "fit.json").read_text())
     b = json.loads((tmp_path / "b" / "fit.json").read_text())
     assert a["values"] == b["values"] and a["cost"] == b["cost"]  # the same fit, bitwise
@@ -270,3 +272,66 @@ def test_a_foreign_or_damaged_program_entry_is_traced_anew(tmp_path, entry):
     assert path.read_bytes() != before  # replaced by this platform's export
     again = type(programs)(tmp_path).call("planted", fn, (x,))  # a new process reads the replaced entry
     np.testing.assert_array_equal(np.asarray(again), np.asarray(fn(x)))
+
+
+def test_structural_results_are_kept_per_structure_and_errors_never(tmp_path):
+    """`ProgramCache.structural` (a fit's set-up checks: the experiments' output names by shape inference): computed
+    once per argument structure, read back by a new process without calling the function; another structure is
+    computed anew; an error is raised as the function raised it and nothing is kept; a damaged entry is recomputed."""
+    import jax
+    import jax.numpy as jnp
+
+    from pamjax._core.cache import ProgramCache
+
+    jax.config.update("jax_enable_x64", True)
+    calls = []
+
+    def names(x):
+        calls.append(x.shape)
+        return sorted(jax.eval_shape(lambda y: {"a": y, "b": y[:1]}, x))
+
+    x = jnp.zeros(3)
+    assert ProgramCache(tmp_path).structural("names", names, (x,)) == ["a", "b"]
+    assert ProgramCache(tmp_path).structural("names", names, (x + 1.0,)) == ["a", "b"]  # other values, same shape
+    assert calls == [(3,)]  # the second "process" read it
+    assert ProgramCache(tmp_path).structural("names", names, (jnp.zeros(4),)) == ["a", "b"]
+    assert calls == [(3,), (4,)]  # another shape: computed
+
+    def fails(x):
+        raise ValueError("bad initial keys")
+
+    for _ in range(2):  # raised both times: never kept
+        with pytest.raises(ValueError, match="bad initial keys"):
+            ProgramCache(tmp_path).structural("fails", fails, (x,))
+    assert not list(tmp_path.glob("programs/fails-*"))
+    for entry in tmp_path.glob("programs/names-*.pkl"):
+        entry.write_bytes(b"\x00damaged")
+    assert ProgramCache(tmp_path).structural("names", names, (x,)) == ["a", "b"]
+    assert calls == [(3,), (4,), (3,)]
+
+
+def test_preload_loads_a_kept_executable_and_nothing_else(tmp_path):
+    """`ProgramCache.preload` (a second fit's programs, loaded while optimistix is imported): False and nothing
+    traced where no executable is kept; after a first `call` a new cache loads it, and its `call` then gives the
+    same values without tracing or compiling."""
+    import jax
+    import jax.numpy as jnp
+
+    from pamjax._core.cache import ProgramCache
+
+    jax.config.update("jax_enable_x64", True)
+
+    def fn(x):
+        return jnp.sin(x) * 2.0
+
+    x = jnp.linspace(0.0, 1.0, 5)
+    with pamjax.runtime.CompileStats() as stats:
+        assert ProgramCache(tmp_path).preload("pre", (x,)) is False
+    assert stats.count["trace"] == 0 and stats.count["compile"] == 0
+    expected = np.asarray(ProgramCache(tmp_path).call("pre", fn, (x,)))
+    fresh = ProgramCache(tmp_path)
+    with pamjax.runtime.CompileStats() as stats:
+        assert fresh.preload("pre", (x,)) is True
+        got = np.asarray(fresh.call("pre", fn, (x,)))
+    assert stats.count["trace"] == 0 and stats.count["compile"] == 0, stats.summary()
+    np.testing.assert_array_equal(got, expected)

@@ -84,7 +84,9 @@ def apply_set(model, values, where):
                                    "entry sets one parameter (index an element as 'path[i]')")
         check_setting(leaf, new, where)
         model = _set_leaf(model, steps, index, new)
-    return checked(model, where)
+    # every value has its parameter's shape (above), and the model before (a preset, or a model file, checked when
+    # loaded) has no batched parameter: nor has the result, which skips that check's shape inference
+    return checked(model, where, batched=False)
 
 
 def parameter_shape(model, path, where):
@@ -123,8 +125,7 @@ def _array(value, where):
 
 
 def _set_leaf(model, attrs, index, value):
-    import jax.numpy as jnp
-
+    from .._core.arrays import as_scalar, device_array
     from .._fit.parameters import Key
 
     def get(m):
@@ -132,10 +133,15 @@ def _set_leaf(model, attrs, index, value):
             m = m[a] if isinstance(a, Key) else getattr(m, a)
         return m
 
-    old = jnp.asarray(get(model))
-    new = jnp.asarray(value, dtype=old.dtype) if index is None else old.at[index].set(float(value))
-    if index is None and new.ndim == 0:
-        new = jnp.asarray(float(value))  # a scalar as a component's converter makes it from a number
+    old = np.asarray(get(model))  # the arrays made on the host (`jnp.asarray` and `.at[].set` compile programs)
+    if index is None and old.ndim == 0:
+        new = as_scalar(float(value))  # a scalar as a component's converter makes it from a number
+    elif index is None:
+        new = device_array(np.asarray(value, dtype=old.dtype))
+    else:
+        new = old.copy()
+        new[index] = float(value)
+        new = device_array(new)
     return eqx.tree_at(get, model, new)
 
 

@@ -14,6 +14,7 @@ import builtins
 import pickle
 import subprocess
 import sys
+import threading
 
 # The script without the script's folder on sys.path (pamjax/_cli's module names must not shadow a library's).
 _RUN = "import runpy, sys; del sys.path[0]; runpy.run_path(sys.argv[1], run_name='__main__')"
@@ -25,15 +26,36 @@ class FigureProcess:
 
     def __init__(self, module):
         self.module = module
+        self.sender = None  # the thread sending `prepare`'s columns
         try:
             self.proc = subprocess.Popen([sys.executable, "-c", _RUN, module.__file__], stdin=subprocess.PIPE,
                                          stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         except OSError:
             self.proc = None
 
+    def prepare(self, columns):
+        """Send `columns` without their models ahead of the request (see `pamjax/_cli/fit_figure.py`), from a thread
+        of its own (a large recording would fill the pipe before the process reads it); nothing if it is not
+        running or `module` has no `prepare`."""
+        if self.proc is None or not hasattr(self.module, "prepare") or self.sender is not None:
+            return
+        message = pickle.dumps({"prepare": columns}, protocol=pickle.HIGHEST_PROTOCOL)
+
+        def send(stream=self.proc.stdin):
+            try:
+                stream.write(message)
+                stream.flush()
+            except (OSError, ValueError):  # the process died (the request then finds out): drawn here instead
+                pass
+
+        self.sender = threading.Thread(target=send, daemon=True)
+        self.sender.start()
+
     def draw(self, path, columns):
         """Draw `columns` into `path` (in the process when it runs, else here)."""
         proc, self.proc = self.proc, None
+        if self.sender is not None:
+            self.sender.join()  # the process reads on: the prepared columns go first, whole
         if proc is not None:
             request = pickle.dumps({"path": str(path), "columns": columns}, protocol=pickle.HIGHEST_PROTOCOL)
             try:
@@ -71,6 +93,14 @@ def start(module):
         process = _STATE[module.__name__] = FigureProcess(module)
         atexit.register(process.close)  # one a command started but did not use (it failed before its figure)
     return _STATE[module.__name__]
+
+
+def prepare(module, columns):
+    """Send `columns` without their models to `module`'s started process, to lay out its figure while the command
+    works (`FigureProcess.prepare`); nothing where no process was started."""
+    process = _STATE.get(module.__name__)
+    if process is not None:
+        process.prepare(columns)
 
 
 def draw(module, path, columns):

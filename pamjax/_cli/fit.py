@@ -194,20 +194,27 @@ def _rig(rig_cfg, tables, model, experiments, free):
 _UNITS = {"pressure": "[Pa abs]", "position": "[m]", "velocity": "[m/s]", "force": "[N]", "mass_flow": "[kg/s]"}
 
 
-def plot(path, result, experiments):
-    """Data vs model per experiment and channel (the fit result's predictions), residuals below
-    (`pamjax/_cli/fit_figure.py`; drawn in the process `run` started, if any)."""
-    from . import figures, fit_figure
-
+def _columns(experiments, result=None):
+    """The figure's columns (`pamjax/_cli/fit_figure.py`): per experiment and channel its data, and the fit
+    `result`'s predictions as the model (none without a result: what the figure's process lays out in advance)."""
     columns = []
     for e in experiments:
         t = np.asarray(e.times)
         split = float(e.split_time) if e.split_time is not None and float(e.split_time) < t[-1] else None
         for c in e.channels:
             columns.append(dict(title=f"{e.name}: {c}", channel=c, unit=_UNITS.get(c, ""), t=t,
-                                data=np.asarray(e.data[c]), model=np.asarray(result.predictions[e.name][c]),
-                                split=split))
-    figures.draw(fit_figure, path, columns)
+                                data=np.asarray(e.data[c]), split=split))
+            if result is not None:
+                columns[-1]["model"] = np.asarray(result.predictions[e.name][c])
+    return columns
+
+
+def plot(path, result, experiments):
+    """Data vs model per experiment and channel (the fit result's predictions), residuals below
+    (`pamjax/_cli/fit_figure.py`; drawn in the process `run` started, if any)."""
+    from . import figures, fit_figure
+
+    figures.draw(fit_figure, path, _columns(experiments, result))
 
 
 def _checkpoint_summary(path):
@@ -231,6 +238,8 @@ def run(args):
 
             figures.start(fit_figure)
         model, experiments, free, options, out_cfg, bench, staged = load(args.config)
+        if not args.no_plot:  # the figure laid out with the data while the fit runs
+            figures.prepare(fit_figure, _columns(experiments))
     except KeyboardInterrupt as err:
         PENDING.clear()  # handled here
         what = "terminated" if interrupt_status(err) == 143 else "interrupted"

@@ -3,8 +3,10 @@
 Also a script: `pamjax._cli.figures` runs this file in a Python process of its own when a fit starts, so that
 importing matplotlib and its first drawing (fonts, ticks, the PNG writer: ~1 s of Python) happen on another core
 while the fit runs; the script then waits for one pickled request on stdin (`{"path": ..., "columns": [...]}`), draws
-it and answers one line on stdout: "ok", or the error's type and message. It imports neither pamjax nor JAX (as a
-script it is not part of the package), only NumPy and matplotlib.
+it and answers one line on stdout: "ok", or the error's type and message. The request may come after a first one,
+`{"prepare": columns}` (the columns without their models, sent when the fit starts): that figure is then laid out
+and drawn once while the fit runs, and the request only adds the models to it (`prepare`). It imports neither
+pamjax nor JAX (as a script it is not part of the package), only NumPy and matplotlib.
 
 `columns`: one dict per compared channel, with `title`, `channel`, `unit`, `t`, `data`, `model` (arrays over the
 samples) and `split` (the identification | validation boundary [s], or None).
@@ -27,26 +29,56 @@ def _figure(**kwargs):
     return Figure(**kwargs)
 
 
-def draw(path, columns):
-    """Write the figure of `columns` (see the module docstring) to `path` as PNG."""
-    fig = _figure(figsize=(4 * len(columns), 6))
-    axes = fig.subplots(2, len(columns), squeeze=False, sharex="col")
+DPI = 110
+
+
+def draw(path, columns, prepared=None):
+    """Write the figure of `columns` (see the module docstring) to `path` as PNG; `prepared`: what `prepare` made of
+    the same columns without their models, if anything (the figure is the same either way)."""
+    fig, axes = prepared if prepared is not None else _layout(columns)
     for j, col in enumerate(columns):
         t, data, model = (np.asarray(col[k]) for k in ("t", "data", "model"))
-        unit = col["unit"]
-        axes[0, j].plot(t, data, ".", ms=2, label="data")
         axes[0, j].plot(t, model, "k-", lw=0.8, label="model")
-        axes[0, j].set(title=col["title"], ylabel=f"{col['channel']} {unit}".strip())
         if col["split"] is not None:
             for ax in axes[:, j]:
                 ax.axvline(col["split"], color="C3", lw=0.8, ls="--")
         axes[1, j].plot(t, model - data, lw=0.8)
-        axes[1, j].set(xlabel="t [s]", ylabel=f"model − data {unit.replace(' abs', '')}".strip())
     if any(col["split"] is not None for col in columns):
         axes[0, 0].plot([], [], color="C3", lw=0.8, ls="--", label="identification | validation")
     axes[0, 0].legend(fontsize=7)
+    fig.savefig(path, dpi=DPI, format="png")
+
+
+def prepare(columns):
+    """The figure of `columns` so far as it does not depend on the models (axes, data, titles, labels), drawn once
+    in memory: the axes' ticks are made and the labels' text laid out before the fit ends, so that `draw` (given
+    this) only adds the models and writes the file (~0.06 s sooner after the fit)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig, axes = _layout(columns)
+    FigureCanvasAgg(fig).draw()
+    return fig, axes
+
+
+def matches(columns, prepared_columns):
+    """Whether `columns` are those `prepare` was given (titles, units, times, data, splits), models aside."""
+    keys = ("title", "channel", "unit", "split")
+    return len(columns) == len(prepared_columns) and all(
+        all(a[k] == b[k] for k in keys) and all(np.array_equal(a[k], b[k]) for k in ("t", "data"))
+        for a, b in zip(columns, prepared_columns))
+
+
+def _layout(columns):
+    """(figure, axes) with each column's data, title and axis labels."""
+    fig = _figure(figsize=(4 * len(columns), 6), dpi=DPI)
+    axes = fig.subplots(2, len(columns), squeeze=False, sharex="col")
+    for j, col in enumerate(columns):
+        unit = col["unit"]
+        axes[0, j].plot(np.asarray(col["t"]), np.asarray(col["data"]), ".", ms=2, label="data")
+        axes[0, j].set(title=col["title"], ylabel=f"{col['channel']} {unit}".strip())
+        axes[1, j].set(xlabel="t [s]", ylabel=f"model − data {unit.replace(' abs', '')}".strip())
     _margins(fig, len(columns))
-    fig.savefig(path, dpi=110, format="png")
+    return fig, axes
 
 
 def _margins(fig, n):
@@ -71,12 +103,21 @@ def _serve():
         _warm_up()
     except Exception:  # noqa: BLE001 - reported when a figure is asked for (e.g. no matplotlib)
         pass
+    prepared = None
     try:
         request = pickle.load(sys.stdin.buffer)
+        if "prepare" in request:  # the data, sent while the fit runs: its figure laid out now
+            try:
+                prepared = (request["prepare"], prepare(request["prepare"]))
+            except Exception:  # noqa: BLE001 - drawn from scratch below (and its error reported then)
+                prepared = None
+            request = pickle.load(sys.stdin.buffer)
     except (EOFError, pickle.UnpicklingError, KeyboardInterrupt):  # the command ended without a figure
         return
     try:
-        draw(request["path"], request["columns"])
+        columns = request["columns"]
+        draw(request["path"], columns,
+             prepared[1] if prepared is not None and matches(columns, prepared[0]) else None)
         answer = "ok"
     except Exception as err:  # noqa: BLE001 - sent back to the command, which reports it as its own
         answer = f"{type(err).__name__}\t{err}".replace("\n", " ")

@@ -16,7 +16,24 @@ from .custom_types import Array, RealArray, RealArrayLike, RealScalar, RealScala
 
 def as_scalar(x: RealScalarLike) -> RealScalar:
     """`jnp.asarray` of a component's scalar parameter: the field converter that gives its constructor the type of
-    the argument (equinox annotates `__init__` with the converter's argument type)."""
+    the argument (equinox annotates `__init__` with the converter's argument type). A Python float or int goes
+    through `jax.device_put`: the same weakly typed array, without the small program `jnp.asarray` compiles for it
+    (~50 ms the first time in a process: a preset's set-up in every `pamjax` command)."""
+    return _asarray(x)
+
+
+def _asarray(x):
+    """`jnp.asarray(x)`, made on the host where `x` is a Python number or a list, tuple or NumPy array of numbers:
+    the same dtype and weak type, without compiling."""
+    if type(x) is float or type(x) is int:  # not bool (`jnp.asarray(True)` is strongly typed), not subclasses
+        return jax.device_put(x)  # weakly typed, as `jnp.asarray` makes it
+    if isinstance(x, (list, tuple, np.ndarray, np.generic)):
+        try:
+            a = np.asarray(x)
+        except Exception:  # noqa: BLE001 - tracers or arrays of other shapes inside: JAX's own rules and errors
+            return jnp.asarray(x)
+        if a.dtype.kind in "fiu":  # strongly typed as `jnp.asarray` makes them (an empty list: float64 both)
+            return device_array(a)
     return jnp.asarray(x)
 
 
@@ -34,20 +51,20 @@ def floats_as_arrays(tree):
 
 def as_optional_scalar(x: RealScalarLike | None) -> RealScalar | None:
     """The converter of an optional scalar parameter: None stays None (not set), anything else a scalar array."""
-    return None if x is None else jnp.asarray(x)
+    return None if x is None else as_scalar(x)
 
 
 def as_array(x: RealArrayLike) -> RealArray:
     """`jnp.asarray` of a component's array parameter (a table, coefficients, a pair of time constants): a number,
     an array or a (nested) list or tuple of numbers."""
-    return jnp.asarray(x)
+    return _asarray(x)
 
 
 def as_table(x: TableLike) -> Table:
     """`jnp.asarray` of a column of a component's table (a calibration's voltages, tabulated conductances, a sampled
     signal's times): a vector with as many entries as the component's other columns (its constructor checks that
     they agree, through the shared dimension of `TableLike`)."""
-    return jnp.asarray(x)
+    return _asarray(x)
 
 
 def device_array(x: RealArrayLike, dtype: DTypeLike | None = None) -> Array:

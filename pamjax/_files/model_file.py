@@ -27,10 +27,9 @@ import sys
 from collections.abc import Sequence
 
 import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
 
-from .._core.arrays import device_array
+from .._core.arrays import as_scalar, device_array
 from .._core.errors import PamjaxInputError, require_float64
 from .._core.fitting import field_units
 from .._core.metadata import version
@@ -226,7 +225,7 @@ class _Decoder:
                           f"{float(back.ravel()[k])!r}); remove \"dtype\" (float64)")
             value = stored
         if value.ndim == 0 and dtype == np.float64:
-            return jnp.asarray(value.item())  # a scalar as `jnp.asarray(9.6)` makes it (the components' converter)
+            return as_scalar(value.item())  # a scalar as `jnp.asarray(9.6)` makes it (the components' converter)
         return device_array(value)
 
     def _dtype(self, spec, name):
@@ -383,22 +382,25 @@ def _parse(text):
     return decoder.decode(text)
 
 
-def _check_document(decoder, document):
-    """The model `document` describes, rebuilt and checked by `decoder` (every parameter used, none batched)."""
+def _check_document(decoder, document, batched=True):
+    """The model `document` describes, rebuilt and checked by `decoder` (every parameter used, none batched: the
+    latter a shape inference of the vector field, skipped with `batched=False`)."""
     if not isinstance(decoder.parameters, dict):
         decoder.fail("'parameters' must be a table of path → {value, unit}")
     model = decoder.decode(document.get("structure"), "")
     unused = set(decoder.parameters) - decoder.used
     if unused:
         decoder.fail(f"parameter(s) {sorted(unused)} are not part of the model's structure (misspelt paths?)")
-    found = batched_parameters(model)
+    found = batched_parameters(model) if batched else []
     if found:
         decoder.fail(describe_batched(found))
     return model
 
 
-def checked(model, where):
+def checked(model, where, batched=True):
     """`model` rebuilt through its components' constructors, so that their value checks run (a model changed with
-    `eqx.tree_at` skips them); an error names `where`. Values and structure are unchanged."""
+    `eqx.tree_at` skips them); an error names `where`. Values and structure are unchanged. `batched=False` skips the
+    check for parameters with axes too many, for a caller that kept every parameter's shape of a model that passed
+    it (a config's `[model] set`; ~0.07 s of shape inference in each `pamjax` command's set-up)."""
     document = model_document(model)
-    return _check_document(_Decoder(where, document, _registry()), document)
+    return _check_document(_Decoder(where, document, _registry()), document, batched)

@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.arrays import as_scalar, device_array
+from .._core.cache import structural
 from .._core.custom_types import RealArrayLike, RealScalar, RealScalarLike
 from .._core.errors import PamjaxInputError
 from .._core.units import check_absolute_pressure
@@ -368,12 +369,6 @@ class Experiment(AbstractExperiment):
                 f"experiment {self.name!r}: build(model) must give a pamjax system, got {type(system)}"
             )
         system = self.system_for(model)
-        try:  # traced, not run: the start state is computed inside the compiled solve
-            y0 = jax.eval_shape(lambda s: self.start_for(s, model), system)
-        except TypeError as err:
-            raise PamjaxInputError(
-                f"experiment {self.name!r}: bad `initial` keys {sorted(self.initial)}: {err}"
-            ) from err
         validate(system, self.signal, self.times, None, self.t0)
         self._stepping(system)  # a stepping this system cannot take is named here
         for key, value in self.initial.items():
@@ -384,14 +379,26 @@ class Experiment(AbstractExperiment):
                     raise PamjaxInputError(f"experiment {self.name!r}: initial pressure must be an ABSOLUTE "
                                            f"pressure > 0 [Pa], got {value}")
                 check_absolute_pressure(value, f"experiment {self.name!r}: initial pressure")
-        period = system.valve.period
-        if self.lowpass_hz is not None and period is not None and self.lowpass_hz < 1.0 / float(period):
+        period = system.valve.period if self.lowpass_hz is not None else None  # (an eager division: only if needed)
+        if period is not None and self.lowpass_hz < 1.0 / float(period):
             warn_filtered(self.name, self.lowpass_hz, 1.0 / float(period), stacklevel=4)
-        # Which channels the system has: its outputs, traced (not solved, not compiled).
-        outputs = jax.eval_shape(lambda s, y: s.outputs(self.t0, y, self.signal(self.t0)), system, y0)
+        # Which channels the system has: its outputs, traced (not solved, not compiled); kept per structure by the
+        # CLI's program cache (a warm `pamjax fit` traces nothing)
+        outputs = structural("experiment_outputs", Experiment._output_names, self, system, model)
         for c in self.channels:
             if c not in outputs and c != "command":
                 raise PamjaxInputError(f"experiment {self.name!r}: the system has no output {c!r}")
+
+    def _output_names(self, system, model):
+        """The names of `system`'s outputs, by shape inference of the start state (computed inside the compiled
+        solve) and of the outputs there; bad `initial` keys are named."""
+        try:
+            y0 = jax.eval_shape(lambda s: self.start_for(s, model), system)
+        except TypeError as err:
+            raise PamjaxInputError(
+                f"experiment {self.name!r}: bad `initial` keys {sorted(self.initial)}: {err}"
+            ) from err
+        return sorted(jax.eval_shape(lambda s, y: s.outputs(self.t0, y, self.signal(self.t0)), system, y0))
 
     def predict(self, model):
         """Model channels at the recording's times (traceable): dict channel → array."""

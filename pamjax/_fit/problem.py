@@ -117,6 +117,35 @@ class Problem:
         r, j = self._call("jacobian", residuals_and_jacobian, theta, ready)
         return np.asarray(r)[self.mask], np.asarray(j)[self.mask]
 
+    def preload(self, theta):
+        """Load the problem's compiled programs kept by the CLI's program cache, if any (a second run), the
+        residuals' in a second thread: the first Jacobian then starts at once. The loading releases Python's lock,
+        so a thread importing optimistix meanwhile (`fit`) goes on. `preload_s`: its wall time (0 if nothing was
+        loaded: no cache)."""
+        programs = program_cache()
+        self.preload_s = 0.0
+        if programs is None:
+            return
+        t0 = time.perf_counter()
+        args = (self.space, device_array(theta), self.exps)
+        side = threading.Thread(target=programs.preload, args=("fit_residuals", args), daemon=True)
+        side.start()
+        programs.preload("fit_jacobian", args, _jacobian_options())
+        programs.preload("fit_physical", args[:2])
+        side.join()
+        self.preload_s = time.perf_counter() - t0
+
+    def physical(self, theta):
+        """(physical values, d(values)/dθ) at θ as NumPy arrays (`physical_and_jacobian`; through the CLI's program
+        cache when it is on, so that a warm run does not trace it)."""
+        programs = program_cache()
+        args = (self.space, device_array(theta))
+        if programs is None:
+            out = physical_and_jacobian(*args)
+        else:
+            out = programs.call("fit_physical", physical_and_jacobian.__wrapped__, args)
+        return tuple(np.asarray(a) for a in out)
+
     def start(self, theta):
         """The start point's residuals and Jacobian. The residual function (for trial steps) is compiled at the
         same time in a second thread, on the second core when there is one, started once the Jacobian's Python
@@ -132,7 +161,7 @@ class Problem:
 
         out = self.jacobian(theta, ready)  # an error or Ctrl-C here leaves the (daemon) side thread unwaited for
         ready()
-        physical_and_jacobian(self.space, device_array(theta))  # compiled now for the statistics at the end
+        self.physical(theta)  # compiled now for the statistics at the end
         side.join()
         self.ready_s = time.perf_counter() - t0
         return out
