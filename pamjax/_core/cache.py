@@ -18,6 +18,8 @@ import pathlib
 import sys
 import threading
 
+from .compile_stats import CompileStats as CompileStats  # public in pamjax.runtime
+
 OPT_OUT = "PAMJAX_COMPILATION_CACHE"
 DIR_ENV = "PAMJAX_CACHE_DIR"
 # s: programs that compiled faster than this are not written (reading a tiny entry costs about as much as compiling
@@ -65,71 +67,6 @@ def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> path
     jax.config.update("jax_persistent_cache_min_compile_time_secs", minimum)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     return path
-
-
-_PHASES = {  # jax.monitoring duration events → phase
-    "/jax/core/compile/jaxpr_trace_duration": "trace",
-    "/jax/core/compile/jaxpr_to_mlir_module_duration": "lower",
-    "/jax/core/compile/backend_compile_duration": "compile",
-}
-
-
-class CompileStats:
-    """What JAX compiles while active (a context manager): per phase ("trace": Python to jaxpr, "lower": jaxpr to
-    StableHLO, "compile": XLA, or a persistent-cache read) the number of programs and the seconds, and of the
-    persistent cache's `requests` its `hits` (`misses` = programs compiled anew); `longest_anew_s`: the longest
-    compilation that was not a persistent-cache read. From `jax.monitoring`'s events; listeners cannot be removed,
-    so an inactive one ignores events."""
-
-    def __init__(self) -> None:
-        self.count = dict.fromkeys(_PHASES.values(), 0)
-        self.seconds = dict.fromkeys(_PHASES.values(), 0.0)
-        self.requests = 0
-        self.hits = 0
-        self.longest_anew_s = 0.0
-        self._active = False
-        self._hit = threading.local()  # a cache hit is recorded inside its program's compile event, in its thread
-
-    def _event(self, event, **kwargs):
-        if not self._active:
-            return
-        if event == "/jax/compilation_cache/compile_requests_use_cache":
-            self.requests += 1
-        elif event == "/jax/compilation_cache/cache_hits":
-            self.hits += 1
-            self._hit.pending = True
-
-    def _duration(self, event, seconds, **kwargs):
-        phase = _PHASES.get(event)
-        if self._active and phase is not None:
-            self.count[phase] += 1
-            self.seconds[phase] += float(seconds)
-            if phase == "compile":
-                if getattr(self._hit, "pending", False):
-                    self._hit.pending = False
-                else:
-                    self.longest_anew_s = max(self.longest_anew_s, float(seconds))
-
-    @property
-    def misses(self):
-        return self.requests - self.hits
-
-    def summary(self):
-        return (f"traced {self.count['trace']} in {self.seconds['trace']:.1f} s, lowered {self.count['lower']} in "
-                f"{self.seconds['lower']:.1f} s, compiled {self.count['compile']} in {self.seconds['compile']:.1f} s"
-                + (f" ({self.hits} of {self.requests} from the persistent cache)" if self.requests else ""))
-
-    def __enter__(self):
-        import jax
-
-        jax.monitoring.register_event_listener(self._event)
-        jax.monitoring.register_event_duration_secs_listener(self._duration)
-        self._active = True
-        return self
-
-    def __exit__(self, *exc):
-        self._active = False
-        return False
 
 
 class ProgramCache:
