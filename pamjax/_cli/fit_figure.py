@@ -98,9 +98,22 @@ def _warm_up():
     draw(io.BytesIO(), [dict(title="warm-up", channel="pressure", unit="[Pa abs]", t=t, data=t, model=t, split=0.5)])
 
 
+def _waiting():
+    """Whether a request is already waiting on stdin (then it warms matplotlib up itself)."""
+    try:
+        import select
+
+        return bool(select.select([sys.stdin], [], [], 0)[0])
+    except (OSError, ValueError):  # e.g. Windows, where select takes sockets only: warm up as before
+        return False
+
+
 def _serve():
     try:
-        _warm_up()
+        import matplotlib.figure  # noqa: F401 - the import first: the longest part, needed either way
+
+        if not _waiting():  # nothing to draw yet: draw a small figure meanwhile (fonts, ticks, the PNG writer)
+            _warm_up()
     except Exception:  # noqa: BLE001 - reported when a figure is asked for (e.g. no matplotlib)
         pass
     prepared = None
