@@ -131,3 +131,16 @@ def test_component_converters_make_jnp_asarrays_without_compiling(value):
     assert isinstance(got, jax.Array)
     assert (got.dtype, got.weak_type, got.shape) == (expected.dtype, expected.weak_type, expected.shape)
     np.testing.assert_array_equal(np.asarray(got), np.asarray(expected))
+
+
+def test_a_tolerance_first_seen_inside_jit_does_not_leak_its_tracer(system):
+    """The regression: `simulate`'s tolerances are kept as device arrays per value; the first call with a value made
+    inside `jax.jit` kept the trace's copy (a tracer), and the next call with that value failed with JAX's
+    UnexpectedTracerError (`pamjax.gallery`'s VPPM fits, depending on which test ran first)."""
+    rtol = 1.2345e-6  # a value no other test uses
+    run = jax.jit(lambda m: pamjax.simulate(_with_mass(system, m), pamjax.Constant(0.5), TS, rtol=rtol).position[-1])
+    inside = float(run(9.6))
+    outside = float(pamjax.simulate(system, pamjax.Constant(0.5), TS, rtol=rtol).position[-1])
+    assert inside == pytest.approx(outside, rel=1e-9, abs=1e-12)
+    assert float(jax.jit(lambda m: pamjax.simulate(_with_mass(system, m), pamjax.Constant(0.5), TS,
+                                                   rtol=rtol).position[-1])(9.6)) == inside

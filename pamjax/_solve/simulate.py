@@ -436,7 +436,8 @@ def _positive(value, name):
         if v is None or v.ndim != 0 or not np.isfinite(v) or v <= 0:
             raise PamjaxInputError(f"{name} must be a finite number > 0, got {value!r}")
         array = device_array(v)
-        if plain:
+        if plain and not isinstance(array, jax.core.Tracer):  # inside a jit's trace the copy is staged: a tracer,
+            # which must not outlive that trace (a later call would get it: JAX's UnexpectedTracerError)
             if len(_POSITIVE) >= 64:  # a few values in use: bounded memory
                 _POSITIVE.clear()
             _POSITIVE[key] = array
