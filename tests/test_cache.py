@@ -335,3 +335,89 @@ def test_preload_loads_a_kept_executable_and_nothing_else(tmp_path):
         got = np.asarray(fresh.call("pre", fn, (x,)))
     assert stats.count["trace"] == 0 and stats.count["compile"] == 0, stats.summary()
     np.testing.assert_array_equal(got, expected)
+
+
+def _component_module(folder, name, scale):
+    """A user's component in a file of its own: `Gain(k)(x) = scale · k · x`."""
+    path = folder / f"{name}.py"
+    path.write_text(textwrap.dedent(f"""
+        import equinox as eqx
+        import jax
+
+        class Gain(eqx.Module):
+            k: jax.Array
+
+            def __call__(self, x):
+                return {scale} * self.k * x
+    """))
+    return path
+
+
+def _import_file(name, path):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_an_edited_component_traces_anew(tmp_path, monkeypatch):
+    """The regression: the program cache's key held the versions and the arguments' structure, not the code, so a
+    user who edited their own component (or pamjax's physics, in the README's editable install) and ran again got
+    the program traced from the code before the edit: the old model's results, silently. The key now holds the
+    source files of the classes in the arguments (and pamjax's own): an edit gives another key, and the program is
+    traced from the new code."""
+    import jax
+    import jax.numpy as jnp
+
+    from pamjax._core import code_stamp
+    from pamjax._core.cache import ProgramCache
+
+    jax.config.update("jax_enable_x64", True)
+    name = "pamjax_test_user_gain"
+    monkeypatch.delitem(sys.modules, name, raising=False)
+    path = _component_module(tmp_path, name, 2.0)
+    gain = _import_file(name, path).Gain(jnp.asarray(3.0))
+    x = jnp.linspace(0.0, 1.0, 4)
+    first = np.asarray(ProgramCache(tmp_path / "cache").call("gain", lambda g, x: g(x), (gain, x)))
+    np.testing.assert_allclose(first, 6.0 * np.asarray(x))
+
+    _component_module(tmp_path, name, 5.0)  # the user edits the component; a new process runs it
+    monkeypatch.setattr(code_stamp, "_STAMPS", {})
+    edited = _import_file(name, path).Gain(jnp.asarray(3.0))
+    again = np.asarray(ProgramCache(tmp_path / "cache").call("gain", lambda g, x: g(x), (edited, x)))
+    np.testing.assert_allclose(again, 15.0 * np.asarray(x))  # the old code's program gave 6 x
+
+
+def test_a_component_without_a_source_file_is_compiled_in_the_process_only(tmp_path, monkeypatch):
+    """A class defined at the prompt or in a notebook (its module has no file): its code cannot be told apart from
+    an edited one, so its program is never written to nor read from the disk; it runs all the same."""
+    import types
+
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    from pamjax._core.cache import ProgramCache
+
+    jax.config.update("jax_enable_x64", True)
+    module = types.ModuleType("pamjax_test_prompt")  # no __file__, as `__main__` at the prompt
+
+    class Gain(eqx.Module):
+        k: jax.Array
+
+        def __call__(self, x):
+            return 2.0 * self.k * x
+
+    Gain.__module__ = module.__name__
+    monkeypatch.setitem(sys.modules, module.__name__, module)
+    x = jnp.linspace(0.0, 1.0, 4)
+    programs = ProgramCache(tmp_path)
+    args = (Gain(jnp.asarray(3.0)), x)
+    assert programs.key("gain", args) is None
+    np.testing.assert_allclose(np.asarray(programs.call("gain", lambda g, x: g(x), args)), 6.0 * np.asarray(x))
+    assert programs.structural("names", lambda g, x: ["k"], args) == ["k"]
+    assert not ProgramCache(tmp_path).preload("gain", args)  # another process finds nothing
+    assert not list(tmp_path.rglob("*gain*")) and not list(tmp_path.rglob("*.pkl"))

@@ -18,6 +18,7 @@ import pathlib
 import sys
 import threading
 
+from .code_stamp import code_stamp
 from .compile_stats import CompileStats as CompileStats  # public in pamjax.runtime
 
 OPT_OUT = "PAMJAX_COMPILATION_CACHE"
@@ -99,17 +100,23 @@ class ProgramCache:
     def key(name, args):
         """The SHA-256 (32 hex digits) of what the program traced from `args` depends on: the pytree structure,
         every static field and non-array value (tracing bakes them in), the arrays' shapes and dtypes (never their
-        values: they are the program's arguments), `name`, the versions, the XLA flags and the x64 setting. A
+        values: they are the program's arguments), `name`, the versions, the XLA flags and the x64 setting, and the
+        code (`code_stamp`: pamjax's source files and those of every class and function in `args`, by size and time of
+        change — an edited model, pamjax's own in an editable install or a user's component, traces anew). A
         canonical description (`describe(args, values=False)`), not a `repr`: equinox's pretty-printer cost ~50 ms
-        per call."""
+        per call. None where some code in `args` has no source file (a class defined in a notebook or at the
+        prompt): such a program is compiled in this process only."""
         import hashlib
 
         import jax
 
         from .describe import describe
 
+        code = code_stamp(args)
+        if code is None:  # code whose source cannot be told apart from an edited one: never from or to the disk
+            return None
         text = repr((name, describe(args, values=False), _versions(), os.environ.get("XLA_FLAGS", ""),
-                     bool(jax.config.jax_enable_x64), _platform()))
+                     bool(jax.config.jax_enable_x64), _platform(), code))
         return hashlib.sha256(text.encode()).hexdigest()[:32]
 
     @staticmethod
@@ -121,7 +128,7 @@ class ProgramCache:
         """Whether `name` is already traced for arguments of this structure (on disk or in this process)."""
         name = self._named(name, options)
         key = self._entry(name, args)[0]  # the key `call` then reuses (describing the arguments: ~15 ms)
-        return key in self.memory or (self.directory / f"{name}-{key}.bin").exists()
+        return key in self.memory or (not key.startswith(_LOCAL) and (self.directory / f"{name}-{key}.bin").exists())
 
     def _entry(self, name, args):
         """(key, args, treedef, static, parts) of `args` for program `name`, computed once in this process per set of
@@ -138,7 +145,10 @@ class ProgramCache:
             dynamic, static = eqx.partition(args, eqx.is_array)
             treedef = jax.tree_util.tree_structure(dynamic)
             parts = [None if eqx.is_array(a) else jax.tree_util.tree_leaves(d) for a, d in zip(args, dynamic)]
-            entry = self.keys[ids] = (self.key(name, args), args, treedef, static, parts)
+            key = self.key(name, args)
+            if key is None:  # this process's own: `_local` keys never name a file
+                key = f"{_LOCAL}{len(self.keys)}"
+            entry = self.keys[ids] = (key, args, treedef, static, parts)
         return entry
 
     def call(self, name, fn, args, ready=None, options=None):
@@ -170,6 +180,8 @@ class ProgramCache:
         name = self._named(name, options)
         key = self._entry(name, args)[0]
         if key not in self.memory:
+            if key.startswith(_LOCAL):
+                return False
             compiled = self._load_executable(self.executables / f"{name}-{key}-{_machine()}.exe")
             if compiled is None:
                 return False
@@ -187,6 +199,9 @@ class ProgramCache:
         path = self.directory / f"{name}-{key}.pkl"
         if key in self.memory:
             return self.memory[key]
+        if key.startswith(_LOCAL):
+            result = self.memory[key] = fn(*args)
+            return result
         try:
             result = pickle.loads(path.read_bytes())
         except Exception:  # noqa: BLE001 - missing, damaged or stale: computed anew (and replaced)
@@ -205,6 +220,9 @@ class ProgramCache:
         now if not kept either) compiled through the persistent cache, its executable then kept."""
         import jax
 
+        if key.startswith(_LOCAL):  # compiled through JAX's own cache only (keyed by the lowered program: safe)
+            ready()
+            return jax.jit(flat, compiler_options=options)
         executable = self.executables / f"{name}-{key}-{_machine()}.exe"
         if executable.exists():
             ready()
@@ -282,6 +300,9 @@ class ProgramCache:
         except Exception:  # an executable this backend cannot serialize: the exported program is kept
             return
         self._save(path, data)
+
+
+_LOCAL = "local-"  # the prefix of a key that `ProgramCache.key` could not make (see there)
 
 
 def _versions():
