@@ -101,8 +101,8 @@ class ProgramCache:
         """The SHA-256 (32 hex digits) of what the program traced from `args` depends on: the pytree structure,
         every static field and non-array value (tracing bakes them in), the arrays' shapes and dtypes (never their
         values: they are the program's arguments), `name`, the versions, the XLA flags and the x64 setting, and the
-        code (`code_stamp`: pamjax's source files and those of every class and function in `args`, by size and time of
-        change — an edited model, pamjax's own in an editable install or a user's component, traces anew). A
+        code (`code_stamp`: pamjax's source files and those of every class and function in `args`, by their contents
+        — an edited model, pamjax's own in an editable install or a user's component, traces anew). A
         canonical description (`describe(args, values=False)`), not a `repr`: equinox's pretty-printer cost ~50 ms
         per call. None where some code in `args` has no source file (a class defined in a notebook or at the
         prompt): such a program is compiled in this process only."""
