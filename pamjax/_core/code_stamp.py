@@ -64,9 +64,10 @@ _STAMPS = {}  # module name → its stamp (once per process: a file changed mid-
 
 
 def _module_stamp(name):
-    """(name, digest of its source file) of module `name`; (name,) for a module built into Python or not loaded
-    under that name (a compiled type's nominal module); None for a loaded one without a source file (`__main__` at
-    the prompt or in a notebook, a module made at run time): its code cannot be told apart."""
+    """(name, digest of its source file) of module `name` (size and time of change for a compiled extension);
+    (name,) for a module built into Python or not loaded under that name (a compiled type's nominal module); None
+    for a loaded one without a source file (`__main__` at the prompt or in a notebook, a module made at run time):
+    its code cannot be told apart."""
     if name not in _STAMPS:
         module = sys.modules.get(name)
         path = getattr(module, "__file__", None)
@@ -76,7 +77,11 @@ def _module_stamp(name):
             stamp = None
         else:
             try:
-                stamp = (name, _digest(pathlib.Path(path).read_bytes()))
+                if str(path).endswith(".py"):
+                    stamp = (name, _digest(pathlib.Path(path).read_bytes()))
+                else:  # a compiled extension (jaxlib's is ~100 MB: not read): its size and time of change
+                    st = os.stat(path)
+                    stamp = (name, st.st_size, st.st_mtime_ns)
             except OSError:
                 stamp = None
         _STAMPS[name] = stamp
