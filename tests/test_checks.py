@@ -116,7 +116,7 @@ def test_gradients_pass_through_the_checks(system):
 
 @pytest.mark.parametrize("value", [9.6, 3, [1.0, 2.0], [1, 2], (0.5,), [[1.0], [2.0]], [1, 2.5], np.arange(3.0),
                                    np.float32(2.0), np.int64(4)])
-def test_component_converters_make_jnp_asarrays_without_compiling(value):
+def test_component_converters_make_jnp_asarrays_without_compiling(value, monkeypatch):
     """`as_scalar`/`as_array`/`as_table` (every component's field converter): for host numbers, lists and NumPy
     arrays the same array as `jnp.asarray` (values, dtype, weak type, shape), made on the host: `jnp.asarray`
     compiles a small program per shape and dtype (~50 ms the first time), in every command's set-up."""
@@ -125,8 +125,14 @@ def test_component_converters_make_jnp_asarrays_without_compiling(value):
 
     expected = jnp.asarray(value)
     convert = as_scalar if np.ndim(value) == 0 else as_table if np.ndim(value) == 1 else as_array
+
+    def compiling(*args, **kwargs):  # the program of an earlier call may be cached: the route itself is checked
+        raise AssertionError("jnp.asarray of a host value (it compiles a program per shape and dtype)")
+
+    monkeypatch.setattr(jnp, "asarray", compiling)
     with pamjax.runtime.CompileStats() as stats:
         got = convert(value)
+    monkeypatch.undo()
     assert stats.count["compile"] == 0 and stats.count["trace"] == 0, stats.summary()
     assert isinstance(got, jax.Array)
     assert (got.dtype, got.weak_type, got.shape) == (expected.dtype, expected.weak_type, expected.shape)
