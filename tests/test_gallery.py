@@ -176,12 +176,16 @@ def test_docs_check_command_fails_on_a_stale_page(tmp_path):
 
 
 # --- the scripts ---------------------------------------------------------------------------------------------------
+# Every script runs once per session: in the installed wheel's `pamjax reproduce --quick` (the last section), whose
+# outputs the per-script tests read; running each script in this process as well cost the module ~45 s of a 2-core
+# CI run for the same numbers. The quick scripts (FAST) also run in this process, which checks the record a script
+# returns against the JSON file it writes (the wheel's run only leaves the file).
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=() if n in FAST else pytest.mark.slow) for n in SCRIPTS])
-def test_script_runs_quick_and_gives_the_statuses_the_docs_show(name, tmp_path):
-    record = toolkit.run_script(toolkit.load(name), tmp_path, quick=True)
-    assert json.loads((tmp_path / name / f"{name}.json").read_text())["numbers"] == json.loads(
-        json.dumps(record["numbers"]))
+
+def _check_record(name, record, folder):
+    """`record` (a script's `<name>.json`, written into `folder`) computes every catalogue entry of the script, with
+    finite values, the statuses and holding checks `docs/papers.md` shows, and the figures its entries name."""
+    assert record["script"] == name and record["quick"] is True
     mine = catalogue.verdicts_of({name: record}, scripts=[name])
     documented = catalogue.verdicts_of(_documented()["scripts"], scripts=[name])
     assert mine, f"{name} computes no catalogue entry"
@@ -192,7 +196,24 @@ def test_script_runs_quick_and_gives_the_statuses_the_docs_show(name, tmp_path):
                                     f"{d.holds}; regenerate it (python -m pamjax.gallery.docs --run) if the change is "
                                     "meant")
         if v.entry.figure:
-            assert (tmp_path / name / v.entry.figure).stat().st_size > 10_000, v.entry.figure
+            assert (folder / v.entry.figure).stat().st_size > 10_000, v.entry.figure
+
+
+@pytest.mark.parametrize("name", sorted(FAST))
+def test_script_runs_in_process_and_writes_the_record_it_returns(name, tmp_path):
+    record = toolkit.run_script(toolkit.load(name), tmp_path, quick=True)
+    written = json.loads((tmp_path / name / f"{name}.json").read_text())
+    assert written == json.loads(json.dumps(record))
+    _check_record(name, written, tmp_path / name)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", SCRIPTS)
+def test_script_runs_quick_and_gives_the_statuses_the_docs_show(name, installed_wheel_run):
+    folder = installed_wheel_run["papers"] / name
+    record = json.loads((folder / f"{name}.json").read_text())
+    _check_record(name, record, folder)
+    assert installed_wheel_run["run"]["scripts"][name]["numbers"] == record["numbers"]
 
 
 def test_reproduce_command_writes_the_index_and_run(tmp_path, capsys):
@@ -220,9 +241,10 @@ def test_a_verdict_is_a_dataclass_of_its_entry():
 # procedures, bench recordings). The environment reuses this interpreter's installed dependencies (a `.pth` line to
 # its site-packages: no download of JAX) and installs the wheel with `--no-deps`; building the wheel fetches
 # hatchling (network). What is checked: the wheel's contents (`pyproject.toml`'s build targets) and `pamjax.gallery`
-# with `pamjax/data` run from them. Last in this module: its `pamjax reproduce` runs the scripts above again and, in
-# the same xdist worker after them, finds their compiled programs in the session's persistent cache (measured alone
-# on the 2-core CPU: 103 s with an empty cache, 59 s after the tests above).
+# with `pamjax/data` run from them. Its run is the session's one run of every gallery script: the per-script tests
+# above read its outputs (the fixture is built by the first of them, whichever runs first; ~85 s alone on the
+# 2-core CPU with an empty cache). The environment has no pip of its own: this interpreter's pip installs into it
+# (`pip --python`), which spares `ensurepip` (~3 s).
 
 
 def _clean_env(home):
@@ -231,21 +253,21 @@ def _clean_env(home):
     return env
 
 
-@pytest.mark.slow
-def test_reproduce_runs_from_an_installed_wheel(tmp_path):
+@pytest.fixture(scope="module")
+def installed_wheel_run(tmp_path_factory):
+    """Build the wheel, install it in a fresh virtual environment outside the checkout and run `pamjax reproduce
+    --quick` there, once per session: {"wheel": its file names, "where": pamjax's and the bench's folders as the
+    environment imports them, "papers": the run's output folder, "run": its run.json}."""
+    tmp_path = tmp_path_factory.mktemp("wheel")
     wheels = tmp_path / "wheels"
     build = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--quiet", "-w", str(wheels), str(ROOT)],
                            capture_output=True, text=True, timeout=600)
     assert build.returncode == 0, build.stdout + build.stderr
     [wheel] = wheels.glob("pamjax-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
-    for needed in ("pamjax/gallery/scripts/p000_01_force_laws.py", "pamjax/gallery/procedures/regulator.py",
-                   "pamjax/data/hybrid-reference-bench/E4.npz", "pamjax/data/hybrid-reference-bench/README.md",
-                   "pamjax/data/DMSP-20-300_force_map_long.csv"):
-        assert needed in names, needed
 
     env_dir = tmp_path / "env"
-    venv.EnvBuilder(with_pip=True).create(env_dir)
+    venv.EnvBuilder(with_pip=False).create(env_dir)  # installed into by this interpreter's pip (`--python`)
     python = env_dir / "bin" / "python"
     site = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
                           capture_output=True, text=True, check=True).stdout.strip()
@@ -254,17 +276,33 @@ def test_reproduce_runs_from_an_installed_wheel(tmp_path):
     work = tmp_path / "work"  # outside the checkout: nothing of it on the path
     work.mkdir()
     env = _clean_env(tmp_path)
-    install = subprocess.run([str(python), "-m", "pip", "install", "--no-deps", "--no-index", "--quiet", str(wheel)],
+    install = subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "--no-deps",
+                              "--no-index", "--quiet", str(wheel)],
                              capture_output=True, text=True, cwd=work, env=env, timeout=300)
     assert install.returncode == 0, install.stdout + install.stderr
     where = subprocess.run([str(python), "-c", "import pamjax, pamjax.gallery.toolkit as t; "
                             "print(pamjax.__file__); print(t.bench_folder())"],
                            capture_output=True, text=True, cwd=work, env=env, check=True).stdout.split()
-    assert all(w.startswith(str(env_dir)) for w in where), where  # the wheel's files, not the checkout's
 
     run = subprocess.run([str(env_dir / "bin" / "pamjax"), "reproduce", "--quick", "--out", "papers"],
                          capture_output=True, text=True, cwd=work, env=env, timeout=900)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
-    index = (work / "papers" / "index.md").read_text()
+    papers = work / "papers"
+    return dict(wheel=names, where=where, env=env_dir, papers=papers,
+                run=json.loads((papers / "run.json").read_text()))
+
+
+@pytest.mark.slow
+def test_reproduce_runs_from_an_installed_wheel(installed_wheel_run):
+    wheel_run = installed_wheel_run
+    for needed in ("pamjax/gallery/scripts/p000_01_force_laws.py", "pamjax/gallery/procedures/regulator.py",
+                   "pamjax/data/hybrid-reference-bench/E4.npz", "pamjax/data/hybrid-reference-bench/README.md",
+                   "pamjax/data/DMSP-20-300_force_map_long.csv"):
+        assert needed in wheel_run["wheel"], needed
+    env_dir = str(wheel_run["env"])
+    assert all(w.startswith(env_dir) for w in wheel_run["where"]), wheel_run["where"]  # the wheel's, not the checkout's
+    papers = wheel_run["papers"]
+    index = (papers / "index.md").read_text()
     assert "**number missing**" not in index and "**not run**" not in index
-    assert len(list((work / "papers").glob("p0*/*.png"))) >= 15
+    assert wheel_run["run"]["state"] == "complete" and sorted(wheel_run["run"]["scripts"]) == sorted(SCRIPTS)
+    assert len(list(papers.glob("p0*/*.png"))) >= 15
