@@ -4,6 +4,7 @@ README's `pip install -e`) keeps its version through every edit, and a user's ow
 holds pamjax's source files and the source file of every class and function in the program's arguments, by their
 contents; where a class has no source file (defined at the prompt or in a notebook), no key."""
 
+import functools
 import os
 import pathlib
 import sys
@@ -94,25 +95,21 @@ def _digest(data):
     return hashlib.sha256(data).hexdigest()[:16]
 
 
+@functools.cache  # once per process
 def _package_stamp():
     """A digest of pamjax's own source files (their paths in the package and their contents: ~170 files, ~10 ms once
     per process), so that an edited checkout (the README's `pip install -e`) traces anew although its version stays
     the same, while the same code installed elsewhere (a wheel, a reinstall) finds the programs it traced."""
-    if "package" not in _PACKAGE:
-        import hashlib
+    import hashlib
 
-        root = pathlib.Path(__file__).resolve().parents[1]
-        digest = hashlib.sha256()
-        for folder, dirs, files in os.walk(root):
-            dirs[:] = sorted(d for d in dirs if d != "__pycache__")
-            for f in sorted(files):
-                if f.endswith(".py"):
-                    path = os.path.join(folder, f)
-                    digest.update(os.path.relpath(path, root).encode() + b"\0")
-                    with open(path, "rb") as fh:
-                        digest.update(fh.read())
-        _PACKAGE["package"] = digest.hexdigest()[:16]
-    return _PACKAGE["package"]
-
-
-_PACKAGE = {}  # "package" → `_package_stamp()` (once per process)
+    root = pathlib.Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for folder, dirs, files in os.walk(root):
+        dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+        for f in sorted(files):
+            if f.endswith(".py"):
+                path = os.path.join(folder, f)
+                digest.update(os.path.relpath(path, root).encode() + b"\0")
+                with open(path, "rb") as fh:
+                    digest.update(fh.read())
+    return digest.hexdigest()[:16]

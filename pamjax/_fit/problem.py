@@ -79,6 +79,7 @@ class Problem:
         self.space, self.exps = space, exps
         self.mask = np.concatenate([used & ident for e in exps for _, _, _, used, ident in e.layout()])
         self.seconds = {"residuals": [], "jacobian": []}  # wall time of every call, the first with compilation
+        self.preload_s = 0.0  # wall time of `preload`
 
     def _timed(self, kind, fn, *args):
         t = time.perf_counter()
@@ -123,7 +124,6 @@ class Problem:
         so a thread importing optimistix meanwhile (`fit`) goes on. `preload_s`: its wall time (0 if nothing was
         loaded: no cache)."""
         programs = program_cache()
-        self.preload_s = 0.0
         if programs is None:
             return
         t0 = time.perf_counter()
