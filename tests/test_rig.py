@@ -323,6 +323,20 @@ def test_a_failing_stage_waits_for_the_background_compilation(rig, monkeypatch):
     assert threads and not threads[0].is_alive()
 
 
+def test_the_staged_start_holds_the_position_offset_for_the_joint_fit(rig):
+    # From the presets no model run rests on a stop, so the stages would wander along the offset's near-null
+    # direction (an unseen rig: -9.3 mm for +0.06): they hold it at its start value; the joint problem fits it.
+    bench = pj.bench.load_bench(rig, _plant(), nuisance=["delay", "position_offset"], position_offset=2e-5)
+    assert "sensors[rig].position_offset" in bench.free
+    staged = pj.staged_start(bench.model, bench.experiments, bench.free, max_steps=2, progress=False,
+                             background_compile=False)
+    assert [name for name, *_ in staged.stages] == ["1", "2"]
+    staged_paths = [p for _, paths, _, _ in staged.stages for p in paths]
+    assert "sensors[rig].position_offset" not in staged_paths
+    assert {"sensors[rig].delay", "plant.friction.coulomb_force"} <= set(staged_paths)
+    assert float(staged.model.sensors["rig"].position_offset) == 2e-5
+
+
 @pytest.mark.parametrize("level_mm, freed", [(0.1, True), (-0.25, True), (0.7, False)])
 def test_the_position_offset_is_freed_only_where_a_run_rests_on_a_stroke_limit(tmp_path, level_mm, freed):
     # A payload still within 0.3 mm of a stroke limit rests on it (the offset shows there: freed); one 0.7 mm from it
