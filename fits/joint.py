@@ -14,7 +14,8 @@ valve paths, v0, v1, a0…a4, k0, k1, F_c, C_f; k2 held: only k0/k2 and k1/k2 ar
 the tank tests (E1, E2) and the muscle runs (E3, E4), at the recordings' own rate unless `--rate` decimates them
 (recorded samples, no filter). `--nuisance` fits a real rig's nuisances with them: the pressure sensor's offset and
 gain and the acquisition delay (shared), each run's supply pressure, and the start state of runs whose meta.json
-`init` is "unknown" (logged mid-way); the position sensor's offset is held at `--position-offset` (default 0).
+`init` is "unknown" (logged mid-way); the position sensor's offset is held at `--position-offset` (default 0), and
+the pressure sensor's gain at `--pressure-gain` where given (a calibration: held).
 
 Writes `OUT/joint.json`: `params` and `std_err` by the bench's names (SI units), `status`, `message`, `rmse`
 (every experiment's residual RMSE of `p` [Pa] and `x` [m] at the recordings' rate), the noise levels, the residual
@@ -67,6 +68,10 @@ def parse_args(argv=None):
     ap.add_argument("--position-offset", type=float, default=0.0, metavar="M",
                     help="the position sensor's calibrated offset [m] (what it reads at x = 0); held in the fit (a "
                          "shift of the position origin is absorbed by the force and volume laws: docs/fitting.md)")
+    ap.add_argument("--pressure-gain", type=float, default=None, metavar="G",
+                    help="the pressure sensor's calibrated gain (multiplies the gauge pressure); held in the fit "
+                         "(with --nuisance, the other nuisances are freed; name pressure_gain to fit it from G). With "
+                         "free supplies the runs fix the gain to ~0.3 %% only: docs/fitting.md")
     ap.add_argument("--atmosphere", type=float, default=None, metavar="PA",
                     help="ambient pressure [Pa abs] that gauge readings (barg, kPa gauge) are referred to (default: "
                          "meta.json's atmosphere_Pa, else 101325)")
@@ -122,7 +127,8 @@ def _clean(out, created):
 def run(args, data, out):
     model = pj.presets.mas10_system(valve="pwm", friction="karnopp")  # datasheet / paper values
     bench = pj.bench.load_bench(data, model, rate=args.rate, nuisance=_nuisance_arg(args.nuisance),
-                                position_offset=args.position_offset, atmosphere=args.atmosphere)
+                                position_offset=args.position_offset, atmosphere=args.atmosphere,
+                                pressure_gain=args.pressure_gain)
     out.mkdir(parents=True, exist_ok=True)  # after the data are read: a mistake there leaves no folder behind
     probe = out / ".joint-write-test"
     probe.write_text("")  # the results can be written: checked before minutes of fitting
@@ -158,6 +164,7 @@ def run(args, data, out):
     full = bench if args.rate is None else pj.bench.load_bench(data, model, rate=None,
                                                                 nuisance=_nuisance_arg(args.nuisance),
                                                                 position_offset=args.position_offset,
+                                                                pressure_gain=args.pressure_gain,
                                                                 atmosphere=args.atmosphere)
     channel_errors = res.channel_errors if args.rate is None else pj.evaluate(res.model, full.experiments)
     rmse = {name: {"p" if c == "pressure" else "x": float(st["rmse"]) for c, st in chans.items()}
@@ -177,7 +184,7 @@ def run(args, data, out):
                      fit_s=r.fit_s, compile_s=r.compile_s) for name, paths, exps, r in stages],
         joint_precompile=None if staged is None else dict(wall_s=staged.precompile_s, waited_s=staged.waited_s),
     )
-    if bench.nuisance or args.position_offset:
+    if bench.nuisance or args.position_offset or bench.calibrated:
         summary["nuisance"] = pj.bench.bench_nuisance(res, bench)
     (out / "joint.json").write_text(json.dumps(summary, indent=1))
     report(res, values, errors, summary, over_noise)

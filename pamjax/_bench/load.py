@@ -80,7 +80,8 @@ class Bench:
     (channel → standard deviation used as the residual scale), `skipped` (experiment → reason), `meta` (the parsed
     meta.json), `directory`, `rate` (None: as recorded); `model` (the start model of the fit: the plant, or a
     `pamjax.Rig` holding it with the nuisances' start values), `nuisance` (the nuisance paths in `free`), `notes`
-    (what the loader found: commands checked, runs logged mid-way, start values estimated)."""
+    (what the loader found: commands checked, runs logged mid-way, start values estimated), `calibrated` (the
+    sensors' calibrations given to `load_bench`: {"pressure_gain": value})."""
 
     experiments: list
     free: list
@@ -94,6 +95,7 @@ class Bench:
     nuisance: list = dataclasses.field(default_factory=list)
     notes: list = dataclasses.field(default_factory=list)
     unknown_starts: list = dataclasses.field(default_factory=list)
+    calibrated: dict = dataclasses.field(default_factory=dict)
 
 
 def _free_paths(keys):
@@ -162,7 +164,7 @@ def _start_estimate(rec, offset, window=0.02):
 def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: RealScalarLike | None = None,
                kinds: Sequence[str] = FITTED_KINDS, fitted_keys: Sequence[str] | None = None, substeps: int = 16,
                nuisance: bool | Sequence[str] = False, atmosphere: RealScalarLike | None = None,
-               position_offset: float | int = 0.0) -> "Bench":
+               position_offset: float | int = 0.0, pressure_gain: float | int | None = None) -> "Bench":
     """Experiments of a bench directory for `pamjax.fit(bench.model, bench.experiments, bench.free)`.
 
     **Arguments:**
@@ -184,6 +186,12 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
       `pamjax.Rig`.
     - `position_offset`: the position sensor's offset [m] as calibrated (what it reads at x = 0; default 0), held
       unless "position_offset" is freed.
+    - `pressure_gain`: the pressure sensor's gain as calibrated (a two-point calibration, a reference gauge: what
+      multiplies the gauge pressure), or None. Given, it is held (`nuisance=True` then frees the other nuisances)
+      unless "pressure_gain" is named in `nuisance`, where it is the start value. Worth giving: with every run's
+      supply pressure free, the recordings fix the gain only through the flow laws' absolute pressures, to ~0.3-0.4
+      % (one standard error on realistic1-like rigs), and each supply and F_max follow its error
+      (benchmarks/RESULTS.md, identify).
     - `atmosphere`: the ambient pressure [Pa abs] that gauge readings (`barg`, `kPa gauge`) are referred to;
       default meta.json's `atmosphere_Pa`, else the model's atmospheric pressure.
 
@@ -198,6 +206,13 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
         raise PamjaxInputError(f"{where}: no parameters to fit: meta.json has no fitted_keys and none were given")
     free = _free_paths(keys)
     names = _nuisance_names(nuisance)
+    if pressure_gain is not None:
+        if not (isinstance(pressure_gain, (int, float)) and not isinstance(pressure_gain, bool) and
+                np.isfinite(pressure_gain) and PRESSURE_GAIN_RANGE[0] <= pressure_gain <= PRESSURE_GAIN_RANGE[1]):
+            raise PamjaxInputError(f"pressure_gain must be the pressure sensor's calibrated gain, a number in "
+                                   f"{list(PRESSURE_GAIN_RANGE)} (1.0: reads true), got {pressure_gain!r}")
+        if nuisance is True:  # calibrated: held, the other nuisances freed
+            names.discard("pressure_gain")
     unknown_kinds = [k for k in kinds if k not in FITTED_KINDS]
     if unknown_kinds:
         raise PamjaxInputError(f"kinds {unknown_kinds} are not experiment kinds pamjax fits; valid: "
@@ -264,12 +279,18 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
             abs(position_offset) < 0.1):
         raise PamjaxInputError(f"position_offset must be the position sensor's calibrated offset in m (|x| < 0.1 m), "
                                f"got {position_offset!r}")
-    if names or position_offset:
-        _with_nuisance(bench, specs, names, p_atm, float(position_offset))
+    if names or position_offset or pressure_gain is not None:
+        _with_nuisance(bench, specs, names, p_atm, float(position_offset), pressure_gain, by_default=nuisance is True)
     return bench
 
 
-def _with_nuisance(bench, specs, names, p_atm, position_offset):
+# A calibrated gain of a pressure sensor lies within ±20 % of 1: a transducer's gain error is a fraction of a percent
+# to a few percent (realistic1's rig and the unseen ones: ±1 %), and a factor outside is a unit or scaling mistake
+# (psi taken for bar: 0.069; bar for psi: 14.5), refused.
+PRESSURE_GAIN_RANGE = (0.8, 1.2)
+
+
+def _with_nuisance(bench, specs, names, p_atm, position_offset, pressure_gain=None, by_default=False):
     """`bench` with its model a `Rig` (start values from the data: no solve, nothing of the truth) and the nuisance
     paths appended to `free`."""
     plant = bench.model
@@ -286,7 +307,12 @@ def _with_nuisance(bench, specs, names, p_atm, position_offset):
             rest.append(rec["pressure"][_rest_samples(rec, signal, valve, period)] - p_atm)
     rest = np.concatenate(rest) if rest else np.zeros(0)
     offset = float(np.median(rest)) if rest.size >= 3 else 0.0
-    sensors = Sensors(pressure_offset=offset if "pressure_offset" in names else 0.0, position_offset=position_offset)
+    sensors = Sensors(pressure_offset=offset if "pressure_offset" in names else 0.0, position_offset=position_offset,
+                      pressure_gain=1.0 if pressure_gain is None else float(pressure_gain))
+    if pressure_gain is not None:
+        bench.calibrated["pressure_gain"] = float(pressure_gain)
+        bench.notes.append(f"the pressure sensor's gain: {float(pressure_gain):.6g} as calibrated, "
+                           + ("its start value" if "pressure_gain" in names else "held"))
     levels = {name: _rest_level_at_stop(rec, plant, bench.noise) for name, kind, _, rec, _ in specs
               if kind in MUSCLE_KINDS}
     stops = [name for name, level in levels.items() if level is not None and abs(level) <= STOP_LEVEL]
@@ -300,7 +326,7 @@ def _with_nuisance(bench, specs, names, p_atm, position_offset):
     if stops and "position_offset" in names:
         bench.notes.append(f"{', '.join(stops)}: the payload rests on a stroke limit of known position: the position "
                            "sensor's offset is fitted")
-    elif stops and names == set(DEFAULT_BENCH_NUISANCES):  # nuisance=True: free it where the data determine it
+    elif stops and by_default:  # nuisance=True: free it where the data determine it
         names = names | {"position_offset"}
         bench.notes.append(f"{', '.join(stops)}: the payload rests on a stroke limit of known position, which fixes "
                            "the position sensor's offset: fitted")
@@ -395,6 +421,7 @@ def bench_nuisance(result: FitResult, bench: "Bench") -> dict:
             out[key] = float(getattr(base, field))
             held[key] = ("not identifiable from a rig's runs (a shift of the position origin is absorbed exactly by "
                          "F_max, k0 and v0); held at the calibration given" if field == "position_offset" else
+                         "as calibrated (load_bench's pressure_gain, --pressure-gain)" if field in bench.calibrated else
                          "not fitted (nuisance not freed)")
     supply, supply_se, start, start_se = {}, {}, {}, {}
     units = {"pressure": "pressure_Pa", "position": "position_m", "velocity": "velocity_m_s"}

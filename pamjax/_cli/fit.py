@@ -103,7 +103,8 @@ def _bench(table, model, root):
         pathlib.Path(root) / table["dir"], model, rate=table.get("rate"),
         kinds=tuple(table.get("kinds", pj.bench.FITTED_KINDS)), fitted_keys=table.get("fitted_keys"),
         substeps=table.get("substeps", 16), nuisance=table.get("nuisance", False),
-        position_offset=table.get("position_offset", 0.0), atmosphere=table.get("atmosphere"))
+        position_offset=table.get("position_offset", 0.0), atmosphere=table.get("atmosphere"),
+        pressure_gain=table.get("pressure_gain"))
 
 
 def check_free(model, free, where="[fit] free"):
@@ -338,12 +339,12 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None, 
         summary = dict(data=str(bench.directory), params=values, std_err=errors, status=res.status,
                        message=res.message, rmse=pj.bench.bench_rmse(res), noise=bench.noise, mismatch=res.mismatch,
                        diagnosis=res.diagnosis, notes=bench.notes)
-        if bench.nuisance:
+        if bench.nuisance or bench.calibrated:
             summary["nuisance"] = pj.bench.bench_nuisance(res, bench)
             print("nuisances (the rig's, reported apart from the plant):\n"
                   + pj.bench.nuisance_table(summary["nuisance"]))
         written.append(folder.write_text(BENCH, json.dumps(summary, indent=1) + "\n"))
-    if isinstance(res.model, pj.Rig) and (bench is None or not bench.nuisance):  # a [rig] table's nuisances
+    if isinstance(res.model, pj.Rig) and (bench is None or not (bench.nuisance or bench.calibrated)):  # [rig]
         report = pj.nuisance_report(res)
         lines = [f"  {kind}[{name}].{field}: {v:.6g} ± {se:.3g}" for kind in ("sensors", "runs")
                  for name, fields in report[kind].items() for field, (v, se) in fields.items()]

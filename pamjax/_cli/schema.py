@@ -48,6 +48,7 @@ BENCH = {
     "nuisance": Key("boolean or list of strings", '["delay", "pressure_offset", "supply_pressure"]',
                     "or true: every nuisance the bench determines"),
     "position_offset": Key("number", "0.0", "m"),
+    "pressure_gain": Key("positive number", "1.0", "the pressure sensor's calibrated gain: held"),
     "atmosphere": Key("positive number", "101325.0", "Pa abs"),
 }
 RIG = {
