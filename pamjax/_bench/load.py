@@ -206,13 +206,9 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
         raise PamjaxInputError(f"{where}: no parameters to fit: meta.json has no fitted_keys and none were given")
     free = _free_paths(keys)
     names = _nuisance_names(nuisance)
-    if pressure_gain is not None:
-        if not (isinstance(pressure_gain, (int, float)) and not isinstance(pressure_gain, bool) and
-                np.isfinite(pressure_gain) and PRESSURE_GAIN_RANGE[0] <= pressure_gain <= PRESSURE_GAIN_RANGE[1]):
-            raise PamjaxInputError(f"pressure_gain must be the pressure sensor's calibrated gain, a number in "
-                                   f"{list(PRESSURE_GAIN_RANGE)} (1.0: reads true), got {pressure_gain!r}")
-        if nuisance is True:  # calibrated: held, the other nuisances freed
-            names.discard("pressure_gain")
+    _check_calibrations(position_offset, pressure_gain)
+    if pressure_gain is not None and nuisance is True:  # calibrated: held, the other nuisances freed
+        names.discard("pressure_gain")
     unknown_kinds = [k for k in kinds if k not in FITTED_KINDS]
     if unknown_kinds:
         raise PamjaxInputError(f"kinds {unknown_kinds} are not experiment kinds pamjax fits; valid: "
@@ -275,13 +271,22 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
     if unknown and "start" not in names:
         notes.append(f"{', '.join(unknown)}: start state unknown (meta.json init); fitted as if at rest unless the "
                      "start is freed (nuisance=True / --nuisance)")
+    if names or position_offset or pressure_gain is not None:
+        _with_nuisance(bench, specs, names, p_atm, float(position_offset), pressure_gain, by_default=nuisance is True)
+    return bench
+
+
+def _check_calibrations(position_offset, pressure_gain):
+    """The sensors' calibrations given to `load_bench`, before anything is read: a named error for each mistake."""
     if not (isinstance(position_offset, (int, float)) and np.isfinite(position_offset) and
             abs(position_offset) < 0.1):
         raise PamjaxInputError(f"position_offset must be the position sensor's calibrated offset in m (|x| < 0.1 m), "
                                f"got {position_offset!r}")
-    if names or position_offset or pressure_gain is not None:
-        _with_nuisance(bench, specs, names, p_atm, float(position_offset), pressure_gain, by_default=nuisance is True)
-    return bench
+    if pressure_gain is not None and not (
+            isinstance(pressure_gain, (int, float)) and not isinstance(pressure_gain, bool) and
+            np.isfinite(pressure_gain) and PRESSURE_GAIN_RANGE[0] <= pressure_gain <= PRESSURE_GAIN_RANGE[1]):
+        raise PamjaxInputError(f"pressure_gain must be the pressure sensor's calibrated gain, a number in "
+                               f"{list(PRESSURE_GAIN_RANGE)} (1.0: reads true), got {pressure_gain!r}")
 
 
 # A calibrated gain of a pressure sensor lies within ±20 % of 1: a transducer's gain error is a fraction of a percent
