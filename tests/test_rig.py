@@ -364,6 +364,17 @@ def test_a_calibrated_pressure_gain_is_held_or_is_the_start_of_its_fit(rig, tmp_
     assert setup.bench.calibrated == {"pressure_gain": 1.004} and "sensors[rig].pressure_gain" not in setup.free
 
 
+@pytest.mark.parametrize("gain_se, hint", [(0.0035, True), (0.0005, False)])
+def test_the_nuisance_table_says_what_a_loose_gain_means(gain_se, hint):
+    report = dict(delay_s=1e-3, pressure_offset_Pa=100.0, pressure_gain=1.0, position_offset_m=0.0,
+                  supply_pressure_Pa={"E1": 6.5e5}, start={}, held={"position_offset_m": "held at 0"},
+                  std_err={"delay_s": 1e-6, "pressure_offset_Pa": 30.0, "pressure_gain": gain_se,
+                           "supply_pressure_Pa": {"E1": 2e3}, "start": {}})
+    table = pj.bench.nuisance_table(report)
+    assert ("(± 0.35 %: each supply pressure and F_max follow its error" in table) is hint, table
+    assert ("--pressure-gain" in table) is hint
+
+
 @pytest.mark.parametrize("level_mm, freed, gain", [(0.1, True, None), (-0.25, True, None), (0.7, False, None),
                                                    (0.1, True, 1.003)])
 def test_the_position_offset_is_freed_only_where_a_run_rests_on_a_stroke_limit(tmp_path, level_mm, freed, gain):

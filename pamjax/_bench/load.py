@@ -444,6 +444,11 @@ def bench_nuisance(result: FitResult, bench: "Bench") -> dict:
     return out
 
 
+# Above this relative standard error of the pressure gain the table says what follows from it and how to remove it:
+# 0.2 %, below the 0.28-0.42 % that free supplies leave on realistic1-like rigs (benchmarks/RESULTS.md, identify).
+GAIN_HINT_SE = 2e-3
+
+
 def nuisance_table(nuisance: dict) -> str:
     """Text table of `bench_nuisance`'s report: each nuisance, its value ± standard error (or 'held')."""
     se, rows = nuisance["std_err"], []
@@ -451,6 +456,9 @@ def nuisance_table(nuisance: dict) -> str:
         v = nuisance[key]
         rows.append(f"  {key:<22}{v:>14.6g}  " + (f"± {se[key]:.3g}" if key in se else "held: "
                                                    + nuisance["held"].get(key, "")))
+        if key == "pressure_gain" and se.get(key, 0.0) > GAIN_HINT_SE * abs(v):
+            rows[-1] += (f"  (± {100 * se[key] / abs(v):.2f} %: each supply pressure and F_max follow its error; a "
+                         "calibrated gain removes that: --pressure-gain, [bench] pressure_gain; docs/fitting.md)")
     for run, v in nuisance["supply_pressure_Pa"].items():
         rows.append(f"  {'supply_pressure_Pa':<22}{v:>14.6g}  ± {se['supply_pressure_Pa'][run]:.3g}  ({run})")
     for run, fields in nuisance["start"].items():
