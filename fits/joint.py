@@ -15,7 +15,8 @@ the tank tests (E1, E2) and the muscle runs (E3, E4), at the recordings' own rat
 (recorded samples, no filter). `--nuisance` fits a real rig's nuisances with them: the pressure sensor's offset and
 gain and the acquisition delay (shared), each run's supply pressure, and the start state of runs whose meta.json
 `init` is "unknown" (logged mid-way); the position sensor's offset is held at `--position-offset` (default 0), and
-the pressure sensor's gain at `--pressure-gain` where given (a calibration: held).
+the pressure sensor's gain at `--pressure-gain` where given (a calibration: held; with `--pressure-gain-sd`, its
+uncertainty, fitted with the calibration as one more datum: `pamjax.Measurement`).
 
 Writes `OUT/joint.json`: `params` and `std_err` by the bench's names (SI units), `status`, `message`, `rmse`
 (every experiment's residual RMSE of `p` [Pa] and `x` [m] at the recordings' rate), the noise levels, the residual
@@ -72,6 +73,10 @@ def parse_args(argv=None):
                     help="the pressure sensor's calibrated gain (multiplies the gauge pressure); held in the fit "
                          "(with --nuisance, the other nuisances are freed; name pressure_gain to fit it from G). With "
                          "free supplies the runs fix the gain to ~0.3 %% only: docs/fitting.md")
+    ap.add_argument("--pressure-gain-sd", type=float, default=None, metavar="SD",
+                    help="the calibrated gain's standard uncertainty (absolute: 0.0005 for ±0.05 %%): the gain is "
+                         "then fitted, the calibration weighed against the recordings by its uncertainty "
+                         "(pamjax.Measurement)")
     ap.add_argument("--atmosphere", type=float, default=None, metavar="PA",
                     help="ambient pressure [Pa abs] that gauge readings (barg, kPa gauge) are referred to (default: "
                          "meta.json's atmosphere_Pa, else 101325)")
@@ -128,7 +133,7 @@ def run(args, data, out):
     model = pj.presets.mas10_system(valve="pwm", friction="karnopp")  # datasheet / paper values
     bench = pj.bench.load_bench(data, model, rate=args.rate, nuisance=_nuisance_arg(args.nuisance),
                                 position_offset=args.position_offset, atmosphere=args.atmosphere,
-                                pressure_gain=args.pressure_gain)
+                                pressure_gain=args.pressure_gain, pressure_gain_sd=args.pressure_gain_sd)
     out.mkdir(parents=True, exist_ok=True)  # after the data are read: a mistake there leaves no folder behind
     probe = out / ".joint-write-test"
     probe.write_text("")  # the results can be written: checked before minutes of fitting
@@ -165,8 +170,11 @@ def run(args, data, out):
                                                                 nuisance=_nuisance_arg(args.nuisance),
                                                                 position_offset=args.position_offset,
                                                                 pressure_gain=args.pressure_gain,
+                                                                pressure_gain_sd=args.pressure_gain_sd,
                                                                 atmosphere=args.atmosphere)
+    recorded = {e.name for e in full.experiments if isinstance(e, pj.Experiment)}  # not a calibration's Measurement
     channel_errors = res.channel_errors if args.rate is None else pj.evaluate(res.model, full.experiments)
+    channel_errors = {name: chans for name, chans in channel_errors.items() if name in recorded}
     rmse = {name: {"p" if c == "pressure" else "x": float(st["rmse"]) for c, st in chans.items()}
             for name, chans in channel_errors.items()}
     over_noise = {name: {c: float(st["rmse"]) / full.noise[c] for c, st in chans.items()}
@@ -188,7 +196,7 @@ def run(args, data, out):
         summary["nuisance"] = pj.bench.bench_nuisance(res, bench)
     (out / "joint.json").write_text(json.dumps(summary, indent=1))
     report(res, values, errors, summary, over_noise)
-    plot(out / "joint.png", res.model, full.experiments)
+    plot(out / "joint.png", res.model, [e for e in full.experiments if e.name in recorded])
     print(f"wrote {out / 'joint.json'} and {out / 'joint.png'}")
 
 
@@ -203,6 +211,9 @@ def report(res, values, errors, summary, over_noise):
         print(pj.bench.nuisance_table(summary["nuisance"]))
     for name, chans in over_noise.items():
         print(f"  {name:<10} " + "  ".join(f"{c} RMSE {r:.3f}× noise" for c, r in chans.items()))
+    for w in res.warnings:  # a calibration the recordings contradict (pamjax.Measurement)
+        if w.startswith(pj.bench.CALIBRATION_NAME):
+            print(f"WARNING: {w}")
     if res.mismatch:
         print("WARNING: model mismatch: standard errors understate the uncertainty")
         for hint in res.diagnosis:

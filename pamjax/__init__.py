@@ -81,15 +81,14 @@ from ._solve.simulate import Trajectory as Trajectory, simulate as simulate
 # --- fitting: recordings, experiments, parameters, fit, model files, designs (bench directories: pamjax.bench) ----
 from ._identifiability.design import DesignResult as DesignResult, design_experiment as design_experiment
 from ._identifiability.design_result import PamjaxDesignWarning as PamjaxDesignWarning
-from ._fit.experiment import (
-    AbstractExperiment as AbstractExperiment, Experiment as Experiment, SameSystem as SameSystem,
-    TankFromModel as TankFromModel,
-)
+from ._fit.experiment import (AbstractExperiment as AbstractExperiment, Experiment as Experiment,
+                              SameSystem as SameSystem, TankFromModel as TankFromModel)
 from ._fit.fit import FitResult as FitResult, evaluate as evaluate, fit as fit
 from ._files.model_file import load_model as load_model, save_model as save_model
 from ._fit.multistart import (
     FleetResult as FleetResult, MultistartResult as MultistartResult, fit_fleet as fit_fleet, multistart as multistart,
 )
+from ._fit.measurement import Measurement as Measurement
 from ._fit.parameters import ParameterSpace as ParameterSpace, parameter_paths as parameter_paths
 from ._fit.predictions import predictions as predictions
 from ._identifiability.profile import (

@@ -14,12 +14,15 @@ tests (friction curves, ISO 6358 flow curves, static and loop force maps) are ex
 from ._bench.load import (
     BENCH_NUISANCES as BENCH_NUISANCES,
     BENCH_PARAMETERS as BENCH_PARAMETERS,
+    CALIBRATION_NAME as CALIBRATION_NAME,
     FITTED_KINDS as FITTED_KINDS,
     Bench as Bench,
+    load_bench as load_bench,
+)
+from ._bench.report import (
     bench_nuisance as bench_nuisance,
     bench_rmse as bench_rmse,
     bench_values as bench_values,
-    load_bench as load_bench,
     nuisance_table as nuisance_table,
 )
 from ._fit.static_experiments import (

@@ -80,7 +80,7 @@ def _set(entries):
 FIT_CASES = {
     "top-level key": (_fit_config(append="[solver]\nrtol = 1e-6\n"),
                       r"unknown key\(s\) \['solver'\]; valid keys are "
-                      r"\['bench', 'experiment', 'fit', 'model', 'rig'\]"),
+                      r"\['bench', 'experiment', 'fit', 'measurement', 'model', 'rig'\]"),
     "[model] key": (_fit_config({'preset = "mas10_system"': 'preset = "mas10_system"\nvalve = "pwm"'}),
                     r"\[model\]: unknown key\(s\) \['valve'\]; valid keys are \['file', 'options', 'preset', 'set'\]"),
     "[model] options key": (_fit_config({'valve = "averaged"': 'valves = "averaged"'}),

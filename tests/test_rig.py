@@ -326,8 +326,11 @@ def test_a_failing_stage_waits_for_the_background_compilation(rig, monkeypatch):
 def test_the_staged_start_holds_the_position_offset_for_the_joint_fit(rig):
     # From the presets no model run rests on a stop, so the stages would wander along the offset's near-null
     # direction (an unseen rig: -9.3 mm for +0.06): they hold it at its start value; the joint problem fits it.
-    bench = pj.bench.load_bench(rig, _plant(), nuisance=["delay", "position_offset"], position_offset=2e-5)
+    # A calibrated gain with its uncertainty (a pamjax.Measurement) goes with its parameter: stage 1 (the tank tests).
+    bench = pj.bench.load_bench(rig, _plant(), nuisance=["delay", "position_offset"], position_offset=2e-5,
+                                pressure_gain=1.007, pressure_gain_sd=1e-3)
     assert "sensors[rig].position_offset" in bench.free
+    assert bench.experiments[-1].name == pj.bench.CALIBRATION_NAME
     staged = pj.staged_start(bench.model, bench.experiments, bench.free, max_steps=2, progress=False,
                              background_compile=False)
     assert [name for name, *_ in staged.stages] == ["1", "2"]
@@ -335,6 +338,10 @@ def test_the_staged_start_holds_the_position_offset_for_the_joint_fit(rig):
     assert "sensors[rig].position_offset" not in staged_paths
     assert {"sensors[rig].delay", "plant.friction.coulomb_force"} <= set(staged_paths)
     assert float(staged.model.sensors["rig"].position_offset) == 2e-5
+    (_, paths1, exps1, res1), (_, paths2, exps2, _) = staged.stages
+    assert "sensors[rig].pressure_gain" in paths1 and {"T1", "T2", pj.bench.CALIBRATION_NAME} == set(exps1)
+    assert "sensors[rig].pressure_gain" not in paths2 and pj.bench.CALIBRATION_NAME not in exps2
+    assert set(res1.channel_errors[pj.bench.CALIBRATION_NAME]["value"]) >= {"measured", "sd", "fitted", "z"}
 
 
 def test_a_calibrated_pressure_gain_is_held_or_is_the_start_of_its_fit(rig, tmp_path):
@@ -362,6 +369,50 @@ def test_a_calibrated_pressure_gain_is_held_or_is_the_start_of_its_fit(rig, tmp_
                    f'[bench]\ndir = "{rig}"\nnuisance = true\npressure_gain = 1.004\n')
     setup = load(cfg)
     assert setup.bench.calibrated == {"pressure_gain": 1.004} and "sensors[rig].pressure_gain" not in setup.free
+
+
+def test_a_calibrated_gain_with_its_uncertainty_is_fitted_with_the_calibration_as_a_measurement(rig, tmp_path):
+    bench = pj.bench.load_bench(rig, _plant(), nuisance=True, pressure_gain=1.004, pressure_gain_sd=5e-4)
+    assert "sensors[rig].pressure_gain" in bench.free
+    assert bench.calibrated == {"pressure_gain": 1.004, "pressure_gain_sd": 5e-4}
+    m = bench.experiments[-1]
+    assert isinstance(m, pj.Measurement) and (m.path, m.value, m.sd) == ("sensors[rig].pressure_gain", 1.004, 5e-4)
+    assert [e.name for e in bench.experiments[:-1]] == ["T1", "T2", "M0", "M1"]
+    assert any("1.004 ± 0.0005 as calibrated, fitted with the recordings" in n for n in bench.notes), bench.notes
+    assert pj.ParameterSpace(bench.model, ["sensors[rig].pressure_gain"]).initial_values()[0] == 1.004
+    alone = pj.bench.load_bench(rig, _plant(), pressure_gain=1.004, pressure_gain_sd=5e-4)  # the gain alone freed
+    assert alone.nuisance == ["sensors[rig].pressure_gain"] and alone.experiments[-1].name == m.name
+    with pytest.raises(PamjaxInputError, match="pressure_gain_sd is the uncertainty of a calibrated gain: give "
+                                               "pressure_gain too"):
+        pj.bench.load_bench(rig, _plant(), nuisance=True, pressure_gain_sd=5e-4)
+    for bad in (0.0, -1e-3, 0.5, float("nan"), "5e-4", True):
+        with pytest.raises(PamjaxInputError, match="pressure_gain_sd must be the calibration's standard uncertainty"):
+            pj.bench.load_bench(rig, _plant(), nuisance=True, pressure_gain=1.004, pressure_gain_sd=bad)
+    # the nuisance table says where the fit put the gain against its calibration
+    report = dict(delay_s=1e-3, pressure_offset_Pa=100.0, pressure_gain=1.0052, position_offset_m=0.0,
+                  supply_pressure_Pa={}, start={}, held={}, std_err={"delay_s": 1e-6, "pressure_offset_Pa": 30.0,
+                                                                      "pressure_gain": 4.8e-4},
+                  calibration={"pressure_gain": 1.004, "pressure_gain_sd": 5e-4, "z": 2.4})
+    assert "(calibrated 1.004 ± 0.0005, fitted +2.40 of its uncertainties from it)" in pj.bench.nuisance_table(report)
+    # the pamjax command: [bench] pressure_gain_sd, and a [[measurement]] table of any free parameter
+    from pamjax._cli.fit import load
+
+    cfg = tmp_path / "rig.toml"
+    head = '[model]\npreset = "mas10_system"\noptions = { valve = "pwm", friction = "karnopp" }\n'
+    cfg.write_text(head + f'[bench]\ndir = "{rig}"\nnuisance = true\npressure_gain = 1.004\n'
+                   'pressure_gain_sd = 5e-4\n[[measurement]]\npath = "runs[M0].supply_pressure"\nvalue = 6.45e5\n'
+                   'sd = 1e3\nname = "gauge M0"\n')
+    setup = load(cfg)
+    assert [e.name for e in setup.experiments][-2:] == [pj.bench.CALIBRATION_NAME, "gauge M0"]
+    assert setup.experiments[-1].value == 6.45e5 and "sensors[rig].pressure_gain" in setup.free
+    for body, message in (
+            ('[[measurement]]\npath = "runs[M0].supply_pressure"\nvalue = 6.45e5\n', "needs 'sd'"),
+            ('[[measurement]]\npath = "runs[M9].supply_pressure"\nvalue = 6.45e5\nsd = 1e3\n',
+             r"\[\[measurement\]\] #1: measured runs\[M9\].supply_pressure: the model has no parameter"),
+            ('[[measurement]]\npath = "runs[M0].supply_pressure"\nvalue = 6.45e5\nsd = -1.0\n', "sd")):
+        cfg.write_text(head + f'[bench]\ndir = "{rig}"\nnuisance = true\n' + body)
+        with pytest.raises(PamjaxInputError, match=message):
+            load(cfg)
 
 
 @pytest.mark.parametrize("gain_se, hint", [(0.0035, True), (0.0005, False)])

@@ -19,7 +19,7 @@ driven from meta.json.
 
 `load_bench` turns such a directory into `Experiment`s for `pamjax.fit`, optionally with the rig's nuisances free
 (`nuisance=True`: `pamjax.Rig`); `BENCH_PARAMETERS` maps the bench's parameter names to pamjax parameter paths;
-`bench_values` reads a fit result back in the bench's names.
+`pamjax._bench.report` reads a fit result back in the bench's names.
 """
 
 import dataclasses
@@ -32,8 +32,8 @@ import numpy as np
 from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError
 from .._fit.experiment import Experiment, TankFromModel
-from .._fit.fit import FitResult
-from .._fit.rig import DEFAULT_GROUP, Rig, RunConditions, Sensors, StartState, nuisance_report
+from .._fit.measurement import Measurement
+from .._fit.rig import DEFAULT_GROUP, Rig, RunConditions, Sensors, StartState
 from .._systems.base import AbstractSystem
 from .files import (
     FITTED_KINDS,
@@ -70,7 +70,6 @@ BENCH_PARAMETERS = {
 # calibration (`position_offset=`, default 0) and the plant is identified in the sensor's frame.
 BENCH_NUISANCES = ("pressure_offset", "pressure_gain", "position_offset", "delay", "supply_pressure", "start")
 DEFAULT_BENCH_NUISANCES = ("pressure_offset", "pressure_gain", "delay", "supply_pressure", "start")
-_CHANNEL = {"pressure": "p", "position": "x"}
 
 
 @dataclasses.dataclass
@@ -81,7 +80,8 @@ class Bench:
     meta.json), `directory`, `rate` (None: as recorded); `model` (the start model of the fit: the plant, or a
     `pamjax.Rig` holding it with the nuisances' start values), `nuisance` (the nuisance paths in `free`), `notes`
     (what the loader found: commands checked, runs logged mid-way, start values estimated), `calibrated` (the
-    sensors' calibrations given to `load_bench`: {"pressure_gain": value})."""
+    sensors' calibrations given to `load_bench`: {"pressure_gain": value, "pressure_gain_sd": its uncertainty where
+    given}). A calibrated gain with an uncertainty adds its `pamjax.Measurement` as the last of `experiments`."""
 
     experiments: list
     free: list
@@ -164,7 +164,8 @@ def _start_estimate(rec, offset, window=0.02):
 def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: RealScalarLike | None = None,
                kinds: Sequence[str] = FITTED_KINDS, fitted_keys: Sequence[str] | None = None, substeps: int = 16,
                nuisance: bool | Sequence[str] = False, atmosphere: RealScalarLike | None = None,
-               position_offset: float | int = 0.0, pressure_gain: float | int | None = None) -> "Bench":
+               position_offset: float | int = 0.0, pressure_gain: float | int | None = None,
+               pressure_gain_sd: float | None = None) -> "Bench":
     """Experiments of a bench directory for `pamjax.fit(bench.model, bench.experiments, bench.free)`.
 
     **Arguments:**
@@ -192,6 +193,10 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
       supply pressure free, the recordings fix the gain only through the flow laws' absolute pressures, to ~0.3-0.4
       % (one standard error on realistic1-like rigs), and each supply and F_max follow its error
       (benchmarks/RESULTS.md, identify).
+    - `pressure_gain_sd`: the calibration's standard uncertainty (absolute: 0.0005 for ±0.05 %), or None. Given,
+      the gain is fitted with the recordings and the calibration enters the fit as one more datum, a
+      `pamjax.Measurement` appended to `experiments` (residual (gain − pressure_gain)/sd): the fit weighs calibration
+      and recordings by their uncertainties instead of trusting the calibration exactly. Needs `pressure_gain`.
     - `atmosphere`: the ambient pressure [Pa abs] that gauge readings (`barg`, `kPa gauge`) are referred to;
       default meta.json's `atmosphere_Pa`, else the model's atmospheric pressure.
 
@@ -205,10 +210,7 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
     if not keys:
         raise PamjaxInputError(f"{where}: no parameters to fit: meta.json has no fitted_keys and none were given")
     free = _free_paths(keys)
-    names = _nuisance_names(nuisance)
-    _check_calibrations(position_offset, pressure_gain)
-    if pressure_gain is not None and nuisance is True:  # calibrated: held, the other nuisances freed
-        names.discard("pressure_gain")
+    names = _freed(nuisance, position_offset, pressure_gain, pressure_gain_sd)
     unknown_kinds = [k for k in kinds if k not in FITTED_KINDS]
     if unknown_kinds:
         raise PamjaxInputError(f"kinds {unknown_kinds} are not experiment kinds pamjax fits; valid: "
@@ -272,12 +274,33 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
         notes.append(f"{', '.join(unknown)}: start state unknown (meta.json init); fitted as if at rest unless the "
                      "start is freed (nuisance=True / --nuisance)")
     if names or position_offset or pressure_gain is not None:
-        _with_nuisance(bench, specs, names, p_atm, float(position_offset), pressure_gain, by_default=nuisance is True)
+        _with_nuisance(bench, specs, names, p_atm, float(position_offset), pressure_gain, by_default=nuisance is True,
+                       pressure_gain_sd=pressure_gain_sd)
     return bench
 
 
-def _check_calibrations(position_offset, pressure_gain):
+def _freed(nuisance, position_offset, pressure_gain, pressure_gain_sd):
+    """The nuisance names `load_bench` frees, the calibrations checked first: a calibrated gain is held
+    (`nuisance=True` frees the others), a calibrated gain with its uncertainty is fitted (with its measurement)."""
+    names = _nuisance_names(nuisance)
+    _check_calibrations(position_offset, pressure_gain, pressure_gain_sd)
+    if pressure_gain is not None and nuisance is True:
+        names.discard("pressure_gain")
+    if pressure_gain_sd is not None:
+        names.add("pressure_gain")
+    return names
+
+
+def _check_calibrations(position_offset, pressure_gain, pressure_gain_sd=None):
     """The sensors' calibrations given to `load_bench`, before anything is read: a named error for each mistake."""
+    if pressure_gain_sd is not None:
+        if pressure_gain is None:
+            raise PamjaxInputError("pressure_gain_sd is the uncertainty of a calibrated gain: give pressure_gain too")
+        if not (isinstance(pressure_gain_sd, (int, float)) and not isinstance(pressure_gain_sd, bool) and
+                np.isfinite(pressure_gain_sd) and 0 < pressure_gain_sd <= PRESSURE_GAIN_SD_MAX):
+            raise PamjaxInputError(f"pressure_gain_sd must be the calibration's standard uncertainty, a number in "
+                                   f"(0, {PRESSURE_GAIN_SD_MAX}] (absolute: 0.0005 for ±0.05 %), got "
+                                   f"{pressure_gain_sd!r}")
     if not (isinstance(position_offset, (int, float)) and np.isfinite(position_offset) and
             abs(position_offset) < 0.1):
         raise PamjaxInputError(f"position_offset must be the position sensor's calibrated offset in m (|x| < 0.1 m), "
@@ -293,9 +316,13 @@ def _check_calibrations(position_offset, pressure_gain):
 # to a few percent (realistic1's rig and the unseen ones: ±1 %), and a factor outside is a unit or scaling mistake
 # (psi taken for bar: 0.069; bar for psi: 14.5), refused.
 PRESSURE_GAIN_RANGE = (0.8, 1.2)
+# A calibration's standard uncertainty above 5 % says less than the recordings do (they fix the gain to ~0.3-0.4 %
+# with every supply free: benchmarks/RESULTS.md, identify): refused as a likely slip (a per cent for a fraction).
+PRESSURE_GAIN_SD_MAX = 0.05
 
 
-def _with_nuisance(bench, specs, names, p_atm, position_offset, pressure_gain=None, by_default=False):
+def _with_nuisance(bench, specs, names, p_atm, position_offset, pressure_gain=None, by_default=False,
+                   pressure_gain_sd=None):
     """`bench` with its model a `Rig` (start values from the data: no solve, nothing of the truth) and the nuisance
     paths appended to `free`."""
     plant = bench.model
@@ -316,8 +343,14 @@ def _with_nuisance(bench, specs, names, p_atm, position_offset, pressure_gain=No
                       pressure_gain=1.0 if pressure_gain is None else float(pressure_gain))
     if pressure_gain is not None:
         bench.calibrated["pressure_gain"] = float(pressure_gain)
-        bench.notes.append(f"the pressure sensor's gain: {float(pressure_gain):.6g} as calibrated, "
-                           + ("its start value" if "pressure_gain" in names else "held"))
+        if pressure_gain_sd is not None:
+            bench.calibrated["pressure_gain_sd"] = float(pressure_gain_sd)
+            bench.notes.append(f"the pressure sensor's gain: {float(pressure_gain):.6g} ± "
+                               f"{float(pressure_gain_sd):.3g} as calibrated, fitted with the recordings (the "
+                               "calibration a measurement of it)")
+        else:
+            bench.notes.append(f"the pressure sensor's gain: {float(pressure_gain):.6g} as calibrated, "
+                               + ("its start value" if "pressure_gain" in names else "held"))
     levels = {name: _rest_level_at_stop(rec, plant, bench.noise) for name, kind, _, rec, _ in specs
               if kind in MUSCLE_KINDS}
     stops = [name for name, level in levels.items() if level is not None and abs(level) <= STOP_LEVEL]
@@ -361,6 +394,13 @@ def _with_nuisance(bench, specs, names, p_atm, position_offset, pressure_gain=No
     bench.model = Rig(plant, sensors={DEFAULT_GROUP: sensors}, runs=runs)
     bench.free = [f"plant.{p}" for p in bench.free] + free
     bench.nuisance = free
+    gain = f"{group}.pressure_gain"
+    if pressure_gain_sd is not None and gain in free:
+        bench.experiments.append(Measurement(gain, float(pressure_gain), float(pressure_gain_sd),
+                                             name=CALIBRATION_NAME))
+
+
+CALIBRATION_NAME = "calibration: pressure gain"  # the calibrated gain's `Measurement` among a bench's experiments
 
 
 # A muscle run rests near a stroke limit where its recorded position stays flat within STOP_NEAR of the plant's limit
@@ -394,82 +434,3 @@ def _has_supply(valve):
     except PamjaxInputError:
         return False
     return True
-
-
-def bench_values(result: FitResult, keys: Sequence[str]) -> tuple[dict[str, float], dict[str, float]]:
-    """A fit result's values and standard errors by bench name: ({key: value}, {key: std err}) [SI units]. The
-    plant's labels are matched with or without a `Rig`'s `plant.` prefix."""
-    label_index = {label: i for i, label in enumerate(result.labels)}
-    values, errors = {}, {}
-    for k in keys:
-        label = BENCH_PARAMETERS[k][1]
-        i = label_index.get(label, label_index.get(f"plant.{label}"))
-        if i is not None:
-            values[k], errors[k] = float(result.values[i]), float(result.standard_errors[i])
-    return values, errors
-
-
-def bench_nuisance(result: FitResult, bench: "Bench") -> dict:
-    """A fit's nuisances in the bench's terms (SI units): `delay_s`, `pressure_offset_Pa` (added to the gauge
-    pressure), `pressure_gain` (multiplies it), `position_offset_m`, `supply_pressure_Pa` (run → value), `start` (run
-    → pressure_Pa, position_m, velocity_m_s), each fitted one's standard error under `std_err` (same keys), and
-    `held` (those not fitted, with their value and why)."""
-    report = nuisance_report(result)
-    sensors = report["sensors"].get(DEFAULT_GROUP, {})
-    base = bench.model.sensors[DEFAULT_GROUP] if isinstance(bench.model, Rig) else Sensors()
-    out, se, held = {}, {}, {}
-    for field, key in (("delay", "delay_s"), ("pressure_offset", "pressure_offset_Pa"),
-                       ("pressure_gain", "pressure_gain"), ("position_offset", "position_offset_m")):
-        if field in sensors:
-            out[key], se[key] = sensors[field]
-        else:
-            out[key] = float(getattr(base, field))
-            held[key] = ("not identifiable from a rig's runs (a shift of the position origin is absorbed exactly by "
-                         "F_max, k0 and v0); held at the calibration given" if field == "position_offset" else
-                         "as calibrated (load_bench's pressure_gain, --pressure-gain)" if field in bench.calibrated else
-                         "not fitted (nuisance not freed)")
-    supply, supply_se, start, start_se = {}, {}, {}, {}
-    units = {"pressure": "pressure_Pa", "position": "position_m", "velocity": "velocity_m_s"}
-    for run, fields in report["runs"].items():
-        for name, (value, err) in fields.items():
-            if name == "supply_pressure":
-                supply[run], supply_se[run] = value, err
-            elif name.startswith("start."):
-                key = units[name.split(".", 1)[1]]
-                start.setdefault(run, {})[key] = value
-                start_se.setdefault(run, {})[key] = err
-    out.update(supply_pressure_Pa=supply, start=start)
-    se.update(supply_pressure_Pa=supply_se, start=start_se)
-    out["std_err"], out["held"] = se, held
-    return out
-
-
-# Above this relative standard error of the pressure gain the table says what follows from it and how to remove it:
-# 0.2 %, below the 0.28-0.42 % that free supplies leave on realistic1-like rigs (benchmarks/RESULTS.md, identify).
-GAIN_HINT_SE = 2e-3
-
-
-def nuisance_table(nuisance: dict) -> str:
-    """Text table of `bench_nuisance`'s report: each nuisance, its value ± standard error (or 'held')."""
-    se, rows = nuisance["std_err"], []
-    for key in ("delay_s", "pressure_offset_Pa", "pressure_gain", "position_offset_m"):
-        v = nuisance[key]
-        rows.append(f"  {key:<22}{v:>14.6g}  " + (f"± {se[key]:.3g}" if key in se else "held: "
-                                                   + nuisance["held"].get(key, "")))
-        if key == "pressure_gain" and se.get(key, 0.0) > GAIN_HINT_SE * abs(v):
-            rows[-1] += (f"  (± {100 * se[key] / abs(v):.2f} %: each supply pressure and F_max follow its error; a "
-                         "calibrated gain removes that: --pressure-gain, [bench] pressure_gain; docs/fitting.md)")
-    for run, v in nuisance["supply_pressure_Pa"].items():
-        rows.append(f"  {'supply_pressure_Pa':<22}{v:>14.6g}  ± {se['supply_pressure_Pa'][run]:.3g}  ({run})")
-    for run, fields in nuisance["start"].items():
-        for key, v in fields.items():
-            rows.append(f"  {'start ' + key:<22}{v:>14.6g}  ± {se['start'][run][key]:.3g}  ({run})")
-    return "\n".join(rows)
-
-
-def bench_rmse(result: FitResult) -> dict[str, dict[str, float]]:
-    """{experiment: {"p": Pa, "x": m}}: the residual RMSE of every fitted experiment, by the bench's channel names."""
-    out = {}
-    for name, chans in result.channel_errors.items():
-        out[name] = {_CHANNEL.get(c, c): float(st["rmse"]) for c, st in chans.items() if "rmse" in st}
-    return out

@@ -17,6 +17,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._core.errors import PamjaxInputError
+from .._fit.measurement import check_measured_free
 from .._identifiability.profile import PROFILED_STATUSES
 from . import schema
 from .config import build_model, build_signal, check_initial, load_recording, parameter_shape, read_toml
@@ -91,6 +92,11 @@ def build_fit(cfg, model, root):
         raise PamjaxInputError(f"experiment names must be unique, got {names}: give each [[experiment]] a name")
     if "rig" in cfg:
         model, free = _rig(cfg["rig"], cfg.get("experiment", []), model, experiments, free)
+    experiments += build_measurements(cfg.get("measurement", []), model)
+    check_measured_free(model, experiments, free)  # each measured parameter free: named before any data are fitted
+    names = [e.name for e in experiments]
+    if len(set(names)) != len(names):
+        raise PamjaxInputError(f"experiment and measurement names must be unique, got {names}: give each a name")
     options = {k: fit_cfg[k] for k in ("max_steps", "ftol", "xtol", "gtol") if k in fit_cfg}
     staged = bench is not None and cfg["bench"].get("staged", True)  # pamjax.staged_start first (the default)
     return FitSetup(model, experiments, free, options, fit_cfg.get("out"), bench, staged)
@@ -104,7 +110,23 @@ def _bench(table, model, root):
         kinds=tuple(table.get("kinds", pj.bench.FITTED_KINDS)), fitted_keys=table.get("fitted_keys"),
         substeps=table.get("substeps", 16), nuisance=table.get("nuisance", False),
         position_offset=table.get("position_offset", 0.0), atmosphere=table.get("atmosphere"),
-        pressure_gain=table.get("pressure_gain"))
+        pressure_gain=table.get("pressure_gain"), pressure_gain_sd=table.get("pressure_gain_sd"))
+
+
+def build_measurements(tables, model):
+    """`pamjax.Measurement`s of validated [[measurement]] tables (a parameter's independent measurement with its
+    uncertainty: a calibration, a reference gauge), each checked against the fitted model."""
+    import pamjax as pj
+
+    out = []
+    for k, table in enumerate(tables):
+        try:
+            m = pj.Measurement(table["path"], table["value"], table["sd"], name=table.get("name"))
+            m.check(model)
+        except PamjaxInputError as err:
+            raise PamjaxInputError(f"[[measurement]] #{k + 1}: {err}") from None
+        out.append(m)
+    return out
 
 
 def check_free(model, free, where="[fit] free"):
@@ -200,6 +222,8 @@ def _columns(experiments, result=None):
     `result`'s predictions as the model (none without a result: what the figure's process lays out in advance)."""
     columns = []
     for e in experiments:
+        if e.split_time is None:  # no time axis (a parameter's Measurement: in the printed report)
+            continue
         t = np.asarray(e.times)
         split = float(e.split_time) if e.split_time is not None and float(e.split_time) < t[-1] else None
         for c in e.channels:
@@ -289,6 +313,19 @@ def run(args):
             return interrupt_status(err)
 
 
+def print_errors(channel_errors):
+    """Each experiment's channels: RMSE (and validation RMSE) in % of range; a parameter's measurement: measured,
+    fitted, and how many of its uncertainties apart."""
+    for name, chans in channel_errors.items():
+        for c, e in chans.items():
+            if "z" in e:  # a parameter's Measurement
+                print(f"  {name}: measured {e['measured']:.6g} ± {e['sd']:.3g}, fitted {e['fitted']:.6g} "
+                      f"({e['z']:+.2f} uncertainties)")
+                continue
+            val = f", validation {e['validation_rmse_percent']:.3f} %" if "validation_rmse_percent" in e else ""
+            print(f"  {name} {c}: RMSE {e['rmse']:.4g} ({e['rmse_percent']:.3f} % of range){val}")
+
+
 def _fit_and_write(args, folder, model, experiments, free, options, bench=None, staged=False, stage=None):
     import pamjax as pj
 
@@ -319,10 +356,7 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None, 
     print(f"status {res.status}: {res.iterations} iterations, cost {res.initial_cost:.6g} → {res.cost:.6g} "
           f"({res.fit_s:.1f} s after {res.compile_s:.1f} s compilation)")
     print(res.table())
-    for name, chans in res.channel_errors.items():
-        for c, e in chans.items():
-            val = f", validation {e['validation_rmse_percent']:.3f} %" if "validation_rmse_percent" in e else ""
-            print(f"  {name} {c}: RMSE {e['rmse']:.4g} ({e['rmse_percent']:.3f} % of range){val}")
+    print_errors(res.channel_errors)
     for w in res.warnings:
         print("WARNING:", w)
     if res.status == "max_steps":

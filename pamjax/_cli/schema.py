@@ -28,7 +28,7 @@ MODEL = {
     "set": Key("set", '{ "friction.coulomb_force" = 20.0 }', "parameter path = value, in SI units"),
 }
 
-FIT_TABLES = {"model", "fit", "experiment", "bench", "rig"}
+FIT_TABLES = {"model", "fit", "experiment", "bench", "rig", "measurement"}
 FIT = {
     "free": Key("free", '["friction.coulomb_force"]', "parameter paths, or tables { path, transform, bounds, scale }"),
     "max_steps": Key("positive integer", "40"),
@@ -49,7 +49,15 @@ BENCH = {
                     "or true: every nuisance the bench determines"),
     "position_offset": Key("number", "0.0", "m"),
     "pressure_gain": Key("positive number", "1.0", "the pressure sensor's calibrated gain: held"),
+    "pressure_gain_sd": Key("positive number", "0.0005", "the calibration's standard uncertainty: the gain is then "
+                            "fitted with the calibration as a measurement"),
     "atmosphere": Key("positive number", "101325.0", "Pa abs"),
+}
+MEASUREMENT = {  # pamjax.Measurement: one parameter's independent measurement with its uncertainty
+    "path": Key("string", '"sensors[rig].pressure_gain"', "a parameter path of the fitted model"),
+    "value": Key("number", "1.0004", "in the parameter's SI unit"),
+    "sd": Key("positive number", "0.0005", "the measurement's standard uncertainty, same unit"),
+    "name": Key("string", '"gain calibration"'),
 }
 RIG = {
     "sensors": Key("sensors", "{ pressure_gain = 1.0 }", "start values of pamjax.Sensors, or one table per group",
@@ -223,6 +231,14 @@ def validate_fit(cfg, where="config"):
         raise PamjaxInputError("[fit] needs 'free': the list of parameter paths to fit")
     if not 0 <= fit.get("validation_fraction", 0.0) < 1:
         raise PamjaxInputError(f"[fit] validation_fraction must be in [0, 1), got {fit['validation_fraction']}")
+    measurements = cfg.get("measurement", [])
+    if not isinstance(measurements, list):
+        raise PamjaxInputError("measurements are an array of tables: write [[measurement]] (double brackets)")
+    for k, table in enumerate(measurements):
+        here = f"[[measurement]] #{k + 1}"
+        check_table(table, MEASUREMENT, here, required={
+            key: f"{here} needs '{key}' ({MEASUREMENT[key].shown})"
+            for key in ("path", "value", "sd")})
     experiments = cfg.get("experiment", [])
     if not isinstance(experiments, list):
         raise PamjaxInputError("experiments are an array of tables: write [[experiment]] (double brackets)")

@@ -13,11 +13,16 @@ the linearised standard errors understate the uncertainty. `channel_errors` meas
 - `se_inflation` = rmse_over_noise · √((1 + ρ₁)/(1 − ρ₁)), ρ₁ the lag-1 autocorrelation clipped to [0, 0.99]: the
   factor by which an AR(1) error of that size and correlation widens the true uncertainty over the linearised one.
 
+A parameter `Measurement` (`pamjax._fit.measurement`) is one datum, not a noise sample: its entry gives the measured
+and fitted values and z, and takes no part in `mismatch` (its contradictions are named apart).
+
 `mismatch` flags the fit ("model mismatch: standard errors understate the uncertainty") when any channel's
 `se_inflation` exceeds `MISMATCH_THRESHOLD` (1.2: the residuals are then not noise).
 """
 
 import numpy as np
+
+from .measurement import is_measurement, measurement_stats
 
 MISMATCH_THRESHOLD = 1.2  # se_inflation above which the residuals are not noise
 _LAGS = (1, 2, 5, 10, 20)
@@ -60,6 +65,9 @@ def channel_errors(experiments, residuals):
         for c, scale, data, used, ident_all in e.layout():
             r = np.asarray(residuals[k : k + data.size])
             k += data.size
+            if is_measurement(e):  # one datum with its uncertainty: measured, fitted, z (no noise statistics)
+                out[e.name][c] = measurement_stats(e, r[0])
+                continue
             err = r * scale
             ident = used & ident_all
             valid = used & ~ident_all

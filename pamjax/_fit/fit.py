@@ -29,6 +29,7 @@ from .._files.checkpoint import check_checkpoint_path, read_checkpoint, write_ch
 from .._files.fingerprint import check_resume, fingerprint
 from .diagnostics import channel_errors, covariance, identifiability, mismatch
 from .experiment import AbstractExperiment, Experiments
+from .measurement import check_measured_free, contradictions
 from .parameters import Free, PamjaxIdentifiabilityWarning, ParameterSpace
 from .predictions import predictions
 from .problem import Problem
@@ -306,6 +307,7 @@ def fit(
 
         solver, _ = choose_solver(solver, ftol, xtol, gtol, stall_steps, checkpoint, resume)
     space = ParameterSpace(model, free)
+    check_measured_free(model, experiments, free)
     print_ = fingerprint(model, experiments, free, solver)  # start model, free spec, experiments, data (None: default)
     if resume is not None:
         check_resume(resume, print_)  # before any solve: a checkpoint of another problem is refused, naming why
@@ -401,6 +403,7 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
     diagnosis = nuisance_hints(fitted, exps, predicted, labels) if flagged else []
     if flagged:
         msgs.append(note + ("; the residuals point to " + "; ".join(diagnosis) if diagnosis else ""))
+    msgs += contradictions(exps, errors)  # a parameter Measurement more than 3 uncertainties from its fitted value
     res = FitResult(
         labels=labels,
         paths=[e if isinstance(e, str) else {k: (list(v) if isinstance(v, tuple) else v) for k, v in e.items()}

@@ -16,6 +16,9 @@ together. `staged_start` does that, deciding the stages from the structure of th
 
 Where the experiments give no such split (every experiment sees every free parameter), nothing is done.
 
+A parameter `Measurement` (a calibrated gain with its uncertainty) does not decide the stages; it is fitted in every
+stage that frees its parameter, and in the joint problem.
+
 A rig's position-sensor offset (`sensors[...].position_offset`) is held at its start value through the stages and
 fitted in the joint problem only. A shift of the position origin is absorbed by the force and volume laws' polynomials
 in x; only a run resting on a stroke limit fixes it, and from the presets' plant the model's payload does not rest
@@ -41,6 +44,7 @@ import equinox as eqx
 
 from .experiment import AbstractExperiment
 from .fit import FitResult, Progress, fit, precompile
+from .measurement import is_measurement
 from .parameters import Free, join_path, split_path
 
 
@@ -100,6 +104,12 @@ def _joint_only(entry):
     return len(steps) == 3 and steps[0] == "sensors" and steps[2] == "position_offset"
 
 
+def _measuring(measures, model, entries):
+    """The measurements of parameters among the `free` entries `entries`."""
+    paths = {_path(e) for e in entries}
+    return [m for m in measures if m.sees(model) <= paths]
+
+
 class _Background:
     """`precompile` of several problems, in order, in one daemon thread; `wait(i)` blocks until problem i is
     compiled and returns the seconds waited. An error ends the thread without being raised here: the fit of that
@@ -151,6 +161,11 @@ def staged_start(model: eqx.Module, experiments: Sequence[AbstractExperiment], f
     if any(_path(e) is None for e in joint_free):  # an entry this cannot place: no stages, the joint fit as given
         return StagedStart(model, [])
     free = [e for e in joint_free if not _joint_only(e)]  # what the stages fit
+    # A parameter `Measurement` does not decide the stages (it sees one parameter, not a part of the plant): each
+    # stage fits it beside the recordings where it frees the measured parameter
+    joint = experiments  # the joint problem's, in the caller's order (its programs are compiled for that fit)
+    measures = [e for e in experiments if is_measurement(e)]
+    experiments = [e for e in experiments if not is_measurement(e)]
     seen = [_seen(e, model, free) for e in experiments]
     # Stage 1's experiments see part of the plant (a tank test: the valve, no muscle); a rig's nuisances (each run's
     # own conditions, the sensors) do not decide the stages: every experiment sees only its own run's.
@@ -160,12 +175,13 @@ def staged_start(model: eqx.Module, experiments: Sequence[AbstractExperiment], f
     if not partial or not first or len(first) == len(free) or all(not _is_plant(e) for e in first):
         return StagedStart(model, [])
     stages = []
-    exps1 = [experiments[i] for i in partial]
     rest = [e for e in free if e not in first]
+    exps1 = [experiments[i] for i in partial] + _measuring(measures, model, first)
     full = [experiments[i] for i in range(len(experiments)) if i not in partial]
+    full = full + _measuring(measures, model, rest) if full else full
     # Stage 2's programs, then the joint problem's, compile in a second thread while stage 1 fits (their structure
     # does not depend on the values stage 1 finds); each fit waits for its programs rather than compiling them twice.
-    background = _Background(([(model, full, rest)] if full else []) + [(model, experiments, joint_free)]) \
+    background = _Background(([(model, full, rest)] if full else []) + [(model, joint, joint_free)]) \
         if background_compile else None
     waited = 0.0
     try:

@@ -1,0 +1,101 @@
+"""A fit of a bench directory read back in the bench's terms: the plant's values by the bench's names
+(`bench_values`), the rig's nuisances apart from the plant (`bench_nuisance`, `nuisance_table`) and each recording's
+residual RMSE (`bench_rmse`). `pamjax._bench.load` builds the fit these read."""
+
+from collections.abc import Sequence
+
+from .._fit.fit import FitResult
+from .._fit.measurement import is_measurement
+from .._fit.rig import DEFAULT_GROUP, Rig, Sensors, nuisance_report
+from .load import BENCH_PARAMETERS, CALIBRATION_NAME, Bench
+
+_CHANNEL = {"pressure": "p", "position": "x"}
+
+
+def bench_values(result: FitResult, keys: Sequence[str]) -> tuple[dict[str, float], dict[str, float]]:
+    """A fit result's values and standard errors by bench name: ({key: value}, {key: std err}) [SI units]. The
+    plant's labels are matched with or without a `Rig`'s `plant.` prefix."""
+    label_index = {label: i for i, label in enumerate(result.labels)}
+    values, errors = {}, {}
+    for k in keys:
+        label = BENCH_PARAMETERS[k][1]
+        i = label_index.get(label, label_index.get(f"plant.{label}"))
+        if i is not None:
+            values[k], errors[k] = float(result.values[i]), float(result.standard_errors[i])
+    return values, errors
+
+
+def bench_nuisance(result: FitResult, bench: Bench) -> dict:
+    """A fit's nuisances in the bench's terms (SI units): `delay_s`, `pressure_offset_Pa` (added to the gauge
+    pressure), `pressure_gain` (multiplies it), `position_offset_m`, `supply_pressure_Pa` (run → value), `start` (run
+    → pressure_Pa, position_m, velocity_m_s), each fitted one's standard error under `std_err` (same keys), and
+    `held` (those not fitted, with their value and why)."""
+    report = nuisance_report(result)
+    sensors = report["sensors"].get(DEFAULT_GROUP, {})
+    base = bench.model.sensors[DEFAULT_GROUP] if isinstance(bench.model, Rig) else Sensors()
+    out, se, held = {}, {}, {}
+    for field, key in (("delay", "delay_s"), ("pressure_offset", "pressure_offset_Pa"),
+                       ("pressure_gain", "pressure_gain"), ("position_offset", "position_offset_m")):
+        if field in sensors:
+            out[key], se[key] = sensors[field]
+        else:
+            out[key] = float(getattr(base, field))
+            held[key] = ("not identifiable from a rig's runs (a shift of the position origin is absorbed exactly by "
+                         "F_max, k0 and v0); held at the calibration given" if field == "position_offset" else
+                         "as calibrated (load_bench's pressure_gain, --pressure-gain)" if field in bench.calibrated else
+                         "not fitted (nuisance not freed)")
+    supply, supply_se, start, start_se = {}, {}, {}, {}
+    units = {"pressure": "pressure_Pa", "position": "position_m", "velocity": "velocity_m_s"}
+    for run, fields in report["runs"].items():
+        for name, (value, err) in fields.items():
+            if name == "supply_pressure":
+                supply[run], supply_se[run] = value, err
+            elif name.startswith("start."):
+                key = units[name.split(".", 1)[1]]
+                start.setdefault(run, {})[key] = value
+                start_se.setdefault(run, {})[key] = err
+    out.update(supply_pressure_Pa=supply, start=start)
+    se.update(supply_pressure_Pa=supply_se, start=start_se)
+    out["std_err"], out["held"] = se, held
+    if "pressure_gain_sd" in bench.calibrated and "pressure_gain" in se:  # fitted with its calibration
+        z = result.channel_errors.get(CALIBRATION_NAME, {}).get("value", {}).get("z", float("nan"))
+        out["calibration"] = {"pressure_gain": bench.calibrated["pressure_gain"],
+                              "pressure_gain_sd": bench.calibrated["pressure_gain_sd"], "z": z}
+    return out
+
+
+# Above this relative standard error of the pressure gain the table says what follows from it and how to remove it:
+# 0.2 %, below the 0.28-0.42 % that free supplies leave on realistic1-like rigs (benchmarks/RESULTS.md, identify).
+GAIN_HINT_SE = 2e-3
+
+
+def nuisance_table(nuisance: dict) -> str:
+    """Text table of `bench_nuisance`'s report: each nuisance, its value ± standard error (or 'held')."""
+    se, rows = nuisance["std_err"], []
+    for key in ("delay_s", "pressure_offset_Pa", "pressure_gain", "position_offset_m"):
+        v = nuisance[key]
+        rows.append(f"  {key:<22}{v:>14.6g}  " + (f"± {se[key]:.3g}" if key in se else "held: "
+                                                   + nuisance["held"].get(key, "")))
+        calibration = nuisance.get("calibration")
+        if key == "pressure_gain" and calibration is not None:
+            rows[-1] += (f"  (calibrated {calibration['pressure_gain']:.6g} ± {calibration['pressure_gain_sd']:.3g}, "
+                         f"fitted {calibration['z']:+.2f} of its uncertainties from it)")
+        elif key == "pressure_gain" and se.get(key, 0.0) > GAIN_HINT_SE * abs(v):
+            rows[-1] += (f"  (± {100 * se[key] / abs(v):.2f} %: each supply pressure and F_max follow its error; a "
+                         "calibrated gain removes that: --pressure-gain, [bench] pressure_gain; docs/fitting.md)")
+    for run, v in nuisance["supply_pressure_Pa"].items():
+        rows.append(f"  {'supply_pressure_Pa':<22}{v:>14.6g}  ± {se['supply_pressure_Pa'][run]:.3g}  ({run})")
+    for run, fields in nuisance["start"].items():
+        for key, v in fields.items():
+            rows.append(f"  {'start ' + key:<22}{v:>14.6g}  ± {se['start'][run][key]:.3g}  ({run})")
+    return "\n".join(rows)
+
+
+def bench_rmse(result: FitResult) -> dict[str, dict[str, float]]:
+    """{experiment: {"p": Pa, "x": m}}: the residual RMSE of every fitted experiment, by the bench's channel names."""
+    out = {}
+    measured = {e.name for e in (result.experiments or []) if is_measurement(e)} | {CALIBRATION_NAME}
+    for name, chans in result.channel_errors.items():
+        if name not in measured:  # a parameter's measurement is not a recorded channel
+            out[name] = {_CHANNEL.get(c, c): float(st["rmse"]) for c, st in chans.items() if "rmse" in st}
+    return out
