@@ -82,7 +82,8 @@ def nuisance_table(nuisance: dict) -> str:
                          f"fitted {calibration['z']:+.2f} of its uncertainties from it)")
         elif key == "pressure_gain" and se.get(key, 0.0) > GAIN_HINT_SE * abs(v):
             rows[-1] += (f"  (± {100 * se[key] / abs(v):.2f} %: each supply pressure and F_max follow its error; a "
-                         "calibrated gain removes that: --pressure-gain, [bench] pressure_gain; docs/fitting.md)")
+                         "calibrated gain removes that: --pressure-gain (with its uncertainty: --pressure-gain-sd), "
+                         "[bench] pressure_gain; docs/fitting.md)")
     for run, v in nuisance["supply_pressure_Pa"].items():
         rows.append(f"  {'supply_pressure_Pa':<22}{v:>14.6g}  ± {se['supply_pressure_Pa'][run]:.3g}  ({run})")
     for run, fields in nuisance["start"].items():
