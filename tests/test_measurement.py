@@ -82,3 +82,14 @@ def test_bad_measurements_are_named_before_any_solve():
                                                   "which `free` does not free"):
         pj.fit(pj.CoulombViscousFriction(10.0, 100.0), [exp, pj.Measurement("viscous_coefficient", 250.0, 10.0)],
                ["coulomb_force"], progress=False)
+
+
+def test_a_measurement_adds_its_information_to_an_experiment_design():
+    """`design_experiment`'s prior experiments may hold a calibration: its Fisher information about the parameter is
+    (∂F_c/∂θ)²/sd², θ = log F_c (the fit's transform of a positive parameter): F_c²/sd²."""
+    from pamjax._identifiability.design import information
+
+    friction = pj.CoulombViscousFriction(14.0, 250.0)
+    space = pj.ParameterSpace(friction, FREE)
+    info = information(space, np.asarray(space.initial_theta()), [pj.Measurement("coulomb_force", 15.0, 0.5)])
+    np.testing.assert_allclose(info, [[14.0**2 / 0.5**2, 0.0], [0.0, 0.0]], rtol=1e-12, atol=1e-12)
