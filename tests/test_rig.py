@@ -218,6 +218,10 @@ DAMAGE = {
     "unqualified bar": (_csv_edit("T1", lambda h, r: [h.replace("barg", "bar"), *r]), "ABSOLUTE or GAUGE"),
     "NaN": (_csv_edit("T1", lambda h, r: [h, *r[:5], "0.005,0.5,nan,0", *r[6:]]), "NaN/inf at row 5"),
     "unsorted": (_csv_edit("T1", lambda h, r: [h, r[1], r[0], *r[2:]]), "strictly increasing"),
+    "gauge without its uncertainty": (_meta_edit(lambda m: m["experiments"]["T1"].update(supply_Pa=6.3e5)),
+                                      "T1: a supply reading needs supply_Pa .* and supply_sd_Pa"),
+    "gauge in bar": (_meta_edit(lambda m: m["experiments"]["T1"].update(supply_Pa=6.3, supply_sd_Pa=0.01)),
+                     r"T1: supply_Pa = 6.3 is outside \[50000.0, 5000000.0\]"),
 }
 
 
@@ -227,6 +231,25 @@ def test_every_mistake_in_a_bench_folder_is_named_before_any_fit(case, rig, tmp_
     folder = _damaged(rig, tmp_path, edit)
     with pytest.raises(PamjaxInputError, match=message):
         pj.bench.load_bench(folder, _plant(), nuisance=True)
+
+
+def test_supply_readings_of_a_reference_gauge_are_fitted_as_measurements(rig, tmp_path):
+    folder = _damaged(rig, tmp_path, _meta_edit(lambda m: (m["experiments"]["T1"].update(supply_Pa=6.31e5,
+                                                                                         supply_sd_Pa=1e3),
+                                                           m["experiments"]["M0"].update(supply_Pa=6.44e5,
+                                                                                         supply_sd_Pa=2e3))))
+    bench = pj.bench.load_bench(folder, _plant(), nuisance=True)
+    gauges = [e for e in bench.experiments if isinstance(e, pj.Measurement)]
+    assert [(g.name, g.path, g.value, g.sd) for g in gauges] == [
+        ("gauge: T1 supply", "runs[T1].supply_pressure", 6.31e5, 1e3),
+        ("gauge: M0 supply", "runs[M0].supply_pressure", 6.44e5, 2e3)]
+    start = dict(zip(*[pj.ParameterSpace(bench.model, bench.free).labels,
+                       pj.ParameterSpace(bench.model, bench.free).initial_values()]))
+    assert start["runs[T1].supply_pressure"] == 6.31e5 and start["runs[M0].supply_pressure"] == 6.44e5
+    assert any("read by a reference gauge" in n and "T1, M0" in n for n in bench.notes), bench.notes
+    plain = pj.bench.load_bench(folder, _plant())  # supplies not freed: the readings are said to be unused
+    assert not any(isinstance(e, pj.Measurement) for e in plain.experiments)
+    assert any("T1, M0: supply pressures read by a reference gauge" in n and "unused" in n for n in plain.notes)
 
 
 def test_joint_script_answers_a_bad_folder_in_one_line_and_leaves_nothing(rig, tmp_path, capsys):

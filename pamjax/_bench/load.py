@@ -4,7 +4,8 @@
 
 `meta.json` holds `experiments` (name → kind and conditions: `tank_charge` / `tank_discharge` with `V_tank`, `u`,
 `p0`; `muscle_triangle` with `lo`, `hi`, `f_tri`; `muscle_run` (any recorded duty, e.g. a designed experiment);
-`muscle_PI` closed-loop runs; `init` "unknown…" for a run logged from the middle), `noise` (`p_std_Pa`,
+`muscle_PI` closed-loop runs; `init` "unknown…" for a run logged from the middle; `supply_Pa` ± `supply_sd_Pa`, a
+reference gauge's reading of the run's supply pressure [Pa abs]), `noise` (`p_std_Pa`,
 `x_std_m`), `fitted_keys` (the parameters to identify, named as below) and, optionally, `units` (channel → unit, for
 files that carry none: NPZ and MAT) and `atmosphere_Pa` (the ambient pressure gauge readings are referred to; default
 101325 Pa). Simulated benches also list their true `params` and `nuisance`: never read here (a fit starts from the
@@ -31,6 +32,7 @@ import numpy as np
 
 from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError
+from .._core.units import MAX_ABSOLUTE_PA, MIN_ABSOLUTE_PA
 from .._fit.experiment import Experiment, TankFromModel
 from .._fit.measurement import Measurement
 from .._fit.rig import DEFAULT_GROUP, Rig, RunConditions, Sensors, StartState
@@ -270,13 +272,22 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
         raise PamjaxInputError(f"{where}: no experiment of the kinds {list(kinds)}")
     bench = Bench(experiments, free, keys, noise, skipped, meta, directory, None if rate is None else float(rate),
                   model=model, notes=notes, unknown_starts=unknown)
-    if unknown and "start" not in names:
-        notes.append(f"{', '.join(unknown)}: start state unknown (meta.json init); fitted as if at rest unless the "
-                     "start is freed (nuisance=True / --nuisance)")
+    _unfreed_notes(notes, names, unknown, specs, where)
     if names or position_offset or pressure_gain is not None:
         _with_nuisance(bench, specs, names, p_atm, float(position_offset), pressure_gain, by_default=nuisance is True,
                        pressure_gain_sd=pressure_gain_sd)
     return bench
+
+
+def _unfreed_notes(notes, names, unknown, specs, where):
+    """Notes on what the bench holds that the nuisances not freed leave unused: unknown starts, supply readings."""
+    if unknown and "start" not in names:
+        notes.append(f"{', '.join(unknown)}: start state unknown (meta.json init); fitted as if at rest unless the "
+                     "start is freed (nuisance=True / --nuisance)")
+    read = [name for name, _, e, _, _ in specs if _supply_reading(e, f"{where}/meta.json: {name}") is not None]
+    if read and "supply_pressure" not in names:
+        notes.append(f"{', '.join(read)}: supply pressures read by a reference gauge (meta.json supply_Pa), unused: "
+                     "the supply pressures are not freed (nuisance=True / --nuisance fits them with the readings)")
 
 
 def _freed(nuisance, position_offset, pressure_gain, pressure_gain_sd):
@@ -374,15 +385,19 @@ def _with_nuisance(bench, specs, names, p_atm, position_offset, pressure_gain=No
                          ("position_offset", "position"), ("delay", None)):
         if field in names and (needs is None or needs in compared):
             free.append(f"{group}.{field}")
-    runs = {}
+    runs, gauges = {}, []
     has_supply = _has_supply(valve)
     for (name, kind, e, rec, _), exp in zip(specs, bench.experiments):
         supply = start = None
+        reading = _supply_reading(e, f"bench {bench.directory}/meta.json: {name}")
         if "supply_pressure" in names and has_supply:
             supply = float(valve.supply())
             if exp.start_at_supply and "pressure" in rec.channels:  # a discharge from supply: its first samples
                 supply = float(np.median(rec["pressure"][:5])) - offset
             free.append(f"runs[{name}].supply_pressure")
+            if reading is not None:  # a reference gauge's reading: the start value, and a measurement in the fit
+                supply = reading[0]
+                gauges.append(Measurement(f"runs[{name}].supply_pressure", *reading, name=f"gauge: {name} supply"))
         if "start" in names and name in bench.unknown_starts:
             estimate = _start_estimate(rec, offset)
             start = StartState(**estimate)
@@ -394,10 +409,33 @@ def _with_nuisance(bench, specs, names, p_atm, position_offset, pressure_gain=No
     bench.model = Rig(plant, sensors={DEFAULT_GROUP: sensors}, runs=runs)
     bench.free = [f"plant.{p}" for p in bench.free] + free
     bench.nuisance = free
-    gain = f"{group}.pressure_gain"
-    if pressure_gain_sd is not None and gain in free:
+    _add_measurements(bench, gauges, pressure_gain, pressure_gain_sd)
+
+
+def _add_measurements(bench, gauges, pressure_gain, pressure_gain_sd):
+    """The measurements of freed nuisances, last among the experiments: the calibrated gain's, the supply gauges'."""
+    gain = f"sensors[{DEFAULT_GROUP}].pressure_gain"
+    if pressure_gain_sd is not None and gain in bench.free:
         bench.experiments.append(Measurement(gain, float(pressure_gain), float(pressure_gain_sd),
                                              name=CALIBRATION_NAME))
+    bench.experiments += gauges
+    if gauges:
+        bench.notes.append(f"supply pressures read by a reference gauge (meta.json supply_Pa ± supply_sd_Pa) for "
+                           f"{', '.join(g.name.split(' ')[1] for g in gauges)}: each fitted with its reading as a "
+                           "measurement")
+
+
+def _supply_reading(e, where):
+    """A run's supply pressure as a reference gauge read it: meta.json's `supply_Pa` (ABSOLUTE [Pa]) and its standard
+    uncertainty `supply_sd_Pa` [Pa], or None where the entry has neither."""
+    if "supply_Pa" not in e and "supply_sd_Pa" not in e:
+        return None
+    value = number(e, "supply_Pa", where, MIN_ABSOLUTE_PA, MAX_ABSOLUTE_PA, "Pa abs")
+    sd = number(e, "supply_sd_Pa", where, 0.0, 1e5, "Pa")
+    if value is None or sd is None or not sd > 0:
+        raise PamjaxInputError(f"{where}: a supply reading needs supply_Pa (the run's supply pressure as a reference "
+                               "gauge read it, ABSOLUTE [Pa]) and supply_sd_Pa (its standard uncertainty [Pa], > 0)")
+    return value, sd
 
 
 CALIBRATION_NAME = "calibration: pressure gain"  # the calibrated gain's `Measurement` among a bench's experiments
