@@ -250,6 +250,18 @@ def test_supply_readings_of_a_reference_gauge_are_fitted_as_measurements(rig, tm
     plain = pj.bench.load_bench(folder, _plant())  # supplies not freed: the readings are said to be unused
     assert not any(isinstance(e, pj.Measurement) for e in plain.experiments)
     assert any("T1, M0: supply pressures read by a reference gauge" in n and "unused" in n for n in plain.notes)
+    # the report: each supply beside its reading, and no gauge among the recordings' RMSEs (also read from JSON)
+    report = dict(delay_s=1e-3, pressure_offset_Pa=100.0, pressure_gain=1.0, position_offset_m=0.0, start={}, held={},
+                  supply_pressure_Pa={"T1": 6.325e5},
+                  std_err={"delay_s": 1e-6, "pressure_offset_Pa": 30.0, "pressure_gain": 4e-4,
+                           "supply_pressure_Pa": {"T1": 800.0}},
+                  gauges={"T1": {"supply_Pa": 6.31e5, "supply_sd_Pa": 1e3, "z": 1.5}})
+    assert "(T1)  (gauge 631000 ± 1e+03, fitted +1.50 of its uncertainties from it)" in pj.bench.nuisance_table(report)
+    import types
+
+    stored = types.SimpleNamespace(experiments=None, channel_errors={
+        "T1": {"pressure": {"rmse": 2e3}}, "gauge: T1 supply": {"value": {"rmse": 1.5e3, "z": 1.5}}})
+    assert pj.bench.bench_rmse(stored) == {"T1": {"p": 2e3}}
 
 
 def test_joint_script_answers_a_bad_folder_in_one_line_and_leaves_nothing(rig, tmp_path, capsys):

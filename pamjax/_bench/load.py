@@ -397,7 +397,7 @@ def _with_nuisance(bench, specs, names, p_atm, position_offset, pressure_gain=No
             free.append(f"runs[{name}].supply_pressure")
             if reading is not None:  # a reference gauge's reading: the start value, and a measurement in the fit
                 supply = reading[0]
-                gauges.append(Measurement(f"runs[{name}].supply_pressure", *reading, name=f"gauge: {name} supply"))
+                gauges.append(Measurement(f"runs[{name}].supply_pressure", *reading, name=GAUGE_NAME.format(name)))
         if "start" in names and name in bench.unknown_starts:
             estimate = _start_estimate(rec, offset)
             start = StartState(**estimate)
@@ -439,6 +439,7 @@ def _supply_reading(e, where):
 
 
 CALIBRATION_NAME = "calibration: pressure gain"  # the calibrated gain's `Measurement` among a bench's experiments
+GAUGE_NAME = "gauge: {} supply"  # a run's supply reading's `Measurement` (the run's name in the braces)
 
 
 # A muscle run rests near a stroke limit where its recorded position stays flat within STOP_NEAR of the plant's limit

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 from .._fit.fit import FitResult
 from .._fit.measurement import is_measurement
 from .._fit.rig import DEFAULT_GROUP, Rig, Sensors, nuisance_report
-from .load import BENCH_PARAMETERS, CALIBRATION_NAME, Bench
+from .load import BENCH_PARAMETERS, CALIBRATION_NAME, GAUGE_NAME, Bench
 
 _CHANNEL = {"pressure": "p", "position": "x"}
 
@@ -29,7 +29,9 @@ def bench_nuisance(result: FitResult, bench: Bench) -> dict:
     """A fit's nuisances in the bench's terms (SI units): `delay_s`, `pressure_offset_Pa` (added to the gauge
     pressure), `pressure_gain` (multiplies it), `position_offset_m`, `supply_pressure_Pa` (run → value), `start` (run
     → pressure_Pa, position_m, velocity_m_s), each fitted one's standard error under `std_err` (same keys), and
-    `held` (those not fitted, with their value and why)."""
+    `held` (those not fitted, with their value and why); with a calibrated gain's uncertainty `calibration`
+    (pressure_gain, pressure_gain_sd, z), with a reference gauge's supply readings `gauges` (run → supply_Pa,
+    supply_sd_Pa, z: fitted − reading in its uncertainties)."""
     report = nuisance_report(result)
     sensors = report["sensors"].get(DEFAULT_GROUP, {})
     base = bench.model.sensors[DEFAULT_GROUP] if isinstance(bench.model, Rig) else Sensors()
@@ -61,6 +63,10 @@ def bench_nuisance(result: FitResult, bench: Bench) -> dict:
         z = result.channel_errors.get(CALIBRATION_NAME, {}).get("value", {}).get("z", float("nan"))
         out["calibration"] = {"pressure_gain": bench.calibrated["pressure_gain"],
                               "pressure_gain_sd": bench.calibrated["pressure_gain_sd"], "z": z}
+    gauges = {run: result.channel_errors.get(GAUGE_NAME.format(run), {}).get("value") for run in supply}
+    if any(gauges.values()):  # supplies fitted with a reference gauge's readings: each reading, its sd, z
+        out["gauges"] = {run: {"supply_Pa": g["measured"], "supply_sd_Pa": g["sd"], "z": g["z"]}
+                         for run, g in gauges.items() if g}
     return out
 
 
@@ -86,6 +92,10 @@ def nuisance_table(nuisance: dict) -> str:
                          "[bench] pressure_gain; docs/fitting.md)")
     for run, v in nuisance["supply_pressure_Pa"].items():
         rows.append(f"  {'supply_pressure_Pa':<22}{v:>14.6g}  ± {se['supply_pressure_Pa'][run]:.3g}  ({run})")
+        gauge = nuisance.get("gauges", {}).get(run)
+        if gauge is not None:
+            rows[-1] += (f"  (gauge {gauge['supply_Pa']:.6g} ± {gauge['supply_sd_Pa']:.3g}, fitted {gauge['z']:+.2f} "
+                         "of its uncertainties from it)")
     for run, fields in nuisance["start"].items():
         for key, v in fields.items():
             rows.append(f"  {'start ' + key:<22}{v:>14.6g}  ± {se['start'][run][key]:.3g}  ({run})")
@@ -95,8 +105,8 @@ def nuisance_table(nuisance: dict) -> str:
 def bench_rmse(result: FitResult) -> dict[str, dict[str, float]]:
     """{experiment: {"p": Pa, "x": m}}: the residual RMSE of every fitted experiment, by the bench's channel names."""
     out = {}
-    measured = {e.name for e in (result.experiments or []) if is_measurement(e)} | {CALIBRATION_NAME}
+    measured = {e.name for e in (result.experiments or []) if is_measurement(e)}
     for name, chans in result.channel_errors.items():
-        if name not in measured:  # a parameter's measurement is not a recorded channel
+        if name not in measured and not any("z" in st for st in chans.values()):  # a measurement: not a recording
             out[name] = {_CHANNEL.get(c, c): float(st["rmse"]) for c, st in chans.items() if "rmse" in st}
     return out
