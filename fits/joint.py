@@ -18,15 +18,16 @@ gain and the acquisition delay (shared), each run's supply pressure, and the sta
 the pressure sensor's gain at `--pressure-gain` where given (a calibration: held; with `--pressure-gain-sd`, its
 uncertainty, fitted with the calibration as one more datum: `pamjax.Measurement`).
 
-Writes `OUT/joint.json`: `params` and `std_err` by the bench's names (SI units), `status`, `message`, `rmse`
-(every experiment's residual RMSE of `p` [Pa] and `x` [m] at the recordings' rate), the noise levels, the residual
+Writes `OUT/joint.json`: `params` and `std_err` by the bench's names (SI units), `status`, `message`, `rmse` (every
+experiment's residual RMSE of `p` [Pa] and `x` [m] at the recordings' rate), the noise levels, the residual
 diagnostics (`diagnosis`: what a mismatch points to), with `--nuisance` the rig's `nuisance` (`delay_s`,
 `pressure_offset_Pa`, `pressure_gain`, `position_offset_m`, `supply_pressure_Pa` per run, `start` per run, and
-`std_err` of each); and `OUT/joint.png`, data against model with residuals. A second run refuses to replace them
-without `--overwrite`. A mistake in the data is one line naming the file and key, exit status 2, and no output folder
-left behind. The compiled programs stay in the `pamjax` command's cache directory (`PAMJAX_CACHE_DIR`; off with
-`--no-cache` or `PAMJAX_COMPILATION_CACHE=0`), so a second run, on these recordings or another plant's of the same
-layout, loads them instead of compiling (same experiments and lengths: the same programs). Like the `pamjax`
+`std_err` of each; `calibration` and `gauges` where a calibration's uncertainty or supply readings were given: each
+measured value, its sd and z); and `OUT/joint.png`, data against model with residuals. A second run refuses to
+replace them without `--overwrite`. A mistake in the data is one line naming the file and key, exit status 2, and no
+output folder left behind. The compiled programs stay in the `pamjax` command's cache directory (`PAMJAX_CACHE_DIR`;
+off with `--no-cache` or `PAMJAX_COMPILATION_CACHE=0`), so a second run, on these recordings or another plant's of
+the same layout, loads them instead of compiling (same experiments and lengths: the same programs). Like the `pamjax`
 command's fit, it compiles with XLA's classic CPU emitters (`pamjax.runtime.prefer_fast_compilation`;
 `PAMJAX_FAST_COMPILE=0` turns it off). `benchmarks/identify.py` scores the results against a simulated bench's truth.
 """
