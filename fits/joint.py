@@ -212,8 +212,9 @@ def report(res, values, errors, summary, over_noise):
         print(pj.bench.nuisance_table(summary["nuisance"]))
     for name, chans in over_noise.items():
         print(f"  {name:<10} " + "  ".join(f"{c} RMSE {r:.3f}× noise" for c, r in chans.items()))
-    for w in res.warnings:  # a calibration the recordings contradict (pamjax.Measurement)
-        if w.startswith(pj.bench.CALIBRATION_NAME):
+    measured = [name for name in res.channel_errors if name not in over_noise]  # calibration, gauges
+    for w in res.warnings:  # a measurement the recordings contradict (pamjax.Measurement)
+        if any(w.startswith(f"{name}:") for name in measured):
             print(f"WARNING: {w}")
     if res.mismatch:
         print("WARNING: model mismatch: standard errors understate the uncertainty")

@@ -385,7 +385,7 @@ def _with_nuisance(bench, specs, names, p_atm, position_offset, pressure_gain=No
                          ("position_offset", "position"), ("delay", None)):
         if field in names and (needs is None or needs in compared):
             free.append(f"{group}.{field}")
-    runs, gauges = {}, []
+    runs, gauges = {}, {}
     has_supply = _has_supply(valve)
     for (name, kind, e, rec, _), exp in zip(specs, bench.experiments):
         supply = start = None
@@ -397,7 +397,7 @@ def _with_nuisance(bench, specs, names, p_atm, position_offset, pressure_gain=No
             free.append(f"runs[{name}].supply_pressure")
             if reading is not None:  # a reference gauge's reading: the start value, and a measurement in the fit
                 supply = reading[0]
-                gauges.append(Measurement(f"runs[{name}].supply_pressure", *reading, name=GAUGE_NAME.format(name)))
+                gauges[name] = Measurement(f"runs[{name}].supply_pressure", *reading, name=GAUGE_NAME.format(name))
         if "start" in names and name in bench.unknown_starts:
             estimate = _start_estimate(rec, offset)
             start = StartState(**estimate)
@@ -413,16 +413,16 @@ def _with_nuisance(bench, specs, names, p_atm, position_offset, pressure_gain=No
 
 
 def _add_measurements(bench, gauges, pressure_gain, pressure_gain_sd):
-    """The measurements of freed nuisances, last among the experiments: the calibrated gain's, the supply gauges'."""
+    """The measurements of freed nuisances, last among the experiments: the calibrated gain's, the supply gauges'
+    (run name → `Measurement`)."""
     gain = f"sensors[{DEFAULT_GROUP}].pressure_gain"
     if pressure_gain_sd is not None and gain in bench.free:
         bench.experiments.append(Measurement(gain, float(pressure_gain), float(pressure_gain_sd),
                                              name=CALIBRATION_NAME))
-    bench.experiments += gauges
+    bench.experiments += gauges.values()
     if gauges:
         bench.notes.append(f"supply pressures read by a reference gauge (meta.json supply_Pa ± supply_sd_Pa) for "
-                           f"{', '.join(g.name.split(' ')[1] for g in gauges)}: each fitted with its reading as a "
-                           "measurement")
+                           f"{', '.join(gauges)}: each fitted with its reading as a measurement")
 
 
 def _supply_reading(e, where):

@@ -59,10 +59,10 @@ def bench_nuisance(result: FitResult, bench: Bench) -> dict:
     out.update(supply_pressure_Pa=supply, start=start)
     se.update(supply_pressure_Pa=supply_se, start=start_se)
     out["std_err"], out["held"] = se, held
-    if "pressure_gain_sd" in bench.calibrated and "pressure_gain" in se:  # fitted with its calibration
-        z = result.channel_errors.get(CALIBRATION_NAME, {}).get("value", {}).get("z", float("nan"))
-        out["calibration"] = {"pressure_gain": bench.calibrated["pressure_gain"],
-                              "pressure_gain_sd": bench.calibrated["pressure_gain_sd"], "z": z}
+    calibration = result.channel_errors.get(CALIBRATION_NAME, {}).get("value")
+    if calibration is not None:  # the gain fitted with its calibration: the calibration, its sd, z
+        out["calibration"] = {"pressure_gain": calibration["measured"], "pressure_gain_sd": calibration["sd"],
+                              "z": calibration["z"]}
     gauges = {run: result.channel_errors.get(GAUGE_NAME.format(run), {}).get("value") for run in supply}
     if any(gauges.values()):  # supplies fitted with a reference gauge's readings: each reading, its sd, z
         out["gauges"] = {run: {"supply_Pa": g["measured"], "supply_sd_Pa": g["sd"], "z": g["z"]}
