@@ -238,7 +238,7 @@ class AbstractStaticExperiment(AbstractExperiment):
         if self.needs_muscle_system and not isinstance(model, AbstractMuscleSystem):
             raise PamjaxInputError(f"{self.name}: the model needs a 'muscle' and a 'friction' (a muscle system, e.g. "
                                    f"MuscleSystem), got {type(model).__name__}")
-        pred = self.predict(model)
+        pred = eqx.filter_eval_shape(self.predict, model)  # shapes only: no compilation, nothing computed
         (channel,) = self.channels
         if channel not in pred or np.shape(pred[channel]) != np.shape(self.data[channel]):
             raise PamjaxInputError(f"{self.name}: the model does not predict {channel!r} at the data points")

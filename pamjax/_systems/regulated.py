@@ -91,6 +91,7 @@ class RegulatedMuscleState(eqx.Module):
     friction: StateLike | None = None
 
 
+@eqx.filter_jit  # one program: called eagerly, the bisection's loop would compile at every call (systems/muscle.py)
 def load_equilibrium(muscle: Muscle, load_force, pressure, air: Air):
     """Shortening x [m] at which the muscle's force at `pressure` [Pa abs] equals `load_force` [N], clipped to the
     stroke. Bisection, then one Newton step that carries the implicit derivative."""
