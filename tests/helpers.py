@@ -1,8 +1,11 @@
 """Shared test helpers: tree comparison, finite differences, and independent NumPy transcriptions of the papers'
 equations (the oracles). Nothing here imports pamjax physics: the oracles are written from the papers."""
 
+import contextlib
+
 import equinox as eqx
 import jax
+import jax.monitoring
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
@@ -14,6 +17,22 @@ T_AIR = 293.0  # K, paper 000 Table 1
 KAPPA = 1.4  # paper 000
 LAMINAR_RATIO = 0.999  # ISO 6358-1:2013 laminar limit used by pamjax
 RHO0, T0 = 1.185, 293.15  # ISO 8778 reference density [kg/m³] and temperature [K]
+
+
+@contextlib.contextmanager
+def counted_compilations():
+    """The names of the programs XLA compiles inside the block (JAX's own compilation events), as a list."""
+    names = []
+
+    def listen(event, duration, **kw):
+        if event.endswith("backend_compile_duration"):
+            names.append(str(kw.get("fun_name")))
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        yield names
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
 
 
 def tree_allclose(a, b, rtol=1e-8, atol=1e-10):

@@ -3,6 +3,7 @@
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import counted_compilations
 from scipy.optimize import brentq
 
 import pamjax
@@ -91,6 +92,24 @@ def test_muscle_system_jacobian_matches_finite_differences():
     assert ss.output_names == ("pressure", "force")
     with pytest.raises(pamjax.PamjaxInputError, match="unknown output"):
         linearise(system, y, u, outputs=("torque",))
+
+
+def test_a_second_linearisation_compiles_nothing_new():
+    """`linearise` about another operating point, time or command of the same system reuses its one program (it
+    compiled anew at every call before, ~0.25 s each), and gives what a first call there gives."""
+    system = pamjax.presets.mas10_system(valve="averaged")
+    linearise(system, system.initial_state(pressure=3e5), 0.6, outputs=("pressure", "force"))
+    with counted_compilations() as compiled:
+        again = linearise(system, system.initial_state(pressure=4e5), 0.4, t=0.5, outputs=("pressure", "force"))
+    assert compiled == [], compiled
+    fresh = linearise(pamjax.presets.mas10_system(valve="averaged"), system.initial_state(pressure=4e5), 0.4, t=0.5,
+                      outputs=("pressure", "force"))
+    for name in "ABCD":
+        np.testing.assert_array_equal(getattr(again, name), getattr(fresh, name))
+    h = 1e-6
+    fb = system.vector_field(0.5, system.initial_state(pressure=4e5), jnp.asarray(0.4 + h)).pressure
+    fa = system.vector_field(0.5, system.initial_state(pressure=4e5), jnp.asarray(0.4 - h)).pressure
+    assert again.B[0, 0] == pytest.approx(float(fb - fa) / (2 * h), rel=1e-6)
 
 
 def test_python_control_cross_check(regulator_model):

@@ -1,10 +1,11 @@
 """Systems (`pamjax._systems`: `tank`, `muscle`): vector fields against a NumPy transcription of paper 000 eq. 7, 11,
 13-16; physical bounds; mass balance."""
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import P_ATM, R_AIR, T_AIR, NumpyPlant
+from helpers import P_ATM, R_AIR, T_AIR, NumpyPlant, counted_compilations
 
 import pamjax
 from pamjax import presets
@@ -93,25 +94,13 @@ def test_eager_equilibria_compile_once_per_muscle_model():
     """`initial_state()` called at the top level (a user's script, a bench loader) compiles its equilibrium once per
     muscle model: another pressure, payload or valve reuses it (the bisection's loop compiled anew at every eager
     call before: ~65 ms each). Counted with JAX's own compilation events."""
-    import equinox as eqx
-    import jax.monitoring
-
-    compiled = []
-
-    def listen(event, duration, **kw):
-        if event.endswith("backend_compile_duration"):
-            compiled.append(kw.get("fun_name"))
-
     system = presets.mas10_system("averaged")
     x_first = float(system.initial_state().position)
     heavier = eqx.tree_at(lambda s: s.payload_mass, system, jnp.asarray(20.0))
-    jax.monitoring.register_event_duration_secs_listener(listen)
-    try:
+    with counted_compilations() as compiled:
         xs = [float(presets.mas10_system("pwm").initial_state().position), float(heavier.equilibrium_position(4e5)),
               float(system.equilibrium_position(jnp.asarray(5e5)))]
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listen)
-    assert not any("equilibrium" in str(name) or "scan" in str(name) for name in compiled), compiled
+    assert not any("equilibrium" in name or "scan" in name for name in compiled), compiled
     assert xs[0] == x_first  # the same muscle and payload behind another valve
     assert float(heavier.muscle.force(xs[1], 4e5, heavier.air)) == pytest.approx(20.0 * 9.81, rel=1e-10)
     assert float(system.muscle.force(xs[2], 5e5, system.air)) == pytest.approx(9.6 * 9.81, rel=1e-10)

@@ -132,17 +132,39 @@ def linearise(system: AbstractSystem, state: eqx.Module, command: RealArrayLike,
     command = jnp.asarray(command, dtype=float)
     extra = [jnp.asarray(where(system), dtype=float) for where in inputs.values()]
     u0 = (command, *extra)
-    x_flat, unravel_x = jfu.ravel_pytree(state)
-    u_flat, unravel_u = jfu.ravel_pytree(u0)
+    state = jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype=float), state)  # traced, whatever its leaves' types
     available = jax.eval_shape(lambda: system.outputs(t, state, command))  # names and shapes only
     for name in outputs:
         if name not in available or available[name] is None:
             raise PamjaxInputError(f"unknown output {name!r}; this system has {sorted(available)}")
 
+    # one program per system structure, inputs and outputs (module level: a later call with other values, or another
+    # operating point, reuses it; closures made here at every call compiled anew each time, ~0.25 s a call)
+    A, B, C, D = _jacobians(system, jnp.asarray(t, dtype=float), state, u0, tuple(inputs.values()), tuple(outputs))
+    input_names = _names(command, "command") + tuple(n for name, leaf in zip(inputs, extra) for n in _names(leaf, name))
+    output_names = tuple(n for name in outputs for n in _names(available[name], name))
+    return StateSpace(
+        A=np.asarray(A),
+        B=np.asarray(B),
+        C=np.asarray(C),
+        D=np.asarray(D),
+        state_names=_names(state, "state"),
+        input_names=input_names,
+        output_names=output_names,
+    )
+
+
+@eqx.filter_jit
+def _jacobians(system, t, state, u0, wheres, outputs):
+    """(A, B, C, D) of `linearise`: forward-mode Jacobians of the vector field and of the named outputs with respect
+    to the flat state and the flat inputs (the command, then each `wheres` leaf of the system)."""
+    x_flat, unravel_x = jfu.ravel_pytree(state)
+    u_flat, unravel_u = jfu.ravel_pytree(u0)
+
     def with_inputs(u):
         cmd, *leaves = unravel_u(u)
         s = system
-        for where, leaf in zip(inputs.values(), leaves):
+        for where, leaf in zip(wheres, leaves):
             s = eqx.tree_at(where, s, leaf)
         return s, cmd
 
@@ -155,20 +177,7 @@ def linearise(system: AbstractSystem, state: eqx.Module, command: RealArrayLike,
         out = s.outputs(t, unravel_x(x), cmd)
         return jnp.concatenate([jnp.ravel(out[name]) for name in outputs])
 
-    # compiled once rather than traced op by op: for a muscle system this is several times faster
-    A, B = jax.jit(jax.jacfwd(f, argnums=(0, 1)))(x_flat, u_flat)
-    C, D = jax.jit(jax.jacfwd(h, argnums=(0, 1)))(x_flat, u_flat)
-    input_names = _names(command, "command") + tuple(n for name, leaf in zip(inputs, extra) for n in _names(leaf, name))
-    output_names = tuple(n for name in outputs for n in _names(available[name], name))
-    return StateSpace(
-        A=np.asarray(A),
-        B=np.asarray(B),
-        C=np.asarray(C),
-        D=np.asarray(D),
-        state_names=_names(state, "state"),
-        input_names=input_names,
-        output_names=output_names,
-    )
+    return (*jax.jacfwd(f, argnums=(0, 1))(x_flat, u_flat), *jax.jacfwd(h, argnums=(0, 1))(x_flat, u_flat))
 
 
 def equilibrium(system: AbstractSystem, command: RealArrayLike, guess: eqx.Module, *, t: RealScalarLike = 0.0,
