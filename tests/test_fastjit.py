@@ -1,5 +1,6 @@
 """`pamjax._core.fastjit.filter_jit` against `equinox.filter_jit`: the same values and outputs, retraced exactly when
-a static leaf, the tree structure or an array's shape or dtype changes, and the fallback for unhashable leaves."""
+a static leaf, the tree structure or an array's shape or dtype changes, and the fallback for unhashable leaves;
+`SameCode`, a user's function keyed by its code and closure values (an inline sweep factory reuses its program)."""
 
 import equinox as eqx
 import jax
@@ -84,3 +85,51 @@ def test_simulate_through_it_equals_the_equinox_program():
         np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-12, atol=0)
     traj = pamjax.simulate(system, signal, ts)  # simulate's own top-level program
     np.testing.assert_allclose(np.asarray(traj.position), np.asarray(a.position), rtol=1e-9, atol=1e-13)
+
+
+# --- `SameCode`: a user's function keyed by its code and closure values, so that an inline lambda reuses a program
+
+
+def _scaled(scale):
+    return lambda v: v * scale
+
+
+def test_same_code_is_equal_exactly_when_the_functions_compute_the_same():
+    from pamjax._core.fastjit import SameCode
+
+    assert SameCode(_scaled(2.0)) == SameCode(_scaled(2.0))  # two closures, one code, equal values
+    assert hash(SameCode(_scaled(2.0))) == hash(SameCode(_scaled(2.0)))
+    assert SameCode(_scaled(2.0)) != SameCode(_scaled(3.0))
+    assert SameCode(_scaled(2.0)) != SameCode(_scaled(2))  # 2.0 and 2 are other constants of a program
+    assert SameCode(_scaled(0.0)) != SameCode(_scaled(-0.0))
+    assert SameCode(_scaled((1.0, "a"))) == SameCode(_scaled((1.0, "a")))
+    assert SameCode(_scaled(_scaled(1.0))) == SameCode(_scaled(_scaled(1.0)))  # a function in the closure, by its code
+    assert SameCode(_scaled(_scaled(1.0))) != SameCode(_scaled(_scaled(5.0)))
+    lambdas = [lambda v: v + 1 for _ in range(2)]
+    assert SameCode(lambdas[0]) == SameCode(lambdas[1])
+    assert SameCode(lambda v: v + 1) != SameCode(lambdas[0])  # another lambda's code (another line)
+    array = jnp.ones(2)
+    by_identity = _scaled(array)  # an array has no value key: the function by its identity
+    assert SameCode(by_identity) == SameCode(by_identity) and SameCode(by_identity) != SameCode(_scaled(array))
+    assert SameCode(_scaled([1.0])) != SameCode(_scaled([1.0]))  # a list may change: by identity
+    assert SameCode(_scaled(2.0))(3.0) == 6.0
+
+
+def test_an_inline_factory_reuses_the_sweeps_program_and_another_closure_value_does_not():
+    """A sweep called in a loop with its signal factory written inline compiles once; a factory closing over another
+    value is another program, whose results are its own (checked against the same sweep written without it)."""
+    from helpers import counted_compilations
+
+    system = presets.mas10_tank_system("averaged")
+    ts = jnp.linspace(0.0, 0.2, 5)
+
+    def run(scale, duty=(0.2, 0.6)):
+        return pamjax.sweep(system, lambda v: pamjax.Constant(v["duty"] * scale), ts, {"duty": jnp.asarray(duty)},
+                            progress=False).outputs["pressure"]
+
+    first = run(1.0)
+    with counted_compilations() as compiled:
+        again = run(1.0, duty=(0.3, 0.5))
+    assert not [name for name in compiled if "run_chunk" in name], compiled
+    np.testing.assert_allclose(again, run(0.5, duty=(0.6, 1.0)), rtol=1e-12)  # its own program: 0.5 x (0.6, 1)
+    assert not np.allclose(run(0.5), first)

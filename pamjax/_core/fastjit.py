@@ -15,6 +15,7 @@ hashed goes to `equinox.filter_jit`, which refuses it with its own error.
 """
 
 import functools
+import types
 
 import equinox as eqx
 import jax
@@ -71,3 +72,86 @@ def filter_jit(fn, **jit_kwargs):
 
     call.lower = slow.lower  # the same program, for ahead-of-time use
     return call
+
+
+class SameCode:
+    """A user's function as a static argument of a compiled program, equal to another function of the same code with
+    the same defaults and closure values, so that a lambda written inline (`sweep(system, lambda v: Constant(v["duty"]),
+    ...)` in a loop, a script run cell by cell) reuses the program its first call compiled instead of compiling one per
+    call (a function is otherwise keyed by its identity: a 1,024-point sweep's ~3 s of compilation at every call).
+    Two such functions compute the same thing: the same instructions, the same constants, the same global namespace
+    (its names are read when the program is traced, as for any jitted function) and equal closure values. A closure
+    value that cannot be compared by value (an array, a list, a dict, an object without value equality) keys the
+    function by its identity, as before."""
+
+    __slots__ = ("fn", "_key")
+
+    def __init__(self, fn):
+        self.fn = fn
+        self._key = _code_key(fn)
+
+    def __call__(self, *args, **kwargs):
+        return self.fn(*args, **kwargs)
+
+    def __hash__(self):
+        return hash(self._key)
+
+    def __eq__(self, other):
+        return isinstance(other, SameCode) and self._key == other._key
+
+    def __repr__(self):
+        return f"SameCode({self.fn!r})"
+
+
+class _Identity:
+    """Keys an object by its identity (kept alive with the key)."""
+
+    __slots__ = ("obj",)
+
+    def __init__(self, obj):
+        self.obj = obj
+
+    def __hash__(self):
+        return id(self.obj)
+
+    def __eq__(self, other):
+        return isinstance(other, _Identity) and other.obj is self.obj
+
+
+_VALUE_TYPES = (bool, int, float, complex, str, bytes, type(None))
+
+
+def _value_key(value, depth=0):
+    """A key equal for equal values: numbers and strings (with their type: 1, 1.0 and True differ), tuples and
+    frozensets of them, functions by `_code_key`; None where the value has no such key."""
+    if isinstance(value, float):
+        return (float, value.hex())  # -0.0 and 0.0 apart, every NaN alike
+    if isinstance(value, complex):
+        return (complex, value.real.hex(), value.imag.hex())
+    if isinstance(value, _VALUE_TYPES):
+        return (type(value), value)
+    if depth < 4 and isinstance(value, (tuple, frozenset)):
+        keys = [_value_key(v, depth + 1) for v in value]
+        return None if any(k is None for k in keys) else (type(value), tuple(keys))
+    if depth < 4 and isinstance(value, types.FunctionType):
+        key = _code_key(value, depth + 1)
+        return None if isinstance(key, _Identity) else key
+    if isinstance(value, (types.ModuleType, type)):
+        return _Identity(value)  # a module or a class: the same object is the same namespace
+    return None
+
+
+def _code_key(fn, depth=0):
+    if not isinstance(fn, types.FunctionType):
+        return _Identity(fn)
+    parts = [fn.__code__, _Identity(fn.__globals__)]
+    for value in (fn.__defaults__ or ()) + tuple(sorted((fn.__kwdefaults__ or {}).items())):
+        parts.append(_value_key(value, depth))
+    for cell in fn.__closure__ or ():
+        try:
+            parts.append(_value_key(cell.cell_contents, depth))
+        except ValueError:  # an empty cell (a name assigned after the function was made)
+            parts.append(None)
+    if any(p is None for p in parts):
+        return _Identity(fn)
+    return ("code", tuple(parts))
