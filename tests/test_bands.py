@@ -286,6 +286,9 @@ def test_refusals_are_named(refits, tmp_path):
     loaded = pj.FitResult.from_json(res.to_json(tmp_path / "fit.json"))
     with pytest.raises(PamjaxInputError, match="pass model="):
         pj.prediction_band(loaded, predict)
+    adaptive = lambda m: pj.simulate(m, PREDICT_SIGNAL, T_PREDICT[:4], throw=False).pressure  # noqa: E731
+    with pytest.raises(PamjaxInputError, match='needs adjoint="forward"'):  # reverse mode only: named, not JAX's
+        pj.prediction_band(res, adaptive)
     with warnings.catch_warnings():
         warnings.simplefilter("error", pj.PamjaxBandWarning)
         mismatched = res.to_dict() | {"mismatch": True}

@@ -120,3 +120,27 @@ def test_dynamic_recovery_with_validation_split():
     errors = res.channel_errors[rec.name]["position"]
     # validation error (last 40 %) of the same order as the noise (1e-4 m), reported separately
     assert errors["validation_rmse"] < 3e-4 and errors["rmse"] < 3e-4
+
+
+def test_a_fit_of_other_data_of_the_same_layout_compiles_nothing_new():
+    """A second recording of the same run (other noise, so another default scale) fitted with a `build` written inline
+    reuses the first fit's compiled residuals and Jacobian (a default scale and an inline function used to key new
+    programs: ~1.5 s each fit of this tank), and the fit is its own: each recovers its recording's supply line."""
+    from helpers import counted_compilations
+
+    tank = presets.mas10_tank_system("averaged")
+    ts = np.linspace(0.0, 1.0, 101)
+
+    def fit(seed):
+        rec = pj.synthetic_recording(tank, pj.Constant(0.5), ts, noise={"pressure": 1000.0}, seed=seed)
+        exp = pj.Experiment(rec, pj.Constant(0.5), build=lambda m: m)  # default scale: 1 % of the data's range
+        return pj.fit(tank, exp, ["volume"], progress=False)
+
+    first = fit(1)
+    with counted_compilations() as compiled:
+        second = fit(2)
+    assert compiled == [], compiled
+    assert first.converged and second.converged
+    assert first.values[0] != second.values[0]  # each fitted its own data
+    for res in (first, second):
+        assert abs(res.values[0] - float(tank.volume)) < 3 * res.standard_errors[0]

@@ -155,7 +155,15 @@ def _value_and_jacobian(predict, space, theta):
         y = predict(space.model(t))
         return y, y
 
-    jac, y = jax.jacfwd(f, has_aux=True)(theta)
+    try:
+        jac, y = jax.jacfwd(f, has_aux=True)(theta)
+    except TypeError as err:  # a reverse-mode-only solve inside `predict` (simulate's default adjoint)
+        if "custom_vjp" not in str(err):
+            raise
+        raise PamjaxInputError(
+            "predict must be differentiable in forward mode for method='linear': a pamjax.simulate inside it needs "
+            "adjoint=\"forward\" (e.g. lambda m: pj.simulate(m, signal, ts, adjoint=\"forward\", throw=False)"
+            ".channel(\"position\")), or use method='samples'") from None
     return y, jac
 
 

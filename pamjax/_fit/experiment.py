@@ -14,6 +14,7 @@ different systems share parameters through the model (all valve tests use `model
 import abc
 import copy
 import hashlib
+import types
 from collections.abc import Callable, Mapping, Sequence
 
 import equinox as eqx
@@ -25,6 +26,7 @@ from .._core.arrays import as_scalar, device_array
 from .._core.cache import structural
 from .._core.custom_types import RealArrayLike, RealScalar, RealScalarLike
 from .._core.errors import PamjaxInputError
+from .._core.fastjit import SameCode
 from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
 from .._solve.simulate import Stepping, fixed_grid_size, resolve_stepping, solve, validate
@@ -173,7 +175,9 @@ class Experiment(AbstractExperiment):
     times: jax.Array
     data: dict
     weights: dict  # 1/scale where the sample is used, 0 where masked (NaN)
-    scales: dict = eqx.field(static=True)
+    # channel -> scale, NumPy float64 scalars: leaves of the pytree (read on the host only), not static, so that a
+    # fit of other data of the same layout reuses the compiled residuals (a default scale follows the data)
+    scales: dict
     noise_channels: tuple = eqx.field(static=True)  # channels whose scale the user gave (their noise level)
     signal: AbstractSignal
     build: Callable[[eqx.Module], AbstractSystem]
@@ -234,7 +238,8 @@ class Experiment(AbstractExperiment):
         for c in scales:
             if c not in channels:
                 raise PamjaxInputError(f"scales names channel {c!r}, which is not compared; channels are {channels}")
-        self.scales = {c: float(scales.get(c, _default_scale(recording[c][recording.mask[c]]))) for c in channels}
+        self.scales = {c: np.float64(scales.get(c, _default_scale(recording[c][recording.mask[c]])))
+                       for c in channels}
         self.noise_channels = tuple(c for c in channels if c in scales)
         for c, s in self.scales.items():
             if not (np.isfinite(s) and s > 0):
@@ -246,7 +251,9 @@ class Experiment(AbstractExperiment):
         self.data = {c: device_array(np.where(recording.mask[c], recording[c], 0.0)) for c in channels}
         self.weights = {c: device_array(recording.mask[c] / self.scales[c]) for c in channels}
         self.signal = signal
-        self.build = SameSystem() if build is None else build
+        # a function written inline reuses the programs of an equal one (`SameCode`: same code, closure values)
+        self.build = SameSystem() if build is None else SameCode(build) if isinstance(build, types.FunctionType) \
+            else build
         initial = dict(initial or {})
         self.start_at_supply = isinstance(initial.get("pressure"), str)
         if self.start_at_supply:
