@@ -135,6 +135,11 @@ class _Constant:
         return f"_Constant(shape={self.array.shape}, sha256={digest})"
 
 
+def _keyed(build):
+    """A `build` function written inline reuses the programs of an equal one (`SameCode`: same code, closure values)."""
+    return SameCode(build) if isinstance(build, types.FunctionType) else build
+
+
 def _default_scale(values):
     """1 % of the channel's range (so a residual of 1 is 1 % of range), or 1 for a flat channel."""
     span = float(np.ptp(values)) if values.size else 0.0
@@ -238,8 +243,7 @@ class Experiment(AbstractExperiment):
         for c in scales:
             if c not in channels:
                 raise PamjaxInputError(f"scales names channel {c!r}, which is not compared; channels are {channels}")
-        self.scales = {c: np.float64(scales.get(c, _default_scale(recording[c][recording.mask[c]])))
-                       for c in channels}
+        self.scales = {c: np.float64(scales.get(c, _default_scale(recording[c][recording.mask[c]]))) for c in channels}
         self.noise_channels = tuple(c for c in channels if c in scales)
         for c, s in self.scales.items():
             if not (np.isfinite(s) and s > 0):
@@ -251,9 +255,7 @@ class Experiment(AbstractExperiment):
         self.data = {c: device_array(np.where(recording.mask[c], recording[c], 0.0)) for c in channels}
         self.weights = {c: device_array(recording.mask[c] / self.scales[c]) for c in channels}
         self.signal = signal
-        # a function written inline reuses the programs of an equal one (`SameCode`: same code, closure values)
-        self.build = SameSystem() if build is None else SameCode(build) if isinstance(build, types.FunctionType) \
-            else build
+        self.build = SameSystem() if build is None else _keyed(build)
         initial = dict(initial or {})
         self.start_at_supply = isinstance(initial.get("pressure"), str)
         if self.start_at_supply:
