@@ -131,15 +131,15 @@ def _triangle_phase(signal, t, u, period):
     refined at the PWM period's resolution; None if no φ fits within the duty tolerance."""
     idx = period_starts(t, period)
     ts, us = t[idx], u[idx]
-    cycle = 1.0 / float(signal.frequency)
-    best = None
-    for phi in np.arange(0.0, cycle, 1e-3):
-        ref = np.asarray(Triangle(signal.low, signal.high, signal.frequency)(np.floor((ts + phi) / period + 1e-9)
-                                                                              * period))
-        err = float(np.max(np.abs(ref - us)))
-        if best is None or err < best[1]:
-            best = (phi, err)
-    return best[0] if best[1] <= _DUTY_TOLERANCE else None
+    low, high, frequency = float(signal.low), float(signal.high), float(signal.frequency)
+    phis = np.arange(0.0, 1.0 / frequency, 1e-3)
+    errors = np.empty(phis.size)
+    for start in range(0, phis.size, 256):  # `Triangle.__call__` in NumPy, 256 candidate phases at a time
+        x = np.floor((ts[None, :] + phis[start:start + 256, None]) / period + 1e-9) * period * frequency
+        ref = low + (high - low) * (1.0 - np.abs(2.0 * (x - np.floor(x)) - 1.0))
+        errors[start:start + 256] = np.max(np.abs(ref - us[None, :]), axis=1)
+    best = int(np.argmin(errors))  # the first of equal errors, as a scan from φ = 0 finds it
+    return float(phis[best]) if errors[best] <= _DUTY_TOLERANCE else None
 
 
 def run_command(name, kind, e, rec, valve_period, where, notes, unknown_start):
