@@ -168,3 +168,20 @@ def test_bad_reference_and_plant_raise(plant):
         simulate_closed_loop(ClosedLoop(plant, PIController(), REF), -1.0)
     with pytest.raises(pamjax.PamjaxInputError, match="smooth"):  # exact edges run on the fixed grid, not adaptively
         ClosedLoop(presets.mas10_system("exact"), PIController(), REF, stepping="adaptive")
+
+
+def test_a_second_tuning_compiles_nothing_new_and_starts_from_its_own_gains(model):
+    """`tune_controller` of another loop of the same structure (other gains) reuses the first call's program (a
+    closure jitted per call compiled anew each time, ~3.7 s), and each run's first RMSE is its own loop's."""
+    from helpers import counted_compilations
+
+    def loop(kp):
+        return ClosedLoop(model, PIController(proportional_gain=kp), REF)
+
+    pamjax.tune_controller(loop(25.0), ("proportional_gain",), 0.2, steps=1)
+    with counted_compilations() as compiled:
+        _, history = pamjax.tune_controller(loop(40.0), ("proportional_gain",), 0.2, steps=1)
+    assert compiled == [], compiled
+    assert history[0][1] == (40.0,)
+    own = float(jax.jit(lambda: tracking_rmse(loop(40.0), 10, 0.0, samples_per_period=5))())
+    assert history[0][0] == pytest.approx(own, rel=1e-9)

@@ -46,14 +46,12 @@ def tune_controller(
         if value is None or not np.all(np.asarray(value) > 0):
             raise PamjaxInputError(f"tune_controller: gain {name!r} must be a positive controller field, got {value}")
     num_periods = int(np.ceil(float(duration) / float(loop.period) - 1e-9))
-    get = lambda ctl: tuple(getattr(ctl, n) for n in gains)  # noqa: E731
+    gains = tuple(gains)
+    get = _getter(gains)
 
-    def loss(log_gains):
-        controller = eqx.tree_at(get, loop.controller, tuple(jnp.exp(g) for g in log_gains))
-        tuned = eqx.tree_at(lambda lp: lp.controller, loop, controller)
-        return tracking_rmse(tuned, num_periods, start, samples_per_period=samples_per_period)
+    def value_and_grad(log_gains):
+        return _rmse_and_gradient(log_gains, loop, gains, num_periods, float(start), samples_per_period)
 
-    value_and_grad = eqx.filter_jit(jax.value_and_grad(loss))
     params = tuple(jnp.log(jnp.asarray(g, dtype=float)) for g in get(loop.controller))
     m = jtu.tree_map(jnp.zeros_like, params)
     v = jtu.tree_map(jnp.zeros_like, params)
@@ -81,3 +79,19 @@ def tune_controller(
         )
     controller = eqx.tree_at(get, loop.controller, tuple(jnp.exp(g) for g in best[1]))
     return eqx.tree_at(lambda lp: lp.controller, loop, controller), history
+
+
+def _getter(gains):
+    return lambda ctl: tuple(getattr(ctl, n) for n in gains)
+
+
+# One program per loop structure, gains, length and window (module level, the loop an argument): a closure jitted per
+# call compiled anew at every `tune_controller` call (~3.7 s for a 1 s loop of the MAS-10).
+@eqx.filter_jit
+def _rmse_and_gradient(log_gains, loop, gains, num_periods, start, samples_per_period):
+    def loss(log_gains):
+        controller = eqx.tree_at(_getter(gains), loop.controller, tuple(jnp.exp(g) for g in log_gains))
+        tuned = eqx.tree_at(lambda lp: lp.controller, loop, controller)
+        return tracking_rmse(tuned, num_periods, start, samples_per_period=samples_per_period)
+
+    return jax.value_and_grad(loss)(log_gains)
