@@ -108,11 +108,20 @@ def test_same_code_is_equal_exactly_when_the_functions_compute_the_same():
     lambdas = [lambda v: v + 1 for _ in range(2)]
     assert SameCode(lambdas[0]) == SameCode(lambdas[1])
     assert SameCode(lambda v: v + 1) != SameCode(lambdas[0])  # another lambda's code (another line)
-    array = jnp.ones(2)
-    by_identity = _scaled(array)  # an array has no value key: the function by its identity
-    assert SameCode(by_identity) == SameCode(by_identity) and SameCode(by_identity) != SameCode(_scaled(array))
-    assert SameCode(_scaled([1.0])) != SameCode(_scaled([1.0]))  # a list may change: by identity
+    array = jnp.ones(2)  # an array, a list, a system: by identity
+    assert SameCode(_scaled(array)) == SameCode(_scaled(array)) and SameCode(_scaled(array)) != SameCode(_scaled(
+        jnp.ones(2)))
+    assert SameCode(_scaled([1.0])) != SameCode(_scaled([1.0]))
     assert SameCode(_scaled(2.0))(3.0) == 6.0
+    # a loop at a script's top level rebinds a global that its inline lambda reads: each value is another function
+    script = {}
+    exec("def make():\n    return lambda v: v * scale\n", script)
+    script["scale"] = 1.0
+    first = SameCode(script["make"]())
+    script["scale"] = 1.0
+    assert SameCode(script["make"]()) == first
+    script["scale"] = 2.0
+    assert SameCode(script["make"]()) != first
 
 
 def test_an_inline_factory_reuses_the_sweeps_program_and_another_closure_value_does_not():

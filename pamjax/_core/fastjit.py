@@ -75,20 +75,23 @@ def filter_jit(fn, **jit_kwargs):
 
 
 class SameCode:
-    """A user's function as a static argument of a compiled program, equal to another function of the same code with
-    the same defaults and closure values, so that a lambda written inline (`sweep(system, lambda v: Constant(v["duty"]),
-    ...)` in a loop, a script run cell by cell) reuses the program its first call compiled instead of compiling one per
-    call (a function is otherwise keyed by its identity: a 1,024-point sweep's ~3 s of compilation at every call).
-    Two such functions compute the same thing: the same instructions, the same constants, the same global namespace
-    (its names are read when the program is traced, as for any jitted function) and equal closure values. A closure
-    value that cannot be compared by value (an array, a list, a dict, an object without value equality) keys the
-    function by its identity, as before."""
+    """A user's function as a static argument of a compiled program, equal to another function that computes the same
+    thing, so that a lambda written inline (`sweep(system, lambda v: Constant(v["duty"]), ...)` in a loop, a script
+    run cell by cell) reuses the program its first call compiled instead of compiling one per call (a function is
+    otherwise keyed by its identity: a 1,024-point sweep's ~3 s of compilation at every call).
+
+    Two functions are equal when they have the same code (instructions, constants, names), the same global namespace,
+    and equal values for everything the code reads from outside: defaults, closure cells and the globals it names
+    (a loop at a module's top level rebinds a global that an inline lambda reads: each value is another program).
+    Numbers, strings, and tuples of them compare by value (1, 1.0 and True apart; -0.0 and 0.0 apart); functions by
+    this same rule; anything else (a module, a system, an array) by its identity, as JAX itself treats one function
+    object whose captured objects change in place."""
 
     __slots__ = ("fn", "_key")
 
     def __init__(self, fn):
         self.fn = fn
-        self._key = _code_key(fn)
+        self._key = _code_key(fn) if isinstance(fn, types.FunctionType) else _Identity(fn)
 
     def __call__(self, *args, **kwargs):
         return self.fn(*args, **kwargs)
@@ -119,39 +122,43 @@ class _Identity:
 
 
 _VALUE_TYPES = (bool, int, float, complex, str, bytes, type(None))
+_MAX_DEPTH = 4  # nested tuples and functions compared by value this deep; deeper, by identity
 
 
 def _value_key(value, depth=0):
-    """A key equal for equal values: numbers and strings (with their type: 1, 1.0 and True differ), tuples and
-    frozensets of them, functions by `_code_key`; None where the value has no such key."""
+    """A key equal for equal values (see `SameCode`), else the object's identity."""
     if isinstance(value, float):
         return (float, value.hex())  # -0.0 and 0.0 apart, every NaN alike
     if isinstance(value, complex):
         return (complex, value.real.hex(), value.imag.hex())
     if isinstance(value, _VALUE_TYPES):
         return (type(value), value)
-    if depth < 4 and isinstance(value, (tuple, frozenset)):
-        keys = [_value_key(v, depth + 1) for v in value]
-        return None if any(k is None for k in keys) else (type(value), tuple(keys))
-    if depth < 4 and isinstance(value, types.FunctionType):
-        key = _code_key(value, depth + 1)
-        return None if isinstance(key, _Identity) else key
-    if isinstance(value, (types.ModuleType, type)):
-        return _Identity(value)  # a module or a class: the same object is the same namespace
-    return None
+    if depth < _MAX_DEPTH and isinstance(value, (tuple, frozenset)):
+        return (type(value), tuple(_value_key(v, depth + 1) for v in value))
+    if depth < _MAX_DEPTH and isinstance(value, types.FunctionType):
+        return _code_key(value, depth + 1)
+    return _Identity(value)
+
+
+def _global_names(code):
+    """The names `code` (and the functions and comprehensions defined in it) may read as globals."""
+    names = set(code.co_names)
+    for const in code.co_consts:
+        if isinstance(const, types.CodeType):
+            names |= _global_names(const)
+    return names
 
 
 def _code_key(fn, depth=0):
-    if not isinstance(fn, types.FunctionType):
-        return _Identity(fn)
     parts = [fn.__code__, _Identity(fn.__globals__)]
-    for value in (fn.__defaults__ or ()) + tuple(sorted((fn.__kwdefaults__ or {}).items())):
-        parts.append(_value_key(value, depth))
+    parts += [_value_key(v, depth) for v in fn.__defaults__ or ()]
+    parts += [(k, _value_key(v, depth)) for k, v in sorted((fn.__kwdefaults__ or {}).items())]
     for cell in fn.__closure__ or ():
         try:
             parts.append(_value_key(cell.cell_contents, depth))
         except ValueError:  # an empty cell (a name assigned after the function was made)
-            parts.append(None)
-    if any(p is None for p in parts):
-        return _Identity(fn)
+            parts.append(_Identity(cell))
+    # the globals it reads, by value (an attribute name that is no global is skipped: `pj.Constant` reads `pj`)
+    parts += [(name, _value_key(fn.__globals__[name], depth)) for name in sorted(_global_names(fn.__code__))
+              if name in fn.__globals__]
     return ("code", tuple(parts))
