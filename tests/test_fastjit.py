@@ -108,10 +108,14 @@ def test_same_code_is_equal_exactly_when_the_functions_compute_the_same():
     lambdas = [lambda v: v + 1 for _ in range(2)]
     assert SameCode(lambdas[0]) == SameCode(lambdas[1])
     assert SameCode(lambda v: v + 1) != SameCode(lambdas[0])  # another lambda's code (another line)
-    array = jnp.ones(2)  # an array, a list, a system: by identity
+    array = jnp.ones(2)  # what cannot change in place (a JAX array, a system, a module): by its identity
     assert SameCode(_scaled(array)) == SameCode(_scaled(array)) and SameCode(_scaled(array)) != SameCode(_scaled(
         jnp.ones(2)))
-    assert SameCode(_scaled([1.0])) != SameCode(_scaled([1.0]))
+    system = presets.mas10_system("averaged")
+    assert SameCode(_scaled(system)) == SameCode(_scaled(system))
+    mutable = [[1.0], {"k": 1.0}, np.ones(2)]  # what may have changed since: never shared, traced afresh
+    for value in mutable:
+        assert SameCode(_scaled(value)) != SameCode(_scaled(value))
     assert SameCode(_scaled(2.0))(3.0) == 6.0
     # a loop at a script's top level rebinds a global that its inline lambda reads: each value is another function
     script = {}
@@ -122,6 +126,9 @@ def test_same_code_is_equal_exactly_when_the_functions_compute_the_same():
     assert SameCode(script["make"]()) == first
     script["scale"] = 2.0
     assert SameCode(script["make"]()) != first
+    script["params"] = {"scale": 1.0}  # a global dict changed between two calls: not shared
+    exec("def make_from_dict():\n    return lambda v: v * params['scale']\n", script)
+    assert SameCode(script["make_from_dict"]()) != SameCode(script["make_from_dict"]())
 
 
 def test_an_inline_factory_reuses_the_sweeps_program_and_another_closure_value_does_not():

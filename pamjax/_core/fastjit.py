@@ -84,14 +84,16 @@ class SameCode:
     and equal values for everything the code reads from outside: defaults, closure cells and the globals it names
     (a loop at a module's top level rebinds a global that an inline lambda reads: each value is another program).
     Numbers, strings, and tuples of them compare by value (1, 1.0 and True apart; -0.0 and 0.0 apart); functions by
-    this same rule; anything else (a module, a system, an array) by its identity, as JAX itself treats one function
-    object whose captured objects change in place."""
+    this same rule; what cannot change in place (a module, a class, a JAX array, an equinox module such as a system)
+    by its identity. A function that reads anything else (a dict, a list, a NumPy array, an arbitrary object: it may
+    have changed since) is keyed by its own identity, as before, so that it is traced afresh."""
 
     __slots__ = ("fn", "_key")
 
     def __init__(self, fn):
         self.fn = fn
-        self._key = _code_key(fn) if isinstance(fn, types.FunctionType) else _Identity(fn)
+        key = _code_key(fn) if isinstance(fn, types.FunctionType) else None
+        self._key = _Identity(fn) if key is None else key
 
     def __call__(self, *args, **kwargs):
         return self.fn(*args, **kwargs)
@@ -126,7 +128,7 @@ _MAX_DEPTH = 4  # nested tuples and functions compared by value this deep; deepe
 
 
 def _value_key(value, depth=0):
-    """A key equal for equal values (see `SameCode`), else the object's identity."""
+    """A key equal for equal values (see `SameCode`); None for a value that may change in place."""
     if isinstance(value, float):
         return (float, value.hex())  # -0.0 and 0.0 apart, every NaN alike
     if isinstance(value, complex):
@@ -134,10 +136,13 @@ def _value_key(value, depth=0):
     if isinstance(value, _VALUE_TYPES):
         return (type(value), value)
     if depth < _MAX_DEPTH and isinstance(value, (tuple, frozenset)):
-        return (type(value), tuple(_value_key(v, depth + 1) for v in value))
+        keys = tuple(_value_key(v, depth + 1) for v in value)
+        return None if any(k is None for k in keys) else (type(value), keys)
     if depth < _MAX_DEPTH and isinstance(value, types.FunctionType):
         return _code_key(value, depth + 1)
-    return _Identity(value)
+    if isinstance(value, (types.ModuleType, type, types.BuiltinFunctionType, jax.Array, eqx.Module)):
+        return _Identity(value)  # cannot change in place: the same object reads the same
+    return None
 
 
 def _global_names(code):
@@ -150,15 +155,17 @@ def _global_names(code):
 
 
 def _code_key(fn, depth=0):
+    """`fn`'s key (see `SameCode`), or None where it reads a value that may change in place."""
     parts = [fn.__code__, _Identity(fn.__globals__)]
     parts += [_value_key(v, depth) for v in fn.__defaults__ or ()]
-    parts += [(k, _value_key(v, depth)) for k, v in sorted((fn.__kwdefaults__ or {}).items())]
-    for cell in fn.__closure__ or ():
-        try:
-            parts.append(_value_key(cell.cell_contents, depth))
-        except ValueError:  # an empty cell (a name assigned after the function was made)
-            parts.append(_Identity(cell))
+    parts += [_value_key(v, depth) for _, v in sorted((fn.__kwdefaults__ or {}).items())]
+    try:
+        parts += [_value_key(cell.cell_contents, depth) for cell in fn.__closure__ or ()]
+    except ValueError:  # an empty cell (a name assigned after the function was made)
+        return None
     # the globals it reads, by value (an attribute name that is no global is skipped: `pj.Constant` reads `pj`)
-    parts += [(name, _value_key(fn.__globals__[name], depth)) for name in sorted(_global_names(fn.__code__))
-              if name in fn.__globals__]
-    return ("code", tuple(parts))
+    names = sorted(n for n in _global_names(fn.__code__) if n in fn.__globals__)
+    parts += [_value_key(fn.__globals__[n], depth) for n in names]
+    if any(p is None for p in parts):
+        return None
+    return ("code", tuple(names), tuple(parts))
