@@ -108,6 +108,12 @@ class SameCode:
         return f"SameCode({self.fn!r})"
 
 
+def keyed_by_code(fn):
+    """`SameCode(fn)` for a plain Python function (a `def` or a `lambda`); anything else as it is (a callable module,
+    e.g. a system builder with parameters, stays a pytree whose arrays are traced)."""
+    return SameCode(fn) if isinstance(fn, types.FunctionType) else fn
+
+
 class _Identity:
     """Keys an object by its identity (kept alive with the key)."""
 

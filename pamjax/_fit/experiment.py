@@ -14,7 +14,6 @@ different systems share parameters through the model (all valve tests use `model
 import abc
 import copy
 import hashlib
-import types
 from collections.abc import Callable, Mapping, Sequence
 
 import equinox as eqx
@@ -26,7 +25,7 @@ from .._core.arrays import as_scalar, device_array
 from .._core.cache import structural
 from .._core.custom_types import RealArrayLike, RealScalar, RealScalarLike
 from .._core.errors import PamjaxInputError
-from .._core.fastjit import SameCode
+from .._core.fastjit import keyed_by_code
 from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
 from .._solve.simulate import Stepping, fixed_grid_size, resolve_stepping, solve, validate
@@ -133,11 +132,6 @@ class _Constant:
     def __repr__(self):  # process-independent (fingerprints of resumed fits compare it)
         digest = hashlib.sha256(np.ascontiguousarray(self.array).tobytes()).hexdigest()[:16]
         return f"_Constant(shape={self.array.shape}, sha256={digest})"
-
-
-def _keyed(build):
-    """A `build` function written inline reuses the programs of an equal one (`SameCode`: same code, closure values)."""
-    return SameCode(build) if isinstance(build, types.FunctionType) else build
 
 
 def _default_scale(values):
@@ -255,7 +249,7 @@ class Experiment(AbstractExperiment):
         self.data = {c: device_array(np.where(recording.mask[c], recording[c], 0.0)) for c in channels}
         self.weights = {c: device_array(recording.mask[c] / self.scales[c]) for c in channels}
         self.signal = signal
-        self.build = SameSystem() if build is None else _keyed(build)
+        self.build = SameSystem() if build is None else keyed_by_code(build)  # an inline lambda: one program
         initial = dict(initial or {})
         self.start_at_supply = isinstance(initial.get("pressure"), str)
         if self.start_at_supply:

@@ -17,7 +17,7 @@ import numpy as np
 
 from .._core.custom_types import ArrayLike, Float, Real, RealArrayLike, RealScalarLike
 from .._core.errors import PamjaxInputError, PamjaxSolveError
-from .._core.fastjit import SameCode
+from .._core.fastjit import keyed_by_code
 from .._systems.base import AbstractSystem
 
 
@@ -141,8 +141,8 @@ def linearise(system: AbstractSystem, state: eqx.Module, command: RealArrayLike,
 
     # one program per system structure, inputs and outputs (module level: a later call with other values, or another
     # operating point, reuses it; closures made here at every call compiled anew each time, ~0.25 s a call)
-    A, B, C, D = _jacobians(system, jnp.asarray(t, dtype=float), state, u0, tuple(map(SameCode, inputs.values())),
-                            tuple(outputs))
+    wheres = tuple(map(keyed_by_code, inputs.values()))
+    A, B, C, D = _jacobians(system, jnp.asarray(t, dtype=float), state, u0, wheres, tuple(outputs))
     input_names = _names(command, "command") + tuple(n for name, leaf in zip(inputs, extra) for n in _names(leaf, name))
     output_names = tuple(n for name in outputs for n in _names(available[name], name))
     return StateSpace(

@@ -23,7 +23,7 @@ import numpy as np
 from .._core.arrays import floats_as_arrays
 from .._core.custom_types import RealArrayLike, RealScalarLike, TimesLike
 from .._core.errors import PamjaxInputError, check_time_grid, require_float64
-from .._core.fastjit import SameCode
+from .._core.fastjit import keyed_by_code
 from .._physics.signals import AbstractSignal
 from .._solve import fixed_step as _fixed_step
 from .._systems.base import AbstractSystem
@@ -63,7 +63,7 @@ def sweep(
     - `system`: the base system (`MuscleSystem`, `TankSystem`, ...).
     - `signal`: the base command signal (`Constant(0.5)`, `Sine(...)`), or a factory `values -> signal` called per
       point with the dict of that point's swept values (for keys that are not paths). A factory written inline (a
-      `lambda` in a loop) reuses the compiled program of an earlier one with the same code and closure values.
+      `lambda` in a loop) reuses the compiled program of an earlier one with the same code reading the same values.
     - `ts`: concrete, strictly increasing output times [s]; the solve starts at `ts[0]` and steps land on every
       output time (so no step exceeds the spacing of `ts`).
     - `over`: `{path: values}`. Paths name a leaf of the system (`"payload_mass"`, `"valve.supply_pressure"`,
@@ -121,7 +121,7 @@ def sweep(
     system = floats_as_arrays(system)  # a value set with eqx.tree_at: an argument, not a constant of the program
     _check_arguments(system, signal, ts, over, method, dt, chunk_size, gather, reduce)
     if not isinstance(signal, AbstractSignal):  # a factory written inline: the program of an equal one is reused
-        signal = SameCode(signal)
+        signal = keyed_by_code(signal)
     ts_np = np.asarray(ts, dtype=float)
     base_state, available = structure(system, y0)  # shapes only: no solve yet
     plan, values, batch_shape = make_plan(system, signal, base_state, over)
