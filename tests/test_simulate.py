@@ -153,14 +153,18 @@ def test_another_horizon_tolerance_or_first_step_does_not_compile_again():
     # another program than the automatic first step, once). Bad values are refused naming the argument.
     system = presets.mas10_tank_system()  # smoothed PWM edges, adaptive Tsit5 with the edge clipping
 
-    def run(t_end=0.2, rtol=1e-6, atol=1e-6, dt0=None):
+    def run(t_end=0.2, rtol=1e-6, atol=1e-6, dt0=None, **kwargs):
         ts = np.linspace(0.0, t_end, 11)
-        return pamjax.simulate(system, pamjax.Constant(0.5), ts, rtol=rtol, atol=atol, dt0=dt0).pressure
+        return pamjax.simulate(system, pamjax.Constant(0.5), ts, rtol=rtol, atol=atol, dt0=dt0, **kwargs).pressure
 
     first, first_dt0 = run(), run(dt0=1e-4)
     with pamjax.runtime.CompileStats() as stats:
         longer, tighter, other_dt0 = run(t_end=0.3), run(rtol=1e-8, atol=1e-7), run(dt0=3e-4)
+        # a concrete call's result cannot be differentiated: its default program is the forward-mode loop (the
+        # lighter trace), the one an explicit adjoint="forward" asks for; under grad the default stays reverse mode
+        forward = run(adjoint="forward")
     assert stats.count["compile"] == 0 and stats.count["trace"] == 0, stats.summary()
+    np.testing.assert_array_equal(forward, first)
     assert np.all(np.isfinite(np.stack([first, first_dt0, longer, tighter, other_dt0])))
     for same_run in (tighter, first_dt0, other_dt0):  # other tolerances or first steps: the same solution
         np.testing.assert_allclose(same_run, first, rtol=1e-4)

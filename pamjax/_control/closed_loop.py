@@ -184,7 +184,7 @@ class ClosedLoop(eqx.Module):
         return ClosedLoopState(plant=plant_state, controller=self.controller.initial_state(), duty=jnp.zeros(()),
                                valve_open=jnp.zeros((), dtype=bool), estimator=belief)
 
-    def step(self, t, state, sample_offsets, *, rtol, atol, max_steps):
+    def step(self, t, state, sample_offsets, *, rtol, atol, max_steps, adjoint=None):
         """One PWM period from `t`: the controller picks the duty from the plant's state (or its estimate), the plant
         runs with it held, the estimator takes the period's readings. Returns the next state, the duty and the
         samples: the plant's position, pressure and velocity at `t + sample_offsets` (the last offset is the period's
@@ -208,6 +208,7 @@ class ClosedLoop(eqx.Module):
                 rtol=rtol,
                 atol=atol,
                 max_steps=max_steps,
+                adjoint=adjoint,
                 starts_off=False,
                 num_periods=1,  # a smoothed valve's edges get step boundaries of their own
             )
@@ -274,7 +275,7 @@ class ClosedLoopTrajectory(eqx.Module):
         return rmse, jnp.max(jnp.abs(error))
 
 
-def _run(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps):
+def _run(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps, adjoint=None):
     period = loop.period
     offsets = period * jnp.arange(1, samples_per_period + 1) / samples_per_period
     state = loop.initial_state() if y0 is None else y0
@@ -284,7 +285,8 @@ def _run(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps):
     starts = period * jnp.arange(num_periods, dtype=float)
 
     def body(state, t):
-        state, duty, samples = loop.step(t, state, offsets, rtol=rtol, atol=atol, max_steps=max_steps)
+        state, duty, samples = loop.step(t, state, offsets, rtol=rtol, atol=atol, max_steps=max_steps,
+                                         adjoint=adjoint)
         return state, (t, duty, samples)
 
     final, (starts, duties, samples) = jax.lax.scan(body, state, starts)
@@ -307,9 +309,11 @@ def _run(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps):
 
 def run_closed_loop(loop: ClosedLoop, num_periods: int, samples_per_period: int = 10, y0: ClosedLoopState | None = None,
                     rtol: RealScalarLike = 1e-6, atol: RealScalarLike = 1e-6,
-                    max_steps: int = 2000) -> ClosedLoopTrajectory:
-    """The unchecked, traceable core of `simulate_closed_loop` (for use inside grad / vmap)."""
-    return _run(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps)
+                    max_steps: int = 2000, adjoint: str | None = None) -> ClosedLoopTrajectory:
+    """The unchecked, traceable core of `simulate_closed_loop` (for use inside grad / vmap); `adjoint` as for
+    `simulate` (reverse mode by default; `simulate_closed_loop`, whose result nothing differentiates, asks for
+    forward mode: diffrax's plain loop, the lighter trace)."""
+    return _run(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps, adjoint)
 
 
 _run_jit = eqx.filter_jit(_run)
@@ -354,4 +358,4 @@ def simulate_closed_loop(
             f"reference must stay inside the muscle's stroke [{x_min}, {x_max}] m, but spans [{lo}, {hi}] m"
         )
     num_periods = int(np.ceil(duration / float(loop.period) - 1e-9))
-    return _run_jit(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps)
+    return _run_jit(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps, "forward")

@@ -52,11 +52,13 @@ class JointControlTrajectory(eqx.Module):
 
 def run_joint_control(loop: JointControlLoop, ts: TimesLike, y0: JointControlState | None = None,
                       rtol: RealScalarLike = 1e-7, atol: RealScalarLike = 1e-7,
-                      max_steps: int = 100_000) -> JointControlTrajectory:
-    """The unchecked, traceable core of `simulate_joint_control` (for use inside grad / vmap)."""
+                      max_steps: int = 100_000, adjoint: str | None = None) -> JointControlTrajectory:
+    """The unchecked, traceable core of `simulate_joint_control` (for use inside grad / vmap); `adjoint` as for
+    `simulate` (reverse mode by default; `simulate_joint_control`, whose result nothing differentiates, asks for
+    forward mode: diffrax's plain loop, the lighter trace)."""
     ts = jnp.asarray(ts, dtype=float)
     y0 = loop.initial_state(ts[0]) if y0 is None else y0
-    traj = solve(loop, Constant(0.0), ts, y0, ts[0], rtol=rtol, atol=atol, max_steps=max_steps)
+    traj = solve(loop, Constant(0.0), ts, y0, ts[0], rtol=rtol, atol=atol, max_steps=max_steps, adjoint=adjoint)
     joint, p_atm = loop.joint, loop.air.atmospheric_pressure
     pressure, angle = traj.pressure, traj.angle
     theta_r, sum_r = jax.vmap(loop.targets)(ts)
@@ -153,4 +155,4 @@ def simulate_joint_control(
     """
     check_joint_control_loop(loop)
     check_joint_control(loop, ts)
-    return _run_jit(loop, jnp.asarray(ts, dtype=float), y0, rtol, atol, max_steps)
+    return _run_jit(loop, jnp.asarray(ts, dtype=float), y0, rtol, atol, max_steps, "forward")

@@ -112,7 +112,8 @@ def _lane_hybrid(system, signal, y0, ts, grid, channels, reduction):
 
 
 def _lane_adaptive(system, signal, y0, ts, channels, reduction, solve_options):
-    traj = solve(system, signal, ts, y0, ts[0], throw=False, **solve_options)
+    # a sweep's results are concrete (nothing differentiates them): diffrax's plain loop, as a concrete `simulate`
+    traj = solve(system, signal, ts, y0, ts[0], throw=False, **{"adjoint": "forward", **solve_options})
     obs = jnp.stack([jnp.asarray(traj.channel(c), dtype=float) for c in channels], axis=-1)
     finite = jnp.all(jnp.isfinite(obs))
     if reduction is not None:
