@@ -391,12 +391,8 @@ def simulate(
         # is a static argument: one value for every horizon, so that another horizon does not compile again.
         periods = _EDGE_CLIP
     traced = traced_model or traced_times or _is_traced(y0)
-    if adjoint is None and not traced:
-        # Nothing can differentiate a concrete call's result: diffrax's plain loop (forward mode) instead of its
-        # checkpointed one, which traces the step ~0.1 s faster (about a third of the trace) for the same steps,
-        # results and run time (docs/performance.md, "Compilation"); a reverse-mode solve stays the default under
-        # jit, vmap and grad.
-        adjoint = "forward"
+    # nothing differentiates a concrete call's result: diffrax's plain loop, a lighter trace (docs/performance.md)
+    adjoint = "forward" if adjoint is None and not traced else adjoint
     if solver is None and stepping == "adaptive":
         solver = default_solver(system)
     if max_steps is None:  # a budget that grows with the horizon (a 1,000 s PWM run needs ~1.6 M steps)
