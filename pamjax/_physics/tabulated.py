@@ -8,6 +8,7 @@ All pressures are ABSOLUTE [Pa].
 """
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -68,20 +69,35 @@ def _pchip_slopes(x, y):
     return jnp.concatenate([first[None], inner, last[None]])
 
 
+# Tables up to this many rows find the interval by comparing the query with every inner knot (a handful of operations);
+# longer ones by `jnp.searchsorted` (a loop in the compiled program). Inside a vector field, differentiated for a
+# Rosenbrock step, each loop costs compilation: the ISO 6358 regulator's solve compiles ~15 % faster this way
+# (docs/performance.md, "Compilation").
+_COMPARE_ALL_ROWS = 128
+
+
 def pchip(x, y, xq):
     """Monotone PCHIP interpolant through (`x`, `y`) evaluated at `xq`; end values held outside [x₀, x_n]."""
     x = jnp.asarray(x, dtype=float)
     y = jnp.asarray(y, dtype=float)
     d = _pchip_slopes(x, y)
     xq = jnp.clip(xq, x[0], x[-1])
-    i = jnp.clip(jnp.searchsorted(x, xq, side="right") - 1, 0, x.shape[0] - 2)
-    h = x[i + 1] - x[i]
-    s = (xq - x[i]) / h
+    if x.shape[0] <= _COMPARE_ALL_ROWS:  # the interval [x_i, x_i+1) holding xq (the last one closed)
+        i = jnp.sum(x[1:-1] <= jnp.expand_dims(xq, -1), axis=-1)
+    else:
+        i = jnp.clip(jnp.searchsorted(x, xq, side="right") - 1, 0, x.shape[0] - 2)
+    # the interval's ends, values and slopes in one gather (indexing each array apart makes six)
+    rows = jnp.stack([x[:-1], x[1:], y[:-1], y[1:], d[:-1], d[1:]])
+    picked = (jax.lax.dynamic_index_in_dim(rows, i, axis=1, keepdims=False) if jnp.ndim(i) == 0
+              else jnp.take(rows, i, axis=1))
+    x0, x1, y0, y1, d0, d1 = picked
+    h = x1 - x0
+    s = (xq - x0) / h
     h00 = (1.0 + 2.0 * s) * (1.0 - s) ** 2
     h10 = s * (1.0 - s) ** 2
     h01 = s * s * (3.0 - 2.0 * s)
     h11 = s * s * (s - 1.0)
-    return h00 * y[i] + h10 * h * d[i] + h01 * y[i + 1] + h11 * h * d[i + 1]
+    return h00 * y0 + h10 * h * d0 + h01 * y1 + h11 * h * d1
 
 
 class TabulatedISO6358Restriction(AbstractRestriction):
