@@ -7,6 +7,7 @@ import pytest
 from scipy.interpolate import PchipInterpolator
 
 import pamjax
+from pamjax._physics.calibration import PreparedVoltageCalibration
 from pamjax._physics.regulator import (
     PAPER001_AIR,
     ISO6358Regulator,
@@ -14,7 +15,13 @@ from pamjax._physics.regulator import (
     VoltageCalibration,
 )
 from pamjax._physics.signals import SquareWave
-from pamjax._physics.tabulated import TabulatedISO6358Restriction, paper001_charging_restriction, pchip
+from pamjax._physics.tabulated import (
+    PreparedTabulatedRestriction,
+    TabulatedISO6358Restriction,
+    paper001_charging_restriction,
+    pchip,
+    prepared_tables,
+)
 from pamjax._systems.regulated import RegulatedMuscleSystem, RegulatorSystem, muscle_stiffness, stiffness_rate
 from pamjax.presets import PAPER001_CHARGING_TABLE, PAPER001_DISCHARGING_TABLE, dmsp40_muscle
 
@@ -65,6 +72,49 @@ def test_tabulated_flow_at_table_rows_matches_eq13():
             ours = float(_mass_flow(restriction, np.asarray(p_in), np.asarray(ratio * p_in)))
             ref = _eq13_reference(c / 1e5, b, p_in, ratio * p_in, 298.0)
             assert ours == pytest.approx(ref, rel=1e-12)
+
+
+def test_prepared_tables_give_the_same_flows_calibration_and_gradients():
+    # A solve computes each interpolant's table once, ahead of its loop (`prepared_tables`): the same numbers as the
+    # model's own PCHIPs, the same derivatives with respect to the table entries (which a fit may free), and only
+    # inside the solve (the model itself keeps its plain parts).
+    system = RegulatorSystem(pamjax.vppm_regulator(), volume=1e-6)
+    prepared = prepared_tables(system)
+    regulator, ready = system.regulator, prepared.regulator
+    assert isinstance(ready.charging, PreparedTabulatedRestriction) and isinstance(
+        ready.calibration, PreparedVoltageCalibration)
+    assert not isinstance(regulator.charging, PreparedTabulatedRestriction)
+    assert prepared_tables(prepared).regulator.charging is ready.charging  # prepared once
+    pressures = np.linspace(1.0e5, 9.0e5, 41)
+    for plain, fast in ((regulator.charging, ready.charging), (regulator.discharging, ready.discharging)):
+        for method in ("conductance", "ratio"):
+            np.testing.assert_allclose(_calls(plain, method, pressures), _calls(fast, method, pressures), rtol=1e-14)
+    volts = np.linspace(-1.0, 11.0, 25)  # beyond the table: held end values
+    np.testing.assert_allclose(_calls(regulator.calibration, "__call__", volts),
+                               _calls(ready.calibration, "__call__", volts), rtol=1e-14, atol=1e-9)
+    gauge = np.asarray(_calls(regulator.calibration, "__call__", volts))
+    np.testing.assert_allclose(_calls(ready.calibration, "inverse", gauge), np.clip(volts, 0.0, 10.0), atol=1e-12)
+    state = system.initial_state()
+    for volt in (0.5, 3.0, 9.0):
+        np.testing.assert_allclose(jax.tree.leaves(_field(system, state, volt)),
+                                   jax.tree.leaves(_field(prepared, state, volt)), rtol=1e-13)
+    grads = [_table_gradient(wrap, regulator.charging) for wrap in (lambda r: r, lambda r: r.prepared())]
+    assert np.all(np.isfinite(grads[0])) and np.any(grads[0] != 0)
+    np.testing.assert_allclose(grads[1], grads[0], rtol=1e-12)
+
+
+_calls = eqx.filter_jit(lambda part, method, x: jax.vmap(getattr(part, method))(x))
+_field = eqx.filter_jit(lambda system, state, volt: system.vector_field(0.0, state, volt))
+
+
+def _table_gradient(wrap, restriction):
+    """d(flow at 4.5 bar into 2 bar)/d(the C table), through `wrap(restriction)` with the table traced."""
+
+    def flow(c):
+        part = wrap(eqx.tree_at(lambda r: r.sonic_conductance, restriction, c))
+        return part.mass_flow(4.5e5, 2.0e5, PAPER001_AIR)
+
+    return np.asarray(jax.jit(jax.grad(flow))(restriction.sonic_conductance))
 
 
 def test_bad_tables_and_voltages_are_named():

@@ -26,7 +26,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._core.custom_types import Array, FloatScalar, Real, RealScalar, RealScalarLike, StateLike, Table
+from .._core.custom_types import Array, FloatScalar, Real, RealScalar, RealScalarLike, StateLike
 from .._core.errors import (
     PamjaxInputError,
     check_finite,
@@ -37,11 +37,12 @@ from .._core.errors import (
 from .._core.fitting import parameter, positive
 from .._core.units import BAR, FLOW_UNIT, check_absolute_pressure
 from .._papers import datasheets, paper001
+from .calibration import VOLTAGE_RANGE, VoltageCalibration
 from .chamber import chamber_flow, pressure_rate
 from .gas import AbstractRestriction, Air
 from .hysteresis import EXPONENT_BOUNDS, bouc_wen_rate, exponent_field
 from .smooth import smooth_relu
-from .tabulated import check_table_axis, paper001_charging_restriction, paper001_discharging_restriction, pchip
+from .tabulated import paper001_charging_restriction, paper001_discharging_restriction
 from .valves.base import AbstractControlElement
 
 
@@ -59,41 +60,9 @@ def __getattr__(name):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-VOLTAGE_RANGE = paper001.VOLTAGE_RANGE  # V
 EQ6_TIME_CONSTANTS = paper001.EQ6_TIME_CONSTANTS  # s
 EQ7_FLOW_GAIN = paper001.EQ7_GAIN * BAR / FLOW_UNIT  # Pa per kg/s (≈ -4.67e9): eq. 7's gain in SI
 TANK_VOLUME = paper001.TANK_VOLUME  # m³
-
-
-def check_voltage(voltage, name="reference voltage"):
-    """Reference voltage within the VPPM's 0-10 V (paper 001, Sect. 2), else `PamjaxInputError`."""
-    check_finite(voltage, name)
-    check_in_closed_interval(voltage, *VOLTAGE_RANGE, f"{name} [V]")
-
-
-class VoltageCalibration(eqx.Module):
-    """Static calibration (paper 001, Fig. 3): reference voltage [V] → set GAUGE pressure [Pa], a monotone PCHIP
-    through the table. Default: the straight line of eq. 6's static gain, 1.01 bar/V over 0-10 V.
-
-    **Arguments:** `voltage` [V] strictly increasing within 0-10 V; `gauge_pressure` [Pa] strictly increasing.
-    """
-
-    voltage: Table = parameter(VOLTAGE_RANGE, unit="V", shape="table")
-    gauge_pressure: Table = parameter((0.0, VOLTAGE_RANGE[1] * paper001.EQ6_GAIN * BAR), unit="Pa", shape="table")
-
-    def __check_init__(self):
-        check_table_axis(self.voltage, "VoltageCalibration.voltage")
-        check_voltage(self.voltage, "VoltageCalibration.voltage")
-        check_table_axis(self.gauge_pressure, "VoltageCalibration.gauge_pressure")
-        if jnp.shape(self.voltage) != jnp.shape(self.gauge_pressure):
-            raise PamjaxInputError(
-                f"VoltageCalibration.gauge_pressure must have the shape of .voltage {jnp.shape(self.voltage)}, got "
-                f"{jnp.shape(self.gauge_pressure)}"
-            )
-
-    def __call__(self, voltage):
-        """Set gauge pressure [Pa] at `voltage` [V]."""
-        return pchip(self.voltage, self.gauge_pressure, voltage)
 
 
 class RegulatorState(eqx.Module):

@@ -10,6 +10,7 @@ All pressures are ABSOLUTE [Pa].
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import jax.tree_util as jtu
 import numpy as np
 
 from .._core.custom_types import Table
@@ -76,20 +77,26 @@ def _pchip_slopes(x, y):
 _COMPARE_ALL_ROWS = 128
 
 
-def pchip(x, y, xq):
-    """Monotone PCHIP interpolant through (`x`, `y`) evaluated at `xq`; end values held outside [x₀, x_n]."""
+def pchip_table(x, y):
+    """The PCHIP interpolant through (`x`, `y`) as a (6, n - 1) table: per interval its left and right knot, the
+    values there and the slopes there (what `pchip_at` reads)."""
     x = jnp.asarray(x, dtype=float)
     y = jnp.asarray(y, dtype=float)
     d = _pchip_slopes(x, y)
-    xq = jnp.clip(xq, x[0], x[-1])
-    if x.shape[0] <= _COMPARE_ALL_ROWS:  # the interval [x_i, x_i+1) holding xq (the last one closed)
-        i = jnp.sum(x[1:-1] <= jnp.expand_dims(xq, -1), axis=-1)
+    return jnp.stack([x[:-1], x[1:], y[:-1], y[1:], d[:-1], d[1:]])
+
+
+def pchip_at(table, xq):
+    """The interpolant of `pchip_table` at `xq`; end values held outside [x₀, x_n]."""
+    knots = table[0]
+    xq = jnp.clip(xq, knots[0], table[1, -1])
+    if knots.shape[0] <= _COMPARE_ALL_ROWS:  # the interval [x_i, x_i+1) holding xq (the last one closed)
+        i = jnp.sum(knots[1:] <= jnp.expand_dims(xq, -1), axis=-1)
     else:
-        i = jnp.clip(jnp.searchsorted(x, xq, side="right") - 1, 0, x.shape[0] - 2)
+        i = jnp.clip(jnp.searchsorted(knots, xq, side="right") - 1, 0, knots.shape[0] - 1)
     # the interval's ends, values and slopes in one gather (indexing each array apart makes six)
-    rows = jnp.stack([x[:-1], x[1:], y[:-1], y[1:], d[:-1], d[1:]])
-    picked = (jax.lax.dynamic_index_in_dim(rows, i, axis=1, keepdims=False) if jnp.ndim(i) == 0
-              else jnp.take(rows, i, axis=1))
+    picked = (jax.lax.dynamic_index_in_dim(table, i, axis=1, keepdims=False) if jnp.ndim(i) == 0
+              else jnp.take(table, i, axis=1))
     x0, x1, y0, y1, d0, d1 = picked
     h = x1 - x0
     s = (xq - x0) / h
@@ -100,7 +107,33 @@ def pchip(x, y, xq):
     return h00 * y0 + h10 * h * d0 + h01 * y1 + h11 * h * d1
 
 
-class TabulatedISO6358Restriction(AbstractRestriction):
+def pchip(x, y, xq):
+    """Monotone PCHIP interpolant through (`x`, `y`) evaluated at `xq`; end values held outside [x₀, x_n]."""
+    return pchip_at(pchip_table(x, y), xq)
+
+
+class PreparesTables(eqx.Module):
+    """A part whose interpolants' tables (`pchip_table`: the slopes at the knots) can be computed once, ahead of a
+    solve's loop, instead of at every evaluation of the vector field: `prepared()` returns that form of it (the same
+    values; a solve calls it through `prepared_tables`). The tables depend on the part's parameters, which a fit may
+    trace, so they are computed inside the solve's program, never stored with the model."""
+
+    def prepared(self):
+        return self
+
+
+def prepared_tables(tree):
+    """`tree` (a system) with every `PreparesTables` part replaced by its `prepared()` form. Called once per solve,
+    before its loop: a regulator's four C/b interpolants and its calibration were otherwise differentiated and
+    compiled afresh at every stage of every step (docs/performance.md, "Compilation")."""
+
+    def is_part(x):
+        return isinstance(x, PreparesTables)
+
+    return jtu.tree_map(lambda x: x.prepared() if is_part(x) else x, tree, is_leaf=is_part)
+
+
+class TabulatedISO6358Restriction(AbstractRestriction, PreparesTables):
     """ISO 6358 flow (paper 001 eq. 13-14, standard ratio form) with C and b tabulated against upstream pressure.
 
     ṁ = ρ₀ C(p_up) p_up sqrt(T₀/T) φ(p_down/p_up; b(p_up)), ρ₀ = 1.185 kg/m³, T₀ = 293.15 K (ISO 8778); φ the
@@ -142,11 +175,33 @@ class TabulatedISO6358Restriction(AbstractRestriction):
         """b(p_up) [-] at the upstream pressure [Pa abs]."""
         return pchip(self.pressure, self.critical_ratio, upstream_pressure)
 
+    def prepared(self):
+        return PreparedTabulatedRestriction(self.pressure, self.sonic_conductance, self.critical_ratio,
+                                            self.laminar_ratio, pchip_table(self.pressure, self.sonic_conductance),
+                                            pchip_table(self.pressure, self.critical_ratio))
+
     def mass_flow(self, p1, p2, air: Air):
         p_up, ratio, direction = orient(p1, p2)
         phi = ellipse_flow_fraction(ratio, self.ratio(p_up), self.laminar_ratio)
         sonic = ISO8778_DENSITY * self.conductance(p_up) * p_up * jnp.sqrt(ISO8778_TEMPERATURE / air.temperature)
         return direction * sonic * phi
+
+
+class PreparedTabulatedRestriction(TabulatedISO6358Restriction):
+    """A `TabulatedISO6358Restriction` with its C and b interpolants' tables computed (`prepared()`, inside a
+    solve); the same flow."""
+
+    conductance_table: Table | None = None
+    ratio_table: Table | None = None
+
+    def prepared(self):
+        return self
+
+    def conductance(self, upstream_pressure):
+        return pchip_at(self.conductance_table, upstream_pressure)
+
+    def ratio(self, upstream_pressure):
+        return pchip_at(self.ratio_table, upstream_pressure)
 
 
 def volumetric_flow_anr(mass_flow):

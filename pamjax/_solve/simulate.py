@@ -17,6 +17,7 @@ from .._core.private import diffrax_result_code, equinox_errors_as_nan, jax_at_t
 from .._core.units import check_absolute_pressure
 from .._core.xla_cpu import compiled_with, single_trajectory_options
 from .._physics.signals import AbstractSignal
+from .._physics.tabulated import prepared_tables
 from .._systems.base import AbstractSystem
 from . import chunks as _chunks, synchronous as _sync
 from .checks import check_parameters, naming_batched, runtime_checks, vacuum
@@ -73,6 +74,7 @@ def solve(
     False reads the signal's own value there (a closed loop continuing period by period).
     """
     ts = jnp.asarray(ts, dtype=float)
+    system = prepared_tables(system)  # interpolants' tables once, ahead of the loop (pamjax._physics.tabulated)
     y0 = system.initial_state() if y0 is None else y0
     stepping = resolve_stepping(system, stepping)
     if stepping in ("pwm", "grid"):

@@ -30,7 +30,6 @@ from .._core.errors import PamjaxInputError, check_nonnegative, check_positive
 from .._core.fitting import parameter
 from .._physics.regulator import EQ6_TIME_CONSTANTS, VOLTAGE_RANGE
 from .._physics.signals import AbstractSignal
-from .._physics.tabulated import pchip
 from .base import AbstractSystem
 from .joint import AntagonisticJoint, JointState
 
@@ -120,8 +119,7 @@ def max_gauge_pressure(joint: AntagonisticJoint):
 def _voltage(regulator, gauge_pressure):
     """Inverse calibration: the voltage [V] setting `gauge_pressure` [Pa] (PCHIP with the axes swapped: exact for
     the linear default, monotone for any table)."""
-    cal = regulator.calibration
-    return pchip(cal.gauge_pressure, cal.voltage, gauge_pressure)
+    return regulator.calibration.inverse(gauge_pressure)
 
 
 # --- controller -----------------------------------------------------------------------------------------------------

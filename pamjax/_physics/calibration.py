@@ -1,0 +1,71 @@
+"""The VPPM's static calibration (paper 001, Fig. 3): reference voltage [V] → set gauge pressure [Pa], a monotone
+PCHIP through a table (`VoltageCalibration`), and its prepared form for a solve (`PreparedVoltageCalibration`)."""
+
+import jax.numpy as jnp
+
+from .._core.custom_types import Table
+from .._core.errors import PamjaxInputError, check_finite, check_in_closed_interval
+from .._core.fitting import parameter
+from .._core.units import BAR
+from .._papers import paper001
+from .tabulated import PreparesTables, check_table_axis, pchip, pchip_at, pchip_table
+
+VOLTAGE_RANGE = paper001.VOLTAGE_RANGE  # V
+
+
+def check_voltage(voltage, name="reference voltage"):
+    """Reference voltage within the VPPM's 0-10 V (paper 001, Sect. 2), else `PamjaxInputError`."""
+    check_finite(voltage, name)
+    check_in_closed_interval(voltage, *VOLTAGE_RANGE, f"{name} [V]")
+
+
+class VoltageCalibration(PreparesTables):
+    """Static calibration (paper 001, Fig. 3): reference voltage [V] → set GAUGE pressure [Pa], a monotone PCHIP
+    through the table. Default: the straight line of eq. 6's static gain, 1.01 bar/V over 0-10 V.
+
+    **Arguments:** `voltage` [V] strictly increasing within 0-10 V; `gauge_pressure` [Pa] strictly increasing.
+    """
+
+    voltage: Table = parameter(VOLTAGE_RANGE, unit="V", shape="table")
+    gauge_pressure: Table = parameter((0.0, VOLTAGE_RANGE[1] * paper001.EQ6_GAIN * BAR), unit="Pa", shape="table")
+
+    def __check_init__(self):
+        check_table_axis(self.voltage, "VoltageCalibration.voltage")
+        check_voltage(self.voltage, "VoltageCalibration.voltage")
+        check_table_axis(self.gauge_pressure, "VoltageCalibration.gauge_pressure")
+        if jnp.shape(self.voltage) != jnp.shape(self.gauge_pressure):
+            raise PamjaxInputError(
+                f"VoltageCalibration.gauge_pressure must have the shape of .voltage {jnp.shape(self.voltage)}, got "
+                f"{jnp.shape(self.gauge_pressure)}"
+            )
+
+    def __call__(self, voltage):
+        """Set gauge pressure [Pa] at `voltage` [V]."""
+        return pchip(self.voltage, self.gauge_pressure, voltage)
+
+    def inverse(self, gauge_pressure):
+        """The voltage [V] setting `gauge_pressure` [Pa]: PCHIP with the axes swapped (exact for the linear
+        default, monotone for any table)."""
+        return pchip(self.gauge_pressure, self.voltage, gauge_pressure)
+
+    def prepared(self):
+        return PreparedVoltageCalibration(self.voltage, self.gauge_pressure,
+                                          pchip_table(self.voltage, self.gauge_pressure),
+                                          pchip_table(self.gauge_pressure, self.voltage))
+
+
+class PreparedVoltageCalibration(VoltageCalibration):
+    """A `VoltageCalibration` with both interpolants' tables computed (`prepared()`, inside a solve); the same
+    values."""
+
+    table: Table | None = None
+    inverse_table: Table | None = None
+
+    def prepared(self):
+        return self
+
+    def __call__(self, voltage):
+        return pchip_at(self.table, voltage)
+
+    def inverse(self, gauge_pressure):
+        return pchip_at(self.inverse_table, gauge_pressure)
