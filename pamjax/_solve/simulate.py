@@ -337,7 +337,8 @@ def simulate(
     - `max_steps`: the solve fails beyond this many steps; default (`_solve_hints.default_max_steps`): 200,000, or
       more for long runs (64 per PWM period of a switching valve, 1,000 per second otherwise). `dt0`: initial step
       (default: automatic).
-    - `adjoint`: "reverse" (default), "forward", or any diffrax adjoint.
+    - `adjoint`: "reverse" (default; a concrete call runs forward mode, as nothing differentiates it), "forward",
+      or any diffrax adjoint.
     - `throw`: raise `PamjaxSolveError` on a failed solve (default). With `throw=False` a failed solve returns a
       trajectory whose `result` is non-zero and whose channels are NaN, never plausible-looking numbers.
     - `stepping`: "auto" (default): "adaptive" for smooth systems; for hybrid ones (stick-slip friction,
@@ -393,8 +394,7 @@ def simulate(
         # is a static argument: one value for every horizon, so that another horizon does not compile again.
         periods = _EDGE_CLIP
     traced = traced_model or traced_times or _is_traced(y0)
-    # nothing differentiates a concrete call's result: diffrax's plain loop, a lighter trace (docs/performance.md)
-    adjoint = "forward" if adjoint is None and not traced else adjoint
+    adjoint = "forward" if adjoint is None and not traced else adjoint  # see the docstring: a lighter trace
     if solver is None and stepping == "adaptive":
         solver = default_solver(system)
     if max_steps is None:  # a budget that grows with the horizon (a 1,000 s PWM run needs ~1.6 M steps)
