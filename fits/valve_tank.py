@@ -93,10 +93,11 @@ def plot(path, model, experiments):
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
-    for e in experiments:
+    predicted = pj.predictions(model, experiments)  # one program for every run (one per run compiles each anew)
+    for e, p in zip(experiments, predicted):
         ax = axes[0] if e.name.startswith("E1") else axes[1]
         line = ax.plot(e.times, np.asarray(e.data["pressure"]) / 1e5, ".", ms=2, label=f"{e.name} data")[0]
-        ax.plot(e.times, np.asarray(pj.predictions(model, e)[0]["pressure"]) / 1e5, "-", color=line.get_color(), lw=0.9)
+        ax.plot(e.times, np.asarray(p["pressure"]) / 1e5, "-", color=line.get_color(), lw=0.9)
     axes[0].set(xlabel="t [s]", ylabel="tank pressure [bar abs]", title="charge (path 1→2): data dots, model lines")
     axes[1].set(xlabel="t [s]", title="discharge (path 2→3)")
     for ax in axes:

@@ -82,8 +82,9 @@ def draw(out, experiments, alone, profiles):
     k_fit, k_se = float(alone.values[0]), float(alone.standard_errors[0])
     pyplot = plt()
     fig, axes = pyplot.subplots(1, 2, figsize=(13, 4.5))
-    for k, e in enumerate(experiments):
-        pred = np.asarray(pj.predictions(alone.model, e)[0]["pressure"])
+    predicted = pj.predictions(alone.model, experiments)  # one program for the runs (one per run: 4x the compiling)
+    for k, (e, p) in enumerate(zip(experiments, predicted)):
+        pred = np.asarray(p["pressure"])
         axes[0].plot(e.times, np.asarray(e.data["pressure"]) / 1e5, ".", color=f"C{k}", ms=1.5)
         axes[0].plot(e.times, pred / 1e5, "-", color=f"C{k}", lw=1, label=f"u = {DUTIES[k]:.2f}")
     axes[0].set(xlabel="t [s]", ylabel="tank pressure [bar abs]",
