@@ -7,6 +7,7 @@ against `simulate` of the plant with that supply and start; the identification o
 
 import json
 
+import equinox as eqx
 import jax
 import numpy as np
 import pytest
@@ -166,6 +167,23 @@ def test_a_rig_is_identified_with_its_nuisances_and_a_plain_fit_names_them(rig):
                     "a supply pressure the tank runs contradict"):
         assert finding in text, text
     assert "--nuisance" in text
+
+
+def test_runs_predicted_together_equal_each_run_predicted_alone(rig):
+    # A fit's runs of one system structure share one loop, and their output channels are traced once for all runs
+    # (pamjax._solve.run_outputs: blocks of samples side by side, each with its run's parameters, a run's last block
+    # padded). Against each run predicted alone (the one-run path, traced apart): runs of other lengths (M0 1.2 s,
+    # M1 2 s, both over one block), their own supply pressures, and M1's start logged mid-way.
+    bench = pj.bench.load_bench(rig, _plant(), nuisance=True)
+    model = eqx.tree_at(lambda m: m.runs["M1"].supply_pressure, bench.model, 6.3e5)  # runs unlike each other
+    names = [e.name for e in bench.experiments]
+    together = dict(zip(names, pj.predictions(model, bench.experiments)))
+    for name in ("T2", "M0", "M1"):
+        [alone] = pj.predictions(model, [bench.experiments[names.index(name)]])
+        assert set(alone) == set(together[name]), name
+        for channel, values in alone.items():
+            assert np.all(np.isfinite(values)), (name, channel)
+            np.testing.assert_allclose(together[name][channel], values, rtol=1e-12, atol=1e-9, err_msg=name)
 
 
 def test_a_rig_logged_to_matlab_files_loads_as_its_csv_twin(tmp_path, rig):

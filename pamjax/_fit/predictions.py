@@ -6,6 +6,7 @@ import jax
 import numpy as np
 
 from .._core.errors import require_float64
+from .._solve.run_outputs import run_trajectories
 from .._solve.scaled import scaled
 from .._solve.simulate import fixed_trajectory
 from .._solve.synchronous import solve_runs
@@ -57,11 +58,11 @@ def _predict_runs(model, exps, stepping, substeps):
     sizes = [e.grid_size(s, stepping) for s, e in zip(systems, exps)]
     runs = solve_runs(systems, [e.signal for e in exps], times, [f[0] for f in flats], flats[0][1],
                       [e.t0 for e in exps], stepping=stepping, substeps=substeps, sizes=sizes)
-    preds = []
-    for system, e, ts, (states, num_steps, finite) in zip(systems, exps, times, runs):
-        traj = fixed_trajectory(system, e.signal, ts, e.t0, states, num_steps, finite, stepping)
-        preds.append(e.observe(model, {c: traj.channel(c) for c in traj.channels()}))
-    return preds
+    if len(exps) == 1:
+        trajectories = [fixed_trajectory(systems[0], exps[0].signal, times[0], exps[0].t0, *runs[0], stepping)]
+    else:  # the outputs traced once for all runs, not once per run (pamjax._solve.run_outputs)
+        trajectories = run_trajectories(systems, [e.signal for e in exps], times, runs, [e.t0 for e in exps], stepping)
+    return [e.observe(model, {c: traj.channel(c) for c in traj.channels()}) for e, traj in zip(exps, trajectories)]
 
 
 @eqx.filter_jit

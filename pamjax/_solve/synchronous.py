@@ -174,7 +174,7 @@ def solve_runs(systems, signals, ts_list, z0s, scaled, t0s, *, stepping, substep
         offsets.append(offset_k)
         shifted_ts.append(ts + offset_k)
         offset = offset + (t1 - t0) + 1.0
-    stacked = _stack_systems(systems)
+    stacked = stack_systems(systems)
     field, event, update = _grid_functions(stepping, scaled, systems[0].hybrid)
     all_ts = jnp.concatenate(shifted_ts)
     z_out, num_steps, _, _, finite = _grid.integrate(
@@ -239,7 +239,7 @@ def observe_run(system, signal, ts, z0, scaled, t0, *, stepping, substeps, size,
     return carry, finite
 
 
-def _stack_systems(systems):
+def stack_systems(systems):
     """The systems' array leaves stacked along a new leading axis (their static structure must agree)."""
     arrays = [eqx.filter(s, eqx.is_array) for s in systems]
     structure = [jax.tree_util.tree_structure(a) for a in arrays]
