@@ -16,23 +16,10 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
-from .synchronous import HeldOpeningValve, latched_commands, open_at_start, sharp_opening, stack_systems
-from .trajectory import RESULT_NONFINITE, trajectory
+from .synchronous import exact_opening, held_at, latched_commands, stack_systems
+from .trajectory import fixed_grid_trajectory
 
 BLOCK = 256  # samples per block: at most BLOCK − 1 padded samples per run (a 2 s run at 1 kHz: 47 of 2,001)
-
-
-def _pwm_opening(valve, signal, t, command, t0):
-    """The valve's exact-edge opening at `t` in a run from `t0` (as `synchronous.output_at` holds it)."""
-    start = jnp.floor(t * valve.pwm_frequency + 1e-9) * valve.period
-    first = jnp.floor(t0 * valve.pwm_frequency + 1e-9) * valve.period
-    return sharp_opening(valve, t - start, command, open_at_start(valve, signal, start, first))
-
-
-def _held(system, opening, stepping):
-    if stepping != "pwm":
-        return system
-    return eqx.tree_at(lambda s: s.valve, system, HeldOpeningValve(system.valve, opening))
 
 
 def _blocks(x, size, count):
@@ -48,7 +35,7 @@ def run_trajectories(systems, signals, times, runs, t0s, stepping):
     `times`, with `system.outputs` traced once for all runs."""
     if stepping == "pwm":
         commands = [latched_commands(s.valve, u, ts) for s, u, ts in zip(systems, signals, times)]
-        openings = [jax.vmap(lambda t, c, s=s, u=u, t0=t0: _pwm_opening(s.valve, u, t, c, t0))(ts, cmd)
+        openings = [jax.vmap(lambda t, c, s=s, u=u, t0=t0: exact_opening(s.valve, u, t, c, t0))(ts, cmd)
                     for s, u, ts, cmd, t0 in zip(systems, signals, times, commands, t0s)]
     else:
         commands = [jax.vmap(u)(ts) for u, ts in zip(signals, times)]
@@ -67,7 +54,10 @@ def run_trajectories(systems, signals, times, runs, t0s, stepping):
 
     def block(system_arrays, ts, states, cmds, opens):
         system = eqx.combine(system_arrays, static)
-        return jax.vmap(lambda t, y, c, o: _held(system, o, stepping).outputs(t, y, c))(ts, states, cmds, opens)
+        def one(t, y, c, o):
+            return (held_at(system, o) if stepping == "pwm" else system).outputs(t, y, c)
+
+        return jax.vmap(one)(ts, states, cmds, opens)
 
     outs = jax.vmap(block)(per_block, side_by_side(times), side_by_side([r[0] for r in runs]),
                            side_by_side(commands), side_by_side(openings))
@@ -75,8 +65,6 @@ def run_trajectories(systems, signals, times, runs, t0s, stepping):
     starts = size * np.concatenate([[0], np.cumsum(counts)[:-1]])
     trajectories = []
     for ts, (states, num_steps, finite), cmd, first, n in zip(times, runs, commands, starts, sizes):
-        result = jnp.where(finite, 0, RESULT_NONFINITE)
-        zero = jnp.zeros((), dtype=num_steps.dtype)
         run_outs = jtu.tree_map(lambda a, first=first, n=n: a[first:first + n], outs)
-        trajectories.append(trajectory(ts, states, cmd, run_outs, num_steps, num_steps, zero, result))
+        trajectories.append(fixed_grid_trajectory(ts, states, cmd, run_outs, num_steps, finite))
     return trajectories

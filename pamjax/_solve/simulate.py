@@ -24,7 +24,14 @@ from .checks import check_parameters, naming_batched, runtime_checks, vacuum
 from .edges import ScheduledValve, StartsOff
 from .hints import default_max_steps, failure_hint, fixed_step_hint, negative_inflow
 from .scaled import scaled
-from .trajectory import RESULT_NONFINITE, RESULT_NONPHYSICAL, Trajectory, result_message, trajectory
+from .trajectory import (
+    RESULT_NONFINITE,
+    RESULT_NONPHYSICAL,
+    Trajectory,
+    fixed_grid_trajectory,
+    result_message,
+    trajectory,
+)
 
 if TYPE_CHECKING:  # annotations only: importing diffrax costs ~0.4 s that fixed-grid work never needs
     import diffrax as dfx
@@ -204,23 +211,15 @@ def fixed_grid_size(system, stepping, t0, t1, grid_step=None):
 
 
 def fixed_trajectory(system, signal, ts, t0, states, num_steps, finite, stepping):
-    """The `Trajectory` of a fixed-grid solve from its states at `ts`."""
+    """The `Trajectory` of a fixed-grid solve from its states at `ts` (on the PWM-synchronous grid: the duties latched
+    per period, the valve held at its exact-edge opening for the outputs)."""
     if stepping == "pwm":
-        return pwm_trajectory(system, signal, ts, t0, states, num_steps, finite)
-    commands = jax.vmap(signal)(ts)
-    outs = jax.vmap(system.outputs)(ts, states, commands)
-    result = jnp.where(finite, 0, RESULT_NONFINITE)
-    zero = jnp.zeros((), dtype=num_steps.dtype)
-    return trajectory(ts, states, commands, outs, num_steps, num_steps, zero, result)
-
-
-def pwm_trajectory(system, signal, ts, t0, states, num_steps, finite):
-    """The `Trajectory` of a PWM-synchronous solve from its states at `ts`."""
-    commands = _sync.latched_commands(system.valve, signal, ts)
-    outs = _sync.outputs_at(system, signal, ts, states, commands, t0)
-    result = jnp.where(finite, 0, RESULT_NONFINITE)
-    zero = jnp.zeros((), dtype=num_steps.dtype)
-    return trajectory(ts, states, commands, outs, num_steps, num_steps, zero, result)
+        commands = _sync.latched_commands(system.valve, signal, ts)
+        outs = _sync.outputs_at(system, signal, ts, states, commands, t0)
+    else:
+        commands = jax.vmap(signal)(ts)
+        outs = jax.vmap(system.outputs)(ts, states, commands)
+    return fixed_grid_trajectory(ts, states, commands, outs, num_steps, finite)
 
 
 _solve_jit = eqx.filter_jit(solve)

@@ -259,15 +259,22 @@ def latched_commands(valve: AbstractSwitchingValve, signal, ts):
     return jax.vmap(lambda t: latched_command(valve, signal, t))(ts)
 
 
+def exact_opening(valve: AbstractSwitchingValve, signal, t, command, t0):
+    """The valve's exact-edge opening (0 or 1) at time `t` with latched duty `command`, in a run from `t0`."""
+    start = jnp.floor(t * valve.pwm_frequency + 1e-9) * valve.period
+    first = jnp.floor(t0 * valve.pwm_frequency + 1e-9) * valve.period
+    return sharp_opening(valve, t - start, command, open_at_start(valve, signal, start, first))
+
+
+def held_at(system, opening):
+    """`system` with its switching valve held at `opening` (`HeldOpeningValve`)."""
+    return eqx.tree_at(lambda s: s.valve, system, HeldOpeningValve(system.valve, opening))
+
+
 def output_at(system, signal, t, state, command, t0):
     """`system.outputs` at time `t` with the valve holding its exact-edge opening there (mass flow included), in a
     run from `t0`."""
-    valve = system.valve
-    start = jnp.floor(t * valve.pwm_frequency + 1e-9) * valve.period
-    first = jnp.floor(t0 * valve.pwm_frequency + 1e-9) * valve.period
-    opening = sharp_opening(valve, t - start, command, open_at_start(valve, signal, start, first))
-    held = eqx.tree_at(lambda s: s.valve, system, HeldOpeningValve(valve, opening))
-    return held.outputs(t, state, command)
+    return held_at(system, exact_opening(system.valve, signal, t, command, t0)).outputs(t, state, command)
 
 
 def outputs_at(system, signal, ts, states, commands, t0):

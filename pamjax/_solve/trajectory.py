@@ -78,6 +78,12 @@ def result_message(code):
     return "unknown failure" if message is None else message
 
 
+def fixed_grid_trajectory(ts, states, commands, outs, num_steps, finite):
+    """The `Trajectory` of a fixed-grid solve (its steps all accepted; failed where its states are not finite)."""
+    zero = jnp.zeros((), dtype=num_steps.dtype)
+    return trajectory(ts, states, commands, outs, num_steps, num_steps, zero, jnp.where(finite, 0, RESULT_NONFINITE))
+
+
 def trajectory(ts, states, commands, outs, num_steps, num_accepted, num_rejected, result):
     """The `Trajectory` of a solve: a state with an absolute pressure ≤ 0 marks it failed, and a failed solve's
     outputs are NaN (never plausible-looking numbers)."""
