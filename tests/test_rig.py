@@ -186,6 +186,49 @@ def test_runs_predicted_together_equal_each_run_predicted_alone(rig):
             np.testing.assert_allclose(together[name][channel], values, rtol=1e-12, atol=1e-9, err_msg=name)
 
 
+def test_signals_of_runs_stack_where_they_can():
+    # pamjax._solve.run_signals: a rig's logged duties (tables of different lengths) become one signal with a run
+    # axis, each table padded past its end; every run must read the same at every time, before, inside and after
+    from pamjax._solve.run_signals import stacked_signals
+
+    period = 0.02
+    short = pj.Sampled(np.arange(5) * 0.013, [0.1, 0.5, 0.9, 0.3, 0.7], period=period)
+    long = pj.Sampled(0.4 + np.arange(8) * 0.011, np.linspace(0.05, 0.95, 8), period=period)
+    stacked = stacked_signals([short, long])
+    t = np.linspace(-0.05, 5.0, 1011)  # past the padded samples (1 s apart after the end) too
+    for k, alone in enumerate((short, long)):
+        run = jax.tree_util.tree_map(lambda a, k=k: a[k] if eqx.is_array(a) else a, stacked)
+        np.testing.assert_array_equal(jax.vmap(run)(t), jax.vmap(alone)(t))
+    assert stacked_signals([short, pj.Sampled(short.times, short.values, period=0.01)]) is None  # another latch
+    assert stacked_signals([short, pj.Triangle(0.05, 0.95, 0.5)]) is None  # other kinds: one trace per run
+    assert stacked_signals([pj.Triangle(0.05, 0.95, 0.5), pj.Triangle(0.1, 0.9, 0.25)]) is not None
+
+
+def test_grids_of_runs_traced_together_equal_each_runs_own():
+    # solve_runs traces the PWM-synchronous grids of runs whose signals stack once, over the longest run's periods:
+    # each run's grid must be exactly its own (other lengths, a start inside a period, other supplies)
+    from pamjax._solve import synchronous
+
+    plant = _plant()
+    systems = [pj.TankFromModel(5e-5)(plant).with_supply_pressure(p) for p in (6.3e5, 6.6e5, 6.45e5)]
+    signals = [pj.Sampled(np.arange(n) * 0.02, np.linspace(0.2, 0.8, n), period=0.02) for n in (30, 12, 21)]
+    ts_list = [np.linspace(t0, t0 + d, 50) for t0, d in ((0.0, 0.55), (0.013, 0.2), (0.1, 0.33))]
+    t0s = [ts[0] for ts in ts_list]
+    sizes = [synchronous.num_periods(s.valve, t0, ts[-1]) for s, t0, ts in zip(systems, t0s, ts_list)]
+
+    @jax.jit
+    def grids(t0s, ts_list):
+        return (synchronous._run_grids(systems, signals, ts_list, t0s, "pwm", 16, sizes),
+                [synchronous.pwm_intervals(s.valve, u, t0, ts[-1], 16, n)
+                 for s, u, ts, t0, n in zip(systems, signals, ts_list, t0s, sizes)])
+
+    together, alone = grids(t0s, ts_list)
+    assert len(set(sizes)) == 3
+    for a, b in zip(together, alone):
+        for x, y in zip(a, b):
+            np.testing.assert_array_equal(x, y)
+
+
 def test_a_rig_logged_to_matlab_files_loads_as_its_csv_twin(tmp_path, rig):
     mat = _write_rig(tmp_path, fmt="mat")
     a, b = pj.bench.load_bench(rig, _plant()), pj.bench.load_bench(mat, _plant())

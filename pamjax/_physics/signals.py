@@ -35,6 +35,16 @@ class AbstractSignal(eqx.Module):
         fixed step must resolve (a sweep's scheme takes it); None for a signal that does not repeat."""
         return None
 
+    def table_length(self):
+        """The number of samples of a signal read from a table (`Sampled`), None for one given by a formula: runs
+        whose tables differ in length are stacked after `extended_to` (`pamjax._solve.run_signals`)."""
+        return None
+
+    def extended_to(self, length):
+        """This signal with its table extended to `length` samples past its end, reading the same at every time (a
+        signal without a table: itself)."""
+        return self
+
 
 class Constant(AbstractSignal):
     """u(t) = `value`."""
@@ -156,6 +166,18 @@ class Sampled(AbstractSignal):
     def bounds(self):
         v = np.asarray(self.values, dtype=float)
         return float(v.min()), float(v.max())
+
+    def table_length(self):
+        return self.times.shape[0] if jnp.ndim(self.times) == 1 else None
+
+    def extended_to(self, length):
+        # the added samples 1 s apart after the last, holding its value: the hold reads the last value there anyway
+        pad = length - self.times.shape[0]
+        if pad == 0:
+            return self
+        times = jnp.concatenate([self.times, self.times[-1] + jnp.arange(1, pad + 1, dtype=self.times.dtype)])
+        values = jnp.concatenate([self.values, jnp.repeat(self.values[-1:], pad)])
+        return eqx.tree_at(lambda s: (s.times, s.values), self, (times, values))
 
 
 class SquareWave(AbstractSignal):

@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
+from .run_signals import stacked_signals
 from .synchronous import exact_opening, held_at, latched_commands, stack_systems
 from .trajectory import fixed_grid_trajectory
 
@@ -33,7 +34,10 @@ def _blocks(x, size, count):
 def run_trajectories(systems, signals, times, runs, t0s, stepping):
     """The `Trajectory` of each run of `solve_runs` (`runs`: its (states, num_steps, finite) per run) at its sample
     `times`, with `system.outputs` traced once for all runs."""
-    if stepping == "pwm":
+    stacked = stacked_signals(signals) if stepping == "pwm" else None
+    if stacked is not None:  # the latched duties and exact openings too are computed in the blocks, traced once
+        commands = openings = [None] * len(times)
+    elif stepping == "pwm":
         commands = [latched_commands(s.valve, u, ts) for s, u, ts in zip(systems, signals, times)]
         openings = [jax.vmap(lambda t, c, s=s, u=u, t0=t0: exact_opening(s.valve, u, t, c, t0))(ts, cmd)
                     for s, u, ts, cmd, t0 in zip(systems, signals, times, commands, t0s)]
@@ -52,19 +56,31 @@ def run_trajectories(systems, signals, times, runs, t0s, stepping):
     run_of_block = np.repeat(np.arange(len(systems)), counts)
     per_block = jtu.tree_map(lambda a: a[run_of_block], arrays)
 
-    def block(system_arrays, ts, states, cmds, opens):
+    if stacked is None:
+        signal_arrays = signal_static = t0_block = None
+    else:
+        signal_arrays, signal_static = eqx.partition(stacked, eqx.is_array)
+        signal_arrays = jtu.tree_map(lambda a: a[run_of_block], signal_arrays)
+        t0_block = jnp.stack([jnp.asarray(t0, float) for t0 in t0s])[run_of_block]
+
+    def block(system_arrays, ts, states, cmds, opens, signal_arrays, t0):
         system = eqx.combine(system_arrays, static)
+        if signal_arrays is not None:  # this block's run's signal: its latched duties and exact openings
+            signal = eqx.combine(signal_arrays, signal_static)
+            cmds = latched_commands(system.valve, signal, ts)
+            opens = jax.vmap(lambda t, c: exact_opening(system.valve, signal, t, c, t0))(ts, cmds)
+
         def one(t, y, c, o):
             return (held_at(system, o) if stepping == "pwm" else system).outputs(t, y, c)
 
-        return jax.vmap(one)(ts, states, cmds, opens)
+        return jax.vmap(one)(ts, states, cmds, opens), cmds
 
-    outs = jax.vmap(block)(per_block, side_by_side(times), side_by_side([r[0] for r in runs]),
-                           side_by_side(commands), side_by_side(openings))
-    outs = jtu.tree_map(lambda a: a.reshape((-1,) + a.shape[2:]), outs)
+    outs, blocked_commands = jax.vmap(block)(per_block, side_by_side(times), side_by_side([r[0] for r in runs]),
+                                             side_by_side(commands), side_by_side(openings), signal_arrays, t0_block)
+    outs, blocked_commands = jtu.tree_map(lambda a: a.reshape((-1,) + a.shape[2:]), (outs, blocked_commands))
     starts = size * np.concatenate([[0], np.cumsum(counts)[:-1]])
     trajectories = []
-    for ts, (states, num_steps, finite), cmd, first, n in zip(times, runs, commands, starts, sizes):
-        run_outs = jtu.tree_map(lambda a, first=first, n=n: a[first:first + n], outs)
+    for ts, (states, num_steps, finite), first, n in zip(times, runs, starts, sizes):
+        run_outs, cmd = jtu.tree_map(lambda a, first=first, n=n: a[first:first + n], (outs, blocked_commands))
         trajectories.append(fixed_grid_trajectory(ts, states, cmd, run_outs, num_steps, finite))
     return trajectories

@@ -27,6 +27,7 @@ from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError
 from .._physics.valves.base import AbstractSwitchingValve, AbstractValve
 from . import grid as _grid
+from .run_signals import stacked_signals
 
 
 class HeldOpeningValve(AbstractValve):
@@ -160,12 +161,9 @@ def solve_runs(systems, signals, ts_list, z0s, scaled, t0s, *, stepping, substep
     """
     lefts, rights, auxs, members, offsets, shifted_ts = [], [], [], [], [], []
     offset = 0.0
-    for k, (system, signal, ts, t0) in enumerate(zip(systems, signals, ts_list, t0s)):
+    grids = _run_grids(systems, signals, ts_list, t0s, stepping, substeps, sizes)
+    for k, (ts, t0, (left, right, aux)) in enumerate(zip(ts_list, t0s, grids)):
         t1 = ts[-1]
-        if stepping == "pwm":
-            left, right, aux = pwm_intervals(system.valve, signal, t0, t1, substeps, sizes[k])
-        else:
-            left, right, aux = uniform_intervals(signal, t0, t1, sizes[k])
         offset_k = offset - t0
         lefts.append(left + offset_k)
         rights.append(right + offset_k)
@@ -191,6 +189,22 @@ def solve_runs(systems, signals, ts_list, z0s, scaled, t0s, *, stepping, substep
         out.append((states, steps_k, finite))
     del num_steps  # the whole loop's; each run reports its own
     return out
+
+
+def _run_grids(systems, signals, ts_list, t0s, stepping, substeps, sizes):
+    """Each run's grid `(left, right, aux)` (`pwm_intervals` or `uniform_intervals`). Several runs on the PWM grid
+    whose signals stack (`pamjax._solve.run_signals`) have their grids traced once: computed side by side over the
+    longest run's periods, each run keeping its own (the periods past a run's end are dropped)."""
+    stacked = stacked_signals(signals) if stepping == "pwm" and len(systems) > 1 else None
+    if stacked is None:
+        return [pwm_intervals(s.valve, u, t0, ts[-1], substeps, n) if stepping == "pwm" else
+                uniform_intervals(u, t0, ts[-1], n) for s, u, ts, t0, n in zip(systems, signals, ts_list, t0s, sizes)]
+    periods = max(sizes)
+    left, right, aux = eqx.filter_vmap(lambda v, u, t0, t1: pwm_intervals(v, u, t0, t1, substeps, periods))(
+        stack_systems(systems).valve, stacked, jnp.stack([jnp.asarray(t0, float) for t0 in t0s]),
+        jnp.stack([ts[-1] for ts in ts_list]))
+    count = [n * (substeps + 2) for n in sizes]  # intervals per run: K + 2 per period
+    return [(left[k, :c], right[k, :c], aux[k, :c]) for k, c in enumerate(count)]
 
 
 def _grid_functions(stepping, scaled, hybrid):
