@@ -229,6 +229,25 @@ def test_grids_of_runs_traced_together_equal_each_runs_own():
             np.testing.assert_array_equal(x, y)
 
 
+def test_runs_of_other_signal_kinds_predicted_together_equal_each_alone():
+    # the two other paths of a fit's runs: signals of different kinds (one trace per run, not stacked) and signals of
+    # one kind without tables (constants, stacked as they are); short tank runs of different lengths
+    plant = _plant()
+
+    def tank(name, signal, seconds):
+        t = np.arange(0.0, seconds + 1e-9, 1e-3)
+        rec = pj.Recording(t, {"pressure": np.full(t.size, ATM)})
+        return pj.Experiment(rec, signal, build=pj.TankFromModel(5e-5), initial={"pressure": ATM}, name=name)
+
+    logged = pj.Sampled(np.arange(20) * 0.02, np.linspace(0.2, 0.9, 20), period=0.02)
+    a, b, c = tank("A", pj.Constant(0.5), 0.3), tank("B", logged, 0.4), tank("C", pj.Constant(0.7), 0.2)
+    alone = {e.name: pj.predictions(plant, [e])[0] for e in (a, b, c)}
+    for runs in ([a, b, c], [a, c]):
+        for e, together in zip(runs, pj.predictions(plant, runs)):
+            for channel, values in alone[e.name].items():
+                np.testing.assert_allclose(together[channel], values, rtol=1e-12, atol=1e-9, err_msg=e.name)
+
+
 def test_a_rig_logged_to_matlab_files_loads_as_its_csv_twin(tmp_path, rig):
     mat = _write_rig(tmp_path, fmt="mat")
     a, b = pj.bench.load_bench(rig, _plant()), pj.bench.load_bench(mat, _plant())
