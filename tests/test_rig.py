@@ -218,7 +218,8 @@ def test_grids_of_runs_traced_together_equal_each_runs_own():
 
     @jax.jit
     def grids(t0s, ts_list):
-        return (synchronous._run_grids(systems, signals, ts_list, t0s, "pwm", 16, sizes),
+        return (synchronous._run_grids(systems, synchronous.stack_systems(systems).valve, signals, ts_list, t0s, "pwm",
+                                         16, sizes),
                 [synchronous.pwm_intervals(s.valve, u, t0, ts[-1], 16, n)
                  for s, u, ts, t0, n in zip(systems, signals, ts_list, t0s, sizes)])
 

@@ -161,7 +161,8 @@ def solve_runs(systems, signals, ts_list, z0s, scaled, t0s, *, stepping, substep
     """
     lefts, rights, auxs, members, offsets, shifted_ts = [], [], [], [], [], []
     offset = 0.0
-    grids = _run_grids(systems, signals, ts_list, t0s, stepping, substeps, sizes)
+    stacked = stack_systems(systems)
+    grids = _run_grids(systems, stacked.valve, signals, ts_list, t0s, stepping, substeps, sizes)
     for k, (ts, t0, (left, right, aux)) in enumerate(zip(ts_list, t0s, grids)):
         t1 = ts[-1]
         offset_k = offset - t0
@@ -172,7 +173,6 @@ def solve_runs(systems, signals, ts_list, z0s, scaled, t0s, *, stepping, substep
         offsets.append(offset_k)
         shifted_ts.append(ts + offset_k)
         offset = offset + (t1 - t0) + 1.0
-    stacked = stack_systems(systems)
     field, event, update = _grid_functions(stepping, scaled, systems[0].hybrid)
     all_ts = jnp.concatenate(shifted_ts)
     z_out, num_steps, _, _, finite = _grid.integrate(
@@ -191,8 +191,9 @@ def solve_runs(systems, signals, ts_list, z0s, scaled, t0s, *, stepping, substep
     return out
 
 
-def _run_grids(systems, signals, ts_list, t0s, stepping, substeps, sizes):
-    """Each run's grid `(left, right, aux)` (`pwm_intervals` or `uniform_intervals`). Several runs on the PWM grid
+def _run_grids(systems, valves, signals, ts_list, t0s, stepping, substeps, sizes):
+    """Each run's grid `(left, right, aux)` (`pwm_intervals` or `uniform_intervals`; `valves`: the runs' valves
+    stacked, `stack_systems`). Several runs on the PWM grid
     whose signals stack (`pamjax._solve.run_signals`) have their grids traced once: computed side by side over the
     longest run's periods, each run keeping its own (the periods past a run's end are dropped)."""
     stacked = stacked_signals(signals) if stepping == "pwm" and len(systems) > 1 else None
@@ -201,7 +202,7 @@ def _run_grids(systems, signals, ts_list, t0s, stepping, substeps, sizes):
                 uniform_intervals(u, t0, ts[-1], n) for s, u, ts, t0, n in zip(systems, signals, ts_list, t0s, sizes)]
     periods = max(sizes)
     left, right, aux = eqx.filter_vmap(lambda v, u, t0, t1: pwm_intervals(v, u, t0, t1, substeps, periods))(
-        stack_systems(systems).valve, stacked, jnp.stack([jnp.asarray(t0, float) for t0 in t0s]),
+        valves, stacked, jnp.stack([jnp.asarray(t0, float) for t0 in t0s]),
         jnp.stack([ts[-1] for ts in ts_list]))
     count = [n * (substeps + 2) for n in sizes]  # intervals per run: K + 2 per period
     return [(left[k, :c], right[k, :c], aux[k, :c]) for k, c in enumerate(count)]
