@@ -70,6 +70,37 @@ def test_failed_trials_are_rejected_not_fatal():
     assert any(not accepted for *_, accepted in out.history)
 
 
+@pytest.mark.parametrize("bad", [np.nan, 1e300])
+def test_a_trial_whose_jacobian_cannot_be_factored_is_rejected_not_fatal(bad):
+    # The residuals are defined everywhere, but beyond t = 2 the Jacobian is not finite or so large that its column
+    # norms overflow (a solve that only just held: unseen rig901's joint fit raised NumPy's "SVD did not converge"):
+    # the trial is refused as a failed one, and the fit ends near the boundary without an error.
+    def residuals(t):
+        return np.array([t[0] - 3.0, 0.5 * (t[0] - 3.0)])
+
+    def jacobian(t):
+        return residuals(t), np.full((2, 1), bad) if t[0] > 2.0 else np.array([[1.0], [0.5]])
+
+    out = _run(residuals, jacobian, [0.0], max_steps=60)
+    assert 1.9 < out.theta[0] <= 2.0
+    assert any(not accepted for *_, accepted in out.history)
+
+
+def test_traced_trial_whose_jacobian_is_not_finite_is_rejected_as_on_the_host():
+    @jax.custom_jvp
+    def shifted(t):
+        return t - 3.0
+
+    @shifted.defjvp
+    def _(primals, tangents):
+        (t,), (dt,) = primals, tangents
+        return shifted(t), jnp.where(t > 2.0, jnp.nan, 1.0) * dt
+
+    sol = optx.least_squares(lambda y, args: jnp.stack([shifted(y[0]), 0.5 * shifted(y[0])]),
+                             pj.LevenbergMarquardt(1e-12, 1e-12, 1e-12), jnp.zeros(1), max_steps=60, throw=False)
+    assert 1.9 < float(sol.value[0]) <= 2.0
+
+
 def _wrong_jacobian():
     # The Jacobian's sign is wrong: every step goes uphill.
     def residuals(t):

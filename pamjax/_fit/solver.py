@@ -10,7 +10,7 @@
 - `NielsenDamping` (an `optimistix.AbstractSearch`): Nielsen (1999) / Madsen, Nielsen & Tingleff, "Methods for
   non-linear least squares problems" (2004), alg. 3.16: λ₀ = τ max(1, diag DJᵀJD) = τ, λ ← λ max(1/3, 1 − (2ρ − 1)³)
   after an accepted step (ρ > 1e-4: actual over predicted decrease), λ ← λν, ν ← 2ν after a rejected one (a trial
-  whose residuals are not finite, a failed solve, too).
+  whose residuals are not finite, a failed solve, too; or whose Jacobian cannot be factored: not finite, or overflows).
 
 A step evaluates the residuals at the trial point (and at θ + h v) and the Jacobian only where the trial is accepted
 (optimistix's own `LevenbergMarquardt` linearises at every trial: a forward-mode Jacobian through a fit's solves
@@ -61,16 +61,10 @@ CRAWL_STEPS = 16  # iterations over which a fit that gains less than POTENTIAL_T
 PROBED_MINIMUM = ("converged: no parameter moved by ±0.1 or ±0.01 of its conditional standard error lowers the cost "
                   "by more than 1e-6 of it (a minimum where the cost is not smooth, e.g. where a stick-slip phase "
                   "begins or ends; the damped steps had stopped)")
-REASONS = (
-    "",  # still iterating (or stopped by the step budget)
-    "converged: relative cost decrease below ftol",
-    "converged: step below xtol",
-    "converged: gradient orthogonal to the residuals (gtol)",
-    "converged: no predicted decrease above ftol",
-    PROBED_MINIMUM,
-    "stalled",
-    "converged: gradient orthogonal to the residuals at the start (gtol)",
-)
+REASONS = ("",  # still iterating (or stopped by the step budget)
+           "converged: relative cost decrease below ftol", "converged: step below xtol",
+           "converged: gradient orthogonal to the residuals (gtol)", "converged: no predicted decrease above ftol",
+           PROBED_MINIMUM, "stalled", "converged: gradient orthogonal to the residuals at the start (gtol)")
 _FTOL, _XTOL, _GTOL, _NO_DECREASE, _PROBED, _STALLED, _GTOL_START = range(1, 8)
 
 
@@ -392,6 +386,7 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
         ok = trusted & _all_finite(xp, r_trial)
         actual = cost - xp.where(ok, _cost(r_trial), xp.inf)
         accept, search = self.search.decide(ok, actual, predicted, state.search)
+        refused = self.search.decide(xp.asarray(False), actual, predicted, state.search)[1]  # as a failed trial
         count = state.step + 1
         theta_norm = xp.linalg.norm(y * f.scale)
         # the tests below may only end a fit at a stationary point (or on a zero-residual problem, at its zero)
@@ -400,24 +395,29 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
 
         def accepted():
             r_new, j_new, aux_new = _jacobian(fn, trial, args, host, unravel)
-            cost_new = _cost(r_new)
-            reason = xp.where(
-                stationary & (xp.abs(actual) <= self.ftol * cost_new) & (predicted <= self.ftol * cost_new), _FTOL,
-                xp.where(stationary & small, _XTOL, xp.where(gradient_cosine(j_new, r_new) <= self.gtol, _GTOL, 0)))
-            aux_new = aux_trial if host else aux_new
-            return (trial, r_new, j_new, cost_new, self.descent.factor(r_new, j_new, f.scale), aux_new,
-                    state.accepted + 1, _int(xp, 0), reason, xp.asarray(False))
+            # a Jacobian that cannot be factored (not finite, column norms that overflow) refuses the trial
+            usable = _all_finite(xp, j_new) & _all_finite(xp, xp.linalg.norm(j_new, axis=0))
+            def take():
+                cost_new = _cost(r_new)
+                reason = xp.where(
+                    stationary & (xp.abs(actual) <= self.ftol * cost_new) & (predicted <= self.ftol * cost_new), _FTOL,
+                    xp.where(stationary & small, _XTOL, xp.where(gradient_cosine(j_new, r_new) <= self.gtol, _GTOL, 0)))
+                return (trial, r_new, j_new, cost_new, self.descent.factor(r_new, j_new, f.scale),
+                        aux_trial if host else aux_new, state.accepted + 1, _int(xp, 0), reason, xp.asarray(False),
+                        search)
+            return _cond(host, usable, take, lambda: rejected(refused))
 
-        def rejected():
+        def rejected(after=search):
             # the local model promises no decrease worth having: a minimum to the solver's precision
             reason = xp.where(stationary & (predicted <= self.ftol * cost) & (state.accepted > 0), _NO_DECREASE, 0)
             rejected_in_row = state.rejected_in_row + 1
             stall = (reason == 0) & (rejected_in_row >= self.stall_steps) & small
-            return y, r, jac, cost, f, state.aux, state.accepted, rejected_in_row, reason, stall
+            return y, r, jac, cost, f, state.aux, state.accepted, rejected_in_row, reason, stall, after
 
-        y_new, r, jac, cost, f, aux, n_accepted, rejected_in_row, reason, stall = _cond(host, accept, accepted,
-                                                                                         rejected)
-        row = xp.stack([xp.asarray(count, dtype=float), cost, search.damping, xp.asarray(accept, dtype=float)])
+        y_new, r, jac, cost, f, aux, n_accepted, rejected_in_row, reason, stall, search = _cond(host, accept, accepted,
+                                                                                                 rejected)
+        row = xp.stack([xp.asarray(count, dtype=float), cost, search.damping,
+                        xp.asarray(n_accepted > state.accepted, dtype=float)])
         recent = xp.concatenate([state.recent[1:], xp.reshape(cost, (1,))])
         rows = state.rows + 1
         crawling = (reason == 0) & (n_accepted > 0) & (rows > CRAWL_STEPS) & (recent[0] - cost <= POTENTIAL_TOL * cost)
