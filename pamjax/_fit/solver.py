@@ -395,8 +395,8 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
 
         def accepted():
             r_new, j_new, aux_new = _jacobian(fn, trial, args, host, unravel)
-            # a Jacobian that cannot be factored (not finite, column norms that overflow) refuses the trial
-            usable = _all_finite(xp, j_new) & _all_finite(xp, xp.linalg.norm(j_new, axis=0))
+            # a Jacobian that cannot be factored refuses the trial (a column norm not finite: an entry, or overflow)
+            usable = _all_finite(xp, xp.linalg.norm(j_new, axis=0))
             def take():
                 cost_new = _cost(r_new)
                 reason = xp.where(
