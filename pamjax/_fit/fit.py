@@ -200,6 +200,15 @@ def precompile(model, experiments, free):
     return time.perf_counter() - t0
 
 
+def start_cost(model, experiments, free):
+    """½Σr² of `fit(model, experiments, free)` at its start (one evaluation of the residuals, the program
+    `precompile` compiles); inf where the start's simulation fails."""
+    experiments = _validate(experiments, 1, None, False, None, None)
+    _, theta, problem = _setup(model, experiments, ParameterSpace(model, free))
+    r = problem.residuals(theta)
+    return np.inf if r is None else 0.5 * float(r @ r)
+
+
 def _progress_printer(progress):
     if callable(progress):
         return progress

@@ -70,6 +70,9 @@ def nuisance_hints(model, experiments, predictions, labels):
     from .rig import split
 
     freed = {str(label).split("].", 1)[-1].split(".")[-1] for label in labels if is_nuisance(label)}
+    # runs whose start state the fit already frees ("runs[NAME].start.position", ...): their moving start is known
+    started = {str(label)[5:].split("].start.", 1)[0] for label in labels if str(label).startswith("runs[")
+               and "].start." in str(label)}
     exps = [e for e in experiments if isinstance(e, Experiment) and e.name in predictions]
     hints = []
     num = den = 0.0
@@ -123,8 +126,8 @@ def nuisance_hints(model, experiments, predictions, labels):
             hints.append(f"an offset at rest: before the valve first opens, where the model is at atmospheric "
                          f"pressure, the pressure reads {offset:+.0f} Pa (± {se:.0f} Pa over {rest_n} samples): a "
                          f"pressure sensor offset; {FREE_IT} (pressure_offset, pressure_gain)")
-    if "start" not in freed:
-        for name, finding in starts:
+    for name, finding in starts:
+        if name not in started:
             hints.append(f"a start that is not at rest: {name} {finding} (a recording started mid-run?): give it "
                          f"\"init\": \"unknown\" in meta.json and {FREE_IT} (start)")
     if "supply_pressure" not in freed:

@@ -43,7 +43,8 @@ from collections.abc import Sequence
 import equinox as eqx
 
 from .experiment import AbstractExperiment
-from .fit import FitResult, Progress, fit, precompile
+from .fit import FitResult, Progress, fit, precompile, start_cost
+from .force_balance import force_balance
 from .measurement import is_measurement
 from .parameters import Free, join_path, split_path
 
@@ -58,6 +59,7 @@ class StagedStart:
     stages: list[tuple[str, list[str], list[str], FitResult]]
     waited_s: float = 0.0
     precompile_s: float = 0.0
+    balance: dict | None = None
 
     @property
     def compile_s(self):
@@ -68,6 +70,12 @@ class StagedStart:
         """One line per stage: what was fitted on what, and how the fit ended."""
         lines = [f"stage {name}: {len(res.labels)} parameters on {', '.join(exps)}: {res.status}, {res.iterations} "
                  f"trial steps, cost {res.initial_cost:.4g} → {res.cost:.4g}" for name, _, exps, res in self.stages]
+        if self.balance is not None:
+            b = self.balance
+            lines.insert(1, f"stage 2's start: the muscle runs' force balance ({b['samples'][0]} sliding samples, "
+                            f"{b['samples'][1]} at rest, {b['samples'][2] + b['samples'][3]} on a stroke limit) gives "
+                            f"stage 2 a cost of {b['stage_cost'][1]:.4g} against {b['stage_cost'][0]:.4g} from stage "
+                            f"1's model: {'started from it' if b['used'] else 'not used'}")
         if self.precompile_s:
             lines.append(f"stage 2's and the joint problem's programs compiled beside stage 1 in a second thread "
                          f"({self.precompile_s:.1f} s; {self.waited_s:.1f} s waited for)")
@@ -183,13 +191,14 @@ def staged_start(model: eqx.Module, experiments: Sequence[AbstractExperiment], f
     # does not depend on the values stage 1 finds); each fit waits for its programs rather than compiling them twice.
     background = _Background(([(model, full, rest)] if full else []) + [(model, joint, joint_free)]) \
         if background_compile else None
-    waited = 0.0
+    waited, balance = 0.0, None
     try:
         res = fit(model, exps1, first, max_steps=max_steps, progress=progress)
         stages.append(("1", [_path(e) for e in first], [e.name for e in exps1], res))
         model = res.apply(model)
         if full:
             waited += background.wait(0) if background is not None else 0.0
+            model, balance = _balanced_start(model, full, rest)
             res = fit(model, full, rest, max_steps=max_steps, progress=progress)
             stages.append(("2", [_path(e) for e in rest], [e.name for e in full], res))
             model = res.apply(model)
@@ -199,4 +208,16 @@ def staged_start(model: eqx.Module, experiments: Sequence[AbstractExperiment], f
             background.stop()
         raise
     return StagedStart(model, stages, waited_s=waited,
-                       precompile_s=background.seconds if background is not None else 0.0)
+                       precompile_s=background.seconds if background is not None else 0.0, balance=balance)
+
+
+def _balanced_start(model, experiments, free):
+    """Stage 2's start: the muscle runs' force balance (`force_balance`: the force law moved to where the recorded
+    payload is, without a solve) where stage 2's cost is lower there than at the stage-1 model, else that model.
+    Returns (start model, `StagedStart.balance`)."""
+    balanced = force_balance(model, experiments, free)
+    if balanced is None:
+        return model, None
+    before, after = start_cost(model, experiments, free), start_cost(balanced[0], experiments, free)
+    info = dict(balanced[1], stage_cost=(before, after), used=bool(after < before))
+    return (balanced[0] if after < before else model), info
