@@ -192,6 +192,7 @@ def run(args, data, out):
         stages=[dict(stage=name, free=paths, experiments=exps, status=r.status, iterations=r.iterations, cost=r.cost,
                      fit_s=r.fit_s, compile_s=r.compile_s) for name, paths, exps, r in stages],
         joint_precompile=None if staged is None else dict(wall_s=staged.precompile_s, waited_s=staged.waited_s),
+        stage2_start=None if staged is None else staged.balance,  # the force balance's start (pamjax.staged_start)
     )
     if bench.nuisance or args.position_offset or bench.calibrated:
         summary["nuisance"] = pj.bench.bench_nuisance(res, bench)

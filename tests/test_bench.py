@@ -98,6 +98,7 @@ def test_joint_script_fits_a_bench_directory_from_the_presets(bench, tmp_path):
     assert len(stages["1"]["free"]) == 4 and stages["2"]["experiments"] == ["E3"]
     assert sorted(stages["2"]["free"]) == sorted(pj.bench.BENCH_PARAMETERS[k][0] for k in ("v1", "Fc", "Cf"))
     assert stages["1"]["status"] == "converged"  # four valve parameters on two tank tests: well posed
+    assert result["stage2_start"] is None  # no force-law coefficient free: nothing for the force balance to move
     with pytest.raises(SystemExit, match="--overwrite"):
         joint.main(["--data", str(folder), "--out", str(out), "--quiet"])
 

@@ -43,11 +43,11 @@ def strong_run():
     ts = np.arange(0.0, 6.0 + 1e-9, 1e-3)
     rec = pj.synthetic_recording(truth, signal, ts, noise=NOISE, seed=5, channels=["pressure", "position"],
                                  stepping="pwm", substeps=32, name="strong")
-    return start, pj.Experiment(rec, signal, scales=NOISE), rec
+    return start, pj.Experiment(rec, signal, scales=NOISE), rec, truth
 
 
 def test_force_balance_moves_the_force_law_to_where_the_recorded_payload_is(strong_run):
-    start, experiment, rec = strong_run
+    start, experiment, rec, _ = strong_run
     model, info = force_balance(start, [experiment], FREE)
     sliding, at_rest, upper, lower = info["samples"]
     assert sliding > 50 and upper > 500, info  # the climb, then the payload held on the upper stop
@@ -73,7 +73,7 @@ def test_force_balance_moves_the_force_law_to_where_the_recorded_payload_is(stro
 
 
 def test_force_balance_needs_a_muscle_run_and_something_to_move(strong_run):
-    start, experiment, rec = strong_run
+    start, experiment, rec, _ = strong_run
     # the friction levels alone: held by the balance, so nothing moves
     assert force_balance(start, [experiment], ["friction.coulomb_force", "muscle.volume_law.v1"]) is None
     # a run without a position channel is not a muscle run the balance can read
@@ -85,3 +85,28 @@ def test_force_balance_needs_a_muscle_run_and_something_to_move(strong_run):
     b, _ = force_balance(start, [experiment], FREE)
     np.testing.assert_array_equal(pj.ParameterSpace(a, FREE).initial_values(),
                                   pj.ParameterSpace(b, FREE).initial_values())
+
+
+def test_staged_start_fits_stage_2_from_the_force_balance(strong_run):
+    # A tank test (the valve alone) and the strong muscle's run: stage 1 fits the valve on the tank, stage 2 the
+    # force law on the run, from the balance's start (its cost far below the datasheet law's), and ends at the noise.
+    start, experiment, _, truth = strong_run
+    start = eqx.tree_at(lambda m: m.valve.inflate.discharge_coefficient, start,
+                        0.95 * start.valve.inflate.discharge_coefficient)  # the valve too is off: stage 1 fits it
+    tank = pj.TankFromModel(5e-5)
+    ts = np.arange(0.0, 0.4 + 1e-9, 2e-3)
+    rec = pj.synthetic_recording(tank(truth), pj.Constant(0.5), ts, noise={"pressure": NOISE["pressure"]}, seed=6,
+                                 channels=["pressure"], y0=tank(truth).initial_state(101325.0), name="tank")
+    tank_run = pj.Experiment(rec, pj.Constant(0.5), build=tank, initial={"pressure": 101325.0},
+                             scales={"pressure": NOISE["pressure"]})
+    free = ["valve.inflate.discharge_coefficient", *FREE[:5]]
+    staged = pj.staged_start(start, [tank_run, experiment], free, progress=False)
+    assert [name for name, *_ in staged.stages] == ["1", "2"]
+    balance = staged.balance
+    assert balance["used"] and balance["stage_cost"][1] < 1e-2 * balance["stage_cost"][0], balance
+    assert balance["equilibrium_starts"] == ["strong"]
+    assert any("force balance" in line and "started from it" in line for line in staged.summary())
+    res = staged.stages[1][3]
+    assert res.status == "converged", res.message
+    for chans in res.channel_errors.values():
+        assert all(st["rmse_over_noise"] < 1.1 for st in chans.values()), chans
