@@ -1,28 +1,35 @@
-"""Start values of a muscle's force law and friction from its recordings' force balance: no solve, one small
-least-squares problem.
+"""Start values of a muscle's force law from its recordings' force balance: no solve, one small least-squares
+problem.
 
-A muscle run's recording gives, at every sample, the muscle's pressure p and the payload's position x; smoothed over a
-few PWM periods, also its velocity v and acceleration a. Where the payload slides, eq. 16 with eq. 8-9 holds sample by
-sample,
+A muscle run's recording gives, at every sample, the muscle's pressure p and the payload's position x; smoothed over
+two PWM periods (local quadratic fits), also its velocity v and acceleration a. Where the payload slides, eq. 16 with
+eq. 8-9 holds sample by sample,
 
     F_static(x, p) = M (g + a) + F_c sign(v) + C_f v,
 
-linear in the force law's coefficients (eq. 7: a0…a4, k0, k1) and the friction's levels. Where it holds still, the
-friction bounds the net force, |F_static − M g| ≤ F_c; where it rests on a stroke limit, the stop holds only one way
-(F_static ≥ M g − F_c on the upper stop, F_static ≤ M g + F_c on the lower). An experimenter reads a force map
-that way before fitting any dynamics, and so does `force_balance` (the equalities as residuals, the bounds as one-sided
-residuals where they are violated, a weak prior towards the start model's force over the stroke and pressure range
-where the recordings say nothing), returning the start model with its force law and friction moved.
+linear in the force law's coefficients (eq. 7: a0…a4, k0, k1). Where it holds still, the friction bounds the net
+force, |F_static − M g| ≤ F_c; where it rests on a stroke limit, the stop holds only one way (F_static ≥ M g − F_c on
+the upper stop, F_static ≤ M g + F_c on the lower); where a run starts at rest in the model's equilibrium (no start
+position given) between the stops, F_static = M g there exactly. An experimenter reads a force map that way before
+fitting any dynamics, and so does `force_balance`: the equalities as residuals, the bounds as one-sided residuals
+where they are violated (a convex problem in the coefficients), and a weak prior (30 N) towards the start model's
+force over the stroke and the recorded pressure range, where the recordings may say nothing; it returns the start
+model with its force law moved.
+
+The friction's levels are held at their start values: on triangle runs the payload slides up and down at similar
+speeds, so F_c sign v and C_f v are nearly collinear with the force law's own terms, and freed they drift to
+whatever the force law leaves (C_f → 0 on rig901 below); the dynamics of stage 2 determine them.
 
 Why: a joint fit's stage 2 (`staged_start`) moves the force law through solves of the whole run, which is slow and
 can stop in a local minimum when the start model's payload is nowhere near the recorded one. On an unseen rig whose
 muscle holds the payload on the upper stroke limit for most of its triangle runs (benchmarks/RESULTS.md, identify:
 rig901), the datasheet force law's payload cannot come within 20 mm of where the runs log it, and stage 2 ended at
-7× the noise; `staged_start` fits stage 2 from this balance's start where its cost is the lower one.
+7× the noise; from the balance's start it converges at the noise. `staged_start` fits stage 2 from this start where
+stage 2's cost is the lower one there (both evaluated, one solve each).
 
 The position and pressure are taken as the sensors read them (their offsets, gain and delay are small beside what
-this start needs), and only the free parameters the balance depends on move (the force law's, the friction's, the
-payload's); the others keep their values.
+this start needs), and only the free parameters the balance depends on move (the force law's, the payload's mass
+where it is free); the others keep their values.
 """
 
 import equinox as eqx
@@ -220,14 +227,16 @@ def _gauss_newton(theta, r, jac, args, inequality, moving, max_iterations):
 
 
 def force_balance(model: eqx.Module, experiments, free, max_iterations: int = 30):
-    """The free parameters of `model` the muscle runs' force balance depends on (its force law, friction, payload),
-    fitted to that balance (module docstring); the others keep their values.
+    """The free parameters of `model` the muscle runs' force balance depends on (the force law's; the payload's mass
+    where free), fitted to that balance (module docstring); the others, the friction's levels among them, keep
+    their values.
 
     **Arguments:** as `pamjax.fit`'s `model`, `experiments`, `free`; `max_iterations`: Gauss-Newton steps at most.
 
     **Returns:** `(model, info)` with `info` a dict (`samples`: per kind, sliding / at rest / on the upper stop / on
-    the lower stop; `rms_N`: the sliding samples' balance error [N] at the end; `cost`: start and end), or None
-    where no experiment is a muscle run with pressure and position recorded, or none moves.
+    the lower stop; `rms_N`: the sliding samples' balance error [N] at the end; `cost`: start and end;
+    `equilibrium_starts`: the runs whose start holds F_static = M g), or None where no experiment is a muscle run
+    with pressure and position recorded and a sliding payload, or no free parameter moves the balance.
     """
     space = ParameterSpace(model, free)
     exps, samples = [], []

@@ -235,8 +235,9 @@ def _off_a_kink(model, res, free):
     space = ParameterSpace(model, free)
     se = np.asarray(res.standard_errors, dtype=float)
     moved = np.asarray(space.initial_values(), dtype=float) + KINK_SHIFT * np.where(np.isfinite(se), se, 0.0)
-    if not np.all(np.isfinite(np.asarray(space.theta(moved)))):  # past a bound: stay
-        return model
+    with np.errstate(invalid="ignore", divide="ignore"):  # a move past a bound: θ not finite
+        if not np.all(np.isfinite(np.asarray(space.theta(moved)))):
+            return model
     return space.with_values(moved, model)
 
 
