@@ -67,13 +67,21 @@ KINK_SHIFT = 0.01
 class StagedStart:
     """`model`: the start model of the joint fit; `stages`: (name, free paths, experiment names, FitResult) per
     stage fitted; `waited_s`: wall time the stages and the end spent waiting for the programs compiled in the second
-    thread (stage 2's, the joint problem's); `precompile_s`: that thread's wall time (0 when not used)."""
+    thread (stage 2's, the joint problem's); `precompile_s`: that thread's wall time (0 when not used); `balance`: stage
+    2's start from the muscle runs' force balance (`_balanced_start`), None where it did not apply; `fit_s` and
+    `compile_s`: the stages' times."""
 
     model: eqx.Module
     stages: list[tuple[str, list[str], list[str], FitResult]]
     waited_s: float = 0.0
     precompile_s: float = 0.0
     balance: dict | None = None
+
+    @property
+    def fit_s(self):
+        """The stages' fit time, and the force balance's (its small program compiled, and stage 2's cost evaluated
+        from both starts)."""
+        return sum(res.fit_s for *_, res in self.stages) + (self.balance["seconds"] if self.balance else 0.0)
 
     @property
     def compile_s(self):
@@ -244,10 +252,12 @@ def _off_a_kink(model, res, free):
 def _balanced_start(model, experiments, free):
     """Stage 2's start: the muscle runs' force balance (`force_balance`: the force law moved to where the recorded
     payload is, without a solve) where stage 2's cost is lower there than at the stage-1 model, else that model.
-    Returns (start model, `StagedStart.balance`)."""
+    Returns (start model, `StagedStart.balance`: the balance's `info`, stage 2's cost from each start (`stage_cost`),
+    whether the balance's was `used`, and the wall time of all this, `seconds`)."""
+    t0 = time.perf_counter()
     balanced = force_balance(model, experiments, free)
     if balanced is None:
         return model, None
     before, after = start_cost(model, experiments, free), start_cost(balanced[0], experiments, free)
-    info = dict(balanced[1], stage_cost=(before, after), used=bool(after < before))
+    info = dict(balanced[1], stage_cost=(before, after), used=bool(after < before), seconds=time.perf_counter() - t0)
     return (balanced[0] if after < before else model), info
