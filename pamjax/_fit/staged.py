@@ -33,7 +33,10 @@ fit its values moved `KINK_SHIFT` (0.01) standard errors off that point: the der
 joint fit's first Jacobian, taken exactly there, misleads it. On perturbed4 (benchmarks/RESULTS.md, identify) stage 2
 ended so, and the joint fit from its point crawled for 100 steps (0.6 of the cost gained, status max_steps); moved
 0.01 (or ±0.05) standard errors, or 1e-4 of each value at random, it converged in 10 steps, each to the same cost,
-7.8 lower.
+7.8 lower. The move is in marginal standard errors, all one way, which along the correlated force-law coefficients
+raises the cost by tens to thousands (a step the joint fit takes back at once); 0.01 of the conditional ones (the
+probes' unit: the cost hardly moves) left the joint fit crawling as before: the point must leave the kink's
+neighbourhood, not only the kink.
 
 Three problems compile instead of one. The programs of stage 2 and of the joint problem (the largest: every
 experiment, a tangent per free parameter) do not depend on the values stage 1 finds, so they are compiled in a
