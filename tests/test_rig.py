@@ -169,6 +169,21 @@ def test_a_rig_is_identified_with_its_nuisances_and_a_plain_fit_names_them(rig):
     assert "--nuisance" in text
 
 
+def test_a_start_already_freed_is_not_diagnosed_as_not_at_rest(rig):
+    # The hint "a start that is not at rest" reads the data alone (the first 20 ms move): it names M1 (logged mid-run)
+    # when the fit holds M1's start at rest, and not when the fit frees it (a rig's labels "runs[M1].start.…"; the
+    # hint used to fire for those too). Predictions equal to the data: no other finding, and no solve needed.
+    from pamjax._fit.rig_hints import nuisance_hints
+
+    plant = _plant()
+    plain = pj.bench.load_bench(rig, plant)
+    preds = {e.name: {c: np.asarray(e.data[c]) for c in e.channels} for e in plain.experiments}
+    held = " | ".join(nuisance_hints(plant, plain.experiments, preds, plain.free))
+    assert "a start that is not at rest: M1" in held and "M0" not in held, held
+    labels = plain.free + ["runs[M1].start.pressure", "runs[M1].start.position", "runs[M1].start.velocity"]
+    assert "not at rest" not in " | ".join(nuisance_hints(plant, plain.experiments, preds, labels))
+
+
 def test_runs_predicted_together_equal_each_run_predicted_alone(rig):
     # A fit's runs of one system structure share one loop, and their output channels are traced once for all runs
     # (pamjax._solve.run_outputs: blocks of samples side by side, each with its run's parameters, a run's last block

@@ -29,14 +29,14 @@ right basin and the joint fit took 9 steps to the same optimum (same cost, same 
 
 A stage that ends at a probed minimum (`pamjax.LevenbergMarquardt`: no single-parameter move lowers the cost, at a
 point where the cost is not smooth, e.g. where a stick-slip phase begins or ends as a parameter moves) hands the next
-fit its values moved `KINK_SHIFT` (0.01) standard errors off that point: the derivative there is one-sided, and the
-joint fit's first Jacobian, taken exactly there, misleads it. On perturbed4 (benchmarks/RESULTS.md, identify) stage 2
-ended so, and the joint fit from its point crawled for 100 steps (0.6 of the cost gained, status max_steps); moved
-0.01 (or ±0.05) standard errors, or 1e-4 of each value at random, it converged in 10 steps, each to the same cost,
-7.8 lower. The move is in marginal standard errors, all one way, which along the correlated force-law coefficients
-raises the cost by tens to thousands (a step the joint fit takes back at once); 0.01 of the conditional ones (the
-probes' unit: the cost hardly moves) left the joint fit crawling as before: the point must leave the kink's
-neighbourhood, not only the kink.
+fit its values moved `KINK_SHIFT` (0.01) marginal standard errors off that point: the derivative there is one-sided,
+and the joint fit's first Jacobian, taken exactly there, misleads it. On perturbed4 (benchmarks/RESULTS.md,
+identify) stage 2 ended so, and the joint fit from its point crawled for 100 steps (0.6 of the cost gained, status
+max_steps); moved 0.01 (or ±0.05) standard errors, or 1e-4 of each value at random, it converged in 10 steps, each
+to the same cost, 7.8 lower. The move is in marginal standard errors, all one way, which along the correlated
+force-law coefficients raises the cost by tens to thousands (a step the joint fit takes back at once); 0.01 of the
+conditional ones (the probes' unit: the cost hardly moves) left the joint fit crawling as before: the point must
+leave the kink's neighbourhood, not only the kink.
 
 Three problems compile instead of one. The programs of stage 2 and of the joint problem (the largest: every
 experiment, a tangent per free parameter) do not depend on the values stage 1 finds, so they are compiled in a
@@ -61,8 +61,8 @@ from .measurement import is_measurement
 from .parameters import Free, ParameterSpace, join_path, split_path
 from .solver import PROBED_MINIMUM
 
-# Standard errors by which a stage's values are moved off the point where it ended when that was a probed minimum
-# (module docstring): small beside the joint fit's moves (the perturbed4 joint fit moved b12 and b23 by 2-3 of them).
+# Marginal standard errors by which a stage's values are moved off the point where it ended when that was a probed
+# minimum (module docstring): small beside the joint fit's own moves (perturbed4's moved b12 and b23 by 2-3 of them).
 KINK_SHIFT = 0.01
 
 
@@ -93,7 +93,7 @@ class StagedStart:
 
     def summary(self):
         """One line per stage: what was fitted on what, and how the fit ended."""
-        kink = f" (at a probed minimum: handed on {KINK_SHIFT} standard errors off it)"
+        kink = f" (at a probed minimum: handed on {KINK_SHIFT} marginal standard errors off it)"
         lines = [f"stage {name}: {len(res.labels)} parameters on {', '.join(exps)}: {res.status}, {res.iterations} "
                  f"trial steps, cost {res.initial_cost:.4g} → {res.cost:.4g}"
                  f"{kink if res.message == PROBED_MINIMUM else ''}" for name, _, exps, res in self.stages]
@@ -239,8 +239,9 @@ def staged_start(model: eqx.Module, experiments: Sequence[AbstractExperiment], f
 
 
 def _off_a_kink(model, res, free):
-    """A stage's result moved `KINK_SHIFT` standard errors off the point where it ended, if that was a probed
-    minimum (module docstring); else the result as it is."""
+    """A stage's result moved `KINK_SHIFT` marginal standard errors off the point where it ended (each parameter up,
+    those of infinite standard error not at all), if that was a probed minimum (module docstring); else the result
+    as it is."""
     if res.message != PROBED_MINIMUM:
         return model
     space = ParameterSpace(model, free)
