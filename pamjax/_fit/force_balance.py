@@ -121,7 +121,6 @@ def _equilibrium_start(e, system, model, t):
     return x0, float(e.start_for(system, model).pressure)
 
 
-
 def _residuals(theta, space, exps, samples, sigmas, grid, prior):
     """The balance's residuals at the free parameters' θ (`ParameterSpace`'s: positive ones by their logarithm):
     per run, the equalities of the sliding samples and the signed violations of the bounds (positive: violated);
