@@ -39,6 +39,7 @@ import numpy as np
 
 from .experiment import Experiment
 from .parameters import ParameterSpace
+from .rig import split
 
 SMOOTHING_S = 0.04  # s: two 50 Hz PWM periods (paper 000's valve), the window of the local quadratic fits of x
 MIN_SPEED = 5e-3  # m/s: sliding, beside the 10-30 mm/s of paper 000's triangle runs (a fifth of their slowest)
@@ -60,7 +61,8 @@ def _local_quadratic(y, dt, half):
 
 
 def _is_muscle_run(e, system):
-    return (isinstance(e, Experiment) and {"pressure", "position"} <= set(e.channels)
+    """An `Experiment` recording pressure and position of a system with a muscle lifting a payload against friction."""
+    return ({"pressure", "position"} <= set(e.channels)
             and all(hasattr(system, a) for a in ("muscle", "friction", "payload_mass", "gravity", "air")))
 
 
@@ -107,8 +109,6 @@ def _equilibrium_start(e, system, model, t):
     experiment or a rig's run) and its recording between the stroke limits: there the force law carries the payload
     exactly, F_static(x0, p0) = M g, x0 the recorded mean position over the first 20 ms and p0 the model's start
     pressure; else None."""
-    from .rig import split
-
     _, _, run = split(model, e.name, e.sensor_group)
     given = set(e.initial) | (set(run.start.keywords()) if run is not None and run.start is not None else set())
     if "position" in given or "velocity" in given:
@@ -182,7 +182,7 @@ def _solve(r, jac, inequality, moving):
     scale = np.linalg.norm(jm, axis=0)
     scale[scale == 0] = 1.0
     step, *_ = np.linalg.lstsq(jm / scale, -r[active], rcond=1e-12)
-    return step / scale, active
+    return step / scale
 
 
 def _cost(r, inequality):
@@ -205,7 +205,7 @@ def _gauss_newton(theta, r, jac, args, inequality, moving, max_iterations):
     the force law's coefficients, but a positive parameter's θ is its logarithm); (θ, residuals, cost) at the end."""
     cost = _cost(r, inequality)
     for _ in range(max_iterations):
-        step, _ = _solve(r, jac, inequality, moving)
+        step = _solve(r, jac, inequality, moving)
         trial_cost, shrink = np.inf, 1.0
         while shrink > 1e-3:
             trial = theta.copy()
@@ -238,16 +238,16 @@ def force_balance(model: eqx.Module, experiments, free, max_iterations: int = 30
     with pressure and position recorded and a sliding payload, or no free parameter moves the balance.
     """
     space = ParameterSpace(model, free)
-    exps, samples = [], []
+    exps, systems, samples = [], [], []
     for e in experiments:
         system = e.system_for(model) if isinstance(e, Experiment) else None
         s = _samples(e, system, model) if system is not None and _is_muscle_run(e, system) else None
         if s is not None:
             exps.append(e)
+            systems.append(system)
             samples.append(s)
     if not exps or not any(np.any(s[4] == 0) for s in samples):
         return None
-    systems = [e.system_for(model) for e in exps]
     sigmas = [_sigma(e, sys, s) for e, sys, s in zip(exps, systems, samples)]
     grid = [_grid(sys, s[1]) for sys, s in zip(systems, samples)]
     args = (space, tuple(exps), [tuple(map(jnp.asarray, s[:5])) + s[5:] for s in samples], sigmas, grid,
