@@ -101,6 +101,32 @@ def test_experiment_bad_channel_and_failed_solve_is_finite():
         pj.fit(system, [exp], ["payload_mass"], progress=False)
 
 
+def test_a_trial_step_that_makes_the_muscle_volume_negative_on_its_stroke_is_refused():
+    """V(x) = v0 + v1 x must stay > 0 over the whole stroke (eq. 15 divides by it: `Muscle`'s own check), also where
+    the recorded motion never goes, where a solve is unharmed by it: a fit's trial step past it is refused like a
+    failed solve (its residuals None), so that no fit, e.g. a staged start's stage, hands on a model its next fit's
+    checks reject (an unseen rig's stage 2 did: benchmarks/RESULTS.md, identify, rig1102)."""
+    from pamjax._fit.problem import breaks_a_check
+    from pamjax._solve.checks import check_parameters
+
+    system = presets.mas10_system(valve="averaged")
+    rec = pj.Recording(np.linspace(0, 0.5, 11), dict(pressure=np.full(11, 2e5)))
+    exp = pj.Experiment(rec, pj.Constant(0.5), channels=["pressure"]).bind(system)
+    space = pj.ParameterSpace(system, ["muscle.volume_law.v0"])
+    problem = pj._fit.problem.Problem(space, (exp,))
+    edge = -float(system.muscle.volume_law.v1 * system.muscle.min_position)  # v0 where V(min_position) = 0
+    assert 0 < edge < float(system.muscle.volume_law.v0)
+    for v0, refused in ((1.05 * edge, False), (0.95 * edge, True)):
+        assert (problem.residuals(np.asarray(space.theta(np.array([v0])))) is None) == refused
+        model = space.with_values(np.array([v0]))
+        assert bool(breaks_a_check(model)) == refused
+        if refused:  # the concrete check agrees
+            with pytest.raises(PamjaxInputError, match="volume <= 0 inside the stroke"):
+                check_parameters(model)
+        else:
+            check_parameters(model)
+
+
 @pytest.mark.slow  # ~20 s alone (compilation of the forward-mode Jacobian of the solve), more on a shared CPU
 def test_dynamic_recovery_with_validation_split():
     """Muscle + payload with the averaged valve, 2 s triangle, pressure and position noise as on the hybrid bench."""

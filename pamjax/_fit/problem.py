@@ -4,6 +4,7 @@ once per problem structure (`ProgramCache` when the CLI's persistent cache is on
 sees them as an optimistix `fn(y, args)`: on the host for pamjax's own solver (`Problem.objective`), or through host
 callbacks for any other (`Problem.traced`)."""
 
+import functools
 import threading
 import time
 
@@ -17,14 +18,29 @@ from .._core.cache import program_cache
 from .._core.errors import PamjaxInputError
 from .._core.private import equinox_errors_as_nan
 from .._core.xla_cpu import batched_options, compiled_with
+from .._physics.muscle import AbstractMuscle
 from .predictions import predict_all
 
 
 def _residual_vector(space, theta, exps):
-    """Residuals of every sample (identification and validation parts; the host selects)."""
+    """Residuals of every sample (identification and validation parts; the host selects); NaN where θ's model
+    breaks a check that ties parameters together (`breaks_a_check`), so that the step is refused as a failed one."""
     model = space.model(theta)
     preds = predict_all(model, exps)
-    return jnp.concatenate([e.residuals_of(p, "all") for e, p in zip(exps, preds)])
+    r = jnp.concatenate([e.residuals_of(p, "all") for e, p in zip(exps, preds)])
+    return jnp.where(breaks_a_check(model), jnp.nan, r)
+
+
+def breaks_a_check(model):
+    """Whether (traced or concrete) a muscle's volume is ≤ 0 somewhere on its stroke
+    (`AbstractMuscle.smallest_volume`), which no parameter's own bound prevents (V = v0 + v1 x with v0, v1 > 0 is
+    negative at a stroke's stretched end x < 0 when v0 < −v1 x). A solve is unharmed where the recorded motion never
+    goes, so a trial step there would be accepted, and the fit's result then fail `Muscle`'s checks in the joint fit
+    that starts from it (found on an unseen rig whose stage 2 ended there: benchmarks/RESULTS.md, identify,
+    rig1102)."""
+    muscles = [c for c in jax.tree_util.tree_leaves(model, is_leaf=lambda c: isinstance(c, AbstractMuscle))
+               if isinstance(c, AbstractMuscle)]
+    return functools.reduce(jnp.logical_or, [m.smallest_volume() <= 0 for m in muscles], jnp.asarray(False))
 
 
 @eqx.filter_jit

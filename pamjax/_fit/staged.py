@@ -59,6 +59,7 @@ from .fit import FitResult, Progress, fit, precompile, start_cost
 from .force_balance import force_balance
 from .measurement import is_measurement
 from .parameters import Free, ParameterSpace, join_path, split_path
+from .problem import breaks_a_check
 from .solver import PROBED_MINIMUM
 
 # Marginal standard errors by which a stage's values are moved off the point where it ended when that was a probed
@@ -250,7 +251,8 @@ def _off_a_kink(model, res, free):
     with np.errstate(invalid="ignore", divide="ignore"):  # a move past a bound: θ not finite
         if not np.all(np.isfinite(np.asarray(space.theta(moved)))):
             return model
-    return space.with_values(moved, model)
+    moved = space.with_values(moved, model)
+    return model if bool(breaks_a_check(moved)) else moved  # nor past a check that ties parameters together
 
 
 def _balanced_start(model, experiments, free):

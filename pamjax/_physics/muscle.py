@@ -213,6 +213,9 @@ class BraidVolume(AbstractVolume):
         return length * (self.strand_length**2 - length**2) / (4.0 * jnp.pi * self.turns**2)
 
 
+STROKE_NODES = 33  # evenly spaced points of the stroke where a muscle's volume must be > 0 (eq. 15 divides by V(x))
+
+
 class AbstractMuscle(eqx.Module):
     """What the workflows ask of a muscle (a force map, a controller, an experiment design, a bench's stops): its
     stroke limits `min_position`, `max_position` [m] (x, positive = contraction), its `static_force` (the force law
@@ -237,6 +240,12 @@ class AbstractMuscle(eqx.Module):
     @abc.abstractmethod
     def volume_slope(self, x):
         """dV/dx [m²] at displacement `x` [m]."""
+
+    def smallest_volume(self):
+        """min V(x) [m³] over `STROKE_NODES` points of the stroke, concrete or traced: what must stay > 0 (eq. 15
+        divides by it; `Muscle` checks it when built, and a fit refuses a trial step where it is not,
+        `pamjax._fit.problem`)."""
+        return jnp.min(self.volume(jnp.linspace(self.min_position, self.max_position, STROKE_NODES)))
 
 
 class Muscle(AbstractMuscle):
@@ -270,7 +279,7 @@ class Muscle(AbstractMuscle):
             # eq. 15 divides by V(x): the volume must stay positive over the whole stroke, not only V(0) = v0.
             concrete = not any(isinstance(a, jax.core.Tracer) for a in jax.tree_util.tree_leaves(self.volume_law))
             law = jax.tree_util.tree_map(np.asarray, self.volume_law) if concrete else self.volume_law
-            v = law.volume(np.linspace(lo, hi, 33))
+            v = law.volume(np.linspace(lo, hi, STROKE_NODES))
             if not isinstance(v, jax.core.Tracer) and not bool(np.all(np.asarray(v) > 0)):
                 raise PamjaxInputError(
                     f"Muscle.volume_law gives a volume <= 0 inside the stroke [min_position, max_position] = "
