@@ -152,6 +152,34 @@ def test_a_minimum_where_the_cost_is_not_smooth_is_converged_not_stalled():
     assert len(steps) > len(set(steps))
 
 
+def test_the_statistics_of_a_minimum_at_a_kink_come_from_a_hair_off_it():
+    # At a kink a stick-slip event begins or ends exactly at the end point, and the Jacobian there can be that of the
+    # event's edge (an unseen rig's force law: columns 1e5× their size a hair off, standard errors 100× too small).
+    # The statistics then take the Jacobian a hair off the end point, where the cost is the same; elsewhere, or where
+    # a hair's move changes the cost (a cliff's edge), the end point's.
+    a, e, rest, k, smooth, se0, start = _sticky()
+
+    def residuals(t):
+        return a @ t + e + (0.05 * rest if t[0] > k else 0.0)
+
+    out = _run(residuals, lambda t: (residuals(t), a), start, max_steps=300)
+    assert out.reason == S.PROBED_MINIMUM, out.reason
+    edge = a * np.array([1e5, 1.0])
+    out = dataclasses.replace(out, jacobian=edge)  # the fit's last Jacobian, at the end point
+
+    def jacobian(t):
+        return residuals(t), (edge if np.array_equal(t, out.theta) else a)
+
+    jac, r = D.statistics_jacobian(out, jacobian)
+    np.testing.assert_array_equal(jac, a)
+    assert abs(0.5 * float(r @ r) - out.cost) <= D.HAIR_COST * out.cost
+    cov = _diagnostics.covariance(jac, out.cost, a.shape[0], 1e-10)
+    np.testing.assert_allclose(np.sqrt(cov[0, 0]), se0 * np.sqrt(2 * out.cost / (a.shape[0] - 2)), rtol=1e-9)
+    converged = dataclasses.replace(out, reason="converged: relative cost decrease below ftol")
+    assert D.statistics_jacobian(converged, jacobian)[0] is edge
+    assert D.statistics_jacobian(out, lambda t: (10 * residuals(t), a))[0] is edge  # a cliff both ways
+
+
 def test_a_fit_crawling_at_a_minimum_is_probed_and_converged():
     # Tiny steps accepted between rejections never make `stall_steps` rejections in a row (two bench fits from the
     # presets ran to max_steps so, gaining 1e-9 of the cost per step). Where CRAWL_STEPS iterations together gained

@@ -13,7 +13,7 @@ import optimistix as optx
 from .._core.arrays import device_array
 from .._core.custom_types import ArrayLike, RealVectorLike
 from .._core.errors import PamjaxInputError
-from .solver import CRAWL_STEPS, REASONS, Damping, LevenbergMarquardt, State
+from .solver import CRAWL_STEPS, PROBED_MINIMUM, REASONS, Damping, LevenbergMarquardt, State
 
 
 @dataclasses.dataclass
@@ -131,6 +131,28 @@ def jacobian_check(outcome, residuals, directions=3):
             return np.inf
         worst = max(worst, float(np.linalg.norm((up - down) / (2.0 * eps) - predicted)) / size)
     return worst
+
+
+HAIR = 1e-6  # θ units (the logarithm of a positive value: 1e-6 of it): "a hair off" a kink, for its statistics
+HAIR_COST = 1e-4  # of the cost: the most a hair's move may change it (else the point is on a cliff's edge)
+
+
+def statistics_jacobian(outcome, jacobian):
+    """(Jacobian, residuals) for a fit's statistics (covariance, identifiability): the end point's, except where the
+    fit ended at a kink of its cost (a probed minimum, or stalled): there they are taken a hair off it (every θ
+    component + `HAIR`, else − `HAIR`), where the cost is the end's to within `HAIR_COST` of it. At a kink a
+    stick-slip event begins or ends exactly at the end point, and the Jacobian there can be that of the event's
+    edge: on an unseen rig (benchmarks/RESULTS.md, identify, Session 47: rig1001) the force law's columns were ~1e10
+    at the point and ~1e5 a hair off it (condition 1e9 against 7e3), and the point's covariance gave standard errors
+    100× too small and called seven parameters non-identifiable. `jacobian(θ)` → (r, J) as `Problem.jacobian`."""
+    if outcome.reason not in (PROBED_MINIMUM, "stalled"):
+        return outcome.jacobian, outcome.residual
+    for sign in (1.0, -1.0):
+        r, jac = (np.asarray(a) for a in jacobian(outcome.theta + sign * HAIR))
+        if (np.all(np.isfinite(r)) and np.all(np.isfinite(jac))
+                and abs(0.5 * float(r @ r) - outcome.cost) <= HAIR_COST * outcome.cost):
+            return jac, r
+    return outcome.jacobian, outcome.residual
 
 
 class _Callables:

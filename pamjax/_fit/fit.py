@@ -376,17 +376,17 @@ def _predictions_from(exps, residuals):
 
 
 def _result(model, exps, free, space, state, identifiability_tol, out, overwrite, problem):
+    from .drive import jacobian_check, statistics_jacobian  # optimistix's import only where a fit runs
+
     labels = space.labels
     theta = state.theta
     status, converged, message = _status(state, space, theta)
     if status == "stalled":
-        from .drive import jacobian_check
-
         mismatch_j = jacobian_check(state, problem.residuals)
         message += (f"; the Jacobian disagrees with the cost by {mismatch_j:.2g} (relative) along the steepest "
                     "descent" if mismatch_j > 1e-3 else "; the Jacobian agrees with the cost (a minimum to the "
                     "solver's precision, or a very flat valley)")
-    jac, resid = state.jacobian, state.residual
+    jac, resid = statistics_jacobian(state, problem.jacobian)  # at a kink: a hair off it
     used = int(np.count_nonzero(np.any(jac != 0, axis=1) | (resid != 0)))
     groups = identifiability(jac, labels, identifiability_tol)
     bad = sorted({label for g in groups for label in g})
