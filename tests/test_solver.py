@@ -13,7 +13,7 @@ import pytest
 
 import pamjax as pj
 from pamjax import PamjaxInputError, presets
-from pamjax._fit import diagnostics as _diagnostics, drive as D, solver as S
+from pamjax._fit import diagnostics as _diagnostics, drive as D, escape as E, solver as S
 
 
 def _run(residuals, jacobian, theta, max_steps=200, **kw):
@@ -172,7 +172,7 @@ def test_the_statistics_of_a_minimum_at_a_kink_come_from_a_hair_off_it():
 
     jac, r = D.statistics_jacobian(out, jacobian)
     np.testing.assert_array_equal(jac, a)
-    assert abs(0.5 * float(r @ r) - out.cost) <= D.HAIR_COST * out.cost
+    assert abs(0.5 * float(r @ r) - out.cost) <= E.HAIR_COST * out.cost
     cov = _diagnostics.covariance(jac, out.cost, a.shape[0], 1e-10)
     np.testing.assert_allclose(np.sqrt(cov[0, 0]), se0 * np.sqrt(2 * out.cost / (a.shape[0] - 2)), rtol=1e-9)
     converged = dataclasses.replace(out, reason="converged: relative cost decrease below ftol")
@@ -358,3 +358,58 @@ def test_smooth_model_error_is_flagged_as_mismatch():
     assert stats["autocorrelation"]["1"] > 0.2 and stats["se_inflation"] > 1.2
     flagged, note = _diagnostics.mismatch({"E3": {"position": stats}})
     assert flagged and "E3/position" in note and "understate" in note
+
+
+def test_a_kink_in_a_valley_is_left_for_the_lower_point_beyond_it(monkeypatch):
+    # A valley whose weak combination w = (θ₀ − θ₁)/√2 the data determine 40× worse than θ₀ + θ₁, with a wall across
+    # it (the cost 10 higher for w in (−1.5, 0.3) standard errors of w, as a stick-slip event appearing raises a rig's
+    # cost): from w = −4 the damped steps and the one-parameter probes stop at the wall's near edge, 1.125 above the
+    # smooth minimum, a probed minimum; the least determined direction probed 1–3 standard errors out finds the lower
+    # point beyond the wall, and the fit ends at the far edge, 0.045 above it (unseen rig901: a stall 105 above).
+    rng = np.random.default_rng(5)
+    q = np.linalg.qr(rng.normal(size=(200, 2)))[0]
+    e = rng.normal(size=200)
+    rest = e - q @ (q.T @ e)
+    rot = np.array([[1.0, 1.0], [1.0, -1.0]]) / np.sqrt(2.0)  # θ → (strong, weak) coordinates
+    a = q * [40.0, 1.0] @ rot
+    smooth = np.linalg.lstsq(a, -e, rcond=None)[0]
+    floor = 0.5 * float(np.sum((a @ smooth + e) ** 2))
+
+    def weak(t):
+        return (rot @ (t - smooth))[1]  # in w's standard errors
+
+    def residuals(t):
+        return a @ t + e + (0.05 * rest if -1.5 < weak(t) < 0.3 else 0.0)
+
+    start = smooth + rot.T @ np.array([0.3, -4.0])
+    monkeypatch.setattr(S, "ESCAPES", 0)
+    stuck = _run(residuals, lambda t: (residuals(t), a), start, max_steps=300)
+    assert stuck.reason == S.PROBED_MINIMUM and stuck.escapes == 0
+    assert weak(stuck.theta) == pytest.approx(-1.5, abs=1e-3) and stuck.cost - floor == pytest.approx(1.125, abs=2e-3)
+    monkeypatch.undo()
+    out = _run(residuals, lambda t: (residuals(t), a), start, max_steps=300)
+    assert out.reason == S.PROBED_MINIMUM and out.escapes == 1
+    assert weak(out.theta) == pytest.approx(0.3, abs=1e-3) and out.cost - floor == pytest.approx(0.045, abs=2e-3)
+    # the escape's move is a row of its own in the history, accepted, at a lower cost than the kink's
+    assert min(row[1] for row in out.history) == out.cost < stuck.cost
+
+
+def test_an_escape_probes_the_least_determined_directions_a_hair_off_a_kink():
+    # escape() takes its directions and standard errors from the Jacobian a hair off the point (the point's own is
+    # that of an event's edge: here 1e5× in one column, which would make that parameter's standard error 1e5× too
+    # small and its probes no move at all), probes ±1, ±2, ±3 standard errors along each, and returns the lowest
+    # point found; at a smooth minimum none is lower.
+    a = np.diag([10.0, 0.1])  # standard errors 0.1 and 10
+
+    def residuals(t):
+        return a @ (t - [0.0, 25.0])  # θ₁ 2.5 standard errors from its best value
+
+    def jacobian_at(t):
+        return residuals(t), a
+
+    cost = 0.5 * 2.5**2
+    gain, point = E.escape(np.zeros(2), cost, a * [1.0, 1e5], residuals, jacobian_at)
+    np.testing.assert_allclose(point, [0.0, 20.0])  # +2 standard errors: the lowest of the probes
+    assert gain == pytest.approx(cost - 0.5 * 0.5**2)
+    gain, _ = E.escape(np.array([0.0, 25.0]), 0.0, a, residuals, jacobian_at)
+    assert gain == pytest.approx(-0.5)  # the best probe: one standard error out, the cost ½ higher

@@ -13,6 +13,7 @@ import optimistix as optx
 from .._core.arrays import device_array
 from .._core.custom_types import ArrayLike, RealVectorLike
 from .._core.errors import PamjaxInputError
+from .escape import hair_off
 from .solver import CRAWL_STEPS, PROBED_MINIMUM, REASONS, Damping, LevenbergMarquardt, State
 
 
@@ -20,7 +21,8 @@ from .solver import CRAWL_STEPS, PROBED_MINIMUM, REASONS, Damping, LevenbergMarq
 class Outcome:
     """Where an iteration stopped: `theta`, `residual`, `jacobian`, `cost`, `step` (iterations), `accepted`, `done`,
     `reason` (a sentence starting "converged", "stalled", or "" when the step budget ran out), `history` (per row
-    [step, cost at the current point, damping λ, accepted]), `scale` (Moré's D), `damping`, `restarts`."""
+    [step, cost at the current point, damping λ, accepted]), `scale` (Moré's D), `damping`, `restarts`, `escapes` (moves
+    to a lower valley: `pamjax._fit.escape`)."""
 
     theta: np.ndarray
     residual: np.ndarray
@@ -34,12 +36,13 @@ class Outcome:
     scale: np.ndarray
     damping: float = float("nan")
     restarts: int = 0
+    escapes: int = 0
 
     @classmethod
     def of(cls, y, state, history):
         return cls(np.asarray(y), state.residual, state.jacobian, float(state.cost), int(state.step),
                    int(state.accepted), bool(state.done), REASONS[int(state.reason)], history, state.factors.scale,
-                   float(state.search.damping), int(state.restarts))
+                   float(state.search.damping), int(state.restarts), int(state.escapes))
 
 
 def history_rows(state):
@@ -75,7 +78,7 @@ def state_arrays(y, state, history):
                                    dtype=float),
                 scale=state.factors.scale,
                 counters=np.asarray([state.step, state.accepted, state.rejected_in_row, int(state.done), state.restarts,
-                                     state.reason, state.rows], dtype=np.int64),
+                                     state.reason, state.rows, state.escapes], dtype=np.int64),
                 recent=state.recent, history=np.asarray(history, dtype=float).reshape(-1, 4))
 
 
@@ -88,12 +91,13 @@ def state_from_arrays(solver, a):
     counters = [int(v) for v in a["counters"]]
     if "recent" in a:
         cost, damping, growth, initial = scalars
-        step, accepted, rejected, done, restarts, reason, rows = counters
+        step, accepted, rejected, done, restarts, reason, rows, *more = counters
+        escapes = more[0] if more else 0  # a checkpoint written before the escapes (2026-11-27)
         recent = np.asarray(a["recent"], dtype=float)
     else:  # format 2: the reason as text, no crawl buffer (rebuilt from the history)
         (cost, damping, growth), initial = scalars[:3], history[0][1]
         step, accepted, rejected, done, *rest = counters
-        restarts, rows = (rest[0] if rest else 0), len(history)
+        restarts, rows, escapes = (rest[0] if rest else 0), len(history), 0
         text = str(a["reason"])
         reason = REASONS.index(text) if text in REASONS else (REASONS.index("stalled") if text else 0)
         costs = [row[1] for row in history[-(CRAWL_STEPS + 1):]]
@@ -104,6 +108,7 @@ def state_from_arrays(solver, a):
                   factors=solver.descent.factor(residual, jacobian, np.asarray(a["scale"], dtype=float)),
                   search=Damping(np.float64(damping), np.float64(growth)), step=np.int64(step),
                   accepted=np.int64(accepted), rejected_in_row=np.int64(rejected), restarts=np.int64(restarts),
+                  escapes=np.int64(escapes),
                   done=np.bool_(done), reason=np.int64(reason), rows=np.int64(rows), recent=recent, last_rows=last,
                   aux=None)
     return np.asarray(a["theta"], dtype=float), state, history
@@ -133,26 +138,19 @@ def jacobian_check(outcome, residuals, directions=3):
     return worst
 
 
-HAIR = 1e-6  # θ units (the logarithm of a positive value: 1e-6 of it): "a hair off" a kink, for its statistics
-HAIR_COST = 1e-4  # of the cost: the most a hair's move may change it (else the point is on a cliff's edge)
-
-
 def statistics_jacobian(outcome, jacobian):
     """(Jacobian, residuals) for a fit's statistics (covariance, identifiability): the end point's, except where the
-    fit ended at a kink of its cost (a probed minimum, or stalled): there they are taken a hair off it (every θ
-    component + `HAIR`, else − `HAIR`), where the cost is the end's to within `HAIR_COST` of it. At a kink a
-    stick-slip event begins or ends exactly at the end point, and the Jacobian there can be that of the event's
-    edge: on an unseen rig (benchmarks/RESULTS.md, identify, Session 47: rig1001) the force law's columns were ~1e10
-    at the point and ~1e5 a hair off it (condition 1e9 against 7e3), and the point's covariance gave standard errors
-    100× too small and called seven parameters non-identifiable. `jacobian(θ)` → (r, J) as `Problem.jacobian`."""
+    fit ended at a kink of its cost (a probed minimum, or stalled): there they are taken a hair off it
+    (`pamjax._fit.escape.hair_off`: every θ component + `HAIR`, else − `HAIR`, where the cost is the end's to within
+    `HAIR_COST` of it). At a kink a stick-slip event begins or ends exactly at the end point, and the Jacobian there
+    can be that of the event's edge: on an unseen rig (benchmarks/RESULTS.md, identify, Session 47: rig1001) the
+    force law's columns were ~1e10 at the point and ~1e5 a hair off it (condition 1e9 against 7e3), and the point's
+    covariance gave standard errors 100× too small and called seven parameters non-identifiable. `jacobian(θ)` →
+    (r, J) as `Problem.jacobian`."""
     if outcome.reason not in (PROBED_MINIMUM, "stalled"):
         return outcome.jacobian, outcome.residual
-    for sign in (1.0, -1.0):
-        r, jac = (np.asarray(a) for a in jacobian(outcome.theta + sign * HAIR))
-        if (np.all(np.isfinite(r)) and np.all(np.isfinite(jac))
-                and abs(0.5 * float(r @ r) - outcome.cost) <= HAIR_COST * outcome.cost):
-            return jac, r
-    return outcome.jacobian, outcome.residual
+    off = hair_off(outcome.theta, outcome.cost, jacobian)
+    return (outcome.jacobian, outcome.residual) if off is None else (off[1], off[0])
 
 
 class _Callables:

@@ -13,22 +13,22 @@
   whose residuals are not finite, a failed solve, too; or whose Jacobian cannot be factored: not finite, or overflows).
 
 A step evaluates the residuals at the trial point (and at θ + h v) and the Jacobian only where the trial is accepted
-(optimistix's own `LevenbergMarquardt` linearises at every trial: a forward-mode Jacobian through a fit's solves
-costs several residual evaluations). Stopping (`REASONS`): "converged" at a stationary point (an undamped step could
-gain at most `POTENTIAL_TOL` of the cost) with the relative cost decrease, actual and predicted, below `ftol` or the
-scaled step below `xtol`, or every column of J orthogonal to r within `gtol` (MINPACK's tests); "stalled" after
-`stall_steps` rejections in a row with the predicted decrease above `ftol` and the step below `xtol` — unless probing
-the cost one parameter at a time (`probe`) finds no decrease either: then the point is a minimum of a cost that is
-not smooth there (stick-slip events move with θ), "converged"; where a probe finds a lower point the iteration goes
-on from it (`PROBE_RESTARTS` times at most). The probe also runs where `CRAWL_STEPS` iterations together gained less
-than `POTENTIAL_TOL` of the cost. Rejections alone never stop an iteration before its first accepted step.
+(optimistix's `LevenbergMarquardt` linearises at every trial: several residual evaluations through a fit's solves).
+Stopping (`REASONS`): "converged" at a stationary point (an undamped step could gain at most `POTENTIAL_TOL` of the
+cost) with the relative cost decrease, actual and predicted, below `ftol` or the scaled step below `xtol`, or every
+column of J orthogonal to r within `gtol` (MINPACK's tests); "stalled" after `stall_steps` rejections in a row with
+the predicted decrease above `ftol` and the step below `xtol` — unless probing the cost one parameter at a time
+(`probe`) finds no decrease either: then the point is a minimum of a cost that is not smooth there (stick-slip events
+move with θ), "converged"; where a probe finds a lower point the iteration goes on from it (`PROBE_RESTARTS` times at
+most), and where it finds none, on the host, from a lower point along the least determined directions
+(`pamjax._fit.escape`, `ESCAPES` times at most). The probe also runs where `CRAWL_STEPS` iterations together gained
+less than `POTENTIAL_TOL` of the cost. Rejections alone never stop an iteration before its first accepted step.
 
 **Two ways to run it**, one code: traced, as any optimistix solver (`optx.least_squares(fn, LevenbergMarquardt(),
 y0)`; the Jacobian by `jax.jacfwd` in a `lax.cond` on acceptance); or from the host, as `pamjax.fit` does
 (`pamjax._fit.drive`): `init`/`step`/`terminate` called from Python with a NumPy `y` and an `fn` returning NumPy
 residuals (non-finite where the model fails) with `fn.jacobian(y, args)` → (residuals, Jacobian), a fit's two
-compiled programs. The small linear algebra (an SVD of m × n, n ≤ ~50) then runs in NumPy and no optimiser program is
-compiled (an optimistix step compiled around the programs measured ~4× the Jacobian's compilation).
+compiled programs; the small linear algebra (an SVD of m × n, n ≤ ~50) runs in NumPy, no optimiser program compiled.
 """
 
 import dataclasses
@@ -43,6 +43,8 @@ from jax.flatten_util import ravel_pytree
 
 from .._core.custom_types import ArrayLike
 from .._core.errors import PamjaxInputError
+from .descent import Factors, ScaledDampedDescent, array_module, flatten, on_host
+from .escape import ESCAPES, escape
 
 # A fit counts as converged (by ftol or xtol) only where an undamped Gauss-Newton step could gain at most this
 # fraction of the cost: a heavily damped step is small and gains little anywhere, which alone proves nothing (a start
@@ -51,7 +53,6 @@ POTENTIAL_TOL = 1e-6
 ACCEPT_RATIO = 1e-4  # ρ above which a trial is accepted (Nielsen's alg. 3.16 accepts any ρ > 0; 1e-4 as MINPACK)
 TAU = 1e-3  # λ₀ = τ max(1, diag DJᵀJD) (Madsen, Nielsen & Tingleff 2004, sec. 3.2: 1e-3 unless x₀ is known close)
 GEODESIC_H = 0.1  # finite-difference step of r_vv along the velocity (Transtrum & Sethna 2012, sec. IV: h = 0.1)
-GEODESIC_ALPHA = 0.75  # acceleration trusted while 2‖a‖/‖v‖ ≤ α (Transtrum & Sethna 2012: α = 0.75)
 # The probes, in conditional standard errors (the move of one parameter, the others fixed, that the local model says
 # raises the cost by ½): small enough to see a descent the damped steps missed, large enough to step over the cost's
 # jumps at stick-slip events (~1e-7 of the cost on the bench problems).
@@ -69,15 +70,6 @@ _FTOL, _XTOL, _GTOL, _NO_DECREASE, _PROBED, _STALLED, _GTOL_START = range(1, 8)
 
 
 # --- running on the host (NumPy) or traced (jax.numpy) ---------------------------------------------------------------
-def _on_host(x):
-    """Whether `x` (a pytree) holds host values (NumPy), not JAX arrays or tracers."""
-    return not any(isinstance(leaf, jax.Array) for leaf in jax.tree_util.tree_leaves(x))
-
-
-def _xp(host):
-    return np if host else jnp
-
-
 def _cond(host, pred, true_fn, false_fn):
     """`lax.cond` when traced; a Python branch on the host (only the branch taken evaluates the model)."""
     if host:
@@ -85,16 +77,10 @@ def _cond(host, pred, true_fn, false_fn):
     return jax.lax.cond(pred, true_fn, false_fn)
 
 
-def _flat(out, host):
-    if host:
-        return np.asarray(out, dtype=float).ravel()
-    return jnp.concatenate([jnp.ravel(x) for x in jax.tree_util.tree_leaves(out)])
-
-
 def _residual(fn, y, args, host, unravel):
     """(residuals as one vector, aux) at y."""
     out, aux = fn(unravel(y), args)
-    return _flat(out, host), aux
+    return flatten(out, host), aux
 
 
 def _jacobian(fn, y, args, host, unravel):
@@ -125,74 +111,10 @@ def _cost(r):
 
 def gradient_cosine(jacobian, residual):
     """max over columns of |Jᵢ·r| / (‖Jᵢ‖ ‖r‖): 0 at a stationary point (MINPACK's gtol test)."""
-    xp = _xp(_on_host(jacobian))
+    xp = array_module(on_host(jacobian))
     norms = xp.linalg.norm(jacobian, axis=0) * xp.linalg.norm(residual)
     cos = xp.abs(jacobian.T @ residual) / xp.where(norms > 0, norms, 1.0)
     return xp.max(xp.where(norms > 0, cos, 0.0), initial=0.0)
-
-
-# --- the descent: Moré-scaled damped Gauss-Newton with geodesic acceleration ---------------------------------------
-# The states hold NumPy values where the solver runs from the host (`pamjax.fit`), JAX arrays where it is traced.
-class Factors(eqx.Module):
-    """The descent's state: Moré's scaling D (`scale`), the SVD J D⁻¹ = U S Vᵀ (`u`, `s`, `vt`) and c = Uᵀ r."""
-
-    scale: ArrayLike
-    u: ArrayLike
-    s: ArrayLike
-    vt: ArrayLike
-    c: ArrayLike
-
-
-class ScaledDampedDescent(optx.AbstractDescent):
-    """The Levenberg-Marquardt step with Moré's scaling, through an SVD of the scaled Jacobian, and the geodesic
-    acceleration's correction (`accelerate`). As an optimistix descent (`query`, `step`) it takes λ = 1/step_size,
-    as `optimistix.DampedNewtonDescent` does; y is a 1-D array."""
-
-    def init(self, y, f_info_struct):
-        n = int(np.prod(jnp.shape(y)))
-        m = sum(int(np.prod(x.shape)) for x in jax.tree_util.tree_leaves(f_info_struct.residual))
-        k = min(m, n)
-        return Factors(jnp.zeros(n), jnp.zeros((m, k)), jnp.zeros(k), jnp.zeros((k, n)), jnp.zeros(k))
-
-    def query(self, y, f_info, state):
-        residual = _flat(f_info.residual, False)
-        return self.factor(residual, f_info.jac.as_matrix().reshape(residual.size, -1), state.scale)
-
-    def step(self, step_size, state):
-        velocity, *_ = self.damped(1.0 / step_size, state)
-        return velocity, optx.RESULTS.successful
-
-    @staticmethod
-    def factor(residual, jacobian, scale):
-        """The factors at a new point: D ← max(D, ‖Jᵢ‖) (1 for a column that has never moved the residuals)."""
-        xp = _xp(_on_host(jacobian))
-        scale = xp.maximum(scale, xp.linalg.norm(jacobian, axis=0))
-        scale = xp.where(scale > 0, scale, 1.0)
-        u, s, vt = xp.linalg.svd(jacobian / scale, full_matrices=False)
-        return Factors(scale, u, s, vt, u.T @ residual)
-
-    @staticmethod
-    def damped(damping, f):
-        """(velocity, scaled coefficients, filter factors, predicted decrease, scaled size, potential) of the step
-        with damping λ. `predicted` is the decrease the local linear model promises for the velocity (the yardstick
-        of the acceptance ratio and the convergence tests: the acceleration's own can be negative on a curved
-        valley); `potential` ½‖c‖² what an undamped Gauss-Newton step could still gain (~0 at a minimum)."""
-        xp = _xp(_on_host(f.s))
-        filt = f.s / (f.s * f.s + damping)
-        coef = -filt * f.c
-        velocity = (f.vt.T @ coef) / f.scale
-        fitted = f.c + f.s * coef
-        predicted = 0.5 * (f.c @ f.c - fitted @ fitted)
-        return velocity, coef, filt, predicted, xp.linalg.norm(coef), 0.5 * (f.c @ f.c)
-
-    @staticmethod
-    def accelerate(coef, filt, rvv, f):
-        """(v + a/2, trusted): the step with the geodesic acceleration a = −(damped solve of r_vv), and whether
-        2‖a‖ ≤ α‖v‖ (scaled)."""
-        xp = _xp(_on_host(f.s))
-        acc = -filt * (f.u.T @ rvv)
-        trusted = 2.0 * xp.linalg.norm(acc) <= GEODESIC_ALPHA * xp.linalg.norm(coef)
-        return (f.vt.T @ (coef + 0.5 * acc)) / f.scale, trusted
 
 
 # --- the search: Nielsen's damping update ----------------------------------------------------------------------------
@@ -217,13 +139,13 @@ class NielsenDamping(optx.AbstractSearch):
 
     def start(self, scaled_jacobian):
         """λ₀ = τ max(1, largest diagonal entry of (JD⁻¹)ᵀ(JD⁻¹))."""
-        xp = _xp(_on_host(scaled_jacobian))
+        xp = array_module(on_host(scaled_jacobian))
         largest = xp.max(xp.sum(scaled_jacobian * scaled_jacobian, axis=0), initial=1.0)
         return Damping(self.tau * largest, xp.asarray(2.0))
 
     def decide(self, ok, actual, predicted, state):
         """(accept, new state) for a trial whose cost fell by `actual` where the model predicted `predicted`."""
-        xp = _xp(_on_host((predicted, state.damping)))
+        xp = array_module(on_host((predicted, state.damping)))
         positive = predicted > 0
         rho = xp.where(positive, actual / xp.where(positive, predicted, 1.0), -xp.inf)
         accept = ok & (rho > self.accept_ratio)
@@ -238,7 +160,7 @@ class NielsenDamping(optx.AbstractSearch):
             norms = jnp.linalg.norm(jac, axis=0)
             return self.start(jac / jnp.where(norms > 0, norms, 1.0))
 
-        residual = _flat(f_info.residual, False)
+        residual = flatten(f_info.residual, False)
         diff = jnp.ravel(y_eval - y)
         fitted = f_info.jac.as_matrix().reshape(residual.size, -1) @ diff + residual
         predicted = 0.5 * (residual @ residual - fitted @ fitted)
@@ -265,6 +187,7 @@ class State(eqx.Module):
     accepted: ArrayLike
     rejected_in_row: ArrayLike
     restarts: ArrayLike
+    escapes: ArrayLike
     done: ArrayLike
     reason: ArrayLike
     rows: ArrayLike
@@ -333,8 +256,8 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
 
     # -- optimistix's interface ----------------------------------------------------------------------------------
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
-        host = _on_host(y)
-        xp = _xp(host)
+        host = on_host(y)
+        xp = array_module(host)
         flat, unravel = _ravel(y, host)
         r, jac, aux = _jacobian(fn, flat, args, host, unravel)
         factors = self.descent.factor(r, jac, xp.zeros(flat.size))
@@ -345,20 +268,20 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
         return State(
             residual=r, jacobian=jac, cost=cost, initial_cost=cost, factors=factors, search=search,
             step=_int(xp, 0), accepted=_int(xp, 0), rejected_in_row=_int(xp, 0), restarts=_int(xp, 0),
-            done=xp.asarray(done), reason=xp.where(done, _GTOL_START, 0), rows=_int(xp, 1),
+            escapes=_int(xp, 0), done=xp.asarray(done), reason=xp.where(done, _GTOL_START, 0), rows=_int(xp, 1),
             recent=xp.concatenate([xp.full(CRAWL_STEPS, xp.nan), xp.reshape(cost, (1,))]),
             last_rows=xp.stack([first, xp.full(4, xp.nan)]), aux=aux)
 
     def step(self, fn, y, args, options, state, tags):
-        host = _on_host(y)
-        xp = _xp(host)
+        host = on_host(y)
+        xp = array_module(host)
         flat, unravel = _ravel(y, host)
         with np.errstate(all="ignore"):
             new_flat, state = self._iterate(fn, flat, args, state, host, xp, unravel)
         return unravel(new_flat), state, state.aux
 
     def terminate(self, fn, y, args, options, state, tags):
-        if _on_host(y):
+        if on_host(y):
             result = optx.RESULTS.nonlinear_divergence if int(state.reason) == _STALLED else optx.RESULTS.successful
             return bool(state.done), result
         return state.done, optx.RESULTS.where(state.reason == _STALLED, optx.RESULTS.nonlinear_divergence,
@@ -423,7 +346,7 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
         crawling = (reason == 0) & (n_accepted > 0) & (rows > CRAWL_STEPS) & (recent[0] - cost <= POTENTIAL_TOL * cost)
         base = State(residual=r, jacobian=jac, cost=cost, initial_cost=state.initial_cost, factors=f, search=search,
                      step=count, accepted=n_accepted, rejected_in_row=rejected_in_row, restarts=state.restarts,
-                     done=reason != 0, reason=reason, rows=rows, recent=recent,
+                     escapes=state.escapes, done=reason != 0, reason=reason, rows=rows, recent=recent,
                      last_rows=xp.stack([row, xp.full(4, xp.nan)]), aux=aux)
         return _cond(host, stall | crawling, lambda: self._stalled_or_minimum(fn, y_new, args, base, host, xp, unravel),
                      lambda: (y_new, base))
@@ -431,8 +354,9 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
     def _stalled_or_minimum(self, fn, y, args, state, host, xp, unravel):
         """Where the damped steps have stopped gaining: the Jacobian may describe the cost badly only because the
         cost is not smooth here (a stick-slip phase begins or ends as θ moves), at a minimum all the same. Probe the
-        cost: no lower point → converged; a lower point → go on from it with the start's damping (`PROBE_RESTARTS`
-        times at most); then "stalled"."""
+        cost: a lower point → go on from it with the start's damping (`PROBE_RESTARTS` times at most); none (or no
+        restarts left) → on the host, probe the least determined directions (`pamjax._fit.escape`: a lower valley
+        → go on from there, `ESCAPES` times at most), else stop: converged at a probed minimum, or "stalled"."""
         gain, point = probe(fn, y, args, state.jacobian, state.cost, host=host, unravel=unravel)
         minimum = gain <= POTENTIAL_TOL * state.cost
 
@@ -440,7 +364,7 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
             reason = xp.where(minimum, _PROBED, _STALLED)
             return y, dataclasses.replace(state, done=xp.asarray(True), reason=reason)
 
-        def restart():
+        def restart(point=point, escaped=False):
             r, jac, aux = _jacobian(fn, point, args, host, unravel)
             fresh = xp.linalg.norm(jac, axis=0)
             search = self.search.start(jac / xp.where(fresh > 0, fresh, 1.0))
@@ -448,11 +372,22 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
             row = xp.stack([state.last_rows[0, 0], cost, search.damping, xp.asarray(1.0)])
             return point, dataclasses.replace(
                 state, residual=r, jacobian=jac, cost=cost, factors=self.descent.factor(r, jac, state.factors.scale),
-                search=search, rejected_in_row=_int(xp, 0), restarts=state.restarts + 1, rows=state.rows + 1,
+                search=search, rejected_in_row=_int(xp, 0), restarts=_int(xp, 0) if escaped else state.restarts + 1,
+                escapes=state.escapes + escaped, rows=state.rows + 1,
                 recent=xp.concatenate([state.recent[1:], xp.reshape(cost, (1,))]),
                 last_rows=xp.stack([state.last_rows[0], row]), aux=state.aux if host else aux)
 
-        return _cond(host, minimum | (state.restarts >= PROBE_RESTARTS), stop, restart)
+        if not host:
+            return jax.lax.cond(minimum | (state.restarts >= PROBE_RESTARTS), stop, restart)
+        if not (minimum or state.restarts >= PROBE_RESTARTS):
+            return restart()
+        if state.escapes < ESCAPES:
+            lower, there = escape(y, float(state.cost), state.jacobian,
+                                  lambda t: _residual(fn, t, args, True, unravel)[0],
+                                  lambda t: _jacobian(fn, t, args, True, unravel)[:2])
+            if lower > POTENTIAL_TOL * state.cost:
+                return restart(there, escaped=True)
+        return stop()
 
 
 def _int(xp, value):
@@ -468,7 +403,7 @@ def probe(fn, y, args, jacobian, cost, *, host=True, unravel=lambda t: t):
     standard errors (1/‖Jᵢ‖ of the Jacobian's column), or at the vertex of the parabola through the cost at −0.1, 0,
     +0.1 of them along the best parameter; gain ≤ 0 at a minimum, smooth or not (4n + 1 residual evaluations, only
     where an iteration would otherwise stop as stalled). A failed solve counts as no decrease."""
-    xp = _xp(host)
+    xp = array_module(host)
     norms = xp.linalg.norm(jacobian, axis=0)
     live = norms > 0
     safe = xp.where(live, norms, 1.0)
