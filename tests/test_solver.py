@@ -366,6 +366,7 @@ def test_a_kink_in_a_valley_is_left_for_the_lower_point_beyond_it(monkeypatch):
     # cost): from w = −4 the damped steps and the one-parameter probes stop at the wall's near edge, 1.125 above the
     # smooth minimum, a probed minimum; the least determined direction probed 1–3 standard errors out finds the lower
     # point beyond the wall, and the fit ends at the far edge, 0.045 above it (unseen rig901: a stall 105 above).
+    # Without the escapes (`ESCAPES` = 0 tries) the same fit stays at the near edge.
     rng = np.random.default_rng(5)
     q = np.linalg.qr(rng.normal(size=(200, 2)))[0]
     e = rng.normal(size=200)
@@ -388,7 +389,7 @@ def test_a_kink_in_a_valley_is_left_for_the_lower_point_beyond_it(monkeypatch):
     assert weak(stuck.theta) == pytest.approx(-1.5, abs=1e-3) and stuck.cost - floor == pytest.approx(1.125, abs=2e-3)
     monkeypatch.undo()
     out = _run(residuals, lambda t: (residuals(t), a), start, max_steps=300)
-    assert out.reason == S.PROBED_MINIMUM and out.escapes == 1
+    assert out.reason == S.PROBED_MINIMUM and 1 <= out.escapes <= E.ESCAPES  # tries: the one that moved, and more
     assert weak(out.theta) == pytest.approx(0.3, abs=1e-3) and out.cost - floor == pytest.approx(0.045, abs=2e-3)
     # the escape's move is a row of its own in the history, accepted, at a lower cost than the kink's
     assert min(row[1] for row in out.history) == out.cost < stuck.cost

@@ -1,14 +1,15 @@
 """Leaving a kink for a lower valley: where pamjax's Levenberg-Marquardt stops at a kink of its cost (a probed
-minimum, or stalled: `pamjax._fit.solver`), the cost is probed along the directions the data determine worst, one
-to three standard errors out; where that finds a lower point, the iteration goes on from it (`ESCAPES` times at most).
+minimum, or stalled: `pamjax._fit.solver`), or crawls along one (its one-parameter probes gain less than
+`ESCAPE_BELOW` of the cost), the cost is probed along the directions the data determine worst, one to three standard
+errors out; where that finds a lower point than the one-parameter probes, the iteration goes on from it (`ESCAPES`
+tries per fit at most).
 
 Why: on a rig whose payload rests on a stroke limit most of the time, the force law is seen only along a few climbs
 and the cost has neighbouring minima along a valley of the least determined combinations (k0, k1, F_c, the quartic
 F_max and the pressure gain trading off), with stick-slip kinks across it. The damped steps and the one-parameter
-probes (±0.01 and ±0.1 standard errors) stop at the first kink; an unseen rig (benchmarks/RESULTS.md, identify,
-Session 48: rig901) stalled 105 above the minimum a fit from the truth finds (cost 38,825 against 38,719: a χ²
-difference of 210), and a move of three standard errors along the third least determined direction found a lower
-point from which the fit converged at the truth's minimum.
+probes (±0.01 and ±0.1 standard errors) stop at the first kink: an unseen rig (benchmarks/RESULTS.md, identify,
+Session 48: rig901) stalled at cost 38,825 after crawling along one for 80 steps; with these probes its fit leaves
+that valley and converges at 38,749 (a fit from the truth: 38,719).
 
 The directions and their standard errors are those of the Jacobian a hair off the end point (`hair_off`: at a kink a
 stick-slip event begins or ends exactly at the point, and the Jacobian there can be that of the event's edge, 1e5×
@@ -20,7 +21,8 @@ import numpy as np
 
 HAIR = 1e-6  # θ units (the logarithm of a positive value: 1e-6 of it): "a hair off" a kink
 HAIR_COST = 1e-4  # of the cost: the most a hair's move may change it (else the point is on a cliff's edge)
-ESCAPES = 2  # moves to a lower point found along the least determined directions, per fit
+ESCAPES = 3  # probes along the least determined directions per fit (each 6 × 6 residual evaluations)
+ESCAPE_BELOW = 1e-5  # of the cost: a kink's one-parameter probes gaining less than this (a crawl) try them too
 ESCAPE_DIRECTIONS = 6  # the least determined directions probed (6 × 6 residual evaluations per probe)
 ESCAPE_STEPS = (1.0, -1.0, 2.0, -2.0, 3.0, -3.0)  # standard errors along each (the local model: a cost rise of c²/2)
 RANK_TOL = 1e-6  # directions whose singular value is below this × the largest are not determined: not probed

@@ -44,7 +44,7 @@ from jax.flatten_util import ravel_pytree
 from .._core.custom_types import ArrayLike
 from .._core.errors import PamjaxInputError
 from .descent import Factors, ScaledDampedDescent, array_module, flatten, on_host
-from .escape import ESCAPES, escape
+from .escape import ESCAPE_BELOW, ESCAPES, escape
 
 # A fit counts as converged (by ftol or xtol) only where an undamped Gauss-Newton step could gain at most this
 # fraction of the cost: a heavily damped step is small and gains little anywhere, which alone proves nothing (a start
@@ -373,21 +373,21 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
             return point, dataclasses.replace(
                 state, residual=r, jacobian=jac, cost=cost, factors=self.descent.factor(r, jac, state.factors.scale),
                 search=search, rejected_in_row=_int(xp, 0), restarts=_int(xp, 0) if escaped else state.restarts + 1,
-                escapes=state.escapes + escaped, rows=state.rows + 1,
+                rows=state.rows + 1,
                 recent=xp.concatenate([state.recent[1:], xp.reshape(cost, (1,))]),
                 last_rows=xp.stack([state.last_rows[0], row]), aux=state.aux if host else aux)
 
         if not host:
             return jax.lax.cond(minimum | (state.restarts >= PROBE_RESTARTS), stop, restart)
-        if not (minimum or state.restarts >= PROBE_RESTARTS):
-            return restart()
-        if state.escapes < ESCAPES:
+        spent = state.restarts >= PROBE_RESTARTS
+        if (gain <= ESCAPE_BELOW * state.cost or spent) and state.escapes < ESCAPES:  # crawling on, or stopping
             lower, there = escape(y, float(state.cost), state.jacobian,
                                   lambda t: _residual(fn, t, args, True, unravel)[0],
                                   lambda t: _jacobian(fn, t, args, True, unravel)[:2])
-            if lower > POTENTIAL_TOL * state.cost:
+            state = dataclasses.replace(state, escapes=state.escapes + 1)  # an attempt, found or not
+            if lower > max(gain, POTENTIAL_TOL * state.cost):
                 return restart(there, escaped=True)
-        return stop()
+        return stop() if minimum or spent else restart()
 
 
 def _int(xp, value):
