@@ -44,7 +44,7 @@ from jax.flatten_util import ravel_pytree
 from .._core.custom_types import ArrayLike
 from .._core.errors import PamjaxInputError
 from .descent import Factors, ScaledDampedDescent, array_module, flatten, on_host
-from .escape import ESCAPE_BELOW, ESCAPES, escape
+from .escape import ESCAPE_BELOW, ESCAPE_GAIN, ESCAPES, escape
 
 # A fit counts as converged (by ftol or xtol) only where an undamped Gauss-Newton step could gain at most this
 # fraction of the cost: a heavily damped step is small and gains little anywhere, which alone proves nothing (a start
@@ -385,7 +385,7 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
                                   lambda t: _residual(fn, t, args, True, unravel)[0],
                                   lambda t: _jacobian(fn, t, args, True, unravel)[:2])
             state = dataclasses.replace(state, escapes=state.escapes + 1)  # an attempt, found or not
-            if lower > max(gain, POTENTIAL_TOL * state.cost):
+            if lower > max(gain, ESCAPE_GAIN * state.cost):  # a valley worth the steps
                 return restart(there, escaped=True)
         return stop() if minimum or spent else restart()
 
