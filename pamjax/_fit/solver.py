@@ -20,9 +20,10 @@ column of J orthogonal to r within `gtol` (MINPACK's tests); "stalled" after `st
 the predicted decrease above `ftol` and the step below `xtol` — unless probing the cost one parameter at a time
 (`probe`) finds no decrease either: then the point is a minimum of a cost that is not smooth there (stick-slip events
 move with θ), "converged"; where a probe finds a lower point the iteration goes on from it (`PROBE_RESTARTS` times at
-most), and where it finds none, on the host, from a lower point along the least determined directions
-(`pamjax._fit.escape`, `ESCAPES` times at most). The probe also runs where `CRAWL_STEPS` iterations together gained
-less than `POTENTIAL_TOL` of the cost. Rejections alone never stop an iteration before its first accepted step.
+most); where it finds none or only a crawl's gain, on the host, from a point along the least determined directions
+lower by more than `ESCAPE_GAIN` of the cost (`pamjax._fit.escape`; `ESCAPES` tries). The probe also runs where
+`CRAWL_STEPS` iterations together gained less than `POTENTIAL_TOL` of the cost. Rejections alone never stop an
+iteration before its first accepted step.
 
 **Two ways to run it**, one code: traced, as any optimistix solver (`optx.least_squares(fn, LevenbergMarquardt(),
 y0)`; the Jacobian by `jax.jacfwd` in a `lax.cond` on acceptance); or from the host, as `pamjax.fit` does
