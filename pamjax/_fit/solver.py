@@ -355,9 +355,11 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
     def _stalled_or_minimum(self, fn, y, args, state, host, xp, unravel):
         """Where the damped steps have stopped gaining: the Jacobian may describe the cost badly only because the
         cost is not smooth here (a stick-slip phase begins or ends as θ moves), at a minimum all the same. Probe the
-        cost: a lower point → go on from it with the start's damping (`PROBE_RESTARTS` times at most); none (or no
-        restarts left) → on the host, probe the least determined directions (`pamjax._fit.escape`: a lower valley
-        → go on from there, `ESCAPES` times at most), else stop: converged at a probed minimum, or "stalled"."""
+        cost: a lower point → go on from it with the start's damping (`PROBE_RESTARTS` times at most). Where it
+        finds none, only a crawl's gain (≤ `ESCAPE_BELOW` of the cost) or no restarts are left, on the host the least
+        determined directions are probed too (`pamjax._fit.escape`, `ESCAPES` tries), and a point lower by more than
+        `ESCAPE_GAIN` of the cost (and than the probe's) is gone on from; else a lower probe point, else stop:
+        converged at a probed minimum, or "stalled"."""
         gain, point = probe(fn, y, args, state.jacobian, state.cost, host=host, unravel=unravel)
         minimum = gain <= POTENTIAL_TOL * state.cost
 
