@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
-from .._core.arrays import device_array, floats_as_arrays
+from .._core.arrays import device_array, kept_on_device
 from .._core.custom_types import ArrayLike, Real, RealScalarLike, TimesLike
 from .._core.errors import PamjaxInputError, PamjaxSolveError, check_time_grid, require_float64
 from .._core.fastjit import filter_jit
@@ -20,7 +20,7 @@ from .._physics.signals import AbstractSignal
 from .._physics.tabulated import prepared_tables
 from .._systems.base import AbstractSystem
 from . import chunks as _chunks, synchronous as _sync
-from .checks import check_parameters, naming_batched, runtime_checks, vacuum
+from .checks import check_parameters, naming_batched, prepared, runtime_checks, vacuum
 from .edges import ScheduledValve, StartsOff
 from .hints import default_max_steps, failure_hint, fixed_step_hint, negative_inflow
 from .scaled import scaled
@@ -254,7 +254,7 @@ def validate(system, signal, ts, y0=None, t0=None):
     if t0 is None and ts_np.size < 2:
         raise PamjaxInputError("ts needs at least two times when t0 is not given (the solve starts at ts[0])")
     if not _is_traced(signal):  # a traced signal (e.g. grad w.r.t. the duty) has no concrete bounds to check
-        lo, hi = signal.bounds()
+        lo, hi = type(signal).bounds(signal)  # not `signal.bounds`: equinox makes a bound method a module (~80 µs)
         clo, chi = system.command_range
         if not (np.isfinite(lo) and np.isfinite(hi)):
             raise PamjaxInputError(f"signal must be finite, its bounds are ({lo}, {hi})")
@@ -359,9 +359,10 @@ def simulate(
 
     An `OnOffValve(mode="exact")` has its switching times handed to the solver (step-size clipping at jump times).
     """
-    system = floats_as_arrays(system)  # a value set with eqx.tree_at: an argument, not a constant of the program
+    # a value set with eqx.tree_at as an array: an argument, not a constant of the program
+    system, traced_model = prepared(system)
     validate(system, signal, ts, y0, t0)
-    traced_model = _is_traced((system, signal))
+    traced_model = traced_model or _is_traced(signal)
     if traced_model:  # inside jit/vmap/grad: the same checks, as run-time errors naming the value
         system, signal = runtime_checks(system, signal, ts, system.command_range)
     # Tolerances and the first step as arrays: arguments of the compiled solve, not constants baked into it (another
@@ -371,11 +372,11 @@ def simulate(
     # concrete ts[0] and ts[-1] are read on the host (indexing a device array compiles a one-operation program),
     # before jnp.asarray: under an enclosing jit or vmap (a band's draws) that makes even concrete times tracers
     host = None if _is_traced(ts) else np.asarray(ts, dtype=float)
-    ts = jnp.asarray(ts, dtype=float)
+    ts = _as_times(ts)
     t_end = ts[-1] if host is None else float(host[-1])
     if t0 is None:
         start = None if host is None else float(host[0])
-        t0 = ts[0] if host is None else jnp.asarray(start)
+        t0 = ts[0] if host is None else kept_on_device(("t0", start), lambda: jnp.asarray(start))
     else:
         start = None if _is_traced(t0) else float(np.asarray(t0))
         t0 = jnp.asarray(t0, dtype=float)
@@ -424,31 +425,27 @@ def simulate(
 _EDGE_CLIP = 1  # `num_periods` of an adaptive solve with smoothed edges: edge clipping on (its value is not used)
 
 
+def _as_times(ts):
+    """`jnp.asarray(ts, dtype=float)`, without the eager operation it runs (~0.1 ms) where it would return a concrete
+    float64 array as it is (outside any JAX transformation: inside one it makes a tracer of it)."""
+    keep = isinstance(ts, jax.Array) and ts.dtype == np.float64 and not ts.weak_type and jax_at_top_level()
+    return ts if keep and not isinstance(ts, jax.core.Tracer) else jnp.asarray(ts, dtype=float)
+
+
 def _positive(value, name):
     """A tolerance or step [s] checked finite and > 0 (when concrete), as a float64 array; a Python number's made
-    once per value and default device (a copy to the device costs ~0.1 ms, a tenth of an averaged `simulate`)."""
-    plain = type(value) in (float, int)
-    if plain:
-        key = (type(value), value, jax.config.jax_default_device)
-        cached = _POSITIVE.get(key)
-        if cached is not None:
-            return cached
-    if not _is_traced(value):
-        number = isinstance(value, (int, float, np.ndarray, jax.Array)) and not isinstance(value, bool)
-        v = np.asarray(value, dtype=float) if number else None
-        if v is None or v.ndim != 0 or not np.isfinite(v) or v <= 0:
-            raise PamjaxInputError(f"{name} must be a finite number > 0, got {value!r}")
-        array = device_array(v)
-        if plain and not isinstance(array, jax.core.Tracer):  # inside a jit's trace the copy is staged: a tracer,
-            # which must not outlive that trace (a later call would get it: JAX's UnexpectedTracerError)
-            if len(_POSITIVE) >= 64:  # a few values in use: bounded memory
-                _POSITIVE.clear()
-            _POSITIVE[key] = array
-        return array
-    return value
+    once per value (`kept_on_device`: a copy to the device costs ~0.1 ms, a tenth of an averaged `simulate`)."""
+    if type(value) in (float, int):
+        return kept_on_device(("positive", type(value), value), lambda: _positive_array(value, name))
+    return value if _is_traced(value) else _positive_array(value, name)
 
 
-_POSITIVE = {}  # (type, value, default device) → the checked number as a float64 device array (immutable)
+def _positive_array(value, name):
+    number = isinstance(value, (int, float, np.ndarray, jax.Array)) and not isinstance(value, bool)
+    v = np.asarray(value, dtype=float) if number else None
+    if v is None or v.ndim != 0 or not np.isfinite(v) or v <= 0:
+        raise PamjaxInputError(f"{name} must be a finite number > 0, got {value!r}")
+    return device_array(v)
 
 
 def _fixed_grid_periods(system, stepping, substeps, grid_step, t0, t_end):
