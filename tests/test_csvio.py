@@ -176,6 +176,19 @@ def test_a_missing_time_column_and_a_bad_rename_are_named(tmp_path):
     np.testing.assert_allclose(Recording.load(time).t, T, rtol=1e-12, atol=1e-15)
 
 
+def test_channel_names_in_capitals_are_the_channels(tmp_path):
+    # a logger's header 'Time [s],Pressure [Pa],POSITION [m]' (was: a channel 'Pressure' that a bench then missed)
+    _same_as_reference(Recording.load(_write(tmp_path, _table(header=("Time [s]", "Pressure [Pa]", "POSITION [m]")))))
+    duty = _write(tmp_path, _table(header=("t [s]", "Duty [-]", "position [m]"), p=np.full(60, 0.5)), "duty.csv")
+    assert set(Recording.load(duty).channels) == {"command", "position"}
+    both = _write(tmp_path, _table(header=("t [s]", "pressure [Pa]", "Pressure [Pa]"), x=P), "both.csv")
+    with pytest.raises(PamjaxInputError, match=r"columns 'pressure' and 'Pressure' both become channel 'pressure'"):
+        Recording.load(both)
+    kept = Recording.load(_write(tmp_path, _table(header=("t [s]", "Pressure [Pa]", "x [m]")), "kept.csv"),
+                          rename={"Pressure": "supply"})  # the user's rename decides
+    assert set(kept.channels) == {"supply", "position"}
+
+
 def test_written_csv_reads_back_exactly_with_units_in_the_header(tmp_path):
     rec = Recording(T, dict(pressure=P, position=X, command=np.full(60, 0.5)), name="r")
     path = rec.to_csv(tmp_path / "out.csv")

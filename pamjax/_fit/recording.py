@@ -230,7 +230,8 @@ class Recording:
                  units: Mapping[str, str] | None = None, mask_nan: bool = False, name: str | None = None,
                  unit_checks: bool = True, atmosphere: RealScalarLike | None = None) -> "Recording":
         """Read a CSV with a header row naming the columns, a time column `t` (or `time`) and one column per
-        channel; `name [unit]` or `name (unit)` headers give units, converted to SI (`pamjax._core.csvio`, `_units`).
+        channel (a channel's name in any capitals: `Pressure [barg]`); `name [unit]` or `name (unit)` headers give
+        units, converted to SI (`pamjax._core.csvio`, `_units`).
         Commas, semicolons or tabs; quoted headers; a UTF-8 byte-order mark; lines starting with '#' are comments.
         `units` (dict name → unit) overrides the header's."""
         columns = read_table(path)
@@ -277,6 +278,11 @@ class Recording:
             raise PamjaxInputError(f"rename must be a dict {{name in the file: channel name}}, got {rename!r}")
         names = [n for n, _ in columns]
         rename = {**BENCH_NAMES, **(rename or {})}
+        spelled = {**{c: c for c in DEFAULT_UNITS}, "duty": "command"}  # 'Pressure [barg]', 'POSITION', 'Duty'
+        for n in names:
+            known = spelled.get(n.lower())
+            if known is not None and n != known and n not in rename:
+                rename[n] = known
         if "t" not in [rename.get(n, n) for n in names]:
             time = next((n for n in names if n.lower() == "time" and n not in rename), None)
             if time is None:
