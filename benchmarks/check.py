@@ -62,6 +62,7 @@ CHECKS = {
     "simulate": (["benchmarks/simulate.py", "--quick"], {
         "averaged_ms": _figure(LOWER), "pwm_ms": _figure(LOWER), "pwm_sync_ms": _figure(LOWER),
         "averaged_cpu_ms": _cpu(), "pwm_cpu_ms": _cpu(), "pwm_sync_cpu_ms": _cpu(),
+        "averaged_simulate_ms": _figure(LOWER), "averaged_simulate_cpu_ms": _cpu(),  # simulate() with its checks
         "speedup_averaged_vs_scipy": _figure(HIGHER), "speedup_pwm_vs_scipy": _figure(HIGHER)}, 300),
     "sweep": (["benchmarks/sweep.py", "--quick"], {
         "sweep_avg_s": _figure(LOWER), "speedup_vs_scipy": _figure(HIGHER), "ratio_vs_numba": _figure(HIGHER),

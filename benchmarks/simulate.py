@@ -18,7 +18,9 @@ output and as `xla_cpu_loop_setting=` in the RESULT line.
 
 Ends with `RESULT averaged_ms=... pwm_ms=... speedup_averaged_vs_scipy=... speedup_pwm_vs_scipy=... ...`; the
 `*_cpu_ms` figures are the process's CPU time of the same calls (one thread: what they take on a free core, whatever
-else the machine runs; benchmarks/check.py compares them).
+else the machine runs; benchmarks/check.py compares them). `averaged_ms` times the jitted core
+(`pamjax.unchecked.solve`), `averaged_simulate_ms` / `averaged_simulate_cpu_ms` the whole `simulate()` call of the
+same run (its input checks, set-up and result checks too).
 """
 
 import argparse
@@ -170,7 +172,8 @@ def time_scipy(system, signal, ts, method, repeats, max_step):
 
 
 def time_pamjax(system, signal, ts, repeats, **kwargs):
-    """Compile time (first call), then the median run time of the jitted core and of the whole `simulate` call."""
+    """Compile time (first call), then the median run time of the jitted core and of the whole `simulate` call
+    (its input checks, set-up and result checks too), wall and CPU."""
     args = (system, signal, ts, None, ts[0])
     if kwargs.get("stepping", "adaptive") == "adaptive":
         kwargs.setdefault("solver", pamjax.unchecked.default_solver(system))  # what simulate() picks
@@ -179,7 +182,7 @@ def time_pamjax(system, signal, ts, repeats, **kwargs):
     start = time.perf_counter()
     traj = jax.block_until_ready(_solve_jit(*args, **kwargs))
     compile_s = time.perf_counter() - start
-    core, core_cpu, whole = [], [], []
+    core, core_cpu, whole, whole_cpu = [], [], [], []
     sim_kwargs = {k: v for k, v in kwargs.items() if k != "num_periods"}
     jax.block_until_ready(pamjax.simulate(system, signal, ts, **sim_kwargs))  # warm the simulate() path too
     for _ in range(repeats):
@@ -187,10 +190,11 @@ def time_pamjax(system, signal, ts, repeats, **kwargs):
         traj = jax.block_until_ready(_solve_jit(*args, **kwargs))
         core.append(time.perf_counter() - start)
         core_cpu.append(time.process_time() - cpu)
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         jax.block_until_ready(pamjax.simulate(system, signal, ts, **sim_kwargs))
         whole.append(time.perf_counter() - start)
-    return compile_s, np.median(core), np.median(whole), traj, np.median(core_cpu)
+        whole_cpu.append(time.process_time() - cpu)
+    return compile_s, np.median(core), np.median(whole), traj, np.median(core_cpu), np.median(whole_cpu)
 
 
 def main():
@@ -219,8 +223,8 @@ def main():
         ("pwm", pwm, {}),  # default solver: Tsit5
         ("pwm_sync", pwm, dict(stepping="pwm")),
     ):
-        c, core, whole, traj, core_cpu = time_pamjax(system, signal, ts, repeats, **kwargs)
-        res[name] = dict(compile=c, core=core, whole=whole, traj=traj, cpu=core_cpu)
+        c, core, whole, traj, core_cpu, whole_cpu = time_pamjax(system, signal, ts, repeats, **kwargs)
+        res[name] = dict(compile=c, core=core, whole=whole, traj=traj, cpu=core_cpu, whole_cpu=whole_cpu)
         print(f"  pamjax {name:9s} compile {c:6.2f} s  run {core * 1e3:8.2f} ms (simulate() {whole * 1e3:8.2f} ms)  "
               f"steps {int(traj.num_steps):6d} (rejected {int(traj.num_rejected_steps)})", flush=True)
 
@@ -258,7 +262,8 @@ def main():
         f"averaged_tsit5_ms={res['avg_tsit5']['core'] * 1e3:.2f} "
         f"speedup_averaged_tsit5_vs_scipy={best('averaged') / res['avg_tsit5']['core']:.1f} horizon_s={horizon:g} "
         f"xla_cpu_loop_setting={int(xla['active'])} averaged_cpu_ms={res['averaged']['cpu'] * 1e3:.2f} "
-        f"pwm_cpu_ms={res['pwm']['cpu'] * 1e3:.1f} pwm_sync_cpu_ms={res['pwm_sync']['cpu'] * 1e3:.1f}"
+        f"pwm_cpu_ms={res['pwm']['cpu'] * 1e3:.1f} pwm_sync_cpu_ms={res['pwm_sync']['cpu'] * 1e3:.1f} "
+        f"averaged_simulate_cpu_ms={res['averaged']['whole_cpu'] * 1e3:.2f}"
     )
 
 
