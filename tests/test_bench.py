@@ -164,3 +164,26 @@ def test_pamjax_fit_with_a_bench_table_starts_stage_by_stage(bench, tmp_path, ca
     cfg.write_text(body("staged = 1\n"))
     assert main(["fit", str(cfg), "--out", str(tmp_path / "bad"), "--quiet", "--no-plot"]) == 2
     assert "[bench] staged" in capsys.readouterr().err
+
+
+def test_noise_levels_left_out_of_meta_are_estimated_near_the_sensors_and_said(tmp_path):
+    # The bundled bench's sensors have 2 kPa and 0.1 mm of white noise (its meta.json); without them the loader
+    # estimates them from the recordings. From first differences a fast pressure's slope counted as noise (5.8 kPa,
+    # 2.9x); second differences leave what the switching valve's kinks add (+13 % here).
+    import shutil
+
+    from pamjax.gallery import bench_folder
+
+    folder = tmp_path / "bench"
+    shutil.copytree(bench_folder(), folder)
+    meta = json.loads((folder / "meta.json").read_text())
+    sensors = meta.pop("noise")
+    (folder / "meta.json").write_text(json.dumps(meta))
+    bench = pj.bench.load_bench(folder, presets.mas10_system(valve="pwm", friction="karnopp"))
+    assert bench.noise["pressure"] == pytest.approx(sensors["p_std_Pa"], rel=0.15)
+    assert bench.noise["position"] == pytest.approx(sensors["x_std_m"], rel=0.05)
+    said = [n for n in bench.notes if "noise estimated from the recordings" in n]
+    assert len(said) == 2 and "meta.json 'noise' p_std_Pa" in said[0], bench.notes
+    given = pj.bench.load_bench(bench_folder(), presets.mas10_system(valve="pwm", friction="karnopp"))
+    assert given.noise == {"pressure": sensors["p_std_Pa"], "position": sensors["x_std_m"]}
+    assert not any("noise estimated" in n for n in given.notes)

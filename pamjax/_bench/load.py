@@ -242,7 +242,7 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
             rec = rec.resampled(rate)
         recordings.append(rec)
         specs.append((name, kind, e, rec, signal))
-    noise = noise_levels(meta, recordings, f"{where}/meta.json")
+    noise = noise_levels(meta, recordings, f"{where}/meta.json", notes)
     experiments = []
     for name, kind, e, rec, signal in specs:
         if kind in TANK_KINDS:
