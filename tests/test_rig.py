@@ -329,6 +329,25 @@ def test_every_mistake_in_a_bench_folder_is_named_before_any_fit(case, rig, tmp_
         pj.bench.load_bench(folder, _plant(), nuisance=True)
 
 
+def test_a_logger_clock_that_does_not_start_at_zero_reads_as_the_same_rig(rig, tmp_path):
+    # A data-acquisition clock at 1234.5 s when the runs start: the triangle's phase is counted from each recording's
+    # first sample (was: M0, started at rest, refused as "logged from the middle ... 0.500 s in"); the residuals are
+    # the same as the zero-based files'.
+    def shift(folder):
+        for path in folder.glob("*.csv"):
+            head, *rows = path.read_text().splitlines()
+            path.write_text("\n".join([head] + [f"{float(r.split(',', 1)[0]) + 1234.5:.6f},{r.split(',', 1)[1]}"
+                                               for r in rows]) + "\n")
+
+    zero = pj.bench.load_bench(rig, _plant(), nuisance=True)
+    late = pj.bench.load_bench(_damaged(rig, tmp_path, shift), _plant(), nuisance=True)
+    assert late.notes == zero.notes  # M0 checked at rest, M1 logged mid-way at the same phase
+    assert any("M0: recorded duty = meta.json's triangle (checked)" in n for n in late.notes)
+    for a, b in zip(zero.experiments, late.experiments):
+        np.testing.assert_allclose(np.asarray(b.residuals(late.model)), np.asarray(a.residuals(zero.model)),
+                                   rtol=1e-7, atol=1e-7)
+
+
 def test_supply_readings_of_a_reference_gauge_are_fitted_as_measurements(rig, tmp_path):
     folder = _damaged(rig, tmp_path, _meta_edit(lambda m: (m["experiments"]["T1"].update(supply_Pa=6.31e5,
                                                                                          supply_sd_Pa=1e3),

@@ -195,8 +195,8 @@ def run_command(name, kind, e, rec, valve_period, where, notes, unknown_start):
                 "triangle (lo, hi, f_tri): pamjax cannot know what drove the run; record the commanded duty")
         if not recorded:
             return triangle
-        if triangle is not None:
-            t, u = rec.t, rec["command"]
+        if triangle is not None:  # its phase counted from the first sample (a logger's clock need not start at 0)
+            t, u = rec.t - rec.t[0], rec["command"]
             idx = period_starts(t, valve_period)
             ref = np.asarray(triangle(np.floor(t[idx] / valve_period + 1e-9) * valve_period))
             if float(np.max(np.abs(ref - u[idx]))) > _DUTY_TOLERANCE:
