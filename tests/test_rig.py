@@ -318,6 +318,11 @@ DAMAGE = {
                                       "T1: a supply reading needs supply_Pa .* and supply_sd_Pa"),
     "gauge in bar": (_meta_edit(lambda m: m["experiments"]["T1"].update(supply_Pa=6.3, supply_sd_Pa=0.01)),
                      r"T1: supply_Pa = 6.3 is outside \[50000.0, 5000000.0\]"),
+    "a coarse sensor, its noise not given": (  # positions logged in whole mm: the noise cannot be estimated
+        lambda f: [_meta_edit(lambda m: m.pop("noise"))(f)] + [
+            _csv_edit(n, lambda h, r: [h, *[",".join(c.split(",")[:3] + [str(round(float(c.split(",")[3])))])
+                                            for c in r]])(f) for n in ("M0", "M1")],
+        r"the position noise cannot be estimated .* 'noise': \{\"x_std_m\": ...\} \[m\]"),
 }
 
 

@@ -78,6 +78,11 @@ def noise_levels(meta, recordings, where, notes=None):
             if diffs:
                 d = np.concatenate(diffs)
                 out[c] = float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(6.0))
+                if not (np.isfinite(out[c]) and out[c] > 0):  # most second differences zero: a coarse or held sensor
+                    raise PamjaxInputError(
+                        f"{where}: the {c} noise cannot be estimated from the recordings (most of their second "
+                        f"differences are zero: a sensor whose resolution is coarser than its noise?); give the "
+                        f"sensor's noise standard deviation as 'noise': {{\"{key}\": ...}} [{unit}]")
                 if notes is not None:
                     notes.append(f"{c} noise estimated from the recordings: {out[c]:.4g} {unit} (meta.json 'noise' "
                                  f"{key} gives the sensor's, where known)")
