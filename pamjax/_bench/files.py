@@ -53,6 +53,9 @@ def read_meta(directory):
     return directory, meta
 
 
+_NOISE_KEYS = (("p_std_Pa", "pressure", "Pa"), ("x_std_m", "position", "m"))  # meta.json key, channel, unit
+
+
 def noise_levels(meta, recordings, where, notes=None):
     """Noise standard deviations: meta.json's `noise` where given, else estimated from the recordings, said in
     `notes`. The estimate: 1.4826 MAD of the second differences / √6 (white noise of standard deviation σ has second
@@ -64,7 +67,7 @@ def noise_levels(meta, recordings, where, notes=None):
     if not isinstance(given, dict):
         raise PamjaxInputError(f"{where}: 'noise' must be a table {{'p_std_Pa': ..., 'x_std_m': ...}}, got {given!r}")
     out = {}
-    for key, channel, unit in (("p_std_Pa", "pressure", "Pa"), ("x_std_m", "position", "m")):
+    for key, channel, unit in _NOISE_KEYS:
         if key in given:
             value = given[key]
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
@@ -72,7 +75,7 @@ def noise_levels(meta, recordings, where, notes=None):
                                        f"number > 0 [{unit}], got {value!r} (leave it out to estimate it from the "
                                        "recordings)")
             out[channel] = float(value)
-    for key, c, unit in (("p_std_Pa", "pressure", "Pa"), ("x_std_m", "position", "m")):
+    for key, c, unit in _NOISE_KEYS:
         if c not in out:
             diffs = [np.diff(r[c], n=2) for r in recordings if c in r.channels and np.ptp(r[c]) > 0 and len(r[c]) > 2]
             if diffs:
