@@ -214,9 +214,8 @@ def report(res, values, errors, summary, over_noise):
         print(pj.bench.nuisance_table(summary["nuisance"]))
     for name, chans in over_noise.items():
         print(f"  {name:<10} " + "  ".join(f"{c} RMSE {r:.3f}× noise" for c, r in chans.items()))
-    measured = [name for name in res.channel_errors if name not in over_noise]  # calibration, gauges
-    for w in res.warnings:  # a measurement the recordings contradict (pamjax.Measurement)
-        if any(w.startswith(f"{name}:") for name in measured):
+    for w in res.warnings:  # non-identifiable, a payload that barely moves, a measurement the data contradict
+        if not (res.mismatch and w.startswith("model mismatch")):  # that one below, with what the residuals say
             print(f"WARNING: {w}")
     if res.mismatch:
         print("WARNING: model mismatch: standard errors understate the uncertainty")

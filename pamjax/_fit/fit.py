@@ -13,6 +13,7 @@ import json
 import math
 import os
 import pathlib
+import re
 import threading
 import time
 import warnings
@@ -29,6 +30,7 @@ from .._files.checkpoint import check_checkpoint_path, read_checkpoint, write_ch
 from .._files.fingerprint import check_resume, fingerprint
 from .diagnostics import channel_errors, covariance, identifiability, mismatch
 from .experiment import AbstractExperiment, Experiments
+from .force_balance import weak_motion
 from .measurement import check_measured_free, contradictions
 from .parameters import Free, PamjaxIdentifiabilityWarning, ParameterSpace
 from .predictions import predictions
@@ -40,6 +42,9 @@ if TYPE_CHECKING:  # annotations only: importing optimistix costs ~0.3 s that a 
 
 # `fit`'s progress: True prints, False is silent, a callable gets (step, cost, damping, accepted); None: as False,
 # but the first compilation is announced (`staged_start`'s stages)
+# paths of the parameters a payload's motion determines: the muscle's force law and the friction (`weak_motion`
+# checks the data where one of them is free)
+_MOVES_WITH_THE_PAYLOAD = re.compile(r"(^|\.)(force_law|friction)\.")
 Progress = bool | Callable[[int, float, float, bool], object] | None
 
 
@@ -413,6 +418,10 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
     if flagged:
         msgs.append(note + ("; the residuals point to " + "; ".join(diagnosis) if diagnosis else ""))
     msgs += contradictions(exps, errors)  # a parameter Measurement more than 3 uncertainties from its fitted value
+    if any(_MOVES_WITH_THE_PAYLOAD.search(g.path) for g in space.groups):  # the force law or the friction is free
+        for msg in weak_motion(fitted, exps):  # muscle runs that barely move: few samples fix them
+            msgs.append(msg)
+            warnings.warn(msg, PamjaxIdentifiabilityWarning, stacklevel=3)
     res = FitResult(
         labels=labels,
         paths=[e if isinstance(e, str) else {k: (list(v) if isinstance(v, tuple) else v) for k, v in e.items()}
