@@ -320,6 +320,7 @@ def weak_motion(model: eqx.Module, experiments) -> list[str]:
             "friction rest on those few samples, where the cost can have other minima about as low far from this "
             "one, so their standard errors may understate the uncertainty several-fold (check them with "
             "pamjax.profile_likelihood or a multistart)")
+    advice = "a lower top duty: it rests on the upper stop" if counts[2] >= counts[3] else \
+        "a higher bottom duty: it rests on the lower stop"
     return [f"{', '.join(census)}: the payload " + what.format(where=where, pct=pct[0])
-            + "; to identify them, record muscle runs whose payload stays off its stroke limits (a narrower duty "
-            "range)"]
+            + f"; to identify them, record muscle runs whose payload stays off its stroke limits ({advice})"]
