@@ -40,11 +40,12 @@ from .rig_hints import nuisance_hints
 if TYPE_CHECKING:  # annotations only: importing optimistix costs ~0.3 s that a fit from the cache never needs
     import optimistix as optx
 
-# `fit`'s progress: True prints, False is silent, a callable gets (step, cost, damping, accepted); None: as False,
-# but the first compilation is announced (`staged_start`'s stages)
 # paths of the parameters a payload's motion determines: the muscle's force law and the friction (`weak_motion`
 # checks the data where one of them is free)
 _MOVES_WITH_THE_PAYLOAD = re.compile(r"(^|\.)(force_law|friction)\.")
+
+# `fit`'s progress: True prints, False is silent, a callable gets (step, cost, damping, accepted); None: as False,
+# but the first compilation is announced (`staged_start`'s stages)
 Progress = bool | Callable[[int, float, float, bool], object] | None
 
 

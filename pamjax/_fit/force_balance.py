@@ -320,7 +320,8 @@ def weak_motion(model: eqx.Module, experiments) -> list[str]:
             "friction rest on those few samples, where the cost can have other minima about as low far from this "
             "one, so their standard errors may understate the uncertainty several-fold (check them with "
             "pamjax.profile_likelihood or a multistart)")
-    advice = "a lower top duty: it rests on the upper stop" if counts[2] >= counts[3] else \
-        "a higher bottom duty: it rests on the lower stop"
+    advice = ("a wider or faster duty sweep: friction holds it still" if counts[1] > counts[2] + counts[3] else
+              "off the upper stop: a lower top duty" if counts[2] >= counts[3] else
+              "off the lower stop: a higher bottom duty")
     return [f"{', '.join(census)}: the payload " + what.format(where=where, pct=pct[0])
-            + f"; to identify them, record muscle runs whose payload stays off its stroke limits ({advice})"]
+            + f"; to identify them, record muscle runs that keep the payload moving ({advice})"]
