@@ -294,6 +294,15 @@ def test_refusals_are_named(refits, tmp_path):
         mismatched = res.to_dict() | {"mismatch": True}
         with pytest.raises(pj.PamjaxBandWarning, match="understates the uncertainty"):
             pj.prediction_band(pj.FitUncertainty.from_document(mismatched, "x"), predict, model=res.model)
+        # a fit that warned that its payload barely moved (pamjax._fit.force_balance.weak_motion): its standard
+        # errors, and so the band, may understate the uncertainty; a model file's covariance entry keeps the caution
+        barely = res.to_dict() | {"warnings": ["E3, E4: the payload slides in only 10 % of the muscle runs' samples "
+                                               "(605 of 6286 samples; ...)", "an unrelated warning"]}
+        unc = pj.FitUncertainty.from_document(barely, "x")
+        assert len(unc.cautions) == 1 and pj.FitUncertainty.from_document(unc.document(), "m").cautions == unc.cautions
+        with pytest.raises(pj.PamjaxBandWarning, match="E3, E4's payload barely moved"):
+            pj.prediction_band(unc, predict, model=res.model)
+    assert pj.FitUncertainty.from_document(res.to_dict(), "x").cautions == ()
 
 
 # -- the command line -------------------------------------------------------------------------------------------

@@ -28,6 +28,7 @@ from .._core.arrays import device_array
 from .._core.custom_types import Float
 from .._core.errors import PamjaxInputError
 from .._fit.fit import FitResult
+from .._fit.force_balance import is_weak_motion
 from .._fit.parameters import ParameterSpace
 from .._fit.rig import Rig, is_nuisance
 
@@ -66,8 +67,9 @@ def _path_of(entry):
 class FitUncertainty:
     """The fitted parameters and their covariance: `labels`, `paths` (the fit's free spec), `values`, `covariance`
     (of the physical values, labels' order), and what qualifies them: `status` of the fit, `mismatch` (the residuals
-    were not noise), `se_inflation` (the largest channel's factor, 1 for white noise at the stated level), `source`
-    (where it was read)."""
+    were not noise), `se_inflation` (the largest channel's factor, 1 for white noise at the stated level),
+    `cautions` (the fit's warnings that its standard errors may understate the uncertainty: a payload that barely
+    moved), `source` (where it was read)."""
 
     labels: tuple[str, ...]
     paths: tuple[str | dict[str, Any], ...]
@@ -77,6 +79,7 @@ class FitUncertainty:
     mismatch: bool = False
     se_inflation: float = float("nan")
     source: str = "a FitResult"
+    cautions: tuple[str, ...] = ()
 
     @classmethod
     def from_document(cls, d, source):
@@ -104,8 +107,11 @@ class FitUncertainty:
                        for st in chans.values()]
             factors = [f for f in factors if f is not None and np.isfinite(f)]
             inflation = max(factors) if factors else float("nan")
+        cautions = d.get("cautions")
+        if cautions is None:  # a fit result's dict: its warnings; a model file's entry: its own list
+            cautions = [w for w in d.get("warnings", []) if isinstance(w, str) and is_weak_motion(w)]
         return cls(labels, paths, values, cov, str(d.get("status", "converged")), bool(d.get("mismatch", False)),
-                   _float(inflation), source)
+                   _float(inflation), source, tuple(str(c) for c in cautions))
 
     @classmethod
     def of(cls, result):
@@ -130,7 +136,8 @@ class FitUncertainty:
                 "values": [_json_float(v) for v in self.values],
                 "standard_errors": [_json_float(v) for v in se],
                 "correlation": [[_json_float(c) for c in row] for row in corr],
-                "status": self.status, "mismatch": self.mismatch, "se_inflation": _json_float(self.se_inflation)}
+                "status": self.status, "mismatch": self.mismatch, "se_inflation": _json_float(self.se_inflation),
+                "cautions": list(self.cautions)}
 
     @property
     def of_rig(self):
@@ -158,6 +165,9 @@ class FitUncertainty:
         if self.status != "converged":
             out.append(f"the fit ended '{self.status}', not 'converged': the covariance is of a point that may not "
                        "be the optimum")
+        out += [f"the fit warned: {c.split(': ', 1)[0]}'s payload barely moved, and its force law's and friction's "
+                "standard errors may understate their uncertainty several-fold: the band understates it too"
+                for c in self.cautions]
         return out
 
 

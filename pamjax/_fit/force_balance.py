@@ -300,6 +300,12 @@ def motion_census(model: eqx.Module, experiments) -> dict[str, list[int]]:
     return out
 
 
+def is_weak_motion(warning: str) -> bool:
+    """Whether a fit's warning is `weak_motion`'s (a band from that fit carries it: `pamjax.FitUncertainty`)."""
+    return ": the payload never slides in the muscle runs" in warning or \
+        ": the payload slides in only" in warning
+
+
 def weak_motion(model: eqx.Module, experiments) -> list[str]:
     """A warning where the muscle runs' payload slides in fewer than WEAK_MOTION of their samples: the force law and
     the friction are then fitted from those few samples, the cost has other minima about as low far away (a stuck
