@@ -16,7 +16,8 @@ over the stroke the triangle runs cover (the a_i one by one are ill-conditioned)
            realistic_sets=... realistic_converged=... realistic_max_param_err_pct=...
            realistic_worst_nuisance_over_tol=... realistic_worst_rmse_over_noise=... realistic_fit_s=...
            realistic_compile_s=... realistic_max_param_err_sensor_frame_pct=...
-           realistic_worst_fitted_nuisance_over_tol=...
+           realistic_worst_fitted_nuisance_over_tol=... realistic_weak_motion_warned=...
+           realistic_unwarned_max_param_err_pct=...
 
 (max over sets and quantities; fit_s and compile_s are those of the slowest set).
 
@@ -31,6 +32,10 @@ stop of known position (a shift of the origin is absorbed exactly by F_max, k0 a
 holds it and identifies the plant in the sensor's frame, which `realistic_max_param_err_sensor_frame_pct` scores
 (the truth re-expanded about the sensor's origin, `in_sensor_frame`), beside the strict figure in the truth's frame;
 `realistic_worst_fitted_nuisance_over_tol` is the worst over the nuisances the fit freed (the held offset left out).
+`realistic_weak_motion_warned` counts the rigs whose fit warned that the muscle runs' payload barely moved (its
+force law and friction rest on a few sliding samples; docs/fitting.md, "Runs that hold the payload on a stop"), and
+`realistic_unwarned_max_param_err_pct` is the worst plant quantity over the others: what a user told nothing
+should be able to trust (nan where every rig was warned).
 `--score-only` scores the fits an earlier run left in `--out` again, without fitting.
 """
 
@@ -52,6 +57,8 @@ DEFAULT_SETS = [SHARED / "hybrid-reference-bench", SHARED / "hybrid-reference-be
 DEFAULT_REALISTIC = [SHARED / "bench-realistic" / "realistic1"]
 TARGET_PCT, TARGET_RMSE, TARGET_S, TARGET_REALISTIC_S = 2.0, 1.2, 120.0, 180.0
 # issue 29: tolerance of each nuisance (absolute; the gain and the supply pressures relative)
+# the start of pamjax's weak-motion warning in a fit's `warnings` (pamjax._fit.force_balance.weak_motion)
+WEAK_MOTION_MARKS = (": the payload slides in only", ": the payload never slides")
 NUISANCE_TOLERANCE = {"delay_s": 3e-4, "pressure_offset_Pa": 300.0, "pressure_gain": 3e-3, "position_offset_m": 5e-5,
                       "supply_pressure_Pa": 5e-3}
 
@@ -166,6 +173,7 @@ def evaluate_sets(sets, out, nuisance, score_only=False):
         sc, frame = s.get("score", {}), s.get("score_sensor_frame", {})
         worst_rmse = max(r for chans in s["rmse_over_noise"].values() for r in chans.values())
         rows.append(dict(set=name, status=s["status"], converged=s["converged"],
+                         warned=any(m in w for w in s.get("warnings", []) for m in WEAK_MOTION_MARKS),
                          max_err_pct=100 * sc.get("max_relative_error", float("nan")),
                          fmax_err_pct=100 * sc.get("fmax_max_relative_error", float("nan")),
                          worst_rmse=worst_rmse, fit_s=s["fit_s"], compile_s=s["compile_s"],
@@ -179,10 +187,11 @@ def evaluate_sets(sets, out, nuisance, score_only=False):
                                                     if k not in s.get("nuisance", {}).get("held", {})),
                                                    default=float("nan"))))
     print(f"\n{'set':<28}{'status':<11}{'max err %':>10}{'F_max %':>9}{'RMSE/noise':>11}{'iters':>6}"
-          f"{'fit s':>8}{'compile s':>10}{'process s':>10}")
+          f"{'fit s':>8}{'compile s':>10}{'process s':>10}  warned")
     for r in rows:
         print(f"{r['set']:<28}{r['status']:<11}{r['max_err_pct']:>10.3f}{r['fmax_err_pct']:>9.3f}{r['worst_rmse']:>11.3f}"
-              f"{r['iterations']:>6}{r['fit_s']:>8.1f}{r['compile_s']:>10.1f}{r['wall_s']:>10.1f}")
+              f"{r['iterations']:>6}{r['fit_s']:>8.1f}{r['compile_s']:>10.1f}{r['wall_s']:>10.1f}"
+              f"  {'weak motion' if r['warned'] else ''}")
     for r in rows:
         print(f"  {r['set']}: " + ", ".join(f"{k} {v:+.2f}" for k, v in r["errors"].items()
                                            if not k.startswith("a")))
@@ -202,7 +211,9 @@ def summary_of(rows):
                 fit_s=slowest["fit_s"], compile_s=slowest["compile_s"],
                 worst_nuisance=max(r["worst_nuisance"] for r in rows),
                 sensor_frame_err_pct=max(r["sensor_frame_err_pct"] for r in rows),
-                worst_fitted_nuisance=max(r["worst_fitted_nuisance"] for r in rows))
+                worst_fitted_nuisance=max(r["worst_fitted_nuisance"] for r in rows),
+                warned=sum(r["warned"] for r in rows),
+                unwarned_err_pct=max((r["max_err_pct"] for r in rows if not r["warned"]), default=float("nan")))
 
 
 def main():
@@ -234,14 +245,17 @@ def main():
               f"{real['worst_nuisance']:.2f}× tolerance), RMSE ≤ {TARGET_RMSE}× noise (worst "
               f"{real['worst_rmse']:.3f}), "
               f"fit + compile ≤ {TARGET_REALISTIC_S} s per rig (slowest {real['fit_s'] + real['compile_s']:.1f} s), "
-              f"converged {real['converged']}/{real['sets']}")
+              f"converged {real['converged']}/{real['sets']}; warned of weak motion {real['warned']}, the others "
+              f"within {real['unwarned_err_pct']:.2f} %")
         line.append(f"realistic_sets={real['sets']} realistic_converged={real['converged']} "
                     f"realistic_max_param_err_pct={real['max_param_err_pct']:.3f} "
                     f"realistic_worst_nuisance_over_tol={real['worst_nuisance']:.3f} "
                     f"realistic_worst_rmse_over_noise={real['worst_rmse']:.3f} realistic_fit_s={real['fit_s']:.1f} "
                     f"realistic_compile_s={real['compile_s']:.1f} "
                     f"realistic_max_param_err_sensor_frame_pct={real['sensor_frame_err_pct']:.3f} "
-                    f"realistic_worst_fitted_nuisance_over_tol={real['worst_fitted_nuisance']:.3f}")
+                    f"realistic_worst_fitted_nuisance_over_tol={real['worst_fitted_nuisance']:.3f} "
+                    f"realistic_weak_motion_warned={real['warned']} "
+                    f"realistic_unwarned_max_param_err_pct={real['unwarned_err_pct']:.3f}")
     print("RESULT " + " ".join(line))
 
 
