@@ -325,7 +325,7 @@ def weak_motion(model: eqx.Module, experiments) -> list[str]:
             "slides in only {pct:.0f} % of the muscle runs' samples ({where}): the force law (a0…a4, k0, k1) and the "
             "friction rest on those few samples, where the cost can have other minima about as low far from this "
             "one, so their standard errors may understate the uncertainty several-fold (check them with "
-            "pamjax.profile_likelihood or a multistart)")
+            "pamjax.profile_likelihood on those parameters)")
     advice = ("a wider or faster duty sweep: friction holds it still" if counts[1] > counts[2] + counts[3] else
               "off the upper stop: a lower top duty" if counts[2] >= counts[3] else
               "off the lower stop: a higher bottom duty")
