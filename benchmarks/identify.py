@@ -57,7 +57,7 @@ DEFAULT_SETS = [SHARED / "hybrid-reference-bench", SHARED / "hybrid-reference-be
 DEFAULT_REALISTIC = [SHARED / "bench-realistic" / "realistic1"]
 TARGET_PCT, TARGET_RMSE, TARGET_S, TARGET_REALISTIC_S = 2.0, 1.2, 120.0, 180.0
 # issue 29: tolerance of each nuisance (absolute; the gain and the supply pressures relative)
-# the start of pamjax's weak-motion warning in a fit's `warnings` (pamjax._fit.force_balance.weak_motion)
+# the start of pamjax's weak-motion warning in a fit's `warnings` (pamjax._fit.force_balance: _NEVER, _ONLY)
 WEAK_MOTION_MARKS = (": the payload slides in only", ": the payload never slides")
 NUISANCE_TOLERANCE = {"delay_s": 3e-4, "pressure_offset_Pa": 300.0, "pressure_gain": 3e-3, "position_offset_m": 5e-5,
                       "supply_pressure_Pa": 5e-3}

@@ -300,10 +300,14 @@ def motion_census(model: eqx.Module, experiments) -> dict[str, list[int]]:
     return out
 
 
+# how `weak_motion`'s warning begins after the runs' names, as `is_weak_motion` recognises it (and
+# benchmarks/identify.py, which reads the warnings of joint.json without importing pamjax)
+_NEVER, _ONLY = "the payload never slides in the muscle runs", "the payload slides in only"
+
+
 def is_weak_motion(warning: str) -> bool:
     """Whether a fit's warning is `weak_motion`'s (a band from that fit carries it: `pamjax.FitUncertainty`)."""
-    return ": the payload never slides in the muscle runs" in warning or \
-        ": the payload slides in only" in warning
+    return f": {_NEVER}" in warning or f": {_ONLY}" in warning
 
 
 def weak_motion(model: eqx.Module, experiments) -> list[str]:
@@ -319,15 +323,15 @@ def weak_motion(model: eqx.Module, experiments) -> list[str]:
     pct = 100.0 * counts / total
     where = (f"{counts[0]} of {total} samples; on a stroke limit {pct[2] + pct[3]:.0f} %, held by friction "
              f"{pct[1]:.0f} %")
-    what = ("never slides in the muscle runs ({where}): they bound the net force but fix neither the force law "
+    what = (_NEVER + " ({where}): they bound the net force but fix neither the force law "
             "(a0…a4, k0, k1) nor the friction, whose fitted values come from the start and any other runs"
             if counts[0] == 0 else
-            "slides in only {pct:.0f} % of the muscle runs' samples ({where}): the force law (a0…a4, k0, k1) and the "
+            _ONLY + " {pct:.0f} % of the muscle runs' samples ({where}): the force law (a0…a4, k0, k1) and the "
             "friction rest on those few samples, where the cost can have other minima about as low far from this "
             "one, so their standard errors may understate the uncertainty several-fold (check them with "
             "pamjax.profile_likelihood on those parameters)")
     advice = ("a wider or faster duty sweep: friction holds it still" if counts[1] > counts[2] + counts[3] else
               "off the upper stop: a lower top duty" if counts[2] >= counts[3] else
               "off the lower stop: a higher bottom duty")
-    return [f"{', '.join(census)}: the payload " + what.format(where=where, pct=pct[0])
+    return [f"{', '.join(census)}: " + what.format(where=where, pct=pct[0])
             + f"; to identify them, record muscle runs that keep the payload moving ({advice})"]
