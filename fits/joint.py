@@ -35,6 +35,7 @@ command's fit, it compiles with XLA's classic CPU emitters (`pamjax.runtime.pref
 import argparse
 import json
 import pathlib
+import re
 import sys
 import time
 
@@ -47,6 +48,9 @@ import pamjax as pj  # noqa: E402
 from pamjax.gallery import bench_folder  # noqa: E402
 
 DEFAULT_DATA = bench_folder()  # the hybrid bench recordings shipped with pamjax (pamjax/data/)
+# --profile: profile → (a lower cost found) fit again from it → profile again, at most this many profiles; a fit whose
+# payload barely moves can have several minima about as low (docs/fitting.md, "Runs that hold the payload on a stop")
+PROFILE_ROUNDS = 3
 
 
 def parse_args(argv=None):
@@ -81,6 +85,12 @@ def parse_args(argv=None):
     ap.add_argument("--atmosphere", type=float, default=None, metavar="PA",
                     help="ambient pressure [Pa abs] that gauge readings (barg, kPa gauge) are referred to (default: "
                          "meta.json's atmosphere_Pa, else 101325)")
+    ap.add_argument("--profile", default=None, metavar="NAMES",
+                    help="after the fit, profile these parameters (comma-separated bench keys such as Fc,k0, or the "
+                         "fit's labels; 'all': every fitted parameter): their likelihood-ratio intervals in joint.json "
+                         "and OUT/profile.json, profile.png. Where a profile finds a lower cost than the fit's, fit "
+                         f"again from there and profile again (at most {PROFILE_ROUNDS} rounds). Minutes per "
+                         "parameter on a rig (pamjax.profile_likelihood, docs/identifiability.md)")
     ap.add_argument("--device", default="auto", choices=("auto", "cpu", "gpu", "tpu"),
                     help="where the fit runs (default auto: the CPU, where a single trajectory's solve loop is one "
                          "compiled function; on a GPU each step is a kernel launch: pamjax.runtime.for_command)")
@@ -104,7 +114,8 @@ def main(argv=None):
     args = parse_args(argv)
     data = pathlib.Path(args.data)
     out = pathlib.Path(args.out or f"results/joint_{data.resolve().name}")
-    targets = [out / "joint.json", out / "joint.png"]
+    targets = [out / "joint.json", out / "joint.png"] + ([out / "profile.json", out / "profile.png"] if args.profile
+                                                         else [])
     existing = [str(p) for p in targets if p.exists()]
     if existing and not args.overwrite:
         sys.exit(f"joint.py: {', '.join(existing)} exist; pass --overwrite to replace them (or another --out)")
@@ -135,6 +146,7 @@ def run(args, data, out):
     bench = pj.bench.load_bench(data, model, rate=args.rate, nuisance=_nuisance_arg(args.nuisance),
                                 position_offset=args.position_offset, atmosphere=args.atmosphere,
                                 pressure_gain=args.pressure_gain, pressure_gain_sd=args.pressure_gain_sd)
+    profiled = _profiled(args.profile, pj.ParameterSpace(bench.model, bench.free).labels)  # named before any solve
     out.mkdir(parents=True, exist_ok=True)  # after the data are read: a mistake there leaves no folder behind
     probe = out / ".joint-write-test"
     probe.write_text("")  # the results can be written: checked before minutes of fitting
@@ -164,6 +176,9 @@ def run(args, data, out):
             start = staged.model
             print("\n".join(staged.summary()))
         res = pj.fit(start, bench.experiments, bench.free, max_steps=args.max_steps, progress=not args.quiet)
+    prof, refits = None, []
+    if profiled:  # likelihood-ratio intervals; a lower cost found on the way: fitted again from it
+        res, prof, refits = _profile(res, bench, profiled, args)
     wall = time.perf_counter() - t0
     stages = staged.stages if staged is not None else []
     values, errors = pj.bench.bench_values(res, bench.fitted_keys)
@@ -185,7 +200,7 @@ def run(args, data, out):
         message=res.message, rmse=rmse, rmse_over_noise=over_noise, noise=full.noise, mismatch=res.mismatch,
         diagnosis=res.diagnosis, warnings=res.warnings, iterations=res.iterations, cost=res.cost,
         initial_cost=res.initial_cost,
-        fit_s=res.fit_s + (staged.fit_s if staged is not None else 0.0),
+        fit_s=res.fit_s + (staged.fit_s if staged is not None else 0.0) + sum(r["fit_s"] for r in refits),
         compile_s=res.compile_s + (staged.compile_s if staged is not None else 0.0), wall_s=wall,
         held={"k2": float(model.muscle.force_law.k2)},
         skipped=bench.skipped, notes=bench.notes, start={k: v for k, v in zip(res.labels, res.initial_values)},
@@ -197,10 +212,75 @@ def run(args, data, out):
     )
     if bench.nuisance or args.position_offset or bench.calibrated:
         summary["nuisance"] = pj.bench.bench_nuisance(res, bench)
+    if prof is not None:
+        summary["profile"] = _profile_summary(prof, refits)
     (out / "joint.json").write_text(json.dumps(summary, indent=1))
     report(res, values, errors, summary, over_noise)
+    if prof is not None:
+        print(f"profiles ({summary['profile']['profile_s']:.0f} s, {len(refits)} refit(s) from a lower point):\n"
+              + prof.table())
+        prof.write(out, overwrite=True)
+        print(f"wrote {out / 'profile.json'} and {out / 'profile.png'}")
+    elif pj.FitUncertainty.of(res).cautions:  # the fit's weak-motion warning: few samples fix the force law
+        print("  check those parameters' uncertainty with their profiles (minutes per parameter): the same command "
+              "with --profile Fc,Cf,k0,k1")
     plot(out / "joint.png", res.model, [e for e in full.experiments if e.name in recorded])
     print(f"wrote {out / 'joint.json'} and {out / 'joint.png'}")
+
+
+_LABEL_KEYS = {label: key for key, (_, label) in pj.bench.BENCH_PARAMETERS.items()}
+
+
+def _profiled(value, labels):
+    """The fit's labels `--profile VALUE` names: bench keys (Fc, k0) or labels, comma-separated, or 'all'."""
+    if value is None or value == "all":
+        return None if value is None else list(labels)
+    fitted = {_LABEL_KEYS.get(lbl.removeprefix("plant.")) for lbl in labels}
+    keys = [k for k in pj.bench.BENCH_PARAMETERS if k in fitted]
+    what = f"give bench keys ({', '.join(keys)}), the fit's labels ({', '.join(labels)}) or 'all'"
+    out = []
+    for name in [n.strip() for n in re.split(r",(?![^\[]*\])", value) if n.strip()]:  # not an index's [1,0]
+        label = pj.bench.BENCH_PARAMETERS[name][1] if name in pj.bench.BENCH_PARAMETERS else name
+        match = [lbl for lbl in labels if lbl in (label, f"plant.{label}")]
+        if not match:
+            raise pj.PamjaxInputError(f"--profile: {name!r} is not a fitted parameter; {what}")
+        out += [m for m in match if m not in out]
+    if not out:
+        raise pj.PamjaxInputError(f"--profile: {value!r} names no parameter; {what}")
+    return out
+
+
+def _profile(res, bench, labels, args):
+    """Profile `labels` of the fit `res`; where a re-fitted point lies below the fit's cost (the fit is not at the
+    lowest minimum: a payload that barely moves leaves several about as low), fit again from the lowest point and
+    profile again, at most PROFILE_ROUNDS profiles. Returns the final fit, its profile and the refits."""
+    refits = []
+    for round_ in range(PROFILE_ROUNDS):
+        print(f"profiling {', '.join(labels)} (pamjax.profile_likelihood)", flush=True)
+        prof = pj.profile_likelihood(res, labels, progress=not args.quiet)
+        lower = prof.lowest()
+        if lower is None or round_ == PROFILE_ROUNDS - 1:
+            return res, prof, refits
+        print(f"the profile found a cost lower than the fit's by Δχ² = {-lower[0]:.3g}: fitting again from there",
+              flush=True)
+        new = pj.fit(prof.lower_start(res), bench.experiments, bench.free, max_steps=args.max_steps,
+                     progress=not args.quiet)
+        refits.append(dict(delta_chi2=lower[0], from_cost=res.cost, cost=new.cost, status=new.status,
+                           iterations=new.iterations, fit_s=new.fit_s))
+        if not new.cost < res.cost or new.status not in ("converged", "at bound"):  # what profiles accept
+            print(f"  the refit ended with status {new.status}, cost {new.cost:.6g} (the fit's {res.cost:.6g}): "
+                  "kept if lower, its profile not taken", flush=True)
+            return (new if new.cost < res.cost else res), prof, refits
+        res = new
+    return res, prof, refits
+
+
+def _profile_summary(prof, refits):
+    """joint.json's "profile": each profiled parameter by its bench key (else its label): likelihood-ratio and
+    linearised intervals, verdict; the profiles' level, time and warnings, and the refits from a lower point."""
+    params = {_LABEL_KEYS.get(p.label.removeprefix("plant."), p.label): dict(
+        value=p.value, interval=p.interval, linearised=p.linearised, verdict=p.verdict) for p in prof.profiles}
+    return dict(level=prof.level, params=params, profile_s=prof.profile_s, warnings=prof.warnings, refits=refits)
 
 
 def report(res, values, errors, summary, over_noise):

@@ -80,10 +80,22 @@ def test_joint_script_fits_a_bench_directory_from_the_presets(bench, tmp_path):
     out = tmp_path / "out"
     # --no-cache: the script would turn the persistent cache on in PAMJAX_CACHE_DIR (the session's, when the tests
     # have one: tests/conftest.py, whose cache this run still uses), else in the user's cache directory
-    joint.main(["--data", str(folder), "--out", str(out), "--quiet", "--max-steps", "60", "--no-cache"])
+    joint.main(["--data", str(folder), "--out", str(out), "--quiet", "--max-steps", "60", "--no-cache",
+                "--profile", "Fc"])
     result = json.loads((out / "joint.json").read_text())
     assert (out / "joint.png").exists()
     assert result["status"] == "converged", result["message"]
+    # --profile Fc: its likelihood-ratio interval by the bench's name, around the fitted value, covering the truth
+    # (a well-moving payload: the interval is about the linearised one), and profile.json / profile.png beside
+    prof = result["profile"]
+    assert set(prof["params"]) == {"Fc"} and prof["params"]["Fc"]["verdict"] == "identifiable"
+    lo, hi = prof["params"]["Fc"]["interval"]
+    assert lo < result["params"]["Fc"] < hi and lo < params["Fc"] < hi
+    lin = prof["params"]["Fc"]["linearised"]
+    assert 0.5 < (hi - lo) / (lin[1] - lin[0]) < 2.0
+    assert not prof["warnings"] and prof["refits"] == []
+    assert json.loads((out / "profile.json").read_text())["labels"] == ["friction.coulomb_force"]
+    assert (out / "profile.png").stat().st_size > 10_000
     assert set(result["params"]) == set(KEYS) and set(result["std_err"]) == set(KEYS)
     for k in KEYS:  # recovered within 4 standard errors of the truth
         assert abs(result["params"][k] - params[k]) < 4 * result["std_err"][k], (k, result["params"][k], params[k])
@@ -101,6 +113,22 @@ def test_joint_script_fits_a_bench_directory_from_the_presets(bench, tmp_path):
     assert result["stage2_start"] is None  # no force-law coefficient free: nothing for the force balance to move
     with pytest.raises(SystemExit, match="--overwrite"):
         joint.main(["--data", str(folder), "--out", str(out), "--quiet"])
+
+
+def test_joint_script_names_a_parameter_it_cannot_profile_before_any_fit(bench, tmp_path, capsys):
+    folder, _ = bench
+    spec = importlib.util.spec_from_file_location("joint", ROOT / "fits" / "joint.py")
+    joint = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(joint)
+    out = tmp_path / "out"
+    for bad in ("k2", "Fc,nonsense", ","):  # k2 is held (not fitted); an unknown name; nothing named
+        with pytest.raises(SystemExit) as exit_:
+            joint.main(["--data", str(folder), "--out", str(out), "--quiet", "--no-cache", "--profile", bad])
+        assert exit_.value.code == 2
+        err = capsys.readouterr().err
+        assert "--profile" in err and ("is not a fitted parameter" in err or "names no parameter" in err), err
+        assert "Fc" in err  # what it can profile: the bench keys fitted
+        assert not out.exists()  # named before any fit: nothing written, no folder left behind
 
 
 def test_staged_start_needs_experiments_that_see_part_of_the_model(bench):

@@ -2,6 +2,8 @@
 eq. 7 transcribed in NumPy on a run simulated with exact stick-slip from a plant the datasheet force law is far from.
 """
 
+import warnings
+
 import equinox as eqx
 import jax
 import numpy as np
@@ -210,3 +212,7 @@ def test_a_fit_whose_payload_barely_moves_says_its_force_law_rests_on_few_sample
     with pytest.warns(pj.PamjaxIdentifiabilityWarning, match="the payload never slides"):
         res = pj.fit(start, [held], ["friction.coulomb_force"], max_steps=1, progress=False)
     assert any(w.startswith("from5: the payload never slides") for w in res.warnings), res.warnings
+    with warnings.catch_warnings():  # warn=False (the stages of pamjax.staged_start): in the result only
+        warnings.simplefilter("error")
+        quiet = pj.fit(start, [held], ["friction.coulomb_force"], max_steps=1, progress=False, warn=False)
+    assert quiet.warnings == res.warnings

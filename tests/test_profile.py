@@ -115,7 +115,7 @@ def test_bad_input_is_named_before_any_solve():
         pj.profile_likelihood(loaded)
 
 
-def test_fit_cli_profile_writes_json_and_figure(tmp_path):
+def test_fit_cli_profile_writes_json_and_figure(tmp_path, capsys):
     # A 0.6 s constant-volume charge through the averaged valve, eq. 13 terms u and u·p free.
     system = presets.mas10_tank_system(valve="averaged")
     ts = np.arange(0.0, 0.6, 2e-3)
@@ -140,6 +140,15 @@ def test_fit_cli_profile_writes_json_and_figure(tmp_path):
     assert all(p["verdict"] == "identifiable" for p in data["profiles"])
     assert (tmp_path / "out" / "profile.png").stat().st_size > 10_000
     assert (tmp_path / "out" / "fit.png").is_file()
+    # --profile NAMES: those only (a rig's fit frees dozens; each profile is minutes there), names checked first
+    one = "valve.coefficients[1,1]"
+    assert main(["fit", str(cfg), "--out", str(tmp_path / "one"), "--quiet", "--no-plot", "--profile", one]) == 0
+    data = json.loads((tmp_path / "one" / "profile.json").read_text())
+    assert data["labels"] == [one] and data["profiles"][0]["verdict"] == "identifiable"
+    assert main(["fit", str(cfg), "--out", str(tmp_path / "bad"), "--quiet", "--profile", "valve.mass"]) == 2
+    err = capsys.readouterr().err
+    assert "--profile: ['valve.mass'] must be fitted parameters" in err and one in err
+    assert not (tmp_path / "bad").exists()  # named before the fit: nothing written
 
 
 # -- a start that is not a minimum (issue 33) ------------------------------------------------------------------
@@ -169,5 +178,15 @@ def test_a_start_below_which_the_profile_finds_a_lower_cost_voids_every_verdict(
     assert prof.warnings and "not at a minimum" in prof.warnings[0]
     assert all(p.verdict.startswith("not a minimum") for p in prof.profiles)
     assert "WARNING: the fit is not at a minimum" in prof.table()
+    # the lowest re-fitted point: every parameter's value there, a start to fit again from, which reaches the fit
+    delta, point = prof.lowest()
+    assert delta < -1.0 and set(point) == set(res.labels)
+    again = _fit(prof.lower_start(moved), [exp], ["force_law.k0", "force_law.k1"])
+    assert again.cost == pytest.approx(res.cost, rel=1e-6)
+    np.testing.assert_allclose(again.values, res.values, rtol=1e-4)
+    other = _fit(muscle, [exp], ["force_law.k0"])
+    with pytest.raises(PamjaxInputError, match="result: this profile is of a fit of"):
+        prof.lower_start(other)
     control = pj.profile_likelihood(res, progress=False)  # the fit itself: no warning, the verdicts stand
     assert not control.warnings and all(p.verdict == "identifiable" for p in control.profiles)
+    assert control.lowest() is None and control.lower_start(res) is None

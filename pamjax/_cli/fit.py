@@ -11,6 +11,7 @@ read; a [rig] around the plant); the output folder is created, test-written and 
 
 import json
 import pathlib
+import re
 import sys
 from typing import NamedTuple
 
@@ -36,8 +37,10 @@ def add_arguments(parser):
                         help="continue the fit checkpointed in --out (after Ctrl-C, a crash or a max_steps stop)")
     parser.add_argument("--quiet", action="store_true", help="no per-iteration progress")
     parser.add_argument("--no-plot", action="store_true", help="skip the figure")
-    parser.add_argument("--profile", action="store_true", help="also profile every fitted parameter: write "
-                        "profile.json and profile.png (pamjax.profile_likelihood, docs/identifiability.md)")
+    parser.add_argument("--profile", nargs="?", const="all", default=None, metavar="NAMES",
+                        help="also profile every fitted parameter, or those NAMES lists (comma-separated labels, as "
+                        "fit.json's): write profile.json and profile.png (pamjax.profile_likelihood, "
+                        "docs/identifiability.md)")
 
 
 class FitSetup(NamedTuple):
@@ -253,7 +256,20 @@ def _checkpoint_summary(path):
 
 
 def _resume_command(args, out):
-    return f"pamjax fit {args.config} --out {out} --resume" + (" --profile" if args.profile else "")
+    profile = "" if not args.profile else " --profile" if args.profile == "all" else f" --profile {args.profile}"
+    return f"pamjax fit {args.config} --out {out} --resume{profile}"
+
+
+def profiled_labels(value, labels):
+    """The labels `--profile VALUE` names among a fit's `labels` ('all': every one), checked before the fit."""
+    if value in (None, "all"):
+        return None if value is None else list(labels)
+    names = [n.strip() for n in re.split(r",(?![^\[]*\])", value) if n.strip()]  # not the comma of an index [1,0]
+    unknown = [n for n in names if n not in labels]
+    if unknown or not names:
+        raise PamjaxInputError(f"--profile: {unknown or value!r} must be fitted parameters (comma-separated); they "
+                               f"are {', '.join(labels)}")
+    return names
 
 
 def run(args):
@@ -263,6 +279,10 @@ def run(args):
 
             figures.start(fit_figure)
         model, experiments, free, options, out_cfg, bench, staged = load(args.config)
+        if args.profile not in (None, "all"):  # the names checked before any work
+            import pamjax as pj
+
+            profiled_labels(args.profile, pj.ParameterSpace(model, free).labels)
         if not args.no_plot:  # the figure laid out with the data while the fit runs
             figures.prepare(fit_figure, _columns(experiments))
     except KeyboardInterrupt as err:
@@ -407,7 +427,7 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None, 
 def _profile_and_write(args, folder, res):
     import pamjax as pj
 
-    prof = pj.profile_likelihood(res, progress=not args.quiet)
+    prof = pj.profile_likelihood(res, profiled_labels(args.profile, res.labels), progress=not args.quiet)
     print(f"profiles ({prof.profile_s:.1f} s):\n{prof.table()}")
     for w in prof.warnings:
         print(f"pamjax fit: error: {w}", file=sys.stderr, flush=True)

@@ -261,6 +261,7 @@ def fit(
     checkpoint: str | os.PathLike | None = None,
     resume: str | os.PathLike | None = None,
     solver: "optx.AbstractLeastSquaresSolver | optx.AbstractMinimiser | None" = None,
+    warn: bool = True,
 ) -> FitResult:
     """Fit the parameters named in `free` of `model` to `experiments` by nonlinear least squares.
 
@@ -303,6 +304,9 @@ def fit(
       uninterrupted fit with the same `max_steps` ends (values, cost, iterations, history). The checkpoint carries a
       fingerprint of the start model, free spec, experiments and data (`pamjax._files.fingerprint`): a resume of another
       problem is refused before any solve, saying what differs.
+    - `warn`: also emit the result's warnings about identifiability (non-identifiable combinations, a payload that
+      barely moves) as `PamjaxIdentifiabilityWarning`s; they are in `FitResult.warnings` either way (False: a fit
+      inside a procedure that reports its own, e.g. the stages of `pamjax.staged_start`).
 
     **Returns:** a `FitResult`: values, standard errors, correlation, `status` ('converged', 'at bound',
     'stalled', 'max_steps') with `message` saying why, per-channel errors with the noise level and residual
@@ -359,7 +363,7 @@ def fit(
         extra_compile = 0.0
     else:
         outcome, extra_compile = run_optimistix(solver, problem, theta, max_steps, report, announce)
-    res = _result(model, exps, free, space, outcome, identifiability_tol, out, overwrite, problem)
+    res = _result(model, exps, free, space, outcome, identifiability_tol, problem, warn)
     res.compile_s = problem.compile_seconds() + extra_compile
     res.fit_s = time.perf_counter() - t_start - res.compile_s
     res.compile_s += problem.preload_s  # loading a second run's programs (before t_start)
@@ -381,7 +385,7 @@ def _predictions_from(exps, residuals):
     return out
 
 
-def _result(model, exps, free, space, state, identifiability_tol, out, overwrite, problem):
+def _result(model, exps, free, space, state, identifiability_tol, problem, warn=True):
     from .drive import jacobian_check, statistics_jacobian  # optimistix's import only where a fit runs
 
     labels = space.labels
@@ -409,7 +413,8 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
                else "non-identifiable combination: " + ", ".join(grp) + " (only a combination of them is fixed by the "
                "data; hold one of them fixed)")
         msgs.append(msg)
-        warnings.warn(msg, PamjaxIdentifiabilityWarning, stacklevel=3)
+        if warn:
+            warnings.warn(msg, PamjaxIdentifiabilityWarning, stacklevel=3)
     fitted = space.with_values(np.asarray(values))
     r_all = problem.all_residuals(theta)
     errors = channel_errors(exps, r_all)
@@ -422,7 +427,8 @@ def _result(model, exps, free, space, state, identifiability_tol, out, overwrite
     if any(_MOVES_WITH_THE_PAYLOAD.search(g.path) for g in space.groups):  # the force law or the friction is free
         for msg in weak_motion(fitted, exps):  # muscle runs that barely move: few samples fix them
             msgs.append(msg)
-            warnings.warn(msg, PamjaxIdentifiabilityWarning, stacklevel=3)
+            if warn:
+                warnings.warn(msg, PamjaxIdentifiabilityWarning, stacklevel=3)
     res = FitResult(
         labels=labels,
         paths=[e if isinstance(e, str) else {k: (list(v) if isinstance(v, tuple) else v) for k, v in e.items()}

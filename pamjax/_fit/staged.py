@@ -191,7 +191,8 @@ def staged_start(model: eqx.Module, experiments: Sequence[AbstractExperiment], f
     `background_compile`: compile stage 2's and the joint problem's programs in a second thread from the start
     (default); False compiles each stage's programs when it starts and leaves the joint problem's to the joint fit.
 
-    **Returns:** a `StagedStart` (`.model` to start the joint fit from; `.stages` with each stage's `FitResult`).
+    **Returns:** a `StagedStart` (`.model` to start the joint fit from; `.stages` with each stage's `FitResult`,
+    whose `warnings` are not emitted as Python warnings: the joint fit from it emits its own).
     """
     experiments, joint_free = list(experiments), list(free)
     if any(_path(e) is None for e in joint_free):  # an entry this cannot place: no stages, the joint fit as given
@@ -221,13 +222,13 @@ def staged_start(model: eqx.Module, experiments: Sequence[AbstractExperiment], f
         if background_compile else None
     waited, balance = 0.0, None
     try:
-        res = fit(model, exps1, first, max_steps=max_steps, progress=progress)
+        res = fit(model, exps1, first, max_steps=max_steps, progress=progress, warn=False)
         stages.append(("1", [_path(e) for e in first], [e.name for e in exps1], res))
         model = _off_a_kink(res.apply(model), res, first)
         if full:
             waited += background.wait(0) if background is not None else 0.0
             model, balance = _balanced_start(model, full, rest)
-            res = fit(model, full, rest, max_steps=max_steps, progress=progress)
+            res = fit(model, full, rest, max_steps=max_steps, progress=progress, warn=False)
             stages.append(("2", [_path(e) for e in rest], [e.name for e in full], res))
             model = _off_a_kink(res.apply(model), res, rest)
         waited += background.wait(-1) if background is not None else 0.0

@@ -104,6 +104,27 @@ class ProfileResult:
     def to_dict(self):
         return dataclasses.asdict(self)
 
+    def lowest(self):
+        """(Δχ², {label: value}) of the lowest re-fitted point of every profile: the profiled parameter there and the
+        others as re-fitted; None when no point lies below the fit by more than `NOT_A_MINIMUM`."""
+        delta, p, k = min(((d, p, k) for p in self.profiles for k, d in enumerate(p.delta)), key=lambda x: x[0],
+                          default=(0.0, None, None))
+        if not delta < NOT_A_MINIMUM:
+            return None
+        return float(delta), {p.label: float(p.values[k]), **{lbl: float(v[k]) for lbl, v in p.others.items()}}
+
+    def lower_start(self, result):
+        """`result`'s model with every fitted parameter at the lowest re-fitted point (`lowest`), to fit again from
+        (`pamjax.fit(profile.lower_start(result), experiments, result.paths)`) when the profiles found a lower cost
+        than the fit's; None when they did not."""
+        found = self.lowest()
+        if found is None:
+            return None
+        values = found[1]
+        if set(values) != set(result.labels):
+            raise PamjaxInputError(f"result: this profile is of a fit of {sorted(values)}, not of {result.labels}")
+        return ParameterSpace(result.model, result.paths).with_values(np.asarray([values[k] for k in result.labels]))
+
     def to_json(self, path, overwrite=False):
         """Write the result; refuses to replace an existing file unless `overwrite`."""
         path = writable_path(path, overwrite)
@@ -340,8 +361,9 @@ def _not_a_minimum(jobs, done, space, labels, values):
     at = float(space.physical(jnp.asarray(theta))[k])
     return [f"the fit is not at a minimum: with {name} = {at:.6g} (fitted {values[k]:.6g}) and the others re-fitted "
             f"the cost is lower by Δχ² = {-delta:.3g}; the profiles are taken around a point that is not the best "
-            "fit, so their intervals and verdicts say nothing: fit again (e.g. from that point, or with tighter "
-            "ftol/xtol/gtol) and profile the new result"]
+            "fit, so their intervals and verdicts say nothing: fit again (from that point: pamjax.fit("
+            "profile.lower_start(result), experiments, result.paths); or with tighter ftol/xtol/gtol) and profile the "
+            "new result"]
 
 
 def _validate(result, names, experiments, level, max_points, span, workers):
