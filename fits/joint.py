@@ -1,7 +1,7 @@
 """Joint identification of paper 000's MAS-10 plant from a bench directory, starting from the datasheet presets.
 
     python fits/joint.py --data DIR [--out DIR] [--nuisance] [--rate HZ] [--max-steps N] [--overwrite] [--no-cache]
-                         [--device auto|cpu|gpu]
+                         [--device auto|cpu|gpu] [--profile NAMES]
 
 DIR holds one recording per experiment (`<name>.npz`, `.csv` with units in its header such as `pressure [barg]`,
 `position [mm]`, or `.mat`) and a `meta.json` describing them (the layout of `shared/data/hybrid-reference-bench/`
@@ -23,13 +23,17 @@ experiment's residual RMSE of `p` [Pa] and `x` [m] at the recordings' rate), the
 diagnostics (`diagnosis`: what a mismatch points to), with `--nuisance` the rig's `nuisance` (`delay_s`,
 `pressure_offset_Pa`, `pressure_gain`, `position_offset_m`, `supply_pressure_Pa` per run, `start` per run, and
 `std_err` of each; `calibration` and `gauges` where a calibration's uncertainty or supply readings were given: each
-measured value, its sd and z); and `OUT/joint.png`, data against model with residuals. A second run refuses to
-replace them without `--overwrite`. A mistake in the data is one line naming the file and key, exit status 2, and no
-output folder left behind. The compiled programs stay in the `pamjax` command's cache directory (`PAMJAX_CACHE_DIR`;
-off with `--no-cache` or `PAMJAX_COMPILATION_CACHE=0`), so a second run, on these recordings or another plant's of
-the same layout, loads them instead of compiling (same experiments and lengths: the same programs). Like the `pamjax`
-command's fit, it compiles with XLA's classic CPU emitters (`pamjax.runtime.prefer_fast_compilation`;
-`PAMJAX_FAST_COMPILE=0` turns it off). `benchmarks/identify.py` scores the results against a simulated bench's truth.
+measured value, its sd and z); and `OUT/joint.png`, data against model with residuals. `--profile Fc,k0` (bench keys
+or the fit's labels, or `all`) profiles those parameters after the fit (`pamjax.profile_likelihood`): their
+likelihood-ratio intervals in `joint.json`'s `profile`, `OUT/profile.json` and `OUT/profile.png`; where a profile
+finds a lower cost than the fit's, the fit is taken again from there and profiled again (`profile.refits`). A second
+run refuses to replace them without `--overwrite`. A mistake in the data is one line naming the file and key, exit
+status 2, and no output folder left behind. The compiled programs stay in the `pamjax` command's cache directory
+(`PAMJAX_CACHE_DIR`; off with `--no-cache` or `PAMJAX_COMPILATION_CACHE=0`), so a second run, on these recordings or
+another plant's of the same layout, loads them instead of compiling (same experiments and lengths: the same programs).
+Like the `pamjax` command's fit, it compiles with XLA's classic CPU emitters
+(`pamjax.runtime.prefer_fast_compilation`; `PAMJAX_FAST_COMPILE=0` turns it off). `benchmarks/identify.py` scores the
+results against a simulated bench's truth.
 """
 
 import argparse
@@ -176,9 +180,9 @@ def run(args, data, out):
             start = staged.model
             print("\n".join(staged.summary()))
         res = pj.fit(start, bench.experiments, bench.free, max_steps=args.max_steps, progress=not args.quiet)
-    prof, refits = None, []
+    prof, refits, profile_s = None, [], 0.0
     if profiled:  # likelihood-ratio intervals; a lower cost found on the way: fitted again from it
-        res, prof, refits = _profile(res, bench, profiled, args)
+        res, prof, refits, profile_s = _profile(res, bench, profiled, args)
     wall = time.perf_counter() - t0
     stages = staged.stages if staged is not None else []
     values, errors = pj.bench.bench_values(res, bench.fitted_keys)
@@ -213,7 +217,7 @@ def run(args, data, out):
     if bench.nuisance or args.position_offset or bench.calibrated:
         summary["nuisance"] = pj.bench.bench_nuisance(res, bench)
     if prof is not None:
-        summary["profile"] = _profile_summary(prof, refits)
+        summary["profile"] = _profile_summary(prof, refits, profile_s)
     (out / "joint.json").write_text(json.dumps(summary, indent=1))
     report(res, values, errors, summary, over_noise)
     if prof is not None:
@@ -222,8 +226,8 @@ def run(args, data, out):
         prof.write(out, overwrite=True)
         print(f"wrote {out / 'profile.json'} and {out / 'profile.png'}")
     elif pj.FitUncertainty.of(res).cautions:  # the fit's weak-motion warning: few samples fix the force law
-        print("  check those parameters' uncertainty with their profiles (minutes per parameter): the same command "
-              "with --profile Fc,Cf,k0,k1")
+        print("  the same command with --profile Fc looks along F_c for a lower minimum and fits again from it "
+              "(minutes); no interval bounds the other minima: record runs that move the payload")
     plot(out / "joint.png", res.model, [e for e in full.experiments if e.name in recorded])
     print(f"wrote {out / 'joint.json'} and {out / 'joint.png'}")
 
@@ -253,34 +257,35 @@ def _profiled(value, labels):
 def _profile(res, bench, labels, args):
     """Profile `labels` of the fit `res`; where a re-fitted point lies below the fit's cost (the fit is not at the
     lowest minimum: a payload that barely moves leaves several about as low), fit again from the lowest point and
-    profile again, at most PROFILE_ROUNDS profiles. Returns the final fit, its profile and the refits."""
-    refits = []
-    for round_ in range(PROFILE_ROUNDS):
+    profile again, at most PROFILE_ROUNDS profiles. Returns the final fit, its profile, the refits (each with the
+    profile that led to it) and the seconds all profiles took."""
+    refits, seconds = [], 0.0
+    while True:
         print(f"profiling {', '.join(labels)} (pamjax.profile_likelihood)", flush=True)
         prof = pj.profile_likelihood(res, labels, progress=not args.quiet)
+        seconds += prof.profile_s
         lower = prof.lowest()
-        if lower is None or round_ == PROFILE_ROUNDS - 1:
-            return res, prof, refits
+        if lower is None or len(refits) == PROFILE_ROUNDS - 1:
+            return res, prof, refits, seconds
         print(f"the profile found a cost lower than the fit's by Δχ² = {-lower[0]:.3g}: fitting again from there",
               flush=True)
         new = pj.fit(prof.lower_start(res), bench.experiments, bench.free, max_steps=args.max_steps,
-                     progress=not args.quiet)
-        refits.append(dict(delta_chi2=lower[0], from_cost=res.cost, cost=new.cost, status=new.status,
-                           iterations=new.iterations, fit_s=new.fit_s))
+                     progress=not args.quiet, warn=False)  # its warnings: in the report, as the first fit's
+        refits.append(dict(profile_s=prof.profile_s, delta_chi2=lower[0], from_cost=res.cost, cost=new.cost,
+                           status=new.status, iterations=new.iterations, fit_s=new.fit_s))
         if not new.cost < res.cost or new.status not in ("converged", "at bound"):  # what profiles accept
             print(f"  the refit ended with status {new.status}, cost {new.cost:.6g} (the fit's {res.cost:.6g}): "
                   "kept if lower, its profile not taken", flush=True)
-            return (new if new.cost < res.cost else res), prof, refits
+            return (new if new.cost < res.cost else res), prof, refits, seconds
         res = new
-    return res, prof, refits
 
 
-def _profile_summary(prof, refits):
+def _profile_summary(prof, refits, profile_s):
     """joint.json's "profile": each profiled parameter by its bench key (else its label): likelihood-ratio and
     linearised intervals, verdict; the profiles' level, time and warnings, and the refits from a lower point."""
     params = {_LABEL_KEYS.get(p.label.removeprefix("plant."), p.label): dict(
         value=p.value, interval=p.interval, linearised=p.linearised, verdict=p.verdict) for p in prof.profiles}
-    return dict(level=prof.level, params=params, profile_s=prof.profile_s, warnings=prof.warnings, refits=refits)
+    return dict(level=prof.level, params=params, profile_s=profile_s, warnings=prof.warnings, refits=refits)
 
 
 def report(res, values, errors, summary, over_noise):

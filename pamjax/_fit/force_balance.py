@@ -328,8 +328,9 @@ def weak_motion(model: eqx.Module, experiments) -> list[str]:
             if counts[0] == 0 else
             _ONLY + " {pct:.0f} % of the muscle runs' samples ({where}): the force law (a0…a4, k0, k1) and the "
             "friction rest on those few samples, where the cost can have other minima about as low far from this "
-            "one, so their standard errors may understate the uncertainty several-fold (check them with "
-            "pamjax.profile_likelihood on those parameters)")
+            "one, so their standard errors may understate the uncertainty several-fold (a profile, "
+            "pamjax.profile_likelihood, can find a lower minimum nearby, but its interval follows one valley of the "
+            "cost and need not reach the others)")
     advice = ("a wider or faster duty sweep: friction holds it still" if counts[1] > counts[2] + counts[3] else
               "off the upper stop: a lower top duty" if counts[2] >= counts[3] else
               "off the lower stop: a higher bottom duty")
