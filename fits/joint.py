@@ -39,7 +39,6 @@ results against a simulated bench's truth.
 import argparse
 import json
 import pathlib
-import re
 import sys
 import time
 
@@ -237,21 +236,7 @@ _LABEL_KEYS = {label: key for key, (_, label) in pj.bench.BENCH_PARAMETERS.items
 
 def _profiled(value, labels):
     """The fit's labels `--profile VALUE` names: bench keys (Fc, k0) or labels, comma-separated, or 'all'."""
-    if value is None or value == "all":
-        return None if value is None else list(labels)
-    fitted = {_LABEL_KEYS.get(lbl.removeprefix("plant.")) for lbl in labels}
-    keys = [k for k in pj.bench.BENCH_PARAMETERS if k in fitted]
-    what = f"give bench keys ({', '.join(keys)}), the fit's labels ({', '.join(labels)}) or 'all'"
-    out = []
-    for name in [n.strip() for n in re.split(r",(?![^\[]*\])", value) if n.strip()]:  # not an index's [1,0]
-        label = pj.bench.BENCH_PARAMETERS[name][1] if name in pj.bench.BENCH_PARAMETERS else name
-        match = [lbl for lbl in labels if lbl in (label, f"plant.{label}")]
-        if not match:
-            raise pj.PamjaxInputError(f"--profile: {name!r} is not a fitted parameter; {what}")
-        out += [m for m in match if m not in out]
-    if not out:
-        raise pj.PamjaxInputError(f"--profile: {value!r} names no parameter; {what}")
-    return out
+    return None if value is None else pj.bench.fitted_labels(value, labels, "--profile")
 
 
 def _profile(res, bench, labels, args):

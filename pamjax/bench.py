@@ -23,6 +23,7 @@ from ._bench.report import (
     bench_nuisance as bench_nuisance,
     bench_rmse as bench_rmse,
     bench_values as bench_values,
+    fitted_labels as fitted_labels,
     nuisance_table as nuisance_table,
 )
 from ._fit.static_experiments import (

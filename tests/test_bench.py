@@ -131,6 +131,22 @@ def test_joint_script_names_a_parameter_it_cannot_profile_before_any_fit(bench, 
         assert not out.exists()  # named before any fit: nothing written, no folder left behind
 
 
+def test_fitted_labels_takes_bench_keys_labels_and_indexed_labels():
+    rig = ["plant.valve.inflate.discharge_coefficient", "a0", "a1", "plant.friction.coulomb_force",
+           "sensors[rig].delay", "runs[E4].start.pressure"]
+    pick = pj.bench.fitted_labels
+    assert pick("Fc, a1,sensors[rig].delay", rig) == ["plant.friction.coulomb_force", "a1", "sensors[rig].delay"]
+    assert pick(["Cv12", "plant.valve.inflate.discharge_coefficient"], rig) == [rig[0]]  # one label, once
+    assert pick("all", rig) == rig
+    plain = ["valve.coefficients[1,0]", "valve.coefficients[1,1]", "friction.coulomb_force"]
+    assert pick("valve.coefficients[1,1],Fc", plain) == [plain[1], plain[2]]  # the index's comma is no separator
+    with pytest.raises(PamjaxInputError, match=r"--profile: 'k0' is not a fitted parameter; give bench keys "
+                                               r"\(Cv12, a0, a1, Fc\), the fit's labels"):
+        pick("k0", rig, "--profile")
+    with pytest.raises(PamjaxInputError, match="names no parameter"):
+        pick(" , ", rig)
+
+
 def test_staged_start_needs_experiments_that_see_part_of_the_model(bench):
     # Stages come from the experiments' structure: where every experiment's system has every free parameter (here
     # the muscle run alone), or an entry cannot be placed, there is nothing to stage and the model comes back as is.

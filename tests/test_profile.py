@@ -147,7 +147,7 @@ def test_fit_cli_profile_writes_json_and_figure(tmp_path, capsys):
     assert data["labels"] == [one] and data["profiles"][0]["verdict"] == "identifiable"
     assert main(["fit", str(cfg), "--out", str(tmp_path / "bad"), "--quiet", "--profile", "valve.mass"]) == 2
     err = capsys.readouterr().err
-    assert "--profile: ['valve.mass'] must be fitted parameters" in err and one in err
+    assert "--profile: 'valve.mass' is not a fitted parameter; give the fit's labels" in err and one in err
     assert not (tmp_path / "bad").exists()  # named before the fit: nothing written
 
 

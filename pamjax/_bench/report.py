@@ -1,15 +1,19 @@
 """A fit of a bench directory read back in the bench's terms: the plant's values by the bench's names
-(`bench_values`), the rig's nuisances apart from the plant (`bench_nuisance`, `nuisance_table`) and each recording's
-residual RMSE (`bench_rmse`). `pamjax._bench.load` builds the fit these read."""
+(`bench_values`), the rig's nuisances apart from the plant (`bench_nuisance`, `nuisance_table`), each recording's
+residual RMSE (`bench_rmse`), and the fit's labels a user's names pick (`fitted_labels`: `--profile Fc,k0`).
+`pamjax._bench.load` builds the fit these read."""
 
+import re
 from collections.abc import Sequence
 
+from .._core.errors import PamjaxInputError
 from .._fit.fit import FitResult
 from .._fit.measurement import is_measurement
 from .._fit.rig import DEFAULT_GROUP, Rig, Sensors, nuisance_report
 from .load import BENCH_PARAMETERS, CALIBRATION_NAME, GAUGE_NAME, Bench
 
 _CHANNEL = {"pressure": "p", "position": "x"}
+_PLANT = "plant."  # how a pamjax.Rig's fit labels its plant's parameters
 
 
 def bench_values(result: FitResult, keys: Sequence[str]) -> tuple[dict[str, float], dict[str, float]]:
@@ -109,4 +113,32 @@ def bench_rmse(result: FitResult) -> dict[str, dict[str, float]]:
     for name, chans in result.channel_errors.items():
         if name not in measured and not any("z" in st for st in chans.values()):  # a measurement: not a recording
             out[name] = {_CHANNEL.get(c, c): float(st["rmse"]) for c, st in chans.items() if "rmse" in st}
+    return out
+
+
+# the index's comma ([1,0]) is not a separator between names
+_NAMES = re.compile(r",(?![^\[]*\])")
+
+
+def fitted_labels(names: str | Sequence[str], labels: Sequence[str], where: str = "names") -> list[str]:
+    """The fit's `labels` that `names` picks: 'all' (every one), or bench keys (`Fc`, `k0`: `BENCH_PARAMETERS`) and
+    labels, as a list or one comma-separated string (`"Fc,plant.muscle.force_law.k1"`). A name that picks none is
+    named with what can be given (`where`: the argument, e.g. `--profile`), before any work."""
+    labels = list(labels)
+    given = [n.strip() for n in (_NAMES.split(names) if isinstance(names, str) else names) if n.strip()]
+    if given == ["all"]:
+        return labels
+    by_label = {label: key for key, (_, label) in BENCH_PARAMETERS.items()}
+    fitted = {by_label.get(label.removeprefix(_PLANT)) for label in labels}
+    what = (f"give bench keys ({', '.join(k for k in BENCH_PARAMETERS if k in fitted)}), " if fitted - {None} else
+            "give ") + f"the fit's labels ({', '.join(labels)}) or 'all'"
+    out = []
+    for name in given:
+        label = BENCH_PARAMETERS[name][1] if name in BENCH_PARAMETERS else name
+        match = [lbl for lbl in labels if lbl in (label, _PLANT + label)]
+        if not match:
+            raise PamjaxInputError(f"{where}: {name!r} is not a fitted parameter; {what}")
+        out += [m for m in match if m not in out]
+    if not out:
+        raise PamjaxInputError(f"{where}: {names!r} names no parameter; {what}")
     return out

@@ -11,7 +11,6 @@ read; a [rig] around the plant); the output folder is created, test-written and 
 
 import json
 import pathlib
-import re
 import sys
 from typing import NamedTuple
 
@@ -38,9 +37,9 @@ def add_arguments(parser):
     parser.add_argument("--quiet", action="store_true", help="no per-iteration progress")
     parser.add_argument("--no-plot", action="store_true", help="skip the figure")
     parser.add_argument("--profile", nargs="?", const="all", default=None, metavar="NAMES",
-                        help="also profile every fitted parameter, or those NAMES lists (comma-separated labels, as "
-                        "fit.json's): write profile.json and profile.png (pamjax.profile_likelihood, "
-                        "docs/identifiability.md)")
+                        help="also profile every fitted parameter, or those NAMES lists (comma-separated: labels "
+                        "as fit.json's, or a bench's keys such as Fc): write profile.json and profile.png "
+                        "(pamjax.profile_likelihood, docs/identifiability.md)")
 
 
 class FitSetup(NamedTuple):
@@ -261,15 +260,11 @@ def _resume_command(args, out):
 
 
 def profiled_labels(value, labels):
-    """The labels `--profile VALUE` names among a fit's `labels` ('all': every one), checked before the fit."""
-    if value in (None, "all"):
-        return None if value is None else list(labels)
-    names = [n.strip() for n in re.split(r",(?![^\[]*\])", value) if n.strip()]  # not the comma of an index [1,0]
-    unknown = [n for n in names if n not in labels]
-    if unknown or not names:
-        raise PamjaxInputError(f"--profile: {unknown or value!r} must be fitted parameters (comma-separated); they "
-                               f"are {', '.join(labels)}")
-    return names
+    """The labels `--profile VALUE` names among a fit's `labels` (bench keys such as Fc, labels, or 'all'; None
+    without --profile), checked before the fit (`pamjax.bench.fitted_labels`)."""
+    import pamjax as pj
+
+    return None if value is None else pj.bench.fitted_labels(value, labels, "--profile")
 
 
 def run(args):
@@ -279,7 +274,7 @@ def run(args):
 
             figures.start(fit_figure)
         model, experiments, free, options, out_cfg, bench, staged = load(args.config)
-        if args.profile not in (None, "all"):  # the names checked before any work
+        if args.profile is not None:  # the names checked before any work
             import pamjax as pj
 
             profiled_labels(args.profile, pj.ParameterSpace(model, free).labels)
