@@ -181,7 +181,11 @@ def run(args, data, out):
         res = pj.fit(start, bench.experiments, bench.free, max_steps=args.max_steps, progress=not args.quiet)
     prof, refits, profile_s = None, [], 0.0
     if profiled:  # likelihood-ratio intervals; a lower cost found on the way: fitted again from it
-        res, prof, refits, profile_s = _profile(res, bench, profiled, args)
+        print(f"profiling {', '.join(profiled)} (pamjax.profile_to_minimum: at most {PROFILE_ROUNDS} profiles)",
+              flush=True)
+        done = pj.profile_to_minimum(res, profiled, rounds=PROFILE_ROUNDS, max_steps=args.max_steps,
+                                     progress=not args.quiet)
+        res, prof, refits, profile_s = done.result, done.profile, done.refits, done.profile_s
     wall = time.perf_counter() - t0
     stages = staged.stages if staged is not None else []
     values, errors = pj.bench.bench_values(res, bench.fitted_keys)
@@ -237,32 +241,6 @@ _LABEL_KEYS = {label: key for key, (_, label) in pj.bench.BENCH_PARAMETERS.items
 def _profiled(value, labels):
     """The fit's labels `--profile VALUE` names: bench keys (Fc, k0) or labels, comma-separated, or 'all'."""
     return None if value is None else pj.bench.fitted_labels(value, labels, "--profile")
-
-
-def _profile(res, bench, labels, args):
-    """Profile `labels` of the fit `res`; where a re-fitted point lies below the fit's cost (the fit is not at the
-    lowest minimum: a payload that barely moves leaves several about as low), fit again from the lowest point and
-    profile again, at most PROFILE_ROUNDS profiles. Returns the final fit, its profile, the refits (each with the
-    profile that led to it) and the seconds all profiles took."""
-    refits, seconds = [], 0.0
-    while True:
-        print(f"profiling {', '.join(labels)} (pamjax.profile_likelihood)", flush=True)
-        prof = pj.profile_likelihood(res, labels, progress=not args.quiet)
-        seconds += prof.profile_s
-        lower = prof.lowest()
-        if lower is None or len(refits) == PROFILE_ROUNDS - 1:
-            return res, prof, refits, seconds
-        print(f"the profile found a cost lower than the fit's by Δχ² = {-lower[0]:.3g}: fitting again from there",
-              flush=True)
-        new = pj.fit(prof.lower_start(res), bench.experiments, bench.free, max_steps=args.max_steps,
-                     progress=not args.quiet, warn=False)  # its warnings: in the report, as the first fit's
-        refits.append(dict(profile_s=prof.profile_s, delta_chi2=lower[0], from_cost=res.cost, cost=new.cost,
-                           status=new.status, iterations=new.iterations, fit_s=new.fit_s))
-        if not new.cost < res.cost or new.status not in ("converged", "at bound"):  # what profiles accept
-            print(f"  the refit ended with status {new.status}, cost {new.cost:.6g} (the fit's {res.cost:.6g}): "
-                  "kept if lower, its profile not taken", flush=True)
-            return (new if new.cost < res.cost else res), prof, refits, seconds
-        res = new
 
 
 def _profile_summary(prof, refits, profile_s):

@@ -94,6 +94,7 @@ from ._fit.predictions import predictions as predictions
 from ._identifiability.profile import (
     LikelihoodProfile as LikelihoodProfile, ProfileResult as ProfileResult, profile_likelihood as profile_likelihood,
 )
+from ._identifiability.lowest import ProfiledFit as ProfiledFit, profile_to_minimum as profile_to_minimum
 from ._fit.recording import Recording as Recording
 from ._fit.rig import (
     Rig as Rig, RunConditions as RunConditions, Sensors as Sensors, StartState as StartState,

@@ -2,6 +2,7 @@
 two-parameter profile agrees with a brute-force grid of an independent NumPy transcription; eq. 7's k0, k1, k2 come
 out structurally non-identifiable; `pamjax fit --profile` writes the profile and its figure; bad input is named."""
 
+import dataclasses
 import json
 import math
 import textwrap
@@ -115,7 +116,7 @@ def test_bad_input_is_named_before_any_solve():
         pj.profile_likelihood(loaded)
 
 
-def test_fit_cli_profile_writes_json_and_figure(tmp_path, capsys):
+def test_fit_cli_profile_writes_json_and_figure(tmp_path, capsys, monkeypatch):
     # A 0.6 s constant-volume charge through the averaged valve, eq. 13 terms u and u·p free.
     system = presets.mas10_tank_system(valve="averaged")
     ts = np.arange(0.0, 0.6, 2e-3)
@@ -145,6 +146,25 @@ def test_fit_cli_profile_writes_json_and_figure(tmp_path, capsys):
     assert main(["fit", str(cfg), "--out", str(tmp_path / "one"), "--quiet", "--no-plot", "--profile", one]) == 0
     data = json.loads((tmp_path / "one" / "profile.json").read_text())
     assert data["labels"] == [one] and data["profiles"][0]["verdict"] == "identifiable"
+    # a fit the profile finds is not at its minimum (here: moved off it before profiling): the refit's results
+    # replace the fit's files, profile.json lists the refit, and the verdicts stand
+    real = pj.profile_to_minimum
+
+    def from_a_moved_fit(res, names, **kwargs):
+        c = res.model.valve.coefficients
+        off = eqx.tree_at(lambda m: m.valve.coefficients, res.model, c.at[1, 1].multiply(1.05))
+        moved = dataclasses.replace(res, model=off, values=[res.values[0], res.values[1] * 1.05])
+        return real(moved, names, **kwargs)
+
+    monkeypatch.setattr(pj, "profile_to_minimum", from_a_moved_fit)
+    assert main(["fit", str(cfg), "--out", str(tmp_path / "moved"), "--no-plot", "--profile", one]) == 0
+    monkeypatch.undo()
+    text = capsys.readouterr().out
+    assert "1 refit(s) from the lowest point" in text, text[-2000:]
+    data = json.loads((tmp_path / "moved" / "profile.json").read_text())
+    assert len(data["refits"]) == 1 and data["profiles"][0]["verdict"] == "identifiable"
+    written = json.loads((tmp_path / "moved" / "fit.json").read_text())
+    assert written["cost"] == pytest.approx(data["refits"][0]["cost"], rel=1e-12)
     assert main(["fit", str(cfg), "--out", str(tmp_path / "bad"), "--quiet", "--profile", "valve.mass"]) == 2
     err = capsys.readouterr().err
     assert "--profile: 'valve.mass' is not a fitted parameter; give the fit's labels" in err and one in err
@@ -168,8 +188,6 @@ def test_a_fit_stopped_at_max_steps_is_refused_before_any_work():
 def test_a_start_below_which_the_profile_finds_a_lower_cost_voids_every_verdict():
     # a "converged" result whose model is not the best fit (here: moved off it by hand; in practice a fit stopped
     # by a loose tolerance): the re-fits find a lower cost, and no verdict claims anything
-    import dataclasses
-
     muscle, *_, exp = _force_map(2.0, np.linspace(0.5, 6.0, 7), np.linspace(-0.01, 0.07, 9))
     res = _fit(muscle, [exp], ["force_law.k0", "force_law.k1"])
     off = eqx.tree_at(lambda m: m.force_law.k1, res.model, res.model.force_law.k1 * 1.05)
@@ -190,3 +208,14 @@ def test_a_start_below_which_the_profile_finds_a_lower_cost_voids_every_verdict(
     control = pj.profile_likelihood(res, progress=False)  # the fit itself: no warning, the verdicts stand
     assert not control.warnings and all(p.verdict == "identifiable" for p in control.profiles)
     assert control.lowest() is None and control.lower_start(res) is None
+    # profile_to_minimum: the refit from the lowest point, then a profile of it whose verdicts stand
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pj.PamjaxIdentifiabilityWarning)
+        done = pj.profile_to_minimum(moved, progress=False)
+    assert len(done.refits) == 1 and done.refits[0]["delta_chi2"] < -1.0
+    assert done.refits[0]["cost"] < done.refits[0]["from_cost"] and done.refits[0]["status"] == "converged"
+    assert done.result.cost == pytest.approx(res.cost, rel=1e-6) and not done.profile.warnings
+    assert [p.verdict for p in done.profile.profiles] == ["identifiable"] * 2
+    assert done.profile_s > done.profile.profile_s > 0
+    with pytest.raises(PamjaxInputError, match="rounds must be an int >= 1"):
+        pj.profile_to_minimum(res, rounds=0)

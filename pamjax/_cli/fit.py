@@ -344,8 +344,6 @@ def print_errors(channel_errors):
 def _fit_and_write(args, folder, model, experiments, free, options, bench=None, staged=False, stage=None):
     import pamjax as pj
 
-    from .._files.model_file import model_json
-
     checkpoint = folder / CHECKPOINT
     done = _checkpoint_summary(checkpoint) if args.resume else None
     print(f"fitting {len(free)} parameter entries to {len(experiments)} experiments "
@@ -368,6 +366,28 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None, 
     res = pj.fit(model, experiments, free, progress=progress, checkpoint=checkpoint,
                  resume=checkpoint if args.resume else None, overwrite=args.overwrite, **options)
     raise_pending()
+    _report_and_write(args, folder, res, experiments, bench)
+    if args.profile and res.status not in PROFILED_STATUSES:  # not a minimum: profiles would mean nothing
+        print(f"pamjax fit: error: no profile taken: the fit stopped with status {res.status!r}, not at a minimum of "
+              "the cost, where every profile would fall below the fit and read as non-identifiable. The fit is "
+              f"written ({folder / RESULT}, {folder / MODEL}); raise [fit] max_steps in {args.config} and continue "
+              f"it with: {_resume_command(args, folder.path)}", file=sys.stderr, flush=True)
+        return 1
+    if args.profile:  # pamjax.profile_to_minimum along the named parameters, re-using the fit's compiled programs
+        if stage is not None:
+            stage["profiling"] = True
+        void = _profile_and_write(args, folder, res, experiments, bench, progress, options.get("max_steps", 100))
+        if void:  # still a lower cost after the refits: the profiles are written, each verdict void
+            return 1
+    return 1 if folder.failed else 0
+
+
+def _report_and_write(args, folder, res, experiments, bench):
+    """Print a fit's report and write fit.json, model.json, bench.json (a [bench]) and the figure."""
+    import pamjax as pj
+
+    from .._files.model_file import model_json
+
     print(f"status {res.status}: {res.iterations} iterations, cost {res.initial_cost:.6g} → {res.cost:.6g} "
           f"({res.fit_s:.1f} s after {res.compile_s:.1f} s compilation)")
     print(res.table())
@@ -404,33 +424,31 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None, 
         except ModuleNotFoundError:
             print("no figure: matplotlib is not installed (pip install matplotlib)")
     print("wrote " + ", ".join(str(p) for p in written if p is not None))
-    if args.profile and res.status not in PROFILED_STATUSES:  # not a minimum: profiles would mean nothing
-        print(f"pamjax fit: error: no profile taken: the fit stopped with status {res.status!r}, not at a minimum of "
-              "the cost, where every profile would fall below the fit and read as non-identifiable. The fit is "
-              f"written ({folder / RESULT}, {folder / MODEL}); raise [fit] max_steps in {args.config} and continue "
-              f"it with: {_resume_command(args, folder.path)}", file=sys.stderr, flush=True)
-        return 1
-    if args.profile:  # pamjax.profile_likelihood along every fitted parameter, re-using the fit's compiled programs
-        if stage is not None:
-            stage["profiling"] = True
-        written, void = _profile_and_write(args, folder, res)
-        if void:  # a re-fit found a lower cost: the profiles are written, each verdict void
-            return 1
-    return 1 if folder.failed else 0
 
 
-def _profile_and_write(args, folder, res):
+def _profile_and_write(args, folder, res, experiments, bench, progress, max_steps):
+    """Profile the named parameters (`pamjax.profile_to_minimum`); where a profile finds a lower cost, the fit from
+    there replaces the fit's files (the checkpoint keeps the first fit: `--resume --profile` takes the same path
+    again). Writes profile.json (with the refits) and profile.png; returns whether the verdicts are void."""
     import pamjax as pj
 
-    prof = pj.profile_likelihood(res, profiled_labels(args.profile, res.labels), progress=not args.quiet)
-    print(f"profiles ({prof.profile_s:.1f} s):\n{prof.table()}")
+    done = pj.profile_to_minimum(res, profiled_labels(args.profile, res.labels), max_steps=max_steps,
+                                 progress=not args.quiet, fit_progress=progress)
+    raise_pending()
+    prof = done.profile
+    if done.refits:
+        print(f"the profiles found a lower cost than the fit's: {len(done.refits)} refit(s) from the lowest point, "
+              f"cost {res.cost:.6g} → {done.result.cost:.6g}; the refit's results replace the fit's (the checkpoint "
+              "keeps the first fit: --resume --profile takes the same path again)", flush=True)
+        _report_and_write(args, folder, done.result, experiments, bench)
+    print(f"profiles ({done.profile_s:.1f} s):\n{prof.table()}")
     for w in prof.warnings:
         print(f"pamjax fit: error: {w}", file=sys.stderr, flush=True)
-    written = [folder.write_text(PROFILE, json.dumps(prof.to_dict(), indent=1) + "\n")]
+    written = [folder.write_text(PROFILE, json.dumps(dict(prof.to_dict(), refits=done.refits), indent=1) + "\n")]
     if not args.no_plot:
         try:
             written.append(folder.write(PROFILE_FIGURE, prof.plot))
         except ModuleNotFoundError:
             print("no profile figure: matplotlib is not installed (pip install matplotlib)")
     print("wrote " + ", ".join(str(p) for p in written if p is not None))
-    return written, bool(prof.warnings)
+    return bool(prof.warnings)

@@ -361,9 +361,9 @@ def _not_a_minimum(jobs, done, space, labels, values):
     at = float(space.physical(jnp.asarray(theta))[k])
     return [f"the fit is not at a minimum: with {name} = {at:.6g} (fitted {values[k]:.6g}) and the others re-fitted "
             f"the cost is lower by Δχ² = {-delta:.3g}; the profiles are taken around a point that is not the best "
-            "fit, so their intervals and verdicts say nothing: fit again (from that point: pamjax.fit("
-            "profile.lower_start(result), experiments, result.paths); or with tighter ftol/xtol/gtol) and profile the "
-            "new result"]
+            "fit, so their intervals and verdicts say nothing: fit again from that point and profile the new result "
+            "(pamjax.profile_to_minimum does both; or pamjax.fit(profile.lower_start(result), experiments, "
+            "result.paths))"]
 
 
 def _validate(result, names, experiments, level, max_points, span, workers):

@@ -412,7 +412,7 @@ def _profile_interrupted(folder):
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    with patched(pamjax, "profile_likelihood", interrupted):
+    with patched(pamjax, "profile_to_minimum", interrupted):  # what pamjax fit --profile calls
         status, text = fit_run(folder, "--profile")
     if status != 130 or "complete and written" not in text or not (folder / "out" / "fit.json").is_file():
         return False
