@@ -12,9 +12,10 @@ time, minima about as low can lie far apart (docs/fitting.md, "Runs that hold th
 
 import dataclasses
 from collections.abc import Sequence
+from typing import Any
 
 from .._core.errors import PamjaxInputError
-from .._fit.fit import FitResult, fit
+from .._fit.fit import FitResult, Progress, fit
 from .profile import PROFILED_STATUSES, ProfileResult, profile_likelihood
 
 ROUNDS = 3  # profiles at most: the first, and two more after refits from a lower point
@@ -40,8 +41,8 @@ def profile_to_minimum(
     rounds: int = ROUNDS,
     max_steps: int = 100,
     progress: bool = True,
-    fit_progress: object = None,
-    **profile_options,
+    fit_progress: Progress = None,
+    **profile_options: Any,
 ) -> ProfiledFit:
     """Profile `names` of the fit `result` (`pamjax.profile_likelihood`; default every fitted parameter); where a
     re-fitted point lies below the fit's cost, fit again from the lowest one (`pamjax.fit` with the result's
