@@ -53,7 +53,7 @@ from pamjax.gallery import bench_folder  # noqa: E402
 DEFAULT_DATA = bench_folder()  # the hybrid bench recordings shipped with pamjax (pamjax/data/)
 # --profile: profile → (a lower cost found) fit again from it → profile again, at most this many profiles; a fit whose
 # payload barely moves can have several minima about as low (docs/fitting.md, "Runs that hold the payload on a stop")
-PROFILE_ROUNDS = 3
+PROFILE_ROUNDS = 3  # pamjax.profile_to_minimum's default, named here for the help and the report
 
 
 def parse_args(argv=None):
@@ -235,9 +235,6 @@ def run(args, data, out):
     print(f"wrote {out / 'joint.json'} and {out / 'joint.png'}")
 
 
-_LABEL_KEYS = {label: key for key, (_, label) in pj.bench.BENCH_PARAMETERS.items()}
-
-
 def _profiled(value, labels):
     """The fit's labels `--profile VALUE` names: bench keys (Fc, k0) or labels, comma-separated, or 'all'."""
     return None if value is None else pj.bench.fitted_labels(value, labels, "--profile")
@@ -246,7 +243,7 @@ def _profiled(value, labels):
 def _profile_summary(prof, refits, profile_s):
     """joint.json's "profile": each profiled parameter by its bench key (else its label): likelihood-ratio and
     linearised intervals, verdict; the profiles' level, time and warnings, and the refits from a lower point."""
-    params = {_LABEL_KEYS.get(p.label.removeprefix("plant."), p.label): dict(
+    params = {pj.bench.bench_key(p.label) or p.label: dict(
         value=p.value, interval=p.interval, linearised=p.linearised, verdict=p.verdict) for p in prof.profiles}
     return dict(level=prof.level, params=params, profile_s=profile_s, warnings=prof.warnings, refits=refits)
 

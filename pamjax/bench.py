@@ -20,6 +20,7 @@ from ._bench.load import (
     load_bench as load_bench,
 )
 from ._bench.report import (
+    bench_key as bench_key,
     bench_nuisance as bench_nuisance,
     bench_rmse as bench_rmse,
     bench_values as bench_values,

@@ -23,7 +23,7 @@ def bench_values(result: FitResult, keys: Sequence[str]) -> tuple[dict[str, floa
     values, errors = {}, {}
     for k in keys:
         label = BENCH_PARAMETERS[k][1]
-        i = label_index.get(label, label_index.get(f"plant.{label}"))
+        i = label_index.get(label, label_index.get(_PLANT + label))
         if i is not None:
             values[k], errors[k] = float(result.values[i]), float(result.standard_errors[i])
     return values, errors
@@ -116,8 +116,15 @@ def bench_rmse(result: FitResult) -> dict[str, dict[str, float]]:
     return out
 
 
+_KEYS = {label: key for key, (_, label) in BENCH_PARAMETERS.items()}  # a fit label (no `plant.`) → its bench key
 # the index's comma ([1,0]) is not a separator between names
 _NAMES = re.compile(r",(?![^\[]*\])")
+
+
+def bench_key(label: str) -> str | None:
+    """The bench's name of a fit's label (`plant.friction.coulomb_force` or `friction.coulomb_force` → `Fc`), or None
+    where the bench has no name for it (a nuisance, a parameter outside `BENCH_PARAMETERS`)."""
+    return _KEYS.get(label.removeprefix(_PLANT))
 
 
 def fitted_labels(names: str | Sequence[str], labels: Sequence[str], where: str = "names") -> list[str]:
@@ -128,8 +135,7 @@ def fitted_labels(names: str | Sequence[str], labels: Sequence[str], where: str 
     given = [n.strip() for n in (_NAMES.split(names) if isinstance(names, str) else names) if n.strip()]
     if given == ["all"]:
         return labels
-    by_label = {label: key for key, (_, label) in BENCH_PARAMETERS.items()}
-    fitted = {by_label.get(label.removeprefix(_PLANT)) for label in labels}
+    fitted = {bench_key(label) for label in labels}
     what = (f"give bench keys ({', '.join(k for k in BENCH_PARAMETERS if k in fitted)}), " if fitted - {None} else
             "give ") + f"the fit's labels ({', '.join(labels)}) or 'all'"
     out = []
