@@ -85,8 +85,7 @@ VALVE_KEYS = ("Cv12", "b12", "Cv23", "b23")  # the bench parameters a constant-v
 def truth_model(model, bench):
     """The preset model with the bench's true values of the fitted parameters."""
     space = pj.ParameterSpace(model, bench.free)
-    by_label = {label: key for key, (_, label) in pj.bench.BENCH_PARAMETERS.items()}
-    return space.with_values(np.asarray([bench.meta["params"][by_label[lbl]] for lbl in space.labels]))
+    return space.with_values(np.asarray([bench.meta["params"][pj.bench.bench_key(lbl)] for lbl in space.labels]))
 
 
 class Arm:
@@ -267,12 +266,11 @@ def main(argv=None):
     sd = {arm: np.std(v, axis=0, ddof=1) for arm, v in values.items()}
     ratio = sd["triangle"] / sd["designed"]
     true_values = np.asarray(pj.ParameterSpace(truth, bench.free).initial_values())
-    by_label = {label: key for key, (_, label) in pj.bench.BENCH_PARAMETERS.items()}
     print(f"\n{'key':<6}{'true':>13}{'SD triangle':>13}{'SD designed':>13}{'ratio':>8}{'predicted':>10}"
           f"{'bias tri [SD]':>14}{'bias des [SD]':>14}")
     for i, label in enumerate(labels):
         bias = [(np.mean(values[a][:, i]) - true_values[i]) / sd[a][i] for a in ("triangle", "designed")]
-        print(f"{by_label[label]:<6}{true_values[i]:>13.6g}{sd['triangle'][i]:>13.4g}{sd['designed'][i]:>13.4g}"
+        print(f"{pj.bench.bench_key(label):<6}{true_values[i]:>13.6g}{sd['triangle'][i]:>13.4g}{sd['designed'][i]:>13.4g}"
               f"{ratio[i]:>8.2f}{predicted[i]:>10.2f}{bias[0]:>14.2f}{bias[1]:>14.2f}")
     converged = sum(s == "converged" for arm in status.values() for s in arm)
     total = sum(len(arm) for arm in status.values())
@@ -285,7 +283,7 @@ def main(argv=None):
                        design_s=tank_res.design_s, compile_s=tank_res.compile_s, iterations=tank_res.iterations,
                        message=tank_res.message, margin=args.tank_margin, knots=args.tank_knots,
                        labels=tank_res.labels, se=tank_res.standard_errors),
-                   labels=labels, keys=[by_label[lbl] for lbl in labels], truth=true_values.tolist(),
+                   labels=labels, keys=[pj.bench.bench_key(lbl) for lbl in labels], truth=true_values.tolist(),
                    sd={a: v.tolist() for a, v in sd.items()}, ratio=ratio.tolist(), predicted_ratio=predicted.tolist(),
                    values={a: v.tolist() for a, v in values.items()}, status=status, fit_s=seconds,
                    fit_median_s=fit_med, seeds=args.seeds, load_average_end=os.getloadavg()[0],

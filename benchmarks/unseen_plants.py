@@ -53,8 +53,7 @@ def draw_params(meta, rng):
 def truth_model(model, bench, params):
     """The preset model with `params`' values of the bench's fitted parameters."""
     space = pj.ParameterSpace(model, bench.free)
-    by_label = {label: key for key, (_, label) in pj.bench.BENCH_PARAMETERS.items()}
-    return space.with_values(np.asarray([params[by_label[label]] for label in space.labels]))
+    return space.with_values(np.asarray([params[pj.bench.bench_key(label)] for label in space.labels]))
 
 
 def write_plant(directory, meta, params, truth, bench, substeps, seed):

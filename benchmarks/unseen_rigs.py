@@ -17,6 +17,9 @@ CSV files as they are):
    period (four times the fits' 16), read at t − delay, through the sensors, plus the bench's noise (2 kPa, 0.1 mm),
    at 1 kHz, written as CSV: `time [s],duty [-],pressure [barg],position [mm]` (zeros on the tank rig), and
    `meta.json` with the truth under `params` and `nuisance` (read only by identify.py, to score).
+4. `--payload-run KG`: one more run, E5, E3's triangle with a payload of KG kg (`payload_kg` in its meta.json entry),
+   its supply pressure drawn after the rig's other draws: the rig's other runs and nuisances are those of its seed
+   without it. The remedy the weak-motion warning advises where the payload rests on the upper stop.
 
 The rigs are written under `--out` (not part of the repository). Ends with identify.py's RESULT line.
 """
@@ -86,6 +89,8 @@ def write_rig(directory, template, params, truth, nuisance, substeps, seed):
             y0 = system.initial_state(ATMOSPHERE if e["p0"] == "p_atm" else supply)
         else:
             system = truth.with_supply_pressure(supply)
+            if "payload_kg" in e:  # a run with weights added (--payload-run)
+                system = pj.PayloadFromModel(float(e["payload_kg"]))(system)
             signal, y0 = pj.Triangle(float(e["lo"]), float(e["hi"]), float(e["f_tri"])), None
             if str(e.get("init", "")).startswith("unknown"):
                 preroll = round(nuisance["e4_preroll_s"] / period) * period  # logging starts on a PWM period
@@ -117,9 +122,14 @@ def main(argv=None):
     ap.add_argument("--substeps", type=int, default=64, help="RK4 nodes per PWM period of the simulation")
     ap.add_argument("--out", default="results/unseen_rigs")
     ap.add_argument("--no-fit", action="store_true", help="write the rigs only")
+    ap.add_argument("--payload-run", type=float, default=None, metavar="KG",
+                    help="also record E5, E3's triangle with a payload of KG kg (meta.json payload_kg): the remedy "
+                         "the weak-motion warning advises; the rig's other runs and nuisances stay those of its seed")
     args = ap.parse_args(argv)
     if args.rigs < 1:
         raise SystemExit("--rigs must be >= 1")
+    if args.payload_run is not None and not args.payload_run > 0:
+        raise SystemExit("--payload-run must be a mass > 0 [kg]")
     out = pathlib.Path(args.out)
     truth_meta = json.loads((pathlib.Path(BENCH) / "meta.json").read_text())
     template = json.loads((REALISTIC / "meta.json").read_text())
@@ -132,7 +142,12 @@ def main(argv=None):
         params = draw_params(truth_meta, rng)
         nuisance = draw_nuisance(list(template["experiments"]), rng, float(model.valve.supply()))
         directory = out / f"rig{seed}"
-        write_rig(directory, template, params, truth_model(model, bench, params), nuisance, args.substeps, seed)
+        runs = template
+        if args.payload_run is not None:  # drawn after the rig's own draws, recorded last: those stay as they were
+            runs = dict(template, experiments={**template["experiments"], "E5": dict(
+                template["experiments"]["E3"], payload_kg=args.payload_run)})
+            nuisance["supply_pressure_Pa"]["E5"] = float(model.valve.supply()) * rng.uniform(0.97, 1.03)
+        write_rig(directory, runs, params, truth_model(model, bench, params), nuisance, args.substeps, seed)
         print(f"{directory}: delay {nuisance['delay_s'] * 1e3:.2f} ms, offset {nuisance['pressure_offset_Pa']:.0f} Pa, "
               f"gain {nuisance['pressure_gain']:.4f}, E4 from {nuisance['e4_preroll_s']:.2f} s", flush=True)
         sets.append(str(directory))

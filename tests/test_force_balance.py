@@ -11,7 +11,7 @@ import pytest
 
 import pamjax as pj
 from pamjax import presets
-from pamjax._fit.force_balance import WEAK_MOTION, force_balance, motion_census, weak_motion
+from pamjax._fit.force_balance import WEAK_MOTION, _advice, force_balance, motion_census, weak_motion
 
 jax.config.update("jax_enable_x64", True)
 
@@ -201,7 +201,27 @@ def test_a_fit_whose_payload_barely_moves_says_its_force_law_rests_on_few_sample
     (sliding, at_rest, upper, lower), = motion_census(start, [_window(rec, 1.0)]).values()
     assert 0 < sliding < 0.1 * (sliding + at_rest + upper + lower), (sliding, at_rest, upper, lower)
     [msg] = weak_motion(start, [_window(rec, 1.0)])
-    assert msg.startswith("from1: the payload slides in only") and "profile" in msg and "a lower top duty" in msg, msg
+    assert msg.startswith("from1: the payload slides in only") and "profile" in msg, msg
+    # the advice: a run with half the muscle's force at zero contraction and supply pressure as its payload (eq. 7
+    # at x = 0 and the valve's 0.65 MPa abs in gauge: ~577 N, ~29 kg), which the muscle cannot hold on the upper stop
+    # at low duty; already carrying more than that, a lower top duty
+    force = _eq7(*_law(start), 0.0, float(start.valve.supply_pressure) - 101325.0)
+    mass = 0.5 * force / 9.81
+    assert 25 < mass < 35 and f"a heavier payload, about {mass:.0f} kg instead of 9.6 kg" in msg, (mass, msg)
+    assert f"{force:.0f} N" in msg and "payload_kg" in msg and "a lower top duty" not in msg, msg
+    heavy = eqx.tree_at(lambda m: m.payload_mass, start, 40.0)
+    [msg_heavy] = weak_motion(heavy, [_window(rec, 1.0)])
+    assert msg_heavy.endswith("(off the upper stop: a lower top duty)"), msg_heavy
+    # on the lower stop: a lighter payload where the model's is heavier than half that force, else a higher bottom
+    # duty; where friction holds the payload between the stops, a wider sweep whatever the payload
+    on_lower, held = [5, 0, 0, 95], [5, 80, 10, 5]
+    assert f"a lighter payload, about {mass:.0f} kg instead of 40 kg" in _advice(heavy, [_window(rec, 1.0)], on_lower)
+    assert _advice(start, [_window(rec, 1.0)], on_lower) == "off the lower stop: a higher bottom duty"
+    assert _advice(heavy, [_window(rec, 1.0)], held).startswith("a wider or faster duty sweep")
+    # a run already made with a heavier payload than the advice's (pamjax.PayloadFromModel): the duty, not the payload
+    window = _window(rec, 1.0)
+    with_heavy_run = [window, eqx.tree_at(lambda e: e.build, window, pj.PayloadFromModel(40.0))]
+    assert _advice(start, with_heavy_run, [5, 0, 95, 0]) == "off the upper stop: a lower top duty"
     # a tank test (no position) is no muscle run, and does not dilute the census
     tank = pj.Experiment(pj.Recording(rec.t, {"pressure": rec["pressure"]}), pj.Constant(0.5),
                          scales={"pressure": NOISE["pressure"]})

@@ -310,6 +310,12 @@ DAMAGE = {
     "wrong triangle": (_meta_edit(lambda m: m["experiments"]["M1"].update(f_tri=0.3)),
                        "not meta.json's triangle.*at any phase"),
     "mid-way at rest": (_meta_edit(lambda m: m["experiments"]["M1"].pop("init")), "logged from the middle.*unknown"),
+    "payload of no mass": (_meta_edit(lambda m: m["experiments"]["M0"].update(payload_kg=0)),
+                           "M0: payload_kg must be > 0 .kg."),
+    "payload as text": (_meta_edit(lambda m: m["experiments"]["M0"].update(payload_kg="20 kg")),
+                        "M0: payload_kg must be a number .kg., got '20 kg'"),
+    "payload on a tank": (_meta_edit(lambda m: m["experiments"]["T1"].update(payload_kg=20)),
+                          "'T1' is a tank test, which lifts no payload"),
     "zero noise": (_meta_edit(lambda m: m["noise"].update(p_std_Pa=0)), "p_std_Pa must be.*> 0"),
     "unqualified bar": (_csv_edit("T1", lambda h, r: [h.replace("barg", "bar"), *r]), "ABSOLUTE or GAUGE"),
     "NaN": (_csv_edit("T1", lambda h, r: [h, *r[:5], "0.005,0.5,nan,0", *r[6:]]), "NaN/inf at row 5"),
@@ -603,3 +609,38 @@ def test_the_position_offset_is_freed_only_where_a_run_rests_on_a_stroke_limit(t
     assert ("mm from a stroke limit" in notes) is (not freed)
     if not freed:
         assert "+0.70 mm" in notes  # the rest level, as the sensor reads it
+
+
+def test_a_run_with_another_payload_is_simulated_with_it(tmp_path):
+    """A muscle run made with 25 kg on the hook (meta.json `payload_kg`): its experiment simulates the plant lifting
+    25 kg (`pamjax.PayloadFromModel`), and the plant that recorded it scores it at the noise; read as a 9.6 kg run,
+    it is far off. The other runs keep the model's payload."""
+    plant = _plant()
+    heavy = eqx.tree_at(lambda m: m.payload_mass, plant, 25.0)
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 2.0 + 5e-4, 1e-3)
+    signal = pj.Triangle(0.05, 0.95, 0.5)
+    clean = _read_at(heavy, signal, t, None)
+    duty = np.asarray(jax.vmap(signal)(np.floor(t / 0.02 + 1e-9) * 0.02))
+    p = clean["pressure"] - ATM + NOISE["p_std_Pa"] * rng.standard_normal(t.size)
+    x = clean["position"] + NOISE["x_std_m"] * rng.standard_normal(t.size)
+    assert np.ptp(clean["position"]) > 0.01  # the payload moves
+    for name in ("H", "L"):
+        np.savetxt(tmp_path / f"{name}.csv", np.column_stack([t, duty, p / 1e5, x * 1e3]), delimiter=",",
+                   header="time [s],duty [-],pressure [barg],position [mm]", comments="", fmt="%.6f")
+    runs = dict(kind="muscle_triangle", lo=0.05, hi=0.95, f_tri=0.5)
+    meta = dict(experiments={"H": dict(runs, payload_kg=25), "L": runs}, noise=NOISE, fitted_keys=["Fc"])
+    (tmp_path / "meta.json").write_text(json.dumps(meta))
+    bench = pj.bench.load_bench(tmp_path, plant)
+    by_name = {e.name: e for e in bench.experiments}
+    assert float(by_name["H"].system_for(plant).payload_mass) == 25.0
+    assert float(by_name["L"].system_for(plant).payload_mass) == float(plant.payload_mass)
+    assert any("H: payload 25 kg" in n for n in bench.notes), bench.notes
+    errors = pj.evaluate(plant, bench.experiments)
+    for c, sigma in (("pressure", NOISE["p_std_Pa"]), ("position", NOISE["x_std_m"])):
+        assert errors["H"][c]["rmse"] < 1.2 * sigma, errors["H"][c]
+        assert errors["L"][c]["rmse"] > 5 * sigma, errors["L"][c]
+    with pytest.raises(PamjaxInputError, match="PayloadFromModel.mass"):
+        pj.PayloadFromModel(-1.0)
+    with pytest.raises(PamjaxInputError, match="lifts no payload"):
+        pj.PayloadFromModel(20.0)(pj.TankFromModel(5e-5)(plant))

@@ -319,6 +319,7 @@ def _recordings():
                       substeps=8, sensors="bench"),
         pj.Experiment(arrays, pj.Constant(np.float64(0.5)), channels=("pressure",), initial={"pressure": "supply"}),
         pj.TankFromModel(np.float64(5e-5), polytropic_index=1),
+        pj.PayloadFromModel(np.float64(20.0)), pj.PayloadFromModel(20),
     ]
 
 

@@ -33,10 +33,10 @@ import numpy as np
 from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError
 from .._core.units import MAX_ABSOLUTE_PA, MIN_ABSOLUTE_PA
-from .._fit.experiment import Experiment, TankFromModel
+from .._fit.experiment import Experiment, PayloadFromModel, TankFromModel
 from .._fit.measurement import Measurement
 from .._fit.rig import DEFAULT_GROUP, Rig, RunConditions, Sensors, StartState
-from .._systems.base import AbstractSystem
+from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from .files import (
     FITTED_KINDS,
     MUSCLE_KINDS,
@@ -246,6 +246,9 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
     experiments = []
     for name, kind, e, rec, signal in specs:
         if kind in TANK_KINDS:
+            if "payload_kg" in e:
+                raise PamjaxInputError(f"{where}/meta.json: {name!r} is a tank test, which lifts no payload; "
+                                       "payload_kg belongs to muscle runs")
             volume = number(e, "V_tank", f"{where}/meta.json: {name}", 0.0, None, "m^3")
             if volume is None or volume <= 0:
                 raise PamjaxInputError(f"{where}/meta.json: tank test {name!r} needs V_tank, its volume > 0 [m^3]")
@@ -267,7 +270,8 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
                 raise PamjaxInputError(f"{where}/meta.json: no noise level for {missing} (give 'noise')")
             lead = START_LEAD if name in unknown and "start" in names else 0.0  # solved from before the log
             experiments.append(Experiment(rec, signal, channels=channels, scales={c: noise[c] for c in channels},
-                                          name=name, substeps=substeps, t0=rec.t[0] - lead))
+                                          name=name, substeps=substeps, t0=rec.t[0] - lead,
+                                          build=_payload(e, model, f"{where}/meta.json: {name}", notes)))
     if not experiments:
         raise PamjaxInputError(f"{where}: no experiment of the kinds {list(kinds)}")
     bench = Bench(experiments, free, keys, noise, skipped, meta, directory, None if rate is None else float(rate),
@@ -277,6 +281,22 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
         _with_nuisance(bench, specs, names, p_atm, float(position_offset), pressure_gain, by_default=nuisance is True,
                        pressure_gain_sd=pressure_gain_sd)
     return bench
+
+
+def _payload(e, model, where, notes):
+    """`PayloadFromModel` for a muscle run whose meta.json entry gives `payload_kg` (weights added or taken off),
+    else None (the model's payload)."""
+    mass = number(e, "payload_kg", where, unit="kg")
+    if mass is None:
+        return None
+    if mass <= 0:
+        raise PamjaxInputError(f"{where}: payload_kg must be > 0 [kg] (the mass the muscle lifts in this run), got "
+                               f"{e['payload_kg']!r}")
+    if not isinstance(model, AbstractMuscleSystem):
+        raise PamjaxInputError(f"{where}: payload_kg is given but the model ({type(model).__name__}) lifts no payload")
+    notes.append(f"{where.rsplit(': ', 1)[-1]}: payload {mass:g} kg (payload_kg; the model's is "
+                 f"{float(model.payload_mass):g} kg)")
+    return PayloadFromModel(mass)
 
 
 def _unfreed_notes(notes, names, unknown, specs, where):

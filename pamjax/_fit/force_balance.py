@@ -41,6 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.errors import PamjaxInputError
 from .experiment import Experiment
 from .parameters import ParameterSpace
 from .rig import split
@@ -59,6 +60,12 @@ STRIDE = 5  # every 5th sample (1 kHz → 200 Hz): the balance needs no more, an
 # whose force law or friction missed 2 % (2.6-42 %; rig1403's F_c +42 % with a standard error of 4 %); the lowest
 # above it (31.6 %, rig1002) was within 0.3 %.
 WEAK_MOTION = 0.15
+# The payload `weak_motion` advises for a run that moves, as a share of the muscle's force at zero contraction and
+# supply pressure: half keeps the muscle able to lift it over much of its stroke at high duty and unable to hold it
+# on the upper stop at low duty. Measured (benchmarks/RESULTS.md, identify, Session 52): one 25 s triangle run
+# with 30 kg (half the MAS-10 preset's 577 N) beside E3 and E4 brought all nine stop-resting unseen rigs from 2.6-208 %
+# off to within 0.57 %; the fits' own advice there, 24-36 kg, did as well.
+PAYLOAD_SHARE = 0.5
 
 
 def _local_quadratic(y, dt, half):
@@ -331,8 +338,31 @@ def weak_motion(model: eqx.Module, experiments) -> list[str]:
             "one, so their standard errors may understate the uncertainty several-fold (a profile, "
             "pamjax.profile_likelihood, can find a lower minimum nearby, but its interval follows one valley of the "
             "cost and need not reach the others)")
-    advice = ("a wider or faster duty sweep: friction holds it still" if counts[1] > counts[2] + counts[3] else
-              "off the upper stop: a lower top duty" if counts[2] >= counts[3] else
-              "off the lower stop: a higher bottom duty")
+    advice = _advice(model, experiments, counts)
     return [f"{', '.join(census)}: " + what.format(where=where, pct=pct[0])
             + f"; to identify them, record muscle runs that keep the payload moving ({advice})"]
+
+
+def _advice(model, experiments, counts):
+    """What run would move the payload: a wider duty sweep where friction holds it, else another payload (one
+    PAYLOAD_SHARE of the force the muscle pulls at zero contraction and supply pressure) where the runs' payloads are
+    all lighter (on the upper stop) or all heavier (on the lower) than that, else another duty range."""
+    if counts[1] > counts[2] + counts[3]:
+        return "a wider or faster duty sweep: friction holds it still"
+    upper = counts[2] >= counts[3]
+    systems = [s for e, s in ((e, e.system_for(model)) for e in experiments if isinstance(e, Experiment))
+               if _is_muscle_run(e, s)]
+    carried = [float(s.payload_mass) for s in systems]
+    system = systems[0]
+    try:
+        force = float(system.muscle.static_force(0.0, system.valve.supply(), system.air))
+    except PamjaxInputError:  # a valve without a supply pressure of its own
+        force = float("nan")
+    mass = PAYLOAD_SHARE * force / float(system.gravity)
+    if upper and mass > 1.2 * max(carried) or not upper and 0 < mass < min(carried) / 1.2:
+        return (f"off the {'upper' if upper else 'lower'} stop: a run with a {'heavier' if upper else 'lighter'} "
+                f"payload, about {mass:.0f} kg instead of {max(carried) if upper else min(carried):g} kg — half the "
+                f"{force:.0f} N the muscle pulls at zero contraction and supply pressure, which it lifts at high duty "
+                "and lets down at low duty; in a bench directory, payload_kg in the run's meta.json entry, else "
+                "pamjax.PayloadFromModel")
+    return "off the upper stop: a lower top duty" if upper else "off the lower stop: a higher bottom duty"
