@@ -230,7 +230,7 @@ def run(args, data, out):
         print(f"wrote {out / 'profile.json'} and {out / 'profile.png'}")
     elif pj.FitUncertainty.of(res).cautions:  # the fit's weak-motion warning: few samples fix the force law
         print("  the same command with --profile Fc looks along F_c for a lower minimum and fits again from it "
-              "(minutes); no interval bounds the other minima: record runs that move the payload")
+              "(minutes); no interval bounds the other minima: the run the warning names is what identifies them")
     plot(out / "joint.png", res.model, [e for e in full.experiments if e.name in recorded])
     print(f"wrote {out / 'joint.json'} and {out / 'joint.png'}")
 
