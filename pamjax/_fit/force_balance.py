@@ -66,6 +66,9 @@ WEAK_MOTION = 0.15
 # with 30 kg (half the MAS-10 preset's 577 N) beside E3 and E4 brought all nine stop-resting unseen rigs from 2.6-208 %
 # off to within 0.57 %; the fits' own advice there, 24-36 kg, did as well.
 PAYLOAD_SHARE = 0.5
+# Advise another payload only where it differs from every run's by more than this factor; closer, the runs already
+# carry about that payload, and the advice falls back to the duty range (the weights a rig swaps differ far more).
+PAYLOAD_MARGIN = 1.2
 
 
 def _local_quadratic(y, dt, half):
@@ -359,7 +362,7 @@ def _advice(model, experiments, counts):
     except PamjaxInputError:  # a valve without a supply pressure of its own
         force = float("nan")
     mass = PAYLOAD_SHARE * force / float(system.gravity)
-    if upper and mass > 1.2 * max(carried) or not upper and 0 < mass < min(carried) / 1.2:
+    if upper and mass > PAYLOAD_MARGIN * max(carried) or not upper and 0 < mass < min(carried) / PAYLOAD_MARGIN:
         return (f"off the {'upper' if upper else 'lower'} stop: a run with a {'heavier' if upper else 'lighter'} "
                 f"payload, about {mass:.0f} kg instead of {max(carried) if upper else min(carried):g} kg — half the "
                 f"{force:.0f} N the muscle pulls at zero contraction and supply pressure, which it lifts at high duty "
