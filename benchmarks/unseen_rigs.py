@@ -20,6 +20,8 @@ CSV files as they are):
 4. `--payload-run KG`: one more run, E5, E3's triangle with a payload of KG kg (`payload_kg` in its meta.json entry),
    its supply pressure drawn after the rig's other draws: the rig's other runs and nuisances are those of its seed
    without it. The remedy the weak-motion warning advises where the payload rests on the upper stop.
+   `--design-run DIR` records instead, as E5, the run `pamjax design` wrote into DIR (design.csv's duty, held per PWM
+   period; design.json's `payload_kg`): a `"muscle_run"` with a recorded duty column and no triangle parameters.
 
 The rigs are written under `--out` (not part of the repository). Ends with identify.py's RESULT line.
 """
@@ -78,7 +80,8 @@ def write_rig(directory, template, params, truth, nuisance, substeps, seed):
     period = float(truth.valve.period)
     experiments = {}
     for name, e in template["experiments"].items():
-        e = {k: v for k, v in e.items() if k != "phase_s"}
+        design = e.get("design_csv")  # --design-run: the designed duty (read here, not written to meta.json)
+        e = {k: v for k, v in e.items() if k not in ("phase_s", "design_csv")}
         supply = nuisance["supply_pressure_Pa"][name]
         fs = float(template.get("sampling_hz", 1000.0))
         t = np.arange(0.0, float(e["t_end"]) + 0.5 / fs, 1.0 / fs)
@@ -91,7 +94,12 @@ def write_rig(directory, template, params, truth, nuisance, substeps, seed):
             system = truth.with_supply_pressure(supply)
             if "payload_kg" in e:  # a run with weights added (--payload-run)
                 system = pj.PayloadFromModel(float(e["payload_kg"]))(system)
-            signal, y0 = pj.Triangle(float(e["lo"]), float(e["hi"]), float(e["f_tri"])), None
+            if design is not None:  # the design's duty, one per PWM period (its last row: the run's end)
+                rec = pj.Recording.load(design)
+                signal = pj.Sampled(rec.t[:-1], np.asarray(rec["command"])[:-1], period=period)
+            else:
+                signal = pj.Triangle(float(e["lo"]), float(e["hi"]), float(e["f_tri"]))
+            y0 = None
             if str(e.get("init", "")).startswith("unknown"):
                 preroll = round(nuisance["e4_preroll_s"] / period) * period  # logging starts on a PWM period
                 e["init"] = "unknown: logging started mid-way through the triangle run"
@@ -115,6 +123,22 @@ def write_rig(directory, template, params, truth, nuisance, substeps, seed):
     (directory / "meta.json").write_text(json.dumps(meta, indent=1) + "\n")
 
 
+def _extra_run(args, template):
+    """E5's meta.json entry: E3's triangle with `--payload-run` kg, or the design of `--design-run` (a muscle run of
+    its duration, driven by its duty column, with its payload), else None."""
+    if args.payload_run is not None:
+        return dict(template["experiments"]["E3"], payload_kg=args.payload_run)
+    if args.design_run is None:
+        return None
+    folder = pathlib.Path(args.design_run)
+    design = json.loads((folder / "design.json").read_text())
+    entry = dict(kind="muscle_run", t_end=float(design["duration"]), design_csv=str(folder / "design.csv"),
+                 init="rest at equilibrium F_static(x0,p_atm)=Mg, valve off, stuck")
+    if design.get("payload_kg") is not None:
+        entry["payload_kg"] = float(design["payload_kg"])
+    return entry
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rigs", type=int, default=3)
@@ -122,6 +146,9 @@ def main(argv=None):
     ap.add_argument("--substeps", type=int, default=64, help="RK4 nodes per PWM period of the simulation")
     ap.add_argument("--out", default="results/unseen_rigs")
     ap.add_argument("--no-fit", action="store_true", help="write the rigs only")
+    ap.add_argument("--design-run", default=None, metavar="DIR",
+                    help="also record E5, the run `pamjax design` wrote into DIR (design.csv's duty; design.json's "
+                         "payload_kg where it carries one): the rig's other runs and nuisances stay those of its seed")
     ap.add_argument("--payload-run", type=float, default=None, metavar="KG",
                     help="also record E5, E3's triangle with a payload of KG kg (meta.json payload_kg): the remedy "
                          "the weak-motion warning advises; the rig's other runs and nuisances stay those of its seed")
@@ -130,6 +157,10 @@ def main(argv=None):
         raise SystemExit("--rigs must be >= 1")
     if args.payload_run is not None and not args.payload_run > 0:
         raise SystemExit("--payload-run must be a mass > 0 [kg]")
+    if args.payload_run is not None and args.design_run is not None:
+        raise SystemExit("give --payload-run or --design-run, not both (each records E5)")
+    if args.design_run is not None and not (pathlib.Path(args.design_run) / "design.csv").is_file():
+        raise SystemExit(f"--design-run {args.design_run}: no design.csv there (a pamjax design output folder)")
     out = pathlib.Path(args.out)
     truth_meta = json.loads((pathlib.Path(BENCH) / "meta.json").read_text())
     template = json.loads((REALISTIC / "meta.json").read_text())
@@ -143,9 +174,9 @@ def main(argv=None):
         nuisance = draw_nuisance(list(template["experiments"]), rng, float(model.valve.supply()))
         directory = out / f"rig{seed}"
         runs = template
-        if args.payload_run is not None:  # drawn after the rig's own draws, recorded last: those stay as they were
-            runs = dict(template, experiments={**template["experiments"], "E5": dict(
-                template["experiments"]["E3"], payload_kg=args.payload_run)})
+        extra = _extra_run(args, template)
+        if extra is not None:  # drawn after the rig's own draws, recorded last: those stay as they were
+            runs = dict(template, experiments={**template["experiments"], "E5": extra})
             nuisance["supply_pressure_Pa"]["E5"] = float(model.valve.supply()) * rng.uniform(0.97, 1.03)
         write_rig(directory, runs, params, truth_model(model, bench, params), nuisance, args.substeps, seed)
         print(f"{directory}: delay {nuisance['delay_s'] * 1e3:.2f} ms, offset {nuisance['pressure_offset_Pa']:.0f} Pa, "

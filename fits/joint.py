@@ -23,7 +23,9 @@ experiment's residual RMSE of `p` [Pa] and `x` [m] at the recordings' rate), the
 diagnostics (`diagnosis`: what a mismatch points to), with `--nuisance` the rig's `nuisance` (`delay_s`,
 `pressure_offset_Pa`, `pressure_gain`, `position_offset_m`, `supply_pressure_Pa` per run, `start` per run, and
 `std_err` of each; `calibration` and `gauges` where a calibration's uncertainty or supply readings were given: each
-measured value, its sd and z); and `OUT/joint.png`, data against model with residuals. `--profile Fc,k0` (bench keys
+measured value, its sd and z); `OUT/model.json`, the fitted plant (`pamjax.load_model`; a `[model] file` of
+`pamjax simulate` or `pamjax design`, e.g. to design the run a weak-motion warning names); and `OUT/joint.png`, data
+against model with residuals. `--profile Fc,k0` (bench keys
 or the fit's labels, or `all`) profiles those parameters after the fit (`pamjax.profile_likelihood`): their
 likelihood-ratio intervals in `joint.json`'s `profile`, `OUT/profile.json` and `OUT/profile.png`; where a profile
 finds a lower cost than the fit's, the fit is taken again from there and profiled again (`profile.refits`). A second
@@ -117,8 +119,8 @@ def main(argv=None):
     args = parse_args(argv)
     data = pathlib.Path(args.data)
     out = pathlib.Path(args.out or f"results/joint_{data.resolve().name}")
-    targets = [out / "joint.json", out / "joint.png"] + ([out / "profile.json", out / "profile.png"] if args.profile
-                                                         else [])
+    targets = [out / "joint.json", out / "model.json", out / "joint.png"]
+    targets += [out / "profile.json", out / "profile.png"] if args.profile else []
     existing = [str(p) for p in targets if p.exists()]
     if existing and not args.overwrite:
         sys.exit(f"joint.py: {', '.join(existing)} exist; pass --overwrite to replace them (or another --out)")
@@ -222,6 +224,10 @@ def run(args, data, out):
     if prof is not None:
         summary["profile"] = _profile_summary(prof, refits, profile_s)
     (out / "joint.json").write_text(json.dumps(summary, indent=1))
+    plant = res.model.plant if isinstance(res.model, pj.Rig) else res.model  # the rig's nuisances: in joint.json
+    pj.save_model(out / "model.json", plant, overwrite=True, provenance={  # what pamjax fit writes as its model.json
+        "written_by": f"fits/joint.py --data {data}", "status": res.status, "cost": res.cost, "free": res.labels,
+        "covariance": pj.FitUncertainty.of(res).document()})
     report(res, values, errors, summary, over_noise)
     if prof is not None:
         print(f"profiles ({summary['profile']['profile_s']:.0f} s, {len(refits)} refit(s) from a lower point):\n"
@@ -232,7 +238,8 @@ def run(args, data, out):
         print("  the same command with --profile Fc looks along F_c for a lower minimum and fits again from it "
               "(minutes); no interval bounds the other minima: the run the warning names is what identifies them")
     plot(out / "joint.png", res.model, [e for e in full.experiments if e.name in recorded])
-    print(f"wrote {out / 'joint.json'} and {out / 'joint.png'}")
+    print(f"wrote {out / 'joint.json'}, {out / 'model.json'} (the fitted plant: pamjax.load_model, a [model] file) "
+          f"and {out / 'joint.png'}")
 
 
 def _profiled(value, labels):

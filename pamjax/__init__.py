@@ -81,8 +81,8 @@ from ._solve.simulate import Trajectory as Trajectory, simulate as simulate
 # --- fitting: recordings, experiments, parameters, fit, model files, designs (bench directories: pamjax.bench) ----
 from ._identifiability.design import DesignResult as DesignResult, design_experiment as design_experiment
 from ._identifiability.design_result import PamjaxDesignWarning as PamjaxDesignWarning
-from ._fit.experiment import (AbstractExperiment as AbstractExperiment, Experiment as Experiment, PayloadFromModel
-                              as PayloadFromModel, SameSystem as SameSystem, TankFromModel as TankFromModel)
+from ._fit.experiment import AbstractExperiment as AbstractExperiment, Experiment as Experiment
+from ._fit.builds import PayloadFromModel as PayloadFromModel, SameSystem as SameSystem, TankFromModel as TankFromModel
 from ._fit.fit import FitResult as FitResult, evaluate as evaluate, fit as fit
 from ._files.model_file import load_model as load_model, save_model as save_model
 from ._fit.multistart import (

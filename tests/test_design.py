@@ -5,6 +5,7 @@ replays as the same signal; `pamjax design CONFIG.toml` writes it; bad input is 
 The system is paper 000's valve feeding the 5e-5 m³ test tank (pressure only, a few PWM periods): small programs.
 """
 
+import json
 import math
 import pathlib
 import textwrap
@@ -543,3 +544,77 @@ def test_a_designed_run_is_a_bench_experiment(muscle_design, tmp_path):
     rec_no_duty.to_csv(tmp_path / "D1.csv", overwrite=True)
     with pytest.raises(PamjaxInputError, match=r"'D1' has no recorded duty column"):
         pj.bench.load_bench(tmp_path, model)
+
+
+def _latching(model):
+    """The MAS-10 preset with eq. 7's F_max raised by 300 N: at the upper stop it pulls ~190 N even at atmospheric
+    pressure, above the 94 N payload, so a payload that reaches the stop stays there (the unseen rigs' case)."""
+    a = model.muscle.force_law.max_force_coefficients
+    return eqx.tree_at(lambda m: m.muscle.force_law.max_force_coefficients, model, a.at[0].add(300.0))
+
+
+def test_design_config_payload_kg_designs_a_run_with_another_payload(tmp_path):
+    # `payload_kg` in [design]: the signal drives the model lifting that payload (build = PayloadFromModel), "auto"
+    # the one pamjax.PayloadFromModel.advised proposes; bad values and a tank test beside it are refused by key.
+    from pamjax._cli.design import load
+
+    body = ('[model]\npreset = "mas10_system"\noptions = { valve = "pwm" }\n[design]\n'
+            'free = ["friction.coulomb_force"]\nduration = 2.0\nnoise = { pressure = 2e3, position = 1e-4 }\n%s\n')
+    cfg = tmp_path / "payload.toml"
+    for value in ("30.0", '"auto"'):
+        cfg.write_text(body % f"payload_kg = {value}")
+        model, _, _, kwargs, _ = load(cfg)
+        system = kwargs["build"](model)
+        expected = 30.0 if value == "30.0" else float(pj.PayloadFromModel.advised(model).mass)
+        assert isinstance(system, pj.MuscleSystem) and float(system.payload_mass) == pytest.approx(expected)
+        assert eqx.tree_equal(eqx.tree_at(lambda s: s.payload_mass, system, model.payload_mass), model)  # the rest
+    for bad, match in (("-5.0", r"\[design\] payload_kg must be \"auto\" or a number > 0"),
+                       ('"heavy"', r"\[design\] payload_kg must be \"auto\" or a number > 0"),
+                       ("30000.0", r"payload_kg = 30000 kg: more than 1000 kg; that looks like g"),
+                       ("30.0\ntank_volume = 5e-5", r"\[design\]: give tank_volume .* or payload_kg .*not both")):
+        cfg.write_text(body % f"payload_kg = {bad}")
+        with pytest.raises(PamjaxInputError, match=match):
+            load(cfg)
+
+
+def test_a_design_with_another_payload_says_so_and_its_csv_carries_it(tmp_path):
+    # The designed run's payload, where build changed it, is part of the design (the bench must carry it and the fit
+    # read it): DesignResult.payload_kg, a comment line of design.csv (which Recording.load still reads) and JSON.
+    from pamjax._identifiability.design import designed_payload
+    from pamjax._identifiability.design_result import DesignResult
+
+    model = presets.mas10_system("pwm")
+    assert designed_payload(model, pj.PayloadFromModel(26.5)(model)) == 26.5
+    assert designed_payload(model, model) is None
+    assert designed_payload(model, pj.TankFromModel(5e-5)(model)) is None
+    res = DesignResult(times=[0.0, 0.02], duty=[0.3, 0.6], period=0.02, labels=["friction.coulomb_force"],
+                       values=[16.0], subset=["friction.coulomb_force"], criterion="D",
+                       standard_errors={"design": [0.1], "prior": [math.inf]}, objective=[0.0, -1.0], history=[],
+                       constraints={"feasible": True}, parametrisation="envelope", iterations=1, message="",
+                       design_s=1.0, compile_s=0.5, duration=0.04, payload_kg=26.5)
+    text = res.to_csv(tmp_path / "design.csv").read_text()
+    assert "# payload 26.5 kg (not the model's): load the rig with it and fit the recording with payload_kg = 26.5" \
+        in text
+    rec = pj.Recording.load(tmp_path / "design.csv")
+    np.testing.assert_allclose(np.asarray(rec["command"]), [0.3, 0.6, 0.6])
+    assert json.loads(res.to_json(tmp_path / "design.json").read_text())["payload_kg"] == 26.5
+
+
+def test_a_failed_design_whose_payload_the_stop_holds_names_the_heavier_payload():
+    # A design whose payload passes the upper stroke limit, where the model's muscle holds it on the stop even at
+    # atmospheric pressure: the failure names payload_kg = "auto" and its mass; not where the muscle lets it down,
+    # nor where the design already has a build of its own.
+    from types import SimpleNamespace
+
+    from pamjax._cli.design import _payload_hint
+
+    model = presets.mas10_system("pwm")
+    over = SimpleNamespace(constraints=dict(position_range=[-0.02, 0.075], stroke_limits=[-0.02, 0.07]))
+    within = SimpleNamespace(constraints=dict(position_range=[-0.02, 0.05], stroke_limits=[-0.02, 0.07]))
+    latching = _latching(model)
+    mass = float(pj.PayloadFromModel.advised(latching).mass)
+    hint = _payload_hint(latching, over, {})
+    assert f'payload_kg = "auto" designs the run with {mass:.3g} kg' in hint and "no duty brings it down" in hint
+    assert _payload_hint(model, over, {}) == ""  # the preset lets its payload down at low pressure
+    assert _payload_hint(latching, within, {}) == ""
+    assert _payload_hint(latching, over, {"build": pj.PayloadFromModel(40.0)}) == ""

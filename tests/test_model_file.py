@@ -95,6 +95,10 @@ def test_bad_json_names_line_and_column_and_files_are_never_replaced(tmp_path):
         pamjax.load_model(tmp_path / "missing.json")
     with pytest.raises(FileExistsError, match="overwrite=True"):
         pamjax.save_model(path, presets.mas10_system("pwm"))
+    swapped = tmp_path / "swapped.json"
+    with pytest.raises(PamjaxInputError, match=r"save_model takes the path first: save_model\('.*swapped\.json', "):
+        pamjax.save_model(presets.mas10_system("pwm"), str(swapped))  # the arguments swapped: named, nothing written
+    assert not swapped.exists()
 
 
 def test_a_fitted_model_carries_on(tmp_path):

@@ -644,3 +644,21 @@ def test_a_run_with_another_payload_is_simulated_with_it(tmp_path):
         pj.PayloadFromModel(-1.0)
     with pytest.raises(PamjaxInputError, match="lifts no payload"):
         pj.PayloadFromModel(20.0)(pj.TankFromModel(5e-5)(plant))
+
+
+def test_the_advised_payload_is_half_the_pull_at_zero_contraction_and_supply_pressure():
+    """`PayloadFromModel.advised`: PAYLOAD_SHARE (one half) of eq. 7 at x = 0 and the supply pressure (F = a0 −
+    (p_max − p_g) k0/k2, transcribed here), over g; it follows the model's force law and supply. Refused, by name,
+    for a system without a payload."""
+    plant = _plant()
+    law, air = plant.muscle.force_law, plant.air
+    for supply in (6.5e5, 5.0e5):
+        model = plant.with_supply_pressure(supply)
+        gauge = supply - float(air.atmospheric_pressure)
+        force = float(law.max_force_coefficients[0]) - (float(law.max_pressure) - gauge) * float(law.k0) / float(
+            law.k2)
+        advised = pj.PayloadFromModel.advised(model)
+        assert float(advised.mass) == pytest.approx(0.5 * force / float(model.gravity), rel=1e-12)
+        assert float(advised(model).payload_mass) == float(advised.mass)
+    with pytest.raises(PamjaxInputError, match="PayloadFromModel.advised: TankSystem lifts no payload"):
+        pj.PayloadFromModel.advised(pj.TankFromModel(5e-5)(plant))

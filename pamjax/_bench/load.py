@@ -33,7 +33,8 @@ import numpy as np
 from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError
 from .._core.units import MAX_ABSOLUTE_PA, MIN_ABSOLUTE_PA
-from .._fit.experiment import Experiment, PayloadFromModel, TankFromModel
+from .._fit.builds import PayloadFromModel, TankFromModel
+from .._fit.experiment import Experiment
 from .._fit.measurement import Measurement
 from .._fit.rig import DEFAULT_GROUP, Rig, RunConditions, Sensors, StartState
 from .._systems.base import AbstractMuscleSystem, AbstractSystem

@@ -36,11 +36,12 @@ def load(path):
     schema.validate_design(cfg, str(path))
     model = build_model(cfg.get("model", {}), path.parent)
     table = cfg["design"]
-    return model, table["free"], float(table["duration"]), build_design(table, path.parent), table.get("out")
+    return model, table["free"], float(table["duration"]), build_design(table, path.parent, model), table.get("out")
 
 
-def build_design(table, root):
-    """The keyword arguments of `pamjax.design_experiment` a validated [design] table gives."""
+def build_design(table, root, model=None):
+    """The keyword arguments of `pamjax.design_experiment` a validated [design] table gives (`model`: for
+    `payload_kg = "auto"`, the payload `pamjax.PayloadFromModel.advised` proposes for it)."""
     import pamjax as pj
 
     kwargs = {k: table[k] for k in schema.DESIGN_ARGS if k in table}
@@ -58,7 +59,22 @@ def build_design(table, root):
         kwargs["duty_band"] = tuple(kwargs["duty_band"])
     if "tank_volume" in table:  # a tank test of the model's valve, as a fit experiment's tank_volume
         kwargs["build"] = pj.TankFromModel(float(table["tank_volume"]))
+    if "payload_kg" in table:  # a muscle run with weights added or taken off, as a fit experiment's payload_kg
+        kwargs["build"] = payload_build(table["payload_kg"], model)
     return kwargs
+
+
+def payload_build(value, model):
+    """`payload_kg = 30.0` → `PayloadFromModel(30.0)`; "auto" → `PayloadFromModel.advised(model)` (a refusal named
+    as the key's)."""
+    import pamjax as pj
+
+    if value != "auto":
+        return pj.PayloadFromModel(float(value))
+    try:
+        return pj.PayloadFromModel.advised(model)
+    except PamjaxInputError as err:
+        raise PamjaxInputError(f"[design] payload_kg = \"auto\": {err}") from err
 
 
 def _initial(value, root):
@@ -91,6 +107,9 @@ def run(args):
               f"({res.design_s:.1f} s, of which {res.compile_s:.1f} s to the first iteration)")
         print(res.table())
         print(constraint_lines(res.constraints))
+        if res.payload_kg is not None:
+            print(f"payload: {res.payload_kg:.4g} kg (the model's: {float(model.payload_mass):g} kg): load the rig "
+                  f"with it, and fit its recording with payload_kg = {res.payload_kg:.4g}")
         written = []
         if res.feasible:
             written.append(folder.write("design.csv", lambda p: res.to_csv(p, overwrite=True)))
@@ -106,9 +125,32 @@ def run(args):
                   "must not play it; design.json and design.png show it):\n  "
                   + "\n  ".join(res.constraints["violations"])
                   + "\nRelax the limit named, start from a signal within it (initial = a constant duty), or allow "
-                  "more steps", file=sys.stderr)
+                  "more steps" + _payload_hint(model, res, kwargs), file=sys.stderr)
             return 1
         return 1 if folder.failed else 0
+
+
+def _payload_hint(model, res, kwargs):
+    """Where the payload passes the upper stroke limit of a run with the model's own payload and the model's muscle
+    holds it on the upper stop even at atmospheric pressure (no duty brings it down): the heavier payload that
+    `payload_kg = "auto"` would carry."""
+    import pamjax as pj
+
+    x, limits = res.constraints.get("position_range"), res.constraints.get("stroke_limits")
+    if "build" in kwargs or x is None or limits is None or not x[1] > limits[1]:
+        return ""
+    try:
+        held = float(model.muscle.static_force(model.muscle.max_position, model.air.atmospheric_pressure, model.air))
+        mass = float(pj.PayloadFromModel.advised(model).mass)
+    except (PamjaxInputError, AttributeError):  # not a muscle system, or no supply pressure of its own
+        return ""
+    weight = float(model.payload_mass) * float(model.gravity)
+    if not (held > weight and mass > float(model.payload_mass)):
+        return ""
+    return (f"\nThe payload reaches the upper stop, where the model's muscle pulls {held:.0f} N even at atmospheric "
+            f"pressure against its {weight:.0f} N weight, so no duty brings it down: a heavier payload does, "
+            f"[design] payload_kg = \"auto\" designs the run with {mass:.3g} kg (half the muscle's pull at zero "
+            "contraction and supply pressure)")
 
 
 def constraint_lines(c):

@@ -157,7 +157,8 @@ def build_experiments(tables, model, root, validation_fraction=0.0):
 
     systems = []
     for k, e in enumerate(tables):
-        build = pj.TankFromModel(e["tank_volume"]) if "tank_volume" in e else None
+        build = (pj.TankFromModel(e["tank_volume"]) if "tank_volume" in e
+                 else pj.PayloadFromModel(e["payload_kg"]) if "payload_kg" in e else None)
         if "initial" in e:
             check_initial(build(model) if build is not None else model, e["initial"], f"{_where(k)} initial")
         systems.append(build)

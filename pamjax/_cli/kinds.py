@@ -135,6 +135,11 @@ def _number_or_auto(value, key, where, table, name):
         raise PamjaxInputError(f"{where} must be \"auto\" or a number, e.g. 0.025; got {value!r}")
 
 
+def _positive_or_auto(value, key, where, table, name):
+    if value != "auto" and not (is_number(value) and np.isfinite(value) and value > 0):
+        raise PamjaxInputError(f"{where} must be \"auto\" or a number > 0, e.g. {key.shown}; got {value!r}")
+
+
 def _force_or_false(value, key, where, table, name):
     if value is not False and not (is_number(value) and np.isfinite(value)):
         raise PamjaxInputError(f"{where} must be a force [N] (e.g. 20.0) or false for no limit, got {value!r}")
@@ -276,6 +281,7 @@ _CHECKS = {
     "boolean or list of strings": _boolean_or_list,
     "pair of numbers": _pair,
     "number or auto": _number_or_auto,
+    "positive number or auto": _positive_or_auto,
     "force or false": _force_or_false,
     "duty or file": _duty_or_file,
     "options": _options,

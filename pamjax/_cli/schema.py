@@ -72,6 +72,8 @@ EXPERIMENT = {
     "scales": Key("table of positive numbers", "{ pressure = 2e3, position = 1e-4 }",
                   "the channel's noise level, in its SI unit", entry="2e3"),
     "tank_volume": Key("positive number", "5e-5", "m³", setting=True),
+    "payload_kg": Key("positive number", "30.0", "kg: this muscle run's payload, where it is not the model's",
+                      setting=True),
     "initial": Key("table of numbers", "{ pressure = 101325.0 }", "keyword arguments of the system's initial_state",
                    setting=True, entry="101325.0"),
     "rate": Key("positive number", "100.0", "Hz"),
@@ -151,7 +153,7 @@ SWEEP_KEYS = {  # the [sweep] keys each kind uses
 }
 
 DESIGN_TABLES = {"model", "design"}
-# free, duration, noise, prior, baseline, initial, tank_volume, out; the rest: pamjax.design_experiment's arguments
+# free, duration, noise, prior, baseline, initial, tank_volume, payload_kg, out; the rest: design_experiment's arguments
 DESIGN = {
     "free": Key("free", '["friction.coulomb_force"]', "parameter paths, as [fit] free"),
     "duration": Key("positive number", "33.0", "s"),
@@ -161,6 +163,8 @@ DESIGN = {
     "baseline": Key("string", '"my_current_runs.toml"', "a fit config whose experiments the design must beat"),
     "initial": Key("duty or file", "0.6", 'a constant duty, or the design CSV to start from: "earlier/design.csv"'),
     "tank_volume": Key("positive number", "5e-5", "m³", setting=True),
+    "payload_kg": Key("positive number or auto", "30.0", 'kg, or "auto": half the model\'s pull at zero contraction '
+                      "and supply pressure (pamjax.PayloadFromModel.advised)", setting=True),
     "out": Key("string", '"results/design_example"'),
     "channels": Key("list of strings", '["pressure", "position"]'),
     "start": Key("table of numbers", "{ pressure = 101325.0 }", "keyword arguments of the system's initial_state",
@@ -183,7 +187,7 @@ DESIGN = {
 }
 # the keyword arguments of pamjax.design_experiment
 DESIGN_ARGS = tuple(k for k in DESIGN if k not in ("free", "duration", "noise", "prior", "baseline", "initial",
-                                                     "tank_volume", "out"))
+                                                     "tank_volume", "payload_kg", "out"))
 
 
 # -- one validation per config -----------------------------------------------------------------------------------
@@ -248,12 +252,20 @@ def validate_fit(cfg, where="config"):
         here = f"[[experiment]] #{k + 1}"
         check_table(table, EXPERIMENT, here, required={
             "file": f"{here} needs 'file' (a CSV or NPZ recording, relative to the config)"})
+        one_build(table, here)
         conditions = [key for key in RUN_CONDITIONS if key in table and not (key == "sensors" and bench is not None)]
         if conditions and "rig" not in cfg:  # without a rig they would change nothing: refused, not ignored
             raise PamjaxInputError(
                 f"{here} {conditions[0]} is a run condition of a rig, which only a [rig] table applies: "
                 + ("a [bench] directory takes its runs' conditions from its meta.json; remove it" if bench is not None
                    else "add a [rig] table (its sensors and the nuisances to fit; it may be empty)"))
+
+
+def one_build(table, where):
+    """`tank_volume` (a tank test of the model's valve) and `payload_kg` (a muscle run's payload) exclude each other."""
+    if "tank_volume" in table and "payload_kg" in table:
+        raise PamjaxInputError(f"{where}: give tank_volume (a tank test of the model's valve) or payload_kg (the "
+                               "payload of a muscle run), not both")
 
 
 def validate_simulate(cfg, where="simulate config"):
@@ -299,6 +311,7 @@ def validate_design(cfg, where="config"):
         raise PamjaxInputError(f"{where} needs a [design] table (free, duration, noise, ...)")
     check_table(cfg["design"], DESIGN, "[design]", required={k: f"[design] needs '{k}'"
                                                              for k in ("free", "duration", "noise")})
+    one_build(cfg["design"], "[design]")
     check_model(cfg.get("model", {}))
 
 

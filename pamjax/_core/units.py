@@ -222,6 +222,7 @@ def check_absolute_pressure(values, name, *, above_atmosphere=False):
 _PLAUSIBLE = {
     "payload_mass": ("kg", 1e3, "g"),  # no pneumatic muscle lifts a tonne (DMSP-40: 6000 N)
     "mass": ("kg", 1e3, "g"),
+    "payload_kg": ("kg", 1e3, "g"),
     "min_position": ("m", 1.0, "mm"),
     "max_position": ("m", 1.0, "mm"),
     "position": ("m", 1.0, "mm"),

@@ -158,6 +158,12 @@ def save_model(path: str | os.PathLike, model: eqx.Module, *, overwrite: bool = 
     """Write `model` (every parameter, its units and structure) to the JSON file `path`; `load_model(path)` reads it
     back equal, bitwise. Refuses to replace an existing file unless `overwrite=True`. `provenance`: a JSON-able dict
     stored beside (e.g. how the model was fitted). `classes`: your own component classes used in the model."""
+    if isinstance(path, eqx.Module) and isinstance(model, str | os.PathLike):
+        raise PamjaxInputError(f"save_model takes the path first: save_model({str(model)!r}, model), got the model "
+                               "first")
+    if not isinstance(path, str | os.PathLike):
+        raise PamjaxInputError(f"save_model: path must be a file path (str or os.PathLike), got "
+                               f"{type(path).__name__}")
     path = pathlib.Path(path)
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")

@@ -21,17 +21,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._core.arrays import as_scalar, device_array
+from .._core.arrays import device_array
 from .._core.cache import structural
-from .._core.custom_types import RealArrayLike, RealScalar, RealScalarLike
-from .._core.errors import PamjaxInputError, check_positive
+from .._core.custom_types import RealArrayLike, RealScalarLike
+from .._core.errors import PamjaxInputError
 from .._core.fastjit import keyed_by_code
 from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
 from .._solve.simulate import Stepping, fixed_grid_size, resolve_stepping, solve, validate
 from .._solve.synchronous import num_periods
-from .._systems.base import AbstractMuscleSystem, AbstractSystem
-from .._systems.tank import TankSystem
+from .._systems.base import AbstractSystem
+from .builds import SameSystem
 from .recording import Recording, warn_filtered
 from .rig import DEFAULT_GROUP, split
 
@@ -96,38 +96,6 @@ class AbstractExperiment(eqx.Module):
 
 # What `fit`, `evaluate` and `predictions` take as their experiments: a list (or tuple) of them, or one
 Experiments = AbstractExperiment | Sequence[AbstractExperiment]
-
-
-class SameSystem(eqx.Module):
-    """The model is the system of the experiment."""
-
-    def __call__(self, model):
-        return model
-
-
-class TankFromModel(eqx.Module):
-    """A constant-volume tank of `volume` [m³] fed by the model's valve (paper 000's valve tests)."""
-
-    volume: RealScalar = eqx.field(converter=as_scalar)  # m³
-    polytropic_index: RealScalar = eqx.field(converter=as_scalar, default=1.4)  # -
-
-    def __call__(self, model):
-        return TankSystem(valve=model.valve, volume=self.volume, air=model.air, polytropic_index=self.polytropic_index)
-
-
-class PayloadFromModel(eqx.Module):
-    """The model's system lifting another payload of `mass` [kg]: a run made with weights added or taken off (a
-    bench's `payload_kg`). Every other parameter, the fitted ones included, is the model's."""
-
-    mass: RealScalar = eqx.field(converter=as_scalar)  # kg
-
-    def __check_init__(self):
-        check_positive(self.mass, "PayloadFromModel.mass")
-
-    def __call__(self, model):
-        if not isinstance(model, AbstractMuscleSystem):
-            raise PamjaxInputError(f"PayloadFromModel: {type(model).__name__} lifts no payload (not a muscle system)")
-        return eqx.tree_at(lambda s: s.payload_mass, model, self.mass)
 
 
 class _Constant:

@@ -42,6 +42,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.errors import PamjaxInputError
+from .builds import PAYLOAD_SHARE, PayloadFromModel
 from .experiment import Experiment
 from .parameters import ParameterSpace
 from .rig import split
@@ -60,12 +61,6 @@ STRIDE = 5  # every 5th sample (1 kHz → 200 Hz): the balance needs no more, an
 # whose force law or friction missed 2 % (2.6-42 %; rig1403's F_c +42 % with a standard error of 4 %); the lowest
 # above it (31.6 %, rig1002) was within 0.3 %.
 WEAK_MOTION = 0.15
-# The payload `weak_motion` advises for a run that moves, as a share of the muscle's force at zero contraction and
-# supply pressure: half keeps the muscle able to lift it over much of its stroke at high duty and unable to hold it
-# on the upper stop at low duty. Measured (benchmarks/RESULTS.md, identify, Session 52): one 25 s triangle run
-# with 30 kg (half the MAS-10 preset's 577 N) beside E3 and E4 brought all nine stop-resting unseen rigs from 2.6-208 %
-# off to within 0.57 %; the fits' own advice there, 24-36 kg, did as well.
-PAYLOAD_SHARE = 0.5
 # Advise another payload only where it differs from every run's by more than this factor; closer, the runs already
 # carry about that payload, and the advice falls back to the duty range (the weights a rig swaps differ far more).
 PAYLOAD_MARGIN = 1.2
@@ -358,14 +353,14 @@ def _advice(model, experiments, counts):
     carried = [float(s.payload_mass) for s in systems]
     system = systems[0]
     try:
-        force = float(system.muscle.static_force(0.0, system.valve.supply(), system.air))
-    except PamjaxInputError:  # a valve without a supply pressure of its own
-        force = float("nan")
-    mass = PAYLOAD_SHARE * force / float(system.gravity)
+        mass = float(PayloadFromModel.advised(system).mass)  # PAYLOAD_SHARE of the pull at 0 and supply pressure
+    except PamjaxInputError:  # a valve without a supply pressure of its own, a muscle that pulls nothing there
+        mass = float("nan")
+    force = mass * float(system.gravity) / PAYLOAD_SHARE
     if upper and mass > PAYLOAD_MARGIN * max(carried) or not upper and 0 < mass < min(carried) / PAYLOAD_MARGIN:
         return (f"off the {'upper' if upper else 'lower'} stop: a run with a {'heavier' if upper else 'lighter'} "
                 f"payload, about {mass:.0f} kg instead of {max(carried) if upper else min(carried):g} kg — half the "
                 f"{force:.0f} N the muscle pulls at zero contraction and supply pressure, which it lifts at high duty "
-                "and lets down at low duty; in a bench directory, payload_kg in the run's meta.json entry, else "
-                "pamjax.PayloadFromModel")
+                "and lets down at low duty; record it with payload_kg in the run's meta.json entry or [[experiment]] "
+                "table (pamjax.PayloadFromModel in Python); pamjax design with payload_kg = \"auto\" designs its duty")
     return "off the upper stop: a lower top duty" if upper else "off the lower stop: a higher bottom duty"

@@ -29,7 +29,7 @@ from .._fit.experiment import AbstractExperiment, Experiments
 from .._fit.parameters import Free
 from .._fit.problem import physical_and_jacobian, residuals_and_jacobian
 from .._physics.signals import AbstractSignal
-from .._systems.base import AbstractSystem
+from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from . import design_objective as obj
 from .design_result import DesignResult, PamjaxDesignWarning, constraints_report, worst_violation
 from .design_setup import (
@@ -341,8 +341,19 @@ def design_experiment(
     if not constraints["feasible"]:
         warnings.warn("pamjax.design_experiment: the design violates its limits (a bench must not play it; to_csv "
                       "refuses it): " + "; ".join(constraints["violations"]), PamjaxDesignWarning, stacklevel=2)
-    return _result(setup, aux, history, errors, constraints, message + note, criterion, parametrisation,
-                   float(duration), t_start, compile_s)
+    result = _result(setup, aux, history, errors, constraints, message + note, criterion, parametrisation,
+                     float(duration), t_start, compile_s)
+    result.payload_kg = designed_payload(model, setup["system"])
+    return result
+
+
+def designed_payload(model, system):
+    """The payload [kg] the designed run carries where `build` made it another than the model's (a bench must load
+    the rig so, and log it: `payload_kg`), else None."""
+    if not (isinstance(system, AbstractMuscleSystem) and isinstance(model, AbstractMuscleSystem)):
+        return None
+    mass = float(system.payload_mass)
+    return None if mass == float(model.payload_mass) else mass
 
 
 def _problem_of(setup, theta, index, weight, max_pressure, max_duty_step, criterion):

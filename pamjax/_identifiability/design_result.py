@@ -125,6 +125,9 @@ class DesignResult:
       gradient, overlapped with the prior and baseline experiments' Jacobians), before the first iteration.
     - `duration` [s]: of the run (the last period may end before its full length).
     - `prediction`: the predicted run at the objective's samples (t, position, pressure, eq. 7 force; not in JSON).
+    - `payload_kg`: the payload [kg] of the designed run where `build` changed it from the model's (e.g.
+      `pamjax.PayloadFromModel.advised(model)`), else None: the bench must carry it, and its recording be fitted
+      with it (`payload_kg` in the run's meta.json entry or [[experiment]] table).
     """
 
     times: list
@@ -145,6 +148,7 @@ class DesignResult:
     compile_s: float
     duration: float | None = None
     prediction: dict | None = dataclasses.field(default=None, repr=False, compare=False)
+    payload_kg: float | None = None
 
     def signal(self):
         """The designed duty as `pamjax.Sampled(times, duty, period=period)`."""
@@ -176,6 +180,8 @@ class DesignResult:
         path = writable_path(path, overwrite)
         lines = [f"# pamjax design: {self.criterion}-optimal over {', '.join(self.subset)}; PWM period "
                  f"{self.period} s; duty latched per period",
+                 *([f"# payload {self.payload_kg:.6g} kg (not the model's): load the rig with it and fit the "
+                    f"recording with payload_kg = {self.payload_kg:.6g}"] if self.payload_kg is not None else []),
                  "# predicted standard errors (Cramér-Rao, SI units): label, design"
                  + (", baseline" if "baseline" in self.standard_errors else "") + ", prior experiments alone"]
         for i, label in enumerate(self.labels):

@@ -1,0 +1,67 @@
+"""What an `Experiment` drives, built from the model: the model itself (`SameSystem`), a constant-volume tank fed by its
+valve (`TankFromModel`: paper 000's valve tests) or the model lifting another payload (`PayloadFromModel`: a run with
+weights added or taken off). Each is a callable model → system; `Experiment(build=...)`, `design_experiment(build=...)`
+and a bench's meta.json (`tank_volume`, `payload_kg`) use them."""
+
+import equinox as eqx
+
+from .._core.arrays import as_scalar
+from .._core.custom_types import RealScalar
+from .._core.errors import PamjaxInputError, check_positive
+from .._systems.base import AbstractMuscleSystem, AbstractSystem
+from .._systems.tank import TankSystem
+
+# The payload `PayloadFromModel.advised` (and the weak-motion warning of a fit, `pamjax._fit.force_balance`) proposes
+# for a run that moves, as a share of the force the muscle pulls at zero contraction and supply pressure: half keeps
+# the muscle able to lift it over much of its stroke at high duty and unable to hold it on the upper stop at low duty.
+# Measured (benchmarks/RESULTS.md, identify, Session 52): one 25 s triangle run with 30 kg (half the MAS-10 preset's
+# 577 N) beside E3 and E4 brought all nine stop-resting unseen rigs from 2.6-208 % off to within 0.57 %; the fits'
+# own advice there, 24-36 kg, did as well.
+PAYLOAD_SHARE = 0.5
+
+
+class SameSystem(eqx.Module):
+    """The model is the system of the experiment."""
+
+    def __call__(self, model):
+        return model
+
+
+class TankFromModel(eqx.Module):
+    """A constant-volume tank of `volume` [m³] fed by the model's valve (paper 000's valve tests)."""
+
+    volume: RealScalar = eqx.field(converter=as_scalar)  # m³
+    polytropic_index: RealScalar = eqx.field(converter=as_scalar, default=1.4)  # -
+
+    def __call__(self, model):
+        return TankSystem(valve=model.valve, volume=self.volume, air=model.air, polytropic_index=self.polytropic_index)
+
+
+class PayloadFromModel(eqx.Module):
+    """The model's system lifting another payload of `mass` [kg]: a run made with weights added or taken off (a
+    bench's `payload_kg`). Every other parameter, the fitted ones included, is the model's."""
+
+    mass: RealScalar = eqx.field(converter=as_scalar)  # kg
+
+    def __check_init__(self):
+        check_positive(self.mass, "PayloadFromModel.mass")
+
+    def __call__(self, model):
+        if not isinstance(model, AbstractMuscleSystem):
+            raise PamjaxInputError(f"PayloadFromModel: {type(model).__name__} lifts no payload (not a muscle system)")
+        return eqx.tree_at(lambda s: s.payload_mass, model, self.mass)
+
+    @classmethod
+    def advised(cls, model: AbstractSystem) -> "PayloadFromModel":
+        """The payload to record a run with where the model's payload rests on the upper stop (its muscle pulls more
+        than the payload weighs there at every pressure, so no duty brings it down): `PAYLOAD_SHARE` (half) of the
+        force the model's muscle pulls at zero contraction and its valve's supply pressure, over g. Design at your
+        best estimate (the fit that warned), not the datasheet: the advice follows the model's force law."""
+        if not isinstance(model, AbstractMuscleSystem):
+            raise PamjaxInputError(f"PayloadFromModel.advised: {type(model).__name__} lifts no payload (not a muscle "
+                                   "system)")
+        force = float(model.muscle.static_force(0.0, model.valve.supply(), model.air))
+        if not force > 0:
+            raise PamjaxInputError(f"PayloadFromModel.advised: the model's muscle pulls {force:g} N at zero "
+                                   "contraction and supply pressure; no payload can be advised from it")
+        return cls(PAYLOAD_SHARE * force / float(model.gravity))
