@@ -174,6 +174,25 @@ def test_example_fit_config_is_valid(no_solves):
     validate_config(tomllib.loads((EXAMPLES / "fit_example.toml").read_text()))
 
 
+def test_an_experiment_with_payload_kg_drives_the_model_lifting_that_payload(tmp_path, no_solves):
+    # [[experiment]] payload_kg: the run made with weights added (pamjax.PayloadFromModel); the other runs keep the
+    # model's payload, and every other parameter is shared
+    from pamjax._cli.fit import load_config
+
+    t = np.arange(0.0, 0.1 + 5e-4, 1e-3)
+    rows = np.column_stack([t, np.full(t.size, 0.5), np.full(t.size, 2e5), np.zeros(t.size)])
+    np.savetxt(tmp_path / "run.csv", rows, delimiter=",", header="t [s],duty [-],pressure [Pa],position [m]",
+               comments="")
+    body = _FIT_OK.replace('file = "missing.csv"', 'file = "run.csv"')
+    config = tmp_path / "fit.toml"
+    config.write_text(textwrap.dedent(body + '    payload_kg = 30.0\n    name = "heavy"\n'
+                                      + body[body.index("    [[experiment]]"):]))
+    model, experiments, *_ = load_config(config)
+    heavy, plain = (e.system_for(model) for e in experiments)
+    assert float(heavy.payload_mass) == 30.0 and float(plain.payload_mass) == float(model.payload_mass)
+    assert float(heavy.muscle.force_law.k0) == float(model.muscle.force_law.k0)
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # pamjax sweep
 
