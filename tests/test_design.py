@@ -618,3 +618,48 @@ def test_a_failed_design_whose_payload_the_stop_holds_names_the_heavier_payload(
     assert _payload_hint(model, over, {}) == ""  # the preset lets its payload down at low pressure
     assert _payload_hint(latching, within, {}) == ""
     assert _payload_hint(latching, over, {"build": pj.PayloadFromModel(40.0)}) == ""
+
+
+def _rests_on_the_stop(force_at_stop):
+    """The MAS-10 preset (PWM valve) with eq. 7 shifted so that it gives `force_at_stop` N at the lower stop and
+    atmospheric pressure: below the 94 N payload, which therefore rests on that stop at the run's start."""
+    model = presets.mas10_system("pwm")
+    f = float(model.muscle.static_force(model.muscle.min_position, 101325.0, model.air))
+    a = model.muscle.force_law.max_force_coefficients
+    return eqx.tree_at(lambda m: m.muscle.force_law.max_force_coefficients, model, a.at[0].add(force_at_stop - f))
+
+
+def test_the_force_margin_asks_only_tension_where_the_payload_rests_on_the_lower_stop():
+    # On the lower stop the stop carries the payload: eq. 7 is not seen there, only the muscle's geometry (its volume,
+    # which the volume law gives while the muscle is taut). So the floor is min_force where the payload hangs free and
+    # 0 N on the stop (force_floor), in the objective, the start's check and the report alike.
+    from pamjax._identifiability.design import check_design
+    from pamjax._identifiability.design_result import constraints_report
+
+    stop = -0.02
+    x = np.array([stop, stop + 5e-7, stop + 1e-3])
+    np.testing.assert_array_equal(obj.force_floor(x, stop, 20.0, xp=np), [0.0, 0.0, 20.0])
+    np.testing.assert_array_equal(obj.force_floor(x, stop, -np.inf, xp=np), [-np.inf] * 3)
+    np.testing.assert_array_equal(np.asarray(obj.force_floor(jnp.asarray(x), stop, -5.0)), [-5.0] * 3)
+    free = ["friction.coulomb_force"]
+    noise = {"pressure": 2e3, "position": 1e-4}
+    taut = _rests_on_the_stop(10.0)
+    assert float(taut.initial_state().position) == pytest.approx(stop)  # the start: on the lower stop
+    check_design(taut, free, 2.0, noise=noise)  # 10 N on the stop: taut, accepted under the default 20 N
+    with pytest.raises(PamjaxInputError, match=r"min_force: eq. 7 gives -5.0 N at the run's start, on the lower stop"):
+        check_design(_rests_on_the_stop(-5.0), free, 2.0, noise=noise)
+    setup = dict(thresholds=[], duty_band=(0.1, 0.9), duty_margin=0.0, band=(0.1, 0.9), windows=[],
+                 max_duty_step=None, limits=None, max_pressure=None, min_force=20.0, system=taut)
+
+    def report(force):
+        worst = np.max(np.maximum(obj.force_floor(x, stop, 20.0, xp=np) - force, 0.0))
+        aux = dict(duty=np.full(3, 0.5), position=x, pressure=np.full(3, 2e5), force=np.asarray(force),
+                   worst_stroke=0.0, worst_pressure=0.0, worst_step=0.0, worst_force=worst)
+        return constraints_report(aux, setup)
+
+    ok = report([10.0, 12.0, 25.0])
+    assert ok["feasible"] and ok["violations"] == [] and ok["free_force_min"] == 25.0 and ok["stop_force_min"] == 10.0
+    slack = report([-3.0, 12.0, 25.0])
+    assert not slack["feasible"] and len(slack["violations"]) == 1 and "on the lower stop" in slack["violations"][0]
+    near = report([10.0, 12.0, 15.0])
+    assert not near["feasible"] and "15.0 N where the payload hangs free" in near["violations"][0]

@@ -165,8 +165,12 @@ def constraint_lines(c):
     lines.append("  " + band)
     verified = c.get("verified") or {}
     if c["min_force"] is not None:
-        f = verified.get("force_range") or c["force_range"]
-        lines.append(f"  muscle force (eq. 7) >= {c['min_force']:g} N: smallest {f[0]:.1f} N")
+        free, stop = (verified.get(k, c.get(k)) for k in ("free_force_min", "stop_force_min"))
+        line = f"  muscle force (eq. 7) >= {c['min_force']:g} N where the payload hangs free: " + (
+            f"smallest {free:.1f} N" if free is not None else "it never does")
+        if stop is not None:  # the stop carries the payload: only tension is asked (docs/identifiability.md)
+            line += f"; >= 0 N on the lower stop: smallest {stop:.1f} N"
+        lines.append(line)
     if c["stroke_limits"] is not None:
         x = verified.get("position_range") or c["position_range"]
         lines.append(f"  stroke {1e3 * x[0]:.2f} … {1e3 * x[1]:.2f} mm within {1e3 * c['stroke_limits'][0]:.2f} … "

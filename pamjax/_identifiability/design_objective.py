@@ -21,9 +21,10 @@ where the run dwells, m, and how hard it is excited there, s).
 
 Constraints enter as quadratic penalties on their violation (the optimiser also refuses steps that leave a feasible
 point): the stroke within the end stops less a margin, the pressure below a limit, |u_k − u_{k−1}| below a rate
-limit, the muscle's static force (eq. 7, before the slack) above a margin (penalised from `FORCE_BUFFER` above
-it), and, when a baseline is given, each named parameter's variance below the baseline experiment's. (The duty's
-distance from the valve's switching thresholds is kept exactly, by the band `lo`, `hi` of the clip.)
+limit, the muscle's static force (eq. 7, before the slack) above a margin where the payload hangs free and above
+0 N where it rests on the lower stop (`force_floor`; penalised from `FORCE_BUFFER` above it), and, when a baseline is
+given, each named parameter's variance below the baseline experiment's. (The duty's distance from the valve's
+switching thresholds is kept exactly, by the band `lo`, `hi` of the clip.)
 """
 
 import equinox as eqx
@@ -43,6 +44,7 @@ FORCE_UNIT = 1.0  # N: a violation of the muscle's force margin in newtons
 FORCE_BUFFER = 5.0  # N: the force penalty acts from min_force + 5 N, the limit itself from min_force: the search sees
 # the limit's gradient before it reaches it (a step may not cross it, so without one it crawls along it), and the
 # PWM ripple between the objective's samples (≈ 4 N on the MAS-10 example: `design.VERIFY_TOLERANCE`) stays above it
+STOP_TOLERANCE = 1e-6  # m: a payload within 1 µm of the lower stop rests on it (the stop holds it at its position)
 PENALTY = 100.0  # weight of a squared violation of one unit per second of run (stroke, pressure) or per period
 FLOOR_PENALTY = 1000.0  # weight of a squared excess of a log variance over the baseline's (~0.5 % slack)
 
@@ -146,6 +148,14 @@ def _criterion(cov, subset, criterion):
     return jnp.log(jnp.trace(block))
 
 
+def force_floor(position, lower_stop, min_force, xp=jnp):
+    """The force eq. 7 must keep at each sample: `min_force` where the payload hangs free; where it rests on the lower
+    stop, only tension (0 N, or `min_force` if lower): the stop carries the payload there, so the force law is not
+    seen (the payload stays until the muscle pulls its weight, far above the limit), but the muscle's geometry is,
+    through its volume, which the volume law gives only while the muscle is taut."""
+    return xp.where(position <= lower_stop + STOP_TOLERANCE, xp.minimum(min_force, 0.0), min_force)
+
+
 def evaluate(c, problem: DesignProblem):
     """(objective, aux): the criterion plus the penalties at coefficients `c`; aux holds the criterion, the
     penalties, the largest violations (stroke [m], pressure [Pa], duty step, force [N]), the duty, and the predicted
@@ -182,9 +192,10 @@ def evaluate(c, problem: DesignProblem):
     if problem.min_force is not None:
         system = exp.system_for(problem.space.model(problem.theta))
         force = system.muscle.static_force(pred["position"], pred["pressure"], system.air)
-        near = jnp.maximum(problem.min_force + FORCE_BUFFER - force, 0.0)
+        floor = force_floor(pred["position"], system.muscle.min_position, problem.min_force)
+        near = jnp.maximum(floor + FORCE_BUFFER - force, 0.0)
         pen_force = PENALTY * dt * jnp.sum((near / FORCE_UNIT) ** 2)
-        worst_force = jnp.max(jnp.maximum(problem.min_force - force, 0.0))
+        worst_force = jnp.max(jnp.maximum(floor - force, 0.0))
     if problem.floor is not None:
         excess = jnp.where(jnp.isfinite(problem.floor), jnp.log(jnp.diag(cov)) - jnp.log(problem.floor), 0.0)
         pen_floor = FLOOR_PENALTY * jnp.sum(jnp.maximum(excess, 0.0) ** 2)

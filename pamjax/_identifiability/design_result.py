@@ -10,7 +10,7 @@ import numpy as np
 from .._core.errors import PamjaxInputError
 from .._core.paths import writable_path
 from .._physics.signals import Sampled
-from .design_objective import FORCE_UNIT, PRESSURE_UNIT, STEP_UNIT, STROKE_UNIT
+from .design_objective import FORCE_UNIT, PRESSURE_UNIT, STEP_UNIT, STOP_TOLERANCE, STROKE_UNIT, force_floor
 
 
 class PamjaxDesignWarning(UserWarning):
@@ -41,6 +41,31 @@ def _worst(values, lo, hi):
     return float(max(np.max(lo - values, initial=0.0), np.max(values - hi, initial=0.0), 0.0))
 
 
+def _force_margin(force, position, setup):
+    """(the smallest eq. 7 force where the payload hangs free, the smallest where it rests on the lower stop, the
+    largest shortfall below `force_floor`'s floor); Nones where not predicted, or the payload never there."""
+    if force is None or position is None or setup["min_force"] is None:
+        return None, None, None
+    force, position = np.asarray(force, dtype=float), np.asarray(position, dtype=float)
+    stop = float(setup["system"].muscle.min_position)
+    on = position <= stop + STOP_TOLERANCE
+    floor = force_floor(position, stop, setup["min_force"], xp=np)
+    return (float(force[~on].min()) if np.any(~on) else None, float(force[on].min()) if np.any(on) else None,
+            float(max(np.max(floor - force), 0.0)))
+
+
+def _force_lines(free, stop, f_min):
+    """The violated force limits, one line each, from the smallest forces off and on the lower stop."""
+    lines = []
+    if free is not None and free < f_min - 1e-9:
+        lines.append(f"min_force: eq. 7's force down to {free:.1f} N where the payload hangs free, limit {f_min:g} N "
+                     "(the muscle near slack)")
+    if stop is not None and stop < min(f_min, 0.0) - 1e-9:
+        lines.append(f"min_force: eq. 7's force down to {stop:.1f} N with the payload on the lower stop: the muscle "
+                     "slack there (the volume law holds only while it is taut)")
+    return lines
+
+
 def constraints_report(aux, setup, verified=None):
     """The `constraints` report of a design: the limits, the predicted extremes at the objective's samples and, when
     verified, at the fit's resolution, and whether every limit holds (within `VERIFY_TOLERANCE` at the fit's
@@ -59,16 +84,18 @@ def constraints_report(aux, setup, verified=None):
         stroke_limits=None if setup["limits"] is None else [float(s) for s in setup["limits"]],
         position_range=_range(position), max_pressure=setup["max_pressure"], pressure_range=_range(pressure),
         min_force=setup["min_force"], force_range=_range(force), feasible=worst_violation(aux) <= 1e-9)
+    out["free_force_min"], out["stop_force_min"], _ = _force_margin(force, position, setup)
     if verified is not None:
         lo_x, hi_x = setup["limits"] if setup["limits"] is not None else (-np.inf, np.inf)
         p_max = np.inf if setup["max_pressure"] is None else setup["max_pressure"]
         f_min = -np.inf if setup["min_force"] is None else setup["min_force"]
+        free_min, stop_min, force_excess = _force_margin(verified.get("force"), verified.get("position"), setup)
         excess = dict(stroke=_worst(verified.get("position"), lo_x, hi_x),
                       pressure=_worst(verified.get("pressure"), -np.inf, p_max),
-                      force=_worst(verified.get("force"), f_min, np.inf))
+                      force=force_excess if force_excess is not None else _worst(verified.get("force"), f_min, np.inf))
         out["verified"] = dict(
             position_range=_range(verified.get("position")), pressure_range=_range(verified.get("pressure")),
-            force_range=_range(verified.get("force")), excess=excess,
+            force_range=_range(verified.get("force")), free_force_min=free_min, stop_force_min=stop_min, excess=excess,
             tolerance=dict(VERIFY_TOLERANCE),
             feasible=all(v is None or v <= VERIFY_TOLERANCE[k] for k, v in excess.items()))
         out["feasible"] = out["feasible"] and out["verified"]["feasible"]
@@ -95,10 +122,11 @@ def _violations(report):
     if p_max is not None and over("pressure", p is not None and p[1] > p_max + 1e-9):
         pr = v.get("pressure_range") or p
         lines.append(f"max_pressure: predicted up to {pr[1] / 1e5:.3f} bar abs, limit {p_max / 1e5:.3f} bar abs")
-    f, f_min = report["force_range"], report["min_force"]
-    if f_min is not None and over("force", f is not None and f[0] < f_min - 1e-9):
-        fr = v.get("force_range") or f
-        lines.append(f"min_force: eq. 7's force down to {fr[0]:.1f} N, limit {f_min:g} N (the muscle near slack)")
+    f_min = report["min_force"]
+    if f_min is not None:
+        at_samples = _force_lines(report["free_force_min"], report["stop_force_min"], f_min)
+        if over("force", bool(at_samples)):
+            lines += _force_lines(v.get("free_force_min"), v.get("stop_force_min"), f_min) or at_samples
     if report["max_duty_step"] is not None and report["largest_duty_step"] > report["max_duty_step"] + 1e-9:
         lines.append(f"max_duty_step: a step of {report['largest_duty_step']:.3f}, limit {report['max_duty_step']:g}")
     return lines

@@ -361,13 +361,18 @@ def set_up(model, free, duration, *, noise, channels, start, build, rate, criter
             f"from there keeps it. It is an ABSOLUTE pressure in Pa: 5 bar abs = 5e5, 5 bar gauge = "
             f"{5e5 + float(system.air.atmospheric_pressure):.6g}")
     if min_force is not None:
-        f0 = float(np.asarray(static_force_along(system, device_array(np.asarray(y0.position, dtype=float)),
+        x0 = float(np.asarray(y0.position, dtype=float))
+        f0 = float(np.asarray(static_force_along(system, device_array(x0),
                                                  device_array(np.asarray(y0.pressure, dtype=float)))))
-        if f0 < min_force:
+        floor = float(obj.force_floor(x0, float(system.muscle.min_position), min_force, xp=np))
+        if f0 < floor:
             raise PamjaxInputError(
                 f"min_force {min_force:g} N: eq. 7 gives {f0:.1f} N at the run's start, so no run from there keeps "
                 f"the muscle's force above it; give min_force below {f0:.1f} N (default {MIN_FORCE:g}), or None / "
-                "false for no limit")
+                "false for no limit" if floor == min_force else
+                f"min_force: eq. 7 gives {f0:.1f} N at the run's start, on the lower stop: the muscle is slack there "
+                "(the volume law holds only while it is taut); start from another state (start = {...}), or "
+                "min_force = false for no limit")
     count = int(math.ceil(duration / period - 1e-9))
     times = np.arange(count) * period
     c0, basis = start_coefficients(parametrisation, times, float(duration), knots,
