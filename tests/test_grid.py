@@ -119,6 +119,38 @@ def test_gradients_through_event_times_match_finite_differences():
     np.testing.assert_allclose(float(fwd[1]), fd, rtol=1e-5)
 
 
+def _landing_loss(params, hi, landing):
+    """`_loss` for `landing`, a plant whose payload starts on the lower stop, under a triangle 0.15…`hi` (every duty
+    above the valve's threshold)."""
+    coulomb, viscous, v1, k0 = params
+    model = eqx.tree_at(lambda s: (s.friction.coulomb_force, s.friction.viscous_coefficient,
+                                   s.muscle.volume_law.v1, s.muscle.force_law.k0), landing, (coulomb, viscous, v1, k0))
+    ts = jnp.linspace(0.0, 2.0, 101)
+    traj = solve(model, pj.Triangle(0.15, hi, 0.5), ts, model.initial_state(), 0.0, stepping="pwm", substeps=8,
+                 num_periods=100)
+    return jnp.mean(traj.position) * 1e3 + jnp.mean(traj.pressure) * 1e-5
+
+
+def test_second_derivatives_through_event_times_match_finite_differences():
+    # A design's gradient differentiates a Jacobian again (d/d duty of d loss/d parameters, forward over forward):
+    # the located event times' own derivatives are differentiated. Against central differences in the duty of the
+    # first derivatives (forward mode, checked above), on a payload that lifts off its lower stop and slides and
+    # sticks. A Newton step from a gradient-stopped root carried the first derivatives only: its mixed second
+    # derivatives missed g_θ g_sc / g_s² (here 0.1-31 % off; the wrong sign on a design's heavy payload).
+    # eq. 7 at the lower stop and atmospheric pressure: 50 N, below the 94 N payload, which rests there at the start
+    f_stop = float(eqx.filter_jit(MODEL.muscle.static_force)(MODEL.muscle.min_position, 101325.0, MODEL.air))
+    a = MODEL.muscle.force_law.max_force_coefficients
+    landing = eqx.tree_at(lambda m: m.muscle.force_law.max_force_coefficients, MODEL, a.at[0].add(50.0 - f_stop))
+    params = np.asarray([16.0, 250.0, 4.1558930e-04, float(MODEL.muscle.force_law.k0)])
+    hi = 0.8
+    gradient = jax.jit(jax.jacfwd(_landing_loss))
+    mixed = np.asarray(jax.jit(jax.jacfwd(jax.jacfwd(_landing_loss), argnums=1))(params, hi, landing))
+    h = 1e-6
+    fd = (np.asarray(gradient(params, hi + h, landing)) - np.asarray(gradient(params, hi - h, landing))) / (2 * h)
+    assert np.all(np.abs(mixed) > 0)
+    np.testing.assert_allclose(mixed, fd, rtol=1e-6)
+
+
 def test_stepping_rules():
     ts = np.linspace(0.0, 0.1, 11)
     with pytest.raises(PamjaxInputError, match="hybrid.*stepping='auto'"):

@@ -4,10 +4,11 @@ The grid is given as intervals [left_i, right_i] (the PWM-synchronous grid of `p
 switching valve, a uniform grid otherwise), each with the valve opening held over it (or None). Each interval is one
 classical RK4 step. A hybrid system (`system.hybrid`, e.g. a muscle with `KarnoppFriction`) also gives an event function
 g that stays ≥ 0 while its current mode holds; when g < 0 at the end of a step, the crossing τ is located on the
-step's cubic Hermite interpolant (bisection, then one Newton step that carries the derivatives: dτ/dθ = −g_θ/g_τ,
-the implicit function theorem), the state at τ is passed through `system.event_update` (the new mode), and the rest
-of the interval is integrated from τ in the new mode. Up to `MAX_EVENTS` events per interval are resolved (the
-grid's steps are ~1 ms; a stick-slip plant switches at most once or twice in one).
+step's cubic Hermite interpolant (bisection, then one Newton step; its derivatives are the implicit function
+theorem's, dτ/dθ = −g_θ/g_τ, to every order: a custom JVP, `_locate`), the state at τ is passed through
+`system.event_update` (the new mode), and the rest of the interval is integrated from τ in the new mode. Up to
+`MAX_EVENTS` events per interval are resolved (the grid's steps are ~1 ms; a stick-slip plant switches at most once
+or twice in one).
 
 Between events the vector field is smooth (a mode holds the friction's sign fixed), so every segment is integrated
 at RK4's full order, and the trajectory is a continuous, piecewise-smooth function of every parameter: fits get
@@ -57,38 +58,57 @@ def _rk4(field, system, ta, tb, z, a):
     return zb, slopes[0], slopes[4]
 
 def _locate(event, system, seg):
-    """Time and state of the first crossing g = 0 in a step whose end has g < 0."""
-    ta, tb, za, zb, fa, fb = seg
-    h = tb - ta
-    frozen = jax.lax.stop_gradient((system, ta, h, za, zb, fa, fb))
+    """Time and state of the first crossing g = 0 in a step whose end has g < 0.
 
-    def g_frozen(s):
-        sys_, ta_, h_, za_, zb_, fa_, fb_ = frozen
+    The crossing s* ∈ [0, 1] (of the step) is bracketed by bisection on the step's Hermite interpolant and polished
+    by one Newton step; its derivatives are those of the implicit function g(s*, θ) = 0, to every order: a custom
+    JVP gives ds*/dθ = −g_θ/g_s at s*, and differentiating that rule again (s* inside it is this function, whose
+    rule applies again) gives the second derivatives a design's gradient of a Jacobian needs (a Newton step from a
+    gradient-stopped root carries the first derivatives only: its mixed second derivatives had the wrong sign on a
+    payload landing on and lifting off its stop, tests/test_grid.py). A first-order Jacobian (a fit's) traces the
+    rule once: g's tangent and its slope in s, as before."""
+    ta, tb, za, zb, fa, fb = seg
+    args = (system, ta, tb - ta, za, zb, fa, fb)
+
+    def g_of(s, a):
+        sys_, ta_, h_, za_, zb_, fa_, fb_ = a
         return event(sys_, ta_ + s * h_, _hermite(s, h_, za_, zb_, fa_, fb_))
 
-    def bisect(_, bounds):
-        lo, hi = bounds
-        mid = 0.5 * (lo + hi)
-        below = g_frozen(mid) < 0
-        return jnp.where(below, lo, mid), jnp.where(below, mid, hi)
+    # what `event` closes over (arrays of the enclosing trace) as explicit, differentiable inputs: a custom JVP may
+    # not close over a tracer
+    g_closed, consts = jax.closure_convert(g_of, jnp.zeros(()), args)
 
-    lo, hi = jax.lax.fori_loop(0, _BISECTIONS, bisect, (jnp.zeros(()), jnp.ones(())))
-    s = jax.lax.stop_gradient(0.5 * (lo + hi))
+    def g(s, a):
+        return g_closed(s, a[0], *a[1])
 
-    def g(s):
-        return event(system, ta + s * h, _hermite(s, h, za, zb, fa, fb))
+    def slope_at(s, a):
+        return jax.jvp(lambda q: g(q, a), (s,), (jnp.ones_like(s),))
 
-    # One Newton step from the bracketed root: its value moves by ~2^-40, its derivative is −g_θ/g_s (the implicit
-    # function theorem). Only g's value carries derivatives; its slope g_s comes from the frozen interpolant (the
-    # term it drops, g ∂g_s/∂θ / g_s², vanishes with g at the root: |g| ≤ 2^-41 |g_s| after the bisection), so a
-    # forward-mode Jacobian carries first derivatives here, not the second derivatives of the event function and the
-    # interpolant (13 % of the example fit's Jacobian program, ~0.7 CPU-s of its compilation; docs/performance.md).
-    value = g(s)
-    _, slope = jax.jvp(g_frozen, (s,), (jnp.ones_like(s),))
-    slope_ok = jnp.abs(slope) > 0
-    s_new = s - jnp.where(slope_ok, value / jnp.where(slope_ok, slope, 1.0), 0.0)
-    s_new = jnp.clip(s_new, 0.0, 1.0)
-    return ta + s_new * h, _hermite(s_new, h, za, zb, fa, fb)
+    @jax.custom_jvp
+    def crossing(a):
+        def bisect(_, bounds):
+            lo, hi = bounds
+            mid = 0.5 * (lo + hi)
+            below = g(mid, a) < 0
+            return jnp.where(below, lo, mid), jnp.where(below, mid, hi)
+
+        lo, hi = jax.lax.fori_loop(0, _BISECTIONS, bisect, (jnp.zeros(()), jnp.ones(())))
+        s = 0.5 * (lo + hi)
+        value, slope = slope_at(s, a)  # one Newton step: the root to ~2^-40 of the step moves by ~2^-80
+        ok = jnp.abs(slope) > 0
+        return jnp.clip(s - jnp.where(ok, value / jnp.where(ok, slope, 1.0), 0.0), 0.0, 1.0)
+
+    @crossing.defjvp
+    def _crossing_jvp(primals, tangents):
+        (a,), (da,) = primals, tangents
+        s = crossing(a)
+        slope = slope_at(s, a)[1]
+        g_dot = jax.jvp(lambda b: g(s, b), (a,), (da,))[1]
+        ok = (jnp.abs(slope) > 0) & (s > 0.0) & (s < 1.0)  # a crossing clipped to the step's end does not move
+        return s, jnp.where(ok, -g_dot / jnp.where(ok, slope, 1.0), 0.0)
+
+    s = crossing((args, tuple(consts)))
+    return ta + s * (tb - ta), _hermite(s, tb - ta, za, zb, fa, fb)
 
 
 def integrate(systems, field, event, update, z0s, left, right, aux, member, offsets, ts):
