@@ -184,7 +184,10 @@ def integrate(systems, field, event, update, z0s, left, right, aux, member, offs
                         za.at[j].set(z_s), zb_.at[j].set(zb), fa_.at[j].set(fa), fb_.at[j].set(fb),
                         n_ev + resolve, n_miss + (crossed & ~resolve))
 
-            return jax.lax.cond(c[0] < tb, work, lambda c: c, c)
+            # The first segment is stepped even when the interval has zero length (an edge on a uniform node, the
+            # rest of a clipped grid): its RK4 step of length 0 leaves the state as it is, and carries the state's
+            # derivative with respect to that length (the vector field times it), which skipping it lost.
+            return jax.lax.cond((c[0] < tb) | (j == 0), work, lambda c: c, c)
 
         _, z_end, starts, lengths, za, zb, fa, fb, n_events, n_missed = jax.lax.fori_loop(0, slots, segment, init)
         # Unused slots: empty segments at tb holding the end state.
