@@ -184,9 +184,8 @@ def integrate(systems, field, event, update, z0s, left, right, aux, member, offs
                         za.at[j].set(z_s), zb_.at[j].set(zb), fa_.at[j].set(fa), fb_.at[j].set(fb),
                         n_ev + resolve, n_miss + (crossed & ~resolve))
 
-            # The first segment is stepped even when the interval has zero length (an edge on a uniform node, the
-            # rest of a clipped grid): its RK4 step of length 0 leaves the state as it is, and carries the state's
-            # derivative with respect to that length (the vector field times it), which skipping it lost.
+            # The first segment is stepped even at zero length (an edge on a uniform node): its RK4 step of length 0
+            # leaves the state and carries its derivative in that length (the field times it), which a skip lost.
             return jax.lax.cond((c[0] < tb) | (j == 0), work, lambda c: c, c)
 
         _, z_end, starts, lengths, za, zb, fa, fb, n_events, n_missed = jax.lax.fori_loop(0, slots, segment, init)
