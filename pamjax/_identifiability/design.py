@@ -341,10 +341,8 @@ def design_experiment(
     if not constraints["feasible"]:
         warnings.warn("pamjax.design_experiment: the design violates its limits (a bench must not play it; to_csv "
                       "refuses it): " + "; ".join(constraints["violations"]), PamjaxDesignWarning, stacklevel=2)
-    result = _result(setup, aux, history, errors, constraints, message + note, criterion, parametrisation,
-                     float(duration), t_start, compile_s)
-    result.payload_kg = designed_payload(model, setup["system"])
-    return result
+    return _result(setup, aux, history, errors, constraints, message + note, criterion, parametrisation,
+                   float(duration), t_start, compile_s, designed_payload(model, setup["system"]))
 
 
 def designed_payload(model, system):
@@ -376,7 +374,7 @@ def _standard_errors(setup, aux, theta, prior_info, base_info, verify, duration,
 
 
 def _result(setup, aux, history, errors, constraints, message, criterion, parametrisation, duration, t_start,
-            compile_s):
+            compile_s, payload_kg):
     """The `DesignResult` of the search's last point `aux` (its duty, criterion and predicted channels)."""
     space, exp = setup["space"], setup["experiment"]
     position, pressure, force = (aux.get(k) for k in ("position", "pressure", "force"))
@@ -387,7 +385,7 @@ def _result(setup, aux, history, errors, constraints, message, criterion, parame
         standard_errors=errors,
         objective=[history[0][2], float(aux["criterion"])], history=history, constraints=constraints,
         parametrisation=parametrisation, iterations=len(history) - 1, message=message,
-        design_s=time.perf_counter() - t_start, compile_s=compile_s, duration=duration,
+        design_s=time.perf_counter() - t_start, compile_s=compile_s, duration=duration, payload_kg=payload_kg,
         prediction=dict(t=np.asarray(exp.times), position=None if position is None else np.asarray(position),
                         pressure=None if pressure is None else np.asarray(pressure),
                         force=None if force is None else np.asarray(force)))

@@ -148,12 +148,17 @@ def _criterion(cov, subset, criterion):
     return jnp.log(jnp.trace(block))
 
 
+def on_lower_stop(position, lower_stop):
+    """Whether the payload rests on the lower stop at each sample (within `STOP_TOLERANCE`)."""
+    return position <= lower_stop + STOP_TOLERANCE
+
+
 def force_floor(position, lower_stop, min_force, xp=jnp):
     """The force eq. 7 must keep at each sample: `min_force` where the payload hangs free; where it rests on the lower
     stop, only tension (0 N, or `min_force` if lower): the stop carries the payload there, so the force law is not
     seen (the payload stays until the muscle pulls its weight, far above the limit), but the muscle's geometry is,
     through its volume, which the volume law gives only while the muscle is taut."""
-    return xp.where(position <= lower_stop + STOP_TOLERANCE, xp.minimum(min_force, 0.0), min_force)
+    return xp.where(on_lower_stop(position, lower_stop), xp.minimum(min_force, 0.0), min_force)
 
 
 def evaluate(c, problem: DesignProblem):

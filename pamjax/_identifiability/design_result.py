@@ -10,7 +10,7 @@ import numpy as np
 from .._core.errors import PamjaxInputError
 from .._core.paths import writable_path
 from .._physics.signals import Sampled
-from .design_objective import FORCE_UNIT, PRESSURE_UNIT, STEP_UNIT, STOP_TOLERANCE, STROKE_UNIT, force_floor
+from .design_objective import FORCE_UNIT, PRESSURE_UNIT, STEP_UNIT, STROKE_UNIT, force_floor, on_lower_stop
 
 
 class PamjaxDesignWarning(UserWarning):
@@ -48,7 +48,7 @@ def _force_margin(force, position, setup):
         return None, None, None
     force, position = np.asarray(force, dtype=float), np.asarray(position, dtype=float)
     stop = float(setup["system"].muscle.min_position)
-    on = position <= stop + STOP_TOLERANCE
+    on = on_lower_stop(position, stop)
     floor = force_floor(position, stop, setup["min_force"], xp=np)
     return (float(force[~on].min()) if np.any(~on) else None, float(force[on].min()) if np.any(on) else None,
             float(max(np.max(floor - force), 0.0)))
