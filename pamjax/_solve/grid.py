@@ -30,7 +30,7 @@ _RK4_A = np.array([[0, 0, 0, 0, 0], [0.5, 0, 0, 0, 0], [0, 0.5, 0, 0, 0], [0, 0,
                    [1 / 6, 1 / 3, 1 / 3, 1 / 6, 0]], dtype=float)
 _RK4_C = np.array([0.0, 0.5, 0.5, 1.0, 1.0])
 _RK4_AUX = np.array([0, 1, 1, 2, 2])  # which of the interval's (start, middle, end) aux values
-_BISECTIONS = 40  # halvings of the step to bracket an event (2^-40 of a ~1 ms step), before the Newton step
+_BISECTIONS = 53  # halvings of the step: the crossing to 2^-54 of it (a ~1 ms step: ~1e-19 s)
 
 
 def _hermite(s, h, za, zb, fa, fb):
@@ -60,13 +60,15 @@ def _rk4(field, system, ta, tb, z, a):
 def _locate(event, system, seg):
     """Time and state of the first crossing g = 0 in a step whose end has g < 0.
 
-    The crossing s* ∈ [0, 1] (of the step) is bracketed by bisection on the step's Hermite interpolant and polished
-    by one Newton step; its derivatives are those of the implicit function g(s*, θ) = 0, to every order: a custom
-    JVP gives ds*/dθ = −g_θ/g_s at s*, and differentiating that rule again (s* inside it is this function, whose
-    rule applies again) gives the second derivatives a design's gradient of a Jacobian needs (a Newton step from a
-    gradient-stopped root carries the first derivatives only: its mixed second derivatives had the wrong sign on a
-    payload landing on and lifting off its stop, tests/test_grid.py). A first-order Jacobian (a fit's) traces the
-    rule once: g's tangent and its slope in s, as before."""
+    The crossing s* ∈ [0, 1] (of the step) is found by bisection on the step's Hermite interpolant, to float64's
+    resolution (`_BISECTIONS`); its derivatives are those of the implicit function g(s*, θ) = 0, to every order: a
+    custom JVP gives ds*/dθ = −g_θ/g_s at s*, and differentiating that rule again (s* inside it is this function,
+    whose rule applies again) gives the second derivatives a design's gradient of a Jacobian needs (a Newton step
+    from a gradient-stopped root carries the first derivatives only: its mixed second derivatives had the wrong sign
+    on a payload landing on and lifting off its stop, tests/test_grid.py). A first-order Jacobian (a fit's) traces
+    the rule once: g's tangent and its slope in s. No Newton step polishes the root: the rule gives the
+    derivatives, and a polishing step in the primal added a second evaluation of g and g_s to every program (the
+    fit's Jacobian 7 % larger: docs/performance.md); 13 more halvings cost a scalar g each, at events only."""
     ta, tb, za, zb, fa, fb = seg
     args = (system, ta, tb - ta, za, zb, fa, fb)
 
@@ -93,10 +95,7 @@ def _locate(event, system, seg):
             return jnp.where(below, lo, mid), jnp.where(below, mid, hi)
 
         lo, hi = jax.lax.fori_loop(0, _BISECTIONS, bisect, (jnp.zeros(()), jnp.ones(())))
-        s = 0.5 * (lo + hi)
-        value, slope = slope_at(s, a)  # one Newton step: the root to ~2^-40 of the step moves by ~2^-80
-        ok = jnp.abs(slope) > 0
-        return jnp.clip(s - jnp.where(ok, value / jnp.where(ok, slope, 1.0), 0.0), 0.0, 1.0)
+        return jnp.where(lo > 0, 0.5 * (lo + hi), 0.0)  # lo = 0: g < 0 from the start (the step's start, fixed)
 
     @crossing.defjvp
     def _crossing_jvp(primals, tangents):
@@ -104,7 +103,7 @@ def _locate(event, system, seg):
         s = crossing(a)
         slope = slope_at(s, a)[1]
         g_dot = jax.jvp(lambda b: g(s, b), (a,), (da,))[1]
-        ok = (jnp.abs(slope) > 0) & (s > 0.0) & (s < 1.0)  # a crossing clipped to the step's end does not move
+        ok = (jnp.abs(slope) > 0) & (s > 0)  # a crossing at the step's start moves with the start only
         return s, jnp.where(ok, -g_dot / jnp.where(ok, slope, 1.0), 0.0)
 
     s = crossing((args, tuple(consts)))
@@ -122,8 +121,8 @@ def integrate(systems, field, event, update, z0s, left, right, aux, member, offs
     - `field(system, t, z, aux_j)` → dz/dt (flat scaled) with `aux_j` the interval's aux at RK4 stage time j ∈ {0:
       start, 1: middle, 2: end} (the held valve opening, or the command at that time); `event(system, t, z)` → g
       (None for systems without modes); `update(system, t, z)` → z after an event.
-    - `left`, `right`: (intervals,) interval ends (zero-length intervals are skipped exactly); `aux`: (intervals,
-      3).
+    - `left`, `right`: (intervals,) interval ends (a zero-length interval is one RK4 step of length 0, which carries
+      the derivative in its length); `aux`: (intervals, 3).
     - `offsets`: (runs,) the shift [s] of each run's clock; `field`, `event` and `update` see the run's own time.
     - `ts`: output times (shifted like the intervals); a time at or before its run's start takes its initial state
       (the caller's job, as it knows the runs' starts).
