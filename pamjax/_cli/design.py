@@ -153,6 +153,19 @@ def _payload_hint(model, res, kwargs):
             "contraction and supply pressure)")
 
 
+def _tolerated(verified, key, fmt, scale=1.0):
+    """A note for a limit the check at the fit's resolution passes by less than its tolerance (the PWM ripple
+    between the objective's samples, which the objective cannot see: `VERIFY_TOLERANCE`), so that a smallest force
+    of 19.3 N under ">= 20 N" is not left beside "every limit kept" unexplained; "" where the limit holds."""
+    excess = (verified.get("excess") or {}).get(key)
+    if not excess:
+        return ""
+    tolerance = verified["tolerance"][key]
+    state = "within" if excess <= tolerance else "beyond"
+    return (f" (past the limit by {fmt.format(excess * scale)} at the fit's resolution, {state} the "
+            f"{fmt.format(tolerance * scale)} allowed for the PWM ripple between the design's samples)")
+
+
 def constraint_lines(c):
     """The limits a design keeps, one line each (what `pamjax design` prints)."""
     lines = ["constraints:"]
@@ -170,14 +183,15 @@ def constraint_lines(c):
             f"smallest {free:.1f} N" if free is not None else "it never does")
         if stop is not None:  # the stop carries the payload: only tension is asked (docs/identifiability.md)
             line += f"; >= 0 N on the lower stop: smallest {stop:.1f} N"
-        lines.append(line)
+        lines.append(line + _tolerated(verified, "force", "{:.1f} N"))
     if c["stroke_limits"] is not None:
         x = verified.get("position_range") or c["position_range"]
         lines.append(f"  stroke {1e3 * x[0]:.2f} … {1e3 * x[1]:.2f} mm within {1e3 * c['stroke_limits'][0]:.2f} … "
-                     f"{1e3 * c['stroke_limits'][1]:.2f} mm")
+                     f"{1e3 * c['stroke_limits'][1]:.2f} mm" + _tolerated(verified, "stroke", "{:.3f} mm", 1e3))
     if c["max_pressure"] is not None:
         p = verified.get("pressure_range") or c["pressure_range"]
-        lines.append(f"  pressure up to {p[1] / 1e5:.3f} bar abs, limit {c['max_pressure'] / 1e5:.3f} bar abs")
+        lines.append(f"  pressure up to {p[1] / 1e5:.3f} bar abs, limit {c['max_pressure'] / 1e5:.3f} bar abs"
+                     + _tolerated(verified, "pressure", "{:.1f} kPa", 1e-3))
     if c["max_duty_step"] is not None:
         lines.append(f"  duty step up to {c['largest_duty_step']:.3f}, limit {c['max_duty_step']:g}")
     lines.append("  every limit kept" if c["feasible"] else "  VIOLATED: " + "; ".join(c["violations"]))
