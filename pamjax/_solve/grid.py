@@ -30,7 +30,7 @@ _RK4_A = np.array([[0, 0, 0, 0, 0], [0.5, 0, 0, 0, 0], [0, 0.5, 0, 0, 0], [0, 0,
                    [1 / 6, 1 / 3, 1 / 3, 1 / 6, 0]], dtype=float)
 _RK4_C = np.array([0.0, 0.5, 0.5, 1.0, 1.0])
 _RK4_AUX = np.array([0, 1, 1, 2, 2])  # which of the interval's (start, middle, end) aux values
-_BISECTIONS = 53  # halvings of the step: the crossing to 2^-54 of it (a ~1 ms step: ~1e-19 s)
+_BISECTIONS = 40  # halvings of the step: the crossing to 2^-41 of it (a 2.5 ms step: 1e-15 s, float64's resolution of t ~ 8 s)
 
 
 def _hermite(s, h, za, zb, fa, fb):
@@ -68,7 +68,8 @@ def _locate(event, system, seg):
     on a payload landing on and lifting off its stop, tests/test_grid.py). A first-order Jacobian (a fit's) traces
     the rule once: g's tangent and its slope in s. No Newton step polishes the root: the rule gives the
     derivatives, and a polishing step in the primal added a second evaluation of g and g_s to every program (the
-    fit's Jacobian 7 % larger: docs/performance.md); 13 more halvings cost a scalar g each, at events only."""
+    fit's Jacobian 7 % larger: docs/performance.md). 40 halvings place the root within 2^-41 of the step, below
+    float64's resolution of the time itself (more would cost every lane of a sweep, where `cond` runs both branches)."""
     ta, tb, za, zb, fa, fb = seg
     args = (system, ta, tb - ta, za, zb, fa, fb)
 
