@@ -30,7 +30,7 @@ _RK4_A = np.array([[0, 0, 0, 0, 0], [0.5, 0, 0, 0, 0], [0, 0.5, 0, 0, 0], [0, 0,
                    [1 / 6, 1 / 3, 1 / 3, 1 / 6, 0]], dtype=float)
 _RK4_C = np.array([0.0, 0.5, 0.5, 1.0, 1.0])
 _RK4_AUX = np.array([0, 1, 1, 2, 2])  # which of the interval's (start, middle, end) aux values
-_BISECTIONS = 40  # halvings of the step: the crossing to 2^-41 of it (a 2.5 ms step: 1e-15 s, float64's resolution of t ~ 8 s)
+_BISECTIONS = 40  # halvings of the step: the crossing within 2^-41 of it (2.5 ms: 1e-15 s, float64's step in t ~ 8 s)
 
 
 def _hermite(s, h, za, zb, fa, fb):
