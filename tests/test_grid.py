@@ -224,6 +224,31 @@ def test_step_interpolant_is_the_cubic_hermite():
         np.testing.assert_allclose(np.asarray(ds), h * slope, rtol=1e-12, atol=1e-15)
 
 
+
+def test_event_location_is_the_root_and_its_derivative_the_implicit_functions():
+    # `_locate` on a straight step z(s) = za + s (zb - za) (slopes zb - za over h = 1: the Hermite is the line) and
+    # g = z - c: the crossing s* = (za - c)/(za - zb) to the bisection's 2^-41, dτ/d(za, zb, c) the implicit function
+    # theorem's in closed form, and a start where g < 0 already: τ = the step's start, moving with it only.
+    from pamjax._solve.grid import _locate
+
+    def event(c, t, z):
+        return z[0] - c
+
+    def tau(za, zb, c, ta=0.0):
+        za, zb = jnp.atleast_1d(za), jnp.atleast_1d(zb)
+        return _locate(event, c, (ta, ta + 1.0, za, zb, zb - za, zb - za))[0]
+
+    located = jax.jit(jax.value_and_grad(tau, argnums=(0, 1, 2, 3)))
+    za, zb, c = 1.0, -0.6, 0.3
+    value, grads = located(za, zb, c, 0.0)
+    assert abs(float(value) - (za - c) / (za - zb)) < 1e-12
+    d = za - zb  # s* = (za - c)/d: ∂/∂za = (c - zb)/d², ∂/∂zb = (za - c)/d², ∂/∂c = -1/d, ∂/∂ta = 1
+    np.testing.assert_allclose([float(x) for x in grads], [(c - zb) / d**2, (za - c) / d**2, -1.0 / d, 1.0],
+                               rtol=1e-10)
+    value, grads = located(0.2, -0.6, 0.3, 0.5)  # g(0) = -0.1 < 0: no root inside the step
+    assert float(value) == 0.5 and [float(x) for x in grads] == [0.0, 0.0, 0.0, 1.0]
+
+
 def test_runs_in_one_loop_switch_their_start_modes_each_on_its_own():
     # A fit integrates experiments of one structure as runs of one loop; a start outside its mode is switched per
     # run before it (mapped over the runs). Two runs, stuck at the preset's rest and stuck 2 mm below it (the net

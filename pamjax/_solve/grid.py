@@ -60,8 +60,8 @@ def _rk4(field, system, ta, tb, z, a):
 def _locate(event, system, seg):
     """Time and state of the first crossing g = 0 in a step whose end has g < 0.
 
-    The crossing s* ∈ [0, 1] (of the step) is found by bisection on the step's Hermite interpolant, to float64's
-    resolution (`_BISECTIONS`); its derivatives are those of the implicit function g(s*, θ) = 0, to every order: a
+    The crossing s* ∈ [0, 1] (of the step) is found by bisection on the step's Hermite interpolant
+    (`_BISECTIONS`); its derivatives are those of the implicit function g(s*, θ) = 0, to every order: a
     custom JVP gives ds*/dθ = −g_θ/g_s at s*, and differentiating that rule again (s* inside it is this function,
     whose rule applies again) gives the second derivatives a design's gradient of a Jacobian needs (a Newton step
     from a gradient-stopped root carries the first derivatives only: its mixed second derivatives had the wrong sign
