@@ -11,7 +11,7 @@ fixed grids are (`pamjax._solve.synchronous`, `pamjax._solve.grid`):
 - `"grid"` (a continuous valve, e.g. the averaged eq. 13): K uniform RK4 steps with the duty held.
 
 Stick-slip events (`KarnoppFriction`) and the inelastic stroke limits are located inside the steps (bisection on the
-step's Hermite interpolant, then one Newton step that carries the implicit function theorem's derivative), so the
+step's Hermite interpolant; the located time carries the implicit function theorem's derivatives), so the
 loop is a continuous, piecewise-smooth function of gains and plant parameters: reverse-mode gradients for tuning.
 """
 
