@@ -224,7 +224,6 @@ def test_step_interpolant_is_the_cubic_hermite():
         np.testing.assert_allclose(np.asarray(ds), h * slope, rtol=1e-12, atol=1e-15)
 
 
-
 def test_event_location_is_the_root_and_its_derivative_the_implicit_functions():
     # `_locate` on a straight step z(s) = za + s (zb - za) (slopes zb - za over h = 1: the Hermite is the line) and
     # g = z - c: the crossing s* = (za - c)/(za - zb) to the bisection's 2^-41, dτ/d(za, zb, c) the implicit function

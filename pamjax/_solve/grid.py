@@ -4,8 +4,8 @@ The grid is given as intervals [left_i, right_i] (the PWM-synchronous grid of `p
 switching valve, a uniform grid otherwise), each with the valve opening held over it (or None). Each interval is one
 classical RK4 step. A hybrid system (`system.hybrid`, e.g. a muscle with `KarnoppFriction`) also gives an event function
 g that stays ≥ 0 while its current mode holds; when g < 0 at the end of a step, the crossing τ is located on the
-step's cubic Hermite interpolant (bisection, then one Newton step; its derivatives are the implicit function
-theorem's, dτ/dθ = −g_θ/g_τ, to every order: a custom JVP, `_locate`), the state at τ is passed through
+step's cubic Hermite interpolant (bisection; its derivatives are the implicit function theorem's,
+dτ/dθ = −g_θ/g_τ, to every order: a custom JVP, `_locate`), the state at τ is passed through
 `system.event_update` (the new mode), and the rest of the interval is integrated from τ in the new mode. Up to
 `MAX_EVENTS` events per interval are resolved (the grid's steps are ~1 ms; a stick-slip plant switches at most once
 or twice in one).
@@ -84,9 +84,6 @@ def _locate(event, system, seg):
     def g(s, a):
         return g_closed(s, a[0], *a[1])
 
-    def slope_at(s, a):
-        return jax.jvp(lambda q: g(q, a), (s,), (jnp.ones_like(s),))
-
     @jax.custom_jvp
     def crossing(a):
         def bisect(_, bounds):
@@ -102,7 +99,7 @@ def _locate(event, system, seg):
     def _crossing_jvp(primals, tangents):
         (a,), (da,) = primals, tangents
         s = crossing(a)
-        slope = slope_at(s, a)[1]
+        slope = jax.jvp(lambda q: g(q, a), (s,), (jnp.ones_like(s),))[1]  # g_s at the root
         g_dot = jax.jvp(lambda b: g(s, b), (a,), (da,))[1]
         ok = (jnp.abs(slope) > 0) & (s > 0)  # a crossing at the step's start moves with the start only
         return s, jnp.where(ok, -g_dot / jnp.where(ok, slope, 1.0), 0.0)
