@@ -1,5 +1,6 @@
 import gc
 import os
+import shutil
 import tempfile
 
 # The tests run single trajectories, gradients and fits, which the `pamjax` command's fit/simulate/demo compile with
@@ -29,9 +30,12 @@ jax.config.update("jax_enable_x64", True)
 # that several test modules compile (the MAS-10 presets' solves above all) is compiled once per session instead of
 # once per worker and process. This conftest is loaded by the controlling process before it starts the workers,
 # which inherit the variables. PAMJAX_TEST_CACHE=0 turns it off (each process then compiles everything itself).
+# The process that made the directory (the controlling one) removes it when the session ends (`pytest_unconfigure`):
+# 70 MB per run were left in the temporary folder before.
+_MADE_CACHE = None
 if os.environ.get("PAMJAX_TEST_CACHE", "1") != "0":
     if "PAMJAX_CACHE_DIR" not in os.environ:
-        os.environ["PAMJAX_CACHE_DIR"] = tempfile.mkdtemp(prefix="pamjax-test-cache-")
+        os.environ["PAMJAX_CACHE_DIR"] = _MADE_CACHE = tempfile.mkdtemp(prefix="pamjax-test-cache-")
     os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.environ["PAMJAX_CACHE_DIR"])  # scripts' own processes
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.5")
     jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
@@ -83,6 +87,11 @@ def _tune_gc():
 
 def pytest_configure(config):
     _tune_gc()  # the libraries imported by now (JAX, the conftest's own)
+
+
+def pytest_unconfigure(config):
+    if _MADE_CACHE is not None and not hasattr(config, "workerinput"):  # the workers have ended by now
+        shutil.rmtree(_MADE_CACHE, ignore_errors=True)
 
 
 def pytest_collection_finish(session):

@@ -1,8 +1,10 @@
 """The package's structure, checked (docs/architecture.md): one direction of imports between the layers
 (import-linter's layers contract in pyproject.toml), workflows that ask contracts instead of concrete classes, abstract
-methods that are abstract, modules and functions of a readable size, and fits/ and benchmarks/ on public names only."""
+methods that are abstract, modules and functions of a readable size, and fits/ and benchmarks/ on public names only;
+and the suite itself leaves no temporary compilation cache behind."""
 
 import ast
+import os
 import pathlib
 import re
 import subprocess
@@ -126,6 +128,19 @@ MAX_INIT_LINES = 160  # issue 31: the top level holds what a user imports daily;
 def test_top_level_is_compact():
     lines = len((PACKAGE / "__init__.py").read_text().splitlines())
     assert lines <= MAX_INIT_LINES, f"pamjax/__init__.py has {lines} lines (at most {MAX_INIT_LINES})"
+
+
+def test_the_suite_leaves_no_cache_behind(tmp_path):
+    """The session's compilation cache (tests/conftest.py: a fresh temporary folder, ~70 MB after a full run) is
+    removed when the session ends; every run left one behind before."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("PAMJAX_CACHE_DIR", "JAX_COMPILATION_CACHE_DIR", "PYTEST_XDIST_WORKER", "PAMJAX_TEST_CACHE")}
+    env["TMPDIR"] = str(tmp_path)
+    run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-n", "0", "-p", "no:cacheprovider",
+                          "tests/test_architecture.py::test_top_level_is_compact"],
+                         cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert not list(tmp_path.glob("pamjax-test-cache-*")), "the session's cache folder was left behind"
 
 
 def _moved():
