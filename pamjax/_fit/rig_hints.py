@@ -5,9 +5,17 @@ A fit of the ideal plant to a rig's recordings ends with residuals that are not 
 everyday nuisance, measured here from the data, the fitted predictions and the commands, without another solve:
 
 - **an offset at rest**: where a run starts at rest at atmospheric pressure, until its valve first opens (the fitted
-  model's pressure first moves), the model IS the atmosphere; the data's mean there is the pressure sensor's offset;
+  model's pressure first moves), the model IS the atmosphere; the data's mean there is the pressure sensor's offset.
+  An offset is the same all through that window; data that rise in its second half (against its first) are a valve
+  that opens before the model's, at a lower duty: a switching valve faster than the model's (its thresholds are the
+  switching time over the PWM period, paper 000), reported as such; where the data rise at all beyond the noise (3
+  standard errors), the offset is read from the first half only: over the whole window, valves 16 % and 1.3 %
+  faster than the model's read as "offsets" of 3.7 kPa and 0.6 kPa (benchmarks/RESULTS.md, design);
 - **a lag between command and response**: data(t) = model(t − d) ≈ model(t) − d ṁ(t), so the residual regressed on
-  −ṁ gives the acquisition delay d (pooled over every run and channel, each weighted by its noise);
+  −ṁ gives the acquisition delay d (pooled over every run and channel, each weighted by its noise). Data that LEAD
+  the model are no acquisition delay (a sensor cannot read early): a switching valve that switches faster than the
+  model's does that (or a command logged late), and where the model has a switching valve the finding names its
+  switching delays beside the (then negative) delay;
 - **a start that is not at rest**: a run declared at rest whose first 20 ms move, or sit far from the model's rest
   state (a recording started mid-run);
 - **a supply pressure the tank runs contradict**: a discharge starts at its supply, so its first samples give that
@@ -20,15 +28,29 @@ enough to matter (beside the bench figures of issue 29: 0.1 ms, 300 Pa, 1 kPa), 
 import numpy as np
 
 from .experiment import Experiment
+from .parameters import parameter_paths
 from .rig import is_nuisance
 
 FREE_IT = ("free it: fits/joint.py --nuisance, [bench] nuisance = true in a pamjax fit config, or "
            "load_bench(..., nuisance=True) / pamjax.Rig in Python")
 _SIGNIFICANT = 5.0  # standard errors
 _MIN_DELAY = 1e-4  # s
+_RISING = 3.0  # standard errors of a rise at rest beyond which the offset is read from the first half only
 _MIN_OFFSET = 300.0  # Pa
 _MIN_SUPPLY = 1e3  # Pa
 _START_WINDOW = 0.02  # s
+_SWITCHING = ("valve.switch_on_delay", "valve.switch_off_delay")  # a switching valve's delays (paper 000: ~2 ms)
+_FREE_SWITCHING = ("free its switching delays: free = [..., \"valve.switch_on_delay\", \"valve.switch_off_delay\"] "
+                   "(a rig's plant: \"plant.valve.switch_on_delay\", ...)")
+
+
+def _switches(model):
+    """Whether the fit's plant has a switching valve with switching delays to free."""
+    from .rig import split
+
+    plant = split(model, None, None)[0]
+    paths = parameter_paths(plant)
+    return all(path in paths for path in _SWITCHING)
 
 
 def _start_pressure(e, system, model, atmosphere):
@@ -76,7 +98,8 @@ def nuisance_hints(model, experiments, predictions, labels):
     exps = [e for e in experiments if isinstance(e, Experiment) and e.name in predictions]
     hints = []
     num = den = 0.0
-    rest_sum, rest_n, rest_sigma = 0.0, 0, None
+    rest = [0.0, 0, 0.0, 0]  # sum, count of data − atmosphere at rest: the first, then the second half of each window
+    rest_sigma = None
     starts, supplies, steady = [], [], []
     for e in exps:
         plant, _, _ = split(model, e.name, e.sensor_group)
@@ -100,10 +123,12 @@ def nuisance_hints(model, experiments, predictions, labels):
             if c == "pressure":
                 if abs(start_p - atmosphere) < 1.0:  # at rest until the model's pressure first moves (the valve opens)
                     moved = np.flatnonzero(np.abs(pred - pred[0]) > 1.0)
-                    rest = used & (np.arange(t.size) < (moved[0] if moved.size else t.size))
-                    if np.count_nonzero(rest) >= 3:
-                        rest_sum += float(np.sum(data[rest] - atmosphere))
-                        rest_n += int(np.count_nonzero(rest))
+                    at_rest = np.flatnonzero(used & (np.arange(t.size) < (moved[0] if moved.size else t.size)))
+                    if at_rest.size >= 6:
+                        half = at_rest.size // 2
+                        first, second = data[at_rest[:half]] - atmosphere, data[at_rest[half:]] - atmosphere
+                        rest = [rest[0] + float(first.sum()), rest[1] + first.size,
+                                rest[2] + float(second.sum()), rest[3] + second.size]
                         rest_sigma = sigma
                 if e.start_at_supply:
                     head = used & (t <= t[0] + 0.005)
@@ -115,17 +140,9 @@ def nuisance_hints(model, experiments, predictions, labels):
                     steady.append((e.name, float(np.mean(data[tail] - pred[tail])),
                                    sigma / np.sqrt(max(np.count_nonzero(tail), 1))))
     if den > 0 and "delay" not in freed:
-        d, se = num / den, 1.0 / np.sqrt(den)
-        if abs(d) > max(_SIGNIFICANT * se, _MIN_DELAY):
-            hints.append(f"a lag between command and response: the data {'lag' if d > 0 else 'lead'} the model by "
-                         f"{abs(d) * 1e3:.2f} ms (± {se * 1e3:.2g} ms; residuals regressed on the model's slope): an "
-                         f"acquisition delay; {FREE_IT} (delay)")
-    if rest_n and "pressure_offset" not in freed:
-        offset, se = rest_sum / rest_n, rest_sigma / np.sqrt(rest_n)
-        if abs(offset) > max(_SIGNIFICANT * se, _MIN_OFFSET):
-            hints.append(f"an offset at rest: before the valve first opens, where the model is at atmospheric "
-                         f"pressure, the pressure reads {offset:+.0f} Pa (± {se:.0f} Pa over {rest_n} samples): a "
-                         f"pressure sensor offset; {FREE_IT} (pressure_offset, pressure_gain)")
+        hints += _lag_hint(num / den, 1.0 / np.sqrt(den), model)
+    if rest[1] and rest[3]:
+        hints += _rest_hints(rest, rest_sigma, model, offset_freed="pressure_offset" in freed)
     for name, finding in starts:
         if name not in started:
             hints.append(f"a start that is not at rest: {name} {finding} (a recording started mid-run?): give it "
@@ -143,4 +160,41 @@ def nuisance_hints(model, experiments, predictions, labels):
             hints.append(f"a supply pressure the tank runs contradict: their steady pressures sit on both sides of the "
                          f"model (data − model over their last 20 %, kPa: {spread}), which one supply pressure cannot "
                          f"give; {FREE_IT} (supply_pressure, per run)")
+    return hints
+
+
+def _lag_hint(d, se, model):
+    """The lag finding for a pooled lag `d` [s] (positive: the data lag the model) of standard error `se`."""
+    if abs(d) <= max(_SIGNIFICANT * se, _MIN_DELAY):
+        return []
+    found = (f"a lag between command and response: the data {'lag' if d > 0 else 'lead'} the model by "
+             f"{abs(d) * 1e3:.2f} ms (± {se * 1e3:.2g} ms; residuals regressed on the model's slope): ")
+    if d < 0 and _switches(model):
+        found += (f"not an acquisition delay (that makes them lag) but a valve that switches {abs(d) * 1e3:.2f} ms "
+                  f"faster than the model's (or a command logged late); {_FREE_SWITCHING}, or a negative delay: ")
+    else:
+        found += "an acquisition delay; "
+    return [f"{found}{FREE_IT} (delay)"]
+
+
+def _rest_hints(rest, sigma, model, offset_freed):
+    """The findings of the pressure at rest (`rest`: sum and count of data − atmosphere over the first, then the
+    second half of each run's window before the model's valve opens; `sigma` the pressure noise)."""
+    hints = []
+    early, late = rest[0] / rest[1], rest[2] / rest[3]
+    rise, rise_se = late - early, sigma * np.sqrt(1.0 / rest[1] + 1.0 / rest[3])
+    if rise > max(_SIGNIFICANT * rise_se, _MIN_OFFSET):
+        hints.append(f"a valve that opens before the model's: where the model rests at atmospheric pressure (its valve "
+                     f"still shut), the data rise by {rise:+.0f} Pa (± {rise_se:.0f} Pa) from the first half of that "
+                     "time to the second, which no sensor offset does: the valve opens at a lower duty than the "
+                     "model's threshold" + (f" (a switching valve faster than the model's); {_FREE_SWITCHING}"
+                                            if _switches(model) else "; check the valve's dead band"))
+    # the offset over the whole window; over its first half only where the data rise within it (a valve that opens
+    # early shows at the window's end) beyond what noise gives a constant offset (3 standard errors)
+    n = rest[1] if rise > _RISING * rise_se else rest[1] + rest[3]
+    offset, se = (rest[0] if n == rest[1] else rest[0] + rest[2]) / n, sigma / np.sqrt(n)
+    if not offset_freed and abs(offset) > max(_SIGNIFICANT * se, _MIN_OFFSET):
+        hints.append(f"an offset at rest: before the valve first opens, where the model is at atmospheric pressure, "
+                     f"the pressure reads {offset:+.0f} Pa (± {se:.0f} Pa over {n} samples): a pressure sensor "
+                     f"offset; {FREE_IT} (pressure_offset, pressure_gain)")
     return hints
