@@ -292,7 +292,11 @@ def plot(path, model, experiments):
         axes[1, 0].plot(e.times, (tr["pressure"] - np.asarray(e.data["pressure"])) / 1e3, lw=0.5,
                         color=line.get_color())
     axes[0, 0].set(ylabel="tank pressure [bar abs]", title="tank tests: data (dots), model (lines)")
-    axes[0, 0].legend(fontsize=6)
+    if tanks:  # a bench of muscle runs only has no tank test to label
+        axes[0, 0].legend(fontsize=6)
+    else:
+        axes[0, 0].text(0.5, 0.5, "no tank tests in this bench", ha="center", va="center",
+                        transform=axes[0, 0].transAxes)
     axes[1, 0].set(xlabel="t [s]", ylabel="model − data [kPa]", title="tank residuals")
     axes[2, 0].axis("off")
     for k, e in enumerate(runs, start=1):

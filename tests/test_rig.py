@@ -700,6 +700,8 @@ def test_a_valve_faster_than_the_models_is_named_and_not_taken_for_a_sensor_offs
         if name == "fast":
             assert "a valve that opens before the model's" in text and "valve.switch_on_delay" in text, text
             assert "the data lead the model" in text and "not an acquisition delay" in text, text
-            assert "an offset at rest" not in text, text
+            assert "an offset at rest" not in text and '"t_on", "t_off"' in text, text
+            keyed = pj.bench.load_bench(tmp_path / name, model, fitted_keys=["Fc", "t_on", "t_off"])
+            assert keyed.free == ["friction.coulomb_force", "valve.switch_on_delay", "valve.switch_off_delay"]
         else:
             assert "an offset at rest" in text and "opens before" not in text, text

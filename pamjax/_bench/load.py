@@ -65,6 +65,10 @@ BENCH_PARAMETERS = {
     "k2": ("muscle.force_law.k2", "muscle.force_law.k2"),
     "Fc": ("friction.coulomb_force", "friction.coulomb_force"),
     "Cf": ("friction.viscous_coefficient", "friction.viscous_coefficient"),
+    # the switching valve's delays (paper 000: "approximately 2 ms"; its thresholds are t_on/T and 1 − t_off/T): free
+    # them where a fit's diagnosis finds the valve faster or slower than the model's (pamjax._fit.rig_hints)
+    "t_on": ("valve.switch_on_delay", "valve.switch_on_delay"),
+    "t_off": ("valve.switch_off_delay", "valve.switch_off_delay"),
 }
 # The nuisances `load_bench(..., nuisance=...)` can free (docs/fitting.md, "Identifying your own rig"), and those
 # `nuisance=True` frees. The position sensor's offset only where a muscle run rests on a stroke limit: elsewhere a

@@ -40,8 +40,8 @@ _MIN_OFFSET = 300.0  # Pa
 _MIN_SUPPLY = 1e3  # Pa
 _START_WINDOW = 0.02  # s
 _SWITCHING = ("valve.switch_on_delay", "valve.switch_off_delay")  # a switching valve's delays (paper 000: ~2 ms)
-_FREE_SWITCHING = ("free its switching delays: free = [..., \"valve.switch_on_delay\", \"valve.switch_off_delay\"] "
-                   "(a rig's plant: \"plant.valve.switch_on_delay\", ...)")
+_FREE_SWITCHING = ("free its switching delays: \"t_on\", \"t_off\" in a bench's meta.json fitted_keys (fits/joint.py, "
+                   "[bench]), or free = [..., \"valve.switch_on_delay\", \"valve.switch_off_delay\"] in Python")
 
 
 def _switches(model):
