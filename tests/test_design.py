@@ -696,3 +696,34 @@ def test_a_limit_passed_within_the_check_tolerance_is_explained_where_it_is_prin
     assert not c["feasible"] and "beyond the 5.0 N allowed" in text and "VIOLATED" in text
     c, text = printed([25.0, 30.0, 40.0], [2e5, 3e5, 3e5])  # every limit held: no note
     assert c["feasible"] and "past the limit" not in text
+
+
+def test_random_probes_carry_the_search_past_a_kink_the_gradient_cannot_see(monkeypatch):
+    # A cost with jumps (a stick-slip phase or a stop contact appearing): along the gradient it jumps up at c0 = 0.1,
+    # while a step across c1 = 0.03, which the gradient (0 along c1) never proposes, lowers it by 4. The line search
+    # stalls at the first jump; the probes find the second (the search used to end there: "no descent").
+    from pamjax._identifiability import design as design_module
+
+    def fake_value(c, problem):
+        c = np.asarray(c)
+        v = (c[0] - 1.0) ** 2 + 3.0 * (c[0] > 0.1) - 4.0 * (c[1] > 0.03) + np.sum(c[1:] ** 2)
+        zero = jnp.zeros(())
+        return jnp.asarray(v), dict(criterion=jnp.asarray(v), worst_stroke=zero, worst_pressure=zero,
+                                    worst_step=zero, worst_force=zero)
+
+    def gradient(c, problem):
+        c = np.asarray(c)
+        return jnp.asarray(np.concatenate([[2.0 * (c[0] - 1.0)], 2.0 * c[1:]]))
+
+    monkeypatch.setattr(obj, "value", fake_value)
+    c0 = np.zeros(4)
+    monkeypatch.setattr(design_module, "PROBES", 0)
+    _, aux_without, _, message_without = design_module._optimise(c0, None, gradient, 30, None, seed=0)
+    monkeypatch.setattr(design_module, "PROBES", 8)
+    c, aux_with, history, message_with = design_module._optimise(c0, None, gradient, 30, None, seed=0)
+    assert float(aux_without["criterion"]) > 0.8 and "no descent" in message_without
+    assert float(aux_with["criterion"]) < float(aux_without["criterion"]) - 3.0 and c[1] > 0.03, (c, message_with)
+    assert "random probes past kinks" in message_with
+    assert all(b[1] <= a[1] for a, b in zip(history, history[1:]))  # never uphill
+    again = design_module._optimise(c0, None, gradient, 30, None, seed=0)
+    assert np.array_equal(again[0], c)  # seeded: the same search twice
