@@ -52,7 +52,7 @@ from .design_setup import (
 # appears), the search probes PROBES seeded random directions, both signs, of max-norm PROBE_SCALES in turn (in the
 # coefficients' units: the duty band is z ∈ [0, 1]). Measured on the fitted models of three stop-resting rigs
 # (benchmarks/RESULTS.md, design, Session 55): the D criterion 0–4.1 lower than without (never higher: a probe is
-# taken only where it lowers the objective), for 3–30 s more.
+# taken only where it lowers the objective); the searches with probes took 5–32 s.
 PROBES = 8
 PROBE_SCALES = (0.05, 0.02, 0.005)
 START_CALMER = (0.8, 0.6, 0.4, 0.2, 0.0)  # factors on START_AMPLITUDE tried, in turn, where the default start breaks a
@@ -301,7 +301,8 @@ def design_experiment(
     Maximises the Fisher information F = F_prior + Σ JᵀJ (J: the noise-scaled outputs' forward-mode Jacobian with
     respect to the fit's scaled parameters, through the solve) in the D sense (minimise log det F⁻¹ on `subset`) or
     the A sense (log tr F⁻¹), by BFGS with gradients through the solve, the PWM edges and the stick-slip events
-    (`design_objective`). The design is local: it is optimal near the parameter values of `model`, from the
+    (`design_objective`), and seeded random probes where the cost's kinks stop the line search (`PROBES`). The
+    design is local: it is optimal near the parameter values of `model`, from the
     start signal. Design at your best estimate — the fit of a short pilot run, not the datasheet: at the MAS-10
     presets the payload rests 11 mm higher than on the bench plant, and a design there predicted gains on the force
     law's a3, a4 that the plant did not give (docs/identifiability.md).
