@@ -302,10 +302,10 @@ def design_experiment(
     respect to the fit's scaled parameters, through the solve) in the D sense (minimise log det F⁻¹ on `subset`) or
     the A sense (log tr F⁻¹), by BFGS with gradients through the solve, the PWM edges and the stick-slip events
     (`design_objective`), and seeded random probes where the cost's kinks stop the line search (`PROBES`). The
-    design is local: it is optimal near the parameter values of `model`, from the
-    start signal. Design at your best estimate — the fit of a short pilot run, not the datasheet: at the MAS-10
-    presets the payload rests 11 mm higher than on the bench plant, and a design there predicted gains on the force
-    law's a3, a4 that the plant did not give (docs/identifiability.md).
+    design is local: it is optimal near the parameter values of `model`, from the start signal. Design at your best
+    estimate — the fit of a short pilot run, not the datasheet: at the MAS-10 presets the payload rests 11 mm higher
+    than on the bench plant, and a design there predicted gains on the force law's a3, a4 that the plant did not give
+    (docs/identifiability.md).
 
     **Arguments:**
 
@@ -345,7 +345,7 @@ def design_experiment(
       modulating a seeded multilevel carrier; gradient in forward mode, 2·knots tangents) or "periods" (one free value
       per period; gradient in reverse mode: exact but ~50× a Jacobian per step on a 2-core CPU for 33 s).
     - `steps`: BFGS iterations at most; `initial`: start signal (a pamjax signal or one duty per period; default paper
-      000's E3 triangle with the carrier on top); `seed`: the carrier's.
+      000's E3 triangle with the carrier on top); `seed`: the carrier's and the probes'.
     - `design_rate` [Hz], `substeps`: resolution of the objective (docs/identifiability.md: within 0.2 % of the
       fit's); `verify`: recompute the final standard errors at the fit's resolution (16 substeps, `rate`).
     - `progress`: True prints one line per iteration; a callable gets (iteration, objective, criterion, step,
