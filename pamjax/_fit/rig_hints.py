@@ -11,6 +11,9 @@ everyday nuisance, measured here from the data, the fitted predictions and the c
   switching time over the PWM period, paper 000), reported as such; where the data rise at all beyond the noise (3
   standard errors), the offset is read from the first half only: over the whole window, valves 16 % and 1.3 %
   faster than the model's read as "offsets" of 3.7 kPa and 0.6 kPa (benchmarks/RESULTS.md, design);
+- **a valve that opens after the model's**: in the first 0.1 s after the model's valve first opens, the data rise
+  less than half as much as the model (and by more than 1 kPa): a switching valve slower than the model's, whose
+  thresholds sit at a higher duty (no sensor gain, supply pressure or delay of milliseconds does that);
 - **a lag between command and response**: data(t) = model(t − d) ≈ model(t) − d ṁ(t), so the residual regressed on
   −ṁ gives the acquisition delay d (pooled over every run and channel, each weighted by its noise). Data that LEAD
   the model are no acquisition delay (a sensor cannot read early): a switching valve that switches faster than the
@@ -39,6 +42,8 @@ _RISING = 3.0  # standard errors of a rise at rest beyond which the offset is re
 _MIN_OFFSET = 300.0  # Pa
 _MIN_SUPPLY = 1e3  # Pa
 _START_WINDOW = 0.02  # s
+_ONSET = 0.1  # s after the model's valve first opens, where a slower valve's data still rest (E3: 0.14 s at 2.4 ms)
+_MIN_ONSET = 1e3  # Pa: a rise missing from the data at the valve's opening
 _SWITCHING = ("valve.switch_on_delay", "valve.switch_off_delay")  # a switching valve's delays (paper 000: ~2 ms)
 _FREE_SWITCHING = ("free its switching delays: \"t_on\", \"t_off\" in a bench's meta.json fitted_keys (fits/joint.py, "
                    "[bench]), or free = [..., \"valve.switch_on_delay\", \"valve.switch_off_delay\"] in Python")
@@ -98,7 +103,7 @@ def nuisance_hints(model, experiments, predictions, labels):
     exps = [e for e in experiments if isinstance(e, Experiment) and e.name in predictions]
     hints = []
     num = den = 0.0
-    rest = [0.0, 0, 0.0, 0]  # sum, count of data − atmosphere at rest: the first, then the second half of each window
+    rest = [0.0] * 7  # what the runs that start at rest at atmospheric pressure show there (`_at_rest`), summed
     rest_sigma = None
     starts, supplies, steady = [], [], []
     for e in exps:
@@ -122,14 +127,8 @@ def nuisance_hints(model, experiments, predictions, labels):
                 den += float(slope @ slope) / sigma**2
             if c == "pressure":
                 if abs(start_p - atmosphere) < 1.0:  # at rest until the model's pressure first moves (the valve opens)
-                    moved = np.flatnonzero(np.abs(pred - pred[0]) > 1.0)
-                    at_rest = np.flatnonzero(used & (np.arange(t.size) < (moved[0] if moved.size else t.size)))
-                    if at_rest.size >= 6:
-                        half = at_rest.size // 2
-                        first, second = data[at_rest[:half]] - atmosphere, data[at_rest[half:]] - atmosphere
-                        rest = [rest[0] + float(first.sum()), rest[1] + first.size,
-                                rest[2] + float(second.sum()), rest[3] + second.size]
-                        rest_sigma = sigma
+                    rest = [a + b for a, b in zip(rest, _at_rest(t, data, pred, used, atmosphere))]
+                    rest_sigma = sigma
                 if e.start_at_supply:
                     head = used & (t <= t[0] + 0.005)
                     if np.count_nonzero(head) >= 3:
@@ -143,6 +142,8 @@ def nuisance_hints(model, experiments, predictions, labels):
         hints += _lag_hint(num / den, 1.0 / np.sqrt(den), model)
     if rest[1] and rest[3]:
         hints += _rest_hints(rest, rest_sigma, model, offset_freed="pressure_offset" in freed)
+    if rest[6]:
+        hints += _onset_hint(rest, rest_sigma, model)
     for name, finding in starts:
         if name not in started:
             hints.append(f"a start that is not at rest: {name} {finding} (a recording started mid-run?): give it "
@@ -177,8 +178,40 @@ def _lag_hint(d, se, model):
     return [f"{found}{FREE_IT} (delay)"]
 
 
+def _at_rest(t, data, pred, used, atmosphere):
+    """What a run that starts at rest at atmospheric pressure shows, as sums: of data − atmosphere and their counts
+    over the first, then the second half of the window before the model's valve opens (its pressure first moves); and
+    over the `_ONSET` seconds after it, of data − atmosphere, of model − atmosphere, and their count."""
+    out = [0.0] * 7
+    moved = np.flatnonzero(np.abs(pred - pred[0]) > 1.0)
+    start = moved[0] if moved.size else t.size
+    at_rest = np.flatnonzero(used & (np.arange(t.size) < start))
+    if at_rest.size >= 6:
+        half = at_rest.size // 2
+        first, second = data[at_rest[:half]] - atmosphere, data[at_rest[half:]] - atmosphere
+        out[:4] = [float(first.sum()), first.size, float(second.sum()), second.size]
+    onset = np.flatnonzero(used & (np.arange(t.size) >= start) & (t <= t[min(start, t.size - 1)] + _ONSET))
+    if moved.size and onset.size >= 10:
+        out[4:] = [float(np.sum(data[onset] - atmosphere)), float(np.sum(pred[onset] - atmosphere)), onset.size]
+    return out
+
+
+def _onset_hint(rest, sigma, model):
+    """The finding of the pressure just after the model's valve opens (`_at_rest`'s sums): a valve that opens later."""
+    data_rise, model_rise, n = rest[4] / rest[6], rest[5] / rest[6], rest[6]
+    se = sigma / np.sqrt(n)
+    if model_rise - data_rise > max(_SIGNIFICANT * se, _MIN_ONSET) and data_rise < 0.5 * model_rise:
+        return [f"a valve that opens after the model's: in the first {_ONSET * 1e3:.0f} ms after the model's valve "
+                f"opens, its pressure rises by {model_rise / 1e3:.1f} kPa on average and the data by "
+                f"{data_rise / 1e3:.1f} kPa (± {se / 1e3:.2g}), far less than a sensor's gain, a supply pressure or a "
+                "delay of milliseconds explain: the valve opens at a higher duty than the model's threshold"
+                + (f" (a switching valve slower than the model's); {_FREE_SWITCHING}" if _switches(model)
+                   else "; check the valve's dead band")]
+    return []
+
+
 def _rest_hints(rest, sigma, model, offset_freed):
-    """The findings of the pressure at rest (`rest`: sum and count of data − atmosphere over the first, then the
+    """The findings of the pressure at rest (`rest`: `_at_rest`'s sums: data − atmosphere over the first, then the
     second half of each run's window before the model's valve opens; `sigma` the pressure noise)."""
     hints = []
     early, late = rest[0] / rest[1], rest[2] / rest[3]
