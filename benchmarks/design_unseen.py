@@ -28,8 +28,8 @@ The arms (each run from rest at atmospheric pressure, recorded at 1 kHz):
    triangle parameters; E3, E4 as "muscle_triangle").
 4. `pamjax.bench.load_bench` of the folder and `pamjax.fit` of each arm's runs from the presets, the five
    parameters free (`--free-switching`: and the valve's switching delays, which the fits' diagnosis names where a
-   plant's valve switches faster than the model's: "the data lead the model", "a valve that opens before the
-   model's").
+   plant's valve switches faster or slower than the model's: "the data lead the model", "a valve that opens
+   before / after the model's").
 
 Reports per arm and parameter the worst |error| over the plants [% of the plant's value], the fit's standard error
 [%], the residual RMSE over the noise, and the plant-side conditions (periods near the plant's thresholds, the
@@ -180,7 +180,7 @@ def write_bench(directory, model, truth, t_switch, runs, seed):
     return conditions
 
 
-SWITCHING = ["valve.switch_on_delay", "valve.switch_off_delay"]  # what the fit's diagnosis names for a faster valve
+SWITCHING = ["valve.switch_on_delay", "valve.switch_off_delay"]  # what the diagnosis names for another valve
 
 
 def fit_arm(model, bench, names, free_switching=False):
@@ -205,7 +205,8 @@ def main(argv=None):
                     " (0: the design point's 2 ms)")
     ap.add_argument("--reuse", action="store_true", help="read the designs of an earlier run from --out")
     ap.add_argument("--free-switching", action="store_true", help="free the valve's switching delays in every arm's "
-                    "fit too, as the fit's diagnosis advises where the plant's valve switches faster than the model's")
+                    "fit too, as the fit's diagnosis advises where the plant's valve switches faster or slower "
+                    "than the model's")
     ap.add_argument("--out", default="results/design_unseen")
     args = ap.parse_args(argv)
     out = pathlib.Path(args.out)
