@@ -103,7 +103,7 @@ def nuisance_hints(model, experiments, predictions, labels):
     exps = [e for e in experiments if isinstance(e, Experiment) and e.name in predictions]
     hints = []
     num = den = 0.0
-    rest = [0.0] * 7  # what the runs that start at rest at atmospheric pressure show there (`_at_rest`), summed
+    rest = np.zeros(7)  # what the runs that start at rest at atmospheric pressure show there (`_at_rest`), summed
     rest_sigma = None
     starts, supplies, steady = [], [], []
     for e in exps:
@@ -127,7 +127,7 @@ def nuisance_hints(model, experiments, predictions, labels):
                 den += float(slope @ slope) / sigma**2
             if c == "pressure":
                 if abs(start_p - atmosphere) < 1.0:  # at rest until the model's pressure first moves (the valve opens)
-                    rest = [a + b for a, b in zip(rest, _at_rest(t, data, pred, used, atmosphere))]
+                    rest += _at_rest(t, data, pred, used, atmosphere)
                     rest_sigma = sigma
                 if e.start_at_supply:
                     head = used & (t <= t[0] + 0.005)
@@ -182,7 +182,7 @@ def _at_rest(t, data, pred, used, atmosphere):
     """What a run that starts at rest at atmospheric pressure shows, as sums: of data − atmosphere and their counts
     over the first, then the second half of the window before the model's valve opens (its pressure first moves); and
     over the `_ONSET` seconds after it, of data − atmosphere, of model − atmosphere, and their count."""
-    out = [0.0] * 7
+    out = np.zeros(7)
     moved = np.flatnonzero(np.abs(pred - pred[0]) > 1.0)
     start = moved[0] if moved.size else t.size
     at_rest = np.flatnonzero(used & (np.arange(t.size) < start))
@@ -224,10 +224,10 @@ def _rest_hints(rest, sigma, model, offset_freed):
                                             if _switches(model) else "; check the valve's dead band"))
     # the offset over the whole window; over its first half only where the data rise within it (a valve that opens
     # early shows at the window's end) beyond what noise gives a constant offset (3 standard errors)
-    n = rest[1] if rise > _RISING * rise_se else rest[1] + rest[3]
-    offset, se = (rest[0] if n == rest[1] else rest[0] + rest[2]) / n, sigma / np.sqrt(n)
+    total, n = (rest[0], rest[1]) if rise > _RISING * rise_se else (rest[0] + rest[2], rest[1] + rest[3])
+    offset, se = total / n, sigma / np.sqrt(n)
     if not offset_freed and abs(offset) > max(_SIGNIFICANT * se, _MIN_OFFSET):
         hints.append(f"an offset at rest: before the valve first opens, where the model is at atmospheric pressure, "
-                     f"the pressure reads {offset:+.0f} Pa (± {se:.0f} Pa over {n} samples): a pressure sensor "
+                     f"the pressure reads {offset:+.0f} Pa (± {se:.0f} Pa over {n:.0f} samples): a pressure sensor "
                      f"offset; {FREE_IT} (pressure_offset, pressure_gain)")
     return hints
