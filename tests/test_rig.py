@@ -709,5 +709,8 @@ def test_a_valve_faster_or_slower_than_the_models_is_named_and_not_taken_for_a_s
         elif name == "slow":  # opens at duty 0.12, the model at 0.1: its data still rest where the model's rise
             assert "a valve that opens after the model's" in text and '"t_on", "t_off"' in text, text
             assert "an offset at rest" not in text and "opens before" not in text, text
+            # its later edges make the data lag the model like an acquisition delay: the lag names the valve too
+            [lag] = [f for f in text.split(" | ") if "the data lag the model" in f]
+            assert "a valve that switches" in lag and "slower than the model's" in lag, lag
         else:
             assert "an offset at rest" in text and "opens before" not in text and "opens after" not in text, text
