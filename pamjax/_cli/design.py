@@ -10,7 +10,7 @@ import numpy as np
 
 from .._core.errors import PamjaxInputError
 from . import schema
-from .config import build_model, read_toml
+from .config import build_model, build_signal, read_toml
 from .fit import load_config
 from .out import OutputFolder
 
@@ -53,6 +53,10 @@ def build_design(table, root, model=None):
             except PamjaxInputError as err:
                 raise PamjaxInputError(f"[design] {key} = {table[key]!r}: {err}") from err
             kwargs[key] = experiments
+    for key in ("prior_runs", "baseline_runs"):  # planned runs: added to the fit config's experiments, if any
+        if key in table:
+            runs = planned_experiments(table[key], key, table, model)
+            kwargs[key[:-5]] = [*kwargs.get(key[:-5], []), *runs]
     if "initial" in table:
         kwargs["initial"] = _initial(table["initial"], root)
     if "duty_band" in kwargs:
@@ -62,6 +66,33 @@ def build_design(table, root, model=None):
     if "payload_kg" in table:  # a muscle run with weights added or taken off, as a fit experiment's payload_kg
         kwargs["build"] = payload_build(table["payload_kg"], model)
     return kwargs
+
+
+def planned_experiments(runs, key, table, model):
+    """`prior_runs` / `baseline_runs` (runs not recorded yet: a signal and a duration each) as experiments of `model`
+    (of its tank test or another payload where a run gives `tank_volume` or `payload_kg`) from the default start,
+    sampled at the design's `rate` on its `channels` with its `noise` as their scales, and the model's own prediction
+    as their data: a design's information reads only the model's Jacobian along a run, never its data. One solve
+    per run (`pamjax.synthetic_recording`)."""
+    import pamjax as pj
+
+    channels = list(table.get("channels", ("pressure", "position")))  # design_experiment's default channels
+    rate = float(table.get("rate", 1000.0))  # Hz, design_experiment's default rate
+    missing = [c for c in channels if c not in table["noise"]]
+    if missing:
+        raise PamjaxInputError(f"[design] {key}: noise has no level for channel(s) {missing}")
+    out = []
+    for k, run in enumerate(runs):
+        name = run.get("name", f"{key}[{k}]")
+        signal = build_signal(run["signal"], f"[design] {key}[{k}] signal")
+        t = np.round(np.arange(0.0, float(run["duration"]) + 0.5 / rate, 1.0 / rate), 12)
+        build = (pj.TankFromModel(float(run["tank_volume"])) if "tank_volume" in run
+                 else pj.PayloadFromModel(float(run["payload_kg"])) if "payload_kg" in run else None)
+        system = model if build is None else build(model)
+        rec = pj.synthetic_recording(system, signal, t, channels=channels, name=name)
+        out.append(pj.Experiment(rec, signal, channels=channels, scales={c: float(table["noise"][c]) for c in channels},
+                                 build=build, name=name))
+    return out
 
 
 def payload_build(value, model):

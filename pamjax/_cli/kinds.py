@@ -150,6 +150,36 @@ def _duty_or_file(value, key, where, table, name):
         raise PamjaxInputError(f"{where} must be a constant duty or a design CSV path, got {value!r}")
 
 
+PLANNED_RUN_KEYS = {"name", "signal", "duration", "tank_volume", "payload_kg"}  # a design's prior_runs / baseline_runs
+
+
+def _planned_runs(value, key, where, table, name):
+    """A design's `prior_runs` / `baseline_runs`: a non-empty list of runs not recorded, each a table with `signal` (a
+    signal table, not "recorded": there is no recording), `duration` [s], and optionally `name` and what it runs on
+    as a fit experiment says it: `tank_volume` [m³] (a tank test of the model's valve) or `payload_kg` [kg]."""
+    if not isinstance(value, list) or not value:
+        raise PamjaxInputError(f"{where} must be a non-empty list of runs, e.g. {key.example}, got {value!r}")
+    for k, run in enumerate(value):
+        at = f"{where}[{k}]"
+        check_keys(run, PLANNED_RUN_KEYS, at)
+        for needed in ("signal", "duration"):
+            if needed not in run:
+                raise PamjaxInputError(f"{at} needs '{needed}' (e.g. {key.example})")
+        if run["signal"] == "recorded" or (isinstance(run["signal"], dict) and run["signal"].get("kind") == "recorded"):
+            raise PamjaxInputError(f"{at} signal: a planned run has no recording to read a command from; give a "
+                                   "signal table (kind = \"Triangle\", ...), or a fit config as prior / baseline")
+        check_signal(run["signal"], key, f"{at} signal")
+        require(run["duration"], "positive number", f"{at} duration", "25.0 (s)")
+        if "name" in run:
+            require(run["name"], "string", f"{at} name", '"E3"')
+        for k, unit in (("tank_volume", "5e-5 (m³)"), ("payload_kg", "30.0 (kg)")):
+            if k in run:
+                require(run[k], "positive number", f"{at} {k}", unit)
+                check_setting(k, run[k], at)
+        if "tank_volume" in run and "payload_kg" in run:
+            raise PamjaxInputError(f"{at}: tank_volume (a tank test) or payload_kg (a muscle run), not both")
+
+
 def _options(value, key, where, table, name):
     """`[model] options`: a table checked in `check_model`, which knows the preset."""
     require(value, "table", where, key.shown)
@@ -288,6 +318,7 @@ _CHECKS = {
     "set": _set,
     "sensors": _sensors,
     "signal": check_signal,
+    "planned runs": _planned_runs,
     "free": check_free,
     "axis": _axis,
     "over": _over,

@@ -153,7 +153,10 @@ SWEEP_KEYS = {  # the [sweep] keys each kind uses
 }
 
 DESIGN_TABLES = {"model", "design"}
-# free, duration, noise, prior, baseline, initial, tank_volume, payload_kg, out; the rest: design_experiment's arguments
+_PLANNED = ('[{ name = "E3", signal = { kind = "Triangle", low = 0.05, high = 0.95, frequency = 0.08 }, '
+            'duration = 25.0 }]')
+# free, duration, noise, prior, baseline, prior_runs, baseline_runs, initial, tank_volume, payload_kg, out; the rest:
+# design_experiment's arguments
 DESIGN = {
     "free": Key("free", '["friction.coulomb_force"]', "parameter paths, as [fit] free"),
     "duration": Key("positive number", "33.0", "s"),
@@ -161,6 +164,8 @@ DESIGN = {
                  "the bench's noise standard deviation per channel, in its SI unit", entry="2e3"),
     "prior": Key("string", '"fit_example.toml"', "a fit config whose experiments are in hand"),
     "baseline": Key("string", '"my_current_runs.toml"', "a fit config whose experiments the design must beat"),
+    "prior_runs": Key("planned runs", _PLANNED, "runs not recorded yet whose information counts as in hand"),
+    "baseline_runs": Key("planned runs", _PLANNED, "runs not recorded yet (your protocol) the design must beat"),
     "initial": Key("duty or file", "0.6", 'a constant duty, or the design CSV to start from: "earlier/design.csv"'),
     "tank_volume": Key("positive number", "5e-5", "m³", setting=True),
     "payload_kg": Key("positive number or auto", "30.0", 'kg, or "auto": half the model\'s pull at zero contraction '
@@ -186,8 +191,8 @@ DESIGN = {
     "period": Key("positive number", "0.02", "s, the PWM period of a valve that has none"),
 }
 # the keyword arguments of pamjax.design_experiment
-DESIGN_ARGS = tuple(k for k in DESIGN if k not in ("free", "duration", "noise", "prior", "baseline", "initial",
-                                                     "tank_volume", "payload_kg", "out"))
+DESIGN_ARGS = tuple(k for k in DESIGN if k not in ("free", "duration", "noise", "prior", "baseline", "prior_runs",
+                                                     "baseline_runs", "initial", "tank_volume", "payload_kg", "out"))
 
 
 # -- one validation per config -----------------------------------------------------------------------------------
