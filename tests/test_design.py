@@ -260,15 +260,58 @@ def test_cli_design_writes_csv_json_figure_and_refuses_to_overwrite(tmp_path, ca
 
 
 def test_design_example_config_loads():
-    # every key of examples/design_example.toml is checked and its model built (nothing solved)
+    # every key of examples/design_example.toml is checked and its model built (the design not run): five parameters
+    # designed for, the valve's switching delays free beside them, E3 + E4 as the planned runs to beat
     from pamjax._cli.design import load
 
     model, free, duration, kwargs, out = load(pathlib.Path(__file__).resolve().parents[1] / "examples"
                                               / "design_example.toml")
-    assert duration == 33.0 and len(free) == 5 and out == "results/design_example"
+    assert duration == 33.0 and len(free) == 7 and out == "results/design_example"
+    assert kwargs["subset"] == free[:5] and free[5:] == ["valve.switch_on_delay", "valve.switch_off_delay"]
+    assert [e.name for e in kwargs["baseline"]] == ["E3", "E4"] and kwargs["baseline_margin"] == 1.1
+    assert [float(e.times[-1]) for e in kwargs["baseline"]] == pytest.approx([25.0, 8.0])
     assert kwargs["duty_band"] == (0.1, 0.9) and kwargs["criterion"] == "D"
     assert kwargs["duty_margin"] == "auto" and kwargs["min_force"] == 20.0
     assert "build" not in kwargs
+
+
+def test_design_config_planned_runs_are_runs_of_the_model_and_bad_ones_are_named(tmp_path):
+    # `baseline_runs` / `prior_runs`: a protocol not recorded yet (a signal and a duration) as experiments of the
+    # model: the design's rate, channels and noise, a tank test where it says tank_volume, the model's prediction as
+    # its data (a design's information never reads data: the same run with other data carries the same information).
+    from pamjax._cli.design import load
+    from pamjax._identifiability.design import information
+
+    body = ('[model]\npreset = "mas10_system"\noptions = { valve = "pwm" }\n[design]\n'
+            'free = ["valve.inflate.discharge_coefficient"]\nduration = 1.0\nnoise = { pressure = 2e3 }\n'
+            'channels = ["pressure"]\nrate = 500.0\nstart = { pressure = 101325.0 }\ntank_volume = 5e-5\n'
+            'baseline_runs = %s\n')
+    cfg = tmp_path / "planned.toml"
+    cfg.write_text(body % '[{ name = "held", signal = { kind = "Constant", value = 0.6 }, duration = 0.2, '
+                          'tank_volume = 5e-5 }]')
+    model, free, _, kwargs, _ = load(cfg)
+    [run] = kwargs["baseline"]
+    assert run.name == "held" and isinstance(run.signal, pj.Constant) and tuple(run.channels) == ("pressure",)
+    t = np.asarray(run.times)
+    assert t[0] == 0.0 and t[-1] == pytest.approx(0.2) and np.allclose(np.diff(t), 1 / 500.0)
+    assert isinstance(run.build(model), pj.TankSystem) and float(run.scales["pressure"]) == 2e3
+    data = np.asarray(run.data["pressure"])
+    assert data[-1] > data[0] + 1e4  # the tank fills at duty 0.6: the model's prediction, not a placeholder
+    other = pj.Experiment(pj.Recording(t, {"pressure": data + 5e3}, name="held"), run.signal, channels=["pressure"],
+                          scales={"pressure": 2e3}, build=run.build, name="held")
+    space = pj.ParameterSpace(model, free)
+    theta = space.initial_values()
+    assert np.allclose(information(space, theta, [run]), information(space, theta, [other]), rtol=1e-12)
+    for bad, match in (("[]", r"baseline_runs must be a non-empty list"),
+                       ('[{ signal = "recorded", duration = 1.0 }]', r"baseline_runs\[0\] signal: a planned run"),
+                       ('[{ signal = { kind = "Constant", value = 0.6 } }]', r"baseline_runs\[0\] needs 'duration'"),
+                       ('[{ signal = { kind = "Constant", value = 0.6 }, duration = -1.0 }]',
+                        r"baseline_runs\[0\] duration"),
+                       ('[{ signal = { kind = "Constant", value = 0.6 }, duration = 1.0, durtion = 2 }]',
+                        r"baseline_runs\[0\]: unknown key\(s\) \['durtion'\]")):
+        cfg.write_text(body % bad)
+        with pytest.raises(PamjaxInputError, match=match):
+            load(cfg)
 
 
 def test_design_config_tank_volume_designs_a_tank_test(tmp_path):

@@ -175,8 +175,8 @@ def _lag_hint(d, se, model):
                   f"faster than the model's (or a command logged late); {_FREE_SWITCHING}, or a negative delay: ")
     elif _switches(model):  # a slower valve delays both edges alike: a lag too, told apart by its thresholds only
         found += (f"an acquisition delay, or a valve that switches {abs(d) * 1e3:.2f} ms slower than the model's "
-                  "(both delay every edge alike; where \"a valve that opens after the model's\" is also found, it is "
-                  f"the valve: {_FREE_SWITCHING}); for the delay, ")
+                  "(both delay every edge alike; where the valve is also found to open after the model's, it is the "
+                  f"valve: {_FREE_SWITCHING}); for the delay, ")
     else:
         found += "an acquisition delay; "
     return [f"{found}{FREE_IT} (delay)"]

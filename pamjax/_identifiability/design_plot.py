@@ -21,8 +21,10 @@ def plot_design(result, path):
         axes[0].axhline(b, color="C3", lw=0.8, ls="--")
     for b in cons.get("switching_thresholds") or []:
         axes[0].axhline(b, color="0.4", lw=0.8, ls=":")
-    axes[0].set(ylabel="duty [-]", title=f"{result.criterion}-optimal PWM duty ({result.parametrisation}), "
-                                         f"one value per {1e3 * result.period:g} ms period (dashed: the duties "
+    optimal = (f"{result.criterion}-optimal" if len(result.subset) == len(result.labels)
+               else f"{result.criterion}_s-optimal (on {len(result.subset)} of {len(result.labels)})")
+    axes[0].set(ylabel="duty [-]", title=f"{optimal} PWM duty ({result.parametrisation}), "
+                                         f"one value per {1e3 * result.period:g} ms period\n(dashed: the duties "
                                          "allowed; dotted: the valve's switching thresholds)")
     if stroke:
         axes[1].plot(pred["t"], 1e3 * np.asarray(pred["position"]), lw=0.7)
