@@ -115,6 +115,10 @@ def test_design_raises_the_information_keeps_its_constraints_and_replays_from_cs
     ratio = np.asarray(res.standard_errors["baseline"]) / np.asarray(res.standard_errors["design"])
     assert np.all(ratio > 0.97), ratio  # the floor's penalty leaves a slack of ~1 %
     assert all(math.isinf(s) for s in res.standard_errors["prior"])  # no prior experiments: nothing known
+    # no prior: the target is the baseline's standard error over the margin (1), and what falls short is named
+    np.testing.assert_allclose(res.standard_errors["target"], res.standard_errors["baseline"], rtol=1e-9)
+    short = {k: v for k, v in zip(res.labels, 1 / ratio) if v > 1 + 1e-9}
+    assert res.baseline_shortfall == pytest.approx(short, rel=1e-12)
     # the start (steps=0) is the constant 0.6 of TANK: the design beats it
     start = pj.design_experiment(_tank(), FREE, 0.4, noise=NOISE, steps=0, baseline=[base], progress=False, **TANK)
     assert start.objective[1] == pytest.approx(res.objective[0], rel=1e-9)
@@ -279,7 +283,7 @@ def test_design_config_planned_runs_are_runs_of_the_model_and_bad_ones_are_named
     # `baseline_runs` / `prior_runs`: a protocol not recorded yet (a signal and a duration) as experiments of the
     # model: the design's rate, channels and noise, a tank test where it says tank_volume, the model's prediction as
     # its data (a design's information never reads data: the same run with other data carries the same information).
-    from pamjax._cli.design import load
+    from pamjax._cli.design import baseline_line, load
     from pamjax._identifiability.design import information
 
     body = ('[model]\npreset = "mas10_system"\noptions = { valve = "pwm" }\n[design]\n'
@@ -302,6 +306,10 @@ def test_design_config_planned_runs_are_runs_of_the_model_and_bad_ones_are_named
     space = pj.ParameterSpace(model, free)
     theta = space.initial_values()
     assert np.allclose(information(space, theta, [run]), information(space, theta, [other]), rtol=1e-12)
+    # what `pamjax design` prints of the baseline's goal: met, or short on the parameters it names
+    assert baseline_line({}, 1.1).startswith("baseline: every parameter of subset at or below")
+    assert "short of the baseline's standard errors / 1.1" in baseline_line({"k1": 1.0123}, 1.1)
+    assert "k1 (1.012× its target)" in baseline_line({"k1": 1.0123}, 1.1)
     for bad, match in (("[]", r"baseline_runs must be a non-empty list"),
                        ('[{ signal = "recorded", duration = 1.0 }]', r"baseline_runs\[0\] signal: a planned run"),
                        ('[{ signal = { kind = "Constant", value = 0.6 } }]', r"baseline_runs\[0\] needs 'duration'"),

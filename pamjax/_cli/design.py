@@ -138,6 +138,8 @@ def run(args):
               f"({res.design_s:.1f} s, of which {res.compile_s:.1f} s to the first iteration)")
         print(res.table())
         print(constraint_lines(res.constraints))
+        if "target" in res.standard_errors:
+            print(baseline_line(res.baseline_shortfall, kwargs.get("baseline_margin", 1.0)))
         if res.payload_kg is not None:
             print(f"payload: {res.payload_kg:.4g} kg (the model's: {float(model.payload_mass):g} kg): load the rig "
                   f"with it, and fit its recording with payload_kg = {res.payload_kg:.4g}")
@@ -195,6 +197,15 @@ def _tolerated(verified, key, fmt, scale=1.0):
     state = "within" if excess <= tolerance else "beyond"
     return (f" (past the limit by {fmt.format(excess * scale)} at the fit's resolution, {state} the "
             f"{fmt.format(tolerance * scale)} allowed for the PWM ripple between the design's samples)")
+
+
+def baseline_line(shortfall, margin):
+    """Whether the design reached the baseline's standard errors over `baseline_margin` (a goal, not a limit)."""
+    goal = f"the baseline's standard errors / {float(margin):g} (baseline_margin)"
+    if not shortfall:
+        return f"baseline: every parameter of subset at or below {goal}"
+    return (f"baseline: short of {goal} on " + ", ".join(f"{k} ({v:.3f}× its target)" for k, v in shortfall.items())
+            + "; a goal, not a limit: the design is valid (more steps, or a smaller baseline_margin)")
 
 
 def constraint_lines(c):

@@ -377,6 +377,9 @@ def design_experiment(
     c, aux, history, message = _optimise(np.asarray(c0, dtype=float), prob, gradient, steps, report, seed)
     errors, verified = _standard_errors(setup, aux, theta, prior_info, base_info, verify, float(duration),
                                         float(rate), noise, build)
+    if base_info is not None:  # what `baseline_margin` asks of each parameter of `subset` (inf elsewhere), physical
+        g = np.abs(np.diag(np.asarray(physical_and_jacobian(setup["space"], device_array(theta))[1])))
+        errors["target"] = [float(math.sqrt(f) * s) for f, s in zip(np.asarray(prob.floor), g)]
     constraints = constraints_report(aux, setup, verified)
     if not constraints["feasible"]:
         warnings.warn("pamjax.design_experiment: the design violates its limits (a bench must not play it; to_csv "

@@ -3,6 +3,7 @@ its CSV, JSON, table and figure."""
 
 import dataclasses
 import json
+import math
 
 import jax.numpy as jnp
 import numpy as np
@@ -141,7 +142,8 @@ class DesignResult:
     - `labels`, `values` (the design point), `subset` (the labels the criterion is on), `criterion` ("D" or "A").
     - `standard_errors`: predicted (Cramér-Rao) standard errors in physical units per label, for "design" (prior
       experiments + the designed one), "prior" (prior experiments alone; inf where they do not determine it) and
-      "baseline" (prior + baseline experiments) when a baseline was given.
+      "baseline" (prior + baseline experiments) and "target" (what `baseline_margin` asks of each parameter of
+      `subset`; inf elsewhere) when a baseline was given; `baseline_shortfall` names those the design leaves short.
     - `objective`: [start, end] values of the criterion; `history`: per iteration [iteration, objective, criterion,
       step length, accepted].
     - `constraints`: the limits and what the design keeps of them: the duty band, the valve's switching thresholds,
@@ -194,6 +196,17 @@ class DesignResult:
     def feasible(self):
         """Whether the design keeps every limit (`constraints["violations"]` lists those it does not)."""
         return bool(self.constraints.get("feasible", True))
+
+    @property
+    def baseline_shortfall(self):
+        """{label: the design's predicted standard error over its target} for each parameter the design leaves short
+        of what `baseline_margin` asked (a goal the search pursues by a penalty, not a limit: the design stays valid);
+        empty where every target is met or no baseline was given. At the fit's resolution where `verify`."""
+        target = self.standard_errors.get("target")
+        if target is None:
+            return {}
+        design = self.standard_errors["design"]
+        return {lbl: d / t for lbl, d, t in zip(self.labels, design, target) if math.isfinite(t) and d > t * (1 + 1e-9)}
 
     def to_csv(self, path, overwrite=False, infeasible_ok=False):
         """`t [s],duty [-]`: one row per PWM period (its start and duty) and a last row at the run's end (the last
