@@ -172,10 +172,10 @@ def _planned_runs(value, key, where, table, name):
         require(run["duration"], "positive number", f"{at} duration", "25.0 (s)")
         if "name" in run:
             require(run["name"], "string", f"{at} name", '"E3"')
-        for k, unit in (("tank_volume", "5e-5 (m³)"), ("payload_kg", "30.0 (kg)")):
-            if k in run:
-                require(run[k], "positive number", f"{at} {k}", unit)
-                check_setting(k, run[k], at)
+        for field, unit in (("tank_volume", "5e-5 (m³)"), ("payload_kg", "30.0 (kg)")):
+            if field in run:
+                require(run[field], "positive number", f"{at} {field}", unit)
+                check_setting(field, run[field], at)
         if "tank_volume" in run and "payload_kg" in run:
             raise PamjaxInputError(f"{at}: tank_volume (a tank test) or payload_kg (a muscle run), not both")
 
