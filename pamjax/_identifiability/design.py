@@ -367,8 +367,9 @@ def design_experiment(
                           criterion)
     gradient = obj.reverse_gradient if parametrisation == "periods" else obj.forward_gradient
     report = _printer(progress, f"design: {setup['count']} PWM periods, {len(c0)} coefficients ({parametrisation}), "
-                                f"{criterion}-optimal over {len(subset)} of {len(space.labels)} parameters; compiling "
-                                "the objective and its gradient ...")
+                                f"{criterion}-optimal over {len(subset)} of {len(space.labels)} parameters (objective: "
+                                "the criterion plus the penalties of the limits" + " and the baseline's target"
+                                * (baseline is not None) + "); compiling the objective and its gradient ...")
     prob, prior_info, base_info, compile_s, start_aux = _prepare(problem, gradient, c0, space, theta, prior, baseline,
                                                                  index, float(baseline_margin))
     note = ""
