@@ -274,6 +274,8 @@ def main(argv=None):
             print(f"  {arm:<14} {fits[arm]['status']:<10} {fits[arm]['seconds']:6.1f} s  rmse/noise "
                   f"{fits[arm]['rmse_over_noise']:.2f}  error % " + " ".join(f"{k} {v:+.2f}" for k, v in errs.items()),
                   flush=True)
+        print("  standard error, E3 + E4 / designed: " + " ".join(
+            f"{k} {fits['E3 + E4']['se'][k] / fits['designed']['se'][k]:.3f}" for k in KEYS.values()), flush=True)
         plants.append(dict(seed=seed, factors=factors, truth=truth, switching_time_s=t_switch, conditions=conditions,
                            fits=fits))
 
