@@ -306,6 +306,12 @@ def test_design_config_planned_runs_are_runs_of_the_model_and_bad_ones_are_named
     space = pj.ParameterSpace(model, free)
     theta = space.initial_values()
     assert np.allclose(information(space, theta, [run]), information(space, theta, [other]), rtol=1e-12)
+    # a tank test among the planned runs of a muscle design records the design's channels it has: its pressure
+    muscle = body.replace("tank_volume = 5e-5\n", "").replace('channels = ["pressure"]\n', "").replace(
+        "noise = { pressure = 2e3 }", "noise = { pressure = 2e3, position = 1e-4 }")
+    cfg.write_text(muscle % '[{ signal = { kind = "Constant", value = 0.6 }, duration = 0.1, tank_volume = 5e-5 }]')
+    [tank] = load(cfg)[3]["baseline"]
+    assert tuple(tank.channels) == ("pressure",) and tank.name == "baseline_runs[0]"
     # what `pamjax design` prints of the baseline's goal: met, or short on the parameters it names
     assert baseline_line({}, 1.1).startswith("baseline: every parameter of subset at or below")
     assert "short of the baseline's standard errors / 1.1" in baseline_line({"k1": 1.0123}, 1.1)

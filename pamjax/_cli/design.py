@@ -71,9 +71,9 @@ def build_design(table, root, model=None):
 def planned_experiments(runs, key, table, model):
     """`prior_runs` / `baseline_runs` (runs not recorded yet: a signal and a duration each) as experiments of `model`
     (of its tank test or another payload where a run gives `tank_volume` or `payload_kg`) from the default start,
-    sampled at the design's `rate` on its `channels` with its `noise` as their scales, and the model's own prediction
-    as their data: a design's information reads only the model's Jacobian along a run, never its data. One solve
-    per run (`pamjax.synthetic_recording`)."""
+    sampled at the design's `rate` on those of its `channels` the run has (a tank test: pressure) with its `noise` as
+    their scales, and the model's own prediction as their data: a design's information reads only the model's
+    Jacobian along a run, never its data. One solve per run (`pamjax.synthetic_recording`)."""
     import pamjax as pj
 
     channels = list(table.get("channels", ("pressure", "position")))  # design_experiment's default channels
@@ -89,8 +89,12 @@ def planned_experiments(runs, key, table, model):
         build = (pj.TankFromModel(float(run["tank_volume"])) if "tank_volume" in run
                  else pj.PayloadFromModel(float(run["payload_kg"])) if "payload_kg" in run else None)
         system = model if build is None else build(model)
-        rec = pj.synthetic_recording(system, signal, t, channels=channels, name=name)
-        out.append(pj.Experiment(rec, signal, channels=channels, scales={c: float(table["noise"][c]) for c in channels},
+        rec = pj.synthetic_recording(system, signal, t, name=name)  # pressure, and position where it has one
+        recorded = [c for c in channels if c in rec.channels]  # a tank test of a muscle design: its pressure
+        if not recorded:
+            raise PamjaxInputError(f"[design] {key}[{k}]: the run records none of the design's channels {channels} "
+                                   f"(it has {sorted(rec.channels)})")
+        out.append(pj.Experiment(rec, signal, channels=recorded, scales={c: float(table["noise"][c]) for c in recorded},
                                  build=build, name=name))
     return out
 
