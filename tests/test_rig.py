@@ -167,6 +167,8 @@ def test_a_rig_is_identified_with_its_nuisances_and_a_plain_fit_names_them(rig):
                     "a supply pressure the tank runs contradict"):
         assert finding in text, text
     assert "a valve that opens" not in text, text  # a delay, a gain and supply drift are not the valve's timing
+    [lag] = [f for f in res0.diagnosis if "the data lag the model" in f]  # and the lag is read as the delay it is
+    assert "an acquisition delay (a valve slower than the model's would" in lag, lag
     assert "--nuisance" in text
 
 
@@ -690,7 +692,7 @@ def test_a_valve_faster_or_slower_than_the_models_is_named_and_not_taken_for_a_s
     # read that as a pressure sensor offset (+3.7 kPa on a held-back plant of benchmarks/design_unseen.py) and its
     # lead of 0.34 ms as an acquisition delay, which can only lag. A 2.4 ms valve opens at duty 0.12: its data still
     # rest where the model's pressure rises. A true offset on the same run is still named.
-    from pamjax._fit.rig_hints import nuisance_hints
+    from pamjax._fit.rig_hints import _lag_hint, nuisance_hints
 
     model = _plant()
     fast = eqx.tree_at(lambda m: (m.valve.switch_on_delay, m.valve.switch_off_delay), model, (1.67e-3, 1.67e-3))
@@ -711,6 +713,9 @@ def test_a_valve_faster_or_slower_than_the_models_is_named_and_not_taken_for_a_s
             assert "an offset at rest" not in text and "opens before" not in text, text
             # its later edges make the data lag the model like an acquisition delay: the lag names the valve too
             [lag] = [f for f in text.split(" | ") if "the data lag the model" in f]
-            assert "a valve that switches" in lag and "slower than the model's" in lag, lag
+            assert "a valve that switches up to" in lag and "slower than the model's" in lag, lag
+            # without a run from rest to check the valve's thresholds, the lag names both causes
+            [both] = _lag_hint(4e-4, 1e-5, model, None)
+            assert "an acquisition delay, or a valve that switches 0.40 ms slower" in both, both
         else:
             assert "an offset at rest" in text and "opens before" not in text and "opens after" not in text, text

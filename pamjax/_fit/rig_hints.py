@@ -138,12 +138,12 @@ def nuisance_hints(model, experiments, predictions, labels):
                     tail = used & (t >= t[0] + 0.8 * (t[-1] - t[0]))
                     steady.append((e.name, float(np.mean(data[tail] - pred[tail])),
                                    sigma / np.sqrt(max(np.count_nonzero(tail), 1))))
-    if den > 0 and "delay" not in freed:
-        hints += _lag_hint(num / den, 1.0 / np.sqrt(den), model)
-    if rest[1] and rest[3]:
-        hints += _rest_hints(rest, rest_sigma, model, offset_freed="pressure_offset" in freed)
-    if rest[6]:
-        hints += _onset_hint(rest, rest_sigma, model)
+    at_rest = _rest_hints(rest, rest_sigma, model, offset_freed="pressure_offset" in freed) if rest[1] and rest[3] \
+        else []
+    onset = _onset_hint(rest, rest_sigma, model) if rest[6] else []
+    if den > 0 and "delay" not in freed:  # whether the valve opens late was checked (rest[6]) and found (onset)
+        hints += _lag_hint(num / den, 1.0 / np.sqrt(den), model, None if not rest[6] else bool(onset))
+    hints += at_rest + onset
     for name, finding in starts:
         if name not in started:
             hints.append(f"a start that is not at rest: {name} {finding} (a recording started mid-run?): give it "
@@ -164,8 +164,9 @@ def nuisance_hints(model, experiments, predictions, labels):
     return hints
 
 
-def _lag_hint(d, se, model):
-    """The lag finding for a pooled lag `d` [s] (positive: the data lag the model) of standard error `se`."""
+def _lag_hint(d, se, model, opens_late=None):
+    """The lag finding for a pooled lag `d` [s] (positive: the data lag the model) of standard error `se`;
+    `opens_late`: whether the valve was found to open after the model's (None: not checked, no run at rest)."""
     if abs(d) <= max(_SIGNIFICANT * se, _MIN_DELAY):
         return []
     found = (f"a lag between command and response: the data {'lag' if d > 0 else 'lead'} the model by "
@@ -173,10 +174,16 @@ def _lag_hint(d, se, model):
     if d < 0 and _switches(model):
         found += (f"not an acquisition delay (that makes them lag) but a valve that switches {abs(d) * 1e3:.2f} ms "
                   f"faster than the model's (or a command logged late); {_FREE_SWITCHING}, or a negative delay: ")
-    elif _switches(model):  # a slower valve delays both edges alike: a lag too, told apart by its thresholds only
+    elif _switches(model) and opens_late:  # a slower valve delays both edges alike, and its thresholds show it
+        found += (f"a valve that switches up to {abs(d) * 1e3:.2f} ms slower than the model's (it also opens after "
+                  f"the model's, below): {_FREE_SWITCHING}; what is left of the lag is an acquisition delay: ")
+    elif _switches(model) and opens_late is False:
+        found += ("an acquisition delay (a valve slower than the model's would delay the edges alike, but then it "
+                  "would also open after the model's, and it does not); ")
+    elif _switches(model):  # no run at rest to tell them apart: both
         found += (f"an acquisition delay, or a valve that switches {abs(d) * 1e3:.2f} ms slower than the model's "
-                  "(both delay every edge alike; where the valve is also found to open after the model's, it is the "
-                  f"valve: {_FREE_SWITCHING}); for the delay, ")
+                  f"(both delay every edge alike; a run from rest tells them apart: {_FREE_SWITCHING}); for the "
+                  "delay, ")
     else:
         found += "an acquisition delay; "
     return [f"{found}{FREE_IT} (delay)"]
