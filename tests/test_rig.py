@@ -168,7 +168,7 @@ def test_a_rig_is_identified_with_its_nuisances_and_a_plain_fit_names_them(rig):
         assert finding in text, text
     assert "a valve that opens" not in text, text  # a delay, a gain and supply drift are not the valve's timing
     [lag] = [f for f in res0.diagnosis if "the data lag the model" in f]  # and the lag is read as the delay it is
-    assert "an acquisition delay (a valve slower than the model's would" in lag, lag
+    assert "most likely an acquisition delay (a valve slower than the model's would" in lag, lag
     assert "--nuisance" in text
 
 

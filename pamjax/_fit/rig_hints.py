@@ -178,8 +178,9 @@ def _lag_hint(d, se, model, opens_late=None):
         found += (f"a valve that switches up to {abs(d) * 1e3:.2f} ms slower than the model's (it also opens after "
                   f"the model's, below): {_FREE_SWITCHING}; what is left of the lag is an acquisition delay: ")
     elif _switches(model) and opens_late is False:
-        found += ("an acquisition delay (a valve slower than the model's would delay the edges alike, but then it "
-                  "would also open after the model's, and it does not); ")
+        found += ("most likely an acquisition delay (a valve slower than the model's would delay the edges alike, "
+                  "but it would also open visibly after the model's, which the data do not show; a valve slower by "
+                  f"a fraction of a millisecond might not: {_FREE_SWITCHING} if the delay fits poorly); ")
     elif _switches(model):  # no run at rest to tell them apart: both
         found += (f"an acquisition delay, or a valve that switches {abs(d) * 1e3:.2f} ms slower than the model's "
                   f"(both delay every edge alike; a run from rest tells them apart: {_FREE_SWITCHING}); for the "
