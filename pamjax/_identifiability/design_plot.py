@@ -55,6 +55,10 @@ def plot_design(result, path):
         rel = np.where(np.isfinite(rel), rel, np.nan)
         axes[3].bar(k + (j - (len(series) - 1) / 2) * width, 100 * rel, width, color=color,
                     label={"prior": "prior experiments alone"}.get(name, name))
+    if "target" in result.standard_errors:  # what baseline_margin asks, over the design's bars
+        target = np.asarray(result.standard_errors["target"], dtype=float) / np.where(values > 0, values, 1.0)
+        axes[3].scatter(k - (len(series) - 1) / 2 * width, 100 * np.where(np.isfinite(target), target, np.nan),
+                        marker="_", s=300, color="k", zorder=3, label="target (baseline / baseline_margin)")
     axes[3].set_yscale("log")
     short = [".".join(lbl.split(".")[-2:]) if lbl.count(".") > 1 else lbl for lbl in result.labels]
     axes[3].set_xticks(k, short, rotation=45, ha="right", fontsize=8)
