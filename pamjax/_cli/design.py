@@ -86,8 +86,8 @@ def planned_experiments(runs, key, table, model):
         name = run.get("name", f"{key}[{k}]")
         signal = build_signal(run["signal"], f"[design] {key}[{k}] signal")
         t = np.round(np.arange(0.0, float(run["duration"]) + 0.5 / rate, 1.0 / rate), 12)
-        build = (pj.TankFromModel(float(run["tank_volume"])) if "tank_volume" in run
-                 else pj.PayloadFromModel(float(run["payload_kg"])) if "payload_kg" in run else None)
+        build = (pj.TankFromModel(float(run["tank_volume"])) if "tank_volume" in run  # as [design]'s own keys
+                 else payload_build(run["payload_kg"], model) if "payload_kg" in run else None)
         system = model if build is None else build(model)
         rec = pj.synthetic_recording(system, signal, t, name=name)  # pressure, and position where it has one
         recorded = [c for c in channels if c in rec.channels]  # a tank test of a muscle design: its pressure
