@@ -114,7 +114,8 @@ def designs(out, reuse):
     model, free, duration, kwargs = example()
     if list(KEYS) != list(kwargs.get("subset", free)):
         raise SystemExit(f"{CONFIG}: the design is for {kwargs.get('subset', free)}; this benchmark draws {list(KEYS)}")
-    plain = {k: v for k, v in kwargs.items() if k not in ("subset", "baseline", "baseline_margin")}
+    plain = {k: v for k, v in kwargs.items() if k not in ("subset", "baseline", "baseline_margin", "spread",
+                                                           "spread_points")}
     variants = {"designed": (free, kwargs),
                 "unconstrained": (list(KEYS), dict(plain, duty_margin=0, min_force=None, steps=30))}
     runs, seconds = {}, {}

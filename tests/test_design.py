@@ -135,6 +135,67 @@ def test_design_raises_the_information_keeps_its_constraints_and_replays_from_cs
         res.to_csv(path)
 
 
+def _standard_errors_at(values, experiment):
+    """Standard errors [physical units] of FREE from `experiment`'s information at the tank whose FREE are `values`:
+    the fit's Jacobian of the experiment there (not the design's objective)."""
+    from pamjax._fit.problem import physical_and_jacobian
+    from pamjax._identifiability.design import information, variances
+
+    space = pj.ParameterSpace(pj.ParameterSpace(_tank(), FREE).with_values(np.asarray(values)), FREE)
+    theta = space.initial_theta()
+    g = np.asarray(physical_and_jacobian(space, theta)[1])
+    return np.sqrt(variances(information(space, np.asarray(theta), [experiment]), g))
+
+
+def test_a_spread_design_averages_its_points_each_with_its_own_target():
+    # spread: the objective is the average over the model's point and `spread_points` drawn as a Latin hypercube
+    # (at 2 points: one in each half of every parameter's ±20 %); each point reports its design's and its baseline's
+    # standard errors, checked against the fit's Jacobian of the designed run and of the baseline at that point
+    from pamjax._identifiability.design_points import design_thetas
+
+    base_rec = pj.synthetic_recording(_tank(), pj.Constant(0.3), np.arange(0.0, 0.4, 2e-3), name="base")
+    base = pj.Experiment(base_rec, pj.Constant(0.3), channels=["pressure"], scales=NOISE,
+                         initial={"pressure": 101325.0})
+    res = pj.design_experiment(_tank(), FREE, 0.4, noise=NOISE, steps=3, baseline=[base], progress=False, spread=0.2,
+                               spread_points=2, **TANK)
+    assert len(res.points) == 3 and res.points[0]["values"] == pytest.approx(res.values, rel=1e-12)
+    rel = np.array([p["values"] for p in res.points[1:]]) / np.array(res.values) - 1.0
+    assert np.all(np.abs(rel) <= 0.2) and np.all(rel[0] * rel[1] < 0), rel  # one point in each half of each spread
+    assert res.objective[1] == pytest.approx(np.mean([p["criterion"] for p in res.points]), rel=1e-9)
+    assert res.objective[1] < res.objective[0] and all(p["worst_violation"] == 0.0 for p in res.points)
+    t = np.arange(0.0, 0.4 + 1e-3, 2e-3)
+    for point in res.points:
+        model = pj.ParameterSpace(_tank(), FREE).with_values(np.asarray(point["values"]))
+        run = pj.Experiment(pj.synthetic_recording(model, res.signal(), t, name="designed"), res.signal(),
+                            channels=["pressure"], scales=NOISE, initial={"pressure": 101325.0})
+        errors = point["standard_errors"]
+        np.testing.assert_allclose(errors["design"], _standard_errors_at(point["values"], run), rtol=0.03)
+        np.testing.assert_allclose(errors["baseline"], _standard_errors_at(point["values"], base), rtol=1e-6)
+        np.testing.assert_allclose(errors["target"], errors["baseline"], rtol=1e-9)  # margin 1, no prior
+    short = {}
+    for point in res.points:
+        for label, d, t_ in zip(res.labels, point["standard_errors"]["design"], point["standard_errors"]["target"]):
+            if d > t_ * (1 + 1e-9):
+                short[label] = max(short.get(label, 0.0), d / t_)
+    assert res.points_shortfall == pytest.approx(short, rel=1e-12)
+    # steps=0 scores a given duty over the spread (one value per period, no search, no gradient): the same points'
+    # criteria for the designed duty
+    scored = pj.design_experiment(_tank(), FREE, 0.4, noise=NOISE, steps=0, baseline=[base], progress=False,
+                                  spread=0.2, spread_points=2, **{**TANK, "initial": res.duty},
+                                  parametrisation="periods")
+    assert scored.iterations == 0 and scored.duty == pytest.approx(res.duty, abs=1e-9)
+    np.testing.assert_allclose([p["criterion"] for p in scored.points], [p["criterion"] for p in res.points],
+                               rtol=1e-6)
+    space = pj.ParameterSpace(_tank(), FREE)
+    first, again, other = (design_thetas(space, 0.2, 2, seed)[0] for seed in (0, 0, 1))
+    np.testing.assert_array_equal(first, again)  # seeded: the same points twice, others for another seed
+    assert not np.allclose(first, other)
+    np.testing.assert_allclose(first, np.array([p["values"] for p in res.points[1:]]), rtol=1e-12)
+    one = design_thetas(space, {FREE[1]: 0.2}, 3, 0)[0]  # a table spreads only the labels it names
+    np.testing.assert_array_equal(one[:, [0, 2]], np.tile(np.asarray(res.values)[[0, 2]], (3, 1)))
+    assert np.ptp(one[:, 1]) > 0
+
+
 VALVE = [*FREE, "valve.exhaust.critical_ratio"]
 TANK_BUILD = dict(channels=("pressure",), start={"pressure": 101325.0}, rate=500.0, knots=4,
                   initial=pj.Constant(0.6), build=pj.TankFromModel(5e-5))
@@ -432,6 +493,11 @@ def _muscle():
     (_tank, dict(initial=pj.Constant(1.5)), r"initial: the start duty must lie in \[0, 1\]"),
     (_tank, dict(period=-0.02), r"period must be the PWM period"),
     (_tank, dict(noise={"pressure": 2e5}), r"noise\['pressure'\] = 200000\.0 Pa is 0\.36 of the valve's whole range"),
+    (_tank, dict(spread=1.5), r"spread: the relative spread of valve\.inflate\.discharge_coefficient must be a "
+                              r"number in \[0, 1\)"),
+    (_tank, dict(spread={"k1": 0.2}), r"spread: unknown parameter label\(s\) \['k1'\]; the free parameters are"),
+    (_tank, dict(spread=0.2, spread_points=0), r"spread_points must be a positive integer"),
+    (_tank, dict(spread=0.0), r"spread: every fraction is 0"),
     (_muscle, dict(stroke_margin=5.0), r"stroke_margin 5\.0 m leaves no stroke"),
     (_muscle, dict(min_force=200.0), r"min_force 200 N: eq\. 7 gives 94\.2 N at the run's start"),
     (_muscle, dict(noise={"pressure": 2e3, "position": 0.1}), r"noise\['position'\] = 0\.1 m is 1\.1 of the"),
@@ -759,7 +825,7 @@ def test_random_probes_carry_the_search_past_a_kink_the_gradient_cannot_see(monk
     # A cost with jumps (a stick-slip phase or a stop contact appearing): along the gradient it jumps up at c0 = 0.1,
     # while a step across c1 = 0.03, which the gradient (0 along c1) never proposes, lowers it by 4. The line search
     # stalls at the first jump; the probes find the second (the search used to end there: "no descent").
-    from pamjax._identifiability import design as design_module
+    from pamjax._identifiability import design_search as search
 
     def fake_value(c, problem):
         c = np.asarray(c)
@@ -774,13 +840,37 @@ def test_random_probes_carry_the_search_past_a_kink_the_gradient_cannot_see(monk
 
     monkeypatch.setattr(obj, "value", fake_value)
     c0 = np.zeros(4)
-    monkeypatch.setattr(design_module, "PROBES", 0)
-    _, aux_without, _, message_without = design_module._optimise(c0, None, gradient, 30, None, seed=0)
-    monkeypatch.setattr(design_module, "PROBES", 8)
-    c, aux_with, history, message_with = design_module._optimise(c0, None, gradient, 30, None, seed=0)
+    monkeypatch.setattr(search, "PROBES", 0)
+    _, aux_without, _, message_without = search.optimise(c0, None, gradient, 30, None, seed=0)
+    monkeypatch.setattr(search, "PROBES", 8)
+    c, aux_with, history, message_with = search.optimise(c0, None, gradient, 30, None, seed=0)
     assert float(aux_without["criterion"]) > 0.8 and "no descent" in message_without
     assert float(aux_with["criterion"]) < float(aux_without["criterion"]) - 3.0 and c[1] > 0.03, (c, message_with)
     assert "random probes past kinks" in message_with
     assert all(b[1] <= a[1] for a, b in zip(history, history[1:]))  # never uphill
-    again = design_module._optimise(c0, None, gradient, 30, None, seed=0)
+    again = search.optimise(c0, None, gradient, 30, None, seed=0)
     assert np.array_equal(again[0], c)  # seeded: the same search twice
+
+
+def test_a_spread_designs_points_are_printed_with_their_ratios_and_targets():
+    # `pamjax design` prints each design point: its criterion, whether its plant would pass a limit, and the
+    # baseline's standard error over the design's per parameter of subset; then the targets (margin at the model's
+    # point, 1 at the others) and what falls short
+    import types
+
+    from pamjax._cli.design import points_lines
+
+    labels = ["muscle.volume_law.v1", "friction.coulomb_force", "valve.switch_on_delay"]
+
+    def point(design, violation):
+        return dict(values=[1.0, 2.0, 3.0], criterion=-80.0, worst_violation=violation,
+                    standard_errors=dict(design=design, baseline=[1.0, 1.0, 1.0], target=[1 / 1.1, 1 / 1.1, math.inf]))
+
+    res = types.SimpleNamespace(labels=labels, subset=labels[:2], points=[point([0.8, 0.9, 5.0], 0.0),
+                                                                          point([0.95, 1.04, 5.0], 3.5)])
+    res.points_shortfall = pj.DesignResult.points_shortfall.fget(res)
+    text = points_lines(res, 1.1)
+    assert "point 0: criterion -80.0000, every limit kept; baseline/design v1 1.250, coulomb_force 1.111" in text
+    assert "point 1: criterion -80.0000, a limit passed (worst 3.5" in text and "switch_on_delay" not in text
+    assert "/ 1.1 at the model's point and the baseline's own at the others" in text
+    assert "friction.coulomb_force (1.144× its target at worst)" in text and "v1 (" in text

@@ -144,6 +144,8 @@ def run(args):
         print(constraint_lines(res.constraints))
         if "target" in res.standard_errors:
             print(baseline_line(res.baseline_shortfall, kwargs.get("baseline_margin", 1.0)))
+        if res.points:
+            print(points_lines(res, kwargs.get("baseline_margin", 1.0)))
         if res.payload_kg is not None:
             print(f"payload: {res.payload_kg:.4g} kg (the model's: {float(model.payload_mass):g} kg): load the rig "
                   f"with it, and fit its recording with payload_kg = {res.payload_kg:.4g}")
@@ -210,6 +212,38 @@ def baseline_line(shortfall, margin):
         return f"baseline: every parameter of subset at or below {goal}"
     return (f"baseline: short of {goal} on " + ", ".join(f"{k} ({v:.3f}× its target)" for k, v in shortfall.items())
             + "; a goal, not a limit: the design is valid (more steps, or a smaller baseline_margin)")
+
+
+def points_lines(res, margin):
+    """A spread design's points, one line each: criterion, limits and (with a baseline) the baseline's standard error
+    over the design's per parameter of subset; then whether every point reached its target."""
+    subset = [res.labels.index(s) for s in res.subset]
+    lines = [f"design points: the model's (0) and {len(res.points) - 1} drawn from spread; the objective is the "
+             "average over them (standard errors at the design's resolution)"]
+    for k, point in enumerate(res.points):
+        kept = point["worst_violation"] <= 1e-9
+        line = f"  point {k}: criterion {point['criterion']:.4f}, " + (
+            "every limit kept" if kept else f"a limit passed (worst {point['worst_violation']:.3g} mm/kPa/N)")
+        errors = point["standard_errors"]
+        if "baseline" in errors:
+            line += "; baseline/design " + ", ".join(
+                f"{res.labels[i].rsplit('.', 1)[-1]} {errors['baseline'][i] / errors['design'][i]:.3f}" for i in subset)
+        lines.append(line)
+    if "target" in res.points[0]["standard_errors"]:
+        lines.append(points_baseline_line(res.points_shortfall, margin))
+    return "\n".join(lines)
+
+
+def points_baseline_line(shortfall, margin):
+    """Whether every design point reached its target: the baseline's standard errors over `baseline_margin` at the
+    model's point, the baseline's own (or over the margin, if below 1) at the others."""
+    goal = (f"the baseline's standard errors / {float(margin):g} at the model's point and the baseline's own at the "
+            "others" if float(margin) > 1 else f"the baseline's standard errors / {float(margin):g}")
+    if not shortfall:
+        return f"baseline at every design point: every parameter of subset at or below {goal}"
+    return (f"baseline at the design points: short of {goal} on "
+            + ", ".join(f"{k} ({v:.3f}× its target at worst)" for k, v in shortfall.items())
+            + "; a goal, not a limit: the design is valid")
 
 
 def constraint_lines(c):

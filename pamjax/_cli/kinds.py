@@ -145,6 +145,17 @@ def _force_or_false(value, key, where, table, name):
         raise PamjaxInputError(f"{where} must be a force [N] (e.g. 20.0) or false for no limit, got {value!r}")
 
 
+def _spread(value, key, where, table, name):
+    """A design's `spread`: one fraction for every free parameter, or a table of them by label (range checked by
+    `pamjax.design_experiment`, which knows the labels)."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            require(v, "number", f"{where}.{k}", "0.2")
+    elif not (is_number(value) and np.isfinite(value)):
+        raise PamjaxInputError(f"{where} must be a fraction (0.2: every free parameter within ±20 %) or a table of "
+                               f'them by label ({{ "muscle.force_law.k1" = 0.2 }}), got {value!r}')
+
+
 def _duty_or_file(value, key, where, table, name):
     if not (isinstance(value, str) or (is_number(value) and np.isfinite(value))):
         raise PamjaxInputError(f"{where} must be a constant duty or a design CSV path, got {value!r}")
@@ -314,6 +325,7 @@ _CHECKS = {
     "positive number or auto": _positive_or_auto,
     "force or false": _force_or_false,
     "duty or file": _duty_or_file,
+    "spread": _spread,
     "options": _options,
     "set": _set,
     "sensors": _sensors,

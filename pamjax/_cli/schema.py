@@ -188,6 +188,8 @@ DESIGN = {
     "steps": Key("integer", "30"),
     "seed": Key("integer", "0"),
     "baseline_margin": Key("positive number", "1.0"),
+    "spread": Key("spread", "0.2", "the plant's relative spread around the model: designed over points drawn from it"),
+    "spread_points": Key("positive integer", "4", "design points drawn from the spread beside the model's own"),
     "period": Key("positive number", "0.02", "s, the PWM period of a valve that has none"),
 }
 # the keyword arguments of pamjax.design_experiment

@@ -30,8 +30,9 @@ from .._fit.parameters import Free
 from .._fit.problem import physical_and_jacobian, residuals_and_jacobian
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
-from . import design_objective as obj
+from . import design_objective as obj, design_points as pts
 from .design_result import DesignResult, PamjaxDesignWarning, constraints_report, worst_violation
+from .design_search import optimise
 from .design_setup import (
     CARRIER_HOLD,
     DESIGN_RATE,
@@ -46,15 +47,9 @@ from .design_setup import (
     set_up,
     start_coefficients,
     static_force_along,
+    stroke_limits,
 )
 
-# Where the line search along the gradient fails (a kink: the cost jumps where a stick-slip phase or a stop contact
-# appears), the search probes PROBES seeded random directions, both signs, of max-norm PROBE_SCALES in turn (in the
-# coefficients' units: the duty band is z ∈ [0, 1]). Measured on the fitted models of three stop-resting rigs
-# (benchmarks/RESULTS.md, design, Session 55): the D criterion 0–4.1 lower than without (never higher: a probe is
-# taken only where it lowers the objective); the searches with probes took 5–32 s.
-PROBES = 8
-PROBE_SCALES = (0.05, 0.02, 0.005)
 START_CALMER = (0.8, 0.6, 0.4, 0.2, 0.0)  # factors on START_AMPLITUDE tried, in turn, where the default start breaks a
 # limit (a fast exhaust from high up slackens the muscle): a search that starts within its limits stays within them
 
@@ -102,93 +97,6 @@ def _floor(prior_info, base_info, margin):
     prior_precision = 1.0 / variances(prior_info)  # 0 where the prior leaves a parameter free
     gain = np.maximum(1.0 / v_base - prior_precision, 0.0)
     return 1.0 / (prior_precision + margin**2 * gain)
-
-
-def _feasible(aux_trial, aux):
-    """Whether a trial keeps the feasible set (or, from an infeasible point, does not increase the worst violation)."""
-    return worst_violation(aux_trial) <= max(worst_violation(aux), 0.0) + 1e-9
-
-
-def _probe(c, v, aux, problem, rng):
-    """The best of `PROBES` seeded random directions (both signs, max-norm `PROBE_SCALES` in turn) that lowers the
-    objective by more than 1e-3 and keeps feasibility: (trial, value, aux, scale), or None."""
-    best = None
-    for k in range(PROBES):
-        scale = PROBE_SCALES[k % len(PROBE_SCALES)]
-        e = rng.standard_normal(c.size)
-        e *= scale / np.max(np.abs(e))
-        for trial in (c + e, c - e):
-            v_trial, aux_trial = obj.value(jnp.asarray(trial), problem)
-            v_trial = float(v_trial)
-            if (math.isfinite(v_trial) and v_trial < v - 1e-3 and _feasible(aux_trial, aux)
-                    and (best is None or v_trial < best[1])):
-                best = (trial, v_trial, aux_trial, scale)
-    return best
-
-
-def _optimise(c, problem, gradient, steps, report, seed=0):
-    """BFGS on the host: a backtracking line search on the value (cheap), a gradient at each accepted point; a
-    trial may not leave the feasible set (or, from an infeasible start, increase the worst violation). The cost
-    jumps where a stick-slip phase or a stop contact appears or vanishes, and the gradient does not see a jump: where
-    the line search fails, seeded random probes around the point (`_probe`) look for a lower value past it, and the
-    search goes on from the best one with steepest descent; two failures of both in a row end the search."""
-    rng = np.random.default_rng(seed)
-    probed = 0
-    v, aux = obj.value(jnp.asarray(c), problem)
-    v = float(v)
-    g = np.asarray(gradient(jnp.asarray(c), problem))
-    eye = np.eye(c.size)
-    h0 = 0.5 / max(float(np.max(np.abs(g))), 1e-12)  # first step moves z by at most 0.5 (the band is z ∈ [0, 1])
-    inverse = eye * h0
-    history = [[0, v, float(aux["criterion"]), 0.0, True]]
-    failures, message = 0, f"{steps} iterations"
-    for it in range(1, steps + 1):
-        direction = -inverse @ g
-        slope = float(g @ direction)
-        if not slope < 0:
-            inverse, direction = eye * h0, -h0 * g
-            slope = float(g @ direction)
-        step, accepted = 1.0, False
-        for _ in range(8):
-            trial = c + step * direction
-            v_trial, aux_trial = obj.value(jnp.asarray(trial), problem)
-            v_trial = float(v_trial)
-            if math.isfinite(v_trial) and v_trial <= v + 1e-4 * step * slope and _feasible(aux_trial, aux):
-                accepted = True
-                break
-            step *= 0.3
-        found = None if accepted else _probe(c, v, aux, problem, rng)
-        if found is not None:  # past a kink: go on from there by steepest descent (no curvature across a jump)
-            trial, v_trial, aux_trial, step = found
-            accepted, probed, inverse = True, probed + 1, eye * h0
-        history.append([it, v_trial if accepted else v, float((aux_trial if accepted else aux)["criterion"]), step,
-                         accepted])
-        if report is not None:  # the printer also says which steps were probes (a callable gets the five values)
-            report(it, history[-1][1], history[-1][2], step, accepted,
-                   **({"probe": found is not None} if getattr(report, "says_probes", False) else {}))
-        if not accepted:
-            failures += 1
-            inverse = eye * h0 * 0.1
-            if failures >= 2:
-                message = (f"stopped after {it} iterations: no descent along the gradient nor in {2 * PROBES} random "
-                           "probes around the point (kinks of the cost)")
-                break
-            continue
-        failures = 0
-        g_new = np.asarray(gradient(jnp.asarray(trial), problem))
-        s, y = trial - c, g_new - g
-        if found is None and s @ y > 1e-12 * np.linalg.norm(s) * np.linalg.norm(y):
-            rho = 1.0 / (s @ y)
-            left = eye - rho * np.outer(s, y)
-            inverse = left @ inverse @ left.T + rho * np.outer(s, s)
-        decrease = v - v_trial
-        c, g, v, aux = trial, g_new, v_trial, aux_trial
-        if decrease < 1e-6 * max(abs(v), 1.0) and step == 1.0:
-            message = f"converged after {it} iterations (objective decrease below 1e-6)"
-            break
-    if probed:
-        message += f"; {probed} of the steps by random probes past kinks of the cost, where the gradient saw no descent"
-    return c, aux, history, message
 
 
 def variances(info, transform=None):
@@ -293,6 +201,8 @@ def design_experiment(
     design_rate: RealScalarLike = DESIGN_RATE,
     substeps: int = DESIGN_SUBSTEPS,
     verify: bool = True,
+    spread: RealScalarLike | dict[str, RealScalarLike] | None = None,
+    spread_points: int = pts.SPREAD_POINTS,
     progress: bool | Callable[..., object] = True,
 ) -> DesignResult:
     """Choose a PWM duty signal (one value per PWM period) that maximises the information a recording of
@@ -348,6 +258,13 @@ def design_experiment(
       000's E3 triangle with the carrier on top); `seed`: the carrier's and the probes'.
     - `design_rate` [Hz], `substeps`: resolution of the objective (docs/identifiability.md: within 0.2 % of the
       fit's); `verify`: recompute the final standard errors at the fit's resolution (16 substeps, `rate`).
+    - `spread`: the plant's expected spread around `model` (a fraction for every free parameter, e.g. 0.2 for
+      ±20 %, or {label: fraction}): the design is then scored at `spread_points` further design points drawn from it
+      (a seeded Latin hypercube) beside the model's own, its objective the average of theirs (`design_points`): a
+      design robust over the plant's spread, at (1 + `spread_points`)× the work per iteration. The limits are kept
+      at the model's point; with a baseline, the design must beat it by `baseline_margin` there and match it (margin
+      1) at every other point. The result's `points` report each point (its standard errors, and whether its plant
+      would pass a limit). `steps=0` with a spread scores the start signal over the spread.
     - `progress`: True prints one line per iteration; a callable gets (iteration, objective, criterion, step,
       accepted); False is silent.
 
@@ -363,6 +280,7 @@ def design_experiment(
     space, subset, c0 = setup["space"], setup["subset"], setup["c0"]
     theta = np.asarray(space.initial_theta())
     index = tuple(space.labels.index(s) for s in subset)
+    point_values, thetas = pts.design_thetas(space, spread, spread_points, seed)  # checked before any solve
     problem = _problem_of(setup, theta, index, float(rate) / float(design_rate), max_pressure, max_duty_step,
                           criterion)
     gradient = obj.reverse_gradient if parametrisation == "periods" else obj.forward_gradient
@@ -372,21 +290,33 @@ def design_experiment(
                                 * (baseline is not None) + "); compiling the objective and its gradient ...")
     prob, prior_info, base_info, compile_s, start_aux = _prepare(problem, gradient, c0, space, theta, prior, baseline,
                                                                  index, float(baseline_margin))
+    points = [_at_point(setup, th, prior, baseline, index, min(float(baseline_margin), 1.0), stroke_margin,
+                        _problem_of(setup, th, index, float(rate) / float(design_rate), max_pressure, max_duty_step,
+                                    criterion)) for th in thetas]
+    if points:  # the search: the points' criteria and targets, the limits at the model's point (`design_points`)
+        prob = (prob, *(pts.without_limits(p) for p, _ in points))
+        start_aux = _points_start(c0, prob)
     note = ""
     if initial is None and worst_violation(start_aux) > 0:  # the default start breaks a limit: a calmer carrier
         c0, note = _calmer_start(c0, prob, setup, parametrisation, float(duration), knots, seed)
-    c, aux, history, message = _optimise(np.asarray(c0, dtype=float), prob, gradient, steps, report, seed)
+    c, aux, history, message = optimise(np.asarray(c0, dtype=float), prob, gradient, steps, report, seed)
     errors, verified = _standard_errors(setup, aux, theta, prior_info, base_info, verify, float(duration),
                                         float(rate), noise, build)
+    nominal = prob[0] if points else prob
     if base_info is not None:  # what `baseline_margin` asks of each parameter of `subset` (inf elsewhere), physical
-        g = np.abs(np.diag(np.asarray(physical_and_jacobian(setup["space"], device_array(theta))[1])))
-        errors["target"] = [float(math.sqrt(f) * s) for f, s in zip(np.asarray(prob.floor), g)]
+        errors["target"] = _targets(space, theta, nominal.floor)
     constraints = constraints_report(aux, setup, verified)
     if not constraints["feasible"]:
         warnings.warn("pamjax.design_experiment: the design violates its limits (a bench must not play it; to_csv "
                       "refuses it): " + "; ".join(constraints["violations"]), PamjaxDesignWarning, stacklevel=2)
-    return _result(setup, aux, history, errors, constraints, message + note, criterion, parametrisation,
-                   float(duration), t_start, compile_s, designed_payload(model, setup["system"]))
+    result = _result(setup, aux, history, errors, constraints, message + note, criterion, parametrisation,
+                     float(duration), t_start, compile_s, designed_payload(model, setup["system"]))
+    if points:
+        limited = (prob[0], *(p for p, _ in points))  # each point's plant at the design's limits, for the report
+        result.points = _points_report(space, theta, point_values, thetas, limited,
+                                       [base_info, *(b for _, b in points)], pts.value(jnp.asarray(c), limited)[1])
+    return result
+
 
 
 def designed_payload(model, system):
@@ -403,6 +333,49 @@ def _problem_of(setup, theta, index, weight, max_pressure, max_duty_step, criter
     return functools.partial(_problem, setup["space"], theta, setup["experiment"], setup["basis"], weight,
                              setup["band"], setup["windows"], setup["limits"], max_pressure, max_duty_step,
                              setup["force_law"], setup["min_force"], index, criterion)
+
+
+def _at_point(setup, theta, prior, baseline, index, margin, stroke_margin, make):
+    """The design problem at another design point θ (`make`: (prior information, floor) → problem): its own prior
+    information, baseline target and stroke limits (its payload rests elsewhere); and its prior + baseline
+    information (None without a baseline)."""
+    space = setup["space"]
+    prior_info, base_info, floor = _in_hand(space, theta, prior, baseline, index, margin)
+    model = space.with_values(physical_and_jacobian(space, device_array(theta))[0])  # compiled, not op by op
+    limits = stroke_limits(setup["experiment"].system_for(model), setup["start"], stroke_margin)
+    return pts.with_stroke(make(prior_info, floor), limits), base_info
+
+
+def _points_start(c0, prob):
+    """The objective's aux at the start over the design points, which must each determine every parameter."""
+    _, aux = pts.value(jnp.asarray(c0), prob)
+    loose = [k for k, a in enumerate(aux["points"]) if not math.isfinite(float(a["criterion"]))]
+    if loose:
+        raise PamjaxInputError(f"spread: at design point(s) {loose} (0: the model's) the start signal does not "
+                               "determine every free parameter, so the criterion is undefined there; give a smaller "
+                               "spread or start from another signal (`initial`)")
+    return aux
+
+
+def _targets(space, theta, floor):
+    """The standard errors [physical units] a variance floor on θ asks for (inf where none)."""
+    g = np.abs(np.diag(np.asarray(physical_and_jacobian(space, device_array(theta))[1])))
+    return [float(math.sqrt(f) * s) for f, s in zip(np.asarray(floor), g)]
+
+
+def _points_report(space, theta, values, thetas, problems, base_infos, aux):
+    """`DesignResult.points`: per design point (the model's first) its values, criterion, worst violation and
+    predicted standard errors (design; baseline and target with a baseline), at the objective's resolution."""
+    out = []
+    for k, (th, vals, a) in enumerate(zip([theta, *thetas], [np.asarray(space.initial_values()), *values],
+                                          aux["points"])):
+        errors = {"design": _physical_errors(space, th, np.asarray(a["information"]))}
+        if base_infos[k] is not None:
+            errors["baseline"] = _physical_errors(space, th, base_infos[k])
+            errors["target"] = _targets(space, th, problems[k].floor)
+        out.append(dict(values=[float(v) for v in vals], criterion=float(a["criterion"]),
+                        worst_violation=worst_violation(a), standard_errors=errors))
+    return out
 
 
 def _standard_errors(setup, aux, theta, prior_info, base_info, verify, duration, rate, noise, build):
@@ -442,7 +415,7 @@ def _calmer_start(c0, prob, setup, parametrisation, duration, knots, seed):
         trial, _ = start_coefficients(parametrisation, setup["times"], duration, knots,
                                       obj.multilevel_carrier(setup["count"], CARRIER_HOLD, seed), setup["band"],
                                       None, factor * START_AMPLITUDE)
-        if worst_violation(obj.value(jnp.asarray(trial), prob)[1]) <= 0:
+        if worst_violation(pts.value(jnp.asarray(trial), prob)[1]) <= 0:
             return trial, (f"; the default start broke a limit, so its carrier's amplitude was lowered to "
                            f"{factor * START_AMPLITUDE:g}")
     return c0, ""
@@ -472,7 +445,9 @@ def check_design(model, free, duration, **kwargs):
     args = {k: v.default for k, v in inspect.signature(design_experiment).parameters.items()
             if k in known and k in SETUP_ARGS}
     args.update({k: v for k, v in kwargs.items() if k in SETUP_ARGS})
-    set_up(model, free, duration, **args)
+    setup = set_up(model, free, duration, **args)
+    pts.design_thetas(setup["space"], kwargs.get("spread"), kwargs.get("spread_points", pts.SPREAD_POINTS),
+                      kwargs.get("seed", 0))
 
 
 def _printer(progress, announce):

@@ -158,6 +158,11 @@ class DesignResult:
     - `payload_kg`: the payload [kg] of the designed run where `build` changed it from the model's (e.g.
       `pamjax.PayloadFromModel.advised(model)`), else None: the bench must carry it, and its recording be fitted
       with it (`payload_kg` in the run's meta.json entry or [[experiment]] table).
+    - `points`: with a `spread`, one entry per design point (the model's first): its `values` (labels order), its
+      `criterion`, `worst_violation` (of its limits, in the penalties' units; 0 when kept) and `standard_errors`
+      ("design", and with a baseline "baseline" and "target", at that point), at the objective's resolution (250 Hz,
+      4 substeps: within 0.2 % of the fit's); `objective` and `history` then hold the average criterion over them.
+      None without a spread. `points_shortfall` names the parameters some point leaves short of its target.
     """
 
     times: list
@@ -179,6 +184,7 @@ class DesignResult:
     duration: float | None = None
     prediction: dict | None = dataclasses.field(default=None, repr=False, compare=False)
     payload_kg: float | None = None
+    points: list | None = None
 
     def signal(self):
         """The designed duty as `pamjax.Sampled(times, duty, period=period)`."""
@@ -207,6 +213,19 @@ class DesignResult:
             return {}
         design = self.standard_errors["design"]
         return {lbl: d / t for lbl, d, t in zip(self.labels, design, target) if math.isfinite(t) and d > t * (1 + 1e-9)}
+
+    @property
+    def points_shortfall(self):
+        """{label: the largest ratio over the design points of the predicted standard error to its target} for each
+        parameter some design point leaves short of what `baseline_margin` asked there; empty without a spread, a
+        baseline, or a shortfall."""
+        worst = {}
+        for point in self.points or []:
+            errors = point["standard_errors"]
+            for label, d, t in zip(self.labels, errors["design"], errors.get("target", [])):
+                if math.isfinite(t) and d > t * (1 + 1e-9):
+                    worst[label] = max(worst.get(label, 0.0), d / t)
+        return worst
 
     def to_csv(self, path, overwrite=False, infeasible_ok=False):
         """`t [s],duty [-]`: one row per PWM period (its start and duty) and a last row at the run's end (the last
