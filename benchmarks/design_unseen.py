@@ -2,7 +2,7 @@
 simulation of plants nobody designed or fitted at, against paper 000's triangle pair E3 + E4 (issue 29, item 7).
 
     python benchmarks/design_unseen.py [--plants 3] [--seed 2901] [--spread 0.2] [--switching-spread 0.2]
-                                       [--reuse] [--free-switching] [--out results/design_unseen]
+                                       [--reuse] [--free-switching] [--pilot] [--out results/design_unseen]
 
 The arms (each run from rest at atmospheric pressure, recorded at 1 kHz):
 
@@ -14,6 +14,10 @@ The arms (each run from rest at atmospheric pressure, recorded at 1 kHz):
     unconstrained    the kind of design the issue played (33 s): D-optimal on the five alone, 30 iterations, without
                      the threshold margin, the force limit and the baseline (duty_margin = 0, min_force = None)
     E3 + E4          paper 000's triangle runs (Triangle 0.05-0.95 at 0.08 Hz for 25 s and at 0.25 Hz for 8 s: 33 s)
+    pilot + design   (--pilot) the documented workflow at the same 33 s: E4 (8 s) recorded and fitted alone from the
+                     presets, then a 25 s run designed at that fit with E4 in hand (the example's keys) to beat E3
+                     by the example's margin, played through the plant; E4 + the designed run fitted (one design
+                     per plant, ~2-3 min each)
 
 1. Design both design arms at the example's design point (the presets of `mas10_system(valve="pwm",
    friction="karnopp")`), from the config's keys, timed (`--reuse`: read OUT/designed.json and OUT/unconstrained.json
@@ -41,7 +45,9 @@ every plant (the precision alone: where both arms fit at the noise floor, their 
 Ends with
     RESULT plants=... designed_max_err_pct=... triangle_max_err_pct=... unconstrained_max_err_pct=...
            designed_worst_rmse_over_noise=... designed_tighter=.../5 designed_tighter_se=.../5
-and writes OUT/design_unseen.json, the designs' JSON/CSV and the plants' bench folders.
+(--pilot: and pilot_max_err_pct=... pilot_worst_rmse_over_noise=... pilot_tighter_se=.../5, the last counted as
+designed_tighter_se) and writes OUT/design_unseen.json, the designs' JSON/CSV and the plants' bench folders (the
+pilot arm's in OUT/plant<seed>_pilot).
 """
 
 import argparse
@@ -173,13 +179,12 @@ def run_duties(name, runs):
     return runs[name]
 
 
-def write_bench(directory, model, truth, t_switch, runs, seed):
+def write_bench(directory, model, truth, t_switch, runs, seed, names=("designed", "unconstrained", *TRIANGLES)):
     """Each run of the plant by the SciPy reference, with noise, as CSV files and meta.json; returns the plant-side
     conditions per run (periods near the plant's thresholds, smallest eq. 7 force)."""
     directory.mkdir(parents=True, exist_ok=True)
     plant = numpy_plant(model, truth)
     experiments, conditions = {}, {}
-    names = ["designed", "unconstrained", *TRIANGLES]
     for k, name in enumerate(names):
         duties, duration = run_duties(name, runs)
         t = np.round(np.arange(0.0, duration + 0.5 / RATE, 1.0 / RATE), 9)
@@ -213,6 +218,9 @@ def write_bench(directory, model, truth, t_switch, runs, seed):
 
 
 SWITCHING = ["valve.switch_on_delay", "valve.switch_off_delay"]  # what the diagnosis names for another valve
+PILOT = "E4"  # the pilot run: paper 000's 8 s triangle, fitted alone before the design
+PILOT_DESIGN_S = 25.0  # s: the designed run after it (E3's length: pilot + design = E3 + E4's 33 s of bench time)
+E3_RUN = {"name": "E3", "signal": {"kind": "Triangle", "low": 0.05, "high": 0.95, "frequency": 0.08}, "duration": 25.0}
 
 
 def fit_arm(model, bench, names, free_switching=False):
@@ -228,6 +236,39 @@ def fit_arm(model, bench, names, free_switching=False):
     return dict(status=res.status, values=values, se=errors, rmse_over_noise=over, seconds=time.perf_counter() - t0)
 
 
+def pilot_arm(model, fit_model, bench, directory, truth, t_switch, seed, free_switching):
+    """The documented workflow at E3 + E4's bench time: E4 fitted alone from the presets (the pilot), a 25 s run
+    designed at its fit with E4 in hand (the example's keys: D_s on the five, the switching delays free as
+    nuisances, the default limits) to beat E3 by the example's margin, played through the plant (the same reference,
+    E4's recording as the pilot fitted it), and E4 + the designed run fitted from the presets."""
+    pilot_exps = [e for e in bench.experiments if e.name == PILOT]
+    free = list(bench.free) + (SWITCHING if free_switching else [])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pj.PamjaxIdentifiabilityWarning)
+        pilot = pj.fit(fit_model, pilot_exps, free, max_steps=100, progress=False)
+    _, design_free, _, kwargs = example()
+    kwargs = {k: v for k, v in kwargs.items() if k not in ("spread", "spread_points")}
+    kwargs.update(prior=pilot_exps, baseline=planned_runs(pilot.model, [E3_RUN]))
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pj.PamjaxDesignWarning)  # reported below
+        res = pj.design_experiment(pilot.model, design_free, PILOT_DESIGN_S, progress=False, **kwargs)
+    design_s = time.perf_counter() - t0
+    ratio = np.asarray(res.standard_errors["baseline"]) / np.asarray(res.standard_errors["design"])
+    print(f"  pilot ({PILOT} alone: {pilot.status}); design at its fit: {res.message.split(';')[0]}, "
+          f"{design_s:.1f} s, feasible {res.feasible}; predicted (E4 + E3) / (E4 + design): "
+          + ", ".join(f"{k} {r:.3f}" for k, r in zip(KEYS.values(), ratio)), flush=True)
+    folder = directory.parent / f"{directory.name}_pilot"
+    write_bench(folder, model, truth, t_switch, {"pilot_designed": (np.asarray(res.duty), PILOT_DESIGN_S)}, seed,
+                names=("pilot_designed",))
+    meta = json.loads((folder / "meta.json").read_text())
+    meta["experiments"][PILOT] = json.loads((directory / "meta.json").read_text())["experiments"][PILOT]
+    (folder / "meta.json").write_text(json.dumps(meta, indent=1) + "\n")
+    (folder / f"{PILOT}.csv").write_bytes((directory / f"{PILOT}.csv").read_bytes())
+    out = fit_arm(fit_model, pj.bench.load_bench(folder, fit_model), [PILOT, "pilot_designed"], free_switching)
+    return dict(out, design_s=design_s, pilot_status=pilot.status, predicted_ratio=ratio.tolist())
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--plants", type=int, default=3)
@@ -239,6 +280,8 @@ def main(argv=None):
     ap.add_argument("--free-switching", action="store_true", help="free the valve's switching delays in every arm's "
                     "fit too, as the fit's diagnosis advises where the plant's valve switches faster or slower "
                     "than the model's")
+    ap.add_argument("--pilot", action="store_true", help="add the arm 'pilot + design': E4 fitted alone, a 25 s run "
+                    "designed at its fit (with E4 in hand, to beat E3 by the example's margin), E4 + it fitted")
     ap.add_argument("--out", default="results/design_unseen")
     args = ap.parse_args(argv)
     out = pathlib.Path(args.out)
@@ -246,6 +289,7 @@ def main(argv=None):
     print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs; load average at start {os.getloadavg()[0]:.2f}; "
           f"jax {jax.__version__}", flush=True)
     model, runs, design_s = designs(out, args.reuse)
+    arms = dict(ARMS, **({"pilot + design": [PILOT, "pilot_designed"]} if args.pilot else {}))
     fit_model = pj.presets.mas10_system(valve="pwm", friction="karnopp")
     plants, skipped = [], []
     for seed in range(args.seed, args.seed + 3 * args.plants):
@@ -268,8 +312,11 @@ def main(argv=None):
               + "; ".join(f"{n}: {c['near_thresholds']}/{c['periods']} periods within 0.025 of its thresholds, "
                           f"eq. 7 force >= {c['min_force']:.1f} N" for n, c in conditions.items()), flush=True)
         fits = {}
-        for arm, names in ARMS.items():
-            fits[arm] = fit_arm(fit_model, bench, names, args.free_switching)
+        for arm, names in arms.items():
+            if arm == "pilot + design":
+                fits[arm] = pilot_arm(model, fit_model, bench, directory, truth, t_switch, seed, args.free_switching)
+            else:
+                fits[arm] = fit_arm(fit_model, bench, names, args.free_switching)
             errs = {k: 100 * (fits[arm]["values"][k] / truth[k] - 1) for k in KEYS.values()}
             fits[arm]["error_pct"] = errs
             print(f"  {arm:<14} {fits[arm]['status']:<10} {fits[arm]['seconds']:6.1f} s  rmse/noise "
@@ -277,6 +324,10 @@ def main(argv=None):
                   flush=True)
         print("  standard error, E3 + E4 / designed: " + " ".join(
             f"{k} {fits['E3 + E4']['se'][k] / fits['designed']['se'][k]:.3f}" for k in KEYS.values()), flush=True)
+        if args.pilot:
+            print("  standard error, E3 + E4 / pilot + design: " + " ".join(
+                f"{k} {fits['E3 + E4']['se'][k] / fits['pilot + design']['se'][k]:.3f}" for k in KEYS.values()),
+                flush=True)
         plants.append(dict(seed=seed, factors=factors, truth=truth, switching_time_s=t_switch, conditions=conditions,
                            fits=fits))
 
@@ -285,19 +336,19 @@ def main(argv=None):
     print(f"\n{len(plants)} held-back plants (seeds {', '.join(str(p['seed']) for p in plants)}"
           + (f"; {len(skipped)} skipped: {skipped}" if skipped else "") + "): worst |error| [% of the plant's value] / "
           "largest fit standard error [%]")
-    print(f"{'key':<5}" + "".join(f"{arm:>26}" for arm in ARMS))
-    worst = {arm: {} for arm in ARMS}
-    se = {arm: {} for arm in ARMS}
+    print(f"{'key':<5}" + "".join(f"{arm:>26}" for arm in arms))
+    worst = {arm: {} for arm in arms}
+    se = {arm: {} for arm in arms}
     for k in KEYS.values():
         row = f"{k:<5}"
-        for arm in ARMS:
+        for arm in arms:
             worst[arm][k] = max(abs(p["fits"][arm]["error_pct"][k]) for p in plants)
             se[arm][k] = max(100 * p["fits"][arm]["se"][k] / abs(p["truth"][k]) for p in plants)
             row += f"{worst[arm][k]:>16.3f} / {se[arm][k]:<7.3f}"
         print(row)
-    rmse = {arm: max(p["fits"][arm]["rmse_over_noise"] for p in plants) for arm in ARMS}
+    rmse = {arm: max(p["fits"][arm]["rmse_over_noise"] for p in plants) for arm in arms}
     print("worst residual RMSE / noise: " + ", ".join(f"{arm} {v:.2f}" for arm, v in rmse.items()))
-    converged = {arm: sum(p["fits"][arm]["status"] == "converged" for p in plants) for arm in ARMS}
+    converged = {arm: sum(p["fits"][arm]["status"] == "converged" for p in plants) for arm in arms}
     tighter = sum(worst["designed"][k] < worst["E3 + E4"][k] and se["designed"][k] < se["E3 + E4"][k]
                   for k in KEYS.values())
     # the precision alone: the design's standard error smaller on every plant (worst errors at the noise floor compare
@@ -313,7 +364,16 @@ def main(argv=None):
           f"triangle_max_err_pct={max(worst['E3 + E4'].values()):.3f} "
           f"unconstrained_max_err_pct={max(worst['unconstrained'].values()):.3f} "
           f"designed_worst_rmse_over_noise={rmse['designed']:.2f} designed_tighter={tighter}/{len(KEYS)} "
-          f"designed_tighter_se={tighter_se}/{len(KEYS)}")
+          f"designed_tighter_se={tighter_se}/{len(KEYS)}" + (pilot_result(plants, worst, rmse) if args.pilot else ""))
+
+
+def pilot_result(plants, worst, rmse):
+    """The pilot arm's fields of the RESULT line: its worst error, worst RMSE over the noise, and the parameters whose
+    standard error is smaller than E3 + E4's on every plant."""
+    tighter = sum(all(p["fits"]["pilot + design"]["se"][k] < p["fits"]["E3 + E4"]["se"][k] for p in plants)
+                  for k in KEYS.values())
+    return (f" pilot_max_err_pct={max(worst['pilot + design'].values()):.3f} "
+            f"pilot_worst_rmse_over_noise={rmse['pilot + design']:.2f} pilot_tighter_se={tighter}/{len(KEYS)}")
 
 
 if __name__ == "__main__":
