@@ -318,7 +318,6 @@ def design_experiment(
     return result
 
 
-
 def designed_payload(model, system):
     """The payload [kg] the designed run carries where `build` made it another than the model's (a bench must load
     the rig so, and log it: `payload_kg`), else None."""
