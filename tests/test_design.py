@@ -147,7 +147,7 @@ def _standard_errors_at(values, experiment):
     return np.sqrt(variances(information(space, np.asarray(theta), [experiment]), g))
 
 
-def test_a_spread_design_averages_its_points_each_with_its_own_target():
+def test_a_spread_design_averages_its_points_each_with_its_own_target(tmp_path):
     # spread: the objective is the average over the model's point and `spread_points` drawn as a Latin hypercube
     # (at 2 points: one in each half of every parameter's ±20 %); each point reports its design's and its baseline's
     # standard errors, checked against the fit's Jacobian of the designed run and of the baseline at that point
@@ -163,6 +163,7 @@ def test_a_spread_design_averages_its_points_each_with_its_own_target():
     assert np.all(np.abs(rel) <= 0.2) and np.all(rel[0] * rel[1] < 0), rel  # one point in each half of each spread
     assert res.objective[1] == pytest.approx(np.mean([p["criterion"] for p in res.points]), rel=1e-9)
     assert res.objective[1] < res.objective[0] and all(p["worst_violation"] == 0.0 for p in res.points)
+    assert res.plot(tmp_path / "spread.png").stat().st_size > 0  # the points drawn over the design's bars
     t = np.arange(0.0, 0.4 + 1e-3, 2e-3)
     for point in res.points:
         model = pj.ParameterSpace(_tank(), FREE).with_values(np.asarray(point["values"]))

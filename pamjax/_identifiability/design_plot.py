@@ -1,5 +1,6 @@
 """The figure of a `DesignResult`: the designed duty, the predicted run against its limits, and the predicted
-standard errors against the baseline's and the prior experiments' alone."""
+standard errors against the baseline's and the prior experiments' alone (and, for a design over a spread, at each of
+its points)."""
 
 import numpy as np
 
@@ -59,6 +60,11 @@ def plot_design(result, path):
         target = np.asarray(result.standard_errors["target"], dtype=float) / np.where(values > 0, values, 1.0)
         axes[3].scatter(k - (len(series) - 1) / 2 * width, 100 * np.where(np.isfinite(target), target, np.nan),
                         marker="_", s=300, color="k", zorder=3, label="target (baseline / baseline_margin)")
+    for n, point in enumerate(result.points or []):  # a spread design: each point's own, over the design's bars
+        own = np.abs(np.asarray(point["values"]))
+        rel = np.asarray(point["standard_errors"]["design"], dtype=float) / np.where(own > 0, own, 1.0)
+        axes[3].scatter(k - (len(series) - 1) / 2 * width, 100 * np.where(np.isfinite(rel), rel, np.nan), marker=".",
+                        s=25, color="C3", zorder=4, label="design at the spread's points" if n == 0 else None)
     axes[3].set_yscale("log")
     short = [".".join(lbl.split(".")[-2:]) if lbl.count(".") > 1 else lbl for lbl in result.labels]
     axes[3].set_xticks(k, short, rotation=45, ha="right", fontsize=8)
