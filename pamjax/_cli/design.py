@@ -205,13 +205,23 @@ def _tolerated(verified, key, fmt, scale=1.0):
             f"{fmt.format(tolerance * scale)} allowed for the PWM ripple between the design's samples)")
 
 
-def baseline_line(shortfall, margin):
-    """Whether the design reached the baseline's standard errors over `baseline_margin` (a goal, not a limit)."""
-    goal = f"the baseline's standard errors / {float(margin):g} (baseline_margin)"
+def baseline_line(shortfall, margin, points=False):
+    """Whether the design reached the baseline's standard errors over `baseline_margin` (a goal, not a limit); with
+    `points`, whether every design point of a spread design reached its own (the margin at the model's point, the
+    baseline's own, or over the margin if below 1, at the others)."""
+    m = float(margin)
+    if not points:
+        goal, every, short = f"the baseline's standard errors / {m:g} (baseline_margin)", "baseline:", "baseline:"
+    else:
+        goal = (f"the baseline's standard errors / {m:g}" + (" at the model's point and the baseline's own at the "
+                                                              "others" if m > 1 else ""))
+        every, short = "baseline at every design point:", "baseline at the design points:"
     if not shortfall:
-        return f"baseline: every parameter of subset at or below {goal}"
-    return (f"baseline: short of {goal} on " + ", ".join(f"{k} ({v:.3f}× its target)" for k, v in shortfall.items())
-            + "; a goal, not a limit: the design is valid (more steps, or a smaller baseline_margin)")
+        return f"{every} every parameter of subset at or below {goal}"
+    worst = " at worst" if points else ""
+    hint = "" if points else " (more steps, or a smaller baseline_margin)"
+    named = ", ".join(f"{k} ({v:.3f}× its target{worst})" for k, v in shortfall.items())
+    return f"{short} short of {goal} on {named}; a goal, not a limit: the design is valid{hint}"
 
 
 def points_lines(res, margin):
@@ -230,20 +240,8 @@ def points_lines(res, margin):
                 f"{res.labels[i].rsplit('.', 1)[-1]} {errors['baseline'][i] / errors['design'][i]:.3f}" for i in subset)
         lines.append(line)
     if "target" in res.points[0]["standard_errors"]:
-        lines.append(points_baseline_line(res.points_shortfall, margin))
+        lines.append(baseline_line(res.points_shortfall, margin, points=True))
     return "\n".join(lines)
-
-
-def points_baseline_line(shortfall, margin):
-    """Whether every design point reached its target: the baseline's standard errors over `baseline_margin` at the
-    model's point, the baseline's own (or over the margin, if below 1) at the others."""
-    goal = (f"the baseline's standard errors / {float(margin):g} at the model's point and the baseline's own at the "
-            "others" if float(margin) > 1 else f"the baseline's standard errors / {float(margin):g}")
-    if not shortfall:
-        return f"baseline at every design point: every parameter of subset at or below {goal}"
-    return (f"baseline at the design points: short of {goal} on "
-            + ", ".join(f"{k} ({v:.3f}× its target at worst)" for k, v in shortfall.items())
-            + "; a goal, not a limit: the design is valid")
 
 
 def constraint_lines(c):

@@ -312,9 +312,8 @@ def design_experiment(
     result = _result(setup, aux, history, errors, constraints, message + note, criterion, parametrisation,
                      float(duration), t_start, compile_s, designed_payload(model, setup["system"]))
     if points:
-        limited = (prob[0], *(p for p, _ in points))  # each point's plant at the design's limits, for the report
-        result.points = _points_report(space, theta, point_values, thetas, limited,
-                                       [base_info, *(b for _, b in points)], pts.value(jnp.asarray(c), limited)[1])
+        result.points = _points_report(space, theta, point_values, thetas, [prob[0], *(p for p, _ in points)],
+                                       [base_info, *(b for _, b in points)], c, aux)
     return result
 
 
@@ -362,12 +361,13 @@ def _targets(space, theta, floor):
     return [float(math.sqrt(f) * s) for f, s in zip(np.asarray(floor), g)]
 
 
-def _points_report(space, theta, values, thetas, problems, base_infos, aux):
+def _points_report(space, theta, values, thetas, problems, base_infos, c, aux):
     """`DesignResult.points`: per design point (the model's first) its values, criterion, worst violation and
-    predicted standard errors (design; baseline and target with a baseline), at the objective's resolution."""
+    predicted standard errors (design; baseline and target with a baseline), at the objective's resolution. Each
+    other point's plant is evaluated at the design's limits (`problems`: with them); the model's is the search's."""
+    auxes = [aux["points"][0], *(obj.value(jnp.asarray(c), p)[1] for p in problems[1:])]
     out = []
-    for k, (th, vals, a) in enumerate(zip([theta, *thetas], [np.asarray(space.initial_values()), *values],
-                                          aux["points"])):
+    for k, (th, vals, a) in enumerate(zip([theta, *thetas], [np.asarray(space.initial_values()), *values], auxes)):
         errors = {"design": _physical_errors(space, th, np.asarray(a["information"]))}
         if base_infos[k] is not None:
             errors["baseline"] = _physical_errors(space, th, base_infos[k])
