@@ -70,6 +70,17 @@ def test_load_bench(bench):
         pj.bench.load_bench(folder, model, fitted_keys=["Cv12", "nonsense"])
     with pytest.raises(PamjaxInputError, match="no meta.json"):
         pj.bench.load_bench(ROOT, model)
+    # runs: some of the bench's experiments by name (a pilot's tests before a design), the others skipped and said
+    pilot = pj.bench.load_bench(folder, model, runs=["E3", "E1"])
+    assert [e.name for e in pilot.experiments] == ["E1", "E3"] and "not in runs" in pilot.skipped["E2"]
+    assert pilot.free == b.free and pilot.noise == b.noise
+    np.testing.assert_array_equal(pilot.experiments[1].times, b.experiments[2].times)
+    for runs, match in ((["E9"], r"runs \['E9'\] are not experiments of its meta.json; it has \['E1', 'E2', 'E3', "
+                                 r"'E5'\]"),
+                        (["E5"], r"runs \['E5'\] are of kinds \['muscle_PI'\], not among kinds"),
+                        ("E3", "runs must be a non-empty list of experiment names"), ([], "non-empty list")):
+        with pytest.raises(PamjaxInputError, match=match):
+            pj.bench.load_bench(folder, model, runs=runs)
 
 
 def test_joint_script_fits_a_bench_directory_from_the_presets(bench, tmp_path):

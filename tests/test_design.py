@@ -102,6 +102,29 @@ def test_reverse_gradient_per_period_equals_forward_mode():
     np.testing.assert_allclose(rev, fwd, rtol=1e-8, atol=1e-10 * np.max(np.abs(fwd)))
 
 
+def test_targets_are_the_baselines_standard_errors_over_the_margin_where_a_transform_mixes_parameters():
+    # A force law's a0…a4 share one transform (θ mixes them), so √floor × |∂a/∂θ| (the diagonal) is no standard error
+    # of a: it once reported a target of 0.0012 N for a0 beside a baseline of 2.5 N and named a0 "576× short" of it
+    # while the table's ratio column read 3.6× better. The target is the baseline's physical standard error over the
+    # margin (no prior here), as that column reads, for mixed and unmixed parameters alike.
+    from pamjax._identifiability import design as dmod
+
+    free = ["muscle.force_law.max_force_coefficients", "muscle.force_law.k0"]
+    space = pj.ParameterSpace(presets.mas10_system(), free)
+    theta = np.asarray(space.initial_theta())
+    a = np.random.default_rng(7).normal(size=(theta.size, theta.size))
+    base = a @ a.T + theta.size * np.eye(theta.size)  # a baseline's information about θ
+    prior = np.zeros_like(base)
+    floor = dmod._floor(prior, base, 1.5)
+    targets = dmod._targets(space, theta, floor, base)
+    physical = np.asarray(dmod._physical_errors(space, theta, base))
+    np.testing.assert_allclose(targets, physical / 1.5, rtol=1e-12)
+    g = np.abs(np.diag(np.asarray(dmod.physical_and_jacobian(space, device_array(theta))[1])))
+    assert not np.allclose(np.sqrt(floor) * g, physical / 1.5, rtol=1e-3)  # the diagonal's figure is another one
+    floor[:2] = np.inf  # no target where the floor asks none
+    assert all(math.isinf(t) for t in dmod._targets(space, theta, floor, base)[:2])
+
+
 def test_design_raises_the_information_keeps_its_constraints_and_replays_from_csv(tmp_path):
     # Baseline: a constant-duty run of the same length; the design must match it on every parameter.
     base_rec = pj.synthetic_recording(_tank(), pj.Constant(0.3), np.arange(0.0, 0.4, 2e-3), name="base")

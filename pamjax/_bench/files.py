@@ -9,8 +9,10 @@ import pathlib
 import numpy as np
 
 from .._core.errors import PamjaxInputError
+from .._fit.builds import PayloadFromModel
 from .._fit.recording import BENCH_NAMES, Recording
 from .._physics.signals import Constant, Sampled, Triangle
+from .._systems.base import AbstractMuscleSystem
 
 TANK_KINDS = ("tank_charge", "tank_discharge")
 MUSCLE_KINDS = ("muscle_triangle", "muscle_run")
@@ -226,3 +228,36 @@ def run_command(name, kind, e, rec, valve_period, where, notes, unknown_start):
     return Sampled(rec.t, rec["command"], period=valve_period)
 
 
+def payload_build(e, model, where, notes):
+    """`PayloadFromModel` for a muscle run whose meta.json entry gives `payload_kg` (weights added or taken off),
+    else None (the model's payload)."""
+    mass = number(e, "payload_kg", where, unit="kg")
+    if mass is None:
+        return None
+    if mass <= 0:
+        raise PamjaxInputError(f"{where}: payload_kg must be > 0 [kg] (the mass the muscle lifts in this run), got "
+                               f"{e['payload_kg']!r}")
+    if not isinstance(model, AbstractMuscleSystem):
+        raise PamjaxInputError(f"{where}: payload_kg is given but the model ({type(model).__name__}) lifts no payload")
+    notes.append(f"{where.rsplit(': ', 1)[-1]}: payload {mass:g} kg (payload_kg; the model's is "
+                 f"{float(model.payload_mass):g} kg)")
+    return PayloadFromModel(mass)
+
+
+def check_runs(runs, meta, kinds, where):
+    """`load_bench`'s `runs` (None: every experiment of `kinds`): names of meta.json's experiments, each of a kind
+    fitted."""
+    if runs is None:
+        return
+    if isinstance(runs, str) or not all(isinstance(r, str) for r in runs) or not runs:
+        raise PamjaxInputError(f"runs must be a non-empty list of experiment names (e.g. [\"E4\"]), got {runs!r}")
+    experiments = meta["experiments"]
+    unknown = [r for r in runs if r not in experiments]
+    if unknown:
+        raise PamjaxInputError(f"{where}: runs {unknown} are not experiments of its meta.json; it has "
+                               f"{sorted(experiments)}")
+    unfitted = [r for r in runs if experiments[r].get("kind") not in kinds]
+    if unfitted:
+        raise PamjaxInputError(f"{where}: runs {unfitted} are of kinds "
+                               f"{sorted({str(experiments[r].get('kind')) for r in unfitted})}, not among kinds="
+                               f"{list(kinds)}")

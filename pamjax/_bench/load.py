@@ -33,18 +33,20 @@ import numpy as np
 from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError
 from .._core.units import MAX_ABSOLUTE_PA, MIN_ABSOLUTE_PA
-from .._fit.builds import PayloadFromModel, TankFromModel
+from .._fit.builds import TankFromModel
 from .._fit.experiment import Experiment
 from .._fit.measurement import Measurement
 from .._fit.rig import DEFAULT_GROUP, Rig, RunConditions, Sensors, StartState
-from .._systems.base import AbstractMuscleSystem, AbstractSystem
+from .._systems.base import AbstractSystem
 from .files import (
     FITTED_KINDS,
     MUSCLE_KINDS,
     TANK_KINDS,
+    check_runs,
     load_recording,
     noise_levels,
     number,
+    payload_build,
     period_starts,
     read_meta,
     recording_file,
@@ -172,7 +174,7 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
                kinds: Sequence[str] = FITTED_KINDS, fitted_keys: Sequence[str] | None = None, substeps: int = 16,
                nuisance: bool | Sequence[str] = False, atmosphere: RealScalarLike | None = None,
                position_offset: float | int = 0.0, pressure_gain: float | int | None = None,
-               pressure_gain_sd: float | None = None) -> "Bench":
+               pressure_gain_sd: float | None = None, runs: Sequence[str] | None = None) -> "Bench":
     """Experiments of a bench directory for `pamjax.fit(bench.model, bench.experiments, bench.free)`.
 
     **Arguments:**
@@ -185,6 +187,7 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
     - `kinds`: the experiment kinds to fit (default: tank charge/discharge and the muscle runs; the closed-loop
       `muscle_PI` runs are left out: pamjax's PWM grid reads a planned duty, not a controller's).
     - `fitted_keys`: bench parameter names to free (default: meta.json's `fitted_keys`).
+    - `runs`: the experiments to fit, by name (e.g. `["E4"]`, a pilot run alone); default: every one of `kinds`.
     - `substeps`: RK4 nodes per PWM period of the fixed grid.
     - `nuisance`: False (default: ideal sensors, nominal supply, every run at rest unless meta.json gives its start),
       True (free the nuisances of a real rig that its recordings determine: the pressure sensor's offset and gain
@@ -227,8 +230,12 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
         atmosphere = number(meta, "atmosphere_Pa", f"{where}/meta.json", 5e4, 1.2e5, "Pa abs") or p_atm
     period = None if model.valve.period is None else float(model.valve.period)
     specs, skipped, recordings, notes, unknown = [], {}, [], [], []
+    check_runs(runs, meta, kinds, where)
     for name, e in meta["experiments"].items():
         kind = e.get("kind")
+        if runs is not None and name not in runs:
+            skipped[name] = f"not in runs={list(runs)}"
+            continue
         if kind not in kinds:
             skipped[name] = f"kind {kind!r} not fitted (kinds={list(kinds)})"
             continue
@@ -276,7 +283,7 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
             lead = START_LEAD if name in unknown and "start" in names else 0.0  # solved from before the log
             experiments.append(Experiment(rec, signal, channels=channels, scales={c: noise[c] for c in channels},
                                           name=name, substeps=substeps, t0=rec.t[0] - lead,
-                                          build=_payload(e, model, f"{where}/meta.json: {name}", notes)))
+                                          build=payload_build(e, model, f"{where}/meta.json: {name}", notes)))
     if not experiments:
         raise PamjaxInputError(f"{where}: no experiment of the kinds {list(kinds)}")
     bench = Bench(experiments, free, keys, noise, skipped, meta, directory, None if rate is None else float(rate),
@@ -286,22 +293,6 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
         _with_nuisance(bench, specs, names, p_atm, float(position_offset), pressure_gain, by_default=nuisance is True,
                        pressure_gain_sd=pressure_gain_sd)
     return bench
-
-
-def _payload(e, model, where, notes):
-    """`PayloadFromModel` for a muscle run whose meta.json entry gives `payload_kg` (weights added or taken off),
-    else None (the model's payload)."""
-    mass = number(e, "payload_kg", where, unit="kg")
-    if mass is None:
-        return None
-    if mass <= 0:
-        raise PamjaxInputError(f"{where}: payload_kg must be > 0 [kg] (the mass the muscle lifts in this run), got "
-                               f"{e['payload_kg']!r}")
-    if not isinstance(model, AbstractMuscleSystem):
-        raise PamjaxInputError(f"{where}: payload_kg is given but the model ({type(model).__name__}) lifts no payload")
-    notes.append(f"{where.rsplit(': ', 1)[-1]}: payload {mass:g} kg (payload_kg; the model's is "
-                 f"{float(model.payload_mass):g} kg)")
-    return PayloadFromModel(mass)
 
 
 def _unfreed_notes(notes, names, unknown, specs, where):

@@ -112,7 +112,8 @@ def _bench(table, model, root):
         kinds=tuple(table.get("kinds", pj.bench.FITTED_KINDS)), fitted_keys=table.get("fitted_keys"),
         substeps=table.get("substeps", 16), nuisance=table.get("nuisance", False),
         position_offset=table.get("position_offset", 0.0), atmosphere=table.get("atmosphere"),
-        pressure_gain=table.get("pressure_gain"), pressure_gain_sd=table.get("pressure_gain_sd"))
+        pressure_gain=table.get("pressure_gain"), pressure_gain_sd=table.get("pressure_gain_sd"),
+        runs=table.get("runs"))
 
 
 def build_measurements(tables, model):

@@ -43,6 +43,7 @@ BENCH = {
     "rate": Key("positive number", "1000.0", "Hz"),
     "kinds": Key("list of strings", '["tank_charge", "muscle_triangle"]'),
     "fitted_keys": Key("list of strings", '["Cv12", "b12", "Fc"]'),
+    "runs": Key("list of strings", '["E4"]', "the experiments to fit, by name (default: every one of kinds)"),
     "substeps": Key("positive integer", "16"),
     "staged": Key("boolean", "false"),
     "nuisance": Key("boolean or list of strings", '["delay", "pressure_offset", "supply_pressure"]',

@@ -304,7 +304,7 @@ def design_experiment(
                                         float(rate), noise, build)
     nominal = prob[0] if points else prob
     if base_info is not None:  # what `baseline_margin` asks of each parameter of `subset` (inf elsewhere), physical
-        errors["target"] = _targets(space, theta, nominal.floor)
+        errors["target"] = _targets(space, theta, nominal.floor, base_info)
     constraints = constraints_report(aux, setup, verified)
     if not constraints["feasible"]:
         warnings.warn("pamjax.design_experiment: the design violates its limits (a bench must not play it; to_csv "
@@ -355,10 +355,15 @@ def _points_start(c0, prob):
     return aux
 
 
-def _targets(space, theta, floor):
-    """The standard errors [physical units] a variance floor on θ asks for (inf where none)."""
-    g = np.abs(np.diag(np.asarray(physical_and_jacobian(space, device_array(theta))[1])))
-    return [float(math.sqrt(f) * s) for f, s in zip(np.asarray(floor), g)]
+def _targets(space, theta, floor, base_info):
+    """The standard errors [physical units] a variance floor on θ asks for (inf where none): the baseline's, each
+    scaled as the floor scales the baseline's variance of its θ. Exactly √floor × |∂value/∂θ| where each value has a
+    θ of its own; where a transform mixes them (a force law's a0…a4), the baseline's physical standard errors over the
+    margin, as the table's ratio column reads (not that diagonal, which mixes units)."""
+    base = np.asarray(_physical_errors(space, theta, base_info))
+    with np.errstate(invalid="ignore"):  # inf / inf where the baseline leaves a parameter free: no target
+        scale = np.sqrt(np.asarray(floor, dtype=float) / variances(base_info))
+    return [float(b * f) if math.isfinite(f) else math.inf for b, f in zip(base, scale)]
 
 
 def _points_report(space, theta, values, thetas, problems, base_infos, c, aux):
@@ -371,7 +376,7 @@ def _points_report(space, theta, values, thetas, problems, base_infos, c, aux):
         errors = {"design": _physical_errors(space, th, np.asarray(a["information"]))}
         if base_infos[k] is not None:
             errors["baseline"] = _physical_errors(space, th, base_infos[k])
-            errors["target"] = _targets(space, th, problems[k].floor)
+            errors["target"] = _targets(space, th, problems[k].floor, base_infos[k])
         out.append(dict(values=[float(v) for v in vals], criterion=float(a["criterion"]),
                         worst_violation=worst_violation(a), standard_errors=errors))
     return out
