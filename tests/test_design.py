@@ -364,6 +364,32 @@ def test_design_example_config_loads():
     assert "build" not in kwargs
 
 
+def test_pilot_examples_chain_the_pilots_model_file_and_runs_into_the_design(tmp_path):
+    # examples/pilot_fit.toml fits some of the shipped bench's runs ([bench] runs) and writes model.json, which
+    # examples/pilot_design.toml designs at, with the same runs as its prior and the same 15 parameters free (the
+    # chain's files laid out as in the repository; the pilot's model.json here the presets', nothing solved but E3)
+    from pamjax._cli.design import load as load_design
+    from pamjax._cli.fit import load as load_fit
+
+    root = pathlib.Path(__file__).resolve().parents[1]
+    (tmp_path / "examples").mkdir()
+    for name in ("pilot_fit.toml", "pilot_design.toml"):
+        (tmp_path / "examples" / name).write_text((root / "examples" / name).read_text())
+    (tmp_path / "pamjax" / "data").mkdir(parents=True)
+    (tmp_path / "pamjax" / "data" / "hybrid-reference-bench").symlink_to(root / "pamjax" / "data" /
+                                                                        "hybrid-reference-bench")
+    pj.save_model(tmp_path / "results" / "pilot_fit" / "model.json", presets.mas10_system(valve="pwm",
+                                                                                         friction="karnopp"))
+    _, experiments, free, _, out, bench, staged = load_fit(tmp_path / "examples" / "pilot_fit.toml")
+    runs = ["E1_u0.25", "E1_u0.50", "E1_u0.75", "E2_u0.25", "E2_u0.50", "E2_u0.75", "E4"]
+    assert [e.name for e in experiments] == runs and staged and out == "results/pilot_fit"
+    assert "not in runs" in bench.skipped["E3"] and len(bench.fitted_keys) == 15
+    model, design_free, duration, kwargs, out = load_design(tmp_path / "examples" / "pilot_design.toml")
+    assert design_free == list(free) and duration == 25.0 and out == "results/pilot_design"
+    assert [e.name for e in kwargs["prior"]] == runs and [e.name for e in kwargs["baseline"]] == ["E3"]
+    assert float(model.valve.period) == 0.02 and kwargs["baseline_margin"] == 1.0
+
+
 def test_design_config_planned_runs_are_runs_of_the_model_and_bad_ones_are_named(tmp_path):
     # `baseline_runs` / `prior_runs`: a protocol not recorded yet (a signal and a duration) as experiments of the
     # model: the design's rate, channels and noise, a tank test where it says tank_volume, the model's prediction as
