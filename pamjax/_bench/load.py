@@ -258,23 +258,7 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
     experiments = []
     for name, kind, e, rec, signal in specs:
         if kind in TANK_KINDS:
-            if "payload_kg" in e:
-                raise PamjaxInputError(f"{where}/meta.json: {name!r} is a tank test, which lifts no payload; "
-                                       "payload_kg belongs to muscle runs")
-            volume = number(e, "V_tank", f"{where}/meta.json: {name}", 0.0, None, "m^3")
-            if volume is None or volume <= 0:
-                raise PamjaxInputError(f"{where}/meta.json: tank test {name!r} needs V_tank, its volume > 0 [m^3]")
-            p0 = e.get("p0", "p_atm" if kind == "tank_charge" else "p_s")
-            if p0 == "p_s":
-                p0 = "supply"  # the run's own supply pressure (its nuisance, when fitted)
-            elif p0 == "p_atm":
-                p0 = p_atm
-            elif not isinstance(p0, (int, float)):
-                raise PamjaxInputError(f"{where}/meta.json: {name!r} p0 must be 'p_atm', 'p_s' or a pressure [Pa abs], "
-                                       f"got {p0!r}")
-            experiments.append(Experiment(
-                rec, signal, channels=["pressure"], scales={"pressure": noise["pressure"]},
-                build=TankFromModel(volume), initial={"pressure": p0}, name=name, substeps=substeps))
+            experiments.append(_tank_test(name, kind, e, rec, signal, noise, p_atm, substeps, f"{where}/meta.json"))
         else:  # from rest at equilibrium, valve off, stuck (the model's default initial state) unless unknown
             channels = [c for c in ("pressure", "position") if c in rec.channels and np.ptp(rec[c]) > 0]
             missing = [c for c in channels if c not in noise]
@@ -293,6 +277,25 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
         _with_nuisance(bench, specs, names, p_atm, float(position_offset), pressure_gain, by_default=nuisance is True,
                        pressure_gain_sd=pressure_gain_sd)
     return bench
+
+
+def _tank_test(name, kind, e, rec, signal, noise, p_atm, substeps, where):
+    """The `Experiment` of a tank test's meta.json entry `e` (its volume and start pressure checked)."""
+    if "payload_kg" in e:
+        raise PamjaxInputError(f"{where}: {name!r} is a tank test, which lifts no payload; payload_kg belongs to "
+                               "muscle runs")
+    volume = number(e, "V_tank", f"{where}: {name}", 0.0, None, "m^3")
+    if volume is None or volume <= 0:
+        raise PamjaxInputError(f"{where}: tank test {name!r} needs V_tank, its volume > 0 [m^3]")
+    p0 = e.get("p0", "p_atm" if kind == "tank_charge" else "p_s")
+    if p0 == "p_s":
+        p0 = "supply"  # the run's own supply pressure (its nuisance, when fitted)
+    elif p0 == "p_atm":
+        p0 = p_atm
+    elif not isinstance(p0, (int, float)):
+        raise PamjaxInputError(f"{where}: {name!r} p0 must be 'p_atm', 'p_s' or a pressure [Pa abs], got {p0!r}")
+    return Experiment(rec, signal, channels=["pressure"], scales={"pressure": noise["pressure"]},
+                      build=TankFromModel(volume), initial={"pressure": p0}, name=name, substeps=substeps)
 
 
 def _unfreed_notes(notes, names, unknown, specs, where):
