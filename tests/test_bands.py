@@ -413,3 +413,17 @@ def test_cli_sweep_steady_state_band(fitted):
     assert np.all(columns["pressure_pa_abs_lower"] < columns["pressure_pa_abs"])
     assert np.all(columns["pressure_pa_abs"] < columns["pressure_pa_abs_upper"])
     assert (root / "ss" / "sweep.png").stat().st_size > 10_000
+
+
+def test_cli_band_notes_give_the_commands_option_not_the_apis_keyword(capsys):
+    # A band's note advises `method='samples'` (the API's keyword); the command line prints its own option instead.
+    from pamjax._cli.bands import report
+
+    class Band:
+        def describe(self):
+            return "95 % confidence band (linear)\nnote: nonlinear in position (index 0.4); use method='samples'"
+
+    text = report(Band(), "results/fit/model.json", "pamjax simulate")
+    out = capsys.readouterr().out
+    assert "use --band-method samples" in out and "use --band-method samples" in text
+    assert "method='samples'" not in out

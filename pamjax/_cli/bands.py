@@ -116,7 +116,8 @@ def _options(args):
 
 def report(band, source, command):
     """Print what the band is, and return the same as CSV comment lines."""
-    lines = [f"band from the covariance of {source}", *band.describe().splitlines()]
+    lines = [f"band from the covariance of {source}",  # the API's advice in the command's own words
+             *band.describe().replace("use method='samples'", "use --band-method samples").splitlines()]
     for line in lines:
         print(f"{command}: {line}")
     return "\n".join(lines)
