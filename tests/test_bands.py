@@ -278,11 +278,6 @@ def test_refusals_are_named(refits, tmp_path):
     pj.save_model(tmp_path / "model.json", res.model)  # a model file that no fit wrote
     with pytest.raises(PamjaxInputError, match="this model was not fitted"):
         pj.prediction_band(tmp_path / "model.json", predict)
-    stick_slip = presets.mas10_system(valve="averaged", friction="karnopp")
-    friction = pj.FitUncertainty.from_document(dict(labels=["friction.coulomb_force"], paths=["friction.coulomb_force"],
-                                                    values=[16.0], standard_errors=[0.5], correlation=[[1.0]]), "x")
-    with pytest.raises(PamjaxInputError, match="this model is hybrid"):
-        pj.steady_state_band(friction, [0.5], model=stick_slip)
     loaded = pj.FitResult.from_json(res.to_json(tmp_path / "fit.json"))
     with pytest.raises(PamjaxInputError, match="pass model="):
         pj.prediction_band(loaded, predict)
@@ -427,3 +422,34 @@ def test_cli_band_notes_give_the_commands_option_not_the_apis_keyword(capsys):
     out = capsys.readouterr().out
     assert "use --band-method samples" in out and "use --band-method samples" in text
     assert "method='samples'" not in out
+
+
+def test_a_stick_slip_models_steady_state_band_is_the_delta_method_over_its_maps():
+    """A hybrid model (exact stick-slip, `KarnoppFriction`): the map's lanes locate the mode switches as `simulate`
+    does, so its band is a band like any other. Its prediction is `steady_state_map` of the model, and its standard
+    deviation the delta method with each gradient from central differences of two more `steady_state_map`s (the band
+    takes its differences at ±1 σ along the covariance's axes, the reference at ±1e-3 of each value: they agree to
+    the band's own nonlinearity, a few per cent)."""
+    model = presets.mas10_system(valve="averaged", friction="karnopp")
+    paths = ["friction.coulomb_force", "muscle.force_law.k0"]
+    values = np.array([float(model.friction.coulomb_force), float(model.muscle.force_law.k0)])
+    se, corr = np.array([1.0, 2.0]), np.array([[1.0, 0.3], [0.3, 1.0]])
+    uncertainty = pj.FitUncertainty.from_document(dict(labels=paths, paths=paths, values=values.tolist(),
+                                                       standard_errors=se.tolist(), correlation=corr.tolist()), "x")
+    u, kwargs = np.linspace(0.1, 0.9, 5), dict(horizon=3.0, window=0.5)
+    band = pj.steady_state_band(uncertainty, u, model=model, progress=False, **kwargs)
+    np.testing.assert_array_equal(band.prediction["position"], pj.steady_state_map(model, u, **kwargs)["position"])
+    space = pj.ParameterSpace(model, paths)
+    grads = []
+    for i in range(2):
+        h = 1e-3 * values[i]
+        up, down = values.copy(), values.copy()
+        up[i] += h
+        down[i] -= h
+        maps = [np.asarray(pj.steady_state_map(space.with_values(v), u, **kwargs)["position"]) for v in (up, down)]
+        grads.append((maps[0] - maps[1]) / (2 * h))
+    grads = np.stack(grads, axis=-1)
+    reference = np.sqrt(np.einsum("ui,ij,uj->u", grads, corr * np.outer(se, se), grads))
+    assert np.all(reference > 1e-4)  # the payload moves with the parameters at every duty
+    np.testing.assert_allclose(band.std["position"], reference, rtol=0.05)
+    assert band.nonlinearity["position"] < 0.1

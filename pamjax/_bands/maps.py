@@ -27,7 +27,6 @@ from .._core.errors import PamjaxInputError, PamjaxSolveError
 from .._fit.parameters import Key, getter, join_path
 from .._physics.valves.averaged import cycle_averaged_flow
 from .._sweep.maps import frequency_response, steady_state_map
-from .._systems.base import AbstractSystem
 from .band import (
     Method,
     PredictionBand,
@@ -64,15 +63,6 @@ def swept_values(prop, thetas, extra_axes=1):
         v = np.asarray(v)
         out[join_path(a)] = v.reshape(v.shape[:1] + (1,) * extra_axes + v.shape[1:])
     return out
-
-
-def _sweepable(prop, what):
-    """A map's band needs a map the sweep engine computes: its fixed-step lanes locate no stick-slip events."""
-    model = prop.space.base
-    if isinstance(model, AbstractSystem) and model.hybrid:
-        raise PamjaxInputError(f"{what}: this model is hybrid (stick-slip friction, e.g. KarnoppFriction), and sweeps "
-                               "step without locating its mode switches; band a pamjax.simulate prediction with "
-                               "pamjax.prediction_band instead, or map a model with CoulombViscousFriction")
 
 
 def parameter_points(prop, method, samples, seed):
@@ -134,7 +124,6 @@ def steady_state_band(result: ResultLike, commands: RealVectorLike, *, model: eq
     z_of(level)
     check_method(method, samples)
     prop = propagation(result, model)
-    _sweepable(prop, "steady_state_band")
     points = parameter_points(prop, method, samples, seed)
     kwargs = dict(map_kwargs)
     if "scheme" in kwargs:
@@ -156,7 +145,6 @@ def frequency_response_band(result: ResultLike, frequencies: RealVectorLike, *, 
     z_of(level)
     check_method(method, samples)
     prop = propagation(result, model)
-    _sweepable(prop, "frequency_response_band")
     if channels is None:
         channels = tuple(c for c in ("position", "pressure") if c in prop.space.base.output_names)
     points = parameter_points(prop, method, samples, seed)

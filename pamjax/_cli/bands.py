@@ -20,7 +20,7 @@ from .._bands.maps import flow_surface_band, frequency_response_band, steady_sta
 from .._bands.uncertainty import PamjaxBandWarning, propagation, read_uncertainty
 from .._core.errors import PamjaxInputError
 from .._fit.parameters import split_path
-from .._systems.base import AbstractMuscleSystem, AbstractSystem
+from .._systems.base import AbstractMuscleSystem
 
 DEFAULT_LEVEL = 0.95  # the two-sided 95 % band (z = 1.96), the usual default for confidence bands
 DEFAULT_SAMPLES = 200  # draws: the 2.5 % quantile then scatters by ~0.19 σ (docs/fitting.md)
@@ -191,10 +191,6 @@ def check_sweep(args, config, root, model):
     if getattr(args, "distributed", False):
         raise PamjaxInputError("pamjax sweep --band runs its band's sweeps in one process: drop --distributed (the "
                                "band of a map is a few sweeps of the map's size)")
-    if config["kind"] != "flow_surface" and isinstance(model, AbstractSystem) and model.hybrid:
-        raise PamjaxInputError("pamjax sweep --band: this model is hybrid (stick-slip friction, e.g. KarnoppFriction), "
-                               "and sweeps step without locating its mode switches; band a run with pamjax simulate "
-                               "--band instead")
     over = config.get("sweep", {}).get("over", {})
     return fitted_source(config, root, "pamjax sweep", model, changed=(("[sweep] over", over),))
 
