@@ -453,3 +453,32 @@ def test_a_stick_slip_models_steady_state_band_is_the_delta_method_over_its_maps
     assert np.all(reference > 1e-4)  # the payload moves with the parameters at every duty
     np.testing.assert_allclose(band.std["position"], reference, rtol=0.05)
     assert band.nonlinearity["position"] < 0.1
+
+
+def test_cli_sweep_band_of_a_stick_slip_model_file(tmp_path):
+    # `pamjax sweep --band` of a fitted stick-slip model (its model.json carrying the covariance): was refused as
+    # "hybrid"; now its band's map is the plain map and brackets it
+    model = presets.mas10_system(valve="averaged", friction="karnopp")
+    paths = ["friction.coulomb_force", "muscle.force_law.k0"]
+    covariance = dict(labels=paths, paths=paths, values=[float(model.friction.coulomb_force),
+                                                         float(model.muscle.force_law.k0)],
+                      standard_errors=[1.0, 2.0], correlation=[[1.0, 0.3], [0.3, 1.0]], status="converged",
+                      mismatch=False)
+    pj.save_model(tmp_path / "model.json", model, provenance=dict(covariance=covariance))
+    (tmp_path / "ss.toml").write_text(textwrap.dedent("""
+        kind = "steady_state"
+        [model]
+        file = "model.json"
+        [sweep]
+        commands = [0.1, 0.5, 0.9]
+        horizon = 3.0
+        window = 0.5
+    """))
+    assert main(["sweep", str(tmp_path / "ss.toml"), "--out", str(tmp_path / "b"), "--band", "--cpu-devices", "1",
+                 "--no-plot"]) == 0
+    assert main(["sweep", str(tmp_path / "ss.toml"), "--out", str(tmp_path / "p"), "--cpu-devices", "1",
+                 "--no-plot"]) == 0
+    with np.load(tmp_path / "b" / "sweep.npz") as band, np.load(tmp_path / "p" / "sweep.npz") as plain:
+        np.testing.assert_array_equal(band["position_m"], plain["position_m"])
+        assert np.all(band["position_m_lower"] < band["position_m"])
+        assert np.all(band["position_m"] < band["position_m_upper"])
