@@ -1,7 +1,7 @@
 """Joint identification of paper 000's MAS-10 plant from a bench directory, starting from the datasheet presets.
 
     python fits/joint.py --data DIR [--out DIR] [--nuisance] [--rate HZ] [--max-steps N] [--overwrite] [--no-cache]
-                         [--device auto|cpu|gpu] [--profile NAMES]
+                         [--device auto|cpu|gpu] [--profile NAMES] [--runs NAMES]
 
 DIR holds one recording per experiment (`<name>.npz`, `.csv` with units in its header such as `pressure [barg]`,
 `position [mm]`, or `.mat`) and a `meta.json` describing them (the layout of `shared/data/hybrid-reference-bench/`
@@ -16,7 +16,8 @@ the tank tests (E1, E2) and the muscle runs (E3, E4), at the recordings' own rat
 gain and the acquisition delay (shared), each run's supply pressure, and the start state of runs whose meta.json
 `init` is "unknown" (logged mid-way); the position sensor's offset is held at `--position-offset` (default 0), and
 the pressure sensor's gain at `--pressure-gain` where given (a calibration: held; with `--pressure-gain-sd`, its
-uncertainty, fitted with the calibration as one more datum: `pamjax.Measurement`).
+uncertainty, fitted with the calibration as one more datum: `pamjax.Measurement`). `--runs E1_u0.25,...,E4` fits
+only the experiments named (a pilot before a design: docs/identifiability.md, "Pilot, then design").
 
 Writes `OUT/joint.json`: `params` and `std_err` by the bench's names (SI units), `status`, `message`, `rmse` (every
 experiment's residual RMSE of `p` [Pa] and `x` [m] at the recordings' rate), the noise levels, the residual
@@ -64,6 +65,9 @@ def parse_args(argv=None):
                     "experiment: <name>.npz, .csv or .mat)")
     ap.add_argument("--out", default=None, help="output directory (default results/joint_<data folder name>)")
     ap.add_argument("--rate", type=float, default=None, help="decimate the recordings to this rate [Hz]")
+    ap.add_argument("--runs", default=None, metavar="NAMES",
+                    help="fit only these experiments, comma-separated (e.g. the tank tests and E4 before a design: "
+                         "pamjax.bench.load_bench's runs); default: every one the bench fits")
     ap.add_argument("--max-steps", type=int, default=100, help="Levenberg-Marquardt trial steps at most")
     ap.add_argument("--overwrite", action="store_true", help="replace existing results in --out")
     ap.add_argument("--quiet", action="store_true", help="no per-iteration progress")
@@ -113,6 +117,10 @@ def _nuisance_arg(value):
     return [v.strip() for v in value.split(",") if v.strip()]
 
 
+def _runs_arg(value):
+    return None if value is None else [v.strip() for v in value.split(",") if v.strip()]
+
+
 def main(argv=None):
     """Run the identification; a mistake in the data or the arguments is one line on stderr and exit status 2
     (nothing written, no output folder left behind), Ctrl-C exit status 130."""
@@ -150,7 +158,8 @@ def run(args, data, out):
     model = pj.presets.mas10_system(valve="pwm", friction="karnopp")  # datasheet / paper values
     bench = pj.bench.load_bench(data, model, rate=args.rate, nuisance=_nuisance_arg(args.nuisance),
                                 position_offset=args.position_offset, atmosphere=args.atmosphere,
-                                pressure_gain=args.pressure_gain, pressure_gain_sd=args.pressure_gain_sd)
+                                pressure_gain=args.pressure_gain, pressure_gain_sd=args.pressure_gain_sd,
+                                runs=_runs_arg(args.runs))
     profiled = _profiled(args.profile, pj.ParameterSpace(bench.model, bench.free).labels)  # named before any solve
     out.mkdir(parents=True, exist_ok=True)  # after the data are read: a mistake there leaves no folder behind
     probe = out / ".joint-write-test"
@@ -196,7 +205,7 @@ def run(args, data, out):
                                                                 position_offset=args.position_offset,
                                                                 pressure_gain=args.pressure_gain,
                                                                 pressure_gain_sd=args.pressure_gain_sd,
-                                                                atmosphere=args.atmosphere)
+                                                                atmosphere=args.atmosphere, runs=_runs_arg(args.runs))
     recorded = {e.name for e in full.experiments if isinstance(e, pj.Experiment)}  # not a calibration's Measurement
     channel_errors = res.channel_errors if args.rate is None else pj.evaluate(res.model, full.experiments)
     channel_errors = {name: chans for name, chans in channel_errors.items() if name in recorded}

@@ -144,6 +144,10 @@ def test_joint_script_names_a_parameter_it_cannot_profile_before_any_fit(bench, 
         assert "--profile" in err and ("is not a fitted parameter" in err or "names no parameter" in err), err
         assert "Fc" in err  # what it can profile: the bench keys fitted
         assert not out.exists()  # named before any fit: nothing written, no folder left behind
+    for bad, named in (("E9", "runs ['E9'] are not experiments of its meta.json"), (",", "non-empty list")):
+        with pytest.raises(SystemExit) as exit_:  # --runs: meta.json's experiments only, named before any fit
+            joint.main(["--data", str(folder), "--out", str(out), "--quiet", "--no-cache", "--runs", bad])
+        assert exit_.value.code == 2 and named in capsys.readouterr().err and not out.exists()
 
 
 def test_fitted_labels_takes_bench_keys_labels_and_indexed_labels():
@@ -218,6 +222,7 @@ def test_pamjax_fit_with_a_bench_table_starts_stage_by_stage(bench, tmp_path, ca
     assert "stage 1: 4 parameters on E1, E2" in out and "stage 2: 3 parameters on E3" in out
     result = json.loads((tmp_path / "out" / "bench.json").read_text())
     assert result["status"] == "converged" and set(result["params"]) == set(KEYS)
+    assert set(result["rmse"]) == {"E1", "E2", "E3"} and "E5" in result["skipped"]  # what was fitted, what not
     for k in KEYS:
         assert abs(result["params"][k] - params[k]) < 4 * result["std_err"][k], k
     cfg.write_text(body("staged = 1\n"))

@@ -409,7 +409,7 @@ def _report_and_write(args, folder, res, experiments, bench):
         values, errors = pj.bench.bench_values(res, bench.fitted_keys)
         summary = dict(data=str(bench.directory), params=values, std_err=errors, status=res.status,
                        message=res.message, rmse=pj.bench.bench_rmse(res), noise=bench.noise, mismatch=res.mismatch,
-                       diagnosis=res.diagnosis, notes=bench.notes)
+                       diagnosis=res.diagnosis, notes=bench.notes, skipped=bench.skipped)  # as joint.json's
         if bench.nuisance or bench.calibrated:
             summary["nuisance"] = pj.bench.bench_nuisance(res, bench)
             print("nuisances (the rig's, reported apart from the plant):\n"
