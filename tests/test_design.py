@@ -260,6 +260,26 @@ def test_a_designed_tank_test_beats_constant_duty_tank_tests_of_the_same_time(ta
     assert np.all(base / design > 0.97), base / design  # the floor's penalty: none worse (≈1 % slack)
 
 
+def test_a_design_that_determines_nothing_says_so_and_still_draws(tank_design, tmp_path):
+    # A design point far from any plant (a fit that did not converge: the muscle slack, every direction loose) gives
+    # infinite predicted standard errors: they are named as undetermined (not "every parameter at or below the
+    # baseline"), the figure is drawn without a log scale to put them on (it raised matplotlib's "Data cannot be
+    # log-scaled"), and the floor of parameters nothing fixes is inf without a division warning.
+    import dataclasses
+
+    from pamjax._identifiability import design as dmod
+
+    _, res = tank_design
+    assert res.undetermined == []
+    loose = dataclasses.replace(res, standard_errors={k: [math.inf] * len(v) for k, v in res.standard_errors.items()})
+    assert loose.undetermined == list(res.subset) and loose.baseline_shortfall == {}
+    assert loose.plot(tmp_path / "loose.png").stat().st_size > 10_000
+    with pytest.warns(pj.PamjaxDesignWarning, match=r"leaves \['a'\] undetermined"):
+        dmod._warn_undetermined(["a"])
+    zero = np.zeros((2, 2))
+    assert np.all(np.isinf(dmod._floor(zero, zero, 1.0)))  # warnings are errors in the suite
+
+
 def test_a_designed_tank_tests_information_matches_the_fits_standard_errors(tank_design):
     # The design's predicted (Cramér-Rao) errors are the fit's linearised ones on a recording of the designed signal:
     # σ² (JᵀJ)⁻¹ at the fit, σ² the fit's residual variance (divided out here). The recording is the fit's own

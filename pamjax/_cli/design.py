@@ -142,7 +142,10 @@ def run(args):
               f"({res.design_s:.1f} s, of which {res.compile_s:.1f} s to the first iteration)")
         print(res.table())
         print(constraint_lines(res.constraints))
-        if "target" in res.standard_errors:
+        if res.undetermined:  # no standard error, ratio or target means anything for them
+            print(f"not determined: {', '.join(res.undetermined)} (infinite predicted standard errors: the design "
+                  "with the prior leaves them free; design at a converged fit, or free fewer parameters)")
+        elif "target" in res.standard_errors:
             print(baseline_line(res.baseline_shortfall, kwargs.get("baseline_margin", 1.0)))
         if res.points:
             print(points_lines(res, kwargs.get("baseline_margin", 1.0)))

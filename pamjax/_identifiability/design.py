@@ -96,7 +96,8 @@ def _floor(prior_info, base_info, margin):
     v_base = variances(base_info)
     prior_precision = 1.0 / variances(prior_info)  # 0 where the prior leaves a parameter free
     gain = np.maximum(1.0 / v_base - prior_precision, 0.0)
-    return 1.0 / (prior_precision + margin**2 * gain)
+    with np.errstate(divide="ignore"):  # inf (no floor) where neither the prior nor the baseline fixes a parameter
+        return 1.0 / (prior_precision + margin**2 * gain)
 
 
 def variances(info, transform=None):
@@ -306,6 +307,7 @@ def design_experiment(
     if base_info is not None:  # what `baseline_margin` asks of each parameter of `subset` (inf elsewhere), physical
         errors["target"] = _targets(space, theta, nominal.floor, base_info)
     constraints = constraints_report(aux, setup, verified)
+    _warn_undetermined([space.labels[i] for i in index if not math.isfinite(errors["design"][i])])
     if not constraints["feasible"]:
         warnings.warn("pamjax.design_experiment: the design violates its limits (a bench must not play it; to_csv "
                       "refuses it): " + "; ".join(constraints["violations"]), PamjaxDesignWarning, stacklevel=2)
@@ -315,6 +317,15 @@ def design_experiment(
         result.points = _points_report(space, theta, point_values, thetas, [prob[0], *(p for p, _ in points)],
                                        [base_info, *(b for _, b in points)], c, aux)
     return result
+
+
+def _warn_undetermined(loose):
+    """A `PamjaxDesignWarning` naming the parameters of `subset` the design leaves free (infinite standard errors)."""
+    if loose:
+        warnings.warn(f"pamjax.design_experiment: the design with the prior leaves {loose} undetermined (infinite "
+                      "predicted standard errors: a direction of the parameters the runs do not fix), so no ratio or "
+                      "target says anything about them; design at a converged fit, or free fewer parameters",
+                      PamjaxDesignWarning, stacklevel=3)
 
 
 def designed_payload(model, system):

@@ -65,7 +65,11 @@ def plot_design(result, path):
         rel = np.asarray(point["standard_errors"]["design"], dtype=float) / np.where(own > 0, own, 1.0)
         axes[3].scatter(k - (len(series) - 1) / 2 * width, 100 * np.where(np.isfinite(rel), rel, np.nan), marker=".",
                         s=25, color="C3", zorder=4, label="design at the spread's points" if n == 0 else None)
-    axes[3].set_yscale("log")
+    if any(np.isfinite(b.get_height()) and b.get_height() > 0 for b in axes[3].patches):
+        axes[3].set_yscale("log")
+    else:  # nothing determined: no bar to draw on a log scale
+        axes[3].text(0.5, 0.5, "no parameter determined (infinite standard errors)", transform=axes[3].transAxes,
+                     ha="center", va="center")
     short = [".".join(lbl.split(".")[-2:]) if lbl.count(".") > 1 else lbl for lbl in result.labels]
     axes[3].set_xticks(k, short, rotation=45, ha="right", fontsize=8)
     axes[3].set(ylabel="predicted standard error [% of value]")

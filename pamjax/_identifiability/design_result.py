@@ -215,6 +215,15 @@ class DesignResult:
         return {lbl: d / t for lbl, d, t in zip(self.labels, design, target) if math.isfinite(t) and d > t * (1 + 1e-9)}
 
     @property
+    def undetermined(self):
+        """The parameters of `subset` whose predicted standard error is infinite: the design with the prior leaves
+        them free (their information below 1e-9 of the largest, a direction the runs do not fix), so no standard
+        error, target or ratio says anything about them. Typically a design point far from a plant (a fit that did
+        not converge, a force law that leaves the muscle slack)."""
+        design = self.standard_errors["design"]
+        return [lbl for lbl, d in zip(self.labels, design) if lbl in self.subset and not math.isfinite(d)]
+
+    @property
     def points_shortfall(self):
         """{label: the largest ratio over the design points of the predicted standard error to its target} for each
         parameter some design point leaves short of what `baseline_margin` asked there; empty without a spread, a
