@@ -280,6 +280,47 @@ def test_a_design_that_determines_nothing_says_so_and_still_draws(tank_design, t
     assert np.all(np.isinf(dmod._floor(zero, zero, 1.0)))  # warnings are errors in the suite
 
 
+def _fit_result(labels, values, se, corr, **kw):
+    """A `FitResult` holding only a covariance (what a design's prior reads of a fit)."""
+    fields = dict(labels=list(labels), paths=list(labels), values=list(values), initial_values=list(values),
+                  standard_errors=list(se), correlation=np.asarray(corr).tolist(), cost=1.0, initial_cost=1.0,
+                  iterations=1, accepted_steps=1, status="converged", converged=True, message="", channel_errors={},
+                  mismatch=False, non_identifiable=[], warnings=[], history=[], fit_s=0.0, compile_s=0.0,
+                  num_residuals=100)
+    return pj.FitResult(**(fields | kw))
+
+
+def test_a_fits_covariance_is_the_designs_prior_with_its_nuisances_marginalised(tank_design, tmp_path):
+    # prior = a fit (its fit.json, or the FitResult): the design's prior standard errors are the fit's own, its
+    # plant block (`plant.` labels of a rig's fit) with the nuisance marginalised, here a pressure gain correlated
+    # with the flow terms. The experiments alone would hold the gain known and report them tighter (Session 58).
+    model, res = tank_design
+    labels, values = list(res.labels), np.asarray(res.values)
+    se = np.array([*(0.01 * values), 0.004])
+    a = np.random.default_rng(5).normal(size=(5, 5))
+    cov = a @ a.T + 5 * np.eye(5)
+    corr = cov / np.sqrt(np.outer(np.diag(cov), np.diag(cov)))
+    fit = _fit_result([f"plant.{lbl}" for lbl in labels] + ["sensors[rig].pressure_gain"], [*values, 1.0], se, corr)
+    path = fit.to_json(tmp_path / "fit.json")
+    kwargs = dict(noise=NOISE, steps=0, progress=False, **TANK_BUILD)
+    for prior in ([str(path)], fit):
+        d = pj.design_experiment(model, VALVE, 0.4, prior=prior, **kwargs)
+        np.testing.assert_allclose(d.standard_errors["prior"], se[:4], rtol=1e-9)
+    # a fit that may not hold is named: not converged, and fitted at other values than the design point's
+    moved = _fit_result(labels, values * 1.01, se[:4], corr[:4, :4], status="max_steps")
+    with pytest.warns(pj.PamjaxDesignWarning) as caught:
+        pj.design_experiment(model, VALVE, 0.4, prior=[moved], **kwargs)
+    said = " ".join(str(w.message) for w in caught)
+    assert "ended 'max_steps', not converged" in said and "differ from its fitted values" in said
+    with pytest.raises(PamjaxInputError, match="is not a file"):
+        pj.design_experiment(model, VALVE, 0.4, prior=[str(tmp_path / "none.json")], **kwargs)
+    with pytest.raises(PamjaxInputError, match="determines none of the design's free parameters"):
+        pj.design_experiment(model, VALVE, 0.4, prior=[_fit_result(["friction.coulomb_force"], [16.0], [1.0],
+                                                                    [[1.0]])], **kwargs)
+    with pytest.raises(PamjaxInputError, match="prior must be pamjax experiments"):
+        pj.design_experiment(model, VALVE, 0.4, prior=[1.0], **kwargs)
+
+
 def test_a_designed_tank_tests_information_matches_the_fits_standard_errors(tank_design):
     # The design's predicted (Cramér-Rao) errors are the fit's linearised ones on a recording of the designed signal:
     # σ² (JᵀJ)⁻¹ at the fit, σ² the fit's residual variance (divided out here). The recording is the fit's own
@@ -408,6 +449,12 @@ def test_pilot_examples_chain_the_pilots_model_file_and_runs_into_the_design(tmp
     assert design_free == list(free) and duration == 25.0 and out == "results/pilot_design"
     assert [e.name for e in kwargs["prior"]] == runs and [e.name for e in kwargs["baseline"]] == ["E3"]
     assert float(model.valve.period) == 0.02 and kwargs["baseline_margin"] == 1.0
+    # prior = the pilot's fit.json instead of its config: the fit's covariance (its rig's nuisances counted)
+    text = (tmp_path / "examples" / "pilot_design.toml").read_text()
+    (tmp_path / "examples" / "by_fit.toml").write_text(text.replace('prior = "pilot_fit.toml"',
+                                                                    'prior = "../results/pilot_fit/fit.json"'))
+    _, _, _, kwargs, _ = load_design(tmp_path / "examples" / "by_fit.toml")
+    assert kwargs["prior"] == [str(tmp_path / "examples" / ".." / "results" / "pilot_fit" / "fit.json")]
 
 
 def test_design_config_planned_runs_are_runs_of_the_model_and_bad_ones_are_named(tmp_path):

@@ -47,7 +47,9 @@ def build_design(table, root, model=None):
     kwargs = {k: table[k] for k in schema.DESIGN_ARGS if k in table}
     kwargs["noise"] = table["noise"]
     for key in ("prior", "baseline"):  # fit configs: their experiments
-        if key in table:
+        if key == "prior" and str(table.get(key, "")).endswith(".json"):  # a fit's fit.json: its covariance
+            kwargs[key] = [str(pathlib.Path(root) / table[key])]
+        elif key in table:
             try:
                 _, experiments, *_ = load_config(pathlib.Path(root) / table[key])
             except PamjaxInputError as err:

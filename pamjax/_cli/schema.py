@@ -163,7 +163,8 @@ DESIGN = {
     "duration": Key("positive number", "33.0", "s"),
     "noise": Key("table of positive numbers", "{ pressure = 2e3, position = 1e-4 }",
                  "the bench's noise standard deviation per channel, in its SI unit", entry="2e3"),
-    "prior": Key("string", '"fit_example.toml"', "a fit config whose experiments are in hand"),
+    "prior": Key("string", '"fit_example.toml"', "a fit config whose experiments are in hand, or a fit's fit.json "
+                 "(its covariance: a rig's nuisances counted)"),
     "baseline": Key("string", '"my_current_runs.toml"', "a fit config whose experiments the design must beat"),
     "prior_runs": Key("planned runs", _PLANNED, "runs not recorded yet whose information counts as in hand"),
     "baseline_runs": Key("planned runs", _PLANNED, "runs not recorded yet (your protocol) the design must beat"),

@@ -49,6 +49,7 @@ from .design_setup import (
     static_force_along,
     stroke_limits,
 )
+from .prior_fit import PriorFits, fit_information, split_prior
 
 START_CALMER = (0.8, 0.6, 0.4, 0.2, 0.0)  # factors on START_AMPLITUDE tried, in turn, where the default start breaks a
 # limit (a fast exhaust from high up slackens the muscle): a search that starts within its limits stays within them
@@ -118,10 +119,13 @@ def _physical_errors(space, theta, info):
     return [float(math.sqrt(v)) for v in variances(info, g)]
 
 
-def _in_hand(space, theta, prior, baseline, index, margin):
-    """(prior information, prior + baseline information or None, the variance floor on `index` or None)."""
+def _in_hand(space, theta, prior, baseline, index, margin, at_point=True):
+    """(prior information, prior + baseline information or None, the variance floor on `index` or None); `prior`:
+    (experiments, fits) (`prior_fit.split_prior`)."""
     n = len(space.labels)
-    prior_info = information(space, theta, prior) if len(prior) else np.zeros((n, n))
+    experiments, fits = prior
+    prior_info = information(space, theta, experiments) if experiments else np.zeros((n, n))
+    prior_info = prior_info + fit_information(space, theta, fits, at_point)
     if baseline is None:
         return prior_info, None, None
     base_info = prior_info + information(space, theta, baseline)
@@ -182,7 +186,7 @@ def design_experiment(
     start: dict[str, RealScalarLike] | None = None,
     build: Callable[[AbstractSystem], AbstractSystem] | None = None,
     rate: RealScalarLike = 1000.0,
-    prior: Experiments = (),
+    prior: Experiments | PriorFits = (),
     baseline: Experiments | None = None,
     baseline_margin: RealScalarLike = 1.0,
     criterion: Literal["D", "A"] = "D",
@@ -234,7 +238,9 @@ def design_experiment(
     - `noise`: channel → noise standard deviation of the bench [channel unit], e.g. `{"pressure": 2e3, "position":
       1e-4}`; `channels`: those recorded; `rate`: the recording's sample rate [Hz].
     - `prior`: experiments already in hand (or run anyway, e.g. constant-volume tank tests): their information is
-      added (a muscle run alone cannot separate the valve's flow scale from the muscle's volume).
+      added (a muscle run alone cannot separate the valve's flow scale from the muscle's volume); or a fit of them
+      (a `FitResult`, the path of its fit.json): its covariance's information, a rig's nuisances marginalised, which
+      the experiments alone count as known (`prior_fit`).
     - `baseline`: experiments the design must match or beat on every parameter of `subset` (predicted standard
       errors); with `baseline_margin` m > 1 the designed run must carry m² times the baseline run's information on
       each of them beyond what `prior` gives (`_floor`); a penalty enforces it.
@@ -272,7 +278,7 @@ def design_experiment(
     **Returns:** a `DesignResult` (`signal()`, `to_csv`, `to_json`, `plot`, `table`).
     """
     t_start = time.perf_counter()
-    prior, baseline = _experiments(prior, "prior"), _experiments(baseline, "baseline")
+    prior, baseline = split_prior(prior), _experiments(baseline, "baseline")
     setup = set_up(model, free, duration, noise=noise, channels=channels, start=start, build=build, rate=rate,
                    criterion=criterion, subset=subset, duty_band=duty_band, stroke_margin=stroke_margin,
                    max_pressure=max_pressure, max_duty_step=max_duty_step, parametrisation=parametrisation,
@@ -349,7 +355,7 @@ def _at_point(setup, theta, prior, baseline, index, margin, stroke_margin, make)
     information, baseline target and stroke limits (its payload rests elsewhere); and its prior + baseline
     information (None without a baseline)."""
     space = setup["space"]
-    prior_info, base_info, floor = _in_hand(space, theta, prior, baseline, index, margin)
+    prior_info, base_info, floor = _in_hand(space, theta, prior, baseline, index, margin, at_point=False)
     model = space.with_values(physical_and_jacobian(space, device_array(theta))[0])  # compiled, not op by op
     limits = stroke_limits(setup["experiment"].system_for(model), setup["start"], stroke_margin)
     return pts.with_stroke(make(prior_info, floor), limits), base_info
@@ -461,6 +467,7 @@ def check_design(model, free, duration, **kwargs):
             if k in known and k in SETUP_ARGS}
     args.update({k: v for k, v in kwargs.items() if k in SETUP_ARGS})
     setup = set_up(model, free, duration, **args)
+    split_prior(kwargs.get("prior"))  # a fit's file read and checked
     pts.design_thetas(setup["space"], kwargs.get("spread"), kwargs.get("spread_points", pts.SPREAD_POINTS),
                       kwargs.get("seed", 0))
 
