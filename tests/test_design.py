@@ -978,6 +978,7 @@ def test_a_spread_designs_points_are_printed_with_their_ratios_and_targets():
     from pamjax._cli.design import points_lines
 
     labels = ["muscle.volume_law.v1", "friction.coulomb_force", "valve.switch_on_delay"]
+    # (each parameter by its label's last two parts: the valve's two paths' discharge_coefficient stay apart)
 
     def point(design, violation):
         return dict(values=[1.0, 2.0, 3.0], criterion=-80.0, worst_violation=violation,
@@ -987,7 +988,8 @@ def test_a_spread_designs_points_are_printed_with_their_ratios_and_targets():
                                                                           point([0.95, 1.04, 5.0], 3.5)])
     res.points_shortfall = pj.DesignResult.points_shortfall.fget(res)
     text = points_lines(res, 1.1)
-    assert "point 0: criterion -80.0000, every limit kept; baseline/design v1 1.250, coulomb_force 1.111" in text
+    assert ("point 0: criterion -80.0000, every limit kept; baseline/design volume_law.v1 1.250, "
+            "friction.coulomb_force 1.111") in text
     assert "point 1: criterion -80.0000, a limit passed (worst 3.5" in text and "switch_on_delay" not in text
     assert "/ 1.1 at the model's point and the baseline's own at the others" in text
     assert "friction.coulomb_force (1.144× its target at worst)" in text and "v1 (" in text

@@ -229,6 +229,12 @@ def baseline_line(shortfall, margin, points=False):
     return f"{short} short of {goal} on {named}; a goal, not a limit: the design is valid{hint}"
 
 
+def _short(label):
+    """A label's last two parts (`inflate.discharge_coefficient`, `force_law.k0`; `a0` as it is): the last alone
+    would name the valve's two paths alike."""
+    return ".".join(label.split(".")[-2:])
+
+
 def points_lines(res, margin):
     """A spread design's points, one line each: criterion, limits and (with a baseline) the baseline's standard error
     over the design's per parameter of subset; then whether every point reached its target."""
@@ -242,7 +248,7 @@ def points_lines(res, margin):
         errors = point["standard_errors"]
         if "baseline" in errors:
             line += "; baseline/design " + ", ".join(
-                f"{res.labels[i].rsplit('.', 1)[-1]} {errors['baseline'][i] / errors['design'][i]:.3f}" for i in subset)
+                f"{_short(res.labels[i])} {errors['baseline'][i] / errors['design'][i]:.3f}" for i in subset)
         lines.append(line)
     if "target" in res.points[0]["standard_errors"]:
         lines.append(baseline_line(res.points_shortfall, margin, points=True))
