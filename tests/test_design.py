@@ -319,6 +319,10 @@ def test_a_fits_covariance_is_the_designs_prior_with_its_nuisances_marginalised(
                                                                     [[1.0]])], **kwargs)
     with pytest.raises(PamjaxInputError, match="prior must be pamjax experiments"):
         pj.design_experiment(model, VALVE, 0.4, prior=[1.0], **kwargs)
+    # two values rounded to a correlation of 1 in fit.json: no information along their difference, and no error
+    rounded = _fit_result(labels[:2], values[:2], se[:2], [[1.0, 1.0], [1.0, 1.0]])
+    d = pj.design_experiment(model, VALVE, 0.4, prior=[rounded], **kwargs)
+    assert all(math.isinf(v) for v in d.standard_errors["prior"])  # one combination known: neither value alone
 
 
 def test_a_designed_tank_tests_information_matches_the_fits_standard_errors(tank_design):
