@@ -380,7 +380,7 @@ def _targets(space, theta, floor, base_info):
     base = np.asarray(_physical_errors(space, theta, base_info))
     with np.errstate(invalid="ignore"):  # inf / inf where the baseline leaves a parameter free: no target
         scale = np.sqrt(np.asarray(floor, dtype=float) / variances(base_info))
-    return [float(b * f) if math.isfinite(f) else math.inf for b, f in zip(base, scale)]
+    return [float(b * f) if math.isfinite(f) and math.isfinite(b) else math.inf for b, f in zip(base, scale)]
 
 
 def _points_report(space, theta, values, thetas, problems, base_infos, c, aux):
