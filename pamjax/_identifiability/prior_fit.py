@@ -78,21 +78,22 @@ def fit_information(space, theta, fits, at_point=True):
         if not keep:
             raise PamjaxInputError(f"prior: {source} determines none of the design's free parameters (it fitted "
                                    f"{list(fit.labels)}; the design frees {list(space.labels)})")
-        cov = np.asarray(fit.correlation, dtype=float)[np.ix_(keep, keep)] * np.outer(se[keep], se[keep])
+        corr = np.asarray(fit.correlation, dtype=float)[np.ix_(keep, keep)]
         rows = [space.labels.index(labels[i]) for i in keep]
-        total += g[rows].T @ _precision(cov) @ g[rows]
+        total += g[rows].T @ _precision(se[keep], corr) @ g[rows]
         if at_point:
             _cautions(fit, source, [labels[i] for i in keep], np.asarray(fit.values, dtype=float)[keep], values[rows])
     return total
 
 
-def _precision(cov):
-    """The inverse of a covariance block. A direction of (numerically) zero variance, e.g. two values rounded to a
-    correlation of ±1 in fit.json, counts as no information rather than an infinite one: the prior errs on the side
-    of knowing less, and a singular block is no error."""
-    w, v = np.linalg.eigh(0.5 * (cov + cov.T))
+def _precision(se, corr):
+    """The inverse of the covariance diag(se) · corr · diag(se), inverted in the correlation's scale (the physical
+    variances span 25 orders of magnitude, v0's to a4's). A direction of (numerically) zero variance, e.g. two values
+    rounded to a correlation of ±1 in fit.json, counts as no information rather than an infinite one: the prior errs
+    on the side of knowing less, and a singular block is no error."""
+    w, v = np.linalg.eigh(0.5 * (corr + corr.T))
     good = w > 1e-12 * max(float(w.max()), 1e-300)
-    return (v[:, good] / w[good]) @ v[:, good].T
+    return ((v[:, good] / w[good]) @ v[:, good].T) / np.outer(se, se)
 
 
 def _cautions(fit, source, labels, fitted, design):
