@@ -431,6 +431,13 @@ def test_cli_design_writes_csv_json_figure_and_refuses_to_overwrite(tmp_path, ca
     assert main(["design", str(bad), "--out", str(tmp_path / "o2"), "--quiet"]) == 2
     assert "[design]: unknown key(s) ['knot']" in capsys.readouterr().err
     assert not (tmp_path / "o2").exists()  # refused before the output folder was made
+    # prior = a fit's fit.json that did not converge: the design runs, and says what its prior may not hold
+    model = presets.mas10_tank_system(valve="pwm")
+    values = np.asarray(pj.ParameterSpace(model, FREE).initial_values())
+    _fit_result(FREE, values, 0.01 * values, np.eye(3), status="max_steps").to_json(tmp_path / "fit.json")
+    (tmp_path / "prior.toml").write_text(cfg.read_text() + 'prior = "fit.json"\n')
+    assert main(["design", str(tmp_path / "prior.toml"), "--out", str(tmp_path / "o3"), "--quiet"]) == 0
+    assert "warning: prior " in (out_text := capsys.readouterr().out) and "ended 'max_steps', not converged" in out_text
 
 
 def test_design_example_config_loads():

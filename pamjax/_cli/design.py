@@ -137,9 +137,14 @@ def run(args):
     out = pathlib.Path(args.out or out_cfg or f"results/{pathlib.Path(args.config).stem}")
     outputs = [o for o in OUTPUTS if not (args.no_plot and o.endswith(".png"))]
     with OutputFolder(out, "pamjax design", outputs, overwrite=args.overwrite) as folder:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", pj.PamjaxDesignWarning)  # reported below, as the command's outcome
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", pj.PamjaxDesignWarning)  # reported below, as the command's outcome
             res = pj.design_experiment(model, free, duration, progress=not args.quiet, **kwargs)
+        for w in caught:  # what a prior fit may not hold is said here; the limits and the undetermined ones below
+            if not issubclass(w.category, pj.PamjaxDesignWarning):
+                warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+            elif ": prior " in str(w.message):
+                print("warning: " + str(w.message).split(": ", 1)[1])
         print(f"{res.message}; {res.criterion} criterion {res.objective[0]:.4f} → {res.objective[1]:.4f} "
               f"({res.design_s:.1f} s, of which {res.compile_s:.1f} s to the first iteration)")
         print(res.table())
