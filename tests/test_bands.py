@@ -93,20 +93,9 @@ def test_delta_method_equals_central_differences_in_the_physical_parameters(refi
     unconstrained space must give the same σ (to 1e-4: the differences' truncation and round-off)."""
     fits, bands = refits
     res, band = fits[0], bands[0]
-    space = pj.ParameterSpace(res.model, FREE)
-    values = np.asarray(res.values)
-    columns = []
-    for i in range(values.size):
-        h = 1e-4 * abs(values[i])
-        up, down = values.copy(), values.copy()
-        up[i] += h
-        down[i] -= h
-        columns.append((np.asarray(predict(space.with_values(up))) - np.asarray(predict(space.with_values(down))))
-                       / (2 * h))
-    jac = np.stack(columns, axis=-1)
     se = np.asarray(res.standard_errors)
     cov = np.asarray(res.correlation) * np.outer(se, se)
-    reference = np.sqrt(np.einsum("ti,ij,tj->t", jac, cov, jac))
+    reference = _delta_std(predict, pj.ParameterSpace(res.model, FREE), np.asarray(res.values), cov, 1e-4)
     later = T_PREDICT > 0.15
     np.testing.assert_allclose(band.std[later], reference[later], rtol=1e-4)
     np.testing.assert_allclose(band.upper - band.prediction, 1.959964 * band.std, rtol=1e-6)
@@ -192,18 +181,9 @@ def test_flow_surface_band_against_central_differences():
     uncertainty = pj.FitUncertainty.from_document(json.loads(json.dumps(document)), "a stated covariance")
     u, p = np.array([0.3, 0.6]), np.array([2e5, 4e5])
     band = pj.flow_surface_band(uncertainty, u, p, model=model)
-    space = pj.ParameterSpace(model, paths)
-    grads = []
-    for i in range(2):
-        h = 1e-6 * values[i]
-        up, down = values.copy(), values.copy()
-        up[i] += h
-        down[i] -= h
-        flow = [pj.flow_surface(space.with_values(v).valve, u, p, model.air) for v in (up, down)]
-        grads.append((flow[0] - flow[1]) / (2 * h))
-    grads = np.stack(grads, axis=-1)
     cov = np.array([[1.0, 0.4], [0.4, 1.0]]) * np.outer(se, se)
-    reference = np.sqrt(np.einsum("...i,ij,...j->...", grads, cov, grads))
+    reference = _delta_std(lambda m: pj.flow_surface(m.valve, u, p, model.air), pj.ParameterSpace(model, paths), values,
+                           cov, 1e-6)
     np.testing.assert_allclose(band.std["mass_flow"], reference, rtol=1e-5)
     np.testing.assert_allclose(band.prediction["mass_flow"], pj.flow_surface(model.valve, u, p, model.air),
                                rtol=1e-12)
@@ -227,17 +207,7 @@ def test_band_of_a_switching_valve_and_stick_slip_on_the_pwm_grid():
         return pj.simulate(m, pj.Triangle(0.1, 0.9, 1.0), ts, throw=False).channel("position")
 
     band = pj.prediction_band(uncertainty, position, model=model, check_linearity=False)
-    space = pj.ParameterSpace(model, paths)
-    grads = []
-    for i in range(2):
-        h = 1e-5 * values[i]
-        up, down = values.copy(), values.copy()
-        up[i] += h
-        down[i] -= h
-        grads.append((np.asarray(position(space.with_values(up))) - np.asarray(position(space.with_values(down))))
-                     / (2 * h))
-    grads = np.stack(grads, axis=-1)
-    reference = np.sqrt(np.einsum("ti,ij,tj->t", grads, corr * np.outer(se, se), grads))
+    reference = _delta_std(position, pj.ParameterSpace(model, paths), values, corr * np.outer(se, se), 1e-5)
     moving = reference > 1e-3 * reference.max()
     assert np.count_nonzero(moving) > 20
     np.testing.assert_allclose(band.std[moving], reference[moving], rtol=1e-4)
@@ -390,17 +360,30 @@ def test_cli_band_refusals_and_an_older_model_file(fitted, capsys):
     assert "this model was not fitted" in capsys.readouterr().err
 
 
+def _delta_std(predict, space, values, cov, rel_step):
+    """The delta method's standard deviation of `predict(model)` (an independent reference for a band): each
+    gradient a central difference at ±`rel_step` of each physical value, σ² = gᵀ Σ g per output."""
+    grads = []
+    for i in range(values.size):
+        h = rel_step * values[i]
+        up, down = values.copy(), values.copy()
+        up[i] += h
+        down[i] -= h
+        grads.append((np.asarray(predict(space.with_values(up))) - np.asarray(predict(space.with_values(down))))
+                     / (2 * h))
+    grads = np.stack(grads, axis=-1)
+    return np.sqrt(np.einsum("...i,ij,...j->...", grads, cov, grads))
+
+
+def _steady_state_config(model_file, commands, horizon):
+    """A `pamjax sweep` config of the steady-state map of a model file, its last 0.5 s averaged."""
+    return (f'kind = "steady_state"\n[model]\nfile = "{model_file}"\n[sweep]\ncommands = {commands}\n'
+            f"horizon = {horizon}\nwindow = 0.5\n")
+
+
 def test_cli_sweep_steady_state_band(fitted):
     root = fitted
-    (root / "ss.toml").write_text(textwrap.dedent("""
-        kind = "steady_state"
-        [model]
-        file = "fit/model.json"
-        [sweep]
-        commands = [0.3, 0.5, 0.7]
-        horizon = 2.0
-        window = 0.5
-    """))
+    (root / "ss.toml").write_text(_steady_state_config("fit/model.json", [0.3, 0.5, 0.7], 2.0))
     assert main(["sweep", str(root / "ss.toml"), "--out", str(root / "ss"), "--band", "--cpu-devices", "1"]) == 0
     with np.load(root / "ss" / "sweep.npz") as f:
         columns = {k: f[k] for k in f.files}
@@ -439,17 +422,8 @@ def test_a_stick_slip_models_steady_state_band_is_the_delta_method_over_its_maps
     u, kwargs = np.linspace(0.1, 0.9, 5), dict(horizon=3.0, window=0.5)
     band = pj.steady_state_band(uncertainty, u, model=model, progress=False, **kwargs)
     np.testing.assert_array_equal(band.prediction["position"], pj.steady_state_map(model, u, **kwargs)["position"])
-    space = pj.ParameterSpace(model, paths)
-    grads = []
-    for i in range(2):
-        h = 1e-3 * values[i]
-        up, down = values.copy(), values.copy()
-        up[i] += h
-        down[i] -= h
-        maps = [np.asarray(pj.steady_state_map(space.with_values(v), u, **kwargs)["position"]) for v in (up, down)]
-        grads.append((maps[0] - maps[1]) / (2 * h))
-    grads = np.stack(grads, axis=-1)
-    reference = np.sqrt(np.einsum("ui,ij,uj->u", grads, corr * np.outer(se, se), grads))
+    reference = _delta_std(lambda m: pj.steady_state_map(m, u, **kwargs)["position"], pj.ParameterSpace(model, paths),
+                           values, corr * np.outer(se, se), 1e-3)
     assert np.all(reference > 1e-4)  # the payload moves with the parameters at every duty
     np.testing.assert_allclose(band.std["position"], reference, rtol=0.05)
     assert band.nonlinearity["position"] < 0.1
@@ -465,15 +439,7 @@ def test_cli_sweep_band_of_a_stick_slip_model_file(tmp_path):
                       standard_errors=[1.0, 2.0], correlation=[[1.0, 0.3], [0.3, 1.0]], status="converged",
                       mismatch=False)
     pj.save_model(tmp_path / "model.json", model, provenance=dict(covariance=covariance))
-    (tmp_path / "ss.toml").write_text(textwrap.dedent("""
-        kind = "steady_state"
-        [model]
-        file = "model.json"
-        [sweep]
-        commands = [0.1, 0.5, 0.9]
-        horizon = 3.0
-        window = 0.5
-    """))
+    (tmp_path / "ss.toml").write_text(_steady_state_config("model.json", [0.1, 0.5, 0.9], 3.0))
     assert main(["sweep", str(tmp_path / "ss.toml"), "--out", str(tmp_path / "b"), "--band", "--cpu-devices", "1",
                  "--no-plot"]) == 0
     assert main(["sweep", str(tmp_path / "ss.toml"), "--out", str(tmp_path / "p"), "--cpu-devices", "1",
