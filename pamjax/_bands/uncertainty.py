@@ -30,9 +30,8 @@ from .._core.errors import PamjaxInputError
 from .._fit.fit import FitResult
 from .._fit.force_balance import is_weak_motion
 from .._fit.parameters import ParameterSpace
-from .._fit.rig import Rig, is_nuisance
+from .._fit.rig import PLANT_PREFIX, Rig, is_nuisance, plant_label
 
-PLANT_PREFIX = "plant."
 SECTION = "covariance"  # the entry of a model file's provenance that carries the fit's uncertainty
 
 
@@ -53,7 +52,7 @@ def _json_float(v):
 def _strip(entry):
     """A free entry (path string or {path, ...}) with a Rig's `plant.` prefix removed."""
     if isinstance(entry, str):
-        return entry[len(PLANT_PREFIX):] if entry.startswith(PLANT_PREFIX) else entry
+        return plant_label(entry)
     entry = dict(entry)
     entry["path"] = _strip(entry["path"])
     return entry

@@ -9,11 +9,10 @@ from collections.abc import Sequence
 from .._core.errors import PamjaxInputError
 from .._fit.fit import FitResult
 from .._fit.measurement import is_measurement
-from .._fit.rig import DEFAULT_GROUP, Rig, Sensors, nuisance_report
+from .._fit.rig import DEFAULT_GROUP, PLANT_PREFIX, Rig, Sensors, nuisance_report, plant_label
 from .load import BENCH_PARAMETERS, CALIBRATION_NAME, GAUGE_NAME, Bench
 
 _CHANNEL = {"pressure": "p", "position": "x"}
-_PLANT = "plant."  # how a pamjax.Rig's fit labels its plant's parameters
 
 
 def bench_values(result: FitResult, keys: Sequence[str]) -> tuple[dict[str, float], dict[str, float]]:
@@ -23,7 +22,7 @@ def bench_values(result: FitResult, keys: Sequence[str]) -> tuple[dict[str, floa
     values, errors = {}, {}
     for k in keys:
         label = BENCH_PARAMETERS[k][1]
-        i = label_index.get(label, label_index.get(_PLANT + label))
+        i = label_index.get(label, label_index.get(PLANT_PREFIX + label))
         if i is not None:
             values[k], errors[k] = float(result.values[i]), float(result.standard_errors[i])
     return values, errors
@@ -124,7 +123,7 @@ _NAMES = re.compile(r",(?![^\[]*\])")
 def bench_key(label: str) -> str | None:
     """The bench's name of a fit's label (`plant.friction.coulomb_force` or `friction.coulomb_force` → `Fc`), or None
     where the bench has no name for it (a nuisance, a parameter outside `BENCH_PARAMETERS`)."""
-    return _KEYS.get(label.removeprefix(_PLANT))
+    return _KEYS.get(plant_label(label))
 
 
 def fitted_labels(names: str | Sequence[str], labels: Sequence[str], where: str = "names") -> list[str]:
@@ -141,7 +140,7 @@ def fitted_labels(names: str | Sequence[str], labels: Sequence[str], where: str 
     out = []
     for name in given:
         label = BENCH_PARAMETERS[name][1] if name in BENCH_PARAMETERS else name
-        match = [lbl for lbl in labels if lbl in (label, _PLANT + label)]
+        match = [lbl for lbl in labels if lbl in (label, PLANT_PREFIX + label)]
         if not match:
             raise PamjaxInputError(f"{where}: {name!r} is not a fitted parameter; {what}")
         out += [m for m in match if m not in out]

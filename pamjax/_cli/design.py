@@ -9,6 +9,7 @@ import warnings
 import numpy as np
 
 from .._core.errors import PamjaxInputError
+from .._identifiability.design_result import short_label
 from . import schema
 from .config import build_model, build_signal, read_toml
 from .fit import load_config
@@ -234,12 +235,6 @@ def baseline_line(shortfall, margin, points=False):
     return f"{short} short of {goal} on {named}; a goal, not a limit: the design is valid{hint}"
 
 
-def _short(label):
-    """A label's last two parts (`inflate.discharge_coefficient`, `force_law.k0`; `a0` as it is): the last alone
-    would name the valve's two paths alike."""
-    return ".".join(label.split(".")[-2:])
-
-
 def points_lines(res, margin):
     """A spread design's points, one line each: criterion, limits and (with a baseline) the baseline's standard error
     over the design's per parameter of subset; then whether every point reached its target."""
@@ -253,7 +248,7 @@ def points_lines(res, margin):
         errors = point["standard_errors"]
         if "baseline" in errors:
             line += "; baseline/design " + ", ".join(
-                f"{_short(res.labels[i])} {errors['baseline'][i] / errors['design'][i]:.3f}" for i in subset)
+                f"{short_label(res.labels[i])} {errors['baseline'][i] / errors['design'][i]:.3f}" for i in subset)
         lines.append(line)
     if "target" in res.points[0]["standard_errors"]:
         lines.append(baseline_line(res.points_shortfall, margin, points=True))

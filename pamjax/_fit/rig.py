@@ -138,6 +138,14 @@ def split(model, name, group):
     return model, None, None
 
 
+PLANT_PREFIX = "plant."  # how a `Rig` labels its plant's parameters (`plant.valve.inflate.discharge_coefficient`)
+
+
+def plant_label(label):
+    """A rig fit's label of a plant parameter as the plant's own (`plant.` taken off; other labels as they are)."""
+    return label.removeprefix(PLANT_PREFIX)
+
+
 def is_nuisance(path):
     """Whether a parameter path (or label) names a rig's nuisance rather than the plant."""
     head = str(path).split(".")[0].split("[")[0]

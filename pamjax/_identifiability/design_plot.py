@@ -4,6 +4,8 @@ its points)."""
 
 import numpy as np
 
+from .design_result import short_label
+
 
 def plot_design(result, path):
     import matplotlib
@@ -70,7 +72,7 @@ def plot_design(result, path):
     else:  # nothing determined: no bar to draw on a log scale
         axes[3].text(0.5, 0.5, "no parameter determined (infinite standard errors)", transform=axes[3].transAxes,
                      ha="center", va="center")
-    short = [".".join(lbl.split(".")[-2:]) if lbl.count(".") > 1 else lbl for lbl in result.labels]
+    short = [short_label(lbl) for lbl in result.labels]
     axes[3].set_xticks(k, short, rotation=45, ha="right", fontsize=8)
     axes[3].set(ylabel="predicted standard error [% of value]")
     axes[3].legend(fontsize=8)

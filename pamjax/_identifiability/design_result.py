@@ -14,6 +14,12 @@ from .._physics.signals import Sampled
 from .design_objective import FORCE_UNIT, PRESSURE_UNIT, STEP_UNIT, STROKE_UNIT, force_floor, on_lower_stop
 
 
+def short_label(label):
+    """A parameter's label by its last two parts (`inflate.discharge_coefficient`, `force_law.k0`; `a0` as it is),
+    as the design's figure and `pamjax design` name it: the last alone would name the valve's two paths alike."""
+    return ".".join(label.split(".")[-2:])
+
+
 class PamjaxDesignWarning(UserWarning):
     """A design that ends outside its limits (`DesignResult.constraints["violations"]` says which)."""
 

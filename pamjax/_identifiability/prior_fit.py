@@ -23,10 +23,9 @@ from .._fit.experiment import AbstractExperiment
 from .._fit.fit import FitResult
 from .._fit.force_balance import is_weak_motion
 from .._fit.problem import physical_and_jacobian
-from .._fit.rig import is_nuisance
+from .._fit.rig import is_nuisance, plant_label
 from .design_result import PamjaxDesignWarning
 
-PLANT = "plant."  # how a rig's fit labels its plant's parameters (`pamjax.Rig`)
 # What `prior` may hold besides experiments: fits of them, or the paths of their fit.json, alone or mixed in a list.
 PriorFits = FitResult | str | os.PathLike | Sequence[AbstractExperiment | FitResult | str | os.PathLike]
 
@@ -71,7 +70,7 @@ def fit_information(space, theta, fits, at_point=True):
         return total
     values, g = (np.asarray(a) for a in physical_and_jacobian(space, device_array(theta)))
     for fit, source in fits:
-        labels = [label[len(PLANT):] if label.startswith(PLANT) else label for label in fit.labels]
+        labels = [plant_label(label) for label in fit.labels]
         se = np.asarray(fit.standard_errors, dtype=float)
         keep = [i for i, label in enumerate(labels) if not is_nuisance(fit.labels[i]) and label in space.labels
                 and math.isfinite(se[i]) and se[i] > 0]
