@@ -31,28 +31,23 @@ from .._fit.problem import physical_and_jacobian, residuals_and_jacobian
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from . import design_objective as obj, design_points as pts
+from .design_repair import repaired_start, search
 from .design_result import DesignResult, PamjaxDesignWarning, constraints_report, worst_violation
 from .design_search import optimise
 from .design_setup import (
-    CARRIER_HOLD,
     DESIGN_RATE,
     DESIGN_SUBSTEPS,
     DUTY_BAND,
     FIT_SUBSTEPS,
     MIN_FORCE,
     SETUP_ARGS,
-    START_AMPLITUDE,
     STROKE_MARGIN,
     designed_experiment,
     set_up,
-    start_coefficients,
     static_force_along,
     stroke_limits,
 )
 from .prior_fit import PriorFits, fit_information, split_prior
-
-START_CALMER = (0.8, 0.6, 0.4, 0.2, 0.0)  # factors on START_AMPLITUDE tried, in turn, where the default start breaks a
-# limit (a fast exhaust from high up slackens the muscle): a search that starts within its limits stays within them
 
 
 def information(space, theta, experiments, predictions=False):
@@ -303,12 +298,12 @@ def design_experiment(
     if points:  # the search: the points' criteria and targets, the limits at the model's point (`design_points`)
         prob = (prob, *(pts.without_limits(p) for p, _ in points))
         start_aux = _points_start(c0, prob)
-    note = ""
-    if initial is None and worst_violation(start_aux) > 0:  # the default start breaks a limit: a calmer carrier
-        c0, note = _calmer_start(c0, prob, setup, parametrisation, float(duration), knots, seed)
-    c, aux, history, message = optimise(np.asarray(c0, dtype=float), prob, gradient, steps, report, seed)
-    errors, verified = _standard_errors(setup, aux, theta, prior_info, base_info, verify, float(duration),
-                                        float(rate), noise, build)
+    c0, note = (repaired_start(prob, setup, parametrisation, float(duration), knots, seed, start_aux)
+                if initial is None and worst_violation(start_aux) > 0 else (c0, ""))  # repaired where it breaks one
+    c, aux, history, message, errors, verified, tightened = search(
+        np.asarray(c0, dtype=float), prob, gradient, steps, report, seed, setup, optimise,
+        lambda a: _standard_errors(setup, a, theta, prior_info, base_info, verify, float(duration), float(rate),
+                                   noise, build))
     nominal = prob[0] if points else prob
     if base_info is not None:  # what `baseline_margin` asks of each parameter of `subset` (inf elsewhere), physical
         errors["target"] = _targets(space, theta, nominal.floor, base_info)
@@ -317,7 +312,7 @@ def design_experiment(
     if not constraints["feasible"]:
         warnings.warn("pamjax.design_experiment: the design violates its limits (a bench must not play it; to_csv "
                       "refuses it): " + "; ".join(constraints["violations"]), PamjaxDesignWarning, stacklevel=2)
-    result = _result(setup, aux, history, errors, constraints, message + note, criterion, parametrisation,
+    result = _result(setup, aux, history, errors, constraints, message + note + tightened, criterion, parametrisation,
                      float(duration), t_start, compile_s, designed_payload(model, setup["system"]))
     if points:
         result.points = _points_report(space, theta, point_values, thetas, [prob[0], *(p for p, _ in points)],
@@ -427,19 +422,6 @@ def _result(setup, aux, history, errors, constraints, message, criterion, parame
         prediction=dict(t=np.asarray(exp.times), position=None if position is None else np.asarray(position),
                         pressure=None if pressure is None else np.asarray(pressure),
                         force=None if force is None else np.asarray(force)))
-
-
-def _calmer_start(c0, prob, setup, parametrisation, duration, knots, seed):
-    """The default start with its carrier's amplitude lowered (`START_CALMER`) until it keeps every limit, and the
-    note for the message; the start as it was if none does."""
-    for factor in START_CALMER:
-        trial, _ = start_coefficients(parametrisation, setup["times"], duration, knots,
-                                      obj.multilevel_carrier(setup["count"], CARRIER_HOLD, seed), setup["band"],
-                                      None, factor * START_AMPLITUDE)
-        if worst_violation(pts.value(jnp.asarray(trial), prob)[1]) <= 0:
-            return trial, (f"; the default start broke a limit, so its carrier's amplitude was lowered to "
-                           f"{factor * START_AMPLITUDE:g}")
-    return c0, ""
 
 
 def _verified(setup, duty, duration, rate, noise, build):

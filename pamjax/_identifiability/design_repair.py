@@ -1,0 +1,192 @@
+"""The design's repairs where its limits and its runs disagree (`design_experiment`):
+
+- `repaired_start`: the default start (paper 000's E3 triangle with the carrier on top) breaks a limit on the
+  model at hand (a pilot fit whose payload reaches the upper stop at E3's top duty, or whose muscle goes slack in the
+  carrier's fast exhausts). The start is repaired where it breaks the limit: the carrier's amplitude halved and the
+  level moved away from the limit over the second before each sample that passes it, until the start keeps every
+  limit. A calmer carrier everywhere (the start before, with its amplitude lowered in fixed steps) lost the carrier
+  where it was harmless: on one of three unseen realistic rigs it went to amplitude 0, and the design was E3 again
+  (benchmarks/RESULTS.md, design_rigs, Session 58).
+- `search`: the search, and the design verified at the fit's resolution; where the run passes a limit there that the
+  objective's samples keep (the PWM ripple between them: eq. 7's force 10.6 N lower on one rig, 24.8 N at the
+  samples and 14.2 N between them), the objective's limit is tightened by what its samples missed and the search
+  goes on from where it stopped, `TIGHTEN_ROUNDS` times at most.
+"""
+
+import math
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from . import design_objective as obj, design_points as pts
+from .design_result import VERIFY_TOLERANCE, constraints_report, worst_violation
+from .design_setup import CARRIER_HOLD, START_AMPLITUDE, start_coefficients
+
+REPAIRS = 10  # evaluations of the objective the start's repair may take (one forward-mode Jacobian each)
+REPAIR_WINDOW = 1.0  # s: a limit passed at t is blamed on the duties of the second before it (the muscle's response
+# to a duty step settles within ~0.5 s on the MAS-10 bench, paper 000 Fig. 11)
+REPAIR_BIN = 0.05  # s: the samples passing a limit are taken 50 ms at a time (one window each)
+REPAIR_LEVEL = 0.1  # of the duty band: how far one repair moves the level away from the limit passed
+REPAIR_AMPLITUDE = 0.02  # of the band: a carrier amplitude halved below it is set to 0
+TIGHTEN_ROUNDS = 2  # searches after the first, each with the limits tightened by what the verification found
+TIGHTEN_SPARE = 1.0  # in each limit's penalty unit (mm, kPa, N): kept beyond the gap the verification found
+
+
+def _knots_of(times, start, end, basis):
+    """The coefficients (indices) whose basis functions act on the periods from `start` to `end` [s]."""
+    rows = (times >= start - 1e-12) & (times <= end + 1e-12)
+    if not np.any(rows):
+        rows = np.argmin(np.abs(times - end)) == np.arange(times.size)
+    return np.flatnonzero(np.max(basis[rows], axis=0) > 0.05)
+
+
+def _blamed(aux, problem, sample_times, period_times, basis):
+    """(coefficients to calm, to lower, to raise): those acting over the `REPAIR_WINDOW` before each sample that
+    passes a limit. The carrier is calmed wherever a limit is passed; the level lowered where the run passes the upper
+    stroke limit or the pressure limit, raised where it passes the lower stroke limit; where eq. 7's force drops
+    below its limit (the fast exhausts of the carrier), raised (more pressure, more force) only once the carrier is
+    gone there (`repaired_start`: the level's sweep is where the information is)."""
+    x, p, f = (None if aux.get(k) is None else np.asarray(aux[k]) for k in ("position", "pressure", "force"))
+    passed = dict(lower=[], raise_=[], force=[])
+    if problem.stroke is not None and x is not None:
+        lo, hi = (float(s) for s in problem.stroke)
+        passed["lower"].append(x > hi)
+        passed["raise_"].append(x < lo)
+    if p is not None and math.isfinite(float(problem.max_pressure)):
+        passed["lower"].append(p > float(problem.max_pressure))
+    if problem.min_force is not None and f is not None and x is not None:
+        floor = obj.force_floor(x, float(problem.space.model(problem.theta).muscle.min_position),
+                                float(problem.min_force), xp=np)
+        passed["force"].append(f < floor)
+    out = {key: set() for key in passed}
+    for key, masks in passed.items():
+        for mask in masks:
+            for t in np.unique(np.floor(sample_times[mask] / REPAIR_BIN) * REPAIR_BIN):
+                out[key].update(_knots_of(period_times, t - REPAIR_WINDOW, t + REPAIR_BIN, basis).tolist())
+    return out["lower"], out["raise_"], out["force"]
+
+
+def repaired_start(problem, setup, parametrisation, duration, knots, seed, aux0=None):
+    """The default start (E3's triangle, the carrier at `START_AMPLITUDE`) repaired where it breaks a limit (module
+    docstring), and the note for the design's message; the least violating start found if none of `REPAIRS` keeps
+    every limit. `problem`: the search's (one `DesignProblem`, or the design points' tuple, the model's first);
+    `seed`: the start's multilevel carrier's; `aux0`: the objective's aux at the default start, if known."""
+    carrier = obj.multilevel_carrier(setup["count"], CARRIER_HOLD, seed)
+    nominal = problem[0] if isinstance(problem, tuple) else problem
+    times = np.asarray(setup["times"])
+    sample_times = np.asarray(setup["experiment"].times)
+    flat, _ = start_coefficients(parametrisation, times, duration, knots, carrier, setup["band"], None, 0.0)
+    envelope = parametrisation == "envelope"
+    level = np.array(flat[:knots] if envelope else flat)
+    amplitude = np.full(level.size, START_AMPLITUDE)
+    basis = obj.bspline_basis(times, 0.0, duration, knots) if envelope else np.eye(times.size)
+
+    best, repairs, aux = None, 0, aux0
+    while True:
+        c = np.concatenate([level, amplitude]) if envelope else level + amplitude * carrier
+        if aux is None:
+            aux = pts.value(jnp.asarray(c), problem)[1]
+        violation = worst_violation(aux)
+        if best is None or violation < best[1]:
+            best = (c, violation)
+        lower, raise_, force = _blamed(aux, nominal, sample_times, times, basis)
+        calm = sorted(lower | raise_ | force)
+        if violation <= 0 or repairs == REPAIRS or not calm:  # kept; or out of repairs; or nothing a sample shows
+            break
+        bare = [k for k in force if amplitude[k] == 0.0]  # no carrier left there: more pressure
+        amplitude[calm] *= 0.5
+        amplitude[np.abs(amplitude) < REPAIR_AMPLITUDE] = 0.0
+        lower, raise_ = sorted(lower - raise_), sorted((raise_ | set(bare)) - lower)
+        level[lower] = np.minimum(level[lower], 1.0) - REPAIR_LEVEL
+        level[raise_] = np.maximum(level[raise_], 0.0) + REPAIR_LEVEL
+        repairs, aux = repairs + 1, None
+    c, violation = best
+    if violation > 0:
+        return c, (f"; the default start broke a limit and {_repairs(repairs)} (a calmer carrier and the level "
+                   f"moved off the limit where it was passed) did not keep it (worst violation {violation:.3g} in "
+                   "the limit's unit: mm, kPa, N)")
+    return c, (f"; the default start broke a limit, so it was repaired where it did ({_repairs(repairs)}: the "
+               "carrier's amplitude halved and the level moved off the limit over the second before each sample "
+               "that passed it)")
+
+
+def _repairs(count):
+    return f"{count} repair" + "s" * (count != 1)
+
+
+def _tightened(problem, report, tolerance=VERIFY_TOLERANCE):
+    """`problem` (one `DesignProblem`) with each limit that the run at the fit's resolution passes by more than the
+    tolerance, while the objective's samples keep it, tightened by the gap between the two (and `TIGHTEN_SPARE`);
+    and the note on what was tightened. (None, "") where no limit needs it."""
+    verified = report.get("verified")
+    if verified is None or verified["feasible"]:
+        return None, ""
+    excess, notes = verified["excess"], []
+    if excess.get("force") is not None and excess["force"] > tolerance["force"] and \
+            report.get("free_force_min") is not None and verified.get("free_force_min") is not None:
+        gap = report["free_force_min"] - verified["free_force_min"]
+        if gap > 0:
+            limit = float(problem.min_force) + gap + TIGHTEN_SPARE * obj.FORCE_UNIT
+            problem = eqx.tree_at(lambda p: p.min_force, problem, jnp.asarray(limit))
+            notes.append(f"eq. 7's force {verified['free_force_min']:.1f} N between the samples, {gap:.1f} N below "
+                         f"them: its limit raised to {limit:.1f} N")
+    if excess.get("stroke") is not None and excess["stroke"] > tolerance["stroke"] and problem.stroke is not None:
+        (x_lo, x_hi), (v_lo, v_hi) = report["position_range"], verified["position_range"]
+        lo, hi = (float(s) for s in problem.stroke)
+        spare = TIGHTEN_SPARE * obj.STROKE_UNIT
+        new = (lo + max(x_lo - v_lo, 0.0) + spare * (v_lo < x_lo), hi - max(v_hi - x_hi, 0.0) - spare * (v_hi > x_hi))
+        problem = eqx.tree_at(lambda p: p.stroke, problem, jnp.asarray(new))
+        notes.append(f"the stroke {1e3 * v_lo:.2f} … {1e3 * v_hi:.2f} mm between the samples: its limits moved to "
+                     f"{1e3 * new[0]:.2f} … {1e3 * new[1]:.2f} mm")
+    if excess.get("pressure") is not None and excess["pressure"] > tolerance["pressure"]:
+        gap = report["verified"]["pressure_range"][1] - report["pressure_range"][1]
+        if gap > 0:
+            limit = float(problem.max_pressure) - gap - TIGHTEN_SPARE * obj.PRESSURE_UNIT
+            problem = eqx.tree_at(lambda p: p.max_pressure, problem, jnp.asarray(limit))
+            notes.append(f"the pressure {gap / 1e3:.1f} kPa higher between the samples: its limit lowered to "
+                         f"{limit / 1e5:.3f} bar abs")
+    return (problem, "; ".join(notes)) if notes else (None, "")
+
+
+def _numbered_on(report, offset):
+    """`report` with the iterations numbered on from `offset` (None stays None)."""
+    if report is None:
+        return None
+
+    def numbered(it, *args, **kwargs):
+        return report(it + offset, *args, **kwargs)
+
+    numbered.says_probes = getattr(report, "says_probes", False)
+    return numbered
+
+
+def search(c0, problem, gradient, steps, report, seed, setup, optimise, verify):
+    """The search (`optimise`) from `c0`, the design verified at the fit's resolution (`verify`: aux → (standard
+    errors, the verified channels or None)) and, where the run there passes a limit its samples keep, searched on
+    with the limit tightened (module docstring). Returns (c, aux at the original limits, history, message, errors,
+    verified, note)."""
+    c, aux, history, message = optimise(c0, problem, gradient, steps, report, seed)
+    errors, verified = verify(aux)
+    searched, notes = problem, []
+    for round_ in range(1, TIGHTEN_ROUNDS + 1):
+        if steps == 0 or verified is None or worst_violation(aux) > 1e-9:  # no search asked, nothing verified, or
+            # the samples themselves pass a limit (no ripple to make up for)
+            break
+        nominal = searched[0] if isinstance(searched, tuple) else searched
+        tight, note = _tightened(nominal, constraints_report(aux, setup, verified))
+        if tight is None:
+            break
+        searched = (tight, *searched[1:]) if isinstance(searched, tuple) else tight
+        more = max(steps // 2, 5)
+        if getattr(report, "says_probes", False):  # the command's printer: say why the search goes on
+            print(f"  verified at the fit's resolution: {note}; {more} more iterations", flush=True)
+        offset = history[-1][0]
+        c, _, more_history, more_message = optimise(c, searched, gradient, more, _numbered_on(report, offset),
+                                                    seed + round_)
+        history += [[it + offset, *rest] for it, *rest in more_history[1:]]
+        aux = pts.value(jnp.asarray(c), problem)[1]  # the report is against the user's limits
+        errors, verified = verify(aux)
+        notes.append(f"verified at the fit's resolution, {note}; searched on {len(more_history) - 1} iterations "
+                     f"({more_message})")
+    return c, aux, history, message, errors, verified, "".join(f"; {n}" for n in notes)
