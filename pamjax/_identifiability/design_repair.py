@@ -73,7 +73,7 @@ def repaired_start(problem, setup, parametrisation, duration, knots, seed, aux0=
     every limit. `problem`: the search's (one `DesignProblem`, or the design points' tuple, the model's first);
     `seed`: the start's multilevel carrier's; `aux0`: the objective's aux at the default start, if known."""
     carrier = obj.multilevel_carrier(setup["count"], CARRIER_HOLD, seed)
-    nominal = problem[0] if isinstance(problem, tuple) else problem
+    nominal = _model_point(problem)
     times = np.asarray(setup["times"])
     sample_times = np.asarray(setup["experiment"].times)
     flat, _ = start_coefficients(parametrisation, times, duration, knots, carrier, setup["band"], None, 0.0)
@@ -115,38 +115,46 @@ def _repairs(count):
     return f"{count} repair" + "s" * (count != 1)
 
 
-def _tightened(problem, report, tolerance=VERIFY_TOLERANCE):
-    """`problem` (one `DesignProblem`) with each limit that the run at the fit's resolution passes by more than the
-    tolerance, while the objective's samples keep it, tightened by the gap between the two (and `TIGHTEN_SPARE`);
-    and the note on what was tightened. (None, "") where no limit needs it."""
+def _tightened(current, original, report, tolerance=VERIFY_TOLERANCE):
+    """`current` (the search's `DesignProblem`) with each limit that the run at the fit's resolution passes by more
+    than the tolerance, while the objective's samples keep it, tightened to the user's (`original`'s) less the gap
+    between the two and `TIGHTEN_SPARE` (never loosened from `current`'s); and the note on what was tightened.
+    (None, "") where no limit needs it."""
     verified = report.get("verified")
     if verified is None or verified["feasible"]:
         return None, ""
-    excess, notes = verified["excess"], []
+    excess, notes, problem = verified["excess"], [], current
     if excess.get("force") is not None and excess["force"] > tolerance["force"] and \
             report.get("free_force_min") is not None and verified.get("free_force_min") is not None:
         gap = report["free_force_min"] - verified["free_force_min"]
         if gap > 0:
-            limit = float(problem.min_force) + gap + TIGHTEN_SPARE * obj.FORCE_UNIT
+            limit = max(float(current.min_force), float(original.min_force) + gap + TIGHTEN_SPARE * obj.FORCE_UNIT)
             problem = eqx.tree_at(lambda p: p.min_force, problem, jnp.asarray(limit))
             notes.append(f"eq. 7's force {verified['free_force_min']:.1f} N between the samples, {gap:.1f} N below "
                          f"them: its limit raised to {limit:.1f} N")
-    if excess.get("stroke") is not None and excess["stroke"] > tolerance["stroke"] and problem.stroke is not None:
+    if excess.get("stroke") is not None and excess["stroke"] > tolerance["stroke"] and current.stroke is not None:
         (x_lo, x_hi), (v_lo, v_hi) = report["position_range"], verified["position_range"]
-        lo, hi = (float(s) for s in problem.stroke)
+        (lo, hi), (now_lo, now_hi) = ([float(s) for s in q.stroke] for q in (original, current))
         spare = TIGHTEN_SPARE * obj.STROKE_UNIT
-        new = (lo + max(x_lo - v_lo, 0.0) + spare * (v_lo < x_lo), hi - max(v_hi - x_hi, 0.0) - spare * (v_hi > x_hi))
+        new = (max(now_lo, lo + max(x_lo - v_lo, 0.0) + spare * (v_lo < x_lo)),
+               min(now_hi, hi - max(v_hi - x_hi, 0.0) - spare * (v_hi > x_hi)))
         problem = eqx.tree_at(lambda p: p.stroke, problem, jnp.asarray(new))
         notes.append(f"the stroke {1e3 * v_lo:.2f} … {1e3 * v_hi:.2f} mm between the samples: its limits moved to "
                      f"{1e3 * new[0]:.2f} … {1e3 * new[1]:.2f} mm")
     if excess.get("pressure") is not None and excess["pressure"] > tolerance["pressure"]:
-        gap = report["verified"]["pressure_range"][1] - report["pressure_range"][1]
+        gap = verified["pressure_range"][1] - report["pressure_range"][1]
         if gap > 0:
-            limit = float(problem.max_pressure) - gap - TIGHTEN_SPARE * obj.PRESSURE_UNIT
+            limit = min(float(current.max_pressure),
+                        float(original.max_pressure) - gap - TIGHTEN_SPARE * obj.PRESSURE_UNIT)
             problem = eqx.tree_at(lambda p: p.max_pressure, problem, jnp.asarray(limit))
             notes.append(f"the pressure {gap / 1e3:.1f} kPa higher between the samples: its limit lowered to "
                          f"{limit / 1e5:.3f} bar abs")
     return (problem, "; ".join(notes)) if notes else (None, "")
+
+
+def _model_point(problem):
+    """The model's `DesignProblem` of the search's (one, or the design points' tuple, the model's first)."""
+    return problem[0] if isinstance(problem, tuple) else problem
 
 
 def _numbered_on(report, offset):
@@ -173,8 +181,8 @@ def search(c0, problem, gradient, steps, report, seed, setup, optimise, verify):
         if steps == 0 or verified is None or worst_violation(aux) > 1e-9:  # no search asked, nothing verified, or
             # the samples themselves pass a limit (no ripple to make up for)
             break
-        nominal = searched[0] if isinstance(searched, tuple) else searched
-        tight, note = _tightened(nominal, constraints_report(aux, setup, verified))
+        report_ = constraints_report(aux, setup, verified)
+        tight, note = _tightened(_model_point(searched), _model_point(problem), report_)
         if tight is None:
             break
         searched = (tight, *searched[1:]) if isinstance(searched, tuple) else tight
