@@ -1030,21 +1030,27 @@ def test_a_spread_designs_points_are_printed_with_their_ratios_and_targets():
 # --- the design's repairs (design_repair): a start that breaks a limit, a run that passes one between the samples ---
 
 
-def test_a_default_start_that_breaks_a_limit_is_repaired_where_it_does_and_keeps_its_carrier_elsewhere():
-    # MAS-10, 2 s, eq. 7's force kept >= 60 N: the default start's carrier (E3's triangle ± 0.25 of the band)
-    # exhausts the muscle below it. The repair calms the carrier over the second before each sample passing the limit
-    # (and, where no carrier is left, raises the level): the start then keeps the limit at the objective's samples,
-    # and the carrier is still there where it was harmless (a calmer carrier everywhere went to amplitude 0 on one of
-    # three realistic rigs: the design was E3 again).
+@pytest.mark.parametrize("duration, limits", [(2.0, dict(min_force=60.0)),
+                                              (3.0, dict(min_force=None, stroke_margin=0.047))])
+def test_a_default_start_that_breaks_a_limit_is_repaired_where_it_does_and_keeps_its_carrier_elsewhere(duration,
+                                                                                                      limits):
+    # MAS-10: eq. 7's force kept >= 60 N over 2 s, where the default start's carrier (E3's triangle ± 0.25 of the
+    # band) exhausts the muscle below it; or the upper stroke limit at 28 mm over 3 s, which the start's rising level
+    # passes. The repair calms the carrier over the second before each sample passing a limit and moves the level
+    # off the stroke limit (or, for the force, up where no carrier is left): the start then keeps every limit at the
+    # objective's samples, and the carrier is still there where it was harmless (a calmer carrier everywhere went to
+    # amplitude 0 on one of three realistic rigs: the design was E3 again).
     from pamjax._identifiability.design_repair import REPAIR_AMPLITUDE
 
-    kwargs = dict(noise=MUSCLE_NOISE, rate=500.0, knots=4, steps=0, progress=False, min_force=60.0)
+    kwargs = dict(noise=MUSCLE_NOISE, rate=500.0, knots=4, steps=0, progress=False, **limits)
     with warnings.catch_warnings():  # steps=0: nothing searched on for the ripple the fit's resolution may show
         warnings.simplefilter("ignore", pj.PamjaxDesignWarning)
-        res = pj.design_experiment(_muscle(), MUSCLE_FREE, 2.0, **kwargs)
+        res = pj.design_experiment(_muscle(), MUSCLE_FREE, duration, **kwargs)
     c = res.constraints
     assert "the default start broke a limit, so it was repaired where it did" in res.message
-    assert c["free_force_min"] >= 60.0 and (c["stop_force_min"] is None or c["stop_force_min"] >= 0.0)
+    assert c["position_range"][1] <= c["stroke_limits"][1] and c["position_range"][0] >= c["stroke_limits"][0]
+    if c["min_force"] is not None:
+        assert c["free_force_min"] >= c["min_force"] and (c["stop_force_min"] is None or c["stop_force_min"] >= 0.0)
     assert "verified at the fit's resolution" not in res.message  # steps=0: the start scored, no search
     level = np.asarray(_at(pj.Triangle(0.05, 0.95, 0.08), device_array(np.asarray(res.times))))
     swing = np.abs(np.asarray(res.duty) - np.clip(level, 0.125, 0.875))
