@@ -24,11 +24,14 @@ from .design_result import VERIFY_TOLERANCE, constraints_report, worst_violation
 from .design_setup import CARRIER_HOLD, START_AMPLITUDE, start_coefficients
 
 REPAIRS = 10  # evaluations of the objective the start's repair may take (one forward-mode Jacobian each)
-REPAIR_WINDOW = 1.0  # s: a limit passed at t is blamed on the duties of the second before it (the muscle's response
-# to a duty step settles within ~0.5 s on the MAS-10 bench, paper 000 Fig. 11)
+REPAIR_WINDOW = 1.0  # s: a limit passed at t is blamed on the duties of the second before it (assumed: longer than
+# the muscle's response to a duty step; the coefficients acting there are found from their basis functions)
 REPAIR_BIN = 0.05  # s: the samples passing a limit are taken 50 ms at a time (one window each)
-REPAIR_LEVEL = 0.1  # of the duty band: how far one repair moves the level away from the limit passed
-REPAIR_AMPLITUDE = 0.02  # of the band: a carrier amplitude halved below it is set to 0
+REPAIR_LEVEL = 0.1  # of the duty band: how far one repair moves the level away from the limit passed (assumed; ten
+# repairs can move it across the whole band)
+REPAIR_AMPLITUDE = 0.02  # of the band: a carrier amplitude halved below it is set to 0 (assumed: 1.5 % duty; on
+# rig3102's pilot, E3's triangle with a carrier of 0.05 of the band scored no better than without one (D criterion
+# -234.1 against -234.7), with 0.25 of it -241.1: the carrier's information is in its large swings)
 TIGHTEN_ROUNDS = 2  # searches after the first, each with the limits tightened by what the verification found
 TIGHTEN_SPARE = 1.0  # in each limit's penalty unit (mm, kPa, N): kept beyond the gap the verification found
 
@@ -42,11 +45,10 @@ def _knots_of(times, start, end, basis):
 
 
 def _blamed(aux, problem, sample_times, period_times, basis):
-    """(coefficients to calm, to lower, to raise): those acting over the `REPAIR_WINDOW` before each sample that
-    passes a limit. The carrier is calmed wherever a limit is passed; the level lowered where the run passes the upper
-    stroke limit or the pressure limit, raised where it passes the lower stroke limit; where eq. 7's force drops
-    below its limit (the fast exhausts of the carrier), raised (more pressure, more force) only once the carrier is
-    gone there (`repaired_start`: the level's sweep is where the information is)."""
+    """The coefficients acting over the `REPAIR_WINDOW` before each sample that passes a limit, as three sets: where
+    the run passes the upper stroke limit or the pressure limit (the level to be lowered), the lower stroke limit (to
+    be raised), eq. 7's force limit (the fast exhausts of the carrier: raised, more pressure and more force, only
+    once no carrier is left there; `repaired_start`). The carrier is calmed on all three."""
     x, p, f = (None if aux.get(k) is None else np.asarray(aux[k]) for k in ("position", "pressure", "force"))
     passed = dict(lower=[], raise_=[], force=[])
     if problem.stroke is not None and x is not None:
