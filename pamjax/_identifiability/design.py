@@ -257,9 +257,12 @@ def design_experiment(
       modulating a seeded multilevel carrier; gradient in forward mode, 2·knots tangents) or "periods" (one free value
       per period; gradient in reverse mode: exact but ~50× a Jacobian per step on a 2-core CPU for 33 s).
     - `steps`: BFGS iterations at most; `initial`: start signal (a pamjax signal or one duty per period; default paper
-      000's E3 triangle with the carrier on top); `seed`: the carrier's and the probes'.
+      000's E3 triangle with the carrier on top; where it breaks a limit, repaired or calmed, `design_repair`);
+      `seed`: the carrier's and the probes'.
     - `design_rate` [Hz], `substeps`: resolution of the objective (docs/identifiability.md: within 0.2 % of the
-      fit's); `verify`: recompute the final standard errors at the fit's resolution (16 substeps, `rate`).
+      fit's); `verify`: recompute the final standard errors and the limits at the fit's resolution (16 substeps,
+      `rate`); where the run there passes a limit that the objective's samples keep, the search goes on with that
+      limit tightened (`design_repair.search`; the message says so).
     - `spread`: the plant's expected spread around `model` (a fraction for every free parameter, e.g. 0.2 for
       ±20 %, or {label: fraction}): the design is then scored at `spread_points` further design points drawn from it
       (a seeded Latin hypercube) beside the model's own, its objective the average of theirs (`design_points`): a
