@@ -1,18 +1,19 @@
 """The design's repairs where its limits and its runs disagree (`design_experiment`):
 
-- `repaired_start`: the default start (paper 000's E3 triangle with the carrier on top) breaks a limit on the
+- `start_candidates`: the default start (paper 000's E3 triangle with the carrier on top) breaks a limit on the
   model at hand (a pilot fit whose payload reaches the upper stop at E3's top duty, or whose muscle goes slack in the
-  carrier's fast exhausts). The start is repaired where it breaks the limit: the carrier's amplitude halved and the
-  level moved away from the limit over the second before each sample that passes it, until the start keeps every
-  limit. Its rival, a calmer carrier everywhere (the amplitude lowered in fixed steps until the start keeps every
-  limit), is tried too, and the start within the limits with the lower objective is taken: neither is better
-  everywhere. A calmer carrier alone went to amplitude 0 on one of three unseen realistic rigs (the design was E3
-  again) and kept no limit on another, whose pilot's payload E3's top duty lifts onto the upper stop (only moving the
-  level helps there); on the MAS-10 example at the presets it led to the better design.
-- `search`: the search, and the design verified at the fit's resolution; where the run passes a limit there that the
-  objective's samples keep (the PWM ripple between them: eq. 7's force 10.6 N lower on one rig, 24.8 N at the
-  samples and 14.2 N between them), the objective's limit is tightened by what its samples missed and the search
-  goes on from where it stopped, `TIGHTEN_ROUNDS` times at most.
+  carrier's fast exhausts). Searched from, in turn until a design keeps every limit: the carrier's amplitude lowered
+  everywhere until the start keeps every limit; else the default start as it is (the penalties bring it within the
+  limits: the MAS-10 example at the presets); else, where that search ends outside a limit, the start repaired where
+  it breaks one (`repaired_start`): the carrier's amplitude halved and the level moved away from the limit over the
+  second before each sample that passes it. Before, where no calmer carrier kept the limits, the search went on
+  from the default start as it was and no further, and on one of three unseen realistic rigs (its pilot's payload
+  lifted onto the upper stop by E3's top duty, which no calmer carrier avoids: only a lower level does) it ended on
+  the stop: no design.
+- `search_from` / `search`: the search, and the design verified at the fit's resolution; where the run passes a
+  limit there that the objective's samples keep (the PWM ripple between them: eq. 7's force 10.6 N lower on one
+  rig, 24.8 N at the samples and 14.2 N between them), the objective's limit is tightened by what its samples missed
+  and the search goes on from where it stopped, `TIGHTEN_ROUNDS` times at most.
 """
 
 import math
@@ -34,9 +35,7 @@ REPAIR_LEVEL = 0.1  # of the duty band: how far one repair moves the level away 
 REPAIR_AMPLITUDE = 0.02  # of the band: a carrier amplitude halved below it is set to 0 (assumed: 1.5 % duty; on
 # rig3102's pilot, E3's triangle with a carrier of 0.05 of the band scored no better than without one (D criterion
 # -234.1 against -234.7), with 0.25 of it -241.1: the carrier's information is in its large swings)
-CALMER = (0.8, 0.6, 0.4, 0.2, 0.0)  # factors on START_AMPLITUDE tried, in turn, for a calmer carrier everywhere (the
-# repair's rival: on the MAS-10 example at the presets it led to a better design, 1.11-1.58x E3 + E4 predicted on the
-# five parameters against 1.00-1.49x from the repaired start; benchmarks/RESULTS.md, Session 59)
+CALMER = (0.8, 0.6, 0.4, 0.2, 0.0)  # factors on START_AMPLITUDE tried, in turn, for a calmer carrier everywhere
 TIGHTEN_ROUNDS = 2  # searches after the first, each with the limits tightened by what the verification found
 TIGHTEN_SPARE = 1.0  # in each limit's penalty unit (mm, kPa, N): kept beyond the gap the verification found
 
@@ -80,7 +79,7 @@ def repaired_start(problem, setup, parametrisation, duration, knots, seed, aux0=
     every limit. `problem`: the search's (one `DesignProblem`, or the design points' tuple, the model's first);
     `seed`: the start's multilevel carrier's; `aux0`: the objective's aux at the default start, if known."""
     carrier = obj.multilevel_carrier(setup["count"], CARRIER_HOLD, seed)
-    nominal = _model_point(problem)
+    nominal = _model_point(problem)  # the limits are the model's
     times = np.asarray(setup["times"])
     sample_times = np.asarray(setup["experiment"].times)
     flat, _ = start_coefficients(parametrisation, times, duration, knots, carrier, setup["band"], None, 0.0)
@@ -110,19 +109,30 @@ def repaired_start(problem, setup, parametrisation, duration, knots, seed, aux0=
         level[raise_] = np.maximum(level[raise_], 0.0) + REPAIR_LEVEL
         repairs, aux = repairs + 1, None
     c, violation, value = best
-    calmer = _calmer(problem, flat, knots, envelope, carrier)
-    if calmer is not None and (violation > 0 or calmer[2] < value):
-        return calmer[0], (f"; the default start broke a limit, so its carrier's amplitude was lowered to "
-                           f"{calmer[1]:g} (the start within the limits with the lowest objective; repaired where "
-                           f"it broke one, {_repairs(repairs)}, it scored {value:.4g} against {calmer[2]:.4g})")
     if violation > 0:
-        return c, (f"; the default start broke a limit and neither a calmer carrier nor {_repairs(repairs)} (the "
-                   f"carrier calmed and the level moved off the limit where it was passed) kept it (worst "
-                   f"violation {violation:.3g} in the limit's unit: mm, kPa, N)")
-    return c, (f"; the default start broke a limit, so it was repaired where it did ({_repairs(repairs)}: the "
-               "carrier's amplitude halved and the level moved off the limit over the second before each sample "
-               "that passed it)" + ("" if calmer is None else f"; its objective {value:.4g}, a calmer carrier's "
-                                    f"everywhere {calmer[2]:.4g}"))
+        return c, (f"; neither the default start, nor a calmer carrier, nor {_repairs(repairs)} (the carrier calmed "
+                   f"and the level moved off the limit where it was passed) kept every limit (worst violation "
+                   f"{violation:.3g} in the limit's unit: mm, kPa, N)")
+    return c, (f"; the default start broke a limit and no calmer carrier kept it, so it was repaired where it did "
+               f"({_repairs(repairs)}: the carrier's amplitude halved and the level moved off the limit over the "
+               "second before each sample that passed it)")
+
+
+def start_candidates(problem, setup, parametrisation, duration, knots, seed, c0, aux0):
+    """The starts to search from, in turn, where the default start `c0` breaks a limit: [(coefficients, note)] or
+    callables giving them. A calmer carrier everywhere if one keeps every limit (`CALMER`); else the default start
+    as it is (the search's penalties bring it within the limits: on the MAS-10 example at the presets, a better
+    design than from the repaired start, 4 of 5 parameters tighter than E3 + E4 on three held-back plants against 2),
+    then, where that search ends outside a limit, the repaired start (`repaired_start`)."""
+    carrier = obj.multilevel_carrier(setup["count"], CARRIER_HOLD, seed)
+    flat, _ = start_coefficients(parametrisation, np.asarray(setup["times"]), duration, knots, carrier,
+                                 setup["band"], None, 0.0)
+    calmer = _calmer(problem, flat, knots, parametrisation == "envelope", carrier)
+    if calmer is not None:
+        return [(calmer[0], f"; the default start broke a limit, so its carrier's amplitude was lowered to "
+                            f"{calmer[1]:g}")]
+    return [(c0, "; the default start broke a limit and no calmer carrier kept it: searched from it as it is"),
+            lambda: repaired_start(problem, setup, parametrisation, duration, knots, seed, aux0)]
 
 
 def _calmer(problem, flat, knots, envelope, carrier):
@@ -224,3 +234,21 @@ def search(c0, problem, gradient, steps, report, seed, setup, optimise, verify):
         notes.append(f"verified at the fit's resolution, {note}; searched on {len(more_history) - 1} iterations "
                      f"({more_message})")
     return c, aux, history, message, errors, verified, "".join(f"; {n}" for n in notes)
+
+
+def search_from(starts, problem, gradient, steps, report, seed, setup, optimise, verify):
+    """`search` from each of `starts` ((coefficients, note), or a callable giving them: `start_candidates`) in turn
+    until a design keeps every limit (`constraints_report`'s `feasible`: at the samples and, within the tolerance, at
+    the fit's resolution), or the last: (c, aux, history, message, errors, verified, note)."""
+    notes = ""
+    for k, start in enumerate(starts):
+        c0, note = start() if callable(start) else start
+        out = search(np.asarray(c0, dtype=float), problem, gradient, steps, report, seed, setup, optimise, verify)
+        feasible = constraints_report(out[1], setup, out[5])["feasible"]
+        if feasible or k == len(starts) - 1:
+            return (*out[:6], notes + note + out[6])
+        violations = "; ".join(constraints_report(out[1], setup, out[5])["violations"])
+        notes += f"{note}; that search ended outside a limit ({violations}), so it was searched again"
+        if getattr(report, "says_probes", False):
+            print(f"  the search ended outside a limit ({violations}); searching again from another start", flush=True)
+    raise AssertionError("no start")  # unreachable: `starts` is never empty
