@@ -31,7 +31,7 @@ from .._fit.problem import physical_and_jacobian, residuals_and_jacobian
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from . import design_objective as obj, design_points as pts
-from .design_repair import search_from, start_candidates
+from .design_repair import search, start_within_limits
 from .design_result import DesignResult, PamjaxDesignWarning, constraints_report, worst_violation
 from .design_search import optimise
 from .design_setup import (
@@ -301,10 +301,10 @@ def design_experiment(
     if points:  # the search: the points' criteria and targets, the limits at the model's point (`design_points`)
         prob = (prob, *(pts.without_limits(p) for p, _ in points))
         start_aux = _points_start(c0, prob)
-    starts = (start_candidates(prob, setup, parametrisation, float(duration), knots, seed, c0, start_aux)
-              if initial is None and worst_violation(start_aux) > 0 else [(c0, "")])  # calmer, as is, repaired
-    c, aux, history, message, errors, verified, note = search_from(
-        starts, prob, gradient, steps, report, seed, setup, optimise,
+    c0, note = (start_within_limits(prob, setup, parametrisation, float(duration), knots, seed, start_aux)
+                if initial is None and worst_violation(start_aux) > 0 else (c0, ""))  # calmer, else repaired
+    c, aux, history, message, errors, verified, tightened = search(
+        np.asarray(c0, dtype=float), prob, gradient, steps, report, seed, setup, optimise,
         lambda a: _standard_errors(setup, a, theta, prior_info, base_info, verify, float(duration), float(rate),
                                    noise, build))
     nominal = prob[0] if points else prob
@@ -315,7 +315,7 @@ def design_experiment(
     if not constraints["feasible"]:
         warnings.warn("pamjax.design_experiment: the design violates its limits (a bench must not play it; to_csv "
                       "refuses it): " + "; ".join(constraints["violations"]), PamjaxDesignWarning, stacklevel=2)
-    result = _result(setup, aux, history, errors, constraints, message + note, criterion, parametrisation,
+    result = _result(setup, aux, history, errors, constraints, message + note + tightened, criterion, parametrisation,
                      float(duration), t_start, compile_s, designed_payload(model, setup["system"]))
     if points:
         result.points = _points_report(space, theta, point_values, thetas, [prob[0], *(p for p, _ in points)],

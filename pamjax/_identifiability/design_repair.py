@@ -1,16 +1,15 @@
 """The design's repairs where its limits and its runs disagree (`design_experiment`):
 
-- `start_candidates`: the default start (paper 000's E3 triangle with the carrier on top) breaks a limit on the
+- `start_within_limits`: the default start (paper 000's E3 triangle with the carrier on top) breaks a limit on the
   model at hand (a pilot fit whose payload reaches the upper stop at E3's top duty, or whose muscle goes slack in the
-  carrier's fast exhausts). Searched from, in turn until a design keeps every limit: the carrier's amplitude lowered
-  everywhere until the start keeps every limit; else the default start as it is (the penalties bring it within the
-  limits: the MAS-10 example at the presets); else, where that search ends outside a limit, the start repaired where
-  it breaks one (`repaired_start`): the carrier's amplitude halved and the level moved away from the limit over the
-  second before each sample that passes it. Before, where no calmer carrier kept the limits, the search went on
-  from the default start as it was and no further, and on one of three unseen realistic rigs (its pilot's payload
-  lifted onto the upper stop by E3's top duty, which no calmer carrier avoids: only a lower level does) it ended on
-  the stop: no design.
-- `search_from` / `search`: the search, and the design verified at the fit's resolution; where the run passes a
+  carrier's fast exhausts). The carrier's amplitude is lowered everywhere until the start keeps every limit (as
+  before); where no amplitude does, the start is repaired where it breaks one (`repaired_start`): the carrier's
+  amplitude halved and the level moved away from the limit over the second before each sample that passes it.
+  Before, the search then went on from the default start as it was, and on one of three unseen realistic rigs (its
+  pilot's payload lifted onto the upper stop by E3's top duty, which no calmer carrier avoids: only a lower level
+  does) it ended on the stop: no design. The repaired start taken before a calmer carrier (or whichever scores
+  lower) gave the MAS-10 example a weaker design (benchmarks/RESULTS.md, Session 59).
+- `search`: the search, and the design verified at the fit's resolution; where the run passes a
   limit there that the objective's samples keep (the PWM ripple between them: eq. 7's force 10.6 N lower on one
   rig, 24.8 N at the samples and 14.2 N between them), the objective's limit is tightened by what its samples missed
   and the search goes on from where it stopped, `TIGHTEN_ROUNDS` times at most.
@@ -118,21 +117,17 @@ def repaired_start(problem, setup, parametrisation, duration, knots, seed, aux0=
                "second before each sample that passed it)")
 
 
-def start_candidates(problem, setup, parametrisation, duration, knots, seed, c0, aux0):
-    """The starts to search from, in turn, where the default start `c0` breaks a limit: [(coefficients, note)] or
-    callables giving them. A calmer carrier everywhere if one keeps every limit (`CALMER`); else the default start
-    as it is (the search's penalties bring it within the limits: on the MAS-10 example at the presets, a better
-    design than from the repaired start, 4 of 5 parameters tighter than E3 + E4 on three held-back plants against 2),
-    then, where that search ends outside a limit, the repaired start (`repaired_start`)."""
+def start_within_limits(problem, setup, parametrisation, duration, knots, seed, aux0):
+    """Where the default start breaks a limit: the carrier's amplitude lowered everywhere (`CALMER`, in turn) until
+    the start keeps every limit; else the start repaired where it breaks one (`repaired_start`). (coefficients,
+    note for the design's message)."""
     carrier = obj.multilevel_carrier(setup["count"], CARRIER_HOLD, seed)
     flat, _ = start_coefficients(parametrisation, np.asarray(setup["times"]), duration, knots, carrier,
                                  setup["band"], None, 0.0)
     calmer = _calmer(problem, flat, knots, parametrisation == "envelope", carrier)
     if calmer is not None:
-        return [(calmer[0], f"; the default start broke a limit, so its carrier's amplitude was lowered to "
-                            f"{calmer[1]:g}")]
-    return [(c0, "; the default start broke a limit and no calmer carrier kept it: searched from it as it is"),
-            lambda: repaired_start(problem, setup, parametrisation, duration, knots, seed, aux0)]
+        return calmer[0], f"; the default start broke a limit, so its carrier's amplitude was lowered to {calmer[1]:g}"
+    return repaired_start(problem, setup, parametrisation, duration, knots, seed, aux0)
 
 
 def _calmer(problem, flat, knots, envelope, carrier):
@@ -235,20 +230,3 @@ def search(c0, problem, gradient, steps, report, seed, setup, optimise, verify):
                      f"({more_message})")
     return c, aux, history, message, errors, verified, "".join(f"; {n}" for n in notes)
 
-
-def search_from(starts, problem, gradient, steps, report, seed, setup, optimise, verify):
-    """`search` from each of `starts` ((coefficients, note), or a callable giving them: `start_candidates`) in turn
-    until a design keeps every limit (`constraints_report`'s `feasible`: at the samples and, within the tolerance, at
-    the fit's resolution), or the last: (c, aux, history, message, errors, verified, note)."""
-    notes = ""
-    for k, start in enumerate(starts):
-        c0, note = start() if callable(start) else start
-        out = search(np.asarray(c0, dtype=float), problem, gradient, steps, report, seed, setup, optimise, verify)
-        feasible = constraints_report(out[1], setup, out[5])["feasible"]
-        if feasible or k == len(starts) - 1:
-            return (*out[:6], notes + note + out[6])
-        violations = "; ".join(constraints_report(out[1], setup, out[5])["violations"])
-        notes += f"{note}; that search ended outside a limit ({violations}), so it was searched again"
-        if getattr(report, "says_probes", False):
-            print(f"  the search ended outside a limit ({violations}); searching again from another start", flush=True)
-    raise AssertionError("no start")  # unreachable: `starts` is never empty
