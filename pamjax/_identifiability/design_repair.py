@@ -87,15 +87,14 @@ def repaired_start(problem, setup, parametrisation, duration, knots, seed, aux0=
     amplitude = np.full(level.size, START_AMPLITUDE)
     basis = obj.bspline_basis(times, 0.0, duration, knots) if envelope else np.eye(times.size)
 
-    best, repairs, aux, value = None, 0, aux0, math.inf
+    best, repairs, aux = None, 0, aux0
     while True:
         c = np.concatenate([level, amplitude]) if envelope else level + amplitude * carrier
         if aux is None:
-            value, aux = pts.value(jnp.asarray(c), problem)
-            value = float(value)
+            aux = pts.value(jnp.asarray(c), problem)[1]
         violation = worst_violation(aux)
         if best is None or violation < best[1]:
-            best = (c, violation, value)
+            best = (c, violation)
         lower, raise_, force = _blamed(aux, nominal, sample_times, times, basis)
         calm = sorted(lower | raise_ | force)
         if violation <= 0 or repairs == REPAIRS or not calm:  # kept; or out of repairs; or nothing a sample shows
@@ -107,7 +106,7 @@ def repaired_start(problem, setup, parametrisation, duration, knots, seed, aux0=
         level[lower] = np.minimum(level[lower], 1.0) - REPAIR_LEVEL
         level[raise_] = np.maximum(level[raise_], 0.0) + REPAIR_LEVEL
         repairs, aux = repairs + 1, None
-    c, violation, value = best
+    c, violation = best
     if violation > 0:
         return c, (f"; neither the default start, nor a calmer carrier, nor {_repairs(repairs)} (the carrier calmed "
                    f"and the level moved off the limit where it was passed) kept every limit (worst violation "
@@ -132,13 +131,12 @@ def start_within_limits(problem, setup, parametrisation, duration, knots, seed, 
 
 def _calmer(problem, flat, knots, envelope, carrier):
     """The default start with its carrier's amplitude lowered everywhere (`CALMER`, in turn) until it keeps every
-    limit: (coefficients, amplitude, objective), or None if none does."""
+    limit: (coefficients, amplitude), or None if none does."""
     for factor in CALMER:
         amplitude = factor * START_AMPLITUDE
         c = np.concatenate([flat[:knots], np.full(knots, amplitude)]) if envelope else flat + amplitude * carrier
-        value, aux = pts.value(jnp.asarray(c), problem)
-        if worst_violation(aux) <= 0:
-            return c, amplitude, float(value)
+        if worst_violation(pts.value(jnp.asarray(c), problem)[1]) <= 0:
+            return c, amplitude
     return None
 
 
