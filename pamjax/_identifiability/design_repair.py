@@ -72,17 +72,15 @@ def _blamed(aux, problem, sample_times, period_times, basis):
     return out["lower"], out["raise_"], out["force"]
 
 
-def repaired_start(problem, setup, parametrisation, duration, knots, seed, aux0=None):
+def repaired_start(problem, setup, envelope, duration, knots, carrier, flat, aux0=None):
     """The default start (E3's triangle, the carrier at `START_AMPLITUDE`) repaired where it breaks a limit (module
     docstring), and the note for the design's message; the least violating start found if none of `REPAIRS` keeps
     every limit. `problem`: the search's (one `DesignProblem`, or the design points' tuple, the model's first);
-    `seed`: the start's multilevel carrier's; `aux0`: the objective's aux at the default start, if known."""
-    carrier = obj.multilevel_carrier(setup["count"], CARRIER_HOLD, seed)
+    `carrier`, `flat`: the start's multilevel carrier and its coefficients without it (`start_within_limits`);
+    `aux0`: the objective's aux at the default start, if known."""
     nominal = _model_point(problem)  # the limits are the model's
     times = np.asarray(setup["times"])
     sample_times = np.asarray(setup["experiment"].times)
-    flat, _ = start_coefficients(parametrisation, times, duration, knots, carrier, setup["band"], None, 0.0)
-    envelope = parametrisation == "envelope"
     level = np.array(flat[:knots] if envelope else flat)
     amplitude = np.full(level.size, START_AMPLITUDE)
     basis = obj.bspline_basis(times, 0.0, duration, knots) if envelope else np.eye(times.size)
@@ -123,10 +121,11 @@ def start_within_limits(problem, setup, parametrisation, duration, knots, seed, 
     carrier = obj.multilevel_carrier(setup["count"], CARRIER_HOLD, seed)
     flat, _ = start_coefficients(parametrisation, np.asarray(setup["times"]), duration, knots, carrier,
                                  setup["band"], None, 0.0)
-    calmer = _calmer(problem, flat, knots, parametrisation == "envelope", carrier)
+    envelope = parametrisation == "envelope"
+    calmer = _calmer(problem, flat, knots, envelope, carrier)
     if calmer is not None:
         return calmer[0], f"; the default start broke a limit, so its carrier's amplitude was lowered to {calmer[1]:g}"
-    return repaired_start(problem, setup, parametrisation, duration, knots, seed, aux0)
+    return repaired_start(problem, setup, envelope, duration, knots, carrier, flat, aux0)
 
 
 def _calmer(problem, flat, knots, envelope, carrier):
@@ -144,7 +143,7 @@ def _repairs(count):
     return f"{count} repair" + "s" * (count != 1)
 
 
-def _tightened(current, original, report, tolerance=VERIFY_TOLERANCE):
+def _tightened(current, original, report):
     """`current` (the search's `DesignProblem`) with each limit that the run at the fit's resolution passes by more
     than the tolerance, while the objective's samples keep it, tightened to the user's (`original`'s) less the gap
     between the two and `TIGHTEN_SPARE` (never loosened from `current`'s); and the note on what was tightened.
@@ -152,7 +151,7 @@ def _tightened(current, original, report, tolerance=VERIFY_TOLERANCE):
     verified = report.get("verified")
     if verified is None or verified["feasible"]:
         return None, ""
-    excess, notes, problem = verified["excess"], [], current
+    excess, notes, problem, tolerance = verified["excess"], [], current, VERIFY_TOLERANCE
     if excess.get("force") is not None and excess["force"] > tolerance["force"] and \
             report.get("free_force_min") is not None and verified.get("free_force_min") is not None:
         gap = report["free_force_min"] - verified["free_force_min"]
@@ -210,8 +209,8 @@ def search(c0, problem, gradient, steps, report, seed, setup, optimise, verify):
         if steps == 0 or verified is None or worst_violation(aux) > 1e-9:  # no search asked, nothing verified, or
             # the samples themselves pass a limit (no ripple to make up for)
             break
-        report_ = constraints_report(aux, setup, verified)
-        tight, note = _tightened(_model_point(searched), _model_point(problem), report_)
+        limits = constraints_report(aux, setup, verified)
+        tight, note = _tightened(_model_point(searched), _model_point(problem), limits)
         if tight is None:
             break
         searched = (tight, *searched[1:]) if isinstance(searched, tuple) else tight
