@@ -229,6 +229,27 @@ def test_pamjax_fit_with_a_bench_table_starts_stage_by_stage(bench, tmp_path, ca
     assert main(["fit", str(cfg), "--out", str(tmp_path / "bad"), "--quiet", "--no-plot"]) == 2
     assert "[bench] staged" in capsys.readouterr().err
 
+    # stopped at max_steps in its stages and its joint fit, then resumed with the budget raised as the report advises:
+    # the joint fit goes on from the staged start it began at (kept beside the checkpoint), not from one computed
+    # again with the larger budget (was: refused, "the start model differs")
+    short = tmp_path / "short"
+    cfg.write_text(body("").replace("max_steps = 60", "max_steps = 2"))
+    assert main(["fit", str(cfg), "--out", str(short), "--quiet", "--no-plot"]) == 0
+    out = capsys.readouterr().out
+    assert "stage 2: 3 parameters on E3: max_steps" in out and "raise [fit] max_steps and continue" in out
+    kept = np.load(short / "staged_start.npz")["values"]
+    cfg.write_text(body(""))
+    assert main(["fit", str(cfg), "--out", str(short), "--quiet", "--no-plot", "--resume"]) == 0
+    out = capsys.readouterr().out
+    assert "the staged start of the fit resumed (staged_start.npz):" in out and "\n  stage 2: 3 parameters" in out
+    resumed = json.loads((short / "fit.json").read_text())
+    assert resumed["status"] == "converged" and np.array_equal(np.load(short / "staged_start.npz")["values"], kept)
+    # another problem (fewer runs): the kept start is refused, naming what differs
+    other = body("").replace(f'dir = "{folder}"', f'dir = "{folder}"\nruns = ["E1", "E3"]')
+    cfg.write_text(other)
+    assert main(["fit", str(cfg), "--out", str(short), "--quiet", "--no-plot", "--resume"]) == 2
+    assert "holds the staged start of a different fit" in capsys.readouterr().err
+
 
 def test_noise_levels_left_out_of_meta_are_estimated_near_the_sensors_and_said(tmp_path):
     # The bundled bench's sensors have 2 kPa and 0.1 mm of white noise (its meta.json); without them the loader

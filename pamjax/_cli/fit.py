@@ -19,7 +19,7 @@ import numpy as np
 from .._core.errors import PamjaxInputError
 from .._fit.measurement import check_measured_free
 from .._identifiability.profile import PROFILED_STATUSES
-from . import schema
+from . import fit_start, schema
 from .config import build_model, build_signal, check_initial, load_recording, parameter_shape, read_toml
 from .kinds import sensor_groups
 from .out import PENDING, OutputFolder, interrupt_status, raise_pending
@@ -299,7 +299,8 @@ def run(args):
                                    "to continue that fit, e.g. with a larger [fit] max_steps)")
         raise PamjaxInputError(f"pamjax fit: {out / CHECKPOINT} holds an earlier fit (checkpointed after {earlier}); "
                                "continue it with --resume, or start again with --overwrite")
-    outputs = [RESULT, MODEL, CHECKPOINT] + ([] if args.no_plot else [FIGURE]) + ([BENCH] if bench else [])
+    outputs = [RESULT, MODEL, CHECKPOINT] + ([] if args.no_plot else [FIGURE]) + ([BENCH] if bench else []) \
+        + ([fit_start.STAGED_START] if staged else [])
     if args.profile:
         outputs += [PROFILE] + ([] if args.no_plot else [PROFILE_FIGURE])
     # --resume replaces what the resumed run wrote (its checkpoint proves it is the same problem)
@@ -358,12 +359,19 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None, 
                   f"{'accepted' if accepted else 'rejected'}", flush=True)
         raise_pending()
 
-    if staged:  # valve on the tank tests, muscle on the runs, then the joint fit
-        # (deterministic: a --resume computes the same start again, which its checkpoint's fingerprint checks)
-        staged = pj.staged_start(model, experiments, free, max_steps=options.get("max_steps", 100),
-                                 progress=progress)
-        model = staged.model
-        for line in staged.summary():
+    kept = fit_start.load(folder / fit_start.STAGED_START, model, experiments, free) if staged and args.resume \
+        else None
+    if kept is not None:  # the start the resumed fit began at, as it was computed (fit_start's docstring)
+        model, summary = kept
+        print(f"the staged start of the fit resumed ({fit_start.STAGED_START}):", flush=True)
+        for line in summary:
+            print(f"  {line}", flush=True)
+    elif staged:  # valve on the tank tests, muscle on the runs, then the joint fit
+        staged_fit = pj.staged_start(model, experiments, free, max_steps=options.get("max_steps", 100),
+                                     progress=progress)
+        fit_start.save(folder, model, experiments, free, staged_fit)
+        model = staged_fit.model
+        for line in staged_fit.summary():
             print(line, flush=True)
     res = pj.fit(model, experiments, free, progress=progress, checkpoint=checkpoint,
                  resume=checkpoint if args.resume else None, overwrite=args.overwrite, **options)
