@@ -209,6 +209,10 @@ def test_a_fit_whose_payload_barely_moves_says_its_force_law_rests_on_few_sample
     mass = 0.5 * force / 9.81
     assert 25 < mass < 35 and f"a heavier payload, about {mass:.0f} kg instead of 9.6 kg" in msg, (mass, msg)
     assert f"{force:.0f} N" in msg and "payload_kg" in msg and "a lower top duty" not in msg, msg
+    assert msg.endswith('pamjax design with payload_kg = "auto" designs its duty)'), msg  # the payload slid: designed
+    # where it never slid, the force law is fixed only where the runs held it: a wide sweep first, a design after
+    never = _advice(start, [_window(rec, 1.0)], [0, 0, 100, 0])
+    assert "such as E3's triangle" in never and "once a fit has seen the payload move, pamjax design" in never, never
     heavy = eqx.tree_at(lambda m: m.payload_mass, start, 40.0)
     [msg_heavy] = weak_motion(heavy, [_window(rec, 1.0)])
     assert msg_heavy.endswith("(off the upper stop: a lower top duty)"), msg_heavy

@@ -341,6 +341,19 @@ def weak_motion(model: eqx.Module, experiments) -> list[str]:
             + f"; to identify them, record muscle runs that keep the payload moving ({advice})"]
 
 
+def _design_advice(counts):
+    """How to choose the heavier run's duty: designed at this fit where the payload slid at all (its force law fixed
+    somewhere), else E3's triangle first. Where it never slid, the force law is fixed only where the runs held it (on
+    a stop: the payload's weight at every pressure), and a design at it stands on nothing (rig3100 of
+    benchmarks/design_rigs.py: eq. 7 −1283 N at the lower stop, the design refused to start;
+    benchmarks/RESULTS.md, design, Session 60)."""
+    if counts[0] > 0:
+        return "pamjax design with payload_kg = \"auto\" designs its duty"
+    return ("as a wide duty sweep such as E3's triangle: these runs fix the force law only where they held the "
+            "payload, so a design at this fit would stand on nothing; once a fit has seen the payload move, pamjax "
+            "design with payload_kg = \"auto\" designs its duty")
+
+
 def _advice(model, experiments, counts):
     """What run would move the payload: a wider duty sweep where friction holds it, else another payload (one
     PAYLOAD_SHARE of the force the muscle pulls at zero contraction and supply pressure) where the runs' payloads are
@@ -362,5 +375,5 @@ def _advice(model, experiments, counts):
                 f"payload, about {mass:.0f} kg instead of {max(carried) if upper else min(carried):g} kg — half the "
                 f"{force:.0f} N the muscle pulls at zero contraction and supply pressure, which it lifts at high duty "
                 "and lets down at low duty; record it with payload_kg in the run's meta.json entry or [[experiment]] "
-                "table (pamjax.PayloadFromModel in Python); pamjax design with payload_kg = \"auto\" designs its duty")
+                "table (pamjax.PayloadFromModel in Python); " + _design_advice(counts))
     return "off the upper stop: a lower top duty" if upper else "off the lower stop: a higher bottom duty"
