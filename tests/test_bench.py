@@ -244,6 +244,14 @@ def test_pamjax_fit_with_a_bench_table_starts_stage_by_stage(bench, tmp_path, ca
     assert "the staged start of the fit resumed (staged_start.npz):" in out and "\n  stage 2: 3 parameters" in out
     resumed = json.loads((short / "fit.json").read_text())
     assert resumed["status"] == "converged" and np.array_equal(np.load(short / "staged_start.npz")["values"], kept)
+    # a staged start left without a checkpoint (stopped before the joint fit's first iteration, where the command says
+    # to run it again as it was) is replaced, not refused
+    again = tmp_path / "again"
+    again.mkdir()
+    (again / "staged_start.npz").write_bytes((short / "staged_start.npz").read_bytes())
+    cfg.write_text(body("").replace("max_steps = 60", "max_steps = 2"))
+    assert main(["fit", str(cfg), "--out", str(again), "--quiet", "--no-plot"]) == 0
+    capsys.readouterr()
     # another problem (fewer runs): the kept start is refused, naming what differs
     other = body("").replace(f'dir = "{folder}"', f'dir = "{folder}"\nruns = ["E1", "E3"]')
     cfg.write_text(other)

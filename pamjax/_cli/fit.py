@@ -303,8 +303,9 @@ def run(args):
         + ([fit_start.STAGED_START] if staged else [])
     if args.profile:
         outputs += [PROFILE] + ([] if args.no_plot else [PROFILE_FIGURE])
-    # --resume replaces what the resumed run wrote (its checkpoint proves it is the same problem)
-    replaceable = outputs if args.resume else []
+    # --resume replaces what the resumed run wrote (its checkpoint proves it is the same problem); a staged start
+    # without a checkpoint (a run stopped before the joint fit's first iteration) is replaced by the next start
+    replaceable = outputs if args.resume else [fit_start.STAGED_START]
     with OutputFolder(out, "pamjax fit", outputs, overwrite=args.overwrite, replaceable=replaceable) as folder:
         checkpoint = folder / CHECKPOINT
         if args.resume and not checkpoint.exists():
