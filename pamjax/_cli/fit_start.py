@@ -27,7 +27,7 @@ def save(folder, model, experiments, free, staged):
 
     space = pj.ParameterSpace(staged.model, free)
     arrays = dict(values=np.asarray(space.initial_values(), dtype=np.float64),
-                  labels=np.asarray(space.labels, dtype=str), problem=encode(fingerprint(model, experiments, free)),
+                  problem=encode(fingerprint(model, experiments, free)),  # its model and free list order the values
                   summary=np.asarray(list(staged.summary()), dtype=str))
     folder.write(STAGED_START, lambda path: np.savez(path, **arrays))
 
@@ -42,16 +42,13 @@ def load(path, model, experiments, free):
         return None
     try:
         with np.load(path, allow_pickle=False) as f:
-            values, labels, summary = f["values"], [str(s) for s in f["labels"]], [str(s) for s in f["summary"]]
+            values, summary = f["values"], [str(s) for s in f["summary"]]
             saved = json.loads(str(f["problem"]))
     except (OSError, KeyError, ValueError) as err:
         raise PamjaxInputError(f"resume: {path} is not a readable staged start ({err}); start again with "
                                "--overwrite") from err
     diff = differences(saved, fingerprint(model, experiments, free))
-    space = pj.ParameterSpace(model, free)
-    if not diff and labels != list(space.labels):
-        diff = [f"the free parameters differ (saved: {labels})"]
     if diff:
         raise PamjaxInputError(f"resume: {path} holds the staged start of a different fit: " + "; ".join(diff)
                                + ". Resume with the same config and data, or start again with --overwrite")
-    return space.with_values(values), summary
+    return pj.ParameterSpace(model, free).with_values(values), summary
