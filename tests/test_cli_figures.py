@@ -78,3 +78,26 @@ def test_an_error_in_the_process_comes_back_as_its_own_type(tmp_path):
             process.draw(tmp_path / "no such folder" / "fig.png", _columns())
     finally:
         process.close()
+
+
+def test_many_channels_wrap_into_rows_of_panels(tmp_path):
+    """A rig's ten compared channels: rows of at most `PER_ROW` columns (not one strip 40 inches wide), each
+    column's residual panel right under its data panel, every panel inside the figure and none overlapping."""
+    cols = [dict(c, title=f"{c['title']} {i}") for i in range(3) for c in _columns(seed=i)][:7]
+    fit_figure.draw(tmp_path / "seven.png", cols)
+    fit_figure.draw(tmp_path / "three.png", cols[:3])
+    seven, three = _pixels(tmp_path / "seven.png"), _pixels(tmp_path / "three.png")
+    assert seven.shape[1] == round(4 * fit_figure.PER_ROW * fit_figure.DPI) and seven.shape[0] == 2 * three.shape[0]
+    fig, axes = fit_figure.prepare(_without_models(cols))
+    boxes = [[ax.get_position() for ax in axes[:, j]] for j in range(len(cols))]
+    for j, (upper, lower) in enumerate(boxes):
+        assert lower.y1 < upper.y0 and abs(lower.x0 - upper.x0) < 1e-12, j  # the residuals right under the data
+        assert all(0.0 < v < 1.0 for b in (upper, lower) for v in (b.x0, b.x1, b.y0, b.y1)), j
+    second = fit_figure.PER_ROW  # the first column of the second row: under the first row's panels
+    assert boxes[second][0].y1 < boxes[0][1].y0 and abs(boxes[second][0].x0 - boxes[0][0].x0) < 1e-12
+    visible = [ax for ax in fig.axes if ax.get_visible()]
+    assert len(visible) == 2 * len(cols)
+    for a in range(len(visible)):
+        for b in range(a):
+            p, q = visible[a].get_position(), visible[b].get_position()
+            assert p.x1 <= q.x0 or q.x1 <= p.x0 or p.y1 <= q.y0 or q.y1 <= p.y0  # no two panels overlap

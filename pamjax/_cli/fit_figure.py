@@ -68,28 +68,54 @@ def matches(columns, prepared_columns):
         for a, b in zip(columns, prepared_columns))
 
 
+PER_ROW = 5  # compared channels side by side at most; more wrap into further rows (a 10-channel rig: 2 rows of 5)
+
+
 def _layout(columns):
-    """(figure, axes) with each column's data, title and axis labels."""
-    fig = _figure(figsize=(4 * len(columns), 6), dpi=DPI)
-    axes = fig.subplots(2, len(columns), squeeze=False, sharex="col")
+    """(figure, axes) with each column's data, title and axis labels; `axes[0, j]` and `axes[1, j]` are column j's
+    data and residual panels (one above the other), the columns in rows of at most `PER_ROW`."""
+    n = len(columns)
+    across, rows = min(n, PER_ROW), -(-n // PER_ROW)
+    fig = _figure(figsize=(4 * across, 6 * rows), dpi=DPI)
+    grid = fig.subplots(2 * rows, across, squeeze=False)
+    axes = np.empty((2, n), dtype=object)
+    for j in range(n):
+        axes[0, j], axes[1, j] = grid[2 * (j // across), j % across], grid[2 * (j // across) + 1, j % across]
+        axes[1, j].sharex(axes[0, j])
+        axes[0, j].tick_params(labelbottom=False)
+    for k in range(n, rows * across):  # the last row's empty places
+        grid[2 * (k // across), k % across].set_visible(False)
+        grid[2 * (k // across) + 1, k % across].set_visible(False)
     for j, col in enumerate(columns):
         unit = col["unit"]
         axes[0, j].plot(np.asarray(col["t"]), np.asarray(col["data"]), ".", ms=2, label="data")
         axes[0, j].set(title=col["title"], ylabel=f"{col['channel']} {unit}".strip())
         axes[1, j].set(xlabel="t [s]", ylabel=f"model − data {unit.replace(' abs', '')}".strip())
-    _margins(fig, len(columns))
+    _margins(fig, across, rows)
     return fig, axes
 
 
-def _margins(fig, n):
+def _margins(fig, n, rows):
     """Fixed margins in inches, room for six-digit tick labels (pressures in Pa), an axis label and a title: the
-    layout `tight_layout` would find for these axes, without its extra drawing pass (a third of the figure's time)."""
+    layout `tight_layout` would find for these axes, without its extra drawing pass (a third of the figure's time).
+    Between a column's two panels a small gap, between rows of columns room for the residuals' time axis and the
+    next title."""
     width, height = fig.get_size_inches()
-    left, right, top, bottom, gap_x, gap_y = 0.95, 0.15, 0.35, 0.55, 1.05, 0.2  # inches
+    left, right, top, bottom, gap_x, gap_y, gap_rows = 0.95, 0.15, 0.35, 0.55, 1.05, 0.2, 0.9  # inches
     axis_w = (width - left - right - (n - 1) * gap_x) / n
-    axis_h = (height - top - bottom - gap_y) / 2
+    axis_h = (height - top - bottom - rows * gap_y - (rows - 1) * gap_rows) / (2 * rows)
     fig.subplots_adjust(left=left / width, right=1 - right / width, top=1 - top / height, bottom=bottom / height,
                         wspace=gap_x / axis_w, hspace=gap_y / axis_h)
+    if rows > 1:  # subplots_adjust spaces every row alike: move each pair of panels to its own place
+        for r in range(rows):
+            y0 = bottom + (rows - 1 - r) * (2 * axis_h + gap_y + gap_rows)
+            for ax in fig.axes:
+                spec = ax.get_subplotspec()
+                if spec is not None and spec.rowspan.start // 2 == r:
+                    upper = spec.rowspan.start % 2 == 0
+                    box = ax.get_position()
+                    ax.set_position([box.x0, (y0 + (axis_h + gap_y if upper else 0.0)) / height, box.width,
+                                     axis_h / height])
 
 
 def _warm_up():
