@@ -590,6 +590,9 @@ def test_stroke_limits_are_the_stops_less_the_margin_or_the_rest_position():
     assert stroke_limits(muscle, None, 0.005) == pytest.approx((lo + 0.005, hi - 0.005))
     margin = rest - lo + 0.002  # the payload rests 2 mm inside the margin: the design may go as far as the rest
     assert stroke_limits(muscle, None, margin) == pytest.approx((rest, hi - margin))
+    # strictly below the rest, by far less than any sensor resolves: a design's own solve that holds the payload at a
+    # rest a few units in the last place lower (computed in another program) keeps the limit
+    assert rest - 1e-8 < stroke_limits(muscle, None, margin)[0] < rest - 1e-12
     assert stroke_limits(_tank(), None, 0.005) is None
 
 

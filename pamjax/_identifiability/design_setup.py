@@ -22,6 +22,7 @@ from . import design_objective as obj
 # Defaults and their sources.
 DUTY_BAND = (0.1, 0.9)  # paper 000: with the MHE2's ~2 ms switching time, only duty 10-90 % has an effect at 50 Hz
 STROKE_MARGIN = 0.005  # m; assumed (paper 000 gives no clearance): ≈ 5 % of the MAS-10's 95 mm stroke
+REST_SLACK = 1e-9  # m: a stroke limit set by the start's rest position lies this much beyond it (below)
 DUTY_MARGIN_FRACTION = 0.25  # of a switching threshold's distance from the end of [0, 1] (t_on·f below, t_off·f above):
 # paper 000 gives the MHE2's switching time only as "approximately 2 ms", ±0.5 ms in its rounding (±25 %); a duty within
 # that of a threshold (0.1 ± 0.025 and 0.9 ± 0.025 at 50 Hz) may or may not switch a real valve in its period
@@ -262,7 +263,11 @@ def stroke_limits(model, start, margin):
         return None
     lo, hi = float(model.muscle.min_position) + margin, float(model.muscle.max_position) - margin
     x0 = float(np.asarray(getattr(_start_state(model, dict(start or {})), "position", np.nan)))
-    return (min(lo, x0), max(hi, x0)) if math.isfinite(x0) else (lo, hi)
+    # Where the rest sets a limit, it lies `REST_SLACK` (1 nm) beyond it: the objective's solve holds the payload at
+    # a rest it computes in another program, a few units in the last place away (4e-17 m below on a pilot fit's
+    # model), which the start's check read as a broken limit: ten repairs spent on it, and a start of them instead
+    # of the default one.
+    return ((min(lo, x0 - REST_SLACK), max(hi, x0 + REST_SLACK)) if math.isfinite(x0) else (lo, hi))
 
 
 @eqx.filter_jit
