@@ -94,3 +94,21 @@ def test_float32_mode_is_refused_with_instructions():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert "REFUSED" in out.stdout and "jax_enable_x64" in out.stdout, out.stdout + out.stderr
+
+
+def test_a_gradient_of_the_whole_system_on_the_pwm_grid_names_the_remedy():
+    # jax.grad of a loss of the whole system traces the PWM frequency; the stick-slip model's PWM-synchronous grid
+    # needs it to size the grid: the error names the way that works (the parameters only), which is then checked
+    import jax
+
+    system = presets.mas10_system(valve="pwm", friction="karnopp")
+    ts = jnp.linspace(0.0, 0.2, 11)
+
+    def loss(s):
+        return jnp.mean(pamjax.simulate(s, pamjax.Constant(0.5), ts).position ** 2)
+
+    with pytest.raises(pamjax.PamjaxInputError, match=r"pwm_frequency.*ParameterSpace\(system, free\)\.model\(theta\)"):
+        jax.grad(loss)(system)
+    space = pamjax.ParameterSpace(system, ["muscle.force_law.k0"])
+    g = jax.grad(lambda th: loss(space.model(th)))(jnp.asarray(space.initial_theta()))
+    assert bool(jnp.all(jnp.isfinite(g))) and float(g[0]) != 0.0

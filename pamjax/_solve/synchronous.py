@@ -80,7 +80,9 @@ def num_periods(valve: AbstractSwitchingValve, t0: RealScalarLike, t1: RealScala
     except (TypeError, jax.errors.ConcretizationTypeError) as err:
         raise PamjaxInputError(
             "stepping='pwm' needs concrete t0, ts and pwm_frequency to size its grid; inside jit pass "
-            "num_periods to pamjax's solve() explicitly"
+            "num_periods to pamjax's solve() explicitly; for gradients, differentiate with respect to the parameters "
+            "only (pamjax.ParameterSpace(system, free).model(theta), or eqx.partition), not the whole system, so "
+            "that pwm_frequency stays concrete"
         ) from err
     first = np.floor(t0 * frequency + 1e-9)
     return max(int(np.ceil(t1 * frequency - first - 1e-9)), 1)
