@@ -115,8 +115,10 @@ def _controller(system, signal, ts, rtol, atol, jump_ts, edge_clip):
     from .edge_clip import EdgeClipController
 
     dtmin = None if jump_ts is not None else 50 * jnp.finfo(float).eps * jnp.maximum(jnp.abs(ts[-1]), 1.0)
-    controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=system.valve.max_step(), dtmin=dtmin,
-                                   force_dtmin=False)
+    # dtmax out of the gradient, as diffrax holds its step sizes (a step at dtmax = T/10 would carry the PWM
+    # frequency's tangent into the step times, and a gradient with respect to it blew up: -1e17 over 0.2 s)
+    dtmax = jax.lax.stop_gradient(system.valve.max_step())
+    controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=dtmax, dtmin=dtmin, force_dtmin=False)
     if edge_clip:  # steps end either side of every smoothed switching edge (the valve's next_edge_step)
         controller = EdgeClipController(controller, system.valve, signal)
     if jump_ts is not None:
@@ -388,7 +390,7 @@ def simulate(
         periods = _fixed_grid_periods(system, stepping, substeps, grid_step, start, t_end)
     elif system.valve.exact_edges:
         system, jump_ts = _scheduled(system, signal, start, t_end)
-    elif system.valve.smooth_edges and not (traced_times or _is_traced(system.valve.pwm_frequency)):
+    elif system.valve.smooth_edges:
         # step boundaries around every smoothed edge (the frequency, not the valve's `period`: 1/f run eagerly
         # would compile a one-operation program). An adaptive solve only asks whether num_periods is given, and it
         # is a static argument: one value for every horizon, so that another horizon does not compile again.
