@@ -29,7 +29,10 @@ def _pwm_period(valve):
 def default_max_steps(system, t0, t1):
     """The step budget of a run over [t0, t1] [s]: 200,000, or the horizon's share (64 per PWM period of a switching
     valve, 1,000 per second otherwise) rounded up to 200,000 × a power of two, so that few budgets (each a separate
-    compilation) occur."""
+    compilation) occur. 200,000 where the PWM frequency is traced (`jax.grad` of a loss with respect to the whole
+    system traces it too, and the budget is static)."""
+    if system.valve.switches and isinstance(system.valve.pwm_frequency, jax.core.Tracer):
+        return BASE_MAX_STEPS
     period = _pwm_period(system.valve)
     horizon = max(float(t1) - float(t0), 0.0)
     rate = STEPS_PER_PWM_PERIOD / period if period is not None else STEPS_PER_SECOND

@@ -400,7 +400,7 @@ def simulate(
     if solver is None and stepping == "adaptive":
         solver = default_solver(system)
     if max_steps is None:  # a budget that grows with the horizon (a 1,000 s PWM run needs ~1.6 M steps)
-        max_steps = _default_budget(system, traced_times, t0, t_end)
+        max_steps = 200_000 if traced_times else default_max_steps(system, t0, t_end)
     # A concrete call checks the result on the host (below), so its program is traced with equinox's run-time
     # checks (diffrax's, on the save times) as NaN rather than as host callbacks: JAX does not keep a program with a
     # host callback in its persistent cache, and a second run would compile the solve again.
@@ -457,14 +457,6 @@ def _fixed_grid_periods(system, stepping, substeps, grid_step, t0, t_end):
     if not (isinstance(grid_step, (int, float)) and np.isfinite(grid_step) and grid_step > 0):
         raise PamjaxInputError(f"grid_step must be a positive number of seconds, got {grid_step!r}")
     return fixed_grid_size(system, stepping, t0, t_end, grid_step)
-
-
-def _default_budget(system, traced_times, t0, t_end):
-    """`max_steps` when not given: `default_max_steps`, or 200,000 where the horizon or the PWM frequency is traced
-    (`jax.grad` of a loss with respect to the whole system traces the frequency too, and the budget is static)."""
-    if traced_times or (system.valve.switches and _is_traced(system.valve.pwm_frequency)):
-        return 200_000
-    return default_max_steps(system, float(t0), t_end)
 
 
 def _scheduled(system, signal, t0, t_end):
