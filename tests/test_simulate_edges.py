@@ -168,3 +168,27 @@ def test_a_traced_system_gets_the_same_edge_steps_and_gradients_that_match_finit
         central = (float(loss(eqx.tree_at(get, system, jnp.asarray(x + step))))
                    - float(loss(eqx.tree_at(get, system, jnp.asarray(x - step))))) / (2 * step)
         assert float(get(grads)) == pytest.approx(central, rel=0.03)
+
+
+def test_the_exact_valve_differentiates_in_every_parameter_but_its_timing():
+    # The exact-edge reference computes its switching times before the solve, so its timing (PWM frequency, switch
+    # delays) and the signal must be concrete; its flow coefficients, the muscle and the friction need not be. A
+    # gradient with respect to them was refused as if the whole valve were needed; now it equals central differences.
+    import jax
+    import jax.numpy as jnp
+
+    free = ["valve.inflate.discharge_coefficient", "muscle.force_law.k0", "friction.coulomb_force"]
+    system = presets.mas10_system(valve="exact")
+    space = pj.ParameterSpace(system, free)
+    theta = jnp.asarray(space.initial_theta())
+    ts = jnp.linspace(0.0, 0.5, 51)
+
+    def loss(th):
+        return jnp.mean(pj.simulate(space.model(th), pj.Constant(0.5), ts).position)
+
+    grads = np.asarray(jax.grad(loss)(theta))
+    for i, step in enumerate(np.eye(len(free)) * 1e-5):
+        central = (float(loss(theta + step)) - float(loss(theta - step))) / 2e-5
+        assert grads[i] == pytest.approx(central, rel=1e-3), free[i]
+    with pytest.raises(pj.PamjaxInputError, match=r"mode='exact'.*pwm_frequency and switch delays"):
+        jax.grad(lambda s: jnp.mean(pj.simulate(s, pj.Constant(0.5), ts).position))(system)

@@ -462,12 +462,14 @@ def _fixed_grid_periods(system, stepping, substeps, grid_step, t0, t_end):
 def _scheduled(system, signal, t0, t_end):
     """An exact-edge valve's switching times computed before the solve: the system with a `ScheduledValve` and the
     jump times inside (t0, ts[-1]) handed to the step-size controller (None if there are none)."""
-    if _is_traced((system.valve, signal, t0, t_end)):
-        raise PamjaxInputError(
-            "OnOffValve(mode='exact') needs concrete valve timing and signal (its edge times are computed before "
-            "the solve); use mode='smooth' inside jit/grad/vmap"
-        )
-    edges, states = system.valve.edge_schedule(signal, float(t0), float(t_end))
+    message = ("OnOffValve(mode='exact') needs a concrete signal, pwm_frequency and switch delays (its edge times are "
+               "computed before the solve); use mode='smooth' inside jit/grad/vmap of them (other parameters may be)")
+    if _is_traced((signal, t0, t_end)):
+        raise PamjaxInputError(message)
+    try:  # the flow coefficients may be traced (a gradient or a fit of them): the schedule reads the timing only
+        edges, states = system.valve.edge_schedule(signal, float(t0), float(t_end))
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError) as err:
+        raise PamjaxInputError(message) from err
     system = eqx.tree_at(lambda s: s.valve, system,
                          ScheduledValve(system.valve, device_array(edges), device_array(states)))
     inside = edges[(edges > float(t0)) & (edges < float(t_end))]
