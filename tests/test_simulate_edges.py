@@ -192,3 +192,22 @@ def test_the_exact_valve_differentiates_in_every_parameter_but_its_timing():
         assert grads[i] == pytest.approx(central, rel=1e-3), free[i]
     with pytest.raises(pj.PamjaxInputError, match=r"mode='exact'.*pwm_frequency and switch delays"):
         jax.grad(lambda s: jnp.mean(pj.simulate(s, pj.Constant(0.5), ts).position))(system)
+
+
+def test_the_duty_gradient_through_the_edge_steps_matches_finite_differences():
+    # A tank charged at 50 % duty through the smoothed PWM valve, adaptive steps ending either side of every edge.
+    # The boundaries moved with the duty and carried its tangent into the step times: the gradient came out 5.9 %
+    # above central differences of the same solve. Held out of the gradient (as diffrax holds its step sizes), the
+    # boundaries leave the derivative of the solution itself: within 0.2 %.
+    import jax
+    import jax.numpy as jnp
+
+    tank = presets.mas10_tank_system("smooth")
+    ts = np.linspace(0.0, 0.5, 26)
+
+    def loss(u):
+        return jnp.mean(pj.simulate(tank, pj.Constant(u), ts).pressure)
+
+    grad = float(jax.jit(jax.grad(loss))(jnp.asarray(0.5)))
+    central = (float(loss(0.5 + 1e-3)) - float(loss(0.5 - 1e-3))) / 2e-3
+    assert grad == pytest.approx(central, rel=0.005)
