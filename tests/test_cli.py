@@ -239,8 +239,8 @@ SWEEP_CASES = {
                       r"payload_mass = 9600 kg"),
     "model and system": ('kind = "steady_state"\n[system]\nvalve = "pwm"\n[model]\npreset = "mas10_system"\n',
                          r"either \[system\] .* or \[model\]"),
-    "exact valve from [model]": ('kind = "steady_state"\n[model]\noptions = { valve = "exact" }\n',
-                                 r"exact-edge valve .* use pamjax simulate"),
+    "exact valve's flow surface": ('kind = "flow_surface"\n[model]\noptions = { valve = "exact" }\n',
+                                   r"flow_surface' maps a smoothed switching valve, not the exact-edge one"),
 }
 
 

@@ -150,3 +150,43 @@ def test_cli_sweeps_a_fitted_stick_slip_model_file(tmp_path):
     gain = np.array([float(r["position_gain_m"]) for r in rows])
     np.testing.assert_allclose(gain, ref["position"]["gain"], rtol=1e-9)
     assert np.all(gain > 1e-3)  # 1e-18 m per unit duty before
+
+
+def test_an_exact_edge_valve_is_swept_on_the_pwm_grid_as_simulate_steps_it():
+    # The exact-edge valve (mode "exact") jumps at its edges. Swept with the switching valve's fixed RK4 step, the
+    # jumps fell inside the steps and the tank pressure after 2 s was 90-180 Pa off the exact solution, status 0. Its
+    # lanes now run on the PWM-synchronous grid, the edges nodes of the grid: each equals `simulate(stepping="pwm")`
+    # and lies within a few Pa of the exact-edge adaptive solve at tight tolerance.
+    system = presets.mas10_system(valve="exact")  # smooth friction: no events, only the valve's edges
+    ts = np.linspace(0.0, 2.0, 21)
+    r = pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": np.array([0.2, 0.4])},
+                     reduce=pamjax.FinalValue(), progress=False)
+    assert r.method == "pwm" and np.all(r.status == 0)
+    for k, u in enumerate((0.2, 0.4)):
+        grid = pamjax.simulate(system, pamjax.Constant(u), ts, stepping="pwm")
+        assert abs(r["pressure"][k] - float(grid.pressure[-1])) < PRESSURE_TOL
+        assert abs(r["position"][k] - float(grid.position[-1])) < POSITION_TOL
+        tight = pamjax.simulate(system, pamjax.Constant(u), ts, rtol=1e-10, atol=1e-10)
+        assert abs(r["pressure"][k] - float(tight.pressure[-1])) < 5.0, u  # Pa (docs/performance.md: K = 16)
+    with pytest.raises(PamjaxInputError, match=r"method='rodas5a' cannot sweep this system: its valve switches at "
+                                               r"exact edges"):
+        pamjax.sweep(system, pamjax.Constant(0.5), ts, {"signal.value": np.array([0.2])}, method="rodas5a",
+                     progress=False)
+
+
+def test_cli_sweeps_an_exact_edge_model_file_and_refuses_its_flow_surface(tmp_path, capsys):
+    from pamjax._cli.main import main
+
+    system = presets.mas10_system(valve="exact")
+    pamjax.save_model(tmp_path / "model.json", system)
+    config = tmp_path / "ss.toml"
+    config.write_text('kind = "steady_state"\n[model]\nfile = "model.json"\n[sweep]\ncommands = [0.3, 0.6]\n'
+                      "horizon = 1.0\nwindow = 0.5\n")
+    assert main(["sweep", str(config), "--out", str(tmp_path / "ss"), "--cpu-devices", "1", "--no-plot"]) == 0
+    rows = _rows(tmp_path / "ss" / "sweep.csv")
+    ref = pamjax.steady_state_map(system, np.array([0.3, 0.6]), horizon=1.0, window=0.5, progress=False)
+    np.testing.assert_allclose([float(r["pressure_pa_abs"]) for r in rows], ref["pressure"], rtol=1e-12)
+    config = tmp_path / "fs.toml"
+    config.write_text('kind = "flow_surface"\n[model]\nfile = "model.json"\n')
+    assert main(["sweep", str(config), "--out", str(tmp_path / "fs"), "--no-plot"]) == 2
+    assert "flow_surface' maps a smoothed switching valve" in capsys.readouterr().err

@@ -118,7 +118,7 @@ SIMULATE = {
 SWEEP_TABLES = {"kind", "system", "model", "sweep"}
 SWEEP_KINDS = ("steady_state", "flow_surface", "frequency_response")
 SYSTEM = {  # paper 000's MAS-10 preset (flow_surface: its MHE2 valve alone)
-    # sweeps step on a fixed grid: the smoothed-edge switching valve or eq. 13; the exact-edge valve needs simulate
+    # the smoothed-edge switching valve or eq. 13 (an exact-edge valve: a [model] file; swept on the PWM grid)
     "valve": Key("string", '"pwm"', "smoothed switching, or eq. 13", choices=("pwm", "averaged")),
     "payload_mass": Key("positive number", "9.6", "kg", setting=True),
     "supply_pressure": Key("positive number", "6.5e5", "Pa abs", setting=True),

@@ -92,9 +92,9 @@ def build_sweep_model(config, root):
     if "model" in config:
         model = build_model(config["model"], root)
         valve = model.valve if isinstance(model, AbstractSystem) else None
-        if valve is not None and valve.exact_edges:
-            raise PamjaxInputError("[model]: sweeps step on a fixed grid, which the exact-edge valve (mode = "
-                                   "\"exact\") does not suit; use pamjax simulate for it, or a smoothed valve")
+        if valve is not None and valve.exact_edges and kind == "flow_surface":
+            raise PamjaxInputError("[model]: kind = 'flow_surface' maps a smoothed switching valve, not the "
+                                   "exact-edge one (mode = \"exact\"); use mode = \"smooth\"")
         if kind == "flow_surface" and not (valve is not None and valve.switches):
             raise PamjaxInputError(f"kind = 'flow_surface' maps a switching valve; this model's valve is a "
                                    f"{type(valve).__name__}")

@@ -237,16 +237,24 @@ def _grid_functions(stepping, scaled, hybrid):
 
 
 def observe_run(system, signal, ts, z0, scaled, t0, *, stepping, substeps, size, observe, init):
-    """One run of a hybrid `system` on the fixed grid of `solve_runs` (same intervals, steps and events), each
-    output time passed on the fly to `observe(carry, k, t, state, command)` with the named state and the command
-    in force (the latched duty with a switching valve), nothing of the trajectory kept: a sweep's lane
-    (`pamjax._solve.grid.integrate_observed`). `ts` concrete, `ts[0]` ≥ `t0`. Returns `(carry, finite)`."""
+    """One run of a hybrid `system` (or of one with an exact-edge valve) on the fixed grid of `solve_runs` (same
+    intervals, steps and events), each output time passed on the fly to `observe(carry, k, t, state, command)`
+    with the named state and the command in force (the latched duty with a switching valve), nothing of the
+    trajectory kept: a sweep's lane (`pamjax._solve.grid.integrate_observed`). `ts` concrete, `ts[0]` ≥ `t0`.
+    Returns `(carry, finite)`."""
     t1 = ts[-1]
     if stepping == "pwm":
         left, right, aux = pwm_intervals(system.valve, signal, t0, t1, substeps, size)
     else:
         left, right, aux = uniform_intervals(signal, t0, t1, size)
     field, event, update = _grid_functions(stepping, scaled, system.hybrid)
+    if event is None:  # a smooth plant (a sweep of an exact-edge valve): no event ever fires
+
+        def event(system, t, z):
+            return jnp.ones((), dtype=z.dtype)
+
+        def update(system, t, z):
+            return z
 
     def seen(carry, k, t, z):
         command = latched_command(system.valve, signal, t) if stepping == "pwm" else signal(t)

@@ -79,7 +79,8 @@ def _lane_fixed(system, signal, y0, ts, counts, steps, scheme, channels, reducti
 
 
 def _lane_hybrid(system, signal, y0, ts, grid, channels, reduction):
-    """A hybrid lane (stick-slip friction): `simulate`'s fixed grid with the events located inside the step, the
+    """A hybrid lane (stick-slip friction; or an exact-edge valve's, on the PWM grid with no events): `simulate`'s
+    fixed grid with the events located inside the step, the
     outputs observed on the fly (`pamjax._solve.synchronous.observe_run`), so each lane equals its own `simulate`."""
     stepping, size, substeps = grid
     z0, scaled_state = scaled(system, y0)
@@ -212,6 +213,11 @@ def hybrid_method_and_step(system, signal, values, flat, plan, method, dt, ts):
     up) or "grid" (a continuous valve: uniform RK4 steps of at most `dt`, default `simulate`'s 1 ms), the step no
     longer than 1/100 of the signal's shortest period; `grid` = (stepping, size, substeps), size the periods or
     steps covering `ts`."""
+    if method not in ("auto", "rk4") and not system.hybrid:
+        raise PamjaxInputError(
+            f"method={method!r} cannot sweep this system: its valve switches at exact edges (mode='exact'), which "
+            "only the PWM-synchronous RK4 grid has as nodes (the scheme of pamjax.simulate(..., stepping='pwm')); "
+            "use method='auto' (or 'rk4', with dt its step), or the valve's mode 'smooth' for the other schemes")
     if method not in ("auto", "rk4"):
         raise PamjaxInputError(
             f"method={method!r} cannot sweep this system: it is hybrid (stick-slip friction, e.g. KarnoppFriction), "

@@ -91,7 +91,9 @@ def sweep(
       `solve_options` go to it). A hybrid system (stick-slip friction, `KarnoppFriction`) is integrated as
       `simulate` integrates it, each lane on the fixed RK4 grid with the stick/slip events located inside the step
       (method "grid" for a continuous valve, "pwm" on the PWM-synchronous grid for a switching one): "auto" or
-      "rk4" (`dt` the grid step) only; the schemes that do not see the events are refused.
+      "rk4" (`dt` the grid step) only; the schemes that do not see the events are refused. So is a valve with
+      exact edges (`OnOffValve(mode="exact")`): on the PWM-synchronous grid, its edges nodes of the grid, as
+      `simulate(..., stepping="pwm")` (a fixed RK4 step straddling its jumps was 90-180 Pa off after 2 s).
     - `dt`: the fixed step [s] (the first step for "rodas5a"/"ros2a"). Default: RK4 at 2.5 / (largest |eigenvalue|
       of the Jacobian at the initial states) (its stability limit with a 10 % margin), "rodas5a"'s first step 1 ms,
       the others 5 ms; all capped at 2 PWM edge widths for a switching valve and at 1/100 of the signal's shortest
@@ -141,7 +143,7 @@ def sweep(
                                                                                 float(ts_np[0])))))))
 
     grid = None
-    if system.hybrid:  # stick-slip friction: simulate's fixed grid with its events (lanes.hybrid_method_and_step)
+    if system.hybrid or system.valve.exact_edges:  # stick-slip friction or exact edges: simulate's fixed grid
         method, dt, grid = hybrid_method_and_step(system, signal, values, flat, plan, method, dt, ts_np)
     else:
         method, dt = method_and_step(system, signal, values, flat, plan, method, dt, stiffness)
