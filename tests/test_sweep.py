@@ -201,3 +201,35 @@ def test_flow_surface_equals_cycle_average_and_cli_writes_outputs(tmp_path):
     data = np.load(tmp_path / "out" / "sweep.npz")
     np.testing.assert_allclose(data["mass_flow_kg_s"], flow_surface(valve, [0.2, 0.8], [2e5, 5e5], air).ravel())
     assert (tmp_path / "out" / "sweep.csv").read_text().startswith("duty,pressure_pa_abs,mass_flow_kg_s")
+
+
+def test_paper_001s_systems_sweep_and_a_joints_pairs_are_named():
+    # Sweeps of a regulated muscle crashed with an AttributeError (the lanes read `state.pressure`, which its state
+    # keeps in its regulator's); a joint's default channels stacked its muscles' pairs with scalars (a ValueError).
+    # The lanes now read the pressure from the system's outputs; a joint's default channels are its scalar ones, and
+    # a pair asked for is refused by name.
+    import pamjax as pj
+    from pamjax._sweep.lanes import channel_shapes
+    from pamjax._sweep.plan import make_plan, structure
+
+    muscle = pj.presets.dmsp40_muscle()
+    regulated = pj.RegulatedMuscleSystem(pj.ISO6358Regulator(), muscle)
+    volts = np.array([1.0, 3.0])
+    r = sweep(regulated, pj.Constant(0.0), TS, {"signal.value": volts}, reduce=FinalValue(), progress=False)
+    assert np.all(r.status == 0)
+    for k, v in enumerate(volts):
+        traj = pj.simulate(regulated, pj.Constant(float(v)), TS, rtol=1e-9, atol=1e-9)
+        assert abs(r["pressure"][k] - float(traj.pressure[-1])) < 10.0  # Pa: rodas5a at 1e-5 of 1 bar
+        assert abs(r["position"][k] - float(traj.position[-1])) < 1e-6
+    joint = pj.AntagonisticJoint(pj.ISO6358Regulator(), pj.ISO6358Regulator(), muscle, muscle)
+    signal = pj.VoltagePair(pj.Constant(3.0), pj.Constant(1.5))
+    # the joint's channels as a sweep sees them (traced, not solved: a joint's sweep compiles for ~20 s here; by hand
+    # its default-channel sweep equalled simulate's angle to 1e-8 rad)
+    plan, values, _ = make_plan(joint, signal, structure(joint, None)[0], {"signal.flexor.value": volts})
+    shapes = channel_shapes(joint, signal, None, plan, {k: jnp.asarray(v.reshape(-1)[0]) for k, v in values.items()},
+                            0.0)
+    assert [c for c, shape in shapes.items() if shape == ()] == ["angle", "angular_velocity"]
+    assert shapes["pressure"] == (2,)
+    with pytest.raises(pj.PamjaxInputError, match=r"channel 'pressure' of this system has shape \(2,\) per point; a "
+                                                  r"sweep maps scalar channels: choose among \['angle'"):
+        sweep(joint, signal, TS, {"signal.flexor.value": volts}, channels=("pressure",), progress=False)

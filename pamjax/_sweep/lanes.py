@@ -40,9 +40,11 @@ DEFAULT_GRID_STEP = inspect.signature(solve).parameters["grid_step"].default
 
 
 def _observe(system, signal, t, state, channels):
+    """(the channels at `t`, stacked; whether every absolute pressure of the system is > 0: its outputs' "pressure",
+    every system's, one chamber's or several, wherever its state keeps it)."""
     command = signal(system.valve.command_time(t))
     outs = dict(system.outputs(t, state, command), command=command)
-    return jnp.stack([jnp.asarray(outs[c], dtype=float) for c in channels])
+    return jnp.stack([jnp.asarray(outs[c], dtype=float) for c in channels]), jnp.all(outs["pressure"] > 0)
 
 
 def _lane_fixed(system, signal, y0, ts, counts, steps, scheme, channels, reduction):
@@ -62,8 +64,8 @@ def _lane_fixed(system, signal, y0, ts, counts, steps, scheme, channels, reducti
     def update(carry, k, t, z):
         acc, physical = carry
         state = state_of(z)
-        obs = _observe(system, signal, t, state, channels)
-        physical = physical & jnp.all(state.pressure > 0)
+        obs, positive = _observe(system, signal, t, state, channels)
+        physical = physical & positive
         if reduction is None:
             acc = acc.at[k].set(obs)
         else:
@@ -100,7 +102,7 @@ def _lane_hybrid(system, signal, y0, ts, grid, channels, reduction):
             outs = system.outputs(t, state, command)
         outs = dict(outs, command=command)
         obs = jnp.stack([jnp.asarray(outs[c], dtype=float) for c in channels])
-        physical = physical & jnp.all(state.pressure > 0)
+        physical = physical & jnp.all(outs["pressure"] > 0)  # every system's outputs have it (_observe)
         acc = acc.at[k].set(obs) if reduction is None else acc + w[k] * obs
         return acc, physical
 
@@ -260,6 +262,18 @@ def _edge_time_scale(system, plan, flat):
 
 
 @eqx.filter_jit
+def channel_shapes(system, signal, y0, plan, values, t0):
+    """{channel: shape} of one lane's outputs at `t0` (`values`: one point's swept values), traced, not solved: a
+    joint's "pressure" is both muscles', (2,)."""
+
+    def outputs(vals):
+        sys_l, sig_l, y0_l = make_lane(system, signal, y0, plan, vals)
+        command = sig_l(sys_l.valve.command_time(t0))
+        return dict(sys_l.outputs(t0, y0_l, command), command=command)
+
+    return {c: tuple(v.shape) for c, v in jax.eval_shape(outputs, values).items()}
+
+
 def jacobians(system, signal, y0, plan, values, t0):
     """Each lane's Jacobian of the scaled vector field at its initial state [1/s] (eigenvalues taken on the host,
     as not every backend has a non-symmetric eigensolver)."""

@@ -27,7 +27,7 @@ from .._core.fastjit import keyed_by_code
 from .._physics.signals import AbstractSignal
 from .._solve import fixed_step as _fixed_step
 from .._systems.base import AbstractSystem
-from .lanes import chunk_program, hybrid_method_and_step, jacobians, method_and_step
+from .lanes import channel_shapes, chunk_program, hybrid_method_and_step, jacobians, method_and_step
 from .plan import make_plan, structure, validate_values
 from .reductions import AbstractReduction
 from .result import SUCCESS, SweepResult, in_point_order
@@ -131,10 +131,16 @@ def sweep(
     validate_values(system, signal, y0, plan, values, batch_size)
     flat = {k: np.ascontiguousarray(v.reshape((batch_size,) + s))
             for (k, v), s in zip(values.items(), plan.leaf_shapes)}
-    channels = tuple(available) if channels is None else tuple(channels)
+    shapes = channel_shapes(system, signal, y0, plan, {k: jnp.asarray(v[0]) for k, v in flat.items()},
+                            float(ts_np[0]))
+    scalars = [c for c in available if shapes.get(c, ()) == ()]  # a sweep maps scalar channels (not a joint's pair)
+    channels = tuple(scalars) if channels is None else tuple(channels)
     for c in channels:
         if c not in available:
             raise PamjaxInputError(f"unknown channel {c!r}; this system has {available}")
+        if c not in scalars:
+            raise PamjaxInputError(f"channel {c!r} of this system has shape {shapes[c]} per point; a sweep maps "
+                                   f"scalar channels: choose among {scalars}")
 
     def stiffness():
         sample = np.unique(np.linspace(0, batch_size - 1, min(batch_size, 64)).astype(int))
