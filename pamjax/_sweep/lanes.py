@@ -261,7 +261,6 @@ def _edge_time_scale(system, plan, flat):
     return float(np.min(np.asarray(lanes({k: jnp.asarray(v) for k, v in flat.items()}))))
 
 
-@eqx.filter_jit
 def channel_shapes(system, signal, y0, plan, values, t0):
     """{channel: shape} of one lane's outputs at `t0` (`values`: one point's swept values), traced, not solved: a
     joint's "pressure" is both muscles', (2,)."""
@@ -274,6 +273,7 @@ def channel_shapes(system, signal, y0, plan, values, t0):
     return {c: tuple(v.shape) for c, v in jax.eval_shape(outputs, values).items()}
 
 
+@eqx.filter_jit
 def jacobians(system, signal, y0, plan, values, t0):
     """Each lane's Jacobian of the scaled vector field at its initial state [1/s] (eigenvalues taken on the host,
     as not every backend has a non-symmetric eigensolver)."""
