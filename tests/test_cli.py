@@ -16,6 +16,7 @@ import pytest
 import pamjax
 import pamjax._cli.out as cli_out
 import pamjax._cli.sweep as cli_sweep
+from pamjax import presets
 from pamjax._cli.main import main
 from pamjax._cli.out import OutputFolder
 
@@ -522,3 +523,36 @@ def test_an_interrupt_inside_the_import_lock_waits_until_the_lock_is_free():
     """)
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.stdout.split() == ["False", "True", "False"], out.stdout + out.stderr
+
+
+def test_a_regulator_models_sweep_takes_volts_and_names_its_range(tmp_path, capsys, no_solves):
+    # `pamjax sweep` held every model's commands to duty ratios in [0, 1]: a regulator-fed model (0-10 V reference,
+    # paper 001) could not be mapped at its own commands, though `pamjax.steady_state_map` takes them. Now they are
+    # checked against the model's command range, which is also the default axis; columns and labels say volts.
+    from pamjax._cli.kinds import VOLTAGE, command_of, commands
+
+    model = pamjax.RegulatedMuscleSystem(pamjax.ISO6358Regulator(), presets.dmsp40_muscle(), load_force=893.0)
+    pamjax.save_model(tmp_path / "reg.json", model)
+    config = _write(tmp_path, 'kind = "steady_state"\n[model]\nfile = "reg.json"\n[sweep]\ncommands = [2.0, 8.0]\n')
+    assert cli_sweep.prepare(tomllib.loads(config.read_text()), tmp_path) is not None  # no error: volts accepted
+    assert command_of(model) is VOLTAGE
+    np.testing.assert_allclose(commands({}, model, 11), np.linspace(0.0, 10.0, 11))  # the default: the range
+    config.write_text(config.read_text().replace("[2.0, 8.0]", "[2.0, 12.0]"))
+    _refused(capsys, ["sweep", str(config), "--out", str(tmp_path / "out"), "--cpu-devices", "1"],
+             r"commands are reference voltages of the model's RegulatedMuscleSystem \[V\] in \[0, 10\], got 2 … 12")
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_trajectory_csv_names_a_regulators_volts_and_every_channels_unit():
+    # `pamjax simulate` wrote `command [1]` for a regulator's 0-10 V reference and `inlet_flow []` (no unit).
+    import types
+
+    from pamjax._cli.simulate import columns_of, command_unit
+
+    model = pamjax.RegulatedMuscleSystem(pamjax.ISO6358Regulator(), presets.dmsp40_muscle(), load_force=893.0)
+    assert command_unit(model) == "V" and command_unit(presets.mas10_system("averaged")) == "1"
+    names = [*model.output_names, "command"]
+    traj = types.SimpleNamespace(t=np.zeros(2), channels=lambda: names, channel=lambda c: np.zeros(2))
+    cols, units = columns_of(traj, command_unit(model))
+    assert units["command"] == "V" and units["inlet_flow"] == "kg/s"
+    assert all(units[c] for c in cols), units

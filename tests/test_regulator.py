@@ -129,6 +129,13 @@ def test_bad_tables_and_voltages_are_named():
         VoltageCalibration(voltage=(0.0, 12.0), gauge_pressure=(0.0, 1e6))
     with pytest.raises(pamjax.PamjaxInputError, match=r"\[0.0, 10.0\]"):
         pamjax.simulate(RegulatorSystem(LinearRegulator(), volume=0.0), SquareWave(0.0, 12.0), np.linspace(0, 0.1, 3))
+    # a tank fed by a regulator: a TankSystem took one and crashed in its solve (AttributeError: no `mass_flow`);
+    # `TankFromModel` (a config's `tank_volume`) of a regulator-fed model built that TankSystem
+    with pytest.raises(pamjax.PamjaxInputError, match=r"TankSystem.valve must be a valve .* got ISO6358Regulator: a "
+                                                      r"tank fed by a pressure regulator is a RegulatorSystem"):
+        pamjax.TankSystem(valve=ISO6358Regulator(), volume=5e-5)
+    tank = pamjax.TankFromModel(5e-5)(RegulatedMuscleSystem(ISO6358Regulator(), dmsp40_muscle()))
+    assert isinstance(tank, RegulatorSystem) and float(tank.volume) == 5e-5
 
 
 def test_linear_regulator_step_matches_eq6_analytically():

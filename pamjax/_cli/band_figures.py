@@ -80,7 +80,7 @@ def trajectory(path, traj, band, recording=None, title=""):
 
 
 def _steady(spec, b):
-    _, u, r = spec
+    _, u, r, command = spec
     names = [c for c in ("pressure", "position") if c in r.channels]
     plt, fig, axes = _figure(2 * len(names), [3, 1] * len(names), width=7)
     for k, c in enumerate(names):
@@ -90,25 +90,27 @@ def _steady(spec, b):
         shade(ax, u, b.lower[c], b.upper[c], b, to)
         ax.set(ylabel="pressure [MPa gauge]" if c == "pressure" else "displacement [mm]")
         deviation(axes[2 * k + 1], u, b.prediction[c], b.lower[c], b.upper[c], c, c)
-    for a in axes:
+    for a in axes if command.dead_bands else ():
         a.axvspan(0, 0.1, color="gray", alpha=0.15)
         a.axvspan(0.9, 1.0, color="gray", alpha=0.15)
-    axes[0].set_title(f"Steady state against constant duty, {100 * b.level:g} % band ({b.method})", fontsize=9)
+    axes[0].set_title(f"Steady state against a constant {command.label}, {100 * b.level:g} % band ({b.method})",
+                      fontsize=9)
     axes[0].legend(fontsize=7)
-    axes[-1].set(xlabel="duty ratio u [-]")
+    axes[-1].set(xlabel=command.label)
     return plt, fig
 
 
 def _bode(spec, b):
-    _, f, fr = spec
+    _, f, fr, command = spec
     channel = "position" if "position" in fr else "pressure"
     scale, unit = (1e3, "mm") if channel == "position" else (1e-5, "bar")
     gain, phase = f"{channel}_gain", f"{channel}_phase"
     plt, fig, axes = _figure(4, [3, 1, 3, 1], width=7)
     axes[0].loglog(f, fr[channel]["gain"] * scale)
     shade(axes[0], f, b.lower[gain], b.upper[gain], b, lambda v: v * scale)
-    axes[0].set(ylabel=f"gain [{unit} per unit duty]")
-    axes[0].set_title(f"Frequency response: duty → {channel}, {100 * b.level:g} % band ({b.method})", fontsize=9)
+    axes[0].set(ylabel=f"gain [{unit} per {command.unit}]")
+    axes[0].set_title(f"Frequency response: {command.column} → {channel}, {100 * b.level:g} % band ({b.method})",
+                      fontsize=9)
     axes[0].legend(fontsize=7)
     deviation(axes[1], f, b.prediction[gain], b.lower[gain], b.upper[gain], "percent", "gain", relative=True)
     axes[2].semilogx(f, fr[channel]["phase"])
@@ -120,7 +122,7 @@ def _bode(spec, b):
 
 
 def _surface(spec, b):
-    _, u, p, flow = spec
+    _, u, p, flow, command = spec
     plt, fig, axes = _figure(2, [3, 1.5], width=7)
     for n, j in enumerate(range(0, len(p), max(1, len(p) // 8))):
         color = f"C{n % 10}"
@@ -132,7 +134,7 @@ def _surface(spec, b):
     axes[0].set_title(f"Averaged flow surface (chamber held at p), {100 * b.level:g} % band ({b.method}) shaded",
                       fontsize=9)
     axes[0].legend(fontsize=7)
-    axes[-1].set(xlabel="duty ratio u [-]")
+    axes[-1].set(xlabel=command.label)
     return plt, fig
 
 

@@ -21,6 +21,7 @@ from .._bands.uncertainty import PamjaxBandWarning, propagation, read_uncertaint
 from .._core.errors import PamjaxInputError
 from .._fit.parameters import split_path
 from .._systems.base import AbstractMuscleSystem
+from .kinds import commands
 
 DEFAULT_LEVEL = 0.95  # the two-sided 95 % band (z = 1.96), the usual default for confidence bands
 DEFAULT_SAMPLES = 200  # draws: the 2.5 % quantile then scatters by ~0.19 σ (docs/fitting.md)
@@ -203,11 +204,11 @@ def _one_map(config, model, uncertainty, options, axis):
     if kind == "flow_surface":
         from .._core.units import ATMOSPHERE
 
-        u = axis("commands", {"start": 0, "stop": 1, "num": 41})
+        u = commands(config.get("sweep", {}), model, 41)
         p = axis("pressures", {"start": ATMOSPHERE, "stop": float(model.valve.supply_pressure), "num": 41})
         band = flow_surface_band(uncertainty, u, p, model=model, **options)
     elif kind == "steady_state":
-        u = axis("commands", {"start": 0, "stop": 1, "num": 101})
+        u = commands(config.get("sweep", {}), model, 101)
         kwargs = {k: float(sw[k]) for k in ("horizon", "window", "sample_interval") if k in sw}
         band = steady_state_band(uncertainty, u, model=model, progress=False, **kwargs, **solver, **options)
     else:

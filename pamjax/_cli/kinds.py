@@ -266,8 +266,9 @@ def check_free(free, key, where, table=None, name=None):
 
 
 def axis(spec, name):
-    """The values of a `[sweep]` axis: a non-empty list of numbers, or `{ start, stop, num[, log] }`; duty ratios in
-    [0, 1] for `commands`, absolute pressures for `pressures`, positive frequencies for `frequencies`."""
+    """The values of a `[sweep]` axis: a non-empty list of numbers, or `{ start, stop, num[, log] }`; absolute
+    pressures for `pressures`, positive frequencies for `frequencies` (`commands` are checked against the model's
+    command range by `commands`, once the model is built)."""
     if isinstance(spec, list) and spec and all(is_number(v) for v in spec):
         values = np.asarray(spec, dtype=float)
     elif isinstance(spec, dict) and {"start", "stop", "num"} <= set(spec):
@@ -287,14 +288,50 @@ def axis(spec, name):
                                + (" (a single string where a list is expected)" if isinstance(spec, str) else ""))
     if not np.all(np.isfinite(values)):
         raise PamjaxInputError(f"[sweep] {name} must be finite numbers, got {spec!r}")
-    if name == "commands" and not np.all((values >= 0) & (values <= 1)):
-        hint = " (these look like percent: divide by 100)" if np.all((values >= 0) & (values <= 100)) else ""
-        raise PamjaxInputError(f"[sweep] commands are duty ratios in [0, 1], got {values.min():g} … "
-                               f"{values.max():g}{hint}")
     if name == "pressures":
         check_absolute_pressure(values, "[sweep] pressures")
     if name == "frequencies" and not np.all(values > 0):
         raise PamjaxInputError(f"[sweep] frequencies must be > 0 [Hz], got {values.min():g}")
+    return values
+
+
+class Command(NamedTuple):
+    """A model's command as a sweep writes and draws it: the CSV column, the axis label, the unit of a gain per
+    command, and whether the valve's dead bands (duty < 0.1, > 0.9: paper 000, Sect. 2) are shaded."""
+
+    column: str
+    label: str
+    unit: str
+    dead_bands: bool
+
+
+DUTY = Command("duty", "duty ratio u [-]", "unit duty", True)
+VOLTAGE = Command("command_v", "reference voltage [V]", "V", False)
+
+
+def command_bounds(model):
+    """The model's command range as two floats: [0, 1] for a valve's duty ratio, 0-10 V for a regulator's reference
+    (paper 001, Sect. 2)."""
+    lo, hi = getattr(model, "command_range", None) or model.valve.command_range
+    return float(np.min(lo)), float(np.max(hi))
+
+
+def command_of(model):
+    """`DUTY` for a valve's model, `VOLTAGE` for a regulator's."""
+    return DUTY if command_bounds(model) == (0.0, 1.0) else VOLTAGE
+
+
+def commands(sw, model, num):
+    """A `[sweep]` map's commands: `commands` if given, else `num` points over the model's command range; refused,
+    naming the range, where any lies outside it."""
+    lo, hi = command_bounds(model)
+    values = axis(sw.get("commands", {"start": lo, "stop": hi, "num": num}), "commands")
+    if not np.all((values >= lo) & (values <= hi)):
+        duty = command_of(model) is DUTY
+        hint = " (these look like percent: divide by 100)" if duty and np.all((values >= 0) & (values <= 100)) else ""
+        what = "duty ratios" if duty else f"reference voltages of the model's {type(model).__name__} [V]"
+        raise PamjaxInputError(f"[sweep] commands are {what} in [{lo:g}, {hi:g}], got {values.min():g} … "
+                               f"{values.max():g}{hint}")
     return values
 
 

@@ -31,7 +31,13 @@ DEFAULT_DT = 0.01  # s: 100 rows per second, the rate of paper 000's figures
 LONG_ROWS = 100_000  # a run with more output rows than this is announced before it starts (it takes a while)
 MAX_ROWS = 2_000_000  # a larger CSV (hundreds of MB) is more likely a unit slip (t_end in ms) than a wish
 _UNITS = {"t": "s", "command": "1", "pressure": "Pa abs", "position": "m", "velocity": "m/s", "force": "N",
-          "friction_force": "N", "mass_flow": "kg/s", "volume": "m^3"}
+          "friction_force": "N", "mass_flow": "kg/s", "inlet_flow": "kg/s", "volume": "m^3"}
+
+
+def command_unit(system):
+    """The command's unit: a duty ratio ("1") for a valve's [0, 1], volts for a regulator's 0-10 V reference (paper
+    001, Sect. 2: every other `command_range` pamjax has is the regulator's)."""
+    return "1" if tuple(float(np.max(b)) for b in system.command_range) == (0.0, 1.0) else "V"
 
 
 def add_arguments(parser):
@@ -115,14 +121,14 @@ def build_run(cfg, model, root):
     return Run(cfg, pathlib.Path(root), model, system, signal, jnp.asarray(ts), kwargs, recording)
 
 
-def columns_of(traj):
+def columns_of(traj, command="1"):
     """The trajectory's channels as CSV columns (name → array) and their units, in the order of `_UNITS` (docs/cli.md:
     t, command, pressure, position, velocity, force, friction_force, mass_flow, volume), then any others."""
     cols = {"t": np.asarray(traj.t)}
     channels = traj.channels()
     for c in [c for c in _UNITS if c in channels] + [c for c in channels if c not in _UNITS]:
         cols[c] = np.asarray(traj.channel(c))
-    return cols, {c: _UNITS.get(c, "") for c in cols}
+    return cols, {c: command if c == "command" else _UNITS.get(c, "") for c in cols}
 
 
 PLOT_POINTS = 100_000  # a figure's width holds ~1,000 pixels: more points than this are drawn as their envelope
@@ -146,7 +152,7 @@ def _envelope(t, y):
     return np.concatenate([ts, t[n:]]), np.concatenate([ys, y[n:]])
 
 
-def plot(path, traj, recording=None, title=""):
+def plot(path, traj, recording=None, title="", command="1"):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -155,7 +161,7 @@ def plot(path, traj, recording=None, title=""):
     panels = [("pressure", 1e-6, "pressure [MPa abs]")]
     if traj.position is not None:
         panels += [("position", 1e3, "position [mm]"), ("force", 1.0, "muscle force [N]")]
-    panels.append(("command", 1.0, "command"))
+    panels.append(("command", 1.0, "command [V]" if command == "V" else "command (duty)"))
     fig, axes = plt.subplots(len(panels), 1, figsize=(9, 2.3 * len(panels)), sharex=True, squeeze=False)
     t = np.asarray(traj.t)
     for ax, (c, scale, label) in zip(axes[:, 0], panels):
@@ -196,13 +202,13 @@ def run(args):
         if len(ts) > LONG_ROWS:  # a run of minutes: say so before it starts
             print(f"pamjax simulate: solving {float(ts[-1] - ts[0]):g} s ({len(ts):,} output times) ...", flush=True)
         traj = pj.simulate(system, signal, ts, **kwargs)
-        cols, units = columns_of(traj)
+        cols, units = columns_of(traj, command_unit(system))
         summary = ", ".join(f"{c} {np.min(v):.6g} … {np.max(v):.6g} {units[c]}" for c, v in cols.items()
                             if c in ("pressure", "position"))
         print(f"pamjax simulate: {type(system).__name__}, {len(ts)} output times over "
               f"{float(ts[-1] - ts[0]):g} s, {int(traj.num_steps)} solver steps; {summary}")
         comment = f"pamjax simulate {args.config}: {type(system).__name__}; pressures absolute"
-        figure = lambda p: plot(p, traj, recording, str(args.config))  # noqa: E731
+        figure = lambda p: plot(p, traj, recording, str(args.config), units["command"])  # noqa: E731
         if band_source is not None:  # --band: <channel>_lower / _upper columns, the band drawn in the figure
             comment, figure = bands.add_to_simulation(args, r, band_source, traj, cols, units, comment)
         written = [folder.write("trajectory.csv", lambda p: write_table(p, cols, units, comment))]

@@ -35,7 +35,7 @@ from .._sweep.maps import flow_surface, frequency_response, steady_state_map
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from . import bands, schema
 from .config import apply_set, build_model, read_toml
-from .kinds import axis as _axis
+from .kinds import axis as _axis, command_of, commands
 from .out import OutputFolder
 from .schema import SOLVER_KEYS
 
@@ -79,10 +79,7 @@ def load(path):
     path against it (nothing solved); returns (config, model)."""
     path = pathlib.Path(path)
     config = read_toml(path)
-    schema.validate_sweep(config)
-    model = build_sweep_model(config, path.parent)
-    check_over(config, model)
-    return config, model
+    return config, prepare(config, path.parent)
 
 
 def build_sweep_model(config, root):
@@ -139,6 +136,8 @@ def prepare(config, root="."):
     schema.validate_sweep(config)
     model = build_sweep_model(config, root)
     check_over(config, model)
+    if config["kind"] != "frequency_response":
+        commands(config.get("sweep", {}), model, 1)  # within the model's command range
     return model
 
 
@@ -175,14 +174,15 @@ def _run_one(config, model, progress, native_over):
     options = {k: sw[k] for k in SOLVER_KEYS if k in sw}
     if kind == "flow_surface":
         valve = model.valve
-        u = _axis(sw.get("commands", {"start": 0, "stop": 1, "num": 41}), "commands")
+        u = commands(sw, model, 41)
         default_p = {"start": ATMOSPHERE, "stop": float(valve.supply_pressure), "num": 41}  # p_atm (ISO 2533) … p_s
         p = _axis(sw.get("pressures", default_p), "pressures")
         flow = flow_surface(valve, u, p, model.air)
         uu, pp = np.meshgrid(u, p, indexing="ij")
-        return dict(duty=uu.ravel(), pressure_pa_abs=pp.ravel(), mass_flow_kg_s=flow.ravel()), ("surface", u, p, flow)
+        return ({command_of(model).column: uu.ravel(), "pressure_pa_abs": pp.ravel(),
+                 "mass_flow_kg_s": flow.ravel()}, ("surface", u, p, flow, command_of(model)))
     if kind == "steady_state":
-        u = _axis(sw.get("commands", {"start": 0, "stop": 1, "num": 101}), "commands")
+        u = commands(sw, model, 101)
         kwargs = {k: float(sw[k]) for k in ("horizon", "window", "sample_interval") if k in sw}
         grid = {}  # axis k for the k-th swept path, the last axis for the commands
         for k, (path, values) in enumerate((native_over or {}).items()):
@@ -190,11 +190,12 @@ def _run_one(config, model, progress, native_over):
         r = steady_state_map(model, u, progress=progress, over=grid or None, **kwargs, **options)
         shape = np.broadcast_shapes(u.shape, *(v.shape for v in grid.values()))
         cols = {_over_name(model, p): np.broadcast_to(v, shape).ravel() for p, v in grid.items()}
-        cols.update(duty=np.broadcast_to(u, shape).ravel(), pressure_pa_abs=np.ravel(r["pressure"]))
+        cols.update({command_of(model).column: np.broadcast_to(u, shape).ravel(),
+                     "pressure_pa_abs": np.ravel(r["pressure"])})
         if "position" in r.channels:
             cols["position_m"] = np.ravel(r["position"])
         cols["status"] = np.ravel(r.status)
-        return cols, (("steady", u, r) if not grid else ("table", cols, list(cols)[: len(grid)]))
+        return cols, (("steady", u, r, command_of(model)) if not grid else ("table", cols, list(cols)[: len(grid)]))
     f = _axis(sw.get("frequencies", {"start": 0.05, "stop": 5.0, "num": 16, "log": True}), "frequencies")
     kwargs = {k: float(sw[k]) for k in ("offset", "amplitude") if k in sw}
     kwargs.update({k: int(sw[k]) for k in ("settle_periods", "periods", "samples_per_period") if k in sw})
@@ -205,7 +206,7 @@ def _run_one(config, model, progress, native_over):
         cols.update(position_gain_m=fr["position"]["gain"], position_phase_deg=fr["position"]["phase"])
     cols.update(pressure_gain_pa=fr["pressure"]["gain"], pressure_phase_deg=fr["pressure"]["phase"],
                 status=fr["result"].status)
-    return cols, ("bode", f, fr)
+    return cols, ("bode", f, fr, command_of(model))
 
 
 def plot(spec, path):
@@ -216,33 +217,33 @@ def plot(spec, path):
 
     kind = spec[0]
     if kind == "surface":
-        _, u, p, flow = spec
+        _, u, p, flow, command = spec
         fig, ax = plt.subplots(figsize=(7, 5))
         for j in range(0, len(p), max(1, len(p) // 8)):
             ax.plot(u, flow[:, j] * 1e3, label=f"p = {(p[j] - ATMOSPHERE) / 1e6:.2f} MPa gauge")
-        ax.set(xlabel="duty ratio u [-]", ylabel="cycle-averaged mass flow [g/s]",
+        ax.set(xlabel=command.label, ylabel="cycle-averaged mass flow [g/s]",
                title="Averaged flow surface of the switching valve (chamber held at p)")
         ax.legend(fontsize=7)
     elif kind == "steady":
-        _, u, r = spec
+        _, u, r, command = spec
         rows = 2 if "position" in r.channels else 1
         fig, axes = plt.subplots(rows, 1, figsize=(7, 3.5 * rows), sharex=True, squeeze=False)
         axes[0, 0].plot(u, (r["pressure"] - ATMOSPHERE) / 1e6)
-        axes[0, 0].set(ylabel="pressure [MPa gauge]", title="Steady state against constant duty")
+        axes[0, 0].set(ylabel="pressure [MPa gauge]", title=f"Steady state against a constant {command.label}")
         if rows == 2:
             axes[1, 0].plot(u, r["position"] * 1e3)
             axes[1, 0].set(ylabel="displacement [mm]")
-        axes[-1, 0].set(xlabel="duty ratio u [-]")
-        for a in axes[:, 0]:
+        axes[-1, 0].set(xlabel=command.label)
+        for a in axes[:, 0] if command.dead_bands else ():
             a.axvspan(0, 0.1, color="gray", alpha=0.15)
             a.axvspan(0.9, 1.0, color="gray", alpha=0.15)
     elif kind == "bode":
-        _, f, fr = spec
+        _, f, fr, command = spec
         channel = "position" if "position" in fr else "pressure"
         scale, unit = (1e3, "mm") if channel == "position" else (1e-5, "bar")
         fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 7), sharex=True)
         a1.loglog(f, fr[channel]["gain"] * scale)
-        a1.set(ylabel=f"gain [{unit} per unit duty]", title=f"Frequency response: duty → {channel}")
+        a1.set(ylabel=f"gain [{unit} per {command.unit}]", title=f"Frequency response: {command.column} → {channel}")
         a2.semilogx(f, fr[channel]["phase"])
         a2.set(xlabel="frequency [Hz]", ylabel="phase [deg]")
     else:  # a grid over parameters: one line per swept point against the map's own axis

@@ -8,7 +8,9 @@ import equinox as eqx
 from .._core.arrays import as_scalar
 from .._core.custom_types import RealScalar
 from .._core.errors import PamjaxInputError, check_positive
+from .._physics.regulator import AbstractRegulator
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
+from .._systems.regulated import RegulatorSystem
 from .._systems.tank import TankSystem
 
 # The payload `PayloadFromModel.advised` (and the weak-motion warning of a fit, `pamjax._fit.force_balance`) proposes
@@ -28,12 +30,16 @@ class SameSystem(eqx.Module):
 
 
 class TankFromModel(eqx.Module):
-    """A constant-volume tank of `volume` [m³] fed by the model's valve (paper 000's valve tests)."""
+    """A constant-volume tank of `volume` [m³] fed by the model's valve (paper 000's valve tests), or by its pressure
+    regulator (a `RegulatorSystem`: paper 001's tank, its appendix), at the polytropic index `polytropic_index`."""
 
     volume: RealScalar = eqx.field(converter=as_scalar)  # m³
-    polytropic_index: RealScalar = eqx.field(converter=as_scalar, default=1.4)  # -
+    polytropic_index: RealScalar = eqx.field(converter=as_scalar, default=1.4)  # - (paper 000's adiabatic tank tests)
 
     def __call__(self, model):
+        if isinstance(model.valve, AbstractRegulator):
+            return RegulatorSystem(regulator=model.valve, volume=self.volume, air=model.air,
+                                   polytropic_index=self.polytropic_index)
         return TankSystem(valve=model.valve, volume=self.volume, air=model.air, polytropic_index=self.polytropic_index)
 
 

@@ -2,6 +2,8 @@
 built from one point's values, and the checks of every point's values against the components' own constraints,
 before any solve."""
 
+import inspect
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -156,14 +158,18 @@ def structure(system, y0):
     return _STRUCTURES[key], [*system.output_names, "command"]
 
 
-def make_plan(system, signal, base_state, over):
+def make_plan(system, signal, base_state, over, y0_given=True):
     """The `Plan` of `over` ({path: values}), the values broadcast to the batch shape (plus each leaf's own shape),
-    and the batch shape. Paths name a leaf of the system, the signal ("signal.…") or the initial state ("y0.…"); with
-    a signal factory, any other name goes to the factory."""
+    and the batch shape. Paths name a leaf of the system, the signal ("signal.…") or the initial state ("y0.…": a
+    leaf of the `y0` given, or without one a number `system.initial_state` takes, e.g. "y0.pressure"); with a signal
+    factory, any other name goes to the factory."""
     factory = not isinstance(signal, AbstractSignal)
     keys, targets, leaf_shapes, arrays = [], [], [], []
     for key, value in over.items():
-        where, parts, leaf = _resolve(system, signal, base_state, factory, key)
+        if not y0_given and isinstance(key, str) and _split(key)[0] == "y0":
+            where, parts, leaf = "y0", _initial_state_keyword(system, key), 0.0
+        else:
+            where, parts, leaf = _resolve(system, signal, base_state, factory, key)
         shape = () if leaf is None else tuple(np.shape(leaf))
         try:
             v = np.asarray(value, dtype=float)
@@ -184,6 +190,18 @@ def make_plan(system, signal, base_state, over):
         ) from None
     values = {k: np.broadcast_to(a, batch_shape + s) for k, a, s in zip(keys, arrays, leaf_shapes)}
     return Plan(tuple(keys), tuple(targets), tuple(leaf_shapes)), values, batch_shape
+
+
+def _initial_state_keyword(system, key):
+    """The one keyword of `system.initial_state` a swept "y0.<name>" names (the sweep's start is built from it)."""
+    parts = _split(key)[1]
+    names = [n for n, p in inspect.signature(system.initial_state).parameters.items()
+             if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+    if len(parts) != 1 or parts[0] not in names:
+        raise PamjaxInputError(
+            f"over[{key!r}]: without a y0, a swept start names a number {type(system).__name__}.initial_state takes "
+            f"({', '.join(f'y0.{n}' for n in names) or 'none'}); to sweep another leaf of the start, pass y0")
+    return parts
 
 
 def _resolve(system, signal, base_state, factory, key):

@@ -126,7 +126,7 @@ def sweep(
         signal = keyed_by_code(signal)
     ts_np = np.asarray(ts, dtype=float)
     base_state, available = structure(system, y0)  # shapes only: no solve yet
-    plan, values, batch_shape = make_plan(system, signal, base_state, over)
+    plan, values, batch_shape = make_plan(system, signal, base_state, over, y0_given=y0 is not None)
     batch_size = int(np.prod(batch_shape))
     validate_values(system, signal, y0, plan, values, batch_size)
     flat = {k: np.ascontiguousarray(v.reshape((batch_size,) + s))

@@ -4,7 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._core.custom_types import RealScalar, StateLike
-from .._core.errors import check_in_open_interval, check_positive
+from .._core.errors import PamjaxInputError, check_in_open_interval, check_positive
 from .._core.fitting import parameter, positive
 from .._papers import paper000
 from .._physics.chamber import pressure_rate
@@ -34,6 +34,11 @@ class TankSystem(AbstractSystem):
     output_names = ("pressure", "mass_flow")
 
     def __check_init__(self):
+        if not isinstance(self.valve, AbstractValve):
+            raise PamjaxInputError(
+                f"TankSystem.valve must be a valve (an AbstractValve: mass flow from a duty ratio), got "
+                f"{type(self.valve).__name__}" + (": a tank fed by a pressure regulator is a RegulatorSystem("
+                "regulator, volume)" if hasattr(self.valve, "needs_volume") else ""))
         check_positive(self.volume, "TankSystem.volume")
         check_in_open_interval(self.polytropic_index, 0.99, 1.41, "TankSystem.polytropic_index")
 
