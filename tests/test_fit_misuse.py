@@ -29,3 +29,15 @@ def test_fewer_residuals_than_free_parameters_is_refused():
             "friction.viscous_coefficient"]
     with pytest.raises(PamjaxInputError, match=r"give 4 residuals .* for 5 free parameters"):
         pamjax.fit(model, [exp], free, progress=False)
+
+
+def test_max_steps_takes_a_numpy_integer_and_refuses_a_bool():
+    # `fit(max_steps=np.int64(3))` was refused as "max_steps must be a positive int, got 3"
+    from pamjax._fit.fit import _validate
+
+    exp = pamjax.Experiment(pamjax.Recording(np.linspace(0.0, 0.1, 5), {"pressure": np.full(5, 2e5)}),
+                            pamjax.Constant(0.5))
+    assert _validate([exp], np.int64(3), None, False, None, None) == [exp]
+    for bad in (True, 0, 2.5):
+        with pytest.raises(PamjaxInputError, match=r"max_steps must be a positive int"):
+            _validate([exp], bad, None, False, None, None)

@@ -85,6 +85,22 @@ def test_parameter_paths_name_runs_and_sensors():
         pj.ParameterSpace(rig, ["runs[E9].supply_pressure"])
 
 
+def test_implausible_sensors_and_a_group_no_experiment_reads_are_named():
+    # A gain written in percent (101.0) or a delay in ms (2.0) ran a fit to max_steps at 887x the noise; sensors
+    # under a group name no experiment reads (a typo: "Rig") were not used at all: the experiments read as ideal.
+    for kw, match in ((dict(pressure_gain=101.0), r"pressure_gain = 101 is outside \[0.5, 2\] \(a gain in percent"),
+                      (dict(delay=2.0), r"delay = 2 is outside \[-0.1, 0.1\] \(s: a delay in ms"),
+                      (dict(position_offset=-0.3), r"position_offset = -0.3 .*an offset in mm"),
+                      (dict(pressure_offset=2e5), r"pressure_offset = 200000 .*kPa or bar")):
+        with pytest.raises(PamjaxInputError, match=match):
+            pj.Sensors(**kw)
+    t = np.linspace(0.0, 0.1, 11)
+    exp = pj.Experiment(pj.Recording(t, {"pressure": np.full(11, ATM)}), pj.Constant(0.5))  # group "rig"
+    with pytest.raises(PamjaxInputError, match=r"reads sensor group 'rig', which the Rig has none of \(its groups: "
+                                               r"\['Rig'\]\)"):
+        pj.predictions(pj.Rig(_plant(), sensors={"Rig": pj.Sensors(pressure_offset=1500.0)}), [exp])
+
+
 def _write_rig(folder, fmt="csv"):
     """A small rig: a tank charge T1 and a discharge T2 (0.5 s), a triangle run M0 from rest (1.2 s) and one, M1,
     logged from PREROLL s (2 s), with the nuisances of TRUTH, written as a logger writes them (time [s], duty [-],
@@ -459,6 +475,14 @@ def test_a_config_declares_the_rig_of_its_experiments(rig, tmp_path, capsys):
     cfg.write_text(head + '[rig]\nfree = ["gain"]\n' + tanks)
     assert main(["fit", str(cfg), "--out", str(tmp_path / "bad"), "--quiet", "--no-plot"]) == 2
     assert "[rig] free names ['gain']" in capsys.readouterr().err
+    # a sensors group no experiment reads (its calibration would do nothing), a gain in percent: named, nothing fitted
+    for rig_table, match in (('sensors = { left = { pressure_offset = 1500.0 } }\nfree = ["delay"]',
+                              "[rig] sensors: no [[experiment]] reads its sensors as ['left'] (their groups: ['rig']"),
+                             ('sensors = { pressure_gain = 100.8 }\nfree = ["delay"]',
+                              "[rig] sensors: Sensors.pressure_gain = 100.8 is outside [0.5, 2] (a gain in percent")):
+        cfg.write_text(head + f"[rig]\n{rig_table}\n" + tanks)
+        assert main(["fit", str(cfg), "--out", str(tmp_path / "bad"), "--quiet", "--no-plot"]) == 2
+        assert match in capsys.readouterr().err
 
 
 def test_a_failing_stage_waits_for_the_background_compilation(rig, monkeypatch):

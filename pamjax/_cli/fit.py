@@ -191,7 +191,11 @@ def _rig(rig_cfg, tables, model, experiments, free):
 
     groups = sensor_groups(rig_cfg.get("sensors", {}))
     used = {e.sensor_group for e in experiments}
-    groups = {g: pj.Sensors(**{k: float(v) for k, v in groups.get(g, {}).items()}) for g in used | set(groups)}
+    unused = sorted(g for g in groups if g not in used and groups[g])  # a typo'd group: its values would do nothing
+    if unused:
+        raise PamjaxInputError(f"[rig] sensors: no [[experiment]] reads its sensors as {unused} (their groups: "
+                               f"{sorted(used)}; an experiment's `sensors` key names its group, \"rig\" by default)")
+    groups = {g: _sensors(pj, g, groups.get(g, {})) for g in used | set(groups)}
     wanted = set(rig_cfg.get("free", []))
     runs, nuisance = {}, []
     for table, e in zip(tables, experiments):
@@ -216,6 +220,14 @@ def _rig(rig_cfg, tables, model, experiments, free):
                 nuisance.append(f"sensors[{g}].{field}")
     plant_free = [f"plant.{p}" if isinstance(p, str) else {**p, "path": f"plant.{p['path']}"} for p in free]
     return pj.Rig(model, sensors=groups, runs=runs), plant_free + nuisance
+
+
+def _sensors(pj, group, values):
+    """`pamjax.Sensors` of a [rig] sensors group's start values; an implausible one named by its key."""
+    try:
+        return pj.Sensors(**{k: float(v) for k, v in values.items()})
+    except PamjaxInputError as e:
+        raise PamjaxInputError(f"[rig] sensors{'' if group == 'rig' else '.' + group}: {e}") from None
 
 
 _UNITS = {"pressure": "[Pa abs]", "position": "[m]", "velocity": "[m/s]", "force": "[N]", "mass_flow": "[kg/s]"}

@@ -312,7 +312,7 @@ VOLTAGE = Command("command_v", "reference voltage [V]", "V", False)
 def command_bounds(model):
     """The model's command range as two floats: [0, 1] for a valve's duty ratio, 0-10 V for a regulator's reference
     (paper 001, Sect. 2)."""
-    lo, hi = getattr(model, "command_range", None) or model.valve.command_range
+    lo, hi = model.command_range
     return float(np.min(lo)), float(np.max(hi))
 
 

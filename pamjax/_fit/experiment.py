@@ -33,7 +33,7 @@ from .._solve.synchronous import num_periods
 from .._systems.base import AbstractSystem
 from .builds import SameSystem
 from .recording import Recording, warn_filtered
-from .rig import DEFAULT_GROUP, split
+from .rig import DEFAULT_GROUP, check_group, split
 
 
 class AbstractExperiment(eqx.Module):
@@ -348,6 +348,7 @@ class Experiment(AbstractExperiment):
 
     def check(self, model):
         """Concrete validation (signal range, times, initial state) before any traced solve."""
+        check_group(model, self.name, self.sensor_group)
         plant, _, _ = split(model, self.name, self.sensor_group)
         system = self.build(plant)
         if not isinstance(system, AbstractSystem):

@@ -176,8 +176,8 @@ def _validate(experiments, max_steps, out, overwrite, checkpoint, resume):
     names = [e.name for e in experiments]
     if len(set(names)) != len(names):
         raise PamjaxInputError(f"experiment names must be unique, got {names}")
-    if not (isinstance(max_steps, int) and max_steps > 0):
-        raise PamjaxInputError(f"max_steps must be a positive int, got {max_steps}")
+    if not (isinstance(max_steps, (int, np.integer)) and not isinstance(max_steps, bool) and max_steps > 0):
+        raise PamjaxInputError(f"max_steps must be a positive int, got {max_steps!r}")
     return experiments
 
 
@@ -317,6 +317,7 @@ def fit(
     any fit; `FileExistsError` if `out` (or `checkpoint`) exists and `overwrite` is False.
     """
     experiments = _validate(experiments, max_steps, out, overwrite, checkpoint, resume)
+    max_steps = int(max_steps)  # a NumPy integer (np.int64(40)) as well
     if solver is None:  # the default: its module (optimistix, lineax: ~0.1 s) is imported beside the set-up
         _check_settings(ftol, xtol, gtol, stall_steps)
         beside = threading.Thread(target=importlib.import_module, args=(f"{__package__}.drive",), daemon=True)

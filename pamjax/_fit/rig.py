@@ -27,9 +27,10 @@ from typing import TYPE_CHECKING, Literal
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 
 from .._core.custom_types import RealScalar
-from .._core.errors import PamjaxInputError
+from .._core.errors import PamjaxInputError, concrete_values
 from .._core.fitting import positive, signed
 from .._systems.base import AbstractSystem
 
@@ -38,6 +39,14 @@ if TYPE_CHECKING:  # annotations only: the fit imports this module
 
 DEFAULT_GROUP = "rig"
 NUISANCE_ROOTS = ("sensors", "runs")
+# What a working sensor can be off by (beyond: a unit slip, named with its fix): a pressure sensor's gain within a
+# factor 2 (a gain written in percent reads 101), its offset within 1 bar (the MAS-10's 6 bar gauge range: an offset
+# of a sixth of it is a broken sensor, not a calibration), a position offset within 0.1 m (the MAS-10-300's 75 mm
+# stroke, paper 000: mm written as m), an acquisition delay within 0.1 s (five 50 Hz PWM periods: ms written as s).
+SENSOR_LIMITS = {"pressure_gain": ((0.5, 2.0), "a gain in percent? 1.0 reads true, 1.01 is 1 % high"),
+                 "pressure_offset": ((-1e5, 1e5), "Pa: an offset in kPa or bar? 1.5 kPa is 1500.0"),
+                 "position_offset": ((-0.1, 0.1), "m: an offset in mm? 0.2 mm is 0.0002"),
+                 "delay": ((-0.1, 0.1), "s: a delay in ms? 2 ms is 0.002")}
 
 
 class Sensors(eqx.Module):
@@ -53,6 +62,13 @@ class Sensors(eqx.Module):
     pressure_gain: RealScalar = positive(1.0, unit="-")  # multiplies the gauge pressure
     position_offset: RealScalar = signed(0.0, scale=1e-4, unit="m")
     delay: RealScalar = signed(0.0, scale=1e-3, unit="s")  # the samples lag the command
+
+    def __check_init__(self):
+        for name, ((lo, hi), hint) in SENSOR_LIMITS.items():
+            v = concrete_values(getattr(self, name))  # traced values (inside a fit's program) are not checked
+            if v is not None and not np.all((v >= lo) & (v <= hi)):
+                worst = float(v.flat[np.argmax(np.abs(v))])
+                raise PamjaxInputError(f"Sensors.{name} = {worst:g} is outside [{lo:g}, {hi:g}] ({hint})")
 
     def observe(self, channel, values, atmosphere):
         """The measured `channel` from the model's `values` (the delay is applied where the model is read)."""
@@ -136,6 +152,16 @@ def split(model, name, group):
     if isinstance(model, Rig):
         return model.plant, model.sensors.get(group), model.runs.get(name)
     return model, None, None
+
+
+def check_group(model, name, group):
+    """A `Rig` must hold the sensors of experiment `name`'s group: one it lacks (a typo: `sensors={"Rig": ...}`) would
+    read the experiment through ideal sensors, its calibration unused."""
+    if isinstance(model, Rig) and group not in model.sensors:
+        raise PamjaxInputError(f"experiment {name!r} reads sensor group {group!r}, which the Rig has none of (its "
+                               f"groups: {sorted(model.sensors)}); name the group as the experiment does "
+                               f"(Experiment(sensor_group=...), {DEFAULT_GROUP!r} by default), or give it Sensors() "
+                               "for ideal sensors")
 
 
 PLANT_PREFIX = "plant."  # how a `Rig` labels its plant's parameters (`plant.valve.inflate.discharge_coefficient`)

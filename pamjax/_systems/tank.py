@@ -9,6 +9,7 @@ from .._core.fitting import parameter, positive
 from .._papers import paper000
 from .._physics.chamber import pressure_rate
 from .._physics.gas import Air
+from .._physics.regulator import AbstractRegulator
 from .._physics.valves.base import AbstractValve
 from .base import AbstractSystem
 
@@ -38,7 +39,7 @@ class TankSystem(AbstractSystem):
             raise PamjaxInputError(
                 f"TankSystem.valve must be a valve (an AbstractValve: mass flow from a duty ratio), got "
                 f"{type(self.valve).__name__}" + (": a tank fed by a pressure regulator is a RegulatorSystem("
-                "regulator, volume)" if hasattr(self.valve, "needs_volume") else ""))
+                "regulator, volume)" if isinstance(self.valve, AbstractRegulator) else ""))
         check_positive(self.volume, "TankSystem.volume")
         check_in_open_interval(self.polytropic_index, 0.99, 1.41, "TankSystem.polytropic_index")
 
