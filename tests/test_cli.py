@@ -348,6 +348,29 @@ def test_existing_results_are_refused_with_the_flag_that_replaces_them(tmp_path,
     assert (out / "sweep.csv").read_text() == "earlier"
 
 
+def test_overwrite_replaces_the_earlier_results_whole_once_the_new_ones_are_written(tmp_path):
+    # `pamjax fit --overwrite` without --profile left the earlier fit's profile.json/png beside the new fit.json
+    # (read as its profile); `simulate --overwrite --no-plot` left the earlier trajectory.png.
+    out = tmp_path / "out"
+    out.mkdir()
+    for name in ("fit.json", "profile.json", "profile.png", "notes.txt"):
+        (out / name).write_text("earlier")
+    stale = ["fit.png", "profile.json", "profile.png"]
+    with pytest.raises(RuntimeError):  # a run that fails leaves the earlier results as they were
+        with OutputFolder(out, "pamjax fit", ["fit.json"], overwrite=True, stale=stale):
+            raise RuntimeError("interrupted")
+    assert (out / "profile.json").exists()
+    with OutputFolder(out, "pamjax fit", ["fit.json"], overwrite=True, stale=stale) as folder:
+        folder.write_text("fit.json", "new")
+        assert (out / "profile.json").exists()  # until the command is done
+    assert (out / "fit.json").read_text() == "new"
+    assert not (out / "profile.json").exists() and not (out / "profile.png").exists()
+    assert (out / "notes.txt").read_text() == "earlier"  # not a pamjax output: never touched
+    with OutputFolder(out, "pamjax fit", ["fit.json", "profile.json"], overwrite=True, stale=stale) as folder:
+        folder.write_text("profile.json", "kept")  # an output of this run is never in its stale list
+    assert (out / "profile.json").read_text() == "kept"
+
+
 def test_results_that_cannot_be_written_at_the_end_go_to_a_named_fallback(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     real = cli_out.os.replace

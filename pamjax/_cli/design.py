@@ -137,7 +137,8 @@ def run(args):
     check_design(model, free, duration, **kwargs)  # every refusal before the output folder exists
     out = pathlib.Path(args.out or out_cfg or f"results/{pathlib.Path(args.config).stem}")
     outputs = [o for o in OUTPUTS if not (args.no_plot and o.endswith(".png"))]
-    with OutputFolder(out, "pamjax design", outputs, overwrite=args.overwrite) as folder:
+    with OutputFolder(out, "pamjax design", outputs, overwrite=args.overwrite,
+                      stale=OUTPUTS) as folder:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", pj.PamjaxDesignWarning)  # reported below, as the command's outcome
             res = pj.design_experiment(model, free, duration, progress=not args.quiet, **kwargs)

@@ -318,7 +318,9 @@ def run(args):
     # --resume replaces what the resumed run wrote (its checkpoint proves it is the same problem); a staged start
     # without a checkpoint (a run stopped before the joint fit's first iteration) is replaced by the next start
     replaceable = outputs if args.resume else [fit_start.STAGED_START]
-    with OutputFolder(out, "pamjax fit", outputs, overwrite=args.overwrite, replaceable=replaceable) as folder:
+    stale = [FIGURE, BENCH, fit_start.STAGED_START, PROFILE, PROFILE_FIGURE]  # what an earlier fit here may have left
+    with OutputFolder(out, "pamjax fit", outputs, overwrite=args.overwrite, replaceable=replaceable,
+                      stale=stale) as folder:
         checkpoint = folder / CHECKPOINT
         if args.resume and not checkpoint.exists():
             raise PamjaxInputError(f"pamjax fit --resume: {out} holds no checkpoint ({CHECKPOINT}); run without "

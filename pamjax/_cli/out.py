@@ -74,15 +74,19 @@ class OutputFolder:
 
     **Arguments:** `path`; `command` (for messages and the lock, e.g. "pamjax fit"); `outputs`: the file names the
     command writes (an existing one is refused unless `overwrite`, or unless listed in `replaceable`); `flag`: the
-    command-line option that names the folder.
+    command-line option that names the folder; `stale`: what an earlier run of the command may have written that this
+    one does not (a figure this run skips with --no-plot, an earlier --profile's profile.json): with `overwrite`, the
+    earlier results are replaced whole, so these are removed once the command has written its own (else they would
+    read as this run's); an interrupted or failed run leaves them.
     """
 
-    def __init__(self, path, command, outputs, *, overwrite=False, replaceable=(), flag="--out"):
+    def __init__(self, path, command, outputs, *, overwrite=False, replaceable=(), flag="--out", stale=()):
         if path is None or str(path).strip() == "":
             raise PamjaxInputError(f"{command}: the output folder is empty; name one with {flag}")
         self.path = pathlib.Path(path)
         self.command, self.outputs, self.flag = command, list(outputs), flag
         self.overwrite, self.replaceable = overwrite, set(replaceable)
+        self.stale = [name for name in stale if name not in self.outputs]
         self.failed = []  # (name, error, where it went instead)
         self._fd = None
 
@@ -101,8 +105,13 @@ class OutputFolder:
             raise
         return self
 
-    def __exit__(self, *exc):
-        self._unlock()
+    def __exit__(self, exc_type, *exc):
+        try:
+            if exc_type is None and self.overwrite and not self.failed:  # the earlier results replaced whole: what
+                for name in self.stale:  # this run did not write of them is removed, not left to read as its own
+                    (self.path / name).unlink(missing_ok=True)
+        finally:
+            self._unlock()
         return False
 
     def _refuse(self, what, err=None):

@@ -198,7 +198,8 @@ def run(args):
     band_source = bands.check_simulate(args, r)  # --band: a fitted model file, before the output folder
     out = args.out or f"results/simulate-{pathlib.Path(args.config).stem}"
     outputs = [o for o in OUTPUTS if not (args.no_plot and o.endswith(".png"))]
-    with OutputFolder(out, "pamjax simulate", outputs, overwrite=args.overwrite) as folder:
+    with OutputFolder(out, "pamjax simulate", outputs, overwrite=args.overwrite,
+                      stale=OUTPUTS) as folder:
         if len(ts) > LONG_ROWS:  # a run of minutes: say so before it starts
             print(f"pamjax simulate: solving {float(ts[-1] - ts[0]):g} s ({len(ts):,} output times) ...", flush=True)
         traj = pj.simulate(system, signal, ts, **kwargs)

@@ -281,7 +281,8 @@ def run(args):
     name = os.path.splitext(os.path.basename(args.config))[0]
     out = args.out or os.path.join("results", f"sweep-{name}")
     outputs = [o for o in OUTPUTS if not (args.no_plot and o.endswith(".png"))]
-    with OutputFolder(out, "pamjax sweep", outputs, overwrite=args.overwrite) as folder:
+    with OutputFolder(out, "pamjax sweep", outputs, overwrite=args.overwrite,
+                      stale=OUTPUTS) as folder:
         start = time.perf_counter()
         columns, spec = run_config(config, model=model)
         import jax
