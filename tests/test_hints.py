@@ -125,3 +125,17 @@ def test_a_hybrid_system_is_never_told_to_use_adaptive_stepping():
     step = float(re.search(r"pass grid_step=([\d.e-]+) or less", text).group(1))
     assert step < 0.02
     assert bool(pamjax.simulate(system, pamjax.Constant(0.5), ts, grid_step=step).succeeded)
+
+
+def test_a_friction_states_rate_once_moving_is_in_the_suggested_step():
+    # Bristle friction's state relaxes at σ0|v|/F_c: zero at rest, ~1,900 1/s at 0.3 m/s. The PWM grid's 16 substeps
+    # blew up once the payload moved, and the hint, reading the modes at the start (at rest), said "not a step-size
+    # problem: check the model's parameters". It now reads them moving too, and its step works.
+    system = presets.mas10_system(valve="exact", friction="bristle")
+    ts = jnp.linspace(0.0, 0.6, 31)
+    with pytest.raises(PamjaxSolveError) as info:
+        pamjax.simulate(system, pamjax.Constant(1.0), ts, stepping="pwm")
+    text = str(info.value)
+    assert "not a step-size problem" not in text and "once the payload moves" in text
+    suggested = int(re.search(r"pass substeps=([\d,]+) or more", text).group(1).replace(",", ""))
+    assert bool(pamjax.simulate(system, pamjax.Constant(1.0), ts, stepping="pwm", substeps=suggested).succeeded)
