@@ -287,12 +287,17 @@ def run_plant(name, plant, args, out):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    # the docstring's first paragraph: its first sentence, which runs over three lines
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", default="results/control")
-    parser.add_argument("--duration", type=float, default=20.0)
+    parser.add_argument("--duration", type=float, default=20.0,
+                        help=f"run length [s], above the tracking window's start ({WINDOW_START} s)")
     parser.add_argument("--tune-steps", type=int, default=20)
     parser.add_argument("--plant", choices=("smooth", "identified", "both"), default="both")
     args = parser.parse_args()
+    if not args.duration > WINDOW_START:  # every figure is over t >= WINDOW_START: an empty window gives NaN
+        parser.error(f"--duration must exceed the tracking window's start {WINDOW_START} s (RMSE and peak are over "
+                     f"t >= {WINDOW_START} s), got {args.duration}")
     jax.config.update("jax_enable_x64", True)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -185,3 +185,47 @@ def test_a_second_tuning_compiles_nothing_new_and_starts_from_its_own_gains(mode
     assert history[0][1] == (40.0,)
     own = float(jax.jit(lambda: tracking_rmse(loop(40.0), 10, 0.0, samples_per_period=5))())
     assert history[0][0] == pytest.approx(own, rel=1e-9)
+
+
+def test_error_window_at_or_after_the_end_raises(model):
+    """A window start at or after the run's end left the window empty: RMSE 0/0 = NaN and a 0 peak, and
+    `tune_controller` ran every step on NaN. Refused, naming `start` and the run's end; a start inside still works."""
+    traj = simulate_closed_loop(ClosedLoop(model, PIController(), REF), 0.1)  # 5 periods: ends at 0.1 s
+    for start in (0.1, 5.0):
+        with pytest.raises(pamjax.PamjaxInputError, match=r"start = .* 0\.1 s"):
+            traj.tracking_error(start=start)
+    # the last period starts at 0.08 s: a later start leaves no period start in estimation_error's window
+    for start in (0.09, 5.0):
+        with pytest.raises(pamjax.PamjaxInputError, match=r"start = .* 0\.1 s"):
+            traj.estimation_error(start)
+    rmse, peak = traj.tracking_error(start=0.095)
+    assert np.isfinite(float(rmse)) and float(peak) > 0
+    assert all(np.isfinite(float(v)) for v in traj.estimation_error(0.08).values())
+    from helpers import counted_compilations
+
+    loop = ClosedLoop(model, PIController(), REF)
+    with counted_compilations() as compiled, pytest.raises(pamjax.PamjaxInputError, match=r"start = 5\.0 s.*0\.2 s"):
+        pamjax.tune_controller(loop, ("proportional_gain",), 0.2, start=5.0, steps=1)
+    assert compiled == [], compiled  # refused before any solve
+
+
+def test_fits_control_refuses_a_duration_inside_the_window_and_describes_itself(monkeypatch, capsys):
+    """`fits/control.py --duration 3` crashed with "All-NaN slice" (every figure is over t >= 5 s); now an argparse
+    error names --duration. Its --help showed the docstring's first line, cut mid-sentence; now the whole sentence."""
+    import importlib.util
+    import pathlib
+    import sys
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "fits" / "control.py"
+    spec = importlib.util.spec_from_file_location("fits_control_under_test", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    monkeypatch.setattr(sys, "argv", ["control.py", "--duration", "3", "--out", "unused"])
+    with pytest.raises(SystemExit) as exit_info:
+        script.main()
+    assert exit_info.value.code == 2 and "--duration" in capsys.readouterr().err
+    monkeypatch.setattr(sys, "argv", ["control.py", "--help"])
+    with pytest.raises(SystemExit):
+        script.main()
+    assert "the SMC fed by an extended Kalman filter from the bench's noisy sensors." in " ".join(
+        capsys.readouterr().out.split())

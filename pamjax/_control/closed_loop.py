@@ -261,18 +261,44 @@ class ClosedLoopTrajectory(eqx.Module):
 
     def estimation_error(self, start=0.0):
         """RMS of (what the controller read − the true state) at the period starts t ≥ `start` [s], per state:
-        {"pressure" [Pa], "position" [m], "velocity" [m/s]} (zeros without an estimator; traceable)."""
+        {"pressure" [Pa], "position" [m], "velocity" [m/s]} (zeros without an estimator; traceable).
+
+        **Raises:** `PamjaxInputError` where `start` and the run are concrete and no period starts at or after
+        `start` (an empty window: the RMS would be 0/0 = NaN)."""
+        _check_window(start, self.period_start, self.t, "estimation_error", "its last period starts")
         weight = (self.period_start >= start).astype(float)
         return {name: jnp.sqrt(jnp.sum(weight * (getattr(self.observed, name) - getattr(self.period_start_state, name))
                                        ** 2) / jnp.sum(weight))
                 for name in ("pressure", "position", "velocity")}
 
     def tracking_error(self, start=0.0):
-        """(RMSE, peak |e|) [m] of e = r − x over samples with t ≥ `start` [s] (traceable)."""
+        """(RMSE, peak |e|) [m] of e = r − x over samples with t ≥ `start` [s] (traceable).
+
+        **Raises:** `PamjaxInputError` where `start` and the run are concrete and `start` is at or after the run's end
+        (an empty window: the RMSE would be 0/0 = NaN and the peak 0)."""
+        _check_window(start, self.t, self.t, "tracking_error", "its last sample is")
         weight = (self.t >= start).astype(float)
         error = (self.reference - self.position) * weight
         rmse = jnp.sqrt(jnp.sum(error**2) / jnp.sum(weight))
         return rmse, jnp.max(jnp.abs(error))
+
+
+def _check_window(start, times, samples, method, last_is):
+    """Refuse a window start `start` [s] after every time of `times` (the times the window averages over; `last_is`
+    names the last of them) or at or after the run's end (the last of `samples`), where both are concrete: the window
+    would be empty and the RMS 0/0 = NaN. Inside jit, grad or vmap they are traced and the check is left to the caller
+    (`tune_controller` checks its `start` before solving)."""
+    if isinstance(start, jax.core.Tracer) or isinstance(times, jax.core.Tracer) or np.size(times) == 0:
+        return
+    start_value = _concrete(start)
+    if start_value is None:
+        return
+    last, end = float(np.max(np.asarray(times))), float(np.max(np.asarray(samples)))
+    if not (start_value <= last and start_value < end):  # also refuses a NaN start
+        raise PamjaxInputError(
+            f"{method}: start = {start_value} s leaves an empty window: the run ends at {end} s ({last_is} at "
+            f"{last} s); give a start before that, or run longer"
+        )
 
 
 def _run(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps, adjoint=None):

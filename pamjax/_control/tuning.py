@@ -38,6 +38,9 @@ def tune_controller(
     start; `steps` Adam steps; `learning_rate` in log-gain units; `callback(step, rmse, gains)` for progress.
 
     **Returns:** `(tuned_loop, history)`: the loop with the best gains met and a list of (rmse [m], gains) per step.
+
+    **Raises:** `PamjaxInputError`, before any solve, for a gain that is no positive controller field, a duration
+    that is not > 0 or a `start` at or after the run's end (`duration` rounded up to whole PWM periods).
     """
     if not isinstance(loop, ClosedLoop):
         raise PamjaxInputError(f"loop must be a ClosedLoop, got {type(loop).__name__}")
@@ -45,12 +48,20 @@ def tune_controller(
         value = getattr(loop.controller, name, None)
         if value is None or not np.all(np.asarray(value) > 0):
             raise PamjaxInputError(f"tune_controller: gain {name!r} must be a positive controller field, got {value}")
-    num_periods = int(np.ceil(float(duration) / float(loop.period) - 1e-9))
+    duration, start = float(duration), float(start)
+    if not (np.isfinite(duration) and duration > 0):
+        raise PamjaxInputError(f"tune_controller: duration must be > 0 [s], got {duration}")
+    num_periods = int(np.ceil(duration / float(loop.period) - 1e-9))
+    end = num_periods * float(loop.period)  # s, the run's end: whole PWM periods
+    if not start < end:  # an empty RMSE window: every step's loss and gradient would be NaN (also a NaN start)
+        raise PamjaxInputError(f"tune_controller: start = {start} s (the RMSE window's start) is at or after the "
+                               f"run's end ({end} s for duration {duration} s); give a start before it or a longer "
+                               "duration")
     gains = tuple(gains)
     get = _getter(gains)
 
     def value_and_grad(log_gains):
-        return _rmse_and_gradient(log_gains, loop, gains, num_periods, float(start), samples_per_period)
+        return _rmse_and_gradient(log_gains, loop, gains, num_periods, start, samples_per_period)
 
     params = tuple(jnp.log(jnp.asarray(g, dtype=float)) for g in get(loop.controller))
     m = jtu.tree_map(jnp.zeros_like, params)

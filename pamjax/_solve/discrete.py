@@ -10,6 +10,10 @@ State (eq. 17): x = [p, x, ẋ, ẍ] (pressure [Pa abs], position [m], velocity 
 The rates come from the system's own vector field (the same valve flow, muscle force, friction, end stops and volume
 as the continuous model), so the discrete model converges to `simulate` as T_s → 0 with error O(T_s). A friction
 model with its own state (bristle) is stepped by explicit Euler too. For a `TankSystem` only eq. 18 applies.
+A switching valve acts on the pair (u_k, u_{k-1}) of this PWM period's duty and the last one's (`read_command`: a
+period above 90 % duty, whose off-pulse at 50 Hz is shorter than the 2 ms switch-off delay, leaves it open), the
+period before t0 off, exactly as in `simulate`. A hybrid system (stick-slip, `KarnoppFriction`) is refused: Euler
+steps cannot switch its mode.
 Explicit Euler is stable only for T_s below ~2/(fastest rate): with the smooth Coulomb sign (16 N over 1e-3 m/s on
 9.6 kg) that is ≈ 1 ms; paper 000 samples at 0.1 ms.
 """
@@ -24,6 +28,7 @@ from .._core.custom_types import Array, ArrayLike, PyTreeLike, Real, RealScalarL
 from .._core.errors import PamjaxInputError, check_positive
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractSystem
+from .edges import StartsOff
 from .simulate import validate
 
 
@@ -56,20 +61,22 @@ def discrete_step(system: AbstractSystem, t: RealScalarLike, state: eqx.Module, 
 @eqx.filter_jit
 def _run(system, signal, y0, t0, sample_time, num_steps: int):
     valve = system.valve
+    if valve.switches:  # the valve is off in the PWM period before the run, as in `simulate` and the EKF's `filter`
+        signal = StartsOff(signal, valve.command_time(t0))
 
-    def command_at(t):
-        return signal(valve.command_time(t))
+    def acts_on(t):  # what the valve acts on at t: a switching valve's (u_k, u_{k-1}), its state carries over
+        return valve.read_command(signal, t)
 
     def body(state, k):
         t = t0 + k * sample_time
-        new = discrete_step(system, t, state, command_at(t), sample_time)
+        new = discrete_step(system, t, state, acts_on(t), sample_time)
         return new, new
 
     _, states = jax.lax.scan(body, y0, jnp.arange(num_steps, dtype=float))
     states = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), y0, states)
     ts = t0 + jnp.arange(num_steps + 1, dtype=float) * sample_time
-    commands = jax.vmap(command_at)(ts)
-    outs = jax.vmap(system.outputs)(ts, states, commands)
+    commands = jax.vmap(lambda t: signal(valve.command_time(t)))(ts)  # the latched duty, as `simulate`'s `command`
+    outs = jax.vmap(lambda t, y: system.outputs(t, y, acts_on(t)))(ts, states)
     acceleration = None
     if "velocity" in outs:  # eq. 21
         acceleration = jnp.concatenate([jnp.zeros(1), jnp.diff(outs["velocity"]) / sample_time])
@@ -92,13 +99,24 @@ def simulate_discrete(system: AbstractSystem, signal: AbstractSignal, sample_tim
     """Paper 000's discrete-time model (eq. 18-21): step `system` by Euler at `sample_time` T_s [s] from `t0` to
     `t_end` [s] (⌈(t_end − t0)/T_s⌉ steps, the last sample at or just past `t_end`).
 
-    **Arguments:** `system` (`MuscleSystem` or `TankSystem`), `signal` (the command, read at each t_k),
-    `sample_time` T_s [s] > 0, `t_end` [s] > `t0`, `y0` (default `system.initial_state()`), `t0` [s].
+    **Arguments:** `system` (a smooth `MuscleSystem` or a `TankSystem`), `signal` (the command, read at each t_k as
+    the valve reads it: a switching valve acts on this period's and the last period's duty, off in the period before
+    `t0`, as in `simulate`), `sample_time` T_s [s] > 0, `t_end` [s] > `t0`, `y0` (default `system.initial_state()`),
+    `t0` [s].
 
     **Returns:** a `DiscreteTrajectory`. Differentiable (reverse and forward mode) and jitted.
 
-    **Raises:** `PamjaxInputError` for bad input, naming the argument.
+    **Raises:** `PamjaxInputError` for bad input, naming the argument, and for a hybrid `system` (stick-slip
+    friction, `KarnoppFriction`): Euler steps cannot switch its mode (use `simulate`).
     """
+    # A hybrid system's Euler steps never evaluate the events that switch its mode: stuck for ever, silently.
+    if isinstance(system, AbstractSystem) and system.hybrid:
+        raise PamjaxInputError(
+            "simulate_discrete: system must be smooth, not hybrid: the discrete-time model (eq. 18-21) steps by Euler "
+            "and cannot switch a stick-slip mode (a payload stuck at the start would stay stuck); give the system "
+            "CoulombViscousFriction (eq. 20's sign smoothed), e.g. presets.mas10_system('averaged'), or solve the "
+            "hybrid system with pamjax.simulate (events located inside the step)"
+        )
     check_positive(sample_time, "sample_time")
     check_positive(float(t_end) - float(t0), "t_end - t0")
     num_steps = int(np.ceil((float(t_end) - float(t0)) / float(sample_time) - 1e-9))
