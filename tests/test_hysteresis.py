@@ -216,6 +216,9 @@ def test_preset_and_start_states():
         z = sys.initial_state(pressure=P_ATM + 2e5, velocity=v).friction
         assert float(fr.force(v, z)) == pytest.approx(16.0 * np.sign(v) + 250.0 * v, rel=1e-3)
         assert abs(float(fr.state_rate(v, z))) < 1e-9  # steady on its branch
+    for v in (1e-6, -1e-5, 1e-4):  # a creep: the branch lies beyond δ (the smoothed |v|); three Newton steps from
+        z = fr.initial_state(v)  # sign(v) had stopped at 2.6 δ instead of 1.38 δ at 1e-6 m/s (ż = −2.7e-6)
+        assert abs(float(fr.state_rate(v, z))) < 1e-12 * abs(v) / 1e-6 and float(z) * v > 0
     g = jax.grad(lambda v: fr.force(v, fr.initial_state(v)))
     assert np.isfinite(float(g(0.0))) and np.isfinite(float(g(3e-3)))
     traj = pj.simulate(sys, pj.Triangle(0.05, 0.95, 0.5), jnp.linspace(0.0, 2.0, 5))
