@@ -280,3 +280,124 @@ def test_noise_levels_left_out_of_meta_are_estimated_near_the_sensors_and_said(t
     given = pj.bench.load_bench(bench_folder(), presets.mas10_system(valve="pwm", friction="karnopp"))
     assert given.noise == {"pressure": sensors["p_std_Pa"], "position": sensors["x_std_m"]}
     assert not any("noise estimated" in n for n in given.notes)
+
+
+# --- CSV benches written by hand (no simulation: load_bench solves nothing) ----------------------------------------
+def _csv_bench(folder, runs, **meta):
+    """A bench folder of CSV files: `runs` = {name: (meta.json entry, header, columns)}; meta.json's other keys from
+    `meta` (noise given, one fitted key)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, (entry, header, columns) in runs.items():
+        lines = [header] + [",".join(f"{v:.6g}" for v in row) for row in np.column_stack(columns)]
+        (folder / f"{name}.csv").write_text("\n".join(lines) + "\n")
+    meta = {"experiments": {n: e for n, (e, _, _) in runs.items()}, "noise": NOISE, "fitted_keys": ["Cv12"], **meta}
+    (folder / "meta.json").write_text(json.dumps(meta))
+    return folder
+
+
+T_RUN = np.arange(500) * 1e-3  # s: 0.5 s at 1 kHz
+RISING = 20.0 + 20.0 * T_RUN  # mm: a payload moving up at 20 mm/s
+MIDWAY = dict(kind="muscle_run", init="unknown: logged mid-way")
+TRIANGLE = dict(kind="muscle_triangle", lo=0.05, hi=0.95, f_tri=0.5)
+
+
+def _plant():
+    return presets.mas10_system(valve="pwm", friction="karnopp")
+
+
+def test_a_run_logged_mid_way_without_pressure_gets_its_start_from_position_and_model(tmp_path):
+    # A run logged mid-way that records position but no pressure (was: nuisance=True crashed reading its pressure
+    # for the start estimate): position and velocity from its first samples, the start pressure where the model rests
+    # at that position, all three fitted, and said.
+    folder = _csv_bench(tmp_path / "b", {"M": (MIDWAY, "t [s],duty [-],position [mm]",
+                                              [T_RUN, np.full(500, 0.6), RISING])})
+    bench = pj.bench.load_bench(folder, _plant(), nuisance=True)
+    assert bench.experiments[0].channels == ("position",)
+    assert {"runs[M].start.pressure", "runs[M].start.position", "runs[M].start.velocity"} <= set(bench.free)
+    start = bench.model.runs["M"].start
+    assert float(start.position) == pytest.approx(0.0199, abs=2e-4) and float(start.velocity) == pytest.approx(0.02)
+    p_atm = float(_plant().air.atmospheric_pressure)
+    assert p_atm < float(start.pressure) < p_atm + 1e6
+    rest = _plant().initial_state(pressure=float(start.pressure))  # the model rests there at that pressure
+    assert float(rest.position) == pytest.approx(float(start.position), abs=1e-5)
+    assert any("M: start state fitted" in n and "not recorded" in n for n in bench.notes), bench.notes
+
+
+def test_a_triangle_without_duty_column_refused_mid_way_and_said_at_rest(tmp_path):
+    # Logged mid-way, meta.json's triangle cannot drive a run without its recorded duty (its phase is unknown; was:
+    # driven from phase 0, silently). At rest, it drives the run, and the notes say the command came from meta.json.
+    columns = [T_RUN, np.full(500, 3.0), RISING]
+    header = "t [s],pressure [barg],position [mm]"
+    midway = _csv_bench(tmp_path / "mid", {"M": ({**TRIANGLE, "init": "unknown"}, header, columns)})
+    with pytest.raises(PamjaxInputError, match=r"'M' was logged mid-way .*/M\.csv has no duty column .*phase .*"
+                                               "unknown.*record the commanded duty"):
+        pj.bench.load_bench(midway, _plant())
+    rest = pj.bench.load_bench(_csv_bench(tmp_path / "rest", {"M": (TRIANGLE, header, columns)}), _plant())
+    assert isinstance(rest.experiments[0].signal, pj.Triangle)
+    assert any("M: no recorded duty column; driven by meta.json's triangle" in n for n in rest.notes), rest.notes
+
+
+@pytest.mark.parametrize("duty, match", [
+    (np.where(np.arange(500) == 3, 1.5, 0.6), r"M\.csv, line 6: the duty column 'duty' of experiment 'M' reads 1\.5 "
+                                              r"there, outside \[0, 1\] \(its range: \[0\.6, 1\.5\]\); a duty ratio"),
+    (np.where(np.arange(500) == 7, -0.1, 0.6), r"M\.csv, line 10: .* reads -0\.1 there"),
+    (np.full(500, 60.0), r"M\.csv, line 3: .* reads 60 .*looks like percent: write its header 'duty \[%\]'"),
+])
+def test_a_recorded_duty_out_of_range_is_named_by_file_column_and_line(tmp_path, duty, match):
+    # Was: blamed meta.json, gave the range only, and called any value up to 100 (a single 1.5) percent.
+    folder = _csv_bench(tmp_path / "b", {"M": (MIDWAY, "t [s],duty [-],position [mm]", [T_RUN, duty, RISING])})
+    path = folder / "M.csv"
+    path.write_text("# logger export\n" + path.read_text())  # a comment line: counted in the file's lines
+    with pytest.raises(PamjaxInputError, match=match) as err:
+        pj.bench.load_bench(folder, _plant())
+    assert "meta.json" not in str(err.value) and ("percent" in str(err.value)) == (duty.max() > 1.5)
+
+
+def test_bad_rows_of_a_bench_recording_are_named_by_file_and_line(tmp_path):
+    # Was: "Recording 'M': ... row 3" (0-based, no file) and advice to pass mask_nan=True, which load_bench and a
+    # pamjax fit config cannot.
+    folder = _csv_bench(tmp_path / "b", {"M": (MIDWAY, "t [s],duty [-],position [mm]",
+                                              [T_RUN, np.full(500, 0.6), RISING])})
+    path = folder / "M.csv"
+    good = path.read_text().splitlines()
+    for edit, match in (
+            (lambda L: L[:4] + ["0.003,0.6,nan"] + L[5:], r"M\.csv, line 5: column 'position' \(channel 'position'\) "
+                                                         r"of experiment 'M' is NaN/inf .*fix or delete that line"),
+            (lambda L: L[:4] + [L[3]] + L[5:], r"M\.csv, line 5: t = 0\.002 s is not after the sample before it "
+                                               r"\(line 4: .*strictly increasing"),
+            (lambda L: L[:1], r"M\.csv: 0 data rows")):
+        path.write_text("\n".join(edit(good)) + "\n")
+        with pytest.raises(PamjaxInputError, match=match) as err:
+            pj.bench.load_bench(folder, _plant())
+        assert "mask_nan" not in str(err.value)
+
+
+def test_meta_json_units_apply_to_csv_columns_without_header_units(tmp_path):
+    # A CSV headed 't,u,p,x' with meta.json "units" {"p": "barg", "x": "mm"} (was: the units ignored for CSV files,
+    # and the pressure refused as looking like bar); a header unit that contradicts meta.json's is refused naming both.
+    run = {"M": (MIDWAY, "t,u,p,x", [T_RUN, np.full(500, 0.6), 3.0 + T_RUN, RISING])}
+    folder = _csv_bench(tmp_path / "b", run, units={"p": "barg", "x": "mm"})
+    data = pj.bench.load_bench(folder, _plant()).experiments[0].data
+    np.testing.assert_allclose(data["pressure"], 101325.0 + 1e5 * (3.0 + T_RUN))
+    np.testing.assert_allclose(data["position"], RISING * 1e-3)
+    both = _csv_bench(tmp_path / "both", {"M": (MIDWAY, "t,u,p [bar abs],x", run["M"][2])},
+                      units={"p": "barg", "x": "mm"})
+    with pytest.raises(PamjaxInputError, match=r"M\.csv: column 'p' is in 'bar abs' by the file, but meta\.json "
+                                               r"'units' .*says 'p' is in 'barg'"):
+        pj.bench.load_bench(both, _plant())
+
+
+def test_meta_json_atmosphere_is_the_models(tmp_path):
+    # atmosphere_Pa converts the gauge readings and is the model's atmosphere too (was: the readings referred to
+    # 95 kPa, the model's exhaust, tank start and rest to 101325 Pa); said in the notes.
+    t = np.arange(200) * 1e-3
+    tank = (dict(kind="tank_charge", V_tank=5e-5, u=0.5, p0="p_atm"), "t [s],duty [-],pressure [barg]",
+            [t, np.full(200, 0.5), 2.0 * t])
+    folder = _csv_bench(tmp_path / "b", {"T": tank}, atmosphere_Pa=95000.0)
+    bench = pj.bench.load_bench(folder, _plant())
+    assert float(bench.model.air.atmospheric_pressure) == 95000.0
+    e = bench.experiments[0]
+    assert float(e.initial["pressure"]) == 95000.0 and e.data["pressure"][0] == pytest.approx(95000.0)
+    assert any("atmospheric pressure set to 95000 Pa" in n for n in bench.notes), bench.notes
+    rig = pj.bench.load_bench(folder, _plant(), nuisance=True)  # the Rig's plant too
+    assert float(rig.model.plant.air.atmospheric_pressure) == 95000.0

@@ -197,3 +197,32 @@ def test_written_csv_reads_back_exactly_with_units_in_the_header(tmp_path):
     back = Recording.load(path)
     for c in rec.channels:
         np.testing.assert_array_equal(back[c], rec[c])
+
+
+def test_default_units_fill_the_columns_a_header_leaves_without(tmp_path):
+    # A bench's meta.json "units" for a CSV headed 't,p,x' (was: ignored for CSV files); a header unit they
+    # contradict is refused naming both, one they restate is accepted; a channel the file lacks is skipped.
+    path = _write(tmp_path, _table(header=("t", "p", "x [mm]"), p=(P - 101325.0) / 1e5, x=X * 1e3))
+    rec = Recording.load(path, default_units={"p": "barg", "x": "mm", "u": "%"})
+    np.testing.assert_allclose(rec["pressure"], P, rtol=1e-12)
+    np.testing.assert_allclose(rec["position"], X, rtol=1e-12, atol=1e-18)
+    assert rec.units == {"pressure": "Pa", "position": "m"}
+    with pytest.raises(PamjaxInputError, match=r"r\.csv: column 'x' is in 'mm' by the file, but meta\.json 'units' "
+                                               r"\(default_units\) says 'position' is in 'm'"):
+        Recording.load(path, default_units={"p": "barg", "position": "m"})
+    with pytest.raises(PamjaxInputError, match=r"names 'pres', neither a column of the file"):
+        Recording.load(path, default_units={"pres": "barg"})
+
+
+def test_mat_units_keyed_by_the_files_variable_names(tmp_path):
+    # A MATLAB file with variables Pressure / Position and units keyed the same (was: refused, "units name
+    # ['Position', 'Pressure'], not channels", without saying how to key them).
+    scipy_io = pytest.importorskip("scipy.io")
+    scipy_io.savemat(tmp_path / "r.mat", dict(time=T, Pressure=(P - 101325.0) / 1e5, Position=X * 1e3))
+    for units in ({"Pressure": "barg", "Position": "mm"}, {"p": "barg", "position": "mm"}):
+        rec = Recording.load(tmp_path / "r.mat", units=units)
+        np.testing.assert_allclose(rec["pressure"], P, rtol=1e-12)
+        np.testing.assert_allclose(rec["position"], X, rtol=1e-12, atol=1e-18)
+    with pytest.raises(PamjaxInputError, match=r"units name \['Presure'\], not channels .*key units by channel name "
+                                               r"\('t' for the times\) or by the file's column name"):
+        Recording.load(tmp_path / "r.mat", units={"Presure": "barg"})

@@ -120,3 +120,28 @@ def test_filter_below_the_pwm_frequency_warns():
         pamjax.Experiment(tank.filtered(20.0), pamjax.Constant(0.5)).check(system)
 
 
+
+
+def test_bad_rows_of_a_file_are_named_by_file_and_line(tmp_path):
+    # Was: "Recording 'r': ... row 3" (0-based, no file). A CSV's line counts its header and comment lines; the NaN
+    # advice names the Python call that has mask_nan; arrays keep their 0-based row and Recording(..., mask_nan=True).
+    body = ["# exported", "t [s],position [m]", "0.0,0.0", "0.1,0.001", "0.2,nan", "0.3,0.003"]
+    path = tmp_path / "r.csv"
+    for lines, match in (
+            (body, r"r\.csv, line 5: channel 'position' is NaN/inf at row 2 \(0-based data row; t = 0\.2 s\): clean "
+                   r"or delete that line .*Recording\.load\(path, mask_nan=True\)"),
+            (body[:4] + ["0.1,0.002"] + body[5:], r"r\.csv, line 5: t = 0\.1 s is not after the sample before it "
+                                                  r"\(line 4: t = 0\.1 s\): t must be strictly increasing"),
+            (body[:4] + [",0.002"] + body[5:], r"r\.csv, line 5: the time is nan .*t must be finite"),
+            (body[:2], r"r\.csv: 0 data rows: a recording needs at least 2 samples")):
+        path.write_text("\n".join(lines) + "\n")
+        with pytest.raises(PamjaxInputError, match=match):
+            Recording.load(path)
+    np.savez(tmp_path / "r.npz", t=np.arange(4.0), x=np.array([0.0, 1e-3, np.inf, 0.0]))
+    with pytest.raises(PamjaxInputError, match=r"r\.npz, sample 3: channel 'position' is NaN/inf"):
+        Recording.load(tmp_path / "r.npz")
+    with pytest.raises(PamjaxInputError, match=r"Recording 'a': channel 'position' is NaN/inf at row 1 .*"
+                                               r"Recording\(\.\.\., mask_nan=True\)"):
+        Recording(np.arange(3.0), dict(position=[0.0, np.nan, 0.0]), name="a")
+    rec = Recording.load(tmp_path / "r.npz", mask_nan=True)
+    assert rec.locate(2) == f"{tmp_path / 'r.npz'}, sample 3" and rec.columns == {"position": "x"}

@@ -10,7 +10,7 @@ import numpy as np
 
 from .._core.errors import PamjaxInputError
 from .._fit.builds import PayloadFromModel
-from .._fit.recording import BENCH_NAMES, Recording
+from .._fit.recording import Recording
 from .._physics.signals import Constant, Sampled, Triangle
 from .._systems.base import AbstractMuscleSystem
 
@@ -109,18 +109,22 @@ def recording_file(directory, name):
 
 
 def load_recording(path, name, meta, atmosphere):
+    """The recording of experiment `name` at `path`: meta.json's `units` for the columns whose file gives none (a CSV
+    header's own unit that differs is refused, naming both), a NaN/inf sample refused naming the file and line."""
     units = meta.get("units")
     if units is not None and not isinstance(units, dict):
         raise PamjaxInputError(f"meta.json 'units' must be a table channel → unit (e.g. {{\"p\": \"barg\"}}), got "
                                f"{units!r}")
-    kwargs = dict(name=name, atmosphere=atmosphere, mask_nan=False)
-    if units and path.suffix.lower() != ".csv":  # CSV headers carry their own units
-        kwargs["units"] = _renamed_units(units)
-    return Recording.load(path, **kwargs)
-
-
-def _renamed_units(units):
-    return {BENCH_NAMES.get(k, k) if k not in ("t", "time") else "t": str(v) for k, v in units.items()}
+    rec = Recording.load(path, name=name, atmosphere=atmosphere, mask_nan=True,
+                         default_units={str(k): str(v) for k, v in (units or {}).items()})
+    for channel, valid in rec.mask.items():
+        if not np.all(valid):
+            row = int(np.argmin(valid))
+            raise PamjaxInputError(
+                f"{rec.locate(row)}: column {rec.columns.get(channel, channel)!r} (channel {channel!r}) of "
+                f"experiment {name!r} is NaN/inf at row {row} (0-based data row; t = {rec.t[row]:g} s): a bench "
+                "recording must be complete; fix or delete that line, or cut the recording before the bad rows")
+    return rec
 
 
 def number(e, key, where, lo=None, hi=None, unit=""):
@@ -165,11 +169,7 @@ def run_command(name, kind, e, rec, valve_period, where, notes, unknown_start):
     here = f"{where}: experiment {name!r}"
     recorded = "command" in rec.channels
     if recorded:
-        u = rec["command"]
-        if np.nanmin(u) < -1e-9 or np.nanmax(u) > 1 + 1e-9:
-            hint = " (it looks like percent: write the header 'duty [%]')" if np.nanmax(u) <= 100 else ""
-            raise PamjaxInputError(f"{where}: the recorded duty of experiment {name!r} must lie in [0, 1], its range "
-                                   f"is [{np.nanmin(u):g}, {np.nanmax(u):g}]{hint}")
+        _check_duty_range(name, rec)
     if kind in TANK_KINDS:
         duty = number(e, "u", here, 0.0, 1.0)
         if recorded and duty is not None:
@@ -183,6 +183,7 @@ def run_command(name, kind, e, rec, valve_period, where, notes, unknown_start):
             raise PamjaxInputError(f"{where}: experiment {name!r} has neither a recorded duty column nor meta.json's "
                                    "'u'")
         if not recorded:
+            notes.append(f"{name}: no recorded duty column; driven by meta.json's duty u = {duty:g}")
             return Constant(duty)
     else:
         keys = [k for k in ("lo", "hi", "f_tri") if k in e]
@@ -204,6 +205,14 @@ def run_command(name, kind, e, rec, valve_period, where, notes, unknown_start):
                 f"{where}: experiment {name!r} has no recorded duty column (u / duty) and meta.json gives no "
                 "triangle (lo, hi, f_tri): pamjax cannot know what drove the run; record the commanded duty")
         if not recorded:
+            if unknown_start:
+                raise PamjaxInputError(
+                    f"{where}: experiment {name!r} was logged mid-way (its \"init\" is unknown), and its recording "
+                    f"{rec.source} has no duty column (columns: {sorted(rec.channels)}): the triangle's phase at its "
+                    "first sample is unknown, so meta.json's triangle cannot drive it; record the commanded duty (a "
+                    "column u / duty) in the file")
+            notes.append(f"{name}: no recorded duty column; driven by meta.json's triangle (lo={lo:g}, hi={hi:g}, "
+                         f"f_tri={f:g} Hz) from the run's start, unchecked (a recorded duty is checked against it)")
             return triangle
         if triangle is not None:  # its phase counted from the first sample (a logger's clock need not start at 0)
             t, u = rec.t - rec.t[0], rec["command"]
@@ -226,6 +235,86 @@ def run_command(name, kind, e, rec, valve_period, where, notes, unknown_start):
             else:
                 notes.append(f"{name}: recorded duty = meta.json's triangle (checked); driven by the recorded duty")
     return Sampled(rec.t, rec["command"], period=valve_period)
+
+
+def _check_duty_range(name, rec):
+    """A recorded duty lies in [0, 1]: else an error naming the file, its duty column and the first bad row (a CSV's
+    line), with the percent hint where the values look like percent (none negative, some above 1.5, none above
+    100)."""
+    u = rec["command"]
+    bad = (u < -1e-9) | (u > 1 + 1e-9)
+    if not np.any(bad):
+        return
+    row = int(np.argmax(bad))
+    column = rec.columns.get("command", "command")
+    low, high = float(np.min(u)), float(np.max(u))
+    csv = rec.source is not None and str(rec.source).lower().endswith((".csv", ".txt"))
+    if low >= 0 and 1.5 < high <= 100:
+        fix = ("it looks like percent: write its header 'duty [%]'" if csv else
+               f"it looks like percent: give meta.json \"units\": {{\"{column}\": \"%\"}}")
+    else:
+        fix = "a duty ratio lies in [0, 1] (0.5: half of each PWM period open): correct that value"
+    raise PamjaxInputError(f"{rec.locate(row)}: the duty column {column!r} of experiment {name!r} reads {u[row]:g} "
+                           f"there, outside [0, 1] (its range: [{low:g}, {high:g}]); {fix}")
+
+
+def start_estimate(rec, offset, plant, lead, window=0.02):
+    """A run logged mid-way: its start (pressure, position, velocity) `lead` s before its first sample, from the
+    first `window` seconds of data (the median pressure less the rest offset, a straight line through the position).
+    A pressure the run did not record is the one at which the model rests at that position (`holding_pressure`).
+    Returns (name → start value, what it came from: for the notes)."""
+    keep = rec.t <= rec.t[0] + window
+    out, said = {}, [f"first {window * 1e3:g} ms of data"]
+    if "pressure" in rec.channels:
+        out["pressure"] = float(np.median(rec["pressure"][keep])) - offset
+    if "position" in rec.channels and np.ptp(rec["position"]) > 0:
+        slope, intercept = np.polyfit(rec.t[keep] - rec.t[0], rec["position"][keep], 1)
+        position = float(intercept - slope * lead)
+        if "pressure" not in out and isinstance(plant, AbstractMuscleSystem):
+            out["pressure"] = holding_pressure(plant, position)
+            said.append("the pressure, not recorded, where the model rests at that position")
+        out.update(position=position, velocity=float(slope))
+    return out, "; ".join(said)
+
+
+def holding_pressure(plant, position):
+    """The pressure [Pa abs] at which `plant` (an `AbstractMuscleSystem`) rests at `position` [m]: its start state at
+    rest (`initial_state(pressure=...)`, the static balance of muscle and payload) inverted on a 2.5 kPa grid from the
+    atmosphere up 1 MPa (an end of it where the position lies beyond)."""
+    import jax
+
+    p_atm = float(plant.air.atmospheric_pressure)
+    pressures = np.linspace(p_atm, p_atm + 1e6, 401)
+    rest = np.asarray(jax.vmap(lambda p: plant.initial_state(pressure=p).position)(pressures))
+    above = np.nonzero(rest >= position)[0]
+    if above.size == 0:
+        return float(pressures[-1])
+    k = int(above[0])
+    if k == 0:
+        return p_atm
+    share = (position - rest[k - 1]) / (rest[k] - rest[k - 1])
+    return float(pressures[k - 1] + share * (pressures[k] - pressures[k - 1]))
+
+
+def with_atmosphere(model, atmosphere, said, notes):
+    """`model` with its air's atmospheric pressure the bench's `atmosphere` [Pa abs] (the ambient pressure its gauge
+    readings refer to, as `said`: meta.json's atmosphere_Pa or `load_bench`'s atmosphere), which the valve's exhaust,
+    a tank's "p_atm" start and a run at rest then refer to too; said in `notes`. `model` itself where they agree."""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    try:
+        value = float(atmosphere) if not isinstance(atmosphere, (bool, str)) else np.nan
+    except (TypeError, ValueError):
+        value = np.nan
+    if not (np.isfinite(value) and 5e4 <= value <= 1.2e5):
+        raise PamjaxInputError(f"{said} must be the ambient pressure in Pa abs (50-120 kPa), got {atmosphere!r}")
+    old = model.air.atmospheric_pressure
+    if abs(value - float(old)) < 0.5:
+        return model
+    notes.append(f"the model's atmospheric pressure set to {value:.6g} Pa ({said}; the model had {float(old):.6g} "
+                 "Pa): the gauge readings, the valve's exhaust and the tank tests' p_atm refer to it")
+    return eqx.tree_at(lambda m: m.air.atmospheric_pressure, model, jnp.asarray(value, jnp.result_type(old)))
 
 
 def payload_build(e, model, where, notes):

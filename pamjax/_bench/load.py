@@ -7,16 +7,16 @@
 `muscle_PI` closed-loop runs; `init` "unknown…" for a run logged from the middle; `supply_Pa` ± `supply_sd_Pa`, a
 reference gauge's reading of the run's supply pressure [Pa abs]), `noise` (`p_std_Pa`,
 `x_std_m`), `fitted_keys` (the parameters to identify, named as below) and, optionally, `units` (channel → unit, for
-files that carry none: NPZ and MAT) and `atmosphere_Pa` (the ambient pressure gauge readings are referred to; default
-101325 Pa). Simulated benches also list their true `params` and `nuisance`: never read here (a fit starts from the
-model it is given, e.g. the presets).
+columns whose file gives none: NPZ, MAT, a CSV header without units) and `atmosphere_Pa` (the ambient pressure gauge
+readings are referred to, and the model's; default 101325 Pa). Simulated benches also list their true `params` and
+`nuisance`: never read here (a fit starts from the model it is given, e.g. the presets).
 
 Recordings: `<name>.npz`, `<name>.csv` or `<name>.mat`, one per experiment, with time, the duty the rig commanded
 (`u` / `duty` / `command`, held per PWM period), pressure and position (short names `t, u, p, x` or full ones; CSV
 headers give units, `pressure [barg]`, `position [mm]`; gauge pressures become absolute with the stated
 atmosphere). The command that drives a run is the one the rig logged: meta.json's duty or triangle, where given, is
 checked against it (a contradiction is an error naming both), and only a recording without a command column is
-driven from meta.json.
+driven from meta.json (said in the notes; refused for a run logged mid-way, whose triangle phase is unknown).
 
 `load_bench` turns such a directory into `Experiment`s for `pamjax.fit`, optionally with the rig's nuisances free
 (`nuisance=True`: `pamjax.Rig`); `BENCH_PARAMETERS` maps the bench's parameter names to pamjax parameter paths;
@@ -51,6 +51,8 @@ from .files import (
     read_meta,
     recording_file,
     run_command,
+    start_estimate,
+    with_atmosphere,
 )
 
 # bench name → (pamjax parameter path, label of the value in a FitResult)
@@ -157,19 +159,6 @@ def _rest_samples(rec, signal, valve, period):
 START_LEAD = 0.005
 
 
-def _start_estimate(rec, offset, window=0.02):
-    """A run logged mid-way: its start (pressure, position, velocity) `START_LEAD` before its first sample, from the
-    first `window` seconds of data (the median pressure less the rest offset, a straight line through the
-    position)."""
-    keep = rec.t <= rec.t[0] + window
-    p = float(np.median(rec["pressure"][keep])) - offset
-    out = {"pressure": p}
-    if "position" in rec.channels and np.ptp(rec["position"]) > 0:
-        slope, intercept = np.polyfit(rec.t[keep] - rec.t[0], rec["position"][keep], 1)
-        out.update(position=float(intercept - slope * START_LEAD), velocity=float(slope))
-    return out
-
-
 def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: RealScalarLike | None = None,
                kinds: Sequence[str] = FITTED_KINDS, fitted_keys: Sequence[str] | None = None, substeps: int = 16,
                nuisance: bool | Sequence[str] = False, atmosphere: RealScalarLike | None = None,
@@ -208,7 +197,8 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
       `pamjax.Measurement` appended to `experiments` (residual (gain − pressure_gain)/sd): the fit weighs calibration
       and recordings by their uncertainties instead of trusting the calibration exactly. Needs `pressure_gain`.
     - `atmosphere`: the ambient pressure [Pa abs] that gauge readings (`barg`, `kPa gauge`) are referred to;
-      default meta.json's `atmosphere_Pa`, else the model's atmospheric pressure.
+      default meta.json's `atmosphere_Pa`, else the model's atmospheric pressure. Given either way, it is the rig's
+      ambient pressure: `bench.model`'s air takes it (its exhaust, a tank's "p_atm" start), said in `notes`.
 
     **Returns:** a `Bench`. **Raises:** `PamjaxInputError` naming the experiment, file and key for every mistake in
     the directory (missing or duplicated recordings, unreadable meta.json, units, NaN, time order, a duty outside
@@ -225,11 +215,14 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
     if unknown_kinds:
         raise PamjaxInputError(f"kinds {unknown_kinds} are not experiment kinds pamjax fits; valid: "
                                f"{list(FITTED_KINDS)}")
-    p_atm = float(model.air.atmospheric_pressure)
+    notes, said = [], "meta.json atmosphere_Pa" if atmosphere is None else "the atmosphere given"
     if atmosphere is None:
-        atmosphere = number(meta, "atmosphere_Pa", f"{where}/meta.json", 5e4, 1.2e5, "Pa abs") or p_atm
+        atmosphere = number(meta, "atmosphere_Pa", f"{where}/meta.json", 5e4, 1.2e5, "Pa abs")
+    if atmosphere is not None:  # the rig's ambient pressure: the model's too
+        model = with_atmosphere(model, atmosphere, said, notes)
+    atmosphere = p_atm = float(model.air.atmospheric_pressure)
     period = None if model.valve.period is None else float(model.valve.period)
-    specs, skipped, recordings, notes, unknown = [], {}, [], [], []
+    specs, skipped, recordings, unknown = [], {}, [], []
     check_runs(runs, meta, kinds, where)
     for name, e in meta["experiments"].items():
         kind = e.get("kind")
@@ -418,11 +411,11 @@ def _with_nuisance(bench, specs, names, p_atm, position_offset, pressure_gain=No
                 supply = reading[0]
                 gauges[name] = Measurement(f"runs[{name}].supply_pressure", *reading, name=GAUGE_NAME.format(name))
         if "start" in names and name in bench.unknown_starts:
-            estimate = _start_estimate(rec, offset)
+            estimate, source = start_estimate(rec, offset, plant, START_LEAD)
             start = StartState(**estimate)
             free += [f"runs[{name}].start.{k}" for k in estimate]
             bench.notes.append(f"{name}: start state fitted (meta.json init unknown), from "
-                               + ", ".join(f"{k} {v:.4g}" for k, v in estimate.items()) + " (first 20 ms of data)")
+                               + ", ".join(f"{k} {v:.4g}" for k, v in estimate.items()) + f" ({source})")
         if supply is not None or start is not None:
             runs[name] = RunConditions(supply_pressure=supply, start=start)
     bench.model = Rig(plant, sensors={DEFAULT_GROUP: sensors}, runs=runs)

@@ -53,14 +53,16 @@ class Recording:
       a unit that does not fit the channel, and a pressure unit other than Pa that does not say absolute or gauge,
       are refused.
     - `mask_nan`: False (default) raises on NaN naming channel and row; True keeps them and marks them in `mask`.
-    - `name`: a label. `source`: where the data came from (a file), named in error messages.
+    - `name`: a label. `source`: where the data came from (a file), named in error messages (a bad row by its file
+      line for a CSV, counting the header: `locate`).
     - `unit_checks`: True (default) refuses values whose magnitude betrays another unit (positions beyond 1 m:
       millimetres; samples 1 s or more apart: milliseconds; pressures below half an atmosphere: bar, gauge, ...),
       naming the likely unit. False skips these magnitude checks (never the unit conversions).
     - `atmosphere`: the ambient pressure [Pa abs] that gauge units (`barg`, `kPa gauge`, `psig`) are referred to;
       default the ISO 2533 standard atmosphere, 101325 Pa.
 
-    `mask[name]` is a boolean array, True where the sample is valid. `units` holds the SI unit of each channel.
+    `mask[name]` is a boolean array, True where the sample is valid. `units` holds the SI unit of each channel;
+    `columns` the name of each channel's column in the file it was read from (`Recording.load`; else empty).
     """
 
     def __init__(self, t: TimesLike, channels: Mapping[str, TimesLike], units: Mapping[str, str] | None = None, *,
@@ -71,25 +73,18 @@ class Recording:
             raise PamjaxInputError(f"Recording {self.name!r}: atmosphere must be the ambient pressure in Pa abs "
                                    f"(50-120 kPa), got {atmosphere!r}")
         units = {} if units is None else dict(units)
+        self.source = source
+        self.columns = {}  # channel → its column's name in the file it was read from (`Recording.load`)
         where = str(source) if source is not None else f"Recording {self.name!r}"
         t, _ = to_si("t", units.pop("t", "s"), np.asarray(t, dtype=float), where)
-        if t.ndim != 1 or t.size < 2:
-            raise PamjaxInputError(f"Recording {self.name!r}: t must be 1-D with at least 2 times, got shape {t.shape}")
-        if not np.all(np.isfinite(t)):
-            row = int(np.argmin(np.isfinite(t)))
-            raise PamjaxInputError(f"Recording {self.name!r}: t must be finite; row {row} is {t[row]}")
-        if not np.all(np.diff(t) > 0):
-            row = int(np.argmin(np.diff(t) > 0)) + 1
-            raise PamjaxInputError(
-                f"Recording {self.name!r}: t must be strictly increasing; t[{row}] = {t[row]} <= t[{row - 1}] = "
-                f"{t[row - 1]}"
-            )
+        _check_times(t, source, self.name)
         if not channels:
             raise PamjaxInputError(f"Recording {self.name!r}: needs at least one channel besides t")
         unknown = set(units) - set(channels)
         if unknown:
             raise PamjaxInputError(f"{where}: units name {sorted(unknown)}, not channels of the recording "
-                                   f"{sorted(channels)}")
+                                   f"{sorted(channels)}: key units by channel name ('t' for the times)"
+                                   + (" or by the file's column name" if source is not None else ""))
         if unit_checks:
             check_magnitude("time", t, where, "t")
         self.unit_checks = bool(unit_checks)
@@ -107,10 +102,14 @@ class Recording:
             valid = np.isfinite(v)
             if not mask_nan and not np.all(valid):
                 row = int(np.argmin(valid))
+                if source is None:
+                    raise PamjaxInputError(
+                        f"Recording {self.name!r}: channel {key!r} is NaN/inf at row {row} (t = {t[row]} s); clean "
+                        "the data or pass Recording(..., mask_nan=True) to leave such samples out of fits")
                 raise PamjaxInputError(
-                    f"Recording {self.name!r}: channel {key!r} is NaN/inf at row {row} (t = {t[row]} s); "
-                    "clean the data or pass mask_nan=True to leave such samples out of fits"
-                )
+                    f"{sample_location(source, self.name, row)}: channel {key!r} is NaN/inf at row {row} (0-based "
+                    f"data row; t = {t[row]} s): clean or delete that line of the file (a Python script can instead "
+                    "leave such samples out of its fit: Recording.load(path, mask_nan=True))")
             dimension = "pressure" if unit == "Pa" else channel_dimension(key)
             if dimension == "pressure" or unit_checks:
                 check_magnitude(dimension, v[valid], where, key)
@@ -118,6 +117,11 @@ class Recording:
             self.units[key] = unit
             self.mask[key] = valid
         self.lowpass_hz = None  # the lowest low-pass cut-off [Hz] applied by `filtered`, if any
+
+    def locate(self, row: int) -> str:
+        """Where sample `row` (0-based) of this recording is: `<file>, line N` for a CSV (1-based, counting the header
+        and comment lines), `<file>, sample N` (1-based) for other files, `Recording '<name>', row N` for arrays."""
+        return sample_location(self.source, self.name, row)
 
     def __getitem__(self, key):
         if key == "t":
@@ -228,23 +232,28 @@ class Recording:
     @classmethod
     def from_csv(cls, path: str | os.PathLike, *, rename: Mapping[str, str] | None = None,
                  units: Mapping[str, str] | None = None, mask_nan: bool = False, name: str | None = None,
-                 unit_checks: bool = True, atmosphere: RealScalarLike | None = None) -> "Recording":
+                 unit_checks: bool = True, atmosphere: RealScalarLike | None = None,
+                 default_units: Mapping[str, str] | None = None) -> "Recording":
         """Read a CSV with a header row naming the columns, a time column `t` (or `time`) and one column per
         channel (a channel's name in any capitals: `Pressure [barg]`); `name [unit]` or `name (unit)` headers give
         units, converted to SI (`pamjax._core.csvio`, `_units`).
         Commas, semicolons or tabs; quoted headers; a UTF-8 byte-order mark; lines starting with '#' are comments.
-        `units` (dict name → unit) overrides the header's."""
+        `units` (dict name → unit) overrides the header's; `default_units` (a bench's meta.json `units`) gives the
+        units of columns whose header has none, and a header unit that differs from it is refused, naming both.
+        Either is keyed by the file's column name, the channel's or a bench short name (`p`, `x`, `u`, `t`)."""
         columns = read_table(path)
         return cls._from_columns(pathlib.Path(path), [(n, v) for n, _, v in columns],
                                  {n: u for n, u, _ in columns if u is not None}, rename, units, mask_nan, name,
-                                 unit_checks, atmosphere)
+                                 unit_checks, atmosphere, default_units)
 
     @classmethod
     def from_npz(cls, path: str | os.PathLike, *, rename: Mapping[str, str] | None = None,
                  units: Mapping[str, str] | None = None, mask_nan: bool = False, name: str | None = None,
-                 unit_checks: bool = True, atmosphere: RealScalarLike | None = None) -> "Recording":
+                 unit_checks: bool = True, atmosphere: RealScalarLike | None = None,
+                 default_units: Mapping[str, str] | None = None) -> "Recording":
         """Read an NPZ with a `t` array and one array per channel (the hybrid bench's short names t, u, p, x are
-        renamed to command, pressure, position)."""
+        renamed to command, pressure, position); `units` and `default_units` as in `from_csv` (the file's own units:
+        its `__units__`)."""
         path = pathlib.Path(path)
         if not path.is_file():
             raise PamjaxInputError(f"recording file {path} does not exist")
@@ -254,24 +263,28 @@ class Recording:
         columns = [(k, v) for k, v in columns if v.ndim == 1]  # other arrays are metadata
         return cls._from_columns(
             path, columns, meta.get("units", {}), rename, units, mask_nan, name or meta.get("name"), unit_checks,
-            atmosphere
+            atmosphere, default_units
         )
 
     @classmethod
     def from_mat(cls, path: str | os.PathLike, *, rename: Mapping[str, str] | None = None,
                  units: Mapping[str, str] | None = None, mask_nan: bool = False, name: str | None = None,
-                 unit_checks: bool = True, atmosphere: RealScalarLike | None = None) -> "Recording":
+                 unit_checks: bool = True, atmosphere: RealScalarLike | None = None,
+                 default_units: Mapping[str, str] | None = None) -> "Recording":
         """Read a MATLAB `.mat` file (Simulink / dSPACE logs): every 1-D numeric variable is a column (a time
         variable `t` or `time`, channels by name or the bench short names t, u, p, x); MATLAB files carry no units,
-        so `units` (dict name → unit) says what is not SI (e.g. {"p": "barg", "x": "mm"}). v5-v7.2 files through
-        `scipy.io.loadmat`, v7.3 (HDF5) through h5py (`pip install "pamjax[mat]"`)."""
+        so `units` (dict name → unit, keyed by the variable's name or the channel's) says what is not SI (e.g.
+        {"p": "barg", "x": "mm"}; `default_units` the same). v5-v7.2 files through `scipy.io.loadmat`, v7.3 (HDF5)
+        through h5py (`pip install "pamjax[mat]"`)."""
         path = pathlib.Path(path)
         if not path.is_file():
             raise PamjaxInputError(f"recording file {path} does not exist")
-        return cls._from_columns(path, _mat_columns(path), {}, rename, units, mask_nan, name, unit_checks, atmosphere)
+        return cls._from_columns(path, _mat_columns(path), {}, rename, units, mask_nan, name, unit_checks, atmosphere,
+                                 default_units)
 
     @classmethod
-    def _from_columns(cls, path, columns, file_units, rename, units, mask_nan, name, unit_checks, atmosphere=None):
+    def _from_columns(cls, path, columns, file_units, rename, units, mask_nan, name, unit_checks, atmosphere=None,
+                      default_units=None):
         """`columns`: list of (name in the file, 1-D array). Bench short names (t, u, p, x, ...) and `rename` map
         file names to channel names; two columns that end up with one name are refused."""
         if rename is not None and not isinstance(rename, dict):
@@ -301,10 +314,13 @@ class Recording:
             data[new], source[new] = v, k
             if k in file_units:
                 u[new] = file_units[k]
-        u.update(units or {})
+        _add_default_units(u, default_units, data, source, names, rename, path, atmosphere)
+        u.update({_unit_key(k, names, rename): v for k, v in (units or {}).items()})  # the caller's: over the file's
         t = data.pop("t")
-        return cls(t, data, u, mask_nan=mask_nan, name=name or path.stem, source=path, unit_checks=unit_checks,
-                   atmosphere=atmosphere)
+        out = cls(t, data, u, mask_nan=mask_nan, name=name or path.stem, source=path, unit_checks=unit_checks,
+                  atmosphere=atmosphere)
+        out.columns = {c: k for c, k in source.items() if c != "t"}
+        return out
 
     @classmethod
     def load(cls, path: str | os.PathLike, **kwargs: Any) -> "Recording":
@@ -317,6 +333,99 @@ class Recording:
         if suffix == ".mat":
             return cls.from_mat(path, **kwargs)
         raise PamjaxInputError(f"recording file must be .csv, .npz or .mat, got {path}")
+
+
+def _unit_key(key, names, rename):
+    """The channel a `units` key names: a column of the file (by its name there: `Pressure`, `p`), `t` / `time`, a
+    bench short name or a channel's name in any capitals; other keys are kept (and refused as naming no channel)."""
+    if key in names:
+        return rename.get(key, key)
+    low = str(key).lower()
+    if low in ("t", "time"):
+        return "t"
+    if key in BENCH_NAMES:
+        return BENCH_NAMES[key]
+    return "command" if low == "duty" else low if low in DEFAULT_UNITS else key
+
+
+def _add_default_units(u, default_units, data, source, names, rename, path, atmosphere):
+    """`default_units` (a bench's meta.json `units`) into `u` (channel → unit) for the columns the file gives no unit;
+    a unit the file gives that differs is refused naming both; a known channel the file lacks is skipped."""
+    for key, unit in (default_units or {}).items():
+        channel = _unit_key(key, names, rename)
+        if channel not in data:
+            if channel in DEFAULT_UNITS or channel in BENCH_NAMES.values():
+                continue  # a bench-wide table: a channel this file does not record
+            raise PamjaxInputError(f"{path}: meta.json 'units' (default_units) names {key!r}, neither a column of "
+                                   f"the file {names} nor a channel; key units by column or channel name (t, p / "
+                                   "pressure, x / position, u / duty)")
+        if channel in u and not _same_unit(channel, u[channel], unit, path, atmosphere):
+            raise PamjaxInputError(f"{path}: column {source[channel]!r} is in {u[channel]!r} by the file, but "
+                                   f"meta.json 'units' (default_units) says {key!r} is in {unit!r}: one of them is "
+                                   "wrong; keep one")
+        u.setdefault(channel, str(unit))
+
+
+def _same_unit(channel, a, b, where, atmosphere):
+    """Whether units `a` and `b` of `channel` convert a value alike (`bar g` and `barg`; `Pa` and `Pa abs`)."""
+    if str(a).strip() == str(b).strip():
+        return True
+    try:
+        va, ua = to_si(channel, a, np.array([1.0, 3.0]), where, atmosphere)
+        vb, ub = to_si(channel, b, np.array([1.0, 3.0]), where, atmosphere)
+    except PamjaxInputError:
+        return False
+    return ua == ub and bool(np.allclose(va, vb, rtol=1e-12, atol=0.0))
+
+
+def sample_location(source, name, row):
+    """Where sample `row` (0-based) of a recording read from `source` (a file, or None) is (`Recording.locate`)."""
+    if source is None:
+        return f"Recording {name!r}, row {row}"
+    path = pathlib.Path(source)
+    line = _csv_line(path, row) if path.suffix.lower() in (".csv", ".txt") else None
+    return f"{path}, line {line}" if line is not None else f"{path}, sample {row + 1}"
+
+
+def _csv_line(path, row):
+    """The 1-based line of a CSV file that holds its data row `row` (0-based), counted as `pamjax._core.csvio` reads
+    the file (blank and '#' comment lines skipped, the first other line the header); None if it cannot be read."""
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return None
+    for encoding in ("utf-8-sig", "cp1252", "latin-1"):  # as the reader decodes it
+        try:
+            text = data.decode(encoding)
+            break
+        except UnicodeDecodeError:
+            continue
+    lines = [k + 1 for k, line in enumerate(text.splitlines()) if line.strip() and not line.lstrip().startswith("#")]
+    return lines[row + 1] if 0 <= row < len(lines) - 1 else None
+
+
+def _check_times(t, source, name):
+    """A recording's times [s]: 1-D, at least 2, finite, strictly increasing; a mistake named by file and line where
+    the recording was read from a file, by row (0-based) for arrays."""
+    if t.ndim != 1 or t.size < 2:
+        if source is not None and t.ndim == 1:
+            raise PamjaxInputError(f"{source}: {t.size} data row{'' if t.size == 1 else 's'}: a recording needs at "
+                                   "least 2 samples (rows below the header of a CSV)")
+        raise PamjaxInputError(f"Recording {name!r}: t must be 1-D with at least 2 times, got shape {t.shape}")
+    if not np.all(np.isfinite(t)):
+        row = int(np.argmin(np.isfinite(t)))
+        if source is None:
+            raise PamjaxInputError(f"Recording {name!r}: t must be finite; row {row} is {t[row]}")
+        raise PamjaxInputError(f"{sample_location(source, name, row)}: the time is {t[row]} (an empty or non-numeric "
+                               "cell): t must be finite; fix or delete that line")
+    if not np.all(np.diff(t) > 0):
+        row = int(np.argmin(np.diff(t) > 0)) + 1
+        if source is None:
+            raise PamjaxInputError(f"Recording {name!r}: t must be strictly increasing; t[{row}] = {t[row]} <= "
+                                   f"t[{row - 1}] = {t[row - 1]}")
+        raise PamjaxInputError(f"{sample_location(source, name, row)}: t = {t[row]} s is not after the sample before "
+                               f"it ({sample_location(source, name, row - 1).rsplit(', ', 1)[-1]}: t = {t[row - 1]} "
+                               "s): t must be strictly increasing; delete a repeated row, sort rows out of order")
 
 
 def _mat_columns(path):
