@@ -46,3 +46,19 @@ def test_sampled_zero_order_hold_and_pwm_latch():
     latched = pamjax.Sampled(times, values, period=0.02)  # value at the start of each 20 ms PWM period
     np.testing.assert_array_equal(_eval(latched, [0.005, 0.019, 0.021, 0.035, 0.041]), [0.2, 0.2, 0.6, 0.6, 0.8])
     assert latched.bounds() == (0.2, 0.8)
+
+
+def test_a_held_sample_at_its_period_start_counts_whatever_the_rounding():
+    # A logger's times 1234.507 + k ms moved by -7 ms land a few ulp beside the periods' starts k·20 ms: a sample at
+    # 1234.5000000000002 (after 61725 · 0.02 = 1234.5) was not "in force" at its period's start, and the period took
+    # the previous period's duty.
+    import numpy as np
+
+    import pamjax
+
+    t = np.nextafter(1234.5 + 1e-3 * np.arange(60), np.inf)  # each logged time one ulp after its grid time
+    u = np.repeat([0.2, 0.5, 0.8], 20)
+    signal = pamjax.Sampled(t, u, period=0.02)
+    for k, expected in enumerate((0.2, 0.5, 0.8)):
+        start = 1234.5 + 0.02 * k
+        assert float(signal(start + 0.005)) == expected and float(signal(start)) == expected

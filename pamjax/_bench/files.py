@@ -237,6 +237,57 @@ def run_command(name, kind, e, rec, valve_period, where, notes, unknown_start):
     return Sampled(rec.t, rec["command"], period=valve_period)
 
 
+def on_pwm_clock(name, rec, period, notes):
+    """`rec` with its times on the valve's PWM clock (periods starting at multiples of `period` [s], as the model's
+    valve counts them). A logger's clock need not be: it may start at 12.345 s, or a run may be logged from the
+    middle of a period, and a valve switched 7 ms off its recorded edges leaves a tank charge's residuals at 11× the
+    noise. Where the recorded duty changes, it changes at period starts: those fix the periods' phase (to within a
+    sample; the file's clock kept where it agrees). A run without a change (a constant duty) is taken to start its
+    periods with its first sample, as a triangle's phase is counted from it. Each move is said in `notes`."""
+    if period is None:
+        return rec
+    t0, reason = float(rec.t[0]), None
+    found = _pwm_phase(rec, period)
+    if found is not None:
+        phase, width = found  # period starts at `phase` (mod period) on the file's clock, or up to `width` before it
+        if phase > period * (1.0 - 1e-9):
+            phase -= period  # just below a whole period: at its start
+        if -1e-9 * period <= phase < width:
+            return rec  # the file's clock agrees with the recorded duty's changes
+        shift, reason = -phase, "where its recorded duty changes"
+    else:
+        k = t0 / period
+        if abs(k - round(k)) < 1e-6:
+            return rec
+        shift, reason = -t0, "from its first sample: a constant duty shows no period start"
+    moved = rec.shifted(shift)
+    notes.append(f"{name}: its PWM periods start at {-shift % period * 1e3:.3g} ms after a multiple of "
+                 f"{period * 1e3:g} ms on the file's clock ({reason}): its times moved by {shift:.6g} s onto the "
+                 "valve's clock")
+    return moved
+
+
+def _pwm_phase(rec, period):
+    """(phase, width) [s]: where on the file's clock (mod `period`) the recorded duty's changes put the PWM period
+    starts, and how far before that they may lie: a change is logged by the first sample at or after its period start,
+    so each change allows (t_c − dt, t_c]; `phase` is the latest start all allow (the change's own sample: a logger
+    clocked with the valve samples the period start itself). None without a duty change, or where the changes
+    disagree (a duty not held per period)."""
+    if "command" not in rec.channels or rec.t.size < 3:
+        return None
+    u, t = rec["command"], rec.t
+    at = np.nonzero(np.diff(u) != 0)[0] + 1
+    if at.size == 0:
+        return None
+    dt = float(np.median(np.diff(t)))
+    ref = float(t[at[0]])
+    offsets = (t[at] - ref + 0.5 * period) % period - 0.5 * period  # each change relative to the first, in (-T/2, T/2]
+    lo, hi = float(np.max(offsets - dt)), float(np.min(offsets))  # a period start in (t_c - dt, t_c] for each
+    if lo >= hi + 1e-9 * period:
+        return None
+    return (ref + hi) % period, hi - lo
+
+
 def _check_duty_range(name, rec):
     """A recorded duty lies in [0, 1]: else an error naming the file, its duty column and the first bad row (a CSV's
     line), with the percent hint where the values look like percent (none negative, some above 1.5, none above

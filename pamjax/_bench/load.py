@@ -46,6 +46,7 @@ from .files import (
     load_recording,
     noise_levels,
     number,
+    on_pwm_clock,
     payload_build,
     period_starts,
     read_meta,
@@ -242,6 +243,7 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
         start_unknown = str(e.get("init", "")).strip().lower().startswith("unknown")
         if start_unknown:
             unknown.append(name)
+        rec = on_pwm_clock(name, rec, period, notes)
         signal = run_command(name, kind, e, rec, period, f"{where}/meta.json", notes, start_unknown)
         if rate is not None:
             rec = rec.resampled(rate)

@@ -149,6 +149,13 @@ class Recording:
         out.lowpass_hz = self.lowpass_hz if filtered_at is None else min(filtered_at, self.lowpass_hz or np.inf)
         return out
 
+    def shifted(self, dt: RealScalarLike) -> "Recording":
+        """The same samples with their times moved by `dt` [s] (a logger's clock put on the run's); its file and
+        columns kept for messages."""
+        out = self._replace(self.t + float(dt), dict(self.channels))
+        out.source, out.columns = self.source, dict(self.columns)
+        return out
+
     # -- preprocessing ------------------------------------------------------------------------------------------
     def filtered(self, cutoff_hz: RealScalarLike = 20.0, order: int = 2, channels: Sequence[str] | None = None,
                  pwm_frequency: RealScalarLike | None = None) -> "Recording":

@@ -158,8 +158,9 @@ class Sampled(AbstractSignal):
             raise PamjaxInputError(f"Sampled.period must be > 0 [s], got {self.period}")
 
     def __call__(self, t):
-        if self.period is not None:
-            t = jnp.floor(t / self.period + 1e-9) * self.period
+        if self.period is not None:  # the period's start, and the sample there whichever of the two rounds lower
+            # (k·period against a logged time: 1234.5000000000002 > 61725 · 0.02 took the last period's duty)
+            t = (jnp.floor(t / self.period + 1e-9) + 1e-9) * self.period
         index = jnp.clip(jnp.searchsorted(self.times, t, side="right") - 1, 0, self.times.shape[0] - 1)
         return self.values[index]
 
