@@ -1,5 +1,9 @@
 """`linearise`: autodiff Jacobians → state space, transfer functions, Bode data; paper 001 eq. 6-8 reproduced."""
 
+import re
+
+import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -123,3 +127,50 @@ def test_python_control_cross_check(regulator_model):
     np.testing.assert_allclose(
         np.ravel(mag), np.abs(regulator_model.frequency_response([0.5, 3.0, 20.0], 0, 0)), rtol=1e-9
     )
+
+
+@pytest.mark.parametrize("command", [-0.3, 1.5, float("nan")])
+def test_a_command_outside_the_range_is_named_before_any_solve(command):
+    """Eq. 13's parabola extrapolates: duty -0.3 gave a 2 MPa "equilibrium", NaN a NaN B. Refused, as `simulate`
+    refuses such a signal; and a regulator's 0-10 V."""
+    system = pamjax.presets.mas10_system(valve="averaged")
+    guess = system.initial_state(pressure=4e5)
+    with pytest.raises(pamjax.PamjaxInputError, match="command"):
+        equilibrium(system, command, guess)
+    with pytest.raises(pamjax.PamjaxInputError, match="command"):
+        linearise(system, guess, command)
+    regulated = RegulatorSystem(LinearRegulator(), volume=0.0)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"command.*\[0\.0, 10\.0\]"):
+        equilibrium(regulated, 12.0, regulated.initial_state())
+
+
+@pytest.fixture(scope="module")
+def bouc_wen_settled():
+    """The MAS-10 with Bouc–Wen friction (a memory state) at duty 0.6, and its state after a 10 s `simulate`."""
+    system = pamjax.presets.mas10_system(valve="averaged", friction="bouc_wen")
+    traj = pamjax.simulate(system, pamjax.Constant(0.6), np.linspace(0.0, 10.0, 3))
+    return system, jax.tree_util.tree_map(lambda a: a[-1], traj.state)
+
+
+def test_equilibrium_with_a_memory_state_is_the_settled_state(bouc_wen_settled):
+    """The friction state's rate vanishes at rest whatever its value: a continuum of equilibria, a singular Jacobian
+    (Newton's solve went to NaN). The least-squares steps converge to the equilibrium nearest the guess: from the
+    settled state of a long simulate, with its pressure off by 5 kPa, back to that state."""
+    system, settled = bouc_wen_settled
+    guess = eqx.tree_at(lambda s: s.pressure, settled, settled.pressure + 5e3)
+    eq = equilibrium(system, 0.6, guess)
+    # measured: pressure 6e-8 Pa, position 7e-10 m, friction state 4e-10 m apart (the simulate settled to 1e-13 m/s)
+    assert float(eq.pressure) == pytest.approx(float(settled.pressure), abs=1.0)
+    assert float(eq.position) == pytest.approx(float(settled.position), abs=1e-7)
+    assert float(eq.friction) == pytest.approx(float(settled.friction), abs=1e-7)
+    rate = system.vector_field(0.0, eq, jnp.asarray(0.6))
+    assert abs(float(rate.pressure)) < 1e-3 and abs(float(rate.velocity)) < 1e-9 and abs(float(eq.velocity)) < 1e-12
+
+
+def test_a_failed_equilibrium_prints_values_and_names_the_singular_state(bouc_wen_settled):
+    system, _ = bouc_wen_settled
+    with pytest.raises(pamjax.PamjaxSolveError) as failed:
+        equilibrium(system, 0.6, system.initial_state(pressure=5.4e5), max_steps=1)
+    message = str(failed.value)
+    assert "f64[" not in message and re.search(r"pressure=5\d{5}", message), message  # values, not shapes
+    assert "singular" in message and "friction" in message and "simulate" in message, message

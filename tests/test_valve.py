@@ -102,6 +102,30 @@ def test_averaged_valve_is_eq13_in_gauge_pressure():
         assert float(got) == pytest.approx(expected, rel=1e-13)
 
 
+_command_for_flow = eqx.filter_jit(
+    lambda valve, flows, p: jax.vmap(lambda m: valve.command_for_flow(m, p, AIR))(flows))
+
+
+def test_command_for_flow_returns_the_duty_nearest_the_flow():
+    """Eq. 13's inverse: the increasing root where a duty in [0, 1] reaches the flow, else the duty whose flow comes
+    nearest. Above the 6.5 bar supply the preset's outflow peaks inside [0, 1] (-7.609e-4 kg/s at u = 0.951, 7 bar):
+    a demand of -7e-4 kg/s is out of reach, and the vertex comes nearer than duty 1 (-7.669e-4 kg/s), which the
+    inverse returned."""
+    valve = presets.mas10_averaged_valve()
+    us = np.linspace(0.0, 1.0, 20001)
+    for p in (3e5, 7e5, 8e5):
+        flows = np.asarray(_averaged_mass_flow(valve, np.asarray(0.0), us, np.asarray(p)))
+        demands = np.concatenate([np.linspace(flows.min() - 2e-4, flows.max() + 2e-4, 9), [-7e-4]])
+        duties = np.asarray(_command_for_flow(valve, demands, np.asarray(p)))
+        reached = np.asarray(_averaged_mass_flow(valve, np.asarray(0.0), duties, np.asarray(p)))
+        assert np.all((duties >= 0.0) & (duties <= 1.0)), duties
+        best = np.min(np.abs(flows[:, None] - demands[None, :]), axis=0)  # the dense grid's nearest flow
+        # no duty of the grid comes nearer than 1e-10 kg/s (1e-7 of the flows); the grid's step is 3e-8 kg/s
+        np.testing.assert_array_less(np.abs(reached - demands), best + 1e-10)
+    vertex = float(_command_for_flow(valve, np.asarray([-7e-4]), np.asarray(7e5))[0])
+    assert vertex == pytest.approx(0.951, abs=1e-3)
+
+
 def test_exact_mode_refuses_gradient_with_respect_to_duty():
     with pytest.raises(pamjax.PamjaxInputError, match="exact"):
         jax.grad(lambda u: EXACT.mass_flow(0.005, u, 3e5, AIR))(jnp.asarray(0.5))

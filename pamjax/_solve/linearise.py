@@ -16,7 +16,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from .._core.custom_types import ArrayLike, Float, Real, RealArrayLike, RealScalarLike
-from .._core.errors import PamjaxInputError, PamjaxSolveError
+from .._core.errors import PamjaxInputError, PamjaxSolveError, concrete_values
 from .._core.fastjit import keyed_by_code
 from .._systems.base import AbstractSystem
 
@@ -129,6 +129,7 @@ def linearise(system: AbstractSystem, state: eqx.Module, command: RealArrayLike,
     The operating point need not be an equilibrium (then A, B describe the local flow); transfer functions and
     Bode data are meaningful about an equilibrium (`equilibrium` finds one).
     """
+    _check_command(system, command)
     inputs = {} if inputs is None else dict(inputs)
     command = jnp.asarray(command, dtype=float)
     extra = [jnp.asarray(where(system), dtype=float) for where in inputs.values()]
@@ -182,24 +183,70 @@ def _jacobians(system, t, state, u0, wheres, outputs):
     return (*jax.jacfwd(f, argnums=(0, 1))(x_flat, u_flat), *jax.jacfwd(h, argnums=(0, 1))(x_flat, u_flat))
 
 
+def _check_command(system, command):
+    """Refuse a concrete `command` that is not finite or lies outside `system.command_range` (a duty ratio in
+    [0, 1], a regulator's 0-10 V), as `simulate` refuses such a signal: the flow laws extrapolate beyond it (eq. 13's
+    parabola gives a 2 MPa "equilibrium" at duty -0.3). A traced command (jit/grad) has no value to check."""
+    value = concrete_values(command)
+    if value is None:
+        return
+    if not np.all(np.isfinite(value)):
+        raise PamjaxInputError(f"command must be finite (no NaN or inf), got {np.array2string(value, threshold=6)}")
+    bounds = [concrete_values(b) for b in system.command_range]
+    if any(b is None for b in bounds):
+        return
+    lo, hi = float(np.max(bounds[0])), float(np.min(bounds[1]))
+    if np.any(value < lo - 1e-12) or np.any(value > hi + 1e-12):
+        raise PamjaxInputError(f"command (the valve command, e.g. a duty ratio) must lie within the system's "
+                               f"command_range [{lo}, {hi}], got {np.array2string(value, threshold=6)}")
+
+
+# Singular values of the scaled Jacobian below this fraction of the largest are taken as zero in the Newton step.
+# Scaled fields have physical ones down to ~1e-4 of the largest (MAS-10 with Coulomb friction), a memory state's
+# null direction ~1e-18 (measured).
+SINGULAR_RCOND = 1e-10
+
+
 def equilibrium(system: AbstractSystem, command: RealArrayLike, guess: eqx.Module, *, t: RealScalarLike = 0.0,
                 rtol: RealScalarLike = 1e-10, atol: RealScalarLike = 1e-10, max_steps: int = 200) -> eqx.Module:
     """A state where `system.vector_field(t, ·, command)` vanishes, by Newton's method from `guess`, solved in the
     system's scaled units (`state_scale`): full Newton steps until a step is below `atol + rtol |z|` in every
-    scaled component. Raises `PamjaxSolveError` if it does not converge within `max_steps`.
+    scaled component. Raises `PamjaxInputError` for a `command` outside `system.command_range` (or not finite),
+    `PamjaxSolveError` if it does not converge within `max_steps`.
+
+    Each step is the least-squares (minimum-norm) solution of the linearised equations: where the equilibria form
+    a continuum, the Jacobian is singular and the steps converge to the equilibrium nearest the guess (in scaled
+    units). That is the case with a memory state (Bouc–Wen or bristle friction, a regulator's
+    `PressureHysteresis`): its rate vanishes at rest whatever its value, so the equilibrium depends on the path
+    taken to it; a long `simulate` (or `steady_state_map`) gives the one reached from a given start.
 
     One small compiled loop (the field and its forward-mode Jacobian traced once): optimistix's `Newton` root
     finder compiled a program several times the size (~12 s for the DMSP-40 muscle, against ~2 s)."""
+    _check_command(system, command)
     scale = jtu.tree_map(jnp.asarray, system.state_scale())
     scaled_guess = jtu.tree_map(lambda a, s: jnp.asarray(a, dtype=float) / s, guess, scale)
-    y, converged = _newton(system, jnp.asarray(command, dtype=float), jnp.asarray(t, dtype=float), scaled_guess,
-                           scale, float(rtol), float(atol), int(max_steps))
+    y, converged, singular = _newton(system, jnp.asarray(command, dtype=float), jnp.asarray(t, dtype=float),
+                                     scaled_guess, scale, float(rtol), float(atol), int(max_steps))
     if not bool(converged):
-        raise PamjaxSolveError(
-            f"equilibrium: Newton's method did not converge within max_steps={max_steps} (last state {y}); try a "
-            "guess closer to the operating point or a larger max_steps"
-        )
+        raise PamjaxSolveError(_no_convergence(y, np.asarray(singular), max_steps))
     return y
+
+
+def _no_convergence(y, singular, max_steps):
+    """The message of a failed `equilibrium`: the last state's values, and why (a singular Jacobian named)."""
+    names = _names(y, "")
+    values = np.concatenate([np.ravel(np.asarray(leaf, dtype=float)) for leaf in jtu.tree_leaves(y)])
+    state = ", ".join(f"{n.lstrip('.')}={v:.9g}" for n, v in zip(names, values))
+    message = f"equilibrium: Newton's method did not converge within max_steps={max_steps} (last state: {state}); "
+    if np.all(np.isfinite(singular)) and np.any(singular != 0):
+        along = [names[k].lstrip(".") for k in np.argsort(-np.abs(singular)) if abs(singular[k]) > 0.1]
+        return message + (
+            f"the Jacobian of the vector field is singular there, along {', '.join(along)}: the equilibria form a "
+            "continuum (e.g. a friction or hysteresis memory state, whose rate vanishes at rest whatever its value), "
+            "and which one the system reaches depends on its path: simulate to steady state instead "
+            "(`pamjax.simulate` with a long horizon, or `pamjax.steady_state_map`)")
+    return message + ("try a guess closer to the operating point or a larger max_steps, or simulate to steady state "
+                      "(`pamjax.simulate`, `pamjax.steady_state_map`)")
 
 
 def _with_value(fun):
@@ -225,9 +272,15 @@ def _newton(system, command, t, scaled_guess, scale, rtol, atol, max_steps):
     def body(carry):
         z, _, k = carry
         jac, f = jax.jacfwd(_with_value(residual), has_aux=True)(z)
-        dz = -jnp.linalg.solve(jac, f)
+        dz = -jnp.linalg.lstsq(jac, f, rcond=SINGULAR_RCOND)[0]  # minimum norm where the Jacobian is singular
         z = z + dz
         return z, jnp.all(jnp.abs(dz) <= atol + rtol * jnp.abs(z)), k + 1
 
     z, done, _ = jax.lax.while_loop(cond, body, (z0, jnp.asarray(False), jnp.asarray(0)))
-    return jtu.tree_map(lambda a, s: a * s, unravel(z), scale), done & jnp.all(jnp.isfinite(z))
+    # for a failure's message: the null direction of the Jacobian at the last state (or the guess, where the last
+    # state is not finite), zero where the Jacobian is regular
+    z_end = jnp.where(jnp.all(jnp.isfinite(z)), z, z0)
+    _, sigma, vt = jnp.linalg.svd(jax.jacfwd(residual)(z_end))
+    null = vt[-1] / jnp.max(jnp.abs(vt[-1]))
+    singular = jnp.where(sigma[-1] <= SINGULAR_RCOND * sigma[0], null, jnp.zeros_like(null))
+    return jtu.tree_map(lambda a, s: a * s, unravel(z), scale), done & jnp.all(jnp.isfinite(z)), singular

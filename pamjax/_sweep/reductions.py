@@ -26,13 +26,24 @@ class FinalValue(AbstractReduction):
 
 
 class WindowMean(AbstractReduction):
-    """Mean over the output times in the last `window` [s] (e.g. the last N PWM periods: N / f_PWM)."""
+    """Time average over the last `window` [s] (e.g. the last N PWM periods: N / f_PWM) of the outputs interpolated
+    linearly between the output times: the trapezoid rule, with the window's start interpolated where it falls
+    between two output times. Over a whole number of periods sampled evenly each phase counts once (a plain mean
+    of the samples in [t_end − window, t_end] counts the phase at both ends: 24 Pa of bias on the MAS-10's PWM
+    pressure over a 1 s window, 120 Pa over 0.2 s, measured)."""
 
     window: float | int = eqx.field(static=True)
 
     def weights(self, ts, system, signal):
-        inside = ts >= ts[-1] - self.window * (1 + 1e-12)
-        return inside / jnp.sum(inside)
+        if ts.shape[0] < 2:
+            return jnp.ones_like(ts)
+        start = ts[-1] - self.window
+        h = jnp.diff(ts)
+        theta = jnp.clip((start - ts[:-1]) / jnp.where(h > 0, h, 1.0), 0.0, 1.0)  # fraction before the window
+        inside = h * (1.0 - theta)  # length of each interval inside the window
+        # trapezoid over [max(t_k, start), t_k+1] with y(start) = (1 − θ) y_k + θ y_k+1
+        node = jnp.zeros_like(ts).at[:-1].add(0.5 * inside * (1.0 - theta)).at[1:].add(0.5 * inside * (1.0 + theta))
+        return node / jnp.sum(node)
 
 
 class FourierCoefficient(AbstractReduction):

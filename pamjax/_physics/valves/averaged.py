@@ -10,7 +10,7 @@ from ..._core.custom_types import Array, FloatScalar, Real, RealArrayLike, RealS
 from ..._core.errors import PamjaxInputError, check_finite
 from ..._core.fitting import labelled
 from ..gas import Air
-from ..smooth import safe_sqrt
+from ..smooth import safe_divide, safe_sqrt
 from .base import AbstractSwitchingValve, AbstractValve
 
 
@@ -56,16 +56,25 @@ class AveragedValve(AbstractValve):
 
     def command_for_flow(self, mass_flow, pressure, air: Air):
         """The duty u ∈ [0, 1] whose averaged flow (eq. 13) is `mass_flow` [kg/s] at chamber `pressure` [Pa abs]: the
-        increasing root of c₂u² + c₁u + c₀ = ṁ, cᵢ = Σⱼ m[i, j] p_gʲ; clipped to [0, 1] where ṁ is out of reach.
-        Written as u = 2(ṁ − c₀) / (c₁ + √(c₁² + 4c₂(ṁ − c₀))), stable as c₂ → 0."""
+        increasing root of c₂u² + c₁u + c₀ = ṁ, cᵢ = Σⱼ m[i, j] p_gʲ, written
+        u = 2(ṁ − c₀) / (c₁ + √(c₁² + 4c₂(ṁ − c₀))), stable as c₂ → 0. Where no root in [0, 1] reaches ṁ: the duty
+        in [0, 1] whose flow comes nearest, among the ends 0 and 1, the parabola's vertex −c₁/(2c₂) where it lies
+        inside (the flow's extreme there: at high chamber pressure the preset's outflow peaks at u ≈ 0.95, and
+        duty 1 flows less) and the other root."""
         p_gauge = pressure - air.atmospheric_pressure
         c0, c1, c2 = self.coefficients @ jnp.stack([jnp.ones_like(p_gauge), p_gauge, p_gauge * p_gauge])
         demand = mass_flow - c0
         discriminant = c1 * c1 + 4.0 * c2 * demand
-        root = 2.0 * demand / (c1 + safe_sqrt(discriminant))
-        # No real root: the demand lies beyond the parabola's vertex; the nearest reachable duty is the saturated one.
-        root = jnp.where(discriminant > 0, root, jnp.where(demand > 0, 1.0, 0.0))
-        return jnp.clip(root, 0.0, 1.0)
+        real = discriminant >= 0
+        # denominators kept off 0 by 1e-12 kg/s (flows are ~1e-3): finite values and gradients in every candidate
+        root = safe_divide(2.0 * demand, c1 + safe_sqrt(discriminant), tiny=1e-12)
+        other = safe_divide(2.0 * demand, c1 - safe_sqrt(discriminant), tiny=1e-12)  # the decreasing root
+        vertex = jnp.broadcast_to(safe_divide(-c1, 2.0 * c2, tiny=1e-12), root.shape)
+        candidates = jnp.clip(jnp.stack([root, other, jnp.zeros_like(root), jnp.ones_like(root), vertex]), 0.0, 1.0)
+        miss = jnp.abs(c0 + candidates * (c1 + candidates * c2) - mass_flow)
+        miss = miss.at[:2].set(jnp.where(real, miss[:2], jnp.inf))  # no real roots: only the extremes count
+        # the first nearest: the increasing root wherever it reaches ṁ (eq. 13's inverse, as before)
+        return jnp.take_along_axis(candidates, jnp.argmin(miss, axis=0)[None], axis=0)[0]
 
 
 def cycle_averaged_flow(valve: AbstractSwitchingValve, command: RealScalarLike, pressure: RealScalarLike, air: Air,
