@@ -3,8 +3,11 @@ exact-edge reference whose switching times are handed to the solver as jump time
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from .._physics.signals import AbstractSignal
+from .._core.arrays import device_array
+from .._core.errors import concrete_values
+from .._physics.signals import AbstractSignal, Step
 from .._physics.valves.base import AbstractSwitchingValve
 
 
@@ -62,3 +65,17 @@ class ScheduledValve(AbstractSwitchingValve):
 
     def mass_flow(self, t, command, pressure, air):
         return self.valve.mass_flow_at_opening(self.opening(t), pressure, air)
+
+
+def command_jumps(signal, t0, t_end):
+    """The times inside (t0, t_end) where a continuous valve's command jumps (a `Step`), as step boundaries for the
+    adaptive solve, or None. Stepped over, a jump is not seen by the solver's error estimate: the averaged MAS-10
+    from duty 0.97 to 0.2 ended 349 Pa / 22 µm off a tight solve at the default tolerances (2 Pa without the jump);
+    with the boundary it is solved as two smooth pieces. None where the times are traced (no value to place)."""
+    if not isinstance(signal, Step):
+        return None
+    times = [concrete_values(x) for x in (signal.time, t0, t_end)]
+    if any(v is None or v.ndim for v in times):
+        return None
+    at, lo, hi = (float(v) for v in times)
+    return device_array(np.asarray([at])) if lo < at < hi else None

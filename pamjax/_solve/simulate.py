@@ -21,7 +21,7 @@ from .._physics.tabulated import prepared_tables
 from .._systems.base import AbstractSystem
 from . import chunks as _chunks, synchronous as _sync
 from .checks import check_parameters, naming_batched, prepared, runtime_checks, vacuum
-from .edges import ScheduledValve, StartsOff
+from .edges import ScheduledValve, StartsOff, command_jumps
 from .hints import default_max_steps, failure_hint, fixed_step_hint, negative_inflow
 from .scaled import scaled
 from .trajectory import (
@@ -390,11 +390,11 @@ def simulate(
         periods = _fixed_grid_periods(system, stepping, substeps, grid_step, start, t_end)
     elif system.valve.exact_edges:
         system, jump_ts = _scheduled(system, signal, start, t_end)
-    elif system.valve.smooth_edges:
-        # step boundaries around every smoothed edge (the frequency, not the valve's `period`: 1/f run eagerly
-        # would compile a one-operation program). An adaptive solve only asks whether num_periods is given, and it
-        # is a static argument: one value for every horizon, so that another horizon does not compile again.
+    elif system.valve.smooth_edges:  # step boundaries at the smoothed edges (from the frequency: 1/f run eagerly
+        # would compile a program); a static flag, one value for every horizon: another does not compile again
         periods = _EDGE_CLIP
+    else:  # a continuous valve: a step boundary where its command jumps
+        jump_ts = command_jumps(signal, start, t_end)
     traced = traced_model or traced_times or _is_traced(y0)
     adjoint = "forward" if adjoint is None and not traced else adjoint  # see the docstring: a lighter trace
     if solver is None and stepping == "adaptive":
