@@ -35,6 +35,11 @@ class AbstractSignal(eqx.Module):
         fixed step must resolve (a sweep's scheme takes it); None for a signal that does not repeat."""
         return None
 
+    def jump_times(self):
+        """The times [s] where the signal jumps, which an adaptive solve takes as step boundaries (a jump inside a
+        step is not seen by its error estimate); () for a continuous signal or one with too many to list."""
+        return ()
+
     def table_length(self):
         """The number of samples of a signal read from a table (`Sampled`), None for one given by a formula: runs
         whose tables differ in length are stacked after `extended_to` (`pamjax._solve.run_signals`)."""
@@ -80,6 +85,9 @@ class Step(AbstractSignal):
     def bounds(self):
         b, a = float(self.before), float(self.after)
         return min(a, b), max(a, b)
+
+    def jump_times(self):
+        return (self.time,)
 
 
 class Triangle(AbstractSignal):

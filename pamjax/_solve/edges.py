@@ -7,7 +7,7 @@ import numpy as np
 
 from .._core.arrays import device_array
 from .._core.errors import concrete_values
-from .._physics.signals import AbstractSignal, Step
+from .._physics.signals import AbstractSignal
 from .._physics.valves.base import AbstractSwitchingValve
 
 
@@ -68,14 +68,14 @@ class ScheduledValve(AbstractSwitchingValve):
 
 
 def command_jumps(signal, t0, t_end):
-    """The times inside (t0, t_end) where a continuous valve's command jumps (a `Step`), as step boundaries for the
-    adaptive solve, or None. Stepped over, a jump is not seen by the solver's error estimate: the averaged MAS-10
-    from duty 0.97 to 0.2 ended 349 Pa / 22 µm off a tight solve at the default tolerances (2 Pa without the jump);
-    with the boundary it is solved as two smooth pieces. None where the times are traced (no value to place)."""
-    if not isinstance(signal, Step):
+    """The times inside (t0, t_end) where a continuous valve's command jumps (`signal.jump_times()`: a `Step`'s), as
+    step boundaries for the adaptive solve, or None. Stepped over, a jump is not seen by the solver's error estimate:
+    the averaged MAS-10 from duty 0.97 to 0.2 ended 349 Pa / 22 µm off a tight solve at the default tolerances (2 Pa
+    without the jump); with the boundary it is solved as two smooth pieces. Traced times (no value to place) are
+    left out."""
+    values = [concrete_values(x) for x in (t0, t_end, *signal.jump_times())]
+    if any(v is None or v.ndim for v in values):
         return None
-    times = [concrete_values(x) for x in (signal.time, t0, t_end)]
-    if any(v is None or v.ndim for v in times):
-        return None
-    at, lo, hi = (float(v) for v in times)
-    return device_array(np.asarray([at])) if lo < at < hi else None
+    lo, hi, *jumps = (float(v) for v in values)
+    inside = sorted(t for t in jumps if lo < t < hi)
+    return device_array(np.asarray(inside)) if inside else None
