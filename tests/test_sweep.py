@@ -242,3 +242,11 @@ def test_paper_001s_systems_sweep_and_a_joints_pairs_are_named():
     with pytest.raises(pj.PamjaxInputError, match=r"channel 'pressure' of this system has shape \(2,\) per point; a "
                                                   r"sweep maps scalar channels: choose among \['angle'"):
         sweep(joint, signal, TS, {"signal.flexor.value": volts}, channels=("pressure",), progress=False)
+
+
+def test_a_window_of_no_length_is_refused():
+    # WindowMean(0.0) (the trapezoid weights of no interval) gave 0/0 = NaN in every lane with status 0
+    for bad in (0.0, -1.0, float("nan"), "1 s"):
+        with pytest.raises(pamjax.PamjaxInputError, match=r"WindowMean.window must be a duration > 0"):
+            WindowMean(bad)
+    assert WindowMean(2).window == 2

@@ -2,10 +2,13 @@
 with per-lane weights (`FinalValue`, `WindowMean`, `FourierCoefficient`)."""
 
 import abc
+import numbers
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 
+from .._core.errors import PamjaxInputError
 from .plan import get
 
 
@@ -33,6 +36,10 @@ class WindowMean(AbstractReduction):
     pressure over a 1 s window, 120 Pa over 0.2 s, measured)."""
 
     window: float | int = eqx.field(static=True)
+
+    def __check_init__(self):  # a window of no length averages nothing: 0/0 in every lane, silently
+        if not (isinstance(self.window, numbers.Real) and np.isfinite(self.window) and self.window > 0):
+            raise PamjaxInputError(f"WindowMean.window must be a duration > 0 [s], got {self.window!r}")
 
     def weights(self, ts, system, signal):
         if ts.shape[0] < 2:
