@@ -80,6 +80,9 @@ def _edited(tmp_path, edit):
     (lambda d: d["structure"]["fields"]["valve"]["fields"]["mode"].update(value="fast"), r"mode"),
     (lambda d: d.update(format="something else"), r"is not a pamjax model file"),
     (lambda d: d.update(format_version=99), r"format_version 99"),
+    # a number in quotes was read as the number (any text through float()): only nan/inf are written quoted
+    (lambda d: d["parameters"]["payload_mass"].update(value="9.6"),
+     r"parameter 'payload_mass': '9.6' is not a number .*'9.6' is text: write a number without quotes"),
 ])
 def test_a_damaged_file_is_refused_naming_the_entry(tmp_path, edit, match):
     with pytest.raises(PamjaxInputError, match=match):

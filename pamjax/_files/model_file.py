@@ -322,8 +322,11 @@ def _flat(v):
 def _from_json_value(v):
     if isinstance(v, list):
         return [_from_json_value(x) for x in v]
-    if isinstance(v, str):
-        return float(v)  # "nan", "inf", "-inf"
+    if isinstance(v, str):  # how `save_model` writes a non-finite value; any other text is not a number here
+        if v.strip().lower() not in ("nan", "inf", "-inf"):
+            raise ValueError(f"{v!r} is text: write a number without quotes (only \"nan\", \"inf\" and \"-inf\" "
+                             "are quoted)")
+        return float(v)
     return v
 
 
