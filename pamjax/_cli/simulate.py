@@ -24,6 +24,7 @@ from .._core.errors import PamjaxInputError
 from .._solve.simulate import validate
 from . import bands, schema
 from .config import build_model, build_signal, check_initial, load_recording, read_toml
+from .kinds import DUTY, command_of
 from .out import OutputFolder
 
 OUTPUTS = ("trajectory.csv", "trajectory.png")
@@ -36,8 +37,8 @@ _UNITS = {"t": "s", "command": "1", "pressure": "Pa abs", "position": "m", "velo
 
 def command_unit(system):
     """The command's unit: a duty ratio ("1") for a valve's [0, 1], volts for a regulator's 0-10 V reference (paper
-    001, Sect. 2: every other `command_range` pamjax has is the regulator's)."""
-    return "1" if tuple(float(np.max(b)) for b in system.command_range) == (0.0, 1.0) else "V"
+    001, Sect. 2), as `pamjax sweep` tells them apart (`kinds.command_of`)."""
+    return "1" if command_of(system) is DUTY else "V"
 
 
 def add_arguments(parser):

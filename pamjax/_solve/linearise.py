@@ -277,10 +277,14 @@ def _newton(system, command, t, scaled_guess, scale, rtol, atol, max_steps):
         return z, jnp.all(jnp.abs(dz) <= atol + rtol * jnp.abs(z)), k + 1
 
     z, done, _ = jax.lax.while_loop(cond, body, (z0, jnp.asarray(False), jnp.asarray(0)))
-    # for a failure's message: the null direction of the Jacobian at the last state (or the guess, where the last
-    # state is not finite), zero where the Jacobian is regular
+    converged = done & jnp.all(jnp.isfinite(z))
+
+    def null_direction(z_end):  # for a failure's message only: the Jacobian's null direction, zero where regular
+        _, sigma, vt = jnp.linalg.svd(jax.jacfwd(residual)(z_end))
+        null = vt[-1] / jnp.max(jnp.abs(vt[-1]))
+        return jnp.where(sigma[-1] <= SINGULAR_RCOND * sigma[0], null, jnp.zeros_like(null))
+
+    # at the last state (or the guess, where the last state is not finite); not computed for a converged solve
     z_end = jnp.where(jnp.all(jnp.isfinite(z)), z, z0)
-    _, sigma, vt = jnp.linalg.svd(jax.jacfwd(residual)(z_end))
-    null = vt[-1] / jnp.max(jnp.abs(vt[-1]))
-    singular = jnp.where(sigma[-1] <= SINGULAR_RCOND * sigma[0], null, jnp.zeros_like(null))
-    return jtu.tree_map(lambda a, s: a * s, unravel(z), scale), done & jnp.all(jnp.isfinite(z)), singular
+    singular = jax.lax.cond(converged, lambda _: jnp.zeros_like(z0), null_direction, z_end)
+    return jtu.tree_map(lambda a, s: a * s, unravel(z), scale), converged, singular
