@@ -8,7 +8,6 @@ into reference voltages. Prints the tracking RMSE per frequency and writes a fig
 """
 
 import argparse
-import json
 import pathlib
 
 import jax
@@ -40,7 +39,7 @@ def main(argv=None):
             f"stiffness {r['stiffness'].min():.0f}-{r['stiffness'].max():.0f} N m/rad"
         )
     (out / "ankle.json").write_text(
-        json.dumps({str(f): dict(rmse_rad=r["rmse"]) for f, r in results.items()}, indent=2)
+        pj.json_text({str(f): dict(rmse_rad=r["rmse"]) for f, r in results.items()}, indent=2)
     )
     try:
         import matplotlib

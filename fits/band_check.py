@@ -24,7 +24,6 @@ predictions, their ±1.96 σ spread and the first fit's band) to `--out`; refuse
 """
 
 import argparse
-import json
 import pathlib
 import time
 import warnings
@@ -165,7 +164,7 @@ def main():
                                       float(np.max(samples.std[c][live] / bands[0]["run"].std[c][live]))]
                                   for c in ("pressure", "position")},
         wall_s=time.perf_counter() - t0)
-    (out / "band_check.json").write_text(json.dumps(summary, indent=1))
+    (out / "band_check.json").write_text(pj.json_text(summary, indent=1))
     plot(out / "band_check.png", bands, truths)
     for key, row in report.items():
         print(f"{key:24s} refit σ / band σ: median {row['ratio_median']:.3f} ({row['ratio_min']:.3f}…"

@@ -18,7 +18,6 @@ bench's E5 recordings. Writes `control.json`, `control_<plant>.png` (reference v
 """
 
 import argparse
-import json
 import pathlib
 import time
 
@@ -305,7 +304,7 @@ def main():
     names = list(PLANTS) if args.plant == "both" else [args.plant]
     for name in names:
         report[name] = run_plant(name, PLANTS[name](), args, out)
-    (out / "control.json").write_text(json.dumps(report, indent=1))
+    (out / "control.json").write_text(pamjax.json_text(report, indent=1))
     print(f"wrote {out}")
     for name in names:
         summary = report[name]["summary"]

@@ -12,11 +12,11 @@ V(x) − v0 = ∫₀ˣ F_max/p_max dx (cumulative trapezoid, 201 points over the
 """
 
 import argparse
-import json
 import pathlib
 
 import numpy as np
 
+import pamjax as pj  # noqa: E402
 from pamjax.gallery.procedures.force_map import (  # noqa: E402  (the derivation's steps)
     P,
     scaled_muscle,
@@ -55,7 +55,7 @@ def main():
     derived = derive()
     folder = pathlib.Path(args.out)
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / "derived_presets.json").write_text(json.dumps(derived, indent=2))
+    (folder / "derived_presets.json").write_text(pj.json_text(derived, indent=2))
     m = derived["mas10"]
     rows = [
         ("a0..a4", m["a"], presets.MAS10_MAX_FORCE_COEFFICIENTS),

@@ -89,7 +89,7 @@ def main():
                              p_err_kpa=1e-3 * rms(p - p_ref) if ok else None,
                              seconds=time.perf_counter() - t0))
             print(rows[-1], flush=True)
-    (out / "friction_convergence.json").write_text(json.dumps(rows, indent=1))
+    (out / "friction_convergence.json").write_text(pj.json_text(rows, indent=1))
     print(f"\n{'run':<5}{'model':<9}{'setting':>10}{'steps':>9}{'x err mm':>10}{'p err kPa':>10}{'x/noise':>9}"
           f"{'p/noise':>9}")
     for r in rows:

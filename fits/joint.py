@@ -40,7 +40,6 @@ results against a simulated bench's truth.
 """
 
 import argparse
-import json
 import pathlib
 import sys
 import time
@@ -232,7 +231,7 @@ def run(args, data, out):
         summary["nuisance"] = pj.bench.bench_nuisance(res, bench)
     if prof is not None:
         summary["profile"] = _profile_summary(prof, refits, profile_s)
-    (out / "joint.json").write_text(json.dumps(summary, indent=1))
+    (out / "joint.json").write_text(pj.json_text(summary, indent=1))
     plant = res.model.plant if isinstance(res.model, pj.Rig) else res.model  # the rig's nuisances: in joint.json
     pj.save_model(out / "model.json", plant, overwrite=True, provenance={  # what pamjax fit writes as its model.json
         "written_by": f"fits/joint.py --data {data}", "status": res.status, "cost": res.cost, "free": res.labels,

@@ -6,7 +6,6 @@ work). Runs the closed loop and the feed-forward alone, prints RMSEs, writes a f
 """
 
 import argparse
-import json
 import pathlib
 
 import jax
@@ -71,7 +70,7 @@ def main(argv=None):
             f"{s['step_stiffness_error_after_1s']:.3f} N m/rad from 1 s after, peak angle deviation "
             f"{s['step_peak_angle_deviation_rad']:.4f} rad"
         )
-    (out / "joint_control.json").write_text(json.dumps({k: v["summary"] for k, v in runs.items()}, indent=2))
+    (out / "joint_control.json").write_text(pj.json_text({k: v["summary"] for k, v in runs.items()}, indent=2))
     try:
         import matplotlib
 

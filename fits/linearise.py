@@ -17,7 +17,6 @@ Bode diagram `linearise.png` to `--out`; refuses to overwrite existing results u
 """
 
 import argparse
-import json
 import pathlib
 import sys
 import time
@@ -168,7 +167,7 @@ def main(argv=None):
         )
     report["wall_time_s"] = time.perf_counter() - start
     out.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(report, indent=1))
+    path.write_text(pj.json_text(report, indent=1))
     try:
         plot(
             {

@@ -80,7 +80,7 @@ def main():
                    fitted=dict(zip(res.labels, res.values)), standard_errors=dict(zip(res.labels, res.standard_errors)),
                    relative_error=dict(zip(res.labels, rel.tolist())), z=dict(zip(res.labels, z.tolist())),
                    max_relative_error_percent=float(100 * np.max(np.abs(rel))))
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    (out / "summary.json").write_text(pj.json_text(summary, indent=1))
     plot(out / "valve_tank.png", res.model, experiments)
     print(f"max |fitted − true| = {summary['max_relative_error_percent']:.2f} %; wrote {out}/fit.json, summary.json, "
           "valve_tank.png")

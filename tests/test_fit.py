@@ -1,6 +1,7 @@
 """fit: parameter recovery on noisy synthetic data (within 3 standard errors), identifiability warnings, JSON round
 trip, bad input. The truth is the simulator's own parameters; the noise is seeded."""
 
+import json
 import warnings
 
 import jax.numpy as jnp
@@ -48,13 +49,19 @@ def test_force_map_recovery_within_three_standard_errors():
     np.testing.assert_allclose(np.diag(corr), 1.0, atol=1e-12)
 
 
-def test_k0_k1_k2_are_reported_non_identifiable():
+def test_k0_k1_k2_are_reported_non_identifiable(tmp_path):
     truth, exp = _force_map()
     free = ["force_law.k0", "force_law.k1", "force_law.k2"]
     with pytest.warns(pj.PamjaxIdentifiabilityWarning, match="force_law.k0, force_law.k1, force_law.k2"):
         res = pj.fit(truth, [exp], free, progress=False)
     assert res.non_identifiable == [free]
     assert all(np.isinf(res.standard_errors))
+    # fit.json stays strict JSON (no bare Infinity / NaN, which most readers refuse) and reads back as the floats
+    text = res.to_json(tmp_path / "fit.json").read_text()
+    json.loads(text, parse_constant=lambda word: pytest.fail(f"fit.json holds the bare word {word}"))
+    back = pj.FitResult.from_json(tmp_path / "fit.json")
+    assert all(np.isinf(back.standard_errors)) and back.values == res.values
+    np.testing.assert_array_equal(np.asarray(back.correlation, float), np.asarray(res.correlation, float))
 
 
 def test_json_round_trip_is_exact_and_apply_rebuilds_model(tmp_path):

@@ -9,13 +9,13 @@ parameters checked against the model, every [[experiment]] checked against it be
 read; a [rig] around the plant); the output folder is created, test-written and locked before the fit starts.
 """
 
-import json
 import pathlib
 import sys
 from typing import NamedTuple
 
 import numpy as np
 
+from .._core import jsonio
 from .._core.errors import PamjaxInputError
 from .._fit.measurement import check_measured_free
 from .._identifiability.profile import PROFILED_STATUSES
@@ -426,7 +426,7 @@ def _report_and_write(args, folder, res, experiments, bench):
                   "free": res.labels, "result": RESULT,
                   "covariance": pj.FitUncertainty.of(res).document()}  # what --band propagates (docs/cli.md)
     plant = res.model.plant if isinstance(res.model, pj.Rig) else res.model  # the rig's nuisances: in bench.json
-    written = [folder.write_text(RESULT, json.dumps(res.to_dict(), indent=1) + "\n"),
+    written = [folder.write_text(RESULT, jsonio.dumps(res.to_dict(), indent=1) + "\n"),
                folder.write_text(MODEL, model_json(plant, provenance))]
     if bench is not None:  # the bench's names: params, std_err, status, rmse of p [Pa] and x [m] per experiment
         values, errors = pj.bench.bench_values(res, bench.fitted_keys)
@@ -437,7 +437,7 @@ def _report_and_write(args, folder, res, experiments, bench):
             summary["nuisance"] = pj.bench.bench_nuisance(res, bench)
             print("nuisances (the rig's, reported apart from the plant):\n"
                   + pj.bench.nuisance_table(summary["nuisance"]))
-        written.append(folder.write_text(BENCH, json.dumps(summary, indent=1) + "\n"))
+        written.append(folder.write_text(BENCH, jsonio.dumps(summary, indent=1) + "\n"))
     if isinstance(res.model, pj.Rig) and (bench is None or not (bench.nuisance or bench.calibrated)):  # [rig]
         report = pj.nuisance_report(res)
         lines = [f"  {kind}[{name}].{field}: {v:.6g} ± {se:.3g}" for kind in ("sensors", "runs")
@@ -469,7 +469,7 @@ def _profile_and_write(args, folder, res, experiments, bench, progress, max_step
     print(f"profiles ({done.profile_s:.1f} s):\n{prof.table()}")
     for w in prof.warnings:
         print(f"pamjax fit: error: {w}", file=sys.stderr, flush=True)
-    written = [folder.write_text(PROFILE, json.dumps(dict(prof.to_dict(), refits=done.refits), indent=1) + "\n")]
+    written = [folder.write_text(PROFILE, jsonio.dumps(dict(prof.to_dict(), refits=done.refits), indent=1) + "\n")]
     if not args.no_plot:
         try:
             written.append(folder.write(PROFILE_FIGURE, prof.plot))

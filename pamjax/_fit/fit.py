@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 import equinox as eqx
 import numpy as np
 
+from .._core import jsonio
 from .._core.cache import program_cache
 from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError, require_float64
@@ -39,6 +40,10 @@ from .rig_hints import nuisance_hints
 
 if TYPE_CHECKING:  # annotations only: importing optimistix costs ~0.3 s that a fit from the cache never needs
     import optimistix as optx
+
+# FitResult's fields that hold numbers (written "inf" / "nan" where not finite: strict JSON)
+_NUMERIC_FIELDS = ("values", "initial_values", "standard_errors", "correlation", "cost", "initial_cost",
+                   "channel_errors", "history", "fit_s", "compile_s")
 
 # paths of the parameters a payload's motion determines: the muscle's force law and the friction (`weak_motion`
 # checks the data where one of them is free)
@@ -110,6 +115,9 @@ class FitResult:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "FitResult":
         d = dict(d)
+        for name in _NUMERIC_FIELDS:  # "inf", "nan" (strict JSON) back to floats
+            if name in d:
+                d[name] = jsonio.numbers(d[name])
         d.setdefault("message", d.get("status", ""))  # results written before these fields existed
         d.setdefault("mismatch", False)
         return cls(**d)
@@ -120,7 +128,7 @@ class FitResult:
         if path.exists() and not overwrite:
             raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.to_dict(), indent=1))
+        path.write_text(jsonio.dumps(self.to_dict(), indent=1))  # strict JSON: "inf" for an undetermined error
         return path
 
     @classmethod

@@ -20,6 +20,7 @@ from typing import Any
 import equinox as eqx
 import numpy as np
 
+from .._core import jsonio
 from .._core.custom_types import RealArrayLike, RealScalarLike, RealVectorLike
 from .._core.errors import PamjaxInputError, PamjaxSolveError, require_float64
 from .experiment import Experiments
@@ -73,7 +74,7 @@ class MultistartResult:
                     processes=self.processes, errors=self.errors,
                     results=[None if r is None else r.to_dict() for r in self.results])
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(data, indent=1))
+        path.write_text(jsonio.dumps(data, indent=1))
         return path
 
 

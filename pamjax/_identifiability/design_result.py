@@ -2,12 +2,12 @@
 its CSV, JSON, table and figure."""
 
 import dataclasses
-import json
 import math
 
 import jax.numpy as jnp
 import numpy as np
 
+from .._core import jsonio
 from .._core.errors import PamjaxInputError
 from .._core.paths import writable_path
 from .._physics.signals import Sampled
@@ -201,7 +201,7 @@ class DesignResult:
 
     def to_json(self, path, overwrite=False):
         path = writable_path(path, overwrite)
-        path.write_text(json.dumps(self.to_dict(), indent=1))
+        path.write_text(jsonio.dumps(self.to_dict(), indent=1))
         return path
 
     @property

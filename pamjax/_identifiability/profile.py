@@ -28,7 +28,6 @@ the fit's compiled functions (`pamjax._fit.problem`: no new compilation for a pr
 
 import concurrent.futures
 import dataclasses
-import json
 import math
 import pathlib
 import statistics
@@ -39,6 +38,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core import jsonio
 from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError, require_float64
 from .._core.paths import writable_path
@@ -128,7 +128,7 @@ class ProfileResult:
     def to_json(self, path, overwrite=False):
         """Write the result; refuses to replace an existing file unless `overwrite`."""
         path = writable_path(path, overwrite)
-        path.write_text(json.dumps(self.to_dict(), indent=1))
+        path.write_text(jsonio.dumps(self.to_dict(), indent=1))
         return path
 
     def table(self):
