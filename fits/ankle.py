@@ -16,6 +16,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
+from pamjax.gallery import json_text  # noqa: E402
 from pamjax.gallery.procedures.ankle import P_ATM, gait_angle, run  # noqa: E402,F401
 
 
@@ -39,7 +40,7 @@ def main(argv=None):
             f"stiffness {r['stiffness'].min():.0f}-{r['stiffness'].max():.0f} N m/rad"
         )
     (out / "ankle.json").write_text(
-        pj.json_text({str(f): dict(rmse_rad=r["rmse"]) for f, r in results.items()}, indent=2)
+        json_text({str(f): dict(rmse_rad=r["rmse"]) for f, r in results.items()}, indent=2)
     )
     try:
         import matplotlib

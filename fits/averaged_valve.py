@@ -24,7 +24,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import pamjax as pj  # noqa: E402
+from pamjax.gallery import json_text  # noqa: E402
 from pamjax.gallery.procedures.averaged_valve import compute, plot  # noqa: E402
 
 
@@ -46,7 +46,7 @@ def main():
             f"RMSE {report[k]['rmse_percent']:5.2f} % of range"
         )
     out.mkdir(parents=True, exist_ok=True)
-    json_path.write_text(pj.json_text(report, indent=1))
+    json_path.write_text(json_text(report, indent=1))
     plot(png_path, *plot_args)
     print(f"wrote {json_path} and {png_path}")
 

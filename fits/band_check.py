@@ -35,6 +35,7 @@ import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
 from pamjax import presets  # noqa: E402
+from pamjax.gallery import json_text  # noqa: E402
 
 FREE = ["muscle.volume_law.v0", "muscle.force_law.k0", "friction.coulomb_force", "friction.viscous_coefficient",
         "valve.coefficients[1,0]"]
@@ -164,7 +165,7 @@ def main():
                                       float(np.max(samples.std[c][live] / bands[0]["run"].std[c][live]))]
                                   for c in ("pressure", "position")},
         wall_s=time.perf_counter() - t0)
-    (out / "band_check.json").write_text(pj.json_text(summary, indent=1))
+    (out / "band_check.json").write_text(json_text(summary, indent=1))
     plot(out / "band_check.png", bands, truths)
     for key, row in report.items():
         print(f"{key:24s} refit σ / band σ: median {row['ratio_median']:.3f} ({row['ratio_min']:.3f}…"

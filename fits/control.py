@@ -39,7 +39,7 @@ from pamjax import (
     simulate_closed_loop,
     tune_controller,
 )
-from pamjax.gallery import bench_folder
+from pamjax.gallery import bench_folder, json_text
 from pamjax.gallery.procedures.bench import bench_plant
 from pamjax.unchecked import run_closed_loop
 
@@ -304,7 +304,7 @@ def main():
     names = list(PLANTS) if args.plant == "both" else [args.plant]
     for name in names:
         report[name] = run_plant(name, PLANTS[name](), args, out)
-    (out / "control.json").write_text(pamjax.json_text(report, indent=1))
+    (out / "control.json").write_text(json_text(report, indent=1))
     print(f"wrote {out}")
     for name in names:
         summary = report[name]["summary"]

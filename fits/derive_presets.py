@@ -16,7 +16,7 @@ import pathlib
 
 import numpy as np
 
-import pamjax as pj  # noqa: E402
+from pamjax.gallery import json_text  # noqa: E402
 from pamjax.gallery.procedures.force_map import (  # noqa: E402  (the derivation's steps)
     P,
     scaled_muscle,
@@ -55,7 +55,7 @@ def main():
     derived = derive()
     folder = pathlib.Path(args.out)
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / "derived_presets.json").write_text(pj.json_text(derived, indent=2))
+    (folder / "derived_presets.json").write_text(json_text(derived, indent=2))
     m = derived["mas10"]
     rows = [
         ("a0..a4", m["a"], presets.MAS10_MAX_FORCE_COEFFICIENTS),

@@ -26,7 +26,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
-from pamjax.gallery import bench_folder  # noqa: E402
+from pamjax.gallery import bench_folder, json_text  # noqa: E402
 
 DEFAULT_DATA = bench_folder()  # the hybrid bench recordings shipped with pamjax (pamjax/data/)
 
@@ -89,7 +89,7 @@ def main():
                              p_err_kpa=1e-3 * rms(p - p_ref) if ok else None,
                              seconds=time.perf_counter() - t0))
             print(rows[-1], flush=True)
-    (out / "friction_convergence.json").write_text(pj.json_text(rows, indent=1))
+    (out / "friction_convergence.json").write_text(json_text(rows, indent=1))
     print(f"\n{'run':<5}{'model':<9}{'setting':>10}{'steps':>9}{'x err mm':>10}{'p err kPa':>10}{'x/noise':>9}"
           f"{'p/noise':>9}")
     for r in rows:

@@ -50,7 +50,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
-from pamjax.gallery import bench_folder  # noqa: E402
+from pamjax.gallery import bench_folder, json_text  # noqa: E402
 
 DEFAULT_DATA = bench_folder()  # the hybrid bench recordings shipped with pamjax (pamjax/data/)
 # --profile: profile → (a lower cost found) fit again from it → profile again, at most this many profiles; a fit whose
@@ -231,7 +231,7 @@ def run(args, data, out):
         summary["nuisance"] = pj.bench.bench_nuisance(res, bench)
     if prof is not None:
         summary["profile"] = _profile_summary(prof, refits, profile_s)
-    (out / "joint.json").write_text(pj.json_text(summary, indent=1))
+    (out / "joint.json").write_text(json_text(summary, indent=1))
     plant = res.model.plant if isinstance(res.model, pj.Rig) else res.model  # the rig's nuisances: in joint.json
     pj.save_model(out / "model.json", plant, overwrite=True, provenance={  # what pamjax fit writes as its model.json
         "written_by": f"fits/joint.py --data {data}", "status": res.status, "cost": res.cost, "free": res.labels,

@@ -21,6 +21,7 @@ from pamjax import (  # noqa: E402
     JointControlLoop,
     simulate_joint_control,
 )
+from pamjax.gallery import json_text  # noqa: E402
 
 OPEN_LOOP = dict(angle_proportional_gain=0.0, angle_integral_gain=0.0, sum_proportional_gain=0.0, sum_integral_gain=0.0)
 
@@ -70,7 +71,7 @@ def main(argv=None):
             f"{s['step_stiffness_error_after_1s']:.3f} N m/rad from 1 s after, peak angle deviation "
             f"{s['step_peak_angle_deviation_rad']:.4f} rad"
         )
-    (out / "joint_control.json").write_text(pj.json_text({k: v["summary"] for k, v in runs.items()}, indent=2))
+    (out / "joint_control.json").write_text(json_text({k: v["summary"] for k, v in runs.items()}, indent=2))
     try:
         import matplotlib
 

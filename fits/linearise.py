@@ -27,6 +27,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
+from pamjax.gallery import json_text  # noqa: E402
 from pamjax.gallery.procedures.linearised import describe, flow_input  # noqa: E402
 from pamjax.units import BAR  # noqa: E402
 
@@ -167,7 +168,7 @@ def main(argv=None):
         )
     report["wall_time_s"] = time.perf_counter() - start
     out.mkdir(parents=True, exist_ok=True)
-    path.write_text(pj.json_text(report, indent=1))
+    path.write_text(json_text(report, indent=1))
     try:
         plot(
             {

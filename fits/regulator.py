@@ -14,7 +14,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
-import pamjax as pj  # noqa: E402
+from pamjax.gallery import json_text  # noqa: E402
 from pamjax.gallery.procedures.regulator import (  # noqa: E402, F401  (the procedures; this file is their command line)
     B_BOUNDS,
     NOISE_TANK,
@@ -56,7 +56,7 @@ def main(argv=None):
         f"MSE {v['validation_mse_bar2']:.2e} bar², fit {v['validation_fit_percent']:.2f} %"
     )
     report["G_Vref"] = {k: v[k] for k in v if not isinstance(v[k], np.ndarray) and k != "n_id"}
-    path.write_text(pj.json_text(report, indent=2))
+    path.write_text(json_text(report, indent=2))
     try:
         import matplotlib
 

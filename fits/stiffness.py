@@ -16,7 +16,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import pamjax as pj  # noqa: E402
+from pamjax.gallery import json_text  # noqa: E402
 from pamjax.gallery.procedures.stiffness import PAPER, RATE, plot, run, summarise  # noqa: E402,F401
 
 
@@ -52,7 +52,7 @@ def main(argv=None):
         f"dK/dt (eq. 9) / eq. 11 {report['correlation_dK_dt_eq11']:.3f}"
     )
     out.mkdir(parents=True, exist_ok=True)
-    path.write_text(pj.json_text(report, indent=1))
+    path.write_text(json_text(report, indent=1))
     try:
         plot(r, out / "stiffness.png")
     except ImportError:

@@ -21,7 +21,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
-from pamjax.gallery import bench_folder  # noqa: E402
+from pamjax.gallery import bench_folder, json_text  # noqa: E402
 from pamjax.gallery.procedures.bench import tank_model  # noqa: E402
 
 TABLE_1 = {"valve.inflate.discharge_coefficient": 0.36, "valve.inflate.critical_ratio": 0.28,
@@ -80,7 +80,7 @@ def main():
                    fitted=dict(zip(res.labels, res.values)), standard_errors=dict(zip(res.labels, res.standard_errors)),
                    relative_error=dict(zip(res.labels, rel.tolist())), z=dict(zip(res.labels, z.tolist())),
                    max_relative_error_percent=float(100 * np.max(np.abs(rel))))
-    (out / "summary.json").write_text(pj.json_text(summary, indent=1))
+    (out / "summary.json").write_text(json_text(summary, indent=1))
     plot(out / "valve_tank.png", res.model, experiments)
     print(f"max |fitted − true| = {summary['max_relative_error_percent']:.2f} %; wrote {out}/fit.json, summary.json, "
           "valve_tank.png")

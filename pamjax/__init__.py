@@ -85,7 +85,6 @@ from ._fit.experiment import AbstractExperiment as AbstractExperiment, Experimen
 from ._fit.builds import PayloadFromModel as PayloadFromModel, SameSystem as SameSystem, TankFromModel as TankFromModel
 from ._fit.fit import FitResult as FitResult, evaluate as evaluate, fit as fit
 from ._files.model_file import load_model as load_model, save_model as save_model
-from ._core.jsonio import json_text as json_text
 from ._fit.multistart import (
     FleetResult as FleetResult, MultistartResult as MultistartResult, fit_fleet as fit_fleet, multistart as multistart,
 )

@@ -43,7 +43,7 @@ def numbers(obj: Any) -> Any:
     return obj
 
 
-def json_text(obj: Any, indent: int | None = 1) -> str:
+def json_text(obj: dict | list, indent: int | None = 1) -> str:
     """Strict JSON text of a result (a dict of numbers, lists, arrays, text): what `pamjax fit` and `FitResult.to_json`
     write. A non-finite number (a standard error the data do not determine: inf) is written as the text "inf", "-inf"
     or "nan", which every JSON reader accepts; NumPy/JAX arrays and scalars as lists and numbers."""
