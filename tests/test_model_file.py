@@ -232,6 +232,23 @@ def test_save_refuses_what_load_would_refuse(tmp_path):
     assert not (tmp_path / "m.json").exists()
 
 
+def test_a_closed_loop_with_its_default_estimator_round_trips(tmp_path):
+    # the estimator's spreads per state (initial_std, process_noise: Pa and Pa/√s for the pressure) are not absolute
+    # pressures, and the sensors' seed is an integer: both were refused by save_model before
+    model = presets.mas10_system("averaged")
+    loop = pamjax.ClosedLoop(presets.mas10_system("pwm"), pamjax.SlidingModeController(model), pamjax.Constant(0.03),
+                             estimator=pamjax.ExtendedKalmanFilter(model), sensors=pamjax.LoopSensors(seed=7))
+    path = pamjax.save_model(tmp_path / "loop.json", loop)
+    back = pamjax.load_model(path)
+    _assert_identical(loop, back)
+    assert int(back.sensors.seed) == 7 and back.sensors.seed.dtype == loop.sensors.seed.dtype
+    doc = json.loads(path.read_text(encoding="utf-8"))
+    doc["parameters"]["sensors.seed"]["value"] = 7.5  # a seed must stay a whole number
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    with pytest.raises(PamjaxInputError, match=r"'sensors.seed': dtype 'int32' cannot hold 7\.5"):
+        pamjax.load_model(path)
+
+
 def test_a_signal_is_not_saved_as_a_model(tmp_path):
     with pytest.raises(PamjaxInputError, match=r"got the signal Triangle: a signal is an input"):
         pamjax.save_model(tmp_path / "s.json", pamjax.Triangle(0.05, 0.95, 0.25))

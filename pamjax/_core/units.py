@@ -234,6 +234,9 @@ _PLAUSIBLE = {
     "v0": ("m³", 0.1, "cm³"),
 }
 _ABSOLUTE_PRESSURES = {"pressure", "pressures", "atmospheric_pressure"}
+# containers whose entries are spreads per state (an estimator's initial standard deviations and process noise: Pa,
+# Pa/√s for the pressure), not states: their `pressure` is no absolute pressure
+_SPREADS = {"initial_std", "process_noise"}
 # K: the coldest air a pneumatic bench works in is far above this (-73 °C); a temperature below it was written in °C
 # (paper 000's 293 K is 20 °C).
 MIN_TEMPERATURE_K = 200.0
@@ -249,7 +252,10 @@ def checks_setting(path):
 def check_setting(path, values, where):
     """Plausibility of a value a user typed for parameter `path` (e.g. 'valve.supply_pressure', 'payload_mass',
     'y0.pressure'): refused with the likely unit named when its magnitude says another unit."""
-    leaf = str(path).split(".")[-1].split("[")[0]
+    parts = [part.split("[")[0] for part in str(path).split(".")]
+    leaf = parts[-1]
+    if len(parts) > 1 and parts[-2] in _SPREADS:
+        return  # a spread (σ, noise intensity) keyed by state name: any magnitude ≥ 0, the component checks it
     v = np.asarray(values, dtype=float)
     v = v[np.isfinite(v)]  # NaN and inf are the components' own checks to name ("must be finite")
     label = f"{where} {path}"

@@ -202,7 +202,8 @@ class _Decoder:
                       "(optionally) dtype and shape")
         self.used.add(path)
         name = f"parameter {path!r}"
-        dtype = self._dtype(entry.get("dtype", "float64"), name)
+        counted = declared in (None, "") and entry.get("unit") in (None, "")  # unitless: may be a count or seed
+        dtype = self._dtype(entry.get("dtype", "float64"), name, counted)
         raw = entry["value"]
         if any(isinstance(v, bool) for v in _flat(raw)):
             self.fail(f"{name}: {raw!r} is not a number or a list of numbers")
@@ -234,12 +235,14 @@ class _Decoder:
             return as_scalar(value.item())  # a scalar as `jnp.asarray(9.6)` makes it (the components' converter)
         return device_array(value)
 
-    def _dtype(self, spec, name):
+    def _dtype(self, spec, name, counted=False):
+        """The entry's dtype: floating point, or an integer one for a unitless setting (`counted`: a seed, a count,
+        as `save_model` writes `LoopSensors.seed`; the values must then be whole numbers, checked by `array`)."""
         try:
             dtype = np.dtype(spec)
         except TypeError:
             self.fail(f"{name}: dtype {spec!r} is not a dtype")
-        if dtype.kind != "f":
+        if dtype.kind != "f" and not (counted and dtype.kind in "iu"):
             self.fail(f"{name}: dtype {spec!r}: a model parameter is a floating-point number (an integer dtype would "
                       "cut 9.6 to 9); remove \"dtype\" (float64)")
         return dtype

@@ -4,8 +4,9 @@
 page and `docs/papers.md` written from them (`pamjax.gallery.report`, `pamjax.gallery.docs`).
 
 The toolkit a script uses: `Result` (and `Row`), `plt`, `save`, `bench_folder` / `bench_params` (the hybrid bench's
-recordings, shipped in `pamjax/data/hybrid-reference-bench`), and `script_main` (run one script on its own), `json_text` (strict JSON of a
-report: a non-finite number as the text "inf" / "nan", as pamjax's own result files write it).
+recordings, shipped in `pamjax/data/hybrid-reference-bench`), `script_main` (run one script on its own), and
+`json_text` (strict JSON of a report: a non-finite number as the text "inf" / "nan", as pamjax's result files
+write it).
 """
 
 from .._core.jsonio import json_text as json_text
