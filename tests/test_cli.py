@@ -242,6 +242,18 @@ SWEEP_CASES = {
                          r"either \[system\] .* or \[model\]"),
     "exact valve's flow surface": ('kind = "flow_surface"\n[model]\noptions = { valve = "exact" }\n',
                                    r"flow_surface' maps a smoothed switching valve, not the exact-edge one"),
+    # only the grid's first point was checked: the bad last value failed after the earlier maps were solved
+    "over bad last value, map by map": ('kind = "frequency_response"\n[system]\nvalve = "averaged"\n[sweep]\n'
+                                        'frequencies = [0.2, 2.0]\n'
+                                        'over = { "payload_mass" = [9.6, 5.0, 12.0, -1.0] }\n',
+                                        r"\[sweep\] over: .*payload_mass must be > 0 and finite, got -1"),
+    "over bad value of a second path": ('kind = "frequency_response"\n[system]\nvalve = "averaged"\n[sweep]\n'
+                                        'over = { "payload_mass" = [9.6, 5.0], '
+                                        '"friction.coulomb_force" = [10.0, -3.0] }\n',
+                                        r"\[sweep\] over: .*coulomb_force .*-3"),
+    "over bad last value, one sweep": ('kind = "steady_state"\n[system]\nvalve = "averaged"\n[sweep]\n'
+                                       'over = { "payload_mass" = [9.6, 5.0, -1.0] }\n',
+                                       r"\[sweep\] over: .*payload_mass must be > 0 and finite, got -1"),
 }
 
 

@@ -90,6 +90,17 @@ def test_fleet_fits_each_member_and_records_failures():
         (dict(max_stepz=3), "unknown fit option 'max_stepz'"),
         (dict(out="x.json"), "'out' is not passed to the individual fits"),
         (dict(distributed="yes"), "distributed must be None, True or False"),
+        # option values are checked as `fit` checks them, before any fit (max_steps=-3 was "every start failed")
+        (dict(max_steps=-3), "max_steps must be a positive int, got -3"),
+        (dict(max_steps="ten"), "max_steps must be a positive int, got 'ten'"),
+        (dict(ftol=2.0), r"ftol must be a number in \[0, 1\), got 2.0"),
+        (dict(stall_steps=0), "stall_steps must be a positive int"),
+        (dict(solver="lm"), "solver must be None, a pamjax.LevenbergMarquardt or an optimistix"),
+        # the seed: None or an integer >= 0 (NumPy's ValueError / TypeError, or a bool taken as 1, before)
+        (dict(seed=-1), "seed must be None or an integer >= 0, got -1"),
+        (dict(seed="abc"), "seed must be None or an integer >= 0, got 'abc'"),
+        (dict(seed=True), "seed must be None or an integer >= 0, got True"),
+        (dict(seed=1.5), "seed must be None or an integer >= 0, got 1.5"),
     ],
 )
 def test_bad_arguments_are_named_before_any_fit(problem, kwargs, match):
@@ -106,3 +117,29 @@ def test_fleet_bad_arguments():
         pj.fit_fleet({"a": muscle}, {"a": [exp], "b": [exp]}, FREE)
     with pytest.raises(PamjaxInputError, match="fleet member 'a': unknown parameter"):
         pj.fit_fleet(muscle, {"a": [exp]}, ["force_law.k9"])
+    # a bad option value: every member failed, without an exception, before
+    for value in (-3, "ten"):
+        with pytest.raises(PamjaxInputError, match=f"max_steps must be a positive int, got {value!r}"):
+            pj.fit_fleet(muscle, {"a": [exp], "b": [exp]}, FREE, max_steps=value, progress=False)
+
+
+def test_a_fresh_seed_is_recorded_and_drawn_once_for_every_process(problem, monkeypatch):
+    """seed=None draws fresh starts; the seed drawn is `result.seed`, which draws them again. Spread over processes,
+    each process drew its own, so the starts recorded were not the ones the other processes fitted: now process 0's
+    seed is sent to every process (emulated here: `gather_bytes` hands this process process 0's value)."""
+    import pamjax._core.distributed as distributed
+    from pamjax._fit import multistart as multistart_module
+
+    muscle, exp, space = problem
+    fresh = pj.multistart(muscle, [exp], FREE, starts=3, seed=None, spread=0.4, max_steps=1, progress=False)
+    assert isinstance(fresh.seed, int) and fresh.seed >= 0
+    again = pj.multistart(muscle, [exp], FREE, starts=3, seed=fresh.seed, spread=0.4, max_steps=1, progress=False)
+    np.testing.assert_array_equal(again.starts, fresh.starts)
+    assert again.seed == fresh.seed and pj.multistart(muscle, [exp], FREE, starts=np.asarray(fresh.starts[:1]),
+                                                      max_steps=1, progress=False).seed is None
+    sent = []
+    monkeypatch.setattr(distributed, "gather_bytes", lambda payload: sent.append(payload) or [b"1234", payload])
+    values, seed = multistart_module._start_values(space, 3, None, 0.4, True)
+    assert seed == 1234 and len(sent) == 1  # process 0's, on this process
+    np.testing.assert_array_equal(values, multistart_module._start_values(space, 3, 1234, 0.4)[0])
+    assert multistart_module._start_values(space, 3, 7, 0.4, True)[1] == 7 and len(sent) == 1  # a seed: no exchange

@@ -175,6 +175,27 @@ def test_initial_state_path_and_factory(averaged):
         (dict(over={"signal.value": [0.5]}, channels=("altitude",)), "altitude"),
         (dict(over={"signal.value": [0.5]}, ts=[0.0, 1.0, 0.5]), "ts"),
         (dict(over={}), "over"),
+        # a swept start pressure is checked as `simulate` checks y0.pressure (it gave NaN outputs with status 2)
+        (dict(over={"y0.pressure": [2e5, -1e5]}),
+         r"over\['y0.pressure'\] must be an ABSOLUTE pressure > 0 \[Pa\], point 1 is -100000.0"),
+        (dict(over={"y0.pressure": [0.0]}), r"over\['y0.pressure'\] must be an ABSOLUTE pressure > 0"),
+        (dict(over={"y0.pressure": [1.01325]}), r"over\['y0.pressure'\] is 1.01325 Pa at most: that looks like bar"),
+        (dict(over={"y0.pressure": [-1.0]}, y0=pamjax.MuscleState(pressure=2e5, position=0.0, velocity=0.0)),
+         r"over\['y0.pressure'\] must be an ABSOLUTE pressure > 0"),
+        (dict(over={"signal.value": [0.5]}, y0=pamjax.MuscleState(pressure=-1e5, position=0.0, velocity=0.0)),
+         r"y0.pressure must be an ABSOLUTE pressure > 0"),
+        # raw IndexError / "Need at least one array to stack" / "unknown channel 'p'" before
+        (dict(over={"signal.value": []}), r"over\['signal.value'\] holds no values"),
+        (dict(over={"signal.value": [0.5]}, channels=()), r"channels must be None or a non-empty sequence"),
+        (dict(over={"signal.value": [0.5]}, channels="pressure"),
+         r"channels must be None or a non-empty sequence of channel names such as \('pressure',\)"),
+        # a signal without a frequency: AttributeError 'Constant' object has no attribute 'frequency' before
+        (dict(over={"signal.value": [0.5]}, reduce=FourierCoefficient(2)),
+         r"FourierCoefficient needs the signal's frequency: the signal Constant has none .* "
+         r"FourierCoefficient\(2, frequency=\.\.\.\)"),
+        # a window longer than the 1 s run: the mean of the whole run before, without a word
+        (dict(over={"signal.value": [0.5]}, reduce=WindowMean(5.0)),
+         r"WindowMean\(5.0\) needs a window of 5 s, longer than the run \(ts\[-1\] - ts\[0\] = 1 s\)"),
     ],
 )
 def test_bad_input_is_named(averaged, kwargs, match):
@@ -182,6 +203,35 @@ def test_bad_input_is_named(averaged, kwargs, match):
     ts = kwargs.pop("ts", TS)
     with pytest.raises(pamjax.PamjaxInputError, match=match):
         sweep(averaged, pamjax.Constant(0.5), ts, **kwargs)
+
+
+def test_a_fourier_window_longer_than_the_run_or_a_bad_frequency_is_refused(averaged):
+    """On a 1 s run `FourierCoefficient(4)` at 1 Hz equalled `FourierCoefficient(1)`, a frequency of 0 gave twice the
+    mean and -1 zeros; now each is refused before any solve, at every swept point's frequency."""
+    sine = pamjax.Sine(0.5, 0.2, 1.0)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"FourierCoefficient\(4\) at 1 Hz needs a window of 4 s, "
+                                                      r"longer than the run"):
+        sweep(averaged, sine, TS, {"signal.frequency": [1.0]}, reduce=FourierCoefficient(4), progress=False)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"FourierCoefficient\(1\) at 0.5 Hz needs a window of 2 s"):
+        sweep(averaged, sine, TS, {"signal.frequency": [2.0, 0.5]}, reduce=FourierCoefficient(1), progress=False)
+    # a signal factory's frequencies, read from the signals it makes
+    with pytest.raises(pamjax.PamjaxInputError, match=r"FourierCoefficient\(1\) at 0.5 Hz"):
+        sweep(averaged, lambda v: pamjax.Sine(0.5, 0.2, float(v["f"])), TS, {"f": [2.0, 0.5]},
+              reduce=FourierCoefficient(1), progress=False)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"FourierCoefficient\(1\) at 0.5 Hz"):
+        sweep(averaged, pamjax.Constant(0.5), TS, {"signal.value": [0.5]},
+              reduce=FourierCoefficient(1, frequency=0.5), progress=False)
+    for bad in (0.0, -1.0, float("nan"), float("inf"), True):
+        with pytest.raises(pamjax.PamjaxInputError, match=r"FourierCoefficient.frequency must be a frequency > 0"):
+            FourierCoefficient(1, frequency=bad)
+    for bad in (0, -2, 1.5, True, float("nan")):
+        with pytest.raises(pamjax.PamjaxInputError, match=r"FourierCoefficient.periods must be a whole number"):
+            FourierCoefficient(bad)
+    # windows that fit are accepted, to the rounding of a span: the checks alone (no sweep compiled)
+    lanes = lambda: [(averaged, pamjax.Sine(0.5, 0.2, np.array([1.0, 3.0])))]  # noqa: E731
+    for reduce in (WindowMean(1.0), WindowMean(1.0 + 1e-12), FourierCoefficient(1),
+                   FourierCoefficient(2, frequency=2.0), FinalValue()):
+        reduce.check(TS, lanes)
 
 
 def test_flow_surface_equals_cycle_average_and_cli_writes_outputs(tmp_path):

@@ -119,9 +119,18 @@ def test_frequency_response_of_a_pwm_valve_does_not_depend_on_the_sampling():
         (dict(samples_per_period=2), "samples_per_period"),
         (dict(frequencies=[[0.5, 1.0]]), "frequencies"),
         (dict(frequencies=[0.5, -1.0]), "frequencies"),
+        # an `over` sweeping the frequency itself below the grid's: a 2 s window on a 1 s run, not a wrong number
+        (dict(frequencies=[1.0], settle_periods=0, periods=1, over={"signal.frequency": [1.0, 0.5]}),
+         r"frequency_response's 1 periods at 0.5 Hz needs a window of 2 s, longer than the run"),
     ],
 )
 def test_frequency_response_bad_input_is_named(kwargs, match):
     kwargs = {"frequencies": [0.5, 1.0], **kwargs}
     with pytest.raises(pamjax.PamjaxInputError, match=match):
         frequency_response(presets.mas10_system(valve="averaged"), kwargs.pop("frequencies"), **kwargs)
+
+
+def test_steady_state_map_of_no_commands_is_refused():
+    # an IndexError from deep in the sweep before
+    with pytest.raises(pamjax.PamjaxInputError, match=r"commands must be a non-empty 1-D array, got shape \(0,\)"):
+        steady_state_map(presets.mas10_system(valve="averaged"), [], horizon=0.5, window=0.1, progress=False)

@@ -39,6 +39,9 @@ class MultistartResult:
     - `results`: a `FitResult` per start (None where the start failed), `errors`: None or the failure's message
       per start ("PamjaxInputError: ..."), `starts`: the start values (n_starts × parameters, physical units, in
       the order of `labels`), `processes`: the process that ran each start.
+    - `seed`: the seed the starts were drawn with (the one given, or with `seed=None` the fresh one drawn, process
+      0's in a multi-process run): `multistart(..., seed=result.seed)` draws the same starts again; None where the
+      starts were given as an array.
     """
 
     best: FitResult
@@ -48,6 +51,7 @@ class MultistartResult:
     starts: np.ndarray
     labels: list[str]
     processes: list[int]
+    seed: int | None = None
 
     @property
     def costs(self):
@@ -70,7 +74,7 @@ class MultistartResult:
         path = pathlib.Path(path)
         if path.exists() and not overwrite:
             raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
-        data = dict(best_index=self.best_index, labels=self.labels, starts=self.starts.tolist(),
+        data = dict(best_index=self.best_index, labels=self.labels, starts=self.starts.tolist(), seed=self.seed,
                     processes=self.processes, errors=self.errors,
                     results=[None if r is None else r.to_dict() for r in self.results])
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -102,13 +106,24 @@ class FleetResult:
 
 
 def _check_fit_options(fit_options):
-    known = set(inspect.signature(fit).parameters) - {"model", "experiments", "free"}
+    """The options passed to every `fit`: their names against `fit`'s signature, then their values as `fit` checks
+    them before anything is set up, so that a bad value is one `PamjaxInputError` here, not a failed fit per task."""
+    signature = inspect.signature(fit)
+    known = set(signature.parameters) - {"model", "experiments", "free"}
     for key in fit_options:
         if key in _NOT_PASSED:
             raise PamjaxInputError(f"{key!r} is not passed to the individual fits (write the chosen result with "
                                    "its to_json; progress is per task here)")
         if key not in known:
             raise PamjaxInputError(f"unknown fit option {key!r}; valid: {sorted(known - set(_NOT_PASSED))}")
+    options = {name: p.default for name, p in signature.parameters.items() if name in known} | fit_options
+    max_steps = options["max_steps"]  # `fit`'s own test of it (in its private `_validate`)
+    if not (isinstance(max_steps, int | np.integer) and not isinstance(max_steps, bool) and max_steps > 0):
+        raise PamjaxInputError(f"max_steps must be a positive int, got {max_steps!r}")
+    from .drive import choose_solver  # `fit`'s check of `solver`, and of ftol/xtol/gtol/stall_steps (by its solver)
+
+    choose_solver(options["solver"], options["ftol"], options["xtol"], options["gtol"], options["stall_steps"],
+                  None, None)
 
 
 def _use_processes(distributed):
@@ -173,9 +188,29 @@ def _reissue(caught, prefix=""):
         warnings.warn(prefix + message, cls, stacklevel=3)
 
 
-def _start_values(space, starts, seed, spread):
-    """(n_starts, n_params) physical start values: the model's own, then draws around it in the fit's
-    unconstrained space (θ = θ₀ + spread · N(0, 1)), or the rows given."""
+def _check_seed(seed):
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0):
+        raise PamjaxInputError(f"seed must be None or an integer >= 0, got {seed!r}")
+
+
+def _drawn_seed(seed, shared):
+    """The seed the starts are drawn with: `seed`, or for None a fresh one (NumPy's entropy); when the starts are
+    spread over processes, process 0's, sent to every process (each process drawing its own would fit starts that
+    differ from the ones recorded)."""
+    if seed is not None:
+        return int(seed)
+    entropy = int(np.random.SeedSequence().entropy)
+    if not shared:
+        return entropy
+    from .._core.distributed import gather_bytes
+
+    return int(gather_bytes(str(entropy).encode())[0])  # every process calls it: process 0's value on all
+
+
+def _start_values(space, starts, seed, spread, shared=False):
+    """((n_starts, n_params) physical start values, the seed they were drawn with): the model's own, then draws
+    around it in the fit's unconstrained space (θ = θ₀ + spread · N(0, 1)), or the rows given (seed None).
+    `shared`: the starts are spread over processes (a seed of None is then drawn once, on process 0)."""
     n_params = space.size
     if isinstance(starts, int | np.integer) and not isinstance(starts, bool):
         if starts < 1:
@@ -186,14 +221,15 @@ def _start_values(space, starts, seed, spread):
             raise PamjaxInputError(f"spread must be a number >= 0 or one per parameter ({n_params}: "
                                    f"{space.labels}), got {spread!r}")
         theta0 = np.asarray(space.initial_theta())
+        seed = _drawn_seed(seed, shared)
         draws = np.random.default_rng(seed).standard_normal((int(starts) - 1, n_params))
         drawn = [np.asarray(space.physical(theta0 + spread * z)) for z in draws]
-        return np.stack([np.asarray(space.initial_values()), *drawn])  # start 0: the model's values, exactly
+        return np.stack([np.asarray(space.initial_values()), *drawn]), seed  # start 0: the model's values, exactly
     values = np.asarray(starts, dtype=float) if not isinstance(starts, str) else None
     if values is None or values.ndim != 2 or values.shape[1] != n_params or values.shape[0] < 1:
         raise PamjaxInputError(f"starts must be a count or an array (n_starts, {n_params}) of start values for "
                                f"{space.labels}, got {np.shape(starts) if values is not None else starts!r}")
-    return values
+    return values, None
 
 
 def multistart(
@@ -202,7 +238,7 @@ def multistart(
     free: Free,
     *,
     starts: int | RealArrayLike = 8,
-    seed: int = 0,
+    seed: int | None = 0,
     spread: RealScalarLike | RealVectorLike = 0.5,
     distributed: bool | None = None,
     progress: bool | Callable[[str], object] = True,
@@ -224,7 +260,9 @@ def multistart(
     - `model`, `experiments`, `free`: as for `pamjax.fit`.
     - `starts`: the number of starts (default 8), or an array (n_starts, n_params) of physical start values in
       the order of `ParameterSpace(model, free).labels` (e.g. a Latin hypercube of your own).
-    - `seed`: the NumPy seed of the drawn starts (the same starts on every process and every run).
+    - `seed`: the NumPy seed of the drawn starts, an integer >= 0 (the same starts on every process and every run),
+      or None for fresh ones each run (drawn once, on process 0, when the starts are spread over processes: the
+      same starts on every process); the seed used is `result.seed`.
     - `spread`: standard deviation of the draws in the unconstrained space (default 0.5: a factor ~1.65 for
       positive parameters), a number or one per parameter.
     - `distributed`: None (default: spread over the processes when there are several), or False (every process
@@ -243,10 +281,12 @@ def multistart(
     """
     require_float64("pamjax.multistart")
     _check_fit_options(fit_options)
+    _check_seed(seed)
+    spread_over_processes = _use_processes(distributed)
     space = ParameterSpace(model, free)  # names bad parameters before anything runs
-    values = _start_values(space, starts, seed, spread)
+    values, seed = _start_values(space, starts, seed, spread, spread_over_processes)
     tasks = [(f"start {i}", space.with_values(v), experiments) for i, v in enumerate(values)]
-    outcomes = _run_fits(tasks, free, fit_options, _use_processes(distributed), progress, "multistart:")
+    outcomes = _run_fits(tasks, free, fit_options, spread_over_processes, progress, "multistart:")
     results, errors, caught, processes = (list(x) for x in zip(*outcomes))
     finished = [i for i, r in enumerate(results) if r is not None]
     if not finished:
@@ -254,7 +294,7 @@ def multistart(
     best = min(finished, key=lambda i: (results[i].cost, i))
     _reissue(caught[best])
     return MultistartResult(best=results[best], best_index=best, results=results, errors=errors, starts=values,
-                            labels=space.labels, processes=processes)
+                            labels=space.labels, processes=processes, seed=seed)
 
 
 def fit_fleet(

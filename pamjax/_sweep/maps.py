@@ -16,7 +16,7 @@ from .._physics.signals import Constant, Sine
 from .._physics.valves.averaged import cycle_averaged_flow
 from .._physics.valves.base import AbstractSwitchingValve
 from .._systems.base import AbstractSystem
-from .reductions import AbstractReduction, WindowMean
+from .reductions import AbstractReduction, WindowMean, check_window
 from .result import SweepResult
 from .sweep import sweep
 
@@ -42,8 +42,8 @@ def steady_state_map(system: AbstractSystem, commands: RealVectorLike, *, horizo
     `sweep`. **Returns:** a `SweepResult` with `over["signal.value"]`.
     """
     commands = np.asarray(commands, dtype=float)
-    if commands.ndim != 1:
-        raise PamjaxInputError(f"commands must be 1-D, got shape {commands.shape}")
+    if commands.ndim != 1 or commands.size == 0:
+        raise PamjaxInputError(f"commands must be a non-empty 1-D array, got shape {commands.shape}")
     check_positive(horizon, "horizon")
     if not 0 < window <= horizon:
         raise PamjaxInputError(f"window must lie in (0, horizon = {horizon}] s, got {window}")
@@ -96,6 +96,10 @@ class _FourierIntegral(AbstractReduction):
     otherwise the error is the trapezoid rule's on the fractional interval, O(h³)."""
 
     periods: int = eqx.field(static=True)
+
+    def check(self, ts, lanes):  # an `over` that sweeps "signal.frequency" itself may leave the window too short
+        f = np.concatenate([np.ravel(np.asarray(signal.cycle_frequency(), dtype=float)) for _, signal in lanes()])
+        check_window(self.periods / f.min(), ts, f"frequency_response's {self.periods} periods at {f.min():.6g} Hz")
 
     def weights(self, ts, system, signal):
         window = self.periods / signal.frequency  # s

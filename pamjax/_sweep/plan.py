@@ -11,6 +11,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from .._core.errors import PamjaxInputError
+from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
 
 
@@ -84,6 +85,7 @@ def validate_values(system, signal, y0, plan, values, batch_size):
         if not np.all(np.isfinite(v)):
             bad = int(np.argmin(np.all(np.isfinite(v.reshape(batch_size, -1)), axis=1)))
             raise PamjaxInputError(f"over[{key!r}] must be finite, point {bad} is {v[bad]}")
+    check_start(y0, plan, flat)
 
     def check_lanes(vals, n, leaves="scalar"):
         for key, (where, parts), shape in zip(plan.keys, plan.targets, plan.leaf_shapes):
@@ -132,6 +134,44 @@ def validate_values(system, signal, y0, plan, values, batch_size):
                       {k: np.asarray(v[i]).tolist() for k, v in flat.items()} | {"index": i})
 
 
+def _names_pressure(parts):
+    """Whether a start value's path names a pressure: a state's `pressure` leaf, or an `initial_state` keyword such as
+    `pressure` or `flexor_pressure` (the contract: `AbstractSystem.initial_state` takes ABSOLUTE pressures)."""
+    return bool(parts) and (parts[-1] == "pressure" or parts[-1].endswith("_pressure"))
+
+
+def _check_start_pressure(values, name):
+    """`simulate`'s check of a start pressure (`pamjax._solve.simulate.validate` refuses a y0.pressure ≤ 0, then a
+    pressure in another unit, by `check_absolute_pressure`), over every lane's value."""
+    v = np.asarray(values, dtype=float).reshape(-1)
+    if not np.all(v > 0):
+        bad = int(np.argmin(v > 0))
+        raise PamjaxInputError(f"{name} must be an ABSOLUTE pressure > 0 [Pa], point {bad} is {v[bad]}")
+    check_absolute_pressure(v, name)  # 1.01325 (bar) or 0.5 (gauge MPa) refused naming the likely unit
+
+
+def check_start(y0, plan, flat):
+    """The checks `simulate` applies to a start state, on a sweep's, before any solve: every swept start value that is
+    a pressure ("y0.pressure", "y0.flexor_pressure", a `pressure` leaf of the `y0` given) an ABSOLUTE pressure > 0
+    [Pa] at every point, named by its key; the `y0` given finite, its pressures that are not swept likewise."""
+    swept = set()
+    for key, (where, parts) in zip(plan.keys, plan.targets):
+        if where == "y0":
+            swept.add(".".join(parts))
+            if _names_pressure(parts):
+                _check_start_pressure(flat[key], f"over[{key!r}]")
+    if y0 is None:
+        return
+    for path, leaf in jtu.tree_flatten_with_path(y0)[0]:
+        name = jtu.keystr(path).lstrip(".")
+        if name in swept or isinstance(leaf, jax.core.Tracer):
+            continue
+        if not np.all(np.isfinite(np.asarray(leaf, dtype=float))):
+            raise PamjaxInputError(f"y0 must be finite (no NaN or inf), y0.{name} is {leaf}")
+        if _names_pressure(name.split(".")):
+            _check_start_pressure(leaf, f"y0.{name}")
+
+
 def check_bounds(system, sig, point):
     if not isinstance(sig, AbstractSignal):
         raise PamjaxInputError(f"the signal factory must return a pamjax signal, got {type(sig)}")
@@ -142,6 +182,20 @@ def check_bounds(system, sig, point):
         raise PamjaxInputError(
             f"signal (the valve command) must stay within [{clo}, {chi}], its range is [{lo}, {hi}]{where}"
         )
+
+
+def host_lanes(system, signal, plan, flat, batch_size):
+    """(system, signal) pairs that hold every lane's swept values, for checks on the host before any solve (nothing
+    traced or solved): one pair with all values batched in its swept leaves, or, where a signal factory does not take
+    a batch of values, one pair per lane."""
+    values = {k: np.asarray(v) for k, v in flat.items()}
+    system = lane_system(system, plan, values)
+    try:
+        return [(system, make_signal(signal, plan, values))]
+    except PamjaxInputError:
+        raise
+    except Exception:  # a factory that needs one lane's numbers (e.g. `float(v["duty"])`)
+        return [(system, make_signal(signal, plan, {k: v[i] for k, v in values.items()})) for i in range(batch_size)]
 
 
 _STRUCTURES = {}
@@ -188,6 +242,9 @@ def make_plan(system, signal, base_state, over, y0_given=True):
             "over values must broadcast together, got shapes "
             + ", ".join(f"{k}: {a.shape}" for k, a in zip(keys, arrays))
         ) from None
+    for k, a, s in zip(keys, arrays, leaf_shapes):  # no point to sweep: refused by name, not an IndexError later
+        if int(np.prod(a.shape[: a.ndim - len(s)])) == 0:
+            raise PamjaxInputError(f"over[{k!r}] holds no values (shape {a.shape}): give at least one")
     values = {k: np.broadcast_to(a, batch_shape + s) for k, a, s in zip(keys, arrays, leaf_shapes)}
     return Plan(tuple(keys), tuple(targets), tuple(leaf_shapes)), values, batch_shape
 

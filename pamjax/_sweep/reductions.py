@@ -1,5 +1,6 @@
 """Reductions of a sweep's outputs over the output times, evaluated on the fly: each is a weighted sum Σ_k w_k y(t_k)
-with per-lane weights (`FinalValue`, `WindowMean`, `FourierCoefficient`)."""
+with per-lane weights (`FinalValue`, `WindowMean`, `FourierCoefficient`), checked on the host before any solve
+(`AbstractReduction.check`: a window longer than the run, a frequency that is not > 0)."""
 
 import abc
 import numbers
@@ -19,6 +20,26 @@ class AbstractReduction(eqx.Module):
     def weights(self, ts, system, signal):
         """Weights over the output times `ts` [s] for one lane (real or complex, shape `ts.shape`); the lane's
         `system` and `signal` may set them (e.g. a swept frequency)."""
+
+    def check(self, ts, lanes):
+        """Refuse (`PamjaxInputError`), before any solve, a reduction that cannot be evaluated over the concrete
+        output times `ts` [s] (e.g. a window longer than the run, which the weights would silently cut short).
+        `lanes()` gives (system, signal) pairs that hold every lane's values (`pamjax._sweep.plan.host_lanes`), for
+        a reduction whose weights read the lane; the default accepts any."""
+
+
+# A window may exceed the run's span by rounding only: relative 1e-9, `FourierCoefficient`'s own tolerance on
+# its window's start (a window computed as periods / f of an exact span differs from it by a few ulp).
+WINDOW_TOLERANCE = 1e-9
+
+
+def check_window(window, ts, what):
+    """Refuse a reduction window [s] longer than the run `ts[-1] − ts[0]` (beyond `WINDOW_TOLERANCE`): its weights
+    would average over whatever the run holds and return a wrong number without a word."""
+    span = float(ts[-1] - ts[0])
+    if not window <= span * (1 + WINDOW_TOLERANCE):
+        raise PamjaxInputError(f"{what} needs a window of {window:.6g} s, longer than the run (ts[-1] - ts[0] = "
+                               f"{span:.6g} s): lengthen ts or shorten the window")
 
 
 class FinalValue(AbstractReduction):
@@ -40,6 +61,9 @@ class WindowMean(AbstractReduction):
     def __check_init__(self):  # a window of no length averages nothing: 0/0 in every lane, silently
         if not (isinstance(self.window, numbers.Real) and np.isfinite(self.window) and self.window > 0):
             raise PamjaxInputError(f"WindowMean.window must be a duration > 0 [s], got {self.window!r}")
+
+    def check(self, ts, lanes):
+        check_window(self.window, ts, f"WindowMean({self.window!r})")
 
     def weights(self, ts, system, signal):
         if ts.shape[0] < 2:
@@ -64,8 +88,48 @@ class FourierCoefficient(AbstractReduction):
     periods: int = eqx.field(static=True, default=3)
     frequency: str | float | int = eqx.field(static=True, default="signal.frequency")
 
+    def __check_init__(self):
+        p = self.periods
+        if isinstance(p, bool) or not (isinstance(p, numbers.Real) and np.isfinite(p) and p >= 1 and int(p) == p):
+            raise PamjaxInputError(f"FourierCoefficient.periods must be a whole number of periods >= 1, got {p!r}")
+        f = self.frequency
+        if isinstance(f, str):
+            if not f:
+                raise PamjaxInputError("FourierCoefficient.frequency must be a path such as 'signal.frequency' or a "
+                                       "frequency > 0 [Hz], got ''")
+        elif isinstance(f, bool) or not (isinstance(f, numbers.Real) and np.isfinite(f) and f > 0):
+            raise PamjaxInputError(f"FourierCoefficient.frequency must be a frequency > 0 [Hz] (or a path such as "
+                                   f"'signal.frequency'), got {f!r}")
+
+    def check(self, ts, lanes):
+        if isinstance(self.frequency, str):  # every lane's frequency, read where its weights read it
+            f = np.concatenate([np.ravel(np.asarray(self.lane_frequency(system, signal), dtype=float))
+                                for system, signal in lanes()])
+        else:
+            f = np.array([float(self.frequency)])
+        if not np.all(np.isfinite(f) & (f > 0)):
+            bad = f[~(np.isfinite(f) & (f > 0))][0]
+            raise PamjaxInputError(f"FourierCoefficient's frequency ({self.frequency!r}) must be finite and > 0 [Hz] "
+                                   f"at every point, got {bad}")
+        check_window(self.periods / f.min(), ts, f"FourierCoefficient({self.periods}) at {f.min():.6g} Hz")
+
+    def lane_frequency(self, system, signal):
+        """The lane's frequency [Hz]: the number given, or read from the lane by its path ("signal.frequency": the
+        signal's `cycle_frequency()`, the contract of a periodic signal)."""
+        f = signal.cycle_frequency() if self.frequency == "signal.frequency" else None
+        if f is not None:
+            return f
+        try:  # another path, or a signal of the user's that names its frequency without `cycle_frequency`
+            return _lane_value(self.frequency, system, signal)
+        except PamjaxInputError:
+            if self.frequency != "signal.frequency":
+                raise
+        raise PamjaxInputError(
+            f"FourierCoefficient needs the signal's frequency: the signal {type(signal).__name__} has none (it does "
+            f"not repeat); pass FourierCoefficient({self.periods}, frequency=...) [Hz]")
+
     def weights(self, ts, system, signal):
-        f = _lane_value(self.frequency, system, signal)
+        f = self.lane_frequency(system, signal)
         inside = ts >= ts[-1] - self.periods / f * (1 + 1e-9)
         # the window [t_end - P/f, t_end] sampled with both ends would count one point twice: drop the first
         first = jnp.argmax(inside)
@@ -78,5 +142,10 @@ def _lane_value(path_or_number, system, signal):
         head, *rest = path_or_number.split(".")
         root = signal if head == "signal" else system
         parts = rest if head == "signal" else [head, *rest]
-        return get(root, parts)
+        try:
+            return get(root, parts)
+        except AttributeError:
+            raise PamjaxInputError(f"FourierCoefficient.frequency: the {'signal' if head == 'signal' else 'system'} "
+                                   f"({type(root).__name__}) has no leaf {'.'.join(parts)!r}; pass "
+                                   "FourierCoefficient(periods, frequency=...) [Hz] or a path it has") from None
     return jnp.asarray(path_or_number, dtype=float)

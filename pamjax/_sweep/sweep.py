@@ -28,7 +28,7 @@ from .._physics.signals import AbstractSignal
 from .._solve import fixed_step as _fixed_step
 from .._systems.base import AbstractSystem
 from .lanes import channel_shapes, chunk_program, hybrid_method_and_step, jacobians, method_and_step
-from .plan import make_plan, structure, validate_values
+from .plan import host_lanes, make_plan, structure, validate_values
 from .reductions import AbstractReduction
 from .result import SUCCESS, SweepResult, in_point_order
 from .sharding import Layout, gather_processes, local_part, mesh_of, put
@@ -117,11 +117,13 @@ def sweep(
     `gather="local"`).
 
     **Raises:** `PamjaxInputError` naming the argument (unknown path, values that break a component's constraint,
-    a command outside the valve's range, bad `ts`/`dt`/`chunk_size`), before any solve.
+    a start pressure that is not ABSOLUTE [Pa] > 0, a command outside the valve's range, bad `ts`/`dt`/`chunk_size`/
+    `channels`, a reduction's window longer than the run or a frequency that is not > 0), before any solve.
     """
     require_float64("pamjax.sweep")
     system = floats_as_arrays(system)  # a value set with eqx.tree_at: an argument, not a constant of the program
     _check_arguments(system, signal, ts, over, method, dt, chunk_size, gather, reduce)
+    channels = _channel_names(channels)
     if not isinstance(signal, AbstractSignal):  # a factory written inline: the program of an equal one is reused
         signal = keyed_by_code(signal)
     ts_np = np.asarray(ts, dtype=float)
@@ -131,6 +133,8 @@ def sweep(
     validate_values(system, signal, y0, plan, values, batch_size)
     flat = {k: np.ascontiguousarray(v.reshape((batch_size,) + s))
             for (k, v), s in zip(values.items(), plan.leaf_shapes)}
+    if reduce is not None:  # its window against the run, every lane's frequency (on the host, before any solve)
+        reduce.check(ts_np, lambda: host_lanes(system, signal, plan, flat, batch_size))
     shapes = channel_shapes(system, signal, y0, plan, {k: jnp.asarray(v[0]) for k, v in flat.items()},
                             float(ts_np[0]))
     scalars = [c for c in available if shapes.get(c, ()) == ()]  # a sweep maps scalar channels (not a joint's pair)
@@ -198,6 +202,19 @@ def _check_arguments(system, signal, ts, over, method, dt, chunk_size, gather, r
     if reduce is not None and not isinstance(reduce, AbstractReduction):
         raise PamjaxInputError(f"reduce must be None, FinalValue(), WindowMean(window) or FourierCoefficient(...), "
                                f"got {reduce!r}")
+
+
+def _channel_names(channels):
+    """`channels` as a tuple of names (None: the default), or `PamjaxInputError` naming it: a bare string would be
+    read letter by letter ("unknown channel 'p'"), an empty one would stack no outputs."""
+    if channels is None:
+        return None
+    names = tuple(channels) if not isinstance(channels, str) and np.iterable(channels) else None
+    if not names or not all(isinstance(c, str) for c in names):
+        example = f"({channels!r},)" if isinstance(channels, str) else '("pressure", "position")'
+        raise PamjaxInputError(f"channels must be None or a non-empty sequence of channel names such as {example}, "
+                               f"got {channels!r}")
+    return names
 
 
 def _run_calls(system, signal, y0, flat, ts_np, plan, config, mesh, layout, progress):
