@@ -291,12 +291,14 @@ def main():
     parser.add_argument("--out", default="results/control")
     parser.add_argument("--duration", type=float, default=20.0,
                         help=f"run length [s], above the tracking window's start ({WINDOW_START} s)")
-    parser.add_argument("--tune-steps", type=int, default=20)
+    parser.add_argument("--tune-steps", type=int, default=20, help="Adam steps of the gain tuning (>= 0)")
     parser.add_argument("--plant", choices=("smooth", "identified", "both"), default="both")
     args = parser.parse_args()
     if not args.duration > WINDOW_START:  # every figure is over t >= WINDOW_START: an empty window gives NaN
         parser.error(f"--duration must exceed the tracking window's start {WINDOW_START} s (RMSE and peak are over "
                      f"t >= {WINDOW_START} s), got {args.duration}")
+    if args.tune_steps < 0:  # tune_controller's steps: 0 evaluates the paper's gains, without a step
+        parser.error(f"--tune-steps must be >= 0 (Adam steps of the gain tuning), got {args.tune_steps}")
     jax.config.update("jax_enable_x64", True)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

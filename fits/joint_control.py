@@ -23,6 +23,8 @@ from pamjax import (  # noqa: E402
 )
 from pamjax.gallery import json_text  # noqa: E402
 
+WINDOW_START = 2.0  # s, the gait's RMSE window: after the first gait cycle (t >= 2 s)
+STEP_TIME = 1.0  # s, the stiffness step; its error is read from 1 s after it (t >= 2 s)
 OPEN_LOOP = dict(angle_proportional_gain=0.0, angle_integral_gain=0.0, sum_proportional_gain=0.0, sum_integral_gain=0.0)
 
 
@@ -32,16 +34,19 @@ def main(argv=None):
     ap.add_argument("--stiffness", type=float, default=160.0, help="held stiffness in the gait run [N m/rad]")
     ap.add_argument("--step", type=float, nargs=2, default=[145.0, 165.0], help="stiffness step [N m/rad]")
     ap.add_argument("--frequency", type=float, default=0.5, help="gait frequency [Hz]")
-    ap.add_argument("--duration", type=float, default=6.0, help="[s]")
+    ap.add_argument("--duration", type=float, default=6.0,
+                    help=f"run length [s], above the RMSE window's start ({WINDOW_START} s)")
     args = ap.parse_args(argv)
+    if not args.duration > WINDOW_START:  # the RMSE and the step's settled error are over t >= 2 s: an empty window
+        ap.error(f"--duration must exceed the RMSE window's start {WINDOW_START} s (the gait's RMSE and the step's "
+                 f"error are over t >= {WINDOW_START} s), got {args.duration}")
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
     m = pj.presets.dmsp40_muscle()
     joint = pj.AntagonisticJoint(pj.ISO6358Regulator(), pj.ISO6358Regulator(), m, m)
     ts = jnp.linspace(0.0, args.duration, int(round(100 * args.duration)) + 1)
-    start = 2.0  # s, RMSE window: after the first gait cycle
-    step_time = 1.0  # s
+    start, step_time = WINDOW_START, STEP_TIME
     runs = {}
     for label, ctl in (
         ("closed loop", AntagonisticJointController()),

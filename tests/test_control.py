@@ -229,3 +229,81 @@ def test_fits_control_refuses_a_duration_inside_the_window_and_describes_itself(
         script.main()
     assert "the SMC fed by an extended Kalman filter from the bench's noisy sensors." in " ".join(
         capsys.readouterr().out.split())
+
+
+def test_a_period_other_than_the_switching_valves_is_refused_whatever_the_stepping(plant, model):
+    """The smoothed PWM valve (stepping "adaptive") latches one duty per 20 ms PWM period: a 10 ms controller period
+    was accepted and every second duty silently dropped (only stepping "pwm" checked it). Refused with the same
+    message; the valve's own period, and any period of an averaged valve, still work."""
+    assert ClosedLoop(plant, PIController(), REF).stepping == "adaptive"
+    for stepping in ("auto", "adaptive", "pwm"):
+        with pytest.raises(pamjax.PamjaxInputError, match=r"ClosedLoop\.period \(0\.01 s\) must be the valve's PWM"):
+            ClosedLoop(plant, PIController(), REF, period=0.01, stepping=stepping)
+    assert float(ClosedLoop(plant, PIController(), REF, period=0.02).period) == 0.02
+    assert float(ClosedLoop(model, PIController(), REF, period=0.01).period) == 0.01
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(rtol=-1.0), "rtol must be a finite number > 0"),
+    (dict(rtol=np.nan), "rtol must be a finite number > 0"),
+    (dict(atol=0.0), "atol must be a finite number > 0"),
+    (dict(max_steps=0), "max_steps must be an int >= 1"),
+    (dict(max_steps=10.5), "max_steps must be an int >= 1"),
+])
+def test_simulate_closed_loop_refuses_bad_solver_settings(plant, kwargs, match):
+    """`rtol=-1` ran silently; `atol=0` and `max_steps=0` returned inf positions with only `result` 1. Refused before
+    any solve, as `pamjax.simulate` refuses them."""
+    from helpers import counted_compilations
+
+    loop = ClosedLoop(plant, PIController(), REF)
+    with counted_compilations() as compiled, pytest.raises(pamjax.PamjaxInputError, match=match):
+        simulate_closed_loop(loop, 0.1, **kwargs)
+    assert compiled == [], compiled
+
+
+def test_tune_controller_refuses_bad_settings_before_any_solve(model):
+    """`steps=-1` returned [] (then `fits/control.py` failed on history[0]), `samples_per_period=0` a raw IndexError,
+    a gain that is no float parameter (the SMC's `model`, the PID's static `seed`) raw TypeErrors, a NaN learning rate
+    ran on. Each refused, naming the argument, before any solve."""
+    from helpers import counted_compilations
+
+    from pamjax._control.pid import PIDController
+
+    loop = ClosedLoop(model, PIController(), REF)
+    cases = [
+        (loop, ("proportional_gain",), dict(steps=-1), "steps must be an int >= 0"),
+        (loop, ("proportional_gain",), dict(steps=1.5), "steps must be an int >= 0"),
+        (loop, ("proportional_gain",), dict(samples_per_period=0), "samples_per_period must be an int >= 1"),
+        (loop, ("proportional_gain",), dict(learning_rate=float("nan")), "learning_rate must be a finite number > 0"),
+        (loop, ("proportional_gain",), dict(learning_rate=-0.1), "learning_rate must be a finite number > 0"),
+        (loop, ("no_such_gain",), {}, r"gain 'no_such_gain' must name a positive, real-valued parameter"),
+        (loop, "proportional_gain", {}, "gains must be a non-empty tuple"),
+        (ClosedLoop(model, SlidingModeController(model), REF), ("model",), {},
+         r"gain 'model' must name a positive, real-valued parameter of the SlidingModeController, got MuscleSystem"),
+        (ClosedLoop(model, PIDController(seed=3), REF), ("seed",), {},
+         r"gain 'seed' must name a positive, real-valued parameter of the PIDController"),
+    ]
+    with counted_compilations() as compiled:
+        for lp, gains, kwargs, match in cases:
+            with pytest.raises(pamjax.PamjaxInputError, match=match):
+                pamjax.tune_controller(lp, gains, 0.1, **kwargs)
+    assert compiled == [], compiled
+
+
+def test_fits_control_refuses_negative_tune_steps(monkeypatch, capsys, tmp_path):
+    """`fits/control.py --tune-steps -1` ran every simulation, then crashed with an IndexError on the tuning's empty
+    history; now an argparse error names --tune-steps before any work."""
+    import importlib.util
+    import pathlib
+    import sys
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "fits" / "control.py"
+    spec = importlib.util.spec_from_file_location("fits_control_tune_steps", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    out = tmp_path / "out"
+    monkeypatch.setattr(sys, "argv", ["control.py", "--tune-steps", "-1", "--out", str(out)])
+    with pytest.raises(SystemExit) as exit_info:
+        script.main()
+    assert exit_info.value.code == 2 and "--tune-steps" in capsys.readouterr().err
+    assert not out.exists()

@@ -223,3 +223,68 @@ def test_bad_estimator_and_sensor_input_raises():
                       sensors=pj.LoopSensors(noise=(0.0, 0.0)))
     with pytest.raises(pj.PamjaxInputError, match="samples_per_period"):
         pj.LoopSensors(samples_per_period=0)
+
+
+def test_measurement_noise_must_match_the_sensor_channels():
+    """`measurement_noise=[2e3]` with the two default channels was broadcast (2 km of noise on the position) and
+    three values failed at run time with a raw TypeError; a 2-D or scalar one was taken too. The loop, which knows the
+    sensors, refuses another length; the filter refuses any shape but 1-D."""
+    ref = pj.Sine(0.03, 0.01, 0.2)
+    for noise in ([2e3], [2e3, 1e-4, 1.0]):
+        ekf = pj.ExtendedKalmanFilter(MODEL, measurement_noise=noise)
+        with pytest.raises(pj.PamjaxInputError, match=r"measurement_noise must have one σ_R per sensor channel "
+                                                      r"\('pressure', 'position'\)"):
+            pj.ClosedLoop(PLANT, pj.SlidingModeController(MODEL), ref, estimator=ekf)
+    pj.ClosedLoop(PLANT, pj.SlidingModeController(MODEL), ref,  # one channel, one value
+                  estimator=pj.ExtendedKalmanFilter(MODEL, measurement_noise=[1e4]),
+                  sensors=pj.LoopSensors(channels=("pressure",), noise=(2e3,)))
+    for noise in (2e3, [[2e3, 1e-4]], []):
+        with pytest.raises(pj.PamjaxInputError, match="measurement_noise must be a 1-D array"):
+            pj.ExtendedKalmanFilter(MODEL, measurement_noise=noise)
+
+
+@pytest.mark.parametrize("substeps", [0, -1, 2.5, True])
+def test_substeps_must_be_a_positive_int(substeps):
+    """0 divided by zero in `predict`, -1 made it the identity (no prediction at all), 2.5 ran with 2 steps of T/2.5."""
+    with pytest.raises(pj.PamjaxInputError, match="substeps must be an int >= 1"):
+        pj.ExtendedKalmanFilter(MODEL, substeps=substeps)
+
+
+_short_filter = eqx.filter_jit(lambda ekf, noise: ekf.filter(pj.Constant(0.6), np.tile([1.5e5, 1e-3], (3, 1)), 1e-3,
+                                                             CHANNELS, noise))
+
+
+def test_filter_uses_its_noise_argument_over_measurement_noise():
+    """`filter(..., noise=...)` was ignored where `measurement_noise` was set (the docstring: `noise` defaults to
+    `measurement_noise`); the argument given wins, so 100× the noise weights the readings less: a larger spread."""
+    ekf = pj.ExtendedKalmanFilter(MODEL, measurement_noise=BENCH_NOISE)
+    _, std, _ = _short_filter(ekf, BENCH_NOISE)
+    _, std_wide, _ = _short_filter(ekf, 100 * BENCH_NOISE)
+    assert float(std_wide.position[-1]) > 10 * float(std.position[-1]), (std_wide.position, std.position)
+    _, std_default, _ = ekf.filter(pj.Constant(0.6), np.tile([1.5e5, 1e-3], (3, 1)), 1e-3, CHANNELS)
+    np.testing.assert_allclose(np.asarray(std_default.position), np.asarray(std.position), rtol=1e-12)
+
+
+def test_filter_refuses_bad_noise_sample_time_and_channels():
+    """Zeros gave NaN estimates, negative noise and a sample time <= 0 ran, a wrong length or an unknown channel
+    failed with raw TypeError / AttributeError. Each refused, naming the argument, before filtering."""
+    ekf = pj.ExtendedKalmanFilter(MODEL)
+    readings = np.tile([1.5e5, 0.0], (4, 1))
+    signal = pj.Constant(0.6)
+    cases = [
+        (dict(noise=[2e3, 1e-4, 5.0]), r"filter: noise must have one σ_R per sensor channel"),
+        (dict(noise=[2e3]), r"filter: noise must have one σ_R per sensor channel"),
+        (dict(noise=[0.0, 1e-4]), r"filter: noise must be > 0"),
+        (dict(noise=[-2e3, 1e-4]), r"filter: noise must be > 0"),
+        (dict(noise=[np.inf, 1e-4]), r"filter: noise must be finite"),
+        (dict(noise=BENCH_NOISE, sample_time=0.0), r"filter: sample_time must be > 0"),
+        (dict(noise=BENCH_NOISE, sample_time=-1e-3), r"filter: sample_time must be > 0"),
+        (dict(noise=BENCH_NOISE, channels=("pressure", "force")), r"filter: channels \['force'\] are not states"),
+        (dict(noise=BENCH_NOISE[:1], channels="pressure"), r"filter: channels must be a non-empty tuple"),
+    ]
+    for kwargs, match in cases:
+        args = dict(sample_time=1e-3, channels=CHANNELS) | kwargs
+        with pytest.raises(pj.PamjaxInputError, match=match):
+            ekf.filter(signal, readings, **args)
+    with pytest.raises(pj.PamjaxInputError, match="measurement_noise must have one σ_R"):  # the default checked too
+        pj.ExtendedKalmanFilter(MODEL, measurement_noise=[2e3]).filter(signal, readings, 1e-3, CHANNELS)

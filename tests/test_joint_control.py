@@ -166,3 +166,47 @@ def test_bad_references(joint):
         m = pj.presets.dmsp40_muscle()
         bad = pj.AntagonisticJoint(pj.FeedbackRegulator(), pj.FeedbackRegulator(), m, m)
         JointControlLoop(bad, ctl, GaitAngle(), pj.Constant(160.0))
+
+
+def _trajectory(n=5):
+    """A small `JointControlTrajectory` over t = 0 … 1 s (no solve: its `rmse` alone is under test)."""
+    from pamjax._control.joint import JointControlTrajectory
+
+    t = jnp.linspace(0.0, 1.0, n)
+    ones = jnp.ones(n)
+    return JointControlTrajectory(t=t, angle=0.1 * ones, angle_reference=0.1 * ones + 0.01 * t, stiffness=150.0 * ones,
+                                  stiffness_reference=150.0 * ones + t, pressure_sum=4e5 * ones,
+                                  pressure_sum_reference=4e5 * ones, pressure=jnp.full((n, 2), 3e5),
+                                  voltage=jnp.full((n, 2), 3.0), result=jnp.asarray(0))
+
+
+def test_rmse_refuses_an_empty_window():
+    """`rmse(start)` with `start` at or after the run's end (or NaN) averaged over nothing: a silent NaN (and
+    `fits/joint_control.py --duration 1.5` then crashed). Refused, naming `start` and the run's end; a start inside
+    still works."""
+    traj = _trajectory()
+    for start in (1.0, 10.0, float("nan")):
+        with pytest.raises(pj.PamjaxInputError, match=r"rmse: start = .* the run ends at 1\.0 s"):
+            traj.rmse(start=start)
+    angle, stiffness = traj.rmse(start=0.5)  # t = 0.5, 0.75, 1.0
+    np.testing.assert_allclose([float(angle), float(stiffness)],
+                               [0.01 * np.sqrt(np.mean(np.array([0.5, 0.75, 1.0]) ** 2)),
+                                np.sqrt(np.mean(np.array([0.5, 0.75, 1.0]) ** 2))], rtol=1e-12)
+
+
+def test_fits_joint_control_refuses_a_duration_inside_the_window(tmp_path, capsys):
+    """`fits/joint_control.py --duration 1.5` ran both loops and crashed at the end on an empty window (t >= 2 s);
+    now an argparse error names --duration before any work (no output folder made)."""
+    import importlib.util
+    import pathlib
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "fits" / "joint_control.py"
+    spec = importlib.util.spec_from_file_location("fits_joint_control_under_test", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    out = tmp_path / "out"
+    for duration in ("1.5", "2.0", "nan"):
+        with pytest.raises(SystemExit) as exit_info:
+            script.main(["--duration", duration, "--out", str(out)])
+        assert exit_info.value.code == 2 and "--duration" in capsys.readouterr().err
+    assert not out.exists()

@@ -263,3 +263,12 @@ def test_simulate_writes_the_columns_in_the_documented_order():
     assert list(cols) == ["t", "command", "pressure", "position", "velocity", "force", "friction_force", "mass_flow",
                           "volume"]
     assert units["pressure"] == "Pa abs"
+
+
+def test_a_closed_loops_period_is_saved_with_its_unit(tmp_path):
+    # ClosedLoop.period was declared with a comment only (`# s`): its entry had no unit
+    loop = pamjax.ClosedLoop(presets.mas10_system("pwm"), pamjax.PIController(), pamjax.Constant(0.03))
+    path = pamjax.save_model(tmp_path / "loop.json", loop)
+    entry = json.loads(path.read_text(encoding="utf-8"))["parameters"]["period"]
+    assert entry["unit"] == "s" and entry["value"] == 0.02
+    _assert_identical(loop, pamjax.load_model(path))

@@ -27,13 +27,14 @@ from .._core.custom_types import (
     StateLike,
 )
 from .._core.errors import PamjaxInputError, check_positive
+from .._core.fitting import parameter
 from .._papers import paper000
 from .._physics.signals import AbstractSignal, Step
 from .._solve.simulate import solve
 from .._solve.trajectory import RESULT_NONFINITE
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from .controllers import AbstractController, reference_derivatives
-from .estimator import ExtendedKalmanFilter, LoopSensors, check_channels
+from .estimator import ExtendedKalmanFilter, LoopSensors, check_channels, check_noise_channels
 from .fixed_grid import period_on_grid
 
 _DEFAULT_SUBSTEPS = 16  # RK4 nodes per period on the fixed grids: ≤ 1.25 ms at 50 Hz, as `simulate`'s PWM grid
@@ -93,10 +94,11 @@ class ClosedLoop(eqx.Module):
     optionally noisy sensors with a state estimator between the plant and the controller.
 
     The controller runs once per PWM period T = 1/f of the plant's valve (1/50 s for paper 000's MHE2); an
-    `AveragedValve` plant uses `period` [s] (default 0.02 s). Without an estimator the controller reads the plant's
-    true state at each period start; with one (`estimator`, e.g. `ExtendedKalmanFilter`) it reads the estimate, which
-    the estimator forms from the `sensors`' noisy readings (default `LoopSensors()`: pressure and position at 1 kHz with
-    the bench's 2 kPa and 0.1 mm noise).
+    `AveragedValve` plant uses `period` [s] (default 0.02 s); with a switching valve a `period` other than its PWM
+    period is refused, whatever the stepping (the valve latches one duty per PWM period). Without an estimator the
+    controller reads the plant's true state at each period start; with one (`estimator`, e.g.
+    `ExtendedKalmanFilter`) it reads the estimate, which the estimator forms from the `sensors`' noisy readings
+    (default `LoopSensors()`: pressure and position at 1 kHz with the bench's 2 kPa and 0.1 mm noise).
 
     `stepping`: how each period's plant is solved. "auto" (default): "adaptive" (diffrax, `rtol`/`atol` of
     `simulate_closed_loop`) for a smooth plant (smoothed valve edges, smooth friction); the fixed grid with events
@@ -110,7 +112,7 @@ class ClosedLoop(eqx.Module):
     plant: AbstractSystem
     controller: AbstractController
     reference: AbstractSignal
-    period: RealScalar  # s
+    period: RealScalar = parameter(unit="s")  # set by __init__ (the valve's PWM period by default)
     estimator: ExtendedKalmanFilter | None
     sensors: LoopSensors | None
     stepping: str = eqx.field(static=True)
@@ -145,7 +147,7 @@ class ClosedLoop(eqx.Module):
         if not (isinstance(self.substeps, int) and self.substeps >= 2):
             raise PamjaxInputError(f"ClosedLoop.substeps must be an int >= 2 (RK4 nodes per period), got "
                                    f"{self.substeps!r}")
-        if self.stepping == "pwm":
+        if self.plant.valve.switches:  # whatever the stepping: the valve latches one duty per PWM period
             period, valve_period = _concrete(self.period), _concrete(self.plant.valve.period)
             if period is not None and valve_period is not None and not np.isclose(period, valve_period, rtol=1e-12):
                 raise PamjaxInputError(
@@ -168,6 +170,8 @@ class ClosedLoop(eqx.Module):
                 )
             check_channels(self.plant, self.sensors.channels, "plant")
             check_channels(self.estimator.model, self.sensors.channels, "estimator's model")
+            check_noise_channels(self.estimator.measurement_noise, self.sensors.channels,
+                                 "ExtendedKalmanFilter.measurement_noise")
             noise = self.sensors.noise
             if (self.estimator.measurement_noise is None and not isinstance(noise, jax.core.Tracer)
                     and not np.all(np.asarray(noise) > 0)):
@@ -265,7 +269,7 @@ class ClosedLoopTrajectory(eqx.Module):
 
         **Raises:** `PamjaxInputError` where `start` and the run are concrete and no period starts at or after
         `start` (an empty window: the RMS would be 0/0 = NaN)."""
-        _check_window(start, self.period_start, self.t, "estimation_error", "its last period starts")
+        check_window(start, self.period_start, self.t, "estimation_error", "its last period starts")
         weight = (self.period_start >= start).astype(float)
         return {name: jnp.sqrt(jnp.sum(weight * (getattr(self.observed, name) - getattr(self.period_start_state, name))
                                        ** 2) / jnp.sum(weight))
@@ -276,18 +280,19 @@ class ClosedLoopTrajectory(eqx.Module):
 
         **Raises:** `PamjaxInputError` where `start` and the run are concrete and `start` is at or after the run's end
         (an empty window: the RMSE would be 0/0 = NaN and the peak 0)."""
-        _check_window(start, self.t, self.t, "tracking_error", "its last sample is")
+        check_window(start, self.t, self.t, "tracking_error", "its last sample is")
         weight = (self.t >= start).astype(float)
         error = (self.reference - self.position) * weight
         rmse = jnp.sqrt(jnp.sum(error**2) / jnp.sum(weight))
         return rmse, jnp.max(jnp.abs(error))
 
 
-def _check_window(start, times, samples, method, last_is):
+def check_window(start, times, samples, method, last_is):
     """Refuse a window start `start` [s] after every time of `times` (the times the window averages over; `last_is`
     names the last of them) or at or after the run's end (the last of `samples`), where both are concrete: the window
     would be empty and the RMS 0/0 = NaN. Inside jit, grad or vmap they are traced and the check is left to the caller
-    (`tune_controller` checks its `start` before solving)."""
+    (`tune_controller` checks its `start` before solving). Shared by the closed loops' trajectories
+    (`ClosedLoopTrajectory`, `JointControlTrajectory`)."""
     if isinstance(start, jax.core.Tracer) or isinstance(times, jax.core.Tracer) or np.size(times) == 0:
         return
     start_value = _concrete(start)
@@ -299,6 +304,19 @@ def _check_window(start, times, samples, method, last_is):
             f"{method}: start = {start_value} s leaves an empty window: the run ends at {end} s ({last_is} at "
             f"{last} s); give a start before that, or run longer"
         )
+
+
+def _check_solver_settings(rtol, atol, max_steps):
+    """`rtol` and `atol` finite numbers > 0 and `max_steps` an int >= 1, as `simulate` refuses them: a tolerance of 0
+    or a step budget of 0 failed every period's solve (inf positions, `result` 1), a negative `rtol` ran silently."""
+    for name, value in (("rtol", rtol), ("atol", atol)):
+        number = (isinstance(value, (int, float, np.ndarray, np.generic, jax.Array))
+                  and not isinstance(value, (bool, np.bool_)))
+        v = None if (not number or isinstance(value, jax.core.Tracer)) else np.asarray(value, dtype=float)
+        if not number or (v is not None and (v.ndim != 0 or not np.isfinite(v) or v <= 0)):
+            raise PamjaxInputError(f"{name} must be a finite number > 0, got {value!r}")
+    if not (isinstance(max_steps, (int, np.integer)) and not isinstance(max_steps, bool) and max_steps >= 1):
+        raise PamjaxInputError(f"max_steps must be an int >= 1 (solver steps per period), got {max_steps!r}")
 
 
 def _run(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps, adjoint=None):
@@ -368,10 +386,12 @@ def simulate_closed_loop(
     at atmospheric pressure, valve off); `rtol`, `atol` as for `simulate` (scaled states) and `max_steps` per period,
     for adaptive stepping (the fixed grid's size is `ClosedLoop.substeps`).
 
-    **Raises:** `PamjaxInputError` for a reference outside the muscle's stroke or a bad duration, before any solve.
+    **Raises:** `PamjaxInputError` for a reference outside the muscle's stroke, a bad duration, `rtol` or `atol`
+    not a finite number > 0 or `max_steps` not an int >= 1, before any solve.
     """
     if not isinstance(loop, ClosedLoop):
         raise PamjaxInputError(f"loop must be a ClosedLoop, got {type(loop).__name__}")
+    _check_solver_settings(rtol, atol, max_steps)
     duration = float(duration)
     if not np.isfinite(duration) or duration <= 0:
         raise PamjaxInputError(f"duration must be > 0 [s], got {duration}")

@@ -136,11 +136,11 @@ class ExtendedKalmanFilter(eqx.Module):
       acceleration error of 0.6 m/s²: 6 N on 9.6 kg, where the smooth sign misplaces stick-slip). Chosen on a grid
       (pressure 3e4-4e5, position 1e-5-1e-3, velocity 0.005-0.5) as the smallest estimation error of the SMC's loop
       on `presets.mas10_system("pwm", friction="karnopp")` with the bench's noise (docs/control.md).
-    - `measurement_noise`: σ_R per sensor channel, in the channel's unit; None (default): the loop's
-      `LoopSensors.noise`.
+    - `measurement_noise`: σ_R per sensor channel (a 1-D array, one value > 0 per channel, in the channel's unit; a
+      `ClosedLoop` checks it against its sensors' channels); None (default): the loop's `LoopSensors.noise`.
     - `initial_std`: {state: σ} of the initial belief about the model's state at rest (pressure 1e4 Pa, position
       5e-3 m, velocity 1e-2 m/s).
-    - `substeps` (static int, 1): Euler steps of the model per sample. Paper 000's averaged model runs at 1 kHz in
+    - `substeps` (static int >= 1, 1): Euler steps of the model per sample. Paper 000's averaged model runs at 1 kHz in
       one; a switching-valve model (`presets.mas10_system("pwm")`, smoothed edges of 0.1 ms) needs ≥ 10, and then
       predicts the PWM ripple (with pressure process noise 3e4 Pa/√s its pressure error halves, docs/control.md).
     """
@@ -177,7 +177,14 @@ class ExtendedKalmanFilter(eqx.Module):
             for k, v in values.items():
                 check_nonnegative(v, f"ExtendedKalmanFilter.{name}[{k!r}]")
         if self.measurement_noise is not None:
+            if jnp.ndim(self.measurement_noise) != 1 or jnp.size(self.measurement_noise) == 0:
+                raise PamjaxInputError(
+                    "ExtendedKalmanFilter.measurement_noise must be a 1-D array of σ_R, one per sensor channel, got "
+                    f"shape {jnp.shape(self.measurement_noise)}")
             check_positive(self.measurement_noise, "ExtendedKalmanFilter.measurement_noise")
+        if not (isinstance(self.substeps, int) and not isinstance(self.substeps, bool) and self.substeps >= 1):
+            raise PamjaxInputError(
+                f"ExtendedKalmanFilter.substeps must be an int >= 1 (Euler steps per sample), got {self.substeps!r}")
 
     # --- the state map -------------------------------------------------------------------------------------------
     def _template(self):
@@ -229,11 +236,12 @@ class ExtendedKalmanFilter(eqx.Module):
         return KalmanState(mean=mean, covariance=0.5 * (covariance + covariance.T))
 
     def update(self, state: KalmanState, readings, channels, noise):
-        """Correct the belief with `readings` (m,) of the state fields `channels`, whose noise the filter takes as
-        `measurement_noise` (or `noise`, the sensors' own, where that is None). Returns (belief, normalised
-        innovation (y − h(z))/σ_R)."""
+        """Correct the belief with `readings` (m,) of the state fields `channels`, whose noise σ_R per channel the
+        filter takes as `noise` (the callers choose it: `run_period` the filter's `measurement_noise`, or the sensors'
+        own where that is None; `filter` its `noise` argument, or `measurement_noise` where that is None). Returns
+        (belief, normalised innovation (y − h(z))/σ_R)."""
         sc = self._scaled()
-        sigma = jnp.asarray(noise if self.measurement_noise is None else self.measurement_noise, dtype=float)
+        sigma = jnp.asarray(noise, dtype=float)
 
         def measure(z):
             named = sc.state(z)
@@ -255,25 +263,39 @@ class ExtendedKalmanFilter(eqx.Module):
         at each of the sensors' N samples t_k + jT/N. `readings` (N, channels)."""
         signal = Step(previous_duty, duty, start)
         sample_time = period / sensors.samples_per_period
+        noise = sensors.noise if self.measurement_noise is None else self.measurement_noise
 
         def body(belief, xs):
             j, y = xs
             t = start + j * sample_time
             belief = self.predict(belief, t, self.model.valve.read_command(signal, t), sample_time)
-            belief, _ = self.update(belief, y, sensors.channels, sensors.noise)
+            belief, _ = self.update(belief, y, sensors.channels, noise)
             return belief, None
 
         state, _ = jax.lax.scan(body, state, (jnp.arange(readings.shape[0], dtype=float), readings))
         return state
 
     def filter(self, signal, readings, sample_time, channels, noise=None, *, t0=0.0, initial=None):
-        """Filter a recording offline: `readings` (N, channels) of the state fields `channels` at t0 + k T_s (k = 1
-        … N), the model driven by the command `signal` (read as its valve reads it). `noise` σ per channel (default:
-        `measurement_noise`). Returns (estimates: a named state with a leading axis of N, their standard deviations
-        alike, the final `KalmanState`)."""
+        """Filter a recording offline: `readings` (N, channels) of the state fields `channels` (a tuple of the
+        model's state names) at t0 + k T_s (k = 1 … N, `sample_time` T_s > 0 [s]), the model driven by the command
+        `signal` (read as its valve reads it). `noise` σ_R per channel (> 0, in the channel's unit): given, it is the
+        one used, whatever `measurement_noise`; None (default): `measurement_noise`. Returns (estimates: a named
+        state with a leading axis of N, their standard deviations alike, the final `KalmanState`).
+
+        **Raises:** `PamjaxInputError`, before filtering, for an unknown channel, a `noise` (or `measurement_noise`)
+        not one value > 0 per channel, a `sample_time` not > 0 or `readings` not (N, channels)."""
         if noise is None and self.measurement_noise is None:
             raise PamjaxInputError("ExtendedKalmanFilter.filter needs `noise` (σ per channel) or measurement_noise")
-        noise = self.measurement_noise if noise is None else noise
+        if not (isinstance(channels, (tuple, list)) and channels and all(isinstance(c, str) for c in channels)):
+            raise PamjaxInputError(f"ExtendedKalmanFilter.filter: channels must be a non-empty tuple of state names, "
+                                   f"got {channels!r}")
+        channels = tuple(channels)
+        check_channels(self.model, channels, "estimator's model", name="ExtendedKalmanFilter.filter: channels")
+        name = "ExtendedKalmanFilter.filter: noise" if noise is not None else "ExtendedKalmanFilter.measurement_noise"
+        noise = self.measurement_noise if noise is None else jnp.asarray(noise, dtype=float)
+        check_noise_channels(noise, channels, name)
+        check_positive(noise, name)
+        check_positive(sample_time, "ExtendedKalmanFilter.filter: sample_time")
         belief = self.initial_state() if initial is None else initial
         readings = jnp.asarray(readings, dtype=float)
         if readings.ndim != 2 or readings.shape[1] != len(channels):
@@ -291,9 +313,20 @@ class ExtendedKalmanFilter(eqx.Module):
         return means, stds, final
 
 
-def check_channels(system, channels, what):
-    """Every sensor channel must be a state field of `system` (the plant, or the filter's model)."""
+def check_channels(system, channels, what, name="LoopSensors.channels"):
+    """Every sensor channel must be a state field of `system` (the plant, or the filter's model); `name` names the
+    argument that holds them."""
     fields = _state_fields(jax.eval_shape(system.initial_state))
     missing = [c for c in channels if c not in fields]
     if missing:
-        raise PamjaxInputError(f"LoopSensors.channels {missing} are not states of the {what} (its states: {fields})")
+        raise PamjaxInputError(f"{name} {missing} are not states of the {what} (its states: {fields})")
+
+
+def check_noise_channels(noise, channels, name):
+    """`noise` (σ_R per channel; None: not set, nothing to check) must hold one value per channel of `channels`: a
+    single value was broadcast to every channel (2 kPa taken as the position's σ) and a longer one failed at run
+    time. The shape is known even under jit, so this never waits for the values."""
+    if noise is not None and jnp.shape(noise) != (len(channels),):
+        raise PamjaxInputError(
+            f"{name} must have one σ_R per sensor channel {tuple(channels)} (shape ({len(channels)},)), got shape "
+            f"{jnp.shape(noise)}")

@@ -21,6 +21,7 @@ from .._systems.joint_control import (
     max_gauge_pressure,
     regulated_stiffness,
 )
+from .closed_loop import check_window
 
 
 class JointControlTrajectory(eqx.Module):
@@ -41,7 +42,11 @@ class JointControlTrajectory(eqx.Module):
     result: Int[Array, ""]
 
     def rmse(self, start=0.0):
-        """(angle RMSE [rad], stiffness RMSE [N m/rad]) over t ≥ `start` [s]."""
+        """(angle RMSE [rad], stiffness RMSE [N m/rad]) over t ≥ `start` [s] (traceable).
+
+        **Raises:** `PamjaxInputError` where `start` and the run are concrete and `start` is at or after the run's end
+        (an empty window, or a NaN start: the RMSE would be 0/0 = NaN)."""
+        check_window(start, self.t, self.t, "rmse", "its last sample is")
         w = (self.t >= start).astype(float)
         n = jnp.sum(w)
         return (

@@ -34,20 +34,20 @@ def tune_controller(
     closed loop, differentiated through the whole sampled-data simulation (reverse mode).
 
     **Arguments:** `loop` a `ClosedLoop` (the plant it holds is the one tuned on); `gains` a tuple of attribute names
-    of its controller (e.g. `("proportional_gain", "integral_gain")`); `duration` [s]; `start` [s] the RMSE window's
-    start; `steps` Adam steps; `learning_rate` in log-gain units; `callback(step, rmse, gains)` for progress.
+    of its controller, each a real-valued (floating-point) parameter > 0 (e.g. `("proportional_gain",
+    "integral_gain")`); `duration` [s]; `start` [s] the RMSE window's start; `steps` Adam steps (an int >= 0; 0
+    evaluates the loop's own gains, without a step); `learning_rate` in log-gain units (finite, > 0);
+    `samples_per_period` samples of the RMSE per PWM period (an int >= 1); `callback(step, rmse, gains)` for progress.
 
     **Returns:** `(tuned_loop, history)`: the loop with the best gains met and a list of (rmse [m], gains) per step.
 
-    **Raises:** `PamjaxInputError`, before any solve, for a gain that is no positive controller field, a duration
-    that is not > 0 or a `start` at or after the run's end (`duration` rounded up to whole PWM periods).
+    **Raises:** `PamjaxInputError`, before any solve, for a gain that is no positive real-valued controller
+    parameter, a duration that is not > 0, a `start` at or after the run's end (`duration` rounded up to whole PWM
+    periods), or a bad `steps`, `learning_rate` or `samples_per_period`.
     """
     if not isinstance(loop, ClosedLoop):
         raise PamjaxInputError(f"loop must be a ClosedLoop, got {type(loop).__name__}")
-    for name in gains:
-        value = getattr(loop.controller, name, None)
-        if value is None or not np.all(np.asarray(value) > 0):
-            raise PamjaxInputError(f"tune_controller: gain {name!r} must be a positive controller field, got {value}")
+    _check_settings(loop.controller, gains, steps, learning_rate, samples_per_period)
     duration, start = float(duration), float(start)
     if not (np.isfinite(duration) and duration > 0):
         raise PamjaxInputError(f"tune_controller: duration must be > 0 [s], got {duration}")
@@ -90,6 +90,43 @@ def tune_controller(
         )
     controller = eqx.tree_at(get, loop.controller, tuple(jnp.exp(g) for g in best[1]))
     return eqx.tree_at(lambda lp: lp.controller, loop, controller), history
+
+
+def _check_settings(controller, gains, steps, learning_rate, samples_per_period):
+    """The tuning's own arguments, checked on the host before any solve (`PamjaxInputError` naming each)."""
+    if isinstance(gains, str) or not isinstance(gains, Sequence) or not gains:
+        raise PamjaxInputError(f"tune_controller: gains must be a non-empty tuple of controller parameter names, got "
+                               f"{gains!r}")
+    for name in gains:
+        value = getattr(controller, name, None) if isinstance(name, str) else None
+        # a leaf of the controller's pytree with a floating-point dtype: a sub-model ("model") or an integer or
+        # static field ("seed") has no log to descend on
+        real = (isinstance(value, (float, np.ndarray, jax.Array)) and not isinstance(value, jax.core.Tracer)
+                and np.issubdtype(np.asarray(value).dtype, np.floating))
+        if not real or not np.all(np.asarray(value) > 0) or not np.all(np.isfinite(np.asarray(value))):
+            raise PamjaxInputError(f"tune_controller: gain {name!r} must name a positive, real-valued parameter of "
+                                   f"the {type(controller).__name__}, got {_describe(value)}")
+    if not (isinstance(steps, (int, np.integer)) and not isinstance(steps, bool) and steps >= 0):
+        raise PamjaxInputError(f"tune_controller: steps must be an int >= 0 (Adam steps), got {steps!r}")
+    number = (isinstance(learning_rate, (int, float, np.number, np.ndarray, jax.Array))
+              and not isinstance(learning_rate, (bool, np.bool_)))
+    rate = np.asarray(learning_rate, dtype=float) if number else None
+    if rate is None or rate.ndim != 0 or not (np.isfinite(rate) and rate > 0):
+        raise PamjaxInputError(f"tune_controller: learning_rate must be a finite number > 0 (log-gain units), got "
+                               f"{learning_rate!r}")
+    if not (isinstance(samples_per_period, (int, np.integer)) and not isinstance(samples_per_period, bool)
+            and samples_per_period >= 1):
+        raise PamjaxInputError(f"tune_controller: samples_per_period must be an int >= 1, got "
+                               f"{samples_per_period!r}")
+
+
+def _describe(value):
+    """A refused gain's value, briefly: a number as it is, anything else by its type."""
+    if value is None:
+        return "None (no such field, or unset)"
+    if isinstance(value, (int, float, np.ndarray, jax.Array)):
+        return repr(np.asarray(value)) if np.size(value) <= 6 else f"an array of shape {np.shape(value)}"
+    return type(value).__name__
 
 
 def _getter(gains):
