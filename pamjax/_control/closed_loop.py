@@ -26,7 +26,7 @@ from .._core.custom_types import (
     Series,
     StateLike,
 )
-from .._core.errors import PamjaxInputError, check_positive
+from .._core.errors import PamjaxInputError, check_count, check_positive
 from .._core.fitting import parameter
 from .._papers import paper000
 from .._physics.signals import AbstractSignal, Step
@@ -315,8 +315,7 @@ def _check_solver_settings(rtol, atol, max_steps):
         v = None if (not number or isinstance(value, jax.core.Tracer)) else np.asarray(value, dtype=float)
         if not number or (v is not None and (v.ndim != 0 or not np.isfinite(v) or v <= 0)):
             raise PamjaxInputError(f"{name} must be a finite number > 0, got {value!r}")
-    if not (isinstance(max_steps, (int, np.integer)) and not isinstance(max_steps, bool) and max_steps >= 1):
-        raise PamjaxInputError(f"max_steps must be an int >= 1 (solver steps per period), got {max_steps!r}")
+    check_count(max_steps, "max_steps", "an int >= 1 (solver steps per period)")
 
 
 def _run(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps, adjoint=None):

@@ -107,6 +107,12 @@ def check_in_closed_interval(x, lo, hi, name):
     _traced(x, lambda a: ~((a >= lo) & (a <= hi)), name, f"in [{lo}, {hi}]")
 
 
+def check_count(x, name, what="a positive int"):
+    """`x` a whole count >= 1 (a Python or NumPy integer, not a bool), e.g. a step budget (`max_steps`)."""
+    if not (isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_)) and x >= 1):
+        raise PamjaxInputError(f"{name} must be {what}, got {x!r}")
+
+
 def check_time_grid(ts, name="ts"):
     """A 1-D, finite, strictly increasing time grid with at least one point."""
     v = concrete_values(ts)

@@ -12,7 +12,7 @@ import optimistix as optx
 
 from .._core.arrays import device_array
 from .._core.custom_types import ArrayLike, RealVectorLike
-from .._core.errors import PamjaxInputError
+from .._core.errors import PamjaxInputError, check_count
 from .escape import hair_off
 from .solver import CRAWL_STEPS, PROBED_MINIMUM, REASONS, Damping, LevenbergMarquardt, State
 
@@ -192,8 +192,7 @@ def levenberg_marquardt(residuals: Callable[[np.ndarray], ArrayLike | None],
     elif not isinstance(solver, LevenbergMarquardt):
         raise PamjaxInputError(f"solver must be a pamjax.LevenbergMarquardt, got {type(solver).__name__} (any "
                                "optimistix solver runs in optimistix.least_squares)")
-    if not (isinstance(max_steps, int) and max_steps > 0):
-        raise PamjaxInputError(f"max_steps must be a positive int, got {max_steps!r}")
+    check_count(max_steps, "max_steps")
     theta0 = np.asarray(theta0, dtype=float)
     if theta0.ndim != 1:
         raise PamjaxInputError(f"theta0 must be a 1-D array, got shape {theta0.shape}")

@@ -26,7 +26,7 @@ import numpy as np
 from .._core import jsonio
 from .._core.cache import program_cache
 from .._core.custom_types import RealScalarLike
-from .._core.errors import PamjaxInputError, require_float64
+from .._core.errors import PamjaxInputError, check_count, require_float64
 from .._files.checkpoint import check_checkpoint_path, read_checkpoint, write_checkpoint
 from .._files.fingerprint import check_resume, fingerprint
 from .diagnostics import channel_errors, covariance, identifiability, mismatch
@@ -184,8 +184,7 @@ def _validate(experiments, max_steps, out, overwrite, checkpoint, resume):
     names = [e.name for e in experiments]
     if len(set(names)) != len(names):
         raise PamjaxInputError(f"experiment names must be unique, got {names}")
-    if not (isinstance(max_steps, (int, np.integer)) and not isinstance(max_steps, bool) and max_steps > 0):
-        raise PamjaxInputError(f"max_steps must be a positive int, got {max_steps!r}")
+    check_count(max_steps, "max_steps")
     return experiments
 
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from .._core import jsonio
 from .._core.custom_types import RealArrayLike, RealScalarLike, RealVectorLike
-from .._core.errors import PamjaxInputError, PamjaxSolveError, require_float64
+from .._core.errors import PamjaxInputError, PamjaxSolveError, check_count, require_float64
 from .experiment import Experiments
 from .fit import FitResult, fit
 from .parameters import Free, ParameterSpace
@@ -117,9 +117,7 @@ def _check_fit_options(fit_options):
         if key not in known:
             raise PamjaxInputError(f"unknown fit option {key!r}; valid: {sorted(known - set(_NOT_PASSED))}")
     options = {name: p.default for name, p in signature.parameters.items() if name in known} | fit_options
-    max_steps = options["max_steps"]  # `fit`'s own test of it (in its private `_validate`)
-    if not (isinstance(max_steps, int | np.integer) and not isinstance(max_steps, bool) and max_steps > 0):
-        raise PamjaxInputError(f"max_steps must be a positive int, got {max_steps!r}")
+    check_count(options["max_steps"], "max_steps")  # as `fit` checks it
     from .drive import choose_solver  # `fit`'s check of `solver`, and of ftol/xtol/gtol/stall_steps (by its solver)
 
     choose_solver(options["solver"], options["ftol"], options["xtol"], options["gtol"], options["stall_steps"],
