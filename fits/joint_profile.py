@@ -41,13 +41,18 @@ def main(argv=None):
 
     model = pj.presets.mas10_system(valve="pwm", friction="karnopp")
     bench = pj.bench.load_bench(data, model, rate=args.rate)
+    keys = list(args.names or bench.fitted_keys)
+    bad, twice = [k for k in keys if k not in bench.fitted_keys], sorted({k for k in keys if keys.count(k) > 1})
+    if bad or twice:  # before the joint fit (minutes), not after it
+        ap.error(f"--names {bad or twice}: " + ("not among the bench's fitted parameters" if bad else "given twice")
+                 + f"; the fitted ones (meta.json's fitted_keys) are: {' '.join(bench.fitted_keys)}")
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", pj.PamjaxIdentifiabilityWarning)
         res = pj.fit(model, bench.experiments, bench.free, progress=False)
     print(f"fit: {res.status}, {res.iterations} iterations, {time.perf_counter() - t0:.1f} s")
     label = {k: pj.bench.BENCH_PARAMETERS[k][1] for k in bench.fitted_keys}
-    names = [label[k] for k in (args.names or bench.fitted_keys)]
+    names = [label[k] for k in keys]
     prof = pj.profile_likelihood(res, names, workers=args.workers)
     print(f"profiles of {len(names)} parameters: {prof.profile_s:.1f} s (σ² = {prof.sigma2:.3g})")
     key = {v: k for k, v in label.items()}

@@ -189,6 +189,54 @@ def test_flow_surface_band_against_central_differences():
                                rtol=1e-12)
 
 
+def _stated(model, paths, relative):
+    """A `FitUncertainty` of `paths` of `model` at their values, uncorrelated, `relative` standard errors, read back
+    from its JSON document (as a fit.json or a model file carries it): no fit needed."""
+    space = pj.ParameterSpace(model, paths)
+    values = [float(v) for v in np.asarray(space.initial_values())]
+    document = dict(labels=list(space.labels), paths=paths, values=values,
+                    standard_errors=[relative * v for v in values], correlation=np.eye(len(paths)).tolist(),
+                    status="converged", mismatch=False)
+    return document, pj.FitUncertainty.from_document(json.loads(json.dumps(document)), "a stated covariance")
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(pressures=[-2e5, 3e5]), r"pressures \(absolute\) \[Pa\] must be > 0"),
+    (dict(commands=[-0.5, 0.5, 1.5]), r"commands must lie in \[0\.0, 1\.0\]"),
+    (dict(phases=0), r"phases must be a positive integer"),
+    (dict(phases=2.5), r"phases must be a positive integer"),
+    (dict(averaged=True), r"model: flow_surface_band needs a switching valve .* AveragedValve does not switch"),
+])
+def test_flow_surface_band_refuses_what_flow_surface_refuses_before_anything_is_traced(kwargs, match, monkeypatch):
+    # the same checks as pamjax.flow_surface (and an averaged valve, which has no PWM period to average over, and
+    # phases, flow_surface's samples): named, before the band is traced (not numbers, not JAX's TypeError)
+    import pamjax._bands.maps as band_maps
+
+    monkeypatch.setattr(band_maps, "propagated_band", lambda *a: pytest.fail("traced before refusing the input"),
+                        raising=False)
+    averaged = kwargs.pop("averaged", False)
+    model = presets.mas10_tank_system("averaged" if averaged else "pwm")
+    paths = ["valve.coefficients[1,0]"] if averaged else ["valve.inflate.discharge_coefficient"]
+    args = {**dict(commands=[0.5], pressures=[3e5], phases=400), **kwargs}
+    with pytest.raises(PamjaxInputError, match=match):
+        pj.flow_surface_band(_stated(model, paths, 0.01)[1], args.pop("commands"), args.pop("pressures"),
+                             model=model, **args)
+    if "pressures" in kwargs or "commands" in kwargs:  # flow_surface's own refusal, the same words
+        with pytest.raises(PamjaxInputError, match=match):
+            pj.flow_surface(model.valve, kwargs.get("commands", [0.5]), kwargs.get("pressures", [3e5]), model.air)
+
+
+def test_a_fit_json_without_model_asks_for_the_model(tmp_path):
+    # a fit.json holds the covariance but no model: the band asks for model= (not "not a pamjax model file")
+    document, _ = _stated(presets.mas10_tank_system("averaged"), FREE, 0.01)
+    (tmp_path / "fit.json").write_text(json.dumps(document))
+    with pytest.raises(PamjaxInputError, match=r"model: this fit result holds no model \(read from JSON\?\): pass "
+                                               r"model="):
+        pj.prediction_band(tmp_path / "fit.json", predict)
+    with pytest.raises(PamjaxInputError, match=r"pass model="):
+        pj.prediction_band(str(tmp_path / "fit.json"), predict)
+
+
 @pytest.mark.slow  # ~30 s: compiles the PWM grid's solve with tangents and vmapped
 def test_band_of_a_switching_valve_and_stick_slip_on_the_pwm_grid():
     """The bench's model (switching valve on the PWM-synchronous grid, exact stick-slip): the grid's size needs the

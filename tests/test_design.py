@@ -655,6 +655,26 @@ def _muscle():
     (_muscle, dict(noise={"pressure": 2e3, "position": 0.1}), r"noise\['position'\] = 0\.1 m is 1\.1 of the"),
     (_muscle, dict(build=pj.TankFromModel(5e-5), channels=("pressure",), start={"pressure": 101325.0}),
      r"free: \['friction\.coulomb_force', 'muscle\.force_law\.k0'\] do not enter the designed system \(TankSystem"),
+    # a period the switching valve does not latch with: half of a 10 ms design's duties would do nothing at 50 Hz
+    (_tank, dict(period=0.01), r"period 0\.01 s differs from the PWM period of the model's switching valve "
+                               r"\(0\.02 s, 50 Hz\)"),
+    (_muscle, dict(build=pj.TankFromModel(5e-5), channels=("pressure",), start={"pressure": 101325.0},
+                   free=["valve.inflate.discharge_coefficient"], period=0.01), r"period 0\.01 s differs"),
+    (_tank, dict(design_rate=0.0), r"design_rate must be the objective's sample rate \[Hz\], a number > 0, got 0\.0"),
+    (_tank, dict(design_rate=float("nan")), r"design_rate must be .* got nan"),
+    (_tank, dict(design_rate=-250.0), r"design_rate must be .* got -250\.0"),
+    (_tank, dict(baseline_margin=float("nan")), r"baseline_margin must be a positive number, e\.g\. 1\.0 .* got nan"),
+    (_tank, dict(baseline_margin=-1.0), r"baseline_margin must be a positive number.* got -1\.0"),
+    (_tank, dict(baseline_margin=math.inf), r"baseline_margin must be a positive number.* got inf"),
+    (_tank, dict(baseline_margin="1.1"), r"baseline_margin must be a positive number.* got '1\.1'"),
+    (_tank, dict(subset=[FREE[0], FREE[0]]), r"subset names \['valve\.inflate\.discharge_coefficient'\] more than "
+                                             r"once"),
+    (_tank, dict(duty_band=(0.1, 0.5, 0.9)), r"duty_band must be \(lo, hi\) .* got \(0\.1, 0\.5, 0\.9\)"),
+    (_tank, dict(duty_band=0.5), r"duty_band must be \(lo, hi\) .* got 0\.5"),
+    (_tank, dict(max_pressure="5e5"), r"max_pressure must be an absolute pressure > 0 \[Pa\], got '5e5'"),
+    (_tank, dict(rate="abc"), r"rate must be the recording's sample rate \[Hz\], a number > 0, got 'abc'"),
+    (_tank, dict(noise={"pressure": "abc"}), r"noise\['pressure'\] must be a number > 0 .* got 'abc'"),
+    (_tank, dict(seed="a"), r"seed must be an integer >= 0 .* got 'a'"),
 ])
 def test_limits_no_run_can_keep_are_named_before_any_solve(model, kwargs, match, monkeypatch):
     # the battery's cases (issue 33): a limit in the wrong unit, a run shorter than a period, a band across the valve's
@@ -664,13 +684,21 @@ def test_limits_no_run_can_keep_are_named_before_any_solve(model, kwargs, match,
     monkeypatch.setattr(obj, "value", lambda *a: pytest.fail("solved before rejecting the input"))
     base = (dict(noise=NOISE, **TANK) if model is _tank else
             dict(noise=MUSCLE_NOISE, knots=4, rate=500.0))
-    free = FREE if model is _tank else MUSCLE_FREE
     args = {**base, **kwargs}
+    free = args.pop("free", FREE if model is _tank else MUSCLE_FREE)
     duration = args.pop("duration", 0.4)
     with pytest.raises(PamjaxInputError, match=match):
         pj.design_experiment(model(), free, duration, progress=False, **args)
     with pytest.raises(PamjaxInputError, match=match):  # the CLI's check before it makes the output folder
         check_design(model(), free, duration, **args)
+
+
+def test_a_period_equal_to_the_switching_valves_own_is_accepted():
+    # the refusal of another period (above) leaves the valve's own, given as a number, and None alone
+    from pamjax._identifiability.design import check_design
+
+    for period in (None, 0.02, 1.0 / 50.0 * (1.0 + 1e-12)):
+        assert check_design(_tank(), FREE, 0.4, noise=NOISE, **{**TANK, "period": period}) is None
 
 
 def test_an_averaged_valve_designs_with_the_period_given():
@@ -724,7 +752,7 @@ def test_the_force_penalty_acts_from_the_buffer_and_the_limit_from_min_force():
                    build=None, rate=500.0, criterion="D", subset=None, duty_band=(0.1, 0.9), stroke_margin=0.005,
                    max_pressure=None, max_duty_step=None, parametrisation="envelope", knots=4, steps=3,
                    initial=pj.Constant(0.55), seed=0, period=None, design_rate=250.0, substeps=4, duty_margin="auto",
-                   min_force=None)
+                   min_force=None, baseline_margin=1.0)
     space = setup["space"]
     theta = np.asarray(space.initial_theta())
 

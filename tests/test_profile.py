@@ -1,6 +1,7 @@
 """profile: likelihood-ratio intervals equal the linearised ones for a model linear in its parameters; a nonlinear
 two-parameter profile agrees with a brute-force grid of an independent NumPy transcription; eq. 7's k0, k1, k2 come
-out structurally non-identifiable; `pamjax fit --profile` writes the profile and its figure; bad input is named."""
+out structurally non-identifiable; `pamjax fit --profile` writes the profile and its figure; bad input is named, also
+`fits/joint_profile.py --names` before its joint fit."""
 
 import dataclasses
 import json
@@ -114,6 +115,43 @@ def test_bad_input_is_named_before_any_solve():
     loaded = pj.FitResult.from_dict(json.loads(json.dumps(res.to_dict())))
     with pytest.raises(PamjaxInputError, match="experiments: this FitResult does not carry"):
         pj.profile_likelihood(loaded)
+
+
+def test_repeated_names_no_experiments_and_a_level_not_a_number_are_named_before_any_work(monkeypatch):
+    # each was a raw ValueError / TypeError, the repeated name's only after every branch had been walked
+    from pamjax._identifiability import profile as profile_module
+
+    muscle, *_, exp = _force_map(2.0, np.linspace(0.5, 6.0, 7), np.linspace(-0.01, 0.07, 9))
+    res = _fit(muscle, [exp], ["force_law.k0", "force_law.k1"])
+    monkeypatch.setattr(profile_module, "_Evaluator", lambda *a: pytest.fail("worked before refusing the input"))
+    with pytest.raises(PamjaxInputError, match=r"names \['force_law\.k0'\] given more than once"):
+        pj.profile_likelihood(res, ["force_law.k0", "force_law.k1", "force_law.k0"], progress=False)
+    with pytest.raises(PamjaxInputError, match=r"experiments must hold the experiments the fit was made of, got none"):
+        pj.profile_likelihood(res, experiments=[], progress=False)
+    for level in ("0.95", True, float("nan"), [0.95]):
+        with pytest.raises(PamjaxInputError, match=r"level must be in \(0, 1\), a number"):
+            pj.profile_likelihood(res, level=level, progress=False)
+
+
+def test_joint_profile_script_checks_names_against_the_bench_before_fitting(tmp_path, monkeypatch, capsys):
+    # fits/joint_profile.py --names: a held key (k2) or a pamjax label is refused by the parser, listing the bench's
+    # fitted keys, before the joint fit (minutes); it was a raw KeyError after it
+    import importlib.util
+    import pathlib
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "fits" / "joint_profile.py"
+    spec = importlib.util.spec_from_file_location("joint_profile", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    monkeypatch.setattr(pj, "fit", lambda *a, **k: pytest.fail("fitted before checking --names"))
+    for names in (["k2"], ["friction.coulomb_force"], ["Fc", "Fc"]):
+        with pytest.raises(SystemExit) as exit_info:
+            script.main(["--names", *names, "--out", str(tmp_path)])
+        assert exit_info.value.code == 2
+        err = capsys.readouterr().err
+        assert f"--names {sorted(set(names))}" in err and "fitted ones (meta.json's fitted_keys) are: " in err, err
+        assert " Fc " in err and " k2 " not in err
+    assert not list(tmp_path.iterdir())
 
 
 def test_fit_cli_profile_writes_json_and_figure(tmp_path, capsys, monkeypatch):

@@ -285,13 +285,20 @@ def prediction_band(result: ResultLike, predict: Callable[[Any], PyTreeLike], *,
 
     **Returns:** a `PredictionBand` (`prediction`, `lower`, `upper`, `std`, `method`, `how`, `nonlinearity`, ...).
     """
-    z = z_of(level)
+    z_of(level)
     check_method(method, samples)
     if not callable(predict):
         raise PamjaxInputError(f"predict must be a function model -> prediction, got {type(predict).__name__}")
     if not (isinstance(batch, int) and batch >= 1):
         raise PamjaxInputError(f"batch must be a positive integer, got {batch!r}")
-    prop = propagation(result, model)
+    return propagated_band(predict, propagation(result, model), level, method, samples, seed, batch,
+                           check_linearity)
+
+
+def propagated_band(predict, prop, level, method, samples, seed, batch, check_linearity):
+    """`prediction_band` on a `Propagation` already made (its arguments checked): for a caller that checks the
+    fitted model before anything is traced (`flow_surface_band`)."""
+    z = z_of(level)
     notes = list(prop.notes)
     if method == "linear":
         out = _linear(predict, prop, z, check_linearity, batch, notes)

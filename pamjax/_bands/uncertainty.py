@@ -199,10 +199,10 @@ def propagation(result, model=None, *, check_values=False):
     unc = FitUncertainty.of(result)
     if model is None:
         model = result.model if isinstance(result, FitResult) else None  # a FitUncertainty carries none
-        if model is None and isinstance(result, (str, pathlib.Path)):
+        if model is None and isinstance(result, (str, pathlib.Path)) and _is_model_file(result):
             from .._files.model_file import load_model
 
-            model = load_model(result)
+            model = load_model(result)  # a fit.json holds no model: refused below, asking for model=
         if model is None:
             raise PamjaxInputError("model: this fit result holds no model (read from JSON?): pass model= (the fitted "
                                    "model, or the fit's start model: the fitted values are set on it)")
@@ -235,6 +235,11 @@ def propagation(result, model=None, *, check_values=False):
     for note in unc.notes():
         warnings.warn(note, PamjaxBandWarning, stacklevel=3)
     return Propagation(space, theta, cov_theta, block.labels, tuple(gone), tuple(notes))
+
+
+def _is_model_file(path):
+    """Whether `path` (a JSON document `read_uncertainty` has read) is a model file, not a fit result."""
+    return json.loads(pathlib.Path(path).read_text(encoding="utf-8")).get("format") == "pamjax-model"
 
 
 def _check_values(space, block):

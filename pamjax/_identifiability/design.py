@@ -220,7 +220,7 @@ def design_experiment(
     **Arguments:**
 
     - `model`: the system at the design point (e.g. `presets.mas10_system(valve="pwm", friction="karnopp")`); its
-      valve's PWM frequency sets the period (or give `period` [s]).
+      valve's PWM frequency sets the period (`period` [s]: for a valve without one; another refused).
     - `free`: the parameters of interest, as `fit` takes them.
     - `duration`: of the designed run [s], from `start` (keyword arguments of the system's `initial_state`; default
       at rest at atmospheric pressure).
@@ -281,7 +281,7 @@ def design_experiment(
                    criterion=criterion, subset=subset, duty_band=duty_band, stroke_margin=stroke_margin,
                    max_pressure=max_pressure, max_duty_step=max_duty_step, parametrisation=parametrisation,
                    knots=knots, steps=steps, initial=initial, seed=seed, period=period, design_rate=design_rate,
-                   substeps=substeps, duty_margin=duty_margin, min_force=min_force)
+                   substeps=substeps, duty_margin=duty_margin, min_force=min_force, baseline_margin=baseline_margin)
     space, subset, c0 = setup["space"], setup["subset"], setup["c0"]
     theta = np.asarray(space.initial_theta())
     index = tuple(space.labels.index(s) for s in subset)

@@ -36,6 +36,7 @@ CARRIER_HOLD = 10  # PWM periods (0.2 s at 50 Hz): the hold of the most informat
 # compared in docs/identifiability.md (0.1, 0.2, 0.5 and 1 s holds)
 DESIGN_RATE = 250.0  # Hz: the objective's samples; the information matrix agrees within 0.2 % with 1 kHz (docs)
 DESIGN_SUBSTEPS = 4  # RK4 nodes per PWM period in the objective: within 0.2 % of the fit's 16 (docs)
+PERIOD_RTOL = 1e-9  # a `period` given for a switching valve must be its own to this (float round-off of 1/f)
 FIT_SUBSTEPS = inspect.signature(Experiment.__init__).parameters["substeps"].default  # what a fit integrates with
 
 
@@ -69,8 +70,58 @@ def built_system(model, build, start, channels):
     return system
 
 
+def _real(value):
+    """`value` as a float where it is one real number (a Python or NumPy number, a 0-d array; not a bool, not a
+    string), else None."""
+    if isinstance(value, (bool, np.bool_, str, bytes)) or np.ndim(value) != 0:
+        return None
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return None
+
+
+def _check_numbers(noise, channels, band, rate, design_rate, stroke_margin, max_pressure, max_duty_step, seed,
+                   baseline_margin):
+    """The numeric arguments' types and ranges: each a `PamjaxInputError` naming it (a string or a list where a number
+    is due would otherwise fail deep inside, unnamed)."""
+    for c in channels:
+        v = _real(noise[c])
+        if not (v is not None and math.isfinite(v) and v > 0):
+            raise PamjaxInputError(f"noise[{c!r}] must be a number > 0 (the channel's standard deviation), got "
+                                   f"{noise[c]!r}")
+    try:  # a sequence of two numbers (a scalar, a string or a ragged list: refused below)
+        pair = [_real(b) for b in band] if np.ndim(band) == 1 else []
+    except (TypeError, ValueError):
+        pair = []
+    if len(pair) != 2 or None in pair or not 0.0 <= pair[0] < pair[1] <= 1.0:
+        raise PamjaxInputError(f"duty_band must be (lo, hi) with 0 <= lo < hi <= 1, got {band!r}")
+    for name, value, what in (("rate", rate, "the recording's sample rate"),
+                              ("design_rate", design_rate, "the objective's sample rate")):
+        v = _real(value)
+        if not (v is not None and math.isfinite(v) and v > 0):
+            raise PamjaxInputError(f"{name} must be {what} [Hz], a number > 0, got {value!r}")
+    v = _real(stroke_margin)
+    if not (v is not None and v >= 0):
+        raise PamjaxInputError(f"stroke_margin must be >= 0 [m], got {stroke_margin!r}")
+    v = None if max_pressure is None else _real(max_pressure)
+    if max_pressure is not None and not (v is not None and v > 0):
+        raise PamjaxInputError(f"max_pressure must be an absolute pressure > 0 [Pa], got {max_pressure!r}")
+    v = None if max_duty_step is None else _real(max_duty_step)
+    if max_duty_step is not None and not (v is not None and 0 < v <= 1):
+        raise PamjaxInputError(f"max_duty_step must be in (0, 1] (duty change per PWM period), got {max_duty_step!r}")
+    if not (isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and seed >= 0):
+        raise PamjaxInputError(f"seed must be an integer >= 0 (of the start's carrier and the spread's points), got "
+                               f"{seed!r}")
+    v = _real(baseline_margin)  # the same range as `pamjax design`'s schema: a positive number
+    if not (v is not None and math.isfinite(v) and v > 0):
+        raise PamjaxInputError(f"baseline_margin must be a positive number, e.g. 1.0 (the baseline's standard errors "
+                               f"matched; 2.0: halved), got {baseline_margin!r}")
+
+
 def _validate(model, free, duration, noise, channels, band, criterion, subset, parametrisation, knots, steps, rate,
-              stroke_margin, max_pressure, max_duty_step, period, build, start, duty_margin, min_force):
+              stroke_margin, max_pressure, max_duty_step, period, build, start, duty_margin, min_force, design_rate,
+              seed, baseline_margin):
     require_float64("pamjax.design_experiment")
     if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
         raise PamjaxInputError(f"duration must be a positive number of seconds, got {duration!r}")
@@ -89,6 +140,13 @@ def _validate(model, free, duration, noise, channels, band, criterion, subset, p
     if period is not None and not (isinstance(period, (int, float)) and not isinstance(period, bool)
                                    and math.isfinite(period) and period > 0):
         raise PamjaxInputError(f"period must be the PWM period, a number > 0 [s] (e.g. 0.02 at 50 Hz), got {period!r}")
+    if period is not None and valve_period is not None and not math.isclose(period, float(valve_period),
+                                                                             rel_tol=PERIOD_RTOL, abs_tol=0.0):
+        raise PamjaxInputError(f"period {period!r} s differs from the PWM period of the model's switching valve "
+                               f"({float(valve_period):g} s, {1.0 / float(valve_period):g} Hz), which latches one duty "
+                               f"per {float(valve_period):g} s whatever the design sets: leave period out (None) or "
+                               f"give {float(valve_period):g}; a valve at another frequency is another model "
+                               "(its pwm_frequency)")
     period = float(valve_period) if period is None else float(period)
     if duration < period * (1.0 - 1e-9):
         raise PamjaxInputError(f"duration {duration!r} s is shorter than one PWM period ({period:g} s): a design sets "
@@ -99,27 +157,17 @@ def _validate(model, free, duration, noise, channels, band, criterion, subset, p
     if not isinstance(noise, dict) or not set(channels) <= set(noise):
         raise PamjaxInputError(f"noise must give the noise standard deviation of every channel {list(channels)} "
                                f"(e.g. {{'pressure': 2e3, 'position': 1e-4}} [Pa, m]), got {noise!r}")
-    for c in channels:
-        if not (math.isfinite(float(noise[c])) and float(noise[c]) > 0):
-            raise PamjaxInputError(f"noise[{c!r}] must be > 0 (the channel's standard deviation), got {noise[c]!r}")
+    _check_numbers(noise, channels, band, rate, design_rate, stroke_margin, max_pressure, max_duty_step, seed,
+                   baseline_margin)
     _check_noise_scale(system, noise, channels)
-    lo, hi = (float(b) for b in band)
-    if not 0.0 <= lo < hi <= 1.0:
-        raise PamjaxInputError(f"duty_band must be (lo, hi) with 0 <= lo < hi <= 1, got {band!r}")
     if criterion not in ("D", "A"):
         raise PamjaxInputError(f"criterion must be 'D' or 'A', got {criterion!r}")
     if parametrisation not in ("envelope", "periods"):
         raise PamjaxInputError(f"parametrisation must be 'envelope' or 'periods', got {parametrisation!r}")
-    if not (isinstance(knots, int) and knots >= 4):
+    if not (isinstance(knots, int) and not isinstance(knots, bool) and knots >= 4):
         raise PamjaxInputError(f"knots must be an int >= 4 (cubic B-spline coefficients), got {knots!r}")
-    if not (isinstance(steps, int) and steps >= 0):
+    if not (isinstance(steps, int) and not isinstance(steps, bool) and steps >= 0):
         raise PamjaxInputError(f"steps must be a non-negative int, got {steps!r}")
-    if not (math.isfinite(rate) and rate > 0):
-        raise PamjaxInputError(f"rate must be the recording's sample rate [Hz] > 0, got {rate!r}")
-    if not stroke_margin >= 0:
-        raise PamjaxInputError(f"stroke_margin must be >= 0 [m], got {stroke_margin!r}")
-    if max_pressure is not None and not max_pressure > 0:
-        raise PamjaxInputError(f"max_pressure must be an absolute pressure > 0 [Pa], got {max_pressure!r}")
     if not (duty_margin == "auto" or (isinstance(duty_margin, (int, float)) and not isinstance(duty_margin, bool)
                                       and 0 <= duty_margin < 0.5)):
         raise PamjaxInputError(f"duty_margin must be 'auto' (a quarter of the valve's switching time, in duty) or a "
@@ -129,13 +177,15 @@ def _validate(model, free, duration, noise, channels, band, criterion, subset, p
                                                         not isinstance(min_force, bool) and math.isfinite(min_force))):
         raise PamjaxInputError(f"min_force must be the force [N] eq. 7 must keep along the run (default "
                                f"{MIN_FORCE:g}), or None / false for no limit, got {min_force!r}")
-    if max_duty_step is not None and not 0 < max_duty_step <= 1:
-        raise PamjaxInputError(f"max_duty_step must be in (0, 1] (duty change per PWM period), got {max_duty_step!r}")
     space = ParameterSpace(model, free)
     subset = list(space.labels) if subset is None else list(subset)
     unknown = [s for s in subset if s not in space.labels]
     if unknown or not subset:
         raise PamjaxInputError(f"subset {unknown or subset!r} must name free parameters; they are {space.labels}")
+    twice = sorted({s for s in subset if subset.count(s) > 1})
+    if twice:
+        raise PamjaxInputError(f"subset names {twice} more than once: name each free parameter at most once (they "
+                               f"are {space.labels})")
     if build is not None:
         _check_seen(model, space, build, system)
     return space, subset, period, channels, system, start
@@ -328,18 +378,19 @@ def start_coefficients(parametrisation, times, duration, knots, carrier, band, i
 
 SETUP_ARGS = ("noise", "channels", "start", "build", "rate", "criterion", "subset", "duty_band", "stroke_margin",
               "max_pressure", "max_duty_step", "parametrisation", "knots", "steps", "initial", "seed", "period",
-              "design_rate", "substeps", "duty_margin", "min_force")
+              "design_rate", "substeps", "duty_margin", "min_force", "baseline_margin")
 
 
 def set_up(model, free, duration, *, noise, channels, start, build, rate, criterion, subset, duty_band, stroke_margin,
            max_pressure, max_duty_step, parametrisation, knots, steps, initial, seed, period, design_rate, substeps,
-           duty_margin, min_force):
+           duty_margin, min_force, baseline_margin):
     """Everything before the first solve, as a dict: the checked arguments, the valve's switching thresholds and the
     duties they leave, the limits (each checked against the run's start state), the start coefficients and the
-    designed experiment."""
+    designed experiment. `baseline_margin` is only checked here (`design` uses it)."""
     space, subset, period, channels, system, start = _validate(
-        model, free, duration, noise, channels, duty_band, criterion, subset, parametrisation, knots, steps,
-        float(rate), stroke_margin, max_pressure, max_duty_step, period, build, start, duty_margin, min_force)
+        model, free, duration, noise, channels, duty_band, criterion, subset, parametrisation, knots, steps, rate,
+        stroke_margin, max_pressure, max_duty_step, period, build, start, duty_margin, min_force, design_rate, seed,
+        baseline_margin)
     model = strong_types(model)
     space = ParameterSpace(model, free)
     thresholds = switching_thresholds(system.valve)

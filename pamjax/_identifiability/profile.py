@@ -29,6 +29,7 @@ the fit's compiled functions (`pamjax._fit.problem`: no new compilation for a pr
 import concurrent.futures
 import dataclasses
 import math
+import numbers
 import pathlib
 import statistics
 import time
@@ -375,6 +376,8 @@ def _validate(result, names, experiments, level, max_points, span, workers):
         raise PamjaxInputError("experiments: this FitResult does not carry its experiments (it was read from JSON); "
                                "pass the experiments it was fitted to")
     experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
+    if not experiments:
+        raise PamjaxInputError("experiments must hold the experiments the fit was made of, got none")
     if not all(isinstance(e, AbstractExperiment) for e in experiments):
         raise PamjaxInputError(f"experiments must be pamjax experiments, got {[type(e).__name__ for e in experiments]}")
     if result.model is None:
@@ -390,8 +393,11 @@ def _validate(result, names, experiments, level, max_points, span, workers):
     unknown = [n for n in names if n not in result.labels]
     if unknown or not names:
         raise PamjaxInputError(f"names {unknown or names!r} must be fitted parameters; they are {result.labels}")
-    if not 0.0 < level < 1.0:
-        raise PamjaxInputError(f"level must be in (0, 1), got {level!r}")
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise PamjaxInputError(f"names {twice} given more than once: name each fitted parameter once")
+    if not (isinstance(level, numbers.Real) and not isinstance(level, bool) and 0.0 < level < 1.0):
+        raise PamjaxInputError(f"level must be in (0, 1), a number (0.95: 95 %), got {level!r}")
     if not (isinstance(max_points, int) and max_points >= 2):
         raise PamjaxInputError(f"max_points must be an int >= 2, got {max_points!r}")
     if not span > 0:
