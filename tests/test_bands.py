@@ -205,7 +205,7 @@ def _stated(model, paths, relative):
     (dict(commands=[-0.5, 0.5, 1.5]), r"commands must lie in \[0\.0, 1\.0\]"),
     (dict(phases=0), r"phases must be a positive integer"),
     (dict(phases=2.5), r"phases must be a positive integer"),
-    (dict(averaged=True), r"model: flow_surface_band needs a switching valve .* AveragedValve does not switch"),
+    (dict(averaged=True), r"valve: the flow surface is a switching valve.s flow .* AveragedValve does not switch"),
 ])
 def test_flow_surface_band_refuses_what_flow_surface_refuses_before_anything_is_traced(kwargs, match, monkeypatch):
     # the same checks as pamjax.flow_surface (and an averaged valve, which has no PWM period to average over, and

@@ -252,6 +252,12 @@ def test_flow_surface_equals_cycle_average_and_cli_writes_outputs(tmp_path):
     data = np.load(tmp_path / "out" / "sweep.npz")
     np.testing.assert_allclose(data["mass_flow_kg_s"], flow_surface(valve, [0.2, 0.8], [2e5, 5e5], air).ravel())
     assert (tmp_path / "out" / "sweep.csv").read_text().startswith("duty,pressure_pa_abs,mass_flow_kg_s")
+    # an averaged valve has no PWM period to average over: named (it was a TypeError deep in the traced surface),
+    # and a number of phases that is no positive int
+    with pytest.raises(pamjax.PamjaxInputError, match=r"the flow surface is a switching valve.s .* AveragedValve"):
+        flow_surface(presets.mas10_system("averaged").valve, u, p, air)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"samples must be a positive integer"):
+        flow_surface(valve, u, p, air, samples=0)
 
 
 def test_paper_001s_systems_sweep_and_a_joints_pairs_are_named():

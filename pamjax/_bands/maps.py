@@ -24,10 +24,10 @@ import numpy as np
 
 from .._core.arrays import device_array
 from .._core.custom_types import RealVectorLike
-from .._core.errors import PamjaxInputError, PamjaxSolveError, check_positive
+from .._core.errors import PamjaxInputError, PamjaxSolveError
 from .._fit.parameters import Key, getter, join_path
 from .._physics.valves.averaged import cycle_averaged_flow
-from .._sweep.maps import frequency_response, steady_state_map
+from .._sweep.maps import check_flow_surface, frequency_response, steady_state_map
 from .._systems.base import AbstractSystem
 from .band import (
     Method,
@@ -192,26 +192,10 @@ def flow_surface_band(result: ResultLike, commands: RealVectorLike, pressures: R
     traced surface (forward-mode Jacobian, or draws), `phases` per PWM period as `flow_surface`'s `samples`."""
     z_of(level)
     check_method(method, samples)
-    commands = np.asarray(commands, dtype=float)  # `flow_surface`'s checks, on the host before anything is traced
-    pressures = np.asarray(pressures, dtype=float)
-    if commands.ndim != 1 or pressures.ndim != 1:
-        raise PamjaxInputError(f"commands and pressures must be 1-D, got {commands.shape} and {pressures.shape}")
-    check_positive(pressures, "pressures (absolute) [Pa]")
-    if not (isinstance(phases, (int, np.integer)) and not isinstance(phases, bool) and phases >= 1):
-        raise PamjaxInputError(f"phases must be a positive integer (samples per PWM period, as flow_surface's "
-                               f"samples; default 400), got {phases!r}")
     prop = propagation(result, model)
     if not isinstance(prop.space.base, AbstractSystem):
         raise PamjaxInputError(f"model: flow_surface_band needs a system with a valve and air (e.g. "
                                f"presets.mas10_system(valve='pwm')), got {type(prop.space.base).__name__}")
-    valve = prop.space.base.valve
-    if not valve.switches:
-        raise PamjaxInputError(f"model: flow_surface_band needs a switching valve (the surface is its flow averaged "
-                               f"over a PWM period); the fitted model's {type(valve).__name__} does not switch, so its "
-                               "flow is no PWM average: band its mass_flow(t, command, pressure, air) with "
-                               "pamjax.prediction_band instead")
-    lo, hi = valve.command_range
-    if not bool(np.all((commands >= np.asarray(lo)) & (commands <= np.asarray(hi)))):
-        raise PamjaxInputError(f"commands must lie in [{lo}, {hi}] (the valve's command_range), got {commands}")
+    commands, pressures = check_flow_surface(prop.space.base.valve, commands, pressures, phases, "phases")
     predict = _Surface(device_array(commands), device_array(pressures), int(phases))
     return propagated_band(predict, prop, level, method, samples, seed, *SURFACE_BAND)

@@ -63,15 +63,31 @@ def flow_surface(valve: AbstractSwitchingValve, commands: RealVectorLike, pressu
     the surface paper 000's eq. 13 is fitted to. Shape (len(commands), len(pressures)); one vmapped call.
     `samples` phases per period (midpoint rule; with the smoothed edges 400 agree with 4000 to 2e-16 of the
     range on the MHE2 preset, measured)."""
-    commands = np.asarray(commands, dtype=float)  # checked on the host: no eager device operations
+    commands, pressures = check_flow_surface(valve, commands, pressures, samples, "samples")
+    return np.asarray(_flow_surface(valve, commands, pressures, air, samples))
+
+
+def check_flow_surface(valve, commands, pressures, samples, samples_name):
+    """`flow_surface`'s checks, on the host before anything is traced (shared with `flow_surface_band`): 1-D
+    commands in the valve's `command_range`, positive absolute pressures, a switching valve (the surface is its flow
+    averaged over a PWM period) and a positive int of phases per period (`samples_name` names it). Returns the
+    commands and pressures as float arrays."""
+    commands = np.asarray(commands, dtype=float)  # no eager device operations
     pressures = np.asarray(pressures, dtype=float)
     if commands.ndim != 1 or pressures.ndim != 1:
         raise PamjaxInputError(f"commands and pressures must be 1-D, got {commands.shape} and {pressures.shape}")
     check_positive(pressures, "pressures (absolute) [Pa]")
+    if not valve.switches:
+        raise PamjaxInputError(f"valve: the flow surface is a switching valve's flow averaged over a PWM period; "
+                               f"{type(valve).__name__} does not switch (an averaged valve's flow is its own "
+                               "mass_flow(t, command, pressure, air): evaluate that directly)")
+    if not (isinstance(samples, (int, np.integer)) and not isinstance(samples, bool) and samples >= 1):
+        raise PamjaxInputError(f"{samples_name} must be a positive integer (phases per PWM period; default 400), "
+                               f"got {samples!r}")
     lo, hi = valve.command_range
     if not bool(np.all((commands >= np.asarray(lo)) & (commands <= np.asarray(hi)))):
-        raise PamjaxInputError(f"commands must lie in [{lo}, {hi}]")
-    return np.asarray(_flow_surface(valve, commands, pressures, air, samples))
+        raise PamjaxInputError(f"commands must lie in [{lo}, {hi}] (the valve's command_range), got {commands}")
+    return commands, pressures
 
 
 @eqx.filter_jit
