@@ -12,7 +12,7 @@ import numpy as np
 
 from .._core.arrays import as_array, as_scalar, as_table
 from .._core.custom_types import RealArray, RealScalar, Table
-from .._core.errors import PamjaxInputError, check_finite, check_positive, check_time_grid
+from .._core.errors import PamjaxInputError, check_finite, check_positive, check_time_grid, concrete_values
 from .._core.fitting import parameter, positive
 from .._papers import paper001
 from .smooth import smooth_step
@@ -36,8 +36,9 @@ class AbstractSignal(eqx.Module):
         return None
 
     def jump_times(self):
-        """The times [s] where the signal jumps, which an adaptive solve takes as step boundaries (a jump inside a
-        step is not seen by its error estimate); () for a continuous signal or one with too many to list."""
+        """The times [s] where the signal jumps (scalars or 1-D arrays of them, concrete or traced), which an adaptive
+        solve takes as step boundaries (a jump inside a step is not seen by its error estimate; a traced jump time
+        differentiates through the boundary); () for a continuous signal or one with too many to list."""
         return ()
 
     def table_length(self):
@@ -141,6 +142,12 @@ class Sine(AbstractSignal):
         return o - a, o + a
 
 
+# Sampled's hold changes listed as the adaptive solve's step boundaries, at most: a 40 s run of a duty latched per
+# 50 Hz PWM period (paper 000's valve) has 2,000; a longer list (a 1 kHz log) is left to the solver's error control,
+# its jumps being that many small ones
+MAX_LISTED_JUMPS = 2000
+
+
 class Sampled(AbstractSignal):
     """A signal sampled from measured data, held constant between samples (zero-order hold).
 
@@ -175,6 +182,25 @@ class Sampled(AbstractSignal):
     def bounds(self):
         v = np.asarray(self.values, dtype=float)
         return float(v.min()), float(v.max())
+
+    def jump_times(self):
+        """The times where the held value changes (with `period`: the period starts where the latched sample
+        changes), as one array; () where the table is traced or lists more than `MAX_LISTED_JUMPS` changes (each is
+        a step boundary of the adaptive solve: a 1 kHz log's thousands of tiny steps would cost more than the
+        solver's error control loses on them)."""
+        times, values = concrete_values(self.times), concrete_values(self.values)
+        if times is None or values is None or times.ndim != 1 or times.size < 2:
+            return ()
+        if self.period is not None:  # the period starts from the first sample's period to the last's, latched
+            first, last = np.floor(times[0] / self.period + 1e-9), np.floor(times[-1] / self.period + 1e-9)
+            if last - first > 2 * MAX_LISTED_JUMPS:
+                return ()
+            times = np.arange(first, last + 1) * self.period
+            latched = (np.floor(times / self.period + 1e-9) + 1e-9) * self.period  # as __call__ reads it
+            values = values[np.clip(np.searchsorted(concrete_values(self.times), latched, side="right") - 1, 0,
+                                    values.size - 1)]
+        changed = np.flatnonzero(values[1:] != values[:-1]) + 1
+        return (times[changed],) if 0 < changed.size <= MAX_LISTED_JUMPS else ()
 
     def table_length(self):
         return self.times.shape[0] if jnp.ndim(self.times) == 1 else None

@@ -68,17 +68,22 @@ class ScheduledValve(AbstractSwitchingValve):
 
 
 def command_jumps(signal, t0, t_end):
-    """The times inside (t0, t_end) where a continuous valve's command jumps (`signal.jump_times()`: a `Step`'s), as
-    step boundaries for the adaptive solve, or None. Stepped over, a jump is not seen by the solver's error estimate:
-    the averaged MAS-10 from duty 0.97 to 0.2 ended 349 Pa / 22 µm off a tight solve at the default tolerances (2 Pa
-    without the jump); with the boundary it is solved as two smooth pieces. Traced times (no value to place) are
-    left out."""
+    """The times where a continuous valve's command jumps (`signal.jump_times()`: a `Step`'s, a `Sampled` table's
+    hold changes), as step boundaries for the adaptive solve, or None. Stepped over, a jump is not seen by the
+    solver's error estimate: the averaged MAS-10 from duty 0.97 to 0.2 ended 349 Pa / 22 µm off a tight solve at the
+    default tolerances (2 Pa without the jump); with the boundary it is solved as two smooth pieces. Concrete times
+    are those inside (t0, t_end), sorted; traced ones (a `Step.time` differentiated or vmapped) are kept as traced
+    boundaries, so that the solution's derivative with respect to a jump time flows through the step that ends there
+    (without one it was exactly 0)."""
     jumps = type(signal).jump_times(signal)  # not `signal.jump_times`: equinox makes a bound method a module (~80 µs)
     if not jumps:  # (most signals: nothing read, nothing moved to the host)
         return None
-    values = [concrete_values(x) for x in (t0, t_end, *jumps)]
-    if any(v is None or v.ndim for v in values):
+    if any(concrete_values(x) is None for x in jumps):  # traced: every jump, sorted on the device
+        return jnp.sort(jnp.concatenate([jnp.ravel(jnp.asarray(x, dtype=float)) for x in jumps]))
+    bounds = [concrete_values(x) for x in (t0, t_end)]
+    if any(v is None or v.ndim for v in bounds):
         return None
-    lo, hi, *jumps = (float(v) for v in values)
-    inside = sorted(t for t in jumps if lo < t < hi)
-    return device_array(np.asarray(inside)) if inside else None
+    lo, hi = (float(v) for v in bounds)
+    every = np.concatenate([np.ravel(concrete_values(x)) for x in jumps])
+    inside = np.unique(every[(every > lo) & (every < hi)])
+    return device_array(inside) if inside.size else None
