@@ -105,6 +105,13 @@ def test_a_parameter_with_an_axis_too_many_is_named(system):
         pamjax.simulate(_with_mass(system, jnp.asarray([9.6, 5.0])), pamjax.Constant(0.5), TS)
 
 
+def test_a_start_state_that_is_not_finite_is_named_by_its_leaf(system):
+    # `check_finite_state`, which simulate, linearise and equilibrium share: the leaf named (was "y0 must be finite")
+    y0 = eqx.tree_at(lambda s: s.position, system.initial_state(pressure=4e5), jnp.asarray(np.inf))
+    with pytest.raises(PamjaxInputError, match=r"y0\.position must be finite \(no NaN or inf\), got inf"):
+        pamjax.simulate(system, pamjax.Constant(0.5), TS, y0=y0)
+
+
 def test_a_duty_in_percent_is_named_as_percent(system):
     with pytest.raises(PamjaxInputError, match=r"its range is \[50\.0, 50\.0\]; that looks like percent: a duty ratio "
                                                r"of 0\.5 is written 0\.5"):

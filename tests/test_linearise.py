@@ -174,3 +174,48 @@ def test_a_failed_equilibrium_prints_values_and_names_the_singular_state(bouc_we
     message = str(failed.value)
     assert "f64[" not in message and re.search(r"pressure=5\d{5}", message), message  # values, not shapes
     assert "singular" in message and "friction" in message and "simulate" in message, message
+
+
+def test_a_system_simulate_refuses_is_refused_before_anything_is_computed():
+    """`linearise` and `equilibrium` ran none of `simulate`'s parameter checks: with payload_mass = -1 set by
+    `eqx.tree_at`, equilibrium returned a state and linearise an A with a positive pole; with k2 = 0 linearise gave a
+    NaN row. Both now refuse them by name, as `simulate` does, compiling nothing."""
+    system = pamjax.presets.mas10_system(valve="averaged")
+    guess = system.initial_state(pressure=4e5)
+    for where, value, match in ((lambda s: s.payload_mass, -1.0, r"payload_mass must be > 0 and finite, got -1"),
+                                (lambda s: s.muscle.force_law.k2, 0.0, r"PolynomialForce\.k2 must be > 0")):
+        bad = eqx.tree_at(where, system, value)
+        with counted_compilations() as compiled:
+            with pytest.raises(pamjax.PamjaxInputError, match=match):
+                equilibrium(bad, 0.5, guess)
+            with pytest.raises(pamjax.PamjaxInputError, match=match):
+                linearise(bad, guess, 0.5)
+        assert compiled == [], compiled
+
+
+def test_a_state_or_time_that_is_not_finite_is_named_before_anything_is_computed():
+    """A NaN pressure in the operating point gave NaN rows of A (and a NaN guess a 'did not converge' without the
+    cause): the leaf is named."""
+    system = pamjax.presets.mas10_system(valve="averaged")
+    state = system.initial_state(pressure=4e5)
+    nan_pressure = eqx.tree_at(lambda s: s.pressure, state, jnp.asarray(np.nan))
+    with counted_compilations() as compiled:
+        with pytest.raises(pamjax.PamjaxInputError, match=r"state\.pressure must be finite \(no NaN or inf\), got nan"):
+            linearise(system, nan_pressure, 0.5)
+        with pytest.raises(pamjax.PamjaxInputError, match=r"guess\.pressure must be finite"):
+            equilibrium(system, 0.5, nan_pressure)
+        with pytest.raises(pamjax.PamjaxInputError, match=r"\bt must be finite"):
+            linearise(system, state, 0.5, t=np.inf)
+    assert compiled == [], compiled
+
+
+def test_derivatives_that_are_not_finite_are_refused_naming_where():
+    """A finite operating point far outside the model's domain (the payload 1e200 m up) has NaN derivatives: refused
+    with a `PamjaxSolveError` naming the rows and columns, never returned as a model (the program is the one the
+    tests above compiled for this system); `equilibrium` from there says its state left the model's domain."""
+    system = pamjax.presets.mas10_system(valve="averaged")
+    far = eqx.tree_at(lambda s: s.position, system.initial_state(pressure=4e5), jnp.asarray(1e200))
+    with pytest.raises(pamjax.PamjaxSolveError, match=r"not finite.*A: ∂\(state\.velocity\)/∂\(state\.pressure"):
+        linearise(system, far, 0.5, outputs=("pressure", "force"))
+    with pytest.raises(pamjax.PamjaxSolveError, match=r"left the model's domain: its state turned non-finite"):
+        equilibrium(system, 0.5, far)  # (was: "did not converge ... or a larger max_steps")

@@ -186,3 +186,11 @@ def test_a_step_command_is_solved_to_the_tolerance_across_its_jump():
     traj = pamjax.simulate(system, signal, ts, y0=y0)
     assert float(jnp.max(jnp.abs(traj.pressure - ref.pressure))) < 20.0
     assert float(jnp.max(jnp.abs(traj.position - ref.position))) < 1e-6
+
+
+@pytest.mark.parametrize("t0", [-np.inf, np.nan, np.inf])
+@pytest.mark.parametrize("valve", ["averaged", "pwm"])
+def test_a_start_time_that_is_not_finite_is_named_before_the_solve(valve, t0):
+    # t0 = -inf passed the check "t0 <= ts[0]" and surfaced as a bare OverflowError from the step budget
+    with pytest.raises(pamjax.PamjaxInputError, match=r"t0 must be finite \(no NaN or inf\)"):
+        pamjax.simulate(presets.mas10_system(valve), pamjax.Constant(0.5), np.linspace(0.0, 0.1, 3), t0=t0)

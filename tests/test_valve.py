@@ -140,6 +140,39 @@ def test_exact_mode_refuses_gradient_with_respect_to_duty():
     assert np.isfinite(g) and g > 0
 
 
+@pytest.mark.parametrize("kwargs, match", [
+    # 300 Hz with the 2 ms delays: the three steppings gave a tank 650, 124 and 105 kPa (exact/adaptive,
+    # smooth/adaptive, exact/pwm), all "succeeded"
+    (dict(pwm_frequency=300.0), r"switch_on_delay \(2 ms\) \+ switch_off_delay \(2 ms\) = 4 ms must be shorter than "
+                                r"the PWM period 1/pwm_frequency = 3\.33333 ms \(pwm_frequency = 300 Hz\)"),
+    # a switch-on delay longer than the 20 ms period: duty 1 never opened the valve
+    (dict(switch_on_delay=0.025), r"switch_on_delay \(25 ms\) \+ switch_off_delay \(2 ms\) = 27 ms .* 20 ms"),
+    (dict(pwm_frequency=250.0), r"= 4 ms must be shorter than the PWM period 1/pwm_frequency = 4 ms"),  # equal
+])
+def test_switching_delays_that_outlast_the_pwm_period_are_refused(kwargs, match):
+    # The valve's timing (opening, edge_schedule, the PWM grid's open_at_start) takes each period to open or close
+    # the valve within itself: t_on + t_off < T. Refused by the constructor, by simulate for a valve changed with
+    # eqx.tree_at, and by a sweep for one of its lanes, before anything is compiled.
+    for mode in ("smooth", "exact"):
+        with pytest.raises(pamjax.PamjaxInputError, match=match + r".*each delay plays out within one period"):
+            presets.mas10_valve(mode, **kwargs)
+    system = presets.mas10_tank_system("exact")
+    fields = tuple(kwargs)
+    changed = eqx.tree_at(lambda s: tuple(getattr(s.valve, f) for f in fields), system,
+                          tuple(jnp.asarray(v) for v in kwargs.values()))
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        pamjax.simulate(changed, pamjax.Constant(1.0), np.linspace(0.0, 0.3, 31))
+    presets.mas10_valve("smooth", pwm_frequency=249.0)  # 4.016 ms > 4 ms: accepted
+
+
+def test_a_sweep_over_the_pwm_frequency_names_the_lane_whose_period_the_delays_outlast():
+    system = presets.mas10_tank_system("smooth")
+    over = {"valve.pwm_frequency": np.array([50.0, 100.0, 300.0])}
+    with pytest.raises(pamjax.PamjaxInputError, match=r"over\['valve\.pwm_frequency'\]: OnOffValve: .* = 4 ms must be "
+                                                       r"shorter than .* 3\.33333 ms .*at index \(2,\)"):
+        pamjax.sweep(system, pamjax.Constant(0.5), np.linspace(0.0, 0.1, 11), over, progress=False)
+
+
 def test_smooth_pwm_trajectory_converges_to_exact_edges():
     # Tank charging at 50 % duty for ~0.1 s (5 periods). The exact-edge solve is the reference (jump times handed to
     # the solver). Compared half-way between edges (edges at 2 ms and 12 ms of each period): symmetric logistic edges

@@ -101,6 +101,19 @@ def check_parameters(system, where="system"):
         del _CHECKED[:-_REMEMBERED]
 
 
+def check_finite_state(state, name):
+    """Refuse a state (a start state, an operating point, a guess) with a concrete leaf that is not finite, naming
+    the leaf (`y0.pressure must be finite (no NaN or inf), got nan`). Traced leaves have no value to check."""
+    for path, leaf in jax.tree_util.tree_flatten_with_path(state)[0]:
+        if isinstance(leaf, jax.core.Tracer):
+            continue
+        value = np.asarray(leaf, dtype=float)
+        if not np.all(np.isfinite(value)):
+            where = f"{name}.{_name(path)}" if path else name
+            raise PamjaxInputError(f"{where} must be finite (no NaN or inf), got "
+                                   f"{np.array2string(value, threshold=6)}")
+
+
 def runtime_checks(system, signal, ts, command_range):
     """`(system, signal)` with the checks that meet traced values attached as run-time errors (`equinox.error_if`
     on those values): the components' own checks, and the command within `command_range` at the times `ts` (when

@@ -16,9 +16,10 @@ import jax.tree_util as jtu
 import numpy as np
 
 from .._core.custom_types import ArrayLike, Float, Real, RealArrayLike, RealScalarLike
-from .._core.errors import PamjaxInputError, PamjaxSolveError, concrete_values
+from .._core.errors import PamjaxInputError, PamjaxSolveError, check_finite, concrete_values
 from .._core.fastjit import keyed_by_code
 from .._systems.base import AbstractSystem
+from .checks import check_finite_state, check_parameters
 
 
 class StateSpace(eqx.Module):
@@ -128,8 +129,12 @@ def linearise(system: AbstractSystem, state: eqx.Module, command: RealArrayLike,
 
     The operating point need not be an equilibrium (then A, B describe the local flow); transfer functions and
     Bode data are meaningful about an equilibrium (`equilibrium` finds one).
+
+    **Raises:** `PamjaxInputError` for what `simulate` refuses in the system (`payload_mass` ≤ 0, set with
+    `eqx.tree_at` or not), a `state`, `command` or `t` that is not finite or a command outside `system.command_range`,
+    before anything is computed; `PamjaxSolveError` where a derivative is not finite at the operating point (named).
     """
-    _check_command(system, command)
+    _check_inputs(system, command, state, "state", t)
     inputs = {} if inputs is None else dict(inputs)
     command = jnp.asarray(command, dtype=float)
     extra = [jnp.asarray(where(system), dtype=float) for where in inputs.values()]
@@ -146,15 +151,28 @@ def linearise(system: AbstractSystem, state: eqx.Module, command: RealArrayLike,
     A, B, C, D = _jacobians(system, jnp.asarray(t, dtype=float), state, u0, wheres, tuple(outputs))
     input_names = _names(command, "command") + tuple(n for name, leaf in zip(inputs, extra) for n in _names(leaf, name))
     output_names = tuple(n for name in outputs for n in _names(available[name], name))
-    return StateSpace(
-        A=np.asarray(A),
-        B=np.asarray(B),
-        C=np.asarray(C),
-        D=np.asarray(D),
-        state_names=_names(state, "state"),
-        input_names=input_names,
-        output_names=output_names,
-    )
+    state_names = _names(state, "state")
+    A, B, C, D = (np.asarray(m) for m in (A, B, C, D))
+    _refuse_non_finite((A, B, C, D), state_names, input_names, output_names)
+    return StateSpace(A=A, B=B, C=C, D=D, state_names=state_names, input_names=input_names, output_names=output_names)
+
+
+def _refuse_non_finite(matrices, state_names, input_names, output_names):
+    """A `PamjaxSolveError` naming the rows and columns of (A, B, C, D) that are not finite: a NaN derivative at the
+    operating point (a state outside the model's domain, a parameter that divides by zero) is not a linear model."""
+    rows = {"A": state_names, "B": state_names, "C": output_names, "D": output_names}
+    columns = {"A": state_names, "B": input_names, "C": state_names, "D": input_names}
+    bad = []
+    for name, m in zip("ABCD", matrices):
+        if not np.all(np.isfinite(m)):
+            r, c = (sorted(set(np.nonzero(~np.isfinite(m))[k].tolist())) for k in (0, 1))
+            bad.append(f"{name}: ∂({', '.join(rows[name][i] for i in r)})/∂({', '.join(columns[name][j] for j in c)})")
+    if bad:
+        raise PamjaxSolveError(
+            f"linearise: the derivatives are not finite (NaN or inf) at this operating point: {'; '.join(bad)}. The "
+            "vector field or outputs are not differentiable there (a state outside the model's domain, e.g. a "
+            "pressure or position beyond what the model takes, or a parameter that divides by zero)"
+        )
 
 
 @eqx.filter_jit
@@ -181,6 +199,18 @@ def _jacobians(system, t, state, u0, wheres, outputs):
         return jnp.concatenate([jnp.ravel(out[name]) for name in outputs])
 
     return (*jax.jacfwd(f, argnums=(0, 1))(x_flat, u_flat), *jax.jacfwd(h, argnums=(0, 1))(x_flat, u_flat))
+
+
+def _check_inputs(system, command, state, state_name, t):
+    """`simulate`'s checks of what `linearise` and `equilibrium` are given, before anything is computed: every
+    component's own checks (`check_parameters`: a system changed with `eqx.tree_at` skipped them), a finite state and
+    time, and the command (`_check_command`)."""
+    if not isinstance(system, AbstractSystem):
+        raise PamjaxInputError(f"system must be a pamjax system (TankSystem, MuscleSystem, ...), got {type(system)}")
+    check_parameters(system)
+    check_finite_state(state, state_name)
+    check_finite(t, "t")
+    _check_command(system, command)
 
 
 def _check_command(system, command):
@@ -221,8 +251,11 @@ def equilibrium(system: AbstractSystem, command: RealArrayLike, guess: eqx.Modul
     taken to it; a long `simulate` (or `steady_state_map`) gives the one reached from a given start.
 
     One small compiled loop (the field and its forward-mode Jacobian traced once): optimistix's `Newton` root
-    finder compiled a program several times the size (~12 s for the DMSP-40 muscle, against ~2 s)."""
-    _check_command(system, command)
+    finder compiled a program several times the size (~12 s for the DMSP-40 muscle, against ~2 s).
+
+    Raises `PamjaxInputError`, as `linearise` does, for a system `simulate` refuses and a `guess` or `t` that is not
+    finite, before anything is computed."""
+    _check_inputs(system, command, guess, "guess", t)
     scale = jtu.tree_map(jnp.asarray, system.state_scale())
     scaled_guess = jtu.tree_map(lambda a, s: jnp.asarray(a, dtype=float) / s, guess, scale)
     y, converged, singular = _newton(system, jnp.asarray(command, dtype=float), jnp.asarray(t, dtype=float),
@@ -238,6 +271,10 @@ def _no_convergence(y, singular, max_steps):
     values = np.concatenate([np.ravel(np.asarray(leaf, dtype=float)) for leaf in jtu.tree_leaves(y)])
     state = ", ".join(f"{n.lstrip('.')}={v:.9g}" for n, v in zip(names, values))
     message = f"equilibrium: Newton's method did not converge within max_steps={max_steps} (last state: {state}); "
+    if not np.all(np.isfinite(values)):
+        return (f"equilibrium: Newton's method left the model's domain: its state turned non-finite ({state}), where "
+                "the vector field or its Jacobian is NaN or inf; try a guess closer to the operating point, or "
+                "simulate to steady state (`pamjax.simulate`, `pamjax.steady_state_map`)")
     if np.all(np.isfinite(singular)) and np.any(singular != 0):
         along = [names[k].lstrip(".") for k in np.argsort(-np.abs(singular)) if abs(singular[k]) > 0.1]
         return message + (

@@ -20,7 +20,7 @@ from .._physics.signals import AbstractSignal
 from .._physics.tabulated import prepared_tables
 from .._systems.base import AbstractSystem
 from . import chunks as _chunks, synchronous as _sync
-from .checks import check_parameters, naming_batched, prepared, runtime_checks, vacuum
+from .checks import check_finite_state, check_parameters, naming_batched, prepared, runtime_checks, vacuum
 from .edges import ScheduledValve, StartsOff, command_jumps
 from .hints import default_max_steps, failure_hint, fixed_step_hint, negative_inflow
 from .scaled import scaled
@@ -247,6 +247,8 @@ def validate(system, signal, ts, y0=None, t0=None):
     if not isinstance(signal, AbstractSignal):
         raise PamjaxInputError(f"signal must be a pamjax signal (Constant, Triangle, ...), got {type(signal)}")
     check_time_grid(ts, "ts")
+    if t0 is not None and not _is_traced(t0) and not np.isfinite(float(t0)):  # (-inf overflowed the step budget)
+        raise PamjaxInputError(f"t0 must be finite (no NaN or inf), got {t0}")
     if _is_traced(ts):  # inside jit: shape checks only; values were (or can only be) checked outside
         ts_np = np.zeros(jnp.shape(ts))
     else:
@@ -269,10 +271,7 @@ def validate(system, signal, ts, y0=None, t0=None):
             )
     check_parameters(system)  # a system changed with eqx.tree_at skipped its components' checks
     if y0 is not None:
-        leaves = jtu.tree_leaves(y0)
-        for leaf in leaves:
-            if not isinstance(leaf, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(leaf))):
-                raise PamjaxInputError("y0 must be finite (no NaN or inf)")
+        check_finite_state(y0, "y0")
         pressure = getattr(y0, "pressure", None)
         if pressure is not None and not isinstance(pressure, jax.core.Tracer) and not np.all(np.asarray(pressure) > 0):
             raise PamjaxInputError(f"y0.pressure must be an ABSOLUTE pressure > 0 [Pa], got {pressure}")

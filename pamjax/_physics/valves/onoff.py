@@ -7,7 +7,7 @@ import numpy as np
 
 from ..._core.arrays import device_array
 from ..._core.custom_types import RealScalar
-from ..._core.errors import PamjaxInputError, check_nonnegative, check_positive
+from ..._core.errors import PamjaxInputError, check_nonnegative, check_positive, concrete_values
 from ..._core.fitting import positive
 from ..._core.units import check_absolute_pressure
 from ..._papers import paper000
@@ -38,6 +38,38 @@ def _commands_at(signal, times):
     return jax.vmap(signal)(times)
 
 
+def _check_delays_within_period(frequency, on_delay, off_delay):
+    """Refuse switching delays whose sum is not shorter than the PWM period T = 1/f. The valve's timing (`opening`,
+    `edge_schedule`, `switching_gates` and the PWM-synchronous grid's `open_at_start`) takes each period to open or
+    close the valve within itself: t_on + t_off < T, so that a period whose on-pulse is too short to open the valve
+    closes it, and the edges of one period never pass those of the next. Beyond it the three steppings disagree
+    silently (300 Hz with the 2 ms delays: a tank at 650, 124 or 105 kPa by stepping) and a delay longer than the
+    period never opens the valve. Concrete values only, elementwise (a sweep's lanes checked at once); traced ones
+    (jit, vmap, grad) have no value to check here."""
+    values = [concrete_values(x) for x in (frequency, on_delay, off_delay)]
+    if any(v is None for v in values):
+        return
+    try:
+        frequency, on_delay, off_delay = np.broadcast_arrays(*values)
+    except ValueError:  # shapes that do not combine: the parameter with an axis too many is named elsewhere
+        return
+    with np.errstate(divide="ignore"):
+        period = 1.0 / frequency
+    bad = ~(on_delay + off_delay < period)
+    if not np.any(bad):
+        return
+    i = np.unravel_index(int(np.argmax(bad)), bad.shape)
+    f, on, off = float(frequency[i]), float(on_delay[i]), float(off_delay[i])
+    where = f" (at index {tuple(int(k) for k in i)} of the values given)" if bad.size > 1 else ""
+    raise PamjaxInputError(
+        f"OnOffValve: switch_on_delay ({on * 1e3:.6g} ms) + switch_off_delay ({off * 1e3:.6g} ms) = "
+        f"{(on + off) * 1e3:.6g} ms must be shorter than the PWM period 1/pwm_frequency = {1e3 / f:.6g} ms "
+        f"(pwm_frequency = {f:.6g} Hz){where}: the valve model assumes each delay plays out within one period (each "
+        "period opens or closes the valve before the next begins); lower pwm_frequency below "
+        f"1/(switch_on_delay + switch_off_delay) = {1.0 / (on + off):.6g} Hz or shorten the delays"
+    )
+
+
 class OnOffValve(AbstractSwitchingValve):
     """Paper 000's 3/2 high-speed on/off valve (Festo MHE2) driven by PWM.
 
@@ -62,7 +94,8 @@ class OnOffValve(AbstractSwitchingValve):
       A = 3.14e-6 m²). An exhaust silencer is a `SeriesRestriction(exhaust_port, silencer)`.
     - `supply_pressure`: p_s [Pa abs]; 0.65 MPa abs (paper 000; the "6.5 MPa" in its valve section is a typo).
     - `pwm_frequency`: f [Hz]; 50 (paper 000).
-    - `switch_on_delay`, `switch_off_delay`: [s]; 2e-3 each (paper 000: switching time ≈ 2 ms).
+    - `switch_on_delay`, `switch_off_delay`: [s]; 2e-3 each (paper 000: switching time ≈ 2 ms). Their sum must be
+      shorter than the PWM period 1/f (each delay plays out within one period; refused otherwise).
     - `edge_width`: time width of a smoothed edge [s]; 1e-4 (0.5 % of the 20 ms period, 5 % of the switching time).
     - `mode`: "smooth" or "exact".
     """
@@ -85,6 +118,7 @@ class OnOffValve(AbstractSwitchingValve):
         check_positive(self.edge_width, "OnOffValve.edge_width")
         if self.mode not in ("smooth", "exact"):
             raise PamjaxInputError(f"OnOffValve.mode must be 'smooth' or 'exact', got {self.mode!r}")
+        _check_delays_within_period(self.pwm_frequency, self.switch_on_delay, self.switch_off_delay)
 
     def supply(self):
         return self.supply_pressure
@@ -173,7 +207,7 @@ class OnOffValve(AbstractSwitchingValve):
         phase = t - jnp.floor(t / period + 1e-9) * period  # in [0, T)
         opens_p, closes_p = step(previous * period - on_delay), step_open((1.0 - previous) * period - off_delay)
         opens_k, closes_k = step(duty * period - on_delay), step_open((1.0 - duty) * period - off_delay)
-        during_p = opens_p  # (a period that does not open the valve closes it: T > t_on + t_off)
+        during_p = opens_p  # (a period that does not open it closes it: T > t_on + t_off, as __check_init__ requires)
         after_p = (1.0 - closes_p) * during_p
         during_k = opens_k + (1.0 - opens_k) * after_p
         after_k = (1.0 - closes_k) * during_k
