@@ -61,8 +61,9 @@ def _region_openings(valve: AbstractSwitchingValve, command, open_before):
 def open_at_start(valve: AbstractSwitchingValve, signal, start, first_start):
     """Whether the valve is open at the start `start` of a PWM period: it stays open from the period before when that
     period's off-pulse was too short to close it (duty above ~90 % at 50 Hz with 2 ms delays). The valve is closed
-    before `first_start` (the start of the first period simulated: the runs start with the valve off). Exact when
-    T > switch_on_delay + switch_off_delay (a period then opens or closes the valve); two periods back otherwise."""
+    before `first_start` (the start of the first period simulated: the runs start with the valve off). Exact, as
+    T > switch_on_delay + switch_off_delay (`OnOffValve` refuses delays that outlast the period): each period then
+    opens or closes the valve, so two periods back determine it."""
     period = valve.period
     state = jnp.zeros((), dtype=bool)
     for back in (2.0, 1.0):
