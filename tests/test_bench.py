@@ -401,3 +401,131 @@ def test_meta_json_atmosphere_is_the_models(tmp_path):
     assert any("atmospheric pressure set to 95000 Pa" in n for n in bench.notes), bench.notes
     rig = pj.bench.load_bench(folder, _plant(), nuisance=True)  # the Rig's plant too
     assert float(rig.model.plant.air.atmospheric_pressure) == 95000.0
+
+
+# --- mistakes in a bench folder named before any fit, and what the loader leaves out said ---------------------------
+T_TANK = np.arange(200) * 1e-3  # s
+TANK = (dict(kind="tank_charge", V_tank=5e-5, u=0.5, p0="p_atm"), "t [s],duty [-],pressure [barg]",
+        [T_TANK, np.full(200, 0.5), 2.0 * T_TANK])
+RUN_HEADER = "t [s],duty [-],{} [barg],position [mm]"
+RUN_COLUMNS = [T_RUN, np.full(500, 0.6), 3.0 + T_RUN, RISING]
+
+
+def test_an_unknown_kind_is_refused_naming_the_run_meta_json_and_the_kinds(tmp_path):
+    # A typo in a run's kind (was: the run silently left out, its reason only in Bench.skipped).
+    folder = _csv_bench(tmp_path / "b", {"T": TANK, "M": ({**MIDWAY, "kind": "muscle_trianlge"},
+                                                          RUN_HEADER.format("pressure"), RUN_COLUMNS)})
+    with pytest.raises(PamjaxInputError, match=r"b/meta\.json: experiment 'M' has kind 'muscle_trianlge', which pamjax "
+                                               r"does not know \(did you mean 'muscle_triangle'\?\); write one of "
+                                               r"\['tank_charge', 'tank_discharge', 'muscle_triangle', 'muscle_run'\] "
+                                               r"\(fitted\) or \['muscle_PI'\] \(known, not fitted\)"):
+        pj.bench.load_bench(folder, _plant())
+    known = _csv_bench(tmp_path / "k", {"T": TANK, "M": ({"kind": "muscle_PI"}, RUN_HEADER.format("pressure"),
+                                                         RUN_COLUMNS)})
+    assert set(pj.bench.load_bench(known, _plant()).skipped) == {"M"}  # known, not fitted: left out, as before
+
+
+def test_a_pressure_column_not_read_as_pressure_is_named_or_said(tmp_path):
+    # `presure [barg]` in a muscle run (was: left out of the fit in silence; a tank run said "no pressure column"
+    # without naming it); `pressure (bar(g))` reads as the pressure; a run that has no pressure at all is said.
+    typo = _csv_bench(tmp_path / "typo", {"M": (MIDWAY, RUN_HEADER.format("presure"), RUN_COLUMNS)})
+    with pytest.raises(PamjaxInputError, match=r"M\.csv: column 'presure' is in a pressure unit \('barg'\) but is not "
+                                               r"a channel pamjax reads, and experiment 'M' has no pressure column: "
+                                               r"if it is the pressure, head it 'pressure \[barg\]'"):
+        pj.bench.load_bench(typo, _plant())
+    tank = _csv_bench(tmp_path / "tank", {"T": (TANK[0], "t [s],duty [-],presure [barg]", TANK[2])})
+    with pytest.raises(PamjaxInputError, match=r"T\.csv: column 'presure' is in a pressure unit"):
+        pj.bench.load_bench(tank, _plant())
+    paren = _csv_bench(tmp_path / "paren", {"M": (MIDWAY, "t [s],duty [-],pressure (bar(g)),position [mm]",
+                                                  RUN_COLUMNS)})
+    bench = pj.bench.load_bench(paren, _plant())
+    assert bench.experiments[0].channels == ("pressure", "position")
+    np.testing.assert_allclose(bench.experiments[0].data["pressure"], 101325.0 + 1e5 * (3.0 + T_RUN))
+    none = _csv_bench(tmp_path / "none", {"M": (MIDWAY, "t [s],duty [-],position [mm]", [T_RUN, RUN_COLUMNS[1],
+                                                                                         RISING])})
+    notes = pj.bench.load_bench(none, _plant()).notes
+    assert any("M: no pressure column in M.csv: fitted on its position alone" in n for n in notes), notes
+
+
+def test_columns_a_bench_does_not_fit_from_are_ignored_and_said(tmp_path):
+    # docs/fitting.md: "other columns ignored" (was: a 'dp_filter [Pa]' refused as looking like kPa, an empty 'notes'
+    # column as NaN at row 0, a text 'status' column as not a number, 'force [kgf]' as a unit pamjax does not know).
+    plain = pj.bench.load_bench(_csv_bench(tmp_path / "plain", {"T": TANK}), _plant())
+    header = TANK[1] + ",dp_filter [Pa],notes,status,force [kgf]"
+    folder = _csv_bench(tmp_path / "b", {"T": (TANK[0], header, [*TANK[2], np.full(200, 850.0)])})
+    path = folder / "T.csv"
+    head, *rows = path.read_text().splitlines()
+    path.write_text("\n".join([head] + [row + f",,{'OK' if k else 'FAULT'},8" for k, row in enumerate(rows)]) + "\n")
+    bench = pj.bench.load_bench(folder, _plant())
+    np.testing.assert_array_equal(bench.experiments[0].data["pressure"], plain.experiments[0].data["pressure"])
+    said = [n for n in bench.notes if "ignored" in n]
+    assert said == ["T: T.csv's 'dp_filter', 'notes', 'status', 'force' ignored (a bench run is fitted from its time, "
+                    "duty, pressure and position)"], bench.notes
+    rows[3] = rows[3].replace(rows[3].split(",")[2], "nan")  # the columns used keep every check
+    path.write_text("\n".join([head] + [row + ",,OK,8" for row in rows]) + "\n")
+    with pytest.raises(PamjaxInputError, match=r"T\.csv, line 5: column 'pressure' \(channel 'pressure'\) .* NaN/inf"):
+        pj.bench.load_bench(folder, _plant())
+
+
+def test_a_recording_with_an_upper_case_extension_is_found(tmp_path):
+    # E1.CSV (was: "has no recording E1.npz, E1.csv or E1.mat (the folder holds E1.CSV)"); two spellings: refused.
+    folder = _csv_bench(tmp_path / "b", {"T": TANK})
+    (folder / "T.csv").rename(folder / "T.CSV")
+    bench = pj.bench.load_bench(folder, _plant())
+    np.testing.assert_allclose(bench.experiments[0].data["pressure"], 101325.0 + 2e5 * T_TANK)
+    (folder / "T.csv").write_text((folder / "T.CSV").read_text())
+    if len({p.name.lower() for p in folder.iterdir()}) < len(list(folder.iterdir())):  # a case-sensitive file system
+        with pytest.raises(PamjaxInputError, match=r"'T' has 2 recordings \(T\.CSV, T\.csv\); keep one"):
+            pj.bench.load_bench(folder, _plant())
+
+
+def test_a_tank_volume_beyond_any_test_tank_is_refused_naming_meta_json(tmp_path):
+    # V_tank = 50 (cm^3 written as m^3; was: accepted, and refused inside the fit naming neither meta.json nor V_tank,
+    # after `pamjax fit` had made its output folder).
+    folder = _csv_bench(tmp_path / "b", {"T": ({**TANK[0], "V_tank": 50.0}, TANK[1], TANK[2])})
+    with pytest.raises(PamjaxInputError, match=r"b/meta\.json: tank test 'T' has V_tank = 50 m\^3, more than 0\.1 m\^3 "
+                                               r"\(100 litres\).* looks like litres \(50 l = 0\.05 m\^3\) or cm\^3 "
+                                               r"\(50 cm\^3 = 5e-05 m\^3\)"):
+        pj.bench.load_bench(folder, _plant())
+
+
+def test_mat_variables_that_are_no_channel_are_ignored_and_units_go_in_meta_json(tmp_path):
+    # A 5-value `temp`, a scalar and a string beside t, u, p, x (was: "Recording 'T': channel 'temp' has shape (5,),
+    # expected (200,)", the file not named); a channel cut short is named with its file; times in ms without a unit
+    # are refused saying to give meta.json "units" (was: "write 't [ms]' in the header", which a MAT file has not).
+    scipy_io = pytest.importorskip("scipy.io")
+    folder = _csv_bench(tmp_path / "b", {"T": TANK}, units={"p": "barg"})
+    (folder / "T.csv").unlink()
+    t, u, p = TANK[2]
+    scipy_io.savemat(folder / "T.mat", dict(t=t, u=u, p=p, temp=np.full(5, 20.0), fs=1000.0, rig="A"))
+    bench = pj.bench.load_bench(folder, _plant())
+    np.testing.assert_allclose(bench.experiments[0].data["pressure"], 101325.0 + 2e5 * t)
+    assert any("T: T.mat's 'temp' ignored" in n for n in bench.notes), bench.notes
+    scipy_io.savemat(folder / "T.mat", dict(t=t, u=u, p=p[:-1]))
+    with pytest.raises(PamjaxInputError, match=r"T\.mat: 'p' \(channel 'pressure'\) has 199 values, the time 200"):
+        pj.bench.load_bench(folder, _plant())
+    scipy_io.savemat(folder / "T.mat", dict(t=t * 1e3, u=u, p=p))
+    with pytest.raises(PamjaxInputError, match=r"T\.mat: 't' is sampled every 1 s .*give its unit, \{\"t\": \"ms\"\}, "
+                                               r"in meta\.json's \"units\""):
+        pj.bench.load_bench(folder, _plant())
+
+
+def test_pamjax_fit_prints_the_runs_left_out_and_the_loaders_notes(tmp_path, monkeypatch, capsys):
+    # `pamjax fit` with a [bench] (was: neither the skipped runs nor the notes printed, as fits/joint.py prints them);
+    # the fit itself interrupted as it starts: nothing is solved.
+    from pamjax._cli.main import main
+
+    folder = _csv_bench(tmp_path / "b", {"T": (TANK[0], TANK[1] + ",valve_current [mA]", [*TANK[2], np.ones(200)]),
+                                         "P": ({"kind": "muscle_PI"}, RUN_HEADER.format("pressure"), RUN_COLUMNS)})
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pj, "fit", interrupted)
+    cfg = tmp_path / "bench.toml"
+    cfg.write_text(f'[model]\npreset = "mas10_system"\noptions = {{ valve = "pwm", friction = "karnopp" }}\n'
+                   f'[bench]\ndir = "{folder}"\nstaged = false\n')
+    assert main(["fit", str(cfg), "--out", str(tmp_path / "out"), "--quiet", "--no-plot"]) == 130
+    out = capsys.readouterr().out
+    assert f"bench {folder}: left out: P (kind 'muscle_PI' not fitted" in out, out
+    assert "\n  T: T.csv's 'valve_current' ignored" in out, out

@@ -186,3 +186,59 @@ def test_a_real_interrupt_during_compilation_exits_cleanly(folder, signum, code)
     else:
         assert f"pamjax fit: {word} before the first iteration finished; nothing to resume" in err, err
     assert not (out / ".pamjax.lock").exists()
+
+
+def _copy_of(out, into):
+    import shutil
+
+    shutil.copytree(out, into)
+    (into / ".pamjax.lock").unlink(missing_ok=True)
+    return into
+
+
+def test_a_damaged_checkpoint_is_named_and_overwrite_starts_again(folder, reference, capsys):
+    # A truncated checkpoint.npz (a full disk, a copy cut short) made every `pamjax fit` into that folder, --overwrite
+    # included, an internal error: "BadZipFile: File is not a zip file", status 1, the file not named.
+    out, config = _copy_of(folder / "reference", folder / "damaged"), str(folder / "fit.toml")
+    checkpoint = out / "checkpoint.npz"
+    checkpoint.write_bytes(checkpoint.read_bytes()[:2000])
+    for flags in ([], ["--resume"]):
+        assert main(["fit", config, "--out", str(out), "--quiet", "--no-plot", *flags]) == 2
+        err = capsys.readouterr().err
+        assert re.search(rf"{re.escape(str(checkpoint))} is not a readable checkpoint \(BadZipFile: .*\), so no fit "
+                         r"can be resumed from it: start again with --overwrite \(which replaces it\)", err), err
+    assert main(["fit", config, "--out", str(out), "--quiet", "--no-plot", "--overwrite"]) == 0
+    assert _fields(json.loads((out / "fit.json").read_text())) == _fields(reference)
+    with np.load(checkpoint) as f:  # replaced by this fit's
+        assert int(f["history"][-1][0]) == reference["iterations"]
+
+
+def test_a_damaged_staged_start_is_named_on_resume(tmp_path):
+    # A truncated staged_start.npz on --resume (was: "BadZipFile: File is not a zip file", status 1).
+    from pamjax._cli import fit_start
+
+    path = tmp_path / fit_start.STAGED_START
+    np.savez(path, values=np.zeros(3), summary=np.asarray(["stage 1"]), problem=np.asarray("{}"))
+    path.write_bytes(path.read_bytes()[:100])
+    with pytest.raises(pamjax.PamjaxInputError, match=r"resume: .*staged_start\.npz is not a readable staged start "
+                                                      r"\(BadZipFile: .*\); start again with --overwrite"):
+        fit_start.load(path, None, [], [])
+
+
+def test_an_overwrite_interrupted_before_its_first_checkpoint_offers_no_resume(folder, reference, monkeypatch, capsys):
+    # --overwrite interrupted before this run checkpointed anything (was: "the checkpoint after iteration N ... is kept.
+    # Resume with: ... --resume", naming the EARLIER run's checkpoint, whose resume is then refused).
+    out, config = _copy_of(folder / "reference", folder / "overwritten"), str(folder / "fit.toml")
+    before = (out / "checkpoint.npz").read_bytes()
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pamjax, "fit", interrupted)
+    assert main(["fit", config, "--out", str(out), "--quiet", "--no-plot", "--overwrite"]) == 130
+    err = capsys.readouterr().err
+    assert re.search(r"interrupted before the first iteration finished; nothing to resume \(this run checkpointed "
+                     rf"nothing; {re.escape(str(out / 'checkpoint.npz'))} is the earlier fit's, left as it was\): run "
+                     rf"pamjax fit {re.escape(config)} --out {re.escape(str(out))} --overwrite to start again",
+                     err), err
+    assert "Resume with" not in err and (out / "checkpoint.npz").read_bytes() == before

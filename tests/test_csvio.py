@@ -226,3 +226,46 @@ def test_mat_units_keyed_by_the_files_variable_names(tmp_path):
     with pytest.raises(PamjaxInputError, match=r"units name \['Presure'\], not channels .*key units by channel name "
                                                r"\('t' for the times\) or by the file's column name"):
         Recording.load(tmp_path / "r.mat", units={"Presure": "barg"})
+
+
+def test_a_gauge_suffix_in_round_brackets_is_the_columns_unit(tmp_path):
+    # `pressure (bar(g))`, the documented `name (unit)` form with the documented `(g)` suffix (was: the nested
+    # brackets did not parse, and the column became a channel 'pressure (bar(g))' without a unit).
+    from pamjax._core.csvio import split_header
+
+    assert split_header("pressure (bar(g))") == ("pressure", "bar(g)")
+    assert split_header("p (MPa (abs.))") == ("p", "MPa (abs.)")
+    assert split_header("force (N)") == ("force", "N") and split_header("x") == ("x", None)
+    path = _write(tmp_path, _table(header=("t (s)", "pressure (bar(g))", "position (m)"), p=(P - 101325.0) / 1e5))
+    rec = Recording.load(path)
+    assert sorted(rec.channels) == ["position", "pressure"]
+    np.testing.assert_allclose(rec["pressure"], P, rtol=1e-12)
+
+
+def test_columns_not_asked_for_are_left_unread_whatever_they_hold(tmp_path):
+    # `read_table(keep=...)` and `Recording.load(channels=...)`: a column not asked for is not read (text, empty cells,
+    # a differential pressure of 850 Pa that the pressure checks would refuse), and is listed in `ignored` with its
+    # unit; the columns read keep every check.
+    from pamjax._core.csvio import read_table
+
+    rows = ["t [s],pressure [Pa],position [m],dp_filter [Pa],notes,status"]
+    rows += [f"{float(t)!r},{float(p)!r},{float(x)!r},850,,{'FAULT' if k % 2 else 'OK'}"
+             for k, (t, p, x) in enumerate(zip(T, P, X))]
+    path = _write(tmp_path, "\n".join(rows) + "\n")
+    with pytest.raises(PamjaxInputError, match=r"column 6 \('status'\): 'OK' is not a number"):
+        read_table(path)
+    columns = read_table(path, keep=lambda name: name in ("t", "pressure", "position"))
+    assert [(n, u) for n, u, _ in columns] == [("t", "s"), ("pressure", "Pa"), ("position", "m"),
+                                               ("dp_filter", "Pa"), ("notes", None), ("status", None)]
+    assert [v is None for _, _, v in columns] == [False, False, False, True, True, True]
+    rec = Recording.load(path, channels=["pressure", "position"])
+    _same_as_reference(rec)
+    assert rec.ignored == {"dp_filter": ("Pa", "not a channel read"), "notes": (None, "not a channel read"),
+                           "status": (None, "not a channel read")}
+    with pytest.raises(PamjaxInputError, match=r"'dp_filter' is 850 Pa at most"):  # asked for: checked
+        Recording.load(path, channels=["pressure", "position", "dp_filter"])
+    bad = _write(tmp_path, _table().replace(f",{float(P[3])!r},", ",nan,"), name="bad.csv")
+    with pytest.raises(PamjaxInputError, match=r"bad\.csv, line 5: channel 'pressure' is NaN/inf"):
+        Recording.load(bad, channels=["pressure"])
+    with pytest.raises(PamjaxInputError, match="channels must be a list of channel names"):
+        Recording.load(path, channels="pressure")

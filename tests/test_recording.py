@@ -145,3 +145,38 @@ def test_bad_rows_of_a_file_are_named_by_file_and_line(tmp_path):
         Recording(np.arange(3.0), dict(position=[0.0, np.nan, 0.0]), name="a")
     rec = Recording.load(tmp_path / "r.npz", mask_nan=True)
     assert rec.locate(2) == f"{tmp_path / 'r.npz'}, sample 3" and rec.columns == {"position": "x"}
+
+
+def test_npz_and_mat_variables_that_are_no_channel_and_not_one_per_time_are_left_out(tmp_path):
+    # A 5-value calibration table `temp` beside t, u, p, x (was: the file unreadable, "Recording 'r': channel 'temp'
+    # has shape (5,), expected (200,)", no file named); a channel's array of another length is refused naming the file.
+    scipy_io = pytest.importorskip("scipy.io")
+    t = np.arange(200) / 100.0
+    p, x = 2e5 + 1e3 * t, 0.01 * t
+    np.savez(tmp_path / "r.npz", t=t, p=p, x=x, temp=np.full(5, 20.0))
+    scipy_io.savemat(tmp_path / "r.mat", dict(t=t, p=p, x=x, temp=np.full(5, 20.0), fs=1000.0, rig="A"))
+    for suffix in ("npz", "mat"):
+        rec = Recording.load(tmp_path / f"r.{suffix}")
+        assert sorted(rec.channels) == ["position", "pressure"], suffix
+        np.testing.assert_array_equal(rec["pressure"], p)
+        assert rec.ignored == {"temp": (None, "5 values, the time 200: not a channel")}
+    np.savez(tmp_path / "short.npz", t=t, p=p[:-1], x=x)
+    with pytest.raises(PamjaxInputError, match=r"short\.npz: 'p' \(channel 'pressure'\) has 199 values, the time 200"):
+        Recording.load(tmp_path / "short.npz")
+    with pytest.raises(PamjaxInputError, match=r"^Recording 'q': channel 'position' has shape \(2,\)"):
+        Recording([0.0, 1.0, 2.0], dict(position=[0, 0]), name="q")
+
+
+def test_a_unit_hint_for_a_file_without_header_says_where_its_units_go(tmp_path):
+    # An NPZ's times in ms: the hint names the units table (meta.json's "units" in a bench folder), not a CSV header
+    # the file does not have (was: "write 't [ms]' in the header").
+    t = np.arange(200) * 1.0  # ms
+    np.savez(tmp_path / "r.npz", t=t, x=0.01 * t / 1e3)
+    with pytest.raises(PamjaxInputError, match=r"r\.npz: 't' is sampled every 1 s .*look like ms: give its unit, "
+                                               r"\{\"t\": \"ms\"\}, in meta\.json's \"units\" .* units=") as err:
+        Recording.load(tmp_path / "r.npz")
+    assert "header to carry it" in str(err.value) and "in the header" not in str(err.value)
+    assert Recording.load(tmp_path / "r.npz", units={"t": "ms"}).t[1] == pytest.approx(1e-3)
+    with pytest.raises(PamjaxInputError, match=r"reaches 2 m; .*look like mm .*give its unit, "
+                                               r"\{\"position\": \"mm\"\}, in Recording\(\.\.\., units=\.\.\.\)"):
+        Recording(np.arange(60) / 100.0, dict(position=np.linspace(0, 2, 60)), name="r")

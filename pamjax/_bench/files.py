@@ -3,8 +3,10 @@ header, MATLAB .mat), and the command that drove each run (the recorded duty, ch
 mistake is a `PamjaxInputError` naming the experiment, the file and the key, with what to write instead.
 `pamjax._bench.load` builds the experiments from what this reads."""
 
+import difflib
 import json
 import pathlib
+import re
 
 import numpy as np
 
@@ -17,7 +19,19 @@ from .._systems.base import AbstractMuscleSystem
 TANK_KINDS = ("tank_charge", "tank_discharge")
 MUSCLE_KINDS = ("muscle_triangle", "muscle_run")
 FITTED_KINDS = TANK_KINDS + MUSCLE_KINDS
+# Kinds a meta.json may list that no fit takes: the hybrid bench's closed-loop runs (pamjax's PWM grid reads a planned
+# duty, not a controller's). Any other kind is a typo, refused by name (was: the run silently left out).
+UNFITTED_KINDS = ("muscle_PI",)
+KNOWN_KINDS = FITTED_KINDS + UNFITTED_KINDS
 RECORDING_SUFFIXES = (".npz", ".csv", ".mat")
+# The channels a bench run is fitted from (`Recording.load(..., channels=...)`): every other column of its file is
+# left unread, whatever it holds (docs/fitting.md: "other columns ignored"), and said in the notes.
+BENCH_CHANNELS = ("command", "pressure", "position")
+# m³: the largest V_tank meta.json may give. A tank test charges a rigid volume through the valve under test: paper
+# 000's and the benches' are 50 cm³ (5e-5 m³); pneumatic test tanks and receivers go to some tens of litres. 0.1 m³
+# (100 l) is also the model's own limit for a tank volume (`check_setting`'s "tank_volume"), so a value past it —
+# litres or cm³ written as m³ (50 for 50 cm³) — is refused here, naming meta.json, instead of inside the fit.
+MAX_TANK_VOLUME = 0.1
 # A recorded duty agrees with meta.json's when every PWM period's value is within this of it: a logger writes the
 # duty with 6 decimals (shared/data/bench-realistic), far below any duty step that changes a valve's behaviour.
 _DUTY_TOLERANCE = 1e-3
@@ -51,7 +65,13 @@ def read_meta(directory):
     for name, e in meta["experiments"].items():
         if not isinstance(e, dict) or "kind" not in e:
             raise PamjaxInputError(f"{path}: experiment {name!r} must be a table with a 'kind' (one of "
-                                   f"{list(FITTED_KINDS) + ['muscle_PI']}), got {e!r}")
+                                   f"{list(KNOWN_KINDS)}), got {e!r}")
+        if e["kind"] not in KNOWN_KINDS:
+            close = difflib.get_close_matches(str(e["kind"]), KNOWN_KINDS, n=1)
+            raise PamjaxInputError(
+                f"{path}: experiment {name!r} has kind {e['kind']!r}, which pamjax does not know"
+                + (f" (did you mean {close[0]!r}?)" if close else "") + f"; write one of {list(FITTED_KINDS)} (fitted) "
+                f"or {list(UNFITTED_KINDS)} (known, not fitted)")
     return directory, meta
 
 
@@ -95,7 +115,10 @@ def noise_levels(meta, recordings, where, notes=None):
 
 
 def recording_file(directory, name):
-    found = [directory / f"{name}{s}" for s in RECORDING_SUFFIXES if (directory / f"{name}{s}").exists()]
+    """The one recording of experiment `name` in `directory`: `<name>.npz`, `.csv` or `.mat`, the extension in any
+    capitals (`E1.CSV`, as loggers on Windows write it)."""
+    found = sorted(p for p in directory.iterdir() if p.suffix.lower() in RECORDING_SUFFIXES
+                   and p.name[:-len(p.suffix)] == name and p.is_file())
     if not found:
         others = sorted(p.name for p in directory.iterdir() if p.suffix.lower() in RECORDING_SUFFIXES)
         raise PamjaxInputError(
@@ -108,15 +131,20 @@ def recording_file(directory, name):
     return found[0]
 
 
-def load_recording(path, name, meta, atmosphere):
-    """The recording of experiment `name` at `path`: meta.json's `units` for the columns whose file gives none (a CSV
-    header's own unit that differs is refused, naming both), a NaN/inf sample refused naming the file and line."""
+def load_recording(path, name, meta, atmosphere, notes=None):
+    """The recording of experiment `name` at `path`: its time and `BENCH_CHANNELS` (other columns left unread, said
+    in `notes`), meta.json's `units` for the columns whose file gives none (a CSV header's own unit that differs is
+    refused, naming both), a NaN/inf sample refused naming the file and line."""
     units = meta.get("units")
     if units is not None and not isinstance(units, dict):
         raise PamjaxInputError(f"meta.json 'units' must be a table channel → unit (e.g. {{\"p\": \"barg\"}}), got "
                                f"{units!r}")
-    rec = Recording.load(path, name=name, atmosphere=atmosphere, mask_nan=True,
+    rec = Recording.load(path, name=name, atmosphere=atmosphere, mask_nan=True, channels=BENCH_CHANNELS,
                          default_units={str(k): str(v) for k, v in (units or {}).items()})
+    if rec.ignored and notes is not None:
+        notes.append(f"{name}: {path.name}'s " + ", ".join(
+            f"{k!r}" + ("" if why == "not a channel read" else f" ({why})") for k, (_, why) in rec.ignored.items())
+            + " ignored (a bench run is fitted from its time, duty, pressure and position)")
     for channel, valid in rec.mask.items():
         if not np.all(valid):
             row = int(np.argmin(valid))
@@ -125,6 +153,45 @@ def load_recording(path, name, meta, atmosphere):
                 f"experiment {name!r} is NaN/inf at row {row} (0-based data row; t = {rec.t[row]:g} s): a bench "
                 "recording must be complete; fix or delete that line, or cut the recording before the bad rows")
     return rec
+
+
+_PRESSURE_UNIT = re.compile(r"^\s*(pa|hpa|kpa|mpa|mbar|bar|psi)", re.IGNORECASE)  # how a pressure unit begins
+
+
+def check_channels(name, kind, rec, where, notes):
+    """A run's recording has what its kind is fitted from: a tank test its pressure, a muscle run its pressure or its
+    position (without a pressure: said in `notes`). Where the pressure is missing and a column left unread carries a
+    pressure unit (`presure [barg]`), that column is named with the header to write."""
+    if "pressure" in rec.channels:
+        return
+    units = {k: unit for k, (unit, _) in rec.ignored.items() if unit and _PRESSURE_UNIT.match(unit)}
+    if units:
+        column, unit = next(iter(units.items()))
+        raise PamjaxInputError(
+            f"{rec.source}: column {column!r} is in a pressure unit ({unit!r}) but is not a channel pamjax reads, and "
+            f"experiment {name!r} has no pressure column: if it is the pressure, head it 'pressure [{unit}]' (p and "
+            "Pressure read as the pressure too); if it is not (the run recorded no pressure), delete that column")
+    if kind in TANK_KINDS:
+        raise PamjaxInputError(f"{where}: tank test {name!r} has no pressure column (columns of {rec.source}: "
+                               f"{sorted([*rec.columns.values(), *rec.ignored])}); head it 'pressure [barg]' (or p)")
+    if "position" not in rec.channels:
+        raise PamjaxInputError(f"{where}: {name!r} records neither pressure nor position (columns of {rec.source}: "
+                               f"{sorted([*rec.columns.values(), *rec.ignored])})")
+    notes.append(f"{name}: no pressure column in {pathlib.Path(rec.source).name}: fitted on its position alone (a "
+                 "pressure is headed 'pressure [barg]', or p)")
+
+
+def tank_volume(name, e, where):
+    """A tank test's `V_tank` [m³] from its meta.json entry `e`: > 0 and at most `MAX_TANK_VOLUME`."""
+    volume = number(e, "V_tank", f"{where}: {name}", 0.0, None, "m^3")
+    if volume is None or volume <= 0:
+        raise PamjaxInputError(f"{where}: tank test {name!r} needs V_tank, its volume > 0 [m^3]")
+    if volume > MAX_TANK_VOLUME:
+        raise PamjaxInputError(
+            f"{where}: tank test {name!r} has V_tank = {volume:g} m^3, more than {MAX_TANK_VOLUME:g} m^3 ("
+            f"{MAX_TANK_VOLUME * 1e3:g} litres), beyond any bench's test tank: V_tank is in m^3, and this looks like "
+            f"litres ({volume:g} l = {volume * 1e-3:g} m^3) or cm^3 ({volume:g} cm^3 = {volume * 1e-6:g} m^3)")
+    return volume
 
 
 def number(e, key, where, lo=None, hi=None, unit=""):

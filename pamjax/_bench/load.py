@@ -42,6 +42,7 @@ from .files import (
     FITTED_KINDS,
     MUSCLE_KINDS,
     TANK_KINDS,
+    check_channels,
     check_runs,
     load_recording,
     noise_levels,
@@ -53,6 +54,7 @@ from .files import (
     recording_file,
     run_command,
     start_estimate,
+    tank_volume,
     with_atmosphere,
 )
 
@@ -202,8 +204,9 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
       ambient pressure: `bench.model`'s air takes it (its exhaust, a tank's "p_atm" start), said in `notes`.
 
     **Returns:** a `Bench`. **Raises:** `PamjaxInputError` naming the experiment, file and key for every mistake in
-    the directory (missing or duplicated recordings, unreadable meta.json, units, NaN, time order, a duty outside
-    [0, 1], meta.json contradicting a recording), before anything is fitted.
+    the directory (missing or duplicated recordings, unreadable meta.json, an unknown kind, units, NaN, time order, a
+    duty outside [0, 1], a V_tank beyond a test tank, meta.json contradicting a recording), before anything is fitted.
+    Columns a run is not fitted from are ignored, unread, and said in `notes`.
     """
     directory, meta = read_meta(directory)
     where = f"bench {directory}"
@@ -233,13 +236,8 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
         if kind not in kinds:
             skipped[name] = f"kind {kind!r} not fitted (kinds={list(kinds)})"
             continue
-        rec = load_recording(recording_file(directory, name), name, meta, atmosphere)
-        if kind in MUSCLE_KINDS and "pressure" not in rec.channels and "position" not in rec.channels:
-            raise PamjaxInputError(f"{where}: {name!r} records neither pressure nor position (columns: "
-                                   f"{sorted(rec.channels)})")
-        if kind in TANK_KINDS and "pressure" not in rec.channels:
-            raise PamjaxInputError(f"{where}: tank test {name!r} has no pressure column (columns: "
-                                   f"{sorted(rec.channels)})")
+        rec = load_recording(recording_file(directory, name), name, meta, atmosphere, notes)
+        check_channels(name, kind, rec, where, notes)
         start_unknown = str(e.get("init", "")).strip().lower().startswith("unknown")
         if start_unknown:
             unknown.append(name)
@@ -279,9 +277,7 @@ def _tank_test(name, kind, e, rec, signal, noise, p_atm, substeps, where):
     if "payload_kg" in e:
         raise PamjaxInputError(f"{where}: {name!r} is a tank test, which lifts no payload; payload_kg belongs to "
                                "muscle runs")
-    volume = number(e, "V_tank", f"{where}: {name}", 0.0, None, "m^3")
-    if volume is None or volume <= 0:
-        raise PamjaxInputError(f"{where}: tank test {name!r} needs V_tank, its volume > 0 [m^3]")
+    volume = tank_volume(name, e, where)
     p0 = e.get("p0", "p_atm" if kind == "tank_charge" else "p_s")
     if p0 == "p_s":
         p0 = "supply"  # the run's own supply pressure (its nuisance, when fitted)

@@ -258,16 +258,6 @@ def plot(path, result, experiments):
     figures.draw(fit_figure, path, _columns(experiments, result))
 
 
-def _checkpoint_summary(path):
-    """'iteration k (cost c)' of a checkpoint, or None if there is none."""
-    try:
-        with np.load(path, allow_pickle=False) as f:
-            history = f["history"]
-        return f"iteration {int(history[-1][0])} (cost {history[-1][1]:.6g})"
-    except (OSError, KeyError, ValueError, IndexError):
-        return None
-
-
 def _resume_command(args, out):
     profile = "" if not args.profile else " --profile" if args.profile == "all" else f" --profile {args.profile}"
     return f"pamjax fit {args.config} --out {out} --resume{profile}"
@@ -304,7 +294,8 @@ def run(args):
     if args.resume and args.overwrite:
         raise PamjaxInputError("pamjax fit: --resume continues the fit in --out, --overwrite starts it again: "
                                "give one of them")
-    earlier = _checkpoint_summary(out / CHECKPOINT) if (out / CHECKPOINT).is_file() else None
+    # a damaged checkpoint named here (with --overwrite it is replaced)
+    earlier = None if args.overwrite else fit_start.checkpoint_summary(out / CHECKPOINT, strict=True)
     if earlier and not (args.resume or args.overwrite):  # named before the generic "exists" of the outputs
         if (out / RESULT).exists():
             raise PamjaxInputError(f"pamjax fit: {out / RESULT} exists; pass --overwrite to replace it (or --resume "
@@ -326,24 +317,38 @@ def run(args):
             raise PamjaxInputError(f"pamjax fit --resume: {out} holds no checkpoint ({CHECKPOINT}); run without "
                                    "--resume to start the fit")
         stage = {}  # "profiling": True once the fit's results are written and the profiles are being taken
+        found = fit_start.file_state(checkpoint)  # an --overwrite run's earlier checkpoint: not this run's to resume
         try:
             return _fit_and_write(args, folder, model, experiments, free, options, bench, staged, stage)
         except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM: one line on what is kept and how to go on
             PENDING.clear()  # handled here
             what = "terminated" if interrupt_status(err) == 143 else "interrupted"
-            where = _checkpoint_summary(checkpoint)
+            ours = args.resume or fit_start.file_state(checkpoint) != found  # --resume: the checkpoint is this fit's
+            where = fit_start.checkpoint_summary(checkpoint) if ours else None
             if stage.get("profiling"):
                 print(f"pamjax fit: {what} while profiling; the fit itself is complete and written ({out / RESULT}, "
                       f"{out / MODEL}); no profile was written. Take the profiles with: {_resume_command(args, out)}",
                       file=sys.stderr, flush=True)
             elif where is None:
                 again = f"pamjax fit {args.config} --out {out}" + (" --overwrite" if args.overwrite else "")
-                print(f"pamjax fit: {what} before the first iteration finished; nothing to resume: run {again} to "
-                      "start again", file=sys.stderr, flush=True)
+                kept = "" if found is None or ours else f"; {checkpoint} is the earlier fit's, left as it was"
+                print(f"pamjax fit: {what} before the first iteration finished; nothing to resume (this run "
+                      f"checkpointed nothing{kept}): run {again} to start again", file=sys.stderr, flush=True)
             else:
                 print(f"pamjax fit: {what}; the checkpoint after {where} is kept in {checkpoint}. Resume with: "
                       f"{_resume_command(args, out)}", file=sys.stderr, flush=True)
             return interrupt_status(err)
+
+
+def _print_bench(bench):
+    """The bench's runs left out (grouped by reason) and the loader's notes."""
+    reasons = {}
+    for name, reason in bench.skipped.items():
+        reasons.setdefault(reason, []).append(name)
+    left = "; ".join(f"{', '.join(names)} ({reason})" for reason, names in reasons.items()) or "none"
+    print(f"bench {bench.directory}: left out: {left}", flush=True)
+    for note in bench.notes:
+        print(f"  {note}", flush=True)
 
 
 def print_errors(channel_errors):
@@ -363,10 +368,12 @@ def _fit_and_write(args, folder, model, experiments, free, options, bench=None, 
     import pamjax as pj
 
     checkpoint = folder / CHECKPOINT
-    done = _checkpoint_summary(checkpoint) if args.resume else None
+    done = fit_start.checkpoint_summary(checkpoint) if args.resume else None
     print(f"fitting {len(free)} parameter entries to {len(experiments)} experiments "
           f"({', '.join(e.name for e in experiments)})" + (f", resuming from {done}" if done else "")
           + f"; checkpoint {checkpoint}", flush=True)
+    if bench is not None:  # what the loader left out and what it found, as fits/joint.py prints them
+        _print_bench(bench)
 
     def progress(step, cost, step_size, accepted):  # fit's own line, and the point where a signal is honoured
         if not args.quiet:

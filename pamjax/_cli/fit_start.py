@@ -9,9 +9,13 @@ start model differs in ..."), after a minute of stages redone. The start is now 
 free parameters' values exactly (float64), the problem it was computed for (the fingerprint of the config's model,
 experiments and free parameters, `pamjax._files.fingerprint`) and the stages' summary; `--resume` starts the joint fit
 from it, and computes nothing again.
+
+Both files a fit keeps for `--resume` are read here: the staged start, and the summary of the checkpoint
+(`checkpoint_summary`) that the command names before the fit (a damaged one refused by name) and when interrupted.
 """
 
 import json
+import zipfile
 
 import numpy as np
 
@@ -19,6 +23,36 @@ from .._core.errors import PamjaxInputError
 from .._files.fingerprint import differences, encode, fingerprint
 
 STAGED_START = "staged_start.npz"
+
+
+# what reading a damaged .npz raises: a truncated one is no zip file, a cut member ends early, a foreign one is no npz
+UNREADABLE = (OSError, KeyError, ValueError, IndexError, EOFError, zipfile.BadZipFile)
+
+
+def checkpoint_summary(path, strict=False):
+    """'iteration k (cost c)' of the checkpoint at `path`; None where there is none, or where it cannot be read
+    (`strict`: a `PamjaxInputError` naming the file and what to do)."""
+    if not path.is_file():
+        return None
+    try:
+        with open(path, "rb") as file, np.load(file, allow_pickle=False) as f:  # closed also where np.load fails
+            history = f["history"]
+        return f"iteration {int(history[-1][0])} (cost {history[-1][1]:.6g})"
+    except UNREADABLE as err:
+        if not strict:
+            return None
+        raise PamjaxInputError(f"pamjax fit: {path} is not a readable checkpoint ({type(err).__name__}: {err}), so no "
+                               "fit can be resumed from it: start again with --overwrite (which replaces it), or "
+                               "choose another folder with --out") from None
+
+
+def file_state(path):
+    """What tells a rewritten file from the one found (`write_checkpoint` replaces it whole); None: no file."""
+    try:
+        stat = path.stat()
+    except OSError:
+        return None
+    return stat.st_ino, stat.st_mtime_ns, stat.st_size
 
 
 def save(folder, model, experiments, free, staged):
@@ -41,12 +75,12 @@ def load(path, model, experiments, free):
     if not path.is_file():
         return None
     try:
-        with np.load(path, allow_pickle=False) as f:
+        with open(path, "rb") as file, np.load(file, allow_pickle=False) as f:  # closed also where np.load fails
             values, summary = f["values"], [str(s) for s in f["summary"]]
             saved = json.loads(str(f["problem"]))
-    except (OSError, KeyError, ValueError) as err:
-        raise PamjaxInputError(f"resume: {path} is not a readable staged start ({err}); start again with "
-                               "--overwrite") from err
+    except UNREADABLE as err:
+        raise PamjaxInputError(f"resume: {path} is not a readable staged start ({type(err).__name__}: {err}); start "
+                               "again with --overwrite") from None
     diff = differences(saved, fingerprint(model, experiments, free))
     if diff:
         raise PamjaxInputError(f"resume: {path} holds the staged start of a different fit: " + "; ".join(diff)

@@ -20,7 +20,9 @@ from .errors import PamjaxInputError
 _DELIMITERS = (",", ";", "\t", "|")
 _MISSING = {"", "nan", "na", "n/a", "null", "none", "-nan"}  # lower-case; NaN cells (refused unless mask_nan)
 _INDEX_NAMES = {"", "index", "idx", "row", "rownames"}  # lower-case names of a row-index column
-_UNIT = re.compile(r"^(.*?)\s*(?:\[([^\]]*)\]|\(([^)]*)\))\s*$")
+# `name [unit]` or `name (unit)`; the round form may nest one level of brackets, as the gauge suffix does:
+# `pressure (bar(g))`, `pressure (MPa (abs.))` (docs/cli.md, Units)
+_UNIT = re.compile(r"^(.*?)\s*(?:\[([^\]]*)\]|\(((?:[^()]|\([^()]*\))*)\))\s*$")
 _SAMPLE_LINES = 50  # lines the delimiter is sniffed from
 
 
@@ -51,7 +53,8 @@ def sniff_delimiter(lines):
 
 
 def split_header(cell):
-    """`'pressure [bar abs]'` → ('pressure', 'bar abs'); `'force (N)'` → ('force', 'N'); `'x'` → ('x', None)."""
+    """`'pressure [bar abs]'` → ('pressure', 'bar abs'); `'force (N)'` → ('force', 'N'); `'p (bar(g))'` → ('p',
+    'bar(g)'); `'x'` → ('x', None)."""
     m = _UNIT.match(cell)
     if m is None:
         return cell.strip(), None
@@ -70,8 +73,10 @@ def _number(cell, decimal_comma):
         raise
 
 
-def read_table(path):
-    """Read a CSV table: list of (name, unit or None, float array), in column order."""
+def read_table(path, keep=None):
+    """Read a CSV table: list of (name, unit or None, float array), in column order. `keep` (a callable name → bool;
+    None: every column) chooses the columns to read: another column is left unread whatever its cells hold (text,
+    empty cells) and returned as (name, unit, None); names are checked (index column, doubles) among those read."""
     path = pathlib.Path(path)
     if not path.exists():
         raise PamjaxInputError(f"recording file {path} does not exist")
@@ -90,6 +95,7 @@ def read_table(path):
             "time column 't' and at least one channel, separated by commas, semicolons or tabs"
         )
     names, units = zip(*(split_header(h) for h in header))
+    read = [keep is None or bool(keep(n)) for n in names]
     rows = []
     for lineno, line in lines[1:]:
         cells = _split(line, delimiter)
@@ -100,6 +106,9 @@ def read_table(path):
                                    f"has {len(header)}")
         row = []
         for j, cell in enumerate(cells):
+            if not read[j]:
+                row.append(np.nan)  # a column not asked for: its cells are not read
+                continue
             try:
                 row.append(_number(cell, decimal_comma=delimiter != ","))
             except ValueError:
@@ -109,15 +118,16 @@ def read_table(path):
                 ) from None
         rows.append(row)
     data = np.asarray(rows, dtype=float).reshape(-1, len(header))
-    columns = [(n, u, data[:, j]) for j, (n, u) in enumerate(zip(names, units))
-               if n or u is not None or not np.all(np.isnan(data[:, j]))]  # an empty unnamed column: a trailing ','
-    _check_names(path, [(n, header[j]) for j, (n, _, _) in enumerate(columns)])
-    return columns
+    columns = [(j, n, u, data[:, j] if read[j] else None) for j, (n, u) in enumerate(zip(names, units))
+               if n or u is not None or (read[j] and not np.all(np.isnan(data[:, j])))]  # not an empty unnamed one
+    _check_names(path, [(j, n, header[j]) for j, n, _, v in columns if v is not None])
+    return [(n, u, v) for _, n, u, v in columns]
 
 
 def _check_names(path, named):
+    """`named`: (0-based column, name, header cell) of the columns read."""
     seen = {}
-    for j, (name, cell) in enumerate(named):
+    for j, name, cell in named:
         if name.lower() in _INDEX_NAMES or name.lower().startswith("unnamed:"):
             raise PamjaxInputError(
                 f"{path}: column {j + 1} ({cell!r}) looks like a row index, not a channel (pandas' DataFrame.to_csv "

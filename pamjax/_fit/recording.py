@@ -18,15 +18,18 @@ from .._core.csvio import read_table, write_table
 from .._core.custom_types import RealScalarLike, TimesLike
 from .._core.errors import PamjaxInputError
 from .._core.paths import writable_path
-from .._core.units import channel_dimension, check_magnitude, to_si
-
-# Default unit per well-known channel name.
-DEFAULT_UNITS = dict(
-    pressure="Pa", position="m", velocity="m/s", force="N", mass_flow="kg/s", command="1", volume="m^3"
+from .._core.units import channel_dimension, to_si
+from .recording_files import (
+    DEFAULT_UNITS,
+    add_default_units,
+    checked_magnitude,
+    mat_columns,
+    renaming,
+    sample_location,
+    select_columns,
+    unit_key,
+    wanted,
 )
-# Short names used by bench files (the hybrid reference bench: t, u, p, x) → pamjax channel names.
-BENCH_NAMES = dict(p="pressure", x="position", u="command", v="velocity", F="force", mdot="mass_flow",
-                   duty="command")
 
 
 def _scipy_signal():
@@ -62,7 +65,10 @@ class Recording:
       default the ISO 2533 standard atmosphere, 101325 Pa.
 
     `mask[name]` is a boolean array, True where the sample is valid. `units` holds the SI unit of each channel;
-    `columns` the name of each channel's column in the file it was read from (`Recording.load`; else empty).
+    `columns` the name of each channel's column in the file it was read from (`Recording.load`; else empty);
+    `ignored` the file's columns `Recording.load` left out, column → (its unit as the file gives it, or None; why):
+    those not among its `channels=`, and an NPZ/MAT variable that is no channel pamjax knows and has not one value per
+    time (a scalar setting, a short table).
     """
 
     def __init__(self, t: TimesLike, channels: Mapping[str, TimesLike], units: Mapping[str, str] | None = None, *,
@@ -75,6 +81,7 @@ class Recording:
         units = {} if units is None else dict(units)
         self.source = source
         self.columns = {}  # channel → its column's name in the file it was read from (`Recording.load`)
+        self.ignored = {}  # the file's columns left out by `Recording.load`: column → (unit or None, why)
         where = str(source) if source is not None else f"Recording {self.name!r}"
         t, _ = to_si("t", units.pop("t", "s"), np.asarray(t, dtype=float), where)
         _check_times(t, source, self.name)
@@ -86,7 +93,7 @@ class Recording:
                                    f"{sorted(channels)}: key units by channel name ('t' for the times)"
                                    + (" or by the file's column name" if source is not None else ""))
         if unit_checks:
-            check_magnitude("time", t, where, "t")
+            checked_magnitude("time", t, where, "t", source)
         self.unit_checks = bool(unit_checks)
         self.t = t
         self.channels = {}
@@ -95,9 +102,7 @@ class Recording:
         for key, values in channels.items():
             v = np.asarray(values, dtype=float)
             if v.shape != t.shape:
-                raise PamjaxInputError(
-                    f"Recording {self.name!r}: channel {key!r} has shape {v.shape}, expected {t.shape} (same as t)"
-                )
+                raise PamjaxInputError(f"{where}: channel {key!r} has shape {v.shape}, expected {t.shape} (same as t)")
             v, unit = to_si(key, units.get(key, DEFAULT_UNITS.get(key, "")), v, where, atmosphere)
             valid = np.isfinite(v)
             if not mask_nan and not np.all(valid):
@@ -112,7 +117,7 @@ class Recording:
                     "leave such samples out of its fit: Recording.load(path, mask_nan=True))")
             dimension = "pressure" if unit == "Pa" else channel_dimension(key)
             if dimension == "pressure" or unit_checks:
-                check_magnitude(dimension, v[valid], where, key)
+                checked_magnitude(dimension, v[valid], where, key, source)
             self.channels[key] = v
             self.units[key] = unit
             self.mask[key] = valid
@@ -153,7 +158,7 @@ class Recording:
         """The same samples with their times moved by `dt` [s] (a logger's clock put on the run's); its file and
         columns kept for messages."""
         out = self._replace(self.t + float(dt), dict(self.channels))
-        out.source, out.columns = self.source, dict(self.columns)
+        out.source, out.columns, out.ignored = self.source, dict(self.columns), dict(self.ignored)
         return out
 
     # -- preprocessing ------------------------------------------------------------------------------------------
@@ -240,27 +245,33 @@ class Recording:
     def from_csv(cls, path: str | os.PathLike, *, rename: Mapping[str, str] | None = None,
                  units: Mapping[str, str] | None = None, mask_nan: bool = False, name: str | None = None,
                  unit_checks: bool = True, atmosphere: RealScalarLike | None = None,
-                 default_units: Mapping[str, str] | None = None) -> "Recording":
+                 default_units: Mapping[str, str] | None = None,
+                 channels: Sequence[str] | None = None) -> "Recording":
         """Read a CSV with a header row naming the columns, a time column `t` (or `time`) and one column per
         channel (a channel's name in any capitals: `Pressure [barg]`); `name [unit]` or `name (unit)` headers give
         units, converted to SI (`pamjax._core.csvio`, `_units`).
         Commas, semicolons or tabs; quoted headers; a UTF-8 byte-order mark; lines starting with '#' are comments.
         `units` (dict name → unit) overrides the header's; `default_units` (a bench's meta.json `units`) gives the
         units of columns whose header has none, and a header unit that differs from it is refused, naming both.
-        Either is keyed by the file's column name, the channel's or a bench short name (`p`, `x`, `u`, `t`)."""
-        columns = read_table(path)
+        Either is keyed by the file's column name, the channel's or a bench short name (`p`, `x`, `u`, `t`).
+        `channels` (channel names, e.g. `("pressure", "position", "command")`; None: every column) reads the time
+        and those channels only: another column is left unread, whatever it holds (text, empty cells, another
+        quantity), and listed in `ignored`."""
+        columns = read_table(path, keep=wanted(channels, rename))
         return cls._from_columns(pathlib.Path(path), [(n, v) for n, _, v in columns],
                                  {n: u for n, u, _ in columns if u is not None}, rename, units, mask_nan, name,
-                                 unit_checks, atmosphere, default_units)
+                                 unit_checks, atmosphere, default_units, channels)
 
     @classmethod
     def from_npz(cls, path: str | os.PathLike, *, rename: Mapping[str, str] | None = None,
                  units: Mapping[str, str] | None = None, mask_nan: bool = False, name: str | None = None,
                  unit_checks: bool = True, atmosphere: RealScalarLike | None = None,
-                 default_units: Mapping[str, str] | None = None) -> "Recording":
+                 default_units: Mapping[str, str] | None = None,
+                 channels: Sequence[str] | None = None) -> "Recording":
         """Read an NPZ with a `t` array and one array per channel (the hybrid bench's short names t, u, p, x are
-        renamed to command, pressure, position); `units` and `default_units` as in `from_csv` (the file's own units:
-        its `__units__`)."""
+        renamed to command, pressure, position); `units`, `default_units` and `channels` as in `from_csv` (the
+        file's own units: its `__units__`). A 1-D array that is no channel pamjax knows and has not one value per
+        time is left out (`ignored`); a channel's is refused naming the file."""
         path = pathlib.Path(path)
         if not path.is_file():
             raise PamjaxInputError(f"recording file {path} does not exist")
@@ -270,50 +281,42 @@ class Recording:
         columns = [(k, v) for k, v in columns if v.ndim == 1]  # other arrays are metadata
         return cls._from_columns(
             path, columns, meta.get("units", {}), rename, units, mask_nan, name or meta.get("name"), unit_checks,
-            atmosphere, default_units
+            atmosphere, default_units, channels
         )
 
     @classmethod
     def from_mat(cls, path: str | os.PathLike, *, rename: Mapping[str, str] | None = None,
                  units: Mapping[str, str] | None = None, mask_nan: bool = False, name: str | None = None,
                  unit_checks: bool = True, atmosphere: RealScalarLike | None = None,
-                 default_units: Mapping[str, str] | None = None) -> "Recording":
+                 default_units: Mapping[str, str] | None = None,
+                 channels: Sequence[str] | None = None) -> "Recording":
         """Read a MATLAB `.mat` file (Simulink / dSPACE logs): every 1-D numeric variable is a column (a time
         variable `t` or `time`, channels by name or the bench short names t, u, p, x); MATLAB files carry no units,
         so `units` (dict name → unit, keyed by the variable's name or the channel's) says what is not SI (e.g.
-        {"p": "barg", "x": "mm"}; `default_units` the same). v5-v7.2 files through `scipy.io.loadmat`, v7.3 (HDF5)
-        through h5py (`pip install "pamjax[mat]"`)."""
+        {"p": "barg", "x": "mm"}; `default_units` the same). A variable that is no channel pamjax knows and has not
+        one value per time (a 5-sample calibration table) is left out (`ignored`), as are scalars and text;
+        `channels` as in `from_csv`. v5-v7.2 files through `scipy.io.loadmat`, v7.3 (HDF5) through h5py
+        (`pip install "pamjax[mat]"`)."""
         path = pathlib.Path(path)
         if not path.is_file():
             raise PamjaxInputError(f"recording file {path} does not exist")
-        return cls._from_columns(path, _mat_columns(path), {}, rename, units, mask_nan, name, unit_checks, atmosphere,
-                                 default_units)
+        return cls._from_columns(path, mat_columns(path), {}, rename, units, mask_nan, name, unit_checks, atmosphere,
+                                 default_units, channels)
 
     @classmethod
     def _from_columns(cls, path, columns, file_units, rename, units, mask_nan, name, unit_checks, atmosphere=None,
-                      default_units=None):
-        """`columns`: list of (name in the file, 1-D array). Bench short names (t, u, p, x, ...) and `rename` map
-        file names to channel names; two columns that end up with one name are refused."""
+                      default_units=None, channels=None):
+        """`columns`: list of (name in the file, 1-D array, or None for a column the CSV reader left unread). Bench
+        short names (t, u, p, x, ...) and `rename` map file names to channel names; two columns that end up with one
+        name are refused; the columns left out (`select_columns`) are listed in `ignored`."""
         if rename is not None and not isinstance(rename, dict):
             raise PamjaxInputError(f"rename must be a dict {{name in the file: channel name}}, got {rename!r}")
-        names = [n for n, _ in columns]
-        rename = {**BENCH_NAMES, **(rename or {})}
-        spelled = {**{c: c for c in DEFAULT_UNITS}, "duty": "command"}  # 'Pressure [barg]', 'POSITION', 'Duty'
-        for n in names:
-            known = spelled.get(n.lower())
-            if known is not None and n != known and n not in rename:
-                rename[n] = known
-        if "t" not in [rename.get(n, n) for n in names]:
-            time = next((n for n in names if n.lower() == "time" and n not in rename), None)
-            if time is None:
-                raise PamjaxInputError(f"{path}: needs a time column 't' (or 'time'), has {names}")
-            rename[time] = "t"
-        unknown = set(rename) - set(BENCH_NAMES) - set(names)
-        if unknown:
-            raise PamjaxInputError(f"{path}: rename names {sorted(unknown)}, which are not columns of the file "
-                                   f"(columns: {names})")
+        user, names = dict(rename or {}), [n for n, _ in columns]
+        rename = renaming(names, user, path)
+        kept, ignored = select_columns(columns, rename, user, channels, file_units, path)
+        left = {rename.get(k, k) for k in ignored}  # the channels those columns would have been
         data, u, source = {}, {}, {}
-        for k, v in columns:
+        for k, v in kept:
             new = rename.get(k, k)
             if new in data:
                 raise PamjaxInputError(f"{path}: columns {source[new]!r} and {k!r} both become channel {new!r}; "
@@ -321,12 +324,14 @@ class Recording:
             data[new], source[new] = v, k
             if k in file_units:
                 u[new] = file_units[k]
-        _add_default_units(u, default_units, data, source, names, rename, path, atmosphere)
-        u.update({_unit_key(k, names, rename): v for k, v in (units or {}).items()})  # the caller's: over the file's
+        add_default_units(u, default_units, data, source, names, rename, path, atmosphere, left)
+        given = {unit_key(k, names, rename): v for k, v in (units or {}).items()}
+        u.update({c: v for c, v in given.items() if c not in left or c in data})  # the caller's: over the file's
         t = data.pop("t")
         out = cls(t, data, u, mask_nan=mask_nan, name=name or path.stem, source=path, unit_checks=unit_checks,
                   atmosphere=atmosphere)
         out.columns = {c: k for c, k in source.items() if c != "t"}
+        out.ignored = ignored
         return out
 
     @classmethod
@@ -340,75 +345,6 @@ class Recording:
         if suffix == ".mat":
             return cls.from_mat(path, **kwargs)
         raise PamjaxInputError(f"recording file must be .csv, .npz or .mat, got {path}")
-
-
-def _unit_key(key, names, rename):
-    """The channel a `units` key names: a column of the file (by its name there: `Pressure`, `p`), `t` / `time`, a
-    bench short name or a channel's name in any capitals; other keys are kept (and refused as naming no channel)."""
-    if key in names:
-        return rename.get(key, key)
-    low = str(key).lower()
-    if low in ("t", "time"):
-        return "t"
-    if key in BENCH_NAMES:
-        return BENCH_NAMES[key]
-    return "command" if low == "duty" else low if low in DEFAULT_UNITS else key
-
-
-def _add_default_units(u, default_units, data, source, names, rename, path, atmosphere):
-    """`default_units` (a bench's meta.json `units`) into `u` (channel → unit) for the columns the file gives no unit;
-    a unit the file gives that differs is refused naming both; a known channel the file lacks is skipped."""
-    for key, unit in (default_units or {}).items():
-        channel = _unit_key(key, names, rename)
-        if channel not in data:
-            if channel in DEFAULT_UNITS or channel in BENCH_NAMES.values():
-                continue  # a bench-wide table: a channel this file does not record
-            raise PamjaxInputError(f"{path}: meta.json 'units' (default_units) names {key!r}, neither a column of "
-                                   f"the file {names} nor a channel; key units by column or channel name (t, p / "
-                                   "pressure, x / position, u / duty)")
-        if channel in u and not _same_unit(channel, u[channel], unit, path, atmosphere):
-            raise PamjaxInputError(f"{path}: column {source[channel]!r} is in {u[channel]!r} by the file, but "
-                                   f"meta.json 'units' (default_units) says {key!r} is in {unit!r}: one of them is "
-                                   "wrong; keep one")
-        u.setdefault(channel, str(unit))
-
-
-def _same_unit(channel, a, b, where, atmosphere):
-    """Whether units `a` and `b` of `channel` convert a value alike (`bar g` and `barg`; `Pa` and `Pa abs`)."""
-    if str(a).strip() == str(b).strip():
-        return True
-    try:
-        va, ua = to_si(channel, a, np.array([1.0, 3.0]), where, atmosphere)
-        vb, ub = to_si(channel, b, np.array([1.0, 3.0]), where, atmosphere)
-    except PamjaxInputError:
-        return False
-    return ua == ub and bool(np.allclose(va, vb, rtol=1e-12, atol=0.0))
-
-
-def sample_location(source, name, row):
-    """Where sample `row` (0-based) of a recording read from `source` (a file, or None) is (`Recording.locate`)."""
-    if source is None:
-        return f"Recording {name!r}, row {row}"
-    path = pathlib.Path(source)
-    line = _csv_line(path, row) if path.suffix.lower() in (".csv", ".txt") else None
-    return f"{path}, line {line}" if line is not None else f"{path}, sample {row + 1}"
-
-
-def _csv_line(path, row):
-    """The 1-based line of a CSV file that holds its data row `row` (0-based), counted as `pamjax._core.csvio` reads
-    the file (blank and '#' comment lines skipped, the first other line the header); None if it cannot be read."""
-    try:
-        data = path.read_bytes()
-    except OSError:
-        return None
-    for encoding in ("utf-8-sig", "cp1252", "latin-1"):  # as the reader decodes it
-        try:
-            text = data.decode(encoding)
-            break
-        except UnicodeDecodeError:
-            continue
-    lines = [k + 1 for k, line in enumerate(text.splitlines()) if line.strip() and not line.lstrip().startswith("#")]
-    return lines[row + 1] if 0 <= row < len(lines) - 1 else None
 
 
 def _check_times(t, source, name):
@@ -433,36 +369,6 @@ def _check_times(t, source, name):
         raise PamjaxInputError(f"{sample_location(source, name, row)}: t = {t[row]} s is not after the sample before "
                                f"it ({sample_location(source, name, row - 1).rsplit(', ', 1)[-1]}: t = {t[row - 1]} "
                                "s): t must be strictly increasing; delete a repeated row, sort rows out of order")
-
-
-def _mat_columns(path):
-    """[(name, 1-D float array)] of a .mat file's 1-D numeric variables (row or column vectors)."""
-    try:
-        import scipy.io
-    except ModuleNotFoundError as err:  # pragma: no cover - depends on the environment
-        raise ModuleNotFoundError('reading .mat recordings needs SciPy: pip install "pamjax[mat]"') from err
-    try:
-        raw = scipy.io.loadmat(str(path), squeeze_me=True)
-    except NotImplementedError:  # MATLAB v7.3: an HDF5 file
-        try:
-            import h5py
-        except ModuleNotFoundError as err:
-            raise PamjaxInputError(f"{path} is a MATLAB v7.3 (HDF5) file: reading it needs h5py "
-                                   '(pip install "pamjax[mat]"), or save it with -v7 in MATLAB') from err
-        with h5py.File(path, "r") as f:
-            raw = {k: np.asarray(f[k]) for k in f.keys() if isinstance(f[k], h5py.Dataset)}
-    except ValueError as err:
-        raise PamjaxInputError(f"{path} is not a MATLAB .mat file scipy can read: {err}") from err
-    columns = []
-    for k, v in raw.items():
-        if k.startswith("__"):
-            continue
-        a = np.asarray(v)
-        if a.dtype.kind in "fiu" and a.ndim in (1, 2) and (a.ndim == 1 or 1 in a.shape) and a.size > 1:
-            columns.append((k, a.reshape(-1).astype(float)))
-    if not columns:
-        raise PamjaxInputError(f"{path} holds no 1-D numeric variable (expected t and one vector per channel)")
-    return columns
 
 
 class PamjaxDataWarning(UserWarning):
