@@ -164,15 +164,19 @@ def test_announcement_comes_with_compilation_only(monkeypatch):
 
 @pytest.mark.parametrize("how", ["env", "flag"])
 def test_cache_can_be_turned_off(tmp_path, how):
-    config, cache = _config(tmp_path), tmp_path / "cache"
+    # Off also where JAX_COMPILATION_CACHE_DIR turns JAX's own cache on: JAX wrote its programs there, and pamjax its
+    # traced programs beside them, whatever --no-cache or PAMJAX_COMPILATION_CACHE=0 said.
+    config, cache, jax_cache = _config(tmp_path), tmp_path / "cache", tmp_path / "jax-cache"
     env = {"PAMJAX_COMPILATION_CACHE": "0"} if how == "env" else {}
     extra = [] if how == "env" else ["--no-cache"]
     proc = subprocess.run([sys.executable, "-m", "pamjax", "fit", str(config), "--out", str(tmp_path / "a"),
                            "--quiet", "--no-plot", *extra],
-                          env=dict(os.environ, PAMJAX_CACHE_DIR=str(cache), **env), capture_output=True, text=True,
-                          timeout=600)
+                          env=dict(os.environ, PAMJAX_CACHE_DIR=str(cache), JAX_COMPILATION_CACHE_DIR=str(jax_cache),
+                                   JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0", **env),
+                          capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert not cache.exists() or not any(cache.iterdir())
+    for folder in (cache, jax_cache):
+        assert not folder.exists() or not any(folder.iterdir()), sorted(folder.rglob("*"))
 
 
 def test_default_cache_directory_follows_the_platform_convention(monkeypatch, tmp_path):

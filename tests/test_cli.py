@@ -460,6 +460,70 @@ def test_the_process_is_set_up_for_the_commands_own_process_only(tmp_path, capsy
     assert calls == ["freeze", (50_000, 20, 100), ("status", 2)]  # batched lanes: XLA's default emitters
 
 
+def test_the_common_flags_count_before_or_after_the_command(tmp_path, capsys, no_solves):
+    # `pamjax --no-cache --debug --device gpu simulate x.toml` (where `pamjax --help` lists them) parsed to the
+    # defaults: the subcommand's copies of the flags reset what was given before it (`pamjax --device tpu ...` ran on
+    # the CPU). Given before or after the command they count; after it, it wins; a bad value is refused in both.
+    from pamjax._cli.main import _parser
+
+    parser, _ = _parser()
+    for argv in (["--no-cache", "--debug", "--device", "gpu", "simulate", "x.toml"],
+                 ["simulate", "--no-cache", "--debug", "--device", "gpu", "x.toml"],
+                 ["--device", "tpu", "simulate", "--device", "gpu", "--no-cache", "--debug", "x.toml"]):
+        args = parser.parse_args(argv)
+        assert (args.no_cache, args.debug, args.device, args.config) == (True, True, "gpu", "x.toml"), argv
+    args = parser.parse_args(["fit", "x.toml"])
+    assert (args.no_cache, args.debug, args.device) == (False, False, "auto")
+    for argv in (["--device", "xpu", "simulate", "x.toml"], ["simulate", "--device", "xpu", "x.toml"]):
+        with pytest.raises(SystemExit) as exit_:
+            parser.parse_args(argv)
+        assert exit_.value.code == 2 and "argument --device: invalid choice: 'xpu'" in capsys.readouterr().err
+    config = _write(tmp_path, "[fit\n")  # --debug before the command lets the traceback through
+    with pytest.raises(pamjax.PamjaxInputError, match="not valid TOML"):
+        main(["--debug", "fit", str(config)])
+
+
+def test_a_simulate_step_budget_failure_names_the_config_key(tmp_path, capsys):
+    # A run that outgrows its step budget was told "pass max_steps=16,384 ... (throw=False returns ...)": Python's
+    # words (16,384 is no TOML number; throw is no key). `pamjax simulate` names its [simulate] keys, the number plain.
+    config = _write(tmp_path, """
+        [model]
+        preset = "mas10_tank_system"
+        options = { valve = "pwm" }
+        [input]
+        signal = { kind = "Constant", value = 0.5 }
+        [simulate]
+        t_end = 1.0
+        max_steps = 100
+    """)
+    err = _refused(capsys, ["simulate", str(config), "--out", str(tmp_path / "out"), "--no-plot"],
+                   r"the whole run needs about [\d,]+; set \[simulate\] max_steps = (\d+) or \[simulate\] stepping = "
+                   r'"pwm" \(fixed RK4 steps', code=1)
+    budget = re.search(r"max_steps = (\d+)", err)[1]
+    assert tomllib.loads(f"max_steps = {budget}")["max_steps"] > 100
+    assert "throw=False" not in err and "max_steps=" not in err.split("): ", 1)[1], err
+
+
+@pytest.mark.parametrize("api, cli", [
+    ("needs RK4 steps below 1e-05 s; pass substeps=1,024 or more, or use stepping='adaptive' with "
+     "solver=pamjax.Rodas5() (implicit: not limited by stiffness). Pass throw=False to get the result with status "
+     "instead.",
+     'needs RK4 steps below 1e-05 s; set [simulate] substeps = 1024 or more, or use [simulate] stepping = "adaptive" '
+     'with [simulate] solver = "Rodas5" (implicit: not limited by stiffness).'),
+    ("makes it milder). Pass solver=pamjax.Rodas5() (implicit, L-stable). (throw=False returns the partial result "
+     "with its status instead.)",
+     'makes it milder). Set [simulate] solver = "Rodas5" (implicit, L-stable).'),
+    ("became non-finite (parameters far outside the physical range?); simulate with throw=False and look at the "
+     "trajectory up to that time. (throw=False returns the partial result with its status instead.)",
+     "became non-finite (parameters far outside the physical range?)."),
+])
+def test_a_simulate_failures_advice_is_in_the_configs_terms(api, cli):
+    from pamjax._cli.main import _in_config_terms
+
+    assert _in_config_terms("simulate", api) == cli
+    assert _in_config_terms("fit", api) == api  # a fit's config has no such keys: the advice as it was
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # sweep end to end (small)
 

@@ -27,6 +27,11 @@ def test_pamjax_demo_runs_paper_000s_experiments_and_writes_its_figure(tmp_path,
     printed = capsys.readouterr().out
     assert printed.count("tank,") == 6 and printed.count("muscle + 9.6 kg") == 4
     assert (tmp_path / "paper000_experiments.png").stat().st_size > 50_000
+    # --overwrite replaces the earlier demo whole: its figure, which a --no-plot run does not draw, is removed (was:
+    # left in place, reading as this run's); the programs are compiled already: seconds
+    assert main(["demo", "--out", str(tmp_path), "--overwrite", "--no-plot"]) == 0
+    capsys.readouterr()
+    assert not (tmp_path / "paper000_experiments.png").exists() and (tmp_path / "triangle_0.25_pwm.csv").exists()
     results = run_experiments(progress=lambda line: None)  # compiled already: seconds
     for name, traj in results.items():  # each run written as CSV with units in the header, exact
         rec = pamjax.Recording.load(tmp_path / f"{name}.csv")

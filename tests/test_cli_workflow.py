@@ -213,6 +213,20 @@ def test_a_damaged_checkpoint_is_named_and_overwrite_starts_again(folder, refere
         assert int(f["history"][-1][0]) == reference["iterations"]
 
 
+def test_a_resume_without_a_checkpoint_is_refused_before_the_folder_is_made(folder, monkeypatch, capsys):
+    # Refused with status 2, but after creating the output folder (and its parents), left empty.
+    def no_fit(*args, **kwargs):
+        raise AssertionError("a fit was started")
+
+    monkeypatch.setattr(pamjax, "fit", no_fit)
+    out = folder / "never" / "made"
+    assert main(["fit", str(folder / "fit.toml"), "--out", str(out), "--resume", "--quiet", "--no-plot"]) == 2
+    err = capsys.readouterr().err
+    assert f"pamjax fit: error: {out} holds no checkpoint (checkpoint.npz); run without --resume to start the fit" \
+        in err, err
+    assert not (folder / "never").exists()
+
+
 def test_a_damaged_staged_start_is_named_on_resume(tmp_path):
     # A truncated staged_start.npz on --resume (was: "BadZipFile: File is not a zip file", status 1).
     from pamjax._cli import fit_start

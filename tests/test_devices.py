@@ -2,6 +2,7 @@
 there is one, `--device` / `device=` to choose. No GPU here: the choices are checked against fake device lists and
 a JAX whose backends have not started (its configuration calls recorded), and the command line in this process."""
 
+import os
 import re
 import subprocess
 import sys
@@ -65,7 +66,7 @@ def test_an_unknown_or_absent_device_is_an_input_error_naming_it(work, device, m
 
 def test_the_command_sets_its_platforms_before_jax_starts(monkeypatch):
     # A fresh process's view: backends not started; what the command line sets is recorded, nothing starts.
-    updates = []
+    updates, before = [], jax.config.jax_platforms  # "cpu" where a command ran in this process before (main(argv))
     monkeypatch.setattr("pamjax._core.private.jax_backends_initialized", lambda: False)
     monkeypatch.setattr(jax.config, "update", lambda name, value: updates.append((name, value)))
 
@@ -86,7 +87,7 @@ def test_the_command_sets_its_platforms_before_jax_starts(monkeypatch):
     monkeypatch.setattr(jax, "devices", no_gpu)
     with pytest.raises(PamjaxInputError, match=r"--device gpu: JAX cannot start a GPU here \(Unknown backend"):
         devices.for_command("single", "gpu", environ={})
-    assert updates[-2:] == [("jax_platforms", ""), ("jax_platforms", None)]  # and put back
+    assert updates[-2:] == [("jax_platforms", ""), ("jax_platforms", before)]  # and put back
 
 
 def test_a_fresh_command_process_runs_single_trajectories_on_the_cpu_platform_only():
@@ -104,6 +105,51 @@ def test_the_command_line_says_where_it_runs_and_refuses_an_absent_device(tmp_pa
     assert main(["simulate", str(config), "--out", str(tmp_path / "out")]) == 2  # a config error, after the line
     out, err = capsys.readouterr()
     assert re.search(r"^pamjax simulate: running on 1 cpu device \(single-trajectory work", out, re.M), out
-    assert main(["simulate", str(config), "--device", "tpu", "--out", str(tmp_path / "out")]) == 2
-    out, err = capsys.readouterr()
-    assert "pamjax simulate: error: device='tpu': JAX finds no TPU here (available: cpu)" in err, err
+    for argv in (["simulate", str(config), "--device", "tpu"], ["--device", "tpu", "simulate", str(config)]):
+        assert main([*argv, "--out", str(tmp_path / "out")]) == 2  # given before the command too (was: ignored)
+        out, err = capsys.readouterr()
+        assert "pamjax simulate: error: device='tpu': JAX finds no TPU here (available: cpu)" in err, (argv, err)
+
+
+def test_a_jax_platforms_that_cannot_start_is_an_input_error_naming_it(monkeypatch):
+    # JAX_PLATFORMS=tpu without a TPU: `pamjax simulate` reported an internal error at the first computation
+    # ("RuntimeError: Unable to initialize backend 'tpu' ... please report it", status 1). Now tried first and named
+    # with the platforms there are (JAX then asked for every platform, and put back).
+    updates = []
+    monkeypatch.setattr("pamjax._core.private.jax_backends_initialized", lambda: False)
+    monkeypatch.setattr(jax.config, "update", lambda name, value: updates.append((name, value)))
+
+    def no_tpu(platform=None):
+        if platform == "cpu":
+            return [CPU0]
+        raise RuntimeError("Unable to initialize backend 'tpu': INTERNAL: Failed to open libtpu.so")
+
+    monkeypatch.setattr(jax, "devices", no_tpu)
+    before = jax.config.jax_platforms
+    with pytest.raises(PamjaxInputError, match=r"JAX_PLATFORMS=tpu \(set in the environment\): JAX cannot start "
+                                               r"it here \(Unable to initialize backend 'tpu': .*\); available: cpu\."
+                                               r" Unset JAX_PLATFORMS or set it to one of those, or choose with "
+                                               r"--device"):
+        devices.for_command("single", "auto", environ={"JAX_PLATFORMS": "tpu"})
+    assert updates == [("jax_platforms", ""), ("jax_platforms", before)]
+    updates.clear()
+    # not tried: a CPU-only list (it starts; a sweep still splits the CPU after this), a multi-process run's
+    _, line = devices.for_command("batched", "auto", environ={"JAX_PLATFORMS": "cpu"})
+    assert updates == [] and "JAX_PLATFORMS=cpu" in line
+    _, line = devices.for_command("batched", "auto", environ={"JAX_PLATFORMS": "tpu"}, check=False)
+    assert updates == [] and "JAX_PLATFORMS=tpu" in line
+
+
+def test_the_command_refuses_an_absent_jax_platforms_with_status_2(tmp_path):
+    try:
+        jax.devices("tpu")
+        pytest.skip("this machine has a TPU")
+    except RuntimeError:
+        pass
+    env = dict(os.environ, JAX_PLATFORMS="tpu")
+    proc = subprocess.run([sys.executable, "-m", "pamjax", "simulate", str(tmp_path / "never-read.toml"), "--out",
+                           str(tmp_path / "out")], env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2, proc.stderr
+    assert re.search(r"^pamjax simulate: error: JAX_PLATFORMS=tpu \(set in the environment\): JAX cannot start it "
+                     r"here .*; available: cpu", proc.stderr, re.M), proc.stderr
+    assert "please report it" not in proc.stderr and not (tmp_path / "out").exists()

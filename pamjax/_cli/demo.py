@@ -112,7 +112,8 @@ def run(args):
     from .simulate import columns_of
 
     outputs = [f"{name}.csv" for name in experiment_names()] + ([] if args.no_plot else [FIGURE])
-    with OutputFolder(args.out, "pamjax demo", outputs, overwrite=args.overwrite) as folder:
+    with OutputFolder(args.out, "pamjax demo", outputs, overwrite=args.overwrite,
+                      stale=[FIGURE]) as folder:  # an earlier demo's figure, which a --no-plot run does not replace
         print("pamjax demo: paper 000 (Festo MAS-10-300, MHE2 valve at 50 Hz, 0.65 MPa abs supply), preset "
               "parameters")
         results = run_experiments()

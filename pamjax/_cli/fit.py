@@ -302,6 +302,9 @@ def run(args):
                                    "to continue that fit, e.g. with a larger [fit] max_steps)")
         raise PamjaxInputError(f"pamjax fit: {out / CHECKPOINT} holds an earlier fit (checkpointed after {earlier}); "
                                "continue it with --resume, or start again with --overwrite")
+    if args.resume and not (out / CHECKPOINT).is_file():  # refused before the output folder is made
+        raise PamjaxInputError(f"pamjax fit --resume: {out} holds no checkpoint ({CHECKPOINT}); run without "
+                               "--resume to start the fit")
     outputs = [RESULT, MODEL, CHECKPOINT] + ([] if args.no_plot else [FIGURE]) + ([BENCH] if bench else []) \
         + ([fit_start.STAGED_START] if staged else [])
     if args.profile:
@@ -313,9 +316,6 @@ def run(args):
     with OutputFolder(out, "pamjax fit", outputs, overwrite=args.overwrite, replaceable=replaceable,
                       stale=stale) as folder:
         checkpoint = folder / CHECKPOINT
-        if args.resume and not checkpoint.exists():
-            raise PamjaxInputError(f"pamjax fit --resume: {out} holds no checkpoint ({CHECKPOINT}); run without "
-                                   "--resume to start the fit")
         stage = {}  # "profiling": True once the fit's results are written and the profiles are being taken
         found = fit_start.file_state(checkpoint)  # an --overwrite run's earlier checkpoint: not this run's to resume
         try:

@@ -69,20 +69,30 @@ def _signals_as_interrupts():
         PENDING.clear()
 
 
-def _parser():
+def _common(suppress):
+    """The flags every command takes, before or after its name (`pamjax --no-cache fit ...` = `pamjax fit --no-cache
+    ...`). The main parser holds their defaults; each subparser's copy has none (`argparse.SUPPRESS`), so a flag given
+    before the command is not reset by the subparser, and one given after it wins. Both copies refuse a bad value."""
     common = argparse.ArgumentParser(add_help=False)
-    common.add_argument("--debug", action="store_true",
+    off, auto = (argparse.SUPPRESS, argparse.SUPPRESS) if suppress else (False, "auto")
+    common.add_argument("--debug", action="store_true", default=off,
                         help=f"show Python tracebacks (also: environment variable {DEBUG_VARIABLE}=1)")
-    common.add_argument("--device", default="auto", choices=("auto", "cpu", "gpu", "tpu"),
+    common.add_argument("--device", choices=("auto", "cpu", "gpu", "tpu"), default=auto,
                         help="where the work runs: auto (default: single-trajectory commands on the CPU, where "
                              "they run fastest; sweeps on a GPU/TPU if there is one, else every CPU core), or cpu, "
                              "gpu, tpu to choose (docs/performance.md)")
-    common.add_argument("--no-cache", action="store_true",
-                        help="do not use JAX's persistent compilation cache (default: on, in the user's cache "
-                             "directory; PAMJAX_CACHE_DIR moves it, PAMJAX_COMPILATION_CACHE=0 turns it off)")
+    common.add_argument("--no-cache", action="store_true", default=off,
+                        help="use no compilation cache: neither pamjax's nor JAX's persistent one (default: on, in "
+                             "the user's cache directory; PAMJAX_CACHE_DIR moves it, PAMJAX_COMPILATION_CACHE=0 "
+                             "turns it off)")
+    return common
+
+
+def _parser():
     parser = argparse.ArgumentParser(prog="pamjax", description="Differentiable pneumatic artificial muscle models.",
-                                     parents=[common])
+                                     parents=[_common(suppress=False)])
     sub = parser.add_subparsers(dest="command", required=True)
+    common = _common(suppress=True)
     modules = {}
     for name, (module_name, help_text) in _COMMANDS.items():
         module = importlib.import_module(module_name)
@@ -90,6 +100,28 @@ def _parser():
         module.add_arguments(p)
         modules[name] = module
     return parser, modules
+
+
+# A failed solve's advice is worded for the Python API (pamjax._solve.hints, shared with `pamjax.simulate`); `pamjax
+# simulate` names the [simulate] keys instead (max_steps = 16384, stepping = "pwm", solver = "Rodas5") and drops what
+# only the API has (throw=False).
+_SIMULATE_ADVICE = (
+    (r"\b([Pp])ass (?=(max_steps|substeps|solver)=)", lambda m: "Set " if m[1] == "P" else "set "),
+    (r"\b(set|Set) (max_steps|substeps)=([\d,]+)", lambda m: f"{m[1]} [simulate] {m[2]} = {m[3].replace(',', '')}"),
+    (r"\bsolver=pamjax\.(\w+)\(\)", r'[simulate] solver = "\1"'),
+    (r"\bstepping='(\w+)'", r'[simulate] stepping = "\1"'),
+    (r" ?\(throw=False [^)]*\)", ""),
+    (r"[.;] ?(Pass|pass|simulate with) throw=False[^.]*", ""),
+)
+
+
+def _in_config_terms(command, text):
+    """`text` (a solve's failure) with its advice in the config's terms where the command's config has the keys."""
+    text = str(text)
+    if command == "simulate":
+        for pattern, replacement in _SIMULATE_ADVICE:
+            text = re.sub(pattern, replacement, text)
+    return text
 
 
 def _say(command, text):
@@ -148,11 +180,12 @@ def _main(argv, program=False):
     import jax
 
     jax.config.update("jax_enable_x64", True)  # float64 physics (entry point, not an import-time side effect)
-    if not args.no_cache:  # a second run of a workflow loads its compiled programs instead of compiling (_cache)
-        from .._core.cache import enable_compilation_cache
+    from .._core.cache import announce_compilation, cache_disabled, disable_compilation_cache, enable_compilation_cache
 
+    if args.no_cache or cache_disabled():  # off: JAX's own too, even where JAX_COMPILATION_CACHE_DIR turned it on
+        disable_compilation_cache()
+    else:  # a second run of a workflow loads its compiled programs instead of compiling (_core/cache.py)
         enable_compilation_cache()
-    from .._core.cache import announce_compilation
     from .._core.errors import PamjaxInputError, PamjaxSolveError
 
     command = args.command
@@ -188,7 +221,7 @@ def _main(argv, program=False):
         except PamjaxSolveError as err:
             if debug:
                 raise
-            _say(command, err)
+            _say(command, _in_config_terms(command, err))
             return EXIT_FAILED
         except OSError as err:  # a file that cannot be read or written
             if debug:

@@ -8,9 +8,10 @@ command line turns that on by default; a Python program that imports pamjax deci
 
 Where: `$PAMJAX_CACHE_DIR` if set, else the user's cache directory (`$XDG_CACHE_HOME` or `~/.cache` on Linux,
 `~/Library/Caches` on macOS, `%LOCALAPPDATA%` on Windows) under `pamjax/jax-compilation`.
-Off: `PAMJAX_COMPILATION_CACHE=0`
-(or the CLI's `--no-cache`). Stale entries are harmless (a new key misses and compiles); the directory can be
-deleted at any time. `PAMJAX_CACHE_MIN_COMPILE_SECONDS` (default 0.1) sets the shortest compilation kept.
+Off: `PAMJAX_COMPILATION_CACHE=0` (or the CLI's `--no-cache`; in the CLI both turn JAX's own off too,
+`disable_compilation_cache()`, also where `JAX_COMPILATION_CACHE_DIR` turned it on). Stale entries are harmless (a
+new key misses and compiles); the directory can be deleted at any time. `PAMJAX_CACHE_MIN_COMPILE_SECONDS`
+(default 0.1) sets the shortest compilation kept.
 """
 
 import os
@@ -68,6 +69,16 @@ def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> path
     jax.config.update("jax_persistent_cache_min_compile_time_secs", minimum)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     return path
+
+
+def disable_compilation_cache():
+    """Turn off, for this process, both JAX's persistent compilation cache and pamjax's traced programs beside it
+    (`program_cache()` then returns None), also where `JAX_COMPILATION_CACHE_DIR` in the environment turned JAX's on:
+    the CLI's `--no-cache` and `PAMJAX_COMPILATION_CACHE=0`. Call it before anything compiles."""
+    import jax
+
+    jax.config.update("jax_enable_compilation_cache", False)
+    jax.config.update("jax_compilation_cache_dir", None)
 
 
 class ProgramCache:
@@ -377,11 +388,12 @@ _PROGRAMS = {"cache": None}
 
 
 def program_cache():
-    """The `ProgramCache` of the persistent compilation cache's directory, or None when that cache is off."""
+    """The `ProgramCache` of the persistent compilation cache's directory, or None when that cache is off (no
+    directory, or `jax_enable_compilation_cache` false: `disable_compilation_cache()`)."""
     import jax
 
     directory = jax.config.jax_compilation_cache_dir
-    if not directory:
+    if not directory or not jax.config.jax_enable_compilation_cache:
         return None
     cache = _PROGRAMS["cache"]
     if cache is None or cache.directory.parent != pathlib.Path(directory):
@@ -420,7 +432,8 @@ class announce_compilation:  # noqa: N801 - used as a context manager, like cont
         import jax
 
         directory = jax.config.jax_compilation_cache_dir
-        return None if cache_disabled() or not directory else pathlib.Path(directory)
+        off = cache_disabled() or not directory or not jax.config.jax_enable_compilation_cache
+        return None if off else pathlib.Path(directory)
 
     @staticmethod
     def _cache_is_empty(directory):

@@ -155,6 +155,27 @@ def unavailable_message(device, err):
     return f"--device {device}: JAX cannot start a {str(device).upper()} here ({first})"
 
 
+def _start_users_platforms(users):
+    """Start the platforms the environment's `JAX_PLATFORMS` names (`users`), so that one that cannot start is a
+    `PamjaxInputError` naming the variable and the platforms there are, not an internal error at the first
+    computation. A CPU-only list is never tried (it starts; a sweep still splits the CPU into devices after this)."""
+    import jax
+
+    try:
+        jax.devices()
+    except RuntimeError as err:
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        before = jax.config.jax_platforms
+        jax.config.update("jax_platforms", "")  # every platform JAX can start, to name them
+        try:
+            have = ", ".join(sorted({_kind(d.platform) for d in _all_devices()})) or "none"
+        finally:
+            jax.config.update("jax_platforms", before)
+        raise PamjaxInputError(f"JAX_PLATFORMS={users} (set in the environment): JAX cannot start it here ({first}); "
+                               f"available: {have}. Unset JAX_PLATFORMS or set it to one of those, or choose with "
+                               "--device") from None
+
+
 def for_command(work: Literal["single", "batched"], device: str | None = "auto",
                 environ: Mapping[str, str] | None = None,
                 check: bool = True) -> tuple[contextlib.AbstractContextManager, str]:
@@ -174,6 +195,8 @@ def for_command(work: Literal["single", "batched"], device: str | None = "auto",
     requested = _check(work, device)
     users = environ.get("JAX_PLATFORMS", "").strip()
     if requested == "auto" and users:
+        if check and any(p.strip() not in ("", "cpu") for p in users.split(",")):  # the CPU is always there
+            _start_users_platforms(users)
         return contextlib.nullcontext(), f"running on JAX_PLATFORMS={users} (set in the environment; --device " \
                                          "overrides it)"
     if jax_backends_initialized():

@@ -107,8 +107,9 @@ def failure_hint(system, signal, ts, t0, y0, traj, max_steps, solver, message):
         per_period = f" ({steps * period / (reached - t0):.0f} per PWM period)" if period is not None else ""
         fix = (" or stepping='pwm' (fixed RK4 steps on the PWM grid, ~18 per period, for any horizon)"
                if period is not None else "")
-        budget = int(2 ** math.ceil(math.log2(2 * needed)))  # 2×: the rate of steps varies along a run
-        return (f"{where}{per_period}: the whole run needs about {needed:,.0f}; pass max_steps={budget:,}{fix}")
+        # 2×: the rate of steps varies along a run; a plain integer, as Python and a TOML config both read it
+        budget = int(2 ** math.ceil(math.log2(2 * needed)))
+        return (f"{where}{per_period}: the whole run needs about {needed:,.0f}; pass max_steps={budget}{fix}")
     inflow = negative_inflow(system, signal, t0, y0)
     if inflow is not None:
         return f"{where}: {inflow}"
