@@ -166,6 +166,8 @@ def run(args, data, out):
     probe.unlink()
     if not args.no_cache:  # a second run (another start, more steps, the next plant) compiles nothing again
         pj.runtime.enable_compilation_cache()
+    else:  # none at all: JAX's own too, where JAX_COMPILATION_CACHE_DIR in the environment turned it on
+        pj.runtime.disable_compilation_cache()
     pj.runtime.prefer_fast_compilation()  # fits of single trajectories: XLA's classic CPU emitters compile them faster
     start_model = bench.model
     print(f"bench {data}: {len(bench.experiments)} experiments ({', '.join(e.name for e in bench.experiments)}); "

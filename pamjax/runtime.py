@@ -3,13 +3,18 @@ distributed run.
 
     import pamjax.runtime
     pamjax.runtime.enable_compilation_cache()   # compiled programs kept on disk for the next process
+    pamjax.runtime.disable_compilation_cache()  # none, JAX's own included (JAX_COMPILATION_CACHE_DIR)
     pamjax.runtime.xla_cpu_status()             # whether importing pamjax set its XLA CPU option
     placed, line = pamjax.runtime.for_command("single", "auto")  # before JAX starts: a fit's devices, said
 
 None of these changes a result; they change how fast it comes (docs/performance.md, docs/sweeps.md).
 """
 
-from ._core.cache import CompileStats as CompileStats, enable_compilation_cache as enable_compilation_cache
+from ._core.cache import (
+    CompileStats as CompileStats,
+    disable_compilation_cache as disable_compilation_cache,
+    enable_compilation_cache as enable_compilation_cache,
+)
 from ._core.devices import DeviceChoice as DeviceChoice, for_command as for_command, select_devices as select_devices
 from ._core.distributed import (
     PamjaxDistributedError as PamjaxDistributedError,

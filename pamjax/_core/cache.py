@@ -71,7 +71,7 @@ def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> path
     return path
 
 
-def disable_compilation_cache():
+def disable_compilation_cache() -> None:
     """Turn off, for this process, both JAX's persistent compilation cache and pamjax's traced programs beside it
     (`program_cache()` then returns None), also where `JAX_COMPILATION_CACHE_DIR` in the environment turned JAX's on:
     the CLI's `--no-cache` and `PAMJAX_COMPILATION_CACHE=0`. Call it before anything compiles."""
@@ -79,6 +79,13 @@ def disable_compilation_cache():
 
     jax.config.update("jax_enable_compilation_cache", False)
     jax.config.update("jax_compilation_cache_dir", None)
+
+
+def cache_turned_off():
+    """Whether this process turned JAX's persistent compilation cache off (`disable_compilation_cache`)."""
+    import jax
+
+    return not jax.config.jax_enable_compilation_cache
 
 
 class ProgramCache:

@@ -24,7 +24,7 @@ import equinox as eqx
 import numpy as np
 
 from .._core import jsonio
-from .._core.cache import program_cache
+from .._core.cache import cache_turned_off, program_cache
 from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError, check_count, require_float64
 from .._files.checkpoint import check_checkpoint_path, read_checkpoint, write_checkpoint
@@ -358,7 +358,8 @@ def fit(
     announce = resume is None and progress is not False and not problem.cached(theta)
     if announce:
         cache = ("cached afterwards" if program_cache() is not None
-                 else "pamjax.runtime.enable_compilation_cache() keeps it")
+                 else "not kept: the compilation cache is off" if cache_turned_off()  # --no-cache
+                 else "pamjax.runtime.enable_compilation_cache() keeps it")  # a Python program's default
         print(f"fit: {len(labels)} parameters, {len(exps)} experiments; compiling the residuals and their "
               f"Jacobian (first run; {cache}) ...", flush=True)
     if own:
