@@ -246,3 +246,23 @@ def test_bad_input_is_named():
         pj.bench.HysteresisLoopExperiment(x, p, v, x, starts=starts[:-1])
     with pytest.raises(pj.PamjaxInputError, match="ABSOLUTE"):
         pj.bench.HysteresisLoopExperiment(x, p / 1e5, v, x)  # bar
+
+
+_steady_state_and_slope = eqx.filter_jit(lambda f, v: jax.value_and_grad(f.steady_state)(v))
+
+
+def test_at_rest_the_steady_state_is_the_rest_state_not_nan():
+    """`steady_state(0)`: every z is at rest and the branches' limits are ±δ (|v|/|v|ₛ → 1/(1 − β)); it was 0/0 =
+    NaN, and so was `steady_friction_force(BoucWenFriction(), 0)`. Now z = 0, between them (`initial_state`'s rest
+    state), with a finite slope; off 0 unchanged. A path at rest has no direction: refused by name (it was all NaN)."""
+    law = friction()
+    z, slope = (float(a) for a in _steady_state_and_slope(law, np.asarray(0.0)))
+    assert z == 0.0 and np.isfinite(slope)
+    assert float(pj.bench.steady_friction_force(pj.BoucWenFriction(), 0.0)) == 0.0
+    for v in (-5e-3, 1e-6, 5e-3):  # the closed form's value off 0: |u|ⁿ = |v| / ((1 − β)|v| + β |v|ₛ)
+        level = abs(v) / ((1 - 0.4) * abs(v) + 0.4 * (np.sqrt(v * v + 1e-10) - 1e-5))
+        expected = np.sign(v) * level ** (1 / 1.5) * 3.5e-3
+        assert float(_steady_state_and_slope(law, np.asarray(v))[0]) == pytest.approx(expected, rel=1e-12)
+    x, _, starts = loop_path()
+    with pytest.raises(pj.PamjaxInputError, match=r"velocities must be non-zero \(the direction of motion\), row 0"):
+        pj.bench.path_friction_force(law, x, np.zeros(x.size), starts)

@@ -102,3 +102,45 @@ def test_pressures_for_inverts_the_static_map(joint):
 def test_joint_command_shape_is_checked(joint):
     with pytest.raises(pamjax.PamjaxInputError, match="shape \\(2,\\)"):
         joint.vector_field(0.0, initial_state(joint), jnp.asarray(3.0))
+
+
+def test_equilibrium_angle_refuses_pressures_that_hold_no_angle_in_its_range(joint):
+    """The torque keeps one sign over [−0.6, 0.6] rad: refused with the torques at both ends (it returned 1.04 rad,
+    where 57.7 N m remained, from an unguarded Newton step); initial_state says so too. Traced, the angle stays in the
+    range (the Newton step is clamped to it)."""
+    with pytest.raises(pamjax.PamjaxInputError, match=r"flexor_pressure 800000 Pa and extensor_pressure 101325 Pa "
+                                                      r"hold the joint at no angle in \[−0.6, 0.6\] rad .* the static "
+                                                      r"torque is 253.6 N m at −0.6 rad and 88.42 N m at 0.6 rad"):
+        joint.equilibrium_angle(8e5, P_ATM)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"AntagonisticJoint.initial_state: flexor_pressure 800000 Pa .* "
+                                                      r"or give the start `angle`"):
+        joint.initial_state(8e5, P_ATM)
+    assert _equilibrium_angle(joint, 8e5, P_ATM) == pytest.approx(0.6, abs=1e-12)
+    assert _equilibrium_angle(joint, P_ATM, 8e5) == pytest.approx(-0.6, abs=1e-12)
+
+
+@pytest.mark.parametrize("call, match", [
+    (lambda j: j.equilibrium_angle(3.5, 3.0), "flexor_pressure is 3.5 Pa at most: that looks like bar"),
+    (lambda j: j.equilibrium_angle(3e5, 3e4), "extensor_pressure is 30000 Pa at most.*GAUGE"),
+    (lambda j: j.equilibrium_angle(np.nan, 3e5), "flexor_pressure must be finite"),
+    (lambda j: j.initial_state(3.0, 3.0), "flexor_pressure is 3 Pa at most: that looks like bar"),
+    (lambda j: j.initial_state(3e5, 0.0, angle=0.0), "extensor_pressure is 0 Pa at most"),
+    (lambda j: j.pressures_for(0.1, 5.0), r"pressure_sum must be a GAUGE pressure sum >= 1000 Pa .* looks like bar"),
+    (lambda j: j.pressures_for(0.1, -5e5), r"pressure_sum must be .* got -500000.0: negative"),
+    (lambda j: j.pressures_for(np.nan, 5e5), "angle must be finite"),
+])
+def test_pressures_in_bar_or_gauge_and_bad_sums_are_named(joint, call, match):
+    """Refused by name before anything is computed (each was accepted: bar gave an angle, a negative sum a negative
+    absolute pressure, NaN a NaN)."""
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        call(joint)
+
+
+def test_pressures_for_refuses_an_angle_its_sum_cannot_hold(joint):
+    """A 1 bar sum holds at most ±0.245 rad: 0.3 rad is refused with that range (it returned (201325, 101325) Pa,
+    which hold 0.245 rad); reachable angles still invert the static map."""
+    with pytest.raises(pamjax.PamjaxInputError, match=r"angle 0.3 rad cannot be held with pressure_sum 100000 Pa: that "
+                                                      r"sum holds the joint from -0.245 rad .* to 0.245 rad"):
+        joint.pressures_for(0.3, 1e5)
+    pf, pe = (float(p) for p in joint.pressures_for(0.2, 1e5))
+    assert _equilibrium_angle(joint, pf, pe) == pytest.approx(0.2, abs=1e-6)

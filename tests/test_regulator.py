@@ -243,3 +243,15 @@ def test_stiffness_rate_formula():
 
     fd = (pv(h) - pv(-h)) / (2 * h)
     assert float(_stiffness_rate(muscle, *map(np.asarray, (x, v, p, pdot)))) == pytest.approx(fd, rel=1e-6)
+
+
+def test_a_table_of_upstream_pressures_in_bar_is_named():
+    # Tables 1-2 print the upstream pressures in bar (1.946, 2.954, ...): given as such they were taken as Pa, so every
+    # flow read the tables' first row. The axis is ABSOLUTE pressure in Pa: refused naming the likely unit.
+    conductance, ratio = np.array([1.6e-9, 2.1e-9, 6.4e-9]), np.array([0.66, 0.6, 0.57])
+    with pytest.raises(pamjax.PamjaxInputError, match=r"TabulatedISO6358Restriction.pressure is 3.9 Pa at most: that "
+                                                      r"looks like bar"):
+        TabulatedISO6358Restriction(np.array([1.9, 2.9, 3.9]), conductance, ratio)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"TabulatedISO6358Restriction.pressure drops to 20000 Pa.*GAUGE"):
+        TabulatedISO6358Restriction(np.array([2e4, 1e5, 2e5]), conductance, ratio)  # gauge
+    TabulatedISO6358Restriction(np.array([1.9e5, 2.9e5, 3.9e5]), conductance, ratio)

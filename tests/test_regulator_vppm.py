@@ -170,3 +170,15 @@ def test_bad_input_is_named():
     old_style = pj.ISO6358RegulatorState(pilot=P_ATM, pilot_output=P_ATM, pressure=P_ATM)  # no branch
     with pytest.raises(pj.PamjaxInputError, match="its state needs `hysteresis`"):
         reg.state_rate(old_style, 3.0, 1e-4, 0.0, AIR)
+
+
+@pytest.mark.parametrize("volts", [12.0, -0.5, np.nan])
+def test_a_voltage_outside_the_calibration_is_named(volts):
+    # 12 V was clamped silently to the calibration's 10 V end (static_outlet_pressure 6.95e5 Pa, the band at 10 V)
+    reg = pj.vppm_regulator()
+    within = r"voltage must lie within the calibration's range \[0, 10\] V"
+    match = "voltage must be finite" if np.isnan(volts) else within
+    with pytest.raises(pj.PamjaxInputError, match=match):
+        reg.static_outlet_pressure(volts, 1e-3, AIR)
+    with pytest.raises(pj.PamjaxInputError, match=match):
+        reg.accuracy_band(volts, AIR)

@@ -194,3 +194,31 @@ def test_a_start_time_that_is_not_finite_is_named_before_the_solve(valve, t0):
     # t0 = -inf passed the check "t0 <= ts[0]" and surfaced as a bare OverflowError from the step budget
     with pytest.raises(pamjax.PamjaxInputError, match=r"t0 must be finite \(no NaN or inf\)"):
         pamjax.simulate(presets.mas10_system(valve), pamjax.Constant(0.5), np.linspace(0.0, 0.1, 3), t0=t0)
+
+
+def _nested_start(kind, pressure):
+    """A regulated muscle's or an antagonistic joint's start state whose pressure (kept in a regulator's state) is
+    `pressure`, built without solving anything."""
+    muscle, regulator = presets.dmsp40_muscle(), pamjax.ISO6358Regulator()
+    if kind == "regulated":
+        system = pamjax.RegulatedMuscleSystem(regulator, muscle)
+        return system, pamjax.Constant(3.0), system.initial_state(pressure=pressure, position=0.02)
+    system = pamjax.AntagonisticJoint(regulator, regulator, muscle, muscle)
+    y0 = system.initial_state(3e5, 3e5, angle=0.0)
+    y0 = eqx.tree_at(lambda s: s.extensor.pressure, y0, jnp.asarray(pressure))
+    return system, pamjax.VoltagePair(pamjax.Constant(3.0), pamjax.Constant(3.0)), y0
+
+
+@pytest.mark.parametrize("kind, pressure, match", [
+    ("regulated", 3.0, r"y0.regulator.pressure is 3 Pa at most: that looks like bar"),
+    ("regulated", 0.0, r"y0.regulator.pressure must be an ABSOLUTE pressure > 0 \[Pa\], got 0.0"),
+    ("regulated", 2e4, r"y0.regulator.pressure is 20000 Pa at most: .*GAUGE"),
+    ("joint", 3.0, r"y0.extensor.pressure is 3 Pa at most: that looks like bar"),
+    ("joint", -1e5, r"y0.extensor.pressure must be an ABSOLUTE pressure > 0"),
+])
+def test_a_start_pressure_kept_in_a_regulators_state_is_checked_like_y0_pressure(kind, pressure, match):
+    # simulate read only a top-level y0.pressure: a regulated muscle or a joint started in bar or gauge ran silently
+    # (from 3 Pa). Its pressures are now read through the system's `start_pressures`; refused before any solve.
+    system, signal, y0 = _nested_start(kind, pressure)
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        pamjax.simulate(system, signal, np.linspace(0.0, 0.1, 3), y0=y0)

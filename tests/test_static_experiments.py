@@ -112,3 +112,18 @@ def test_bad_input_is_named_before_any_fit():
                                      restriction="nozzle").check(presets.mas10_valve())
     with pytest.raises(pj.PamjaxInputError, match="needs a 'muscle'"):
         pj.bench.LoopForceMapExperiment([0.0], [3e5], [1e-3], [10.0], scale=1.0).check(presets.mas10_valve())
+
+
+def test_a_run_without_time_and_maps_in_mm_are_named():
+    # A constant `t` gave NumPy's raw LinAlgError ("SVD did not converge"); positions in mm (0-70) were fitted as
+    # metres. Both refused by name, before anything is computed.
+    t = np.zeros(10)
+    with pytest.raises(pj.PamjaxInputError, match=r"^t must span a time .* all are 0"):
+        pj.bench.constant_velocity_point(t, np.linspace(0.0, 0.01, 10), np.full(10, 3.0))
+    x, p, f = np.linspace(0.0, 70.0, 8), np.full(8, 4e5), np.linspace(500.0, 100.0, 8)
+    v = np.where(np.arange(8) < 4, 1e-3, -1e-3)
+    for build in (lambda: pj.bench.ForceMapExperiment(x, p, f), lambda: pj.bench.LoopForceMapExperiment(x, p, v, f),
+                  lambda: pj.bench.HysteresisLoopExperiment(x, p, v, f)):
+        with pytest.raises(pj.PamjaxInputError, match=r"positions reach 70 m, .* these look like mm"):
+            build()
+    pj.bench.ForceMapExperiment(x / 1e3, p, f)  # the same map in metres

@@ -104,3 +104,23 @@ def test_eager_equilibria_compile_once_per_muscle_model():
     assert xs[0] == x_first  # the same muscle and payload behind another valve
     assert float(heavier.muscle.force(xs[1], 4e5, heavier.air)) == pytest.approx(20.0 * 9.81, rel=1e-10)
     assert float(system.muscle.force(xs[2], 5e5, system.air)) == pytest.approx(9.6 * 9.81, rel=1e-10)
+
+
+def test_start_pressures_name_every_absolute_pressure_a_state_holds():
+    """`AbstractSystem.start_pressures`, which `simulate` and `sweep` check in a y0: the top-level `pressure` by
+    default, a regulator's where the state keeps it there (a regulated muscle, both muscles of a joint); another
+    structure has none."""
+    muscle, regulator = presets.dmsp40_muscle(), pamjax.ISO6358Regulator()
+    tank = presets.mas10_tank_system("averaged")
+    regulated = pamjax.RegulatedMuscleSystem(regulator, muscle)
+    joint = pamjax.AntagonisticJoint(regulator, regulator, muscle, muscle)
+    cases = [
+        (tank, tank.initial_state(pressure=3e5), {"pressure": 3e5}),
+        (pamjax.RegulatorSystem(regulator), pamjax.RegulatorSystem(regulator).initial_state(4e5), {"pressure": 4e5}),
+        (regulated, regulated.initial_state(pressure=5e5, position=0.02), {"regulator.pressure": 5e5}),
+        (joint, joint.initial_state(3e5, 2e5, angle=0.0), {"flexor.pressure": 3e5, "extensor.pressure": 2e5}),
+        (regulated, tank.initial_state(pressure=3e5), {}),
+    ]
+    for system, state, expected in cases:
+        got = system.start_pressures(state)
+        assert {name: float(p) for name, p in got.items()} == expected, type(system).__name__

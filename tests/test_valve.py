@@ -195,3 +195,24 @@ def test_fit_averaged_valve_reports_quality():
     fitted, report = pamjax.fit_averaged_valve(EXACT, AIR, np.linspace(0, 1, 11), np.linspace(P_ATM, 6.5e5, 11))
     assert isinstance(fitted, pamjax.AveragedValve)
     assert 0 < report["rmse_percent"] < report["max_error_percent"] < 30
+
+
+@pytest.mark.parametrize("grid, match", [
+    (dict(pressures=np.linspace(1.01325, 6.5, 21)), r"pressures is 6.5 Pa at most: that looks like bar"),
+    (dict(pressures=np.linspace(0.0, 5.487e5, 21)), r"pressures drops to 0 Pa, .* GAUGE pressure"),
+    (dict(pressures=np.array([P_ATM])), r"pressures must hold at least two distinct pressures above atmosphere"),
+    (dict(pressures=np.array([P_ATM, 3e5, 3e5])), r"pressures must hold at least two distinct pressures"),
+    (dict(pressures=np.array([np.nan, 3e5, 4e5])), r"pressures must be finite"),
+    (dict(pressures=np.ones((3, 3)) * 3e5), r"pressures must be a 1-D, non-empty grid, got shape \(3, 3\)"),
+    (dict(commands=np.linspace(0.0, 100.0, 21)), r"commands must lie within the valve's command range \[0, 1\] .* "
+                                                 r"got \[0, 100\]; that looks like percent"),
+    (dict(commands=np.linspace(-1.0, 1.0, 21)), r"commands must lie within .* got \[-1, 1\]"),
+    (dict(commands=np.array([])), r"commands must be a 1-D, non-empty grid, got shape \(0,\)"),
+    (dict(commands=np.ones((3, 3)) * 0.5), r"commands must be a 1-D, non-empty grid, got shape \(3, 3\)"),
+    (dict(commands=np.array([0.5, np.inf])), r"commands must be finite"),
+])
+def test_fit_averaged_valve_refuses_a_grid_in_other_units_by_name(grid, match):
+    # bar, gauge pressures, percent or ±1 commands were fitted silently; NaN, one pressure at atmosphere, an empty or
+    # a 2-D grid gave unnamed or raw errors. Refused before anything is computed.
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        pamjax.fit_averaged_valve(EXACT, AIR, **grid)

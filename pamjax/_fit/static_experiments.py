@@ -34,7 +34,7 @@ from .._core.custom_types import (
     RealVectorLike,
     TableLike,
 )
-from .._core.errors import PamjaxInputError
+from .._core.errors import PamjaxInputError, concrete_values
 from .._core.units import MIN_ABSOLUTE_PA
 from .._physics.friction import AbstractFriction
 from .._physics.gas import AbstractRestriction, Air
@@ -69,7 +69,8 @@ def _air(model):
 
 
 def steady_friction_force(friction: AbstractFriction, velocity: RealArrayLike) -> FloatArray:
-    """Friction force [N] at steady sliding with constant `velocity` [m/s] ≠ 0 (paper 000 eq. 9: F_c sign(v) + C_f v).
+    """Friction force [N] at steady sliding with constant `velocity` [m/s] ≠ 0 (paper 000 eq. 9: F_c sign(v) + C_f v;
+    at v = 0 the friction's at rest: 0 N for a Bouc–Wen one, whose `steady_state(0)` is its rest state).
 
     Memoryless frictions are evaluated directly; a hybrid (stick-slip) friction in its sliding mode sign(v); a friction
     with its own state (bristles) at the state where that state is at rest (Newton on `state_rate(v, z) = 0`)."""
@@ -105,12 +106,12 @@ def constant_velocity_point(t: TableLike, position: TableLike, force: TableLike)
     part of the run at constant velocity."""
     t, x, f = (np.asarray(a, dtype=float) for a in (t, position, force))
     if not (t.ndim == x.ndim == f.ndim == 1 and t.size == x.size == f.size and t.size >= 3):
-        raise PamjaxInputError(
-            f"t, position, force must be 1-D of one length >= 3, got {t.shape}, {x.shape}, {f.shape}"
-        )
+        raise PamjaxInputError(f"t, position, force must be 1-D of one length >= 3: {t.shape}, {x.shape}, {f.shape}")
     for name, a in (("t", t), ("position", x), ("force", f)):
         if not np.all(np.isfinite(a)):
             raise PamjaxInputError(f"{name} must be finite, NaN/inf at row {int(np.argmin(np.isfinite(a)))}")
+    if np.ptp(t) == 0:  # (no slope to fit: NumPy's least squares fails with a LinAlgError)
+        raise PamjaxInputError(f"t must span a time (the velocity is the slope of position over t), all are {t[0]:g}")
     velocity = float(np.polyfit(t, x, 1)[0])
     return velocity, float(np.mean(f)), float(np.std(f, ddof=1) / np.sqrt(f.size))
 
@@ -134,12 +135,28 @@ def _columns(names, arrays):
     return arrays
 
 
+def _check_map(x, p, v=None):
+    """A force map's positions [m] (not mm), ABSOLUTE pressures [Pa] and velocities (≠ 0; none for a static map)."""
+    if np.max(np.abs(x)) > 1.0:  # (as `pamjax._core.units.check_magnitude` refuses a length channel's mm)
+        raise PamjaxInputError(f"positions reach {np.max(np.abs(x)):g} m, but no muscle contracts by a metre (the "
+                               "MAS-10's stroke is 75 mm): these look like mm; pamjax takes m")
+    _check_absolute("pressures", p)
+    if v is not None:
+        _check_moving(v, "the direction of motion")
+
+
+def _check_moving(v, why):
+    """Concrete velocities all ≠ 0 (`why` they must be), else `PamjaxInputError` naming the first 0; traced: none."""
+    v = concrete_values(v)
+    if v is not None and np.any(v == 0):
+        raise PamjaxInputError(f"velocities must be non-zero ({why}), row {int(np.argmin(v != 0))} is 0")
+
+
 def _check_absolute(name, p):
     if np.min(p) < MIN_ABSOLUTE_PA:
-        raise PamjaxInputError(
-            f"{name} must be ABSOLUTE [Pa]; the lowest is {np.min(p):.4g} Pa (row {int(np.argmin(p))}), below half an "
-            "atmosphere: these look like gauge or bar (add 101325 Pa to gauge readings)"
-        )
+        raise PamjaxInputError(f"{name} must be ABSOLUTE [Pa]; the lowest is {np.min(p):.4g} Pa (row "
+                               f"{int(np.argmin(p))}), below half an atmosphere: these look like gauge or bar (add "
+                               "101325 Pa to gauge readings)")
 
 
 def _set_data(experiment, channel, values, scale, unit, name):
@@ -175,7 +192,7 @@ class ForceMapExperiment(AbstractExperiment):
     def __init__(self, positions: TableLike, pressures: TableLike, forces: TableLike,
                  scale: RealScalarLike | None = None, slack_force: RealScalarLike = 0.0, name: str = "force_map"):
         x, p, f = _columns(("positions", "pressures", "forces"), (positions, pressures, forces))
-        _check_absolute("pressures", p)  # half an atmosphere; a vented muscle reads about 101325 Pa absolute
+        _check_map(x, p)  # pressures above half an atmosphere: a vented muscle reads about 101325 Pa absolute
         self.positions, self.pressures, self.forces = jnp.asarray(x), jnp.asarray(p), jnp.asarray(f)
         self.slack = jnp.asarray(f <= slack_force)
         self.scale = float(0.01 * np.ptp(f) if scale is None else scale)
@@ -201,10 +218,8 @@ class ForceMapExperiment(AbstractExperiment):
             raise PamjaxInputError(f"{self.name}: the model has no muscle (needs model.muscle or a Muscle)")
 
     def predict(self, model):
-        muscle = self._muscle(model)
-        air = _air(model)
-        f = jax.vmap(lambda x, p: muscle.static_force(x, p, air))(self.positions, self.pressures)
-        return {"force": f}
+        muscle, air = self._muscle(model), _air(model)
+        return {"force": jax.vmap(lambda x, p: muscle.static_force(x, p, air))(self.positions, self.pressures)}
 
     def layout(self):
         ones = np.ones(self.forces.shape, dtype=bool)
@@ -212,8 +227,7 @@ class ForceMapExperiment(AbstractExperiment):
 
     def residuals_of(self, pred, part="identification"):
         del part
-        f = pred["force"]
-        return jnp.where(self.slack, jnp.maximum(f, 0.0), f - self.forces) / self.scale
+        return jnp.where(self.slack, jnp.maximum(pred["force"], 0.0), pred["force"] - self.forces) / self.scale
 
 
 class AbstractStaticExperiment(AbstractExperiment):
@@ -276,8 +290,7 @@ class FrictionCurveExperiment(AbstractStaticExperiment):
     def __init__(self, velocities: TableLike, forces: TableLike, scale: RealScalarLike | None = None,
                  friction: str = "friction", name: str = "friction_curve"):
         v, f = _columns(("velocities", "forces"), (velocities, forces))
-        if np.any(v == 0):
-            raise PamjaxInputError(f"velocities must be non-zero (sliding), row {int(np.argmin(v != 0))} is 0")
+        _check_moving(v, "sliding")
         self.velocities = jnp.asarray(v)
         self.friction = Component(friction)
         _set_data(self, "force", f, scale, "N", name)
@@ -347,11 +360,7 @@ class LoopForceMapExperiment(AbstractStaticExperiment):
                  scale: RealScalarLike | None = None, slack_force: RealScalarLike = 0.0, name: str = "loop_force_map"):
         x, p, v, f = _columns(("positions", "pressures", "velocities", "forces"),
                               (positions, pressures, velocities, forces))
-        _check_absolute("pressures", p)
-        if np.any(v == 0):
-            raise PamjaxInputError(
-                f"velocities must be non-zero (the direction of motion), row {int(np.argmin(v != 0))} is 0"
-            )
+        _check_map(x, p, v)
         self.positions, self.pressures, self.velocities = jnp.asarray(x), jnp.asarray(p), jnp.asarray(v)
         self.slack = jnp.asarray(f <= slack_force)
         _set_data(self, "force", f, scale, "N", name)  # slack points: see `residuals_of`
@@ -365,8 +374,7 @@ class LoopForceMapExperiment(AbstractStaticExperiment):
 
     def residuals_of(self, pred, part="identification"):
         del part
-        f = pred["force"]
-        return jnp.where(self.slack, jnp.maximum(f, 0.0), f - self.data["force"]) / self.scale
+        return jnp.where(self.slack, jnp.maximum(pred["force"], 0.0), pred["force"] - self.data["force"]) / self.scale
 
 
 def loop_average(positions: TableLike, pressures: TableLike, velocities: TableLike, forces: TableLike,
@@ -399,6 +407,7 @@ def path_friction_force(friction: AbstractFriction, positions: TableLike, veloci
     stage's state is kept within the sliding states ±z_s of that speed, which bound the state of a friction that
     saturates there (bristle, Bouc–Wen): where a transition is shorter than a sub-step (stiff), RK4 then lands on the
     branch instead of overshooting it."""
+    _check_moving(velocities, "the direction of motion")
     x, v = jnp.asarray(positions, dtype=float), jnp.asarray(velocities, dtype=float)
     if friction.initial_state() is None or friction.hybrid:
         return steady_friction_force(friction, v)
@@ -407,7 +416,6 @@ def path_friction_force(friction: AbstractFriction, positions: TableLike, veloci
     step_velocity = jnp.sign(dx) * speed
     h = jnp.abs(dx) / speed / substeps
     at_start = jax.vmap(lambda w: sliding_state(friction, w))(v)
-
     bound = jnp.abs(jax.vmap(lambda w: sliding_state(friction, w))(step_velocity + (dx == 0) * v))
 
     def rk4(z, u, h, zmax):
@@ -462,11 +470,7 @@ class HysteresisLoopExperiment(AbstractStaticExperiment):
                  starts: BoolTableLike | None = None, substeps: int = 4, name: str = "hysteresis_loop"):
         x, p, v, f = _columns(("positions", "pressures", "velocities", "forces"),
                               (positions, pressures, velocities, forces))
-        _check_absolute("pressures", p)
-        if np.any(v == 0):
-            raise PamjaxInputError(
-                f"velocities must be non-zero (the direction of motion), row {int(np.argmin(v != 0))} is 0"
-            )
+        _check_map(x, p, v)
         if starts is None:
             starts = np.concatenate([[True], p[1:] != p[:-1]])
         starts = np.asarray(starts)
@@ -493,5 +497,4 @@ class HysteresisLoopExperiment(AbstractStaticExperiment):
 
     def residuals_of(self, pred, part="identification"):
         del part
-        f = pred["force"]
-        return jnp.where(self.slack, jnp.maximum(f, 0.0), f - self.data["force"]) / self.scale
+        return jnp.where(self.slack, jnp.maximum(pred["force"], 0.0), pred["force"] - self.data["force"]) / self.scale

@@ -101,9 +101,7 @@ class BoucWenFriction(AbstractFriction):
     def initial_state(self, velocity=0.0):
         """At rest: the virgin state z = 0, halfway between the branches (a fit may start elsewhere: y0); a run that
         starts moving (a recording started mid-run) on the branch of its velocity (`steady_state`)."""
-        v = jnp.asarray(velocity, dtype=float)
-        moving = v != 0
-        return jnp.where(moving, self.steady_state(jnp.where(moving, v, 1.0)), 0.0)
+        return self.steady_state(velocity)  # 0 at rest
 
     def state_rate(self, v, z):
         u = z / self.transition_length
@@ -116,9 +114,13 @@ class BoucWenFriction(AbstractFriction):
         """z where ż = 0 at constant velocity v ≠ 0, on the branch of v: ẋ − |u|ⁿ ((1 − β) ẋ + β |ẋ|ₛ sign u) = 0 gives
         |u|ⁿ = |v| / ((1 − β)|v| + β |v|ₛ), |v|ₛ the smoothed |v| (`smooth_abs`): sign(v) for |v| ≫ the smoothing
         width, above it at a creep (|v|ₛ < |v|: 1.025 at 1e-4 m/s, 1.38 at 1e-6 m/s with the defaults). In closed
-        form (three Newton steps from sign(v) had not converged at a creep: 2.6 instead of 1.38)."""
+        form (three Newton steps from sign(v) had not converged at a creep: 2.6 instead of 1.38). At v = 0 every z is
+        at rest and the two branches' limits differ in sign: z = 0, between them (the state at rest of
+        `initial_state`; the level's 0/0 there was NaN), with finite gradients."""
         v = jnp.asarray(v, dtype=float)
-        speed = jnp.abs(v)
-        level = speed / ((1.0 - self.shape) * speed + self.shape * smooth_abs(v, self.velocity_width))
-        u = jnp.sign(v) * level ** (1.0 / self.exponent)
+        moving = v != 0
+        safe = jnp.where(moving, v, 1.0)  # the "double where": no 0/0 in the value or the gradient at v = 0
+        speed = jnp.abs(safe)
+        level = speed / ((1.0 - self.shape) * speed + self.shape * smooth_abs(safe, self.velocity_width))
+        u = jnp.where(moving, jnp.sign(safe) * level ** (1.0 / self.exponent), 0.0)
         return u * self.transition_length

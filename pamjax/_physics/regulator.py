@@ -25,6 +25,7 @@ from typing import Any, Literal
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._core.custom_types import Array, FloatScalar, Real, RealScalar, RealScalarLike, StateLike
 from .._core.errors import (
@@ -33,6 +34,7 @@ from .._core.errors import (
     check_in_closed_interval,
     check_nonnegative,
     check_positive,
+    concrete_values,
 )
 from .._core.fitting import parameter, positive
 from .._core.units import BAR, FLOW_UNIT, check_absolute_pressure
@@ -385,7 +387,9 @@ class ISO6358Regulator(AbstractRegulator):
         """The steady outlet pressure [Pa abs] at `voltage` [V] while `mass_flow` [kg/s] leaves the outlet (> 0;
         < 0 flows back in): the main stage's droop, plus the hysteresis offset on `branch` (+1: the set pressure last
         rose, −1: it fell). The data sheet's pressure-against-flow curve. Bisection between atmosphere and supply
-        (the seats' net flow falls with the outlet pressure)."""
+        (the seats' net flow falls with the outlet pressure). A concrete `voltage` outside the calibration's range
+        (0-10 V) raises `PamjaxInputError` (the calibration would hold its end value)."""
+        self._check_voltage(voltage)
         target = air.atmospheric_pressure + self.calibration(voltage)
         if self.hysteresis is not None:
             target = target + self.hysteresis.offset(jnp.asarray(branch, dtype=float))
@@ -408,10 +412,21 @@ class ISO6358Regulator(AbstractRegulator):
     def accuracy_band(self, voltage, air, accuracy=paper001.ACCURACY):
         """(lowest, highest) outlet pressure [Pa abs] within the accuracy band at `voltage` [V]: the set pressure
         ± `accuracy` × the full scale (the calibration at 10 V; paper 001: "standard accuracy 2 %", of the full
-        scale assumed, as a regulator's data sheet states it; 0.2 bar for the 10 bar VPPM)."""
+        scale assumed, as a regulator's data sheet states it; 0.2 bar for the 10 bar VPPM). A concrete `voltage`
+        outside the calibration's range (0-10 V) raises `PamjaxInputError`."""
+        self._check_voltage(voltage)
         set_pressure = air.atmospheric_pressure + self.calibration(voltage)
         band = accuracy * self.calibration(VOLTAGE_RANGE[1])
         return set_pressure - band, set_pressure + band
+
+    def _check_voltage(self, voltage):
+        """`voltage` [V], where concrete, finite and within the calibration's table (it holds its end values beyond
+        it: 12 V would silently set the 10 V pressure)."""
+        check_finite(voltage, "voltage")
+        v, table = concrete_values(voltage), concrete_values(self.calibration.voltage)
+        if v is not None and table is not None and not np.all((v >= table[0]) & (v <= table[-1])):
+            raise PamjaxInputError(f"voltage must lie within the calibration's range [{table[0]:g}, {table[-1]:g}] V, "
+                                   f"got {np.array2string(v, threshold=6)}")
 
     def state_scale(self):
         s = jnp.asarray(BAR)

@@ -16,6 +16,7 @@ import numpy as np
 from .._core.custom_types import Table
 from .._core.errors import PamjaxInputError, check_finite, check_in_open_interval, check_positive, concrete_values
 from .._core.fitting import parameter, positive, ratio
+from .._core.units import check_absolute_pressure
 from .._papers import paper001
 from .gas import (
     DEFAULT_LAMINAR_RATIO,
@@ -158,6 +159,7 @@ class TabulatedISO6358Restriction(AbstractRestriction, PreparesTables):
         name = type(self).__name__
         check_table_axis(self.pressure, f"{name}.pressure")
         check_positive(self.pressure, f"{name}.pressure")
+        check_absolute_pressure(self.pressure, f"{name}.pressure")  # upstream pressures in bar (1.9, 2.9) refused
         for field in ("sonic_conductance", "critical_ratio"):
             if jnp.shape(getattr(self, field)) != jnp.shape(self.pressure):
                 raise PamjaxInputError(

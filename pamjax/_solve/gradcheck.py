@@ -1,4 +1,5 @@
-"""Gradient checks: autodiff (forward and reverse mode) against central finite differences, per parameter.
+"""Gradient checks: autodiff (forward and reverse mode) against finite differences, per parameter: central ones,
+one-sided ones for a parameter on the edge of its valid range.
 
 Used by `tests/reliability/` and `benchmarks/reliability.py`; public so users can check their own losses.
 """
@@ -13,7 +14,9 @@ import jax.tree_util as jtu
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
-from .._core.custom_types import PyTreeLike, RealScalarLike
+from .._core.custom_types import PyTreeLike, RealArrayLike, RealScalarLike
+from .._core.errors import PamjaxInputError
+from .checks import check_parameters
 
 
 def parameter_names(tree):
@@ -39,59 +42,69 @@ def parameter_names(tree):
 # judged error 5.2e-5, one pair inconclusive (set 4's PWM frequency, 9e-4 of the largest scaled sensitivity: noise
 # reaches it before its curvature lets go). A finer ladder (adding 5e-6, 2e-6) found a coincident noisy pair there.
 RELATIVE_STEPS = (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4, 5e-5, 2e-5, 1e-5, 1e-6)
+# A parameter at 0 has no magnitude of its own to step by (h·0 = 0) or to scale its sensitivity with (0 · ∂L/∂θ = 0,
+# which passed any gradient): it takes this one instead (`zero_scale`), the size of a change that matters, in its own
+# unit. 1 suits a pure number (a duty, an offset of order 1); a dimensional parameter at 0 (an internal volume of
+# 0 m³, an outlet flow of 0 kg/s) needs its natural size given (1e-4 m³, 1e-3 kg/s).
+ZERO_SCALE = 1.0
+SIDES = {0: "central", 1: "forward", -1: "backward"}
 
 
 def gradient_check(loss: Callable[[PyTreeLike, Literal["forward", "reverse"]], RealScalarLike], tree: PyTreeLike, *,
                    relative_steps: Sequence[float] = RELATIVE_STEPS,
-                   floor: RealScalarLike = 1e-3) -> dict[str, np.ndarray]:
-    """Compare d loss / d θ from forward mode, reverse mode and central finite differences for every scalar θ in the
+                   floor: RealScalarLike = 1e-3, zero_scale: RealArrayLike = ZERO_SCALE) -> dict[str, np.ndarray]:
+    """Compare d loss / d θ from forward mode, reverse mode and finite differences for every scalar θ in the
     inexact-array leaves of `tree`.
 
     `loss(tree, adjoint)` returns a scalar; `adjoint` is "forward" or "reverse" (pass it on to `simulate`/`solve`).
-    Finite differences use steps h·max(|θ|, 1e-12) for each h in `relative_steps` (default `RELATIVE_STEPS`, a
-    ladder from 1e-2 to 1e-6); the estimate kept per parameter is the mean of the most consistent pair of
-    neighbouring steps. A wide ladder matters for losses computed by adaptive solves: the loss is smooth only down
-    to the solver's noise (its step sequence changes with θ), so small steps measure the noise (noise / step) and
-    large ones the curvature; the consistent pair lies between, at a different step for each parameter.
+    Finite differences use steps h·m for each h in `relative_steps` (default `RELATIVE_STEPS`, a ladder from 1e-2 to
+    1e-6), m = |θ|, or `zero_scale` (default `ZERO_SCALE` = 1; a number, or one per parameter) for a parameter at 0;
+    the estimate kept per parameter is the mean of the most consistent pair of neighbouring steps. A wide ladder
+    matters for losses computed by adaptive solves: the loss is smooth only down to the solver's noise (its step
+    sequence changes with θ), so small steps measure the noise (noise / step) and large ones the curvature; the
+    consistent pair lies between, at a different step for each parameter.
 
-    Errors are measured on scaled sensitivities s = θ ∂L/∂θ, relative to max(|s_fd|, `floor`·max|s_fd|), so that
+    Differences are central, (L(θ + s) − L(θ − s)) / 2s, where both perturbed trees pass their components' checks
+    (`__check_init__`, as `simulate` applies them); a parameter on the edge of its valid range (a volume of 0, a
+    calibration's voltage at 10 V) is differenced one-sidedly into it, (∓3 L(θ) ± 4 L(θ ± s) ∓ L(θ ± 2s)) / 2s
+    (second order); one that cannot be moved either way at any step is named (`PamjaxInputError`), before any
+    difference is computed.
+
+    Errors are measured on scaled sensitivities s = m ∂L/∂θ, relative to max(|s_fd|, `floor`·max|s_fd|), so that
     parameters with negligible influence are not judged on round-off.
 
     Returns a dict of NumPy arrays: `names`, `forward`, `reverse`, `finite_difference`, `fd_consistency`,
     `error_fd` (autodiff reverse vs FD) and `error_modes` (forward vs reverse), both relative as described, and
-    `error_modes_normwise` = max|s_fwd − s_rev| / max|s_rev| (forward vs reverse relative to the gradient's size).
+    `error_modes_normwise` = max|s_fwd − s_rev| / max|s_rev| (forward vs reverse relative to the gradient's size);
+    `difference`: per parameter "central", "forward" or "backward" (at the kept pair).
     """
     params, static = eqx.partition(tree, eqx.is_inexact_array)
     flat, unravel = ravel_pytree(params)
+    names = np.asarray(parameter_names(tree))
+    theta = np.asarray(flat)
+    magnitude = _magnitudes(theta, zero_scale)
 
     def f(vector, adjoint):
         return loss(eqx.combine(unravel(vector), static), adjoint)
 
+    def passes(vector):
+        try:
+            check_parameters(eqx.combine(unravel(jnp.asarray(vector)), static), "tree")
+        except PamjaxInputError:
+            return False
+        return True
+
+    check_parameters(eqx.combine(unravel(flat), static), "tree")  # the tree itself must pass
+    sides = _sides(passes, theta, magnitude, relative_steps, names)
     reverse = np.asarray(jax.jit(jax.grad(lambda v: f(v, "reverse")))(flat))
     forward = np.asarray(jax.jit(jax.jacfwd(lambda v: f(v, "forward")))(flat))
-    f_batched = jax.jit(jax.vmap(lambda v: f(v, "reverse")))
-    theta = np.asarray(flat)
-    n = theta.size
-    magnitude = np.maximum(np.abs(theta), 1e-12)
-    estimates = []
-    for h in relative_steps:
-        step = h * magnitude
-        perturb = np.concatenate([np.diag(step), -np.diag(step)])
-        values = np.asarray(f_batched(jnp.asarray(theta[None, :] + perturb)))
-        estimates.append((values[:n] - values[n:]) / (2 * step))
-    estimates = np.stack(estimates)  # (steps, n)
-    if len(relative_steps) > 1:
-        gaps = np.abs(np.diff(estimates, axis=0))  # consistency of neighbouring steps
-        best = np.argmin(gaps, axis=0)
-        fd = 0.5 * (estimates[best, np.arange(n)] + estimates[best + 1, np.arange(n)])
-        consistency = gaps[best, np.arange(n)] / np.maximum(np.abs(fd), 1e-300)
-    else:
-        fd, consistency = estimates[0], np.zeros(n)
-    s_fd, s_rev, s_fwd = theta * fd, theta * reverse, theta * forward
+    estimates = _estimates(jax.jit(jax.vmap(lambda v: f(v, "reverse"))), theta, magnitude, relative_steps, sides)
+    fd, consistency, best = _kept(estimates)
+    s_fd, s_rev, s_fwd = magnitude * fd, magnitude * reverse, magnitude * forward
     denominator = np.maximum(np.abs(s_fd), floor * np.max(np.abs(s_fd)))
     denominator_modes = np.maximum(np.abs(s_rev), floor * np.max(np.abs(s_rev)))
     return dict(
-        names=np.asarray(parameter_names(tree)),
+        names=names,
         forward=forward,
         reverse=reverse,
         finite_difference=fd,
@@ -99,4 +112,86 @@ def gradient_check(loss: Callable[[PyTreeLike, Literal["forward", "reverse"]], R
         error_fd=np.abs(s_rev - s_fd) / denominator,
         error_modes=np.abs(s_fwd - s_rev) / denominator_modes,
         error_modes_normwise=np.max(np.abs(s_fwd - s_rev)) / max(np.max(np.abs(s_rev)), 1e-300),
+        difference=np.asarray([SIDES[int(sides[k, i])] for i, k in enumerate(best)]),
     )
+
+
+def _magnitudes(theta, zero_scale):
+    """Each parameter's scale m: |θ|, or `zero_scale` where θ = 0 (checked: > 0 and finite, one or one per θ)."""
+    scale = np.asarray(zero_scale, dtype=float)
+    if scale.shape not in ((), theta.shape) or not np.all(np.isfinite(scale) & (scale > 0)):
+        raise PamjaxInputError(f"zero_scale must be > 0 and finite, one number or one per parameter ({theta.size}), "
+                               f"got {zero_scale!r}")
+    return np.where(theta != 0, np.abs(theta), np.broadcast_to(scale, theta.shape))
+
+
+def _sides(passes, theta, magnitude, relative_steps, names):
+    """(steps, n): per step and parameter, how it is differenced: 0 central, +1 forward, −1 backward, NaN not at
+    all (no valid pair). `passes(vector)`: whether the tree at `vector` passes its components' checks. A valid range
+    is an interval: from the largest offset that passes, every smaller one on that side does too."""
+    h = np.asarray(relative_steps, dtype=float)
+    sides = np.full((h.size, theta.size), np.nan)
+    for i in range(theta.size):
+        ok = {}
+        for sign in (1.0, -1.0):
+            offsets = sign * magnitude[i] * np.concatenate([h, 2.0 * h])
+            ok[sign] = np.zeros(offsets.size, dtype=bool)
+            for j in np.argsort(-np.abs(offsets)):
+                vector = theta.copy()
+                vector[i] += offsets[j]
+                if passes(vector):
+                    ok[sign] = np.abs(offsets) <= np.abs(offsets[j])
+                    break
+        n = h.size
+        plus, minus = ok[1.0], ok[-1.0]
+        sides[:, i] = np.where(plus[:n] & minus[:n], 0.0, np.where(plus[:n] & plus[n:], 1.0,
+                                                                    np.where(minus[:n] & minus[n:], -1.0, np.nan)))
+    stuck = [str(names[i]) for i in range(theta.size) if np.all(np.isnan(sides[:, i]))]
+    if stuck:
+        raise PamjaxInputError(
+            f"gradient_check: {', '.join(stuck)} cannot be perturbed either way (every step of relative_steps × its "
+            "magnitude leaves what its component accepts): leave it out of `tree` (keep it in the loss' closure)"
+        )
+    return sides
+
+
+def _estimates(f_batched, theta, magnitude, relative_steps, sides):
+    """(steps, n) finite-difference derivatives: each step's 2n perturbed trees and θ itself in one batch."""
+    n = theta.size
+    estimates = []
+    for k, h in enumerate(relative_steps):
+        step, side = h * magnitude, np.nan_to_num(sides[k], nan=0.0)
+        first = np.where(side == 0, 1.0, side)  # central: +s, −s; one-sided: ±s, ±2s
+        second = np.where(side == 0, -1.0, 2.0 * side)
+        usable = ~np.isnan(sides[k])
+        perturb = np.concatenate([np.diag(np.where(usable, first * step, 0.0)),
+                                  np.diag(np.where(usable, second * step, 0.0)), np.zeros((1, n))])
+        try:
+            values = np.asarray(f_batched(jnp.asarray(theta[None, :] + perturb)))
+        except jax.errors.JaxRuntimeError as err:  # a refusal the components' checks do not make (the loss' own)
+            refusal = [line.strip() for line in str(err).splitlines() if "must be" in line][:1]
+            raise PamjaxInputError(f"gradient_check: the loss failed at a tree perturbed by relative step {h:g}"
+                                   + (f": {refusal[0].split('Error: ')[-1]}" if refusal else "")) from None
+        plus, other, base = values[:n], values[n:2 * n], values[-1]
+        central = (plus - other) / (2 * step)
+        one_sided = side * (-3.0 * base + 4.0 * plus - other) / (2 * step)
+        estimates.append(np.where(usable, np.where(side == 0, central, one_sided), np.nan))
+    return np.stack(estimates)
+
+
+def _kept(estimates):
+    """(fd, consistency, step index) per parameter: the mean of the most consistent pair of neighbouring steps (both
+    usable), or the first usable estimate where no pair is."""
+    n = estimates.shape[1]
+    columns = np.arange(n)
+    first = np.argmax(~np.isnan(estimates), axis=0)
+    if estimates.shape[0] == 1:
+        return estimates[0], np.zeros(n), first
+    gaps = np.abs(np.diff(estimates, axis=0))  # consistency of neighbouring steps
+    gaps = np.where(np.isnan(gaps), np.inf, gaps)
+    best = np.argmin(gaps, axis=0)
+    paired = np.isfinite(gaps[best, columns])
+    fd = np.where(paired, 0.5 * (estimates[best, columns] + estimates[np.minimum(best + 1, len(estimates) - 1),
+                                                                          columns]), estimates[first, columns])
+    consistency = np.where(paired, gaps[best, columns], np.inf) / np.maximum(np.abs(fd), 1e-300)
+    return fd, consistency, np.where(paired, best, first)

@@ -85,7 +85,7 @@ def validate_values(system, signal, y0, plan, values, batch_size):
         if not np.all(np.isfinite(v)):
             bad = int(np.argmin(np.all(np.isfinite(v.reshape(batch_size, -1)), axis=1)))
             raise PamjaxInputError(f"over[{key!r}] must be finite, point {bad} is {v[bad]}")
-    check_start(y0, plan, flat)
+    check_start(system, y0, plan, flat)
 
     def check_lanes(vals, n, leaves="scalar"):
         for key, (where, parts), shape in zip(plan.keys, plan.targets, plan.leaf_shapes):
@@ -134,9 +134,12 @@ def validate_values(system, signal, y0, plan, values, batch_size):
                       {k: np.asarray(v[i]).tolist() for k, v in flat.items()} | {"index": i})
 
 
-def _names_pressure(parts):
-    """Whether a start value's path names a pressure: a state's `pressure` leaf, or an `initial_state` keyword such as
-    `pressure` or `flexor_pressure` (the contract: `AbstractSystem.initial_state` takes ABSOLUTE pressures)."""
+def _names_pressure(parts, pressures=None):
+    """Whether a start value's path names a pressure: with a `y0` given, one of its `pressures` (the system's
+    `start_pressures(y0)`: "pressure", "regulator.pressure"); without, an `initial_state` keyword such as `pressure`
+    or `flexor_pressure` (the contract: `AbstractSystem.initial_state` takes ABSOLUTE pressures)."""
+    if pressures is not None:
+        return ".".join(parts) in pressures
     return bool(parts) and (parts[-1] == "pressure" or parts[-1].endswith("_pressure"))
 
 
@@ -150,15 +153,17 @@ def _check_start_pressure(values, name):
     check_absolute_pressure(v, name)  # 1.01325 (bar) or 0.5 (gauge MPa) refused naming the likely unit
 
 
-def check_start(y0, plan, flat):
+def check_start(system, y0, plan, flat):
     """The checks `simulate` applies to a start state, on a sweep's, before any solve: every swept start value that is
-    a pressure ("y0.pressure", "y0.flexor_pressure", a `pressure` leaf of the `y0` given) an ABSOLUTE pressure > 0
-    [Pa] at every point, named by its key; the `y0` given finite, its pressures that are not swept likewise."""
+    a pressure ("y0.pressure", "y0.flexor_pressure", a pressure of the `y0` given by the system's `start_pressures`:
+    "y0.regulator.pressure") an ABSOLUTE pressure > 0 [Pa] at every point, named by its key; the `y0` given finite,
+    its pressures that are not swept likewise."""
+    pressures = None if y0 is None else type(system).start_pressures(system, y0)
     swept = set()
     for key, (where, parts) in zip(plan.keys, plan.targets):
         if where == "y0":
             swept.add(".".join(parts))
-            if _names_pressure(parts):
+            if _names_pressure(parts, pressures):
                 _check_start_pressure(flat[key], f"over[{key!r}]")
     if y0 is None:
         return
@@ -168,7 +173,8 @@ def check_start(y0, plan, flat):
             continue
         if not np.all(np.isfinite(np.asarray(leaf, dtype=float))):
             raise PamjaxInputError(f"y0 must be finite (no NaN or inf), y0.{name} is {leaf}")
-        if _names_pressure(name.split(".")):
+    for name, leaf in pressures.items():
+        if name not in swept and not isinstance(leaf, jax.core.Tracer):
             _check_start_pressure(leaf, f"y0.{name}")
 
 

@@ -10,6 +10,7 @@ import abc
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import jax.tree_util as jtu
 
 from .._physics.friction import AbstractFriction
 from .._physics.gas import Air
@@ -33,6 +34,8 @@ class AbstractSystem(eqx.Module):
     - `hybrid`: whether it has discrete modes switched at events (stick-slip friction); a hybrid system also defines
       `event_function` and `event_update`, which the fixed-grid integrator (`pamjax._solve.grid`) uses.
     - `with_supply_pressure(p)`: the system with its valve fed at another supply pressure (a rig's runs).
+    - `start_pressures(state)`: the ABSOLUTE pressures a state holds, by their path in it, which `simulate` and
+      `sweep` check in a start state `y0` (> 0, not bar or gauge by magnitude).
     - `discrete_step(...)`: one step of its discrete-time model (explicit Euler unless the system says otherwise).
     """
 
@@ -88,11 +91,26 @@ class AbstractSystem(eqx.Module):
         return eqx.tree_at(lambda s: tuple(s.actuators.values()), self,
                            tuple(e.with_supply_pressure(pressure) for e in elements))
 
+    def start_pressures(self, state):
+        """{path: ABSOLUTE pressure [Pa]} of the pressures `state` (a state of this system, e.g. `simulate`'s `y0`)
+        holds, each named by its path in the state ("pressure", "regulator.pressure"): what `simulate` and `sweep`
+        check in a start state (> 0, and not bar or gauge by its magnitude). By default the state's own `pressure`,
+        if it has one; a system whose state keeps its pressures deeper (in a regulator's state) names them."""
+        return state_leaves(state, ("pressure",))
+
     def discrete_step(self, t, state, command, sample_time):
         """One explicit Euler step of `sample_time` [s] from `state` at `t` [s] with `command` held (paper 000 eq. 18
         for every state); systems whose discrete-time model differs override it."""
         rate = self.vector_field(t, state, command)
         return jax.tree_util.tree_map(lambda y, dy: y + sample_time * dy, state, rate)
+
+
+def state_leaves(state, paths):
+    """{path: leaf} of the leaves of `state` at the dotted `paths` ("pressure", "regulator.pressure") it has (a state
+    of another structure has none of them)."""
+    leaves = jtu.tree_flatten_with_path(state)[0]
+    return {name: leaf for name, leaf in ((jtu.keystr(k, simple=True, separator="."), v) for k, v in leaves)
+            if name in paths}
 
 
 class AbstractMuscleSystem(AbstractSystem):

@@ -13,16 +13,18 @@ with the pressure sum, as paper 001 proposes. The command is the pair of referen
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._core.custom_types import RealScalar, StateLike
-from .._core.errors import PamjaxInputError, check_nonnegative, check_positive
+from .._core.errors import PamjaxInputError, check_finite, check_nonnegative, check_positive, concrete_values
 from .._core.fitting import parameter, positive
+from .._core.units import check_absolute_pressure
 from .._papers import paper000, paper001
 from .._physics.gas import Air
 from .._physics.muscle import EndStops, Muscle
 from .._physics.regulator import AbstractRegulator, paper001_air
 from .._physics.signals import AbstractSignal
-from .base import AbstractSystem
+from .base import AbstractSystem, state_leaves
 from .regulated import muscle_stiffness
 
 PULLEY_RADIUS = 0.03  # m, assumed (orthosis lever; ±0.35 rad swings x by ±10 mm of the DMSP-40's 100 mm stroke)
@@ -31,6 +33,17 @@ JOINT_INERTIA = 0.05  # kg m², assumed: foot (≈ 1.3 kg) plus orthosis shell a
 FOOT_MASS = 1.3  # kg, ≈ 1.45 % of paper 001's 91.3 kg subject (Winter's segment tables)
 FOOT_ARM = 0.06  # m, ankle to foot centre of mass (assumed)
 JOINT_DAMPING = 2.0  # N m s/rad, assumed
+MAX_ANGLE = 0.6  # rad, the range `equilibrium_angle` searches (±34°: beyond an ankle's ±0.35 rad gait swing)
+# Pa: a GAUGE pressure sum below this was written in bar or MPa (10 mbar holds no joint; the threshold of
+# `pamjax._core.units.check_setting`'s gauge p_max check)
+MIN_GAUGE_SUM = 1e3
+
+
+def check_joint_pressures(**pressures):
+    """Each of the named ABSOLUTE pressures [Pa] finite and not in bar or gauge (`check_absolute_pressure`), named."""
+    for name, pressure in pressures.items():
+        check_finite(pressure, name)
+        check_absolute_pressure(pressure, name)
 
 
 class JointState(eqx.Module):
@@ -129,8 +142,25 @@ class AntagonisticJoint(AbstractSystem):
         gravity = -self.foot_mass * self.gravity * self.foot_arm * jnp.sin(angle)
         return self.pulley_radius**2 * (kf + ke) + gravity
 
-    def equilibrium_angle(self, flexor_pressure, extensor_pressure, max_angle=0.6):
-        """Angle [rad] where the static torque vanishes, in [−max_angle, max_angle]: bisection + a Newton step."""
+    def equilibrium_angle(self, flexor_pressure, extensor_pressure, max_angle=MAX_ANGLE):
+        """Angle [rad] in [−max_angle, max_angle] where the static torque at the ABSOLUTE pressures [Pa] vanishes:
+        bisection, then a Newton step (which carries the implicit derivative) kept within the range. Concrete values
+        are checked: pressures in bar or gauge, and pressures whose torque keeps one sign over the whole range (the
+        joint would come to rest beyond it, on an end stop), raise `PamjaxInputError`; traced ones are not (there the
+        end of the range nearest the rest angle is returned)."""
+        check_joint_pressures(flexor_pressure=flexor_pressure, extensor_pressure=extensor_pressure)
+        ends = concrete_values(self.torque(jnp.asarray([-max_angle, max_angle]), flexor_pressure, extensor_pressure))
+        if ends is not None and not ends[0] >= 0.0 >= ends[1]:  # the torque falls with the angle
+            raise PamjaxInputError(
+                f"flexor_pressure {float(flexor_pressure):.6g} Pa and extensor_pressure {float(extensor_pressure):.6g} "
+                f"Pa hold the joint at no angle in [−{max_angle:g}, {max_angle:g}] rad (max_angle): the static torque "
+                f"is {ends[0]:.4g} N m at −{max_angle:g} rad and {ends[1]:.4g} N m at {max_angle:g} rad, one sign "
+                "over the range, so the joint would rest beyond it (on an end stop)"
+            )
+        return self._bisected_angle(flexor_pressure, extensor_pressure, max_angle)
+
+    def _bisected_angle(self, flexor_pressure, extensor_pressure, max_angle):
+        """`equilibrium_angle` without its checks (traceable): the end of the range where no angle inside holds."""
 
         def tau(joint, a):
             return joint.torque(a, flexor_pressure, extensor_pressure)  # decreasing in a
@@ -146,15 +176,39 @@ class AntagonisticJoint(AbstractSystem):
         lo, hi = jax.lax.fori_loop(0, 60, body, (jnp.asarray(-max_angle), jnp.asarray(max_angle)))
         a = 0.5 * (lo + hi)
         slope = jax.grad(lambda q: tau(frozen, q))(a)
-        return a - tau(self, a) / jnp.where(slope < 0, slope, -1.0)
+        # the Newton step stays in the range: from a bracket's end (no root inside) it would leave it
+        return jnp.clip(a - tau(self, a) / jnp.where(slope < 0, slope, -1.0), -max_angle, max_angle)
 
     def pressures_for(self, angle, pressure_sum):
         """(p_f, p_e) [Pa abs] holding `angle` [rad] statically with GAUGE pressure sum `pressure_sum` [Pa]
-        (feed-forward: the difference sets the angle, the sum the stiffness). Bisection on the difference."""
+        (feed-forward: the difference sets the angle, the sum the stiffness). Bisection on the difference, within
+        ±`pressure_sum` (neither muscle below atmosphere). Concrete values are checked: a sum < 0, in bar (below
+        `MIN_GAUGE_SUM`) or not finite, and an angle that no split of the sum holds (the range it reaches named),
+        raise `PamjaxInputError`; traced ones are not (there the nearest split is returned: one muscle vented)."""
         p_atm = self.air.atmospheric_pressure
+        check_finite(angle, "angle")
+        check_finite(pressure_sum, "pressure_sum")
+        total = concrete_values(pressure_sum)
+        if total is not None and not np.all(total >= MIN_GAUGE_SUM) and not np.all(total == 0.0):
+            raise PamjaxInputError(
+                f"pressure_sum must be a GAUGE pressure sum >= {MIN_GAUGE_SUM:g} Pa (or 0), got {total}: "
+                + ("negative" if np.any(total < 0) else "that looks like bar or MPa (5 bar = 5e5 Pa)")
+            )
 
         def tau(delta):
             return self.torque(angle, p_atm + 0.5 * (pressure_sum + delta), p_atm + 0.5 * (pressure_sum - delta))
+
+        ends = concrete_values(tau(jnp.stack([-jnp.asarray(pressure_sum), jnp.asarray(pressure_sum)])))
+        if ends is not None and not ends[0] <= 0.0 <= ends[1]:  # the torque rises with the difference
+            grid, full = np.linspace(-MAX_ANGLE, MAX_ANGLE, 241), p_atm + pressure_sum  # one evaluation, interpolated
+            torques = np.asarray(self.torque(grid, jnp.asarray([[p_atm], [full]]), jnp.asarray([[full], [p_atm]])))
+            reach = [float(np.interp(0.0, -row, grid)) for row in torques]  # where each torque (falling) crosses 0
+            lo, hi = (f"{a:.4g} rad" if abs(a) < MAX_ANGLE else f"{a:g} rad or beyond" for a in reach)
+            raise PamjaxInputError(
+                f"angle {float(angle):g} rad cannot be held with pressure_sum {float(pressure_sum):g} Pa: that sum "
+                f"holds the joint from {lo} (all of it in the extensor) to {hi} (all in the flexor); a larger "
+                "sum reaches further"
+            )
 
         def body(_, bounds):
             lo, hi = bounds
@@ -167,16 +221,28 @@ class AntagonisticJoint(AbstractSystem):
         return p_atm + 0.5 * (pressure_sum + delta), p_atm + 0.5 * (pressure_sum - delta)
 
     def initial_state(self, flexor_pressure=None, extensor_pressure=None, angle=None):
-        """At rest with the given absolute pressures (atmospheric by default) at their static equilibrium angle."""
+        """At rest with the given absolute pressures [Pa] (atmospheric by default) at their static equilibrium angle
+        (`equilibrium_angle`), or at `angle` [rad]."""
         pf = jnp.asarray(self.air.atmospheric_pressure if flexor_pressure is None else flexor_pressure, dtype=float)
         pe = jnp.asarray(self.air.atmospheric_pressure if extensor_pressure is None else extensor_pressure, dtype=float)
-        a = self.equilibrium_angle(pf, pe) if angle is None else jnp.asarray(angle, dtype=float)
+        check_joint_pressures(flexor_pressure=pf, extensor_pressure=pe)
+        if angle is None:
+            try:
+                a = self.equilibrium_angle(pf, pe)
+            except PamjaxInputError as err:
+                raise PamjaxInputError(f"AntagonisticJoint.initial_state: {err}; or give the start `angle`") from None
+        else:
+            a = jnp.asarray(angle, dtype=float)
         return JointState(
             flexor=self.flexor_regulator.initial_state(pf),
             extensor=self.extensor_regulator.initial_state(pe),
             angle=a,
             angular_velocity=jnp.zeros(()),
         )
+
+    def start_pressures(self, state):
+        """Both muscles' pressures, in their regulators' states: "flexor.pressure", "extensor.pressure" [Pa abs]."""
+        return state_leaves(state, ("flexor.pressure", "extensor.pressure"))
 
     def _chambers(self, state):
         xf, xe = self.contractions(state.angle)

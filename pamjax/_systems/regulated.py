@@ -24,7 +24,7 @@ from .._physics.friction import AbstractFriction, CoulombViscousFriction
 from .._physics.gas import Air
 from .._physics.muscle import EndStops, Muscle, stroke_root
 from .._physics.regulator import AbstractRegulator, paper001_air
-from .base import AbstractMuscleSystem, AbstractSystem
+from .base import AbstractMuscleSystem, AbstractSystem, state_leaves
 
 
 class RegulatorSystem(AbstractSystem):
@@ -186,6 +186,10 @@ class RegulatedMuscleSystem(AbstractMuscleSystem):
             velocity=jnp.asarray(velocity, dtype=float),
             friction=self.friction.initial_state(velocity),
         )
+
+    def start_pressures(self, state):
+        """The muscle's pressure, in the regulator's state: {"regulator.pressure": p [Pa abs]}."""
+        return state_leaves(state, ("regulator.pressure",))
 
     def _chamber(self, state):
         volume = self.muscle.volume(state.position)

@@ -9,6 +9,7 @@ from ..._core.arrays import as_array, device_array
 from ..._core.custom_types import Array, FloatScalar, Real, RealArrayLike, RealScalarLike, RealVectorLike
 from ..._core.errors import PamjaxInputError, check_finite
 from ..._core.fitting import labelled
+from ..._core.units import check_absolute_pressure
 from ..gas import Air
 from ..smooth import safe_divide, safe_sqrt
 from .base import AbstractSwitchingValve, AbstractValve
@@ -95,12 +96,27 @@ def fit_averaged_valve(valve: AbstractSwitchingValve, air: Air, commands: RealAr
 
     With `pin_endpoints` (default) the fit is constrained to zero flow where the physical valve has none: duty 0 at
     atmospheric pressure and duty 1 at supply pressure. Without it the unconstrained biquadratic charges a tank
-    above the supply pressure at high duty (and below atmosphere at low duty)."""
+    above the supply pressure at high duty (and below atmosphere at low duty).
+
+    A grid given is checked: `commands` 1-D, finite, within the valve's `command_range` (duty 0…1, not percent);
+    `pressures` 1-D, finite, ABSOLUTE [Pa] (not bar or gauge), at least two distinct ones above atmosphere (eq. 13 is
+    quadratic in the pressure); `PamjaxInputError` naming the argument otherwise."""
     # a user's grid (NumPy or a list) and the fitted coefficients are put on the device without compiling
     # (`device_array`; `jnp.asarray` of a NumPy array compiles a small program per shape)
-    commands = jnp.linspace(0.0, 1.0, 41) if commands is None else device_array(commands)
+    if commands is None:
+        commands = jnp.linspace(0.0, 1.0, 41)
+    else:
+        commands = device_array(_grid(commands, "commands", valve.command_range))
     if pressures is None:
         pressures = jnp.linspace(air.atmospheric_pressure, valve.supply_pressure, 41)
+    else:
+        pressures = _grid(pressures, "pressures")
+        check_absolute_pressure(pressures, "pressures")
+        atmosphere = float(air.atmospheric_pressure)
+        if np.unique(pressures[pressures > atmosphere]).size < 2:
+            raise PamjaxInputError(f"pressures must hold at least two distinct pressures above atmosphere "
+                                   f"({atmosphere:g} Pa abs): eq. 13 is quadratic in the gauge pressure; got "
+                                   f"{pressures}")
     coef, max_error, rmse, span = (np.asarray(x) for x in
                                    _fit_coefficients(valve, air, commands, device_array(pressures), pin_endpoints))
     fitted = AveragedValve(device_array(coef))
@@ -112,6 +128,20 @@ def fit_averaged_valve(valve: AbstractSwitchingValve, air: Air, commands: RealAr
         flow_range=float(span),
     )
     return fitted, report
+
+
+def _grid(values, name, bounds=None):
+    """A fit grid as a 1-D, non-empty, finite NumPy array (within `bounds` if given); `PamjaxInputError` naming it."""
+    v = np.asarray(values, dtype=float)
+    if v.ndim != 1 or v.size == 0:
+        raise PamjaxInputError(f"{name} must be a 1-D, non-empty grid, got shape {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise PamjaxInputError(f"{name} must be finite (no NaN or inf), got {v}")
+    if bounds is not None and not np.all((v >= bounds[0]) & (v <= bounds[1])):
+        hint = "; that looks like percent" if bounds == (0.0, 1.0) and np.max(v) > 1.0 else ""
+        raise PamjaxInputError(f"{name} must lie within the valve's command range [{bounds[0]:g}, {bounds[1]:g}] "
+                               f"(the duty ratio), got [{np.min(v):g}, {np.max(v):g}]{hint}")
+    return v
 
 
 @eqx.filter_jit
