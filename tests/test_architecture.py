@@ -302,7 +302,6 @@ COMPONENT_LAYERS = ("_physics", "_systems")
 EXPERIMENT_MODULES = ("pamjax/_fit/experiment.py", "pamjax/_fit/static_experiments.py")
 # (module, attribute) → why a literal hasattr/getattr there is not a component's attribute read outside its layer
 GENERIC_READS = {
-    ("pamjax/_solve/simulate.py", "pressure"): "y0's field: a system's named state (data), checked if it has one",
     ("pamjax/_solve/trajectory.py", "pressure"): "the states' field: a named state (data), marks p ≤ 0 as failed",
     ("pamjax/_solve/hints.py", "pressure"): "the start state's field: a named state (data), for a diagnosis",
     ("pamjax/_solve/hints.py", "friction"): "the start state's friction mode: a named state (data), for a diagnosis",

@@ -127,6 +127,9 @@ def test_bad_tables_and_voltages_are_named():
         TabulatedISO6358Restriction(p, np.full(3, 1e-9), np.array([0.5, 1.2, 0.5]))
     with pytest.raises(pamjax.PamjaxInputError, match="VoltageCalibration.voltage"):
         VoltageCalibration(voltage=(0.0, 12.0), gauge_pressure=(0.0, 1e6))
+    # a calibration table in bar (0-10.1) set 3.03 Pa at 3 V without a word
+    with pytest.raises(pamjax.PamjaxInputError, match=r"gauge_pressure reaches 10.1 Pa at most: that looks like bar"):
+        VoltageCalibration(gauge_pressure=(0.0, 10.1))
     with pytest.raises(pamjax.PamjaxInputError, match=r"\[0.0, 10.0\]"):
         pamjax.simulate(RegulatorSystem(LinearRegulator(), volume=0.0), SquareWave(0.0, 12.0), np.linspace(0, 0.1, 3))
     # a tank fed by a regulator: a TankSystem took one and crashed in its solve (AttributeError: no `mass_flow`);

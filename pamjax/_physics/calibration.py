@@ -2,15 +2,19 @@
 PCHIP through a table (`VoltageCalibration`), and its prepared form for a solve (`PreparedVoltageCalibration`)."""
 
 import jax.numpy as jnp
+import numpy as np
 
 from .._core.custom_types import Table
-from .._core.errors import PamjaxInputError, check_finite, check_in_closed_interval
+from .._core.errors import PamjaxInputError, check_finite, check_in_closed_interval, concrete_values
 from .._core.fitting import parameter
 from .._core.units import BAR
 from .._papers import paper001
 from .tabulated import PreparesTables, check_table_axis, pchip, pchip_at, pchip_table
 
 VOLTAGE_RANGE = paper001.VOLTAGE_RANGE  # V
+# Pa: a calibration whose largest set pressure is below this was written in bar or MPa (1e3 Pa = 10 mbar; the VPPM
+# sets up to 10 bar over its 0-10 V, paper 001 Sect. 2)
+MIN_FULL_SCALE = 1e3
 
 
 def check_voltage(voltage, name="reference voltage"):
@@ -38,6 +42,11 @@ class VoltageCalibration(PreparesTables):
                 f"VoltageCalibration.gauge_pressure must have the shape of .voltage {jnp.shape(self.voltage)}, got "
                 f"{jnp.shape(self.gauge_pressure)}"
             )
+        top = concrete_values(self.gauge_pressure)
+        if top is not None and top.size and float(np.max(np.abs(top))) < MIN_FULL_SCALE:
+            raise PamjaxInputError(
+                f"VoltageCalibration.gauge_pressure reaches {float(np.max(np.abs(top))):g} Pa at most: that looks like "
+                "bar or MPa; the table is GAUGE pressure in Pa (the VPPM's 0-10 V span 0-10.1 bar = 1.01e6 Pa)")
 
     def __call__(self, voltage):
         """Set gauge pressure [Pa] at `voltage` [V]."""

@@ -272,7 +272,7 @@ def validate(system, signal, ts, y0=None, t0=None):
     check_parameters(system)  # a system changed with eqx.tree_at skipped its components' checks
     if y0 is not None:
         check_finite_state(y0, "y0")
-        for name, pressure in type(system).start_pressures(system, y0).items():  # "pressure", "regulator.pressure"
+        for name, pressure in type(system).start_pressures(system, y0).items():  # y0.pressure, y0.regulator.pressure
             if not isinstance(pressure, jax.core.Tracer) and not np.all(np.asarray(pressure) > 0):
                 raise PamjaxInputError(f"y0.{name} must be an ABSOLUTE pressure > 0 [Pa], got {pressure}")
             check_absolute_pressure(pressure, f"y0.{name}")  # 1.01325 (bar) or 0 (gauge) refused, the unit named
