@@ -226,6 +226,10 @@ def test_a_continuous_valves_command_jumps_are_step_boundaries_sampled_and_trace
     assert [list(np.asarray(j)) for j in held.jump_times()] == [[2.0]]
     latched = pj.Sampled(np.array([0.0, 0.013, 0.05]), np.array([0.5, 0.7, 0.7]), period=0.02)
     assert [list(np.asarray(j)) for j in latched.jump_times()] == [[0.02]]  # latched at the period after 0.013 s
+    # the last sample latches at the period after its own: its change is a jump too (0.06 s here)
+    tail = pj.Sampled(np.array([0.0, 0.013, 0.02, 0.031, 0.05]), np.array([0.3, 0.3, 0.4, 0.4, 0.5]), period=0.02)
+    np.testing.assert_allclose(np.concatenate(tail.jump_times()), [0.02, 0.06])
+    assert float(tail(0.059)) == 0.4 and float(tail(0.06)) == 0.5
     tight = pj.simulate(system, pj.Step(0.97, 0.2, 2.0), ts, rtol=1e-11, atol=1e-11)
     traj = pj.simulate(system, held, ts)
     assert float(np.max(np.abs(traj.pressure - tight.pressure))) < 20.0

@@ -191,11 +191,12 @@ class Sampled(AbstractSignal):
         times, values = concrete_values(self.times), concrete_values(self.values)
         if times is None or values is None or times.ndim != 1 or times.size < 2:
             return ()
-        if self.period is not None:  # the period starts from the first sample's period to the last's, latched
+        if self.period is not None:  # the period starts from the first sample's period to the one after the last
+            # sample's (which latches it), each with the sample it latches
             first, last = np.floor(times[0] / self.period + 1e-9), np.floor(times[-1] / self.period + 1e-9)
             if last - first > 2 * MAX_LISTED_JUMPS:
                 return ()
-            times = np.arange(first, last + 1) * self.period
+            times = np.arange(first, last + 2) * self.period
             latched = (np.floor(times / self.period + 1e-9) + 1e-9) * self.period  # as __call__ reads it
             values = values[np.clip(np.searchsorted(concrete_values(self.times), latched, side="right") - 1, 0,
                                     values.size - 1)]
