@@ -22,6 +22,7 @@ and fitted values and z, and takes no part in `mismatch` (its contradictions are
 
 import numpy as np
 
+from .._core.errors import PamjaxInputError
 from .measurement import is_measurement, measurement_stats
 
 MISMATCH_THRESHOLD = 1.2  # se_inflation above which the residuals are not noise
@@ -101,6 +102,21 @@ def mismatch(errors):
     bad.sort(reverse=True)
     return True, ("model mismatch: standard errors understate the uncertainty; the residuals are not noise in "
                   + ", ".join(b for _, b in bad))
+
+
+def check_identifiability_tol(tol):
+    """`fit`'s `identifiability_tol` as a float, a finite number in (0, 1): singular values below tol × the largest
+    mark the null directions (`identifiability`, `covariance`), so 0 or less (or NaN) would mark none (NaN: and
+    leave every direction out of the covariance, standard errors of 0), 1 or more all but the first."""
+    value = None
+    if not isinstance(tol, (bool, np.bool_, str)) and np.ndim(tol) == 0:
+        try:
+            value = float(tol)
+        except (TypeError, ValueError):
+            value = None
+    if value is None or not 0.0 < value < 1.0:
+        raise PamjaxInputError(f"identifiability_tol must be a number in (0, 1), got {tol!r}")
+    return value
 
 
 def identifiability(jac, labels, tol):

@@ -24,7 +24,7 @@ import numpy as np
 from .._core.arrays import device_array
 from .._core.cache import structural
 from .._core.custom_types import RealArrayLike, RealScalarLike
-from .._core.errors import PamjaxInputError
+from .._core.errors import PamjaxInputError, check_count
 from .._core.fastjit import keyed_by_code
 from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
@@ -123,6 +123,28 @@ def _default_scale(values):
     return 0.01 * span if span > 0 else 1.0
 
 
+def _compared_channels(recording, channels, name):
+    """The checked tuple of an `Experiment`'s compared channels (default: the recording's pressure, position,
+    velocity and force): recorded, and each named once."""
+    if channels is None:
+        channels = [c for c in recording.channels if c in ("pressure", "position", "velocity", "force")]
+    if isinstance(channels, str):
+        raise PamjaxInputError(f"experiment {name!r}: channels must be a list of channel names, got {channels!r} "
+                               "(a single one: put it in brackets)")
+    channels = tuple(channels)
+    if not channels:
+        raise PamjaxInputError(
+            f"experiment {name!r}: no channels to compare; recording has {sorted(recording.channels)}"
+        )
+    twice = sorted({c for c in channels if channels.count(c) > 1}, key=str)
+    if twice:  # every sample of it would be fitted twice: the cost doubled, the standard errors shrunk by √2
+        raise PamjaxInputError(f"experiment {name!r}: channels names {', '.join(map(repr, twice))} more than once "
+                               f"({list(channels)}); name each channel once")
+    for c in channels:
+        recording[c]  # error naming the valid channels
+    return channels
+
+
 class Experiment(AbstractExperiment):
     """A dynamic experiment: simulate `build(model)` driven by `signal` and compare `channels` with `recording`.
 
@@ -207,15 +229,7 @@ class Experiment(AbstractExperiment):
             raise PamjaxInputError(f"recording must be a pamjax.Recording, got {type(recording)}")
         if not isinstance(signal, AbstractSignal):
             raise PamjaxInputError(f"signal must be a pamjax signal (Constant, Triangle, ...), got {type(signal)}")
-        if channels is None:
-            channels = [c for c in recording.channels if c in ("pressure", "position", "velocity", "force")]
-        channels = tuple(channels)
-        if not channels:
-            raise PamjaxInputError(
-                f"experiment {name!r}: no channels to compare; recording has {sorted(recording.channels)}"
-            )
-        for c in channels:
-            recording[c]  # error naming the valid channels
+        channels = _compared_channels(recording, channels, name)
         scales = dict(scales or {})
         for c in scales:
             if c not in channels:
@@ -249,13 +263,15 @@ class Experiment(AbstractExperiment):
                                        dtype=float)
         self.name = recording.name if name is None else str(name)
         self.channels = channels
+        check_count(max_steps, "max_steps")
         self.rtol, self.atol, self.max_steps = float(rtol), float(atol), int(max_steps)
         self.dt0 = None if dt0 is None else float(dt0)
         if stepping not in ("auto", "adaptive", "pwm", "grid"):
             raise PamjaxInputError(f"stepping must be 'auto', 'adaptive', 'pwm' or 'grid', got {stepping!r}")
-        if not (isinstance(substeps, int) and substeps >= 2):
+        if not (isinstance(substeps, (int, np.integer)) and not isinstance(substeps, (bool, np.bool_))
+                and substeps >= 2):  # a NumPy integer too (np.int64(16)), never a bool
             raise PamjaxInputError(f"substeps must be an int >= 2 (RK4 nodes per PWM period), got {substeps!r}")
-        self.stepping, self.substeps = stepping, substeps
+        self.stepping, self.substeps = stepping, int(substeps)
         self.lowpass_hz = recording.lowpass_hz
         self.span = (float(self.t0), float(t[-1]))
         self.host_times = _Constant(np.asarray(t, dtype=float))

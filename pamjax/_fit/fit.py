@@ -29,7 +29,7 @@ from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError, check_count, require_float64
 from .._files.checkpoint import check_checkpoint_path, read_checkpoint, write_checkpoint
 from .._files.fingerprint import check_resume, fingerprint
-from .diagnostics import channel_errors, covariance, identifiability, mismatch
+from .diagnostics import channel_errors, check_identifiability_tol, covariance, identifiability, mismatch
 from .experiment import AbstractExperiment, Experiments
 from .force_balance import weak_motion
 from .measurement import check_measured_free, contradictions
@@ -161,12 +161,13 @@ def evaluate(model: eqx.Module, experiments: Experiments) -> dict[str, dict[str,
 
 
 def _check_settings(ftol, xtol, gtol, stall_steps):
-    """The default solver's settings, checked before anything is set up (as `LevenbergMarquardt` checks them)."""
-    if isinstance(stall_steps, bool) or not (isinstance(stall_steps, int) and stall_steps >= 1):
-        raise PamjaxInputError(f"stall_steps must be a positive int, got {stall_steps!r}")
+    """The default solver's settings, checked before anything is set up (as `LevenbergMarquardt` checks them);
+    returns `stall_steps` as an int (a NumPy integer too)."""
+    check_count(stall_steps, "stall_steps")
     for label, tol in (("ftol", ftol), ("xtol", xtol), ("gtol", gtol)):
         if isinstance(tol, bool) or not (isinstance(tol, (int, float)) and 0 <= tol < 1):
             raise PamjaxInputError(f"{label} must be a number in [0, 1), got {tol!r}")
+    return int(stall_steps)
 
 
 def _validate(experiments, max_steps, out, overwrite, checkpoint, resume):
@@ -186,6 +187,22 @@ def _validate(experiments, max_steps, out, overwrite, checkpoint, resume):
         raise PamjaxInputError(f"experiment names must be unique, got {names}")
     check_count(max_steps, "max_steps")
     return experiments
+
+
+def _check_free(model, experiments, free):
+    """The `ParameterSpace` of `free` (every entry checked), and the measurements' parameters freed."""
+    space = ParameterSpace(model, free)
+    check_measured_free(model, experiments, free)
+    return space
+
+
+def check_fit_inputs(model, experiments, free, max_steps=100):
+    """What `fit(model, experiments, free, max_steps=max_steps)` refuses before anything is set up or compiled, by
+    the same checks: float64, the experiments (pamjax experiments, at least one, unique names), the step budget, the
+    free entries and the measurements' parameters. Returns (the experiments as a list, the `ParameterSpace`).
+    `staged_start` calls it first: its stages never fit a part of a problem the joint fit would refuse."""
+    experiments = _validate(experiments, max_steps, None, False, None, None)
+    return experiments, _check_free(model, experiments, free)
 
 
 def _setup(model, experiments, space):
@@ -287,7 +304,8 @@ def fit(
     - `experiments`: a list of `Experiment` / `ForceMapExperiment`.
     - `free`: parameter paths, e.g.
       `["valve.inflate.discharge_coefficient", "muscle.force_law.max_force_coefficients"]`,
-      or dicts `{"path": ..., "transform": "log"|"linear"|"logistic"|"nodes", "bounds": (lo, hi), "scale": s}`.
+      or dicts `{"path": ..., "transform": "log"|"linear"|"logistic"|"nodes", "bounds": (lo, hi), "scale": s}`
+      (bounds apply through the logistic transform, their default; with another one they are refused).
     - `max_steps`: trial steps at most. `ftol`, `xtol`, `gtol`: convergence on the relative cost decrease (actual
       and predicted), on the scaled step, and on the gradient's cosine with the residuals (MINPACK's tests).
     - `stall_steps`: rejected trials in a row after which a fit whose step has shrunk below `xtol` while the local
@@ -302,8 +320,9 @@ def fit(
       `stall_steps`, `checkpoint` or `resume`. Progress then prints one line per evaluation.
     - `progress`: True prints one line per iteration (cost, damping, accepted); a callable gets
       (step, cost, damping, accepted); False is silent; None prints only the notice of a first compilation.
-    - `identifiability_tol`: singular values of the column-normalised Jacobian below this × the largest mark a
-      non-identifiable combination (warned about by name; its parameters get infinite standard errors).
+    - `identifiability_tol`: a number in (0, 1): singular values of the column-normalised Jacobian below this ×
+      the largest mark a non-identifiable combination (warned about by name; its parameters get infinite standard
+      errors); the directions below it are left out of the covariance.
     - `out`: a JSON path to write the result to; checked BEFORE the fit; never replaced unless `overwrite=True`.
     - `checkpoint`: an `.npz` path written (atomically) after every iteration with the whole iteration state.
       Never replaces an existing file unless `overwrite=True` or it is the `resume` file.
@@ -325,16 +344,16 @@ def fit(
     """
     experiments = _validate(experiments, max_steps, out, overwrite, checkpoint, resume)
     max_steps = int(max_steps)  # a NumPy integer (np.int64(40)) as well
+    identifiability_tol = check_identifiability_tol(identifiability_tol)
     if solver is None:  # the default: its module (optimistix, lineax: ~0.1 s) is imported beside the set-up
-        _check_settings(ftol, xtol, gtol, stall_steps)
+        stall_steps = _check_settings(ftol, xtol, gtol, stall_steps)
         beside = threading.Thread(target=importlib.import_module, args=(f"{__package__}.drive",), daemon=True)
         beside.start()
     else:  # an optimistix object: optimistix is imported
         from .drive import choose_solver
 
         solver, _ = choose_solver(solver, ftol, xtol, gtol, stall_steps, checkpoint, resume)
-    space = ParameterSpace(model, free)
-    check_measured_free(model, experiments, free)
+    space = _check_free(model, experiments, free)
     print_ = fingerprint(model, experiments, free, solver)  # start model, free spec, experiments, data (None: default)
     if resume is not None:
         check_resume(resume, print_)  # before any solve: a checkpoint of another problem is refused, naming why

@@ -240,6 +240,9 @@ def _field_metadata(model, attrs):
 
 def _entry(entry):
     """(path, transform, bounds, scale) of a free entry: a path string, or a dict with those keys."""
+    if not isinstance(entry, (str, Mapping)):
+        raise PamjaxInputError(f"free parameter entry {entry!r} must be a parameter path (a string) or a dict with "
+                               f"the keys {', '.join(FREE_ENTRY_KEYS)}")
     spec = {"path": entry} if isinstance(entry, str) else dict(entry)
     path = spec.pop("path", None)
     if path is None:
@@ -270,9 +273,13 @@ def _start_value(model, path, attrs, index, valid):
 
 def _transform(path, value, index, transform, bounds, meta):
     """The checked (transform, bounds) of a free entry: the user's, else its field's declaration (a "log" one only
-    for a positive start value, a "nodes" one only for the whole array), else "linear"."""
+    for a positive start value, a "nodes" one only for the whole array), else "linear". Bounds are those of the
+    logistic transform (the only one that has any): with another transform they are refused, never ignored."""
     if bounds is not None:
-        lo, hi = (float(b) for b in bounds)
+        lo, hi = _bounds(path, bounds)
+        if transform is not None and transform != "logistic":
+            raise PamjaxInputError(f"free parameter {path!r}: bounds apply through the 'logistic' transform, not "
+                                   f"{transform!r} (which would ignore them): drop transform or bounds")
         if not (lo < hi and np.all(value > lo) and np.all(value < hi)):
             raise PamjaxInputError(f"bounds {bounds} of {path!r} must satisfy lo < start value {value} < hi")
         transform = transform or "logistic"
@@ -287,6 +294,18 @@ def _transform(path, value, index, transform, bounds, meta):
     if transform == "logistic" and bounds is None:
         raise PamjaxInputError(f"{path!r}: a logistic transform needs bounds (lo, hi)")
     return transform, bounds
+
+
+def _bounds(path, bounds):
+    """(lo, hi) of a free entry's `bounds`: two finite numbers."""
+    try:
+        lo, hi = (float(b) for b in (() if isinstance(bounds, str) else bounds))
+    except (TypeError, ValueError):  # not a pair, or not numbers
+        raise PamjaxInputError(f"free parameter {path!r}: bounds must be (lo, hi), two numbers, "
+                               f"got {bounds!r}") from None
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        raise PamjaxInputError(f"free parameter {path!r}: bounds must be finite, got {bounds!r}")
+    return lo, hi
 
 
 def _domain(model, attrs, name, path):
@@ -358,7 +377,8 @@ def strong_types(model):
 class ParameterSpace(eqx.Module):
     """Maps the unconstrained, O(1)-scaled vector θ to a model with the free parameters set (everything else
     fixed). `free` entries: a path string, or a dict {path, transform ('linear'|'log'|'logistic'|'nodes'),
-    bounds (lo, hi), scale (linear transform: the O(1) unit of θ; default the start magnitude, see
+    bounds (lo, hi: the logistic transform's, its default; refused with another), scale (linear transform: the O(1)
+    unit of θ; default the start magnitude, see
     `_zero_start_scale` for parameters starting at 0)}."""
 
     base: eqx.Module

@@ -55,7 +55,7 @@ import equinox as eqx
 import numpy as np
 
 from .experiment import AbstractExperiment
-from .fit import FitResult, Progress, fit, precompile, start_cost
+from .fit import FitResult, Progress, check_fit_inputs, fit, precompile, start_cost
 from .force_balance import force_balance
 from .measurement import is_measurement
 from .parameters import Free, ParameterSpace, join_path, split_path
@@ -194,9 +194,12 @@ def staged_start(model: eqx.Module, experiments: Sequence[AbstractExperiment], f
     **Returns:** a `StagedStart` (`.model` to start the joint fit from; `.stages` with each stage's `FitResult`,
     whose `warnings` are not emitted as Python warnings: the joint fit from it emits its own).
     """
-    experiments, joint_free = list(experiments), list(free)
-    if any(_path(e) is None for e in joint_free):  # an entry this cannot place: no stages, the joint fit as given
-        return StagedStart(model, [])
+    joint_free = free if isinstance(free, str) else list(free)  # a string: refused below as fit refuses it
+    if not isinstance(free, str) and any(_path(e) is None for e in joint_free):  # an entry this cannot place: no
+        return StagedStart(model, [])  # stages, the joint fit as given
+    # Refused before any stage compiles, as the joint fit refuses them (a misspelt path would drop out of the stages,
+    # two experiments of one name or a parameter freed twice fail only in the stage that fits them)
+    experiments, _ = check_fit_inputs(model, experiments, joint_free, max_steps)
     free = [e for e in joint_free if not _joint_only(e)]  # what the stages fit
     # A parameter `Measurement` does not decide the stages (it sees one parameter, not a part of the plant): each
     # stage fits it beside the recordings where it frees the measured parameter
