@@ -154,3 +154,19 @@ def test_malformed_free_entries_are_refused_by_name(entry, match):
     # bounds=(lo, mid, hi) raised "too many values to unpack", an entry 3 "'int' object is not iterable"
     with pytest.raises(PamjaxInputError, match=match):
         pamjax.ParameterSpace(presets.mas10_tank_system(valve="averaged"), [entry])
+
+
+def test_numpy_integer_counts_of_the_solver_and_the_loop_experiment_are_taken():
+    # `LevenbergMarquardt(stall_steps=np.int64(8))` and a hysteresis loop's `substeps=np.int64(4)` were refused as
+    # "must be a positive int" (a NumPy integer, as a config or an array read gives it); a bool stays refused
+    pj = pamjax
+    solver = pj.LevenbergMarquardt(stall_steps=np.int64(8))
+    assert solver.stall_steps == 8 and type(solver.stall_steps) is int
+    with pytest.raises(PamjaxInputError, match="stall_steps must be a positive int, got True"):
+        pj.LevenbergMarquardt(stall_steps=True)
+    x = np.linspace(0.0, 0.02, 5)
+    loop = pj.bench.HysteresisLoopExperiment(x, np.full(5, 4e5), np.full(5, 0.01), np.ones(5), scale=1.0,
+                                              substeps=np.int64(4))
+    assert loop.substeps == 4 and type(loop.substeps) is int
+    with pytest.raises(PamjaxInputError, match="substeps must be an integer >= 1"):
+        pj.bench.HysteresisLoopExperiment(x, np.full(5, 4e5), np.full(5, 0.01), np.ones(5), scale=1.0, substeps=0)

@@ -43,7 +43,7 @@ import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
 from .._core.custom_types import ArrayLike
-from .._core.errors import PamjaxInputError
+from .._core.errors import PamjaxInputError, check_count
 from .descent import Factors, ScaledDampedDescent, array_module, flatten, on_host
 from .escape import ESCAPE_BELOW, ESCAPE_GAIN, ESCAPES, escape
 
@@ -235,15 +235,14 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
         for label, tol in (("ftol", ftol), ("xtol", xtol), ("gtol", gtol)):
             if isinstance(tol, bool) or not (isinstance(tol, (int, float)) and 0 <= tol < 1):
                 raise PamjaxInputError(f"{label} must be a number in [0, 1), got {tol!r}")
-        if isinstance(stall_steps, bool) or not (isinstance(stall_steps, int) and stall_steps >= 1):
-            raise PamjaxInputError(f"stall_steps must be a positive int, got {stall_steps!r}")
+        check_count(stall_steps, "stall_steps")
         if not isinstance(geodesic, bool):
             raise PamjaxInputError(f"geodesic must be True or False, got {geodesic!r}")
         self.rtol, self.atol, self.gtol = float(ftol), float(xtol), float(gtol)
         self.norm = optx.two_norm
         self.descent, self.search = ScaledDampedDescent(), NielsenDamping()
         self.verbose = _noop_verbose
-        self.stall_steps, self.geodesic = stall_steps, geodesic
+        self.stall_steps, self.geodesic = int(stall_steps), geodesic
 
     def fingerprint(self):
         """What a checkpoint records of this solver (`pamjax._files.fingerprint`): whether the acceleration is on (the

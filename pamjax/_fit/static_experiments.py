@@ -34,7 +34,7 @@ from .._core.custom_types import (
     RealVectorLike,
     TableLike,
 )
-from .._core.errors import PamjaxInputError, concrete_values
+from .._core.errors import PamjaxInputError, check_count, concrete_values
 from .._core.units import MIN_ABSOLUTE_PA
 from .._physics.friction import AbstractFriction
 from .._physics.gas import AbstractRestriction, Air
@@ -479,12 +479,11 @@ class HysteresisLoopExperiment(AbstractStaticExperiment):
                                    f"{starts.dtype} {starts.shape}")
         if not starts[0]:
             raise PamjaxInputError("starts[0] must be True: the first sample begins a sweep")
-        if not (isinstance(substeps, int) and substeps >= 1):
-            raise PamjaxInputError(f"substeps must be an integer >= 1, got {substeps!r}")
+        check_count(substeps, "substeps", "an integer >= 1")
         self.positions, self.pressures, self.velocities = jnp.asarray(x), jnp.asarray(p), jnp.asarray(v)
         self.starts = jnp.asarray(starts)
         self.slack = jnp.asarray(f <= slack_force)
-        self.substeps = substeps
+        self.substeps = int(substeps)  # static: a Python int (a NumPy integer hashes as another program)
         _set_data(self, "force", f, scale, "N", name)
 
     needs_muscle_system = True
