@@ -60,7 +60,7 @@ from ._physics.hysteresis import BoucWenFriction
 from ._physics.muscle import CubicVolume, LinearVolume, Muscle, PolynomialForce
 from ._physics.regulator import paper001_air
 from ._physics.valves.averaged import AveragedValve
-from ._physics.valves.base import AbstractValve
+from ._physics.valves.base import AbstractControlElement, AbstractValve
 from ._physics.valves.onoff import OnOffValve
 from ._systems.muscle import MuscleSystem
 from ._systems.tank import TankSystem
@@ -172,6 +172,11 @@ ValveChoice = Literal["pwm", "smooth", "exact", "averaged"]  # paper 000's valve
 
 
 def _valve(valve, silencer=False):
+    if not isinstance(valve, (str, AbstractControlElement)):  # None or a number: an AttributeError in the solve
+        raise PamjaxInputError(
+            f"valve must be 'pwm' (smooth edges), 'exact' or 'averaged', or a valve object (an AbstractValve, e.g. "
+            f"mas10_valve()); got {type(valve).__name__} {valve!r:.80}"
+        )
     if valve in ("pwm", "smooth"):
         return mas10_valve("smooth", silencer=silencer)
     if valve == "exact":
@@ -204,6 +209,11 @@ def mas10_system(valve: ValveChoice | AbstractValve = "pwm",
     `BoucWenFriction`'s assumed defaults, paper 000 giving no loop shape) or a friction model; `silencer`: an exhaust
     silencer on the switching valve (see `mas10_valve`).
     """
+    if not isinstance(friction, (str, AbstractFriction)):  # None or a number: an AttributeError in the solve
+        raise PamjaxInputError(
+            "friction must be 'coulomb', 'karnopp', 'bristle', 'bouc_wen' or a friction model (an AbstractFriction, "
+            f"e.g. KarnoppFriction()); got {type(friction).__name__} {friction!r:.80}"
+        )
     if friction == "coulomb":
         friction = CoulombViscousFriction(COULOMB_FORCE, VISCOUS_COEFFICIENT)
     elif friction == "karnopp":

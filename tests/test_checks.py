@@ -192,3 +192,27 @@ def test_a_tolerance_first_seen_inside_jit_does_not_leak_its_tracer(system):
     assert inside == pytest.approx(outside, rel=1e-9, abs=1e-12)
     assert float(jax.jit(lambda m: pamjax.simulate(_with_mass(system, m), pamjax.Constant(0.5), TS,
                                                    rtol=rtol).position[-1])(9.6)) == inside
+
+
+@pytest.mark.parametrize("where, value, match", [
+    # each was silent or a failure inside the solve; set with eqx.tree_at (no constructor ran), named before it
+    (lambda s: s.end_stops.width, 0.1, r"EndStops\.width = 0\.1 m: more than 0\.005 m.*looks like mm"),  # 21 kN
+    (lambda s: s.muscle.volume_law.v0, 0.02356, r"LinearVolume\.v0 = 0\.02356 m³.*looks like cm³ or litres"),
+    (lambda s: s.muscle.volume_law.v1, -1e-4, r"LinearVolume\.v1 must be > 0 and finite"),
+    (lambda s: s.friction, None, r"MuscleSystem\.friction must be an AbstractFriction .*got NoneType"),
+])
+def test_a_part_or_a_magnitude_set_with_tree_at_is_named_before_the_solve(system, where, value, match):
+    changed = eqx.tree_at(where, system, value, is_leaf=lambda x: x is None)
+    with pytest.raises(PamjaxInputError, match=match):
+        pamjax.simulate(changed, pamjax.Constant(0.5), TS)
+
+
+def test_a_nominal_length_and_an_edge_width_set_with_tree_at_are_named_before_the_solve():
+    # the DMSP-40's L0 = 400 (mm) simulated silently; a valve edge of 0.1 (ms) too
+    plant = eqx.tree_at(lambda s: s.muscle, presets.mas10_system("averaged"), presets.dmsp40_muscle())
+    changed = eqx.tree_at(lambda s: s.muscle.volume_law.nominal_length, plant, 400.0)
+    with pytest.raises(PamjaxInputError, match=r"CubicVolume\.nominal_length = 400 m: more than 10 m.*looks like mm"):
+        pamjax.simulate(changed, pamjax.Constant(0.5), TS)
+    tank = eqx.tree_at(lambda s: s.valve.edge_width, presets.mas10_tank_system(), 0.1)
+    with pytest.raises(PamjaxInputError, match=r"OnOffValve\.edge_width \(0\.1 s = 100 ms\) must not exceed 5%"):
+        pamjax.simulate(tank, pamjax.Constant(0.25), TS)

@@ -156,3 +156,20 @@ def test_series_equivalent_is_slower_than_the_valve_alone():
     cva, b = eqx.filter_jit(_gas.series_equivalent)(SERIES, AIR)  # one program (eagerly: one per operation)
     assert 0 < float(cva) < 0.39 * 3.14e-6 / np.sqrt(287 * 293)
     assert 0.0 < float(b) < 1.0
+
+
+def test_a_sonic_conductance_left_in_m3_per_s_bar_is_refused():
+    # Paper 001 tabulates C in m³/(s bar); left undivided by 1e5 (7.0564e-4) the solve failed after 200,000 steps
+    # (PamjaxSolveError). Valves are ~1e-9 to 1e-6 m³/(s Pa), a DN50 pipe ~4e-6: above 1e-5 is refused, named. The
+    # tabulated law (`_physics/tabulated.py`) refuses its tables likewise.
+    match = r"sonic_conductance.* = 0\.000\d+ m³/\(s Pa\): more than 1e-05.*looks like m³/\(s bar\) .*divide by 1e5"
+    with pytest.raises(pamjax.PamjaxInputError, match=r"ISO6358Restriction\." + match):
+        pamjax.ISO6358Restriction(7.0564e-4, 0.5328)
+    table = pamjax.presets.PAPER001_CHARGING_TABLE
+    pressure = np.asarray(table["upstream_pressure_bar"]) * 1e5
+    conductance = np.asarray(table["sonic_conductance_m3_per_s_bar"])
+    ratio = np.asarray(table["critical_ratio"])
+    with pytest.raises(pamjax.PamjaxInputError, match=r"TabulatedISO6358Restriction\." + match):
+        pamjax.TabulatedISO6358Restriction(pressure, conductance, ratio)
+    pamjax.TabulatedISO6358Restriction(pressure, conductance / 1e5, ratio)  # converted: accepted
+    pamjax.ISO6358Restriction(4e-6, 0.5)  # a DN50 pipe's order: accepted

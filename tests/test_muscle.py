@@ -86,3 +86,48 @@ def test_end_stops_inactive_inside_and_restoring_outside():
     assert float(stops.force(0.076, 0.0, -0.02, 0.075)) < -900  # pushes back down beyond x_max (1 mm · 1e6 N/m)
     assert float(stops.force(-0.021, 0.0, -0.02, 0.075)) > 900
     assert float(stops.force(0.076, 0.1, -0.02, 0.075)) < float(stops.force(0.076, 0.0, -0.02, 0.075))  # damping
+
+
+def test_an_end_stop_width_in_mm_is_refused():
+    # `EndStops(width=0.1)` (0.1 mm typed as m) put 21 kN on the payload mid-stroke, silently; a few mm is the most
+    # a stop's contact is smoothed over
+    with pytest.raises(pamjax.PamjaxInputError, match=r"EndStops\.width = 0\.1 m: more than 0\.005 m.*looks like mm"):
+        pamjax.EndStops(width=0.1)
+    assert float(pamjax.EndStops(width=2e-3).width) == 2e-3  # a soft stop of a few mm stays legal
+
+
+@pytest.mark.parametrize("build, match", [
+    # the MAS-10's v0 (2.36e-5 m³) typed in litres passed the 0.1 m³ cut-off
+    (lambda: pamjax.LinearVolume(0.02356, presets.MAS10_V1),
+     r"LinearVolume\.v0 = 0\.02356 m³.*looks like cm³ or litres"),
+    # the DMSP-40's cubic volume in litres: 0.5 m³ over 0.4 m is a bore 1.26 m across
+    (lambda: pamjax.CubicVolume(jnp.asarray(presets.DMSP40_VOLUME_CUBIC) * 1e3, 0.4),
+     r"CubicVolume\.coefficients\[0\].*needs a bore.*looks like litres or cm³"),
+    # declared positive (fitted in log space) but only checked finite: a shrinking volume was accepted
+    (lambda: pamjax.LinearVolume(2.3e-5, -1e-4), r"LinearVolume\.v1 must be > 0 and finite, got -0\.0001"),
+])
+def test_volumes_in_litres_and_a_negative_volume_slope_are_refused(build, match):
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        build()
+
+
+@pytest.mark.parametrize("build, name", [
+    (lambda: pamjax.CubicVolume(jnp.asarray(presets.DMSP40_VOLUME_CUBIC), 400.0), "CubicVolume"),
+    (lambda: pamjax.TonduLopezForce(radius=5e-3, braid_angle=0.4, nominal_length=300.0), "TonduLopezForce"),
+    (lambda: pamjax.ChouHannafordForce(strand_length=0.35, turns=3.0, nominal_length=300.0), "ChouHannafordForce"),
+    (lambda: pamjax.BraidVolume(390.0, 7.9, 300.0), "BraidVolume"),
+])
+def test_a_nominal_length_in_mm_is_refused(build, name):
+    # L0 = 400 (mm) simulated silently: no muscle is 10 m long
+    match = rf"{name}\.nominal_length = \d+ m: more than 10 m.*looks like mm"
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        build()
+
+
+@pytest.mark.parametrize("field", ["force_law", "volume_law"])
+def test_a_muscle_without_a_force_or_volume_law_is_refused_by_name(field):
+    # Muscle(force_law=None) ended as an AttributeError inside simulate
+    laws = dict(force_law=presets.mas10_muscle().force_law, volume_law=pamjax.LinearVolume(2e-5, 1e-4))
+    laws[field] = None
+    with pytest.raises(pamjax.PamjaxInputError, match=rf"Muscle\.{field} must be an Abstract\w+ .*got NoneType"):
+        pamjax.Muscle(**laws, min_position=-0.02, max_position=0.075)

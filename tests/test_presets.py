@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from pamjax import presets
+from pamjax import PamjaxInputError, presets
 
 _spec = importlib.util.spec_from_file_location(
     "derive_presets", pathlib.Path(__file__).resolve().parents[1] / "fits" / "derive_presets.py"
@@ -63,3 +63,18 @@ def test_preset_muscle_is_physical():
     x_atm = float(system.equilibrium_position(jnp.asarray(101325.0)))  # unpressurised: stretched below x = 0
     assert lo <= x_atm < 0.0 < positions[0]
     assert presets.MAS10_V1 > 0 and presets.MAS10_V0 + presets.MAS10_V1 * hi > presets.MAS10_V0  # volume grows
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    # each ended as an AttributeError inside simulate (None.mass_flow, 5.force, ...)
+    (dict(valve=None), r"valve must be 'pwm' .* or a valve object \(an AbstractValve.*got NoneType None"),
+    (dict(valve=123), r"valve must be 'pwm' .* or a valve object \(an AbstractValve.*got int 123"),
+    (dict(friction=None), r"friction must be 'coulomb', .* or a friction model \(an AbstractFriction.*got NoneType"),
+    (dict(friction=5), r"friction must be 'coulomb', .* or a friction model \(an AbstractFriction.*got int 5"),
+])
+def test_a_preset_given_a_part_of_the_wrong_kind_names_it(kwargs, match):
+    with pytest.raises(PamjaxInputError, match=match):
+        presets.mas10_system(**kwargs)
+    if "valve" in kwargs:
+        with pytest.raises(PamjaxInputError, match=match):
+            presets.mas10_tank_system(**kwargs)

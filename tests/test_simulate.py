@@ -222,3 +222,20 @@ def test_a_start_pressure_kept_in_a_regulators_state_is_checked_like_y0_pressure
     system, signal, y0 = _nested_start(kind, pressure)
     with pytest.raises(pamjax.PamjaxInputError, match=match):
         pamjax.simulate(system, signal, np.linspace(0.0, 0.1, 3), y0=y0)
+
+
+@pytest.mark.parametrize("kind, position, match", [
+    # 30 (mm as m) failed at t = 0 with "minimum step size reached"; 0.5 m, outside the 95 mm stroke, too
+    ("mas10", 30.0, r"y0\.position = 30 m: more than 1 m; that looks like mm"),
+    ("mas10", 0.5, r"y0\.position = 0\.5 m lies outside the stroke its system allows, \[-0\.02, 0\.075\] m"),
+    ("mas10", -0.1, r"y0\.position = -0\.1 m lies outside the stroke"),
+    ("regulated", 0.4, r"y0\.position = 0\.4 m lies outside the stroke its system allows, \[-0\.02, 0\.1\] m"),
+])
+def test_a_start_position_in_mm_or_outside_the_stroke_is_named_before_the_solve(kind, position, match):
+    # checked as y0's pressures are, through the system's contract (`start_positions`), before anything compiles
+    system = (presets.mas10_system("averaged") if kind == "mas10" else
+              pamjax.RegulatedMuscleSystem(pamjax.ISO6358Regulator(), presets.dmsp40_muscle()))
+    signal = pamjax.Constant(0.5 if kind == "mas10" else 3.0)  # a duty; a regulator's reference voltage [V]
+    y0 = system.initial_state(pressure=3e5, position=position)
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        pamjax.simulate(system, signal, np.linspace(0.0, 0.1, 3), y0=y0)

@@ -124,3 +124,39 @@ def test_start_pressures_name_every_absolute_pressure_a_state_holds():
     for system, state, expected in cases:
         got = system.start_pressures(state)
         assert {name: float(p) for name, p in got.items()} == expected, type(system).__name__
+
+
+@pytest.mark.parametrize("field, value, match", [
+    # each ended as an AttributeError inside simulate
+    ("muscle", None, r"MuscleSystem\.muscle must be an AbstractMuscle .*got NoneType"),
+    ("valve", None, r"MuscleSystem\.valve must be an AbstractValve .*got NoneType"),
+    ("valve", pamjax.ISO6358Regulator(), r"MuscleSystem\.valve .*got ISO6358Regulator; a muscle fed by a pressure "
+                                         r"regulator is a RegulatedMuscleSystem"),
+    ("friction", 5.0, r"MuscleSystem\.friction must be an AbstractFriction .*got float"),
+])
+def test_a_muscle_system_given_a_part_of_the_wrong_kind_names_it(field, value, match):
+    parts = dict(valve=presets.mas10_valve(), muscle=presets.mas10_muscle())
+    parts[field] = value
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        pamjax.MuscleSystem(**parts)
+
+
+def test_start_positions_name_every_displacement_a_state_holds_with_its_stroke():
+    """`AbstractSystem.start_positions`, which `simulate` checks in a y0: a muscle system's `position` with its
+    muscle's stroke; a tank's state holds none, and a joint's (an angle) none either."""
+    muscle, regulator = presets.dmsp40_muscle(), pamjax.ISO6358Regulator()
+    plant, tank = presets.mas10_system("averaged"), presets.mas10_tank_system("averaged")
+    regulated = pamjax.RegulatedMuscleSystem(regulator, muscle)
+    joint = pamjax.AntagonisticJoint(regulator, regulator, muscle, muscle)
+    cases = [
+        (plant, plant.initial_state(pressure=3e5, position=0.01),
+         {"position": (0.01, (presets.MAS10_MIN_POSITION, presets.MAS10_MAX_POSITION))}),
+        (regulated, regulated.initial_state(pressure=5e5, position=0.02),
+         {"position": (0.02, (float(muscle.min_position), float(muscle.max_position)))}),
+        (tank, tank.initial_state(pressure=3e5), {}),
+        (joint, joint.initial_state(3e5, 2e5, angle=0.0), {}),
+    ]
+    for system, state, expected in cases:
+        got = system.start_positions(state)
+        got = {name: (float(x), None if s is None else tuple(float(b) for b in s)) for name, (x, s) in got.items()}
+        assert got == expected, type(system).__name__

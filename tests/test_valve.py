@@ -216,3 +216,20 @@ def test_fit_averaged_valve_refuses_a_grid_in_other_units_by_name(grid, match):
     # a 2-D grid gave unnamed or raw errors. Refused before anything is computed.
     with pytest.raises(pamjax.PamjaxInputError, match=match):
         pamjax.fit_averaged_valve(EXACT, AIR, **grid)
+
+
+@pytest.mark.parametrize("width, frequency", [(0.1, 50.0), (2e-3, 50.0), (3e-4, 249.0)])
+def test_an_edge_width_not_well_below_the_pwm_period_is_refused(width, frequency):
+    # edge_width = 0.1 (0.1 ms typed in s) passed: the magnitude check let anything up to 0.1 s through, and a
+    # logistic edge of 100 ms smears a 20 ms period's switching into a constant half-open valve. An edge is at most
+    # 5 % of the period (1 ms at 50 Hz): refused by the constructor and, set with eqx.tree_at, before the solve.
+    match = r"OnOffValve\.edge_width \(.* s = .* ms\) must not exceed 5% of the PWM period"
+    for mode in ("smooth", "exact"):
+        with pytest.raises(pamjax.PamjaxInputError, match=match):
+            presets.mas10_valve(mode, edge_width=width, pwm_frequency=frequency)
+    changed = eqx.tree_at(lambda s: s.valve.edge_width, presets.mas10_tank_system(), width)
+    changed = eqx.tree_at(lambda s: s.valve.pwm_frequency, changed, frequency)
+    with pytest.raises(pamjax.PamjaxInputError, match=match + (r".*looks like ms" if width == 0.1 else "")):
+        pamjax.simulate(changed, pamjax.Constant(0.25), np.linspace(0.0, 0.1, 3))
+    presets.mas10_valve("smooth", edge_width=4e-4)  # 2 % of 20 ms (the convergence test's widest): accepted
+    presets.mas10_valve("smooth", pwm_frequency=249.0)  # the default 1e-4 s at the fastest PWM the delays allow

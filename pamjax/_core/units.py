@@ -20,6 +20,23 @@ MIN_ABSOLUTE_PA = 5e4  # Pa
 MAX_ABSOLUTE_PA = 5e6  # Pa
 # Sampling-interval checks need a run, not a handful of points (a 5-point test recording may be 1 s apart).
 MIN_SAMPLES_FOR_RATE = 50
+# m, a muscle's nominal length L0: Festo makes its longest muscles (MAS-40, DMSP-40) 9 m long, and most PAMs are a
+# few decimetres (MAS-10-300: 0.3 m, DMSP-40-400: 0.4 m); 10 m and more is millimetres typed as metres (400 for 0.4 m).
+MAX_MUSCLE_LENGTH = 10.0
+# m³, a muscle's chamber volume (`LinearVolume.v0`): the largest muscle made, a 9 m MAS-40 (40 mm bore), holds
+# π/4 · (40 mm)² · 9 m ≈ 0.011 m³; paper 000's MAS-10 holds 2.36e-5 m³ (24 cm³), paper 001's DMSP-40 ~5e-4 m³. A
+# volume above 0.02 m³ (20 l, about twice the largest) is litres or cm³ typed as m³ (the MAS-10's 0.02356 l).
+MAX_MUSCLE_VOLUME = 0.02
+# s, a smoothed valve edge's time width (`OnOffValve.edge_width`, 1e-4 s by default): `OnOffValve` keeps it below 5 %
+# of its PWM period (where the edge must fit); PWM drives of pneumatic on/off valves run at 5 Hz or faster (slower,
+# the muscle follows each pulse: bang-bang, not PWM), so 10 ms (5 % of a 5 Hz period) bounds every edge; 0.1 for
+# 0.1 ms is milliseconds typed as seconds.
+MAX_EDGE_WIDTH = 0.01
+# m³/(s Pa), an ISO 6358 sonic conductance C: C [dm³/(s bar)] ≈ effective area [mm²] / 5 (the usual conversion),
+# so paper 000's MHE2 (3.14 mm²) and paper 001's VPPM have C ≈ 6-7e-9, the largest industrial valves ~1e-6, and a
+# DN50 pipe's 1,960 mm² ~4e-6. Above 1e-5 the value is still in m³/(s bar) (paper 001's tables: 7e-4) or
+# dm³/(s bar), not divided by 1e5 (or 1e8).
+MAX_SONIC_CONDUCTANCE = 1e-5
 PSI = 6894.757293168  # Pa per psi (NIST SP 811)
 BAR = 1e5  # Pa per bar
 LITRE_PER_MINUTE = 1e-3 / 60.0  # m³/s per l/min
@@ -228,10 +245,13 @@ _PLAUSIBLE = {
     "position": ("m", 1.0, "mm"),
     "switch_on_delay": ("s", 0.1, "ms"),
     "switch_off_delay": ("s", 0.1, "ms"),
-    "edge_width": ("s", 0.1, "ms"),
+    "edge_width": ("s", MAX_EDGE_WIDTH, "ms"),
+    # a tank: paper 001's is 0.04 m³ (40 l), so litres typed as m³ (0.05 for a 50 cm³ tank) are a real test tank too;
+    # only what no pneumatic-muscle rig uses (100 l and more) is refused
     "volume": ("m³", 0.1, "cm³ or litres"),
     "tank_volume": ("m³", 0.1, "cm³ or litres"),
-    "v0": ("m³", 0.1, "cm³"),
+    "v0": ("m³", MAX_MUSCLE_VOLUME, "cm³ or litres"),
+    "nominal_length": ("m", MAX_MUSCLE_LENGTH, "mm"),
 }
 _ABSOLUTE_PRESSURES = {"pressure", "pressures", "atmospheric_pressure"}
 # containers whose entries are spreads per state (an estimator's initial standard deviations and process noise: Pa,
@@ -274,11 +294,39 @@ def check_setting(path, values, where):
             "p_max of eq. 7 is a GAUGE pressure in Pa (paper 000: 6e5)"
         )
     elif leaf in _PLAUSIBLE and v.size:
-        unit, limit, likely = _PLAUSIBLE[leaf]
-        peak = float(np.nanmax(np.abs(v)))
-        if peak > limit:
-            raise PamjaxInputError(f"{label} = {peak:g} {unit}: more than {limit:g} {unit}; that looks like {likely} "
-                                   f"(pamjax takes SI units: {unit})")
+        _refuse_implausible(leaf, v, label)
+
+
+def _refuse_implausible(leaf, v, label):
+    unit, limit, likely = _PLAUSIBLE[leaf]
+    peak = float(np.nanmax(np.abs(v)))
+    if peak > limit:
+        raise PamjaxInputError(f"{label} = {peak:g} {unit}: more than {limit:g} {unit}; that looks like {likely} "
+                               f"(pamjax takes SI units: {unit})")
+
+
+def check_plausible(values, name):
+    """`check_setting`'s magnitude check of a component's own field as it is built (`name`:
+    'CubicVolume.nominal_length', its last part the field): 400 for a 0.4 m nominal length looks like mm. Traced
+    values are not checked."""
+    v = concrete_values(values)
+    if v is not None and np.isfinite(v).any():
+        _refuse_implausible(name.split(".")[-1], v[np.isfinite(v)], name)
+
+
+def check_sonic_conductance(values, name):
+    """Refuse an ISO 6358 sonic conductance C [m³/(s Pa)] above `MAX_SONIC_CONDUCTANCE`, no valve's: still in
+    m³/(s bar) or dm³/(s bar) (paper 001 tabulates m³/(s bar)). Traced values are not checked."""
+    v = concrete_values(values)
+    if v is None or not np.isfinite(v).any():
+        return
+    peak = float(np.max(v[np.isfinite(v)]))
+    if peak > MAX_SONIC_CONDUCTANCE:
+        raise PamjaxInputError(
+            f"{name} = {peak:g} m³/(s Pa): more than {MAX_SONIC_CONDUCTANCE:g}, a DN50 pipe's order (valves: ~1e-9 to "
+            "1e-6); that looks like m³/(s bar) or dm³/(s bar): divide by 1e5 (m³/(s bar)) or 1e8 (dm³/(s bar)) for "
+            "m³/(s Pa)"
+        )
 
 
 # -- units of model parameters (model files) ----------------------------------------------------------------------

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 from .._core.custom_types import RealScalar
 from .._core.errors import check_in_open_interval, check_positive
 from .._core.fitting import parameter, positive, ratio
-from .._core.units import ATMOSPHERE, ISO8778_DENSITY, ISO8778_TEMPERATURE
+from .._core.units import ATMOSPHERE, ISO8778_DENSITY, ISO8778_TEMPERATURE, check_sonic_conductance
 from .._papers import paper000
 from .smooth import safe_divide, safe_sqrt
 
@@ -149,7 +149,8 @@ class ISO6358Restriction(AbstractRestriction):
 
     **Arguments:**
 
-    - `sonic_conductance`: C [m³/(s Pa)] (paper 001 tabulates it in m³/(s bar): divide by 1e5).
+    - `sonic_conductance`: C [m³/(s Pa)] (paper 001 tabulates it in m³/(s bar): divide by 1e5); above 1e-5, a DN50
+      pipe's order, it is refused as a C left in m³/(s bar) (`pamjax._core.units.MAX_SONIC_CONDUCTANCE`).
     - `critical_ratio`: b [-] in (0, 1).
     - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
     """
@@ -160,6 +161,7 @@ class ISO6358Restriction(AbstractRestriction):
 
     def __check_init__(self):
         check_positive(self.sonic_conductance, "ISO6358Restriction.sonic_conductance")
+        check_sonic_conductance(self.sonic_conductance, "ISO6358Restriction.sonic_conductance")  # m³/(s bar) refused
         check_in_open_interval(self.critical_ratio, 0.0, 1.0, "ISO6358Restriction.critical_ratio")
         check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "ISO6358Restriction.laminar_ratio")
 

@@ -14,8 +14,9 @@ import numpy as np
 
 from .._core.arrays import as_array
 from .._core.custom_types import Array, Real, RealScalar, RealScalarLike, RealVector
-from .._core.errors import PamjaxInputError, check_finite, check_in_open_interval, check_positive
+from .._core.errors import PamjaxInputError, check_finite, check_in_open_interval, check_positive, concrete_values
 from .._core.fitting import parameter, polynomial, positive
+from .._core.units import check_plausible
 from .._papers import paper000
 from .smooth import smooth_relu, smooth_step
 
@@ -89,6 +90,7 @@ class ChouHannafordForce(AbstractForceLaw):
         check_positive(self.strand_length, "ChouHannafordForce.strand_length")
         check_positive(self.turns, "ChouHannafordForce.turns")
         check_positive(self.nominal_length, "ChouHannafordForce.nominal_length")
+        check_plausible(self.nominal_length, "ChouHannafordForce.nominal_length")  # 400 (mm) for 0.4 m refused
 
     def static_force(self, x, gauge_pressure):
         cos_theta = (self.nominal_length - x) / self.strand_length
@@ -112,6 +114,7 @@ class TonduLopezForce(AbstractForceLaw):
     def __check_init__(self):
         check_positive(self.radius, "TonduLopezForce.radius")
         check_positive(self.nominal_length, "TonduLopezForce.nominal_length")
+        check_plausible(self.nominal_length, "TonduLopezForce.nominal_length")
         check_positive(self.correction, "TonduLopezForce.correction")
         v = self.braid_angle
         if not isinstance(v, jax.core.Tracer) and not bool(jnp.all((v > 0) & (v < jnp.pi / 2))):
@@ -141,10 +144,32 @@ class LinearVolume(AbstractVolume):
 
     def __check_init__(self):
         check_positive(self.v0, "LinearVolume.v0")
-        check_finite(self.v1, "LinearVolume.v1")
+        check_plausible(self.v0, "LinearVolume.v0")  # the MAS-10's 0.02356 (litres) refused: no muscle holds 20 l
+        check_positive(self.v1, "LinearVolume.v1")  # declared positive (fitted in log space): V grows as x does
 
     def volume(self, x):
         return self.v0 + self.v1 * x
+
+
+# m², the widest bore a muscle's chamber has, for the volume at nominal length V0 against its length L0: π/4 · (0.2 m)²,
+# a muscle 20 cm across, five times Festo's widest (40 mm: the DMSP-40's V0/L0 = π/4 · (40 mm)² = 1.26e-3 m²). A
+# volume in litres or cm³ typed as m³ (the DMSP-40's 0.5 l as 0.5) is a thousand times or more its bore times L0.
+MAX_BORE_AREA = 0.25 * np.pi * 0.2**2
+
+
+def _check_bore(volume, nominal_length, name):
+    """Refuse a volume at nominal length [m³] that needs a bore wider than `MAX_BORE_AREA` over `nominal_length`
+    [m] (concrete values only): litres or cm³ typed as m³."""
+    v, length = concrete_values(volume), concrete_values(nominal_length)
+    if v is None or length is None or not np.all(np.isfinite(v)) or not np.all(length > 0):
+        return
+    bore = float(np.max(v / length))
+    if bore > MAX_BORE_AREA:
+        raise PamjaxInputError(
+            f"{name} = {float(np.max(v)):g} m³ over a nominal length of {float(np.max(length)):g} m needs a bore of "
+            f"{bore:g} m² = π/4 · ({(4 * bore / np.pi) ** 0.5:.3g} m)², more than a muscle 20 cm across "
+            f"({MAX_BORE_AREA:.3g} m²); that looks like litres or cm³ (pamjax takes m³: 0.5 l is 5e-4 m³)"
+        )
 
 
 class CubicVolume(AbstractVolume):
@@ -164,6 +189,8 @@ class CubicVolume(AbstractVolume):
         check_finite(self.coefficients, "CubicVolume.coefficients")
         check_positive(self.coefficients[0], "CubicVolume.coefficients[0] (volume at nominal length)")
         check_positive(self.nominal_length, "CubicVolume.nominal_length")
+        check_plausible(self.nominal_length, "CubicVolume.nominal_length")
+        _check_bore(self.coefficients[0], self.nominal_length, "CubicVolume.coefficients[0] (volume at nominal length)")
 
     def volume(self, x):
         return jnp.polyval(self.coefficients[::-1], x / self.nominal_length)
@@ -187,6 +214,7 @@ class BraidVolume(AbstractVolume):
         check_positive(self.strand_length, "BraidVolume.strand_length")
         check_positive(self.turns, "BraidVolume.turns")
         check_positive(self.nominal_length, "BraidVolume.nominal_length")
+        check_plausible(self.nominal_length, "BraidVolume.nominal_length")
         b, length = self.strand_length, self.nominal_length
         if not isinstance(b, jax.core.Tracer) and not isinstance(length, jax.core.Tracer) and not bool(b > length):
             raise PamjaxInputError(
@@ -268,6 +296,11 @@ class Muscle(AbstractMuscle):
     slack_width: RealScalar = parameter(1.0, unit="N")
 
     def __check_init__(self):
+        for name, law, base, example in (("force_law", self.force_law, AbstractForceLaw, "PolynomialForce"),
+                                         ("volume_law", self.volume_law, AbstractVolume, "LinearVolume")):
+            if not isinstance(law, base):  # (None ended as an AttributeError inside the solve)
+                raise PamjaxInputError(f"Muscle.{name} must be an {base.__name__} (e.g. {example}), got "
+                                       f"{type(law).__name__}")
         check_finite(self.min_position, "Muscle.min_position")
         check_finite(self.max_position, "Muscle.max_position")
         check_positive(self.slack_width, "Muscle.slack_width")
@@ -313,13 +346,19 @@ class Muscle(AbstractMuscle):
         return jax.grad(self.force, argnums=0)(jnp.asarray(x, dtype=float), pressure, air)
 
 
+# m, the widest smoothing of an end stop's contact: δ of a fraction of a millimetre (1e-4 by default) to a few mm. The
+# contact's spring k δ softplus(−d/δ) reaches a distance d into the stroke: at δ = 5 mm with the default 1e6 N/m it
+# already pushes 90 N (the MAS-10's 9.6 kg payload) 20 mm inside the stops, at 0.1 (0.1 mm typed as m) 21 kN mid-stroke.
+MAX_END_STOP_WIDTH = 5e-3
+
+
 class EndStops(eqx.Module):
     """Stiff, damped contact at the stroke limits [x_min, x_max] of a muscle, smooth at contact.
 
     F = −k·relu_δ(x − x_max) + k·relu_δ(x_min − x) − c v (s_δ(x − x_max) + s_δ(x_min − x)).
 
     **Arguments:** `stiffness` k [N/m] (1e6: 0.6 mm penetration under the MAS-10's 630 N), `damping` c [N s/m]
-    (6e3 ≈ critical for 9.6 kg on k), `width` δ [m] (1e-4).
+    (6e3 ≈ critical for 9.6 kg on k), `width` δ [m] (1e-4; at most `MAX_END_STOP_WIDTH`, 5 mm).
     """
 
     stiffness: RealScalar = positive(1e6, unit="N/m")
@@ -330,6 +369,13 @@ class EndStops(eqx.Module):
         check_positive(self.stiffness, "EndStops.stiffness")
         check_positive(self.damping, "EndStops.damping")
         check_positive(self.width, "EndStops.width")
+        width = concrete_values(self.width)
+        if width is not None and np.any(width > MAX_END_STOP_WIDTH):
+            raise PamjaxInputError(
+                f"EndStops.width = {float(np.max(width)):g} m: more than {MAX_END_STOP_WIDTH:g} m, the widest a stop's "
+                "contact is smoothed over (a fraction of a millimetre to a few mm; the MAS-10's whole stroke is "
+                "95 mm); that looks like mm (pamjax takes m: 0.1 mm is 1e-4)"
+            )
 
     def force(self, x, v, x_min, x_max):
         over = x - x_max

@@ -16,7 +16,7 @@ import numpy as np
 from .._core.custom_types import Table
 from .._core.errors import PamjaxInputError, check_finite, check_in_open_interval, check_positive, concrete_values
 from .._core.fitting import parameter, positive, ratio
-from .._core.units import check_absolute_pressure
+from .._core.units import check_absolute_pressure, check_sonic_conductance
 from .._papers import paper001
 from .gas import (
     DEFAULT_LAMINAR_RATIO,
@@ -145,7 +145,8 @@ class TabulatedISO6358Restriction(AbstractRestriction, PreparesTables):
     **Arguments:**
 
     - `pressure`: table axis p_up [Pa abs], strictly increasing.
-    - `sonic_conductance`: C at each table pressure [m³/(s Pa)] (paper 001 gives m³/(s bar): divide by 1e5), > 0.
+    - `sonic_conductance`: C at each table pressure [m³/(s Pa)] (paper 001 gives m³/(s bar): divide by 1e5), > 0
+      and at most 1e-5, a DN50 pipe's order (above it, a C still in m³/(s bar) is refused).
     - `critical_ratio`: b at each table pressure [-], in (0, 1).
     - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
     """
@@ -167,6 +168,7 @@ class TabulatedISO6358Restriction(AbstractRestriction, PreparesTables):
                     f"got {jnp.shape(getattr(self, field))}"
                 )
         check_positive(self.sonic_conductance, f"{name}.sonic_conductance (C)")
+        check_sonic_conductance(self.sonic_conductance, f"{name}.sonic_conductance (C)")  # m³/(s bar) refused
         check_in_open_interval(self.critical_ratio, 0.0, 1.0, f"{name}.critical_ratio (b)")
 
     def conductance(self, upstream_pressure):

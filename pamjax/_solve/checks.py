@@ -27,9 +27,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.arrays import floats_as_arrays
-from .._core.errors import PamjaxInputError, traced_checks
+from .._core.errors import PamjaxInputError, concrete_values, traced_checks
 from .._core.private import jax_at_top_level
-from .._core.units import MIN_ABSOLUTE_PA, check_setting, checks_setting
+from .._core.units import MIN_ABSOLUTE_PA, check_absolute_pressure, check_setting, checks_setting
 from .._systems.base import AbstractSystem
 from .hints import negative_inflow
 from .trajectory import RESULT_NONPHYSICAL
@@ -112,6 +112,43 @@ def check_finite_state(state, name):
             where = f"{name}.{_name(path)}" if path else name
             raise PamjaxInputError(f"{where} must be finite (no NaN or inf), got "
                                    f"{np.array2string(value, threshold=6)}")
+
+
+# The farthest a start position may lie outside the stroke its system names, as a fraction of that stroke: the end
+# stops let the payload press in by ~0.6 mm (the MAS-10's 630 N on the stops' 1e6 N/m), and a position read off a
+# bench's sensor may sit a little past a stop; 5 % of the stroke (4.75 mm of the MAS-10's 95 mm) admits both and
+# refuses a start the stops would fling the payload from (0.5 m for the MAS-10: was "minimum step size reached").
+START_STROKE_MARGIN = 0.05
+
+
+def check_start_state(system, y0):
+    """`simulate`'s checks of a start state `y0` (None: nothing to check), concrete leaves only: every leaf finite;
+    the pressures the system names (`start_pressures`) ABSOLUTE pascal, > 0 and not bar or gauge by magnitude; the
+    displacements it names (`start_positions`) metres (not mm by magnitude) and inside their stroke, give or take
+    `START_STROKE_MARGIN`."""
+    if y0 is None:
+        return
+    check_finite_state(y0, "y0")
+    for name, pressure in type(system).start_pressures(system, y0).items():  # y0.pressure, y0.regulator.pressure
+        if not isinstance(pressure, jax.core.Tracer) and not np.all(np.asarray(pressure) > 0):
+            raise PamjaxInputError(f"y0.{name} must be an ABSOLUTE pressure > 0 [Pa], got {pressure}")
+        check_absolute_pressure(pressure, f"y0.{name}")  # 1.01325 (bar) or 0 (gauge) refused, the unit named
+    for name, (position, stroke) in type(system).start_positions(system, y0).items():
+        x = concrete_values(position)
+        if x is None:
+            continue
+        check_setting(f"y0.{name}", x, "start state")  # 30 for 30 mm refused, "looks like mm"
+        lo, hi = (None, None) if stroke is None else (concrete_values(b) for b in stroke)
+        if lo is None or hi is None:
+            continue
+        margin = START_STROKE_MARGIN * (hi - lo)
+        if np.any((x < lo - margin) | (x > hi + margin)):
+            raise PamjaxInputError(
+                f"y0.{name} = {np.array2string(x, threshold=6)} m lies outside the stroke its system allows, "
+                f"[{float(np.min(lo)):.6g}, {float(np.max(hi)):.6g}] m (the muscle's min_position, max_position; "
+                f"{START_STROKE_MARGIN:.0%} of it beyond either end is admitted, for the end stops' give): start "
+                "inside it (position in metres, positive = contraction)"
+            )
 
 
 def runtime_checks(system, signal, ts, command_range):

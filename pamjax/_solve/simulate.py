@@ -14,13 +14,12 @@ from .._core.custom_types import ArrayLike, Real, RealScalarLike, TimesLike
 from .._core.errors import PamjaxInputError, PamjaxSolveError, check_time_grid, require_float64
 from .._core.fastjit import filter_jit
 from .._core.private import diffrax_result_code, equinox_errors_as_nan, jax_at_top_level
-from .._core.units import check_absolute_pressure
 from .._core.xla_cpu import compiled_with, single_trajectory_options
 from .._physics.signals import AbstractSignal
 from .._physics.tabulated import prepared_tables
 from .._systems.base import AbstractSystem
 from . import chunks as _chunks, synchronous as _sync
-from .checks import check_finite_state, check_parameters, naming_batched, prepared, runtime_checks, vacuum
+from .checks import check_parameters, check_start_state, naming_batched, prepared, runtime_checks, vacuum
 from .edges import ScheduledValve, StartsOff, command_jumps
 from .hints import default_max_steps, failure_hint, fixed_step_hint, negative_inflow
 from .scaled import scaled
@@ -270,12 +269,7 @@ def validate(system, signal, ts, y0=None, t0=None):
                                                 f"written {hi / 100:g}, not {hi:g}" if percent else "")
             )
     check_parameters(system)  # a system changed with eqx.tree_at skipped its components' checks
-    if y0 is not None:
-        check_finite_state(y0, "y0")
-        for name, pressure in type(system).start_pressures(system, y0).items():  # y0.pressure, y0.regulator.pressure
-            if not isinstance(pressure, jax.core.Tracer) and not np.all(np.asarray(pressure) > 0):
-                raise PamjaxInputError(f"y0.{name} must be an ABSOLUTE pressure > 0 [Pa], got {pressure}")
-            check_absolute_pressure(pressure, f"y0.{name}")  # 1.01325 (bar) or 0 (gauge) refused, the unit named
+    check_start_state(system, y0)  # y0's pressures (not bar, not gauge) and positions (not mm, inside the stroke)
 
 
 def default_solver(system: AbstractSystem) -> "dfx.AbstractSolver":

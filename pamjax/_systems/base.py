@@ -36,6 +36,8 @@ class AbstractSystem(eqx.Module):
     - `with_supply_pressure(p)`: the system with its valve fed at another supply pressure (a rig's runs).
     - `start_pressures(state)`: the ABSOLUTE pressures a state holds, by their path in it, which `simulate` and
       `sweep` check in a start state `y0` (> 0, not bar or gauge by magnitude).
+    - `start_positions(state)`: the displacements [m] a state holds, by their path, each with the stroke it must lie
+      in (or None), which `simulate` checks in a start state `y0` (not mm by magnitude; inside the stroke).
     - `discrete_step(...)`: one step of its discrete-time model (explicit Euler unless the system says otherwise).
     """
 
@@ -98,6 +100,14 @@ class AbstractSystem(eqx.Module):
         if it has one; a system whose state keeps its pressures deeper (in a regulator's state) names them."""
         return state_leaves(state, ("pressure",))
 
+    def start_positions(self, state):
+        """{path: (displacement [m], stroke)} of the displacements `state` (a state of this system, e.g. `simulate`'s
+        `y0`) holds, each named by its path in the state ("position"), with the (lowest, highest) values [m] its
+        system allows, or None where it sets none: what `simulate` checks in a start state (not mm by its
+        magnitude, inside the stroke). By default the state's own `position`, if it has one, with no stroke; a muscle
+        system gives its muscle's."""
+        return {name: (x, None) for name, x in state_leaves(state, ("position",)).items()}
+
     def discrete_step(self, t, state, command, sample_time):
         """One explicit Euler step of `sample_time` [s] from `state` at `t` [s] with `command` held (paper 000 eq. 18
         for every state); systems whose discrete-time model differs override it."""
@@ -127,3 +137,8 @@ class AbstractMuscleSystem(AbstractSystem):
     muscle: eqx.AbstractVar[AbstractMuscle]
     friction: eqx.AbstractVar[AbstractFriction]
     payload_mass: eqx.AbstractVar[jax.Array]
+
+    def start_positions(self, state):
+        """The state's `position` with the muscle's stroke (`min_position`, `max_position`) [m]."""
+        stroke = (self.muscle.min_position, self.muscle.max_position)
+        return {name: (x, stroke) for name, x in state_leaves(state, ("position",)).items()}

@@ -8,13 +8,14 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._core.custom_types import RealScalar, StateLike
-from .._core.errors import check_in_open_interval, check_positive
+from .._core.errors import PamjaxInputError, check_in_open_interval, check_positive
 from .._core.fitting import parameter, positive
 from .._papers import paper000
 from .._physics.chamber import pressure_rate
 from .._physics.friction import AbstractFriction, CoulombViscousFriction
 from .._physics.gas import Air
-from .._physics.muscle import EndStops, Muscle, stroke_root
+from .._physics.muscle import AbstractMuscle, EndStops, Muscle, stroke_root
+from .._physics.regulator import AbstractRegulator
 from .._physics.valves.base import AbstractValve
 from .base import AbstractMuscleSystem
 
@@ -27,6 +28,23 @@ class MuscleState(eqx.Module):
     position: StateLike
     velocity: StateLike
     friction: StateLike | None = None
+
+
+def _check_parts(system):
+    """Refuse a part of the wrong kind (None, a number, a string: each ended as an AttributeError inside the solve),
+    named, as the constructor is called (and before a solve, for a part set with `eqx.tree_at`)."""
+    for name, part, kind, example in (
+        ("valve", system.valve, AbstractValve, "presets.mas10_valve(), AveragedValve"),
+        ("muscle", system.muscle, AbstractMuscle, "presets.mas10_muscle()"),
+        ("friction", system.friction, AbstractFriction, "CoulombViscousFriction(), KarnoppFriction()"),
+        ("end_stops", system.end_stops, EndStops, "EndStops()"),
+        ("air", system.air, Air, "Air()"),
+    ):
+        if not isinstance(part, kind):
+            hint = ("; a muscle fed by a pressure regulator is a RegulatedMuscleSystem(regulator, muscle)"
+                    if isinstance(part, AbstractRegulator) else "")
+            raise PamjaxInputError(f"MuscleSystem.{name} must be an {kind.__name__} (e.g. {example}), got "
+                                   f"{type(part).__name__}{hint}")
 
 
 class MuscleSystem(AbstractMuscleSystem):
@@ -54,6 +72,7 @@ class MuscleSystem(AbstractMuscleSystem):
     output_names = ("pressure", "position", "velocity", "force", "friction_force", "mass_flow", "volume")
 
     def __check_init__(self):
+        _check_parts(self)
         check_positive(self.payload_mass, "MuscleSystem.payload_mass")
         check_positive(self.gravity, "MuscleSystem.gravity")
         check_in_open_interval(self.polytropic_index, 0.99, 1.41, "MuscleSystem.polytropic_index")

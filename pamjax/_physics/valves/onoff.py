@@ -9,7 +9,7 @@ from ..._core.arrays import device_array
 from ..._core.custom_types import RealScalar
 from ..._core.errors import PamjaxInputError, check_nonnegative, check_positive, concrete_values
 from ..._core.fitting import positive
-from ..._core.units import check_absolute_pressure
+from ..._core.units import MAX_EDGE_WIDTH, check_absolute_pressure
 from ..._papers import paper000
 from ..gas import AbstractRestriction, Air
 from ..smooth import smooth_step
@@ -70,6 +70,42 @@ def _check_delays_within_period(frequency, on_delay, off_delay):
     )
 
 
+# The widest smoothed edge, as a fraction of the PWM period: at a 50 % duty a period's on and off edges are half a
+# period apart, 10 edge widths at 1/20, and the logistic opening between them still reaches 99.3 % (S(5)); a wider
+# edge never fully opens or closes the valve within a period, which the valve's timing assumes (each period opens and
+# closes it before the next begins). The default 1e-4 s is 0.5 % of paper 000's 20 ms period (and 2.5 % of the 4 ms
+# period of the fastest PWM the 2 ms delays allow); milliseconds typed as seconds (0.1 for 0.1 ms) are 500 % of it.
+MAX_EDGE_FRACTION = 0.05
+
+
+def _check_edge_within_period(frequency, edge_width):
+    """Refuse a smoothed edge wider than `MAX_EDGE_FRACTION` of the PWM period 1/f (concrete values only,
+    elementwise, as `_check_delays_within_period`)."""
+    values = [concrete_values(x) for x in (frequency, edge_width)]
+    if any(v is None for v in values):
+        return
+    try:
+        frequency, width = np.broadcast_arrays(*values)
+    except ValueError:  # shapes that do not combine: the parameter with an axis too many is named elsewhere
+        return
+    with np.errstate(divide="ignore"):
+        limit = MAX_EDGE_FRACTION / frequency
+    bad = ~(width <= limit)
+    if not np.any(bad):
+        return
+    i = np.unravel_index(int(np.argmax(bad)), bad.shape)
+    f, w = float(frequency[i]), float(width[i])
+    where = f" (at index {tuple(int(k) for k in i)} of the values given)" if bad.size > 1 else ""
+    unit = (f"; {w:g} looks like ms (pamjax takes seconds: 0.1 ms is 1e-4)" if w > MAX_EDGE_WIDTH else
+            "; give a narrower edge")  # wider than any PWM's edge (`MAX_EDGE_WIDTH`): milliseconds typed as seconds
+    raise PamjaxInputError(
+        f"OnOffValve.edge_width ({w:.6g} s = {w * 1e3:.6g} ms) must not exceed {MAX_EDGE_FRACTION:.0%} of the PWM "
+        f"period 1/pwm_frequency = {1e3 / f:.6g} ms, i.e. {MAX_EDGE_FRACTION / f:.6g} s{where}: a smoothed edge "
+        f"that wide never lets the valve open or close fully within a period (the default is 1e-4 s, 0.5 % of "
+        f"50 Hz's 20 ms){unit}"
+    )
+
+
 class OnOffValve(AbstractSwitchingValve):
     """Paper 000's 3/2 high-speed on/off valve (Festo MHE2) driven by PWM.
 
@@ -97,6 +133,7 @@ class OnOffValve(AbstractSwitchingValve):
     - `switch_on_delay`, `switch_off_delay`: [s]; 2e-3 each (paper 000: switching time ≈ 2 ms). Their sum must be
       shorter than the PWM period 1/f (each delay plays out within one period; refused otherwise).
     - `edge_width`: time width of a smoothed edge [s]; 1e-4 (0.5 % of the 20 ms period, 5 % of the switching time).
+      At most 5 % of the PWM period (`MAX_EDGE_FRACTION`; refused otherwise).
     - `mode`: "smooth" or "exact".
     """
 
@@ -119,6 +156,7 @@ class OnOffValve(AbstractSwitchingValve):
         if self.mode not in ("smooth", "exact"):
             raise PamjaxInputError(f"OnOffValve.mode must be 'smooth' or 'exact', got {self.mode!r}")
         _check_delays_within_period(self.pwm_frequency, self.switch_on_delay, self.switch_off_delay)
+        _check_edge_within_period(self.pwm_frequency, self.edge_width)
 
     def supply(self):
         return self.supply_pressure
