@@ -377,6 +377,8 @@ def simulate(
     start = t0 if start is None else start  # the start as the fixed grid's size and the edge schedule read it
     traced_times = _is_traced((ts, t0))  # (after jnp.asarray: tracers under an enclosing jit or vmap)
     jump_ts = periods = None
+    traced = traced_model or traced_times or _is_traced(y0)
+    adjoint = "forward" if adjoint is None and not traced else adjoint  # see the docstring: a lighter trace
     stepping = resolve_stepping(system, stepping)
     if stepping in ("pwm", "grid"):
         periods = _fixed_grid_periods(system, stepping, substeps, grid_step, start, t_end)
@@ -385,10 +387,8 @@ def simulate(
     elif system.valve.smooth_edges:  # step boundaries at the smoothed edges (from the frequency: 1/f run eagerly
         # would compile a program); a static flag, one value for every horizon: another does not compile again
         periods = _EDGE_CLIP
-    else:  # a continuous valve: a step boundary where its command jumps
-        jump_ts = command_jumps(signal, start, t_end)
-    traced = traced_model or traced_times or _is_traced(y0)
-    adjoint = "forward" if adjoint is None and not traced else adjoint  # see the docstring: a lighter trace
+    else:  # a continuous valve: a step boundary where its command jumps (forward mode only: `command_jumps`)
+        jump_ts = command_jumps(signal, start, t_end, adjoint)
     if solver is None and stepping == "adaptive":
         solver = default_solver(system)
     if max_steps is None:  # a budget that grows with the horizon (a 1,000 s PWM run needs ~1.6 M steps)
