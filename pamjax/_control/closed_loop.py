@@ -30,6 +30,7 @@ from .._core.errors import PamjaxInputError, check_count, check_positive
 from .._core.fitting import parameter
 from .._papers import paper000
 from .._physics.signals import AbstractSignal, Step
+from .._solve.checks import check_positive_number
 from .._solve.simulate import solve
 from .._solve.trajectory import RESULT_NONFINITE
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
@@ -310,11 +311,7 @@ def _check_solver_settings(rtol, atol, max_steps):
     """`rtol` and `atol` finite numbers > 0 and `max_steps` an int >= 1, as `simulate` refuses them: a tolerance of 0
     or a step budget of 0 failed every period's solve (inf positions, `result` 1), a negative `rtol` ran silently."""
     for name, value in (("rtol", rtol), ("atol", atol)):
-        number = (isinstance(value, (int, float, np.ndarray, np.generic, jax.Array))
-                  and not isinstance(value, (bool, np.bool_)))
-        v = None if (not number or isinstance(value, jax.core.Tracer)) else np.asarray(value, dtype=float)
-        if not number or (v is not None and (v.ndim != 0 or not np.isfinite(v) or v <= 0)):
-            raise PamjaxInputError(f"{name} must be a finite number > 0, got {value!r}")
+        check_positive_number(value, name)
     check_count(max_steps, "max_steps", "an int >= 1 (solver steps per period)")
 
 

@@ -121,6 +121,34 @@ def check_finite_state(state, name):
 START_STROKE_MARGIN = 0.05
 
 
+def check_positive_number(value, name):
+    """A solver setting (a tolerance, a step [s]) one finite number > 0: a Python or NumPy number or a 0-d array, not
+    a bool, else `PamjaxInputError` naming it. Returns it as a NumPy float; a traced value unchecked, as None.
+    `simulate`'s check of rtol, atol, dt0, grid_step, and `simulate_closed_loop`'s."""
+    if isinstance(value, jax.core.Tracer):
+        return None
+    number = (isinstance(value, (int, float, np.ndarray, np.generic, jax.Array))
+              and not isinstance(value, (bool, np.bool_)))
+    v = np.asarray(value, dtype=float) if number else None
+    if v is None or v.ndim != 0 or not np.isfinite(v) or v <= 0:
+        raise PamjaxInputError(f"{name} must be a finite number > 0, got {value!r}")
+    return v
+
+
+def check_start_pressure(pressure, name, lanes=False):
+    """A start pressure ABSOLUTE pascal: > 0, and not bar or gauge by its magnitude (1.01325 or 0 refused, the likely
+    unit named); concrete values only. `lanes`: one value per point of a sweep, the first bad one named by its index.
+    `simulate`'s check of `y0` and `sweep`'s of its start values."""
+    v = concrete_values(pressure)
+    if v is not None and not np.all(v > 0):
+        if not lanes:
+            raise PamjaxInputError(f"{name} must be an ABSOLUTE pressure > 0 [Pa], got {pressure}")
+        v = v.reshape(-1)
+        bad = int(np.argmin(v > 0))
+        raise PamjaxInputError(f"{name} must be an ABSOLUTE pressure > 0 [Pa], point {bad} is {v[bad]}")
+    check_absolute_pressure(pressure, name)
+
+
 def check_start_state(system, y0):
     """`simulate`'s checks of a start state `y0` (None: nothing to check), concrete leaves only: every leaf finite;
     the pressures the system names (`start_pressures`) ABSOLUTE pascal, > 0 and not bar or gauge by magnitude; the
@@ -130,9 +158,7 @@ def check_start_state(system, y0):
         return
     check_finite_state(y0, "y0")
     for name, pressure in type(system).start_pressures(system, y0).items():  # y0.pressure, y0.regulator.pressure
-        if not isinstance(pressure, jax.core.Tracer) and not np.all(np.asarray(pressure) > 0):
-            raise PamjaxInputError(f"y0.{name} must be an ABSOLUTE pressure > 0 [Pa], got {pressure}")
-        check_absolute_pressure(pressure, f"y0.{name}")  # 1.01325 (bar) or 0 (gauge) refused, the unit named
+        check_start_pressure(pressure, f"y0.{name}")
     for name, (position, stroke) in type(system).start_positions(system, y0).items():
         x = concrete_values(position)
         if x is None:

@@ -11,8 +11,8 @@ import jax.tree_util as jtu
 import numpy as np
 
 from .._core.errors import PamjaxInputError
-from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
+from .._solve.checks import check_start_pressure
 
 
 def get(obj, parts):
@@ -143,16 +143,6 @@ def _names_pressure(parts, pressures=None):
     return bool(parts) and (parts[-1] == "pressure" or parts[-1].endswith("_pressure"))
 
 
-def _check_start_pressure(values, name):
-    """`simulate`'s check of a start pressure (`pamjax._solve.simulate.validate` refuses a y0.pressure ≤ 0, then a
-    pressure in another unit, by `check_absolute_pressure`), over every lane's value."""
-    v = np.asarray(values, dtype=float).reshape(-1)
-    if not np.all(v > 0):
-        bad = int(np.argmin(v > 0))
-        raise PamjaxInputError(f"{name} must be an ABSOLUTE pressure > 0 [Pa], point {bad} is {v[bad]}")
-    check_absolute_pressure(v, name)  # 1.01325 (bar) or 0.5 (gauge MPa) refused naming the likely unit
-
-
 def check_start(system, y0, plan, flat):
     """The checks `simulate` applies to a start state, on a sweep's, before any solve: every swept start value that is
     a pressure ("y0.pressure", "y0.flexor_pressure", a pressure of the `y0` given by the system's `start_pressures`:
@@ -164,7 +154,7 @@ def check_start(system, y0, plan, flat):
         if where == "y0":
             swept.add(".".join(parts))
             if _names_pressure(parts, pressures):
-                _check_start_pressure(flat[key], f"over[{key!r}]")
+                check_start_pressure(flat[key], f"over[{key!r}]", lanes=True)
     if y0 is None:
         return
     for path, leaf in jtu.tree_flatten_with_path(y0)[0]:
@@ -175,7 +165,7 @@ def check_start(system, y0, plan, flat):
             raise PamjaxInputError(f"y0 must be finite (no NaN or inf), y0.{name} is {leaf}")
     for name, leaf in pressures.items():
         if name not in swept and not isinstance(leaf, jax.core.Tracer):
-            _check_start_pressure(leaf, f"y0.{name}")
+            check_start_pressure(leaf, f"y0.{name}", lanes=True)
 
 
 def check_bounds(system, sig, point):
