@@ -38,6 +38,26 @@ def _commands_at(signal, times):
     return jax.vmap(signal)(times)
 
 
+def _first_violation(holds, *params):
+    """Where the condition `holds(*values)` fails for the concrete, broadcast values of `params` (a sweep's lanes
+    checked at once): (the first failing point's values as floats, its index as a phrase where there are several), or
+    None when it holds everywhere, a value is traced, or the shapes do not combine (named elsewhere)."""
+    values = [concrete_values(x) for x in params]
+    if any(v is None for v in values):
+        return None
+    try:
+        values = np.broadcast_arrays(*values)
+    except ValueError:
+        return None
+    with np.errstate(divide="ignore"):
+        bad = ~holds(*values)
+    if not np.any(bad):
+        return None
+    i = np.unravel_index(int(np.argmax(bad)), bad.shape)
+    where = f" (at index {tuple(int(k) for k in i)} of the values given)" if bad.size > 1 else ""
+    return tuple(float(v[i]) for v in values), where
+
+
 def _check_delays_within_period(frequency, on_delay, off_delay):
     """Refuse switching delays whose sum is not shorter than the PWM period T = 1/f. The valve's timing (`opening`,
     `edge_schedule`, `switching_gates` and the PWM-synchronous grid's `open_at_start`) takes each period to open or
@@ -46,21 +66,10 @@ def _check_delays_within_period(frequency, on_delay, off_delay):
     silently (300 Hz with the 2 ms delays: a tank at 650, 124 or 105 kPa by stepping) and a delay longer than the
     period never opens the valve. Concrete values only, elementwise (a sweep's lanes checked at once); traced ones
     (jit, vmap, grad) have no value to check here."""
-    values = [concrete_values(x) for x in (frequency, on_delay, off_delay)]
-    if any(v is None for v in values):
+    found = _first_violation(lambda f, on, off: on + off < 1.0 / f, frequency, on_delay, off_delay)
+    if found is None:
         return
-    try:
-        frequency, on_delay, off_delay = np.broadcast_arrays(*values)
-    except ValueError:  # shapes that do not combine: the parameter with an axis too many is named elsewhere
-        return
-    with np.errstate(divide="ignore"):
-        period = 1.0 / frequency
-    bad = ~(on_delay + off_delay < period)
-    if not np.any(bad):
-        return
-    i = np.unravel_index(int(np.argmax(bad)), bad.shape)
-    f, on, off = float(frequency[i]), float(on_delay[i]), float(off_delay[i])
-    where = f" (at index {tuple(int(k) for k in i)} of the values given)" if bad.size > 1 else ""
+    (f, on, off), where = found
     raise PamjaxInputError(
         f"OnOffValve: switch_on_delay ({on * 1e3:.6g} ms) + switch_off_delay ({off * 1e3:.6g} ms) = "
         f"{(on + off) * 1e3:.6g} ms must be shorter than the PWM period 1/pwm_frequency = {1e3 / f:.6g} ms "
@@ -81,21 +90,10 @@ MAX_EDGE_FRACTION = 0.05
 def _check_edge_within_period(frequency, edge_width):
     """Refuse a smoothed edge wider than `MAX_EDGE_FRACTION` of the PWM period 1/f (concrete values only,
     elementwise, as `_check_delays_within_period`)."""
-    values = [concrete_values(x) for x in (frequency, edge_width)]
-    if any(v is None for v in values):
+    found = _first_violation(lambda f, w: w <= MAX_EDGE_FRACTION / f, frequency, edge_width)
+    if found is None:
         return
-    try:
-        frequency, width = np.broadcast_arrays(*values)
-    except ValueError:  # shapes that do not combine: the parameter with an axis too many is named elsewhere
-        return
-    with np.errstate(divide="ignore"):
-        limit = MAX_EDGE_FRACTION / frequency
-    bad = ~(width <= limit)
-    if not np.any(bad):
-        return
-    i = np.unravel_index(int(np.argmax(bad)), bad.shape)
-    f, w = float(frequency[i]), float(width[i])
-    where = f" (at index {tuple(int(k) for k in i)} of the values given)" if bad.size > 1 else ""
+    (f, w), where = found
     unit = (f"; {w:g} looks like ms (pamjax takes seconds: 0.1 ms is 1e-4)" if w > MAX_EDGE_WIDTH else
             "; give a narrower edge")  # wider than any PWM's edge (`MAX_EDGE_WIDTH`): milliseconds typed as seconds
     raise PamjaxInputError(
