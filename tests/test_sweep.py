@@ -184,6 +184,15 @@ def test_initial_state_path_and_factory(averaged):
          r"over\['y0.pressure'\] must be an ABSOLUTE pressure > 0"),
         (dict(over={"signal.value": [0.5]}, y0=pamjax.MuscleState(pressure=-1e5, position=0.0, velocity=0.0)),
          r"y0.pressure must be an ABSOLUTE pressure > 0"),
+        # a swept start position is checked as `simulate` checks y0.position (mm, outside the stroke: solved before,
+        # the payload flung from the stops)
+        (dict(over={"y0.position": [0.0, 0.5]}),
+         r"over\['y0.position'\] = 0.5 at point 1 m lies outside the stroke its system allows"),
+        (dict(over={"y0.position": [30.0]}), r"y0.position = 30 m: more than 1 m; that looks like mm"),
+        (dict(over={"y0.pressure": [2e5]}, y0=pamjax.MuscleState(pressure=2e5, position=0.5, velocity=0.0)),
+         r"y0.position = 0.5 m lies outside the stroke"),
+        (dict(over={"y0.position": [0.01, -0.5]}, y0=pamjax.MuscleState(pressure=2e5, position=0.0, velocity=0.0)),
+         r"over\['y0.position'\] = -0.5 at point 1 m lies outside the stroke"),
         # raw IndexError / "Need at least one array to stack" / "unknown channel 'p'" before
         (dict(over={"signal.value": []}), r"over\['signal.value'\] holds no values"),
         (dict(over={"signal.value": [0.5]}, channels=()), r"channels must be None or a non-empty sequence"),

@@ -160,21 +160,34 @@ def check_start_state(system, y0):
     for name, pressure in type(system).start_pressures(system, y0).items():  # y0.pressure, y0.regulator.pressure
         check_start_pressure(pressure, f"y0.{name}")
     for name, (position, stroke) in type(system).start_positions(system, y0).items():
-        x = concrete_values(position)
-        if x is None:
-            continue
-        check_setting(f"y0.{name}", x, "start state")  # 30 for 30 mm refused, "looks like mm"
-        lo, hi = (None, None) if stroke is None else (concrete_values(b) for b in stroke)
-        if lo is None or hi is None:
-            continue
-        margin = START_STROKE_MARGIN * (hi - lo)
-        if np.any((x < lo - margin) | (x > hi + margin)):
-            raise PamjaxInputError(
-                f"y0.{name} = {np.array2string(x, threshold=6)} m lies outside the stroke its system allows, "
-                f"[{float(np.min(lo)):.6g}, {float(np.max(hi)):.6g}] m (the muscle's min_position, max_position; "
-                f"{START_STROKE_MARGIN:.0%} of it beyond either end is admitted, for the end stops' give): start "
-                "inside it (position in metres, positive = contraction)"
-            )
+        check_start_position(position, stroke, f"y0.{name}")
+
+
+def check_start_position(position, stroke, name, lanes=False, path=None):
+    """A start displacement [m] (concrete values only): metres (30 for 30 mm refused, "looks like mm") and inside
+    `stroke` (lowest, highest) [m] (None: unchecked), give or take `START_STROKE_MARGIN`. `lanes`: one value per point
+    of a sweep, the first bad one named by its index; `path` the state's own path ("y0.position") where `name` is
+    another ("over['y0.position']"). `simulate`'s check of `y0` and `sweep`'s of its start values."""
+    x = concrete_values(position)
+    if x is None:
+        return
+    check_setting(path or name, x, "start state")
+    lo, hi = (None, None) if stroke is None else (concrete_values(b) for b in stroke)
+    if lo is None or hi is None:
+        return
+    margin = START_STROKE_MARGIN * (hi - lo)
+    outside = (x < lo - margin) | (x > hi + margin)
+    if np.any(outside):
+        shown = np.array2string(x, threshold=6)
+        if lanes:
+            bad = int(np.argmax(np.reshape(outside, -1)))
+            shown = f"{float(np.reshape(x, -1)[bad]):.6g} at point {bad}"
+        raise PamjaxInputError(
+            f"{name} = {shown} m lies outside the stroke its system allows, "
+            f"[{float(np.min(lo)):.6g}, {float(np.max(hi)):.6g}] m (the muscle's min_position, max_position; "
+            f"{START_STROKE_MARGIN:.0%} of it beyond either end is admitted, for the end stops' give): start "
+            "inside it (position in metres, positive = contraction)"
+        )
 
 
 def runtime_checks(system, signal, ts, command_range):

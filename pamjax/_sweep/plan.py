@@ -12,7 +12,7 @@ import numpy as np
 
 from .._core.errors import PamjaxInputError
 from .._physics.signals import AbstractSignal
-from .._solve.checks import check_start_pressure
+from .._solve.checks import check_start_position, check_start_pressure
 
 
 def get(obj, parts):
@@ -146,15 +146,21 @@ def _names_pressure(parts, pressures=None):
 def check_start(system, y0, plan, flat):
     """The checks `simulate` applies to a start state, on a sweep's, before any solve: every swept start value that is
     a pressure ("y0.pressure", "y0.flexor_pressure", a pressure of the `y0` given by the system's `start_pressures`:
-    "y0.regulator.pressure") an ABSOLUTE pressure > 0 [Pa] at every point, named by its key; the `y0` given finite,
-    its pressures that are not swept likewise."""
+    "y0.regulator.pressure") an ABSOLUTE pressure > 0 [Pa] at every point, named by its key; every swept start value
+    that is a displacement the system names (`start_positions`: "y0.position") metres and inside its stroke; the `y0`
+    given finite, its pressures and displacements that are not swept likewise."""
     pressures = None if y0 is None else type(system).start_pressures(system, y0)
-    swept = set()
-    for key, (where, parts) in zip(plan.keys, plan.targets):
-        if where == "y0":
-            swept.add(".".join(parts))
-            if _names_pressure(parts, pressures):
-                check_start_pressure(flat[key], f"over[{key!r}]", lanes=True)
+    starts = {".".join(parts): key for key, (where, parts) in zip(plan.keys, plan.targets) if where == "y0"}
+    # the displacements the system names (`start_positions`: "position", with its stroke) in the start given, or
+    # without one among the `initial_state` keywords swept
+    state = y0 if y0 is not None else {name: flat[key] for name, key in starts.items()}
+    positions = type(system).start_positions(system, state)
+    swept = set(starts)
+    for name, key in starts.items():
+        if _names_pressure(name.split("."), pressures):
+            check_start_pressure(flat[key], f"over[{key!r}]", lanes=True)
+        if name in positions:
+            check_start_position(flat[key], positions[name][1], f"over[{key!r}]", lanes=True, path=f"y0.{name}")
     if y0 is None:
         return
     for path, leaf in jtu.tree_flatten_with_path(y0)[0]:
@@ -166,6 +172,9 @@ def check_start(system, y0, plan, flat):
     for name, leaf in pressures.items():
         if name not in swept and not isinstance(leaf, jax.core.Tracer):
             check_start_pressure(leaf, f"y0.{name}", lanes=True)
+    for name, (leaf, stroke) in positions.items():
+        if name not in swept and not isinstance(leaf, jax.core.Tracer):
+            check_start_position(leaf, stroke, f"y0.{name}")
 
 
 def check_bounds(system, sig, point):
