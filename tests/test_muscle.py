@@ -124,6 +124,28 @@ def test_a_nominal_length_in_mm_is_refused(build, name):
         build()
 
 
+@pytest.mark.parametrize("build, name", [
+    (lambda: pamjax.ChouHannafordForce(strand_length=390.0, turns=7.9, nominal_length=0.3), "ChouHannafordForce"),
+    (lambda: pamjax.BraidVolume(390.0, 7.9, 0.3), "BraidVolume"),
+])
+def test_a_strand_length_in_mm_is_refused(build, name):
+    # b_s = 390 (mm) beside L0 = 0.3 m passed b_s > L0 and simulated a braid 1,000 times too long, silently
+    with pytest.raises(pamjax.PamjaxInputError, match=rf"{name}\.strand_length = 390 m: .*looks like mm"):
+        build()
+    assert float(pamjax.BraidVolume(0.39, 7.9, 0.3).strand_length) == 0.39  # the MAS-10's braid in metres stays legal
+
+
+@pytest.mark.parametrize("build, name", [
+    (lambda: pamjax.TankSystem(presets.mas10_averaged_valve(), 5.0), "TankSystem"),
+    (lambda: pamjax.TankFromModel(5.0)(presets.mas10_system(valve="averaged")), "TankSystem"),
+    (lambda: pamjax.RegulatorSystem(pamjax.FeedbackRegulator(), 40.0), "RegulatorSystem"),
+])
+def test_a_tank_volume_in_litres_is_refused(build, name):
+    # a 5 l tank typed as 5 (m³) charged 100,000 times too slowly, silently
+    with pytest.raises(pamjax.PamjaxInputError, match=rf"{name}\.volume = \d+ m³: more than 0\.1 m³.*litres"):
+        build()
+
+
 @pytest.mark.parametrize("field", ["force_law", "volume_law"])
 def test_a_muscle_without_a_force_or_volume_law_is_refused_by_name(field):
     # Muscle(force_law=None) ended as an AttributeError inside simulate

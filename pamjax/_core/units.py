@@ -252,6 +252,8 @@ _PLAUSIBLE = {
     "tank_volume": ("m³", 0.1, "cm³ or litres"),
     "v0": ("m³", MAX_MUSCLE_VOLUME, "cm³ or litres"),
     "nominal_length": ("m", MAX_MUSCLE_LENGTH, "mm"),
+    # a braid's strand b_s = √3 (1 − ε_max) L0 (paper 000 eq. 1 at cos²θ = 1/3) is at most √3 L0
+    "strand_length": ("m", 3.0**0.5 * MAX_MUSCLE_LENGTH, "mm"),
 }
 _ABSOLUTE_PRESSURES = {"pressure", "pressures", "atmospheric_pressure"}
 # containers whose entries are spreads per state (an estimator's initial standard deviations and process noise: Pa,

@@ -91,6 +91,7 @@ class ChouHannafordForce(AbstractForceLaw):
         check_positive(self.turns, "ChouHannafordForce.turns")
         check_positive(self.nominal_length, "ChouHannafordForce.nominal_length")
         check_plausible(self.nominal_length, "ChouHannafordForce.nominal_length")  # 400 (mm) for 0.4 m refused
+        check_plausible(self.strand_length, "ChouHannafordForce.strand_length")  # 390 (mm) for 0.39 m refused
 
     def static_force(self, x, gauge_pressure):
         cos_theta = (self.nominal_length - x) / self.strand_length
@@ -215,6 +216,7 @@ class BraidVolume(AbstractVolume):
         check_positive(self.turns, "BraidVolume.turns")
         check_positive(self.nominal_length, "BraidVolume.nominal_length")
         check_plausible(self.nominal_length, "BraidVolume.nominal_length")
+        check_plausible(self.strand_length, "BraidVolume.strand_length")  # 390 (mm) for 0.39 m refused
         b, length = self.strand_length, self.nominal_length
         if not isinstance(b, jax.core.Tracer) and not isinstance(length, jax.core.Tracer) and not bool(b > length):
             raise PamjaxInputError(

@@ -18,6 +18,7 @@ import jax.numpy as jnp
 from .._core.custom_types import FloatScalar, RealScalar, RealScalarLike, StateLike
 from .._core.errors import check_in_open_interval, check_nonnegative, check_positive
 from .._core.fitting import parameter, positive
+from .._core.units import check_plausible
 from .._papers import datasheets, paper000, paper001
 from .._physics.chamber import chamber_flow
 from .._physics.friction import AbstractFriction, CoulombViscousFriction
@@ -48,6 +49,7 @@ class RegulatorSystem(AbstractSystem):
             check_positive(self.volume, f"RegulatorSystem.volume (an {type(self.regulator).__name__} needs a chamber)")
         else:
             check_nonnegative(self.volume, "RegulatorSystem.volume")
+        check_plausible(self.volume, "RegulatorSystem.volume")  # 40 (litres) for paper 001's 0.04 m³ tank refused
         check_in_open_interval(self.polytropic_index, 0.99, 1.41, "RegulatorSystem.polytropic_index")
 
     @property

@@ -6,6 +6,7 @@ import jax.numpy as jnp
 from .._core.custom_types import RealScalar, StateLike
 from .._core.errors import PamjaxInputError, check_in_open_interval, check_positive
 from .._core.fitting import parameter, positive
+from .._core.units import check_plausible
 from .._papers import paper000
 from .._physics.chamber import pressure_rate
 from .._physics.gas import Air
@@ -41,6 +42,7 @@ class TankSystem(AbstractSystem):
                 f"{type(self.valve).__name__}" + (": a tank fed by a pressure regulator is a RegulatorSystem("
                 "regulator, volume)" if isinstance(self.valve, AbstractRegulator) else ""))
         check_positive(self.volume, "TankSystem.volume")
+        check_plausible(self.volume, "TankSystem.volume")  # 5 (litres) for a 5 l tank refused
         check_in_open_interval(self.polytropic_index, 0.99, 1.41, "TankSystem.polytropic_index")
 
     def initial_state(self, pressure=None):
