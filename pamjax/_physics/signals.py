@@ -70,8 +70,7 @@ class Constant(AbstractSignal):
 
 class Step(AbstractSignal):
     """u(t) = `before` for t < `time`, `after` from `time` [s] on. An adaptive solve of a continuous valve ends a step
-    at the jump (concrete calls, forward mode); a derivative with respect to `time` needs forward mode
-    (`pamjax.simulate(..., adjoint="forward")` under `jax.jacfwd`): reverse mode steps over the jump and gives 0."""
+    at the jump, so that `simulate` is differentiable with respect to `time` (forward and reverse mode)."""
 
     before: RealScalar = eqx.field(converter=as_scalar)
     after: RealScalar = eqx.field(converter=as_scalar)

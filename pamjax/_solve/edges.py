@@ -67,19 +67,16 @@ class ScheduledValve(AbstractSwitchingValve):
         return self.valve.mass_flow_at_opening(self.opening(t), pressure, air)
 
 
-def command_jumps(signal, t0, t_end, adjoint="forward"):
+def command_jumps(signal, t0, t_end):
     """The times where a continuous valve's command jumps (`signal.jump_times()`: a `Step`'s, a `Sampled` table's
     hold changes), as step boundaries for the adaptive solve, or None. Stepped over, a jump is not seen by the
     solver's error estimate: the averaged MAS-10 from duty 0.97 to 0.2 ended 349 Pa / 22 µm off a tight solve at the
     default tolerances (2 Pa without the jump); with the boundary it is solved as two smooth pieces. Concrete times
     are those inside (t0, t_end), sorted; traced ones (a `Step.time` differentiated or vmapped) are kept as traced
     boundaries, so that the solution's derivative with respect to a jump time flows through the step that ends there
-    (without one it was exactly 0). None under a reverse-mode `adjoint` (anything but "forward" / `ForwardMode`):
-    RODAS5's reverse pass through such a boundary came out NaN for some jump times (d x(3 s)/d payload_mass of the
-    averaged MAS-10 under a Step at 1.5 s or 2 s; finite at 1.234 s, and without the boundary), so reverse mode
-    steps over the jump as before the boundaries, accurate to what the error control sees of it."""
-    if not _forward(adjoint):
-        return None
+    (without one it was exactly 0), in forward and reverse mode alike. (Reverse mode stepped over the jumps for a
+    while: RODAS5's reverse pass through a boundary came out NaN for some jump times, from a rejected trial step
+    after the jump whose stages overflowed; `rodas5_step` now bounds its stages.)"""
     jumps = type(signal).jump_times(signal)  # not `signal.jump_times`: equinox makes a bound method a module (~80 µs)
     if not jumps:  # (most signals: nothing read, nothing moved to the host)
         return None
@@ -92,12 +89,3 @@ def command_jumps(signal, t0, t_end, adjoint="forward"):
     every = np.concatenate([np.ravel(concrete_values(x)) for x in jumps])
     inside = np.unique(every[(every > lo) & (every < hi)])
     return device_array(inside) if inside.size else None
-
-
-def _forward(adjoint):
-    """Whether `simulate`'s resolved `adjoint` differentiates in forward mode ("forward", `diffrax.ForwardMode`)."""
-    if isinstance(adjoint, str):
-        return adjoint == "forward"
-    import diffrax as dfx
-
-    return isinstance(adjoint, dfx.ForwardMode)

@@ -33,6 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 
 _GAMMA = 0.19
+_STAGE_BOUND = 1e10  # a stage's state within 1e10 (|z0| + 1) of the step's start: see `rodas5_step`
 _C = np.array([0.0, 0.38, 0.3878509998321533, 0.4839718937873840, 0.4570477008819580, 1.0, 1.0, 1.0])
 _D = np.array([_GAMMA, -0.1823079225333714636, -0.319231832186874912, 0.3449828624725343, -0.377417564392089818,
                0.0, 0.0, 0.0])
@@ -131,7 +132,13 @@ def rodas5_step(f, t0, z0, h, inverse=small_inverse):
     """One RODAS5 step of z' = f(t, z) (flat vector) from t0 to t0 + h: (z1, local error estimate, f(t0, z0)).
     `inverse`: the small-matrix inverse. Its seven later stages are one loop over the tableau, so the vector field
     is traced and compiled once for them: for single trajectories (`Rodas5`, diffrax), whose compilation is what a
-    user waits for. Batched lanes (`sweep`) use `rodas5_step_unrolled` (same step, faster there)."""
+    user waits for. Batched lanes (`sweep`) use `rodas5_step_unrolled` (same step, faster there).
+
+    Each later stage's state is clipped to within `_STAGE_BOUND` (|z0| + 1) of z0, componentwise: far beyond any
+    step the error control accepts (whose stages move by a fraction of the state), it keeps a wild trial step finite.
+    A trial step far too long (after a command jump, the step size carried over from before it: 0.30 s where 0.4 ms
+    is accepted) drove its stages from 1e6 to 1e220, then inf and NaN; the step is rejected, but reverse mode
+    multiplies its zero cotangent by those values, and 0 × inf is NaN: `jax.grad` through the whole solve was NaN."""
     f0, f_t, jac_z = _jacobian(f, t0, z0)
     w_inverse = inverse(jnp.eye(z0.shape[0], dtype=z0.dtype) / (h * _GAMMA) - jac_z)
 
@@ -141,8 +148,10 @@ def rodas5_step(f, t0, z0, h, inverse=small_inverse):
     k0 = w_inverse @ (f0 + (_D[0] * h) * f_t)
     ks = jnp.zeros((8, n), z0.dtype).at[0].set(k0)
 
+    bound = _STAGE_BOUND * (jnp.abs(z0) + 1.0)
+
     def stage(i, ks):
-        z = z0 + jnp.asarray(_A_STAGE, z0.dtype)[i] @ ks
+        z = jnp.clip(z0 + jnp.asarray(_A_STAGE, z0.dtype)[i] @ ks, z0 - bound, z0 + bound)
         rhs = f(t0 + jnp.asarray(_C, z0.dtype)[i] * h, z) + (jnp.asarray(_CC_STAGE, z0.dtype)[i] / h) @ ks
         rhs = rhs + (jnp.asarray(_D, z0.dtype)[i] * h) * f_t
         return ks.at[i].set(w_inverse @ rhs)

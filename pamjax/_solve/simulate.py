@@ -395,8 +395,8 @@ def simulate(
     elif system.valve.smooth_edges:  # step boundaries at the smoothed edges (from the frequency: 1/f run eagerly
         # would compile a program); a static flag, one value for every horizon: another does not compile again
         periods = _EDGE_CLIP
-    else:  # a continuous valve: a step boundary where its command jumps (forward mode only: `command_jumps`)
-        jump_ts = command_jumps(signal, start, t_end, adjoint)
+    else:  # a continuous valve: a step boundary where its command jumps (`command_jumps`)
+        jump_ts = command_jumps(signal, start, t_end)
     if solver is None and stepping == "adaptive":
         solver = default_solver(system)
     if max_steps is None:  # a budget that grows with the horizon (a 1,000 s PWM run needs ~1.6 M steps)
