@@ -106,6 +106,16 @@ def test_status_per_point_with_injected_failure(averaged):
     np.testing.assert_array_equal(result["position"][[0, 2]], alone["position"][[0, 2]])
 
 
+def test_the_reported_step_is_the_step_taken(averaged):
+    # No step is longer than the spacing of `ts` (0.05 s here): a dt of 1 s was reported as 1 s, so halving it to
+    # check the result changed nothing, unseen. The result's dt is the step taken.
+    over = {"signal.value": np.array([0.3, 0.7])}
+    long = sweep(averaged, pamjax.Constant(0.5), TS, over, method="rk4", dt=1.0, progress=False)
+    spaced = sweep(averaged, pamjax.Constant(0.5), TS, over, method="rk4", dt=0.05, progress=False)
+    assert long.dt == pytest.approx(0.05) and spaced.dt == pytest.approx(0.05)
+    np.testing.assert_array_equal(long["pressure"], spaced["pressure"])
+
+
 def test_reductions_match_numpy(averaged):
     ts = np.linspace(0.0, 2.0, 401)  # RK4: the reductions do not depend on the scheme (RODAS5 compiles 4x longer)
     over = {"signal.frequency": np.array([1.0, 2.5]), "signal.amplitude": np.array([0.2, 0.3])}

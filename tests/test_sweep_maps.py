@@ -134,3 +134,11 @@ def test_steady_state_map_of_no_commands_is_refused():
     # an IndexError from deep in the sweep before
     with pytest.raises(pamjax.PamjaxInputError, match=r"commands must be a non-empty 1-D array, got shape \(0,\)"):
         steady_state_map(presets.mas10_system(valve="averaged"), [], horizon=0.5, window=0.1, progress=False)
+
+
+def test_a_sample_interval_longer_than_the_window_is_named():
+    # "ts needs at least two times (the sweep starts at ts[0])" named neither setting before
+    with pytest.raises(pamjax.PamjaxInputError, match=r"sample_interval must be at most the window \(0.5 s\) and the "
+                                                      r"horizon \(1.0 s\), got 2.0"):
+        steady_state_map(presets.mas10_system(valve="averaged"), [0.5], horizon=1.0, window=0.5, sample_interval=2.0,
+                         progress=False)

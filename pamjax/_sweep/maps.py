@@ -52,6 +52,9 @@ def steady_state_map(system: AbstractSystem, commands: RealVectorLike, *, horizo
         sample_interval = (float(valve.period) / SAMPLES_PER_PWM_PERIOD if valve is not None and valve.switches
                            else SMOOTH_SAMPLE_INTERVAL)
     check_positive(sample_interval, "sample_interval")
+    if not sample_interval <= window:  # a window of no sample ("ts needs at least two times" named neither)
+        raise PamjaxInputError(f"sample_interval must be at most the window ({window} s) and the horizon "
+                               f"({horizon} s), got {sample_interval}")
     ts = np.linspace(0.0, horizon, int(round(horizon / sample_interval)) + 1)
     return sweep(system, Constant(0.5), ts, {"signal.value": commands, **(over or {})}, reduce=WindowMean(window),
                  **sweep_kwargs)

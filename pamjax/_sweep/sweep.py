@@ -97,7 +97,8 @@ def sweep(
     - `dt`: the fixed step [s] (the first step for "rodas5a"/"ros2a"). Default: RK4 at 2.5 / (largest |eigenvalue|
       of the Jacobian at the initial states) (its stability limit with a 10 % margin), "rodas5a"'s first step 1 ms,
       the others 5 ms; all capped at 2 PWM edge widths for a switching valve and at 1/100 of the signal's shortest
-      period. Check a fixed-step result by halving `dt`.
+      period; and at the spacing of `ts` (the result's `dt` is the longest step taken). Check a fixed-step result by
+      halving the result's `dt`.
     - `chunk_size`: points per device per compiled call (memory bound). Default (`default_chunk_size`): all points
       split evenly over the devices, at most 8,192 per call on CPU, on a GPU/TPU as many as 1 GiB of outputs per
       device holds (one call is fastest there). The last call is padded. Results are bitwise the same for the same
@@ -157,7 +158,11 @@ def sweep(
         method, dt, grid = hybrid_method_and_step(system, signal, values, flat, plan, method, dt, ts_np)
     else:
         method, dt = method_and_step(system, signal, values, flat, plan, method, dt, stiffness)
-    counts = np.zeros(0, dtype=np.int64) if method == "adaptive" or grid else _fixed_step.step_counts(ts_np, dt)[0]
+    counts = np.zeros(0, dtype=np.int64)
+    if method != "adaptive" and not grid:  # no step longer than the output spacing: the step used is reported (a dt
+        # of 5 s on a 1 ms grid was reported as 5 s; halving 2 ms -> 1 ms there changed nothing, unseen)
+        counts, steps = _fixed_step.step_counts(ts_np, dt)
+        dt = float(np.max(steps))
     config = (method, tuple(int(c) for c in counts), channels, reduce, tuple(sorted((solve_options or {}).items())),
               grid)
     mesh = mesh_of(devices)
