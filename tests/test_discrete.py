@@ -96,3 +96,25 @@ def test_hybrid_system_is_refused():
     system = presets.mas10_system("averaged", friction="karnopp")
     with pytest.raises(pamjax.PamjaxInputError, match="hybrid.*CoulombViscousFriction.*simulate"):
         pamjax.simulate_discrete(system, pamjax.Constant(0.7), 1e-4, 0.01)
+
+
+def test_a_diverging_run_or_a_sample_time_past_the_run_is_named():
+    # Euler at T_s = 0.1 s (the paper's 0.1 ms typed as ms) returned NaN and negative absolute pressures silently;
+    # T_s = 1 s for a 10 ms run made one step to 1 s (4.6 MPa)
+    system = presets.mas10_system("averaged")
+    y0 = system.initial_state(pressure=3e5)
+    with pytest.raises(pamjax.PamjaxSolveError, match=r"simulate_discrete diverged at t = .* sample_time = 0.1 s is "
+                                                      r"above its stability limit"):
+        pamjax.simulate_discrete(system, pamjax.Constant(0.6), 0.1, 1.0, y0=y0)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"sample_time \(1.0 s\) must not exceed the run"):
+        pamjax.simulate_discrete(system, pamjax.Constant(0.6), 1.0, 0.01, y0=y0)
+
+
+def test_a_regulated_muscle_steps_its_position_with_the_new_velocity():
+    # eq. 19 (semi-implicit Euler), as MuscleSystem steps it: paper 001's RegulatedMuscleSystem fell back on the
+    # generic explicit step (x moved by the OLD velocity: 1.8e-8 m per step off eq. 19 at T_s = 0.1 ms)
+    system = pamjax.RegulatedMuscleSystem(pamjax.ISO6358Regulator(), presets.dmsp40_muscle())
+    d = pamjax.simulate_discrete(system, pamjax.Constant(3.0), 1e-4, 0.02)
+    x, v = np.asarray(d.position), np.asarray(d.velocity)
+    assert np.max(np.abs(v)) > 1e-3  # it moves
+    np.testing.assert_allclose(np.diff(x), 1e-4 * v[1:], rtol=0, atol=1e-15)

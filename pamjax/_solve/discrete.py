@@ -25,7 +25,7 @@ import numpy as np
 
 from .._core.arrays import floats_as_arrays
 from .._core.custom_types import Array, ArrayLike, PyTreeLike, Real, RealScalarLike, Series
-from .._core.errors import PamjaxInputError, check_positive
+from .._core.errors import PamjaxInputError, PamjaxSolveError, check_positive, concrete_values
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractSystem
 from .edges import StartsOff
@@ -106,8 +106,9 @@ def simulate_discrete(system: AbstractSystem, signal: AbstractSignal, sample_tim
 
     **Returns:** a `DiscreteTrajectory`. Differentiable (reverse and forward mode) and jitted.
 
-    **Raises:** `PamjaxInputError` for bad input, naming the argument, and for a hybrid `system` (stick-slip
-    friction, `KarnoppFriction`): Euler steps cannot switch its mode (use `simulate`).
+    **Raises:** `PamjaxInputError` for bad input, naming the argument (a `sample_time` longer than the run
+    included), and for a hybrid `system` (stick-slip friction, `KarnoppFriction`): Euler steps cannot switch its
+    mode (use `simulate`); `PamjaxSolveError` when a concrete run diverges (Euler above its stability limit).
     """
     # A hybrid system's Euler steps never evaluate the events that switch its mode: stuck for ever, silently.
     if isinstance(system, AbstractSystem) and system.hybrid:
@@ -119,10 +120,35 @@ def simulate_discrete(system: AbstractSystem, signal: AbstractSignal, sample_tim
         )
     check_positive(sample_time, "sample_time")
     check_positive(float(t_end) - float(t0), "t_end - t0")
+    if float(sample_time) > float(t_end) - float(t0):  # one step far past t_end (1 s for a 10 ms run): a unit slip
+        raise PamjaxInputError(f"sample_time ({sample_time} s) must not exceed the run, t_end - t0 = "
+                               f"{float(t_end) - float(t0):g} s (paper 000 samples at 1e-4 s: seconds, not ms)")
     num_steps = int(np.ceil((float(t_end) - float(t0)) / float(sample_time) - 1e-9))
     if num_steps > 50_000_000:
         raise PamjaxInputError(f"sample_time {sample_time} gives {num_steps} steps up to t_end; use a larger one")
     system = floats_as_arrays(system)  # a value set with eqx.tree_at: an argument, not a constant of the program
     validate(system, signal, np.array([float(t0), float(t0) + num_steps * float(sample_time)]), y0, None)
     y0 = system.initial_state() if y0 is None else y0
-    return _run(system, signal, y0, jnp.asarray(t0, dtype=float), jnp.asarray(sample_time, dtype=float), num_steps)
+    traj = _run(system, signal, y0, jnp.asarray(t0, dtype=float), jnp.asarray(sample_time, dtype=float), num_steps)
+    _check_stable(traj, sample_time)
+    return traj
+
+
+def _check_stable(traj, sample_time):
+    """A concrete run whose Euler steps diverged (a state not finite, an absolute pressure <= 0) raises
+    `PamjaxSolveError` naming the first such sample and the remedy; it returned NaN and negative pressures silently
+    (T_s = 0.1 s, the paper's 0.1 ms typed as ms: NaN after a few steps)."""
+    pressure = concrete_values(traj.pressure)
+    leaves = [concrete_values(leaf) for leaf in jax.tree_util.tree_leaves(traj.state)]
+    if pressure is None or any(v is None for v in leaves):
+        return  # traced (under jit, grad, vmap): nothing to check on the host
+    bad = ~(pressure > 0)
+    for v in leaves:
+        bad = bad | ~np.isfinite(v.reshape(v.shape[0], -1)).all(axis=1)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise PamjaxSolveError(
+            f"simulate_discrete diverged at t = {float(traj.t[k]):.6g} s (step {k}: a state not finite or an absolute "
+            f"pressure <= 0): explicit Euler at sample_time = {float(sample_time):g} s is above its stability limit "
+            "(about 2 / the fastest rate: ~1 ms for the MAS-10 with the smooth Coulomb sign); use a smaller "
+            "sample_time (paper 000: 1e-4 s)")

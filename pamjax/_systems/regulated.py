@@ -218,6 +218,14 @@ class RegulatedMuscleSystem(AbstractMuscleSystem):
             friction=self.friction.state_rate(state.velocity, state.friction),
         )
 
+    def discrete_step(self, t, state, command, sample_time):
+        """Paper 000 eq. 18-20 as `MuscleSystem` steps them: the regulator's state, ẋ and a friction state by explicit
+        Euler, x with the NEW velocity (semi-implicit Euler, eq. 19; the generic explicit step moved x by the old
+        one, which changes the stability of the DMSP-40's lightly damped mass and spring)."""
+        rate = self.vector_field(t, state, command)
+        stepped = jax.tree_util.tree_map(lambda y, dy: y + sample_time * dy, state, rate)
+        return eqx.tree_at(lambda s: s.position, stepped, state.position + sample_time * stepped.velocity)
+
     def outputs(self, t, state, command):
         volume, volume_rate = self._chamber(state)
         muscle, friction, _ = self._forces(state)
