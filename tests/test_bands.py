@@ -496,3 +496,47 @@ def test_cli_sweep_band_of_a_stick_slip_model_file(tmp_path):
         np.testing.assert_array_equal(band["position_m"], plain["position_m"])
         assert np.all(band["position_m_lower"] < band["position_m"])
         assert np.all(band["position_m"] < band["position_m_upper"])
+
+
+def test_a_samples_band_of_a_phase_near_180_degrees_is_differenced_modulo_a_turn():
+    # draws of a phase at -179.96° fall on both sides of the ±180° cut: their raw quantiles spanned [-179.99,
+    # 179.99] (σ 149°) where the linear band gave ±0.12°; unwrapped about ŷ, as the linear method differences them
+    from pamjax._bands.maps import band_of_points
+
+    rng = np.random.default_rng(0)
+    phase = -179.96 + 0.06 * rng.standard_normal((201, 1))
+    phase[0] = -179.96
+    wrapped = (phase + 180.0) % 360.0 - 180.0  # what the frequency response gives: within [-180, 180)
+    assert np.any(wrapped > 0)
+    gain = 1.0 + 0.01 * rng.standard_normal((201, 1))
+    outputs = {"position_gain": gain, "position_phase": wrapped}
+    pred, lower, upper, std, _, failed = band_of_points(outputs, "samples", 0.95, 3, {"position_phase": 360.0})
+    assert failed == 0 and pred["position_phase"] == pytest.approx(-179.96)
+    assert std["position_phase"][0] == pytest.approx(0.06, rel=0.2)
+    assert lower["position_phase"][0] < -179.96 < upper["position_phase"][0]
+    assert upper["position_phase"][0] - lower["position_phase"][0] < 1.0
+    np.testing.assert_allclose(std["position_gain"], np.std(gain[1:], ddof=1))  # no period: as it was
+
+
+def test_seed_channels_and_over_are_refused_by_name_before_any_work(tmp_path, capsys):
+    # raw NumPy errors for the seed (on the command line after the simulation ran), "unknown channel 'p'" for a bare
+    # string, a raw "multiple values for keyword argument 'over'" TypeError; a result that does not exist would be
+    # refused otherwise, so each is checked before the fit is read
+    missing = tmp_path / "missing.json"
+    for seed in (-1, 1.5, True, "0"):
+        with pytest.raises(PamjaxInputError, match=r"seed must be an integer >= 0"):
+            pj.prediction_band(missing, predict, method="samples", seed=seed)
+        with pytest.raises(PamjaxInputError, match=r"seed must be an integer >= 0"):
+            pj.steady_state_band(missing, [0.5], method="samples", seed=seed)
+    with pytest.raises(PamjaxInputError, match=r"channels must be .* such as \('position',\), got 'position'"):
+        pj.frequency_response_band(missing, [1.0], channels="position")
+    with pytest.raises(PamjaxInputError, match=r"over: steady_state_band sweeps the fitted parameters' points"):
+        pj.steady_state_band(missing, [0.5], over={"payload_mass": np.array([5.0, 9.6])})
+    with pytest.raises(PamjaxInputError, match=r"over: frequency_response_band sweeps"):
+        pj.frequency_response_band(missing, [1.0], over={"payload_mass": np.array([5.0, 9.6])})
+    for command in ("simulate", "sweep"):
+        for seed in ("-1", "1.5"):
+            with pytest.raises(SystemExit) as exit_:
+                main([command, str(tmp_path / "x.toml"), "--band", "--band-method", "samples", "--band-seed", seed])
+            assert exit_.value.code == 2
+            assert f"--band-seed must be an integer >= 0, got '{seed}'" in capsys.readouterr().err

@@ -3,6 +3,7 @@ written whole (every parameter with its unit, the structure, the static settings
 damaged or hand-edited file is refused naming the file and the entry, and a file cannot make pamjax run code."""
 
 import json
+import pathlib
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -272,3 +273,81 @@ def test_a_closed_loops_period_is_saved_with_its_unit(tmp_path):
     entry = json.loads(path.read_text(encoding="utf-8"))["parameters"]["period"]
     assert entry["unit"] == "s" and entry["value"] == 0.02
     _assert_identical(loop, pamjax.load_model(path))
+
+
+# -- empty values, malformed structure, provenance; fit.json beside it ---------------------------------------------
+@pytest.mark.parametrize("path", ["payload_mass", "friction.coulomb_force"])
+def test_an_empty_value_is_refused_on_load_and_save(tmp_path, path):
+    # "value": [] loaded as shape (0,), and simulate then failed with a raw JAX TypeError about its scan's carry
+    with pytest.raises(PamjaxInputError, match=rf"m\.json: parameter '{path}': \[\] holds no number; write its value"):
+        pamjax.load_model(_file(tmp_path, lambda p: p[path].update(value=[])))
+    empty = eqx.tree_at(lambda s: s.payload_mass, presets.mas10_system("averaged"), jnp.zeros((0,)))
+    with pytest.raises(PamjaxInputError, match=r"cannot save .*e\.json: parameter 'payload_mass': \[\] holds no"):
+        pamjax.save_model(tmp_path / "e.json", empty)
+    assert not (tmp_path / "e.json").exists()
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda d: d.pop("parameters"), r"m\.json: no 'parameters' table"),  # was a KeyError
+    (lambda d: d["structure"].update({"class": 5}), r"m\.json: structure at the top: \"class\" must be a class name"),
+    (lambda d: d["structure"].update({"fields": []}), r"m\.json: MuscleSystem at the top: \"fields\" must be a table"),
+    (lambda d: d["structure"]["fields"].update(payload_mass={"array": ["payload_mass"]}),
+     r"m\.json: structure at payload_mass: \"array\" must name a parameter"),
+    (lambda d: d["structure"]["fields"]["valve"]["fields"].update(mode={"tuple": 3}),
+     r"m\.json: structure at valve\.mode: \"tuple\" must be a list"),
+])
+def test_a_malformed_structure_is_refused_naming_the_entry(tmp_path, edit, match):
+    # each escaped as a raw KeyError, TypeError or AttributeError
+    with pytest.raises(PamjaxInputError, match=match):
+        pamjax.load_model(_edited(tmp_path, edit))
+
+
+def test_provenance_is_stored_as_strict_json_or_refused_by_name(tmp_path):
+    # inf and NumPy scalars (a FitResult's to_dict(), a count from NumPy) raised raw JSON errors
+    model = presets.mas10_system("averaged")
+    provenance = {"se": [float("inf"), np.float32(1.5)], "n": np.int64(3), "values": np.array([1.0, 2.0])}
+    path = pamjax.save_model(tmp_path / "p.json", model, provenance=provenance)
+    assert json.loads(path.read_text(encoding="utf-8"))["provenance"] == {"se": ["inf", 1.5], "n": 3,
+                                                                          "values": [1.0, 2.0]}
+    _assert_identical(model, pamjax.load_model(path))
+    with pytest.raises(PamjaxInputError, match=r"provenance must hold numbers, text, lists and dicts only"):
+        pamjax.save_model(tmp_path / "q.json", model, provenance={"when": object()})
+    with pytest.raises(PamjaxInputError, match=r"provenance must be a dict"):
+        pamjax.save_model(tmp_path / "q.json", model, provenance=["fit"])
+    assert not (tmp_path / "q.json").exists()
+
+
+def _fit_result():
+    """A small FitResult made by hand (no fit): what to_json / from_json move."""
+    return pamjax.FitResult(
+        labels=["payload_mass"], paths=["payload_mass"], values=[9.6], initial_values=[9.0],
+        standard_errors=[float("inf")], correlation=[[1.0]], cost=1.0, initial_cost=2.0, iterations=3,
+        accepted_steps=2, status="converged", converged=True, message="converged", channel_errors={}, mismatch=False,
+        non_identifiable=[["payload_mass"]], warnings=[], history=[], fit_s=0.1, compile_s=0.2, num_residuals=10)
+
+
+def test_fit_result_json_names_a_model_file_and_is_replaced_whole(tmp_path, monkeypatch):
+    # from_json of a model.json raised a raw TypeError about `format`; to_json wrote in place, so a crash while
+    # overwriting truncated the previous fit.json
+    model_path = pamjax.save_model(tmp_path / "model.json", presets.mas10_system("averaged"))
+    with pytest.raises(PamjaxInputError, match=r"model\.json: not a fit result \(fit\.json\): a model file .*load_"):
+        pamjax.FitResult.from_json(model_path)
+    (tmp_path / "other.json").write_text('{"labels": []}')
+    with pytest.raises(PamjaxInputError, match=r"other\.json: not a fit result .*missing"):
+        pamjax.FitResult.from_json(tmp_path / "other.json")
+    result = _fit_result()
+    path = result.to_json(tmp_path / "fit.json")
+    assert pamjax.FitResult.from_json(path) == result
+    before = path.read_text()
+    real = pathlib.Path.write_text
+
+    def crash(self, text, *args, **kwargs):  # half the file written, then the process dies
+        real(self, text[: len(text) // 2], *args, **kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pathlib.Path, "write_text", crash)
+    with pytest.raises(KeyboardInterrupt):
+        result.to_json(path, overwrite=True)
+    monkeypatch.undo()
+    assert path.read_text() == before and sorted(p.name for p in tmp_path.iterdir()) == ["fit.json", "model.json",
+                                                                                        "other.json"]

@@ -257,3 +257,17 @@ def test_a_start_below_which_the_profile_finds_a_lower_cost_voids_every_verdict(
     assert done.profile_s > done.profile.profile_s > 0
     with pytest.raises(PamjaxInputError, match="rounds must be an int >= 1"):
         pj.profile_to_minimum(res, rounds=0)
+
+
+def test_a_progress_callable_gets_the_lines_and_nothing_is_printed(capsys):
+    # the callable was never called, and the lines were printed instead
+    muscle, *_, exp = _force_map(2.0, np.linspace(0.5, 6.0, 7), np.linspace(-0.01, 0.07, 9))
+    res = _fit(muscle, [exp], ["force_law.k0", "force_law.k1"])
+    capsys.readouterr()
+    lines = []
+    prof = pj.profile_likelihood(res, ["force_law.k0"], max_points=4, progress=lines.append)
+    assert capsys.readouterr().out == ""
+    assert all(isinstance(line, str) for line in lines)
+    assert lines[0].startswith("profiling 1 parameter(s)") and any(line.startswith("profiled force_law.k0")
+                                                                    for line in lines)
+    assert lines[-1].startswith(f"force_law.k0: {prof.profiles[0].verdict}")

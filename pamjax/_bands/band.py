@@ -20,6 +20,7 @@ prediction, not a prediction interval of new measurements (add the noise for tha
 """
 
 import dataclasses
+import numbers
 import statistics
 import warnings
 from collections.abc import Callable
@@ -48,12 +49,17 @@ def z_of(level):
     return statistics.NormalDist().inv_cdf(0.5 + 0.5 * float(level))
 
 
-def check_method(method, samples):
+def check_method(method, samples, seed=0):
+    """`method`, `samples` and the draws' `seed` of a band, refused by name before any work (a seed NumPy's generator
+    refuses, -1 or 1.5, failed only after the fitted model was read, and on the command line after the simulation)."""
     if method not in METHODS:
         raise PamjaxInputError(f"method must be one of {list(METHODS)}, got {method!r}")
     if not (isinstance(samples, int) and not isinstance(samples, bool) and samples >= 20):
         raise PamjaxInputError(f"samples must be an integer >= 20 (draws whose quantiles make the band), "
                                f"got {samples!r}")
+    if not (seed is None or (isinstance(seed, numbers.Integral) and not isinstance(seed, bool) and seed >= 0)):
+        raise PamjaxInputError(f"seed must be an integer >= 0 (the draws' generator; None: a fresh one each call), "
+                               f"got {seed!r}")
 
 
 def principal_steps(cov):
@@ -75,7 +81,8 @@ def draws(theta, cov, samples, seed):
     return theta + z @ principal_steps(cov)
 
 
-def _wrap(d, period):
+def wrap(d, period):
+    """`d` taken into [-period/2, period/2) (a phase difference in degrees: period 360); as it is for None."""
     return d if period is None else (d + 0.5 * period) % period - 0.5 * period
 
 
@@ -83,8 +90,8 @@ def linear_from_points(y0, plus, minus, period=None):
     """(σ, nonlinearity index) of one output from its values at θ̂ (`y0`) and at θ̂ ± sₖ (`plus`, `minus`: (n, ...)):
     σ² = Σ ((y₊ − y₋)/2)² (central differences at ±1 σ: the delta method where no Jacobian is traced), the index as
     in the module docstring. `period` (e.g. 360 for a phase in degrees): differences taken modulo it."""
-    slope = _wrap(plus - minus, period) / 2.0
-    curve = (_wrap(plus - y0[None], period) + _wrap(minus - y0[None], period)) / 2.0
+    slope = wrap(plus - minus, period) / 2.0
+    curve = (wrap(plus - y0[None], period) + wrap(minus - y0[None], period)) / 2.0
     sigma = np.sqrt(np.sum(slope**2, axis=0))
     return sigma, nonlinearity_index(sigma, curve)
 
@@ -96,8 +103,13 @@ def nonlinearity_index(sigma, curve):
     return float(np.nanmax(bend) / top) if top > 0 and np.any(np.isfinite(bend)) else 0.0
 
 
-def quantile_band(ys, level):
-    """(lower, upper, std) of draws `ys` (samples, ...) over the draws that did not fail (NaN rows left out)."""
+def quantile_band(ys, level, about=None, period=None):
+    """(lower, upper, std) of draws `ys` (samples, ...) over the draws that did not fail (NaN rows left out). With a
+    `period` (360 for a phase in degrees), each draw is first taken within half a period of `about` (the prediction
+    at θ̂), as `linear_from_points` differences them: draws of a phase near ±180° fall on both sides of the cut, and
+    their raw quantiles spanned the whole turn."""
+    if period is not None:
+        ys = about + wrap(ys - about, period)
     alpha = 0.5 * (1.0 - level)
     lower, upper = np.nanquantile(ys, [alpha, 1.0 - alpha], axis=0)
     return lower, upper, np.nanstd(ys, axis=0, ddof=1)
@@ -286,7 +298,7 @@ def prediction_band(result: ResultLike, predict: Callable[[Any], PyTreeLike], *,
     **Returns:** a `PredictionBand` (`prediction`, `lower`, `upper`, `std`, `method`, `how`, `nonlinearity`, ...).
     """
     z_of(level)
-    check_method(method, samples)
+    check_method(method, samples, seed)
     if not callable(predict):
         raise PamjaxInputError(f"predict must be a function model -> prediction, got {type(predict).__name__}")
     if not (isinstance(batch, int) and batch >= 1):

@@ -93,8 +93,27 @@ def band_of_points(outputs, method, level, n, periods=None):
             std[name], index[name] = linear_from_points(y[0], y[1 : n + 1], y[n + 1 :], period)
             lower[name], upper[name] = y[0] - z * std[name], y[0] + z * std[name]
         else:
-            lower[name], upper[name], std[name] = quantile_band(y[1:][ok[1:]], level)
+            period = (periods or {}).get(name)  # a phase: the draws differenced modulo a turn about ŷ
+            lower[name], upper[name], std[name] = quantile_band(y[1:][ok[1:]], level, y[0], period)
     return pred, lower, upper, std, (index if method == "linear" else None), int(np.count_nonzero(~ok[1:]))
+
+
+def map_options(kwargs, band, target):
+    """The keyword arguments a map's band passes on to `target` (its `scheme` as the map's `method`), refusing by name
+    those the band sets itself: `over` is its batch axis of parameter points (a user's `over` gave a raw "multiple
+    values for keyword argument" TypeError), `system` the fitted model."""
+    kwargs = dict(kwargs)
+    if "over" in kwargs:
+        raise PamjaxInputError(f"over: {band} sweeps the fitted parameters' points along its own batch axis and takes "
+                               "no `over`; for the band at other values of a parameter the fit did not determine, set "
+                               f"them on the model (model=eqx.tree_at(...)) and call {band} once per value (as pamjax "
+                               "sweep --band does per point of [sweep] over)")
+    if "system" in kwargs:
+        raise PamjaxInputError(f"system: {band} maps the fitted model (`result`, or `model=`), not a `system` of "
+                               f"{target}'s")
+    if "scheme" in kwargs:
+        kwargs["method"] = kwargs.pop("scheme")
+    return kwargs
 
 
 def _map_band(prop, outputs, method, level, samples, seed, how, periods=None):
@@ -127,12 +146,10 @@ def steady_state_band(result: ResultLike, commands: RealVectorLike, *, model: eq
     batch axis of one sweep (module docstring). `result`, `model`, `level`, `method`, `samples`, `seed` as for
     `prediction_band`; `map_kwargs` go to `steady_state_map` (`horizon`, `window`, `method` → `scheme`, ...)."""
     z_of(level)
-    check_method(method, samples)
+    check_method(method, samples, seed)
+    kwargs = map_options(map_kwargs, "steady_state_band", "steady_state_map")
     prop = propagation(result, model)
     points = parameter_points(prop, method, samples, seed)
-    kwargs = dict(map_kwargs)
-    if "scheme" in kwargs:
-        kwargs["method"] = kwargs.pop("scheme")
     r = steady_state_map(prop.space.base, commands, over=swept_values(prop, points), **kwargs)
     outputs = {c: np.asarray(r[c]) for c in r.channels if c != "command"}
     return _map_band(prop, outputs, method, level, samples, seed, f"{len(points)} x {np.size(commands)} lanes of "
@@ -148,14 +165,17 @@ def frequency_response_band(result: ResultLike, frequencies: RealVectorLike, *, 
     batch axis of one sweep (module docstring); arguments as for `steady_state_band`, `response_kwargs` to
     `frequency_response` (`offset`, `amplitude`, `periods`, ...)."""
     z_of(level)
-    check_method(method, samples)
+    check_method(method, samples, seed)
+    if channels is not None and (isinstance(channels, str) or not np.iterable(channels) or not channels
+                                 or not all(isinstance(c, str) for c in channels)):
+        example = f"({channels!r},)" if isinstance(channels, str) else '("position", "pressure")'
+        raise PamjaxInputError(f"channels must be None or a non-empty sequence of channel names such as {example}, "
+                               f"got {channels!r}")  # a bare string was read letter by letter ("unknown channel 'p'")
+    kwargs = map_options(response_kwargs, "frequency_response_band", "frequency_response")
     prop = propagation(result, model)
     if channels is None:
         channels = tuple(c for c in ("position", "pressure") if c in prop.space.base.output_names)
     points = parameter_points(prop, method, samples, seed)
-    kwargs = dict(response_kwargs)
-    if "scheme" in kwargs:
-        kwargs["method"] = kwargs.pop("scheme")
     fr = frequency_response(prop.space.base, frequencies, channels=tuple(channels), over=swept_values(prop, points),
                             **kwargs)
     outputs, periods = {}, {}
@@ -191,7 +211,7 @@ def flow_surface_band(result: ResultLike, commands: RealVectorLike, pressures: R
     (a switching valve's cycle-averaged mass flow [kg/s], shape (commands, pressures)): `prediction_band` of the
     traced surface (forward-mode Jacobian, or draws), `phases` per PWM period as `flow_surface`'s `samples`."""
     z_of(level)
-    check_method(method, samples)
+    check_method(method, samples, seed)
     prop = propagation(result, model)
     if not isinstance(prop.space.base, AbstractSystem):
         raise PamjaxInputError(f"model: flow_surface_band needs a system with a valve and air (e.g. "

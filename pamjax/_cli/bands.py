@@ -62,7 +62,8 @@ def add_arguments(parser):
     group.add_argument("--band-level", type=_level, default=DEFAULT_LEVEL, help="confidence level (default 0.95)")
     group.add_argument("--band-samples", type=int_at_least("--band-samples", 20), default=DEFAULT_SAMPLES,
                        help=f"draws for --band-method samples (default {DEFAULT_SAMPLES})")
-    group.add_argument("--band-seed", type=int, default=0, help="seed of the draws (default 0)")
+    group.add_argument("--band-seed", type=int_at_least("--band-seed", 0), default=0,  # refused before the run
+                       help="seed of the draws, an integer >= 0 (default 0)")
 
 
 def _touches(key, entry):

@@ -32,6 +32,7 @@ import numpy as np
 from .._core.arrays import as_scalar, device_array
 from .._core.errors import PamjaxInputError, require_float64
 from .._core.fitting import field_units
+from .._core.jsonio import plain
 from .._core.metadata import version
 from .._core.units import check_setting, parameter_to_si
 from .._physics.signals import AbstractSignal
@@ -125,6 +126,7 @@ def model_document(model, provenance=None, classes=()):
                                f"{type(model).__name__}: a signal is an input, given to simulate beside the model")
     parameters = {}
     structure = _encode(model, "", parameters, _registry(classes))
+    provenance = _provenance(provenance)
     return {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
@@ -133,8 +135,26 @@ def model_document(model, provenance=None, classes=()):
         "class": structure["class"],
         "parameters": parameters,
         "structure": structure,
-        "provenance": provenance or {},
+        "provenance": provenance,
     }
+
+
+def _provenance(provenance):
+    """`provenance` as strict JSON holds it, as pamjax's other writers store results (`pamjax._core.jsonio.plain`):
+    NumPy/JAX numbers and arrays as numbers and lists, a non-finite number as the text "inf", "-inf" or "nan" (a fit's
+    undetermined standard error); anything else JSON cannot hold is refused by name (it raised a raw TypeError or
+    ValueError from `json` after the model was encoded)."""
+    if provenance is None:
+        return {}
+    if not isinstance(provenance, dict):
+        raise PamjaxInputError(f"provenance must be a dict (JSON-able: numbers, text, lists, dicts), got "
+                               f"{type(provenance).__name__}")
+    provenance = plain(provenance)
+    try:
+        json.dumps(provenance, allow_nan=False)
+    except (TypeError, ValueError) as err:
+        raise PamjaxInputError(f"provenance must hold numbers, text, lists and dicts only (JSON): {err}") from None
+    return provenance
 
 
 def model_json(model, provenance=None, classes=()):
@@ -170,18 +190,28 @@ def save_model(path: str | os.PathLike, model: eqx.Module, *, overwrite: bool = 
     document = model_document(model, provenance, classes)
     # what load_model would refuse is not written: the same checks, run on the document itself
     _check_document(_Decoder(f"cannot save {path}", document, _registry(classes)), document)
-    text = model_json(model, provenance, classes)
+    return replace_text(path, model_json(model, provenance, classes))
+
+
+def replace_text(path, text):
+    """Write `text` to `path` through a temporary file in the same folder renamed over it (`os.replace`, atomic on
+    one file system): a crash or a full disk while writing leaves the previous file whole, never a truncated one."""
+    path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")  # the process's own: two writers never share one
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     return path
 
 
 class _Decoder:
     def __init__(self, where, document, classes):
         self.where, self.classes = where, classes
-        self.parameters = document["parameters"]
+        self.parameters = document.get("parameters")
         self.used = set()
 
     def fail(self, message):
@@ -216,6 +246,9 @@ class _Decoder:
                 value = value.reshape(entry["shape"])
             except (TypeError, ValueError) as err:
                 self.fail(f"{name}: shape {entry['shape']!r} does not fit its value ({err})")
+        if value.size == 0:  # loaded as shape (0,), and simulate failed with a raw JAX error about the scan's carry
+            self.fail(f"{name}: {raw!r} holds no number; write its value (a number, or a list of numbers where the "
+                      "model takes several)")
         unit = entry.get("unit")
         try:
             value = parameter_to_si(declared, None if unit in (None, "") else unit, value, name)
@@ -251,27 +284,50 @@ class _Decoder:
         if not isinstance(node, dict) or len(node) == 0:
             self.fail(f"structure at {path or 'the top'} must be a table, got {node!r}")
         if "array" in node:
+            if not isinstance(node["array"], str):
+                self.fail(f"structure at {path or 'the top'}: \"array\" must name a parameter (its path, such as "
+                          f"\"payload_mass\"), got {node['array']!r}")
             return self.array(node["array"], unit)
         if "class" in node:
             return self.module(node, path)
         if "value" in node:
-            return float(node["value"]) if node.get("type") == "float" else node["value"]
+            return self.setting(node, path)
         for kind in ("tuple", "list"):
             if kind in node:
+                if not isinstance(node[kind], list):
+                    self.fail(f"structure at {path or 'the top'}: \"{kind}\" must be a list, got {node[kind]!r}")
                 items = [self.decode(v, f"{path}.{i}") for i, v in enumerate(node[kind])]
                 return tuple(items) if kind == "tuple" else items
         if "dict" in node:
+            if not isinstance(node["dict"], dict):
+                self.fail(f"structure at {path or 'the top'}: \"dict\" must be a table, got {node['dict']!r}")
             return {k: self.decode(v, f"{path}.{k}") for k, v in node["dict"].items()}
         self.fail(f"structure at {path or 'the top'} has no class, array or value: {node!r}")
 
+    def setting(self, node, path):
+        """A static setting (`{"value": ...}`; a non-finite float as `{"value": "inf", "type": "float"}`)."""
+        if node.get("type") != "float":
+            return node["value"]
+        try:
+            return float(node["value"])
+        except (TypeError, ValueError):
+            self.fail(f"structure at {path or 'the top'}: {node['value']!r} is not a float (\"inf\", \"-inf\" or "
+                      "\"nan\" in quotes, else a number)")
+
     def module(self, node, path):
         name = node["class"]
+        if not isinstance(name, str):
+            self.fail(f"structure at {path or 'the top'}: \"class\" must be a class name (text such as "
+                      f"\"MuscleSystem\"), got {name!r}")
         cls = self.classes.get(name)
         if cls is None:
             hint = " (pass your own component classes as classes=[...])" if "." in name else ""
             self.fail(f"class {name!r} at {path or 'the top'} is not a pamjax model class{hint}")
         fields = {f.name: f for f in dataclasses.fields(cls)}
         given = node.get("fields", {})
+        if not isinstance(given, dict):
+            self.fail(f"{name} at {path or 'the top'}: \"fields\" must be a table of field → structure, got "
+                      f"{given!r}")
         unknown = set(given) - set(fields)
         if unknown:
             self.fail(f"{name} at {path or 'the top'} has no field(s) {sorted(unknown)}; its fields are "
@@ -397,6 +453,8 @@ def _parse(text):
 def _check_document(decoder, document, batched=True):
     """The model `document` describes, rebuilt and checked by `decoder` (every parameter used, none batched: the
     latter a shape inference of the vector field, skipped with `batched=False`)."""
+    if decoder.parameters is None:
+        decoder.fail("no 'parameters' table (path → {value, unit}): a model file lists every parameter there")
     if not isinstance(decoder.parameters, dict):
         decoder.fail("'parameters' must be a table of path → {value, unit}")
     model = decoder.decode(document.get("structure"), "")

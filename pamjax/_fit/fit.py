@@ -29,6 +29,7 @@ from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError, check_count, require_float64
 from .._files.checkpoint import check_checkpoint_path, read_checkpoint, write_checkpoint
 from .._files.fingerprint import check_resume, fingerprint
+from .._files.model_file import FORMAT as MODEL_FORMAT, replace_text
 from .diagnostics import channel_errors, check_identifiability_tol, covariance, identifiability, mismatch
 from .experiment import AbstractExperiment, Experiments
 from .force_balance import weak_motion
@@ -114,26 +115,35 @@ class FitResult:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "FitResult":
+        if not isinstance(d, dict) or d.get("format") == MODEL_FORMAT:  # a model.json's TypeError named `format`
+            raise PamjaxInputError("not a fit result (fit.json): " + (
+                "a model file (model.json): read it with pamjax.load_model; pamjax fit writes the FitResult to "
+                "fit.json beside it" if isinstance(d, dict) else f"a {type(d).__name__}, not a dict of its fields"))
         d = dict(d)
         for name in _NUMERIC_FIELDS:  # "inf", "nan" (strict JSON) back to floats
             if name in d:
                 d[name] = jsonio.numbers(d[name])
         d.setdefault("message", d.get("status", ""))  # results written before these fields existed
         d.setdefault("mismatch", False)
-        return cls(**d)
+        try:
+            return cls(**d)
+        except TypeError as err:  # a field unknown or missing, named by the message
+            raise PamjaxInputError(f"not a fit result (fit.json): {err}") from None
 
     def to_json(self, path: str | os.PathLike, overwrite: bool = False) -> pathlib.Path:
-        """Write the result (floats exact via repr); refuses to replace an existing file unless `overwrite`."""
+        """Write the result (floats exact via repr); refuses to replace an existing file unless `overwrite`. Through a
+        temporary file renamed over `path`: a crash while overwriting leaves the previous fit.json whole."""
         path = pathlib.Path(path)
         if path.exists() and not overwrite:
             raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(jsonio.dumps(self.to_dict(), indent=1))  # strict JSON: "inf" for an undetermined error
-        return path
+        return replace_text(path, jsonio.dumps(self.to_dict(), indent=1))  # strict JSON: "inf" for an undetermined SE
 
     @classmethod
     def from_json(cls, path: str | os.PathLike) -> "FitResult":
-        return cls.from_dict(json.loads(pathlib.Path(path).read_text()))
+        try:
+            return cls.from_dict(json.loads(pathlib.Path(path).read_text(encoding="utf-8")))
+        except (PamjaxInputError, json.JSONDecodeError, UnicodeDecodeError) as err:
+            raise PamjaxInputError(f"{path}: {err}") from None
 
     def apply(self, model: eqx.Module) -> eqx.Module:
         """`model` with the fitted values set (the free spec in `paths`)."""

@@ -334,20 +334,27 @@ def _verdict(lower, upper, branches):
         ("s" if len(sides) == 2 else "") + ")"
 
 
-def _walk_all(jobs, names, workers, progress):
-    """Walk every branch in a pool of `workers` threads; with `progress`, a line as each parameter's two branches
+def _sayer(progress):
+    """Where `progress` lines go: printed (True), to the callable (a string each, as `pamjax.sweep`'s), or nowhere."""
+    if callable(progress):
+        return progress
+    return (lambda line: print(f"  {line}", flush=True)) if progress else None
+
+
+def _walk_all(jobs, names, workers, say):
+    """Walk every branch in a pool of `workers` threads; with `say`, a line as each parameter's two branches
     finish (a profile takes seconds to minutes)."""
-    if progress:
-        print(f"  profiling {len(names)} parameter(s): {len(jobs)} branches on {workers} thread(s) ...", flush=True)
+    if say:
+        say(f"profiling {len(names)} parameter(s): {len(jobs)} branches on {workers} thread(s) ...")
     with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
         futures = [pool.submit(job[1].walk) for job in jobs]
-        if progress:
+        if say:
             left = {name: 2 for name in names}
             for future in concurrent.futures.as_completed(futures):
                 name = jobs[futures.index(future)][0]
                 left[name] -= 1
                 if left[name] == 0:
-                    print(f"  profiled {name} ({sum(v == 0 for v in left.values())} of {len(names)})", flush=True)
+                    say(f"profiled {name} ({sum(v == 0 for v in left.values())} of {len(names)})")
         return [f.result() for f in futures]
 
 
@@ -417,7 +424,7 @@ def profile_likelihood(
     span: RealScalarLike = 4.0,
     max_steps: int = 30,
     workers: int = 2,
-    progress: bool | Callable[..., object] = True,
+    progress: bool | Callable[[str], object] = True,
 ) -> ProfileResult:
     """Profile likelihoods of the parameters `names` (labels of `result`; default all) of a fit.
 
@@ -435,11 +442,12 @@ def profile_likelihood(
     - `level`: of the likelihood-ratio interval; `max_points` per side; `span`; `max_steps`: Levenberg-Marquardt
       steps per point.
     - `workers`: threads running the branches (parameter × side) side by side; 1 runs them in turn.
-    - `progress`: True prints one line per finished parameter; False is silent.
+    - `progress`: True prints one line per finished parameter, a callable gets each line (a string), False: none.
 
     **Returns:** a `ProfileResult` (`table()`, `plot(path)`, `to_json(path)`, `write(folder)`).
     """
     names, experiments = _validate(result, names, experiments, level, max_points, span, workers)
+    say = _sayer(progress)
     t_start = time.perf_counter()
     space = ParameterSpace(result.model, result.paths)
     theta = np.asarray(space.initial_theta())
@@ -457,7 +465,7 @@ def profile_likelihood(
         loose = any(name in group for group in result.non_identifiable)  # linearised error infinite
         se_tau = math.inf if loose else math.sqrt(max(float(u @ cov @ u), 0.0))
         jobs += [(name, _Branch(ev, i, u, side, theta, ev.jac, se_tau, settings)) for side in (-1, 1)]
-    done = _walk_all(jobs, names, workers, progress)
+    done = _walk_all(jobs, names, workers, say)
     warnings = _not_a_minimum(jobs, done, space, labels, result.values)
     z = math.sqrt(threshold)
     profiles = []
@@ -481,12 +489,12 @@ def profile_likelihood(
             others=others, converged=[bool(p[3]) for p in points], interval=[float(v) for v in lo_hi],
             linearised=[value - z * se, value + z * se],
             verdict="not a minimum: see warnings" if warnings else _verdict(*ends, (lower_b, upper_b))))
-        if progress:
+        if say:
             p = profiles[-1]
-            print(f"  {name}: {p.verdict}; {level:.0%} LR interval [{p.interval[0]:.6g}, {p.interval[1]:.6g}] "
-                  f"(linearised [{p.linearised[0]:.6g}, {p.linearised[1]:.6g}])", flush=True)
-    for w in warnings if progress else ():
-        print(f"  WARNING: {w}", flush=True)
+            say(f"{name}: {p.verdict}; {level:.0%} LR interval [{p.interval[0]:.6g}, {p.interval[1]:.6g}] "
+                f"(linearised [{p.linearised[0]:.6g}, {p.linearised[1]:.6g}])")
+    for w in warnings if say else ():
+        say(f"WARNING: {w}")
     return ProfileResult(profiles=profiles, labels=names, level=level, threshold=threshold, sigma2=ev.sigma2,
                          cost=ev.cost, profile_s=time.perf_counter() - t_start, warnings=warnings)
 
