@@ -185,3 +185,13 @@ def test_fits_module_gives_the_package_procedures():
     assert callable(fits_module("control").bench_plant)
     with pytest.raises(Exception, match="no procedures in the package"):
         fits_module("joint")
+
+
+def test_an_empty_out_is_refused_by_name(gallery, tmp_path, monkeypatch, capsys):
+    """`--out ''` (an unset shell variable) would be Path('') == '.': the current folder. Refused by name, nothing
+    written, as the other commands' output folders refuse it."""
+    monkeypatch.chdir(tmp_path)
+    for empty in ("", "  "):
+        assert _run(gallery, empty, monkeypatch=monkeypatch) == 2
+        assert "the output folder is empty; name one with --out" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gallery"]

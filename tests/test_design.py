@@ -675,6 +675,12 @@ def _muscle():
     (_tank, dict(rate="abc"), r"rate must be the recording's sample rate \[Hz\], a number > 0, got 'abc'"),
     (_tank, dict(noise={"pressure": "abc"}), r"noise\['pressure'\] must be a number > 0 .* got 'abc'"),
     (_tank, dict(seed="a"), r"seed must be an integer >= 0 .* got 'a'"),
+    # a noise in bar (0.02 bar = 2 kPa) would weight the pressure 1e5× (the position's mm is refused above)
+    (_tank, dict(noise={"pressure": 0.02}), r"noise\['pressure'\] = 0\.02 Pa is below 1 Pa.* bar .* kPa"),
+    (_muscle, dict(noise={**MUSCLE_NOISE, "force": 1.0}), r"noise: \['force'\] not among the design's channels "
+                                                          r"\['pressure', 'position'\]"),
+    (_tank, dict(noise={"pressure": 2e3, "position": 1e-4}), r"noise: \['position'\] not among the design's"),
+    (_tank, dict(spread_points=7), r"spread_points = 7 is given without spread"),
 ])
 def test_limits_no_run_can_keep_are_named_before_any_solve(model, kwargs, match, monkeypatch):
     # the battery's cases (issue 33): a limit in the wrong unit, a run shorter than a period, a band across the valve's

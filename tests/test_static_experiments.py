@@ -127,3 +127,62 @@ def test_a_run_without_time_and_maps_in_mm_are_named():
         with pytest.raises(pj.PamjaxInputError, match=r"positions reach 70 m, .* these look like mm"):
             build()
     pj.bench.ForceMapExperiment(x / 1e3, p, f)  # the same map in metres
+
+
+def test_map_positions_outside_the_muscles_stroke_are_refused_by_name():
+    # The data file's lengths L (0.222-0.296 m of a 300 mm muscle) passed for the contraction L0 - L were fitted to
+    # nonsense (a0 = -3370 N) with only an identifiability warning: `check` (run by `fit` before anything is solved)
+    # compares the positions with the muscle's stroke, 5 % of it admitted beyond either end (as simulate's start).
+    system = presets.mas10_system("averaged")  # stroke [-0.02, 0.075] m
+    lengths = np.linspace(0.222, 0.296, 6)
+    p, f, v = np.full(6, 4e5), np.linspace(300.0, 0.0, 6), np.where(np.arange(6) < 3, 1e-3, -1e-3)
+    for exp in (pj.bench.ForceMapExperiment(lengths, p, f, scale=1.0, name="bench_map"),
+                pj.bench.LoopForceMapExperiment(lengths, p, v, f, scale=1.0, name="bench_map"),
+                pj.bench.HysteresisLoopExperiment(lengths, p, v, f, scale=1.0, name="bench_map")):
+        with pytest.raises(pj.PamjaxInputError, match=r"^bench_map: positions\[0\] = 0\.222 m .* outside the muscle's "
+                                                      r"stroke \[-0\.02, 0\.075\] m .* contractions L0 − L \[m\]"):
+            exp.check(system)
+    with pytest.raises(pj.PamjaxInputError, match=r"bench_map: positions\[0\] = 0\.222 m"):  # a muscle alone
+        pj.bench.ForceMapExperiment(lengths, p, f, scale=1.0, name="bench_map").check(system.muscle)
+    with pytest.raises(pj.PamjaxInputError, match=r"bench_map: positions\[0\] = 0\.222 m"):  # before any solve
+        pj.fit(system.muscle, [pj.bench.ForceMapExperiment(lengths, p, f, scale=1.0, name="bench_map")],
+               ["force_law.k0"], progress=False)
+    # within the margin (4 % of the 95 mm stroke beyond either end) the same map is accepted
+    inside = np.linspace(-0.02 - 0.0038, 0.075 + 0.0038, 6)
+    pj.bench.ForceMapExperiment(inside, p, f, scale=1.0).check(system)
+    pj.bench.LoopForceMapExperiment(inside, p, v, f, scale=1.0).check(system)
+
+
+def test_force_map_scale_and_slack_force_are_checked_as_the_loops_are():
+    # scale=inf made every residual 0 (LoopForceMapExperiment refused it); slack_force=NaN turned every slack point
+    # (0 N) into an ordinary 0 N point. Both refused by name, for each map.
+    x, p, f, v = [0.0, 0.01, 0.02], np.full(3, 4e5), np.array([100.0, 50.0, 0.0]), [1e-3, 1e-3, -1e-3]
+    builds = (lambda **k: pj.bench.ForceMapExperiment(x, p, f, **k),
+              lambda **k: pj.bench.LoopForceMapExperiment(x, p, v, f, **k),
+              lambda **k: pj.bench.HysteresisLoopExperiment(x, p, v, f, **k))
+    for build in builds:
+        for scale in (np.inf, np.nan, 0.0):
+            with pytest.raises(pj.PamjaxInputError, match=r"^scale must be > 0 and finite \[N\]"):
+                build(scale=scale)
+        for slack in (np.nan, np.inf, [0.0, 1.0]):
+            with pytest.raises(pj.PamjaxInputError, match=r"^slack_force must be one number \[N\]"):
+                build(slack_force=slack)
+        assert np.asarray(build(slack_force=0.0).slack).tolist() == [False, False, True]
+        assert not np.any(np.asarray(build(slack_force=-np.inf).slack))  # -inf: no slack point
+
+
+def test_force_map_errors_count_the_loaded_points_only():
+    """A slack point (measured F ≤ 0) is an inequality, not a measurement of 0 N: its residual is 0 where the model is
+    slack too, so counting it diluted the RMSE (the DMSP-20-300 map, 66 of 126 points slack: 3.1 N instead of the
+    loaded points' 4.3 N). The statistics are over the loaded points; the slack ones are counted apart, with the
+    model's largest push there."""
+    from pamjax._fit.diagnostics import channel_errors
+
+    forces = np.array([100.0, 200.0, 0.0, 300.0, 0.0, 0.0, 150.0, 250.0])
+    x = np.linspace(0.0, 0.05, forces.size)
+    exp = pj.bench.ForceMapExperiment(x, np.full(forces.size, 4e5), forces, scale=2.0)
+    r = np.where(forces > 0, [1.0, -1.0, 0, 1.0, 0, 0, -1.0, 1.0], [0, 0, 0, 0, 1.5, 0, 0, 0])  # (model − F) / scale
+    stats = channel_errors([exp], r)["force_map"]["force"]
+    assert stats["rmse"] == pytest.approx(2.0) and stats["max_error"] == pytest.approx(2.0)  # loaded: |err| = 2 N
+    assert stats["slack_points"] == 3 and stats["slack_max_violation"] == pytest.approx(3.0)
+    assert stats["range"] == pytest.approx(300.0)  # the map's forces from 0 N up

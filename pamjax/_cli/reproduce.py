@@ -200,6 +200,8 @@ def _recover_stale(out):
 
 
 def run(args):
+    if str(args.out).strip() == "":  # Path('') is '.': an unset `--out "$DIR"` would write into the current folder
+        raise PamjaxInputError("pamjax reproduce: the output folder is empty; name one with --out")
     chosen = _selection(args)
     _check_dependencies()
     modules = {name: toolkit.load(source) for name, source in chosen.items()}

@@ -34,13 +34,22 @@ from .._core.custom_types import (
     RealVectorLike,
     TableLike,
 )
-from .._core.errors import PamjaxInputError, check_count, concrete_values
-from .._core.units import MIN_ABSOLUTE_PA
+from .._core.errors import PamjaxInputError, check_count
 from .._physics.friction import AbstractFriction
 from .._physics.gas import AbstractRestriction, Air
 from .._physics.muscle import AbstractMuscle
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from .experiment import AbstractExperiment
+from .static_checks import (
+    check_absolute,
+    check_map,
+    check_moving,
+    check_scale,
+    check_stroke,
+    columns,
+    set_data,
+    slack_points,
+)
 
 
 class Component(eqx.Module):
@@ -124,61 +133,15 @@ def flow_curve(restriction: AbstractRestriction, upstream_pressure: RealScalarLi
     return jax.vmap(lambda r: restriction.mass_flow(p1, r * p1, air))(jnp.asarray(ratios, dtype=float))
 
 
-def _columns(names, arrays):
-    arrays = [np.asarray(a, dtype=float) for a in arrays]
-    shapes = [a.shape for a in arrays]
-    if not (all(s == shapes[0] for s in shapes) and arrays[0].ndim == 1 and arrays[0].size > 0):
-        raise PamjaxInputError(f"{', '.join(names)} must be 1-D arrays of one length, got shapes {shapes}")
-    for name, a in zip(names, arrays):
-        if not np.all(np.isfinite(a)):
-            raise PamjaxInputError(f"{name} is NaN/inf at row {int(np.argmin(np.isfinite(a)))}")
-    return arrays
-
-
-def _check_map(x, p, v=None):
-    """A force map's positions [m] (not mm), ABSOLUTE pressures [Pa] and velocities (≠ 0; none for a static map)."""
-    if np.max(np.abs(x)) > 1.0:  # (as `pamjax._core.units.check_magnitude` refuses a length channel's mm)
-        raise PamjaxInputError(f"positions reach {np.max(np.abs(x)):g} m, but no muscle contracts by a metre (the "
-                               "MAS-10's stroke is 75 mm): these look like mm; pamjax takes m")
-    _check_absolute("pressures", p)
-    if v is not None:
-        _check_moving(v, "the direction of motion")
-
-
-def _check_moving(v, why):
-    """Concrete velocities all ≠ 0 (`why` they must be), else `PamjaxInputError` naming the first 0; traced: none."""
-    v = concrete_values(v)
-    if v is not None and np.any(v == 0):
-        raise PamjaxInputError(f"velocities must be non-zero ({why}), row {int(np.argmin(v != 0))} is 0")
-
-
-def _check_absolute(name, p):
-    if np.min(p) < MIN_ABSOLUTE_PA:
-        raise PamjaxInputError(f"{name} must be ABSOLUTE [Pa]; the lowest is {np.min(p):.4g} Pa (row "
-                               f"{int(np.argmin(p))}), below half an atmosphere: these look like gauge or bar (add "
-                               "101325 Pa to gauge readings)")
-
-
-def _set_data(experiment, channel, values, scale, unit, name):
-    """Inside an experiment's `__init__`: the measured `channel`, its scale [`unit`] (default 1 % of the range; the
-    noise level if known) and the name."""
-    s = float(0.01 * np.ptp(values) if scale is None else scale)
-    if not (np.isfinite(s) and s > 0):
-        raise PamjaxInputError(f"scale must be > 0 [{unit}] (the measurement's noise level), got {s}")
-    experiment.scale = s
-    experiment.data = {channel: jnp.asarray(values)}
-    experiment.name = str(name)
-    experiment.channels = (channel,)
-
-
 class ForceMapExperiment(AbstractExperiment):
     """Static force map: measured muscle forces [N] at positions x [m] and ABSOLUTE pressures [Pa].
 
     Residual (F_model − F) / scale at loaded points; at slack points (measured F ≤ `slack_force`, default 0 N) only a
     positive model force counts: max(F_model, 0) / scale ("force ≤ 0 → 0", the muscle cannot push).
 
-    **Arguments:** `positions` [m], `pressures` [Pa abs], `forces` [N], `scale` [N] (default 1 % of the force range),
-    `muscle`: model → muscle (default `model.muscle`, or the model itself if it is a `Muscle`), `name`.
+    **Arguments:** `positions` [m] (the contraction L0 − L, within the muscle's stroke: `check` refuses a length L),
+    `pressures` [Pa abs], `forces` [N], `scale` [N] (default 1 % of the force range), `slack_force` [N], `name`. The
+    model is a muscle system (its `muscle`) or a muscle.
     """
 
     positions: jax.Array
@@ -191,13 +154,11 @@ class ForceMapExperiment(AbstractExperiment):
 
     def __init__(self, positions: TableLike, pressures: TableLike, forces: TableLike,
                  scale: RealScalarLike | None = None, slack_force: RealScalarLike = 0.0, name: str = "force_map"):
-        x, p, f = _columns(("positions", "pressures", "forces"), (positions, pressures, forces))
-        _check_map(x, p)  # pressures above half an atmosphere: a vented muscle reads about 101325 Pa absolute
+        x, p, f = columns(("positions", "pressures", "forces"), (positions, pressures, forces))
+        check_map(x, p)  # pressures above half an atmosphere: a vented muscle reads about 101325 Pa absolute
         self.positions, self.pressures, self.forces = jnp.asarray(x), jnp.asarray(p), jnp.asarray(f)
-        self.slack = jnp.asarray(f <= slack_force)
-        self.scale = float(0.01 * np.ptp(f) if scale is None else scale)
-        if not self.scale > 0:
-            raise PamjaxInputError(f"scale must be > 0 [N], got {self.scale}")
+        self.slack = slack_points(f, slack_force)
+        self.scale = check_scale(f, scale, "N")  # as the other bench tests' (`set_data`)
         self.name = str(name)
         self.channels = ("force",)
 
@@ -216,6 +177,7 @@ class ForceMapExperiment(AbstractExperiment):
     def check(self, model):
         if not isinstance(self._muscle(model), AbstractMuscle):
             raise PamjaxInputError(f"{self.name}: the model has no muscle (needs model.muscle or a Muscle)")
+        check_stroke(self.name, self.positions, self._muscle(model))
 
     def predict(self, model):
         muscle, air = self._muscle(model), _air(model)
@@ -246,12 +208,15 @@ class AbstractStaticExperiment(AbstractExperiment):
     def predict(self, model):
         """{channel: the model's values at the data points} (traceable)."""
 
-    needs_muscle_system = False  # the force maps: the model must have a muscle and a friction
+    needs_muscle_system = False  # the force maps: the model must have a muscle and a friction, and their positions
+    # must lie within the muscle's stroke (`check_stroke`)
 
     def check(self, model):
         if self.needs_muscle_system and not isinstance(model, AbstractMuscleSystem):
             raise PamjaxInputError(f"{self.name}: the model needs a 'muscle' and a 'friction' (a muscle system, e.g. "
                                    f"MuscleSystem), got {type(model).__name__}")
+        if self.needs_muscle_system:
+            check_stroke(self.name, self.positions, model.muscle)
         pred = eqx.filter_eval_shape(self.predict, model)  # shapes only: no compilation, nothing computed
         (channel,) = self.channels
         if channel not in pred or np.shape(pred[channel]) != np.shape(self.data[channel]):
@@ -289,11 +254,11 @@ class FrictionCurveExperiment(AbstractStaticExperiment):
 
     def __init__(self, velocities: TableLike, forces: TableLike, scale: RealScalarLike | None = None,
                  friction: str = "friction", name: str = "friction_curve"):
-        v, f = _columns(("velocities", "forces"), (velocities, forces))
-        _check_moving(v, "sliding")
+        v, f = columns(("velocities", "forces"), (velocities, forces))
+        check_moving(v, "sliding")
         self.velocities = jnp.asarray(v)
         self.friction = Component(friction)
-        _set_data(self, "force", f, scale, "N", name)
+        set_data(self, "force", f, scale, "N", name)
 
     def predict(self, model):
         return {"force": steady_friction_force(self.friction(model, AbstractFriction, self.name), self.velocities)}
@@ -320,13 +285,13 @@ class FlowCurveExperiment(AbstractStaticExperiment):
 
     def __init__(self, upstream_pressures: TableLike, downstream_pressures: TableLike, mass_flows: TableLike,
                  scale: RealScalarLike | None = None, restriction: str = "valve.inflate", name: str = "flow_curve"):
-        p1, p2, m = _columns(("upstream_pressures", "downstream_pressures", "mass_flows"),
+        p1, p2, m = columns(("upstream_pressures", "downstream_pressures", "mass_flows"),
                              (upstream_pressures, downstream_pressures, mass_flows))
-        _check_absolute("upstream_pressures", p1)
-        _check_absolute("downstream_pressures", p2)
+        check_absolute("upstream_pressures", p1)
+        check_absolute("downstream_pressures", p2)
         self.upstream_pressures, self.downstream_pressures = jnp.asarray(p1), jnp.asarray(p2)
         self.restriction = Component(restriction)
-        _set_data(self, "mass_flow", m, scale, "kg/s", name)
+        set_data(self, "mass_flow", m, scale, "kg/s", name)
 
     def predict(self, model):
         restriction, air = self.restriction(model, AbstractRestriction, self.name), _air(model)
@@ -342,8 +307,9 @@ class LoopForceMapExperiment(AbstractStaticExperiment):
     Slack points (measured F ≤ `slack_force`, 0 N by default) only penalise a positive model force, as in
     `ForceMapExperiment`.
 
-    **Arguments:** `positions` x [m] (shortening), `pressures` [Pa abs], `velocities` ẋ [m/s] (≠ 0; sign =
-    direction), `forces` [N], `scale` [N] (default 1 % of the force range), `slack_force` [N], `name`. The model is a
+    **Arguments:** `positions` x [m] (shortening L0 − L, within the muscle's stroke), `pressures` [Pa abs],
+    `velocities` ẋ [m/s] (≠ 0; sign = direction), `forces` [N], `scale` [N] (default 1 % of the force range),
+    `slack_force` [N], `name`. The model is a
     muscle system (`muscle`, `friction`, `air`).
     """
 
@@ -358,12 +324,12 @@ class LoopForceMapExperiment(AbstractStaticExperiment):
 
     def __init__(self, positions: TableLike, pressures: TableLike, velocities: TableLike, forces: TableLike,
                  scale: RealScalarLike | None = None, slack_force: RealScalarLike = 0.0, name: str = "loop_force_map"):
-        x, p, v, f = _columns(("positions", "pressures", "velocities", "forces"),
+        x, p, v, f = columns(("positions", "pressures", "velocities", "forces"),
                               (positions, pressures, velocities, forces))
-        _check_map(x, p, v)
+        check_map(x, p, v)
         self.positions, self.pressures, self.velocities = jnp.asarray(x), jnp.asarray(p), jnp.asarray(v)
-        self.slack = jnp.asarray(f <= slack_force)
-        _set_data(self, "force", f, scale, "N", name)  # slack points: see `residuals_of`
+        self.slack = slack_points(f, slack_force)
+        set_data(self, "force", f, scale, "N", name)  # slack points: see `residuals_of`
 
     needs_muscle_system = True
 
@@ -383,7 +349,7 @@ def loop_average(positions: TableLike, pressures: TableLike, velocities: TableLi
 
     Points with equal (x, p) measured in both directions (sign of ẋ) are paired. Returns (x [m], p [Pa], mean force
     [N], width [N] = F(stretching) − F(contracting)) for each pair, sorted by pressure then position."""
-    x, p, v, f = _columns(("positions", "pressures", "velocities", "forces"),
+    x, p, v, f = columns(("positions", "pressures", "velocities", "forces"),
                           (positions, pressures, velocities, forces))
     keys = {}
     for xi, pi, vi, fi in zip(np.round(x, decimals), np.round(p, 3), np.sign(v), f):
@@ -407,7 +373,7 @@ def path_friction_force(friction: AbstractFriction, positions: TableLike, veloci
     stage's state is kept within the sliding states ±z_s of that speed, which bound the state of a friction that
     saturates there (bristle, Bouc–Wen): where a transition is shorter than a sub-step (stiff), RK4 then lands on the
     branch instead of overshooting it."""
-    _check_moving(velocities, "the direction of motion")
+    check_moving(velocities, "the direction of motion")
     x, v = jnp.asarray(positions, dtype=float), jnp.asarray(velocities, dtype=float)
     if friction.initial_state() is None or friction.hybrid:
         return steady_friction_force(friction, v)
@@ -447,11 +413,11 @@ class HysteresisLoopExperiment(AbstractStaticExperiment):
 
     Slack points (measured F ≤ `slack_force`) only penalise a positive model force, as in `ForceMapExperiment`.
 
-    **Arguments:** `positions` x [m] (shortening), `pressures` [Pa abs], `velocities` ẋ [m/s] (≠ 0; sign =
-    direction), `forces` [N], in the order travelled; `scale` [N] (default 1 % of the force range);
-    `slack_force` [N]; `starts`: bool per sample, True where a new sweep begins (default: the first sample and
-    every change of pressure); `substeps`: RK4 steps per sample interval (4); `name`. The model is a muscle system
-    (`muscle`, `friction`, `air`).
+    **Arguments:** `positions` x [m] (shortening L0 − L, within the muscle's stroke), `pressures` [Pa abs],
+    `velocities` ẋ [m/s] (≠ 0; sign = direction), `forces` [N], in the order travelled; `scale` [N] (default 1 % of
+    the force range); `slack_force` [N]; `starts`: bool per sample, True where a new sweep begins (default: the
+    first sample and every change of pressure); `substeps`: RK4 steps per sample interval (4); `name`. The model is a
+    muscle system (`muscle`, `friction`, `air`).
     """
 
     positions: jax.Array
@@ -468,9 +434,9 @@ class HysteresisLoopExperiment(AbstractStaticExperiment):
     def __init__(self, positions: TableLike, pressures: TableLike, velocities: TableLike, forces: TableLike,
                  scale: RealScalarLike | None = None, slack_force: RealScalarLike = 0.0,
                  starts: BoolTableLike | None = None, substeps: int = 4, name: str = "hysteresis_loop"):
-        x, p, v, f = _columns(("positions", "pressures", "velocities", "forces"),
+        x, p, v, f = columns(("positions", "pressures", "velocities", "forces"),
                               (positions, pressures, velocities, forces))
-        _check_map(x, p, v)
+        check_map(x, p, v)
         if starts is None:
             starts = np.concatenate([[True], p[1:] != p[:-1]])
         starts = np.asarray(starts)
@@ -482,9 +448,9 @@ class HysteresisLoopExperiment(AbstractStaticExperiment):
         check_count(substeps, "substeps", "an integer >= 1")
         self.positions, self.pressures, self.velocities = jnp.asarray(x), jnp.asarray(p), jnp.asarray(v)
         self.starts = jnp.asarray(starts)
-        self.slack = jnp.asarray(f <= slack_force)
+        self.slack = slack_points(f, slack_force)
         self.substeps = int(substeps)  # static: a Python int (a NumPy integer hashes as another program)
-        _set_data(self, "force", f, scale, "N", name)
+        set_data(self, "force", f, scale, "N", name)
 
     needs_muscle_system = True
 

@@ -40,6 +40,9 @@ def spread_fractions(labels, spread, count):
     """The relative spread of each free parameter (labels order; 0 where a dict leaves one out) for `spread` (a number
     in (0, 1) for every one, or {label: fraction}), checked with `count`; None without a spread."""
     if spread is None:
+        if not (isinstance(count, (int, np.integer)) and not isinstance(count, bool) and count == SPREAD_POINTS):
+            raise PamjaxInputError(f"spread_points = {count!r} is given without spread: the points are drawn from the "
+                                   "plant's spread; give spread too (e.g. 0.2: ±20 %), or leave spread_points out")
         return None
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
         raise PamjaxInputError(f"spread_points must be a positive integer (design points beside the model's own; "

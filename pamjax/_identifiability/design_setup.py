@@ -37,6 +37,8 @@ CARRIER_HOLD = 10  # PWM periods (0.2 s at 50 Hz): the hold of the most informat
 DESIGN_RATE = 250.0  # Hz: the objective's samples; the information matrix agrees within 0.2 % with 1 kHz (docs)
 DESIGN_SUBSTEPS = 4  # RK4 nodes per PWM period in the objective: within 0.2 % of the fit's 16 (docs)
 PERIOD_RTOL = 1e-9  # a `period` given for a switching valve must be its own to this (float round-off of 1/f)
+MIN_PRESSURE_NOISE = 1.0  # Pa: below any bench transducer's noise (a 16-bit reading of 0-10 bar resolves 15 Pa; the
+# hybrid reference bench's is 2 kPa): a smaller noise is a unit slip, 0.02 meant in bar (2 kPa) or 2 in kPa
 FIT_SUBSTEPS = inspect.signature(Experiment.__init__).parameters["substeps"].default  # what a fit integrates with
 
 
@@ -188,12 +190,21 @@ def _validate(model, free, duration, noise, channels, band, criterion, subset, p
                                f"are {space.labels})")
     if build is not None:
         _check_seen(model, space, build, system)
+    extra = [c for c in noise if c not in channels]  # after the rest: a muscle's noise table kept for its tank test
+    if extra:  # a level the design would not weight: a typo, or a channel left out of `channels`
+        raise PamjaxInputError(f"noise: {extra} not among the design's channels {list(channels)}: give a level for "
+                               "those channels only (or add the channel to channels)")
     return space, subset, period, channels, system, start
 
 
 def _check_noise_scale(system, noise, channels):
     """A noise level no sensor of this system can have: a position noise of a tenth of the whole stroke or more, a
-    pressure noise of a tenth of the supply's range or more (a unit slip: 0.1 meant in mm)."""
+    pressure noise of a tenth of the supply's range or more, or below `MIN_PRESSURE_NOISE` (a unit slip: 0.1 meant in
+    mm, 0.02 in bar)."""
+    if "pressure" in channels and float(noise["pressure"]) < MIN_PRESSURE_NOISE:
+        raise PamjaxInputError(f"noise['pressure'] = {noise['pressure']!r} Pa is below {MIN_PRESSURE_NOISE:g} Pa, no "
+                               "pressure transducer's noise: that looks like bar (0.02 bar = 2e3 Pa) or kPa (2 kPa = "
+                               "2e3 Pa); the noise is a standard deviation in Pa")
     if "position" in channels and isinstance(system, AbstractMuscleSystem):
         stroke = float(system.muscle.max_position) - float(system.muscle.min_position)
         if float(noise["position"]) >= 0.1 * stroke:
