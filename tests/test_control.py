@@ -307,3 +307,96 @@ def test_fits_control_refuses_negative_tune_steps(monkeypatch, capsys, tmp_path)
         script.main()
     assert exit_info.value.code == 2 and "--tune-steps" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_simulate_closed_loop_runs_the_parameter_checks_simulate_runs(model):
+    """A plant or controller changed with `eqx.tree_at` skipped its constructor's checks, and `simulate_closed_loop`
+    ran none of `simulate`'s: payload_mass = -9.6 returned inf positions, duty limits (-0.5, 1.5) fed the valve a
+    duty of 1.5. Refused by name before any solve, as `simulate` refuses them."""
+    from helpers import counted_compilations
+
+    bad_plant = eqx.tree_at(lambda lp: lp.plant.payload_mass, ClosedLoop(model, PIController(), REF), -9.6)
+    bad_limits = ClosedLoop(model, eqx.tree_at(lambda c: (c.duty_min, c.duty_max), PIController(), (-0.5, 1.5)), REF)
+    with counted_compilations() as compiled:
+        with pytest.raises(pamjax.PamjaxInputError, match=r"payload_mass must be > 0 and finite, got -9\.6"):
+            simulate_closed_loop(bad_plant, 0.1)
+        with pytest.raises(pamjax.PamjaxInputError, match=r"PIController\.duty_min must be in \[0, 1\].*-0\.5"):
+            simulate_closed_loop(bad_limits, 0.1)
+        with pytest.raises(pamjax.PamjaxInputError, match=r"payload_mass must be > 0"):  # tuning checks it too
+            pamjax.tune_controller(bad_plant, ("proportional_gain",), 0.1)
+    assert compiled == [], compiled
+
+
+def test_tune_controller_refuses_duty_limits_and_bias_and_tunes_integer_gains(model):
+    """Tuning ("duty_max",) moved it from 0.9 to 2.99 (Adam on its logarithm knows no upper bound): the duty limits
+    and the bias are refused as no gains. Integer gains (PIController(proportional_gain=30), which the controller
+    and the loop take) were refused as not "real-valued": tuned as floats."""
+    from helpers import counted_compilations
+
+    loop = ClosedLoop(model, PIController(duty_max=0.9), REF)
+    with counted_compilations() as compiled:
+        for name in ("duty_max", "duty_min", "bias"):
+            with pytest.raises(pamjax.PamjaxInputError, match=rf"'{name}' is no gain: the duty limits are bounds in"):
+                pamjax.tune_controller(loop, ("proportional_gain", name), 0.2, steps=1)
+    assert compiled == [], compiled
+    integer = ClosedLoop(model, PIController(proportional_gain=30), REF)
+    tuned, history = pamjax.tune_controller(integer, ("proportional_gain",), 0.2, steps=1)
+    assert history[0][1] == pytest.approx((30.0,), rel=1e-12) and all(np.isfinite(rmse) for rmse, _ in history)
+    assert jnp.issubdtype(tuned.controller.proportional_gain.dtype, jnp.floating)
+
+
+def test_simulate_closed_loop_checks_its_start_state(model):
+    """`y0` ran unchecked: a plant pressure of 3.0 (bar) and a position of 30 (mm) gave inf, a NaN pressure inf, and
+    a plain plant state a raw AttributeError. Refused as `simulate` refuses them in its y0 (named y0.plant...), a plant
+    state with the way to make a loop state of it, before any solve."""
+    from helpers import counted_compilations
+
+    loop = ClosedLoop(model, PIController(), REF)
+    cases = [
+        (model.initial_state(pressure=3.0, position=0.0), r"y0\.plant\.pressure is 3 Pa at most: that looks like bar"),
+        (model.initial_state(pressure=3e5, position=30.0), r"y0\.plant\.position = 30 m.*mm"),
+        (model.initial_state(pressure=float("nan"), position=0.0), r"y0\.plant\.pressure must be finite"),
+    ]
+    starts = [(loop.initial_state(plant_state=plant_state), match) for plant_state, match in cases]
+    plant_state = model.initial_state(pressure=3e5)
+    late_duty = eqx.tree_at(lambda y: y.duty, loop.initial_state(), 1.5)
+    with counted_compilations() as compiled:
+        for y0, match in starts:
+            with pytest.raises(pamjax.PamjaxInputError, match=match):
+                simulate_closed_loop(loop, 0.1, y0=y0)
+        with pytest.raises(pamjax.PamjaxInputError, match=r"y0 must be a ClosedLoopState .*got MuscleState.*"
+                                                          r"loop\.initial_state\(plant_state=\.\.\.\)"):
+            simulate_closed_loop(loop, 0.1, y0=plant_state)
+        with pytest.raises(pamjax.PamjaxInputError, match=r"y0\.duty .* must be in \[0\.0, 1\.0\], got 1\.5"):
+            simulate_closed_loop(loop, 0.1, y0=late_duty)
+    assert compiled == [], compiled
+
+
+def test_a_failed_closed_loop_solve_raises_and_a_period_in_ms_is_refused(model):
+    """A period's failed solve (max_steps=5) returned inf positions with only `result` 1; `simulate` raises. Now a
+    `PamjaxSolveError` names the first failed period and the fix; throw=False returns the trajectory with its status.
+    A period of 20.0 (20 ms meant) ran 20 s on one duty: refused by magnitude."""
+    loop = ClosedLoop(model, PIController(), REF)
+    with pytest.raises(pamjax.PamjaxSolveError, match=r"period starting at t = 0 s: .*maximum number of .*steps.*"
+                                                      r"Raise max_steps \(now 5 solver steps per period\)"):
+        simulate_closed_loop(loop, 0.04, max_steps=5)
+    traj = simulate_closed_loop(loop, 0.04, max_steps=5, throw=False)
+    assert int(traj.result) != 0 and not np.all(np.isfinite(np.asarray(traj.position)))
+    with pytest.raises(pamjax.PamjaxInputError, match=r"ClosedLoop\.period is 20\.0 s.*looks like milliseconds"):
+        ClosedLoop(model, PIController(), REF, period=20.0)
+
+
+def test_several_gains_or_durations_where_the_loop_takes_one_are_named(model):
+    """A PI with proportional_gain = [25, 30] failed deep inside the solve ("incompatible shapes for broadcasting"),
+    a duration np.array([1.0]) with a raw TypeError: refused, naming them, before any solve."""
+    from helpers import counted_compilations
+
+    pair = ClosedLoop(model, PIController(proportional_gain=np.array([25.0, 30.0])), REF)
+    one = ClosedLoop(model, PIController(), REF)
+    with counted_compilations() as compiled:
+        with pytest.raises(pamjax.PamjaxInputError, match=r"one duty per period, its parameters proportional_gain "
+                                                          r"\(shape \(2,\)\) hold several values"):
+            simulate_closed_loop(pair, 0.1)
+        with pytest.raises(pamjax.PamjaxInputError, match=r"duration must be a finite number > 0, got array"):
+            simulate_closed_loop(one, np.array([0.1]))
+    assert compiled == [], compiled

@@ -210,3 +210,27 @@ def test_fits_joint_control_refuses_a_duration_inside_the_window(tmp_path, capsy
             script.main(["--duration", duration, "--out", str(out)])
         assert exit_info.value.code == 2 and "--duration" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_simulate_joint_control_checks_the_loop_and_raises_on_a_failed_solve(joint, monkeypatch):
+    """A joint changed with `eqx.tree_at` (inertia < 0) skipped its constructor's checks and the run returned NaN with
+    only `result` 1; a y0 of another type ran into the solve. Refused by name before any solve, as `simulate` refuses
+    them; a failed solve (here a stand-in run whose result is 1, no compilation) raises `PamjaxSolveError` as
+    `simulate` does, and throw=False returns it with its status."""
+    from helpers import counted_compilations
+
+    import pamjax._control.joint as joint_module
+
+    loop = JointControlLoop(joint, AntagonisticJointController(), GaitAngle(0.5), pj.Constant(160.0))
+    bad = eqx.tree_at(lambda lp: lp.joint.inertia, loop, -float(joint.inertia))
+    with counted_compilations() as compiled:
+        with pytest.raises(pj.PamjaxInputError, match=r"AntagonisticJoint\.inertia must be > 0 and finite"):
+            simulate_joint_control(bad, TS)
+        with pytest.raises(pj.PamjaxInputError, match=r"y0 must be a JointControlState .*got tuple"):
+            simulate_joint_control(loop, TS, y0=(3e5, 3e5))
+    assert compiled == [], compiled
+    failed = eqx.tree_at(lambda tr: tr.result, _trajectory(), jnp.asarray(1))
+    monkeypatch.setattr(joint_module, "_run_jit", lambda *args: failed)
+    with pytest.raises(pj.PamjaxSolveError, match=r"simulate_joint_control: the solve failed: .*result code 1"):
+        simulate_joint_control(loop, TS)
+    assert int(simulate_joint_control(loop, TS, throw=False).result) == 1

@@ -53,10 +53,12 @@ def test_transfer_function_coefficients(regulator_model):
 
 
 def test_eq8_feedback_form_matches_its_formula():
+    # eq. 8 is linear: its model is the same at any operating point; at 0 V (not 2 V: with K1 = 0.7 the static gain
+    # is -9.5 bar/V, and 2 V an outlet at -18 bar abs, which `linearise` refuses as `simulate` refuses it in y0)
     reg = FeedbackRegulator(k1=0.7, k2=0.3)
     system = RegulatorSystem(reg, volume=0.0)
-    y = equilibrium(system, 2.0, system.initial_state())
-    ss = linearise(system, y, 2.0, inputs={"outlet_flow": lambda s: s.outlet_flow})
+    y = equilibrium(system, 0.0, system.initial_state())
+    ss = linearise(system, y, 0.0, inputs={"outlet_flow": lambda s: s.outlet_flow})
     f = np.logspace(-2, 2, 25)
     s = 2j * np.pi * f
     gv = 1.01 / ((1 + TAU1 * s) * (1 + TAU2 * s))
@@ -210,12 +212,92 @@ def test_a_state_or_time_that_is_not_finite_is_named_before_anything_is_computed
 
 
 def test_derivatives_that_are_not_finite_are_refused_naming_where():
-    """A finite operating point far outside the model's domain (the payload 1e200 m up) has NaN derivatives: refused
-    with a `PamjaxSolveError` naming the rows and columns, never returned as a model (the program is the one the
-    tests above compiled for this system); `equilibrium` from there says its state left the model's domain."""
+    """A finite operating point far outside the model's domain (the payload moving at 1e308 m/s: a position 1e200 m up
+    is now refused as a start state, in mm) has non-finite derivatives: refused with a `PamjaxSolveError` naming the
+    rows and columns, never returned as a model (the program is the one the tests above compiled for this system);
+    `equilibrium` from there says its state left the model's domain."""
     system = pamjax.presets.mas10_system(valve="averaged")
-    far = eqx.tree_at(lambda s: s.position, system.initial_state(pressure=4e5), jnp.asarray(1e200))
-    with pytest.raises(pamjax.PamjaxSolveError, match=r"not finite.*A: ∂\(state\.velocity\)/∂\(state\.pressure"):
+    far = eqx.tree_at(lambda s: s.velocity, system.initial_state(pressure=4e5), jnp.asarray(1e308))
+    with pytest.raises(pamjax.PamjaxSolveError, match=r"not finite.*A: ∂\(state\.pressure, state\.velocity\)/∂"):
         linearise(system, far, 0.5, outputs=("pressure", "force"))
     with pytest.raises(pamjax.PamjaxSolveError, match=r"left the model's domain: its state turned non-finite"):
         equilibrium(system, 0.5, far)  # (was: "did not converge ... or a larger max_steps")
+
+
+def test_a_command_that_is_not_one_number_is_refused():
+    """An array command broadcast into the state: `equilibrium` returned a "state" whose pressure was a pair and whose
+    rates were not zero, `linearise` an A of shape (4, 3). Refused by name, before anything is computed."""
+    system = pamjax.presets.mas10_system(valve="averaged")
+    guess = system.initial_state(pressure=4e5)
+    with counted_compilations() as compiled:
+        for command in (np.array([0.5, 0.6]), [0.5], np.array([[0.5]])):
+            with pytest.raises(pamjax.PamjaxInputError, match=r"command must be one number .*got shape"):
+                equilibrium(system, command, guess)
+            with pytest.raises(pamjax.PamjaxInputError, match=r"command must be one number"):
+                linearise(system, guess, command)
+    assert compiled == [], compiled
+
+
+def test_an_operating_point_or_guess_simulate_refuses_as_a_start_is_refused():
+    """A pressure in bar (5.4) gave the poles of a model at a vacuum, a position in mm (30) a model 30 m up: refused
+    as `simulate` refuses them in `y0`, naming the leaf, before anything is computed."""
+    system = pamjax.presets.mas10_system(valve="averaged")
+    bar = system.initial_state(pressure=5.4, position=0.03)
+    mm = system.initial_state(pressure=5.4e5, position=30.0)
+    with counted_compilations() as compiled:
+        with pytest.raises(pamjax.PamjaxInputError, match=r"state\.pressure is 5\.4 Pa at most: that looks like bar"):
+            linearise(system, bar, 0.6)
+        with pytest.raises(pamjax.PamjaxInputError, match=r"guess\.pressure .*bar"):
+            equilibrium(system, 0.6, bar)
+        with pytest.raises(pamjax.PamjaxInputError, match=r"state\.position.*mm"):
+            linearise(system, mm, 0.6)
+    assert compiled == [], compiled
+
+
+def test_a_pole_at_zero_gives_the_limit_where_it_cancels_and_is_named_where_it_does_not(bouc_wen_settled):
+    """A memory state (Bouc-Wen friction here; bristle friction, a regulator's hysteresis) puts a pole at 0 in A:
+    dc_gain and bandwidth raised numpy's raw LinAlgError at `equilibrium`'s state, and at a settled state's (a pole
+    at 1e-12 of the largest) gave G at exactly 0, not the limit the response tends to. The pole cancels in the
+    command-to-position channel (the command does not drive the memory state): dc_gain is the limit G(0⁺), equal to
+    the response at a low frequency. An integrator a channel keeps (ẋ = u) is a `PamjaxInputError` naming the pole
+    at 0 and the state, not a LinAlgError."""
+    system, settled = bouc_wen_settled
+    for point in (settled, equilibrium(system, 0.6, settled)):
+        ss = linearise(system, point, 0.6, outputs=("position",))
+        assert np.min(np.abs(ss.poles())) < 1e-9 * np.max(np.abs(ss.poles()))
+        low = ss.frequency_response(1e-8, "position")[0]
+        assert ss.dc_gain("position") == pytest.approx(low.real, rel=1e-6) and ss.dc_gain("position") > 0
+        assert 0.1 < ss.bandwidth("position") < 100.0
+    integrator = pamjax.StateSpace(A=np.array([[-1.0, 0.0], [0.0, 0.0]]), B=np.ones((2, 1)), C=np.ones((1, 2)),
+                                   D=np.zeros((1, 1)), state_names=("lag", "ramp"), input_names=("u",),
+                                   output_names=("y",))
+    for method in (integrator.dc_gain, integrator.bandwidth):
+        with pytest.raises(pamjax.PamjaxInputError, match=r"G\(0\) of y / u .* infinite: .*\(in the rates of ramp"):
+            method()
+    assert np.isfinite(integrator.frequency_response(0.1)[0])
+
+
+def test_bad_channel_frequency_drop_and_newton_settings_are_named(regulator_model):
+    """An output index past the last gave a raw IndexError; a negative frequency and a drop_db <= 0 silently gave
+    numbers (the bandwidth was the search grid's first point, 1e-4 Hz); equilibrium's max_steps=-1 and rtol=NaN
+    ran to a "did not converge". Each refused, naming the argument."""
+    ss = regulator_model
+    with pytest.raises(pamjax.PamjaxInputError, match=r"output index 5 is out of range: this model has 1 outputs"):
+        ss.frequency_response(1.0, output=5)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"input index -1 is out of range"):
+        ss.dc_gain(0, -1)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"frequency must be finite and >= 0"):
+        ss.frequency_response([1.0, -1.0])
+    for drop in (0.0, -3.0, np.nan):
+        with pytest.raises(pamjax.PamjaxInputError, match=r"drop_db must be a finite number > 0"):
+            ss.bandwidth(drop_db=drop)
+    system = pamjax.presets.mas10_system(valve="averaged")
+    guess = system.initial_state(pressure=4e5)
+    with counted_compilations() as compiled:
+        for kwargs, match in ((dict(max_steps=-1), "max_steps must be an int >= 1"),
+                              (dict(max_steps=2.5), "max_steps must be an int >= 1"),
+                              (dict(rtol=np.nan), "rtol must be a finite number > 0"),
+                              (dict(atol=0.0), "atol must be a finite number > 0")):
+            with pytest.raises(pamjax.PamjaxInputError, match=match):
+                equilibrium(system, 0.6, guess, **kwargs)
+    assert compiled == [], compiled

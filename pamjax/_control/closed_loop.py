@@ -6,6 +6,7 @@ Per period the plant is solved adaptively (diffrax; a smooth plant: smoothed val
 fixed grid with events located inside the step (`pamjax._control.fixed_grid`: exact PWM edges, exact stick-slip),
 which the loop chooses from the plant (`stepping="auto"`)."""
 
+import dataclasses
 from typing import Literal
 
 import equinox as eqx
@@ -26,19 +27,24 @@ from .._core.custom_types import (
     Series,
     StateLike,
 )
-from .._core.errors import PamjaxInputError, check_count, check_positive
+from .._core.errors import PamjaxInputError, PamjaxSolveError, check_count, check_in_closed_interval, check_positive
 from .._core.fitting import parameter
 from .._papers import paper000
 from .._physics.signals import AbstractSignal, Step
-from .._solve.checks import check_positive_number
+from .._solve.checks import check_finite_state, check_parameters, check_positive_number, prepared
+from .._solve.linearise import check_state
 from .._solve.simulate import solve
-from .._solve.trajectory import RESULT_NONFINITE
+from .._solve.trajectory import RESULT_NONFINITE, result_message
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from .controllers import AbstractController, reference_derivatives
 from .estimator import ExtendedKalmanFilter, LoopSensors, check_channels, check_noise_channels
 from .fixed_grid import period_on_grid
 
 _DEFAULT_SUBSTEPS = 16  # RK4 nodes per period on the fixed grids: ≤ 1.25 ms at 50 Hz, as `simulate`'s PWM grid
+# s: the longest controller period taken. Pneumatic PWM runs at 10-500 Hz (paper 000's MHE2: 50 Hz, 20 ms) and a
+# muscle's pressure settles in ~0.1 s: a period of a second or more holds one duty over the whole motion, and is
+# milliseconds written as seconds (period=20.0 meant as 20 ms ran 20 s with one duty).
+MAX_PERIOD = 1.0
 
 
 class ClosedLoopState(eqx.Module):
@@ -145,6 +151,11 @@ class ClosedLoop(eqx.Module):
                 f"ClosedLoop.reference must be a pamjax signal (e.g. Sine), got {type(self.reference).__name__}"
             )
         check_positive(self.period, "ClosedLoop.period")
+        period = _concrete(self.period)
+        if period is not None and period > MAX_PERIOD:
+            raise PamjaxInputError(
+                f"ClosedLoop.period is {period} s, longer than {MAX_PERIOD} s: that looks like milliseconds (a 20 ms "
+                "period, paper 000's 50 Hz PWM, is written 0.02); the controller holds one duty per period [s]")
         if not (isinstance(self.substeps, int) and self.substeps >= 2):
             raise PamjaxInputError(f"ClosedLoop.substeps must be an int >= 2 (RK4 nodes per period), got "
                                    f"{self.substeps!r}")
@@ -368,6 +379,7 @@ def simulate_closed_loop(
     rtol: RealScalarLike = 1e-6,
     atol: RealScalarLike = 1e-6,
     max_steps: int = 2000,
+    throw: bool = True,
 ) -> ClosedLoopTrajectory:
     """Simulate a sampled-data closed loop for `duration` [s] (rounded up to whole PWM periods).
 
@@ -379,18 +391,24 @@ def simulate_closed_loop(
 
     **Arguments:** `loop` a `ClosedLoop`; `duration` [s]; `samples_per_period` output samples per period (10: 2 ms
     at 50 Hz, the position ripple resolved); `y0` initial `ClosedLoopState` (default: plant at rest in equilibrium
-    at atmospheric pressure, valve off); `rtol`, `atol` as for `simulate` (scaled states) and `max_steps` per period,
-    for adaptive stepping (the fixed grid's size is `ClosedLoop.substeps`).
+    at atmospheric pressure, valve off; another plant state: `loop.initial_state(plant_state=...)`); `rtol`, `atol`
+    as for `simulate` (scaled states) and `max_steps` per period, for adaptive stepping (the fixed grid's size is
+    `ClosedLoop.substeps`); `throw`: raise `PamjaxSolveError` where a period's solve fails (default), as `simulate`
+    does; with `throw=False` the trajectory comes back with `result` non-zero and non-finite samples from there.
 
-    **Raises:** `PamjaxInputError` for a reference outside the muscle's stroke, a bad duration, `rtol` or `atol`
-    not a finite number > 0 or `max_steps` not an int >= 1, before any solve.
+    **Raises:** `PamjaxInputError`, before any solve, for what `simulate` refuses in the plant or a start state
+    (parameters set with `eqx.tree_at`, such as `payload_mass` ≤ 0, are checked as the constructors check them, the
+    controller's duty limits too; `y0.plant`'s pressures ABSOLUTE pascal, its position in metres inside the stroke,
+    every leaf finite), a `y0` that is no `ClosedLoopState`, a controller whose duty is not one number, a reference
+    outside the muscle's stroke, a bad duration, `rtol` or `atol` not a finite number > 0 or `max_steps` not an int
+    >= 1; `PamjaxSolveError` where a period's solve fails and `throw` is True.
     """
     if not isinstance(loop, ClosedLoop):
         raise PamjaxInputError(f"loop must be a ClosedLoop, got {type(loop).__name__}")
+    loop, _ = prepared(loop)  # a float set with eqx.tree_at as an array: checked, and no constant of the program
+    check_parameters(loop, "loop")  # the components' own checks, which eqx.tree_at skipped
     _check_solver_settings(rtol, atol, max_steps)
-    duration = float(duration)
-    if not np.isfinite(duration) or duration <= 0:
-        raise PamjaxInputError(f"duration must be > 0 [s], got {duration}")
+    duration = float(check_positive_number(duration, "duration"))
     if not (isinstance(samples_per_period, int) and samples_per_period >= 1):
         raise PamjaxInputError(f"samples_per_period must be a positive int, got {samples_per_period!r}")
     lo, hi = loop.reference.bounds()
@@ -399,5 +417,61 @@ def simulate_closed_loop(
         raise PamjaxInputError(
             f"reference must stay inside the muscle's stroke [{x_min}, {x_max}] m, but spans [{lo}, {hi}] m"
         )
+    _check_start(loop, y0)
     num_periods = int(np.ceil(duration / float(loop.period) - 1e-9))
-    return _run_jit(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps, "forward")
+    traj = _run_jit(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps, "forward")
+    if throw and not isinstance(traj.result, jax.core.Tracer) and int(traj.result) != 0:
+        raise PamjaxSolveError(_failure(loop, traj, max_steps))
+    return traj
+
+
+def _check_start(loop, y0):
+    """`y0` a `ClosedLoopState` whose plant state passes `simulate`'s start-state checks (named "y0.plant...") and
+    whose other leaves are finite; and the controller's duty one number (`jax.eval_shape` of its update: tracing
+    only, nothing compiled), else the solve failed deep inside JAX (a gain of two values: "incompatible shapes")."""
+    if y0 is not None:
+        if not isinstance(y0, ClosedLoopState):
+            raise PamjaxInputError(
+                f"y0 must be a ClosedLoopState (plant, controller, duty, ...), got {type(y0).__name__}: start the loop "
+                "from a plant state with y0=loop.initial_state(plant_state=...)")
+        check_state(loop.plant, y0.plant, "y0.plant")
+        check_finite_state(y0.controller, "y0.controller")
+        check_finite_state(y0.duty, "y0.duty")
+        check_finite_state(y0.estimator, "y0.estimator")
+        check_in_closed_interval(y0.duty, 0.0, 1.0, "y0.duty (the duty of the period before the start)")
+
+    def duty(lp, y):
+        state = lp.initial_state() if y is None else y
+        observed = state.plant if lp.estimator is None else lp.estimator.estimate(state.estimator)
+        t = jnp.zeros(())
+        return lp.controller.update(t, reference_derivatives(lp.reference, t), observed, state.controller,
+                                    lp.period)[0]
+
+    several = [f"{f.name} (shape {np.shape(leaf)})" for f in dataclasses.fields(loop.controller)
+               if eqx.is_array(leaf := getattr(loop.controller, f.name)) and np.ndim(leaf) > 0]
+    try:
+        shape = jax.eval_shape(duty, loop, y0).shape
+    except (TypeError, ValueError):
+        if not several:
+            raise
+        shape = None
+    if shape != ():
+        raise PamjaxInputError(
+            f"ClosedLoop.controller ({type(loop.controller).__name__}) must give one duty per period, "
+            + (f"its parameters {', '.join(several)} hold several values: give one value each"
+               if several else f"it gives shape {shape}")
+            + " (a batch of controllers is jax.vmap over pamjax.unchecked.run_closed_loop)")
+
+
+def _failure(loop, traj, max_steps):
+    """The message of a failed closed-loop solve: the first period whose samples are not finite, the cause, the fix."""
+    code = int(traj.result)
+    bad = ~np.isfinite(np.asarray(traj.position).reshape(len(np.asarray(traj.period_start)), -1)).all(axis=1)
+    when = (f"in the period starting at t = {float(np.asarray(traj.period_start)[int(np.argmax(bad))]):.6g} s"
+            if bad.any() else "in a period")
+    fix = (f"Raise max_steps (now {max_steps} solver steps per period) or loosen rtol/atol"
+           if loop.stepping == "adaptive" else f"Raise ClosedLoop(substeps=...) (now {loop.substeps} per period)")
+    cause = result_message(code).split(" Try increasing")[0].rstrip(".")  # the fix follows
+    return (f"simulate_closed_loop: the plant's solve failed {when}: {cause} (result code {code}). "
+            f"{fix}, or check the plant's parameters and start state. (throw=False returns the trajectory with its "
+            "status instead: its samples are not finite from there.)")

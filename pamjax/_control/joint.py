@@ -8,9 +8,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.custom_types import Array, Float, Int, RealScalarLike, Series, TimesLike
-from .._core.errors import PamjaxInputError
+from .._core.errors import PamjaxInputError, PamjaxSolveError
 from .._physics.signals import Constant
+from .._solve.checks import check_parameters, check_start_state, prepared
 from .._solve.simulate import solve
+from .._solve.trajectory import result_message
 from .._systems.joint_control import (
     JointControlLoop,
     JointControlState,
@@ -144,6 +146,7 @@ def simulate_joint_control(
     rtol: RealScalarLike = 1e-7,
     atol: RealScalarLike = 1e-7,
     max_steps: int = 100_000,
+    throw: bool = True,
 ) -> JointControlTrajectory:
     """Simulate angle and stiffness (or pressure-sum) control of an antagonistic joint over the times `ts` [s].
 
@@ -153,11 +156,32 @@ def simulate_joint_control(
 
     **Arguments:** `loop` a `JointControlLoop`; `ts` save times [s] (the solve starts at ts[0]); `y0` initial
     `JointControlState` (default: at rest holding the references at ts[0]); `rtol`, `atol` on the scaled state
-    (pressures in bar, angle in 0.1 rad); `max_steps`.
+    (pressures in bar, angle in 0.1 rad); `max_steps`; `throw`: raise `PamjaxSolveError` on a failed solve (default),
+    as `simulate` does; with `throw=False` the trajectory comes back with `result` non-zero and NaN channels.
 
-    **Raises:** `PamjaxInputError` for an angle reference outside the joint's range or an infeasible stiffness or
-    pressure-sum target (see `check_joint_control`), before any solve.
+    **Raises:** `PamjaxInputError` for what `simulate` refuses in the loop (parameters set with `eqx.tree_at`, such
+    as a joint inertia ≤ 0, are checked as the constructors check them), a `y0` that is no `JointControlState` or
+    holds a non-finite value, an angle reference outside the joint's range or an infeasible stiffness or
+    pressure-sum target (see `check_joint_control`), before any solve; `PamjaxSolveError` where the solve fails and
+    `throw` is True.
     """
     check_joint_control_loop(loop)
+    loop, _ = prepared(loop)  # a float set with eqx.tree_at as an array: checked, and no constant of the program
+    check_parameters(loop, "loop")  # the components' own checks, which eqx.tree_at skipped (inertia < 0: NaN)
+    # the loop's state structure from its `state_scale` (a state of constants; shapes only, nothing computed), not
+    # a class test across layers
+    if y0 is not None and (jax.tree_util.tree_structure(y0)
+                           != jax.tree_util.tree_structure(jax.eval_shape(loop.state_scale))):
+        raise PamjaxInputError(f"y0 must be a JointControlState (plant, integrals) of this loop, got "
+                               f"{type(y0).__name__}: loop.initial_state(t0) is one")
+    check_start_state(loop, y0)
     check_joint_control(loop, ts)
-    return _run_jit(loop, jnp.asarray(ts, dtype=float), y0, rtol, atol, max_steps, "forward")
+    traj = _run_jit(loop, jnp.asarray(ts, dtype=float), y0, rtol, atol, max_steps, "forward")
+    if throw and not isinstance(traj.result, jax.core.Tracer) and int(traj.result) != 0:
+        code = int(traj.result)
+        cause = result_message(code).split(" Try increasing")[0].rstrip(".")  # the fix follows
+        raise PamjaxSolveError(
+            f"simulate_joint_control: the solve failed: {cause} (result code {code}, max_steps={max_steps}). Raise "
+            "max_steps or loosen rtol/atol, or check the joint's parameters, gains and start state. (throw=False "
+            "returns the trajectory with its status instead.)")
+    return traj

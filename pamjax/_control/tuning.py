@@ -1,6 +1,7 @@
 """Gradient-based tuning of a closed loop's controller gains (Adam on their logarithms, reverse mode through the
 whole sampled-data simulation)."""
 
+import dataclasses
 from collections.abc import Callable, Sequence
 
 import equinox as eqx
@@ -11,7 +12,13 @@ import numpy as np
 
 from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError
+from .._solve.checks import check_parameters, prepared
 from .closed_loop import ClosedLoop, run_closed_loop
+
+# A controller's settings that are no gains: bounded (the duty limits lie in [0, 1], a PWM duty ratio) or an offset
+# (the bias, the duty at zero error). Adam on a logarithm keeps a value > 0 but not below 1: tuning `duty_max` from 0.9
+# gave 2.99, a duty the valve cannot take. They are set, not tuned.
+NOT_GAINS = ("duty_min", "duty_max", "bias")
 
 
 def tracking_rmse(loop: ClosedLoop, num_periods: int, start=0.0, **kwargs):
@@ -34,20 +41,30 @@ def tune_controller(
     closed loop, differentiated through the whole sampled-data simulation (reverse mode).
 
     **Arguments:** `loop` a `ClosedLoop` (the plant it holds is the one tuned on); `gains` a tuple of attribute names
-    of its controller, each a real-valued (floating-point) parameter > 0 (e.g. `("proportional_gain",
-    "integral_gain")`); `duration` [s]; `start` [s] the RMSE window's start; `steps` Adam steps (an int >= 0; 0
+    of its controller, each a real-valued parameter > 0 (e.g. `("proportional_gain", "integral_gain")`; an integer
+    value such as `proportional_gain=30` is tuned as the float 30.0), not a duty limit or the bias (`duty_min`,
+    `duty_max`, `bias`: bounded settings, which a descent on the logarithm would push out of [0, 1]; set them
+    yourself); `duration` [s]; `start` [s] the RMSE window's start; `steps` Adam steps (an int >= 0; 0
     evaluates the loop's own gains, without a step); `learning_rate` in log-gain units (finite, > 0);
     `samples_per_period` samples of the RMSE per PWM period (an int >= 1); `callback(step, rmse, gains)` for progress.
 
     **Returns:** `(tuned_loop, history)`: the loop with the best gains met and a list of (rmse [m], gains) per step.
 
-    **Raises:** `PamjaxInputError`, before any solve, for a gain that is no positive real-valued controller
-    parameter, a duration that is not > 0, a `start` at or after the run's end (`duration` rounded up to whole PWM
-    periods), or a bad `steps`, `learning_rate` or `samples_per_period`.
+    **Raises:** `PamjaxInputError`, before any solve, for what `simulate_closed_loop` refuses in the loop (parameters
+    set with `eqx.tree_at` are checked as the constructors check them), a gain that is no positive real-valued
+    controller parameter or is a duty limit or the bias, a duration that is not a number > 0, a `start` at or after
+    the run's end (`duration` rounded up to whole PWM periods), or a bad `steps`, `learning_rate` or
+    `samples_per_period`.
     """
     if not isinstance(loop, ClosedLoop):
         raise PamjaxInputError(f"loop must be a ClosedLoop, got {type(loop).__name__}")
+    loop, _ = prepared(loop)  # a float set with eqx.tree_at as an array, as `simulate_closed_loop` takes it
+    check_parameters(loop, "loop")  # the components' own checks, which eqx.tree_at skipped
     _check_settings(loop.controller, gains, steps, learning_rate, samples_per_period)
+    for value, name in ((duration, "duration"), (start, "start")):
+        if not (isinstance(value, (int, float, np.number, np.ndarray, jax.Array)) and np.ndim(value) == 0
+                and not isinstance(value, (bool, np.bool_))):
+            raise PamjaxInputError(f"tune_controller: {name} must be a number [s], got {value!r}")
     duration, start = float(duration), float(start)
     if not (np.isfinite(duration) and duration > 0):
         raise PamjaxInputError(f"tune_controller: duration must be > 0 [s], got {duration}")
@@ -59,6 +76,9 @@ def tune_controller(
                                "duration")
     gains = tuple(gains)
     get = _getter(gains)
+    # integer-valued gains (PIController(proportional_gain=30) keeps an int array) as floats: a log to descend on
+    loop = eqx.tree_at(lambda lp: get(lp.controller), loop,
+                       tuple(jnp.asarray(g, dtype=float) for g in get(loop.controller)))
 
     def value_and_grad(log_gains):
         return _rmse_and_gradient(log_gains, loop, gains, num_periods, start, samples_per_period)
@@ -97,12 +117,20 @@ def _check_settings(controller, gains, steps, learning_rate, samples_per_period)
     if isinstance(gains, str) or not isinstance(gains, Sequence) or not gains:
         raise PamjaxInputError(f"tune_controller: gains must be a non-empty tuple of controller parameter names, got "
                                f"{gains!r}")
+    static = {f.name for f in dataclasses.fields(controller) if f.metadata.get("static", False)}
     for name in gains:
+        if name in NOT_GAINS:
+            raise PamjaxInputError(
+                f"tune_controller: {name!r} is no gain: the duty limits are bounds in [0, 1] (a PWM duty ratio) and "
+                "the bias the duty at zero error, which a descent on the logarithm would push out of range (duty_max "
+                f"0.9 went to 2.99); set {name} on the controller yourself and tune its gains")
         value = getattr(controller, name, None) if isinstance(name, str) else None
-        # a leaf of the controller's pytree with a floating-point dtype: a sub-model ("model") or an integer or
-        # static field ("seed") has no log to descend on
-        real = (isinstance(value, (float, np.ndarray, jax.Array)) and not isinstance(value, jax.core.Tracer)
-                and np.issubdtype(np.asarray(value).dtype, np.floating))
+        # a leaf of the controller's pytree with a real (floating-point or integer) dtype: a sub-model ("model") or
+        # a static field ("seed", which no gradient reaches) has no log to descend on
+        real = (name not in static and isinstance(value, (int, float, np.ndarray, jax.Array))
+                and not isinstance(value, (bool, jax.core.Tracer))
+                and (np.issubdtype(np.asarray(value).dtype, np.floating)
+                     or np.issubdtype(np.asarray(value).dtype, np.integer)))
         if not real or not np.all(np.asarray(value) > 0) or not np.all(np.isfinite(np.asarray(value))):
             raise PamjaxInputError(f"tune_controller: gain {name!r} must name a positive, real-valued parameter of "
                                    f"the {type(controller).__name__}, got {_describe(value)}")

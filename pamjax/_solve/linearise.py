@@ -15,11 +15,17 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
-from .._core.custom_types import ArrayLike, Float, Real, RealArrayLike, RealScalarLike
-from .._core.errors import PamjaxInputError, PamjaxSolveError, check_finite, concrete_values
+from .._core.custom_types import ArrayLike, Float, Real, RealScalarLike
+from .._core.errors import PamjaxInputError, PamjaxSolveError, check_count, check_finite, concrete_values
 from .._core.fastjit import keyed_by_code
 from .._systems.base import AbstractSystem
-from .checks import check_finite_state, check_parameters
+from .checks import (
+    check_finite_state,
+    check_parameters,
+    check_positive_number,
+    check_start_position,
+    check_start_pressure,
+)
 
 
 class StateSpace(eqx.Module):
@@ -34,26 +40,55 @@ class StateSpace(eqx.Module):
     output_names: tuple[str, ...] = eqx.field(static=True)
 
     def _index(self, names, name, kind):
-        if isinstance(name, int):
-            return name
+        if isinstance(name, (int, np.integer)) and not isinstance(name, (bool, np.bool_)):
+            if not 0 <= name < len(names):
+                raise PamjaxInputError(f"{kind} index {name} is out of range: this model has {len(names)} {kind}s "
+                                       f"(indices 0 to {len(names) - 1}): {list(names)}")
+            return int(name)
         if name not in names:
             raise PamjaxInputError(f"unknown {kind} {name!r}; this model has {list(names)}")
         return names.index(name)
 
     def frequency_response(self, frequency, output=0, input=0):
-        """G(j 2π f) = C (j2πf I − A)⁻¹ B + D for `frequency` [Hz] (array), one output/input pair (names or indices)."""
+        """G(j 2π f) = C (j2πf I − A)⁻¹ B + D for `frequency` [Hz] (array, finite, ≥ 0), one output/input pair (names
+        or indices). At f = 0 with a pole at 0 (a memory state), the limit G(0⁺) where the pole cancels (`dc_gain`).
+
+        **Raises:** `PamjaxInputError` for an unknown output or input, a negative or non-finite frequency (a real
+        model's G(−j2πf) is the conjugate of G(j2πf)), and where G is infinite: a pole at j2πf that this channel
+        keeps (at f = 0: an integrator, see `dc_gain`)."""
         i = self._index(self.output_names, output, "output")
         j = self._index(self.input_names, input, "input")
         f = np.atleast_1d(np.asarray(frequency, dtype=float))
+        if not np.all(np.isfinite(f) & (f >= 0)):
+            raise PamjaxInputError(f"frequency must be finite and >= 0 [Hz] (G at -f is the complex conjugate of G at "
+                                   f"f), got {np.array2string(f, threshold=6)}")
         n = self.A.shape[0]
         out = np.empty(f.shape, dtype=complex)
+        static = None
         for k, fk in enumerate(f):
-            x = np.linalg.solve(2j * np.pi * fk * np.eye(n) - self.A, self.B[:, j])
+            if fk == 0:
+                static = _static_gain(self, i, j) if static is None else static
+                out[k] = static
+                continue
+            try:
+                x = np.linalg.solve(2j * np.pi * fk * np.eye(n) - self.A, self.B[:, j])
+            except np.linalg.LinAlgError:
+                raise PamjaxInputError(
+                    f"G(j2πf) is infinite at f = {fk} Hz: a pole of A lies on the imaginary axis there (an undamped "
+                    f"mode; poles {np.array2string(self.poles(), precision=4, threshold=8)} 1/s); evaluate it at "
+                    "other frequencies") from None
             out[k] = self.C[i] @ x + self.D[i, j]
         return out
 
     def dc_gain(self, output=0, input=0):
-        """Static gain G(0) = D − C A⁻¹ B."""
+        """Static gain G(0) = D − C A⁻¹ B; with poles at 0 (A singular: a memory state such as bristle or Bouc-Wen
+        friction or a regulator's hysteresis, whose rate vanishes at rest whatever its value) the limit G(0⁺) of
+        G(s) as s → 0, which is finite where this channel cancels the pole (the memory state is neither driven by
+        the input nor seen in the output at rest, or follows the motion): the small-signal gain with the memory
+        state carried along.
+
+        **Raises:** `PamjaxInputError` (not numpy's `LinAlgError`) where the pole at 0 stays in this channel (an
+        integrator: an infinite static gain), naming the states whose rates make A singular."""
         return float(np.real(self.frequency_response(0.0, output, input)[0]))
 
     def bode(self, frequency, output=0, input=0):
@@ -62,7 +97,12 @@ class StateSpace(eqx.Module):
         return 20 * np.log10(np.abs(g)), np.degrees(np.unwrap(np.angle(g)))
 
     def bandwidth(self, output=0, input=0, drop_db=3.0, fmax=1e4):
-        """Lowest frequency [Hz] where |G| falls `drop_db` below |G(0)| (the −3 dB bandwidth), by bisection."""
+        """Lowest frequency [Hz] where |G| falls `drop_db` (> 0, a drop: 3 for the −3 dB bandwidth) below |G(0)|, by
+        bisection on a grid from 1e-4 Hz to `fmax` [Hz]. Raises `PamjaxInputError` for `drop_db` ≤ 0 (|G| is "below"
+        |G(0)| + 0 dB at once: the grid's first point came back), a bad `fmax`, or an infinite G(0) (`dc_gain`)."""
+        check_positive_number(drop_db, "drop_db")
+        if check_positive_number(fmax, "fmax") <= 1e-4:
+            raise PamjaxInputError(f"fmax must exceed 1e-4 Hz (the search grid's lowest frequency), got {fmax!r}")
         ref = 20 * np.log10(abs(self.dc_gain(output, input)))
 
         def below(f):
@@ -104,6 +144,66 @@ class StateSpace(eqx.Module):
         return control.ss(self.A, self.B, self.C, self.D)
 
 
+# A pole with |λ| at or below this fraction of the largest |λ| is a pole at 0 (eigenvalues do not depend on the
+# states' units). Measured: a memory state's pole is 1e-19 of the largest at `equilibrium`'s state and 1e-12 at the
+# end of a 10 s `simulate` (Bouc-Wen MAS-10); the smallest physical pole met, 2e-4 (MAS-10, Coulomb friction).
+ZERO_POLE_RTOL = 1e-9
+
+
+def _balanced(A, B, C):
+    """(T⁻¹AT, T⁻¹B, CT) with T diagonal such that each state's row and column of A have equal norms (Parlett and
+    Reinsch's balancing): the same poles and transfer functions, without the SI units' 1e10 spread (Pa against m),
+    so that null directions are found by the SVD."""
+    A, B, C = (np.array(m, dtype=float) for m in (A, B, C))
+    for _ in range(20):
+        for k in range(A.shape[0]):
+            column = np.linalg.norm(np.delete(A[:, k], k))
+            row = np.linalg.norm(np.delete(A[k, :], k))
+            if column > 0 and row > 0:
+                d = np.sqrt(row / column)
+                A[:, k] *= d
+                A[k, :] /= d
+                B[k, :] /= d
+                C[:, k] *= d
+    return A, B, C
+
+
+def _static_gain(ss, i, j):
+    """G_ij(0⁺) = lim G_ij(s), s → 0. Without a pole at 0, D − C A⁻¹ B. With k poles at 0 (right and left null
+    bases N, W of A, balanced): G(s) = C P₀ B / s + D − C A^# B + O(s), P₀ = N (WᵀN)⁻¹ Wᵀ the projector on the null
+    space along A's range and A^# the group inverse, x = −A^# B solving [A N; Wᵀ 0] [x; λ] = [−B; 0]. The limit is
+    finite where the residue C P₀ B vanishes (to rounding)."""
+    poles = np.abs(np.linalg.eigvals(ss.A))
+    zero = int(np.sum(poles <= ZERO_POLE_RTOL * np.max(poles, initial=0.0)))
+    if zero == 0:
+        return ss.C[i] @ np.linalg.solve(-ss.A, ss.B[:, j]) + ss.D[i, j]
+    A, B, C = _balanced(ss.A, ss.B, ss.C)
+    u, _, vt = np.linalg.svd(A)
+    N, W = vt[-zero:].T, u[:, -zero:]
+    try:
+        projector = N @ np.linalg.solve(W.T @ N, W.T)
+        bordered = np.block([[A, N], [W.T, np.zeros((zero, zero))]])
+        x = np.linalg.solve(bordered, np.concatenate([-B[:, j], np.zeros(zero)]))[: A.shape[0]]
+    except np.linalg.LinAlgError:  # WᵀN singular: a Jordan block at 0 (a double integrator)
+        projector, x = None, None
+    if projector is not None:
+        residue = C[i] @ projector @ B[:, j]
+        # against |C| |P₀| |B| (N and W orthonormal: |P₀| = |(WᵀN)⁻¹|): a cancelled pole leaves rounding only
+        if abs(residue) <= 1e-8 * np.linalg.norm(C[i]) * np.linalg.norm(B[:, j]) * np.linalg.norm(
+                np.linalg.inv(W.T @ N), 2):
+            return C[i] @ x + ss.D[i, j]
+    left = np.abs(W[:, -1])
+    rows = [ss.state_names[k] for k in np.argsort(-left) if left[k] > 0.1 * np.max(left)]
+    raise PamjaxInputError(
+        f"the static gain G(0) of {ss.output_names[i]} / {ss.input_names[j]} (and a bandwidth measured from it) is "
+        f"infinite: A has a pole at s = 0 (in the rates of {', '.join(rows)}) that this channel keeps, an integrator "
+        "(a state whose rate vanishes at rest whatever its value, driven by this input and seen in this output): a "
+        "constant input change makes the output ramp. Read |G| at a low frequency instead (frequency_response(f) or "
+        "bode(f) with f > 0, e.g. 1e-2 Hz), look at poles() and transfer_function(), or linearise a model without "
+        "the integrating state"
+    )
+
+
 def _names(tree, prefix):
     paths = jtu.tree_flatten_with_path(tree)[0]
     out = []
@@ -114,15 +214,15 @@ def _names(tree, prefix):
     return tuple(out)
 
 
-def linearise(system: AbstractSystem, state: eqx.Module, command: RealArrayLike, *, t: RealScalarLike = 0.0,
+def linearise(system: AbstractSystem, state: eqx.Module, command: RealScalarLike, *, t: RealScalarLike = 0.0,
               inputs: Mapping[str, Callable[[AbstractSystem], Real[ArrayLike, "..."]]] | None = None,
               outputs: Sequence[str] = ("pressure",)) -> StateSpace:
     """Linearise `system` about (`state`, `command`) at time `t`: a `StateSpace`.
 
     **Arguments:**
 
-    - `system`: any pamjax system (`vector_field(t, y, u)` and `outputs(t, y, u)`); `state`: its state pytree;
-      `command`: the command (scalar or array).
+    - `system`: any pamjax system (`vector_field(t, y, u)` and `outputs(t, y, u)`); `state`: its state pytree
+      (SI, ABSOLUTE pressures, as `simulate`'s `y0`); `command`: the command, one number (a duty ratio, a voltage).
     - `inputs`: extra inputs, a dict name → function selecting an array leaf of the system (e.g.
       `{"outlet_flow": lambda s: s.outlet_flow}`); they follow the command (named "command") in B and D.
     - `outputs`: names of `system.outputs` channels (default ("pressure",)).
@@ -131,8 +231,10 @@ def linearise(system: AbstractSystem, state: eqx.Module, command: RealArrayLike,
     Bode data are meaningful about an equilibrium (`equilibrium` finds one).
 
     **Raises:** `PamjaxInputError` for what `simulate` refuses in the system (`payload_mass` ≤ 0, set with
-    `eqx.tree_at` or not), a `state`, `command` or `t` that is not finite or a command outside `system.command_range`,
-    before anything is computed; `PamjaxSolveError` where a derivative is not finite at the operating point (named).
+    `eqx.tree_at` or not) and in a start state (a pressure in bar or gauge, a position in mm or outside the stroke),
+    a `state`, `command` or `t` that is not finite, a command that is not one number or lies outside
+    `system.command_range`, before anything is computed; `PamjaxSolveError` where a derivative is not finite at the
+    operating point (named).
     """
     _check_inputs(system, command, state, "state", t)
     inputs = {} if inputs is None else dict(inputs)
@@ -203,20 +305,38 @@ def _jacobians(system, t, state, u0, wheres, outputs):
 
 def _check_inputs(system, command, state, state_name, t):
     """`simulate`'s checks of what `linearise` and `equilibrium` are given, before anything is computed: every
-    component's own checks (`check_parameters`: a system changed with `eqx.tree_at` skipped them), a finite state and
-    time, and the command (`_check_command`)."""
+    component's own checks (`check_parameters`: a system changed with `eqx.tree_at` skipped them), the state as
+    `simulate` checks its `y0` (`check_state`), a finite time, and the command (`_check_command`)."""
     if not isinstance(system, AbstractSystem):
         raise PamjaxInputError(f"system must be a pamjax system (TankSystem, MuscleSystem, ...), got {type(system)}")
     check_parameters(system)
-    check_finite_state(state, state_name)
+    check_state(system, state, state_name)
     check_finite(t, "t")
     _check_command(system, command)
 
 
+def check_state(system, state, name):
+    """`simulate`'s start-state checks (`check_start_state`) of a state given under another `name` (an operating
+    point "state", a "guess", a closed loop's "y0.plant"), concrete leaves only: every leaf finite; the pressures
+    the system names ABSOLUTE pascal, > 0 and not bar or gauge by magnitude (5.4 for 5.4 bar gave poles of a model
+    at a vacuum); its displacements metres (30 for 30 mm refused) and inside their stroke."""
+    check_finite_state(state, name)
+    for path, pressure in type(system).start_pressures(system, state).items():
+        check_start_pressure(pressure, f"{name}.{path}")
+    for path, (position, stroke) in type(system).start_positions(system, state).items():
+        check_start_position(position, stroke, f"{name}.{path}")
+
+
 def _check_command(system, command):
-    """Refuse a concrete `command` that is not finite or lies outside `system.command_range` (a duty ratio in
-    [0, 1], a regulator's 0-10 V), as `simulate` refuses such a signal: the flow laws extrapolate beyond it (eq. 13's
-    parabola gives a 2 MPa "equilibrium" at duty -0.3). A traced command (jit/grad) has no value to check."""
+    """Refuse a `command` that is not one number (a shape is known even traced), and a concrete one that is not
+    finite or lies outside `system.command_range` (a duty ratio in [0, 1], a regulator's 0-10 V), as `simulate`
+    refuses such a signal: the flow laws extrapolate beyond it (eq. 13's parabola gives a 2 MPa "equilibrium" at
+    duty -0.3). Every system takes one command: an array of two broadcast into the state (an "equilibrium" of a
+    pressure pair that was none, an A of shape (4, 3)). A traced command (jit/grad) has no value to check."""
+    if np.ndim(command) != 0:
+        raise PamjaxInputError(
+            f"command must be one number (the valve command, e.g. a duty ratio), got shape {np.shape(command)}: a "
+            "system takes one command; for several operating points, call once per command (or jax.vmap over it)")
     value = concrete_values(command)
     if value is None:
         return
@@ -237,7 +357,7 @@ def _check_command(system, command):
 SINGULAR_RCOND = 1e-10
 
 
-def equilibrium(system: AbstractSystem, command: RealArrayLike, guess: eqx.Module, *, t: RealScalarLike = 0.0,
+def equilibrium(system: AbstractSystem, command: RealScalarLike, guess: eqx.Module, *, t: RealScalarLike = 0.0,
                 rtol: RealScalarLike = 1e-10, atol: RealScalarLike = 1e-10, max_steps: int = 200) -> eqx.Module:
     """A state where `system.vector_field(t, ·, command)` vanishes, by Newton's method from `guess`, solved in the
     system's scaled units (`state_scale`): full Newton steps until a step is below `atol + rtol |z|` in every
@@ -253,9 +373,13 @@ def equilibrium(system: AbstractSystem, command: RealArrayLike, guess: eqx.Modul
     One small compiled loop (the field and its forward-mode Jacobian traced once): optimistix's `Newton` root
     finder compiled a program several times the size (~12 s for the DMSP-40 muscle, against ~2 s).
 
-    Raises `PamjaxInputError`, as `linearise` does, for a system `simulate` refuses and a `guess` or `t` that is not
-    finite, before anything is computed."""
+    Raises `PamjaxInputError`, as `linearise` does, for a system `simulate` refuses, a `guess` it refuses as a start
+    state, a `t` that is not finite, and `rtol`, `atol` that are not finite numbers > 0 or a `max_steps` that is not
+    an int >= 1, before anything is computed."""
     _check_inputs(system, command, guess, "guess", t)
+    check_positive_number(rtol, "rtol")
+    check_positive_number(atol, "atol")
+    check_count(max_steps, "max_steps", "an int >= 1 (Newton steps)")
     scale = jtu.tree_map(jnp.asarray, system.state_scale())
     scaled_guess = jtu.tree_map(lambda a, s: jnp.asarray(a, dtype=float) / s, guess, scale)
     y, converged, singular = _newton(system, jnp.asarray(command, dtype=float), jnp.asarray(t, dtype=float),
