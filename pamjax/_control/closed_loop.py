@@ -31,8 +31,7 @@ from .._core.errors import PamjaxInputError, PamjaxSolveError, check_count, chec
 from .._core.fitting import parameter
 from .._papers import paper000
 from .._physics.signals import AbstractSignal, Step
-from .._solve.checks import check_finite_state, check_parameters, check_positive_number, prepared
-from .._solve.linearise import check_state
+from .._solve.checks import check_finite_state, check_parameters, check_positive_number, check_start_state, prepared
 from .._solve.simulate import solve
 from .._solve.trajectory import RESULT_NONFINITE, result_message
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
@@ -434,7 +433,7 @@ def _check_start(loop, y0):
             raise PamjaxInputError(
                 f"y0 must be a ClosedLoopState (plant, controller, duty, ...), got {type(y0).__name__}: start the loop "
                 "from a plant state with y0=loop.initial_state(plant_state=...)")
-        check_state(loop.plant, y0.plant, "y0.plant")
+        check_start_state(loop.plant, y0.plant, "y0.plant")
         check_finite_state(y0.controller, "y0.controller")
         check_finite_state(y0.duty, "y0.duty")
         check_finite_state(y0.estimator, "y0.estimator")

@@ -149,18 +149,19 @@ def check_start_pressure(pressure, name, lanes=False):
     check_absolute_pressure(pressure, name)
 
 
-def check_start_state(system, y0):
+def check_start_state(system, y0, name="y0"):
     """`simulate`'s checks of a start state `y0` (None: nothing to check), concrete leaves only: every leaf finite;
     the pressures the system names (`start_pressures`) ABSOLUTE pascal, > 0 and not bar or gauge by magnitude; the
     displacements it names (`start_positions`) metres (not mm by magnitude) and inside their stroke, give or take
-    `START_STROKE_MARGIN`."""
+    `START_STROKE_MARGIN`. `name`: what the errors call the state (a linearisation's "state" or "guess", a closed
+    loop's "y0.plant")."""
     if y0 is None:
         return
-    check_finite_state(y0, "y0")
-    for name, pressure in type(system).start_pressures(system, y0).items():  # y0.pressure, y0.regulator.pressure
-        check_start_pressure(pressure, f"y0.{name}")
-    for name, (position, stroke) in type(system).start_positions(system, y0).items():
-        check_start_position(position, stroke, f"y0.{name}")
+    check_finite_state(y0, name)
+    for path, pressure in type(system).start_pressures(system, y0).items():  # y0.pressure, y0.regulator.pressure
+        check_start_pressure(pressure, f"{name}.{path}")
+    for path, (position, stroke) in type(system).start_positions(system, y0).items():
+        check_start_position(position, stroke, f"{name}.{path}")
 
 
 def check_start_position(position, stroke, name, lanes=False, path=None):

@@ -19,13 +19,7 @@ from .._core.custom_types import ArrayLike, Float, Real, RealScalarLike
 from .._core.errors import PamjaxInputError, PamjaxSolveError, check_count, check_finite, concrete_values
 from .._core.fastjit import keyed_by_code
 from .._systems.base import AbstractSystem
-from .checks import (
-    check_finite_state,
-    check_parameters,
-    check_positive_number,
-    check_start_position,
-    check_start_pressure,
-)
+from .checks import check_parameters, check_positive_number, check_start_state
 
 
 class StateSpace(eqx.Module):
@@ -306,25 +300,13 @@ def _jacobians(system, t, state, u0, wheres, outputs):
 def _check_inputs(system, command, state, state_name, t):
     """`simulate`'s checks of what `linearise` and `equilibrium` are given, before anything is computed: every
     component's own checks (`check_parameters`: a system changed with `eqx.tree_at` skipped them), the state as
-    `simulate` checks its `y0` (`check_state`), a finite time, and the command (`_check_command`)."""
+    `simulate` checks its `y0` (`check_start_state`), a finite time, and the command (`_check_command`)."""
     if not isinstance(system, AbstractSystem):
         raise PamjaxInputError(f"system must be a pamjax system (TankSystem, MuscleSystem, ...), got {type(system)}")
     check_parameters(system)
-    check_state(system, state, state_name)
+    check_start_state(system, state, state_name)  # simulate's checks (5.4 for 5.4 bar: poles of a vacuum)
     check_finite(t, "t")
     _check_command(system, command)
-
-
-def check_state(system, state, name):
-    """`simulate`'s start-state checks (`check_start_state`) of a state given under another `name` (an operating
-    point "state", a "guess", a closed loop's "y0.plant"), concrete leaves only: every leaf finite; the pressures
-    the system names ABSOLUTE pascal, > 0 and not bar or gauge by magnitude (5.4 for 5.4 bar gave poles of a model
-    at a vacuum); its displacements metres (30 for 30 mm refused) and inside their stroke."""
-    check_finite_state(state, name)
-    for path, pressure in type(system).start_pressures(system, state).items():
-        check_start_pressure(pressure, f"{name}.{path}")
-    for path, (position, stroke) in type(system).start_positions(system, state).items():
-        check_start_position(position, stroke, f"{name}.{path}")
 
 
 def _check_command(system, command):
