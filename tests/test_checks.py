@@ -216,3 +216,12 @@ def test_a_nominal_length_and_an_edge_width_set_with_tree_at_are_named_before_th
     tank = eqx.tree_at(lambda s: s.valve.edge_width, presets.mas10_tank_system(), 0.1)
     with pytest.raises(PamjaxInputError, match=r"OnOffValve\.edge_width \(0\.1 s = 100 ms\) must not exceed 5%"):
         pamjax.simulate(tank, pamjax.Constant(0.25), TS)
+
+
+def test_an_empty_array_for_a_scalar_parameter_is_refused():
+    # payload_mass = [] passed the positivity checks vacuously and the solve failed deep inside JAX ("scan body
+    # function carry input and carry output must have equal types")
+    with pytest.raises(pamjax.PamjaxInputError, match=r"a scalar parameter got an empty array \(shape \(0,\)\)"):
+        presets.mas10_system(valve="averaged", payload_mass=np.array([]))
+    with pytest.raises(pamjax.PamjaxInputError, match="empty array"):
+        pamjax.Step(0.2, 0.8, [])

@@ -12,6 +12,7 @@ import numpy as np
 from jax.typing import DTypeLike
 
 from .custom_types import Array, RealArray, RealArrayLike, RealScalar, RealScalarLike, Table, TableLike
+from .errors import PamjaxInputError
 from .private import jax_at_top_level
 
 
@@ -19,8 +20,14 @@ def as_scalar(x: RealScalarLike) -> RealScalar:
     """`jnp.asarray` of a component's scalar parameter: the field converter that gives its constructor the type of
     the argument (equinox annotates `__init__` with the converter's argument type). A Python float or int goes
     through `jax.device_put`: the same weakly typed array, without the small program `jnp.asarray` compiles for it
-    (~50 ms the first time in a process: a preset's set-up in every `pamjax` command)."""
-    return _asarray(x)
+    (~50 ms the first time in a process: a preset's set-up in every `pamjax` command). An empty array is refused:
+    it is no number nor a batch of them (a payload_mass of [] passed the positivity checks vacuously, and the solve
+    failed deep inside JAX)."""
+    a = _asarray(x)
+    if a.size == 0:
+        raise PamjaxInputError(f"a scalar parameter got an empty array (shape {a.shape}): give one number [SI], or a "
+                               "batch of them")
+    return a
 
 
 def _asarray(x):
