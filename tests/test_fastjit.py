@@ -149,3 +149,42 @@ def test_an_inline_factory_reuses_the_sweeps_program_and_another_closure_value_d
     assert compiled == [], compiled
     np.testing.assert_allclose(again, run(0.5, duty=(0.6, 1.0)), rtol=1e-12)  # its own program: 0.5 x (0.6, 1)
     assert not np.allclose(run(0.5), first)
+
+
+class _DutyFactory:
+    """A callable object whose attribute a script changes between two sweeps."""
+
+    def __init__(self, scale):
+        self.scale = scale
+
+    def __call__(self, v):
+        return pamjax.Constant(v["duty"] * self.scale)
+
+
+def test_a_callable_object_is_keyed_by_its_attributes_so_a_changed_one_is_traced_afresh():
+    """A factory object whose attribute changed between two sweeps gave the first sweep's results again (the program
+    was keyed by the object's identity); it is keyed by its type and attributes' values, or, with an attribute that
+    may change in place, shared with no other call."""
+    from pamjax._core.fastjit import SameCode
+
+    factory = _DutyFactory(1.0)
+    first = SameCode(factory)
+    assert SameCode(_DutyFactory(1.0)) == first and hash(SameCode(_DutyFactory(1.0))) == hash(first)
+    factory.scale = 0.5
+    assert SameCode(factory) != first
+    held = SameCode(_DutyFactory([1.0]))  # a list attribute may change in place: this call's own program
+    assert held == held and held != SameCode(held.fn)
+    assert SameCode(factory.__call__) != SameCode(_DutyFactory(1.0).__call__)  # a bound method: its object's state
+
+    system = presets.mas10_tank_system("averaged")
+    ts = jnp.linspace(0.0, 0.2, 5)
+    factory.scale = 1.0
+    run = lambda: pamjax.sweep(system, factory, ts, {"duty": jnp.asarray([0.2, 0.6])},  # noqa: E731
+                               progress=False).outputs["pressure"]
+    full = run()
+    factory.scale = 0.5
+    half = run()
+    expected = pamjax.sweep(system, lambda v: pamjax.Constant(v["duty"] * 0.5), ts, {"duty": jnp.asarray([0.2, 0.6])},
+                            progress=False).outputs["pressure"]
+    np.testing.assert_allclose(half, expected, rtol=1e-12)
+    assert not np.allclose(half, full)

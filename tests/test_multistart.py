@@ -143,3 +143,19 @@ def test_a_fresh_seed_is_recorded_and_drawn_once_for_every_process(problem, monk
     assert seed == 1234 and len(sent) == 1  # process 0's, on this process
     np.testing.assert_array_equal(values, multistart_module._start_values(space, 3, 1234, 0.4)[0])
     assert multistart_module._start_values(space, 3, 7, 0.4, True)[1] == 7 and len(sent) == 1  # a seed: no exchange
+
+
+def test_experiments_and_draw_settings_with_given_starts_are_refused_before_any_fit(problem):
+    """No experiments ran every start and failed each; a fleet member's experiments of None was recorded as a failed
+    member; spread (even -5) and seed were silently ignored with an array of starts."""
+    muscle, exp, space = problem
+    with pytest.raises(PamjaxInputError, match="experiments must be a non-empty list"):
+        pj.multistart(muscle, [], FREE, starts=3, max_steps=1, progress=False)
+    with pytest.raises(PamjaxInputError, match="fleet member 'b': experiments must be pamjax experiments"):
+        pj.fit_fleet(muscle, {"a": [exp], "b": None}, FREE, max_steps=1, progress=False)
+    rows = np.tile(np.asarray(space.initial_values()), (2, 1))
+    with pytest.raises(PamjaxInputError, match="spread must be a number >= 0"):
+        pj.multistart(muscle, [exp], FREE, starts=rows, spread=-5.0, seed=123, progress=False)
+    for given, shown in ((dict(spread=0.3), "spread=0.3"), (dict(seed=7), "seed=7"), (dict(seed=None), "seed=None")):
+        with pytest.raises(PamjaxInputError, match=f"{shown}: spread and seed draw the starts"):
+            pj.multistart(muscle, [exp], FREE, starts=rows, progress=False, **given)

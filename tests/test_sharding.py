@@ -35,12 +35,31 @@ SCRIPT = textwrap.dedent(
     values = sharding.put(np.array([0.2, 0.4, 0.6, 0.8]), mesh)
     assert len(values.sharding.device_set) == 2
     assert [s.data.shape for s in values.addressable_shards] == [(2,), (2,)]
+
+    # devices=[one device] runs there (it ran on the default device before): its inputs and outputs are put there
+    import pamjax._sweep.sweep as sweep_module
+    seen, program = [], sweep_module.chunk_program
+
+    def spied(platform):
+        def call(system, signal, y0, vals, *args, **kwargs):
+            out = program(platform)(system, signal, y0, vals, *args, **kwargs)
+            seen.append({d for v in (*vals.values(), out[0]) for d in v.devices()})
+            return out
+        return call
+
+    sweep_module.chunk_program = spied
+    second = jax.devices()[1]
+    there = pamjax.sweep(system, pamjax.Constant(0.5), ts, over, channels=("pressure", "position"), devices=[second])
+    sweep_module.chunk_program = program
+    assert seen == [{second}], seen
+    for c in ("pressure", "position"):
+        np.testing.assert_allclose(there[c], single[c], rtol=1e-12, atol=0)
     print("SHARDING OK")
     """
 )
 
 
-def test_sweep_sharded_over_two_cpu_devices_equals_single_device():
+def test_sweep_sharded_over_two_cpu_devices_equals_single_device_and_one_device_given_runs_there():
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu")
     proc = subprocess.run([sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr

@@ -148,6 +148,10 @@ def test_chunks_equal_one_call_and_report_progress(averaged):
     assert len(lines) == 3 and "chunk 3/3" in lines[-1]
     for c in whole.channels:
         np.testing.assert_array_equal(chunked[c], whole[c])
+    # a NumPy integer is a chunk size ("must be a positive integer, got 2" before); a bool is not
+    numpy_chunks = sweep(averaged, pamjax.Constant(0.5), TS, {"signal.value": duties}, reduce=FinalValue(),
+                         chunk_size=np.int64(2), progress=False)
+    np.testing.assert_array_equal(numpy_chunks["pressure"], chunked["pressure"])
 
 
 def test_default_chunk_size_per_platform():
@@ -212,6 +216,15 @@ def test_initial_state_path_and_factory(averaged):
         (dict(over={"signal.value": [0.5]}, reduce=FourierCoefficient(2)),
          r"FourierCoefficient needs the signal's frequency: the signal Constant has none .* "
          r"FourierCoefficient\(2, frequency=\.\.\.\)"),
+        (dict(over={"signal.value": [0.5]}, chunk_size=True), r"chunk_size must be a positive integer .*got True"),
+        # solver settings a method would ignore (a tolerance with RK4 changed nothing, unseen), an unknown option (a
+        # raw TypeError after the planning), a dt with "adaptive" (result.dt NaN)
+        (dict(over={"signal.value": [0.5]}, solve_options={"rtol": 1e-12}),
+         r"solve_options \['rtol'\] go to method='adaptive' only; method='auto' takes none"),
+        (dict(over={"signal.value": [0.5]}, method="rk4", solve_options={"bogus": 1}), r"method='rk4' takes none"),
+        (dict(over={"signal.value": [0.5]}, method="adaptive", solve_options={"rtoll": 1e-9}),
+         r"unknown solve_options \['rtoll'\]; valid: .*'rtol'"),
+        (dict(over={"signal.value": [0.5]}, method="adaptive", dt=0.5), r"dt is the step of the fixed-step methods"),
         # a window longer than the 1 s run: the mean of the whole run before, without a word
         (dict(over={"signal.value": [0.5]}, reduce=WindowMean(5.0)),
          r"WindowMean\(5.0\) needs a window of 5 s, longer than the run \(ts\[-1\] - ts\[0\] = 1 s\)"),
@@ -325,3 +338,42 @@ def test_a_window_of_no_length_is_refused():
         with pytest.raises(pamjax.PamjaxInputError, match=r"WindowMean.window must be a duration > 0"):
             WindowMean(bad)
     assert WindowMean(2).window == 2
+
+
+def test_bad_devices_are_named(averaged):
+    """A Mesh without its one "batch" axis, a string, a device listed twice: raw JAX errors before (one of them "this
+    is a bug in pamjax")."""
+    import jax
+    from jax.sharding import Mesh
+
+    device = jax.devices()[0]
+    cases = [(Mesh(np.array([device]), ("x",)), r"a Mesh must have exactly one axis, named 'batch'.*\('x',\)"),
+             (Mesh(np.array([device]).reshape(1, 1), ("batch", "model")), r"\('batch', 'model'\)"),
+             ("cpu", r"devices must be None .*a non-empty list of jax.Device .*got 'cpu'"),
+             ([], r"devices must be None"), ([0], r"devices must be None"),
+             ([device, device], r"devices lists a device more than once")]
+    for devices, match in cases:
+        with pytest.raises(pamjax.PamjaxInputError, match=match):
+            sweep(averaged, pamjax.Constant(0.5), TS, {"signal.value": [0.5]}, devices=devices, progress=False)
+
+
+def test_local_shards_saved_and_loaded_merge_into_the_whole_result(averaged, tmp_path):
+    """docs/distributed.md's gather="local" recipe saved points/position/status only, which merge_sweep_shards (it
+    takes SweepResults) could not join: `SweepResult.save` writes what it needs, `SweepResult.load` reads it."""
+    over = {"signal.value": np.array([[0.2, 0.4], [0.6, 0.8]])}
+    local = sweep(averaged, pamjax.Constant(0.5), TS, over, reduce=FinalValue(), gather="local", progress=False)
+    whole = sweep(averaged, pamjax.Constant(0.5), TS, over, reduce=FinalValue(), progress=False)
+    paths = []
+    for k, keep in enumerate((local.points % 2 == 0, local.points % 2 == 1)):  # two processes' shards, emulated
+        shard = pamjax.SweepResult(over={n: v[keep] for n, v in local.over.items()}, t=local.t,
+                                   channels=local.channels, outputs={c: v[keep] for c, v in local.outputs.items()},
+                                   status=local.status[keep], dt=local.dt, method=local.method,
+                                   points=local.points[keep], batch_shape=local.batch_shape)
+        paths.append(shard.save(tmp_path / f"map-{k}.npz"))
+    merged = pamjax.merge_sweep_shards(pamjax.SweepResult.load(p) for p in paths)
+    assert (merged.method, merged.dt, merged.channels) == (whole.method, whole.dt, whole.channels)
+    np.testing.assert_array_equal(merged.over["signal.value"], over["signal.value"])
+    np.testing.assert_array_equal(merged.status, whole.status)
+    for c in whole.channels:
+        np.testing.assert_array_equal(merged[c], whole[c])
+    assert pamjax.SweepResult.load(whole.save(tmp_path / "whole")).points is None  # a whole result, no ".npz" added

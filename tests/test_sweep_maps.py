@@ -81,7 +81,8 @@ def test_frequency_response_equals_sinusoid_fit_and_falls_with_frequency():
         last = ts > horizon - periods / f + 1e-9
         for channel in ("position", "pressure"):
             amp, phase = _sine_fit(ts[last], np.asarray(traj.channel(channel))[last], f)
-            # measured agreement: 5e-7 relative in gain, 3e-5 deg in phase (RK4 vs adaptive); bounds 1e-4 and 0.01 deg
+            # the default method (rodas5a) against a tight simulate: 5.5e-7 relative in gain, 4e-6 deg in phase at
+            # these frequencies (up to 8.8e-6 and 3.3e-4 deg at 2 Hz, docs/sweeps.md); bounds 1e-4 and 0.01 deg
             np.testing.assert_allclose(fr[channel]["gain"][k], amp / amplitude, rtol=1e-4)
             dphi = (fr[channel]["phase"][k] - phase + 180.0) % 360.0 - 180.0
             assert abs(dphi) < 0.01, (f, channel, fr[channel]["phase"][k], phase)
@@ -119,9 +120,16 @@ def test_frequency_response_of_a_pwm_valve_does_not_depend_on_the_sampling():
         (dict(samples_per_period=2), "samples_per_period"),
         (dict(frequencies=[[0.5, 1.0]]), "frequencies"),
         (dict(frequencies=[0.5, -1.0]), "frequencies"),
-        # an `over` sweeping the frequency itself below the grid's: a 2 s window on a 1 s run, not a wrong number
-        (dict(frequencies=[1.0], settle_periods=0, periods=1, over={"signal.frequency": [1.0, 0.5]}),
-         r"frequency_response's 1 periods at 0.5 Hz needs a window of 2 s, longer than the run"),
+        # an `over` sweeping the frequency itself replaced the map's axis: the gains at 2 and 3 Hz were reported as
+        # those of `frequencies` (or, below the grid's, a 2 s window on a 1 s run)
+        (dict(over={"signal.frequency": [2.0, 3.0]}),
+         r"frequency_response: over must not hold 'signal.frequency', the map's own axis: pass those values as "
+         r"frequencies"),
+        # "unknown channel 'p'" (a string read letter by letter), raw errors, a TypeError "multiple values" before
+        (dict(channels="position"), r"channels must be .* such as \('position',\), got 'position'"),
+        (dict(samples_per_period=float("nan")), r"samples_per_period must be finite"),
+        (dict(settle_periods=float("inf")), r"settle_periods must be finite"),
+        (dict(reduce=pamjax.FinalValue()), r"frequency_response takes no reduce"),
     ],
 )
 def test_frequency_response_bad_input_is_named(kwargs, match):
@@ -142,3 +150,13 @@ def test_a_sample_interval_longer_than_the_window_is_named():
                                                       r"horizon \(1.0 s\), got 2.0"):
         steady_state_map(presets.mas10_system(valve="averaged"), [0.5], horizon=1.0, window=0.5, sample_interval=2.0,
                          progress=False)
+
+
+def test_steady_state_map_refuses_its_own_axis_in_over_and_a_reduce():
+    # over["signal.value"] replaced the commands silently; reduce= was a raw TypeError "multiple values"
+    system = presets.mas10_system(valve="averaged")
+    with pytest.raises(pamjax.PamjaxInputError, match=r"steady_state_map: over must not hold 'signal.value', the "
+                                                      r"map's own axis: pass those values as commands"):
+        steady_state_map(system, [0.2, 0.5], horizon=1.0, window=0.5, over={"signal.value": [0.9, 0.9]})
+    with pytest.raises(pamjax.PamjaxInputError, match=r"steady_state_map takes no reduce"):
+        steady_state_map(system, [0.5], horizon=1.0, window=0.5, reduce=pamjax.FinalValue())

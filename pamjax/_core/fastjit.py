@@ -86,14 +86,27 @@ class SameCode:
     Numbers, strings, and tuples of them compare by value (1, 1.0 and True apart; -0.0 and 0.0 apart); functions by
     this same rule; what cannot change in place (a module, a class, a JAX array, an equinox module such as a system)
     by its identity. A function that reads anything else (a dict, a list, a NumPy array, an arbitrary object: it may
-    have changed since) is keyed by its own identity, as before, so that it is traced afresh."""
+    have changed since) is keyed by its own identity: another function object is traced afresh, but the SAME function
+    object reuses the program traced at its first call, whatever that dict holds now, as `jax.jit` itself does (a
+    `def` reading a global dict that changed between two sweeps gave the first sweep's results again). A factory
+    must be a pure function of its arguments; globals are read when it is traced (docs/sweeps.md).
+
+    A callable object (not a function, nor an equinox module: that stays a pytree) is keyed by its type and the
+    values of its attributes, by the same rule, so an attribute changed between two calls is another program (a
+    bound method by its function and its object's attributes; a `functools.partial` by its function and
+    arguments); an object whose attributes may change in place (a dict, a list, ...) or that has none to compare
+    (`__slots__`, a C type) is not shared with any other `SameCode`, so it is traced afresh at every call."""
 
     __slots__ = ("fn", "_key")
 
     def __init__(self, fn):
         self.fn = fn
-        key = _code_key(fn) if isinstance(fn, types.FunctionType) else None
-        self._key = _Identity(fn) if key is None else key
+        if isinstance(fn, types.FunctionType):
+            key = _code_key(fn)
+            self._key = _Identity(fn) if key is None else key
+        else:  # a callable object: by its state now; else this instance only (a changed attribute is traced afresh)
+            key = _value_key(fn)
+            self._key = _Identity(self) if key is None else key
 
     def __call__(self, *args, **kwargs):
         return self.fn(*args, **kwargs)
@@ -109,9 +122,10 @@ class SameCode:
 
 
 def keyed_by_code(fn):
-    """`SameCode(fn)` for a plain Python function (a `def` or a `lambda`); anything else as it is (a callable module,
-    e.g. a system builder with parameters, stays a pytree whose arrays are traced)."""
-    return SameCode(fn) if isinstance(fn, types.FunctionType) else fn
+    """`SameCode(fn)` for a plain Python function (a `def` or a `lambda`) or another callable object (by its type and
+    attributes' values, see `SameCode`); an equinox module as it is (a callable module, e.g. a system builder with
+    parameters, stays a pytree whose arrays are traced and whose static fields key the program by value)."""
+    return fn if isinstance(fn, eqx.Module) else SameCode(fn)
 
 
 class _Identity:
@@ -148,7 +162,37 @@ def _value_key(value, depth=0):
         return _code_key(value, depth + 1)
     if isinstance(value, (types.ModuleType, type, types.BuiltinFunctionType, jax.Array, eqx.Module)):
         return _Identity(value)  # cannot change in place: the same object reads the same
+    if depth < _MAX_DEPTH and callable(value):
+        return _object_key(value, depth + 1)
     return None
+
+
+_HEAP_TYPE = 1 << 9  # Py_TPFLAGS_HEAPTYPE: a class written in Python
+
+
+def _plain_python_class(cls):
+    """Whether an instance's whole state is its `__dict__`: every class of its MRO written in Python (no C state,
+    no `__slots__`)."""
+    return all(c is object or (c.__flags__ & _HEAP_TYPE and "__slots__" not in vars(c)) for c in cls.__mro__)
+
+
+def _object_key(obj, depth):
+    """A callable object's key: its type and its state by value (`_value_key`), or None where that may change in
+    place or cannot be read (no `__dict__`)."""
+    if isinstance(obj, types.MethodType):
+        owner = _value_key(obj.__self__, depth)  # a class's method: the class, by identity
+        parts = (_value_key(obj.__func__, depth), _object_key(obj.__self__, depth) if owner is None else owner)
+    elif isinstance(obj, functools.partial):
+        parts = (_value_key(obj.func, depth), _value_key(obj.args, depth),
+                 _value_key(tuple(sorted(obj.keywords.items())), depth))
+    elif _plain_python_class(type(obj)) and isinstance(getattr(obj, "__dict__", None), dict):
+        state = sorted(vars(obj).items())
+        parts = (tuple(name for name, _ in state), *(_value_key(v, depth) for _, v in state))
+    else:
+        return None
+    if any(p is None for p in parts):
+        return None
+    return ("object", _Identity(type(obj)), parts)
 
 
 def _global_names(code):

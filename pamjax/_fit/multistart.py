@@ -24,9 +24,11 @@ from .._core import jsonio
 from .._core.custom_types import RealArrayLike, RealScalarLike, RealVectorLike
 from .._core.errors import PamjaxInputError, PamjaxSolveError, check_count, require_float64
 from .experiment import Experiments
-from .fit import FitResult, fit
-from .parameters import Free, ParameterSpace
+from .fit import FitResult, check_fit_inputs, fit
+from .parameters import Free
 
+DEFAULT_SPREAD = 0.5  # the draws' standard deviation in the unconstrained space: a factor ~1.65 for a positive one
+DEFAULT_SEED = 0  # `multistart`'s seed: the same starts on every run unless another seed (or None) is given
 _NOT_PASSED = ("out", "checkpoint", "resume", "overwrite", "progress")  # per-task files/output: not for many fits
 
 
@@ -205,19 +207,33 @@ def _drawn_seed(seed, shared):
     return int(gather_bytes(str(entropy).encode())[0])  # every process calls it: process 0's value on all
 
 
+def _spread_values(space, spread):
+    """`spread` (None: the default) as one standard deviation per parameter, or `PamjaxInputError` naming it."""
+    n_params = space.size
+    given = DEFAULT_SPREAD if spread is None else spread
+    try:
+        values = np.asarray(given, dtype=float)
+    except (TypeError, ValueError):
+        values = None
+    if values is None or values.ndim > 1 or values.size not in (1, n_params) or \
+            not np.all(np.isfinite(values) & (values >= 0)):
+        raise PamjaxInputError(f"spread must be a number >= 0 or one per parameter ({n_params}: "
+                               f"{space.labels}), got {spread!r}")
+    return np.broadcast_to(values, (n_params,))
+
+
 def _start_values(space, starts, seed, spread, shared=False):
     """((n_starts, n_params) physical start values, the seed they were drawn with): the model's own, then draws
     around it in the fit's unconstrained space (θ = θ₀ + spread · N(0, 1)), or the rows given (seed None).
-    `shared`: the starts are spread over processes (a seed of None is then drawn once, on process 0)."""
+    `shared`: the starts are spread over processes (a seed of None is then drawn once, on process 0). `spread`
+    None: the default; a `spread`, or a `seed` other than the default 0, with rows given is refused (it would
+    be ignored)."""
     n_params = space.size
+    drawn_spread = _spread_values(space, spread)  # checked whatever the starts (-5 with rows given passed, unseen)
     if isinstance(starts, int | np.integer) and not isinstance(starts, bool):
         if starts < 1:
             raise PamjaxInputError(f"starts must be >= 1 (or an array of start values), got {starts}")
-        spread = np.broadcast_to(np.asarray(spread, dtype=float), (n_params,)) if np.ndim(spread) <= 1 and \
-            np.size(spread) in (1, n_params) else None
-        if spread is None or not np.all(np.isfinite(spread) & (spread >= 0)):
-            raise PamjaxInputError(f"spread must be a number >= 0 or one per parameter ({n_params}: "
-                                   f"{space.labels}), got {spread!r}")
+        spread = drawn_spread
         theta0 = np.asarray(space.initial_theta())
         seed = _drawn_seed(seed, shared)
         draws = np.random.default_rng(seed).standard_normal((int(starts) - 1, n_params))
@@ -227,6 +243,12 @@ def _start_values(space, starts, seed, spread, shared=False):
     if values is None or values.ndim != 2 or values.shape[1] != n_params or values.shape[0] < 1:
         raise PamjaxInputError(f"starts must be a count or an array (n_starts, {n_params}) of start values for "
                                f"{space.labels}, got {np.shape(starts) if values is not None else starts!r}")
+    ignored = [f"{name}={value!r}" for name, value, unset in (("spread", spread, spread is None),
+                                                               ("seed", seed, isinstance(seed, int | np.integer)
+                                                                and seed == DEFAULT_SEED)) if not unset]
+    if ignored:
+        raise PamjaxInputError(f"{' and '.join(ignored)}: spread and seed draw the starts, and the starts are given "
+                               f"as an array ({values.shape[0]} rows); drop them, or pass starts as a count")
     return values, None
 
 
@@ -236,8 +258,8 @@ def multistart(
     free: Free,
     *,
     starts: int | RealArrayLike = 8,
-    seed: int | None = 0,
-    spread: RealScalarLike | RealVectorLike = 0.5,
+    seed: int | None = DEFAULT_SEED,
+    spread: RealScalarLike | RealVectorLike | None = None,
     distributed: bool | None = None,
     progress: bool | Callable[[str], object] = True,
     **fit_options: Any,
@@ -261,8 +283,9 @@ def multistart(
     - `seed`: the NumPy seed of the drawn starts, an integer >= 0 (the same starts on every process and every run),
       or None for fresh ones each run (drawn once, on process 0, when the starts are spread over processes: the
       same starts on every process); the seed used is `result.seed`.
-    - `spread`: standard deviation of the draws in the unconstrained space (default 0.5: a factor ~1.65 for
-      positive parameters), a number or one per parameter.
+    - `spread`: standard deviation of the draws in the unconstrained space (default None: 0.5, a factor ~1.65 for
+      positive parameters), a number or one per parameter. With `starts` an array, neither `spread` nor a `seed`
+      (other than the default 0) may be given: nothing is drawn.
     - `distributed`: None (default: spread over the processes when there are several), or False (every process
       runs every start).
     - `progress`: True prints one line per finished start (from the process that ran it), a callable gets that
@@ -281,7 +304,8 @@ def multistart(
     _check_fit_options(fit_options)
     _check_seed(seed)
     spread_over_processes = _use_processes(distributed)
-    space = ParameterSpace(model, free)  # names bad parameters before anything runs
+    # the experiments and free parameters as `fit` checks them: one error here, not a failed fit per start
+    _, space = check_fit_inputs(model, experiments, free, fit_options.get("max_steps", 1))
     values, seed = _start_values(space, starts, seed, spread, spread_over_processes)
     tasks = [(f"start {i}", space.with_values(v), experiments) for i, v in enumerate(values)]
     outcomes = _run_fits(tasks, free, fit_options, spread_over_processes, progress, "multistart:")
@@ -330,9 +354,9 @@ def fit_fleet(
             raise PamjaxInputError(f"model has no start model for fleet members {missing}")
     names = list(fleet)
     tasks = [(str(n), model[n] if isinstance(model, dict) else model, fleet[n]) for n in names]
-    for name, member_model, _ in tasks:
+    for name, member_model, experiments in tasks:  # as `fit` checks them: refused here, not a failed member
         try:
-            ParameterSpace(member_model, free)
+            check_fit_inputs(member_model, experiments, free, fit_options.get("max_steps", 1))
         except PamjaxInputError as err:
             raise PamjaxInputError(f"fleet member {name!r}: {err}") from None
     outcomes = _run_fits(tasks, free, fit_options, _use_processes(distributed), progress, "fleet: member")

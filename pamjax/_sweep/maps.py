@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.custom_types import Float, RealArrayLike, RealScalarLike, RealVectorLike
-from .._core.errors import PamjaxInputError, check_positive
+from .._core.errors import PamjaxInputError, check_finite, check_nonnegative, check_positive
 from .._physics.gas import Air
 from .._physics.signals import Constant, Sine
 from .._physics.valves.averaged import cycle_averaged_flow
@@ -18,7 +18,7 @@ from .._physics.valves.base import AbstractSwitchingValve
 from .._systems.base import AbstractSystem
 from .reductions import AbstractReduction, WindowMean, check_window
 from .result import SweepResult
-from .sweep import sweep
+from .sweep import channel_names, sweep
 
 # Output samples per PWM period for the steady-state mean: the mean over 20 equally spaced phases is within 60 Pa
 # (0.01 % of the range) of the mean over 40 on the MAS-10 (duties 0.12-0.88, measured); sampling at 100 Hz, two
@@ -38,9 +38,12 @@ def steady_state_map(system: AbstractSystem, commands: RealVectorLike, *, horizo
     **Arguments:** `commands` 1-D; `horizon` [s] (default 5 s: on the MAS-10 with 9.6 kg the position still creeps
     by ~2 mm between 2 s and 5 s at duty 0.5); `window` [s] (default 1 s = 50 PWM periods); `sample_interval` [s]
     of the output times averaged (default: 1/20 of the PWM period for a switching valve, else 0.01 s); `over`:
-    further swept paths, broadcast against `commands[:, None]`-style shapes by the caller; `sweep_kwargs` go to
-    `sweep`. **Returns:** a `SweepResult` with `over["signal.value"]`.
+    further swept paths, broadcast against `commands[:, None]`-style shapes by the caller (not "signal.value": the
+    map's axis, `commands`); `sweep_kwargs` go to `sweep` (not `reduce`: the window's mean is the map).
+    **Returns:** a `SweepResult` with `over["signal.value"]`.
     """
+    check_map_arguments("steady_state_map", "signal.value", "commands", over, sweep_kwargs,
+                        "the mean over the last window")
     commands = np.asarray(commands, dtype=float)
     if commands.ndim != 1 or commands.size == 0:
         raise PamjaxInputError(f"commands must be a non-empty 1-D array, got shape {commands.shape}")
@@ -58,6 +61,20 @@ def steady_state_map(system: AbstractSystem, commands: RealVectorLike, *, horizo
     ts = np.linspace(0.0, horizon, int(round(horizon / sample_interval)) + 1)
     return sweep(system, Constant(0.5), ts, {"signal.value": commands, **(over or {})}, reduce=WindowMean(window),
                  **sweep_kwargs)
+
+
+def check_map_arguments(caller, axis, axis_name, over, sweep_kwargs, reduction):
+    """`PamjaxInputError` for what a map sets itself: its own axis in `over` (the map's values would be silently
+    replaced: a frequency_response over {"signal.frequency": [2, 3]} reported its gains at 2 and 3 Hz as those of
+    `frequencies`), and a `reduce` among the arguments passed to `sweep` (the map's reduction is its result)."""
+    if over is not None and not isinstance(over, dict):
+        raise PamjaxInputError(f"{caller}: over must be None or a dict {{path: values}}, got {over!r}")
+    if axis in (over or {}):
+        raise PamjaxInputError(f"{caller}: over must not hold {axis!r}, the map's own axis: pass those values as "
+                               f"{axis_name}")
+    if "reduce" in sweep_kwargs:
+        raise PamjaxInputError(f"{caller} takes no reduce: it reduces each run itself ({reduction}); call "
+                               "pamjax.sweep for another reduction")
 
 
 def flow_surface(valve: AbstractSwitchingValve, commands: RealVectorLike, pressures: RealVectorLike, air: Air,
@@ -116,7 +133,7 @@ class _FourierIntegral(AbstractReduction):
 
     periods: int = eqx.field(static=True)
 
-    def check(self, ts, lanes):  # an `over` that sweeps "signal.frequency" itself may leave the window too short
+    def check(self, ts, lanes):  # a guard: frequency_response sizes the run for its lowest frequency
         f = np.concatenate([np.ravel(np.asarray(signal.cycle_frequency(), dtype=float)) for _, signal in lanes()])
         check_window(self.periods / f.min(), ts, f"frequency_response's {self.periods} periods at {f.min():.6g} Hz")
 
@@ -143,21 +160,29 @@ def frequency_response(system: AbstractSystem, frequencies: RealVectorLike, *, o
     `samples_per_period` samples of the highest). Defaults: mid-range duty 0.5 ± 0.2, inside the valve's 10-90 %
     usable band; 3 settling periods (on the MAS-10 with the averaged valve the harmonic at 0.5 Hz is the same to
     8 digits after 3 and 8 periods, measured). `over`: further swept paths (as `steady_state_map`'s), broadcast
-    against the frequencies, which are the last axis (e.g. values of shape (k, 1) map k models at every frequency).
+    against the frequencies, which are the last axis (e.g. values of shape (k, 1) map k models at every frequency);
+    not "signal.frequency" (the map's axis: `frequencies`). `sweep_kwargs` go to `sweep`, but not `reduce`.
     **Returns:** dict with `frequency`, and per channel `gain` (|Y|/|U|, channel units per unit command) and `phase`
     [deg] (arg Y − arg U, unwrapped along increasing frequency), U = −i·amplitude the commanded sine's coefficient
     (exact, whatever the valve: a PWM valve's latched duty is not the reference), plus the `SweepResult`.
     """
+    check_map_arguments("frequency_response", "signal.frequency", "frequencies", over, sweep_kwargs,
+                        "the Fourier integral over the last periods")
+    names = channel_names(channels)
+    if names is None:
+        raise PamjaxInputError('channels must be a non-empty sequence of channel names such as ("position",), '
+                               "got None")
     frequencies = np.asarray(frequencies, dtype=float)
     if frequencies.ndim != 1 or frequencies.size == 0:
         raise PamjaxInputError(f"frequencies must be a non-empty 1-D array [Hz], got shape {frequencies.shape}")
     check_positive(frequencies, "frequencies")
+    check_finite(amplitude, "amplitude")
     if amplitude == 0:
         raise PamjaxInputError("amplitude must be non-zero (the gain divides by the command's amplitude)")
     if int(periods) != periods or periods < 1:
         raise PamjaxInputError(f"periods must be a positive integer, got {periods}")
-    if settle_periods < 0:
-        raise PamjaxInputError(f"settle_periods must be >= 0, got {settle_periods}")
+    check_nonnegative(settle_periods, "settle_periods")  # NaN and inf too (a horizon of inf, or NaN samples)
+    check_finite(samples_per_period, "samples_per_period")
     if samples_per_period < 4:
         raise PamjaxInputError(f"samples_per_period must be >= 4 (twice the Nyquist rate of the highest frequency), "
                                f"got {samples_per_period}")
@@ -165,7 +190,7 @@ def frequency_response(system: AbstractSystem, frequencies: RealVectorLike, *, o
     n = int(np.ceil(horizon * frequencies.max() * samples_per_period))
     ts = np.linspace(0.0, horizon, n + 1)
     result = sweep(system, Sine(offset, amplitude, 1.0), ts, {"signal.frequency": frequencies, **(over or {})},
-                   reduce=_FourierIntegral(int(periods)), channels=(*channels, "command"), **sweep_kwargs)
+                   reduce=_FourierIntegral(int(periods)), channels=(*names, "command"), **sweep_kwargs)
     # the reference is the commanded sine itself, U = −i A e^{iφ} (u = offset + Re(U e^{i2πft})), not the harmonic
     # of the "command" channel: a switching valve's channel is the duty latched once per PWM period, whose sampled
     # steps moved the phase with `samples_per_period` (−65.7° at 40, −62.3° at 64 at 5 Hz on the MAS-10, against a
@@ -175,7 +200,7 @@ def frequency_response(system: AbstractSystem, frequencies: RealVectorLike, *, o
     u = -1j * lane_amplitude * np.exp(1j * lane_phase)
     order = np.argsort(frequencies)
     out = dict(frequency=frequencies, result=result)
-    for c in channels:
+    for c in names:
         ratio = result[c] / u
         phase = np.empty(ratio.shape)
         phase[..., order] = np.degrees(np.unwrap(np.angle(ratio[..., order]), axis=-1))

@@ -1,5 +1,7 @@
 """What a sweep returns (`SweepResult`, its status codes), and the whole result joined from every process's shard."""
 
+import os
+import pathlib
 from collections.abc import Iterable
 
 import equinox as eqx
@@ -49,6 +51,32 @@ class SweepResult(eqx.Module):
         if channel not in self.outputs:
             raise PamjaxInputError(f"unknown channel {channel!r}; this sweep has {list(self.outputs)}")
         return self.outputs[channel]
+
+    def save(self, path: str | os.PathLike) -> pathlib.Path:
+        """Write the whole result (a shard of `gather="local"` too: what `merge_sweep_shards` needs) to one NPZ
+        file, values exact; `SweepResult.load` reads it back."""
+        arrays = {f"over:{k}": np.asarray(v) for k, v in self.over.items()}
+        arrays |= {f"out:{c}": np.asarray(self.outputs[c]) for c in self.channels}
+        if self.points is not None:
+            arrays["points"] = np.asarray(self.points)
+        if self.batch_shape is not None:
+            arrays["batch_shape"] = np.asarray(self.batch_shape, dtype=np.int64)
+        path = pathlib.Path(path)
+        with path.open("wb") as f:  # a file object: np.savez would append ".npz" to a name without it
+            np.savez(f, t=np.asarray(self.t), status=np.asarray(self.status), dt=np.float64(self.dt),
+                     method=np.str_(self.method), channels=np.asarray(self.channels, dtype=str), **arrays)
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "SweepResult":
+        """The `SweepResult` that `save` wrote to `path`."""
+        with np.load(path, allow_pickle=False) as f:
+            data = {k: f[k] for k in f.files}
+        channels = tuple(str(c) for c in data["channels"])
+        return cls(over={k[len("over:"):]: v for k, v in data.items() if k.startswith("over:")}, t=data["t"],
+                   channels=channels, outputs={c: data[f"out:{c}"] for c in channels}, status=data["status"],
+                   dt=float(data["dt"]), method=str(data["method"]), points=data.get("points"),
+                   batch_shape=tuple(int(n) for n in data["batch_shape"]) if "batch_shape" in data else None)
 
 
 def in_point_order(points, out, status, batch_size):

@@ -8,16 +8,49 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from .._core.errors import PamjaxInputError
+
 _LANE_MULTIPLE = 8  # pad batches to a multiple of this many lanes (bitwise batch-independence, see sweep)
 
 
+def check_devices(devices):
+    """`sweep`'s `devices` as given (None, a `Mesh`, or a list of distinct `jax.Device`s), or `PamjaxInputError`
+    naming it: a Mesh without its one "batch" axis, a string, a device listed twice (raw JAX errors, one of them
+    "this is a bug in pamjax") are refused before anything runs."""
+    if devices is None:
+        return None
+    if isinstance(devices, Mesh):
+        if tuple(devices.axis_names) != ("batch",):
+            raise PamjaxInputError(f"devices: a Mesh must have exactly one axis, named 'batch' (the sweep's points "
+                                   f"are split along it), got axis names {tuple(devices.axis_names)} of shape "
+                                   f"{dict(devices.shape)}; write Mesh(np.array(jax.devices()), ('batch',))")
+        return devices
+    listed = list(devices) if not isinstance(devices, str | bytes) and np.iterable(devices) else None
+    if not listed or not all(isinstance(d, jax.Device) for d in listed):
+        raise PamjaxInputError(f"devices must be None (all of jax.devices()), a non-empty list of jax.Device "
+                               f"(e.g. jax.devices('cpu')) or a Mesh with a 'batch' axis, got {devices!r}")
+    if len(set(listed)) != len(listed):
+        raise PamjaxInputError(f"devices lists a device more than once: {listed}; each device runs its own lanes")
+    return listed
+
+
 def mesh_of(devices):
+    """The `Mesh` of the batch axis over `devices` (checked by `check_devices`), or None for a single device (see
+    `device_of`)."""
     if isinstance(devices, Mesh):
         return devices
     devices = jax.devices() if devices is None else list(devices)
     if len(devices) < 2:
         return None
     return Mesh(np.asarray(devices), ("batch",))
+
+
+def device_of(devices):
+    """The one device `devices` lists (the sweep's inputs are put there, so it runs there), or None: the default
+    device, or a mesh."""
+    if devices is None or isinstance(devices, Mesh) or len(devices) != 1:
+        return None
+    return list(devices)[0]
 
 
 _CPU_CHUNK = 8192  # points per compiled call on CPU: wider batches run no faster there (measured, benchmarks/sweep.py)
@@ -110,10 +143,11 @@ def gather_processes(points, out, status):
     return tuple(np.concatenate(p) for p in zip(*parts))
 
 
-def put(x, mesh):
+def put(x, mesh, device=None):
     """A host array as a global array sharded over the mesh's batch axis (works single- and multi-host: every
-    process holds the full host array and contributes its devices' slices)."""
+    process holds the full host array and contributes its devices' slices); without a mesh, on `device` (None: the
+    default device). The compiled call runs where its inputs are committed."""
     if mesh is None:
-        return jnp.asarray(x)
+        return jnp.asarray(x) if device is None else jax.device_put(x, device)
     sharding = NamedSharding(mesh, PartitionSpec("batch"))
     return jax.make_array_from_callback(x.shape, sharding, lambda index: x[index])

@@ -11,6 +11,7 @@ chunk of lanes with the scheme and step (`lanes`), the reductions (`reductions`)
 processes (`sharding`), the result (`result`); this module is the front end.
 """
 
+import inspect
 import time
 from collections.abc import Callable, Sequence
 from typing import Any, Literal
@@ -22,16 +23,17 @@ import numpy as np
 
 from .._core.arrays import floats_as_arrays
 from .._core.custom_types import RealArrayLike, RealScalarLike, TimesLike
-from .._core.errors import PamjaxInputError, check_time_grid, require_float64
+from .._core.errors import PamjaxInputError, check_count, check_time_grid, require_float64
 from .._core.fastjit import keyed_by_code
 from .._physics.signals import AbstractSignal
 from .._solve import fixed_step as _fixed_step
+from .._solve.simulate import solve
 from .._systems.base import AbstractSystem
 from .lanes import channel_shapes, chunk_program, hybrid_method_and_step, jacobians, method_and_step
 from .plan import host_lanes, make_plan, structure, validate_values
 from .reductions import AbstractReduction
 from .result import SUCCESS, SweepResult, in_point_order
-from .sharding import Layout, gather_processes, local_part, mesh_of, put
+from .sharding import Layout, check_devices, device_of, gather_processes, local_part, mesh_of, put
 
 
 def sweep(
@@ -77,25 +79,26 @@ def sweep(
     - `reduce`: None (whole trajectories at `ts`), `FinalValue()`, `WindowMean(window)` or
       `FourierCoefficient(periods, frequency)`.
     - `channels`: output channels to keep (default: all the system's outputs and "command").
-    - `method`: "auto" (default: "rodas5a" for a continuous valve, "rk4" for a switching one), "rodas5a" (RODAS5,
-      an L-stable Rosenbrock method of order 5, under per-lane error control at rtol = atol = 1e-5 on the scaled
-      state, every output time landed on exactly: accurate along the whole trajectory and fastest for a stiff
-      plant, as a sticking payload makes it; on the 1,024-duty MAS-10 map within 5e-5 Pa and 4e-10 m of a tight
-      solve, `dt` its first step), "rk4" (fixed steps, accurate along the whole trajectory; its step is bounded by
-      the plant's stiffest eigenvalue, which for paper 000's friction is also the time scale of the stick-slip
-      transitions; the PWM valve's smoothed edges bound any scheme's step, and fixed steps keep the lanes in
-      lockstep), "ros2" (L-stable Rosenbrock at a fixed step 3x larger: for steady-state maps, where only settled
-      values matter; it smears the fast transients, by tens of um on the MAS-10), "ros2a" (ROS2 under per-lane
-      error control, rtol = atol = 1e-3: a quick steady-state map, within about 1 Pa and 10 um of RK4 on the MAS-10
-      map, tens of um with coarse output grids), or "adaptive" (vmapped diffrax Tsit5, a slow reference;
-      `solve_options` go to it). A hybrid system (stick-slip friction, `KarnoppFriction`) is integrated as
-      `simulate` integrates it, each lane on the fixed RK4 grid with the stick/slip events located inside the step
-      (method "grid" for a continuous valve, "pwm" on the PWM-synchronous grid for a switching one): "auto" or
-      "rk4" (`dt` the grid step) only; the schemes that do not see the events are refused. So is a valve with
-      exact edges (`OnOffValve(mode="exact")`): on the PWM-synchronous grid, its edges nodes of the grid, as
-      `simulate(..., stepping="pwm")` (a fixed RK4 step straddling its jumps was 90-180 Pa off after 2 s).
-    - `dt`: the fixed step [s] (the first step for "rodas5a"/"ros2a"). Default: RK4 at 2.5 / (largest |eigenvalue|
-      of the Jacobian at the initial states) (its stability limit with a 10 % margin), "rodas5a"'s first step 1 ms,
+    - `method`: "auto" (default: "rodas5a" for a continuous valve, "rk4" for a switching one), "rodas5a" (RODAS5, an
+      L-stable Rosenbrock method of order 5, under per-lane error control at rtol = atol = 1e-5 on the scaled state,
+      every output time landed on exactly: accurate along the whole trajectory and fastest for a stiff plant, as a
+      sticking payload makes it; on the 1,024-duty MAS-10 map within 5e-5 Pa and 4e-10 m of a tight solve, `dt` its
+      first step), "rk4" (fixed steps, accurate along the whole trajectory; its step is bounded by the plant's stiffest
+      eigenvalue, which for paper 000's friction is also the time scale of the stick-slip transitions; the PWM valve's
+      smoothed edges bound any scheme's step, and fixed steps keep the lanes in lockstep), "ros2" (L-stable Rosenbrock
+      at a fixed step 3x larger: for steady-state maps, where only settled values matter; it smears the fast transients,
+      by tens of um on the MAS-10), "ros2a" (ROS2 under per-lane error control, rtol = atol = 1e-3: a quick steady-state
+      map, within about 1 Pa and 10 um of RK4 on the MAS-10 map, tens of um with coarse output grids), or "adaptive"
+      (vmapped diffrax Tsit5, a slow reference; `solve_options` go to it, and to no other method). A hybrid system
+      (stick-slip friction, `KarnoppFriction`) is integrated as `simulate` integrates it, each lane on the fixed RK4
+      grid with the stick/slip events located inside the step (method "grid" for a continuous valve, "pwm" on the
+      PWM-synchronous grid for a switching one): "auto" or "rk4" (`dt` the grid step) only; the schemes that do not see
+      the events are refused. So is a valve with exact edges (`OnOffValve(mode="exact")`): on the PWM-synchronous grid,
+      its edges nodes of the grid, as `simulate(..., stepping="pwm")` (a fixed RK4 step straddling its jumps was 90-180
+      Pa off after 2 s).
+    - `dt`: the fixed step [s] (the first step for "rodas5a"/"ros2a"; not with "adaptive": its first step is
+      `solve_options={"dt0": ...}`). Default: RK4 at 2.5 / (largest |eigenvalue| of the Jacobian at the initial
+      states) (its stability limit with a 10 % margin), "rodas5a"'s first step 1 ms,
       the others 5 ms; all capped at 2 PWM edge widths for a switching valve and at 1/100 of the signal's shortest
       period; and at the spacing of `ts` (the result's `dt` is the longest step taken). Check a fixed-step result by
       halving the result's `dt`.
@@ -107,7 +110,10 @@ def sweep(
     - `devices`: None (all of `jax.devices()`: the batch axis is sharded over them with a `Mesh` and
       `NamedSharding`, each device running its own lanes under `shard_map`; after
       `pamjax.runtime.initialize_distributed()` (or `jax.distributed.initialize()`) the devices of every process, each
-      process computing its devices' points), a list of devices, or a `Mesh` with a "batch" axis.
+      process computing its devices' points), a list of distinct devices (one device: the sweep runs there), or a
+      1-D `Mesh` whose axis is named "batch".
+    - `solve_options`: with `method="adaptive"` only, keyword arguments of its solve (`rtol`, `atol`, `max_steps`,
+      `dt0`, `solver`, ...: `simulate`'s).
     - `progress`: True (print one line per chunk when there are several; process 0 only), False, or a callable
       taking a string.
     - `gather`: "all" (default: every process returns the whole result, gathered once at the end) or "local" (each
@@ -119,12 +125,14 @@ def sweep(
 
     **Raises:** `PamjaxInputError` naming the argument (unknown path, values that break a component's constraint,
     a start pressure that is not ABSOLUTE [Pa] > 0, a command outside the valve's range, bad `ts`/`dt`/`chunk_size`/
-    `channels`, a reduction's window longer than the run or a frequency that is not > 0), before any solve.
+    `channels`/`devices`, `solve_options` with a method that takes none or an option `simulate` does not have, a
+    reduction's window longer than the run or a frequency that is not > 0), before any solve.
     """
     require_float64("pamjax.sweep")
     system = floats_as_arrays(system)  # a value set with eqx.tree_at: an argument, not a constant of the program
     _check_arguments(system, signal, ts, over, method, dt, chunk_size, gather, reduce)
-    channels = _channel_names(channels)
+    devices, chunk_size = _check_run_options(method, dt, solve_options, devices, chunk_size)
+    channels = channel_names(channels)
     if not isinstance(signal, AbstractSignal):  # a factory written inline: the program of an equal one is reused
         signal = keyed_by_code(signal)
     ts_np = np.asarray(ts, dtype=float)
@@ -165,10 +173,10 @@ def sweep(
         dt = float(np.max(steps))
     config = (method, tuple(int(c) for c in counts), channels, reduce, tuple(sorted((solve_options or {}).items())),
               grid)
-    mesh = mesh_of(devices)
+    mesh, device = mesh_of(devices), device_of(devices)
     layout = Layout.plan(batch_size, chunk_size, mesh, devices,
                          len(channels) * (1 if reduce is not None else ts_np.size) * 2)  # x2: complex
-    points, out, status = _run_calls(system, signal, y0, flat, ts_np, plan, config, mesh, layout, progress)
+    points, out, status = _run_calls(system, signal, y0, flat, ts_np, plan, config, (mesh, device), layout, progress)
     if gather == "local":
         return SweepResult(over={k: v[points] for k, v in flat.items()}, t=ts_np, channels=channels,
                            outputs={ch: out[..., i] for i, ch in enumerate(channels)},  # (n,) or (n, T) per channel
@@ -200,8 +208,8 @@ def _check_arguments(system, signal, ts, over, method, dt, chunk_size, gather, r
             f"method must be 'auto', 'rodas5a', 'rk4', 'ros2', 'ros2a' or 'adaptive', got {method!r}")
     if dt is not None and not (np.isfinite(dt) and dt > 0):
         raise PamjaxInputError(f"dt must be a step > 0 [s], got {dt}")
-    if chunk_size is not None and not (isinstance(chunk_size, int) and chunk_size > 0):
-        raise PamjaxInputError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    if chunk_size is not None:
+        check_count(chunk_size, "chunk_size", "a positive integer (points per device per call; not a bool)")
     if gather not in ("all", "local"):
         raise PamjaxInputError(f"gather must be 'all' or 'local', got {gather!r}")
     if reduce is not None and not isinstance(reduce, AbstractReduction):
@@ -209,7 +217,31 @@ def _check_arguments(system, signal, ts, over, method, dt, chunk_size, gather, r
                                f"got {reduce!r}")
 
 
-def _channel_names(channels):
+# What `solve_options` may hold: `solve`'s keywords, less those each adaptive lane sets itself
+_ADAPTIVE_OPTIONS = tuple(sorted(set(inspect.signature(solve).parameters) - {"system", "signal", "ts", "y0", "t0",
+                                                                              "throw"}))
+
+
+def _check_run_options(method, dt, solve_options, devices, chunk_size):
+    """(`devices` checked by `check_devices`, `chunk_size` as an int or None), or `PamjaxInputError` for solver
+    settings the chosen method would ignore or reject after the planning: options with a fixed-step method (every
+    method but "adaptive": a tolerance there changed nothing, unseen), an unknown option's name (a raw TypeError from
+    inside the solve), a `dt` with "adaptive" (its step is chosen by diffrax; the result's dt was NaN)."""
+    if solve_options is not None and not isinstance(solve_options, dict):
+        raise PamjaxInputError(f"solve_options must be None or a dict of simulate's options, got {solve_options!r}")
+    if solve_options and method != "adaptive":
+        raise PamjaxInputError(f"solve_options {sorted(solve_options)} go to method='adaptive' only; method={method!r} "
+                               "takes none (its step is dt, its tolerances fixed: see sweep's method)")
+    unknown = sorted(set(solve_options or {}) - set(_ADAPTIVE_OPTIONS))
+    if unknown:
+        raise PamjaxInputError(f"unknown solve_options {unknown}; valid: {list(_ADAPTIVE_OPTIONS)}")
+    if method == "adaptive" and dt is not None:
+        raise PamjaxInputError("dt is the step of the fixed-step methods; method='adaptive' chooses its own steps: "
+                               "drop dt (its first step is solve_options={'dt0': ...})")
+    return check_devices(devices), None if chunk_size is None else int(chunk_size)  # a NumPy integer too
+
+
+def channel_names(channels):
     """`channels` as a tuple of names (None: the default), or `PamjaxInputError` naming it: a bare string would be
     read letter by letter ("unknown channel 'p'"), an empty one would stack no outputs."""
     if channels is None:
@@ -222,9 +254,11 @@ def _channel_names(channels):
     return names
 
 
-def _run_calls(system, signal, y0, flat, ts_np, plan, config, mesh, layout, progress):
+def _run_calls(system, signal, y0, flat, ts_np, plan, config, placement, layout, progress):
     """Every compiled call of the layout; (points, outputs, status) of this process's devices, in call order. One
-    progress line per call when there are several (process 0 only)."""
+    progress line per call when there are several (process 0 only). `placement`: (the mesh, or None; without one,
+    the one device given, or None for the default)."""
+    mesh, device = placement
     say = (print if progress is True else progress) if progress else None
     if say is not None and jax.process_index() != 0:
         say = None  # one report per sweep, from process 0
@@ -233,7 +267,7 @@ def _run_calls(system, signal, y0, flat, ts_np, plan, config, mesh, layout, prog
     for c in range(layout.calls):
         start = time.perf_counter()
         index, valid = layout.lanes_of_call(c)
-        vals = {k: put(v[index], mesh) for k, v in flat.items()}
+        vals = {k: put(v[index], mesh, device) for k, v in flat.items()}
         platform = next(iter(next(iter(vals.values())).devices())).platform  # where the lanes were put
         out, status = chunk_program(platform)(system, signal, y0, vals, ts_j, plan, config, mesh)
         pieces.append(local_part(out, status, index, valid))
