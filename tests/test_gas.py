@@ -173,3 +173,17 @@ def test_a_sonic_conductance_left_in_m3_per_s_bar_is_refused():
         pamjax.TabulatedISO6358Restriction(pressure, conductance, ratio)
     pamjax.TabulatedISO6358Restriction(pressure, conductance / 1e5, ratio)  # converted: accepted
     pamjax.ISO6358Restriction(4e-6, 0.5)  # a DN50 pipe's order: accepted
+
+
+@pytest.mark.parametrize("make, match", [
+    (lambda: pamjax.Air(gas_constant=0.287), r"Air\.gas_constant = 0\.287 J/\(kg K\).*looks like kJ/\(kg K\)"),
+    (lambda: pamjax.Air(gas_constant=8.314), r"Air\.gas_constant = 8\.314 .*molar gas constant"),
+    (lambda: pamjax.EllipseRestriction(36.0, 0.28), r"discharge_coefficient must lie in \(0, 1\].*got 36; .*percent"),
+])
+def test_a_gas_constant_or_discharge_coefficient_in_other_units_is_refused(make, match):
+    # Air(gas_constant=0.287) (kJ/(kg K)) filled a tank to 126 kPa instead of 429 kPa, and a C_v of 36 (percent) ran
+    # 100 times the flow, both silently. A gas's R lies in 20-5000 J/(kg K); C_v in (0, 1].
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        make()
+    pamjax.Air(gas_constant=4124.0)  # hydrogen
+    pamjax.EllipseRestriction(1.0, 0.28)  # an ideal orifice

@@ -62,3 +62,20 @@ def test_a_held_sample_at_its_period_start_counts_whatever_the_rounding():
     for k, expected in enumerate((0.2, 0.5, 0.8)):
         start = 1234.5 + 0.02 * k
         assert float(signal(start + 0.005)) == expected and float(signal(start)) == expected
+
+
+def test_a_square_wave_edge_too_wide_for_its_period_is_refused():
+    # 1 ms edges at 100 Hz (10 % of the period) peaked at 2.55 of 3 and jumped at each period start, silently. As
+    # OnOffValve's: an edge is at most 5 % of the period; paper 001's 1.5 Hz wave and 1 ms at 50 Hz (5 %) pass.
+    for frequency, width in [(100.0, 1e-3), (10.0, 1e-2)]:
+        with pytest.raises(pamjax.PamjaxInputError, match=r"SquareWave\.edge_width \(.* s\) must not exceed 5% of the "
+                                                          r"period 1/SquareWave\.frequency"):
+            pamjax.SquareWave(0.0, 3.0, frequency, edge_width=width)
+    pamjax.SquareWave(0.0, 3.0, 1.5)
+    pamjax.SquareWave(0.0, 3.0, 50.0, edge_width=1e-3)
+
+
+def test_a_sampled_period_that_is_not_finite_is_refused():
+    # period=inf was accepted and read the last sample at every time (the latch time (0 + 1e-9) · inf is inf)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"Sampled\.period must be a finite number > 0"):
+        pamjax.Sampled([0.0, 0.1, 0.2], [0.2, 0.5, 0.9], period=float("inf"))

@@ -239,3 +239,27 @@ def test_a_start_position_in_mm_or_outside_the_stroke_is_named_before_the_solve(
     y0 = system.initial_state(pressure=3e5, position=position)
     with pytest.raises(pamjax.PamjaxInputError, match=match):
         pamjax.simulate(system, signal, np.linspace(0.0, 0.1, 3), y0=y0)
+
+
+def test_unchecked_solve_with_its_defaults_gives_simulates_answer():
+    # pamjax.unchecked.solve clipped its steps at the smoothed PWM edges only when num_periods was passed (simulate
+    # always does: up to 1.5 kPa apart at the default tolerances), and never built the exact valve's switching
+    # schedule that simulate builds. Now: the same answer with the defaults; an exact valve traced under jit (no
+    # concrete edge times) is refused by name.
+    ts = jnp.linspace(0.0, 0.1, 6)
+    signal = pamjax.Constant(0.25)
+    for mode in ("smooth", "exact"):
+        system = presets.mas10_tank_system(presets.mas10_valve(mode))
+        reference = pamjax.simulate(system, signal, ts).pressure
+        np.testing.assert_allclose(pamjax.unchecked.solve(system, signal, ts, None, 0.0).pressure, reference,
+                                   rtol=0, atol=1e-6)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"OnOffValve\(mode='exact'\) needs a concrete signal"):
+        eqx.filter_jit(lambda s: pamjax.unchecked.solve(s, signal, ts, None, 0.0))(system)
+
+
+@pytest.mark.parametrize("value", [[0.5], [0.2, 0.5]])
+def test_a_constant_holding_an_array_is_refused_by_name(value):
+    # Constant([0.5]) from a data slice constructed (a sweep builds batched Constants on purpose) and simulate then
+    # failed with diffrax's raw broadcasting ValueError: a simulated command is one number, several are a sweep.
+    with pytest.raises(pamjax.PamjaxInputError, match=r"Constant holds commands of shape \(.*\): simulate takes one"):
+        pamjax.simulate(presets.mas10_tank_system(), pamjax.Constant(value), np.linspace(0.0, 0.2, 3))

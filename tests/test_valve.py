@@ -210,10 +210,13 @@ def test_fit_averaged_valve_reports_quality():
     (dict(commands=np.array([])), r"commands must be a 1-D, non-empty grid, got shape \(0,\)"),
     (dict(commands=np.ones((3, 3)) * 0.5), r"commands must be a 1-D, non-empty grid, got shape \(3, 3\)"),
     (dict(commands=np.array([0.5, np.inf])), r"commands must be finite"),
+    (dict(commands=[0.3, 0.6]), r"commands must hold at least three distinct duties: eq. 13 is quadratic"),
+    (dict(commands=[0.5, 0.5, 0.5]), r"commands must hold at least three distinct duties"),
 ])
 def test_fit_averaged_valve_refuses_a_grid_in_other_units_by_name(grid, match):
-    # bar, gauge pressures, percent or ±1 commands were fitted silently; NaN, one pressure at atmosphere, an empty or
-    # a 2-D grid gave unnamed or raw errors. Refused before anything is computed.
+    # bar, gauge pressures, percent or ±1 commands were fitted silently, and fewer than three distinct duties
+    # (eq. 13 underdetermined in u); NaN, one pressure at atmosphere, an empty or a 2-D grid gave unnamed or raw
+    # errors. Refused before anything is computed.
     with pytest.raises(pamjax.PamjaxInputError, match=match):
         pamjax.fit_averaged_valve(EXACT, AIR, **grid)
 
@@ -233,3 +236,17 @@ def test_an_edge_width_not_well_below_the_pwm_period_is_refused(width, frequency
         pamjax.simulate(changed, pamjax.Constant(0.25), np.linspace(0.0, 0.1, 3))
     presets.mas10_valve("smooth", edge_width=4e-4)  # 2 % of 20 ms (the convergence test's widest): accepted
     presets.mas10_valve("smooth", pwm_frequency=249.0)  # the default 1e-4 s at the fastest PWM the delays allow
+
+
+def test_a_zero_length_pulse_switches_nothing_with_zero_delays():
+    # switch_on_delay = 0 (accepted) opened the valve at duty 0 in every period: the gate u T - t_on >= 0 held for a
+    # zero-length pulse (exact: open, smooth: half open, a tank at duty 0 charged to supply); with both delays 0 the
+    # smooth opening at duty 1 dipped to 0.75 at each period end. Duty 0 must never open it, duty 1 never close it.
+    ts = np.linspace(0.0, 2 * T, 401)
+    for mode in ("smooth", "exact"):
+        valve = presets.mas10_valve(mode, switch_on_delay=0.0, switch_off_delay=0.0)
+        assert not bool(valve.switching_gates(0.0)[0]) and not bool(valve.switching_gates(1.0)[1])
+        np.testing.assert_array_equal(np.asarray(_openings(valve, ts, np.asarray(0.0))), 0.0)
+        np.testing.assert_array_equal(np.asarray(_openings(valve, ts, np.asarray(1.0))), 1.0)
+    edges, _ = presets.mas10_valve("exact", switch_on_delay=0.0).edge_schedule(pamjax.Constant(0.0), 0.0, 0.1)
+    assert edges.size == 0

@@ -12,9 +12,10 @@ import abc
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._core.custom_types import RealScalar
-from .._core.errors import check_in_open_interval, check_positive
+from .._core.errors import PamjaxInputError, check_in_open_interval, check_positive, concrete_values
 from .._core.fitting import parameter, positive, ratio
 from .._core.units import ATMOSPHERE, ISO8778_DENSITY, ISO8778_TEMPERATURE, check_sonic_conductance
 from .._papers import paper000
@@ -22,6 +23,30 @@ from .smooth import safe_divide, safe_sqrt
 
 # ISO 6358-1:2013, clause 3: flow is treated as laminar (linear in Δp) for p_down/p_up above 0.999.
 DEFAULT_LAMINAR_RATIO = 0.999
+# J/(kg K): a gas's R = 8.314 J/(mol K) / M spans 4124 (hydrogen, M = 2 g/mol) to 57 (sulphur hexafluoride, 146 g/mol);
+# air's is 287.05. Below 20 it is no gas's: 0.287 is air's in kJ/(kg K) (a tank then fills to 126 kPa, not 429 kPa).
+GAS_CONSTANT_RANGE = (20.0, 5000.0)
+
+
+def _first_outside(x, lo, hi):
+    """The first concrete, finite, positive value of `x` outside [lo, hi] (as a float), or None (traced values are
+    not checked: a fit may move them; the sign and finiteness are `check_positive`'s)."""
+    v = concrete_values(x)
+    if v is None:
+        return None
+    bad = v[np.isfinite(v) & (v > 0) & ((v < lo) | (v > hi))]
+    return float(bad.flat[0]) if bad.size else None
+
+
+def check_gas_constant(x, name):
+    """Refuse a specific gas constant no gas has (`GAS_CONSTANT_RANGE`, J/(kg K)): kJ/(kg K) or the molar 8.314."""
+    lo, hi = GAS_CONSTANT_RANGE
+    r = _first_outside(x, lo, hi)
+    if r is not None:
+        likely = ("kJ/(kg K) (air: 0.287 kJ/(kg K) is 287.05 J/(kg K)) or the molar gas constant J/(mol K) (divide "
+                  "8.314 by the molar mass in kg/mol)" if r < lo else "another unit")
+        raise PamjaxInputError(f"{name} = {r:g} J/(kg K): no gas has a specific gas constant outside [{lo:g}, {hi:g}] "
+                               f"J/(kg K); that looks like {likely} (pamjax takes J/(kg K): air 287.05)")
 
 
 class Air(eqx.Module):
@@ -29,7 +54,8 @@ class Air(eqx.Module):
 
     **Arguments:**
 
-    - `gas_constant`: specific gas constant R [J/(kg K)]; 287 (paper 000, Table 1).
+    - `gas_constant`: specific gas constant R [J/(kg K)]; 287 (paper 000, Table 1). Within `GAS_CONSTANT_RANGE`
+      (20-5000 J/(kg K), every gas's; refused otherwise: 0.287 is kJ/(kg K)).
     - `temperature`: air temperature T [K]; 293 (paper 000, Table 1).
     - `heat_capacity_ratio`: κ [-]; 1.4 (paper 000, eq. 10 text).
     - `atmospheric_pressure`: p_atm [Pa abs]; 101325 (ISO 2533 standard atmosphere). The gauge reference of the
@@ -43,6 +69,7 @@ class Air(eqx.Module):
 
     def __check_init__(self):
         check_positive(self.gas_constant, "Air.gas_constant")
+        check_gas_constant(self.gas_constant, "Air.gas_constant")
         check_positive(self.temperature, "Air.temperature")
         check_in_open_interval(self.heat_capacity_ratio, 1.0, 2.0, "Air.heat_capacity_ratio")
         check_positive(self.atmospheric_pressure, "Air.atmospheric_pressure")
@@ -117,7 +144,7 @@ class EllipseRestriction(AbstractRestriction):
 
     **Arguments:**
 
-    - `discharge_coefficient`: C_v [-] (Table 1: 0.36 inflate 1→2, 0.39 exhaust 2→3).
+    - `discharge_coefficient`: C_v [-] in (0, 1] (Table 1: 0.36 inflate 1→2, 0.39 exhaust 2→3).
     - `critical_ratio`: b_v [-] in (0, 1) (Table 1: 0.28 inflate, 0.49 exhaust).
     - `area`: effective orifice area A [m²] (Table 1: 3.14e-6).
     - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
@@ -130,6 +157,11 @@ class EllipseRestriction(AbstractRestriction):
 
     def __check_init__(self):
         check_positive(self.discharge_coefficient, "EllipseRestriction.discharge_coefficient")
+        cv = _first_outside(self.discharge_coefficient, 0.0, 1.0)  # C_v: effective over geometric area, at most 1
+        if cv is not None:
+            raise PamjaxInputError(
+                f"EllipseRestriction.discharge_coefficient must lie in (0, 1] (C_v, the effective over the geometric "
+                f"area), got {cv:g}" + (f"; that looks like percent: write {cv / 100:g}" if cv <= 100 else ""))
         check_in_open_interval(self.critical_ratio, 0.0, 1.0, "EllipseRestriction.critical_ratio")
         check_positive(self.area, "EllipseRestriction.area")
         check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "EllipseRestriction.laminar_ratio")

@@ -16,6 +16,7 @@ from .._core.errors import PamjaxInputError, check_finite, check_positive, check
 from .._core.fitting import parameter, positive
 from .._papers import paper001
 from .smooth import smooth_step
+from .valves.onoff import MAX_EDGE_FRACTION, first_violation
 
 
 class AbstractSignal(eqx.Module):
@@ -41,6 +42,11 @@ class AbstractSignal(eqx.Module):
         differentiates through the boundary); () for a continuous signal or one with too many to list."""
         return ()
 
+    def command_shape(self):
+        """The shape of the command at one time: () for a signal `simulate` runs; a sweep's batch shape for one
+        holding a batch of values (a `Constant` of an array, as `pamjax.sweep` builds it), which `simulate` refuses."""
+        return ()
+
     def table_length(self):
         """The number of samples of a signal read from a table (`Sampled`), None for one given by a formula: runs
         whose tables differ in length are stacked after `extended_to` (`pamjax._solve.run_signals`)."""
@@ -53,7 +59,7 @@ class AbstractSignal(eqx.Module):
 
 
 class Constant(AbstractSignal):
-    """u(t) = `value`."""
+    """u(t) = `value`, one number: an array of values is a sweep's batch (`pamjax.sweep`), refused by `simulate`."""
 
     value: RealArray = eqx.field(converter=as_array)
 
@@ -62,6 +68,9 @@ class Constant(AbstractSignal):
 
     def __call__(self, t):
         return self.value + 0.0 * t
+
+    def command_shape(self):
+        return jnp.shape(self.value)
 
     def bounds(self):
         v = np.asarray(self.value, dtype=float)
@@ -170,8 +179,8 @@ class Sampled(AbstractSignal):
                 f"Sampled.values must have the same shape as Sampled.times, got {jnp.shape(self.values)} "
                 f"and {jnp.shape(self.times)}"
             )
-        if self.period is not None and not self.period > 0:
-            raise PamjaxInputError(f"Sampled.period must be > 0 [s], got {self.period}")
+        if self.period is not None and not (self.period > 0 and np.isfinite(self.period)):  # inf: every t in period 0
+            raise PamjaxInputError(f"Sampled.period must be a finite number > 0 [s] (or None), got {self.period}")
 
     def __call__(self, t):
         if self.period is not None:  # the period's start, and the sample there whichever of the two rounds lower
@@ -220,7 +229,9 @@ class Sampled(AbstractSignal):
 class SquareWave(AbstractSignal):
     """Square wave between `low` and `high` at `frequency` [Hz], duty 50 %, low at t = 0 and rising
     5 edge widths later (paper 001's 1.5 Hz, 0-3 V reference, Fig. 7). Edges are logistic steps of time width
-    `edge_width` [s] (1e-3: 0.15 % of a 1.5 Hz period)."""
+    `edge_width` [s] (1e-3: 0.15 % of a 1.5 Hz period), at most 5 % of the period (`MAX_EDGE_FRACTION`, as
+    `OnOffValve`'s; refused otherwise): the edges half a period apart are then 10 widths apart and the wave reaches
+    within 1.5 % of `high` and `low`; 1e-3 s at 100 Hz (10 %) peaked at 2.55 of 3 and jumped at each period start."""
 
     low: RealScalar = parameter(0.0, unit="V")
     high: RealScalar = parameter(paper001.SQUARE_WAVE_HIGH, unit="V")
@@ -232,6 +243,15 @@ class SquareWave(AbstractSignal):
         check_finite(self.high, "SquareWave.high")
         check_positive(self.frequency, "SquareWave.frequency")
         check_positive(self.edge_width, "SquareWave.edge_width")
+        found = first_violation(lambda f, w: w <= MAX_EDGE_FRACTION / f, self.frequency, self.edge_width)
+        if found is not None:
+            (f, w), where = found
+            raise PamjaxInputError(
+                f"SquareWave.edge_width ({w:.6g} s) must not exceed {MAX_EDGE_FRACTION:.0%} of the period "
+                f"1/SquareWave.frequency = {1.0 / f:.6g} s (frequency = {f:.6g} Hz), i.e. {MAX_EDGE_FRACTION / f:.6g} "
+                f"s{where}: wider logistic edges never reach low or high within a half period (and the wave jumps at "
+                "each period start); give a narrower edge_width or a lower frequency"
+            )
 
     def cycle_frequency(self):
         return self.frequency

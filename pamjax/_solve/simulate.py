@@ -81,11 +81,13 @@ def solve(
     `atol` applies to the scaled state (pressure in units of 1e5 Pa, position in 1e-2 m, ...: `state_scale`).
     `stepping="pwm"` integrates on the PWM-synchronous grid (`pamjax._solve.synchronous`), `stepping="grid"` on a
     uniform grid of at most `grid_step` [s]; inside jit they need the static `num_periods` (PWM periods covering [t0,
-    ts[-1]], or grid steps). With adaptive stepping and a valve with smoothed switching edges, `num_periods` (if
-    given) puts step boundaries either side of every edge (`EdgeClipController`, asking the valve's `next_edge_step`;
-    `simulate` always does).
-    `starts_off`: a switching valve's previous PWM period is off at `t0` (a run from rest);
-    False reads the signal's own value there (a closed loop continuing period by period).
+    ts[-1]], or grid steps). Adaptive stepping puts step boundaries either side of every smoothed switching edge
+    (`EdgeClipController`), as `simulate` does (no `num_periods` needed). Two differ (`simulate` reads concrete times):
+    an `OnOffValve(mode="exact")` gets its switching schedule computed here only from concrete arguments (traced ones
+    are refused: use mode="smooth" or stepping="pwm"); for a continuous valve whose command jumps (a `Step`, a
+    `Sampled` hold) pass `jump_ts` = `signal.jump_times()` inside (t0, ts[-1]), sorted, as `simulate` does, else the
+    solver may step over a jump (~350 Pa off). `starts_off`: a switching valve's previous PWM period is off at `t0` (a
+    run from rest); False reads the signal's own value there (a closed loop continuing period by period).
     """
     ts = jnp.asarray(ts, dtype=float)
     system = prepared_tables(system)  # interpolants' tables once, ahead of the loop (pamjax._physics.tabulated)
@@ -93,9 +95,11 @@ def solve(
     stepping = resolve_stepping(system, stepping)
     if stepping in ("pwm", "grid"):
         return _solve_fixed(system, signal, ts, y0, t0, stepping, substeps, num_periods, grid_step, throw)
+    if system.valve.exact_edges:  # its switching times handed to the solver, as `simulate` does (concrete only)
+        system, jump_ts = _scheduled(system, signal, t0, ts[-1])
     if system.valve.switches and starts_off:  # the valve is off before the run (as the PWM grid and the schedule)
         signal = StartsOff(signal, system.valve.command_time(t0))
-    edge_clip = system.valve.smooth_edges and num_periods is not None
+    edge_clip = system.valve.smooth_edges  # simulate's default (it passes `_EDGE_CLIP`): unclipped, 1.5 kPa off
     controller = _controller(system, signal, ts, rtol, atol, jump_ts, edge_clip)
     import diffrax as dfx  # here, not at the top: importing diffrax costs ~0.4 s that fixed-grid work never needs
 
@@ -253,6 +257,9 @@ def validate(system, signal, ts, y0=None, t0=None):
         raise PamjaxInputError(f"system must be a pamjax system (TankSystem, MuscleSystem, ...), got {type(system)}")
     if not isinstance(signal, AbstractSignal):
         raise PamjaxInputError(f"signal must be a pamjax signal (Constant, Triangle, ...), got {type(signal)}")
+    if shape := type(signal).command_shape(signal):  # a sweep's batch (diffrax's raw broadcasting error otherwise)
+        raise PamjaxInputError(f"{type(signal).__name__} holds commands of shape {shape}: simulate takes one number "
+                               "at each time (Constant(0.5)); several values are a sweep (pamjax.sweep or jax.vmap)")
     check_time_grid(ts, "ts")
     if t0 is not None and not _is_traced(t0) and not np.isfinite(float(t0)):  # (-inf overflowed the step budget)
         raise PamjaxInputError(f"t0 must be finite (no NaN or inf), got {t0}")

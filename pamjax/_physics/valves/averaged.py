@@ -98,7 +98,8 @@ def fit_averaged_valve(valve: AbstractSwitchingValve, air: Air, commands: RealAr
     atmospheric pressure and duty 1 at supply pressure. Without it the unconstrained biquadratic charges a tank
     above the supply pressure at high duty (and below atmosphere at low duty).
 
-    A grid given is checked: `commands` 1-D, finite, within the valve's `command_range` (duty 0…1, not percent);
+    A grid given is checked: `commands` 1-D, finite, within the valve's `command_range` (duty 0…1, not percent), at
+    least three distinct duties (eq. 13 is quadratic in u);
     `pressures` 1-D, finite, ABSOLUTE [Pa] (not bar or gauge), at least two distinct ones above atmosphere (eq. 13 is
     quadratic in the pressure); `PamjaxInputError` naming the argument otherwise."""
     # a user's grid (NumPy or a list) and the fitted coefficients are put on the device without compiling
@@ -106,7 +107,11 @@ def fit_averaged_valve(valve: AbstractSwitchingValve, air: Air, commands: RealAr
     if commands is None:
         commands = jnp.linspace(0.0, 1.0, 41)
     else:
-        commands = device_array(_grid(commands, "commands", valve.command_range))
+        commands = _grid(commands, "commands", valve.command_range)
+        if np.unique(commands).size < 3:
+            raise PamjaxInputError(f"commands must hold at least three distinct duties: eq. 13 is quadratic in the "
+                                   f"duty u; got {commands}")
+        commands = device_array(commands)
     if pressures is None:
         pressures = jnp.linspace(air.atmospheric_pressure, valve.supply_pressure, 41)
     else:

@@ -38,7 +38,7 @@ def _commands_at(signal, times):
     return jax.vmap(signal)(times)
 
 
-def _first_violation(holds, *params):
+def first_violation(holds, *params):
     """Where the condition `holds(*values)` fails for the concrete, broadcast values of `params` (a sweep's lanes
     checked at once): (the first failing point's values as floats, its index as a phrase where there are several), or
     None when it holds everywhere, a value is traced, or the shapes do not combine (named elsewhere)."""
@@ -66,7 +66,7 @@ def _check_delays_within_period(frequency, on_delay, off_delay):
     silently (300 Hz with the 2 ms delays: a tank at 650, 124 or 105 kPa by stepping) and a delay longer than the
     period never opens the valve. Concrete values only, elementwise (a sweep's lanes checked at once); traced ones
     (jit, vmap, grad) have no value to check here."""
-    found = _first_violation(lambda f, on, off: on + off < 1.0 / f, frequency, on_delay, off_delay)
+    found = first_violation(lambda f, on, off: on + off < 1.0 / f, frequency, on_delay, off_delay)
     if found is None:
         return
     (f, on, off), where = found
@@ -89,8 +89,8 @@ MAX_EDGE_FRACTION = 0.05
 
 def _check_edge_within_period(frequency, edge_width):
     """Refuse a smoothed edge wider than `MAX_EDGE_FRACTION` of the PWM period 1/f (concrete values only,
-    elementwise, as `_check_delays_within_period`)."""
-    found = _first_violation(lambda f, w: w <= MAX_EDGE_FRACTION / f, frequency, edge_width)
+    elementwise, as `_check_delays_within_period`; `SquareWave` checks its edges so too)."""
+    found = first_violation(lambda f, w: w <= MAX_EDGE_FRACTION / f, frequency, edge_width)
     if found is None:
         return
     (f, w), where = found
@@ -112,8 +112,9 @@ class OnOffValve(AbstractSwitchingValve):
 
     PWM timing (paper 000, "Analytic valve model"): the command is on during [kT, kT + uT) of each period T = 1/f.
     The valve opens `switch_on_delay` after the command goes on and closes `switch_off_delay` after it goes off; a
-    command pulse shorter than the delay never switches it. With the 2 ms delays at 50 Hz, duties below 10 % leave the
-    valve shut and duties above 90 % leave it open (the paper's 10-90 % usable range).
+    command pulse shorter than the delay never switches it, nor does a zero-length one (duty 0 or 1, even with a zero
+    delay). With the 2 ms delays at 50 Hz, duties below 10 % leave the valve shut and duties above 90 % leave it open
+    (the paper's 10-90 % usable range).
 
     The duty is latched at each period start (`read_command`), as the valve driver, the bench and the
     PWM-synchronous grid latch it. `mode="smooth"` (default): edges are logistic steps of time width `edge_width` [s]
@@ -241,8 +242,12 @@ class OnOffValve(AbstractSwitchingValve):
 
             step_open = step
         phase = t - jnp.floor(t / period + 1e-9) * period  # in [0, T)
-        opens_p, closes_p = step(previous * period - on_delay), step_open((1.0 - previous) * period - off_delay)
-        opens_k, closes_k = step(duty * period - on_delay), step_open((1.0 - duty) * period - off_delay)
+
+        def gates(u):  # a zero-length pulse (duty 0 or 1) switches nothing, whatever the delay (`switching_gates`)
+            return (jnp.where(u > 0, step(u * period - on_delay), 0.0),
+                    jnp.where(u < 1, step_open((1.0 - u) * period - off_delay), 0.0))
+
+        (opens_p, closes_p), (opens_k, closes_k) = gates(previous), gates(duty)
         during_p = opens_p  # (a period that does not open it closes it: T > t_on + t_off, as __check_init__ requires)
         after_p = (1.0 - closes_p) * during_p
         during_k = opens_k + (1.0 - opens_k) * after_p
@@ -253,9 +258,12 @@ class OnOffValve(AbstractSwitchingValve):
 
     def switching_gates(self, command):
         """(opens, closes) for a period of duty `command`: whether its on-pulse (u T) outlasts the switch-on delay
-        and its off-pulse ((1 − u) T) the switch-off delay (paper 000: only duties of 10-90 % switch at 50 Hz)."""
+        and its off-pulse ((1 − u) T) the switch-off delay (paper 000: only duties of 10-90 % switch at 50 Hz). A
+        zero-length pulse switches nothing even with a zero delay: duty 0 never opens the valve, duty 1 never closes
+        it (`u T − t_on ≥ 0` alone would open it at duty 0 when t_on = 0)."""
         period = self.period
-        return (command * period - self.switch_on_delay >= 0, (1.0 - command) * period - self.switch_off_delay > 0)
+        return (jnp.logical_and(command > 0, command * period - self.switch_on_delay >= 0),
+                jnp.logical_and(command < 1, (1.0 - command) * period - self.switch_off_delay > 0))
 
     def edge_phases(self, command):
         """Phases [s] of the period's on edge (t_on after its start) and off edge (u T + t_off), clipped to [0, T] and
@@ -282,11 +290,11 @@ class OnOffValve(AbstractSwitchingValve):
         commands = np.asarray(_commands_at(signal, device_array(starts)), dtype=float)
         times, states, state = [], [], 0.0
         for start, u in zip(starts, commands):
-            if u * period - on >= 0:
+            if u > 0 and u * period - on >= 0:  # a zero-length pulse opens nothing (`switching_gates`)
                 state = 1.0
                 times.append(start + on)
                 states.append(state)
-            if (1.0 - u) * period - off > 0:
+            if u < 1 and (1.0 - u) * period - off > 0:
                 state = 0.0
                 times.append(start + u * period + off)
                 states.append(state)
