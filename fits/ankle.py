@@ -4,7 +4,7 @@ an ankle joint along a gait-like trajectory (paper 001's future work) at stride 
 angle at a fixed pressure sum (co-contraction, which sets the stiffness); the calibration (1.01 bar/V) turns them
 into reference voltages. Prints the tracking RMSE per frequency and writes a figure.
 
-    python fits/ankle.py [--out results/ankle] [--frequencies 0.125 0.5 1.5] [--sum-bar 5]
+    python fits/ankle.py [--out results/ankle] [--frequencies 0.125 0.5 1.5] [--sum-bar 5] [--overwrite]
 """
 
 import argparse
@@ -25,8 +25,13 @@ def main(argv=None):
     ap.add_argument("--out", default="results/ankle")
     ap.add_argument("--frequencies", type=float, nargs="+", default=[0.125, 0.5, 1.5])
     ap.add_argument("--sum-bar", type=float, default=5.0, help="gauge pressure sum (co-contraction) [bar]")
+    ap.add_argument("--overwrite", action="store_true", help="replace existing results in --out")
     args = ap.parse_args(argv)
     out = pathlib.Path(args.out)
+    existing = [str(p) for p in (out / "ankle.json", out / "ankle.png") if p.exists()]
+    if existing and not args.overwrite:  # a --quick or trial run must not replace a full run's results
+        raise SystemExit(f"ankle.py: {', '.join(existing)} exist; pass --overwrite to replace them (or "
+                         "another --out)")
     out.mkdir(parents=True, exist_ok=True)
     m = pj.presets.dmsp40_muscle()
     joint = pj.AntagonisticJoint(pj.ISO6358Regulator(), pj.ISO6358Regulator(), m, m)

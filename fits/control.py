@@ -3,6 +3,7 @@ averaged model's equivalent control, gradient-tuned gains, a ±20 % robustness s
 SMC fed by an extended Kalman filter from the bench's noisy sensors.
 
     python fits/control.py [--out results/control] [--tune-steps 20] [--duration 20] [--plant smooth|identified|both]
+        [--overwrite]
 
 Plants (MAS-10-300 + 9.6 kg, MHE2 valve, from rest at atmospheric pressure):
 - "smooth": `presets.mas10_system("pwm")`: smoothed PWM edges and the smooth Coulomb sign, solved adaptively per period;
@@ -293,6 +294,7 @@ def main():
                         help=f"run length [s], above the tracking window's start ({WINDOW_START} s)")
     parser.add_argument("--tune-steps", type=int, default=20, help="Adam steps of the gain tuning (>= 0)")
     parser.add_argument("--plant", choices=("smooth", "identified", "both"), default="both")
+    parser.add_argument("--overwrite", action="store_true", help="replace existing results in --out")
     args = parser.parse_args()
     if not args.duration > WINDOW_START:  # every figure is over t >= WINDOW_START: an empty window gives NaN
         parser.error(f"--duration must exceed the tracking window's start {WINDOW_START} s (RMSE and peak are over "
@@ -301,9 +303,13 @@ def main():
         parser.error(f"--tune-steps must be >= 0 (Adam steps of the gain tuning), got {args.tune_steps}")
     jax.config.update("jax_enable_x64", True)
     out = pathlib.Path(args.out)
+    names = list(PLANTS) if args.plant == "both" else [args.plant]
+    existing = [str(p) for p in [out / "control.json", *(out / f"control_{n}.png" for n in names)] if p.exists()]
+    if existing and not args.overwrite:  # a --quick or trial run must not replace a full run's results
+        raise SystemExit(f"control.py: {', '.join(existing)} exist; pass --overwrite to replace them (or "
+                         "another --out)")
     out.mkdir(parents=True, exist_ok=True)
     report = dict(paper=PAPER, window_start_s=WINDOW_START, duration_s=args.duration)
-    names = list(PLANTS) if args.plant == "both" else [args.plant]
     for name in names:
         report[name] = run_plant(name, PLANTS[name](), args, out)
     (out / "control.json").write_text(json_text(report, indent=1))

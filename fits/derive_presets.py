@@ -1,6 +1,6 @@
 """Re-derive the MAS-10-300 / DMSP-40-400 preset numbers documented in `pamjax/presets.py` and compare.
 
-    python fits/derive_presets.py [--out results/derive_presets]
+    python fits/derive_presets.py [--out results/derive_presets] [--overwrite]
 
 Steps (presets.py docstring items 1-3): per-length affine fit F = c0 + c1 p of the DMSP-20-300 force map (non-zero
 points), the force at p_max = 0.6 MPa gauge and slope ∂F/∂p; a least-squares quartic in ε through those five 6-bar
@@ -49,7 +49,12 @@ def derive(with_valve=True):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="results/derive_presets")
+    parser.add_argument("--overwrite", action="store_true", help="replace existing results in --out")
     args = parser.parse_args()
+    existing = [str(p) for p in [pathlib.Path(args.out) / "derived_presets.json"] if p.exists()]
+    if existing and not args.overwrite:  # a --quick or trial run must not replace a full run's results
+        raise SystemExit(f"derive_presets.py: {', '.join(existing)} exist; pass --overwrite to replace them (or "
+                         "another --out)")
     from pamjax import presets
 
     derived = derive()

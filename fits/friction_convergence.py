@@ -1,7 +1,7 @@
 """How close the smooth friction models come to exact stick-slip, and at what cost: paper 000's triangle runs (E3, E4
 of a bench directory) simulated with the bench's true parameters under every friction model pamjax has.
 
-    python fits/friction_convergence.py [--data DIR] [--out DIR] [--quick]
+    python fits/friction_convergence.py [--data DIR] [--out DIR] [--quick] [--overwrite]
 
 - `KarnoppFriction` (exact stick-slip, events located inside the step of the PWM-synchronous grid, K = 16): the
   reference; its RMSE against the recordings is reported in units of their noise (1.00 = the model error is lost in
@@ -51,8 +51,13 @@ def main():
     ap.add_argument("--data", default=str(DEFAULT_DATA))
     ap.add_argument("--out", default="results/friction_convergence")
     ap.add_argument("--quick", action="store_true", help="E4 only, three widths")
+    ap.add_argument("--overwrite", action="store_true", help="replace existing results in --out")
     args = ap.parse_args()
     data, out = pathlib.Path(args.data), pathlib.Path(args.out)
+    existing = [str(p) for p in (out / "friction_convergence.json", out / "friction_convergence.png") if p.exists()]
+    if existing and not args.overwrite:  # a --quick or trial run must not replace a full run's results
+        raise SystemExit(f"friction_convergence.py: {', '.join(existing)} exist; pass --overwrite to replace them (or "
+                         "another --out)")
     out.mkdir(parents=True, exist_ok=True)
     meta = json.loads((data / "meta.json").read_text())
     P, noise = meta["params"], meta["noise"]

@@ -30,10 +30,12 @@ against model with residuals. `--profile Fc,k0` (bench keys
 or the fit's labels, or `all`) profiles those parameters after the fit (`pamjax.profile_likelihood`): their
 likelihood-ratio intervals in `joint.json`'s `profile`, `OUT/profile.json` and `OUT/profile.png`; where a profile
 finds a lower cost than the fit's, the fit is taken again from there and profiled again (`profile.refits`). A second
-run refuses to replace them without `--overwrite`. A mistake in the data is one line naming the file and key, exit
-status 2, and no output folder left behind. The compiled programs stay in the `pamjax` command's cache directory
-(`PAMJAX_CACHE_DIR`; off with `--no-cache` or `PAMJAX_COMPILATION_CACHE=0`), so a second run, on these recordings or
-another plant's of the same layout, loads them instead of compiling (same experiments and lengths: the same programs).
+run refuses to replace them without `--overwrite`, which replaces them whole (an earlier `--profile`'s
+profile.json and .png removed where this run profiles nothing, as `pamjax fit` does). A mistake in the data is one
+line naming the file and key, exit status 2, and no output folder left behind. The compiled programs stay in the
+`pamjax` command's cache directory (`PAMJAX_CACHE_DIR`; off with `--no-cache` or `PAMJAX_COMPILATION_CACHE=0`), so a
+second run, on these recordings or another plant's of the same layout, loads them instead of compiling (same experiments
+and lengths: the same programs).
 Like the `pamjax` command's fit, it compiles with XLA's classic CPU emitters
 (`pamjax.runtime.prefer_fast_compilation`; `PAMJAX_FAST_COMPILE=0` turns it off). `benchmarks/identify.py` scores the
 results against a simulated bench's truth.
@@ -105,7 +107,10 @@ def parse_args(argv=None):
     ap.add_argument("--no-cache", action="store_true",
                     help="compile everything anew, keep nothing (default: the persistent compilation cache, as the "
                          "pamjax command's: a second run loads the compiled programs; PAMJAX_COMPILATION_CACHE=0 too)")
-    return ap.parse_args(argv)
+    args = ap.parse_args(argv)
+    if args.multistart < 1:  # was: 0 or a negative count ran the single fit, silently
+        ap.error(f"--multistart must be >= 1 (the starts fitted; 1: the presets alone), got {args.multistart}")
+    return args
 
 
 def _nuisance_arg(value):
@@ -248,6 +253,9 @@ def run(args, data, out):
         print("  the same command with --profile Fc looks along F_c for a lower minimum and fits again from it "
               "(minutes); no interval bounds the other minima: the run the warning names is what identifies them")
     plot(out / "joint.png", res.model, [e for e in full.experiments if e.name in recorded])
+    if prof is None and args.overwrite:  # the earlier results replaced whole, as pamjax fit does: an earlier
+        for name in ("profile.json", "profile.png"):  # --profile's files would read as this run's
+            (out / name).unlink(missing_ok=True)
     print(f"wrote {out / 'joint.json'}, {out / 'model.json'} (the fitted plant: pamjax.load_model, a [model] file) "
           f"and {out / 'joint.png'}")
 

@@ -2,7 +2,7 @@
 pressure difference while the joint stiffness is held, then steps, through the pressure sum (paper 001's future
 work). Runs the closed loop and the feed-forward alone, prints RMSEs, writes a figure and a JSON.
 
-    python fits/joint_control.py [--out results/joint_control] [--stiffness 160] [--step 145 165]
+    python fits/joint_control.py [--out results/joint_control] [--stiffness 160] [--step 145 165] [--overwrite]
 """
 
 import argparse
@@ -34,6 +34,7 @@ def main(argv=None):
     ap.add_argument("--stiffness", type=float, default=160.0, help="held stiffness in the gait run [N m/rad]")
     ap.add_argument("--step", type=float, nargs=2, default=[145.0, 165.0], help="stiffness step [N m/rad]")
     ap.add_argument("--frequency", type=float, default=0.5, help="gait frequency [Hz]")
+    ap.add_argument("--overwrite", action="store_true", help="replace existing results in --out")
     ap.add_argument("--duration", type=float, default=6.0,
                     help=f"run length [s], above the RMSE window's start ({WINDOW_START} s)")
     args = ap.parse_args(argv)
@@ -41,6 +42,10 @@ def main(argv=None):
         ap.error(f"--duration must exceed the RMSE window's start {WINDOW_START} s (the gait's RMSE and the step's "
                  f"error are over t >= {WINDOW_START} s), got {args.duration}")
     out = pathlib.Path(args.out)
+    existing = [str(p) for p in (out / "joint_control.json", out / "joint_control.png") if p.exists()]
+    if existing and not args.overwrite:  # a --quick or trial run must not replace a full run's results
+        raise SystemExit(f"joint_control.py: {', '.join(existing)} exist; pass --overwrite to replace them (or "
+                         "another --out)")
     out.mkdir(parents=True, exist_ok=True)
 
     m = pj.presets.dmsp40_muscle()

@@ -128,6 +128,12 @@ def test_joint_script_fits_a_bench_directory_from_the_presets(bench, tmp_path):
     assert result["stage2_start"] is None  # no force-law coefficient free: nothing for the force balance to move
     with pytest.raises(SystemExit, match="--overwrite"):
         joint.main(["--data", str(folder), "--out", str(out), "--quiet"])
+    # --overwrite replaces the earlier results whole, as pamjax fit does (was: the earlier --profile's files kept,
+    # reading as this run's)
+    joint.main(["--data", str(folder), "--out", str(out), "--quiet", "--max-steps", "2", "--no-cache", "--joint-only",
+                "--overwrite"])
+    assert (out / "joint.json").is_file() and "profile" not in json.loads((out / "joint.json").read_text())
+    assert not (out / "profile.json").exists() and not (out / "profile.png").exists()
 
 
 def test_joint_script_names_a_parameter_it_cannot_profile_before_any_fit(bench, tmp_path, capsys):
@@ -144,6 +150,11 @@ def test_joint_script_names_a_parameter_it_cannot_profile_before_any_fit(bench, 
         assert "--profile" in err and ("is not a fitted parameter" in err or "names no parameter" in err), err
         assert "Fc" in err  # what it can profile: the bench keys fitted
         assert not out.exists()  # named before any fit: nothing written, no folder left behind
+    for count in ("0", "-2"):  # was: the single fit, silently
+        with pytest.raises(SystemExit) as exit_:
+            joint.main(["--data", str(folder), "--out", str(out), "--quiet", "--no-cache", "--multistart", count])
+        assert exit_.value.code == 2 and "--multistart must be >= 1" in capsys.readouterr().err
+        assert not out.exists()
     for bad, named in (("E9", "runs ['E9'] are not experiments of its meta.json"), (",", "non-empty list")):
         with pytest.raises(SystemExit) as exit_:  # --runs: meta.json's experiments only, named before any fit
             joint.main(["--data", str(folder), "--out", str(out), "--quiet", "--no-cache", "--runs", bad])
@@ -423,6 +434,28 @@ def test_an_unknown_kind_is_refused_naming_the_run_meta_json_and_the_kinds(tmp_p
     known = _csv_bench(tmp_path / "k", {"T": TANK, "M": ({"kind": "muscle_PI"}, RUN_HEADER.format("pressure"),
                                                          RUN_COLUMNS)})
     assert set(pj.bench.load_bench(known, _plant()).skipped) == {"M"}  # known, not fitted: left out, as before
+
+
+@pytest.mark.parametrize("where, key, close", [
+    ("run", "payload_kgs", "payload_kg"), ("run", "Payload_kg", "payload_kg"),
+    ("top", "atmosphere_pa", "atmosphere_Pa"), ("noise", "p_std", "p_std_Pa")])
+def test_a_misspelt_meta_json_key_is_refused_naming_the_file_and_the_closest_key(tmp_path, where, key, close):
+    # Was: ignored, the run fitted with the model's payload or the gauge readings converted with 101325 Pa.
+    run = ({**MIDWAY, **({key: 30.0} if where == "run" else {})}, RUN_HEADER.format("pressure"), RUN_COLUMNS)
+    extra = {"top": {key: 95000.0}, "noise": {"noise": {**NOISE, key: 2000.0}}}.get(where, {})
+    folder = _csv_bench(tmp_path / "b", {"T": TANK, "M": run}, **extra)
+    with pytest.raises(PamjaxInputError, match=rf"b/meta\.json.* has key '{key}', which pamjax does not know \(did you "
+                                               rf"mean '{close}'\?\)"):
+        pj.bench.load_bench(folder, _plant())
+
+
+def test_the_keys_of_every_shared_bench_meta_json_are_known():
+    # The truth listings (params, nuisance) and a bench's own description are allowed, unread.
+    from pamjax._bench.files import read_meta
+
+    shared = [f.parent for root in (ROOT / "shared", ROOT.parent / "shared") for f in root.glob("data/**/meta.json")]
+    for folder in [ROOT / "pamjax/data/hybrid-reference-bench", *shared]:
+        read_meta(folder)
 
 
 def test_a_pressure_column_not_read_as_pressure_is_named_or_said(tmp_path):

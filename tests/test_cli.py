@@ -254,6 +254,17 @@ SWEEP_CASES = {
     "over bad last value, one sweep": ('kind = "steady_state"\n[system]\nvalve = "averaged"\n[sweep]\n'
                                        'over = { "payload_mass" = [9.6, 5.0, -1.0] }\n',
                                        r"\[sweep\] over: .*payload_mass must be > 0 and finite, got -1"),
+    # refused by the maps once they ran, after the output folder was created (was: an empty folder left behind)
+    "window beyond horizon": ('kind = "steady_state"\n[system]\nvalve = "averaged"\n[sweep]\ncommands = [0.5]\n'
+                              'horizon = 1.0\nwindow = 2.0\n', r"\[sweep\] window must lie in \(0, horizon = 1\] s"),
+    "sample_interval beyond window": ('kind = "steady_state"\n[sweep]\ncommands = [0.5]\nwindow = 0.5\n'
+                                      'sample_interval = 0.6\n', r"\[sweep\] sample_interval = 0.6 s must be at most"),
+    "default sample_interval beyond window": ('kind = "steady_state"\n[system]\nvalve = "averaged"\n[sweep]\n'
+                                              'window = 0.005\n', r"sample_interval = 0.01 s \(its default"),
+    "frequency response beyond the duty range": ('kind = "frequency_response"\n[system]\nvalve = "averaged"\n'
+                                                 '[sweep]\nfrequencies = [0.5]\noffset = 0.9\namplitude = 0.2\n',
+                                                 r"\[sweep\] offset ± amplitude \(0.9 ± 0.2: 0.7 … 1.1\) must stay "
+                                                 r"within the model's command range \[0, 1\]"),
 }
 
 
@@ -502,6 +513,26 @@ def test_a_simulate_step_budget_failure_names_the_config_key(tmp_path, capsys):
     budget = re.search(r"max_steps = (\d+)", err)[1]
     assert tomllib.loads(f"max_steps = {budget}")["max_steps"] > 100
     assert "throw=False" not in err and "max_steps=" not in err.split("): ", 1)[1], err
+
+
+def test_a_simulate_stepping_advice_can_be_followed(tmp_path, capsys):
+    # The advice "use stepping='grid' (uniform fixed steps) or 'adaptive'" named a value [simulate] refused.
+    text = """
+        [model]
+        preset = "mas10_tank_system"
+        options = { valve = "averaged" }
+        [input]
+        signal = { kind = "Constant", value = 0.5 }
+        [simulate]
+        t_end = 0.05
+        stepping = "pwm"
+    """
+    config = _write(tmp_path, text)
+    _refused(capsys, ["simulate", str(config), "--out", str(tmp_path / "o1"), "--no-plot"],
+             r"use stepping='grid'", code=2)
+    _write(tmp_path, text.replace('"pwm"', '"grid"\n        grid_step = 0.002'))
+    assert main(["simulate", str(config), "--out", str(tmp_path / "o2"), "--no-plot"]) == 0, capsys.readouterr().err
+    assert (tmp_path / "o2" / "trajectory.csv").is_file()
 
 
 @pytest.mark.parametrize("api, cli", [

@@ -190,3 +190,15 @@ def test_a_design_names_the_prior_config_its_error_comes_from(tmp_path, capsys):
     assert main(["design", str(config), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert "[design] prior = 'prior.toml': [fit]: unknown key(s) ['max_step']" in err, err
+
+
+def test_simulate_takes_every_stepping_pamjax_simulate_takes():
+    # Was: ['adaptive', 'pwm'] only, while simulate's own advice says "use stepping='grid'" or "stepping='auto'".
+    import typing
+
+    from pamjax._solve.simulate import Stepping
+
+    assert set(schema.SIMULATE["stepping"].choices) == set(typing.get_args(Stepping))
+    base = '[input]\nsignal = { kind = "Constant", value = 0.5 }\n[simulate]\nt_end = 1.0\n'
+    for stepping in typing.get_args(Stepping):
+        schema.validate("simulate", tomllib.loads(base + f'stepping = "{stepping}"\ngrid_step = 5e-4\n'))

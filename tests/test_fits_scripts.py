@@ -49,3 +49,17 @@ def test_static_force_script_matches_authors_max_error(tmp_path):
     again = subprocess.run([sys.executable, "fits/static_force.py", "--out", str(tmp_path)], capture_output=True,
                            text=True, env=checkout_env())
     assert again.returncode != 0 and "exists" in again.stderr
+
+
+@pytest.mark.parametrize("script, result", [("derive_presets", "derived_presets.json"),
+                                            ("friction_convergence", "friction_convergence.json"),
+                                            ("ankle", "ankle.png"), ("control", "control.json"),
+                                            ("joint_control", "joint_control.json")])
+def test_scripts_refuse_to_replace_an_earlier_run_without_overwrite(tmp_path, script, result):
+    # Was: a --quick or trial run silently replaced a full run's results (these scripts had no --overwrite).
+    (tmp_path / result).write_text("an earlier run")
+    run = subprocess.run([sys.executable, f"fits/{script}.py", "--out", str(tmp_path), "--quick"][
+                         :5 if script == "friction_convergence" else 4], capture_output=True, text=True,
+                         env=checkout_env(), timeout=120)
+    assert run.returncode != 0 and f"{result} exist; pass --overwrite" in run.stderr, run.stderr
+    assert (tmp_path / result).read_text() == "an earlier run"

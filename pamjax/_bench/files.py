@@ -37,6 +37,31 @@ MAX_TANK_VOLUME = 0.1
 _DUTY_TOLERANCE = 1e-3
 
 
+# The keys a meta.json may hold; any other is refused by name with the closest known one (was: "payload_kgs" or
+# "atmosphere_pa" silently ignored: the model's payload, 101325 Pa). Read: what `read_meta` and `load_bench` use.
+# Informational, never read: a simulated bench's truth (`params`, `nuisance`: docs/fitting.md), what the shared
+# benches and the benchmarks' rigs record of themselves (shared/data/*/meta.json, benchmarks/unseen_rigs.py,
+# design_unseen.py: a run's t_end, a muscle_PI run's controller), free text (`description`, `comment`, `notes`).
+_TEXT_KEYS = ("description", "comment", "notes")
+META_KEYS = ("experiments", "noise", "fitted_keys", "units", "atmosphere_Pa")
+META_INFO_KEYS = ("params", "nuisance", "params_seed", "set", "files", "conventions", "sampling_hz", "non_identifiable",
+                  "x_eq_patm", "perturbation", "generated_by", "switching_time_s", *_TEXT_KEYS)
+EXPERIMENT_KEYS = ("kind", "V_tank", "u", "p0", "lo", "hi", "f_tri", "init", "payload_kg", "supply_Pa", "supply_sd_Pa")
+EXPERIMENT_INFO_KEYS = ("t_end", "phase_s", "w", "kp", "ki", "u0", "x_mid", "amp", "anti_windup", *_TEXT_KEYS)
+
+
+def check_keys(table, known, what, informational=()):
+    """Every key of `table` (a meta.json table) is in `known` or `informational`: else a `PamjaxInputError` naming
+    `what` (the file and the table) and the key, with the closest known key (case aside, else difflib)."""
+    allowed = (*known, *informational)
+    for key in table:
+        if key in allowed:
+            continue
+        close = [k for k in allowed if k.lower() == str(key).lower()] or difflib.get_close_matches(str(key), allowed)
+        raise PamjaxInputError(f"{what} has key {key!r}, which pamjax does not know" + (
+            f" (did you mean {close[0]!r}?)" if close else "") + f"; the keys read there: {list(known)}")
+
+
 _META_TEMPLATE = ('{"experiments": {"E1": {"kind": "tank_charge", "V_tank": 5e-5, "u": 0.5, "p0": "p_atm"}, '
                   '"E3": {"kind": "muscle_run"}}, "noise": {"p_std_Pa": 2000, "x_std_m": 1e-4}, '
                   '"fitted_keys": ["Cv12", "b12", "Cv23", "b23", "v0", "v1", "Fc", "Cf"]}')
@@ -62,10 +87,14 @@ def read_meta(directory):
     if not isinstance(meta, dict) or not isinstance(meta.get("experiments"), dict) or not meta["experiments"]:
         raise PamjaxInputError(f"{path} needs an 'experiments' table (name → kind and conditions), e.g. "
                                f"{_META_TEMPLATE}")
+    check_keys(meta, META_KEYS, str(path), META_INFO_KEYS)
+    if isinstance(meta.get("noise"), dict):
+        check_keys(meta["noise"], [key for key, _, _ in _NOISE_KEYS], f"{path}: 'noise'")
     for name, e in meta["experiments"].items():
         if not isinstance(e, dict) or "kind" not in e:
             raise PamjaxInputError(f"{path}: experiment {name!r} must be a table with a 'kind' (one of "
                                    f"{list(KNOWN_KINDS)}), got {e!r}")
+        check_keys(e, EXPERIMENT_KEYS, f"{path}: experiment {name!r}", EXPERIMENT_INFO_KEYS)
         if e["kind"] not in KNOWN_KINDS:
             close = difflib.get_close_matches(str(e["kind"]), KNOWN_KINDS, n=1)
             raise PamjaxInputError(

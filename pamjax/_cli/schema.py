@@ -107,8 +107,10 @@ SIMULATE = {
     "initial": Key("table of numbers", "{ pressure = 101325.0 }", "keyword arguments of the system's initial_state",
                    setting=True, entry="101325.0"),
     "tank_volume": Key("positive number", "5e-5", "m³", setting=True),
-    "stepping": Key("string", '"pwm"', choices=("adaptive", "pwm")),
+    # every stepping `pamjax.simulate` takes (its default "auto"), so its advice ("use stepping='grid'") can be followed
+    "stepping": Key("string", '"pwm"', choices=("auto", "adaptive", "pwm", "grid")),
     "substeps": Key("positive integer", "16"),
+    "grid_step": Key("positive number", "0.001", "s"),
     "solver": Key("string", '"Rodas5"', choices=SOLVERS),
     "rtol": Key("positive number", "1e-6"),
     "atol": Key("positive number", "1e-6"),

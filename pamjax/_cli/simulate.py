@@ -112,7 +112,7 @@ def build_run(cfg, model, root):
         if rows < 2:
             raise PamjaxInputError(f"[simulate] dt = {dt} s leaves fewer than two output times in [{t0}, {t_end}] s")
         ts = t0 + dt * np.arange(rows)
-    kwargs = {k: sim[k] for k in ("stepping", "substeps", "rtol", "atol", "max_steps") if k in sim}
+    kwargs = {k: sim[k] for k in ("stepping", "substeps", "grid_step", "rtol", "atol", "max_steps") if k in sim}
     if "solver" in sim:
         import diffrax as dfx
 

@@ -18,6 +18,7 @@ runs, and a key the chosen `kind` does not use is an error listing the ones it d
 """
 
 import dataclasses
+import inspect
 import itertools
 import os
 import pathlib
@@ -31,11 +32,12 @@ from .._core.distributed import join_for_cli
 from .._core.errors import PamjaxInputError
 from .._core.fitting import field_units
 from .._core.units import ATMOSPHERE
+from .._sweep import maps
 from .._sweep.maps import flow_surface, frequency_response, steady_state_map
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from . import bands, schema
 from .config import apply_set, build_model, read_toml
-from .kinds import axis as _axis, command_of, commands
+from .kinds import DUTY, axis as _axis, command_bounds, command_of, commands
 from .out import OutputFolder
 from .schema import SOLVER_KEYS
 
@@ -156,7 +158,43 @@ def prepare(config, root="."):
     check_over(config, model)
     if config["kind"] != "frequency_response":
         commands(config.get("sweep", {}), model, 1)  # within the model's command range
+    check_map_settings(config, model)
     return model
+
+
+def _default(function, name):
+    """`pamjax._sweep.maps`'s `function`'s default for the argument `name` (read, not copied)."""
+    return inspect.signature(getattr(maps, function)).parameters[name].default
+
+
+def check_map_settings(config, model):
+    """What the maps refuse only when they start (window beyond the horizon, sample_interval beyond the window, a
+    frequency response's offset ± amplitude beyond the command range), checked here with their defaults, before the
+    output folder is taken (docs/cli.md: every command checks all of its config, then holds its folder; was: an
+    empty output folder left behind)."""
+    sw, kind = config.get("sweep", {}), config["kind"]
+    if kind == "steady_state":
+        horizon = float(sw.get("horizon", _default("steady_state_map", "horizon")))
+        window = float(sw.get("window", _default("steady_state_map", "window")))
+        if not window <= horizon:
+            raise PamjaxInputError(f"[sweep] window must lie in (0, horizon = {horizon:g}] s (the last window of "
+                                   f"each run is averaged), got {window:g}")
+        valve = model.valve if isinstance(model, AbstractSystem) else None
+        interval = sw.get("sample_interval", float(valve.period) / maps.SAMPLES_PER_PWM_PERIOD if valve is not None and
+                          valve.switches else maps.SMOOTH_SAMPLE_INTERVAL)
+        if not interval <= window:
+            said = "" if "sample_interval" in sw else " (its default for this model's valve)"
+            raise PamjaxInputError(f"[sweep] sample_interval = {interval:g} s{said} must be at most the window "
+                                   f"({window:g} s): the window would hold no sample")
+    elif kind == "frequency_response":
+        offset = float(sw.get("offset", _default("frequency_response", "offset")))
+        amplitude = abs(float(sw.get("amplitude", _default("frequency_response", "amplitude"))))
+        lo, hi = command_bounds(model)
+        if offset - amplitude < lo - 1e-12 or offset + amplitude > hi + 1e-12:
+            raise PamjaxInputError(
+                f"[sweep] offset ± amplitude ({offset:g} ± {amplitude:g}: {offset - amplitude:g} … "
+                f"{offset + amplitude:g}) must stay within the model's command range [{lo:g}, {hi:g}] "
+                f"({'duty ratios' if command_of(model) is DUTY else 'reference voltages [V]'})")
 
 
 def run_config(config, progress=print, root=".", model=None):
