@@ -547,6 +547,10 @@ def test_a_simulate_stepping_advice_can_be_followed(tmp_path, capsys):
     ("became non-finite (parameters far outside the physical range?); simulate with throw=False and look at the "
      "trajectory up to that time. (throw=False returns the partial result with its status instead.)",
      "became non-finite (parameters far outside the physical range?)."),
+    # [simulate] grid_step exists: its advice was left in Python's terms
+    ("RK4 on a uniform grid of 0.002 s is unstable here: pass grid_step=0.0005 or less, or stepping='adaptive'",
+     'RK4 on a uniform grid of 0.002 s is unstable here: set [simulate] grid_step = 0.0005 or less, or [simulate] '
+     'stepping = "adaptive"'),
 ])
 def test_a_simulate_failures_advice_is_in_the_configs_terms(api, cli):
     from pamjax._cli.main import _in_config_terms

@@ -106,8 +106,9 @@ def _parser():
 # simulate` names the [simulate] keys instead (max_steps = 16384, stepping = "pwm", solver = "Rodas5") and drops what
 # only the API has (throw=False).
 _SIMULATE_ADVICE = (
-    (r"\b([Pp])ass (?=(max_steps|substeps|solver)=)", lambda m: "Set " if m[1] == "P" else "set "),
+    (r"\b([Pp])ass (?=(max_steps|substeps|solver|grid_step)=)", lambda m: "Set " if m[1] == "P" else "set "),
     (r"\b(set|Set) (max_steps|substeps)=([\d,]+)", lambda m: f"{m[1]} [simulate] {m[2]} = {m[3].replace(',', '')}"),
+    (r"\b(set|Set) grid_step=([\d.eE+-]*\d)", r"\1 [simulate] grid_step = \2"),
     (r"\bsolver=pamjax\.(\w+)\(\)", r'[simulate] solver = "\1"'),
     (r"\bstepping='(\w+)'", r'[simulate] stepping = "\1"'),
     (r" ?\(throw=False [^)]*\)", ""),
