@@ -218,10 +218,12 @@ def test_a_nominal_length_and_an_edge_width_set_with_tree_at_are_named_before_th
         pamjax.simulate(tank, pamjax.Constant(0.25), TS)
 
 
-def test_an_empty_array_for_a_scalar_parameter_is_refused():
+def test_an_empty_array_or_text_for_a_scalar_parameter_is_refused():
     # payload_mass = [] passed the positivity checks vacuously and the solve failed deep inside JAX ("scan body
     # function carry input and carry output must have equal types")
     with pytest.raises(pamjax.PamjaxInputError, match=r"a scalar parameter got an empty array \(shape \(0,\)\)"):
         presets.mas10_system(valve="averaged", payload_mass=np.array([]))
     with pytest.raises(pamjax.PamjaxInputError, match="empty array"):
         pamjax.Step(0.2, 0.8, [])
+    with pytest.raises(pamjax.PamjaxInputError, match=r"a scalar parameter got the text '0.1': give a number"):
+        pamjax.Step("0.1", 0.8, 1.0)  # a raw JAX TypeError before

@@ -179,6 +179,9 @@ def test_a_sonic_conductance_left_in_m3_per_s_bar_is_refused():
     (lambda: pamjax.Air(gas_constant=0.287), r"Air\.gas_constant = 0\.287 J/\(kg K\).*looks like kJ/\(kg K\)"),
     (lambda: pamjax.Air(gas_constant=8.314), r"Air\.gas_constant = 8\.314 .*molar gas constant"),
     (lambda: pamjax.EllipseRestriction(36.0, 0.28), r"discharge_coefficient must lie in \(0, 1\].*got 36; .*percent"),
+    # an orifice area in mm² (3.14 for paper 000's 3.14e-6 m²) failed after 200,000 steps with a "stiff" hint
+    (lambda: pamjax.EllipseRestriction(0.36, 0.28, area=3.14), r"EllipseRestriction\.area = 3\.14 m².*mm² or cm²"),
+    (lambda: pamjax.NozzleRestriction(0.5, area=3.14), r"NozzleRestriction\.area = 3\.14 m².*mm² or cm²"),
 ])
 def test_a_gas_constant_or_discharge_coefficient_in_other_units_is_refused(make, match):
     # Air(gas_constant=0.287) (kJ/(kg K)) filled a tank to 126 kPa instead of 429 kPa, and a C_v of 36 (percent) ran

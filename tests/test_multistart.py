@@ -159,3 +159,10 @@ def test_experiments_and_draw_settings_with_given_starts_are_refused_before_any_
     for given, shown in ((dict(spread=0.3), "spread=0.3"), (dict(seed=7), "seed=7"), (dict(seed=None), "seed=None")):
         with pytest.raises(PamjaxInputError, match=f"{shown}: spread and seed draw the starts"):
             pj.multistart(muscle, [exp], FREE, starts=rows, progress=False, **given)
+
+
+def test_a_progress_that_is_neither_a_flag_nor_a_callable_is_refused_before_any_fit(problem):
+    # progress="yes" failed with a raw TypeError after the first fit had run
+    muscle, exp, _ = problem
+    with pytest.raises(PamjaxInputError, match=r"progress must be True, False or a callable .*'yes'"):
+        pj.multistart(muscle, [exp], FREE, starts=2, max_steps=1, progress="yes")

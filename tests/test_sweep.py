@@ -210,6 +210,8 @@ def test_initial_state_path_and_factory(averaged):
         # raw IndexError / "Need at least one array to stack" / "unknown channel 'p'" before
         (dict(over={"signal.value": []}), r"over\['signal.value'\] holds no values"),
         (dict(over={"signal.value": [0.5]}, channels=()), r"channels must be None or a non-empty sequence"),
+        # a raw TypeError after the first chunk had run
+        (dict(over={"signal.value": [0.5]}, progress="yes"), r"progress must be True, False or a callable"),
         (dict(over={"signal.value": [0.5]}, channels="pressure"),
          r"channels must be None or a non-empty sequence of channel names such as \('pressure',\)"),
         # a signal without a frequency: AttributeError 'Constant' object has no attribute 'frequency' before

@@ -23,6 +23,8 @@ def as_scalar(x: RealScalarLike) -> RealScalar:
     (~50 ms the first time in a process: a preset's set-up in every `pamjax` command). An empty array is refused:
     it is no number nor a batch of them (a payload_mass of [] passed the positivity checks vacuously, and the solve
     failed deep inside JAX)."""
+    if isinstance(x, (str, bytes)):  # jnp.asarray("0.1"): a raw TypeError from JAX, naming no parameter
+        raise PamjaxInputError(f"a scalar parameter got the text {x!r}: give a number [SI] (0.1, not \"0.1\")")
     a = _asarray(x)
     if a.size == 0:
         raise PamjaxInputError(f"a scalar parameter got an empty array (shape {a.shape}): give one number [SI], or a "

@@ -107,6 +107,14 @@ def check_in_closed_interval(x, lo, hi, name):
     _traced(x, lambda a: ~((a >= lo) & (a <= hi)), name, f"in [{lo}, {hi}]")
 
 
+def check_progress(progress):
+    """A `progress` argument: True, False (or None) or a callable taking each line, else `PamjaxInputError` before
+    any work (`progress="yes"` failed with a raw TypeError after the first chunk or fit had run)."""
+    if not (isinstance(progress, bool) or progress is None or callable(progress)):
+        raise PamjaxInputError(f"progress must be True, False or a callable taking each progress line, got "
+                               f"{progress!r}")
+
+
 def check_count(x, name, what="a positive int"):
     """`x` a whole count >= 1 (a Python or NumPy integer, not a bool), e.g. a step budget (`max_steps`)."""
     if not (isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_)) and x >= 1):

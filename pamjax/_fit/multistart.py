@@ -22,7 +22,7 @@ import numpy as np
 
 from .._core import jsonio
 from .._core.custom_types import RealArrayLike, RealScalarLike, RealVectorLike
-from .._core.errors import PamjaxInputError, PamjaxSolveError, check_count, require_float64
+from .._core.errors import PamjaxInputError, PamjaxSolveError, check_count, check_progress, require_float64
 from .experiment import Experiments
 from .fit import FitResult, check_fit_inputs, fit
 from .parameters import Free
@@ -146,6 +146,7 @@ def _run_fits(tasks, free, fit_options, spread_over_processes, progress, what):
 
     me = jax.process_index()
     mine = my_tasks(len(tasks)) if spread_over_processes else range(len(tasks))
+    check_progress(progress)  # before any fit
     say = (print if progress is True else progress) if progress else None
     local = {}
     for i in mine:

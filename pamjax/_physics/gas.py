@@ -17,7 +17,7 @@ import numpy as np
 from .._core.custom_types import RealScalar
 from .._core.errors import PamjaxInputError, check_in_open_interval, check_positive, concrete_values
 from .._core.fitting import parameter, positive, ratio
-from .._core.units import ATMOSPHERE, ISO8778_DENSITY, ISO8778_TEMPERATURE, check_sonic_conductance
+from .._core.units import ATMOSPHERE, ISO8778_DENSITY, ISO8778_TEMPERATURE, check_plausible, check_sonic_conductance
 from .._papers import paper000
 from .smooth import safe_divide, safe_sqrt
 
@@ -164,6 +164,7 @@ class EllipseRestriction(AbstractRestriction):
                 f"area), got {cv:g}" + (f"; that looks like percent: write {cv / 100:g}" if cv <= 100 else ""))
         check_in_open_interval(self.critical_ratio, 0.0, 1.0, "EllipseRestriction.critical_ratio")
         check_positive(self.area, "EllipseRestriction.area")
+        check_plausible(self.area, "EllipseRestriction.area")  # 3.14 (mm²) for 3.14e-6 m² refused
         check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "EllipseRestriction.laminar_ratio")
 
     def mass_flow(self, p1, p2, air: Air):
@@ -221,6 +222,7 @@ class NozzleRestriction(AbstractRestriction):
     def __check_init__(self):
         check_positive(self.flow_coefficient, "NozzleRestriction.flow_coefficient")
         check_positive(self.area, "NozzleRestriction.area")
+        check_plausible(self.area, "NozzleRestriction.area")
         check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "NozzleRestriction.laminar_ratio")
 
     def mass_flow(self, p1, p2, air: Air):

@@ -23,7 +23,7 @@ import numpy as np
 
 from .._core.arrays import floats_as_arrays
 from .._core.custom_types import RealArrayLike, RealScalarLike, TimesLike
-from .._core.errors import PamjaxInputError, check_count, check_time_grid, require_float64
+from .._core.errors import PamjaxInputError, check_count, check_progress, check_time_grid, require_float64
 from .._core.fastjit import keyed_by_code
 from .._physics.signals import AbstractSignal
 from .._solve import fixed_step as _fixed_step
@@ -131,6 +131,7 @@ def sweep(
     require_float64("pamjax.sweep")
     system = floats_as_arrays(system)  # a value set with eqx.tree_at: an argument, not a constant of the program
     _check_arguments(system, signal, ts, over, method, dt, chunk_size, gather, reduce)
+    check_progress(progress)
     devices, chunk_size = _check_run_options(method, dt, solve_options, devices, chunk_size)
     channels = channel_names(channels)
     if not isinstance(signal, AbstractSignal):  # a factory written inline: the program of an equal one is reused
