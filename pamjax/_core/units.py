@@ -252,9 +252,6 @@ _PLAUSIBLE = {
     "tank_volume": ("m³", 0.1, "cm³ or litres"),
     "v0": ("m³", MAX_MUSCLE_VOLUME, "cm³ or litres"),
     "nominal_length": ("m", MAX_MUSCLE_LENGTH, "mm"),
-    # an orifice's effective area: paper 000's valve 3.14e-6 m² (2 mm across); 1e-2 m² is an orifice 113 mm across,
-    # no pneumatic valve's: 3.14 (mm²) typed as m² failed after 200,000 steps with a "stiff" hint
-    "area": ("m²", 1e-2, "mm² or cm²"),
     # a braid's strand b_s = √3 (1 − ε_max) L0 (paper 000 eq. 1 at cos²θ = 1/3) is at most √3 L0
     "strand_length": ("m", 3.0**0.5 * MAX_MUSCLE_LENGTH, "mm"),
 }

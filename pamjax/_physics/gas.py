@@ -17,7 +17,7 @@ import numpy as np
 from .._core.custom_types import RealScalar
 from .._core.errors import PamjaxInputError, check_in_open_interval, check_positive, concrete_values
 from .._core.fitting import parameter, positive, ratio
-from .._core.units import ATMOSPHERE, ISO8778_DENSITY, ISO8778_TEMPERATURE, check_plausible, check_sonic_conductance
+from .._core.units import ATMOSPHERE, ISO8778_DENSITY, ISO8778_TEMPERATURE, check_sonic_conductance
 from .._papers import paper000
 from .smooth import safe_divide, safe_sqrt
 
@@ -47,6 +47,20 @@ def check_gas_constant(x, name):
                   "8.314 by the molar mass in kg/mol)" if r < lo else "another unit")
         raise PamjaxInputError(f"{name} = {r:g} J/(kg K): no gas has a specific gas constant outside [{lo:g}, {hi:g}] "
                                f"J/(kg K); that looks like {likely} (pamjax takes J/(kg K): air 287.05)")
+
+
+# m²: an orifice's effective area above this is no pneumatic valve's (paper 000's: 3.14e-6 m², 2 mm across; 1e-2 m²
+# is 113 mm across): 3.14 (mm²) typed as m² failed after 200,000 steps with a "stiff" hint. A restriction's own
+# check, not the generic by-name table of `pamjax._core.units` (a user component's `area` may be a plate's 2 m²).
+MAX_ORIFICE_AREA = 1e-2
+
+
+def check_orifice_area(x, name):
+    """Refuse an orifice area above `MAX_ORIFICE_AREA` [m²]: mm² or cm² typed as m² (concrete values only)."""
+    a = _first_outside(x, 0.0, MAX_ORIFICE_AREA)
+    if a is not None:
+        raise PamjaxInputError(f"{name} = {a:g} m²: more than {MAX_ORIFICE_AREA:g} m² (an orifice 113 mm across); that "
+                               "looks like mm² or cm² (pamjax takes SI units: m²; paper 000's valve: 3.14e-6 m²)")
 
 
 class Air(eqx.Module):
@@ -164,7 +178,7 @@ class EllipseRestriction(AbstractRestriction):
                 f"area), got {cv:g}" + (f"; that looks like percent: write {cv / 100:g}" if cv <= 100 else ""))
         check_in_open_interval(self.critical_ratio, 0.0, 1.0, "EllipseRestriction.critical_ratio")
         check_positive(self.area, "EllipseRestriction.area")
-        check_plausible(self.area, "EllipseRestriction.area")  # 3.14 (mm²) for 3.14e-6 m² refused
+        check_orifice_area(self.area, "EllipseRestriction.area")  # 3.14 (mm²) for 3.14e-6 m² refused
         check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "EllipseRestriction.laminar_ratio")
 
     def mass_flow(self, p1, p2, air: Air):
@@ -222,7 +236,7 @@ class NozzleRestriction(AbstractRestriction):
     def __check_init__(self):
         check_positive(self.flow_coefficient, "NozzleRestriction.flow_coefficient")
         check_positive(self.area, "NozzleRestriction.area")
-        check_plausible(self.area, "NozzleRestriction.area")
+        check_orifice_area(self.area, "NozzleRestriction.area")
         check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "NozzleRestriction.laminar_ratio")
 
     def mass_flow(self, p1, p2, air: Air):
