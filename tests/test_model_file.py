@@ -295,6 +295,9 @@ def test_an_empty_value_is_refused_on_load_and_save(tmp_path, path):
      r"m\.json: structure at payload_mass: \"array\" must name a parameter"),
     (lambda d: d["structure"]["fields"]["valve"]["fields"].update(mode={"tuple": 3}),
      r"m\.json: structure at valve\.mode: \"tuple\" must be a list"),
+    # a top-level "class" contradicting the structure was ignored (the file said one model and loaded another)
+    (lambda d: d.update({"class": "TankSystem"}),
+     r"m\.json: its \"class\" is 'TankSystem', but its structure builds a MuscleSystem"),
 ])
 def test_a_malformed_structure_is_refused_naming_the_entry(tmp_path, edit, match):
     # each escaped as a raw KeyError, TypeError or AttributeError

@@ -458,6 +458,10 @@ def _check_document(decoder, document, batched=True):
     if not isinstance(decoder.parameters, dict):
         decoder.fail("'parameters' must be a table of path → {value, unit}")
     model = decoder.decode(document.get("structure"), "")
+    named = document.get("class")  # the summary the file states at its top: a hand edit left it contradicting
+    if named is not None and named != _class_name(type(model)):
+        decoder.fail(f"its \"class\" is {named!r}, but its structure builds a {_class_name(type(model))}: edit both "
+                     "alike (the structure is what is built)")
     unused = set(decoder.parameters) - decoder.used
     if unused:
         decoder.fail(f"parameter(s) {sorted(unused)} are not part of the model's structure (misspelt paths?)")
