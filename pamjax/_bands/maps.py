@@ -28,6 +28,7 @@ from .._core.errors import PamjaxInputError, PamjaxSolveError
 from .._fit.parameters import Key, getter, join_path
 from .._physics.valves.averaged import cycle_averaged_flow
 from .._sweep.maps import check_flow_surface, frequency_response, steady_state_map
+from .._sweep.sweep import channel_names
 from .._systems.base import AbstractSystem
 from .band import (
     Method,
@@ -166,11 +167,7 @@ def frequency_response_band(result: ResultLike, frequencies: RealVectorLike, *, 
     `frequency_response` (`offset`, `amplitude`, `periods`, ...)."""
     z_of(level)
     check_method(method, samples, seed)
-    if channels is not None and (isinstance(channels, str) or not np.iterable(channels) or not channels
-                                 or not all(isinstance(c, str) for c in channels)):
-        example = f"({channels!r},)" if isinstance(channels, str) else '("position", "pressure")'
-        raise PamjaxInputError(f"channels must be None or a non-empty sequence of channel names such as {example}, "
-                               f"got {channels!r}")  # a bare string was read letter by letter ("unknown channel 'p'")
+    channels = channel_names(channels)  # sweep's check: a bare string was read letter by letter ("unknown channel 'p'")
     kwargs = map_options(response_kwargs, "frequency_response_band", "frequency_response")
     prop = propagation(result, model)
     if channels is None:
