@@ -18,6 +18,7 @@ import json
 import textwrap
 import warnings
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -187,6 +188,25 @@ def test_flow_surface_band_against_central_differences():
     np.testing.assert_allclose(band.std["mass_flow"], reference, rtol=1e-5)
     np.testing.assert_allclose(band.prediction["mass_flow"], pj.flow_surface(model.valve, u, p, model.air),
                                rtol=1e-12)
+
+
+def test_a_linearity_check_point_that_fails_is_counted_and_warned():
+    """A prediction that fails (NaN) at +1 σ of the volume, finite at the fitted value: the linear band's σ is the
+    delta method's, but its linearity check lost an axis; it said "index 0, the linear band holds", failed 0."""
+    model = presets.mas10_tank_system("averaged")
+    volume = float(model.volume)
+    document = dict(labels=["volume"], paths=["volume"], values=[volume], standard_errors=[0.01 * volume],
+                    correlation=[[1.0]], status="converged", mismatch=False)
+    uncertainty = pj.FitUncertainty.from_document(document, "a stated covariance")
+
+    def fragile(m):
+        return jnp.where(m.volume > 1.005 * volume, jnp.nan, 1e6 * m.volume) * jnp.ones(3)
+
+    with pytest.warns(pj.PamjaxBandWarning, match="1 of the 2 linearity-check predictions at ±1 σ failed"):
+        band = pj.prediction_band(uncertainty, fragile, model=model)
+    text = band.describe()
+    assert band.failed == 1 and "1 of 3 predictions failed" in text and "the linear band holds" not in text
+    np.testing.assert_allclose(band.std, 1e6 * 0.01 * volume, rtol=1e-6)
 
 
 def _stated(model, paths, relative):

@@ -187,6 +187,11 @@ def test_initialize_distributed_says_why_it_cannot_join():
                                                "JAX_PROCESS_ID": "one"})
     with pytest.raises(pamjax.PamjaxInputError, match=r"process_id .* in \[0, 1\], got 2"):
         pamjax.runtime.initialize_distributed("h:1", 2, 2)
+    with pytest.raises(pamjax.PamjaxInputError, match="PAMJAX_DISTRIBUTED_TIMEOUT must be .* > 0, got 0"):
+        pamjax.runtime.initialize_distributed("h:1", 2, 1, environ={"PAMJAX_DISTRIBUTED_TIMEOUT": "0"})  # not 300 s
+    for bad in (float("inf"), True):
+        with pytest.raises(pamjax.PamjaxInputError, match="timeout must be"):
+            pamjax.runtime.initialize_distributed("h:1", 2, 1, timeout=bad)
     with pytest.raises(PamjaxDistributedError, match="already started its backend"):
         pamjax.runtime.initialize_distributed("127.0.0.1:1", 2, 1)
 

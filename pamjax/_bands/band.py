@@ -124,7 +124,8 @@ class PredictionBand:
       (an array, or a dict of them).
     - `method` ("linear" or "samples") and `how` (one sentence: which Jacobian or how many draws).
     - `parameters`: the labels propagated; `marginalised`: a rig fit's nuisances left out (the plant's band).
-    - `draws`, `failed`: predictions made for the band and those that failed (NaN; left out of "samples").
+    - `draws`, `failed`: predictions made for the band and those that failed (NaN; left out of "samples"; in
+      "linear", of its linearity check, with a warning).
     - `nonlinearity`: per output, the curvature index of the module docstring (linear method; None for samples).
     - `notes`: what the band cannot promise (model mismatch, a fit not converged, strong nonlinearity).
     """
@@ -150,8 +151,9 @@ class PredictionBand:
         if self.nonlinearity is not None:
             leaves = self.nonlinearity.items() if isinstance(self.nonlinearity, dict) else [("", self.nonlinearity)]
             worst = max(v for _, v in leaves)
-            verdict = (f"< {NONLINEARITY_WARNING}: the linear band holds" if worst <= NONLINEARITY_WARNING else
-                       f"> {NONLINEARITY_WARNING}: see the note")
+            verdict = (f"> {NONLINEARITY_WARNING}: see the note" if worst > NONLINEARITY_WARNING else
+                       "on the axes whose ±1 σ predictions did not fail: see the note" if self.failed else
+                       f"< {NONLINEARITY_WARNING}: the linear band holds")
             lines.append("nonlinearity index " + ", ".join(f"{k} {v:.3g}".strip() for k, v in leaves)
                          + f" ({verdict})")
         if self.failed:
@@ -235,18 +237,26 @@ def _linear(predict, prop, z, check, batch, notes):
                                "the solve failed); use method='samples'")
     lower = jax.tree_util.tree_map(lambda a, s: a - z * s, y, std)
     upper = jax.tree_util.tree_map(lambda a, s: a + z * s, y, std)
-    index, count = None, 1
+    index, count, failed = None, 1, 0
     if check:
         points = sigma_points(prop.theta, cov)
         n = prop.theta.size
         ys = evaluate(predict, prop.space, points[1:], batch)
         count += 2 * n
+        ok = _finite_rows(ys, 2 * n)
+        failed = int(np.count_nonzero(~ok))
+        axes = ok[:n] & ok[n:]  # a failed point's axis is left out of the index (its NaN hid every output's curvature)
         index = jax.tree_util.tree_map(
-            lambda s, a, yy: nonlinearity_index(s, (yy[:n] + yy[n:] - 2 * a[None]) / 2.0), std, y, ys)
+            lambda s, a, yy: nonlinearity_index(s, (yy[:n][axes] + yy[n:][axes] - 2 * a[None]) / 2.0), std, y, ys)
+        if failed:
+            note = (f"{failed} of the {2 * n} linearity-check predictions at ±1 σ failed (a solve that fails within "
+                    "the band's own width): the linear band cannot be trusted there; use method='samples'")
+            notes.append(note)
+            warnings.warn(note, PamjaxBandWarning, stacklevel=3)
         nonlinearity_warning(index, notes)
     how = ("delta method, forward-mode Jacobian in the fit's unconstrained parameters"
            + (f"; linearity checked at ±1 σ along the {prop.theta.size} principal axes" if check else ""))
-    return y, lower, upper, std, how, count, 0, index
+    return y, lower, upper, std, how, count, failed, index
 
 
 def _samples(predict, prop, level, samples, seed, batch, notes):

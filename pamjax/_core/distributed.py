@@ -133,9 +133,14 @@ def initialize_distributed(
     coordinator = coordinator_address or environ.get(ENV_COORDINATOR) or None
     count = num_processes if num_processes is not None else _env_int(ENV_NUM_PROCESSES, environ)
     index = process_id if process_id is not None else _env_int(ENV_PROCESS_ID, environ)
-    timeout = timeout if timeout is not None else (_env_int(ENV_TIMEOUT, environ) or DEFAULT_TIMEOUT)
-    if not (isinstance(timeout, int | float) and timeout > 0):
-        raise PamjaxInputError(f"timeout must be a number of seconds > 0, got {timeout!r}")
+    if timeout is None:  # an environment value of 0 is refused below, not read as "unset" (it ran with 300 s)
+        timeout = _env_int(ENV_TIMEOUT, environ)
+        timeout, timeout_name = (DEFAULT_TIMEOUT, "timeout") if timeout is None else (timeout, ENV_TIMEOUT)
+    else:
+        timeout_name = "timeout"
+    if not (isinstance(timeout, int | float) and not isinstance(timeout, bool) and timeout > 0
+            and np.isfinite(timeout)):
+        raise PamjaxInputError(f"{timeout_name} must be a number of seconds > 0, got {timeout!r}")
     given = {"coordinator_address": coordinator, "num_processes": count, "process_id": index}
     cluster = _detected_cluster(environ)
     if all(v is not None for v in given.values()):
