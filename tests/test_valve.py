@@ -238,6 +238,18 @@ def test_an_edge_width_not_well_below_the_pwm_period_is_refused(width, frequency
     presets.mas10_valve("smooth", pwm_frequency=249.0)  # the default 1e-4 s at the fastest PWM the delays allow
 
 
+def test_the_smooth_opening_stays_within_0_and_1_with_unequal_delays():
+    # A 2 ms switch-on and a zero switch-off delay: a pulse just short of 2 ms (duty ~0.1) half-opens the valve
+    # through the smooth gate while its off edge u T + t_off comes before the on edge t_on; the sum of logistic
+    # steps dipped to -0.055 (flow reversed through the supply path) between the two edges.
+    valve = presets.mas10_valve("smooth", switch_on_delay=2e-3, switch_off_delay=0.0)
+    ts = np.linspace(0.0, T, 2001)
+    for duty in np.linspace(0.07, 0.13, 25):
+        for previous in (0.0, 0.5, 1.0):
+            o = np.asarray(_openings(valve, ts, np.array([duty, previous])))
+            assert o.min() >= 0.0 and o.max() <= 1.0, (duty, previous, o.min(), o.max())
+
+
 def test_a_zero_length_pulse_switches_nothing_with_zero_delays():
     # switch_on_delay = 0 (accepted) opened the valve at duty 0 in every period: the gate u T - t_on >= 0 held for a
     # zero-length pulse (exact: open, smooth: half open, a tank at duty 0 charged to supply); with both delays 0 the
