@@ -170,3 +170,17 @@ def test_numpy_integer_counts_of_the_solver_and_the_loop_experiment_are_taken():
     assert loop.substeps == 4 and type(loop.substeps) is int
     with pytest.raises(PamjaxInputError, match="substeps must be an integer >= 1"):
         pj.bench.HysteresisLoopExperiment(x, np.full(5, 4e5), np.full(5, 0.01), np.ones(5), scale=1.0, substeps=0)
+
+
+def test_noise_scales_in_another_unit_are_refused_by_name():
+    # scales=dict(position=0.1) meant 0.1 mm: 5x the whole recorded stroke, the position weighted 1,000x too little,
+    # fitted silently; a pressure noise of 0.02 meant 0.02 bar weighted the pressure 1e5x too much.
+    model = presets.mas10_system("averaged")
+    signal = pamjax.Triangle(0.05, 0.95, 0.25)
+    rec = pamjax.synthetic_recording(model, signal, np.linspace(0.0, 4.0, 201),
+                                     noise=dict(pressure=2e3, position=1e-4), seed=0)
+    with pytest.raises(PamjaxInputError, match=r"scales\['position'\] = 0.1 exceeds the whole range .*0.1 mm = 1e-4"):
+        pamjax.Experiment(rec, signal, channels=["pressure", "position"], scales=dict(pressure=2e3, position=0.1))
+    with pytest.raises(PamjaxInputError, match=r"scales\['pressure'\] = 0.02 Pa is below 1 Pa.*kPa or bar"):
+        pamjax.Experiment(rec, signal, channels=["pressure", "position"], scales=dict(pressure=0.02, position=1e-4))
+    pamjax.Experiment(rec, signal, channels=["pressure", "position"], scales=dict(pressure=2e3, position=1e-4))

@@ -123,6 +123,28 @@ def _default_scale(values):
     return 0.01 * span if span > 0 else 1.0
 
 
+# Fewer recorded samples than this and a channel's range says little about its noise: not checked against it
+# (the range of n normal samples is ~4 σ at n = 20, ~6.5 σ at 1,000).
+MIN_SAMPLES_FOR_SCALE_CHECK = 20
+MIN_PRESSURE_SCALE = 1.0  # Pa: below any transducer's noise (a 16-bit reading of 0-10 bar resolves 15 Pa): kPa or bar
+
+
+def check_noise_scale(channel, scale, values):
+    """Refuse a given noise level (`scales[channel]`, a standard deviation in the channel's SI unit) that the
+    recorded `values` contradict: larger than their whole range (0.1 meant in mm weighted the position 1,000× too
+    little, silently), or a pressure noise below `MIN_PRESSURE_SCALE` Pa (0.02 meant in bar: weighted 1e5× too much)."""
+    if channel.startswith("pressure") and scale < MIN_PRESSURE_SCALE:
+        raise PamjaxInputError(f"scales[{channel!r}] = {scale:g} Pa is below {MIN_PRESSURE_SCALE:g} Pa, no pressure "
+                               "sensor's noise: that looks like kPa or bar (0.02 bar = 2 kPa = 2e3 Pa); the scale "
+                               "is the channel's noise standard deviation in Pa")
+    span = float(np.ptp(values)) if values.size >= MIN_SAMPLES_FOR_SCALE_CHECK else 0.0
+    if span > 0 and scale > span:
+        hint = " (0.1 mm = 1e-4 m)" if channel.startswith("position") else ""
+        raise PamjaxInputError(f"scales[{channel!r}] = {scale:g} exceeds the whole range of the recorded {channel} "
+                               f"({span:.4g}): a noise standard deviation is a fraction of it; is it in another unit"
+                               f"{hint}? Scales are in the channel's SI unit")
+
+
 def _compared_channels(recording, channels, name):
     """The checked tuple of an `Experiment`'s compared channels (default: the recording's pressure, position,
     velocity and force): recorded, and each named once."""
@@ -239,6 +261,8 @@ class Experiment(AbstractExperiment):
         for c, s in self.scales.items():
             if not (np.isfinite(s) and s > 0):
                 raise PamjaxInputError(f"scales[{c!r}] must be > 0 (the channel's noise level), got {s}")
+        for c in self.noise_channels:
+            check_noise_scale(c, self.scales[c], recording[c][recording.mask[c]])
         if not 0.0 <= float(validation_fraction) < 1.0:
             raise PamjaxInputError(f"validation_fraction must be in [0, 1), got {validation_fraction}")
         t = recording.t
