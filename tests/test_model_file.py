@@ -153,6 +153,20 @@ def test_a_value_in_another_unit_is_converted_to_si(tmp_path, path, value, unit,
     assert float(leaf) == pytest.approx(si, rel=1e-12, abs=1e-12)
 
 
+def test_a_gauge_unit_is_relative_to_the_models_own_atmosphere(tmp_path):
+    # a bench at 1,600 m (83.4 kPa): "6 bar gauge" was read as 6e5 + 101325 Pa whatever the file's atmosphere, 17.9 kPa
+    # too high; p_max in "Pa abs" likewise 17.9 kPa too low
+    def edit(p):
+        p["air.atmospheric_pressure"].update(value=83.4, unit="kPa abs")
+        p["valve.supply_pressure"].update(value=6.0, unit="bar gauge")
+        p["muscle.force_law.max_pressure"].update(value=683400.0, unit="Pa abs")
+
+    m = pamjax.load_model(_file(tmp_path, edit, model=presets.mas10_system("pwm")))
+    assert float(m.air.atmospheric_pressure) == pytest.approx(83400.0, rel=1e-12)
+    assert float(m.valve.supply_pressure) == pytest.approx(683400.0, rel=1e-12)
+    assert float(m.muscle.force_law.max_pressure) == pytest.approx(6e5, rel=1e-12)
+
+
 @pytest.mark.parametrize("path, value, unit, match", [
     # the battery's silent cases: a number in another unit under the SI one
     ("payload_mass", 9600.0, "kg", r"m\.json: parameter payload_mass = 9600 kg.*looks like g.*\"unit\": \"g\""),

@@ -362,12 +362,13 @@ def canonical_unit(unit):
     return "1" if u in ("", "-", "1") else u
 
 
-def parameter_to_si(declared, given, values, name):
+def parameter_to_si(declared, given, values, name, atmosphere=ATMOSPHERE):
     """`values` of parameter `name`, given in unit `given`, in the component's own unit `declared` (SI): converted,
     or a `PamjaxInputError` naming `name`, the unit and the ones accepted. `declared` None (a parameter whose unit
     pamjax does not know) takes only the empty unit. Pressures: a field in `Pa abs` takes any pressure unit that says
     `abs` or `gauge` (`bar abs`, `barg`; Pa alone is absolute), one in `Pa gauge` likewise (`Pa` alone refused: say
-    which), one in plain `Pa` (a pressure scale, neither) takes an unqualified unit (`kPa`, `bar`)."""
+    which), one in plain `Pa` (a pressure scale, neither) takes an unqualified unit (`kPa`, `bar`); gauge and absolute
+    differ by `atmosphere` [Pa] (the model's own atmospheric pressure where it states one)."""
     values = np.asarray(values, dtype=float)
     if given is None:
         return values
@@ -383,7 +384,7 @@ def parameter_to_si(declared, given, values, name):
     if have == want:
         return values
     if want in ("Pa abs", "Pa gauge", "Pa"):
-        return _pressure_parameter(want, given, values, name)
+        return _pressure_parameter(want, given, values, name, atmosphere)
     if want == "K" and given.strip() in _CELSIUS:
         return values + 273.15
     table = {canonical_unit(u): f for u, f in _PARAMETER_FACTORS.get(want, {}).items()}
@@ -394,7 +395,7 @@ def parameter_to_si(declared, given, values, name):
                            f"{declared!r}; write the value in one of {accepted}")
 
 
-def _pressure_parameter(want, given, values, name):
+def _pressure_parameter(want, given, values, name, atmosphere):
     m = _PRESSURE.match(given.strip())
     if m is None:
         raise PamjaxInputError(f"{name}: unit {given!r} is not a pressure unit; this parameter is in {want!r} (Pa, "
@@ -414,5 +415,5 @@ def _pressure_parameter(want, given, values, name):
                                f"or '{base} gauge'); this parameter is {kind} pressure in Pa")
     si = values * factor
     if want == "Pa abs":
-        return si + ATMOSPHERE if gauge else si
-    return si - ATMOSPHERE if absolute else si
+        return si + atmosphere if gauge else si
+    return si - atmosphere if absolute else si

@@ -34,7 +34,7 @@ from .._core.errors import PamjaxInputError, require_float64
 from .._core.fitting import field_units
 from .._core.jsonio import plain
 from .._core.metadata import version
-from .._core.units import check_setting, parameter_to_si
+from .._core.units import ATMOSPHERE, check_setting, parameter_to_si
 from .._physics.signals import AbstractSignal
 from .._solve.checks import batched_parameters, describe_batched
 
@@ -251,7 +251,8 @@ class _Decoder:
                       "model takes several)")
         unit = entry.get("unit")
         try:
-            value = parameter_to_si(declared, None if unit in (None, "") else unit, value, name)
+            value = parameter_to_si(declared, None if unit in (None, "") else unit, value, name,
+                                    self.atmosphere_for(path))
             check_setting(path, value, "parameter")
         except PamjaxInputError as err:
             self.fail(f"{err}{_unit_hint(str(err), declared)}")
@@ -267,6 +268,25 @@ class _Decoder:
         if value.ndim == 0 and dtype == np.float64:
             return as_scalar(value.item())  # a scalar as `jnp.asarray(9.6)` makes it (the components' converter)
         return device_array(value)
+
+    def atmosphere_for(self, path):
+        """The atmospheric pressure [Pa abs] a gauge unit of parameter `path` is relative to: the file's nearest
+        enclosing `air.atmospheric_pressure` (a bench at 1,600 m: 6 barg at 83.4 kPa is 683.4 kPa abs, not the 701.3
+        of the standard atmosphere), else ISO 2533's; an entry that is no number is left to its own decoding."""
+        best, atmosphere = -1, ATMOSPHERE
+        for key, entry in self.parameters.items():
+            parts = key.split(".")
+            if parts[-2:] != ["air", "atmospheric_pressure"] or not isinstance(entry, dict):
+                continue
+            owner = ".".join(parts[:-2])
+            if (owner == "" or path.startswith(owner + ".")) and len(owner) > best:
+                try:
+                    value = float(parameter_to_si("Pa abs", entry.get("unit") or None, entry.get("value"), key))
+                except (PamjaxInputError, TypeError, ValueError):
+                    continue
+                if np.isfinite(value) and value > 0:
+                    best, atmosphere = len(owner), value
+        return atmosphere
 
     def _dtype(self, spec, name, counted=False):
         """The entry's dtype: floating point, or an integer one for a unitless setting (`counted`: a seed, a count,
