@@ -343,7 +343,8 @@ def test_a_triangle_without_duty_column_refused_mid_way_and_said_at_rest(tmp_pat
     with pytest.raises(PamjaxInputError, match=r"'M' was logged mid-way .*/M\.csv has no duty column .*phase .*"
                                                "unknown.*record the commanded duty"):
         pj.bench.load_bench(midway, _plant())
-    rest = pj.bench.load_bench(_csv_bench(tmp_path / "rest", {"M": (TRIANGLE, header, columns)}), _plant())
+    at_rest = [T_RUN, np.zeros(500), RISING]  # at rest: the atmosphere (3 bar gauge is a run logged mid-way)
+    rest = pj.bench.load_bench(_csv_bench(tmp_path / "rest", {"M": (TRIANGLE, header, at_rest)}), _plant())
     assert isinstance(rest.experiments[0].signal, pj.Triangle)
     assert any("M: no recorded duty column; driven by meta.json's triangle" in n for n in rest.notes), rest.notes
 
@@ -562,3 +563,95 @@ def test_pamjax_fit_prints_the_runs_left_out_and_the_loaders_notes(tmp_path, mon
     out = capsys.readouterr().out
     assert f"bench {folder}: left out: P (kind 'muscle_PI' not fitted" in out, out
     assert "\n  T: T.csv's 'valve_current' ignored" in out, out
+
+
+AT_REST = [T_RUN, np.zeros(500), 0.02 + np.zeros(500), -15.0 + 0.1 * np.sin(T_RUN * 400)]  # 2 kPa offset, still
+
+
+def test_a_partial_list_of_a0_to_a4_or_a_name_for_a_list_is_refused(tmp_path):
+    # a0…a4 are one array: fitted_keys ["Cv12", "a0"] freed all five and reported a0 alone; a string was read as its
+    # characters ("C", "v", ...).
+    folder = _csv_bench(tmp_path / "b", {"M": ({"kind": "muscle_run"}, RUN_HEADER.format("pressure"), AT_REST)})
+    with pytest.raises(PamjaxInputError, match=r"fitted_keys name \['a0'\] of a0…a4.*one array.*give all five"):
+        pj.bench.load_bench(folder, _plant(), fitted_keys=["Cv12", "a0"])
+    with pytest.raises(PamjaxInputError, match=r"fitted_keys must be a list of bench parameter names .*'Cv12'"):
+        pj.bench.load_bench(folder, _plant(), fitted_keys="Cv12")
+    whole = pj.bench.load_bench(folder, _plant(), fitted_keys=("Cv12", "a0", "a1", "a2", "a3", "a4"))
+    assert whole.free == ["valve.inflate.discharge_coefficient", "muscle.force_law.max_force_coefficients"]
+    assert whole.fitted_keys == ["Cv12", "a0", "a1", "a2", "a3", "a4"]
+
+
+def test_the_noise_estimate_is_taken_at_the_recorded_rate(tmp_path):
+    # Decimating keeps recorded samples (each sample's noise as it was) but aliases the 50 Hz PWM ripple into the
+    # second differences: at 100 Hz the pressure's estimate was 6-9x the sensor's on realistic1.
+    import shutil
+
+    from pamjax.gallery import bench_folder
+
+    folder = tmp_path / "bench"
+    shutil.copytree(bench_folder(), folder)
+    meta = json.loads((folder / "meta.json").read_text())
+    meta.pop("noise")
+    (folder / "meta.json").write_text(json.dumps(meta))
+    full = pj.bench.load_bench(folder, _plant())
+    for rate in (200.0, 100.0):
+        low = pj.bench.load_bench(folder, _plant(), rate=rate)
+        assert low.noise == full.noise and len(low.experiments[0].times) < len(full.experiments[0].times)
+
+
+def test_a_start_estimate_at_a_low_rate_takes_enough_samples(tmp_path):
+    # At 25 Hz the first 20 ms held one sample, and the line through it raised numpy's LinAlgError.
+    folder = _csv_bench(tmp_path / "b", {"M": (MIDWAY, "t [s],duty [-],position [mm]",
+                                              [T_RUN, np.full(500, 0.6), RISING])})
+    bench = pj.bench.load_bench(folder, _plant(), nuisance=True, rate=25.0)
+    assert float(bench.model.runs["M"].start.velocity) == pytest.approx(0.02)
+    assert any("M: start state fitted" in n and "first 80 ms of data" in n for n in bench.notes), bench.notes
+
+
+def test_runs_named_by_numbers_are_quoted_in_their_paths_and_a_name_no_path_holds_is_refused(tmp_path):
+    # Was: runs[1].supply_pressure, which the fit's own path parser refuses (an array index).
+    runs = {"1": ({"kind": "muscle_run"}, RUN_HEADER.format("pressure"), AT_REST)}
+    bench = pj.bench.load_bench(_csv_bench(tmp_path / "num", runs), _plant(), nuisance=True)
+    assert "runs['1'].supply_pressure" in bench.free
+    space = pj.ParameterSpace(bench.model, bench.free)
+    assert "runs['1'].supply_pressure" in space.labels
+    bad = _csv_bench(tmp_path / "bad", {"E]2": runs["1"]})
+    with pytest.raises(PamjaxInputError, match=r"run 'E\]2' cannot be named in a parameter path .*rename the run"):
+        pj.bench.load_bench(bad, _plant(), nuisance=True)
+
+
+def test_a_muscle_run_logged_mid_way_without_init_is_refused(tmp_path):
+    # A muscle_run (any duty) was fitted from rest though its first samples read 5.7 bar abs; triangles were refused.
+    header, high = RUN_HEADER.format("pressure"), np.full(500, 4.7)  # barg
+    for kind, run in (({"kind": "muscle_run"}, (header, [T_RUN, np.full(500, 0.6), high, RISING])),
+                      (TRIANGLE, ("t [s],pressure [barg],position [mm]", [T_RUN, high, RISING]))):  # no duty: no phase
+        folder = _csv_bench(tmp_path / kind["kind"], {"M": (kind, *run)})
+        with pytest.raises(PamjaxInputError, match=r"'M' starts at 571325 Pa abs \(\+4\.7 bar gauge.* logged from the "
+                                                   r"middle.*mark it with \"init\": \"unknown\""):
+            pj.bench.load_bench(folder, _plant())
+    marked = _csv_bench(tmp_path / "marked", {"M": (MIDWAY, header, [T_RUN, np.full(500, 0.6), high, RISING])})
+    assert pj.bench.load_bench(marked, _plant()).unknown_starts == ["M"]
+    rest = _csv_bench(tmp_path / "rest", {"M": ({"kind": "muscle_run"}, header, AT_REST)})  # a sensor offset: at rest
+    assert [e.name for e in pj.bench.load_bench(rest, _plant()).experiments] == ["M"]
+
+
+@pytest.mark.parametrize("entry, match", [
+    ({"p0": 1.01325}, r"'T' p0 must be 'p_atm', 'p_s' or a pressure in Pa ABSOLUTE .*got 1\.01325"),
+    ({"p0": True}, r"'T' p0 must be .*got True"),
+    ({"p0": 1e9}, r"'T' p0 must be .*got 1000000000\.0"),
+    ({"supply_Pa": 5.5e4, "supply_sd_Pa": 1e3}, r"meta\.json: T: supply_Pa = 55000 Pa is not above the atmosphere"),
+])
+def test_a_tank_start_or_a_supply_reading_that_is_no_absolute_pressure_is_named(tmp_path, entry, match):
+    folder = _csv_bench(tmp_path / "b", {"T": ({**TANK[0], **entry}, TANK[1], TANK[2])})
+    with pytest.raises(PamjaxInputError, match=match):
+        pj.bench.load_bench(folder, _plant())
+
+
+def test_two_experiments_of_one_name_in_meta_json_are_refused(tmp_path):
+    # JSON keeps the last of two keys: two runs of one name were one run, silently.
+    folder = _csv_bench(tmp_path / "b", {"T": TANK})
+    text = (folder / "meta.json").read_text()
+    twice = text.replace('"experiments": {', '"experiments": {"T": {"kind": "tank_charge"}, ')
+    (folder / "meta.json").write_text(twice)
+    with pytest.raises(PamjaxInputError, match=r"meta\.json: key 'T' is written twice in one table"):
+        pj.bench.load_bench(folder, _plant())

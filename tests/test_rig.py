@@ -750,3 +750,49 @@ def test_a_valve_faster_or_slower_than_the_models_is_named_and_not_taken_for_a_s
             assert "an acquisition delay, or a valve that switches 0.40 ms slower" in both, both
         else:
             assert "an offset at rest" in text and "opens before" not in text and "opens after" not in text, text
+
+
+def _bench_config(rig, tmp_path, body=""):
+    cfg = tmp_path / "rig.toml"
+    cfg.write_text('[model]\npreset = "mas10_system"\noptions = { valve = "pwm", friction = "karnopp" }\n'
+                   f'[bench]\ndir = "{rig}"\nnuisance = true\n' + body)
+    return cfg
+
+
+def test_fit_free_beside_bench_nuisance_frees_the_nuisances_too(rig, tmp_path):
+    # Was: [fit] free replaced the bench's free list, so `nuisance = true` held every nuisance, silently.
+    from pamjax._cli.fit import load
+
+    setup = load(_bench_config(rig, tmp_path, '[fit]\nfree = ["plant.friction.coulomb_force"]\n'))
+    assert setup.bench.nuisance and "runs[M1].start.position" in setup.bench.nuisance
+    assert setup.free == ["plant.friction.coulomb_force", *setup.bench.nuisance]
+    assert any("[fit] free: the nuisances [bench] frees are fitted beside it" in n for n in setup.bench.notes)
+    both = load(_bench_config(rig, tmp_path, '[fit]\nfree = ["plant.friction.coulomb_force", '
+                                             '"sensors[rig].delay"]\n'))  # one already named: not twice
+    assert both.free.count("sensors[rig].delay") == 1 and len(both.free) == len(setup.free)
+
+
+def test_an_experiment_with_initial_beside_a_bench_rig_is_checked_against_its_plant(rig, tmp_path):
+    # Was: AttributeError "'Rig' object has no attribute 'valve'" (its `initial` checked against the tank of the rig).
+    from pamjax._cli.fit import load
+
+    extra = (f'[[experiment]]\nname = "extra"\nfile = "{rig / "T1.csv"}"\ntank_volume = 5e-5\nchannels = ["pressure"]\n'
+             'scales = { pressure = 2e3 }\ninitial = { INITIAL = 101325.0 }\n')
+    setup = load(_bench_config(rig, tmp_path, extra.replace("INITIAL", "pressure")))
+    assert [e.name for e in setup.experiments][-1] == "extra" and isinstance(setup.model, pj.Rig)
+    with pytest.raises(PamjaxInputError, match=r"\[\[experiment\]\] #1 initial"):
+        load(_bench_config(rig, tmp_path, extra.replace("INITIAL", "presure")))
+
+
+def test_a_rig_experiment_named_by_a_number_gets_a_path_the_fit_reads(rig, tmp_path):
+    # [rig] free = ["supply_pressure"] of an [[experiment]] named "1" was runs[1].supply_pressure: an array index.
+    from pamjax._cli.fit import load
+
+    cfg = tmp_path / "rig.toml"
+    cfg.write_text('[model]\npreset = "mas10_system"\noptions = { valve = "pwm", friction = "karnopp" }\n'
+                   '[fit]\nfree = ["valve.inflate.discharge_coefficient"]\n[rig]\nfree = ["supply_pressure"]\n'
+                   f'[[experiment]]\nname = "1"\nfile = "{rig / "T1.csv"}"\ntank_volume = 5e-5\n'
+                   'channels = ["pressure"]\nscales = { pressure = 2e3 }\nsupply_pressure = 6.3e5\n')
+    setup = load(cfg)
+    assert setup.free == ["plant.valve.inflate.discharge_coefficient", "runs['1'].supply_pressure"]
+    assert pj.ParameterSpace(setup.model, setup.free).initial_values()[1] == 6.3e5

@@ -15,6 +15,7 @@ from .._fit.builds import PayloadFromModel
 from .._fit.recording import Recording
 from .._physics.signals import Constant, Sampled, Triangle
 from .._systems.base import AbstractMuscleSystem
+from .checks import number, unique_keys
 
 TANK_KINDS = ("tank_charge", "tank_discharge")
 MUSCLE_KINDS = ("muscle_triangle", "muscle_run")
@@ -27,11 +28,6 @@ RECORDING_SUFFIXES = (".npz", ".csv", ".mat")
 # The channels a bench run is fitted from (`Recording.load(..., channels=...)`): every other column of its file is
 # left unread, whatever it holds (docs/fitting.md: "other columns ignored"), and said in the notes.
 BENCH_CHANNELS = ("command", "pressure", "position")
-# m³: the largest V_tank meta.json may give. A tank test charges a rigid volume through the valve under test: paper
-# 000's and the benches' are 50 cm³ (5e-5 m³); pneumatic test tanks and receivers go to some tens of litres. 0.1 m³
-# (100 l) is also the model's own limit for a tank volume (`check_setting`'s "tank_volume"), so a value past it —
-# litres or cm³ written as m³ (50 for 50 cm³) — is refused here, naming meta.json, instead of inside the fit.
-MAX_TANK_VOLUME = 0.1
 # A recorded duty agrees with meta.json's when every PWM period's value is within this of it: a logger writes the
 # duty with 6 decimals (shared/data/bench-realistic), far below any duty step that changes a valve's behaviour.
 _DUTY_TOLERANCE = 1e-3
@@ -81,7 +77,7 @@ def read_meta(directory):
             f"e.g. {_META_TEMPLATE} (each experiment named as its file; the layout: docs/fitting.md, 'Identifying "
             "your own rig')")
     try:
-        meta = json.loads(path.read_text())
+        meta = json.loads(path.read_text(), object_pairs_hook=unique_keys(str(path)))
     except json.JSONDecodeError as err:
         raise PamjaxInputError(f"{path} is not valid JSON: {err}") from None
     if not isinstance(meta, dict) or not isinstance(meta.get("experiments"), dict) or not meta["experiments"]:
@@ -208,31 +204,6 @@ def check_channels(name, kind, rec, where, notes):
                                f"{sorted([*rec.columns.values(), *rec.ignored])})")
     notes.append(f"{name}: no pressure column in {pathlib.Path(rec.source).name}: fitted on its position alone (a "
                  "pressure is headed 'pressure [barg]', or p)")
-
-
-def tank_volume(name, e, where):
-    """A tank test's `V_tank` [m³] from its meta.json entry `e`: > 0 and at most `MAX_TANK_VOLUME`."""
-    volume = number(e, "V_tank", f"{where}: {name}", 0.0, None, "m^3")
-    if volume is None or volume <= 0:
-        raise PamjaxInputError(f"{where}: tank test {name!r} needs V_tank, its volume > 0 [m^3]")
-    if volume > MAX_TANK_VOLUME:
-        raise PamjaxInputError(
-            f"{where}: tank test {name!r} has V_tank = {volume:g} m^3, more than {MAX_TANK_VOLUME:g} m^3 ("
-            f"{MAX_TANK_VOLUME * 1e3:g} litres), beyond any bench's test tank: V_tank is in m^3, and this looks like "
-            f"litres ({volume:g} l = {volume * 1e-3:g} m^3) or cm^3 ({volume:g} cm^3 = {volume * 1e-6:g} m^3)")
-    return volume
-
-
-def number(e, key, where, lo=None, hi=None, unit=""):
-    if key not in e:
-        return None
-    v = e[key]
-    if not (isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)):
-        raise PamjaxInputError(f"{where}: {key} must be a number{f' [{unit}]' if unit else ''}, got {v!r}")
-    if (lo is not None and v < lo) or (hi is not None and v > hi):
-        hint = " (a duty ratio: 0.5, not 50 %)" if key in ("u", "lo", "hi") and v > 1 else ""
-        raise PamjaxInputError(f"{where}: {key} = {v!r} is outside [{lo}, {hi}]{hint}")
-    return float(v)
 
 
 def period_starts(t, period):
@@ -405,13 +376,21 @@ def _check_duty_range(name, rec):
                            f"there, outside [0, 1] (its range: [{low:g}, {high:g}]); {fix}")
 
 
+# A straight line through the first samples of a run logged mid-way needs two, and a third so that one noisy sample
+# does not set its slope: at a low `rate` (25 Hz: one sample in the 20 ms window; was numpy's "SVD did not converge")
+# the window takes the first three, said in the notes by the time they span.
+START_SAMPLES = 3
+
+
 def start_estimate(rec, offset, plant, lead, window=0.02):
     """A run logged mid-way: its start (pressure, position, velocity) `lead` s before its first sample, from the
-    first `window` seconds of data (the median pressure less the rest offset, a straight line through the position).
-    A pressure the run did not record is the one at which the model rests at that position (`holding_pressure`).
-    Returns (name → start value, what it came from: for the notes)."""
+    first `window` seconds of data, at least its first `START_SAMPLES` (the median pressure less the rest offset, a
+    straight line through the position). A pressure the run did not record is the one at which the model rests at
+    that position (`holding_pressure`). Returns (name → start value, what it came from: for the notes)."""
     keep = rec.t <= rec.t[0] + window
-    out, said = {}, [f"first {window * 1e3:g} ms of data"]
+    keep[:START_SAMPLES] = True
+    span = max(window, float(rec.t[np.count_nonzero(keep) - 1] - rec.t[0]))
+    out, said = {}, [f"first {span * 1e3:g} ms of data"]
     if "pressure" in rec.channels:
         out["pressure"] = float(np.median(rec["pressure"][keep])) - offset
     if "position" in rec.channels and np.ptp(rec["position"]) > 0:
@@ -478,22 +457,3 @@ def payload_build(e, model, where, notes):
     notes.append(f"{where.rsplit(': ', 1)[-1]}: payload {mass:g} kg (payload_kg; the model's is "
                  f"{float(model.payload_mass):g} kg)")
     return PayloadFromModel(mass)
-
-
-def check_runs(runs, meta, kinds, where):
-    """`load_bench`'s `runs` (None: every experiment of `kinds`): names of meta.json's experiments, each of a kind
-    fitted."""
-    if runs is None:
-        return
-    if isinstance(runs, str) or not all(isinstance(r, str) for r in runs) or not runs:
-        raise PamjaxInputError(f"runs must be a non-empty list of experiment names (e.g. [\"E4\"]), got {runs!r}")
-    experiments = meta["experiments"]
-    unknown = [r for r in runs if r not in experiments]
-    if unknown:
-        raise PamjaxInputError(f"{where}: runs {unknown} are not experiments of its meta.json; it has "
-                               f"{sorted(experiments)}")
-    unfitted = [r for r in runs if experiments[r].get("kind") not in kinds]
-    if unfitted:
-        raise PamjaxInputError(f"{where}: runs {unfitted} are of kinds "
-                               f"{sorted({str(experiments[r].get('kind')) for r in unfitted})}, not among kinds="
-                               f"{list(kinds)}")

@@ -32,21 +32,28 @@ import numpy as np
 
 from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError
-from .._core.units import MAX_ABSOLUTE_PA, MIN_ABSOLUTE_PA
 from .._fit.builds import TankFromModel
 from .._fit.experiment import Experiment
 from .._fit.measurement import Measurement
 from .._fit.rig import DEFAULT_GROUP, Rig, RunConditions, Sensors, StartState
 from .._systems.base import AbstractSystem
+from .checks import (
+    check_at_rest,
+    check_calibrations,
+    check_runs,
+    number,
+    run_path,
+    supply_reading,
+    tank_start,
+    tank_volume,
+)
 from .files import (
     FITTED_KINDS,
     MUSCLE_KINDS,
     TANK_KINDS,
     check_channels,
-    check_runs,
     load_recording,
     noise_levels,
-    number,
     on_pwm_clock,
     payload_build,
     period_starts,
@@ -54,7 +61,6 @@ from .files import (
     recording_file,
     run_command,
     start_estimate,
-    tank_volume,
     with_atmosphere,
 )
 
@@ -77,6 +83,7 @@ BENCH_PARAMETERS = {
     "t_on": ("valve.switch_on_delay", "valve.switch_on_delay"),
     "t_off": ("valve.switch_off_delay", "valve.switch_off_delay"),
 }
+_FORCE_PATH = "muscle.force_law.max_force_coefficients"  # a0…a4: one array
 # The nuisances `load_bench(..., nuisance=...)` can free (docs/fitting.md, "Identifying your own rig"), and those
 # `nuisance=True` frees. The position sensor's offset only where a muscle run rests on a stroke limit: elsewhere a
 # shift of the position origin is absorbed EXACTLY by the plant (F_max's quartic a0…a4, eq. 7's k0 − k1 x and eq. 14's
@@ -113,16 +120,26 @@ class Bench:
 
 
 def _free_paths(keys):
+    """(keys as a list, their parameter paths) of bench names `keys`: a0…a4 name one array, so all five or none."""
+    if isinstance(keys, (str, bytes)) or not np.iterable(keys) or not all(isinstance(k, str) for k in keys):
+        raise PamjaxInputError(f"fitted_keys must be a list of bench parameter names (e.g. [\"Cv12\", \"Fc\"]), got "
+                               f"{keys!r}")
+    keys = list(keys)
     unknown = [k for k in keys if k not in BENCH_PARAMETERS]
     if unknown:
         raise PamjaxInputError(f"fitted_keys {unknown} are not bench parameters pamjax knows; valid: "
                                f"{sorted(BENCH_PARAMETERS)}")
+    forces = [k for k in BENCH_PARAMETERS if k in keys and BENCH_PARAMETERS[k][0] == _FORCE_PATH]
+    if forces and len(forces) < 5:  # was: all five freed, the others reported nowhere
+        raise PamjaxInputError(f"fitted_keys name {forces} of a0…a4, the coefficients of F_max(x), which pamjax "
+                               f"fits as one array ({_FORCE_PATH}, by its values at 5 nodes): give all five (a0, a1, "
+                               "a2, a3, a4) or none")
     paths = []
     for k in keys:
         path = BENCH_PARAMETERS[k][0]
         if path not in paths:
             paths.append(path)
-    return paths
+    return keys, paths
 
 
 def _nuisance_names(nuisance):
@@ -175,7 +192,7 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
     - `model`: the plant to be fitted (e.g. `pamjax.presets.mas10_system(valve="pwm", friction="karnopp")`); its
       atmospheric and supply pressures set the tank tests' initial pressures (`p0` "p_atm" / "p_s").
     - `rate`: decimate the recordings to this rate [Hz] (`Recording.resampled`: recorded samples, no filter);
-      None keeps them as recorded.
+      None keeps them as recorded. A noise meta.json does not give is estimated at the recorded rate.
     - `kinds`: the experiment kinds to fit (default: tank charge/discharge and the muscle runs; the closed-loop
       `muscle_PI` runs are left out: pamjax's PWM grid reads a planned duty, not a controller's).
     - `fitted_keys`: bench parameter names to free (default: meta.json's `fitted_keys`).
@@ -210,10 +227,9 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
     """
     directory, meta = read_meta(directory)
     where = f"bench {directory}"
-    keys = list(meta.get("fitted_keys", [])) if fitted_keys is None else list(fitted_keys)
+    keys, free = _free_paths(meta.get("fitted_keys", []) if fitted_keys is None else fitted_keys)
     if not keys:
         raise PamjaxInputError(f"{where}: no parameters to fit: meta.json has no fitted_keys and none were given")
-    free = _free_paths(keys)
     names = _freed(nuisance, position_offset, pressure_gain, pressure_gain_sd)
     unknown_kinds = [k for k in kinds if k not in FITTED_KINDS]
     if unknown_kinds:
@@ -243,9 +259,14 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
             unknown.append(name)
         rec = on_pwm_clock(name, rec, period, notes)
         signal = run_command(name, kind, e, rec, period, f"{where}/meta.json", notes, start_unknown)
+        if kind in MUSCLE_KINDS and not start_unknown:  # fitted from rest: its first samples must read it
+            check_at_rest(name, rec, p_atm, f"{where}/meta.json")
+        # the noise from the recordings as recorded: decimating (`resampled` keeps recorded samples) leaves each
+        # sample's noise as it was, but aliases the 50 Hz PWM ripple into the second differences (realistic1's 2 kPa
+        # read 12-18 kPa at 200-100 Hz)
+        recordings.append(rec)
         if rate is not None:
             rec = rec.resampled(rate)
-        recordings.append(rec)
         specs.append((name, kind, e, rec, signal))
     noise = noise_levels(meta, recordings, f"{where}/meta.json", notes)
     experiments = []
@@ -265,7 +286,7 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
         raise PamjaxInputError(f"{where}: no experiment of the kinds {list(kinds)}")
     bench = Bench(experiments, free, keys, noise, skipped, meta, directory, None if rate is None else float(rate),
                   model=model, notes=notes, unknown_starts=unknown)
-    _unfreed_notes(notes, names, unknown, specs, where)
+    _unfreed_notes(notes, names, unknown, specs, where, p_atm)
     if names or position_offset or pressure_gain is not None:
         _with_nuisance(bench, specs, names, p_atm, float(position_offset), pressure_gain, by_default=nuisance is True,
                        pressure_gain_sd=pressure_gain_sd)
@@ -278,23 +299,17 @@ def _tank_test(name, kind, e, rec, signal, noise, p_atm, substeps, where):
         raise PamjaxInputError(f"{where}: {name!r} is a tank test, which lifts no payload; payload_kg belongs to "
                                "muscle runs")
     volume = tank_volume(name, e, where)
-    p0 = e.get("p0", "p_atm" if kind == "tank_charge" else "p_s")
-    if p0 == "p_s":
-        p0 = "supply"  # the run's own supply pressure (its nuisance, when fitted)
-    elif p0 == "p_atm":
-        p0 = p_atm
-    elif not isinstance(p0, (int, float)):
-        raise PamjaxInputError(f"{where}: {name!r} p0 must be 'p_atm', 'p_s' or a pressure [Pa abs], got {p0!r}")
+    p0 = tank_start(name, kind, e, p_atm, where)  # "supply": the run's own supply pressure (its nuisance, if fitted)
     return Experiment(rec, signal, channels=["pressure"], scales={"pressure": noise["pressure"]},
                       build=TankFromModel(volume), initial={"pressure": p0}, name=name, substeps=substeps)
 
 
-def _unfreed_notes(notes, names, unknown, specs, where):
+def _unfreed_notes(notes, names, unknown, specs, where, p_atm):
     """Notes on what the bench holds that the nuisances not freed leave unused: unknown starts, supply readings."""
     if unknown and "start" not in names:
         notes.append(f"{', '.join(unknown)}: start state unknown (meta.json init); fitted as if at rest unless the "
                      "start is freed (nuisance=True / --nuisance)")
-    read = [name for name, _, e, _, _ in specs if _supply_reading(e, f"{where}/meta.json: {name}") is not None]
+    read = [name for name, _, e, _, _ in specs if supply_reading(e, f"{where}/meta.json: {name}", p_atm) is not None]
     if read and "supply_pressure" not in names:
         notes.append(f"{', '.join(read)}: supply pressures read by a reference gauge (meta.json supply_Pa), unused: "
                      "the supply pressures are not freed (nuisance=True / --nuisance fits them with the readings)")
@@ -304,42 +319,12 @@ def _freed(nuisance, position_offset, pressure_gain, pressure_gain_sd):
     """The nuisance names `load_bench` frees, the calibrations checked first: a calibrated gain is held
     (`nuisance=True` frees the others), a calibrated gain with its uncertainty is fitted (with its measurement)."""
     names = _nuisance_names(nuisance)
-    _check_calibrations(position_offset, pressure_gain, pressure_gain_sd)
+    check_calibrations(position_offset, pressure_gain, pressure_gain_sd)
     if pressure_gain is not None and nuisance is True:
         names.discard("pressure_gain")
     if pressure_gain_sd is not None:
         names.add("pressure_gain")
     return names
-
-
-def _check_calibrations(position_offset, pressure_gain, pressure_gain_sd=None):
-    """The sensors' calibrations given to `load_bench`, before anything is read: a named error for each mistake."""
-    if pressure_gain_sd is not None:
-        if pressure_gain is None:
-            raise PamjaxInputError("pressure_gain_sd is the uncertainty of a calibrated gain: give pressure_gain too")
-        if not (isinstance(pressure_gain_sd, (int, float)) and not isinstance(pressure_gain_sd, bool) and
-                np.isfinite(pressure_gain_sd) and 0 < pressure_gain_sd <= PRESSURE_GAIN_SD_MAX):
-            raise PamjaxInputError(f"pressure_gain_sd must be the calibration's standard uncertainty, a number in "
-                                   f"(0, {PRESSURE_GAIN_SD_MAX}] (absolute: 0.0005 for ±0.05 %), got "
-                                   f"{pressure_gain_sd!r}")
-    if not (isinstance(position_offset, (int, float)) and np.isfinite(position_offset) and
-            abs(position_offset) < 0.1):
-        raise PamjaxInputError(f"position_offset must be the position sensor's calibrated offset in m (|x| < 0.1 m), "
-                               f"got {position_offset!r}")
-    if pressure_gain is not None and not (
-            isinstance(pressure_gain, (int, float)) and not isinstance(pressure_gain, bool) and
-            np.isfinite(pressure_gain) and PRESSURE_GAIN_RANGE[0] <= pressure_gain <= PRESSURE_GAIN_RANGE[1]):
-        raise PamjaxInputError(f"pressure_gain must be the pressure sensor's calibrated gain, a number in "
-                               f"{list(PRESSURE_GAIN_RANGE)} (1.0: reads true), got {pressure_gain!r}")
-
-
-# A calibrated gain of a pressure sensor lies within ±20 % of 1: a transducer's gain error is a fraction of a percent
-# to a few percent (realistic1's rig and the unseen ones: ±1 %), and a factor outside is a unit or scaling mistake
-# (psi taken for bar: 0.069; bar for psi: 14.5), refused.
-PRESSURE_GAIN_RANGE = (0.8, 1.2)
-# A calibration's standard uncertainty above 5 % says less than the recordings do (they fix the gain to ~0.3-0.4 %
-# with every supply free: benchmarks/RESULTS.md, identify): refused as a likely slip (a per cent for a fraction).
-PRESSURE_GAIN_SD_MAX = 0.05
 
 
 def _with_nuisance(bench, specs, names, p_atm, position_offset, pressure_gain=None, by_default=False,
@@ -399,19 +384,19 @@ def _with_nuisance(bench, specs, names, p_atm, position_offset, pressure_gain=No
     has_supply = _has_supply(valve)
     for (name, kind, e, rec, _), exp in zip(specs, bench.experiments):
         supply = start = None
-        reading = _supply_reading(e, f"bench {bench.directory}/meta.json: {name}")
+        reading = supply_reading(e, f"bench {bench.directory}/meta.json: {name}", p_atm)
         if "supply_pressure" in names and has_supply:
             supply = float(valve.supply())
             if exp.start_at_supply and "pressure" in rec.channels:  # a discharge from supply: its first samples
                 supply = float(np.median(rec["pressure"][:5])) - offset
-            free.append(f"runs[{name}].supply_pressure")
+            free.append(run_path(name, "supply_pressure", f"bench {bench.directory}/meta.json"))
             if reading is not None:  # a reference gauge's reading: the start value, and a measurement in the fit
                 supply = reading[0]
-                gauges[name] = Measurement(f"runs[{name}].supply_pressure", *reading, name=GAUGE_NAME.format(name))
+                gauges[name] = Measurement(free[-1], *reading, name=GAUGE_NAME.format(name))
         if "start" in names and name in bench.unknown_starts:
             estimate, source = start_estimate(rec, offset, plant, START_LEAD)
             start = StartState(**estimate)
-            free += [f"runs[{name}].start.{k}" for k in estimate]
+            free += [run_path(name, f"start.{k}", f"bench {bench.directory}/meta.json") for k in estimate]
             bench.notes.append(f"{name}: start state fitted (meta.json init unknown), from "
                                + ", ".join(f"{k} {v:.4g}" for k, v in estimate.items()) + f" ({source})")
         if supply is not None or start is not None:
@@ -433,19 +418,6 @@ def _add_measurements(bench, gauges, pressure_gain, pressure_gain_sd):
     if gauges:
         bench.notes.append(f"supply pressures read by a reference gauge (meta.json supply_Pa ± supply_sd_Pa) for "
                            f"{', '.join(gauges)}: each fitted with its reading as a measurement")
-
-
-def _supply_reading(e, where):
-    """A run's supply pressure as a reference gauge read it: meta.json's `supply_Pa` (ABSOLUTE [Pa]) and its standard
-    uncertainty `supply_sd_Pa` [Pa], or None where the entry has neither."""
-    if "supply_Pa" not in e and "supply_sd_Pa" not in e:
-        return None
-    value = number(e, "supply_Pa", where, MIN_ABSOLUTE_PA, MAX_ABSOLUTE_PA, "Pa abs")
-    sd = number(e, "supply_sd_Pa", where, 0.0, 1e5, "Pa")
-    if value is None or sd is None or not sd > 0:
-        raise PamjaxInputError(f"{where}: a supply reading needs supply_Pa (the run's supply pressure as a reference "
-                               "gauge read it, ABSOLUTE [Pa]) and supply_sd_Pa (its standard uncertainty [Pa], > 0)")
-    return value, sd
 
 
 CALIBRATION_NAME = "calibration: pressure gain"  # the calibrated gain's `Measurement` among a bench's experiments

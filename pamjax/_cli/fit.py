@@ -15,6 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .._bench.checks import run_path
 from .._core import jsonio
 from .._core.errors import PamjaxInputError
 from .._fit.measurement import check_measured_free
@@ -86,7 +87,7 @@ def build_fit(cfg, model, root):
         bench = _bench(cfg["bench"], model, root)
         experiments += bench.experiments
         model = bench.model  # the plant, or a pamjax.Rig holding it with the rig's nuisances
-        free = bench.free if free is None else free
+        free = bench.free if free is None else _with_nuisance(free, bench)
     check_free(model, free)
     experiments += build_experiments(cfg.get("experiment", []), model, root, fit_cfg.get("validation_fraction", 0.0))
     names = [e.name for e in experiments]
@@ -102,6 +103,17 @@ def build_fit(cfg, model, root):
     options = {k: fit_cfg[k] for k in ("max_steps", "ftol", "xtol", "gtol") if k in fit_cfg}
     staged = bench is not None and cfg["bench"].get("staged", True)  # pamjax.staged_start first (the default)
     return FitSetup(model, experiments, free, options, fit_cfg.get("out"), bench, staged)
+
+
+def _with_nuisance(free, bench):
+    """[fit] free (the plant's paths, `plant.` on the rig) with the nuisances [bench] frees appended (was: dropped,
+    silently, with `nuisance = true`): `[bench] nuisance` chooses them (a list of names for some), and its gauges'
+    and calibration's measurements need them free."""
+    given = {entry if isinstance(entry, str) else entry.get("path") for entry in free}
+    added = [path for path in bench.nuisance if path not in given]
+    if added:
+        bench.notes.append(f"[fit] free: the nuisances [bench] frees are fitted beside it ({', '.join(added)})")
+    return [*free, *added]
 
 
 def _bench(table, model, root):
@@ -156,12 +168,12 @@ def build_experiments(tables, model, root, validation_fraction=0.0):
     keys against the system it drives), then each recording read, windowed, filtered and resampled."""
     import pamjax as pj
 
-    systems = []
+    systems, plant = [], model.plant if isinstance(model, pj.Rig) else model  # a [bench]'s rig: its plant
     for k, e in enumerate(tables):
         build = (pj.TankFromModel(e["tank_volume"]) if "tank_volume" in e
                  else pj.PayloadFromModel(e["payload_kg"]) if "payload_kg" in e else None)
         if "initial" in e:
-            check_initial(build(model) if build is not None else model, e["initial"], f"{_where(k)} initial")
+            check_initial(build(plant) if build is not None else plant, e["initial"], f"{_where(k)} initial")
         systems.append(build)
     experiments = []
     for k, (e, build) in enumerate(zip(tables, systems)):
@@ -209,9 +221,9 @@ def _rig(rig_cfg, tables, model, experiments, free):
         if supply is not None or start is not None:
             runs[e.name] = pj.RunConditions(supply_pressure=supply, start=start)
         if "supply_pressure" in wanted and supply is not None:
-            nuisance.append(f"runs[{e.name}].supply_pressure")
+            nuisance.append(run_path(e.name, "supply_pressure", "[[experiment]] name"))
         if "start" in wanted and start is not None:
-            nuisance += [f"runs[{e.name}].start.{k}" for k in table["start"]]
+            nuisance += [run_path(e.name, f"start.{k}", "[[experiment]] name") for k in table["start"]]
     for g in sorted(groups):
         channels = {c for e in experiments if e.sensor_group == g for c in e.channels}
         for field in schema.SENSOR_FIELDS:
