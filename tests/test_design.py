@@ -1127,3 +1127,110 @@ def test_a_limit_the_run_passes_between_the_samples_is_tightened_and_searched_on
     assert c["feasible"] and c["verified"]["pressure_range"][1] <= limit and c["max_pressure"] == limit
     assert lines == sorted(lines) and [h[0] for h in res.history] == list(range(len(res.history)))  # numbered on
     assert res.iterations == len(res.history) - 1 > 4
+
+
+# --- slips named before any work (issue: an earlier design smoothed, one margin for both thresholds, rate in kHz,
+# a start outside the stroke) ---
+
+
+def _set_up(model, free, duration, **kwargs):
+    """`design_setup.set_up` with `design_experiment`'s defaults (as `check_design` calls it): no solve."""
+    import inspect
+
+    from pamjax._identifiability.design_setup import SETUP_ARGS, set_up
+
+    args = {k: v.default for k, v in inspect.signature(pj.design_experiment).parameters.items() if k in SETUP_ARGS}
+    return set_up(model, free, duration, **{**args, **kwargs})
+
+
+def test_an_earlier_design_given_as_initial_is_the_envelopes_start_as_it_is():
+    # An earlier design's per-period duties under the default envelope were least-squares fitted to its 4-knot level,
+    # the carrier dropped: the start (and a steps=0 score) was another signal, up to 0.17 off. The part the envelope
+    # cannot represent is now its fixed offset: the start duty and the objective's duty at the start are the given
+    # one; a constant (which the envelope represents) needs none, so its designs share one compilation as before.
+    from pamjax._identifiability.design import _problem_of
+
+    given = np.repeat([0.6, 0.8, 0.55, 0.75, 0.5], 4)  # 20 periods of 0.4 s, steps <= 0.25: TANK's max_duty_step
+    setup = _set_up(_tank(), FREE, 0.4, noise=NOISE, **{**TANK, "initial": given})
+    assert setup["basis"] is not None and setup["offset"] is not None  # the envelope, with an offset
+    np.testing.assert_allclose(np.asarray(setup["experiment"].signal.values), given, atol=1e-9)
+    n = len(FREE)
+    problem = _problem_of(setup, np.asarray(setup["space"].initial_theta()), tuple(range(n)), 2.0, None, 0.3,
+                          "D")(np.zeros((n, n)), None)
+    duty = eqx.filter_jit(lambda p, c: p.duty(c))(problem, device_array(setup["c0"]))
+    np.testing.assert_allclose(np.asarray(duty), given, atol=1e-9)
+    assert _set_up(_tank(), FREE, 0.4, noise=NOISE, **TANK)["offset"] is None  # Constant(0.6)
+    signal = pj.Sampled(np.arange(21) * 0.02, [*given, given[-1]])  # `pamjax design`'s initial = "design.csv"
+    np.testing.assert_allclose(np.asarray(_set_up(_tank(), FREE, 0.4, noise=NOISE, **{**TANK, "initial": signal})
+                                          ["experiment"].signal.values), given, atol=1e-9)
+
+
+def test_auto_duty_margin_is_each_thresholds_own_quarter():
+    # t_on 2 ms, t_off 4 ms at 50 Hz: thresholds 0.1 and 0.8, each kept a quarter of its own switching time (0.025,
+    # 0.05); one margin, the smaller, left the 0.8 threshold only 0.025 (and with t_off 1 ms gave 0.1 just 0.0125)
+    from pamjax._identifiability.design_setup import auto_margins, duty_limits
+
+    slow_off = eqx.tree_at(lambda m: m.valve.switch_off_delay, _tank(), jnp.asarray(4e-3))
+    setup = _set_up(slow_off, FREE, 0.4, noise=NOISE, **TANK)
+    assert setup["thresholds"] == pytest.approx((0.1, 0.8), abs=1e-9)
+    assert setup["duty_margin"] == pytest.approx([0.025, 0.05], abs=1e-9)
+    assert setup["band"] == pytest.approx((0.125, 0.9)) and np.allclose(setup["windows"], [(0.75, 0.85)])
+    fast_off = auto_margins((0.1, 0.95))
+    assert fast_off == pytest.approx([0.025, 0.0125])
+    lo, hi, windows = duty_limits((0.0, 1.0), (0.1, 0.95), fast_off)
+    assert np.allclose(windows, [(0.075, 0.125), (0.9375, 0.9625)])
+    assert _set_up(_tank(), FREE, 0.4, noise=NOISE, **TANK)["duty_margin"] == pytest.approx(0.025)  # one number
+    from pamjax._cli.design import constraint_lines
+
+    report = dict(duty_range=[0.2, 0.7], duty_limits=[0.125, 0.9], switching_thresholds=[0.1, 0.8],
+                  duty_band=[0.1, 0.9], duty_margin=[0.025, 0.05], threshold_distance=0.1, min_force=None,
+                  stroke_limits=None, max_pressure=None, max_duty_step=None, feasible=True)
+    assert "kept 0.025, 0.05 (each its own) from the valve's switching thresholds 0.1, 0.8" in constraint_lines(report)
+
+
+@pytest.mark.parametrize("model, kwargs, match", [
+    (_tank, dict(rate=1.0), r"rate 1\.0 Hz is below the PWM frequency \(50 Hz\).* Hz \(1 kHz = 1000\.0\)"),  # kHz
+    (_tank, dict(rate=1e-3), r"rate 0\.001 Hz is below the PWM frequency"),
+    (_tank, dict(design_rate=10.0), r"design_rate 10\.0 Hz is below the PWM frequency"),
+    (_muscle, dict(start={"position": 0.5}), r"start\.position = 0\.5 m lies outside the stroke"),
+    (_tank, dict(start={"pressure": 1.01325}), r"start\.pressure"),  # bar
+    (_tank, dict(subset=FREE[0]), r"subset must be a list of free parameter labels.* got the string"),
+    (_tank, dict(channels="pressure"), r"channels must be a list of recorded channels.* got the string 'pressure'"),
+    (_muscle, dict(noise={"pressure": 2e3, "position": 0.1}), r"noise\['position'\] = 0\.1 m is 1\.1 of the"),
+])
+def test_a_rate_below_the_pwm_frequency_a_start_outside_the_stroke_and_bare_strings_are_named(model, kwargs, match,
+                                                                                              monkeypatch):
+    # rate = 1.0 (meant in kHz) gave the standard errors of a 3-sample run (22-32× worse); 1e-3 failed in Recording,
+    # unnamed; a start at 0.5 m was widened into the stroke limit and failed ~35 s later, misnamed; a bare string
+    # was split into its letters. Each refused before any solve, by the design and by the CLI's check.
+    from pamjax._identifiability.design import check_design
+
+    monkeypatch.setattr(obj, "value", lambda *a: pytest.fail("solved before rejecting the input"))
+    base = dict(noise=NOISE, **TANK) if model is _tank else dict(noise=MUSCLE_NOISE, knots=4, rate=500.0)
+    args = {**base, **kwargs}
+    free = FREE if model is _tank else MUSCLE_FREE
+    with pytest.raises(PamjaxInputError, match=match):
+        pj.design_experiment(model(), free, 0.4, progress=False, **args)
+    with pytest.raises(PamjaxInputError, match=match):
+        check_design(model(), free, 0.4, **args)
+
+
+def test_a_numpy_duration_is_a_number_and_a_missing_initial_csv_names_the_key(tmp_path, capsys):
+    from pamjax._identifiability.design import check_design
+
+    assert check_design(_tank(), FREE, np.int64(1), noise=NOISE, **TANK) is None  # was "not a positive number"
+    cfg = tmp_path / "d.toml"
+    cfg.write_text(textwrap.dedent("""
+        [model]
+        preset = "mas10_tank_system"
+        options = { valve = "pwm" }
+        [design]
+        free = ["valve.inflate.discharge_coefficient"]
+        duration = 0.2
+        noise = { pressure = 2e3 }
+        channels = ["pressure"]
+        start = { pressure = 101325.0 }
+        initial = "nope.csv"
+    """))
+    assert main(["design", str(cfg), "--out", str(tmp_path / "o"), "--quiet", "--no-plot"]) == 2
+    assert "[design] initial = 'nope.csv'" in capsys.readouterr().err and not (tmp_path / "o").exists()

@@ -288,3 +288,98 @@ def test_filter_refuses_bad_noise_sample_time_and_channels():
             ekf.filter(signal, readings, **args)
     with pytest.raises(pj.PamjaxInputError, match="measurement_noise must have one σ_R"):  # the default checked too
         pj.ExtendedKalmanFilter(MODEL, measurement_noise=[2e3]).filter(signal, readings, 1e-3, CHANNELS)
+
+
+def test_filter_refuses_a_signal_simulate_refuses():
+    """A duty triangle of 20-80 (meant in percent) was filtered as a valve held open (final pressure 239 kPa against
+    102 kPa at 0.2-0.8) and a number for a signal failed with a raw TypeError; `simulate`'s check of the signal
+    against the valve names both."""
+    ekf = pj.ExtendedKalmanFilter(MODEL)
+    readings = np.tile([1.5e5, 0.0], (4, 1))
+    with pytest.raises(pj.PamjaxInputError, match=r"filter: signal .* must stay within \[0\.0, 1\.0\].* looks like "
+                                                  r"percent"):
+        ekf.filter(pj.Triangle(20.0, 80.0, 1.0), readings, 1e-3, CHANNELS, BENCH_NOISE)
+    with pytest.raises(pj.PamjaxInputError, match=r"filter: signal must be a pamjax signal"):
+        ekf.filter(0.5, readings, 1e-3, CHANNELS, BENCH_NOISE)
+
+
+_gap_filter = eqx.filter_jit(lambda ekf, readings: ekf.filter(pj.Constant(0.6), readings, 1e-3, CHANNELS,
+                                                               BENCH_NOISE))
+
+
+def test_a_nan_reading_is_a_missing_sample_and_the_start_must_be_finite():
+    """One NaN reading (a dropped sample) turned 40 of 50 later estimates NaN, silently; it is now skipped: the
+    estimates stay finite, those before it unchanged, the pressure's spread grows at the gap and the position still
+    updates there. A t0 or an initial mean that is not finite, or an infinite reading, is refused, named."""
+    ekf = pj.ExtendedKalmanFilter(MODEL)
+    clean = np.tile([1.2e5, -0.004], (12, 1)) + np.outer(np.arange(12), [1e3, 1e-4])
+    gap = clean.copy()
+    gap[5, 0] = np.nan
+    est, std, _ = _gap_filter(ekf, clean)
+    est_gap, std_gap, final = _gap_filter(ekf, gap)
+    assert all(np.all(np.isfinite(np.asarray(getattr(est_gap, k)))) for k in ("pressure", "position", "velocity"))
+    np.testing.assert_array_equal(np.asarray(est_gap.pressure)[:5], np.asarray(est.pressure)[:5])
+    assert float(std_gap.pressure[5]) > 1.2 * float(std.pressure[5])
+    assert abs(float(est_gap.position[5]) - float(est.position[5])) < 1e-6  # its own reading still used
+    assert np.all(np.isfinite(np.asarray(final.covariance)))
+    signal = pj.Constant(0.6)
+    with pytest.raises(pj.PamjaxInputError, match=r"filter: t0 must be finite"):
+        ekf.filter(signal, clean, 1e-3, CHANNELS, BENCH_NOISE, t0=np.nan)
+    bad = clean.copy()
+    bad[7, 1] = np.inf
+    with pytest.raises(pj.PamjaxInputError, match=r"filter: readings\[7, 1\] \(position\) is inf"):
+        ekf.filter(signal, bad, 1e-3, CHANNELS, BENCH_NOISE)
+    with pytest.raises(pj.PamjaxInputError, match=r"initial_state: mean.pressure must be finite"):
+        ekf.initial_state(jax.tree_util.tree_map(lambda a: a * np.nan, MODEL.initial_state()))
+
+
+def test_bad_shapes_and_types_of_the_filters_inputs_are_named():
+    """Each of these failed with a raw TypeError / ValueError (or, a negative-definite covariance, ran): now a
+    `PamjaxInputError` naming the argument, before filtering."""
+    ekf = pj.ExtendedKalmanFilter(MODEL)
+    belief = ekf.initial_state()
+    readings = np.tile([1.5e5, 0.0], (4, 1))
+    signal = pj.Constant(0.6)
+    cases = [
+        (dict(initial=pj.KalmanState(belief.mean, np.eye(2))), r"initial.covariance must have shape \(3, 3\)"),
+        (dict(initial=pj.KalmanState(np.zeros(2), belief.covariance)), r"initial.mean must have shape \(3,\)"),
+        (dict(initial=pj.KalmanState(belief.mean, -belief.covariance)),
+         r"initial.covariance must be symmetric positive semi-definite"),
+        (dict(sample_time=[1e-3, 1e-3]), r"filter: sample_time must be one number"),
+        (dict(noise=[0.02, 1e-4]), r"filter: noise\['pressure'\] = 0\.02 Pa is below 1 Pa"),  # bar
+        (dict(noise=[2e3, 0.1]), r"filter: noise\['position'\] = 0\.1 m is 1\.1 of the muscle's whole stroke"),
+    ]
+    for kwargs, match in cases:
+        args = dict(sample_time=1e-3, noise=BENCH_NOISE) | kwargs
+        with pytest.raises(pj.PamjaxInputError, match=match):
+            ekf.filter(signal, readings, channels=CHANNELS, **args)
+    with pytest.raises(pj.PamjaxInputError, match=r"process_noise\['pressure'\] must be one value .* got shape \(2,\)"):
+        pj.ExtendedKalmanFilter(MODEL, process_noise=dict(pressure=[1e5, 2e5]))
+    with pytest.raises(pj.PamjaxInputError, match=r"measurement_noise must be numbers, got 'abc'"):
+        pj.ExtendedKalmanFilter(MODEL, measurement_noise="abc")
+    with pytest.raises(pj.PamjaxInputError, match=r"initial_state: mean must be a state of the filter's model"):
+        ekf.initial_state(dict(pressure=2e5))
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(seed=1.5), r"LoopSensors.seed must be an integer"),  # was truncated to 1
+    (dict(seed="a"), r"LoopSensors.seed must be an integer"),
+    (dict(samples_per_period=True), r"samples_per_period must be an int >= 1"),
+    (dict(noise=(0.02, 1e-4)), r"LoopSensors.noise\['pressure'\] = 0\.02 Pa is below 1 Pa"),  # bar
+])
+def test_loop_sensors_refuse_a_fractional_seed_a_bool_count_and_a_noise_in_bar(kwargs, match):
+    with pytest.raises(pj.PamjaxInputError, match=match):
+        pj.LoopSensors(**kwargs)
+    assert int(pj.LoopSensors(seed=np.int64(3)).seed) == 3 and int(pj.LoopSensors(seed=2.0).seed) == 2
+
+
+def test_a_loop_refuses_sensor_and_filter_noise_in_mm():
+    """LoopSensors(noise=(2e3, 0.1)): 0.1 m of position noise, more than the stroke (0.1 meant in mm), ran; so did a
+    filter's measurement_noise of [2e3, 0.1]. The loop knows the plant's stroke: refused, naming each table."""
+    ref = pj.Sine(0.03, 0.01, 0.2)
+    with pytest.raises(pj.PamjaxInputError, match=r"LoopSensors.noise\['position'\] = 0.1 m"):
+        pj.ClosedLoop(PLANT, pj.SlidingModeController(MODEL), ref, estimator=pj.ExtendedKalmanFilter(MODEL),
+                      sensors=pj.LoopSensors(noise=(2e3, 0.1)))
+    with pytest.raises(pj.PamjaxInputError, match=r"ExtendedKalmanFilter.measurement_noise\['position'\] = 0.1 m"):
+        pj.ClosedLoop(PLANT, pj.SlidingModeController(MODEL), ref,
+                      estimator=pj.ExtendedKalmanFilter(MODEL, measurement_noise=[2e3, 0.1]))

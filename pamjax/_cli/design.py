@@ -121,7 +121,10 @@ def _initial(value, root):
 
     if not isinstance(value, str):
         return pj.Constant(float(value))
-    rec = pj.Recording.load(pathlib.Path(root) / value)  # its `duty` column is read as channel "command"
+    try:  # a missing or unreadable file named as the key's
+        rec = pj.Recording.load(pathlib.Path(root) / value)  # its `duty` column is read as channel "command"
+    except (PamjaxInputError, OSError) as err:
+        raise PamjaxInputError(f"[design] initial = {value!r}: {err}") from err
     if "command" not in rec.channels:  # held from each row's time: a period's duty at its start
         raise PamjaxInputError(f"[design] initial = {value!r} has no duty column (channels: "
                                f"{sorted(rec.channels)}); give a design.csv of pamjax design")
@@ -262,7 +265,9 @@ def constraint_lines(c):
     band = f"duty {c['duty_range'][0]:.4f} … {c['duty_range'][1]:.4f} within {c['duty_limits'][0]:.4g} … " \
            f"{c['duty_limits'][1]:.4g}"
     if c["switching_thresholds"]:
-        band += (f" (the band {c['duty_band'][0]:g} … {c['duty_band'][1]:g} kept {c['duty_margin']:.4g} from the "
+        margin = c["duty_margin"]  # one number, or one per threshold (auto, asymmetric switching times)
+        kept = f"{margin:.4g}" if np.ndim(margin) == 0 else f"{', '.join(f'{m:.4g}' for m in margin)} (each its own)"
+        band += (f" (the band {c['duty_band'][0]:g} … {c['duty_band'][1]:g} kept {kept} from the "
                  f"valve's switching thresholds {', '.join(f'{t:.4g}' for t in c['switching_thresholds'])}; closest "
                  f"period {c['threshold_distance']:.4g} away)")
     lines.append("  " + band)

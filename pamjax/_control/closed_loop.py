@@ -36,7 +36,7 @@ from .._solve.simulate import solve
 from .._solve.trajectory import RESULT_NONFINITE, result_message
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from .controllers import AbstractController, reference_derivatives
-from .estimator import ExtendedKalmanFilter, LoopSensors, check_channels, check_noise_channels
+from .estimator import ExtendedKalmanFilter, LoopSensors, check_channels, check_noise_channels, check_noise_scale
 from .fixed_grid import period_on_grid
 
 _DEFAULT_SUBSTEPS = 16  # RK4 nodes per period on the fixed grids: ≤ 1.25 ms at 50 Hz, as `simulate`'s PWM grid
@@ -183,6 +183,12 @@ class ClosedLoop(eqx.Module):
             check_channels(self.estimator.model, self.sensors.channels, "estimator's model")
             check_noise_channels(self.estimator.measurement_noise, self.sensors.channels,
                                  "ExtendedKalmanFilter.measurement_noise")
+            # in bar or mm by their magnitude (0.1 m of position noise on a 95 mm stroke was run)
+            check_noise_scale(self.plant, dict(zip(self.sensors.channels, self.sensors.noise)), "LoopSensors.noise")
+            if self.estimator.measurement_noise is not None:
+                check_noise_scale(self.estimator.model, dict(zip(self.sensors.channels,
+                                                                 self.estimator.measurement_noise)),
+                                  "ExtendedKalmanFilter.measurement_noise")
             noise = self.sensors.noise
             if (self.estimator.measurement_noise is None and not isinstance(noise, jax.core.Tracer)
                     and not np.all(np.asarray(noise) > 0)):

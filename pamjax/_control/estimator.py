@@ -19,19 +19,26 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
+import numpy as np
 
 from .._core.arrays import as_array
 from .._core.custom_types import Array, ArrayLike, Float, Int, IntScalarLike, Real, RealArrayLike
-from .._core.errors import PamjaxInputError, check_nonnegative, check_positive
+from .._core.errors import PamjaxInputError, check_finite, check_nonnegative, check_positive, concrete_values
 from .._physics.signals import Step
+from .._solve.checks import check_start_state
 from .._solve.scaled import scaled
-from .._systems.base import AbstractSystem
+from .._solve.simulate import validate
+from .._systems.base import AbstractMuscleSystem, AbstractSystem
 
 # The hybrid reference bench's sensors (`shared/data/hybrid-reference-bench/meta.json`, "noise": p_std_Pa 2000,
 # x_std_m 1e-4; "sampling_hz": 1000): the pressure sensor (Festo SDE1) and the potentiometer of paper 000's Fig. 1.
 BENCH_PRESSURE_NOISE = 2e3  # Pa
 BENCH_POSITION_NOISE = 1e-4  # m
 BENCH_SAMPLES_PER_PERIOD = 20  # 1 kHz at 50 Hz PWM
+MIN_PRESSURE_NOISE = 1.0  # Pa: below any bench transducer's noise (a 16-bit reading of 0-10 bar resolves 15 Pa; the
+# hybrid reference bench's is 2 kPa): a smaller noise is a unit slip, 0.02 meant in bar (2 kPa) or 2 in kPa
+COVARIANCE_RTOL = 1e-9  # of the largest eigenvalue: how negative an initial covariance's may be (round-off), or
+# how far from symmetric its entries
 
 
 def _state_fields(state):
@@ -40,11 +47,56 @@ def _state_fields(state):
 
 
 def _as_seed(seed: IntScalarLike) -> Int[Array, ""]:
+    """A whole number (an int, or a whole-valued number or array: a model file's); 1.5 was truncated to 1 and "a"
+    failed with a raw ValueError. A traced seed (vmapped) is taken as it is."""
+    if not isinstance(seed, jax.core.Tracer):
+        value = None if isinstance(seed, (bool, np.bool_, str, bytes)) else concrete_values(seed)
+        if value is None or value.ndim != 0 or not np.isfinite(value) or value != np.round(value):
+            raise PamjaxInputError(f"LoopSensors.seed must be an integer (the sensors' noise seed), got {seed!r}")
     return jnp.asarray(seed, dtype=jnp.int32)
 
 
+def _floats(values, name):
+    """`values` as a float array, or a `PamjaxInputError` naming `name` (a string was a raw ValueError)."""
+    try:
+        return jnp.asarray(values, float)
+    except (TypeError, ValueError) as err:
+        raise PamjaxInputError(f"{name} must be numbers, got {values!r}") from err
+
+
 def _as_optional_floats(values: RealArrayLike | None) -> Float[Array, "..."] | None:
-    return values if values is None else jnp.asarray(values, float)
+    return values if values is None else _floats(values, "ExtendedKalmanFilter.measurement_noise")
+
+
+def check_noise_scale(system, noise, name):
+    """A sensor noise level {channel: σ} no sensor of `system` can have (None: no system, only the rules that need
+    none): a pressure noise in (0, `MIN_PRESSURE_NOISE`) Pa (a unit slip: 0.02 meant in bar, 2 in kPa), a position
+    noise of a tenth of the muscle's whole stroke or more (0.1 meant in mm), a pressure noise of a tenth of the
+    supply's range or more. `name` names the table ("noise", "LoopSensors.noise"); traced values are not checked.
+    `design_experiment`'s check of its noise, the filter's of its `noise`."""
+    values = {c: concrete_values(v) for c, v in noise.items()}
+    p = values.get("pressure")
+    if p is not None and 0.0 < float(p) < MIN_PRESSURE_NOISE:
+        raise PamjaxInputError(f"{name}['pressure'] = {float(p)!r} Pa is below {MIN_PRESSURE_NOISE:g} Pa, no "
+                               "pressure transducer's noise: that looks like bar (0.02 bar = 2e3 Pa) or kPa (2 kPa = "
+                               "2e3 Pa); the noise is a standard deviation in Pa")
+    x = values.get("position")
+    if x is not None and isinstance(system, AbstractMuscleSystem):
+        stroke = float(system.muscle.max_position) - float(system.muscle.min_position)
+        if float(x) >= 0.1 * stroke:
+            raise PamjaxInputError(f"{name}['position'] = {float(x)!r} m is {float(x) / stroke:.2g} of the muscle's "
+                                   f"whole stroke ({1e3 * stroke:.0f} mm): the noise is a standard deviation in metres "
+                                   "(0.1 mm = 1e-4)")
+    if p is None or system is None:
+        return
+    try:
+        span = float(system.valve.supply()) - float(system.air.atmospheric_pressure)
+    except PamjaxInputError:  # a valve without a supply pressure of its own (the averaged valve)
+        return
+    if float(p) >= 0.1 * span:
+        raise PamjaxInputError(f"{name}['pressure'] = {float(p)!r} Pa is {float(p) / span:.2g} of the valve's whole "
+                               f"range (supply − atmosphere, {span / 1e5:.2f} bar): the noise is a standard deviation "
+                               "in Pa (2 kPa = 2e3)")
 
 
 class LoopSensors(eqx.Module):
@@ -73,9 +125,10 @@ class LoopSensors(eqx.Module):
             raise PamjaxInputError(f"LoopSensors.noise must have one standard deviation per channel {channels}, got "
                                    f"shape {jnp.shape(self.noise)}")
         check_nonnegative(self.noise, "LoopSensors.noise")
-        if not (isinstance(self.samples_per_period, int) and self.samples_per_period >= 1):
-            raise PamjaxInputError(
-                f"LoopSensors.samples_per_period must be an int >= 1, got {self.samples_per_period!r}")
+        check_noise_scale(None, dict(zip(channels, self.noise)), "LoopSensors.noise")  # the plant's: ClosedLoop
+        n = self.samples_per_period
+        if not (isinstance(n, int) and not isinstance(n, bool) and n >= 1):
+            raise PamjaxInputError(f"LoopSensors.samples_per_period must be an int >= 1, got {n!r}")
 
     def offsets(self, period):
         """Sample times after the period start [s]: jT/N, j = 1 … N (the last at the period's end)."""
@@ -176,6 +229,10 @@ class ExtendedKalmanFilter(eqx.Module):
                 )
             for k, v in values.items():
                 check_nonnegative(v, f"ExtendedKalmanFilter.{name}[{k!r}]")
+                want = getattr(template, k).shape
+                if not _broadcasts(jnp.shape(v), want):  # [1e5, 2e5] failed in filter with a broadcast ValueError
+                    raise PamjaxInputError(f"ExtendedKalmanFilter.{name}[{k!r}] must be one value per entry of the "
+                                           f"state {k!r} (shape {want}: a single number), got shape {jnp.shape(v)}")
         if self.measurement_noise is not None:
             if jnp.ndim(self.measurement_noise) != 1 or jnp.size(self.measurement_noise) == 0:
                 raise PamjaxInputError(
@@ -210,8 +267,14 @@ class ExtendedKalmanFilter(eqx.Module):
 
     def initial_state(self, mean=None):
         """The belief at the start: `mean` (a model state; default the model at rest, `model.initial_state()`) with
-        the standard deviations `initial_std`."""
+        the standard deviations `initial_std`.
+
+        **Raises:** `PamjaxInputError` for a `mean` that is not a state of the model (a dict, another model's state)
+        or one `simulate` would refuse as a start (a leaf not finite, a pressure not absolute pascal, a position
+        outside the stroke)."""
         mean = self.model.initial_state() if mean is None else mean
+        _check_state_like(self._template(), mean, "ExtendedKalmanFilter.initial_state: mean")
+        check_start_state(self.model, mean, "ExtendedKalmanFilter.initial_state: mean")
         z0, sc = scaled(self.model, mean)
         std = sc.vector(_named(self._template(), self.initial_std, "initial_std"))
         return KalmanState(mean=z0, covariance=jnp.diag(std**2))
@@ -238,8 +301,9 @@ class ExtendedKalmanFilter(eqx.Module):
     def update(self, state: KalmanState, readings, channels, noise):
         """Correct the belief with `readings` (m,) of the state fields `channels`, whose noise σ_R per channel the
         filter takes as `noise` (the callers choose it: `run_period` the filter's `measurement_noise`, or the sensors'
-        own where that is None; `filter` its `noise` argument, or `measurement_noise` where that is None). Returns
-        (belief, normalised innovation (y − h(z))/σ_R)."""
+        own where that is None; `filter` its `noise` argument, or `measurement_noise` where that is None). A reading
+        that is not finite (NaN: a dropped sample) is missing: that channel is not updated at that sample. Returns
+        (belief, normalised innovation (y − h(z))/σ_R, 0 for a missing reading)."""
         sc = self._scaled()
         sigma = jnp.asarray(noise, dtype=float)
 
@@ -248,10 +312,15 @@ class ExtendedKalmanFilter(eqx.Module):
             return jnp.stack([getattr(named, c) for c in channels]) / sigma
 
         predicted, h = measure(state.mean), jax.jacfwd(measure)(state.mean)
+        # A NaN reading is a missing one (a dropped sample): its row of H and its innovation are 0, so its gain is 0
+        # and the other channels update as without it (the readings made finite first: a NaN in the branch not taken
+        # would still reach the gradient)
+        present = jnp.isfinite(readings)
+        h = jnp.where(present[:, None], h, 0.0)
         p = state.covariance
         s = h @ p @ h.T + jnp.eye(len(channels))
         gain = jnp.linalg.solve(s, h @ p).T  # P Hᵀ S⁻¹ (S, P symmetric)
-        innovation = readings / sigma - predicted
+        innovation = jnp.where(present, jnp.where(present, readings, 0.0) / sigma - predicted, 0.0)
         mean = state.mean + gain @ innovation
         joseph = jnp.eye(p.shape[0]) - gain @ h
         covariance = joseph @ p @ joseph.T + gain @ gain.T
@@ -278,29 +347,21 @@ class ExtendedKalmanFilter(eqx.Module):
     def filter(self, signal, readings, sample_time, channels, noise=None, *, t0=0.0, initial=None):
         """Filter a recording offline: `readings` (N, channels) of the state fields `channels` (a tuple of the
         model's state names) at t0 + k T_s (k = 1 … N, `sample_time` T_s > 0 [s]), the model driven by the command
-        `signal` (read as its valve reads it). `noise` σ_R per channel (> 0, in the channel's unit): given, it is the
-        one used, whatever `measurement_noise`; None (default): `measurement_noise`. Returns (estimates: a named
+        `signal` (a pamjax signal within the valve's `command_range`, read as the valve reads it). `noise` σ_R per
+        channel (> 0, in the channel's unit): given, it is the one used, whatever `measurement_noise`; None
+        (default): `measurement_noise`. A NaN reading is a missing one (a dropped sample): that channel is not
+        updated at that sample, and the estimate's standard deviation grows over the gap. `initial`: the belief at
+        t0 (a `KalmanState`, e.g. `initial_state(mean)`; default `initial_state()`). Returns (estimates: a named
         state with a leading axis of N, their standard deviations alike, the final `KalmanState`).
 
         **Raises:** `PamjaxInputError`, before filtering, for an unknown channel, a `noise` (or `measurement_noise`)
-        not one value > 0 per channel, a `sample_time` not > 0 or `readings` not (N, channels)."""
-        if noise is None and self.measurement_noise is None:
-            raise PamjaxInputError("ExtendedKalmanFilter.filter needs `noise` (σ per channel) or measurement_noise")
-        if not (isinstance(channels, (tuple, list)) and channels and all(isinstance(c, str) for c in channels)):
-            raise PamjaxInputError(f"ExtendedKalmanFilter.filter: channels must be a non-empty tuple of state names, "
-                                   f"got {channels!r}")
-        channels = tuple(channels)
-        check_channels(self.model, channels, "estimator's model", name="ExtendedKalmanFilter.filter: channels")
-        name = "ExtendedKalmanFilter.filter: noise" if noise is not None else "ExtendedKalmanFilter.measurement_noise"
-        noise = self.measurement_noise if noise is None else jnp.asarray(noise, dtype=float)
-        check_noise_channels(noise, channels, name)
-        check_positive(noise, name)
-        check_positive(sample_time, "ExtendedKalmanFilter.filter: sample_time")
-        belief = self.initial_state() if initial is None else initial
-        readings = jnp.asarray(readings, dtype=float)
-        if readings.ndim != 2 or readings.shape[1] != len(channels):
-            raise PamjaxInputError(
-                f"readings must be (N, {len(channels)}) for channels {channels}, got {readings.shape}")
+        not one value > 0 per channel or in another unit by its magnitude (`check_noise_scale`), a `sample_time` not
+        one number > 0, a `t0` not finite, `readings` not (N, channels) with N >= 1 or with an infinite value (its
+        index named), a `signal` `simulate` would refuse (not a signal, outside the valve's command range: a duty of
+        20-80 meant in percent), or an `initial` belief not of the model's shape, not finite or whose covariance is
+        not symmetric positive semi-definite."""
+        readings, channels, noise, belief = self._filter_inputs(signal, readings, sample_time, channels, noise, t0,
+                                                                initial)
 
         def body(b, xs):
             k, y = xs
@@ -311,6 +372,45 @@ class ExtendedKalmanFilter(eqx.Module):
 
         final, (means, stds) = jax.lax.scan(body, belief, (jnp.arange(readings.shape[0], dtype=float), readings))
         return means, stds, final
+
+    def _filter_inputs(self, signal, readings, sample_time, channels, noise, t0, initial):
+        """`filter`'s checks, in its arguments' order of importance: (readings, channels, noise, initial belief)."""
+        where = "ExtendedKalmanFilter.filter"
+        if noise is None and self.measurement_noise is None:
+            raise PamjaxInputError(f"{where} needs `noise` (σ per channel) or measurement_noise")
+        if not (isinstance(channels, (tuple, list)) and channels and all(isinstance(c, str) for c in channels)):
+            raise PamjaxInputError(f"{where}: channels must be a non-empty tuple of state names, got {channels!r}")
+        channels = tuple(channels)
+        check_channels(self.model, channels, "estimator's model", name=f"{where}: channels")
+        name = f"{where}: noise" if noise is not None else "ExtendedKalmanFilter.measurement_noise"
+        noise = self.measurement_noise if noise is None else _floats(noise, name)
+        check_noise_channels(noise, channels, name)
+        check_positive(noise, name)
+        check_noise_scale(self.model, dict(zip(channels, noise)), name)
+        if not _one_number(sample_time):
+            raise PamjaxInputError(f"{where}: sample_time must be one number T_s [s] (the readings' spacing), got "
+                                   f"{sample_time!r}")
+        check_positive(sample_time, f"{where}: sample_time")
+        if not _one_number(t0):
+            raise PamjaxInputError(f"{where}: t0 must be one time [s], got {t0!r}")
+        check_finite(t0, f"{where}: t0")
+        readings = _floats(readings, f"{where}: readings")
+        if readings.ndim != 2 or readings.shape[1] != len(channels) or readings.shape[0] == 0:
+            raise PamjaxInputError(
+                f"{where}: readings must be (N, {len(channels)}) for channels {channels}, N >= 1, got "
+                f"{readings.shape}")
+        values = concrete_values(readings)
+        if values is not None and np.any(np.isinf(values)):
+            k, c = np.argwhere(np.isinf(values))[0]
+            raise PamjaxInputError(f"{where}: readings[{k}, {c}] ({channels[c]}) is {values[k, c]}: a reading must be "
+                                   "finite, or NaN where it is missing (a dropped sample, skipped)")
+        try:  # simulate's checks of the signal against the model's valve (ts: the readings' times)
+            validate(self.model, signal, t0 + sample_time * np.arange(1, readings.shape[0] + 1), t0=t0)
+        except PamjaxInputError as err:
+            raise PamjaxInputError(f"{where}: {err}") from None
+        belief = self.initial_state() if initial is None else initial
+        _check_belief(self._template(), belief, f"{where}: initial")
+        return readings, channels, noise, belief
 
 
 def check_channels(system, channels, what, name="LoopSensors.channels"):
@@ -330,3 +430,58 @@ def check_noise_channels(noise, channels, name):
         raise PamjaxInputError(
             f"{name} must have one σ_R per sensor channel {tuple(channels)} (shape ({len(channels)},)), got shape "
             f"{jnp.shape(noise)}")
+
+
+def _one_number(x):
+    """Whether `x` is one real number (a Python or NumPy number, a 0-d array, a traced scalar; not a bool or a
+    string)."""
+    if isinstance(x, jax.core.Tracer):
+        return x.ndim == 0
+    if isinstance(x, (bool, np.bool_, str, bytes)):
+        return False
+    value = concrete_values(x)
+    return value is not None and value.ndim == 0
+
+
+def _broadcasts(shape, want):
+    """Whether an array of `shape` broadcasts to `want` without changing it."""
+    try:
+        return np.broadcast_shapes(tuple(shape), tuple(want)) == tuple(want)
+    except ValueError:
+        return False
+
+
+def _check_state_like(template, state, name):
+    """`state` must be a state of the model whose shapes `template` has (its type, fields and shapes): a dict or
+    another model's state failed with a raw pytree error."""
+    ok = jtu.tree_structure(state) == jtu.tree_structure(template)
+    if ok:
+        ok = all(jnp.shape(a) == jnp.shape(b) for a, b in zip(jtu.tree_leaves(state), jtu.tree_leaves(template)))
+    if not ok:
+        raise PamjaxInputError(f"{name} must be a state of the filter's model (a {type(template).__name__} with "
+                               f"fields {_state_fields(template)}, as model.initial_state() gives), got "
+                               f"{type(state).__name__}")
+
+
+def _check_belief(template, belief, name):
+    """A belief the filter can start from: a `KalmanState` whose mean is (n,) and covariance (n, n) (n: the model's
+    state size), finite, the covariance symmetric positive semi-definite (concrete values only). A covariance of
+    another size failed with a raw TypeError, a negative-definite one gave estimates that meant nothing."""
+    n = sum(int(np.prod(jnp.shape(x))) for x in jtu.tree_leaves(template))
+    if not isinstance(belief, KalmanState):
+        raise PamjaxInputError(f"{name} must be a KalmanState (e.g. the filter's initial_state(mean)), got "
+                               f"{type(belief).__name__}")
+    for field, want in (("mean", (n,)), ("covariance", (n, n))):
+        shape = jnp.shape(getattr(belief, field))
+        if shape != want:
+            raise PamjaxInputError(f"{name}.{field} must have shape {want} (the model's {n} states, scaled: "
+                                   f"initial_state(mean) makes it), got {shape}")
+        check_finite(getattr(belief, field), f"{name}.{field}")
+    p = concrete_values(belief.covariance)
+    if p is None:
+        return
+    size = max(float(np.max(np.abs(p))), 1e-300)
+    eigenvalues = np.linalg.eigvalsh(0.5 * (p + p.T))
+    if np.max(np.abs(p - p.T)) > COVARIANCE_RTOL * size or eigenvalues.min() < -COVARIANCE_RTOL * size:
+        raise PamjaxInputError(f"{name}.covariance must be symmetric positive semi-definite, its eigenvalues run "
+                               f"from {eigenvalues.min():.3g} to {eigenvalues.max():.3g}")

@@ -153,11 +153,12 @@ def _prepare(problem, gradient, c0, space, theta, prior, baseline, index, margin
 
 
 def _problem(space, theta, exp, basis, weight, band, windows, limits, max_pressure, max_duty_step, force_law,
-             min_force, index, criterion, prior_info, floor):
+             min_force, index, criterion, prior_info, floor, offset=None):
     """The design's `DesignProblem` with a prior information and a variance floor. An absent limit or floor is an
     infinite one (its penalty and worst violation are exactly 0), not None: the problem's structure, and so the
     compiled objective and gradient, is then the same whichever limits and baseline a design of this system,
-    parametrisation and duration has (one compilation for all of them)."""
+    parametrisation and duration has (one compilation for all of them). `offset`: the envelope's fixed part of a
+    given start (`design_setup.start_offset`)."""
     return obj.DesignProblem(
         space=space, theta=device_array(theta), experiment=exp,
         basis=None if basis is None else device_array(basis), prior=device_array(prior_info),
@@ -168,7 +169,7 @@ def _problem(space, theta, exp, basis, weight, band, windows, limits, max_pressu
         max_step=jnp.asarray(np.inf if max_duty_step is None else float(max_duty_step)),
         min_force=(jnp.asarray(-np.inf if min_force is None else float(min_force)) if force_law else None),
         floor=device_array(np.full(len(space.labels), np.inf) if floor is None else floor), subset=index,
-        criterion=criterion)
+        criterion=criterion, offset=None if offset is None else device_array(offset))
 
 
 def design_experiment(
@@ -223,7 +224,7 @@ def design_experiment(
       valve's PWM frequency sets the period (`period` [s]: for a valve without one; another refused).
     - `free`: the parameters of interest, as `fit` takes them.
     - `duration`: of the designed run [s], from `start` (keyword arguments of the system's `initial_state`; default
-      at rest at atmospheric pressure).
+      at rest at atmospheric pressure; checked as `simulate` checks a `y0`: a position inside the stroke).
     - `build`: model → the system the designed signal drives, as `Experiment(build=...)` takes it (default: `model`
       itself). E.g. `pamjax.TankFromModel(5e-5)` with `channels=("pressure",)` and `start={"pressure": 101325.0}`
       designs a constant-volume tank test of `model`'s valve: the test that separates the valve's flow scales from
@@ -231,7 +232,8 @@ def design_experiment(
       only those the built system depends on, e.g. the valve's); the stroke limit applies only to a system with a
       muscle and a `position` channel.
     - `noise`: channel → noise standard deviation of the bench [channel unit], e.g. `{"pressure": 2e3, "position":
-      1e-4}`; `channels`: those recorded; `rate`: the recording's sample rate [Hz].
+      1e-4}`; `channels`: those recorded; `rate`: the recording's sample rate [Hz] (at least the PWM frequency: 1 kHz
+      is 1000.0, not 1.0).
     - `prior`: experiments already in hand (or run anyway, e.g. constant-volume tank tests): their information is
       added (a muscle run alone cannot separate the valve's flow scale from the muscle's volume); or a fit of them
       (a `FitResult`, the path of its fit.json): its covariance's information, a rig's nuisances marginalised, which
@@ -241,23 +243,25 @@ def design_experiment(
       each of them beyond what `prior` gives (`_floor`); a penalty enforces it.
     - `criterion`: "D" (default) or "A"; `subset`: labels the criterion is on (default all).
     - `duty_band`: (lo, hi) duty the valve acts on (0.1, 0.9: paper 000); `duty_margin`: every period's duty is kept
-      this far from the valve's switching thresholds (`switching_thresholds`: the duties below which a period does
-      not open it and above which it does not close it, 0.1 and 0.9 for paper 000's valve), where whether a real
-      valve switches is a coin toss; "auto" (default): a quarter of the threshold's distance from 0 or 1, i.e. of the
-      switching time (0.025 at 50 Hz and 2 ms: `DUTY_MARGIN_FRACTION`); 0 for none. The band less the margins
-      (`duty_limits`) must be one interval. `stroke_margin` [m] kept from the end stops (`muscle.min_position`,
-      `max_position`); `max_pressure` [Pa abs] (default none: a valve cannot exceed its supply); `max_duty_step`:
-      largest duty change from one period to the next (default none); `min_force` [N]: eq. 7's force (the muscle's
-      force law before the slack) kept at or above it along the run, so that the muscle stays in tension where its
-      force law is backed by data (default `MIN_FORCE`, 20 N; None for no limit; only for a system with a muscle).
-      Each limit is checked against the run's start before any solve (a limit the start breaks is refused, naming
-      it); the design's `constraints` report them, and a design that ends outside one warns
+      this far from the valve's switching thresholds (`switching_thresholds`: the duties below which a period does not
+      open it and above which it does not close it, 0.1 and 0.9 for paper 000's valve), where whether a real valve
+      switches is a coin toss; "auto" (default): a quarter of each threshold's distance from 0 or 1, i.e. of its own
+      switching time (0.025 at 50 Hz and 2 ms: `DUTY_MARGIN_FRACTION`; t_off 4 ms: 0.05 at 0.8); 0 for none. The band
+      less the margins (`duty_limits`) must be one interval. `stroke_margin` [m] kept from the end stops
+      (`muscle.min_position`, `max_position`); `max_pressure` [Pa abs] (default none: a valve cannot exceed its supply);
+      `max_duty_step`: largest duty change from one period to the next (default none); `min_force` [N]: eq. 7's force
+      (the muscle's force law before the slack) kept at or above it along the run, so that the muscle stays in tension
+      where its force law is backed by data (default `MIN_FORCE`, 20 N; None for no limit; only for a system with a
+      muscle). Each limit is checked against the run's start before any solve (a limit the start breaks is refused,
+      naming it); the design's `constraints` report them, and a design that ends outside one warns
       (`PamjaxDesignWarning`) and is refused by `to_csv`.
     - `parametrisation`: "envelope" (default: a level and an amplitude, `knots` cubic B-spline coefficients each,
       modulating a seeded multilevel carrier; gradient in forward mode, 2·knots tangents) or "periods" (one free value
       per period; gradient in reverse mode: exact but ~50× a Jacobian per step on a 2-core CPU for 33 s).
-    - `steps`: BFGS iterations at most; `initial`: start signal (a pamjax signal or one duty per period; default paper
-      000's E3 triangle with the carrier on top; where it breaks a limit, repaired or calmed, `design_repair`);
+    - `steps`: BFGS iterations at most; `initial`: start signal (a pamjax signal or one duty per period, e.g. an
+      earlier design's `duty`, started from as it is: under "envelope", the part its level cannot represent is kept
+      as a fixed offset; default paper 000's E3 triangle with the carrier on top; where it breaks a limit, repaired
+      or calmed, `design_repair`);
       `seed`: the carrier's and the probes'.
     - `design_rate` [Hz], `substeps`: resolution of the objective (docs/identifiability.md: within 0.2 % of the
       fit's); `verify`: recompute the final standard errors and the limits at the fit's resolution (16 substeps,
@@ -345,7 +349,7 @@ def _problem_of(setup, theta, index, weight, max_pressure, max_duty_step, criter
     """`_problem` with all but the prior information and the variance floor bound: (prior, floor) → the problem."""
     return functools.partial(_problem, setup["space"], theta, setup["experiment"], setup["basis"], weight,
                              setup["band"], setup["windows"], setup["limits"], max_pressure, max_duty_step,
-                             setup["force_law"], setup["min_force"], index, criterion)
+                             setup["force_law"], setup["min_force"], index, criterion, offset=setup["offset"])
 
 
 def _at_point(setup, theta, prior, baseline, index, margin, stroke_margin, make):

@@ -124,9 +124,12 @@ class DesignProblem(eqx.Module):
     floor: jax.Array | None  # (n,) baseline variances of θ (inf where not constrained)
     subset: tuple = eqx.field(static=True)
     criterion: str = eqx.field(static=True)
+    offset: jax.Array | None = None  # (periods,): z's fixed part beside basis @ c (a given start the envelope cannot
+    # represent, `design_setup.start_offset`); None: none
 
     def duty(self, c):
         z = c if self.basis is None else self.basis @ c
+        z = z if self.offset is None else z + self.offset
         u = self.band[0] + (self.band[1] - self.band[0]) * clip01(z)
         return u if self.windows is None else skip_windows(u, self.windows)
 

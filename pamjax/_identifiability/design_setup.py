@@ -10,12 +10,14 @@ import equinox as eqx
 import jax
 import numpy as np
 
+from .._control.estimator import check_noise_scale
 from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError, require_float64
 from .._fit.experiment import Experiment
 from .._fit.parameters import ParameterSpace, strong_types
 from .._fit.recording import Recording
 from .._physics.signals import AbstractSignal, Sampled, Triangle
+from .._solve.checks import check_start_state
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from . import design_objective as obj
 
@@ -25,7 +27,8 @@ STROKE_MARGIN = 0.005  # m; assumed (paper 000 gives no clearance): ≈ 5 % of t
 REST_SLACK = 1e-9  # m: a stroke limit set by the start's rest position lies this much beyond it (below)
 DUTY_MARGIN_FRACTION = 0.25  # of a switching threshold's distance from the end of [0, 1] (t_on·f below, t_off·f above):
 # paper 000 gives the MHE2's switching time only as "approximately 2 ms", ±0.5 ms in its rounding (±25 %); a duty within
-# that of a threshold (0.1 ± 0.025 and 0.9 ± 0.025 at 50 Hz) may or may not switch a real valve in its period
+# that of a threshold (0.1 ± 0.025 and 0.9 ± 0.025 at 50 Hz) may or may not switch a real valve in its period. Each
+# threshold keeps a quarter of its own switching time (t_on 2 ms, t_off 4 ms: 0.025 at 0.1, 0.05 at 0.8)
 MIN_FORCE = 20.0  # N; eq. 7 is backed by data only above it: the measured DMSP-20-300 force map it was derived from
 # (Martens & Boblan 2017, Appendix A1; `presets`) is affine in pressure within 2 N down to its smallest non-zero
 # force, 21 N, and has no point between slack and 21 N. No braid model is checked below that, nor is the slack itself
@@ -37,8 +40,8 @@ CARRIER_HOLD = 10  # PWM periods (0.2 s at 50 Hz): the hold of the most informat
 DESIGN_RATE = 250.0  # Hz: the objective's samples; the information matrix agrees within 0.2 % with 1 kHz (docs)
 DESIGN_SUBSTEPS = 4  # RK4 nodes per PWM period in the objective: within 0.2 % of the fit's 16 (docs)
 PERIOD_RTOL = 1e-9  # a `period` given for a switching valve must be its own to this (float round-off of 1/f)
-MIN_PRESSURE_NOISE = 1.0  # Pa: below any bench transducer's noise (a 16-bit reading of 0-10 bar resolves 15 Pa; the
-# hybrid reference bench's is 2 kPa): a smaller noise is a unit slip, 0.02 meant in bar (2 kPa) or 2 in kPa
+OFFSET_TOLERANCE = 1e-9  # in the soft clip's units (the band's width): a given start the envelope represents to this is
+# represented; a larger remainder (an earlier design's per-period duties) is kept as the envelope's offset
 FIT_SUBSTEPS = inspect.signature(Experiment.__init__).parameters["substeps"].default  # what a fit integrates with
 
 
@@ -121,26 +124,14 @@ def _check_numbers(noise, channels, band, rate, design_rate, stroke_margin, max_
                                f"matched; 2.0: halved), got {baseline_margin!r}")
 
 
-def _validate(model, free, duration, noise, channels, band, criterion, subset, parametrisation, knots, steps, rate,
-              stroke_margin, max_pressure, max_duty_step, period, build, start, duty_margin, min_force, design_rate,
-              seed, baseline_margin):
-    require_float64("pamjax.design_experiment")
-    if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
-        raise PamjaxInputError(f"duration must be a positive number of seconds, got {duration!r}")
-    start = {} if start is None else start
-    if not isinstance(start, dict):
-        raise PamjaxInputError(f"start must be a dict of keyword arguments of the system's initial_state (e.g. "
-                               f"{{'pressure': 101325.0}}), got {start!r}")
-    start = dict(start)
-    channels = tuple(channels)
-    system = built_system(model, build, start, channels)
+def _period(system, period):
+    """The design's PWM period [s]: the switching valve's own, or `period` for a valve without one (checked)."""
     valve_period = system.valve.period  # a switching valve's PWM period (None for a continuous one)
     if period is None and valve_period is None:
         raise PamjaxInputError("period: the model's valve has no pwm_frequency; give the PWM period [s] the bench's "
                                "PWM driver latches the duty with: period=0.02 in pamjax.design_experiment, "
                                "`period = 0.02` in the [design] table of a config")
-    if period is not None and not (isinstance(period, (int, float)) and not isinstance(period, bool)
-                                   and math.isfinite(period) and period > 0):
+    if period is not None and not ((p := _real(period)) is not None and math.isfinite(p) and p > 0):
         raise PamjaxInputError(f"period must be the PWM period, a number > 0 [s] (e.g. 0.02 at 50 Hz), got {period!r}")
     if period is not None and valve_period is not None and not math.isclose(period, float(valve_period),
                                                                              rel_tol=PERIOD_RTOL, abs_tol=0.0):
@@ -149,7 +140,28 @@ def _validate(model, free, duration, noise, channels, band, criterion, subset, p
                                f"per {float(valve_period):g} s whatever the design sets: leave period out (None) or "
                                f"give {float(valve_period):g}; a valve at another frequency is another model "
                                "(its pwm_frequency)")
-    period = float(valve_period) if period is None else float(period)
+    return float(valve_period) if period is None else float(period)
+
+
+def _validate(model, free, duration, noise, channels, band, criterion, subset, parametrisation, knots, steps, rate,
+              stroke_margin, max_pressure, max_duty_step, period, build, start, duty_margin, min_force, design_rate,
+              seed, baseline_margin):
+    require_float64("pamjax.design_experiment")
+    if not ((d := _real(duration)) is not None and math.isfinite(d) and d > 0):
+        raise PamjaxInputError(f"duration must be a positive number of seconds, got {duration!r}")
+    duration = d
+    for name, value, what in (("channels", channels, "recorded channels, e.g. ['pressure', 'position']"),
+                              ("subset", subset, "free parameter labels, e.g. ['friction.coulomb_force']")):
+        if isinstance(value, (str, bytes)):  # a bare string was split into its letters
+            raise PamjaxInputError(f"{name} must be a list of {what}, got the string {value!r}")
+    start = {} if start is None else start
+    if not isinstance(start, dict):
+        raise PamjaxInputError(f"start must be a dict of keyword arguments of the system's initial_state (e.g. "
+                               f"{{'pressure': 101325.0}}), got {start!r}")
+    start = dict(start)
+    channels = tuple(channels)
+    system = built_system(model, build, start, channels)
+    period = _period(system, period)
     if duration < period * (1.0 - 1e-9):
         raise PamjaxInputError(f"duration {duration!r} s is shorter than one PWM period ({period:g} s): a design sets "
                                f"one duty per period, so it needs at least one (duration >= {period:g} s; designs that "
@@ -161,7 +173,12 @@ def _validate(model, free, duration, noise, channels, band, criterion, subset, p
                                f"(e.g. {{'pressure': 2e3, 'position': 1e-4}} [Pa, m]), got {noise!r}")
     _check_numbers(noise, channels, band, rate, design_rate, stroke_margin, max_pressure, max_duty_step, seed,
                    baseline_margin)
-    _check_noise_scale(system, noise, channels)
+    for name, value in (("rate", rate), ("design_rate", design_rate)):  # 1.0 meant in kHz: 3 samples of a 2 s run
+        if float(value) < (1.0 - 1e-9) / period:
+            raise PamjaxInputError(f"{name} {value!r} Hz is below the PWM frequency ({1.0 / period:g} Hz): a run "
+                                   "sampled slower than one sample per PWM period cannot show what its duties do; "
+                                   f"{name} is a sample rate in Hz (1 kHz = 1000.0)")
+    check_noise_scale(system, {c: noise[c] for c in channels}, "noise")
     if criterion not in ("D", "A"):
         raise PamjaxInputError(f"criterion must be 'D' or 'A', got {criterion!r}")
     if parametrisation not in ("envelope", "periods"):
@@ -195,31 +212,6 @@ def _validate(model, free, duration, noise, channels, band, criterion, subset, p
         raise PamjaxInputError(f"noise: {extra} not among the design's channels {list(channels)}: give a level for "
                                "those channels only (or add the channel to channels)")
     return space, subset, period, channels, system, start
-
-
-def _check_noise_scale(system, noise, channels):
-    """A noise level no sensor of this system can have: a position noise of a tenth of the whole stroke or more, a
-    pressure noise of a tenth of the supply's range or more, or below `MIN_PRESSURE_NOISE` (a unit slip: 0.1 meant in
-    mm, 0.02 in bar)."""
-    if "pressure" in channels and float(noise["pressure"]) < MIN_PRESSURE_NOISE:
-        raise PamjaxInputError(f"noise['pressure'] = {noise['pressure']!r} Pa is below {MIN_PRESSURE_NOISE:g} Pa, no "
-                               "pressure transducer's noise: that looks like bar (0.02 bar = 2e3 Pa) or kPa (2 kPa = "
-                               "2e3 Pa); the noise is a standard deviation in Pa")
-    if "position" in channels and isinstance(system, AbstractMuscleSystem):
-        stroke = float(system.muscle.max_position) - float(system.muscle.min_position)
-        if float(noise["position"]) >= 0.1 * stroke:
-            raise PamjaxInputError(f"noise['position'] = {noise['position']!r} m is "
-                                   f"{float(noise['position']) / stroke:.2g} of the muscle's whole stroke "
-                                   f"({1e3 * stroke:.0f} mm): the noise is a standard deviation in metres (0.1 mm = "
-                                   "1e-4)")
-    try:
-        span = float(system.valve.supply()) - float(system.air.atmospheric_pressure)
-    except PamjaxInputError:  # a valve without a supply pressure of its own (the averaged valve)
-        span = None
-    if "pressure" in channels and span is not None and float(noise["pressure"]) >= 0.1 * span:
-        raise PamjaxInputError(f"noise['pressure'] = {noise['pressure']!r} Pa is {float(noise['pressure']) / span:.2g} "
-                               f"of the valve's whole range (supply − atmosphere, {span / 1e5:.2f} bar): the noise "
-                               "is a standard deviation in Pa (2 kPa = 2e3)")
 
 
 def _check_seen(model, space, build, system):
@@ -275,25 +267,36 @@ def switching_thresholds(valve):
     return tuple(sorted(found))
 
 
+def auto_margins(thresholds):
+    """`duty_margin="auto"`: each threshold's own margin, `DUTY_MARGIN_FRACTION` of its distance from 0 or 1 (of its
+    switching time in duty: t_on·f, t_off·f). One margin for both, the smaller, let a 1 ms t_off's 0.0125 stand at
+    the 2 ms opening's 0.1 too, inside its ±0.025 coin toss."""
+    return [DUTY_MARGIN_FRACTION * min(float(t), 1.0 - float(t)) for t in thresholds]
+
+
 def duty_limits(band, thresholds, margin):
-    """The duties a design may use: (lo, hi, windows): the band less `margin` at either end where a switching
-    threshold lies within `margin` of it, and the windows (θ − m, θ + m) of the thresholds inside it, which no period's
-    duty may enter (`design_objective.skip_windows`). A band the margins leave empty is refused."""
+    """The duties a design may use: (lo, hi, windows): the band less the margin m of a switching threshold θ at
+    either end where θ lies within m of it, and the windows (θ − m, θ + m) of the thresholds inside it, which no
+    period's duty may enter (`design_objective.skip_windows`). `margin`: one for every threshold, or one per threshold
+    (`auto_margins`). A band the margins leave empty is refused."""
     lo, hi = band
-    if not margin or not thresholds:
+    margins = [float(margin)] * len(thresholds) if np.ndim(margin) == 0 else [float(m) for m in margin]
+    if not any(margins):
         return lo, hi, ()
-    for th in thresholds:  # a threshold within the margin of an end: that end moves inside
-        if th - margin <= lo < th + margin:
-            lo = th + margin
-        if th - margin < hi <= th + margin:
-            hi = th - margin
-    windows = tuple((th - margin, th + margin) for th in thresholds if lo < th - margin and th + margin < hi)
+    for th, m in zip(thresholds, margins):  # a threshold within its margin of an end: that end moves inside
+        if m and th - m <= lo < th + m:
+            lo = th + m
+        if m and th - m < hi <= th + m:
+            hi = th - m
+    windows = tuple((th - m, th + m) for th, m in zip(thresholds, margins) if m and lo < th - m and th + m < hi)
     if not hi > lo:
+        one = max(margins) - min(margins) <= 1e-9 * max(margins)
+        shown = f"{min(margins):g}" if one else f"{', '.join(f'{m:.6g}' for m in margins)} (each threshold's)"
         raise PamjaxInputError(
-            f"duty_band ({band[0]:g}, {band[1]:g}) lies within duty_margin {margin:g} of the valve's switching "
+            f"duty_band ({band[0]:g}, {band[1]:g}) lies within duty_margin {shown} of the valve's switching "
             f"thresholds {', '.join(f'{t:.6g}' for t in thresholds)} (a period's duty below {thresholds[0]:.6g} does "
             f"not open it, above {thresholds[-1]:.6g} does not close it): no duty is left; use a wider band, e.g. "
-            f"({thresholds[0] + margin:.6g}, {thresholds[-1] - margin:.6g}), or a smaller duty_margin")
+            f"({thresholds[0] + margins[0]:.6g}, {thresholds[-1] - margins[-1]:.6g}), or a smaller duty_margin")
     return lo, hi, windows
 
 
@@ -362,29 +365,49 @@ def _sampled(signal, times):
     return jax.vmap(signal)(times)
 
 
+def _start_level(times, band, initial):
+    """The start's level per period, in the units of the soft clip (0 and 1 the band's ends): of `initial` (a signal
+    or per-period duties, checked), or of paper 000's E3 triangle."""
+    lo, hi = band
+    if initial is None:
+        return (np.asarray(_sampled(Triangle(*START_LEVEL), device_array(times))) - lo) / (hi - lo)
+    duty = (np.asarray(_sampled(initial, device_array(times))) if isinstance(initial, AbstractSignal)
+            else np.asarray(initial, dtype=float))
+    if duty.shape != times.shape:
+        raise PamjaxInputError(f"initial must be a signal or one duty per PWM period ({times.size}), got shape "
+                               f"{duty.shape}")
+    if not np.all(np.isfinite(duty)) or np.min(duty) < 0.0 or np.max(duty) > 1.0:
+        raise PamjaxInputError(f"initial: the start duty must lie in [0, 1] (a duty ratio: 0.5, not 50 %), its "
+                               f"range is [{np.min(duty):g}, {np.max(duty):g}]")
+    return obj.unclip01((np.clip(duty, lo, hi) - lo) / (hi - lo))
+
+
 def start_coefficients(parametrisation, times, duration, knots, carrier, band, initial, amplitude=START_AMPLITUDE):
     """The start: z = level + `amplitude` ξ, the level from `initial` (a signal or per-period duties; default paper
     000's E3 triangle; no carrier on a given one), in the units of the soft clip (0 and 1 the band's ends; beyond
-    them saturated)."""
-    lo, hi = band
-    if initial is None:
-        level = (np.asarray(_sampled(Triangle(*START_LEVEL), device_array(times))) - lo) / (hi - lo)
-    else:
-        duty = (np.asarray(_sampled(initial, device_array(times))) if isinstance(initial, AbstractSignal)
-                else np.asarray(initial, dtype=float))
-        if duty.shape != times.shape:
-            raise PamjaxInputError(f"initial must be a signal or one duty per PWM period ({times.size}), got shape "
-                                   f"{duty.shape}")
-        if not np.all(np.isfinite(duty)) or np.min(duty) < 0.0 or np.max(duty) > 1.0:
-            raise PamjaxInputError(f"initial: the start duty must lie in [0, 1] (a duty ratio: 0.5, not 50 %), its "
-                                   f"range is [{np.min(duty):g}, {np.max(duty):g}]")
-        level = obj.unclip01((np.clip(duty, lo, hi) - lo) / (hi - lo))
+    them saturated). (coefficients, basis: None for one per period); the envelope's level is the level's
+    least-squares fit (`start_offset`: what it leaves of a given start)."""
+    level = _start_level(times, band, initial)
     if parametrisation == "periods":
         return level + (amplitude * carrier if initial is None else 0.0), None
     b = obj.bspline_basis(times, 0.0, duration, knots)
     c_level = np.linalg.lstsq(b, level, rcond=None)[0]
     return (np.concatenate([c_level, np.full(knots, amplitude if initial is None else 0.0)]),
             obj.envelope_basis(times, duration, knots, carrier))
+
+
+def start_offset(parametrisation, times, duration, knots, band, initial):
+    """The envelope's offset (`DesignProblem.offset`): the part of a given start its B-spline level cannot represent
+    (an earlier design's per-period duties, its carrier), kept as a fixed term of z, so that the design starts from
+    the duty given, not its smoothed level (up to 0.17 off, the standard errors up to 19 % apart). None where there is
+    none: one per period, no given start (the default start is the envelope's own), a start the level represents to
+    `OFFSET_TOLERANCE` (a constant)."""
+    if parametrisation == "periods" or initial is None:
+        return None
+    level = _start_level(times, band, initial)
+    b = obj.bspline_basis(times, 0.0, duration, knots)
+    offset = level - b @ np.linalg.lstsq(b, level, rcond=None)[0]
+    return offset if np.max(np.abs(offset)) > OFFSET_TOLERANCE else None
 
 
 SETUP_ARGS = ("noise", "channels", "start", "build", "rate", "criterion", "subset", "duty_band", "stroke_margin",
@@ -397,21 +420,26 @@ def set_up(model, free, duration, *, noise, channels, start, build, rate, criter
            duty_margin, min_force, baseline_margin):
     """Everything before the first solve, as a dict: the checked arguments, the valve's switching thresholds and the
     duties they leave, the limits (each checked against the run's start state), the start coefficients and the
-    designed experiment. `baseline_margin` is only checked here (`design` uses it)."""
+    designed experiment. `baseline_margin` is only checked here (`design` uses it). The start state is checked as
+    `simulate` checks a `y0` (`check_start_state`: a position outside the stroke was widened into the stroke limit
+    and failed 35 s later, misnamed)."""
     space, subset, period, channels, system, start = _validate(
         model, free, duration, noise, channels, duty_band, criterion, subset, parametrisation, knots, steps, rate,
         stroke_margin, max_pressure, max_duty_step, period, build, start, duty_margin, min_force, design_rate, seed,
         baseline_margin)
     model = strong_types(model)
     space = ParameterSpace(model, free)
+    y0 = _start_state(system, start)  # where simulate would refuse it (0.5 m: outside the stroke), before any work
+    check_start_state(system, y0, "start")
     thresholds = switching_thresholds(system.valve)
-    margin = (DUTY_MARGIN_FRACTION * min(min(t, 1.0 - t) for t in thresholds) if thresholds else 0.0) \
-        if duty_margin == "auto" else float(duty_margin)
+    margin = auto_margins(thresholds) if duty_margin == "auto" else float(duty_margin)
     *band, windows = duty_limits(tuple(float(b) for b in duty_band), thresholds, margin)
     band = tuple(band)
+    if np.ndim(margin):  # reported as one number where one serves every threshold (to the thresholds' round-off)
+        one = not margin or np.ptp(margin) <= 1e-9 * max(margin)
+        margin = (min(margin) if margin else 0.0) if one else margin
     force_law = _has_force_law(system)
     min_force = None if (min_force is None or min_force is False or not force_law) else float(min_force)
-    y0 = _start_state(system, start)
     limits = None
     if "position" in channels and isinstance(system, AbstractMuscleSystem):
         lo, hi = float(system.muscle.min_position), float(system.muscle.max_position)
@@ -444,11 +472,13 @@ def set_up(model, free, duration, *, noise, channels, start, build, rate, criter
     times = np.arange(count) * period
     c0, basis = start_coefficients(parametrisation, times, float(duration), knots,
                                    obj.multilevel_carrier(count, CARRIER_HOLD, seed), band, initial)
-    z0 = device_array(c0 if basis is None else basis @ c0)
+    offset = start_offset(parametrisation, times, float(duration), knots, band, initial)
+    z0 = device_array(c0 if basis is None else basis @ c0 + (0.0 if offset is None else offset))
     duty = _skip(band[0] + (band[1] - band[0]) * np.asarray(obj.clip01_and_slope(z0)[0]), windows)
     exp = designed_experiment(model, float(duration), period, float(design_rate), channels, noise, start, substeps,
                               duty, build)
     return dict(model=model, space=space, subset=subset, period=period, channels=channels, system=system, start=start,
                 thresholds=thresholds, duty_margin=margin, duty_band=[float(b) for b in duty_band], band=band,
                 windows=windows, force_law=force_law, min_force=min_force, limits=limits, max_pressure=max_pressure,
-                max_duty_step=max_duty_step, count=count, times=times, c0=c0, basis=basis, experiment=exp)
+                max_duty_step=max_duty_step, count=count, times=times, c0=c0, basis=basis, offset=offset,
+                experiment=exp)
