@@ -17,7 +17,7 @@ import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
 from pamjax.gallery import json_text  # noqa: E402
-from pamjax.gallery.procedures.ankle import P_ATM, gait_angle, run  # noqa: E402,F401
+from pamjax.gallery.procedures.ankle import check_run, gait_angle, run  # noqa: E402,F401
 
 
 def main(argv=None):
@@ -27,14 +27,23 @@ def main(argv=None):
     ap.add_argument("--sum-bar", type=float, default=5.0, help="gauge pressure sum (co-contraction) [bar]")
     ap.add_argument("--overwrite", action="store_true", help="replace existing results in --out")
     args = ap.parse_args(argv)
+    m = pj.presets.dmsp40_muscle()
+    joint = pj.AntagonisticJoint(pj.ISO6358Regulator(), pj.ISO6358Regulator(), m, m)
+    # checked before any work (the runs' compiled static map cannot check them): 0 Hz divided by zero, a sum in bar
+    # ran silently into a 19° RMSE, a sum beyond the regulators was clipped
+    bad = [f for f in args.frequencies if not (np.isfinite(f) and f > 0)]
+    if bad:
+        ap.error(f"--frequencies must be finite stride frequencies > 0 [Hz], got {bad}")
+    try:
+        check_run(joint, args.frequencies[0], args.sum_bar * 1e5)
+    except pj.PamjaxInputError as err:
+        ap.error(f"--sum-bar {args.sum_bar:g} (gauge pressure sum [bar]): {err}")
     out = pathlib.Path(args.out)
     existing = [str(p) for p in (out / "ankle.json", out / "ankle.png") if p.exists()]
     if existing and not args.overwrite:  # a --quick or trial run must not replace a full run's results
         raise SystemExit(f"ankle.py: {', '.join(existing)} exist; pass --overwrite to replace them (or "
                          "another --out)")
     out.mkdir(parents=True, exist_ok=True)
-    m = pj.presets.dmsp40_muscle()
-    joint = pj.AntagonisticJoint(pj.ISO6358Regulator(), pj.ISO6358Regulator(), m, m)
     results = {}
     for f in args.frequencies:
         r = run(joint, f, args.sum_bar * 1e5)
@@ -58,7 +67,7 @@ def main(argv=None):
             axes[0, k].plot(r["t"], np.degrees(r["reference"]), "k--", label="reference")
             axes[0, k].plot(r["t"], np.degrees(r["angle"]), label="simulated")
             axes[0, k].set_title(f"{f} Hz, RMSE {np.degrees(r['rmse']):.2f}°")
-            axes[1, k].plot(r["t"], (r["pressure"] - P_ATM) / 1e5)
+            axes[1, k].plot(r["t"], (r["pressure"] - float(joint.air.atmospheric_pressure)) / 1e5)
             axes[2, k].plot(r["t"], r["stiffness"])
             axes[2, k].set_xlabel("t [s]")
         axes[0, 0].set_ylabel("angle [°]")

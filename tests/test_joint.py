@@ -1,5 +1,7 @@
 """Antagonistic joint: angle follows the pressure difference, stiffness the pressure sum (paper 001, Sect. 7)."""
 
+import re
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -144,3 +146,80 @@ def test_pressures_for_refuses_an_angle_its_sum_cannot_hold(joint):
         joint.pressures_for(0.3, 1e5)
     pf, pe = (float(p) for p in joint.pressures_for(0.2, 1e5))
     assert _equilibrium_angle(joint, pf, pe) == pytest.approx(0.2, abs=1e-6)
+
+
+_M = dmsp40_muscle()
+_R = ISO6358Regulator
+
+
+@pytest.mark.parametrize("build, match", [
+    (lambda: AntagonisticJoint(_R(), _R(), _M, _M, polytropic_index=0.0),
+     r"AntagonisticJoint\.polytropic_index must be in the open interval \(0\.99, 1\.41\), got 0"),
+    (lambda: AntagonisticJoint(_R(), _R(), _M, _M, polytropic_index=-1.0), r"polytropic_index .*got -1"),
+    (lambda: AntagonisticJoint(_R(), _R(), _M, _M, pulley_radius=30.0),
+     r"AntagonisticJoint\.pulley_radius = 30 m: more than 0\.5 m .*looks like mm"),
+    (lambda: AntagonisticJoint(_R(), _R(), _M, _M, gravity=np.nan), r"AntagonisticJoint\.gravity must be finite"),
+    (lambda: AntagonisticJoint(_R(), _R(), _M, _M, foot_arm=np.nan), r"AntagonisticJoint\.foot_arm must be finite"),
+    (lambda: AntagonisticJoint(_R(), _R(), _M, _M, foot_arm=60.0), r"AntagonisticJoint\.foot_arm = 60 m"),
+    (lambda: AntagonisticJoint(_R(), _R(), _M, _M, pre_contraction=0.5),
+     r"AntagonisticJoint\.pre_contraction = 0\.5 m lies outside the flexor's stroke \[-0\.02, 0\.1\] m"),
+    (lambda: AntagonisticJoint(_M, _M, _R(), _R()),
+     r"AntagonisticJoint\.flexor_regulator must be a pressure regulator .*got Muscle; the arguments are"),
+    (lambda: AntagonisticJoint(_R(), _R(), None, _M), r"AntagonisticJoint\.flexor must be a Muscle .*got NoneType"),
+    (lambda: VoltagePair(3.0, 2.0), r"VoltagePair\.flexor must be a pamjax signal .*got float"),
+])
+def test_a_joint_with_a_bad_part_or_parameter_is_refused_by_name(build, match):
+    """Each was accepted: n = -1 drove a pressure to -5.4 bar absolute, a 30 m pulley (mm) gave 2.1e8 N m/rad, NaN
+    gravity a NaN stiffness, a pre-contraction outside the stroke was blamed on the pressures later, swapped or
+    missing parts and a VoltagePair of numbers ended in raw AttributeErrors at the solve."""
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        build()
+
+
+@pytest.mark.parametrize("call, match", [
+    (lambda j: j.equilibrium_angle(np.array([4e5, 3e5]), np.array([3e5, 4e5])),
+     r"equilibrium_angle takes one number each for flexor_pressure, extensor_pressure .*jax\.vmap"),
+    (lambda j: j.pressures_for(np.array([0.1, 0.2]), 5e5), r"pressures_for takes one number each for angle"),
+    (lambda j: j.pressures_for(0.1, np.array([4e5, 5e5])),
+     r"pressures_for takes one number each .*pressure_sum \(2,\)"),
+    (lambda j: j.initial_state(3e5, 3e5, angle=20.0),
+     r"angle = 20 rad lies outside the joint's range \[-1, 1\] rad .*looks like degrees \(20° = 0\.3491 rad"),
+    (lambda j: j.initial_state(3e5, 3e5, angle=np.nan), r"angle must be finite"),
+])
+def test_one_operating_point_and_a_start_angle_in_range_are_asked_for(joint, call, match):
+    """Arrays of pressures or sums ended in a JAX scan-carry TypeError or NumPy's ambiguous truth value; a start angle
+    of 20 (degrees) ran into the solve's "minimum step size". Named, before anything is computed."""
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        call(joint)
+    assert joint.angle_range() == pytest.approx((-1.0, 1.0))
+    assert float(joint.initial_state(3e5, 3e5, angle=0.5).angle) == 0.5
+
+
+def test_fits_ankle_refuses_bad_frequencies_and_sums_before_any_run(tmp_path, capsys):
+    """`fits/ankle.py --frequencies 0` divided by zero, -0.5 gave a traceback, `--sum-bar 0.01` ran silently to an 18.8°
+    RMSE and wrote ankle.json, 14 was clipped by the regulators, -3 gave a traceback: each is an argparse error naming
+    the option before any run (no output folder); the gallery procedure refuses them too."""
+    import importlib.util
+    import pathlib
+
+    from pamjax.gallery.procedures import ankle
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "fits" / "ankle.py"
+    spec = importlib.util.spec_from_file_location("fits_ankle_under_test", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    out = tmp_path / "out"
+    for args, match in ((["--frequencies", "0"], r"--frequencies must be finite stride frequencies > 0"),
+                        (["--frequencies", "0.5", "-0.5"], r"--frequencies .*got \[-0\.5\]"),
+                        (["--sum-bar", "0.01"], r"--sum-bar 0\.01 .*cannot be held with pressure_sum 1000 Pa"),
+                        (["--sum-bar", "14"], r"--sum-bar 14 .*above the regulators' 5\.987e\+05 Pa"),
+                        (["--sum-bar", "-3"], r"--sum-bar -3 .*negative")):
+        with pytest.raises(SystemExit) as exit_info:
+            script.main([*args, "--out", str(out)])
+        assert exit_info.value.code == 2
+        err = capsys.readouterr().err
+        assert re.search(match, err), err
+    assert not out.exists()
+    joint = AntagonisticJoint(_R(), _R(), _M, _M)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"f \(the stride frequency\) must be a finite number > 0"):
+        ankle.run(joint, 0.0, 5e5)

@@ -234,3 +234,54 @@ def test_simulate_joint_control_checks_the_loop_and_raises_on_a_failed_solve(joi
     with pytest.raises(pj.PamjaxSolveError, match=r"simulate_joint_control: the solve failed: .*result code 1"):
         simulate_joint_control(loop, TS)
     assert int(simulate_joint_control(loop, TS, throw=False).result) == 1
+
+
+def test_static_inverse_matches_bisection_where_a_muscle_is_slack(joint):
+    """At θ = 0 with a 1.2 bar sum the extensor is slack: Newton from Δ = 0 stalled there (Δ = 0, 16 kPa from the
+    bisection's 32.5 kPa, leaving the foot's weight unheld). The safeguarded search finds the bisection's root."""
+    for angle, total in ((0.0, 1.2e5), (0.1, 1.0e5), (-0.3, 1.3e5)):
+        angle, total = jnp.asarray(angle), jnp.asarray(total)
+        got = _hold_pressures(joint, angle, total)
+        np.testing.assert_allclose(np.asarray(got), np.asarray(_pressures_for(joint, angle, total)), atol=1.0)
+        assert abs(float(_torque(joint, angle, *got))) < 1e-6
+
+
+def test_sum_for_stiffness_reaches_every_stiffness_in_range_and_names_the_range(joint):
+    """Plain Newton from 4 bar diverged for targets on the steep part of K(Σ): K = 100 N m/rad at θ = 0 gave
+    Σ = 1.08e273 Pa, 110 gave 5.24 bar (K = 137.9), though 1.5-2 bar give 99.7-114.4. Safeguarded, every stiffness in
+    `stiffness_range` is met; an eager call outside it names the range; the derivative (implicit function) matches
+    finite differences."""
+    for angle, k in ((0.0, 56.0), (0.0, 100.0), (0.0, 110.0), (0.0, 114.0), (0.1, 50.0), (-0.25, 190.0)):
+        total = _sum_for_stiffness(joint, jnp.asarray(angle), jnp.asarray(k))
+        assert 0.0 < float(total) < 2 * 5.987e5
+        assert float(_held_stiffness(joint, jnp.asarray(angle), total)) == pytest.approx(k, rel=1e-9)
+    with pytest.raises(pj.PamjaxInputError, match=r"stiffness 50 N m/rad is not reached at angle 0 rad: .*spans "
+                                                  r"\[55\.48, 186\.7\] N m/rad"):
+        sum_for_stiffness(joint, 0.0, 50.0)
+    slope = jax.jit(jax.grad(lambda k: sum_for_stiffness(joint, 0.1, k)))(150.0)
+    h = 1e-3
+    up, down = (float(_sum_for_stiffness(joint, jnp.asarray(0.1), jnp.asarray(150.0 + d))) for d in (h, -h))
+    assert float(slope) == pytest.approx((up - down) / (2 * h), rel=1e-5)
+
+
+@pytest.mark.parametrize("angle, target, kind, match", [
+    (0.0, 100.0, "stiffness", None),  # reachable: was "needs gauge pressures (1.082e+273, 1.082e+273) Pa outside"
+    (0.0, 50.0, "stiffness", r"stiffness target 50 N m/rad at t = 0\.000 s \(θ_r = 0\.000 rad\) is not reached: the "
+                             r"joint's regulated stiffness there spans \[55\.48, 186\.7\] N m/rad"),
+    (0.1, 6.0, "pressure_sum", r"pressure-sum target must be a GAUGE pressure sum >= 1000 Pa, got 6 .*looks like bar"),
+    (0.1, 0.0, "pressure_sum", r"got 0 at t = 0\.000 s .*0 vents both muscles"),
+    (0.25, 0.5e5, "pressure_sum", r"pressure-sum target is infeasible .*one below 0: the sum 5e\+04 Pa is too small"),
+])
+def test_an_infeasible_target_says_why(joint, angle, target, kind, match):
+    """The feasibility check quoted every failure as gauge pressures "outside [0, 5.987e+05] Pa", even pressures
+    inside that range (a stiffness missed), and a sum of 6 (bar) or 0 as "(3, 3) Pa". Each reason is its own."""
+    from pamjax._control.joint import check_joint_control
+
+    held = GaitAngle(first=0.0, second=0.0, offset=angle)
+    step = pj.Step(target, target, 0.0)
+    loop = JointControlLoop(joint, AntagonisticJointController(), held, step, target_kind=kind)
+    if match is None:
+        check_joint_control(loop, TS)
+        return
+    with pytest.raises(pj.PamjaxInputError, match=match):
+        check_joint_control(loop, TS)

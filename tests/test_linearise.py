@@ -301,3 +301,25 @@ def test_bad_channel_frequency_drop_and_newton_settings_are_named(regulator_mode
             with pytest.raises(pamjax.PamjaxInputError, match=match):
                 equilibrium(system, 0.6, guess, **kwargs)
     assert compiled == [], compiled
+
+
+def test_a_joint_is_linearised_about_its_command_vector():
+    """`linearise` and `equilibrium` refused the `AntagonisticJoint` (docs: "works on any pamjax system") with its
+    (V_f, V_e) command ("command must be one number") and with one voltage. A vector is taken where the system's rates
+    keep the state's shapes: B and D get a column per voltage, and the static angle gain per volt matches the
+    equilibria's finite difference. One voltage, or three, are refused by the joint's own message."""
+    m = pamjax.presets.dmsp40_muscle()
+    joint = pamjax.AntagonisticJoint(pamjax.ISO6358Regulator(), pamjax.ISO6358Regulator(), m, m)
+    command = jnp.array([3.0, 2.0])
+    y = equilibrium(joint, command, joint.initial_state(101325.0 + 3.03e5, 101325.0 + 2.02e5))
+    ss = linearise(joint, y, command, outputs=("angle",))
+    assert ss.B.shape == (8, 2) and ss.input_names == ("command[0]", "command[1]")
+    assert np.all(np.real(ss.poles()) < 0)
+    h = 0.01
+    moved = equilibrium(joint, command + jnp.array([h, 0.0]), y)
+    fd = (float(moved.angle) - float(y.angle)) / h
+    assert ss.dc_gain("angle", "command[0]") == pytest.approx(fd, rel=5e-3)
+    assert ss.dc_gain("angle", "command[1]") < 0 < ss.dc_gain("angle", "command[0]")
+    for bad in (3.0, jnp.array([3.0, 2.0, 1.0])):
+        with pytest.raises(pamjax.PamjaxInputError, match=r"must be \(flexor, extensor\) voltages, shape \(2,\)"):
+            linearise(joint, y, bad)

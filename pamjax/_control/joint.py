@@ -13,6 +13,7 @@ from .._physics.signals import Constant
 from .._solve.checks import check_parameters, check_start_state, prepared
 from .._solve.simulate import solve
 from .._solve.trajectory import result_message
+from .._systems.joint import MIN_GAUGE_SUM
 from .._systems.joint_control import (
     JointControlLoop,
     JointControlState,
@@ -22,6 +23,7 @@ from .._systems.joint_control import (
     joint_angle_range,
     max_gauge_pressure,
     regulated_stiffness,
+    stiffness_range,
 )
 from .closed_loop import check_window
 
@@ -96,23 +98,23 @@ _run_jit = eqx.filter_jit(run_joint_control)
 
 @eqx.filter_jit
 def _static_targets(loop, grid):
-    """θ_r, the held pressures and the static residual (|torque| [N m], and |K − K_r| [N m/rad] for a stiffness
-    target) on `grid` [s]."""
+    """On `grid` [s]: θ_r, Σ_r, the held pressures, the static torque left at them [N m] and, for a stiffness target,
+    the stiffness reached minus the target's and the stiffness range at θ_r (`stiffness_range`) [N m/rad]."""
     joint = loop.joint
     theta, total = jax.vmap(loop.targets)(grid)
     pf, pe = jax.vmap(lambda a, s: hold_pressures(joint, a, s))(theta, total)
-    residual = jnp.abs(jax.vmap(joint.torque)(theta, pf, pe))
-    if loop.target_kind == "stiffness":
-        achieved = jax.vmap(lambda a, s: held_stiffness(joint, a, s))(theta, total)
-        residual = jnp.maximum(residual, jnp.abs(achieved - jax.vmap(loop.target)(grid)))
-    return theta, pf, pe, residual
+    torque = jax.vmap(joint.torque)(theta, pf, pe)
+    if loop.target_kind != "stiffness":
+        return theta, total, pf, pe, torque, None
+    missed = jax.vmap(lambda a, s: held_stiffness(joint, a, s))(theta, total) - jax.vmap(loop.target)(grid)
+    return theta, total, pf, pe, torque, (missed, jax.vmap(lambda a: stiffness_range(joint, a))(theta))
 
 
 def check_joint_control(loop: JointControlLoop, ts, samples=401):
     """Concrete feasibility checks before any solve (`PamjaxInputError` naming the argument): the angle reference
-    inside the joint's range; at `samples` times over `ts`, the target held statically with both gauge pressures in
-    [0, `max_gauge_pressure`] (a stiffness outside what the pressure sum can give, or a sum too small for the angle,
-    fails here)."""
+    inside the joint's range; at `samples` times over `ts`, a pressure-sum target a GAUGE sum ≥ `MIN_GAUGE_SUM` Pa (not
+    bar), a stiffness target inside the stiffness the joint reaches at θ_r (`stiffness_range`), and the target held
+    statically with both gauge pressures in [0, `max_gauge_pressure`]: each failure says which of these it is."""
     ts = np.asarray(ts, dtype=float)
     if ts.ndim != 1 or ts.size < 2 or not np.all(np.isfinite(ts)) or not np.all(np.diff(ts) > 0):
         raise PamjaxInputError(f"ts must be a finite, strictly increasing 1-D time grid [s] of ≥ 2 times, got {ts}")
@@ -123,19 +125,44 @@ def check_joint_control(loop: JointControlLoop, ts, samples=401):
             f"angle_reference must stay inside the joint's range [{a_lo:.3f}, {a_hi:.3f}] rad (both muscles within "
             f"their strokes), but spans [{lo}, {hi}] rad"
         )
-    grid = jnp.asarray(np.linspace(ts[0], ts[-1], samples))
-    joint = loop.joint
-    theta, pf, pe, residual = (np.asarray(a) for a in _static_targets(loop, grid))
-    p_atm, p_max = float(joint.air.atmospheric_pressure), float(max_gauge_pressure(joint))
+    grid = np.linspace(ts[0], ts[-1], samples)
+    theta, total, pf, pe, torque, stiffness = jax.tree_util.tree_map(
+        np.asarray, _static_targets(loop, jnp.asarray(grid)))
+    p_atm, p_max = float(loop.joint.air.atmospheric_pressure), float(max_gauge_pressure(loop.joint))
     gauge = np.stack([pf, pe]) - p_atm
+
+    def at(k):
+        return f"at t = {grid[k]:.3f} s (θ_r = {theta[k]:.3f} rad)"
+
+    if loop.target_kind == "pressure_sum":
+        small = ~(total >= MIN_GAUGE_SUM)
+        if np.any(small):
+            k = int(np.argmax(small))
+            why = ("negative" if total[k] < 0 else "0 vents both muscles and holds no angle" if total[k] == 0 else
+                   "not finite" if not np.isfinite(total[k]) else "that looks like bar or MPa (5 bar = 5e5 Pa)")
+            raise PamjaxInputError(f"pressure-sum target must be a GAUGE pressure sum >= {MIN_GAUGE_SUM:g} Pa, got "
+                                   f"{total[k]:g} {at(k)}: {why}")
+    else:
+        missed, (k_lo, k_hi) = stiffness
+        bad = ~(np.abs(missed) < 1e-6)
+        if np.any(bad):
+            k = int(np.argmax(bad))
+            target = float(np.asarray(loop.target(grid[k])))
+            raise PamjaxInputError(
+                f"stiffness target {target:g} N m/rad {at(k)} is not reached: the joint's regulated stiffness there "
+                f"spans [{k_lo[k]:.4g}, {k_hi[k]:.4g}] N m/rad (gauge pressure sums 0 to {2 * p_max:.4g} Pa)")
     name = "stiffness target" if loop.target_kind == "stiffness" else "pressure-sum target"
-    bad = ~np.isfinite(gauge).all(0) | (gauge.min(0) < 0) | (gauge.max(0) > p_max) | ~(residual < 1e-6)
-    if np.any(bad):
-        k = int(np.argmax(bad))
-        raise PamjaxInputError(
-            f"{name} is infeasible at t = {float(grid[k]):.3f} s (θ_r = {float(theta[k]):.3f} rad): holding it needs "
-            f"gauge pressures ({gauge[0, k]:.4g}, {gauge[1, k]:.4g}) Pa outside [0, {p_max:.4g}] Pa (supply / 10 V)"
-        )
+    if not np.all(np.abs(torque) < 1e-6):
+        k = int(np.argmax(~(np.abs(torque) < 1e-6)))
+        raise PamjaxInputError(f"{name} {at(k)}: no pressure pair with gauge sum {total[k]:.4g} Pa holds θ_r (a "
+                               f"static torque of {torque[k]:.4g} N m is left)")
+    for failed, why in ((gauge.min(0) < 0, "one below 0: the sum {:.4g} Pa is too small to hold θ_r (a larger sum, "
+                                           "or stiffness, holds it)"),
+                        (gauge.max(0) > p_max, f"one above the regulators' {p_max:.4g} Pa (supply / 10 V)")):
+        if np.any(failed):
+            k = int(np.argmax(failed))
+            raise PamjaxInputError(f"{name} is infeasible {at(k)}: holding it needs gauge pressures "
+                                   f"({gauge[0, k]:.4g}, {gauge[1, k]:.4g}) Pa, " + why.format(total[k]))
 
 
 def simulate_joint_control(

@@ -65,6 +65,9 @@ def __getattr__(name):
 EQ6_TIME_CONSTANTS = paper001.EQ6_TIME_CONSTANTS  # s
 EQ7_FLOW_GAIN = paper001.EQ7_GAIN * BAR / FLOW_UNIT  # Pa per kg/s (≈ -4.67e9): eq. 7's gain in SI
 TANK_VOLUME = paper001.TANK_VOLUME  # m³
+# m³, a regulator's internal volume: 5 × the VPPM's 2.06e-4 (paper 001 Fig. 6); more is litres or cm³ typed as m³
+# (0.206 or 206 for its 206 cm³, which left the outlet at 0.02 bar of a 3 bar set point after 1 s)
+MAX_INTERNAL_VOLUME = 1e-3
 
 
 class RegulatorState(eqx.Module):
@@ -324,6 +327,11 @@ class ISO6358Regulator(AbstractRegulator):
         check_positive(self.full_opening_error, "ISO6358Regulator.full_opening_error")
         check_positive(self.opening_width, "ISO6358Regulator.opening_width")
         check_nonnegative(self.internal_volume, "ISO6358Regulator.internal_volume")
+        volume = concrete_values(self.internal_volume)
+        if volume is not None and np.any(volume > MAX_INTERNAL_VOLUME):
+            raise PamjaxInputError(f"ISO6358Regulator.internal_volume = {np.max(volume):g} m³: more than "
+                                   f"{MAX_INTERNAL_VOLUME:g} m³ (5 × the VPPM's); that looks like cm³ or litres "
+                                   "(pamjax takes SI units: m³)")
 
     def initial_state(self, pressure):
         """At rest at `pressure` [Pa abs]; a hysteresis in its virgin state (u = 0, between its branches)."""

@@ -208,7 +208,8 @@ def _names(tree, prefix):
     return tuple(out)
 
 
-def linearise(system: AbstractSystem, state: eqx.Module, command: RealScalarLike, *, t: RealScalarLike = 0.0,
+def linearise(system: AbstractSystem, state: eqx.Module, command: RealScalarLike | Real[ArrayLike, " m"], *,
+              t: RealScalarLike = 0.0,
               inputs: Mapping[str, Callable[[AbstractSystem], Real[ArrayLike, "..."]]] | None = None,
               outputs: Sequence[str] = ("pressure",)) -> StateSpace:
     """Linearise `system` about (`state`, `command`) at time `t`: a `StateSpace`.
@@ -216,7 +217,9 @@ def linearise(system: AbstractSystem, state: eqx.Module, command: RealScalarLike
     **Arguments:**
 
     - `system`: any pamjax system (`vector_field(t, y, u)` and `outputs(t, y, u)`); `state`: its state pytree
-      (SI, ABSOLUTE pressures, as `simulate`'s `y0`); `command`: the command, one number (a duty ratio, a voltage).
+      (SI, ABSOLUTE pressures, as `simulate`'s `y0`); `command`: the command, one number (a duty ratio, a voltage),
+      or a vector for a system that takes one (an `AntagonisticJoint`'s (V_f, V_e): B and D get one column each,
+      "command[0]", "command[1]").
     - `inputs`: extra inputs, a dict name → function selecting an array leaf of the system (e.g.
       `{"outlet_flow": lambda s: s.outlet_flow}`); they follow the command (named "command") in B and D.
     - `outputs`: names of `system.outputs` channels (default ("pressure",)).
@@ -226,9 +229,9 @@ def linearise(system: AbstractSystem, state: eqx.Module, command: RealScalarLike
 
     **Raises:** `PamjaxInputError` for what `simulate` refuses in the system (`payload_mass` ≤ 0, set with
     `eqx.tree_at` or not) and in a start state (a pressure in bar or gauge, a position in mm or outside the stroke),
-    a `state`, `command` or `t` that is not finite, a command that is not one number or lies outside
-    `system.command_range`, before anything is computed; `PamjaxSolveError` where a derivative is not finite at the
-    operating point (named).
+    a `state`, `command` or `t` that is not finite, a command of a shape the system does not take or that lies
+    outside `system.command_range`, before anything is computed; `PamjaxSolveError` where a derivative is not finite
+    at the operating point (named).
     """
     _check_inputs(system, command, state, "state", t)
     inputs = {} if inputs is None else dict(inputs)
@@ -306,19 +309,22 @@ def _check_inputs(system, command, state, state_name, t):
     check_parameters(system)
     check_start_state(system, state, state_name)  # simulate's checks (5.4 for 5.4 bar: poles of a vacuum)
     check_finite(t, "t")
-    _check_command(system, command)
+    _check_command(system, command, state, t)
 
 
-def _check_command(system, command):
-    """Refuse a `command` that is not one number (a shape is known even traced), and a concrete one that is not
-    finite or lies outside `system.command_range` (a duty ratio in [0, 1], a regulator's 0-10 V), as `simulate`
-    refuses such a signal: the flow laws extrapolate beyond it (eq. 13's parabola gives a 2 MPa "equilibrium" at
-    duty -0.3). Every system takes one command: an array of two broadcast into the state (an "equilibrium" of a
-    pressure pair that was none, an A of shape (4, 3)). A traced command (jit/grad) has no value to check."""
-    if np.ndim(command) != 0:
+def _check_command(system, command, state, t):
+    """Refuse a `command` of a shape `system` does not take (a shape is known even traced), and a concrete one that
+    is not finite or lies outside `system.command_range` (a duty ratio in [0, 1], a regulator's 0-10 V), as
+    `simulate` refuses such a signal: the flow laws extrapolate beyond it (eq. 13's parabola gives a 2 MPa
+    "equilibrium" at duty -0.3). One number, or a vector where the system takes one (an `AntagonisticJoint`'s
+    (V_f, V_e)): its rates then have the state's shapes. A system of one command broadcasts a vector into the
+    state instead (an "equilibrium" of a pressure pair that was none, an A of shape (4, 3)): refused, as is a
+    vector the system refuses itself. A traced command (jit/grad) has no value to check."""
+    if np.ndim(command) > 1 or (np.ndim(command) == 1 and not _takes_vector(system, command, state, t)):
         raise PamjaxInputError(
-            f"command must be one number (the valve command, e.g. a duty ratio), got shape {np.shape(command)}: a "
-            "system takes one command; for several operating points, call once per command (or jax.vmap over it)")
+            f"command must be one number (the valve command, e.g. a duty ratio), or a vector for a system that takes "
+            f"one (an AntagonisticJoint's (V_f, V_e)), got shape {np.shape(command)}: for several operating points, "
+            "call once per command (or jax.vmap over it)")
     value = concrete_values(command)
     if value is None:
         return
@@ -333,13 +339,29 @@ def _check_command(system, command):
                                f"command_range [{lo}, {hi}], got {np.array2string(value, threshold=6)}")
 
 
+def _takes_vector(system, command, state, t):
+    """Whether `system`'s rates at `state` for the vector `command` have the state's shapes (shapes only: nothing
+    computed or compiled); a `PamjaxInputError` the system raises for it (the joint's "(flexor, extensor)") passes."""
+    try:
+        shape = jax.ShapeDtypeStruct(np.shape(command), float)  # a shape only: no array made, nothing compiled
+        rates = jax.eval_shape(lambda c: system.vector_field(t, state, c), shape)
+    except PamjaxInputError:
+        raise
+    except (TypeError, ValueError, IndexError):  # the command could not be broadcast into the state
+        return False
+    shapes = [np.shape(leaf) for leaf in jtu.tree_leaves(state)]
+    return (jtu.tree_structure(rates) == jtu.tree_structure(state)
+            and shapes == [leaf.shape for leaf in jtu.tree_leaves(rates)])
+
+
 # Singular values of the scaled Jacobian below this fraction of the largest are taken as zero in the Newton step.
 # Scaled fields have physical ones down to ~1e-4 of the largest (MAS-10 with Coulomb friction), a memory state's
 # null direction ~1e-18 (measured).
 SINGULAR_RCOND = 1e-10
 
 
-def equilibrium(system: AbstractSystem, command: RealScalarLike, guess: eqx.Module, *, t: RealScalarLike = 0.0,
+def equilibrium(system: AbstractSystem, command: RealScalarLike | Real[ArrayLike, " m"], guess: eqx.Module, *,
+                t: RealScalarLike = 0.0,
                 rtol: RealScalarLike = 1e-10, atol: RealScalarLike = 1e-10, max_steps: int = 200) -> eqx.Module:
     """A state where `system.vector_field(t, ·, command)` vanishes, by Newton's method from `guess`, solved in the
     system's scaled units (`state_scale`): full Newton steps until a step is below `atol + rtol |z|` in every

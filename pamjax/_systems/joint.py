@@ -16,16 +16,23 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.custom_types import RealScalar, StateLike
-from .._core.errors import PamjaxInputError, check_finite, check_nonnegative, check_positive, concrete_values
+from .._core.errors import (
+    PamjaxInputError,
+    check_finite,
+    check_in_open_interval,
+    check_nonnegative,
+    check_positive,
+    concrete_values,
+)
 from .._core.fitting import parameter, positive
 from .._core.units import check_absolute_pressure
 from .._papers import paper000, paper001
 from .._physics.gas import Air
-from .._physics.muscle import EndStops, Muscle
+from .._physics.muscle import AbstractMuscle, EndStops, Muscle
 from .._physics.regulator import AbstractRegulator, paper001_air
 from .._physics.signals import AbstractSignal
 from .base import AbstractSystem, state_leaves
-from .regulated import muscle_stiffness
+from .regulated import MUSCLE_KINDS, POLYTROPIC_RANGE, REGULATOR_KINDS, check_component, muscle_stiffness
 
 PULLEY_RADIUS = 0.03  # m, assumed (orthosis lever; ±0.35 rad swings x by ±10 mm of the DMSP-40's 100 mm stroke)
 PRE_CONTRACTION = 0.01  # m, assumed: 2.5 % contraction at θ = 0, where the DMSP-40 preset pulls from ≈ 0.7 bar gauge
@@ -37,6 +44,30 @@ MAX_ANGLE = 0.6  # rad, the range `equilibrium_angle` searches (±34°: beyond a
 # Pa: a GAUGE pressure sum below this was written in bar or MPa (10 mbar holds no joint; the threshold of
 # `pamjax._core.units.check_setting`'s gauge p_max check)
 MIN_GAUGE_SUM = 1e3
+# m: the lever arms of muscle-driven joints are centimetres (orthoses 0.03-0.1 m); on a 0.5 m pulley a DMSP-40's
+# 100 mm stroke turns the joint by 0.2 rad (±6°), so more is a radius in mm or cm (30 for 0.03 m)
+MAX_PULLEY_RADIUS = 0.5
+# m: a foot's centre of mass lies ≈ 0.06 m from the ankle (a whole leg's ≈ 0.4 m from the hip); more than a metre is
+# mm or cm
+MAX_FOOT_ARM = 1.0
+
+
+def check_length(value, name, limit, what):
+    """A concrete length [m] `name` finite and at most `limit` in size (`what` says why); more looks like mm."""
+    check_finite(value, name)
+    v = concrete_values(value)
+    if v is not None and np.any(np.abs(v) > limit):
+        raise PamjaxInputError(f"{name} = {float(np.max(np.abs(v))):g} m: more than {limit:g} m ({what}); that looks "
+                               "like mm or cm (pamjax takes SI units: m)")
+
+
+def check_scalar(name, **values):
+    """Each of the named `values` one number (shape ()): `name` (the method) takes one operating point."""
+    shapes = {key: np.shape(v) for key, v in values.items()}
+    if any(shape != () for shape in shapes.values()):
+        got = ", ".join(f"{key} {shape}" for key, shape in shapes.items())
+        raise PamjaxInputError(f"{name} takes one number each for {', '.join(values)} (one operating point), got "
+                               f"shapes {got}: for several, call it once per point or jax.vmap over it")
 
 
 def check_joint_pressures(**pressures):
@@ -61,6 +92,11 @@ class VoltagePair(AbstractSignal):
 
     flexor: AbstractSignal
     extensor: AbstractSignal
+
+    def __check_init__(self):
+        for name in ("flexor", "extensor"):
+            check_component(getattr(self, name), AbstractSignal, f"VoltagePair.{name}",
+                            "a pamjax signal of voltage [V] (pj.Constant(3.0), pj.Step(...), pj.Sampled(...))")
 
     def __call__(self, t):
         return jnp.stack([jnp.asarray(self.flexor(t), dtype=float), jnp.asarray(self.extensor(t), dtype=float)])
@@ -98,10 +134,62 @@ class AntagonisticJoint(AbstractSystem):
     output_names = ("pressure", "mass_flow", "angle", "angular_velocity", "force", "volume")
 
     def __check_init__(self):
+        order = "; the arguments are (flexor_regulator, extensor_regulator, flexor, extensor)"
+        for name, kind, what in (("flexor_regulator", AbstractRegulator, REGULATOR_KINDS),
+                                 ("extensor_regulator", AbstractRegulator, REGULATOR_KINDS),
+                                 ("flexor", AbstractMuscle, MUSCLE_KINDS), ("extensor", AbstractMuscle, MUSCLE_KINDS)):
+            check_component(getattr(self, name), kind, f"AntagonisticJoint.{name}", what, order)
         check_positive(self.pulley_radius, "AntagonisticJoint.pulley_radius")
+        check_length(self.pulley_radius, "AntagonisticJoint.pulley_radius", MAX_PULLEY_RADIUS, "a joint's lever arm")
+        check_length(self.foot_arm, "AntagonisticJoint.foot_arm", MAX_FOOT_ARM, "ankle to the foot's centre of mass")
+        check_finite(self.gravity, "AntagonisticJoint.gravity")
         check_positive(self.inertia, "AntagonisticJoint.inertia")
         check_nonnegative(self.foot_mass, "AntagonisticJoint.foot_mass")
         check_nonnegative(self.damping, "AntagonisticJoint.damping")
+        check_in_open_interval(self.polytropic_index, *POLYTROPIC_RANGE, "AntagonisticJoint.polytropic_index")
+        self._check_pre_contraction()
+
+    def _check_pre_contraction(self):
+        """x₀ finite and inside both muscles' strokes (θ = 0 must be a pose of the joint)."""
+        check_finite(self.pre_contraction, "AntagonisticJoint.pre_contraction")
+        x0 = concrete_values(self.pre_contraction)
+        for name in ("flexor", "extensor"):
+            muscle = getattr(self, name)
+            lo, hi = concrete_values(muscle.min_position), concrete_values(muscle.max_position)
+            if x0 is None or lo is None or hi is None or np.all((lo <= x0) & (x0 <= hi)):
+                continue
+            in_mm = np.all((lo <= x0 / 1e3) & (x0 / 1e3 <= hi))
+            hint = "; that looks like mm (pamjax takes SI units: m)" if in_mm else ""
+            raise PamjaxInputError(
+                f"AntagonisticJoint.pre_contraction = {x0.max() if x0.size == 1 else x0:g} m lies outside the {name}'s "
+                f"stroke [{float(lo):g}, {float(hi):g}] m (its min_position, max_position): x₀ is both muscles' "
+                f"contraction at θ = 0, which must be a pose of the joint{hint}")
+
+    def angle_range(self):
+        """(θ_min, θ_max) [rad] where both muscles stay inside their strokes, x₀ ± r θ ∈ [x_min, x_max], as floats;
+        None where one of these parameters is traced."""
+        values = [concrete_values(v) for v in (self.pulley_radius, self.pre_contraction, self.flexor.min_position,
+                                               self.flexor.max_position, self.extensor.min_position,
+                                               self.extensor.max_position)]
+        if any(v is None or v.shape != () for v in values):
+            return None
+        r, x0, f_lo, f_hi, e_lo, e_hi = (float(v) for v in values)
+        return max((f_lo - x0) / r, (x0 - e_hi) / r), min((f_hi - x0) / r, (x0 - e_lo) / r)
+
+    def check_angle(self, angle, name="angle"):
+        """A concrete `angle` [rad] finite and inside `angle_range` (a start beyond it is on an end stop; 20 for
+        20° looks like degrees); traced values, or a joint with traced parameters, are not checked."""
+        check_finite(angle, name)
+        a, bounds = concrete_values(angle), self.angle_range()
+        if a is None or bounds is None:
+            return
+        lo, hi = bounds
+        if not np.all((a >= lo) & (a <= hi)):
+            worst = float(a.flat[np.argmax(np.maximum(lo - a, a - hi))])
+            hint = (f": that looks like degrees ({worst:g}° = {np.radians(worst):.4g} rad; pamjax takes radians)"
+                    if lo <= np.radians(worst) <= hi else "")
+            raise PamjaxInputError(f"{name} = {worst:g} rad lies outside the joint's range [{lo:.4g}, {hi:.4g}] rad "
+                                   f"(both muscles inside their strokes){hint}")
 
     @property
     def valve(self):
@@ -148,6 +236,8 @@ class AntagonisticJoint(AbstractSystem):
         are checked: pressures in bar or gauge, and pressures whose torque keeps one sign over the whole range (the
         joint would come to rest beyond it, on an end stop), raise `PamjaxInputError`; traced ones are not (there the
         end of the range nearest the rest angle is returned)."""
+        check_scalar("AntagonisticJoint.equilibrium_angle", flexor_pressure=flexor_pressure,
+                     extensor_pressure=extensor_pressure)
         check_joint_pressures(flexor_pressure=flexor_pressure, extensor_pressure=extensor_pressure)
         ends = concrete_values(self.torque(jnp.asarray([-max_angle, max_angle]), flexor_pressure, extensor_pressure))
         if ends is not None and not ends[0] >= 0.0 >= ends[1]:  # the torque falls with the angle
@@ -186,6 +276,7 @@ class AntagonisticJoint(AbstractSystem):
         `MIN_GAUGE_SUM`) or not finite, and an angle that no split of the sum holds (the range it reaches named),
         raise `PamjaxInputError`; traced ones are not (there the nearest split is returned: one muscle vented)."""
         p_atm = self.air.atmospheric_pressure
+        check_scalar("AntagonisticJoint.pressures_for", angle=angle, pressure_sum=pressure_sum)
         check_finite(angle, "angle")
         check_finite(pressure_sum, "pressure_sum")
         total = concrete_values(pressure_sum)
@@ -222,7 +313,7 @@ class AntagonisticJoint(AbstractSystem):
 
     def initial_state(self, flexor_pressure=None, extensor_pressure=None, angle=None):
         """At rest with the given absolute pressures [Pa] (atmospheric by default) at their static equilibrium angle
-        (`equilibrium_angle`), or at `angle` [rad]."""
+        (`equilibrium_angle`), or at `angle` [rad], which must lie in `angle_range` (`PamjaxInputError`)."""
         pf = jnp.asarray(self.air.atmospheric_pressure if flexor_pressure is None else flexor_pressure, dtype=float)
         pe = jnp.asarray(self.air.atmospheric_pressure if extensor_pressure is None else extensor_pressure, dtype=float)
         check_joint_pressures(flexor_pressure=pf, extensor_pressure=pe)
@@ -232,6 +323,7 @@ class AntagonisticJoint(AbstractSystem):
             except PamjaxInputError as err:
                 raise PamjaxInputError(f"AntagonisticJoint.initial_state: {err}; or give the start `angle`") from None
         else:
+            self.check_angle(angle)
             a = jnp.asarray(angle, dtype=float)
         return JointState(
             flexor=self.flexor_regulator.initial_state(pf),

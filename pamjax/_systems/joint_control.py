@@ -26,14 +26,23 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.custom_types import ArrayLike, FloatScalar, Real, RealScalar, RealScalarLike
-from .._core.errors import PamjaxInputError, check_nonnegative, check_positive
+from .._core.errors import PamjaxInputError, check_nonnegative, check_positive, concrete_values
 from .._core.fitting import parameter
 from .._physics.regulator import EQ6_TIME_CONSTANTS, VOLTAGE_RANGE
 from .._physics.signals import AbstractSignal
 from .base import AbstractSystem
 from .joint import AntagonisticJoint, JointState
 
-NEWTON_ITERATIONS = 6  # torque is affine in Δ and the stiffness nearly affine in Σ (DMSP-40): 2 suffice; 6 for slack
+# The static inverses' root finds (safeguarded Newton, `increasing_root`): the torque is affine in Δ and the stiffness
+# nearly affine in Σ where both muscles pull (Newton: 2-4 steps), flat where one is slack (bisection there). A step
+# below ROOT_TOLERANCE [Pa] (1e-11 bar; the round-off of a Newton step here is ~1e-10 Pa for Δ, ~1e-9 Pa for Σ) ends
+# the search. At least every second step halves the bracket, and 43 halvings narrow the widest (8e6 Pa) to it, so
+# ROOT_STEPS bounds every search.
+ROOT_TOLERANCE = 1e-6
+ROOT_STEPS = 100
+# Pa: `hold_difference` searches Δ within ±(Σ + this): 40 bar gauge in one muscle, far beyond any muscle's rating
+# (DMSP-40: 6 bar), so the holding difference lies inside unless no pressure holds the angle
+DIFFERENCE_SPAN = 4e6
 
 # Default gains, designed on two DMSP-40s, ISO6358Regulators, default joint (reasoning per line):
 # ∂τ/∂Δ = 2.70e-4 N m/Pa and K_θ ≈ 115-180 N m/rad, so the static angle gain is ≈ 1.9e-6 rad/Pa.
@@ -59,22 +68,60 @@ def _pressures(joint, pressure_sum, difference):
     return p_atm + 0.5 * (pressure_sum + difference), p_atm + 0.5 * (pressure_sum - difference)
 
 
+def increasing_root(fun, lower, upper, start):
+    """x in [`lower`, `upper`] where the nondecreasing `fun` (x ↦ (value, slope)) vanishes: Newton's method
+    safeguarded by bisection (Numerical Recipes' `rtsafe`): every evaluation narrows the bracket, and a Newton step
+    that leaves it, or that would not halve the step before last (a flat stretch, a kink), is replaced by the
+    bracket's midpoint. A root outside the bracket gives its nearer end. A `jax.lax.while_loop` (no derivatives):
+    callers stop the gradient of what goes in and differentiate one Newton step at the result (`newton_step`)."""
+
+    def cond(carry):
+        _, _, _, step, _, k = carry
+        return jnp.any(jnp.abs(step) > ROOT_TOLERANCE) & (k < ROOT_STEPS)
+
+    def body(carry):
+        x, lo, hi, step, before, k = carry  # the last step and the one before it
+        value, slope = fun(x)
+        lo, hi = jnp.where(value < 0, x, lo), jnp.where(value > 0, x, hi)
+        newton = x - value / jnp.where(slope > 0, slope, 1.0)
+        fast = (slope > 0) & (newton >= lo) & (newton <= hi) & (jnp.abs(2.0 * value) <= jnp.abs(before * slope))
+        new = jnp.where(value == 0, x, jnp.where(fast, newton, 0.5 * (lo + hi)))
+        return new, lo, hi, new - x, step, k + 1
+
+    lower, upper = jnp.broadcast_arrays(jnp.asarray(lower, dtype=float), jnp.asarray(upper, dtype=float))
+    x0 = jnp.clip(start, lower, upper)
+    return jax.lax.while_loop(cond, body, (x0, lower, upper, upper - lower, upper - lower, 0))[0]
+
+
+def newton_step(residual, root, lower, upper):
+    """One Newton step of `residual` (differentiable) from `root` (found with the gradient stopped), kept in
+    [`lower`, `upper`]: the root again, now carrying the implicit-function derivatives. Where the slope vanishes (a
+    flat stretch) the root is kept; where the root is a bracket's end (none inside) the step cannot leave it."""
+    value, slope = jax.value_and_grad(residual)(root)
+    flat = ~(slope > 0)
+    return jnp.clip(jnp.where(flat, root, root - value / jnp.where(flat, 1.0, slope)), lower, upper)
+
+
 def hold_difference(joint: AntagonisticJoint, angle, pressure_sum):
-    """Δ = p_f − p_e [Pa] whose static torque vanishes at `angle` [rad] with gauge sum `pressure_sum` [Pa]: Newton
-    from Δ = 0 (torque is affine in Δ away from slack and end stops). Same root as `AntagonisticJoint.pressures_for`
-    (bisection); only the last step is differentiated, which gives the implicit-function derivatives."""
+    """Δ = p_f − p_e [Pa] whose static torque vanishes at `angle` [rad] with gauge sum `pressure_sum` [Pa]:
+    safeguarded Newton from Δ = 0 within ±(Σ + `DIFFERENCE_SPAN`) (`increasing_root`: the torque rises with Δ; it
+    is affine where both muscles pull, flat where both are slack). Where Σ is too small to hold the angle, Δ leaves
+    ±Σ (one gauge pressure below 0: that muscle slack). Same root as `AntagonisticJoint.pressures_for`'s bisection
+    wherever that one holds the angle; one Newton step at the root gives the implicit-function derivatives. One
+    compiled program (eagerly, its loop would compile at every call)."""
+    return _hold_difference(joint, jnp.asarray(angle, dtype=float), jnp.asarray(pressure_sum, dtype=float))
 
-    def tau(d, a, s):
-        return joint.torque(a, *_pressures(joint, s, d))
 
-    def newton(d, a, s):
-        value, slope = jax.value_and_grad(tau)(d, a, s)
-        return d - value / slope
+@eqx.filter_jit
+def _hold_difference(joint, angle, pressure_sum):
+    def tau(j, d, a, s):
+        return j.torque(a, *_pressures(j, s, d))
 
-    frozen = jax.lax.stop_gradient((angle, pressure_sum))
-    d = jnp.zeros_like(jnp.asarray(pressure_sum, dtype=float))
-    d = jax.lax.fori_loop(0, NEWTON_ITERATIONS - 1, lambda _, d: newton(d, *frozen), d)
-    return newton(jax.lax.stop_gradient(d), angle, pressure_sum)
+    frozen = jax.lax.stop_gradient((joint, angle, pressure_sum))
+    span = jnp.abs(jnp.asarray(frozen[2], dtype=float)) + DIFFERENCE_SPAN
+    d = increasing_root(lambda d: jax.value_and_grad(tau, argnums=1)(frozen[0], d, *frozen[1:]), -span, span,
+                        jnp.zeros_like(span))
+    return newton_step(lambda d: tau(joint, d, angle, pressure_sum), d, -span, span)
 
 
 def hold_pressures(joint: AntagonisticJoint, angle, pressure_sum):
@@ -87,18 +134,49 @@ def held_stiffness(joint: AntagonisticJoint, angle, pressure_sum):
     return regulated_stiffness(joint, angle, *hold_pressures(joint, angle, pressure_sum))
 
 
+def stiffness_range(joint: AntagonisticJoint, angle):
+    """(K_min, K_max) [N m/rad]: the regulated stiffness at `angle` [rad] held with gauge sums from 0 (the muscle
+    that holds the angle alone, the other slack) to twice the regulators' `max_gauge_pressure` (the stiffness does
+    not fall as the sum rises)."""
+    top = 2.0 * max_gauge_pressure(joint)
+    return held_stiffness(joint, angle, 0.0 * top), held_stiffness(joint, angle, top)
+
+
 def sum_for_stiffness(joint: AntagonisticJoint, angle, stiffness, initial_sum=4e5):
     """Gauge pressure sum Σ [Pa] giving regulated stiffness `stiffness` [N m/rad] at `angle` [rad] held statically:
-    Newton on Σ from `initial_sum` [Pa] (K is nearly affine in Σ), last step differentiated."""
+    safeguarded Newton on Σ from `initial_sum` [Pa] within [0, 2 × the regulators' `max_gauge_pressure`]
+    (`increasing_root`: K is nearly affine in Σ where both muscles pull, flat where one is slack), one Newton step
+    at the root differentiated. Concrete values outside `stiffness_range` raise `PamjaxInputError` naming the range;
+    traced ones give the nearer end of the bracket."""
+    angle, stiffness = jnp.asarray(angle, dtype=float), jnp.asarray(stiffness, dtype=float)
+    if all(concrete_values(v) is not None for v in jax.tree_util.tree_leaves((joint, angle, stiffness))):
+        low, high = (float(k) for k in _stiffness_range(joint, angle))
+        k = concrete_values(stiffness)
+        if not np.all((k >= low) & (k <= high)):
+            raise PamjaxInputError(
+                f"stiffness {_text(k)} N m/rad is not reached at angle {_text(concrete_values(angle))} rad: the "
+                f"joint's regulated stiffness there spans [{low:.4g}, {high:.4g}] N m/rad (gauge pressure sums 0 to "
+                f"{2.0 * float(max_gauge_pressure(joint)):.4g} Pa)")
+    return _sum_for_stiffness(joint, angle, stiffness, jnp.asarray(initial_sum, dtype=float))
 
-    def newton(s, a, k):
-        value, slope = jax.value_and_grad(lambda q: held_stiffness(joint, a, q))(s)
-        return s - (value - k) / slope
 
-    frozen = jax.lax.stop_gradient((angle, stiffness))
-    s = jnp.asarray(initial_sum, dtype=float) + 0.0 * frozen[1]
-    s = jax.lax.fori_loop(0, NEWTON_ITERATIONS - 1, lambda _, s: newton(s, *frozen), s)
-    return newton(jax.lax.stop_gradient(s), angle, stiffness)
+def _text(values):
+    return f"{float(values):g}" if np.size(values) == 1 else np.array2string(values, threshold=6)
+
+
+_stiffness_range = eqx.filter_jit(stiffness_range)
+
+
+@eqx.filter_jit
+def _sum_for_stiffness(joint, angle, stiffness, initial_sum):
+    def residual(j, q, a, k):
+        return held_stiffness(j, a, q) - k
+
+    frozen = jax.lax.stop_gradient((joint, angle, stiffness))
+    top = jax.lax.stop_gradient(2.0 * max_gauge_pressure(joint)) + 0.0 * frozen[2]
+    s = increasing_root(lambda q: jax.value_and_grad(residual, argnums=1)(frozen[0], q, *frozen[1:]), 0.0 * top, top,
+                        initial_sum + 0.0 * top)
+    return newton_step(lambda q: residual(joint, q, angle, stiffness), s, 0.0, top)
 
 
 def max_gauge_pressure(joint: AntagonisticJoint):
@@ -292,11 +370,9 @@ class JointControlLoop(AbstractSystem):
 
 
 def joint_angle_range(joint: AntagonisticJoint):
-    """(θ_min, θ_max) [rad] where both muscles stay inside their strokes: x₀ ± r θ ∈ [x_min, x_max]."""
-    r, x0 = float(joint.pulley_radius), float(joint.pre_contraction)
-    f_lo, f_hi = float(joint.flexor.min_position), float(joint.flexor.max_position)
-    e_lo, e_hi = float(joint.extensor.min_position), float(joint.extensor.max_position)
-    return max((f_lo - x0) / r, (x0 - e_hi) / r), min((f_hi - x0) / r, (x0 - e_lo) / r)
+    """(θ_min, θ_max) [rad] where both muscles stay inside their strokes: x₀ ± r θ ∈ [x_min, x_max]
+    (`AntagonisticJoint.angle_range`)."""
+    return joint.angle_range()
 
 
 def check_joint_control_loop(loop, name="loop"):

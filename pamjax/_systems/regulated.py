@@ -16,16 +16,30 @@ import jax
 import jax.numpy as jnp
 
 from .._core.custom_types import FloatScalar, RealScalar, RealScalarLike, StateLike
-from .._core.errors import check_in_open_interval, check_nonnegative, check_positive
+from .._core.errors import PamjaxInputError, check_finite, check_in_open_interval, check_nonnegative, check_positive
 from .._core.fitting import parameter, positive
 from .._core.units import check_plausible
 from .._papers import datasheets, paper000, paper001
 from .._physics.chamber import chamber_flow
 from .._physics.friction import AbstractFriction, CoulombViscousFriction
 from .._physics.gas import Air
-from .._physics.muscle import EndStops, Muscle, stroke_root
+from .._physics.muscle import AbstractMuscle, EndStops, Muscle, stroke_root
 from .._physics.regulator import AbstractRegulator, paper001_air
 from .base import AbstractMuscleSystem, AbstractSystem, state_leaves
+
+# the polytropic index n of eq. 3 and 12: 1 isothermal (paper 001) to 1.4 adiabatic (air); outside, n = 0 freezes a
+# chamber's pressure and n < 0 drives it below vacuum
+POLYTROPIC_RANGE = (0.99, 1.41)
+REGULATOR_KINDS = "a pressure regulator (ISO6358Regulator(), LinearRegulator(), FeedbackRegulator(), vppm_regulator())"
+MUSCLE_KINDS = "a Muscle (e.g. pj.presets.dmsp40_muscle())"
+
+
+def check_component(value, kind, name, what, hint=""):
+    """A `PamjaxInputError` naming `name` unless `value` is a `kind` (`what` says which, with an example; `hint`
+    follows): a component of the wrong type (regulators and muscles swapped, None) failed much later with a raw
+    AttributeError."""
+    if not isinstance(value, kind):
+        raise PamjaxInputError(f"{name} must be {what}, got {type(value).__name__}{hint}")
 
 
 class RegulatorSystem(AbstractSystem):
@@ -45,12 +59,14 @@ class RegulatorSystem(AbstractSystem):
     output_names = ("pressure", "mass_flow", "inlet_flow", "volume")
 
     def __check_init__(self):
+        check_component(self.regulator, AbstractRegulator, "RegulatorSystem.regulator", REGULATOR_KINDS)
         if self.regulator.needs_volume:
             check_positive(self.volume, f"RegulatorSystem.volume (an {type(self.regulator).__name__} needs a chamber)")
         else:
             check_nonnegative(self.volume, "RegulatorSystem.volume")
         check_plausible(self.volume, "RegulatorSystem.volume")  # 40 (litres) for paper 001's 0.04 m³ tank refused
-        check_in_open_interval(self.polytropic_index, 0.99, 1.41, "RegulatorSystem.polytropic_index")
+        check_in_open_interval(self.polytropic_index, *POLYTROPIC_RANGE, "RegulatorSystem.polytropic_index")
+        check_finite(self.outlet_flow, "RegulatorSystem.outlet_flow")  # NaN ended in "maximum step size" at the solve
 
     @property
     def valve(self):
@@ -166,9 +182,11 @@ class RegulatedMuscleSystem(AbstractMuscleSystem):
                     "volume")
 
     def __check_init__(self):
+        check_component(self.regulator, AbstractRegulator, "RegulatedMuscleSystem.regulator", REGULATOR_KINDS)
+        check_component(self.muscle, AbstractMuscle, "RegulatedMuscleSystem.muscle", MUSCLE_KINDS)
         check_nonnegative(self.load_force, "RegulatedMuscleSystem.load_force")
         check_positive(self.payload_mass, "RegulatedMuscleSystem.payload_mass")
-        check_in_open_interval(self.polytropic_index, 0.99, 1.41, "RegulatedMuscleSystem.polytropic_index")
+        check_in_open_interval(self.polytropic_index, *POLYTROPIC_RANGE, "RegulatedMuscleSystem.polytropic_index")
 
     @property
     def valve(self):
