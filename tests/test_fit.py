@@ -64,6 +64,21 @@ def test_k0_k1_k2_are_reported_non_identifiable(tmp_path):
     np.testing.assert_array_equal(np.asarray(back.correlation, float), np.asarray(res.correlation, float))
 
 
+def test_a_parameter_without_effect_has_no_correlations_and_its_result_round_trips(tmp_path):
+    # the correlations of a parameter flagged "no effect" (infinite standard error) read 0.508, -0.984, ...: the
+    # ratio was taken before its standard error was set to inf; now NaN off the diagonal, 1 on it
+    truth, exp = _force_map()
+    free = FORCE_FREE + ["volume_law.v0"]  # a force map does not see the muscle's volume
+    with pytest.warns(pj.PamjaxIdentifiabilityWarning, match="parameter volume_law.v0 has no effect on the data"):
+        res = pj.fit(truth, [exp], free, progress=False)
+    corr, se = np.asarray(res.correlation), np.asarray(res.standard_errors)
+    assert np.isinf(se[-1]) and np.all(np.isfinite(se[:-1]))
+    assert np.all(np.isnan(corr[-1, :-1])) and np.all(np.isnan(corr[:-1, -1])) and corr[-1, -1] == 1.0
+    assert np.all(np.isfinite(corr[:-1, :-1]))
+    res.to_json(tmp_path / "fit.json")
+    assert pj.FitResult.from_json(tmp_path / "fit.json") == res  # NaN equal to NaN: fit.json reads back equal
+
+
 def test_json_round_trip_is_exact_and_apply_rebuilds_model(tmp_path):
     truth, exp = _force_map()
     space = pj.ParameterSpace(truth, FORCE_FREE)

@@ -36,7 +36,7 @@ def test_fewer_residuals_than_free_parameters_is_refused():
 
 def test_max_steps_takes_a_numpy_integer_and_refuses_a_bool():
     # `fit(max_steps=np.int64(3))` was refused as "max_steps must be a positive int, got 3"
-    from pamjax._fit.fit import _validate
+    from pamjax._fit.fit_checks import validate_fit as _validate
 
     exp = pamjax.Experiment(pamjax.Recording(np.linspace(0.0, 0.1, 5), {"pressure": np.full(5, 2e5)}),
                             pamjax.Constant(0.5))
@@ -134,7 +134,7 @@ def test_substeps_and_counts_take_numpy_integers_and_refuse_bools():
     for bad in (True, 0, 2.5):  # int(2.5) was 2, int(True) 1: taken silently
         with pytest.raises(PamjaxInputError, match=r"max_steps must be a positive int"):
             pamjax.Experiment(_recording(), pamjax.Constant(0.5), max_steps=bad)
-    from pamjax._fit.fit import _check_settings
+    from pamjax._fit.fit_checks import check_settings as _check_settings
 
     assert _check_settings(1e-10, 1e-10, 1e-10, np.int64(8)) == 8  # fit(stall_steps=np.int64(8)) was refused
     for bad in (True, 0, 2.5):
@@ -149,6 +149,8 @@ def test_substeps_and_counts_take_numpy_integers_and_refuse_bools():
     ({"path": "volume", "bounds": 1e-4}, r"'volume': bounds must be \(lo, hi\), two numbers"),
     ({"path": "volume", "bounds": "ab"}, r"'volume': bounds must be \(lo, hi\), two numbers"),
     ({"path": "volume", "bounds": (0.0, float("inf"))}, r"'volume': bounds must be finite"),
+    ({"path": "valve.coefficients", "transform": "nodes"},  # "needs an enclosing component with a None range"
+     r"'valve.coefficients': a 'nodes' transform needs a polynomial whose field names the range it spans"),
 ])
 def test_malformed_free_entries_are_refused_by_name(entry, match):
     # bounds=(lo, mid, hi) raised "too many values to unpack", an entry 3 "'int' object is not iterable"
@@ -184,3 +186,141 @@ def test_noise_scales_in_another_unit_are_refused_by_name():
     with pytest.raises(PamjaxInputError, match=r"scales\['pressure'\] = 0.02 Pa is below 1 Pa.*kPa or bar"):
         pamjax.Experiment(rec, signal, channels=["pressure", "position"], scales=dict(pressure=0.02, position=1e-4))
     pamjax.Experiment(rec, signal, channels=["pressure", "position"], scales=dict(pressure=2e3, position=1e-4))
+
+
+# Misuse found by the fit API's second tester (issue: fitapi), refused by name before any solve.
+
+def test_a_parameter_the_data_barely_see_is_flagged_and_the_covariance_is_column_normalised():
+    # muscle.slack_width on a triangle run: a Jacobian column of 2.4e-10 beside ~300. The covariance cut it by the
+    # unnormalised singular values (standard error 9e-19), identifiability (normalised columns) flagged nothing.
+    from pamjax._fit.diagnostics import covariance, identifiability
+
+    rng = np.random.default_rng(0)
+    jac = rng.standard_normal((200, 3)) * np.array([25.0, 20.0, 2e-11])
+    assert identifiability(jac, ["a", "b", "c"], 1e-6) == [["c"]]
+    cost, used = 90.0, 200
+    sigma2 = 2 * cost / (used - 3)
+    cov = covariance(jac, cost, used, 1e-6)
+    np.testing.assert_allclose(cov[:2, :2], sigma2 * np.linalg.inv(jac[:, :2].T @ jac[:, :2]), rtol=1e-10)
+    assert np.all(cov[2] == 0) and np.all(cov[:, 2] == 0)  # left out, as identifiability says
+    # well conditioned, nothing left out: σ²(JᵀJ)⁻¹ to rounding, whatever the columns' scales
+    jac = rng.standard_normal((200, 3)) * np.array([3e3, 1.0, 2e-2])
+    assert identifiability(jac, ["a", "b", "c"], 1e-6) == []
+    np.testing.assert_allclose(covariance(jac, cost, used, 1e-6), sigma2 * np.linalg.inv(jac.T @ jac), rtol=1e-10)
+
+
+@pytest.mark.parametrize("values, match", [
+    ([3e-5, 20.0, 2e-3, 999.0], r"values must be 3 numbers, one per label \(muscle.volume_law.v0, "
+                                r"friction.coulomb_force, valve.coefficients\[1,0\]\); got shape \(4,\)"),
+    ([3e-5, 20.0], r"values must be 3 numbers.*got shape \(2,\)"),
+    ([[3e-5, 20.0, 2e-3]], r"values must be 3 numbers.*got shape \(1, 3\)"),
+    ({"friction.coulomb_force": 20.0}, r"values must be 3 numbers.*got a dict"),
+    ([3e-5, float("nan"), 2e-3], r"values: friction.coulomb_force = nan must be finite"),
+    ([-3e-5, 20.0, 2e-3], r"values: muscle.volume_law.v0 = -3e-05 is negative; .* log space"),
+])
+def test_with_values_refuses_a_wrong_count_shape_or_value(values, match):
+    # 4 values for 3 parameters dropped the 4th silently; 2, a 2-D row or a dict raised raw NumPy errors
+    space = pamjax.ParameterSpace(presets.mas10_system("averaged"),
+                                  ["muscle.volume_law.v0", "friction.coulomb_force", "valve.coefficients[1,0]"])
+    with pytest.raises(PamjaxInputError, match=match):
+        space.with_values(values)
+    space.with_values([3e-5, 20.0, 2e-3])
+    bounded = pamjax.ParameterSpace(presets.mas10_system("averaged"),
+                                    [{"path": "friction.coulomb_force", "bounds": (1.0, 40.0)}])
+    with pytest.raises(PamjaxInputError, match=r"friction.coulomb_force = 50 lies outside its bounds \(1, 40\)"):
+        bounded.with_values([50.0])
+    bounded.with_values(np.asarray(bounded.physical(np.array([60.0]))))  # at the bound, rounded: taken
+
+
+def test_fit_out_and_checkpoint_that_cannot_be_written_are_refused_before_the_fit(tmp_path):
+    # out under a file, out a folder (overwrite=True) and a checkpoint under a file failed after the fit (or its
+    # first iteration) as raw FileExistsError / IsADirectoryError, the result lost
+    (tmp_path / "afile").write_text("")
+    (tmp_path / "folder").mkdir()
+    exp = pamjax.Experiment(_recording(), pamjax.Constant(0.5))
+    steps = []
+    for kwargs, match in ((dict(out=tmp_path / "afile" / "fit.json"), r"out .* lies under .*afile.*which is a file"),
+                          (dict(out=tmp_path / "folder", overwrite=True), r"out .*folder' is a folder: give the path"),
+                          (dict(checkpoint=tmp_path / "afile" / "ck.npz"), r"checkpoint .* lies under .*a file")):
+        with pytest.raises(PamjaxInputError, match=match):
+            pamjax.fit(presets.mas10_tank_system("averaged"), exp, ["volume"], progress=lambda *a: steps.append(a),
+                       **kwargs)
+    assert steps == []
+
+
+def test_synthetic_recording_refuses_bad_noise_and_seeds():
+    model = presets.mas10_system("averaged")
+    signal = pamjax.Triangle(0.05, 0.95, 0.25)
+    ts = np.linspace(0.0, 4.0, 201)  # the recording of test_noise_scales_in_another_unit_are_refused_by_name
+    for kwargs, match in (
+        (dict(noise=dict(pressure=np.nan)), r"noise\['pressure'\] must be a finite standard deviation >= 0"),
+        (dict(noise=dict(velocity=1e-3)), r"noise names channel 'velocity', which is not recorded; the recorded "
+                                          r"channels are \['pressure', 'position', 'command'\]"),
+        (dict(seed=-1), r"seed must be an int >= 0"), (dict(seed=1.5), r"seed must be an int >= 0"),
+        (dict(noise=dict(pressure=0.02)), r"noise\['pressure'\] = 0.02 Pa is below 1 Pa.*kPa or bar"),
+        (dict(noise=dict(position=0.1)), r"noise\['position'\] = 0.1 exceeds the whole range .*0.1 mm = 1e-4"),
+    ):
+        with pytest.raises(PamjaxInputError, match=match):
+            pamjax.synthetic_recording(model, signal, ts, **kwargs)
+    rec = pamjax.synthetic_recording(model, signal, ts, noise=dict(pressure=2e3, velocity=1e-3), seed=np.int64(1),
+                                     channels=["pressure", "velocity"])
+    assert sorted(rec.channels) == ["pressure", "velocity"]
+
+
+def _two_channels():
+    t = np.linspace(0.0, 0.1, 5)
+    return pamjax.Recording(t, {"pressure": np.full(5, 2e5), "position": np.full(5, 0.01)}, name="r")
+
+
+def test_an_unknown_part_of_the_residuals_is_refused():
+    # part="validaton" (or "test") was taken as "all"
+    exp = pamjax.Experiment(_two_channels(), pamjax.Constant(0.5))
+    for part in ("validaton", "test", None):
+        with pytest.raises(PamjaxInputError, match=r"part must be one of 'identification', 'validation', 'all'"):
+            exp.residuals_of({}, part)
+    force_map = pamjax.bench.ForceMapExperiment(np.zeros(3), np.full(3, 3e5), np.ones(3), scale=1.0)
+    with pytest.raises(PamjaxInputError, match=r"part must be one of"):
+        force_map.residuals(presets.mas10_muscle(), "Validation")
+
+
+def test_a_compared_channel_with_every_sample_masked_is_refused():
+    # it dropped out of the fit unseen (channel_errors {'range': 1.0}, no warning)
+    rec = _two_channels()
+    masked = pamjax.Recording(rec.t, {"pressure": np.full(5, np.nan), "position": rec["position"]}, mask_nan=True,
+                              name="m")
+    with pytest.raises(PamjaxInputError, match=r"experiment 'm': channel 'pressure' has no valid sample \(all masked"):
+        pamjax.Experiment(masked, pamjax.Constant(0.5), channels=["pressure", "position"])
+    pamjax.Experiment(masked, pamjax.Constant(0.5), channels=["position"])
+
+
+def test_an_initial_position_in_mm_or_outside_the_stroke_is_refused():
+    # initial={"position": 20} (20 mm meant), 0.5 m or -0.3 m outside the stroke [-0.02, 0.075] m were never checked
+    model = presets.mas10_system("averaged")
+    for position, match in ((20.0, r"experiment 'r': .*initial.position = 20 m: .*looks like mm"),
+                            (0.5, r"experiment 'r': initial.position = .*0.5.* m lies outside the stroke"),
+                            (-0.3, r"experiment 'r': initial.position = .*-0.3.* m lies outside the stroke")):
+        with pytest.raises(PamjaxInputError, match=match):
+            pamjax.Experiment(_two_channels(), pamjax.Constant(0.5), initial={"position": position}).check(model)
+    pamjax.Experiment(_two_channels(), pamjax.Constant(0.5), initial={"position": 0.01}).check(model)
+
+
+def test_staged_start_lists_each_stages_entries_with_their_array_index(monkeypatch):
+    # StagedStart.stages listed ['valve.coefficients', 'valve.coefficients'] for [1,0] and [1,1]: the index stripped
+    import pamjax._fit.staged as staged_module
+
+    class Done:  # a stage's result, without fitting: where it started, converged
+        message, status = "converged", "converged"
+
+        def apply(self, model):
+            return model
+
+    monkeypatch.setattr(staged_module, "fit", lambda *args, **kwargs: Done())
+    monkeypatch.setattr(staged_module, "_balanced_start", lambda model, full, rest: (model, None))
+    model = presets.mas10_system(valve="averaged", friction="karnopp")
+    rec = pamjax.Recording(np.linspace(0.0, 0.1, 5), {"pressure": np.full(5, 2e5), "position": np.zeros(5)})
+    run = pamjax.Experiment(rec, pamjax.Constant(0.5), name="tri")
+    tank = pamjax.Experiment(_recording(), pamjax.Constant(0.5), build=pamjax.TankFromModel(5e-5), name="tank")
+    free = ["valve.coefficients[1,0]", "valve.coefficients[1,1]", "friction.coulomb_force"]
+    staged = pamjax.staged_start(model, [run, tank], free, max_steps=2, progress=False, background_compile=False)
+    assert [(name, entries) for name, entries, *_ in staged.stages] == [
+        ("1", ["valve.coefficients[1,0]", "valve.coefficients[1,1]"]), ("2", ["friction.coulomb_force"])]

@@ -180,3 +180,17 @@ def test_a_unit_hint_for_a_file_without_header_says_where_its_units_go(tmp_path)
     with pytest.raises(PamjaxInputError, match=r"reaches 2 m; .*look like mm .*give its unit, "
                                                r"\{\"position\": \"mm\"\}, in Recording\(\.\.\., units=\.\.\.\)"):
         Recording(np.arange(60) / 100.0, dict(position=np.linspace(0, 2, 60)), name="r")
+
+
+def test_units_as_text_channels_as_a_list_and_text_values_are_refused_by_name():
+    # raw ValueError "dictionary update sequence element #0", TypeError "unhashable type", ValueError "could not
+    # convert string to float"
+    t, p = np.linspace(0.0, 1.0, 11), np.linspace(2e5, 6e5, 11)
+    with pytest.raises(PamjaxInputError, match=r"units must be a dict channel → unit .* got 'bar abs'"):
+        Recording(t, {"pressure": p}, units="bar abs")
+    with pytest.raises(PamjaxInputError, match=r"channels must be a dict name → values .* got a list"):
+        Recording(t, [p])
+    with pytest.raises(PamjaxInputError, match=r"channel 'command' must hold numbers"):
+        Recording(t, {"pressure": p, "command": ["on"] * 11})
+    with pytest.raises(PamjaxInputError, match=r"t must hold numbers"):
+        Recording(["a"] * 11, {"pressure": p})

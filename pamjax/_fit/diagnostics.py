@@ -144,13 +144,30 @@ def check_identifiability_tol(tol):
     return value
 
 
-def identifiability(jac, labels, tol):
-    """Null directions of the column-normalised Jacobian: lists of labels that the data cannot separate."""
+def _seen_columns(jac, tol):
+    """(column norms, which columns the data see) of the Jacobian in θ (an O(1)-scaled space: a column is what an
+    e-fold or 100 % change of its parameter does to the residuals): a column at or below `tol` × the largest is a
+    parameter the data do not see. muscle.slack_width's column on a triangle run was 2.4e-10 beside ~300: a direction
+    that the covariance left out, so its standard error read 9e-19 with no warning (σ²(JᵀJ)⁻¹ gives 2.6e9)."""
     norms = np.linalg.norm(jac, axis=0)
-    groups = [[labels[i]] for i in np.flatnonzero(norms == 0)]
-    live = np.flatnonzero(norms > 0)
+    return norms, norms > tol * np.max(norms, initial=0.0) if np.any(norms > 0) else np.zeros(norms.shape, bool)
+
+
+def _normalised_svd(jac, norms, seen):
+    """The SVD of the seen columns scaled to unit norm, where the directions the data do not fix are those with
+    singular values below tol × the largest (whatever the parameters' units or sensitivities)."""
+    return np.linalg.svd(jac[:, seen] / norms[seen], full_matrices=False)
+
+
+def identifiability(jac, labels, tol):
+    """What the data cannot fix: lists of labels, one per parameter whose Jacobian column is at or below `tol` × the
+    largest (the data do not see it), one per null direction (singular value below `tol` × the largest) of the
+    column-normalised Jacobian of the others (a combination the data cannot separate)."""
+    norms, seen = _seen_columns(jac, tol)
+    groups = [[labels[i]] for i in np.flatnonzero(~seen)]
+    live = np.flatnonzero(seen)
     if live.size:
-        _, s, vt = np.linalg.svd(jac[:, live] / norms[live], full_matrices=False)
+        _, s, vt = _normalised_svd(jac, norms, seen)
         for k in np.flatnonzero(s < tol * s[0]):
             v = vt[k]
             groups.append([labels[live[i]] for i in np.flatnonzero(np.abs(v) > 0.1 * np.max(np.abs(v)))])
@@ -158,10 +175,19 @@ def identifiability(jac, labels, tol):
 
 
 def covariance(jac, cost, used, tol):
-    """Covariance of θ from the Jacobian at the optimum, σ² (JᵀJ)⁺ with σ² = 2 cost / (used − n), directions with
-    singular values below `tol` × the largest left out."""
-    dof = max(used - jac.shape[1], 1)
-    sigma2 = 2.0 * float(cost) / dof
-    _, s, vt = np.linalg.svd(jac, full_matrices=False)
-    keep = s > tol * s[0] if s.size and s[0] > 0 else np.zeros_like(s, dtype=bool)
-    return (vt[keep].T / s[keep] ** 2) @ vt[keep] * sigma2
+    """Covariance of θ from the Jacobian at the optimum, σ² (JᵀJ)⁺ with σ² = 2 cost / (used − n), in the
+    column-normalised coordinates `identifiability` judges in (J = Ĵ D, D the column norms: D⁻¹ (ĴᵀĴ)⁺ D⁻¹), so the
+    two leave out the same things: the parameters the data do not see (rows and columns 0) and the null directions
+    of Ĵ. Where nothing is left out this is σ² (JᵀJ)⁻¹ (to rounding); a pseudo-inverse of J unscaled cut directions by
+    singular values that mix units and sensitivities, and gave a parameter the data barely see a standard error of
+    0 instead of its true, huge one."""
+    n = jac.shape[1]
+    sigma2 = 2.0 * float(cost) / max(used - n, 1)
+    norms, seen = _seen_columns(jac, tol)
+    cov = np.zeros((n, n))
+    if np.any(seen):
+        _, s, vt = _normalised_svd(jac, norms, seen)
+        keep = s >= tol * s[0]  # the complement of `identifiability`'s null directions
+        inner = (vt[keep].T / s[keep] ** 2) @ vt[keep]
+        cov[np.ix_(seen, seen)] = inner / np.outer(norms[seen], norms[seen]) * sigma2
+    return cov

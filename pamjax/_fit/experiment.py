@@ -28,6 +28,7 @@ from .._core.errors import PamjaxInputError, check_count
 from .._core.fastjit import keyed_by_code
 from .._core.units import check_absolute_pressure
 from .._physics.signals import AbstractSignal
+from .._solve.checks import check_start_state
 from .._solve.simulate import Stepping, fixed_grid_size, resolve_stepping, solve, validate
 from .._solve.synchronous import num_periods
 from .._systems.base import AbstractSystem
@@ -91,7 +92,17 @@ class AbstractExperiment(eqx.Module):
         return None
 
     def residuals(self, model, part="identification"):
+        check_part(part)
         return self.residuals_of(self.predict(model), part)
+
+
+PARTS = ("identification", "validation", "all")  # the parts of an experiment's residuals
+
+
+def check_part(part):
+    """`residuals`' `part`, one of `PARTS` (an unknown one, "validaton", was taken as "all")."""
+    if not (isinstance(part, str) and part in PARTS):
+        raise PamjaxInputError(f"part must be one of {', '.join(map(repr, PARTS))}, got {part!r}")
 
 
 # What `fit`, `evaluate` and `predictions` take as their experiments: a list (or tuple) of them, or one
@@ -129,18 +140,18 @@ MIN_SAMPLES_FOR_SCALE_CHECK = 20
 MIN_PRESSURE_SCALE = 1.0  # Pa: below any transducer's noise (a 16-bit reading of 0-10 bar resolves 15 Pa): kPa or bar
 
 
-def check_noise_scale(channel, scale, values):
-    """Refuse a given noise level (`scales[channel]`, a standard deviation in the channel's SI unit) that the
+def check_scale_against_data(channel, scale, values, name="scales"):
+    """Refuse a given noise level (`name[channel]`, a standard deviation in the channel's SI unit) that the
     recorded `values` contradict: larger than their whole range (0.1 meant in mm weighted the position 1,000× too
     little, silently), or a pressure noise below `MIN_PRESSURE_SCALE` Pa (0.02 meant in bar: weighted 1e5× too much)."""
     if channel.startswith("pressure") and scale < MIN_PRESSURE_SCALE:
-        raise PamjaxInputError(f"scales[{channel!r}] = {scale:g} Pa is below {MIN_PRESSURE_SCALE:g} Pa, no pressure "
+        raise PamjaxInputError(f"{name}[{channel!r}] = {scale:g} Pa is below {MIN_PRESSURE_SCALE:g} Pa, no pressure "
                                "sensor's noise: that looks like kPa or bar (0.02 bar = 2 kPa = 2e3 Pa); the scale "
                                "is the channel's noise standard deviation in Pa")
     span = float(np.ptp(values)) if values.size >= MIN_SAMPLES_FOR_SCALE_CHECK else 0.0
     if span > 0 and scale > span:
         hint = " (0.1 mm = 1e-4 m)" if channel.startswith("position") else ""
-        raise PamjaxInputError(f"scales[{channel!r}] = {scale:g} exceeds the whole range of the recorded {channel} "
+        raise PamjaxInputError(f"{name}[{channel!r}] = {scale:g} exceeds the whole range of the recorded {channel} "
                                f"({span:.4g}): a noise standard deviation is a fraction of it; is it in another unit"
                                f"{hint}? Scales are in the channel's SI unit")
 
@@ -155,15 +166,17 @@ def _compared_channels(recording, channels, name):
                                "(a single one: put it in brackets)")
     channels = tuple(channels)
     if not channels:
-        raise PamjaxInputError(
-            f"experiment {name!r}: no channels to compare; recording has {sorted(recording.channels)}"
-        )
+        raise PamjaxInputError(f"experiment {name!r}: no channels to compare; recording has "
+                               f"{sorted(recording.channels)}")
     twice = sorted({c for c in channels if channels.count(c) > 1}, key=str)
     if twice:  # every sample of it would be fitted twice: the cost doubled, the standard errors shrunk by √2
         raise PamjaxInputError(f"experiment {name!r}: channels names {', '.join(map(repr, twice))} more than once "
                                f"({list(channels)}); name each channel once")
     for c in channels:
         recording[c]  # error naming the valid channels
+        if not np.any(recording.mask[c]):
+            raise PamjaxInputError(f"experiment {name!r}: channel {c!r} has no valid sample (all masked: NaN), so it "
+                                   f"would drop out of the fit unseen; compare other channels than {list(channels)}")
     return channels
 
 
@@ -191,8 +204,9 @@ class Experiment(AbstractExperiment):
       pattern with the parameters, and the cost jumps by O(1) between neighbouring trial points (docs/fitting.md),
       which stalls Levenberg-Marquardt. The grid is sized from the valve's PWM frequency in the model the
       experiment is first used with.
-    - `validation_fraction`: the last fraction of the samples kept out of the fit (paper 001: 0.4), reported as
-      validation error.
+    - `validation_fraction`: the last fraction of the recording's DURATION kept out of the fit (paper 001: 0.4), the
+      samples after t_first + (1 − fraction)·(t_last − t_first), reported as validation error (by time, not by sample
+      count: the two differ for a recording not sampled uniformly).
     - `sensors`: the sensor group whose `pamjax.Sensors` read this experiment when it is predicted from a
       `pamjax.Rig` (default "rig": one set of sensors for the whole rig); its run conditions are the rig's
       `runs[name]`. `initial={"pressure": "supply"}` starts a tank at its run's supply pressure.
@@ -251,7 +265,7 @@ class Experiment(AbstractExperiment):
             raise PamjaxInputError(f"recording must be a pamjax.Recording, got {type(recording)}")
         if not isinstance(signal, AbstractSignal):
             raise PamjaxInputError(f"signal must be a pamjax signal (Constant, Triangle, ...), got {type(signal)}")
-        channels = _compared_channels(recording, channels, name)
+        channels = _compared_channels(recording, channels, recording.name if name is None else str(name))
         scales = dict(scales or {})
         for c in scales:
             if c not in channels:
@@ -262,7 +276,7 @@ class Experiment(AbstractExperiment):
             if not (np.isfinite(s) and s > 0):
                 raise PamjaxInputError(f"scales[{c!r}] must be > 0 (the channel's noise level), got {s}")
         for c in self.noise_channels:
-            check_noise_scale(c, self.scales[c], recording[c][recording.mask[c]])
+            check_scale_against_data(c, self.scales[c], recording[c][recording.mask[c]])
         if not 0.0 <= float(validation_fraction) < 1.0:
             raise PamjaxInputError(f"validation_fraction must be in [0, 1), got {validation_fraction}")
         t = recording.t
@@ -392,9 +406,8 @@ class Experiment(AbstractExperiment):
         plant, _, _ = split(model, self.name, self.sensor_group)
         system = self.build(plant)
         if not isinstance(system, AbstractSystem):
-            raise PamjaxInputError(
-                f"experiment {self.name!r}: build(model) must give a pamjax system, got {type(system)}"
-            )
+            raise PamjaxInputError(f"experiment {self.name!r}: build(model) must give a pamjax system, got "
+                                   f"{type(system)}")
         system = self.system_for(model)
         validate(system, self.signal, self.times, None, self.t0)
         self._stepping(system)  # a stepping this system cannot take is named here
@@ -415,6 +428,10 @@ class Experiment(AbstractExperiment):
         for c in self.channels:
             if c not in outputs and c != "command":
                 raise PamjaxInputError(f"experiment {self.name!r}: the system has no output {c!r}")
+        try:  # as `simulate` checks y0.position: metres (not 20 for 20 mm), inside the stroke
+            check_start_state(system, self.start_for(system, model) if "position" in self.initial else None, "initial")
+        except PamjaxInputError as err:
+            raise PamjaxInputError(f"experiment {self.name!r}: {err}") from None
 
     def _output_names(self, system, model):
         """The names of `system`'s outputs, by shape inference of the start state (computed inside the compiled
@@ -422,9 +439,8 @@ class Experiment(AbstractExperiment):
         try:
             y0 = jax.eval_shape(lambda s: self.start_for(s, model), system)
         except TypeError as err:
-            raise PamjaxInputError(
-                f"experiment {self.name!r}: bad `initial` keys {sorted(self.initial)}: {err}"
-            ) from err
+            raise PamjaxInputError(f"experiment {self.name!r}: bad `initial` keys {sorted(self.initial)}: "
+                                   f"{err}") from err
         return sorted(jax.eval_shape(lambda s, y: s.outputs(self.t0, y, self.signal(self.t0)), system, y0))
 
     def predict(self, model):
@@ -440,19 +456,9 @@ class Experiment(AbstractExperiment):
         # The output times and start as compile-time constants (the recording's own, exactly): diffrax then checks
         # them at trace time instead of with a run-time host callback, and a program with a host callback cannot be
         # kept in JAX's persistent compilation cache.
-        traj = solve(
-            system,
-            self.signal,
-            jnp.asarray(self.host_times.array) if times is self.times else times,
-            y0,
-            jnp.asarray(self.span[0]),
-            rtol=self.rtol,
-            atol=self.atol,
-            max_steps=self.max_steps,
-            dt0=self.dt0,
-            adjoint="forward",
-            num_periods=self._edge_periods(system),
-        )
+        traj = solve(system, self.signal, jnp.asarray(self.host_times.array) if times is self.times else times, y0,
+                     jnp.asarray(self.span[0]), rtol=self.rtol, atol=self.atol, max_steps=self.max_steps, dt0=self.dt0,
+                     adjoint="forward", num_periods=self._edge_periods(system))
         return self.observe(model, {c: traj.channel(c) for c in traj.channels()})
 
     def _edge_periods(self, system):
@@ -488,7 +494,7 @@ class Experiment(AbstractExperiment):
 
     def residuals_of(self, pred, part="identification"):
         """`residuals` from this experiment's predictions `pred` (dict channel → array at `times`)."""
+        check_part(part)
         keep = {"identification": self.times <= self.split_time, "validation": self.times > self.split_time}.get(
-            part, jnp.ones_like(self.times, dtype=bool)
-        )
+            part, jnp.ones_like(self.times, dtype=bool))
         return jnp.concatenate([(pred[c] - self.data[c]) * self.weights[c] * keep for c in self.channels])

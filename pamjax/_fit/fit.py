@@ -26,14 +26,15 @@ import numpy as np
 from .._core import jsonio
 from .._core.cache import cache_turned_off, program_cache
 from .._core.custom_types import RealScalarLike
-from .._core.errors import PamjaxInputError, check_count, require_float64
-from .._files.checkpoint import check_checkpoint_path, read_checkpoint, write_checkpoint
+from .._core.errors import PamjaxInputError
+from .._files.checkpoint import read_checkpoint, write_checkpoint
 from .._files.fingerprint import check_resume, fingerprint
 from .._files.model_file import FORMAT as MODEL_FORMAT, replace_text
 from .diagnostics import channel_errors, check_identifiability_tol, covariance, identifiability, mismatch
 from .experiment import AbstractExperiment, Experiments
+from .fit_checks import check_fit_inputs as check_fit_inputs, check_free, check_settings, validate_fit
 from .force_balance import weak_motion
-from .measurement import check_measured_free, contradictions
+from .measurement import contradictions
 from .parameters import Free, PamjaxIdentifiabilityWarning, ParameterSpace
 from .predictions import predictions
 from .problem import Problem
@@ -60,7 +61,8 @@ class FitResult:
     """The outcome of `fit`. Physical values in SI units (F_max as a0…a4 [N/mⁱ], eq. 13 as m1…m9).
 
     - `labels`, `paths` (the `free` spec), `values`, `initial_values`, `standard_errors` (inf for parameters in a
-      non-identifiable combination), `correlation` (matrix).
+      non-identifiable combination or that the data do not see), `correlation` (matrix; NaN off the diagonal in the
+      rows and columns of those with an infinite standard error: their direction is left out, nothing to correlate).
     - `cost` ½Σr² at the end (r = (model − data)/scale), `initial_cost`, `iterations` (trial steps),
       `accepted_steps`, `status` ('converged', 'at bound', 'stalled', 'max_steps'), `converged`, `message` (why it
       stopped).
@@ -112,6 +114,15 @@ class FitResult:
     def to_dict(self):
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
                 if f.name not in ("model", "predictions", "experiments")}
+
+    def __eq__(self, other: object) -> bool:
+        """Every stored field (`to_dict`'s), floats exactly and NaN equal to NaN (the correlations of a parameter
+        with an infinite standard error; a noise not estimated): a fit.json read back equals its result."""
+        if not isinstance(other, FitResult):
+            return NotImplemented
+        return jsonio.dumps(self.to_dict()) == jsonio.dumps(other.to_dict())
+
+    __hash__ = None  # mutable, as the dataclass's own equality left it
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "FitResult":
@@ -170,51 +181,6 @@ def evaluate(model: eqx.Module, experiments: Experiments) -> dict[str, dict[str,
     return channel_errors(experiments, r)
 
 
-def _check_settings(ftol, xtol, gtol, stall_steps):
-    """The default solver's settings, checked before anything is set up (as `LevenbergMarquardt` checks them);
-    returns `stall_steps` as an int (a NumPy integer too)."""
-    check_count(stall_steps, "stall_steps")
-    for label, tol in (("ftol", ftol), ("xtol", xtol), ("gtol", gtol)):
-        if isinstance(tol, bool) or not (isinstance(tol, (int, float)) and 0 <= tol < 1):
-            raise PamjaxInputError(f"{label} must be a number in [0, 1), got {tol!r}")
-    return int(stall_steps)
-
-
-def _validate(experiments, max_steps, out, overwrite, checkpoint, resume):
-    require_float64("pamjax.fit")
-    if out is not None and pathlib.Path(out).exists() and not overwrite:
-        raise FileExistsError(f"{out} exists; pass overwrite=True to replace it")
-    check_checkpoint_path(checkpoint, resume, overwrite)
-    experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
-    if not experiments:
-        raise PamjaxInputError("experiments must be a non-empty list")
-    for e in experiments:
-        if not isinstance(e, AbstractExperiment):
-            raise PamjaxInputError(f"experiments must be pamjax experiments (Experiment, ForceMapExperiment, ...), "
-                                   f"got {type(e)}")
-    names = [e.name for e in experiments]
-    if len(set(names)) != len(names):
-        raise PamjaxInputError(f"experiment names must be unique, got {names}")
-    check_count(max_steps, "max_steps")
-    return experiments
-
-
-def _check_free(model, experiments, free):
-    """The `ParameterSpace` of `free` (every entry checked), and the measurements' parameters freed."""
-    space = ParameterSpace(model, free)
-    check_measured_free(model, experiments, free)
-    return space
-
-
-def check_fit_inputs(model, experiments, free, max_steps=100):
-    """What `fit(model, experiments, free, max_steps=max_steps)` refuses before anything is set up or compiled, by
-    the same checks: float64, the experiments (pamjax experiments, at least one, unique names), the step budget, the
-    free entries and the measurements' parameters. Returns (the experiments as a list, the `ParameterSpace`).
-    `staged_start` calls it first: its stages never fit a part of a problem the joint fit would refuse."""
-    experiments = _validate(experiments, max_steps, None, False, None, None)
-    return experiments, _check_free(model, experiments, free)
-
-
 def _setup(model, experiments, space):
     """The experiments checked against `model` and bound to it (PWM grids sized), the start θ and the
     compiled-function host of a fit (`Problem`)."""
@@ -234,7 +200,7 @@ def precompile(model, experiments, free):
     once at `model`'s values. Returns the wall time [s]. `staged_start` runs this in a second thread while its
     stages fit, so that the joint fit after them starts at once."""
     t0 = time.perf_counter()
-    experiments = _validate(experiments, 1, None, False, None, None)
+    experiments = validate_fit(experiments, 1, None, False, None, None)
     _, theta, problem = _setup(model, experiments, ParameterSpace(model, free))
     problem.start(theta)
     return time.perf_counter() - t0
@@ -243,7 +209,7 @@ def precompile(model, experiments, free):
 def start_cost(model, experiments, free):
     """½Σr² of `fit(model, experiments, free)` at its start (one evaluation of the residuals, the program
     `precompile` compiles); inf where the start's simulation fails."""
-    experiments = _validate(experiments, 1, None, False, None, None)
+    experiments = validate_fit(experiments, 1, None, False, None, None)
     _, theta, problem = _setup(model, experiments, ParameterSpace(model, free))
     r = problem.residuals(theta)
     return np.inf if r is None else 0.5 * float(r @ r)
@@ -330,10 +296,12 @@ def fit(
       `stall_steps`, `checkpoint` or `resume`. Progress then prints one line per evaluation.
     - `progress`: True prints one line per iteration (cost, damping, accepted); a callable gets
       (step, cost, damping, accepted); False is silent; None prints only the notice of a first compilation.
-    - `identifiability_tol`: a number in (0, 1): singular values of the column-normalised Jacobian below this ×
-      the largest mark a non-identifiable combination (warned about by name; its parameters get infinite standard
-      errors); the directions below it are left out of the covariance.
-    - `out`: a JSON path to write the result to; checked BEFORE the fit; never replaced unless `overwrite=True`.
+    - `identifiability_tol`: a number in (0, 1): a parameter whose Jacobian column (in θ) is at most this × the
+      largest has no effect on the data, and singular values of the others' column-normalised Jacobian below this ×
+      the largest mark a non-identifiable combination (both warned about by name; their parameters get infinite
+      standard errors); the covariance is computed in the same column-normalised coordinates, these left out.
+    - `out`: a JSON path to write the result to; checked BEFORE the fit (a file path, in a writable folder or one
+      that can be made there); never replaced unless `overwrite=True`.
     - `checkpoint`: an `.npz` path written (atomically) after every iteration with the whole iteration state.
       Never replaces an existing file unless `overwrite=True` or it is the `resume` file.
     - `resume`: an `.npz` checkpoint of this same problem: the fit continues from it and ends bitwise where an
@@ -350,20 +318,21 @@ def fit(
     fitted `model`.
 
     **Raises:** `PamjaxInputError` for an unknown parameter (listing the valid ones) or bad experiment input, before
-    any fit; `FileExistsError` if `out` (or `checkpoint`) exists and `overwrite` is False.
+    any fit, and for an `out` or `checkpoint` that cannot be written (a folder, a path under a file);
+    `FileExistsError` if `out` (or `checkpoint`) exists and `overwrite` is False.
     """
-    experiments = _validate(experiments, max_steps, out, overwrite, checkpoint, resume)
+    experiments = validate_fit(experiments, max_steps, out, overwrite, checkpoint, resume)
     max_steps = int(max_steps)  # a NumPy integer (np.int64(40)) as well
     identifiability_tol = check_identifiability_tol(identifiability_tol)
     if solver is None:  # the default: its module (optimistix, lineax: ~0.1 s) is imported beside the set-up
-        stall_steps = _check_settings(ftol, xtol, gtol, stall_steps)
+        stall_steps = check_settings(ftol, xtol, gtol, stall_steps)
         beside = threading.Thread(target=importlib.import_module, args=(f"{__package__}.drive",), daemon=True)
         beside.start()
     else:  # an optimistix object: optimistix is imported
         from .drive import choose_solver
 
         solver, _ = choose_solver(solver, ftol, xtol, gtol, stall_steps, checkpoint, resume)
-    space = _check_free(model, experiments, free)
+    space = check_free(model, experiments, free)
     print_ = fingerprint(model, experiments, free, solver)  # start model, free spec, experiments, data (None: default)
     if resume is not None:
         check_resume(resume, print_)  # before any solve: a checkpoint of another problem is refused, naming why
@@ -445,6 +414,9 @@ def _result(model, exps, free, space, state, identifiability_tol, problem, warn=
         corr = cov / np.outer(se, se)
     corr = np.where(np.isfinite(corr), corr, 0.0)
     se = np.where(np.isin(labels, bad), np.inf, se)
+    undetermined = np.isinf(se)  # its covariance entries are those of a direction left out: no correlation to show
+    corr[undetermined, :] = corr[:, undetermined] = np.nan
+    np.fill_diagonal(corr, 1.0)
     msgs = []
     for grp in groups:
         msg = (f"parameter {grp[0]} has no effect on the data" if len(grp) == 1

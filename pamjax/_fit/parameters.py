@@ -315,8 +315,9 @@ def _domain(model, attrs, name, path):
         if name is not None and isinstance(owner, eqx.Module) and hasattr(owner, name):
             lo, hi = getattr(owner, name)
             return float(lo), float(hi)
-    raise PamjaxInputError(f"{path!r}: a 'nodes' transform needs an enclosing component with a {name!r} range; "
-                           "give another transform")
+    what = (f"an enclosing component with a {name!r} range" if name is not None else
+            "a polynomial whose field names the range it spans (a muscle's max_force_coefficients: its stroke)")
+    raise PamjaxInputError(f"{path!r}: a 'nodes' transform needs {what}; give another transform")
 
 
 def _nodes_basis(model, attrs, path, flat, domain):
@@ -438,10 +439,11 @@ class ParameterSpace(eqx.Module):
         return device_array(np.concatenate(vals))
 
     def with_values(self, values, model=None):
-        """`model` (default the base) with the free parameters set to physical `values`."""
+        """`model` (default the base) with the free parameters set to physical `values`: one number per label, in
+        their order (concrete ones checked: finite, a log-fitted one not negative, a logistic one within its bounds)."""
         model = self.base if model is None else model
         traced = isinstance(values, jax.core.Tracer)
-        for g, v in zip(self.groups, self._split(values if traced else np.asarray(values))):
+        for g, v in zip(self.groups, self._split(values if traced else self._checked(values))):
             get = getter(g.attrs)
             if traced:
                 old = jnp.asarray(get(model), dtype=float)
@@ -456,6 +458,30 @@ class ParameterSpace(eqx.Module):
                 new = device_array(new)
             model = eqx.tree_at(get, model, new)
         return model
+
+    def _checked(self, values):
+        """Concrete `with_values` values as a float array: as many as labels (4 for 3 dropped the 4th silently),
+        finite, and in each parameter's range as the space maps it (a negative value of a log-fitted one, a value
+        outside a logistic one's bounds has no θ)."""
+        want = f"{self.size} number{'s' * (self.size != 1)}, one per label ({', '.join(self.labels)})"
+        try:
+            v = None if isinstance(values, (str, Mapping)) else np.asarray(values, dtype=float)
+        except (TypeError, ValueError):
+            v = None
+        if v is None or v.shape != (self.size,):
+            got = f"shape {v.shape}" if v is not None else f"a {type(values).__name__}"
+            raise PamjaxInputError(f"values must be {want}; got {got}: {values!r}")
+        for g, x in zip(self.groups, self._split(v)):
+            for label, xi, lo, hi in zip(g.labels, x, np.asarray(g.lower), np.asarray(g.upper)):
+                if not np.isfinite(xi):
+                    raise PamjaxInputError(f"values: {label} = {xi} must be finite")
+                if g.transform == "log" and xi < 0:
+                    raise PamjaxInputError(f"values: {label} = {xi:g} is negative; {g.path} is fitted in log space "
+                                           "(a positive quantity)")
+                give = 1e-9 * (hi - lo)  # lo + (hi − lo)·σ(θ) rounds past a bound (0.1 + 0.2·1 = 0.30000000000000004)
+                if g.transform == "logistic" and not lo - give <= xi <= hi + give:
+                    raise PamjaxInputError(f"values: {label} = {xi:g} lies outside its bounds ({lo:g}, {hi:g})")
+        return v
 
     def model(self, theta):
         return self.with_values(self.physical(theta))

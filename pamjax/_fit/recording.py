@@ -78,12 +78,22 @@ class Recording:
         if atmosphere is not None and not (np.isfinite(atmosphere) and 5e4 <= float(atmosphere) <= 1.2e5):
             raise PamjaxInputError(f"Recording {self.name!r}: atmosphere must be the ambient pressure in Pa abs "
                                    f"(50-120 kPa), got {atmosphere!r}")
+        if units is not None and not isinstance(units, Mapping):  # "bar abs": dict() raised a raw ValueError
+            raise PamjaxInputError(f"Recording {self.name!r}: units must be a dict channel → unit (e.g. "
+                                   f"{{'pressure': 'bar abs', 't': 'ms'}}), got {units!r}")
+        if not isinstance(channels, Mapping):
+            raise PamjaxInputError(f"Recording {self.name!r}: channels must be a dict name → values (e.g. "
+                                   f"{{'pressure': p, 'position': x}}), got a {type(channels).__name__}")
         units = {} if units is None else dict(units)
         self.source = source
         self.columns = {}  # channel → its column's name in the file it was read from (`Recording.load`)
         self.ignored = {}  # the file's columns left out by `Recording.load`: column → (unit or None, why)
         where = str(source) if source is not None else f"Recording {self.name!r}"
-        t, _ = to_si("t", units.pop("t", "s"), np.asarray(t, dtype=float), where)
+        try:
+            t = np.asarray(t, dtype=float)
+        except (TypeError, ValueError) as err:
+            raise PamjaxInputError(f"{where}: t must hold numbers, the times [s] ({err})") from None
+        t, _ = to_si("t", units.pop("t", "s"), t, where)
         _check_times(t, source, self.name)
         if not channels:
             raise PamjaxInputError(f"Recording {self.name!r}: needs at least one channel besides t")
@@ -100,7 +110,10 @@ class Recording:
         self.units = {}
         self.mask = {}
         for key, values in channels.items():
-            v = np.asarray(values, dtype=float)
+            try:
+                v = np.asarray(values, dtype=float)
+            except (TypeError, ValueError) as err:  # text, or rows of unequal lengths
+                raise PamjaxInputError(f"{where}: channel {key!r} must hold numbers ({err})") from None
             if v.shape != t.shape:
                 raise PamjaxInputError(f"{where}: channel {key!r} has shape {v.shape}, expected {t.shape} (same as t)")
             v, unit = to_si(key, units.get(key, DEFAULT_UNITS.get(key, "")), v, where, atmosphere)

@@ -110,6 +110,12 @@ class StagedStart:
         return lines
 
 
+def _entry(entry):
+    """A `free` entry's path as given, array index and all (a stage's list read ['valve.coefficients',
+    'valve.coefficients'] for [1,0] and [1,1]: `_path` strips the index, for grouping)."""
+    return entry if isinstance(entry, str) else entry.get("path")
+
+
 def _path(entry):
     """The parameter path of a `free` entry (a path string, or a dict with `path`), without an array index."""
     path = entry if isinstance(entry, str) else entry.get("path") if isinstance(entry, dict) else None
@@ -226,13 +232,13 @@ def staged_start(model: eqx.Module, experiments: Sequence[AbstractExperiment], f
     waited, balance = 0.0, None
     try:
         res = fit(model, exps1, first, max_steps=max_steps, progress=progress, warn=False)
-        stages.append(("1", [_path(e) for e in first], [e.name for e in exps1], res))
+        stages.append(("1", [_entry(e) for e in first], [e.name for e in exps1], res))
         model = _off_a_kink(res.apply(model), res, first)
         if full:
             waited += background.wait(0) if background is not None else 0.0
             model, balance = _balanced_start(model, full, rest)
             res = fit(model, full, rest, max_steps=max_steps, progress=progress, warn=False)
-            stages.append(("2", [_path(e) for e in rest], [e.name for e in full], res))
+            stages.append(("2", [_entry(e) for e in rest], [e.name for e in full], res))
             model = _off_a_kink(res.apply(model), res, rest)
         waited += background.wait(-1) if background is not None else 0.0
     except BaseException:  # an error or Ctrl-C in a stage: the second thread ends before the error leaves here

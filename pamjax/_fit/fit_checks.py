@@ -1,0 +1,80 @@
+"""What `fit` refuses before anything is set up or compiled: float64, the experiments, the step budget, the default
+solver's settings, the free entries and the measurements' parameters, and the paths it will write (`out`,
+`checkpoint`). `staged_start` and `multistart` run the same checks first (`check_fit_inputs`)."""
+
+import os
+import pathlib
+
+from .._core.errors import PamjaxInputError, check_count, require_float64
+from .._files.checkpoint import check_checkpoint_path
+from .experiment import AbstractExperiment
+from .measurement import check_measured_free
+from .parameters import ParameterSpace
+
+
+def check_settings(ftol, xtol, gtol, stall_steps):
+    """The default solver's settings, checked before anything is set up (as `LevenbergMarquardt` checks them);
+    returns `stall_steps` as an int (a NumPy integer too)."""
+    check_count(stall_steps, "stall_steps")
+    for label, tol in (("ftol", ftol), ("xtol", xtol), ("gtol", gtol)):
+        if isinstance(tol, bool) or not (isinstance(tol, (int, float)) and 0 <= tol < 1):
+            raise PamjaxInputError(f"{label} must be a number in [0, 1), got {tol!r}")
+    return int(stall_steps)
+
+
+def check_output_path(path, name):
+    """A file `fit` writes (`out`, `checkpoint`) can be written where it is asked for: not a folder, and the nearest
+    folder of it that exists (the others are made) a writable folder, not a file. Checked before the fit: these
+    failed as raw `IsADirectoryError` / `FileExistsError` after the whole fit (or its first iteration), its result
+    lost."""
+    path = pathlib.Path(path)
+    if path.is_dir():
+        raise PamjaxInputError(f"{name} {str(path)!r} is a folder: give the path of a file in it "
+                               f"({name}={str(path / ('fit.json' if name == 'out' else 'fit.npz'))!r})")
+    folder = next((p for p in path.parents if p.exists()), pathlib.Path("."))
+    if not folder.is_dir():
+        raise PamjaxInputError(f"{name} {str(path)!r} lies under {str(folder)!r}, which is a file, not a folder: "
+                               "give a path in a folder")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise PamjaxInputError(f"{name} {str(path)!r}: the folder {str(folder)!r} is not writable")
+
+
+def validate_fit(experiments, max_steps, out, overwrite, checkpoint, resume):
+    """`fit`'s arguments besides the model and the free entries, checked; returns the experiments as a list."""
+    require_float64("pamjax.fit")
+    if out is not None:
+        check_output_path(out, "out")
+        if pathlib.Path(out).exists() and not overwrite:
+            raise FileExistsError(f"{out} exists; pass overwrite=True to replace it")
+    check_checkpoint_path(checkpoint, resume, overwrite)
+    if checkpoint is not None:
+        check_output_path(checkpoint, "checkpoint")
+    experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
+    if not experiments:
+        raise PamjaxInputError("experiments must be a non-empty list")
+    for e in experiments:
+        if not isinstance(e, AbstractExperiment):
+            raise PamjaxInputError(f"experiments must be pamjax experiments (Experiment, ForceMapExperiment, ...), "
+                                   f"got {type(e)}")
+    names = [e.name for e in experiments]
+    if len(set(names)) != len(names):
+        raise PamjaxInputError(f"experiment names must be unique, got {names}")
+    check_count(max_steps, "max_steps")
+    return experiments
+
+
+def check_free(model, experiments, free):
+    """The `ParameterSpace` of `free` (every entry checked), and the measurements' parameters freed."""
+    space = ParameterSpace(model, free)
+    check_measured_free(model, experiments, free)
+    return space
+
+
+def check_fit_inputs(model, experiments, free, max_steps=100):
+    """What `fit(model, experiments, free, max_steps=max_steps)` refuses before anything is set up or compiled, by
+    the same checks: float64, the experiments (pamjax experiments, at least one, unique names), the step budget, the
+    free entries and the measurements' parameters. Returns (the experiments as a list, the `ParameterSpace`).
+    `staged_start` calls it first: its stages never fit a part of a problem the joint fit would refuse."""
+    experiments = validate_fit(experiments, max_steps, None, False, None, None)
+    return experiments, check_free(model, experiments, free)
+
