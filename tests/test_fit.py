@@ -192,3 +192,18 @@ def test_a_fit_of_other_data_of_the_same_layout_compiles_nothing_new():
     assert first.values[0] != second.values[0]  # each fitted its own data
     for res in (first, second):
         assert abs(res.values[0] - float(tank.volume)) < 3 * res.standard_errors[0]
+
+
+def test_a_tank_built_from_the_model_takes_the_models_polytropic_index():
+    # TankFromModel used 1.4 whatever the model said: a model set to 1.0 (a CLI [simulate] tank_volume with
+    # set = { polytropic_index = 1.0 }) charged its tank adiabatically. Now the model's own index, an explicit one
+    # winning; the presets' 1.4 (paper 000) gives the tank it gave before.
+    import equinox as eqx
+
+    model = presets.mas10_system("exact")
+    assert float(pj.TankFromModel(5e-5)(model).polytropic_index) == 1.4
+    isothermal = eqx.tree_at(lambda s: s.polytropic_index, model, jnp.asarray(1.0))
+    assert float(pj.TankFromModel(5e-5)(isothermal).polytropic_index) == 1.0
+    assert float(pj.TankFromModel(5e-5, polytropic_index=1.2)(isothermal).polytropic_index) == 1.2
+    regulated = pj.RegulatedMuscleSystem(pj.ISO6358Regulator(), presets.dmsp40_muscle())  # paper 001: isothermal
+    assert float(pj.TankFromModel(5e-5)(regulated).polytropic_index) == float(regulated.polytropic_index)

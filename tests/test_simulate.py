@@ -263,3 +263,34 @@ def test_a_constant_holding_an_array_is_refused_by_name(value):
     # failed with diffrax's raw broadcasting ValueError: a simulated command is one number, several are a sweep.
     with pytest.raises(pamjax.PamjaxInputError, match=r"Constant holds commands of shape \(.*\): simulate takes one"):
         pamjax.simulate(presets.mas10_tank_system(), pamjax.Constant(value), np.linspace(0.0, 0.2, 3))
+
+
+@pytest.mark.parametrize("valve", ["exact", "pwm"])
+def test_grid_stepping_of_a_switching_valve_is_refused_by_name(valve):
+    # The uniform grid read the command as one duty at each RK4 stage: not latched per PWM period, the valve's state
+    # from the period before lost, 27-30 kPa off the exact-edge solve over a 2 s triangle, not converging as the step
+    # shrank. Refused before any solve, pointing to the PWM-synchronous grid; an unchecked solve refuses it too.
+    system, signal, ts = presets.mas10_system(valve), pamjax.Triangle(0.05, 0.95, 1.0), np.linspace(0.0, 0.1, 3)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"stepping='grid' is for continuous valves.* use stepping='pwm'"):
+        pamjax.simulate(system, signal, ts, stepping="grid")
+    with pytest.raises(pamjax.PamjaxInputError, match=r"stepping='grid' is for continuous valves"):
+        solve(system, signal, jnp.asarray(ts), None, 0.0, stepping="grid", num_periods=100)
+    hybrid = presets.mas10_system(valve, friction="karnopp")  # its adaptive solve is refused: 'auto' is advised
+    with pytest.raises(pamjax.PamjaxInputError, match=r"use stepping='pwm' .* or stepping='auto'"):
+        pamjax.simulate(hybrid, signal, ts, stepping="grid")
+
+
+@pytest.mark.parametrize("kind", ["muscle", "tank"])
+def test_a_start_state_holding_several_values_is_refused_by_name(kind):
+    # a y0 holding two pressures failed in a muscle's solve with JAX's raw carry-type TypeError, and a tank returned
+    # pressures of shape (n, 2) without a word: one start state is simulated, several are a sweep.
+    pressures = jnp.array([2e5, 3e5])
+    if kind == "muscle":
+        system = presets.mas10_system("averaged")
+        y0 = system.initial_state(pressure=pressures, position=0.01)
+    else:
+        system = presets.mas10_tank_system("exact")
+        y0 = system.initial_state(pressure=pressures)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"y0\.pressure has shape \(2,\) where the system's state .* "
+                                                      r"holds one number: .*pamjax\.sweep.* jax\.vmap"):
+        pamjax.simulate(system, pamjax.Constant(0.5), np.linspace(0.0, 0.1, 3), y0=y0)

@@ -77,7 +77,8 @@ class OutputFolder:
     command-line option that names the folder; `stale`: what an earlier run of the command may have written that this
     one does not (a figure this run skips with --no-plot, an earlier --profile's profile.json): with `overwrite`, the
     earlier results are replaced whole, so these are removed once the command has written its own (else they would
-    read as this run's); an interrupted or failed run leaves them.
+    read as this run's); an interrupted or failed run leaves them. Without `overwrite` one that exists is refused,
+    as an existing output is (unless every output is `replaceable`: a resumed run's folder).
     """
 
     def __init__(self, path, command, outputs, *, overwrite=False, replaceable=(), flag="--out", stale=()):
@@ -195,6 +196,18 @@ class OutputFolder:
             if (self.path / name).exists() and name not in self.replaceable:
                 raise PamjaxInputError(f"{self.command}: {self.path / name} exists; pass --overwrite to replace it, or "
                                        f"choose another folder with {self.flag}")
+        # An earlier run's file that this one does not write (its figure, left by a run with --no-plot) would sit
+        # beside this run's results as if it were theirs (`pamjax simulate --no-plot` into a folder holding only an
+        # old trajectory.png wrote a new CSV next to it): refused as the outputs are. Not where every output is
+        # replaceable (`pamjax fit --resume`: the folder holds the resumed run's own files, and --overwrite, which
+        # would remove them, is not given with --resume).
+        if self.outputs and set(self.outputs) <= self.replaceable:
+            return
+        for name in self.stale:
+            if (self.path / name).exists() and name not in self.replaceable:
+                raise PamjaxInputError(f"{self.command}: {self.path / name} exists, an earlier run's that this one "
+                                       "would not replace; pass --overwrite to replace the earlier results whole "
+                                       f"(it is then removed), or choose another folder with {self.flag}")
 
     # -- after the work -------------------------------------------------------------------------------------------
     def write_text(self, name, text):

@@ -21,7 +21,7 @@ import numpy as np
 
 from .._core.csvio import write_table
 from .._core.errors import PamjaxInputError
-from .._solve.simulate import validate
+from .._solve.simulate import resolve_stepping, validate
 from . import bands, schema
 from .config import build_model, build_signal, check_initial, load_recording, read_toml
 from .kinds import DUTY, command_of
@@ -79,6 +79,7 @@ def load(path):
     model = build_model(cfg.get("model", {}), path.parent)
     run = build_run(cfg, model, path.parent)
     validate(run.system, run.signal, run.ts, run.kwargs.get("y0"))  # signal range, initial state
+    resolve_stepping(run.system, run.kwargs.get("stepping", "auto"))  # "grid" with a switching valve, ...
     return run
 
 
@@ -104,14 +105,7 @@ def build_run(cfg, model, root):
     if recording is not None and "dt" not in sim:
         ts = recording.t[(recording.t >= t0) & (recording.t <= t_end)]
     else:
-        dt = float(sim.get("dt", DEFAULT_DT))
-        rows = int(np.floor((t_end - t0) / dt + 1e-9)) + 1
-        if rows > MAX_ROWS:
-            raise PamjaxInputError(f"[simulate] t_end = {t_end} s at dt = {dt} s would write {rows:,} rows (more than "
-                                   f"{MAX_ROWS:,}); raise dt, or check t_end is in seconds")
-        if rows < 2:
-            raise PamjaxInputError(f"[simulate] dt = {dt} s leaves fewer than two output times in [{t0}, {t_end}] s")
-        ts = t0 + dt * np.arange(rows)
+        ts = output_times(t0, t_end, float(sim.get("dt", DEFAULT_DT)), exact_end="t_end" in sim)
     kwargs = {k: sim[k] for k in ("stepping", "substeps", "grid_step", "rtol", "atol", "max_steps") if k in sim}
     if "solver" in sim:
         import diffrax as dfx
@@ -120,6 +114,27 @@ def build_run(cfg, model, root):
     if sim.get("initial"):
         kwargs["y0"] = system.initial_state(**sim["initial"])
     return Run(cfg, pathlib.Path(root), model, system, signal, jnp.asarray(ts), kwargs, recording)
+
+
+def output_times(t0, t_end, dt, exact_end=True):
+    """The output rows t0, t0 + dt, ..., t_end [s]: `dt` apart (a CSV that stands in for a recording is uniformly
+    sampled: `Recording.sample_rate`, its filters) and ending at `t_end`, as `pamjax.simulate_discrete`'s grid
+    covers its `t_end`. A `dt` that does not divide t_end - t0 is refused (t_end 1.0, dt 0.3 ended the CSV at 0.9 s
+    without a word), with a dt that does; not `exact_end` (t_end defaulted to a recording's end, which a resampling
+    dt seldom divides), the rows end at the last one within it."""
+    steps = (t_end - t0) / dt
+    rows = int(np.floor(steps + 1e-9)) + 1
+    if rows > MAX_ROWS:
+        raise PamjaxInputError(f"[simulate] t_end = {t_end} s at dt = {dt} s would write {rows:,} rows (more than "
+                               f"{MAX_ROWS:,}); raise dt, or check t_end is in seconds")
+    if rows < 2:
+        raise PamjaxInputError(f"[simulate] dt = {dt} s leaves fewer than two output times in [{t0}, {t_end}] s")
+    if exact_end and abs(steps - round(steps)) > 1e-9 * max(steps, 1.0):
+        last, fits = t0 + dt * (rows - 1), (t_end - t0) / np.ceil(steps)
+        raise PamjaxInputError(f"[simulate] dt = {dt:g} s does not divide t_end - t0 = {t_end - t0:g} s: the rows "
+                               f"would end at {last:g} s, short of t_end; set dt = {fits:.6g} (or another divisor), "
+                               f"or t_end = {last:g} or {last + dt:g}")
+    return t0 + dt * np.arange(rows)
 
 
 def columns_of(traj, command="1"):

@@ -6,12 +6,14 @@ and a bench's meta.json (`tank_volume`, `payload_kg`) use them."""
 import equinox as eqx
 
 from .._core.arrays import as_scalar
-from .._core.custom_types import RealScalar
+from .._core.custom_types import RealScalar, RealScalarLike
 from .._core.errors import PamjaxInputError, check_positive
+from .._papers import paper000
 from .._physics.regulator import AbstractRegulator
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from .._systems.regulated import RegulatorSystem
 from .._systems.tank import TankSystem
+from .parameters import parameter_paths
 
 # The payload `PayloadFromModel.advised` (and the weak-motion warning of a fit, `pamjax._fit.force_balance`) proposes
 # for a run that moves, as a share of the force the muscle pulls at zero contraction and supply pressure: half keeps
@@ -20,6 +22,8 @@ from .._systems.tank import TankSystem
 # 577 N) beside E3 and E4 brought all nine stop-resting unseen rigs from 2.6-208 % off to within 0.57 %; the fits'
 # own advice there, 24-36 kg, did as well.
 PAYLOAD_SHARE = 0.5
+# A tank's polytropic index where the model has none of its own: 1.4, adiabatic (paper 000's tank tests, eq. 15).
+DEFAULT_TANK_POLYTROPIC_INDEX = paper000.POLYTROPIC_INDEX
 
 
 class SameSystem(eqx.Module):
@@ -29,18 +33,29 @@ class SameSystem(eqx.Module):
         return model
 
 
+def _optional_scalar(value: RealScalarLike | None) -> RealScalar | None:
+    """`as_scalar`, None kept (the field's "not given")."""
+    return None if value is None else as_scalar(value)
+
+
 class TankFromModel(eqx.Module):
     """A constant-volume tank of `volume` [m³] fed by the model's valve (paper 000's valve tests), or by its pressure
-    regulator (a `RegulatorSystem`: paper 001's tank, its appendix), at the polytropic index `polytropic_index`."""
+    regulator (a `RegulatorSystem`: paper 001's tank, its appendix), at the polytropic index `polytropic_index`:
+    by default the model's own (its `polytropic_index`: the air is the model's, and so is how it exchanges heat;
+    a model set to 1.0 charged its tank at 1.4, 49 kPa high after 0.09 s), 1.4 (`DEFAULT_TANK_POLYTROPIC_INDEX`) for
+    a model without one."""
 
     volume: RealScalar = eqx.field(converter=as_scalar)  # m³
-    polytropic_index: RealScalar = eqx.field(converter=as_scalar, default=1.4)  # - (paper 000's adiabatic tank tests)
+    polytropic_index: RealScalar | None = eqx.field(converter=_optional_scalar, default=None)  # - (None: the model's)
 
     def __call__(self, model):
+        index = self.polytropic_index
+        if index is None:  # the model's parameter by the path a fit frees it by (no system contract names it)
+            index = (model.polytropic_index if "polytropic_index" in parameter_paths(model)
+                     else DEFAULT_TANK_POLYTROPIC_INDEX)
         if isinstance(model.valve, AbstractRegulator):
-            return RegulatorSystem(regulator=model.valve, volume=self.volume, air=model.air,
-                                   polytropic_index=self.polytropic_index)
-        return TankSystem(valve=model.valve, volume=self.volume, air=model.air, polytropic_index=self.polytropic_index)
+            return RegulatorSystem(regulator=model.valve, volume=self.volume, air=model.air, polytropic_index=index)
+        return TankSystem(valve=model.valve, volume=self.volume, air=model.air, polytropic_index=index)
 
 
 class PayloadFromModel(eqx.Module):

@@ -150,18 +150,91 @@ def check_start_pressure(pressure, name, lanes=False):
 
 
 def check_start_state(system, y0, name="y0"):
-    """`simulate`'s checks of a start state `y0` (None: nothing to check), concrete leaves only: every leaf finite;
+    """`simulate`'s checks of a start state `y0` (None: nothing to check): its leaves the shapes of the system's state
+    (`check_state_shapes`: one start state, not a batch); concrete leaves only: every leaf finite;
     the pressures the system names (`start_pressures`) ABSOLUTE pascal, > 0 and not bar or gauge by magnitude; the
     displacements it names (`start_positions`) metres (not mm by magnitude) and inside their stroke, give or take
     `START_STROKE_MARGIN`. `name`: what the errors call the state (a linearisation's "state" or "guess", a closed
     loop's "y0.plant")."""
     if y0 is None:
         return
+    check_state_shapes(system, y0, name)
     check_finite_state(y0, name)
     for path, pressure in type(system).start_pressures(system, y0).items():  # y0.pressure, y0.regulator.pressure
         check_start_pressure(pressure, f"{name}.{path}")
     for path, (position, stroke) in type(system).start_positions(system, y0).items():
         check_start_position(position, stroke, f"{name}.{path}")
+
+
+def resolve_stepping(system, stepping):
+    """The stepping for `system`: "auto" is "adaptive" for smooth systems, and for hybrid ones (stick-slip
+    friction) the fixed grid: "pwm" with a switching valve, "grid" with a continuous one. "grid" is refused for a
+    switching valve: its uniform steps read the command as one duty at each RK4 stage, so the duty was not latched
+    per PWM period nor the valve's state carried from the period before, and the result was silently off (MAS-10,
+    Triangle(0.05, 0.95, 1.0) over 2 s: 27-30 kPa and 2.6-3.3 mm from the exact-edge solve, not converging as the
+    step shrank: 29.6, 27.7, 27.6 kPa at 1e-3, 1e-4, 1e-5 s), where "pwm" puts its edges on the grid (18 Pa)."""
+    if stepping not in ("auto", "adaptive", "pwm", "grid"):
+        raise PamjaxInputError(f"stepping must be 'auto', 'adaptive', 'pwm' or 'grid', got {stepping!r}")
+    switches = system.valve.switches
+    if stepping == "auto":
+        return ("pwm" if switches else "grid") if system.hybrid else "adaptive"
+    if stepping == "adaptive" and system.hybrid:
+        raise PamjaxInputError(
+            "this system is hybrid (stick-slip friction, e.g. KarnoppFriction): its modes switch at events, which "
+            "the fixed-grid integrator locates; use stepping='auto' (or 'pwm' for a switching valve, 'grid' "
+            "otherwise), or CoulombViscousFriction for an adaptive solve"
+        )
+    if stepping == "pwm" and not switches:
+        raise PamjaxInputError(
+            f"stepping='pwm' needs a switching valve (its PWM edges define the grid), got {type(system.valve).__name__}"
+            "; use stepping='grid' (uniform fixed steps) or 'adaptive'"
+        )
+    if stepping == "grid" and switches:
+        other = "stepping='auto'" if system.hybrid else "stepping='adaptive'"
+        raise PamjaxInputError(
+            f"stepping='grid' is for continuous valves (averaged, proportional); {type(system.valve).__name__} "
+            "switches on PWM edges, which uniform steps straddle without latching the duty per period (tens of kPa "
+            f"off); use stepping='pwm' (its edges on the grid, the exact-edge model) or {other}"
+        )
+    return stepping
+
+
+def check_state_shapes(system, y0, name="y0"):
+    """Refuse a start state `y0` whose leaves do not have the shapes of the system's own state (`initial_state()`):
+    one with several values in a leaf (`initial_state(pressure=jnp.array([2e5, 3e5]))`, a batch) failed in the
+    solve with JAX's raw carry-type `TypeError` (a muscle), or came back as a trajectory of shape (n, 2) (a tank).
+    Cheap where it matters (`simulate` costs ~1 ms): nothing is done for a state whose every leaf is 0-d (no leaf
+    to hold a batch in), and the system's state is shape-inferred (`jax.eval_shape` of `initial_state`, ~1.5 ms)
+    only where a leaf's shape differs from its `state_scale()`'s (~0.2 ms)."""
+    leaves = jax.tree_util.tree_leaves(y0)
+    if not isinstance(system, AbstractSystem) or all(np.ndim(leaf) == 0 for leaf in leaves):
+        return
+    mismatch = _shape_mismatch(system.state_scale(), y0)
+    if mismatch is None:
+        return
+    try:
+        mismatch = _shape_mismatch(jax.eval_shape(system.initial_state), y0)
+    except Exception:  # noqa: BLE001 - a system whose initial_state needs arguments: the scale's shapes decide
+        pass
+    if mismatch is not None:
+        path, shape, wanted = mismatch
+        raise PamjaxInputError(
+            f"{name}.{path} has shape {shape} where the system's state (system.initial_state()) holds "
+            f"{'one number' if not wanted else f'shape {wanted}'}: simulate takes one start state; several are a "
+            "sweep (pamjax.sweep over 'y0.pressure', ...) or jax.vmap over simulate")
+
+
+def _shape_mismatch(template, y0):
+    """(path, y0's shape, the template's) of the first leaf of `y0` whose shape is not `template`'s; None where
+    every leaf's is, or where the two are not states of one structure (left to the solve's own errors)."""
+    found, structure = jax.tree_util.tree_flatten_with_path(y0)
+    wanted = jax.tree_util.tree_leaves(template)
+    if structure != jax.tree_util.tree_structure(template):
+        return None
+    for (path, leaf), want in zip(found, wanted):
+        if np.shape(leaf) != tuple(np.shape(want)):
+            return _name(path), tuple(np.shape(leaf)), tuple(np.shape(want))
+    return None
 
 
 def check_start_position(position, stroke, name, lanes=False, path=None):

@@ -25,6 +25,7 @@ from .checks import (
     check_start_state,
     naming_batched,
     prepared,
+    resolve_stepping,
     runtime_checks,
     vacuum,
 )
@@ -174,28 +175,6 @@ def _solve_adaptive(system, signal, ts, y0, t0, solver, controller, max_steps, d
     return trajectory(
         ts, states, commands, outs, stats["num_steps"], stats["num_accepted_steps"], stats["num_rejected_steps"], result
     )
-
-
-def resolve_stepping(system, stepping):
-    """The stepping for `system`: "auto" is "adaptive" for smooth systems, and for hybrid ones (stick-slip
-    friction) the fixed grid: "pwm" with a switching valve, "grid" with a continuous one."""
-    if stepping not in ("auto", "adaptive", "pwm", "grid"):
-        raise PamjaxInputError(f"stepping must be 'auto', 'adaptive', 'pwm' or 'grid', got {stepping!r}")
-    switches = system.valve.switches
-    if stepping == "auto":
-        return ("pwm" if switches else "grid") if system.hybrid else "adaptive"
-    if stepping == "adaptive" and system.hybrid:
-        raise PamjaxInputError(
-            "this system is hybrid (stick-slip friction, e.g. KarnoppFriction): its modes switch at events, which "
-            "the fixed-grid integrator locates; use stepping='auto' (or 'pwm' for a switching valve, 'grid' "
-            "otherwise), or CoulombViscousFriction for an adaptive solve"
-        )
-    if stepping == "pwm" and not switches:
-        raise PamjaxInputError(
-            f"stepping='pwm' needs a switching valve (its PWM edges define the grid), got {type(system.valve).__name__}"
-            "; use stepping='grid' (uniform fixed steps) or 'adaptive'"
-        )
-    return stepping
 
 
 def _solve_fixed(system, signal, ts, y0, t0, stepping, substeps, size, grid_step, throw):
@@ -352,7 +331,8 @@ def simulate(
     - `stepping`: "auto" (default): "adaptive" for smooth systems; for hybrid ones (stick-slip friction,
       `KarnoppFriction`) "pwm" with a switching valve and "grid" with a continuous one. "adaptive": diffrax with the
       PID controller above. "grid": fixed RK4 steps of `grid_step` [s] (default 1 ms) with the hybrid system's
-      events located inside the step (`pamjax._solve.grid`). "pwm" (switching `OnOffValve` only):
+      events located inside the step (`pamjax._solve.grid`), for continuous valves (a switching valve is refused:
+      uniform steps do not latch its duty per PWM period). "pwm" (switching `OnOffValve` only):
       PWM-synchronous fixed RK4 steps whose grid contains every switching edge, `substeps` (default 16)
       uniform nodes per PWM period plus the two edges. It integrates the exact-edge model (duty latched per period,
       sharp edges, whatever the valve's `mode`) and is differentiable with respect to everything, the duty, the PWM
