@@ -91,6 +91,19 @@ def test_pwm_sweep_and_grid_shape():
         np.testing.assert_allclose(result["pressure"][i, j], ref.pressure, rtol=0, atol=20.0)
 
 
+def test_a_pwm_sweep_latches_the_duty_pair_as_simulate_does():
+    # The smoothed PWM valve's fixed-step lanes read one duty as held over both periods: at duty 0.95 the first
+    # period started open (simulate: the valve is off before the run) and a period after one above 90 % lost the
+    # open state carried from it: 12 kPa off at 10 ms at Constant(0.95), 10-15 kPa along a 1 Hz triangle.
+    tank = presets.mas10_tank_system("pwm")
+    ts = np.linspace(0.0, 0.2, 21)
+    duties = np.array([0.5, 0.95])
+    result = sweep(tank, pamjax.Constant(0.5), ts, {"signal.value": duties}, channels=("pressure",))
+    for i, u in enumerate(duties):
+        ref = pamjax.simulate(tank, pamjax.Constant(u), ts, rtol=1e-10, atol=1e-10, max_steps=10**6)
+        np.testing.assert_allclose(result["pressure"][i], ref.pressure, rtol=0, atol=20.0)
+
+
 def test_status_per_point_with_injected_failure(averaged):
     # A viscous coefficient of 1e6 N s/m gives the eigenvalue -C_f/M ~ -1e5 /s: RK4 at 1 ms overflows there.
     # (A tiny velocity_width would not do: tanh saturates, so RK4 chatters but stays bounded.)
