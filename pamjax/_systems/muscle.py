@@ -85,7 +85,12 @@ class MuscleSystem(AbstractMuscleSystem):
 
     def initial_state(self, pressure=None, position=None, velocity=0.0):
         """State at rest: `pressure` [Pa abs] (atmospheric by default) and `position` [m] (by default the static
-        equilibrium with the payload at that pressure)."""
+        equilibrium with the payload at that pressure). One state: each argument one number (an array of pressures
+        failed inside the equilibrium's bisection with JAX's raw carry-type error; several: `jax.vmap` over it)."""
+        for name, value in (("pressure", pressure), ("position", position), ("velocity", velocity)):
+            if value is not None and jnp.ndim(value) != 0:
+                raise PamjaxInputError(f"initial_state: {name} must be one number, got shape {jnp.shape(value)}: one "
+                                       "state at a time (several: jax.vmap(system.initial_state) or pamjax.sweep)")
         p = self.air.atmospheric_pressure if pressure is None else jnp.asarray(pressure, dtype=float)
         x = self.equilibrium_position(p) if position is None else jnp.asarray(position, dtype=float)
         return MuscleState(
