@@ -75,10 +75,12 @@ class OutputFolder:
     **Arguments:** `path`; `command` (for messages and the lock, e.g. "pamjax fit"); `outputs`: the file names the
     command writes (an existing one is refused unless `overwrite`, or unless listed in `replaceable`); `flag`: the
     command-line option that names the folder; `stale`: what an earlier run of the command may have written that this
-    one does not (a figure this run skips with --no-plot, an earlier --profile's profile.json): with `overwrite`, the
-    earlier results are replaced whole, so these are removed once the command has written its own (else they would
-    read as this run's); an interrupted or failed run leaves them. Without `overwrite` one that exists is refused,
-    as an existing output is (unless every output is `replaceable`: a resumed run's folder).
+    one does not (a figure this run skips with --no-plot, an earlier --profile's profile.json): with `overwrite` (or
+    every output `replaceable`: a resumed run's folder), the earlier results are replaced whole, so these are removed
+    once the command has written its own (else they would read as this run's). Without `overwrite` one that exists
+    is refused, as an existing output is (unless every output is `replaceable`). An `overwrite` run stopped after
+    writing some outputs removes the earlier run's files it had not replaced yet, saying so; one stopped before
+    writing any leaves the earlier results whole.
     """
 
     def __init__(self, path, command, outputs, *, overwrite=False, replaceable=(), flag="--out", stale=()):
@@ -89,6 +91,7 @@ class OutputFolder:
         self.overwrite, self.replaceable = overwrite, set(replaceable)
         self.stale = [name for name in stale if name not in self.outputs]
         self.failed = []  # (name, error, where it went instead)
+        self.written = []  # the outputs this run has written, in order
         self._fd = None
 
     def __truediv__(self, name):
@@ -108,12 +111,30 @@ class OutputFolder:
 
     def __exit__(self, exc_type, *exc):
         try:
-            if exc_type is None and self.overwrite and not self.failed:  # the earlier results replaced whole: what
-                for name in self.stale:  # this run did not write of them is removed, not left to read as its own
-                    (self.path / name).unlink(missing_ok=True)
+            resumed = bool(self.outputs) and set(self.outputs) <= self.replaceable  # `fit --resume`: its own folder
+            if exc_type is None and (self.overwrite or resumed) and not self.failed:  # the earlier results replaced
+                for name in self.stale:  # whole: what this run did not write of them is removed, not left to read as
+                    (self.path / name).unlink(missing_ok=True)  # its own (`fit --resume --no-plot`: the old fit.png)
+            elif exc_type is not None and self.overwrite and self.written:
+                self._drop_earlier()
         finally:
             self._unlock()
         return False
+
+    def _drop_earlier(self):
+        """An --overwrite run stopped after writing some of its outputs: the earlier run's files it had not replaced
+        yet are removed (a new trajectory.csv beside the earlier run's figure read as one run's results), and one
+        line says what the folder now holds."""
+        earlier = [name for name in self.outputs + self.stale
+                   if name not in self.written and (self.path / name).exists()]
+        for name in earlier:
+            try:
+                (self.path / name).unlink()
+            except OSError:
+                pass
+        print(f"{self.command}: stopped after writing {', '.join(self.written)} in {self.path}"
+              + (f"; the earlier run's {', '.join(earlier)} removed (its results were being replaced)" if earlier
+                 else ""), flush=True)
 
     def _refuse(self, what, err=None):
         reason = f" ({err.strerror or err})" if isinstance(err, OSError) else ""
@@ -222,6 +243,7 @@ class OutputFolder:
         try:
             writer(tmp)
             os.replace(tmp, target)
+            self.written.append(name)
             return target
         except OSError as err:
             try:
