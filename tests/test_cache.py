@@ -425,3 +425,38 @@ def test_a_component_without_a_source_file_is_compiled_in_the_process_only(tmp_p
     assert programs.structural("names", lambda g, x: ["k"], args) == ["k"]
     assert not ProgramCache(tmp_path).preload("gain", args)  # another process finds nothing
     assert not list(tmp_path.rglob("*gain*")) and not list(tmp_path.rglob("*.pkl"))
+
+
+def test_enable_compilation_cache_refuses_a_non_path_and_reads_an_empty_one_as_the_default(tmp_path, monkeypatch):
+    # enable_compilation_cache(123) was a raw TypeError; "" cached in the current folder while an empty
+    # PAMJAX_CACHE_DIR means the default folder
+    import jax
+
+    from pamjax._core.cache import enable_compilation_cache
+
+    with pytest.raises(pamjax.PamjaxInputError, match=r"path must be a folder \(str or os.PathLike\) or None for the "
+                                                      r"default, got 123"):
+        enable_compilation_cache(123)
+    names = ("jax_compilation_cache_dir", "jax_persistent_cache_min_compile_time_secs",
+             "jax_persistent_cache_min_entry_size_bytes")
+    before = {name: getattr(jax.config, name) for name in names}
+    monkeypatch.delenv("PAMJAX_COMPILATION_CACHE", raising=False)
+    monkeypatch.setenv("PAMJAX_CACHE_DIR", str(tmp_path / "default"))
+    monkeypatch.chdir(tmp_path)
+    try:
+        assert enable_compilation_cache("") == tmp_path / "default"
+        assert jax.config.jax_compilation_cache_dir == str(tmp_path / "default")
+    finally:
+        for name, value in before.items():
+            jax.config.update(name, value)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["default"]
+
+
+def test_the_cache_minimum_must_be_a_number_of_seconds():
+    from pamjax._core.distributed import env_seconds
+
+    assert env_seconds("S", 0.1, {}) == 0.1 and env_seconds("S", 0.1, {"S": " 2 "}) == 2.0
+    for bad in ("0.5s", "-1", "nan", "inf"):
+        with pytest.raises(pamjax.PamjaxInputError, match=rf"environment variable S='{bad}': write a number of "
+                                                          r"seconds >= 0"):
+            env_seconds("S", 0.1, {"S": bad})

@@ -306,6 +306,12 @@ SIMULATE_CASES = {
                       r"would write 25,000,001 rows .* check t_end is in seconds"),
     "recorded without a file": (_SIM_OK.replace('{ kind = "Constant", value = 0.5 }', '"recorded"'),
                                 r"'recorded' needs file"),
+    # t_end 1.0 at dt 0.3 ended the CSV at 0.9 s without a word
+    "dt that does not divide the run": (_SIM_OK + "dt = 0.3\n", r"dt = 0.3 s does not divide t_end - t0 = 1 s: the "
+                                        r"rows would end at 0.9 s, short of t_end; set dt = 0.25"),
+    # the uniform grid read a switching valve's duty unlatched: tens of kPa off, silently
+    "grid with a switching valve": (_SIM_OK + 'stepping = "grid"\n',
+                                    r"stepping='grid' is for continuous valves.* use stepping='pwm'"),
 }
 
 
@@ -690,3 +696,95 @@ def test_the_trajectory_csv_names_a_regulators_volts_and_every_channels_unit():
     cols, units = columns_of(traj, command_unit(model))
     assert units["command"] == "V" and units["inlet_flow"] == "kg/s"
     assert all(units[c] for c in cols), units
+
+
+def test_an_earlier_runs_figure_alone_in_the_folder_is_refused_without_overwrite(tmp_path, capsys, no_solves):
+    # `pamjax simulate --no-plot` into a folder holding only an earlier run's trajectory.png wrote its CSV beside it,
+    # the figure reading as this run's; refused as an existing output is, and --overwrite removes it once written.
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "trajectory.png").write_text("earlier")
+    config = _write(tmp_path, _SIM_OK)
+    _refused(capsys, ["simulate", str(config), "--out", str(out), "--no-plot"],
+             r"trajectory.png exists, an earlier run's that this one would not replace; pass --overwrite")
+    assert not (out / "trajectory.csv").exists() and (out / "trajectory.png").read_text() == "earlier"
+    with OutputFolder(out, "pamjax simulate", ["trajectory.csv"], overwrite=True, stale=["trajectory.png"]) as folder:
+        folder.write_text("trajectory.csv", "new")
+    assert not (out / "trajectory.png").exists()
+    (out / "fit.png").write_text("the resumed fit's")  # a resumed run (every output replaceable): its own files
+    with OutputFolder(out, "pamjax fit", ["fit.json"], replaceable=["fit.json"], stale=["fit.png"]):
+        pass
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the environment's settings, --out "", a checkpoint that cannot be written
+
+
+@pytest.mark.parametrize("command", ["simulate", "sweep", "fit", "design"])
+def test_an_empty_out_is_refused_by_every_command(tmp_path, capsys, no_solves, monkeypatch, command):
+    # `--out "$DIR"` with DIR unset: simulate, sweep, fit and design wrote to results/... instead (demo refused it)
+    monkeypatch.chdir(tmp_path)
+    _refused(capsys, [command, str(tmp_path / "never-read.toml"), "--out", ""],
+             rf"^pamjax {command}: error: the output folder is empty; name one with --out$")
+    assert not any(tmp_path.iterdir())
+
+
+def test_on_off_environment_variables_take_the_same_words_and_refuse_others(tmp_path, capsys, no_solves, monkeypatch):
+    config = _write(tmp_path, "[fit\n")
+    for word in ("false", "off", "no", "0", ""):  # PAMJAX_DEBUG=false showed the traceback
+        monkeypatch.setenv("PAMJAX_DEBUG", word)
+        _refused(capsys, ["fit", str(config)], "not valid TOML")
+    monkeypatch.setenv("PAMJAX_DEBUG", "Yes")
+    with pytest.raises(pamjax.PamjaxInputError, match="not valid TOML"):
+        main(["fit", str(config)])
+    monkeypatch.delenv("PAMJAX_DEBUG")
+    for name in ("PAMJAX_DEBUG", "PAMJAX_COMPILATION_CACHE", "PAMJAX_FAST_COMPILE"):  # "disabled" was read as on
+        monkeypatch.setenv(name, "disabled")
+        _refused(capsys, ["fit", str(config)], rf"^pamjax fit: error: environment variable {name}='disabled': write "
+                                               r"one of 1/true/yes/on \(on\) or 0/false/no/off \(off\), or unset it")
+        monkeypatch.delenv(name)
+    from pamjax._core.distributed import env_flag
+
+    assert [env_flag("X", d, {"X": v}) for d, v in ((True, "OFF"), (False, " on "), (True, ""), (False, "1"))] == \
+        [False, True, True, True]
+
+
+@pytest.mark.parametrize("value", ["0.5s", "abc", "-1", "nan", "inf"])
+def test_a_cache_minimum_that_is_not_a_number_of_seconds_is_named(tmp_path, capsys, no_solves, monkeypatch, value):
+    # "0.5s" crashed every command with a ValueError traceback; "-1" and "nan" were taken silently
+    monkeypatch.delenv("PAMJAX_COMPILATION_CACHE", raising=False)
+    monkeypatch.setenv("PAMJAX_CACHE_MIN_COMPILE_SECONDS", value)
+    _refused(capsys, ["fit", str(tmp_path / "never-read.toml")],
+             rf"environment variable PAMJAX_CACHE_MIN_COMPILE_SECONDS='{re.escape(value)}': write a number of "
+             r"seconds >= 0 \(e.g. 0.5, no unit\)")
+
+
+def test_a_checkpoint_that_cannot_be_written_names_it_keeps_the_last_and_leaves_no_temporary(tmp_path, capsys,
+                                                                                            monkeypatch):
+    # a full disk during a fit: a bare "[Errno 28] No space left on device", and checkpoint.npz.tmp.npz left behind
+    import pamjax._files.checkpoint as checkpoint
+
+    path = tmp_path / "out" / "checkpoint.npz"
+    checkpoint.write_checkpoint(path, ["a"], {"theta": np.ones(1)})
+    before = path.read_bytes()
+    real = np.savez
+
+    def disk_full(file, *args, **kwargs):
+        real(file, *args, **kwargs)  # written in part, then the disk is full
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(checkpoint.np, "savez", disk_full)
+    with pytest.raises(OSError, match=r"could not write the fit's checkpoint .*checkpoint.npz \(No space left on "
+                                      r"device\); the checkpoint already there .* is kept whole: make room .* resume "
+                                      r"the fit from it \(pamjax fit --resume") as failed:
+        checkpoint.write_checkpoint(path, ["a"], {"theta": np.zeros(1)})
+    assert failed.value.errno == errno.ENOSPC and failed.value.filename == str(path)
+    assert path.read_bytes() == before and [p.name for p in path.parent.iterdir()] == ["checkpoint.npz"]
+    with pytest.raises(OSError, match="no earlier checkpoint is there to resume from"):
+        checkpoint.write_checkpoint(tmp_path / "other" / "checkpoint.npz", ["a"], {"theta": np.zeros(1)})
+    assert not any((tmp_path / "other").iterdir())
+    # the command line says it in one line, naming the file once, status 1
+    monkeypatch.setattr(cli_sweep, "run", lambda args: checkpoint.write_checkpoint(path, ["a"], {"theta": np.ones(1)}))
+    err = _refused(capsys, ["sweep", "never-read.toml"], r"^pamjax sweep: error: could not write the fit's "
+                                                          r"checkpoint .* resume=\.\.\.\)\)$", code=1)
+    assert err.count(str(path)) == 1

@@ -824,6 +824,35 @@ def test_cli_design_takes_period_and_fails_an_infeasible_design(tmp_path, capsys
     assert not (tmp_path / "c" / "design.csv").exists() and (tmp_path / "c" / "design.json").exists()
 
 
+def test_an_infeasible_design_with_overwrite_removes_the_earlier_designs_csv(tmp_path, capsys):
+    # `pamjax design --overwrite` that ended outside its limits said "no design.csv was written (a bench must not
+    # play it)" and left the earlier run's design.csv beside its new design.json: a bench played the old design
+    cfg = tmp_path / "d.toml"
+    cfg.write_text(textwrap.dedent("""
+        [model]
+        preset = "mas10_tank_system"
+        options = { valve = "pwm" }
+        [design]
+        free = ["valve.inflate.discharge_coefficient"]
+        duration = 0.2
+        noise = { pressure = 2e3 }
+        channels = ["pressure"]
+        start = { pressure = 101325.0 }
+        rate = 500.0
+        knots = 4
+        initial = 0.6
+        steps = 1
+        max_pressure = 1.2e5
+    """))  # the smallest infeasible design above (test_cli_design_takes_period_and_fails_an_infeasible_design)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "design.csv").write_text("t [s],duty [-]\n0.0,0.5\n")  # an earlier, feasible design's
+    assert main(["design", str(cfg), "--out", str(out), "--quiet", "--no-plot", "--overwrite"]) == 1
+    err = capsys.readouterr().err
+    assert "no design.csv was written (a bench must not play it; the earlier run's " in err and "was removed" in err
+    assert not (out / "design.csv").exists() and (out / "design.json").exists()
+
+
 def test_a_designed_run_is_a_bench_experiment(muscle_design, tmp_path):
     # A designed run recorded on a rig (the recording's own duty column, no triangle parameters) is a bench
     # experiment: kind "muscle_run", or "muscle_triangle" without lo/hi/f_tri. `load_bench` drives it by the recorded

@@ -153,3 +153,29 @@ def test_the_command_refuses_an_absent_jax_platforms_with_status_2(tmp_path):
     assert re.search(r"^pamjax simulate: error: JAX_PLATFORMS=tpu \(set in the environment\): JAX cannot start it "
                      r"here .*; available: cpu", proc.stderr, re.M), proc.stderr
     assert "please report it" not in proc.stderr and not (tmp_path / "out").exists()
+
+
+def test_a_platform_jax_fails_to_start_with_a_bare_assertion_is_named_as_the_others(monkeypatch):
+    # JAX_PLATFORMS=cuda without CUDA: JAX's `backends()` fails `assert _default_backend is not None`, which reached
+    # the user as "AssertionError: ... please report it" (status 1) where rocm or a typo gave the named input error
+    monkeypatch.setattr("pamjax._core.private.jax_backends_initialized", lambda: False)
+    monkeypatch.setattr(jax.config, "update", lambda name, value: None)
+
+    def no_cuda(platform=None):
+        if platform == "cpu":
+            return [CPU0]
+        raise AssertionError()
+
+    monkeypatch.setattr(jax, "devices", no_cuda)
+    with pytest.raises(PamjaxInputError, match=r"JAX_PLATFORMS=cuda \(set in the environment\): JAX cannot start it "
+                                               r"here \(no backend of it started\); available: cpu\. Unset"):
+        devices.for_command("single", "auto", environ={"JAX_PLATFORMS": "cuda"})
+    with pytest.raises(PamjaxInputError, match=r"--device gpu: JAX cannot start a GPU here \(no backend of it"):
+        devices.for_command("single", "gpu", environ={})
+
+
+@pytest.mark.parametrize("work", ["single", "batched"])
+def test_no_devices_to_choose_from_is_an_input_error(work):
+    # available=[]: a bare StopIteration ("single"), or a choice without devices whose statement() raised IndexError
+    with pytest.raises(PamjaxInputError, match=r"select_devices: available holds no device; pass JAX devices"):
+        devices.select_devices(work, available=[])

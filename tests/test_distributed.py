@@ -115,15 +115,17 @@ def test_cli_sweep_distributed_equals_single_process(runs):
     np.testing.assert_array_equal(written["status"], single["status"])
 
 
-def test_cli_sweep_distributed_says_why_it_cannot_join(monkeypatch, tmp_path):
+def test_cli_sweep_distributed_says_why_it_cannot_join(monkeypatch, tmp_path, capsys):
+    # once a SystemExit(text): status 1 with no "pamjax sweep: error:"; now the command's one-line input error
     from pamjax._cli.main import main
 
     for name in ("JAX_COORDINATOR_ADDRESS", "JAX_NUM_PROCESSES", "JAX_PROCESS_ID", "SLURM_JOB_ID",
                  "OMPI_MCA_orte_hnp_uri", "OMPI_COMM_WORLD_RANK"):
         monkeypatch.delenv(name, raising=False)
     (tmp_path / "map.toml").write_text(CONFIG)
-    with pytest.raises(SystemExit, match="--distributed: nothing to join: none of JAX_COORDINATOR_ADDRESS"):
-        main(["sweep", str(tmp_path / "map.toml"), "--no-plot", "--out", str(tmp_path / "x"), "--distributed"])
+    assert main(["sweep", str(tmp_path / "map.toml"), "--no-plot", "--out", str(tmp_path / "x"), "--distributed"]) == 2
+    assert re.search(r"^pamjax sweep: error: --distributed: nothing to join: none of JAX_COORDINATOR_ADDRESS",
+                     capsys.readouterr().err, re.M)
 
 
 def test_processes_say_what_they_joined(runs):
@@ -194,6 +196,19 @@ def test_initialize_distributed_says_why_it_cannot_join():
             pamjax.runtime.initialize_distributed("h:1", 2, 1, timeout=bad)
     with pytest.raises(PamjaxDistributedError, match="already started its backend"):
         pamjax.runtime.initialize_distributed("127.0.0.1:1", 2, 1)
+
+
+def test_initialize_distributed_names_a_bad_address_and_takes_numpy_integers():
+    # a port-like int as the address was a raw TypeError; np.int64(2) processes "must be an integer >= 1"
+    with pytest.raises(pamjax.PamjaxInputError, match=r"coordinator_address must be a string \"host:port\" \(the "
+                                                      r"address of process 0\), got 1234"):
+        pamjax.runtime.initialize_distributed(1234, 2, 0)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"process_id .* in \[0, 1\], got 5"):
+        pamjax.runtime.initialize_distributed("h:1", np.int64(2), np.int64(5))
+    with pytest.raises(pamjax.PamjaxInputError, match=r"num_processes .* integer >= 1, got True"):
+        pamjax.runtime.initialize_distributed("h:1", True, 0)
+    with pytest.raises(PamjaxDistributedError, match="already started its backend"):  # taken: checks passed
+        pamjax.runtime.initialize_distributed("127.0.0.1:1", np.int64(2), np.int32(1))
 
 
 def test_local_shards_merge_to_the_whole_sweep():

@@ -138,7 +138,7 @@ def run(args):
 
     model, free, duration, kwargs, out_cfg = load(args.config)
     check_design(model, free, duration, **kwargs)  # every refusal before the output folder exists
-    out = pathlib.Path(args.out or out_cfg or f"results/{pathlib.Path(args.config).stem}")
+    out = pathlib.Path(args.out if args.out is not None else out_cfg or f"results/{pathlib.Path(args.config).stem}")
     outputs = [o for o in OUTPUTS if not (args.no_plot and o.endswith(".png"))]
     with OutputFolder(out, "pamjax design", outputs, overwrite=args.overwrite,
                       stale=OUTPUTS) as folder:
@@ -164,9 +164,12 @@ def run(args):
         if res.payload_kg is not None:
             print(f"payload: {res.payload_kg:.4g} kg (the model's: {float(model.payload_mass):g} kg): load the rig "
                   f"with it, and fit its recording with payload_kg = {res.payload_kg:.4g}")
-        written = []
+        written, removed = [], False
         if res.feasible:
             written.append(folder.write("design.csv", lambda p: res.to_csv(p, overwrite=True)))
+        elif (folder / "design.csv").exists():  # an earlier run's (--overwrite): a bench would play it as this run's
+            (folder / "design.csv").unlink()
+            removed = True
         written.append(folder.write("design.json", lambda p: res.to_json(p, overwrite=True)))
         if not args.no_plot:
             try:
@@ -175,8 +178,9 @@ def run(args):
                 print("no figure: matplotlib is not installed (pip install matplotlib)")
         print("wrote " + ", ".join(str(p) for p in written if p is not None))
         if not res.feasible:
-            print("pamjax design: FAILED: the design ends outside its limits, so no design.csv was written (a bench "
-                  "must not play it; design.json and design.png show it):\n  "
+            gone = f"; the earlier run's {folder / 'design.csv'} was removed" if removed else ""
+            print(f"pamjax design: FAILED: the design ends outside its limits, so no design.csv was written (a bench "
+                  f"must not play it{gone}; design.json and design.png show it):\n  "
                   + "\n  ".join(res.constraints["violations"])
                   + "\nRelax the limit named, start from a signal within it (initial = a constant duty), or allow "
                   "more steps" + _payload_hint(model, res, kwargs), file=sys.stderr)

@@ -302,7 +302,7 @@ def run(args):
         print(f"pamjax fit: {what} while reading {args.config}, before the fit started; nothing to resume, nothing "
               "written", file=sys.stderr, flush=True)
         return interrupt_status(err)
-    out = pathlib.Path(args.out or out_cfg or f"results/{pathlib.Path(args.config).stem}")
+    out = pathlib.Path(args.out if args.out is not None else out_cfg or f"results/{pathlib.Path(args.config).stem}")
     if args.resume and args.overwrite:
         raise PamjaxInputError("pamjax fit: --resume continues the fit in --out, --overwrite starts it again: "
                                "give one of them")

@@ -76,7 +76,8 @@ def _common(suppress):
     common = argparse.ArgumentParser(add_help=False)
     off, auto = (argparse.SUPPRESS, argparse.SUPPRESS) if suppress else (False, "auto")
     common.add_argument("--debug", action="store_true", default=off,
-                        help=f"show Python tracebacks (also: environment variable {DEBUG_VARIABLE}=1)")
+                        help=f"show Python tracebacks (also: environment variable {DEBUG_VARIABLE}=1; 0 or unset: "
+                             "off)")
     common.add_argument("--device", choices=("auto", "cpu", "gpu", "tpu"), default=auto,
                         help="where the work runs: auto (default: single-trajectory commands on the CPU, where "
                              "they run fastest; sweeps on a GPU/TPU if there is one, else every CPU core), or cpu, "
@@ -168,6 +169,30 @@ def _end_process(status):
     os._exit(int(status) if isinstance(status, int) else 1)
 
 
+def _settings(args):
+    """Read the environment's settings before any work, and return whether to show tracebacks (`--debug`,
+    `PAMJAX_DEBUG`); turn the compilation cache on or off; refuse `--out ""` (`Path("")` is the current folder: an
+    unset `--out "$DIR"` fell back to results/... in simulate, sweep, fit and design). An on/off variable is read by
+    `env_flag` (`PAMJAX_DEBUG=false` turned the tracebacks on); those `xla_cpu` reads at import are checked here,
+    so that a value they do not take ("disabled", read there as on) is named rather than guessed."""
+    from .._core.cache import cache_disabled, disable_compilation_cache, enable_compilation_cache
+    from .._core.distributed import env_flag
+    from .._core.errors import PamjaxInputError
+    from .._core.xla_cpu import FAST_COMPILE, OPT_OUT
+
+    debug = args.debug or env_flag(DEBUG_VARIABLE, False)
+    for name in (FAST_COMPILE, OPT_OUT):
+        env_flag(name, True)
+    out = getattr(args, "out", None)
+    if out is not None and not str(out).strip():
+        raise PamjaxInputError(f"pamjax {args.command}: the output folder is empty; name one with --out")
+    if args.no_cache or cache_disabled():  # off: JAX's own too, even where JAX_COMPILATION_CACHE_DIR turned it on
+        disable_compilation_cache()
+    else:  # a second run of a workflow loads its compiled programs instead of compiling (_core/cache.py)
+        enable_compilation_cache()
+    return debug
+
+
 def _main(argv, program=False):
     parser, modules = _parser()
     args = parser.parse_args(argv)
@@ -177,19 +202,20 @@ def _main(argv, program=False):
             from .._core.xla_cpu import prefer_fast_compilation
 
             prefer_fast_compilation()
-    debug = args.debug or os.environ.get(DEBUG_VARIABLE, "") not in ("", "0")
     import jax
 
     jax.config.update("jax_enable_x64", True)  # float64 physics (entry point, not an import-time side effect)
-    from .._core.cache import announce_compilation, cache_disabled, disable_compilation_cache, enable_compilation_cache
-
-    if args.no_cache or cache_disabled():  # off: JAX's own too, even where JAX_COMPILATION_CACHE_DIR turned it on
-        disable_compilation_cache()
-    else:  # a second run of a workflow loads its compiled programs instead of compiling (_core/cache.py)
-        enable_compilation_cache()
+    from .._core.cache import announce_compilation
     from .._core.errors import PamjaxInputError, PamjaxSolveError
 
     command = args.command
+    try:
+        debug = _settings(args)
+    except PamjaxInputError as err:  # a bad environment variable or --out "": named, before any work (status 2)
+        if args.debug:
+            raise
+        _say(command, err)
+        return EXIT_INPUT
     started = False  # whether the command's own work began (before it, an interrupt has nothing to keep)
     with _signals_as_interrupts():
         try:
@@ -227,7 +253,8 @@ def _main(argv, program=False):
         except OSError as err:  # a file that cannot be read or written
             if debug:
                 raise
-            _say(command, f"{err.strerror or err}: {err.filename}" if err.filename else err)
+            text = err.strerror or str(err)  # the file named once: a message that names it already is left whole
+            _say(command, f"{text}: {err.filename}" if err.filename and str(err.filename) not in text else text)
             return EXIT_FAILED
         except Exception as err:  # not a user error: one line, the traceback on request
             if debug:

@@ -333,7 +333,7 @@ def run(args):
         run_config(config, model=model)
         return 0
     name = os.path.splitext(os.path.basename(args.config))[0]
-    out = args.out or os.path.join("results", f"sweep-{name}")
+    out = args.out if args.out is not None else os.path.join("results", f"sweep-{name}")  # "": OutputFolder refuses
     outputs = [o for o in OUTPUTS if not (args.no_plot and o.endswith(".png"))]
     with OutputFolder(out, "pamjax sweep", outputs, overwrite=args.overwrite,
                       stale=OUTPUTS) as folder:

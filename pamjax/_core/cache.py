@@ -11,7 +11,7 @@ Where: `$PAMJAX_CACHE_DIR` if set, else the user's cache directory (`$XDG_CACHE_
 Off: `PAMJAX_COMPILATION_CACHE=0` (or the CLI's `--no-cache`; in the CLI both turn JAX's own off too,
 `disable_compilation_cache()`, also where `JAX_COMPILATION_CACHE_DIR` turned it on). Stale entries are harmless (a
 new key misses and compiles); the directory can be deleted at any time. `PAMJAX_CACHE_MIN_COMPILE_SECONDS`
-(default 0.1) sets the shortest compilation kept.
+(default 0.1) sets the shortest compilation kept. A value these variables do not take is refused, named.
 """
 
 import os
@@ -21,6 +21,8 @@ import threading
 
 from .code_stamp import code_stamp
 from .compile_stats import CompileStats as CompileStats  # public in pamjax.runtime
+from .distributed import env_flag, env_seconds
+from .errors import PamjaxInputError
 
 OPT_OUT = "PAMJAX_COMPILATION_CACHE"
 DIR_ENV = "PAMJAX_CACHE_DIR"
@@ -43,18 +45,24 @@ def default_cache_dir() -> pathlib.Path:
 
 
 def cache_disabled() -> bool:
-    return os.environ.get(OPT_OUT, "1").strip().lower() in ("0", "false", "no", "off")
+    return not env_flag(OPT_OUT, True)  # a value other than on/off words is refused (`env_flag`)
 
 
 def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> pathlib.Path | None:
-    """Turn on JAX's persistent compilation cache in `path` (default `default_cache_dir()`). Returns the directory,
-    or None when `PAMJAX_COMPILATION_CACHE=0` turns it off or the directory cannot be created (the run then just
-    compiles, and says why)."""
+    """Turn on JAX's persistent compilation cache in `path` (default, also for "" as for an empty `PAMJAX_CACHE_DIR`:
+    `default_cache_dir()`). Returns the directory, or None when `PAMJAX_COMPILATION_CACHE=0` turns it off or the
+    directory cannot be created (the run then just compiles, and says why). A `path` that is no path, or a bad
+    environment variable, is a `PamjaxInputError`."""
+    if path is not None and not isinstance(path, str | os.PathLike):
+        raise PamjaxInputError(f"enable_compilation_cache: path must be a folder (str or os.PathLike) or None for "
+                               f"the default, got {path!r}")
+    path = None if path is None or not str(os.fspath(path)).strip() else path
     if cache_disabled():
         return None
+    minimum = env_seconds("PAMJAX_CACHE_MIN_COMPILE_SECONDS", MIN_COMPILE_SECONDS)  # before anything is made
     import jax
 
-    path = pathlib.Path(path) if path is not None else default_cache_dir()
+    path = pathlib.Path(path).expanduser() if path is not None else default_cache_dir()
     try:
         path.mkdir(parents=True, exist_ok=True)
         probe = path / ".pamjax-write-test"
@@ -65,7 +73,6 @@ def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> path
               f"directory or {OPT_OUT}=0", file=sys.stderr)
         return None
     jax.config.update("jax_compilation_cache_dir", str(path))
-    minimum = float(os.environ.get("PAMJAX_CACHE_MIN_COMPILE_SECONDS", MIN_COMPILE_SECONDS))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", minimum)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     return path

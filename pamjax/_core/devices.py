@@ -99,6 +99,9 @@ def select_devices(work: Literal["single", "batched"], device: str | None = "aut
     by_kind = {}
     for d in available:
         by_kind.setdefault(_kind(d.platform), []).append(d)
+    if not by_kind:  # nothing to choose from: a choice without devices has no platform and places nothing
+        raise PamjaxInputError("select_devices: available holds no device; pass JAX devices (e.g. jax.devices()), "
+                               "or leave available=None for every device JAX can start")
     if requested != "auto":
         if requested not in by_kind:
             have = ", ".join(sorted(by_kind)) or "none"
@@ -113,8 +116,7 @@ def select_devices(work: Literal["single", "batched"], device: str | None = "aut
     accelerators = [k for k in by_kind if k != "cpu"]
     if accelerators:
         return DeviceChoice(tuple(by_kind[accelerators[0]]), BATCHED_REASON, requested)
-    return DeviceChoice(tuple(by_kind.get("cpu", ())), "batched work: no accelerator here, every CPU device",
-                        requested)
+    return DeviceChoice(tuple(by_kind["cpu"]), "batched work: no accelerator here, every CPU device", requested)
 
 
 def _all_devices():
@@ -125,7 +127,7 @@ def _all_devices():
     for platform in ("cpu", "gpu", "tpu"):
         try:
             devices += jax.devices(platform)
-        except RuntimeError:  # not installed or not present
+        except STARTUP_ERRORS:  # not installed or not present
             continue
     return devices
 
@@ -149,10 +151,23 @@ def platforms_before_start(work: str, device: str | None = "auto"):
                  "to stay on the CPU)"
 
 
+# What JAX raises when a platform cannot start: a RuntimeError ("Unable to initialize backend 'tpu'"), or, for
+# JAX_PLATFORMS=cuda without a CUDA plugin (jax 0.10.2 on this project's CPU machine), a bare AssertionError from
+# `xla_bridge.backends()` ("assert _default_backend is not None"): the same user error, not an internal one.
+STARTUP_ERRORS = (RuntimeError, AssertionError)
+
+
+def _first_line(err):
+    """JAX's error in one line (a bare AssertionError: what it means)."""
+    text = str(err).strip()
+    if text:
+        return text.splitlines()[0]
+    return "no backend of it started" if isinstance(err, AssertionError) else type(err).__name__
+
+
 def unavailable_message(device, err):
     """The user's message when the platform `device` asked for cannot start (JAX's own error appended)."""
-    first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-    return f"--device {device}: JAX cannot start a {str(device).upper()} here ({first})"
+    return f"--device {device}: JAX cannot start a {str(device).upper()} here ({_first_line(err)})"
 
 
 def _start_users_platforms(users):
@@ -163,8 +178,8 @@ def _start_users_platforms(users):
 
     try:
         jax.devices()
-    except RuntimeError as err:
-        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+    except STARTUP_ERRORS as err:
+        first = _first_line(err)
         before = jax.config.jax_platforms
         jax.config.update("jax_platforms", "")  # every platform JAX can start, to name them
         try:
@@ -209,7 +224,7 @@ def for_command(work: Literal["single", "batched"], device: str | None = "auto",
     if check and requested in ("gpu", "tpu"):  # say it now, not as an internal error at the first computation
         try:
             jax.devices(requested)
-        except RuntimeError as err:
+        except STARTUP_ERRORS as err:
             jax.config.update("jax_platforms", before)  # a program that called main(argv) keeps its platforms
             raise PamjaxInputError(unavailable_message(requested, err)) from None
     return contextlib.nullcontext(), line

@@ -8,6 +8,7 @@ joined or why it could not, and gathers Python-level results (bytes) from every 
 """
 
 import dataclasses
+import numbers
 import os
 from collections.abc import Mapping, Sequence
 
@@ -72,6 +73,48 @@ def _env_int(name, environ):
         raise PamjaxInputError(f"environment variable {name} must be an integer, got {text!r}") from None
 
 
+# The words an on/off environment variable takes (`env_flag`); the off ones are those `xla_cpu` reads as off.
+FLAG_ON, FLAG_OFF = ("1", "true", "yes", "on"), ("0", "false", "no", "off")
+
+
+def env_flag(name: str, default: bool, environ: Mapping[str, str] | None = None) -> bool:
+    """The on/off environment variable `name` (`PAMJAX_DEBUG`, `PAMJAX_COMPILATION_CACHE`, ...): `default` when
+    unset or empty, True for 1/true/yes/on, False for 0/false/no/off (any case). Anything else is a
+    `PamjaxInputError` naming the variable and the words it takes: `PAMJAX_DEBUG=false` once turned the tracebacks
+    on, and a typo such as "disabled" must not silently mean either."""
+    environ = os.environ if environ is None else environ
+    value = environ.get(name, "").strip().lower()
+    if not value:
+        return default
+    if value not in FLAG_ON + FLAG_OFF:
+        raise PamjaxInputError(f"environment variable {name}={environ[name]!r}: write one of {'/'.join(FLAG_ON)} "
+                               f"(on) or {'/'.join(FLAG_OFF)} (off), or unset it")
+    return value in FLAG_ON
+
+
+def env_seconds(name: str, default: float, environ: Mapping[str, str] | None = None) -> float:
+    """The environment variable `name` as a number of seconds >= 0 (`default` when unset or empty); anything else
+    (a unit, "nan", a negative number) is a `PamjaxInputError` naming the variable: "0.5s" in
+    `PAMJAX_CACHE_MIN_COMPILE_SECONDS` crashed every command with a traceback, "-1" and "nan" were taken silently."""
+    environ = os.environ if environ is None else environ
+    text = environ.get(name, "").strip()
+    try:
+        value = float(text) if text else float(default)
+    except ValueError:
+        value = float("nan")
+    if not (np.isfinite(value) and value >= 0.0):
+        raise PamjaxInputError(f"environment variable {name}={environ[name]!r}: write a number of seconds >= 0 "
+                               f"(e.g. 0.5, no unit), or unset it for the default {default:g} s")
+    return value
+
+
+def _as_int(value):
+    """`value` as an int if it is an integer (NumPy's too, never a bool), else unchanged (refused by the caller)."""
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool | np.bool_):
+        return int(value)
+    return value
+
+
 def _detected_cluster(environ):
     for name, keys in _CLUSTERS.items():
         if all(k in environ for k in keys):
@@ -130,9 +173,12 @@ def initialize_distributed(
     environ = os.environ if environ is None else environ
     if jax.distributed.is_initialized():
         return process_info()
+    if coordinator_address is not None and not isinstance(coordinator_address, str):  # 1234 for "host:1234"
+        raise PamjaxInputError(f"coordinator_address must be a string \"host:port\" (the address of process 0), got "
+                               f"{coordinator_address!r}")
     coordinator = coordinator_address or environ.get(ENV_COORDINATOR) or None
-    count = num_processes if num_processes is not None else _env_int(ENV_NUM_PROCESSES, environ)
-    index = process_id if process_id is not None else _env_int(ENV_PROCESS_ID, environ)
+    count = _as_int(num_processes) if num_processes is not None else _env_int(ENV_NUM_PROCESSES, environ)
+    index = _as_int(process_id) if process_id is not None else _env_int(ENV_PROCESS_ID, environ)
     if timeout is None:  # an environment value of 0 is refused below, not read as "unset" (it ran with 300 s)
         timeout = _env_int(ENV_TIMEOUT, environ)
         timeout, timeout_name = (DEFAULT_TIMEOUT, "timeout") if timeout is None else (timeout, ENV_TIMEOUT)
@@ -148,9 +194,9 @@ def initialize_distributed(
             else f"{ENV_COORDINATOR}/{ENV_NUM_PROCESSES}/{ENV_PROCESS_ID}"
         if ":" not in coordinator:
             raise PamjaxInputError(f"coordinator address must be host:port, got {coordinator!r}")
-        if not (isinstance(count, int) and count >= 1):
+        if not (isinstance(count, int) and not isinstance(count, bool) and count >= 1):
             raise PamjaxInputError(f"num_processes ({ENV_NUM_PROCESSES}) must be an integer >= 1, got {count!r}")
-        if not (isinstance(index, int) and 0 <= index < count):
+        if not (isinstance(index, int) and not isinstance(index, bool) and 0 <= index < count):
             raise PamjaxInputError(
                 f"process_id ({ENV_PROCESS_ID}) must be an integer in [0, {count - 1}], got {index!r}")
     elif cluster is not None and not any(v is not None for v in given.values()):
@@ -188,14 +234,15 @@ def initialize_distributed(
 
 
 def join_for_cli(distributed: bool) -> bool:
-    """A command's `--distributed`: join (required), print what was joined, exit with the reason if it cannot.
-    True on the process that writes the outputs (process 0, or the only one)."""
+    """A command's `--distributed`: join (required), print what was joined, or raise a `PamjaxInputError` saying why
+    it cannot (the command's one-line message, status 2: the settings, or the coordinator they name, are the user's
+    to fix). True on the process that writes the outputs (process 0, or the only one)."""
     if not distributed:
         return True
     try:
         info = initialize_distributed(required=True)
     except (PamjaxDistributedError, PamjaxInputError) as err:
-        raise SystemExit(f"pamjax: --distributed: {err}") from None
+        raise PamjaxInputError(f"--distributed: {err}") from None
     print(info, flush=True)
     return info.process_index == 0
 

@@ -5,6 +5,8 @@ exactly where the interrupted fit stopped, and refuses a checkpoint of another p
 The arrays are the solver's (`pamjax._fit.drive.state_arrays`: θ, the solver's state, the history); this module
 checks and stores them, the fit turns them back into its solver's state (`drive.state_from_arrays`)."""
 
+import contextlib
+import os
 import pathlib
 
 import numpy as np
@@ -30,13 +32,28 @@ def check_checkpoint_path(checkpoint, resume, overwrite):
 
 def write_checkpoint(path, labels, arrays, fingerprint=None):
     """Save the iteration state (`arrays`: θ, the solver's state, the history; every array exactly) after an
-    iteration. Written to a temporary file and renamed, so an interruption leaves the previous checkpoint intact."""
+    iteration. Written to a temporary file of this process's own (two writers never share one) and renamed, so an
+    interruption or a failed write leaves the previous checkpoint whole; the temporary file is removed on any
+    failure. A write that fails (a full disk: the fit stopped with a bare "[Errno 28] No space left on device" and
+    left `checkpoint.npz.tmp.npz` behind) is an `OSError` of the same errno naming the checkpoint (`filename`) and
+    what is kept."""
     path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp.npz")
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}.npz")  # ends in .npz: np.savez adds none
     extra = {} if fingerprint is None else {"fingerprint": encode(fingerprint)}  # see pamjax._files.fingerprint
-    np.savez(tmp, format=CHECKPOINT_FORMAT, labels=np.asarray(labels, dtype=str), **arrays, **extra)
-    tmp.replace(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(tmp, format=CHECKPOINT_FORMAT, labels=np.asarray(labels, dtype=str), **arrays, **extra)
+        os.replace(tmp, path)
+    except BaseException as err:  # a Ctrl-C during the write too: no half-written file left behind
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
+        if not isinstance(err, OSError):
+            raise
+        kept = ("the checkpoint already there (the last one written) is kept whole: make room (or fix the folder) "
+                "and resume the fit from it (pamjax fit --resume, or pamjax.fit(..., resume=...))"
+                if path.is_file() else "no earlier checkpoint is there to resume from")
+        raise OSError(err.errno, f"could not write the fit's checkpoint {path} ({err.strerror or err}); {kept}",
+                      str(path)) from err
 
 
 def read_checkpoint(path, labels, num_residuals):
