@@ -215,7 +215,7 @@ def test_a_parameter_the_data_barely_see_is_flagged_and_the_covariance_is_column
     ([3e-5, 20.0], r"values must be 3 numbers.*got shape \(2,\)"),
     ([[3e-5, 20.0, 2e-3]], r"values must be 3 numbers.*got shape \(1, 3\)"),
     ({"friction.coulomb_force": 20.0}, r"values must be 3 numbers.*got a dict"),
-    ([3e-5, float("nan"), 2e-3], r"values: friction.coulomb_force = nan must be finite"),
+    ([3e-5, float("nan"), 2e-3], r"values: friction.coulomb_force = nan is non-finite"),
     ([-3e-5, 20.0, 2e-3], r"values: muscle.volume_law.v0 = -3e-05 is negative; .* log space"),
 ])
 def test_with_values_refuses_a_wrong_count_shape_or_value(values, match):

@@ -155,6 +155,8 @@ def _run_fits(tasks, free, fit_options, spread_over_processes, progress, what):
         with warnings.catch_warnings(record=True) as caught:  # re-issued by the caller for the fits it reports
             warnings.simplefilter("always")
             try:
+                if isinstance(model, PamjaxInputError):  # a start that is no model (a NaN value): its failure
+                    raise model
                 res, err = fit(model, experiments, free, progress=False, **fit_options), None
             except Exception as exc:  # a failed task is recorded, the others go on
                 res, err = None, f"{type(exc).__name__}: {exc}"
@@ -175,6 +177,15 @@ def _run_fits(tasks, free, fit_options, spread_over_processes, progress, what):
                 res.model = res.apply(model)  # the same bits as the fitted model (values are exact floats)
             outcomes[int(i)] = (res, e, [tuple(x) for x in w], process)
     return [outcomes[i] for i in range(len(tasks))]
+
+
+def _start_model(space, values):
+    """The model at one start's `values`, or the `PamjaxInputError` that refuses them (a NaN in a given row): that
+    start fails and is recorded, as a fit that fails, and the others go on."""
+    try:
+        return space.with_values(values)
+    except PamjaxInputError as err:
+        return err
 
 
 def _reissue(caught, prefix=""):
@@ -308,7 +319,7 @@ def multistart(
     # the experiments and free parameters as `fit` checks them: one error here, not a failed fit per start
     _, space = check_fit_inputs(model, experiments, free, fit_options.get("max_steps", 1))
     values, seed = _start_values(space, starts, seed, spread, spread_over_processes)
-    tasks = [(f"start {i}", space.with_values(v), experiments) for i, v in enumerate(values)]
+    tasks = [(f"start {i}", _start_model(space, v), experiments) for i, v in enumerate(values)]
     outcomes = _run_fits(tasks, free, fit_options, spread_over_processes, progress, "multistart:")
     results, errors, caught, processes = (list(x) for x in zip(*outcomes))
     finished = [i for i, r in enumerate(results) if r is not None]

@@ -474,7 +474,7 @@ class ParameterSpace(eqx.Module):
         for g, x in zip(self.groups, self._split(v)):
             for label, xi, lo, hi in zip(g.labels, x, np.asarray(g.lower), np.asarray(g.upper)):
                 if not np.isfinite(xi):
-                    raise PamjaxInputError(f"values: {label} = {xi} must be finite")
+                    raise PamjaxInputError(f"values: {label} = {xi} is non-finite; each value must be a finite number")
                 if g.transform == "log" and xi < 0:
                     raise PamjaxInputError(f"values: {label} = {xi:g} is negative; {g.path} is fitted in log space "
                                            "(a positive quantity)")
