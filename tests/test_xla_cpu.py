@@ -115,6 +115,17 @@ def test_import_asks_for_fast_compilation_when_the_environment_does(keep_status,
         assert (f"--{_xla_cpu.EMITTER_FLAG}=false" in env["XLA_FLAGS"]) is wanted
 
 
+def test_an_on_off_variable_set_to_another_word_is_warned_about_and_left_at_its_default(keep_status, monkeypatch):
+    # PAMJAX_FAST_COMPILE=disabled turned fast compilation ON (anything but 0/off did), silently
+    monkeypatch.setattr(_xla_cpu, "_backends_initialised", lambda: False)
+    monkeypatch.setattr(_xla_cpu, "_jaxlib_version", lambda: _xla_cpu.FAST_COMPILE_JAXLIB[0])
+    env = {_xla_cpu.FAST_COMPILE: "disabled"}
+    with pytest.warns(UserWarning, match=r"PAMJAX_FAST_COMPILE='disabled' is neither on .* nor off"):
+        status = _xla_cpu.apply(env)
+    assert status["active"] and not status["fast_compile"]
+    assert f"--{_xla_cpu.EMITTER_FLAG}=false" not in env["XLA_FLAGS"]
+
+
 def test_this_jaxlib_knows_the_flag_when_the_suite_asks_for_it():
     # The suite asks for fast compilation (tests/conftest.py): on a jaxlib of the checked range it is in effect here,
     # which also shows that XLA accepted the flag (it would have aborted the process otherwise).

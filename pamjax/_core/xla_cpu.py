@@ -108,6 +108,18 @@ def _off(value) -> bool:
     return str(value).strip().lower() in ("0", "false", "no", "off")
 
 
+def _unknown_flag(environ, name):
+    """Warn (at import: not an error) about an on/off variable set to a word that is neither, which is then left at
+    its default: `PAMJAX_FAST_COMPILE=disabled` turned fast compilation ON (anything not "0"/"off" did); the command
+    line refuses such a value (`pamjax._core.distributed.env_flag`)."""
+    value = environ.get(name, "").strip()
+    known = value.lower() in ("", "1", "true", "yes", "on", "0", "false", "no", "off")
+    if not known:
+        warnings.warn(f"pamjax: environment variable {name}={value!r} is neither on (1/true/yes/on) nor off "
+                      "(0/false/no/off): left at its default", stacklevel=4)
+    return not known
+
+
 def apply(environ=os.environ) -> dict:
     """Add the setting to `environ["XLA_FLAGS"]` unless the user set the key, opted out, or JAX is already running;
     with `PAMJAX_FAST_COMPILE=1`, `prefer_fast_compilation` too."""
@@ -117,7 +129,7 @@ def apply(environ=os.environ) -> dict:
         value = int(users.group(1))
         _status.update(active=value >= THRESHOLD_BYTES, reason=(
             f"set by the user in XLA_FLAGS: {KEY}={value} (pamjax's value: {THRESHOLD_BYTES})"))
-    elif _off(environ.get(OPT_OUT, "1")):
+    elif not _unknown_flag(environ, OPT_OUT) and _off(environ.get(OPT_OUT, "1")):
         _status.update(active=False, reason=f"{OPT_OUT}={environ[OPT_OUT]}: XLA_FLAGS left as they are")
     elif _backends_initialised():
         _status.update(active=False, reason=(
@@ -129,7 +141,7 @@ def apply(environ=os.environ) -> dict:
     else:
         environ["XLA_FLAGS"] = merged_flags(flags)
         _status.update(active=True, reason=f"set by pamjax: {KEY}={THRESHOLD_BYTES} in XLA_FLAGS")
-    requested = environ.get(FAST_COMPILE, "").strip()
+    requested = "" if _unknown_flag(environ, FAST_COMPILE) else environ.get(FAST_COMPILE, "").strip()
     if requested and not _off(requested):
         prefer_fast_compilation(environ)
     else:
