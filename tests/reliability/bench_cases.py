@@ -35,7 +35,7 @@ def _folder(d):
     folder.mkdir()
     t = np.arange(0.0, 0.2005, 1e-3)
     rows = {"T1": np.column_stack([t, np.full(t.size, 0.5), 4.0 * t / 0.2, 0 * t]),
-            "M1": np.column_stack([t, 0.05 + 0.9 * t, 0.5 + t, -15.0 + 5 * t])}
+            "M1": np.column_stack([t, 0.05 + 0.9 * t, 2.5 * t, -15.0 + 5 * t])}  # from rest: 0 barg at t = 0
     for name, table in rows.items():
         np.savetxt(folder / f"{name}.csv", table, delimiter=",", header=HEADER, comments="", fmt="%.6f")
     meta = dict(experiments=dict(T1=dict(kind="tank_charge", V_tank=5e-5, u=0.5, p0="p_atm"),
