@@ -101,15 +101,29 @@ def test_frequency_response_equals_sinusoid_fit_and_falls_with_frequency():
 def test_frequency_response_of_a_pwm_valve_does_not_depend_on_the_sampling():
     """With the PWM valve the "command" channel is the duty latched per PWM period: its sampled harmonic, the old
     reference, moved the 5 Hz pressure phase with `samples_per_period` (-65.7 deg at 40, -62.3 deg at 64). Against
-    the commanded sine: -79.19 and -79.20 deg, gains 0.17 % apart (the 50 Hz ripple aliased into Y, measured)."""
+    the commanded sine, on a grid of at least 20 samples per PWM period: -79.33 deg at the defaults, a tight
+    reference's (-79.17 and -79.18 deg, gains 0.17 % apart, when the 50 Hz ripple aliased into Y)."""
     system = presets.mas10_system(valve="pwm")
     fr = [frequency_response(system, [5.0], settle_periods=1, periods=1, samples_per_period=spp, progress=False)
           for spp in (40, 64)]
     for channel in ("position", "pressure"):
         np.testing.assert_allclose(fr[0][channel]["gain"], fr[1][channel]["gain"], rtol=0.01)
         np.testing.assert_allclose(fr[0][channel]["phase"], fr[1][channel]["phase"], atol=0.5)
-    # a low-pass lag: measured -79.2 deg (the old reference gave -65.7)
+    # a low-pass lag: -75.1 deg after this one settling period, -79.33 settled (the old reference gave -65.7)
     assert -90.0 < fr[0]["pressure"]["phase"][0] < -70.0
+
+
+def test_frequency_response_samples_a_pwm_valves_ripple():
+    """At 40 samples per 5 Hz period (200 Hz) the 50 Hz ripple's 4th harmonic aliased onto 5 Hz: the MAS-10's pressure
+    gain 0.15 % and phase 0.15 deg off a tight reference (-79.17 against -79.33 deg at the defaults). The grid now
+    holds at least 20 samples per PWM period, as `steady_state_map`'s: the same harmonic as at 400 per 5 Hz period."""
+    system = presets.mas10_system(valve="pwm")
+    fr = [frequency_response(system, [5.0], settle_periods=1, periods=1, samples_per_period=spp, progress=False)
+          for spp in (40, 400)]
+    assert np.max(np.diff(fr[0]["result"].t)) <= 1.0 / (20 * 50.0) * (1 + 1e-9)
+    for channel in ("position", "pressure"):
+        np.testing.assert_allclose(fr[0][channel]["gain"], fr[1][channel]["gain"], rtol=1e-4)
+        np.testing.assert_allclose(fr[0][channel]["phase"], fr[1][channel]["phase"], atol=0.01)
 
 
 @pytest.mark.parametrize(

@@ -4,6 +4,7 @@ chunk of lanes; the scheme and step a sweep chooses from the plant's stiffness a
 import contextlib
 import functools
 import inspect
+import warnings
 
 import equinox as eqx
 import jax
@@ -19,7 +20,7 @@ from .._solve import fixed_step as _fixed_step, synchronous as _sync
 from .._solve.edges import StartsOff
 from .._solve.scaled import scaled
 from .._solve.simulate import solve
-from .plan import lane_system, make_lane
+from .plan import host_lanes, lane_system, make_lane
 from .result import NON_FINITE, NON_PHYSICAL, SOLVER_FAILED, SUCCESS
 
 # Default step of the ROS2 scheme [s]: on paper 000's MAS-10 plant (averaged valve, 1,024 duties x 5 s) its
@@ -33,6 +34,17 @@ RODAS5A_FIRST_STEP = 1e-3  # s
 # the state after 2 s is within 0.2 um and 1.2 Pa of a tight reference at duties 0.105-0.88, at 5e-4 s off by up to
 # 50 um and 285 Pa (the edges fall between RK4's samples; measured, docs/sweeps.md).
 EDGE_WIDTHS_PER_STEP = 2.0
+# The default RK4 step's check (`checked_rk4_step`): lanes probed, the largest difference between RK4 at the step
+# and at its half (pressure per 1e5 Pa, position per 1e-2 m: 200 Pa, 20 um) at the output times, and the halvings
+# tried. A guard against a step that is unstable or does not resolve a fast mode the command excites, not an error
+# control: past the limit the gaps fall by 15-70x per halving. Measured: the MAS-10's default step 4e-5 under
+# constant duties, 1.05e-3 under 0.5-8 Hz sines at 1.25 ms (the 1/100-period cap; 33-44 Pa, 6-10 um off a tight
+# solve there); the VPPM-regulated DMSP-40 at 5 / 2.5 / 1.25 ms 0.18 / 0.011 / 1.9e-4 (1.25 ms passes, 10 Pa and
+# 1.6 um off a tight solve); ISO 6358 at 16.7 / 8.3 / 4.2 ms 0.048 / 0.0071 / 1.3e-4 (4.2 ms: 22 Pa); the averaged
+# valve filling the MAS-10 tank at 50 / 25 / 12.5 ms 0.067 / 0.0029 / 1.5e-4 (12.5 ms: 16 Pa, 50 ms: 7 kPa).
+RK4_CHECK_LANES = 4
+RK4_CHECK_TOLERANCE = 2e-3
+RK4_CHECK_HALVINGS = 6
 # A periodic command needs >= 100 steps per period for 2nd-order accuracy at the 1e-4 level.
 STEPS_PER_SIGNAL_PERIOD = 100
 # `solve`'s fixed-grid defaults (RK4 nodes per PWM period; the uniform grid's step [s]), read from its signature
@@ -82,7 +94,7 @@ def _lane_fixed(system, signal, y0, ts, counts, steps, scheme, channels, reducti
         return acc, physical
 
     (acc, physical), _, finite = _fixed_step.integrate(
-        field, z0, ts, counts, steps, scheme, (init, jnp.asarray(True)), update
+        field, z0, ts, counts, steps, scheme, (init, jnp.asarray(True)), update, jumps=lane_jumps(system, signal)
     )
     finite = finite & jnp.all(jnp.isfinite(acc))
     status = jnp.where(finite, jnp.where(physical, SUCCESS, NON_PHYSICAL), NON_FINITE)
@@ -123,8 +135,24 @@ def _lane_hybrid(system, signal, y0, ts, grid, channels, reduction):
     return acc, status
 
 
+def lane_jumps(system, signal):
+    """The lane's command jumps (`signal.jump_times()`: a `Step`'s time, swept or not, traced in the lane) as one
+    sorted 1-D array, each a step boundary of the lane as of `simulate`'s adaptive solve (`command_jumps`); None for
+    a signal without jumps (checked when traced: its lanes compile as before) or a switching valve, which latches the
+    command once per PWM period (`simulate` hands it none either)."""
+    jumps = () if system.valve.switches else type(signal).jump_times(signal)
+    if not jumps:
+        return None
+    return jnp.sort(jnp.concatenate([jnp.ravel(jnp.asarray(x, dtype=float)) for x in jumps]))
+
+
 def _lane_adaptive(system, signal, y0, ts, channels, reduction, solve_options):
-    # a sweep's results are concrete (nothing differentiates them): diffrax's plain loop, as a concrete `simulate`
+    # a sweep's results are concrete (nothing differentiates them): diffrax's plain loop, as a concrete `simulate`;
+    # the command's jumps step boundaries, as `simulate` sets them (a Step stepped over: 17 Pa off on the MAS-10)
+    jumps = lane_jumps(system, signal)
+    if jumps is not None:
+        given = solve_options.get("jump_ts")
+        solve_options["jump_ts"] = jumps if given is None else jnp.sort(jnp.concatenate([jumps, jnp.ravel(given)]))
     traj = solve(system, signal, ts, y0, ts[0], throw=False, **{"adjoint": "forward", **solve_options})
     obs = jnp.stack([jnp.asarray(traj.channel(c), dtype=float) for c in channels], axis=-1)
     finite = jnp.all(jnp.isfinite(obs))
@@ -176,19 +204,24 @@ def chunk_program(platform):
     return functools.partial(program, vector_log=platform == "cpu")
 
 
-def _signal_frequency(signal, values, plan):
-    """The highest frequency [Hz] of the (possibly swept) signal, or None."""
-    freqs = []
-    frequency = signal.cycle_frequency() if isinstance(signal, AbstractSignal) else None
-    if frequency is not None:
-        freqs.append(float(np.max(np.asarray(frequency))))
+def _signal_frequency(system, signal, plan, flat):
+    """The highest frequency [Hz] of the (possibly swept) signal over every lane, or None: each lane's signal's own
+    `cycle_frequency()` (a factory called on the host, `host_lanes`), whatever key a factory reads it from (a
+    factory's "f" went uncapped: 5 ms steps, 7.7 kPa off with ros2 at 8 Hz), and any swept signal or factory key
+    named "frequency" (a signal class that does not report its own)."""
+    if not isinstance(signal, AbstractSignal) or any(where in ("signal", "factory") for where, _ in plan.targets):
+        signals = [lane for _, lane in host_lanes(system, signal, plan, flat, len(next(iter(flat.values()))))]
+    else:
+        signals = [signal]
+    freqs = [float(np.max(np.asarray(f, dtype=float))) for f in (type(s).cycle_frequency(s) for s in signals)
+             if f is not None]
     for key, (where, parts) in zip(plan.keys, plan.targets):
         if parts and parts[-1] == "frequency" and where in ("signal", "factory"):
-            freqs.append(float(np.max(values[key])))
+            freqs.append(float(np.max(flat[key])))
     return max(freqs) if freqs else None
 
 
-def method_and_step(system, signal, values, flat, plan, method, dt, stiffness):
+def method_and_step(system, signal, flat, plan, method, dt, stiffness):
     """The scheme and step of a sweep: "auto" is RK4 for a switching valve and RODAS5 under error control
     otherwise; the default step is capped at 2 edge widths of the valve's smoothed edges (over every point), at
     1/100 of the signal's shortest period, and at RK4's stability limit on the plant's `stiffness()` (the largest
@@ -203,7 +236,7 @@ def method_and_step(system, signal, values, flat, plan, method, dt, stiffness):
     edge = _edge_time_scale(system, plan, flat)
     if edge is not None:
         caps.append(EDGE_WIDTHS_PER_STEP * edge)
-    frequency = _signal_frequency(signal, values, plan)
+    frequency = _signal_frequency(system, signal, plan, flat)
     if frequency is not None:
         caps.append(1.0 / (STEPS_PER_SIGNAL_PERIOD * frequency))
     if method == "rk4":
@@ -215,7 +248,70 @@ def method_and_step(system, signal, values, flat, plan, method, dt, stiffness):
     return method, min(caps)
 
 
-def hybrid_method_and_step(system, signal, values, flat, plan, method, dt, ts):
+@eqx.filter_jit
+def lane_paths(system, signal, y0, plan, values, ts, steps, counts):
+    """Each lane's "pressure" [1e5 Pa] and "position" [1e-2 m] (where the system has one), at every output time,
+    by RK4 (`counts` static): the probe of `checked_rk4_step`, a continuous valve's lanes as `_lane_fixed`
+    integrates them (its jumps step boundaries)."""
+
+    def lane(vals):
+        sys_l, sig_l, y0_l = make_lane(system, signal, y0, plan, vals)
+        z0, scaled_state = scaled(sys_l, y0_l)
+
+        def field(t, z):
+            return scaled_state.field(sys_l, t, z, sys_l.valve.read_command(sig_l, t))
+
+        def observe(t, z):
+            outs = sys_l.outputs(t, scaled_state.state(z), sys_l.valve.read_command(sig_l, t))
+            return jnp.concatenate([jnp.ravel(outs["pressure"]) / 1e5,
+                                    *([jnp.ravel(outs["position"]) / 1e-2] if "position" in outs else [])])
+
+        init = jnp.zeros((ts.shape[0], observe(ts[0], z0).shape[0]))
+        paths, _, _ = _fixed_step.integrate(field, z0, ts, np.asarray(counts, dtype=np.int64), steps, "rk4", init,
+                                            lambda acc, k, t, z: acc.at[k].set(observe(t, z)),
+                                            jumps=lane_jumps(sys_l, sig_l))
+        return paths
+
+    return jax.vmap(lane)(values)
+
+
+def checked_rk4_step(system, signal, y0, plan, flat, ts, dt):
+    """The default RK4 step `dt` [s] of a continuous valve's sweep, halved until RK4 at it and at half of it agree
+    within `RK4_CHECK_TOLERANCE` on `RK4_CHECK_LANES` lanes spread over the batch (pressure per 1e5 Pa, position per
+    1e-2 m, at every output time; at most `RK4_CHECK_HALVINGS` times, then a `UserWarning` naming method="rodas5a").
+    The stability limit on the Jacobians at the initial states misses a plant that stiffens as it moves, and a fast
+    mode the command excites: paper 001's VPPM-regulated DMSP-40 (73 /s at the start, 3,432 /s at 0.04 s) took 5 ms
+    steps, 9.3 kPa and 1.9 mm off a tight `simulate`, status 0 (now 1.25 ms: 10 Pa, 1.6 um); the ISO 6358 regulator
+    16.7 ms, 5.5 kPa off (now 4.2 ms: 22 Pa). On the host CPU (a GPU's loop of small kernels is slower), one
+    program per step tried; the MAS-10's default step passes (it and its half agree to 4e-5)."""
+    batch = len(next(iter(flat.values())))
+    sample = np.unique(np.linspace(0, batch - 1, min(batch, RK4_CHECK_LANES)).astype(int))
+    cpu = jax.local_devices(backend="cpu")[0]  # this process's: every process decides alike
+    arrays, static = eqx.partition((system, signal, y0), eqx.is_array)
+    system, signal, y0 = eqx.combine(jax.device_put(arrays, cpu), static)
+    vals = jax.device_put({k: v[sample] for k, v in flat.items()}, cpu)
+    ts_j = jax.device_put(ts, cpu)
+
+    def paths(step):
+        counts, steps = _fixed_step.step_counts(ts, step)
+        return np.asarray(lane_paths(system, signal, y0, plan, vals, ts_j, jax.device_put(steps, cpu),
+                                     tuple(int(c) for c in counts)))
+
+    dt = float(np.max(_fixed_step.step_counts(ts, dt)[1]))  # the step taken (none longer than the output spacing)
+    coarse = paths(dt)
+    for _ in range(RK4_CHECK_HALVINGS):
+        fine = paths(dt / 2)
+        both = np.isfinite(coarse) & np.isfinite(fine)  # a lane non-finite at both steps fails whatever the step
+        gap = float(np.max(np.abs(coarse - fine)[both], initial=0.0))
+        if gap <= RK4_CHECK_TOLERANCE and not np.any(np.isfinite(fine) & ~np.isfinite(coarse)):
+            return dt
+        dt, coarse = dt / 2, fine
+    warnings.warn(f"sweep: RK4's default step is still off its half by {gap:.2g} (pressure per 1e5 Pa, position per "
+                  f"1e-2 m) after {RK4_CHECK_HALVINGS} halvings, at {dt:.3g} s: pass a smaller dt, or use "
+                  "method='rodas5a' (error control)", stacklevel=3)
+    return dt
+
+def hybrid_method_and_step(system, signal, flat, plan, method, dt, ts):
     """The scheme of a sweep of a hybrid system (stick-slip friction, `system.hybrid`): `simulate`'s fixed grid with
     the mode switches located inside the RK4 step, the only scheme of pamjax that integrates such a system; the
     error-controlled and implicit schemes would hold the payload stuck at its start (they do not see the events),
@@ -236,7 +332,7 @@ def hybrid_method_and_step(system, signal, values, flat, plan, method, dt, ts):
             "integrates (the scheme of pamjax.simulate); use method='auto' (or 'rk4', with dt its step), or "
             "CoulombViscousFriction (smooth) for the other schemes")
     t0, t1 = float(ts[0]), float(ts[-1])
-    frequency = _signal_frequency(signal, values, plan)
+    frequency = _signal_frequency(system, signal, plan, flat)
     signal_cap = np.inf if frequency is None else 1.0 / (STEPS_PER_SIGNAL_PERIOD * frequency)
     if not system.valve.switches:
         step = min(DEFAULT_GRID_STEP if dt is None else float(dt), signal_cap)

@@ -29,7 +29,7 @@ from .._physics.signals import AbstractSignal
 from .._solve import fixed_step as _fixed_step
 from .._solve.simulate import solve
 from .._systems.base import AbstractSystem
-from .lanes import channel_shapes, chunk_program, hybrid_method_and_step, jacobians, method_and_step
+from .lanes import channel_shapes, checked_rk4_step, chunk_program, hybrid_method_and_step, jacobians, method_and_step
 from .plan import host_lanes, make_plan, structure, validate_values
 from .reductions import AbstractReduction
 from .result import SUCCESS, SweepResult, in_point_order
@@ -87,8 +87,9 @@ def sweep(
       eigenvalue, which for paper 000's friction is also the time scale of the stick-slip transitions; the PWM valve's
       smoothed edges bound any scheme's step, and fixed steps keep the lanes in lockstep), "ros2" (L-stable Rosenbrock
       at a fixed step 3x larger: for steady-state maps, where only settled values matter; it smears the fast transients,
-      by tens of um on the MAS-10), "ros2a" (ROS2 under per-lane error control, rtol = atol = 1e-3: a quick steady-state
-      map, within about 1 Pa and 10 um of RK4 on the MAS-10 map, tens of um with coarse output grids), or "adaptive"
+      82-456 um and 0.1-2.7 kPa at t = 0.1 s on the MAS-10), "ros2a" (ROS2 under per-lane error control, rtol = atol
+      = 1e-3: a quick steady-state map, within about 1 Pa and 10 um of RK4 on the MAS-10 map, tens of um with coarse
+      output grids), or "adaptive"
       (vmapped diffrax Tsit5, a slow reference; `solve_options` go to it, and to no other method). A hybrid system
       (stick-slip friction, `KarnoppFriction`) is integrated as `simulate` integrates it, each lane on the fixed RK4
       grid with the stick/slip events located inside the step (method "grid" for a continuous valve, "pwm" on the
@@ -99,9 +100,11 @@ def sweep(
     - `dt`: the fixed step [s] (the first step for "rodas5a"/"ros2a"; not with "adaptive": its first step is
       `solve_options={"dt0": ...}`). Default: RK4 at 2.5 / (largest |eigenvalue| of the Jacobian at the initial
       states) (its stability limit with a 10 % margin), "rodas5a"'s first step 1 ms,
-      the others 5 ms; all capped at 2 PWM edge widths for a switching valve and at 1/100 of the signal's shortest
-      period; and at the spacing of `ts` (the result's `dt` is the longest step taken). Check a fixed-step result by
-      halving the result's `dt`.
+      the others 5 ms; all capped at 2 PWM edge widths for a switching valve and at 1/100 of the shortest period of
+      the points' signals (`cycle_frequency()`); and at the spacing of `ts` (the result's `dt` is the longest step
+      taken). With a continuous valve RK4's default is then halved until it and its half agree on 4 lanes within
+      200 Pa and 20 um (a plant that stiffens as it moves). A command's jumps (`Step`) are step boundaries of every
+      method, as in `simulate`. Check a fixed-step result by halving the result's `dt`.
     - `chunk_size`: points per device per compiled call (memory bound). Default (`default_chunk_size`): all points
       split evenly over the devices, at most 8,192 per call on CPU, on a GPU/TPU as many as 1 GiB of outputs per
       device holds (one call is fastest there). The last call is padded. Results are bitwise the same for the same
@@ -155,18 +158,7 @@ def sweep(
         if c not in scalars:
             raise PamjaxInputError(f"channel {c!r} of this system has shape {shapes[c]} per point; a sweep maps "
                                    f"scalar channels: choose among {scalars}")
-
-    def stiffness():
-        sample = np.unique(np.linspace(0, batch_size - 1, min(batch_size, 64)).astype(int))
-        vals = {k: jnp.asarray(v[sample]) for k, v in flat.items()}
-        return float(np.nanmax(np.abs(np.linalg.eigvals(np.asarray(jacobians(system, signal, y0, plan, vals,
-                                                                                float(ts_np[0])))))))
-
-    grid = None
-    if system.hybrid or system.valve.exact_edges:  # stick-slip friction or exact edges: simulate's fixed grid
-        method, dt, grid = hybrid_method_and_step(system, signal, values, flat, plan, method, dt, ts_np)
-    else:
-        method, dt = method_and_step(system, signal, values, flat, plan, method, dt, stiffness)
+    method, dt, grid = _scheme(system, signal, y0, plan, flat, ts_np, method, dt)
     counts = np.zeros(0, dtype=np.int64)
     if method != "adaptive" and not grid:  # no step longer than the output spacing: the step used is reported (a dt
         # of 5 s on a 1 ms grid was reported as 5 s; halving 2 ms -> 1 ms there changed nothing, unseen)
@@ -191,6 +183,26 @@ def sweep(
         outputs = {ch: out[:, i].reshape(batch_shape) for i, ch in enumerate(channels)}
     return SweepResult(over=values, t=ts_np, channels=channels, outputs=outputs, status=status.reshape(batch_shape),
                        dt=dt, method=method)
+
+
+def _scheme(system, signal, y0, plan, flat, ts_np, method, dt):
+    """(method, dt, grid) of a sweep: a hybrid system's or an exact-edge valve's fixed grid as `simulate`'s
+    (`hybrid_method_and_step`), else the scheme and step of `method_and_step`, RK4's default step on a continuous
+    valve checked against its half (`checked_rk4_step`; a switching valve's is set by its edges); grid None."""
+    if system.hybrid or system.valve.exact_edges:  # stick-slip friction or exact edges: simulate's fixed grid
+        return hybrid_method_and_step(system, signal, flat, plan, method, dt, ts_np)
+    batch_size = len(next(iter(flat.values())))
+
+    def stiffness():
+        sample = np.unique(np.linspace(0, batch_size - 1, min(batch_size, 64)).astype(int))
+        vals = {k: jnp.asarray(v[sample]) for k, v in flat.items()}
+        return float(np.nanmax(np.abs(np.linalg.eigvals(np.asarray(jacobians(system, signal, y0, plan, vals,
+                                                                                float(ts_np[0])))))))
+
+    chosen, step = method_and_step(system, signal, flat, plan, method, dt, stiffness)
+    if chosen == "rk4" and dt is None and not system.valve.switches:
+        step = checked_rk4_step(system, signal, y0, plan, flat, ts_np, step)
+    return chosen, step, None
 
 
 def _check_arguments(system, signal, ts, over, method, dt, chunk_size, gather, reduce):
