@@ -207,3 +207,11 @@ def test_a_tank_built_from_the_model_takes_the_models_polytropic_index():
     assert float(pj.TankFromModel(5e-5, polytropic_index=1.2)(isothermal).polytropic_index) == 1.2
     regulated = pj.RegulatedMuscleSystem(pj.ISO6358Regulator(), presets.dmsp40_muscle())  # paper 001: isothermal
     assert float(pj.TankFromModel(5e-5)(regulated).polytropic_index) == float(regulated.polytropic_index)
+
+
+def test_a_payload_in_grams_is_refused_by_the_build():
+    # PayloadFromModel(9600.0) (grams) lifted 9.6 t in a fit; a config's payload_kg and a model file's payload_mass
+    # refuse the same number ("looks like g")
+    with pytest.raises(pj.PamjaxInputError, match=r"PayloadFromModel.mass: payload_mass = 9600 kg.*looks like g"):
+        pj.PayloadFromModel(9600.0)
+    assert float(pj.PayloadFromModel(45.0).mass) == 45.0

@@ -201,6 +201,11 @@ def test_a_start_already_freed_is_not_diagnosed_as_not_at_rest(rig):
     assert "a start that is not at rest: M1" in held and "M0" not in held, held
     labels = plain.free + ["runs[M1].start.pressure", "runs[M1].start.position", "runs[M1].start.velocity"]
     assert "not at rest" not in " | ".join(nuisance_hints(plant, plain.experiments, preds, labels))
+    # a run already marked "init": "unknown" gets the same hint: it told the user to add what meta.json had; now it
+    # says that such a run is fitted from rest until its start is freed; a quoted run path (runs['M1']) frees it too
+    assert '"init": "unknown" in meta.json (if it is not already' in held, held
+    quoted = plain.free + [f"runs['M1'].start.{k}" for k in ("pressure", "position", "velocity")]
+    assert "not at rest" not in " | ".join(nuisance_hints(plant, plain.experiments, preds, quoted))
 
 
 def test_runs_predicted_together_equal_each_run_predicted_alone(rig):

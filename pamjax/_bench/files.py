@@ -11,6 +11,7 @@ import re
 import numpy as np
 
 from .._core.errors import PamjaxInputError
+from .._core.units import check_setting
 from .._fit.builds import PayloadFromModel
 from .._fit.recording import Recording
 from .._physics.signals import Constant, Sampled, Triangle
@@ -452,6 +453,7 @@ def payload_build(e, model, where, notes):
     if mass <= 0:
         raise PamjaxInputError(f"{where}: payload_kg must be > 0 [kg] (the mass the muscle lifts in this run), got "
                                f"{e['payload_kg']!r}")
+    check_setting("payload_kg", mass, f"{where}:")  # 9600 (grams) loaded as 9.6 t, as a config refuses it
     if not isinstance(model, AbstractMuscleSystem):
         raise PamjaxInputError(f"{where}: payload_kg is given but the model ({type(model).__name__}) lifts no payload")
     notes.append(f"{where.rsplit(': ', 1)[-1]}: payload {mass:g} kg (payload_kg; the model's is "

@@ -7,7 +7,8 @@ import equinox as eqx
 
 from .._core.arrays import as_scalar
 from .._core.custom_types import RealScalar, RealScalarLike
-from .._core.errors import PamjaxInputError, check_positive
+from .._core.errors import PamjaxInputError, check_positive, concrete_values
+from .._core.units import check_setting
 from .._papers import paper000
 from .._physics.regulator import AbstractRegulator
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
@@ -66,6 +67,8 @@ class PayloadFromModel(eqx.Module):
 
     def __check_init__(self):
         check_positive(self.mass, "PayloadFromModel.mass")
+        if concrete_values(self.mass) is not None:  # 9600 (grams) lifted 9.6 t; the model's payload_mass refuses it
+            check_setting("payload_mass", self.mass, "PayloadFromModel.mass:")
 
     def __call__(self, model):
         if not isinstance(model, AbstractMuscleSystem):

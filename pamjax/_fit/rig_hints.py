@@ -98,8 +98,8 @@ def nuisance_hints(model, experiments, predictions, labels):
 
     freed = {str(label).split("].", 1)[-1].split(".")[-1] for label in labels if is_nuisance(label)}
     # runs whose start state the fit already frees ("runs[NAME].start.position", ...): their moving start is known
-    started = {str(label)[5:].split("].start.", 1)[0] for label in labels if str(label).startswith("runs[")
-               and "].start." in str(label)}
+    started = {str(label)[5:].split("].start.", 1)[0].strip("'\"") for label in labels  # runs['1']: quoted
+               if str(label).startswith("runs[") and "].start." in str(label)}
     exps = [e for e in experiments if isinstance(e, Experiment) and e.name in predictions]
     hints = []
     num = den = 0.0
@@ -146,8 +146,9 @@ def nuisance_hints(model, experiments, predictions, labels):
     hints += at_rest + onset
     for name, finding in starts:
         if name not in started:
-            hints.append(f"a start that is not at rest: {name} {finding} (a recording started mid-run?): give it "
-                         f"\"init\": \"unknown\" in meta.json and {FREE_IT} (start)")
+            hints.append(f"a start that is not at rest: {name} {finding} (a recording started mid-run?): mark it "
+                         f"\"init\": \"unknown\" in meta.json (if it is not already: it is then fitted as if at "
+                         f"rest until its start is freed) and {FREE_IT} (start)")
     if "supply_pressure" not in freed:
         off = [(n, d, se, p0) for n, d, se, p0 in supplies if abs(d) > max(_SIGNIFICANT * se, _MIN_SUPPLY)]
         if off:
