@@ -43,7 +43,7 @@ from typing import Any, Literal
 
 import jax.numpy as jnp
 
-from ._core.arrays import device_array
+from ._core.arrays import as_scalar, check_overrides, device_array
 from ._core.custom_types import RealScalarLike
 from ._core.errors import PamjaxInputError
 from ._papers import datasheets, paper000, paper001
@@ -120,20 +120,28 @@ def mas10_silencer() -> PorousRestriction:
     return PorousRestriction(MAS10_SILENCER_PERMEANCE)
 
 
-def mas10_valve(mode: Literal["smooth", "exact"] = "smooth", silencer: bool | AbstractRestriction | None = False,
-                **kwargs: Any) -> OnOffValve:
+def mas10_valve(mode: Literal["smooth", "exact"] | None = None, /,
+                silencer: bool | AbstractRestriction | None = False, **kwargs: Any) -> OnOffValve:
     """Festo MHE2 3/2 on/off valve with paper 000's Table 1 paths, 0.65 MPa abs supply, 50 Hz, 2 ms delays.
 
+    `mode`: "smooth" (the default, also for None) or "exact", given positionally or as `mode=` (not both).
     `silencer`: False (default, as Table 1 was identified), True (port 3 → `mas10_silencer()`, docstring item 5) or
-    any restriction placed in series after the exhaust port. Keyword arguments override any `OnOffValve` field."""
-    exhaust = EllipseRestriction(EXHAUST_DISCHARGE_COEFFICIENT, EXHAUST_CRITICAL_RATIO, VALVE_AREA)
+    any restriction placed in series after the exhaust port. Keyword arguments override any `OnOffValve` field; an
+    `exhaust=` override is the exhaust port, the silencer then sits after it (`SeriesRestriction(exhaust, silencer)`).
+    """
+    if mode is not None and "mode" in kwargs:  # mas10_valve("smooth", mode="exact"): Python's "multiple values"
+        raise PamjaxInputError(f"mas10_valve got mode twice: {mode!r} (positionally) and mode={kwargs['mode']!r}; "
+                               "give it once")
+    check_overrides(OnOffValve, kwargs, "mas10_valve")
+    exhaust = (kwargs.pop("exhaust") if "exhaust" in kwargs
+               else EllipseRestriction(EXHAUST_DISCHARGE_COEFFICIENT, EXHAUST_CRITICAL_RATIO, VALVE_AREA))
     if silencer is True:
         silencer = mas10_silencer()
     if silencer is not False and silencer is not None:
         if not isinstance(silencer, AbstractRestriction):
             raise PamjaxInputError(f"silencer must be True, False or a restriction (e.g. PorousRestriction), got "
                                    f"{silencer!r}")
-        exhaust = SeriesRestriction(exhaust, silencer)
+        exhaust = SeriesRestriction(exhaust, silencer)  # after the port, the user's own included (it was replaced)
     fields = dict(
         inflate=EllipseRestriction(INFLATE_DISCHARGE_COEFFICIENT, INFLATE_CRITICAL_RATIO, VALVE_AREA),
         exhaust=exhaust,
@@ -141,7 +149,7 @@ def mas10_valve(mode: Literal["smooth", "exact"] = "smooth", silencer: bool | Ab
         pwm_frequency=PWM_FREQUENCY,
         switch_on_delay=SWITCH_DELAY,
         switch_off_delay=SWITCH_DELAY,
-        mode=mode,
+        mode="smooth" if mode is None else mode,
     )
     fields.update(kwargs)
     return OnOffValve(**fields)
@@ -255,7 +263,14 @@ def paper001_restriction(
     critical_ratio: RealScalarLike = paper001.CHARGING_TABLE["critical_ratio"][-1],
 ) -> ISO6358Restriction:
     """An ISO 6358 restriction with paper 001's units converted (default: Table 1 at 6.943 bar)."""
-    return ISO6358Restriction(sonic_conductance=sonic_conductance_m3_per_s_bar / 1e5, critical_ratio=critical_ratio)
+    try:  # a text ("7e-4") was a raw TypeError of the unit conversion, naming no argument
+        conductance = as_scalar(sonic_conductance_m3_per_s_bar)
+    except (PamjaxInputError, TypeError) as err:
+        raise PamjaxInputError(f"paper001_restriction: sonic_conductance_m3_per_s_bar must be a number [m³/(s bar)], "
+                               f"e.g. 7e-4, got {sonic_conductance_m3_per_s_bar!r:.80} ({err})") from None
+    if isinstance(sonic_conductance_m3_per_s_bar, (int, float)):  # divided on the host: no program compiled for it
+        conductance = float(sonic_conductance_m3_per_s_bar)
+    return ISO6358Restriction(sonic_conductance=conductance / 1e5, critical_ratio=critical_ratio)
 
 
 __all__ = [

@@ -655,3 +655,35 @@ def test_two_experiments_of_one_name_in_meta_json_are_refused(tmp_path):
     (folder / "meta.json").write_text(twice)
     with pytest.raises(PamjaxInputError, match=r"meta\.json: key 'T' is written twice in one table"):
         pj.bench.load_bench(folder, _plant())
+
+
+def test_the_silenced_presets_exhaust_port_is_what_cv23_and_b23_free():
+    """With `mas10_system(silencer=True)` the exhaust port is `valve.exhaust.first` (a silencer in series after it):
+    Cv23/b23 mapped to `valve.exhaust.discharge_coefficient`, which `fit` refused as a path the user never wrote."""
+    model = presets.mas10_system(valve="pwm", friction="karnopp", silencer=True)
+    b = pj.bench.load_bench(ROOT / "pamjax/data/hybrid-reference-bench", model, runs=["E2_u0.50"],
+                            fitted_keys=["Cv23", "b23", "Cv12"])
+    assert b.free == ["valve.exhaust.first.discharge_coefficient", "valve.exhaust.first.critical_ratio",
+                      "valve.inflate.discharge_coefficient"]
+    assert any("valve.exhaust.critical_ratio is valve.exhaust.first.critical_ratio" in n for n in b.notes)
+    space = pj.ParameterSpace(b.model, b.free)  # what fit builds first: every path is the model's
+    assert len(space.initial_values()) == 3
+    # read back in the bench's names: Cv23 and b23 were left out of bench_values (and bench_key, --profile Cv23)
+    import types
+
+    from pamjax._bench.report import bench_key, bench_values, fitted_labels
+
+    fitted = types.SimpleNamespace(labels=list(b.free), values=[0.4, 0.5, 0.36], standard_errors=[0.01, 0.02, 0.03])
+    assert bench_values(fitted, ["Cv23", "b23", "Cv12"]) == ({"Cv23": 0.4, "b23": 0.5, "Cv12": 0.36},
+                                                             {"Cv23": 0.01, "b23": 0.02, "Cv12": 0.03})
+    assert [bench_key(label) for label in b.free] == ["Cv23", "b23", "Cv12"]
+    assert fitted_labels("b23", b.free) == ["valve.exhaust.first.critical_ratio"]
+
+
+def test_a_payload_in_grams_in_meta_json_is_refused_naming_the_file(tmp_path):
+    # "payload_kg": 9600 (grams) loaded as a 9.6 t payload; a config's payload_kg refuses the same number
+    run = ({**MIDWAY, "payload_kg": 9600.0}, RUN_HEADER.format("pressure"), RUN_COLUMNS)
+    folder = _csv_bench(tmp_path / "b", {"T": TANK, "M": run})
+    with pytest.raises(PamjaxInputError, match=r"b/meta\.json.*payload_kg = 9600 kg: more than 1000 kg; that looks "
+                                               r"like g"):
+        pj.bench.load_bench(folder, _plant())

@@ -78,3 +78,56 @@ def test_a_preset_given_a_part_of_the_wrong_kind_names_it(kwargs, match):
     if "valve" in kwargs:
         with pytest.raises(PamjaxInputError, match=match):
             presets.mas10_tank_system(**kwargs)
+
+
+def test_a_silencer_sits_after_the_users_own_exhaust_port():
+    """`mas10_valve(silencer=True, exhaust=port)`: the `exhaust` override replaced the silenced exhaust (the silencer
+    dropped silently: 1.84x the silenced flow at 0.2 MPa); the silencer now follows the user's port."""
+    import pamjax as pj
+
+    port = pj.EllipseRestriction(0.39, 0.49, 3.14e-6)  # one's own fitted port (here Table 1's values)
+    valve = presets.mas10_valve("smooth", silencer=True, exhaust=port)
+    assert valve.exhaust.first is port
+    assert float(valve.exhaust.second.permeance) == presets.MAS10_SILENCER_PERMEANCE
+    silenced = presets.mas10_valve("smooth", silencer=True).exhaust
+    air = pj.Air()
+    assert float(valve.exhaust.mass_flow(2e5, 101325.0, air)) == pytest.approx(
+        float(silenced.mass_flow(2e5, 101325.0, air)), rel=1e-9)
+    assert presets.mas10_valve(exhaust=port).exhaust is port  # no silencer: the port as given
+
+
+@pytest.mark.parametrize("call, match", [
+    # each was Python's raw TypeError naming no valid field
+    (lambda: presets.mas10_valve("smooth", switch_on_dely=3e-3),
+     r"mas10_valve got the keyword switch_on_dely=, which is no OnOffValve field \(did you mean switch_on_delay=\?\)"
+     r".*pwm_frequency, switch_on_delay, switch_off_delay"),
+    (lambda: presets.mas10_valve("smooth", mode="exact"),
+     r"mas10_valve got mode twice: 'smooth' \(positionally\) and mode='exact'; give it once"),
+    (lambda: __import__("pamjax").vppm_regulator("fast", time_constant=(0.1, 0.2)),
+     r"vppm_regulator got the keyword time_constant=, which is no ISO6358Regulator field \(did you mean "
+     r"time_constants=\?\).*supply_pressure"),
+    (lambda: presets.paper001_restriction("7e-4"),
+     r"paper001_restriction: sonic_conductance_m3_per_s_bar must be a number \[m³/\(s bar\)\].*got '7e-4'"),
+])
+def test_a_misspelt_or_doubled_preset_keyword_is_named_with_the_valid_fields(call, match):
+    with pytest.raises(PamjaxInputError, match=match):
+        call()
+
+
+def test_a_preset_valves_mode_is_taken_positionally_or_as_a_keyword():
+    assert presets.mas10_valve("exact").mode == "exact" and presets.mas10_valve(mode="exact").mode == "exact"
+    assert presets.mas10_valve().mode == "smooth"
+
+
+def test_saving_a_preset_holding_ones_own_component_says_how(tmp_path):
+    """save_model of a model with a user's own class said only "... is not a pamjax model class", without the
+    `classes=[...]` that both save_model and load_model take."""
+    import pamjax as pj
+
+    class MyFriction(pj.CoulombViscousFriction):
+        pass
+
+    system = presets.mas10_system(valve="averaged", friction=MyFriction(16.0, 250.0))
+    with pytest.raises(PamjaxInputError, match=r"is not a pamjax model class \(pass your own component classes as "
+                                               r"classes=\[\.\.\.\]\)"):
+        pj.save_model(tmp_path / "m.json", system)

@@ -24,6 +24,7 @@ import sys
 import typing
 
 import numpy as np
+import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 # The layers whose modules are type-checked by the hook: every one the public namespaces re-export from; not the
@@ -642,6 +643,78 @@ def test_annotations_under_beartype(case_name):
     results = _results()
     assert case_name in results, "the worker did not report this case:\n" + results[""]["detail"]
     assert results[case_name]["ok"], results[case_name]["detail"]
+
+
+# --- the field converters: a parameter is a real number (integers made floats, bools refused) -----------------------
+# (pamjax imported inside the tests: this file's worker imports it only after installing the type-checking hook)
+def _host_or_jax(value):
+    import jax.numpy as jnp
+
+    return jnp.asarray(10) if isinstance(value, str) else value
+
+
+@pytest.mark.parametrize("value", [10, np.int64(10), np.int32(10), [1, 2], (3,), np.arange(3), [[1], [2]], "jax"])
+def test_integer_parameters_become_floats_without_compiling(value, monkeypatch):
+    """`payload_mass=10` was stored as int64: the README's `jax.grad(loss)(system)` failed with JAX's "grad requires
+    real-valued inputs ... got int64", naming no parameter. Host values still go through without compiling."""
+    import jax
+    import jax.numpy as jnp
+
+    from pamjax._core.arrays import as_array, as_scalar, as_table
+
+    value = _host_or_jax(value)
+    convert = as_scalar if np.ndim(value) == 0 else as_table if np.ndim(value) == 1 else as_array
+    expected = np.asarray(value, dtype=float)
+    if not isinstance(value, jax.Array):
+        monkeypatch.setattr(jnp, "asarray", lambda *a, **k: pytest.fail("jnp.asarray of a host value (compiles)"))
+    got = convert(value)
+    monkeypatch.undo()
+    assert got.dtype == jnp.float64 and got.shape == expected.shape
+    assert got.weak_type == (type(value) is int)  # a Python int as a Python float: weakly typed
+    np.testing.assert_array_equal(np.asarray(got), expected)
+
+
+@pytest.mark.parametrize("value, what", [(True, "a bool"), (np.bool_(False), "a bool"), ([True, False], "bools")])
+def test_a_bool_parameter_is_refused(value, what):
+    import jax.numpy as jnp
+
+    from pamjax import PamjaxInputError
+    from pamjax._core.arrays import as_array, as_scalar
+
+    for given in (value, jnp.asarray(value)):
+        what = what if given is value else "bools"
+        with pytest.raises(PamjaxInputError, match=rf"a parameter must be a number, got .* \({what}\): write the"):
+            as_scalar(given) if np.ndim(given) == 0 else as_array(given)
+
+
+def test_an_integer_payload_is_differentiable_and_a_bool_one_refused():
+    import jax
+    import jax.numpy as jnp
+
+    import pamjax as pj
+    from pamjax import PamjaxInputError, presets
+
+    system = presets.mas10_system(valve="averaged", payload_mass=10)
+    assert system.payload_mass.dtype == jnp.float64
+    grad = jax.grad(lambda s: s.payload_mass ** 2 + s.friction.coulomb_force)(system)  # was a raw TypeError
+    assert float(grad.payload_mass) == pytest.approx(20.0)
+    friction = pj.CoulombViscousFriction(16, 250)
+    assert friction.coulomb_force.dtype == friction.viscous_coefficient.dtype == jnp.float64
+    with pytest.raises(PamjaxInputError, match=r"got True \(a bool\)"):
+        presets.mas10_system(valve="averaged", payload_mass=True)  # was 1 kg
+
+
+def test_check_overrides_names_the_closest_field_and_all_of_them():
+    import pamjax as pj
+    from pamjax import PamjaxInputError
+    from pamjax._core.arrays import check_overrides
+
+    check_overrides(pj.OnOffValve, {"pwm_frequency": 40.0}, "f")
+    with pytest.raises(PamjaxInputError, match=r"f got the keyword supply=, which is no OnOffValve field \(did you "
+                                               r"mean supply_pressure=\?\); the fields it overrides: inflate, exhaust"):
+        check_overrides(pj.OnOffValve, {"supply": 6e5}, "f")
+    with pytest.raises(PamjaxInputError, match=r"xyz=, which is no OnOffValve field; the fields"):
+        check_overrides(pj.OnOffValve, {"xyz": 1}, "f")
 
 
 if __name__ == "__main__":

@@ -35,6 +35,7 @@ from .._core.errors import PamjaxInputError
 from .._fit.builds import TankFromModel
 from .._fit.experiment import Experiment
 from .._fit.measurement import Measurement
+from .._fit.parameters import parameter_paths
 from .._fit.rig import DEFAULT_GROUP, Rig, RunConditions, Sensors, StartState
 from .._systems.base import AbstractSystem
 from .checks import (
@@ -142,6 +143,23 @@ def _free_paths(keys):
     return keys, paths
 
 
+def _on_model(paths, model, notes):
+    """`paths` as they are on `model`: a path the model has not, with a port held as the `first` of a restriction in
+    series after it (the silenced preset's exhaust, `SeriesRestriction(port, silencer)`), is the port's. Cv23 and b23
+    were `valve.exhaust.discharge_coefficient`, which the silenced model has not: `fit` refused a path the user never
+    wrote. A path the model has not either way is left to `fit` to name."""
+    valid, out = parameter_paths(model), []
+    for path in paths:
+        parts = path.split(".")
+        ported = (".".join([*parts[:i], "first", *parts[i:]]) for i in range(1, len(parts)))
+        mapped = path if path in valid else next((p for p in ported if p in valid), path)
+        if mapped != path:
+            notes.append(f"{path} is {mapped} on this model (a restriction in series after that port, e.g. a "
+                         "silencer: fitted as it is)")
+        out.append(mapped)
+    return out
+
+
 def _nuisance_names(nuisance):
     if nuisance is True:
         return set(DEFAULT_BENCH_NUISANCES)
@@ -236,6 +254,7 @@ def load_bench(directory: str | os.PathLike, model: AbstractSystem, *, rate: Rea
         raise PamjaxInputError(f"kinds {unknown_kinds} are not experiment kinds pamjax fits; valid: "
                                f"{list(FITTED_KINDS)}")
     notes, said = [], "meta.json atmosphere_Pa" if atmosphere is None else "the atmosphere given"
+    free = _on_model(free, model, notes)  # a silenced exhaust's port is valve.exhaust.first
     if atmosphere is None:
         atmosphere = number(meta, "atmosphere_Pa", f"{where}/meta.json", 5e4, 1.2e5, "Pa abs")
     if atmosphere is not None:  # the rig's ambient pressure: the model's too

@@ -21,8 +21,7 @@ def bench_values(result: FitResult, keys: Sequence[str]) -> tuple[dict[str, floa
     label_index = {label: i for i, label in enumerate(result.labels)}
     values, errors = {}, {}
     for k in keys:
-        label = BENCH_PARAMETERS[k][1]
-        i = label_index.get(label, label_index.get(PLANT_PREFIX + label))
+        i = next((label_index[c] for c in _forms(BENCH_PARAMETERS[k][1]) if c in label_index), None)
         if i is not None:
             values[k], errors[k] = float(result.values[i]), float(result.standard_errors[i])
     return values, errors
@@ -120,10 +119,21 @@ _KEYS = {label: key for key, (_, label) in BENCH_PARAMETERS.items()}  # a fit la
 _NAMES = re.compile(r",(?![^\[]*\])")
 
 
+def _forms(label):
+    """The labels a fit may give the bench's `label`: itself and on a `Rig` (`plant.`), each also as the port of a
+    series restriction (`valve.exhaust.first.critical_ratio`: a silenced exhaust, `load_bench`'s mapping); Cv23 and
+    b23 fitted so were left out of `bench_values`, silently."""
+    head, _, leaf = label.rpartition(".")
+    series = f"{head}.first.{leaf}" if head else label
+    return (label, PLANT_PREFIX + label, series, PLANT_PREFIX + series)
+
+
 def bench_key(label: str) -> str | None:
-    """The bench's name of a fit's label (`plant.friction.coulomb_force` or `friction.coulomb_force` → `Fc`), or None
-    where the bench has no name for it (a nuisance, a parameter outside `BENCH_PARAMETERS`)."""
-    return _KEYS.get(plant_label(label))
+    """The bench's name of a fit's label (`plant.friction.coulomb_force` or `friction.coulomb_force` → `Fc`; a
+    series restriction's port, `valve.exhaust.first.…`, as its restriction's), or None where the bench has no name
+    for it (a nuisance, a parameter outside `BENCH_PARAMETERS`)."""
+    plain = plant_label(label)
+    return _KEYS.get(plain, _KEYS.get(plain.replace(".first.", ".")))
 
 
 def fitted_labels(names: str | Sequence[str], labels: Sequence[str], where: str = "names") -> list[str]:
@@ -140,7 +150,7 @@ def fitted_labels(names: str | Sequence[str], labels: Sequence[str], where: str 
     out = []
     for name in given:
         label = BENCH_PARAMETERS[name][1] if name in BENCH_PARAMETERS else name
-        match = [lbl for lbl in labels if lbl in (label, PLANT_PREFIX + label)]
+        match = [lbl for lbl in labels if lbl in _forms(label)]
         if not match:
             raise PamjaxInputError(f"{where}: {name!r} is not a fitted parameter; {what}")
         out += [m for m in match if m not in out]

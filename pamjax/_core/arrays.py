@@ -6,6 +6,9 @@ JAX (0.10) compiles a small program for `jnp.asarray` of a NumPy array or a Pyth
 `jax.device_put` of the same NumPy array compiles nothing and gives the same array.
 """
 
+import dataclasses
+import difflib
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -22,7 +25,7 @@ def as_scalar(x: RealScalarLike) -> RealScalar:
     through `jax.device_put`: the same weakly typed array, without the small program `jnp.asarray` compiles for it
     (~50 ms the first time in a process: a preset's set-up in every `pamjax` command). An empty array is refused:
     it is no number nor a batch of them (a payload_mass of [] passed the positivity checks vacuously, and the solve
-    failed deep inside JAX)."""
+    failed deep inside JAX). Integers become floats, bools are refused (`_asarray`)."""
     if isinstance(x, (str, bytes)):  # jnp.asarray("0.1"): a raw TypeError from JAX, naming no parameter
         raise PamjaxInputError(f"a scalar parameter got the text {x!r}: give a number [SI] (0.1, not \"0.1\")")
     a = _asarray(x)
@@ -32,19 +35,58 @@ def as_scalar(x: RealScalarLike) -> RealScalar:
     return a
 
 
+def _refuse_bool(x):
+    what = "a bool" if isinstance(x, (bool, np.bool_)) else "bools"
+    raise PamjaxInputError(f"a parameter must be a number, got {x!r:.80} ({what}): write the value itself (1.0, not "
+                           "True)")
+
+
 def _asarray(x):
     """`jnp.asarray(x)`, made on the host where `x` is a Python number or a list, tuple or NumPy array of numbers:
-    the same dtype and weak type, without compiling."""
-    if type(x) is float or type(x) is int:  # not bool (`jnp.asarray(True)` is strongly typed), not subclasses
+    the same dtype and weak type, without compiling; except that integers become floats (as if written 10.0) and
+    bools are refused. A parameter is a real number: `payload_mass=10` stored as an int64 array failed the README's
+    `jax.grad(loss)(system)` with JAX's "grad requires real-valued inputs ... got int64", naming no parameter, and
+    `payload_mass=True` was 1 kg. (Counts and seeds have converters of their own, e.g. `LoopSensors.seed`.)"""
+    if type(x) is float:  # not bool (`jnp.asarray(True)` is strongly typed), not subclasses
         return jax.device_put(x)  # weakly typed, as `jnp.asarray` makes it
+    if type(x) is int:
+        return jax.device_put(float(x))  # weakly typed float, as `jnp.asarray(10.0)`
+    if isinstance(x, (bool, np.bool_)):
+        _refuse_bool(x)
     if isinstance(x, (list, tuple, np.ndarray, np.generic)):
         try:
             a = np.asarray(x)
         except Exception:  # noqa: BLE001 - tracers or arrays of other shapes inside: JAX's own rules and errors
-            return jnp.asarray(x)
-        if a.dtype.kind in "fiu":  # strongly typed as `jnp.asarray` makes them (an empty list: float64 both)
+            return _floating(jnp.asarray(x), x)
+        if a.dtype.kind == "b":
+            _refuse_bool(x)
+        if a.dtype.kind in "iu":  # strongly typed floats, as `jnp.asarray(np.asarray(x, float))`
+            return device_array(a.astype(np.float64))
+        if a.dtype.kind == "f":  # strongly typed as `jnp.asarray` makes them (an empty list: float64 both)
             return device_array(a)
-    return jnp.asarray(x)
+    return _floating(jnp.asarray(x), x)
+
+
+def _floating(a, x):
+    """A JAX array or tracer `a` (made of `x`) of integers as floats; of bools refused (its dtype is known even
+    traced)."""
+    if a.dtype == jnp.bool_:
+        _refuse_bool(x)
+    if jnp.issubdtype(a.dtype, jnp.integer):
+        return a.astype(jnp.result_type(float))
+    return a
+
+
+def check_overrides(cls: type, overrides: dict, caller: str) -> None:
+    """Every key of `overrides` (a preset builder's keyword arguments, passed on to `cls`) is a field of `cls`'s
+    constructor: else a `PamjaxInputError` naming the keyword, the closest field (one it begins, else difflib's) and
+    all of them (a misspelt `switch_on_dely=3e-3` was Python's raw TypeError from `cls.__init__`, listing nothing)."""
+    valid = [f.name for f in dataclasses.fields(cls) if f.init]
+    for key in overrides:
+        if key not in valid:
+            close = [f for f in valid if f.startswith(str(key))] or difflib.get_close_matches(str(key), valid, n=1)
+            raise PamjaxInputError(f"{caller} got the keyword {key}=, which is no {cls.__name__} field" + (
+                f" (did you mean {close[0]}=?)" if close else "") + f"; the fields it overrides: {', '.join(valid)}")
 
 
 def floats_as_arrays(tree):

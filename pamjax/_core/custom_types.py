@@ -35,7 +35,7 @@ BoolTableLike = Bool[ArrayLike, " entries"] | Sequence[bool]  # a column of flag
 StateLike = Real[ArrayLike, "*batch"]
 
 # --- stored and returned -------------------------------------------------------------------------------------------
-RealScalar = Real[Array, ""]  # a component's scalar parameter after its converter (an int stays an int)
+RealScalar = Real[Array, ""]  # a component's scalar parameter after its converter (an int becomes a float)
 RealVector = Real[Array, " _"]
 RealArray = Real[Array, "..."]
 Table = Real[Array, " entries"]

@@ -97,7 +97,7 @@ def _encode(obj, path, parameters, classes):
         name = _class_name(cls)
         if name not in classes:
             raise PamjaxInputError(f"cannot save {path or 'the model'}: {cls.__module__}.{cls.__qualname__} is not a "
-                                   "pamjax model class")
+                                   "pamjax model class (pass your own component classes as classes=[...])")
         units = _units_of(cls)
         fields = {}
         for f in dataclasses.fields(obj):

@@ -57,8 +57,12 @@ DMSP40_VOLUME_CUBIC = (  # (d, c, b, a) of paper 001 eq. 4 in ε = x/L0 [m³]; v
     5.61662e-03,
 )
 DMSP40_MIN_POSITION = -0.02  # m, assumed as for the MAS-10
-DMSP40_VISCOUS_COEFFICIENT = 3000.0  # N s/m, assumed: paper 001 gives no friction; ≈ 0.2 of critical damping
-#                                      2 sqrt(k M) for the 91 kg load on the DMSP-40's ≈ 1e5 N/m at 3 bar
+# N s/m, ASSUMED (paper 001 gives no friction; fits and the gallery use this value): a damping ratio
+# C/(2 sqrt(K M)) of 0.77 for the M = 893 N / 9.81 = 91.0 kg load at 3 bar gauge, where this preset holds it at
+# x = 35.7 mm with K = 4.20e4 N/m (pamjax.muscle_stiffness, eq. 9, closed chamber n = 1); 1.03 on the isobaric
+# stiffness 2.31e4 N/m (pressure_slope=0), 0.50 on a round 1e5 N/m. (The comment here claimed "≈ 0.2 of critical
+# damping on ≈ 1e5 N/m": an arithmetic slip, 3000 / (2 sqrt(1e5 · 91.0)) = 0.50.)
+DMSP40_VISCOUS_COEFFICIENT = 3000.0
 
 # --- Festo VPPM-6L (paper 001's regulator): what its data sheet [29] would give, not available here -----------------
 # Paper 001 quotes from it: 0.02-10 bar, 2 % accuracy, 50 mbar maximal hysteresis, modes fast/universal/precise

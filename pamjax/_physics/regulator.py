@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.arrays import check_overrides
 from .._core.custom_types import Array, FloatScalar, Real, RealScalar, RealScalarLike, StateLike
 from .._core.errors import (
     PamjaxInputError,
@@ -472,6 +473,7 @@ def vppm_regulator(mode: Literal["universal", "fast", "precise"] = "universal", 
     if mode not in datasheets.VPPM_MODE_FACTORS:
         raise PamjaxInputError(f"mode must be one of {sorted(datasheets.VPPM_MODE_FACTORS)} (paper 001 Sect. 2), got "
                                f"{mode!r}")
+    check_overrides(ISO6358Regulator, fields, "vppm_regulator")  # a misspelt field was a raw TypeError
     if hysteresis is True:
         hysteresis = PressureHysteresis()
     elif hysteresis is False or hysteresis is None:
