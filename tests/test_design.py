@@ -824,11 +824,8 @@ def test_cli_design_takes_period_and_fails_an_infeasible_design(tmp_path, capsys
     assert not (tmp_path / "c" / "design.csv").exists() and (tmp_path / "c" / "design.json").exists()
 
 
-def test_an_infeasible_design_with_overwrite_removes_the_earlier_designs_csv(tmp_path, capsys):
-    # `pamjax design --overwrite` that ended outside its limits said "no design.csv was written (a bench must not
-    # play it)" and left the earlier run's design.csv beside its new design.json: a bench played the old design
-    cfg = tmp_path / "d.toml"
-    cfg.write_text(textwrap.dedent("""
+# A tank design's config up to its [design] table's last common key (two tests below add their own keys)
+TANK_DESIGN_CONFIG = textwrap.dedent("""
         [model]
         preset = "mas10_tank_system"
         options = { valve = "pwm" }
@@ -838,12 +835,20 @@ def test_an_infeasible_design_with_overwrite_removes_the_earlier_designs_csv(tmp
         noise = { pressure = 2e3 }
         channels = ["pressure"]
         start = { pressure = 101325.0 }
+""").lstrip()
+
+
+def test_an_infeasible_design_with_overwrite_removes_the_earlier_designs_csv(tmp_path, capsys):
+    # `pamjax design --overwrite` that ended outside its limits said "no design.csv was written (a bench must not
+    # play it)" and left the earlier run's design.csv beside its new design.json: a bench played the old design
+    cfg = tmp_path / "d.toml"
+    cfg.write_text(TANK_DESIGN_CONFIG + textwrap.dedent("""
         rate = 500.0
         knots = 4
         initial = 0.6
         steps = 1
         max_pressure = 1.2e5
-    """))  # the smallest infeasible design above (test_cli_design_takes_period_and_fails_an_infeasible_design)
+    """).lstrip())  # the smallest infeasible design above (test_cli_design_takes_period_and_fails_an_infeasible_design)
     out = tmp_path / "out"
     out.mkdir()
     (out / "design.csv").write_text("t [s],duty [-]\n0.0,0.5\n")  # an earlier, feasible design's
@@ -1249,17 +1254,6 @@ def test_a_numpy_duration_is_a_number_and_a_missing_initial_csv_names_the_key(tm
 
     assert check_design(_tank(), FREE, np.int64(1), noise=NOISE, **TANK) is None  # was "not a positive number"
     cfg = tmp_path / "d.toml"
-    cfg.write_text(textwrap.dedent("""
-        [model]
-        preset = "mas10_tank_system"
-        options = { valve = "pwm" }
-        [design]
-        free = ["valve.inflate.discharge_coefficient"]
-        duration = 0.2
-        noise = { pressure = 2e3 }
-        channels = ["pressure"]
-        start = { pressure = 101325.0 }
-        initial = "nope.csv"
-    """))
+    cfg.write_text(TANK_DESIGN_CONFIG + 'initial = "nope.csv"\n')
     assert main(["design", str(cfg), "--out", str(tmp_path / "o"), "--quiet", "--no-plot"]) == 2
     assert "[design] initial = 'nope.csv'" in capsys.readouterr().err and not (tmp_path / "o").exists()
