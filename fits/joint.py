@@ -43,6 +43,7 @@ results against a simulated bench's truth.
 
 import argparse
 import pathlib
+import shlex
 import sys
 import time
 
@@ -108,6 +109,8 @@ def parse_args(argv=None):
                     help="compile everything anew, keep nothing (default: the persistent compilation cache, as the "
                          "pamjax command's: a second run loads the compiled programs; PAMJAX_COMPILATION_CACHE=0 too)")
     args = ap.parse_args(argv)
+    # the command as given, for model.json's provenance (it said "--data DIR" alone: --nuisance, --rate left out)
+    args.command = "fits/joint.py " + shlex.join(sys.argv[1:] if argv is None else [str(a) for a in argv])
     if args.multistart < 1:  # was: 0 or a negative count ran the single fit, silently
         ap.error(f"--multistart must be >= 1 (the starts fitted; 1: the presets alone), got {args.multistart}")
     return args
@@ -241,7 +244,7 @@ def run(args, data, out):
     (out / "joint.json").write_text(json_text(summary, indent=1))
     plant = res.model.plant if isinstance(res.model, pj.Rig) else res.model  # the rig's nuisances: in joint.json
     pj.save_model(out / "model.json", plant, overwrite=True, provenance={  # what pamjax fit writes as its model.json
-        "written_by": f"fits/joint.py --data {data}", "status": res.status, "cost": res.cost, "free": res.labels,
+        "written_by": args.command, "status": res.status, "cost": res.cost, "free": res.labels,
         "covariance": pj.FitUncertainty.of(res).document()})
     report(res, values, errors, summary, over_noise)
     if prof is not None:

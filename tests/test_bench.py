@@ -99,7 +99,9 @@ def test_joint_script_fits_a_bench_directory_from_the_presets(bench, tmp_path):
     # model.json: the fitted plant, as pamjax fit writes it (a [model] file of pamjax design or simulate)
     fitted = pj.load_model(out / "model.json")
     assert float(fitted.friction.coulomb_force) == pytest.approx(result["params"]["Fc"], rel=1e-12)
-    assert json.loads((out / "model.json").read_text())["provenance"]["status"] == "converged"
+    provenance = json.loads((out / "model.json").read_text())["provenance"]
+    assert provenance["status"] == "converged"
+    assert provenance["written_by"].endswith("--max-steps 60 --no-cache --profile Fc")  # its flags, not --data alone
     # --profile Fc: its likelihood-ratio interval by the bench's name, around the fitted value, covering the truth
     # (a well-moving payload: the interval is about the linearised one), and profile.json / profile.png beside
     prof = result["profile"]
