@@ -16,7 +16,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
-from pamjax.gallery import json_text  # noqa: E402
+from pamjax.gallery import json_text, refuse_existing  # noqa: E402
 from pamjax.gallery.procedures.ankle import check_run, gait_angle, run  # noqa: E402,F401
 
 
@@ -39,10 +39,7 @@ def main(argv=None):
     except pj.PamjaxInputError as err:
         ap.error(f"--sum-bar {args.sum_bar:g} (gauge pressure sum [bar]): {err}")
     out = pathlib.Path(args.out)
-    existing = [str(p) for p in (out / "ankle.json", out / "ankle.png") if p.exists()]
-    if existing and not args.overwrite:  # a --quick or trial run must not replace a full run's results
-        raise SystemExit(f"ankle.py: {', '.join(existing)} exist; pass --overwrite to replace them (or "
-                         "another --out)")
+    refuse_existing("ankle.py", [out / "ankle.json", out / "ankle.png"], args.overwrite)
     out.mkdir(parents=True, exist_ok=True)
     results = {}
     for f in args.frequencies:

@@ -40,7 +40,7 @@ from pamjax import (
     simulate_closed_loop,
     tune_controller,
 )
-from pamjax.gallery import bench_folder, json_text
+from pamjax.gallery import bench_folder, json_text, refuse_existing
 from pamjax.gallery.procedures.bench import bench_plant
 from pamjax.unchecked import run_closed_loop
 
@@ -304,10 +304,7 @@ def main():
     jax.config.update("jax_enable_x64", True)
     out = pathlib.Path(args.out)
     names = list(PLANTS) if args.plant == "both" else [args.plant]
-    existing = [str(p) for p in [out / "control.json", *(out / f"control_{n}.png" for n in names)] if p.exists()]
-    if existing and not args.overwrite:  # a --quick or trial run must not replace a full run's results
-        raise SystemExit(f"control.py: {', '.join(existing)} exist; pass --overwrite to replace them (or "
-                         "another --out)")
+    refuse_existing("control.py", [out / "control.json", *(out / f"control_{n}.png" for n in names)], args.overwrite)
     out.mkdir(parents=True, exist_ok=True)
     report = dict(paper=PAPER, window_start_s=WINDOW_START, duration_s=args.duration)
     for name in names:

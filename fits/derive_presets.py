@@ -16,7 +16,7 @@ import pathlib
 
 import numpy as np
 
-from pamjax.gallery import json_text  # noqa: E402
+from pamjax.gallery import json_text, refuse_existing  # noqa: E402
 from pamjax.gallery.procedures.force_map import (  # noqa: E402  (the derivation's steps)
     P,
     scaled_muscle,
@@ -51,10 +51,7 @@ def main():
     parser.add_argument("--out", default="results/derive_presets")
     parser.add_argument("--overwrite", action="store_true", help="replace existing results in --out")
     args = parser.parse_args()
-    existing = [str(p) for p in [pathlib.Path(args.out) / "derived_presets.json"] if p.exists()]
-    if existing and not args.overwrite:  # a --quick or trial run must not replace a full run's results
-        raise SystemExit(f"derive_presets.py: {', '.join(existing)} exist; pass --overwrite to replace them (or "
-                         "another --out)")
+    refuse_existing("derive_presets.py", [pathlib.Path(args.out) / "derived_presets.json"], args.overwrite)
     from pamjax import presets
 
     derived = derive()

@@ -26,7 +26,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
-from pamjax.gallery import bench_folder, json_text  # noqa: E402
+from pamjax.gallery import bench_folder, json_text, refuse_existing  # noqa: E402
 
 DEFAULT_DATA = bench_folder()  # the hybrid bench recordings shipped with pamjax (pamjax/data/)
 
@@ -54,10 +54,8 @@ def main():
     ap.add_argument("--overwrite", action="store_true", help="replace existing results in --out")
     args = ap.parse_args()
     data, out = pathlib.Path(args.data), pathlib.Path(args.out)
-    existing = [str(p) for p in (out / "friction_convergence.json", out / "friction_convergence.png") if p.exists()]
-    if existing and not args.overwrite:  # a --quick or trial run must not replace a full run's results
-        raise SystemExit(f"friction_convergence.py: {', '.join(existing)} exist; pass --overwrite to replace them (or "
-                         "another --out)")
+    refuse_existing("friction_convergence.py", [out / "friction_convergence.json", out / "friction_convergence.png"],
+                    args.overwrite)
     out.mkdir(parents=True, exist_ok=True)
     meta = json.loads((data / "meta.json").read_text())
     P, noise = meta["params"], meta["noise"]

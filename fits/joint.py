@@ -53,7 +53,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
-from pamjax.gallery import bench_folder, json_text  # noqa: E402
+from pamjax.gallery import bench_folder, json_text, refuse_existing  # noqa: E402
 
 DEFAULT_DATA = bench_folder()  # the hybrid bench recordings shipped with pamjax (pamjax/data/)
 # --profile: profile → (a lower cost found) fit again from it → profile again, at most this many profiles; a fit whose
@@ -136,9 +136,7 @@ def main(argv=None):
     out = pathlib.Path(args.out or f"results/joint_{data.resolve().name}")
     targets = [out / "joint.json", out / "model.json", out / "joint.png"]
     targets += [out / "profile.json", out / "profile.png"] if args.profile else []
-    existing = [str(p) for p in targets if p.exists()]
-    if existing and not args.overwrite:
-        sys.exit(f"joint.py: {', '.join(existing)} exist; pass --overwrite to replace them (or another --out)")
+    refuse_existing("joint.py", targets, args.overwrite)
     created = not out.exists()
     try:
         placed, where = pj.runtime.for_command("single", args.device)  # before JAX starts; said first

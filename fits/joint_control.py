@@ -21,7 +21,7 @@ from pamjax import (  # noqa: E402
     JointControlLoop,
     simulate_joint_control,
 )
-from pamjax.gallery import json_text  # noqa: E402
+from pamjax.gallery import json_text, refuse_existing  # noqa: E402
 
 WINDOW_START = 2.0  # s, the gait's RMSE window: after the first gait cycle (t >= 2 s)
 STEP_TIME = 1.0  # s, the stiffness step; its error is read from 1 s after it (t >= 2 s)
@@ -42,10 +42,7 @@ def main(argv=None):
         ap.error(f"--duration must exceed the RMSE window's start {WINDOW_START} s (the gait's RMSE and the step's "
                  f"error are over t >= {WINDOW_START} s), got {args.duration}")
     out = pathlib.Path(args.out)
-    existing = [str(p) for p in (out / "joint_control.json", out / "joint_control.png") if p.exists()]
-    if existing and not args.overwrite:  # a --quick or trial run must not replace a full run's results
-        raise SystemExit(f"joint_control.py: {', '.join(existing)} exist; pass --overwrite to replace them (or "
-                         "another --out)")
+    refuse_existing("joint_control.py", [out / "joint_control.json", out / "joint_control.png"], args.overwrite)
     out.mkdir(parents=True, exist_ok=True)
 
     m = pj.presets.dmsp40_muscle()

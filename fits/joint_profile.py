@@ -11,7 +11,6 @@ Fits the bench directory's tank tests and triangle runs (E1, E2, E3, E4) from th
 
 import argparse
 import pathlib
-import sys
 import time
 import warnings
 
@@ -19,7 +18,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 import pamjax as pj  # noqa: E402
-from pamjax.gallery import bench_folder  # noqa: E402
+from pamjax.gallery import bench_folder, refuse_existing  # noqa: E402
 
 DEFAULT_DATA = bench_folder()  # the hybrid bench recordings shipped with pamjax (pamjax/data/)
 
@@ -35,9 +34,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     data = pathlib.Path(args.data)
     out = pathlib.Path(args.out or f"results/joint_profile_{data.resolve().name}")
-    existing = [str(p) for p in (out / "profile.json", out / "profile.png") if p.exists()]
-    if existing and not args.overwrite:
-        sys.exit(f"joint_profile.py: {', '.join(existing)} exist; pass --overwrite to replace them (or another --out)")
+    refuse_existing("joint_profile.py", [out / "profile.json", out / "profile.png"], args.overwrite)
 
     model = pj.presets.mas10_system(valve="pwm", friction="karnopp")
     bench = pj.bench.load_bench(data, model, rate=args.rate)

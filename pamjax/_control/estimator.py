@@ -24,6 +24,7 @@ import numpy as np
 from .._core.arrays import as_array
 from .._core.custom_types import Array, ArrayLike, Float, Int, IntScalarLike, Real, RealArrayLike
 from .._core.errors import PamjaxInputError, check_finite, check_nonnegative, check_positive, concrete_values
+from .._core.units import MIN_PRESSURE_NOISE
 from .._physics.signals import Step
 from .._solve.checks import check_start_state
 from .._solve.scaled import scaled
@@ -35,8 +36,6 @@ from .._systems.base import AbstractMuscleSystem, AbstractSystem
 BENCH_PRESSURE_NOISE = 2e3  # Pa
 BENCH_POSITION_NOISE = 1e-4  # m
 BENCH_SAMPLES_PER_PERIOD = 20  # 1 kHz at 50 Hz PWM
-MIN_PRESSURE_NOISE = 1.0  # Pa: below any bench transducer's noise (a 16-bit reading of 0-10 bar resolves 15 Pa; the
-# hybrid reference bench's is 2 kPa): a smaller noise is a unit slip, 0.02 meant in bar (2 kPa) or 2 in kPa
 COVARIANCE_RTOL = 1e-9  # of the largest eigenvalue: how negative an initial covariance's may be (round-off), or
 # how far from symmetric its entries
 

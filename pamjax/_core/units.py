@@ -262,6 +262,10 @@ _SPREADS = {"initial_std", "process_noise"}
 # K: the coldest air a pneumatic bench works in is far above this (-73 °C); a temperature below it was written in °C
 # (paper 000's 293 K is 20 °C).
 MIN_TEMPERATURE_K = 200.0
+# Pa: below any bench transducer's noise (a 16-bit reading of 0-10 bar resolves 15 Pa; the hybrid reference bench's is
+# 2 kPa): a smaller pressure noise is a unit slip, 0.02 meant in bar (2 kPa) or 2 in kPa (the estimator's, a design's,
+# an experiment's scales and a synthetic recording's noise check it)
+MIN_PRESSURE_NOISE = 1.0
 
 
 def checks_setting(path):

@@ -26,7 +26,7 @@ from .._core.cache import structural
 from .._core.custom_types import RealArrayLike, RealScalarLike
 from .._core.errors import PamjaxInputError, check_count
 from .._core.fastjit import keyed_by_code
-from .._core.units import check_absolute_pressure
+from .._core.units import MIN_PRESSURE_NOISE, check_absolute_pressure
 from .._physics.signals import AbstractSignal
 from .._solve.checks import check_start_state
 from .._solve.simulate import Stepping, fixed_grid_size, resolve_stepping, solve, validate
@@ -137,15 +137,14 @@ def _default_scale(values):
 # Fewer recorded samples than this and a channel's range says little about its noise: not checked against it
 # (the range of n normal samples is ~4 σ at n = 20, ~6.5 σ at 1,000).
 MIN_SAMPLES_FOR_SCALE_CHECK = 20
-MIN_PRESSURE_SCALE = 1.0  # Pa: below any transducer's noise (a 16-bit reading of 0-10 bar resolves 15 Pa): kPa or bar
 
 
 def check_scale_against_data(channel, scale, values, name="scales"):
     """Refuse a given noise level (`name[channel]`, a standard deviation in the channel's SI unit) that the
     recorded `values` contradict: larger than their whole range (0.1 meant in mm weighted the position 1,000× too
-    little, silently), or a pressure noise below `MIN_PRESSURE_SCALE` Pa (0.02 meant in bar: weighted 1e5× too much)."""
-    if channel.startswith("pressure") and scale < MIN_PRESSURE_SCALE:
-        raise PamjaxInputError(f"{name}[{channel!r}] = {scale:g} Pa is below {MIN_PRESSURE_SCALE:g} Pa, no pressure "
+    little, silently), or a pressure noise below `MIN_PRESSURE_NOISE` Pa (0.02 meant in bar: weighted 1e5× too much)."""
+    if channel.startswith("pressure") and scale < MIN_PRESSURE_NOISE:
+        raise PamjaxInputError(f"{name}[{channel!r}] = {scale:g} Pa is below {MIN_PRESSURE_NOISE:g} Pa, no pressure "
                                "sensor's noise: that looks like kPa or bar (0.02 bar = 2 kPa = 2e3 Pa); the scale "
                                "is the channel's noise standard deviation in Pa")
     span = float(np.ptp(values)) if values.size >= MIN_SAMPLES_FOR_SCALE_CHECK else 0.0

@@ -17,6 +17,7 @@ from .toolkit import (
     bench_params as bench_params,
     fits_module as fits_module,
     plt as plt,
+    refuse_existing as refuse_existing,
     save as save,
     script_main as script_main,
 )

@@ -195,3 +195,11 @@ def script_main(module_name):
         print(f"{v.entry.item} [{v.status}]: {v.entry.what}\n    paper {v.entry.paper_says} | pamjax {v.pamjax}\n"
               f"    {v.reading}")
     print(f"wrote {pathlib.Path(args.out) / stem} ({record['seconds']:.1f} s)")
+
+
+def refuse_existing(script, paths, overwrite):
+    """Stop `script` (a fits/ script's file name) before any work where one of its results `paths` exists and
+    `overwrite` is not set: a --quick or trial run must not replace a full run's results."""
+    existing = [str(path) for path in paths if pathlib.Path(path).exists()]
+    if existing and not overwrite:
+        raise SystemExit(f"{script}: {', '.join(existing)} exist; pass --overwrite to replace them (or another --out)")
