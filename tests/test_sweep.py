@@ -76,6 +76,23 @@ def test_a_step_commands_jump_is_a_step_boundary(averaged, method):
         np.testing.assert_allclose(result["position"][i], ref.position, rtol=0, atol=5e-7)
 
 
+@pytest.mark.parametrize("period", [None, 0.05])
+def test_a_swept_sampled_tables_hold_changes_are_step_boundaries(averaged, period):
+    """A sweep's lanes receive a `Sampled` table traced, and its hold changes were then no step boundaries: a factory
+    scaling a 4-sample duty table on the averaged MAS-10 was 0.16 kPa off a tight `simulate` with "rodas5a", 0.93 kPa
+    latched per period, status 0. Every time a traced table's held value may change (with `period`: the instant the
+    latch reads the period's sample) is now one, as a swept `Step`'s time is."""
+    times, base = np.array([0.0, 0.33, 0.61, 0.87]), np.array([0.9, 0.2, 0.8, 0.3])
+    scales = np.array([0.6, 1.0])
+    result = sweep(averaged, lambda v: pamjax.Sampled(times, base * v["scale"], period=period), TS,
+                   {"scale": scales}, method="rodas5a", channels=("pressure", "position"), progress=False)
+    assert np.all(result.succeeded)
+    for i, scale in enumerate(scales):
+        ref = pamjax.simulate(averaged, pamjax.Sampled(times, base * scale, period=period), TS, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(result["pressure"][i], ref.pressure, rtol=0, atol=10.0)
+        np.testing.assert_allclose(result["position"][i], ref.position, rtol=0, atol=1e-6)
+
+
 def test_the_step_cap_of_a_periodic_signal_reads_each_points_signal(averaged):
     """The 1/100-of-a-period cap read the frequency from a swept key named "frequency" only: a factory reading "f"
     took ROS2's 5 ms default at 20 Hz (7.7 kPa off a tight `simulate` at 8 Hz, status 0). Each point's signal's own

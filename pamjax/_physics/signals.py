@@ -156,6 +156,24 @@ class Sine(AbstractSignal):
 # 50 Hz PWM period (paper 000's valve) has 2,000; a longer list (a 1 kHz log) is left to the solver's error control,
 # its jumps being that many small ones
 MAX_LISTED_JUMPS = 2000
+LATCH_SLACK = 1e-9  # of a period: `Sampled` latches period k from (k − slack)·period on (a logged k·period one ulp low)
+
+
+def latch_instants(k, period):
+    """The time from which `Sampled(..., period)` reads period k's sample, (k − slack)·period: a subtraction and a
+    product, each rounded once by IEEE arithmetic, so the listed jump and the latch agree to the last bit in NumPy
+    and in any compiled program (floor(t / period + slack) did not: XLA at optimisation level 0 read 0.34999999995 s
+    as period 7, NumPy as 6). A step boundary there lets no stage of the step before it read the new sample (listed
+    at k·period, 5e-11 s later, a step ending there read it: 0.17 kPa off at simulate's default tolerances, 0.7 kPa
+    with a sweep's RODAS5). NumPy or traced `k` alike."""
+    return (k - LATCH_SLACK) * period
+
+
+def latched_period(t, period):
+    """The period whose sample `Sampled(..., period)` holds at t: floor(t / period + slack), corrected by exact
+    comparisons with `latch_instants` where the division rounded across a period start."""
+    k = jnp.floor(t / period + LATCH_SLACK)
+    return k + (t >= latch_instants(k + 1.0, period)) - (t < latch_instants(k, period))
 
 
 class Sampled(AbstractSignal):
@@ -185,7 +203,7 @@ class Sampled(AbstractSignal):
     def __call__(self, t):
         if self.period is not None:  # the period's start, and the sample there whichever of the two rounds lower
             # (k·period against a logged time: 1234.5000000000002 > 61725 · 0.02 took the last period's duty)
-            t = (jnp.floor(t / self.period + 1e-9) + 1e-9) * self.period
+            t = (latched_period(t, self.period) + LATCH_SLACK) * self.period
         index = jnp.clip(jnp.searchsorted(self.times, t, side="right") - 1, 0, self.times.shape[0] - 1)
         return self.values[index]
 
@@ -195,19 +213,32 @@ class Sampled(AbstractSignal):
 
     def jump_times(self):
         """The times where the held value changes (with `period`: the period starts where the latched sample
-        changes), as one array; () where the table is traced or lists more than `MAX_LISTED_JUMPS` changes (each is
-        a step boundary of the adaptive solve: a 1 kHz log's thousands of tiny steps would cost more than the
-        solver's error control loses on them)."""
-        times, values = concrete_values(self.times), concrete_values(self.values)
-        if times is None or values is None or times.ndim != 1 or times.size < 2:
+        changes), as one array; () where there are more than `MAX_LISTED_JUMPS` (each is a step boundary of the
+        adaptive solve: a 1 kHz log's thousands of tiny steps would cost more than the solver's error control loses on
+        them). A traced table (a sweep's lanes, which receive their tables traced): every time the held value may
+        change, traced, as a swept `Step`'s time is (stepped over, a sweep's lanes were 0.6 kPa / 37 µm off
+        `simulate` on the averaged MAS-10)."""
+        if jnp.ndim(self.times) != 1 or self.times.shape[0] < 2:
             return ()
+        times, values = concrete_values(self.times), concrete_values(self.values)
+        if times is None:  # sample i is in force from its time on, or (with `period`) from the next period start
+            if self.times.shape[0] > MAX_LISTED_JUMPS + 1:
+                return ()
+            later = self.times[1:]
+            if self.period is not None:
+                later = latch_instants(jnp.ceil(later / self.period - LATCH_SLACK), self.period)
+            return (later,)
+        if values is None:  # traced: each sample's (or period start's) time, whether or not the value changes there
+            values = np.arange(times.size, dtype=float)
         if self.period is not None:  # the period starts from the first sample's period to the one after the last
             # sample's (which latches it), each with the sample it latches
-            first, last = np.floor(times[0] / self.period + 1e-9), np.floor(times[-1] / self.period + 1e-9)
+            first = np.floor(times[0] / self.period + LATCH_SLACK)
+            last = np.floor(times[-1] / self.period + LATCH_SLACK)
             if last - first > 2 * MAX_LISTED_JUMPS:
                 return ()
-            times = np.arange(first, last + 2) * self.period
-            latched = (np.floor(times / self.period + 1e-9) + 1e-9) * self.period  # as __call__ reads it
+            periods = np.arange(first, last + 2)
+            times = np.asarray(latch_instants(periods, self.period))
+            latched = (periods + LATCH_SLACK) * self.period  # as __call__ reads each period
             values = values[np.clip(np.searchsorted(concrete_values(self.times), latched, side="right") - 1, 0,
                                     values.size - 1)]
         changed = np.flatnonzero(values[1:] != values[:-1]) + 1
