@@ -336,6 +336,20 @@ def test_a_run_logged_mid_way_without_pressure_gets_its_start_from_position_and_
     assert any("M: start state fitted" in n and "not recorded" in n for n in bench.notes), bench.notes
 
 
+def test_a_mid_way_starts_estimate_reads_the_data_through_the_given_calibration(tmp_path):
+    # The start estimate subtracted the rest offset only: a calibrated pressure gain (1.05) left the start pressure
+    # 5 % of its gauge value off (26 kPa at 520 kPa gauge), a calibrated position offset (2 mm) all of it. Both are
+    # now read back through the rig's sensors, as the fit's model reads the plant.
+    measured = np.full(500, 6.2)  # barg
+    folder = _csv_bench(tmp_path / "b", {"M": (MIDWAY, "t [s],duty [-],pressure [barg],position [mm]",
+                                              [T_RUN, np.full(500, 0.6), measured, RISING])})
+    bench = pj.bench.load_bench(folder, _plant(), nuisance=["start"], pressure_gain=1.05, position_offset=0.002)
+    start = bench.model.runs["M"].start
+    p_atm = float(_plant().air.atmospheric_pressure)
+    assert float(start.pressure) == pytest.approx(p_atm + 6.2e5 / 1.05, rel=1e-9)
+    assert float(start.position) == pytest.approx(0.0199 - 0.002, abs=2e-4)
+
+
 def test_a_triangle_without_duty_column_refused_mid_way_and_said_at_rest(tmp_path):
     # Logged mid-way, meta.json's triangle cannot drive a run without its recorded duty (its phase is unknown; was:
     # driven from phase 0, silently). At rest, it drives the run, and the notes say the command came from meta.json.

@@ -346,6 +346,8 @@ DAMAGE = {
     "unsorted": (_csv_edit("T1", lambda h, r: [h, r[1], r[0], *r[2:]]), "strictly increasing"),
     "gauge without its uncertainty": (_meta_edit(lambda m: m["experiments"]["T1"].update(supply_Pa=6.3e5)),
                                       "T1: a supply reading needs supply_Pa .* and supply_sd_Pa"),
+    "gauge read as gauge": (_meta_edit(lambda m: m["experiments"]["T2"].update(supply_Pa=5.61e5, supply_sd_Pa=1e3)),
+                            r"T2: supply_Pa = 561000 Pa lies below the run's recorded pressure .* ABSOLUTE"),
     "gauge in bar": (_meta_edit(lambda m: m["experiments"]["T1"].update(supply_Pa=6.3, supply_sd_Pa=0.01)),
                      r"T1: supply_Pa = 6.3 is outside \[50000.0, 5000000.0\]"),
     "a coarse sensor, its noise not given": (  # positions logged in whole mm: the noise cannot be estimated

@@ -33,6 +33,10 @@ REST_GAUGE_MAX = 3e4
 # The first samples compared with the rest (their median: one spike decides nothing), taken at the recorded rate:
 # 2 ms at 1 kHz, before a valve opened in the first PWM period (after its ~2 ms switching delay) fills the muscle.
 REST_SAMPLES = 3
+# Of a supply reading's gauge value: how far a run's recorded pressure may lie above it (sensor gain errors of a few
+# per cent, a filling tank's last samples at the supply); a gauge reading taken for an absolute one lies an
+# atmosphere (17-25 % of a 4-6 barg supply) below the full tank.
+SUPPLY_EXCESS = 0.08
 
 
 def number(e, key, where, lo=None, hi=None, unit=""):
@@ -107,6 +111,20 @@ def supply_reading(e, where, p_atm):
         raise PamjaxInputError(f"{where}: supply_Pa = {value:g} Pa is not above the atmosphere ({p_atm:g} Pa abs): "
                                "it is the supply's ABSOLUTE pressure (a gauge reading plus the atmosphere)")
     return value, sd
+
+
+def check_supply_reading(reading, pressure, where, p_atm):
+    """A reference gauge's supply reading (`supply_reading`) against the run's recorded pressure [Pa abs, as the
+    plant's sensor reads it back]: no pressure fills above its supply. A supply written as a gauge reading (5 barg
+    as 5e5 for 601 kPa abs) lies one atmosphere below the full tank's samples: refused where the samples exceed
+    it by more than `SUPPLY_EXCESS` of its gauge value plus five of its standard uncertainties (the fitted supplies
+    of realistic1 and the unseen rigs lie within 0.5 % of their gauges; a sensor's gain error is at most a few %)."""
+    value, sd = reading
+    top = float(np.max(pressure)) if np.size(pressure) else -np.inf
+    if top > value + SUPPLY_EXCESS * (value - p_atm) + 5.0 * sd:
+        raise PamjaxInputError(f"{where}: supply_Pa = {value:g} Pa lies below the run's recorded pressure (up to "
+                               f"{top:g} Pa abs): it is the supply's ABSOLUTE pressure (a gauge reading plus the "
+                               f"atmosphere, {p_atm:g} Pa here)")
 
 
 def check_runs(runs, meta, kinds, where):

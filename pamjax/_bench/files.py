@@ -383,25 +383,32 @@ def _check_duty_range(name, rec):
 START_SAMPLES = 3
 
 
-def start_estimate(rec, offset, plant, lead, window=0.02):
+def start_estimate(rec, sensors, p_atm, plant, lead, window=0.02):
     """A run logged mid-way: its start (pressure, position, velocity) `lead` s before its first sample, from the
-    first `window` seconds of data, at least its first `START_SAMPLES` (the median pressure less the rest offset, a
-    straight line through the position). A pressure the run did not record is the one at which the model rests at
-    that position (`holding_pressure`). Returns (name → start value, what it came from: for the notes)."""
+    first `window` seconds of data, at least its first `START_SAMPLES` (the median pressure, a straight line through
+    the position), each read back through the rig's `sensors` (`Sensors.observe` inverted: a calibrated gain of 1.05
+    left the start pressure 5 % of its gauge value off, a calibrated position offset its whole size). A pressure the
+    run did not record is the one at which the model rests at that position (`holding_pressure`). Returns (name →
+    start value, what it came from: for the notes)."""
     keep = rec.t <= rec.t[0] + window
     keep[:START_SAMPLES] = True
     span = max(window, float(rec.t[np.count_nonzero(keep) - 1] - rec.t[0]))
     out, said = {}, [f"first {span * 1e3:g} ms of data"]
     if "pressure" in rec.channels:
-        out["pressure"] = float(np.median(rec["pressure"][keep])) - offset
+        out["pressure"] = unread_pressure(float(np.median(rec["pressure"][keep])), sensors, p_atm)
     if "position" in rec.channels and np.ptp(rec["position"]) > 0:
         slope, intercept = np.polyfit(rec.t[keep] - rec.t[0], rec["position"][keep], 1)
-        position = float(intercept - slope * lead)
+        position = float(intercept - slope * lead) - float(sensors.position_offset)
         if "pressure" not in out and isinstance(plant, AbstractMuscleSystem):
             out["pressure"] = holding_pressure(plant, position)
             said.append("the pressure, not recorded, where the model rests at that position")
         out.update(position=position, velocity=float(slope))
     return out, "; ".join(said)
+
+
+def unread_pressure(measured, sensors, p_atm):
+    """The plant's pressure [Pa abs] that `sensors` read as `measured`: `Sensors.observe` inverted."""
+    return p_atm + (measured - p_atm - float(sensors.pressure_offset)) / float(sensors.pressure_gain)
 
 
 def holding_pressure(plant, position):

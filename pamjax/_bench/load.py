@@ -42,6 +42,7 @@ from .checks import (
     check_at_rest,
     check_calibrations,
     check_runs,
+    check_supply_reading,
     number,
     run_path,
     supply_reading,
@@ -62,6 +63,7 @@ from .files import (
     recording_file,
     run_command,
     start_estimate,
+    unread_pressure,
     with_atmosphere,
 )
 
@@ -404,16 +406,19 @@ def _with_nuisance(bench, specs, names, p_atm, position_offset, pressure_gain=No
     for (name, kind, e, rec, _), exp in zip(specs, bench.experiments):
         supply = start = None
         reading = supply_reading(e, f"bench {bench.directory}/meta.json: {name}", p_atm)
+        if reading is not None and "pressure" in rec.channels:
+            check_supply_reading(reading, unread_pressure(np.asarray(rec["pressure"]), sensors, p_atm),
+                                 f"bench {bench.directory}/meta.json: {name}", p_atm)
         if "supply_pressure" in names and has_supply:
             supply = float(valve.supply())
             if exp.start_at_supply and "pressure" in rec.channels:  # a discharge from supply: its first samples
-                supply = float(np.median(rec["pressure"][:5])) - offset
+                supply = unread_pressure(float(np.median(rec["pressure"][:5])), sensors, p_atm)
             free.append(run_path(name, "supply_pressure", f"bench {bench.directory}/meta.json"))
             if reading is not None:  # a reference gauge's reading: the start value, and a measurement in the fit
                 supply = reading[0]
                 gauges[name] = Measurement(free[-1], *reading, name=GAUGE_NAME.format(name))
         if "start" in names and name in bench.unknown_starts:
-            estimate, source = start_estimate(rec, offset, plant, START_LEAD)
+            estimate, source = start_estimate(rec, sensors, p_atm, plant, START_LEAD)
             start = StartState(**estimate)
             free += [run_path(name, f"start.{k}", f"bench {bench.directory}/meta.json") for k in estimate]
             bench.notes.append(f"{name}: start state fitted (meta.json init unknown), from "
