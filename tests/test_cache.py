@@ -452,6 +452,27 @@ def test_enable_compilation_cache_refuses_a_non_path_and_reads_an_empty_one_as_t
     assert sorted(p.name for p in tmp_path.iterdir()) == ["default"]
 
 
+def test_an_unwritable_cache_folder_turns_the_cache_off_as_said(tmp_path, monkeypatch, capsys):
+    # The CLI's cache folder unwritable: it said "compilation cache off", and a fit then told the command-line user
+    # "pamjax.runtime.enable_compilation_cache() keeps it". The cache is now off as said, and the fit says so.
+    import jax
+
+    from pamjax._core.cache import cache_turned_off, enable_compilation_cache, program_cache
+
+    names = ("jax_compilation_cache_dir", "jax_enable_compilation_cache")
+    before = {name: getattr(jax.config, name) for name in names}
+    monkeypatch.delenv("PAMJAX_COMPILATION_CACHE", raising=False)
+    (tmp_path / "file").write_text("not a folder")
+    try:
+        jax.config.update("jax_compilation_cache_dir", None)
+        assert enable_compilation_cache(tmp_path / "file" / "cache") is None
+        assert "compilation cache off: cannot write" in capsys.readouterr().err
+        assert cache_turned_off() and program_cache() is None
+    finally:
+        for name, value in before.items():
+            jax.config.update(name, value)
+
+
 def test_the_cache_minimum_must_be_a_number_of_seconds():
     from pamjax._core.distributed import env_seconds
 

@@ -71,6 +71,8 @@ def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> path
     except OSError as err:
         print(f"pamjax: compilation cache off: cannot write {path} ({err.strerror}); set {DIR_ENV} to a writable "
               f"directory or {OPT_OUT}=0", file=sys.stderr)
+        if not jax.config.jax_compilation_cache_dir:  # off, as said (a fit then said "enable_compilation_cache()")
+            disable_compilation_cache()
         return None
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", minimum)
