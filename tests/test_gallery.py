@@ -17,6 +17,7 @@ import sysconfig
 import venv
 import zipfile
 
+import numpy as np
 import pytest
 
 from pamjax._cli.main import main
@@ -167,6 +168,37 @@ def test_calibrations_and_assumptions_are_not_reproductions():
     assert modes and all("ASSUMPTION" in e.basis for e in modes)
 
 
+def test_put_in_numbers_of_paper_000_are_procedure_checks_over_both_valve_paths():
+    """Paper 000 eq. 10's flow curves are made by eq. 11 (eq. 11 wins by construction, against the noise put in), so
+    eq. 10 is a procedure check whose reading covers path 2→3 as well as 1→2; the usable duty 10-90 % is the 2 ms
+    delay × 50 Hz put in (1 ms gives 5-95 %), as the 100 Hz usable steps are: neither is a reproduction."""
+    eq10 = [e for e in catalogue.entries() if (e.paper, e.item) == ("000", "eq. 10")]
+    assert eq10 and all(e.kind == PROCEDURE for e in eq10)
+    targeted = {c.path for e in eq10 for c in e.checks if c.target is not None}
+    assert {"eq10_over_eq11_rmse/inflate", "eq10_over_eq11_rmse/exhaust"} <= targeted
+    v = catalogue.verdict(eq10[0], {"eq10_over_eq11_rmse": {"inflate": 7.5, "exhaust": 0.9}})
+    assert "truth NOT recovered" in v.reading and not all(v.holds.values())  # path 2→3 counts
+    for item in ("text: switching time 2 ms, usable duty 10-90 %",
+                 "text: 100 Hz PWM gives a poor duty resolution at 0.1 ms sampling"):
+        kinds = {e.kind for e in catalogue.entries() if (e.paper, e.item) == ("000", item)}
+        assert kinds and COMPARE not in kinds, (item, kinds)
+
+
+def test_pwm_ripple_leaves_out_the_slow_motion():
+    """Paper 000's PWM ripple (p000_08) is the chattering within a period, not the motion along the triangle: a
+    smooth ramp has none at every frequency (measured as the raw peak-to-peak it grew with the period, and the
+    25 / 50 / 100 Hz check held without any chattering), and a lopsided ripple on a ramp is measured whole."""
+    from pamjax.gallery.scripts import p000_08_pwm_frequency as pwm
+
+    t = np.arange(0.0, 4.0 + 1e-9, 1.0 / pwm.OUTPUT_RATE)
+    ramp = 0.015 * t  # 15 mm/s, no chattering
+    for f in pwm.FREQUENCIES:
+        phase = (t * f + 1e-9) % 1.0
+        chatter = 1e-4 * np.where(phase < 0.9, phase / 0.9, (1 - phase) / 0.1)  # 0.1 mm peak to peak
+        assert max(pwm.ripple(t, ramp, f)) < 1e-12, f
+        assert np.allclose(pwm.ripple(t, ramp + chatter, f), 1e-4, rtol=1e-3), f
+
+
 # --- docs/papers.md ------------------------------------------------------------------------------------------------
 
 def test_docs_papers_md_is_generated_from_its_numbers():
@@ -185,6 +217,39 @@ def test_docs_check_command_fails_on_a_stale_page(tmp_path):
     assert docs.main(["--check", "--docs", str(tmp_path)]) == 1
     (tmp_path / "papers.md").write_text((DOCS / "papers.md").read_text())
     assert docs.main(["--check", "--docs", str(tmp_path)]) == 0
+
+
+def test_docs_from_refuses_a_partial_run_and_names_what_is_missing(tmp_path, capsys):
+    """`--from` a run of one script, of a `--scripts` folder or an unfinished run would rewrite the page with the
+    other items "not run": refused, naming what is missing, the docs untouched; the complete run gives the page."""
+    target = tmp_path / "docs"
+    target.mkdir()
+    for name in ("papers.md", "papers.json"):
+        (target / name).write_text((DOCS / name).read_text())
+    full = dict(_documented(), state="complete")
+    folder = tmp_path / "run"
+    folder.mkdir()
+
+    def from_run(run):
+        (folder / "run.json").write_text(json.dumps(run))
+        return docs.main(["--from", str(folder), "--docs", str(target)])
+
+    one = dict(full, scripts={SCRIPTS[0]: full["scripts"][SCRIPTS[0]]})
+    assert from_run(one) == 2
+    err = capsys.readouterr().err
+    assert f"{len(SCRIPTS) - 1} of the gallery's {len(SCRIPTS)} scripts did not run" in err and SCRIPTS[-1] in err
+    for bad, says in ((dict(full, scripts_folder="mine"), "--scripts"), (dict(full, state="interrupted"), "state"),
+                      (dict(full, quick=False), "--quick")):
+        assert from_run(bad) == 2 and says in capsys.readouterr().err
+    for name in ("papers.md", "papers.json"):
+        assert (target / name).read_text() == (DOCS / name).read_text(), name
+    assert docs.main(["--from", str(tmp_path / "nowhere"), "--docs", str(target)]) == 2
+    assert "nowhere: no such folder" in capsys.readouterr().err
+    assert from_run(full) == 0 and (target / "papers.md").read_text() == (DOCS / "papers.md").read_text()
+    (target / "papers.json").write_text(json.dumps(docs.trimmed(one)))  # a gutted page, current with its numbers
+    (target / "papers.md").write_text(docs.page(docs.trimmed(one)))
+    assert docs.main(["--check", "--docs", str(target)]) == 1
+    assert "not a complete --quick run" in capsys.readouterr().out
 
 
 # --- the scripts ---------------------------------------------------------------------------------------------------
@@ -241,6 +306,70 @@ def test_reproduce_command_writes_the_index_and_run(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "unknown script(s) ['p999_nothing']" in err and "Traceback" not in err
     assert not (tmp_path / "x").exists()
+
+
+OWN_SCRIPT = """from pamjax.gallery import Result
+PAPER = "000"
+TITLE = "numbers that are not finite"
+COVERS = ()
+
+
+def run(out, quick=False):
+    (out / "figure.png").write_bytes(b"this run's")
+    return Result([], {"x": float("nan"), "y": float("inf"), "quick": quick})
+"""
+
+
+@pytest.fixture
+def own_script(tmp_path):
+    folder = tmp_path / "scripts"
+    folder.mkdir()
+    (folder / "p000_93_nan.py").write_text(OWN_SCRIPT)
+    return folder / "p000_93_nan.py"
+
+
+def _strict(path):
+    return json.loads(path.read_text(), parse_constant=lambda word: pytest.fail(f"{path}: bare {word}, not JSON"))
+
+
+def _script_main(module, monkeypatch, *argv):
+    monkeypatch.setitem(sys.modules, "gallery_test_script", module)
+    monkeypatch.setattr(sys, "argv", [module.__file__, *argv])
+    toolkit.script_main("gallery_test_script")
+
+
+def test_a_reproduce_run_is_strict_json_and_a_script_alone_does_not_write_into_it(own_script, tmp_path, monkeypatch):
+    """run.json and <script>.json write a non-finite number as "nan" / "inf" (strict JSON, as pamjax.gallery says);
+    a script run on its own refuses a `pamjax reproduce` run's folder, --overwrite or not (its index would describe
+    results no longer there), and points to `--merge`."""
+    out = tmp_path / "papers"
+    assert main(["reproduce", "--quick", "--scripts", str(own_script.parent), "--out", str(out)]) == 0
+    record = _strict(out / "p000_93_nan" / "p000_93_nan.json")
+    assert record["numbers"] == _strict(out / "run.json")["scripts"]["p000_93_nan"]["numbers"]
+    assert record["numbers"] == {"x": "nan", "y": "inf", "quick": True}
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    module = toolkit.load(own_script)
+    for flags in (("--quick",), ("--quick", "--overwrite")):
+        with pytest.raises(SystemExit, match="pamjax reproduce --quick --only p000_93_nan --merge"):
+            _script_main(module, monkeypatch, "--out", str(out), *flags)
+    with pytest.raises(SystemExit, match="That run is quick and this one full mode"):  # --merge would refuse that
+        _script_main(module, monkeypatch, "--out", str(out), "--overwrite")
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+
+def test_a_script_alone_replaces_its_earlier_results_only_with_overwrite_and_whole(own_script, tmp_path, monkeypatch):
+    module = toolkit.load(own_script)
+    out = tmp_path / "alone"
+    _script_main(module, monkeypatch, "--quick", "--out", str(out))
+    folder = out / "p000_93_nan"
+    (folder / "stale.png").write_bytes(b"the earlier run's")
+    with pytest.raises(SystemExit, match="--overwrite"):
+        _script_main(module, monkeypatch, "--out", str(out))
+    assert _strict(folder / "p000_93_nan.json")["quick"] is True and (folder / "stale.png").exists()
+    _script_main(module, monkeypatch, "--out", str(out), "--overwrite")
+    assert _strict(folder / "p000_93_nan.json")["quick"] is False
+    assert sorted(p.name for p in folder.iterdir()) == ["figure.png", "p000_93_nan.json"]  # nothing of the earlier
+    assert [p.name for p in out.iterdir()] == ["p000_93_nan"]  # no staging folder left
 
 
 def test_a_verdict_is_a_dataclass_of_its_entry():

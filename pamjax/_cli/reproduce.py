@@ -24,12 +24,13 @@ import shutil
 import sys
 import time
 
+from .._core import jsonio
 from .._core.errors import PamjaxInputError
 from ..gallery import catalogue, report, toolkit
 from .out import OutputFolder
 
-STAGING = ".reproduce-partial"
-INDEX, RUN = "index.md", "run.json"
+STAGING = toolkit.REPRODUCE_STAGING  # a script run on its own refuses a folder with these (`toolkit.run_alone`)
+INDEX, RUN = toolkit.INDEX_MD, toolkit.RUN_JSON
 
 
 def add_arguments(parser):
@@ -129,14 +130,20 @@ def _new_run(args, planned):
     from .._core.metadata import version
 
     return dict(format=report.FORMAT, version=1, state="running", quick=bool(args.quick), planned=list(planned),
+                scripts_folder=str(args.scripts) if args.scripts else None,
                 started=time.strftime("%Y-%m-%d %H:%M:%S"), finished=None, pamjax_version=version(),
                 machine=f"{platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}",
                 scripts={})
 
 
+def _json(data):
+    """Strict JSON text of a run (`pamjax._core.jsonio`: a non-finite number as "nan", "inf" or "-inf")."""
+    return jsonio.dumps(data, indent=1, ensure_ascii=False)
+
+
 def _write_json(path, data):
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(json.dumps(toolkit.jsonable(data), indent=1, ensure_ascii=False))
+    tmp.write_text(_json(data))
     os.replace(tmp, path)
 
 
@@ -145,7 +152,8 @@ def _commit(folder, staging, run, earlier, args):
     out, written = folder.path, list(run["scripts"])
     if args.merge:
         run = dict(earlier, scripts={**earlier.get("scripts", {}), **run["scripts"]}, state="complete",
-                   finished=run["finished"], merged=[*earlier.get("merged", []), run["started"]])
+                   finished=run["finished"], merged=[*earlier.get("merged", []), run["started"]],
+                   scripts_folder=earlier.get("scripts_folder") or run.get("scripts_folder"))
     elif earlier is not None:  # --overwrite: the earlier run goes as a whole
         for name in set(earlier.get("scripts", {})) | set(toolkit.script_names()):
             if name not in run["scripts"] and (out / name).is_dir() and (out / name / f"{name}.json").exists():
@@ -155,7 +163,7 @@ def _commit(folder, staging, run, earlier, args):
             shutil.rmtree(out / name)
         os.replace(staging / name, out / name)
     shutil.rmtree(staging, ignore_errors=True)
-    folder.write_text(RUN, json.dumps(toolkit.jsonable(run), indent=1, ensure_ascii=False))
+    folder.write_text(RUN, _json(run))
     folder.write_text(INDEX, report.index_page(run))
     return run
 

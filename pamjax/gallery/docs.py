@@ -2,7 +2,7 @@
 `docs/papers.json`), so that the page says what the numbers say and nothing else.
 
     python -m pamjax.gallery.docs --run             # run the quick gallery, then write docs/papers.{json,md}
-    python -m pamjax.gallery.docs --from DIR        # from an existing run's DIR/run.json
+    python -m pamjax.gallery.docs --from DIR        # from an existing run's DIR/run.json (complete, --quick, all)
     python -m pamjax.gallery.docs --check           # exit 1 if docs/papers.md is not what docs/papers.json gives
 
 `tests/test_gallery.py` checks that the page is current (the `--check` comparison) and that a fresh quick run of each
@@ -15,7 +15,8 @@ import pathlib
 import sys
 import tempfile
 
-from . import catalogue, report
+from .._core import jsonio
+from . import catalogue, report, toolkit
 
 KEEP = ("paper", "title", "quick", "seconds", "numbers")  # of each script's record: what the page needs
 
@@ -54,7 +55,10 @@ numbers) and `OUT/<script>/` (figures and `<script>.json`). An earlier run in `O
 silently replaced: the command refuses unless `--overwrite` (replace it as a whole) or `--merge` (this run's scripts
 replace theirs, the rest is kept; same mode only). Scripts run into a staging folder that replaces the earlier results
 only when all have finished; an interrupted or failing run leaves the earlier one as it was and puts what finished in
-`OUT/interrupted-<time>/` (or `failed-<time>/`), its index marked so. The gallery needs matplotlib and SciPy
+`OUT/interrupted-<time>/` (or `failed-<time>/`), its index marked so. A script run on its own writes
+`OUT/<script>/` (`--out`, default `results/papers`), replaces its own earlier results there only with `--overwrite`
+(as a whole, once it has finished) and refuses a folder holding a `pamjax reproduce` run, whose index would no longer
+match (`pamjax reproduce --only NAME --merge` reruns one script into it). The gallery needs matplotlib and SciPy
 (`pip install 'pamjax[gallery]'`); it runs from an installed wheel (the scripts, procedures and recordings are in the
 package).
 
@@ -133,10 +137,32 @@ def page(run):
     return "\n".join(lines) + "\n" + TAIL
 
 
+def problems(run, complete=True):
+    """Why `run` cannot make docs/papers.md (empty when it can): the page shows every catalogue item, so its run is a
+    finished `--quick` run of every script of the package's gallery and of nothing else (a run of some scripts, of one
+    paper or of a `--scripts` folder would show the rest as "not run", or other scripts' numbers). `complete`: also
+    the run's state (docs/papers.json, a trimmed run, keeps none)."""
+    found, scripts = [], run.get("scripts", {})
+    if not run.get("quick") or any(not r.get("quick", True) for r in scripts.values()):
+        found.append("not a --quick run")
+    if complete and run.get("state") != "complete":
+        found.append(f"its state is {run.get('state')!r}, not 'complete'")
+    if run.get("scripts_folder"):
+        found.append(f"a run of the scripts in {run['scripts_folder']} (--scripts), not the package's")
+    missing = [n for n in toolkit.script_names() if n not in scripts]
+    if missing:
+        found.append(f"{len(missing)} of the gallery's {len(toolkit.script_names())} scripts did not run: "
+                     f"{', '.join(missing)}")
+    unknown = sorted(set(scripts) - set(toolkit.script_names()))
+    if unknown:
+        found.append(f"scripts that are not the gallery's: {', '.join(unknown)}")
+    return found
+
+
 def write(run, docs):
     docs = pathlib.Path(docs)
     data = trimmed(run)
-    (docs / "papers.json").write_text(json.dumps(data, indent=1, ensure_ascii=False) + "\n")
+    (docs / "papers.json").write_text(jsonio.dumps(data, indent=1, ensure_ascii=False) + "\n")
     (docs / "papers.md").write_text(page(data))
     return docs / "papers.md"
 
@@ -158,8 +184,10 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if args.check:
         ok, _ = current(args.docs)
-        print(f"{args.docs}/papers.md is {'current' if ok else 'NOT current: run python -m pamjax.gallery.docs --run'}")
-        return 0 if ok else 1
+        gutted = problems(json.loads((pathlib.Path(args.docs) / "papers.json").read_text()), complete=False)
+        print(f"{args.docs}/papers.md is {'current' if ok else 'NOT current: run python -m pamjax.gallery.docs --run'}"
+              + (f"; papers.json is not a complete --quick run ({'; '.join(gutted)})" if gutted else ""))
+        return 0 if ok and not gutted else 1
     if args.run:
         from .._cli.main import main as pamjax
 
@@ -169,9 +197,19 @@ def main(argv=None):
                 return status
             run = json.loads((pathlib.Path(tmp) / "run.json").read_text())
     else:
-        run = json.loads((pathlib.Path(args.source) / "run.json").read_text())
-    if not run.get("quick") or run.get("state") != "complete":
-        print("docs/papers.md is made from a complete --quick run", file=sys.stderr)
+        source = pathlib.Path(args.source) / toolkit.RUN_JSON
+        try:
+            run = json.loads(source.read_text())
+        except (OSError, ValueError) as err:
+            there = "no such folder" if not source.parent.is_dir() else f"{toolkit.RUN_JSON} cannot be read ({err})"
+            print(f"--from {args.source}: {there}; name the output folder of a `pamjax reproduce --quick` run",
+                  file=sys.stderr)
+            return 2
+    found = problems(run)
+    if found:
+        print(f"docs/papers.md is made from a complete --quick run of every gallery script (`pamjax reproduce "
+              f"--quick`); {args.source or 'the run'} is not: {'; '.join(found)}. {args.docs} is unchanged",
+              file=sys.stderr)
         return 2
     print(f"wrote {write(run, args.docs)} and papers.json")
     return 0

@@ -1,6 +1,6 @@
 """The gallery's toolkit: what a script returns (`Result`), how it draws (`plt`, `save`), where the hybrid bench's
 recordings are (`bench_folder`, `bench_params`), and how scripts are found, loaded and run (`script_names`, `load`,
-`run_script`, `script_main`).
+`run_script`, `run_alone`, `script_main`).
 
 A gallery script is a module of `pamjax.gallery.scripts` named `pNNN_MM_topic` (NNN the paper, MM its order) with
 `PAPER` ("000" or "001"), `TITLE`, `COVERS` (the paper items whose catalogue entries it computes numbers for) and
@@ -17,15 +17,19 @@ import os
 import pathlib
 import pkgutil
 import re
+import shutil
 import sys
 import time
 
+from .._core import jsonio
 from .._core.errors import PamjaxInputError
 
 PAPERS = {"000": "paper000", "001": "paper001"}
 SCRIPT_NAME = re.compile(r"^p(\d{3})_\d{2}_\w+$")
 BENCH_ENV = "PAMJAX_BENCH_DATA"  # another copy of the bench recordings (a folder with meta.json)
 REQUIRED = ("PAPER", "TITLE", "run")
+# what `pamjax reproduce` writes into its output folder beside the script folders (`pamjax._cli.reproduce`)
+RUN_JSON, INDEX_MD, REPRODUCE_STAGING = "run.json", "index.md", ".reproduce-partial"
 
 
 @dataclasses.dataclass
@@ -128,31 +132,22 @@ def name_of(module):
     return pathlib.Path(module.__file__).stem
 
 
-def jsonable(obj):
-    """`obj` with NumPy/JAX arrays and scalars as lists and Python numbers, dict keys as strings."""
-    if isinstance(obj, dict):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [jsonable(v) for v in obj]
-    if hasattr(obj, "tolist"):
-        return obj.tolist()
-    return obj
-
-
 def run_script(module, out, quick):
     """Run one gallery script into `out/<name>/`; returns its record (a dict: script, paper, title, covers, quick,
-    seconds, finished, rows, numbers, paper_numbers) and writes it as `<name>.json` there."""
+    seconds, finished, rows, numbers, paper_numbers) and writes it as `<name>.json` there. The record is strict JSON
+    (`pamjax._core.jsonio`: a non-finite number as the text "nan", "inf" or "-inf", which the catalogue reads as a
+    missing number), and the one returned is the one written."""
     name = name_of(module)
     folder = pathlib.Path(out) / name
     folder.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     result = module.run(folder, quick)
     seconds = time.perf_counter() - start
-    record = jsonable(dict(
+    record = jsonio.plain(dict(
         script=name, paper=module.PAPER, title=module.TITLE, covers=list(getattr(module, "COVERS", ())), quick=quick,
         seconds=seconds, finished=time.strftime("%Y-%m-%d %H:%M:%S"),
         rows=[dataclasses.asdict(r) for r in result.rows], numbers=result.numbers, paper_numbers=result.paper))
-    (folder / f"{name}.json").write_text(json.dumps(record, indent=1, ensure_ascii=False))
+    (folder / f"{name}.json").write_text(jsonio.dumps(record, indent=1, ensure_ascii=False))
     return record
 
 
@@ -172,9 +167,59 @@ def fits_module(name):
     return importlib.import_module(f"pamjax.gallery.procedures.{_PROCEDURES[name]}")
 
 
+def refuse_reproduce_folder(out, name, quick):
+    """Stop a script run on its own (`script_main`) before any work where `out` holds a `pamjax reproduce` run (its
+    run.json or index.md, or the staging folder of one under way): writing `out/<name>/` there would leave the run's
+    index and run.json describing results that are no longer there. `--overwrite` does not lift this: the command
+    that replaces one script of such a run and rewrites its index is `pamjax reproduce --only NAME --merge`."""
+    found = [p.name for p in (out / RUN_JSON, out / INDEX_MD) if p.exists()] + sorted(
+        p.name for p in out.glob(f"{REPRODUCE_STAGING}-*"))
+    if not found:
+        return
+    try:
+        earlier = json.loads((out / RUN_JSON).read_text()).get("quick")
+    except (OSError, ValueError, AttributeError):
+        earlier = None  # no readable run.json: its mode is not known
+    mode = "quick" if quick else "full mode"
+    if earlier is not None and bool(earlier) != bool(quick):
+        how = (f"That run is {'quick' if earlier else 'full mode'} and this one {mode} (one index does not mix "
+               "modes): choose another folder with --out")
+    else:
+        how = (f"Run `pamjax reproduce {'--quick ' if quick else ''}--only {name} --merge --out {out}` to replace "
+               "this script's results in that run, or choose another folder with --out")
+    raise SystemExit(f"{name}: {out} holds a `pamjax reproduce` run ({', '.join(found)}); a script run on its own "
+                     f"would leave its index out of step with {out / name}, --overwrite or not. {how}")
+
+
+def run_alone(module, out, quick, overwrite):
+    """What `script_main` does once its arguments are read: refuse, before any work, a folder holding a `pamjax
+    reproduce` run (`refuse_reproduce_folder`) or the script's earlier results unless `overwrite`; run the script into
+    a staging folder beside them, and only when it has finished replace the earlier `out/<name>/` as a whole (nothing
+    of the earlier run is left beside the new files; an interrupted or failing run leaves it as it was)."""
+    name, out = name_of(module), pathlib.Path(out)
+    refuse_reproduce_folder(out, name, quick)
+    folder = out / name
+    earlier = [folder] if (folder.is_dir() and any(folder.iterdir())) or folder.is_file() else []
+    refuse_existing(f"python -m pamjax.gallery.scripts.{name}", earlier, overwrite)
+    staging = out / f".{name}.partial-{os.getpid()}"
+    try:
+        staging.mkdir(parents=True)
+        record = run_script(module, staging, quick)
+        if folder.is_dir():
+            shutil.rmtree(folder)
+        elif folder.exists():
+            folder.unlink()
+        os.replace(staging / name, folder)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return record
+
+
 def script_main(module_name):
-    """`python -m pamjax.gallery.scripts.<script> [--quick] [--out DIR]`: run one gallery script on its own (float64
-    on; the script is imported afresh after that, so that its module-level values are float64 too)."""
+    """`python -m pamjax.gallery.scripts.<script> [--quick] [--out DIR] [--overwrite]`: run one gallery script on its
+    own (float64 on; the script is imported afresh after that, so that its module-level values are float64 too). Its
+    earlier results in DIR/<script>/ are replaced only with --overwrite, and a folder holding a `pamjax reproduce`
+    run is refused (`run_alone`)."""
     import argparse
 
     import jax
@@ -187,8 +232,10 @@ def script_main(module_name):
     parser = argparse.ArgumentParser(description=f"paper {module.PAPER}: {module.TITLE}")
     parser.add_argument("--quick", action="store_true", help="shorter runs and fewer points")
     parser.add_argument("--out", default="results/papers", help="parent folder; the script writes OUT/<script>/")
+    parser.add_argument("--overwrite", action="store_true", help="replace this script's earlier results in "
+                        "OUT/<script>/ (a folder holding a `pamjax reproduce` run is refused whatever the flag)")
     args = parser.parse_args()
-    record = run_script(module, args.out, args.quick)
+    record = run_alone(module, args.out, args.quick, args.overwrite)
     from .catalogue import verdicts_of
 
     for v in verdicts_of({record["script"]: record}, scripts=[record["script"]]):
