@@ -474,7 +474,7 @@ def test_an_unwritable_cache_folder_turns_the_cache_off_as_said(tmp_path, monkey
 
 
 def test_the_cache_minimum_must_be_a_number_of_seconds():
-    from pamjax._core.distributed import env_seconds
+    from pamjax._core.env import env_seconds
 
     assert env_seconds("S", 0.1, {}) == 0.1 and env_seconds("S", 0.1, {"S": " 2 "}) == 2.0
     for bad in ("0.5s", "-1", "nan", "inf"):

@@ -743,7 +743,7 @@ def test_on_off_environment_variables_take_the_same_words_and_refuse_others(tmp_
         _refused(capsys, ["fit", str(config)], rf"^pamjax fit: error: environment variable {name}='disabled': write "
                                                r"one of 1/true/yes/on \(on\) or 0/false/no/off \(off\), or unset it")
         monkeypatch.delenv(name)
-    from pamjax._core.distributed import env_flag
+    from pamjax._core.env import env_flag
 
     assert [env_flag("X", d, {"X": v}) for d, v in ((True, "OFF"), (False, " on "), (True, ""), (False, "1"))] == \
         [False, True, True, True]

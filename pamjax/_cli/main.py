@@ -176,7 +176,7 @@ def _settings(args):
     `env_flag` (`PAMJAX_DEBUG=false` turned the tracebacks on); those `xla_cpu` reads at import are checked here,
     so that a value they do not take ("disabled", read there as on) is named rather than guessed."""
     from .._core.cache import cache_disabled, disable_compilation_cache, enable_compilation_cache
-    from .._core.distributed import env_flag
+    from .._core.env import env_flag
     from .._core.errors import PamjaxInputError
     from .._core.xla_cpu import FAST_COMPILE, OPT_OUT
 

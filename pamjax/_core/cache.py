@@ -21,7 +21,7 @@ import threading
 
 from .code_stamp import code_stamp
 from .compile_stats import CompileStats as CompileStats  # public in pamjax.runtime
-from .distributed import env_flag, env_seconds
+from .env import env_flag, env_seconds
 from .errors import PamjaxInputError
 
 OPT_OUT = "PAMJAX_COMPILATION_CACHE"

@@ -111,7 +111,7 @@ def _off(value) -> bool:
 def _unknown_flag(environ, name):
     """Warn (at import: not an error) about an on/off variable set to a word that is neither, which is then left at
     its default: `PAMJAX_FAST_COMPILE=disabled` turned fast compilation ON (anything not "0"/"off" did); the command
-    line refuses such a value (`pamjax._core.distributed.env_flag`)."""
+    line refuses such a value (`pamjax._core.env.env_flag`)."""
     value = environ.get(name, "").strip()
     known = value.lower() in ("", "1", "true", "yes", "on", "0", "false", "no", "off")
     if not known:
