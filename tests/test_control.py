@@ -400,3 +400,46 @@ def test_several_gains_or_durations_where_the_loop_takes_one_are_named(model):
         with pytest.raises(pamjax.PamjaxInputError, match=r"duration must be a finite number > 0, got array"):
             simulate_closed_loop(one, np.array([0.1]))
     assert compiled == [], compiled
+
+
+def test_a_sample_on_the_window_start_to_round_off_is_in_the_window(model):
+    """The sample times are period starts plus offsets, a sum XLA fuses into an FMA in one program and not in another
+    (0.18 + 0.02 = 0.19999999999999998, fused 0.2): with `t >= start` the sample on start = 0.2 s was in the value's
+    window and not in the reverse-mode gradient's (tune_controller's gradient 0.29 % off forward mode and central
+    differences, 25 periods of 20 ms, XLA's default flags). A sample one rounding before `start` is in the window now,
+    as is the one on it; a sample before it is not."""
+    traj = simulate_closed_loop(ClosedLoop(model, PIController(), REF), 0.1)  # t = 2, 4, ..., 100 ms
+    t = np.asarray(traj.t)
+    start = t[24]  # 50 ms, the end of the third period
+    nudged = t.copy()
+    nudged[24] = np.nextafter(start, 0.0)  # the same sample, its time one rounding lower
+    exact = [float(v) for v in _tracking_error(traj, np.asarray(start))]
+    assert [float(v) for v in _tracking_error(eqx.tree_at(lambda tr: tr.t, traj, jnp.asarray(nudged)),
+                                              np.asarray(start))] == exact
+    later = [float(v) for v in _tracking_error(traj, np.asarray(0.5 * (t[24] + t[25])))]
+    e = np.asarray(traj.reference - traj.position)
+    np.testing.assert_allclose(exact, [np.sqrt(np.mean(e[24:] ** 2)), np.max(np.abs(e[24:]))], rtol=1e-12)
+    np.testing.assert_allclose(later, [np.sqrt(np.mean(e[25:] ** 2)), np.max(np.abs(e[25:]))], rtol=1e-12)
+
+
+def test_a_gain_named_twice_or_a_start_state_of_another_plant_is_refused(plant):
+    """tune_controller(("proportional_gain", "proportional_gain")) ran and reported two values for one gain; a start
+    state of the identified plant (a stick-slip friction leaf) given to a loop on the smooth plant, or to `simulate`,
+    failed with a raw pytree ValueError. Both refused by name before any solve."""
+    from helpers import counted_compilations
+
+    identified = presets.mas10_system("pwm", friction="karnopp")
+    other = identified.initial_state()
+    loop = ClosedLoop(plant, PIController(), REF)
+    y0 = loop.initial_state(plant_state=other)
+    wrong = (r"must be a state of the system \(MuscleSystem\): "
+             r"a MuscleState with leaves \(pressure, position, velocity\)")
+    with counted_compilations() as compiled:
+        with pytest.raises(pamjax.PamjaxInputError, match=r"gains names 'proportional_gain' more than once"):
+            pamjax.tune_controller(loop, ("proportional_gain", "proportional_gain"), 0.1)
+        with pytest.raises(pamjax.PamjaxInputError, match=r"y0\.plant " + wrong + r".*got a MuscleState with leaves "
+                                                          r"\(pressure, position, velocity, friction\)"):
+            simulate_closed_loop(loop, 0.1, y0=y0)
+        with pytest.raises(pamjax.PamjaxInputError, match=r"y0 " + wrong):
+            pamjax.simulate(plant, pamjax.Constant(0.5), np.linspace(0.0, 0.1, 3), y0=other)
+    assert compiled == [], compiled

@@ -118,3 +118,18 @@ def test_a_regulated_muscle_steps_its_position_with_the_new_velocity():
     x, v = np.asarray(d.position), np.asarray(d.velocity)
     assert np.max(np.abs(v)) > 1e-3  # it moves
     np.testing.assert_allclose(np.diff(x), 1e-4 * v[1:], rtol=0, atol=1e-15)
+
+
+def test_plain_float_start_states_and_a_listed_sample_time():
+    """A y0 of Python floats (which `simulate` takes) failed with a raw TypeError in the scan, sample_time=[1e-4] with
+    one from float(): the floats run as the arrays do, the list is refused by name."""
+    system = presets.mas10_system("averaged")
+    floats = pamjax.MuscleState(pressure=3e5, position=0.01, velocity=0.0)
+    arrays = jax.tree_util.tree_map(jnp.asarray, floats)
+    run = [pamjax.simulate_discrete(system, pamjax.Constant(0.6), 1e-3, 0.05, y0=y0) for y0 in (floats, arrays)]
+    np.testing.assert_array_equal(np.asarray(run[0].pressure), np.asarray(run[1].pressure))
+    for kwargs, match in ((dict(sample_time=[1e-4]), r"sample_time must be one number \[s\].*got \[0\.0001\]"),
+                          (dict(t_end=np.array([0.05])), r"t_end must be one number")):
+        args = dict(sample_time=1e-3, t_end=0.05) | kwargs
+        with pytest.raises(pamjax.PamjaxInputError, match=match):
+            pamjax.simulate_discrete(system, pamjax.Constant(0.6), **args)

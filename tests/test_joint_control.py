@@ -141,6 +141,7 @@ def test_held_stiffness_grows_with_sum(joint):
         (dict(angle_integral_gain=-1.0), "angle_integral_gain"),
         (dict(sum_integral_gain=-2.0), "sum_integral_gain"),
         (dict(tracking_time=0.0), "tracking_time"),
+        (dict(lead_time=64.0), r"lead_time is 64 s, longer than 1 s: that looks like milliseconds"),  # 64 ms meant
     ],
 )
 def test_bad_gains(kwargs, match):
@@ -234,6 +235,15 @@ def test_simulate_joint_control_checks_the_loop_and_raises_on_a_failed_solve(joi
     with pytest.raises(pj.PamjaxSolveError, match=r"simulate_joint_control: the solve failed: .*result code 1"):
         simulate_joint_control(loop, TS)
     assert int(simulate_joint_control(loop, TS, throw=False).result) == 1
+
+
+def test_simulate_joint_control_checks_the_pressures_in_y0(joint):
+    """A flexor pressure of 3.0 (3 bar meant) in y0 was simulated (its `start_pressures` looked for a top-level
+    "pressure" only), where `simulate` refuses it in the joint's own y0. Refused, named, before any solve."""
+    loop = JointControlLoop(joint, AntagonisticJointController(), GaitAngle(0.5), pj.Constant(160.0))
+    bad = eqx.tree_at(lambda s: s.plant.flexor.pressure, loop.initial_state(), jnp.asarray(3.0))
+    with pytest.raises(pj.PamjaxInputError, match=r"y0\.plant\.flexor\.pressure is 3 Pa at most: that looks like bar"):
+        simulate_joint_control(loop, TS, y0=bad)
 
 
 def test_static_inverse_matches_bisection_where_a_muscle_is_slack(joint):

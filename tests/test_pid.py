@@ -79,3 +79,30 @@ def test_bad_input_is_named():
         pj.PIDController(sample_time=0.0)
     with pytest.raises(pj.PamjaxInputError, match="duty_min"):
         pj.PIDController(duty_min=0.8, duty_max=0.2)
+
+
+def test_bias_seed_and_times_in_other_units_are_refused():
+    """bias=50 (50 % meant) and bias=-2 ran with the duty pinned at a limit, seed=1.5 failed inside the solve with a
+    raw JAX TypeError, sample_time=20.0 (ms meant) ran; in a loop, measurement_noise=0.1 (0.1 mm meant) ran as 100 mm
+    of noise on the MAS-10's 95 mm stroke, which `LoopSensors.noise` refuses. Each refused by name; the bench's values
+    still pass, also where the loop is checked again before a run (after eqx.tree_at)."""
+    plant = pj.presets.mas10_system("averaged")
+    ref = pj.Sine(0.03, 0.01, 0.3)
+    for make, match in (
+        (lambda: pj.PIController(bias=50.0), r"PIController\.bias must be in \[0, 1\] \(the duty at zero error"),
+        (lambda: pj.PIDController(bias=-2.0), r"PIDController\.bias must be in \[0, 1\]"),
+        (lambda: pj.PIDController(seed=1.5), r"PIDController\.seed must be an int"),
+        (lambda: pj.PIDController(sample_time=20.0), r"sample_time is 20\.0 s, longer than 1\.0 s: that looks like "
+                                                     r"milliseconds"),
+        (lambda: pj.ClosedLoop(plant, pj.PIDController(measurement_noise=0.1), ref),
+         r"PIDController\.measurement_noise.* = 0\.1 m is 1\.1 of the muscle's whole stroke"),
+        (lambda: pj.ClosedLoop(plant, pj.PIDController(sample_time=0.1), ref),
+         r"sample_time \(0\.1 s\) must not exceed the loop's period \(0\.02 s\)"),
+        (lambda: pj.simulate_closed_loop(eqx.tree_at(lambda lp: lp.controller.measurement_noise,
+                                                     pj.ClosedLoop(plant, pj.PIDController(), ref), 0.1), 0.1),
+         r"PIDController\.measurement_noise.* = 0\.1 m"),
+    ):
+        with pytest.raises(pj.PamjaxInputError, match=match):
+            make()
+    loop = pj.ClosedLoop(plant, pj.PIDController(measurement_noise=1e-4, seed=np.int64(2), bias=1.0), ref)
+    assert loop.controller.seed == 2 and float(pj.PIController(bias=0.0).bias) == 0.0

@@ -35,15 +35,11 @@ from .._solve.checks import check_finite_state, check_parameters, check_positive
 from .._solve.simulate import solve
 from .._solve.trajectory import RESULT_NONFINITE, result_message
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
-from .controllers import AbstractController, reference_derivatives
+from .controllers import MAX_PERIOD, AbstractController, reference_derivatives
 from .estimator import ExtendedKalmanFilter, LoopSensors, check_channels, check_noise_channels, check_noise_scale
 from .fixed_grid import period_on_grid
 
 _DEFAULT_SUBSTEPS = 16  # RK4 nodes per period on the fixed grids: ≤ 1.25 ms at 50 Hz, as `simulate`'s PWM grid
-# s: the longest controller period taken. Pneumatic PWM runs at 10-500 Hz (paper 000's MHE2: 50 Hz, 20 ms) and a
-# muscle's pressure settles in ~0.1 s: a period of a second or more holds one duty over the whole motion, and is
-# milliseconds written as seconds (period=20.0 meant as 20 ms ran 20 s with one duty).
-MAX_PERIOD = 1.0
 
 
 class ClosedLoopState(eqx.Module):
@@ -155,6 +151,7 @@ class ClosedLoop(eqx.Module):
             raise PamjaxInputError(
                 f"ClosedLoop.period is {period} s, longer than {MAX_PERIOD} s: that looks like milliseconds (a 20 ms "
                 "period, paper 000's 50 Hz PWM, is written 0.02); the controller holds one duty per period [s]")
+        self.controller.check_loop(self.plant, self.period)  # e.g. a PID's sensor noise against the stroke
         if not (isinstance(self.substeps, int) and self.substeps >= 2):
             raise PamjaxInputError(f"ClosedLoop.substeps must be an int >= 2 (RK4 nodes per period), got "
                                    f"{self.substeps!r}")
@@ -220,19 +217,9 @@ class ClosedLoop(eqx.Module):
         if self.stepping == "adaptive":
             order = jnp.argsort(offsets)  # diffrax saves at non-decreasing times
             # this period's duty from t, the last period's before it: a switching valve latches both (`read_command`)
-            traj = solve(
-                self.plant,
-                Step(state.duty, duty, t),
-                t + offsets[order],
-                state.plant,
-                t,
-                rtol=rtol,
-                atol=atol,
-                max_steps=max_steps,
-                adjoint=adjoint,
-                starts_off=False,
-                num_periods=1,  # a smoothed valve's edges get step boundaries of their own
-            )
+            # num_periods=1: a smoothed valve's edges get step boundaries of their own
+            traj = solve(self.plant, Step(state.duty, duty, t), t + offsets[order], state.plant, t, rtol=rtol,
+                         atol=atol, max_steps=max_steps, adjoint=adjoint, starts_off=False, num_periods=1)
             states = jtu.tree_map(lambda a: a[jnp.argsort(order)], traj.state)
             result = traj.result
         else:
@@ -287,21 +274,39 @@ class ClosedLoopTrajectory(eqx.Module):
         **Raises:** `PamjaxInputError` where `start` and the run are concrete and no period starts at or after
         `start` (an empty window: the RMS would be 0/0 = NaN)."""
         check_window(start, self.period_start, self.t, "estimation_error", "its last period starts")
-        weight = (self.period_start >= start).astype(float)
+        weight = window_weight(self.period_start, start)
         return {name: jnp.sqrt(jnp.sum(weight * (getattr(self.observed, name) - getattr(self.period_start_state, name))
                                        ** 2) / jnp.sum(weight))
                 for name in ("pressure", "position", "velocity")}
 
     def tracking_error(self, start=0.0):
-        """(RMSE, peak |e|) [m] of e = r − x over samples with t ≥ `start` [s] (traceable).
+        """(RMSE, peak |e|) [m] of e = r − x over samples with t ≥ `start` [s] (traceable; a sample on `start` to
+        round-off is in the window: `window_weight`).
 
         **Raises:** `PamjaxInputError` where `start` and the run are concrete and `start` is at or after the run's end
         (an empty window: the RMSE would be 0/0 = NaN and the peak 0)."""
         check_window(start, self.t, self.t, "tracking_error", "its last sample is")
-        weight = (self.t >= start).astype(float)
+        weight = window_weight(self.t, start)
         error = (self.reference - self.position) * weight
         rmse = jnp.sqrt(jnp.sum(error**2) / jnp.sum(weight))
         return rmse, jnp.max(jnp.abs(error))
+
+
+# A time counts as in the window t ≥ start from this fraction of a sample interval before `start`. The sample times
+# are period starts plus offsets, a sum XLA fuses into an FMA in one program and not in another (0.18 + 0.02 =
+# 0.19999999999999998, fused 0.2): the sample on start = 0.2 s was in the value's window and not in the reverse-mode
+# gradient's (tune_controller's gradient 0.29 % off forward mode at 25 periods of 20 ms). Round-off is ~1e-16 of t.
+WINDOW_TOLERANCE = 1e-6
+
+
+def window_weight(times, start):
+    """1.0 where `times` [s] (increasing) are at or after `start` [s], else 0.0, a time within `WINDOW_TOLERANCE` of
+    the mean sample interval before `start` counted as on it: every program that computes the times (forward, reverse
+    mode, fused or not) then makes the same window. Traceable."""
+    times = jnp.asarray(times)
+    n = times.shape[0]
+    interval = (times[-1] - times[0]) / (n - 1) if n > 1 else jnp.abs(times[0])
+    return (times >= start - WINDOW_TOLERANCE * interval).astype(float)
 
 
 def check_window(start, times, samples, method, last_is):

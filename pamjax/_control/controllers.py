@@ -18,7 +18,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.custom_types import FloatScalar, RealScalar, RealScalarLike
-from .._core.errors import PamjaxInputError, check_finite, check_nonnegative, check_positive
+from .._core.errors import (
+    PamjaxInputError,
+    check_in_closed_interval,
+    check_nonnegative,
+    check_positive,
+    concrete_values,
+)
 from .._core.fitting import parameter
 from .._papers import datasheets, paper000
 from .._physics.gas import Air
@@ -26,6 +32,11 @@ from .._physics.signals import AbstractSignal
 from .._physics.smooth import smooth_sign
 from .._physics.valves.averaged import AveragedValve
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
+
+# s: the longest controller period taken. Pneumatic PWM runs at 10-500 Hz (paper 000's MHE2: 50 Hz, 20 ms) and a
+# muscle's pressure settles in ~0.1 s: a period of a second or more holds one duty over the whole motion, and is
+# milliseconds written as seconds (period=20.0 meant as 20 ms ran 20 s with one duty).
+MAX_PERIOD = 1.0
 
 
 # --- reference ------------------------------------------------------------------------------------------------------
@@ -49,6 +60,16 @@ def check_duty_limits(lo, hi, name):
             raise PamjaxInputError(f"{name}.duty_min ({lo}) must be below duty_max ({hi})")
 
 
+def check_bias(bias, name):
+    """The duty at zero error u0 in [0, 1], a PWM duty ratio as the duty limits are: bias=50 (50 % meant) ran with
+    the duty pinned at duty_max, silently. A traced bias is checked at run time (`check_in_closed_interval`)."""
+    v = concrete_values(bias)
+    if v is not None and not np.all((v >= 0) & (v <= 1)):  # also NaN
+        raise PamjaxInputError(f"{name}.bias must be in [0, 1] (the duty at zero error, a PWM duty ratio: 50 % is "
+                               f"0.5), got {np.array2string(v, threshold=6)}")
+    check_in_closed_interval(bias, 0.0, 1.0, f"{name}.bias")
+
+
 class AbstractController(eqx.Module):
     """A sampled-data controller, called once per PWM period.
 
@@ -60,6 +81,10 @@ class AbstractController(eqx.Module):
 
     def initial_state(self):
         return None
+
+    def check_loop(self, plant, period):
+        """The controller's checks that need the loop's `plant` and `period` [s] (`ClosedLoop` runs them, as it is
+        built and before every run); none by default."""
 
     @abc.abstractmethod
     def update(self, t, reference, plant_state, state, period):
@@ -87,7 +112,7 @@ class PIController(AbstractController):
     def __check_init__(self):
         check_nonnegative(self.proportional_gain, "PIController.proportional_gain")
         check_nonnegative(self.integral_gain, "PIController.integral_gain")
-        check_finite(self.bias, "PIController.bias")
+        check_bias(self.bias, "PIController")
         check_duty_limits(self.duty_min, self.duty_max, "PIController")
 
     def initial_state(self):

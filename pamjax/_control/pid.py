@@ -5,18 +5,26 @@ measurement noise it could not be used in the real system")."""
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._core.custom_types import RealScalar, StateLike
-from .._core.errors import check_finite, check_nonnegative, check_positive
+from .._core.errors import PamjaxInputError, check_nonnegative, check_positive, concrete_values
 from .._core.fitting import parameter
 from .._papers import datasheets, paper000
-from .controllers import AbstractController, check_duty_limits
+from .controllers import MAX_PERIOD, AbstractController, check_bias, check_duty_limits
+from .estimator import check_noise_scale
 
 
 class PIDState(eqx.Module):
     """`integral` ∫e dt [m s]."""
 
     integral: StateLike
+
+
+def _static_seed(seed: int) -> int:
+    """A NumPy integer as the Python int a static field holds (hashable, no array); anything else as it is, for
+    `PIDController`'s check to name."""
+    return int(seed) if isinstance(seed, np.integer) else seed
 
 
 class PIDController(AbstractController):
@@ -33,7 +41,13 @@ class PIDController(AbstractController):
     **Arguments:** `proportional_gain` K_P [1/m] (25, paper 000), `integral_gain` K_I [1/(m s)] (150, paper 000),
     `derivative_gain` K_D [s/m] (0: the paper's PI), `bias` u0 [-] (0.5, as `PIController`), `duty_min`, `duty_max`
     [-] (0, 1), `measurement_noise` σ [m] (0; the hybrid bench's potentiometer: 1e-4), `sample_time` T_s [s] (1e-4:
-    paper 000's "0.1 ms sampling time"), `seed` (static int).
+    paper 000's "0.1 ms sampling time"; at most the loop's period: both samples lie in one period), `seed` (static
+    int).
+
+    **Raises:** `PamjaxInputError` for a negative gain or noise, a `bias` outside [0, 1], bad duty limits, a
+    `sample_time` not > 0 or above `MAX_PERIOD` (1 s: milliseconds written as seconds), a `seed` that is no int;
+    in a `ClosedLoop`, a `measurement_noise` of a tenth of the plant's stroke or more (0.1 meant in mm) and a
+    `sample_time` longer than the loop's period.
     """
 
     proportional_gain: RealScalar = parameter(paper000.PI_PROPORTIONAL_GAIN, unit="1/m")
@@ -44,14 +58,32 @@ class PIDController(AbstractController):
     duty_max: RealScalar = parameter(1.0, unit="-")
     measurement_noise: RealScalar = parameter(0.0, unit="m")
     sample_time: RealScalar = parameter(paper000.SAMPLE_TIME, unit="s")
-    seed: int = eqx.field(static=True, default=0)
+    seed: int = eqx.field(static=True, default=0, converter=_static_seed)
 
     def __check_init__(self):
         for name in ("proportional_gain", "integral_gain", "derivative_gain", "measurement_noise"):
             check_nonnegative(getattr(self, name), f"PIDController.{name}")
         check_positive(self.sample_time, "PIDController.sample_time")
-        check_finite(self.bias, "PIDController.bias")
+        sample_time = concrete_values(self.sample_time)
+        if sample_time is not None and np.any(sample_time > MAX_PERIOD):
+            raise PamjaxInputError(f"PIDController.sample_time is {sample_time} s, longer than {MAX_PERIOD} s: that "
+                                   "looks like milliseconds (paper 000's 0.1 ms sampling time is 1e-4) [s]")
+        check_bias(self.bias, "PIDController")
         check_duty_limits(self.duty_min, self.duty_max, "PIDController")
+        # static: no array (a noise key's seed; 1.5 failed inside the solve with a raw JAX TypeError)
+        if isinstance(self.seed, (bool, np.bool_)) or not isinstance(self.seed, (int, np.integer)):
+            raise PamjaxInputError(f"PIDController.seed must be an int (the sensor noise's seed), got {self.seed!r}")
+
+    def check_loop(self, plant, period):
+        """The sensor noise in metres by its magnitude against the plant's stroke (0.1 meant in mm ran as 100 mm of
+        noise on the MAS-10's 95 mm stroke), as `LoopSensors.noise`; the sample time within the loop's period."""
+        if np.ndim(self.measurement_noise) == 0:  # several values: refused by `simulate_closed_loop`, named
+            check_noise_scale(plant, {"position": self.measurement_noise}, "PIDController.measurement_noise")
+        sample_time, period = concrete_values(self.sample_time), concrete_values(period)
+        if sample_time is not None and period is not None and np.any(sample_time > period):
+            raise PamjaxInputError(
+                f"PIDController.sample_time ({sample_time} s) must not exceed the loop's period ({period} s): the "
+                "controller differentiates two position samples of one period (paper 000 samples every 1e-4 s)")
 
     def initial_state(self):
         return PIDState(integral=jnp.zeros(()))

@@ -52,9 +52,9 @@ def tune_controller(
 
     **Raises:** `PamjaxInputError`, before any solve, for what `simulate_closed_loop` refuses in the loop (parameters
     set with `eqx.tree_at` are checked as the constructors check them), a gain that is no positive real-valued
-    controller parameter or is a duty limit or the bias, a duration that is not a number > 0, a `start` at or after
-    the run's end (`duration` rounded up to whole PWM periods), or a bad `steps`, `learning_rate` or
-    `samples_per_period`.
+    controller parameter or is a duty limit or the bias or is named twice, a duration that is not a number > 0, a
+    `start` at or after the run's end (`duration` rounded up to whole PWM periods), or a bad `steps`,
+    `learning_rate` or `samples_per_period`.
     """
     if not isinstance(loop, ClosedLoop):
         raise PamjaxInputError(f"loop must be a ClosedLoop, got {type(loop).__name__}")
@@ -134,6 +134,10 @@ def _check_settings(controller, gains, steps, learning_rate, samples_per_period)
         if not real or not np.all(np.asarray(value) > 0) or not np.all(np.isfinite(np.asarray(value))):
             raise PamjaxInputError(f"tune_controller: gain {name!r} must name a positive, real-valued parameter of "
                                    f"the {type(controller).__name__}, got {_describe(value)}")
+    repeated = sorted({name for name in gains if list(gains).count(name) > 1})
+    if repeated:  # ("proportional_gain", "proportional_gain") ran with two values reported for one gain
+        raise PamjaxInputError(f"tune_controller: gains names {', '.join(map(repr, repeated))} more than once; name "
+                               "each gain once")
     if not (isinstance(steps, (int, np.integer)) and not isinstance(steps, bool) and steps >= 0):
         raise PamjaxInputError(f"tune_controller: steps must be an int >= 0 (Adam steps), got {steps!r}")
     number = (isinstance(learning_rate, (int, float, np.number, np.ndarray, jax.Array))

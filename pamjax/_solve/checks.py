@@ -150,14 +150,16 @@ def check_start_pressure(pressure, name, lanes=False):
 
 
 def check_start_state(system, y0, name="y0"):
-    """`simulate`'s checks of a start state `y0` (None: nothing to check): its leaves the shapes of the system's state
-    (`check_state_shapes`: one start state, not a batch); concrete leaves only: every leaf finite;
+    """`simulate`'s checks of a start state `y0` (None: nothing to check): a state of the system's own structure
+    (`check_state_structure`), its leaves the shapes of the system's state (`check_state_shapes`: one start state,
+    not a batch); concrete leaves only: every leaf finite;
     the pressures the system names (`start_pressures`) ABSOLUTE pascal, > 0 and not bar or gauge by magnitude; the
     displacements it names (`start_positions`) metres (not mm by magnitude) and inside their stroke, give or take
     `START_STROKE_MARGIN`. `name`: what the errors call the state (a linearisation's "state" or "guess", a closed
     loop's "y0.plant")."""
     if y0 is None:
         return
+    check_state_structure(system, y0, name)
     check_state_shapes(system, y0, name)
     check_finite_state(y0, name)
     for path, pressure in type(system).start_pressures(system, y0).items():  # y0.pressure, y0.regulator.pressure
@@ -197,6 +199,38 @@ def resolve_stepping(system, stepping):
             f"off); use stepping='pwm' (its edges on the grid, the exact-edge model) or {other}"
         )
     return stepping
+
+
+_STRUCTURES = []  # (system, its state's pytree structure) of the last few systems at the top level (kept alive)
+
+
+def check_state_structure(system, y0, name="y0"):
+    """Refuse a start state `y0` that is no state of `system`: its pytree structure not that of the system's state
+    (its `state_scale()`'s, shape-inferred: ~0.7 ms, nothing compiled, once per system object). Another plant's state
+    (the identified plant's, with a stick-slip friction leaf, given to a smooth plant) failed inside the solve with a
+    raw pytree ValueError."""
+    if not isinstance(system, AbstractSystem):
+        return
+    found = [structure for known, structure in _STRUCTURES if known is system]
+    template = None
+    if not found:
+        template = jax.eval_shape(system.state_scale)
+        found = [jax.tree_util.tree_structure(template)]
+        if jax_at_top_level():
+            _STRUCTURES.append((system, found[0]))
+            del _STRUCTURES[:-_REMEMBERED]
+    if jax.tree_util.tree_structure(y0) == found[0]:
+        return
+    template = jax.eval_shape(system.state_scale) if template is None else template
+
+    def described(state):
+        paths = [_name(path) for path, _ in jax.tree_util.tree_flatten_with_path(state)[0]]
+        return f"a {type(state).__name__} with leaves ({', '.join(paths)})"
+
+    raise PamjaxInputError(
+        f"{name} must be a state of the system ({type(system).__name__}): {described(template)}, as its "
+        f"initial_state() gives; got {described(y0)}: the state of another system (another friction model, "
+        "regulator or valve) does not fit it")
 
 
 def check_state_shapes(system, y0, name="y0"):

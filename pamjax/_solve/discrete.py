@@ -118,6 +118,8 @@ def simulate_discrete(system: AbstractSystem, signal: AbstractSignal, sample_tim
             "CoulombViscousFriction (eq. 20's sign smoothed), e.g. presets.mas10_system('averaged'), or solve the "
             "hybrid system with pamjax.simulate (events located inside the step)"
         )
+    sample_time, t_end, t0 = (_number(v, name) for v, name in ((sample_time, "sample_time"), (t_end, "t_end"),
+                                                                  (t0, "t0")))
     check_positive(sample_time, "sample_time")
     check_positive(float(t_end) - float(t0), "t_end - t0")
     if float(sample_time) > float(t_end) - float(t0):  # one step far past t_end (1 s for a 10 ms run): a unit slip
@@ -128,10 +130,23 @@ def simulate_discrete(system: AbstractSystem, signal: AbstractSignal, sample_tim
         raise PamjaxInputError(f"sample_time {sample_time} gives {num_steps} steps up to t_end; use a larger one")
     system = floats_as_arrays(system)  # a value set with eqx.tree_at: an argument, not a constant of the program
     validate(system, signal, np.array([float(t0), float(t0) + num_steps * float(sample_time)]), y0, None)
-    y0 = system.initial_state() if y0 is None else y0
+    # as `simulate` takes it: a plain float leaf (MuscleState(3e5, 0.0, 0.0)) was a raw TypeError in the scan
+    y0 = system.initial_state() if y0 is None else jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype=float), y0)
     traj = _run(system, signal, y0, jnp.asarray(t0, dtype=float), jnp.asarray(sample_time, dtype=float), num_steps)
     _check_stable(traj, sample_time)
     return traj
+
+
+def _number(value, name):
+    """`value` [s] as a float where it is one concrete real number, else `PamjaxInputError` naming `name` (it sets the
+    number of steps: sample_time=[1e-4] was a raw TypeError from float())."""
+    number = (isinstance(value, (int, float, np.ndarray, np.generic, jax.Array))
+              and not isinstance(value, (bool, np.bool_, jax.core.Tracer)))
+    v = np.asarray(value, dtype=float) if number else None
+    if v is None or v.ndim != 0:
+        raise PamjaxInputError(f"{name} must be one number [s], concrete (it sets the number of steps), got "
+                               f"{value!r}")
+    return float(v)
 
 
 def _check_stable(traj, sample_time):

@@ -53,6 +53,9 @@ SUM_PROPORTIONAL_GAIN = 0.0  # -: off. When one regulator's exhaust is flow-limi
 # other muscle the wrong way and corrupts the difference (angle RMSE 0.033 → 0.044 rad at K_θ = 140, measured)
 SUM_INTEGRAL_GAIN = 2.0  # 1/s: slow removal of static sum (hence stiffness) errors, time constant 0.5 s
 LEAD_TIME = EQ6_TIME_CONSTANTS[0] + EQ6_TIME_CONSTANTS[1]  # s, 0.064: first-order inverse of eq. 6's two poles
+# s: the longest lead taken. It inverts the regulators' lag (eq. 6: 64 ms); a lead of a second or more would run the
+# references a half gait cycle ahead (0.5 Hz) and is milliseconds written as seconds (64.0 meant as eq. 6's 64 ms)
+MAX_LEAD_TIME = 1.0
 TRACKING_TIME = 0.1  # s, back-calculation time constant: Åström-Hägglund's T_t ≈ T_i (= K_P/K_I = 0.1 s)
 
 
@@ -211,7 +214,8 @@ class AntagonisticJointController(eqx.Module):
 
     **Arguments:** `angle_proportional_gain` K_Pθ [Pa/rad] (1e6), `angle_integral_gain` K_Iθ [Pa/(rad s)] (1e7),
     `sum_proportional_gain` K_PΣ [-] (0), `sum_integral_gain` K_IΣ [1/s] (2), `lead_time` T_lead [s] (0.064,
-    eq. 6's τ₁ + τ₂), `tracking_time` T_t [s] (0.1); reasons beside the module constants.
+    eq. 6's τ₁ + τ₂; at most `MAX_LEAD_TIME`, 1 s), `tracking_time` T_t [s] (0.1); reasons beside the module
+    constants.
     """
 
     angle_proportional_gain: RealScalar = parameter(ANGLE_PROPORTIONAL_GAIN, unit="Pa/rad")
@@ -231,6 +235,11 @@ class AntagonisticJointController(eqx.Module):
         ):
             check_nonnegative(getattr(self, name), f"AntagonisticJointController.{name}")
         check_positive(self.tracking_time, "AntagonisticJointController.tracking_time")
+        lead = concrete_values(self.lead_time)
+        if lead is not None and np.any(lead > MAX_LEAD_TIME):
+            raise PamjaxInputError(f"AntagonisticJointController.lead_time is {_text(lead)} s, longer than "
+                                   f"{MAX_LEAD_TIME:g} s: that looks like milliseconds (eq. 6's τ₁ + τ₂ = 64 ms is "
+                                   "0.064) [s]")
 
     def command(self, joint, targets, target_rates, angle, pressures, integrals):
         """Reference voltages (V_f, V_e) [V] and the integrators' rates [Pa/s] from the targets (θ_r [rad], Σ_r
@@ -348,6 +357,12 @@ class JointControlLoop(AbstractSystem):
         plant = state.plant
         pressures = (plant.flexor.pressure, plant.extensor.pressure)
         return self.controller.command(self.joint, targets, rates, plant.angle, pressures, state.integrals)
+
+    def start_pressures(self, state):
+        """The joint's pressures in the loop's state: "plant.flexor.pressure", "plant.extensor.pressure" [Pa abs]
+        (`simulate_joint_control` checks them in its `y0`, as `simulate` checks the joint's)."""
+        plant = getattr(state, "plant", None)
+        return {} if plant is None else {f"plant.{k}": v for k, v in self.joint.start_pressures(plant).items()}
 
     def initial_state(self, t0=0.0):
         """At rest holding the references at `t0` [s] statically, integrators reset."""
