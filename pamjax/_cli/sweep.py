@@ -22,6 +22,7 @@ import inspect
 import itertools
 import os
 import pathlib
+import re
 import time
 
 import numpy as np
@@ -116,12 +117,35 @@ def _leaf(model, path):
     return obj
 
 
-def _over_name(model, path):
-    """`path [unit]` for a swept parameter (the unit its component's field declares)."""
+def over_column(model, path):
+    """`path [unit]` for a swept parameter (the unit its component's field declares; an element's with its index's
+    exponents resolved, `element_unit`)."""
+    from .._fit.parameters import split_path
+
     parts = path.split("[")[0].split(".")
     owner = _leaf(model, ".".join(parts[:-1])) if len(parts) > 1 else model
     unit = field_units(type(owner)).get(parts[-1], "") if dataclasses.is_dataclass(owner) else ""
+    index = split_path(path)[1] if "[" in path else None
+    unit = element_unit(unit, index) if unit and index is not None else unit
     return f"{path} [{unit}]" if unit else path
+
+
+def element_unit(unit, index):
+    """The unit of one element of an array whose field declares a unit with exponents named by the index,
+    `i` (the first axis) and `j` (the second): `AveragedValve.coefficients`' "kg/(s Pa^j)" (eq. 13's m[i, j] multiplies
+    u^i p_g^j) is "kg/s" at [1, 0], "kg/(s Pa)" at [0, 1], "kg/(s Pa^2)" at [2, 2]. A unit without them is the
+    element's own."""
+    names = dict(zip("ij", index))
+
+    def power(match):
+        n = names.get(match.group(2))
+        if n is None:
+            return match.group(0)
+        return "" if n == 0 else match.group(1) if n == 1 else f"{match.group(1)}^{n}"
+
+    unit = re.sub(r"([A-Za-z]+)\^([ij])\b", power, unit)
+    unit = re.sub(r"\s+\)", ")", re.sub(r"\(\s+", "(", unit)).strip()
+    return re.sub(r"\(([^\s()]+)\)", r"\1", unit)  # "kg/(s)" -> "kg/s"
 
 
 def _native(config, model, paths):
@@ -214,11 +238,11 @@ def run_config(config, progress=print, root=".", model=None):
         cols, spec = _run_one(config, point_model, progress, None)
         n = len(next(iter(cols.values())))
         for p, v in zip(paths, point):
-            columns.setdefault(_over_name(model, p), []).append(np.full(n, v))
+            columns.setdefault(over_column(model, p), []).append(np.full(n, v))
         for name, values in cols.items():
             columns.setdefault(name, []).append(np.asarray(values))
     columns = {k: np.concatenate(v) for k, v in columns.items()}
-    return columns, (spec if not paths else ("table", columns, [_over_name(model, p) for p in paths]))
+    return columns, (spec if not paths else ("table", columns, [over_column(model, p) for p in paths]))
 
 
 def _run_one(config, model, progress, native_over):
@@ -243,7 +267,7 @@ def _run_one(config, model, progress, native_over):
             grid[path] = np.asarray(values, dtype=float).reshape((-1,) + (1,) * (len(native_over) - k))
         r = steady_state_map(model, u, progress=progress, over=grid or None, **kwargs, **options)
         shape = np.broadcast_shapes(u.shape, *(v.shape for v in grid.values()))
-        cols = {_over_name(model, p): np.broadcast_to(v, shape).ravel() for p, v in grid.items()}
+        cols = {over_column(model, p): np.broadcast_to(v, shape).ravel() for p, v in grid.items()}
         cols.update({command_of(model).column: np.broadcast_to(u, shape).ravel(),
                      "pressure_pa_abs": np.ravel(r["pressure"])})
         if "position" in r.channels:

@@ -12,7 +12,7 @@ import numpy as np
 
 from .._core.errors import PamjaxInputError
 from .._physics.signals import AbstractSignal
-from .._solve.checks import check_start_position, check_start_pressure
+from .._solve.checks import check_parameters, check_start_position, check_start_pressure
 
 
 def get(obj, parts):
@@ -113,6 +113,7 @@ def validate_values(system, signal, y0, plan, values, batch_size):
     if not batched_ok:
         for i in range(batch_size):
             check_lanes({k: v[i] for k, v in flat.items()}, 1)
+    check_magnitudes(system, plan, flat, batch_size)
     # The command must stay in the valve's range at every point: all points at once where the signal's `bounds()`
     # takes arrays (Constant), point by point otherwise.
     signal_keys = [k for k, (w, _) in zip(plan.keys, plan.targets) if w in ("signal", "factory")]
@@ -132,6 +133,50 @@ def validate_values(system, signal, y0, plan, values, batch_size):
     for i in range(batch_size):
         check_bounds(system, make_signal(signal, plan, {k: jnp.asarray(v[i]) for k, v in flat.items()}),
                       {k: np.asarray(v[i]).tolist() for k, v in flat.items()} | {"index": i})
+
+
+def check_magnitudes(system, plan, flat, batch_size):
+    """`simulate`'s check of a system's parameters (`check_parameters`: the magnitudes that betray another unit,
+    9600 kg for 9.6 kg looks like grams, 75 m for a 75 mm stroke like mm) on every lane's system, before any solve;
+    a failure named by its swept key and the first point that fails (`over['payload_mass'] at point 1: ...`). The
+    components' own checks have passed at every point (`check_lanes`), and the magnitude checks refuse a value beyond
+    a bound (a peak above, a low below, `pamjax._core.units.check_setting`), so a set of points passes where the
+    points holding each swept entry's lowest and highest value pass: those few systems are checked (~1 ms each), not
+    every point's, and the first failing point is found by bisecting the points (one with an own check that takes no
+    batch of values, `muscle.max_position`'s `bool(hi > lo)`, cannot be checked with its values batched)."""
+    keys = [(key, parts) for key, (where, parts) in zip(plan.keys, plan.targets) if where == "system"]
+    if not keys:  # the base system alone, as `simulate` checks it (then remembered: a loop of sweeps pays once)
+        check_parameters(system)
+        return
+
+    def point(i):
+        return lane_system(system, plan, {key: np.asarray(flat[key][i]) for key, _ in keys})
+
+    def fails(stop):  # whether any of the points [0, stop) fails: those at each entry's extremes decide
+        extremes = set()
+        for key, _ in keys:
+            entries = flat[key][:stop].reshape(stop, -1)
+            extremes.update(np.argmin(entries, axis=0).tolist() + np.argmax(entries, axis=0).tolist())
+        try:
+            for i in sorted(extremes):
+                check_parameters(point(i))
+        except PamjaxInputError:
+            return True
+        return False
+
+    if not fails(batch_size):
+        return
+    lo, hi = 0, batch_size  # the first `lo` points pass, the first `hi` fail
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        lo, hi = (lo, mid) if fails(mid) else (mid, hi)
+    try:
+        check_parameters(point(hi - 1))
+    except PamjaxInputError as err:
+        named = [key for key, parts in keys if f"parameter {'.'.join(parts)} " in str(err)]
+        if not named:
+            raise  # a parameter no point sweeps: named as `simulate` names it
+        raise PamjaxInputError(f"over[{named[0]!r}] at point {hi - 1}: {err}") from None
 
 
 def _names_pressure(parts, pressures=None):
