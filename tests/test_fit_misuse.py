@@ -324,3 +324,59 @@ def test_staged_start_lists_each_stages_entries_with_their_array_index(monkeypat
     staged = pamjax.staged_start(model, [run, tank], free, max_steps=2, progress=False, background_compile=False)
     assert [(name, entries) for name, entries, *_ in staged.stages] == [
         ("1", ["valve.coefficients[1,0]", "valve.coefficients[1,1]"]), ("2", ["friction.coulomb_force"])]
+
+
+# -- checkpoints and the fingerprint (tester t66d) ---------------------------------------------------------------
+def test_numpy_bounds_and_scales_in_a_free_entry_are_fingerprinted_as_plain_numbers():
+    # np.array([100, 400]) or (np.int64(100), np.int64(400)) bounds (float32 too) crashed every fit with a raw
+    # TypeError "'numpy.int64' object is not iterable" from the fingerprint; ParameterSpace took them
+    import jax.numpy as jnp
+    from problems import force_map
+
+    from pamjax._files.fingerprint import fingerprint
+
+    muscle, exp = force_map()
+    plain = fingerprint(muscle, [exp], [{"path": "force_law.k0", "bounds": [50.0, 200.0], "scale": 2.0}])["free"]
+    for bounds, scale in ((np.array([50, 200]), np.int64(2)), ((np.int64(50), np.int64(200)), np.float32(2.0)),
+                          ((np.float32(50), np.float32(200)), np.array(2.0)), (jnp.array([50.0, 200.0]), 2)):
+        free = [{"path": "force_law.k0", "bounds": bounds, "scale": scale}]
+        assert fingerprint(muscle, [exp], free)["free"] == plain
+    free = ["force_law.k1", {"path": "force_law.k0", "bounds": np.array([50, 200])}]
+    assert pamjax.fit(muscle, [exp], free, max_steps=1, progress=False).iterations == 1
+
+
+@pytest.fixture(scope="module")
+def checkpointed(tmp_path_factory):
+    """A force-map fit from a start off the minimum, stopped at max_steps = 3 with its checkpoint."""
+    from problems import FORCE_MAP_FREE, force_map
+
+    muscle, exp = force_map()
+    space = pamjax.ParameterSpace(muscle, FORCE_MAP_FREE)
+    start = space.with_values(np.asarray(space.initial_values()) * 1.3)
+    path = tmp_path_factory.mktemp("checkpoint") / "fit.npz"
+    res = pamjax.fit(start, [exp], FORCE_MAP_FREE, max_steps=3, checkpoint=path, progress=False)
+    assert res.status == "max_steps"
+    return start, exp, FORCE_MAP_FREE, path, res
+
+
+def test_a_truncated_checkpoint_is_refused_naming_resume(checkpointed, tmp_path):
+    # a checkpoint cut short (a full disk, a partial copy) was a raw zipfile.BadZipFile, or EOFError at 0 bytes
+    start, exp, free, path, _ = checkpointed
+    raw = path.read_bytes()
+    for cut, error in ((len(raw) // 2, "BadZipFile"), (0, "EOFError")):
+        (tmp_path / "cut.npz").write_bytes(raw[:cut])
+        with pytest.raises(PamjaxInputError, match=rf"resume: .*cut\.npz is not a readable pamjax fit checkpoint "
+                                                   rf"\({error}: .*start again without resume"):
+            pamjax.fit(start, [exp], free, max_steps=20, resume=tmp_path / "cut.npz", progress=False)
+
+
+def test_a_resume_with_fewer_max_steps_than_the_checkpoint_holds_is_refused(checkpointed):
+    # it returned the checkpoint's iterations (3 of max_steps = 2, status 'max_steps'), where an uninterrupted fit
+    # with max_steps = 2 ends elsewhere
+    start, exp, free, path, res = checkpointed
+    with pytest.raises(PamjaxInputError, match=rf"max_steps = 2: the checkpoint resumed already holds "
+                                               rf"{res.iterations} iterations.*resume with max_steps >= "
+                                               rf"{res.iterations}"):
+        pamjax.fit(start, [exp], free, max_steps=2, resume=path, progress=False)
+    same = pamjax.fit(start, [exp], free, max_steps=res.iterations, resume=path, progress=False)
+    assert same.values == res.values and same.iterations == res.iterations  # as many as it holds: its end

@@ -97,6 +97,7 @@ def test_fleet_fits_each_member_and_records_failures():
         (dict(ftol=2.0), r"ftol must be a number in \[0, 1\), got 2.0"),
         (dict(stall_steps=0), "stall_steps must be a positive int"),
         (dict(solver="lm"), "solver must be None, a pamjax.LevenbergMarquardt or an optimistix"),
+        (dict(identifiability_tol=2.0), r"identifiability_tol must be a number in \(0, 1\), got 2.0"),  # every start
         # the seed: None or an integer >= 0 (NumPy's ValueError / TypeError, or a bool taken as 1, before)
         (dict(seed=-1), "seed must be None or an integer >= 0, got -1"),
         (dict(seed="abc"), "seed must be None or an integer >= 0, got 'abc'"),
@@ -122,6 +123,8 @@ def test_fleet_bad_arguments():
     for value in (-3, "ten"):
         with pytest.raises(PamjaxInputError, match=f"max_steps must be a positive int, got {value!r}"):
             pj.fit_fleet(muscle, {"a": [exp], "b": [exp]}, FREE, max_steps=value, progress=False)
+    with pytest.raises(PamjaxInputError, match=r"identifiability_tol must be a number in \(0, 1\), got 2.0"):
+        pj.fit_fleet(muscle, {"a": [exp], "b": [exp]}, FREE, identifiability_tol=2.0, progress=False)  # all failed
 
 
 def test_a_fresh_seed_is_recorded_and_drawn_once_for_every_process(problem, monkeypatch):
@@ -167,3 +170,25 @@ def test_a_progress_that_is_neither_a_flag_nor_a_callable_is_refused_before_any_
     muscle, exp, _ = problem
     with pytest.raises(PamjaxInputError, match=r"progress must be True, False or a callable .*'yes'"):
         pj.multistart(muscle, [exp], FREE, starts=2, max_steps=1, progress="yes")
+
+
+def test_results_gathered_from_other_processes_carry_what_a_single_process_result_carries(problem):
+    """Spread over processes, each result came back through JSON without its experiments and predictions, so every
+    process's `best` was refused by `profile_likelihood`. Emulated in one process: the gathering path of `_run_fits`
+    (its payload through JSON) against the plain one, for a list of experiments and a single one (`fit_fleet`)."""
+    from pamjax._fit import multistart as multistart_module
+
+    muscle, exp, space = problem
+    start = space.with_values(np.asarray(space.initial_values()) * 0.9)
+    tasks = [("a", muscle, [exp]), ("b", start, exp)]
+    plain = multistart_module._run_fits(tasks, FREE, dict(max_steps=30), False, False, "x")
+    gathered = multistart_module._run_fits(tasks, FREE, dict(max_steps=30), True, False, "x")
+    for (alone, *_), (sent, *_) in zip(plain, gathered):
+        assert fit_fields(sent) == fit_fields(alone)
+        assert eqx.tree_equal(sent.model, alone.model) and eqx.tree_equal(sent.experiments, alone.experiments)
+        assert sent.predictions.keys() == alone.predictions.keys()
+        for name, channels in alone.predictions.items():
+            for channel, values in channels.items():
+                np.testing.assert_array_equal(sent.predictions[name][channel], values)  # bitwise, NaN alike
+    profile = pj.profile_likelihood(gathered[0][0], ["force_law.k0"], max_points=2, progress=False)
+    assert profile.profiles[0].verdict  # profiled, not refused

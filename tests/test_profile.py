@@ -271,3 +271,33 @@ def test_a_progress_callable_gets_the_lines_and_nothing_is_printed(capsys):
     assert lines[0].startswith("profiling 1 parameter(s)") and any(line.startswith("profiled force_law.k0")
                                                                     for line in lines)
     assert lines[-1].startswith(f"force_law.k0: {prof.profiles[0].verdict}")
+
+
+def test_a_result_read_from_json_is_told_what_works_and_bad_counts_or_spans_are_named(monkeypatch):
+    # read from JSON, the advice "pass the experiments" only led to a second refusal ("no fitted model"); span="4"
+    # was a raw TypeError, max_points=np.int64(5) refused as "must be an int"
+    from pamjax._identifiability import profile as profile_module
+
+    muscle, *_, exp = _force_map(2.0, np.linspace(0.5, 6.0, 7), np.linspace(-0.01, 0.07, 9))
+    res = _fit(muscle, [exp], ["force_law.k0", "force_law.k1"])
+    loaded = pj.FitResult.from_dict(json.loads(json.dumps(res.to_dict())))
+    rebuild = r"set its fitted model from the model the fit started from: result\.model = result\.apply\(start_model\)"
+    with pytest.raises(PamjaxInputError, match=rf"pass the experiments it was fitted to, and {rebuild}$"):
+        pj.profile_likelihood(loaded, progress=False)
+    with pytest.raises(PamjaxInputError, match=rf"result has no fitted model \(read from JSON\): {rebuild}"):
+        pj.profile_likelihood(loaded, experiments=[exp], progress=False)
+    loaded.model = loaded.apply(muscle)  # as the advice says: then it profiles
+    prof = pj.profile_likelihood(loaded, ["force_law.k0"], experiments=[exp], max_points=np.int64(2),
+                                 max_steps=np.int64(30), workers=np.int64(1), progress=False)
+    assert prof.profiles[0].label == "force_law.k0" and len(prof.profiles[0].values) >= 3
+    monkeypatch.setattr(profile_module, "_Evaluator", lambda *a: pytest.fail("worked before refusing the input"))
+    for kwargs, match in ((dict(span="4"), r"span must be a finite number > 0 .*got '4'"),
+                          (dict(span=float("inf")), "span must be a finite number > 0"),
+                          (dict(span=0.0), "span must be a finite number > 0"),
+                          (dict(max_points=1), "max_points must be an int >= 2, got 1"),
+                          (dict(max_points=True), "max_points must be an int >= 2, got True"),
+                          (dict(max_steps=0), "max_steps must be an int >= 1, got 0"),
+                          (dict(max_steps="5"), "max_steps must be an int >= 1, got '5'"),
+                          (dict(workers=2.0), "workers must be an int >= 1, got 2.0")):
+        with pytest.raises(PamjaxInputError, match=match):
+            pj.profile_likelihood(res, progress=False, **kwargs)

@@ -19,6 +19,7 @@ import dataclasses
 import json
 import pathlib
 import warnings
+import zipfile
 
 import equinox as eqx
 import numpy as np
@@ -28,6 +29,8 @@ from .._core.errors import PamjaxInputError
 
 _DATA_FIELDS = {"times", "data", "weights", "positions", "pressures", "forces", "slack"}
 _VERSION = 1
+# what np.load raises for a file that is not a whole .npz (as the CLI's `UNREADABLE`); an .npy is an array: TypeError
+_UNREADABLE = (OSError, KeyError, ValueError, IndexError, EOFError, TypeError, zipfile.BadZipFile)
 
 
 def _leaves_by_path(model, prefix=""):
@@ -55,6 +58,15 @@ def _solver(solver):
     return {"class": type(solver).__qualname__, **settings}
 
 
+def _plain(value):
+    """JSON for what `json` cannot write itself: a NumPy or JAX scalar (`np.int64(100)`, `np.float32(4e2)`) as its
+    Python number, an array or other iterable (bounds `np.array([100, 400])`) as a list. `ParameterSpace` accepts
+    these in a free entry, so the fingerprint must too; 100 and 100.0 compare equal after `json.loads`."""
+    if isinstance(value, np.generic) or hasattr(value, "__array__"):
+        return np.asarray(value).tolist()
+    return list(value)
+
+
 def fingerprint(model, experiments, free, solver=None):
     """The fingerprint of a fit problem (a JSON-serialisable dict; see the module docstring)."""
     experiment_prints = []
@@ -67,7 +79,7 @@ def fingerprint(model, experiments, free, solver=None):
     return {
         "version": _VERSION,
         "model": {"class": type(model).__qualname__, "leaves": _leaves_by_path(model)},
-        "free": json.loads(json.dumps(free, default=list)),
+        "free": json.loads(json.dumps(free, default=_plain)),
         "experiments": experiment_prints,
         "solver": _solver(solver),
     }
@@ -115,10 +127,12 @@ def check_resume(path, current):
     if not path.is_file():
         return
     try:
-        with np.load(path, allow_pickle=False) as f:
-            saved = json.loads(str(f["fingerprint"])) if "fingerprint" in f.files else None
-    except (OSError, ValueError) as err:
-        raise PamjaxInputError(f"resume: {path} is not a readable pamjax fit checkpoint ({err})") from err
+        with path.open("rb") as handle, np.load(handle, allow_pickle=False) as f:  # closed on a BadZipFile too
+            arrays = {k: f[k] for k in f.files}  # every member read: a file cut short fails here, not in the fit
+        saved = json.loads(str(arrays["fingerprint"])) if "fingerprint" in arrays else None
+    except _UNREADABLE as err:  # a checkpoint cut short (a full disk, a partial copy): BadZipFile, 0 bytes: EOFError
+        raise PamjaxInputError(f"resume: {path} is not a readable pamjax fit checkpoint ({type(err).__name__}: "
+                               f"{err}); resume from a whole checkpoint, or start again without resume") from None
     if saved is None:
         warnings.warn(f"resume: {path} holds no fingerprint (written by an older pamjax): pamjax cannot check that it "
                       "belongs to this model, these experiments and data", UserWarning, stacklevel=3)

@@ -228,7 +228,10 @@ def choose_solver(solver, ftol, xtol, gtol, stall_steps, checkpoint, resume):
 def run_fit(solver, problem, theta, max_steps, report, announce, start=None, save=None):
     """`fit` with pamjax's `LevenbergMarquardt`, driven from the host (`run_on_host`) around the fit's two compiled
     programs (`Problem.objective`): from θ, or from `start` = (θ, state, history) of a checkpoint; `save(y, state,
-    history)` after every iteration. Returns the `Outcome`."""
+    history)` after every iteration. Returns the `Outcome`. A checkpoint past `max_steps` is refused
+    (`check_resumed_steps`)."""
+    if start is not None:
+        check_resumed_steps(int(start[1].step), max_steps)
     fn = problem.objective(started=start is not None)
     if start is not None:
         y, state, history = start
@@ -251,6 +254,17 @@ def run_fit(solver, problem, theta, max_steps, report, announce, start=None, sav
         save(y, state, history)
     y, state, history = run_on_host(solver, fn, y, state, history, max_steps=max_steps, on_step=on_step)
     return Outcome.of(y, state, history)
+
+
+def check_resumed_steps(steps, max_steps):
+    """A resume ends where an uninterrupted fit with the same `max_steps` ends. A checkpoint already `steps` >
+    `max_steps` iterations in holds only its last point, not the one that fit stops at: refused by name (it returned
+    the checkpoint's iterations as if `max_steps` allowed them: 8 of max_steps = 3, status 'max_steps')."""
+    if steps > max_steps:
+        raise PamjaxInputError(
+            f"max_steps = {max_steps}: the checkpoint resumed already holds {steps} iterations, and an uninterrupted "
+            f"fit with max_steps = {max_steps} ends at an earlier point the checkpoint does not keep; resume with "
+            f"max_steps >= {steps} (pamjax fit: raise [fit] max_steps), or fit again without resume")
 
 
 def run_optimistix(solver, problem, theta, max_steps, report, announce):

@@ -23,6 +23,7 @@ import numpy as np
 from .._core import jsonio
 from .._core.custom_types import RealArrayLike, RealScalarLike, RealVectorLike
 from .._core.errors import PamjaxInputError, PamjaxSolveError, check_count, check_progress, require_float64
+from .diagnostics import check_identifiability_tol
 from .experiment import Experiments
 from .fit import FitResult, check_fit_inputs, fit
 from .parameters import Free
@@ -119,7 +120,8 @@ def _check_fit_options(fit_options):
         if key not in known:
             raise PamjaxInputError(f"unknown fit option {key!r}; valid: {sorted(known - set(_NOT_PASSED))}")
     options = {name: p.default for name, p in signature.parameters.items() if name in known} | fit_options
-    check_count(options["max_steps"], "max_steps")  # as `fit` checks it
+    check_count(options["max_steps"], "max_steps")  # as `fit` checks them
+    check_identifiability_tol(options["identifiability_tol"])  # 2.0 was a failed fit per start ("every start failed")
     from .drive import choose_solver  # `fit`'s check of `solver`, and of ftol/xtol/gtol/stall_steps (by its solver)
 
     choose_solver(options["solver"], options["ftol"], options["xtol"], options["gtol"], options["stall_steps"],
@@ -167,16 +169,38 @@ def _run_fits(tasks, free, fit_options, spread_over_processes, progress, what):
             say(f"{what} {name} ({i + 1}/{len(tasks)}){where}: {outcome}, {time.perf_counter() - start:.2f} s")
     if not spread_over_processes:
         return [(*local[i], me) for i in range(len(tasks))]
-    payload = {str(i): (None if r is None else r.to_dict(), e, w) for i, (r, e, w) in local.items()}
+    payload = {str(i): (None if r is None else _sent(r), e, w) for i, (r, e, w) in local.items()}
     outcomes = {}
     for process, blob in enumerate(gather_bytes(json.dumps(payload).encode())):
         for i, (d, e, w) in json.loads(blob).items():
-            model = tasks[int(i)][1]
-            res = None if d is None else FitResult.from_dict(d)
-            if res is not None:
-                res.model = res.apply(model)  # the same bits as the fitted model (values are exact floats)
-            outcomes[int(i)] = (res, e, [tuple(x) for x in w], process)
+            _, model, experiments = tasks[int(i)]
+            outcomes[int(i)] = (None if d is None else _received(d, model, experiments), e, [tuple(x) for x in w],
+                                process)
     return [outcomes[i] for i in range(len(tasks))]
+
+
+def _sent(res):
+    """A `FitResult` as JSON for the other processes: its stored fields and its predictions (floats exact through
+    JSON: Python writes a float's shortest repr that reads back to the same bits; NaN where a sample was masked)."""
+    predictions = {name: {c: np.asarray(v).tolist() for c, v in channels.items()}
+                   for name, channels in res.predictions.items()}
+    return dict(res.to_dict(), predictions=predictions)
+
+
+def _received(d, model, experiments):
+    """The `FitResult` of `_sent`'s dict, with what a single-process fit's result carries besides its stored fields
+    (without them every process's `best` was refused by `profile_likelihood`, and its `predictions` were None): the
+    fitted model (`apply` on the task's start model: the same bits, values being exact floats), the experiments as
+    `fit` bound them to that model, and the predictions sent."""
+    d = dict(d)
+    predictions = d.pop("predictions")
+    res = FitResult.from_dict(d)
+    res.model = res.apply(model)
+    listed = experiments if isinstance(experiments, (list, tuple)) else [experiments]  # as `fit` lists them
+    res.experiments = tuple(e.bind(model) for e in listed)
+    res.predictions = {name: {c: np.asarray(v, dtype=float) for c, v in channels.items()}
+                       for name, channels in predictions.items()}
+    return res
 
 
 def _start_model(space, values):

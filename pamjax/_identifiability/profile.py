@@ -285,12 +285,7 @@ class _Evaluator:
         self.jac = j
         dof = max(int(np.count_nonzero(np.any(j != 0, axis=1) | (r != 0))) - j.shape[1], 1)
         self.sigma2 = 2.0 * self.cost / dof
-
-    def residuals(self, theta):
-        return self.problem.residuals(theta)
-
-    def jacobian(self, theta):
-        return self.problem.jacobian(theta)
+        self.residuals, self.jacobian = self.problem.residuals, self.problem.jacobian  # θ → r; θ → (r, J)
 
 
 def _direction(space, theta, index):
@@ -374,21 +369,25 @@ def _not_a_minimum(jobs, done, space, labels, values):
             "result.paths))"]
 
 
-def _validate(result, names, experiments, level, max_points, span, workers):
+def _validate(result, names, experiments, level, max_points, span, max_steps, workers):
     require_float64("pamjax.profile_likelihood")
     if not isinstance(result, FitResult):
         raise PamjaxInputError(f"result must be a pamjax.FitResult, got {type(result)}")
     experiments = result.experiments if experiments is None else experiments
+    # read from JSON: neither experiments nor model (asking for the experiments alone led to a second refusal)
+    rebuild = "set its fitted model from the model the fit started from: result.model = result.apply(start_model)"
     if experiments is None:
         raise PamjaxInputError("experiments: this FitResult does not carry its experiments (it was read from JSON); "
-                               "pass the experiments it was fitted to")
+                               "pass the experiments it was fitted to" + (f", and {rebuild}" if result.model is None
+                                                                          else ""))
     experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
     if not experiments:
         raise PamjaxInputError("experiments must hold the experiments the fit was made of, got none")
     if not all(isinstance(e, AbstractExperiment) for e in experiments):
         raise PamjaxInputError(f"experiments must be pamjax experiments, got {[type(e).__name__ for e in experiments]}")
     if result.model is None:
-        raise PamjaxInputError("result has no fitted model (read from JSON): profile the FitResult `fit` returned")
+        raise PamjaxInputError(f"result has no fitted model (read from JSON): {rebuild}, or profile the FitResult "
+                               "`fit` returned")
     status = result.status
     if status not in PROFILED_STATUSES:
         raise PamjaxInputError(
@@ -403,14 +402,14 @@ def _validate(result, names, experiments, level, max_points, span, workers):
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise PamjaxInputError(f"names {twice} given more than once: name each fitted parameter once")
-    if not (isinstance(level, numbers.Real) and not isinstance(level, bool) and 0.0 < level < 1.0):
+    real = [isinstance(x, numbers.Real) and not isinstance(x, bool) for x in (level, span)]
+    if not (real[0] and 0.0 < level < 1.0):
         raise PamjaxInputError(f"level must be in (0, 1), a number (0.95: 95 %), got {level!r}")
-    if not (isinstance(max_points, int) and max_points >= 2):
-        raise PamjaxInputError(f"max_points must be an int >= 2, got {max_points!r}")
-    if not span > 0:
-        raise PamjaxInputError(f"span must be > 0 (in the fit's scaled coordinates), got {span!r}")
-    if not (isinstance(workers, int) and workers >= 1):
-        raise PamjaxInputError(f"workers must be an int >= 1, got {workers!r}")
+    if not (real[1] and 0.0 < span < math.inf):  # span="4" was a raw TypeError; inf steps to θ = inf
+        raise PamjaxInputError(f"span must be a finite number > 0 (in the fit's scaled coordinates), got {span!r}")
+    for key, value, least in (("max_points", max_points, 2), ("max_steps", max_steps, 1), ("workers", workers, 1)):
+        if not (isinstance(value, int | np.integer) and not isinstance(value, bool) and value >= least):
+            raise PamjaxInputError(f"{key} must be an int >= {least}, got {value!r}")  # np.int64(5) too
     return names, experiments
 
 
@@ -446,7 +445,7 @@ def profile_likelihood(
 
     **Returns:** a `ProfileResult` (`table()`, `plot(path)`, `to_json(path)`, `write(folder)`).
     """
-    names, experiments = _validate(result, names, experiments, level, max_points, span, workers)
+    names, experiments = _validate(result, names, experiments, level, max_points, span, max_steps, workers)
     say = _sayer(progress)
     t_start = time.perf_counter()
     space = ParameterSpace(result.model, result.paths)
@@ -454,8 +453,8 @@ def profile_likelihood(
     exps = tuple(e.bind(result.model) for e in experiments)
     ev = _Evaluator(space, exps, theta)
     threshold = chi2_quantile_1dof(level)
-    settings = dict(threshold=threshold, overshoot=1.5, max_points=max_points, span=float(span), first_step=0.6,
-                    max_steps=max_steps, ftol=1e-10, xtol=1e-10, gtol=1e-10)
+    settings = dict(threshold=threshold, overshoot=1.5, max_points=int(max_points), span=float(span), first_step=0.6,
+                    max_steps=int(max_steps), ftol=1e-10, xtol=1e-10, gtol=1e-10)
     cov = ev.sigma2 * np.linalg.pinv(ev.jac.T @ ev.jac)
     labels = list(space.labels)
     jobs = []
@@ -465,7 +464,7 @@ def profile_likelihood(
         loose = any(name in group for group in result.non_identifiable)  # linearised error infinite
         se_tau = math.inf if loose else math.sqrt(max(float(u @ cov @ u), 0.0))
         jobs += [(name, _Branch(ev, i, u, side, theta, ev.jac, se_tau, settings)) for side in (-1, 1)]
-    done = _walk_all(jobs, names, workers, say)
+    done = _walk_all(jobs, names, int(workers), say)
     warnings = _not_a_minimum(jobs, done, space, labels, result.values)
     z = math.sqrt(threshold)
     profiles = []
