@@ -30,7 +30,15 @@ from .._core.errors import PamjaxInputError
 from .._files.checkpoint import read_checkpoint, write_checkpoint
 from .._files.fingerprint import check_resume, fingerprint
 from .._files.model_file import FORMAT as MODEL_FORMAT, replace_text
-from .diagnostics import channel_errors, check_identifiability_tol, covariance, identifiability, mismatch
+from .diagnostics import (
+    channel_errors,
+    check_identifiability_tol,
+    covariance,
+    identifiability,
+    identifiability_notes,
+    mismatch,
+    stopped_at_bound,
+)
 from .experiment import AbstractExperiment, Experiments
 from .fit_checks import check_fit_inputs as check_fit_inputs, check_free, check_settings, validate_fit
 from .force_balance import weak_motion
@@ -61,8 +69,9 @@ class FitResult:
     """The outcome of `fit`. Physical values in SI units (F_max as a0…a4 [N/mⁱ], eq. 13 as m1…m9).
 
     - `labels`, `paths` (the `free` spec), `values`, `initial_values`, `standard_errors` (inf for parameters in a
-      non-identifiable combination or that the data do not see), `correlation` (matrix; NaN off the diagonal in the
-      rows and columns of those with an infinite standard error: their direction is left out, nothing to correlate).
+      non-identifiable combination, that the data do not see, or stopped at a bound of their range), `correlation`
+      (matrix; NaN off the diagonal in the rows and columns of those with an infinite standard error: their direction
+      is left out, nothing to correlate).
     - `cost` ½Σr² at the end (r = (model − data)/scale), `initial_cost`, `iterations` (trial steps),
       `accepted_steps`, `status` ('converged', 'at bound', 'stalled', 'max_steps'), `converged`, `message` (why it
       stopped).
@@ -405,8 +414,10 @@ def _result(model, exps, free, space, state, identifiability_tol, problem, warn=
                     "solver's precision, or a very flat valley)")
     jac, resid = statistics_jacobian(state, problem.jacobian)  # at a kink: a hair off it
     used = int(np.count_nonzero(np.any(jac != 0, axis=1) | (resid != 0)))
-    groups = identifiability(jac, labels, identifiability_tol)
-    bad = sorted({label for g in groups for label in g})
+    hit = space.at_bound(theta)
+    groups = identifiability(jac, labels, identifiability_tol, hit)
+    pinned = stopped_at_bound(jac, labels, identifiability_tol, hit)  # a flat transform there, not blind data
+    bad = sorted({label for g in groups for label in g} | set(pinned))
     values, g = problem.physical(theta)
     cov = g @ covariance(jac, state.cost, used, identifiability_tol) @ g.T
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
@@ -417,14 +428,9 @@ def _result(model, exps, free, space, state, identifiability_tol, problem, warn=
     undetermined = np.isinf(se)  # its covariance entries are those of a direction left out: no correlation to show
     corr[undetermined, :] = corr[:, undetermined] = np.nan
     np.fill_diagonal(corr, 1.0)
-    msgs = []
-    for grp in groups:
-        msg = (f"parameter {grp[0]} has no effect on the data" if len(grp) == 1
-               else "non-identifiable combination: " + ", ".join(grp) + " (only a combination of them is fixed by the "
-               "data; hold one of them fixed)")
-        msgs.append(msg)
-        if warn:
-            warnings.warn(msg, PamjaxIdentifiabilityWarning, stacklevel=3)
+    msgs = identifiability_notes(pinned, groups)
+    for msg in msgs if warn else []:
+        warnings.warn(msg, PamjaxIdentifiabilityWarning, stacklevel=3)
     fitted = space.with_values(np.asarray(values))
     r_all = problem.all_residuals(theta)
     errors = channel_errors(exps, r_all)
