@@ -20,7 +20,8 @@ predictions, their ±1.96 σ spread and the first fit's band) to `--out`; refuse
 
     python fits/band_check.py [--seeds 40] [--out results/band_check] [--overwrite] [--quick]
 
-`--quick`: 8 seeds, for a smoke run.
+`--quick`: 8 seeds (unless `--seeds` is given), for a smoke run. `--seeds` must be at least 2: the refits' spread
+is a standard deviation over seeds (one refit has none).
 """
 
 import argparse
@@ -35,7 +36,7 @@ import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
 from pamjax import presets  # noqa: E402
-from pamjax.gallery import json_text  # noqa: E402
+from pamjax.gallery import json_text, refuse_existing  # noqa: E402
 
 FREE = ["muscle.volume_law.v0", "muscle.force_law.k0", "friction.coulomb_force", "friction.viscous_coefficient",
         "valve.coefficients[1,0]"]
@@ -127,16 +128,16 @@ def plot(path, bands, truths):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=40)
+    parser.add_argument("--seeds", type=int, default=None, help="noise seeds, refits (default 40; 8 with --quick)")
     parser.add_argument("--out", default="results/band_check")
     parser.add_argument("--overwrite", action="store_true")
-    parser.add_argument("--quick", action="store_true", help="8 seeds (a smoke run)")
+    parser.add_argument("--quick", action="store_true", help="8 seeds unless --seeds is given (a smoke run)")
     args = parser.parse_args()
-    seeds = 8 if args.quick else args.seeds
+    seeds = args.seeds if args.seeds is not None else 8 if args.quick else 40
+    if seeds < 2:  # one refit gives a NaN spread (std with ddof=1), none a ValueError after the work
+        parser.error(f"--seeds must be at least 2 (the refits' spread is a standard deviation over seeds), got {seeds}")
     out = pathlib.Path(args.out)
-    for name in ("band_check.json", "band_check.png"):
-        if (out / name).exists() and not args.overwrite:
-            raise SystemExit(f"{out / name} exists; pass --overwrite to replace it")
+    refuse_existing("band_check.py", [out / "band_check.json", out / "band_check.png"], args.overwrite)
     out.mkdir(parents=True, exist_ok=True)
     truth = presets.mas10_system(valve="averaged")
     space = pj.ParameterSpace(truth, FREE)

@@ -58,18 +58,22 @@ def main():
     folder = pathlib.Path(args.out)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "derived_presets.json").write_text(json_text(derived, indent=2))
-    m = derived["mas10"]
+    m, d = derived["mas10"], derived["dmsp40"]
     rows = [
-        ("a0..a4", m["a"], presets.MAS10_MAX_FORCE_COEFFICIENTS),
-        ("k0", m["k0"], presets.MAS10_K0),
-        ("k1", m["k1"], presets.MAS10_K1),
-        ("v0", m["v0"], presets.MAS10_V0),
-        ("v1", m["v1"], presets.MAS10_V1),
-        ("m1..m9", derived["mas10_averaged_valve"], presets.MAS10_AVERAGED_VALVE),
+        ("MAS-10-300", "a0..a4", m["a"], presets.MAS10_MAX_FORCE_COEFFICIENTS),
+        ("MAS-10-300", "k0", m["k0"], presets.MAS10_K0),
+        ("MAS-10-300", "k1", m["k1"], presets.MAS10_K1),
+        ("MAS-10-300", "v0", m["v0"], presets.MAS10_V0),
+        ("MAS-10-300", "v1", m["v1"], presets.MAS10_V1),
+        ("MAS-10-300", "m1..m9", derived["mas10_averaged_valve"], presets.MAS10_AVERAGED_VALVE),
+        ("DMSP-40-400", "a0..a4", d["a"], presets.DMSP40_MAX_FORCE_COEFFICIENTS),
+        ("DMSP-40-400", "k0", d["k0"], presets.DMSP40_K0),
+        ("DMSP-40-400", "k1", d["k1"], presets.DMSP40_K1),
+        ("DMSP-40-400", "d,c,b,a", d["volume_cubic"], presets.DMSP40_VOLUME_CUBIC),  # volume cubic, ascending in ε
     ]
-    for name, got, preset in rows:
+    for muscle, name, got, preset in rows:
         rel = np.max(np.abs(np.subtract(got, preset)) / np.maximum(np.abs(preset), 1e-300))
-        print(f"{name:8s} max relative difference to presets.py: {rel:.1e}")
+        print(f"{muscle:11s} {name:8s} max relative difference to presets.py: {rel:.1e}")
     print("averaged valve fit:", derived["averaged_valve_fit"])
     print(f"wrote {folder / 'derived_presets.json'}")
 

@@ -54,12 +54,16 @@ def main():
     ap.add_argument("--overwrite", action="store_true", help="replace existing results in --out")
     args = ap.parse_args()
     data, out = pathlib.Path(args.data), pathlib.Path(args.out)
+    runs = ["E4"] if args.quick else ["E3", "E4"]
+    missing = [name for name in ("meta.json", *(f"{r}.npz" for r in runs)) if not (data / name).is_file()]
+    if missing:  # before --out is made (a missing folder left an empty one behind)
+        ap.error(f"--data {data} must be a bench directory holding meta.json and {', '.join(f'{r}.npz' for r in runs)}"
+                 f"; {', '.join(missing)} not found there")
     refuse_existing("friction_convergence.py", [out / "friction_convergence.json", out / "friction_convergence.png"],
                     args.overwrite)
     out.mkdir(parents=True, exist_ok=True)
     meta = json.loads((data / "meta.json").read_text())
     P, noise = meta["params"], meta["noise"]
-    runs = ["E4"] if args.quick else ["E3", "E4"]
     widths = [1e-2, 1e-3, 1e-4] if args.quick else [1e-2, 3e-3, 1e-3, 3e-4, 1e-4]
     stiffnesses = [1e4, 1e5] if args.quick else [1e4, 1e5, 1e6]
     rows = []

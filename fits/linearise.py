@@ -8,7 +8,8 @@ inputs, and gives the state space, the transfer functions, the static gains and 
   l/min ANR;
 - eq. 8, `FeedbackRegulator` with its default K1, K2 (same static gains; its own poles);
 - the physical `ISO6358Regulator` feeding the DMSP-40 with 893 N (any pamjax system linearises): the paper saw
-  slower dynamics with the muscle attached.
+  slower dynamics with the muscle attached. Above ~5.93 V its set pressure exceeds the 7 bar abs supply: the
+  outlet sits at the supply, the voltage no longer moves it, and that model is reported as saturated (no bandwidth).
 
 The eq. 5-7 result is cross-checked against python-control when it is installed. Writes `linearise.json` and the
 Bode diagram `linearise.png` to `--out`; refuses to overwrite existing results unless `--overwrite`.
@@ -21,13 +22,14 @@ import pathlib
 import sys
 import time
 
+import equinox as eqx
 import jax
 
 jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
-from pamjax.gallery import json_text  # noqa: E402
+from pamjax.gallery import json_text, refuse_existing  # noqa: E402
 from pamjax.gallery.procedures.linearised import describe, flow_input  # noqa: E402
 from pamjax.units import BAR  # noqa: E402
 
@@ -72,7 +74,51 @@ def control_cross_check(ss):
     )
 
 
-def plot(models, path):
+def muscle_guess(muscle, u):
+    """The equilibrium guess of the regulator feeding the muscle at `u` [V]: its pilot pair at the set pressure,
+    the outlet (and the muscle) at the set pressure or, above ~5.93 V (a set pressure over the 7 bar abs supply),
+    at the supply, where the outlet saturates. A guess with the outlet at a set pressure above the supply (or the
+    pilot pair clipped to the supply with it) made Newton's method fail (`PamjaxSolveError`)."""
+    p_set = muscle.air.atmospheric_pressure + muscle.regulator.calibration(u)
+    outlet = jax.numpy.minimum(p_set, muscle.regulator.supply_pressure)
+    guess = muscle.initial_state(pressure=outlet)  # load equilibrium at that pressure
+    return eqx.tree_at(lambda s: (s.regulator.pilot, s.regulator.pilot_output), guess, (p_set, p_set))
+
+
+def describe_saturated(ss, set_pressure, supply):
+    """`describe` of the muscle model where the set pressure is at or above the supply: the outlet sits at the
+    supply, the voltage no longer moves it (static gain ~0), so the voltage channel has no bandwidth."""
+    return dict(
+        saturated=True,
+        set_pressure_Pa=set_pressure,
+        supply_pressure_Pa=supply,
+        state_names=list(ss.state_names),
+        A=ss.A.tolist(),
+        B=ss.B.tolist(),
+        poles_per_s=[[float(p.real), float(p.imag)] for p in ss.poles()],
+        voltage_gain_bar_per_V=ss.dc_gain("pressure", "command") / BAR,
+        bandwidth_Hz=None,
+    )
+
+
+def linearise_all(u):
+    """eq. 5-7, eq. 8 and the ISO 6358 regulator + DMSP-40 linearised at `u` [V]; the last one's report."""
+    inputs = {"outlet_flow": flow_input}
+    linear = pj.RegulatorSystem(pj.LinearRegulator(), volume=0.0)  # closed port (eq. 6 identification set-up)
+    ss = pj.linearise(linear, pj.equilibrium(linear, u, linear.initial_state()), u, inputs=inputs)
+    feedback = pj.RegulatorSystem(pj.FeedbackRegulator(), volume=0.0)
+    ss8 = pj.linearise(feedback, pj.equilibrium(feedback, u, feedback.initial_state()), u, inputs=inputs)
+    muscle = pj.RegulatedMuscleSystem(pj.ISO6358Regulator(), pj.presets.dmsp40_muscle())
+    guess = jax.jit(lambda v: muscle_guess(muscle, v))(u)
+    ss_m = pj.linearise(muscle, pj.equilibrium(muscle, u, guess), u, outputs=("pressure", "position"))
+    set_pressure = float(muscle.air.atmospheric_pressure + muscle.regulator.calibration(u))
+    supply = float(muscle.regulator.supply_pressure)
+    report = (describe_saturated(ss_m, set_pressure, supply) if set_pressure >= supply
+              else describe(ss_m, flow=False))
+    return ss, ss8, ss_m, report
+
+
+def plot(models, path, volts):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -92,11 +138,12 @@ def plot(models, path):
         mag.semilogx(FREQUENCIES, m - g0, style, color=colour, label=f"{label}: {bandwidth:.2f} Hz")
         ph.semilogx(FREQUENCIES, p, style, color=colour)
     mag.axhline(-3.0, color="k", lw=0.6)
-    mag.set(ylabel="|P_out/V_ref| / static gain [dB]", ylim=(-50, 5), title="Regulator linearised at 3 V (paper 001)")
+    title = f"Regulator linearised at {volts:g} V (paper 001: 3 V)"
+    mag.set(ylabel="|P_out/V_ref| / static gain [dB]", ylim=(-50, 5), title=title)
     mag.legend(fontsize=8, loc="lower left")
     ph.set(xlabel="f [Hz]", ylabel="phase [deg]")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=120, metadata={"Title": title})  # the title also as the PNG's text, for a reader
     plt.close(fig)
 
 
@@ -108,36 +155,31 @@ def main(argv=None):
     args = ap.parse_args(argv)
     out = pathlib.Path(args.out)
     path = out / "linearise.json"
-    if path.exists() and not args.overwrite:
-        raise SystemExit(f"{path} exists; pass --overwrite")
-    start = time.perf_counter()
     u = args.voltage
     lo, hi = pj.presets.VPPM_VOLTAGE_RANGE
-    if not lo <= u <= hi:
-        raise SystemExit(f"--voltage must be within the VPPM's {lo:g}-{hi:g} V, got {u}")
-    inputs = {"outlet_flow": flow_input}
-
-    linear = pj.RegulatorSystem(pj.LinearRegulator(), volume=0.0)  # closed port (eq. 6 identification set-up)
-    ss = pj.linearise(linear, pj.equilibrium(linear, u, linear.initial_state()), u, inputs=inputs)
-    feedback = pj.RegulatorSystem(pj.FeedbackRegulator(), volume=0.0)
-    ss8 = pj.linearise(feedback, pj.equilibrium(feedback, u, feedback.initial_state()), u, inputs=inputs)
-    muscle = pj.RegulatedMuscleSystem(pj.ISO6358Regulator(), pj.presets.dmsp40_muscle())
-    p_set = muscle.air.atmospheric_pressure + muscle.regulator.calibration(u)
-    guess = jax.jit(lambda p: muscle.initial_state(pressure=p))(p_set)  # load equilibrium at the set pressure
-    ss_m = pj.linearise(muscle, pj.equilibrium(muscle, u, guess), u, outputs=("pressure", "position"))
+    if not lo <= u <= hi:  # also refuses nan
+        ap.error(f"--voltage must be within the VPPM's {lo:g}-{hi:g} V, got {u}")
+    refuse_existing("linearise.py", [path, out / "linearise.png"], args.overwrite)
+    start = time.perf_counter()
+    try:
+        ss, ss8, ss_m, muscle_report = linearise_all(u)
+    except pj.PamjaxSolveError as err:
+        raise SystemExit(f"linearise.py: no operating point at --voltage {u:g}: {err}") from None
+    saturated = muscle_report.get("saturated", False)
+    bode_models = [("eq5_7", ss), ("eq8", ss8)] + ([] if saturated else [("iso6358_muscle", ss_m)])
 
     report = dict(
         paper=PAPER,
         operating_point_V=u,
         eq5_7=describe(ss),
         eq8=describe(ss8),
-        iso6358_muscle=describe(ss_m, flow=False),
+        iso6358_muscle=muscle_report,
         python_control=control_cross_check(ss),
         bode=dict(
             frequency_Hz=FREQUENCIES.tolist(),
             **{
                 f"{name}_{k}": v.tolist()
-                for name, model in (("eq5_7", ss), ("eq8", ss8), ("iso6358_muscle", ss_m))
+                for name, model in bode_models
                 for k, v in zip(("magnitude_dB", "phase_deg"), model.bode(FREQUENCIES, "pressure", "command"))
             },
         ),
@@ -157,6 +199,12 @@ def main(argv=None):
     for name, label in (("eq8", "eq. 8 (FeedbackRegulator)"), ("iso6358_muscle", "ISO6358Regulator + DMSP-40")):
         r = report[name]
         poles = ", ".join(f"{complex(*p):.3g}" for p in r["poles_per_s"])
+        if r.get("saturated"):
+            print(f"{label}: saturated: the set pressure {r['set_pressure_Pa'] / BAR:.3f} bar abs is at or above the "
+                  f"{r['supply_pressure_Pa'] / BAR:g} bar abs supply, the outlet sits at the supply and the voltage "
+                  f"does not move it ({r['voltage_gain_bar_per_V']:.3g} bar/V, no bandwidth; not in the figure); "
+                  f"poles {poles}")
+            continue
         print(f"{label}: bandwidth {r['bandwidth_Hz']:.3f} Hz, {r['voltage_gain_bar_per_V']:.4f} bar/V, poles {poles}")
     c = report["python_control"]
     if c is None:
@@ -170,14 +218,9 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     path.write_text(json_text(report, indent=1))
     try:
-        plot(
-            {
-                "eq5_7": (ss, "eq. 5-7, closed port"),
-                "eq8": (ss8, "eq. 8, default K1, K2"),
-                "iso6358_muscle": (ss_m, "ISO 6358 regulator + DMSP-40, 893 N"),
-            },
-            out / "linearise.png",
-        )
+        labels = {"eq5_7": "eq. 5-7, closed port", "eq8": "eq. 8, default K1, K2",
+                  "iso6358_muscle": "ISO 6358 regulator + DMSP-40, 893 N"}
+        plot({name: (model, labels[name]) for name, model in bode_models}, out / "linearise.png", u)
     except ImportError:
         print("matplotlib not installed: no figure")
     print(f"wrote {path} ({report['wall_time_s']:.1f} s)")

@@ -14,7 +14,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
-from pamjax.gallery import json_text  # noqa: E402
+from pamjax.gallery import json_text, refuse_existing  # noqa: E402
 from pamjax.gallery.procedures.regulator import (  # noqa: E402, F401  (the procedures; this file is their command line)
     B_BOUNDS,
     NOISE_TANK,
@@ -39,8 +39,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     out = pathlib.Path(args.out)
     path = out / "regulator_fit.json"
-    if path.exists() and not args.overwrite:
-        raise SystemExit(f"{path} exists; pass --overwrite")
+    refuse_existing("regulator.py", [path, out / "g_vref_fit.png"], args.overwrite)  # the figure alone too
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(0)
     report = fit_tables(rng, args.quick)

@@ -17,6 +17,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
+from pamjax.gallery import refuse_existing  # noqa: E402
 from pamjax.gallery.procedures.force_map import (  # noqa: E402
     AUTHORS_MAX_ERROR_PERCENT,
     L0,
@@ -30,6 +31,7 @@ def report(name, res):
     e = res.channel_errors["force_map"]["force"]
     print(f"{name}: RMSE {e['rmse']:.2f} N ({e['rmse_percent']:.2f} % of range), max error {e['max_error']:.2f} N "
           f"({e['max_error_percent']:.2f} % of range; authors' model: < {AUTHORS_MAX_ERROR_PERCENT} %)")
+    print(f"  fit status: {res.status}" + ("" if res.converged else f" (warning: {res.message})"))
     print(res.table())
 
 
@@ -72,6 +74,10 @@ def main():
     ap.add_argument("--overwrite", action="store_true")
     args = ap.parse_args()
     out = pathlib.Path(args.out)
+    # all three up front: pj.fit refuses its own `out` only when it gets there, after the fits before it were
+    # written (a rerun left a new fit_eq7.json beside an old fit_eq6.json and figure)
+    refuse_existing("static_force.py", [out / "fit_eq7.json", out / "fit_eq6.json", out / "static_force.png"],
+                    args.overwrite)
 
     x, p, f = load_map()
     experiment = pj.bench.ForceMapExperiment(x, p, f, scale=1.0)  # residuals in N

@@ -15,8 +15,9 @@ import time
 import jax
 
 jax.config.update("jax_enable_x64", True)
+import numpy as np  # noqa: E402
 
-from pamjax.gallery import json_text  # noqa: E402
+from pamjax.gallery import json_text, refuse_existing  # noqa: E402
 from pamjax.gallery.procedures.stiffness import PAPER, RATE, plot, run, summarise  # noqa: E402,F401
 
 
@@ -28,10 +29,13 @@ def main(argv=None):
     args = ap.parse_args(argv)
     out = pathlib.Path(args.out)
     path = out / "stiffness.json"
-    if path.exists() and not args.overwrite:
-        raise SystemExit(f"{path} exists; pass --overwrite")
-    if not args.duration > 0:
-        raise SystemExit(f"--duration must be > 0 s, got {args.duration}")
+    # ten saving intervals at least: eq. 10 is compared with central differences away from the regulator's switching
+    # instants, and a run of a few samples (4 ms) has none of them (a raw ValueError after the solve before)
+    shortest = 10.0 / RATE
+    if not (np.isfinite(args.duration) and args.duration >= shortest):
+        ap.error(f"--duration must be a finite number >= {shortest:g} s (ten sampling intervals at {RATE:g} Hz), "
+                 f"got {args.duration:g}")
+    refuse_existing("stiffness.py", [path, out / "stiffness.png"], args.overwrite)
     start = time.perf_counter()
     r = run(args.duration)
     report = summarise(r)

@@ -21,7 +21,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import pamjax as pj  # noqa: E402
-from pamjax.gallery import bench_folder, json_text  # noqa: E402
+from pamjax.gallery import bench_folder, json_text, refuse_existing  # noqa: E402
 from pamjax.gallery.procedures.bench import tank_model  # noqa: E402
 
 TABLE_1 = {"valve.inflate.discharge_coefficient": 0.36, "valve.inflate.critical_ratio": 0.28,
@@ -30,6 +30,19 @@ FREE = list(TABLE_1)
 NOISE = 2e3  # Pa: the bench's pressure noise (meta.json "noise")
 DUTIES = (0.25, 0.50, 0.75)
 
+
+def check_rate(ap, rate, horizon, bench):
+    """`--rate` [Hz]: finite, giving at least two samples per run (a solve starts at the first), and for the bench's
+    recordings at most their own rate (resampling only decimates); `ap.error` (exit status 2) otherwise."""
+    if not (np.isfinite(rate) and rate * horizon >= 1.0):
+        ap.error(f"--rate must be a finite number >= {1.0 / horizon:g} Hz (at least two samples in each {horizon:g} s "
+                 f"run), got {rate:g}")
+    if bench is not None:
+        t = pj.Recording.load(bench / "E1_u0.25.npz").t
+        own = 1.0 / float(np.min(np.diff(t)))
+        if rate > own * (1 + 1e-9):
+            ap.error(f"--rate must be at most the bench recordings' own {own:.6g} Hz (resampling decimates), "
+                     f"got {rate:g}")
 
 
 def main():
@@ -43,9 +56,12 @@ def main():
     args = ap.parse_args()
     out = pathlib.Path(args.out or f"results/valve_tank_{args.data}")
     bench = bench_folder()
+    horizon = 0.5 if args.quick else 2.0
+    check_rate(ap, args.rate, horizon, bench if args.data == "bench" else None)
+    # all three up front: pj.fit refuses fit.json only after the recordings are made, and not the other two
+    refuse_existing("valve_tank.py", [out / "fit.json", out / "summary.json", out / "valve_tank.png"], args.overwrite)
     P = json.loads((bench / "meta.json").read_text())["params"]
     truth = tank_model(P, *TABLE_1.values())
-    horizon = 0.5 if args.quick else 2.0
     ts = np.arange(0.0, horizon + 1e-9, 1.0 / args.rate)
 
     experiments = []

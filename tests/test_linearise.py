@@ -44,6 +44,16 @@ def test_eq6_bandwidth_and_eq7_static_gain(regulator_model):
     np.testing.assert_allclose(ss.frequency_response(f, 0, 0) / BAR, _eq6(f), rtol=1e-10)
 
 
+@pytest.mark.parametrize("volts", [0.0, 10.0])
+def test_the_voltage_gain_at_the_calibration_ends_is_eq6s(volts):
+    # Was: 0.505 bar/V at exactly 0 V and 10 V (the calibration held its ends with jnp.clip, whose derivative at a
+    # bound is 1/2), 1.01 everywhere else.
+    system = RegulatorSystem(LinearRegulator(), volume=0.0)
+    y = system.initial_state(pressure=system.air.atmospheric_pressure + volts * 1.01 * BAR)
+    ss = linearise(system, y, volts, inputs={"outlet_flow": lambda s: s.outlet_flow})
+    assert ss.dc_gain("pressure", "command") / BAR == pytest.approx(1.01, rel=1e-12)
+
+
 def test_transfer_function_coefficients(regulator_model):
     num, den = regulator_model.transfer_function("pressure", "command")
     # eq. 6: 1.01/(τ1τ2 s² + (τ1+τ2) s + 1), normalised to a monic denominator

@@ -56,6 +56,23 @@ def test_pchip_matches_scipy_and_stays_within_each_interval(table, column):
     assert float(_pchip(x, y, np.asarray(x[-1] + 1.0))) == pytest.approx(y[-1])
 
 
+def test_pchip_slope_at_the_table_ends_is_the_interior_one():
+    # Was: `jnp.clip` held the end values, and JAX's derivative of clip AT a bound is 1/2: the calibration's gain at
+    # exactly 0 V and 10 V was 0.505 bar/V instead of 1.01 (pj.linearise of LinearRegulator halved its static gain).
+    x = np.asarray(PAPER001_CHARGING_TABLE["upstream_pressure_bar"]) * 1e5
+    y = np.asarray(PAPER001_CHARGING_TABLE["sonic_conductance_m3_per_s_bar"])
+    slope = jax.jit(jax.vmap(jax.grad(pchip, argnums=2), in_axes=(None, None, 0)))
+    h = 1e-4 * (x[1] - x[0])
+    for end, inward in ((x[0], h), (x[-1], -h)):
+        one_sided = (float(_pchip(x, y, np.asarray(end + inward))) - float(_pchip(x, y, np.asarray(end)))) / inward
+        assert float(slope(x, y, np.asarray([end]))[0]) == pytest.approx(one_sided, rel=1e-3)
+    assert np.all(np.asarray(slope(x, y, np.asarray([x[0] - 1.0, x[-1] + 1.0]))) == 0.0)  # held beyond the ends
+    calibration = VoltageCalibration()
+    for part in (calibration, calibration.prepared()):
+        gains = jax.jit(jax.vmap(jax.grad(part)))(np.asarray([0.0, 5.0, 10.0]))
+        np.testing.assert_allclose(np.asarray(gains) / 1e5, 1.01, rtol=1e-12)
+
+
 def _eq13_reference(c_si, b, p_in, p_out, temperature):
     """Paper 001 eq. 13-14 (ratio form), NumPy: mass flow = ρ0 C p_in sqrt(T0/T) φ."""
     r = p_out / p_in

@@ -90,7 +90,11 @@ def pchip_table(x, y):
 def pchip_at(table, xq):
     """The interpolant of `pchip_table` at `xq`; end values held outside [x₀, x_n]."""
     knots = table[0]
-    xq = jnp.clip(xq, knots[0], table[1, -1])
+    lo, hi = knots[0], table[1, -1]
+    # not jnp.clip: its derivative AT a bound is 1/2 (JAX splits a tie of max/min), which halved a calibration's gain
+    # at exactly 0 V and 10 V (pj.linearise: 0.505 instead of 1.01 bar/V). At the table's ends the one-sided
+    # (interior) slope is the interpolant's own; beyond them the held end value has slope 0.
+    xq = jnp.where(xq < lo, lo, jnp.where(xq > hi, hi, xq))
     if knots.shape[0] <= _COMPARE_ALL_ROWS:  # the interval [x_i, x_i+1) holding xq (the last one closed)
         i = jnp.sum(knots[1:] <= jnp.expand_dims(xq, -1), axis=-1)
     else:

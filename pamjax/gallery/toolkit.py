@@ -249,4 +249,5 @@ def refuse_existing(script, paths, overwrite):
     `overwrite` is not set: a --quick or trial run must not replace a full run's results."""
     existing = [str(path) for path in paths if pathlib.Path(path).exists()]
     if existing and not overwrite:
-        raise SystemExit(f"{script}: {', '.join(existing)} exist; pass --overwrite to replace them (or another --out)")
+        it, verb = ("it", "exists") if len(existing) == 1 else ("them", "exist")
+        raise SystemExit(f"{script}: {', '.join(existing)} {verb}; pass --overwrite to replace {it} (or another --out)")
