@@ -11,7 +11,14 @@ from scipy.integrate import solve_ivp
 
 import pamjax
 from pamjax import presets
-from pamjax._solve.rodas import rodas5_step, rodas5_step_unrolled, small_inverse, small_inverse_lanes
+from pamjax._solve.fixed_step import RODAS5A_DEFECT_ALLOWANCE
+from pamjax._solve.rodas import (
+    rodas5_step,
+    rodas5_step_defect,
+    rodas5_step_unrolled,
+    small_inverse,
+    small_inverse_lanes,
+)
 from pamjax._solve.simulate import solve
 
 
@@ -93,6 +100,33 @@ def test_unrolled_stages_are_the_same_step_as_the_stage_loop(van_der_pol_referen
         errors.append(np.max(np.abs(unrolled[0] - van_der_pol_reference.y[:, -1])))
     ratios = np.asarray(errors[:-1]) / np.asarray(errors[1:])
     assert np.all(ratios > 24.0), (errors, ratios)
+
+
+def _braking_into_stick(t, z):
+    """A payload braking into stick under a smooth Coulomb sign (x, v; c = 1.7 m/s², width 1 mm/s: ~1,700 /s in the
+    band, as paper 000's F_c / (w M)), forced below the friction level."""
+    return jnp.stack([z[1], 0.5 * jnp.sin(3.0 * t) - 1.7 * jnp.tanh(z[1] / 1e-3) - 0.3 * z[0]])
+
+
+_defect_step = jax.jit(lambda z, h: rodas5_step_defect(_braking_into_stick, 0.0, z, h))
+
+
+def test_the_defect_sees_a_step_into_stiffness_that_the_embedded_estimate_passes():
+    # From v = 10 mm/s (sliding: the Jacobian has none of the band's stiffness) a 17 ms step crosses into the band.
+    # RODAS5's last three stages, all at the step's end, settle on the same wrong velocity, so its embedded estimate
+    # passes at rtol = atol = 1e-5 while the step is > 1,000x that off; the filtered midpoint defect is > 1,000x too.
+    # A resolved step (2 ms) has both small. Reference: SciPy's Radau at rtol 1e-13.
+    z0 = np.array([0.0, 0.01])
+    for h, bad in ((0.017, True), (0.002, False)):
+        z1, error, defect = (np.asarray(a) for a in _defect_step(z0, h))
+        exact = solve_ivp(lambda t, z: np.asarray(_braking_into_stick(t, z)), (0.0, h), z0, method="Radau",
+                          rtol=1e-13, atol=1e-15).y[:, -1]
+        scale = 1e-5 * (1.0 + np.maximum(np.abs(z0), np.abs(z1)))
+        rms = lambda v: float(np.sqrt(np.mean((v / scale) ** 2)))  # noqa: E731
+        if bad:
+            assert rms(error) < 1.0 and rms(z1 - exact) > 1e3 and rms(defect) > 1e2 * RODAS5A_DEFECT_ALLOWANCE
+        else:
+            assert rms(z1 - exact) < 1e-2 and rms(error) < 1e-2 and rms(defect) < 1e-2 * RODAS5A_DEFECT_ALLOWANCE
 
 
 # `small_inverse` jitted (as the solver runs it): eagerly, its gather-based elimination compiles dozens of one-operation

@@ -169,6 +169,37 @@ def rodas5_step_unrolled(f, t0, z0, h, inverse=small_inverse_lanes):
     kernels per stage (dynamic slices, small batched products, a copy of the buffer): a 1,024-lane sweep took
     1.6x as long (docs/performance.md). Costs the field traced seven more times (compilation: the 1,024-lane
     sweep's first call ~1 s longer)."""
+    z1, error, f0, _, _ = _unrolled_stages(f, t0, z0, h, inverse)
+    return z1, error, f0
+
+
+def rodas5_step_defect(f, t0, z0, h, inverse=small_inverse_lanes):
+    """`rodas5_step_unrolled` with a second error estimate: (z1, local error estimate, filtered defect).
+
+    The defect is the residual of the step's continuous solution at its midpoint tₘ = t0 + h/2, d = u'(tₘ) −
+    f(tₘ, u(tₘ)), u the cubic Hermite through (z0, f(t0, z0)) and (z1, f(t0 + h, ẑ1)) (ẑ1 the embedded solution,
+    whose field value the last stage computes: one more field evaluation per step, at tₘ). It enters the local error
+    as e' = J e + d does: the estimate is h (I − hγJ)⁻¹ d = W⁻¹ d / γ with the step's own W⁻¹, so a component stiff
+    over the step (a sticking payload, λ ≈ 1,700 /s) weighs d / |λ|, not h d (as RADAU5 filters its estimate,
+    Hairer & Wanner II, IV.8; unfiltered, the creeping payload's cubic midpoint held the MAS-10 map's steps back:
+    its slowest lane 143 iterations against 128 at the same allowance, 126 without the check).
+    Residual control is what SciML's OrdinaryDiffEq.jl (issue #2054) proposes for stiffly accurate Rosenbrock
+    methods, whose embedded estimate cannot see it.
+
+    Why RODAS5 needs it: its embedded estimate k₈ comes from the last of three stages, all at t0 + h. A component
+    that turns stiff inside the step (the payload through the friction's 1 mm/s band at a velocity reversal,
+    ~1,700 /s, where the Jacobian at the sliding start has none of it) is pulled by those stages onto the same
+    wrong quasi-steady value, so they agree and k₈ is small: on the averaged MAS-10 under a sine, a 12.5 ms step
+    with k₈ at 0.86 of the tolerance was 4,000x it off (the lane 64.5 µm off a tight `simulate`, status 0). The
+    Hermite's midpoint falls between the wrong end and the right start, where the field is far from u'."""
+    z1, error, f0, f_end, w_inverse = _unrolled_stages(f, t0, z0, h, inverse)
+    u = 0.5 * (z0 + z1) + (0.125 * h) * (f0 - f_end)
+    du = (1.5 / h) * (z1 - z0) - 0.25 * (f0 + f_end)
+    return z1, error, w_inverse @ (du - f(t0 + 0.5 * h, u)) / _GAMMA
+
+
+def _unrolled_stages(f, t0, z0, h, inverse):
+    """The unrolled step: (z1, error estimate k₈, f(t0, z0), f(t0 + h, ẑ1) (ẑ1 = z1 − k₈), W⁻¹)."""
     f0, f_t, jac_z = _jacobian_columns(f, t0, z0)
     inv_h = 1.0 / h
     w_inverse = inverse(jnp.eye(z0.shape[0], dtype=z0.dtype) * (inv_h / _GAMMA) - jac_z)
@@ -185,5 +216,6 @@ def rodas5_step_unrolled(f, t0, z0, h, inverse=small_inverse_lanes):
     z = z0 + sum(_A[5, j] * ks[j] for j in range(5)) + ks[5]
     ks.append(stage(f(t0 + h, z), 6, ks))
     z = z + ks[6]  # the embedded order-4 solution
-    ks.append(stage(f(t0 + h, z), 7, ks))
-    return z + ks[7], ks[7], f0
+    f_end = f(t0 + h, z)
+    ks.append(stage(f_end, 7, ks))
+    return z + ks[7], ks[7], f0, f_end, w_inverse
