@@ -190,3 +190,40 @@ def test_a_gas_constant_or_discharge_coefficient_in_other_units_is_refused(make,
         make()
     pamjax.Air(gas_constant=4124.0)  # hydrogen
     pamjax.EllipseRestriction(1.0, 0.28)  # an ideal orifice
+
+
+@pytest.mark.parametrize("make, match", [
+    (lambda: pamjax.EllipseRestriction(0.36, 0.5, 3.14e-6, laminar_ratio=0.3), r"EllipseRestriction\.laminar_ratio "
+     r"\(0\.3\) must exceed the critical ratio, EllipseRestriction\.critical_ratio \(0\.5\)"),
+    (lambda: pamjax.ISO6358Restriction(7e-9, 0.9999995), r"ISO6358Restriction\.laminar_ratio \(0\.999\) must "
+     r"exceed the critical ratio, ISO6358Restriction\.critical_ratio \(0\.9999995\)"),
+    (lambda: pamjax.NozzleRestriction(0.8, 3.14e-6, laminar_ratio=0.5), r"NozzleRestriction\.laminar_ratio \(0\.5\) "
+     r"must exceed the critical ratio, the nozzle's"),
+    (lambda: pamjax.NozzleRestriction(36.0, 3.14e-6), r"flow_coefficient must lie in \(0, 1\].*got 36; .*percent"),
+    (lambda: pamjax.NozzleRestriction(5.0, 3.14e-6), r"flow_coefficient must lie in \(0, 1\].*got 5"),
+])
+def test_a_laminar_ratio_below_the_critical_ratio_or_a_nozzle_coefficient_above_1_is_refused(make, match):
+    # laminar_ratio <= b was silently replaced by b + 1e-6 (the subsonic ellipse became a straight line), and b above
+    # 1 - 1e-6 lost the laminar branch (slope 0 at equal pressures); a nozzle's C_q of 36 (percent) ran 45x the flow
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        make()
+
+
+def test_a_traced_critical_ratio_near_1_keeps_the_laminar_branch():
+    # a fit may move b where the constructor cannot check it: the branch must still exist (it vanished above
+    # b = 1 - 1e-6 and jax.grad at equal pressures was 0 where finite differences give -0.023 kg/(s Pa))
+    @jax.jit  # b traced, as in a fit (a concrete b this close to 1 is refused: the test above)
+    def flow(p2, b):
+        return pamjax.EllipseRestriction(0.36, b, 3.14e-6).mass_flow(6e5, p2, AIR)
+
+    slope = float(jax.grad(flow)(6e5, 0.9999995))
+    fd = (float(flow(6e5 + 0.01, 0.9999995)) - float(flow(6e5 - 0.01, 0.9999995))) / 0.02
+    assert slope < 0 and slope == pytest.approx(fd, rel=1e-3)
+
+
+@pytest.mark.parametrize("restriction", [INFLATE, ISO, NOZZLE], ids=["ellipse", "iso6358", "nozzle"])
+def test_equal_pressures_below_one_pascal_give_no_flow(restriction):
+    # the ratio was p_down / max(p_up, 1 Pa): at 0.5 Pa on both ports 0.5, a flow with no pressure difference whose
+    # sign flipped across p1 = p2
+    assert float(restriction.mass_flow(0.5, 0.5, AIR)) == 0.0
+    assert float(restriction.mass_flow(0.5, 0.5000001, AIR)) < 0.0 < float(restriction.mass_flow(0.5000001, 0.5, AIR))

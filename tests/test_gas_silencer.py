@@ -65,3 +65,27 @@ def test_bad_input_is_named():
         presets.mas10_valve(silencer="U-M7")
     with pytest.raises(pj.PamjaxInputError, match="permeance"):
         pj.PorousRestriction(-1.0)
+
+
+def test_series_restriction_is_elementwise_in_the_pressures():
+    # the intermediate pressure's Newton step took jax.grad of an elementwise residual: arrays of pressures raised
+    # "Gradient only defined for scalar-output functions", while every other restriction is elementwise
+    valve = presets.mas10_valve(silencer=True)
+    p = np.array([6.5e5, 3e5, 1.5e5])
+    flows = np.asarray(valve.exhaust.mass_flow(p, P_ATM, AIR))
+    np.testing.assert_allclose(flows, [float(valve.exhaust.mass_flow(q, P_ATM, AIR)) for q in p], rtol=1e-12)
+    assert np.asarray(valve.mass_flow_at_opening(0.0, p, AIR)).shape == (3,)
+
+
+@pytest.mark.parametrize("make, match", [
+    (lambda port: pj.SeriesRestriction(port, "silencer"), r"SeriesRestriction\.second must be an AbstractRestriction"),
+    (lambda port: pj.SeriesRestriction(None, port), r"SeriesRestriction\.first must be an AbstractRestriction"),
+    # 0 halvings gave the flow the wrong sign, 1 a flow 13 times too large
+    (lambda port: pj.SeriesRestriction(port, presets.mas10_silencer(), iterations=0), r"iterations must be an int of "
+     r"at least 50"),
+    (lambda port: pj.SeriesRestriction(port, presets.mas10_silencer(), iterations=10), r"iterations must be at least "
+     r"50, got 10: fewer halvings leave the intermediate pressure unconverged"),
+])
+def test_series_restriction_refuses_a_part_that_is_no_restriction_or_too_few_iterations(make, match):
+    with pytest.raises(pj.PamjaxInputError, match=match):
+        make(pj.EllipseRestriction(0.39, 0.49, 3.14e-6))

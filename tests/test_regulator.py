@@ -296,3 +296,13 @@ def test_a_regulator_volume_in_litres_a_nan_outlet_flow_or_a_missing_part_is_nam
     with pytest.raises(pamjax.PamjaxInputError, match=match):
         build()
     assert float(pamjax.vppm_regulator().internal_volume) == pytest.approx(2.06e-4, rel=0.01)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(charging=7e-9), r"ISO6358Regulator\.charging must be an AbstractRestriction .*got float"),
+    (dict(discharging=None), r"ISO6358Regulator\.discharging must be an AbstractRestriction .*got NoneType"),
+])
+def test_iso6358_regulator_refuses_a_path_that_is_no_restriction(kwargs, match):
+    # a sonic conductance where the charging restriction belongs: accepted, then a raw AttributeError in the solve
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        pamjax.ISO6358Regulator(**kwargs)

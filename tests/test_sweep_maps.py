@@ -177,3 +177,9 @@ def test_steady_state_map_refuses_its_own_axis_in_over_and_a_reduce():
         steady_state_map(system, [0.2, 0.5], horizon=1.0, window=0.5, over={"signal.value": [0.9, 0.9]})
     with pytest.raises(pamjax.PamjaxInputError, match=r"steady_state_map takes no reduce"):
         steady_state_map(system, [0.5], horizon=1.0, window=0.5, reduce=pamjax.FinalValue())
+
+
+def test_flow_surface_refuses_pressures_in_bar():
+    # pressures=[2.0, 3.0] (bar) mapped a chamber at 2 and 3 Pa abs; fit_averaged_valve refused the same grid
+    with pytest.raises(pamjax.PamjaxInputError, match=r"pressures is 3 Pa at most: that looks like bar"):
+        pamjax.flow_surface(presets.mas10_valve(), [0.25, 0.5], [2.0, 3.0], pamjax.Air())

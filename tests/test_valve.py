@@ -262,3 +262,55 @@ def test_a_zero_length_pulse_switches_nothing_with_zero_delays():
         np.testing.assert_array_equal(np.asarray(_openings(valve, ts, np.asarray(1.0))), 1.0)
     edges, _ = presets.mas10_valve("exact", switch_on_delay=0.0).edge_schedule(pamjax.Constant(0.0), 0.0, 0.1)
     assert edges.size == 0
+
+
+def test_cycle_averaged_flow_is_elementwise_in_duty_and_pressure():
+    # jnp.mean over every axis: an array of pressures or duties returned ONE number, the mean of the right ones
+    p, u = np.array([1.5e5, 3e5, 6e5]), np.array([0.25, 0.5, 0.75])
+    flows = np.asarray(_cycle_averaged_flow(SMOOTH, u[:, None], p[None, :], AIR, samples=200))
+    assert flows.shape == (3, 3)
+    each = [[float(_cycle_averaged_flow(SMOOTH, np.asarray(ui), np.asarray(pi), AIR, samples=200)) for pi in p]
+            for ui in u]
+    np.testing.assert_allclose(flows, each, rtol=1e-12)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(command=50.0), r"command must lie in \[0\.0, 1\.0\] .*got \[50\.\]; that looks like percent"),
+    (dict(command=-0.5), r"command must lie in \[0\.0, 1\.0\]"),
+    (dict(pressure=3.0), r"pressure is 3 Pa at most: that looks like bar"),
+    (dict(pressure=float("nan")), r"pressure \(absolute\) \[Pa\] must be > 0 and finite"),
+    (dict(samples=0), r"samples must be a positive integer"),
+    (dict(valve=presets.mas10_averaged_valve()), r"valve: the cycle average is a switching valve's flow .*"
+     r"AveragedValve does not switch"),
+])
+def test_cycle_averaged_flow_refuses_what_flow_surface_refuses(kwargs, match):
+    # duty 50 (percent) gave duty 1's flow, a pressure in bar or NaN a number, an averaged valve a raw TypeError
+    args = {**dict(valve=SMOOTH, command=0.5, pressure=3e5, samples=400), **kwargs}
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        pamjax.cycle_averaged_flow(args["valve"], args["command"], args["pressure"], AIR, samples=args["samples"])
+
+
+@pytest.mark.parametrize("args, match", [
+    ((float("nan"), 3e5), r"equivalent_duty: mass_flow must be finite"),
+    ((1e-3, float("nan")), r"equivalent_duty: pressure \(absolute\) \[Pa\] must be > 0 and finite"),
+    ((1e-3, 3.0), r"equivalent_duty: pressure is 3 Pa at most: that looks like bar"),
+])
+def test_equivalent_duty_refuses_nan_and_bar(args, match):
+    # a NaN flow or pressure gave duty 0.0, a pressure in bar the duty for 3 Pa abs
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        pamjax.equivalent_duty(presets.mas10_averaged_valve(), *args, AIR)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"equivalent_duty: valve must be an averaged valve .*got "
+                                                       r"OnOffValve"):  # a raw AttributeError (no command_for_flow)
+        pamjax.equivalent_duty(SMOOTH, 1e-3, 3e5, AIR)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(inflate=0.36), r"OnOffValve\.inflate must be an AbstractRestriction .*got float"),
+    (dict(inflate=None), r"OnOffValve\.inflate must be an AbstractRestriction .*got NoneType"),
+    (dict(exhaust="silencer"), r"OnOffValve\.exhaust must be an AbstractRestriction .*got str"),
+])
+def test_on_off_valve_refuses_a_path_that_is_no_restriction(kwargs, match):
+    # a number, None or a string was accepted and the solve died with a raw AttributeError naming no argument
+    port = pamjax.EllipseRestriction(0.39, 0.49, 3.14e-6)
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        pamjax.OnOffValve(**{**dict(inflate=port, exhaust=port), **kwargs})

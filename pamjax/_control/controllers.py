@@ -26,11 +26,13 @@ from .._core.errors import (
     concrete_values,
 )
 from .._core.fitting import parameter
+from .._core.units import check_absolute_pressure
 from .._papers import datasheets, paper000
 from .._physics.gas import Air
 from .._physics.signals import AbstractSignal
 from .._physics.smooth import smooth_sign
 from .._physics.valves.averaged import AveragedValve
+from .._physics.valves.base import AbstractControlElement
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
 
 # s: the longest controller period taken. Pneumatic PWM runs at 10-500 Hz (paper 000's MHE2: 50 Hz, 20 ms) and a
@@ -134,7 +136,21 @@ def equivalent_duty(valve: AveragedValve, mass_flow: RealScalarLike, pressure: R
                     air: Air) -> FloatScalar:
     """The duty u ∈ [0, 1] whose averaged flow (paper 000 eq. 13) is `mass_flow` [kg/s] at chamber `pressure`
     [Pa abs]: `valve.command_for_flow` of an averaged valve (`AveragedValve`: the increasing root of eq. 13's
-    quadratic in u, clipped to [0, 1] where ṁ is out of reach)."""
+    quadratic in u, clipped to [0, 1] where ṁ is out of reach).
+
+    Concrete inputs are checked (a NaN flow or pressure gave duty 0, a pressure in bar a duty for 3 Pa abs); traced
+    ones, as in a control loop, are not (no value to check, and the loop's program is left as it was)."""
+    if not (isinstance(valve, AbstractControlElement) and valve.averaged):
+        raise PamjaxInputError(
+            f"equivalent_duty: valve must be an averaged valve (paper 000 eq. 13, AveragedValve, e.g. "
+            f"presets.mas10_averaged_valve()), whose flow command_for_flow inverts; got {type(valve).__name__} (a "
+            "switching valve's cycle average: fit_averaged_valve(valve, air) first)")
+    flow = concrete_values(mass_flow)
+    if flow is not None and not np.all(np.isfinite(flow)):
+        raise PamjaxInputError(f"equivalent_duty: mass_flow must be finite [kg/s], got {flow}")
+    if concrete_values(pressure) is not None:
+        check_positive(pressure, "equivalent_duty: pressure (absolute) [Pa]")
+        check_absolute_pressure(pressure, "equivalent_duty: pressure")
     return valve.command_for_flow(mass_flow, pressure, air)
 
 

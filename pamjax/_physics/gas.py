@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.custom_types import RealScalar
-from .._core.errors import PamjaxInputError, check_in_open_interval, check_positive, concrete_values
+from .._core.errors import PamjaxInputError, check_count, check_in_open_interval, check_positive, concrete_values
 from .._core.fitting import parameter, positive, ratio
 from .._core.units import ATMOSPHERE, ISO8778_DENSITY, ISO8778_TEMPERATURE, check_sonic_conductance
 from .._papers import paper000
@@ -63,6 +63,38 @@ def check_orifice_area(x, name):
                                "looks like mm² or cm² (pamjax takes SI units: m²; paper 000's valve: 3.14e-6 m²)")
 
 
+def check_flow_coefficient(x, name, what):
+    """Refuse a discharge or flow coefficient outside (0, 1] (`what`: the ratio it is); above 1 and up to 100 it
+    looks like percent (concrete values only: a fit may move them)."""
+    check_positive(x, name)
+    c = _first_outside(x, 0.0, 1.0)
+    if c is not None:
+        raise PamjaxInputError(f"{name} must lie in (0, 1] ({what}, at most 1), got {c:g}"
+                               + (f"; that looks like percent: write {c / 100:g}" if c <= 100 else ""))
+
+
+def check_laminar_ratio(laminar_ratio, critical_ratio, name, critical_name=None):
+    """Refuse a laminar ratio outside (b, 1) for the critical ratio b (`critical_name`, by default `name`'s
+    critical_ratio; concrete values only). At or below b the law had no subsonic branch: the start of the laminar
+    line was silently moved to b + 1e-6 (`ellipse_flow_fraction`)."""
+    check_in_open_interval(laminar_ratio, 0.0, 1.0, f"{name}.laminar_ratio")
+    b = concrete_values(critical_ratio)
+    if b is not None and np.any(b >= laminar_ratio):
+        critical_name = critical_name or f"{name}.critical_ratio"
+        raise PamjaxInputError(
+            f"{name}.laminar_ratio ({laminar_ratio:g}) must exceed the critical ratio, {critical_name} "
+            f"({float(np.max(b)):.10g}): the laminar branch runs from it to r = 1, above the subsonic branch (ISO "
+            f"6358-1:2013: {DEFAULT_LAMINAR_RATIO}); raise laminar_ratio or lower the critical ratio")
+
+
+def check_restriction(part, name, example):
+    """Refuse a part that is no `AbstractRestriction` (a number, None, a string: each ended as a raw AttributeError
+    or TypeError inside the solve), naming it (`example`: what to write)."""
+    if not isinstance(part, AbstractRestriction):
+        raise PamjaxInputError(f"{name} must be an AbstractRestriction (e.g. {example}), got {type(part).__name__} "
+                               f"{part!r:.60}")
+
+
 class Air(eqx.Module):
     """Ideal-gas properties of the working air.
 
@@ -90,13 +122,17 @@ class Air(eqx.Module):
 
 
 def orient(p1, p2):
-    """Upstream/downstream split: returns (p_up, ratio p_down/p_up in (0, 1], direction ±1)."""
+    """Upstream/downstream split: returns (p_up, ratio p_down/p_up in [0, 1], direction ±1)."""
     forward = p1 >= p2
     p_up = jnp.where(forward, p1, p2)
     p_down = jnp.where(forward, p2, p1)
-    # Pressures outside the physical range (the solver may try them) are clipped for the ratio only.
-    p_up_safe = jnp.maximum(p_up, 1.0)
-    ratio = safe_divide(p_down, p_up_safe)
+    # Pressures outside the physical range (the solver may try them): at p_up <= 1e-100 Pa the ratio is 1 (no flow;
+    # p_up is clipped to 0 below too). Not p_down / max(p_up, 1 Pa): below 1 Pa that ratio was p_down < 1 at EQUAL
+    # pressures, a flow with no pressure difference whose sign flipped across p1 = p2. Each law is homogeneous of
+    # degree 1 in the pressures, so its gradient stays bounded as p_up → 0; the floor keeps the ratio's own
+    # derivative p_down/p_up² finite in float64 (and the double where 0/0 out of it).
+    positive = p_up > 1e-100
+    ratio = jnp.where(positive, p_down / jnp.where(positive, p_up, 1.0), 1.0)
     # where, not clip: jnp.clip's gradient is halved at the bound, and ratio = 1 exactly at equal pressures.
     ratio = jnp.where(ratio > 1.0, 1.0, jnp.where(ratio < 0.0, 0.0, ratio))
     direction = jnp.where(forward, 1.0, -1.0)
@@ -110,9 +146,15 @@ def ellipse_flow_fraction(ratio, critical_ratio, laminar_ratio=DEFAULT_LAMINAR_R
     φ(r_lam) to 0 at r = 1 (laminar branch, finite slope).
 
     **Arguments:** `ratio` r = p_down/p_up in [0, 1]; `critical_ratio` b in (0, 1); `laminar_ratio` r_lam in (b, 1).
+
+    The restrictions refuse a concrete r_lam <= b (`check_laminar_ratio`). A b that is traced (a fit moves it) or that
+    depends on the pressure (`TabulatedISO6358Restriction`'s b(p_up), checked against r_lam at its table's points
+    only) may still reach r_lam: there the branch starts a thousandth of the way from b to 1 instead, so that it
+    exists (r_lam < 1) for every b < 1. (b + 1e-6 did not: above b = 1 − 1e-6 the branch vanished and the slope at
+    equal pressures was 0.)
     """
     b = critical_ratio
-    r_lam = jnp.maximum(laminar_ratio, b + 1e-6)
+    r_lam = jnp.maximum(laminar_ratio, b + 1e-3 * (1.0 - b))
 
     def ellipse(r):
         z = jnp.clip((r - b) / (1.0 - b), 0.0, 1.0)
@@ -134,7 +176,8 @@ def nozzle_flow_parameter(ratio, kappa, gas_constant, laminar_ratio=DEFAULT_LAMI
             2.0 * kappa / (gas_constant * (kappa - 1.0)) * (r ** (2.0 / kappa) - r ** ((kappa + 1.0) / kappa))
         )
 
-    r_lam = jnp.maximum(laminar_ratio, r_cr + 1e-6)
+    # NozzleRestriction refuses r_lam <= MAX_NOZZLE_CRITICAL_RATIO, above every accepted κ's r_cr: a guard only
+    r_lam = jnp.maximum(laminar_ratio, r_cr + 1e-3 * (1.0 - r_cr))
     laminar = subsonic(r_lam) * (1.0 - ratio) / (1.0 - r_lam)
     return jnp.where(ratio > r_lam, laminar, jnp.where(ratio <= r_cr, choked, subsonic(ratio)))
 
@@ -170,16 +213,12 @@ class EllipseRestriction(AbstractRestriction):
     laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
 
     def __check_init__(self):
-        check_positive(self.discharge_coefficient, "EllipseRestriction.discharge_coefficient")
-        cv = _first_outside(self.discharge_coefficient, 0.0, 1.0)  # C_v: effective over geometric area, at most 1
-        if cv is not None:
-            raise PamjaxInputError(
-                f"EllipseRestriction.discharge_coefficient must lie in (0, 1] (C_v, the effective over the geometric "
-                f"area), got {cv:g}" + (f"; that looks like percent: write {cv / 100:g}" if cv <= 100 else ""))
+        check_flow_coefficient(self.discharge_coefficient, "EllipseRestriction.discharge_coefficient",
+                               "C_v, the effective over the geometric area")
         check_in_open_interval(self.critical_ratio, 0.0, 1.0, "EllipseRestriction.critical_ratio")
         check_positive(self.area, "EllipseRestriction.area")
         check_orifice_area(self.area, "EllipseRestriction.area")  # 3.14 (mm²) for 3.14e-6 m² refused
-        check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "EllipseRestriction.laminar_ratio")
+        check_laminar_ratio(self.laminar_ratio, self.critical_ratio, "EllipseRestriction")
 
     def mass_flow(self, p1, p2, air: Air):
         p_up, ratio, direction = orient(p1, p2)
@@ -210,7 +249,7 @@ class ISO6358Restriction(AbstractRestriction):
         check_positive(self.sonic_conductance, "ISO6358Restriction.sonic_conductance")
         check_sonic_conductance(self.sonic_conductance, "ISO6358Restriction.sonic_conductance")  # m³/(s bar) refused
         check_in_open_interval(self.critical_ratio, 0.0, 1.0, "ISO6358Restriction.critical_ratio")
-        check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "ISO6358Restriction.laminar_ratio")
+        check_laminar_ratio(self.laminar_ratio, self.critical_ratio, "ISO6358Restriction")
 
     def mass_flow(self, p1, p2, air: Air):
         p_up, ratio, direction = orient(p1, p2)
@@ -219,14 +258,20 @@ class ISO6358Restriction(AbstractRestriction):
         return direction * sonic * phi
 
 
+# The nozzle's critical ratio (2/(κ+1))^(κ/(κ−1)) falls from e^(−1/2) = 0.6065 as κ → 1 to 0.444 at κ = 2 (air's 1.4:
+# 0.528); `Air` accepts κ in (1, 2), so a laminar ratio above this one lies above every gas's critical ratio.
+MAX_NOZZLE_CRITICAL_RATIO = float(np.exp(-0.5))
+
+
 class NozzleRestriction(AbstractRestriction):
     """Isentropic convergent nozzle, paper 000 eq. 10: ṁ = A p_up C_q C_m(r) / sqrt(T_up).
 
     **Arguments:**
 
-    - `flow_coefficient`: C_q [-].
+    - `flow_coefficient`: C_q [-] in (0, 1] (the effective over the geometric area; 36 or 5 refused).
     - `area`: A [m²].
-    - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
+    - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013). Above `MAX_NOZZLE_CRITICAL_RATIO`
+      (0.607), the critical ratio of every gas `Air` accepts (κ in (1, 2)), so that the subsonic branch exists.
     """
 
     flow_coefficient: RealScalar = positive(unit="-")
@@ -234,10 +279,13 @@ class NozzleRestriction(AbstractRestriction):
     laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
 
     def __check_init__(self):
-        check_positive(self.flow_coefficient, "NozzleRestriction.flow_coefficient")
+        check_flow_coefficient(self.flow_coefficient, "NozzleRestriction.flow_coefficient",
+                               "C_q, the effective over the geometric area")
         check_positive(self.area, "NozzleRestriction.area")
         check_orifice_area(self.area, "NozzleRestriction.area")
-        check_in_open_interval(self.laminar_ratio, 0.0, 1.0, "NozzleRestriction.laminar_ratio")
+        # the critical ratio is Air's (κ), unknown here: above the largest any accepted κ gives
+        check_laminar_ratio(self.laminar_ratio, MAX_NOZZLE_CRITICAL_RATIO, "NozzleRestriction",
+                            "the nozzle's at κ → 1, e^(-1/2) (air's: 0.528)")
 
     def mass_flow(self, p1, p2, air: Air):
         p_up, ratio, direction = orient(p1, p2)
@@ -265,6 +313,13 @@ class PorousRestriction(AbstractRestriction):
         return self.permeance * (p1 - p2) * (p1 + p2)
 
 
+# Bisection halvings SeriesRestriction needs: the bracket [p2, p1], up to 5e6 Pa wide (`MAX_ABSOLUTE_PA`), shrinks to
+# 5e6 / 2^50 = 4e-9 Pa, float64's spacing there (9e-10 Pa). Measured on the MAS-10 exhaust port and silencer (both
+# orders, 1.02-50 bar): 40 halvings agree with 200 to 4e-16, 35 only to 1.5e-9 (the final Newton step from a point
+# across a branch switch), 10 to 2e-6, 1 gave 13 times the flow and 0 the wrong sign.
+MIN_SERIES_ITERATIONS = 50
+
+
 class SeriesRestriction(AbstractRestriction):
     """Two restrictions in series (e.g. the valve's exhaust port and a silencer), combined into one.
 
@@ -272,12 +327,24 @@ class SeriesRestriction(AbstractRestriction):
     ISO 6358-3:2014). It is bracketed between p1 and p2 and found by bisection; a final Newton step carries the
     implicit-function derivative, so gradients with respect to both restrictions' parameters are exact.
 
-    **Arguments:** `first` (port 1 side) and `second` (port 2 side): any `AbstractRestriction`.
+    **Arguments:** `first` (port 1 side) and `second` (port 2 side): any `AbstractRestriction`; `iterations`: the
+    bisection's halvings, an int of at least `MIN_SERIES_ITERATIONS` (default 60).
     """
 
     first: AbstractRestriction
     second: AbstractRestriction
     iterations: int = eqx.field(static=True, default=60)
+
+    def __check_init__(self):
+        check_restriction(self.first, "SeriesRestriction.first", "EllipseRestriction(0.39, 0.49, 3.14e-6)")
+        check_restriction(self.second, "SeriesRestriction.second", "presets.mas10_silencer()")
+        check_count(self.iterations, "SeriesRestriction.iterations",
+                    f"an int of at least {MIN_SERIES_ITERATIONS} (bisection halvings; default 60)")
+        if self.iterations < MIN_SERIES_ITERATIONS:
+            raise PamjaxInputError(
+                f"SeriesRestriction.iterations must be at least {MIN_SERIES_ITERATIONS}, got {self.iterations}: "
+                "fewer halvings leave the intermediate pressure unconverged (0 gave the flow the wrong sign, 1 a "
+                "flow 13 times too large, 10 one 2e-6 off on the MAS-10 exhaust and silencer); default 60")
 
     def intermediate_pressure(self, p1, p2, air: Air):
         """Pressure between the two restrictions [Pa abs]."""
@@ -301,7 +368,9 @@ class SeriesRestriction(AbstractRestriction):
 
         lo, hi = jax.lax.fori_loop(0, self.iterations, body, (lo0, hi0))
         pm = jax.lax.stop_gradient(0.5 * (lo + hi))
-        slope = jax.grad(frozen_residual)(pm)
+        # elementwise d residual / d pm (each pressure's residual depends on its own pm only): jax.grad needs one
+        # scalar output and refused arrays of pressures, which every other restriction takes
+        _, slope = jax.jvp(frozen_residual, (pm,), (jnp.ones_like(pm),))
         slope = jnp.where(slope < 0, slope, -1e-30)
         return pm - safe_divide(residual(pm), jax.lax.stop_gradient(slope))
 

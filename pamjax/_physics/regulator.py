@@ -42,7 +42,7 @@ from .._core.units import BAR, FLOW_UNIT, check_absolute_pressure
 from .._papers import datasheets, paper001
 from .calibration import VOLTAGE_RANGE, VoltageCalibration
 from .chamber import chamber_flow, pressure_rate
-from .gas import AbstractRestriction, Air
+from .gas import AbstractRestriction, Air, check_restriction
 from .hysteresis import EXPONENT_BOUNDS, bouc_wen_rate, exponent_field
 from .smooth import smooth_relu
 from .tabulated import paper001_charging_restriction, paper001_discharging_restriction
@@ -320,6 +320,8 @@ class ISO6358Regulator(AbstractRegulator):
     needs_volume = True  # eq. 12 divides by the chamber's volume
 
     def __check_init__(self):
+        for name, part in (("charging", self.charging), ("discharging", self.discharging)):
+            check_restriction(part, f"ISO6358Regulator.{name}", "ISO6358Restriction(7e-9, 0.3)")
         if jnp.shape(self.time_constants) != (2,):
             raise PamjaxInputError(f"time_constants must be (τ1, τ2) [s], got shape {jnp.shape(self.time_constants)}")
         check_positive(self.time_constants, "ISO6358Regulator.time_constants")

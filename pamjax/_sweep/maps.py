@@ -13,7 +13,7 @@ from .._core.custom_types import Float, RealArrayLike, RealScalarLike, RealVecto
 from .._core.errors import PamjaxInputError, check_finite, check_nonnegative, check_positive
 from .._physics.gas import Air
 from .._physics.signals import Constant, Sine
-from .._physics.valves.averaged import cycle_averaged_flow
+from .._physics.valves.averaged import check_cycle_average, cycle_averaged_flow
 from .._physics.valves.base import AbstractSwitchingValve
 from .._systems.base import AbstractSystem
 from .reductions import AbstractReduction, WindowMean, check_window
@@ -125,24 +125,16 @@ def flow_surface(valve: AbstractSwitchingValve, commands: RealVectorLike, pressu
 
 def check_flow_surface(valve, commands, pressures, samples, samples_name):
     """`flow_surface`'s checks, on the host before anything is traced (shared with `flow_surface_band`): 1-D
-    commands in the valve's `command_range`, positive absolute pressures, a switching valve (the surface is its flow
-    averaged over a PWM period) and a positive int of phases per period (`samples_name` names it). Returns the
-    commands and pressures as float arrays."""
+    commands in the valve's `command_range`, positive ABSOLUTE pressures (bar and gauge refused, as
+    `fit_averaged_valve` refuses them), a switching valve (the surface is its flow averaged over a PWM period) and a
+    positive int of phases per period (`samples_name` names it): `cycle_averaged_flow`'s `check_cycle_average`.
+    Returns the commands and pressures as float arrays."""
     commands = np.asarray(commands, dtype=float)  # no eager device operations
     pressures = np.asarray(pressures, dtype=float)
     if commands.ndim != 1 or pressures.ndim != 1:
         raise PamjaxInputError(f"commands and pressures must be 1-D, got {commands.shape} and {pressures.shape}")
-    check_positive(pressures, "pressures (absolute) [Pa]")
-    if not valve.switches:
-        raise PamjaxInputError(f"valve: the flow surface is a switching valve's flow averaged over a PWM period; "
-                               f"{type(valve).__name__} does not switch (an averaged valve's flow is its own "
-                               "mass_flow(t, command, pressure, air): evaluate that directly)")
-    if not (isinstance(samples, (int, np.integer)) and not isinstance(samples, bool) and samples >= 1):
-        raise PamjaxInputError(f"{samples_name} must be a positive integer (phases per PWM period; default 400), "
-                               f"got {samples!r}")
-    lo, hi = valve.command_range
-    if not bool(np.all((commands >= np.asarray(lo)) & (commands <= np.asarray(hi)))):
-        raise PamjaxInputError(f"commands must lie in [{lo}, {hi}] (the valve's command_range), got {commands}")
+    check_cycle_average(valve, commands, pressures, samples, ("commands", "pressures", samples_name),
+                        "the flow surface")
     return commands, pressures
 
 

@@ -6,8 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._core.arrays import as_array, device_array
-from ..._core.custom_types import Array, FloatScalar, Real, RealArrayLike, RealScalarLike, RealVectorLike
-from ..._core.errors import PamjaxInputError, check_finite
+from ..._core.custom_types import Array, FloatArray, Real, RealArrayLike, RealVectorLike
+from ..._core.errors import PamjaxInputError, check_finite, check_positive, concrete_values
 from ..._core.fitting import labelled
 from ..._core.units import check_absolute_pressure
 from ..gas import Air
@@ -78,13 +78,52 @@ class AveragedValve(AbstractValve):
         return jnp.take_along_axis(candidates, jnp.argmin(miss, axis=0)[None], axis=0)[0]
 
 
-def cycle_averaged_flow(valve: AbstractSwitchingValve, command: RealScalarLike, pressure: RealScalarLike, air: Air,
-                        samples: int = 4000) -> FloatScalar:
-    """PWM-period average of an on/off valve's flow into a chamber held at `pressure` [Pa abs], for duty `command`
-    [kg/s] (paper 000's "equivalent mass flow"; midpoint rule over `samples` phases of one period)."""
+def cycle_averaged_flow(valve: AbstractSwitchingValve, command: RealArrayLike, pressure: RealArrayLike, air: Air,
+                        samples: int = 4000) -> FloatArray:
+    """PWM-period average of an on/off valve's flow [kg/s] into a chamber held at `pressure` [Pa abs], for duty
+    `command` (paper 000's "equivalent mass flow"; midpoint rule over `samples` phases of one period).
+
+    Elementwise: `command` and `pressure` broadcast against each other, one average per pair (the mean is over the
+    phases only). Checked as `flow_surface` checks them (`check_cycle_average`): a switching valve, duties within its
+    `command_range`, finite ABSOLUTE pressures and an int `samples` >= 1; traced values (jit, vmap, grad) have no
+    value to check."""
+    check_cycle_average(valve, command, pressure, samples, ("command", "pressure", "samples"), "the cycle average")
     phases = (jnp.arange(samples) + 0.5) / samples * valve.period
-    flows = jax.vmap(lambda t: valve.mass_flow(t, command, pressure, air))(phases)
-    return jnp.mean(flows)
+
+    def average(u, p):  # one duty and pressure (a valve's opening reads a duty pair of shape (2,) as (u_k, u_k-1))
+        return jnp.mean(jax.vmap(lambda t: valve.mass_flow(t, u, p, air))(phases), axis=0)
+
+    if jnp.ndim(command) == 0 and jnp.ndim(pressure) == 0:
+        return average(command, pressure)
+    u, p = jnp.broadcast_arrays(jnp.asarray(command, dtype=float), jnp.asarray(pressure, dtype=float))
+    flows = jax.vmap(average)(u.ravel(), p.ravel())
+    return flows.reshape(u.shape + flows.shape[1:])
+
+
+def check_cycle_average(valve, commands, pressures, samples, names, what):
+    """The checks of a cycle average (`cycle_averaged_flow`, `flow_surface`), on concrete values before anything is
+    traced: a switching valve (`what`, e.g. "the flow surface", is its flow averaged over a PWM period), a positive
+    int of phases per period, duties within the valve's `command_range` (percent named), finite, positive, ABSOLUTE
+    pressures [Pa] (bar and gauge named). `names`: the (commands, pressures, samples) arguments' names, as the
+    `PamjaxInputError` names them; traced values have no value to check."""
+    command_name, pressure_name, samples_name = names
+    if not (isinstance(valve, AbstractSwitchingValve) and valve.switches):
+        raise PamjaxInputError(f"valve: {what} is a switching valve's flow averaged over a PWM period; "
+                               f"{type(valve).__name__} does not switch (an averaged valve's flow is its own "
+                               "mass_flow(t, command, pressure, air): evaluate that directly; a switching one: e.g. "
+                               "presets.mas10_valve())")
+    if not (isinstance(samples, (int, np.integer)) and not isinstance(samples, (bool, np.bool_)) and samples >= 1):
+        raise PamjaxInputError(f"{samples_name} must be a positive integer (phases per PWM period), got {samples!r}")
+    u = concrete_values(commands)
+    lo, hi = valve.command_range
+    if u is not None and not np.all((u >= lo) & (u <= hi)):  # NaN too
+        bad = u[~((u >= lo) & (u <= hi))]
+        hint = "; that looks like percent (duty 0.5 is 50 %)" if hi == 1.0 and np.any(bad > hi) else ""
+        raise PamjaxInputError(f"{command_name} must lie in [{lo}, {hi}] (the valve's command_range, the duty ratio), "
+                               f"got {np.array2string(bad, threshold=6)}{hint}")
+    if concrete_values(pressures) is not None:
+        check_positive(pressures, f"{pressure_name} (absolute) [Pa]")
+        check_absolute_pressure(pressures, pressure_name)
 
 
 def fit_averaged_valve(valve: AbstractSwitchingValve, air: Air, commands: RealArrayLike | None = None,

@@ -11,7 +11,7 @@ from ..._core.errors import PamjaxInputError, check_nonnegative, check_positive,
 from ..._core.fitting import positive
 from ..._core.units import MAX_EDGE_WIDTH, check_absolute_pressure
 from ..._papers import paper000
-from ..gas import AbstractRestriction, Air
+from ..gas import AbstractRestriction, Air, check_restriction
 from ..smooth import smooth_step
 from .base import AbstractSwitchingValve
 
@@ -146,6 +146,8 @@ class OnOffValve(AbstractSwitchingValve):
     mode: str = eqx.field(static=True, default="smooth")
 
     def __check_init__(self):
+        check_restriction(self.inflate, "OnOffValve.inflate", "EllipseRestriction(0.36, 0.28, 3.14e-6)")
+        check_restriction(self.exhaust, "OnOffValve.exhaust", "EllipseRestriction(0.39, 0.49, 3.14e-6)")
         check_positive(self.supply_pressure, "OnOffValve.supply_pressure")
         check_absolute_pressure(self.supply_pressure, "OnOffValve.supply_pressure", above_atmosphere=True)
         check_positive(self.pwm_frequency, "OnOffValve.pwm_frequency")
