@@ -77,7 +77,7 @@ def test_stiffness_script_reproduces_fig12_setup(tmp_path):
     k_lo, k_hi = r["stiffness_eq9_range_N_per_m"]
     assert 0 < k_lo < k_hi
     again = _run("stiffness.py", tmp_path, "--duration", "1.0")
-    assert again.returncode != 0 and "exists" in again.stderr
+    assert again.returncode != 0 and "exist; pass --overwrite" in again.stderr
 
 
 def test_linearise_script_reproduces_eq6_bandwidth_and_eq7_gain(tmp_path):
@@ -101,4 +101,4 @@ def test_linearise_script_reproduces_eq6_bandwidth_and_eq7_gain(tmp_path):
         assert c["voltage_gain_bar_per_V"] == pytest.approx(1.01, rel=1e-9)
         assert c["frequency_response_max_relative_difference"] < 1e-9
     again = _run("linearise.py", tmp_path)
-    assert again.returncode != 0 and "exists" in again.stderr
+    assert again.returncode != 0 and "exist; pass --overwrite" in again.stderr

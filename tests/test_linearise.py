@@ -333,3 +333,18 @@ def test_a_joint_is_linearised_about_its_command_vector():
     for bad in (3.0, jnp.array([3.0, 2.0, 1.0])):
         with pytest.raises(pamjax.PamjaxInputError, match=r"must be \(flexor, extensor\) voltages, shape \(2,\)"):
             linearise(joint, y, bad)
+
+
+def test_equilibrium_is_reverse_differentiable_with_the_implicit_derivative():
+    """jax.grad through `equilibrium` raised JAX's while-loop error; its derivative is the implicit function's,
+    equal to jax.jacfwd's and to finite differences."""
+    system = pamjax.presets.mas10_system("averaged")
+    guess = system.initial_state(pressure=3e5)
+
+    def position(m):
+        return equilibrium(eqx.tree_at(lambda s: s.payload_mass, system, m), 0.5, guess).position
+
+    grad = float(jax.grad(position)(9.6))
+    fd = float((position(9.6 + 1e-4) - position(9.6 - 1e-4)) / 2e-4)
+    np.testing.assert_allclose(grad, float(jax.jacfwd(position)(9.6)), rtol=1e-8)
+    np.testing.assert_allclose(grad, fd, rtol=1e-5)

@@ -297,3 +297,16 @@ def test_a_start_state_holding_several_values_is_refused_by_name(kind):
     with pytest.raises(pamjax.PamjaxInputError, match=r"y0\.pressure has shape \(2,\) where the system's state .* "
                                                       r"holds one number: .*pamjax\.sweep.* jax\.vmap"):
         pamjax.simulate(system, pamjax.Constant(0.5), np.linspace(0.0, 0.1, 3), y0=y0)
+
+
+def test_forward_mode_autodiff_of_the_default_adjoint_names_adjoint_forward():
+    """jax.jacfwd through simulate with its default (reverse-mode) adjoint raised JAX's raw custom_vjp TypeError."""
+    system = presets.mas10_system("averaged")
+
+    def loss(m):
+        traj = pamjax.simulate(eqx.tree_at(lambda s: s.payload_mass, system, m), pamjax.Constant(0.5),
+                               jnp.linspace(0.0, 0.02, 3))
+        return jnp.mean(traj.position**2)
+
+    with pytest.raises(pamjax.PamjaxInputError, match='adjoint="forward"'):
+        jax.jacfwd(loss)(9.6)

@@ -132,3 +132,30 @@ def test_unstable_grid_reports_failure_instead_of_nan():
         assert np.all(np.isfinite(np.asarray(traj.position)))
     else:
         assert np.all(np.isnan(np.asarray(traj.position)))
+
+
+def test_more_periods_than_the_minimum_change_neither_value_nor_frequency_derivative():
+    """Output at a period boundary (0.3 s = 15 periods of 50 Hz): a grid of one period more ends in zero-length
+    intervals there, which the output was read from (d/df 12x off); now both sizes give the FD derivative."""
+    system, ts = presets.mas10_system("pwm"), jnp.linspace(0.0, 0.3, 4)
+    n_min = pamjax.unchecked.num_periods(system.valve, 0.0, 0.3)
+
+    def final(f, n):
+        s = eqx.tree_at(lambda s: s.valve.pwm_frequency, system, f)
+        tr = pamjax.unchecked.solve(s, pamjax.Constant(0.5), ts, None, 0.0, stepping="pwm", num_periods=n)
+        return jnp.stack([tr.position[-1] / 1e-3, tr.pressure[-1] / 1e3])
+
+    fd = (final(50.0 + 1e-5, n_min) - final(50.0 - 1e-5, n_min)) / 2e-5
+    for n in (n_min, n_min + 1):
+        np.testing.assert_allclose(final(50.0, n), final(50.0, n_min), rtol=1e-12)
+        np.testing.assert_allclose(jax.jacfwd(lambda f: final(f, n))(50.0), fd, rtol=1e-4)
+
+
+def test_fitting_the_pwm_frequency_on_the_pwm_grid_is_refused_by_name():
+    model = presets.mas10_system("pwm", friction="karnopp")
+    ts = np.linspace(0.0, 0.1, 11)
+    signal = pamjax.Constant(0.5)
+    rec = pamjax.synthetic_recording(model, signal, ts, channels=("pressure",))
+    exp = pamjax.Experiment(rec, signal, scales={"pressure": 2e3})
+    with pytest.raises(pamjax.PamjaxInputError, match=r"valve\.pwm_frequency.*PWM-synchronous grid.*mode='smooth'"):
+        pamjax.fit(model, [exp], ["valve.pwm_frequency"], progress=False, max_steps=2)

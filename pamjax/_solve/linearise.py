@@ -424,11 +424,18 @@ def _with_value(fun):
 
 @eqx.filter_jit
 def _newton(system, command, t, scaled_guess, scale, rtol, atol, max_steps):
-    z0, unravel = jfu.ravel_pytree(scaled_guess)
+    z0, unravel = jfu.ravel_pytree(jax.lax.stop_gradient(scaled_guess))
 
-    def residual(z):
+    def residual_of(system, command, t, scale, z):
         y = jtu.tree_map(lambda a, s: a * s, unravel(z), scale)
         return jfu.ravel_pytree(jtu.tree_map(lambda d, s: d / s, system.vector_field(t, y, command), scale))[0]
+
+    # The loop sees the inputs without their derivatives (JAX cannot reverse-differentiate a while loop); the
+    # derivative is the implicit function's, added after it (below).
+    fixed = jtu.tree_map(lambda x: jax.lax.stop_gradient(x) if eqx.is_array(x) else x, (system, command, t, scale))
+
+    def residual(z):
+        return residual_of(*fixed, z)
 
     def cond(carry):
         z, done, k = carry
@@ -452,4 +459,8 @@ def _newton(system, command, t, scaled_guess, scale, rtol, atol, max_steps):
     # at the last state (or the guess, where the last state is not finite); not computed for a converged solve
     z_end = jnp.where(jnp.all(jnp.isfinite(z)), z, z0)
     singular = jax.lax.cond(converged, lambda _: jnp.zeros_like(z0), null_direction, z_end)
+    # Implicit-function derivative: one more Newton step with the inputs' derivatives, its value taken off again,
+    # so that dz = -J⁺ ∂f (f = 0 at the root; minimum norm where J is singular), in forward and reverse mode alike.
+    step = -jnp.linalg.pinv(jax.jacfwd(residual)(z), rtol=SINGULAR_RCOND) @ residual_of(system, command, t, scale, z)
+    z = z + (step - jax.lax.stop_gradient(step))
     return jtu.tree_map(lambda a, s: a * s, unravel(z), scale), converged, singular

@@ -402,8 +402,8 @@ def simulate(
                            dt0=dt0, adjoint=adjoint, jump_ts=jump_ts, throw=throw and traced, stepping=stepping,
                            substeps=substeps, num_periods=periods_, grid_step=grid_step_)
 
-        traj = (solve_on(ts, y0, t0, periods, grid_step) if pieces is None
-                else _chunks.solve_pieces(solve_on, system, stepping, host, y0, t0, pieces))
+        traj = _forward_mode_named(lambda: solve_on(ts, y0, t0, periods, grid_step) if pieces is None
+                                   else _chunks.solve_pieces(solve_on, system, stepping, host, y0, t0, pieces))
     if not traced:
         traj = vacuum(traj, system, signal, t0, y0)
         if throw:
@@ -412,6 +412,21 @@ def simulate(
 
 
 _EDGE_CLIP = 1  # `num_periods` of an adaptive solve with smoothed edges: edge clipping on (its value is not used)
+
+
+def _forward_mode_named(solve):
+    """`solve()`, JAX's error for forward-mode autodiff (jax.jacfwd, jax.jvp) of the default reverse-mode adjoint
+    raised as a `PamjaxInputError` naming `adjoint="forward"`: caught, not looked for, so no check of the tracers
+    costs the solves that pass."""
+    try:
+        return solve()
+    except TypeError as err:
+        if "forward-mode autodiff" not in str(err):
+            raise
+        raise PamjaxInputError(
+            'simulate is being forward-differentiated (jax.jacfwd, jax.jvp) with its reverse-mode adjoint: pass '
+            'adjoint="forward" to simulate for forward-mode derivatives (the default adjoint serves jax.grad)'
+        ) from err
 
 
 def _as_times(ts):
