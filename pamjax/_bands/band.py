@@ -171,8 +171,9 @@ def _value_and_jacobian(predict, space, theta):
 
     try:
         jac, y = jax.jacfwd(f, has_aux=True)(theta)
-    except TypeError as err:  # a reverse-mode-only solve inside `predict` (simulate's default adjoint)
-        if "custom_vjp" not in str(err):
+    except (TypeError, PamjaxInputError) as err:  # a reverse-mode-only solve inside `predict` (simulate's default
+        # adjoint: JAX's TypeError, or simulate's own naming of it)
+        if "custom_vjp" not in str(err) and "forward-differentiated" not in str(err):
             raise
         raise PamjaxInputError(
             "predict must be differentiable in forward mode for method='linear': a pamjax.simulate inside it needs "
