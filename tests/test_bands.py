@@ -55,8 +55,9 @@ def truth():
 
 @pytest.fixture(scope="module")
 def refits(truth):
-    """40 fits of 40 noise seeds, each with its linear band of `predict`. (A few seeds' residuals pass the mismatch
-    threshold by chance, 101 samples being few for a lag-1 autocorrelation: their bands' warning is expected.)"""
+    """40 fits of 40 noise seeds, each with its linear band of `predict`. (A seed's residuals may pass the mismatch
+    threshold by chance, at most ~1 % of fits since the threshold reads the sample count: its band's warning is
+    expected.)"""
     fits, bands = [], []
     for seed in range(REFITS):
         res = _fit(truth, seed)
