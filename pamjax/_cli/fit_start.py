@@ -15,18 +15,14 @@ Both files a fit keeps for `--resume` are read here: the staged start, and the s
 """
 
 import json
-import zipfile
 
 import numpy as np
 
 from .._core.errors import PamjaxInputError
-from .._files.fingerprint import differences, encode, fingerprint
+from .._files.fingerprint import UNREADABLE, differences, encode, fingerprint
 
 STAGED_START = "staged_start.npz"
 
-
-# what reading a damaged .npz raises: a truncated one is no zip file, a cut member ends early, a foreign one is no npz
-UNREADABLE = (OSError, KeyError, ValueError, IndexError, EOFError, zipfile.BadZipFile)
 
 
 def checkpoint_summary(path, strict=False):

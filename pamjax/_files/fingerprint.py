@@ -26,11 +26,13 @@ import numpy as np
 
 from .._core.describe import describe as _describe, digest as _digest
 from .._core.errors import PamjaxInputError
+from .._core.jsonio import plain
 
 _DATA_FIELDS = {"times", "data", "weights", "positions", "pressures", "forces", "slack"}
 _VERSION = 1
-# what np.load raises for a file that is not a whole .npz (as the CLI's `UNREADABLE`); an .npy is an array: TypeError
-_UNREADABLE = (OSError, KeyError, ValueError, IndexError, EOFError, TypeError, zipfile.BadZipFile)
+# what reading a damaged .npz raises: a truncated one is no zip file (BadZipFile; 0 bytes: EOFError), a cut member
+# ends early, a foreign one is no npz (an .npy is an array: TypeError); here and in the CLI (`pamjax._cli.fit_start`)
+UNREADABLE = (OSError, KeyError, ValueError, IndexError, EOFError, TypeError, zipfile.BadZipFile)
 
 
 def _leaves_by_path(model, prefix=""):
@@ -58,15 +60,6 @@ def _solver(solver):
     return {"class": type(solver).__qualname__, **settings}
 
 
-def _plain(value):
-    """JSON for what `json` cannot write itself: a NumPy or JAX scalar (`np.int64(100)`, `np.float32(4e2)`) as its
-    Python number, an array or other iterable (bounds `np.array([100, 400])`) as a list. `ParameterSpace` accepts
-    these in a free entry, so the fingerprint must too; 100 and 100.0 compare equal after `json.loads`."""
-    if isinstance(value, np.generic) or hasattr(value, "__array__"):
-        return np.asarray(value).tolist()
-    return list(value)
-
-
 def fingerprint(model, experiments, free, solver=None):
     """The fingerprint of a fit problem (a JSON-serialisable dict; see the module docstring)."""
     experiment_prints = []
@@ -79,7 +72,8 @@ def fingerprint(model, experiments, free, solver=None):
     return {
         "version": _VERSION,
         "model": {"class": type(model).__qualname__, "leaves": _leaves_by_path(model)},
-        "free": json.loads(json.dumps(free, default=_plain)),
+        # NumPy or JAX numbers in a free entry (bounds `np.array([100, 400])`), which `ParameterSpace` accepts
+        "free": json.loads(json.dumps(free, default=lambda v: plain(v) if hasattr(v, "tolist") else list(v))),
         "experiments": experiment_prints,
         "solver": _solver(solver),
     }
@@ -130,7 +124,7 @@ def check_resume(path, current):
         with path.open("rb") as handle, np.load(handle, allow_pickle=False) as f:  # closed on a BadZipFile too
             arrays = {k: f[k] for k in f.files}  # every member read: a file cut short fails here, not in the fit
         saved = json.loads(str(arrays["fingerprint"])) if "fingerprint" in arrays else None
-    except _UNREADABLE as err:  # a checkpoint cut short (a full disk, a partial copy): BadZipFile, 0 bytes: EOFError
+    except UNREADABLE as err:  # a checkpoint cut short (a full disk, a partial copy): BadZipFile, 0 bytes: EOFError
         raise PamjaxInputError(f"resume: {path} is not a readable pamjax fit checkpoint ({type(err).__name__}: "
                                f"{err}); resume from a whole checkpoint, or start again without resume") from None
     if saved is None:
