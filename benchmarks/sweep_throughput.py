@@ -11,7 +11,10 @@ tight adaptive solve (`pamjax.simulate`, Tsit5, rtol = atol = 1e-10) of the same
     python benchmarks/sweep_throughput.py                           # 100,000 points, all methods
     python benchmarks/sweep_throughput.py --points 8192 --chunk-size 8192 --methods rk4,ros2
 
-Ends with `RESULT platform=... points=... avg_rodas5a_pts_per_s=... avg_rk4_pts_per_s=... ... pwm_rk4_pts_per_s=...`.
+`--kernel on` runs a GPU's lanes as one Pallas kernel (`PAMJAX_SWEEP_KERNEL=1`, `pamjax/_sweep/kernel.py`).
+
+Ends with `RESULT platform=... points=... kernel=off|on avg_rodas5a_pts_per_s=... avg_rk4_pts_per_s=... ...
+pwm_rk4_pts_per_s=...`.
 """
 
 import argparse
@@ -30,7 +33,12 @@ def main():
                         help="comma-separated subset of rodas5a, rk4, ros2, ros2a, pwm")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--check", type=int, default=4, help="points checked against a tight adaptive solve")
+    parser.add_argument("--kernel", choices=("off", "on"), default="off",
+                        help="on: a GPU's lanes as one Pallas kernel (PAMJAX_SWEEP_KERNEL=1; docs/performance.md)")
     args = parser.parse_args()
+    import os
+
+    os.environ["PAMJAX_SWEEP_KERNEL"] = "1" if args.kernel == "on" else "0"
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     unknown = sorted(set(methods) - {"rodas5a", "rk4", "ros2", "ros2a", "pwm"})
     if unknown or args.points < 1 or args.repeats < 1 or args.horizon <= 0:
@@ -86,7 +94,8 @@ def main():
               f"max|dx| {max(errors_x):.2e} m ({len(check)} points)", flush=True)
 
     fields = " ".join(f"{('avg_' + k) if k != 'pwm' else 'pwm_rk4'}_pts_per_s={v:.0f}" for k, v in rates.items())
-    print(f"RESULT platform={device.platform} points={args.points} horizon_s={args.horizon:g} {fields}")
+    print(f"RESULT platform={device.platform} points={args.points} horizon_s={args.horizon:g} kernel={args.kernel} "
+          f"{fields}")
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import PartitionSpec
 
+from .._core.env import env_flag
 from .._core.errors import PamjaxInputError
 from .._core.xla_cpu import batched_options, compiled_with
 from .._physics.signals import AbstractSignal
@@ -20,6 +21,7 @@ from .._solve import fixed_step as _fixed_step, synchronous as _sync
 from .._solve.edges import StartsOff
 from .._solve.scaled import scaled
 from .._solve.simulate import solve
+from . import kernel
 from .plan import host_lanes, lane_system, make_lane
 from .result import NON_FINITE, NON_PHYSICAL, SOLVER_FAILED, SUCCESS
 
@@ -162,12 +164,8 @@ def _lane_adaptive(system, signal, y0, ts, channels, reduction, solve_options):
     return obs, status
 
 
-def _run_chunk(system, signal, y0, values, ts, plan, config, mesh=None, vector_log=False):
-    """One compiled call over a chunk of lanes. With a `mesh` the lanes are split over its devices by `shard_map`:
-    each device runs its own lanes' loop, so an error-controlled scheme's while loop ends per device when that
-    device's slowest lane ends, with no cross-device agreement per iteration. `vector_log` (static; on a CPU): the
-    fixed-scheme lanes' softplus takes its log from `smooth.log1p_exp` (`smooth.batched_lanes`), as XLA's CPU code
-    for a float64 log is not vectorised (a GPU's is native: there, not measured, XLA's own is kept)."""
+def lane_function(system, signal, y0, ts, plan, config, vector_log=False):
+    """One lane as a function of its swept values (a dict key -> the point's value): (outputs, status)."""
     method, counts, channels, reduction, solve_options, grid = config
     counts = np.asarray(counts)
 
@@ -181,6 +179,16 @@ def _run_chunk(system, signal, y0, values, ts, plan, config, mesh=None, vector_l
         with batched_lanes() if vector_log else contextlib.nullcontext():  # the field is traced here, no nested jit
             return _lane_fixed(sys_l, sig_l, y0_l, ts, counts, steps, method, channels, reduction)
 
+    return lane
+
+
+def _run_chunk(system, signal, y0, values, ts, plan, config, mesh=None, vector_log=False):
+    """One compiled call over a chunk of lanes. With a `mesh` the lanes are split over its devices by `shard_map`:
+    each device runs its own lanes' loop, so an error-controlled scheme's while loop ends per device when that
+    device's slowest lane ends, with no cross-device agreement per iteration. `vector_log` (static; on a CPU): the
+    fixed-scheme lanes' softplus takes its log from `smooth.log1p_exp` (`smooth.batched_lanes`), as XLA's CPU code
+    for a float64 log is not vectorised (a GPU's is native: there, not measured, XLA's own is kept)."""
+    lane = lane_function(system, signal, y0, ts, plan, config, vector_log)
     if mesh is None:
         out, status = jax.vmap(lane)(values)
     else:
@@ -375,7 +383,24 @@ def channel_shapes(system, signal, y0, plan, values, t0):
         command = sig_l(sys_l.valve.command_time(t0))
         return dict(sys_l.outputs(t0, y0_l, command), command=command)
 
-    return {c: tuple(v.shape) for c, v in jax.eval_shape(outputs, values).items()}
+    leaves, treedef = jax.tree_util.tree_flatten((system, signal, y0, values))
+    key = (treedef, repr(plan), tuple((type(x), np.shape(x), getattr(x, "dtype", None)) if eqx.is_array(x) else
+                                      (type(x), id(x)) for x in leaves))
+    try:
+        return dict(_CHANNEL_SHAPES[key])
+    except TypeError:  # an unhashable static field: traced every time
+        key = None
+    except KeyError:
+        pass
+    shapes = {c: tuple(v.shape) for c, v in jax.eval_shape(outputs, values).items()}
+    if key is not None and len(_CHANNEL_SHAPES) < 256:
+        _CHANNEL_SHAPES[key] = shapes
+    return dict(shapes)
+
+
+# (the lane's structure, the plan, its leaves' types and shapes) -> {channel: shape}: the outputs' shapes depend on
+# those alone, and their trace was 60 % of a sweep's time outside its lanes (8-16 ms a call, 2-core CPU)
+_CHANNEL_SHAPES = {}
 
 
 @eqx.filter_jit
@@ -390,3 +415,47 @@ def jacobians(system, signal, y0, plan, values, t0):
         return jax.jacfwd(lambda z: scaled_state.field(sys_l, t0, z, command))(z0)
 
     return jax.vmap(lane)(values)
+
+
+def _run_kernel_chunk(system, signal, y0, values, ts, plan, config, interpret=False, block=None, warps=None):
+    """`_run_chunk` (one device) as one GPU kernel (`kernel.py`): the lane-uniform arrays (the plant, the signal,
+    the initial state, the output times) are the kernel's inputs, each point's values its lanes."""
+    dynamic, static = eqx.partition((system, signal, y0, ts), eqx.is_array)
+
+    def lane(uniform, vals):
+        s, g, y, t = eqx.combine(uniform, static)
+        return lane_function(s, g, y, t, plan, config)(vals)
+
+    out, status = kernel.kernel_lanes(lane, dynamic, values, interpret=interpret, block=block, warps=warps)
+    failed = (status != SUCCESS).reshape(status.shape + (1,) * (out.ndim - 1))
+    return jnp.where(failed, jnp.nan, out), status
+
+
+run_kernel_chunk = eqx.filter_jit(_run_kernel_chunk)
+KERNEL_FLAG = "PAMJAX_SWEEP_KERNEL"  # on/off: a sweep's lanes on one GPU as one kernel (`run_lanes`)
+_KERNEL_REFUSED = {}  # a lane program's structure -> why the GPU kernel does not apply to it (said once)
+
+
+def run_lanes(platform, program, system, signal, y0, vals, ts, plan, config, mesh):
+    """A chunk's call: `program` (`chunk_program(platform)`, `_run_chunk`'s XLA program); with
+    `PAMJAX_SWEEP_KERNEL=1` on one GPU (no mesh), the lanes as one kernel (`kernel.py`), unless the kernel cannot
+    express the lane's program or Triton cannot compile it (a `UserWarning` once per program says why, and
+    `program` runs).
+
+    Off by default: on an H200 the kernel ran the 100,000-point averaged map 1.75-1.9x faster (0.032-0.035 s against
+    0.061 s) but took 12.7-13.9 s to compile against XLA's 4.1-4.7 s (benchmarks/RESULTS.md, g4), so a sweep run
+    once waits longer; it pays for sweeps repeated in one process (a design loop) or read from JAX's compilation
+    cache (2.4 s; docs/performance.md)."""
+    if platform == "gpu" and mesh is None and env_flag(KERNEL_FLAG, False):
+        key = str(jax.tree_util.tree_structure((system, signal, y0, vals, plan, config)))
+        if key not in _KERNEL_REFUSED:
+            try:
+                return run_kernel_chunk(system, signal, y0, vals, ts, plan, config, block=kernel.BLOCK_LANES,
+                                        warps=kernel.NUM_WARPS)
+            except PamjaxInputError:
+                raise
+            except Exception as err:  # Unsupported, or a lowering/compilation error of the kernel
+                _KERNEL_REFUSED[key] = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
+                warnings.warn(f"sweep: the GPU kernel does not apply to this sweep ({_KERNEL_REFUSED[key]}); "
+                              f"running XLA's program ({KERNEL_FLAG}=0 skips the attempt)", stacklevel=3)
+    return program(system, signal, y0, vals, ts, plan, config, mesh)

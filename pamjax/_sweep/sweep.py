@@ -29,7 +29,15 @@ from .._physics.signals import AbstractSignal
 from .._solve import fixed_step as _fixed_step
 from .._solve.simulate import solve
 from .._systems.base import AbstractSystem
-from .lanes import channel_shapes, checked_rk4_step, chunk_program, hybrid_method_and_step, jacobians, method_and_step
+from .lanes import (
+    channel_shapes,
+    checked_rk4_step,
+    chunk_program,
+    hybrid_method_and_step,
+    jacobians,
+    method_and_step,
+    run_lanes,
+)
 from .plan import host_lanes, make_plan, structure, validate_values
 from .reductions import AbstractReduction
 from .result import SUCCESS, SweepResult, in_point_order
@@ -282,7 +290,7 @@ def _run_calls(system, signal, y0, flat, ts_np, plan, config, placement, layout,
         index, valid = layout.lanes_of_call(c)
         vals = {k: put(v[index], mesh, device) for k, v in flat.items()}
         platform = next(iter(next(iter(vals.values())).devices())).platform  # where the lanes were put
-        out, status = chunk_program(platform)(system, signal, y0, vals, ts_j, plan, config, mesh)
+        out, status = run_lanes(platform, chunk_program(platform), system, signal, y0, vals, ts_j, plan, config, mesh)
         pieces.append(local_part(out, status, index, valid))
         if say is not None and layout.calls > 1:
             first, last = layout.points_of_call(c)
