@@ -415,6 +415,16 @@ def test_meta_json_units_apply_to_csv_columns_without_header_units(tmp_path):
         pj.bench.load_bench(both, _plant())
 
 
+def test_a_meta_json_with_a_byte_order_mark_is_read(tmp_path):
+    """Notepad's "UTF-8 with BOM": meta.json was refused ("Unexpected UTF-8 BOM"), the CSV beside it read."""
+    run = {"M": (MIDWAY, "t,u,p,x", [T_RUN, np.full(500, 0.6), 3.0 + T_RUN, RISING])}
+    folder = _csv_bench(tmp_path / "b", run, units={"p": "barg", "x": "mm"})
+    meta = folder / "meta.json"
+    meta.write_bytes(b"\xef\xbb\xbf" + meta.read_bytes())
+    data = pj.bench.load_bench(folder, _plant()).experiments[0].data
+    np.testing.assert_allclose(data["position"], RISING * 1e-3)
+
+
 def test_meta_json_atmosphere_is_the_models(tmp_path):
     # atmosphere_Pa converts the gauge readings and is the model's atmosphere too (was: the readings referred to
     # 95 kPa, the model's exhaust, tank start and rest to 101325 Pa); said in the notes.

@@ -219,3 +219,18 @@ def test_a_traced_critical_ratio_near_1_keeps_the_laminar_branch():
     slope = float(jax.grad(flow)(6e5, 0.9999995))
     fd = (float(flow(6e5 + 0.01, 0.9999995)) - float(flow(6e5 - 0.01, 0.9999995))) / 0.02
     assert slope < 0 and slope == pytest.approx(fd, rel=1e-3)
+
+
+@pytest.mark.parametrize("laminar_ratio, match", [
+    (0.1, r"TabulatedISO6358Restriction\.laminar_ratio \(0\.1\) must exceed the critical ratio, "
+          r"TabulatedISO6358Restriction\.critical_ratio \(0\.3\)"),
+    (-3.0, r"TabulatedISO6358Restriction\.laminar_ratio must"),
+    (float("nan"), r"TabulatedISO6358Restriction\.laminar_ratio must"),
+])
+def test_a_tabulated_restrictions_laminar_ratio_is_checked_as_iso6358s(laminar_ratio, match):
+    # never checked (0.1, -3, NaN accepted, from Python and from model files; the flow changed silently), where
+    # ISO6358Restriction refuses the same values
+    table = (np.array([2e5, 4e5, 7e5]), np.array([5e-9, 6e-9, 7e-9]), np.array([0.2, 0.3, 0.25]))
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        pamjax.TabulatedISO6358Restriction(*table, laminar_ratio=laminar_ratio)
+    pamjax.TabulatedISO6358Restriction(*table, laminar_ratio=0.5)

@@ -368,3 +368,44 @@ def test_fit_result_json_names_a_model_file_and_is_replaced_whole(tmp_path, monk
     monkeypatch.undo()
     assert path.read_text() == before and sorted(p.name for p in tmp_path.iterdir()) == ["fit.json", "model.json",
                                                                                         "other.json"]
+
+
+def _drop_payload(d):
+    del d["parameters"]["payload_mass"], d["structure"]["fields"]["payload_mass"]
+
+
+def _inflate(d):
+    return d["structure"]["fields"]["valve"]["fields"]["inflate"]["fields"]
+
+
+@pytest.mark.parametrize("edit, match", [
+    # removed from both tables, it loaded silently with the class default (a fitted 20 kg payload read as 9.6 kg)
+    (_drop_payload, r"m\.json: MuscleSystem: parameter 'payload_mass' is missing from the file; the class default "
+                    r"is not filled in"),
+    (lambda d: _inflate(d).pop("laminar_ratio"), r"m\.json: valve\.inflate \(EllipseRestriction\): setting "
+                                                 r"'valve\.inflate\.laminar_ratio' is missing"),
+    # a float setting in quotes raised numpy's TypeError in the constructor's checks, taken for "a constructor with
+    # its own signature": the component was rebuilt field by field without its checks, and simulate failed raw
+    (lambda d: _inflate(d).update(laminar_ratio={"value": "0.999"}),
+     r"m\.json: structure at valve\.inflate\.laminar_ratio \(EllipseRestriction\.laminar_ratio\): \"0\.999\" is not "
+     r"a number .*write a number without quotes"),
+    (lambda d: _inflate(d).update(laminar_ratio={"value": True}), r"laminar_ratio\): true is not a number"),
+    # a parameter written as a setting: a raw ValueError from jnp.array
+    (lambda d: (d["parameters"].pop("gravity"), d["structure"]["fields"].update(gravity={"value": None})),
+     r"m\.json: structure at gravity \(MuscleSystem\.gravity\): null is written as a setting, but gravity is a "
+     r"parameter: write \{\"array\": \"gravity\"\}"),
+])
+def test_a_missing_field_or_a_setting_of_the_wrong_kind_is_refused_naming_the_entry(tmp_path, edit, match):
+    with pytest.raises(PamjaxInputError, match=match):
+        pamjax.load_model(_edited(tmp_path, edit))
+
+
+def test_a_model_file_with_a_byte_order_mark_loads_and_a_folder_is_not_overwritten(tmp_path):
+    # Notepad's "UTF-8 with BOM" (CRLF): "line 1, column 1: not valid JSON: Expecting value"
+    path = _edited(tmp_path, lambda d: None)
+    model = pamjax.load_model(path)
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_text(encoding="utf-8").replace("\n", "\r\n").encode("utf-8"))
+    assert eqx.tree_equal(pamjax.load_model(path), model)
+    (tmp_path / "folder.json").mkdir()  # was a raw IsADirectoryError from the rename over it
+    with pytest.raises(PamjaxInputError, match=r"save_model: .*folder\.json is a folder; give the model file's path"):
+        pamjax.save_model(tmp_path / "folder.json", model, overwrite=True)

@@ -194,3 +194,55 @@ def test_units_as_text_channels_as_a_list_and_text_values_are_refused_by_name():
         Recording(t, {"pressure": p, "command": ["on"] * 11})
     with pytest.raises(PamjaxInputError, match=r"t must hold numbers"):
         Recording(["a"] * 11, {"pressure": p})
+
+
+def test_an_npz_channel_stored_as_a_column_vector_is_read_and_other_shapes_are_named(tmp_path):
+    # p[:, None] (MATLAB's and pandas' habit) was dropped silently: not read, not in `ignored`, no error; a time so
+    # stored gave "needs a time column 't'". A .mat file with the same shapes was read.
+    t = np.arange(200) / 100.0
+    p, x = 2e5 + 1e3 * t, 0.01 * t
+    np.savez(tmp_path / "r.npz", t=t[:, None], p=p[:, None], x=x[None, :], gains=np.ones((2, 3)), fs=1000.0,
+             notes=np.array(["valve A", None], dtype=object))
+    rec = Recording.load(tmp_path / "r.npz")
+    np.testing.assert_array_equal(rec["pressure"], p)
+    np.testing.assert_array_equal(rec["position"], x)
+    assert rec.ignored == {"gains": (None, "an array of shape (2, 3): not a channel"),
+                           "fs": (None, "a single value (1000.0): not a channel"),
+                           "notes": (None, "objects (text or mixed values): not a channel")}
+    np.savez(tmp_path / "wide.npz", t=t, p=np.stack([p, p], axis=1), x=x)
+    with pytest.raises(PamjaxInputError, match=r"wide\.npz: 'p' \(channel 'pressure'\) holds an array of shape "
+                                               r"\(200, 2\): a channel is one number per time"):
+        Recording.load(tmp_path / "wide.npz")
+
+
+def test_to_npz_without_the_suffix_refuses_the_file_it_would_replace_and_returns_it(tmp_path):
+    # np.savez adds ".npz": to_npz("run") checked "run", replaced an existing run.npz silently and returned "run"
+    _rec().to_npz(tmp_path / "run.npz")
+    with pytest.raises(FileExistsError, match=r"run\.npz exists"):
+        _rec(50).to_npz(tmp_path / "run")
+    assert len(Recording.load(tmp_path / "run.npz")) == 200
+    out = _rec(50).to_npz(tmp_path / "run", overwrite=True)
+    assert out == tmp_path / "run.npz" and len(Recording.load(out)) == 50
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.npz"]
+
+
+def test_a_damaged_npz_or_mat_file_is_refused_naming_the_file(tmp_path):
+    # each was a raw ValueError, JSONDecodeError, AttributeError, EOFError, BadZipFile or scipy MatReadError
+    t, p = np.linspace(0.0, 1.0, 11), np.linspace(2e5, 6e5, 11)
+    np.savez(tmp_path / "ok.npz", t=t, p=p)
+    np.savez(tmp_path / "text.npz", t=t, p=p, __units__=np.array("pressure: Pa"))
+    np.savez(tmp_path / "list.npz", t=t, p=p, __units__=np.array('["Pa"]'))
+    (tmp_path / "csv.npz").write_text("t,p\n0,2e5\n1,3e5\n")
+    (tmp_path / "empty.npz").write_bytes(b"")
+    (tmp_path / "cut.npz").write_bytes((tmp_path / "ok.npz").read_bytes()[:300])
+    (tmp_path / "cut.mat").write_text("hello")
+    for name, match in (("text", r"text\.npz: its '__units__' is not what Recording\.to_npz writes"),
+                        ("list", r"list\.npz: its '__units__' is not what Recording\.to_npz writes"),
+                        ("csv", r"csv\.npz cannot be read as an \.npz archive"),
+                        ("empty", r"empty\.npz cannot be read as an \.npz archive"),
+                        ("cut", r"cut\.npz cannot be read as an \.npz archive")):
+        with pytest.raises(PamjaxInputError, match=match):
+            Recording.load(tmp_path / f"{name}.npz")
+    pytest.importorskip("scipy.io")
+    with pytest.raises(PamjaxInputError, match=r"cut\.mat cannot be read as a MATLAB \.mat file"):
+        Recording.load(tmp_path / "cut.mat")

@@ -78,7 +78,8 @@ def read_meta(directory):
             f"e.g. {_META_TEMPLATE} (each experiment named as its file; the layout: docs/fitting.md, 'Identifying "
             "your own rig')")
     try:
-        meta = json.loads(path.read_text(), object_pairs_hook=unique_keys(str(path)))
+        # utf-8-sig: a byte-order mark (Notepad's "UTF-8 with BOM") skipped, and UTF-8 whatever the platform's code page
+        meta = json.loads(path.read_text(encoding="utf-8-sig"), object_pairs_hook=unique_keys(str(path)))
     except json.JSONDecodeError as err:
         raise PamjaxInputError(f"{path} is not valid JSON: {err}") from None
     if not isinstance(meta, dict) or not isinstance(meta.get("experiments"), dict) or not meta["experiments"]:

@@ -22,7 +22,6 @@ import json
 import math
 import os
 import pathlib
-import re
 import sys
 from collections.abc import Sequence
 
@@ -37,6 +36,17 @@ from .._core.metadata import version
 from .._core.units import ATMOSPHERE, check_setting, parameter_to_si
 from .._physics.signals import AbstractSignal
 from .._solve.checks import batched_parameters, describe_batched
+from .model_checks import (
+    DuplicateKey,
+    constructor_takes,
+    flat,
+    from_json_value,
+    missing_fields,
+    parse_json,
+    same_leaves,
+    setting_problem,
+    unit_hint,
+)
 
 FORMAT = "pamjax-model"
 FORMAT_VERSION = 1
@@ -185,6 +195,9 @@ def save_model(path: str | os.PathLike, model: eqx.Module, *, overwrite: bool = 
         raise PamjaxInputError(f"save_model: path must be a file path (str or os.PathLike), got "
                                f"{type(path).__name__}")
     path = pathlib.Path(path)
+    if path.is_dir():  # replaced by overwrite=True it was a raw IsADirectoryError from os.replace
+        raise PamjaxInputError(f"save_model: {path} is a folder; give the model file's path (e.g. "
+                               f"{path / 'model.json'})")
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
     document = model_document(model, provenance, classes)
@@ -235,10 +248,10 @@ class _Decoder:
         counted = declared in (None, "") and entry.get("unit") in (None, "")  # unitless: may be a count or seed
         dtype = self._dtype(entry.get("dtype", "float64"), name, counted)
         raw = entry["value"]
-        if any(isinstance(v, bool) for v in _flat(raw)):
+        if any(isinstance(v, bool) for v in flat(raw)):
             self.fail(f"{name}: {raw!r} is not a number or a list of numbers")
         try:
-            value = np.asarray(_from_json_value(raw), dtype=np.float64)
+            value = np.asarray(from_json_value(raw), dtype=np.float64)
         except (TypeError, ValueError) as err:
             self.fail(f"{name}: {raw!r} is not a number or a list of numbers ({err})")
         if "shape" in entry:
@@ -255,7 +268,7 @@ class _Decoder:
                                     self.atmosphere_for(path))
             check_setting(path, value, "parameter")
         except PamjaxInputError as err:
-            self.fail(f"{err}{_unit_hint(str(err), declared)}")
+            self.fail(f"{err}{unit_hint(str(err), declared)}")
         if dtype != np.float64:
             stored = value.astype(dtype)
             back = stored.astype(np.float64)
@@ -352,17 +365,29 @@ class _Decoder:
         if unknown:
             self.fail(f"{name} at {path or 'the top'} has no field(s) {sorted(unknown)}; its fields are "
                       f"{sorted(fields)}")
+        where = f"{path} ({name})" if path else name
+        missing = missing_fields(cls, path, given)
+        if missing:
+            self.fail(f"{where}: {missing}")
         units = _units_of(cls)
         values = {k: self.decode(v, f"{path}.{k}" if path else k, units.get(k, _UNIT_FALLBACK.get(k)))
                   for k, v in given.items()}
-        where = f"{path} ({name})" if path else name
+        for k, v in given.items():
+            full = f"{path}.{k}" if path else k
+            problem = setting_problem(fields[k], v, values[k], full)
+            if problem:
+                self.fail(f"structure at {full} ({name}.{k}): {problem}")
+        arguments = {k: v for k, v in values.items() if fields[k].init}
         try:  # through the constructor: converters and value checks run as in Python
-            obj = cls(**{k: v for k, v in values.items() if fields[k].init})
+            obj = cls(**arguments)
         except PamjaxInputError as err:
             self.fail(f"{where}: {err}")
-        except TypeError:
+        except (TypeError, ValueError) as err:
+            if constructor_takes(cls, arguments):  # a value it cannot take: its checks stopped there, never skipped
+                self.fail(f"{where}: {type(err).__name__}: {err} (a value of the wrong kind in its fields "
+                          f"{sorted(arguments)}?)")
             obj = None  # a constructor with its own signature: rebuilt field by field below
-        if obj is None or not _same_leaves(obj, values):
+        if obj is None or not same_leaves(obj, values):
             obj = object.__new__(cls)
             for k, v in values.items():
                 object.__setattr__(obj, k, v)
@@ -370,43 +395,6 @@ class _Decoder:
             if missing:
                 self.fail(f"{where}: field(s) {sorted(missing)} missing")
         return obj
-
-
-def _same_leaves(obj, values):
-    for k, v in values.items():
-        got = getattr(obj, k, None)
-        if eqx.is_array(v):
-            if not (eqx.is_array(got) and got.shape == v.shape and got.dtype == v.dtype
-                    and np.array_equal(np.asarray(got), np.asarray(v), equal_nan=True)):
-                return False
-    return True
-
-
-def _unit_hint(message, declared):
-    """For a magnitude refused as another unit: how to say that unit in the file (which pamjax then converts)."""
-    m = re.search(r"looks like ([^\s,;()]+)", message)
-    if m is None:
-        return ""
-    likely = m.group(1)
-    if declared in ("Pa abs", "Pa gauge"):
-        likely += " abs" if declared == "Pa abs" else " gauge"
-    return (f"; if the number is right in {m.group(1)}, say so in its entry (\"unit\": \"{likely}\") and pamjax "
-            "converts it")
-
-
-def _flat(v):
-    return [x for item in v for x in _flat(item)] if isinstance(v, list) else [v]
-
-
-def _from_json_value(v):
-    if isinstance(v, list):
-        return [_from_json_value(x) for x in v]
-    if isinstance(v, str):  # how `save_model` writes a non-finite value; any other text is not a number here
-        if v.strip().lower() not in ("nan", "inf", "-inf"):
-            raise ValueError(f"{v!r} is text: write a number without quotes (only \"nan\", \"inf\" and \"-inf\" "
-                             "are quoted)")
-        return float(v)
-    return v
 
 
 def load_model(path: str | os.PathLike, *, classes: Sequence[type] = ()) -> eqx.Module:
@@ -418,9 +406,9 @@ def load_model(path: str | os.PathLike, *, classes: Sequence[type] = ()) -> eqx.
     if not path.is_file():
         raise PamjaxInputError(f"model file {path} does not exist" + (" (it is a folder)" if path.is_dir() else ""))
     try:
-        text = path.read_text(encoding="utf-8")
-        document = _parse(text)
-    except _DuplicateKey as dup:
+        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark (Notepad's "UTF-8 with BOM") skipped
+        document = parse_json(text)
+    except DuplicateKey as dup:
         raise PamjaxInputError(f"model file {path}: key {dup.key!r} appears twice in one table (lines "
                                f"{', '.join(map(str, dup.lines))}); JSON would keep only the last one and drop the "
                                "other silently: remove one") from None
@@ -436,38 +424,6 @@ def load_model(path: str | os.PathLike, *, classes: Sequence[type] = ()) -> eqx.
         raise PamjaxInputError(f"model file {path} has format_version {document.get('format_version')!r}; this "
                                f"pamjax reads version {FORMAT_VERSION}")
     return _check_document(_Decoder(f"model file {path}", document, _registry(classes)), document)
-
-
-class _DuplicateKey(Exception):
-    def __init__(self, key, lines):
-        self.key, self.lines = key, lines
-
-
-def _parse(text):
-    """`json.loads(text)`, refusing a key given twice in one object (JSON itself keeps the last silently): the pure
-    Python scanner, whose object parser is told where each object starts, so that the lines of the key's occurrences
-    in that object can be named."""
-    import json.decoder
-    import json.scanner
-
-    def parse_object(s_and_end, strict, scan_once, object_hook, object_pairs_hook, memo=None, _w=None):
-        start = s_and_end[1]
-        pairs, end = json.decoder.JSONObject(s_and_end, strict, scan_once, object_hook, list, memo)
-        keys = [k for k, _ in pairs]
-        for k in keys:
-            if keys.count(k) > 1:
-                span = s_and_end[0][start:end]
-                found = [m.start() for m in re.finditer(re.escape(json.dumps(k)) + r"\s*:", span)]
-                found += [m.start() for m in re.finditer(re.escape(json.dumps(k, ensure_ascii=False)) + r"\s*:",
-                                                          span) if m.start() not in found]
-                lines = sorted(s_and_end[0].count("\n", 0, start + pos) + 1 for pos in found)
-                raise _DuplicateKey(k, lines)
-        return dict(pairs), end
-
-    decoder = json.JSONDecoder()
-    decoder.parse_object = parse_object
-    decoder.scan_once = json.scanner.py_make_scanner(decoder)
-    return decoder.decode(text)
 
 
 def _check_document(decoder, document, batched=True):

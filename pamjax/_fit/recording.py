@@ -24,6 +24,7 @@ from .recording_files import (
     add_default_units,
     checked_magnitude,
     mat_columns,
+    npz_columns,
     renaming,
     sample_location,
     select_columns,
@@ -67,8 +68,8 @@ class Recording:
     `mask[name]` is a boolean array, True where the sample is valid. `units` holds the SI unit of each channel;
     `columns` the name of each channel's column in the file it was read from (`Recording.load`; else empty);
     `ignored` the file's columns `Recording.load` left out, column → (its unit as the file gives it, or None; why):
-    those not among its `channels=`, and an NPZ/MAT variable that is no channel pamjax knows and has not one value per
-    time (a scalar setting, a short table).
+    those not among its `channels=`, and an NPZ/MAT variable that is no channel pamjax knows and is no series of one
+    number per time (a scalar setting, a short table; in an NPZ file also a matrix, text or objects).
     """
 
     def __init__(self, t: TimesLike, channels: Mapping[str, TimesLike], units: Mapping[str, str] | None = None, *,
@@ -248,10 +249,16 @@ class Recording:
         return write_table(path, {"t": self.t, **self.channels}, units, comment)
 
     def to_npz(self, path: str | os.PathLike, overwrite: bool = False) -> pathlib.Path:
-        """Write NPZ with arrays `t` and one per channel, units in `__units__` (JSON)."""
+        """Write NPZ with arrays `t` and one per channel, units in `__units__` (JSON); `.npz` is added to a name
+        without it, as `np.savez` does. Refuses to overwrite an existing file unless `overwrite=True`; returns the
+        path written."""
+        path = pathlib.Path(path)
+        if path.suffix.lower() != ".npz":  # the file np.savez would write (checked, and returned, by that name)
+            path = path.with_name(path.name + ".npz")
         path = writable_path(path, overwrite)
         meta = json.dumps(dict(units=self.units, name=self.name))
-        np.savez(path, t=self.t, __units__=np.asarray(meta), **self.channels)
+        with path.open("wb") as f:  # a file object: np.savez adds no suffix of its own
+            np.savez(f, t=self.t, __units__=np.asarray(meta), **self.channels)
         return path
 
     @classmethod
@@ -283,15 +290,14 @@ class Recording:
                  channels: Sequence[str] | None = None) -> "Recording":
         """Read an NPZ with a `t` array and one array per channel (the hybrid bench's short names t, u, p, x are
         renamed to command, pressure, position); `units`, `default_units` and `channels` as in `from_csv` (the
-        file's own units: its `__units__`). A 1-D array that is no channel pamjax knows and has not one value per
-        time is left out (`ignored`); a channel's is refused naming the file."""
+        file's own units: its `__units__`). A column or row vector ((n, 1), (1, n)) is read as the 1-D array it
+        holds; an array that is no channel pamjax knows and is no series of one number per time (a scalar setting, a
+        short table, a matrix, text or objects, which are never unpickled) is left out (`ignored`); a channel's is
+        refused naming the file, as is a damaged file."""
         path = pathlib.Path(path)
         if not path.is_file():
             raise PamjaxInputError(f"recording file {path} does not exist")
-        with np.load(path, allow_pickle=False) as z:
-            columns = [(k, np.asarray(z[k])) for k in z.files if k != "__units__"]
-            meta = json.loads(str(z["__units__"])) if "__units__" in z.files else {}
-        columns = [(k, v) for k, v in columns if v.ndim == 1]  # other arrays are metadata
+        columns, meta = npz_columns(path)
         return cls._from_columns(
             path, columns, meta.get("units", {}), rename, units, mask_nan, name or meta.get("name"), unit_checks,
             atmosphere, default_units, channels

@@ -4,13 +4,16 @@ NPZ/MAT variable that is no channel and has not one value per time), the units a
 variables of a MATLAB file, where a sample lies in its file, and the magnitude checks' advice for files without a
 header (NPZ, MAT: the unit goes in `units` / meta.json's "units", not in a header)."""
 
+import json
 import pathlib
 import re
+import zlib
 
 import numpy as np
 
 from .._core.errors import PamjaxInputError
 from .._core.units import channel_dimension, check_magnitude, to_si
+from .._files.fingerprint import UNREADABLE
 
 # Default unit per well-known channel name.
 DEFAULT_UNITS = dict(
@@ -67,22 +70,47 @@ def wanted(channels, rename):
 def select_columns(columns, rename, user, channels, file_units, path):
     """(the columns read: [(name, array)], those left out: {name: (unit or None, why)}). Left out: a column the CSV
     reader did not read or not among `channels`, and a variable of an NPZ/MAT file that is no channel pamjax knows
-    and has not one value per time (a channel's is refused, naming the file)."""
+    and is no series of one number per time (a scalar setting, a short table, a matrix, text); a channel's, or a
+    time that is no such series, is refused naming the file."""
     channels = _channel_list(channels)
-    size = next(np.size(v) for k, v in columns if rename.get(k, k) == "t")
+    time, t = next((k, v) for k, v in columns if rename.get(k, k) == "t")
+    why = _not_a_series(t)
+    if why is not None:
+        raise PamjaxInputError(f"{path}: the time {time!r} holds {why}: a time is one number per sample (a 1-D array, "
+                               "or a column vector (n, 1))")
+    size = np.size(t)
     kept, ignored = [], {}
     for k, v in columns:
         new = rename.get(k, k)
+        named = channels is not None or k in user or channel_dimension(new) is not None  # a channel's, not metadata
         if new != "t" and (v is None or (channels is not None and new not in channels)):
             ignored[k] = (file_units.get(k), "not a channel read")
+        elif new != "t" and (why := _not_a_series(v)) is not None:
+            if named:
+                raise PamjaxInputError(f"{path}: {k!r} (channel {new!r}) holds {why}: a channel is one number per "
+                                       "time (a 1-D array, or a column vector (n, 1)); save it as one")
+            ignored[k] = (file_units.get(k), f"{why}: not a channel")
         elif new != "t" and np.size(v) != size:
-            if channels is not None or k in user or channel_dimension(new) is not None:
+            if named:
                 raise PamjaxInputError(f"{path}: {k!r} (channel {new!r}) has {np.size(v)} values, the time {size}: "
                                        "a channel needs one value per time (a truncated log?); cut both to one length")
             ignored[k] = (file_units.get(k), f"{np.size(v)} values, the time {size}: not a channel")
         else:
             kept.append((k, v))
     return kept, ignored
+
+
+def _not_a_series(v):
+    """Why the array `v` (of an NPZ file; a CSV's columns and a MAT file's vectors are series) is no 1-D series of
+    numbers, or None where it is one."""
+    a = np.asarray(v)
+    if a.dtype.kind == "O":
+        return "objects (text or mixed values)"
+    if a.dtype.kind not in "fiub":
+        return "text" if a.dtype.kind in "US" else f"{a.dtype} values"
+    if a.ndim == 0:
+        return f"a single value ({a.item()!r:.30})"
+    return None if a.ndim == 1 else f"an array of shape {a.shape}"
 
 
 def unit_key(key, names, rename):
@@ -155,24 +183,68 @@ def _csv_line(path, row):
     return lines[row + 1] if 0 <= row < len(lines) - 1 else None
 
 
+def npz_columns(path):
+    """([(name, array)], the file's own units and name) of an .npz file (`np.savez`): its arrays, a column or row
+    vector ((n, 1), (1, n): MATLAB's and pandas' habit) as the 1-D series it holds, like a .mat file's; an object array
+    (text or mixed values, which NumPy reads only by unpickling: running code from the file) as an empty placeholder
+    that `select_columns` leaves out by name. The units and name are those `Recording.to_npz` writes in `__units__`.
+    A damaged file (cut short, empty, another format renamed .npz) is refused naming it."""
+    with open(path, "rb") as file:  # opened here: np.load left its own file open when the archive was cut short
+        try:
+            archive = np.load(file, allow_pickle=False)
+        except UNREADABLE as err:  # a CSV renamed: "pickled data" (ValueError); empty: EOFError; cut: BadZipFile
+            raise PamjaxInputError(f"{path} cannot be read as an .npz archive (np.savez's format; an empty or "
+                                   f"truncated copy, or another format renamed .npz?): {type(err).__name__}: "
+                                   f"{err}") from None
+        if not isinstance(archive, np.lib.npyio.NpzFile):
+            raise PamjaxInputError(f"{path} is one NumPy array (an .npy file), not an .npz archive of named arrays: "
+                                   "save the recording with np.savez(path, t=t, p=p, ...)")
+        columns, units = [], None
+        for k in archive.files:
+            try:
+                a = np.asarray(archive[k])
+            except ValueError as err:
+                if "allow_pickle" not in str(err):
+                    raise PamjaxInputError(f"{path}: array {k!r} cannot be read (a damaged file?): {err}") from None
+                a = np.empty((), dtype=object)  # an object array: not unpickled
+            except UNREADABLE as err:
+                raise PamjaxInputError(f"{path}: array {k!r} cannot be read (a damaged file?): "
+                                       f"{type(err).__name__}: {err}") from None
+            if k == "__units__":
+                units = a
+            else:
+                columns.append((k, a.reshape(-1) if a.ndim == 2 and 1 in a.shape else a))
+    return columns, _npz_meta(path, units)
+
+
+def _npz_meta(path, units):
+    """The units table and name of an NPZ file's `__units__` (JSON, as `Recording.to_npz` writes it), or {}."""
+    if units is None:
+        return {}
+    try:
+        meta = json.loads(str(units)) if units.dtype.kind in "US" and units.ndim == 0 else None
+    except json.JSONDecodeError:
+        meta = None
+    if (not isinstance(meta, dict) or not isinstance(meta.get("units", {}), dict)
+            or not all(isinstance(v, str) for v in meta.get("units", {}).values())):
+        raise PamjaxInputError(f"{path}: its '__units__' is not what Recording.to_npz writes (JSON text {{\"units\": "
+                               f"{{channel: unit}}, \"name\": ...}}), got {str(units)[:60]!r}; write that, or save the "
+                               "file without it and give units=... (a bench folder: meta.json's \"units\")")
+    return meta
+
+
 def mat_columns(path):
     """[(name, 1-D float array)] of a .mat file's 1-D numeric variables (row or column vectors)."""
     try:
         import scipy.io
+        from scipy.io.matlab import MatReadError
     except ModuleNotFoundError as err:  # pragma: no cover - depends on the environment
         raise ModuleNotFoundError('reading .mat recordings needs SciPy: pip install "pamjax[mat]"') from err
     try:
-        raw = scipy.io.loadmat(str(path), squeeze_me=True)
-    except NotImplementedError:  # MATLAB v7.3: an HDF5 file
-        try:
-            import h5py
-        except ModuleNotFoundError as err:
-            raise PamjaxInputError(f"{path} is a MATLAB v7.3 (HDF5) file: reading it needs h5py "
-                                   '(pip install "pamjax[mat]"), or save it with -v7 in MATLAB') from err
-        with h5py.File(path, "r") as f:
-            raw = {k: np.asarray(f[k]) for k in f.keys() if isinstance(f[k], h5py.Dataset)}
-    except ValueError as err:
-        raise PamjaxInputError(f"{path} is not a MATLAB .mat file scipy can read: {err}") from err
+        raw = _mat_variables(path, scipy.io)
+    except (MatReadError, *UNREADABLE, zlib.error) as err:  # not a .mat file, cut short, damaged
+        raise PamjaxInputError(f"{path} cannot be read as a MATLAB .mat file (an empty or truncated copy, or another "
+                               f"format renamed .mat?): {type(err).__name__}: {err}") from None
     columns = []
     for k, v in raw.items():
         if k.startswith("__"):
@@ -183,6 +255,20 @@ def mat_columns(path):
     if not columns:
         raise PamjaxInputError(f"{path} holds no 1-D numeric variable (expected t and one vector per channel)")
     return columns
+
+
+def _mat_variables(path, scipy_io):
+    """name → value of a .mat file's variables: v5-v7.2 through `scipy.io.loadmat`, v7.3 (HDF5) through h5py."""
+    try:
+        return scipy_io.loadmat(str(path), squeeze_me=True)
+    except NotImplementedError:  # MATLAB v7.3: an HDF5 file
+        try:
+            import h5py
+        except ModuleNotFoundError as err:
+            raise PamjaxInputError(f"{path} is a MATLAB v7.3 (HDF5) file: reading it needs h5py "
+                                   '(pip install "pamjax[mat]"), or save it with -v7 in MATLAB') from err
+        with h5py.File(path, "r") as f:
+            return {k: np.asarray(f[k]) for k in f.keys() if isinstance(f[k], h5py.Dataset)}
 
 
 # check_magnitude's advice for a CSV file: the unit written in its header

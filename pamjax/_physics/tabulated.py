@@ -24,6 +24,7 @@ from .gas import (
     ISO8778_TEMPERATURE,
     AbstractRestriction,
     Air,
+    check_laminar_ratio,
     ellipse_flow_fraction,
     orient,
 )
@@ -152,7 +153,7 @@ class TabulatedISO6358Restriction(AbstractRestriction, PreparesTables):
     - `sonic_conductance`: C at each table pressure [m³/(s Pa)] (paper 001 gives m³/(s bar): divide by 1e5), > 0
       and at most 1e-5, a DN50 pipe's order (above it, a C still in m³/(s bar) is refused).
     - `critical_ratio`: b at each table pressure [-], in (0, 1).
-    - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
+    - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013); in (max b, 1).
     """
 
     pressure: Table = parameter(unit="Pa abs", shape="table")
@@ -174,6 +175,8 @@ class TabulatedISO6358Restriction(AbstractRestriction, PreparesTables):
         check_positive(self.sonic_conductance, f"{name}.sonic_conductance (C)")
         check_sonic_conductance(self.sonic_conductance, f"{name}.sonic_conductance (C)")  # m³/(s bar) refused
         check_in_open_interval(self.critical_ratio, 0.0, 1.0, f"{name}.critical_ratio (b)")
+        # in (max b, 1), as ISO6358Restriction's: at or below b the law had no subsonic branch (moved silently)
+        check_laminar_ratio(self.laminar_ratio, self.critical_ratio, name)
 
     def conductance(self, upstream_pressure):
         """C(p_up) [m³/(s Pa)] at the upstream pressure [Pa abs]."""
