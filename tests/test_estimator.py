@@ -383,3 +383,44 @@ def test_a_loop_refuses_sensor_and_filter_noise_in_mm():
     with pytest.raises(pj.PamjaxInputError, match=r"ExtendedKalmanFilter.measurement_noise\['position'\] = 0.1 m"):
         pj.ClosedLoop(PLANT, pj.SlidingModeController(MODEL), ref,
                       estimator=pj.ExtendedKalmanFilter(MODEL, measurement_noise=[2e3, 0.1]))
+
+
+@pytest.mark.parametrize("column, scale, shift, match", [
+    (0, 1.0, -101325.0, r"channel 'pressure' of readings drops to .* looks like a GAUGE pressure"),  # gauge Pa
+    (0, 1e-3, 0.0, r"channel 'pressure' of readings is 300 Pa at most: that looks like kPa"),
+    (0, 1e-5, 0.0, r"channel 'pressure' of readings is 3 Pa at most: that looks like bar"),
+    (1, 1e3, 0.0, r"channel 'position' of readings spans \[10, 75\] m, past the stroke \[-0\.02, 0\.075\] m"),  # mm
+    (1, 1e6, 0.0, r"channel 'position' of readings spans \[1e\+04, 7\.5e\+04\] m, past the stroke"),  # µm
+])
+def test_filter_refuses_readings_in_another_unit(column, scale, shift, match):
+    """Gauge pressure readings were filtered to estimates an atmosphere off, positions in mm to x = 52 m and in µm to
+    NaN everywhere (the filter refused the same slips in its initial mean and noise). Refused before filtering,
+    naming the channel; absolute readings at the stroke's ends, a few σ_R beyond them and a missing (NaN) reading
+    pass the check."""
+    ekf = pj.ExtendedKalmanFilter(MODEL)
+    fine = np.array([[1.2e5, 0.01], [3e5, 0.075 + 3e-4], [np.nan, -0.02 - 3e-4], [2e5, np.nan]])
+    ekf._filter_inputs(pj.Constant(0.6), fine, 1e-3, CHANNELS, BENCH_NOISE, 0.0, None)  # no error
+    bad = fine.copy()
+    bad[:, column] = scale * fine[:, column] + shift
+    if column == 1:
+        bad[:, 1] = scale * np.array([0.01, 0.075, np.nan, 0.05])
+    with pytest.raises(pj.PamjaxInputError, match=match):
+        ekf.filter(pj.Constant(0.6), bad, 1e-3, CHANNELS, BENCH_NOISE)
+
+
+def test_a_partial_noise_or_spread_dict_keeps_the_other_defaults_and_strings_are_named():
+    """process_noise=dict(pressure=...) (or initial_std=dict(position=...)) set the other states' values to 0, not
+    their defaults: the filter then claimed a certainty it lacked (80 % 3σ coverage). The others keep their
+    documented defaults; a string ("5 mm") raised a raw ValueError from the converter, now named."""
+    default = pj.ExtendedKalmanFilter(MODEL)
+    assert {k: float(v) for k, v in default.process_noise.items()} == dict(pressure=1.5e5, position=1e-4,
+                                                                           velocity=0.02)
+    partial = pj.ExtendedKalmanFilter(MODEL, process_noise=dict(pressure=3e4), initial_std=dict(position=1e-3))
+    assert {k: float(v) for k, v in partial.process_noise.items()} == dict(pressure=3e4, position=1e-4, velocity=0.02)
+    std, std_default = partial.std(partial.initial_state()), default.std(default.initial_state())
+    np.testing.assert_allclose(float(std.position), 1e-3, rtol=1e-12)
+    for field in ("pressure", "velocity"):
+        np.testing.assert_allclose(float(getattr(std, field)), float(getattr(std_default, field)), rtol=1e-12)
+    with pytest.raises(pj.PamjaxInputError, match=r"ExtendedKalmanFilter.initial_std\['position'\] must be numbers, "
+                                                  r"got '5 mm'"):
+        pj.ExtendedKalmanFilter(MODEL, initial_std=dict(position="5 mm"))

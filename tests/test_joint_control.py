@@ -295,3 +295,46 @@ def test_an_infeasible_target_says_why(joint, angle, target, kind, match):
         return
     with pytest.raises(pj.PamjaxInputError, match=match):
         check_joint_control(loop, TS)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(rtol=-1.0), r"rtol must be a finite number > 0, got -1\.0"),
+    (dict(rtol=0.0), r"rtol must be a finite number > 0"),
+    (dict(rtol=float("nan")), r"rtol must be a finite number > 0, got nan"),
+    (dict(atol="1e-7"), r"atol must be a finite number > 0, got '1e-7'"),
+    (dict(max_steps=2.5), r"max_steps must be an int >= 1 \(solver steps\), got 2\.5"),
+    (dict(max_steps=0), r"max_steps must be an int >= 1"),
+    (dict(ts="0 1 2"), r"ts must be a finite, strictly increasing 1-D time grid .*got '0 1 2'"),
+])
+def test_simulate_joint_control_checks_its_solver_settings_before_any_solve(joint, monkeypatch, kwargs, match):
+    """rtol = -1 or 0 ran to results ~1e29 off with `result` 0; atol="1e-7", max_steps=2.5 and ts="0 1 2" failed with
+    raw TypeError / ValueError; max_steps=0 and rtol=nan ran the whole solve into a misleading "max_steps" failure.
+    Refused by name before any solve (a stand-in solve fails the test), as `simulate_closed_loop` refuses them."""
+    import pamjax._control.joint as joint_module
+
+    def solved(*args):
+        raise AssertionError("the solve ran")
+
+    monkeypatch.setattr(joint_module, "_run_jit", solved)
+    loop = JointControlLoop(joint, AntagonisticJointController(), GaitAngle(0.5), pj.Constant(160.0))
+    kwargs = dict(dict(ts=TS), **kwargs)
+    with pytest.raises(pj.PamjaxInputError, match=match):
+        simulate_joint_control(loop, **kwargs)
+
+
+def test_simulate_joint_control_refuses_a_start_angle_outside_the_joints_range(joint, monkeypatch):
+    """y0 at 5 rad (no joint turns that far: both muscles leave their strokes) ran ~6 s of solve before failing.
+    Refused, named, before any solve; a start at the range's end is taken."""
+    import pamjax._control.joint as joint_module
+
+    def solved(*args):
+        raise AssertionError("the solve ran")
+
+    monkeypatch.setattr(joint_module, "_run_jit", solved)
+    loop = JointControlLoop(joint, AntagonisticJointController(), GaitAngle(0.5), pj.Constant(160.0))
+    start = loop.initial_state()
+    with pytest.raises(pj.PamjaxInputError, match=r"y0\.plant\.angle = 5\.0 rad lies outside the joint's range"):
+        simulate_joint_control(loop, TS, y0=eqx.tree_at(lambda s: s.plant.angle, start, jnp.asarray(5.0)))
+    a_lo, a_hi = joint.angle_range()
+    with pytest.raises(AssertionError, match="the solve ran"):  # every check passed
+        simulate_joint_control(loop, TS, y0=eqx.tree_at(lambda s: s.plant.angle, start, jnp.asarray(a_hi)))

@@ -328,12 +328,13 @@ def check_window(start, times, samples, method, last_is):
         )
 
 
-def _check_solver_settings(rtol, atol, max_steps):
-    """`rtol` and `atol` finite numbers > 0 and `max_steps` an int >= 1, as `simulate` refuses them: a tolerance of 0
-    or a step budget of 0 failed every period's solve (inf positions, `result` 1), a negative `rtol` ran silently."""
+def check_solver_settings(rtol, atol, max_steps, steps="solver steps per period"):
+    """`rtol` and `atol` finite numbers > 0 and `max_steps` an int >= 1 (`steps`: what it counts), as `simulate`
+    refuses them: a tolerance of 0 or a step budget of 0 failed every period's solve (inf positions, `result` 1), a
+    negative `rtol` ran silently. `simulate_closed_loop`'s check, and `simulate_joint_control`'s."""
     for name, value in (("rtol", rtol), ("atol", atol)):
         check_positive_number(value, name)
-    check_count(max_steps, "max_steps", "an int >= 1 (solver steps per period)")
+    check_count(max_steps, "max_steps", f"an int >= 1 ({steps})")
 
 
 def _run(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps, adjoint=None):
@@ -417,7 +418,7 @@ def simulate_closed_loop(
         raise PamjaxInputError(f"loop must be a ClosedLoop, got {type(loop).__name__}")
     loop, _ = prepared(loop)  # a float set with eqx.tree_at as an array: checked, and no constant of the program
     check_parameters(loop, "loop")  # the components' own checks, which eqx.tree_at skipped
-    _check_solver_settings(rtol, atol, max_steps)
+    check_solver_settings(rtol, atol, max_steps)
     duration = float(check_positive_number(duration, "duration"))
     if not (isinstance(samples_per_period, int) and samples_per_period >= 1):
         raise PamjaxInputError(f"samples_per_period must be a positive int, got {samples_per_period!r}")

@@ -24,9 +24,9 @@ import numpy as np
 from .._core.arrays import as_array
 from .._core.custom_types import Array, ArrayLike, Float, Int, IntScalarLike, Real, RealArrayLike
 from .._core.errors import PamjaxInputError, check_finite, check_nonnegative, check_positive, concrete_values
-from .._core.units import MIN_PRESSURE_NOISE
+from .._core.units import MIN_PRESSURE_NOISE, check_absolute_pressure
 from .._physics.signals import Step
-from .._solve.checks import check_start_state
+from .._solve.checks import START_STROKE_MARGIN, check_start_state
 from .._solve.scaled import scaled
 from .._solve.simulate import validate
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
@@ -151,9 +151,12 @@ class KalmanState(eqx.Module):
     covariance: Float[ArrayLike, " *batch n n"]
 
 
-def _arrays(values: dict[str, RealArrayLike]) -> dict[str, Float[Array, "..."]]:
-    """A {state: value} dict with float arrays as values (differentiable leaves, not constants of the program)."""
-    return {k: jnp.asarray(v, dtype=float) for k, v in values.items()} if isinstance(values, dict) else values
+def _per_state(name, defaults):
+    """Converter of a {state: value} dict to float arrays (a string named), omitted states at `defaults`, not 0."""
+    def convert(values: dict[str, RealArrayLike]) -> dict[str, Float[Array, "..."]]:  # annotated: __init__'s type
+        merged = {**defaults, **values} if isinstance(values, dict) else {}  # not a dict: __check_init__ names it
+        return {k: _floats(v, f"ExtendedKalmanFilter.{name}[{k!r}]") for k, v in merged.items()} if merged else values
+    return convert
 
 
 def _named(template, values, name):
@@ -191,7 +194,7 @@ class ExtendedKalmanFilter(eqx.Module):
     - `measurement_noise`: σ_R per sensor channel (a 1-D array, one value > 0 per channel, in the channel's unit; a
       `ClosedLoop` checks it against its sensors' channels); None (default): the loop's `LoopSensors.noise`.
     - `initial_std`: {state: σ} of the initial belief about the model's state at rest (pressure 1e4 Pa, position
-      5e-3 m, velocity 1e-2 m/s).
+      5e-3 m, velocity 1e-2 m/s). A dict naming some states keeps the others' defaults, here and in `process_noise`.
     - `substeps` (static int >= 1, 1): Euler steps of the model per sample. Paper 000's averaged model runs at 1 kHz in
       one; a switching-valve model (`presets.mas10_system("pwm")`, smoothed edges of 0.1 ms) needs ≥ 10, and then
       predicts the PWM ripple (with pressure process noise 3e4 Pa/√s its pressure error halves, docs/control.md).
@@ -199,10 +202,10 @@ class ExtendedKalmanFilter(eqx.Module):
 
     model: AbstractSystem
     process_noise: dict[str, Float[Array, "..."]] = eqx.field(
-        converter=_arrays, default_factory=lambda: dict(pressure=1.5e5, position=1e-4, velocity=0.02))
+        converter=_per_state("process_noise", dict(pressure=1.5e5, position=1e-4, velocity=0.02)), default_factory=dict)
     measurement_noise: Float[Array, " channels"] | None = eqx.field(converter=_as_optional_floats, default=None)
     initial_std: dict[str, Float[Array, "..."]] = eqx.field(
-        converter=_arrays, default_factory=lambda: dict(pressure=1e4, position=5e-3, velocity=1e-2))
+        converter=_per_state("initial_std", dict(pressure=1e4, position=5e-3, velocity=1e-2)), default_factory=dict)
     substeps: int = eqx.field(static=True, default=1)
 
     def __check_init__(self):
@@ -355,10 +358,10 @@ class ExtendedKalmanFilter(eqx.Module):
 
         **Raises:** `PamjaxInputError`, before filtering, for an unknown channel, a `noise` (or `measurement_noise`)
         not one value > 0 per channel or in another unit by its magnitude (`check_noise_scale`), a `sample_time` not
-        one number > 0, a `t0` not finite, `readings` not (N, channels) with N >= 1 or with an infinite value (its
-        index named), a `signal` `simulate` would refuse (not a signal, outside the valve's command range: a duty of
-        20-80 meant in percent), or an `initial` belief not of the model's shape, not finite or whose covariance is
-        not symmetric positive semi-definite."""
+        one number > 0, a `t0` not finite, `readings` not (N, channels) with N >= 1, with an infinite value (its
+        index named) or in another unit (gauge pressures, positions past the stroke), a `signal` `simulate` would
+        refuse (not a signal, outside the valve's command range: a duty of 20-80 meant in percent), or an `initial`
+        belief not of the model's shape, not finite or whose covariance is not symmetric positive semi-definite."""
         readings, channels, noise, belief = self._filter_inputs(signal, readings, sample_time, channels, noise, t0,
                                                                 initial)
 
@@ -403,6 +406,17 @@ class ExtendedKalmanFilter(eqx.Module):
             k, c = np.argwhere(np.isinf(values))[0]
             raise PamjaxInputError(f"{where}: readings[{k}, {c}] ({channels[c]}) is {values[k, c]}: a reading must be "
                                    "finite, or NaN where it is missing (a dropped sample, skipped)")
+        sigma, strokes = concrete_values(noise), self.model.start_positions(self._template())
+        for c, v, s in [] if values is None or sigma is None else zip(channels, values.T, sigma):
+            v, stroke = v[np.isfinite(v)], strokes.get(c, (None, None))[1]
+            if c in self.model.start_pressures(self._template()):  # gauge readings gave estimates 1 atm off
+                check_absolute_pressure(v, f"{where}: channel {c!r} of readings")
+            elif stroke is not None:  # mm readings gave x = 52 m, µm NaN; the end stops' give and 6 σ_R admitted
+                lo, hi = (np.asarray(concrete_values(b), float) for b in stroke)  # NaN where traced: unchecked
+                pad = START_STROKE_MARGIN * (hi - lo) + 6 * s
+                if np.any((v < lo - pad) | (v > hi + pad)):
+                    raise PamjaxInputError(f"{where}: channel {c!r} of readings spans [{v.min():.4g}, {v.max():.4g}] "
+                                           f"m, past the stroke [{lo:.4g}, {hi:.4g}] m ± {pad:.2g}: metres, not mm, µm")
         try:  # simulate's checks of the signal against the model's valve (ts: the readings' times)
             validate(self.model, signal, t0 + sample_time * np.arange(1, readings.shape[0] + 1), t0=t0)
         except PamjaxInputError as err:

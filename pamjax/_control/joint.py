@@ -8,9 +8,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.custom_types import Array, Float, Int, RealScalarLike, Series, TimesLike
-from .._core.errors import PamjaxInputError, PamjaxSolveError
+from .._core.errors import PamjaxInputError, PamjaxSolveError, concrete_values
 from .._physics.signals import Constant
-from .._solve.checks import check_parameters, check_start_state, prepared
+from .._solve.checks import START_STROKE_MARGIN, check_parameters, check_start_state, prepared
 from .._solve.simulate import solve
 from .._solve.trajectory import result_message
 from .._systems.joint import MIN_GAUGE_SUM
@@ -25,7 +25,7 @@ from .._systems.joint_control import (
     regulated_stiffness,
     stiffness_range,
 )
-from .closed_loop import check_window
+from .closed_loop import check_solver_settings, check_window
 
 
 class JointControlTrajectory(eqx.Module):
@@ -115,9 +115,11 @@ def check_joint_control(loop: JointControlLoop, ts, samples=401):
     inside the joint's range; at `samples` times over `ts`, a pressure-sum target a GAUGE sum ≥ `MIN_GAUGE_SUM` Pa (not
     bar), a stiffness target inside the stiffness the joint reaches at θ_r (`stiffness_range`), and the target held
     statically with both gauge pressures in [0, `max_gauge_pressure`]: each failure says which of these it is."""
-    ts = np.asarray(ts, dtype=float)
-    if ts.ndim != 1 or ts.size < 2 or not np.all(np.isfinite(ts)) or not np.all(np.diff(ts) > 0):
-        raise PamjaxInputError(f"ts must be a finite, strictly increasing 1-D time grid [s] of ≥ 2 times, got {ts}")
+    given = ts
+    ts = concrete_values(ts)  # None for what is no array of numbers ("0 1 2" was a raw ValueError)
+    if ts is None or ts.ndim != 1 or ts.size < 2 or not np.all(np.isfinite(ts)) or not np.all(np.diff(ts) > 0):
+        raise PamjaxInputError(f"ts must be a finite, strictly increasing 1-D time grid [s] of ≥ 2 times, got "
+                               f"{given!r}")
     lo, hi = loop.angle_reference.bounds()
     a_lo, a_hi = joint_angle_range(loop.joint)
     if not (np.isfinite(lo) and np.isfinite(hi) and lo >= a_lo and hi <= a_hi):
@@ -165,6 +167,20 @@ def check_joint_control(loop: JointControlLoop, ts, samples=401):
                                    f"({gauge[0, k]:.4g}, {gauge[1, k]:.4g}) Pa, " + why.format(total[k]))
 
 
+def _check_start_angle(loop, y0):
+    """`y0`'s angle inside the joint's range (both muscles within their strokes), give or take `START_STROKE_MARGIN`
+    of it as `simulate` admits a start position beyond the stroke: 5 rad ran ~6 s of solve before failing."""
+    angle = None if y0 is None else concrete_values(y0.plant.angle)
+    bounds = joint_angle_range(loop.joint)  # None where a joint parameter is traced
+    if angle is None or bounds is None:
+        return
+    a_lo, a_hi = bounds
+    margin = START_STROKE_MARGIN * (a_hi - a_lo)
+    if np.any((angle < a_lo - margin) | (angle > a_hi + margin)):
+        raise PamjaxInputError(f"y0.plant.angle = {angle} rad lies outside the joint's range [{a_lo:.3f}, {a_hi:.3f}] "
+                               "rad (both muscles within their strokes): start inside it (angle in radians)")
+
+
 def simulate_joint_control(
     loop: JointControlLoop,
     ts: TimesLike,
@@ -189,10 +205,13 @@ def simulate_joint_control(
     **Raises:** `PamjaxInputError` for what `simulate` refuses in the loop (parameters set with `eqx.tree_at`, such
     as a joint inertia ≤ 0, are checked as the constructors check them), a `y0` that is no `JointControlState` or
     holds a non-finite value, an angle reference outside the joint's range or an infeasible stiffness or
-    pressure-sum target (see `check_joint_control`), before any solve; `PamjaxSolveError` where the solve fails and
-    `throw` is True.
+    pressure-sum target (see `check_joint_control`), a `y0` angle outside the joint's range (give or take
+    `START_STROKE_MARGIN` of it, the end stops' give), `rtol` or `atol` not a finite number > 0 or `max_steps` not an
+    int >= 1 (a negative `rtol` ran silently to results far off with `result` 0), before any solve;
+    `PamjaxSolveError` where the solve fails and `throw` is True.
     """
     check_joint_control_loop(loop)
+    check_solver_settings(rtol, atol, max_steps, "solver steps")
     loop, _ = prepared(loop)  # a float set with eqx.tree_at as an array: checked, and no constant of the program
     check_parameters(loop, "loop")  # the components' own checks, which eqx.tree_at skipped (inertia < 0: NaN)
     # the loop's state structure from its `state_scale` (a state of constants; shapes only, nothing computed), not
@@ -202,6 +221,7 @@ def simulate_joint_control(
         raise PamjaxInputError(f"y0 must be a JointControlState (plant, integrals) of this loop, got "
                                f"{type(y0).__name__}: loop.initial_state(t0) is one")
     check_start_state(loop, y0)
+    _check_start_angle(loop, y0)
     check_joint_control(loop, ts)
     traj = _run_jit(loop, jnp.asarray(ts, dtype=float), y0, rtol, atol, max_steps, "forward")
     if throw and not isinstance(traj.result, jax.core.Tracer) and int(traj.result) != 0:
