@@ -52,6 +52,8 @@ def _uniform_columns(uniform):
     leaves = jax.tree_util.tree_leaves(uniform)
     groups = {}
     for leaf in leaves:
+        if jnp.issubdtype(leaf.dtype, jnp.complexfloating):
+            raise Unsupported("a complex lane-uniform array")
         kind = "f" if jnp.issubdtype(leaf.dtype, jnp.inexact) else "i"
         groups.setdefault(kind, []).append(jnp.ravel(leaf).astype(jnp.float64 if kind == "f" else jnp.int64))
     out = []
