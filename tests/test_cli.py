@@ -21,6 +21,7 @@ from pamjax._cli.main import main
 from pamjax._cli.out import OutputFolder
 
 EXAMPLES = pathlib.Path(__file__).resolve().parents[1] / "examples"
+TRIANGLE = (EXAMPLES / "triangle_025.csv").as_posix()  # 8 s at 50 Hz; its command: the 0.25 Hz triangle 0.05-0.95
 
 
 @pytest.fixture
@@ -157,6 +158,31 @@ FIT_CASES = {
     "tank initial key": (_fit_config(append="tank_volume = 5e-5\ninitial = { position = 0.0 }\n"),
                          r"initial .*TankSystem.*unknown key\(s\) \['position'\]; valid keys are \['pressure'\]"),
     "TOML syntax": ("[fit\nfree = 1\n", r"cfg.toml, line 1, column 5: not valid TOML: Expected '\]'(.|\n)*\[fit"),
+    # an unquoted dotted key is a nested table in TOML: read as the dotted path (was: "unknown parameter 'friction'")
+    "[model] set dotted key": (_fit_config({"[fit]": "[model.set]\nfriction.coulomb_forc = 20.0\n[fit]"}),
+                               r"\[model\] set: unknown parameter 'friction.coulomb_forc'(.|\n)*"
+                               r"friction.coulomb_force"),
+    "[model] options number in quotes": (_fit_config({'"averaged"': '"averaged", payload_mass = "9.6"'}),
+                                         r"\[model\] options payload_mass must be a number \[SI\], e.g. payload_mass = "
+                                         r"9.6; got '9.6' \(a number in quotes"),
+    "recorded period in ms": (_fit_config({'{ kind = "Triangle", low = 0.05, high = 0.95, frequency = 0.25 }':
+                                           '{ kind = "recorded", period = 20.0 }'}),
+                              r"#1 signal period = 20 s is longer than 1 s.*in seconds: 0.02 for 20 ms"),
+    # checked against the recording (read, nothing solved): the bundled 8 s triangle run
+    "recorded period as long as the recording": (
+        _fit_config({'"missing.csv"': f'"{TRIANGLE}"',
+                     '{ kind = "Triangle", low = 0.05, high = 0.95, frequency = 0.25 }':
+                     '{ kind = "recorded", period = 0.8 }'}, append="t_end = 0.5\n"),
+        r"#1 signal period = 0.8 s is not shorter than the recording \(0.5 s\).*in seconds: 0.02 for 20 ms"),
+    "experiment t_end in ms": (_fit_config({'"missing.csv"': f'"{TRIANGLE}"'}, append="t_end = 8000.0\n"),
+                               r"#1 t_end = 8000 s is past the end of recording 'triangle_025', which spans 0 … 8 s.*"
+                               r"8 for 8000 ms"),
+    # the typed signal (2.5 Hz) contradicts the run's own command column (the 0.25 Hz triangle): up to 0.9 apart
+    "signal contradicting the recorded command": (
+        _fit_config({'"missing.csv"': f'"{TRIANGLE}"', "frequency = 0.25": "frequency = 2.5"}),
+        r"#1 \(triangle_025\) signal contradicts the recording's own command column: they differ by more than 0.05 "
+        r".* at \d+ of 401 samples .*the largest at t = [\d.]+ s \(signal [\d.]+, recorded [\d.]+\).*"
+        r'signal = "recorded"'),
     "missing recording": (_fit_config(), r"recording file .*missing.csv does not exist"),
 }
 
@@ -181,7 +207,8 @@ def test_an_experiment_with_payload_kg_drives_the_model_lifting_that_payload(tmp
     from pamjax._cli.fit import load_config
 
     t = np.arange(0.0, 0.1 + 5e-4, 1e-3)
-    rows = np.column_stack([t, np.full(t.size, 0.5), np.full(t.size, 2e5), np.zeros(t.size)])
+    duty = np.asarray(pamjax.Triangle(0.05, 0.95, 0.25)(t))  # the config's signal: a contradicting column is refused
+    rows = np.column_stack([t, duty, np.full(t.size, 2e5), np.zeros(t.size)])
     np.savetxt(tmp_path / "run.csv", rows, delimiter=",", header="t [s],duty [-],pressure [Pa],position [m]",
                comments="")
     body = _FIT_OK.replace('file = "missing.csv"', 'file = "run.csv"')
@@ -192,6 +219,48 @@ def test_an_experiment_with_payload_kg_drives_the_model_lifting_that_payload(tmp
     heavy, plain = (e.system_for(model) for e in experiments)
     assert float(heavy.payload_mass) == 30.0 and float(plain.payload_mass) == float(model.payload_mass)
     assert float(heavy.muscle.force_law.k0) == float(model.muscle.force_law.k0)
+
+
+def test_a_typed_signal_is_checked_against_the_recordings_command_allowing_a_pwm_latch():
+    # the bundled runs' own signals agree with their command columns (the fit example fits them as typed)
+    from pamjax._cli.config import check_against_command
+
+    averaged, pwm = presets.mas10_system("averaged"), presets.mas10_system("pwm")
+    triangle = pamjax.Triangle(0.05, 0.95, 0.25)
+    check_against_command(triangle, pamjax.Recording.load(TRIANGLE), "E", averaged)
+    check_against_command(pamjax.Constant(0.5), pamjax.Recording.load(EXAMPLES / "tank_charge_050.csv"), "E",
+                          presets.mas10_tank_system("averaged"))
+    # a 1 kHz log of a 2 Hz triangle's duty latched per 20 ms PWM period (as latched, or as the next period will
+    # latch it): up to 0.07 off the typed signal, within the switching valve's period (a continuous valve allows
+    # only a sample interval)
+    t = np.arange(0.0, 2.0, 1e-3)
+    fast = pamjax.Triangle(0.05, 0.95, 2.0)
+    for start in (np.floor, np.ceil):
+        latched = pamjax.Recording(t, {"command": np.asarray(fast(start(t / 0.02) * 0.02))}, name="latched")
+        check_against_command(fast, latched, "E", pwm)
+        with pytest.raises(pamjax.PamjaxInputError, match=r"E contradicts the recording's own command column"):
+            check_against_command(fast, latched, "E", averaged)
+
+
+def test_a_dotted_set_key_sets_the_dotted_parameter():
+    # TOML reads `friction.coulomb_force = 20.0` as a table friction = { coulomb_force = 20.0 }
+    from pamjax._cli.config import apply_set
+
+    model = presets.mas10_system("averaged")
+    nested = apply_set(model, tomllib.loads("friction.coulomb_force = 20.0\n"), "[model] set")
+    assert float(nested.friction.coulomb_force) == 20.0
+    twice = tomllib.loads('"friction.coulomb_force" = 20.0\nfriction.coulomb_force = 21.0\n')
+    with pytest.raises(pamjax.PamjaxInputError, match=r"\[model\] set: 'friction.coulomb_force' is given twice"):
+        apply_set(model, twice, "[model] set")
+
+
+def test_a_typed_signal_may_run_past_the_recording_drawn_beside_it(tmp_path, no_solves):
+    # with dt the rows are the run's own; only the recording's channels are drawn (was and is accepted)
+    from pamjax._cli.simulate import load
+
+    text = _SIM_RECORDED.replace('"recorded"', '{ kind = "Constant", value = 0.5 }').replace("t_end = 1.0",
+                                                                                             "t_end = 10.0\ndt = 0.5")
+    assert float(load(_write(tmp_path, text)).ts[-1]) == 10.0
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -293,6 +362,8 @@ _SIM_OK = """
     t_end = 1.0
 """
 
+_SIM_RECORDED = _SIM_OK.replace('{ kind = "Constant", value = 0.5 }', f'"recorded"\n    file = "{TRIANGLE}"')
+
 SIMULATE_CASES = {
     "top-level key": (_SIM_OK + "[output]\n", r"unknown key\(s\) \['output'\]; valid keys are \['input', 'model'"),
     "no input": (_SIM_OK.replace('signal = { kind = "Constant", value = 0.5 }', ""), r"\[input\] needs a signal"),
@@ -309,6 +380,16 @@ SIMULATE_CASES = {
     # t_end 1.0 at dt 0.3 ended the CSV at 0.9 s without a word
     "dt that does not divide the run": (_SIM_OK + "dt = 0.3\n", r"dt = 0.3 s does not divide t_end - t0 = 1 s: the "
                                         r"rows would end at 0.9 s, short of t_end; set dt = 0.25"),
+    # 20 for 20 ms held the first recorded duty all run; a t_end past the recording ended the rows at its end
+    "recorded period in ms": (_SIM_RECORDED.replace('"recorded"', '{ kind = "recorded", period = 20.0 }'),
+                              r"\[input\] signal period = 20 s is longer than 1 s.*in seconds: 0.02 for 20 ms"),
+    "t_end past the recording": (_SIM_RECORDED.replace("t_end = 1.0", "t_end = 20.0"),
+                                 r"\[simulate\] t_end = 20 s is past the end of recording 'triangle_025', which spans "
+                                 r"0 … 8 s \(8 s\): its command drives the model and ends there(?!;)"),
+    "t_end past the recording's times": (_SIM_RECORDED.replace('"recorded"', '{ kind = "Constant", value = 0.5 }')
+                                         .replace("t_end = 1.0", "t_end = 8000.0"),
+                                         r"t_end = 8000 s is past .*the output rows are its times and end there \(give "
+                                         r"dt to simulate the signal past it\); t_end is in seconds: 8 for 8000 ms"),
     # the uniform grid read a switching valve's duty unlatched: tens of kPa off, silently
     "grid with a switching valve": (_SIM_OK + 'stepping = "grid"\n',
                                     r"stepping='grid' is for continuous valves.* use stepping='pwm'"),

@@ -25,7 +25,7 @@ import numpy as np
 
 from .._core.errors import PamjaxInputError
 from .._core.units import check_setting
-from .kinds import check_keys
+from .kinds import check_keys, check_recorded_period, command_bounds
 
 
 def read_toml(path):
@@ -75,7 +75,7 @@ def apply_set(model, values, where):
 
     if not values:
         return model
-    for key, value in values.items():
+    for key, value in flat_paths(values, where).items():
         leaf, steps, index, shape = parameter_shape(model, key, where)
         new = _array(value, f"{where}: {key!r}")
         if new.shape != shape:
@@ -87,6 +87,20 @@ def apply_set(model, values, where):
     # every value has its parameter's shape (above), and the model before (a preset, or a model file, checked when
     # loaded) has no batched parameter: nor has the result, which skips that check's shape inference
     return checked(model, where, batched=False)
+
+
+def flat_paths(values, where, prefix=""):
+    """`values` (parameter path → value) with nested tables flattened into dotted paths: TOML reads an unquoted dotted
+    key, `friction.coulomb_force = 20.0`, as a table `friction` holding `coulomb_force`, which means the parameter
+    "friction.coulomb_force" (was: "unknown parameter 'friction'"). A path given both ways is refused."""
+    out = {}
+    for key, value in values.items():
+        path = f"{prefix}{key}"
+        for p, v in (flat_paths(value, where, f"{path}.") if isinstance(value, dict) else {path: value}).items():
+            if p in out:
+                raise PamjaxInputError(f"{where}: {p!r} is given twice (quoted and as a dotted key): give it once")
+            out[p] = v
+    return out
 
 
 def parameter_shape(model, path, where):
@@ -160,8 +174,95 @@ def build_signal(spec, where, recording=None):
         if recording is None:
             raise PamjaxInputError(f"{where} signal 'recorded' needs a recording with a command channel")
         period = spec.get("period") if isinstance(spec, dict) else None
+        if period is not None:
+            check_recorded_period(period, recording.t, f"{where} signal period")
         return pj.Sampled(recording.t, recording["command"], period=period)
     return getattr(pj, spec["kind"])(**{k: v for k, v in spec.items() if k != "kind"})
+
+
+def is_recorded(spec):
+    """Whether a validated signal spec is the recording's command column ("recorded", or kind = "recorded")."""
+    return spec == "recorded" or spec["kind"] == "recorded"
+
+
+def experiment_signal(table, where, recording, system):
+    """The signal of a validated [[experiment]] table (`build_signal`); a typed one checked against the recording's
+    own command column, where it has one (`check_against_command`)."""
+    spec = table.get("signal", "recorded")
+    signal = build_signal(spec, where, recording)
+    if not is_recorded(spec):
+        check_against_command(signal, recording, f"{where} ({table.get('name', recording.name)}) signal", system)
+    return signal
+
+
+# A typed signal and the recording's command column differ where the bench ran another command than the config says
+# (frequency 2.5 typed for the 0.25 Hz triangle run: up to 0.90 duty apart, fitted without a word, the misfit blamed
+# on a delay). What they may differ by: each sample is compared with the signal anywhere within one PWM period (the
+# latch: a logger writes the duty of the period begun, or the next) or one sample interval, whichever is longer; then
+# by 5 % of the command range (0.05 duty, 0.5 V: far above a logged duty's quantisation, 1/255 = 0.004) at 5 % of the
+# samples (a step's edge, a logger's odd sample).
+COMMAND_TOLERANCE = 0.05  # of the command range
+COMMAND_OUTLIERS = 0.05  # fraction of the samples
+HOLD_POINTS = 9  # times the signal is evaluated at across the hold window
+
+
+def check_against_command(signal, recording, where, system):
+    """Refuse a typed `signal` that contradicts `recording`'s command column (see `COMMAND_TOLERANCE`), naming
+    `where`, the largest difference and its time; nothing to compare without a command column or a system with a
+    command range."""
+    import jax.numpy as jnp
+
+    import pamjax as pj
+
+    if "command" not in recording.channels or not isinstance(system, pj.AbstractSystem):
+        return
+    t, u = np.asarray(recording.t, dtype=float), np.asarray(recording["command"], dtype=float)
+    t, u = t[np.isfinite(u)], u[np.isfinite(u)]
+    if t.size < 2:
+        return
+    period = float(system.valve.period) if system.valve.switches else 0.0
+    hold = max(period, float(np.median(np.diff(t))))
+    lo, hi = np.full(t.shape, np.inf), np.full(t.shape, -np.inf)
+    for shift in np.linspace(-hold, hold, HOLD_POINTS):
+        v = np.asarray(signal(jnp.asarray(t + shift)), dtype=float)
+        if v.shape not in ((), t.shape):
+            return  # one command per actuator: a single command column is not comparable
+        lo, hi = np.minimum(lo, v), np.maximum(hi, v)
+    off = np.maximum(lo - u, u - hi)  # > 0: outside every value the signal takes within the hold
+    low, high = command_bounds(system)
+    tolerance = COMMAND_TOLERANCE * (high - low)
+    bad = np.count_nonzero(off > tolerance)
+    if bad <= COMMAND_OUTLIERS * t.size:
+        return
+    k = int(np.argmax(off))
+    typed = float(np.asarray(signal(jnp.asarray(t[k]))))
+    raise PamjaxInputError(
+        f"{where} contradicts the recording's own command column: they differ by more than {tolerance:g} "
+        f"({COMMAND_TOLERANCE:.0%} of the command range [{low:g}, {high:g}], allowing {hold:g} s of latch or lag) at "
+        f"{bad} of {t.size} samples ({bad / t.size:.0%}), the largest at t = {t[k]:g} s (signal {typed:.4g}, recorded "
+        f"{u[k]:.4g}): the model would be driven by another command than the bench ran. Write signal = \"recorded\" "
+        "(the column drives the model), or correct the signal")
+
+
+def check_end(recording, t_end, where, reason):
+    """Refuse a `t_end` [s] past `recording`'s last sample (more than one sample interval beyond it: a log ending at
+    7.98 s takes t_end = 8.0) naming `where`, the recording's span and `reason` (what stops at its end); one a
+    thousand times too long (8000 for an 8 s log, where 8 s is most of it) is named as milliseconds."""
+    t = np.asarray(recording.t, dtype=float)
+    slack, end = float(np.median(np.diff(t))), float(t[-1])
+    if t_end <= end + slack:
+        return
+    in_ms = t[0] + 0.1 * (end - t[0]) <= t_end / 1000 <= end + slack
+    ms = f"; t_end is in seconds: {t_end / 1000:g} for {t_end:g} ms" if in_ms else ""
+    raise PamjaxInputError(f"{where} = {t_end:g} s is past the end of recording {recording.name!r}, which spans "
+                           f"{t[0]:g} … {end:g} s ({end - t[0]:g} s): {reason}{ms}")
+
+
+def window_to(recording, t_end, where):
+    """`recording` up to `t_end` [s] (an [[experiment]]'s `t_end`), one past its end refused (`check_end`)."""
+    check_end(recording, t_end, where, "the experiment would end there, not at t_end (remove t_end to fit the whole "
+              "recording)")
+    return recording.window(None, t_end)
 
 
 def load_recording(table, root):

@@ -21,7 +21,7 @@ from .._core.errors import PamjaxInputError
 from .._fit.measurement import check_measured_free
 from .._identifiability.profile import PROFILED_STATUSES
 from . import fit_start, schema
-from .config import build_model, build_signal, check_initial, load_recording, parameter_shape, read_toml
+from .config import build_model, check_initial, experiment_signal, load_recording, parameter_shape, read_toml, window_to
 from .kinds import sensor_groups
 from .out import PENDING, OutputFolder, interrupt_status, raise_pending
 
@@ -179,13 +179,13 @@ def build_experiments(tables, model, root, validation_fraction=0.0):
     for k, (e, build) in enumerate(zip(tables, systems)):
         rec = load_recording(e, root)
         if "t_end" in e:
-            rec = rec.window(None, float(e["t_end"]))
+            rec = window_to(rec, float(e["t_end"]), f"{_where(k)} t_end")
         if "filter_hz" in e:
             rec = rec.filtered(float(e["filter_hz"]))
         if "rate" in e:
             rec = rec.resampled(float(e["rate"]))
         experiments.append(pj.Experiment(
-            rec, build_signal(e.get("signal", "recorded"), _where(k), rec), channels=e.get("channels"),
+            rec, experiment_signal(e, _where(k), rec, plant), channels=e.get("channels"),
             scales=e.get("scales"), build=build, initial=e.get("initial"), name=e.get("name", rec.name),
             max_steps=e.get("max_steps", 200_000), validation_fraction=validation_fraction,
             stepping=e.get("stepping", "auto"), sensors=e.get("sensors", "rig")))

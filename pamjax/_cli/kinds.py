@@ -8,12 +8,14 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .._control.controllers import MAX_PERIOD
 from .._core.errors import PamjaxInputError
 from .._core.units import check_absolute_pressure, check_setting
 from .._fit.parameters import FREE_ENTRY_KEYS
 
 SIGNALS = ("Constant", "Triangle", "Sine", "Step", "recorded")
 RECORDED_KEYS = {"kind", "period"}  # signal = { kind = "recorded", period = 0.02 }: the command channel, latched
+PERIOD_HINT = "write the period in seconds: 0.02 for 20 ms (paper 000's 50 Hz PWM)"
 AXIS_KEYS = {"start", "stop", "num", "log"}  # a [sweep] axis as a table
 
 
@@ -219,7 +221,9 @@ def sensor_groups(sensors):
 
 def check_signal(spec, key, where, table=None, name=None):
     """A signal: "recorded" (the recording's command channel), or a table with `kind` (a pamjax signal class) and
-    that class's fields, numbers each, or `{ kind = "recorded", period = 0.02 }` (latched per PWM period)."""
+    that class's fields, numbers each, or `{ kind = "recorded", period = 0.02 }` (latched per PWM period [s], at most
+    `MAX_PERIOD`, a controller's longest: 20.0 is 20 ms written as seconds; against the recording:
+    `check_recorded_period`)."""
     import pamjax as pj
 
     if spec == "recorded":
@@ -230,6 +234,10 @@ def check_signal(spec, key, where, table=None, name=None):
         check_keys(spec, RECORDED_KEYS, f"{where} (kind = 'recorded')")
         if "period" in spec:
             require(spec["period"], "positive number", f"{where} period", "0.02 (s)")
+            if spec["period"] > MAX_PERIOD:  # 20.0 for 20 ms held the first sample's duty all run, silently
+                raise PamjaxInputError(f"{where} period = {spec['period']:g} s is longer than {MAX_PERIOD:g} s, no "
+                                       "PWM valve's (pneumatic PWM runs at 10-500 Hz): the latched command would hold "
+                                       f"one duty over the whole motion; {PERIOD_HINT}")
         return
     fields = dataclasses.fields(getattr(pj, spec["kind"]))
     check_keys(spec, {"kind"} | {f.name for f in fields}, f"{where} (kind = {spec['kind']!r})")
@@ -240,6 +248,15 @@ def check_signal(spec, key, where, table=None, name=None):
                and f.default_factory is dataclasses.MISSING]
     if missing:
         raise PamjaxInputError(f"{where} (kind = {spec['kind']!r}) needs {missing}")
+
+
+def check_recorded_period(period, times, where):
+    """A recorded command's latch `period` [s] against the recording's `times` [s]: a period as long as the recording
+    latches one sample (or two) for the whole run, a constant command: a unit slip (ms), refused naming `where`."""
+    span = float(times[-1] - times[0])
+    if period >= span:
+        raise PamjaxInputError(f"{where} = {period:g} s is not shorter than the recording ({span:g} s): the latched "
+                               f"command would hold its first sample all run; {PERIOD_HINT}")
 
 
 def check_free(free, key, where, table=None, name=None):

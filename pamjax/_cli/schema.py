@@ -10,6 +10,8 @@ table (`config.check_initial`). How a config is read, step by step: docs/archite
 
 import inspect
 
+import numpy as np
+
 from .._core.errors import PamjaxInputError
 from .._core.units import check_setting
 from .kinds import Key, check_keys, check_table, is_number
@@ -83,7 +85,7 @@ EXPERIMENT = {
     "supply_pressure": Key("positive number", "6.5e5", "Pa abs", setting=True),
     "start": Key("table of numbers", "{ pressure = 4e5, position = 0.01, velocity = 0.0 }",
                  "a run logged mid-way", setting=True, entry="4e5", fields=STATE_FIELDS),
-    "t_end": Key("positive number", "8.0", "s"),
+    "t_end": Key("positive number", "8.0", "s, within the recording"),
     "max_steps": Key("positive integer", "200000"),
     "rename": Key("table of strings", '{ p = "pressure" }', entry='"pressure"'),
     "units": Key("table of strings", '{ position = "mm" }', entry='"bar abs"'),
@@ -214,10 +216,14 @@ def check_model(table, where="[model]"):
             raise PamjaxInputError(f"{where}: give either file (a model file) or preset (with options), not both; "
                                    f"remove {both}")
     preset = table.get("preset", "mas10_system")  # one of PRESETS (checked with the table)
-    options = table.get("options", {})
-    check_keys(options, inspect.signature(getattr(pj.presets, preset)).parameters,
-               f"{where} options (keyword arguments of presets.{preset})")
+    options, parameters = table.get("options", {}), inspect.signature(getattr(pj.presets, preset)).parameters
+    check_keys(options, parameters, f"{where} options (keyword arguments of presets.{preset})")
     for key, value in options.items():
+        default = parameters[key].default  # a number: the option is one (was: refused by the preset, key unnamed)
+        if is_number(default) and not (is_number(value) and np.isfinite(value)):
+            raise PamjaxInputError(f"{where} options {key} must be a number [SI], e.g. {key} = {default!r}; got "
+                                   f"{value!r}" + (" (a number in quotes: remove them)" if isinstance(value, str)
+                                                   else ""))
         if is_number(value):
             check_setting(key, value, f"{where} options")
 

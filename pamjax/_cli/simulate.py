@@ -23,7 +23,7 @@ from .._core.csvio import write_table
 from .._core.errors import PamjaxInputError
 from .._solve.simulate import resolve_stepping, validate
 from . import bands, schema
-from .config import build_model, build_signal, check_initial, load_recording, read_toml
+from .config import build_model, build_signal, check_end, check_initial, is_recorded, load_recording, read_toml
 from .kinds import DUTY, command_of
 from .out import OutputFolder
 
@@ -85,7 +85,8 @@ def load(path):
 
 def build_run(cfg, model, root):
     """The `Run` of a validated config and its model: the system, its `initial` keys checked against it, then the
-    recording read (if any), the signal, the output times and the solver's settings."""
+    recording read (if any), the signal, the output times (a `t_end` past the recording refused where its command
+    drives the model or its times are the rows: `check_end`) and the solver's settings."""
     import jax.numpy as jnp
 
     import pamjax as pj
@@ -102,6 +103,10 @@ def build_run(cfg, model, root):
     t_end = float(sim.get("t_end", recording.t[-1] if recording is not None else 0.0))
     if not t_end > t0:
         raise PamjaxInputError(f"[simulate] t_end ({t_end} s) must exceed t0 ({t0} s)")
+    driven = is_recorded(inp.get("signal", "recorded"))
+    if recording is not None and "t_end" in sim and (driven or "dt" not in sim):  # was: rows ending at its end
+        check_end(recording, t_end, "[simulate] t_end", "its command drives the model and ends there" if driven else
+                  "the output rows are its times and end there (give dt to simulate the signal past it)")
     if recording is not None and "dt" not in sim:
         ts = recording.t[(recording.t >= t0) & (recording.t <= t_end)]
     else:
