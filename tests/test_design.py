@@ -1257,3 +1257,78 @@ def test_a_numpy_duration_is_a_number_and_a_missing_initial_csv_names_the_key(tm
     cfg.write_text(TANK_DESIGN_CONFIG + 'initial = "nope.csv"\n')
     assert main(["design", str(cfg), "--out", str(tmp_path / "o"), "--quiet", "--no-plot"]) == 2
     assert "[design] initial = 'nope.csv'" in capsys.readouterr().err and not (tmp_path / "o").exists()
+
+
+# --- a failed solve is not information (issue: an 800 s baseline run ran out of its max_steps: its residuals NaN, its
+# forward-mode Jacobian exact zeros, its standard errors inf, and the design was said to beat it) ---
+
+
+def _out_of_steps(name="E3"):
+    """A run of the averaged MAS-10 whose adaptive solve runs out of steps (2): fails at once, as a long run does."""
+    rec = pj.Recording(np.linspace(0.0, 0.5, 11), {"pressure": np.full(11, 2e5)}, name=name)
+    return pj.Experiment(rec, pj.Constant(0.5), channels=["pressure"], scales={"pressure": 2e3}, stepping="adaptive",
+                         max_steps=2, name=name)
+
+
+def test_a_baseline_or_prior_run_whose_solve_fails_is_named_not_counted_as_no_information():
+    from pamjax._identifiability import design as dmod
+    from pamjax._identifiability.prior_fit import split_prior
+
+    model = presets.mas10_system(valve="averaged")
+    space = pj.ParameterSpace(model, MUSCLE_FREE)
+    theta = np.asarray(space.initial_theta())
+    for role, prior, baseline in (("baseline", split_prior(()), [_out_of_steps()]),
+                                  ("prior", split_prior([_out_of_steps()]), None)):
+        with pytest.raises(PamjaxInputError, match=rf"^{role}: not counted as information, as its simulation at the "
+                                                   r"design point fails: experiment 'E3': its solve fails: the maximum "
+                                                   r"number of solver steps was reached: max_steps=2 .*raise its "
+                                                   r"max_steps"):
+            dmod._in_hand(space, theta, prior, baseline, (0, 1), 1.0)
+
+
+def test_a_designed_run_whose_solve_fails_at_the_start_says_so_not_that_it_determines_nothing(monkeypatch):
+    # an 800 s design ran out of the designed run's max_steps: it was reported as "the start signal ... does not
+    # determine [...]"; here the designed run's budget is cut to 2 steps
+    from pamjax._identifiability import design_setup
+
+    made = design_setup.designed_experiment
+
+    def out_of_steps(*args, **kwargs):
+        exp = made(*args, **kwargs)
+        object.__setattr__(exp, "max_steps", 2)  # a static field of the bound copy (as `Experiment.bind` sets one)
+        return exp
+
+    monkeypatch.setattr(design_setup, "designed_experiment", out_of_steps)
+    with pytest.raises(PamjaxInputError, match=r"duration: the designed run's solve fails at the start signal: the "
+                                               r"maximum number of solver steps was reached: max_steps=2 .*design a "
+                                               r"shorter run \(duration\)"):
+        pj.design_experiment(presets.mas10_tank_system(valve="averaged"), ["valve.coefficients[1,0]"], 0.2,
+                             noise=NOISE, channels=("pressure",), start={"pressure": 101325.0}, rate=500.0, knots=4,
+                             steps=0, period=0.02, initial=pj.Constant(0.6), progress=False)
+
+
+def test_a_long_planned_run_gets_the_step_budget_of_its_horizon():
+    # a planned run has no max_steps key: an 800 s triangle of the averaged valve needs ~253,000 steps at the
+    # Experiment's rtol 1e-9, beyond its default 100,000; a short run keeps the default (its compiled program)
+    from pamjax._cli.design import _step_budget
+
+    model = presets.mas10_system(valve="averaged")
+    assert _step_budget(model, 25.0) == {}
+    assert _step_budget(model, 800.0)["max_steps"] >= 2 * 253_000
+
+
+def test_a_long_designed_run_gets_the_step_budget_of_its_horizon():
+    # the designed run of an 800 s design ran out of the Experiment's default 100,000 steps at 96 s (~1,040 steps/s
+    # at rtol 1e-9 with a duty per period): it gets twice `simulate`'s budget for its horizon; a design of up to
+    # 50 s keeps the default (its compiled program)
+    import inspect
+
+    from pamjax._identifiability.design_setup import designed_experiment
+
+    model = _tank()
+    short = designed_experiment(model, 0.4, 0.02, 250.0, ("pressure",), NOISE, {"pressure": 101325.0}, 4,
+                                np.full(20, 0.5))
+    long = designed_experiment(model, 800.0, 0.02, 50.0, ("pressure",), NOISE, {"pressure": 101325.0}, 4,
+                               np.full(40_000, 0.5))
+    assert short.max_steps == inspect.signature(pj.Experiment.__init__).parameters["max_steps"].default
+    assert long.max_steps >= 2 * 1_040 * 800

@@ -380,3 +380,18 @@ def test_a_resume_with_fewer_max_steps_than_the_checkpoint_holds_is_refused(chec
         pamjax.fit(start, [exp], free, max_steps=2, resume=path, progress=False)
     same = pamjax.fit(start, [exp], free, max_steps=res.iterations, resume=path, progress=False)
     assert same.values == res.values and same.iterations == res.iterations  # as many as it holds: its end
+
+
+def test_a_start_whose_solve_runs_out_of_steps_names_the_experiment_and_its_max_steps():
+    # An 800 s run failed its solve at the experiment's max_steps and the fit blamed "the start values and the
+    # experiments' initial states": the message names the experiment whose solve failed (not the one that solved),
+    # why (its max_steps) and the budget that finishes it
+    system = presets.mas10_system(valve="averaged")
+    rec = pamjax.Recording(np.linspace(0, 0.5, 11), dict(pressure=np.full(11, 2e5)), name="r")
+    exps = [pamjax.Experiment(rec, pamjax.Constant(0.5), stepping="adaptive", name=name, max_steps=steps)
+            for name, steps in (("ok", 100_000), ("long", 2))]
+    with pytest.raises(PamjaxInputError, match=r"experiment 'long': its solve fails: the maximum number of solver "
+                                               r"steps was reached: max_steps=2 .*raise its max_steps \(e\.g\. "
+                                               r"max_steps = \d+\)") as caught:
+        pamjax.fit(system, exps, ["payload_mass"], progress=False)
+    assert "'ok'" not in str(caught.value) and "check the start values" not in str(caught.value)

@@ -5,6 +5,7 @@ sees them as an optimistix `fn(y, args)`: on the host for pamjax's own solver (`
 callbacks for any other (`Problem.traced`)."""
 
 import functools
+import math
 import threading
 import time
 
@@ -85,6 +86,78 @@ def _jacobian_program(options):
 def physical_and_jacobian(space, theta):
     """The physical values at θ and d(values)/dθ, compiled (run eagerly, each operation compiles on its own)."""
     return space.physical(theta), jax.jacfwd(space.physical)(theta)
+
+
+def solve_failure(exp, model):
+    """Why experiment `exp`'s solve fails at the concrete `model`: (the cause: what stopped it, where, with which
+    max_steps; a step budget that would finish the run, or None where the budget is not the cause), or None where it
+    succeeds. The experiment's solve again, as `simulate` runs it with its settings (`throw=False`), on the way to an
+    error only: its residuals are NaN and its forward-mode Jacobian exact zeros (a failed solve's outputs are NaN
+    whatever the parameters), which say nothing of the cause."""
+    from .._solve.simulate import simulate  # (here: only a failed start pays for the import)
+    from .._solve.trajectory import result_message
+    from .experiment import Experiment
+
+    if not isinstance(exp, Experiment):  # static and force-map experiments have no solve of their own
+        return None
+    try:  # a diagnosis must not raise in place of the failure it explains
+        import diffrax as dfx
+
+        system = exp.system_for(model)
+        key = exp.batch_key(model)
+        stepping = "adaptive" if key is None else key[0]
+        settings = (dict(solver=dfx.Tsit5(), rtol=exp.rtol, atol=exp.atol, max_steps=exp.max_steps, dt0=exp.dt0)
+                    if stepping == "adaptive" else dict(substeps=exp.substeps))  # Tsit5: `Experiment.predict`'s
+        ts = np.asarray(exp.times, dtype=float)
+        traj = simulate(system, exp.signal, ts, y0=exp.start_for(system, model), t0=exp.span[0], stepping=stepping,
+                        throw=False, **settings)
+        code, steps = int(traj.result), int(traj.num_steps)
+        if code == 0:
+            return None
+        states = np.stack([np.ravel(np.asarray(x)) for x in jax.tree_util.tree_leaves(traj.state)], axis=-1)
+        finite = np.flatnonzero(np.all(np.isfinite(states.reshape(len(ts), -1)), axis=1))
+    except Exception:  # noqa: BLE001
+        return None
+    t0, t1 = exp.span
+    reached = float(ts[finite[-1]]) if finite.size else t0
+    cause = result_message(code).split(" Try increasing")[0].rstrip(".")  # the remedy is the caller's
+    cause = cause[:1].lower() + cause[1:]
+    where = f"it stopped at t = {reached:.4g} s of {t1:.4g} s"
+    if stepping != "adaptive" or steps < exp.max_steps:
+        return f"{cause} ({where}, {stepping} stepping)", None
+    if reached <= t0:  # not one sample after the start: no rate of steps to scale the budget by
+        return f"{cause}: max_steps={exp.max_steps} ({where})", int(2 ** math.ceil(math.log2(10 * exp.max_steps)))
+    needed = steps * (t1 - t0) / (reached - t0)
+    budget = int(2 ** math.ceil(math.log2(2 * needed)))  # 2×: the rate of steps varies along a run (as `simulate`)
+    return (f"{cause}: max_steps={exp.max_steps} ({where}; the whole run needs about {needed:,.0f} steps at "
+            f"rtol={exp.rtol:g})"), budget
+
+
+def failed_solves(space, theta, exps, residuals, remedy=None):
+    """What non-finite residuals come from: for each experiment of `exps` (bound) whose block of `residuals` (the
+    identification samples `Problem.mask` keeps, in order) is not all finite at θ, a phrase "experiment 'E3': its
+    solve fails: ...: raise its max_steps ..." (`solve_failure`; `remedy` in place of the advice on max_steps, for
+    runs that have no such setting), joined by "; ". "" where all are finite."""
+    values = None
+    phrases, k = [], 0
+    residuals = np.asarray(residuals)
+    for e in exps:
+        size = int(sum(np.count_nonzero(used & ident) for _, _, _, used, ident in e.layout()))
+        block, k = residuals[k:k + size], k + size
+        if np.all(np.isfinite(block)):
+            continue
+        if values is None:
+            values = np.asarray(physical_and_jacobian(space, device_array(theta))[0])  # compiled, not op by op
+        failure = solve_failure(e, space.with_values(values))
+        if failure is None:
+            phrases.append(f"experiment {e.name!r}: its predictions are not finite though its solve alone succeeds "
+                           "(a parameter outside its physical range, e.g. a muscle volume <= 0 on the stroke)")
+            continue
+        cause, budget = failure
+        fix = (": check its parameters and initial state" if budget is None else f": {remedy}" if remedy else
+               f": raise its max_steps (e.g. max_steps = {budget}) or shorten the run")
+        phrases.append(f"experiment {e.name!r}: its solve fails: {cause}{fix}")
+    return "; ".join(phrases)
 
 
 class Problem:
@@ -250,7 +323,8 @@ class _Objective:
             return self.problem.jacobian(theta)
         self.started = True
         r, j = self.problem.start(theta)
-        if not np.all(np.isfinite(r)) or not np.all(np.isfinite(j)):
-            raise PamjaxInputError("the start model's simulation fails (non-finite residuals or Jacobian): check the "
-                                   "start values and the experiments' initial states")
+        if not np.all(np.isfinite(r)) or not np.all(np.isfinite(j)):  # the experiments' own causes where known
+            named = failed_solves(self.problem.space, theta, self.problem.exps, r)
+            raise PamjaxInputError("the start model's simulation fails (non-finite residuals or Jacobian): " + (
+                named or "check the start values and the experiments' initial states"))
         return r, j

@@ -18,6 +18,7 @@ import warnings
 from collections.abc import Callable, Sequence
 from typing import Literal
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -27,7 +28,7 @@ from .._core.custom_types import RealScalarLike, RealVectorLike
 from .._core.errors import PamjaxInputError
 from .._fit.experiment import AbstractExperiment, Experiments
 from .._fit.parameters import Free
-from .._fit.problem import physical_and_jacobian, residuals_and_jacobian
+from .._fit.problem import failed_solves, physical_and_jacobian, residuals_and_jacobian, solve_failure
 from .._physics.signals import AbstractSignal
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from . import design_objective as obj, design_points as pts
@@ -50,20 +51,26 @@ from .design_setup import (
 from .prior_fit import PriorFits, fit_information, split_prior
 
 
-def information(space, theta, experiments, predictions=False):
+def information(space, theta, experiments, predictions=False, role="experiments", remedy=None):
     """Fisher information about θ of `experiments` (identification samples, as the fit uses them): JᵀJ of the
     scaled residuals at θ (the fit's compiled Jacobian, shared with fits of the same problem structure). With
     `predictions`, also each experiment's predicted channels {channel: values at its samples}, read back from the
-    same residuals (data + scale · residual: no further solve, no further compilation)."""
+    same residuals (data + scale · residual: no further solve, no further compilation). A failed solve is no
+    information (its residuals are NaN, its Jacobian exact zeros): a `PamjaxInputError` naming `role`, the run and
+    why (`failed_solves`; `remedy` its advice for runs without a max_steps of their own)."""
     model = space.with_values(physical_and_jacobian(space, device_array(theta))[0])  # compiled, not op by op
     exps = tuple(e.bind(model) for e in experiments)
     layouts = [e.layout() for e in exps]
     mask = np.concatenate([used & ident for layout in layouts for _, _, _, used, ident in layout])
-    residuals, jac = residuals_and_jacobian(space, device_array(theta), exps)
-    jac = np.asarray(jac)[mask]
+    residuals, jac = (np.asarray(a) for a in residuals_and_jacobian(space, device_array(theta), exps))
+    if not (np.all(np.isfinite(residuals[mask])) and np.all(np.isfinite(jac[mask]))):
+        named = failed_solves(space, theta, exps, residuals[mask], remedy)
+        raise PamjaxInputError(f"{role}: not counted as information, as its simulation at the design point fails: "
+                               + (named or "non-finite residuals or Jacobian"))
+    jac = jac[mask]
     if not predictions:
         return jac.T @ jac
-    residuals, k, preds = np.asarray(residuals), 0, []
+    k, preds = 0, []
     for layout in layouts:
         pred = {}
         for name, scale, data, _, _ in layout:
@@ -119,11 +126,11 @@ def _in_hand(space, theta, prior, baseline, index, margin, at_point=True):
     (experiments, fits) (`prior_fit.split_prior`)."""
     n = len(space.labels)
     experiments, fits = prior
-    prior_info = information(space, theta, experiments) if experiments else np.zeros((n, n))
+    prior_info = information(space, theta, experiments, role="prior") if experiments else np.zeros((n, n))
     prior_info = prior_info + fit_information(space, theta, fits, at_point)
     if baseline is None:
         return prior_info, None, None
-    base_info = prior_info + information(space, theta, baseline)
+    base_info = prior_info + information(space, theta, baseline, role="baseline")
     floor = np.full(n, np.inf)
     floor[list(index)] = _floor(prior_info, base_info, margin)[list(index)]
     return prior_info, base_info, floor
@@ -143,6 +150,7 @@ def _prepare(problem, gradient, c0, space, theta, prior, baseline, index, margin
     start_value, start_aux = obj.value(jnp.asarray(c0), prob)
     warm.join()
     if not np.isfinite(float(start_value)):
+        _failed_start(prob, start_aux, space, theta)
         loose = [lbl for lbl, v in zip(space.labels, variances(np.asarray(start_aux["information"]))) if np.isinf(v)]
         raise PamjaxInputError(f"initial: the start signal (with the prior experiments) does not determine {loose}, "
                                "so the criterion is undefined there. They enter the run, but not independently of "
@@ -150,6 +158,19 @@ def _prepare(problem, gradient, c0, space, theta, prior, baseline, index, margin
                                "signal (`initial`, e.g. a constant duty in the middle of the band), add prior "
                                "experiments that fix them, or remove them from free")
     return prob, prior_info, base_info, time.perf_counter() - t_compile, start_aux
+
+
+def _failed_start(prob, aux, space, theta):
+    """A `PamjaxInputError` where the designed run's solve fails at the start signal (its predictions NaN: nothing
+    determined, for want of a solve, not of information), saying why (`solve_failure`)."""
+    if all(np.all(np.isfinite(np.asarray(aux[k]))) for k in ("position", "pressure") if aux.get(k) is not None):
+        return
+    model = space.with_values(physical_and_jacobian(space, device_array(theta))[0])
+    failure = solve_failure(eqx.tree_at(lambda e: e.signal.values, prob.experiment, aux["duty"]), model)
+    cause = "its predictions are not finite" if failure is None else failure[0]
+    fix = ("design a shorter run (duration)" if failure and failure[1]  # its budget ran out (the Experiment's default)
+           else "check the model's parameters and the start state")
+    raise PamjaxInputError(f"duration: the designed run's solve fails at the start signal: {cause}; {fix}")
 
 
 def _problem(space, theta, exp, basis, weight, band, windows, limits, max_pressure, max_duty_step, force_law,
@@ -437,7 +458,8 @@ def _verified(setup, duty, duration, rate, noise, build):
     full = designed_experiment(setup["model"], duration, setup["period"], rate, setup["channels"], noise,
                                setup["start"], FIT_SUBSTEPS, duty, build)
     info, (verified,) = information(setup["space"], np.asarray(setup["space"].initial_theta()), [full],
-                                    predictions=True)
+                                    predictions=True, role="duration: the designed run at the fit's resolution",
+                                    remedy="design a shorter run")
     if setup["force_law"] and {"position", "pressure"} <= set(verified):
         verified["force"] = np.asarray(static_force_along(setup["system"], device_array(verified["position"]),
                                                           device_array(verified["pressure"])))
