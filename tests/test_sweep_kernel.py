@@ -73,7 +73,8 @@ def test_traced_indices_conditionals_and_shapes_match_vmap():
         window = jax.lax.dynamic_slice(grid, (k,), (3,))
         branch = jax.lax.cond(x > 0.8, lambda y: jnp.exp(y), lambda y: jnp.log1p(y), x)
         parts = jnp.split(jnp.concatenate([grid[:4] * x, jnp.array([x])]), [2])
-        return picked, window, branch, parts[1][::-1], jnp.clip(x, 0.6, 0.9)
+        written = jax.lax.dynamic_update_slice(grid, jnp.stack([x, 2.0 * x]), (k,)).at[1].set(-x)
+        return picked, window, branch, parts[1][::-1], jnp.clip(x, 0.6, 0.9), written
 
     _check(fun, 0.75)
 

@@ -294,12 +294,7 @@ class Evaluator:
             with jax.ensure_compile_time_eval():
                 marks = np.asarray(lax.dynamic_update_slice(
                     jnp.zeros(operand.shape, jnp.int64), jnp.arange(1, update.size + 1).reshape(update.shape), values))
-            out = operand.copy()
-            flat_update = update.reshape(-1)
-            for idx in np.ndindex(*operand.shape):
-                if marks[idx]:
-                    out[idx] = flat_update[marks[idx] - 1]
-            return out
+            return _written(operand, update, marks)
 
         return self._indexed(operand, [s[()] for s in starts], read, clip=True)
 
@@ -312,12 +307,7 @@ class Evaluator:
                               dtype=eqn.invars[1].aval.dtype)
             marks = np.asarray(eqn.primitive.bind(jnp.zeros(operand.shape, jnp.int64), idx,
                                                   jnp.arange(1, updates.size + 1).reshape(updates.shape), **p))
-        out = operand.copy()
-        flat = updates.reshape(-1)
-        for i in np.ndindex(*operand.shape):
-            if marks[i]:
-                out[i] = flat[marks[i] - 1]
-        return out
+        return _written(operand, updates, marks)
 
     # --- control flow ---------------------------------------------------------------------------------------------
 
@@ -400,6 +390,17 @@ class Evaluator:
 
         final = lax.while_loop(lambda flat: self.any_lane(holds(unflatten(flat))), body, flatten(carry))
         return unflatten(final)
+
+
+def _written(operand, updates, marks):
+    """`operand` with the elements of `updates` written where `marks` (an int array of the operand's shape: 0 where
+    nothing is written, else 1 + the flat index of the update element written there) says."""
+    out = operand.copy()
+    flat = updates.reshape(-1)
+    for idx in np.ndindex(*operand.shape):
+        if marks[idx]:
+            out[idx] = flat[marks[idx] - 1]
+    return out
 
 
 def _elementwise_like(eqn):
