@@ -21,6 +21,7 @@ import re
 import tomllib
 
 import equinox as eqx
+import jax
 import numpy as np
 
 from .._core.errors import PamjaxInputError
@@ -206,19 +207,9 @@ COMMAND_OUTLIERS = 0.05  # fraction of the samples
 HOLD_POINTS = 9  # times the signal is evaluated at across the hold window
 
 
-def _signal_at(signal, times):
-    """`signal` at `times`, as one compiled program per signal type (`jax.vmap`): evaluated op by op (9 shifts of
-    the recording's times) it compiled each operation on its own, 0.4-0.5 s of the main job's cold and warm runs."""
-    import equinox as eqx
-    import jax
-
-    global _SIGNAL_AT
-    if _SIGNAL_AT is None:
-        _SIGNAL_AT = eqx.filter_jit(lambda s, ts: jax.vmap(s)(ts))
-    return _SIGNAL_AT(signal, times)
-
-
-_SIGNAL_AT = None  # `_signal_at`'s program, made on first use (`import pamjax._cli` imports no equinox for it)
+# A signal at an array of times as one compiled program per signal type: evaluated op by op (9 shifts of the
+# recording's times) it compiled each operation on its own, 0.4-0.5 s of the main job's cold and warm runs.
+_signal_at = eqx.filter_jit(lambda signal, times: jax.vmap(signal)(times))
 
 
 def check_against_command(signal, recording, where, system):

@@ -10,6 +10,7 @@ import numpy as np
 
 from .._core.errors import PamjaxInputError
 from .._identifiability.design_result import short_label
+from .._identifiability.design_setup import run_step_budget as _step_budget  # one rule for planned and designed runs
 from . import schema
 from .config import build_model, build_signal, read_toml
 from .fit import load_config
@@ -100,17 +101,6 @@ def planned_experiments(runs, key, table, model):
         out.append(pj.Experiment(rec, signal, channels=recorded, scales={c: float(table["noise"][c]) for c in recorded},
                                  build=build, name=name, **_step_budget(system, float(run["duration"]))))
     return out
-
-
-def _step_budget(system, duration):
-    """A planned run's `max_steps` (it has no key for one): the Experiment's default (100,000) where `simulate`'s
-    budget for its horizon is the base 200,000, else that budget (`default_max_steps`: 1,000 steps per second of a
-    continuous valve, 64 per PWM period). An 800 s triangle of the averaged MAS-10 needs ~253,000 adaptive steps at
-    the Experiment's rtol 1e-9 (~320/s): with the default its solve failed, and its information read as none."""
-    from .._solve.hints import BASE_MAX_STEPS, default_max_steps
-
-    budget = default_max_steps(system, 0.0, duration)
-    return {"max_steps": budget} if budget > BASE_MAX_STEPS else {}
 
 
 def payload_build(value, model):

@@ -355,16 +355,18 @@ def designed_experiment(model, duration, period, rate, channels, noise, start, s
     starts = np.arange(len(duty)) * period
     signal = Sampled(device_array(starts), device_array(duty, dtype=float), period=period)
     exp = Experiment(rec, signal, channels=list(channels), scales={c: float(noise[c]) for c in channels},
-                     build=build, initial=start, name="design", substeps=substeps, **_step_budget(model, duration))
+                     build=build, initial=start, name="design", substeps=substeps, **run_step_budget(model, duration))
     exp.check(model)
     return exp.bind(model)
 
 
-def _step_budget(model, duration):
-    """The designed run's `max_steps`: the Experiment's default (100,000) up to 50 s, else `simulate`'s budget for
-    twice the run (`default_max_steps`): an 800 s design ran out of the default at 96 s (it needs ~1,040 steps/s at
-    the Experiment's rtol 1e-9 with a duty per period, above that budget's 1,000/s) and was named, not designed."""
-    return {} if duration <= 50.0 else {"max_steps": default_max_steps(model, 0.0, 2.0 * duration)}
+def run_step_budget(system, duration):
+    """The `max_steps` of a designed or planned run of `duration` [s] (none has a key for one): the Experiment's
+    default (100,000) up to 50 s (its compiled program), else `simulate`'s budget for twice the run
+    (`default_max_steps`): an 800 s design ran out of the default at 96 s (~1,040 steps/s at the Experiment's rtol
+    1e-9 with a duty per period, above that budget's 1,000/s), and an 800 s planned triangle of the averaged MAS-10
+    needs ~253,000; with the default their solves failed and read as no information."""
+    return {} if duration <= 50.0 else {"max_steps": default_max_steps(system, 0.0, 2.0 * duration)}
 
 
 @eqx.filter_jit
