@@ -254,6 +254,21 @@ def test_a_dotted_set_key_sets_the_dotted_parameter():
         apply_set(model, twice, "[model] set")
 
 
+def test_a_dotted_over_key_sweeps_the_dotted_parameter():
+    # `[sweep] over`'s unquoted dotted key was read as a table: "over.friction must be a non-empty list of numbers"
+    from pamjax._cli.sweep import prepare
+
+    config = tomllib.loads('kind = "steady_state"\n[system]\nvalve = "averaged"\n[sweep]\n'
+                           'over = { friction.coulomb_force = [10.0, 20.0], payload_mass = { start = 5.0, '
+                           'stop = 9.6, num = 2 } }\n')
+    prepare(config)
+    assert list(config["sweep"]["over"]) == ["friction.coulomb_force", "payload_mass"]
+    twice = tomllib.loads('kind = "steady_state"\n[sweep.over]\n"friction.coulomb_force" = [1.0]\n'
+                          'friction.coulomb_force = [2.0]\n')
+    with pytest.raises(pamjax.PamjaxInputError, match=r"\[sweep\] over: 'friction.coulomb_force' is given twice"):
+        prepare(twice)
+
+
 def test_a_typed_signal_may_run_past_the_recording_drawn_beside_it(tmp_path, no_solves):
     # with dt the rows are the run's own; only the recording's channels are drawn (was and is accepted)
     from pamjax._cli.simulate import load
@@ -320,6 +335,9 @@ SWEEP_CASES = {
                                         'over = { "payload_mass" = [9.6, 5.0], '
                                         '"friction.coulomb_force" = [10.0, -3.0] }\n',
                                         r"\[sweep\] over: .*coulomb_force .*-3"),
+    "over dotted key, bad value": ('kind = "steady_state"\n[system]\nvalve = "averaged"\n[sweep]\n'
+                                   'over = { friction.coulomb_force = [10.0, -3.0] }\n',
+                                   r"\[sweep\] over: .*coulomb_force .*-3"),
     "over bad last value, one sweep": ('kind = "steady_state"\n[system]\nvalve = "averaged"\n[sweep]\n'
                                        'over = { "payload_mass" = [9.6, 5.0, -1.0] }\n',
                                        r"\[sweep\] over: .*payload_mass must be > 0 and finite, got -1"),

@@ -362,6 +362,22 @@ def _axis(value, key, where, table, name):
     axis(value, name)
 
 
+def over_paths(over, prefix=""):
+    """`[sweep] over` (parameter path → axis) with nested tables flattened into dotted paths, as `[model] set`'s: TOML
+    reads an unquoted dotted key, `friction.coulomb_force = [10.0, 20.0]`, as a table `friction` holding
+    `coulomb_force` (was: "over.friction must be a non-empty list of numbers or a table"). A table with an axis's
+    keys (`start`, `stop`, `num`, `log`) is an axis, not a path; a path given both ways is refused."""
+    out = {}
+    for key, spec in over.items():
+        path = f"{prefix}{key}"
+        nested = isinstance(spec, dict) and spec and not AXIS_KEYS & set(spec)
+        for p, v in (over_paths(spec, f"{path}.") if nested else {path: spec}).items():
+            if p in out:
+                raise PamjaxInputError(f"[sweep] over: {p!r} is given twice (quoted and as a dotted key): give it once")
+            out[p] = v
+    return out
+
+
 def _over(over, key, where, table, name):
     if not isinstance(over, dict):
         raise PamjaxInputError(f"{where} must be a table of parameter path = values, got {over!r}")
