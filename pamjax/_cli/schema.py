@@ -14,7 +14,7 @@ import numpy as np
 
 from .._core.errors import PamjaxInputError
 from .._core.units import check_setting
-from .kinds import Key, check_keys, check_table, is_number
+from .kinds import Key, check_keys, check_table, is_number, over_paths
 
 # -- the commands' tables ----------------------------------------------------------------------------------------
 PRESETS = ("mas10_system", "mas10_tank_system")
@@ -313,6 +313,9 @@ def validate_sweep(cfg, where="sweep config"):
         raise PamjaxInputError("give either [system] (paper 000's preset) or [model] (any model), not both")
     if "model" in cfg:
         check_model(cfg["model"])
+    sweep = cfg.get("sweep")
+    if isinstance(sweep, dict) and isinstance(sweep.get("over"), dict):
+        sweep["over"] = over_paths(sweep["over"])  # unquoted dotted keys as parameter paths (TOML nests them)
     check_table(cfg.get("system", {}), SYSTEM, "[system]", valid=SYSTEM_KEYS[kind],
                 valid_label=f"[system] (kind = {kind!r})")
     check_table(cfg.get("sweep", {}), SWEEP, "[sweep]", valid=SWEEP_KEYS[kind],

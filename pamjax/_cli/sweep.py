@@ -38,7 +38,7 @@ from .._sweep.maps import flow_surface, frequency_response, steady_state_map
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from . import bands, schema
 from .config import apply_set, build_model, read_toml
-from .kinds import DUTY, axis as _axis, command_bounds, command_of, commands, over_paths
+from .kinds import DUTY, axis as _axis, command_bounds, command_of, commands
 from .out import OutputFolder
 from .schema import SOLVER_KEYS
 
@@ -177,9 +177,6 @@ def check_over(config, model):
 def prepare(config, root="."):
     """Validate a parsed config and build its model, checking every swept path against it (nothing solved): `load`
     of a config already read."""
-    sw = config.get("sweep")
-    if isinstance(sw, dict) and isinstance(sw.get("over"), dict):
-        sw["over"] = over_paths(sw["over"])  # dotted keys as paths, before the schema reads them
     schema.validate_sweep(config)
     model = build_sweep_model(config, root)
     check_over(config, model)
