@@ -275,7 +275,17 @@ def test_a_typed_signal_may_run_past_the_recording_drawn_beside_it(tmp_path, no_
 
     text = _SIM_RECORDED.replace('"recorded"', '{ kind = "Constant", value = 0.5 }').replace("t_end = 1.0",
                                                                                              "t_end = 10.0\ndt = 0.5")
-    assert float(load(_write(tmp_path, text)).ts[-1]) == 10.0
+    # the triangle's recorded command is not 0.5: said, as the recording drawn beside is of another run (was silent)
+    with pytest.warns(pamjax.PamjaxDataWarning, match=r"\[input\] signal contradicts the recording's own command "
+                                                      r"column.*signal = \"recorded\" to simulate the recorded run"):
+        assert float(load(_write(tmp_path, text)).ts[-1]) == 10.0
+
+
+def test_a_typed_signal_that_matches_the_recording_is_simulated_without_a_word(tmp_path, no_solves):
+    from pamjax._cli.simulate import load
+
+    text = _SIM_RECORDED.replace('"recorded"', '{ kind = "Triangle", low = 0.05, high = 0.95, frequency = 0.25 }')
+    assert load(_write(tmp_path, text)).recording is not None
 
 
 # ---------------------------------------------------------------------------------------------------------------

@@ -79,8 +79,27 @@ def load(path):
     model = build_model(cfg.get("model", {}), path.parent)
     run = build_run(cfg, model, path.parent)
     validate(run.system, run.signal, run.ts, run.kwargs.get("y0"))  # signal range, initial state
+    if run.recording is not None and not is_recorded(cfg["input"].get("signal", "recorded")):
+        _warn_against_command(run)
     resolve_stepping(run.system, run.kwargs.get("stepping", "auto"))  # "grid" with a switching valve, ...
     return run
+
+
+def _warn_against_command(run):
+    """A typed signal beside a recording whose command column it contradicts: the recording drawn beside the
+    simulation is of another run than the one simulated, said (was: drawn without a word, its misfit read as the
+    model's). Not refused, as `pamjax fit` does: a what-if input beside a recording is a use."""
+    import warnings
+
+    from .._fit.recording import PamjaxDataWarning
+    from .config import check_against_command
+
+    try:
+        check_against_command(run.signal, run.recording, "[input] signal", run.system)
+    except PamjaxInputError as err:
+        text = str(err).split(": the model would be driven")[0]
+        warnings.warn(f"pamjax simulate: {text}: the recording drawn beside the simulation ran another command; write "
+                      "signal = \"recorded\" to simulate the recorded run", PamjaxDataWarning, stacklevel=2)
 
 
 def build_run(cfg, model, root):
