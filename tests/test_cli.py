@@ -414,6 +414,9 @@ SIMULATE_CASES = {
     "t_end past the recording": (_SIM_RECORDED.replace("t_end = 1.0", "t_end = 20.0"),
                                  r"\[simulate\] t_end = 20 s is past the end of recording 'triangle_025', which spans "
                                  r"0 … 8 s \(8 s\): its command drives the model and ends there(?!;)"),
+    # the first recorded duty was held back to a t0 before the log (a made-up command)
+    "t0 before the recording": (_SIM_RECORDED + "t0 = -2.0\n", r"\[simulate\] t0 = -2 s is before the start of "
+                                r"recording 'triangle_025', which spans 0 … 8 s: its command drives the model"),
     "t_end past the recording's times": (_SIM_RECORDED.replace('"recorded"', '{ kind = "Constant", value = 0.5 }')
                                          .replace("t_end = 1.0", "t_end = 8000.0"),
                                          r"t_end = 8000 s is past .*the output rows are its times and end there \(give "

@@ -264,6 +264,17 @@ def check_end(recording, t_end, where, reason):
                            f"{t[0]:g} … {end:g} s ({end - t[0]:g} s): {reason}{ms}")
 
 
+def check_start(recording, t0, where):
+    """Refuse a `t0` [s] before `recording`'s first sample (more than one sample interval before it) where its
+    command drives the model: the command before the log would be made up (was: the first sample held back to t0)."""
+    t = np.asarray(recording.t, dtype=float)
+    if t0 >= t[0] - float(np.median(np.diff(t))):
+        return
+    raise PamjaxInputError(f"{where} = {t0:g} s is before the start of recording {recording.name!r}, which spans "
+                           f"{t[0]:g} … {t[-1]:g} s: its command drives the model and starts there (t0 = {t[0]:g}, or "
+                           "remove t0 to start with the recording)")
+
+
 def window_to(recording, t_end, where):
     """`recording` up to `t_end` [s] (an [[experiment]]'s `t_end`), one past its end refused (`check_end`)."""
     check_end(recording, t_end, where, "the experiment would end there, not at t_end (remove t_end to fit the whole "

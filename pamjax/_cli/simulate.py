@@ -123,6 +123,10 @@ def build_run(cfg, model, root):
     if not t_end > t0:
         raise PamjaxInputError(f"[simulate] t_end ({t_end} s) must exceed t0 ({t0} s)")
     driven = is_recorded(inp.get("signal", "recorded"))
+    if recording is not None and "t0" in sim and driven:
+        from .config import check_start
+
+        check_start(recording, t0, "[simulate] t0")
     if recording is not None and "t_end" in sim and (driven or "dt" not in sim):  # was: rows ending at its end
         check_end(recording, t_end, "[simulate] t_end", "its command drives the model and ends there" if driven else
                   "the output rows are its times and end there (give dt to simulate the signal past it)")
