@@ -221,6 +221,28 @@ def test_a_spread_design_averages_its_points_each_with_its_own_target(tmp_path):
     assert np.ptp(one[:, 1]) > 0
 
 
+def test_a_spread_point_whose_solve_fails_is_named_as_a_failed_solve(monkeypatch):
+    # a design point whose run fails (predictions NaN) was reported as "the start signal does not determine every
+    # free parameter", with the advice to change the signal
+    from pamjax._identifiability import design_points
+
+    def aux(position, criterion):
+        return {"position": np.array([0.0, position]), "pressure": np.array([2e5, 2e5]), "criterion": criterion}
+
+    def fake(points):
+        return lambda c, problem: (0.0, {"points": points})
+
+    monkeypatch.setattr(design_points, "value", fake([aux(0.0, -3.0), aux(np.nan, np.nan), aux(0.0, -2.0)]))
+    with pytest.raises(PamjaxInputError, match=r"design point\(s\) \[1\] .*solve fails at the start signal"):
+        design_points.points_start(None, None)
+    monkeypatch.setattr(design_points, "value", fake([aux(0.0, -3.0), aux(0.0, np.inf), aux(0.0, -2.0)]))
+    with pytest.raises(PamjaxInputError, match=r"design point\(s\) \[1\] .*does not determine every free parameter"):
+        design_points.points_start(None, None)
+    points = [aux(0.0, -3.0), aux(0.0, -2.0)]
+    monkeypatch.setattr(design_points, "value", fake(points))
+    assert design_points.points_start(None, None)["points"] is points
+
+
 VALVE = [*FREE, "valve.exhaust.critical_ratio"]
 TANK_BUILD = dict(channels=("pressure",), start={"pressure": 101325.0}, rate=500.0, knots=4,
                   initial=pj.Constant(0.6), build=pj.TankFromModel(5e-5))

@@ -325,7 +325,7 @@ def design_experiment(
                                     criterion)) for th in thetas]
     if points:  # the search: the points' criteria and targets, the limits at the model's point (`design_points`)
         prob = (prob, *(pts.without_limits(p) for p, _ in points))
-        start_aux = _points_start(c0, prob)
+        start_aux = pts.points_start(jnp.asarray(c0), prob)
     c0, note = (start_within_limits(prob, setup, parametrisation, float(duration), knots, seed, start_aux)
                 if initial is None and worst_violation(start_aux) > 0 else (c0, ""))  # calmer, else repaired
     c, aux, history, message, errors, verified, tightened = search(
@@ -382,17 +382,6 @@ def _at_point(setup, theta, prior, baseline, index, margin, stroke_margin, make)
     model = space.with_values(physical_and_jacobian(space, device_array(theta))[0])  # compiled, not op by op
     limits = stroke_limits(setup["experiment"].system_for(model), setup["start"], stroke_margin)
     return pts.with_stroke(make(prior_info, floor), limits), base_info
-
-
-def _points_start(c0, prob):
-    """The objective's aux at the start over the design points, which must each determine every parameter."""
-    _, aux = pts.value(jnp.asarray(c0), prob)
-    loose = [k for k, a in enumerate(aux["points"]) if not math.isfinite(float(a["criterion"]))]
-    if loose:
-        raise PamjaxInputError(f"spread: at design point(s) {loose} (0: the model's) the start signal does not "
-                               "determine every free parameter, so the criterion is undefined there; give a smaller "
-                               "spread or start from another signal (`initial`)")
-    return aux
 
 
 def _targets(space, theta, floor, base_info):

@@ -25,6 +25,8 @@ Session 57, benchmarks/RESULTS.md). What each point's plant would do at the desi
 infinite: the same program): no further compilation, (K + 1)× the work per iteration.
 """
 
+import math
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -127,3 +129,27 @@ def gradient(grad, c, problem):
     if not isinstance(problem, tuple):
         return grad(c, problem)
     return sum(np.asarray(grad(c, p)) for p in problem) / len(problem)
+
+
+def points_start(c0, problem):
+    """The objective's aux at the start `c0` over the design points, which must each determine every parameter. A
+    point whose solve fails there (its predictions not finite: a long run out of `max_steps`, a plant that diverges)
+    is named as such, not as one the start signal does not determine (was: "does not determine every free parameter"
+    for a failed solve, and the advice to change the signal)."""
+    _, aux = value(c0, problem)
+    failed, loose = [], []
+    for k, a in enumerate(aux["points"]):
+        predictions = [np.asarray(a[key]) for key in ("position", "pressure") if a.get(key) is not None]
+        if not all(np.all(np.isfinite(p)) for p in predictions):
+            failed.append(k)
+        elif not math.isfinite(float(a["criterion"])):
+            loose.append(k)
+    if failed:
+        raise PamjaxInputError(f"spread: at design point(s) {failed} (0: the model's) the designed run's solve fails "
+                               "at the start signal (its predictions are not finite: out of max_steps, or a plant that "
+                               "runs away there): give a smaller spread or a shorter duration")
+    if loose:
+        raise PamjaxInputError(f"spread: at design point(s) {loose} (0: the model's) the start signal does not "
+                               "determine every free parameter, so the criterion is undefined there; give a smaller "
+                               "spread or start from another signal (`initial`)")
+    return aux
