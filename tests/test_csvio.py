@@ -33,7 +33,8 @@ def _same_as_reference(rec):
 
 
 @pytest.mark.parametrize("variant", ["comma", "semicolon", "tab", "quoted header", "BOM", "Windows-1252 comment",
-                                     "decimal comma", "CRLF", "trailing delimiter", "comment lines"])
+                                     "decimal comma", "CRLF", "trailing delimiter", "comment lines",
+                                     "UTF-16 with BOM", "UTF-16 without BOM", "sep= line"])
 def test_every_dialect_reads_the_same_recording(tmp_path, variant):
     text, encoding = _table(), "utf-8"
     if variant == "semicolon":
@@ -55,6 +56,12 @@ def test_every_dialect_reads_the_same_recording(tmp_path, variant):
     elif variant == "comment lines":
         lines = _table().splitlines()
         text = "# bench 3\n\n" + lines[0] + "\n# valve opened\n" + "\n".join(lines[1:]) + "\n"
+    elif variant == "UTF-16 with BOM":  # Excel's "Unicode Text" (tab-separated): was a column-count refusal
+        text, encoding = _table("\t"), "utf-16"
+    elif variant == "UTF-16 without BOM":
+        text, encoding = _table(";"), "utf-16-le"
+    elif variant == "sep= line":  # Excel's delimiter directive: was read as a one-column header
+        text = "sep=;\n" + _table(";", fmt=lambda v: repr(v).replace(".", ","))
     _same_as_reference(Recording.load(_write(tmp_path, text, encoding=encoding)))
 
 

@@ -28,6 +28,10 @@ _SAMPLE_LINES = 50  # lines the delimiter is sniffed from
 
 def _decode(path):
     data = pathlib.Path(path).read_bytes()
+    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):  # UTF-16 with its BOM: Excel's "Unicode Text", LabVIEW, PowerShell
+        return data.decode("utf-16")  # (was: read byte by byte as cp1252, every other character a NUL)
+    if len(data) >= 4 and data.count(0) >= len(data) // 4:  # UTF-16 without a BOM: ASCII with a NUL beside each byte
+        return data.decode("utf-16-le" if data[1] == 0 else "utf-16-be", errors="replace")
     for encoding in ("utf-8-sig", "cp1252"):  # a BOM is dropped; Excel on Windows writes cp1252
         try:
             return data.decode(encoding)
@@ -86,7 +90,12 @@ def read_table(path, keep=None):
              if line.strip() and not line.lstrip().startswith("#")]
     if not lines:
         raise PamjaxInputError(f"{path}: no header line (the file is empty or only comments)")
-    delimiter = sniff_delimiter(lines)
+    directive = re.fullmatch(r"\s*sep=(.)\s*", lines[0][1], flags=re.IGNORECASE)
+    if directive:  # Excel's `sep=;` first line names the delimiter (was: read as a one-column header)
+        lines = lines[1:]
+        if not lines:
+            raise PamjaxInputError(f"{path}: no header line after the 'sep=' line")
+    delimiter = directive.group(1) if directive else sniff_delimiter(lines)
     header_line, header_text = lines[0]
     header = _split(header_text, delimiter)
     if len(header) < 2:
