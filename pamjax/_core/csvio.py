@@ -4,9 +4,10 @@ sweep`, `pamjax demo`).
 
 The reader takes what spreadsheets and bench software write: the standard library's `csv` parser with the
 delimiter sniffed (comma, semicolon, tab or bar), quoted headers, a UTF-8 byte-order mark (Excel's "CSV UTF-8"),
-Windows-1252 text, decimal commas in semicolon- or tab-separated files, `#` comment lines, units as `name [unit]`
-or `name (unit)`. What it cannot read unambiguously it refuses by name: a non-numeric cell (file, line, column), a
-ragged row, two columns of one name, a row-index column (pandas' `to_csv` writes one unless `index=False`).
+Windows-1252 text, UTF-16 (Excel's "Unicode Text"), Excel's `sep=;` first line, decimal commas in semicolon- or
+tab-separated files, `#` comment lines, units as `name [unit]` or `name (unit)`. What it cannot read unambiguously it
+refuses by name: a non-numeric cell (file, line, column), a ragged row, two columns of one name, a row-index column
+(pandas' `to_csv` writes one unless `index=False`).
 """
 
 import csv
