@@ -358,6 +358,10 @@ SWEEP_CASES = {
                                       'sample_interval = 0.6\n', r"\[sweep\] sample_interval = 0.6 s must be at most"),
     "default sample_interval beyond window": ('kind = "steady_state"\n[system]\nvalve = "averaged"\n[sweep]\n'
                                               'window = 0.005\n', r"sample_interval = 0.01 s \(its default"),
+    # the 50 Hz PWM latches one duty a period: at 30 Hz the "gain" was the ripple's (was: run, after the folder)
+    "frequency response above the PWM's Nyquist": ('kind = "frequency_response"\n[sweep]\nfrequencies = [1.0, 30.0]\n',
+                                                  r"\[sweep\] frequencies must lie below half the switching valve's "
+                                                  r"PWM frequency \(50 Hz / 2 = 25 Hz\), got \[30\.\] Hz"),
     "frequency response beyond the duty range": ('kind = "frequency_response"\n[system]\nvalve = "averaged"\n'
                                                  '[sweep]\nfrequencies = [0.5]\noffset = 0.9\namplitude = 0.2\n',
                                                  r"\[sweep\] offset ± amplitude \(0.9 ± 0.2: 0.7 … 1.1\) must stay "

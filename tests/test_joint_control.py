@@ -338,3 +338,16 @@ def test_simulate_joint_control_refuses_a_start_angle_outside_the_joints_range(j
     a_lo, a_hi = joint.angle_range()
     with pytest.raises(AssertionError, match="the solve ran"):  # every check passed
         simulate_joint_control(loop, TS, y0=eqx.tree_at(lambda s: s.plant.angle, start, jnp.asarray(a_hi)))
+
+
+@pytest.mark.parametrize("args, match", [
+    ((10.0, 4.01e5, 3.01e5), r"angle = 10 rad lies outside the joint's range .*looks like degrees"),
+    ((0.1, 4.01, 3.01), r"flexor_pressure is 4.01 Pa at most: that looks like bar"),
+    ((0.1, 4.01e5, float("nan")), r"extensor_pressure must be finite"),
+])
+def test_regulated_stiffness_of_a_point_in_other_units_is_named(joint, args, match):
+    """The angle in degrees (10: 15,365 N m/rad against 137 at 0.1 rad) or pressures in bar (−0.076) were computed
+    silently; refused naming the argument, as `AntagonisticJoint.initial_state` refuses them (traced values, as in
+    `held_stiffness` and the loop, are not checked)."""
+    with pytest.raises(pj.PamjaxInputError, match=match):
+        pj.regulated_stiffness(joint, *args)

@@ -306,3 +306,43 @@ def test_iso6358_regulator_refuses_a_path_that_is_no_restriction(kwargs, match):
     # a sonic conductance where the charging restriction belongs: accepted, then a raw AttributeError in the solve
     with pytest.raises(pamjax.PamjaxInputError, match=match):
         pamjax.ISO6358Regulator(**kwargs)
+
+
+def test_feedback_regulator_initial_state_is_at_rest():
+    """`initial_state(p)` is at rest, as its docstring says: with its three stages at 0 (as they were) ṗ was
+    −1.3e7 Pa/s and the outlet fell from 3.03 to 0.55 bar gauge in 0.1 s at a constant 3 V. The rest state holds
+    under `rest_voltage` (3 V at 3.03 bar gauge with the default gains: eq. 5's 1.01 bar/V), also with other gains,
+    in a tank, in a muscle system and with another atmosphere (the systems pass their air)."""
+    p = P_ATM + 3.03e5
+    default = pamjax.FeedbackRegulator()
+    assert float(default.rest_voltage(p)) == pytest.approx(3.0, rel=1e-12)
+    thin = pamjax.Air(atmospheric_pressure=9.5e4)
+    for system in (RegulatorSystem(default, volume=0.0), RegulatorSystem(default, volume=0.04),
+                   RegulatorSystem(pamjax.FeedbackRegulator(k1=0.7, k2=0.3), volume=0.0),
+                   RegulatorSystem(default, air=thin), RegulatedMuscleSystem(default, dmsp40_muscle())):
+        state = system.initial_state(p)
+        regulator = state.regulator if isinstance(system, RegulatedMuscleSystem) else state
+        assert float(regulator.pressure) == p
+        volt = system.regulator.rest_voltage(p, system.air)
+        rates = _field(system, state, volt)
+        rates = rates.regulator if isinstance(system, RegulatedMuscleSystem) else rates
+        # the stages' rates are ~1e5 Pa/s per bar of imbalance; at rest only round-off is left
+        assert np.max(np.abs(jax.tree.leaves(rates))) < 1e-3, (type(system).__name__, rates)
+
+
+@pytest.mark.parametrize("call, match", [
+    (lambda m: muscle_stiffness(m, 0.03, 4.01, PAPER001_AIR), r"pressure is 4.01 Pa at most: that looks like bar"),
+    (lambda m: muscle_stiffness(m, 30.0, P_ATM + 3e5, PAPER001_AIR),
+     r"x = 30 m lies outside the muscle's stroke \[-0.02, 0.1\] m .*looks like mm"),
+    (lambda m: muscle_stiffness(m, -0.5, P_ATM + 3e5, PAPER001_AIR), r"x = -0.5 m lies outside the muscle's stroke"),
+    (lambda m: muscle_stiffness(m, 0.03, float("nan"), PAPER001_AIR), r"pressure must be finite"),
+    (lambda m: stiffness_rate(m, 30.0, 0.01, P_ATM + 3e5, 1e5), r"x = 30 m lies outside .*looks like mm"),
+    (lambda m: stiffness_rate(m, 0.03, 0.01, 3e4, 1e5), r"pressure is 30000 Pa at most: .*GAUGE"),
+    (lambda m: stiffness_rate(m, 0.03, float("nan"), P_ATM + 3e5, 1e5), r"velocity must be finite"),
+])
+def test_stiffness_of_a_point_in_other_units_is_named(call, match):
+    """Eq. 9-10 at pressures in bar (4.01: K = −0.0), positions in mm (30: K = −1.4e13 N/m) or outside the stroke
+    (−0.5 m: 9.3e7), or NaN were computed silently; refused naming the argument, as `linearise` refuses such a state.
+    Traced values (the jitted calls of the tests above) are not checked."""
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        call(dmsp40_muscle())

@@ -183,3 +183,37 @@ def test_flow_surface_refuses_pressures_in_bar():
     # pressures=[2.0, 3.0] (bar) mapped a chamber at 2 and 3 Pa abs; fit_averaged_valve refused the same grid
     with pytest.raises(pamjax.PamjaxInputError, match=r"pressures is 3 Pa at most: that looks like bar"):
         pamjax.flow_surface(presets.mas10_valve(), [0.25, 0.5], [2.0, 3.0], pamjax.Air())
+
+
+def test_frequency_response_refuses_frequencies_at_or_above_the_pwm_nyquist_frequency():
+    """A switching valve latches one duty per PWM period: at 50 Hz on the MAS-10's 50 Hz valve the latched duty was
+    0.5 every period, yet the map reported a gain of 94,765 Pa/duty at -124 deg (the ripple). Refused before any
+    solve, naming the PWM frequency and the averaged valve; a swept PWM frequency counts by its lowest value; the
+    averaged valve maps beyond it."""
+    pwm = presets.mas10_tank_system()
+    for frequencies in ([1.0, 50.0], [25.0], [30.0, 100.0]):
+        with pytest.raises(pamjax.PamjaxInputError, match=r"frequencies must lie below half the switching valve's "
+                                                          r"PWM frequency \(50 Hz / 2 = 25 Hz\).*averaged valve"):
+            frequency_response(pwm, frequencies, channels=("pressure",), progress=False)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"\(20 Hz / 2 = 10 Hz\), got \[12.\] Hz"):
+        frequency_response(pwm, [12.0], channels=("pressure",), over={"valve.pwm_frequency": [[20.0], [100.0]]},
+                           progress=False)
+    from pamjax._sweep.maps import check_below_pwm_nyquist  # the CLI's check before it takes its output folder
+
+    check_below_pwm_nyquist(pwm, [24.9])  # below: accepted
+    check_below_pwm_nyquist(presets.mas10_tank_system(valve="averaged"), [50.0, 100.0])  # no switching valve
+
+
+@pytest.mark.parametrize("call, key", [
+    (lambda s: frequency_response(s, [1.0], channels=("pressure",), rtol=1e-9), "rtol"),
+    (lambda s: steady_state_map(s, [0.5], atol=1e-9), "atol"),
+    (lambda s: steady_state_map(s, [0.5], horizn=1.0), "horizn"),
+])
+def test_a_keyword_no_map_takes_is_named(call, key):
+    """`rtol=1e-9` was a raw `TypeError: sweep() got an unexpected keyword argument`: named, with the arguments the
+    map and `sweep` take (and, for a tolerance, where it goes)."""
+    match = rf"got the keyword {key}=, which neither it nor pamjax.sweep takes.*its arguments: .*, and for " \
+            r"pamjax.sweep: y0, .*method, dt"
+    with pytest.raises(pamjax.PamjaxInputError, match=match) as err:
+        call(presets.mas10_tank_system(valve="averaged"))
+    assert ("solve_options" in str(err.value).split("its arguments")[0]) == (key != "horizn")

@@ -191,6 +191,9 @@ def _default(function, name):
     return inspect.signature(getattr(maps, function)).parameters[name].default
 
 
+FREQUENCIES = {"start": 0.05, "stop": 5.0, "num": 16, "log": True}  # Hz, [sweep] frequencies' default: paper 000's band
+
+
 def check_map_settings(config, model):
     """What the maps refuse only when they start (window beyond the horizon, sample_interval beyond the window, a
     frequency response's offset ± amplitude beyond the command range), checked here with their defaults, before the
@@ -219,6 +222,9 @@ def check_map_settings(config, model):
                 f"[sweep] offset ± amplitude ({offset:g} ± {amplitude:g}: {offset - amplitude:g} … "
                 f"{offset + amplitude:g}) must stay within the model's command range [{lo:g}, {hi:g}] "
                 f"({'duty ratios' if command_of(model) is DUTY else 'reference voltages [V]'})")
+        over = {p: _axis(v, f"over.{p}") for p, v in sw.get("over", {}).items()}
+        maps.check_below_pwm_nyquist(model, _axis(sw.get("frequencies", FREQUENCIES), "frequencies"), over,
+                                     "[sweep] frequencies")
 
 
 def run_config(config, progress=print, root=".", model=None):
@@ -274,7 +280,7 @@ def _run_one(config, model, progress, native_over):
             cols["position_m"] = np.ravel(r["position"])
         cols["status"] = np.ravel(r.status)
         return cols, (("steady", u, r, command_of(model)) if not grid else ("table", cols, list(cols)[: len(grid)]))
-    f = _axis(sw.get("frequencies", {"start": 0.05, "stop": 5.0, "num": 16, "log": True}), "frequencies")
+    f = _axis(sw.get("frequencies", FREQUENCIES), "frequencies")
     kwargs = {k: float(sw[k]) for k in ("offset", "amplitude") if k in sw}
     kwargs.update({k: int(sw[k]) for k in ("settle_periods", "periods", "samples_per_period") if k in sw})
     channels = ("position", "pressure") if isinstance(model, AbstractMuscleSystem) else ("pressure",)

@@ -38,7 +38,7 @@ from .._core.errors import (
     concrete_values,
 )
 from .._core.fitting import parameter, positive
-from .._core.units import BAR, FLOW_UNIT, check_absolute_pressure
+from .._core.units import ATMOSPHERE, BAR, FLOW_UNIT, check_absolute_pressure
 from .._papers import datasheets, paper001
 from .calibration import VOLTAGE_RANGE, VoltageCalibration
 from .chamber import chamber_flow, pressure_rate
@@ -103,8 +103,9 @@ class AbstractRegulator(AbstractControlElement):
     needs_volume = False
 
     @abc.abstractmethod
-    def initial_state(self, pressure):
-        """The state at rest with the outlet at `pressure` [Pa abs] and no flow."""
+    def initial_state(self, pressure, air=None):
+        """The state at rest with the outlet at `pressure` [Pa abs] and no flow: every derivative zero under the voltage
+        that sets it (cal⁻¹(p − p_atm); `FeedbackRegulator.rest_voltage`), p_atm `air`'s (default 101325 Pa)."""
 
     @abc.abstractmethod
     def state_rate(self, state, voltage, volume, volume_rate, air, polytropic_index=1.0, outlet_flow=0.0):
@@ -153,7 +154,7 @@ class LinearRegulator(AbstractRegulator):
         check_positive(self.time_constants, f"{type(self).__name__}.time_constants")
         check_finite(self.flow_gain, f"{type(self).__name__}.flow_gain")
 
-    def initial_state(self, pressure):
+    def initial_state(self, pressure, air=None):
         p = jnp.asarray(pressure, dtype=float)
         return RegulatorState(pilot=p, pressure=p)
 
@@ -207,9 +208,18 @@ class FeedbackRegulator(AbstractRegulator):
         for name in ("voltage_gain", "flow_gain", "k1", "k2"):
             check_finite(getattr(self, name), f"FeedbackRegulator.{name}")
 
-    def initial_state(self, pressure):
+    def initial_state(self, pressure, air=None):
+        """At rest at gauge g = p − p_atm: G_Q's stage at g, the voltage stages at g/g_q (no flow), under `rest_voltage`
+        (g/1.01 bar/V with the default gains). With stages at 0 (as was) 3.03 bar gauge fell to 0.55 in 0.1 s."""
         p = jnp.asarray(pressure, dtype=float)
-        return FeedbackRegulatorState(voltage_stage=0.0 * p, voltage_output=0.0 * p, flow_stage=0.0 * p, pressure=p)
+        gauge = p - (ATMOSPHERE if air is None else air.atmospheric_pressure)
+        stage = gauge / self.flow_gain  # flow_stage = g_q × voltage_output at rest
+        return FeedbackRegulatorState(voltage_stage=stage, voltage_output=stage, flow_stage=gauge, pressure=p)
+
+    def rest_voltage(self, pressure, air=None):
+        """The reference voltage [V] of `initial_state(pressure, air)`: k1 V − g/BAR = stage/(BAR g_v) for V."""
+        rest = self.initial_state(pressure, air)
+        return (rest.voltage_stage / (BAR * self.voltage_gain) + rest.flow_stage / BAR) / self.k1
 
     def _rates(self, state, voltage, volume, volume_rate, air, n, outlet_flow):
         tau1, tau2 = self.time_constants[0], self.time_constants[1]
@@ -336,7 +346,7 @@ class ISO6358Regulator(AbstractRegulator):
                                    f"{MAX_INTERNAL_VOLUME:g} m³ (5 × the VPPM's); that looks like cm³ or litres "
                                    "(pamjax takes SI units: m³)")
 
-    def initial_state(self, pressure):
+    def initial_state(self, pressure, air=None):
         """At rest at `pressure` [Pa abs]; a hysteresis in its virgin state (u = 0, between its branches)."""
         p = jnp.asarray(pressure, dtype=float)
         u = None if self.hysteresis is None else jnp.zeros_like(p)

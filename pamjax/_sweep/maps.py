@@ -1,6 +1,7 @@
 """The sweeps users map an actuator with: steady state against duty, the valve's averaged flow surface, frequency
 response. Thin recipes over `sweep` and `cycle_averaged_flow`; no physics here."""
 
+import inspect
 from collections.abc import Sequence
 from typing import Any
 
@@ -15,6 +16,7 @@ from .._physics.gas import Air
 from .._physics.signals import Constant, Sine
 from .._physics.valves.averaged import check_cycle_average, cycle_averaged_flow
 from .._physics.valves.base import AbstractSwitchingValve
+from .._solve.simulate import solve
 from .._systems.base import AbstractSystem
 from .reductions import AbstractReduction, WindowMean, check_window
 from .result import SweepResult
@@ -49,7 +51,7 @@ def steady_state_map(system: AbstractSystem, commands: RealVectorLike, *, horizo
     map's axis, `commands`); `sweep_kwargs` go to `sweep` (not `reduce`: the window's mean is the map).
     **Returns:** a `SweepResult` with `over["signal.value"]`.
     """
-    check_map_arguments("steady_state_map", "signal.value", "commands", over, sweep_kwargs,
+    check_map_arguments(steady_state_map, "signal.value", "commands", over, sweep_kwargs,
                         "the mean over the last window")
     commands = np.asarray(commands, dtype=float)
     if commands.ndim != 1 or commands.size == 0:
@@ -88,29 +90,77 @@ def _pwm_frequency(system, over):
     or not), 0 without one: `frequency_response` samples its ripple `SAMPLES_PER_PWM_PERIOD` times a period, as
     `steady_state_map` does. At 40 samples per period of 5 Hz (200 Hz) the 50 Hz ripple's 4th harmonic aliased onto
     5 Hz: the MAS-10's pressure gain 0.15 % and phase 0.15 deg off a tight reference (-79.17 deg against -79.33)."""
+    f = pwm_frequencies(system, over)
+    return float(f.max()) if f.size else 0.0
+
+
+def pwm_frequencies(system: AbstractSystem, over: dict[str, RealArrayLike] | None = None) -> np.ndarray:
+    """The PWM frequencies [Hz] of `system`'s switching valve over a map's points (its `valve.pwm_frequency`, or
+    the values `over["valve.pwm_frequency"]` sweeps), 1-D; empty without a switching valve. Swept values that are no
+    positive finite numbers give the valve's own (the sweep's checks name them)."""
     valve = system.valve if isinstance(system, AbstractSystem) else None
     if valve is None or not valve.switches:
-        return 0.0
+        return np.zeros(0)
     swept = (over or {}).get("valve.pwm_frequency")
     try:
-        f = float(np.max(np.asarray(valve.pwm_frequency if swept is None else swept, dtype=float)))
+        f = np.ravel(np.asarray(valve.pwm_frequency if swept is None else swept, dtype=float))
     except (TypeError, ValueError):  # not numbers: the sweep names them
-        f = np.nan
-    return f if np.isfinite(f) and f > 0 else float(valve.pwm_frequency)  # bad values: named by the sweep's checks
+        f = np.full(1, np.nan)
+    return f if f.size and np.all(np.isfinite(f) & (f > 0)) else np.ravel(np.asarray(valve.pwm_frequency, float))
+
+
+def check_below_pwm_nyquist(system: AbstractSystem, frequencies: RealVectorLike,
+                            over: dict[str, RealArrayLike] | None = None, name: str = "frequencies") -> None:
+    """`PamjaxInputError` naming `name` where a command frequency [Hz] reaches half the PWM frequency of `system`'s
+    switching valve (the lowest over `over`'s points): the valve latches one duty per period, so the command is
+    sampled at the PWM frequency and a sine at or above its Nyquist frequency aliases (at 50 Hz on the MAS-10's
+    50 Hz valve the latched duty was 0.5 every period, yet `frequency_response` reported 94,765 Pa/duty at -124 deg:
+    the ripple). Nothing to check without a switching valve. `frequency_response`'s check, and the CLI's before it
+    takes its output folder."""
+    pwm = pwm_frequencies(system, over)
+    f = np.ravel(np.asarray(frequencies, dtype=float))
+    if not pwm.size or not f.size:
+        return
+    nyquist = 0.5 * float(pwm.min())
+    bad = f[f >= nyquist]
+    if bad.size:
+        raise PamjaxInputError(
+            f"{name} must lie below half the switching valve's PWM frequency ({2 * nyquist:g} Hz / 2 = {nyquist:g} "
+            f"Hz), got {np.array2string(bad, threshold=6)} Hz: the valve latches one duty per PWM period, so a "
+            "command at or above that frequency aliases and its gain is the PWM ripple. To map beyond it, use the "
+            "averaged valve (paper 000 eq. 13: a preset's valve='averaged', or pj.AveragedValve / "
+            "pj.fit_averaged_valve(valve, air))")
+
+
+# tolerances and step limits of the adaptive solve (`solve`'s keywords), which a map passes only in `solve_options`
+SOLVE_OPTIONS = tuple(sorted(set(inspect.signature(solve).parameters) - {"system", "signal", "ts", "y0", "t0",
+                                                                         "throw"}))
 
 
 def check_map_arguments(caller, axis, axis_name, over, sweep_kwargs, reduction):
     """`PamjaxInputError` for what a map sets itself: its own axis in `over` (the map's values would be silently
     replaced: a frequency_response over {"signal.frequency": [2, 3]} reported its gains at 2 and 3 Hz as those of
-    `frequencies`), and a `reduce` among the arguments passed to `sweep` (the map's reduction is its result)."""
+    `frequencies`), a `reduce` among the arguments passed to `sweep` (the map's reduction is its result), and a
+    keyword neither the map (`caller`, the function) nor `sweep` takes (`rtol=1e-9` was a raw TypeError from inside
+    `sweep`)."""
+    name = caller.__name__
     if over is not None and not isinstance(over, dict):
-        raise PamjaxInputError(f"{caller}: over must be None or a dict {{path: values}}, got {over!r}")
+        raise PamjaxInputError(f"{name}: over must be None or a dict {{path: values}}, got {over!r}")
     if axis in (over or {}):
-        raise PamjaxInputError(f"{caller}: over must not hold {axis!r}, the map's own axis: pass those values as "
+        raise PamjaxInputError(f"{name}: over must not hold {axis!r}, the map's own axis: pass those values as "
                                f"{axis_name}")
     if "reduce" in sweep_kwargs:
-        raise PamjaxInputError(f"{caller} takes no reduce: it reduces each run itself ({reduction}); call "
+        raise PamjaxInputError(f"{name} takes no reduce: it reduces each run itself ({reduction}); call "
                                "pamjax.sweep for another reduction")
+    own = [p for p, spec in inspect.signature(caller).parameters.items() if spec.kind is not spec.VAR_KEYWORD]
+    passed = [p for p, spec in inspect.signature(sweep).parameters.items()
+              if spec.kind is spec.KEYWORD_ONLY and p != "reduce" and p not in own]
+    for key in sweep_kwargs:
+        if key not in passed:
+            hint = (f" ({key} is an option of the adaptive solve: method='adaptive', solve_options={{{key!r}: ...}})"
+                    if key in SOLVE_OPTIONS else "")
+            raise PamjaxInputError(f"{name} got the keyword {key}=, which neither it nor pamjax.sweep takes{hint}; "
+                                   f"its arguments: {', '.join(own[1:])}, and for pamjax.sweep: {', '.join(passed)}")
 
 
 def flow_surface(valve: AbstractSwitchingValve, commands: RealVectorLike, pressures: RealVectorLike, air: Air,
@@ -190,12 +240,14 @@ def frequency_response(system: AbstractSystem, frequencies: RealVectorLike, *, o
     usable band; 3 settling periods (on the MAS-10 with the averaged valve the harmonic at 0.5 Hz is the same to
     8 digits after 3 and 8 periods, measured). `over`: further swept paths (as `steady_state_map`'s), broadcast
     against the frequencies, which are the last axis (e.g. values of shape (k, 1) map k models at every frequency);
-    not "signal.frequency" (the map's axis: `frequencies`). `sweep_kwargs` go to `sweep`, but not `reduce`.
+    not "signal.frequency" (the map's axis: `frequencies`). `sweep_kwargs` go to `sweep`, but not `reduce`. With a
+    switching valve the frequencies must lie below half its PWM frequency (`check_below_pwm_nyquist`: above, the duty
+    it latches once a period aliases); the averaged valve maps beyond it.
     **Returns:** dict with `frequency`, and per channel `gain` (|Y|/|U|, channel units per unit command) and `phase`
     [deg] (arg Y − arg U, unwrapped along increasing frequency), U = −i·amplitude the commanded sine's coefficient
     (exact, whatever the valve: a PWM valve's latched duty is not the reference), plus the `SweepResult`.
     """
-    check_map_arguments("frequency_response", "signal.frequency", "frequencies", over, sweep_kwargs,
+    check_map_arguments(frequency_response, "signal.frequency", "frequencies", over, sweep_kwargs,
                         "the Fourier integral over the last periods")
     names = channel_names(channels)
     if names is None:
@@ -205,6 +257,7 @@ def frequency_response(system: AbstractSystem, frequencies: RealVectorLike, *, o
     if frequencies.ndim != 1 or frequencies.size == 0:
         raise PamjaxInputError(f"frequencies must be a non-empty 1-D array [Hz], got shape {frequencies.shape}")
     check_positive(frequencies, "frequencies")
+    check_below_pwm_nyquist(system, frequencies, over)
     check_finite(amplitude, "amplitude")
     if amplitude == 0:
         raise PamjaxInputError("amplitude must be non-zero (the gain divides by the command's amplitude)")

@@ -326,8 +326,8 @@ class AntagonisticJoint(AbstractSystem):
             self.check_angle(angle)
             a = jnp.asarray(angle, dtype=float)
         return JointState(
-            flexor=self.flexor_regulator.initial_state(pf),
-            extensor=self.extensor_regulator.initial_state(pe),
+            flexor=self.flexor_regulator.initial_state(pf, self.air),
+            extensor=self.extensor_regulator.initial_state(pe, self.air),
             angle=a,
             angular_velocity=jnp.zeros(()),
         )

@@ -31,7 +31,7 @@ from .._core.fitting import parameter
 from .._physics.regulator import EQ6_TIME_CONSTANTS, VOLTAGE_RANGE
 from .._physics.signals import AbstractSignal
 from .base import AbstractSystem
-from .joint import AntagonisticJoint, JointState
+from .joint import AntagonisticJoint, JointState, check_joint_pressures
 
 # The static inverses' root finds (safeguarded Newton, `increasing_root`): the torque is affine in Δ and the stiffness
 # nearly affine in Σ where both muscles pull (Newton: 2-4 steps), flat where one is slack (bisection there). A step
@@ -62,7 +62,18 @@ TRACKING_TIME = 0.1  # s, back-calculation time constant: Åström-Hägglund's T
 # --- static inverse -------------------------------------------------------------------------------------------------
 def regulated_stiffness(joint: AntagonisticJoint, angle: RealScalarLike, flexor_pressure: RealScalarLike,
                         extensor_pressure: RealScalarLike) -> FloatScalar:
-    """K_θ = −∂τ/∂θ [N m/rad] at held absolute pressures [Pa] (regulated muscles), by autodiff of the torque."""
+    """K_θ = −∂τ/∂θ [N m/rad] at held absolute pressures [Pa] (regulated muscles), by autodiff of the torque.
+    Concrete values are checked, as `AntagonisticJoint.initial_state` checks them (traced ones are not): `angle`
+    [rad] inside the joint's `angle_range` (10 for 10° gave 15,365 N m/rad against 137 at 0.1 rad), the pressures
+    finite and ABSOLUTE pascal (4.01 for 4.01 bar gave −0.076); else `PamjaxInputError` naming the argument."""
+    joint.check_angle(angle)
+    check_joint_pressures(flexor_pressure=flexor_pressure, extensor_pressure=extensor_pressure)
+    return _torque_stiffness(joint, angle, flexor_pressure, extensor_pressure)
+
+
+def _torque_stiffness(joint, angle, flexor_pressure, extensor_pressure):
+    """`regulated_stiffness` unchecked: `held_stiffness` takes it where the holding pressures leave the plausible
+    range (a slack muscle's gauge pressure below 0 where the sum cannot hold the angle)."""
     return -jax.grad(lambda a: joint.torque(a, flexor_pressure, extensor_pressure))(jnp.asarray(angle, dtype=float))
 
 
@@ -134,7 +145,7 @@ def hold_pressures(joint: AntagonisticJoint, angle, pressure_sum):
 
 def held_stiffness(joint: AntagonisticJoint, angle, pressure_sum):
     """Regulated stiffness [N m/rad] at `angle` [rad] held with gauge sum `pressure_sum` [Pa]."""
-    return regulated_stiffness(joint, angle, *hold_pressures(joint, angle, pressure_sum))
+    return _torque_stiffness(joint, angle, *hold_pressures(joint, angle, pressure_sum))
 
 
 def stiffness_range(joint: AntagonisticJoint, angle):

@@ -14,11 +14,19 @@ the outlet pressure). Both serve `simulate`, fitting and `linearise` alike.
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._core.custom_types import FloatScalar, RealScalar, RealScalarLike, StateLike
-from .._core.errors import PamjaxInputError, check_finite, check_in_open_interval, check_nonnegative, check_positive
+from .._core.errors import (
+    PamjaxInputError,
+    check_finite,
+    check_in_open_interval,
+    check_nonnegative,
+    check_positive,
+    concrete_values,
+)
 from .._core.fitting import parameter, positive
-from .._core.units import check_plausible
+from .._core.units import check_absolute_pressure, check_plausible
 from .._papers import datasheets, paper000, paper001
 from .._physics.chamber import chamber_flow
 from .._physics.friction import AbstractFriction, CoulombViscousFriction
@@ -30,6 +38,9 @@ from .base import AbstractMuscleSystem, AbstractSystem, state_leaves
 # the polytropic index n of eq. 3 and 12: 1 isothermal (paper 001) to 1.4 adiabatic (air); outside, n = 0 freezes a
 # chamber's pressure and n < 0 drives it below vacuum
 POLYTROPIC_RANGE = (0.99, 1.41)
+# a shortening may leave the stroke by the end stops' give (along a run): by 5 % of the stroke, the margin `simulate`
+# admits a start state by (pamjax._solve.checks.START_STROKE_MARGIN)
+STROKE_MARGIN = 0.05
 REGULATOR_KINDS = "a pressure regulator (ISO6358Regulator(), LinearRegulator(), FeedbackRegulator(), vppm_regulator())"
 MUSCLE_KINDS = "a Muscle (e.g. pj.presets.dmsp40_muscle())"
 
@@ -79,7 +90,7 @@ class RegulatorSystem(AbstractSystem):
     def initial_state(self, pressure=None):
         """Outlet at rest at `pressure` [Pa abs]; atmospheric by default."""
         p = self.air.atmospheric_pressure if pressure is None else pressure
-        return self.regulator.initial_state(jnp.asarray(p, dtype=float))
+        return self.regulator.initial_state(jnp.asarray(p, dtype=float), self.air)
 
     def _args(self):
         return self.volume, 0.0, self.air, self.polytropic_index, self.outlet_flow
@@ -121,6 +132,28 @@ def load_equilibrium(muscle: Muscle, load_force, pressure, air: Air):
     return jnp.where(interior, newton, x)
 
 
+def check_muscle_point(muscle, x, pressure, x_name="x", pressure_name="pressure"):
+    """The operating point of `muscle_stiffness` and `stiffness_rate`, where concrete (traced values, inside jit, vmap
+    or grad, are not checked): `pressure` finite and ABSOLUTE pascal (4.01 for 4.01 bar gave K = −0.0), `x` [m]
+    finite and inside the muscle's stroke give or take `STROKE_MARGIN` (30 for 30 mm gave −1.4e13 N/m, −0.5 m 9.3e7);
+    else `PamjaxInputError` naming the argument, as `simulate` names a start state."""
+    check_finite(pressure, pressure_name)
+    check_absolute_pressure(pressure, pressure_name)
+    check_finite(x, x_name)
+    v, lo, hi = (concrete_values(b) for b in (x, muscle.min_position, muscle.max_position))
+    if v is None or lo is None or hi is None:
+        return
+    margin = STROKE_MARGIN * (hi - lo)
+    outside = (v < lo - margin) | (v > hi + margin)
+    if np.any(outside):
+        worst = float(np.reshape(v, -1)[np.argmax(np.reshape(outside, -1))])
+        hint = (f": that looks like mm ({worst:g} mm = {worst / 1e3:g} m; pamjax takes metres)"
+                if abs(worst) > 1.0 and lo <= worst / 1e3 <= hi else "")  # a metre: `check_setting`'s limit
+        raise PamjaxInputError(f"{x_name} = {worst:g} m lies outside the muscle's stroke [{float(lo):.4g}, "
+                               f"{float(hi):.4g}] m (min_position, max_position; {STROKE_MARGIN:.0%} of it beyond "
+                               f"either end admitted, for the end stops' give){hint}")
+
+
 def volume_derivatives(muscle: Muscle, x):
     """(V, dV/dx, d²V/dx²) [m³, m², m] at shortening `x` [m], by autodiff of the volume law (paper 001 eq. 4)."""
     x = jnp.asarray(x, dtype=float)
@@ -136,7 +169,9 @@ def muscle_stiffness(muscle: Muscle, x: RealScalarLike, pressure: RealScalarLike
     `pressure_slope` dp/dx [Pa/m] along the motion; default the closed chamber, dp/dV = −n p/V (eq. 9's first
     term), so dp/dx = −n p V'/V. For the virtual-work force F = p_g V'(x) this is eq. 9 exactly:
     K = −(V')² dp/dV − V'' p_g. The isobaric stiffness (eq. 9's second term) is `pressure_slope=0`.
+    Concrete `x` and `pressure` are checked (`check_muscle_point`: metres inside the stroke, ABSOLUTE pascal).
     """
+    check_muscle_point(muscle, x, pressure)
     x = jnp.asarray(x, dtype=float)
     pressure = jnp.asarray(pressure, dtype=float)
     if pressure_slope is None:
@@ -152,7 +187,11 @@ def stiffness_rate(muscle: Muscle, x: RealScalarLike, velocity: RealScalarLike, 
 
     Eq. 10 as printed is the time derivative of the virtual-work force p V'(x), i.e. K ẋ; paper 001 calls it the
     stiffness rate of change. With paper 001's x = (L − L0)/L0 its value is L0 times this one (same sign).
+    Concrete `x` and `pressure` are checked as `muscle_stiffness`'s; `velocity` and `pressure_rate` finite.
     """
+    check_muscle_point(muscle, x, pressure)
+    check_finite(velocity, "velocity")
+    check_finite(pressure_rate, "pressure_rate")
     _, dv, d2v = volume_derivatives(muscle, x)
     return dv * pressure_rate + d2v * velocity * pressure
 
@@ -201,7 +240,7 @@ class RegulatedMuscleSystem(AbstractMuscleSystem):
         p = jnp.asarray(self.air.atmospheric_pressure if pressure is None else pressure, dtype=float)
         x = load_equilibrium(self.muscle, self.load_force, p, self.air) if position is None else position
         return RegulatedMuscleState(
-            regulator=self.regulator.initial_state(p),
+            regulator=self.regulator.initial_state(p, self.air),
             position=jnp.asarray(x, dtype=float),
             velocity=jnp.asarray(velocity, dtype=float),
             friction=self.friction.initial_state(velocity),
