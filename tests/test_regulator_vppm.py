@@ -182,3 +182,12 @@ def test_a_voltage_outside_the_calibration_is_named(volts):
         reg.static_outlet_pressure(volts, 1e-3, AIR)
     with pytest.raises(pj.PamjaxInputError, match=match):
         reg.accuracy_band(volts, AIR)
+
+
+@pytest.mark.parametrize("width", [0.05, 0.5])
+def test_a_hysteresis_width_in_bar_is_named(width):
+    # 0.05 for the paper's 50 mbar, typed in bar, made the loop 0.05 Pa wide (none) without a word
+    with pytest.raises(pj.PamjaxInputError, match=r"PressureHysteresis.width = .* Pa is below 1 Pa.*looks like bar"):
+        pj.PressureHysteresis(width=width)
+    assert float(pj.PressureHysteresis(width=5e3).width) == 5e3
+

@@ -11,7 +11,7 @@ import re
 
 import numpy as np
 
-from .errors import PamjaxInputError, concrete_values
+from .errors import PamjaxInputError, check_positive, concrete_values
 
 ATMOSPHERE = 101325.0  # Pa abs, ISO 2533 standard atmosphere (also `Air.atmospheric_pressure`'s default)
 # No pneumatic muscle test runs below half an atmosphere absolute (a vented chamber reads ~101325 Pa abs).
@@ -318,6 +318,18 @@ def check_plausible(values, name):
     v = concrete_values(values)
     if v is not None and np.isfinite(v).any():
         _refuse_implausible(name.split(".")[-1], v[np.isfinite(v)], name)
+
+
+def check_pressure_span(values, name):
+    """A pressure difference [Pa] a component holds (a regulator's hysteresis width): positive, and not below
+    `MIN_PRESSURE_NOISE` (0.05 for paper 001's 50 mbar, typed in bar, made its loop 0.05 Pa wide: none). Traced values
+    are not checked."""
+    check_positive(values, name)
+    v = concrete_values(values)
+    if v is not None and np.isfinite(v).any() and float(np.min(v[np.isfinite(v)])) < MIN_PRESSURE_NOISE:
+        low = float(np.min(v[np.isfinite(v)]))
+        raise PamjaxInputError(f"{name} = {low:g} Pa is below {MIN_PRESSURE_NOISE:g} Pa, less than any transducer "
+                               f"resolves: that looks like bar ({low:g} bar = {low * 1e5:g} Pa); pamjax takes Pa")
 
 
 def check_sonic_conductance(values, name):

@@ -38,7 +38,7 @@ from .._core.errors import (
     concrete_values,
 )
 from .._core.fitting import parameter, positive
-from .._core.units import ATMOSPHERE, BAR, FLOW_UNIT, check_absolute_pressure
+from .._core.units import ATMOSPHERE, BAR, FLOW_UNIT, check_absolute_pressure, check_pressure_span
 from .._papers import datasheets, paper001
 from .calibration import VOLTAGE_RANGE, VoltageCalibration
 from .chamber import chamber_flow, pressure_rate
@@ -273,7 +273,7 @@ class PressureHysteresis(eqx.Module):
     rate_width: RealScalar = positive(1e2, unit="Pa/s")
 
     def __check_init__(self):
-        check_positive(self.width, "PressureHysteresis.width")
+        check_pressure_span(self.width, "PressureHysteresis.width")
         check_in_closed_interval(self.exponent, *EXPONENT_BOUNDS, "PressureHysteresis.exponent")
         check_positive(self.rate_width, "PressureHysteresis.rate_width")
 
