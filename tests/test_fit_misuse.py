@@ -395,3 +395,20 @@ def test_a_start_whose_solve_runs_out_of_steps_names_the_experiment_and_its_max_
                                                r"max_steps = \d+\)") as caught:
         pamjax.fit(system, exps, ["payload_mass"], progress=False)
     assert "'ok'" not in str(caught.value) and "check the start values" not in str(caught.value)
+
+
+@pytest.mark.parametrize("start, free, match", [
+    (dict(exponent=1.0), ["exponent", "transition_length"],
+     r"exponent = 1 is on the bound of its range \(1, 10\).*e\.g\. 1\.09, or keep it fixed"),
+    (dict(shape=1.0), ["shape"], r"shape = 1 is on the bound of its range \(0, 1\).*e\.g\. 0\.99"),
+])
+def test_a_fit_started_on_a_bound_of_a_logistic_names_only_that_parameter(start, free, match, recwarn):
+    # Dahl's limits of the Bouc-Wen law (n = 1, beta = 1, documented) freed there: NumPy's divide-by-zero warnings,
+    # then "non-finite transformed parameters: {'exponent': -inf, 'transition_length': 0.0}", the finite one listed
+    # as if at fault and no word of the bound
+    friction = pamjax.BoucWenFriction(**start)
+    exp = pamjax.bench.FrictionCurveExperiment([-0.01, 0.01, 0.02], [-20.0, 20.0, 21.0], friction="")
+    with pytest.raises(PamjaxInputError, match=match) as refused:
+        pamjax.fit(friction, [exp], free, max_steps=1)
+    assert "transition_length" not in str(refused.value)  # only the parameter at fault
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]

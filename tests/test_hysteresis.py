@@ -248,6 +248,19 @@ def test_bad_input_is_named():
         pj.bench.HysteresisLoopExperiment(x, p / 1e5, v, x)  # bar
 
 
+
+@pytest.mark.parametrize("kwargs, match", [
+    # 3.5 (mm) for 3.5e-3 m: a 7 m transition on a 95 mm stroke, the force never reached the other branch (+15.7 N
+    # after a 20 mm return instead of -18.2 N); `EndStops.width` refused the same slip
+    (dict(transition_length=3.5), r"BoucWenFriction\.transition_length = 3\.5 m: more than 0\.1 m.*looks like mm"),
+    (dict(velocity_width=1.0), r"BoucWenFriction\.velocity_width = 1 m/s: more than 0\.05 m/s.*looks like mm/s"),
+])
+def test_a_transition_length_in_mm_or_a_velocity_width_in_mm_per_s_is_refused(kwargs, match):
+    with pytest.raises(pj.PamjaxInputError, match=match):
+        friction(**kwargs)
+    wide = friction(transition_length=0.02, velocity_width=0.01)  # long and wide, but in the units pamjax takes
+    assert float(wide.transition_length) == 0.02 and float(wide.velocity_width) == 0.01
+
 _steady_state_and_slope = eqx.filter_jit(lambda f, v: jax.value_and_grad(f.steady_state)(v))
 
 
@@ -266,3 +279,36 @@ def test_at_rest_the_steady_state_is_the_rest_state_not_nan():
     x, _, starts = loop_path()
     with pytest.raises(pj.PamjaxInputError, match=r"velocities must be non-zero \(the direction of motion\), row 0"):
         pj.bench.path_friction_force(law, x, np.zeros(x.size), starts)
+
+
+_PATH_CASES = {  # case: (what the message says, whether it is decided under jit: shapes and substeps are static)
+    "substeps 0": (r"substeps must be an integer >= 1, got 0", True),  # the reversal ignored: +15.8 N, not -18.2 N
+    "starts[0] False": (r"starts\[0\] must be True", False),  # began in the virgin state z = 0
+    "NaN position": (r"positions is NaN/inf at row 5", False),  # every force after it was NaN
+    "velocities short": (r"positions, velocities must be 1-D arrays of one length.*\(160,\)", True),  # raw TypeError
+    "starts short": (r"starts must be a bool array of the positions' shape \(161,\)", True),  # raw ValueError
+    "positions in mm": (r"positions reach 20 m: these look like mm", False),
+}
+
+
+@pytest.mark.parametrize("case, jit", [(c, False) for c in _PATH_CASES] + [(c, True) for c, (_, static) in
+                                                                            _PATH_CASES.items() if static])
+def test_path_friction_force_checks_its_path_as_the_loop_experiment(case, jit):
+    """`path_friction_force` refuses what `HysteresisLoopExperiment` refuses (`check_path`), eagerly and, for what
+    is known there (the shapes, `substeps`), under jit; traced values are the experiment's to check."""
+    x, v, starts = loop_path()
+    args, substeps = [x, v, starts], 4
+    if case == "substeps 0":
+        substeps = 0
+    elif case == "starts[0] False":
+        args[2] = np.r_[False, starts[1:]]
+    elif case == "NaN position":
+        args[0] = np.where(np.arange(x.size) == 5, np.nan, x)
+    elif case == "velocities short":
+        args[1] = v[:-1]
+    elif case == "starts short":
+        args[2] = starts[:-1]
+    else:
+        args[0] = 1e3 * x
+    with pytest.raises(pj.PamjaxInputError, match=_PATH_CASES[case][0]):
+        (_path_force if jit else pj.bench.path_friction_force)(friction(), *args, substeps)

@@ -146,6 +146,39 @@ def test_a_tank_volume_in_litres_is_refused(build, name):
         build()
 
 
+def _mas10_law(**kw):
+    law = presets.mas10_muscle().force_law
+    k0, k1, k2, p_max = (kw.get(k, getattr(law, k)) for k in ("k0", "k1", "k2", "max_pressure"))
+    return pamjax.PolynomialForce(law.max_force_coefficients, k0, k1, k2, p_max)
+
+
+@pytest.mark.parametrize("build, match", [
+    # p_max = 6 (bar) gave 602 N instead of 120 N at x = 0.02 m, 3 bar gauge; a config refused it (check_setting)
+    (lambda: _mas10_law(max_pressure=6.0), r"PolynomialForce: max_pressure = 6 Pa: that looks like bar"),
+    # k2 = 1 (bar) for 1e5 Pa: eq. 7's slope k0/k2 = 103 m², a muscle of 60 MN at 6 bar
+    (lambda: _mas10_law(k2=1.0),
+     r"PolynomialForce\.k2 = 1 Pa gives eq\. 7 a slope k0/k2 = 102\.8.* looks like k2 in bar"),
+    (lambda: _mas10_law(k2=100.0), r"PolynomialForce\.k2 = 100 Pa .*more than 0\.1 m²"),  # kPa
+    # b_s < L0: cos θ = 1.5 has no braid angle; eq. 5 returned 88 N (BraidVolume refused the same braid)
+    (lambda: pamjax.ChouHannafordForce(0.2, 7.9, 0.3),
+     r"ChouHannafordForce\.strand_length \(0\.2\) must exceed nominal_length \(0\.3\)"),
+    # r0 = 5 (mm): 2.4e8 N at 3 bar gauge instead of 240 N
+    (lambda: pamjax.TonduLopezForce(5.0, 0.4, 0.3), r"TonduLopezForce\.radius = 5 m: more than 0\.1 m.*looks like mm"),
+])
+def test_force_laws_in_other_units_or_without_a_braid_angle_are_refused(build, match):
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        build()
+
+
+def test_force_law_unit_checks_leave_legal_and_traced_values_alone():
+    # another convention for the unidentifiable k2 (1 Pa, not 1e5): the same law
+    law = _mas10_law(k2=1.0, k0=presets.MAS10_K0 * 1e-5, k1=presets.MAS10_K1 * 1e-5)
+    assert float(law.static_force(0.02, 3e5)) == pytest.approx(float(_mas10_law().static_force(0.02, 3e5)), rel=1e-12)
+    assert float(pamjax.TonduLopezForce(0.02, 0.4, 0.4).radius) == 0.02  # the DMSP-40's 20 mm
+    # traced (a fit's trial values, a sweep): not checked
+    assert np.isfinite(jax.jit(lambda p: _mas10_law(max_pressure=p, k2=p).static_force(0.0, 3e5))(6.0))
+
+
 @pytest.mark.parametrize("field", ["force_law", "volume_law"])
 def test_a_muscle_without_a_force_or_volume_law_is_refused_by_name(field):
     # Muscle(force_law=None) ended as an AttributeError inside simulate

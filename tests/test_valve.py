@@ -221,6 +221,13 @@ def test_fit_averaged_valve_refuses_a_grid_in_other_units_by_name(grid, match):
         pamjax.fit_averaged_valve(EXACT, AIR, **grid)
 
 
+def test_fit_averaged_valve_refuses_a_valve_that_does_not_switch_before_reading_its_supply():
+    # the default pressure grid read valve.supply_pressure first: a raw AttributeError for an AveragedValve
+    with pytest.raises(pamjax.PamjaxInputError, match=r"valve: fit_averaged_valve fits eq\. 13 to the cycle average.*"
+                                                      r"AveragedValve does not switch"):
+        pamjax.fit_averaged_valve(presets.mas10_averaged_valve(), AIR)
+
+
 @pytest.mark.parametrize("width, frequency", [(0.1, 50.0), (2e-3, 50.0), (3e-4, 249.0)])
 def test_an_edge_width_not_well_below_the_pwm_period_is_refused(width, frequency):
     # edge_width = 0.1 (0.1 ms typed in s) passed: the magnitude check let anything up to 0.1 s through, and a
@@ -282,6 +289,9 @@ def test_cycle_averaged_flow_is_elementwise_in_duty_and_pressure():
     (dict(samples=0), r"samples must be a positive integer"),
     (dict(valve=presets.mas10_averaged_valve()), r"valve: the cycle average is a switching valve's flow .*"
      r"AveragedValve does not switch"),
+    # 3 duties beside 2 pressures: a raw broadcasting ValueError
+    (dict(command=np.array([0.2, 0.3, 0.5]), pressure=np.array([2e5, 3e5])),
+     r"cycle_averaged_flow: command of shape \(3,\) and pressure of shape \(2,\) do not broadcast"),
 ])
 def test_cycle_averaged_flow_refuses_what_flow_surface_refuses(kwargs, match):
     # duty 50 (percent) gave duty 1's flow, a pressure in bar or NaN a number, an averaged valve a raw TypeError
@@ -294,6 +304,9 @@ def test_cycle_averaged_flow_refuses_what_flow_surface_refuses(kwargs, match):
     ((float("nan"), 3e5), r"equivalent_duty: mass_flow must be finite"),
     ((1e-3, float("nan")), r"equivalent_duty: pressure \(absolute\) \[Pa\] must be > 0 and finite"),
     ((1e-3, 3.0), r"equivalent_duty: pressure is 3 Pa at most: that looks like bar"),
+    # 3 flows beside 2 pressures: a raw TypeError
+    ((np.array([1e-3, 2e-3, 0.0]), np.array([3e5, 4e5])),
+     r"equivalent_duty: mass_flow of shape \(3,\) and pressure of shape \(2,\) do not broadcast"),
 ])
 def test_equivalent_duty_refuses_nan_and_bar(args, match):
     # a NaN flow or pressure gave duty 0.0, a pressure in bar the duty for 3 Pa abs

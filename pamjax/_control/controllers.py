@@ -31,7 +31,7 @@ from .._papers import datasheets, paper000
 from .._physics.gas import Air
 from .._physics.signals import AbstractSignal
 from .._physics.smooth import smooth_sign
-from .._physics.valves.averaged import AveragedValve
+from .._physics.valves.averaged import AveragedValve, check_broadcastable
 from .._physics.valves.base import AbstractControlElement
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
 
@@ -145,6 +145,8 @@ def equivalent_duty(valve: AveragedValve, mass_flow: RealScalarLike, pressure: R
             f"equivalent_duty: valve must be an averaged valve (paper 000 eq. 13, AveragedValve, e.g. "
             f"presets.mas10_averaged_valve()), whose flow command_for_flow inverts; got {type(valve).__name__} (a "
             "switching valve's cycle average: fit_averaged_valve(valve, air) first)")
+    check_broadcastable(("mass_flow", "pressure"), (mass_flow, pressure), "equivalent_duty",
+                        "one flow per pressure, or one of them a scalar")  # (3 flows, 2 pressures: a raw TypeError)
     flow = concrete_values(mass_flow)
     if flow is not None and not np.all(np.isfinite(flow)):
         raise PamjaxInputError(f"equivalent_duty: mass_flow must be finite [kg/s], got {flow}")

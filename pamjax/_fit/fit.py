@@ -197,10 +197,29 @@ def _setup(model, experiments, space):
         e.check(model)
     exps = tuple(e.bind(model) for e in experiments)
     theta = np.asarray(space.initial_theta())
-    if not np.all(np.isfinite(theta)):
-        raise PamjaxInputError(f"start values give non-finite transformed parameters: "
-                               f"{dict(zip(space.labels, theta))}")
+    check_start(space, theta)  # a parameter started on a bound of its logistic's range, named with its value
     return exps, theta, Problem(space, exps)
+
+
+def check_start(space: ParameterSpace, theta: np.ndarray) -> None:
+    """Refuse a start `theta` (`space.initial_theta()`) that is not finite, naming only the parameters at fault, their
+    start values and the range their transform maps onto (`PamjaxInputError`): a Bouc–Wen exponent freed at Dahl's
+    n = 1 is on the bound of its logistic's open range (1, 10) (the whole θ was listed, with no word of the bound)."""
+    theta, values, lines, k = np.asarray(theta, dtype=float), np.asarray(space.initial_values()), [], 0
+    for g in space.groups:
+        for label, v, t, lo, hi in zip(g.labels, values[k:k + g.size], theta[k:k + g.size], np.asarray(g.lower),
+                                       np.asarray(g.upper)):
+            if g.transform == "logistic" and not np.isfinite(t):  # on (or past) a bound: θ = ±inf
+                inside = lo + 0.01 * (hi - lo) if v <= lo else hi - 0.01 * (hi - lo)
+                lines.append(f"{label} = {v:g} is {'on the bound' if v in (lo, hi) else 'outside'} of its range "
+                             f"({lo:g}, {hi:g}), an open interval (the logistic transform reaches a bound only at "
+                             f"θ = ±inf): free it from a value inside, e.g. {inside:.4g}, or keep it fixed")
+            elif not np.isfinite(t):
+                lines.append(f"{label} = {v:g} has no finite θ under its {g.transform} transform")
+        k += g.size
+    if lines:
+        raise PamjaxInputError("start values outside the range a free parameter's transform maps onto:\n  "
+                               + "\n  ".join(lines))
 
 
 def precompile(model, experiments, free):

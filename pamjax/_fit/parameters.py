@@ -175,6 +175,9 @@ class _Group(eqx.Module):
         if self.transform == "logistic":
             lower, upper = xp.asarray(self.lower), xp.asarray(self.upper)
             z = (value - lower) / (upper - lower)
+            if xp is np:  # a value on a bound has θ = ±inf (`fit.check_start` names it), without NumPy's warnings
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    return np.log(z) - np.log1p(-z)
             return xp.log(z) - xp.log1p(-z)
         return xp.linalg.solve(xp.asarray(self.basis), value) / scale
 

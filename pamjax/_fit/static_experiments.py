@@ -34,7 +34,7 @@ from .._core.custom_types import (
     RealVectorLike,
     TableLike,
 )
-from .._core.errors import PamjaxInputError, check_count
+from .._core.errors import PamjaxInputError, check_count, concrete_values
 from .._physics.friction import AbstractFriction
 from .._physics.gas import AbstractRestriction, Air
 from .._physics.muscle import AbstractMuscle
@@ -372,8 +372,12 @@ def path_friction_force(friction: AbstractFriction, positions: TableLike, veloci
     sign(x_k − x_{k−1}) · ½(|ẋ_{k−1}| + |ẋ_k|) for the time that takes, integrated by `substeps` RK4 steps. Each
     stage's state is kept within the sliding states ±z_s of that speed, which bound the state of a friction that
     saturates there (bristle, Bouc–Wen): where a transition is shorter than a sub-step (stiff), RK4 then lands on the
-    branch instead of overshooting it."""
-    check_moving(velocities, "the direction of motion")
+    branch instead of overshooting it.
+
+    Checked as `HysteresisLoopExperiment` checks its path (`check_path`), concrete values before anything is computed:
+    one NaN position made every force after it NaN, `substeps=0` carried no state past a reversal, `starts[0]` False
+    began in the virgin state z = 0 instead of on a branch."""
+    check_path(positions, velocities, starts, substeps)
     x, v = jnp.asarray(positions, dtype=float), jnp.asarray(velocities, dtype=float)
     if friction.initial_state() is None or friction.hybrid:
         return steady_friction_force(friction, v)
@@ -402,6 +406,32 @@ def path_friction_force(friction: AbstractFriction, positions: TableLike, veloci
     z0 = jnp.zeros_like(at_start[0])
     _, force = jax.lax.scan(sample, z0, (step_velocity, h, jnp.asarray(starts), at_start, v, bound))
     return force
+
+
+def check_path(positions, velocities, starts, substeps):
+    """The checks of a loop read as a path (`path_friction_force`, `HysteresisLoopExperiment`), each a
+    `PamjaxInputError` naming the argument: `substeps` an int >= 1 (0 RK4 steps carry no state: the force stays on
+    the branch it started on past every reversal); `positions`, `velocities`, `starts` 1-D of one length; `starts`
+    bool with `starts[0]` True (the first sample begins a sweep, on the branch of its velocity; without it the state
+    starts virgin, z = 0, halfway between the branches); concrete positions and velocities finite (one NaN makes every
+    force after it NaN: the state is carried), positions in m (not mm) and velocities ≠ 0. Traced values (jit, vmap,
+    grad): their shapes and dtype only."""
+    check_count(substeps, "substeps", "an integer >= 1")
+    shapes = [jnp.shape(a) for a in (positions, velocities)]
+    if not (len(shapes[0]) == 1 and shapes[0][0] > 0 and shapes[1] == shapes[0]):
+        raise PamjaxInputError(f"positions, velocities must be 1-D arrays of one length, got shapes {shapes}")
+    traced = isinstance(starts, jax.core.Tracer)
+    dtype = starts.dtype if traced else np.asarray(starts).dtype
+    if jnp.shape(starts) != shapes[0] or dtype != np.bool_:
+        raise PamjaxInputError(f"starts must be a bool array of the positions' shape {shapes[0]}, got "
+                               f"{dtype} {jnp.shape(starts)}")
+    if not traced and not np.asarray(starts)[0]:
+        raise PamjaxInputError("starts[0] must be True: the first sample begins a sweep")
+    if concrete_values(positions) is not None and concrete_values(velocities) is not None:
+        x, _ = columns(("positions", "velocities"), (positions, velocities))
+        if np.max(np.abs(x)) > 1.0:  # as `check_map`: no muscle contracts by a metre
+            raise PamjaxInputError(f"positions reach {np.max(np.abs(x)):g} m: these look like mm; pamjax takes m")
+    check_moving(velocities, "the direction of motion")
 
 
 class HysteresisLoopExperiment(AbstractStaticExperiment):
@@ -439,13 +469,7 @@ class HysteresisLoopExperiment(AbstractStaticExperiment):
         check_map(x, p, v)
         if starts is None:
             starts = np.concatenate([[True], p[1:] != p[:-1]])
-        starts = np.asarray(starts)
-        if starts.shape != x.shape or starts.dtype != bool:
-            raise PamjaxInputError(f"starts must be a bool array of the positions' shape {x.shape}, got "
-                                   f"{starts.dtype} {starts.shape}")
-        if not starts[0]:
-            raise PamjaxInputError("starts[0] must be True: the first sample begins a sweep")
-        check_count(substeps, "substeps", "an integer >= 1")
+        check_path(x, v, starts, substeps)
         self.positions, self.pressures, self.velocities = jnp.asarray(x), jnp.asarray(p), jnp.asarray(v)
         self.starts = jnp.asarray(starts)
         self.slack = slack_points(f, slack_force)

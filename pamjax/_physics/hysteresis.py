@@ -17,16 +17,50 @@ each other) by pinning the state's bounds to ±δ, so that F_c is the branch off
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 
 from .._core.arrays import as_scalar
 from .._core.custom_types import RealScalar
-from .._core.errors import check_in_closed_interval, check_nonnegative, check_positive
+from .._core.errors import (
+    PamjaxInputError,
+    check_in_closed_interval,
+    check_nonnegative,
+    check_positive,
+    concrete_values,
+)
 from .._core.fitting import positive, ratio
 from .._papers import datasheets, paper000
 from .friction import AbstractFriction
 from .smooth import smooth_abs
 
 EXPONENT_BOUNDS = (1.0, 10.0)  # n: ≥ 1 keeps the law continuously differentiable at u = 0; 10 is a corner already
+# m, the longest transition δ: the force reaches the other branch after about 2δ of travel, so δ = 0.1 m spends 0.2 m,
+# twice the whole stroke of paper 000's MAS-10 (95 mm: −20 to 75 mm) and of paper 001's DMSP-40-400, on one transition
+# and a loop never reaches its branches (paper 000's, Figs. 3 and 5, do within a few mm of a reversal). Transitions
+# are a fraction of a mm to a few mm (default 2 mm; docs/hysteresis.md fits 3.5 mm); in mm typed as m (3.5 for 3.5 mm,
+# a 7 m transition) they are far above it.
+MAX_TRANSITION_LENGTH = 0.1
+# m/s, the widest smoothing of sign(ẋ) or |ẋ| around rest (`velocity_width`; defaults 1e-5 for the bristle and
+# Bouc–Wen laws, 1e-3 for `CoulombViscousFriction`): wider, a friction has lost Coulomb's step at the speeds a loop is
+# measured at: tanh(5 mm/s / 0.05 m/s) leaves 10 % of F_c at docs/hysteresis.md's 5 mm/s (paper 000's loops are
+# quasi-static), and the Bouc–Wen state passes its bounds there. mm/s typed as m/s (1 for 1 mm/s) is far above it.
+MAX_VELOCITY_WIDTH = 0.05
+
+
+def check_below(value, limit, name, unit, why):
+    """Refuse a concrete `value` [`unit`] above `limit` as another unit's number (`why`: what it looks like and the
+    value in pamjax's unit); traced values are not checked."""
+    v = concrete_values(value)
+    if v is not None and np.any(v > limit):
+        raise PamjaxInputError(f"{name} = {float(np.max(v)):g} {unit}: more than {limit:g} {unit}: {why}")
+
+
+def check_velocity_width(width, name):
+    """A friction's `velocity_width` [m/s] > 0, finite, at most `MAX_VELOCITY_WIDTH` (mm/s typed as m/s refused)."""
+    check_positive(width, name)
+    check_below(width, MAX_VELOCITY_WIDTH, name, "m/s", "smoothed that wide, a friction has lost its step at a slow "
+                f"loop's speed (tanh(5 mm/s / {MAX_VELOCITY_WIDTH:g} m/s) is 10 % of F_c); that looks like mm/s "
+                "(pamjax takes m/s: 0.01 mm/s is 1e-5)")
 
 
 def exponent_field(default):
@@ -71,12 +105,14 @@ class BoucWenFriction(AbstractFriction):
 
     - `coulomb_force`: F_c [N], the branch offset; 16 (paper 000: half the 32 N loop width, Figs. 3-5).
     - `transition_length`: δ [m]; 2e-3 (assumed: paper 000 gives no loop shape; a transition over ≈ 2δ = 4 mm,
-      5 % of the MAS-10's 75 mm stroke; a fit parameter, identified in `pamjax/gallery/scripts/p000_12_hysteresis.py`).
+      5 % of the MAS-10's 75 mm stroke; a fit parameter, identified in `pamjax/gallery/scripts/p000_12_hysteresis.py`);
+      at most `MAX_TRANSITION_LENGTH`, 0.1 m.
     - `exponent`: n [-] in [1, 10]; 2 (assumed, between Dahl's 1 and a sharp corner; fitted through a logistic).
     - `shape`: β [-] in (0, 1]; ½ (the force leaves a branch along a straight line, Ikhouane & Rodellar's
       normalised form with β = γ).
     - `viscous_coefficient`: C_f [N s/m]; 250 (`pamjax.presets`, item 4).
-    - `velocity_width`: [m/s] smoothing |ẋ|; 1e-5 (numerical, as `BristleFriction`'s).
+    - `velocity_width`: [m/s] smoothing |ẋ|; 1e-5 (numerical, as `BristleFriction`'s); at most `MAX_VELOCITY_WIDTH`,
+      0.05 m/s.
     """
 
     coulomb_force: RealScalar = positive(paper000.COULOMB_FORCE, unit="N")
@@ -89,11 +125,15 @@ class BoucWenFriction(AbstractFriction):
     def __check_init__(self):
         check_nonnegative(self.coulomb_force, "BoucWenFriction.coulomb_force")
         check_positive(self.transition_length, "BoucWenFriction.transition_length")
+        check_below(self.transition_length, MAX_TRANSITION_LENGTH, "BoucWenFriction.transition_length", "m",
+                    "the force takes about 2δ to reach the other branch, twice the MAS-10's whole 95 mm stroke "
+                    "(transitions span a fraction of a mm to a few mm); that looks like mm (pamjax takes m: 3.5 mm is "
+                    "3.5e-3)")
         check_in_closed_interval(self.exponent, *EXPONENT_BOUNDS, "BoucWenFriction.exponent")
         check_positive(self.shape, "BoucWenFriction.shape")
         check_in_closed_interval(self.shape, 0.0, 1.0, "BoucWenFriction.shape")
         check_nonnegative(self.viscous_coefficient, "BoucWenFriction.viscous_coefficient")
-        check_positive(self.velocity_width, "BoucWenFriction.velocity_width")
+        check_velocity_width(self.velocity_width, "BoucWenFriction.velocity_width")
 
     def smoothing_width(self):
         return self.velocity_width

@@ -16,7 +16,7 @@ from .._core.arrays import as_array
 from .._core.custom_types import Array, Real, RealScalar, RealScalarLike, RealVector
 from .._core.errors import PamjaxInputError, check_finite, check_in_open_interval, check_positive, concrete_values
 from .._core.fitting import parameter, polynomial, positive
-from .._core.units import check_plausible
+from .._core.units import check_plausible, check_setting
 from .._papers import paper000
 from .smooth import smooth_relu, smooth_step
 
@@ -62,6 +62,9 @@ class PolynomialForce(AbstractForceLaw):
         check_finite(self.k1, "PolynomialForce.k1")
         check_positive(self.k2, "PolynomialForce.k2")
         check_positive(self.max_pressure, "PolynomialForce.max_pressure")
+        if concrete_values(self.max_pressure) is not None:  # 6 (bar) for 6e5 Pa refused, as a config refuses it
+            check_setting("max_pressure", self.max_pressure, "PolynomialForce:")
+        _check_pressure_slope(self.k0, self.k2)
 
     def max_force(self, x):
         """F_max(x) [N], the force at p_max."""
@@ -73,6 +76,36 @@ class PolynomialForce(AbstractForceLaw):
 
     def static_force(self, x, gauge_pressure):
         return self.max_force(x) - (self.max_pressure - gauge_pressure) * self.pressure_slope(x)
+
+
+# m², the largest slope ∂F/∂p_g = k0/k2 of eq. 7 at x = 0 (a muscle's effective area): 0.1 m² is 60 kN at 6 bar, ten
+# times Festo's strongest muscle (DMSP-40: 6000 N at 6 bar, k0/k2 = 9.8e-3 m²; the MAS-10's 630 N: 1.03e-3 m²). k2 in
+# bar, kPa or MPa (6 for 6e5 Pa: 17 m² with the MAS-10's k0) is far above it; only k0/k2 is identifiable, so the
+# check is on the ratio, whatever convention fixes k2 (pamjax's: 1e5 Pa).
+MAX_PRESSURE_SLOPE = 0.1
+
+
+def _check_pressure_slope(k0, k2):
+    """Refuse eq. 7's slope k0/k2 [m²] above `MAX_PRESSURE_SLOPE` (concrete values only): k2 not in Pa."""
+    k0, k2 = concrete_values(k0), concrete_values(k2)
+    if k0 is None or k2 is None or not (np.all(np.isfinite(k0)) and np.all(k2 > 0)):
+        return  # traced (a fit's trial values), or refused by the checks above
+    slope = float(np.max(np.abs(k0) / k2))
+    if slope > MAX_PRESSURE_SLOPE:
+        raise PamjaxInputError(
+            f"PolynomialForce.k2 = {float(np.min(k2)):g} Pa gives eq. 7 a slope k0/k2 = {slope:g} N/Pa (m²) at x = 0: "
+            f"more than {MAX_PRESSURE_SLOPE:g} m², 60 kN at 6 bar (Festo's strongest muscle, the DMSP-40, has "
+            "9.8e-3 m²); that looks like k2 in bar, kPa or MPa (pamjax takes Pa: 1 bar is 1e5)"
+        )
+
+
+def _check_braid(strand_length, nominal_length, name):
+    """Refuse a braid whose strand b_s is not longer than the muscle at nominal length L0 (eq. 1, L = b_s cos θ:
+    cos θ ≥ 1 has no braid angle), concrete values only."""
+    b, length = strand_length, nominal_length
+    if not isinstance(b, jax.core.Tracer) and not isinstance(length, jax.core.Tracer) and not bool(b > length):
+        raise PamjaxInputError(f"{name}.strand_length ({b}) must exceed nominal_length ({length}): eq. 1, "
+                               "L = b_s cos θ")
 
 
 class ChouHannafordForce(AbstractForceLaw):
@@ -92,11 +125,17 @@ class ChouHannafordForce(AbstractForceLaw):
         check_positive(self.nominal_length, "ChouHannafordForce.nominal_length")
         check_plausible(self.nominal_length, "ChouHannafordForce.nominal_length")  # 400 (mm) for 0.4 m refused
         check_plausible(self.strand_length, "ChouHannafordForce.strand_length")  # 390 (mm) for 0.39 m refused
+        _check_braid(self.strand_length, self.nominal_length, "ChouHannafordForce")  # cos θ = 1.5 gave 88 N
 
     def static_force(self, x, gauge_pressure):
         cos_theta = (self.nominal_length - x) / self.strand_length
         d0 = self.strand_length / (self.turns * jnp.pi)
         return jnp.pi * d0**2 / 4.0 * gauge_pressure * (3.0 * cos_theta**2 - 1.0)
+
+
+# m, the largest radius r0 of a muscle at rest: 0.1 m, a muscle 20 cm across, five times Festo's widest (the DMSP-40's
+# 40 mm bore; as `MAX_BORE_AREA` below); a radius in mm typed as m (5 for the MAS-10's 5 mm) is far above it.
+MAX_RADIUS = 0.1
 
 
 class TonduLopezForce(AbstractForceLaw):
@@ -114,6 +153,13 @@ class TonduLopezForce(AbstractForceLaw):
 
     def __check_init__(self):
         check_positive(self.radius, "TonduLopezForce.radius")
+        radius = concrete_values(self.radius)
+        if radius is not None and np.any(radius > MAX_RADIUS):  # 5 (mm) for 5e-3 m gave 2.4e8 N, not 240 N
+            raise PamjaxInputError(
+                f"TonduLopezForce.radius = {float(np.max(radius)):g} m: more than {MAX_RADIUS:g} m, a muscle 20 cm "
+                "across (the MAS-10's r0 is 5 mm, the DMSP-40's 20 mm); that looks like mm (pamjax takes m: 5 mm is "
+                "5e-3)"
+            )
         check_positive(self.nominal_length, "TonduLopezForce.nominal_length")
         check_plausible(self.nominal_length, "TonduLopezForce.nominal_length")
         check_positive(self.correction, "TonduLopezForce.correction")
@@ -217,11 +263,7 @@ class BraidVolume(AbstractVolume):
         check_positive(self.nominal_length, "BraidVolume.nominal_length")
         check_plausible(self.nominal_length, "BraidVolume.nominal_length")
         check_plausible(self.strand_length, "BraidVolume.strand_length")  # 390 (mm) for 0.39 m refused
-        b, length = self.strand_length, self.nominal_length
-        if not isinstance(b, jax.core.Tracer) and not isinstance(length, jax.core.Tracer) and not bool(b > length):
-            raise PamjaxInputError(
-                f"BraidVolume.strand_length ({b}) must exceed nominal_length ({length}): eq. 1, L = b_s cos θ"
-            )
+        _check_braid(self.strand_length, self.nominal_length, "BraidVolume")
 
     @classmethod
     def from_datasheet(cls, nominal_length: RealScalarLike, diameter: RealScalarLike,

@@ -86,8 +86,11 @@ def cycle_averaged_flow(valve: AbstractSwitchingValve, command: RealArrayLike, p
     Elementwise: `command` and `pressure` broadcast against each other, one average per pair (the mean is over the
     phases only). Checked as `flow_surface` checks them (`check_cycle_average`): a switching valve, duties within its
     `command_range`, finite ABSOLUTE pressures and an int `samples` >= 1; traced values (jit, vmap, grad) have no
-    value to check."""
+    value to check. Shapes that do not broadcast are refused by name (they were a raw ValueError)."""
     check_cycle_average(valve, command, pressure, samples, ("command", "pressure", "samples"), "the cycle average")
+    check_broadcastable(("command", "pressure"), (command, pressure), "cycle_averaged_flow",
+                        "one duty per pressure, or one of them a scalar; a duty × pressure grid is flow_surface, or "
+                        "command[:, None] with pressure[None, :]")
     phases = (jnp.arange(samples) + 0.5) / samples * valve.period
 
     def average(u, p):  # one duty and pressure (a valve's opening reads a duty pair of shape (2,) as (u_k, u_k-1))
@@ -100,6 +103,29 @@ def cycle_averaged_flow(valve: AbstractSwitchingValve, command: RealArrayLike, p
     return flows.reshape(u.shape + flows.shape[1:])
 
 
+def check_switching_valve(valve, what):
+    """`valve` a switching valve (`what`, e.g. "the cycle average", is its flow averaged over a PWM period), else a
+    `PamjaxInputError` naming it and what to pass."""
+    if not (isinstance(valve, AbstractSwitchingValve) and valve.switches):
+        raise PamjaxInputError(f"valve: {what} is a switching valve's flow averaged over a PWM period; "
+                               f"{type(valve).__name__} does not switch (an averaged valve's flow is its own "
+                               "mass_flow(t, command, pressure, air): evaluate that directly; a switching one: e.g. "
+                               "presets.mas10_valve())")
+
+
+def check_broadcastable(names, values, where, expected):
+    """`values` (named `names`) of shapes that broadcast against each other (an elementwise function of them), else
+    a `PamjaxInputError` naming `where`, each argument's shape and what is `expected`. Shapes only: traced values are
+    checked too."""
+    shapes = [tuple(np.shape(v)) for v in values]
+    try:
+        np.broadcast_shapes(*shapes)
+    except ValueError:
+        given = " and ".join(f"{n} of shape {s}" for n, s in zip(names, shapes))
+        raise PamjaxInputError(f"{where}: {given} do not broadcast against each other (the function is elementwise: "
+                               f"{expected})") from None
+
+
 def check_cycle_average(valve, commands, pressures, samples, names, what):
     """The checks of a cycle average (`cycle_averaged_flow`, `flow_surface`), on concrete values before anything is
     traced: a switching valve (`what`, e.g. "the flow surface", is its flow averaged over a PWM period), a positive
@@ -107,11 +133,7 @@ def check_cycle_average(valve, commands, pressures, samples, names, what):
     pressures [Pa] (bar and gauge named). `names`: the (commands, pressures, samples) arguments' names, as the
     `PamjaxInputError` names them; traced values have no value to check."""
     command_name, pressure_name, samples_name = names
-    if not (isinstance(valve, AbstractSwitchingValve) and valve.switches):
-        raise PamjaxInputError(f"valve: {what} is a switching valve's flow averaged over a PWM period; "
-                               f"{type(valve).__name__} does not switch (an averaged valve's flow is its own "
-                               "mass_flow(t, command, pressure, air): evaluate that directly; a switching one: e.g. "
-                               "presets.mas10_valve())")
+    check_switching_valve(valve, what)
     if not (isinstance(samples, (int, np.integer)) and not isinstance(samples, (bool, np.bool_)) and samples >= 1):
         raise PamjaxInputError(f"{samples_name} must be a positive integer (phases per PWM period), got {samples!r}")
     u = concrete_values(commands)
@@ -141,6 +163,8 @@ def fit_averaged_valve(valve: AbstractSwitchingValve, air: Air, commands: RealAr
     least three distinct duties (eq. 13 is quadratic in u);
     `pressures` 1-D, finite, ABSOLUTE [Pa] (not bar or gauge), at least two distinct ones above atmosphere (eq. 13 is
     quadratic in the pressure); `PamjaxInputError` naming the argument otherwise."""
+    # the valve first: the default grid reads its supply pressure (an AveragedValve ended as a raw AttributeError)
+    check_switching_valve(valve, "fit_averaged_valve fits eq. 13 to the cycle average, which")
     # a user's grid (NumPy or a list) and the fitted coefficients are put on the device without compiling
     # (`device_array`; `jnp.asarray` of a NumPy array compiles a small program per shape)
     if commands is None:
