@@ -348,3 +348,67 @@ def test_equilibrium_is_reverse_differentiable_with_the_implicit_derivative():
     fd = float((position(9.6 + 1e-4) - position(9.6 - 1e-4)) / 2e-4)
     np.testing.assert_allclose(grad, float(jax.jacfwd(position)(9.6)), rtol=1e-8)
     np.testing.assert_allclose(grad, fd, rtol=1e-5)
+
+
+def test_a_root_the_system_cannot_reach_is_refused():
+    """Eq. 13's polynomial in p has a second root far above the supply: from a guess at 6e5 Pa, duty 0.1 converged
+    to p = 2.52 MPa abs (4x the MAS-10's 0.65 MPa supply, x = 75.2 mm) with no error, where `simulate` settles at
+    0.131 MPa. Refused, naming the pressure and the bound; from a guess near the state it is found."""
+    system = pamjax.presets.mas10_system("averaged")
+    with pytest.raises(pamjax.PamjaxSolveError, match=r"cannot reach.*pressure = 2\.51\d+e\+06 Pa abs lies outside "
+                                                      r"\[\d+, 6\d{5}\] Pa abs.*guess nearer.*simulate to rest"):
+        equilibrium(system, 0.1, system.initial_state(pressure=6e5))
+    near = equilibrium(system, 0.1, system.initial_state(pressure=1.5e5))
+    assert float(near.pressure) == pytest.approx(131295.0, rel=1e-4)
+
+
+def test_a_switching_valve_is_refused_naming_the_averaged_one():
+    """A PWM valve was frozen at the PWM phase of `t`: "equilibria" at 101325 Pa (t = 0) and -1.09e9 Pa (t = 5 ms),
+    and a static gain of 0. Refused before anything is computed, naming the averaged valve."""
+    system = pamjax.presets.mas10_system("pwm")
+    guess = system.initial_state()
+    with counted_compilations() as compiled:
+        with pytest.raises(pamjax.PamjaxInputError, match=r"system\.valve \(OnOffValve\) switches.*AveragedValve"):
+            equilibrium(system, 0.5, guess, t=0.005)
+        with pytest.raises(pamjax.PamjaxInputError, match=r"switches.*mas10_system\(\"averaged\"\)"):
+            linearise(system, guess, 0.5)
+    assert compiled == [], compiled
+
+
+def test_a_bandwidth_below_the_search_grid_is_found():
+    """With τ₁ = 4000 s the -3 dB point, 3.97e-5 Hz, lies below the search grid's 1e-4 Hz, which came back."""
+    system = RegulatorSystem(LinearRegulator(time_constants=jnp.array([4000.0, 1.0])), volume=0.0)
+    y = system.initial_state(pressure=system.air.atmospheric_pressure + 3 * 1.01 * BAR)
+    ss = linearise(system, y, 3.0, inputs={"outlet_flow": lambda s: s.outlet_flow})
+    exact = brentq(lambda f: abs(1 / ((1 + 4000j * 2 * np.pi * f) * (1 + 2j * np.pi * f))) - 10 ** (-3 / 20),
+                   1e-9, 1.0, xtol=1e-16)
+    assert ss.bandwidth() == pytest.approx(exact, rel=1e-6)
+
+
+def test_bad_frequencies_inputs_and_hand_built_models_are_named(regulator_model):
+    """A 2-D frequency array, an input selecting a sub-module or given as a list, an input named "command" (its
+    column read as the command's), and a hand-built model whose matrices disagree in shape each raised a raw
+    ValueError or TypeError, or were accepted."""
+    with pytest.raises(pamjax.PamjaxInputError, match=r"frequency must be one number or a 1-D array"):
+        regulator_model.bode(np.array([[0.1, 1.0], [2.0, 3.0]]))
+    system = RegulatorSystem(LinearRegulator(), volume=0.0)
+    y = system.initial_state(pressure=system.air.atmospheric_pressure + 3 * 1.01 * BAR)
+    with counted_compilations() as compiled:
+        for inputs, match in (({"air": lambda s: s.air}, r"inputs\['air'\] must select an array leaf .*'Air'"),
+                              ([lambda s: s.outlet_flow], r"inputs must be a dict name → function"),
+                              ({"command": lambda s: s.outlet_flow}, r"names must differ from the command's")):
+            with pytest.raises(pamjax.PamjaxInputError, match=match):
+                linearise(system, y, 3.0, inputs=inputs)
+    assert compiled == [], compiled
+    with pytest.raises(pamjax.PamjaxInputError, match=r"StateSpace: .*B has shape \(2, 1\), expected \(1, 1\)"):
+        pamjax.StateSpace(A=-np.eye(1), B=np.ones((2, 1)), C=np.ones((1, 1)), D=np.zeros((1, 1)), state_names=("x",),
+                          input_names=("u",), output_names=("y",))
+
+
+def test_linearising_a_hysteretic_regulator_warns_that_its_gain_at_rest_averages_the_branches():
+    """The VPPM at rest after a rise to 3 V: dc_gain 0.510 bar/V where a +0.1 V step moves the outlet 1.010 bar/V and
+    a -0.1 V step 0.509 bar/V (the smoothed |dp_set/dt| has zero slope at rest). Said, where it was silent."""
+    system = RegulatorSystem(pamjax.vppm_regulator(), volume=5e-5)
+    y = system.initial_state(pressure=system.air.atmospheric_pressure + 3 * 1.01 * BAR)
+    with pytest.warns(UserWarning, match=r"averages the rising and falling branches"):
+        linearise(system, y, 3.0)

@@ -6,6 +6,7 @@ request, any array leaves of the system (e.g. `RegulatorSystem.outlet_flow`, eq.
 pytree order (names in `state_names`), in SI units.
 """
 
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 
 import equinox as eqx
@@ -18,8 +19,11 @@ import numpy as np
 from .._core.custom_types import ArrayLike, Float, Real, RealScalarLike
 from .._core.errors import PamjaxInputError, PamjaxSolveError, check_count, check_finite, concrete_values
 from .._core.fastjit import keyed_by_code
+from .._core.units import MAX_ABSOLUTE_PA
+from .._physics.regulator import AbstractRegulator
+from .._physics.valves.base import AbstractValve
 from .._systems.base import AbstractSystem
-from .checks import check_parameters, check_positive_number, check_start_state
+from .checks import START_STROKE_MARGIN, check_parameters, check_positive_number, check_start_state
 
 
 class StateSpace(eqx.Module):
@@ -33,6 +37,13 @@ class StateSpace(eqx.Module):
     input_names: tuple[str, ...] = eqx.field(static=True)
     output_names: tuple[str, ...] = eqx.field(static=True)
 
+    def __check_init__(self):  # a hand-built B of the wrong rows failed in NumPy's solve with a raw gufunc error
+        n, m, p = len(self.state_names), len(self.input_names), len(self.output_names)
+        shapes = {"A": (self.A, (n, n)), "B": (self.B, (n, m)), "C": (self.C, (p, n)), "D": (self.D, (p, m))}
+        if bad := [f"{k} has shape {np.shape(x)}, expected {w}" for k, (x, w) in shapes.items() if np.shape(x) != w]:
+            raise PamjaxInputError(f"StateSpace: {'; '.join(bad)} (A n×n, B n×m, C p×n, D p×m for its {n} state_names, "
+                                   f"{m} input_names and {p} output_names)")
+
     def _index(self, names, name, kind):
         if isinstance(name, (int, np.integer)) and not isinstance(name, (bool, np.bool_)):
             if not 0 <= name < len(names):
@@ -44,25 +55,22 @@ class StateSpace(eqx.Module):
         return names.index(name)
 
     def frequency_response(self, frequency, output=0, input=0):
-        """G(j 2π f) = C (j2πf I − A)⁻¹ B + D for `frequency` [Hz] (array, finite, ≥ 0), one output/input pair (names
-        or indices). At f = 0 with a pole at 0 (a memory state), the limit G(0⁺) where the pole cancels (`dc_gain`).
-
-        **Raises:** `PamjaxInputError` for an unknown output or input, a negative or non-finite frequency (a real
-        model's G(−j2πf) is the conjugate of G(j2πf)), and where G is infinite: a pole at j2πf that this channel
-        keeps (at f = 0: an integrator, see `dc_gain`)."""
+        """G(j 2π f) = C (j2πf I − A)⁻¹ B + D for `frequency` [Hz] (a number or 1-D array, finite, ≥ 0), one
+        output/input pair (names or indices); at f = 0 with a pole at 0 (a memory state), the limit G(0⁺) (`dc_gain`).
+        **Raises:** `PamjaxInputError` for an unknown output or input, a frequency of another shape, negative or not
+        finite, and where G is infinite: a pole at j2πf that this channel keeps (at f = 0: an integrator)."""
         i = self._index(self.output_names, output, "output")
         j = self._index(self.input_names, input, "input")
         f = np.atleast_1d(np.asarray(frequency, dtype=float))
+        if f.ndim != 1:
+            raise PamjaxInputError(f"frequency must be one number or a 1-D array [Hz], got shape {f.shape}")
         if not np.all(np.isfinite(f) & (f >= 0)):
             raise PamjaxInputError(f"frequency must be finite and >= 0 [Hz] (G at -f is the complex conjugate of G at "
                                    f"f), got {np.array2string(f, threshold=6)}")
-        n = self.A.shape[0]
-        out = np.empty(f.shape, dtype=complex)
-        static = None
+        n, out, static = self.A.shape[0], np.empty(f.shape, dtype=complex), None
         for k, fk in enumerate(f):
             if fk == 0:
-                static = _static_gain(self, i, j) if static is None else static
-                out[k] = static
+                out[k] = static = _static_gain(self, i, j) if static is None else static
                 continue
             try:
                 x = np.linalg.solve(2j * np.pi * fk * np.eye(n) - self.A, self.B[:, j])
@@ -75,14 +83,10 @@ class StateSpace(eqx.Module):
         return out
 
     def dc_gain(self, output=0, input=0):
-        """Static gain G(0) = D − C A⁻¹ B; with poles at 0 (A singular: a memory state such as bristle or Bouc-Wen
-        friction or a regulator's hysteresis, whose rate vanishes at rest whatever its value) the limit G(0⁺) of
-        G(s) as s → 0, which is finite where this channel cancels the pole (the memory state is neither driven by
-        the input nor seen in the output at rest, or follows the motion): the small-signal gain with the memory
-        state carried along.
-
-        **Raises:** `PamjaxInputError` (not numpy's `LinAlgError`) where the pole at 0 stays in this channel (an
-        integrator: an infinite static gain), naming the states whose rates make A singular."""
+        """Static gain G(0) = D − C A⁻¹ B; with poles at 0 (a memory state: bristle or Bouc-Wen friction, a hysteresis,
+        whose rate vanishes at rest whatever its value) the limit G(0⁺), finite where this channel cancels the pole
+        (a hysteresis at rest: the mean of its rising and falling branches' gains, `linearise`). **Raises:**
+        `PamjaxInputError` where the pole at 0 stays in this channel (an integrator), naming the states."""
         return float(np.real(self.frequency_response(0.0, output, input)[0]))
 
     def bode(self, frequency, output=0, input=0):
@@ -91,9 +95,10 @@ class StateSpace(eqx.Module):
         return 20 * np.log10(np.abs(g)), np.degrees(np.unwrap(np.angle(g)))
 
     def bandwidth(self, output=0, input=0, drop_db=3.0, fmax=1e4):
-        """Lowest frequency [Hz] where |G| falls `drop_db` (> 0, a drop: 3 for the −3 dB bandwidth) below |G(0)|, by
-        bisection on a grid from 1e-4 Hz to `fmax` [Hz]. Raises `PamjaxInputError` for `drop_db` ≤ 0 (|G| is "below"
-        |G(0)| + 0 dB at once: the grid's first point came back), a bad `fmax`, or an infinite G(0) (`dc_gain`)."""
+        """Lowest frequency [Hz] where |G| falls `drop_db` (> 0: 3 for the −3 dB bandwidth) below |G(0)|, by bisection
+        on a grid from 1e-4 Hz (lowered by decades to 1e-12 Hz while |G| is already below there: for τ = 4000 s the
+        grid's first point came back) to `fmax` [Hz]. `PamjaxInputError` for a bad `drop_db` or `fmax`, an infinite
+        G(0) (`dc_gain`), or |G| below already at 1e-12 Hz."""
         check_positive_number(drop_db, "drop_db")
         if check_positive_number(fmax, "fmax") <= 1e-4:
             raise PamjaxInputError(f"fmax must exceed 1e-4 Hz (the search grid's lowest frequency), got {fmax!r}")
@@ -102,12 +107,14 @@ class StateSpace(eqx.Module):
         def below(f):
             return 20 * np.log10(abs(self.frequency_response(f, output, input)[0])) < ref - drop_db
 
-        grid = np.logspace(-4, np.log10(fmax), 400)
+        if (low := next((f for f in 10.0 ** -np.arange(4, 13) if not below(f)), None)) is None:
+            raise PamjaxInputError(f"|G| is already {drop_db} dB below its static gain at 1e-12 Hz, the bandwidth "
+                                   "search's floor: read frequency_response at the frequencies you need")
+        grid = np.logspace(np.log10(low), np.log10(fmax), int(50 * np.log10(fmax / low)) + 1)  # 50 a decade, as before
         hit = [f for f in grid if below(f)]
         if not hit:
             raise PamjaxInputError(f"|G| stays within {drop_db} dB of its static gain up to {fmax} Hz")
-        hi = hit[0]
-        lo = grid[max(np.searchsorted(grid, hi) - 1, 0)]
+        lo, hi = grid[max(np.searchsorted(grid, hit[0]) - 1, 0)], hit[0]
         for _ in range(80):
             mid = 0.5 * (lo + hi)
             lo, hi = (lo, mid) if below(mid) else (mid, hi)
@@ -123,8 +130,7 @@ class StateSpace(eqx.Module):
         i = self._index(self.output_names, output, "output")
         j = self._index(self.input_names, input, "input")
         den = np.poly(self.A)
-        bc = np.outer(self.B[:, j], self.C[i])
-        num = np.real(np.poly(self.A - bc) - den + self.D[i, j] * den)
+        num = np.real(np.poly(self.A - np.outer(self.B[:, j], self.C[i])) - den + self.D[i, j] * den)
         num[np.abs(num) <= 1e-9 * np.max(np.abs(num), initial=0.0)] = 0.0  # cancellation round-off
         num = np.trim_zeros(num, "f")
         return (num if num.size else np.zeros(1)), np.real(den)
@@ -145,14 +151,12 @@ ZERO_POLE_RTOL = 1e-9
 
 
 def _balanced(A, B, C):
-    """(T⁻¹AT, T⁻¹B, CT) with T diagonal such that each state's row and column of A have equal norms (Parlett and
-    Reinsch's balancing): the same poles and transfer functions, without the SI units' 1e10 spread (Pa against m),
-    so that null directions are found by the SVD."""
+    """(T⁻¹AT, T⁻¹B, CT), T diagonal, each state's row and column of A of equal norms (Parlett and Reinsch): the same
+    poles and transfer functions without the SI units' 1e10 spread (Pa against m), for the SVD's null directions."""
     A, B, C = (np.array(m, dtype=float) for m in (A, B, C))
     for _ in range(20):
         for k in range(A.shape[0]):
-            column = np.linalg.norm(np.delete(A[:, k], k))
-            row = np.linalg.norm(np.delete(A[k, :], k))
+            column, row = (np.linalg.norm(np.delete(v, k)) for v in (A[:, k], A[k, :]))
             if column > 0 and row > 0:
                 d = np.sqrt(row / column)
                 A[:, k] *= d
@@ -192,16 +196,13 @@ def _static_gain(ss, i, j):
         f"the static gain G(0) of {ss.output_names[i]} / {ss.input_names[j]} (and a bandwidth measured from it) is "
         f"infinite: A has a pole at s = 0 (in the rates of {', '.join(rows)}) that this channel keeps, an integrator "
         "(a state whose rate vanishes at rest whatever its value, driven by this input and seen in this output): a "
-        "constant input change makes the output ramp. Read |G| at a low frequency instead (frequency_response(f) or "
-        "bode(f) with f > 0, e.g. 1e-2 Hz), look at poles() and transfer_function(), or linearise a model without "
-        "the integrating state"
-    )
+        "constant input change makes the output ramp. Read |G| at f > 0 (frequency_response, bode; e.g. 1e-2 Hz), "
+        "look at poles() and transfer_function(), or linearise a model without the integrating state")
 
 
 def _names(tree, prefix):
-    paths = jtu.tree_flatten_with_path(tree)[0]
     out = []
-    for path, leaf in paths:
+    for path, leaf in jtu.tree_flatten_with_path(tree)[0]:
         name = prefix + "".join(jtu.keystr((k,)) for k in path)
         size = int(np.prod(getattr(leaf, "shape", np.shape(leaf))))
         out.extend([name] if size == 1 else [f"{name}[{i}]" for i in range(size)])
@@ -212,46 +213,52 @@ def linearise(system: AbstractSystem, state: eqx.Module, command: RealScalarLike
               t: RealScalarLike = 0.0,
               inputs: Mapping[str, Callable[[AbstractSystem], Real[ArrayLike, "..."]]] | None = None,
               outputs: Sequence[str] = ("pressure",)) -> StateSpace:
-    """Linearise `system` about (`state`, `command`) at time `t`: a `StateSpace`.
+    """Linearise `system` (any pamjax system with a continuous valve) about (`state`, `command`) at time `t`: a
+    `StateSpace`. `state`: its state pytree (SI, ABSOLUTE pressures, as `simulate`'s `y0`); `command`: one number (a
+    duty ratio, a voltage), or a vector for a system that takes one (an `AntagonisticJoint`'s (V_f, V_e): columns
+    "command[0]", "command[1]"); `inputs`: extra inputs after the command in B and D, a dict name → function
+    selecting an array leaf of the system (`{"outlet_flow": lambda s: s.outlet_flow}`); `outputs`: `system.outputs`
+    channels. Transfer functions and Bode data are meaningful about an equilibrium (`equilibrium`). A state holding
+    a `PressureHysteresis` branch warns (`UserWarning`): at rest the model averages its rising and falling branches.
 
-    **Arguments:**
-
-    - `system`: any pamjax system (`vector_field(t, y, u)` and `outputs(t, y, u)`); `state`: its state pytree
-      (SI, ABSOLUTE pressures, as `simulate`'s `y0`); `command`: the command, one number (a duty ratio, a voltage),
-      or a vector for a system that takes one (an `AntagonisticJoint`'s (V_f, V_e): B and D get one column each,
-      "command[0]", "command[1]").
-    - `inputs`: extra inputs, a dict name → function selecting an array leaf of the system (e.g.
-      `{"outlet_flow": lambda s: s.outlet_flow}`); they follow the command (named "command") in B and D.
-    - `outputs`: names of `system.outputs` channels (default ("pressure",)).
-
-    The operating point need not be an equilibrium (then A, B describe the local flow); transfer functions and
-    Bode data are meaningful about an equilibrium (`equilibrium` finds one).
-
-    **Raises:** `PamjaxInputError` for what `simulate` refuses in the system (`payload_mass` ≤ 0, set with
-    `eqx.tree_at` or not) and in a start state (a pressure in bar or gauge, a position in mm or outside the stroke),
-    a `state`, `command` or `t` that is not finite, a command of a shape the system does not take or that lies
-    outside `system.command_range`, before anything is computed; `PamjaxSolveError` where a derivative is not finite
-    at the operating point (named).
-    """
+    **Raises:** `PamjaxInputError`, before anything is computed, for what `simulate` refuses in the system and in a
+    start state (a pressure in bar or gauge, a position in mm or outside the stroke), a switching (PWM) valve, a
+    `state`, `command` or `t` not finite, a command of a shape the system does not take or outside its
+    `command_range`, `inputs` that are no such dict; `PamjaxSolveError` where a derivative is not finite (named)."""
     _check_inputs(system, command, state, "state", t)
-    inputs = {} if inputs is None else dict(inputs)
+    if not isinstance(inputs, Mapping | None):  # a list of functions: a raw TypeError in dict() before
+        raise PamjaxInputError(f"inputs must be a dict name → function selecting an array leaf of the system, e.g. "
+                               f"{{'outlet_flow': lambda s: s.outlet_flow}}, got {type(inputs).__name__}")
+    inputs, extra = dict(inputs or {}), []
+    for name, where in inputs.items():  # an array leaf of the system itself (a sub-module: a raw TypeError before)
+        try:
+            extra.append(jnp.asarray(where(system), dtype=float))
+            eqx.tree_at(where, system, extra[-1])  # not a number the function made up
+        except (AttributeError, TypeError, ValueError, IndexError, KeyError) as e:
+            raise PamjaxInputError(f"inputs[{name!r}] must select an array leaf of the system (e.g. lambda s: "
+                                   f"s.outlet_flow): {type(e).__name__}: {e}") from None
     command = jnp.asarray(command, dtype=float)
-    extra = [jnp.asarray(where(system), dtype=float) for where in inputs.values()]
-    u0 = (command, *extra)
     state = jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype=float), state)  # traced, whatever its leaves' types
     available = jax.eval_shape(lambda: system.outputs(t, state, command))  # names and shapes only
     for name in outputs:
         if name not in available or available[name] is None:
             raise PamjaxInputError(f"unknown output {name!r}; this system has {sorted(available)}")
-
+    input_names = _names(command, "command") + tuple(n for name, leaf in zip(inputs, extra) for n in _names(leaf, name))
+    if len(set(input_names)) < len(input_names):  # an input named "command" was read as the command's column
+        raise PamjaxInputError(f"inputs: names must differ from the command's ('command') and from each other, got "
+                               f"input names {list(input_names)}; name each after its leaf, e.g. 'outlet_flow'")
+    state_names = _names(state, "state")
+    if any(n.rsplit(".", 1)[-1] == "hysteresis" for n in state_names):  # `ISO6358RegulatorState.hysteresis`'s branch
+        warnings.warn("linearise: the state holds a PressureHysteresis branch: at rest its law's smoothed |dp_set/dt| "
+                      "has zero slope, so the small-signal model averages the rising and falling branches (VPPM at 3 "
+                      "V: dc_gain 0.51 bar/V; a small rise moves the outlet 1.01 bar/V, a fall under 50 mbar not at "
+                      "all; docs/regulator.md); for one branch's gain, step the command in `simulate`", stacklevel=2)
     # one program per system structure, inputs and outputs (module level: a later call with other values, or another
     # operating point, reuses it; closures made here at every call compiled anew each time, ~0.25 s a call)
     wheres = tuple(map(keyed_by_code, inputs.values()))
-    A, B, C, D = _jacobians(system, jnp.asarray(t, dtype=float), state, u0, wheres, tuple(outputs))
-    input_names = _names(command, "command") + tuple(n for name, leaf in zip(inputs, extra) for n in _names(leaf, name))
+    jacobians = _jacobians(system, jnp.asarray(t, dtype=float), state, (command, *extra), wheres, tuple(outputs))
+    A, B, C, D = (np.asarray(m) for m in jacobians)
     output_names = tuple(n for name in outputs for n in _names(available[name], name))
-    state_names = _names(state, "state")
-    A, B, C, D = (np.asarray(m) for m in (A, B, C, D))
     _refuse_non_finite((A, B, C, D), state_names, input_names, output_names)
     return StateSpace(A=A, B=B, C=C, D=D, state_names=state_names, input_names=input_names, output_names=output_names)
 
@@ -270,8 +277,7 @@ def _refuse_non_finite(matrices, state_names, input_names, output_names):
         raise PamjaxSolveError(
             f"linearise: the derivatives are not finite (NaN or inf) at this operating point: {'; '.join(bad)}. The "
             "vector field or outputs are not differentiable there (a state outside the model's domain, e.g. a "
-            "pressure or position beyond what the model takes, or a parameter that divides by zero)"
-        )
+            "pressure or position beyond what the model takes, or a parameter that divides by zero)")
 
 
 @eqx.filter_jit
@@ -301,25 +307,26 @@ def _jacobians(system, t, state, u0, wheres, outputs):
 
 
 def _check_inputs(system, command, state, state_name, t):
-    """`simulate`'s checks of what `linearise` and `equilibrium` are given, before anything is computed: every
-    component's own checks (`check_parameters`: a system changed with `eqx.tree_at` skipped them), the state as
-    `simulate` checks its `y0` (`check_start_state`), a finite time, and the command (`_check_command`)."""
+    """`simulate`'s checks of what `linearise` and `equilibrium` are given, before anything is computed: the
+    components' own (`check_parameters`), the state as a `y0`, a finite time, the command, a continuous valve."""
     if not isinstance(system, AbstractSystem):
         raise PamjaxInputError(f"system must be a pamjax system (TankSystem, MuscleSystem, ...), got {type(system)}")
     check_parameters(system)
     check_start_state(system, state, state_name)  # simulate's checks (5.4 for 5.4 bar: poles of a vacuum)
     check_finite(t, "t")
     _check_command(system, command, state, t)
+    for name, element in system.actuators.items():
+        if element.switches:  # its flow at `t` is one PWM phase's (101325 Pa at t = 0, -1.09e9 Pa at 5 ms: MAS-10)
+            raise PamjaxInputError(f"system.{name} ({type(element).__name__}) switches on PWM edges: linearised or "
+                                   "solved for rest at one time t, it is frozen at that phase of its period. Use the "
+                                   'cycle-averaged valve (eq. 13): presets.mas10_system("averaged"), or an '
+                                   "AveragedValve (pj.fit_averaged_valve fits one to a switching valve)")
 
 
 def _check_command(system, command, state, t):
-    """Refuse a `command` of a shape `system` does not take (a shape is known even traced), and a concrete one that
-    is not finite or lies outside `system.command_range` (a duty ratio in [0, 1], a regulator's 0-10 V), as
-    `simulate` refuses such a signal: the flow laws extrapolate beyond it (eq. 13's parabola gives a 2 MPa
-    "equilibrium" at duty -0.3). One number, or a vector where the system takes one (an `AntagonisticJoint`'s
-    (V_f, V_e)): its rates then have the state's shapes. A system of one command broadcasts a vector into the
-    state instead (an "equilibrium" of a pressure pair that was none, an A of shape (4, 3)): refused, as is a
-    vector the system refuses itself. A traced command (jit/grad) has no value to check."""
+    """Refuse a `command` of a shape `system` does not take (a vector where its rates keep the state's shapes, as the
+    `AntagonisticJoint`'s (V_f, V_e), else broadcast into an A of shape (4, 3)), and a concrete one not finite or
+    outside `system.command_range`, as `simulate` does (eq. 13's parabola gave a 2 MPa equilibrium at duty -0.3)."""
     if np.ndim(command) > 1 or (np.ndim(command) == 1 and not _takes_vector(system, command, state, t)):
         raise PamjaxInputError(
             f"command must be one number (the valve command, e.g. a duty ratio), or a vector for a system that takes "
@@ -354,32 +361,23 @@ def _takes_vector(system, command, state, t):
             and shapes == [leaf.shape for leaf in jtu.tree_leaves(rates)])
 
 
-# Singular values of the scaled Jacobian below this fraction of the largest are taken as zero in the Newton step.
-# Scaled fields have physical ones down to ~1e-4 of the largest (MAS-10 with Coulomb friction), a memory state's
-# null direction ~1e-18 (measured).
+# Singular values of the scaled Jacobian below this fraction of the largest are zero in the Newton step: measured,
+# physical ones down to ~1e-4 of the largest (MAS-10 with Coulomb friction), a memory state's null direction ~1e-18.
 SINGULAR_RCOND = 1e-10
 
 
 def equilibrium(system: AbstractSystem, command: RealScalarLike | Real[ArrayLike, " m"], guess: eqx.Module, *,
                 t: RealScalarLike = 0.0,
                 rtol: RealScalarLike = 1e-10, atol: RealScalarLike = 1e-10, max_steps: int = 200) -> eqx.Module:
-    """A state where `system.vector_field(t, ·, command)` vanishes, by Newton's method from `guess`, solved in the
-    system's scaled units (`state_scale`): full Newton steps until a step is below `atol + rtol |z|` in every
-    scaled component. Raises `PamjaxInputError` for a `command` outside `system.command_range` (or not finite),
-    `PamjaxSolveError` if it does not converge within `max_steps`.
-
-    Each step is the least-squares (minimum-norm) solution of the linearised equations: where the equilibria form
-    a continuum, the Jacobian is singular and the steps converge to the equilibrium nearest the guess (in scaled
-    units). That is the case with a memory state (Bouc–Wen or bristle friction, a regulator's
-    `PressureHysteresis`): its rate vanishes at rest whatever its value, so the equilibrium depends on the path
-    taken to it; a long `simulate` (or `steady_state_map`) gives the one reached from a given start.
-
-    One small compiled loop (the field and its forward-mode Jacobian traced once): optimistix's `Newton` root
-    finder compiled a program several times the size (~12 s for the DMSP-40 muscle, against ~2 s).
-
-    Raises `PamjaxInputError`, as `linearise` does, for a system `simulate` refuses, a `guess` it refuses as a start
-    state, a `t` that is not finite, and `rtol`, `atol` that are not finite numbers > 0 or a `max_steps` that is not
-    an int >= 1, before anything is computed."""
+    """A state where `system.vector_field(t, ·, command)` vanishes, by Newton's method from `guess` in the system's
+    scaled units (`state_scale`), until a step is below `atol + rtol |z|` in every scaled component. Each step is the
+    least-squares (minimum-norm) one: with a memory state (Bouc–Wen or bristle friction, a `PressureHysteresis`),
+    whose rate vanishes at rest whatever its value, the equilibria form a continuum and the steps converge to the
+    one nearest the guess; a long `simulate` (or `steady_state_map`) gives the one reached from a given start. One
+    small compiled loop (optimistix's `Newton` compiled one several times the size: ~12 s against ~2 s, DMSP-40).
+    **Raises:** `PamjaxInputError` before anything is computed for what `linearise` refuses, and `rtol`, `atol` not
+    finite numbers > 0 or a `max_steps` not an int >= 1; `PamjaxSolveError` if it does not converge within
+    `max_steps`, or converges to a state the system cannot reach (a spurious root: `_check_reachable`)."""
     _check_inputs(system, command, guess, "guess", t)
     check_positive_number(rtol, "rtol")
     check_positive_number(atol, "atol")
@@ -390,7 +388,48 @@ def equilibrium(system: AbstractSystem, command: RealScalarLike | Real[ArrayLike
                                      scaled_guess, scale, float(rtol), float(atol), int(max_steps))
     if not bool(converged):
         raise PamjaxSolveError(_no_convergence(y, np.asarray(singular), max_steps))
+    _check_reachable(system, y, t)
     return y
+
+
+# Pressures and positions admitted beyond the bounds `equilibrium` checks (`_check_reachable`), as a fraction of the
+# bounds' span: a regulator settles its hysteresis and droop (25 and 50 mbar of its 6 bar) beyond its set pressure.
+REACH_MARGIN = 0.05
+
+
+def _check_reachable(system, y, t):
+    """A `PamjaxSolveError` for a converged `y` the system cannot reach, a spurious root (eq. 13's polynomial in p has
+    one at 2.52 MPa abs for the MAS-10 at duty 0.1, 4x its 0.65 MPa supply; `simulate` settles at 0.131 MPa): a
+    pressure ≤ 0 or outside [atmosphere, the highest one its elements feed] where each says one (a continuous valve:
+    where its flow stops at every command, in 2.5 kPa steps; a regulator with a flow law into its chamber: its highest
+    set pressure), or a position beyond its stroke by more than `START_STROKE_MARGIN`. A traced `y` is not checked."""
+    if any(concrete_values(leaf) is None for leaf in jtu.tree_leaves(y)):
+        return
+    air, tops, atmosphere = system.air, [], float(system.air.atmospheric_pressure)
+    for element in system.actuators.values():
+        if isinstance(element, AbstractValve):
+            gauge, (lo, hi) = np.arange(0.0, MAX_ABSOLUTE_PA + 1.0, 2.5e3), element.command_range
+            flow = element.mass_flow(t, jnp.linspace(lo, hi, 51)[:, None], atmosphere + gauge, air)
+            filling = np.asarray(flow) > 0
+            tops.append(None if np.any(np.all(filling, axis=1)) else np.max(gauge[np.argmax(~filling, axis=1)]))
+        else:
+            flow_law = isinstance(element, AbstractRegulator) and element.needs_volume
+            tops.append(element.max_gauge_pressure(air) if flow_law else None)
+    top = None if any(h is None for h in tops) else float(np.max(np.asarray(tops, dtype=float)))
+    bounds = (0.0, np.inf) if top is None else (atmosphere - REACH_MARGIN * top, atmosphere + (1 + REACH_MARGIN) * top)
+    limits = [(path, float(p), bounds, "Pa abs") for path, p in system.start_pressures(y).items()]
+    for path, (x, stroke) in system.start_positions(y).items():
+        lo, hi = (-np.inf, np.inf) if stroke is None else map(float, stroke)
+        give = START_STROKE_MARGIN * (hi - lo)
+        limits.append((path, float(x), (lo - give, hi + give), "m"))
+    if found := [f"{path} = {v:.6g} {unit} lies outside [{lo:.6g}, {hi:.6g}] {unit}"
+                 for path, v, (lo, hi), unit in limits if not lo < v <= hi]:
+        raise PamjaxSolveError(
+            f"equilibrium: Newton's method converged to a state the system cannot reach, a spurious root of its flow "
+            f"law: {'; '.join(found)} (from the atmosphere it exhausts to up to the highest pressure its supply "
+            f"feeds, and the stroke, {REACH_MARGIN:.0%} beyond admitted). Start from a guess nearer the expected "
+            "state, or simulate to rest first (`pamjax.simulate` with a long horizon, or `pamjax.steady_state_map`) "
+            "and pass its last state as the guess")
 
 
 def _no_convergence(y, singular, max_steps):
@@ -403,23 +442,18 @@ def _no_convergence(y, singular, max_steps):
         return (f"equilibrium: Newton's method left the model's domain: its state turned non-finite ({state}), where "
                 "the vector field or its Jacobian is NaN or inf; try a guess closer to the operating point, or "
                 "simulate to steady state (`pamjax.simulate`, `pamjax.steady_state_map`)")
-    if np.all(np.isfinite(singular)) and np.any(singular != 0):
-        along = [names[k].lstrip(".") for k in np.argsort(-np.abs(singular)) if abs(singular[k]) > 0.1]
-        return message + (
-            f"the Jacobian of the vector field is singular there, along {', '.join(along)}: the equilibria form a "
-            "continuum (e.g. a friction or hysteresis memory state, whose rate vanishes at rest whatever its value), "
-            "and which one the system reaches depends on its path: simulate to steady state instead "
-            "(`pamjax.simulate` with a long horizon, or `pamjax.steady_state_map`)")
-    return message + ("try a guess closer to the operating point or a larger max_steps, or simulate to steady state "
-                      "(`pamjax.simulate`, `pamjax.steady_state_map`)")
+    along = [names[k].lstrip(".") for k in np.argsort(-np.abs(singular)) if abs(singular[k]) > 0.1]
+    return message + (f"the Jacobian of the vector field is singular there, along {', '.join(along)}: the equilibria "
+                      "form a continuum (e.g. a friction or hysteresis memory state, whose rate vanishes at rest "
+                      "whatever its value), and which one the system reaches depends on its path: simulate to steady "
+                      "state instead (`pamjax.simulate` with a long horizon, or `pamjax.steady_state_map`)"
+                      if np.all(np.isfinite(singular)) and np.any(singular != 0) else "try a guess closer to the "
+                      "operating point or a larger max_steps, or simulate to steady state (`pamjax.simulate`, "
+                      "`pamjax.steady_state_map`)")
 
 
 def _with_value(fun):
-    def both(w):
-        out = fun(w)
-        return out, out
-
-    return both
+    return lambda w: ((out := fun(w)), out)  # (value, value): jacfwd's has_aux gives the Jacobian and f in one trace
 
 
 @eqx.filter_jit
