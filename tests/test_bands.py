@@ -15,9 +15,12 @@ three free parameters (m4, m5 and the volume); each fit < 0.1 s after the first.
 """
 
 import json
+import pathlib
+import re
 import textwrap
 import warnings
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -561,3 +564,98 @@ def test_seed_channels_and_over_are_refused_by_name_before_any_work(tmp_path, ca
                 main([command, str(tmp_path / "x.toml"), "--band", "--band-method", "samples", "--band-seed", seed])
             assert exit_.value.code == 2
             assert f"--band-seed must be an integer >= 0, got '{seed}'" in capsys.readouterr().err
+
+
+# -- a covariance that is not one, any pytree, real-scalar levels, the map's keywords, a misjudged noise level -----
+def test_a_covariance_that_is_not_one_is_refused_by_name(refits, tmp_path):
+    # A variance of -1e-14 gave a band of std 0 everywhere, a correlation of 3 edited into a model file half-widths
+    # of 0 Pa at 11 of 31 rows (J Σ Jᵀ < 0, clipped), a (2, 2) covariance for one label a raw NumPy ValueError.
+    res = refits[0][0]
+    one = dict(labels=("volume",), paths=("volume",), values=np.array([5e-5]))
+    three = dict(labels=tuple(res.labels), paths=tuple(FREE), values=np.asarray(res.values))
+    se = np.asarray(res.standard_errors)
+    corr = np.array([[1.0, 0.9, 0.9], [0.9, 1.0, -0.9], [0.9, -0.9, 1.0]])  # each in [-1, 1], together impossible
+    cases = [
+        (dict(one, covariance=[[-1e-14]]), r"the covariance of a FitUncertainty gives volume a negative variance"),
+        (dict(one, covariance=np.eye(2) * 1e-14), r"need 1 values and a \(1, 1\) covariance, got .* of shape \(2, 2\)"),
+        (dict(one, covariance=[[np.nan]]), "must be finite"),
+        (dict(three, covariance=np.array([[1.0, 3.0, 0], [3.0, 1.0, 0], [0, 0, 1.0]]) * np.outer(se, se)),
+         r"correlates valve.coefficients\[1,0\] and valve.coefficients\[1,1\] by 3: a correlation lies in \[-1, 1\]"),
+        (dict(three, covariance=np.triu(np.full((3, 3), 0.5)) + 0.5 * np.eye(3)), "is not symmetric"),
+        (dict(three, covariance=corr * np.outer(se, se)), "is not positive semi-definite: its correlation matrix"),
+    ]
+    for kwargs, match in cases:
+        with pytest.raises(PamjaxInputError, match=match):
+            pj.FitUncertainty(**kwargs)
+    # a fit's own covariance passes, rounding and all; a file's edited correlation is refused naming the file
+    assert pj.FitUncertainty.of(res).labels == tuple(res.labels)
+    document = json.loads(json.dumps(res.to_dict(), default=str))  # a copy: to_dict shares the result's lists
+    document["correlation"][0][1] = document["correlation"][1][0] = 3.0
+    (tmp_path / "fit.json").write_text(json.dumps(document))
+    with pytest.raises(PamjaxInputError, match=r"the covariance of .*fit.json correlates .* by 3"):
+        pj.prediction_band(tmp_path / "fit.json", predict, model=res.model)
+    # a FitUncertainty built in Python is named as one, not as "a FitResult"
+    built = pj.FitUncertainty(("vol",), ("volume",), np.array([5e-5]), np.array([[1e-14]]))
+    with pytest.raises(PamjaxInputError, match=r"do not match this model's \['volume'\] \(a FitUncertainty\)"):
+        pj.prediction_band(built, predict, model=presets.mas10_tank_system("averaged"))
+
+
+def test_any_pytree_prediction_gets_its_nonlinearity_and_description(refits):
+    # A tuple, list or nested dict broke describe() ("'>' not supported between 'tuple' and 'float'"), and a nested
+    # dict above the 0.1 index killed prediction_band itself after every solve ("bad operand type for unary -").
+    res = refits[0][0]
+    volume, sd = res.values[2], res.standard_errors[2]
+    shapes = {"tuple": lambda m: (m.volume * jnp.ones(2), 2.0 * m.volume), "list": lambda m: [m.volume * jnp.ones(3)],
+              "nested": lambda m: {"tank": {"v": m.volume * jnp.ones(2)}}}
+    for name, f in shapes.items():
+        band = pj.prediction_band(res, f)
+        leaves = jax.tree_util.tree_leaves(band.nonlinearity)
+        assert leaves and all(v < 0.1 for v in leaves), (name, band.nonlinearity)
+        assert "the linear band holds" in band.describe(), name
+    with pytest.warns(pj.PamjaxBandWarning, match=r"nonlinear in the parameters .* in tank.x \("):
+        band = pj.prediction_band(res, lambda m: {"tank": {"x": jnp.exp((m.volume - volume) / sd) * jnp.ones(2)},
+                                                  "y": (m.volume,)})
+    assert band.nonlinearity["tank"]["x"] > 0.1 and "tank.x" in band.describe() and "y[0]" in band.describe()
+
+
+def test_a_level_may_be_any_real_scalar_and_a_maps_unknown_keyword_names_the_band(refits, tmp_path):
+    res = refits[0][0]
+    for level in (np.float32(0.95), jnp.asarray(0.9), np.float64(0.5)):
+        band = pj.prediction_band(res, lambda m: m.volume * jnp.ones(2), level=level, check_linearity=False)
+        assert band.level == pytest.approx(float(level))
+    for level in (np.bool_(True), "0.95", np.array([0.95]), np.float32(1.0)):
+        with pytest.raises(PamjaxInputError, match="level must be a confidence level in"):
+            pj.prediction_band(res, predict, level=level)
+    # a misspelt keyword of a map's band: named with the band, and what it takes, before the fit is read
+    with pytest.raises(PamjaxInputError, match=r"steady_state_band got the keyword horizn=, which it does not take; "
+                                               r"its own: model, level, .*passed on to steady_state_map: horizon"):
+        pj.steady_state_band(tmp_path / "missing.json", [0.5], horizn=3.0)
+    with pytest.raises(PamjaxInputError, match=r"frequency_response_band got the keyword rtol=.*solve_options"):
+        pj.frequency_response_band(tmp_path / "missing.json", [1.0], rtol=1e-9)
+
+
+def test_residuals_above_a_misjudged_noise_level_do_not_claim_understated_standard_errors(truth):
+    # 2 kPa white noise stated as 1 kPa: the covariance is scaled by the residuals' own variance (the refits' spread
+    # over their standard errors 0.88, 1.01, 0.74 over 10 seeds), yet every fit said "standard errors understated by
+    # up to ~2x": se_inflation multiplied the RMSE ratio, which σ² had already absorbed, by the correlation factor.
+    rec = pj.synthetic_recording(truth, SIGNAL, T_FIT, noise=dict(pressure=NOISE), seed=0, name="tank")
+    res = pj.fit(truth, [pj.Experiment(rec, SIGNAL, channels=["pressure"], scales=dict(pressure=NOISE / 2))], FREE,
+                 progress=False)
+    stats = res.channel_errors["tank"]["pressure"]
+    assert stats["rmse_over_noise"] > 1.5 and stats["se_inflation"] < 1.2, stats
+    assert res.mismatch  # reported: not noise at the stated level
+    [note] = [w for w in res.warnings if "stated noise" in w]
+    assert "the noise level stated in the experiment's scales is too low, or the model misfits" in note, note
+    assert "not understated by this ratio" in note and "standard errors understate" not in note, note
+    unc = pj.FitUncertainty.of(res)
+    assert unc.se_inflation == 1.0 and not any("understated by" in n for n in unc.notes()), unc.notes()
+
+
+def test_no_page_runs_simulate_or_sweep_on_a_model_file():
+    # README said `pamjax simulate MODEL.json --band`, which the command refuses (it reads a TOML config naming the
+    # model file: docs/cli.md).
+    root = pathlib.Path(__file__).resolve().parents[1]
+    for page in [root / "README.md", *sorted((root / "docs").glob("*.md"))]:
+        for line in page.read_text(encoding="utf-8").splitlines():
+            if "refused" not in line:  # docs/cli.md: "`pamjax simulate model.json` is refused with ..."
+                assert not re.findall(r"pamjax (?:simulate|sweep) \S+\.json", line), (page.name, line)

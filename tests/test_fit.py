@@ -243,6 +243,35 @@ def test_white_noise_of_short_recordings_is_not_mismatch_and_a_model_error_is():
     assert not diagnostics.mismatch({"E": {"pressure": stats}})[0]
 
 
+def test_white_residuals_above_the_stated_noise_are_reported_apart_from_understated_standard_errors():
+    # The fit's σ² = 2 cost/(m − n) is the residuals' own, so white residuals twice the stated noise (a noise level
+    # misjudged) leave the standard errors right; se_inflation = rmse_over_noise · √((1 + ρ)/(1 − ρ)) said
+    # "understated by up to 2x" (up to 2e+03x with scales = 1). Now the factor is the correlation's alone.
+    from pamjax._fit import diagnostics
+
+    rng = np.random.default_rng(3)
+    white = diagnostics._residual_stats(2.0 * rng.standard_normal(101), 1.0)
+    assert white["rmse_over_noise"] > 1.7 and white["se_inflation"] < 1.2, white
+    errors = {"E": {"pressure": white}}
+    flagged, note = diagnostics.mismatch(errors)
+    assert flagged and "residuals above the stated noise level, yet white, in E/pressure (RMSE" in note, note
+    assert "not understated by this ratio" in note and "standard errors understate" not in note, note
+    assert "pools one variance" not in note and diagnostics.understatement(errors) == 1.0
+    # beside a channel at its stated level, the pooled variance is named
+    errors["E"]["position"] = diagnostics._residual_stats(rng.standard_normal(101), 1.0)
+    assert "pools one variance over them" in diagnostics.mismatch(errors)[1]
+    # a smooth error: correlated residuals, the understatement is their factor (not times the RMSE ratio)
+    t = np.linspace(0.0, 2.0, 101)
+    smooth = diagnostics._residual_stats(rng.standard_normal(t.size) + 3.0 * np.sin(2 * np.pi * 0.5 * t), 1.0)
+    factor = diagnostics.correlation_factor(smooth["autocorrelation"]["1"])
+    assert smooth["se_inflation"] == factor and smooth["rmse_over_noise"] > 2.0
+    assert diagnostics.understatement({"E": {"pressure": smooth}}) == factor > 1.5
+    assert "model mismatch: standard errors understate the uncertainty (by up to" in diagnostics.mismatch(
+        {"E": {"pressure": smooth}})[1]
+    # a fit result written before: its se_inflation the product; the factor is read from its autocorrelation
+    assert diagnostics.understatement({"E": {"pressure": white | {"se_inflation": 2.1}}}) == 1.0
+
+
 def _lead_in_validation():
     """A muscle run of 101 samples over 2 s (validation_fraction 0.4) whose data are the predictions plus white noise
     over the identification samples, and LEAD them by 1 ms past the split (as a fitted parameter's error extrapolates):

@@ -74,3 +74,33 @@ def test_a_refusal_by_the_loss_itself_is_named():
     with pytest.raises(pamjax.PamjaxInputError, match=r"the loss failed at a tree perturbed by relative step 0.01: "
                                                       r"a must be at most 1"):
         pamjax.gradient_check(loss, {"a": jnp.asarray(1.0)})
+
+
+def test_bad_arguments_and_a_loss_that_is_not_finite_are_named():
+    # Each was a silent NaN report, RuntimeWarnings of 0/0, a wrong cause ("cannot be perturbed either way" for no
+    # steps at all), or a raw ValueError / TypeError.
+    tree = {"a": jnp.asarray(2.0), "b": jnp.asarray(3.0)}
+
+    def loss(t, adjoint):
+        return t["a"] ** 2 * t["b"]
+
+    refusals = [
+        (dict(relative_steps=[0.0, 1e-4]), "relative_steps must be one or more finite numbers in"),
+        (dict(relative_steps=[]), "relative_steps must be one or more"),
+        (dict(relative_steps=[1e-3, float("nan")]), "relative_steps must be"),
+        (dict(floor=float("nan")), "floor must be a finite number >= 0"),
+        (dict(floor=-1.0), "floor must be a finite number >= 0"),
+    ]
+    for kwargs, match in refusals:
+        with pytest.raises(pamjax.PamjaxInputError, match=match):
+            pamjax.gradient_check(loss, tree, **kwargs)
+    with pytest.raises(pamjax.PamjaxInputError, match="tree has no parameter to check"):
+        pamjax.gradient_check(lambda t, adjoint: 1.0, {"n": 3})
+    with pytest.raises(pamjax.PamjaxInputError, match=r"loss must take two arguments, loss\(tree, adjoint\)"):
+        pamjax.gradient_check(lambda t: loss(t, None), tree)
+    with pytest.raises(pamjax.PamjaxInputError, match="the loss is not finite at `tree`"):
+        pamjax.gradient_check(lambda t, adjoint: loss(t, adjoint) * jnp.nan, tree)
+    # finite at the tree, its gradient not (√ at 0): named with the parameter
+    with pytest.raises(pamjax.PamjaxInputError, match=r"reverse-mode gradient is not finite at `tree` for \['b'\]"):
+        pamjax.gradient_check(lambda t, adjoint: t["a"] + jnp.sqrt(t["b"]), {"a": jnp.asarray(1.0),
+                                                                            "b": jnp.asarray(0.0)})

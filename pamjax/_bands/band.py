@@ -42,11 +42,24 @@ NONLINEARITY_WARNING = 0.1  # index above which the linear band's 95 % edges are
 FAILED_WARNING = 0.01  # fraction of failed draws above which the samples band is warned about (it is conditional)
 
 
+def real_scalar(x):
+    """`x` as a float where it is one real number (a Python or NumPy number, a 0-d NumPy or concrete JAX array; not a
+    bool or a string), else None. `np.float32(0.95)` and `jnp.asarray(0.9)` were refused as levels."""
+    if isinstance(x, (bool, np.bool_, str, bytes)) or isinstance(x, jax.core.Tracer):
+        return None
+    if isinstance(x, numbers.Real) or (isinstance(x, (np.ndarray, jax.Array)) and np.ndim(x) == 0
+                                       and np.issubdtype(np.asarray(x).dtype, np.number)
+                                       and not np.iscomplexobj(x)):
+        return float(x)
+    return None
+
+
 def z_of(level):
     """The two-sided normal quantile of a confidence `level` in (0, 1) (1.96 for 0.95)."""
-    if not (isinstance(level, (int, float)) and not isinstance(level, bool) and 0 < level < 1):
+    value = real_scalar(level)
+    if value is None or not 0 < value < 1:
         raise PamjaxInputError(f"level must be a confidence level in (0, 1), e.g. 0.95, got {level!r}")
-    return statistics.NormalDist().inv_cdf(0.5 + 0.5 * float(level))
+    return statistics.NormalDist().inv_cdf(0.5 + 0.5 * value)
 
 
 def check_method(method, samples, seed=0):
@@ -126,7 +139,8 @@ class PredictionBand:
     - `parameters`: the labels propagated; `marginalised`: a rig fit's nuisances left out (the plant's band).
     - `draws`, `failed`: predictions made for the band and those that failed (NaN; left out of "samples"; in
       "linear", of its linearity check, with a warning).
-    - `nonlinearity`: per output, the curvature index of the module docstring (linear method; None for samples).
+    - `nonlinearity`: per output, the curvature index of the module docstring, with the structure `predict` returned
+      (a float per array leaf; linear method; None for samples).
     - `notes`: what the band cannot promise (model mismatch, a fit not converged, strong nonlinearity).
     """
 
@@ -141,7 +155,7 @@ class PredictionBand:
     marginalised: list[str]
     draws: int
     failed: int
-    nonlinearity: float | dict[str, float] | None
+    nonlinearity: float | PyTreeLike | None
     notes: list[str]
 
     def describe(self):
@@ -149,8 +163,8 @@ class PredictionBand:
         lines = [f"{100 * self.level:g} % confidence band ({self.method}): {self.how}; "
                  f"{len(self.parameters)} parameters ({', '.join(self.parameters)})"]
         if self.nonlinearity is not None:
-            leaves = self.nonlinearity.items() if isinstance(self.nonlinearity, dict) else [("", self.nonlinearity)]
-            worst = max(v for _, v in leaves)
+            leaves = named_leaves(self.nonlinearity)
+            worst = max((v for _, v in leaves), default=0.0)
             verdict = (f"> {NONLINEARITY_WARNING}: see the note" if worst > NONLINEARITY_WARNING else
                        "on the axes whose ±1 σ predictions did not fail: see the note" if self.failed else
                        f"< {NONLINEARITY_WARNING}: the linear band holds")
@@ -210,18 +224,48 @@ def _finite_rows(tree, rows):
     return ok
 
 
+def _key_name(key):
+    if isinstance(key, jax.tree_util.DictKey):
+        return f".{key.key}"
+    if isinstance(key, jax.tree_util.SequenceKey):
+        return f"[{key.idx}]"
+    if isinstance(key, jax.tree_util.GetAttrKey):
+        return f".{key.name}"
+    return str(key)
+
+
+def named_leaves(tree):
+    """[(name, value)] of a pytree of numbers (a band's `nonlinearity`): the leaf's path, dict keys and attributes
+    joined by dots, sequence indices in brackets ("tank.pressure", "[0]"); "" for a bare number. Any structure that
+    `predict` may return (a tuple, a list, a nested dict) named its leaves; a dict-only reading raised TypeError."""
+    return [("".join(_key_name(k) for k in path).lstrip("."), float(v))
+            for path, v in jax.tree_util.tree_flatten_with_path(tree)[0]]
+
+
 def nonlinearity_warning(index, notes):
-    worst = max(jax.tree_util.tree_leaves(index), default=0.0)
+    leaves = named_leaves(index)
+    worst = max((v for _, v in leaves), default=0.0)
     if worst > NONLINEARITY_WARNING:
         where = ""
-        if isinstance(index, dict):
-            where = " in " + ", ".join(f"{k} ({v:.2g})" for k, v in sorted(index.items(), key=lambda kv: -kv[1])
+        if any(name for name, _ in leaves):
+            where = " in " + ", ".join(f"{k} ({v:.2g})" for k, v in sorted(leaves, key=lambda kv: -kv[1])
                                        if v > NONLINEARITY_WARNING)
         note = (f"the prediction is nonlinear in the parameters over their uncertainty{where}: index "
                 f"{worst:.2g} > {NONLINEARITY_WARNING}, the linear band's edges off by about {3.8 * worst:.1f} σ "
                 "(or the solver's error is not small against the band); use method='samples'")
         notes.append(note)
         warnings.warn(note, PamjaxBandWarning, stacklevel=3)
+
+
+def _delta_std(jac, cov):
+    """√diag(J Σθ Jᵀ) per output. Σθ is positive semi-definite (`check_covariance`), so a negative J Σθ Jᵀ is
+    rounding, at most ~1e-12 of Σ |J| |Σθ| |J| (set to 0); a larger one is refused, not clipped to a band of width 0."""
+    var = np.einsum("...i,ij,...j->...", jac, cov, jac)
+    scale = np.einsum("...i,ij,...j->...", np.abs(jac), np.abs(cov), np.abs(jac))
+    if np.any(var < -1e-9 * scale):
+        raise PamjaxInputError("the covariance propagated is not positive semi-definite: J Σ Jᵀ < 0 for some output "
+                               "(a band of width 0 there); check the fit's covariance (pamjax.FitUncertainty)")
+    return np.sqrt(np.clip(var, 0.0, None))
 
 
 def _linear(predict, prop, z, check, batch, notes):
@@ -231,8 +275,7 @@ def _linear(predict, prop, z, check, batch, notes):
         raise PamjaxSolveError("the prediction of the fitted model is not finite (a failed solve): check the "
                                "prediction (e.g. pamjax.simulate(..., throw=True) outside the band) first")
     cov = prop.covariance
-    std = jax.tree_util.tree_map(
-        lambda j: np.sqrt(np.clip(np.einsum("...i,ij,...j->...", np.asarray(j), cov, np.asarray(j)), 0, None)), jac)
+    std = jax.tree_util.tree_map(lambda j: _delta_std(np.asarray(j), cov), jac)
     if not all(np.all(np.isfinite(leaf)) for leaf in jax.tree_util.tree_leaves(std)):
         raise PamjaxSolveError("the prediction's Jacobian is not finite at the fitted values (forward mode through "
                                "the solve failed); use method='samples'")

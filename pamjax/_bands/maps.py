@@ -28,7 +28,7 @@ from .._core.errors import PamjaxInputError, PamjaxSolveError
 from .._fit.parameters import Key, getter, join_path
 from .._physics.valves.averaged import cycle_averaged_flow
 from .._sweep.maps import check_flow_surface, frequency_response, steady_state_map
-from .._sweep.sweep import channel_names
+from .._sweep.sweep import channel_names, sweep
 from .._systems.base import AbstractSystem
 from .band import (
     Method,
@@ -100,10 +100,24 @@ def band_of_points(outputs, method, level, n, periods=None):
 
 
 def map_options(kwargs, band, target):
-    """The keyword arguments a map's band passes on to `target` (its `scheme` as the map's `method`), refusing by name
-    those the band sets itself: `over` is its batch axis of parameter points (a user's `over` gave a raw "multiple
-    values for keyword argument" TypeError), `system` the fitted model."""
+    """The keyword arguments the map's band `band` (the function) passes on to the map `target` (its `scheme` as the
+    map's `method`), refusing by name those the band sets itself: `over` is its batch axis of parameter points (a
+    user's `over` gave a raw "multiple values for keyword argument" TypeError), `system` the fitted model; and any
+    other that neither the map nor `pamjax.sweep` takes, naming the band and listing what it takes (`horizn=3` was
+    refused naming steady_state_map, or sweep(), and listed `over`), before the fitted model is read."""
     kwargs = dict(kwargs)
+    band_name, target_name = band.__name__, target.__name__
+    own = [p for p, spec in inspect.signature(band).parameters.items() if spec.kind is spec.KEYWORD_ONLY]
+    of_map = [p for p, spec in inspect.signature(target).parameters.items()
+              if spec.kind is spec.KEYWORD_ONLY and p not in ("over", *own)]
+    of_sweep = ["scheme" if p == "method" else p for p, spec in inspect.signature(sweep).parameters.items()
+                if spec.kind is spec.KEYWORD_ONLY and (p == "method" or p not in ("reduce", *of_map, *own))]
+    unknown = [k for k in kwargs if k not in (*of_map, *of_sweep, "over", "system")]
+    if unknown:
+        raise PamjaxInputError(f"{band_name} got the keyword {unknown[0]}=, which it does not take; its own: "
+                               f"{', '.join(own)}; passed on to {target_name}: {', '.join(of_map)}; and to its "
+                               f"pamjax.sweep: {', '.join(of_sweep)} (scheme: the sweep's method)")
+    band = band_name
     if "over" in kwargs:
         raise PamjaxInputError(f"over: {band} sweeps the fitted parameters' points along its own batch axis and takes "
                                "no `over`; for the band at other values of a parameter the fit did not determine, set "
@@ -111,7 +125,7 @@ def map_options(kwargs, band, target):
                                "sweep --band does per point of [sweep] over)")
     if "system" in kwargs:
         raise PamjaxInputError(f"system: {band} maps the fitted model (`result`, or `model=`), not a `system` of "
-                               f"{target}'s")
+                               f"{target_name}'s")
     if "scheme" in kwargs:
         kwargs["method"] = kwargs.pop("scheme")
     return kwargs
@@ -148,7 +162,7 @@ def steady_state_band(result: ResultLike, commands: RealVectorLike, *, model: eq
     `prediction_band`; `map_kwargs` go to `steady_state_map` (`horizon`, `window`, `method` → `scheme`, ...)."""
     z_of(level)
     check_method(method, samples, seed)
-    kwargs = map_options(map_kwargs, "steady_state_band", "steady_state_map")
+    kwargs = map_options(map_kwargs, steady_state_band, steady_state_map)
     prop = propagation(result, model)
     points = parameter_points(prop, method, samples, seed)
     r = steady_state_map(prop.space.base, commands, over=swept_values(prop, points), **kwargs)
@@ -168,7 +182,7 @@ def frequency_response_band(result: ResultLike, frequencies: RealVectorLike, *, 
     z_of(level)
     check_method(method, samples, seed)
     channels = channel_names(channels)  # sweep's check: a bare string was read letter by letter ("unknown channel 'p'")
-    kwargs = map_options(response_kwargs, "frequency_response_band", "frequency_response")
+    kwargs = map_options(response_kwargs, frequency_response_band, frequency_response)
     prop = propagation(result, model)
     if channels is None:
         channels = tuple(c for c in ("position", "pressure") if c in prop.space.base.output_names)

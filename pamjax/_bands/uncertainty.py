@@ -27,6 +27,7 @@ import numpy as np
 from .._core.arrays import device_array
 from .._core.custom_types import Float
 from .._core.errors import PamjaxInputError
+from .._fit.diagnostics import understatement
 from .._fit.fit import FitResult
 from .._fit.force_balance import is_weak_motion
 from .._fit.parameters import ParameterSpace
@@ -62,13 +63,71 @@ def _path_of(entry):
     return entry if isinstance(entry, str) else entry["path"]
 
 
+# A covariance read from a file or built by hand is accepted as positive semi-definite up to rounding: its
+# correlations within 1e-9 of symmetric and of [-1, 1], the correlation matrix's smallest eigenvalue ≥ -1e-8 (a fit's
+# own, σ² G (JᵀJ)⁺ Gᵀ written with 17 digits, is off by ~1e-15; a correlation of 3.0 edited into a model file gave
+# `--band` half-widths of 0 Pa at 11 of 31 rows: J Σ Jᵀ < 0 there, clipped).
+CORRELATION_ROUNDING = 1e-9
+EIGENVALUE_ROUNDING = 1e-8
+
+
+def _correlation(cov):
+    """The correlation matrix of `cov`'s rows with a finite, positive variance (the others: a parameter the fit did
+    not determine, or one it fixed exactly), and those rows."""
+    var = np.diag(cov)
+    live = np.flatnonzero(np.isfinite(var) & (var > 0))
+    sd = np.sqrt(var[live])
+    return cov[np.ix_(live, live)] / np.outer(sd, sd), live
+
+
+def check_covariance(labels, values, covariance, source):
+    """`PamjaxInputError` naming `source` unless `covariance` is an (n, n) covariance of the n `labels`' `values`:
+    symmetric, finite (an infinite variance, with zero covariances, is a parameter the fit did not determine: named
+    when a band is asked for), no negative variance, correlations in [-1, 1] and positive semi-definite, each to
+    rounding (`CORRELATION_ROUNDING`, `EIGENVALUE_ROUNDING`). A band of a covariance that is not one was silently
+    zero wherever J Σ Jᵀ < 0."""
+    n = len(labels)
+    where = f"the covariance of {source}"
+    if values.shape != (n,) or covariance.shape != (n, n):
+        raise PamjaxInputError(f"{where}: its labels ({', '.join(labels)}) need {n} values and a ({n}, {n}) "
+                               f"covariance, got values of shape {values.shape} and a covariance of shape "
+                               f"{covariance.shape}")
+    if not np.all(np.isfinite(values)):
+        raise PamjaxInputError(f"the values of {source} must be finite, got {values}")
+    var = np.diag(covariance)
+    off = covariance[~np.eye(n, dtype=bool)]
+    undetermined = np.isposinf(var)
+    if np.any(np.isnan(var) | np.isneginf(var)) or not np.all(np.isfinite(off)) or np.any(
+            covariance[undetermined][:, ~undetermined] != 0):
+        raise PamjaxInputError(f"{where} must be finite (an infinite variance only for a parameter the fit did not "
+                               f"determine, with covariances of 0), got {np.array2string(covariance, precision=3)}")
+    if np.any(var < 0):
+        bad = [label for label, v in zip(labels, var) if v < 0]
+        raise PamjaxInputError(f"{where} gives {', '.join(bad)} a negative variance ({var[var < 0]}): a variance (a "
+                               "standard error squared) is >= 0")
+    corr, live = _correlation(np.where(np.isfinite(covariance), covariance, 0.0))
+    if np.max(np.abs(corr - corr.T), initial=0.0) > CORRELATION_ROUNDING:
+        raise PamjaxInputError(f"{where} is not symmetric: its correlations {np.array2string(corr, precision=4)}")
+    worst = np.max(np.abs(corr - np.eye(live.size)), initial=0.0)
+    if worst > 1.0 + CORRELATION_ROUNDING:
+        i, j = np.unravel_index(np.argmax(np.abs(corr - np.eye(live.size))), corr.shape)
+        raise PamjaxInputError(f"{where} correlates {labels[live[i]]} and {labels[live[j]]} by {corr[i, j]:.4g}: a "
+                               "correlation lies in [-1, 1] (was the covariance edited?)")
+    lowest = float(np.min(np.linalg.eigvalsh(0.5 * (corr + corr.T)), initial=0.0))
+    if lowest < -EIGENVALUE_ROUNDING:
+        raise PamjaxInputError(f"{where} is not positive semi-definite: its correlation matrix has the eigenvalue "
+                               f"{lowest:.3g} (a combination of the parameters with a negative variance; each "
+                               "correlation may lie in [-1, 1] and the set still not be possible: was it edited?)")
+
+
 @dataclasses.dataclass(frozen=True)
 class FitUncertainty:
     """The fitted parameters and their covariance: `labels`, `paths` (the fit's free spec), `values`, `covariance`
-    (of the physical values, labels' order), and what qualifies them: `status` of the fit, `mismatch` (the residuals
-    were not noise), `se_inflation` (the largest channel's factor, 1 for white noise at the stated level),
-    `cautions` (the fit's warnings that its standard errors may understate the uncertainty: a payload that barely
-    moved), `source` (where it was read)."""
+    (of the physical values, labels' order: checked on construction, `check_covariance`), and what qualifies them:
+    `status` of the fit, `mismatch` (the residuals were not noise at the stated level), `se_inflation` (the factor by
+    which the fit's residuals, correlated in time, make its standard errors understate the uncertainty:
+    `pamjax._fit.diagnostics.understatement`, 1 where they do not), `cautions` (the fit's warnings that its standard
+    errors may understate the uncertainty: a payload that barely moved), `source` (where it was read)."""
 
     labels: tuple[str, ...]
     paths: tuple[str | dict[str, Any], ...]
@@ -77,8 +136,26 @@ class FitUncertainty:
     status: str = "converged"
     mismatch: bool = False
     se_inflation: float = float("nan")
-    source: str = "a FitResult"
+    source: str = "a FitUncertainty"
     cautions: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        labels = self.labels
+        if isinstance(labels, str) or not all(isinstance(label, str) for label in labels):
+            raise PamjaxInputError(f"{self.source}: labels must be a sequence of parameter labels (strings), got "
+                                   f"{labels!r}")
+        if len(self.paths) != len(labels):
+            raise PamjaxInputError(f"{self.source}: {len(labels)} labels but {len(self.paths)} paths")
+        try:
+            values = np.asarray(self.values, dtype=float)
+            cov = np.asarray(self.covariance, dtype=float)
+        except (TypeError, ValueError) as err:
+            raise PamjaxInputError(f"{self.source}: values and covariance must be arrays of numbers: {err}") from None
+        check_covariance(tuple(labels), values, cov, self.source)
+        object.__setattr__(self, "labels", tuple(labels))
+        object.__setattr__(self, "paths", tuple(self.paths))
+        object.__setattr__(self, "values", values)
+        object.__setattr__(self, "covariance", cov)
 
     @classmethod
     def from_document(cls, d, source):
@@ -101,11 +178,9 @@ class FitUncertainty:
         cov = np.where(np.isfinite(cov), cov, 0.0)
         cov[np.diag_indices_from(cov)] = se**2  # inf stays on the diagonal: named when a band is asked for
         inflation = d.get("se_inflation")
-        if inflation is None:
-            factors = [st.get("se_inflation", float("nan")) for chans in d.get("channel_errors", {}).values()
-                       for st in chans.values()]
-            factors = [f for f in factors if f is not None and np.isfinite(f)]
-            inflation = max(factors) if factors else float("nan")
+        if inflation is None:  # a fit result's dict: the factor its channels' statistics give
+            errors = d.get("channel_errors")
+            inflation = understatement(errors) if isinstance(errors, dict) and errors else float("nan")
         cautions = d.get("cautions")
         if cautions is None:  # a fit result's dict: its warnings; a model file's entry: its own list
             cautions = [w for w in d.get("warnings", []) if isinstance(w, str) and is_weak_motion(w)]
@@ -158,9 +233,14 @@ class FitUncertainty:
     def notes(self):
         """What the band cannot promise, in words (and as `PamjaxBandWarning`s)."""
         out = []
-        if self.mismatch:
-            out.append(f"the fit flagged model mismatch (standard errors understated by up to "
-                       f"{self.se_inflation:.2g}x): the band understates the uncertainty")
+        if self.mismatch and not self.se_inflation <= 1.0:  # NaN: a factor not known (a FitUncertainty built so)
+            by = f" by up to {self.se_inflation:.2g}x" if np.isfinite(self.se_inflation) else ""
+            out.append(f"the fit flagged model mismatch (residuals correlated in time: standard errors understated{by})"
+                       ": the band understates the uncertainty")
+        elif self.mismatch:
+            out.append("the fit flagged residuals above the stated noise level but white: a noise level stated too "
+                       "low, which the covariance does not rest on (it is scaled by the residuals' own variance), or "
+                       "a model error that changes from sample to sample, where the band understates the uncertainty")
         if self.status != "converged":
             out.append(f"the fit ended '{self.status}', not 'converged': the covariance is of a point that may not "
                        "be the optimum")

@@ -1,8 +1,12 @@
 """What a fit's residuals say: per-channel errors, noise, whiteness, model mismatch, and the parameter statistics.
 
-A least-squares fit's standard errors assume the residuals are the measurement noise: independent, of the stated
-level. Where the model cannot follow the data, the residuals are larger than the noise and correlated in time, and
-the linearised standard errors understate the uncertainty. `channel_errors` measures both per channel:
+A least-squares fit's standard errors assume the residuals are the measurement noise: independent, of one level.
+`covariance` scales them by the residuals' own variance, σ² = 2 cost / (m − n), not by the noise level the user
+stated: a residual RMSE twice the stated noise (a noise level misjudged, or a model error) already gives standard
+errors twice as wide (the tank of tests/test_bands.py fitted to 2 kPa noise stated as 1 kPa: the spread of refits over
+10 noise seeds over the reported standard errors 0.88, 1.01, 0.74). What σ² does not absorb is the residuals'
+correlation in time: where the model cannot follow the data, its error is smooth, and N correlated residuals hold
+fewer than N samples' information. `channel_errors` measures per channel:
 
 - the noise level: the experiment's scale where the user gave it (the noise standard deviation), else an estimate
   from the residuals themselves, 1.4826 MAD(Δe)/√2 of their first differences (a smooth model error cancels in Δe;
@@ -10,8 +14,11 @@ the linearised standard errors understate the uncertainty. `channel_errors` meas
 - `rmse_over_noise`: the residual RMSE over that level (1 for a model that reproduces the data up to the noise);
 - `autocorrelation`: the residuals' sample autocorrelation at lags 1, 2, 5, 10 and 20 samples (±2/√N for white
   noise);
-- `se_inflation` = rmse_over_noise · √((1 + ρ₁)/(1 − ρ₁)), ρ₁ the lag-1 autocorrelation clipped to [0, 0.99]: the
-  factor by which an AR(1) error of that size and correlation widens the true uncertainty over the linearised one.
+- `se_inflation` = √((1 + ρ₁)/(1 − ρ₁)) (`correlation_factor`), ρ₁ the lag-1 autocorrelation clipped to [0, 0.99]:
+  the factor by which an AR(1) error of that correlation widens the true uncertainty over the linearised one, which
+  σ² has already scaled to the residuals' size. (It was rmse_over_noise times this factor, counting the size twice:
+  the tank above was flagged "standard errors understated by up to 2x" in 10 of 10 fits, whose residuals were white,
+  lag-1 autocorrelation 0.07, and whose standard errors held.)
 
 Slack points (`slack`, a boolean per sample, of the force-map experiments `SLACK_EXPERIMENTS`: `ForceMapExperiment`,
 `LoopForceMapExperiment`, `HysteresisLoopExperiment`) are an inequality, "measured F ≤ slack_force, so the model may
@@ -24,16 +31,23 @@ The `range` stays that of all the data (the map's forces from 0 N up).
 A parameter `Measurement` (`pamjax._fit.measurement`) is one datum, not a noise sample: its entry gives the measured
 and fitted values and z, and takes no part in `mismatch` (its contradictions are named apart).
 
-`mismatch` flags the fit ("model mismatch: standard errors understate the uncertainty") when a channel's
-`se_inflation` exceeds `mismatch_threshold`: the larger of `MISMATCH_THRESHOLD` (1.2: standard errors understated by
-less are not worth a warning) and the value that white noise at the channel's level exceeds with probability
-`FALSE_ALARM` / (the channels tested) over its number of samples, so that a fit of the true model is flagged in at most
-1 % of noise draws, however short its recordings (a fixed 1.2 flagged 10 % of them at 101 samples, 26 % at 41: the
-statistic of N white-noise samples scatters by ~1/√N). See `null_exceedance` for its distribution.
+`mismatch` flags the fit on either of two tests per channel, each at the larger of `MISMATCH_THRESHOLD` (1.2: less
+is not worth a warning) and the value that white noise at the stated level exceeds with probability `FALSE_ALARM` /
+(the tests made), so that a fit of the true model is flagged in at most ~1 % of noise draws, however short its
+recordings (a fixed 1.2 flagged 10 % of them at 101 samples, 26 % at 41: the statistics of N white-noise samples
+scatter by ~1/√N):
+
+- correlated residuals, `se_inflation` above `mismatch_threshold`: "model mismatch: standard errors understate the
+  uncertainty" (by that factor);
+- where the noise level was given, white residuals whose `rmse_over_noise` is above `level_threshold`: the stated
+  level is too low, or the model misfits by errors that change from sample to sample. Reported as residuals above
+  the stated noise, not as standard errors understated by that ratio (σ² absorbs it), except that a fit of several
+  channels pools one σ² over them, so a channel stated too low against the others is weighted too much.
 """
 
 import functools
 import math
+import statistics
 
 import numpy as np
 
@@ -41,73 +55,77 @@ from .._core.errors import PamjaxInputError
 from .measurement import is_measurement, measurement_stats
 from .static_experiments import ForceMapExperiment, HysteresisLoopExperiment, LoopForceMapExperiment
 
-MISMATCH_THRESHOLD = 1.2  # se_inflation below which a mismatch is not worth a warning (the floor of the test)
-# The chance that a fit of the true model to white noise at the stated level flags mismatch, split over its channels
-# (Bonferroni). Measured per fit of 2 channels of N white-noise samples (20000 draws; ± 0.07 %), noise given /
-# estimated: N = 12: 0.92 % / 0.33 %; 20: 0.82 / 0.82; 41: 1.01 / 1.00; 61: 0.98 / 0.81; 101: 1.09 / 0.95; 201: 1.04 /
-# 1.00; 300: 0.78 / 0.92; 1001: 0 / 0.15 (the floor 1.2 rules). A fixed 1.2 flagged 26 % / 45 % of them at N = 41,
-# 10 % / 28 % at 101, 2.5 % / 13 % at 201. The docs' example (docs/fitting.md "From Python": the true model, 61
-# identification samples per channel) over 30 noise seeds: 1 fit flagged (seed 29, 1.46 beside 1.456), was 4.
+MISMATCH_THRESHOLD = 1.2  # se_inflation (or rmse_over_noise) below which a mismatch is not worth a warning
+# The chance that a fit of the true model to white noise at the stated level flags mismatch, split over its tests
+# (Bonferroni: one per channel, two where the noise level is given). Measured per fit of 2 channels of N white-noise
+# samples at the stated level (10000 draws; ± 0.1 %), noise given / estimated: N = 12: 0.81 % / 0.63 %; 20: 0.93 /
+# 0.93; 41: 1.00 / 0.89; 101: 1.01 / 1.11; 201: 0.39 / 0.79; 1001 (3000 draws): 0 / 0 (the floor 1.2 rules). A fixed
+# 1.2 on the former statistic (the RMSE ratio times the correlation factor) flagged 26 % / 45 % of them at N = 41,
+# 10 % / 28 % at 101, 2.5 % / 13 % at 201.
 FALSE_ALARM = 0.01
-_ETA_VARIANCE = 0.90  # N × var of the noise estimate's own scatter (`null_exceedance`)
 _LAGS = (1, 2, 5, 10, 20)
-_Z = np.linspace(-8.0, 8.0, 641)  # quadrature over the lag-1 autocorrelation's standard normal deviate
-_PHI_DZ = np.exp(-0.5 * _Z**2) / math.sqrt(2.0 * math.pi) * (_Z[1] - _Z[0])
-_ERFC = np.frompyfunc(math.erfc, 1, 1)
 
 
-def _upper_tail(z):
-    """P(Z > z) of a standard normal Z, elementwise."""
-    return _ERFC(np.asarray(z, dtype=float) / math.sqrt(2.0)).astype(float) / 2.0
+def correlation_factor(rho: float) -> float:
+    """√((1 + ρ)/(1 − ρ)) for a lag-1 autocorrelation ρ clipped to [0, 0.99]: the factor by which residuals
+    correlated as an AR(1) process widen a parameter's true uncertainty over the linearised standard error (the
+    variance of a mean of N such samples is σ²/N · (1 + ρ)/(1 − ρ) for N ≫ 1/(1 − ρ)). 1 for white residuals; the
+    clip keeps it below √199 ≈ 14 (a residual that is all model error)."""
+    rho = min(max(float(rho), 0.0), 0.99)
+    return math.sqrt((1.0 + rho) / (1.0 - rho))
 
 
-def null_exceedance(inflation: float, samples: int, noise_given: bool) -> float:
-    """P(se_inflation > `inflation`) for `samples` (N ≥ 5) samples of Gaussian white noise at the channel's level,
-    the level given (`noise_given`) or estimated from the residuals (`_noise_estimate`). From the statistic's
-    definition, ln se_inflation = ln(rmse/σ) + atanh(ρ₁⁺) (ρ₁⁺ the lag-1 autocorrelation clipped at 0), with
+def _z_above(alpha):
+    """The standard normal deviate exceeded with probability `alpha`."""
+    return statistics.NormalDist().inv_cdf(1.0 - alpha)
 
-    - ρ₁ of white noise (its mean removed) near normal, mean −1/N, variance (N−2)²/(N²(N−1)) (0.854/N at N = 20, as
-      measured), integrated over;
-    - noise given: rmse²/σ² = χ²_N/N, independent of ρ₁ (a ratio of quadratic forms of a spherical vector does not
-      depend on its length), through Wilson–Hilferty: (χ²_N/N)^⅓ normal, mean 1 − 2/(9N), variance 2/(9N);
-    - noise estimated, σ̂ = 1.4826 MAD(Δe)/√2: the first differences' mean square is 2 rmse² (1 − ρ₁), so rmse/σ̂ =
-      (1 − ρ₁)^−½ / W, W = σ̂ over the differences' RMS/√2, the MAD's own scatter: its influence function gives
-      var(ln σ̂) = 1.36 (1 + 2 × 0.106)/N = 1.65/N over differences of lag-1 correlation −½, of which the RMS of the
-      differences carries (2 + 2 × ¼)/4N = 0.75/N (the efficient estimate: the rest is independent of it), so var W =
-      0.90/(N − 3), W taken normal (the skewness of ln W, 3/√N, is that of a normal W; N − 3 for the variance measured
-      at N = 20, 1.06/N): a small estimate makes the ratio large, the long upper tail of short recordings.
-    """
+
+def null_exceedance(inflation: float, samples: int) -> float:
+    """P(se_inflation > `inflation`) for `samples` (N ≥ 5) samples of Gaussian white noise: se_inflation exceeds s > 1
+    where ρ₁ > tanh(ln s), ρ₁ the lag-1 autocorrelation of white noise (its mean removed), near normal with mean −1/N
+    and variance (N − 2)²/(N²(N − 1)) (0.854/N at N = 20, as measured). It does not depend on the noise level, given
+    or estimated: ρ₁ is a ratio of quadratic forms of the residuals, whatever their size."""
+    if inflation < 1.0:
+        return 1.0
     n = float(samples)
-    rho = -1.0 / n + (n - 2.0) / (n * math.sqrt(n - 1.0)) * _Z
-    rest = math.log(inflation) - np.arctanh(np.clip(rho, 0.0, 0.99))  # what ln(rmse/σ) must exceed
-    if noise_given:
-        a = 2.0 / (9.0 * n)
-        tail = _upper_tail((np.exp(2.0 * rest / 3.0) - 1.0 + a) / math.sqrt(a))
-    else:
-        rest = rest + 0.5 * np.log1p(-np.clip(rho, -0.99, 0.99))  # what −ln W must exceed
-        tail = _upper_tail((1.0 - np.exp(-rest)) / math.sqrt(_ETA_VARIANCE / (n - 3.0)))
-    return float(_PHI_DZ @ tail)
+    rho = math.tanh(math.log(inflation))
+    z = (rho + 1.0 / n) / ((n - 2.0) / (n * math.sqrt(n - 1.0)))
+    return 0.5 * math.erfc(z / math.sqrt(2.0))
 
 
 @functools.lru_cache(maxsize=1024)
-def _null_quantile(samples, noise_given, alpha):
-    """The se_inflation that white noise exceeds with probability `alpha` (bisection in its log, up to e⁵ ≈ 148:
-    a noise estimate from a handful of samples tests nothing)."""
-    lo, hi = 0.0, 5.0
-    for _ in range(40):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if null_exceedance(math.exp(mid), samples, noise_given) > alpha else (lo, mid)
-    return math.exp(hi)
+def _correlation_limit(samples, tests):
+    """The se_inflation that white noise of `samples` samples exceeds with probability FALSE_ALARM / `tests`
+    (`null_exceedance` inverted), at least the floor."""
+    n = float(max(int(samples), 5))
+    rho = -1.0 / n + (n - 2.0) / (n * math.sqrt(n - 1.0)) * _z_above(FALSE_ALARM / max(int(tests), 1))
+    return max(MISMATCH_THRESHOLD, correlation_factor(rho))
+
+
+@functools.lru_cache(maxsize=1024)
+def _level_limit(samples, tests):
+    """The rmse_over_noise that white noise at the stated level exceeds with probability FALSE_ALARM / `tests` over
+    `samples` samples: rmse²/σ² = χ²_N/N, through Wilson–Hilferty ((χ²_N/N)^⅓ normal, mean 1 − 2/(9N), variance
+    2/(9N)), at least the floor."""
+    a = 2.0 / (9.0 * max(int(samples), 5))
+    return max(MISMATCH_THRESHOLD, (1.0 - a + _z_above(FALSE_ALARM / max(int(tests), 1)) * math.sqrt(a)) ** 1.5)
 
 
 def mismatch_threshold(samples: int, noise_given: bool, channels: int = 1) -> float:
-    """The se_inflation above which a channel of `samples` identification samples flags `mismatch` in a fit of
-    `channels` tested channels: the larger of `MISMATCH_THRESHOLD` and the value white noise exceeds with probability
-    `FALSE_ALARM` / `channels` (`null_exceedance`; fewer than 5 samples are tested as 5). Noise given, 2 channels: 1.57
-    at 41 samples, 1.35 at 101, the floor 1.2 from about 280 on; noise estimated, 2 channels: 2.13, 1.60, 1.2 from
-    about 700 on."""
-    alpha = FALSE_ALARM / max(int(channels), 1)
-    return max(MISMATCH_THRESHOLD, _null_quantile(max(int(samples), 5), bool(noise_given), alpha))
+    """The se_inflation above which a channel of `samples` identification samples flags `mismatch` (correlated
+    residuals) in a fit of `channels` tested channels, each with its noise level given (`noise_given`: its level
+    tested too) or not: the larger of `MISMATCH_THRESHOLD` and the value white noise exceeds with probability
+    `FALSE_ALARM` / (the tests made; `null_exceedance`; fewer than 5 samples are tested as 5). 2 channels, noise given:
+    1.52 at 41 samples, 1.31 at 101, 1.21 at 201, the floor 1.2 (a lag-1 autocorrelation of 0.18) from about 220 on;
+    noise estimated: 1.46, 1.28, the floor from about 200 on."""
+    return _correlation_limit(samples, max(int(channels), 1) * (2 if noise_given else 1))
+
+
+def level_threshold(samples: int, channels: int = 1) -> float:
+    """The rmse_over_noise above which a channel of `samples` identification samples, its noise level given, flags
+    `mismatch` (residuals above the stated noise) in a fit of `channels` such channels (each tested twice: its
+    level and its correlation): 2 channels, 1.59 at 12 samples, 1.32 at 41, the floor 1.2 from about 100 on."""
+    return _level_limit(samples, 2 * max(int(channels), 1))
 
 
 def _noise_estimate(err):
@@ -133,9 +151,9 @@ def _residual_stats(err, noise_given):
     noise = noise_given if noise_given is not None else estimate
     ratio = rmse / noise if noise and np.isfinite(noise) and noise > 0 else float("nan")
     acf = _autocorrelation(err)
-    rho = min(max(acf["1"], 0.0), 0.99)
     return dict(noise=noise, noise_estimate=estimate, noise_given=noise_given is not None, rmse_over_noise=ratio,
-                autocorrelation=acf, se_inflation=float(ratio * np.sqrt((1 + rho) / (1 - rho))), samples=int(err.size))
+                autocorrelation=acf, se_inflation=correlation_factor(acf["1"]) if np.isfinite(ratio) else float("nan"),
+                samples=int(err.size))
 
 
 SLACK_EXPERIMENTS = (ForceMapExperiment, LoopForceMapExperiment, HysteresisLoopExperiment)  # declare `slack`
@@ -185,27 +203,74 @@ def channel_errors(experiments, residuals):
     return out
 
 
-def mismatch(errors):
-    """(flag, note): whether any channel's residuals are not noise (`se_inflation` above `mismatch_threshold` for
-    its samples, among all the channels tested), and which ones, worst first. A channel's statistics without
-    `samples` (written before it was stored) are held to the floor, `MISMATCH_THRESHOLD`."""
-    tested = [(name, c, st) for name, chans in errors.items() for c, st in chans.items()
-              if np.isfinite(st.get("se_inflation", float("nan")))]
-    bad = []
-    for name, c, st in tested:
-        factor = st["se_inflation"]
-        limit = (mismatch_threshold(st["samples"], st.get("noise_given", False), len(tested)) if "samples" in st
-                 else MISMATCH_THRESHOLD)
+def _tested(errors):
+    """(experiment, channel, statistics, se_inflation) of every channel with noise statistics. The factor is read
+    from the lag-1 autocorrelation where it is stored: a fit result written before se_inflation was the correlation
+    factor alone stored rmse_over_noise times it."""
+    out = []
+    for name, chans in errors.items():
+        for c, st in chans.items():
+            if not np.isfinite(st.get("se_inflation", float("nan"))):
+                continue
+            rho = (st.get("autocorrelation") or {}).get("1")
+            out.append((name, c, st, correlation_factor(rho) if rho is not None else float(st["se_inflation"])))
+    return out
+
+
+def mismatched_channels(errors):
+    """([(se_inflation, words)] of the channels whose residuals are correlated beyond `mismatch_threshold`,
+    [(rmse_over_noise, words)] of those, their noise level given, whose residuals are white but above
+    `level_threshold`), each worst first. Statistics written without `samples` are held to the floor."""
+    tested = _tested(errors)
+    tests = sum(1 + bool(st.get("noise_given", False)) for *_, st, _ in tested)
+    correlated, high = [], []
+    for name, c, st, factor in tested:
+        n = st.get("samples")
+        ratio, rho = st.get("rmse_over_noise", float("nan")), (st.get("autocorrelation") or {}).get("1", float("nan"))
+        limit = _correlation_limit(n, tests) if n else MISMATCH_THRESHOLD
         if factor > limit:
-            bad.append((factor, f"{name}/{c} (se_inflation {factor:.3f}, above the {limit:.3f} that white noise over "
-                                f"its {st.get('samples', '?')} samples stays below in 99 % of fits; RMSE "
-                                f"{st['rmse_over_noise']:.2f}× noise, lag-1 autocorrelation "
-                                f"{st['autocorrelation']['1']:.2f})"))
-    if not bad:
-        return False, ""
-    bad.sort(reverse=True)
-    return True, ("model mismatch: standard errors understate the uncertainty; the residuals are not noise in "
-                  + ", ".join(b for _, b in bad))
+            correlated.append((factor, f"{name}/{c} (se_inflation {factor:.3f}, above the {limit:.3f} that white "
+                                       f"noise over its {n or '?'} samples stays below in 99 % of fits; lag-1 "
+                                       f"autocorrelation {rho:.2f}, RMSE {ratio:.2f}× noise)"))
+            continue
+        level = _level_limit(n, tests) if n else MISMATCH_THRESHOLD
+        if st.get("noise_given", False) and ratio > level:
+            high.append((ratio, f"{name}/{c} (RMSE {st.get('rmse', float('nan')):.3g}, {ratio:.3g}× the stated noise "
+                                f"{st.get('noise', float('nan')):.3g}, "
+                                f"above the {level:.3f} that white noise at that level over its {n or '?'} samples "
+                                f"stays below in 99 % of fits; lag-1 autocorrelation {rho:.2f})"))
+    return sorted(correlated, reverse=True), sorted(high, reverse=True)
+
+
+def understatement(errors: dict) -> float:
+    """The factor by which a fit's standard errors understate the uncertainty by its residuals (`channel_errors`):
+    the largest se_inflation among the channels `mismatched_channels` flags as correlated, 1 where none is (residuals
+    above the stated noise alone do not make the standard errors understate: σ² is the residuals' own)."""
+    correlated, _ = mismatched_channels(errors)
+    return correlated[0][0] if correlated else 1.0
+
+
+def mismatch(errors):
+    """(flag, note): whether any channel's residuals are not noise at the stated level (`mismatched_channels`:
+    correlated in time, or white but above the stated noise), which ones, worst first, and what it means for the
+    standard errors."""
+    correlated, high = mismatched_channels(errors)
+    notes = []
+    if correlated:
+        notes.append(f"model mismatch: standard errors understate the uncertainty (by up to {correlated[0][0]:.2g}x: "
+                     "the residuals are correlated in time; their size is already in the standard errors); the "
+                     "residuals are not noise in " + ", ".join(b for _, b in correlated))
+    if high:
+        pooled = ("; but the fit weighs each channel by its stated noise and pools one variance over them, so the "
+                  "parameters this channel fixes may be understated by up to its ratio over the others'"
+                  if len(_tested(errors)) > 1 else "")
+        notes.append(
+            "residuals above the stated noise level, yet white, in " + ", ".join(b for _, b in high) + ": the noise "
+            "level stated in the experiment's scales is too low, or the model misfits by errors that change from "
+            "sample to sample (a model error is usually smooth, its residuals correlated in time); the standard "
+            "errors are scaled by the residuals' own variance, not by the stated level, so they are not understated "
+            "by this ratio (state each channel's noise level as about its RMSE)" + pooled)
+    return bool(notes), "; ".join(notes)
 
 
 def check_identifiability_tol(tol):

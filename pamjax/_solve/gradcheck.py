@@ -4,6 +4,7 @@ one-sided ones for a parameter on the edge of its valid range.
 Used by `tests/reliability/` and `benchmarks/reliability.py`; public so users can check their own losses.
 """
 
+import inspect
 from collections.abc import Callable, Sequence
 from typing import Literal
 
@@ -78,10 +79,17 @@ def gradient_check(loss: Callable[[PyTreeLike, Literal["forward", "reverse"]], R
     `error_modes_normwise` = max|s_fwd − s_rev| / max|s_rev| (forward vs reverse relative to the gradient's size);
     `difference`: per parameter "central", "forward" or "backward" (at the kept pair).
     """
+    _check_loss(loss)
+    steps = _check_steps(relative_steps)
+    floor = _check_floor(floor)
     params, static = eqx.partition(tree, eqx.is_inexact_array)
     flat, unravel = ravel_pytree(params)
     names = np.asarray(parameter_names(tree))
     theta = np.asarray(flat)
+    if theta.size == 0:
+        raise PamjaxInputError("gradient_check: tree has no parameter to check: its leaves hold no floating-point "
+                               "array (a Python float or an int is not one); pass e.g. {'a': jnp.asarray(2.0)} or a "
+                               "model, whose parameters are float64 arrays")
     magnitude = _magnitudes(theta, zero_scale)
 
     def f(vector, adjoint):
@@ -95,11 +103,16 @@ def gradient_check(loss: Callable[[PyTreeLike, Literal["forward", "reverse"]], R
         return True
 
     check_parameters(eqx.combine(unravel(flat), static), "tree")  # the tree itself must pass
-    sides = _sides(passes, theta, magnitude, relative_steps, names)
-    reverse = np.asarray(jax.jit(jax.grad(lambda v: f(v, "reverse")))(flat))
+    sides = _sides(passes, theta, magnitude, steps, names)
+    value, reverse = jax.jit(jax.value_and_grad(lambda v: f(v, "reverse")))(flat)
+    _check_finite_at(value, "the loss", names)
+    reverse = np.asarray(reverse)
+    _check_finite_at(reverse, "its reverse-mode gradient", names)
     forward = np.asarray(jax.jit(jax.jacfwd(lambda v: f(v, "forward")))(flat))
-    estimates = _estimates(jax.jit(jax.vmap(lambda v: f(v, "reverse"))), theta, magnitude, relative_steps, sides)
+    _check_finite_at(forward, "its forward-mode gradient", names)
+    estimates = _estimates(jax.jit(jax.vmap(lambda v: f(v, "reverse"))), theta, magnitude, steps, sides)
     fd, consistency, best = _kept(estimates)
+    _check_finite_at(fd, "its finite differences (the loss at every perturbed tree)", names)
     s_fd, s_rev, s_fwd = magnitude * fd, magnitude * reverse, magnitude * forward
     denominator = np.maximum(np.abs(s_fd), floor * np.max(np.abs(s_fd)))
     denominator_modes = np.maximum(np.abs(s_rev), floor * np.max(np.abs(s_rev)))
@@ -114,6 +127,65 @@ def gradient_check(loss: Callable[[PyTreeLike, Literal["forward", "reverse"]], R
         error_modes_normwise=np.max(np.abs(s_fwd - s_rev)) / max(np.max(np.abs(s_rev)), 1e-300),
         difference=np.asarray([SIDES[int(sides[k, i])] for i, k in enumerate(best)]),
     )
+
+
+def _check_loss(loss):
+    """`loss` a function of (tree, adjoint): refused by name before anything is evaluated (one of the tree alone
+    failed with Python's raw TypeError from inside JAX's trace)."""
+    if not callable(loss):
+        raise PamjaxInputError(f"gradient_check: loss must be a function loss(tree, adjoint) -> scalar, got "
+                               f"{type(loss).__name__}")
+    try:
+        signature = inspect.signature(loss)
+    except (TypeError, ValueError):  # a builtin or C function: nothing to read, its call names itself
+        return
+    try:
+        signature.bind(None, "reverse")
+    except TypeError:
+        raise PamjaxInputError(f"gradient_check: loss must take two arguments, loss(tree, adjoint), adjoint "
+                               f"\"forward\" or \"reverse\" (pass it on to simulate/solve), got loss{signature}: e.g. "
+                               "lambda tree, adjoint: my_loss(tree)") from None
+
+
+def _check_steps(relative_steps):
+    """`relative_steps` as a 1-D float array: at least one step, each a finite number in (0, 1) (a step of 0 divided
+    0 by 0; none at all was reported as every parameter "cannot be perturbed either way")."""
+    try:
+        h = np.asarray(relative_steps, dtype=float)
+    except (TypeError, ValueError):
+        h = None
+    if h is None or h.ndim != 1 or h.size == 0 or not np.all(np.isfinite(h) & (h > 0) & (h < 1)):
+        raise PamjaxInputError(f"gradient_check: relative_steps must be one or more finite numbers in (0, 1), the "
+                               f"steps relative to each parameter's magnitude (default RELATIVE_STEPS, 1e-2 to 1e-6), "
+                               f"got {relative_steps!r}")
+    return h
+
+
+def _check_floor(floor):
+    """`floor` a finite number >= 0 (NaN gave every error NaN)."""
+    if isinstance(floor, (bool, np.bool_, str)) or np.ndim(floor) != 0:
+        value = float("nan")
+    else:
+        try:
+            value = float(floor)
+        except (TypeError, ValueError):
+            value = float("nan")
+    if not (np.isfinite(value) and value >= 0):
+        raise PamjaxInputError(f"gradient_check: floor must be a finite number >= 0 (the fraction of the largest "
+                               f"scaled sensitivity below which errors are judged absolutely, default 1e-3), got "
+                               f"{floor!r}")
+    return value
+
+
+def _check_finite_at(values, what, names):
+    """`PamjaxInputError` where the loss, or a derivative of it, is not finite: every error compared with it was
+    NaN, silently."""
+    values = np.asarray(values)
+    if np.all(np.isfinite(values)):
+        return
+    where = "" if values.ndim == 0 else f" for {', '.join(str(n) for n in names[~np.isfinite(values)])}"
+    raise PamjaxInputError(f"gradient_check: {what} is not finite at `tree`{where} ({values!r}): nothing to compare; "
+                           "check the loss there (a failed solve? simulate(..., throw=True) says why)")
 
 
 def _magnitudes(theta, zero_scale):
