@@ -48,3 +48,10 @@ def test_bristle_deflection_bounded_and_sticks():
     # At rest the bristles are a spring: force σ0 z, no creep term.
     assert float(f.state_rate(0.0, 1e-4)) == pytest.approx(0.0, abs=1e-12)
     assert float(f.force(0.0, 1e-4)) == pytest.approx(1e5 * 1e-4, rel=1e-9)
+
+
+def test_a_coulomb_viscous_velocity_width_in_mm_per_s_is_named():
+    # 1 (mm/s) typed for 1e-3 m/s smoothed the sign over 1 m/s: Coulomb's step gone at every speed of a run
+    with pytest.raises(pamjax.PamjaxInputError, match=r"CoulombViscousFriction.velocity_width = 1 m/s.*mm/s"):
+        pamjax.CoulombViscousFriction(velocity_width=1.0)
+    assert float(pamjax.CoulombViscousFriction(velocity_width=1e-3).velocity_width) == 1e-3

@@ -803,3 +803,9 @@ def test_a_rig_experiment_named_by_a_number_gets_a_path_the_fit_reads(rig, tmp_p
     setup = load(cfg)
     assert setup.free == ["plant.valve.inflate.discharge_coefficient", "runs['1'].supply_pressure"]
     assert pj.ParameterSpace(setup.model, setup.free).initial_values()[1] == 6.3e5
+
+
+def test_a_nuisance_report_of_something_else_than_a_fit_result_is_named():
+    # nuisance_report(None) was a raw AttributeError
+    with pytest.raises(pj.PamjaxInputError, match=r"nuisance_report: result must be a fit result .* got NoneType"):
+        pj.nuisance_report(None)

@@ -78,8 +78,9 @@ class FitResult:
     - `channel_errors`: experiment → channel → rmse, max_error, range, rmse_percent, max_error_percent (of the
       data's range, as paper 000 reports them), the same with `validation_` for the held-out part, and the residual
       diagnostics of `pamjax._fit.diagnostics` (noise, rmse_over_noise, autocorrelation, se_inflation).
-    - `mismatch`: True when some channel's residuals are not noise (the standard errors then understate the
-      uncertainty; the note is in `warnings`).
+    - `mismatch`: True when some channel's residuals are not noise at the stated level (`pamjax._fit.diagnostics`:
+      correlated in time, when the standard errors understate the uncertainty by `se_inflation`, or white but above
+      the stated noise, when they do not; the note, which says which, is in `warnings`).
     - `non_identifiable`: lists of labels whose combination the data do not fix; `warnings`.
     - `diagnosis`: where `mismatch` is flagged, what the residuals point to among a real rig's nuisances (an offset
       at rest, an acquisition lag, a start not at rest, per-run supply pressures; `pamjax._fit.rig_hints`), each with

@@ -181,8 +181,12 @@ def is_nuisance(path):
 def nuisance_report(result: "FitResult") -> dict[str, dict[str, dict[str, tuple[float, float]]]]:
     """A fit result's nuisances apart from the plant: {"sensors": {group: {field: (value, std err)}},
     "runs": {run: {"supply_pressure" | "start.position" | ...: (value, std err)}}}."""
+    from .fit import FitResult
     from .parameters import Key, split_path
 
+    if not isinstance(result, FitResult):
+        raise PamjaxInputError(f"nuisance_report: result must be a fit result (pamjax.fit(...) of a pamjax.Rig), got "
+                               f"{type(result).__name__}")
     out = {"sensors": {}, "runs": {}}
     for label, value, se in zip(result.labels, result.values, result.standard_errors):
         if not is_nuisance(label):

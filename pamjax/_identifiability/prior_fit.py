@@ -19,6 +19,7 @@ import numpy as np
 
 from .._core.arrays import device_array
 from .._core.errors import PamjaxInputError
+from .._fit.diagnostics import understatement
 from .._fit.experiment import AbstractExperiment
 from .._fit.fit import FitResult
 from .._fit.force_balance import is_weak_motion
@@ -99,8 +100,11 @@ def _cautions(fit, source, labels, fitted, design):
     notes = []
     if fit.status != "converged":
         notes.append(f"it ended '{fit.status}', not converged")
-    if fit.mismatch:
-        notes.append("it flagged a model mismatch (its standard errors understate the uncertainty)")
+    if fit.mismatch and understatement(fit.channel_errors) > 1.0:
+        notes.append("it flagged a model mismatch (its residuals are correlated in time: its standard errors "
+                     "understate the uncertainty)")
+    elif fit.mismatch:  # white residuals above the stated noise: σ² is the residuals' own, the errors hold
+        notes.append("its residuals are above the noise level its experiments state (check the stated noise)")
     if any(is_weak_motion(w) for w in fit.warnings if isinstance(w, str)):
         notes.append("its payload barely moved (its force law's and friction's standard errors may understate their "
                      "uncertainty several-fold)")

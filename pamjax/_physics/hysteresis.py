@@ -17,20 +17,17 @@ each other) by pinning the state's bounds to ±δ, so that F_c is the branch off
 
 import equinox as eqx
 import jax.numpy as jnp
-import numpy as np
 
 from .._core.arrays import as_scalar
 from .._core.custom_types import RealScalar
 from .._core.errors import (
-    PamjaxInputError,
     check_in_closed_interval,
     check_nonnegative,
     check_positive,
-    concrete_values,
 )
 from .._core.fitting import positive, ratio
 from .._papers import datasheets, paper000
-from .friction import AbstractFriction
+from .friction import AbstractFriction, check_below, check_velocity_width
 from .smooth import smooth_abs
 
 EXPONENT_BOUNDS = (1.0, 10.0)  # n: ≥ 1 keeps the law continuously differentiable at u = 0; 10 is a corner already
@@ -40,29 +37,6 @@ EXPONENT_BOUNDS = (1.0, 10.0)  # n: ≥ 1 keeps the law continuously differentia
 # are a fraction of a mm to a few mm (default 2 mm; docs/hysteresis.md fits 3.5 mm); in mm typed as m (3.5 for 3.5 mm,
 # a 7 m transition) they are far above it.
 MAX_TRANSITION_LENGTH = 0.1
-# m/s, the widest smoothing of sign(ẋ) or |ẋ| around rest (`velocity_width`; defaults 1e-5 for the bristle and
-# Bouc–Wen laws, 1e-3 for `CoulombViscousFriction`): wider, a friction has lost Coulomb's step at the speeds a loop is
-# measured at: tanh(5 mm/s / 0.05 m/s) leaves 10 % of F_c at docs/hysteresis.md's 5 mm/s (paper 000's loops are
-# quasi-static), and the Bouc–Wen state passes its bounds there. mm/s typed as m/s (1 for 1 mm/s) is far above it.
-MAX_VELOCITY_WIDTH = 0.05
-
-
-def check_below(value, limit, name, unit, why):
-    """Refuse a concrete `value` [`unit`] above `limit` as another unit's number (`why`: what it looks like and the
-    value in pamjax's unit); traced values are not checked."""
-    v = concrete_values(value)
-    if v is not None and np.any(v > limit):
-        raise PamjaxInputError(f"{name} = {float(np.max(v)):g} {unit}: more than {limit:g} {unit}: {why}")
-
-
-def check_velocity_width(width, name):
-    """A friction's `velocity_width` [m/s] > 0, finite, at most `MAX_VELOCITY_WIDTH` (mm/s typed as m/s refused)."""
-    check_positive(width, name)
-    check_below(width, MAX_VELOCITY_WIDTH, name, "m/s", "smoothed that wide, a friction has lost its step at a slow "
-                f"loop's speed (tanh(5 mm/s / {MAX_VELOCITY_WIDTH:g} m/s) is 10 % of F_c); that looks like mm/s "
-                "(pamjax takes m/s: 0.01 mm/s is 1e-5)")
-
-
 def exponent_field(default):
     """A Bouc–Wen exponent n [-]: fitted through a logistic onto `EXPONENT_BOUNDS`."""
     return eqx.field(converter=as_scalar, default=default,
