@@ -230,7 +230,8 @@ class ISO6358Restriction(AbstractRestriction):
     """ISO 6358 flow law with sonic conductance C and critical pressure ratio b (paper 001, eq. 1-2, 13-14).
 
     ṁ = ρ₀ C p_up sqrt(T₀/T) · φ(p_down/p_up; b), ρ₀ = 1.185 kg/m³ and T₀ = 293.15 K (ISO 8778).
-    Paper 001's eq. 1 as printed subtracts b from the pressures; the standard ratio form of its eq. 13 is used.
+    Paper 001's eq. 1 as printed subtracts b from the pressures, and its eq. 13 omits ISO 6358's divisor 1 − b (as
+    printed the flow would not vanish at equal pressures); the standard ratio form ((r − b)/(1 − b)) is used.
 
     **Arguments:**
 

@@ -140,7 +140,8 @@ def prepared_tables(tree):
 
 
 class TabulatedISO6358Restriction(AbstractRestriction, PreparesTables):
-    """ISO 6358 flow (paper 001 eq. 13-14, standard ratio form) with C and b tabulated against upstream pressure.
+    """ISO 6358 flow (paper 001 eq. 13-14, with ISO 6358's divisor 1 − b that eq. 13 omits in print) with C and b
+    tabulated against upstream pressure.
 
     ṁ = ρ₀ C(p_up) p_up sqrt(T₀/T) φ(p_down/p_up; b(p_up)), ρ₀ = 1.185 kg/m³, T₀ = 293.15 K (ISO 8778); φ the
     quarter-ellipse with a laminar branch above 0.999 (ISO 6358-1:2013). For a regulator, charging tables are indexed

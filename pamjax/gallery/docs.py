@@ -107,7 +107,8 @@ bad input by name before any fit (gauge pressures, zero velocities, mismatched l
 
 ## Choices made differently
 
-- Paper 001's eq. 1 as printed subtracts b from the pressures; pamjax uses eq. 13's ratio form (`ISO6358Restriction`).
+- Paper 001's eq. 1 as printed subtracts b from the pressures, and eq. 13 omits ISO 6358's divisor 1 − b; pamjax
+  uses ISO 6358's ratio form ((p_out/p_in − b)/(1 − b), `ISO6358Restriction`).
 - The silencer is a porous (Darcy) element, not an ISO 6358 restriction: one parameter, which the paper's two
   sentences fix; an ISO 6358 silencer would need C and b, neither given.
 - Missing data are replaced by stated synthetic data or by the hybrid bench, never by numbers tuned to the paper. No

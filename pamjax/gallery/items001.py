@@ -32,18 +32,21 @@ def _tables(item):
 
 
 ENTRIES = [
-    Entry("001", "eq. 1", "eq. 1 as printed ((p_out − b)/(p_in − b), pressures in bar) against eq. 13's ratio form at "
-          "the choke point, over both tables' rows", COMPARE, "p001_05_tables",
+    Entry("001", "eq. 1", "eq. 1 as printed ((p_out − b)/(p_in − b), pressures in bar) against ISO 6358's ratio form "
+          "at the choke point, over both tables' rows", COMPARE, "p001_05_tables",
           "eq. 1-2 and eq. 13-14 given as the same ISO 6358 law",
           (Check("jump of eq. 1 where eq. 2 takes over", "eq1_printed_max_jump_fraction",
                  AtMost(0.01, "one continuous law: no jump (1 % of the choked flow for the grid)"), spec=".1%"),),
           basis="eq. 1 as printed and eq. 13, NumPy, at Tables 1-2's C and b",
-          reason="eq. 1 as printed subtracts b from the pressures instead of taking the ratio form "
-                 "((p_out/p_in − b)/(1 − b)) of eq. 13: a misprint; pamjax uses eq. 13", figure="flow_curves.png"),
+          reason="eq. 1 as printed subtracts b from the pressures instead of taking ISO 6358's ratio form "
+                 "((p_out/p_in − b)/(1 − b)): a misprint; pamjax uses the ratio form, as eq. 13 does (which omits "
+                 "the divisor 1 − b in print)", figure="flow_curves.png"),
     *(Entry("001", item, "ISO6358Restriction against ρ₀ × eq. 13-14 in NumPy over Table 1's rows", PROCEDURE,
             "p001_05_tables", "the flow law (choked: C p_in)",
             (Check("max difference / choked flow", "eq13_vs_pamjax_max_relative", ROUND_OFF, spec=".1e"),),
-            basis="eq. 13-14 as printed (ISO 8778 reference conditions for ρ₀ and T₀)", figure="flow_curves.png")
+            basis="eq. 13-14 with ISO 6358's divisor 1 − b, which eq. 13 omits in print (as printed the flow would "
+                  "not vanish at equal pressures: 0.89 of the choked flow at p_out/p_in = 0.999); ISO 8778 reference "
+                  "conditions for ρ₀ and T₀", figure="flow_curves.png")
       for item in ("eq. 2", "eq. 13", "eq. 14")),
     Entry("001", "eq. 3", "eq. 3's pressure and volume terms along the run against the flow the regulator delivers",
           PROCEDURE, "p001_01_muscle_flow", "the flow into the muscle (isothermal)",
