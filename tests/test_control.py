@@ -443,3 +443,45 @@ def test_a_gain_named_twice_or_a_start_state_of_another_plant_is_refused(plant):
         with pytest.raises(pamjax.PamjaxInputError, match=r"y0 " + wrong):
             pamjax.simulate(plant, pamjax.Constant(0.5), np.linspace(0.0, 0.1, 3), y0=other)
     assert compiled == [], compiled
+
+
+def test_a_10_ms_period_runs_at_default_tolerances(model):
+    """An averaged-valve loop at a 10 ms period failed from t = 0.06 s ("minimum step size reached", raising max_steps
+    no help): diffrax's first step of a period solve is a fixed 0.01 s, which ended 1 ULP short of the period's end
+    (0.06 + 0.01 < 0.07), and the 1.4e-17 s sliver to it fell below dtmin. It runs, and agrees with a tight solve."""
+    loop = ClosedLoop(model, PIController(), REF, period=0.01)
+    default, tight = (simulate_closed_loop(loop, 0.1, rtol=tol, atol=tol)  # arrays: one program for both
+                      for tol in (np.asarray(1e-6), np.asarray(1e-9)))
+    assert int(default.result) == 0 and int(tight.result) == 0
+    np.testing.assert_allclose(default.position, tight.position, rtol=0, atol=1e-6)
+
+
+def test_tune_controller_refuses_what_simulate_closed_loop_refuses(model):
+    """tune_controller skipped simulate_closed_loop's checks of the loop: a reference outside the stroke (0.5 m, or
+    mm typed as m) was tuned on silently (RMSE of metres, zero gradient, gains unchanged), a PI whose integral gain
+    holds two values failed with a raw JAX TypeError. Refused as simulate_closed_loop refuses them, before any solve."""
+    from helpers import counted_compilations
+
+    two = ClosedLoop(model, PIController(integral_gain=jnp.array([150.0, 100.0])), REF)
+    with counted_compilations() as compiled:
+        for reference in (pamjax.Constant(0.5), pamjax.Sine(30.0, 10.0, 0.2)):
+            with pytest.raises(pamjax.PamjaxInputError, match=r"reference must stay inside the muscle's stroke"):
+                pamjax.tune_controller(ClosedLoop(model, PIController(), reference), ("proportional_gain",), 0.1)
+        with pytest.raises(pamjax.PamjaxInputError, match=r"one duty per period, its parameters integral_gain"):
+            pamjax.tune_controller(two, ("proportional_gain",), 0.1)
+    assert compiled == [], compiled
+
+
+def test_equivalent_duty_names_a_missing_air_and_a_string_flow_and_a_loop_one_period(model):
+    """equivalent_duty(valve, 1e-3, 3e5, None) was a raw AttributeError, mass_flow="1e-3" a raw TypeError; a
+    ClosedLoop with period=[0.02, 0.01] was built, and simulate_closed_loop then blamed its controller for giving
+    several duties. Each named."""
+    valve = model.valve
+    with pytest.raises(pamjax.PamjaxInputError, match=r"equivalent_duty: air must be .*Air.*got NoneType"):
+        equivalent_duty(valve, 1e-3, 3e5, None)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"equivalent_duty: mass_flow must be a real number .*'1e-3'"):
+        equivalent_duty(valve, "1e-3", 3e5, model.air)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"equivalent_duty: pressure must be a real number"):
+        equivalent_duty(valve, 1e-3, "3e5", model.air)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"ClosedLoop\.period must be one number \[s\].*shape \(2,\)"):
+        ClosedLoop(model, PIController(), REF, period=jnp.array([0.02, 0.01]))

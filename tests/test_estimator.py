@@ -424,3 +424,17 @@ def test_a_partial_noise_or_spread_dict_keeps_the_other_defaults_and_strings_are
     with pytest.raises(pj.PamjaxInputError, match=r"ExtendedKalmanFilter.initial_std\['position'\] must be numbers, "
                                                   r"got '5 mm'"):
         pj.ExtendedKalmanFilter(MODEL, initial_std=dict(position="5 mm"))
+
+
+def test_loop_sensors_take_a_seed_of_any_size():
+    """LoopSensors(seed=2**31) (and 2**32, 2**40, -2**31 - 1, as NumPy's generators take them) was a raw
+    OverflowError. Accepted, folded into the int32 seed deterministically: distinct from each other and from small
+    seeds, reproducible, and every seed that fits int32 kept as it was (its noise unchanged)."""
+    from pamjax._control.controllers import fold_seed
+
+    big = (2**31, 2**32, 2**40, -(2**31) - 1, 2**64, np.uint64(2**63))
+    seeds = [int(pj.LoopSensors(seed=s).seed) for s in big]
+    assert len(set(seeds) | {0, 1, -1, 2**31 - 1}) == len(big) + 4
+    assert seeds == [int(pj.LoopSensors(seed=s).seed) for s in big]
+    assert [int(pj.LoopSensors(seed=s).seed) for s in (0, -1, 2**31 - 1, -(2**31))] == [0, -1, 2**31 - 1, -(2**31)]
+    assert fold_seed(2**40, 64) == 2**40 and -(2**63) <= fold_seed(2**64, 64) < 2**63  # PIDController's 64 bits

@@ -145,6 +145,9 @@ class ClosedLoop(eqx.Module):
             raise PamjaxInputError(
                 f"ClosedLoop.reference must be a pamjax signal (e.g. Sine), got {type(self.reference).__name__}"
             )
+        if np.ndim(self.period) != 0:  # [0.02, 0.01] ran, its controller then blamed for giving several duties
+            raise PamjaxInputError(f"ClosedLoop.period must be one number [s] (e.g. 0.02), got shape "
+                                   f"{np.shape(self.period)}: one loop per period (several are a jax.vmap)")
         check_positive(self.period, "ClosedLoop.period")
         period = _concrete(self.period)
         if period is not None and period > MAX_PERIOD:
@@ -414,21 +417,11 @@ def simulate_closed_loop(
     outside the muscle's stroke, a bad duration, `rtol` or `atol` not a finite number > 0 or `max_steps` not an int
     >= 1; `PamjaxSolveError` where a period's solve fails and `throw` is True.
     """
-    if not isinstance(loop, ClosedLoop):
-        raise PamjaxInputError(f"loop must be a ClosedLoop, got {type(loop).__name__}")
-    loop, _ = prepared(loop)  # a float set with eqx.tree_at as an array: checked, and no constant of the program
-    check_parameters(loop, "loop")  # the components' own checks, which eqx.tree_at skipped
+    loop = checked_loop(loop, y0)
     check_solver_settings(rtol, atol, max_steps)
     duration = float(check_positive_number(duration, "duration"))
     if not (isinstance(samples_per_period, int) and samples_per_period >= 1):
         raise PamjaxInputError(f"samples_per_period must be a positive int, got {samples_per_period!r}")
-    lo, hi = loop.reference.bounds()
-    x_min, x_max = float(loop.plant.muscle.min_position), float(loop.plant.muscle.max_position)
-    if not (np.isfinite(lo) and np.isfinite(hi) and lo >= x_min and hi <= x_max):
-        raise PamjaxInputError(
-            f"reference must stay inside the muscle's stroke [{x_min}, {x_max}] m, but spans [{lo}, {hi}] m"
-        )
-    _check_start(loop, y0)
     num_periods = int(np.ceil(duration / float(loop.period) - 1e-9))
     traj = _run_jit(loop, num_periods, samples_per_period, y0, rtol, atol, max_steps, "forward")
     if throw and not isinstance(traj.result, jax.core.Tracer) and int(traj.result) != 0:
@@ -436,10 +429,23 @@ def simulate_closed_loop(
     return traj
 
 
-def _check_start(loop, y0):
-    """`y0` a `ClosedLoopState` whose plant state passes `simulate`'s start-state checks (named "y0.plant...") and
-    whose other leaves are finite; and the controller's duty one number (`jax.eval_shape` of its update: tracing
-    only, nothing compiled), else the solve failed deep inside JAX (a gain of two values: "incompatible shapes")."""
+def checked_loop(loop: ClosedLoop, y0: ClosedLoopState | None = None) -> ClosedLoop:
+    """`loop` checked as `simulate_closed_loop` and `tune_controller` check it before any solve, `prepared` (a float
+    set with eqx.tree_at as an array: checked, and no constant of the program): its components' parameters (which
+    eqx.tree_at skipped), its reference inside the muscle's stroke (a reference in mm, or 0.5 m, was tuned on
+    silently: an RMSE of metres, a zero gradient), `y0` a `ClosedLoopState` whose plant state passes `simulate`'s
+    start-state checks (named "y0.plant...") and whose other leaves are finite, and the controller's duty one number
+    (`jax.eval_shape` of its update: tracing only, nothing compiled), else the solve failed deep inside JAX (a gain
+    of two values: "incompatible shapes"). Raises `PamjaxInputError`."""
+    if not isinstance(loop, ClosedLoop):
+        raise PamjaxInputError(f"loop must be a ClosedLoop, got {type(loop).__name__}")
+    loop, _ = prepared(loop)
+    check_parameters(loop, "loop")
+    lo, hi = loop.reference.bounds()
+    x_min, x_max = float(loop.plant.muscle.min_position), float(loop.plant.muscle.max_position)
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo >= x_min and hi <= x_max):
+        raise PamjaxInputError(
+            f"reference must stay inside the muscle's stroke [{x_min}, {x_max}] m, but spans [{lo}, {hi}] m")
     if y0 is not None:
         if not isinstance(y0, ClosedLoopState):
             raise PamjaxInputError(
@@ -472,6 +478,7 @@ def _check_start(loop, y0):
             + (f"its parameters {', '.join(several)} hold several values: give one value each"
                if several else f"it gives shape {shape}")
             + " (a batch of controllers is jax.vmap over pamjax.unchecked.run_closed_loop)")
+    return loop
 
 
 def _failure(loop, traj, max_steps):

@@ -34,6 +34,7 @@ from .._physics.smooth import smooth_sign
 from .._physics.valves.averaged import AveragedValve, check_broadcastable
 from .._physics.valves.base import AbstractControlElement
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
+from .._systems.regulated import check_component
 
 # s: the longest controller period taken. Pneumatic PWM runs at 10-500 Hz (paper 000's MHE2: 50 Hz, 20 ms) and a
 # muscle's pressure settles in ~0.1 s: a period of a second or more holds one duty over the whole motion, and is
@@ -52,6 +53,18 @@ def reference_derivatives(reference: AbstractSignal, t, order=3):
 
 
 # --- controllers ----------------------------------------------------------------------------------------------------
+def fold_seed(seed: int, bits: int = 32) -> int:
+    """An integer noise seed of any size (NumPy's generators take any; 2**32 in `LoopSensors` was a raw
+    OverflowError) as a `bits`-bit signed int for `jax.random.key`: itself where it fits (the noise of every seed
+    that ran before is unchanged), else 32 (64) bits of `numpy.random.SeedSequence` mixing all its digits and its
+    sign: deterministic, and two distinct seeds share a key with probability 2^-bits."""
+    seed, half = int(seed), 2 ** (bits - 1)
+    if -half <= seed < half:
+        return seed
+    word = int(np.random.SeedSequence([abs(seed), int(seed < 0)]).generate_state(1, f"uint{bits}")[0])
+    return word - 2 * half if word >= half else word
+
+
 def check_duty_limits(lo, hi, name):
     for v, which in ((lo, "duty_min"), (hi, "duty_max")):
         arr = np.asarray(v, dtype=float) if not isinstance(v, jax.core.Tracer) else None
@@ -145,6 +158,12 @@ def equivalent_duty(valve: AveragedValve, mass_flow: RealScalarLike, pressure: R
             f"equivalent_duty: valve must be an averaged valve (paper 000 eq. 13, AveragedValve, e.g. "
             f"presets.mas10_averaged_valve()), whose flow command_for_flow inverts; got {type(valve).__name__} (a "
             "switching valve's cycle average: fit_averaged_valve(valve, air) first)")
+    # None gave a raw AttributeError deep in eq. 13
+    check_component(air, Air, "equivalent_duty: air", "the gas's properties, an Air (pamjax.Air(), or model.air)")
+    for name, value, unit in (("mass_flow", mass_flow, "kg/s"), ("pressure", pressure, "Pa abs")):
+        if not _is_real(value):  # the string "1e-3" passed NumPy's float conversion, then failed as a raw TypeError
+            raise PamjaxInputError(f"equivalent_duty: {name} must be a real number or array [{unit}], got "
+                                   f"{type(value).__name__} {value!r}")
     check_broadcastable(("mass_flow", "pressure"), (mass_flow, pressure), "equivalent_duty",
                         "one flow per pressure, or one of them a scalar")  # (3 flows, 2 pressures: a raw TypeError)
     flow = concrete_values(mass_flow)
@@ -154,6 +173,15 @@ def equivalent_duty(valve: AveragedValve, mass_flow: RealScalarLike, pressure: R
         check_positive(pressure, "equivalent_duty: pressure (absolute) [Pa]")
         check_absolute_pressure(pressure, "equivalent_duty: pressure")
     return valve.command_for_flow(mass_flow, pressure, air)
+
+
+def _is_real(value):
+    """`value` a number or an array of them (integer or floating point), concrete or traced: no string, no bool."""
+    try:
+        dtype = value.dtype if isinstance(value, jax.Array) else np.asarray(value).dtype
+    except (TypeError, ValueError):  # a ragged list
+        return False
+    return dtype.kind in "iuf"
 
 
 class SlidingModeController(AbstractController):

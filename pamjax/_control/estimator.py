@@ -30,6 +30,7 @@ from .._solve.checks import START_STROKE_MARGIN, check_start_state
 from .._solve.scaled import scaled
 from .._solve.simulate import validate
 from .._systems.base import AbstractMuscleSystem, AbstractSystem
+from .controllers import fold_seed
 
 # The hybrid reference bench's sensors (`shared/data/hybrid-reference-bench/meta.json`, "noise": p_std_Pa 2000,
 # x_std_m 1e-4; "sampling_hz": 1000): the pressure sensor (Festo SDE1) and the potentiometer of paper 000's Fig. 1.
@@ -47,11 +48,12 @@ def _state_fields(state):
 
 def _as_seed(seed: IntScalarLike) -> Int[Array, ""]:
     """A whole number (an int, or a whole-valued number or array: a model file's); 1.5 was truncated to 1 and "a"
-    failed with a raw ValueError. A traced seed (vmapped) is taken as it is."""
+    failed with a raw ValueError; one outside int32 folded into it (`fold_seed`). A traced seed (vmapped) as it is."""
     if not isinstance(seed, jax.core.Tracer):
         value = None if isinstance(seed, (bool, np.bool_, str, bytes)) else concrete_values(seed)
         if value is None or value.ndim != 0 or not np.isfinite(value) or value != np.round(value):
             raise PamjaxInputError(f"LoopSensors.seed must be an integer (the sensors' noise seed), got {seed!r}")
+        seed = fold_seed(seed if isinstance(seed, (int, np.integer)) else int(value))  # (a float: whole-valued)
     return jnp.asarray(seed, dtype=jnp.int32)
 
 
@@ -104,15 +106,14 @@ class LoopSensors(eqx.Module):
     channel's unit), seeded (`seed`, drawn per period: a run is reproducible and differentiable).
 
     **Arguments:** `channels` (static; state fields, default ("pressure", "position")); `noise` (2e3 Pa, 1e-4 m: the
-    hybrid bench's `meta.json`); `samples_per_period` N (static int, 20: the bench's 1 kHz at 50 Hz); `seed` (an int).
-    """
+    hybrid bench's `meta.json`); `samples_per_period` N (static int, 20: the bench's 1 kHz at 50 Hz); `seed` (an
+    integer of any size: one outside int32 is folded into it, deterministically, by `fold_seed`)."""
 
     channels: tuple[str, ...] = eqx.field(static=True, default=("pressure", "position"))
     noise: Real[Array, " channels"] = eqx.field(converter=as_array,
                                                 default=(BENCH_PRESSURE_NOISE, BENCH_POSITION_NOISE))
     samples_per_period: int = eqx.field(static=True, default=BENCH_SAMPLES_PER_PERIOD)
-    seed: Int[Array, ""] = eqx.field(converter=_as_seed, default=0)  # an array: a new
-    # seed runs the same compiled loop (and seeds vmap)
+    seed: Int[Array, ""] = eqx.field(converter=_as_seed, default=0)  # an array: a new seed, same program; vmaps
 
     def __check_init__(self):
         channels = self.channels
@@ -286,7 +287,6 @@ class ExtendedKalmanFilter(eqx.Module):
         """Propagate the belief over one sample time T_s [s] from `t` with `command` (what the model's valve acts
         on, `valve.read_command`) held: the model's `discrete_step`, linearised."""
         sc = self._scaled()
-
         h = sample_time / self.substeps
 
         def transition(z):

@@ -12,8 +12,7 @@ import numpy as np
 
 from .._core.custom_types import RealScalarLike
 from .._core.errors import PamjaxInputError
-from .._solve.checks import check_parameters, prepared
-from .closed_loop import ClosedLoop, run_closed_loop
+from .closed_loop import ClosedLoop, checked_loop, run_closed_loop
 
 # A controller's settings that are no gains: bounded (the duty limits lie in [0, 1], a PWM duty ratio) or an offset
 # (the bias, the duty at zero error). Adam on a logarithm keeps a value > 0 but not below 1: tuning `duty_max` from 0.9
@@ -51,15 +50,13 @@ def tune_controller(
     **Returns:** `(tuned_loop, history)`: the loop with the best gains met and a list of (rmse [m], gains) per step.
 
     **Raises:** `PamjaxInputError`, before any solve, for what `simulate_closed_loop` refuses in the loop (parameters
-    set with `eqx.tree_at` are checked as the constructors check them), a gain that is no positive real-valued
+    set with `eqx.tree_at` are checked as the constructors check them, a reference outside the muscle's stroke, a
+    controller whose duty is not one number: `checked_loop`), a gain that is no positive real-valued
     controller parameter or is a duty limit or the bias or is named twice, a duration that is not a number > 0, a
     `start` at or after the run's end (`duration` rounded up to whole PWM periods), or a bad `steps`,
     `learning_rate` or `samples_per_period`.
     """
-    if not isinstance(loop, ClosedLoop):
-        raise PamjaxInputError(f"loop must be a ClosedLoop, got {type(loop).__name__}")
-    loop, _ = prepared(loop)  # a float set with eqx.tree_at as an array, as `simulate_closed_loop` takes it
-    check_parameters(loop, "loop")  # the components' own checks, which eqx.tree_at skipped
+    loop = checked_loop(loop)  # as `simulate_closed_loop` checks it: parameters, reference, one duty per period
     _check_settings(loop.controller, gains, steps, learning_rate, samples_per_period)
     for value, name in ((duration, "duration"), (start, "start")):
         if not (isinstance(value, (int, float, np.number, np.ndarray, jax.Array)) and np.ndim(value) == 0

@@ -119,18 +119,21 @@ def _controller(system, signal, ts, rtol, atol, jump_ts, edge_clip):
     "dt_min_reached") instead of grinding to max_steps and holding up a batch. With jump times (the exact valve's
     edges) no dtmin: a step that ends a few ulps short of an edge is followed by a step of a few ulps up to it, which
     the dtmin test would take for a failure (E4 of the hybrid bench failed so at every rtol above 1e-9). Without them,
-    dtmin stays below the shortest step diffrax itself takes: a last step that lands short of t1 by more than 100 ULP
-    (diffrax snaps closer ones to t1) is taken as a sliver, and the controller's next proposal grows from it; a fixed
-    1e-12 s failed runs resting at dtmax ("minimum step size reached" at t1: the exact valve at duty 0 over 2.5 s)."""
+    dtmin, 50 eps·|t1| (50-100 ULP of t1), stays below the shortest step diffrax itself takes: a last step that lands
+    short of t1 by more than 100 ULP (diffrax snaps closer ones to t1, `FirstStepToEnd` the first step too) is taken
+    as a sliver, and the controller's next proposal grows from it. A fixed 1e-12 s failed runs resting at dtmax
+    ("minimum step size reached" at t1: the exact valve at duty 0 over 2.5 s); 50 eps·max(|t1|, 1 s) was 800 ULP
+    of t1 = 0.07 s (a sliver of 100-800 ULP would fail). At least the smallest normal float: > 0 where t1 = 0."""
     import diffrax as dfx
 
-    from .edge_clip import EdgeClipController
+    from .edge_clip import EdgeClipController, FirstStepToEnd
 
-    dtmin = None if jump_ts is not None else 50 * jnp.finfo(float).eps * jnp.maximum(jnp.abs(ts[-1]), 1.0)
+    finfo = jnp.finfo(float)
+    dtmin = None if jump_ts is not None else jnp.maximum(50 * finfo.eps * jnp.abs(ts[-1]), finfo.tiny)
     # dtmax out of the gradient, as diffrax holds its step sizes (a step at dtmax = T/10 would carry the PWM
     # frequency's tangent into the step times, and a gradient with respect to it blew up: -1e17 over 0.2 s)
     dtmax = jax.lax.stop_gradient(system.valve.max_step())
-    controller = dfx.PIDController(rtol=rtol, atol=atol, dtmax=dtmax, dtmin=dtmin, force_dtmin=False)
+    controller = FirstStepToEnd(rtol=rtol, atol=atol, dtmax=dtmax, dtmin=dtmin, force_dtmin=False)
     if edge_clip:  # steps end either side of every smoothed switching edge (the valve's next_edge_step)
         controller = EdgeClipController(controller, system.valve, signal)
     if jump_ts is not None:
