@@ -219,7 +219,8 @@ def check_start(space: ParameterSpace, theta: np.ndarray) -> None:
                 lines.append(f"{label} = {v:g} has no finite θ under its {g.transform} transform")
         k += g.size
     if lines:
-        raise PamjaxInputError("start values outside the range a free parameter's transform maps onto:\n  "
+        raise PamjaxInputError("start values give non-finite transformed parameters (outside the range a free "
+                               "parameter's transform maps onto):\n  "
                                + "\n  ".join(lines))
 
 

@@ -3,6 +3,7 @@ built from one point's values, and the checks of every point's values against th
 before any solve."""
 
 import inspect
+import re
 
 import equinox as eqx
 import jax
@@ -174,6 +175,8 @@ def check_magnitudes(system, plan, flat, batch_size):
         check_parameters(point(hi - 1))
     except PamjaxInputError as err:
         named = [key for key, parts in keys if f"parameter {'.'.join(parts)} " in str(err)]
+        if not named:  # a component's own check names its field, not the path: "PolynomialForce: max_pressure = 6"
+            named = [key for key, parts in keys if re.search(rf"\b{re.escape(parts[-1])} = ", str(err))][:1]
         if not named:
             raise  # a parameter no point sweeps: named as `simulate` names it
         raise PamjaxInputError(f"over[{named[0]!r}] at point {hi - 1}: {err}") from None
