@@ -106,3 +106,11 @@ def test_bias_seed_and_times_in_other_units_are_refused():
             make()
     loop = pj.ClosedLoop(plant, pj.PIDController(measurement_noise=1e-4, seed=np.int64(2), bias=1.0), ref)
     assert loop.controller.seed == 2 and float(pj.PIController(bias=0.0).bias) == 0.0
+
+
+def test_a_seed_of_any_size_is_taken():
+    # 2**64 (an entropy-sized seed) was a raw OverflowError; seeds that fit are kept as they are
+    assert pj.PIDController(seed=2**40).seed == 2**40
+    big, other = pj.PIDController(seed=2**64), pj.PIDController(seed=2**64 + 1)
+    assert -(2**63) <= big.seed < 2**63 and big.seed != other.seed
+    assert pj.PIDController(seed=2**64).seed == big.seed  # deterministic

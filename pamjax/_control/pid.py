@@ -11,7 +11,7 @@ from .._core.custom_types import RealScalar, StateLike
 from .._core.errors import PamjaxInputError, check_nonnegative, check_positive, concrete_values
 from .._core.fitting import parameter
 from .._papers import datasheets, paper000
-from .controllers import MAX_PERIOD, AbstractController, check_bias, check_duty_limits
+from .controllers import MAX_PERIOD, AbstractController, check_bias, check_duty_limits, fold_seed
 from .estimator import check_noise_scale
 
 
@@ -22,9 +22,10 @@ class PIDState(eqx.Module):
 
 
 def _static_seed(seed: int) -> int:
-    """A NumPy integer as the Python int a static field holds (hashable, no array); anything else as it is, for
-    `PIDController`'s check to name."""
-    return int(seed) if isinstance(seed, np.integer) else seed
+    """An integer (Python or NumPy) as the Python int a static field holds (hashable, no array), folded into 64 bits
+    (`fold_seed`: 2**64 was a raw OverflowError); anything else as it is, for `PIDController`'s check to name."""
+    whole = isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_))
+    return fold_seed(seed, 64) if whole else seed
 
 
 class PIDController(AbstractController):
