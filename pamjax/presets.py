@@ -265,11 +265,14 @@ def paper001_restriction(
     """An ISO 6358 restriction with paper 001's units converted (default: Table 1 at 6.943 bar)."""
     try:  # a text ("7e-4") was a raw TypeError of the unit conversion, naming no argument
         conductance = as_scalar(sonic_conductance_m3_per_s_bar)
-    except (PamjaxInputError, TypeError) as err:
+    except (PamjaxInputError, TypeError, ValueError) as err:  # None: a raw ValueError of jnp.asarray
         raise PamjaxInputError(f"paper001_restriction: sonic_conductance_m3_per_s_bar must be a number [m³/(s bar)], "
                                f"e.g. 7e-4, got {sonic_conductance_m3_per_s_bar!r:.80} ({err})") from None
     if isinstance(sonic_conductance_m3_per_s_bar, (int, float)):  # divided on the host: no program compiled for it
         conductance = float(sonic_conductance_m3_per_s_bar)
+    if critical_ratio is None or isinstance(critical_ratio, str):  # None: a raw ValueError of jnp.asarray
+        raise PamjaxInputError(f"paper001_restriction: critical_ratio must be a number in (0, 1), e.g. 0.53, got "
+                               f"{critical_ratio!r}")
     return ISO6358Restriction(sonic_conductance=conductance / 1e5, critical_ratio=critical_ratio)
 
 

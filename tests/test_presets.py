@@ -108,6 +108,12 @@ def test_a_silencer_sits_after_the_users_own_exhaust_port():
      r"time_constants=\?\).*supply_pressure"),
     (lambda: presets.paper001_restriction("7e-4"),
      r"paper001_restriction: sonic_conductance_m3_per_s_bar must be a number \[m³/\(s bar\)\].*got '7e-4'"),
+    # these were raw errors: jnp.asarray's ValueError of None, an unhashable list's TypeError
+    (lambda: presets.paper001_restriction(None), r"sonic_conductance_m3_per_s_bar must be a number.*got None"),
+    (lambda: presets.paper001_restriction(7e-4, None), r"critical_ratio must be a number in \(0, 1\).*got None"),
+    (lambda: __import__("pamjax").vppm_regulator(["fast"]), r"mode must be one of .*got \['fast'\]"),
+    # paper 001's C typed as its SI value into the argument in m³/(s bar): a flow 1e5 times too small, silently
+    (lambda: presets.paper001_restriction(7.0564e-9, 0.5328), r"7.0564e-14 m³/\(s Pa\): less than 1e-12"),
 ])
 def test_a_misspelt_or_doubled_preset_keyword_is_named_with_the_valid_fields(call, match):
     with pytest.raises(PamjaxInputError, match=match):
@@ -131,3 +137,11 @@ def test_saving_a_preset_holding_ones_own_component_says_how(tmp_path):
     with pytest.raises(PamjaxInputError, match=r"is not a pamjax model class \(pass your own component classes as "
                                                r"classes=\[\.\.\.\]\)"):
         pj.save_model(tmp_path / "m.json", system)
+
+
+def test_paper_001s_tables_are_read_only():
+    # presets exported the module's own dicts: an in-place "conversion" of a copy changed every later regulator
+    with pytest.raises(TypeError):
+        presets.PAPER001_CHARGING_TABLE["sonic_conductance_m3_per_s_bar"] = (1.0,)
+    with pytest.raises(TypeError):
+        presets.PAPER001_DISCHARGING_TABLE["critical_ratio"] = (0.5,)

@@ -5,6 +5,7 @@ files always have) and reads those back as floats (`numbers`)."""
 
 import json
 import math
+from collections.abc import Mapping
 from typing import Any
 
 NON_FINITE = ("nan", "inf", "-inf")
@@ -13,7 +14,7 @@ NON_FINITE = ("nan", "inf", "-inf")
 def plain(obj: Any) -> Any:
     """`obj` with dict keys as strings, tuples as lists, NumPy/JAX arrays and scalars as Python numbers and lists, and
     every non-finite float as "nan", "inf" or "-inf"."""
-    if isinstance(obj, dict):
+    if isinstance(obj, Mapping):  # a dict, or a read-only view of one (paper 001's tables)
         return {str(k): plain(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [plain(v) for v in obj]

@@ -37,6 +37,10 @@ MAX_EDGE_WIDTH = 0.01
 # DN50 pipe's 1,960 mm² ~4e-6. Above 1e-5 the value is still in m³/(s bar) (paper 001's tables: 7e-4) or
 # dm³/(s bar), not divided by 1e5 (or 1e8).
 MAX_SONIC_CONDUCTANCE = 1e-5
+# m³/(s Pa): a 0.03 mm orifice's C (7e-4 mm² / 5 = 1.4e-4 dm³/(s bar), 1.4e-12), below any pneumatic valve's; paper
+# 001's 7.06e-4 m³/(s bar) typed as its SI value 7.06e-9 into an argument in m³/(s bar) gave 7.06e-14, a flow 1e5
+# times too small, without a word
+MIN_SONIC_CONDUCTANCE = 1e-12
 PSI = 6894.757293168  # Pa per psi (NIST SP 811)
 BAR = 1e5  # Pa per bar
 LITRE_PER_MINUTE = 1e-3 / 60.0  # m³/s per l/min
@@ -338,7 +342,13 @@ def check_sonic_conductance(values, name):
     v = concrete_values(values)
     if v is None or not np.isfinite(v).any():
         return
-    peak = float(np.max(v[np.isfinite(v)]))
+    peak, low = float(np.max(v[np.isfinite(v)])), float(np.min(v[np.isfinite(v)]))
+    if 0.0 < low < MIN_SONIC_CONDUCTANCE:
+        raise PamjaxInputError(
+            f"{name} = {low:g} m³/(s Pa): less than {MIN_SONIC_CONDUCTANCE:g}, a 0.03 mm orifice's (valves: ~1e-9 to "
+            "1e-6); that looks like a value in m³/(s Pa) divided again by 1e5 (an argument in m³/(s bar) takes paper "
+            "001's 7.06e-4, not 7.06e-9)"
+        )
     if peak > MAX_SONIC_CONDUCTANCE:
         raise PamjaxInputError(
             f"{name} = {peak:g} m³/(s Pa): more than {MAX_SONIC_CONDUCTANCE:g}, a DN50 pipe's order (valves: ~1e-9 to "

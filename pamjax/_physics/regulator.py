@@ -482,7 +482,7 @@ def vppm_regulator(mode: Literal["universal", "fast", "precise"] = "universal", 
     - `hysteresis`: True (`PressureHysteresis()`: 50 mbar), False, or a `PressureHysteresis`.
     - any other `ISO6358Regulator` field (e.g. `supply_pressure`), which overrides the mode's.
     """
-    if mode not in datasheets.VPPM_MODE_FACTORS:
+    if not isinstance(mode, str) or mode not in datasheets.VPPM_MODE_FACTORS:  # a list: a raw unhashable TypeError
         raise PamjaxInputError(f"mode must be one of {sorted(datasheets.VPPM_MODE_FACTORS)} (paper 001 Sect. 2), got "
                                f"{mode!r}")
     check_overrides(ISO6358Regulator, fields, "vppm_regulator")  # a misspelt field was a raw TypeError
