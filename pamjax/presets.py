@@ -39,6 +39,7 @@ values (a0 = 629.7, k0 = 105 N, k1 = 1400 N/m, v0 = 2.6e-5 m³, v1 = 1.9e-4 m²,
 values here are what a fit to that data must close.
 """
 
+from types import MappingProxyType
 from typing import Any, Literal
 
 import jax.numpy as jnp
@@ -110,8 +111,9 @@ EQ6_GAIN = paper001.EQ6_GAIN  # bar/V
 EQ6_TIME_CONSTANTS = paper001.EQ6_TIME_CONSTANTS  # s
 EQ7_GAIN = paper001.EQ7_GAIN  # bar per l/min ANR
 # Paper 001 Tables 1-2 (C in m³/(s bar) → divide by 1e5 for SI).
-PAPER001_CHARGING_TABLE = paper001.CHARGING_TABLE
-PAPER001_DISCHARGING_TABLE = paper001.DISCHARGING_TABLE
+# read-only views: the live dicts were exported, and an in-place edit of "a copy" changed every later default regulator
+PAPER001_CHARGING_TABLE = MappingProxyType(paper001.CHARGING_TABLE)
+PAPER001_DISCHARGING_TABLE = MappingProxyType(paper001.DISCHARGING_TABLE)
 
 
 def mas10_silencer() -> PorousRestriction:

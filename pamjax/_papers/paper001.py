@@ -1,11 +1,8 @@
 """Paper 001: a Festo VPPM proportional pressure regulator (0-10 V reference) feeding a Festo DMSP-40-400 muscle.
 
 Every number the paper prints that pamjax uses, with where it is printed. Pressures ABSOLUTE [Pa] unless a name says
-GAUGE; eq. 5-8 are printed in V, bar (gauge) and l/min; the SI conversions live beside their use. The tables are
-read-only (`presets` exports them: a user's in-place edit of "a copy" changed every later default regulator).
+GAUGE; eq. 5-8 are printed in V, bar (gauge) and l/min; the SI conversions live beside their use.
 """
-
-from types import MappingProxyType
 
 # --- air (eq. 1-3 text) ----------------------------------------------------------------------------------------------
 GAS_CONSTANT = 286.9  # J/(kg K), R
@@ -39,16 +36,16 @@ SQUARE_WAVE_HIGH = 3.0  # V, 0-3 V
 SQUARE_WAVE_FREQUENCY = 1.5  # Hz
 
 # --- Tables 1-2: ISO 6358 C and b of the regulator's paths against pressure (C in m³/(s bar)) ----------------------
-CHARGING_TABLE = MappingProxyType(dict(  # Table 1: tank charging, indexed by the upstream (supply) pressure
+CHARGING_TABLE = dict(  # Table 1: tank charging, indexed by the upstream (supply) pressure
     upstream_pressure_bar=(1.946, 2.954, 3.964, 4.983, 5.991, 6.943),
     critical_ratio=(0.6624, 0.5972, 0.5674, 0.5541, 0.5308, 0.5328),
     sonic_conductance_m3_per_s_bar=(1.6668e-04, 2.1299e-04, 6.4101e-04, 7.8871e-04, 7.7140e-04, 7.0564e-04),
-))
-DISCHARGING_TABLE = MappingProxyType(dict(  # Table 2: tank discharging, indexed by the tank (upstream) pressure
+)
+DISCHARGING_TABLE = dict(  # Table 2: tank discharging, indexed by the tank (upstream) pressure
     tank_pressure_bar=(1.8964, 2.7350, 3.9706, 4.9714, 5.9744, 6.8439),
     critical_ratio=(0.7464, 0.6709, 0.6177, 0.5940, 0.5782, 0.5683),
     sonic_conductance_m3_per_s_bar=(0.0002, 0.0003, 0.0007, 0.0008, 0.0009, 0.0007),
-))
+)
 
 # --- results the paper reports in numbers (Sect. 6), compared in the gallery ---------------------------------------
 FIG5_VOLUME_SHARE = 0.10  # -, "the contribution of dV_PAM is about 10 % of the total output flow rate" (Fig. 5)
