@@ -659,3 +659,11 @@ def test_no_page_runs_simulate_or_sweep_on_a_model_file():
         for line in page.read_text(encoding="utf-8").splitlines():
             if "refused" not in line:  # docs/cli.md: "`pamjax simulate model.json` is refused with ..."
                 assert not re.findall(r"pamjax (?:simulate|sweep) \S+\.json", line), (page.name, line)
+
+
+def test_a_free_entry_of_several_labels_makes_a_fit_uncertainty():
+    # `paths` is the fit's free spec: "force_law.F_max" gives five labels (a0…a4); a check of one path per label
+    # refused every fit of the bench (fits/joint.py: "the fit result: 15 labels but 11 paths")
+    labels = ("a0", "a1", "payload_mass")
+    unc = pj.FitUncertainty(labels, ("force_law.F_max", "payload_mass"), np.ones(3), np.diag([1e-2, 1e-4, 1e-6]))
+    assert unc.labels == labels and unc.covariance.shape == (3, 3)

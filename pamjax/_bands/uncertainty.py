@@ -144,8 +144,6 @@ class FitUncertainty:
         if isinstance(labels, str) or not all(isinstance(label, str) for label in labels):
             raise PamjaxInputError(f"{self.source}: labels must be a sequence of parameter labels (strings), got "
                                    f"{labels!r}")
-        if len(self.paths) != len(labels):
-            raise PamjaxInputError(f"{self.source}: {len(labels)} labels but {len(self.paths)} paths")
         try:
             values = np.asarray(self.values, dtype=float)
             cov = np.asarray(self.covariance, dtype=float)
