@@ -338,6 +338,11 @@ def test_tune_controller_refuses_duty_limits_and_bias_and_tunes_integer_gains(mo
         for name in ("duty_max", "duty_min", "bias"):
             with pytest.raises(pamjax.PamjaxInputError, match=rf"'{name}' is no gain: the duty limits are bounds in"):
                 pamjax.tune_controller(loop, ("proportional_gain", name), 0.2, steps=1)
+        # a PID's sensor noise was "tuned" down (a better sensor, not a better controller): refused as the others
+        noisy = ClosedLoop(model, pamjax.PIDController(measurement_noise=1e-4), REF)
+        for name in ("measurement_noise", "sample_time"):
+            with pytest.raises(pamjax.PamjaxInputError, match=rf"'{name}' is no gain: the sensor's noise and sampling"):
+                pamjax.tune_controller(noisy, ("proportional_gain", name), 0.2, steps=1)
     assert compiled == [], compiled
     integer = ClosedLoop(model, PIController(proportional_gain=30), REF)
     tuned, history = pamjax.tune_controller(integer, ("proportional_gain",), 0.2, steps=1)

@@ -412,3 +412,17 @@ def test_a_fit_started_on_a_bound_of_a_logistic_names_only_that_parameter(start,
         pamjax.fit(friction, [exp], free, max_steps=1)
     assert "transition_length" not in str(refused.value)  # only the parameter at fault
     assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]
+
+
+def test_parameter_paths_of_no_model_and_a_table_of_unknown_truth_are_named():
+    # parameter_paths(3.0) and (None) gave {} without a word; table(truth=...) printed NaN for a misspelt label
+    for bad in (3.0, None):
+        with pytest.raises(pamjax.PamjaxInputError, match=r"parameter_paths: model must be a pamjax model"):
+            pamjax.parameter_paths(bad)
+    result = pamjax.FitResult(labels=["v1"], paths=["v1"], values=[1.0], initial_values=[1.0], standard_errors=[0.1],
+                          correlation=np.eye(1), cost=0.0, initial_cost=0.0, iterations=1, accepted_steps=1,
+                          status="converged", converged=True, message="", channel_errors={}, mismatch=False,
+                          non_identifiable=[], warnings=[], history=[], fit_s=0.0, compile_s=0.0, num_residuals=1)
+    assert "v1" in result.table(truth={"v1": 1.0})
+    with pytest.raises(pamjax.PamjaxInputError, match=r"truth has label\(s\) \['v_1'\] that the fit does not have"):
+        result.table(truth={"v_1": 1.0})

@@ -17,7 +17,14 @@ from .closed_loop import ClosedLoop, checked_loop, run_closed_loop
 # A controller's settings that are no gains: bounded (the duty limits lie in [0, 1], a PWM duty ratio) or an offset
 # (the bias, the duty at zero error). Adam on a logarithm keeps a value > 0 but not below 1: tuning `duty_max` from 0.9
 # gave 2.99, a duty the valve cannot take. They are set, not tuned.
-NOT_GAINS = ("duty_min", "duty_max", "bias")
+# A PID's sensor (`measurement_noise`, `sample_time`) is the rig's, not a setting: tuned, the noise went down to lower
+# the RMSE, a better sensor rather than a better controller.
+_BOUNDED = ("the duty limits are bounds in [0, 1] (a PWM duty ratio) and the bias the duty at zero error, which a "
+            "descent on the logarithm would push out of range (duty_max 0.9 went to 2.99)")
+_SENSOR = ("the sensor's noise and sampling time are the rig's, not the controller's settings: tuned, the noise falls "
+           "to lower the RMSE (a better sensor, not a better controller)")
+NOT_GAINS = {"duty_min": _BOUNDED, "duty_max": _BOUNDED, "bias": _BOUNDED, "measurement_noise": _SENSOR,
+             "sample_time": _SENSOR}
 
 
 def tracking_rmse(loop: ClosedLoop, num_periods: int, start=0.0, **kwargs):
@@ -117,10 +124,8 @@ def _check_settings(controller, gains, steps, learning_rate, samples_per_period)
     static = {f.name for f in dataclasses.fields(controller) if f.metadata.get("static", False)}
     for name in gains:
         if name in NOT_GAINS:
-            raise PamjaxInputError(
-                f"tune_controller: {name!r} is no gain: the duty limits are bounds in [0, 1] (a PWM duty ratio) and "
-                "the bias the duty at zero error, which a descent on the logarithm would push out of range (duty_max "
-                f"0.9 went to 2.99); set {name} on the controller yourself and tune its gains")
+            raise PamjaxInputError(f"tune_controller: {name!r} is no gain: {NOT_GAINS[name]}; set {name} on the "
+                                   "controller yourself and tune its gains")
         value = getattr(controller, name, None) if isinstance(name, str) else None
         # a leaf of the controller's pytree with a real (floating-point or integer) dtype: a sub-model ("model") or
         # a static field ("seed", which no gradient reaches) has no log to descend on

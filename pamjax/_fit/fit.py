@@ -171,7 +171,9 @@ class FitResult:
         return ParameterSpace(model, self.paths).with_values(np.asarray(self.values, dtype=float))
 
     def table(self, truth: dict[str, float] | None = None) -> str:
-        """Text table: label, (true), initial, fitted ± standard error."""
+        """Text table: label, (true), initial, fitted ± standard error; `truth` by label (others refused)."""
+        if truth is not None and (unknown := sorted(set(truth) - set(self.labels))):  # was printed as NaN
+            raise PamjaxInputError(f"table: truth has label(s) {unknown} that the fit does not have: {self.labels}")
         head = f"{'parameter':<44}" + (f"{'true':>14}" if truth is not None else "") + f"{'initial':>14}{'fitted':>14}"
         rows = [head + f"{'± std err':>12}"]
         for i, label in enumerate(self.labels):
@@ -179,7 +181,6 @@ class FitResult:
             rows.append(f"{label:<44}{t}{self.initial_values[i]:>14.6g}{self.values[i]:>14.6g}"
                         f"{self.standard_errors[i]:>12.3g}")
         return "\n".join(rows)
-
 
 
 def evaluate(model: eqx.Module, experiments: Experiments) -> dict[str, dict[str, dict[str, Any]]]:

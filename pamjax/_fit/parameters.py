@@ -95,7 +95,11 @@ def split_path(path):
 
 def parameter_paths(model: eqx.Module, prefix: str = "") -> dict[str, tuple[int, ...]]:
     """All array-valued parameter paths of `model` with their shapes, e.g. {'valve.inflate.area': ()}; dict fields
-    (a `Rig`'s run conditions) give `name[key].…` paths. `prefix` is written before every path (e.g. "plant.")."""
+    (a `Rig`'s run conditions) give `name[key].…` paths. `prefix` is written before every path (e.g. "plant.").
+    Anything but a model (an equinox Module) is refused: a number or None gave {} without a word."""
+    if not isinstance(model, eqx.Module | dict):
+        raise PamjaxInputError(f"parameter_paths: model must be a pamjax model (a system or component), got "
+                               f"{type(model).__name__}")
     return _paths(model, prefix)
 
 
