@@ -703,6 +703,8 @@ def _muscle():
                                                           r"\['pressure', 'position'\]"),
     (_tank, dict(noise={"pressure": 2e3, "position": 1e-4}), r"noise: \['position'\] not among the design's"),
     (_tank, dict(spread_points=7), r"spread_points = 7 is given without spread"),
+    # 33 s written in ms ran out of memory after 18 s (an "internal error"), its output folder left empty
+    (_tank, dict(duration=33000.0), r"duration = 33000 s is more than 3600 s .*looks like ms \(33 s\)"),
 ])
 def test_limits_no_run_can_keep_are_named_before_any_solve(model, kwargs, match, monkeypatch):
     # the battery's cases (issue 33): a limit in the wrong unit, a run shorter than a period, a band across the valve's

@@ -207,6 +207,7 @@ def test_initialize_distributed_names_a_bad_address_and_takes_numpy_integers():
         pamjax.runtime.initialize_distributed("h:1", np.int64(2), np.int64(5))
     with pytest.raises(pamjax.PamjaxInputError, match=r"num_processes .* integer >= 1, got True"):
         pamjax.runtime.initialize_distributed("h:1", True, 0)
+    np.asarray(pamjax.presets.mas10_system(valve="averaged").payload_mass)  # JAX's backend started, whatever ran
     with pytest.raises(PamjaxDistributedError, match="already started its backend"):  # taken: checks passed
         pamjax.runtime.initialize_distributed("127.0.0.1:1", np.int64(2), np.int32(1))
 
@@ -242,3 +243,15 @@ def test_local_shards_merge_to_the_whole_sweep():
         pamjax.merge_sweep_shards([shards[0], shards[0], shards[1]])
     with pytest.raises(pamjax.PamjaxInputError, match="from sweep"):
         pamjax.merge_sweep_shards([whole])
+
+
+def test_a_coordinator_that_never_comes_up_is_named_not_an_abort(tmp_path):
+    # process 1 joining a coordinator nobody started was aborted by XLA at the timeout (SIGABRT, a C++ fatal log)
+    with socket.socket() as s:  # a port nothing listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    code = (f"import pamjax\ntry:\n    pamjax.runtime.initialize_distributed('127.0.0.1:{port}', 2, 1, timeout=1)\n"
+            "except pamjax.runtime.PamjaxDistributedError as e:\n    print('NAMED', e)\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0 and "NAMED could not join process 1 of 2" in run.stdout, (run.returncode, run.stderr)
+    assert "nothing listens there" in run.stdout

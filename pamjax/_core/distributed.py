@@ -103,6 +103,29 @@ def process_info(source="already initialised"):
     )
 
 
+def _reach(coordinator, index, count, timeout, source):
+    """`PamjaxDistributedError` unless something listens at `coordinator` (host:port) within `timeout` [s]: a process
+    that joins a coordinator that never comes up is aborted by XLA's coordination client at its timeout (SIGABRT, a
+    C++ fatal log, exit status 134), which no Python handler sees. The coordinator (process 0) waiting for the others
+    past its timeout is aborted the same way: that one cannot be checked before."""
+    import socket
+    import time
+
+    host, _, port = coordinator.rpartition(":")
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with socket.create_connection((host.strip("[]"), int(port)), timeout=min(1.0, timeout)):
+                return
+        except (OSError, ValueError) as err:
+            if time.monotonic() >= deadline:
+                raise PamjaxDistributedError(
+                    f"could not join process {index} of {count} at coordinator {coordinator} within {timeout:g} s "
+                    f"({source}): nothing listens there ({type(err).__name__}: {err}); start process 0 there first, "
+                    "or check the address and port") from None
+            time.sleep(0.2)
+
+
 def initialize_distributed(
     coordinator_address: str | None = None,
     num_processes: int | None = None,
@@ -183,6 +206,8 @@ def initialize_distributed(
         raise PamjaxDistributedError(
             "cannot join a multi-process run: JAX already started its backend in this process (an array or "
             "computation was made before); call pamjax.runtime.initialize_distributed() first")
+    if coordinator and index:  # not the coordinator: it must listen (else XLA aborts the process at the timeout)
+        _reach(coordinator, index, count, float(timeout), source)
     if jax.config.jax_cpu_collectives_implementation is None:
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
     kwargs = dict(coordinator_address=coordinator, num_processes=count, process_id=index,

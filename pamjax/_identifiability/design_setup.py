@@ -144,12 +144,18 @@ def _period(system, period):
     return float(valve_period) if period is None else float(period)
 
 
+MAX_DURATION = 3600.0  # s: a designed run of an hour; 4000 s asked 109 GB of the 2-core CI machine's 24 GB
+
+
 def _validate(model, free, duration, noise, channels, band, criterion, subset, parametrisation, knots, steps, rate,
               stroke_margin, max_pressure, max_duty_step, period, build, start, duty_margin, min_force, design_rate,
               seed, baseline_margin):
     require_float64("pamjax.design_experiment")
     if not ((d := _real(duration)) is not None and math.isfinite(d) and d > 0):
         raise PamjaxInputError(f"duration must be a positive number of seconds, got {duration!r}")
+    if d > MAX_DURATION:  # 33000 (33 s in ms) ran out of memory after 18 s, its output folder left empty
+        raise PamjaxInputError(f"duration = {d:g} s is more than {MAX_DURATION:g} s (an hour of bench time, whose "
+                               f"periods a design would not fit in memory): that looks like ms ({d / 1e3:g} s)")
     duration = d
     for name, value, what in (("channels", channels, "recorded channels, e.g. ['pressure', 'position']"),
                               ("subset", subset, "free parameter labels, e.g. ['friction.coulomb_force']")):
