@@ -258,6 +258,14 @@ _PLAUSIBLE = {
     "nominal_length": ("m", MAX_MUSCLE_LENGTH, "mm"),
     # a braid's strand b_s = √3 (1 − ε_max) L0 (paper 000 eq. 1 at cos²θ = 1/3) is at most √3 L0
     "strand_length": ("m", 3.0**0.5 * MAX_MUSCLE_LENGTH, "mm"),
+    # a Bouc-Wen transition δ: the force reaches the other branch after ~2δ of travel, so 0.1 m spends twice the
+    # MAS-10's and the DMSP-40's whole stroke on one transition (paper 000's loops turn within a few mm; default 2 mm)
+    "transition_length": ("m", 0.1, "mm"),
+    # a friction's smoothing of sign(ẋ) or |ẋ| (defaults 1e-5 and 1e-3): at 0.05 m/s tanh(5 mm/s / 0.05 m/s) leaves
+    # 10 % of F_c at docs/hysteresis.md's 5 mm/s loop speed, Coulomb's step gone
+    "velocity_width": ("m/s", 0.05, "mm/s"),
+    # a muscle's rest radius r0 (eq. 6): 0.1 m is a muscle 20 cm across, five times the DMSP-40's 20 mm
+    "radius": ("m", 0.1, "mm"),
 }
 _ABSOLUTE_PRESSURES = {"pressure", "pressures", "atmospheric_pressure"}
 # containers whose entries are spreads per state (an estimator's initial standard deviations and process noise: Pa,

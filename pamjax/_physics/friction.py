@@ -8,35 +8,13 @@ import abc
 
 import equinox as eqx
 import jax.numpy as jnp
-import numpy as np
 
 from .._core.custom_types import RealScalar
-from .._core.errors import PamjaxInputError, check_nonnegative, check_positive, concrete_values
+from .._core.errors import check_nonnegative, check_positive
 from .._core.fitting import positive
+from .._core.units import check_plausible
 from .._papers import datasheets, paper000
 from .smooth import smooth_abs, smooth_sign
-
-# m/s, the widest smoothing of sign(ẋ) or |ẋ| around rest (`velocity_width`; defaults 1e-5 for the bristle and
-# Bouc–Wen laws, 1e-3 for `CoulombViscousFriction`): wider, a friction has lost Coulomb's step at the speeds a loop is
-# measured at: tanh(5 mm/s / 0.05 m/s) leaves 10 % of F_c at docs/hysteresis.md's 5 mm/s (paper 000's loops are
-# quasi-static), and the Bouc–Wen state passes its bounds there. mm/s typed as m/s (1 for 1 mm/s) is far above it.
-MAX_VELOCITY_WIDTH = 0.05
-
-
-def check_below(value, limit, name, unit, why):
-    """Refuse a concrete `value` [`unit`] above `limit` as another unit's number (`why`: what it looks like and the
-    value in pamjax's unit); traced values are not checked."""
-    v = concrete_values(value)
-    if v is not None and np.any(v > limit):
-        raise PamjaxInputError(f"{name} = {float(np.max(v)):g} {unit}: more than {limit:g} {unit}: {why}")
-
-
-def check_velocity_width(width, name):
-    """A friction's `velocity_width` [m/s] > 0, finite, at most `MAX_VELOCITY_WIDTH` (mm/s typed as m/s refused)."""
-    check_positive(width, name)
-    check_below(width, MAX_VELOCITY_WIDTH, name, "m/s", "smoothed that wide, a friction has lost its step at a slow "
-                f"loop's speed (tanh(5 mm/s / {MAX_VELOCITY_WIDTH:g} m/s) is 10 % of F_c); that looks like mm/s "
-                "(pamjax takes m/s: 0.01 mm/s is 1e-5)")
 
 
 class AbstractFriction(eqx.Module):
@@ -106,7 +84,8 @@ class CoulombViscousFriction(AbstractFriction):
     def __check_init__(self):
         check_nonnegative(self.coulomb_force, "CoulombViscousFriction.coulomb_force")
         check_nonnegative(self.viscous_coefficient, "CoulombViscousFriction.viscous_coefficient")
-        check_velocity_width(self.velocity_width, "CoulombViscousFriction.velocity_width")  # 1 (mm/s) for 1e-3
+        check_positive(self.velocity_width, "CoulombViscousFriction.velocity_width")
+        check_plausible(self.velocity_width, "CoulombViscousFriction.velocity_width")  # 1 (mm/s) for 1e-3
 
     def smoothing_width(self):
         return self.velocity_width

@@ -26,17 +26,12 @@ from .._core.errors import (
     check_positive,
 )
 from .._core.fitting import positive, ratio
+from .._core.units import check_plausible
 from .._papers import datasheets, paper000
-from .friction import AbstractFriction, check_below, check_velocity_width
+from .friction import AbstractFriction
 from .smooth import smooth_abs
 
 EXPONENT_BOUNDS = (1.0, 10.0)  # n: ≥ 1 keeps the law continuously differentiable at u = 0; 10 is a corner already
-# m, the longest transition δ: the force reaches the other branch after about 2δ of travel, so δ = 0.1 m spends 0.2 m,
-# twice the whole stroke of paper 000's MAS-10 (95 mm: −20 to 75 mm) and of paper 001's DMSP-40-400, on one transition
-# and a loop never reaches its branches (paper 000's, Figs. 3 and 5, do within a few mm of a reversal). Transitions
-# are a fraction of a mm to a few mm (default 2 mm; docs/hysteresis.md fits 3.5 mm); in mm typed as m (3.5 for 3.5 mm,
-# a 7 m transition) they are far above it.
-MAX_TRANSITION_LENGTH = 0.1
 def exponent_field(default):
     """A Bouc–Wen exponent n [-]: fitted through a logistic onto `EXPONENT_BOUNDS`."""
     return eqx.field(converter=as_scalar, default=default,
@@ -80,12 +75,12 @@ class BoucWenFriction(AbstractFriction):
     - `coulomb_force`: F_c [N], the branch offset; 16 (paper 000: half the 32 N loop width, Figs. 3-5).
     - `transition_length`: δ [m]; 2e-3 (assumed: paper 000 gives no loop shape; a transition over ≈ 2δ = 4 mm,
       5 % of the MAS-10's 75 mm stroke; a fit parameter, identified in `pamjax/gallery/scripts/p000_12_hysteresis.py`);
-      at most `MAX_TRANSITION_LENGTH`, 0.1 m.
+      at most 0.1 m (`pamjax._core.units`' plausibility table).
     - `exponent`: n [-] in [1, 10]; 2 (assumed, between Dahl's 1 and a sharp corner; fitted through a logistic).
     - `shape`: β [-] in (0, 1]; ½ (the force leaves a branch along a straight line, Ikhouane & Rodellar's
       normalised form with β = γ).
     - `viscous_coefficient`: C_f [N s/m]; 250 (`pamjax.presets`, item 4).
-    - `velocity_width`: [m/s] smoothing |ẋ|; 1e-5 (numerical, as `BristleFriction`'s); at most `MAX_VELOCITY_WIDTH`,
+    - `velocity_width`: [m/s] smoothing |ẋ|; 1e-5 (numerical, as `BristleFriction`'s); at most
       0.05 m/s.
     """
 
@@ -99,15 +94,13 @@ class BoucWenFriction(AbstractFriction):
     def __check_init__(self):
         check_nonnegative(self.coulomb_force, "BoucWenFriction.coulomb_force")
         check_positive(self.transition_length, "BoucWenFriction.transition_length")
-        check_below(self.transition_length, MAX_TRANSITION_LENGTH, "BoucWenFriction.transition_length", "m",
-                    "the force takes about 2δ to reach the other branch, twice the MAS-10's whole 95 mm stroke "
-                    "(transitions span a fraction of a mm to a few mm); that looks like mm (pamjax takes m: 3.5 mm is "
-                    "3.5e-3)")
+        check_plausible(self.transition_length, "BoucWenFriction.transition_length")  # 3.5 (mm) for 3.5e-3 m
         check_in_closed_interval(self.exponent, *EXPONENT_BOUNDS, "BoucWenFriction.exponent")
         check_positive(self.shape, "BoucWenFriction.shape")
         check_in_closed_interval(self.shape, 0.0, 1.0, "BoucWenFriction.shape")
         check_nonnegative(self.viscous_coefficient, "BoucWenFriction.viscous_coefficient")
-        check_velocity_width(self.velocity_width, "BoucWenFriction.velocity_width")
+        check_positive(self.velocity_width, "BoucWenFriction.velocity_width")
+        check_plausible(self.velocity_width, "BoucWenFriction.velocity_width")  # 1 (mm/s) for 1e-3 m/s
 
     def smoothing_width(self):
         return self.velocity_width

@@ -133,11 +133,6 @@ class ChouHannafordForce(AbstractForceLaw):
         return jnp.pi * d0**2 / 4.0 * gauge_pressure * (3.0 * cos_theta**2 - 1.0)
 
 
-# m, the largest radius r0 of a muscle at rest: 0.1 m, a muscle 20 cm across, five times Festo's widest (the DMSP-40's
-# 40 mm bore; as `MAX_BORE_AREA` below); a radius in mm typed as m (5 for the MAS-10's 5 mm) is far above it.
-MAX_RADIUS = 0.1
-
-
 class TonduLopezForce(AbstractForceLaw):
     """Paper 000, eq. 6 (Tondu & Lopez): F = π r0² p_g [a(1 − k ε)² − b], a = 3/tan²θ0, b = 1/sin²θ0,
     ε = x/L0. `correction` k = 1 is eq. 6 as printed; k > 1 is Tondu & Lopez's correction for the real muscle's
@@ -153,13 +148,7 @@ class TonduLopezForce(AbstractForceLaw):
 
     def __check_init__(self):
         check_positive(self.radius, "TonduLopezForce.radius")
-        radius = concrete_values(self.radius)
-        if radius is not None and np.any(radius > MAX_RADIUS):  # 5 (mm) for 5e-3 m gave 2.4e8 N, not 240 N
-            raise PamjaxInputError(
-                f"TonduLopezForce.radius = {float(np.max(radius)):g} m: more than {MAX_RADIUS:g} m, a muscle 20 cm "
-                "across (the MAS-10's r0 is 5 mm, the DMSP-40's 20 mm); that looks like mm (pamjax takes m: 5 mm is "
-                "5e-3)"
-            )
+        check_plausible(self.radius, "TonduLopezForce.radius")  # 5 (mm) for 5e-3 m gave 2.4e8 N, not 240 N
         check_positive(self.nominal_length, "TonduLopezForce.nominal_length")
         check_plausible(self.nominal_length, "TonduLopezForce.nominal_length")
         check_positive(self.correction, "TonduLopezForce.correction")
