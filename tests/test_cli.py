@@ -356,6 +356,9 @@ SWEEP_CASES = {
                               'horizon = 1.0\nwindow = 2.0\n', r"\[sweep\] window must lie in \(0, horizon = 1\] s"),
     "sample_interval beyond window": ('kind = "steady_state"\n[sweep]\ncommands = [0.5]\nwindow = 0.5\n'
                                       'sample_interval = 0.6\n', r"\[sweep\] sample_interval = 0.6 s must be at most"),
+    # the window's mean of samples that coarse aliases the 50 Hz PWM's ripple (kPa off): was run, after the folder
+    "sample_interval aliasing the PWM": ('kind = "steady_state"\n[sweep]\ncommands = [0.5]\nsample_interval = 0.01\n',
+                                         r"sample_interval = 0.01 s is coarser than 1/20 of the switching valve's PWM"),
     "default sample_interval beyond window": ('kind = "steady_state"\n[system]\nvalve = "averaged"\n[sweep]\n'
                                               'window = 0.005\n', r"sample_interval = 0.01 s \(its default"),
     # the 50 Hz PWM latches one duty a period: at 30 Hz the "gain" was the ripple's (was: run, after the folder)

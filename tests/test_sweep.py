@@ -4,6 +4,8 @@ References are independent: each point is re-simulated with `simulate` (adaptive
 reductions are recomputed with NumPy from whole trajectories.
 """
 
+import dataclasses
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -329,6 +331,16 @@ def test_bad_input_is_named(averaged, kwargs, match):
         sweep(averaged, pamjax.Constant(0.5), ts, **kwargs)
 
 
+def test_a_fourier_window_sampled_unevenly_is_refused(averaged):
+    """The coefficient's sum weighs every sample alike, the integral's rule on even steps only: output times denser
+    in half of the window gave a quietly wrong coefficient; refused before any solve, naming the steps."""
+    ts = np.concatenate([np.linspace(0.0, 1.5, 151), np.linspace(1.505, 2.0, 100)])  # 10 ms, then 5 ms
+    with pytest.raises(pamjax.PamjaxInputError, match=r"FourierCoefficient\(1\) needs output times that sample its "
+                                                      r"window evenly .* from 0.005 to 0.01 s"):
+        sweep(averaged, pamjax.Sine(0.5, 0.2, 1.0), ts, {"signal.frequency": [1.0]}, reduce=FourierCoefficient(1),
+              progress=False)
+
+
 def test_a_fourier_window_longer_than_the_run_or_a_bad_frequency_is_refused(averaged):
     """On a 1 s run `FourierCoefficient(4)` at 1 Hz equalled `FourierCoefficient(1)`, a frequency of 0 gave twice the
     mean and -1 zeros; now each is refused before any solve, at every swept point's frequency."""
@@ -469,3 +481,100 @@ def test_local_shards_saved_and_loaded_merge_into_the_whole_result(averaged, tmp
     for c in whole.channels:
         np.testing.assert_array_equal(merged[c], whole[c])
     assert pamjax.SweepResult.load(whole.save(tmp_path / "whole")).points is None  # a whole result, no ".npz" added
+
+
+def _shard(result, keep):
+    """The points `keep` of a gather="local" result, as one process's shard holds them (its identity kept)."""
+    return pamjax.SweepResult(over={k: v[keep] for k, v in result.over.items()}, t=result.t, channels=result.channels,
+                              outputs={c: v[keep] for c, v in result.outputs.items()}, status=result.status[keep],
+                              dt=result.dt, method=result.method, points=result.points[keep],
+                              batch_shape=result.batch_shape, reduction=result.reduction, identity=result.identity)
+
+
+def test_shards_of_different_sweeps_are_refused_naming_what_differs(averaged, tmp_path):
+    """Only batch shape, channels, times and method were compared: a FinalValue shard joined a WindowMean(0.5) one,
+    duties 0.2-0.8 joined a quarter of them, RK4 at 1 ms joined RK4 at 0.5 ms (reported 1 ms), all silently; other
+    swept paths were a raw KeyError, a trajectory shard with a reduced one a NumPy ValueError. Each shard now
+    carries the sweep's identity (saved and loaded), and what differs is named."""
+    duties = np.linspace(0.2, 0.8, 4)
+
+    def local(values, reduce=FinalValue()):
+        return sweep(averaged, pamjax.Constant(0.5), TS, {"signal.value": values}, reduce=reduce, gather="local",
+                     progress=False)
+
+    def saved(shard, name):
+        return pamjax.SweepResult.load(shard.save(tmp_path / name))
+
+    final = local(duties)
+    head, tail = final.points < 2, final.points >= 2
+    a = saved(_shard(final, head), "a.npz")
+    assert (a.identity, a.reduction) == (final.identity, "FinalValue()") and a.identity.startswith("system=")
+    whole = pamjax.merge_sweep_shards([a, saved(_shard(final, tail), "b.npz")])  # one sweep's shards: joined
+    np.testing.assert_array_equal(whole["pressure"], final["pressure"][np.argsort(final.points)])
+    assert whole.identity == final.identity
+    one_sweep = r"shards must come from one sweep: shard 1 differs from shard 0 in "
+    with pytest.raises(pamjax.PamjaxInputError, match=one_sweep + r"the swept values \(over\) \(identity digests "):
+        pamjax.merge_sweep_shards([a, saved(_shard(local(duties / 4), tail), "c.npz")])
+    with pytest.raises(pamjax.PamjaxInputError, match=one_sweep + r"reduce \(WindowMean\(window=0.5\) vs "
+                                                                  r"FinalValue\(\)\)"):
+        pamjax.merge_sweep_shards([a, saved(_shard(local(duties, WindowMean(0.5)), tail), "d.npz")])
+    # what a shard holds is compared, identity or not (a shard built by hand, or a file saved before identities)
+    b = dataclasses.replace(_shard(final, tail), identity=None, reduction=None)
+    trajectories = {c: np.repeat(v[:, None], TS.size, axis=1) for c, v in b.outputs.items()}
+    for other, match in [(dataclasses.replace(b, dt=b.dt / 2), rf"dt \({b.dt / 2!r} s vs {b.dt!r} s\)"),
+                         (dataclasses.replace(b, over={"payload_mass": np.ones(2)}),
+                          r"swept paths \(over\) \(\['payload_mass'\] vs \['signal.value'\]\)"),
+                         (dataclasses.replace(b, outputs=trajectories), r"shape per point of outputs\['pressure'\] "
+                                                                        r".*\(\(21,\) vs \(\)\)")]:
+        with pytest.raises(pamjax.PamjaxInputError, match=one_sweep + match):
+            pamjax.merge_sweep_shards([a, other])
+    legacy = saved(b, "legacy.npz")  # a file without identity still loads and merges (unchecked beyond what it holds)
+    assert "identity" not in np.load(tmp_path / "legacy.npz").files and legacy.identity is None
+    np.testing.assert_array_equal(pamjax.merge_sweep_shards([a, legacy])["pressure"], whole["pressure"])
+
+
+def test_save_refuses_to_replace_a_file_and_load_names_a_file_it_did_not_write(tmp_path):
+    """`save` replaced an existing file silently (a second map under one name lost the first); `load` of the CLI's
+    column file `sweep.npz` was a raw KeyError('channels')."""
+    def result(duties):
+        return pamjax.SweepResult(over={"signal.value": np.asarray(duties)}, t=np.array([0.0, 1.0]),
+                                  channels=("pressure",), outputs={"pressure": np.array([2e5, 3e5])},
+                                  status=np.zeros(2, dtype=int), dt=0.01, method="rk4")
+
+    path = result([0.2, 0.4]).save(tmp_path / "map.npz")
+    with pytest.raises(FileExistsError, match=r"map.npz exists; pass overwrite=True"):
+        result([0.6, 0.8]).save(path)
+    np.testing.assert_array_equal(pamjax.SweepResult.load(path).over["signal.value"], [0.2, 0.4])
+    result([0.6, 0.8]).save(path, overwrite=True)
+    np.testing.assert_array_equal(pamjax.SweepResult.load(path).over["signal.value"], [0.6, 0.8])
+    cli = tmp_path / "sweep.npz"
+    np.savez(cli, duty=np.array([0.2, 0.5]), pressure_pa_abs=np.array([2e5, 4e5]), status=np.zeros(2))
+    np.save(tmp_path / "one.npy", np.zeros(3))
+    (tmp_path / "map.csv").write_text("t,pressure\n0,2e5\n")
+    for name, why in [("sweep.npz", r": it has no 't', 'dt', 'method', 'channels'"), ("one.npy", "one array"),
+                      ("map.csv", "not an NPZ archive")]:
+        with pytest.raises(pamjax.PamjaxInputError, match=rf"{name} is not a file SweepResult.save wrote.*{why}.*"
+                                                          r"`pamjax sweep` command line .* read it with np.load"):
+            pamjax.SweepResult.load(tmp_path / name)
+
+
+def test_an_adaptive_lane_sets_the_status_codes_of_the_other_methods(averaged, monkeypatch):
+    """`method="adaptive"` never set status 2 (an absolute pressure <= 0), which the status table promises for every
+    method, and gave a state that became NaN (solve's RESULT_NONFINITE) status 3, not 1. The lane's solve is replaced
+    by trajectories with those faults (a real adaptive solve keeps the pressure of this plant positive)."""
+    from pamjax._solve.trajectory import RESULT_NONFINITE
+    from pamjax._sweep import lanes
+
+    class Faulty:
+        def __init__(self, pressure, result):
+            self.pressure, self.result = jnp.asarray(pressure, dtype=float), jnp.asarray(result)
+
+        def channel(self, name):
+            return self.pressure
+
+    ts = jnp.array([0.0, 0.5, 1.0])
+    for pressure, result, status in [([2e5, 3e5, 4e5], 0, 0), ([2e5, -1e3, 4e5], 0, 2),
+                                     ([2e5, np.nan, np.nan], RESULT_NONFINITE, 1), ([2e5, 3e5, np.inf], 1, 3)]:
+        monkeypatch.setattr(lanes, "solve", lambda *a, traj=Faulty(pressure, result), **k: traj)
+        _, got = lanes._lane_adaptive(averaged, pamjax.Constant(0.5), None, ts, ("pressure",), None, {})
+        assert int(got) == status, (pressure, result)

@@ -55,3 +55,30 @@ def test_swept_matrix_elements_are_labelled_with_their_own_unit():
     assert over_column(model, "valve.coefficients[2,2]") == "valve.coefficients[2,2] [kg/(s Pa^2)]"
     assert over_column(model, "payload_mass") == "payload_mass [kg]"
     assert element_unit("m", (1,)) == "m"  # a unit without index exponents is every element's
+
+
+def test_a_key_a_signal_factory_never_reads_is_refused_with_the_nearest_leaf(no_solve):
+    """With a factory, a misspelt system path went to the factory, which never read it: every point ran the base
+    payload, status 0. Refused now, with the nearest leaf's path, as the same typo is without a factory; a key the
+    factory reads (by item, `get`, or by iterating over the values) reaches the solve."""
+    system = presets.mas10_system(valve="averaged")
+    ts = np.linspace(0.0, 0.1, 3)
+
+    def run(signal, over):
+        pamjax.sweep(system, signal, ts, over, reduce=pamjax.FinalValue(), progress=False)
+
+    with pytest.raises(pamjax.PamjaxInputError, match=r"over\['payload_mas'\]: the system \(MuscleSystem\) has no leaf "
+                                                      r"'payload_mas' and the signal factory never reads it .*it reads "
+                                                      r"\['amp'\]\); did you mean 'payload_mass'\?"):
+        run(lambda v: pamjax.Sine(0.5, v["amp"], 1.0), {"amp": 0.2, "payload_mas": [5.0, 15.0]})
+    with pytest.raises(pamjax.PamjaxInputError, match=r"over\['payload_mas'\]: the system \(MuscleSystem\) has no leaf "
+                                                      r"'payload_mas'; did you mean 'payload_mass'\?"):
+        run(pamjax.Sine(0.5, 0.2, 1.0), {"payload_mas": [5.0, 15.0]})
+    with pytest.raises(pamjax.PamjaxInputError, match=r"over\['signal.amp'\]: with a signal factory every signal.\* "
+                                                      r"key goes to the factory, which never reads this one"):
+        run(lambda v: pamjax.Sine(0.5, v["amp"], 1.0), {"amp": 0.2, "signal.amp": [0.1, 0.2]})
+    for factory, over in [(lambda v: pamjax.Sine(0.5, v.get("amp", 0.1), 1.0), {"amp": [0.1, 0.2]}),
+                          (lambda v: pamjax.Sine(**v), {"offset": 0.5, "amplitude": [0.1, 0.2], "frequency": 1.0}),
+                          (lambda v: pamjax.Sine(0.5, v["amp"], 1.0), {"amp": [0.1, 0.2], "payload_mass": 9.6})]:
+        with pytest.raises(AssertionError, match="a solve was started"):
+            run(factory, over)

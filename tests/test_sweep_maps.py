@@ -217,3 +217,45 @@ def test_a_keyword_no_map_takes_is_named(call, key):
     with pytest.raises(pamjax.PamjaxInputError, match=match) as err:
         call(presets.mas10_tank_system(valve="averaged"))
     assert ("solve_options" in str(err.value).split("its arguments")[0]) == (key != "horizn")
+
+
+@pytest.fixture
+def maps_no_sweep(monkeypatch):
+    """Reaching the map's sweep is a test failure: the refusal must come first."""
+    import functools
+
+    from pamjax._sweep import maps
+
+    @functools.wraps(maps.sweep)  # its signature: the map checks its keywords against sweep's
+    def refuse(*args, **kwargs):
+        raise AssertionError("the map's sweep was started")
+
+    monkeypatch.setattr(maps, "sweep", refuse)
+
+
+def test_a_sample_interval_that_aliases_a_pwm_valves_ripple_is_refused(maps_no_sweep):
+    """On the 50 Hz valve a sample_interval of 0.01 s put the map 3.4 and 5.4 kPa off at duties 0.2 and 0.4 (0.005
+    s: 0.8 and 2.0 kPa), status 0: coarser than 1/20 of the PWM period is refused, saying what to write."""
+    pwm = presets.mas10_system(valve="pwm")
+    for interval in (0.01, 0.005):
+        with pytest.raises(pamjax.PamjaxInputError, match=rf"sample_interval = {interval:g} s is coarser than 1/20 of "
+                                                          r"the switching valve's PWM period \(1/\(20 x 50 Hz\) = "
+                                                          r"0.001 s\).*Drop sample_interval .* or give at most 0.001"):
+            steady_state_map(pwm, [0.2, 0.4], horizon=1.0, window=0.2, sample_interval=interval, progress=False)
+    with pytest.raises(AssertionError, match="sweep was started"):  # 1/20 of the period: the map runs
+        steady_state_map(pwm, [0.2], horizon=1.0, window=0.2, sample_interval=0.001, progress=False)
+    from pamjax._sweep.maps import check_pwm_sampling
+
+    check_pwm_sampling(0.01, 0.0)  # no switching valve: any interval up to the window
+
+
+def test_a_maps_arguments_of_the_wrong_kind_are_named(maps_no_sweep):
+    """A window given as a string was a raw TypeError, NaN among the commands was named over['signal.value'] (the
+    map's internal path), and flow_surface without an Air a raw AttributeError."""
+    averaged = presets.mas10_system(valve="averaged")
+    with pytest.raises(pamjax.PamjaxInputError, match=r"window must be a duration \[s\], a number > 0, got '0.2'"):
+        steady_state_map(averaged, [0.2], horizon=1.0, window="0.2", progress=False)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"commands must be finite \(no NaN or inf\), got \[0.2 nan\]"):
+        steady_state_map(averaged, [0.2, np.nan], horizon=1.0, window=0.2, progress=False)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"air must be the gas the valve passes, a pamjax Air .*got None"):
+        pamjax.flow_surface(presets.mas10_valve(), [0.5], [2e5], None)

@@ -213,6 +213,10 @@ def check_map_settings(config, model):
             said = "" if "sample_interval" in sw else " (its default for this model's valve)"
             raise PamjaxInputError(f"[sweep] sample_interval = {interval:g} s{said} must be at most the window "
                                    f"({window:g} s): the window would hold no sample")
+        if "sample_interval" in sw:  # one that aliases a switching valve's ripple, before the output folder is taken
+            over = {p: _axis(v, f"over.{p}") for p, v in sw.get("over", {}).items()}
+            f = maps.pwm_frequencies(model, over)
+            maps.check_pwm_sampling(float(interval), float(f.max()) if f.size else 0.0)
     elif kind == "frequency_response":
         offset = float(sw.get("offset", _default("frequency_response", "offset")))
         amplitude = abs(float(sw.get("amplitude", _default("frequency_response", "amplitude"))))

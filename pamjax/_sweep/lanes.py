@@ -21,6 +21,7 @@ from .._solve import fixed_step as _fixed_step, synchronous as _sync
 from .._solve.edges import StartsOff
 from .._solve.scaled import scaled
 from .._solve.simulate import solve
+from .._solve.trajectory import RESULT_NONFINITE, RESULT_NONPHYSICAL
 from . import kernel
 from .plan import host_lanes, lane_system, make_lane
 from .result import NON_FINITE, NON_PHYSICAL, SOLVER_FAILED, SUCCESS
@@ -157,10 +158,16 @@ def _lane_adaptive(system, signal, y0, ts, channels, reduction, solve_options):
         solve_options["jump_ts"] = jumps if given is None else jnp.sort(jnp.concatenate([jumps, jnp.ravel(given)]))
     traj = solve(system, signal, ts, y0, ts[0], throw=False, **{"adjoint": "forward", **solve_options})
     obs = jnp.stack([jnp.asarray(traj.channel(c), dtype=float) for c in channels], axis=-1)
-    finite = jnp.all(jnp.isfinite(obs))
+    finite = jnp.all(jnp.isfinite(obs)) & (traj.result != RESULT_NONFINITE)
+    # every absolute pressure > 0 at the output times, as the fixed-step lanes check it (`_observe`)
+    physical = jnp.all(jnp.asarray(traj.channel("pressure"), dtype=float) > 0) & (traj.result != RESULT_NONPHYSICAL)
     if reduction is not None:
         obs = reduction.weights(ts, system, signal) @ obs
-    status = jnp.where(traj.result != 0, SOLVER_FAILED, jnp.where(finite, SUCCESS, NON_FINITE))
+    # the codes of `_lane_fixed` (1 non-finite, 2 non-physical); 3 for diffrax's own failures (max_steps, ...): a
+    # state that became non-finite (`solve`'s RESULT_NONFINITE) is status 1 as on the other methods, not 3
+    failed = (traj.result != 0) & (traj.result != RESULT_NONFINITE) & (traj.result != RESULT_NONPHYSICAL)
+    status = jnp.where(failed, SOLVER_FAILED,
+                       jnp.where(finite, jnp.where(physical, SUCCESS, NON_PHYSICAL), NON_FINITE))
     return obs, status
 
 

@@ -2,6 +2,7 @@
 response. Thin recipes over `sweep` and `cycle_averaged_flow`; no physics here."""
 
 import inspect
+import numbers
 from collections.abc import Sequence
 from typing import Any
 
@@ -46,22 +47,28 @@ def steady_state_map(system: AbstractSystem, commands: RealVectorLike, *, horizo
     **Arguments:** `commands` 1-D; `horizon` [s] (default 5 s: on the MAS-10 with 9.6 kg the position still creeps
     by ~2 mm between 2 s and 5 s at duty 0.5); `window` [s] (default 1 s = 50 PWM periods); `sample_interval` [s]
     of the output times (default: for a switching valve 1/100 of the PWM period in the window, whose trapezoid mean
-    is then within 0.03 Pa of the exact time average on the MAS-10, and 1/20 before it; else 0.01 s); `over`:
+    is then within 0.03 Pa of the exact time average on the MAS-10, and 1/20 before it; else 0.01 s; with a
+    switching valve one coarser than 1/20 of its PWM period is refused, `check_pwm_sampling`); `over`:
     further swept paths, broadcast against `commands[:, None]`-style shapes by the caller (not "signal.value": the
     map's axis, `commands`); `sweep_kwargs` go to `sweep` (not `reduce`: the window's mean is the map).
     **Returns:** a `SweepResult` with `over["signal.value"]`.
     """
     check_map_arguments(steady_state_map, "signal.value", "commands", over, sweep_kwargs,
                         "the mean over the last window")
-    commands = np.asarray(commands, dtype=float)
+    try:
+        commands = np.asarray(commands, dtype=float)
+    except (TypeError, ValueError):
+        raise PamjaxInputError(f"commands must be a non-empty 1-D array of duties, got {commands!r}") from None
     if commands.ndim != 1 or commands.size == 0:
         raise PamjaxInputError(f"commands must be a non-empty 1-D array, got shape {commands.shape}")
-    check_positive(horizon, "horizon")
+    check_finite(commands, "commands")  # named as the map's argument, not as over['signal.value']
+    horizon, window = duration(horizon, "horizon"), duration(window, "window")
     if not 0 < window <= horizon:
         raise PamjaxInputError(f"window must lie in (0, horizon = {horizon}] s, got {window}")
     pwm = _pwm_frequency(system, over)  # Hz, 0 without a switching valve
     if sample_interval is not None:
-        check_positive(sample_interval, "sample_interval")
+        sample_interval = duration(sample_interval, "sample_interval")
+        check_pwm_sampling(sample_interval, pwm)
     if sample_interval is None and pwm > 0:
         ts = window_grid(horizon, window, 1.0 / (SAMPLES_PER_PWM_PERIOD * pwm),
                          1.0 / (WINDOW_SAMPLES_PER_PWM_PERIOD * pwm))
@@ -73,6 +80,33 @@ def steady_state_map(system: AbstractSystem, commands: RealVectorLike, *, horizo
         ts = np.linspace(0.0, horizon, int(round(horizon / sample_interval)) + 1)
     return sweep(system, Constant(0.5), ts, {"signal.value": commands, **(over or {})}, reduce=WindowMean(window),
                  **sweep_kwargs)
+
+
+def duration(x, name):
+    """A duration [s] a map takes (`horizon`, `window`, `sample_interval`) as a float > 0, or `PamjaxInputError`
+    naming it: a string ("0.2") was a raw TypeError from a comparison."""
+    if isinstance(x, (bool, np.bool_)) or not (isinstance(x, numbers.Real) or (
+            isinstance(x, (np.ndarray, jax.Array)) and np.ndim(x) == 0 and np.asarray(x).dtype.kind in "iuf")):
+        raise PamjaxInputError(f"{name} must be a duration [s], a number > 0, got {x!r}")
+    check_positive(x, name)
+    return float(x)
+
+
+def check_pwm_sampling(sample_interval, pwm):
+    """`PamjaxInputError` for a `sample_interval` [s] coarser than 1/`SAMPLES_PER_PWM_PERIOD` of the PWM period of a
+    switching valve (`pwm` [Hz], 0 without one): the window's mean of outputs sampled so coarsely aliases the PWM
+    ripple (on the MAS-10's 50 Hz valve, duties 0.2 and 0.4: 3.4 and 5.4 kPa off at 0.01 s, 0.8 and 2.0 kPa at
+    0.005 s; the default grid is within 0.03 Pa of the exact time average)."""
+    if pwm <= 0:
+        return
+    finest = 1.0 / (SAMPLES_PER_PWM_PERIOD * pwm)
+    if sample_interval > finest * (1 + 1e-9):
+        raise PamjaxInputError(
+            f"sample_interval = {sample_interval:g} s is coarser than 1/{SAMPLES_PER_PWM_PERIOD} of the switching "
+            f"valve's PWM period (1/({SAMPLES_PER_PWM_PERIOD} x {pwm:g} Hz) = {finest:g} s): the window's mean of "
+            "samples that coarse aliases the PWM ripple (kPa off on the MAS-10 at 0.01 s). Drop sample_interval (the "
+            f"default samples the window at 1/{WINDOW_SAMPLES_PER_PWM_PERIOD} of the period) or give at most "
+            f"{finest:g} s")
 
 
 def window_grid(horizon, window, before, inside):
@@ -170,6 +204,9 @@ def flow_surface(valve: AbstractSwitchingValve, commands: RealVectorLike, pressu
     `samples` phases per period (midpoint rule; with the smoothed edges 400 agree with 4000 to 2e-16 of the
     range on the MHE2 preset, measured)."""
     commands, pressures = check_flow_surface(valve, commands, pressures, samples, "samples")
+    if not isinstance(air, eqx.Module):  # None was a raw AttributeError from inside the traced flow
+        raise PamjaxInputError(f"air must be the gas the valve passes, a pamjax Air (pj.Air(), or the system's "
+                               f"system.air), got {air!r}")
     return np.asarray(_flow_surface(valve, commands, pressures, air, samples))
 
 

@@ -2,6 +2,7 @@
 built from one point's values, and the checks of every point's values against the components' own constraints,
 before any solve."""
 
+import difflib
 import inspect
 import re
 
@@ -269,7 +270,7 @@ def make_plan(system, signal, base_state, over, y0_given=True):
     """The `Plan` of `over` ({path: values}), the values broadcast to the batch shape (plus each leaf's own shape),
     and the batch shape. Paths name a leaf of the system, the signal ("signal.…") or the initial state ("y0.…": a
     leaf of the `y0` given, or without one a number `system.initial_state` takes, e.g. "y0.pressure"); with a signal
-    factory, any other name goes to the factory."""
+    factory, any other name goes to the factory, which must read it (`check_factory_keys`)."""
     factory = not isinstance(signal, AbstractSignal)
     keys, targets, leaf_shapes, arrays = [], [], [], []
     for key, value in over.items():
@@ -299,7 +300,9 @@ def make_plan(system, signal, base_state, over, y0_given=True):
         if int(np.prod(a.shape[: a.ndim - len(s)])) == 0:
             raise PamjaxInputError(f"over[{k!r}] holds no values (shape {a.shape}): give at least one")
     values = {k: np.broadcast_to(a, batch_shape + s) for k, a, s in zip(keys, arrays, leaf_shapes)}
-    return Plan(tuple(keys), tuple(targets), tuple(leaf_shapes)), values, batch_shape
+    plan = Plan(tuple(keys), tuple(targets), tuple(leaf_shapes))
+    check_factory_keys(system, signal, plan, values)
+    return plan, values, batch_shape
 
 
 def _initial_state_keyword(system, key):
@@ -325,12 +328,81 @@ def _resolve(system, signal, base_state, factory, key):
     except AttributeError:
         leaf = None
         if not factory:
-            raise PamjaxInputError(
-                f"over[{key!r}]: the {where} ({type(root).__name__}) has no leaf {'.'.join(parts)!r}"
-            ) from None
+            raise PamjaxInputError(no_leaf(key, where, root, parts)) from None
         where, parts = "factory", [key]
     if where == "signal" and factory:
         where = "factory"
     if where != "factory" and not isinstance(leaf, (jax.Array, np.ndarray, float, int, jax.ShapeDtypeStruct)):
         raise PamjaxInputError(f"over[{key!r}] must name an array parameter, it names a {type(leaf).__name__}")
     return where, parts, leaf
+
+
+def no_leaf(key, where, root, parts, also=""):
+    """The message for a swept path that names no leaf of the system, signal or start (`also`: what follows), with
+    the nearest leaf's path ("payload_mas": did you mean 'payload_mass'?)."""
+    names = [jtu.keystr(path).lstrip(".") for path, _ in jtu.tree_flatten_with_path(root)[0]]
+    prefix = "" if where == "system" else f"{where}."
+    close = difflib.get_close_matches(".".join(parts), names, n=1)
+    hint = f"; did you mean {prefix + close[0]!r}?" if close else ""
+    return f"over[{key!r}]: the {where} ({type(root).__name__}) has no leaf {'.'.join(parts)!r}{also}{hint}"
+
+
+class _ReadKeys(dict):
+    """A point's values handed to a signal factory, recording the keys it reads (by item, `get` or `in`); one that
+    iterates over them (`dict(v)`, `**v`, `v.items()`) reads them all."""
+
+    def __init__(self, values):
+        super().__init__(values)
+        self.read = set()
+
+    def __getitem__(self, key):
+        self.read.add(key)
+        return super().__getitem__(key)
+
+    def get(self, key, default=None):
+        self.read.add(key)
+        return super().get(key, default)
+
+    def __contains__(self, key):
+        self.read.add(key)
+        return super().__contains__(key)
+
+    def __iter__(self):
+        self.read.update(super().keys())
+        return super().__iter__()
+
+    def keys(self):
+        self.read.update(super().keys())
+        return super().keys()
+
+    def values(self):
+        self.read.update(super().keys())
+        return super().values()
+
+    def items(self):
+        self.read.update(super().keys())
+        return super().items()
+
+
+def check_factory_keys(system, signal, plan, values):
+    """`PamjaxInputError` for a swept key a signal factory never reads that names no leaf of the system (a typo:
+    `{"payload_mas": [5, 15]}` went to the factory, which ignored it: every point ran the base payload, status 0),
+    named with the nearest leaf's path, as without a factory. The factory is called once on the host with the first
+    point's values (the lanes call it with each point's)."""
+    keys = [key for key, (where, _) in zip(plan.keys, plan.targets) if where == "factory"]
+    if isinstance(signal, AbstractSignal) or not keys:
+        return
+    point = _ReadKeys({k: np.asarray(v).reshape((-1,) + shape)[0]
+                       for (k, v), shape in zip(values.items(), plan.leaf_shapes)})
+    signal(point)
+    for key in keys:
+        if key in point.read:
+            continue
+        where, parts = _split(key)
+        unread = (f" and the signal factory never reads it (a key that names no leaf of the system goes to the "
+                  f"factory; it reads {sorted(point.read)})")
+        if where == "system":
+            raise PamjaxInputError(no_leaf(key, where, system, parts, unread))
+        raise PamjaxInputError(f"over[{key!r}]: with a signal factory every signal.* key goes to the factory, which "
+                               f"never reads this one (it reads {sorted(point.read)}): have the factory read it, or "
+                               "drop it")

@@ -112,6 +112,14 @@ class FourierCoefficient(AbstractReduction):
             raise PamjaxInputError(f"FourierCoefficient's frequency ({self.frequency!r}) must be finite and > 0 [Hz] "
                                    f"at every point, got {bad}")
         check_window(self.periods / f.min(), ts, f"FourierCoefficient({self.periods}) at {f.min():.6g} Hz")
+        ts = np.asarray(ts, dtype=float)
+        steps = np.diff(ts[ts >= ts[-1] - self.periods / f.min() * (1 + 1e-9)])
+        if steps.size and np.ptp(steps) > 1e-6 * np.mean(steps):  # the sum is the integral's rule for even steps only
+            raise PamjaxInputError(
+                f"FourierCoefficient({self.periods}) needs output times that sample its window evenly (the sum "
+                f"(2/n) Σ y(t_k) exp(−i 2π f t_k) weighs every sample alike), got steps from {steps.min():.6g} to "
+                f"{steps.max():.6g} s in the last {self.periods / f.min():.6g} s: give ts from np.linspace, or use "
+                "pamjax.frequency_response")
 
     def lane_frequency(self, system, signal):
         """The lane's frequency [Hz]: the number given, or read from the lane by its path ("signal.frequency": the

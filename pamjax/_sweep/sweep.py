@@ -38,9 +38,9 @@ from .lanes import (
     method_and_step,
     run_lanes,
 )
-from .plan import host_lanes, make_plan, structure, validate_values
+from .plan import host_lanes, make_plan, make_signal, structure, validate_values
 from .reductions import AbstractReduction
-from .result import SUCCESS, SweepResult, in_point_order
+from .result import SUCCESS, SweepResult, in_point_order, sweep_identity
 from .sharding import Layout, check_devices, device_of, gather_processes, local_part, mesh_of, put
 
 
@@ -80,9 +80,10 @@ def sweep(
       `"friction.coulomb_force"`, `"muscle.force_law.k0"`), of the signal (`"signal.value"`,
       `"signal.frequency"`) or of the initial state (`"y0.pressure"` [Pa abs]: without `y0`, an argument of
       `system.initial_state`, so the payload starts in equilibrium at that pressure; with `y0`, its leaf); with a
-      signal factory any other name is passed to the factory. Values broadcast together (NumPy rules) to the batch
-      shape, so `{"signal.value": u[:, None], "valve.supply_pressure": p[None, :]}` is a grid; a non-scalar leaf
-      takes its own shape as trailing axes.
+      signal factory any other name is passed to the factory, which must read it (a key it never reads, such as a
+      misspelt parameter path, is refused with the nearest leaf's path). Values broadcast together (NumPy rules) to
+      the batch shape, so `{"signal.value": u[:, None], "valve.supply_pressure": p[None, :]}` is a grid; a
+      non-scalar leaf takes its own shape as trailing axes.
     - `y0`: base initial state (default: each point's `system.initial_state()`, at rest in equilibrium).
     - `reduce`: None (whole trajectories at `ts`), `FinalValue()`, `WindowMean(window)` or
       `FourierCoefficient(periods, frequency)`.
@@ -131,8 +132,8 @@ def sweep(
       process returns the points it computed, flat, with their indices in `points`: for batches larger than one
       host's memory; `merge_sweep_shards` joins them).
 
-    **Returns:** a `SweepResult` (`over`, `t`, `outputs[channel]`, `status`, `dt`, `method`; `points` with
-    `gather="local"`).
+    **Returns:** a `SweepResult` (`over`, `t`, `outputs[channel]`, `status`, `dt`, `method`, `reduction`,
+    `identity`: a digest of the whole sweep that every process's shard shares; `points` with `gather="local"`).
 
     **Raises:** `PamjaxInputError` naming the argument (unknown path, values that break a component's constraint,
     a start pressure that is not ABSOLUTE [Pa] > 0, a command outside the valve's range, bad `ts`/`dt`/`chunk_size`/
@@ -174,6 +175,8 @@ def sweep(
         dt = float(np.max(steps))
     config = (method, tuple(int(c) for c in counts), channels, reduce, tuple(sorted((solve_options or {}).items())),
               grid)
+    record = dict(reduction=repr(reduce), identity=_identity(system, signal, y0, plan, flat, batch_shape, ts_np, config,
+                                                             dt))
     mesh, device = mesh_of(devices), device_of(devices)
     layout = Layout.plan(batch_size, chunk_size, mesh, devices,
                          len(channels) * (1 if reduce is not None else ts_np.size) * 2)  # x2: complex
@@ -181,7 +184,7 @@ def sweep(
     if gather == "local":
         return SweepResult(over={k: v[points] for k, v in flat.items()}, t=ts_np, channels=channels,
                            outputs={ch: out[..., i] for i, ch in enumerate(channels)},  # (n,) or (n, T) per channel
-                           status=status, dt=dt, method=method, points=points, batch_shape=batch_shape)
+                           status=status, dt=dt, method=method, points=points, batch_shape=batch_shape, **record)
     if layout.processes > 1:
         points, out, status = gather_processes(points, out, status)
     out, status = in_point_order(points, out, status, batch_size)
@@ -190,7 +193,17 @@ def sweep(
     else:
         outputs = {ch: out[:, i].reshape(batch_shape) for i, ch in enumerate(channels)}
     return SweepResult(over=values, t=ts_np, channels=channels, outputs=outputs, status=status.reshape(batch_shape),
-                       dt=dt, method=method)
+                       dt=dt, method=method, **record)
+
+
+def _identity(system, signal, y0, plan, flat, batch_shape, ts_np, config, dt):
+    """`SweepResult.identity` of the whole sweep (`sweep_identity`), before its points are spread over processes: a
+    factory by the signals it builds at the first and last points (a function's own text holds no values)."""
+    if not isinstance(signal, AbstractSignal):
+        signal = [make_signal(signal, plan, {k: v[i] for k, v in flat.items()}) for i in (0, -1)]
+    method, counts, channels, reduce, solve_options, grid = config
+    return sweep_identity(system=system, signal=signal, y0=y0, over=(dict(flat), batch_shape), reduce=reduce,
+                          settings=(method, float(dt), counts, channels, solve_options, grid, ts_np))
 
 
 def _scheme(system, signal, y0, plan, flat, ts_np, method, dt):
