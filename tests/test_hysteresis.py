@@ -107,13 +107,13 @@ def test_reduces_to_the_constant_offset():
 
 
 def test_dahl_limit_is_the_bristle_model():
-    """n = 1, β = 1: ż = v − |v| z/δ, the bristle (Dahl) law with σ0 = F_c/δ; without bristle damping the forces
-    are equal too."""
-    bw = pj.BoucWenFriction(16.0, 1.6e-4, 1.0, 1.0, 250.0, 1e-5)
-    bristle = pj.BristleFriction(16.0, 1e5, 0.0, 250.0, 1e-5)
+    """n = 1, β = 1: ż = v − |v| z/δ, the bristle (Dahl) law with σ0 = F_c/δ, as Bouc–Wen's |ẋ| smoothing width
+    → 0 (the bristle law's |v| is exact); without bristle damping the forces are equal too."""
+    bw = pj.BoucWenFriction(16.0, 1.6e-4, 1.0, 1.0, 250.0, 1e-12)
+    bristle = pj.BristleFriction(16.0, 1e5, 0.0, 250.0)
     for v, z in ((0.01, 1e-4), (-0.02, 5e-5), (3e-3, -1.5e-4)):
-        assert float(bw.state_rate(v, z)) == pytest.approx(float(bristle.state_rate(v, z)), rel=1e-12)
-        assert float(bw.force(v, z)) == pytest.approx(float(bristle.force(v, z)), rel=1e-12)
+        assert float(bw.state_rate(v, z)) == pytest.approx(float(bristle.state_rate(v, z)), rel=1e-9)
+        assert float(bw.force(v, z)) == pytest.approx(float(bristle.force(v, z)), rel=1e-9)
 
 
 def test_memoryless_friction_gives_the_loop_force_map():

@@ -362,6 +362,31 @@ def test_a_root_the_system_cannot_reach_is_refused():
     assert float(near.pressure) == pytest.approx(131295.0, rel=1e-4)
 
 
+
+def test_a_stick_slip_equilibrium_holds_its_stuck_mode_and_has_no_linear_model():
+    """KarnoppFriction: the stuck mode's position and velocity rates are 0 at every position, so Newton's method kept
+    the guess's position: from guesses at 4e5 and 2.5e5 Pa, duty 0.5 "converged" at 26.96 and 16.85 mm where the net
+    force on the payload is 45.7 and 96.7 N, beyond F_c = 16 N (simulated from there, it moved to 35.2 mm), and
+    `linearise` there gave three poles at 0. Refused, naming the force and the friction-free rest position; a guess
+    that holds gives an equilibrium within ±F_c; a sliding or moving guess, and linearising a stuck state, are refused
+    before anything is computed, naming the smooth twin."""
+    system = pamjax.presets.mas10_system("averaged", friction="karnopp")
+    with pytest.raises(pamjax.PamjaxSolveError, match=r"position = 26\.95\d* mm.*net force on it is 45\.\d+ N, "
+                                                      r"beyond F_c = 16 N.*rest position 39\.90\d* mm"):
+        equilibrium(system, 0.5, system.initial_state(pressure=4e5))
+    rest = equilibrium(system, 0.5, system.initial_state(pressure=4.6e5))
+    assert float(rest.friction) == 0.0 and float(rest.velocity) == 0.0
+    assert abs(float(system.outputs(0.0, rest, 0.5)["friction_force"])) <= 16.0
+    with pytest.raises(pamjax.PamjaxInputError, match=r"stuck.*no small-signal model.*CoulombViscousFriction"
+                                                      r"\(coulomb_force=16, viscous_coefficient=250\)"):
+        linearise(system, rest, 0.5)
+    moving = eqx.tree_at(lambda s: s.velocity, rest, jnp.asarray(0.2))
+    with counted_compilations() as compiled:
+        for guess, kind in ((system.initial_state(pressure=4.6e5, velocity=0.01), "sliding"), (moving, "stuck")):
+            with pytest.raises(pamjax.PamjaxInputError, match=rf"guess is {kind}.* at velocity 0\.\d+ m/s"):
+                equilibrium(system, 0.5, guess)
+    assert compiled == [], compiled
+
 def test_a_switching_valve_is_refused_naming_the_averaged_one():
     """A PWM valve was frozen at the PWM phase of `t`: "equilibria" at 101325 Pa (t = 0) and -1.09e9 Pa (t = 5 ms),
     and a static gain of 0. Refused before anything is computed, naming the averaged valve."""

@@ -19,11 +19,9 @@ import numpy as np
 from .._core.custom_types import ArrayLike, Float, Real, RealScalarLike
 from .._core.errors import PamjaxInputError, PamjaxSolveError, check_count, check_finite, concrete_values
 from .._core.fastjit import keyed_by_code
-from .._core.units import MAX_ABSOLUTE_PA
-from .._physics.regulator import AbstractRegulator
-from .._physics.valves.base import AbstractValve
 from .._systems.base import AbstractSystem
-from .checks import START_STROKE_MARGIN, check_parameters, check_positive_number, check_start_state
+from .checks import check_parameters, check_positive_number, check_start_state
+from .equilibrium_checks import check_guess_at_rest, check_mode_holds, check_not_stuck, check_reachable
 
 
 class StateSpace(eqx.Module):
@@ -224,8 +222,11 @@ def linearise(system: AbstractSystem, state: eqx.Module, command: RealScalarLike
     **Raises:** `PamjaxInputError`, before anything is computed, for what `simulate` refuses in the system and in a
     start state (a pressure in bar or gauge, a position in mm or outside the stroke), a switching (PWM) valve, a
     `state`, `command` or `t` not finite, a command of a shape the system does not take or outside its
-    `command_range`, `inputs` that are no such dict; `PamjaxSolveError` where a derivative is not finite (named)."""
+    `command_range`, `inputs` that are no such dict, a stuck state of a stick-slip friction (`KarnoppFriction`: at
+    rest nothing moves until the net force reaches F_c, poles at 0; its smooth twin `CoulombViscousFriction` named);
+    `PamjaxSolveError` where a derivative is not finite (named)."""
     _check_inputs(system, command, state, "state", t)
+    check_not_stuck(system, state)  # stick-slip at rest: poles at 0, no small-signal model
     if not isinstance(inputs, Mapping | None):  # a list of functions: a raw TypeError in dict() before
         raise PamjaxInputError(f"inputs must be a dict name → function selecting an array leaf of the system, e.g. "
                                f"{{'outlet_flow': lambda s: s.outlet_flow}}, got {type(inputs).__name__}")
@@ -243,7 +244,8 @@ def linearise(system: AbstractSystem, state: eqx.Module, command: RealScalarLike
     for name in outputs:
         if name not in available or available[name] is None:
             raise PamjaxInputError(f"unknown output {name!r}; this system has {sorted(available)}")
-    input_names = _names(command, "command") + tuple(n for name, leaf in zip(inputs, extra) for n in _names(leaf, name))
+    input_names = _names(command, "command") + tuple(n for name, leaf in zip(inputs, extra)
+                                                         for n in _names(leaf, name))
     if len(set(input_names)) < len(input_names):  # an input named "command" was read as the command's column
         raise PamjaxInputError(f"inputs: names must differ from the command's ('command') and from each other, got "
                                f"input names {list(input_names)}; name each after its leaf, e.g. 'outlet_flow'")
@@ -375,10 +377,13 @@ def equilibrium(system: AbstractSystem, command: RealScalarLike | Real[ArrayLike
     whose rate vanishes at rest whatever its value, the equilibria form a continuum and the steps converge to the
     one nearest the guess; a long `simulate` (or `steady_state_map`) gives the one reached from a given start. One
     small compiled loop (optimistix's `Newton` compiled one several times the size: ~12 s against ~2 s, DMSP-40).
-    **Raises:** `PamjaxInputError` before anything is computed for what `linearise` refuses, and `rtol`, `atol` not
-    finite numbers > 0 or a `max_steps` not an int >= 1; `PamjaxSolveError` if it does not converge within
-    `max_steps`, or converges to a state the system cannot reach (a spurious root: `_check_reachable`)."""
+    **Raises:** `PamjaxInputError` before anything is computed for what `linearise` refuses in any state, a guess
+    of stick-slip friction (`KarnoppFriction`) not at rest in its stuck mode, and `rtol`, `atol` not finite numbers
+    > 0 or a `max_steps` not an int >= 1; `PamjaxSolveError` if it does not converge within `max_steps`, or
+    converges to a state the system cannot reach (a spurious root: `check_reachable`) or, with stick-slip friction,
+    to a stuck payload under a net force beyond F_c (Newton's method cannot move a stuck one: `check_mode_holds`)."""
     _check_inputs(system, command, guess, "guess", t)
+    check_guess_at_rest(system, guess)  # stick-slip: an equilibrium is stuck at rest
     check_positive_number(rtol, "rtol")
     check_positive_number(atol, "atol")
     check_count(max_steps, "max_steps", "an int >= 1 (Newton steps)")
@@ -388,48 +393,9 @@ def equilibrium(system: AbstractSystem, command: RealScalarLike | Real[ArrayLike
                                      scaled_guess, scale, float(rtol), float(atol), int(max_steps))
     if not bool(converged):
         raise PamjaxSolveError(_no_convergence(y, np.asarray(singular), max_steps))
-    _check_reachable(system, y, t)
+    check_reachable(system, y, t)
+    check_mode_holds(system, y, t, command)  # a stuck payload's zero rates made any position an "equilibrium"
     return y
-
-
-# Pressures and positions admitted beyond the bounds `equilibrium` checks (`_check_reachable`), as a fraction of the
-# bounds' span: a regulator settles its hysteresis and droop (25 and 50 mbar of its 6 bar) beyond its set pressure.
-REACH_MARGIN = 0.05
-
-
-def _check_reachable(system, y, t):
-    """A `PamjaxSolveError` for a converged `y` the system cannot reach, a spurious root (eq. 13's polynomial in p has
-    one at 2.52 MPa abs for the MAS-10 at duty 0.1, 4x its 0.65 MPa supply; `simulate` settles at 0.131 MPa): a
-    pressure ≤ 0 or outside [atmosphere, the highest one its elements feed] where each says one (a continuous valve:
-    where its flow stops at every command, in 2.5 kPa steps; a regulator with a flow law into its chamber: its highest
-    set pressure), or a position beyond its stroke by more than `START_STROKE_MARGIN`. A traced `y` is not checked."""
-    if any(concrete_values(leaf) is None for leaf in jtu.tree_leaves(y)):
-        return
-    air, tops, atmosphere = system.air, [], float(system.air.atmospheric_pressure)
-    for element in system.actuators.values():
-        if isinstance(element, AbstractValve):
-            gauge, (lo, hi) = np.arange(0.0, MAX_ABSOLUTE_PA + 1.0, 2.5e3), element.command_range
-            flow = element.mass_flow(t, jnp.linspace(lo, hi, 51)[:, None], atmosphere + gauge, air)
-            filling = np.asarray(flow) > 0
-            tops.append(None if np.any(np.all(filling, axis=1)) else np.max(gauge[np.argmax(~filling, axis=1)]))
-        else:
-            flow_law = isinstance(element, AbstractRegulator) and element.needs_volume
-            tops.append(element.max_gauge_pressure(air) if flow_law else None)
-    top = None if any(h is None for h in tops) else float(np.max(np.asarray(tops, dtype=float)))
-    bounds = (0.0, np.inf) if top is None else (atmosphere - REACH_MARGIN * top, atmosphere + (1 + REACH_MARGIN) * top)
-    limits = [(path, float(p), bounds, "Pa abs") for path, p in system.start_pressures(y).items()]
-    for path, (x, stroke) in system.start_positions(y).items():
-        lo, hi = (-np.inf, np.inf) if stroke is None else map(float, stroke)
-        give = START_STROKE_MARGIN * (hi - lo)
-        limits.append((path, float(x), (lo - give, hi + give), "m"))
-    if found := [f"{path} = {v:.6g} {unit} lies outside [{lo:.6g}, {hi:.6g}] {unit}"
-                 for path, v, (lo, hi), unit in limits if not lo < v <= hi]:
-        raise PamjaxSolveError(
-            f"equilibrium: Newton's method converged to a state the system cannot reach, a spurious root of its flow "
-            f"law: {'; '.join(found)} (from the atmosphere it exhausts to up to the highest pressure its supply "
-            f"feeds, and the stroke, {REACH_MARGIN:.0%} beyond admitted). Start from a guess nearer the expected "
-            "state, or simulate to rest first (`pamjax.simulate` with a long horizon, or `pamjax.steady_state_map`) "
-            "and pass its last state as the guess")
 
 
 def _no_convergence(y, singular, max_steps):
