@@ -481,3 +481,60 @@ def test_the_cache_minimum_must_be_a_number_of_seconds():
         with pytest.raises(pamjax.PamjaxInputError, match=rf"environment variable S='{bad}': write a number of "
                                                           r"seconds >= 0"):
             env_seconds("S", 0.1, {"S": bad})
+
+
+SWITCH = textwrap.dedent("""
+    import pathlib, sys
+    import jax, jax.numpy as jnp
+    from pamjax._core.cache import disable_compilation_cache, enable_compilation_cache
+    a, b = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2])
+    files = lambda d: sum(p.is_file() for p in d.rglob("*"))
+    disable_compilation_cache()
+    jax.jit(lambda x: jnp.sin(x) + 1.0)(jnp.ones(3))  # compiled with the cache off: JAX decided "off" here
+    print(enable_compilation_cache(a) == a, jax.config.jax_enable_compilation_cache)
+    jax.jit(lambda x: jnp.cos(x) + 2.0)(jnp.ones(3))
+    in_a = files(a)
+    print(enable_compilation_cache(b) == b)
+    jax.jit(lambda x: jnp.tan(x) + 3.0)(jnp.ones(3))
+    in_b = files(b)
+    disable_compilation_cache()
+    jax.jit(lambda x: jnp.exp(x) + 4.0)(jnp.ones(3))
+    print(in_a, files(a), in_b, files(b))
+""")
+
+
+def test_the_cache_turns_on_again_and_moves_after_programs_were_compiled(tmp_path):
+    # JAX decides at its first compilation whether its cache is used and in which folder: enable_compilation_cache(d)
+    # after disable_compilation_cache() returned d with the cache still off (no file), and a second
+    # enable_compilation_cache(B) after programs went to A kept writing to A. Now each takes effect at the next
+    # compilation (JAX's reset_cache), and so does a disable after programs were cached.
+    a, b = tmp_path / "a", tmp_path / "b"
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_COMPILATION_CACHE", "JAX_PERSISTENT_CACHE",
+                                                                    "PAMJAX_COMPILATION_CACHE"))}
+    proc = subprocess.run([sys.executable, "-c", SWITCH, str(a), str(b)], capture_output=True, text=True, timeout=300,
+                          env=dict(env, PAMJAX_CACHE_MIN_COMPILE_SECONDS="0"))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    on_again, moved, counts = proc.stdout.split("\n")[:3]
+    assert on_again == "True True" and moved == "True"
+    in_a, a_after, in_b, b_after = map(int, counts.split())
+    assert in_a == a_after == 1  # the program compiled after enable(a), and none after enable(b)
+    assert in_b == b_after == 1  # the program compiled after enable(b); none after the disable
+
+
+def test_compile_stats_entered_again_counts_each_program_once_and_leaves_no_listener():
+    # Every `with` registered two more jax.monitoring listeners for good: the nth use of one object counted each
+    # compilation n times (1, 3, 6 for one program per block), and 5,000 uses slowed every compilation down.
+    import jax
+    from jax._src import monitoring
+
+    before = len(monitoring.get_event_listeners()), len(monitoring.get_event_duration_listeners())
+    stats = pamjax.runtime.CompileStats()
+    for k in range(1, 4):
+        with stats:
+            jax.jit(lambda x, k=k: x * (k + 0.25))(np.ones(3))  # one new program per block
+            assert len(monitoring.get_event_listeners()) == before[0] + 1
+        assert stats.count["compile"] == stats.count["trace"] == k
+    with stats, stats:  # nested: the listeners stay until the outer block ends, and count once
+        jax.jit(lambda x: x * 5.25)(np.ones(3))
+    assert stats.count["compile"] == 4
+    assert (len(monitoring.get_event_listeners()), len(monitoring.get_event_duration_listeners())) == before

@@ -179,3 +179,22 @@ def test_no_devices_to_choose_from_is_an_input_error(work):
     # available=[]: a bare StopIteration ("single"), or a choice without devices whose statement() raised IndexError
     with pytest.raises(PamjaxInputError, match=r"select_devices: available holds no device; pass JAX devices"):
         devices.select_devices(work, available=[])
+
+
+@pytest.mark.parametrize("available, match", [
+    (lambda: jax.devices("cpu")[0], r"available must be a list of JAX devices, got the one device .*: pass it in a "
+                                    r"list, available=\[.*\]"),
+    (CPU0, r"available must be a list of JAX devices, got the one device Fake"),
+    (["cpu"], r"available holds 'cpu', not a JAX device \(a platform name: choose it with device=\.\.\., e\.g\. "
+              r"device='cpu'\); pass a list of JAX devices"),
+    ([CPU0, 3], r"available holds 3, not a JAX device; pass a list of JAX devices, e\.g\. jax\.devices\(\)"),
+    ("cpu", r"available must be a list of JAX devices, got 'cpu'; pass"),
+    (3, r"available must be a list of JAX devices, got 3; pass"),
+])
+def test_available_that_is_not_a_list_of_devices_is_an_input_error_naming_it(available, match):
+    # one device rather than a list was a raw TypeError ("'Device' object is not iterable"), platform names an
+    # AttributeError ("'str' object has no attribute 'platform'")
+    available = available() if callable(available) else available  # a real device: JAX started in the test only
+    with pytest.raises(PamjaxInputError, match=r"select_devices: " + match):
+        devices.select_devices("single", available=available)
+    assert devices.select_devices("single", available=iter([CPU0, GPU0])).devices == (CPU0,)  # any iterable serves

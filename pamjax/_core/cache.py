@@ -19,6 +19,7 @@ import pathlib
 import sys
 import threading
 
+from .cache_switch import point_jax_cache, turn_off_jax_cache
 from .code_stamp import code_stamp
 from .compile_stats import CompileStats as CompileStats  # public in pamjax.runtime
 from .env import env_flag, env_seconds
@@ -74,20 +75,16 @@ def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> path
         if not jax.config.jax_compilation_cache_dir:  # off, as said (a fit then said "enable_compilation_cache()")
             disable_compilation_cache()
         return None
-    jax.config.update("jax_compilation_cache_dir", str(path))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", minimum)
-    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    point_jax_cache(str(path), minimum)  # on again after `disable_compilation_cache`, moved after compilations
     return path
 
 
 def disable_compilation_cache() -> None:
     """Turn off, for this process, both JAX's persistent compilation cache and pamjax's traced programs beside it
     (`program_cache()` then returns None), also where `JAX_COMPILATION_CACHE_DIR` in the environment turned JAX's on:
-    the CLI's `--no-cache` and `PAMJAX_COMPILATION_CACHE=0`. Call it before anything compiles."""
-    import jax
-
-    jax.config.update("jax_enable_compilation_cache", False)
-    jax.config.update("jax_compilation_cache_dir", None)
+    the CLI's `--no-cache` and `PAMJAX_COMPILATION_CACHE=0`. From the next compilation on, also after programs were
+    compiled with it (`cache_switch.py`)."""
+    turn_off_jax_cache()
 
 
 def cache_turned_off():

@@ -14,8 +14,11 @@ class CompileStats:
     """What JAX compiles while active (a context manager): per phase ("trace": Python to jaxpr, "lower": jaxpr to
     StableHLO, "compile": XLA, or a persistent-cache read) the number of programs and the seconds, and of the
     persistent cache's `requests` its `hits` (`misses` = programs compiled anew); `longest_anew_s`: the longest
-    compilation that was not a persistent-cache read. From `jax.monitoring`'s events; listeners cannot be removed,
-    so an inactive one ignores events."""
+    compilation that was not a persistent-cache read. From `jax.monitoring`'s events. One object may be entered
+    again (its numbers add up): its two listeners are registered once, while it is active, and removed when it ends
+    (a JAX without `unregister_event_listener` keeps them, inactive, and the object registers no more of them).
+    Before, every `with` registered two more for good: the nth use of one object counted each event n times, and
+    5,000 uses slowed every later compilation down."""
 
     def __init__(self) -> None:
         self.count = dict.fromkeys(_PHASES.values(), 0)
@@ -24,6 +27,8 @@ class CompileStats:
         self.hits = 0
         self.longest_anew_s = 0.0
         self._active = False
+        self._depth = 0  # nested `with` of this object: the listeners stay until the outermost one ends
+        self._listeners = None  # (event, duration) listeners while registered
         self._hit = threading.local()  # a cache hit is recorded inside its program's compile event, in its thread
 
     def _event(self, event, **kwargs):
@@ -58,11 +63,28 @@ class CompileStats:
     def __enter__(self):
         import jax
 
-        jax.monitoring.register_event_listener(self._event)
-        jax.monitoring.register_event_duration_secs_listener(self._duration)
+        if self._listeners is None:
+            self._listeners = (self._event, self._duration)
+            jax.monitoring.register_event_listener(self._listeners[0])
+            jax.monitoring.register_event_duration_secs_listener(self._listeners[1])
+        self._depth += 1
         self._active = True
         return self
 
     def __exit__(self, *exc):
+        import jax
+
+        self._depth = max(self._depth - 1, 0)
+        if self._depth:
+            return False
         self._active = False
+        event_off = getattr(jax.monitoring, "unregister_event_listener", None)
+        duration_off = getattr(jax.monitoring, "unregister_event_duration_listener", None)
+        if self._listeners is not None and event_off is not None and duration_off is not None:
+            for off, listener in zip((event_off, duration_off), self._listeners):
+                try:
+                    off(listener)
+                except (AssertionError, ValueError):  # already gone (jax.monitoring.clear_event_listeners())
+                    pass
+            self._listeners = None
         return False

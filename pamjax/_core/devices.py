@@ -25,7 +25,7 @@ this project's code: benchmarks/RESULTS.md, `### Which device` (an H100: the fit
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
@@ -94,8 +94,7 @@ def select_devices(work: Literal["single", "batched"], device: str | None = "aut
 
     Raises `PamjaxInputError` for an unknown `work` or `device`, or a `device` platform that is not available."""
     requested = _check(work, device)
-    if available is None:
-        available = _all_devices()
+    available = _all_devices() if available is None else _checked_available(available)
     by_kind = {}
     for d in available:
         by_kind.setdefault(_kind(d.platform), []).append(d)
@@ -117,6 +116,30 @@ def select_devices(work: Literal["single", "batched"], device: str | None = "aut
     if accelerators:
         return DeviceChoice(tuple(by_kind[accelerators[0]]), BATCHED_REASON, requested)
     return DeviceChoice(tuple(by_kind["cpu"]), "batched work: no accelerator here, every CPU device", requested)
+
+
+def _checked_available(available):
+    """`available` as a tuple of devices; one device rather than a list (a raw TypeError: "'Device' object is not
+    iterable"), platform names ("'str' object has no attribute 'platform'") or anything else: a `PamjaxInputError`
+    saying what to pass. A device is what has a `platform` name (a `jax.Device`; the tests' stand-ins)."""
+    how = ("pass a list of JAX devices, e.g. jax.devices() or [jax.devices()[0]], or leave available=None for every "
+           "device JAX can start")
+    if _is_device(available):
+        raise PamjaxInputError(f"select_devices: available must be a list of JAX devices, got the one device "
+                               f"{available!r}: pass it in a list, available=[{available!r}], or leave "
+                               "available=None for every device JAX can start")
+    if isinstance(available, str | bytes | Mapping) or not isinstance(available, Iterable):
+        raise PamjaxInputError(f"select_devices: available must be a list of JAX devices, got {available!r}; {how}")
+    available = tuple(available)
+    for d in available:
+        if not _is_device(d):
+            platform = " (a platform name: choose it with device=..., e.g. device='cpu')" if isinstance(d, str) else ""
+            raise PamjaxInputError(f"select_devices: available holds {d!r}, not a JAX device{platform}; {how}")
+    return available
+
+
+def _is_device(obj):
+    return isinstance(getattr(obj, "platform", None), str)
 
 
 def _all_devices():
