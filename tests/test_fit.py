@@ -338,3 +338,33 @@ def test_the_docs_example_of_the_true_model_reports_no_mismatch_and_no_lag():
     res = _quiet_fit(space.with_values(np.asarray(space.initial_values()) * 1.3), [exp], free)
     assert res.converged and not res.mismatch, res.warnings
     assert not nuisance_hints(res.model, res.experiments, res.predictions, res.labels)
+
+
+def test_a_fit_pushed_past_a_components_range_ends_at_its_bound_and_its_model_is_usable(tmp_path):
+    # The polytropic index was fitted linearly: a tank volume written 10 % high made it "converged" at 1.527, outside
+    # the (0.99, 1.41) the systems accept, a fitted model that simulate, save_model and load_model refused (C_v in
+    # log space likewise converged at 1.105, outside (0, 1]). Now a logistic over the component's range: "at bound".
+    truth = presets.mas10_tank_system(valve="averaged")
+    signal, ts = pj.Triangle(0.05, 0.95, 1.0), np.linspace(0.0, 0.5, 26)
+    rec = pj.synthetic_recording(truth, signal, ts, noise=dict(pressure=2e3), seed=0)
+    exp = pj.Experiment(rec, signal, channels=["pressure"], scales=dict(pressure=2e3))
+    start = presets.mas10_tank_system(valve="averaged", volume=5.5e-5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pj.PamjaxIdentifiabilityWarning)  # "at a bound of its range": expected
+        res = pj.fit(start, [exp], ["polytropic_index"], max_steps=100, progress=False)
+    assert res.status == "at bound" and not res.converged, (res.status, res.values)
+    assert 1.4 < res.values[0] < 1.41 and np.isinf(res.standard_errors[0]), (res.values, res.standard_errors)
+    pj.simulate(res.model, signal, ts)
+    assert pj.load_model(pj.save_model(tmp_path / "model.json", res.model)) == res.model
+
+
+def test_a_discharge_coefficient_started_on_its_bound_is_named_before_any_solve():
+    # C_v = 1 (an ideal orifice, which EllipseRestriction accepts) is the end of the logistic's (0, 1): no θ
+    import equinox as eqx
+
+    start = eqx.tree_at(lambda m: m.valve.inflate.discharge_coefficient, presets.mas10_tank_system(valve="pwm"),
+                        jnp.asarray(1.0))
+    exp = pj.Experiment(pj.Recording(np.linspace(0.0, 0.1, 5), {"pressure": np.full(5, 2e5)}), pj.Constant(0.5))
+    with pytest.raises(PamjaxInputError, match=r"valve\.inflate\.discharge_coefficient = 1 is on the bound of its "
+                                               r"range \(0, 1\).*e\.g\. 0\.99, or keep it fixed"):
+        pj.fit(start, [exp], ["valve.inflate.discharge_coefficient"], progress=False)

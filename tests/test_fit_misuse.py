@@ -426,3 +426,32 @@ def test_parameter_paths_of_no_model_and_a_table_of_unknown_truth_are_named():
     assert "v1" in result.table(truth={"v1": 1.0})
     with pytest.raises(pamjax.PamjaxInputError, match=r"truth has label\(s\) \['v_1'\] that the fit does not have"):
         result.table(truth={"v_1": 1.0})
+
+
+# evaluate / predictions: their `experiments` checked as fit checks them, and a failed solve named (issue t69a).
+
+@pytest.mark.parametrize("call, match", [
+    (lambda m, e, r: pamjax.evaluate(m, []), r"experiments must be a non-empty list"),
+    (lambda m, e, r: pamjax.predictions(m, []), r"experiments must be a non-empty list"),  # returned []
+    (lambda m, e, r: pamjax.evaluate(m, {"run": e}), r"got a dict: pass list\(experiments\.values\(\)\)"),
+    (lambda m, e, r: pamjax.evaluate(e, m), r"model must be .*got the Experiment 'r': the arguments are \(model, "),
+    (lambda m, e, r: pamjax.evaluate(m, [r]), r"must be pamjax experiments .*got Recording: .*pj\.Experiment\("),
+    (lambda m, e, r: pamjax.predictions(m, iter([e])), r"got list_iterator: pass a list"),
+    (lambda m, e, r: pamjax.predictions(m, [e, e]), r"experiment names must be unique"),
+])
+def test_evaluate_and_predictions_check_their_experiments_as_fit_does(call, match):
+    # raw ValueError ("need at least one array to concatenate") and AttributeErrors; predictions(model, []) gave []
+    model = presets.mas10_tank_system(valve="averaged")
+    rec = _recording()
+    with pytest.raises(PamjaxInputError, match=match):
+        call(model, pamjax.Experiment(rec, pamjax.Constant(0.5)), rec)
+
+
+def test_evaluate_and_predictions_name_an_experiment_whose_solve_fails():
+    # max_steps=5: the predictions were NaN with no word, evaluate's rmse NaN and its autocorrelations 0.0 ("white")
+    model = presets.mas10_tank_system(valve="averaged")
+    exp = pamjax.Experiment(_recording(), pamjax.Constant(0.5), max_steps=5)
+    for call in (pamjax.evaluate, pamjax.predictions):
+        with pytest.raises(pamjax.PamjaxSolveError, match=r"experiment 'r': its solve fails: .*max_steps=5 .*raise "
+                                                          r"its max_steps \(e\.g\. Experiment\(\.\.\., max_steps="):
+            call(model, [exp])

@@ -52,3 +52,31 @@ def test_metadata_helpers_keep_their_fit_metadata(tmp_path):
     assert "transform" not in fields["angle"]
     doc = json.loads(pamjax.save_model(tmp_path / "m.json", presets.mas10_system("pwm")).read_text())
     assert all(e["unit"] for e in doc["parameters"].values())
+
+
+@pytest.mark.parametrize("path, bounds", [
+    ("valve.inflate.discharge_coefficient", "FLOW_COEFFICIENT_RANGE"), ("polytropic_index", "POLYTROPIC_RANGE"),
+    ("air.heat_capacity_ratio", "HEAT_CAPACITY_RATIO_RANGE"), ("muscle.slack_width", None),
+    ("end_stops.width", "MAX_END_STOP_WIDTH"), ("gravity", None),
+])
+def test_a_default_transform_keeps_every_trial_value_in_the_range_its_component_accepts(path, bounds):
+    # C_v was fitted in log space and converged at 1.105, the polytropic index linearly at 1.527 (the systems accept
+    # (0.99, 1.41)), widths and gravity linearly through 0: fitted models `simulate`, `save_model` and `load_model`
+    # refused. The logistic's bounds are the component's own constants.
+    import numpy as np
+
+    from pamjax._files.model_file import checked
+    from pamjax._physics import gas, muscle
+
+    model = presets.mas10_system("pwm")
+    space = pamjax.ParameterSpace(model, [path])
+    group = space.groups[0]
+    if bounds is None:
+        assert group.transform == "log"
+    else:
+        assert group.transform == "logistic"
+        expected = (0.0, muscle.MAX_END_STOP_WIDTH) if bounds == "MAX_END_STOP_WIDTH" else getattr(gas, bounds)
+        assert (float(group.lower[0]), float(group.upper[0])) == expected
+    theta0 = float(np.asarray(space.initial_theta())[0])
+    for step in (-20.0, -3.0, -1.0, 1.0, 3.0, 20.0):  # far out: an at-bound fit stops near |θ| = 15-20
+        checked(space.model(np.array([theta0 + step])), "fitted")  # the component's own checks

@@ -192,6 +192,14 @@ def test_a_gas_constant_or_discharge_coefficient_in_other_units_is_refused(make,
     pamjax.EllipseRestriction(1.0, 0.28)  # an ideal orifice
 
 
+def test_a_coefficient_just_above_1_is_not_called_percent():
+    # 1.10 read "that looks like percent: write 0.011": a C_v a little too high (a fit's), not 1.1 %
+    with pytest.raises(pamjax.PamjaxInputError, match=r"must lie in \(0, 1\].*got 1\.1$"):
+        pamjax.EllipseRestriction(1.1, 0.28)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"got 1\.1$"):
+        pamjax.NozzleRestriction(1.1, 3.14e-6)
+
+
 @pytest.mark.parametrize("make, match", [
     (lambda: pamjax.EllipseRestriction(0.36, 0.5, 3.14e-6, laminar_ratio=0.3), r"EllipseRestriction\.laminar_ratio "
      r"\(0\.3\) must exceed the critical ratio, EllipseRestriction\.critical_ratio \(0\.5\)"),

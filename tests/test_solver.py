@@ -266,6 +266,25 @@ def test_traced_wrong_jacobian_ends_as_divergence():
     assert sol.result == optx.RESULTS.nonlinear_divergence and S.REASONS[int(sol.stats["reason"])] == "stalled"
 
 
+def test_a_start_whose_residuals_are_not_finite_fails_traced_and_on_the_host():
+    # NaN residuals at y0 read as a gradient orthogonal to them (NaN norms → cosine 0): RESULTS.successful after 0
+    # steps, "converged"; optimistix's own LevenbergMarquardt fails there. On the host NumPy's SVD raised LinAlgError.
+    t = jnp.linspace(0.0, 3.0, 40)
+
+    def fn(p, args):
+        return p[0] * jnp.exp(-p[1] * t) - 2.0 * jnp.exp(-0.7 * t) + jnp.sqrt(p[0] - 5.0)  # NaN for p[0] < 5
+
+    sol = optx.least_squares(fn, pj.LevenbergMarquardt(), jnp.array([1.0, 1.0]), max_steps=50, throw=False)
+    assert sol.result != optx.RESULTS.successful
+    assert S.REASONS[int(sol.stats["reason"])].startswith("failed: the residuals or their Jacobian are not finite")
+    with pytest.raises(Exception, match=r"diverged"):
+        optx.least_squares(fn, pj.LevenbergMarquardt(), jnp.array([1.0, 1.0]), max_steps=50)
+    host = _run(lambda p: np.asarray(fn(p, None)), lambda p: (np.asarray(fn(p, None)), np.full((40, 2), np.nan)),
+                [1.0, 1.0])
+    assert host.done and host.step == 0 and host.reason.startswith("failed:"), host.reason
+    assert np.isinf(S.gradient_cosine(np.full((3, 2), np.nan), np.ones(3)))  # never "orthogonal"
+
+
 def test_descent_and_search_serve_optimistix_gauss_newton():
     # pamjax's descent (Moré-scaled damped step) and search (Nielsen's damping) in optimistix's own Gauss-Newton loop
     class GN(optx.AbstractGaussNewton):

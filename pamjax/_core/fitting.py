@@ -5,8 +5,9 @@ it; the fitter (`pamjax._fit.parameters`) reads these keys and knows no componen
 
     coulomb_force: RealScalar = positive(16.0, unit="N")
     critical_ratio: RealScalar = ratio(unit="-")
+    polytropic_index: RealScalar = bounded(1.4, bounds=POLYTROPIC_RANGE, unit="-")
     max_force_coefficients: RealVector = eqx.field(converter=as_array, metadata=polynomial("a{i}", "stroke", "N/m^i"))
-    heat_capacity_ratio: RealScalar = parameter(1.4, unit="-")
+    pre_contraction: RealScalar = parameter(0.01, unit="m")
 
 Each helper's `shape` says what the constructor takes (the converter's argument type, `_core/custom_types`):
 "scalar" (the default: a number), "table" (a column of the component's table: every such column of one component
@@ -14,9 +15,12 @@ has the same length) or "array" (any shape: coefficients, a pair of time constan
 exact shape.
 
 - `transform`: "log" (a physically positive quantity, fitted as v₀ eᶿ so that a trial value is never ≤ 0; a start
-  value ≤ 0 falls back to "linear"), "logistic" with `bounds` (lo, hi) (a bounded quantity such as a ratio in
-  (0, 1)), "nodes" (a polynomial's coefficients, fitted as its values at Chebyshev nodes over `domain`), or
-  "linear" (the default: scaled by the start magnitude, or by `scale` where the field declares one: `signed`).
+  value ≤ 0 falls back to "linear"), "logistic" with `bounds` (lo, hi) (a bounded quantity: a ratio in (0, 1),
+  `ratio`; any range outside which the component's check refuses a value, `bounded`, its bounds the check's own
+  constant, so that no trial or fitted value leaves what the component accepts: a discharge coefficient fitted
+  linearly or in log space converged at 1.105, outside the (0, 1] its restriction accepts), "nodes" (a polynomial's
+  coefficients, fitted as its values at Chebyshev nodes over `domain`), or "linear" (the default: scaled by the
+  start magnitude, or by `scale` where the field declares one: `signed`).
 - `domain` ("nodes" only): the name of an attribute (lo, hi) of an enclosing component that bounds the polynomial's
   argument (a `Muscle`'s `stroke` for the force law's F_max(x)).
 - `label`: how the entries of an array are reported, a format with `{i}` the flat index and `{n}` = i + 1 ("a{i}"
@@ -78,6 +82,19 @@ def ratio(default=dataclasses.MISSING, *, unit="-", shape="scalar", **kwargs):
     `shape`."""
     return eqx.field(converter=_converter(default, shape), default=default,
                      metadata=_with_unit(dict(transform="logistic", bounds=(0.0, 1.0)), unit), **kwargs)
+
+
+def bounded(default=dataclasses.MISSING, *, bounds, unit=None, shape="scalar", **kwargs):
+    """An array parameter its component accepts only inside `bounds` = (lo, hi) (a polytropic index in (0.99, 1.41),
+    a discharge coefficient in (0, 1]): fitted through a logistic over (lo, hi), so that a fit's trial and fitted
+    values stay in the range (one the data push to an end stops "at bound", never "converged" outside it), in
+    `unit`, of `shape`. `bounds` is the constant the component's check uses (`bounded(1.4, bounds=POLYTROPIC_RANGE)`),
+    never a copy of its numbers."""
+    lo, hi = (float(b) for b in bounds)
+    if not lo < hi:
+        raise ValueError(f"bounds must be (lo, hi) with lo < hi, got {bounds!r}")
+    return eqx.field(converter=_converter(default, shape), default=default,
+                     metadata=_with_unit(dict(transform="logistic", bounds=(lo, hi)), unit), **kwargs)
 
 
 def signed(default=dataclasses.MISSING, *, scale, unit=None, shape="scalar", **kwargs):

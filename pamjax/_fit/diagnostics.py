@@ -308,9 +308,14 @@ def stopped_at_bound(jac, labels, tol, at_bound):
     whose Jacobian column in θ vanishes there (at or below `tol` × the largest): the transform to the range is flat at
     its bound (the logistic's derivative 4e-10 of the range at 240 − 5e-8 of (100, 240)), not the data blind to the
     parameter (a viscous coefficient of 250 held below 240: its standard error 1.35 when free). Their standard error
-    is undefined there; `identifiability` leaves them out."""
-    _, seen = _seen_columns(jac, tol)
-    return [labels[i] for i in np.flatnonzero(~seen & np.asarray(at_bound, dtype=bool))]
+    is undefined there; `identifiability` leaves them out. The columns are measured against the largest of the
+    parameters NOT at a bound: where every one is (two discharge coefficients pushed to 1), all are pinned, though
+    their columns, all vanishing, compared with one another looked seen (standard errors of 0.01 at C_v = 1)."""
+    at_bound = np.asarray(at_bound, dtype=bool)
+    norms = np.linalg.norm(jac, axis=0)
+    largest = np.max(norms[~at_bound], initial=0.0)
+    pinned = at_bound & (norms <= tol * largest) if largest > 0 else at_bound
+    return [labels[i] for i in np.flatnonzero(pinned)]
 
 
 def identifiability_notes(pinned, groups):

@@ -20,9 +20,9 @@ from .solver import CRAWL_STEPS, PROBED_MINIMUM, REASONS, Damping, LevenbergMarq
 @dataclasses.dataclass
 class Outcome:
     """Where an iteration stopped: `theta`, `residual`, `jacobian`, `cost`, `step` (iterations), `accepted`, `done`,
-    `reason` (a sentence starting "converged", "stalled", or "" when the step budget ran out), `history` (per row
-    [step, cost at the current point, damping λ, accepted]), `scale` (Moré's D), `damping`, `restarts`, `escapes` (moves
-    to a lower valley: `pamjax._fit.escape`)."""
+    `reason` (a sentence starting "converged", "stalled", "failed" (residuals not finite at the start), or "" when
+    the step budget ran out), `history` (per row [step, cost at the current point, damping λ, accepted]), `scale`
+    (Moré's D), `damping`, `restarts`, `escapes` (moves to a lower valley: `pamjax._fit.escape`)."""
 
     theta: np.ndarray
     residual: np.ndarray

@@ -44,7 +44,7 @@ from .fit_checks import check_fit_inputs as check_fit_inputs, check_free, check_
 from .force_balance import weak_motion
 from .measurement import contradictions
 from .parameters import Free, PamjaxIdentifiabilityWarning, ParameterSpace
-from .predictions import predictions
+from .predictions import evaluate as evaluate
 from .problem import Problem
 from .rig_hints import nuisance_hints
 
@@ -183,15 +183,6 @@ class FitResult:
         return "\n".join(rows)
 
 
-def evaluate(model: eqx.Module, experiments: Experiments) -> dict[str, dict[str, dict[str, Any]]]:
-    """Per-channel errors of `model` against `experiments` without fitting: experiment → channel → rmse, max error,
-    % of range, noise, residual whiteness (as `FitResult.channel_errors`). One compiled program for all of them."""
-    experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
-    preds = predictions(model, experiments)
-    r = np.concatenate([np.asarray(e.residuals_of(p, "all")) for e, p in zip(experiments, preds)])
-    return channel_errors(experiments, r)
-
-
 def _setup(model, experiments, space):
     """The experiments checked against `model` and bound to it (PWM grids sized), the start θ and the
     compiled-function host of a fit (`Problem`)."""
@@ -300,10 +291,11 @@ def fit(
     optimistix least-squares solver, by default pamjax's `LevenbergMarquardt` (Nielsen's damping, Moré's scaling,
     geodesic acceleration; `pamjax._fit.solver`), with Jacobians in forward mode through the solves. Parameters
     are fitted in an unconstrained, O(1)-scaled space (`pamjax.ParameterSpace`): log for physically positive
-    quantities (volumes, areas, conductances, friction: a trial value is never ≤ 0), a logistic
-    for ratios and bounded ones, a scale by the starting magnitude for signed coefficients, and the quartic F_max of
-    eq. 7 as its values at five nodes over the stroke (reported as a0…a4). A trial step whose simulation fails
-    (non-finite residuals) is rejected, never fatal.
+    quantities (volumes, areas, conductances, friction: a trial value is never ≤ 0), a logistic over the range
+    their component accepts for bounded ones (critical ratios, discharge coefficients, the polytropic index), a
+    scale by the starting magnitude for signed coefficients, and the quartic F_max of eq. 7 as its values at five
+    nodes over the stroke (reported as a0…a4). A trial step whose simulation fails (non-finite residuals) is
+    rejected, never fatal.
 
     **Arguments:**
 

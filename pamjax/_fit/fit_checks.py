@@ -4,12 +4,15 @@ solver's settings, the free entries and the measurements' parameters, and the pa
 
 import os
 import pathlib
+from collections.abc import Iterator, Mapping
 
 from .._core.errors import PamjaxInputError, check_count, require_float64
 from .._files.checkpoint import check_checkpoint_path
+from .._systems.base import AbstractSystem
 from .experiment import AbstractExperiment
 from .measurement import check_measured_free
 from .parameters import ParameterSpace
+from .recording import Recording
 
 
 def check_settings(ftol, xtol, gtol, stall_steps):
@@ -39,6 +42,49 @@ def check_output_path(path, name):
         raise PamjaxInputError(f"{name} {str(path)!r}: the folder {str(folder)!r} is not writable")
 
 
+def check_experiments(experiments, model=None):
+    """The `experiments` argument of `fit`, `evaluate` and `predictions`: one pamjax experiment or a list (tuple) of
+    them, at least one, their names unique; returned as a list. `evaluate` and `predictions` took anything: an empty
+    list returned nothing (or ended in NumPy's "need at least one array to concatenate"), a dict, a recording or the
+    arguments swapped (`evaluate(experiment, model)`) in raw AttributeErrors. `model`, where given, must be no
+    experiment."""
+    kinds = "pamjax experiments (Experiment, ForceMapExperiment, ...)"
+    if isinstance(model, AbstractExperiment):
+        raise PamjaxInputError(f"model must be the model whose predictions are compared (a system, e.g. "
+                               f"presets.mas10_system()), got the {type(model).__name__} {model.name!r}: the "
+                               "arguments are (model, experiments)")
+    if isinstance(experiments, AbstractExperiment):
+        experiments = [experiments]
+    elif isinstance(experiments, Mapping):
+        raise PamjaxInputError(f"experiments must be a list of {kinds}, got a {type(experiments).__name__}: pass "
+                               "list(experiments.values()) (each experiment carries its own name)")
+    elif not isinstance(experiments, (list, tuple)):
+        raise PamjaxInputError(f"experiments must be {kinds}: one, or a list of them; got "
+                               f"{type(experiments).__name__}{_what_it_is(experiments)}")
+    experiments = list(experiments)
+    if not experiments:
+        raise PamjaxInputError("experiments must be a non-empty list")
+    for e in experiments:
+        if not isinstance(e, AbstractExperiment):
+            raise PamjaxInputError(f"experiments must be {kinds}, got {type(e).__name__}{_what_it_is(e)}")
+    names = [e.name for e in experiments]
+    if len(set(names)) != len(names):
+        raise PamjaxInputError(f"experiment names must be unique, got {names}")
+    return experiments
+
+
+def _what_it_is(x):
+    """What to write instead of `x`, given as an experiment: a recording, a model (the arguments swapped), an
+    iterator."""
+    if isinstance(x, Recording):
+        return ": a recording is compared through an experiment, pj.Experiment(recording, signal, channels=[...])"
+    if isinstance(x, AbstractSystem):
+        return ", a model: the arguments are (model, experiments)"
+    if isinstance(x, Iterator):
+        return ": pass a list (list(...))"
+    return ""
+
+
 def validate_fit(experiments, max_steps, out, overwrite, checkpoint, resume):
     """`fit`'s arguments besides the model and the free entries, checked; returns the experiments as a list."""
     require_float64("pamjax.fit")
@@ -49,16 +95,7 @@ def validate_fit(experiments, max_steps, out, overwrite, checkpoint, resume):
     check_checkpoint_path(checkpoint, resume, overwrite)
     if checkpoint is not None:
         check_output_path(checkpoint, "checkpoint")
-    experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
-    if not experiments:
-        raise PamjaxInputError("experiments must be a non-empty list")
-    for e in experiments:
-        if not isinstance(e, AbstractExperiment):
-            raise PamjaxInputError(f"experiments must be pamjax experiments (Experiment, ForceMapExperiment, ...), "
-                                   f"got {type(e)}")
-    names = [e.name for e in experiments]
-    if len(set(names)) != len(names):
-        raise PamjaxInputError(f"experiment names must be unique, got {names}")
+    experiments = check_experiments(experiments)
     check_count(max_steps, "max_steps")
     return experiments
 

@@ -153,8 +153,9 @@ class _Group(eqx.Module):
             return self.scale * theta
         if self.transform == "log":
             return self.scale * jnp.exp(theta)
-        if self.transform == "logistic":
-            return self.lower + (self.upper - self.lower) * jax.nn.sigmoid(theta)
+        if self.transform == "logistic":  # within the open range: the sigmoid is 1.0 exactly from θ ≈ 37 on
+            lo, hi = jnp.asarray(self.lower, dtype=float), jnp.asarray(self.upper, dtype=float)
+            return jnp.clip(lo + (hi - lo) * jax.nn.sigmoid(theta), jnp.nextafter(lo, hi), jnp.nextafter(hi, lo))
         return self.basis @ (self.scale * theta)  # nodes
 
     def at_bound(self, theta):

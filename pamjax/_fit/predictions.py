@@ -1,16 +1,21 @@
 """Predictions of a model for a list of experiments, in one compiled program: fixed-grid experiments of one system
-structure share one integration loop (`pamjax._solve.synchronous.solve_runs`)."""
+structure share one integration loop (`pamjax._solve.synchronous.solve_runs`); `evaluate`, a model's errors against
+them without fitting."""
+
+from typing import Any
 
 import equinox as eqx
 import jax
 import numpy as np
 
-from .._core.errors import require_float64
+from .._core.errors import PamjaxSolveError, require_float64
 from .._solve.run_outputs import run_trajectories
 from .._solve.scaled import scaled
 from .._solve.simulate import fixed_trajectory
 from .._solve.synchronous import solve_runs
+from .diagnostics import channel_errors
 from .experiment import Experiments
+from .fit_checks import check_experiments
 from .parameters import strong_types
 
 
@@ -40,14 +45,54 @@ def _predictions(model, exps):
 
 def predictions(model: eqx.Module, experiments: Experiments) -> list[dict[str, np.ndarray]]:
     """`model`'s channels at every experiment's times (list of dicts channel → NumPy array), in one compiled
-    program (experiments of one kind share one loop, as in a fit). Checks the experiments first."""
+    program (experiments of one kind share one loop, as in a fit). Checks the experiments first (as `fit` does).
+
+    **Raises:** `PamjaxInputError` for bad experiments; `PamjaxSolveError` naming the experiment, the cause and the
+    remedy where an experiment's solve fails (its predictions would be NaN)."""
     require_float64("pamjax.predictions")
-    experiments = list(experiments) if isinstance(experiments, (list, tuple)) else [experiments]
+    experiments = check_experiments(experiments, model)
     for e in experiments:
         e.check(model)
     model = strong_types(model)
     exps = tuple(e.bind(model) for e in experiments)
-    return [jax.tree_util.tree_map(np.asarray, p) for p in _predictions(model, exps)]
+    preds = [jax.tree_util.tree_map(np.asarray, p) for p in _predictions(model, exps)]
+    check_solved(model, exps, preds)
+    return preds
+
+
+def evaluate(model: eqx.Module, experiments: Experiments) -> dict[str, dict[str, dict[str, Any]]]:
+    """Per-channel errors of `model` against `experiments` without fitting: experiment → channel → rmse, max error,
+    % of range, noise, residual whiteness (as `FitResult.channel_errors`). One compiled program for all of them.
+    Raises as `predictions` does (a failed solve is a `PamjaxSolveError`, not an rmse of NaN)."""
+    experiments = check_experiments(experiments, model)
+    preds = predictions(model, experiments)
+    r = np.concatenate([np.asarray(e.residuals_of(p, "all")) for e, p in zip(experiments, preds)])
+    return channel_errors(experiments, r)
+
+
+def check_solved(model, exps, preds):
+    """A `PamjaxSolveError` naming each experiment of `exps` whose predictions `preds` are not finite at its used
+    samples: a failed solve gave NaN predictions silently (`evaluate` then reported an rmse of NaN and residual
+    autocorrelations of 0, "white"). The cause and remedy are `solve_failure`'s, as `fit`'s start check says them."""
+    from .problem import solve_failure  # (here: problem imports this module)
+
+    phrases = []
+    for e, p in zip(exps, preds):
+        r = np.asarray(e.residuals_of(p, "all"))
+        used = np.concatenate([np.ravel(u) for _, _, _, u, _ in e.layout()])
+        if np.all(np.isfinite(r[used] if used.shape == r.shape else r)):
+            continue
+        failure = solve_failure(e, model)
+        if failure is None:
+            phrases.append(f"experiment {e.name!r}: its predictions are not finite though its solve alone succeeds "
+                           "(check the model's parameters and the experiment's initial state)")
+            continue
+        cause, budget = failure
+        fix = ("check its parameters and initial state" if budget is None else
+               f"raise its max_steps (e.g. Experiment(..., max_steps={budget})) or shorten the run")
+        phrases.append(f"experiment {e.name!r}: its solve fails: {cause}: {fix}")
+    if phrases:
+        raise PamjaxSolveError("the model's predictions are not finite: " + "; ".join(phrases))
 
 
 def _predict_runs(model, exps, stepping, substeps):

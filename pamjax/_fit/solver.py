@@ -66,8 +66,10 @@ PROBED_MINIMUM = ("converged: no parameter moved by ±0.1 or ±0.01 of its condi
 REASONS = ("",  # still iterating (or stopped by the step budget)
            "converged: relative cost decrease below ftol", "converged: step below xtol",
            "converged: gradient orthogonal to the residuals (gtol)", "converged: no predicted decrease above ftol",
-           PROBED_MINIMUM, "stalled", "converged: gradient orthogonal to the residuals at the start (gtol)")
-_FTOL, _XTOL, _GTOL, _NO_DECREASE, _PROBED, _STALLED, _GTOL_START = range(1, 8)
+           PROBED_MINIMUM, "stalled", "converged: gradient orthogonal to the residuals at the start (gtol)",
+           "failed: the residuals or their Jacobian are not finite at the start")
+_FTOL, _XTOL, _GTOL, _NO_DECREASE, _PROBED, _STALLED, _GTOL_START, _NOT_FINITE_START = range(1, 9)
+_FAILED = (_STALLED, _NOT_FINITE_START)  # the reasons that end a solve unsuccessfully
 
 
 # --- running on the host (NumPy) or traced (jax.numpy) ---------------------------------------------------------------
@@ -111,11 +113,12 @@ def _cost(r):
 
 
 def gradient_cosine(jacobian, residual):
-    """max over columns of |Jᵢ·r| / (‖Jᵢ‖ ‖r‖): 0 at a stationary point (MINPACK's gtol test)."""
+    """max over columns of |Jᵢ·r| / (‖Jᵢ‖ ‖r‖): 0 at a stationary point (MINPACK's gtol test); inf where a norm is
+    not finite (NaN residuals are no stationary point: they read as 0, "orthogonal")."""
     xp = array_module(on_host(jacobian))
     norms = xp.linalg.norm(jacobian, axis=0) * xp.linalg.norm(residual)
     cos = xp.abs(jacobian.T @ residual) / xp.where(norms > 0, norms, 1.0)
-    return xp.max(xp.where(norms > 0, cos, 0.0), initial=0.0)
+    return xp.max(xp.where(xp.isfinite(norms), xp.where(norms > 0, cos, 0.0), xp.inf), initial=0.0)
 
 
 # --- the search: Nielsen's damping update ----------------------------------------------------------------------------
@@ -216,7 +219,8 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
     - `geodesic`: the geodesic acceleration (default on; off: plain Levenberg-Marquardt, one residual evaluation
       fewer per step).
 
-    With `optimistix.least_squares`, a stall ends the solve with `RESULTS.nonlinear_divergence`; `sol.stats`
+    With `optimistix.least_squares`, a stall, or residuals or a Jacobian not finite at the start (where optimistix's
+    own solver fails too), ends the solve with `RESULTS.nonlinear_divergence` (`throw=True`: an error); `sol.stats`
     holds `reason` (an index into `pamjax._fit.solver.REASONS`) and `num_accepted_steps`.
     """
 
@@ -260,15 +264,19 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
         xp = array_module(host)
         flat, unravel = _ravel(y, host)
         r, jac, aux = _jacobian(fn, flat, args, host, unravel)
-        factors = self.descent.factor(r, jac, xp.zeros(flat.size))
-        search = self.search.start(jac / factors.scale)
+        # a start whose residuals or Jacobian are not finite is a failure, not a stationary point: NaN norms made the
+        # gradient's cosine 0 and the solve "converged" after 0 steps (optimistix's own solver fails there). It is
+        # factored as zeros (NumPy's SVD raises on NaN) and ends at once.
+        finite = _all_finite(xp, r) & _all_finite(xp, jac)
+        factors = self.descent.factor(xp.where(finite, r, 0.0), xp.where(finite, jac, 0.0), xp.zeros(flat.size))
+        search = self.search.start(xp.where(finite, jac, 0.0) / factors.scale)
         cost = _cost(r)
-        done = gradient_cosine(jac, r) <= self.gtol
+        reason = xp.where(finite, xp.where(gradient_cosine(jac, r) <= self.gtol, _GTOL_START, 0), _NOT_FINITE_START)
         first = xp.stack([xp.asarray(0.0), cost, search.damping, xp.asarray(1.0)])
         return State(
             residual=r, jacobian=jac, cost=cost, initial_cost=cost, factors=factors, search=search,
             step=_int(xp, 0), accepted=_int(xp, 0), rejected_in_row=_int(xp, 0), restarts=_int(xp, 0),
-            escapes=_int(xp, 0), done=xp.asarray(done), reason=xp.where(done, _GTOL_START, 0), rows=_int(xp, 1),
+            escapes=_int(xp, 0), done=xp.asarray(reason != 0), reason=reason, rows=_int(xp, 1),
             recent=xp.concatenate([xp.full(CRAWL_STEPS, xp.nan), xp.reshape(cost, (1,))]),
             last_rows=xp.stack([first, xp.full(4, xp.nan)]), aux=aux)
 
@@ -282,10 +290,10 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
 
     def terminate(self, fn, y, args, options, state, tags):
         if on_host(y):
-            result = optx.RESULTS.nonlinear_divergence if int(state.reason) == _STALLED else optx.RESULTS.successful
-            return bool(state.done), result
-        return state.done, optx.RESULTS.where(state.reason == _STALLED, optx.RESULTS.nonlinear_divergence,
-                                              optx.RESULTS.successful)
+            failed = int(state.reason) in _FAILED
+            return bool(state.done), optx.RESULTS.nonlinear_divergence if failed else optx.RESULTS.successful
+        failed = (state.reason == _STALLED) | (state.reason == _NOT_FINITE_START)
+        return state.done, optx.RESULTS.where(failed, optx.RESULTS.nonlinear_divergence, optx.RESULTS.successful)
 
     def postprocess(self, fn, y, aux, args, options, state, tags, result):
         return y, aux, {"num_accepted_steps": state.accepted, "reason": state.reason}

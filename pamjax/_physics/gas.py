@@ -16,7 +16,7 @@ import numpy as np
 
 from .._core.custom_types import RealScalar
 from .._core.errors import PamjaxInputError, check_count, check_in_open_interval, check_positive, concrete_values
-from .._core.fitting import parameter, positive, ratio
+from .._core.fitting import bounded, parameter, positive, ratio
 from .._core.units import ATMOSPHERE, ISO8778_DENSITY, ISO8778_TEMPERATURE, check_sonic_conductance
 from .._papers import paper000
 from .smooth import safe_divide, safe_sqrt
@@ -26,6 +26,16 @@ DEFAULT_LAMINAR_RATIO = 0.999
 # J/(kg K): a gas's R = 8.314 J/(mol K) / M spans 4124 (hydrogen, M = 2 g/mol) to 57 (sulphur hexafluoride, 146 g/mol);
 # air's is 287.05. Below 20 it is no gas's: 0.287 is air's in kJ/(kg K) (a tank then fills to 126 kPa, not 429 kPa).
 GAS_CONSTANT_RANGE = (20.0, 5000.0)
+# A discharge or flow coefficient: the effective over the geometric area, in (0, 1] (its check) and fitted through a
+# logistic over (0, 1) (`pamjax._core.fitting.bounded`): in log space it converged at 1.105, a restriction refused.
+FLOW_COEFFICIENT_RANGE = (0.0, 1.0)
+# κ = c_p/c_v of an ideal gas: 5/3 monatomic to 1 for a gas of many degrees of freedom (air 1.4); `Air` accepts the
+# open interval, and a fit moves κ through a logistic over it.
+HEAT_CAPACITY_RATIO_RANGE = (1.0, 2.0)
+# the polytropic index n of a chamber (paper 000 eq. 12, 15; paper 001 eq. 3, 12): 1 isothermal (paper 001) to 1.4
+# adiabatic (air); outside, n = 0 freezes a chamber's pressure and n < 0 drives it below vacuum. The systems accept
+# the open interval, and a fit moves n through a logistic over it.
+POLYTROPIC_RANGE = (0.99, 1.41)
 
 
 def _first_outside(x, lo, hi):
@@ -63,14 +73,21 @@ def check_orifice_area(x, name):
                                "looks like mm² or cm² (pamjax takes SI units: m²; paper 000's valve: 3.14e-6 m²)")
 
 
+# A coefficient from this up to 100 looks like percent (36 for 0.36); just above 1 (1.10) it is a coefficient a
+# little too high, for which "write 0.011" was misleading.
+PERCENT_FROM = 2.0
+
+
 def check_flow_coefficient(x, name, what):
-    """Refuse a discharge or flow coefficient outside (0, 1] (`what`: the ratio it is); above 1 and up to 100 it
-    looks like percent (concrete values only: a fit may move them)."""
+    """Refuse a discharge or flow coefficient outside `FLOW_COEFFICIENT_RANGE`, (0, 1] (`what`: the ratio it is);
+    from `PERCENT_FROM` (2) up to 100 it looks like percent (concrete values only: a fit may move them)."""
     check_positive(x, name)
-    c = _first_outside(x, 0.0, 1.0)
+    lo, hi = FLOW_COEFFICIENT_RANGE
+    c = _first_outside(x, lo, hi)
     if c is not None:
-        raise PamjaxInputError(f"{name} must lie in (0, 1] ({what}, at most 1), got {c:g}"
-                               + (f"; that looks like percent: write {c / 100:g}" if c <= 100 else ""))
+        raise PamjaxInputError(f"{name} must lie in ({lo:g}, {hi:g}] ({what}, at most {hi:g}), got {c:g}"
+                               + (f"; that looks like percent: write {c / 100:g}" if PERCENT_FROM <= c <= 100
+                                  else ""))
 
 
 def check_laminar_ratio(laminar_ratio, critical_ratio, name, critical_name=None):
@@ -103,21 +120,21 @@ class Air(eqx.Module):
     - `gas_constant`: specific gas constant R [J/(kg K)]; 287 (paper 000, Table 1). Within `GAS_CONSTANT_RANGE`
       (20-5000 J/(kg K), every gas's; refused otherwise: 0.287 is kJ/(kg K)).
     - `temperature`: air temperature T [K]; 293 (paper 000, Table 1).
-    - `heat_capacity_ratio`: κ [-]; 1.4 (paper 000, eq. 10 text).
+    - `heat_capacity_ratio`: κ [-]; 1.4 (paper 000, eq. 10 text). In `HEAT_CAPACITY_RATIO_RANGE`, (1, 2).
     - `atmospheric_pressure`: p_atm [Pa abs]; 101325 (ISO 2533 standard atmosphere). The gauge reference of the
       force laws and the exhaust pressure of the valves.
     """
 
     gas_constant: RealScalar = positive(paper000.GAS_CONSTANT, unit="J/(kg K)")
     temperature: RealScalar = positive(paper000.TEMPERATURE, unit="K")
-    heat_capacity_ratio: RealScalar = parameter(paper000.HEAT_CAPACITY_RATIO, unit="-")
-    atmospheric_pressure: RealScalar = parameter(ATMOSPHERE, unit="Pa abs")
+    heat_capacity_ratio: RealScalar = bounded(paper000.HEAT_CAPACITY_RATIO, bounds=HEAT_CAPACITY_RATIO_RANGE, unit="-")
+    atmospheric_pressure: RealScalar = positive(ATMOSPHERE, unit="Pa abs")
 
     def __check_init__(self):
         check_positive(self.gas_constant, "Air.gas_constant")
         check_gas_constant(self.gas_constant, "Air.gas_constant")
         check_positive(self.temperature, "Air.temperature")
-        check_in_open_interval(self.heat_capacity_ratio, 1.0, 2.0, "Air.heat_capacity_ratio")
+        check_in_open_interval(self.heat_capacity_ratio, *HEAT_CAPACITY_RATIO_RANGE, "Air.heat_capacity_ratio")
         check_positive(self.atmospheric_pressure, "Air.atmospheric_pressure")
 
 
@@ -206,7 +223,7 @@ class EllipseRestriction(AbstractRestriction):
     - `laminar_ratio`: start of the laminar branch [-]; 0.999 (ISO 6358-1:2013).
     """
 
-    discharge_coefficient: RealScalar = positive(unit="-")
+    discharge_coefficient: RealScalar = bounded(bounds=FLOW_COEFFICIENT_RANGE, unit="-")
     critical_ratio: RealScalar = ratio(unit="-")
     area: RealScalar = positive(paper000.VALVE_AREA, unit="m²")
     laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
@@ -274,7 +291,7 @@ class NozzleRestriction(AbstractRestriction):
       (0.607), the critical ratio of every gas `Air` accepts (κ in (1, 2)), so that the subsonic branch exists.
     """
 
-    flow_coefficient: RealScalar = positive(unit="-")
+    flow_coefficient: RealScalar = bounded(bounds=FLOW_COEFFICIENT_RANGE, unit="-")
     area: RealScalar = positive(paper000.VALVE_AREA, unit="m²")
     laminar_ratio: float = eqx.field(static=True, default=DEFAULT_LAMINAR_RATIO)
 

@@ -15,7 +15,7 @@ import numpy as np
 from .._core.arrays import as_array
 from .._core.custom_types import Array, Real, RealScalar, RealScalarLike, RealVector
 from .._core.errors import PamjaxInputError, check_finite, check_in_open_interval, check_positive, concrete_values
-from .._core.fitting import parameter, polynomial, positive
+from .._core.fitting import bounded, parameter, polynomial, positive
 from .._core.units import check_plausible, check_setting
 from .._papers import paper000
 from .smooth import smooth_relu, smooth_step
@@ -326,7 +326,7 @@ class Muscle(AbstractMuscle):
     volume_law: AbstractVolume
     min_position: RealScalar = parameter(unit="m")
     max_position: RealScalar = parameter(unit="m")
-    slack_width: RealScalar = parameter(1.0, unit="N")
+    slack_width: RealScalar = positive(1.0, unit="N")
 
     def __check_init__(self):
         for name, law, base, example in (("force_law", self.force_law, AbstractForceLaw, "PolynomialForce"),
@@ -396,7 +396,7 @@ class EndStops(eqx.Module):
 
     stiffness: RealScalar = positive(1e6, unit="N/m")
     damping: RealScalar = positive(6e3, unit="N s/m")
-    width: RealScalar = parameter(1e-4, unit="m")
+    width: RealScalar = bounded(1e-4, bounds=(0.0, MAX_END_STOP_WIDTH), unit="m")  # fitted: never past the check
 
     def __check_init__(self):
         check_positive(self.stiffness, "EndStops.stiffness")

@@ -24,15 +24,15 @@ from .._core.errors import (
     check_positive,
     concrete_values,
 )
-from .._core.fitting import parameter, positive
+from .._core.fitting import bounded, parameter, positive
 from .._core.units import check_absolute_pressure
 from .._papers import paper000, paper001
-from .._physics.gas import Air
+from .._physics.gas import POLYTROPIC_RANGE, Air
 from .._physics.muscle import AbstractMuscle, EndStops, Muscle
 from .._physics.regulator import AbstractRegulator, paper001_air
 from .._physics.signals import AbstractSignal
 from .base import AbstractSystem, state_leaves
-from .regulated import MUSCLE_KINDS, POLYTROPIC_RANGE, REGULATOR_KINDS, check_component, muscle_stiffness
+from .regulated import MUSCLE_KINDS, REGULATOR_KINDS, check_component, muscle_stiffness
 
 PULLEY_RADIUS = 0.03  # m, assumed (orthosis lever; ±0.35 rad swings x by ±10 mm of the DMSP-40's 100 mm stroke)
 PRE_CONTRACTION = 0.01  # m, assumed: 2.5 % contraction at θ = 0, where the DMSP-40 preset pulls from ≈ 0.7 bar gauge
@@ -120,16 +120,16 @@ class AntagonisticJoint(AbstractSystem):
     extensor_regulator: AbstractRegulator
     flexor: Muscle
     extensor: Muscle
-    pulley_radius: RealScalar = parameter(PULLEY_RADIUS, unit="m")
+    pulley_radius: RealScalar = positive(PULLEY_RADIUS, unit="m")
     pre_contraction: RealScalar = parameter(PRE_CONTRACTION, unit="m")
-    inertia: RealScalar = parameter(JOINT_INERTIA, unit="kg m²")
+    inertia: RealScalar = positive(JOINT_INERTIA, unit="kg m²")
     foot_mass: RealScalar = parameter(FOOT_MASS, unit="kg")
     foot_arm: RealScalar = parameter(FOOT_ARM, unit="m")
     damping: RealScalar = positive(JOINT_DAMPING, unit="N m s/rad")
     gravity: RealScalar = parameter(paper000.GRAVITY, unit="m/s²")
     end_stops: EndStops = eqx.field(default_factory=EndStops)
     air: Air = eqx.field(default_factory=paper001_air)
-    polytropic_index: RealScalar = parameter(paper001.POLYTROPIC_INDEX, unit="-")
+    polytropic_index: RealScalar = bounded(paper001.POLYTROPIC_INDEX, bounds=POLYTROPIC_RANGE, unit="-")
 
     output_names = ("pressure", "mass_flow", "angle", "angular_velocity", "force", "volume")
 

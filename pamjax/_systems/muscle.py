@@ -9,11 +9,11 @@ import jax.numpy as jnp
 
 from .._core.custom_types import RealScalar, StateLike
 from .._core.errors import PamjaxInputError, check_in_open_interval, check_positive
-from .._core.fitting import parameter, positive
+from .._core.fitting import bounded, positive
 from .._papers import paper000
 from .._physics.chamber import pressure_rate
 from .._physics.friction import AbstractFriction, CoulombViscousFriction
-from .._physics.gas import Air
+from .._physics.gas import POLYTROPIC_RANGE, Air
 from .._physics.muscle import AbstractMuscle, EndStops, Muscle, stroke_root
 from .._physics.regulator import AbstractRegulator
 from .._physics.valves.base import AbstractValve
@@ -66,8 +66,8 @@ class MuscleSystem(AbstractMuscleSystem):
     friction: AbstractFriction = eqx.field(default_factory=CoulombViscousFriction)
     end_stops: EndStops = eqx.field(default_factory=EndStops)
     air: Air = eqx.field(default_factory=Air)
-    gravity: RealScalar = parameter(paper000.GRAVITY, unit="m/s²")
-    polytropic_index: RealScalar = parameter(paper000.POLYTROPIC_INDEX, unit="-")
+    gravity: RealScalar = positive(paper000.GRAVITY, unit="m/s²")
+    polytropic_index: RealScalar = bounded(paper000.POLYTROPIC_INDEX, bounds=POLYTROPIC_RANGE, unit="-")
 
     output_names = ("pressure", "position", "velocity", "force", "friction_force", "mass_flow", "volume")
 
@@ -75,7 +75,7 @@ class MuscleSystem(AbstractMuscleSystem):
         _check_parts(self)
         check_positive(self.payload_mass, "MuscleSystem.payload_mass")
         check_positive(self.gravity, "MuscleSystem.gravity")
-        check_in_open_interval(self.polytropic_index, 0.99, 1.41, "MuscleSystem.polytropic_index")
+        check_in_open_interval(self.polytropic_index, *POLYTROPIC_RANGE, "MuscleSystem.polytropic_index")
 
     def equilibrium_position(self, pressure):
         """Position [m] where the muscle force at `pressure` [Pa abs] carries the payload's weight (friction-free),

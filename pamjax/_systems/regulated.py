@@ -25,19 +25,16 @@ from .._core.errors import (
     check_positive,
     concrete_values,
 )
-from .._core.fitting import parameter, positive
+from .._core.fitting import bounded, parameter, positive
 from .._core.units import check_absolute_pressure, check_plausible
 from .._papers import datasheets, paper000, paper001
 from .._physics.chamber import chamber_flow
 from .._physics.friction import AbstractFriction, CoulombViscousFriction
-from .._physics.gas import Air
+from .._physics.gas import POLYTROPIC_RANGE, Air
 from .._physics.muscle import AbstractMuscle, EndStops, Muscle, stroke_root
 from .._physics.regulator import AbstractRegulator, paper001_air
 from .base import AbstractMuscleSystem, AbstractSystem, state_leaves
 
-# the polytropic index n of eq. 3 and 12: 1 isothermal (paper 001) to 1.4 adiabatic (air); outside, n = 0 freezes a
-# chamber's pressure and n < 0 drives it below vacuum
-POLYTROPIC_RANGE = (0.99, 1.41)
 # a shortening may leave the stroke by the end stops' give (along a run): by 5 % of the stroke, the margin `simulate`
 # admits a start state by (pamjax._solve.checks.START_STROKE_MARGIN)
 STROKE_MARGIN = 0.05
@@ -65,7 +62,7 @@ class RegulatorSystem(AbstractSystem):
     volume: RealScalar = positive(paper001.TANK_VOLUME, unit="m³")
     outlet_flow: RealScalar = parameter(0.0, unit="kg/s")
     air: Air = eqx.field(default_factory=paper001_air)
-    polytropic_index: RealScalar = parameter(paper001.POLYTROPIC_INDEX, unit="-")
+    polytropic_index: RealScalar = bounded(paper001.POLYTROPIC_INDEX, bounds=POLYTROPIC_RANGE, unit="-")
 
     output_names = ("pressure", "mass_flow", "inlet_flow", "volume")
 
@@ -215,7 +212,7 @@ class RegulatedMuscleSystem(AbstractMuscleSystem):
         default_factory=lambda: CoulombViscousFriction(0.0, datasheets.DMSP40_VISCOUS_COEFFICIENT))
     end_stops: EndStops = eqx.field(default_factory=EndStops)
     air: Air = eqx.field(default_factory=paper001_air)
-    polytropic_index: RealScalar = parameter(paper001.POLYTROPIC_INDEX, unit="-")
+    polytropic_index: RealScalar = bounded(paper001.POLYTROPIC_INDEX, bounds=POLYTROPIC_RANGE, unit="-")
 
     output_names = ("pressure", "position", "velocity", "force", "friction_force", "mass_flow", "inlet_flow",
                     "volume")

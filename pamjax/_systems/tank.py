@@ -5,11 +5,11 @@ import jax.numpy as jnp
 
 from .._core.custom_types import RealScalar, StateLike
 from .._core.errors import PamjaxInputError, check_in_open_interval, check_positive
-from .._core.fitting import parameter, positive
+from .._core.fitting import bounded, positive
 from .._core.units import check_plausible
 from .._papers import paper000
 from .._physics.chamber import pressure_rate
-from .._physics.gas import Air
+from .._physics.gas import POLYTROPIC_RANGE, Air
 from .._physics.regulator import AbstractRegulator
 from .._physics.valves.base import AbstractValve
 from .base import AbstractSystem
@@ -31,7 +31,7 @@ class TankSystem(AbstractSystem):
     valve: AbstractValve
     volume: RealScalar = positive(unit="m³")
     air: Air = eqx.field(default_factory=Air)
-    polytropic_index: RealScalar = parameter(paper000.POLYTROPIC_INDEX, unit="-")
+    polytropic_index: RealScalar = bounded(paper000.POLYTROPIC_INDEX, bounds=POLYTROPIC_RANGE, unit="-")
 
     output_names = ("pressure", "mass_flow")
 
@@ -43,7 +43,7 @@ class TankSystem(AbstractSystem):
                 "regulator, volume)" if isinstance(self.valve, AbstractRegulator) else ""))
         check_positive(self.volume, "TankSystem.volume")
         check_plausible(self.volume, "TankSystem.volume")  # 5 (litres) for a 5 l tank refused
-        check_in_open_interval(self.polytropic_index, 0.99, 1.41, "TankSystem.polytropic_index")
+        check_in_open_interval(self.polytropic_index, *POLYTROPIC_RANGE, "TankSystem.polytropic_index")
 
     def initial_state(self, pressure=None):
         """Tank at `pressure` [Pa abs]; atmospheric by default."""
