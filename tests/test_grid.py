@@ -81,9 +81,6 @@ def test_a_start_outside_its_mode_switches_at_once():
     assert float(np.asarray(traj.position)[1]) < x0 + 2e-3 - 1e-5
 
 
-
-@pytest.mark.xfail(strict=True, reason="the start mode is decided by MuscleSystem.event_function/event_update "
-                   "(pamjax/_systems/muscle.py), which zero a stuck start's velocity: fix reported, not in _solve")
 def test_a_start_velocity_on_a_stuck_mode_slides_in_its_direction():
     # A velocity set on a stuck y0 (eqx.tree_at after initial_state(), or a sweep over "y0.velocity" with a base y0)
     # was thrown away at t0: the mode re-decided by the net force and the velocity zeroed, so 0.2 m/s ran exactly as
@@ -93,6 +90,7 @@ def test_a_start_velocity_on_a_stuck_mode_slides_in_its_direction():
     moving = _from_rest(initial_state(MODEL, velocity=np.asarray(0.2)))  # sliding up from the start
     assert float(np.asarray(moving.position)[1]) > x0 + 1e-3
     np.testing.assert_allclose(np.asarray(_from_rest(edited).position), np.asarray(moving.position), rtol=0, atol=1e-12)
+
 
 def _loss(params, duty):
     coulomb, viscous, v1, k0 = params

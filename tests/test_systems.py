@@ -141,6 +141,24 @@ def test_a_muscle_system_given_a_part_of_the_wrong_kind_names_it(field, value, m
         pamjax.MuscleSystem(**parts)
 
 
+def test_a_stick_slip_friction_is_refused_where_its_modes_or_stops_would_be_ignored():
+    # The regulated system locates no events: a Karnopp friction stayed in its start mode (a 1-5 V sine ran as pure
+    # viscous friction, 5.9 mm off the smooth Coulomb twin; from a moving start +200 N with the motion). Beside a
+    # stick-slip friction the stroke limits are inelastic events: a soft bumper EndStops(1e4, 200, 1e-3) changed
+    # nothing (an 80 kg drop bottomed out as with the default stops).
+    with pytest.raises(pamjax.PamjaxInputError, match=r"RegulatedMuscleSystem\.friction: a stick-slip friction "
+                                                      r"\(KarnoppFriction\) needs its modes switched at events"):
+        pamjax.RegulatedMuscleSystem(pamjax.ISO6358Regulator(), presets.dmsp40_muscle(),
+                                     friction=pamjax.KarnoppFriction(200.0, 3000.0))
+    parts = dict(valve=presets.mas10_valve(), muscle=presets.mas10_muscle(), friction=pamjax.KarnoppFriction())
+    with pytest.raises(pamjax.PamjaxInputError, match=r"MuscleSystem\.end_stops: with a stick-slip friction "
+                                                      r"\(KarnoppFriction\) .* would be ignored"):
+        pamjax.MuscleSystem(**parts, end_stops=pamjax.EndStops(1e4, 200.0, 1e-3))
+    assert pamjax.MuscleSystem(**parts, end_stops=pamjax.EndStops()).hybrid  # the default stops: nothing ignored
+    assert not pamjax.MuscleSystem(**{**parts, "friction": pamjax.CoulombViscousFriction()},
+                                   end_stops=pamjax.EndStops(1e4, 200.0, 1e-3)).hybrid
+
+
 def test_start_positions_name_every_displacement_a_state_holds_with_its_stroke():
     """`AbstractSystem.start_positions`, which `simulate` checks in a y0: a muscle system's `position` with its
     muscle's stroke; a tank's state holds none, and a joint's (an angle) none either."""

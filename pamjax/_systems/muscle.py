@@ -5,10 +5,12 @@ volume [m³].
 """
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._core.custom_types import RealScalar, StateLike
-from .._core.errors import PamjaxInputError, check_in_open_interval, check_positive
+from .._core.errors import PamjaxInputError, check_in_open_interval, check_positive, concrete_values
 from .._core.fitting import bounded, positive
 from .._papers import paper000
 from .._physics.chamber import pressure_rate
@@ -47,6 +49,22 @@ def _check_parts(system):
                                    f"{type(part).__name__}{hint}")
 
 
+
+def check_hybrid_stops(system, name):
+    """Refuse `end_stops` other than the default beside a hybrid (stick-slip) friction, which takes the stroke limits
+    as inelastic stops (events) and never reads them: `EndStops(1e4, 200, 1e-3)`, a soft bumper, left an 80 kg drop
+    exactly as the default stops did (concrete values only; a sweep's traced ones are the sweep's checks')."""
+    if not system.friction.hybrid:
+        return
+    default = jax.tree_util.tree_leaves(EndStops())
+    given = [concrete_values(leaf) for leaf in jax.tree_util.tree_leaves(system.end_stops)]
+    if any(g is not None and not np.array_equal(g, np.asarray(d, dtype=float)) for g, d in zip(given, default)):
+        raise PamjaxInputError(
+            f"{name}.end_stops: with a stick-slip friction ({type(system.friction).__name__}) the stroke limits are "
+            "inelastic stops handled as events, and end_stops would be ignored: drop end_stops, or use a smooth "
+            "friction (CoulombViscousFriction, BristleFriction) for elastic stops")
+
+
 class MuscleSystem(AbstractMuscleSystem):
     """Paper 000's plant: a muscle lifting a payload against gravity, fed by a valve.
 
@@ -73,6 +91,7 @@ class MuscleSystem(AbstractMuscleSystem):
 
     def __check_init__(self):
         _check_parts(self)
+        check_hybrid_stops(self, "MuscleSystem")
         check_positive(self.payload_mass, "MuscleSystem.payload_mass")
         check_positive(self.gravity, "MuscleSystem.gravity")
         check_in_open_interval(self.polytropic_index, *POLYTROPIC_RANGE, "MuscleSystem.polytropic_index")
@@ -147,17 +166,23 @@ class MuscleSystem(AbstractMuscleSystem):
         stuck_margin = (self.friction.coulomb_force - jnp.abs(held)) / weight
         gap = jnp.where(z > 0, self.muscle.max_position - x, x - self.muscle.min_position)
         sliding_margin = jnp.minimum(z * v / 1e-2, gap / 1e-2)
-        return jnp.where(self.friction.is_stuck(z), stuck_margin, sliding_margin)
+        stuck = self.friction.is_stuck(z)
+        # a stuck start given a velocity (a y0 edited after initial_state, a sweep over "y0.velocity"): an event at
+        # once, whose update slides in the velocity's direction (stuck holds v = 0 exactly between events, so only a
+        # start state meets this; its velocity was zeroed: the run of a 0.2 m/s start was the resting one)
+        return jnp.where(stuck & (v != 0), -1.0, jnp.where(stuck, stuck_margin, sliding_margin))
 
     def event_update(self, t, state, command):
-        """At rest (velocity 0; a stop is inelastic), on a stop if at one, then stuck or sliding by the net force."""
+        """At rest (velocity 0; a stop is inelastic), on a stop if at one, then stuck or sliding by the net force; a
+        stuck start with a velocity slides on in its direction."""
         x = jnp.clip(state.position, self.muscle.min_position, self.muscle.max_position)
         held = self._held_force(x, self.muscle.force(x, state.pressure, self.air))
+        moving = self.friction.is_stuck(state.friction) & (state.velocity != 0)
         return MuscleState(
             pressure=state.pressure,
             position=x,
-            velocity=jnp.zeros_like(state.velocity),
-            friction=self.friction.mode_after_event(state.friction, held),
+            velocity=jnp.where(moving, state.velocity, jnp.zeros_like(state.velocity)),
+            friction=jnp.where(moving, jnp.sign(state.velocity), self.friction.mode_after_event(state.friction, held)),
         )
 
     def outputs(self, t, state, command):

@@ -220,6 +220,13 @@ class RegulatedMuscleSystem(AbstractMuscleSystem):
     def __check_init__(self):
         check_component(self.regulator, AbstractRegulator, "RegulatedMuscleSystem.regulator", REGULATOR_KINDS)
         check_component(self.muscle, AbstractMuscle, "RegulatedMuscleSystem.muscle", MUSCLE_KINDS)
+        # no events here: a Karnopp friction stayed in its start mode (its Coulomb force lost, or with the motion)
+        if isinstance(self.friction, AbstractFriction) and self.friction.hybrid:
+            raise PamjaxInputError(
+                f"RegulatedMuscleSystem.friction: a stick-slip friction ({type(self.friction).__name__}) needs its "
+                "modes switched at events, which the regulated system does not locate (its Coulomb force was lost, "
+                "or pushed with the motion from a moving start): use CoulombViscousFriction or BristleFriction "
+                "(stick-slip on paper 000's MuscleSystem)")
         check_nonnegative(self.load_force, "RegulatedMuscleSystem.load_force")
         check_positive(self.payload_mass, "RegulatedMuscleSystem.payload_mass")
         check_in_open_interval(self.polytropic_index, *POLYTROPIC_RANGE, "RegulatedMuscleSystem.polytropic_index")
