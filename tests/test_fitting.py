@@ -9,6 +9,7 @@ import json
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 import pytest
 
 import pamjax
@@ -80,3 +81,21 @@ def test_a_default_transform_keeps_every_trial_value_in_the_range_its_component_
     theta0 = float(np.asarray(space.initial_theta())[0])
     for step in (-20.0, -3.0, -1.0, 1.0, 3.0, 20.0):  # far out: an at-bound fit stops near |θ| = 15-20
         checked(space.model(np.array([theta0 + step])), "fitted")  # the component's own checks
+
+
+def test_a_parameter_set_to_a_python_number_is_named_as_such_in_the_unknown_parameter_error():
+    # eqx.tree_at(..., model, 6.0e5) leaves a Python float: not an array, so no parameter; the error only said
+    # "unknown parameter" (the same path as an array is a parameter, and its fit is accepted)
+    tank = presets.mas10_tank_system("pwm")
+    t = np.linspace(0.0, 0.1, 11)
+    exp = pamjax.Experiment(pamjax.Recording(t, {"pressure": np.full(11, 2e5)}), pamjax.Constant(1.0),
+                            channels=["pressure"], scales=dict(pressure=2e3))
+    number = eqx.tree_at(lambda m: m.valve.supply_pressure, tank, 6.0e5)
+    assert "valve.supply_pressure" not in pamjax.parameter_paths(number)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"unknown parameter 'valve\.supply_pressure': it holds a "
+                                                      r"Python number \(600000\.0\), not an array.*np\.asarray"):
+        pamjax.fit(number, [exp], ["valve.supply_pressure"], progress=False)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"unknown parameter 'valve\.supply_pressur';"):  # a typo
+        pamjax.ParameterSpace(tank, ["valve.supply_pressur"])
+    fixed = eqx.tree_at(lambda m: m.valve.supply_pressure, tank, np.asarray(6.0e5))  # as the message says
+    assert pamjax.ParameterSpace(fixed, ["valve.supply_pressure"]).labels == ["valve.supply_pressure"]

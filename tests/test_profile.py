@@ -105,6 +105,31 @@ def test_k0_k1_k2_together_are_structurally_non_identifiable():
         assert max(abs(d) for d in p.delta) < 1e-3
 
 
+def test_a_fit_at_a_bound_holds_the_pinned_parameter_there_and_profiles_it_inwards():
+    # A fit that ended "at bound" (k1's logistic range below its true value): every walk stopped at its first point
+    # (the bound "reached" where it started), the predictor divided by the pinned parameter's vanishing Jacobian
+    # column (on a tank a first point at Δχ² ≈ 1.5e4), and the pinned parameter read "structurally non-identifiable".
+    muscle, *_, exp = _force_map(2.0, np.linspace(0.5, 6.0, 7), np.linspace(-0.01, 0.07, 9))
+    k1 = float(muscle.force_law.k1)
+    start = eqx.tree_at(lambda m: m.force_law.k1, muscle, np.asarray(0.7 * k1))
+    res = _fit(start, [exp], ["force_law.k0", {"path": "force_law.k1", "transform": "logistic",
+                                               "bounds": (0.5 * k1, 0.9 * k1)}])
+    assert res.status == "at bound"
+    prof = pj.profile_likelihood(res, progress=False)
+    k0, pinned = prof["force_law.k0"], prof["force_law.k1"]
+    # k0 with k1 held on its bound: the model is linear in k0, so its profile interval is the linearised one
+    assert k0.verdict == "identifiable" and len(k0.values) > 4
+    np.testing.assert_allclose(k0.interval, k0.linearised, atol=1e-3 * (k0.linearised[1] - k0.linearised[0]))
+    np.testing.assert_allclose(k0.others["force_law.k1"], 0.9 * k1, rtol=1e-6)  # held on its bound
+    # k1 at its upper bound: profiled inwards, its interval one-sided from the bound, Δχ² at its lower end the
+    # threshold (a re-fit of k0 by hand with k1 held there)
+    assert pinned.verdict.startswith("at the upper bound of its range") and "structurally" not in pinned.verdict
+    assert pinned.interval[1] == pytest.approx(0.9 * k1) and 0.5 * k1 < pinned.interval[0] < 0.9 * k1
+    again = _fit(eqx.tree_at(lambda m: m.force_law.k1, res.model, np.asarray(pinned.interval[0])), [exp],
+                 ["force_law.k0"])
+    assert 2.0 * (again.cost - res.cost) / prof.sigma2 == pytest.approx(prof.threshold, abs=0.05)
+
+
 def test_bad_input_is_named_before_any_solve():
     muscle, *_, exp = _force_map(2.0, np.linspace(0.5, 6.0, 7), np.linspace(-0.01, 0.07, 9))
     res = _fit(muscle, [exp], ["force_law.k0", "force_law.k1"])

@@ -101,6 +101,16 @@ def test_implausible_sensors_and_a_group_no_experiment_reads_are_named():
         pj.predictions(pj.Rig(_plant(), sensors={"Rig": pj.Sensors(pressure_offset=1500.0)}), [exp])
 
 
+def test_a_group_the_rig_lacks_is_answered_with_the_keyword_experiment_takes():
+    # the advice was Experiment(sensor_group=...), a keyword Experiment does not have (a TypeError if followed)
+    t = np.linspace(0.0, 0.1, 11)
+    rec = pj.Recording(t, {"pressure": np.full(11, ATM)})
+    with pytest.raises(PamjaxInputError, match=r"Experiment\(\.\.\., sensors='left'\)") as info:
+        pj.predictions(pj.Rig(_plant(), sensors={"left": pj.Sensors()}), [pj.Experiment(rec, pj.Constant(0.5))])
+    assert "sensor_group" not in str(info.value)
+    assert pj.Experiment(rec, pj.Constant(0.5), sensors="left").sensor_group == "left"  # the advice, followed
+
+
 def _write_rig(folder, fmt="csv"):
     """A small rig: a tank charge T1 and a discharge T2 (0.5 s), a triangle run M0 from rest (1.2 s) and one, M1,
     logged from PREROLL s (2 s), with the nuisances of TRUTH, written as a logger writes them (time [s], duty [-],

@@ -257,9 +257,8 @@ def _entry(entry):
         raise PamjaxInputError(f"free parameter entry {entry!r} needs a 'path'")
     transform, bounds, user_scale = spec.pop("transform", None), spec.pop("bounds", None), spec.pop("scale", None)
     if spec:
-        raise PamjaxInputError(
-            f"free parameter {path!r}: unknown keys {sorted(spec)}; valid: {', '.join(FREE_ENTRY_KEYS)}"
-        )
+        raise PamjaxInputError(f"free parameter {path!r}: unknown keys {sorted(spec)}; valid: "
+                               f"{', '.join(FREE_ENTRY_KEYS)}")
     return path, transform, bounds, user_scale
 
 
@@ -268,9 +267,14 @@ def _start_value(model, path, attrs, index, valid):
     an index out of range."""
     leaf_path = join_path(attrs)
     if leaf_path not in valid:
-        raise PamjaxInputError(
-            f"unknown parameter {path!r}; the model's parameters are:\n  " + "\n  ".join(sorted(valid))
-        )
+        try:  # a leaf set to a Python number (eqx.tree_at(..., model, 6.0e5)) is no array: no parameter, say why
+            leaf = getter(attrs)(model)
+        except (AttributeError, KeyError, TypeError, IndexError):
+            leaf = None
+        hint = (f": it holds a Python number ({leaf!r}), not an array; set it as one, np.asarray({leaf!r}) or "
+                "jnp.asarray" if isinstance(leaf, int | float) and not isinstance(leaf, bool) else "")
+        raise PamjaxInputError(f"unknown parameter {path!r}{hint}; the model's parameters are:\n  "
+                               + "\n  ".join(sorted(valid)))
     full = np.asarray(getter(attrs)(model), dtype=float)
     if index is None:
         return full, full
@@ -350,9 +354,8 @@ def _make_group(model, entry, valid):
         scale = np.full(flat.shape, float(meta["scale"]))
     if user_scale is not None:
         if transform != "linear":
-            raise PamjaxInputError(
-                f"free parameter {path!r}: 'scale' applies to the linear transform, not {transform!r}"
-            )
+            raise PamjaxInputError(f"free parameter {path!r}: 'scale' applies to the linear transform, not "
+                                   f"{transform!r}")
         user = np.broadcast_to(np.asarray(user_scale, dtype=float), value.shape).reshape(-1)
         if not np.all(np.isfinite(user) & (user > 0)):
             raise PamjaxInputError(f"free parameter {path!r}: scale must be finite and > 0, got {user_scale!r}")

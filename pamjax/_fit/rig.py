@@ -9,7 +9,8 @@ scalings from the model, and as SDO estimates initial states beside the paramete
 - `Sensors`: pressure offset [Pa] (added to the gauge pressure) and gain [-] (multiplies it), position offset [m],
   acquisition delay [s] (every channel's samples are `delay` late: fractional, differentiable — the model is read
   at t − delay on its own continuous interpolant, not shifted by whole samples). One `Sensors` per group of
-  experiments that share the same sensors (default group "rig": one set for the whole rig).
+  experiments that share the same sensors (default group "rig": one set for the whole rig); an experiment names
+  its group with `Experiment(..., sensors="left")`.
 - `RunConditions`: one run's supply pressure [Pa abs] and its start state (`StartState`: pressure, position,
   velocity; for stick-slip friction the mode follows the velocity — stuck at 0, sliding in its direction
   otherwise — or is declared "stuck").
@@ -158,10 +159,11 @@ def check_group(model, name, group):
     """A `Rig` must hold the sensors of experiment `name`'s group: one it lacks (a typo: `sensors={"Rig": ...}`) would
     read the experiment through ideal sensors, its calibration unused."""
     if isinstance(model, Rig) and group not in model.sensors:
+        example = min(model.sensors, default="left")  # the keyword is `sensors=` (it said `sensor_group=`: a TypeError)
         raise PamjaxInputError(f"experiment {name!r} reads sensor group {group!r}, which the Rig has none of (its "
                                f"groups: {sorted(model.sensors)}); name the group as the experiment does "
-                               f"(Experiment(sensor_group=...), {DEFAULT_GROUP!r} by default), or give it Sensors() "
-                               "for ideal sensors")
+                               f"(Experiment(..., sensors={example!r}), {DEFAULT_GROUP!r} by default), or give it "
+                               "Sensors() for ideal sensors")
 
 
 PLANT_PREFIX = "plant."  # how a `Rig` labels its plant's parameters (`plant.valve.inflate.discharge_coefficient`)

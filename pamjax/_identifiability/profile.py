@@ -13,8 +13,12 @@ exploiting the profile likelihood", Bioinformatics 25(15)). Verdicts:
 - identifiable: Δχ² crosses the threshold on both sides;
 - practically non-identifiable (lower / upper / both sides): the profile rises but stays below the threshold out to
   the search span (the data bound ψ on that side only weakly, or not before a physical limit);
-- structurally non-identifiable: the profile is flat (Δχ² < `FLAT` over the whole span on both sides): other
-  parameters compensate exactly (e.g. k0, k1, k2 of paper 000 eq. 7, which enter only as k0/k2 and k1/k2).
+- structurally non-identifiable: the profile is flat (Δχ² < `profile_walk.FLAT` over the whole span on both
+  sides): other parameters compensate exactly (e.g. k0, k1, k2 of paper 000 eq. 7, which enter only as k0/k2 and
+  k1/k2);
+- at the lower / upper bound of its range: a fit that ended "at bound" left ψ there (the data pull it beyond); its
+  profile is taken inwards only and its interval is one-sided, from the bound. Such parameters are held on their
+  bound while the others are profiled (`pamjax._identifiability.profile_walk`).
 
 Profiles need the fit at a minimum: a fit that stopped at `max_steps` (or stalled) is refused before any work, and
 when a re-fitted point lies below the fit's cost (Δχ² < `NOT_A_MINIMUM`: the fit had not reached the minimum after
@@ -35,7 +39,6 @@ import statistics
 import time
 from collections.abc import Callable, Sequence
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -47,16 +50,13 @@ from .._fit.experiment import AbstractExperiment, Experiments
 from .._fit.fit import FitResult
 from .._fit.parameters import ParameterSpace
 from .._fit.problem import Problem
+from .profile_walk import Branch, bound_side, bound_verdict, crossing, direction, physical_at, verdict
 
-FLAT = 1e-3  # Δχ²: a profile within this of its minimum over its whole span on both sides is flat (structural)
 # Δχ²: a re-fitted point this far BELOW the fit's cost shows that the fit is not at a minimum (a converged fit's
 # re-fits lie within ~1e-6 of it: the stopping tolerances); every verdict is then void, not "non-identifiable"
 NOT_A_MINIMUM = -0.1
 # statuses of a fit whose end point is a minimum (of the cost, or of the cost within the bounds): what profiles need
 PROFILED_STATUSES = ("converged", "at bound")
-BISECTIONS = 3  # re-fits bisecting the step across the threshold (the interval's end to ~1/8 of a step, then
-# interpolated)
-REFINES = 6  # shorter retakes of a step that jumps across the threshold (locates a steep crossing to ~4⁻⁶ of it)
 
 
 def chi2_quantile_1dof(level):
@@ -166,112 +166,6 @@ class ProfileResult:
         return paths
 
 
-class _Branch:
-    """One side of one parameter's profile: θ = τ u + N φ with ψ a monotone function of τ alone; walks τ away from
-    the fit, re-fitting φ at each point."""
-
-    def __init__(self, evaluator, index, u, side, theta, jac, se_tau, settings):
-        self.evaluator, self.index, self.u, self.side = evaluator, index, u, side
-        basis = np.linalg.svd(np.eye(u.size) - np.outer(u, u))[0][:, : u.size - 1]
-        self.null = basis  # orthonormal, ⟂ u
-        self.tau0 = float(u @ theta)
-        self.phi = basis.T @ theta
-        self.jac = jac  # full Jacobian at the current point
-        self.settings = settings
-        span = settings["span"]
-        finite = math.isfinite(se_tau) and se_tau > 0
-        self.step = min(settings["first_step"] * se_tau, 0.25 * span) if finite else 0.05 * span
-        self.points = []  # (tau, delta, theta, converged)
-
-    def theta(self, tau, phi):
-        return tau * self.u + self.null @ phi
-
-    def refit(self, tau, phi):
-        """Re-fit φ with τ held: Levenberg-Marquardt from `phi`."""
-        ev, s = self.evaluator, self.settings
-
-        def residuals(p):
-            return ev.residuals(self.theta(tau, p))
-
-        def jacobian(p):
-            r, j = ev.jacobian(self.theta(tau, p))
-            self.jac = j
-            return r, j @ self.null
-
-        r0 = residuals(phi)
-        if r0 is None:
-            return None
-        from .._fit.drive import levenberg_marquardt
-
-        state = levenberg_marquardt(residuals, jacobian, phi, max_steps=s["max_steps"], ftol=s["ftol"],
-                                    xtol=s["xtol"], gtol=s["gtol"], stall_steps=8)
-        self.jac = ev.jacobian(self.theta(tau, state.theta))[1]
-        return state
-
-    def walk(self):
-        """Step away from the fit until Δχ² passes the threshold by `overshoot`, the span or a bound is reached,
-        or `max_points` points are taken. A step that jumps across the threshold by more than the threshold itself
-        is retaken a quarter as long (at most `REFINES` times), so that the crossing is located where the profile
-        is steep or has a kink (a physical limit)."""
-        s, ev = self.settings, self.evaluator
-        tau, phi, last_delta, refines = self.tau0, self.phi, 0.0, 0
-        while len(self.points) < s["max_points"]:
-            step = self.side * self.step
-            if abs(tau + step - self.tau0) > s["span"]:
-                step = self.side * max(s["span"] - abs(tau - self.tau0), 0.0)
-                if abs(step) < 1e-12:
-                    break
-            # Predictor: the others' linearised change along τ, −(J_φᵀJ_φ)⁺ J_φᵀ J_τ.
-            j_phi, j_tau = self.jac @ self.null, self.jac @ self.u
-            slope = -np.linalg.lstsq(j_phi, j_tau, rcond=None)[0]
-            state = self.refit(tau + step, phi + slope * step)
-            delta = math.inf if state is None else 2.0 * (state.cost - ev.cost) / ev.sigma2
-            if delta > s["threshold"] and delta - last_delta > s["threshold"] and refines < REFINES:
-                refines += 1  # jumped across: retake a shorter step from the last point
-                self.step *= 0.25
-                self.jac = ev.jacobian(self.theta(tau, phi))[1]
-                continue
-            if state is None:  # the solve fails here: the physical range ends
-                break
-            tau, phi = tau + step, state.theta
-            theta = self.theta(tau, phi)
-            self.points.append((tau, delta, theta, state.reason.startswith("converged")))
-            if delta > s["threshold"] * s["overshoot"] or ev.space.at_bound(theta).any():
-                break
-            growth = delta - last_delta
-            if growth < s["threshold"] / 8:
-                self.step *= 2.0
-            elif growth > s["threshold"] / 2:
-                self.step *= 0.5
-            last_delta = delta
-        self._refine()
-        return self
-
-    def _refine(self):
-        """Bisect the last step across the threshold `BISECTIONS` times (re-fits warm-started from the point
-        below), so that interpolating √Δχ² places the interval's end to a small fraction of a step even where the
-        profile is far from quadratic."""
-        s, ev = self.settings, self.evaluator
-        below = [(t, d, th) for t, d, th, _ in self.points if d < s["threshold"]]
-        above = [(t, d, th) for t, d, th, _ in self.points if d >= s["threshold"]]
-        if not above:
-            return
-        lo = max(below, key=lambda p: abs(p[0] - self.tau0), default=(self.tau0, 0.0, self.tau0 * self.u +
-                                                                       self.null @ self.phi))
-        hi = min(above, key=lambda p: abs(p[0] - self.tau0))
-        for _ in range(BISECTIONS):
-            tau = 0.5 * (lo[0] + hi[0])
-            self.jac = ev.jacobian(lo[2])[1]
-            state = self.refit(tau, self.null.T @ lo[2])
-            if state is None:
-                break
-            theta = self.theta(tau, state.theta)
-            point = (tau, 2.0 * (state.cost - ev.cost) / ev.sigma2, theta)
-            self.points.append(point + (state.reason.startswith("converged"),))
-            lo, hi = (point, hi) if point[1] < s["threshold"] else (lo, point)
-        self.points.sort(key=lambda p: abs(p[0] - self.tau0))
-
-
 class _Evaluator:
     """The fit's host problem (`pamjax._fit.problem.Problem`: its compiled residual and Jacobian programs, through the
     CLI's program cache when it is on; identification samples only) with the cost and residual variance at the
@@ -286,47 +180,6 @@ class _Evaluator:
         dof = max(int(np.count_nonzero(np.any(j != 0, axis=1) | (r != 0))) - j.shape[1], 1)
         self.sigma2 = 2.0 * self.cost / dof
         self.residuals, self.jacobian = self.problem.residuals, self.problem.jacobian  # θ → r; θ → (r, J)
-
-
-def _direction(space, theta, index):
-    """Unit vector u in θ along which the physical value of parameter `index` moves, the others held: for a
-    per-entry transform its own coordinate; for the F_max nodes (a0…a4 linear in the five node values) the row of
-    the linear map."""
-    grad = np.asarray(jax.grad(lambda t: space.physical(t)[index])(jnp.asarray(theta)))
-    if np.count_nonzero(grad) == 1:
-        u = (grad != 0).astype(float)
-    else:
-        u = grad / np.linalg.norm(grad)
-    return u
-
-
-def _crossing(points, threshold, tau0):
-    """τ where Δχ² crosses `threshold` on this side, or None: linear interpolation of √Δχ² (exact for a quadratic
-    profile, whose √Δχ² = |τ − τ̂|/se is linear)."""
-    last_tau, last_root = tau0, 0.0
-    for tau, delta, _, _ in points:
-        root = math.sqrt(max(delta, 0.0))
-        if delta >= threshold:
-            w = (math.sqrt(threshold) - last_root) / (root - last_root) if root > last_root else 1.0
-            return last_tau + w * (tau - last_tau)
-        last_tau, last_root = tau, root
-    return None
-
-
-def _physical_at(space, theta, index, u, tau):
-    t = np.asarray(theta) + (tau - float(u @ theta)) * u
-    return float(space.physical(jnp.asarray(t))[index])
-
-
-def _verdict(lower, upper, branches):
-    deltas = [d for b in branches for _, d, _, _ in b.points]
-    if deltas and max(deltas) < FLAT and all(len(b.points) > 0 for b in branches):
-        return "structurally non-identifiable"
-    if lower is not None and upper is not None:
-        return "identifiable"
-    sides = [name for name, hit in (("lower", lower), ("upper", upper)) if hit is None]
-    return "practically non-identifiable (" + (" and ".join(sides) if len(sides) == 1 else "both") + " side" + \
-        ("s" if len(sides) == 2 else "") + ")"
 
 
 def _sayer(progress):
@@ -413,6 +266,71 @@ def _validate(result, names, experiments, level, max_points, span, max_steps, wo
     return names, experiments
 
 
+def _branches(space, theta, ev, result, names, settings):
+    """(name, `Branch`) for both sides of every parameter in `names`. The parameters the fit left at a bound of its
+    range (`ParameterSpace.at_bound`: what made its status "at bound") are held there while the others are profiled
+    (`profile_walk`: re-fitted, the flat transform spoiled every step); one of them is profiled inwards only, the
+    bound closing its other side, over its whole range: from its θ to the range's middle (a logistic's θ = 0; a
+    log's start value) and `span` beyond (its θ of ~15-37 is a physical step of ~1e-7 of the range or less)."""
+    labels = list(space.labels)
+    pinned = space.at_bound(theta)
+    free = ~pinned
+    jac = ev.jac[:, free]
+    cov = ev.sigma2 * np.linalg.pinv(jac.T @ jac)  # the others' covariance, the pinned held (as the fit's errors)
+    jobs = []
+    for name in names:
+        i = labels.index(name)
+        u = direction(space, theta, i)
+        held = pinned & (np.arange(theta.size) != i)
+        if pinned[i]:
+            outward = 1 if bound_side(theta[i]) == "upper" else -1
+            inwards = dict(settings, span=abs(float(theta[i])) + settings["span"])
+            jobs += [(name, Branch(ev, i, u, side, theta, ev.jac, math.inf, inwards, held, closed=side == outward))
+                     for side in (-1, 1)]
+            continue
+        loose = any(name in group for group in result.non_identifiable)  # linearised error infinite
+        se_tau = math.inf if loose else math.sqrt(max(float(u[free] @ cov @ u[free]), 0.0))
+        jobs += [(name, Branch(ev, i, u, side, theta, ev.jac, se_tau, settings, held)) for side in (-1, 1)]
+    return jobs
+
+
+def _profile(space, theta, result, name, branches, threshold, warnings):
+    """The `LikelihoodProfile` of `name` from its two walked branches (lower, upper)."""
+    labels = list(space.labels)
+    i = labels.index(name)
+    lower_b, upper_b = branches
+    u = lower_b.u
+    value = float(result.values[i])
+    pinned = any(b.closed for b in branches)
+    if pinned:  # one branch closed by the bound, where the interval ends; the other interpolated in the value
+        ends = [value if b.closed else crossing(b.points, threshold, value,
+                                                lambda p: float(space.physical(jnp.asarray(p[2]))[i]))
+                for b in branches]
+    else:
+        crossings = [crossing(b.points, threshold, b.tau0) for b in branches]
+        ends = [None if c is None else physical_at(space, theta, i, u, c) for c in crossings]
+    points = sorted([(float(space.physical(jnp.asarray(th))[i]), d, th, ok)
+                     for b in branches for _, d, th, ok in b.points]
+                    + [(value, 0.0, theta, True)], key=lambda p: p[0])
+    others = {lbl: [float(space.physical(jnp.asarray(th))[k]) for _, _, th, _ in points]
+              for k, lbl in enumerate(labels) if k != i}
+    se = float(result.standard_errors[i])
+    z = math.sqrt(threshold)
+    lo_hi = sorted([e if e is not None else -math.inf * side for e, side in zip(ends, (1, -1))])
+    # a decreasing transform (none today) would swap the sides; sorting keeps [lower, upper]
+    if warnings:
+        said = "not a minimum: see warnings"
+    elif pinned:
+        side = bound_side(theta[i])
+        said = bound_verdict(side, ends[0] if side == "upper" else ends[1])
+    else:
+        said = verdict(*ends, branches)
+    return LikelihoodProfile(
+        label=name, value=value, values=[p[0] for p in points], delta=[float(p[1]) for p in points],
+        others=others, converged=[bool(p[3]) for p in points], interval=[float(v) for v in lo_hi],
+        linearised=[value - z * se, value + z * se], verdict=said)
+
+
 def profile_likelihood(
     result: FitResult,
     names: str | Sequence[str] | None = None,
@@ -428,10 +346,12 @@ def profile_likelihood(
     """Profile likelihoods of the parameters `names` (labels of `result`; default all) of a fit.
 
     For each, the other free parameters are re-fitted with it held at values stepping away from the fit on both
-    sides, until Δχ² passes the `level` threshold (3.84 at 95 %) by half again, `max_points` points are taken, a
-    bound is reached, or the step has gone `span` from the fit in the fit's scaled coordinates (4: a factor e⁴ ≈ 55
-    for a positive parameter fitted in log space). Steps start at 0.6 linearised standard errors and adapt to the
-    profile's rise.
+    sides, until Δχ² passes the `level` threshold (3.84 at 95 %) by half again, `max_points` points are taken,
+    another parameter reaches a bound of its range, or the step has gone `span` from the fit in the fit's scaled
+    coordinates (4: a factor e⁴ ≈ 55 for a positive parameter fitted in log space). Steps start at 0.6 linearised
+    standard errors and adapt to the profile's rise. Of a fit that ended "at bound", the parameters at a bound are
+    held there while the others are profiled, and each is profiled inwards from its bound only (a one-sided
+    interval; docs/identifiability.md).
 
     **Arguments:**
 
@@ -455,39 +375,14 @@ def profile_likelihood(
     threshold = chi2_quantile_1dof(level)
     settings = dict(threshold=threshold, overshoot=1.5, max_points=int(max_points), span=float(span), first_step=0.6,
                     max_steps=int(max_steps), ftol=1e-10, xtol=1e-10, gtol=1e-10)
-    cov = ev.sigma2 * np.linalg.pinv(ev.jac.T @ ev.jac)
     labels = list(space.labels)
-    jobs = []
-    for name in names:
-        i = labels.index(name)
-        u = _direction(space, theta, i)
-        loose = any(name in group for group in result.non_identifiable)  # linearised error infinite
-        se_tau = math.inf if loose else math.sqrt(max(float(u @ cov @ u), 0.0))
-        jobs += [(name, _Branch(ev, i, u, side, theta, ev.jac, se_tau, settings)) for side in (-1, 1)]
+    jobs = _branches(space, theta, ev, result, names, settings)
     done = _walk_all(jobs, names, int(workers), say)
     warnings = _not_a_minimum(jobs, done, space, labels, result.values)
-    z = math.sqrt(threshold)
     profiles = []
     for name in names:
-        i = labels.index(name)
-        lower_b, upper_b = [b for (n, _), b in zip(jobs, done) if n == name]
-        u = lower_b.u
-        value = float(result.values[i])
-        crossings = [_crossing(b.points, threshold, b.tau0) for b in (lower_b, upper_b)]
-        ends = [None if c is None else _physical_at(space, theta, i, u, c) for c in crossings]
-        points = sorted([(float(space.physical(jnp.asarray(th))[i]), d, th, ok)
-                         for b in (lower_b, upper_b) for _, d, th, ok in b.points]
-                        + [(value, 0.0, theta, True)], key=lambda p: p[0])
-        others = {lbl: [float(space.physical(jnp.asarray(th))[k]) for _, _, th, _ in points]
-                  for k, lbl in enumerate(labels) if k != i}
-        se = float(result.standard_errors[i])
-        lo_hi = sorted([e if e is not None else -math.inf * side for e, side in zip(ends, (1, -1))])
-        # a decreasing transform (none today) would swap the sides; sorting keeps [lower, upper]
-        profiles.append(LikelihoodProfile(
-            label=name, value=value, values=[p[0] for p in points], delta=[float(p[1]) for p in points],
-            others=others, converged=[bool(p[3]) for p in points], interval=[float(v) for v in lo_hi],
-            linearised=[value - z * se, value + z * se],
-            verdict="not a minimum: see warnings" if warnings else _verdict(*ends, (lower_b, upper_b))))
+        profiles.append(_profile(space, theta, result, name, [b for (n, _), b in zip(jobs, done) if n == name],
+                                 threshold, warnings))
         if say:
             p = profiles[-1]
             say(f"{name}: {p.verdict}; {level:.0%} LR interval [{p.interval[0]:.6g}, {p.interval[1]:.6g}] "
