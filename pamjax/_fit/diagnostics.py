@@ -28,6 +28,14 @@ loaded points' 4.3 N). The statistics are taken over the measured (loaded) sampl
 slack points are counted apart (`slack_points`) with the largest push the model gives there (`slack_max_violation`).
 The `range` stays that of all the data (the map's forces from 0 N up).
 
+An experiment without a time axis (`split_time` None: the static maps and curves of `static_experiments.py`) has no
+order to its samples: its rows are in whatever order the file lists them, so the statistics read off neighbouring
+samples (the first-difference noise estimate, the autocorrelation, `se_inflation`) are not computed for it (NaN,
+`ordered` False) and it takes no part in the correlation test of `mismatch`: the same 126 points of the DMSP-20-300
+map gave a lag-1 autocorrelation of 0.59 and "correlated in time" in file order (by length, then pressure), −0.24
+sorted by pressure, −0.03 shuffled. Its RMSE and its residuals' size are what it reports; σ² scales the standard
+errors by them. `HysteresisLoopExperiment`, whose samples are the path in the order measured, keeps them.
+
 A parameter `Measurement` (`pamjax._fit.measurement`) is one datum, not a noise sample: its entry gives the measured
 and fitted values and z, and takes no part in `mismatch` (its contradictions are named apart).
 
@@ -145,15 +153,18 @@ def _autocorrelation(err):
     return out
 
 
-def _residual_stats(err, noise_given):
+def _residual_stats(err, noise_given, ordered=True):
+    """The noise statistics of one channel's residuals `err`; `ordered` False (samples without a time order,
+    `in_time_order`): those read off neighbouring samples NaN (noise estimate, autocorrelation, se_inflation)."""
+    nan = float("nan")
     rmse = float(np.sqrt(np.mean(err**2)))
-    estimate = _noise_estimate(err)
+    estimate = _noise_estimate(err) if ordered else nan
     noise = noise_given if noise_given is not None else estimate
-    ratio = rmse / noise if noise and np.isfinite(noise) and noise > 0 else float("nan")
-    acf = _autocorrelation(err)
+    ratio = rmse / noise if noise and np.isfinite(noise) and noise > 0 else nan
+    acf = _autocorrelation(err) if ordered else dict.fromkeys(map(str, _LAGS), nan)
     return dict(noise=noise, noise_estimate=estimate, noise_given=noise_given is not None, rmse_over_noise=ratio,
-                autocorrelation=acf, se_inflation=correlation_factor(acf["1"]) if np.isfinite(ratio) else float("nan"),
-                samples=int(err.size))
+                autocorrelation=acf, se_inflation=correlation_factor(acf["1"]) if ordered and np.isfinite(ratio)
+                else nan, samples=int(err.size), ordered=bool(ordered))
 
 
 SLACK_EXPERIMENTS = (ForceMapExperiment, LoopForceMapExperiment, HysteresisLoopExperiment)  # declare `slack`
@@ -166,6 +177,13 @@ def measured_samples(experiment, size):
     if not isinstance(experiment, SLACK_EXPERIMENTS) or np.shape(experiment.slack) != (size,):
         return np.ones(size, dtype=bool)
     return ~np.asarray(experiment.slack, dtype=bool)
+
+
+def in_time_order(experiment) -> bool:
+    """Whether an experiment's samples are in the order measured, so that neighbouring residuals are neighbours in
+    time: one with a time axis (`split_time` not None), or a hysteresis loop read as the path travelled. A static
+    map's or curve's rows are in any order (see the module docstring)."""
+    return experiment.split_time is not None or isinstance(experiment, HysteresisLoopExperiment)
 
 
 def channel_errors(experiments, residuals):
@@ -198,7 +216,7 @@ def channel_errors(experiments, residuals):
                                   f"{prefix}rmse_percent": 100 * rmse / span,
                                   f"{prefix}max_error_percent": 100 * mx / span})
             if np.any(ident):
-                stats.update(_residual_stats(err[ident], given))
+                stats.update(_residual_stats(err[ident], given, in_time_order(e)))
             out[e.name][c] = stats
     return out
 

@@ -34,7 +34,7 @@ from .._core.custom_types import (
     RealVectorLike,
     TableLike,
 )
-from .._core.errors import PamjaxInputError, check_count, concrete_values
+from .._core.errors import PamjaxInputError
 from .._physics.friction import AbstractFriction
 from .._physics.gas import AbstractRestriction, Air
 from .._physics.muscle import AbstractMuscle
@@ -42,11 +42,19 @@ from .._systems.base import AbstractMuscleSystem, AbstractSystem
 from .experiment import AbstractExperiment
 from .static_checks import (
     check_absolute,
+    check_decimals,
+    check_flow_curve,
+    check_kind,
+    check_loaded_above_atmosphere,
     check_map,
     check_moving,
+    check_path,
     check_scale,
     check_stroke,
+    check_unit,
     columns,
+    component_path,
+    numbers,
     set_data,
     slack_points,
 )
@@ -79,10 +87,12 @@ def _air(model):
 
 def steady_friction_force(friction: AbstractFriction, velocity: RealArrayLike) -> FloatArray:
     """Friction force [N] at steady sliding with constant `velocity` [m/s] ≠ 0 (paper 000 eq. 9: F_c sign(v) + C_f v;
-    at v = 0 the friction's at rest: 0 N for a Bouc–Wen one, whose `steady_state(0)` is its rest state).
+    at v = 0 the friction's at rest: 0 N for a Bouc–Wen one, whose `steady_state(0)` is its rest state, and for a
+    bristle one, whose state stays undeflected there).
 
     Memoryless frictions are evaluated directly; a hybrid (stick-slip) friction in its sliding mode sign(v); a friction
     with its own state (bristles) at the state where that state is at rest (Newton on `state_rate(v, z) = 0`)."""
+    check_kind(friction, AbstractFriction, "friction", "a friction model, e.g. pj.KarnoppFriction()")
     velocity = jnp.asarray(velocity, dtype=float)
     return friction.force(velocity, sliding_state(friction, velocity))
 
@@ -103,7 +113,10 @@ def sliding_state(friction: AbstractFriction, velocity):
     z = jnp.zeros_like(velocity) + z
     for _ in range(4):  # state_rate is affine in z for the bristle model: the first step is exact
         rate, slope = jax.jvp(lambda q: friction.state_rate(velocity, q), (z,), (jnp.ones_like(z),))
-        z = z - rate / slope
+        # at v = 0 the bristle's rate is 0 for every z (slope 0): the state stays at rest, where a step 0/0 made the
+        # force and its gradient NaN; the slope kept off 0 on both branches of `where`, so the gradient stays finite
+        flat = slope == 0
+        z = z - jnp.where(flat, 0.0, rate / jnp.where(flat, 1.0, slope))
     return z
 
 
@@ -113,7 +126,7 @@ def constant_velocity_point(t: TableLike, position: TableLike, force: TableLike)
     The velocity is the least-squares slope of `position` [m] over `t` [s]; the force is the mean of `force` [N] (the
     cylinder's chamber-pressure difference times area, or the load cell; paper 000, Fig. 6 procedure). Pass only the
     part of the run at constant velocity."""
-    t, x, f = (np.asarray(a, dtype=float) for a in (t, position, force))
+    t, x, f = (numbers(name, a) for name, a in (("t", t), ("position", position), ("force", force)))
     if not (t.ndim == x.ndim == f.ndim == 1 and t.size == x.size == f.size and t.size >= 3):
         raise PamjaxInputError(f"t, position, force must be 1-D of one length >= 3: {t.shape}, {x.shape}, {f.shape}")
     for name, a in (("t", t), ("position", x), ("force", f)):
@@ -128,7 +141,11 @@ def constant_velocity_point(t: TableLike, position: TableLike, force: TableLike)
 def flow_curve(restriction: AbstractRestriction, upstream_pressure: RealScalarLike, ratios: RealVectorLike,
                air: Air) -> FloatVector:
     """Mass flow [kg/s] through `restriction` from `upstream_pressure` [Pa abs] to `ratios` × that pressure: the
-    ISO 6358-1 flow curve (upstream held, downstream throttled)."""
+    ISO 6358-1 flow curve (upstream held, downstream throttled). The ratios lie in [0, 1]; each argument is checked
+    (`check_flow_curve`) as `FlowCurveExperiment` checks its columns."""
+    check_kind(restriction, AbstractRestriction, "restriction", "a restriction, e.g. a valve's inflate path")
+    check_kind(air, Air, "air", "the air, e.g. pj.Air()")
+    check_flow_curve(upstream_pressure, ratios)
     p1 = jnp.asarray(upstream_pressure, dtype=float)
     return jax.vmap(lambda r: restriction.mass_flow(p1, r * p1, air))(jnp.asarray(ratios, dtype=float))
 
@@ -140,7 +157,8 @@ class ForceMapExperiment(AbstractExperiment):
     positive model force counts: max(F_model, 0) / scale ("force ≤ 0 → 0", the muscle cannot push).
 
     **Arguments:** `positions` [m] (the contraction L0 − L, within the muscle's stroke: `check` refuses a length L),
-    `pressures` [Pa abs], `forces` [N], `scale` [N] (default 1 % of the force range), `slack_force` [N], `name`. The
+    `pressures` [Pa abs] (a loaded point at or below one atmosphere is refused: gauge pressures), `forces` [N] (at
+    least one above `slack_force`), `scale` [N] (default 1 % of the force range), `slack_force` [N], `name`. The
     model is a muscle system (its `muscle`) or a muscle.
     """
 
@@ -157,7 +175,8 @@ class ForceMapExperiment(AbstractExperiment):
         x, p, f = columns(("positions", "pressures", "forces"), (positions, pressures, forces))
         check_map(x, p)  # pressures above half an atmosphere: a vented muscle reads about 101325 Pa absolute
         self.positions, self.pressures, self.forces = jnp.asarray(x), jnp.asarray(p), jnp.asarray(f)
-        self.slack = slack_points(f, slack_force)
+        self.slack = slack_points(f, slack_force)  # and a map with no loaded point refused
+        check_loaded_above_atmosphere(p, f, self.slack)  # gauge pressures once the slack (0 N) rows are dropped
         self.scale = check_scale(f, scale, "N")  # as the other bench tests' (`set_data`)
         self.name = str(name)
         self.channels = ("force",)
@@ -257,7 +276,7 @@ class FrictionCurveExperiment(AbstractStaticExperiment):
         v, f = columns(("velocities", "forces"), (velocities, forces))
         check_moving(v, "sliding")
         self.velocities = jnp.asarray(v)
-        self.friction = Component(friction)
+        self.friction = Component(component_path(friction, "friction", "friction"))
         set_data(self, "force", f, scale, "N", name)
 
     def predict(self, model):
@@ -289,8 +308,9 @@ class FlowCurveExperiment(AbstractStaticExperiment):
                              (upstream_pressures, downstream_pressures, mass_flows))
         check_absolute("upstream_pressures", p1)
         check_absolute("downstream_pressures", p2)
+        check_unit("mass_flow", m, "mass_flows")  # g/s (a flow meter's display) refused as `Recording` refuses it
         self.upstream_pressures, self.downstream_pressures = jnp.asarray(p1), jnp.asarray(p2)
-        self.restriction = Component(restriction)
+        self.restriction = Component(component_path(restriction, "restriction", "valve.inflate"))
         set_data(self, "mass_flow", m, scale, "kg/s", name)
 
     def predict(self, model):
@@ -349,6 +369,7 @@ def loop_average(positions: TableLike, pressures: TableLike, velocities: TableLi
 
     Points with equal (x, p) measured in both directions (sign of ẋ) are paired. Returns (x [m], p [Pa], mean force
     [N], width [N] = F(stretching) − F(contracting)) for each pair, sorted by pressure then position."""
+    check_decimals(decimals)
     x, p, v, f = columns(("positions", "pressures", "velocities", "forces"),
                           (positions, pressures, velocities, forces))
     keys = {}
@@ -406,32 +427,6 @@ def path_friction_force(friction: AbstractFriction, positions: TableLike, veloci
     z0 = jnp.zeros_like(at_start[0])
     _, force = jax.lax.scan(sample, z0, (step_velocity, h, jnp.asarray(starts), at_start, v, bound))
     return force
-
-
-def check_path(positions, velocities, starts, substeps):
-    """The checks of a loop read as a path (`path_friction_force`, `HysteresisLoopExperiment`), each a
-    `PamjaxInputError` naming the argument: `substeps` an int >= 1 (0 RK4 steps carry no state: the force stays on
-    the branch it started on past every reversal); `positions`, `velocities`, `starts` 1-D of one length; `starts`
-    bool with `starts[0]` True (the first sample begins a sweep, on the branch of its velocity; without it the state
-    starts virgin, z = 0, halfway between the branches); concrete positions and velocities finite (one NaN makes every
-    force after it NaN: the state is carried), positions in m (not mm) and velocities ≠ 0. Traced values (jit, vmap,
-    grad): their shapes and dtype only."""
-    check_count(substeps, "substeps", "an integer >= 1")
-    shapes = [jnp.shape(a) for a in (positions, velocities)]
-    if not (len(shapes[0]) == 1 and shapes[0][0] > 0 and shapes[1] == shapes[0]):
-        raise PamjaxInputError(f"positions, velocities must be 1-D arrays of one length, got shapes {shapes}")
-    traced = isinstance(starts, jax.core.Tracer)
-    dtype = starts.dtype if traced else np.asarray(starts).dtype
-    if jnp.shape(starts) != shapes[0] or dtype != np.bool_:
-        raise PamjaxInputError(f"starts must be a bool array of the positions' shape {shapes[0]}, got "
-                               f"{dtype} {jnp.shape(starts)}")
-    if not traced and not np.asarray(starts)[0]:
-        raise PamjaxInputError("starts[0] must be True: the first sample begins a sweep")
-    if concrete_values(positions) is not None and concrete_values(velocities) is not None:
-        x, _ = columns(("positions", "velocities"), (positions, velocities))
-        if np.max(np.abs(x)) > 1.0:  # as `check_map`: no muscle contracts by a metre
-            raise PamjaxInputError(f"positions reach {np.max(np.abs(x)):g} m: these look like mm; pamjax takes m")
-    check_moving(velocities, "the direction of motion")
 
 
 class HysteresisLoopExperiment(AbstractStaticExperiment):
