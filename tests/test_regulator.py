@@ -346,3 +346,90 @@ def test_stiffness_of_a_point_in_other_units_is_named(call, match):
     Traced values (the jitted calls of the tests above) are not checked."""
     with pytest.raises(pamjax.PamjaxInputError, match=match):
         call(dmsp40_muscle())
+
+
+def test_a_shorter_calibration_table_is_the_command_range():
+    """A 0-5 V calibration commanded 7 V held its 5 V pressure: simulate settled there, equilibrium gave 606325 Pa
+    and linearise a dc gain of 0, while `static_outlet_pressure` refused 7 V. The regulator's command range is now
+    its calibration's table, which simulate and linearise check by name (the default stays 0-10 V)."""
+    cal5 = VoltageCalibration(voltage=[0.0, 5.0], gauge_pressure=[0.0, 5.05e5])
+    system = RegulatorSystem(LinearRegulator(calibration=cal5), volume=0.0)
+    assert system.command_range == (0.0, 5.0)
+    assert RegulatorSystem(LinearRegulator(), volume=0.0).command_range == (0.0, 10.0)
+    assert pamjax.FeedbackRegulator().command_range == (0.0, 10.0)
+    with pytest.raises(pamjax.PamjaxInputError, match=r"signal .*must stay within \[0\.0, 5\.0\]"):
+        pamjax.simulate(system, pamjax.Constant(7.0), np.linspace(0.0, 1.0, 3))
+    with pytest.raises(pamjax.PamjaxInputError, match=r"command_range \[0\.0, 5\.0\], got 7"):
+        pamjax.linearise(system, system.initial_state(P_ATM + 5.05e5), 7.0)
+
+
+@pytest.mark.parametrize("gauge, match", [
+    ([0.0, 1010.0], r"reaches 1010 Pa at most .*looks like kPa or mbar"),
+    ([0.0, 10100.0], r"reaches 10100 Pa at most .*looks like kPa or mbar"),
+    ([P_ATM, P_ATM + 1.01e6], r"= 101325 Pa at 0 V: that looks like an ABSOLUTE pressure"),
+    ([-5e5, 1.01e6], r"reaches -500000 Pa: below vacuum"),
+])
+def test_a_calibration_in_kpa_mbar_absolute_or_below_vacuum_is_named(gauge, match):
+    """Each was taken as gauge Pa: the set pressure at 3 V was 303 Pa (kPa), 3030 Pa (mbar), 404325 (absolute)."""
+    with pytest.raises(pamjax.PamjaxInputError, match=r"VoltageCalibration\.gauge_pressure " + match):
+        VoltageCalibration(voltage=[0.0, 10.0], gauge_pressure=gauge)
+
+
+@pytest.mark.parametrize("build, match", [
+    (lambda: LinearRegulator(flow_gain=-0.922),
+     r"LinearRegulator\.flow_gain = 0\.922 Pa/\(kg/s\).*looks like bar/\(l/min\).*-4\.668e\+09 Pa/\(kg/s\)"),
+    (lambda: pamjax.FeedbackRegulator(flow_gain=-4.67e9),
+     r"FeedbackRegulator\.flow_gain = 4\.67e\+09 bar/\(l/min\).*looks like SI.*bar per l/min ANR \(eq\. 7: -0\.922"),
+    (lambda: LinearRegulator(time_constants=(41.0, 23.0)),
+     r"LinearRegulator\.time_constants = \[41\. 23\.\] s: more than 10 s; .*milliseconds.*\(0\.041, 0\.023\) s"),
+    (lambda: pamjax.FeedbackRegulator(time_constants=(41.0, 23.0)), r"FeedbackRegulator\.time_constants.*millisec"),
+    (lambda: ISO6358Regulator(time_constants=(41.0, 23.0)), r"ISO6358Regulator\.time_constants.*milliseconds"),
+    (lambda: RegulatorSystem(ISO6358Regulator(), volume=1e-3, outlet_flow=-2.79),
+     r"RegulatorSystem\.outlet_flow = 2\.79 kg/s: more than 0\.1 kg/s; that looks like l/min \(1 l/min ANR"),
+])
+def test_flow_gains_time_constants_and_outlet_flows_in_other_units_are_named(build, match):
+    """Eq. 7's printed -0.922 bar/(l/min) in LinearRegulator's SI argument made its droop vanish; the SI -4.67e9 in
+    FeedbackRegulator's bar/(l/min) one failed as "maximum step size"; eq. 6's (41, 23) ms left a 3 V step at
+    0.0016 bar after 1 s; an outlet flow of 2.79 (l/min) as kg/s ran to 1713 bar. Refused as built; the defaults
+    and eq. 7's SI value are taken."""
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        build()
+    LinearRegulator(flow_gain=-4.67e9, time_constants=(0.082, 0.046))
+    RegulatorSystem(ISO6358Regulator(), volume=1e-3, outlet_flow=5e-3)
+
+
+@pytest.mark.parametrize("system", [lambda: RegulatorSystem(LinearRegulator(), volume=0.0),
+                                    lambda: RegulatedMuscleSystem(ISO6358Regulator(), dmsp40_muscle())])
+def test_a_voltage_pair_for_one_regulator_is_named(system):
+    """A joint's `VoltagePair` given to a one-regulator system was JAX's raw TypeError on shapes."""
+    pair = pamjax.VoltagePair(pamjax.Constant(3.0), pamjax.Constant(1.0))
+    with pytest.raises(pamjax.PamjaxInputError, match=r"command must be one reference voltage .*shape \(2,\).*"
+                                                      r"VoltagePair"):
+        pamjax.simulate(system(), pair, np.linspace(0.0, 1.0, 3))
+
+
+def _joint():
+    return pamjax.AntagonisticJoint(ISO6358Regulator(), ISO6358Regulator(), dmsp40_muscle(), dmsp40_muscle())
+
+
+@pytest.mark.parametrize("call, match", [
+    (lambda m: muscle_stiffness(m, np.linspace(0.0, 0.05, 3), 4e5, PAPER001_AIR),
+     r"x must be one number \(one operating point\), got shape \(3,\): .*jax\.vmap"),
+    (lambda m: stiffness_rate(m, np.linspace(0.0, 0.05, 3), 0.01, 4e5, 1e5), r"x must be one number .*jax\.vmap"),
+    (lambda m: pamjax.regulated_stiffness(_joint(), np.array([0.0, 0.1]), 4e5, 3e5),
+     r"angle must be one number .*shape \(2,\).*jax\.vmap"),
+    (lambda m: muscle_stiffness(m, 0.01, 4e5, None), r"air must be an Air .*got NoneType"),
+    (lambda m: pamjax.regulated_stiffness(m, 0.1, 4e5, 3e5), r"joint must be an AntagonisticJoint .*got Muscle"),
+    (lambda m: muscle_stiffness(m, 0.01, 4e5, PAPER001_AIR, polytropic_index=float("nan")),
+     r"polytropic_index must be finite"),
+    (lambda m: muscle_stiffness(m, 0.01, 4e5, PAPER001_AIR, polytropic_index=0.0),
+     r"polytropic_index must be in the open interval \(0\.99, 1\.41\)"),
+    (lambda m: muscle_stiffness(m, 0.01, 4e5, PAPER001_AIR, polytropic_index=14.0), r"polytropic_index .*\(0\.99"),
+    (lambda m: muscle_stiffness(m, 0.01, 4e5, PAPER001_AIR, pressure_slope=float("nan")),
+     r"pressure_slope must be finite"),
+])
+def test_stiffness_of_several_points_a_wrong_object_or_a_bad_index_is_named(call, match):
+    """Arrays of positions or angles were JAX's "Gradient only defined for scalar-output functions", air=None and a
+    muscle for the joint raw AttributeErrors, and n = NaN, 0, 14 or a NaN pressure slope silent (NaN) stiffnesses."""
+    with pytest.raises(pamjax.PamjaxInputError, match=match):
+        call(dmsp40_muscle())

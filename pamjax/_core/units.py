@@ -266,6 +266,9 @@ _PLAUSIBLE = {
     "velocity_width": ("m/s", 0.05, "mm/s"),
     # a muscle's rest radius r0 (eq. 6): 0.1 m is a muscle 20 cm across, five times the DMSP-40's 20 mm
     "radius": ("m", 0.1, "mm"),
+    # a regulator's extra outlet draw (eq. 5's Q_in): the VPPM passes at most ~6e-3 kg/s (ISO 6358, choked at 7 bar);
+    # 0.1 kg/s is ~5000 l/min ANR, and paper 001's 2.79 l/min typed as kg/s ran to 1713 bar
+    "outlet_flow": ("kg/s", 0.1, f"l/min (1 l/min ANR = {FLOW_UNIT:.3g} kg/s, pamjax.units.FLOW_UNIT)"),
 }
 _ABSOLUTE_PRESSURES = {"pressure", "pressures", "atmospheric_pressure"}
 # containers whose entries are spreads per state (an estimator's initial standard deviations and process noise: Pa,

@@ -44,6 +44,13 @@ from .calibration import VOLTAGE_RANGE, VoltageCalibration
 from .chamber import chamber_flow, pressure_rate
 from .gas import AbstractRestriction, Air, check_restriction
 from .hysteresis import EXPONENT_BOUNDS, bouc_wen_rate, exponent_field
+from .regulator_checks import (
+    calibration_range,
+    check_calibration_voltage,
+    check_paper_flow_gain,
+    check_si_flow_gain,
+    check_time_constants,
+)
 from .smooth import smooth_relu
 from .tabulated import paper001_charging_restriction, paper001_discharging_restriction
 from .valves.base import AbstractControlElement
@@ -90,7 +97,8 @@ class FeedbackRegulatorState(eqx.Module):
 
 class AbstractRegulator(AbstractControlElement):
     """A pressure regulator feeding a chamber of volume V(t); its state holds the outlet pressure [Pa abs]. The
-    command is the reference voltage, within `command_range` = 0-10 V (paper 001, Sect. 2); the regulator is
+    command is the reference voltage, within `command_range`: its calibration's table (0-10 V by default, paper 001,
+    Sect. 2; beyond a shorter table the calibration would hold its end value), 0-10 V without one; the regulator is
     continuous (`switches` False).
 
     - `needs_volume`: whether the outlet must be a chamber of volume > 0 (a regulator that integrates the chamber's
@@ -99,8 +107,11 @@ class AbstractRegulator(AbstractControlElement):
       and its supply), or None for a regulator without a voltage calibration.
     """
 
-    command_range = VOLTAGE_RANGE
     needs_volume = False
+
+    @property
+    def command_range(self):
+        return calibration_range(getattr(self, "calibration", None))
 
     @abc.abstractmethod
     def initial_state(self, pressure, air=None):
@@ -149,10 +160,8 @@ class LinearRegulator(AbstractRegulator):
     flow_gain: RealScalar = parameter(EQ7_FLOW_GAIN, unit="Pa/(kg/s)")
 
     def __check_init__(self):
-        if jnp.shape(self.time_constants) != (2,):
-            raise PamjaxInputError(f"time_constants must be (τ1, τ2) [s], got shape {jnp.shape(self.time_constants)}")
-        check_positive(self.time_constants, f"{type(self).__name__}.time_constants")
-        check_finite(self.flow_gain, f"{type(self).__name__}.flow_gain")
+        check_time_constants(self.time_constants, f"{type(self).__name__}.time_constants")
+        check_si_flow_gain(self.flow_gain, f"{type(self).__name__}.flow_gain")
 
     def initial_state(self, pressure, air=None):
         p = jnp.asarray(pressure, dtype=float)
@@ -202,10 +211,9 @@ class FeedbackRegulator(AbstractRegulator):
     k2: RealScalar = positive(_eq8_default_gains()[1], unit="-")
 
     def __check_init__(self):
-        if jnp.shape(self.time_constants) != (2,):
-            raise PamjaxInputError(f"time_constants must be (τ1, τ2) [s], got shape {jnp.shape(self.time_constants)}")
-        check_positive(self.time_constants, "FeedbackRegulator.time_constants")
-        for name in ("voltage_gain", "flow_gain", "k1", "k2"):
+        check_time_constants(self.time_constants, "FeedbackRegulator.time_constants")
+        check_paper_flow_gain(self.flow_gain, "FeedbackRegulator.flow_gain")
+        for name in ("voltage_gain", "k1", "k2"):
             check_finite(getattr(self, name), f"FeedbackRegulator.{name}")
 
     def initial_state(self, pressure, air=None):
@@ -332,9 +340,7 @@ class ISO6358Regulator(AbstractRegulator):
     def __check_init__(self):
         for name, part in (("charging", self.charging), ("discharging", self.discharging)):
             check_restriction(part, f"ISO6358Regulator.{name}", "ISO6358Restriction(7e-9, 0.3)")
-        if jnp.shape(self.time_constants) != (2,):
-            raise PamjaxInputError(f"time_constants must be (τ1, τ2) [s], got shape {jnp.shape(self.time_constants)}")
-        check_positive(self.time_constants, "ISO6358Regulator.time_constants")
+        check_time_constants(self.time_constants, "ISO6358Regulator.time_constants")
         check_positive(self.supply_pressure, "ISO6358Regulator.supply_pressure")
         check_absolute_pressure(self.supply_pressure, "ISO6358Regulator.supply_pressure", above_atmosphere=True)
         check_positive(self.full_opening_error, "ISO6358Regulator.full_opening_error")
@@ -441,13 +447,7 @@ class ISO6358Regulator(AbstractRegulator):
         return set_pressure - band, set_pressure + band
 
     def _check_voltage(self, voltage):
-        """`voltage` [V], where concrete, finite and within the calibration's table (it holds its end values beyond
-        it: 12 V would silently set the 10 V pressure)."""
-        check_finite(voltage, "voltage")
-        v, table = concrete_values(voltage), concrete_values(self.calibration.voltage)
-        if v is not None and table is not None and not np.all((v >= table[0]) & (v <= table[-1])):
-            raise PamjaxInputError(f"voltage must lie within the calibration's range [{table[0]:g}, {table[-1]:g}] V, "
-                                   f"got {np.array2string(v, threshold=6)}")
+        check_calibration_voltage(self.calibration, voltage)
 
     def state_scale(self):
         s = jnp.asarray(BAR)

@@ -32,6 +32,7 @@ from .._physics.regulator import EQ6_TIME_CONSTANTS, VOLTAGE_RANGE
 from .._physics.signals import AbstractSignal
 from .base import AbstractSystem
 from .joint import AntagonisticJoint, JointState, check_joint_pressures
+from .regulated import check_component, check_operating_point
 
 # The static inverses' root finds (safeguarded Newton, `increasing_root`): the torque is affine in Δ and the stiffness
 # nearly affine in Σ where both muscles pull (Newton: 2-4 steps), flat where one is slack (bisection there). A step
@@ -66,6 +67,10 @@ def regulated_stiffness(joint: AntagonisticJoint, angle: RealScalarLike, flexor_
     Concrete values are checked, as `AntagonisticJoint.initial_state` checks them (traced ones are not): `angle`
     [rad] inside the joint's `angle_range` (10 for 10° gave 15,365 N m/rad against 137 at 0.1 rad), the pressures
     finite and ABSOLUTE pascal (4.01 for 4.01 bar gave −0.076); else `PamjaxInputError` naming the argument."""
+    check_component(joint, AntagonisticJoint, "joint", "an AntagonisticJoint (a muscle's own stiffness: "
+                    "pj.muscle_stiffness)")
+    check_operating_point(dict(angle=angle), "for several angles, jax.vmap over regulated_stiffness (jax.grad of "
+                          "the torque takes one)")  # the pressures broadcast
     joint.check_angle(angle)
     check_joint_pressures(flexor_pressure=flexor_pressure, extensor_pressure=extensor_pressure)
     return _torque_stiffness(joint, angle, flexor_pressure, extensor_pressure)

@@ -50,6 +50,27 @@ def check_component(value, kind, name, what, hint=""):
         raise PamjaxInputError(f"{name} must be {what}, got {type(value).__name__}{hint}")
 
 
+def check_one_voltage(command, pressure, system):
+    """A one-regulator `system`'s command: one reference voltage [V] per state (no more axes than its `pressure`); a
+    `VoltagePair` (an `AntagonisticJoint`'s two) failed in the solve with JAX's raw TypeError on shapes."""
+    if jnp.ndim(command) > jnp.ndim(pressure):
+        raise PamjaxInputError(
+            f"{system}'s command must be one reference voltage [V] (a signal such as pj.Constant(3.0)), got shape "
+            f"{jnp.shape(command)}: a VoltagePair (flexor, extensor) commands an AntagonisticJoint's two regulators")
+
+
+def check_operating_point(values, hint):
+    """`muscle_stiffness`'s, `stiffness_rate`'s and `regulated_stiffness`'s arguments ({name: value}): one
+    operating point (0-d; jax.grad needs a scalar output), else `PamjaxInputError` naming the first array."""
+    for name, value in values.items():
+        if value is not None and np.ndim(value) > 0:
+            raise PamjaxInputError(f"{name} must be one number (one operating point), got shape {np.shape(value)}: "
+                                   f"{hint}")
+
+
+ONE_POINT_HINT = "for several, jax.vmap over the function (e.g. jax.vmap(lambda x: pj.muscle_stiffness(m, x, p, air)))"
+
+
 class RegulatorSystem(AbstractSystem):
     """A regulator feeding a constant volume V with an extra outlet mass flow Q (kg/s): ṗ from the regulator.
 
@@ -75,6 +96,7 @@ class RegulatorSystem(AbstractSystem):
         check_plausible(self.volume, "RegulatorSystem.volume")  # 40 (litres) for paper 001's 0.04 m³ tank refused
         check_in_open_interval(self.polytropic_index, *POLYTROPIC_RANGE, "RegulatorSystem.polytropic_index")
         check_finite(self.outlet_flow, "RegulatorSystem.outlet_flow")  # NaN ended in "maximum step size" at the solve
+        check_plausible(self.outlet_flow, "RegulatorSystem.outlet_flow")  # 2.79 (l/min as kg/s) ran to 1713 bar
 
     @property
     def valve(self):
@@ -93,9 +115,11 @@ class RegulatorSystem(AbstractSystem):
         return self.volume, 0.0, self.air, self.polytropic_index, self.outlet_flow
 
     def vector_field(self, t, state, command):
+        check_one_voltage(command, state.pressure, "RegulatorSystem")
         return self.regulator.state_rate(state, command, *self._args())
 
     def outputs(self, t, state, command):
+        check_one_voltage(command, state.pressure, "RegulatorSystem")
         return dict(
             pressure=state.pressure,
             mass_flow=self.regulator.delivered_flow(state, command, *self._args()),
@@ -166,9 +190,18 @@ def muscle_stiffness(muscle: Muscle, x: RealScalarLike, pressure: RealScalarLike
     `pressure_slope` dp/dx [Pa/m] along the motion; default the closed chamber, dp/dV = −n p/V (eq. 9's first
     term), so dp/dx = −n p V'/V. For the virtual-work force F = p_g V'(x) this is eq. 9 exactly:
     K = −(V')² dp/dV − V'' p_g. The isobaric stiffness (eq. 9's second term) is `pressure_slope=0`.
-    Concrete `x` and `pressure` are checked (`check_muscle_point`: metres inside the stroke, ABSOLUTE pascal).
+    Concrete `x` and `pressure` are checked (`check_muscle_point`: metres inside the stroke, ABSOLUTE pascal; one
+    operating point each: jax.vmap over several), `polytropic_index` within `POLYTROPIC_RANGE` and `pressure_slope`
+    finite.
     """
+    check_component(muscle, AbstractMuscle, "muscle", MUSCLE_KINDS)
+    check_component(air, Air, "air", "an Air (e.g. pamjax._physics.regulator.paper001_air(), or a system's .air)")
+    check_operating_point(dict(x=x, pressure=pressure), ONE_POINT_HINT)  # jax.grad of the force in both
     check_muscle_point(muscle, x, pressure)
+    check_finite(polytropic_index, "polytropic_index")  # NaN gave a NaN stiffness
+    check_in_open_interval(polytropic_index, *POLYTROPIC_RANGE, "polytropic_index")  # as every system's
+    if pressure_slope is not None:
+        check_finite(pressure_slope, "pressure_slope")
     x = jnp.asarray(x, dtype=float)
     pressure = jnp.asarray(pressure, dtype=float)
     if pressure_slope is None:
@@ -184,8 +217,12 @@ def stiffness_rate(muscle: Muscle, x: RealScalarLike, velocity: RealScalarLike, 
 
     Eq. 10 as printed is the time derivative of the virtual-work force p V'(x), i.e. K ẋ; paper 001 calls it the
     stiffness rate of change. With paper 001's x = (L − L0)/L0 its value is L0 times this one (same sign).
-    Concrete `x` and `pressure` are checked as `muscle_stiffness`'s; `velocity` and `pressure_rate` finite.
+    Concrete `x` and `pressure` are checked as `muscle_stiffness`'s (`x` one number; the others broadcast);
+    `velocity` and `pressure_rate` finite.
     """
+    check_component(muscle, AbstractMuscle, "muscle", MUSCLE_KINDS)
+    check_operating_point(dict(x=x), ONE_POINT_HINT.replace("muscle_stiffness(m, x, p, air)",  # jax.grad in x
+                                                            "stiffness_rate(m, x, v, p, dp)"))
     check_muscle_point(muscle, x, pressure)
     check_finite(velocity, "velocity")
     check_finite(pressure_rate, "pressure_rate")
@@ -266,6 +303,7 @@ class RegulatedMuscleSystem(AbstractMuscleSystem):
         return muscle, friction, stops
 
     def vector_field(self, t, state, command):
+        check_one_voltage(command, state.regulator.pressure, "RegulatedMuscleSystem")
         volume, volume_rate = self._chamber(state)
         d_reg = self.regulator.state_rate(
             state.regulator, command, volume, volume_rate, self.air, self.polytropic_index
@@ -288,6 +326,7 @@ class RegulatedMuscleSystem(AbstractMuscleSystem):
         return eqx.tree_at(lambda s: s.position, stepped, state.position + sample_time * stepped.velocity)
 
     def outputs(self, t, state, command):
+        check_one_voltage(command, state.regulator.pressure, "RegulatedMuscleSystem")
         volume, volume_rate = self._chamber(state)
         muscle, friction, _ = self._forces(state)
         return dict(
