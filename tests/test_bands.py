@@ -667,3 +667,48 @@ def test_a_free_entry_of_several_labels_makes_a_fit_uncertainty():
     labels = ("a0", "a1", "payload_mass")
     unc = pj.FitUncertainty(labels, ("force_law.F_max", "payload_mass"), np.ones(3), np.diag([1e-2, 1e-4, 1e-6]))
     assert unc.labels == labels and unc.covariance.shape == (3, 3)
+
+
+def _covariance_file(tmp_path, edit=None):
+    """A model file whose provenance holds a two-parameter covariance (correlation -0.62), its document `edit`ed."""
+    paths = ("friction.viscous_coefficient", "friction.coulomb_force")
+    se, corr = np.array([3.0, 0.09]), np.array([[1.0, -0.62], [-0.62, 1.0]])
+    doc = pj.FitUncertainty(paths, paths, np.array([250.0, 16.0]), corr * np.outer(se, se)).document()
+    if edit is not None:
+        edit(doc)
+    return pj.save_model(tmp_path / "model.json", presets.mas10_system("averaged"), overwrite=True,
+                         provenance={"covariance": doc})
+
+
+def _set(doc, key, i, j, value):
+    doc[key][i][j] = value
+    if i != j:
+        doc[key][j][i] = value
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda d: _set(d, "correlation", 0, 1, "nan"),  # read as correlation 0
+     r"correlation of friction.viscous_coefficient and friction.coulomb_force is nan"),
+    (lambda d: _set(d, "correlation", 1, 1, 0.3),  # accepted
+     r"correlation of friction.coulomb_force with itself is 0.3"),
+])
+def test_a_damaged_correlation_is_refused_naming_the_pair(tmp_path, edit, match):
+    path = _covariance_file(tmp_path, edit)
+    with pytest.raises(PamjaxInputError, match=match):
+        pj.read_uncertainty(path)
+
+
+def test_an_undetermined_parameters_nan_correlations_read_as_zero(tmp_path):
+    def undetermined(d):
+        d["standard_errors"][1] = "inf"
+        _set(d, "correlation", 0, 1, "nan")
+
+    unc = pj.read_uncertainty(_covariance_file(tmp_path, undetermined))
+    assert np.isinf(unc.covariance[1, 1]) and unc.covariance[0, 1] == 0.0
+
+
+def test_read_uncertainty_skips_a_byte_order_mark(tmp_path):
+    path = _covariance_file(tmp_path)
+    path.write_text("\ufeff" + path.read_text(encoding="utf-8"), encoding="utf-8")  # Notepad's "UTF-8 with BOM"
+    unc = pj.read_uncertainty(path)
+    np.testing.assert_allclose(unc.covariance[0, 1], -0.62 * 3.0 * 0.09, rtol=1e-12)

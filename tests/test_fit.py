@@ -368,3 +368,15 @@ def test_a_discharge_coefficient_started_on_its_bound_is_named_before_any_solve(
     with pytest.raises(PamjaxInputError, match=r"valve\.inflate\.discharge_coefficient = 1 is on the bound of its "
                                                r"range \(0, 1\).*e\.g\. 0\.99, or keep it fixed"):
         pj.fit(start, [exp], ["valve.inflate.discharge_coefficient"], progress=False)
+
+
+def test_fit_json_to_a_folder_is_refused_by_name_and_a_bom_is_read(tmp_path):
+    truth, exp = _force_map()
+    res = _quiet_fit(truth, [exp], FORCE_FREE)
+    (tmp_path / "results").mkdir()
+    for overwrite in (False, True):  # overwrite=True: a raw IsADirectoryError from os.replace
+        with pytest.raises(PamjaxInputError, match=r"results is a folder.*fit\.json"):
+            res.to_json(tmp_path / "results", overwrite=overwrite)
+    path = res.to_json(tmp_path / "fit.json")
+    path.write_text("\ufeff" + path.read_text(encoding="utf-8"), encoding="utf-8")  # Notepad's "UTF-8 with BOM"
+    assert pj.FitResult.from_json(path) == res

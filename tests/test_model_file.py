@@ -409,3 +409,36 @@ def test_a_model_file_with_a_byte_order_mark_loads_and_a_folder_is_not_overwritt
     (tmp_path / "folder.json").mkdir()  # was a raw IsADirectoryError from the rename over it
     with pytest.raises(PamjaxInputError, match=r"save_model: .*folder\.json is a folder; give the model file's path"):
         pamjax.save_model(tmp_path / "folder.json", model, overwrite=True)
+
+
+def test_a_python_float_set_with_tree_at_is_saved_as_the_parameter(tmp_path):
+    # eqx.tree_at(..., 20.0) simulates, but save_model refused it with advice about editing the JSON file
+    model = eqx.tree_at(lambda s: s.payload_mass, presets.mas10_system("pwm"), 20.0)
+    back = pamjax.load_model(pamjax.save_model(tmp_path / "m.json", model))
+    assert eqx.is_array(back.payload_mass) and back.payload_mass.dtype == jnp.float64
+    assert float(back.payload_mass) == 20.0
+
+
+@pytest.mark.parametrize("node, edit, unknown", [
+    ("payload_mass", {"unit": "g"}, "unit"),  # a unit beside {"array": ...} had no effect
+    ("friction", {"klass": "KarnoppFriction"}, "klass"),  # a misspelt key beside "class" was ignored
+])
+def test_unknown_keys_in_a_structure_node_are_refused_by_name(tmp_path, node, edit, unknown):
+    path = pamjax.save_model(tmp_path / "m.json", presets.mas10_system("pwm"))
+    d = json.loads(path.read_text())
+    d["structure"]["fields"][node].update(edit)
+    path.write_text(json.dumps(d))
+    with pytest.raises(PamjaxInputError, match=rf"structure at {node} has unknown key\(s\) \['{unknown}'\]"):
+        pamjax.load_model(path)
+
+
+def test_a_joint_file_with_several_values_in_a_scalar_parameter_is_refused(tmp_path):
+    # the shape inference ran with a scalar command, which the joint refuses: nothing was found
+    joint = pamjax.AntagonisticJoint(pamjax.vppm_regulator(), pamjax.vppm_regulator(), presets.dmsp40_muscle(),
+                                     presets.dmsp40_muscle())
+    path = pamjax.save_model(tmp_path / "joint.json", joint)
+    d = json.loads(path.read_text())
+    d["parameters"]["inertia"]["value"] = [0.05, 0.05]
+    path.write_text(json.dumps(d))
+    with pytest.raises(PamjaxInputError, match=r"'inertia' has shape \(2,\) where the model takes one number"):
+        pamjax.load_model(path)

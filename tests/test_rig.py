@@ -6,6 +6,7 @@ against `simulate` of the plant with that supply and start; the identification o
 (supply drift, offset, gain, a fractional delay, a run logged mid-way), fitted from the presets."""
 
 import json
+import re
 
 import equinox as eqx
 import jax
@@ -819,3 +820,42 @@ def test_a_nuisance_report_of_something_else_than_a_fit_result_is_named():
     # nuisance_report(None) was a raw AttributeError
     with pytest.raises(pj.PamjaxInputError, match=r"nuisance_report: result must be a fit result .* got NoneType"):
         pj.nuisance_report(None)
+
+
+@pytest.mark.parametrize("build, field", [
+    (lambda: pj.StartState(pressure=float("nan")), "StartState.pressure"),
+    (lambda: pj.StartState(pressure=-2e5), "StartState.pressure"),
+    (lambda: pj.StartState(position=float("inf")), "StartState.position"),
+    (lambda: pj.RunConditions(supply_pressure=float("nan")), "RunConditions.supply_pressure"),
+    (lambda: pj.RunConditions(supply_pressure=5.5), "RunConditions.supply_pressure"),  # bar typed
+])
+def test_run_conditions_refuse_a_non_finite_or_non_absolute_pressure_by_name(build, field):
+    # NaN reached the solve, which failed naming neither field; -2e5 Pa abs was simulated
+    with pytest.raises(PamjaxInputError, match=field):
+        build()
+
+
+def test_gauge_pressures_of_a_rig_file_are_relative_to_its_plants_air(tmp_path):
+    base = presets.mas10_system("pwm")
+    plant = pj.MuscleSystem(base.valve, base.muscle, air=pj.Air(atmospheric_pressure=83400.0))  # a bench at 1,600 m
+    rig = pj.Rig(plant, runs={"E1": pj.RunConditions(6.0e5, pj.StartState(pressure=2e5))})
+    path = pj.save_model(tmp_path / "rig.json", rig)
+    d = json.loads(path.read_text())
+    d["parameters"]["runs.E1.supply_pressure"].update(value=5.5, unit="barg")
+    d["parameters"]["runs.E1.start.pressure"].update(value=1.0, unit="barg")
+    path.write_text(json.dumps(d))
+    back = pj.load_model(path)  # they were read against the standard atmosphere: 651325 and 201325
+    np.testing.assert_allclose(float(back.runs["E1"].supply_pressure), 5.5e5 + 83400.0, rtol=1e-12)
+    np.testing.assert_allclose(float(back.runs["E1"].start.pressure), 1e5 + 83400.0, rtol=1e-12)
+
+
+def test_a_rig_file_with_several_values_in_a_sensor_or_run_field_is_refused(tmp_path):
+    rig = pj.Rig(presets.mas10_tank_system("pwm"), runs={"E1": pj.RunConditions(6.5e5)})
+    path = pj.save_model(tmp_path / "rig.json", rig)
+    for key in ("sensors.rig.pressure_gain", "runs.E1.supply_pressure"):
+        d = json.loads(path.read_text())
+        d["parameters"][key]["value"] = [d["parameters"][key]["value"]] * 2
+        edited = tmp_path / "edited.json"
+        edited.write_text(json.dumps(d))
+        with pytest.raises(PamjaxInputError, match=rf"{re.escape(key)}' has shape \(2,\) where the model takes one"):
+            pj.load_model(edited)

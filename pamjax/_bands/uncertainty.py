@@ -80,6 +80,22 @@ def _correlation(cov):
     return cov[np.ix_(live, live)] / np.outer(sd, sd), live
 
 
+def _check_correlation(labels, se, corr, source):
+    """`PamjaxInputError` naming the pair unless `corr` is a stored correlation matrix: a diagonal of 1 and finite
+    entries, except in the rows and columns of a parameter the fit did not determine (standard error inf: a fit
+    writes 0 there, older ones NaN). A NaN elsewhere was read as correlation 0, a diagonal edited to 0.3 accepted."""
+    free = np.isposinf(se)
+    for i, j in zip(*np.nonzero(~(free[:, None] | free[None, :]))):
+        c = corr[i, j]
+        if i == j and not abs(c - 1.0) <= CORRELATION_ROUNDING:
+            raise PamjaxInputError(f"{source}: the correlation of {labels[i]} with itself is {float(c)!r}; a "
+                                   "correlation matrix's diagonal is 1 (the variances are the standard errors squared)")
+        if not np.isfinite(c):
+            raise PamjaxInputError(f"{source}: the correlation of {labels[i]} and {labels[j]} is {float(c)!r}; it "
+                                   "must be a number in [-1, 1] (only a parameter with standard error inf, "
+                                   "undetermined, may have non-finite correlations)")
+
+
 def check_covariance(labels, values, covariance, source):
     """`PamjaxInputError` naming `source` unless `covariance` is an (n, n) covariance of the n `labels`' `values`:
     symmetric, finite (an infinite variance, with zero covariances, is a parameter the fit did not determine: named
@@ -171,9 +187,10 @@ class FitUncertainty:
         if not (se.shape == values.shape == (len(labels),)):
             raise PamjaxInputError(f"{source}: {len(labels)} labels but {se.size} standard errors, {values.size} "
                                    "values")
+        _check_correlation(labels, se, corr, source)
         with np.errstate(invalid="ignore"):
             cov = corr * np.outer(se, se)
-        cov = np.where(np.isfinite(cov), cov, 0.0)
+        cov = np.where(np.isfinite(cov), cov, 0.0)  # only the rows of an undetermined (inf) parameter: checked above
         cov[np.diag_indices_from(cov)] = se**2  # inf stays on the diagonal: named when a band is asked for
         inflation = d.get("se_inflation")
         if inflation is None:  # a fit result's dict: the factor its channels' statistics give
@@ -317,7 +334,7 @@ def propagation(result, model=None, *, check_values=False):
 
 def _is_model_file(path):
     """Whether `path` (a JSON document `read_uncertainty` has read) is a model file, not a fit result."""
-    return json.loads(pathlib.Path(path).read_text(encoding="utf-8")).get("format") == "pamjax-model"
+    return json.loads(pathlib.Path(path).read_text(encoding="utf-8-sig")).get("format") == "pamjax-model"
 
 
 def _check_values(space, block):
@@ -336,7 +353,7 @@ def read_uncertainty(path: str | os.PathLike[str]) -> FitUncertainty:
     if not path.is_file():
         raise PamjaxInputError(f"{path} does not exist" + (" (it is a folder)" if path.is_dir() else ""))
     try:
-        document = json.loads(path.read_text(encoding="utf-8"))
+        document = json.loads(path.read_text(encoding="utf-8-sig"))  # a byte-order mark skipped, as load_model does
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise PamjaxInputError(f"{path} is not a JSON file: {err}") from None
     if not isinstance(document, dict):
@@ -351,7 +368,7 @@ def read_uncertainty(path: str | os.PathLike[str]) -> FitUncertainty:
     beside = provenance.get("result")
     if isinstance(beside, str) and (path.parent / beside).is_file():
         fit_path = path.parent / beside
-        return FitUncertainty.from_document(json.loads(fit_path.read_text(encoding="utf-8")), str(fit_path))
+        return FitUncertainty.from_document(json.loads(fit_path.read_text(encoding="utf-8-sig")), str(fit_path))
     raise PamjaxInputError(
         f"model file {path} carries no fit covariance: this model was not fitted (written by pamjax.save_model, or its "
         f"fit.json is not beside it); a band needs a fitted model: the model.json that pamjax fit writes (it carries "

@@ -53,6 +53,9 @@ FORMAT_VERSION = 1
 # A stored dtype other than float64 must hold the value written to float32's precision at least (2⁻²⁴ relative): a
 # float32 model round-trips exactly, while "int8" (9.6 kg → 9 kg) or float16 (101325 Pa → inf) are refused.
 _DTYPE_RTOL = 2.0**-24
+# The keys of each kind of structure node (the kind: its first key present, in this order, as `decode` reads it).
+_NODE_KEYS = {"array": {"array"}, "class": {"class", "fields"}, "value": {"value", "type"}, "tuple": {"tuple"},
+              "list": {"list"}, "dict": {"dict"}}
 # Units of fields declared without one in their metadata (the docstring gives it).
 _UNIT_FALLBACK = {"velocity_width": "m/s"}
 
@@ -85,6 +88,12 @@ def _units_of(cls):
     return field_units(cls) if dataclasses.is_dataclass(cls) else {}
 
 
+def _is_parameter(field):
+    """Whether a component's `field` is an array parameter (declared with a unit and not static:
+    `pamjax._core.fitting`), as `model_checks.setting_problem` tells it."""
+    return "unit" in field.metadata and not field.metadata.get("static")
+
+
 def _to_json_value(a):
     if a.ndim == 0:
         v = a.item()
@@ -112,7 +121,12 @@ def _encode(obj, path, parameters, classes):
         fields = {}
         for f in dataclasses.fields(obj):
             child = f"{path}.{f.name}" if path else f.name
-            fields[f.name] = _encode(getattr(obj, f.name), child, parameters, classes)
+            value = getattr(obj, f.name)
+            if _is_parameter(f) and isinstance(value, int | float) and not isinstance(value, bool):
+                # `eqx.tree_at(..., model, 20.0)` leaves a Python float where the constructor makes an array: saved
+                # as the parameter it is (a float64 scalar, as `jnp.asarray(20.0)`), not refused as a setting
+                value = np.asarray(float(value), dtype=np.float64)
+            fields[f.name] = _encode(value, child, parameters, classes)
             if child in parameters and "unit" not in parameters[child]:
                 parameters[child]["unit"] = units.get(f.name, _UNIT_FALLBACK.get(f.name, ""))
         return {"class": name, "fields": fields}
@@ -226,6 +240,9 @@ class _Decoder:
         self.where, self.classes = where, classes
         self.parameters = document.get("parameters")
         self.used = set()
+        structure = document.get("structure")
+        # a Rig's runs and sensors are measured on its plant's bench: their gauge pressures are relative to its air
+        self.rig = isinstance(structure, dict) and structure.get("class") == "Rig"
 
     def fail(self, message):
         raise PamjaxInputError(f"{self.where}: {message}")
@@ -285,8 +302,11 @@ class _Decoder:
     def atmosphere_for(self, path):
         """The atmospheric pressure [Pa abs] a gauge unit of parameter `path` is relative to: the file's nearest
         enclosing `air.atmospheric_pressure` (a bench at 1,600 m: 6 barg at 83.4 kPa is 683.4 kPa abs, not the 701.3
-        of the standard atmosphere), else ISO 2533's; an entry that is no number is left to its own decoding."""
+        of the standard atmosphere; for a Rig's runs and sensors, its plant's), else ISO 2533's; an entry that is no
+        number is left to its own decoding."""
         best, atmosphere = -1, ATMOSPHERE
+        if self.rig and path.split(".")[0] in ("runs", "sensors"):  # `Rig`'s NUISANCE_ROOTS: the plant's air
+            path = f"plant.{path}"
         for key, entry in self.parameters.items():
             parts = key.split(".")
             if parts[-2:] != ["air", "atmospheric_pressure"] or not isinstance(entry, dict):
@@ -316,6 +336,10 @@ class _Decoder:
     def decode(self, node, path, unit=None):
         if not isinstance(node, dict) or len(node) == 0:
             self.fail(f"structure at {path or 'the top'} must be a table, got {node!r}")
+        for kind, keys in _NODE_KEYS.items():  # a key beside them ("unit" by "array", "klass") had no effect
+            if kind in node and set(node) - keys:
+                self.fail(f"structure at {path or 'the top'} has unknown key(s) {sorted(set(node) - keys)}; a "
+                          f"{kind!r} node holds {sorted(keys)} only (a parameter's unit goes in 'parameters')")
         if "array" in node:
             if not isinstance(node["array"], str):
                 self.fail(f"structure at {path or 'the top'}: \"array\" must name a parameter (its path, such as "

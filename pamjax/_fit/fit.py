@@ -155,6 +155,9 @@ class FitResult:
         """Write the result (floats exact via repr); refuses to replace an existing file unless `overwrite`. Through a
         temporary file renamed over `path`: a crash while overwriting leaves the previous fit.json whole."""
         path = pathlib.Path(path)
+        if path.is_dir():  # with overwrite=True a raw IsADirectoryError from os.replace (as save_model refuses it)
+            raise PamjaxInputError(f"FitResult.to_json: {path} is a folder; give the file's path (e.g. "
+                                   f"{path / 'fit.json'})")
         if path.exists() and not overwrite:
             raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
         return replace_text(path, jsonio.dumps(self.to_dict(), indent=1))  # strict JSON: "inf" for an undetermined SE
@@ -162,7 +165,7 @@ class FitResult:
     @classmethod
     def from_json(cls, path: str | os.PathLike) -> "FitResult":
         try:
-            return cls.from_dict(json.loads(pathlib.Path(path).read_text(encoding="utf-8")))
+            return cls.from_dict(json.loads(pathlib.Path(path).read_text(encoding="utf-8-sig")))  # BOM: as load_model
         except (PamjaxInputError, json.JSONDecodeError, UnicodeDecodeError) as err:
             raise PamjaxInputError(f"{path}: {err}") from None
 

@@ -31,8 +31,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.custom_types import RealScalar
-from .._core.errors import PamjaxInputError, concrete_values
+from .._core.errors import PamjaxInputError, check_finite, check_positive, concrete_values
 from .._core.fitting import positive, signed
+from .._core.units import check_absolute_pressure
 from .._systems.base import AbstractSystem
 
 if TYPE_CHECKING:  # annotations only: the fit imports this module
@@ -103,6 +104,11 @@ class StartState(eqx.Module):
             raise PamjaxInputError(f"StartState.mode must be one of {START_MODES}, got {self.mode!r}")
         if self.mode == "stuck" and self.velocity is not None:
             raise PamjaxInputError("StartState: a start declared 'stuck' has no velocity (it is 0)")
+        # NaN or a negative (gauge) pressure reached the solve, which failed without naming the field
+        _check_pressure(self.pressure, "StartState.pressure")
+        for name in ("position", "velocity"):
+            if getattr(self, name) is not None:
+                check_finite(getattr(self, name), f"StartState.{name}")
 
     def keywords(self):
         """The `initial_state` keyword arguments this start sets."""
@@ -119,6 +125,20 @@ class RunConditions(eqx.Module):
 
     supply_pressure: RealScalar | None = positive(None, unit="Pa abs")
     start: StartState | None = None
+
+    def __check_init__(self):
+        _check_pressure(self.supply_pressure, "RunConditions.supply_pressure")
+        if self.start is not None and not isinstance(self.start, StartState):
+            raise PamjaxInputError(f"RunConditions.start must be a pamjax.StartState (or None), got "
+                                   f"{type(self.start).__name__}")
+
+
+def _check_pressure(value, name):
+    """An absolute pressure [Pa] a run sets: finite, positive, and of an absolute pressure's magnitude (a gauge value
+    or another unit named). None (the plant's or the experiment's own) passes."""
+    if value is not None:
+        check_positive(value, f"{name} [Pa abs]")
+        check_absolute_pressure(value, name)
 
 
 class Rig(eqx.Module):

@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._core.arrays import floats_as_arrays
+from .._core.custom_types import RealScalar
 from .._core.errors import PamjaxInputError, concrete_values, traced_checks
 from .._core.private import jax_at_top_level
 from .._core.units import MIN_ABSOLUTE_PA, check_absolute_pressure, check_setting, checks_setting
@@ -355,6 +356,9 @@ def _attach(tree, found):
     return jax.tree_util.tree_map(attach, tree)
 
 
+_SCALAR_TYPES = (RealScalar, RealScalar | None)  # the annotations of a one-number parameter (after its converter)
+
+
 def _name(path):
     return ".".join(str(getattr(k, "name", getattr(k, "key", getattr(k, "idx", k)))) for k in path)
 
@@ -378,14 +382,24 @@ def batched_parameters(system, quiet=False):
         except Exception:  # noqa: BLE001
             return []
     if not isinstance(system, AbstractSystem):
-        return []
+        return _wrapped_batched(system, "") if isinstance(system, eqx.Module) else []
     lo, hi = (float(np.min(b)) for b in system.command_range)
-    command = jnp.asarray(0.5 * (lo + hi) if np.isfinite(lo + hi) else 0.0)
-    try:
-        if _fine(system, command):
-            return []
-    except Exception:  # noqa: BLE001 - the shapes do not even combine (any error of shape inference)
-        pass
+    middle = 0.5 * (lo + hi) if np.isfinite(lo + hi) else 0.0
+    # the system's own command: one number, or a (flexor, extensor) pair for a joint, whose range is one regulator's
+    # (a scalar command failed the joint's own shape check, and every trial below with it: nothing was found)
+    commands = [jnp.asarray(middle), jnp.full((2,), middle)]
+
+    def fine(candidate):
+        for command in commands:
+            try:
+                if _fine(candidate, command):
+                    return True
+            except Exception:  # noqa: BLE001, PERF203 - the shapes do not even combine (any error of shape inference)
+                continue
+        return False
+
+    if fine(system):
+        return []
     dynamic, static = eqx.partition(system, eqx.is_array)
     flat, treedef = jax.tree_util.tree_flatten_with_path(dynamic)
     leaves = [leaf for _, leaf in flat]
@@ -396,13 +410,32 @@ def batched_parameters(system, quiet=False):
                 break
             trial = list(leaves)
             trial[k] = leaf[(0,) * axes]
-            try:
-                fine = _fine(eqx.combine(jax.tree_util.tree_unflatten(treedef, trial), static), command)
-            except Exception:  # noqa: BLE001 - this parameter's first entry alone does not fit either
-                continue
-            if fine:
+            if fine(eqx.combine(jax.tree_util.tree_unflatten(treedef, trial), static)):
                 found.append((_name(flat[k][0]), tuple(np.shape(leaf)), tuple(np.shape(trial[k]))))
                 break
+    return found
+
+
+def _wrapped_batched(node, path):
+    """`batched_parameters` of a model that wraps systems (a `Rig`: its plant, sensors and runs): each system's, its
+    path prefixed, and every array with axes where its field is declared `RealScalar` (a sensor's gain, a run's
+    supply pressure), which no shape inference of the plant sees (they reached the solve as raw TypeErrors)."""
+    prefix = f"{path}." if path else ""
+    if isinstance(node, AbstractSystem):
+        return [(prefix + p, shape, wanted) for p, shape, wanted in batched_parameters(node)]
+    if isinstance(node, dict):
+        return [f for k, v in node.items() for f in _wrapped_batched(v, f"{prefix}{k}")]
+    if isinstance(node, list | tuple):
+        return [f for i, v in enumerate(node) for f in _wrapped_batched(v, f"{prefix}{i}")]
+    if not isinstance(node, eqx.Module):
+        return []
+    found = []
+    for f in dataclasses.fields(node):
+        value = getattr(node, f.name, None)
+        if eqx.is_array(value) and f.type in _SCALAR_TYPES and np.ndim(value) > 0:
+            found.append((prefix + f.name, tuple(np.shape(value)), ()))
+        elif not eqx.is_array(value):
+            found += _wrapped_batched(value, prefix + f.name)
     return found
 
 
