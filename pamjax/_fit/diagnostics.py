@@ -30,8 +30,8 @@ The `range` stays that of all the data (the map's forces from 0 N up).
 
 An experiment without a time axis (`split_time` None: the static maps and curves of `static_experiments.py`) has no
 order to its samples: its rows are in whatever order the file lists them, so the statistics read off neighbouring
-samples (the first-difference noise estimate, the autocorrelation, `se_inflation`) are not computed for it (NaN,
-`ordered` False) and it takes no part in the correlation test of `mismatch`: the same 126 points of the DMSP-20-300
+samples (the first-difference noise estimate, the autocorrelation, `se_inflation`) are not computed for it (left
+out, `ordered` False) and it takes no part in the correlation test of `mismatch`: the same 126 points of the DMSP-20-300
 map gave a lag-1 autocorrelation of 0.59 and "correlated in time" in file order (by length, then pressure), −0.24
 sorted by pressure, −0.03 shuffled. Its RMSE and its residuals' size are what it reports; σ² scales the standard
 errors by them. `HysteresisLoopExperiment`, whose samples are the path in the order measured, keeps them.
@@ -155,16 +155,22 @@ def _autocorrelation(err):
 
 def _residual_stats(err, noise_given, ordered=True):
     """The noise statistics of one channel's residuals `err`; `ordered` False (samples without a time order,
-    `in_time_order`): those read off neighbouring samples NaN (noise estimate, autocorrelation, se_inflation)."""
-    nan = float("nan")
+    `in_time_order`): those read off neighbouring samples (noise estimate, autocorrelation, se_inflation) are left
+    out, and the RMSE over the noise only where the noise was given (keys absent, not NaN: NaN ≠ NaN made two equal
+    results unequal)."""
     rmse = float(np.sqrt(np.mean(err**2)))
-    estimate = _noise_estimate(err) if ordered else nan
+    if not ordered:
+        out = dict(noise_given=noise_given is not None, samples=int(err.size), ordered=False)
+        if noise_given is not None and np.isfinite(noise_given) and noise_given > 0:
+            out.update(noise=noise_given, rmse_over_noise=rmse / noise_given)
+        return out
+    estimate = _noise_estimate(err)
     noise = noise_given if noise_given is not None else estimate
-    ratio = rmse / noise if noise and np.isfinite(noise) and noise > 0 else nan
-    acf = _autocorrelation(err) if ordered else dict.fromkeys(map(str, _LAGS), nan)
+    ratio = rmse / noise if noise and np.isfinite(noise) and noise > 0 else float("nan")
+    acf = _autocorrelation(err)
     return dict(noise=noise, noise_estimate=estimate, noise_given=noise_given is not None, rmse_over_noise=ratio,
-                autocorrelation=acf, se_inflation=correlation_factor(acf["1"]) if ordered and np.isfinite(ratio)
-                else nan, samples=int(err.size), ordered=bool(ordered))
+                autocorrelation=acf, se_inflation=correlation_factor(acf["1"]) if np.isfinite(ratio) else float("nan"),
+                samples=int(err.size), ordered=True)
 
 
 SLACK_EXPERIMENTS = (ForceMapExperiment, LoopForceMapExperiment, HysteresisLoopExperiment)  # declare `slack`
