@@ -386,6 +386,14 @@ def test_a_calibration_in_kpa_mbar_absolute_or_below_vacuum_is_named(gauge, matc
     (lambda: ISO6358Regulator(time_constants=(41.0, 23.0)), r"ISO6358Regulator\.time_constants.*milliseconds"),
     (lambda: RegulatorSystem(ISO6358Regulator(), volume=1e-3, outlet_flow=-2.79),
      r"RegulatorSystem\.outlet_flow = 2\.79 kg/s: more than 0\.1 kg/s; that looks like l/min \(1 l/min ANR"),
+    # eq. 6's 1.01 bar/V typed as 1.01e5 Pa/V ran to 4.6e61 Pa, returned as a trajectory
+    (lambda: pamjax.FeedbackRegulator(voltage_gain=1.01e5),
+     r"FeedbackRegulator\.voltage_gain = 101000 bar/V in magnitude: more than 100; that looks like Pa/V"),
+    # 0.05 (bar) for the 5 kPa full-opening error shifted the outlet by ~2.6 kPa, accepted
+    (lambda: ISO6358Regulator(full_opening_error=0.05),
+     r"ISO6358Regulator\.full_opening_error = 0\.05 Pa is below 1 Pa.*looks like bar"),
+    # a 1.3 kg foot typed in grams
+    (lambda: _joint(foot_mass=1300.0), r"AntagonisticJoint\.foot_mass .*1300.*g"),
 ])
 def test_flow_gains_time_constants_and_outlet_flows_in_other_units_are_named(build, match):
     """Eq. 7's printed -0.922 bar/(l/min) in LinearRegulator's SI argument made its droop vanish; the SI -4.67e9 in
@@ -408,8 +416,8 @@ def test_a_voltage_pair_for_one_regulator_is_named(system):
         pamjax.simulate(system(), pair, np.linspace(0.0, 1.0, 3))
 
 
-def _joint():
-    return pamjax.AntagonisticJoint(ISO6358Regulator(), ISO6358Regulator(), dmsp40_muscle(), dmsp40_muscle())
+def _joint(**kwargs):
+    return pamjax.AntagonisticJoint(ISO6358Regulator(), ISO6358Regulator(), dmsp40_muscle(), dmsp40_muscle(), **kwargs)
 
 
 @pytest.mark.parametrize("call, match", [

@@ -243,6 +243,7 @@ def check_absolute_pressure(values, name, *, above_atmosphere=False):
 _PLAUSIBLE = {
     "payload_mass": ("kg", 1e3, "g"),  # no pneumatic muscle lifts a tonne (DMSP-40: 6000 N)
     "mass": ("kg", 1e3, "g"),
+    "foot_mass": ("kg", 100.0, "g"),  # an ankle orthosis's foot: 1.3 kg (1300 typed in grams refused)
     "payload_kg": ("kg", 1e3, "g"),
     "min_position": ("m", 1.0, "mm"),
     "max_position": ("m", 1.0, "mm"),

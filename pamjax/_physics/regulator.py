@@ -212,7 +212,7 @@ class FeedbackRegulator(AbstractRegulator):
 
     def __check_init__(self):
         check_time_constants(self.time_constants, "FeedbackRegulator.time_constants")
-        check_paper_flow_gain(self.flow_gain, "FeedbackRegulator.flow_gain")
+        check_paper_flow_gain(self.flow_gain, "FeedbackRegulator.flow_gain", self.voltage_gain)
         for name in ("voltage_gain", "k1", "k2"):
             check_finite(getattr(self, name), f"FeedbackRegulator.{name}")
 
@@ -343,7 +343,7 @@ class ISO6358Regulator(AbstractRegulator):
         check_time_constants(self.time_constants, "ISO6358Regulator.time_constants")
         check_positive(self.supply_pressure, "ISO6358Regulator.supply_pressure")
         check_absolute_pressure(self.supply_pressure, "ISO6358Regulator.supply_pressure", above_atmosphere=True)
-        check_positive(self.full_opening_error, "ISO6358Regulator.full_opening_error")
+        check_pressure_span(self.full_opening_error, "ISO6358Regulator.full_opening_error")  # 0.05 (bar) refused
         check_positive(self.opening_width, "ISO6358Regulator.opening_width")
         check_nonnegative(self.internal_volume, "ISO6358Regulator.internal_volume")
         volume = concrete_values(self.internal_volume)

@@ -21,6 +21,9 @@ MIN_SI_FLOW_GAIN = 1e6
 # bar/(l/min): the largest |g_q| taken by `FeedbackRegulator.flow_gain` (paper 001: -0.922); 1e3 drops the outlet
 # 1000 bar per l/min, and the SI value -4.67e9 typed in ended in "maximum step size" at the solve
 MAX_PAPER_FLOW_GAIN = 1e3
+# bar/V: eq. 6's 1.01 is the VPPM's 10 bar over 10 V; 100 bar/V would span the regulator's range in 0.1 V, and
+# 1.01e5 is its value in Pa/V
+MAX_PAPER_VOLTAGE_GAIN = 100.0
 EQ7_SI_FLOW_GAIN = paper001.EQ7_GAIN * BAR / FLOW_UNIT  # Pa/(kg/s), ≈ -4.67e9
 
 
@@ -50,9 +53,10 @@ def check_si_flow_gain(value, name):
             f"bar/(l/min) = {EQ7_SI_FLOW_GAIN:.4g} Pa/(kg/s), 1 l/min ANR = {FLOW_UNIT:.4g} kg/s)")
 
 
-def check_paper_flow_gain(value, name):
+def check_paper_flow_gain(value, name, voltage_gain=None):
     """`FeedbackRegulator.flow_gain` g_q [bar/(l/min)]: finite, at most `MAX_PAPER_FLOW_GAIN` in magnitude (the SI
-    value refused by name), where concrete."""
+    value refused by name), where concrete; with `voltage_gain` g_v [bar/V] (the same regulator's), that one finite
+    and at most `MAX_PAPER_VOLTAGE_GAIN` (1.01e5, Pa/V, made the loop run to 4.6e61 Pa, a trajectory returned)."""
     check_finite(value, name)
     v = concrete_values(value)
     if v is not None and np.any(np.abs(v) > MAX_PAPER_FLOW_GAIN):
@@ -60,6 +64,16 @@ def check_paper_flow_gain(value, name):
             f"{name} = {float(np.max(np.abs(v))):g} bar/(l/min) in magnitude: more than {MAX_PAPER_FLOW_GAIN:g}; "
             f"that looks like SI, Pa/(kg/s): this argument is in paper 001's units, bar per l/min ANR (eq. 7: "
             f"{paper001.EQ7_GAIN:g}, = {EQ7_SI_FLOW_GAIN:.4g} Pa/(kg/s))")
+    if voltage_gain is None:
+        return
+    where = name.rsplit(".", 1)[0] + ".voltage_gain"
+    check_finite(voltage_gain, where)
+    g = concrete_values(voltage_gain)
+    if g is not None and np.any(np.abs(g) > MAX_PAPER_VOLTAGE_GAIN):
+        raise PamjaxInputError(
+            f"{where} = {float(np.max(np.abs(g))):g} bar/V in magnitude: more than {MAX_PAPER_VOLTAGE_GAIN:g}; that "
+            f"looks like Pa/V: this argument is in paper 001's units, bar per volt (eq. 6: {paper001.EQ6_GAIN:g} "
+            "bar/V)")
 
 
 def calibration_range(calibration):

@@ -25,7 +25,7 @@ from .._core.errors import (
     concrete_values,
 )
 from .._core.fitting import bounded, parameter, positive
-from .._core.units import check_absolute_pressure
+from .._core.units import check_absolute_pressure, check_plausible
 from .._papers import paper000, paper001
 from .._physics.gas import POLYTROPIC_RANGE, Air
 from .._physics.muscle import AbstractMuscle, EndStops, Muscle
@@ -145,6 +145,7 @@ class AntagonisticJoint(AbstractSystem):
         check_finite(self.gravity, "AntagonisticJoint.gravity")
         check_positive(self.inertia, "AntagonisticJoint.inertia")
         check_nonnegative(self.foot_mass, "AntagonisticJoint.foot_mass")
+        check_plausible(self.foot_mass, "AntagonisticJoint.foot_mass")  # 1300 (grams) refused
         check_nonnegative(self.damping, "AntagonisticJoint.damping")
         check_in_open_interval(self.polytropic_index, *POLYTROPIC_RANGE, "AntagonisticJoint.polytropic_index")
         self._check_pre_contraction()
