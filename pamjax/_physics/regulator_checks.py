@@ -53,27 +53,27 @@ def check_si_flow_gain(value, name):
             f"bar/(l/min) = {EQ7_SI_FLOW_GAIN:.4g} Pa/(kg/s), 1 l/min ANR = {FLOW_UNIT:.4g} kg/s)")
 
 
+def _refuse_above(value, name, limit, unit, advice):
+    """Finite, and at most `limit` in magnitude where concrete, else `PamjaxInputError`: "{name} = … {unit} in
+    magnitude: more than {limit}; {advice}" (a value typed in another unit)."""
+    check_finite(value, name)
+    v = concrete_values(value)
+    if v is not None and np.any(np.abs(v) > limit):
+        raise PamjaxInputError(f"{name} = {float(np.max(np.abs(v))):g} {unit} in magnitude: more than {limit:g}; "
+                               f"{advice}")
+
+
 def check_paper_flow_gain(value, name, voltage_gain=None):
     """`FeedbackRegulator.flow_gain` g_q [bar/(l/min)]: finite, at most `MAX_PAPER_FLOW_GAIN` in magnitude (the SI
     value refused by name), where concrete; with `voltage_gain` g_v [bar/V] (the same regulator's), that one finite
     and at most `MAX_PAPER_VOLTAGE_GAIN` (1.01e5, Pa/V, made the loop run to 4.6e61 Pa, a trajectory returned)."""
-    check_finite(value, name)
-    v = concrete_values(value)
-    if v is not None and np.any(np.abs(v) > MAX_PAPER_FLOW_GAIN):
-        raise PamjaxInputError(
-            f"{name} = {float(np.max(np.abs(v))):g} bar/(l/min) in magnitude: more than {MAX_PAPER_FLOW_GAIN:g}; "
-            f"that looks like SI, Pa/(kg/s): this argument is in paper 001's units, bar per l/min ANR (eq. 7: "
-            f"{paper001.EQ7_GAIN:g}, = {EQ7_SI_FLOW_GAIN:.4g} Pa/(kg/s))")
-    if voltage_gain is None:
-        return
-    where = name.rsplit(".", 1)[0] + ".voltage_gain"
-    check_finite(voltage_gain, where)
-    g = concrete_values(voltage_gain)
-    if g is not None and np.any(np.abs(g) > MAX_PAPER_VOLTAGE_GAIN):
-        raise PamjaxInputError(
-            f"{where} = {float(np.max(np.abs(g))):g} bar/V in magnitude: more than {MAX_PAPER_VOLTAGE_GAIN:g}; that "
-            f"looks like Pa/V: this argument is in paper 001's units, bar per volt (eq. 6: {paper001.EQ6_GAIN:g} "
-            "bar/V)")
+    _refuse_above(value, name, MAX_PAPER_FLOW_GAIN, "bar/(l/min)",
+                  f"that looks like SI, Pa/(kg/s): this argument is in paper 001's units, bar per l/min ANR (eq. 7: "
+                  f"{paper001.EQ7_GAIN:g}, = {EQ7_SI_FLOW_GAIN:.4g} Pa/(kg/s))")
+    if voltage_gain is not None:
+        _refuse_above(voltage_gain, name.rsplit(".", 1)[0] + ".voltage_gain", MAX_PAPER_VOLTAGE_GAIN, "bar/V",
+                      f"that looks like Pa/V: this argument is in paper 001's units, bar per volt (eq. 6: "
+                      f"{paper001.EQ6_GAIN:g} bar/V)")
 
 
 def calibration_range(calibration):
